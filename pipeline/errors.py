@@ -1,0 +1,5 @@
+"""User-facing errors: the CLI prints these without a traceback (exit code 2)."""
+
+
+class InputError(ValueError):
+    """Bad user input. The message names the offending value and says what to do."""

@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+
+from pipeline.association import AssociationGraph, check_links, count_conflicts
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+
+def fig1_graph():
+    """Paper Fig. 1: robots A,B,C,D = 0,1,2,3; f1^A-f2^D, f1^A-f1^B, f1^B-f1^C, f1^C-f1^D."""
+    links = Links(cam_i=[0, 0, 1, 2], feat_i=[0, 0, 0, 0], cam_j=[3, 1, 2, 3], feat_j=[1, 0, 0, 0])
+    return AssociationGraph([1, 1, 1, 2], links)
+
+
+def test_fig1_counts():
+    c = count_conflicts(fig1_graph())
+    assert c.association_sets == 1
+    assert c.conflictive_sets == 1
+    assert c.m_sum == 5
+    assert c.conflictive_features == 5
+
+
+def test_blocks_symmetric_and_identity():
+    g = fig1_graph()
+    assert (g.block(0, 3).toarray() == g.block(3, 0).toarray().T).all()
+    assert (g.block(3, 3).toarray() == np.eye(2, dtype=bool)).all()
+    assert g.block(0, 2).nnz == 0
+
+
+def test_consistent_chain_has_no_conflict():
+    links = Links(cam_i=[0, 1], feat_i=[0, 0], cam_j=[1, 2], feat_j=[0, 0])
+    c = count_conflicts(AssociationGraph([2, 2, 2], links))
+    assert (c.association_sets, c.conflictive_sets, c.m_sum) == (1, 0, 3)
+
+
+@pytest.mark.parametrize(
+    "row, message",
+    [
+        ((0, 0, 0, 1), "self-link"),
+        ((1, 0, 0, 0), "cam_i must be < cam_j"),
+        ((0, 5, 1, 0), "feature id out of range"),
+        ((0, 0, 7, 0), "camera id out of range"),
+    ],
+)
+def test_check_links_names_bad_row(row, message):
+    links = Links(*[[v] for v in row])
+    with pytest.raises(InputError, match=message):
+        check_links(links, [2, 2])
+
+
+def test_check_links_rejects_one_to_many():
+    links = Links(cam_i=[0, 0], feat_i=[0, 0], cam_j=[1, 1], feat_j=[0, 1])
+    with pytest.raises(InputError, match="one-to-one"):
+        check_links(links, [2, 2])
