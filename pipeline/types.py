@@ -141,3 +141,41 @@ class Links:
             np.concatenate([m.pairs[:, 1] for m in parts]),
             np.concatenate([1.0 - m.ratio.astype(np.float64) for m in parts]),
         )
+
+
+@dataclass
+class RunRecord:
+    """Everything a run produced, handed to ``viz`` (which only reads it) and to writers.
+
+    Attributes
+    ----------
+    views : list[View]
+    features : list[Features]
+    links : Links — every link produced by matching, ``(L,)``
+    status : ndarray, (L,) str — ``kept`` or ``deleted``
+    reason : ndarray, (L,) str — stage that cut the link (``resolution``, ``fusion-outlier``…), ``''`` if kept
+    round : ndarray, (L,) int — round of the stage in which the link was cut, ``-1`` if kept
+    iteration : ndarray, (L,) int — detection/resolution iteration that cut it, ``-1`` otherwise
+    conflictive_before : ndarray, (L,) bool — link lies in a conflictive set before resolution
+    truth : ndarray, (L,) int8 — ``1`` good, ``0`` spurious, ``-1`` unknown (real images)
+    points : ndarray, (P, 3) — triangulated track points after cleaning (world frame)
+    point_tracks : ndarray, (P,) int — track id of each point
+    gt_points : ndarray, (G, 3) or None — ground-truth points of the kept tracks (synthetic)
+    fused_points : ndarray, (F, 3) or None — landmark estimates fused by dynamic voting
+    report_markdown : str — the report table, for a text panel
+    """
+
+    views: list
+    features: list
+    links: Links
+    status: np.ndarray
+    reason: np.ndarray
+    round: np.ndarray
+    iteration: np.ndarray
+    conflictive_before: np.ndarray
+    truth: np.ndarray
+    points: np.ndarray
+    point_tracks: np.ndarray
+    gt_points: np.ndarray | None = None
+    fused_points: np.ndarray | None = None
+    report_markdown: str = ""

@@ -1,0 +1,25 @@
+import json
+
+import pytest
+
+from pipeline.runfolder import atomic_run_folder, write_json_atomic
+
+
+def test_failed_run_keeps_previous(tmp_path):
+    out = tmp_path / "runs" / "demo"
+    with atomic_run_folder(out) as d:
+        write_json_atomic(d / "report.json", {"run": 1})
+    with pytest.raises(RuntimeError):
+        with atomic_run_folder(out) as d:
+            write_json_atomic(d / "report.json", {"run": 2})
+            raise RuntimeError("stage failed")
+    assert json.loads((out / "report.json").read_text()) == {"run": 1}
+    assert sorted(p.name for p in out.parent.iterdir()) == ["demo"]
+
+
+def test_second_run_replaces_first(tmp_path):
+    out = tmp_path / "demo"
+    for k in (1, 2):
+        with atomic_run_folder(out) as d:
+            write_json_atomic(d / "report.json", {"run": k})
+    assert json.loads((out / "report.json").read_text()) == {"run": 2}
