@@ -66,8 +66,8 @@ def check_links(links: Links, features_per_camera) -> None:
     a = off[ci] + fi
     b = off[cj] + fj
     for name, key in (("duplicate link", a * off[-1] + b),
-                      (f"not one-to-one (Assumption 2.2): a feature of camera i is linked twice to camera j", a * n + cj),
-                      (f"not one-to-one (Assumption 2.2): a feature of camera j is linked twice to camera i", b * n + ci)):
+                      ("not one-to-one (Assumption 2.2): a feature of camera i is linked twice to camera j", a * n + cj),
+                      ("not one-to-one (Assumption 2.2): a feature of camera j is linked twice to camera i", b * n + ci)):
         order = np.argsort(key, kind="stable")
         dup = np.flatnonzero(key[order][1:] == key[order][:-1])
         if dup.size:

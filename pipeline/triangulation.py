@@ -1,0 +1,267 @@
+"""pycolmap check of the cleaned tracks with known camera poses (issue: run-formation).
+
+Every track (association set: connected component of the links with >= 2 features) is
+triangulated robustly with ``pycolmap.estimate_triangulation`` (LO-RANSAC over the track's
+observations, reprojection residual in pixels, a minimum triangulation angle). The figures
+tell how geometrically sound an association is: a clean track triangulates with all its
+observations as inliers; a track that chains two different surface points loses observations
+or fails.
+
+All pycolmap calls for known-pose reconstructions live here; database and incremental mapping
+calls live in :mod:`pipeline.colmap`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from pipeline.association import AssociationGraph
+from pipeline.types import Features, Links, View
+
+__all__ = ["TriangulationOptions", "TrackTriangulation", "triangulate_tracks",
+           "build_reconstruction", "write_reconstruction", "track_observations"]
+
+pycolmap.logging.minloglevel = 2
+
+# COLMAP's pixel convention puts the origin at the top-left corner of the top-left pixel;
+# OpenCV's at its centre (DESIGN.md conventions).
+COLMAP_PIXEL_SHIFT = 0.5
+
+
+@dataclass
+class TriangulationOptions:
+    """Robust triangulation settings.
+
+    max_error_px : inlier threshold of the reprojection residual, pixels
+    min_tri_angle_deg : minimum triangulation angle; pycolmap's default 0 lets degenerate
+        (parallel-ray) tracks pass, so it is set
+    seed : RANSAC seed, for repeatable runs
+    """
+
+    max_error_px: float = 4.0
+    min_tri_angle_deg: float = 1.0
+    seed: int = 0
+
+
+@dataclass
+class TrackTriangulation:
+    """Result of triangulating every track of one association.
+
+    Attributes
+    ----------
+    track_of_feature : (m,) int — track id of every feature (global index), -1 if in none
+    track_features : list of (k,) int arrays — global feature ids of each track
+    xyz : (T, 3) — triangulated point per track (nan where it failed)
+    ok : (T,) bool — triangulation succeeded
+    inliers : list of (k,) bool — per observation of each track
+    reproj_error_px : list of (k,) float — per observation
+    gt_error : (T,) — distance to the ground-truth point (nan without ground truth)
+    """
+
+    track_of_feature: np.ndarray
+    track_features: list
+    xyz: np.ndarray
+    ok: np.ndarray
+    inliers: list
+    reproj_error_px: list
+    gt_error: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def summary(self) -> dict:
+        """The figures of the report: tracks, triangulated, errors, inlier ratio, rejections."""
+        T = len(self.track_features)
+        ok = self.ok
+        inl = [m for m, good in zip(self.inliers, ok, strict=True) if good]
+        errs = [e[m] for e, m, good in zip(self.reproj_error_px, self.inliers, ok, strict=True) if good]
+        all_err = np.concatenate(errs) if errs else np.zeros(0)
+        n_obs = int(sum(len(f) for f in self.track_features))
+        n_inl = int(sum(int(m.sum()) for m in inl))
+        gt = self.gt_error[ok] if self.gt_error.size else np.zeros(0)
+        gt = gt[np.isfinite(gt)]
+        return {
+            "tracks": T,
+            "triangulated_tracks": int(ok.sum()),
+            "observations": n_obs,
+            "inlier_observations": n_inl,
+            "inlier_ratio": float(n_inl / n_obs) if n_obs else 0.0,
+            "mean_reprojection_error_px": float(all_err.mean()) if all_err.size else None,
+            "median_reprojection_error_px": float(np.median(all_err)) if all_err.size else None,
+            "median_3d_error": float(np.median(gt)) if gt.size else None,
+            "tracks_with_rejected_observation": int(sum(int((~m).any()) for m in inl)),
+        }
+
+
+def _camera(view: View, camera_id: int) -> pycolmap.Camera:
+    w, h = view.size
+    K = view.K
+    return pycolmap.Camera(model="PINHOLE", width=w, height=h, camera_id=camera_id,
+                           params=[K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_SHIFT,
+                                   K[1, 2] + COLMAP_PIXEL_SHIFT])
+
+
+def _pose(view: View) -> pycolmap.Rigid3d:
+    if view.R is None or view.t is None:
+        raise ValueError(f"view {view.name!r} has no pose; known-pose triangulation needs R and t")
+    return pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(view.R, dtype=np.float64)),
+                            np.asarray(view.t, dtype=np.float64).reshape(3))
+
+
+def track_observations(features_per_camera, links: Links) -> tuple[np.ndarray, list]:
+    """Tracks = connected components with >= 2 features (union-find via csgraph).
+
+    Returns ``track_of_feature`` (m,) with -1 for singletons and the list of global feature ids
+    per track, tracks numbered in order of their smallest feature id.
+    """
+    graph = AssociationGraph(features_per_camera, links)
+    labels = graph.components()
+    sizes = np.bincount(labels) if labels.size else np.zeros(0, dtype=np.int64)
+    in_track = sizes[labels] >= 2 if labels.size else np.zeros(0, dtype=bool)
+    track_of_feature = np.full(labels.shape, -1, dtype=np.int64)
+    ids = np.flatnonzero(in_track)
+    # renumber component labels of real tracks 0..T-1 (by first feature)
+    uniq, first = np.unique(labels[ids], return_index=True)
+    order = np.argsort(first, kind="stable")
+    remap = np.full(int(labels.max()) + 1 if labels.size else 0, -1, dtype=np.int64)
+    remap[uniq[order]] = np.arange(len(uniq))
+    track_of_feature[ids] = remap[labels[ids]]
+    sort = np.argsort(track_of_feature[ids], kind="stable")
+    grouped = ids[sort]
+    bounds = np.searchsorted(track_of_feature[grouped], np.arange(len(uniq) + 1))
+    tracks = [grouped[bounds[k]:bounds[k + 1]] for k in range(len(uniq))]
+    return track_of_feature, tracks
+
+
+def _medoid(points: np.ndarray) -> np.ndarray:
+    """Point of ``points`` (k,3) with least summed distance to the others (nan rows ignored)."""
+    p = points[np.isfinite(points).all(axis=1)]
+    if not len(p):
+        return np.full(3, np.nan)
+    d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1).sum(axis=1)
+    return p[int(np.argmin(d))]
+
+
+def triangulate_tracks(views: list[View], features: list[Features], links: Links,
+                       options: TriangulationOptions | None = None,
+                       gt_points: list[np.ndarray] | None = None) -> TrackTriangulation:
+    """Triangulate every track of ``links`` robustly with the known poses of ``views``.
+
+    Parameters
+    ----------
+    views : list of View, (n,) with K, R, t
+    features : list of Features, (n,)
+    links : Links
+    options : TriangulationOptions
+    gt_points : optional list of (m_i, 3) arrays, ground-truth world point of every keypoint
+        (nan where unknown). A track's ground-truth point is the medoid of its observations'
+        points, which a minority of wrong observations cannot move; its 3D error is the
+        distance from the triangulated point to it.
+
+    Returns
+    -------
+    TrackTriangulation
+    """
+    options = options or TriangulationOptions()
+    n = len(views)
+    m_per = np.array([len(f) for f in features], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(m_per)])
+    cam_of = np.repeat(np.arange(n), m_per)
+    all_kp = (np.concatenate([f.keypoints for f in features]).astype(np.float64)
+              if offsets[-1] else np.zeros((0, 2)))
+    all_gt = np.concatenate(gt_points).astype(np.float64) if gt_points is not None and offsets[-1] else None
+    track_of_feature, tracks = track_observations(m_per, links)
+
+    cameras = [_camera(v, k + 1) for k, v in enumerate(views)]
+    poses = [_pose(v) for v in views]
+    opts = pycolmap.EstimateTriangulationOptions()
+    opts.min_tri_angle = float(np.deg2rad(options.min_tri_angle_deg))
+    opts.residual_type = pycolmap.TriangulationResidualType.REPROJECTION_ERROR
+    opts.ransac.max_error = float(options.max_error_px)
+    opts.ransac.random_seed = int(options.seed)
+
+    T = len(tracks)
+    xyz = np.full((T, 3), np.nan)
+    ok = np.zeros(T, dtype=bool)
+    inliers, errors = [], []
+    gt_error = np.full(T, np.nan)
+    for k, feats in enumerate(tracks):
+        cams = cam_of[feats]
+        pts = all_kp[feats] + COLMAP_PIXEL_SHIFT
+        res = pycolmap.estimate_triangulation(pts, [poses[c] for c in cams],
+                                              [cameras[c] for c in cams], opts)
+        if res is None:
+            inliers.append(np.zeros(len(feats), dtype=bool))
+            errors.append(np.full(len(feats), np.nan))
+            continue
+        X = np.asarray(res["xyz"], dtype=np.float64).reshape(3)
+        xyz[k] = X
+        ok[k] = True
+        inliers.append(np.asarray(res["inliers"], dtype=bool).reshape(-1))
+        errors.append(_reprojection_errors(X, views, cams, all_kp[feats]))
+        if all_gt is not None:
+            gt_error[k] = float(np.linalg.norm(X - _medoid(all_gt[feats])))
+    return TrackTriangulation(track_of_feature, tracks, xyz, ok, inliers, errors, gt_error)
+
+
+def _reprojection_errors(X: np.ndarray, views: list[View], cams: np.ndarray,
+                         kp: np.ndarray) -> np.ndarray:
+    out = np.empty(len(cams))
+    for a, c in enumerate(cams):
+        v = views[c]
+        x = v.K @ (v.R @ X + v.t)
+        out[a] = np.inf if x[2] <= 0 else float(np.linalg.norm(x[:2] / x[2] - kp[a]))
+    return out
+
+
+def build_reconstruction(views: list[View], features: list[Features]) -> pycolmap.Reconstruction:
+    """A ``pycolmap.Reconstruction`` with one PINHOLE camera, rig and frame per view and its
+    keypoints (shifted to COLMAP's pixel convention). Image ids are ``camera index + 1``."""
+    rec = pycolmap.Reconstruction()
+    for k, (v, f) in enumerate(zip(views, features, strict=True)):
+        cam = _camera(v, k + 1)
+        rec.add_camera_with_trivial_rig(cam)
+        kp = f.keypoints.astype(np.float64) + COLMAP_PIXEL_SHIFT if len(f) else np.zeros((0, 2))
+        image = pycolmap.Image(name=v.name, keypoints=kp, camera_id=k + 1, image_id=k + 1)
+        rec.add_image_with_trivial_frame(image, _pose(v))
+    return rec
+
+
+def write_reconstruction(path: str | Path, views: list[View], features: list[Features],
+                         tri: TrackTriangulation) -> pycolmap.Reconstruction:
+    """Write the triangulated tracks (inlier observations only) as a COLMAP model to ``path``.
+
+    The folder loads back with ``pycolmap.Reconstruction(path)`` and opens in COLMAP.
+    """
+    rec = build_reconstruction(views, features)
+    m_per = np.array([len(f) for f in features], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(m_per)])
+    cam_of = np.repeat(np.arange(len(views)), m_per)
+    for k, feats in enumerate(tri.track_features):
+        if not tri.ok[k]:
+            continue
+        keep = feats[tri.inliers[k]]
+        cams = cam_of[keep]
+        if len(np.unique(cams)) < 2 or len(np.unique(cams)) < len(cams):
+            # a COLMAP track holds one observation per image at most (a conflictive track)
+            continue
+        track = pycolmap.Track()
+        for g, c in zip(keep, cams, strict=True):
+            track.add_element(int(c) + 1, int(g - offsets[c]))
+        color = _color(views, cams[0], features[cams[0]].keypoints[keep[0] - offsets[cams[0]]])
+        rec.add_point3D(tri.xyz[k], track, color)
+    rec.update_point_3d_errors()
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    rec.write(str(path))
+    return rec
+
+
+def _color(views: list[View], cam: int, xy: np.ndarray) -> np.ndarray:
+    img = views[cam].image
+    h, w = img.shape[:2]
+    u = int(np.clip(round(float(xy[0])), 0, w - 1))
+    v = int(np.clip(round(float(xy[1])), 0, h - 1))
+    px = img[v, u]
+    return np.asarray(np.broadcast_to(px, (3,)), dtype=np.uint8)
