@@ -23,7 +23,7 @@ from pipeline.association import AssociationGraph
 from pipeline.types import Features, Links, View
 
 __all__ = ["TriangulationOptions", "TrackTriangulation", "triangulate_tracks",
-           "build_reconstruction", "write_reconstruction", "track_observations"]
+           "build_reconstruction", "write_reconstruction", "track_observations", "medoid"]
 
 pycolmap.logging.minloglevel = 2
 
@@ -134,7 +134,7 @@ def track_observations(features_per_camera, links: Links) -> tuple[np.ndarray, l
     return track_of_feature, tracks
 
 
-def _medoid(points: np.ndarray) -> np.ndarray:
+def medoid(points: np.ndarray) -> np.ndarray:
     """Point of ``points`` (k,3) with least summed distance to the others (nan rows ignored)."""
     p = points[np.isfinite(points).all(axis=1)]
     if not len(p):
@@ -201,7 +201,7 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
         inliers.append(np.asarray(res["inliers"], dtype=bool).reshape(-1))
         errors.append(_reprojection_errors(X, views, cams, all_kp[feats]))
         if all_gt is not None:
-            gt_error[k] = float(np.linalg.norm(X - _medoid(all_gt[feats])))
+            gt_error[k] = float(np.linalg.norm(X - medoid(all_gt[feats])))
     return TrackTriangulation(track_of_feature, tracks, xyz, ok, inliers, errors, gt_error)
 
 

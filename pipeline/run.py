@@ -1,0 +1,320 @@
+"""Run the whole pipeline and write a run folder (DESIGN.md "Data flow" and "Run outputs").
+
+``clean_association`` is the product's core on any input (rendered or real):
+consistency (detection + resolution by message passing) then robust distributed fusion.
+``run_formation`` wraps it for a rendered formation with ground truth and writes
+``report.json``, ``links.csv``, ``sparse/`` and ``recording.rrd`` atomically.
+"""
+
+from __future__ import annotations
+
+import platform
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.progress import StageTimer
+from pipeline.runfolder import atomic_run_folder, write_json_atomic
+from pipeline.types import Links, RunRecord, View
+
+__all__ = ["FormationConfig", "Cleaning", "clean_association", "run_formation", "versions"]
+
+
+@dataclass
+class FormationConfig:
+    """Options of ``run-formation`` (defaults = ``make run-formation``)."""
+
+    formation: str = "d"
+    seed: int = 0
+    size: tuple[int, int] = (640, 480)
+    features: str = "sift"
+    max_features: int = 2000
+    robots: int | None = None
+    graph: str | None = None
+    tol_px: float = 2.0
+    fusion: bool = True
+    out: str | None = None
+    rerun: bool = True
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        name = f"formation-{self.formation}" if self.robots is None else \
+            f"formation-n{self.robots}-{self.graph}"
+        return Path("runs") / name
+
+
+@dataclass
+class Cleaning:
+    """What the consistency and fusion stages decided for every link (``(L,)`` arrays)."""
+
+    links: Links
+    status: np.ndarray
+    reason: np.ndarray
+    round: np.ndarray
+    iteration: np.ndarray
+    case: np.ndarray
+    conflictive_before: np.ndarray
+    resolution_stats: dict
+    fusion_stats: dict = field(default_factory=dict)
+    fused_points: np.ndarray | None = None
+
+    @property
+    def kept(self) -> np.ndarray:
+        return self.status == "kept"
+
+
+def versions() -> dict:
+    """Versions of Python and the libraries whose behaviour the figures depend on."""
+    import cv2
+    import pycolmap
+    import rerun
+    import scipy
+
+    from pipeline import __version__
+    return {"formation-match": __version__, "python": platform.python_version(),
+            "numpy": np.__version__, "scipy": scipy.__version__, "opencv": cv2.__version__,
+            "pycolmap": pycolmap.__version__, "rerun-sdk": rerun.__version__}
+
+
+def _conflictive_links(features_per_camera, links: Links) -> np.ndarray:
+    from pipeline.association import conflictive_labels
+
+    graph = AssociationGraph(features_per_camera, links)
+    labels, _, conflictive = conflictive_labels(graph)
+    a, _ = graph.global_ids()
+    return conflictive[labels[a]] if len(links) else np.zeros(0, dtype=bool)
+
+
+def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
+                      *, fusion: bool = True, timer: StageTimer | None = None) -> Cleaning:
+    """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
+
+    Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
+    """
+    from pipeline.consistency import resolve_conflicts
+
+    timer = timer or StageTimer(verbose=False)
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    L = len(links)
+    with timer.stage("consistency", "distributed detection + resolution"):
+        conflictive_before = _conflictive_links(m, links)
+        res = resolve_conflicts(m, comm_edges, links)
+        status = np.where(res.deleted, "deleted", "kept").astype(object)
+        reason = np.asarray(res.reason, dtype=object).copy()
+        rnd = np.asarray(res.round, dtype=np.int64).copy()
+        iteration = np.asarray(res.iteration, dtype=np.int64).copy()
+        case = np.asarray(res.case, dtype=object).copy()
+        timer.note(f"{int(res.deleted.sum())} of {L} links cut in "
+                   f"{res.stats.get('iterations')} iteration(s)")
+    cleaning = Cleaning(links, status, reason, rnd, iteration, case, conflictive_before,
+                        dict(res.stats))
+    has_poses = all(v.R is not None and v.t is not None for v in views)
+    if not fusion:
+        cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
+    elif not has_poses:
+        cleaning.fusion_stats = {"enabled": False, "reason": "camera poses unknown"}
+    else:
+        from pipeline.fusion.landmarks import fuse_tracks
+
+        with timer.stage("fusion", "robust distributed fusion by dynamic voting"):
+            kept_idx = np.flatnonzero(cleaning.kept)
+            fr = fuse_tracks(views, features, links.subset(kept_idx), comm_edges)
+            cut = kept_idx[np.asarray(fr.cut_links, dtype=bool)]
+            cleaning.status[cut] = "deleted"
+            cleaning.reason[cut] = "fusion-outlier"
+            cleaning.round[cut] = int(fr.stats.get("rounds", -1))
+            cleaning.fusion_stats = {"enabled": True, **dict(fr.stats),
+                                     "observations_cut_links": int(len(cut))}
+            cleaning.fused_points = np.asarray(fr.points)
+            timer.note(f"{len(cut)} links cut as fusion outliers")
+    return cleaning
+
+
+def _association_counts(m, links: Links, truth: np.ndarray | None, missing: int | None) -> dict:
+    counts = count_conflicts(AssociationGraph(m, links)).as_dict()
+    if truth is not None:
+        counts["good_links"] = int(truth.sum())
+        counts["spurious_links"] = int((~truth).sum())
+        counts["missing_links"] = int(missing) if missing is not None else None
+        counts["precision"] = float(truth.mean()) if len(truth) else None
+    return counts
+
+
+def _resolution_section(cleaning: Cleaning, truth: np.ndarray | None) -> dict:
+    cut = cleaning.reason == "resolution"
+    stats = cleaning.resolution_stats
+    out = {
+        "iterations": stats.get("iterations"),
+        "deleted_links": int(cut.sum()),
+        "detection_rounds": stats.get("detection_rounds"),
+        "resolution_rounds": stats.get("resolution_rounds"),
+        "messages": stats.get("messages"),
+        "bytes": stats.get("bytes"),
+        "max_robot_memory_bytes": stats.get("max_robot_memory_bytes"),
+    }
+    if truth is not None:
+        out["good_deleted"] = int((cut & truth).sum())
+        out["spurious_deleted"] = int((cut & ~truth).sum())
+    out["details"] = {k: v for k, v in stats.items() if k not in out}
+    return out
+
+
+def report_markdown(report: dict) -> str:
+    """The paper-style table (Tables III/IV rows) of one run as markdown."""
+    b, a, r = report["before"], report["after"], report["resolution"]
+    rows = [("Association sets", "association_sets"), ("Conflictive sets (c)", "conflictive_sets"),
+            ("Number of features m_sum", "m_sum"), ("Conflictive features", "conflictive_features"),
+            ("Links", "links"), ("Good links", "good_links"), ("Spurious links", "spurious_links"),
+            ("Missing links", "missing_links")]
+    lines = [f"## {report.get('title', 'run')}", "", "| | before | after |", "|---|---:|---:|"]
+    for label, key in rows:
+        if key in b:
+            lines.append(f"| {label} | {b[key]} | {a[key]} |")
+    lines += ["", "| Resolution | |", "|---|---:|"]
+    for key in ("iterations", "deleted_links", "good_deleted", "spurious_deleted",
+                "detection_rounds", "resolution_rounds", "messages", "bytes"):
+        if key in r:
+            lines.append(f"| {key.replace('_', ' ')} | {r[key]} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> Path:
+    """Render a formation, run every stage, write the run folder; return its path.
+
+    Stages: render → features → matching → consistency → fusion → triangulation (before and
+    after, pycolmap with known poses) → evaluation against ground truth → outputs.
+    """
+    import data_synth
+    from data_synth.ground_truth import points_from_keypoints
+    from pipeline.consistency import centralized
+    from pipeline.evaluate import link_truth, missing_links
+    from pipeline.features import extract_all
+    from pipeline.linkscsv import write_links_csv
+    from pipeline.matching import match_edges
+    from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
+    from pipeline.triangulation import triangulate_tracks, write_reconstruction
+
+    timer = timer or StageTimer()
+    out = config.out_dir()
+    with timer.stage("render", f"formation {config.formation}, seed {config.seed}, "
+                     f"{config.size[0]}x{config.size[1]}"):
+        formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
+                                      n_robots=config.robots, graph=config.graph)
+        views, comm_edges = formation.views, np.asarray(formation.comm_edges)
+    with timer.stage("features", f"{config.features}, at most {config.max_features} per image"):
+        feats = extract_all(views, config.features, config.max_features)
+        m = np.array([len(f) for f in feats], dtype=np.int64)
+        timer.note(f"features per camera: {m.tolist()}")
+    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
+        matches = match_edges(feats, views, comm_edges)
+        links = Links.from_matches(matches)
+        timer.note(f"{len(links)} links")
+    cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
+                                 timer=timer)
+    kept = cleaning.kept
+    kept_links = links.subset(kept)
+
+    with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
+        truth = link_truth(formation, feats, links, tol_px=config.tol_px)
+        truth = np.asarray(truth, dtype=bool)
+        before = _association_counts(m, links, truth,
+                                     missing_links(formation, feats, links, comm_edges,
+                                                   tol_px=config.tol_px))
+        after = _association_counts(m, kept_links, truth[kept],
+                                    missing_links(formation, feats, kept_links, comm_edges,
+                                                  tol_px=config.tol_px))
+        gt_pairs = true_pairs_all(formation, feats, tol_px=config.tol_px)
+        m_total = int(m.sum())
+        pairwise = {"before": pairwise_scores(association_pairs(m, links), gt_pairs, m_total),
+                    "after": pairwise_scores(association_pairs(m, kept_links), gt_pairs, m_total)}
+        baselines = {}
+        for name, keep_mask in centralized.baselines(m, links).items():
+            keep_mask = np.asarray(keep_mask, dtype=bool)
+            bl = links.subset(keep_mask)
+            baselines[name] = {
+                **_association_counts(m, bl, truth[keep_mask],
+                                      missing_links(formation, feats, bl, comm_edges,
+                                                    tol_px=config.tol_px)),
+                "deleted_links": int((~keep_mask).sum()),
+                "good_deleted": int((~keep_mask & truth).sum()),
+                "spurious_deleted": int((~keep_mask & ~truth).sum()),
+                "pairwise": pairwise_scores(association_pairs(m, bl), gt_pairs, m_total),
+            }
+    with timer.stage("triangulation", "pycolmap, known poses, before and after"):
+        gt_points = [points_from_keypoints(v, f.keypoints)[0] if len(f) else np.zeros((0, 3))
+                     for v, f in zip(views, feats, strict=True)]
+        tri_before = triangulate_tracks(views, feats, links, gt_points=gt_points)
+        tri_after = triangulate_tracks(views, feats, kept_links, gt_points=gt_points)
+        triangulation = {"before": tri_before.summary(), "after": tri_after.summary()}
+        timer.note(f"after: {triangulation['after']['triangulated_tracks']} of "
+                   f"{triangulation['after']['tracks']} tracks triangulated")
+
+    report = {
+        "title": f"formation {config.formation} (seed {config.seed})",
+        "n_cameras": len(views),
+        "comm_edges": comm_edges.tolist(),
+        "features_per_camera": m.tolist(),
+        "before": before,
+        "after": after,
+        "resolution": _resolution_section(cleaning, truth),
+        "fusion": _fusion_section(cleaning, truth),
+        "triangulation": triangulation,
+        "pairwise": pairwise,
+        "baselines": baselines,
+        "matching": {"edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)),
+                                "putative": int(p.n_putative), "reason": p.reason}
+                               for p in matches]},
+        "ground_truth": {"tolerance_px": config.tol_px},
+        "versions": versions(),
+        "config": {**asdict(config), "out": str(out)},
+    }
+    if config.fusion and cleaning.fusion_stats.get("enabled") and cleaning.fused_points is not None:
+        report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+
+    md = report_markdown(report)
+    with timer.stage("write", str(out)):
+        with atomic_run_folder(out) as tmp:
+            write_links_csv(tmp / "links.csv", links, cleaning.status, cleaning.reason,
+                            cleaning.round, truth.astype(np.int8))
+            write_reconstruction(tmp / "sparse", views, feats, tri_after)
+            if config.rerun:
+                from viz.rerun_log import log_run
+
+                all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
+                record = RunRecord(
+                    views=views, features=feats, links=links,
+                    status=cleaning.status.astype(str), reason=cleaning.reason.astype(str),
+                    round=cleaning.round, iteration=cleaning.iteration,
+                    conflictive_before=cleaning.conflictive_before,
+                    truth=truth.astype(np.int8),
+                    points=tri_after.xyz[tri_after.ok],
+                    point_tracks=np.flatnonzero(tri_after.ok),
+                    gt_points=_track_gt_points(all_gt, tri_after),
+                    fused_points=cleaning.fused_points,
+                    report_markdown=md)
+                log_run(tmp / "recording.rrd", record)
+            report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+            write_json_atomic(tmp / "report.json", report)
+    print(md)
+    return out
+
+
+def _fusion_section(cleaning: Cleaning, truth: np.ndarray) -> dict:
+    cut = cleaning.reason == "fusion-outlier"
+    out = dict(cleaning.fusion_stats)
+    out["cut_links"] = int(cut.sum())
+    out["cut_spurious"] = int((cut & ~truth).sum())
+    out["cut_good"] = int((cut & truth).sum())
+    return out
+
+
+def _track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
+    """Ground-truth point of each triangulated track (medoid of its observations' points)."""
+    from pipeline.triangulation import medoid
+
+    pts = [medoid(all_gt[t]) for t, ok in zip(tri.track_features, tri.ok, strict=True) if ok]
+    pts = np.array(pts).reshape(-1, 3)
+    return pts[np.isfinite(pts).all(axis=1)]
