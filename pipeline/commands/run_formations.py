@@ -1,0 +1,124 @@
+"""``python -m pipeline run-formations``: formations a–d side by side, as the paper's
+Tables III and IV, plus what the paper could not count without ground truth."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from pipeline.commands.run_formation import parse_size
+from pipeline.runfolder import write_json_atomic
+
+FORMATIONS = ("a", "b", "c", "d")
+
+# (label, section, key) rows; section None = top level of the report
+TABLE_ROWS = [
+    ("Association sets", "before", "association_sets"),
+    ("Conflictive sets (c)", "before", "conflictive_sets"),
+    ("Number of features m_sum", "before", "m_sum"),
+    ("Conflictive features", "before", "conflictive_features"),
+    ("Deleted links", "resolution", "deleted_links"),
+    ("Good deleted links", "resolution", "good_deleted"),
+    ("Spurious deleted links", "resolution", "spurious_deleted"),
+    ("Iterations", "resolution", "iterations"),
+    ("Detection rounds", "resolution", "detection_rounds"),
+    ("Resolution rounds", "resolution", "resolution_rounds"),
+    ("Messages", "resolution", "messages"),
+    ("Good links before", "before", "good_links"),
+    ("Spurious links before", "before", "spurious_links"),
+    ("Missing links before", "before", "missing_links"),
+    ("Good links after", "after", "good_links"),
+    ("Spurious links after", "after", "spurious_links"),
+    ("Missing links after", "after", "missing_links"),
+    ("Conflictive sets after", "after", "conflictive_sets"),
+    ("Fusion: links cut", "fusion", "cut_links"),
+    ("Fusion: spurious among them", "fusion", "cut_spurious"),
+]
+
+PAPER_TABLE_III_IV = {  # Aragüés et al., Tables III and IV (SURF, real images, no ground truth)
+    "Association sets": (528, 590, 605, 632),
+    "Conflictive sets (c)": (2, 22, 31, 72),
+    "Number of features m_sum": (1335, 1643, 1743, 2069),
+    "Conflictive features": (14, 144, 204, 521),
+    "Deleted links": (2, 26, 46, 131),
+    "Good deleted links": (1, 2, 19, 43),
+    "Spurious deleted links": (1, 24, 27, 88),
+}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--features", default="sift")
+    p.add_argument("--max-features", type=int, default=2000)
+    p.add_argument("--size", default="640x480")
+    p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.3f}"
+    return str(v)
+
+
+def formations_table(reports: dict[str, dict]) -> str:
+    """Markdown: our figures for each formation next to the paper's."""
+    names = list(reports)
+    head = "| | " + " | ".join(f"({n})" for n in names) + " | paper (a)–(d) |"
+    lines = [head, "|---|" + "---:|" * len(names) + "---|"]
+    for label, section, key in TABLE_ROWS:
+        vals = [reports[n].get(section, {}).get(key) for n in names]
+        paper = PAPER_TABLE_III_IV.get(label)
+        lines.append(f"| {label} | " + " | ".join(_fmt(v) for v in vals) + " | "
+                     + (", ".join(map(str, paper)) if paper else "") + " |")
+    lines += ["", "Pairwise precision / recall / F1 of the final association (and baselines):", "",
+              "| method | " + " | ".join(f"({n})" for n in names) + " |",
+              "|---|" + "---|" * len(names)]
+
+    def prf(s):
+        return f"{s['precision']:.3f} / {s['recall']:.3f} / {s['f1']:.3f}"
+
+    lines.append("| matching only (before) | " + " | ".join(
+        prf(reports[n]["pairwise"]["before"]) for n in names) + " |")
+    lines.append("| distributed (this) | " + " | ".join(
+        prf(reports[n]["pairwise"]["after"]) for n in names) + " |")
+    for bl in reports[names[0]].get("baselines", {}):
+        lines.append(f"| {bl} (centralized) | " + " | ".join(
+            prf(reports[n]["baselines"][bl]["pairwise"]) for n in names) + " |")
+    lines += ["", "Deleted links (good / spurious) per method:", "",
+              "| method | " + " | ".join(f"({n})" for n in names) + " |",
+              "|---|" + "---|" * len(names)]
+    lines.append("| distributed (this) | " + " | ".join(
+        f"{reports[n]['resolution']['deleted_links']} ({reports[n]['resolution']['good_deleted']}"
+        f" / {reports[n]['resolution']['spurious_deleted']})" for n in names) + " |")
+    for bl in reports[names[0]].get("baselines", {}):
+        lines.append(f"| {bl} | " + " | ".join(
+            f"{reports[n]['baselines'][bl]['deleted_links']} "
+            f"({reports[n]['baselines'][bl]['good_deleted']} / "
+            f"{reports[n]['baselines'][bl]['spurious_deleted']})" for n in names) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run(args) -> int:
+    from pipeline.run import FormationConfig, run_formation
+
+    parent = Path(args.out)
+    reports = {}
+    for name in FORMATIONS:
+        cfg = FormationConfig(formation=name, seed=args.seed, size=parse_size(args.size),
+                              features=args.features, max_features=args.max_features,
+                              out=str(parent / f"formation-{name}"))
+        out = run_formation(cfg)
+        reports[name] = json.loads((out / "report.json").read_text())
+    table = formations_table(reports)
+    md = parent / "formations.md"
+    tmp = md.with_suffix(".md.tmp")
+    tmp.write_text(f"# Formations (a)–(d), seed {args.seed}, {args.features}, {args.size}\n\n"
+                   + table)
+    tmp.replace(md)
+    write_json_atomic(parent / "formations.json", reports)
+    print(table)
+    print(f"saved {md} and {parent / 'formations.json'}")
+    return 0
