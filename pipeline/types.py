@@ -31,6 +31,9 @@ class View:
         Synthetic only: z-depth in the camera frame, ``inf`` where no surface was hit.
     intrinsics_known : bool
         ``False`` when K is a guess (matching then uses the fundamental matrix).
+    intrinsics_source : str
+        Where K came from for real images (``K.txt``, ``exif-35mm``, ``exif-focal-plane``,
+        ``guess``); empty for rendered views.
     """
 
     name: str
@@ -40,6 +43,7 @@ class View:
     t: np.ndarray | None = None
     depth: np.ndarray | None = None
     intrinsics_known: bool = True
+    intrinsics_source: str = ""
 
     @property
     def size(self) -> tuple[int, int]:
