@@ -1,0 +1,99 @@
+"""End to end: a small rendered formation through every stage, then the run folder is checked
+against itself (report vs links.csv vs sparse/ vs recording.rrd)."""
+
+import csv
+import json
+
+import numpy as np
+import pycolmap
+import pytest
+
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.run import FormationConfig, run_formation
+from pipeline.types import Links
+
+SMALL = dict(formation="d", seed=0, size=(320, 240), max_features=600)
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "formation-d"
+    run_formation(FormationConfig(**SMALL, out=str(out)))
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return out, report, rows
+
+
+def test_outputs_exist(small_run):
+    out, _, _ = small_run
+    for name in ("report.json", "links.csv", "sparse", "recording.rrd"):
+        assert (out / name).exists(), name
+
+
+def test_conflicts_found_and_resolved(small_run):
+    _, report, _ = small_run
+    assert report["before"]["conflictive_sets"] > 0
+    assert report["after"]["conflictive_sets"] == 0
+    r = report["resolution"]
+    assert r["deleted_links"] == r["good_deleted"] + r["spurious_deleted"]
+
+
+def test_report_equals_recount_from_links_csv(small_run):
+    _, report, rows = small_run
+    assert list(rows[0]) == ["cam_i", "feat_i", "cam_j", "feat_j", "status", "reason", "round",
+                             "truth"]
+    kept = [r for r in rows if r["status"] == "kept"]
+    cut = [r for r in rows if r["reason"] == "resolution"]
+    assert report["before"]["links"] == len(rows)
+    assert report["after"]["links"] == len(kept)
+    assert report["resolution"]["deleted_links"] == len(cut)
+    assert report["resolution"]["good_deleted"] == sum(r["truth"] == "1" for r in cut)
+    assert report["before"]["good_links"] == sum(r["truth"] == "1" for r in rows)
+    assert report["after"]["spurious_links"] == sum(r["truth"] == "0" for r in kept)
+    assert all(r["reason"] == "" for r in kept)
+    assert all(r["reason"] in ("resolution", "fusion-outlier") for r in rows
+               if r["status"] == "deleted")
+
+    def links_of(rs):
+        return Links(*[np.array([int(r[k]) for r in rs], dtype=np.int64)
+                       for k in ("cam_i", "feat_i", "cam_j", "feat_j")])
+
+    m = report["features_per_camera"]
+    for section, rs in (("before", rows), ("after", kept)):
+        c = count_conflicts(AssociationGraph(m, links_of(rs))).as_dict()
+        for key, value in c.items():
+            assert report[section][key] == value, (section, key)
+
+
+def test_sparse_model_loads(small_run):
+    out, report, _ = small_run
+    rec = pycolmap.Reconstruction(str(out / "sparse"))
+    assert rec.num_images() == report["n_cameras"]
+    assert rec.num_points3D() > 0
+    assert rec.num_points3D() <= report["triangulation"]["after"]["triangulated_tracks"]
+
+
+def test_recording_holds_kept_and_deleted_links(small_run):
+    from viz.rerun_log import count_strips
+
+    out, report, rows = small_run
+    deleted = sum(r["status"] == "deleted" for r in rows)
+    assert count_strips(out / "recording.rrd", "world/links/deleted") == deleted
+    assert count_strips(out / "recording.rrd", "world/links/kept") == len(rows) - deleted
+
+
+def test_failed_run_keeps_previous_run(small_run, monkeypatch):
+    import pipeline.triangulation as tri
+
+    out, report, _ = small_run
+    before = (out / "report.json").read_bytes()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("triangulation failed")
+
+    monkeypatch.setattr(tri, "triangulate_tracks", broken)
+    with pytest.raises(RuntimeError, match="triangulation failed"):
+        run_formation(FormationConfig(**SMALL, out=str(out), rerun=False))
+    assert (out / "report.json").read_bytes() == before
+    assert sorted(p.name for p in out.parent.iterdir()) == [out.name]
