@@ -8,7 +8,6 @@ prints each stage's median wall time next to the 10 s target. Saves
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
