@@ -1,0 +1,198 @@
+"""Local features of each camera — the input of the local matching (Aragüés et al., Sec. V-B).
+
+The paper extracts SURF features on each robot's image. SURF is patented and missing from the
+pip builds of OpenCV, so SIFT is the default here; ORB and AKAZE are offered as fast binary
+alternatives and SURF where the OpenCV build has the non-free algorithms.
+
+One detail matters for the paper's counts: SIFT emits several keypoints at one location (one
+per dominant orientation). With the strict one-feature-per-camera rule of Def. 2.4, such twins
+would be reported as conflictive sets although they image the same point, so co-located
+keypoints are merged here (the strongest response is kept).
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from pipeline.errors import InputError
+from pipeline.types import Features, View
+
+__all__ = ["METHODS", "extract", "extract_all", "merge_colocated", "surf_available"]
+
+#: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
+METHODS = ("sift", "orb", "akaze", "surf")
+
+#: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
+MERGE_RADIUS_PX = 0.5
+
+
+def surf_available() -> bool:
+    """Whether this OpenCV build offers SURF (needs the non-free algorithms)."""
+    try:
+        cv2.xfeatures2d.SURF_create()
+    except (cv2.error, AttributeError):
+        return False
+    return True
+
+
+def _detector(method: str, max_features: int):
+    """The OpenCV detector for ``method``; raises :class:`InputError` for unknown/unavailable ones."""
+    if method == "sift":
+        return cv2.SIFT_create(nfeatures=max_features)
+    if method == "orb":
+        return cv2.ORB_create(nfeatures=max_features)
+    if method == "akaze":
+        # OpenCV 5 moved AKAZE to contrib (cv2.AKAZE_create no longer exists)
+        return cv2.xfeatures2d.AKAZE_create()
+    if method == "surf":
+        try:
+            return cv2.xfeatures2d.SURF_create()
+        except (cv2.error, AttributeError):
+            raise InputError(
+                "feature method 'surf' is not available: this OpenCV build has no non-free "
+                "algorithms (OPENCV_ENABLE_NONFREE); use one of sift, orb, akaze") from None
+    raise InputError(f"unknown feature method {method!r}; choose one of {', '.join(METHODS)}")
+
+
+def _gray(image_or_view) -> np.ndarray:
+    """``(H, W)`` uint8 gray image from a View or an image array; InputError on anything else."""
+    image = image_or_view.image if isinstance(image_or_view, View) else image_or_view
+    if not isinstance(image, np.ndarray):
+        raise InputError(f"expected an image array or a View, got {type(image).__name__}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
+        raise InputError(f"image of shape {image.shape} is not (H, W), (H, W, 3) or (H, W, 4)")
+    if image.shape[0] < 1 or image.shape[1] < 1:
+        raise InputError(f"image of shape {image.shape} is empty")
+    if image.dtype != np.uint8:
+        if np.issubdtype(image.dtype, np.floating) and image.size and float(np.nanmax(image)) <= 1.0:
+            image = np.clip(np.nan_to_num(image) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        elif np.issubdtype(image.dtype, np.number) and not np.issubdtype(image.dtype, np.complexfloating):
+            image = np.clip(np.nan_to_num(image.astype(np.float64)), 0, 255).astype(np.uint8)
+        else:
+            raise InputError(f"image dtype {image.dtype} is not a real number type (use uint8)")
+    if image.ndim == 3:
+        code = cv2.COLOR_RGB2GRAY if image.shape[2] == 3 else cv2.COLOR_RGBA2GRAY
+        image = cv2.cvtColor(image, code)
+    return np.ascontiguousarray(image)
+
+
+def merge_colocated(keypoints: np.ndarray, response: np.ndarray,
+                    radius: float = MERGE_RADIUS_PX) -> np.ndarray:
+    """Indices of the keypoints to keep after merging co-located ones.
+
+    Keypoints closer than ``radius`` pixels (transitively) form one group; of each group only
+    the one with the strongest detector response is kept.
+
+    Parameters
+    ----------
+    keypoints : ndarray, (N, 2) float
+    response : ndarray, (N,) float
+    radius : float
+        Pixels.
+
+    Returns
+    -------
+    keep : ndarray, (K,) int64, sorted ascending, ``K <= N``
+
+    Notes
+    -----
+    ``O(N log N)``: neighbour pairs from a k-d tree, groups from
+    ``scipy.sparse.csgraph.connected_components``.
+    """
+    n = int(keypoints.shape[0])
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    pairs = cKDTree(keypoints).query_pairs(radius, output_type="ndarray")
+    if pairs.size == 0:
+        return np.arange(n, dtype=np.int64)
+    adj = coo_matrix((np.ones(len(pairs), dtype=bool), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, group = connected_components(adj, directed=False)
+    # strongest first, then the first occurrence of each group is its strongest member
+    order = np.lexsort((np.arange(n), -np.asarray(response, dtype=np.float64)))
+    _, first = np.unique(group[order], return_index=True)
+    return np.sort(order[first]).astype(np.int64)
+
+
+def extract(image_or_view, method: str = "sift", max_features: int = 2000,
+            merge_radius: float = MERGE_RADIUS_PX) -> Features:
+    """Detect and describe local features in one image.
+
+    Parameters
+    ----------
+    image_or_view : View or ndarray, (H, W) / (H, W, 3) RGB / (H, W, 4) RGBA
+        uint8 preferred; float images in ``[0, 1]`` are scaled to ``[0, 255]``.
+    method : {"sift", "orb", "akaze", "surf"}
+        ``surf`` only where OpenCV has non-free algorithms.
+    max_features : int
+        Upper bound on the features returned (strongest kept). Co-located duplicates are merged
+        after detection, so fewer may be returned.
+    merge_radius : float
+        Keypoints closer than this many pixels are one feature (strongest kept); ``0`` disables.
+
+    Returns
+    -------
+    Features
+        ``keypoints`` (N, 2) float32, ``descriptors`` (N, D) float32 (SIFT/SURF) or uint8
+        (ORB/AKAZE), ``scales`` (N,) float32. A blank image gives ``N = 0`` with descriptors of
+        shape ``(0, D)``.
+
+    Raises
+    ------
+    InputError
+        Unknown or unavailable ``method``, bad ``max_features``, or an array that is not an image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> len(extract(np.zeros((240, 320), np.uint8)))
+    0
+    """
+    method = str(method).lower()
+    if isinstance(max_features, bool) or not isinstance(max_features, (int, np.integer)) or max_features < 1:
+        raise InputError(f"max_features must be a positive integer, got {max_features!r}")
+    max_features = int(max_features)
+    detector = _detector(method, max_features)
+    gray = _gray(image_or_view)
+    kps, desc = detector.detectAndCompute(gray, None)
+    dim = int(detector.descriptorSize())
+    dtype = np.uint8 if detector.descriptorType() == cv2.CV_8U else np.float32
+    if desc is None or len(kps) == 0:  # blank image: OpenCV returns ((), None)
+        return Features(np.zeros((0, 2), np.float32), np.zeros((0, dim), dtype),
+                        np.zeros(0, np.float32), method)
+    xy = cv2.KeyPoint_convert(kps).astype(np.float32).reshape(-1, 2)
+    response = np.fromiter((k.response for k in kps), dtype=np.float64, count=len(kps))
+    scales = np.fromiter((k.size for k in kps), dtype=np.float32, count=len(kps))
+    keep = (merge_colocated(xy, response, merge_radius) if merge_radius > 0
+            else np.arange(len(kps)))
+    if len(keep) > max_features:  # AKAZE has no feature budget of its own
+        strongest = np.argsort(-response[keep], kind="stable")[:max_features]
+        keep = np.sort(keep[strongest])
+    return Features(np.ascontiguousarray(xy[keep]), np.ascontiguousarray(desc[keep].astype(dtype, copy=False)),
+                    scales[keep], method)
+
+
+def extract_all(views, method: str = "sift", max_features: int = 2000,
+                merge_radius: float = MERGE_RADIUS_PX, workers: int = 2) -> list[Features]:
+    """:func:`extract` for every camera, ``list[Features]`` in camera order.
+
+    Parameters
+    ----------
+    views : sequence of View or image arrays, (n,)
+    method, max_features, merge_radius : see :func:`extract`
+    workers : int
+        Threads; OpenCV releases the GIL inside ``detectAndCompute``. ``1`` runs serially.
+    """
+    views = list(views)
+    _detector(str(method).lower(), 1)  # fail on a bad method before starting any thread
+    if workers <= 1 or len(views) <= 1:
+        return [extract(v, method, max_features, merge_radius) for v in views]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(lambda v: extract(v, method, max_features, merge_radius), views))

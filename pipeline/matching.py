@@ -1,0 +1,383 @@
+"""Local data association between communication neighbours (Aragüés et al., Sec. II and V-B).
+
+Each robot matches its features only with those of its neighbours in the communication graph
+``G_com`` (Sec. II: "the local data association is computed only between neighbours"); a pair
+of robots that cannot communicate never gets an association block (``W_ij = 0``, eq. 3).
+
+For every communication edge ``(i, j)``, ``i < j``:
+
+1. putative matches: mutual nearest neighbours in descriptor space with Lowe's ratio test,
+2. the epipolar constraint with RANSAC (Sec. V-B, ref. [13]) — here ``cv2.USAC_MAGSAC`` on the
+   essential matrix when both cameras are calibrated, on the fundamental matrix otherwise.
+
+The result is one one-to-one association ``A_ij`` per undirected edge (Assumption 2.2), stored
+once with ``i < j``; ``A_ji = A_ijᵀ`` is implied (Assumption 2.3), ``A_ii = I`` (Assumption 2.1)
+is added by :mod:`pipeline.association`.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.types import Features, PairMatches, View
+
+__all__ = ["check_comm_edges", "mutual_ratio_matches", "epipolar_filter", "sampson_error_px",
+           "match_pair", "match_edges", "MIN_MATCHES"]
+
+#: fewest matches an association may have; below this it is left empty (USAC needs >= 7 points)
+MIN_MATCHES = 8
+
+
+# --------------------------------------------------------------------------- graph checks
+
+
+def check_comm_edges(comm_edges, n_cameras: int) -> np.ndarray:
+    """Validate the communication graph and return its edges as ``(E, 2)`` int64, ``i < j``.
+
+    Parameters
+    ----------
+    comm_edges : array-like, (E, 2) int
+        Undirected edges ``(i, j)``, each listed once in either orientation.
+    n_cameras : int
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, each row sorted (``i < j``), in input order
+
+    Raises
+    ------
+    InputError
+        Wrong shape, non-integer ids, a camera id outside ``0..n_cameras-1``, a self-edge, or an
+        edge listed twice (``(i, j)`` and ``(j, i)`` count as the same edge).
+    """
+    try:
+        raw = np.asarray(comm_edges)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"communication edges are not an (E, 2) array of camera ids: {exc}") from None
+    if raw.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if raw.ndim != 2 or raw.shape[1] != 2:
+        raise InputError(f"communication edges must have shape (E, 2), got {raw.shape}")
+    if not np.issubdtype(raw.dtype, np.integer):
+        if not np.issubdtype(raw.dtype, np.floating) or not np.all(np.isfinite(raw)) \
+                or not np.all(raw == np.round(raw)):
+            raise InputError(f"communication edges must be integer camera ids, got dtype {raw.dtype}")
+    edges = raw.astype(np.int64)
+    bad = np.flatnonzero(((edges < 0) | (edges >= n_cameras)).any(axis=1))
+    if bad.size:
+        e = edges[bad[0]]
+        raise InputError(f"communication edge ({e[0]}, {e[1]}) names an unknown camera; "
+                         f"camera ids are 0..{n_cameras - 1}")
+    bad = np.flatnonzero(edges[:, 0] == edges[:, 1])
+    if bad.size:
+        e = edges[bad[0]]
+        raise InputError(f"communication edge ({e[0]}, {e[1]}) is a self-edge; "
+                         "a camera is not its own neighbour")
+    edges = np.sort(edges, axis=1)
+    key = edges[:, 0] * n_cameras + edges[:, 1]
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        e = edges[first[np.flatnonzero(counts > 1)[0]]]
+        raise InputError(f"communication edge ({e[0]}, {e[1]}) is listed more than once; "
+                         "list each undirected edge once")
+    return edges
+
+
+# --------------------------------------------------------------------------- putative matches
+
+
+def _distance_matrix(d_i: np.ndarray, d_j: np.ndarray) -> np.ndarray:
+    """Exact descriptor distances, ``(N_i, N_j)`` float32 (L2, or Hamming for uint8).
+
+    One matrix serves both matching directions, so the mutual test costs one product.
+    """
+    if d_i.dtype == np.uint8:
+        # Hamming: popcount(a xor b) = |a| + |b| - 2 a.b on the unpacked bits
+        a = np.unpackbits(d_i, axis=1).astype(np.float32)
+        b = np.unpackbits(d_j, axis=1).astype(np.float32)
+        dist = a.sum(1)[:, None] + b.sum(1)[None, :] - 2.0 * (a @ b.T)
+        np.maximum(dist, 0.0, out=dist)
+        return dist
+    a = d_i.astype(np.float32, copy=False)
+    b = d_j.astype(np.float32, copy=False)
+    sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    np.maximum(sq, 0.0, out=sq)
+    return np.sqrt(sq, out=sq)
+
+
+def _two_nearest(dist: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nearest index, nearest and second-nearest distance along ``axis`` of ``dist``."""
+    nn = dist.argmin(axis=axis)
+    idx = np.arange(dist.shape[1 - axis])
+    where = (idx, nn) if axis == 1 else (nn, idx)
+    d1 = dist[where].copy()
+    if dist.shape[axis] < 2:
+        return nn, d1, np.full_like(d1, np.inf)
+    dist[where] = np.inf
+    d2 = dist.min(axis=axis)
+    dist[where] = d1
+    return nn, d1, d2
+
+
+def mutual_ratio_matches(desc_i: np.ndarray, desc_j: np.ndarray, ratio: float = 0.8):
+    """Mutual nearest neighbours that pass Lowe's ratio test in both directions.
+
+    Parameters
+    ----------
+    desc_i : ndarray, (N_i, D) float32 or uint8
+    desc_j : ndarray, (N_j, D), same dtype and ``D``
+    ratio : float
+        Keep ``(r, s)`` when ``d1 / d2 < ratio`` both for ``r``'s neighbours in ``j`` and for
+        ``s``'s neighbours in ``i``.
+
+    Returns
+    -------
+    pairs : ndarray, (M, 2) int32 — ``(r, s)``, one-to-one by construction
+    link_ratio : ndarray, (M,) float32 — the larger of the two directional ratios
+
+    Notes
+    -----
+    Interpretation: the paper does not say which ratio test it used; taking it in both
+    directions makes ``A_ij`` independent of which robot of the pair computes it, so
+    ``A_ji = A_ijᵀ`` holds exactly. Exact brute force: one ``(N_i, N_j)`` distance matrix
+    (``O(N_i N_j D)``, a BLAS product), L2 for float descriptors and Hamming for binary ones.
+    A feature whose only candidate is one descriptor (``N = 1`` on the other side) has no
+    second neighbour and passes the ratio test with ratio 0.
+    """
+    n_i, n_j = len(desc_i), len(desc_j)
+    if n_i == 0 or n_j == 0:
+        return np.zeros((0, 2), np.int32), np.zeros(0, np.float32)
+    dist = _distance_matrix(desc_i, desc_j)
+    fwd, f1, f2 = _two_nearest(dist, axis=1)  # for each r: best s
+    bwd, b1, b2 = _two_nearest(dist, axis=0)  # for each s: best r
+    r = np.arange(n_i)
+    mutual = bwd[fwd] == r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rf = np.where(np.isinf(f2), 0.0, f1 / f2)
+        rb = np.where(np.isinf(b2), 0.0, b1 / b2)
+    rf = np.nan_to_num(rf, nan=1.0)  # 0/0: two identical best candidates -> ambiguous
+    rb = np.nan_to_num(rb, nan=1.0)
+    link_ratio = np.maximum(rf, rb[fwd])
+    keep = mutual & (link_ratio < ratio)
+    pairs = np.stack([r[keep], fwd[keep]], axis=1).astype(np.int32)
+    return pairs, link_ratio[keep].astype(np.float32)
+
+
+# --------------------------------------------------------------------------- epipolar geometry
+
+
+def sampson_error_px(F: np.ndarray, x_i: np.ndarray, x_j: np.ndarray) -> np.ndarray:
+    """Sampson error of correspondences ``x_i ↔ x_j`` under ``x_jᵀ F x_i = 0``, in pixels.
+
+    Parameters
+    ----------
+    F : ndarray, (3, 3) — fundamental matrix in pixel coordinates
+    x_i, x_j : ndarray, (M, 2) — pixels
+
+    Returns
+    -------
+    err : ndarray, (M,) float64 — ``sqrt`` of the Sampson distance (Hartley & Zisserman eq. 11.9),
+        the first-order approximation of the 2-view reprojection error.
+    """
+    h_i = np.c_[x_i, np.ones(len(x_i))]
+    h_j = np.c_[x_j, np.ones(len(x_j))]
+    Fx = h_i @ F.T          # rows F x_i
+    Ftx = h_j @ F           # rows F^T x_j
+    num = np.einsum("ij,ij->i", h_j, Fx) ** 2
+    den = Fx[:, 0] ** 2 + Fx[:, 1] ** 2 + Ftx[:, 0] ** 2 + Ftx[:, 1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.sqrt(num / den)
+    return np.where(den > 0, err, np.inf)
+
+
+def epipolar_filter(x_i: np.ndarray, x_j: np.ndarray, K_i: np.ndarray | None, K_j: np.ndarray | None,
+                    intrinsics_known: bool, threshold_px: float = 1.0, confidence: float = 0.999,
+                    max_iters: int = 1000, seed: int = 0):
+    """Epipolar RANSAC (``cv2.USAC_MAGSAC``) on putative correspondences.
+
+    Parameters
+    ----------
+    x_i, x_j : ndarray, (M, 2) float — pixels, ``M >= 7``
+    K_i, K_j : ndarray, (3, 3) or None
+    intrinsics_known : bool
+        ``True``: essential matrix on points normalised by ``K⁻¹`` (threshold divided by the
+        mean focal length); ``False``: fundamental matrix on pixels.
+    threshold_px : float
+        Inlier threshold in pixels.
+    confidence, max_iters : RANSAC stopping rule
+    seed : int
+        ``cv2.setRNGSeed`` before the call, so a run is repeatable.
+
+    Returns
+    -------
+    inliers : ndarray, (M,) bool
+    F : ndarray, (3, 3) or None — fundamental matrix in pixels (``K_j⁻ᵀ E K_i⁻¹`` for E)
+    reason : str — empty on success, else why no model was found
+    """
+    cv2.setRNGSeed(int(seed))
+    m = len(x_i)
+    p_i = np.ascontiguousarray(x_i, dtype=np.float64).reshape(-1, 1, 2)
+    p_j = np.ascontiguousarray(x_j, dtype=np.float64).reshape(-1, 1, 2)
+    try:
+        if intrinsics_known:
+            Ki_inv, Kj_inv = np.linalg.inv(K_i), np.linalg.inv(K_j)
+            f_mean = (K_i[0, 0] + K_i[1, 1] + K_j[0, 0] + K_j[1, 1]) / 4.0
+            n_i = cv2.undistortPoints(p_i, K_i, None)
+            n_j = cv2.undistortPoints(p_j, K_j, None)
+            model, mask = cv2.findEssentialMat(n_i, n_j, np.eye(3), cv2.USAC_MAGSAC,
+                                               confidence, threshold_px / f_mean, max_iters)
+            if model is not None and model.shape == (3, 3):
+                model = Kj_inv.T @ model @ Ki_inv
+        else:
+            model, mask = cv2.findFundamentalMat(p_i, p_j, cv2.USAC_MAGSAC, threshold_px,
+                                                 confidence, max_iters)
+    except cv2.error as exc:
+        first = str(exc).strip().splitlines()[-1] if str(exc).strip() else "cv2.error"
+        return np.zeros(m, bool), None, f"epipolar RANSAC failed ({first})"
+    except np.linalg.LinAlgError:
+        return np.zeros(m, bool), None, "intrinsics K are singular"
+    if model is None or model.shape != (3, 3) or mask is None:
+        return np.zeros(m, bool), None, "epipolar RANSAC found no model"
+    return mask.reshape(-1).astype(bool), model, ""
+
+
+# --------------------------------------------------------------------------- one edge, all edges
+
+
+def _empty(i: int, j: int, n_putative: int, reason: str) -> PairMatches:
+    return PairMatches(i, j, np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                       np.zeros(0, np.float32), n_putative=n_putative, reason=reason)
+
+
+def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
+               K_i: np.ndarray | None = None, K_j: np.ndarray | None = None,
+               intrinsics_known: bool = True, ratio: float = 0.8, threshold_px: float = 1.0,
+               min_matches: int = MIN_MATCHES, confidence: float = 0.999,
+               max_iters: int = 1000, seed: int = 0) -> PairMatches:
+    """The one-to-one association ``A_ij`` of one communication edge (Sec. V-B).
+
+    Parameters
+    ----------
+    i, j : int
+        Camera ids, ``i != j``; if ``i > j`` the result is returned for ``(j, i)``.
+    feats_i, feats_j : Features
+        Same descriptor kind.
+    K_i, K_j : ndarray, (3, 3) or None
+        Intrinsics; needed when ``intrinsics_known``.
+    intrinsics_known : bool
+        Essential matrix (``True``) or fundamental matrix (``False``).
+    ratio : float
+        Lowe ratio threshold in ``(0, 1]`` (see :func:`mutual_ratio_matches`).
+    threshold_px : float
+        Epipolar inlier threshold in pixels.
+    min_matches : int
+        Fewer putative matches or fewer epipolar inliers than this give an empty association
+        with ``reason`` set (a 7-point model fits any 7 points, so ``min_matches >= 8``).
+    confidence, max_iters, seed : RANSAC settings (see :func:`epipolar_filter`)
+
+    Returns
+    -------
+    PairMatches
+        ``pairs`` (M, 2) int32 ``(r, s)`` one-to-one, ``ratio`` (M,), ``epipolar_error`` (M,)
+        Sampson error in pixels under the RANSAC model, ``n_putative``, ``reason``.
+
+    Raises
+    ------
+    InputError
+        ``i == j``, mixed descriptor kinds, bad ``ratio``/``threshold_px``/``min_matches``, or
+        missing/ill-shaped intrinsics when ``intrinsics_known``.
+    """
+    i, j = int(i), int(j)
+    if i == j:
+        raise InputError(f"cannot match camera {i} with itself")
+    if i > j:
+        i, j, feats_i, feats_j, K_i, K_j = j, i, feats_j, feats_i, K_j, K_i
+    if not 0.0 < ratio <= 1.0:
+        raise InputError(f"ratio must be in (0, 1], got {ratio}")
+    if not threshold_px > 0:
+        raise InputError(f"epipolar threshold must be > 0 pixels, got {threshold_px}")
+    if min_matches < 8:
+        raise InputError(f"min_matches must be >= 8 (a 7-point model fits any 7 matches), got {min_matches}")
+    d_i, d_j = feats_i.descriptors, feats_j.descriptors
+    if len(feats_i) and len(feats_j) and (d_i.dtype != d_j.dtype or d_i.shape[1] != d_j.shape[1]):
+        raise InputError(f"cameras {i} and {j} have different descriptors "
+                         f"({feats_i.method} {d_i.dtype}x{d_i.shape[1]} vs "
+                         f"{feats_j.method} {d_j.dtype}x{d_j.shape[1]}); extract both with one method")
+    if intrinsics_known:
+        for cam, K in ((i, K_i), (j, K_j)):
+            if K is None or np.shape(K) != (3, 3) or not np.all(np.isfinite(K)):
+                raise InputError(f"camera {cam}: intrinsics K must be a finite 3x3 matrix "
+                                 f"(got {None if K is None else np.shape(K)}); "
+                                 "or pass intrinsics_known=False")
+        K_i, K_j = np.asarray(K_i, np.float64), np.asarray(K_j, np.float64)
+
+    pairs, link_ratio = mutual_ratio_matches(d_i, d_j, ratio)
+    n_put = len(pairs)
+    if n_put < min_matches:
+        return _empty(i, j, n_put, f"too few putative matches ({n_put} < {min_matches})")
+    x_i = feats_i.keypoints[pairs[:, 0]].astype(np.float64)
+    x_j = feats_j.keypoints[pairs[:, 1]].astype(np.float64)
+    inl, F, why = epipolar_filter(x_i, x_j, K_i, K_j, intrinsics_known, threshold_px,
+                                  confidence, max_iters, seed)
+    if why:
+        return _empty(i, j, n_put, why)
+    err = sampson_error_px(F, x_i, x_j)
+    n_in = int(inl.sum())
+    if n_in < min_matches:
+        return _empty(i, j, n_put, f"too few epipolar inliers ({n_in} < {min_matches})")
+    return PairMatches(i, j, pairs[inl], link_ratio[inl], err[inl].astype(np.float32),
+                       n_putative=n_put, reason="")
+
+
+def match_edges(features: list[Features], views: list[View], comm_edges, ratio: float = 0.8,
+                threshold_px: float = 1.0, min_matches: int = MIN_MATCHES,
+                confidence: float = 0.999, max_iters: int = 1000, seed: int = 0,
+                workers: int = 1) -> list[PairMatches]:
+    """Local associations for every communication edge, and only for those (Sec. II, V-B).
+
+    Parameters
+    ----------
+    features : list[Features], (n,)
+    views : list[View], (n,) — ``K`` and ``intrinsics_known`` of each camera
+    comm_edges : array-like, (E, 2) int — undirected communication graph (see
+        :func:`check_comm_edges`); a camera without neighbours simply gets no associations
+    ratio, threshold_px, min_matches, confidence, max_iters, seed : see :func:`match_pair`
+    workers : int
+        Threads over edges (NumPy's BLAS and OpenCV release the GIL).
+
+    Returns
+    -------
+    list[PairMatches], (E,)
+        One per edge in input order, each with ``i < j``. Build the links with
+        ``Links.from_matches``.
+
+    Raises
+    ------
+    InputError
+        Mismatched lengths of ``features`` and ``views``, a bad edge (unknown camera, self-edge,
+        duplicate), or any error of :func:`match_pair`.
+    """
+    n = len(features)
+    if len(views) != n:
+        raise InputError(f"{n} feature sets but {len(views)} views; give one of each per camera")
+    edges = check_comm_edges(comm_edges, n)
+    methods = {f.method for f in features}
+    if len(methods) > 1:
+        raise InputError(f"cameras use different feature methods {sorted(methods)}; use one")
+
+    def one(e):
+        i, j = int(e[0]), int(e[1])
+        # a fundamental matrix unless both cameras are calibrated
+        known = bool(views[i].intrinsics_known and views[j].intrinsics_known)
+        return match_pair(i, j, features[i], features[j], views[i].K, views[j].K, known,
+                          ratio=ratio, threshold_px=threshold_px, min_matches=min_matches,
+                          confidence=confidence, max_iters=max_iters, seed=seed)
+
+    if workers <= 1 or len(edges) <= 1:
+        return [one(e) for e in edges]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(one, edges))
