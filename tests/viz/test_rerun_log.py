@@ -1,0 +1,264 @@
+"""Tests of viz.rerun_log: write a recording from a hand-built RunRecord and read it back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from pipeline.types import Features, Links, RunRecord, View
+from viz.rerun_log import (
+    LINK_COLORS,
+    camera_entity,
+    count_strips,
+    entity_paths,
+    keypoint_status,
+    link_endpoints_3d,
+    log_run,
+    replay_steps,
+)
+
+W, H = 320, 240
+K = np.array([[300.0, 0.0, (W - 1) / 2], [0.0, 300.0, (H - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def look_at(centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cam_from_world (R, t) of a camera at ``centre`` looking at the origin, world z up."""
+    z = -centre / np.linalg.norm(centre)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ centre
+
+
+def project(R, t, X):
+    x = (R @ X.T).T + t
+    uv = (K @ x.T).T
+    return uv[:, :2] / uv[:, 2:3]
+
+
+# Links of the hand-built record: (cam_i, feat_i, cam_j, feat_j, status, reason, iteration, round,
+# conflictive_before). Features 10..13 form two conflictive sets, each holding two features of
+# camera 0 (Def. 2.4); resolution cuts one link of each; fusion cuts one more, non-conflictive.
+LINKS = [
+    *[(i, r, j, r, "kept", "", -1, -1, False) for i, j in ((0, 1), (0, 2), (1, 2))
+      for r in range(6) if not (i == 1 and r == 5)],
+    (1, 5, 2, 5, "deleted", "fusion-outlier", -1, 0, False),
+    (0, 10, 1, 10, "kept", "", -1, -1, True),
+    (1, 10, 2, 10, "kept", "", -1, -1, True),
+    (0, 11, 2, 10, "deleted", "resolution", 0, 2, True),
+    (0, 12, 1, 12, "deleted", "resolution", 0, 1, True),
+    (1, 12, 2, 12, "kept", "", -1, -1, True),
+    (0, 13, 2, 12, "kept", "", -1, -1, True),
+]
+N_DELETED = sum(row[4] == "deleted" for row in LINKS)
+
+
+def make_record(posed: bool = True, n_cams: int = 3, size=(W, H)) -> RunRecord:
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1, 1, size=(16, 3))
+    views, feats = [], []
+    for i in range(n_cams):
+        angle = 2 * np.pi * i / n_cams
+        R, t = look_at(np.array([5 * np.cos(angle), 5 * np.sin(angle), 1.0]))
+        image = rng.integers(0, 255, size=(size[1], size[0], 3), dtype=np.uint8)
+        kp = project(R, t, X).astype(np.float32)
+        views.append(View(name=f"cam{i:02d}", image=image, K=K.copy(),
+                          R=R if posed else None, t=t if posed else None))
+        feats.append(Features(kp, np.zeros((len(kp), 128), np.float32),
+                              np.ones(len(kp), np.float32), "sift"))
+    rows = [r for r in LINKS if r[0] < n_cams and r[2] < n_cams]
+    col = list(zip(*rows, strict=True))
+    links = Links(col[0], col[1], col[2], col[3])
+    L = len(links)
+    return RunRecord(
+        views=views, features=feats, links=links,
+        status=np.array(col[4]), reason=np.array(col[5]),
+        iteration=np.array(col[6]), round=np.array(col[7]),
+        conflictive_before=np.array(col[8]), truth=np.ones(L, np.int8),
+        points=X[:6], point_tracks=np.arange(6), gt_points=X[:6] + 0.01,
+        fused_points=None, report_markdown="| metric | value |\n|---|---|\n| deleted | 3 |",
+    )
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    record = make_record()
+    path = log_run(tmp_path_factory.mktemp("viz") / "recording.rrd", record,
+                   recording_name="test", image_plane_distance=0.5)
+    return path, record
+
+
+def _chunks(path, entity, static=None):
+    stream = RrdReader(path).store().stream().filter(content=entity)
+    return [c for c in stream.to_chunks() if c.entity_path == entity
+            and (static is None or c.is_static == static)]
+
+
+def test_entities_present(recording):
+    path, _ = recording
+    paths = set(entity_paths(path))
+    for cam in range(3):
+        e = "/" + camera_entity(cam)
+        assert {e, e + "/image", e + "/image/keypoints"} <= paths
+    assert {"/world", "/world/links/kept", "/world/links/deleted", "/world/links/replay",
+            "/world/points/triangulated", "/world/points/ground_truth", "/graph",
+            "/report", "/resolution/log"} <= paths
+    assert "/world/points/fused" not in paths  # fused_points is None
+
+
+def test_one_strip_per_link(recording):
+    path, record = recording
+    assert count_strips(path, "world/links/deleted") == N_DELETED == 3
+    assert count_strips(path, "world/links/kept") == len(record.links) - N_DELETED
+    assert count_strips(path, "/world/links/replay") == len(record.links)
+    assert count_strips(path, "world/links/absent") == 0
+
+
+def test_blueprint_saved(recording):
+    path, _ = recording
+    reader = RrdReader(path)
+    assert [b.kind for b in reader.blueprints()] == ["blueprint"]
+    assert len(reader.recordings()) == 1
+
+
+def test_camera_pose_is_child_from_parent(recording):
+    path, record = recording
+    (chunk,) = _chunks(path, "/world/cam_01", static=True)
+    batch = chunk.to_record_batch().to_pydict()
+    np.testing.assert_allclose(batch["Transform3D:translation"][0][0], record.views[1].t, rtol=1e-6)
+    # Rerun stores Mat3x3 column-major.
+    mat = np.array(batch["Transform3D:mat3x3"][0][0]).reshape(3, 3).T
+    np.testing.assert_allclose(mat, record.views[1].R, atol=1e-6)
+    relation = batch["Transform3D:relation"][0][0]
+    assert relation == rr.TransformRelation.ChildFromParent.value
+
+
+def test_strip_endpoints_lie_on_keypoint_rays():
+    record = make_record()
+    depth = 0.7
+    ends = link_endpoints_3d(record, depth)
+    assert ends.shape == (len(record.links), 2, 3)
+    lk = record.links
+    for side, (cam, feat) in enumerate(((lk.cam_i, lk.feat_i), (lk.cam_j, lk.feat_j))):
+        for k in range(len(lk)):
+            v = record.views[cam[k]]
+            x = v.R @ ends[k, side] + v.t
+            assert x[2] == pytest.approx(depth, rel=1e-5)
+            uv = (K @ x)[:2] / x[2]
+            np.testing.assert_allclose(uv, record.features[cam[k]].keypoints[feat[k]], atol=1e-3)
+
+
+def test_stored_strips_match_geometry(recording):
+    path, record = recording
+    (chunk,) = _chunks(path, "/world/links/deleted", static=True)
+    strips = np.array(chunk.to_record_batch().to_pydict()["LineStrips3D:strips"][-1])
+    deleted = record.status == "deleted"
+    np.testing.assert_allclose(strips, link_endpoints_3d(record, 0.5)[deleted], atol=1e-5)
+
+
+def test_replay_order_and_final_colours(recording):
+    path, record = recording
+    step, keys = replay_steps(record)
+    # Resolution before fusion; within resolution by (iteration, round).
+    assert keys == [("resolution", 0, 1), ("resolution", 0, 2), ("fusion-outlier", -1, 0)]
+    deleted = record.status == "deleted"
+    assert (step[~deleted] == len(keys) + 1).all()
+    assert step[(record.reason == "resolution") & (record.round == 1)].tolist() == [1]
+
+    rows = {}
+    for chunk in _chunks(path, "/world/links/replay", static=False):
+        d = chunk.to_record_batch().to_pydict()
+        for s, colors in zip(d["round"], d["LineStrips3D:colors"], strict=True):
+            rows[int(s)] = np.array(colors, dtype=np.uint32)
+    assert sorted(rows) == list(range(len(keys) + 2))
+
+    def rgba(rgb):
+        return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 255
+
+    assert (rows[0] == rgba(LINK_COLORS["candidate"])).all()
+    final = rows[len(keys) + 1]
+    assert (final[deleted] == rgba(LINK_COLORS["cut"])).all()
+    assert (final[~deleted] == rgba(LINK_COLORS["kept"])).all()
+    # After step 1 only the link cut in resolution round 1 is red.
+    assert (rows[1] == rgba(LINK_COLORS["cut"])).sum() == 1
+
+
+def test_graph_shows_conflictive_sets_and_cuts(recording):
+    path, record = recording
+    rows = {}
+    for chunk in _chunks(path, "/graph", static=False):
+        d = chunk.to_record_batch().to_pydict()
+        for k, s in enumerate(d["round"]):
+            rows[int(s)] = (d["GraphNodes:node_ids"][k], d["GraphEdges:edges"][k])
+    nodes0, edges0 = rows[0]
+    conf = record.conflictive_before
+    assert len(edges0) == conf.sum() == 6
+    assert {"0:10", "0:11", "2:10", "0:12", "0:13"} <= set(nodes0)
+    nodes_end, edges_end = rows[max(rows)]
+    n_cut = int((conf & (record.status == "deleted")).sum())
+    assert sum(n.startswith("cut:") for n in nodes_end) == n_cut == 2
+    assert len(edges_end) == conf.sum() + n_cut  # a cut link is drawn through its marker node
+
+
+def test_keypoint_status_hand_computed():
+    record = make_record()
+    status = keypoint_status(record)
+    m = len(record.features[0])
+    cam0 = status[:m]
+    assert cam0[0] == 1            # kept, not conflictive
+    assert cam0[10] == 2           # conflictive, its links kept
+    assert cam0[11] == 3           # endpoint of a link cut by resolution
+    assert cam0[12] == 3
+    assert cam0[14] == 0           # never linked
+    assert status[m + 5] == 3      # camera 1 feature 5: cut by fusion
+
+
+def test_keypoints_logged_with_status_classes(recording):
+    path, record = recording
+    (chunk,) = _chunks(path, "/world/cam_00/image/keypoints", static=True)
+    d = chunk.to_record_batch().to_pydict()
+    np.testing.assert_array_equal(d["Points2D:class_ids"][0],
+                                  keypoint_status(record)[:len(record.features[0])])
+    # Rerun puts the top-left pixel's centre at (0.5, 0.5), OpenCV at (0, 0).
+    np.testing.assert_allclose(d["Points2D:positions"][0],
+                               record.features[0].keypoints + 0.5, atol=1e-4)
+
+
+def test_real_images_without_poses(tmp_path):
+    record = make_record(posed=False)
+    for v in record.views:  # gray images, as a folder of real photos may hold
+        v.image = np.ascontiguousarray(v.image[..., 0])
+    path = log_run(tmp_path / "real.rrd", record)
+    paths = set(entity_paths(path))
+    assert {"/images/cam_00/image", "/images/cam_02/image/keypoints", "/graph", "/report"} <= paths
+    assert not any(p.startswith("/world/links") or p.startswith("/world/cam") for p in paths)
+    assert count_strips(path, "world/links/deleted") == 0
+    assert len(RrdReader(path).blueprints()) == 1
+
+
+def test_failed_write_leaves_no_file(tmp_path):
+    record = make_record()
+    record.status = record.status[:-1]
+    with pytest.raises(ValueError, match="status"):
+        log_run(tmp_path / "bad.rrd", record)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_six_vga_images_stay_small(tmp_path):
+    """6 images of 640x480 (smooth texture with detail, like a rendered scene) under 2 MB."""
+    record = make_record(n_cams=3, size=(640, 480))
+    rng = np.random.default_rng(1)
+    views, feats = [], []
+    for k in range(6):
+        v = record.views[k % 3]
+        yy, xx = np.mgrid[0:480, 0:640]
+        base = 128 + 60 * np.sin(xx / (9 + k)) * np.cos(yy / 13)
+        img = np.clip(base[..., None] + rng.normal(0, 12, (480, 640, 3)), 0, 255).astype(np.uint8)
+        views.append(View(f"cam{k:02d}", img, K, v.R, v.t))
+        feats.append(record.features[k % 3])
+    record.views, record.features = views, feats
+    path = log_run(tmp_path / "six.rrd", record)
+    assert path.stat().st_size < 2_000_000

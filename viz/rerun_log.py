@@ -1,0 +1,473 @@
+"""Rerun recording of one run: what matching produced, what the consistency stage cut, and why.
+
+Reads a :class:`pipeline.types.RunRecord` and writes a headless ``.rrd`` file; it never computes
+results and never spawns a viewer (``make view`` opens the file). The layout follows Rerun's
+structure-from-motion example:
+
+``world``                          axis convention, static
+``world/cam_XX``                   ``Transform3D`` from ``cam_from_world`` (``x_cam = R x_world + t``)
+``world/cam_XX/image``             ``Pinhole`` + JPEG image
+``world/cam_XX/image/keypoints``   ``Points2D``, class = keypoint status (see :data:`KEYPOINT_CLASSES`)
+``world/links/kept``               ``LineStrips3D``, one green strip per kept link
+``world/links/deleted``            ``LineStrips3D``, one red strip per deleted link
+``world/links/replay``             every link, coloured per step of the ``round`` timeline
+``world/points/{triangulated,ground_truth,fused}``  ``Points3D``
+``graph``                          ``GraphNodes``/``GraphEdges``: conflictive sets before resolution
+                                   (Aragüés et al., Def. 2.4), replayed on the ``round`` timeline
+``resolution/log``                 ``TextLog``: what each step of the replay cut
+``report``                         ``TextDocument`` (markdown)
+
+Cameras without a pose (real images, ``R`` or ``t`` is ``None``) are logged under
+``images/cam_XX`` instead of ``world/``, with their image and keypoints; the 3D entities that
+need poses (camera frusta, ``world/links/*``) are then left out — all of them as soon as one
+camera lacks a pose, since a link strip needs both of its cameras.
+
+The replay (Aragüés et al., Sec. IV, Alg. 1) runs on the ``round`` timeline. Its value is a
+*step*, not the paper's round number, because rounds restart at every detection/resolution
+iteration: step 0 shows every link as a candidate; step ``k`` is the ``k``-th distinct
+``(stage, iteration, round)`` in which links were cut, ordered with the resolution stage first
+and then by ``(iteration, round)``; the last step shows the kept links as kept.
+``resolution/log`` names the iteration and round of every step.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import os
+import uuid
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from pipeline.types import RunRecord
+
+__all__ = [
+    "KEYPOINT_CLASSES",
+    "LINK_COLORS",
+    "camera_entity",
+    "count_strips",
+    "entity_paths",
+    "keypoint_status",
+    "link_endpoints_3d",
+    "log_run",
+    "replay_steps",
+]
+
+#: Keypoint status classes, ``class_id -> (label, RGB)``; the annotation context at ``/`` maps
+#: the ``class_ids`` of every keypoint entity to these.
+KEYPOINT_CLASSES = {
+    0: ("other", (150, 150, 150)),
+    1: ("kept in a track", (40, 200, 60)),
+    2: ("conflictive before resolution", (255, 170, 0)),
+    3: ("cut (endpoint of a deleted link)", (230, 40, 40)),
+}
+#: Link colours (RGB): a candidate during the replay, kept, cut.
+LINK_COLORS = {"candidate": (190, 190, 190), "kept": (40, 200, 60), "cut": (230, 40, 40)}
+
+_LINE_RADIUS = rr.components.Radius.ui_points(1.0)
+_POINT_RADIUS = rr.components.Radius.ui_points(2.5)
+_POINT_COLORS = {"triangulated": (255, 255, 255), "ground_truth": (60, 140, 255),
+                 "fused": (230, 60, 230)}
+_CUT_MARKER = "×"
+
+
+def camera_entity(i: int, posed: bool = True) -> str:
+    """Entity path of camera ``i``: ``world/cam_XX`` if it has a pose, else ``images/cam_XX``."""
+    return f"{'world' if posed else 'images'}/cam_{i:02d}"
+
+
+def _offsets(record: RunRecord) -> np.ndarray:
+    counts = [len(f) for f in record.features]
+    return np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]).astype(np.int64)
+
+
+def _check_record(record: RunRecord) -> None:
+    n = len(record.views)
+    if len(record.features) != n:
+        raise ValueError(f"RunRecord: {n} views but {len(record.features)} feature sets")
+    L = len(record.links)
+    for name in ("status", "reason", "round", "iteration", "conflictive_before", "truth"):
+        got = np.asarray(getattr(record, name)).reshape(-1).shape[0]
+        if got != L:
+            raise ValueError(f"RunRecord.{name} has length {got}, expected one per link ({L})")
+    bad = set(np.unique(np.asarray(record.status, dtype=str)).tolist()) - {"kept", "deleted"}
+    if bad:
+        raise ValueError(f"RunRecord.status holds {sorted(bad)}; expected 'kept' or 'deleted'")
+
+
+def keypoint_status(record: RunRecord) -> np.ndarray:
+    """Status class of every feature, in global order ``offset[i] + r``.
+
+    Parameters
+    ----------
+    record : RunRecord
+
+    Returns
+    -------
+    ndarray, (m_sum,) uint8
+        Class ids of :data:`KEYPOINT_CLASSES`. Precedence, highest first: *cut* (endpoint of a
+        deleted link), *conflictive* (endpoint of a link in a conflictive set before
+        resolution, none of whose links was cut), *kept in a track* (endpoint of a kept link),
+        *other*.
+
+    Notes
+    -----
+    Every feature of a conflictive set ends either in a track or with all its links cut, so a
+    single "after" status would never show *conflictive*; the precedence above keeps the
+    three groups a reader wants to tell apart distinct.
+    """
+    off = _offsets(record)
+    lk = record.links
+    a = off[lk.cam_i] + lk.feat_i
+    b = off[lk.cam_j] + lk.feat_j
+    deleted = np.asarray(record.status) == "deleted"
+    conflictive = np.asarray(record.conflictive_before, dtype=bool)
+    status = np.zeros(int(off[-1]), dtype=np.uint8)
+    # Later assignments win: write the classes in increasing precedence.
+    for cls, mask in ((1, ~deleted), (2, conflictive), (3, deleted)):
+        status[a[mask]] = cls
+        status[b[mask]] = cls
+    return status
+
+
+def _has_pose(view) -> bool:
+    return view.R is not None and view.t is not None
+
+
+def _pinhole_K(K: np.ndarray) -> np.ndarray:
+    """Rerun's pixel grid puts the top-left pixel's centre at (0.5, 0.5), OpenCV's at (0, 0)."""
+    K = np.array(K, dtype=np.float64, copy=True)
+    K[0, 2] += 0.5
+    K[1, 2] += 0.5
+    return K
+
+
+def _default_plane_distance(views) -> float:
+    """A quarter of the median nearest-neighbour distance between camera centres (1 if unknown)."""
+    centres = np.stack([-np.asarray(v.R).T @ np.asarray(v.t) for v in views if _has_pose(v)])
+    if len(centres) < 2:
+        return 1.0
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    nn = np.median(d.min(axis=1))
+    return float(0.25 * nn) if np.isfinite(nn) and nn > 0 else 1.0
+
+
+def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
+    """Both keypoints of every link back-projected to depth ``depth`` in their cameras.
+
+    Parameters
+    ----------
+    record : RunRecord
+        Every view must have a pose.
+    depth : float
+        z-depth in the camera frame (the pinhole image-plane distance, so a strip ends on the
+        keypoint drawn on the image plane).
+
+    Returns
+    -------
+    ndarray, (L, 2, 3) float32
+        World coordinates, ``X = R^T (depth K^-1 [u, v, 1]^T - t)`` for each endpoint.
+    """
+    views = record.views
+    if not all(_has_pose(v) for v in views):
+        raise ValueError("link_endpoints_3d needs a pose (R, t) for every view")
+    kp = np.concatenate([np.asarray(f.keypoints, dtype=np.float64).reshape(-1, 2)
+                         for f in record.features] + [np.zeros((0, 2))])
+    off = _offsets(record)
+    K_inv = np.stack([np.linalg.inv(np.asarray(v.K, dtype=np.float64)) for v in views])
+    R = np.stack([np.asarray(v.R, dtype=np.float64) for v in views])
+    t = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) for v in views])
+    lk = record.links
+    ends = []
+    for cam, feat in ((lk.cam_i, lk.feat_i), (lk.cam_j, lk.feat_j)):
+        uv1 = np.concatenate([kp[off[cam] + feat], np.ones((len(cam), 1))], axis=1)
+        ray = np.einsum("nij,nj->ni", K_inv[cam], uv1)
+        x_cam = depth * ray / ray[:, 2:3]
+        ends.append(np.einsum("nji,nj->ni", R[cam], x_cam - t[cam]))  # R^T (x_cam - t)
+    return np.stack(ends, axis=1).astype(np.float32)
+
+
+def replay_steps(record: RunRecord) -> tuple[np.ndarray, list[tuple[str, int, int]]]:
+    """Step of the ``round`` timeline at which each link is cut.
+
+    Returns
+    -------
+    step : ndarray, (L,) int64
+        ``1..S`` for deleted links, ``S + 1`` for kept links (shown as kept at the last step).
+    keys : list of (stage, iteration, round), length S
+        What step ``k`` replays (``keys[k - 1]``): resolution first, then any later stage
+        (e.g. ``fusion-outlier``) in name order; within a stage by ``(iteration, round)``.
+    """
+    deleted = np.flatnonzero(np.asarray(record.status) == "deleted")
+    reason = np.asarray(record.reason, dtype=str).reshape(-1)
+    it = np.asarray(record.iteration, dtype=np.int64).reshape(-1)
+    rd = np.asarray(record.round, dtype=np.int64).reshape(-1)
+    stages = sorted(set(reason[deleted].tolist()), key=lambda s: (s != "resolution", s))
+    stage_rank = np.array([stages.index(s) for s in reason[deleted]], dtype=np.int64)
+    triples = np.stack([stage_rank, it[deleted], rd[deleted]], axis=1).reshape(-1, 3)
+    uniq, inv = np.unique(triples, axis=0, return_inverse=True)
+    step = np.full(len(record.links), len(uniq) + 1, dtype=np.int64)
+    step[deleted] = inv.reshape(-1) + 1
+    keys = [(stages[s], int(i), int(r)) for s, i, r in uniq]
+    return step, keys
+
+
+def _node_ids(cam: np.ndarray, feat: np.ndarray) -> np.ndarray:
+    return np.char.add(np.char.add(cam.astype(str), ":"), feat.astype(str))
+
+
+def _camera_palette(n: int) -> np.ndarray:
+    """``n`` well-separated RGB colours (golden-ratio hue steps), (n, 3) uint8."""
+    hues = (np.arange(n) * 0.618033988749895) % 1.0
+    return (np.array([colorsys.hsv_to_rgb(h, 0.75, 0.95) for h in hues]).reshape(-1, 3)
+            * 255).astype(np.uint8)
+
+
+def _log_graph(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray) -> None:
+    """Conflictive sets before resolution as a graph, replayed step by step.
+
+    ``GraphEdges`` carries no colour in Rerun 0.41, so a cut link is drawn as two edges through
+    a red ``×`` node; nodes are coloured by camera, so a conflict (Def. 2.4) shows as two nodes
+    of one colour in one component.
+    """
+    conf = np.flatnonzero(np.asarray(record.conflictive_before, dtype=bool))
+    if conf.size == 0:
+        return
+    lk = record.links
+    a = _node_ids(lk.cam_i[conf], lk.feat_i[conf])
+    b = _node_ids(lk.cam_j[conf], lk.feat_j[conf])
+    feat_ids, first = np.unique(np.concatenate([a, b]), return_index=True)
+    feat_cams = np.concatenate([lk.cam_i[conf], lk.cam_j[conf]])[first]
+    feat_colors = _camera_palette(len(record.views))[feat_cams]
+    markers = np.char.add("cut:", conf.astype(str))
+    s_conf = step[conf]
+    deleted = np.asarray(record.status)[conf] == "deleted"
+    for s in [0, *np.unique(s_conf[deleted]).tolist()]:
+        cut = deleted & (s_conf <= s)
+        edges = np.concatenate([
+            np.stack([a[~cut], b[~cut]], axis=1),
+            np.stack([a[cut], markers[cut]], axis=1),
+            np.stack([markers[cut], b[cut]], axis=1),
+        ])
+        n_cut = int(cut.sum())
+        rec.set_time("round", sequence=int(s))
+        rec.log("graph",
+                rr.GraphNodes(
+                    np.concatenate([feat_ids, markers[cut]]),
+                    labels=np.concatenate([feat_ids, np.full(n_cut, _CUT_MARKER)]),
+                    colors=np.concatenate([feat_colors,
+                                           np.tile(LINK_COLORS["cut"], (n_cut, 1))]).astype(np.uint8),
+                    show_labels=True),
+                rr.GraphEdges(edges.tolist(), graph_type="undirected"))
+
+
+def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
+               keys: list, depth: float) -> None:
+    ends = link_endpoints_3d(record, depth)
+    deleted = np.asarray(record.status) == "deleted"
+    reason = np.asarray(record.reason, dtype=str)
+    labels = np.char.add(np.char.add(_node_ids(record.links.cam_i, record.links.feat_i), "–"),
+                         _node_ids(record.links.cam_j, record.links.feat_j))
+    rec.log("world/links/kept",
+            rr.LineStrips3D(ends[~deleted], colors=LINK_COLORS["kept"], radii=_LINE_RADIUS,
+                            labels=labels[~deleted], show_labels=False), static=True)
+    del_labels = np.char.add(np.char.add(labels[deleted], " cut by "), reason[deleted])
+    rec.log("world/links/deleted",
+            rr.LineStrips3D(ends[deleted], colors=LINK_COLORS["cut"], radii=_LINE_RADIUS,
+                            labels=del_labels, show_labels=False), static=True)
+    # Replay: geometry once (static), colours per step (temporal).
+    rec.log("world/links/replay",
+            rr.LineStrips3D(ends, radii=_LINE_RADIUS, labels=labels, show_labels=False),
+            static=True)
+    palette = np.array([LINK_COLORS["candidate"], LINK_COLORS["cut"], LINK_COLORS["kept"]],
+                       dtype=np.uint8)
+    for s in range(len(keys) + 2):
+        state = np.where(step <= s, np.where(deleted, 1, 2), 0)
+        rec.set_time("round", sequence=s)
+        rec.log("world/links/replay", rr.LineStrips3D.from_fields(colors=palette[state]))
+
+
+def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_kept: int) -> None:
+    rec.set_time("round", sequence=0)
+    rec.log("resolution/log", rr.TextLog(f"step 0: {len(step)} links from matching, all candidates"))
+    counts = np.bincount(step, minlength=len(keys) + 2)
+    for k, (stage, iteration, rnd) in enumerate(keys, start=1):
+        rec.set_time("round", sequence=k)
+        rec.log("resolution/log",
+                rr.TextLog(f"step {k}: {stage}, iteration {iteration}, round {rnd}: "
+                           f"{counts[k]} links cut"))
+    rec.set_time("round", sequence=len(keys) + 1)
+    rec.log("resolution/log", rr.TextLog(f"step {len(keys) + 1}: {n_kept} links kept"))
+
+
+def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
+               max_image_views: int) -> rrb.Blueprint:
+    image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p)}/image", name=v.name)
+                   for i, (v, p) in enumerate(zip(record.views, posed, strict=True))][:max_image_views]
+    side = [rrb.Grid(*image_views)] if image_views else []
+    side.append(rrb.Tabs(
+        rrb.GraphView(origin="graph", name="Conflictive sets before resolution"),
+        rrb.TextDocumentView(origin="report", name="Report"),
+        rrb.TextLogView(origin="resolution", name="Resolution steps"),
+    ))
+    if all_posed:
+        main = rrb.Tabs(
+            rrb.Spatial3DView(origin="world", name="Kept (green) and cut (red) links",
+                              contents=["+ $origin/**", "- $origin/links/replay"]),
+            rrb.Spatial3DView(origin="world", name="Resolution replay (round timeline)",
+                              contents=["+ $origin/**", "- $origin/links/kept",
+                                        "- $origin/links/deleted"]),
+        )
+        layout = rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2])
+    else:
+        layout = rrb.Vertical(*side)
+    return rrb.Blueprint(layout, rrb.TimePanel(timeline="round"), collapse_panels=False)
+
+
+def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
+            recording_name: str | None = None, *, image_plane_distance: float | None = None,
+            world_axes=rr.ViewCoordinates.RIGHT_HAND_Z_UP, jpeg_quality: int = 85,
+            max_image_views: int = 4) -> Path:
+    """Write the Rerun recording of one run to ``path`` (headless; no viewer is spawned).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output ``.rrd`` file. Written to a temporary sibling first, then renamed, so a failure
+        leaves no half-written recording.
+    record : RunRecord
+        What the run produced; only read.
+    application_id : str
+        Rerun application id (groups recordings in the viewer).
+    recording_name : str, optional
+        Name shown for the recording in the viewer.
+    image_plane_distance : float, optional
+        Depth of the drawn image planes, and of the link strip endpoints, in world units.
+        Default: a quarter of the median nearest-neighbour distance between camera centres.
+    world_axes : rr.ViewCoordinates
+        Axis convention of the world frame, logged once as static on ``world``.
+    jpeg_quality : int
+        JPEG quality of the logged images (6 images of 640x480 at 85 take about 0.5–1 MB).
+    max_image_views : int
+        How many cameras get a 2D view in the default blueprint.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Notes
+    -----
+    See the module docstring for the entity layout. ``world/links/deleted`` holds exactly one
+    strip per deleted link and ``world/links/kept`` one per kept link (:func:`count_strips`
+    reads them back); both are absent when a camera has no pose.
+    """
+    _check_record(record)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
+
+    posed = [_has_pose(v) for v in record.views]
+    all_posed = bool(posed) and all(posed)
+    depth = float(image_plane_distance) if image_plane_distance else (
+        _default_plane_distance(record.views) if any(posed) else 1.0)
+    step, keys = replay_steps(record)
+    status = keypoint_status(record)
+    off = _offsets(record)
+
+    rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
+    try:
+        rec.save(tmp, default_blueprint=_blueprint(record, posed, all_posed, max_image_views))
+        rec.set_log_time_enabled(False)
+        if recording_name:
+            rec.send_recording_name(recording_name)
+
+        rec.log("/", rr.AnnotationContext([(k, lab, rgb) for k, (lab, rgb)
+                                           in KEYPOINT_CLASSES.items()]), static=True)
+        rec.log("world", world_axes, static=True)
+
+        for i, (view, feats) in enumerate(zip(record.views, record.features, strict=True)):
+            cam = camera_entity(i, posed[i])
+            w, h = view.size
+            if posed[i]:
+                rec.log(cam, rr.Transform3D(mat3x3=np.asarray(view.R, dtype=np.float64),
+                                            translation=np.asarray(view.t, dtype=np.float64).reshape(3),
+                                            relation=rr.TransformRelation.ChildFromParent),
+                        static=True)
+            rec.log(f"{cam}/image",
+                    rr.Pinhole(image_from_camera=_pinhole_K(view.K), resolution=[w, h],
+                               camera_xyz=rr.ViewCoordinates.RDF,
+                               image_plane_distance=depth),
+                    static=True)
+            image = np.ascontiguousarray(view.image)
+            rec.log(f"{cam}/image", rr.Image(image).compress(jpeg_quality=jpeg_quality),
+                    static=True)
+            kp = np.asarray(feats.keypoints, dtype=np.float32).reshape(-1, 2) + 0.5
+            rec.log(f"{cam}/image/keypoints",
+                    rr.Points2D(kp, class_ids=status[off[i]:off[i + 1]],
+                                radii=rr.components.Radius.ui_points(1.5)),
+                    static=True)
+
+        if all_posed and len(record.links):
+            _log_links(rec, record, step, keys, depth)
+
+        points = {"triangulated": record.points, "ground_truth": record.gt_points,
+                  "fused": record.fused_points}
+        for name, pts in points.items():
+            if pts is None:
+                continue
+            pts = np.asarray(pts, dtype=np.float32).reshape(-1, 3)
+            labels = None
+            if name == "triangulated" and record.point_tracks is not None \
+                    and len(record.point_tracks) == len(pts):
+                labels = np.char.add("track ", np.asarray(record.point_tracks).astype(str))
+            rec.log(f"world/points/{name}",
+                    rr.Points3D(pts, colors=_POINT_COLORS[name], radii=_POINT_RADIUS,
+                                labels=labels, show_labels=False if labels is not None else None),
+                    static=True)
+
+        _log_graph(rec, record, step)
+        _log_replay_text(rec, step, keys, int((np.asarray(record.status) == "kept").sum()))
+        rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",
+                                          media_type=rr.MediaType.MARKDOWN), static=True)
+        rec.disconnect()  # writes the footer; the file does not read back without it
+        os.replace(tmp, path)
+    except BaseException:
+        rec.disconnect()
+        if tmp.exists():
+            tmp.unlink()
+        raise
+    return path
+
+
+def entity_paths(path: str | os.PathLike) -> list[str]:
+    """Entity paths stored in a recording, e.g. ``['/world', '/world/links/kept', …]``."""
+    from rerun.chunk import RrdReader
+
+    return list(RrdReader(Path(path)).store().schema().entity_paths())
+
+
+def count_strips(path: str | os.PathLike, entity: str) -> int:
+    """Number of line strips an entity holds in a recording (0 if the entity is absent).
+
+    Reads the static ``LineStrips3D``/``LineStrips2D`` row of ``entity`` (the last one if it was
+    logged more than once). Used to check ``world/links/deleted`` against ``report.json``.
+    """
+    from rerun.chunk import RrdReader
+
+    entity = "/" + entity.strip("/")
+    chunks = RrdReader(Path(path)).store().stream().filter(content=entity, is_static=True).to_chunks()
+    count = 0
+    for chunk in chunks:
+        if chunk.entity_path != entity:
+            continue
+        batch = chunk.to_record_batch()
+        cols = [c for c in batch.schema.names if c.endswith(":strips")]
+        for c in cols:
+            rows = batch.column(c).to_pylist()
+            if rows:
+                count = len(rows[-1] or [])
+    return count
