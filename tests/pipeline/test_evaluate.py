@@ -1,0 +1,79 @@
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.evaluate import link_counts, link_truth, missing_links, missing_links_per_edge
+from pipeline.types import Features, Links
+
+
+def feats(xy):
+    xy = np.asarray(xy, np.float32).reshape(-1, 2)
+    return Features(xy, np.zeros((len(xy), 128), np.float32), np.ones(len(xy), np.float32), "sift")
+
+
+@pytest.fixture
+def identity_truth(monkeypatch):
+    """Ground truth of cameras that all see the same image: same pixel = same point."""
+
+    def good_links(formation, i, xy_i, j, xy_j, tol_px=2.0):
+        return np.linalg.norm(np.asarray(xy_i) - np.asarray(xy_j), axis=1) <= tol_px
+
+    def true_pairs(formation, i, xy_i, j, xy_j, tol_px=2.0):
+        d = np.linalg.norm(np.asarray(xy_i)[:, None] - np.asarray(xy_j)[None], axis=2)
+        r, s = np.nonzero(d <= tol_px)
+        return np.stack([r, s], axis=1)
+
+    fake = types.ModuleType("data_synth.ground_truth")
+    fake.good_links, fake.true_pairs = good_links, true_pairs
+    monkeypatch.setitem(sys.modules, "data_synth.ground_truth", fake)
+    return types.SimpleNamespace(views=[None, None, None])
+
+
+def three_cameras():
+    f = [feats([[0, 0], [10, 10], [20, 20]]), feats([[0, 1], [20, 20], [50, 50]]),
+         feats([[10, 10], [0, 0]])]
+    # 0-1: (0,0) good, (1,2) spurious; 0-2: (0,1) good; 1-2: (1,0) spurious
+    links = Links([0, 0, 0, 1], [0, 1, 0, 1], [1, 1, 2, 2], [0, 2, 1, 0])
+    return f, links
+
+
+def test_link_truth_hand_computed(identity_truth):
+    f, links = three_cameras()
+    np.testing.assert_array_equal(link_truth(identity_truth, f, links), [True, False, True, False])
+    np.testing.assert_array_equal(link_truth(identity_truth, f, links, tol_px=0.5),
+                                  [False, False, True, False])
+
+
+def test_missing_links_only_on_comm_edges(identity_truth):
+    f, links = three_cameras()
+    # true pairs: 0-1 {(0,0), (2,1)}; 0-2 {(0,1), (1,0)}; 1-2 {(0,1)}
+    np.testing.assert_array_equal(
+        missing_links_per_edge(identity_truth, f, links, [[0, 1], [2, 0], [1, 2]]), [1, 1, 1])
+    assert missing_links(identity_truth, f, links, [[0, 1]]) == 1
+    assert missing_links(identity_truth, f, links, []) == 0
+
+
+def test_link_counts(identity_truth):
+    f, links = three_cameras()
+    c = link_counts(identity_truth, f, links, [[0, 1], [0, 2], [1, 2]])
+    assert c == {"good_links": 2, "spurious_links": 2, "missing_links": 3, "precision": 0.5}
+
+
+def test_no_links(identity_truth):
+    f, _ = three_cameras()
+    empty = Links.from_matches([])
+    assert link_truth(identity_truth, f, empty).shape == (0,)
+    assert missing_links(identity_truth, f, empty, [[0, 1]]) == 2
+
+
+def test_bad_inputs(identity_truth):
+    f, links = three_cameras()
+    with pytest.raises(InputError, match="2 feature sets for a formation of 3"):
+        link_truth(identity_truth, f[:2], links)
+    with pytest.raises(InputError, match="features"):
+        link_truth(identity_truth, f, Links([0], [7], [1], [0]))
+    with pytest.raises(InputError, match="unknown camera"):
+        missing_links(identity_truth, f, links, [[0, 3]])
