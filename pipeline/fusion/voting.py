@@ -1,0 +1,382 @@
+"""Robust distributed fusion by voting (Montijano, Martínez, Sagüés, Secs. II–IV).
+
+Three estimators of an attribute ``θ ∈ R^d`` observed by ``N`` robots, each with a
+measurement ``x_i`` and covariance ``Λ_i``; all run on the consensus blocks of
+:mod:`pipeline.fusion.consensus` (neighbour-only messages, counted) and are vectorized over
+hypotheses and over many independent problems (trials or landmarks) at once:
+
+* :func:`distributed_ml` — the non-robust ML of all observations (eqs. 1–3);
+* :func:`static_voting` — Sec. IV-A: hypotheses by max-c consensus (eqs. 6–7) and ML
+  consensus on the chosen subsets (eqs. 4–5), chi-square votes (eq. 8) with the covariance
+  of eq. (9), average consensus of the votes, winner ``h* = argmax_h v_i^h``, final ML of the
+  robots that voted for ``h*``;
+* :func:`dynamic_voting` — Sec. IV-B: hypotheses and votes in one consensus, eqs. (10)–(14);
+  a robot re-tests its observation against its current estimate every round and adds or
+  withdraws its ``(Λ_i⁻¹, Λ_i⁻¹ x_i, 1)`` when its opinion changes.
+
+Shapes: ``B`` problems, ``N`` robots per problem, ``K`` hypotheses, ``d`` dimensions. Flat
+node ``b * N + i`` is robot ``i`` of problem ``b`` (see the consensus module).
+
+Readings of the text (where the paper leaves a choice open)
+-----------------------------------------------------------
+* **The chi-square gate** (eqs. 8, 12, 13). Eq. (12) and Condition 4 define ``d`` as the
+  Mahalanobis *distance* (a square root) and eqs. (8) and (13) compare it with the chi-square
+  *quantile* ``χ²_{d,p}``. ``gate="distance"`` follows that literally
+  (``sqrt(r' Λ⁻¹ r) <= χ²_{d,p}``); ``gate="squared"`` is the usual chi-square test
+  (``r' Λ⁻¹ r <= χ²_{d,p}``). ``p`` is not given in the paper.
+* **Singular P** (Sec. IV-B): a robot whose ``P_i(t)`` is singular votes no. An indefinite
+  ``P_i``, which eq. (14) can create transiently when a robot withdraws, is treated the same
+  way (see :func:`pipeline.fusion.consensus.solve_information`).
+* **Eq. (9) for a member of a one-robot hypothesis** (``c = 1``): then ``θ_ML^h = x_i`` and
+  ``Λ_ML^h = Λ_i``, so eq. (9) gives the zero matrix — the residual ``x_i − θ_ML^h`` is
+  exactly zero. A member whose eq.-(9) covariance is not positive definite votes yes.
+* **Λ_ML^h in eq. (9)** is the robot's local ``(1/N) P_i⁻¹(t)`` after the hypothesis rounds
+  (Sec. III: ``Λ_ML^h = (1/N) lim P_i⁻¹``); robots know ``N``.
+* **Winner and inliers**: each robot picks ``h* = argmax_h v_i^h`` from its own vote vector
+  (ties: lowest index) and counts itself an inlier iff its own current vote for ``h*`` is
+  yes (static: its eq.-(8) vote; dynamic: its gate at the last round).
+* **Initial opinion** (eq. 13 at ``t = 0``): a member of ``V_h`` starts voting (eq. 10), so
+  its previous opinion is "yes"; every other robot's is "no".
+* **Rounds**: max-c consensus runs ``maxc_rounds`` rounds before the consensus; they are
+  counted apart (``maxc_stats``), as the paper's "iterations" count only the consensus.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from pipeline.errors import InputError
+from pipeline.fusion.consensus import (
+    CommStats,
+    as_topology,
+    average_consensus,
+    bundle_bytes,
+    hypothesis_members,
+    information_form,
+    max_c_consensus,
+    ml_consensus,
+    solve_information,
+)
+
+__all__ = [
+    "VotingResult",
+    "gate_threshold",
+    "distributed_ml",
+    "static_voting",
+    "dynamic_voting",
+    "choose_hypotheses",
+]
+
+GATES = ("distance", "squared")
+
+
+@dataclass
+class VotingResult:
+    """Each robot's final view after a fusion run.
+
+    Attributes
+    ----------
+    theta : ndarray, (B, N, d)
+        Robot's estimate of ``θ`` (for its winning hypothesis); 0 where ``valid`` is false.
+    valid : ndarray, (B, N) bool
+        The robot's ``P`` is invertible, so ``theta`` is defined.
+    inlier : ndarray, (B, N) bool
+        The robot's observation is part of its final estimate.
+    winner : ndarray, (B, N) int
+        Hypothesis ``h*`` the robot selected (0 for the non-robust ML).
+    votes : ndarray, (B, N, K)
+        Final vote vectors ``v_i`` (the fraction of robots voting each hypothesis).
+    members : ndarray, (B, N, K) bool
+        ``V_h`` of eq. (7).
+    stats : CommStats
+        Consensus rounds, messages and bytes (hypotheses, votes, final ML).
+    maxc_stats : CommStats
+        Max-c consensus (eq. 6) that chose the members.
+    history : dict or None
+        With ``history=True``: ``theta`` (T+1, B, N, K, d), ``yes`` (T+1, B, N, K) bool,
+        ``v`` (T+1, B, N, K).
+    """
+
+    theta: np.ndarray
+    valid: np.ndarray
+    inlier: np.ndarray
+    winner: np.ndarray
+    votes: np.ndarray
+    members: np.ndarray
+    stats: CommStats
+    maxc_stats: CommStats = field(default_factory=CommStats)
+    history: dict | None = None
+
+
+def gate_threshold(d: int, p: float, gate: str) -> float:
+    """Threshold on the *squared* Mahalanobis distance for the chi-square gate.
+
+    ``gate="squared"``: ``χ²_{d,p}``; ``gate="distance"`` (literal eqs. 8/12):
+    ``(χ²_{d,p})²``, since ``sqrt(r) <= χ²_{d,p}`` iff ``r <= (χ²_{d,p})²``.
+    """
+    if gate not in GATES:
+        raise InputError(f"gate must be one of {GATES}, got {gate!r}")
+    if not 0 < p < 1:
+        raise InputError(f"chi-square confidence p must be in (0, 1), got {p}")
+    q = float(chi2.ppf(p, d))
+    return q * q if gate == "distance" else q
+
+
+def _prepare(x, cov, observed):
+    """Validate and reshape to ``(B, N, d)``, ``(B, N, d, d)``, ``(B, N)``."""
+    x = np.asarray(x, dtype=np.float64)
+    cov = np.asarray(cov, dtype=np.float64)
+    if x.ndim == 2:
+        x = x[None]
+        cov = cov[None] if cov.ndim == 3 else cov
+        if observed is not None:
+            observed = np.asarray(observed)[None]
+    if x.ndim != 3:
+        raise InputError(f"x must have shape (N, d) or (B, N, d), got {x.shape}")
+    B, N, d = x.shape
+    if cov.shape != (B, N, d, d):
+        raise InputError(f"cov must have shape {(B, N, d, d)} to match x, got {cov.shape}")
+    obs = np.ones((B, N), dtype=bool) if observed is None else np.asarray(observed, dtype=bool)
+    if obs.shape != (B, N):
+        raise InputError(f"observed must have shape {(B, N)}, got {obs.shape}")
+    x = np.where(obs[..., None], x, 0.0)
+    cov = np.where(obs[..., None, None], cov, np.eye(d))
+    if not (np.isfinite(x).all() and np.isfinite(cov).all()):
+        raise InputError("x and cov must be finite for every observing robot")
+    if not np.allclose(cov, np.swapaxes(cov, -1, -2), rtol=1e-8, atol=1e-12):
+        raise InputError("cov must be symmetric")
+    ev = np.linalg.eigvalsh(cov)
+    if (ev[..., 0] <= 0).any():
+        b, i = np.argwhere(ev[..., 0] <= 0)[0]
+        raise InputError(f"cov of robot {i} (problem {b}) is not positive definite "
+                         f"(smallest eigenvalue {ev[b, i, 0]:.3g}); every observation needs "
+                         "an invertible covariance")
+    return x, cov, obs
+
+
+def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int | None = None):
+    """``V_h`` for ``K`` hypotheses by max-c consensus on random draws (eqs. 6–7).
+
+    Parameters
+    ----------
+    observed : ndarray, (B, N) bool — only observing robots may be drawn
+    topology : Topology or (E, 2) edges
+    K, c : int
+    rng : numpy Generator or seed
+    maxc_rounds : int or None — default ``N − 1``, a bound on the diameter of a connected
+        graph of ``N`` robots
+
+    Returns
+    -------
+    members : ndarray, (B, N, K) bool;  stats : CommStats
+    """
+    obs = np.asarray(observed, dtype=bool)
+    B, N = obs.shape
+    rng = np.random.default_rng(rng)
+    draws = 1.0 - rng.random((B * N, K))  # h_i in (0, 1]
+    draws[~obs.reshape(-1)] = -np.inf
+    topo = as_topology(topology, N, B)
+    rounds = N - 1 if maxc_rounds is None else int(maxc_rounds)
+    sets, stats = max_c_consensus(draws, topo, c, rounds)
+    return hypothesis_members(draws, sets).reshape(B, N, K), stats
+
+
+def distributed_ml(x, cov, topology, rounds: int = 100, *, observed=None,
+                   history: bool = False) -> VotingResult:
+    """Non-robust distributed ML of all observations (eqs. 1–3; the paper's ref. [12]).
+
+    Parameters
+    ----------
+    x : ndarray, (B, N, d) or (N, d)
+    cov : ndarray, (B, N, d, d) or (N, d, d)
+    topology : Topology over ``N`` or ``B N`` nodes, or (E, 2) robot edges
+    rounds : int
+    observed : ndarray, (B, N) bool or None — robots without an observation relay only
+
+    Returns
+    -------
+    VotingResult with ``K = 1``; every observing robot is an "inlier".
+    """
+    x, cov, obs = _prepare(x, cov, observed)
+    B, N, d = x.shape
+    topo = as_topology(topology, N, B)
+    P0, q0 = information_form(x, cov, obs)
+    out = ml_consensus(P0.reshape(B * N, d, d), q0.reshape(B * N, d), topo, rounds,
+                       history=history)
+    theta, _, _, ok, stats = out[:5]
+    hist = None
+    if history:
+        hist = dict(theta=out[5].reshape(-1, B, N, 1, d))
+    return VotingResult(theta=theta.reshape(B, N, d), valid=ok.reshape(B, N), inlier=obs.copy(),
+                        winner=np.zeros((B, N), dtype=np.int64),
+                        votes=np.broadcast_to(obs.mean(1)[:, None, None], (B, N, 1)).copy(),
+                        members=obs[..., None].copy(), stats=stats, history=hist)
+
+
+def _sq_mahalanobis(r, info):
+    """``r' Λ⁻¹ r`` batched; ``r`` (..., d), ``info`` (..., d, d)."""
+    return np.einsum("...i,...ij,...j->...", r, info, r)
+
+
+def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
+                  gate: str = "distance", rounds=(100, 100, 100), rng=None, members=None,
+                  observed=None, maxc_rounds: int | None = None) -> VotingResult:
+    """Distributed static voting (Sec. IV-A): hypotheses, votes, vote averaging, final ML.
+
+    Parameters
+    ----------
+    x, cov, topology, observed : as in :func:`distributed_ml`
+    K, c : int — hypotheses and robots per hypothesis
+    p : float — chi-square confidence of eq. (8)
+    gate : ``"distance"`` or ``"squared"`` (module docstring)
+    rounds : (int, int, int) — consensus rounds of the three steps: hypotheses (eqs. 2, 5),
+        vote averaging, final ML of the winners
+    rng : seed or Generator for the max-c draws
+    members : ndarray, (B, N, K) bool or None — give ``V_h`` directly instead of drawing
+    maxc_rounds : int or None — see :func:`choose_hypotheses`
+
+    Returns
+    -------
+    VotingResult
+    """
+    x, cov, obs = _prepare(x, cov, observed)
+    B, N, d = x.shape
+    topo = as_topology(topology, N, B)
+    thr = gate_threshold(d, p, gate)
+    r_hyp, r_vote, r_final = (int(r) for r in rounds)
+    if members is None:
+        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
+    else:
+        members = np.asarray(members, dtype=bool) & obs[..., None]
+        maxc_stats = CommStats()
+    K = members.shape[-1]
+    info = np.linalg.inv(cov)                                      # (B, N, d, d)
+    # step 1: the K partial MLs (eq. 4) by consensus with initial conditions (5)
+    P0, q0 = information_form(x[:, :, None], cov[:, :, None], members)   # (B, N, K, ...)
+    theta_h, P_h, _, ok_h, st1 = ml_consensus(P0.reshape(B * N, K, d, d),
+                                              q0.reshape(B * N, K, d), topo, r_hyp)
+    theta_h = theta_h.reshape(B, N, K, d)
+    ok_h = ok_h.reshape(B, N, K)
+    # step 2: votes, eq. (8) with the covariance of eq. (9)
+    P_h = P_h.reshape(B, N, K, d, d)
+    safe = np.where(ok_h[..., None, None], P_h, np.eye(d))
+    cov_ml = np.linalg.inv(safe) / N                              # Λ_ML^h = (1/N) P_i⁻¹
+    cov_i = cov[:, :, None]
+    cov_out = cov_ml + cov_i                                      # eq. (9), i ∉ V_h
+    cov_in = cov_ml + cov_i - 2 * cov_ml @ info[:, :, None] @ cov_ml   # eq. (9), i ∈ V_h
+    cov_ih = np.where(members[..., None, None], cov_in, cov_out)
+    cov_ih = 0.5 * (cov_ih + np.swapaxes(cov_ih, -1, -2))
+    # "positive definite" relative to the robot's own Λ_i: eq. (9) is a difference of
+    # matrices of that size, so round-off leaves ~1e-16 of it where the exact value is 0
+    ev = np.linalg.eigvalsh(cov_ih)
+    scale = np.trace(cov_i, axis1=-2, axis2=-1)
+    pd = ev[..., 0] > 1e-8 * scale
+    safe_c = np.where(pd[..., None, None], cov_ih, np.eye(d))
+    r = x[:, :, None] - theta_h
+    dist_sq = _sq_mahalanobis(r, np.linalg.inv(safe_c))
+    vote0 = ok_h & obs[..., None] & np.where(pd, dist_sq <= thr, members)
+    # step 3: average the votes
+    v, st2 = average_consensus(vote0.astype(np.float64).reshape(B * N, K), topo, r_vote)
+    v = v.reshape(B, N, K)
+    winner = np.argmax(v, axis=-1)
+    inlier = np.take_along_axis(vote0, winner[..., None], -1)[..., 0]
+    # step 4: final ML of the robots that voted for the winner
+    P0, q0 = information_form(x, cov, inlier)
+    theta, _, _, ok, st3 = ml_consensus(P0.reshape(B * N, d, d), q0.reshape(B * N, d), topo,
+                                        r_final)
+    return VotingResult(theta=theta.reshape(B, N, d), valid=ok.reshape(B, N), inlier=inlier,
+                        winner=winner, votes=v, members=members, stats=st1 + st2 + st3,
+                        maxc_stats=maxc_stats)
+
+
+def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
+                   gate: str = "distance", rounds: int = 100, rng=None, members=None,
+                   observed=None, maxc_rounds: int | None = None,
+                   history: bool = False) -> VotingResult:
+    """Distributed dynamic voting (Sec. IV-B, eqs. 10–14).
+
+    Every hypothesis ``h`` carries ``(P_i, q_i, v_i)`` per robot, initialized by eqs. (5) and
+    (10). Each round robot ``i`` tests ``d_i(t) = d(x_i, θ_i(t), Λ_i)`` (eq. 12; no vote
+    while ``P_i(t)`` is singular), compares the outcome with its previous one (eq. 13), and
+    adds ``u_i = ±(Λ_i⁻¹, Λ_i⁻¹ x_i, 1)`` to the consensus update (eqs. 11, 14). One message
+    per neighbour and round carries all ``K`` bundles ``(P, q, v)``.
+
+    Parameters
+    ----------
+    x, cov, topology, observed : as in :func:`distributed_ml`
+    K, c : int — hypotheses and robots per hypothesis
+    p, gate : chi-square gate (module docstring)
+    rounds : int — consensus rounds
+    rng : seed or Generator for the max-c draws
+    members : ndarray, (B, N, K) bool or None — give ``V_h`` directly instead of drawing
+    maxc_rounds : int or None — see :func:`choose_hypotheses`
+    history : bool — keep ``θ_i^h(t)``, the gate outcome and ``v_i^h(t)`` of every round
+
+    Returns
+    -------
+    VotingResult
+        ``theta`` is ``θ_i^{h*}(T)``; ``inlier`` is robot ``i``'s gate for ``h*`` at ``T``.
+    """
+    x, cov, obs = _prepare(x, cov, observed)
+    B, N, d = x.shape
+    topo = as_topology(topology, N, B)
+    thr = gate_threshold(d, p, gate)
+    if members is None:
+        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
+    else:
+        members = np.asarray(members, dtype=bool) & obs[..., None]
+        maxc_stats = CommStats()
+    K = members.shape[-1]
+    M = B * N
+    info = np.linalg.inv(cov).reshape(M, 1, d, d)
+    xf = x.reshape(M, 1, d)
+    obs_f = obs.reshape(M, 1)
+    # the input bundle u of eq. (14): (Λ_i⁻¹, Λ_i⁻¹ x_i, 1) per node
+    u_P = info
+    u_q = (info @ xf[..., None])[..., 0]
+    m = members.reshape(M, K).astype(np.float64)
+    P = u_P * m[..., None, None]                                   # eq. (5)
+    q = u_q * m[..., None]
+    v = m.copy()                                                   # eq. (10)
+    prev_yes = members.reshape(M, K).copy()
+    stats = CommStats()
+    msg = bundle_bytes(K * (d * (d + 1) // 2 + d + 1))
+
+    def opinion(P, q):
+        theta, ok = solve_information(P, q)
+        r = xf - theta
+        yes = ok & obs_f & (_sq_mahalanobis(r, info) <= thr)      # eq. (12), gate
+        return theta, ok, yes
+
+    hist = dict(theta=[], yes=[], v=[]) if history else None
+    for t in range(int(rounds)):
+        theta, ok, yes = opinion(P, q)
+        if history:
+            hist["theta"].append(theta.reshape(B, N, K, d))
+            hist["yes"].append(yes.reshape(B, N, K))
+            hist["v"].append(v.reshape(B, N, K))
+        u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14): ±1 or 0
+        prev_yes = yes
+        A = topo.weights(t)
+        stats.add_round(len(topo.edges(t)), msg)
+        P = (A @ P.reshape(M, -1)).reshape(P.shape) + u[..., None, None] * u_P   # eq. (11)
+        q = (A @ q.reshape(M, -1)).reshape(q.shape) + u[..., None] * u_q
+        v = A @ v + u
+    theta, ok, yes = opinion(P, q)
+    if history:
+        hist["theta"].append(theta.reshape(B, N, K, d))
+        hist["yes"].append(yes.reshape(B, N, K))
+        hist["v"].append(v.reshape(B, N, K))
+        hist = {k: np.stack(val) for k, val in hist.items()}
+    v = v.reshape(B, N, K)
+    winner = np.argmax(v, axis=-1)
+    pick = winner.reshape(M, 1)
+    theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
+    ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
+    yes_w = np.take_along_axis(yes, pick, 1)[:, 0]
+    return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
+                        inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
+                        stats=stats, maxc_stats=maxc_stats, history=hist)

@@ -1,0 +1,169 @@
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.errors import InputError
+from pipeline.fusion.consensus import (
+    FixedTopology,
+    RandomGeometricTopology,
+    SwitchingTopology,
+    average_consensus,
+    graph_diameter,
+    hypothesis_members,
+    information_form,
+    max_c_consensus,
+    metropolis_weights,
+    ml_consensus,
+    ransac_hypotheses,
+    ransac_success,
+)
+
+
+@st.composite
+def connected_graphs(draw, max_nodes=12):
+    """A random connected graph: a random tree plus random extra edges."""
+    n = draw(st.integers(2, max_nodes))
+    parents = [draw(st.integers(0, k - 1)) for k in range(1, n)]
+    edges = {(p, k) for k, p in zip(range(1, n), parents, strict=True)}
+    extra = draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)), max_size=2 * n))
+    edges |= {(min(a, b), max(a, b)) for a, b in extra if a != b}
+    return n, np.array(sorted(edges), dtype=np.int64)
+
+
+def ring(n):
+    return np.array([(k, (k + 1) % n) for k in range(n)])
+
+
+@given(connected_graphs())
+def test_metropolis_doubly_stochastic_with_graph_sparsity(g):
+    n, e = g
+    A = metropolis_weights(e, n).toarray()
+    assert np.allclose(A, A.T)
+    assert np.allclose(A.sum(0), 1) and np.allclose(A.sum(1), 1)
+    assert (np.diag(A) > 0).all()
+    # row i only uses i and its neighbours: the messages it received
+    allowed = np.eye(n, dtype=bool)
+    allowed[e[:, 0], e[:, 1]] = allowed[e[:, 1], e[:, 0]] = True
+    assert (A[~allowed] == 0).all()
+
+
+def test_metropolis_hand_computed_path():
+    A = metropolis_weights([[0, 1], [1, 2]], 3).toarray()
+    third = 1 / 3
+    assert np.allclose(A, [[1 - third, third, 0], [third, third, third], [0, third, 1 - third]])
+
+
+def test_average_consensus_fixed_graph_converges_to_mean():
+    rng = np.random.default_rng(0)
+    x0 = rng.normal(size=(8, 3))
+    x, stats = average_consensus(x0, ring(8), rounds=300)
+    assert np.allclose(x, x0.mean(0), atol=1e-9)
+    assert stats.rounds == 300
+    assert stats.messages == 300 * 2 * 8
+
+
+def test_average_consensus_switching_graph_converges_to_mean():
+    # every single round is disconnected; the union of two consecutive rounds is a ring
+    n = 8
+    even = np.array([(k, k + 1) for k in range(0, n, 2)])
+    odd = np.array([(k, (k + 1) % n) for k in range(1, n, 2)])
+    rng = np.random.default_rng(1)
+    x0 = rng.normal(size=(n, 2))
+    x, stats = average_consensus(x0, SwitchingTopology([even, odd], n), rounds=400)
+    assert np.allclose(x, x0.mean(0), atol=1e-9)
+    assert stats.messages == 400 * 2 * (n // 2)
+    # random geometric graphs redrawn every round also reach the mean
+    x, _ = average_consensus(x0, RandomGeometricTopology(n, 1, radius=0.5, seed=3), rounds=300)
+    assert np.allclose(x, x0.mean(0), atol=1e-8)
+
+
+def test_random_geometric_topology_is_a_function_of_the_round():
+    topo = RandomGeometricTopology(6, 4, radius=0.5, seed=7)
+    e3 = topo.edges(3).copy()
+    topo.edges(1)
+    assert np.array_equal(topo.edges(3), e3)
+    # problems never share an edge
+    assert (e3[:, 0] // 6 == e3[:, 1] // 6).all()
+
+
+def random_covariances(rng, n, d):
+    Q = np.linalg.qr(rng.normal(size=(n, d, d)))[0]
+    ev = rng.uniform(0.1, 2.0, size=(n, d))
+    return Q @ (ev[..., None] * np.swapaxes(Q, -1, -2))
+
+
+def test_distributed_ml_equals_central_eq1():
+    rng = np.random.default_rng(2)
+    n, d = 9, 3
+    x = rng.normal(size=(n, d))
+    cov = random_covariances(rng, n, d)
+    info = np.linalg.inv(cov)
+    central = np.linalg.solve(info.sum(0), (info @ x[..., None]).sum(0)[:, 0])  # eq. (1)
+    P0, q0 = information_form(x, cov)
+    edges = np.array([(k, k + 1) for k in range(n - 1)] + [(0, 4), (2, 7)])
+    theta, P, _, ok, _ = ml_consensus(P0, q0, edges, rounds=400)
+    assert ok.all()
+    assert np.allclose(theta, central, atol=1e-9)
+    assert np.allclose(P, info.mean(0), atol=1e-9)  # eq. (3)
+
+
+def test_partial_ml_prop_3_1():
+    rng = np.random.default_rng(3)
+    n, d = 7, 2
+    x = rng.normal(size=(n, d))
+    cov = random_covariances(rng, n, d)
+    subset = np.array([1, 0, 0, 1, 0, 1, 0], dtype=bool)
+    info = np.linalg.inv(cov[subset])
+    central = np.linalg.solve(info.sum(0), (info @ x[subset][..., None]).sum(0)[:, 0])  # eq. (4)
+    P0, q0 = information_form(x, cov, subset)  # eq. (5)
+    theta, *_ = ml_consensus(P0, q0, ring(n), rounds=400)
+    assert np.allclose(theta, central, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(connected_graphs(), st.integers(1, 4), st.integers(1, 3), st.integers(0, 2**32 - 1))
+def test_max_c_selects_c_largest_within_diameter(g, c, K, seed):
+    n, e = g
+    rng = np.random.default_rng(seed)
+    draws = rng.random((n, K)) + 1e-9
+    diam = graph_diameter(e, n)
+    sets, stats = max_c_consensus(draws, e, c, rounds=diam)
+    top = -np.sort(-draws, axis=0)[:c].T  # (K, min(c, n))
+    m = min(c, n)
+    assert np.array_equal(sets[:, :, :m], np.broadcast_to(top, (n, K, m)))
+    assert np.isneginf(sets[:, :, m:]).all()
+    members = hypothesis_members(draws, sets)
+    assert (members.sum(0) == m).all()  # eq. (7): exactly the c robots of largest draw
+    assert stats.rounds == diam and stats.messages == 2 * len(e) * diam
+
+
+def test_max_c_path_needs_the_diameter():
+    n = 6
+    path = np.array([(k, k + 1) for k in range(n - 1)])
+    draws = np.arange(1, n + 1, dtype=float)[:, None]  # largest at the far end
+    sets, _ = max_c_consensus(draws, path, 2, rounds=n - 2)
+    assert not np.all(sets[0, 0] == [6, 5])
+    sets, _ = max_c_consensus(draws, path, 2, rounds=n - 1)
+    assert np.all(sets[:, 0] == [6, 5])
+
+
+def test_ransac_counts_of_sec_v():
+    assert ransac_hypotheses(0.6, 1, 0.99) == 6  # Fig. 2-3 example
+    assert ransac_hypotheses(0.8, 1, 0.99) == 3  # Monte Carlo
+    assert ransac_success(0.8, 1, 3) >= 0.99 > ransac_success(0.8, 1, 2)
+    with pytest.raises(InputError, match="p_in"):
+        ransac_hypotheses(0.0, 1)
+
+
+def test_bad_edges_name_the_problem():
+    with pytest.raises(InputError, match="self-loop"):
+        FixedTopology([[0, 0]], 3)
+    with pytest.raises(InputError, match="nodes 0..2"):
+        FixedTopology([[0, 5]], 3)
+
+
+def test_fixed_topology_weights_are_sparse_matrix():
+    A = FixedTopology(ring(5), 5).weights(0)
+    assert sp.issparse(A) and A.nnz == 5 + 10
