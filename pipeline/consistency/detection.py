@@ -1,0 +1,192 @@
+"""Decentralized detection of inconsistent associations (Aragüés et al., Sec. III).
+
+Each robot ``i`` keeps ``X_i·(t) = [X_i1(t) … X_in(t)]`` as ONE sparse boolean matrix
+``(m_i, m_total)`` whose columns are global feature ids. It starts from eq. (4)
+(``X_ii(0) = I``, ``X_ij(0) = 0``), and in every round applies eq. (5),
+
+    X_i·(t+1) = W_ii X_i·(t) + Σ_{k ∈ N_i} W_ik X_k·(t),
+
+with the blocks ``X_k·(t)`` last received from each neighbour, kept boolean (Def. 3.4: any
+positive entry becomes ``True``, so ``X_i·(t)`` row ``r`` is the set of features within ``t``
+hops of ``f_r^i``). Robot ``i`` stops at the first ``t_i`` with ``X_i·(t_i) ~ X_i·(t_i − 1)``
+(Prop. 3.5); since ``W_ii = I`` makes the rows grow monotonically, "nothing changed" is
+exactly "the number of non-zeros did not grow". A stopped robot sends nothing more: its
+neighbours keep using the last blocks received from it (the paper's rule after Cor. 3.6),
+which are final.
+
+Interpretations (stated):
+
+* Message content. Robot ``k`` sends to neighbour ``i`` only the rows ``s`` of ``X_k·(t)`` with
+  ``[W_ki]_{s,·} ≠ 0`` — the only rows ``W_ik X_k·(t)`` reads — as ``rows`` (k's local ids),
+  CSR ``indptr`` and column ``indices`` (int32). It sends only while it has not stopped.
+* Rows. Only *active* features get a row: in the first iteration every feature with a link
+  (an isolated feature's row is its own id and can never be conflictive); in later iterations
+  the features that were conflictive and left unassigned by Alg. 1, whose links all stay
+  among themselves (Sec. IV, after Cor. 4.4: "the detection algorithm can be executed on the
+  subgraph defined by this smaller subset of features").
+
+Conflictive features follow rules (8) and (9), which together say: row ``r`` holds two
+columns of one camera. Each conflictive set is named by its smallest global feature id, which
+every robot touching it computes identically; its root follows eq. (10).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from pipeline.consistency.network import Message
+from pipeline.consistency.robot import Robot
+
+__all__ = ["start_detection", "detection_step", "find_conflictive_sets"]
+
+Send = Callable[[int, str, dict], None]
+
+
+def _index_dtype(robot: Robot):
+    return np.int32 if robot.m_total < 2**31 else np.int64
+
+
+def start_detection(robot: Robot, iteration: int, send: Send) -> None:
+    """Round 0 of a detection: initialise ``X_i·(0)`` by eq. (4) and send it.
+
+    Parameters
+    ----------
+    robot : Robot
+    iteration : int — detection/resolution iteration (1-based)
+    send : callable ``(dst, kind, payload)`` bound to this robot
+    """
+    robot.iteration = iteration
+    has_link = np.zeros(robot.m, dtype=bool)
+    has_link[robot.link_r[robot.link_alive]] = True
+    robot.active = robot.candidates & has_link & (robot.component < 0)
+    rows = np.flatnonzero(robot.active)
+    # eq. (4): X_ii(0) = I, X_ij(0) = 0 (rows of the active features only)
+    indptr = np.zeros(robot.m + 1, dtype=np.int64)
+    indptr[rows + 1] = 1
+    indptr = np.cumsum(indptr)
+    robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
+                             indptr), shape=(robot.m, robot.m_total))
+    robot.last_blocks = {}
+    robot.conflictive = np.zeros(robot.m, dtype=bool)
+    robot.set_label = np.full(robot.m, -1, dtype=np.int64)
+    robot.root_of_set = {}
+    robot.stopped = rows.size == 0
+    robot.t_stop = 0
+    if not robot.stopped:
+        _send_blocks(robot, send)
+    robot.measure_memory()
+
+
+def _send_blocks(robot: Robot, send: Send) -> None:
+    """Send each linked neighbour the rows of ``X_i·(t)`` it multiplies by (eq. 5)."""
+    sel = np.flatnonzero(robot.link_alive & robot.active[robot.link_r])
+    if sel.size == 0:
+        return
+    nbr = robot.link_nbr[sel]
+    cut = np.flatnonzero(np.diff(nbr)) + 1
+    idt = _index_dtype(robot)
+    for part in np.split(sel, cut):
+        rows = np.sort(robot.link_r[part])
+        blk = robot.X[rows]
+        send(int(robot.link_nbr[part[0]]), "blocks",
+             {"rows": rows.astype(np.int32), "indptr": blk.indptr.astype(idt),
+              "indices": blk.indices.astype(idt)})
+
+
+def _receive_blocks(robot: Robot, inbox: list[Message]) -> None:
+    for msg in inbox:
+        if msg.kind != "blocks":
+            continue
+        p = msg.payload
+        nrows = p["rows"].shape[0]
+        blk = sp.csr_matrix((np.ones(p["indices"].shape[0], dtype=bool), p["indices"], p["indptr"]),
+                            shape=(nrows, robot.m_total))
+        robot.last_blocks[msg.src] = (p["rows"], blk)
+
+
+def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
+    """One round ``t = round_`` (≥ 1) of eq. (5) for one robot; stops by Prop. 3.5.
+
+    A silent neighbour's last received blocks are used (Sec. III, after Cor. 3.6). Once
+    stopped, the robot neither computes nor sends.
+    """
+    if robot.stopped:
+        return
+    _receive_blocks(robot, inbox)
+    sel = robot.link_alive & robot.active[robot.link_r]
+    p_rows, p_cols, pieces = [], [], []
+    base = 0
+    for k, (rows, blk) in robot.last_blocks.items():
+        mine = np.flatnonzero(sel & (robot.link_nbr == k))
+        if mine.size == 0 or rows.size == 0:
+            continue
+        s = robot.link_s[mine]
+        pos = np.minimum(np.searchsorted(rows, s), rows.size - 1)
+        ok = rows[pos] == s  # a row the neighbour has not sent (only under faults) is skipped
+        p_rows.append(robot.link_r[mine][ok])
+        p_cols.append(base + pos[ok])
+        pieces.append(blk)
+        base += rows.size
+    X = robot.X
+    if pieces:
+        r = np.concatenate(p_rows)
+        c = np.concatenate(p_cols)
+        P = sp.csr_matrix((np.ones(r.size, dtype=bool), (r, c)), shape=(robot.m, base))
+        # eq. (5), boolean (Def. 3.4): X(t+1) = X(t) + Σ_k W_ik X_k(t)
+        X_next = (X + P @ sp.vstack(pieces, format="csr")).tocsr()
+    else:
+        X_next = X
+    X_next.sort_indices()
+    if X_next.nnz == X.nnz:
+        # Prop. 3.5: X_i·(t) ~ X_i·(t-1); W_ii = I makes X grow monotonically
+        robot.stopped = True
+        robot.t_stop = round_
+        find_conflictive_sets(robot)
+    else:
+        robot.X = X_next
+        _send_blocks(robot, send)
+    robot.measure_memory()
+
+
+def find_conflictive_sets(robot: Robot) -> None:
+    """Rules (8) and (9) on ``X_i·(t_i)`` and the root of every set touched (eq. 10).
+
+    Sets ``robot.conflictive`` (m_i,), ``robot.set_label`` (m_i,) — the smallest global id in
+    the feature's conflictive set, ``-1`` otherwise — and ``robot.root_of_set``
+    ``{label: root robot}``.
+    """
+    X = robot.X
+    X.sort_indices()
+    counts = np.diff(X.indptr)
+    row = np.repeat(np.arange(robot.m), counts)
+    cam = np.searchsorted(robot.offsets, X.indices, side="right") - 1
+    # rule (8): another own feature in row r; rule (9): two features of one robot j in row r.
+    # Own column gid(r) is always in row r, so both read: a camera appears twice in the row.
+    twice = (row[1:] == row[:-1]) & (cam[1:] == cam[:-1])
+    conflictive = np.zeros(robot.m, dtype=bool)
+    conflictive[row[1:][twice]] = True
+    robot.conflictive = conflictive
+    label = np.full(robot.m, -1, dtype=np.int64)
+    crow = np.flatnonzero(conflictive)
+    if crow.size == 0:
+        robot.set_label = label
+        robot.root_of_set = {}
+        return
+    label[crow] = X.indices[X.indptr[crow]]  # smallest global id of the set (indices sorted)
+    robot.set_label = label
+    labels, first = np.unique(label[crow], return_index=True)
+    reps = crow[first]
+    sub = X[reps]
+    srow = np.repeat(np.arange(reps.size), np.diff(sub.indptr))
+    scam = np.searchsorted(robot.offsets, sub.indices, side="right") - 1
+    # features per (set, robot): m~_j of Def. 4.1, by run lengths (cams sorted within a row)
+    start = np.flatnonzero(np.r_[True, (srow[1:] != srow[:-1]) | (scam[1:] != scam[:-1])])
+    run_len = np.diff(np.r_[start, srow.size])
+    run_set, run_cam = srow[start], scam[start]
+    # eq. (10): most features; ties to the lowest robot id
+    order = np.lexsort((run_cam, -run_len, run_set))
+    firsts = order[np.r_[True, run_set[order][1:] != run_set[order][:-1]]]
+    robot.root_of_set = dict(zip(labels.tolist(), run_cam[firsts].tolist(), strict=True))

@@ -1,0 +1,306 @@
+"""Driver of the distributed consistency stage: detection + resolution until conflict-free.
+
+Implements the loop of Prop. 4.5 (Aragüés et al.): every robot runs the detection of Sec. III
+(:mod:`.detection`), then the resolution of Sec. IV, Alg. 1 (:mod:`.resolution`), on what
+remains, until no robot finds a conflictive feature.
+
+The driver only plays the clock and the phase barrier of a synchronous system: it tells
+every robot that a round or a phase begins, hands it its inbox and a ``send`` bound to its
+id, and after the run it reads each robot's own log to report what happened. It never passes
+one robot's state to another. Phase ends are decided by the simulation (a detection ends
+when every robot has stopped, Prop. 3.5; a resolution when no message is in flight); a
+deployment would wait the proven bounds instead (``d + 1`` and ``n + 1`` rounds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+
+from pipeline.association import camera_offsets, check_links
+from pipeline.consistency.detection import detection_step, start_detection
+from pipeline.consistency.network import Network, NetworkOptions
+from pipeline.consistency.resolution import resolution_step, start_resolution
+from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, Robot
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+__all__ = [
+    "ConsistencyResult",
+    "resolve_conflicts",
+    "build_robots",
+    "comm_edges_for",
+    "run_detection",
+    "run_resolution",
+]
+
+
+@dataclass
+class ConsistencyResult:
+    """What the distributed stage did to every input link.
+
+    Attributes
+    ----------
+    links : Links — the input links, ``(L,)``
+    deleted : ndarray, (L,) bool
+    reason : ndarray, (L,) str — ``'resolution'`` for a deleted link, ``''`` if kept
+    iteration : ndarray, (L,) int — detection/resolution iteration that cut it (1-based), -1 if kept
+    round : ndarray, (L,) int — resolution round of that iteration in which the receiver of the
+        request cut it (1-based), -1 if kept
+    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a deleted link, ``''`` if kept
+    component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
+        (``q`` = global id of its root feature), -1 for features never assigned
+    stats : dict — ``iterations``, ``detection_rounds``, ``resolution_rounds`` (totals),
+        ``per_iteration`` (list of dicts), ``messages``, ``bytes``, ``messages_by_kind``,
+        ``bytes_by_kind``, ``max_robot_memory_bytes``, ``asymmetric_links``
+    """
+
+    links: Links
+    deleted: np.ndarray
+    reason: np.ndarray
+    iteration: np.ndarray
+    round: np.ndarray
+    case: np.ndarray
+    component: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def kept(self) -> Links:
+        """The links that survived, ``Links`` of length ``(~deleted).sum()``."""
+        return self.links.subset(~self.deleted)
+
+
+def comm_edges_for(features_per_camera, links: Links, comm_edges=None) -> np.ndarray:
+    """Validated communication edges ``(E, 2)`` int64, ``i < j``, unique.
+
+    Parameters
+    ----------
+    features_per_camera : (n,) int
+    links : Links
+    comm_edges : array_like (E, 2) or None
+        ``None``: cameras sharing a link are neighbours.
+
+    Raises
+    ------
+    InputError
+        An edge names a camera outside ``0..n-1`` or itself, or a link joins two cameras that
+        are not neighbours (matching only happens on communication edges).
+    """
+    n = len(np.asarray(features_per_camera))
+    if comm_edges is None:
+        e = np.stack([links.cam_i, links.cam_j], axis=1) if len(links) else np.zeros((0, 2), np.int64)
+        return np.unique(e, axis=0).astype(np.int64).reshape(-1, 2)
+    try:
+        e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"communication edges must be integer pairs (i, j): {exc}") from None
+    bad = np.flatnonzero((e < 0).any(axis=1) | (e >= n).any(axis=1))
+    if bad.size:
+        raise InputError(f"communication edge {bad[0]} {tuple(e[bad[0]].tolist())}: camera id "
+                         f"out of range 0..{n - 1}")
+    bad = np.flatnonzero(e[:, 0] == e[:, 1])
+    if bad.size:
+        raise InputError(f"communication edge {bad[0]} {tuple(e[bad[0]].tolist())}: a camera "
+                         "cannot be its own neighbour")
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    if len(links):
+        key_e = e[:, 0] * n + e[:, 1]
+        key_l = links.cam_i * n + links.cam_j
+        bad = np.flatnonzero(~np.isin(key_l, key_e))
+        if bad.size:
+            k = bad[0]
+            raise InputError(
+                f"link {k} ({links.cam_i[k]},{links.feat_i[k]})-({links.cam_j[k]},{links.feat_j[k]}) "
+                f"joins cameras {links.cam_i[k]} and {links.cam_j[k]}, which are not neighbours in "
+                "the communication graph; add the edge or drop the link")
+    return e
+
+
+def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[np.ndarray]]:
+    """Hand every robot its own associations (what its matching produced).
+
+    Returns
+    -------
+    robots : list[Robot], (n,)
+    link_index : list of (L_i,) int64 — for the report only: the input link behind each row
+        of robot ``i``'s link table (the robot itself never sees it)
+    """
+    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    n = fpc.shape[0]
+    L = len(links)
+    idx = np.arange(L)
+    # each link appears at both ends: (robot, neighbour, own feature, their feature, link)
+    owner = np.concatenate([links.cam_i, links.cam_j])
+    nbr = np.concatenate([links.cam_j, links.cam_i])
+    r = np.concatenate([links.feat_i, links.feat_j])
+    s = np.concatenate([links.feat_j, links.feat_i])
+    li = np.concatenate([idx, idx])
+    order = np.lexsort((s, nbr, owner))
+    owner, nbr, r, s, li = owner[order], nbr[order], r[order], s[order], li[order]
+    bounds = np.searchsorted(owner, np.arange(n + 1))
+    robots, link_index = [], []
+    for i in range(n):
+        a, b = bounds[i], bounds[i + 1]
+        robots.append(Robot(i, fpc, nbr[a:b], r[a:b], s[a:b]))
+        link_index.append(li[a:b])  # Robot keeps the (nbr, s) order given here
+    return robots, link_index
+
+
+def run_detection(robots: list[Robot], network: Network, iteration: int,
+                  max_rounds: int | None = None) -> dict:
+    """One detection (Sec. III) on all robots; returns ``rounds`` and per-robot ``t_stop``."""
+    sends = [partial(network.send, rb.id) for rb in robots]
+    for rb in robots:
+        start_detection(rb, iteration, sends[rb.id])
+    cap = max_rounds if max_rounds is not None else robots[0].m_total + 2 if robots else 0
+    t = 0
+    while not all(rb.stopped for rb in robots) or network.pending:
+        network.end_round()
+        t += 1
+        for rb in robots:
+            detection_step(rb, network.inbox(rb.id), sends[rb.id], t)
+        if t > cap:
+            raise RuntimeError(f"detection did not stop within {cap} rounds")
+    return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
+                conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
+
+
+def run_resolution(robots: list[Robot], network: Network, max_rounds: int | None = None) -> dict:
+    """One run of Alg. 1 on all robots; returns ``rounds``, ``conflictive_sets`` (roots)."""
+    sends = [partial(network.send, rb.id) for rb in robots]
+    sets = sum(start_resolution(rb, sends[rb.id]) for rb in robots)
+    cap = max_rounds if max_rounds is not None else len(robots) + 2
+    t = 0
+    while network.pending:
+        network.end_round()
+        t += 1
+        for rb in robots:
+            resolution_step(rb, network.inbox(rb.id), sends[rb.id], t)
+        if t > cap:
+            raise RuntimeError(f"resolution did not end within {cap} rounds")
+    for rb in robots:
+        # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
+        rb.candidates = rb.conflictive & (rb.component < 0)
+    return dict(rounds=t, conflictive_sets=int(sets))
+
+
+def resolve_conflicts(features_per_camera, comm_edges, links: Links,
+                      network_options: NetworkOptions | None = None) -> ConsistencyResult:
+    """Make the association graph conflict-free with robots that only talk to neighbours.
+
+    Parameters
+    ----------
+    features_per_camera : array_like, (n,) int
+        ``m_i`` of every camera (public knowledge of all robots).
+    comm_edges : array_like, (E, 2) int or None
+        Communication graph; ``None``: cameras that share a link are neighbours.
+    links : Links, (L,)
+        The local associations ``A_ij`` (Assumptions 2.1–2.3, checked).
+    network_options : NetworkOptions or None
+        Fault switches of the simulated network (all off by default).
+
+    Returns
+    -------
+    ConsistencyResult
+
+    Raises
+    ------
+    InputError
+        Links break Assumptions 2.1–2.3, or join cameras that are not neighbours.
+
+    Notes
+    -----
+    Per iteration: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
+    ``n + 1`` (Thm. 4.3 (i) plus the delivery of the last rejects); every conflictive set
+    shrinks by ``≥ 4`` features per iteration, so the loop ends (Prop. 4.5).
+
+    References
+    ----------
+    R. Aragüés, E. Montijano, C. Sagués, "Consistent data association in multi-robot systems
+    with limited communications", RSS 2010 — Secs. III–IV, Alg. 1.
+
+    Examples
+    --------
+    >>> from pipeline.types import Links
+    >>> links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])  # paper Fig. 1
+    >>> res = resolve_conflicts([1, 1, 1, 2], None, links)
+    >>> int(res.deleted.sum())
+    1
+    """
+    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    camera_offsets(fpc)
+    check_links(links, fpc)
+    edges = comm_edges_for(fpc, links, comm_edges)
+    n = fpc.shape[0]
+    robots, link_index = build_robots(fpc, links)
+    network = Network(n, edges, network_options)
+
+    per_iteration = []
+    max_iterations = int(fpc.sum()) // 4 + 2  # Prop. 4.5: each set loses >= 4 features per pass
+    iteration = 0
+    while True:
+        iteration += 1
+        if iteration > max_iterations:
+            raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
+        c0 = network.counters()
+        det = run_detection(robots, network, iteration)
+        rec = dict(iteration=iteration, detection_rounds=det["rounds"], t_stop=det["t_stop"],
+                   conflictive_features=det["conflictive_features"], conflictive_sets=0,
+                   resolution_rounds=0)
+        if det["conflictive_features"] == 0:
+            rec.update(_delta(c0, network.counters()))
+            per_iteration.append(rec)
+            break
+        res = run_resolution(robots, network)
+        rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
+                   last_assignment_round=int(max(
+                       (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),
+                       default=-1)))
+        rec.update(_delta(c0, network.counters()))
+        per_iteration.append(rec)
+
+    return _collect(fpc, links, robots, link_index, per_iteration, network)
+
+
+def _delta(c0: dict, c1: dict) -> dict:
+    return dict(messages=c1["messages"] - c0["messages"], bytes=c1["bytes"] - c0["bytes"])
+
+
+def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray],
+             per_iteration: list[dict], network: Network) -> ConsistencyResult:
+    """Read every robot's own log into per-link arrays (reporting only)."""
+    L = len(links)
+    ends_deleted = np.zeros(L, dtype=np.int64)  # 0, 1 or 2 ends deleted
+    iteration = np.full(L, -1, dtype=np.int64)
+    round_ = np.full(L, -1, dtype=np.int64)
+    case = np.full(L, "", dtype="<U6")
+    for rb, li in zip(robots, link_index, strict=True):
+        gone = ~rb.link_alive
+        np.add.at(ends_deleted, li[gone], 1)
+        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C)))
+        if decided.size:
+            g = li[decided]
+            # if both ends cut the link as receivers (crossing requests), keep the earlier round
+            better = (round_[g] < 0) | (rb.deleted_round[decided] < round_[g])
+            g, d = g[better], decided[better]
+            iteration[g] = rb.deleted_iteration[d]
+            round_[g] = rb.deleted_round[d]
+            case[g] = [CASE_NAMES[int(c)] for c in rb.deleted_case[d]]
+    deleted = ends_deleted > 0
+    reason = np.where(deleted, "resolution", "").astype("<U10")
+    component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
+    cnt = network.counters()
+    stats = dict(
+        iterations=sum(1 for p in per_iteration if p["conflictive_features"] > 0),
+        detection_rounds=int(sum(p["detection_rounds"] for p in per_iteration)),
+        resolution_rounds=int(sum(p["resolution_rounds"] for p in per_iteration)),
+        per_iteration=per_iteration,
+        messages=cnt["messages"], bytes=cnt["bytes"],
+        messages_by_kind=cnt["messages_by_kind"], bytes_by_kind=cnt["bytes_by_kind"],
+        max_robot_memory_bytes=int(max((rb.peak_memory_bytes for rb in robots), default=0)),
+        asymmetric_links=int((ends_deleted == 1).sum()),
+        deleted_links=int(deleted.sum()),
+    )
+    return ConsistencyResult(links=links, deleted=deleted, reason=reason, iteration=iteration,
+                             round=round_, case=case, component=component, stats=stats)

@@ -1,0 +1,202 @@
+"""The in-process transport the robots talk through (DESIGN.md, "the one rule").
+
+Synchronous rounds: what a robot sends in round ``t`` is in its neighbour's inbox in round
+``t + 1``. A robot may send only to its *current* communication neighbours; every message and
+every byte is counted. Faults are properties of the network, never of the algorithm code:
+message drop, delivery delay, crashed robots and a topology that changes per round are
+switched on through :class:`NetworkOptions`. Their defaults are off (a lossless, static
+network, the setting of the paper); the hooks are here so a later study can turn them on
+without touching :mod:`robot`, :mod:`detection` or :mod:`resolution`.
+
+Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
+(sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at
+its numpy ``nbytes`` — all index lists are int32, so a sparse boolean block travels as its
+row ids, CSR ``indptr`` and column ``indices`` (4 bytes each).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["HEADER_BYTES", "Message", "NetworkOptions", "Network", "NotANeighbourError"]
+
+HEADER_BYTES = 12
+
+
+class NotANeighbourError(RuntimeError):
+    """A robot tried to send to a robot that is not its current communication neighbour."""
+
+
+@dataclass
+class Message:
+    """One packet between two neighbouring robots.
+
+    Attributes
+    ----------
+    src, dst : int — sending and receiving robot
+    kind : str — ``blocks`` (detection), ``request`` or ``reject`` (resolution)
+    payload : dict[str, ndarray] — int32 index arrays (see the module docstring)
+    sent_round : int — round in which it was sent
+    """
+
+    src: int
+    dst: int
+    kind: str
+    payload: dict
+    sent_round: int = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Size on the wire: header plus the payload arrays."""
+        return HEADER_BYTES + int(sum(np.asarray(a).nbytes for a in self.payload.values()))
+
+
+@dataclass
+class NetworkOptions:
+    """Fault switches of the network. All off by default (the paper's setting).
+
+    Attributes
+    ----------
+    drop_probability : float
+        Each message is lost with this probability (independently).
+    delay_rounds : int
+        Extra rounds every message spends in flight (0: delivered next round).
+    crashed : frozenset of int
+        Robots that neither send nor receive (their sends are discarded, counted as dropped).
+    topology : callable ``round -> iterable of (i, j)`` or None
+        Communication edges in force at each round; ``None`` keeps the initial edges.
+    seed : int
+        Seed of the drop generator.
+
+    Notes
+    -----
+    The algorithms in this package are proven for the lossless static network; these
+    switches exist so that their behaviour under faults can be studied without editing the
+    algorithm code. Robots already follow the paper's rule for a silent neighbour: they keep
+    using the last blocks received from it (Sec. III, after Cor. 3.6).
+    """
+
+    drop_probability: float = 0.0
+    delay_rounds: int = 0
+    crashed: frozenset = field(default_factory=frozenset)
+    topology: Callable[[int], Iterable[tuple[int, int]]] | None = None
+    seed: int = 0
+
+
+def _adjacency_sets(n: int, edges) -> list[set]:
+    nbrs: list[set] = [set() for _ in range(n)]
+    for a, b in edges:
+        a, b = int(a), int(b)
+        if a != b:
+            nbrs[a].add(b)
+            nbrs[b].add(a)
+    return nbrs
+
+
+class Network:
+    """Synchronous message passing between neighbouring robots.
+
+    Parameters
+    ----------
+    n : int
+        Number of robots.
+    comm_edges : array_like, (E, 2) int
+        Undirected communication edges ``(i, j)``.
+    options : NetworkOptions or None
+
+    Notes
+    -----
+    Usage per round: each robot reads ``inbox(i)`` and calls ``send``; then the driver calls
+    :meth:`end_round`, which moves the sent messages to the inboxes of the next round.
+    """
+
+    def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None) -> None:
+        self.n = int(n)
+        self.options = options or NetworkOptions()
+        self._initial_edges = [tuple(map(int, e)) for e in np.asarray(comm_edges).reshape(-1, 2)]
+        self._nbrs = _adjacency_sets(self.n, self._initial_edges)
+        self.round = 0
+        self._outbox: list[tuple[int, Message]] = []  # (delivery round, message)
+        self._inboxes: list[list[Message]] = [[] for _ in range(self.n)]
+        self._rng = np.random.default_rng(self.options.seed)
+        self.messages = 0
+        self.bytes = 0
+        self.dropped = 0
+        self.messages_by_kind: dict[str, int] = {}
+        self.bytes_by_kind: dict[str, int] = {}
+        self._apply_topology()
+
+    # --- topology -------------------------------------------------------------------------
+    def _apply_topology(self) -> None:
+        if self.options.topology is not None:
+            self._nbrs = _adjacency_sets(self.n, self.options.topology(self.round))
+
+    def neighbours(self, i: int) -> frozenset:
+        """Current communication neighbours of robot ``i`` (a crashed robot has none)."""
+        if i in self.options.crashed:
+            return frozenset()
+        return frozenset(j for j in self._nbrs[i] if j not in self.options.crashed)
+
+    def is_neighbour(self, i: int, j: int) -> bool:
+        return j in self._nbrs[i]
+
+    # --- messages -------------------------------------------------------------------------
+    def send(self, src: int, dst: int, kind: str, payload: dict) -> None:
+        """Queue a message from ``src`` to its current neighbour ``dst``.
+
+        Raises
+        ------
+        NotANeighbourError
+            ``dst`` is not a current communication neighbour of ``src``.
+        """
+        if dst not in self._nbrs[src]:
+            raise NotANeighbourError(
+                f"robot {src} tried to send a {kind!r} message to robot {dst}, "
+                f"which is not its neighbour in round {self.round}")
+        msg = Message(int(src), int(dst), kind, payload, self.round)
+        size = msg.nbytes
+        self.messages += 1
+        self.bytes += size
+        self.messages_by_kind[kind] = self.messages_by_kind.get(kind, 0) + 1
+        self.bytes_by_kind[kind] = self.bytes_by_kind.get(kind, 0) + size
+        opts = self.options
+        if src in opts.crashed or dst in opts.crashed:
+            self.dropped += 1
+            return
+        if opts.drop_probability > 0.0 and self._rng.random() < opts.drop_probability:
+            self.dropped += 1
+            return
+        self._outbox.append((self.round + 1 + int(opts.delay_rounds), msg))
+
+    def inbox(self, i: int) -> list[Message]:
+        """Messages delivered to robot ``i`` at the start of the current round."""
+        return self._inboxes[i]
+
+    def end_round(self) -> None:
+        """Close the round: advance the clock and deliver what is due."""
+        self.round += 1
+        self._apply_topology()
+        due = [m for r, m in self._outbox if r <= self.round]
+        self._outbox = [(r, m) for r, m in self._outbox if r > self.round]
+        self._inboxes = [[] for _ in range(self.n)]
+        for m in due:
+            self._inboxes[m.dst].append(m)
+
+    @property
+    def in_flight(self) -> bool:
+        """True while some message is queued or sits undelivered in an inbox."""
+        return bool(self._outbox) or any(self._inboxes)
+
+    @property
+    def pending(self) -> bool:
+        """True while some sent message has not been delivered yet."""
+        return bool(self._outbox)
+
+    def counters(self) -> dict:
+        """Message and byte counters so far."""
+        return dict(messages=self.messages, bytes=self.bytes, dropped=self.dropped,
+                    messages_by_kind=dict(self.messages_by_kind),
+                    bytes_by_kind=dict(self.bytes_by_kind))

@@ -1,0 +1,131 @@
+"""The robot agent of the distributed consistency stage (Aragüés et al., Secs. II–IV).
+
+A :class:`Robot` holds only its own state: its id, its feature count, its association blocks
+``W_ij`` with its neighbours, its detection blocks ``X_i·(t)``, the last blocks received from
+each neighbour, its component assignments and a log of the links it deleted. Public
+knowledge shared by all robots is the team size ``n`` and every robot's feature count (so
+every robot can turn ``(j, s)`` into the global column ``offsets[j] + s``). A robot never
+reads another robot or a global matrix: it acts on its inbox and sends through the
+:class:`~pipeline.consistency.network.Network`. The algorithms themselves are in
+:mod:`.detection` (Sec. III) and :mod:`.resolution` (Sec. IV, Alg. 1).
+
+Storage of ``W_i·``: the blocks ``W_ij`` for all neighbours ``j`` are kept together as one
+coordinate list of the non-zero entries (``link_nbr = j``, ``link_r = r``, ``link_s = s``,
+``[W_ij]_{r,s} = 1``), sorted by ``(j, s)``, with a boolean ``link_alive`` that Alg. 1 lines 10
+and 18 clear. ``W_ii = I`` (Assumption 2.1) is implicit. :meth:`Robot.block` returns ``W_ij``
+as a sparse boolean matrix.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["Robot"]
+
+# deletion log codes
+CASE_B, CASE_C, ON_REJECT = 1, 2, 3
+CASE_NAMES = {CASE_B: "b", CASE_C: "c", ON_REJECT: "reject"}
+
+
+class Robot:
+    """One robot (= one camera) of the team.
+
+    Parameters
+    ----------
+    robot_id : int
+    features_per_camera : array_like, (n,) int
+        Public feature counts of all robots (column offsets of ``X_i·``).
+    link_nbr, link_r, link_s : array_like, (L_i,) int
+        The robot's own associations: ``[W_{i, nbr}]_{r, s} = 1``.
+
+    Attributes
+    ----------
+    X : scipy.sparse.csr_matrix, (m_i, m_total) bool
+        ``X_i·(t)``: row ``r`` holds the global ids of the features reachable from ``f_r^i``
+        (Def. 3.4: kept boolean). Rows of features outside the current detection are empty.
+    component : ndarray, (m_i,) int64
+        Component ``C_q`` of each feature (``q`` = global id of the root feature), ``-1`` if
+        unassigned.
+    """
+
+    def __init__(self, robot_id: int, features_per_camera, link_nbr, link_r, link_s) -> None:
+        self.id = int(robot_id)
+        fpc = np.asarray(features_per_camera, dtype=np.int64)
+        self.n = int(fpc.shape[0])
+        self.offsets = np.concatenate([[0], np.cumsum(fpc)]).astype(np.int64)
+        self.m = int(fpc[self.id])
+        self.m_total = int(self.offsets[-1])
+        nbr = np.asarray(link_nbr, dtype=np.int32)
+        r = np.asarray(link_r, dtype=np.int32)
+        s = np.asarray(link_s, dtype=np.int32)
+        order = np.lexsort((s, nbr))
+        self.link_nbr, self.link_r, self.link_s = nbr[order], r[order], s[order]
+        self.link_alive = np.ones(order.shape[0], dtype=bool)
+        # key used to find the link (j, s) named by a neighbour's message
+        self._key_base = int(fpc.max(initial=0)) + 1
+        self.link_key = self.link_nbr.astype(np.int64) * self._key_base + self.link_s
+        self.gid0 = int(self.offsets[self.id])
+
+        # detection state (Sec. III)
+        self.X = sp.csr_matrix((self.m, self.m_total), dtype=bool)
+        self.last_blocks: dict[int, tuple[np.ndarray, sp.csr_matrix]] = {}
+        self.candidates = np.ones(self.m, dtype=bool)  # features (re)examined next detection
+        self.active = np.zeros(self.m, dtype=bool)
+        self.stopped = True
+        self.t_stop = 0
+        self.conflictive = np.zeros(self.m, dtype=bool)
+        self.set_label = np.full(self.m, -1, dtype=np.int64)
+        self.root_of_set: dict[int, int] = {}
+
+        # resolution state (Sec. IV, Alg. 1)
+        self.component = np.full(self.m, -1, dtype=np.int64)
+        self.assigned_round = np.full(self.m, -1, dtype=np.int32)
+        self.deleted_round = np.full(self.link_r.shape[0], -1, dtype=np.int32)
+        self.deleted_case = np.zeros(self.link_r.shape[0], dtype=np.int8)
+        self.deleted_iteration = np.full(self.link_r.shape[0], -1, dtype=np.int32)
+        self.iteration = 0
+        self.peak_memory_bytes = 0
+
+    # --- views ----------------------------------------------------------------------------
+    def block(self, j: int) -> sp.csr_matrix:
+        """``W_ij`` as a sparse boolean ``(m_i, m_j)`` matrix (Assumption 2.1: ``W_ii = I``)."""
+        mj = int(self.offsets[j + 1] - self.offsets[j])
+        if j == self.id:
+            return sp.identity(self.m, dtype=bool, format="csr")
+        sel = (self.link_nbr == j) & self.link_alive
+        return sp.csr_matrix((np.ones(int(sel.sum()), dtype=bool),
+                              (self.link_r[sel], self.link_s[sel])), shape=(self.m, mj))
+
+    def neighbours_with_links(self) -> np.ndarray:
+        """Neighbours ``j`` with a non-zero ``W_ij`` (alive links only), sorted."""
+        return np.unique(self.link_nbr[self.link_alive])
+
+    def find_links(self, nbr: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Index in the link table of ``[W_{i,nbr}]_{·, s}``, ``-1`` where there is none."""
+        key = np.asarray(nbr, dtype=np.int64) * self._key_base + np.asarray(s, dtype=np.int64)
+        if self.link_key.size == 0:
+            return np.full(key.shape, -1, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(self.link_key, key), self.link_key.size - 1)
+        return np.where(self.link_key[pos] == key, pos, -1)
+
+    # --- memory ---------------------------------------------------------------------------
+    def memory_bytes(self) -> int:
+        """Bytes of the arrays this robot holds (sparse matrices: data + indices + indptr)."""
+        def csr_bytes(a: sp.csr_matrix) -> int:
+            return int(a.data.nbytes + a.indices.nbytes + a.indptr.nbytes)
+
+        total = sum(int(a.nbytes) for a in (
+            self.link_nbr, self.link_r, self.link_s, self.link_alive, self.link_key,
+            self.candidates, self.active, self.conflictive, self.set_label, self.component,
+            self.assigned_round, self.deleted_round, self.deleted_case, self.deleted_iteration))
+        total += csr_bytes(self.X)
+        for rows, blk in self.last_blocks.values():
+            total += int(rows.nbytes) + csr_bytes(blk)
+        total += 16 * len(self.root_of_set)
+        return total
+
+    def measure_memory(self) -> int:
+        """Update and return the peak of :meth:`memory_bytes`."""
+        self.peak_memory_bytes = max(self.peak_memory_bytes, self.memory_bytes())
+        return self.peak_memory_bytes
