@@ -1,0 +1,132 @@
+"""Synthetic robot formations with ground truth (Aragüés et al., Sec. V-B, Fig. 4).
+
+``render(formation, seed)`` places 6 robots in formation in front of a textured scene with
+repeated structure, renders each robot's camera (image, ``K``, ``cam_from_world``, depth) and
+returns the communication graph of the paper's Fig. 4 formation ``a``–``d``; see
+:mod:`data_synth.formations` for the explicit edge lists and :mod:`data_synth.ground_truth` for
+good / spurious / missing links.
+
+Example
+-------
+>>> import data_synth
+>>> f = data_synth.render("d", seed=0)
+>>> len(f.views), f.comm_edges.shape
+(6, (15, 2))
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from data_synth.formations import (
+    FIG4_EDGES,
+    FORMATIONS,
+    GRAPH_KINDS,
+    Formation,
+    graph_edges,
+    robot_poses,
+)
+from data_synth.ground_truth import (
+    good_links,
+    links_truth,
+    missing_links,
+    points_from_keypoints,
+    true_pairs,
+)
+from data_synth.renderer import intrinsics, render_view
+from data_synth.scene import build_scene
+from pipeline.errors import InputError
+from pipeline.types import View
+
+__all__ = [
+    "render",
+    "Formation",
+    "FORMATIONS",
+    "FIG4_EDGES",
+    "GRAPH_KINDS",
+    "points_from_keypoints",
+    "good_links",
+    "true_pairs",
+    "links_truth",
+    "missing_links",
+    "MIN_SIZE",
+]
+
+MIN_SIZE = (64, 48)
+"""Smallest image size ``(W, H)`` accepted by :func:`render`."""
+
+
+def _check_int(value, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 480),
+           n_robots: int | None = None, graph: str | None = None) -> Formation:
+    """Render a formation: one view per robot plus the communication graph.
+
+    Parameters
+    ----------
+    formation : str
+        ``a``, ``b``, ``c`` or ``d`` — the paper's four communication graphs from few cycles to
+        complete (:data:`FIG4_EDGES`); or a graph kind (``line``, ``ring``, ``ring2``,
+        ``complete``, ``geometric``) as a shorthand for ``graph=``.
+    seed : int
+        Drives the scene textures, the formation jitter and the sensor noise. The camera poses
+        and images do not depend on the graph: formations ``a``–``d`` with one seed share images.
+    size : (W, H)
+        Image size in pixels, at least :data:`MIN_SIZE`.
+    n_robots : int, optional
+        Number of robots (default 6); for ``n != 6`` formations ``a``–``d`` follow their rules
+        (ring, ring + triangles, ring2, complete).
+    graph : str, optional
+        Overrides the communication graph kind.
+
+    Returns
+    -------
+    Formation
+
+    Raises
+    ------
+    InputError
+        Unknown formation or graph kind, ``n_robots < 2``, image smaller than ``MIN_SIZE``.
+    """
+    if not isinstance(formation, str) or (formation not in FORMATIONS and formation not in GRAPH_KINDS):
+        raise InputError(f"unknown formation {formation!r}; choose one of "
+                         f"{', '.join(FORMATIONS)} (the paper's Fig. 4) or a graph kind "
+                         f"({', '.join(GRAPH_KINDS)})")
+    if graph is not None and graph not in GRAPH_KINDS:
+        raise InputError(f"unknown graph kind {graph!r}; choose one of {', '.join(GRAPH_KINDS)}")
+    seed = _check_int(seed, "seed", 0)
+    n = 6 if n_robots is None else _check_int(n_robots, "n_robots", 2)
+    try:
+        W, H = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise InputError(f"size must be (width, height) in pixels, got {size!r}") from None
+    if W < MIN_SIZE[0] or H < MIN_SIZE[1]:
+        raise InputError(f"image size {W}x{H} is too small; use at least {MIN_SIZE[0]}x{MIN_SIZE[1]}")
+
+    if graph is None:
+        kind = FORMATIONS.get(formation, formation)
+    else:
+        kind = graph
+    name = formation if (formation in FORMATIONS and graph is None and n == 6) else f"{kind}-n{n}"
+
+    scene = build_scene(seed)
+    centres, poses = robot_poses(n, seed)
+    if name in FIG4_EDGES:
+        edges = np.array(FIG4_EDGES[name], np.int64)
+        edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
+    else:
+        edges = graph_edges(kind, n, centres, seed)
+    K = intrinsics((W, H))
+    views = []
+    for i, (R, t) in enumerate(poses):
+        image, depth = render_view(scene, K, R, t, (W, H), rng=np.random.default_rng([seed, 3, i]))
+        views.append(View(name=f"cam{i:02d}", image=image, K=K.copy(), R=R, t=t, depth=depth,
+                          intrinsics_known=True))
+    return Formation(name=name, views=views, comm_edges=edges, graph=kind, seed=seed, scene=scene,
+                     centres=centres)

@@ -1,0 +1,196 @@
+"""Robot formations and their communication graphs (Aragüés et al., Sec. V-B and Fig. 4).
+
+The paper's image experiment has 6 robots moving in formation, each taking one image, and
+compares four communication graphs "(a) … (d)" whose number of cycles grows; local matching is
+done only along communication edges. Fig. 4 itself is not in the text we have, so the four
+graphs are defined here explicitly, from few cycles to the complete graph.
+
+Robots 0..5 stand in two rows facing the facade — front row 0, 1, 2 (left to right), back row
+5, 4, 3 (left to right) — so the ring 0-1-2-3-4-5-0 runs around the formation between
+spatial neighbours::
+
+        facade (+y)
+      0 ─ 1 ─ 2        front row
+      │       │
+      5 ─ 4 ─ 3        back row
+
+Communication graphs for 6 robots (``FIG4_EDGES``; cycle rank = E - n + 1):
+
+====  =========================================================  ===  ==========
+name  edges                                                      E    cycle rank
+====  =========================================================  ===  ==========
+(a)   ring: (0,1) (1,2) (2,3) (3,4) (4,5) (0,5)                  6    1
+(b)   ring + triangles: (a) + (0,2) (3,5)                        8    3
+(c)   ring + 2-hop chords: (a) + (0,2) (1,3) (2,4) (3,5) (0,4)   12   7
+      (1,5)
+(d)   complete: all 15 pairs                                     15   10
+====  =========================================================  ===  ==========
+
+For ``n != 6`` robots the same rules apply (``ring``, ring plus chords ``(k, k+2)`` for
+``k ≡ 0 mod 3``, ``ring2``, ``complete``). Parametric graph kinds: ``line``, ``ring``,
+``ring2`` (ring plus 2-hop chords), ``complete`` and ``geometric`` (random geometric graph on
+the robots' positions: an edge where two cameras are closer than a radius drawn from the seed
+between 1.0 and 1.6 times the smallest radius that keeps the graph connected).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy.spatial.distance import pdist, squareform
+
+from data_synth.scene import FACADE_Y, Scene
+from pipeline.errors import InputError
+
+__all__ = [
+    "Formation",
+    "FIG4_EDGES",
+    "FORMATIONS",
+    "GRAPH_KINDS",
+    "graph_edges",
+    "robot_poses",
+    "look_at",
+]
+
+GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
+
+FORMATIONS = {"a": "ring", "b": "ring+triangles", "c": "ring2", "d": "complete"}
+"""Formation name -> graph rule (see the module docstring)."""
+
+FIG4_EDGES = {
+    "a": [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 5)],
+    "b": [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 5), (0, 2), (3, 5)],
+    "c": [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 5),
+          (0, 2), (1, 3), (2, 4), (3, 5), (0, 4), (1, 5)],
+    "d": [(i, j) for i in range(6) for j in range(i + 1, 6)],
+}
+"""The four communication graphs of the 6-robot experiment, edges ``(i, j)`` with ``i < j``."""
+
+
+@dataclass
+class Formation:
+    """A rendered formation: one view per robot and the communication graph.
+
+    Attributes
+    ----------
+    name : str
+        ``a``–``d`` for the paper's formations, else ``<graph>-n<robots>``.
+    views : list[pipeline.types.View]
+        Image, ``K``, ``cam_from_world`` ``(R, t)``, depth, ``intrinsics_known=True``.
+    comm_edges : ndarray, (E, 2) int64
+        Undirected communication edges, ``i < j``, sorted.
+    graph : str
+        Graph rule that produced ``comm_edges``.
+    seed : int
+    scene : data_synth.scene.Scene
+        The rendered scene (faces and named landmarks).
+    centres : ndarray, (n, 3)
+        Camera centres in the world frame.
+    """
+
+    name: str
+    views: list
+    comm_edges: np.ndarray
+    graph: str
+    seed: int
+    scene: Scene = field(repr=False)
+    centres: np.ndarray = field(repr=False)
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.views)
+
+    def neighbours(self, i: int) -> np.ndarray:
+        """Communication neighbours of robot ``i``, sorted ``(d_i,)``."""
+        e = self.comm_edges
+        return np.sort(np.concatenate([e[e[:, 0] == i, 1], e[e[:, 1] == i, 0]]))
+
+
+def look_at(centre, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """``cam_from_world`` ``(R, t)`` of a camera at ``centre`` looking at ``target``.
+
+    Camera axes follow OpenCV: ``x`` right, ``y`` down, ``z`` forward.
+    """
+    c = np.asarray(centre, np.float64)
+    z = np.asarray(target, np.float64) - c
+    z /= np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, np.float64))  # right
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ c
+
+
+def robot_poses(n: int, seed: int, spacing: float = 1.0) -> tuple[np.ndarray, list]:
+    """Camera centres and ``(R, t)`` of ``n`` robots in two rows facing the facade.
+
+    Front row: robots ``0 .. ceil(n/2)-1`` left to right at ``y = 0``; back row: the rest right to
+    left at ``y = -1.4``, shifted by half a spacing — so consecutive indices are spatial
+    neighbours and ``(n-1, 0)`` closes the ring. Heights, positions and gaze targets get a
+    small seeded jitter (the formation is the same for every communication graph).
+
+    Returns
+    -------
+    centres : (n, 3)
+    poses : list of (R (3, 3), t (3,))
+    """
+    rng = np.random.default_rng([seed, 2])
+    k = (n + 1) // 2
+    centres = np.zeros((n, 3))
+    for i in range(n):
+        if i < k:
+            x, y = spacing * (i - (k - 1) / 2), 0.0
+        else:
+            c = n - 1 - i  # back row right -> left
+            x, y = spacing * (c - (k - 1) / 2) + spacing / 2, -1.4
+        centres[i] = (x, y, 1.5)
+    centres += rng.uniform(-0.12, 0.12, (n, 3)) * np.array([1.0, 1.0, 1.5])
+    poses = []
+    for i in range(n):
+        target = np.array([0.35 * centres[i, 0] + rng.uniform(-0.4, 0.4), FACADE_Y,
+                           1.9 + rng.uniform(-0.3, 0.3)])
+        poses.append(look_at(centres[i], target))
+    return centres, poses
+
+
+def _ring(n: int) -> list:
+    return [(i, i + 1) for i in range(n - 1)] + ([(0, n - 1)] if n > 2 else [])
+
+
+def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+    """Edges ``(E, 2)`` int64, ``i < j``, sorted, of a communication graph on ``n`` robots.
+
+    Parameters
+    ----------
+    kind : str
+        ``line``, ``ring``, ``ring2``, ``complete``, ``geometric``, or ``ring+triangles``.
+    n : int
+    centres : (n, 3), optional
+        Robot positions, needed for ``geometric``.
+    seed : int
+        Draws the radius of ``geometric``.
+    """
+    if kind == "line":
+        e = [(i, i + 1) for i in range(n - 1)]
+    elif kind == "ring":
+        e = _ring(n)
+    elif kind == "ring+triangles":
+        e = _ring(n) + [(k, k + 2) for k in range(0, n - 2, 3)]
+    elif kind == "ring2":
+        e = _ring(n) + [(i, (i + 2) % n) for i in range(n)] if n > 3 else _ring(n)
+    elif kind == "complete":
+        e = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    elif kind == "geometric":
+        if centres is None:
+            raise InputError("graph 'geometric' needs the robot positions")
+        D = squareform(pdist(centres[:, :2]))
+        r_conn = float(minimum_spanning_tree(D).toarray().max())
+        r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 1.6)
+        ii, jj = np.nonzero(np.triu(D <= r + 1e-9, k=1))
+        e = list(zip(ii.tolist(), jj.tolist(), strict=True))
+    else:
+        raise InputError(f"unknown graph kind {kind!r}; choose one of {', '.join(GRAPH_KINDS)}")
+    a = np.array(sorted({(min(i, j), max(i, j)) for i, j in e if i != j}), np.int64)
+    return a.reshape(-1, 2)
