@@ -13,7 +13,7 @@ structure-from-motion example:
 ``world/links/replay``             every link, coloured per step of the ``round`` timeline
 ``world/points/{triangulated,ground_truth,fused}``  ``Points3D``
 ``graph``                          ``GraphNodes``/``GraphEdges``: conflictive sets before resolution
-                                   (Aragüés et al., Def. 2.4), replayed on the ``round`` timeline
+                                   (Aragüés et al., Def. 2.4), cuts replayed on ``round``
 ``resolution/log``                 ``TextLog``: what each step of the replay cut
 ``report``                         ``TextDocument`` (markdown)
 
@@ -227,11 +227,15 @@ def _camera_palette(n: int) -> np.ndarray:
 
 
 def _log_graph(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray) -> None:
-    """Conflictive sets before resolution as a graph, replayed step by step.
+    """Conflictive sets before resolution as one graph, replayed on the ``round`` timeline.
 
-    ``GraphEdges`` carries no colour in Rerun 0.41, so a cut link is drawn as two edges through
-    a red ``×`` node; nodes are coloured by camera, so a conflict (Def. 2.4) shows as two nodes
-    of one colour in one component.
+    Nodes are the features of the conflictive sets (Aragüés et al., Def. 2.4), labelled
+    ``camera:feature`` and coloured by camera, so a conflict shows as two nodes of one colour
+    in one component. Edges are the links of those sets. ``GraphEdges`` carries no colour in
+    Rerun 0.41, so each link the run deleted is drawn as two edges through a ``×`` node; the
+    ``×`` is grey (candidate) until the step that cuts the link and red from then on. Links
+    without ``×`` are kept. Node ids, labels and edges are static; only the colours are logged
+    per step, so the replay costs 4 bytes per node and step.
     """
     conf = np.flatnonzero(np.asarray(record.conflictive_before, dtype=bool))
     if conf.size == 0:
@@ -242,26 +246,24 @@ def _log_graph(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray) -> 
     feat_ids, first = np.unique(np.concatenate([a, b]), return_index=True)
     feat_cams = np.concatenate([lk.cam_i[conf], lk.cam_j[conf]])[first]
     feat_colors = _camera_palette(len(record.views))[feat_cams]
-    markers = np.char.add("cut:", conf.astype(str))
-    s_conf = step[conf]
-    deleted = np.asarray(record.status)[conf] == "deleted"
-    for s in [0, *np.unique(s_conf[deleted]).tolist()]:
-        cut = deleted & (s_conf <= s)
-        edges = np.concatenate([
-            np.stack([a[~cut], b[~cut]], axis=1),
-            np.stack([a[cut], markers[cut]], axis=1),
-            np.stack([markers[cut], b[cut]], axis=1),
-        ])
-        n_cut = int(cut.sum())
+    cut = np.asarray(record.status)[conf] == "deleted"
+    markers = np.char.add("cut:", conf[cut].astype(str))
+    edges = np.concatenate([np.stack([a[~cut], b[~cut]], axis=1),
+                            np.stack([a[cut], markers], axis=1),
+                            np.stack([markers, b[cut]], axis=1)])
+    rec.log("graph",
+            rr.GraphNodes(np.concatenate([feat_ids, markers]),
+                          labels=np.concatenate([feat_ids, np.full(len(markers), _CUT_MARKER)]),
+                          show_labels=True),
+            rr.GraphEdges(edges.tolist(), graph_type="undirected"),
+            static=True)
+    marker_step = step[conf[cut]]
+    for s in [0, *np.unique(marker_step).tolist()]:
+        marker_colors = np.where((marker_step <= s)[:, None], LINK_COLORS["cut"],
+                                 LINK_COLORS["candidate"])
         rec.set_time("round", sequence=int(s))
-        rec.log("graph",
-                rr.GraphNodes(
-                    np.concatenate([feat_ids, markers[cut]]),
-                    labels=np.concatenate([feat_ids, np.full(n_cut, _CUT_MARKER)]),
-                    colors=np.concatenate([feat_colors,
-                                           np.tile(LINK_COLORS["cut"], (n_cut, 1))]).astype(np.uint8),
-                    show_labels=True),
-                rr.GraphEdges(edges.tolist(), graph_type="undirected"))
+        rec.log("graph", rr.GraphNodes.from_fields(
+            colors=np.concatenate([feat_colors, marker_colors]).astype(np.uint8)))
 
 
 def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
@@ -280,8 +282,7 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
                             labels=del_labels, show_labels=False), static=True)
     # Replay: geometry once (static), colours per step (temporal).
     rec.log("world/links/replay",
-            rr.LineStrips3D(ends, radii=_LINE_RADIUS, labels=labels, show_labels=False),
-            static=True)
+            rr.LineStrips3D(ends, radii=_LINE_RADIUS), static=True)
     palette = np.array([LINK_COLORS["candidate"], LINK_COLORS["cut"], LINK_COLORS["kept"]],
                        dtype=np.uint8)
     for s in range(len(keys) + 2):

@@ -91,6 +91,11 @@ def recording(tmp_path_factory):
     return path, record
 
 
+def rgba(rgb) -> int:
+    """Rerun's packed colour: 0xRRGGBBAA."""
+    return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 255
+
+
 def _chunks(path, entity, static=None):
     stream = RrdReader(path).store().stream().filter(content=entity)
     return [c for c in stream.to_chunks() if c.entity_path == entity
@@ -175,9 +180,6 @@ def test_replay_order_and_final_colours(recording):
             rows[int(s)] = np.array(colors, dtype=np.uint32)
     assert sorted(rows) == list(range(len(keys) + 2))
 
-    def rgba(rgb):
-        return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 255
-
     assert (rows[0] == rgba(LINK_COLORS["candidate"])).all()
     final = rows[len(keys) + 1]
     assert (final[deleted] == rgba(LINK_COLORS["cut"])).all()
@@ -188,19 +190,25 @@ def test_replay_order_and_final_colours(recording):
 
 def test_graph_shows_conflictive_sets_and_cuts(recording):
     path, record = recording
-    rows = {}
-    for chunk in _chunks(path, "/graph", static=False):
-        d = chunk.to_record_batch().to_pydict()
-        for k, s in enumerate(d["round"]):
-            rows[int(s)] = (d["GraphNodes:node_ids"][k], d["GraphEdges:edges"][k])
-    nodes0, edges0 = rows[0]
+    (static,) = _chunks(path, "/graph", static=True)
+    d = static.to_record_batch().to_pydict()
+    nodes, edges = d["GraphNodes:node_ids"][0], d["GraphEdges:edges"][0]
     conf = record.conflictive_before
-    assert len(edges0) == conf.sum() == 6
-    assert {"0:10", "0:11", "2:10", "0:12", "0:13"} <= set(nodes0)
-    nodes_end, edges_end = rows[max(rows)]
-    n_cut = int((conf & (record.status == "deleted")).sum())
-    assert sum(n.startswith("cut:") for n in nodes_end) == n_cut == 2
-    assert len(edges_end) == conf.sum() + n_cut  # a cut link is drawn through its marker node
+    cut = conf & (record.status == "deleted")
+    assert {"0:10", "0:11", "2:10", "0:12", "0:13", "1:12"} <= set(nodes)
+    markers = [n for n in nodes if n.startswith("cut:")]
+    assert sorted(markers) == sorted(f"cut:{k}" for k in np.flatnonzero(cut))
+    assert len(edges) == conf.sum() + cut.sum() == 8  # a cut link is drawn through its marker
+
+    colors = {}
+    for chunk in _chunks(path, "/graph", static=False):
+        t = chunk.to_record_batch().to_pydict()
+        for s, c in zip(t["round"], t["GraphNodes:colors"], strict=True):
+            colors[int(s)] = np.array(c[len(nodes) - len(markers):], dtype=np.uint32)
+    red = rgba(LINK_COLORS["cut"])
+    assert (colors[0] != red).all()           # before resolution: every marker a candidate
+    assert (colors[1] == red).sum() == 1      # resolution round 1 cut one conflictive link
+    assert (colors[max(colors)] == red).all()
 
 
 def test_keypoint_status_hand_computed():
