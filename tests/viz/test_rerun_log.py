@@ -122,11 +122,26 @@ def test_one_strip_per_link(recording):
     assert count_strips(path, "world/links/absent") == 0
 
 
+def blueprint_views(path) -> set[tuple[str, str]]:
+    """``(view class, origin)`` of every view in the recording's default blueprint."""
+    reader = RrdReader(path)
+    (entry,) = reader.blueprints()
+    views = set()
+    for chunk in reader.store(store=entry).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            kind = batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0]
+            origin = batch.column("ViewBlueprint:space_origin").to_pylist()[-1][0]
+            views.add((kind, origin))
+    return views
+
+
 def test_blueprint_saved(recording):
     path, _ = recording
-    reader = RrdReader(path)
-    assert [b.kind for b in reader.blueprints()] == ["blueprint"]
-    assert len(reader.recordings()) == 1
+    assert len(RrdReader(path).recordings()) == 1
+    views = blueprint_views(path)
+    assert {("3D", "world"), ("2D", "world/cam_00/image"), ("Graph", "graph"),
+            ("TextDocument", "report")} <= views
 
 
 def test_camera_pose_is_child_from_parent(recording):
@@ -244,7 +259,9 @@ def test_real_images_without_poses(tmp_path):
     assert {"/images/cam_00/image", "/images/cam_02/image/keypoints", "/graph", "/report"} <= paths
     assert not any(p.startswith("/world/links") or p.startswith("/world/cam") for p in paths)
     assert count_strips(path, "world/links/deleted") == 0
-    assert len(RrdReader(path).blueprints()) == 1
+    views = blueprint_views(path)
+    assert ("2D", "images/cam_00/image") in views and ("Graph", "graph") in views
+    assert not any(kind == "3D" for kind, _ in views)
 
 
 def test_failed_write_leaves_no_file(tmp_path):
