@@ -1,0 +1,485 @@
+"""COLMAP databases and incremental mapping: the one adapter for those pycolmap calls.
+
+Every pycolmap *database* and *incremental mapping* call of the project sits here (known-pose
+triangulation lives in :mod:`pipeline.triangulation`), so a pycolmap API change touches one
+file, checked by a write-and-reload test.
+
+What it does for the pipeline (DESIGN.md "Data flow", last stages, real images):
+
+- :func:`write_database` — views + features + links as a COLMAP database: cameras, trivial
+  rigs and frames (COLMAP >= 3.12), keypoints, the matches table (every link matching
+  produced) and the two-view geometries (the verified links to map with, e.g. the links kept
+  by the consistency stage, Aragüés et al. Alg. 1).
+- :func:`read_database` — keypoints and two-view geometries of a database made by COLMAP or
+  hloc, as the pipeline's :class:`~pipeline.types.Links`.
+- :func:`write_cleaned_database` — a copy of a database with some two-view-geometry inliers
+  removed; the input file is never opened for writing.
+- :func:`incremental_mapping` — ``pycolmap.incremental_mapping`` and its figures (registered
+  images, points, mean track length, mean reprojection error).
+
+Pixel convention: the pipeline uses OpenCV's (origin at the centre of the top-left pixel),
+COLMAP the corner of the top-left pixel, so keypoints and principal points get ``+0.5`` on the
+way in and ``-0.5`` on the way out.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from pipeline.errors import InputError
+from pipeline.types import Features, Links, View
+
+__all__ = [
+    "COLMAP_PIXEL_OFFSET",
+    "DatabaseContents",
+    "MappingSummary",
+    "quiet_colmap",
+    "write_database",
+    "read_database",
+    "write_cleaned_database",
+    "incremental_mapping",
+]
+
+#: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
+COLMAP_PIXEL_OFFSET = 0.5
+_TVG = pycolmap.TwoViewGeometryConfiguration
+
+
+@contextmanager
+def quiet_colmap(level: int = 2):
+    """Silence COLMAP's C++ log below ``level`` (2 = errors only) inside the block."""
+    previous = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = max(previous, level)
+    try:
+        yield
+    finally:
+        pycolmap.logging.minloglevel = previous
+
+
+# ------------------------------------------------------------------------------------- writing
+
+def _camera(view: View) -> pycolmap.Camera:
+    K = np.asarray(view.K, dtype=np.float64)
+    w, h = view.size
+    cam = pycolmap.Camera(model="PINHOLE", width=w, height=h,
+                          params=[K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET,
+                                  K[1, 2] + COLMAP_PIXEL_OFFSET])
+    # a guessed focal length must be refined by the mapper; a known one is kept as a prior
+    cam.has_prior_focal_length = bool(view.intrinsics_known)
+    return cam
+
+
+def _write_image_with_trivial_rig(db, view: View) -> int:
+    """Camera, one-sensor rig, image and frame, as COLMAP's feature extractor writes them."""
+    camera_id = db.write_camera(_camera(view))
+    sensor = pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=camera_id)
+    rig = pycolmap.Rig()
+    rig.add_ref_sensor(sensor)
+    rig_id = db.write_rig(rig)
+    image_id = db.write_image(pycolmap.Image(name=view.name, camera_id=camera_id))
+    frame = pycolmap.Frame()
+    frame.rig_id = rig_id
+    frame.add_data_id(pycolmap.data_t(sensor_id=sensor, id=image_id))
+    db.write_frame(frame)
+    return image_id
+
+
+def _fundamental(x1: np.ndarray, x2: np.ndarray) -> np.ndarray | None:
+    """Least-squares 8-point F (``x2^T F x1 = 0``) on already verified matches, or None."""
+    import cv2
+
+    if len(x1) < 8:
+        return None
+    F, _ = cv2.findFundamentalMat(x1.astype(np.float64), x2.astype(np.float64), cv2.FM_8POINT)
+    if F is None or F.shape != (3, 3):
+        return None
+    return F
+
+
+def _two_view_geometry(pairs: np.ndarray, view_i: View, view_j: View, kp_i: np.ndarray,
+                       kp_j: np.ndarray) -> pycolmap.TwoViewGeometry:
+    """Two-view geometry whose inliers are ``pairs`` (the verified links of the pair).
+
+    ``F`` is re-fitted to those links (our matcher keeps the RANSAC inliers, not the model);
+    with both intrinsics known the pair is ``CALIBRATED`` with ``E = K_j^T F K_i``. COLMAP's
+    mapper uses only the inliers (it re-estimates the initial pair's pose itself).
+    """
+    inliers = np.ascontiguousarray(pairs, dtype=np.uint32).reshape(-1, 2)
+    F = _fundamental(kp_i[pairs[:, 0]] + COLMAP_PIXEL_OFFSET,
+                     kp_j[pairs[:, 1]] + COLMAP_PIXEL_OFFSET) if len(pairs) else None
+    if F is None:
+        return pycolmap.TwoViewGeometry(config=_TVG.UNCALIBRATED, inlier_matches=inliers)
+    if view_i.intrinsics_known and view_j.intrinsics_known:
+        Ki = _camera(view_i).calibration_matrix()
+        Kj = _camera(view_j).calibration_matrix()
+        return pycolmap.TwoViewGeometry(config=_TVG.CALIBRATED, F=F, E=Kj.T @ F @ Ki,
+                                        inlier_matches=inliers)
+    return pycolmap.TwoViewGeometry(config=_TVG.UNCALIBRATED, F=F, inlier_matches=inliers)
+
+
+def _group_by_pair(a, b, fa, fb) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
+    """``{(a, b): (fa, fb) of the rows with that pair}``, input order kept within a pair."""
+    a, b = np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64)
+    if a.size == 0:
+        return {}
+    order = np.lexsort((b, a))
+    a, b, fa, fb = a[order], b[order], np.asarray(fa)[order], np.asarray(fb)[order]
+    starts = np.flatnonzero(np.r_[True, (a[1:] != a[:-1]) | (b[1:] != b[:-1])])
+    ends = np.r_[starts[1:], len(a)]
+    return {(int(a[s]), int(b[s])): (fa[s:e], fb[s:e]) for s, e in zip(starts, ends, strict=True)}
+
+
+def _pairs_by_edge(links: Links) -> dict[tuple[int, int], np.ndarray]:
+    """Group links by camera pair: ``{(i, j): (M, 2) feature pairs}``."""
+    return {k: np.stack(v, axis=1) for k, v in
+            _group_by_pair(links.cam_i, links.cam_j, links.feat_i, links.feat_j).items()}
+
+
+def write_database(path: str | Path, views: list[View], features: list[Features], links: Links,
+                   keep: np.ndarray | None = None) -> Path:
+    """Write views, keypoints and links as a new COLMAP database.
+
+    Parameters
+    ----------
+    path : the ``.db`` file to create; it must not exist (a database is never overwritten)
+    views : list[View], (n,) — names, sizes and intrinsics (PINHOLE cameras)
+    features : list[Features], (n,) — keypoints (OpenCV convention, written with ``+0.5``);
+        descriptors are not written (the database is for mapping, not for re-matching)
+    links : Links, (L,) — written to the ``matches`` table
+    keep : ndarray, (L,) bool or None — links written as two-view-geometry inliers (``None``:
+        all). ``keep = ~deleted`` gives the database of the cleaned association.
+
+    Returns
+    -------
+    path : Path of the database, written atomically (temp file, then rename)
+
+    Notes
+    -----
+    Image ``i`` gets image id ``i + 1`` and camera id ``i + 1``; each image has its own camera
+    and a trivial rig and frame. Pairs with links get a two-view geometry, even when none of
+    their links is kept (then with no inliers, COLMAP's own way of saying "not verified").
+    """
+    path = Path(path)
+    if len(views) != len(features):
+        raise InputError(f"write_database: {len(views)} views but {len(features)} feature sets")
+    if path.exists():
+        raise InputError(f"database {str(path)!r} already exists; choose a new file name")
+    keep = np.ones(len(links), dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    if keep.shape != (len(links),):
+        raise InputError(f"write_database: keep has shape {keep.shape}, expected ({len(links)},)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".db", dir=path.parent)
+    os.close(fd)
+    os.unlink(tmp)  # COLMAP creates the file itself
+    try:
+        with quiet_colmap(), pycolmap.Database.open(tmp) as db:
+            image_ids = [_write_image_with_trivial_rig(db, v) for v in views]
+            for image_id, f in zip(image_ids, features, strict=True):
+                kp = np.asarray(f.keypoints, dtype=np.float32).reshape(-1, 2)
+                db.write_keypoints(image_id, kp + np.float32(COLMAP_PIXEL_OFFSET))
+            all_pairs = _pairs_by_edge(links)
+            kept_pairs = _pairs_by_edge(links.subset(keep))
+            empty = np.zeros((0, 2), dtype=np.int64)
+            for (i, j), pairs in all_pairs.items():
+                db.write_matches(image_ids[i], image_ids[j],
+                                 np.ascontiguousarray(pairs, dtype=np.uint32))
+                tvg = _two_view_geometry(kept_pairs.get((i, j), empty), views[i], views[j],
+                                         features[i].keypoints, features[j].keypoints)
+                db.write_two_view_geometry(image_ids[i], image_ids[j], tvg)
+        os.replace(tmp, path)
+    except BaseException:
+        for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
+            if os.path.exists(leftover):
+                os.unlink(leftover)
+        raise
+    return path
+
+
+# ------------------------------------------------------------------------------------- reading
+
+@dataclass
+class DatabaseContents:
+    """The verified matches of a COLMAP database in the pipeline's terms.
+
+    Attributes
+    ----------
+    path : Path — the database read
+    names : list[str], (n,) — image names; camera ``i`` is the ``i``-th name in sorted order
+    image_ids : ndarray, (n,) int64 — COLMAP image id of each camera
+    keypoints : list[ndarray], (n,) each (m_i, 2) float32 — OpenCV pixel convention
+    links : Links, (L,) — two-view-geometry inliers, each undirected link once, ``cam_i < cam_j``
+    not_one_to_one : ndarray, (L,) bool — a link whose feature is already linked to another
+        feature of the same other image by an earlier inlier of that pair (COLMAP allows this
+        when cross-check is off; the paper's Assumption 2.2 does not)
+    pairs_without_inliers : int — two-view geometries with no inliers (failed verification)
+    """
+
+    path: Path
+    names: list[str]
+    image_ids: np.ndarray
+    keypoints: list[np.ndarray]
+    links: Links
+    not_one_to_one: np.ndarray
+    pairs_without_inliers: int = 0
+    cameras: list = field(default_factory=list)
+
+    @property
+    def features_per_camera(self) -> np.ndarray:
+        """Keypoints per camera, ``(n,)``."""
+        return np.array([len(k) for k in self.keypoints], dtype=np.int64)
+
+
+def _first_occurrence(key: np.ndarray) -> np.ndarray:
+    """``(L,)`` bool: True where ``key`` appears for the first time (in input order)."""
+    _, first = np.unique(key, return_index=True)
+    out = np.zeros(key.shape[0], dtype=bool)
+    out[first] = True
+    return out
+
+
+def _check_database_file(path: Path) -> None:
+    if not path.is_file():
+        raise InputError(f"database {str(path)!r} does not exist")
+    with open(path, "rb") as fh:
+        if fh.read(16) != b"SQLite format 3\x00":
+            raise InputError(f"{str(path)!r} is not a COLMAP database (not an SQLite file)")
+
+
+def read_database(path: str | Path) -> DatabaseContents:
+    """Read keypoints and two-view geometries from a COLMAP database (COLMAP or hloc made).
+
+    Parameters
+    ----------
+    path : the ``.db`` file; opened on a private copy so the file itself is never touched
+
+    Returns
+    -------
+    DatabaseContents
+
+    Raises
+    ------
+    InputError
+        Missing file, not an SQLite/COLMAP database, fewer than two images, or no two-view
+        geometries (run COLMAP's matcher, or hloc's geometric verification, first).
+    """
+    path = Path(path)
+    _check_database_file(path)
+    with tempfile.TemporaryDirectory(prefix="colmap-read-") as tmp:
+        copy = Path(tmp) / "read.db"
+        shutil.copyfile(path, copy)
+        try:
+            with quiet_colmap(), pycolmap.Database.open(copy) as db:
+                images = db.read_all_images()
+                keypoints = {im.image_id: db.read_keypoints(im.image_id)
+                             if db.exists_keypoints(im.image_id) else np.zeros((0, 2), np.float32)
+                             for im in images}
+                pair_ids, geometries = db.read_two_view_geometries()
+                # rows without inliers may be left out of the read above; count them all
+                n_rows = db.num_verified_image_pairs()
+                cameras = {c.camera_id: c for c in db.read_all_cameras()}
+        except (RuntimeError, ValueError, IndexError) as exc:
+            raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
+    return _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras)
+
+
+def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
+              cameras) -> DatabaseContents:
+    if len(images) < 2:
+        raise InputError(f"database {str(path)!r} holds {len(images)} image(s); at least two are needed")
+    images = sorted(images, key=lambda im: im.name)
+    names = [im.name for im in images]
+    image_ids = np.array([im.image_id for im in images], dtype=np.int64)
+    cam_of_id = {int(iid): k for k, iid in enumerate(image_ids)}
+    kps = [np.ascontiguousarray(np.asarray(keypoints[im.image_id], dtype=np.float32)
+                                .reshape(len(keypoints[im.image_id]), -1)[:, :2]
+                                - np.float32(COLMAP_PIXEL_OFFSET)) for im in images]
+    usable = [(pid, g) for pid, g in zip(pair_ids, geometries, strict=True)
+              if len(g.inlier_matches)]
+    if not usable:
+        what = "no two-view geometries" if not n_rows else \
+            f"{n_rows} two-view geometries, all without inliers"
+        raise InputError(
+            f"database {str(path)!r} has {what}: it holds no verified matches. Run COLMAP's "
+            f"matcher (e.g. 'colmap exhaustive_matcher') or hloc's geometric verification first")
+    parts = []
+    for pid, g in usable:
+        id1, id2 = pycolmap.pair_id_to_image_pair(pid)
+        a, b = cam_of_id[int(id1)], cam_of_id[int(id2)]
+        m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
+        if a > b:
+            a, b, m = b, a, m[:, ::-1]
+        parts.append((np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]))
+    ci, fi, cj, fj = (np.concatenate(col) for col in zip(*parts, strict=True))
+    m = np.array([len(k) for k in kps], dtype=np.int64)
+    bad = np.flatnonzero((fi >= m[ci]) | (fj >= m[cj]))
+    if bad.size:
+        k = bad[0]
+        raise InputError(
+            f"database {str(path)!r}: a two-view geometry of {names[ci[k]]} / {names[cj[k]]} "
+            f"names keypoint {max(fi[k], fj[k])} beyond the stored keypoints; the database is "
+            f"inconsistent")
+    links = Links(ci, fi, cj, fj)
+    # Assumption 2.2 (one-to-one per pair): later duplicates of a feature within a pair
+    n = len(names)
+    offs = np.concatenate([[0], np.cumsum(m)])
+    ga, gb = offs[ci] + fi, offs[cj] + fj
+    one_to_one = _first_occurrence(ga * n + cj) & _first_occurrence(gb * n + ci)
+    return DatabaseContents(path=path, names=names, image_ids=image_ids, keypoints=kps,
+                            links=links, not_one_to_one=~one_to_one,
+                            pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
+                            cameras=[cameras.get(im.camera_id) for im in images])
+
+
+def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
+                           keep: np.ndarray) -> Path:
+    """Copy ``contents.path`` to ``out_path`` keeping only the ``keep`` two-view inliers.
+
+    Parameters
+    ----------
+    contents : DatabaseContents — from :func:`read_database`
+    out_path : new database file; must differ from the input
+    keep : ndarray, (L,) bool — aligned with ``contents.links``
+
+    Returns
+    -------
+    out_path : Path, written atomically (copy to a temp file, edit, rename)
+
+    Notes
+    -----
+    Everything else (cameras, rigs, frames, keypoints, descriptors, the raw ``matches`` table,
+    F/E/H of each pair) is copied unchanged; a pair left without inliers keeps its row with an
+    empty inlier list, which COLMAP's mapper ignores like any pair below its match minimum.
+    """
+    src, out_path = Path(contents.path), Path(out_path)
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != (len(contents.links),):
+        raise InputError(f"keep has shape {keep.shape}, expected ({len(contents.links)},)")
+    if out_path.exists() and out_path.resolve() == src.resolve():
+        raise InputError(f"--out {str(out_path)!r} is the input database; the input is never "
+                         f"modified, choose a new file")
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.", suffix=".db", dir=out_path.parent)
+    os.close(fd)
+    L = contents.links
+    # kept links as (image_id1, image_id2, idx1, idx2) keys in COLMAP's pair orientation
+    id_i, id_j = contents.image_ids[L.cam_i], contents.image_ids[L.cam_j]
+    swap = id_i > id_j
+    a_id, b_id = np.where(swap, id_j, id_i), np.where(swap, id_i, id_j)
+    a_f, b_f = np.where(swap, L.feat_j, L.feat_i), np.where(swap, L.feat_i, L.feat_j)
+    kept_by_pair = {(int(a), int(b)): np.stack([fa, fb], axis=1) for (a, b), (fa, fb) in
+                    _group_by_pair(a_id[keep], b_id[keep], a_f[keep], b_f[keep]).items()}
+    try:
+        shutil.copyfile(src, tmp)
+        with quiet_colmap(), pycolmap.Database.open(tmp) as db:
+            pair_ids, geometries = db.read_two_view_geometries()
+            for pid, g in zip(pair_ids, geometries, strict=True):
+                m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
+                if not len(m):
+                    continue
+                id1, id2 = (int(v) for v in pycolmap.pair_id_to_image_pair(pid))
+                kept = kept_by_pair.get((id1, id2), np.zeros((0, 2), dtype=np.int64))
+                key = m[:, 0] * (1 << 32) + m[:, 1]
+                kept_key = kept[:, 0] * (1 << 32) + kept[:, 1]
+                g.inlier_matches = np.ascontiguousarray(m[np.isin(key, kept_key)], dtype=np.uint32)
+                db.update_two_view_geometry(int(id1), int(id2), g)
+        os.replace(tmp, out_path)
+    except BaseException:
+        for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
+            if os.path.exists(leftover):
+                os.unlink(leftover)
+        raise
+    return out_path
+
+
+# ------------------------------------------------------------------------------------- mapping
+
+@dataclass
+class MappingSummary:
+    """Figures of an incremental reconstruction (the largest model when there are several).
+
+    Attributes
+    ----------
+    images : int — images in the database
+    models : int — reconstructions COLMAP produced
+    registered_images : int — images registered in the largest model
+    registered_names : list[str]
+    points : int — 3D points of the largest model
+    observations : int — 2D observations of those points
+    mean_track_length : float — observations per point
+    mean_reprojection_error : float — pixels
+    reconstruction : pycolmap.Reconstruction or None
+    """
+
+    images: int
+    models: int
+    registered_images: int
+    registered_names: list[str]
+    points: int
+    observations: int
+    mean_track_length: float
+    mean_reprojection_error: float
+    reconstruction: object = None
+
+    def summary(self) -> dict:
+        """The figures as a JSON-ready dict (without the reconstruction)."""
+        return {"images": self.images, "models": self.models,
+                "registered_images": self.registered_images,
+                "registered_names": list(self.registered_names), "points": self.points,
+                "observations": self.observations,
+                "mean_track_length": round(float(self.mean_track_length), 4),
+                "mean_reprojection_error": round(float(self.mean_reprojection_error), 4)}
+
+
+def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
+                        output_dir: str | Path | None = None, num_threads: int = -1,
+                        seed: int = 0) -> MappingSummary:
+    """``pycolmap.incremental_mapping`` on a database; figures of the largest model.
+
+    Parameters
+    ----------
+    database_path : database with two-view geometries (e.g. from :func:`write_database`)
+    image_dir : folder of the images, only to colour points; ``""`` skips colours (the
+        pipeline maps downscaled images whose files do not exist at that size)
+    output_dir : where COLMAP writes its models; a temporary folder when None
+    num_threads : COLMAP threads (-1: all cores)
+    seed : COLMAP's random seed, for repeatable figures
+
+    Returns
+    -------
+    MappingSummary — zeros when no model could be initialised
+    """
+    database_path = Path(database_path)
+    _check_database_file(database_path)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = num_threads
+    options.random_seed = seed
+    options.extract_colors = bool(image_dir)
+    with tempfile.TemporaryDirectory(prefix="colmap-map-") as tmp:
+        out = Path(output_dir) if output_dir is not None else Path(tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        with quiet_colmap():
+            with pycolmap.Database.open(database_path) as db:
+                n_images = db.num_images()
+            # COLMAP insists on an existing image folder even when it reads no pixels
+            models = pycolmap.incremental_mapping(database_path, str(image_dir or tmp), out,
+                                                  options)
+    if not models:
+        return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
+    rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
+    rec.update_point_3d_errors()
+    names = sorted(rec.images[i].name for i in rec.reg_image_ids())
+    return MappingSummary(
+        images=n_images, models=len(models), registered_images=rec.num_reg_images(),
+        registered_names=names, points=rec.num_points3D(),
+        observations=int(rec.compute_num_observations()),
+        mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+        mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
+        reconstruction=rec)

@@ -1,0 +1,194 @@
+"""pipeline.colmap: database write-and-reload, reading COLMAP-made databases, cleaned copies,
+incremental mapping on downscaled Sceaux photographs."""
+
+import hashlib
+
+import numpy as np
+import pycolmap
+import pytest
+
+from pipeline import colmap
+from pipeline.errors import InputError
+from pipeline.types import Features, Links, View
+
+
+def _views_and_features(n=3, m=40, seed=0, known=(True, False, True)):
+    rng = np.random.default_rng(seed)
+    views, feats = [], []
+    for k in range(n):
+        K = np.array([[300.0 + k, 0, 159.5], [0, 301.0, 119.5], [0, 0, 1]])
+        views.append(View(f"img{k}.png", np.zeros((240, 320, 3), np.uint8), K,
+                          intrinsics_known=known[k % len(known)]))
+        kp = rng.uniform([0, 0], [319, 239], size=(m, 2)).astype(np.float32)
+        feats.append(Features(kp, np.zeros((m, 128), np.float32), np.ones(m, np.float32), "sift"))
+    return views, feats
+
+
+def _links(n=3, m=40, seed=0):
+    """One-to-one random links on every camera pair (20 per pair)."""
+    rng = np.random.default_rng(seed)
+    parts = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            r = rng.permutation(m)[:20]
+            s = rng.permutation(m)[:20]
+            parts.append((np.full(20, i), r, np.full(20, j), s))
+    ci, fi, cj, fj = (np.concatenate(c) for c in zip(*parts, strict=True))
+    return Links(ci, fi, cj, fj)
+
+
+def _link_set(links: Links, mask=None):
+    idx = np.arange(len(links)) if mask is None else np.flatnonzero(mask)
+    return {(int(links.cam_i[k]), int(links.feat_i[k]), int(links.cam_j[k]), int(links.feat_j[k]))
+            for k in idx}
+
+
+def _sha(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_write_and_reload_round_trip(tmp_path):
+    views, feats = _views_and_features()
+    links = _links()
+    keep = np.random.default_rng(1).random(len(links)) < 0.7
+    db_path = colmap.write_database(tmp_path / "out.db", views, feats, links, keep)
+    contents = colmap.read_database(db_path)
+    assert contents.names == [v.name for v in views]
+    for kp, f in zip(contents.keypoints, feats, strict=True):
+        assert np.allclose(kp, f.keypoints, atol=1e-4)  # +0.5 on write, -0.5 on read
+    assert _link_set(contents.links) == _link_set(links, keep)
+    assert not contents.not_one_to_one.any()
+    with pycolmap.Database.open(db_path) as db:
+        # COLMAP pixel convention: principal point + 0.5; one trivial rig and frame per image
+        cam = db.read_camera(1)
+        assert np.allclose(cam.params, [300.0, 301.0, 160.0, 120.0])
+        assert cam.has_prior_focal_length and not db.read_camera(2).has_prior_focal_length
+        assert db.num_rigs() == db.num_frames() == db.num_images() == 3
+        # the raw matches table holds every link, kept or not
+        assert db.num_matches() == len(links)
+        pair_ids, geoms = db.read_two_view_geometries()
+        configs = {tuple(int(v) for v in pycolmap.pair_id_to_image_pair(p)): g.config
+                   for p, g in zip(pair_ids, geoms, strict=True)}
+    # image 1 (known) with 2 (guess) -> uncalibrated; 1 with 3 (both known) -> calibrated
+    assert configs[(1, 2)] == pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED
+    assert configs[(1, 3)] == pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+
+
+def test_write_refuses_existing_file(tmp_path):
+    views, feats = _views_and_features()
+    (tmp_path / "x.db").write_bytes(b"keep me")
+    with pytest.raises(InputError, match="already exists"):
+        colmap.write_database(tmp_path / "x.db", views, feats, _links())
+    assert (tmp_path / "x.db").read_bytes() == b"keep me"
+
+
+def test_read_orders_cameras_by_name_and_flips_pairs(tmp_path):
+    """A database whose image ids run against name order (as COLMAP may write them)."""
+    views, feats = _views_and_features(n=2)
+    links = Links([0, 0], [3, 5], [1, 1], [7, 9])
+    path = colmap.write_database(tmp_path / "a.db", views[::-1], feats[::-1],
+                                 Links([0, 0], [7, 9], [1, 1], [3, 5]))
+    contents = colmap.read_database(path)
+    assert contents.names == ["img0.png", "img1.png"]
+    assert contents.image_ids.tolist() == [2, 1]
+    assert _link_set(contents.links) == _link_set(links)
+
+
+def test_cleaned_copy_holds_exactly_the_kept_links_and_input_is_untouched(tmp_path):
+    views, feats = _views_and_features()
+    links = _links()
+    src = colmap.write_database(tmp_path / "in.db", views, feats, links)
+    before = _sha(src)
+    contents = colmap.read_database(src)
+    keep = np.ones(len(contents.links), bool)
+    keep[::3] = False
+    # one pair loses every inlier: it keeps its row with no inliers
+    keep[(contents.links.cam_i == 1) & (contents.links.cam_j == 2)] = False
+    out = colmap.write_cleaned_database(contents, tmp_path / "clean.db", keep)
+    assert _sha(src) == before
+    cleaned = colmap.read_database(out)
+    assert _link_set(cleaned.links) == _link_set(contents.links, keep)
+    assert cleaned.pairs_without_inliers == 1
+    with pycolmap.Database.open(out) as db:
+        assert db.num_matches() == len(links)  # raw matches are copied unchanged
+
+
+def test_cleaned_copy_refuses_to_overwrite_input(tmp_path):
+    views, feats = _views_and_features()
+    src = colmap.write_database(tmp_path / "in.db", views, feats, _links())
+    contents = colmap.read_database(src)
+    with pytest.raises(InputError, match="never modified"):
+        colmap.write_cleaned_database(contents, src, np.ones(len(contents.links), bool))
+
+
+def test_not_one_to_one_inliers_are_flagged(tmp_path):
+    views, feats = _views_and_features(n=2)
+    path = tmp_path / "many.db"
+    with pycolmap.Database.open(path) as db:
+        for v in views:
+            cid = db.write_camera(pycolmap.Camera(model="PINHOLE", width=320, height=240,
+                                                  params=[300, 300, 160, 120]))
+            iid = db.write_image(pycolmap.Image(name=v.name, camera_id=cid))
+            db.write_keypoints(iid, np.zeros((10, 2), np.float32))
+        inl = np.array([[0, 0], [1, 0], [2, 2], [2, 3]], np.uint32)  # 0,1 -> 0 and 2 -> 2,3
+        db.write_two_view_geometry(1, 2, pycolmap.TwoViewGeometry(
+            config=pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED, inlier_matches=inl))
+    contents = colmap.read_database(path)
+    assert contents.not_one_to_one.tolist() == [False, True, False, True]
+
+
+def test_database_without_two_view_geometries(tmp_path):
+    views, feats = _views_and_features(n=2)
+    path = colmap.write_database(tmp_path / "raw.db", views, feats,
+                                 Links(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)))
+    with pytest.raises(InputError, match="no two-view geometries"):
+        colmap.read_database(path)
+
+
+def test_database_whose_geometries_have_no_inliers(tmp_path):
+    views, feats = _views_and_features(n=2)
+    links = Links([0], [1], [1], [2])
+    path = colmap.write_database(tmp_path / "failed.db", views, feats, links, keep=[False])
+    with pytest.raises(InputError, match="all without inliers"):
+        colmap.read_database(path)
+
+
+def test_not_a_database(tmp_path):
+    (tmp_path / "x.db").write_text("hello")
+    with pytest.raises(InputError, match="not an SQLite file"):
+        colmap.read_database(tmp_path / "x.db")
+    with pytest.raises(InputError, match="does not exist"):
+        colmap.read_database(tmp_path / "missing.db")
+
+
+@pytest.fixture(scope="module")
+def sceaux_matches(sceaux_small):
+    from pipeline.features import extract_all
+    from pipeline.io import comm_graph, load_folder
+    from pipeline.matching import match_edges
+
+    views = load_folder(sceaux_small, max_size=640)
+    feats = extract_all(views, "sift", 1500)
+    edges = comm_graph("complete", [v.name for v in views])
+    return views, feats, Links.from_matches(match_edges(feats, views, edges))
+
+
+def test_incremental_mapping_on_sceaux(sceaux_matches, tmp_path):
+    views, feats, links = sceaux_matches
+    path = colmap.write_database(tmp_path / "sceaux.db", views, feats, links)
+    result = colmap.incremental_mapping(path)
+    s = result.summary()
+    assert s["images"] == 4 and s["models"] >= 1
+    assert s["registered_images"] >= 3
+    assert s["points"] > 100
+    assert 2.0 <= s["mean_track_length"] <= 4.0  # at most one observation per image
+    assert 0.0 < s["mean_reprojection_error"] < 2.0
+    assert isinstance(result.reconstruction, pycolmap.Reconstruction)
+    assert set(s["registered_names"]) <= {v.name for v in views}
+
+
+def test_incremental_mapping_without_verified_pairs_registers_nothing(tmp_path):
+    views, feats = _views_and_features(n=2)
+    path = colmap.write_database(tmp_path / "few.db", views, feats, Links([0], [1], [1], [2]))
+    result = colmap.incremental_mapping(path)
+    assert result.registered_images == 0 and result.points == 0
