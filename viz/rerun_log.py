@@ -323,6 +323,9 @@ def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
                                         "- $origin/links/deleted"]),
         )
         layout = rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2])
+    elif len(record.points):
+        layout = rrb.Horizontal(rrb.Spatial3DView(origin="world", name="Triangulated points"),
+                                rrb.Vertical(*side), column_shares=[3, 2])
     else:
         layout = rrb.Vertical(*side)
     return rrb.Blueprint(layout, rrb.TimePanel(timeline="round"), collapse_panels=False)
@@ -378,6 +381,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     step, keys = replay_steps(record)
     status = keypoint_status(record)
     off = _offsets(record)
+    cam_colors = _camera_palette(len(record.views))  # frusta match the graph's node colours
 
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
@@ -401,7 +405,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
             rec.log(f"{cam}/image",
                     rr.Pinhole(image_from_camera=_pinhole_K(view.K), resolution=[w, h],
                                camera_xyz=rr.ViewCoordinates.RDF,
-                               image_plane_distance=depth),
+                               image_plane_distance=depth, color=cam_colors[i]),
                     static=True)
             image = np.ascontiguousarray(view.image)
             rec.log(f"{cam}/image", rr.Image(image).compress(jpeg_quality=jpeg_quality),
@@ -412,7 +416,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                                 radii=rr.components.Radius.ui_points(1.5)),
                     static=True)
 
-        if all_posed and len(record.links):
+        if all_posed:
             _log_links(rec, record, step, keys, depth)
 
         points = {"triangulated": record.points, "ground_truth": record.gt_points,

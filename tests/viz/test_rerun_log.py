@@ -254,6 +254,7 @@ def test_real_images_without_poses(tmp_path):
     record = make_record(posed=False)
     for v in record.views:  # gray images, as a folder of real photos may hold
         v.image = np.ascontiguousarray(v.image[..., 0])
+    record.points, record.point_tracks, record.gt_points = np.zeros((0, 3)), np.zeros(0), None
     path = log_run(tmp_path / "real.rrd", record)
     paths = set(entity_paths(path))
     assert {"/images/cam_00/image", "/images/cam_02/image/keypoints", "/graph", "/report"} <= paths
@@ -261,7 +262,23 @@ def test_real_images_without_poses(tmp_path):
     assert count_strips(path, "world/links/deleted") == 0
     views = blueprint_views(path)
     assert ("2D", "images/cam_00/image") in views and ("Graph", "graph") in views
-    assert not any(kind == "3D" for kind, _ in views)
+    assert not any(kind == "3D" for kind, _ in views)  # no poses and no points: nothing 3D
+
+
+def test_no_links_and_a_camera_without_features(tmp_path):
+    record = make_record()
+    z = np.zeros(0, np.int64)
+    record.links = Links(z, z, z, z)
+    record.status = record.reason = np.zeros(0, str)
+    record.round = record.iteration = z
+    record.truth, record.conflictive_before = np.zeros(0, np.int8), np.zeros(0, bool)
+    record.features[1] = Features(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32),
+                                  np.zeros(0, np.float32), "sift")
+    path = log_run(tmp_path / "empty.rrd", record)
+    assert count_strips(path, "world/links/kept") == count_strips(path, "world/links/deleted") == 0
+    assert {"/world/links/kept", "/world/links/deleted", "/world/cam_01/image"} <= set(
+        entity_paths(path))
+    assert "/graph" not in entity_paths(path)  # no conflictive sets
 
 
 def test_failed_write_leaves_no_file(tmp_path):
