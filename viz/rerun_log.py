@@ -205,8 +205,10 @@ def replay_steps(record: RunRecord) -> tuple[np.ndarray, list[tuple[str, int, in
     reason = np.asarray(record.reason, dtype=str).reshape(-1)
     it = np.asarray(record.iteration, dtype=np.int64).reshape(-1)
     rd = np.asarray(record.round, dtype=np.int64).reshape(-1)
-    stages = sorted(set(reason[deleted].tolist()), key=lambda s: (s != "resolution", s))
-    stage_rank = np.array([stages.index(s) for s in reason[deleted]], dtype=np.int64)
+    names, stage_of = np.unique(reason[deleted], return_inverse=True)
+    stages = sorted(names.tolist(), key=lambda s: (s != "resolution", s))
+    rank_of_name = np.array([stages.index(s) for s in names.tolist()], dtype=np.int64)
+    stage_rank = rank_of_name[stage_of.reshape(-1)]
     triples = np.stack([stage_rank, it[deleted], rd[deleted]], axis=1).reshape(-1, 3)
     uniq, inv = np.unique(triples, axis=0, return_inverse=True)
     step = np.full(len(record.links), len(uniq) + 1, dtype=np.int64)
@@ -273,6 +275,8 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
     reason = np.asarray(record.reason, dtype=str)
     labels = np.char.add(np.char.add(_node_ids(record.links.cam_i, record.links.feat_i), "–"),
                          _node_ids(record.links.cam_j, record.links.feat_j))
+    truth = np.asarray(record.truth, dtype=np.int64).reshape(-1)
+    labels = np.char.add(labels, np.array(["", " (spurious)", " (good)"])[np.clip(truth + 1, 0, 2)])
     rec.log("world/links/kept",
             rr.LineStrips3D(ends[~deleted], colors=LINK_COLORS["kept"], radii=_LINE_RADIUS,
                             labels=labels[~deleted], show_labels=False), static=True)

@@ -174,7 +174,9 @@ def test_strip_endpoints_lie_on_keypoint_rays():
 def test_stored_strips_match_geometry(recording):
     path, record = recording
     (chunk,) = _chunks(path, "/world/links/deleted", static=True)
-    strips = np.array(chunk.to_record_batch().to_pydict()["LineStrips3D:strips"][-1])
+    d = chunk.to_record_batch().to_pydict()
+    strips = np.array(d["LineStrips3D:strips"][-1])
+    assert d["LineStrips3D:labels"][-1][0] == "1:5–2:5 (good) cut by fusion-outlier"
     deleted = record.status == "deleted"
     np.testing.assert_allclose(strips, link_endpoints_3d(record, 0.5)[deleted], atol=1e-5)
 
