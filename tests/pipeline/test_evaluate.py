@@ -77,3 +77,23 @@ def test_bad_inputs(identity_truth):
         link_truth(identity_truth, f, Links([0], [7], [1], [0]))
     with pytest.raises(InputError, match="unknown camera"):
         missing_links(identity_truth, f, links, [[0, 3]])
+
+
+def test_with_rendered_formation():
+    import data_synth
+    from data_synth.ground_truth import true_pairs
+    from pipeline.features import extract_all
+
+    f = data_synth.render("a", seed=0, size=(320, 240))
+    fs = extract_all(f.views, "orb", 300)
+    i, j = (int(v) for v in f.comm_edges[0])
+    tp = true_pairs(f, i, fs[i].keypoints, j, fs[j].keypoints)
+    assert len(tp) > 10
+    exact = Links(np.full(len(tp), i), tp[:, 0], np.full(len(tp), j), tp[:, 1])
+    assert link_truth(f, fs, exact).all()
+    assert missing_links(f, fs, exact, [[i, j]]) == 0
+    half = exact.subset(np.arange(len(tp)) % 2 == 0)
+    assert missing_links(f, fs, half, [[i, j]]) == len(tp) - len(half)
+    # a link shifted to a wrong partner is spurious
+    wrong = Links([i], [tp[0, 0]], [j], [tp[1, 1]])
+    assert not link_truth(f, fs, wrong).any()

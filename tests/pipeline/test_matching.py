@@ -259,3 +259,18 @@ def test_empty_feature_sets_do_not_crash():
     v = [View("a", np.zeros((10, 10), np.uint8), K), View("b", np.zeros((10, 10), np.uint8), K)]
     out = match_edges([e, e], v, [[0, 1]])
     assert len(out[0].pairs) == 0 and "0 < 8" in out[0].reason
+
+
+# ------------------------------------------------------------------ rendered formation
+
+
+def test_easy_rendered_pair_precision_against_ground_truth():
+    import data_synth
+    from pipeline.evaluate import link_truth
+
+    f = data_synth.render("a", seed=0, size=(320, 240))
+    feats = extract_all(f.views, "sift", 500)
+    # neighbouring robots 0 and 1: a wide overlap, the easy case
+    m = match_pair(0, 1, feats[0], feats[1], f.views[0].K, f.views[1].K, True)
+    assert len(m.pairs) >= 50
+    assert link_truth(f, feats, Links.from_matches([m])).mean() >= 0.95

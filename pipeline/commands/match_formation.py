@@ -1,0 +1,146 @@
+"""``python -m pipeline match-formation``: render a formation, match neighbours only, and print
+the first rows of the paper's Table III (Aragüés et al., Sec. V-B) with the ground-truth link
+counts the paper could not give, and the time of each stage."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from pipeline.commands.run_formation import parse_size
+from pipeline.errors import InputError
+
+FORMATIONS = ("a", "b", "c", "d")
+
+# (label, key); the first four are the first rows of the paper's Table III
+ROWS = [
+    ("Association sets", "association_sets"),
+    ("Conflictive sets (c)", "conflictive_sets"),
+    ("Number of features m_sum", "m_sum"),
+    ("Conflictive features", "conflictive_features"),
+    ("Communication edges", "comm_edges"),
+    ("Empty associations", "empty_associations"),
+    ("Links", "links"),
+    ("Good links", "good_links"),
+    ("Spurious links", "spurious_links"),
+    ("Missing links", "missing_links"),
+    ("Raw precision", "precision"),
+    ("Features (all cameras)", "features"),
+    ("time render [s]", "time_render"),
+    ("time features [s]", "time_features"),
+    ("time matching [s]", "time_matching"),
+    ("time evaluate [s]", "time_evaluate"),
+]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--formation", default="d",
+                   help="a|b|c|d (comm graphs of increasing cycles) or all (default d)")
+    p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
+    p.add_argument("--features", default="sift", help="sift|orb|akaze|surf (default sift)")
+    p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
+    p.add_argument("--max-features", type=int, default=2000,
+                   help="features per image (default 2000)")
+    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default 0.8)")
+    p.add_argument("--threshold-px", type=float, default=1.0,
+                   help="epipolar RANSAC inlier threshold in pixels (default 1)")
+    p.add_argument("--tol-px", type=float, default=2.0,
+                   help="ground-truth tolerance of a good link in pixels (default 2)")
+
+
+def match_formation(formation: str, seed: int = 0, size: tuple[int, int] = (640, 480),
+                    features: str = "sift", max_features: int = 2000, ratio: float = 0.8,
+                    threshold_px: float = 1.0, tol_px: float = 2.0, timer=None) -> dict:
+    """Render one formation, extract, match along the communication graph, count and evaluate.
+
+    Returns
+    -------
+    dict
+        The :data:`ROWS` keys (Table III counts, links, good / spurious / missing links,
+        ``precision``, stage times in seconds) plus ``features_per_camera`` and ``edges``
+        (per edge: ``i``, ``j``, ``links``, ``putative``, ``reason``).
+    """
+    import data_synth
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.evaluate import link_counts
+    from pipeline.features import extract_all
+    from pipeline.matching import match_edges
+    from pipeline.progress import StageTimer
+    from pipeline.types import Links
+
+    timer = timer or StageTimer(verbose=False)
+    t0 = dict(timer.timings)
+    with timer.stage("render", f"formation {formation}, seed {seed}, {size[0]}x{size[1]}"):
+        f = data_synth.render(formation, seed=seed, size=size)
+    with timer.stage("features", f"{features}, at most {max_features} per image"):
+        feats = extract_all(f.views, features, max_features)
+    with timer.stage("matching", f"{len(f.comm_edges)} communication edges"):
+        matches = match_edges(feats, f.views, f.comm_edges, ratio=ratio, threshold_px=threshold_px)
+        links = Links.from_matches(matches)
+    m = [len(x) for x in feats]
+    with timer.stage("evaluate", f"ground truth at {tol_px} px"):
+        counts = count_conflicts(AssociationGraph(m, links)).as_dict()
+        counts.update(link_counts(f, feats, links, f.comm_edges, tol_px=tol_px))
+    spent = {k: v - t0.get(k, 0.0) for k, v in timer.timings.items()}
+    return {
+        "formation": formation,
+        **counts,
+        "comm_edges": len(matches),
+        "empty_associations": sum(1 for p in matches if not len(p.pairs)),
+        "features": int(sum(m)),
+        "features_per_camera": m,
+        **{f"time_{k}": round(spent.get(k, 0.0), 3)
+           for k in ("render", "features", "matching", "evaluate")},
+        "edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)), "putative": int(p.n_putative),
+                   "reason": p.reason} for p in matches],
+    }
+
+
+def _fmt(key: str, v) -> str:
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "–"
+        return f"{v:.1%}" if key == "precision" else f"{v:.2f}"
+    return str(v)
+
+
+def table(results: list[dict]) -> str:
+    """Markdown table, one column per formation, and the paper's Table III for reference."""
+    from pipeline.commands.run_formations import PAPER_TABLE_III_IV
+
+    names = [r["formation"] for r in results]
+    lines = ["| | " + " | ".join(f"({n})" for n in names) + " | paper (a)–(d) |",
+             "|---|" + "---:|" * len(names) + "---|"]
+    for label, key in ROWS:
+        paper = PAPER_TABLE_III_IV.get(label)
+        lines.append(f"| {label} | " + " | ".join(_fmt(key, r[key]) for r in results) + " | "
+                     + (", ".join(map(str, paper)) if paper else "") + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run(args) -> int:
+    from pipeline.features import METHODS
+    from pipeline.progress import StageTimer
+
+    name = str(args.formation).lower()
+    if name not in (*FORMATIONS, "all"):
+        raise InputError(f"--formation {args.formation!r}: choose one of a, b, c, d or all")
+    if args.features.lower() not in METHODS:
+        raise InputError(f"--features {args.features!r}: choose one of {', '.join(METHODS)}")
+    if args.max_features < 8:
+        raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
+    size = parse_size(args.size)
+    timer = StageTimer()
+    results = [match_formation(n, seed=args.seed, size=size, features=args.features.lower(),
+                               max_features=args.max_features, ratio=args.ratio,
+                               threshold_px=args.threshold_px, tol_px=args.tol_px, timer=timer)
+               for n in (FORMATIONS if name == "all" else (name,))]
+    print(f"# match-formation: seed {args.seed}, {args.features.lower()}, {size[0]}x{size[1]}, "
+          f"ratio {args.ratio}, epipolar threshold {args.threshold_px} px, "
+          f"ground truth at {args.tol_px} px\n")
+    print(table(results))
+    for r in results:
+        empty = [e for e in r["edges"] if e["reason"]]
+        for e in empty:
+            print(f"({r['formation']}) edge {e['i']}-{e['j']}: empty association: {e['reason']}")
+    return 0
