@@ -5,14 +5,15 @@ compares four communication graphs "(a) … (d)" whose number of cycles grows; l
 done only along communication edges. Fig. 4 itself is not in the text we have, so the four
 graphs are defined here explicitly, from few cycles to the complete graph.
 
-Robots 0..5 stand in two rows facing the facade — front row 0, 1, 2 (left to right), back row
-5, 4, 3 (left to right) — so the ring 0-1-2-3-4-5-0 runs around the formation between
-spatial neighbours::
+The robots drive line abreast on flat ground — robots 0..5 left to right, 0.8 m apart, all
+cameras at the same mount height, each gazing at a slightly different point of the facade::
 
         facade (+y)
-      0 ─ 1 ─ 2        front row
-      │       │
-      5 ─ 4 ─ 3        back row
+      0 ─ 1 ─ 2 ─ 3 ─ 4 ─ 5      (ring edge (0, 5) closes the loop)
+
+Because every baseline is (nearly) parallel to the facade's window rows, to the rows of floor
+tiles and to the row of crates, a copy of a structure along its row lies on the epipolar line of
+the original: such wrong matches pass the epipolar RANSAC, as the paper reports for its images.
 
 Communication graphs for 6 robots (``FIG4_EDGES``; cycle rank = E - n + 1):
 
@@ -123,13 +124,13 @@ def look_at(centre, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]
     return R, -R @ c
 
 
-def robot_poses(n: int, seed: int, spacing: float = 1.0) -> tuple[np.ndarray, list]:
-    """Camera centres and ``(R, t)`` of ``n`` robots in two rows facing the facade.
+def robot_poses(n: int, seed: int, spacing: float = 0.8) -> tuple[np.ndarray, list]:
+    """Camera centres and ``(R, t)`` of ``n`` robots driving line abreast towards the facade.
 
-    Front row: robots ``0 .. ceil(n/2)-1`` left to right at ``y = 0``; back row: the rest right to
-    left at ``y = -1.4``, shifted by half a spacing — so consecutive indices are spatial
-    neighbours and ``(n-1, 0)`` closes the ring. Heights, positions and gaze targets get a
-    small seeded jitter (the formation is the same for every communication graph).
+    Robot ``i`` stands at ``x = spacing * (i - (n - 1) / 2)``, ``y = 0``, camera height 1.5 m,
+    with a small seeded jitter (±10 cm along the line, ±2 cm across it, ±1 cm in height: flat
+    ground) and a seeded gaze target on the facade. The poses do not depend on the
+    communication graph.
 
     Returns
     -------
@@ -137,19 +138,13 @@ def robot_poses(n: int, seed: int, spacing: float = 1.0) -> tuple[np.ndarray, li
     poses : list of (R (3, 3), t (3,))
     """
     rng = np.random.default_rng([seed, 2])
-    k = (n + 1) // 2
     centres = np.zeros((n, 3))
-    for i in range(n):
-        if i < k:
-            x, y = spacing * (i - (k - 1) / 2), 0.0
-        else:
-            c = n - 1 - i  # back row right -> left
-            x, y = spacing * (c - (k - 1) / 2) + spacing / 2, -1.4
-        centres[i] = (x, y, 1.5)
-    centres += rng.uniform(-0.12, 0.12, (n, 3)) * np.array([1.0, 1.0, 1.5])
+    centres[:, 0] = spacing * (np.arange(n) - (n - 1) / 2) + rng.uniform(-0.1, 0.1, n)
+    centres[:, 1] = rng.uniform(-0.02, 0.02, n)
+    centres[:, 2] = 1.5 + rng.uniform(-0.01, 0.01, n)
     poses = []
     for i in range(n):
-        target = np.array([0.35 * centres[i, 0] + rng.uniform(-0.4, 0.4), FACADE_Y,
+        target = np.array([0.3 * centres[i, 0] + rng.uniform(-0.4, 0.4), FACADE_Y,
                            1.9 + rng.uniform(-0.3, 0.3)])
         poses.append(look_at(centres[i], target))
     return centres, poses
