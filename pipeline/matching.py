@@ -96,12 +96,15 @@ def _distance_matrix(d_i: np.ndarray, d_j: np.ndarray) -> np.ndarray:
     One matrix serves both matching directions, so the mutual test costs one product.
     """
     if d_i.dtype == np.uint8:
-        # Hamming: popcount(a xor b) = |a| + |b| - 2 a.b on the unpacked bits
-        a = np.unpackbits(d_i, axis=1).astype(np.float32)
-        b = np.unpackbits(d_j, axis=1).astype(np.float32)
-        dist = a.sum(1)[:, None] + b.sum(1)[None, :] - 2.0 * (a @ b.T)
-        np.maximum(dist, 0.0, out=dist)
-        return dist
+        # Hamming: popcount(a xor b), 64 bits at a time (exact; faster than unpacked-bit BLAS
+        # products, measured in bench/foundation.py)
+        pad = ((0, 0), (0, (-d_i.shape[1]) % 8))
+        a = np.ascontiguousarray(np.pad(d_i, pad)).view(np.uint64)
+        b = np.ascontiguousarray(np.pad(d_j, pad)).view(np.uint64)
+        dist = np.zeros((len(a), len(b)), np.uint16)
+        for w in range(a.shape[1]):  # loop over 64-bit words (4 for ORB, 8 for AKAZE)
+            dist += np.bitwise_count(a[:, w, None] ^ b[None, :, w])
+        return dist.astype(np.float32)
     a = d_i.astype(np.float32, copy=False)
     b = d_j.astype(np.float32, copy=False)
     sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
