@@ -1,0 +1,104 @@
+"""Benchmark: render, feature extraction and neighbour-only matching of one formation.
+
+For each feature method (SIFT, ORB, AKAZE) renders the formation (default d: 6 cameras,
+640x480), extracts features and matches every communication edge, ``--repeat`` times, and
+prints the median wall time of each stage next to the 3 s target for render + extract + match
+with SIFT. Also times extraction serially against a 2-thread pool and matching serially
+against 2 threads (the defaults of :func:`pipeline.features.extract_all` and
+:func:`pipeline.matching.match_edges` follow these figures). Saves
+``runs/bench-foundation/results.json``. Run 0 of each method is a warm-up and not counted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+import data_synth  # noqa: E402
+from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
+from pipeline.features import extract_all  # noqa: E402
+from pipeline.matching import match_edges  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.types import Links  # noqa: E402
+
+TARGET_S = 3.0
+
+
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def bench_method(method: str, args, size) -> dict:
+    runs = []
+    for k in range(args.repeat + 1):
+        f, t_render = _timed(lambda: data_synth.render(args.formation, seed=args.seed, size=size))
+        feats, t_extract = _timed(lambda f=f: extract_all(f.views, method, args.max_features))
+        matches, t_match = _timed(lambda f=f, feats=feats: match_edges(feats, f.views, f.comm_edges))
+        _, t_extract_1 = _timed(lambda f=f: extract_all(f.views, method, args.max_features, workers=1))
+        _, t_match_2 = _timed(lambda f=f, feats=feats: match_edges(feats, f.views, f.comm_edges,
+                                                                   workers=2))
+        if k == 0:
+            continue  # warm-up: imports, OpenCV and BLAS thread pools
+        links = Links.from_matches(matches)
+        counts = count_conflicts(AssociationGraph([len(x) for x in feats], links))
+        runs.append({"render_s": t_render, "extract_s": t_extract, "match_s": t_match,
+                     "total_s": t_render + t_extract + t_match,
+                     "extract_serial_s": t_extract_1, "match_2threads_s": t_match_2,
+                     "features": int(sum(len(x) for x in feats)), "links": len(links),
+                     "conflictive_sets": counts.conflictive_sets,
+                     "edges": len(matches)})
+    med = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
+    return {"method": method, "runs": runs, "median": med}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--formation", default="d")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--max-features", type=int, default=2000)
+    ap.add_argument("--methods", default="sift,orb,akaze")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--out", default=str(ROOT / "runs" / "bench-foundation"))
+    args = ap.parse_args()
+    w, h = (int(v) for v in args.size.lower().split("x"))
+
+    results = [bench_method(m, args, (w, h)) for m in args.methods.split(",")]
+    print(f"\nformation {args.formation}, seed {args.seed}, {w}x{h}, at most {args.max_features} "
+          f"features, median of {args.repeat} runs, {os.cpu_count()} cores, "
+          f"cv2 threads {cv2.getNumThreads()}")
+    cols = ["render_s", "extract_s", "match_s", "total_s", "extract_serial_s", "match_2threads_s",
+            "features", "links", "conflictive_sets"]
+    print(f"{'method':<8}" + "".join(f"{c:>18}" for c in cols))
+    for r in results:
+        med = r["median"]
+        print(f"{r['method']:<8}" + "".join(
+            f"{med[c]:>18.3f}" if c.endswith("_s") else f"{int(med[c]):>18d}" for c in cols))
+    sift = next((r for r in results if r["method"] == "sift"), None)
+    verdict = None
+    if sift is not None:
+        verdict = bool(sift["median"]["total_s"] < TARGET_S)
+        print(f"target: SIFT render + extract + match < {TARGET_S} s → "
+              f"{'met' if verdict else 'NOT met'} ({sift['median']['total_s']:.2f} s)")
+    write_json_atomic(Path(args.out) / "results.json", {
+        "config": vars(args), "cores": os.cpu_count(), "cv2_threads": cv2.getNumThreads(),
+        "numpy": np.__version__, "opencv": cv2.__version__, "target_s": TARGET_S,
+        "target_met": verdict, "results": results})
+    print(f"saved {args.out}/results.json")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
