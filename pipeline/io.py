@@ -504,8 +504,8 @@ def _read_graph_file(path: Path, names: list[str]) -> np.ndarray:
                 ends.append(k)
             else:
                 shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")
-                raise InputError(f"{path}, line {line_no}: image {tok!r} is not in the folder "
-                                 f"(images: {shown})")
+                raise InputError(f"{path}, line {line_no}: image {tok!r} is not one of the {n} "
+                                 f"images ({shown})")
         if ends[0] == ends[1]:
             raise InputError(f"{path}, line {line_no}: self-edge {raw.strip()!r}; an edge joins "
                              f"two different cameras")

@@ -280,7 +280,7 @@ def test_graph_file_with_names_indices_header_and_comments(tmp_path):
 def test_graph_file_naming_unknown_image(tmp_path):
     f = tmp_path / "edges.csv"
     f.write_text("im0.jpg,im1.jpg\nim1.jpg,castle.jpg\n")
-    with pytest.raises(InputError, match=r"edges\.csv, line 2: image 'castle\.jpg' is not in the folder"):
+    with pytest.raises(InputError, match=r"edges\.csv, line 2: image 'castle\.jpg' is not one of the"):
         comm_graph(f, NAMES6)
 
 

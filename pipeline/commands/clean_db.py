@@ -1,0 +1,137 @@
+"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE]``.
+
+For COLMAP and hloc users: the verified matches of a database (its two-view geometries) are
+made consistent by the distributed consistency stage (Aragüés et al., Sec. III detection and
+Sec. IV Alg. 1 resolution, one robot per image), and a NEW database is written with the cut
+links removed from the two-view geometries. Run COLMAP's mapper on OUT.db as usual.
+
+Before the distributed stage, links the paper's model cannot hold are cut too, each with its
+reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
+the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
+between images that are not neighbours: those robots could not have matched).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["CleanDbResult", "clean_database", "add_arguments", "run"]
+
+
+@dataclass
+class CleanDbResult:
+    """What ``clean-db`` did; ``summary()`` is printed and can be saved as JSON."""
+
+    input: Path
+    output: Path
+    images: int
+    comm_edges: int
+    links: int
+    before: dict
+    after: dict
+    cut: dict
+    resolution: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        return {"input": str(self.input), "output": str(self.output), "images": self.images,
+                "comm_edges": self.comm_edges, "links": self.links, "before": self.before,
+                "after": self.after, "cut": self.cut, "resolution": self.resolution}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("database", metavar="IN.db", help="COLMAP database with two-view geometries "
+                                                     "(made by COLMAP or hloc); never modified")
+    p.add_argument("--out", required=True, metavar="OUT.db", help="the cleaned database to write")
+    p.add_argument("--comm-graph", default=None, metavar="FILE",
+                   help="communication graph: 'cam_i,cam_j' lines, 0-based indices of the images "
+                        "in name order or image names (default: images sharing verified "
+                        "matches are neighbours)")
+    p.add_argument("--report", default=None, metavar="JSON",
+                   help="also save the summary as JSON")
+
+
+def clean_database(database: str | Path, out: str | Path,
+                   comm_graph_file: str | Path | None = None) -> CleanDbResult:
+    """Read, make consistent, write a new database (see the module docstring).
+
+    Parameters
+    ----------
+    database : input COLMAP database
+    out : output database (must differ from the input)
+    comm_graph_file : optional comm-graph file (:func:`pipeline.io.comm_graph` file format)
+
+    Returns
+    -------
+    CleanDbResult
+
+    Raises
+    ------
+    InputError
+        Missing/unreadable database, a database without two-view geometries, ``out`` equal to
+        the input, a bad comm-graph file.
+    """
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.io import comm_graph
+
+    database, out = Path(database), Path(out)
+    if out.resolve() == database.resolve():
+        raise InputError(f"--out {str(out)!r} is the input database; the input is never "
+                         f"modified, choose a new file")
+    contents = colmap.read_database(database)
+    links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    reason = np.full(len(links), "", dtype=object)
+    reason[contents.not_one_to_one] = "not-one-to-one"
+    if comm_graph_file is not None:
+        if not Path(comm_graph_file).is_file():
+            raise InputError(f"--comm-graph {str(comm_graph_file)!r}: no such file")
+        edges = comm_graph(Path(comm_graph_file), contents.names)
+        off_graph = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
+        reason[off_graph & (reason == "")] = "not-comm-edge"
+    else:
+        edges = None
+    model_ok = reason == ""
+    model_links = links.subset(model_ok)
+    # the association graph the robots start from: one-to-one links on comm edges
+    before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
+    result = resolve_conflicts(m, edges, model_links)
+    idx = np.flatnonzero(model_ok)
+    reason[idx[result.deleted]] = "resolution"
+    keep = reason == ""
+    after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
+    colmap.write_cleaned_database(contents, out, keep)
+    n_edges = len(edges) if edges is not None else \
+        len(np.unique(model_links.cam_i * n + model_links.cam_j))
+    stats = result.stats
+    return CleanDbResult(
+        input=database, output=out, images=n, comm_edges=n_edges, links=len(links),
+        before=before, after=after,
+        cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge", "resolution")},
+        resolution={k: stats.get(k) for k in ("iterations", "detection_rounds",
+                                              "resolution_rounds", "messages", "bytes",
+                                              "max_robot_memory_bytes")})
+
+
+def run(args) -> int:
+    res = clean_database(args.database, args.out, args.comm_graph)
+    b, a, cut, r = res.before, res.after, res.cut, res.resolution
+    print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
+    print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
+          f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
+    print(f"links cut: {cut['resolution']} by resolution in {r['iterations']} iteration(s) "
+          f"({r['detection_rounds']} detection + {r['resolution_rounds']} resolution rounds, "
+          f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
+          f"{cut['not-comm-edge']} outside the comm graph")
+    print(f"cleaned database written to {res.output}")
+    if args.report:
+        from pipeline.runfolder import write_json_atomic
+
+        write_json_atomic(args.report, res.summary())
+    return 0

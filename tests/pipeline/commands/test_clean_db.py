@@ -1,0 +1,158 @@
+"""clean-db: round trip on databases built by the tests, input never modified, bad input."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from pipeline import colmap
+from pipeline.__main__ import main
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.types import Features, Links, View
+
+
+def _db_with_planted_conflicts(path, n=4, m=30):
+    """Four images; chains of clean links plus two planted cycles that close on a second feature
+    of the same image (the paper's Fig. 1 pattern): two conflictive sets."""
+    rng = np.random.default_rng(0)
+    views, feats = [], []
+    for k in range(n):
+        K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+        views.append(View(f"view_{k}.jpg", np.zeros((240, 320, 3), np.uint8), K))
+        kp = rng.uniform([0, 0], [319, 239], size=(m, 2)).astype(np.float32)
+        feats.append(Features(kp, np.zeros((m, 128), np.float32), np.ones(m, np.float32), "sift"))
+    rows = []
+    for r in range(10, 20):  # clean tracks: feature r in every image, along the ring
+        rows += [(0, r, 1, r), (1, r, 2, r), (2, r, 3, r)]
+    rows += [(0, 0, 1, 0), (1, 0, 2, 0), (0, 1, 2, 0)]          # 0:0 - 1:0 - 2:0 - 0:1
+    rows += [(1, 5, 2, 5), (2, 5, 3, 5), (1, 6, 3, 5)]          # 1:5 - 2:5 - 3:5 - 1:6
+    ci, fi, cj, fj = np.array(rows).T
+    links = Links(ci, fi, cj, fj)
+    colmap.write_database(path, views, feats, links)
+    return views, feats, links
+
+
+def _sha(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_round_trip_cuts_the_conflicts_and_nothing_else(tmp_path, capsys):
+    src = tmp_path / "in.db"
+    _, feats, links = _db_with_planted_conflicts(src)
+    digest = _sha(src)
+    m = [len(f) for f in feats]
+    assert count_conflicts(AssociationGraph(m, links)).conflictive_sets == 2
+
+    out = tmp_path / "out" / "clean.db"
+    report = tmp_path / "clean.json"
+    assert main(["clean-db", str(src), "--out", str(out), "--report", str(report)]) == 0
+    printed = capsys.readouterr().out
+    assert "conflictive sets: 2 before, 0 after" in printed
+
+    assert _sha(src) == digest  # the input is never modified
+    cleaned = colmap.read_database(out)
+    assert count_conflicts(AssociationGraph(m, cleaned.links)).conflictive_sets == 0
+    kept = {tuple(r) for r in np.stack([cleaned.links.cam_i, cleaned.links.feat_i,
+                                        cleaned.links.cam_j, cleaned.links.feat_j], 1).tolist()}
+    given = {tuple(r) for r in np.stack([links.cam_i, links.feat_i, links.cam_j,
+                                         links.feat_j], 1).tolist()}
+    assert kept < given
+    summary = json.loads(report.read_text())
+    cut = given - kept
+    assert summary["cut"]["resolution"] == len(cut) >= 2
+    # every clean track survives: only links of the two planted cycles were cut
+    assert all(r[1] < 10 for r in cut)
+    assert summary["after"]["conflictive_sets"] == 0 and summary["before"]["conflictive_sets"] == 2
+
+
+def test_comm_graph_file_cuts_links_between_non_neighbours(tmp_path):
+    src = tmp_path / "in.db"
+    _, feats, links = _db_with_planted_conflicts(src)
+    graph = tmp_path / "path.csv"
+    graph.write_text("view_0.jpg,view_1.jpg\nview_1.jpg,view_2.jpg\n2,3\n")  # no 0-2, no 1-3
+    out = tmp_path / "clean.db"
+    report = tmp_path / "r.json"
+    assert main(["clean-db", str(src), "--out", str(out), "--comm-graph", str(graph),
+                 "--report", str(report)]) == 0
+    summary = json.loads(report.read_text())
+    assert summary["cut"]["not-comm-edge"] == 2  # (0,1)-(2,0) and (1,6)-(3,5)
+    cleaned = colmap.read_database(out)
+    pairs = set(zip(cleaned.links.cam_i.tolist(), cleaned.links.cam_j.tolist(), strict=True))
+    assert pairs <= {(0, 1), (1, 2), (2, 3)}
+    # without the chords the planted cycles are open chains: nothing left to resolve
+    assert summary["before"]["conflictive_sets"] == 0 and summary["cut"]["resolution"] == 0
+
+
+def test_sceaux_database_round_trip(tmp_path, sceaux_small):
+    """A database built with pycolmap from real matches (all pairs of 4 Sceaux images)."""
+    from pipeline.features import extract_all
+    from pipeline.io import comm_graph, load_folder
+    from pipeline.matching import match_edges
+
+    views = load_folder(sceaux_small, max_size=640)
+    feats = extract_all(views, "sift", 1500)
+    links = Links.from_matches(match_edges(feats, views, comm_graph("complete", [v.name for v in views])))
+    src = colmap.write_database(tmp_path / "sceaux.db", views, feats, links)
+    out = tmp_path / "sceaux-clean.db"
+    assert main(["clean-db", str(src), "--out", str(out)]) == 0
+    cleaned = colmap.read_database(out)
+    m = [len(f) for f in feats]
+    assert count_conflicts(AssociationGraph(m, cleaned.links)).conflictive_sets == 0
+    assert 0 < len(cleaned.links) <= len(links)
+    result = colmap.incremental_mapping(out)  # COLMAP's mapper runs on the cleaned database
+    assert result.registered_images >= 3
+
+
+# ------------------------------------------------------------------------------------ bad input
+
+def _fails(argv, capsys, match):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert match in err, err
+
+
+def test_database_without_two_view_geometries(tmp_path, capsys):
+    src = tmp_path / "raw.db"
+    views = [View(f"v{k}.jpg", np.zeros((10, 10), np.uint8), np.eye(3)) for k in range(2)]
+    feats = [Features(np.zeros((3, 2), np.float32), np.zeros((3, 128), np.float32),
+                      np.ones(3, np.float32), "sift") for _ in range(2)]
+    colmap.write_database(src, views, feats, Links([], [], [], []))
+    out = tmp_path / "out.db"
+    _fails(["clean-db", str(src), "--out", str(out)], capsys, "no two-view geometries")
+    assert not out.exists()
+
+
+def test_missing_database(tmp_path, capsys):
+    _fails(["clean-db", str(tmp_path / "nope.db"), "--out", str(tmp_path / "o.db")], capsys,
+           "does not exist")
+
+
+def test_output_equal_to_input(tmp_path, capsys):
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    digest = _sha(src)
+    _fails(["clean-db", str(src), "--out", str(src)], capsys, "never modified")
+    assert _sha(src) == digest
+
+
+def test_comm_graph_naming_an_unknown_image(tmp_path, capsys):
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    graph = tmp_path / "g.csv"
+    graph.write_text("view_0.jpg,view_1.jpg\nview_1.jpg,castle.jpg\n")
+    out = tmp_path / "o.db"
+    _fails(["clean-db", str(src), "--out", str(out), "--comm-graph", str(graph)], capsys,
+           "line 2: image 'castle.jpg' is not one of the")
+    assert not out.exists()
+
+
+def test_not_a_database(tmp_path, capsys):
+    src = tmp_path / "notes.db"
+    src.write_text("not sqlite")
+    _fails(["clean-db", str(src), "--out", str(tmp_path / "o.db")], capsys, "not an SQLite file")
+
+
+def test_out_is_required(tmp_path):
+    with pytest.raises(SystemExit):
+        main(["clean-db", str(tmp_path / "in.db")])
