@@ -31,6 +31,9 @@ METHODS = ("sift", "orb", "akaze", "surf")
 #: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
 MERGE_RADIUS_PX = 0.5
 
+#: images with a side shorter than this give zero features (smaller than any descriptor patch)
+MIN_IMAGE_PX = 16
+
 
 def surf_available() -> bool:
     """Whether this OpenCV build offers SURF (needs the non-free algorithms)."""
@@ -72,10 +75,17 @@ def _gray(image_or_view) -> np.ndarray:
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise InputError(f"image of shape {image.shape} is empty")
     if image.dtype != np.uint8:
-        if np.issubdtype(image.dtype, np.floating) and image.size and float(np.nanmax(image)) <= 1.0:
-            image = np.clip(np.nan_to_num(image) * 255.0 + 0.5, 0, 255).astype(np.uint8)
-        elif np.issubdtype(image.dtype, np.number) and not np.issubdtype(image.dtype, np.complexfloating):
-            image = np.clip(np.nan_to_num(image.astype(np.float64)), 0, 255).astype(np.uint8)
+        if image.dtype == bool:
+            image = image.astype(np.uint8) * 255
+        elif image.dtype == np.uint16:
+            image = (image // 257).astype(np.uint8)  # 16-bit photographs
+        elif np.issubdtype(image.dtype, np.floating):
+            image = np.nan_to_num(image.astype(np.float64), nan=0.0, posinf=255.0, neginf=0.0)
+            if image.max() <= 1.0:  # float images in [0, 1]
+                image = image * 255.0 + 0.5
+            image = np.clip(image, 0, 255).astype(np.uint8)
+        elif np.issubdtype(image.dtype, np.integer):
+            image = np.clip(image, 0, 255).astype(np.uint8)
         else:
             raise InputError(f"image dtype {image.dtype} is not a real number type (use uint8)")
     if image.ndim == 3:
@@ -128,7 +138,9 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     Parameters
     ----------
     image_or_view : View or ndarray, (H, W) / (H, W, 3) RGB / (H, W, 4) RGBA
-        uint8 preferred; float images in ``[0, 1]`` are scaled to ``[0, 255]``.
+        uint8 preferred; float images in ``[0, 1]`` are scaled to ``[0, 255]``, uint16 divided
+        by 257, bool mapped to 0/255, other numbers clipped to ``[0, 255]``. Images with a side
+        shorter than :data:`MIN_IMAGE_PX` give zero features.
     method : {"sift", "orb", "akaze", "surf"}
         ``surf`` only where OpenCV has non-free algorithms.
     max_features : int
@@ -161,9 +173,16 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     max_features = int(max_features)
     detector = _detector(method, max_features)
     gray = _gray(image_or_view)
-    kps, desc = detector.detectAndCompute(gray, None)
     dim = int(detector.descriptorSize())
     dtype = np.uint8 if detector.descriptorType() == cv2.CV_8U else np.float32
+    if min(gray.shape) < MIN_IMAGE_PX:  # no detector has room for a patch; ORB would raise
+        kps, desc = (), None
+    else:
+        try:
+            kps, desc = detector.detectAndCompute(gray, None)
+        except cv2.error as exc:
+            msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "cv2.error"
+            raise InputError(f"{method} failed on an image of shape {gray.shape}: {msg}") from None
     if desc is None or len(kps) == 0:  # blank image: OpenCV returns ((), None)
         return Features(np.zeros((0, 2), np.float32), np.zeros((0, dim), dtype),
                         np.zeros(0, np.float32), method)

@@ -104,3 +104,30 @@ def test_extract_all_threads_match_serial():
     for fa, fb in zip(a, b, strict=True):
         np.testing.assert_array_equal(fa.keypoints, fb.keypoints)
         np.testing.assert_array_equal(fa.descriptors, fb.descriptors)
+
+
+@pytest.mark.parametrize("method", ["sift", "orb", "akaze"])
+@pytest.mark.parametrize("image", [np.zeros((1, 1), np.uint8), np.full((8, 300), 200, np.uint8)],
+                         ids=["1x1", "8x300"])
+def test_tiny_image_gives_zero_features(method, image):
+    # regression: ORB raised a cv2.error from resize() on a 1x1 image
+    f = extract(image, method)
+    assert len(f) == 0 and f.descriptors.ndim == 2
+
+
+@pytest.mark.parametrize("image", [
+    np.ones((60, 80), bool),
+    (textured()[:, :, 0].astype(np.uint16) * 257),
+    np.full((60, 80), np.nan, np.float32),
+    -np.ones((60, 80), np.int64),
+], ids=["bool", "uint16", "nan", "negative-int"])
+def test_other_dtypes_are_converted(image):
+    f = extract(image, "sift", 200)
+    assert f.descriptors.shape == (len(f), 128)
+
+
+def test_uint16_scaled_not_saturated():
+    img = textured()[:, :, 0]
+    a = extract(img, "sift", 200)
+    b = extract(img.astype(np.uint16) * 257, "sift", 200)
+    np.testing.assert_array_equal(a.keypoints, b.keypoints)
