@@ -1,0 +1,139 @@
+"""Centralized references for the consistency stage — for checking and comparing only.
+
+Nothing here is used by a robot: every function sees the whole association graph.
+
+* :func:`union_find_conflicts` — conflictive sets by connected components (Def. 2.4), the
+  ground truth the distributed detection (Sec. III) must reproduce.
+* Baselines that real SfM tools apply to the same input, each returning a kept mask ``(L,)``:
+
+  - :func:`drop_conflictive_sets` — OpenMVG / MVE / AliceVision "filter tracks": a track
+    holding two features of one image is discarded whole.
+  - :func:`keep_first_per_image` — Theia-style track building: in each set, an image keeps
+    only its first feature (here: its lowest feature id) and links to the others go.
+  - :func:`quality_merge` — a centralized consistent merge (QuickMatch idea): Kruskal over
+    the links by decreasing ``Links.quality``, never merging two clusters that share an
+    image; an upper reference for how many good links can be kept.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.association import AssociationGraph, conflictive_labels
+
+__all__ = [
+    "union_find_conflicts",
+    "drop_conflictive_sets",
+    "keep_first_per_image",
+    "quality_merge",
+    "is_conflict_free",
+]
+
+
+def union_find_conflicts(features_per_camera, links) -> tuple[np.ndarray, np.ndarray]:
+    """Component label and conflict flag of every feature (Def. 2.4), by union-find.
+
+    Parameters
+    ----------
+    features_per_camera : (n,) int
+    links : Links, (L,)
+
+    Returns
+    -------
+    labels : ndarray, (m_total,) int — connected component (scipy.sparse.csgraph)
+    conflictive : ndarray, (m_total,) bool — the feature's set holds two features of one camera
+    """
+    g = AssociationGraph(features_per_camera, links)
+    labels, _, conflictive = conflictive_labels(g)
+    return labels, conflictive[labels] if labels.size else np.zeros(0, dtype=bool)
+
+
+def is_conflict_free(features_per_camera, links) -> bool:
+    """True when no association set holds two features of one camera."""
+    return not union_find_conflicts(features_per_camera, links)[1].any()
+
+
+def _link_ends(features_per_camera, links) -> tuple[np.ndarray, np.ndarray]:
+    off = np.concatenate([[0], np.cumsum(np.asarray(features_per_camera, dtype=np.int64))])
+    return off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
+
+
+def drop_conflictive_sets(features_per_camera, links) -> np.ndarray:
+    """Kept mask ``(L,)``: every link of a conflictive set is dropped ("filter tracks")."""
+    _, conflictive = union_find_conflicts(features_per_camera, links)
+    a, _ = _link_ends(features_per_camera, links)
+    return ~conflictive[a] if len(links) else np.zeros(0, dtype=bool)
+
+
+def keep_first_per_image(features_per_camera, links) -> np.ndarray:
+    """Kept mask ``(L,)``: in each set, each image keeps its first (lowest-id) feature only.
+
+    A link is kept when both its features are kept; the surviving links of a set then join
+    features of distinct images, so the result is conflict-free.
+    """
+    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    labels, _ = union_find_conflicts(fpc, links)
+    if not len(links):
+        return np.zeros(0, dtype=bool)
+    cam = np.repeat(np.arange(fpc.size), fpc)
+    gid = np.arange(labels.size)
+    # first feature of each (set, camera): lowest global id, i.e. lowest feature id
+    order = np.lexsort((gid, cam, labels))
+    key_l, key_c = labels[order], cam[order]
+    first = np.r_[True, (key_l[1:] != key_l[:-1]) | (key_c[1:] != key_c[:-1])]
+    kept_feature = np.zeros(labels.size, dtype=bool)
+    kept_feature[order[first]] = True
+    a, b = _link_ends(fpc, links)
+    return kept_feature[a] & kept_feature[b]
+
+
+def quality_merge(features_per_camera, links) -> np.ndarray:
+    """Kept mask ``(L,)`` of a Kruskal merge by decreasing quality that never joins two
+    clusters sharing a camera (QuickMatch idea, centralized).
+
+    A link is kept if it merges two clusters with disjoint cameras, or if its two ends already
+    lie in one cluster. Links outside conflictive sets are always kept (their sets already
+    hold each camera once), so the loop runs over the links of conflictive sets only. Ties in
+    quality are broken by input order.
+
+    Notes
+    -----
+    ``O(L_c α(L_c))`` union-find operations in Python for the ``L_c`` links of conflictive
+    sets; camera sets are Python integers used as bit sets.
+    """
+    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    L = len(links)
+    kept = np.ones(L, dtype=bool)
+    if L == 0:
+        return kept
+    _, conflictive = union_find_conflicts(fpc, links)
+    a, b = _link_ends(fpc, links)
+    todo = np.flatnonzero(conflictive[a])
+    if todo.size == 0:
+        return kept
+    todo = todo[np.argsort(-links.quality[todo], kind="stable")]
+    parent: dict[int, int] = {}
+    cams: dict[int, int] = {}
+
+    def find(x: int) -> int:
+        root = x
+        while parent.get(root, root) != root:
+            root = parent[root]
+        while parent.get(x, x) != root:  # path compression
+            parent[x], x = root, parent[x]
+        return root
+
+    ca, cb = links.cam_i.tolist(), links.cam_j.tolist()
+    al, bl = a.tolist(), b.tolist()
+    for k in todo.tolist():
+        ra, rb = find(al[k]), find(bl[k])
+        if ra == rb:
+            continue
+        sa = cams.get(ra, 1 << ca[k])
+        sb = cams.get(rb, 1 << cb[k])
+        if sa & sb:
+            kept[k] = False
+            continue
+        parent[rb] = ra
+        cams[ra] = sa | sb
+    return kept
