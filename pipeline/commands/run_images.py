@@ -1,0 +1,317 @@
+"""``python -m pipeline run-images DIR --graph KIND``: the whole pipeline on real photographs.
+
+The stages of a formation run (DESIGN.md "Data flow") without ground truth: load and
+downscale the images with their own intrinsics (:mod:`pipeline.io`), features, matching on the
+user's comm-graph edges only, the distributed consistency stage (Aragüés et al., Sec. III
+detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
+cleaned tracks a pycolmap incremental reconstruction from the matches before and after
+cleaning (:mod:`pipeline.colmap`). Writes the run folder of DESIGN.md "Run outputs" with
+``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``.
+
+Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
+supplies them (and refines guessed focal lengths). Fusion runs only when it registered every
+image (the fusion stage needs every robot's pose); otherwise it is skipped and the report says
+why.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.progress import StageTimer
+from pipeline.runfolder import atomic_run_folder, write_json_atomic
+from pipeline.types import Links, View
+
+__all__ = ["ImagesConfig", "run_images", "add_arguments", "run"]
+
+
+@dataclass
+class ImagesConfig:
+    """Options of ``run-images`` (see ``python -m pipeline run-images --help``)."""
+
+    directory: str
+    graph: str
+    intrinsics: str = "auto"
+    max_size: int | None = 1600
+    features: str = "sift"
+    max_features: int = 2000
+    fusion: bool = True
+    rerun: bool = True
+    export_db: bool = False
+    out: str | None = None
+    threads: int = -1
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        folder = Path(self.directory).resolve().name or "images"
+        graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
+        return Path("runs") / f"images-{folder}-{graph}"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("directory", metavar="DIR",
+                   help="folder of photographs (JPEG/PNG/TIFF; taken in name order)")
+    p.add_argument("--graph", required=True, metavar="ring|ring2|complete|knn:K|FILE",
+                   help="communication graph: a kind, or a file of 'cam_i,cam_j' lines "
+                        "(0-based indices in name order, or image names)")
+    p.add_argument("--intrinsics", default="auto", metavar="auto|exif|K.txt",
+                   help="auto (DIR/K.txt, else EXIF, else a guessed focal length), exif, or "
+                        "a K.txt at the images' full resolution (default auto)")
+    p.add_argument("--max-size", type=int, default=1600, metavar="PX",
+                   help="longest image side after downscaling (default 1600; 0 = full size)")
+    p.add_argument("--features", default="sift", help="sift|orb|akaze (default sift)")
+    p.add_argument("--max-features", type=int, default=2000,
+                   help="features per image (default 2000)")
+    p.add_argument("--export-db", action="store_true",
+                   help="also write the matches as a COLMAP database (run folder/database.db): "
+                        "matches table = every link, two-view geometries = kept links")
+    p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
+    p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
+    p.add_argument("--threads", type=int, default=-1,
+                   help="threads for COLMAP's mapper (default -1: all cores)")
+    p.add_argument("--out", default=None,
+                   help="run folder (default runs/images-<DIR name>-<graph>)")
+
+
+def config_from_args(args) -> ImagesConfig:
+    if args.max_size < 0:
+        raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
+                         f"or 0 for full resolution")
+    if args.max_features < 8:
+        raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
+    return ImagesConfig(directory=args.directory, graph=args.graph, intrinsics=args.intrinsics,
+                        max_size=args.max_size or None, features=args.features,
+                        max_features=args.max_features, fusion=not args.no_fusion,
+                        rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
+                        threads=args.threads)
+
+
+def run(args) -> int:
+    out = run_images(config_from_args(args))
+    print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd"
+          f"{', database.db' if args.export_db else ''})")
+    return 0
+
+
+# ------------------------------------------------------------------------------------ the run
+
+def _posed_views(views: list[View], mapping) -> list[View] | None:
+    """Views with the poses (and refined intrinsics) of the reconstruction, if all registered."""
+    rec = mapping.reconstruction
+    if rec is None or mapping.registered_images < len(views):
+        return None
+    by_name = {rec.images[i].name: rec.images[i] for i in rec.reg_image_ids()}
+    posed = []
+    for v in views:
+        image = by_name[v.name]
+        pose = image.cam_from_world()
+        K = rec.cameras[image.camera_id].calibration_matrix().copy()
+        K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
+        posed.append(dataclasses.replace(v, R=np.asarray(pose.rotation.matrix()),
+                                         t=np.asarray(pose.translation).reshape(3), K=K))
+    return posed
+
+
+def _points_and_tracks(mapping, views: list[View], features, kept: Links):
+    """3D points of the reconstruction and, for each, the association set of its first
+    observation in the kept association graph (``-1`` when that feature is in none)."""
+    from pipeline.association import AssociationGraph
+
+    rec = mapping.reconstruction
+    if rec is None or rec.num_points3D() == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    cam_of_name = {v.name: k for k, v in enumerate(views)}
+    cam_of_image = {i: cam_of_name[rec.images[i].name] for i in rec.reg_image_ids()}
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    graph = AssociationGraph(m, kept)
+    labels = graph.components()
+    xyz, first = [], []
+    for p in rec.points3D.values():
+        el = p.track.elements[0]
+        xyz.append(p.xyz)
+        first.append(graph.offsets[cam_of_image[el.image_id]] + el.point2D_idx)
+    first = np.asarray(first, dtype=np.int64)
+    sizes = np.bincount(labels, minlength=labels.max() + 1 if labels.size else 0)
+    tracks = np.where(sizes[labels[first]] >= 2, labels[first], -1)
+    return np.asarray(xyz, dtype=np.float64).reshape(-1, 3), tracks
+
+
+def _fusion_section(cleaning) -> dict:
+    cut = cleaning.reason == "fusion-outlier"
+    return {**dict(cleaning.fusion_stats), "cut_links": int(cut.sum())}
+
+
+def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
+    """Run every stage on a folder of photographs and write the run folder; return its path.
+
+    Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
+    consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
+    reconstruction after cleaning → outputs (report.json, links.csv with ``truth`` empty,
+    sparse/ = the reconstruction after cleaning, recording.rrd, database.db with
+    ``export_db``).
+
+    Raises
+    ------
+    InputError
+        Bad folder, images, intrinsics or graph (see :func:`pipeline.io.load_folder` and
+        :func:`pipeline.io.comm_graph`), or a bad feature method.
+    """
+    from pipeline import colmap
+    from pipeline.features import extract_all
+    from pipeline.io import comm_graph, load_folder
+    from pipeline.linkscsv import write_links_csv
+    from pipeline.matching import match_edges
+    from pipeline.run import (
+        _association_counts,
+        _resolution_section,
+        clean_association,
+        report_markdown,
+        versions,
+    )
+
+    timer = timer or StageTimer()
+    out = config.out_dir()
+    with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
+        intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
+            else Path(config.intrinsics)
+        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
+        names = [v.name for v in views]
+        comm_edges = comm_graph(config.graph, names)
+        sources = sorted({v.intrinsics_source for v in views})
+        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; "
+                   f"graph {config.graph}: {len(comm_edges)} edges")
+    with timer.stage("features", f"{config.features}, at most {config.max_features} per image"):
+        feats = extract_all(views, config.features, config.max_features)
+        m = np.array([len(f) for f in feats], dtype=np.int64)
+        timer.note(f"features per camera: {m.tolist()}")
+    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
+        matches = match_edges(feats, views, comm_edges)
+        links = Links.from_matches(matches)
+        timer.note(f"{len(links)} links")
+
+    with tempfile.TemporaryDirectory(prefix="run-images-") as work:
+        work = Path(work)
+        with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links"):
+            db_before = colmap.write_database(work / "before.db", views, feats, links)
+            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads)
+            timer.note(_mapping_note(map_before))
+        fusion_available = importlib.util.find_spec("pipeline.fusion.landmarks") is not None
+        posed = _posed_views(views, map_before) if config.fusion and fusion_available else None
+        cleaning = clean_association(posed or views, feats, comm_edges, links,
+                                     fusion=config.fusion and posed is not None, timer=timer)
+        if not config.fusion:
+            cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
+        elif not fusion_available:
+            cleaning.fusion_stats = {"enabled": False,
+                                     "reason": "fusion stage (pipeline.fusion.landmarks) not "
+                                               "available in this build"}
+        elif posed is None:
+            cleaning.fusion_stats = {
+                "enabled": False,
+                "reason": f"camera poses unknown: the reconstruction before cleaning registered "
+                          f"{map_before.registered_images} of {len(views)} images"}
+        kept = cleaning.kept
+        kept_links = links.subset(kept)
+        with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
+            db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
+            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads)
+            timer.note(_mapping_note(map_after))
+
+        report = {
+            "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
+            "n_cameras": len(views),
+            "comm_edges": comm_edges.tolist(),
+            "features_per_camera": m.tolist(),
+            "before": _association_counts(m, links, None, None),
+            "after": _association_counts(m, kept_links, None, None),
+            "resolution": _resolution_section(cleaning, None),
+            "fusion": _fusion_section(cleaning),
+            "triangulation": {"method": "pycolmap incremental mapping from the matches "
+                                        "(two-view geometries = links before / kept links after)",
+                              "before": map_before.summary(), "after": map_after.summary()},
+            "matching": {"edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)),
+                                    "putative": int(p.n_putative), "reason": p.reason}
+                                   for p in matches]},
+            "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
+                        "intrinsics_source": v.intrinsics_source,
+                        "intrinsics_known": bool(v.intrinsics_known)} for v in views],
+            "versions": versions(),
+            "config": {**asdict(config), "out": str(out)},
+        }
+        if cleaning.fused_points is not None:
+            report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+        md = report_markdown(report) + _mapping_markdown(map_before, map_after)
+
+        with timer.stage("write", str(out)):
+            with atomic_run_folder(out) as tmp:
+                write_links_csv(tmp / "links.csv", links, cleaning.status, cleaning.reason,
+                                cleaning.round, np.full(len(links), -1, dtype=np.int8))
+                sparse = tmp / "sparse"
+                sparse.mkdir()
+                rec_after = map_after.reconstruction
+                if rec_after is None:
+                    import pycolmap
+                    rec_after = pycolmap.Reconstruction()
+                rec_after.write(sparse)
+                if config.export_db:
+                    shutil.copyfile(db_after, tmp / "database.db")
+                if config.rerun:
+                    _write_recording(tmp / "recording.rrd", views, feats, links, cleaning,
+                                     map_after, kept_links, md)
+                report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+                write_json_atomic(tmp / "report.json", report)
+    print(md)
+    return out
+
+
+def _write_recording(path: Path, views, feats, links: Links, cleaning, mapping, kept_links,
+                     md: str) -> None:
+    from pipeline.types import RunRecord
+    from viz.rerun_log import log_run
+
+    # cameras registered after cleaning are drawn at their reconstructed pose
+    rec = mapping.reconstruction
+    drawn = list(views)
+    if rec is not None:
+        by_name = {rec.images[i].name: rec.images[i] for i in rec.reg_image_ids()}
+        for k, v in enumerate(views):
+            if v.name in by_name:
+                pose = by_name[v.name].cam_from_world()
+                drawn[k] = dataclasses.replace(v, R=np.asarray(pose.rotation.matrix()),
+                                               t=np.asarray(pose.translation).reshape(3))
+    points, tracks = _points_and_tracks(mapping, views, feats, kept_links)
+    record = RunRecord(
+        views=drawn, features=feats, links=links,
+        status=cleaning.status.astype(str), reason=cleaning.reason.astype(str),
+        round=cleaning.round, iteration=cleaning.iteration,
+        conflictive_before=cleaning.conflictive_before,
+        truth=np.full(len(links), -1, dtype=np.int8),
+        points=points, point_tracks=tracks, gt_points=None,
+        fused_points=cleaning.fused_points, report_markdown=md)
+    log_run(path, record)
+
+
+def _mapping_note(mapping) -> str:
+    return (f"{mapping.registered_images} of {mapping.images} images registered, "
+            f"{mapping.points} points, track length {mapping.mean_track_length:.2f}, "
+            f"reprojection error {mapping.mean_reprojection_error:.3f} px")
+
+
+def _mapping_markdown(before, after) -> str:
+    rows = [("Registered images", "registered_images"), ("Points", "points"),
+            ("Mean track length", "mean_track_length"),
+            ("Mean reprojection error [px]", "mean_reprojection_error")]
+    b, a = before.summary(), after.summary()
+    lines = ["", "| Reconstruction | before | after |", "|---|---:|---:|"]
+    lines += [f"| {label} | {b[key]} | {a[key]} |" for label, key in rows]
+    return "\n".join(lines) + "\n"
