@@ -48,7 +48,7 @@ class ImagesConfig:
     rerun: bool = True
     export_db: bool = False
     out: str | None = None
-    threads: int = -1
+    threads: int = 1
 
     def out_dir(self) -> Path:
         if self.out:
@@ -77,8 +77,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "matches table = every link, two-view geometries = kept links")
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
-    p.add_argument("--threads", type=int, default=-1,
-                   help="threads for COLMAP's mapper (default -1: all cores)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="threads of COLMAP's mapper (default 1: repeatable figures; -1: all cores)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
 
