@@ -27,6 +27,7 @@ __all__ = [
     "keep_first_per_image",
     "quality_merge",
     "is_conflict_free",
+    "baselines",
 ]
 
 
@@ -137,3 +138,17 @@ def quality_merge(features_per_camera, links) -> np.ndarray:
         parent[rb] = ra
         cams[ra] = sa | sb
     return kept
+
+
+def baselines(features_per_camera, links) -> dict[str, np.ndarray]:
+    """Kept masks ``(L,)`` of every centralized baseline on the same input, by name.
+
+    Returns
+    -------
+    dict with ``drop_conflictive_sets``, ``keep_first_per_image`` and ``quality_merge``.
+    """
+    return {
+        "drop_conflictive_sets": drop_conflictive_sets(features_per_camera, links),
+        "keep_first_per_image": keep_first_per_image(features_per_camera, links),
+        "quality_merge": quality_merge(features_per_camera, links),
+    }

@@ -1,0 +1,111 @@
+"""``python -m pipeline resolve --links IN.csv --out OUT.csv [--comm-graph EDGES.csv]``.
+
+Makes a user's own links conflict-free with the distributed consistency stage (Aragüés et
+al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot per camera) and writes the
+run-output ``links.csv`` (DESIGN.md): every input row once, ``status`` ``kept`` or
+``deleted``, ``reason`` ``resolution`` for a cut link, the resolution ``round`` that cut it,
+``truth`` empty (unknown). Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
+``--comm-graph``, cameras that share a link are neighbours.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["add_arguments", "run", "resolve_file"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--links", required=True, metavar="IN.csv",
+                   help="links, one per row: cam_i,feat_i,cam_j,feat_j[,quality] (0-based ids, "
+                        "header optional); never modified")
+    p.add_argument("--out", required=True, metavar="OUT.csv",
+                   help="links.csv to write: cam_i,feat_i,cam_j,feat_j,status,reason,round,truth")
+    p.add_argument("--comm-graph", default=None, metavar="EDGES.csv",
+                   help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
+                        "link are neighbours)")
+    p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+
+
+def resolve_file(links_csv: str | Path, out_csv: str | Path,
+                 comm_graph_csv: str | Path | None = None) -> dict:
+    """Read, resolve, write; return the summary dict.
+
+    Raises
+    ------
+    InputError
+        Bad input rows (see :func:`pipeline.linkscsv.read_links_csv`), a bad comm-graph file,
+        ``out`` equal to the input, or a link between cameras that are not neighbours in the
+        given comm graph (naming its row).
+    """
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.linkscsv import (
+        features_per_camera_for,
+        read_comm_graph_csv,
+        read_links_csv,
+        write_links_csv,
+    )
+
+    links_csv, out_csv = Path(links_csv), Path(out_csv)
+    if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
+        raise InputError(f"--out {str(out_csv)!r} is the input file; the input is never "
+                         "modified, choose a new file")
+    lf = read_links_csv(links_csv)
+    links = lf.links
+    edges = None
+    n_cams = None
+    if comm_graph_csv is not None:
+        edges = read_comm_graph_csv(comm_graph_csv)
+        n_cams = int(edges.max(initial=-1)) + 1
+    m = features_per_camera_for(links, n_cams)
+    n = m.size
+    if edges is not None and len(links):
+        off = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
+        if off.any():
+            k = int(np.flatnonzero(off)[0])
+            raise InputError(
+                f"{links_csv}:{lf.line[k]}: link ({links.cam_i[k]},{links.feat_i[k]})-"
+                f"({links.cam_j[k]},{links.feat_j[k]}) joins cameras {links.cam_i[k]} and "
+                f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
+                "or remove the link")
+    before = count_conflicts(AssociationGraph(m, links)).as_dict()
+    res = resolve_conflicts(m, edges, links)
+    after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
+    write_links_csv(out_csv, links, np.where(res.deleted, "deleted", "kept"), res.reason,
+                    res.round, None)
+    st = res.stats
+    return {
+        "input": str(links_csv), "output": str(out_csv), "cameras": int(n),
+        "comm_edges": int(len(edges)) if edges is not None else
+        int(np.unique(links.cam_i * n + links.cam_j).size),
+        "links": len(links), "deleted": int(res.deleted.sum()),
+        "deleted_by_case": {c: int((res.case == c).sum()) for c in ("b", "c")},
+        "before": before, "after": after,
+        "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
+                                          "messages", "bytes", "max_robot_memory_bytes")},
+    }
+
+
+def run(args) -> int:
+    s = resolve_file(args.links, args.out, args.comm_graph)
+    b, a, r = s["before"], s["after"], s["resolution"]
+    print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
+    print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
+          f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
+    print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
+          f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
+    print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution; "
+          f"{r['messages']} messages, {r['bytes']} bytes, max {r['max_robot_memory_bytes']} "
+          "bytes per robot")
+    print(f"written: {s['output']}")
+    if args.report:
+        from pipeline.runfolder import write_json_atomic
+
+        write_json_atomic(args.report, s)
+    return 0

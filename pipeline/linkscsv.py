@@ -1,0 +1,314 @@
+"""Links as CSV: the user's own links in, the run-output ``links.csv`` out, comm-graph files.
+
+Input (``read_links_csv``): one link per row ``cam_i,feat_i,cam_j,feat_j[,quality]``, 0-based
+integer ids, an optional header row naming those columns, blank lines and ``#`` comment lines
+allowed. Validation is strict and never drops input silently: a non-integer or negative id, a
+bad quality, a wrong number of columns, a self-link, a duplicate link or a link that breaks
+one-to-one-ness (Assumption 2.2 of Aragüés et al.) is an :class:`~pipeline.errors.InputError`
+naming the file, the row number and its content. A row with ``cam_i > cam_j`` is normalised by
+swapping its two ends (DESIGN.md: each undirected link is stored once with ``cam_i < cam_j``).
+
+Output (``write_links_csv``): the ``links.csv`` of DESIGN.md "Run outputs", header
+``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``, written atomically (temp file in the
+same folder, then ``os.replace``).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+__all__ = [
+    "LINK_COLUMNS",
+    "RUN_LINK_COLUMNS",
+    "LinksFile",
+    "read_links_csv",
+    "features_per_camera_for",
+    "write_links_csv",
+    "read_run_links_csv",
+    "read_comm_graph_csv",
+]
+
+LINK_COLUMNS = ("cam_i", "feat_i", "cam_j", "feat_j", "quality")
+RUN_LINK_COLUMNS = ("cam_i", "feat_i", "cam_j", "feat_j", "status", "reason", "round", "truth")
+
+
+@dataclass
+class LinksFile:
+    """A validated links file.
+
+    Attributes
+    ----------
+    links : Links, (L,) — normalised, ``cam_i < cam_j``, in file order
+    line : ndarray, (L,) int — 1-based line number of each link in the file
+    has_quality : bool — the file had a quality column (else quality is 1.0)
+    """
+
+    links: Links
+    line: np.ndarray
+    has_quality: bool
+
+
+def _rows(path: Path):
+    """Yield ``(line number, fields, raw text)`` of the data rows and the header flag."""
+    if not path.is_file():
+        raise InputError(f"links file {str(path)!r}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not a UTF-8 text file ({exc.reason})") from None
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        stripped = raw.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        fields = [f.strip() for f in next(csv.reader([stripped]))]
+        yield lineno, fields, stripped
+
+
+def _int_field(path, lineno, raw, name, value) -> int:
+    try:
+        v = int(value)
+    except ValueError:
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {value!r} is not an integer id; "
+                         "ids are 0-based integers") from None
+    if v < 0:
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is negative; ids are 0-based")
+    return v
+
+
+def _first_duplicate(*cols: np.ndarray) -> tuple[int, int] | None:
+    """Positions of the first two rows equal in all ``cols`` (in file order), or None."""
+    if cols[0].size < 2:
+        return None
+    order = np.lexsort((np.arange(cols[0].size),) + tuple(cols[::-1]))
+    same = np.ones(order.size - 1, dtype=bool)
+    for c in cols:
+        cs = c[order]
+        same &= cs[1:] == cs[:-1]
+    hit = np.flatnonzero(same)
+    if hit.size == 0:
+        return None
+    # report the pair whose second row comes first in the file
+    pairs = np.stack([order[hit], order[hit + 1]], axis=1)
+    k = int(np.argmin(pairs[:, 1]))
+    return int(pairs[k, 0]), int(pairs[k, 1])
+
+
+def read_links_csv(path: str | os.PathLike) -> LinksFile:
+    """Read and validate a user links file.
+
+    Parameters
+    ----------
+    path : path to a CSV with rows ``cam_i,feat_i,cam_j,feat_j[,quality]``
+
+    Returns
+    -------
+    LinksFile
+
+    Raises
+    ------
+    InputError
+        Missing file; a row with the wrong number of columns (4 or 5, the same in every row), a
+        non-integer or negative id, a non-finite quality, a self-link, a duplicate link or one
+        that breaks one-to-one-ness — naming the row number and its content.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "links.csv"
+    >>> _ = p.write_text("cam_i,feat_i,cam_j,feat_j\\n1,5,0,2\\n")
+    >>> lf = read_links_csv(p)
+    >>> (lf.links.cam_i.tolist(), lf.links.feat_i.tolist(), lf.links.cam_j.tolist())
+    ([0], [2], [1])
+    """
+    path = Path(path)
+    lines, raws, vals, quals = [], [], [], []
+    ncols = None
+    first = True
+    for lineno, fields, raw in _rows(path):
+        if first:
+            first = False
+            if fields and fields[0].lower() == "cam_i":
+                if tuple(f.lower() for f in fields) not in (LINK_COLUMNS[:4], LINK_COLUMNS):
+                    raise InputError(f"{path}:{lineno}: header {raw!r} must be "
+                                     f"'cam_i,feat_i,cam_j,feat_j' or with ',quality'")
+                ncols = len(fields)
+                continue
+        if len(fields) not in (4, 5):
+            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected 4 "
+                             "(cam_i,feat_i,cam_j,feat_j) or 5 (with quality)")
+        if ncols is None:
+            ncols = len(fields)
+        elif len(fields) != ncols:
+            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns but the file "
+                             f"started with {ncols}; give quality on every row or on none")
+        ids = [_int_field(path, lineno, raw, name, v)
+               for name, v in zip(LINK_COLUMNS[:4], fields[:4], strict=True)]
+        if ids[0] == ids[2]:
+            raise InputError(f"{path}:{lineno}: {raw!r}: self-link within camera {ids[0]}; "
+                             "a link must join two different cameras")
+        if ncols == 5:
+            try:
+                q = float(fields[4])
+            except ValueError:
+                q = math.nan
+            if not math.isfinite(q):
+                raise InputError(f"{path}:{lineno}: {raw!r}: quality {fields[4]!r} is not a "
+                                 "finite number")
+            quals.append(q)
+        lines.append(lineno)
+        raws.append(raw)
+        vals.append(ids)
+
+    a = np.asarray(vals, dtype=np.int64).reshape(-1, 4)
+    swap = a[:, 0] > a[:, 2]
+    a[swap] = a[swap][:, [2, 3, 0, 1]]
+    ci, fi, cj, fj = a.T
+    checks = (
+        ((ci, fi, cj, fj), "duplicate link (the same link twice)"),
+        ((ci, fi, cj), "not one-to-one: feature {0},{1} is linked twice to camera {2}"),
+        ((cj, fj, ci), "not one-to-one: feature {2},{3} is linked twice to camera {0}"),
+    )
+    for cols, what in checks:
+        dup = _first_duplicate(*cols)
+        if dup is not None:
+            k0, k1 = dup
+            msg = what.format(*a[k1].tolist())
+            raise InputError(f"{path}:{lines[k1]}: {raws[k1]!r}: {msg} (also row {lines[k0]}: "
+                             f"{raws[k0]!r}); matching must give a one-to-one association per "
+                             "camera pair")
+    quality = np.asarray(quals, dtype=np.float64) if ncols == 5 else None
+    return LinksFile(Links(ci, fi, cj, fj, quality), np.asarray(lines, dtype=np.int64), ncols == 5)
+
+
+def features_per_camera_for(links: Links, n_cameras: int | None = None) -> np.ndarray:
+    """Smallest feature counts that hold every id: ``max feat + 1`` per camera, ``(n,)``.
+
+    ``n_cameras`` (e.g. from a comm graph) may add cameras without links.
+    """
+    n = int(max(links.cam_j.max(initial=-1), links.cam_i.max(initial=-1))) + 1
+    if n_cameras is not None:
+        n = max(n, int(n_cameras))
+    m = np.zeros(n, dtype=np.int64)
+    np.maximum.at(m, links.cam_i, links.feat_i + 1)
+    np.maximum.at(m, links.cam_j, links.feat_j + 1)
+    return m
+
+
+def write_links_csv(path: str | os.PathLike, links: Links, status, reason, round_,
+                    truth=None) -> Path:
+    """Write the run-output ``links.csv`` atomically (temp file, then ``os.replace``).
+
+    Parameters
+    ----------
+    path : output file
+    links : Links, (L,)
+    status : (L,) str — ``kept`` or ``deleted``
+    reason : (L,) str — stage that cut the link, ``''`` if kept
+    round_ : (L,) int — round in which it was cut; negative is written empty
+    truth : (L,) int or None — ``1``/``0``; ``-1`` or None is written empty (unknown)
+
+    Returns
+    -------
+    Path — the file written
+    """
+    path = Path(path)
+    L = len(links)
+    status = np.asarray(status).astype(str).reshape(-1)
+    reason = np.asarray(reason).astype(str).reshape(-1)
+    round_ = np.asarray(round_, dtype=np.int64).reshape(-1)
+    truth = np.full(L, -1, dtype=np.int64) if truth is None else np.asarray(truth, dtype=np.int64).reshape(-1)
+    for name, arr in (("status", status), ("reason", reason), ("round", round_), ("truth", truth)):
+        if arr.shape[0] != L:
+            raise ValueError(f"write_links_csv: {name} has length {arr.shape[0]}, expected {L}")
+    bad = ~np.isin(status, ("kept", "deleted"))
+    if bad.any():
+        raise ValueError(f"write_links_csv: status must be 'kept' or 'deleted', got {status[bad][0]!r}")
+    round_s = np.where(round_ >= 0, round_.astype(str), "")
+    truth_s = np.where(truth >= 0, truth.astype(str), "")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(RUN_LINK_COLUMNS)
+            w.writerows(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                            links.feat_j.tolist(), status.tolist(), reason.tolist(),
+                            round_s.tolist(), truth_s.tolist(), strict=True))
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def read_run_links_csv(path: str | os.PathLike) -> dict:
+    """Read a run-output ``links.csv`` back.
+
+    Returns
+    -------
+    dict with ``links`` (Links), ``status``, ``reason`` (str arrays), ``round``, ``truth``
+    (int arrays, ``-1`` where empty).
+    """
+    path = Path(path)
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or tuple(rows[0]) != RUN_LINK_COLUMNS:
+        raise InputError(f"{path}: not a run links.csv (header must be {','.join(RUN_LINK_COLUMNS)})")
+    body = rows[1:]
+    col = {name: [r[k] for r in body] for k, name in enumerate(RUN_LINK_COLUMNS)}
+
+    def ints(vals):
+        return np.array([int(v) if v != "" else -1 for v in vals], dtype=np.int64)
+
+    return dict(links=Links(ints(col["cam_i"]), ints(col["feat_i"]), ints(col["cam_j"]),
+                            ints(col["feat_j"])),
+                status=np.array(col["status"], dtype=str), reason=np.array(col["reason"], dtype=str),
+                round=ints(col["round"]), truth=ints(col["truth"]))
+
+
+def read_comm_graph_csv(path: str | os.PathLike) -> np.ndarray:
+    """Read a communication graph file: rows ``cam_i,cam_j`` (0-based), header optional.
+
+    Blank lines and ``#`` comments are allowed; an edge listed twice (in either orientation)
+    is the same undirected edge.
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, ``i < j``, unique, sorted
+
+    Raises
+    ------
+    InputError
+        Missing file, a row without exactly two columns, a non-integer or negative id, a
+        self-edge — naming the row number and its content.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"comm graph file {str(path)!r}: no such file")
+    edges = []
+    first = True
+    for lineno, fields, raw in _rows(path):
+        if first:
+            first = False
+            if fields and fields[0].lower() == "cam_i":
+                continue
+        if len(fields) != 2:
+            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected "
+                             "2 (cam_i,cam_j)")
+        i, j = (_int_field(path, lineno, raw, name, v)
+                for name, v in zip(("cam_i", "cam_j"), fields, strict=True))
+        if i == j:
+            raise InputError(f"{path}:{lineno}: {raw!r}: camera {i} cannot be its own neighbour")
+        edges.append((min(i, j), max(i, j)))
+    return np.unique(np.asarray(edges, dtype=np.int64).reshape(-1, 2), axis=0)

@@ -1,0 +1,84 @@
+"""``python -m pipeline resolve``: round trip on the paper's Fig. 1 and each bad input."""
+
+import re
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.linkscsv import features_per_camera_for, read_run_links_csv
+
+FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
+
+
+def test_round_trip_fig1(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    src.write_text(FIG1)
+    out = tmp_path / "out.csv"
+    assert main(["resolve", "--links", str(src), "--out", str(out),
+                 "--report", str(tmp_path / "r.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "conflictive sets: 1 before, 0 after" in printed and "deleted: 1 links" in printed
+    back = read_run_links_csv(out)
+    # every input row once, in input order (the 4th row normalised to cam_i < cam_j)
+    assert back["links"].cam_i.tolist() == [0, 0, 1, 2]
+    assert back["status"].tolist() == ["kept", "deleted", "kept", "kept"]
+    assert back["reason"].tolist() == ["", "resolution", "", ""]
+    assert back["round"][1] >= 1 and (back["truth"] == -1).all()
+    kept = back["links"].subset(back["status"] == "kept")
+    m = features_per_camera_for(back["links"])
+    assert count_conflicts(AssociationGraph(m, kept)).conflictive_sets == 0
+    assert (tmp_path / "r.json").is_file()
+    assert src.read_text() == FIG1  # input untouched
+
+
+def test_comm_graph_file(tmp_path):
+    src = tmp_path / "in.csv"
+    src.write_text(FIG1)
+    g = tmp_path / "g.csv"
+    g.write_text("0,1\n1,2\n2,3\n0,3\n0,2\n3,4\n")
+    out = tmp_path / "out.csv"
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--comm-graph", str(g)]) == 0
+    assert (read_run_links_csv(out)["status"] == "deleted").sum() == 1
+
+
+@pytest.mark.parametrize("text, graph, message", [
+    ("0,0,1,0\n0,x,2,0\n", None, "in.csv:2: .*not an integer"),
+    ("0,0,1,0\n1,1,1,2\n", None, "in.csv:2: .*self-link"),
+    ("0,0,1,0\n1,0,0,0\n", None, "in.csv:2: .*duplicate"),
+    ("0,0,1,0\n0,0,1,1\n", None, "in.csv:2: .*linked twice"),
+    ("0,0,1\n", None, "in.csv:1: .*3 columns"),
+    ("0,0,1,0\n0,0,2,0\n", "0,1\n", "in.csv:2: .*not neighbours"),
+    ("0,0,1,0\n", "0,0\n", "g.csv:1: .*own neighbour"),
+])
+def test_bad_input_exits_2_naming_the_row(tmp_path, capsys, text, graph, message):
+    src = tmp_path / "in.csv"
+    src.write_text(text)
+    args = ["resolve", "--links", str(src), "--out", str(tmp_path / "out.csv")]
+    if graph is not None:
+        (tmp_path / "g.csv").write_text(graph)
+        args += ["--comm-graph", str(tmp_path / "g.csv")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ")
+    assert re.search(message, err), err
+    assert not (tmp_path / "out.csv").exists()
+
+
+def test_missing_file_and_out_equal_to_input(tmp_path, capsys):
+    assert main(["resolve", "--links", str(tmp_path / "no.csv"), "--out", str(tmp_path / "o.csv")]) == 2
+    src = tmp_path / "in.csv"
+    src.write_text(FIG1)
+    assert main(["resolve", "--links", str(src), "--out", str(src)]) == 2
+    assert "input file" in capsys.readouterr().err
+    assert src.read_text() == FIG1
+
+
+def test_header_only_file(tmp_path):
+    src = tmp_path / "in.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j\n")
+    out = tmp_path / "out.csv"
+    assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
+    assert len(read_run_links_csv(out)["links"]) == 0
+    assert np.array_equal(read_run_links_csv(out)["round"], np.zeros(0))
