@@ -64,6 +64,30 @@ def quiet_colmap(level: int = 2):
         pycolmap.logging.minloglevel = previous
 
 
+@contextmanager
+def _atomic_database(path: Path, copy_from: Path | None = None):
+    """Yield a temporary database path next to ``path``; renamed onto ``path`` on success.
+
+    With ``copy_from`` the temporary file starts as a copy of that database. On failure the
+    temporary file and its SQLite side files are removed, so no half-written database is left.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".db", dir=path.parent)
+    os.close(fd)
+    try:
+        if copy_from is not None:
+            shutil.copyfile(copy_from, tmp)
+        else:
+            os.unlink(tmp)  # COLMAP creates the file itself
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
+            if os.path.exists(leftover):
+                os.unlink(leftover)
+        raise
+
+
 # ------------------------------------------------------------------------------------- writing
 
 def _camera(view: View) -> pycolmap.Camera:
@@ -175,31 +199,20 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
     keep = np.ones(len(links), dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
     if keep.shape != (len(links),):
         raise InputError(f"write_database: keep has shape {keep.shape}, expected ({len(links)},)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".db", dir=path.parent)
-    os.close(fd)
-    os.unlink(tmp)  # COLMAP creates the file itself
-    try:
-        with quiet_colmap(), pycolmap.Database.open(tmp) as db:
-            image_ids = [_write_image_with_trivial_rig(db, v) for v in views]
-            for image_id, f in zip(image_ids, features, strict=True):
-                kp = np.asarray(f.keypoints, dtype=np.float32).reshape(-1, 2)
-                db.write_keypoints(image_id, kp + np.float32(COLMAP_PIXEL_OFFSET))
-            all_pairs = _pairs_by_edge(links)
-            kept_pairs = _pairs_by_edge(links.subset(keep))
-            empty = np.zeros((0, 2), dtype=np.int64)
-            for (i, j), pairs in all_pairs.items():
-                db.write_matches(image_ids[i], image_ids[j],
-                                 np.ascontiguousarray(pairs, dtype=np.uint32))
-                tvg = _two_view_geometry(kept_pairs.get((i, j), empty), views[i], views[j],
-                                         features[i].keypoints, features[j].keypoints)
-                db.write_two_view_geometry(image_ids[i], image_ids[j], tvg)
-        os.replace(tmp, path)
-    except BaseException:
-        for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
-            if os.path.exists(leftover):
-                os.unlink(leftover)
-        raise
+    with _atomic_database(path) as tmp, quiet_colmap(), pycolmap.Database.open(tmp) as db:
+        image_ids = [_write_image_with_trivial_rig(db, v) for v in views]
+        for image_id, f in zip(image_ids, features, strict=True):
+            kp = np.asarray(f.keypoints, dtype=np.float32).reshape(-1, 2)
+            db.write_keypoints(image_id, kp + np.float32(COLMAP_PIXEL_OFFSET))
+        all_pairs = _pairs_by_edge(links)
+        kept_pairs = _pairs_by_edge(links.subset(keep))
+        empty = np.zeros((0, 2), dtype=np.int64)
+        for (i, j), pairs in all_pairs.items():
+            db.write_matches(image_ids[i], image_ids[j],
+                             np.ascontiguousarray(pairs, dtype=np.uint32))
+            tvg = _two_view_geometry(kept_pairs.get((i, j), empty), views[i], views[j],
+                                     features[i].keypoints, features[j].keypoints)
+            db.write_two_view_geometry(image_ids[i], image_ids[j], tvg)
     return path
 
 
@@ -365,9 +378,6 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
     if out_path.exists() and out_path.resolve() == src.resolve():
         raise InputError(f"--out {str(out_path)!r} is the input database; the input is never "
                          f"modified, choose a new file")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.", suffix=".db", dir=out_path.parent)
-    os.close(fd)
     L = contents.links
     # kept links as (image_id1, image_id2, idx1, idx2) keys in COLMAP's pair orientation
     id_i, id_j = contents.image_ids[L.cam_i], contents.image_ids[L.cam_j]
@@ -376,26 +386,19 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
     a_f, b_f = np.where(swap, L.feat_j, L.feat_i), np.where(swap, L.feat_i, L.feat_j)
     kept_by_pair = {(int(a), int(b)): np.stack([fa, fb], axis=1) for (a, b), (fa, fb) in
                     _group_by_pair(a_id[keep], b_id[keep], a_f[keep], b_f[keep]).items()}
-    try:
-        shutil.copyfile(src, tmp)
-        with quiet_colmap(), pycolmap.Database.open(tmp) as db:
-            pair_ids, geometries = db.read_two_view_geometries()
-            for pid, g in zip(pair_ids, geometries, strict=True):
-                m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
-                if not len(m):
-                    continue
-                id1, id2 = (int(v) for v in pycolmap.pair_id_to_image_pair(pid))
-                kept = kept_by_pair.get((id1, id2), np.zeros((0, 2), dtype=np.int64))
-                key = m[:, 0] * (1 << 32) + m[:, 1]
-                kept_key = kept[:, 0] * (1 << 32) + kept[:, 1]
-                g.inlier_matches = np.ascontiguousarray(m[np.isin(key, kept_key)], dtype=np.uint32)
-                db.update_two_view_geometry(int(id1), int(id2), g)
-        os.replace(tmp, out_path)
-    except BaseException:
-        for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
-            if os.path.exists(leftover):
-                os.unlink(leftover)
-        raise
+    with _atomic_database(out_path, copy_from=src) as tmp, quiet_colmap(), \
+            pycolmap.Database.open(tmp) as db:
+        pair_ids, geometries = db.read_two_view_geometries()
+        for pid, g in zip(pair_ids, geometries, strict=True):
+            m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
+            if not len(m):
+                continue
+            id1, id2 = (int(v) for v in pycolmap.pair_id_to_image_pair(pid))
+            kept = kept_by_pair.get((id1, id2), np.zeros((0, 2), dtype=np.int64))
+            key = m[:, 0] * (1 << 32) + m[:, 1]
+            kept_key = kept[:, 0] * (1 << 32) + kept[:, 1]
+            g.inlier_matches = np.ascontiguousarray(m[np.isin(key, kept_key)], dtype=np.uint32)
+            db.update_two_view_geometry(id1, id2, g)
     return out_path
 
 
