@@ -65,7 +65,9 @@ KEYPOINT_CLASSES = {
 }
 #: Link colours (RGB): a candidate during the replay, kept, cut.
 LINK_COLORS = {"candidate": (190, 190, 190), "kept": (40, 200, 60), "cut": (230, 40, 40)}
-
+# Kept links outnumber cut ones by 10-100x: draw them thin and translucent so the cut ones show.
+_KEPT_ALPHA = 70
+_KEPT_RADIUS = rr.components.Radius.ui_points(0.5)
 _LINE_RADIUS = rr.components.Radius.ui_points(1.0)
 _POINT_RADIUS = rr.components.Radius.ui_points(2.5)
 _POINT_COLORS = {"triangulated": (255, 255, 255), "ground_truth": (60, 140, 255),
@@ -145,14 +147,17 @@ def _pinhole_K(K: np.ndarray) -> np.ndarray:
 
 
 def _default_plane_distance(views) -> float:
-    """A quarter of the median nearest-neighbour distance between camera centres (1 if unknown)."""
+    """0.4 x the median nearest-neighbour distance between camera centres (1 if unknown).
+
+    Large enough to see the images on the frusta, small enough that neighbours' do not overlap.
+    """
     centres = np.stack([-np.asarray(v.R).T @ np.asarray(v.t) for v in views if _has_pose(v)])
     if len(centres) < 2:
         return 1.0
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     np.fill_diagonal(d, np.inf)
     nn = np.median(d.min(axis=1))
-    return float(0.25 * nn) if np.isfinite(nn) and nn > 0 else 1.0
+    return float(0.4 * nn) if np.isfinite(nn) and nn > 0 else 1.0
 
 
 def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
@@ -278,7 +283,8 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
     truth = np.asarray(record.truth, dtype=np.int64).reshape(-1)
     labels = np.char.add(labels, np.array(["", " (spurious)", " (good)"])[np.clip(truth + 1, 0, 2)])
     rec.log("world/links/kept",
-            rr.LineStrips3D(ends[~deleted], colors=LINK_COLORS["kept"], radii=_LINE_RADIUS,
+            rr.LineStrips3D(ends[~deleted], colors=(*LINK_COLORS["kept"], _KEPT_ALPHA),
+                            radii=_KEPT_RADIUS,
                             labels=labels[~deleted], show_labels=False), static=True)
     del_labels = np.char.add(np.char.add(labels[deleted], " cut by "), reason[deleted])
     rec.log("world/links/deleted",
@@ -286,9 +292,9 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
                             labels=del_labels, show_labels=False), static=True)
     # Replay: geometry once (static), colours per step (temporal).
     rec.log("world/links/replay",
-            rr.LineStrips3D(ends, radii=_LINE_RADIUS), static=True)
-    palette = np.array([LINK_COLORS["candidate"], LINK_COLORS["cut"], LINK_COLORS["kept"]],
-                       dtype=np.uint8)
+            rr.LineStrips3D(ends, radii=_KEPT_RADIUS), static=True)
+    palette = np.array([(*LINK_COLORS["candidate"], _KEPT_ALPHA), (*LINK_COLORS["cut"], 255),
+                        (*LINK_COLORS["kept"], _KEPT_ALPHA)], dtype=np.uint8)
     for s in range(len(keys) + 2):
         state = np.where(step <= s, np.where(deleted, 1, 2), 0)
         rec.set_time("round", sequence=s)
@@ -308,6 +314,22 @@ def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_ke
     rec.log("resolution/log", rr.TextLog(f"step {len(keys) + 1}: {n_kept} links kept"))
 
 
+def _default_eye(views) -> rrb.EyeControls3D | None:
+    """Look over the formation from behind and above, towards where the cameras point."""
+    posed = [v for v in views if _has_pose(v)]
+    if not posed:
+        return None
+    centres = np.stack([-np.asarray(v.R).T @ np.asarray(v.t).reshape(3) for v in posed])
+    forward = np.mean([np.asarray(v.R)[2] for v in posed], axis=0)
+    down = np.mean([np.asarray(v.R)[1] for v in posed], axis=0)
+    spread = max(float(np.ptp(centres, axis=0).max()), 1e-3)
+    forward /= max(float(np.linalg.norm(forward)), 1e-9)
+    down /= max(float(np.linalg.norm(down)), 1e-9)
+    centre = centres.mean(axis=0)
+    return rrb.EyeControls3D(position=centre - 0.7 * spread * forward - 0.6 * spread * down,
+                             look_target=centre + 0.5 * spread * forward, eye_up=-down)
+
+
 def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
                max_image_views: int) -> rrb.Blueprint:
     image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p)}/image", name=v.name)
@@ -318,13 +340,15 @@ def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
         rrb.TextDocumentView(origin="report", name="Report"),
         rrb.TextLogView(origin="resolution", name="Resolution steps"),
     ))
+    eye = _default_eye(record.views)
     if all_posed:
         main = rrb.Tabs(
             rrb.Spatial3DView(origin="world", name="Kept (green) and cut (red) links",
-                              contents=["+ $origin/**", "- $origin/links/replay"]),
+                              contents=["+ $origin/**", "- $origin/links/replay"],
+                              eye_controls=eye),
             rrb.Spatial3DView(origin="world", name="Resolution replay (round timeline)",
                               contents=["+ $origin/**", "- $origin/links/kept",
-                                        "- $origin/links/deleted"]),
+                                        "- $origin/links/deleted"], eye_controls=eye),
         )
         layout = rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2])
     elif len(record.points):
@@ -332,7 +356,8 @@ def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
                                 rrb.Vertical(*side), column_shares=[3, 2])
     else:
         layout = rrb.Vertical(*side)
-    return rrb.Blueprint(layout, rrb.TimePanel(timeline="round"), collapse_panels=False)
+    return rrb.Blueprint(layout, rrb.TimePanel(timeline="round", play_state="following"),
+                         collapse_panels=False)
 
 
 def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
@@ -354,7 +379,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         Name shown for the recording in the viewer.
     image_plane_distance : float, optional
         Depth of the drawn image planes, and of the link strip endpoints, in world units.
-        Default: a quarter of the median nearest-neighbour distance between camera centres.
+        Default: 0.4 x the median nearest-neighbour distance between camera centres.
     world_axes : rr.ViewCoordinates
         Axis convention of the world frame, logged once as static on ``world``.
     jpeg_quality : int

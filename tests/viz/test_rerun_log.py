@@ -91,9 +91,9 @@ def recording(tmp_path_factory):
     return path, record
 
 
-def rgba(rgb) -> int:
-    """Rerun's packed colour: 0xRRGGBBAA."""
-    return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 255
+def rgb24(rgb) -> int:
+    """Rerun packs colours as 0xRRGGBBAA; ``packed >> 8`` drops the alpha."""
+    return (rgb[0] << 16) | (rgb[1] << 8) | rgb[2]
 
 
 def _chunks(path, entity, static=None):
@@ -194,15 +194,15 @@ def test_replay_order_and_final_colours(recording):
     for chunk in _chunks(path, "/world/links/replay", static=False):
         d = chunk.to_record_batch().to_pydict()
         for s, colors in zip(d["round"], d["LineStrips3D:colors"], strict=True):
-            rows[int(s)] = np.array(colors, dtype=np.uint32)
+            rows[int(s)] = np.array(colors, dtype=np.uint32) >> 8
     assert sorted(rows) == list(range(len(keys) + 2))
 
-    assert (rows[0] == rgba(LINK_COLORS["candidate"])).all()
+    assert (rows[0] == rgb24(LINK_COLORS["candidate"])).all()
     final = rows[len(keys) + 1]
-    assert (final[deleted] == rgba(LINK_COLORS["cut"])).all()
-    assert (final[~deleted] == rgba(LINK_COLORS["kept"])).all()
+    assert (final[deleted] == rgb24(LINK_COLORS["cut"])).all()
+    assert (final[~deleted] == rgb24(LINK_COLORS["kept"])).all()
     # After step 1 only the link cut in resolution round 1 is red.
-    assert (rows[1] == rgba(LINK_COLORS["cut"])).sum() == 1
+    assert (rows[1] == rgb24(LINK_COLORS["cut"])).sum() == 1
 
 
 def test_graph_shows_conflictive_sets_and_cuts(recording):
@@ -221,8 +221,8 @@ def test_graph_shows_conflictive_sets_and_cuts(recording):
     for chunk in _chunks(path, "/graph", static=False):
         t = chunk.to_record_batch().to_pydict()
         for s, c in zip(t["round"], t["GraphNodes:colors"], strict=True):
-            colors[int(s)] = np.array(c[len(nodes) - len(markers):], dtype=np.uint32)
-    red = rgba(LINK_COLORS["cut"])
+            colors[int(s)] = np.array(c[len(nodes) - len(markers):], dtype=np.uint32) >> 8
+    red = rgb24(LINK_COLORS["cut"])
     assert (colors[0] != red).all()           # before resolution: every marker a candidate
     assert (colors[1] == red).sum() == 1      # resolution round 1 cut one conflictive link
     assert (colors[max(colors)] == red).all()
