@@ -1,0 +1,175 @@
+"""run-images end to end on four downscaled Sceaux photographs; the run folder is checked against
+itself (report.json vs links.csv vs database.db vs sparse/); each bad input fails cleanly."""
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pycolmap
+import pytest
+
+from pipeline import colmap
+from pipeline.__main__ import main
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.types import Links
+
+
+@pytest.fixture(scope="module")
+def sceaux_run(sceaux_small, tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "sceaux-complete"
+    code = main(["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "640",
+                 "--features", "sift", "--export-db", "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return out, report, rows
+
+
+def _links(rows, status=None):
+    sel = [r for r in rows if status is None or r["status"] == status]
+    cols = [np.array([int(r[k]) for r in sel], dtype=np.int64)
+            for k in ("cam_i", "feat_i", "cam_j", "feat_j")]
+    return Links(*cols)
+
+
+def _link_set(links: Links):
+    return set(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                   links.feat_j.tolist(), strict=True))
+
+
+def test_run_folder_contract(sceaux_run):
+    out, report, rows = sceaux_run
+    for name in ("report.json", "links.csv", "sparse", "recording.rrd", "database.db"):
+        assert (out / name).exists(), name
+    assert (out / "recording.rrd").stat().st_size > 0
+    for key in ("n_cameras", "comm_edges", "features_per_camera", "before", "after",
+                "resolution", "fusion", "triangulation", "timings_s", "versions", "config"):
+        assert key in report, key
+    assert report["n_cameras"] == 4 and len(report["comm_edges"]) == 6
+    assert [im["intrinsics_source"] for im in report["images"]] == ["K.txt"] * 4
+    assert list(rows[0]) == ["cam_i", "feat_i", "cam_j", "feat_j", "status", "reason", "round",
+                             "truth"]
+    assert {r["truth"] for r in rows} == {""}  # no ground truth on real photographs
+    assert {r["status"] for r in rows} <= {"kept", "deleted"}
+
+
+def test_conflicts_after_cleaning_are_zero(sceaux_run):
+    _, report, _ = sceaux_run
+    assert report["after"]["conflictive_sets"] == 0
+    assert report["after"]["conflictive_features"] == 0
+    assert report["before"]["conflictive_sets"] >= report["after"]["conflictive_sets"]
+
+
+def test_report_recount_matches_links_csv(sceaux_run):
+    _, report, rows = sceaux_run
+    m = report["features_per_camera"]
+    assert len(rows) == report["before"]["links"]
+    before = count_conflicts(AssociationGraph(m, _links(rows))).as_dict()
+    after = count_conflicts(AssociationGraph(m, _links(rows, "kept"))).as_dict()
+    for key, value in before.items():
+        assert report["before"][key] == value, key
+    for key, value in after.items():
+        assert report["after"][key] == value, key
+    deleted = [r for r in rows if r["status"] == "deleted"]
+    assert report["resolution"]["deleted_links"] == sum(r["reason"] == "resolution" for r in deleted)
+    assert all(r["reason"] for r in deleted) and not any(r["reason"] for r in rows
+                                                         if r["status"] == "kept")
+
+
+def test_exported_database_holds_exactly_the_kept_links(sceaux_run):
+    out, report, rows = sceaux_run
+    contents = colmap.read_database(out / "database.db")
+    assert contents.names == [im["name"] for im in report["images"]]
+    assert _link_set(contents.links) == _link_set(_links(rows, "kept"))
+    with pycolmap.Database.open(out / "database.db") as db:
+        assert db.num_matches() == len(rows)  # the raw matches table keeps every link
+        assert db.num_images() == 4
+
+
+def test_sparse_is_the_reconstruction_after_cleaning(sceaux_run):
+    out, report, _ = sceaux_run
+    rec = pycolmap.Reconstruction(out / "sparse")
+    after = report["triangulation"]["after"]
+    assert rec.num_reg_images() == after["registered_images"] >= 3
+    assert rec.num_points3D() == after["points"] > 0
+    assert 0 < after["mean_reprojection_error"] < 2.0
+    assert report["triangulation"]["before"]["registered_images"] >= 3
+
+
+# ------------------------------------------------------------------------------------ bad input
+
+def _fails(argv, out, capsys, match):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert match in err, err
+    assert not out.exists()  # nothing half-written
+    assert not list(out.parent.glob(f".{out.name}*"))
+
+
+def _copy(sceaux_small, dest, names):
+    dest.mkdir()
+    for n in names:
+        shutil.copy(sceaux_small / n, dest / n)
+    return dest
+
+
+def test_empty_folder(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    out = tmp_path / "run"
+    _fails(["run-images", str(tmp_path / "empty"), "--graph", "ring", "--out", str(out)], out,
+           capsys, "no images")
+
+
+def test_one_image_only(tmp_path, sceaux_small, capsys):
+    d = _copy(sceaux_small, tmp_path / "one", ["100_7100.JPG"])
+    out = tmp_path / "run"
+    _fails(["run-images", str(d), "--graph", "ring", "--out", str(out)], out, capsys,
+           "only one image")
+
+
+def test_non_image_file(tmp_path, sceaux_small, capsys):
+    d = _copy(sceaux_small, tmp_path / "mixed", ["100_7100.JPG", "100_7101.JPG"])
+    (d / "100_7102.JPG").write_text("not a photograph")
+    out = tmp_path / "run"
+    _fails(["run-images", str(d), "--graph", "ring", "--out", str(out)], out, capsys,
+           "100_7102.JPG: cannot read it as an image")
+
+
+def test_truncated_jpeg(tmp_path, sceaux_small, capsys):
+    d = _copy(sceaux_small, tmp_path / "trunc", ["100_7100.JPG", "100_7101.JPG"])
+    data = (d / "100_7101.JPG").read_bytes()
+    (d / "100_7101.JPG").write_bytes(data[: len(data) // 3])
+    out = tmp_path / "run"
+    _fails(["run-images", str(d), "--graph", "ring", "--out", str(out)], out, capsys,
+           "100_7101.JPG: cannot read it as an image")
+
+
+def test_graph_file_naming_a_missing_image(tmp_path, sceaux_small, capsys):
+    graph = tmp_path / "edges.txt"
+    graph.write_text("100_7100.JPG,100_7101.JPG\n100_7101.JPG,100_7199.JPG\n")
+    out = tmp_path / "run"
+    _fails(["run-images", str(sceaux_small), "--graph", str(graph), "--out", str(out)], out,
+           capsys, "line 2: image '100_7199.JPG' is not one of the 4 images")
+
+
+def test_k_txt_that_does_not_parse(tmp_path, sceaux_small, capsys):
+    k = tmp_path / "K.txt"
+    k.write_text("fx 0 cx\n0 fy cy\n0 0 1\n")
+    out = tmp_path / "run"
+    _fails(["run-images", str(sceaux_small), "--graph", "ring", "--intrinsics", str(k),
+            "--out", str(out)], out, capsys, "'fx' is not a number")
+
+
+def test_unknown_feature_method(tmp_path, sceaux_small, capsys):
+    out = tmp_path / "run"
+    assert main(["run-images", str(sceaux_small), "--graph", "ring", "--features", "brief",
+                 "--out", str(out)]) == 2
+    assert "brief" in capsys.readouterr().err and not out.exists()
+
+
+def test_bad_graph_kind(tmp_path, sceaux_small, capsys):
+    out = tmp_path / "run"
+    _fails(["run-images", str(sceaux_small), "--graph", "star", "--out", str(out)], out, capsys,
+           "graph 'star'")
