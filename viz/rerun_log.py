@@ -69,7 +69,7 @@ LINK_COLORS = {"candidate": (190, 190, 190), "kept": (40, 200, 60), "cut": (230,
 _KEPT_ALPHA = 70
 _KEPT_RADIUS = rr.components.Radius.ui_points(0.5)
 _LINE_RADIUS = rr.components.Radius.ui_points(1.0)
-_POINT_RADIUS = rr.components.Radius.ui_points(2.5)
+_POINT_RADIUS = rr.components.Radius.ui_points(1.5)
 _POINT_COLORS = {"triangulated": (255, 255, 255), "ground_truth": (60, 140, 255),
                  "fused": (230, 60, 230)}
 _CUT_MARKER = "×"
@@ -326,7 +326,7 @@ def _default_eye(views) -> rrb.EyeControls3D | None:
     forward /= max(float(np.linalg.norm(forward)), 1e-9)
     down /= max(float(np.linalg.norm(down)), 1e-9)
     centre = centres.mean(axis=0)
-    return rrb.EyeControls3D(position=centre - 0.7 * spread * forward - 0.6 * spread * down,
+    return rrb.EyeControls3D(position=centre - 1.0 * spread * forward - 0.7 * spread * down,
                              look_target=centre + 0.5 * spread * forward, eye_up=-down)
 
 
