@@ -1,0 +1,237 @@
+"""Benchmark: the distributed consistency stage at scale, next to its centralized counterpart.
+
+Random formations of ``n`` robots (default 6 … 200), about 2000 features each, on a ring with
+chords: every robot talks to its ring neighbours, about half also to a robot 2–4 places
+ahead, plus ``n // 20`` random long chords. Associations have a realistic track structure: a
+landmark is seen by a run of consecutive robots on the ring (run length geometric, mean about
+2.2), each robot pair on a comm edge finds a common landmark's link with probability
+``--detect`` (missing links), and ``--spurious`` × (links of the edge) spurious links join
+random unmatched features (one-to-one kept, Assumption 2.2).
+
+In one run, for each ``n``: the whole distributed simulation (:func:`resolve_conflicts`: all
+robots, all rounds, every message counted) against centralized union-find detection plus the
+"drop every link of a conflictive set" baseline on the same input. Prints a table and saves
+``runs/bench-consistency/results.json`` (one record per ``n``) and ``time_messages.png``.
+
+``diameter_bound`` is ``d + 1`` with ``d`` the diameter of the association graph (Cor. 3.6),
+computed centrally by breadth-first search within each association set; ``rounds`` is the
+total of detection and resolution rounds over all iterations.
+
+Usage: ``.venv/bin/python bench/consistency_scale.py [--quick] [--n 6 10 …]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E402
+
+from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
+from pipeline.consistency import resolve_conflicts  # noqa: E402
+from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.types import Links  # noqa: E402
+
+OUT = ROOT / "runs" / "bench-consistency"
+TARGET_N, TARGET_S = 100, 30.0
+
+
+def ring_chords(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Ring edges, a chord 2–4 ahead from about half of the robots, ``n // 20`` long chords."""
+    edges = {(i, (i + 1) % n) for i in range(n)}
+    for i in range(n):
+        if rng.random() < 0.5:
+            edges.add((i, (i + int(rng.integers(2, 5))) % n))
+    for _ in range(max(1, n // 20)):
+        a, b = rng.choice(n, 2, replace=False)
+        edges.add((int(a), int(b)))
+    return np.array(sorted({(min(a, b), max(a, b)) for a, b in edges if a != b}), dtype=np.int64)
+
+
+def synthetic_formation(n: int, features: int, seed: int, spurious: float, detect: float):
+    """Features per camera ``(n,)``, comm edges ``(E, 2)``, links and their truth ``(L,)``."""
+    rng = np.random.default_rng(seed)
+    edges = ring_chords(n, rng)
+    # landmarks seen by runs of consecutive robots on the ring
+    lengths = np.minimum(rng.geometric(0.45, size=int(features * n / 1.8)), max(1, n // 2))
+    starts = rng.integers(0, n, size=lengths.size)
+    cams = np.concatenate([(starts[lengths > k] + k) % n for k in range(int(lengths.max()))])
+    lms = np.concatenate([np.flatnonzero(lengths > k) for k in range(int(lengths.max()))])
+    order = rng.permutation(cams.size)
+    cams, lms = cams[order], lms[order]
+    order = np.argsort(cams, kind="stable")
+    cams, lms = cams[order], lms[order]
+    local = np.arange(cams.size) - np.searchsorted(cams, np.arange(n))[cams]  # shuffled ids
+    keep = local < features
+    cams, lms, local = cams[keep], lms[keep], local[keep]
+    fpc = np.bincount(cams, minlength=n)
+    key = lms * n + cams
+    ko = np.argsort(key)
+    key_s, loc_s = key[ko], local[ko]
+    cam_start = np.searchsorted(cams, np.arange(n + 1))
+    parts = []
+    for a, b in edges:
+        sl = slice(cam_start[a], cam_start[a + 1])
+        kb = lms[sl] * n + b
+        pos = np.minimum(np.searchsorted(key_s, kb), key_s.size - 1)
+        hit = key_s[pos] == kb
+        r, s = local[sl][hit], loc_s[pos[hit]]
+        found = rng.random(r.size) < detect
+        r, s = r[found], s[found]
+        free_a = np.setdiff1d(np.arange(fpc[a]), r)
+        free_b = np.setdiff1d(np.arange(fpc[b]), s)
+        k = min(int(round(spurious * max(r.size, 0.02 * min(fpc[a], fpc[b])))), free_a.size,
+                free_b.size)
+        sr = rng.choice(free_a, k, replace=False)
+        ss = rng.choice(free_b, k, replace=False)
+        parts.append((np.full(r.size + k, a), np.r_[r, sr], np.full(r.size + k, b), np.r_[s, ss],
+                      np.r_[rng.uniform(0.3, 1.0, r.size), rng.uniform(0.0, 0.7, k)],
+                      np.r_[np.ones(r.size, bool), np.zeros(k, bool)]))
+    cols = [np.concatenate([p[c] for p in parts]) for c in range(6)]
+    return fpc, edges, Links(*cols[:5]), cols[5]
+
+
+def association_diameter(fpc, links: Links, batch_nodes: int = 3000) -> int:
+    """Diameter ``d`` of the association graph: BFS within each association set, sets batched."""
+    A = AssociationGraph(fpc, links).adjacency().tocsr()
+    _, labels = connected_components(A, directed=False)
+    sizes = np.bincount(labels)
+    in_set = np.flatnonzero(sizes[labels] >= 2)
+    if in_set.size == 0:
+        return 0
+    in_set = in_set[np.argsort(labels[in_set], kind="stable")]
+    bounds = np.flatnonzero(np.r_[True, labels[in_set][1:] != labels[in_set][:-1], True])
+    d, start = 0, 0
+    while start < bounds.size - 1:
+        stop = start + 1
+        while stop < bounds.size - 1 and bounds[stop + 1] - bounds[start] <= batch_nodes:
+            stop += 1
+        nodes = in_set[bounds[start]:bounds[stop]]
+        D = shortest_path(A[nodes][:, nodes], unweighted=True, directed=False)
+        d = max(d, int(D[np.isfinite(D)].max()))
+        start = stop
+    return d
+
+
+def bench_one(n: int, args) -> dict:
+    fpc, edges, links, truth = synthetic_formation(n, args.features, args.seed + n, args.spurious,
+                                                   args.detect)
+    before = count_conflicts(AssociationGraph(fpc, links))
+
+    t0 = time.perf_counter()
+    res = resolve_conflicts(fpc, edges, links)
+    distributed_s = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    kept_drop = drop_conflictive_sets(fpc, links)  # union-find detection + drop-the-set
+    centralized_s = time.perf_counter() - t0
+
+    assert is_conflict_free(fpc, res.kept()) and is_conflict_free(fpc, links.subset(kept_drop))
+    d = association_diameter(fpc, links)
+    st = res.stats
+    it = st["per_iteration"]
+    rec = dict(
+        n=n, comm_edges=int(len(edges)), features=int(fpc.sum()), m_sum=before.m_sum,
+        links=len(links), spurious_links=int((~truth).sum()),
+        conflictive_sets=before.conflictive_sets, conflictive_features=before.conflictive_features,
+        distributed_s=round(distributed_s, 4), centralized_s=round(centralized_s, 4),
+        ratio=round(distributed_s / max(centralized_s, 1e-9), 1),
+        iterations=st["iterations"],
+        rounds=st["detection_rounds"] + st["resolution_rounds"],
+        detection_rounds=st["detection_rounds"], resolution_rounds=st["resolution_rounds"],
+        first_detection_rounds=int(it[0]["detection_rounds"]), diameter=d, diameter_bound=d + 1,
+        max_resolution_rounds=int(max(p["resolution_rounds"] for p in it)), resolution_bound=n + 1,
+        messages=st["messages"], bytes=st["bytes"], bytes_by_kind=st["bytes_by_kind"],
+        max_robot_memory_bytes=st["max_robot_memory_bytes"],
+        distributed=dict(deleted=int(res.deleted.sum()),
+                         good_deleted=int((res.deleted & truth).sum()),
+                         spurious_deleted=int((res.deleted & ~truth).sum())),
+        drop_set=dict(deleted=int((~kept_drop).sum()), good_deleted=int((~kept_drop & truth).sum()),
+                      spurious_deleted=int((~kept_drop & ~truth).sum())),
+    )
+    return rec
+
+
+def plot(records: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r["n"] for r in records]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    a1.plot(n, [r["distributed_s"] for r in records], "o-", label="distributed (all robots, all rounds)")
+    a1.plot(n, [r["centralized_s"] for r in records], "s-", label="centralized union-find + drop set")
+    a1.axhline(TARGET_S, color="gray", ls=":", label=f"target at n={TARGET_N}")
+    a1.set_xlabel("robots n")
+    a1.set_ylabel("wall time [s]")
+    a1.set_yscale("log")
+    a1.legend(fontsize=8)
+    a2.plot(n, [r["messages"] for r in records], "o-", label="messages")
+    a2.set_xlabel("robots n")
+    a2.set_ylabel("messages")
+    b = a2.twinx()
+    b.plot(n, [r["bytes"] / 1e6 for r in records], "s--", color="C1", label="MB")
+    b.set_ylabel("MB sent")
+    a2.legend(loc="upper left", fontsize=8)
+    b.legend(loc="lower right", fontsize=8)
+    fig.suptitle("Distributed consistency stage (Aragüés et al.) vs centralized")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[6, 10, 20, 50, 100, 150, 200])
+    ap.add_argument("--quick", action="store_true", help="small n only (6, 10, 20)")
+    ap.add_argument("--features", type=int, default=2000, help="features per robot")
+    ap.add_argument("--spurious", type=float, default=0.03,
+                    help="spurious links per edge, as a fraction of its true links")
+    ap.add_argument("--detect", type=float, default=0.85, help="probability a true link is found")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args()
+    ns = [6, 10, 20] if args.quick else args.n
+
+    header = (f"{'n':>4} {'m_sum':>7} {'links':>7} {'confl':>5} {'dist_s':>7} {'cent_s':>7} "
+              f"{'ratio':>6} {'it':>2} {'det1':>4} {'d+1':>4} {'res':>4} {'n+1':>4} "
+              f"{'messages':>9} {'MB':>8} {'mem/robot KB':>12} {'cut dist/drop':>14}")
+    print(header)
+    records = []
+    for n in ns:
+        r = bench_one(n, args)
+        records.append(r)
+        print(f"{r['n']:>4} {r['m_sum']:>7} {r['links']:>7} {r['conflictive_sets']:>5} "
+              f"{r['distributed_s']:>7.2f} {r['centralized_s']:>7.3f} {r['ratio']:>6.0f} "
+              f"{r['iterations']:>2} {r['first_detection_rounds']:>4} {r['diameter_bound']:>4} "
+              f"{r['max_resolution_rounds']:>4} {r['resolution_bound']:>4} {r['messages']:>9} "
+              f"{r['bytes'] / 1e6:>8.1f} {r['max_robot_memory_bytes'] / 1e3:>12.1f} "
+              f"{r['distributed']['deleted']:>6}/{r['drop_set']['deleted']:<7}", flush=True)
+    target = [r for r in records if r["n"] == TARGET_N]
+    if target:
+        t = target[0]["distributed_s"]
+        print(f"target: n={TARGET_N} distributed {t:.2f} s "
+              f"({'within' if t < TARGET_S else 'OVER'} {TARGET_S:.0f} s), "
+              f"{target[0]['ratio']:.0f}x the centralized union-find + drop-set baseline")
+    args.out.mkdir(parents=True, exist_ok=True)
+    meta = dict(python=platform.python_version(), machine=platform.machine(),
+                features_per_robot=args.features, spurious=args.spurious, detect=args.detect,
+                seed=args.seed, command=" ".join(sys.argv))
+    write_json_atomic(args.out / "results.json", records)
+    write_json_atomic(args.out / "meta.json", meta)
+    plot(records, args.out / "time_messages.png")
+    print(f"saved {args.out / 'results.json'} and {args.out / 'time_messages.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
