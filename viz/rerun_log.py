@@ -17,10 +17,11 @@ structure-from-motion example:
 ``resolution/log``                 ``TextLog``: what each step of the replay cut
 ``report``                         ``TextDocument`` (markdown)
 
-Cameras without a pose (real images, ``R`` or ``t`` is ``None``) are logged under
-``images/cam_XX`` instead of ``world/``, with their image and keypoints; the 3D entities that
-need poses (camera frusta, ``world/links/*``) are then left out — all of them as soon as one
-camera lacks a pose, since a link strip needs both of its cameras.
+Cameras without a pose (real images, ``R`` or ``t`` is ``None``; e.g. not registered by the
+mapper) are logged under ``images/cam_XX`` instead of ``world/``, with their image and keypoints
+but no frustum, and ``world/links/*`` leave out every link that touches one of them: a strip
+needs both of its cameras. The conflict graph, the text panels and the ``round`` timeline of
+the graph need no pose and are always logged.
 
 The replay (Aragüés et al., Sec. IV, Alg. 1) runs on the ``round`` timeline. Its value is a
 *step*, not the paper's round number, because rounds restart at every detection/resolution
@@ -166,7 +167,6 @@ def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
     Parameters
     ----------
     record : RunRecord
-        Every view must have a pose.
     depth : float
         z-depth in the camera frame (the pinhole image-plane distance, so a strip ends on the
         keypoint drawn on the image plane).
@@ -174,17 +174,19 @@ def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
     Returns
     -------
     ndarray, (L, 2, 3) float32
-        World coordinates, ``X = R^T (depth K^-1 [u, v, 1]^T - t)`` for each endpoint.
+        World coordinates, ``X = R^T (depth K^-1 [u, v, 1]^T - t)`` for each endpoint; ``NaN`` for
+        an endpoint whose camera has no pose.
     """
     views = record.views
-    if not all(_has_pose(v) for v in views):
-        raise ValueError("link_endpoints_3d needs a pose (R, t) for every view")
+    posed = np.array([_has_pose(v) for v in views], dtype=bool)
     kp = np.concatenate([np.asarray(f.keypoints, dtype=np.float64).reshape(-1, 2)
                          for f in record.features] + [np.zeros((0, 2))])
     off = _offsets(record)
     K_inv = np.stack([np.linalg.inv(np.asarray(v.K, dtype=np.float64)) for v in views])
-    R = np.stack([np.asarray(v.R, dtype=np.float64) for v in views])
-    t = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) for v in views])
+    R = np.stack([np.asarray(v.R, dtype=np.float64) if p else np.full((3, 3), np.nan)
+                  for v, p in zip(views, posed, strict=True)])
+    t = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) if p else np.full(3, np.nan)
+                  for v, p in zip(views, posed, strict=True)])
     lk = record.links
     ends = []
     for cam, feat in ((lk.cam_i, lk.feat_i), (lk.cam_j, lk.feat_j)):
@@ -275,12 +277,16 @@ def _log_graph(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray) -> 
 
 def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
                keys: list, depth: float) -> None:
+    """Kept, deleted and replayed links as 3D strips, for links whose two cameras have a pose."""
     ends = link_endpoints_3d(record, depth)
-    deleted = np.asarray(record.status) == "deleted"
-    reason = np.asarray(record.reason, dtype=str)
-    labels = np.char.add(np.char.add(_node_ids(record.links.cam_i, record.links.feat_i), "–"),
-                         _node_ids(record.links.cam_j, record.links.feat_j))
-    truth = np.asarray(record.truth, dtype=np.int64).reshape(-1)
+    drawable = np.isfinite(ends).all(axis=(1, 2))
+    ends, step = ends[drawable], step[drawable]
+    deleted = (np.asarray(record.status) == "deleted")[drawable]
+    reason = np.asarray(record.reason, dtype=str)[drawable]
+    lk = record.links.subset(drawable)
+    labels = np.char.add(np.char.add(_node_ids(lk.cam_i, lk.feat_i), "–"),
+                         _node_ids(lk.cam_j, lk.feat_j))
+    truth = np.asarray(record.truth, dtype=np.int64).reshape(-1)[drawable]
     labels = np.char.add(labels, np.array(["", " (spurious)", " (good)"])[np.clip(truth + 1, 0, 2)])
     rec.log("world/links/kept",
             rr.LineStrips3D(ends[~deleted], colors=(*LINK_COLORS["kept"], _KEPT_ALPHA),
@@ -303,15 +309,20 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
 
 def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_kept: int) -> None:
     rec.set_time("round", sequence=0)
-    rec.log("resolution/log", rr.TextLog(f"step 0: {len(step)} links from matching, all candidates"))
+    rec.log("resolution/log",
+            rr.TextLog(f"step 0: {_links(len(step))} from matching, all candidates"))
     counts = np.bincount(step, minlength=len(keys) + 2)
     for k, (stage, iteration, rnd) in enumerate(keys, start=1):
         rec.set_time("round", sequence=k)
         rec.log("resolution/log",
                 rr.TextLog(f"step {k}: {stage}, iteration {iteration}, round {rnd}: "
-                           f"{counts[k]} links cut"))
+                           f"{_links(counts[k])} cut"))
     rec.set_time("round", sequence=len(keys) + 1)
-    rec.log("resolution/log", rr.TextLog(f"step {len(keys) + 1}: {n_kept} links kept"))
+    rec.log("resolution/log", rr.TextLog(f"step {len(keys) + 1}: {_links(n_kept)} kept"))
+
+
+def _links(n: int) -> str:
+    return f"{n} link" if n == 1 else f"{n} links"
 
 
 def _default_eye(views) -> rrb.EyeControls3D | None:
@@ -330,8 +341,7 @@ def _default_eye(views) -> rrb.EyeControls3D | None:
                              look_target=centre + 0.5 * spread * forward, eye_up=-down)
 
 
-def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
-               max_image_views: int) -> rrb.Blueprint:
+def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int) -> rrb.Blueprint:
     image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p)}/image", name=v.name)
                    for i, (v, p) in enumerate(zip(record.views, posed, strict=True))][:max_image_views]
     side = [rrb.Grid(*image_views)] if image_views else []
@@ -341,7 +351,7 @@ def _blueprint(record: RunRecord, posed: list[bool], all_posed: bool,
         rrb.TextLogView(origin="resolution", name="Resolution steps"),
     ))
     eye = _default_eye(record.views)
-    if all_posed:
+    if any(posed):
         main = rrb.Tabs(
             rrb.Spatial3DView(origin="world", name="Kept (green) and cut (red) links",
                               contents=["+ $origin/**", "- $origin/links/replay"],
@@ -394,9 +404,10 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
 
     Notes
     -----
-    See the module docstring for the entity layout. ``world/links/deleted`` holds exactly one
-    strip per deleted link and ``world/links/kept`` one per kept link (:func:`count_strips`
-    reads them back); both are absent when a camera has no pose.
+    See the module docstring for the entity layout. When every camera has a pose,
+    ``world/links/deleted`` holds exactly one strip per deleted link and ``world/links/kept`` one
+    per kept link (:func:`count_strips` reads them back); links touching a camera without a
+    pose are left out of both, and both are absent when no camera has a pose.
     """
     _check_record(record)
     path = Path(path)
@@ -404,7 +415,6 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
 
     posed = [_has_pose(v) for v in record.views]
-    all_posed = bool(posed) and all(posed)
     depth = float(image_plane_distance) if image_plane_distance else (
         _default_plane_distance(record.views) if any(posed) else 1.0)
     step, keys = replay_steps(record)
@@ -414,7 +424,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
 
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
-        rec.save(tmp, default_blueprint=_blueprint(record, posed, all_posed, max_image_views))
+        rec.save(tmp, default_blueprint=_blueprint(record, posed, max_image_views))
         rec.set_log_time_enabled(False)
         if recording_name:
             rec.send_recording_name(recording_name)
@@ -445,7 +455,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                                 radii=rr.components.Radius.ui_points(1.5)),
                     static=True)
 
-        if all_posed:
+        if any(posed):
             _log_links(rec, record, step, keys, depth)
 
         points = {"triangulated": record.points, "ground_truth": record.gt_points,

@@ -267,6 +267,22 @@ def test_real_images_without_poses(tmp_path):
     assert not any(kind == "3D" for kind, _ in views)  # no poses and no points: nothing 3D
 
 
+def test_camera_without_pose_among_posed_ones(tmp_path):
+    """A camera the mapper did not register: its links leave world/links, the rest stay."""
+    record = make_record()
+    record.views[2].R = record.views[2].t = None
+    path = log_run(tmp_path / "mixed.rrd", record)
+    paths = set(entity_paths(path))
+    assert {"/world/cam_00", "/images/cam_02/image", "/graph"} <= paths
+    assert "/world/cam_02" not in paths
+    both_posed = (record.links.cam_j < 2)
+    deleted = record.status == "deleted"
+    assert count_strips(path, "world/links/deleted") == (deleted & both_posed).sum() == 1
+    assert count_strips(path, "world/links/kept") == (~deleted & both_posed).sum()
+    ends = link_endpoints_3d(record, 1.0)
+    assert np.isnan(ends[~both_posed, 1]).all() and np.isfinite(ends[~both_posed, 0]).all()
+
+
 def test_no_links_and_a_camera_without_features(tmp_path):
     record = make_record()
     z = np.zeros(0, np.int64)
