@@ -58,3 +58,25 @@ def test_fig1_resolution_cuts_the_conflict():
 def test_fig1_with_explicit_comm_graph_including_an_idle_edge():
     res = resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3], [0, 3], [0, 2]], fig1_links())
     assert res.deleted.sum() == 1
+
+
+def test_stopped_robot_stays_silent_and_neighbours_use_its_last_blocks():
+    links = fig1_links()
+    robots, _ = build_robots(FPC, links)
+    net = Network(4, comm_edges_for(FPC, links))
+    sent = []
+    send = net.send
+
+    def spy(src, dst, kind, payload):
+        sent.append((net.round, src, dst, kind))
+        send(src, dst, kind, payload)
+
+    net.send = spy
+    det = run_detection(robots, net, iteration=1)
+    t_stop = det["t_stop"]
+    assert t_stop[1] < t_stop[3]  # B stops before D
+    for rnd, src, _, kind in sent:
+        assert kind == "blocks" and rnd < t_stop[src]  # nothing after Prop. 3.5 fires
+    # A and C kept running after B went silent and still know the whole set
+    assert t_stop[0] > t_stop[1] and t_stop[2] > t_stop[1]
+    assert robots[0].X[0].nnz == 5 and robots[2].X[0].nnz == 5
