@@ -104,6 +104,34 @@ def test_sceaux_database_round_trip(tmp_path, sceaux_small):
     assert result.registered_images >= 3
 
 
+def test_database_made_by_colmap_itself(tmp_path, sceaux_small):
+    """COLMAP's own SIFT extraction and exhaustive matcher (6-column keypoints, rigs, frames):
+    clean-db removes its conflicts and COLMAP's mapper still runs on the result."""
+    import pycolmap
+
+    src = tmp_path / "colmap.db"
+    options = pycolmap.FeatureExtractionOptions()
+    options.sift.max_num_features = 1000
+    options.num_threads = 2
+    with colmap.quiet_colmap():
+        pycolmap.extract_features(src, sceaux_small, extraction_options=options)
+        pycolmap.match_exhaustive(src)
+    digest = _sha(src)
+    before = colmap.read_database(src)
+    m = before.features_per_camera
+    n_conflicts = count_conflicts(AssociationGraph(m, before.links.subset(~before.not_one_to_one)))
+    out = tmp_path / "colmap-clean.db"
+    report = tmp_path / "r.json"
+    assert main(["clean-db", str(src), "--out", str(out), "--report", str(report)]) == 0
+    assert _sha(src) == digest
+    summary = json.loads(report.read_text())
+    assert summary["before"]["conflictive_sets"] == n_conflicts.conflictive_sets
+    cleaned = colmap.read_database(out)
+    assert count_conflicts(AssociationGraph(m, cleaned.links)).conflictive_sets == 0
+    assert len(cleaned.links) == len(before.links) - sum(summary["cut"].values())
+    assert colmap.incremental_mapping(out).registered_images >= 3
+
+
 # ------------------------------------------------------------------------------------ bad input
 
 def _fails(argv, capsys, match):
