@@ -199,7 +199,7 @@ def sampson_error_px(F: np.ndarray, x_i: np.ndarray, x_j: np.ndarray) -> np.ndar
 
 def epipolar_filter(x_i: np.ndarray, x_j: np.ndarray, K_i: np.ndarray | None, K_j: np.ndarray | None,
                     intrinsics_known: bool, threshold_px: float = 1.0, confidence: float = 0.999,
-                    max_iters: int = 1000, seed: int = 0):
+                    max_iters: int = 1000):
     """Epipolar RANSAC (``cv2.USAC_MAGSAC``) on putative correspondences.
 
     Parameters
@@ -212,16 +212,19 @@ def epipolar_filter(x_i: np.ndarray, x_j: np.ndarray, K_i: np.ndarray | None, K_
     threshold_px : float
         Inlier threshold in pixels.
     confidence, max_iters : RANSAC stopping rule
-    seed : int
-        ``cv2.setRNGSeed`` before the call, so a run is repeatable.
 
     Returns
     -------
     inliers : ndarray, (M,) bool
     F : ndarray, (3, 3) or None — fundamental matrix in pixels (``K_j⁻ᵀ E K_i⁻¹`` for E)
     reason : str — empty on success, else why no model was found
+
+    Notes
+    -----
+    USAC samples with its own fixed random state (``UsacParams.randomGeneratorState = 0``), so
+    the result is repeatable and independent of threads; ``cv2.setRNGSeed`` does not affect it.
+    ``cv2.USAC_MAGSAC`` (38), not ``cv2.MAGSAC`` (2 = ``FM_8POINT``).
     """
-    cv2.setRNGSeed(int(seed))
     m = len(x_i)
     p_i = np.ascontiguousarray(x_i, dtype=np.float64).reshape(-1, 1, 2)
     p_j = np.ascontiguousarray(x_j, dtype=np.float64).reshape(-1, 1, 2)
@@ -260,7 +263,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
                K_i: np.ndarray | None = None, K_j: np.ndarray | None = None,
                intrinsics_known: bool = True, ratio: float = 0.8, threshold_px: float = 1.0,
                min_matches: int = MIN_MATCHES, confidence: float = 0.999,
-               max_iters: int = 1000, seed: int = 0) -> PairMatches:
+               max_iters: int = 1000) -> PairMatches:
     """The one-to-one association ``A_ij`` of one communication edge (Sec. V-B).
 
     Parameters
@@ -280,7 +283,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
     min_matches : int
         Fewer putative matches or fewer epipolar inliers than this give an empty association
         with ``reason`` set (a 7-point model fits any 7 points, so ``min_matches >= 8``).
-    confidence, max_iters, seed : RANSAC settings (see :func:`epipolar_filter`)
+    confidence, max_iters : RANSAC settings (see :func:`epipolar_filter`)
 
     Returns
     -------
@@ -325,7 +328,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
     x_i = feats_i.keypoints[pairs[:, 0]].astype(np.float64)
     x_j = feats_j.keypoints[pairs[:, 1]].astype(np.float64)
     inl, F, why = epipolar_filter(x_i, x_j, K_i, K_j, intrinsics_known, threshold_px,
-                                  confidence, max_iters, seed)
+                                  confidence, max_iters)
     if why:
         return _empty(i, j, n_put, why)
     err = sampson_error_px(F, x_i, x_j)
@@ -338,7 +341,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
 
 def match_edges(features: list[Features], views: list[View], comm_edges, ratio: float = 0.8,
                 threshold_px: float = 1.0, min_matches: int = MIN_MATCHES,
-                confidence: float = 0.999, max_iters: int = 1000, seed: int = 0,
+                confidence: float = 0.999, max_iters: int = 1000,
                 workers: int = 1) -> list[PairMatches]:
     """Local associations for every communication edge, and only for those (Sec. II, V-B).
 
@@ -348,7 +351,7 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     views : list[View], (n,) — ``K`` and ``intrinsics_known`` of each camera
     comm_edges : array-like, (E, 2) int — undirected communication graph (see
         :func:`check_comm_edges`); a camera without neighbours simply gets no associations
-    ratio, threshold_px, min_matches, confidence, max_iters, seed : see :func:`match_pair`
+    ratio, threshold_px, min_matches, confidence, max_iters : see :func:`match_pair`
     workers : int
         Threads over edges (NumPy's BLAS and OpenCV release the GIL).
 
@@ -378,7 +381,7 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
         known = bool(views[i].intrinsics_known and views[j].intrinsics_known)
         return match_pair(i, j, features[i], features[j], views[i].K, views[j].K, known,
                           ratio=ratio, threshold_px=threshold_px, min_matches=min_matches,
-                          confidence=confidence, max_iters=max_iters, seed=seed)
+                          confidence=confidence, max_iters=max_iters)
 
     if workers <= 1 or len(edges) <= 1:
         return [one(e) for e in edges]
