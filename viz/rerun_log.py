@@ -54,6 +54,7 @@ __all__ = [
     "link_endpoints_3d",
     "log_run",
     "replay_steps",
+    "world_axes_from_cameras",
 ]
 
 #: Keypoint status classes, ``class_id -> (label, RGB)``; the annotation context at ``/`` maps
@@ -325,6 +326,26 @@ def _links(n: int) -> str:
     return f"{n} link" if n == 1 else f"{n} links"
 
 
+_UP_AXES = {(0, 1): rr.ViewCoordinates.RIGHT_HAND_X_UP, (0, -1): rr.ViewCoordinates.RIGHT_HAND_X_DOWN,
+            (1, 1): rr.ViewCoordinates.RIGHT_HAND_Y_UP, (1, -1): rr.ViewCoordinates.RIGHT_HAND_Y_DOWN,
+            (2, 1): rr.ViewCoordinates.RIGHT_HAND_Z_UP, (2, -1): rr.ViewCoordinates.RIGHT_HAND_Z_DOWN}
+
+
+def world_axes_from_cameras(views):
+    """Right-handed world convention whose up axis is closest to the cameras' mean up direction.
+
+    Synthetic formations (upright cameras, ``z`` up) give ``RIGHT_HAND_Z_UP``; a COLMAP model,
+    whose frame follows its first cameras (``y`` down), gives ``RIGHT_HAND_Y_DOWN``. Without any
+    pose: ``RIGHT_HAND_Z_UP``.
+    """
+    ups = [-np.asarray(v.R, dtype=np.float64)[1] for v in views if _has_pose(v)]
+    if not ups:
+        return rr.ViewCoordinates.RIGHT_HAND_Z_UP
+    up = np.mean(ups, axis=0)  # camera y points down in the image (OpenCV / RDF)
+    k = int(np.argmax(np.abs(up)))
+    return _UP_AXES[(k, 1 if up[k] >= 0 else -1)]
+
+
 def _default_eye(views) -> rrb.EyeControls3D | None:
     """Look over the formation from behind and above, towards where the cameras point."""
     posed = [v for v in views if _has_pose(v)]
@@ -372,7 +393,7 @@ def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int) -> rr
 
 def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
             recording_name: str | None = None, *, image_plane_distance: float | None = None,
-            world_axes=rr.ViewCoordinates.RIGHT_HAND_Z_UP, jpeg_quality: int = 85,
+            world_axes=None, jpeg_quality: int = 85,
             max_image_views: int = 4) -> Path:
     """Write the Rerun recording of one run to ``path`` (headless; no viewer is spawned).
 
@@ -390,8 +411,9 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     image_plane_distance : float, optional
         Depth of the drawn image planes, and of the link strip endpoints, in world units.
         Default: 0.4 x the median nearest-neighbour distance between camera centres.
-    world_axes : rr.ViewCoordinates
-        Axis convention of the world frame, logged once as static on ``world``.
+    world_axes : rr.ViewCoordinates, optional
+        Axis convention of the world frame, logged once as static on ``world``. Default:
+        :func:`world_axes_from_cameras` (``RIGHT_HAND_Z_UP`` for the synthetic formations).
     jpeg_quality : int
         JPEG quality of the logged images (6 images of 640x480 at 85 take about 0.5–1 MB).
     max_image_views : int
@@ -431,7 +453,8 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
 
         rec.log("/", rr.AnnotationContext([(k, lab, rgb) for k, (lab, rgb)
                                            in KEYPOINT_CLASSES.items()]), static=True)
-        rec.log("world", world_axes, static=True)
+        rec.log("world", world_axes if world_axes is not None
+                else world_axes_from_cameras(record.views), static=True)
 
         for i, (view, feats) in enumerate(zip(record.views, record.features, strict=True)):
             cam = camera_entity(i, posed[i])

@@ -17,6 +17,7 @@ from viz.rerun_log import (
     link_endpoints_3d,
     log_run,
     replay_steps,
+    world_axes_from_cameras,
 )
 
 W, H = 320, 240
@@ -322,3 +323,16 @@ def test_six_vga_images_stay_small(tmp_path):
     record.views, record.features = views, feats
     path = log_run(tmp_path / "six.rrd", record)
     assert path.stat().st_size < 2_000_000
+
+
+def test_world_axes_follow_the_cameras_up_direction():
+    record = make_record()
+    assert world_axes_from_cameras(record.views) == rr.ViewCoordinates.RIGHT_HAND_Z_UP
+    # The same cameras in a y-down frame (x_new = (x, -z, y)): a COLMAP-like model.
+    flip = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    for v in record.views:
+        v.R = v.R @ flip.T
+    assert world_axes_from_cameras(record.views) == rr.ViewCoordinates.RIGHT_HAND_Y_DOWN
+    for v in record.views:
+        v.R = None
+    assert world_axes_from_cameras(record.views) == rr.ViewCoordinates.RIGHT_HAND_Z_UP
