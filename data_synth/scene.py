@@ -157,7 +157,8 @@ def _box_faces(name: str, centre, size, yaw: float, rng: np.random.Generator, lo
 
 
 @functools.lru_cache(maxsize=4)
-def build_scene(seed: int = 0, window_variation: float = 6.0) -> Scene:
+def build_scene(seed: int = 0, window_variants: int = 4, window_variation: float = 6.0,
+                detail: float = 1.0, roughness: float = 0.0) -> Scene:
     """Build the deterministic scene for ``seed`` (cached: textures take ~0.3 s).
 
     Layout (metres): facade ``x ∈ [-10, 10]``, ``z ∈ [0, 9]`` at ``y = 10`` with a 3 x 10 window
@@ -168,8 +169,19 @@ def build_scene(seed: int = 0, window_variation: float = 6.0) -> Scene:
     ----------
     seed : int
         Drives every texture and the small jitter of the crate layout.
+    window_variants : int
+        Number of window decorations (curtain, flower pot, blind, none); windows of one variant
+        are near-copies. Measured at seeds 0–5 (SIFT, formation d): 4 variants give 32–56
+        conflictive sets, a single variant 27–39.
     window_variation : float
-        Per-window noise (grey levels); lower means more confusable windows.
+        Per-window noise (grey levels) on top of the variant; lower means more confusable
+        windows (but then the ratio test rejects both copies: fewer links, not more conflicts).
+    detail : float
+        Multiplies the density of unique stains on the facade and the floor.
+    roughness : float
+        Amplitude of a fine unique grit on the facade; ``> 0`` makes the scene *easier*
+        (unique features dominate: with one window variant, roughness 1.0 dropped formation d
+        from 27–37 to 7–18 conflictive sets at seeds 0–2, raw precision 99.1–99.6 %).
 
     Returns
     -------
@@ -180,11 +192,12 @@ def build_scene(seed: int = 0, window_variation: float = 6.0) -> Scene:
     faces: list = []
     facade_w, facade_h = 20.0, 9.0
     tex = textures.facade_texture(rng, facade_w, facade_h, ppm, rows=3, cols=10,
-                                  window_variation=window_variation)
+                                  window_variation=window_variation, stains_per_m2=1.5 * detail,
+                                  roughness=roughness, window_variants=window_variants)
     faces += _tiled_faces("facade", [-facade_w / 2, FACADE_Y, facade_h], [facade_w, 0, 0],
                           [0, 0, -facade_h], tex)
     floor_w, floor_d = 20.0, 14.0
-    tex = textures.floor_texture(rng, floor_w, floor_d, ppm)
+    tex = textures.floor_texture(rng, floor_w, floor_d, ppm, stains_per_m2=0.8 * detail)
     faces += _tiled_faces("floor", [-floor_w / 2, FACADE_Y, 0.0], [floor_w, 0, 0],
                           [0, -floor_d, 0], tex)
     wall_d, wall_h = 8.0, 4.0

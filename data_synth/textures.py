@@ -99,14 +99,40 @@ def _poster(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
     return img
 
 
-def _window_template(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
-    """One window: dark frame, light sill, 2x3 panes with a glass gradient and cross bars."""
+def _window_template(rng: np.random.Generator, h: int, w: int, variant: int = 0) -> np.ndarray:
+    """One window: dark frame, light sill, 2x3 panes with a glass gradient and cross bars.
+
+    ``variant`` adds a decoration behind the glass — 0 none, 1 a dotted curtain, 2 a flower pot
+    on the sill, 3 a half-lowered blind — drawn from ``rng``: windows of one variant are
+    near-copies, windows of different variants share only the frame.
+    """
     img = np.zeros((h, w, 3), np.float32)
     img[:] = (70, 60, 55)  # frame
     fr = max(2, w // 14)
     glass = np.linspace(0, 1, h - 2 * fr, dtype=np.float32)[:, None] * np.ones((1, w - 2 * fr), np.float32)
     glass = 0.55 * glass + 0.45 * value_noise(rng, glass.shape, cell=w / 3, octaves=2)
     img[fr:h - fr, fr:w - fr] = _tint(glass, (110, 140, 170)) + 30
+    v = variant % 4
+    if v == 1:
+        cw = int(rng.uniform(0.3, 0.5) * (w - 2 * fr))
+        col = rng.uniform(120, 240, 3)
+        img[fr:h - fr, fr:fr + cw] = col * (0.85 + 0.15 * value_noise(rng, (h - 2 * fr, cw), cell=6)[..., None])
+        for _ in range(int(h * cw / 150)):
+            p = (int(16 * (fr + rng.uniform(0, cw))), int(16 * (fr + rng.uniform(0, h - 2 * fr))))
+            cv2.circle(img, p, int(16 * rng.uniform(1.5, 3.5)), tuple(float(c) for c in col * 0.4), -1,
+                       cv2.LINE_AA, 4)
+    elif v == 2:
+        px = int(rng.uniform(0.25, 0.75) * w)
+        base = h - fr - max(3, h // 16)
+        for _ in range(12):
+            p = (int(16 * (px + rng.normal(0, w / 12))), int(16 * (base - h * 0.12 + rng.normal(0, h / 14))))
+            cv2.circle(img, p, int(16 * rng.uniform(2, 6)),
+                       tuple(float(c) for c in rng.uniform([20, 90, 20], [120, 200, 90])), -1, cv2.LINE_AA, 4)
+        cv2.rectangle(img, (px - w // 10, base - h // 10), (px + w // 10, base), (150, 70, 40), -1)
+    elif v == 3:
+        depth = int(rng.uniform(0.25, 0.5) * (h - 2 * fr))
+        for y in range(fr, fr + depth, 4):
+            img[y:y + 3, fr:w - fr] = (225, 220, 205)
     bar = max(2, w // 24)
     for k in (1, 2):  # two horizontal bars -> 3 rows of panes
         y = fr + k * (h - 2 * fr) // 3
@@ -122,7 +148,9 @@ def _window_template(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
 
 
 def facade_texture(rng: np.random.Generator, width_m: float, height_m: float, px_per_m: float,
-                   rows: int, cols: int, window_variation: float = 6.0) -> np.ndarray:
+                   rows: int, cols: int, window_variation: float = 6.0,
+                   stains_per_m2: float = 1.5, roughness: float = 0.0,
+                   window_variants: int = 1) -> np.ndarray:
     """Building facade: plaster noise, string courses, a ``rows x cols`` window grid, posters.
 
     The windows are copies of one template with only a little per-window noise
@@ -148,15 +176,19 @@ def facade_texture(rng: np.random.Generator, width_m: float, height_m: float, px
             shade = rng.uniform(0.75, 1.0)
             cv2.rectangle(img, (x + 1, y + 1), (x + bw - 2, y + bh - 2),
                           (150 * shade, 80 * shade, 60 * shade), -1)
+    if roughness > 0:  # fine grit over plaster and bricks: many small, unique blobs for SIFT
+        grit = value_noise(rng, (H, W), cell=px_per_m * 0.05, octaves=2) - 0.5
+        img *= (1 + roughness * grit)[..., None]
     # string courses between storeys
     storey = (H - ground_h) / rows
     for k in range(rows + 1):
         y = int(k * storey)
         img[max(0, y - 3):y + 3] = (190, 180, 170)
     win_h, win_w = int(storey * 0.55), int(W / cols * 0.5)
-    template = _window_template(rng, win_h, win_w)
+    templates = [_window_template(rng, win_h, win_w, k) for k in range(window_variants)]
     for r in range(rows):
         for c in range(cols):
+            template = templates[int(rng.integers(window_variants))]
             y0 = int(r * storey + storey * 0.22)
             x0 = int((c + 0.5) * W / cols - win_w / 2)
             noise = (rng.standard_normal((win_h // 8 + 1, win_w // 8 + 1)).astype(np.float32)
@@ -170,7 +202,7 @@ def facade_texture(rng: np.random.Generator, width_m: float, height_m: float, px
         x0 = int(rng.uniform(0, W - pw))
         img[y0:y0 + ph, x0:x0 + pw] = _poster(rng, ph, pw)
     # stains: low-alpha unique blobs over everything
-    _random_blobs(rng, img, n=int(W * H / (px_per_m ** 2) * 1.5), rmin=px_per_m * 0.03,
+    _random_blobs(rng, img, n=int(W * H / (px_per_m ** 2) * stains_per_m2), rmin=px_per_m * 0.03,
                   rmax=px_per_m * 0.15, alpha=0.35)
     return _to_u8(img)
 
@@ -193,7 +225,8 @@ def _tile_motif(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def floor_texture(rng: np.random.Generator, width_m: float, depth_m: float, px_per_m: float,
-                  tile_m: float = 0.5, n_motifs: int = 3, dirt: float = 0.25) -> np.ndarray:
+                  tile_m: float = 0.5, n_motifs: int = 3, dirt: float = 0.25,
+                  stains_per_m2: float = 0.8) -> np.ndarray:
     """Tiled floor: tiles drawn from ``n_motifs`` motifs (random rotation), grout, dirt.
 
     Returns
@@ -215,7 +248,7 @@ def floor_texture(rng: np.random.Generator, width_m: float, depth_m: float, px_p
                 img[ty + grout:ty + grout + hh, tx + grout:tx + grout + ww] = m[:hh, :ww]
     stains = value_noise(rng, (H, W), cell=px_per_m * 1.0)
     img *= (1 - dirt + dirt * stains)[..., None]
-    _random_blobs(rng, img, n=int(W * H / (px_per_m ** 2) * 0.8), rmin=px_per_m * 0.02,
+    _random_blobs(rng, img, n=int(W * H / (px_per_m ** 2) * stains_per_m2), rmin=px_per_m * 0.02,
                   rmax=px_per_m * 0.08, alpha=0.5)
     return _to_u8(img)
 
