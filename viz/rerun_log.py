@@ -382,7 +382,7 @@ def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int) -> rr
                                         "- $origin/links/deleted"], eye_controls=eye),
         )
         layout = rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2])
-    elif len(record.points):
+    elif record.points is not None and len(record.points):
         layout = rrb.Horizontal(rrb.Spatial3DView(origin="world", name="Triangulated points"),
                                 rrb.Vertical(*side), column_shares=[3, 2])
     else:
