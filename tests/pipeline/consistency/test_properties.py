@@ -13,7 +13,7 @@ from pipeline.consistency.centralized import is_conflict_free, union_find_confli
 from pipeline.consistency.engine import build_robots, comm_edges_for, run_detection
 from pipeline.consistency.network import Network
 
-SETTINGS = settings(max_examples=120, deadline=None,
+SETTINGS = settings(max_examples=250, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -78,7 +78,7 @@ def test_resolution_properties(inst):
     check_resolution(*inst)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(instances(max_n=10, max_feat=12))
 def test_resolution_properties_larger(inst):
     check_resolution(*inst)
