@@ -10,7 +10,7 @@ structure-from-motion example:
 ``world/cam_XX/image/keypoints``   ``Points2D``, class = keypoint status (see :data:`KEYPOINT_CLASSES`)
 ``world/links/kept``               ``LineStrips3D``, one green strip per kept link
 ``world/links/deleted``            ``LineStrips3D``, one red strip per deleted link
-``world/links/replay``             every link, coloured per step of the ``round`` timeline
+``world/links/replay``             the same links, coloured per step of the ``round`` timeline
 ``world/points/{triangulated,ground_truth,fused}``  ``Points3D``
 ``graph``                          ``GraphNodes``/``GraphEdges``: conflictive sets before resolution
                                    (Aragüés et al., Def. 2.4), cuts replayed on ``round``
@@ -415,7 +415,8 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         Axis convention of the world frame, logged once as static on ``world``. Default:
         :func:`world_axes_from_cameras` (``RIGHT_HAND_Z_UP`` for the synthetic formations).
     jpeg_quality : int
-        JPEG quality of the logged images (6 images of 640x480 at 85 take about 0.5–1 MB).
+        JPEG quality of the logged images (the 6 rendered 640x480 images of formation d take
+        0.38 MB at 85; the whole recording of that run is 1.1 MB).
     max_image_views : int
         How many cameras get a 2D view in the default blueprint.
 
@@ -430,6 +431,12 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     ``world/links/deleted`` holds exactly one strip per deleted link and ``world/links/kept`` one
     per kept link (:func:`count_strips` reads them back); links touching a camera without a
     pose are left out of both, and both are absent when no camera has a pose.
+
+    Examples
+    --------
+    >>> path = log_run(run_dir / "recording.rrd", record)  # doctest: +SKIP
+    >>> count_strips(path, "world/links/deleted") == (record.status == "deleted").sum()  # doctest: +SKIP
+    True
     """
     _check_record(record)
     path = Path(path)
