@@ -87,6 +87,7 @@ def make_record(posed: bool = True, n_cams: int = 3, size=(W, H)) -> RunRecord:
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     record = make_record()
+    record.fused_points = record.points[:4] - 0.01
     path = log_run(tmp_path_factory.mktemp("viz") / "recording.rrd", record,
                    recording_name="test", image_plane_distance=0.5)
     return path, record
@@ -111,8 +112,7 @@ def test_entities_present(recording):
         assert {e, e + "/image", e + "/image/keypoints"} <= paths
     assert {"/world", "/world/links/kept", "/world/links/deleted", "/world/links/replay",
             "/world/points/triangulated", "/world/points/ground_truth", "/graph",
-            "/report", "/resolution/log"} <= paths
-    assert "/world/points/fused" not in paths  # fused_points is None
+            "/world/points/fused", "/report", "/resolution/log"} <= paths
 
 
 def test_one_strip_per_link(recording):
@@ -298,6 +298,7 @@ def test_no_links_and_a_camera_without_features(tmp_path):
     assert {"/world/links/kept", "/world/links/deleted", "/world/cam_01/image"} <= set(
         entity_paths(path))
     assert "/graph" not in entity_paths(path)  # no conflictive sets
+    assert "/world/points/fused" not in entity_paths(path)  # fused_points is None
 
 
 def test_failed_write_leaves_no_file(tmp_path):
