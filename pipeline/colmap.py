@@ -258,6 +258,14 @@ def _first_occurrence(key: np.ndarray) -> np.ndarray:
     return out
 
 
+def _xy(keypoints) -> np.ndarray:
+    """``(m, 2)`` OpenCV-convention positions from COLMAP keypoint rows ``(m, 2|4|6)``."""
+    kp = np.asarray(keypoints, dtype=np.float32)
+    if kp.size == 0:
+        return np.zeros((0, 2), dtype=np.float32)
+    return np.ascontiguousarray(kp[:, :2] - np.float32(COLMAP_PIXEL_OFFSET))
+
+
 def _check_database_file(path: Path) -> None:
     if not path.is_file():
         raise InputError(f"database {str(path)!r} does not exist")
@@ -311,9 +319,7 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     names = [im.name for im in images]
     image_ids = np.array([im.image_id for im in images], dtype=np.int64)
     cam_of_id = {int(iid): k for k, iid in enumerate(image_ids)}
-    kps = [np.ascontiguousarray(np.asarray(keypoints[im.image_id], dtype=np.float32)
-                                .reshape(len(keypoints[im.image_id]), -1)[:, :2]
-                                - np.float32(COLMAP_PIXEL_OFFSET)) for im in images]
+    kps = [_xy(keypoints[im.image_id]) for im in images]
     usable = [(pid, g) for pid, g in zip(pair_ids, geometries, strict=True)
               if len(g.inlier_matches)]
     if not usable:

@@ -137,6 +137,28 @@ def test_not_one_to_one_inliers_are_flagged(tmp_path):
     assert contents.not_one_to_one.tolist() == [False, True, False, True]
 
 
+def test_image_without_keypoints_and_six_column_keypoints(tmp_path):
+    """COLMAP's SIFT stores (x, y, a11, a12, a21, a22); an image may have no keypoints row."""
+    path = tmp_path / "six.db"
+    kp6 = np.zeros((4, 6), np.float32)
+    kp6[:, :2] = [[10.5, 20.5], [30.5, 40.5], [50.5, 60.5], [70.5, 80.5]]
+    with pycolmap.Database.open(path) as db:
+        ids = []
+        for name in ("a.jpg", "b.jpg", "c.jpg"):
+            cid = db.write_camera(pycolmap.Camera(model="PINHOLE", width=320, height=240,
+                                                  params=[300, 300, 160, 120]))
+            ids.append(db.write_image(pycolmap.Image(name=name, camera_id=cid)))
+        db.write_keypoints(ids[0], kp6)
+        db.write_keypoints(ids[1], kp6)
+        db.write_two_view_geometry(ids[0], ids[1], pycolmap.TwoViewGeometry(
+            config=pycolmap.TwoViewGeometryConfiguration.CALIBRATED,
+            inlier_matches=np.array([[0, 1], [2, 3]], np.uint32)))
+    contents = colmap.read_database(path)
+    assert np.allclose(contents.keypoints[0], [[10, 20], [30, 40], [50, 60], [70, 80]])
+    assert contents.features_per_camera.tolist() == [4, 4, 0]
+    assert _link_set(contents.links) == {(0, 0, 1, 1), (0, 2, 1, 3)}
+
+
 def test_database_without_two_view_geometries(tmp_path):
     views, feats = _views_and_features(n=2)
     path = colmap.write_database(tmp_path / "raw.db", views, feats,
