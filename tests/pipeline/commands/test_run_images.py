@@ -98,6 +98,29 @@ def test_sparse_is_the_reconstruction_after_cleaning(sceaux_run):
     assert report["triangulation"]["before"]["registered_images"] >= 3
 
 
+def test_mixed_sizes_and_guessed_intrinsics(tmp_path, sceaux_small):
+    """An internet-style set: different sizes and aspect ratios, no K.txt, no EXIF."""
+    from PIL import Image
+
+    d = tmp_path / "mixed"
+    d.mkdir()
+    with Image.open(sceaux_small / "100_7100.JPG") as im:
+        im.save(d / "a.png")
+    with Image.open(sceaux_small / "100_7101.JPG") as im:
+        im.resize((512, 385)).save(d / "b.jpg")
+    with Image.open(sceaux_small / "100_7102.JPG") as im:
+        im.crop((40, 0, 600, 481)).save(d / "c.tif")
+    out = tmp_path / "run"
+    assert main(["run-images", str(d), "--graph", "complete", "--no-rerun", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [im["size"] for im in report["images"]] == [[640, 481], [512, 385], [560, 481]]
+    assert {im["intrinsics_source"] for im in report["images"]} == {"guess"}
+    # each image its own guess: f = 1.2 * longest side
+    assert [round(im["K"][0][0], 3) for im in report["images"]] == [768.0, 614.4, 672.0]
+    assert report["after"]["conflictive_sets"] == 0
+    assert report["before"]["links"] > 0
+
+
 # ------------------------------------------------------------------------------------ bad input
 
 def _fails(argv, out, capsys, match):
