@@ -52,9 +52,16 @@ class ConsistencyResult:
     case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a deleted link, ``''`` if kept
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
-    stats : dict — ``iterations``, ``detection_rounds``, ``resolution_rounds`` (totals),
-        ``per_iteration`` (list of dicts), ``messages``, ``bytes``, ``messages_by_kind``,
-        ``bytes_by_kind``, ``max_robot_memory_bytes``, ``asymmetric_links``
+    stats : dict — ``iterations`` (detection + resolution passes that found conflicts; a
+        last detection that finds none ends the loop and is counted in the rounds),
+        ``detection_rounds``, ``resolution_rounds`` (totals over all passes),
+        ``per_iteration`` (one dict per detection: ``detection_rounds``, ``t_stop`` (n,) the
+        round each robot stopped (Prop. 3.5), ``conflictive_features``, ``conflictive_sets``,
+        ``resolution_rounds``, ``last_assignment_round``, ``messages``, ``bytes``),
+        ``messages``, ``bytes``, ``messages_by_kind``, ``bytes_by_kind``,
+        ``max_robot_memory_bytes`` (peak over robots and rounds of :meth:`Robot.memory_bytes`),
+        ``asymmetric_links`` (links deleted at one end only; 0 on a lossless network),
+        ``deleted_links``
     """
 
     links: Links

@@ -80,3 +80,14 @@ def test_stopped_robot_stays_silent_and_neighbours_use_its_last_blocks():
     # A and C kept running after B went silent and still know the whole set
     assert t_stop[0] > t_stop[1] and t_stop[2] > t_stop[1]
     assert robots[0].X[0].nnz == 5 and robots[2].X[0].nnz == 5
+
+
+def test_link_between_non_neighbours_is_an_input_error():
+    import pytest
+
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=r"link 0 \(0,0\)-\(3,1\) joins cameras 0 and 3, which are not neighbours"):
+        resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3]], fig1_links())
+    with pytest.raises(InputError, match="own neighbour"):
+        resolve_conflicts(FPC, [[0, 0]], fig1_links())
