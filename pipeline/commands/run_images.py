@@ -227,6 +227,14 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             map_after = colmap.incremental_mapping(db_after, num_threads=config.threads)
             timer.note(_mapping_note(map_after))
 
+        from pipeline.consistency import centralized
+
+        # centralized baselines on the same links, for comparison only (never used by robots)
+        baselines = {}
+        for name, keep_mask in centralized.baselines(m, links).items():
+            keep_mask = np.asarray(keep_mask, dtype=bool)
+            baselines[name] = {**_association_counts(m, links.subset(keep_mask), None, None),
+                               "deleted_links": int((~keep_mask).sum())}
         report = {
             "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
             "n_cameras": len(views),
@@ -239,6 +247,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             "triangulation": {"method": "pycolmap incremental mapping from the matches "
                                         "(two-view geometries = links before / kept links after)",
                               "before": map_before.summary(), "after": map_after.summary()},
+            "baselines": baselines,
             "matching": {"edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)),
                                     "putative": int(p.n_putative), "reason": p.reason}
                                    for p in matches]},

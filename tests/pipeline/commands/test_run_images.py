@@ -60,6 +60,8 @@ def test_conflicts_after_cleaning_are_zero(sceaux_run):
     assert report["after"]["conflictive_sets"] == 0
     assert report["after"]["conflictive_features"] == 0
     assert report["before"]["conflictive_sets"] >= report["after"]["conflictive_sets"]
+    for name, baseline in report["baselines"].items():  # centralized references, same links
+        assert baseline["conflictive_sets"] == 0, name
 
 
 def test_report_recount_matches_links_csv(sceaux_run):
