@@ -31,7 +31,7 @@ For ``n != 6`` robots the same rules apply (``ring``, ring plus chords ``(k, k+2
 ``k ≡ 0 mod 3``, ``ring2``, ``complete``). Parametric graph kinds: ``line``, ``ring``,
 ``ring2`` (ring plus 2-hop chords), ``complete`` and ``geometric`` (random geometric graph on
 the robots' positions: an edge where two cameras are closer than a radius drawn from the seed
-between 1.0 and 1.6 times the smallest radius that keeps the graph connected).
+between 1.0 and 2.5 times the smallest radius that keeps the graph connected).
 """
 
 from __future__ import annotations
@@ -182,7 +182,7 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
             raise InputError("graph 'geometric' needs the robot positions")
         D = squareform(pdist(centres[:, :2]))
         r_conn = float(minimum_spanning_tree(D).toarray().max())
-        r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 1.6)
+        r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 2.5)
         ii, jj = np.nonzero(np.triu(D <= r + 1e-9, k=1))
         e = list(zip(ii.tolist(), jj.tolist(), strict=True))
     else:

@@ -203,6 +203,10 @@ def build_scene(seed: int = 0, window_variants: int = 4, window_variation: float
     wall_d, wall_h = 8.0, 4.0
     tex = textures.side_wall_texture(rng, wall_d, wall_h, ppm)
     faces += _tiled_faces("side_wall", [-7.0, 2.0, wall_h], [0, wall_d, 0], [0, 0, -wall_h], tex)
+    # its back (seen by robots far to the left of a wide formation): faces are one-sided
+    tex = textures.side_wall_texture(rng, wall_d, wall_h, ppm)
+    faces += _tiled_faces("side_wall_back", [-7.0, 2.0 + wall_d, wall_h], [0, -wall_d, 0],
+                          [0, 0, -wall_h], tex)
 
     landmarks: dict = {}
     crate = 0.8
