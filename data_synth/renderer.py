@@ -89,28 +89,41 @@ def _face_roi(face, K, R, t, W, H):
     y1 = min(H - 1, int(np.ceil(xy[:, 1].max())))
     if x0 > x1 or y0 > y1:
         return None
-    return x0, y0, x1, y1, xy.mean(axis=0)
+    return x0, y0, x1, y1, xy
 
 
-def _plane_maps(face, K, R, t, x0, y0, x1, y1):
+def _row_spans(poly: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Leftmost and rightmost ``x`` of a convex polygon ``(k, 2)`` on each row ``ys`` ``(R,)``.
+
+    Rows that miss the polygon get ``(inf, -inf)``.
+    """
+    p, q = poly, np.roll(poly, -1, axis=0)
+    dy = q[:, 1] - p[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tt = (ys[:, None] - p[None, :, 1]) / dy[None, :]
+    hit = (tt >= 0) & (tt <= 1) & (dy[None, :] != 0)
+    x = p[None, :, 0] + tt * (q[None, :, 0] - p[None, :, 0])
+    xl = np.where(hit, x, np.inf).min(axis=1)
+    xr = np.where(hit, x, -np.inf).max(axis=1)
+    return xl, xr
+
+
+def _plane_maps(face, K, R, t, poly, x0, y0, x1, y1):
     """Inverse depth and inside mask of a face over a pixel box, both ``(y1-y0+1, x1-x0+1)``.
 
     ``G = (K [R u, R v, R o + t])⁻¹`` maps a pixel to homogeneous face coordinates
-    ``(a w, b w, w)`` with ``w = 1/z``; the pixel sees the face iff ``w > 0`` and ``0 ≤ a, b ≤ 1``.
+    ``(a w, b w, w)`` with ``w = 1/z``. The pixel centre sees the face iff it lies inside the
+    face's projected (near-clipped, convex) polygon ``poly`` ``(k, 2)`` — tested exactly per row
+    as an ``x`` interval, which is the same set as ``w > 0, 0 ≤ a, b ≤ 1`` but cheaper.
     """
     M = K @ np.column_stack([R @ face.u, R @ face.v, R @ face.origin + t])
-    G = np.linalg.inv(M)
+    g = np.linalg.inv(M)[2]
     xs = np.arange(x0, x1 + 1, dtype=np.float32)
-    ys = np.arange(y0, y1 + 1, dtype=np.float32)[:, None]
-
-    def affine(g):
-        return np.float32(g[0]) * xs + (np.float32(g[1]) * ys + np.float32(g[2]))
-
+    ys = np.arange(y0, y1 + 1, dtype=np.float64)
     # p = K X_cam / z = M (a, b, 1) / z, so G p = (a, b, 1) / z: the scale w is exactly 1/z
-    invz = affine(G[2])
-    a = affine(G[0])
-    b = affine(G[1])
-    mask = (invz > 0) & (a >= 0) & (a <= invz) & (b >= 0) & (b <= invz)
+    invz = np.float32(g[0]) * xs + (g[1] * ys + g[2]).astype(np.float32)[:, None]
+    xl, xr = _row_spans(poly, ys)
+    mask = (xs >= xl.astype(np.float32)[:, None]) & (xs <= xr.astype(np.float32)[:, None])
     return invz, mask
 
 
@@ -149,19 +162,21 @@ def render_view(scene, K: np.ndarray, R: np.ndarray, t: np.ndarray, size: tuple[
         roi = _face_roi(face, K, R, t, W, H)
         if roi is None:
             continue
-        x0, y0, x1, y1, centre = roi
+        x0, y0, x1, y1, poly = roi
         # exact depth at native pixel centres
-        invz, mask = _plane_maps(face, K, R, t, x0, y0, x1, y1)
+        invz, mask = _plane_maps(face, K, R, t, poly, x0, y0, x1, y1)
         zr = zinv[y0:y1 + 1, x0:x1 + 1]
-        np.copyto(zr, invz, where=mask & (invz > zr))
+        cv2.copyTo(invz, (mask & (invz > zr)).view(np.uint8), zr)
         # colour at the supersampled grid
         X0, Y0, X1, Y1 = s * x0, s * y0, s * x1 + s - 1, s * y1 + s - 1
-        invz, mask = _plane_maps(face, Ks, R, t, X0, Y0, X1, Y1)
+        poly_s = poly * s + (s - 1) / 2
+        invz, mask = _plane_maps(face, Ks, R, t, poly_s, X0, Y0, X1, Y1)
         zr = zinv_s[Y0:Y1 + 1, X0:X1 + 1]
         upd = mask & (invz > zr)
         if not upd.any():
             continue
-        level = _mip_level(face, Ks, R, t, A @ np.array([centre[0], centre[1], 1.0]))
+        centre = poly_s.mean(axis=0)
+        level = _mip_level(face, Ks, R, t, np.array([centre[0], centre[1], 1.0]))
         tex = face.mip(level)
         th, tw = tex.shape[:2]
         # texel (j, i) -> face (a, b) = ((j + .5) / tw, (i + .5) / th) -> supersampled pixel
@@ -170,8 +185,9 @@ def render_view(scene, K: np.ndarray, R: np.ndarray, t: np.ndarray, size: tuple[
         M = np.array([[1, 0, -X0], [0, 1, -Y0], [0, 0, 1]]) @ M
         warped = cv2.warpPerspective(tex, M, (X1 - X0 + 1, Y1 - Y0 + 1), flags=cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_REPLICATE)
-        np.copyto(zr, invz, where=upd)
-        np.copyto(color[Y0:Y1 + 1, X0:X1 + 1], warped, where=upd[..., None])
+        m8 = upd.view(np.uint8)
+        cv2.copyTo(invz, m8, zr)  # in place into the z-buffer view (masked copy, as np.copyto)
+        cv2.copyTo(warped, m8, color[Y0:Y1 + 1, X0:X1 + 1])
     image = cv2.resize(color, (W, H), interpolation=cv2.INTER_AREA) if s > 1 else color
     if rng is not None and noise_sigma > 0:
         noise = rng.standard_normal(image.shape, dtype=np.float32) * np.float32(noise_sigma)
