@@ -7,7 +7,8 @@ Each face is a plane, so the map from texture texels to image pixels is a homogr
 1. culls back faces and clips the face polygon against the near plane,
 2. picks a mip level of the texture from the texel footprint of one pixel,
 3. warps the texture into the face's bounding box with ``cv2.warpPerspective``,
-4. computes ``1/z`` and the exact inside-the-rectangle mask analytically, and
+4. computes ``1/z`` analytically and the exact coverage of pixel centres by the projected
+   face polygon (one ``x`` interval per row), and
 5. composites by z-buffer (largest ``1/z`` wins).
 
 Colour is rendered at ``supersample`` times the resolution and area-averaged down
@@ -114,7 +115,8 @@ def _plane_maps(face, K, R, t, poly, x0, y0, x1, y1):
     ``G = (K [R u, R v, R o + t])⁻¹`` maps a pixel to homogeneous face coordinates
     ``(a w, b w, w)`` with ``w = 1/z``. The pixel centre sees the face iff it lies inside the
     face's projected (near-clipped, convex) polygon ``poly`` ``(k, 2)`` — tested exactly per row
-    as an ``x`` interval, which is the same set as ``w > 0, 0 ≤ a, b ≤ 1`` but cheaper.
+    as an ``x`` interval, which is the set ``w > 0, 0 ≤ a, b ≤ 1`` (minus points nearer than
+    ``NEAR``) at a fraction of the cost.
     """
     M = K @ np.column_stack([R @ face.u, R @ face.v, R @ face.origin + t])
     g = np.linalg.inv(M)[2]

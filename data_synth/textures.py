@@ -1,11 +1,11 @@
 """Deterministic procedural textures for the synthetic scene.
 
 The paper's image experiment (Aragüés et al., Sec. V-B) matches SURF features of real photos in
-which "some spurious associations are still found" after the epipolar test, mostly where the
-scene repeats itself. These textures reproduce that: they are rich in blob- and corner-like
-detail for SIFT, and they hold **repeated structure** — a grid of near-identical windows, floor
-tiles drawn from a few motifs, crates that share one stencil — next to unique detail (posters,
-stains, plaster noise) that lets the correct epipolar geometry win RANSAC.
+which, after the epipolar test, "some spurious associations are still found". In man-made scenes
+repeated structure is a usual cause, so these textures are rich in blob- and corner-like detail
+for SIFT and hold **repeated structure** — a grid of windows in a few near-identical variants,
+bricks, floor tiles drawn from a few motifs, crates that share one stencil — next to unique
+detail (posters, stains, plaster noise) that lets the correct epipolar geometry win RANSAC.
 
 Every function takes a ``numpy.random.Generator`` and returns an ``(H, W, 3) uint8`` RGB image;
 the same generator state gives the same texture bit for bit.
@@ -153,9 +153,12 @@ def facade_texture(rng: np.random.Generator, width_m: float, height_m: float, px
                    window_variants: int = 1) -> np.ndarray:
     """Building facade: plaster noise, string courses, a ``rows x cols`` window grid, posters.
 
-    The windows are copies of one template with only a little per-window noise
-    (``window_variation`` grey levels), so features on one window also match the window next to
-    it — the repeated structure along epipolar lines that lets wrong matches survive RANSAC.
+    Each window is one of ``window_variants`` templates (see :func:`_window_template`) plus a
+    little per-window noise (``window_variation`` grey levels), so features on one window also
+    match another window of the same variant in the row — repeated structure along the
+    epipolar lines of a line-abreast formation, which lets wrong matches survive RANSAC.
+    ``stains_per_m2`` sets the density of unique low-contrast blobs, ``roughness`` the amplitude
+    of a fine unique grit (0: none).
 
     Returns
     -------
