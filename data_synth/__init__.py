@@ -28,13 +28,7 @@ from data_synth.formations import (
     graph_edges,
     robot_poses,
 )
-from data_synth.ground_truth import (
-    good_links,
-    links_truth,
-    missing_links,
-    points_from_keypoints,
-    true_pairs,
-)
+from data_synth.ground_truth import good_links, points_from_keypoints, true_pairs
 from data_synth.renderer import intrinsics, render_view
 from data_synth.scene import build_scene
 from pipeline.errors import InputError
@@ -49,8 +43,6 @@ __all__ = [
     "points_from_keypoints",
     "good_links",
     "true_pairs",
-    "links_truth",
-    "missing_links",
     "MIN_SIZE",
 ]
 

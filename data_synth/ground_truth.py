@@ -15,7 +15,7 @@ experiment of Sec. V-B, where the paper itself had no ground truth:
   :func:`sample_depth`.
 * **true pairs** of a communication edge: the good pairs between detected keypoints made
   one-to-one by mutual nearest reprojection distance; **missing links** are true pairs that
-  matching did not return.
+  matching did not return (counted per link set by :mod:`pipeline.evaluate`).
 
 Depth is sampled with bilinear interpolation of ``1/z`` (exact on a plane, where ``1/z`` is
 affine in the pixel) when the four neighbouring pixels lie on one plane, else from the nearest
@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from data_synth.renderer import project
 from pipeline.errors import InputError
-from pipeline.types import Links, View
+from pipeline.types import View
 
 __all__ = [
     "DEPTH_EPS",
@@ -38,8 +38,6 @@ __all__ = [
     "reprojection_errors",
     "good_links",
     "true_pairs",
-    "links_truth",
-    "missing_links",
 ]
 
 DEPTH_EPS = 0.02
@@ -223,55 +221,3 @@ def true_pairs(formation, i: int, xy_i, j: int, xy_j, tol_px: float = 2.0) -> np
     keep = best_s_of_r[rs] == ss
     pairs = np.column_stack([rs[keep], ss[keep]]).astype(np.int64)
     return pairs[np.argsort(pairs[:, 0], kind="stable")]
-
-
-def _per_edge(links: Links):
-    key = links.cam_i * (int(links.cam_j.max(initial=0)) + 1) + links.cam_j
-    for k in np.unique(key):
-        sel = np.flatnonzero(key == k)
-        yield int(links.cam_i[sel[0]]), int(links.cam_j[sel[0]]), sel
-
-
-def links_truth(formation, keypoints: list, links: Links, tol_px: float = 2.0) -> np.ndarray:
-    """Good (``True``) or spurious (``False``) for every link, ``(L,)`` bool.
-
-    Parameters
-    ----------
-    formation : data_synth.Formation
-    keypoints : list of (N_i, 2) arrays — each camera's keypoints (``Features.keypoints``)
-    links : pipeline.types.Links
-    """
-    out = np.zeros(len(links), bool)
-    for i, j, sel in _per_edge(links):
-        out[sel] = good_links(formation, i, keypoints[i][links.feat_i[sel]], j,
-                              keypoints[j][links.feat_j[sel]], tol_px)
-    return out
-
-
-def missing_links(formation, keypoints: list, links: Links, tol_px: float = 2.0) -> Links:
-    """True pairs on the communication edges that ``links`` does not contain.
-
-    Parameters
-    ----------
-    formation : data_synth.Formation — its ``comm_edges`` say where true pairs are sought
-    keypoints : list of (N_i, 2) arrays
-    links : pipeline.types.Links — the links matching returned
-
-    Returns
-    -------
-    pipeline.types.Links — the missing links (quality 1)
-    """
-    parts = []
-    have = set(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                   links.feat_j.tolist(), strict=True))
-    for i, j in np.asarray(formation.comm_edges).tolist():
-        tp = true_pairs(formation, i, keypoints[i], j, keypoints[j], tol_px)
-        miss = np.array([(i, r, j, s) not in have for r, s in tp.tolist()], dtype=bool)
-        if miss.any():
-            parts.append(np.column_stack([np.full(miss.sum(), i), tp[miss, 0],
-                                          np.full(miss.sum(), j), tp[miss, 1]]))
-    if not parts:
-        z = np.zeros(0, np.int64)
-        return Links(z, z, z, z)
-    a = np.concatenate(parts)
-    return Links(a[:, 0], a[:, 1], a[:, 2], a[:, 3])
