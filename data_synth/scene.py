@@ -162,7 +162,7 @@ def build_scene(seed: int = 0, window_variants: int = 4, window_variation: float
     """Build the deterministic scene for ``seed`` (cached: textures take ~0.3 s).
 
     Layout (metres): facade ``x ∈ [-10, 10]``, ``z ∈ [0, 9]`` at ``y = 10`` with a 3 x 10 window
-    grid; tiled floor ``x ∈ [-10, 10]``, ``y ∈ [-4, 10]``; a side wall at ``x = -7``; eight
+    grid; tiled floor ``x ∈ [-10, 10]``, ``y ∈ [-4, 10]``; a side wall at ``x = -7`` (both sides); eight
     crates (0.8 m cubes, same stencil) in two rows at ``y ≈ 5`` and ``y ≈ 6.6``.
 
     Parameters
