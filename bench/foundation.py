@@ -2,11 +2,14 @@
 
 For each feature method (SIFT, ORB, AKAZE) renders the formation (default d: 6 cameras,
 640x480), extracts features and matches every communication edge, ``--repeat`` times, and
-prints the median (and minimum) wall time of each stage next to the 3 s target for render + extract + match
-with SIFT. Also times extraction serially against a 2-thread pool and matching serially
-against 2 threads (the defaults of :func:`pipeline.features.extract_all` and
-:func:`pipeline.matching.match_edges` follow these figures). Saves
-``runs/bench-foundation/results.json``. Run 0 of each method is a warm-up and not counted.
+prints the median (and minimum) wall time of each stage next to the 3 s target for
+render + extract + match with SIFT.
+
+It also times extraction serially (default: a 2-thread pool) and matching serially and with
+2 threads (default: serial for float descriptors, 2 threads for binary ones); the defaults of
+:func:`pipeline.features.extract_all` and :func:`pipeline.matching.match_edges` follow these
+figures. Saves ``runs/bench-foundation/results.json``. Run 0 of each method is a warm-up and
+not counted.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ def bench_method(method: str, args, size) -> dict:
         feats, t_extract = _timed(lambda f=f: extract_all(f.views, method, args.max_features))
         matches, t_match = _timed(lambda f=f, feats=feats: match_edges(feats, f.views, f.comm_edges))
         _, t_extract_1 = _timed(lambda f=f: extract_all(f.views, method, args.max_features, workers=1))
+        _, t_match_1 = _timed(lambda f=f, feats=feats: match_edges(feats, f.views, f.comm_edges,
+                                                                   workers=1))
         _, t_match_2 = _timed(lambda f=f, feats=feats: match_edges(feats, f.views, f.comm_edges,
                                                                    workers=2))
         if k == 0:
@@ -55,7 +60,8 @@ def bench_method(method: str, args, size) -> dict:
         counts = count_conflicts(AssociationGraph([len(x) for x in feats], links))
         runs.append({"render_s": t_render, "extract_s": t_extract, "match_s": t_match,
                      "total_s": t_render + t_extract + t_match,
-                     "extract_serial_s": t_extract_1, "match_2threads_s": t_match_2,
+                     "extract_serial_s": t_extract_1, "match_serial_s": t_match_1,
+                     "match_2threads_s": t_match_2,
                      "features": int(sum(len(x) for x in feats)), "links": len(links),
                      "conflictive_sets": counts.conflictive_sets,
                      "edges": len(matches)})
@@ -83,7 +89,8 @@ def main() -> int:
           f"features, median of {args.repeat} runs (min in brackets), {os.cpu_count()} cores, "
           f"cv2 threads {cv2.getNumThreads()}, load average {load_before[0]:.1f} -> "
           f"{load_after[0]:.1f} (other processes inflate wall times; min is the least disturbed)")
-    cols = ["render_s", "extract_s", "match_s", "total_s", "extract_serial_s", "match_2threads_s",
+    cols = ["render_s", "extract_s", "match_s", "total_s", "extract_serial_s", "match_serial_s",
+            "match_2threads_s",
             "features", "links", "conflictive_sets"]
     print(f"{'method':<8}" + "".join(f"{c:>18}" for c in cols))
     for r in results:

@@ -17,6 +17,7 @@ is added by :mod:`pipeline.association`.
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 
 import cv2
@@ -342,7 +343,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
 def match_edges(features: list[Features], views: list[View], comm_edges, ratio: float = 0.8,
                 threshold_px: float = 1.0, min_matches: int = MIN_MATCHES,
                 confidence: float = 0.999, max_iters: int = 1000,
-                workers: int = 1) -> list[PairMatches]:
+                workers: int | None = None) -> list[PairMatches]:
     """Local associations for every communication edge, and only for those (Sec. II, V-B).
 
     Parameters
@@ -352,8 +353,10 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     comm_edges : array-like, (E, 2) int — undirected communication graph (see
         :func:`check_comm_edges`); a camera without neighbours simply gets no associations
     ratio, threshold_px, min_matches, confidence, max_iters : see :func:`match_pair`
-    workers : int
-        Threads over edges (NumPy's BLAS and OpenCV release the GIL).
+    workers : int, optional
+        Threads over edges. Default: 1 for float descriptors (the BLAS product behind their
+        distances already uses every core), ``min(2, cores)`` for binary ones (the popcount is
+        single-threaded and releases the GIL) — measured in ``bench/foundation.py``.
 
     Returns
     -------
@@ -383,6 +386,9 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
                           ratio=ratio, threshold_px=threshold_px, min_matches=min_matches,
                           confidence=confidence, max_iters=max_iters)
 
+    if workers is None:
+        binary = any(f.descriptors.dtype == np.uint8 for f in features)
+        workers = min(2, os.cpu_count() or 1) if binary else 1
     if workers <= 1 or len(edges) <= 1:
         return [one(e) for e in edges]
     with ThreadPoolExecutor(max_workers=workers) as pool:
