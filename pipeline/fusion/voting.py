@@ -96,8 +96,8 @@ class VotingResult:
     maxc_stats : CommStats
         Max-c consensus (eq. 6) that chose the members.
     history : dict or None
-        With ``history=True``: ``theta`` (T+1, B, N, K, d), ``yes`` (T+1, B, N, K) bool,
-        ``v`` (T+1, B, N, K).
+        With ``history=True``: ``theta`` (T+1, B, N, K, d), ``valid`` (T+1, B, N, K) bool
+        (``P_i`` invertible), ``yes`` (T+1, B, N, K) bool (the gate), ``v`` (T+1, B, N, K).
     """
 
     theta: np.ndarray
@@ -351,11 +351,12 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         yes = ok & obs_f & (_sq_mahalanobis(r, info) <= thr)      # eq. (12), gate
         return theta, ok, yes
 
-    hist = dict(theta=[], yes=[], v=[]) if history else None
+    hist = dict(theta=[], valid=[], yes=[], v=[]) if history else None
     for t in range(int(rounds)):
         theta, ok, yes = opinion(P, q)
         if history:
             hist["theta"].append(theta.reshape(B, N, K, d))
+            hist["valid"].append(ok.reshape(B, N, K))
             hist["yes"].append(yes.reshape(B, N, K))
             hist["v"].append(v.reshape(B, N, K))
         u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14): ±1 or 0
@@ -368,6 +369,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     theta, ok, yes = opinion(P, q)
     if history:
         hist["theta"].append(theta.reshape(B, N, K, d))
+        hist["valid"].append(ok.reshape(B, N, K))
         hist["yes"].append(yes.reshape(B, N, K))
         hist["v"].append(v.reshape(B, N, K))
         hist = {k: np.stack(val) for k, val in hist.items()}
