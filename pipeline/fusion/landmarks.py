@@ -1,0 +1,398 @@
+"""Robust distributed fusion of every track's landmark by dynamic voting (pipeline stage).
+
+For each track (association set of the kept links: a connected component with at least two
+features, found by union-find in :mod:`pipeline.association`), every robot that observes it
+forms a local 3D estimate of the landmark and the observers fuse these estimates by dynamic
+voting (Montijano et al., Sec. IV-B, :func:`pipeline.fusion.voting.dynamic_voting`). A robot
+whose estimate is voted out, and whose own keypoint does not reproject within the gate of the
+fused landmark, declares its observation an outlier; the links to it are cut with reason
+``fusion-outlier``.
+
+The distributed model
+---------------------
+All tracks run at once on the flat node set of :mod:`pipeline.fusion.consensus`: node
+``b * n + i`` is robot ``i`` in track ``b``; it is linked to node ``b * n + j`` when robots
+``i`` and ``j`` are communication neighbours and both observe track ``b``. Robots that do not
+observe a track take no part in its fusion. A robot needs only its own keypoint, pose and
+intrinsics, and its neighbours' keypoints, poses and intrinsics for the track (one message
+each, before the consensus: 2 + 12 + 4 reals, counted in ``setup_*`` stats).
+
+Local estimate (``local=``)
+---------------------------
+* ``"pair"`` (default): two-view triangulation of the robot's own keypoint with the keypoint
+  of the neighbour whose ray makes the widest angle with its own (the best-conditioned depth).
+* ``"neighbours"``: multi-view triangulation of its own keypoint with the keypoints of *all*
+  its neighbours in the track.
+
+Why ``pair`` is the default: estimates must differ for a vote to tell them apart. With
+``neighbours``, every robot of a complete communication graph (formation ``d``) triangulates
+the very same keypoint set, so all estimates are equal and a wrong keypoint can never be
+voted out; and on any graph a wrong keypoint contaminates the estimates of all its
+neighbours. With ``pair`` it contaminates its own estimate and those of the few robots that
+chose it as their partner; those robots keep their observation because their own keypoint
+reprojects onto the fused landmark (the reprojection check above).
+
+Triangulation is linear (DLT on normalized coordinates, every row scaled to unit norm) and
+then refined by three Gauss–Newton steps on the pixel reprojection error. The covariance is
+the first-order propagation of isotropic keypoint noise ``σ_px``:
+``Λ_i = σ_px² (Σ_v J_vᵀ J_v)⁻¹`` with ``J_v`` the ``2 × 3`` Jacobian of the projection into
+view ``v`` at the estimate.
+
+Interpretations and limits
+--------------------------
+* The estimates of two neighbours that share keypoints are correlated; eq. (1) treats them as
+  independent, so the fused covariance is optimistic. The fused point is still the
+  information-weighted mean of the local estimates.
+* Tracks that hold two features of one camera (conflictive sets, which resolution removes)
+  are not fused: their observations are neither fused nor cut (``tracks_conflictive``).
+* A robot without an observing neighbour cannot triangulate; its observation is kept
+  unverified (``estimated`` false). An estimate whose normal matrix is singular (parallel
+  rays) is dropped the same way; the robot then only relays.
+* The fused point of a track is the final ``θ_i`` of its robots averaged over the largest
+  connected group of observers (robots of one group agree up to consensus precision).
+* The gate is the usual chi-square test on the squared Mahalanobis distance
+  (``gate="squared"``); the covariances here come from the measurement model, so the test is
+  calibrated (see ``bench/voting.py`` for the readings of the paper's own gate).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.stats import chi2
+
+from pipeline.association import AssociationGraph
+from pipeline.errors import InputError
+from pipeline.fusion.consensus import FixedTopology, bundle_bytes, ransac_hypotheses
+from pipeline.fusion.voting import dynamic_voting
+from pipeline.types import Features, Links, View
+
+__all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of"]
+
+LOCAL_MODES = ("pair", "neighbours")
+
+
+@dataclass
+class FusionResult:
+    """Fused landmarks and the observations voted out.
+
+    Attributes
+    ----------
+    points : ndarray, (T, 3)
+        Fused landmark of each fused track (world frame).
+    track_ids : ndarray, (T,) int
+        Track of each point (tracks numbered by their smallest global feature id, as in
+        :func:`tracks_of`).
+    obs_track, obs_cam, obs_feat : ndarray, (O,) int
+        Every observation (feature) of every track.
+    obs_estimated : ndarray, (O,) bool
+        The robot formed a local estimate and took part in the vote.
+    obs_inlier : ndarray, (O,) bool
+        Not declared an outlier (true also for observations that were not estimated).
+    cut_links : ndarray, (L,) bool
+        Links with an end at an outlier observation (to cut with reason ``fusion-outlier``).
+    stats : dict
+        ``rounds`` (max-c + consensus), ``messages`` (robot-to-robot, one per neighbour pair
+        and direction per round, bundling all shared tracks), ``bytes``, and counts.
+    """
+
+    points: np.ndarray
+    track_ids: np.ndarray
+    obs_track: np.ndarray
+    obs_cam: np.ndarray
+    obs_feat: np.ndarray
+    obs_estimated: np.ndarray
+    obs_inlier: np.ndarray
+    cut_links: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+
+def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
+    """Track id of every feature (global index), ``-1`` outside tracks; and the track count.
+
+    Tracks are the connected components with at least two features, numbered in order of
+    their smallest global feature id.
+    """
+    graph = AssociationGraph(features_per_camera, links)
+    labels = graph.components()
+    if not labels.size:
+        return np.zeros(0, dtype=np.int64), 0
+    sizes = np.bincount(labels)
+    in_track = sizes[labels] >= 2
+    uniq, first = np.unique(labels[in_track], return_index=True)
+    remap = np.full(labels.max() + 1, -1, dtype=np.int64)
+    order = np.argsort(np.flatnonzero(in_track)[first], kind="stable")
+    remap[uniq[order]] = np.arange(len(uniq))
+    return np.where(in_track, remap[labels], -1), int(len(uniq))
+
+
+# --------------------------------------------------------------------------------------------
+# triangulation
+
+
+def _project(X, R, t, K):
+    """Pixels and ``2 × 3`` Jacobians of ``X`` (..., 3) in cameras (..., 3, 3)/(..., 3)."""
+    Xc = (R @ X[..., None])[..., 0] + t
+    p = (K @ Xc[..., None])[..., 0]
+    z = p[..., 2:3]
+    u = p[..., :2] / z
+    # d u / d Xc = (K[:2] - u K[2]) / z ; d Xc / d X = R
+    dU = (K[..., :2, :] - u[..., :, None] * K[..., 2:3, :]) / z[..., None]
+    return u, dU @ R, Xc[..., 2]
+
+
+def triangulate_views(uv, views_mask, R, t, K, sigma_px: float = 1.0, iterations: int = 3):
+    """Batched multi-view triangulation with first-order covariance.
+
+    Parameters
+    ----------
+    uv : ndarray, (M, V, 2) — pixel of each candidate view
+    views_mask : ndarray, (M, V) bool — views used by each estimate (>= 2 for a solution)
+    R, t, K : ndarrays, (M, V, 3, 3), (M, V, 3), (M, V, 3, 3) — cam_from_world and intrinsics
+    sigma_px : float — keypoint noise
+    iterations : int — Gauss–Newton steps after the DLT
+
+    Returns
+    -------
+    X : ndarray, (M, 3)
+    cov : ndarray, (M, 3, 3) — ``σ_px² (Σ J_vᵀ J_v)⁻¹``
+    ok : ndarray, (M,) bool — finite, covariance positive definite, >= 2 views
+    rms_px : ndarray, (M,) — RMS reprojection error over the used views
+    """
+    w = views_mask.astype(np.float64)
+    ones = np.ones(uv.shape[:-1] + (1,))
+    xn = np.linalg.solve(K, np.concatenate([uv, ones], -1)[..., None])[..., 0]
+    xn = xn[..., :2] / xn[..., 2:3]
+    P = np.concatenate([R, t[..., None]], -1)                         # (M, V, 3, 4)
+    rows = np.stack([xn[..., 0:1] * P[..., 2, :] - P[..., 0, :],
+                     xn[..., 1:2] * P[..., 2, :] - P[..., 1, :]], -2)  # (M, V, 2, 4)
+    rows = rows / np.maximum(np.linalg.norm(rows, axis=-1, keepdims=True), 1e-300)
+    A = (rows * w[..., None, None]).reshape(len(uv), -1, 4)
+    _, _, Vt = np.linalg.svd(A)
+    Xh = Vt[:, -1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X = Xh[:, :3] / Xh[:, 3:4]
+    ok = (views_mask.sum(1) >= 2) & np.isfinite(X).all(1)
+    X = np.where(ok[:, None], X, 0.0)
+    H = np.zeros((len(uv), 3, 3))
+    for step_no in range(int(iterations) + 1):
+        with np.errstate(all="ignore"):
+            u, J, _ = _project(X[:, None], R, t, K)
+        r = np.where(views_mask[..., None], u - uv, 0.0)
+        J = np.where(views_mask[..., None, None], J, 0.0)
+        H = np.einsum("mvij,mvik->mjk", J, J)
+        g = np.einsum("mvij,mvi->mj", J, r)
+        good = ok & np.isfinite(H).all((1, 2)) & np.isfinite(g).all(1)
+        Hs = np.where(good[:, None, None], H, np.eye(3))
+        ev = np.linalg.eigvalsh(Hs)
+        good &= ev[:, 0] > 1e-12 * np.maximum(ev[:, -1], 1e-300)
+        ok = good
+        if step_no == iterations:
+            break
+        step = np.linalg.solve(np.where(ok[:, None, None], H, np.eye(3)), g[..., None])[..., 0]
+        X = np.where(ok[:, None], X - step, X)
+    Hs = np.where(ok[:, None, None], H, np.eye(3))
+    cov = sigma_px ** 2 * np.linalg.inv(Hs)
+    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+    n_used = np.maximum(views_mask.sum(1), 1)
+    rms = np.sqrt((r ** 2).sum((1, 2)) / n_used)
+    ok &= np.isfinite(cov).all((1, 2)) & np.isfinite(X).all(1)
+    return X, cov, ok, rms
+
+
+# --------------------------------------------------------------------------------------------
+# the stage
+
+
+def _check_inputs(views, features, links, comm_edges, sigma_px, local):
+    n = len(views)
+    if len(features) != n:
+        raise InputError(f"got {len(views)} views but {len(features)} feature sets; one each")
+    for i, v in enumerate(views):
+        if v.R is None or v.t is None:
+            raise InputError(f"view {i} ({v.name}) has no pose; fusion needs every camera's "
+                             "cam_from_world (R, t)")
+    if not sigma_px > 0:
+        raise InputError(f"sigma_px must be > 0, got {sigma_px}")
+    if local not in LOCAL_MODES:
+        raise InputError(f"local must be one of {LOCAL_MODES}, got {local!r}")
+    e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    if e.size and ((e < 0).any() or (e >= n).any() or (e[:, 0] == e[:, 1]).any()):
+        raise InputError(f"comm_edges must join two different cameras 0..{n - 1}; got "
+                         f"{e[((e < 0) | (e >= n)).any(1) | (e[:, 0] == e[:, 1])][0].tolist()}")
+    return e
+
+
+def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_edges,
+                sigma_px: float = 1.0, *, local: str = "pair", p: float = 0.99,
+                gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
+                rounds: int = 100, seed: int = 0) -> FusionResult:
+    """Fuse every track's landmark by dynamic voting; flag the observations voted out.
+
+    Parameters
+    ----------
+    views : list of View, (n,) — poses ``R, t`` and intrinsics ``K`` are used
+    features : list of Features, (n,)
+    links : Links, (L,) — the kept links (one-to-one per camera pair)
+    comm_edges : array_like, (E, 2) — communication graph
+    sigma_px : float — keypoint noise (pixels) for the first-order covariances
+    local : ``"pair"`` or ``"neighbours"`` — local estimate (module docstring)
+    p, gate : chi-square gate of the vote (and of the reprojection check)
+    p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
+    rounds : int — dynamic-voting consensus rounds
+    seed : int — max-c random draws
+
+    Returns
+    -------
+    FusionResult
+
+    Raises
+    ------
+    InputError
+        A view without pose, mismatched views/features, bad links or comm edges.
+    """
+    comm = _check_inputs(views, features, links, comm_edges, sigma_px, local)
+    n = len(views)
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(m)])
+    track_of, T = tracks_of(m, links)
+    cam_of = np.repeat(np.arange(n), m)
+    feat_of = np.arange(off[-1]) - off[cam_of]
+    obs_g = np.flatnonzero(track_of >= 0)
+    obs_track, obs_cam, obs_feat = track_of[obs_g], cam_of[obs_g], feat_of[obs_g]
+    n_obs = len(obs_g)
+    L = len(links)
+
+    # (T, n) table of each track's feature per camera; tracks with two features of one camera
+    # (conflictive) are left out
+    per = np.zeros((T, n), dtype=np.int64)
+    np.add.at(per, (obs_track, obs_cam), 1)
+    conflictive = (per > 1).any(1)
+    fused = ~conflictive
+    table = np.full((T, n), -1, dtype=np.int64)
+    ok_obs = fused[obs_track]
+    table[obs_track[ok_obs], obs_cam[ok_obs]] = obs_feat[ok_obs]
+    tr = np.flatnonzero(fused)
+    tab = table[tr]                                                    # (B, n)
+    B = len(tr)
+    observes = tab >= 0
+    adj = np.zeros((n, n), dtype=bool)
+    adj[comm[:, 0], comm[:, 1]] = adj[comm[:, 1], comm[:, 0]] = True
+
+    kp = np.zeros((B, n, 2))
+    for i in range(n):  # per camera, vectorized over tracks
+        sel = observes[:, i]
+        kp[sel, i] = features[i].keypoints[tab[sel, i]].astype(np.float64)
+    Rs = np.stack([np.asarray(v.R, dtype=np.float64) for v in views])
+    ts = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) for v in views])
+    Ks = np.stack([np.asarray(v.K, dtype=np.float64) for v in views])
+
+    # observing neighbours of each observer: nb[b, i, j]
+    nb = observes[:, :, None] & observes[:, None, :] & adj[None]
+    if local == "pair":
+        # ray directions in the world frame; partner = widest angle among observing neighbours
+        xn = np.linalg.solve(Ks[None], np.concatenate([kp, np.ones((B, n, 1))], -1)[..., None])
+        ray = np.einsum("nji,bnj->bni", Rs, xn[..., 0])  # R^T x
+        ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+        cosang = np.einsum("bid,bjd->bij", ray, ray)
+        cosang = np.where(nb, cosang, np.inf)
+        partner = np.argmin(cosang, axis=-1)
+        use = np.zeros((B, n, n), dtype=bool)
+        has = nb.any(-1)
+        bb, ii = np.nonzero(has)
+        use[bb, ii, partner[bb, ii]] = True
+    else:
+        use = nb.copy()
+    has_nb = use.any(-1)
+    use |= np.eye(n, dtype=bool)[None] & has_nb[..., None]
+    est_b, est_i = np.nonzero(has_nb)
+    X = np.zeros((B, n, 3))
+    cov = np.broadcast_to(np.eye(3), (B, n, 3, 3)).copy()
+    estimated = np.zeros((B, n), dtype=bool)
+    if len(est_b):
+        Xe, Ce, oke, _ = triangulate_views(
+            kp[est_b], use[est_b, est_i], np.broadcast_to(Rs, (len(est_b), n, 3, 3)),
+            np.broadcast_to(ts, (len(est_b), n, 3)), np.broadcast_to(Ks, (len(est_b), n, 3, 3)),
+            sigma_px)
+        X[est_b, est_i] = Xe
+        cov[est_b[oke], est_i[oke]] = Ce[oke]
+        estimated[est_b, est_i] = oke
+
+    # the voting network: observers of a track linked by comm edges
+    node_edges = []
+    for i, j in comm:
+        b = np.flatnonzero(observes[:, i] & observes[:, j])
+        node_edges.append(np.stack([b * n + i, b * n + j], 1))
+    node_edges = np.concatenate(node_edges) if node_edges else np.zeros((0, 2), np.int64)
+    active_comm = int(sum(bool((observes[:, i] & observes[:, j]).any()) for i, j in comm))
+    K = ransac_hypotheses(p_in, c, success)
+    stats = dict(tracks=int(T), tracks_fused=0, tracks_conflictive=int(conflictive.sum()),
+                 observations=int(n_obs), observations_estimated=int(estimated.sum()),
+                 observations_voted_out=0, observations_cut=0, links_cut=0,
+                 hypotheses=int(K), c=int(c), local=local, gate=gate, p=float(p),
+                 sigma_px=float(sigma_px), rounds=0, consensus_rounds=int(rounds),
+                 maxc_rounds=0, messages=0, bytes=0, logical_messages=0)
+    empty = FusionResult(np.zeros((0, 3)), np.zeros(0, np.int64), obs_track, obs_cam, obs_feat,
+                         np.zeros(n_obs, bool), np.ones(n_obs, bool), np.zeros(L, bool), stats)
+    if B == 0 or not estimated.any():
+        return empty
+
+    topo = FixedTopology(node_edges, B * n)
+    res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
+                         observed=estimated, maxc_rounds=n - 1)
+    voted_out = estimated & ~res.inlier
+    # a robot voted out keeps its observation if its own keypoint reprojects onto the fused
+    # landmark within the gate: the fault was in its partner's keypoint
+    u, _, z = _project(res.theta, Rs[None], ts[None], Ks[None])
+    e2 = ((u - kp) ** 2).sum(-1) / sigma_px ** 2
+    thr = float(chi2.ppf(p, 2))
+    reproj_ok = res.valid & (z > 0) & (e2 <= (thr if gate == "squared" else thr * thr))
+    outlier = voted_out & res.valid & ~reproj_ok
+
+    # fused point: largest connected group of observers per track
+    ncomp, lab = connected_components(
+        sp.csr_matrix((np.ones(len(node_edges)), (node_edges[:, 0], node_edges[:, 1])),
+                      shape=(B * n, B * n)), directed=False)
+    lab = lab.reshape(B, n)
+    good = res.valid & estimated
+    size = np.bincount(lab[good], minlength=ncomp)
+    best = np.full(B, -1)
+    score = np.where(good, size[lab], -1)
+    best_node = np.argmax(score, axis=1)
+    has_pt = score[np.arange(B), best_node] > 0
+    best[has_pt] = lab[np.arange(B), best_node][has_pt]
+    grp = good & (lab == best[:, None])
+    cnt = grp.sum(1)
+    pts = (res.theta * grp[..., None]).sum(1) / np.maximum(cnt, 1)[:, None]
+
+    # back to observations and links
+    obs_est = np.zeros(n_obs, dtype=bool)
+    obs_in = np.ones(n_obs, dtype=bool)
+    pos_of_track = np.full(T, -1)
+    pos_of_track[tr] = np.arange(B)
+    bo = pos_of_track[obs_track]
+    sel = bo >= 0
+    obs_est[sel] = estimated[bo[sel], obs_cam[sel]]
+    obs_in[sel] = ~outlier[bo[sel], obs_cam[sel]]
+    bad_feature = np.zeros(off[-1], dtype=bool)
+    bad_feature[obs_g[~obs_in]] = True
+    cut = bad_feature[off[links.cam_i] + links.feat_i] | bad_feature[off[links.cam_j] + links.feat_j]
+
+    setup_bytes = 2 * len(node_edges) * bundle_bytes(2 + 12 + 4, with_degree=False)
+    total_rounds = res.maxc_stats.rounds + res.stats.rounds
+    stats.update(
+        tracks_fused=int(has_pt.sum()), observations_voted_out=int(voted_out.sum()),
+        observations_cut=int((~obs_in).sum()), links_cut=int(cut.sum()),
+        rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
+        messages=int(2 * active_comm * total_rounds),
+        logical_messages=int(res.stats.messages + res.maxc_stats.messages),
+        bytes=int(res.stats.bytes + res.maxc_stats.bytes),
+        setup_messages=int(2 * len(node_edges)), setup_bytes=int(setup_bytes),
+        max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
+            res.theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0)
+    return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track,
+                        obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
+                        obs_inlier=obs_in, cut_links=cut, stats=stats)

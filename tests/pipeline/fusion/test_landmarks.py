@@ -1,0 +1,146 @@
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.fusion.landmarks import fuse_tracks, tracks_of, triangulate_views
+from pipeline.types import Links
+
+
+def look_at(centre, target=(0.0, 0.0, 5.0)):
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross([0.0, -1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ centre
+
+
+def rig(n=4):
+    K = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    poses = [look_at(np.array([0.8 * k - 1.2, 0.1 * k, 0.0])) for k in range(n)]
+    R = np.stack([p[0] for p in poses])
+    t = np.stack([p[1] for p in poses])
+    return R, t, np.broadcast_to(K, (n, 3, 3)).copy()
+
+
+def project(X, R, t, K):
+    p = (K @ ((R @ X[..., None])[..., 0] + t)[..., None])[..., 0]
+    return p[..., :2] / p[..., 2:3]
+
+
+def test_triangulation_exact_without_noise_and_first_order_covariance():
+    R, t, K = rig(3)
+    X = np.array([0.3, -0.2, 5.5])
+    uv = np.stack([project(X, R[v], t[v], K[v]) for v in range(3)])
+    mask = np.array([[True, True, False], [True, True, True]])
+    Xs, cov, ok, rms = triangulate_views(np.stack([uv, uv]), mask, np.stack([R, R]),
+                                         np.stack([t, t]), np.stack([K, K]), sigma_px=1.0)
+    assert ok.all()
+    assert np.allclose(Xs, X, atol=1e-9) and (rms < 1e-6).all()
+    # more views, less uncertainty
+    assert np.trace(cov[1]) < np.trace(cov[0])
+    # first-order covariance against the spread of noisy solutions
+    rng = np.random.default_rng(0)
+    S = 3000
+    noisy = uv[None, :2] + rng.normal(0, 1.0, (S, 2, 2))
+    Xn, _, okn, _ = triangulate_views(noisy, np.ones((S, 2), bool), np.broadcast_to(R[:2], (S, 2, 3, 3)),
+                                      np.broadcast_to(t[:2], (S, 2, 3)), np.broadcast_to(K[:2], (S, 2, 3, 3)))
+    emp = np.cov(Xn[okn].T)
+    assert np.allclose(np.sqrt(np.diag(emp)), np.sqrt(np.diag(cov[0])), rtol=0.1)
+
+
+def test_tracks_numbered_by_first_feature():
+    links = Links(cam_i=[0, 1, 0], feat_i=[2, 0, 0], cam_j=[1, 2, 2], feat_j=[0, 1, 0])
+    track_of, T = tracks_of([3, 2, 2], links)
+    assert T == 2
+    # track 0 holds feature (0,0) (global 0); track 1 holds (0,2),(1,0),(2,1)
+    assert track_of.tolist() == [0, -1, 1, 1, -1, 0, 1]
+
+
+def planted_rig():
+    """4 cameras on a complete graph observing 30 points; camera 2's keypoint of point 7 is
+    replaced by a keypoint of no point, 40 px away: wrong but consistent (no conflict)."""
+    rng = np.random.default_rng(3)
+    n, P = 4, 30
+    R, t, K = rig(n)
+    pts = rng.uniform([-1, -1, 4], [1, 1, 7], (P, 3))
+    views, feats = [], []
+    from pipeline.types import Features, View
+    for v in range(n):
+        uv = project(pts, R[v], t[v], K[v]) + rng.normal(0, 0.3, (P, 2))
+        uv = np.concatenate([uv, [[20.0, 20.0]]])  # an extra feature: no point
+        if v == 2:
+            uv[P] = uv[7] + [40.0, 0.0]
+        views.append(View(f"cam{v}", np.zeros((240, 320), np.uint8), K[v], R[v], t[v]))
+        feats.append(Features(uv.astype(np.float32), np.zeros((P + 1, 4), np.float32),
+                              np.ones(P + 1, np.float32), "sift"))
+    ci, fi, cj, fj = [], [], [], []
+    edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n)])
+    for a, b in edges:
+        for k in range(P):
+            ci.append(a)
+            cj.append(b)
+            fi.append(P if (a == 2 and k == 7) else k)
+            fj.append(P if (b == 2 and k == 7) else k)
+    return views, feats, Links(ci, fi, cj, fj), edges, pts
+
+
+def test_fusion_cuts_planted_wrong_but_consistent_observation():
+    views, feats, links, edges, pts = planted_rig()
+    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    planted = ((links.cam_i == 2) & (links.feat_i == 30)) | ((links.cam_j == 2) & (links.feat_j == 30))
+    assert res.cut_links[planted].all()
+    assert not res.cut_links[~planted].any()
+    assert res.stats["tracks_fused"] == 30 and res.stats["observations_cut"] == 1
+    # the fused landmark of the planted track is still right
+    k = int(np.flatnonzero(res.track_ids == 7)[0])
+    assert np.linalg.norm(res.points[k] - pts[7]) < 0.05
+    # all neighbours' estimates on a complete graph are the same keypoint set: nothing to vote
+    same = fuse_tracks(views, feats, links, edges, sigma_px=0.5, local="neighbours")
+    assert not same.cut_links.any()
+
+
+def test_fusion_cuts_planted_link_on_rendered_formation():
+    import data_synth
+    from pipeline.evaluate import link_truth
+    from pipeline.features import extract_all
+    from pipeline.matching import match_edges
+
+    f = data_synth.render("d", seed=0, size=(320, 240))
+    feats = extract_all(f.views)
+    links = Links.from_matches(match_edges(feats, f.views, f.comm_edges))
+    truth = link_truth(f, feats, links)
+    links, truth = links.subset(truth), truth[truth]  # start from good links only
+    m = [len(x) for x in feats]
+    off = np.concatenate([[0], np.cumsum(m)])
+    track_of, T = tracks_of(m, links)
+    cam_of = np.repeat(np.arange(len(m)), m)
+    # a track seen by >= 5 cameras; rewire one observation to a far, unlinked feature
+    sizes = np.bincount(track_of[track_of >= 0], minlength=T)
+    b = int(np.flatnonzero(sizes >= 5)[0])
+    members = np.flatnonzero(track_of == b)
+    g = members[2]
+    k, r = int(cam_of[g]), int(g - off[cam_of[g]])
+    xy = feats[k].keypoints
+    free = np.flatnonzero(track_of[off[k]:off[k + 1]] < 0)
+    far = free[np.linalg.norm(xy[free] - xy[r], axis=1) > 40]
+    r2 = int(far[np.argmin(np.linalg.norm(xy[far] - xy[r], axis=1))])
+    fi, fj = links.feat_i.copy(), links.feat_j.copy()
+    fi[(links.cam_i == k) & (fi == r)] = r2
+    fj[(links.cam_j == k) & (fj == r)] = r2
+    planted = ((links.cam_i == k) & (fi == r2)) | ((links.cam_j == k) & (fj == r2))
+    assert planted.sum() >= 2
+    wrong = Links(links.cam_i, fi, links.cam_j, fj)
+    res = fuse_tracks(f.views, feats, wrong, f.comm_edges)
+    assert res.cut_links[planted].all()
+    assert res.cut_links[~planted].mean() < 0.05
+
+
+def test_fusion_inputs_are_checked():
+    views, feats, links, edges, pts = planted_rig()
+    with pytest.raises(InputError, match="sigma_px"):
+        fuse_tracks(views, feats, links, edges, sigma_px=0)
+    views[1].R = None
+    with pytest.raises(InputError, match="no pose"):
+        fuse_tracks(views, feats, links, edges)
