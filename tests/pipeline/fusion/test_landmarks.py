@@ -86,9 +86,10 @@ def planted_rig():
     return views, feats, Links(ci, fi, cj, fj), edges, pts
 
 
-def test_fusion_cuts_planted_wrong_but_consistent_observation():
+@pytest.mark.parametrize("local", ["robust", "pair"])
+def test_fusion_cuts_planted_wrong_but_consistent_observation(local):
     views, feats, links, edges, pts = planted_rig()
-    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5, local=local)
     planted = ((links.cam_i == 2) & (links.feat_i == 30)) | ((links.cam_j == 2) & (links.feat_j == 30))
     assert res.cut_links[planted].all()
     assert not res.cut_links[~planted].any()
