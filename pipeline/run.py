@@ -60,6 +60,7 @@ class Cleaning:
     resolution_stats: dict
     fusion_stats: dict = field(default_factory=dict)
     fused_points: np.ndarray | None = None
+    fused_track_ids: np.ndarray | None = None
 
     @property
     def kept(self) -> np.ndarray:
@@ -129,6 +130,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
             cleaning.fusion_stats = {"enabled": True, **dict(fr.stats),
                                      "observations_cut_links": int(len(cut))}
             cleaning.fused_points = np.asarray(fr.points)
+            cleaning.fused_track_ids = np.asarray(fr.track_ids)
             timer.note(f"{len(cut)} links cut as fusion outliers")
     return cleaning
 
@@ -228,7 +230,11 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
                                                   tol_px=config.tol_px))
         gt_pairs = true_pairs_all(formation, feats, tol_px=config.tol_px)
         m_total = int(m.sum())
+        resolved = cleaning.reason != "resolution"
+        resolved_links = links.subset(resolved)
         pairwise = {"before": pairwise_scores(association_pairs(m, links), gt_pairs, m_total),
+                    "after_resolution": pairwise_scores(association_pairs(m, resolved_links),
+                                                        gt_pairs, m_total),
                     "after": pairwise_scores(association_pairs(m, kept_links), gt_pairs, m_total)}
         baselines = {}
         for name, keep_mask in centralized.baselines(m, links).items():
@@ -271,8 +277,9 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         "versions": versions(),
         "config": {**asdict(config), "out": str(out)},
     }
-    if config.fusion and cleaning.fusion_stats.get("enabled") and cleaning.fused_points is not None:
-        report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+    if cleaning.fused_points is not None:
+        report["fusion"].update(_fused_point_errors(views, feats, resolved_links, cleaning,
+                                                    gt_points))
 
     md = report_markdown(report)
     with timer.stage("write", str(out)):
@@ -318,3 +325,37 @@ def _track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
     pts = [medoid(all_gt[t]) for t, ok in zip(tri.track_features, tri.ok, strict=True) if ok]
     pts = np.array(pts).reshape(-1, 3)
     return pts[np.isfinite(pts).all(axis=1)]
+
+
+def _fused_point_errors(views, feats, resolved_links: Links, cleaning: Cleaning,
+                        gt_points: list) -> dict:
+    """Fused landmarks against ground truth and against pycolmap on the same tracks.
+
+    Fusion runs on the links kept by resolution; its tracks are numbered like
+    :func:`pipeline.triangulation.track_observations` on those links (smallest feature id), so
+    the pycolmap triangulation of the same links gives the point to compare with.
+    """
+    from pipeline.triangulation import medoid, track_observations, triangulate_tracks
+
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    _, tracks = track_observations(m, resolved_links)
+    tri = triangulate_tracks(views, feats, resolved_links)
+    all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
+    ids = np.asarray(cleaning.fused_track_ids, dtype=np.int64)
+    pts = np.asarray(cleaning.fused_points, dtype=np.float64).reshape(-1, 3)
+    gt = np.array([medoid(all_gt[tracks[k]]) for k in ids]).reshape(-1, 3)
+    err_gt = np.linalg.norm(pts - gt, axis=1)
+    err_gt = err_gt[np.isfinite(err_gt)]
+    ok = tri.ok[ids]
+    err_colmap = np.linalg.norm(pts[ok] - tri.xyz[ids[ok]], axis=1)
+    err_colmap_gt = np.linalg.norm(tri.xyz[ids[ok]] - gt[ok], axis=1)
+    err_colmap_gt = err_colmap_gt[np.isfinite(err_colmap_gt)]
+
+    def med(a):
+        return float(np.median(a)) if len(a) else None
+
+    return {"fused_points": int(len(pts)),
+            "median_error_vs_ground_truth": med(err_gt),
+            "p90_error_vs_ground_truth": float(np.percentile(err_gt, 90)) if len(err_gt) else None,
+            "median_pycolmap_error_vs_ground_truth": med(err_colmap_gt),
+            "median_distance_to_pycolmap": med(err_colmap)}

@@ -82,7 +82,9 @@ def formations_table(reports: dict[str, dict]) -> str:
 
     lines.append("| matching only (before) | " + " | ".join(
         prf(reports[n]["pairwise"]["before"]) for n in names) + " |")
-    lines.append("| distributed (this) | " + " | ".join(
+    lines.append("| distributed resolution | " + " | ".join(
+        prf(reports[n]["pairwise"]["after_resolution"]) for n in names) + " |")
+    lines.append("| distributed resolution + fusion | " + " | ".join(
         prf(reports[n]["pairwise"]["after"]) for n in names) + " |")
     for bl in reports[names[0]].get("baselines", {}):
         lines.append(f"| {bl} (centralized) | " + " | ".join(
