@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from pipeline.errors import InputError
 from pipeline.types import Features, View
 
-__all__ = ["METHODS", "extract", "extract_all", "merge_colocated", "surf_available"]
+__all__ = ["METHODS", "check_method", "extract", "extract_all", "merge_colocated", "surf_available"]
 
 #: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
 METHODS = ("sift", "orb", "akaze", "surf")
@@ -42,6 +42,12 @@ def surf_available() -> bool:
     except (cv2.error, AttributeError):
         return False
     return True
+
+
+def check_method(method: str) -> None:
+    """Raise :class:`InputError` now if ``method`` is unknown or unavailable in this build,
+    so a command fails before its first stage rather than after rendering."""
+    _detector(method, 2000)
 
 
 def _detector(method: str, max_features: int):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.errors import InputError
+from pipeline.features import check_method
 from pipeline.run import FormationConfig
 
 
@@ -41,6 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args) -> FormationConfig:
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
+    check_method(args.features)
     if args.max_features < 8:
         raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
     return FormationConfig(formation=args.formation, seed=args.seed, size=parse_size(args.size),
