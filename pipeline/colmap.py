@@ -42,10 +42,13 @@ __all__ = [
     "DatabaseContents",
     "MappingSummary",
     "quiet_colmap",
+    "calibrated",
     "write_database",
     "read_database",
     "write_cleaned_database",
     "incremental_mapping",
+    "registered_poses",
+    "similarity_between",
 ]
 
 #: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
@@ -90,13 +93,25 @@ def _atomic_database(path: Path, copy_from: Path | None = None):
 
 # ------------------------------------------------------------------------------------- writing
 
+def calibrated(view: View) -> bool:
+    """True when ``view.K`` is a calibration (K.txt, rendered views), not an EXIF estimate or
+    a guess; the mapper then keeps it fixed (:func:`incremental_mapping`)."""
+    return bool(view.intrinsics_known) and not view.intrinsics_source.startswith("exif")
+
+
 def _camera(view: View) -> pycolmap.Camera:
+    """COLMAP camera of a view: ``PINHOLE`` (fx, fy, cx, cy) for a calibration, otherwise
+    ``SIMPLE_PINHOLE`` with one focal length ``sqrt(fx fy)``: EXIF and guessed focal lengths
+    are refined by the mapper, and two free focal lengths drift apart on few views."""
     K = np.asarray(view.K, dtype=np.float64)
     w, h = view.size
-    cam = pycolmap.Camera(model="PINHOLE", width=w, height=h,
-                          params=[K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET,
-                                  K[1, 2] + COLMAP_PIXEL_OFFSET])
-    # a guessed focal length must be refined by the mapper; a known one is kept as a prior
+    cx, cy = K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET
+    if calibrated(view):
+        cam = pycolmap.Camera(model="PINHOLE", width=w, height=h, params=[K[0, 0], K[1, 1], cx, cy])
+    else:
+        cam = pycolmap.Camera(model="SIMPLE_PINHOLE", width=w, height=h,
+                              params=[float(np.sqrt(K[0, 0] * K[1, 1])), cx, cy])
+    # an EXIF focal length is a prior; a guess is not
     cam.has_prior_focal_length = bool(view.intrinsics_known)
     return cam
 
@@ -449,7 +464,7 @@ class MappingSummary:
 
 def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
                         output_dir: str | Path | None = None, num_threads: int = -1,
-                        seed: int = 0) -> MappingSummary:
+                        seed: int = 0, fixed_intrinsics=()) -> MappingSummary:
     """``pycolmap.incremental_mapping`` on a database; figures of the largest model.
 
     Parameters
@@ -460,6 +475,9 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
     output_dir : where COLMAP writes its models; a temporary folder when None
     num_threads : COLMAP threads (-1: all cores)
     seed : COLMAP's random seed, for repeatable figures
+    fixed_intrinsics : iterable of image names whose camera the bundle adjustments keep
+        constant (calibrated cameras: with few views COLMAP otherwise lets the focal length
+        drift far from a known calibration at no cost in reprojection error)
 
     Returns
     -------
@@ -477,6 +495,9 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
         with quiet_colmap():
             with pycolmap.Database.open(database_path) as db:
                 n_images = db.num_images()
+                fixed = set(fixed_intrinsics)
+                options.constant_cameras = {im.camera_id for im in db.read_all_images()
+                                            if im.name in fixed}
             # COLMAP insists on an existing image folder even when it reads no pixels
             models = pycolmap.incremental_mapping(database_path, str(image_dir or tmp), out,
                                                   options)
@@ -492,3 +513,37 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
         mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
         mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
         reconstruction=rec)
+
+
+def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``{image name: (R (3, 3), t (3,), K (3, 3))}`` of the registered images of ``rec``.
+
+    ``R, t`` is ``cam_from_world``; ``K`` is the (possibly refined) camera in the OpenCV pixel
+    convention.
+    """
+    out = {}
+    if rec is None:
+        return out
+    for image_id in rec.reg_image_ids():
+        image = rec.images[image_id]
+        pose = image.cam_from_world()
+        K = np.array(rec.cameras[image.camera_id].calibration_matrix(), dtype=np.float64)
+        K[:2, 2] -= COLMAP_PIXEL_OFFSET
+        out[image.name] = (np.asarray(pose.rotation.matrix(), dtype=np.float64),
+                           np.asarray(pose.translation, dtype=np.float64).reshape(3), K)
+    return out
+
+
+def similarity_between(src, tgt) -> np.ndarray | None:
+    """``tgt_from_src`` similarity ``(3, 4)`` (``x_tgt = M[:, :3] @ x_src + M[:, 3]``) from the
+    projection centres of the images registered in both reconstructions (by name), or None
+    with fewer than three such images. Two reconstructions of one scene have different gauges;
+    this puts points of one into the frame of the other."""
+    a, b = registered_poses(src), registered_poses(tgt)
+    common = sorted(set(a) & set(b))
+    if len(common) < 3:
+        return None
+    src_c = np.stack([-a[k][0].T @ a[k][1] for k in common])  # projection centres
+    tgt_c = np.stack([-b[k][0].T @ b[k][1] for k in common])
+    sim = pycolmap.estimate_sim3d(src_c, tgt_c)
+    return None if sim is None else np.asarray(sim.matrix(), dtype=np.float64)

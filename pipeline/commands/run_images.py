@@ -105,21 +105,64 @@ def run(args) -> int:
 
 # ------------------------------------------------------------------------------------ the run
 
-def _posed_views(views: list[View], mapping) -> list[View] | None:
-    """Views with the poses (and refined intrinsics) of the reconstruction, if all registered."""
-    rec = mapping.reconstruction
-    if rec is None or mapping.registered_images < len(views):
-        return None
-    by_name = {rec.images[i].name: rec.images[i] for i in rec.reg_image_ids()}
-    posed = []
+def _posed(views: list[View], poses: dict) -> list[View]:
+    """Copies of ``views`` with ``R, t`` (and the refined ``K``) of the registered ones."""
+    out = []
     for v in views:
-        image = by_name[v.name]
-        pose = image.cam_from_world()
-        K = rec.cameras[image.camera_id].calibration_matrix().copy()
-        K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
-        posed.append(dataclasses.replace(v, R=np.asarray(pose.rotation.matrix()),
-                                         t=np.asarray(pose.translation).reshape(3), K=K))
-    return posed
+        if v.name in poses:
+            R, t, K = poses[v.name]
+            out.append(dataclasses.replace(v, R=R, t=t, K=K))
+        else:
+            out.append(v)
+    return out
+
+
+def _fuse_registered(cleaning, views: list[View], features, links: Links, comm_edges,
+                     mapping, timer: StageTimer) -> None:
+    """Fusion (Montijano et al., dynamic voting) among the robots whose pose is known.
+
+    Real images have no poses; the reconstruction before cleaning gives them (and refines
+    guessed focal lengths). A robot whose image it did not register cannot form a local
+    landmark estimate, so it takes no part: fusion runs on the registered cameras, their kept
+    links and the comm edges between them (like a crashed robot). Links to an unregistered
+    camera are left as the consistency stage left them. Cut links get reason
+    ``fusion-outlier``; ``cleaning`` is updated in place.
+    """
+    from pipeline import colmap
+    from pipeline.fusion.landmarks import fuse_tracks
+
+    poses = colmap.registered_poses(mapping.reconstruction)
+    reg = np.array([k for k, v in enumerate(views) if v.name in poses], dtype=np.int64)
+    if len(reg) < 2:
+        cleaning.fusion_stats = {"enabled": False, "reason": (
+            f"camera poses unknown: the reconstruction before cleaning registered "
+            f"{len(reg)} of {len(views)} images")}
+        return
+    new = np.full(len(views), -1, dtype=np.int64)
+    new[reg] = np.arange(len(reg))
+    kept_idx = np.flatnonzero(cleaning.kept)
+    ci, cj = new[links.cam_i[kept_idx]], new[links.cam_j[kept_idx]]
+    sub_idx = kept_idx[(ci >= 0) & (cj >= 0)]
+    sub_links = Links(new[links.cam_i[sub_idx]], links.feat_i[sub_idx],
+                      new[links.cam_j[sub_idx]], links.feat_j[sub_idx], links.quality[sub_idx])
+    e = new[np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)]
+    sub_edges = e[(e >= 0).all(axis=1)]
+    posed = _posed(views, poses)
+    with timer.stage("fusion", f"robust distributed fusion by dynamic voting, {len(reg)} of "
+                               f"{len(views)} cameras posed"):
+        fr = fuse_tracks([posed[k] for k in reg], [features[k] for k in reg], sub_links,
+                         sub_edges)
+        cut = sub_idx[np.asarray(fr.cut_links, dtype=bool)]
+        cleaning.status[cut] = "deleted"
+        cleaning.reason[cut] = "fusion-outlier"
+        cleaning.round[cut] = int(fr.stats.get("rounds", -1))
+        cleaning.fused_points = np.asarray(fr.points)
+        cleaning.fusion_stats = {
+            "enabled": True, "poses_from": "reconstruction before cleaning",
+            "cameras": int(len(reg)),
+            "cameras_without_pose": [v.name for v in views if v.name not in poses],
+            **dict(fr.stats), "observations_cut_links": int(len(cut))}
+        timer.note(f"{len(cut)} links cut as fusion outliers")
 
 
 def _points_and_tracks(mapping, views: list[View], features, kept: Links):
@@ -201,30 +244,29 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 
     with tempfile.TemporaryDirectory(prefix="run-images-") as work:
         work = Path(work)
+        # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed
+        # focal lengths are refined
+        fixed = [v.name for v in views if colmap.calibrated(v)]
         with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links"):
             db_before = colmap.write_database(work / "before.db", views, feats, links)
-            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads)
+            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
+                                                    fixed_intrinsics=fixed)
             timer.note(_mapping_note(map_before))
-        fusion_available = importlib.util.find_spec("pipeline.fusion.landmarks") is not None
-        posed = _posed_views(views, map_before) if config.fusion and fusion_available else None
-        cleaning = clean_association(posed or views, feats, comm_edges, links,
-                                     fusion=config.fusion and posed is not None, timer=timer)
+        cleaning = clean_association(views, feats, comm_edges, links, fusion=False, timer=timer)
         if not config.fusion:
             cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
-        elif not fusion_available:
+        elif importlib.util.find_spec("pipeline.fusion.landmarks") is None:
             cleaning.fusion_stats = {"enabled": False,
                                      "reason": "fusion stage (pipeline.fusion.landmarks) not "
                                                "available in this build"}
-        elif posed is None:
-            cleaning.fusion_stats = {
-                "enabled": False,
-                "reason": f"camera poses unknown: the reconstruction before cleaning registered "
-                          f"{map_before.registered_images} of {len(views)} images"}
+        else:
+            _fuse_registered(cleaning, views, feats, links, comm_edges, map_before, timer)
         kept = cleaning.kept
         kept_links = links.subset(kept)
         with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
             db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
-            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads)
+            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads,
+                                                   fixed_intrinsics=fixed)
             timer.note(_mapping_note(map_after))
 
         from pipeline.consistency import centralized
@@ -276,28 +318,28 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
                     shutil.copyfile(db_after, tmp / "database.db")
                 if config.rerun:
                     _write_recording(tmp / "recording.rrd", views, feats, links, cleaning,
-                                     map_after, kept_links, md)
+                                     map_before, map_after, kept_links, md)
                 report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
                 write_json_atomic(tmp / "report.json", report)
     print(md)
     return out
 
 
-def _write_recording(path: Path, views, feats, links: Links, cleaning, mapping, kept_links,
-                     md: str) -> None:
+def _write_recording(path: Path, views, feats, links: Links, cleaning, map_before, mapping,
+                     kept_links, md: str) -> None:
+    from pipeline import colmap
     from pipeline.types import RunRecord
     from viz.rerun_log import log_run
 
-    # cameras registered after cleaning are drawn at their reconstructed pose
-    rec = mapping.reconstruction
-    drawn = list(views)
-    if rec is not None:
-        by_name = {rec.images[i].name: rec.images[i] for i in rec.reg_image_ids()}
-        for k, v in enumerate(views):
-            if v.name in by_name:
-                pose = by_name[v.name].cam_from_world()
-                drawn[k] = dataclasses.replace(v, R=np.asarray(pose.rotation.matrix()),
-                                               t=np.asarray(pose.translation).reshape(3))
+    # cameras registered after cleaning are drawn with their pose and camera in that
+    # reconstruction; fused points, estimated in the frame of the reconstruction before
+    # cleaning, are moved into it by the similarity between the two
+    drawn = _posed(views, colmap.registered_poses(mapping.reconstruction))
+    fused = None
+    if cleaning.fused_points is not None and len(cleaning.fused_points):
+        M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
+        if M is not None:
+            fused = np.asarray(cleaning.fused_points, dtype=np.float64) @ M[:, :3].T + M[:, 3]
     points, tracks = _points_and_tracks(mapping, views, feats, kept_links)
     record = RunRecord(
         views=drawn, features=feats, links=links,
@@ -306,7 +348,7 @@ def _write_recording(path: Path, views, feats, links: Links, cleaning, mapping, 
         conflictive_before=cleaning.conflictive_before,
         truth=np.full(len(links), -1, dtype=np.int8),
         points=points, point_tracks=tracks, gt_points=None,
-        fused_points=cleaning.fused_points, report_markdown=md)
+        fused_points=fused, report_markdown=md)
     log_run(path, record)
 
 

@@ -61,8 +61,13 @@ def test_write_and_reload_round_trip(tmp_path):
     with pycolmap.Database.open(db_path) as db:
         # COLMAP pixel convention: principal point + 0.5; one trivial rig and frame per image
         cam = db.read_camera(1)
+        assert cam.model == pycolmap.CameraModelId.PINHOLE
         assert np.allclose(cam.params, [300.0, 301.0, 160.0, 120.0])
-        assert cam.has_prior_focal_length and not db.read_camera(2).has_prior_focal_length
+        # a guessed K: one focal length sqrt(fx fy), no prior, refined by the mapper
+        guess = db.read_camera(2)
+        assert guess.model == pycolmap.CameraModelId.SIMPLE_PINHOLE
+        assert np.allclose(guess.params, [np.sqrt(301.0 * 301.0), 160.0, 120.0])
+        assert cam.has_prior_focal_length and not guess.has_prior_focal_length
         assert db.num_rigs() == db.num_frames() == db.num_images() == 3
         # the raw matches table holds every link, kept or not
         assert db.num_matches() == len(links)
@@ -207,6 +212,28 @@ def test_incremental_mapping_on_sceaux(sceaux_matches, tmp_path):
     assert 0.0 < s["mean_reprojection_error"] < 2.0
     assert isinstance(result.reconstruction, pycolmap.Reconstruction)
     assert set(s["registered_names"]) <= {v.name for v in views}
+
+
+def test_registered_poses_and_similarity_between_two_gauges(sceaux_matches, tmp_path):
+    views, feats, links = sceaux_matches
+    db_path = colmap.write_database(tmp_path / "s.db", views, feats, links)
+    calibrated = [v.name for v in views if colmap.calibrated(v)]
+    assert len(calibrated) == 4  # K.txt
+    rec = colmap.incremental_mapping(db_path, fixed_intrinsics=calibrated).reconstruction
+    poses = colmap.registered_poses(rec)
+    assert set(poses) <= {v.name for v in views} and len(poses) >= 3
+    for name, (R, t, K) in poses.items():
+        assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and t.shape == (3,)
+        view = next(v for v in views if v.name == name)
+        assert np.allclose(K, view.K)  # kept fixed, back in the OpenCV pixel convention
+    # the same model in another gauge: scale 3, a rotation about z, a shift
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    other = pycolmap.Reconstruction(rec)
+    other.transform(pycolmap.Sim3d(3.0, pycolmap.Rotation3d(R), np.array([1.0, -2.0, 0.5])))
+    M = colmap.similarity_between(rec, other)
+    assert np.allclose(M[:, :3], 3.0 * R, atol=1e-6) and np.allclose(M[:, 3], [1, -2, 0.5], atol=1e-6)
+    assert colmap.similarity_between(rec, pycolmap.Reconstruction()) is None
 
 
 def test_incremental_mapping_without_verified_pairs_registers_nothing(tmp_path):

@@ -80,6 +80,17 @@ def test_report_recount_matches_links_csv(sceaux_run):
                                                          if r["status"] == "kept")
 
 
+def test_fusion_with_poses_of_the_first_reconstruction(sceaux_run):
+    _, report, rows = sceaux_run
+    fusion = report["fusion"]
+    if not fusion["enabled"]:
+        pytest.skip(f"fusion not run: {fusion['reason']}")
+    assert fusion["poses_from"] == "reconstruction before cleaning"
+    registered = report["triangulation"]["before"]["registered_names"]
+    assert fusion["cameras"] == len(registered)
+    assert fusion["cut_links"] == sum(r["reason"] == "fusion-outlier" for r in rows)
+
+
 def test_exported_database_holds_exactly_the_kept_links(sceaux_run):
     out, report, rows = sceaux_run
     contents = colmap.read_database(out / "database.db")
