@@ -18,13 +18,13 @@ from __future__ import annotations
 import csv
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.runfolder import atomic_file
 from pipeline.types import Links
 
 __all__ = [
@@ -235,20 +235,12 @@ def write_links_csv(path: str | os.PathLike, links: Links, status, reason, round
         raise ValueError(f"write_links_csv: status must be 'kept' or 'deleted', got {status[bad][0]!r}")
     round_s = np.where(round_ >= 0, round_.astype(str), "")
     truth_s = np.where(truth >= 0, truth.astype(str), "")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            w = csv.writer(f, lineterminator="\n")
-            w.writerow(RUN_LINK_COLUMNS)
-            w.writerows(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                            links.feat_j.tolist(), status.tolist(), reason.tolist(),
-                            round_s.tolist(), truth_s.tolist(), strict=True))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_file(path, newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(RUN_LINK_COLUMNS)
+        w.writerows(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                        links.feat_j.tolist(), status.tolist(), reason.tolist(),
+                        round_s.tolist(), truth_s.tolist(), strict=True))
     return path
 
 

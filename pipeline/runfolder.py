@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_run_folder", "write_json_atomic"]
+__all__ = ["atomic_file", "atomic_run_folder", "write_json_atomic"]
 
 
 def _json_default(obj):
@@ -30,21 +30,31 @@ def _json_default(obj):
     raise TypeError(f"not JSON serializable: {type(obj).__name__}")
 
 
-def write_json_atomic(path: str | os.PathLike, data) -> Path:
-    """Write ``data`` as indented JSON to ``path`` via a temp file and ``os.replace``."""
+@contextmanager
+def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = None):
+    """Open a temporary file beside ``path``; on success it replaces ``path`` in one rename.
+
+    On any error the temporary file is removed and ``path`` is left as it was.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, default=_json_default)
-            f.write("\n")
+        with os.fdopen(fd, mode, newline=newline) as f:
+            yield f
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-    return path
+
+
+def write_json_atomic(path: str | os.PathLike, data) -> Path:
+    """Write ``data`` as indented JSON to ``path`` atomically (see :func:`atomic_file`)."""
+    with atomic_file(path) as f:
+        json.dump(data, f, indent=2, default=_json_default)
+        f.write("\n")
+    return Path(path)
 
 
 @contextmanager

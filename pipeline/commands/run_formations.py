@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from pipeline.commands.run_formation import parse_size
-from pipeline.runfolder import write_json_atomic
+from pipeline.runfolder import atomic_file, write_json_atomic
 
 FORMATIONS = ("a", "b", "c", "d")
 
@@ -116,10 +116,9 @@ def run(args) -> int:
         reports[name] = json.loads((out / "report.json").read_text())
     table = formations_table(reports)
     md = parent / "formations.md"
-    tmp = md.with_suffix(".md.tmp")
-    tmp.write_text(f"# Formations (a)–(d), seed {args.seed}, {args.features}, {args.size}\n\n"
-                   + table)
-    tmp.replace(md)
+    with atomic_file(md) as f:
+        f.write(f"# Formations (a)–(d), seed {args.seed}, {args.features}, {args.size}\n\n"
+                + table)
     write_json_atomic(parent / "formations.json", reports)
     print(table)
     print(f"saved {md} and {parent / 'formations.json'}")
