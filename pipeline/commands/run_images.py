@@ -62,8 +62,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
                    help="folder of photographs (JPEG/PNG/TIFF; taken in name order)")
     p.add_argument("--graph", required=True, metavar="ring|ring2|complete|knn:K|FILE",
-                   help="communication graph: a kind, or a file of 'cam_i,cam_j' lines "
-                        "(0-based indices in name order, or image names)")
+                   help="communication graph: ring, ring2 (ring + 2-hop chords), complete, "
+                        "knn:K (each image with the K nearest in name order), or a file of "
+                        "'cam_i,cam_j' lines (0-based indices in name order, or image names)")
     p.add_argument("--intrinsics", default="auto", metavar="auto|exif|K.txt",
                    help="auto (DIR/K.txt, else EXIF, else a guessed focal length), exif, or "
                         "a K.txt at the images' full resolution (default auto)")
