@@ -18,6 +18,18 @@ import numpy as np
 __all__ = ["atomic_file", "atomic_run_folder", "write_json_atomic"]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _publish_mode(path: str | os.PathLike, directory: bool) -> None:
+    """Give a temp file/folder the mode a plain ``open``/``mkdir`` would have given it
+    (``mkstemp``/``mkdtemp`` create them private, 0600/0700)."""
+    os.chmod(path, (0o777 if directory else 0o666) & ~_umask())
+
+
 def _json_default(obj):
     if isinstance(obj, np.integer):
         return int(obj)
@@ -42,6 +54,7 @@ def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = 
     try:
         with os.fdopen(fd, mode, newline=newline) as f:
             yield f
+        _publish_mode(tmp, directory=False)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -74,6 +87,7 @@ def atomic_run_folder(out: str | os.PathLike):
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
     try:
         yield tmp
+        _publish_mode(tmp, directory=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
