@@ -19,7 +19,8 @@ from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links, RunRecord, View
 
-__all__ = ["FormationConfig", "Cleaning", "clean_association", "run_formation", "versions"]
+__all__ = ["FormationConfig", "Cleaning", "extract_and_match", "clean_association",
+           "association_counts", "resolution_section", "run_formation", "versions"]
 
 
 @dataclass
@@ -89,6 +90,26 @@ def _conflictive_links(features_per_camera, links: Links) -> np.ndarray:
     return conflictive[labels[a]] if len(links) else np.zeros(0, dtype=bool)
 
 
+def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
+                      max_features: int, timer: StageTimer) -> tuple[list, list, Links]:
+    """Features of every camera, then matching on the communication edges only.
+
+    Returns ``(features, matches, links)``: per-camera Features, per-edge PairMatches and all
+    links (``Links.from_matches``).
+    """
+    from pipeline.features import extract_all
+    from pipeline.matching import match_edges
+
+    with timer.stage("features", f"{method}, at most {max_features} per image"):
+        feats = extract_all(views, method, max_features)
+        timer.note(f"features per camera: {[len(f) for f in feats]}")
+    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
+        matches = match_edges(feats, views, comm_edges)
+        links = Links.from_matches(matches)
+        timer.note(f"{len(links)} links")
+    return feats, matches, links
+
+
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
                       *, fusion: bool = True, timer: StageTimer | None = None) -> Cleaning:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
@@ -135,7 +156,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     return cleaning
 
 
-def _association_counts(m, links: Links, truth: np.ndarray | None, missing: int | None) -> dict:
+def association_counts(m, links: Links, truth: np.ndarray | None, missing: int | None) -> dict:
     counts = count_conflicts(AssociationGraph(m, links)).as_dict()
     if truth is not None:
         counts["good_links"] = int(truth.sum())
@@ -145,7 +166,7 @@ def _association_counts(m, links: Links, truth: np.ndarray | None, missing: int 
     return counts
 
 
-def _resolution_section(cleaning: Cleaning, truth: np.ndarray | None) -> dict:
+def resolution_section(cleaning: Cleaning, truth: np.ndarray | None) -> dict:
     cut = cleaning.reason == "resolution"
     stats = cleaning.resolution_stats
     out = {
@@ -193,9 +214,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     from data_synth.ground_truth import points_from_keypoints
     from pipeline.consistency import centralized
     from pipeline.evaluate import link_truth, missing_links
-    from pipeline.features import extract_all
     from pipeline.linkscsv import write_links_csv
-    from pipeline.matching import match_edges
     from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
     from pipeline.triangulation import triangulate_tracks, write_reconstruction
 
@@ -206,14 +225,9 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
                                       n_robots=config.robots, graph=config.graph)
         views, comm_edges = formation.views, np.asarray(formation.comm_edges)
-    with timer.stage("features", f"{config.features}, at most {config.max_features} per image"):
-        feats = extract_all(views, config.features, config.max_features)
-        m = np.array([len(f) for f in feats], dtype=np.int64)
-        timer.note(f"features per camera: {m.tolist()}")
-    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
-        matches = match_edges(feats, views, comm_edges)
-        links = Links.from_matches(matches)
-        timer.note(f"{len(links)} links")
+    feats, matches, links = extract_and_match(views, comm_edges, config.features,
+                                              config.max_features, timer)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
     cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
                                  timer=timer)
     kept = cleaning.kept
@@ -222,10 +236,10 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
         truth = link_truth(formation, feats, links, tol_px=config.tol_px)
         truth = np.asarray(truth, dtype=bool)
-        before = _association_counts(m, links, truth,
+        before = association_counts(m, links, truth,
                                      missing_links(formation, feats, links, comm_edges,
                                                    tol_px=config.tol_px))
-        after = _association_counts(m, kept_links, truth[kept],
+        after = association_counts(m, kept_links, truth[kept],
                                     missing_links(formation, feats, kept_links, comm_edges,
                                                   tol_px=config.tol_px))
         gt_pairs = true_pairs_all(formation, feats, tol_px=config.tol_px)
@@ -241,7 +255,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
             keep_mask = np.asarray(keep_mask, dtype=bool)
             bl = links.subset(keep_mask)
             baselines[name] = {
-                **_association_counts(m, bl, truth[keep_mask],
+                **association_counts(m, bl, truth[keep_mask],
                                       missing_links(formation, feats, bl, comm_edges,
                                                     tol_px=config.tol_px)),
                 "deleted_links": int((~keep_mask).sum()),
@@ -265,7 +279,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         "features_per_camera": m.tolist(),
         "before": before,
         "after": after,
-        "resolution": _resolution_section(cleaning, truth),
+        "resolution": resolution_section(cleaning, truth),
         "fusion": _fusion_section(cleaning, truth),
         "triangulation": triangulation,
         "pairwise": pairwise,

@@ -211,15 +211,14 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         :func:`pipeline.io.comm_graph`), or a bad feature method.
     """
     from pipeline import colmap
-    from pipeline.features import extract_all
     from pipeline.io import comm_graph, load_folder
     from pipeline.linkscsv import write_links_csv
-    from pipeline.matching import match_edges
     from pipeline.run import (
-        _association_counts,
-        _resolution_section,
+        association_counts,
         clean_association,
+        extract_and_match,
         report_markdown,
+        resolution_section,
         versions,
     )
 
@@ -234,14 +233,9 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         sources = sorted({v.intrinsics_source for v in views})
         timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; "
                    f"graph {config.graph}: {len(comm_edges)} edges")
-    with timer.stage("features", f"{config.features}, at most {config.max_features} per image"):
-        feats = extract_all(views, config.features, config.max_features)
-        m = np.array([len(f) for f in feats], dtype=np.int64)
-        timer.note(f"features per camera: {m.tolist()}")
-    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
-        matches = match_edges(feats, views, comm_edges)
-        links = Links.from_matches(matches)
-        timer.note(f"{len(links)} links")
+    feats, matches, links = extract_and_match(views, comm_edges, config.features,
+                                              config.max_features, timer)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
 
     with tempfile.TemporaryDirectory(prefix="run-images-") as work:
         work = Path(work)
@@ -276,16 +270,16 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         baselines = {}
         for name, keep_mask in centralized.baselines(m, links).items():
             keep_mask = np.asarray(keep_mask, dtype=bool)
-            baselines[name] = {**_association_counts(m, links.subset(keep_mask), None, None),
+            baselines[name] = {**association_counts(m, links.subset(keep_mask), None, None),
                                "deleted_links": int((~keep_mask).sum())}
         report = {
             "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
             "n_cameras": len(views),
             "comm_edges": comm_edges.tolist(),
             "features_per_camera": m.tolist(),
-            "before": _association_counts(m, links, None, None),
-            "after": _association_counts(m, kept_links, None, None),
-            "resolution": _resolution_section(cleaning, None),
+            "before": association_counts(m, links, None, None),
+            "after": association_counts(m, kept_links, None, None),
+            "resolution": resolution_section(cleaning, None),
             "fusion": _fusion_section(cleaning),
             "triangulation": {"method": "pycolmap incremental mapping from the matches "
                                         "(two-view geometries = links before / kept links after)",
