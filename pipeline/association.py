@@ -24,6 +24,7 @@ __all__ = [
     "check_links",
     "ConflictCounts",
     "count_conflicts",
+    "association_sets",
 ]
 
 
@@ -191,3 +192,29 @@ def count_conflicts(graph: AssociationGraph) -> ConflictCounts:
         conflictive_sets=int(conflictive.sum()),
         conflictive_features=int(conflictive[labels].sum()) if labels.size else 0,
     )
+
+
+def association_sets(features_per_camera, links: Links) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Association sets (Def. 2.4: connected components with >= 2 features) of ``links``.
+
+    Sets are numbered in order of their smallest global feature id, so the same links always
+    give the same numbering (the triangulation check and the fusion stage rely on it).
+
+    Returns
+    -------
+    set_of_feature : (m,) int — set id of every feature (global index), -1 for singletons
+    sets : list of (k,) int arrays — the global feature ids of each set, ascending
+    """
+    labels = AssociationGraph(features_per_camera, links).components()
+    set_of_feature = np.full(labels.shape, -1, dtype=np.int64)
+    if not labels.size:
+        return set_of_feature, []
+    sizes = np.bincount(labels)
+    ids = np.flatnonzero(sizes[labels] >= 2)
+    uniq, first = np.unique(labels[ids], return_index=True)
+    remap = np.full(int(labels.max()) + 1, -1, dtype=np.int64)
+    remap[uniq[np.argsort(first, kind="stable")]] = np.arange(len(uniq))
+    set_of_feature[ids] = remap[labels[ids]]
+    grouped = ids[np.argsort(set_of_feature[ids], kind="stable")]
+    bounds = np.searchsorted(set_of_feature[grouped], np.arange(len(uniq) + 1))
+    return set_of_feature, [grouped[bounds[k]:bounds[k + 1]] for k in range(len(uniq))]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.association import camera_offsets
+from pipeline.association import association_sets, camera_offsets
 from pipeline.types import Links
 
 __all__ = ["association_pairs", "pairwise_scores", "true_pairs_all"]
@@ -27,9 +27,7 @@ def association_pairs(features_per_camera, links: Links) -> np.ndarray:
 
     Complexity: sum over association sets of size^2.
     """
-    from pipeline.triangulation import track_observations  # components with >= 2 features
-
-    _, tracks = track_observations(features_per_camera, links)
+    _, tracks = association_sets(features_per_camera, links)
     if not tracks:
         return np.zeros((0, 2), dtype=np.int64)
     parts = []

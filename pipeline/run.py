@@ -346,13 +346,14 @@ def _fused_point_errors(views, feats, resolved_links: Links, cleaning: Cleaning,
     """Fused landmarks against ground truth and against pycolmap on the same tracks.
 
     Fusion runs on the links kept by resolution; its tracks are numbered like
-    :func:`pipeline.triangulation.track_observations` on those links (smallest feature id), so
+    :func:`pipeline.association.association_sets` on those links (smallest feature id), so
     the pycolmap triangulation of the same links gives the point to compare with.
     """
-    from pipeline.triangulation import medoid, track_observations, triangulate_tracks
+    from pipeline.association import association_sets
+    from pipeline.triangulation import medoid, triangulate_tracks
 
     m = np.array([len(f) for f in feats], dtype=np.int64)
-    _, tracks = track_observations(m, resolved_links)
+    _, tracks = association_sets(m, resolved_links)
     tri = triangulate_tracks(views, feats, resolved_links)
     all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
     ids = np.asarray(cleaning.fused_track_ids, dtype=np.int64)

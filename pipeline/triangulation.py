@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from pipeline.association import AssociationGraph
+from pipeline.association import association_sets
 from pipeline.types import Features, Links, View
 
 __all__ = ["TriangulationOptions", "TrackTriangulation", "triangulate_tracks",
-           "build_reconstruction", "write_reconstruction", "track_observations", "medoid"]
+           "build_reconstruction", "write_reconstruction", "medoid"]
 
 pycolmap.logging.minloglevel = 2
 
@@ -109,31 +109,6 @@ def _pose(view: View) -> pycolmap.Rigid3d:
                             np.asarray(view.t, dtype=np.float64).reshape(3))
 
 
-def track_observations(features_per_camera, links: Links) -> tuple[np.ndarray, list]:
-    """Tracks = connected components with >= 2 features (union-find via csgraph).
-
-    Returns ``track_of_feature`` (m,) with -1 for singletons and the list of global feature ids
-    per track, tracks numbered in order of their smallest feature id.
-    """
-    graph = AssociationGraph(features_per_camera, links)
-    labels = graph.components()
-    sizes = np.bincount(labels) if labels.size else np.zeros(0, dtype=np.int64)
-    in_track = sizes[labels] >= 2 if labels.size else np.zeros(0, dtype=bool)
-    track_of_feature = np.full(labels.shape, -1, dtype=np.int64)
-    ids = np.flatnonzero(in_track)
-    # renumber component labels of real tracks 0..T-1 (by first feature)
-    uniq, first = np.unique(labels[ids], return_index=True)
-    order = np.argsort(first, kind="stable")
-    remap = np.full(int(labels.max()) + 1 if labels.size else 0, -1, dtype=np.int64)
-    remap[uniq[order]] = np.arange(len(uniq))
-    track_of_feature[ids] = remap[labels[ids]]
-    sort = np.argsort(track_of_feature[ids], kind="stable")
-    grouped = ids[sort]
-    bounds = np.searchsorted(track_of_feature[grouped], np.arange(len(uniq) + 1))
-    tracks = [grouped[bounds[k]:bounds[k + 1]] for k in range(len(uniq))]
-    return track_of_feature, tracks
-
-
 def medoid(points: np.ndarray) -> np.ndarray:
     """Point of ``points`` (k,3) with least summed distance to the others (nan rows ignored)."""
     p = points[np.isfinite(points).all(axis=1)]
@@ -171,7 +146,7 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
     all_kp = (np.concatenate([f.keypoints for f in features]).astype(np.float64)
               if offsets[-1] else np.zeros((0, 2)))
     all_gt = np.concatenate(gt_points).astype(np.float64) if gt_points is not None and offsets[-1] else None
-    track_of_feature, tracks = track_observations(m_per, links)
+    track_of_feature, tracks = association_sets(m_per, links)
 
     cameras = [_camera(v, k + 1) for k, v in enumerate(views)]
     poses = [_pose(v) for v in views]

@@ -77,7 +77,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.stats import chi2
 
-from pipeline.association import AssociationGraph
+from pipeline.association import association_sets
 from pipeline.errors import InputError
 from pipeline.fusion.consensus import FixedTopology, bundle_bytes, ransac_hypotheses
 from pipeline.fusion.voting import dynamic_voting
@@ -126,20 +126,11 @@ class FusionResult:
 def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
     """Track id of every feature (global index), ``-1`` outside tracks; and the track count.
 
-    Tracks are the connected components with at least two features, numbered in order of
-    their smallest global feature id.
+    Tracks are the association sets (:func:`pipeline.association.association_sets`),
+    numbered in order of their smallest global feature id.
     """
-    graph = AssociationGraph(features_per_camera, links)
-    labels = graph.components()
-    if not labels.size:
-        return np.zeros(0, dtype=np.int64), 0
-    sizes = np.bincount(labels)
-    in_track = sizes[labels] >= 2
-    uniq, first = np.unique(labels[in_track], return_index=True)
-    remap = np.full(labels.max() + 1, -1, dtype=np.int64)
-    order = np.argsort(np.flatnonzero(in_track)[first], kind="stable")
-    remap[uniq[order]] = np.arange(len(uniq))
-    return np.where(in_track, remap[labels], -1), int(len(uniq))
+    track_of, tracks = association_sets(features_per_camera, links)
+    return track_of, len(tracks)
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,7 +4,6 @@ import pytest
 
 from pipeline.triangulation import (
     build_reconstruction,
-    track_observations,
     triangulate_tracks,
     write_reconstruction,
 )
@@ -73,9 +72,11 @@ def test_wrong_observation_is_rejected(scene):
     assert tri.summary()["tracks_with_rejected_observation"] == 1
 
 
-def test_track_observations_skips_singletons():
+def test_association_sets_skip_singletons():
+    from pipeline.association import association_sets
+
     links = Links([0], [1], [1], [0])
-    track_of_feature, tracks = track_observations([3, 2], links)
+    track_of_feature, tracks = association_sets([3, 2], links)
     assert len(tracks) == 1
     assert track_of_feature.tolist() == [-1, 0, -1, 0, -1]
 
