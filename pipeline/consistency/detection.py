@@ -40,7 +40,7 @@ import scipy.sparse as sp
 from pipeline.consistency.network import Message
 from pipeline.consistency.robot import Robot
 
-__all__ = ["start_detection", "detection_step", "find_conflictive_sets"]
+__all__ = ["start_detection", "detection_step", "eq5_next", "find_conflictive_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -116,10 +116,37 @@ def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) 
     if robot.stopped:
         return
     _receive_blocks(robot, inbox)
+    X = robot.X
+    X_next = eq5_next(robot, robot.last_blocks)
+    X_next.sort_indices()
+    if X_next.nnz == X.nnz:
+        # Prop. 3.5: X_i·(t) ~ X_i·(t-1); W_ii = I makes X grow monotonically
+        robot.stopped = True
+        robot.t_stop = round_
+        find_conflictive_sets(robot)
+    else:
+        robot.X = X_next
+        _send_blocks(robot, send)
+    robot.measure_memory()
+
+
+def eq5_next(robot: Robot, blocks: dict) -> sp.csr_matrix:
+    """``X_i·(t+1)`` by eq. (5), boolean (Def. 3.4), from the neighbours' blocks ``X_k·(t)``.
+
+    Parameters
+    ----------
+    robot : Robot — reads ``X``, its alive links and its active rows
+    blocks : dict ``k -> (rows (R_k,) int32, block (R_k, m_total) csr bool)``
+        The rows of ``X_k·(t)`` that neighbour ``k`` sent (rows linked to this robot).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, (m_i, m_total) bool, indices sorted
+    """
     sel = robot.link_alive & robot.active[robot.link_r]
     p_rows, p_cols, pieces = [], [], []
     base = 0
-    for k, (rows, blk) in robot.last_blocks.items():
+    for k, (rows, blk) in blocks.items():
         mine = np.flatnonzero(sel & (robot.link_nbr == k))
         if mine.size == 0 or rows.size == 0:
             continue
@@ -138,17 +165,9 @@ def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) 
         # eq. (5), boolean (Def. 3.4): X(t+1) = X(t) + Σ_k W_ik X_k(t)
         X_next = (X + P @ sp.vstack(pieces, format="csr")).tocsr()
     else:
-        X_next = X
+        X_next = X.copy()
     X_next.sort_indices()
-    if X_next.nnz == X.nnz:
-        # Prop. 3.5: X_i·(t) ~ X_i·(t-1); W_ii = I makes X grow monotonically
-        robot.stopped = True
-        robot.t_stop = round_
-        find_conflictive_sets(robot)
-    else:
-        robot.X = X_next
-        _send_blocks(robot, send)
-    robot.measure_memory()
+    return X_next
 
 
 def find_conflictive_sets(robot: Robot) -> None:

@@ -10,6 +10,15 @@ id, and after the run it reads each robot's own log to report what happened. It 
 one robot's state to another. Phase ends are decided by the simulation (a detection ends
 when every robot has stopped, Prop. 3.5; a resolution when no message is in flight); a
 deployment would wait the proven bounds instead (``d + 1`` and ``n + 1`` rounds).
+
+With a fault switch of the network on, the robots run the fault-tolerant protocol of
+:mod:`.reliable` (acknowledged, retransmitted messages; lockstep detection; timeouts of
+``T`` rounds on silent neighbours). Then a phase ends when every robot still alive is done
+(detection: stopped, every linked neighbour's ``final`` in, everything acknowledged;
+resolution: everything acknowledged); a detection in which a robot lost a neighbour is run
+again before any resolution, and the loop ends on a detection that lost nobody and found no
+conflictive feature. A crashed robot is simply no longer stepped (it is dead); the survivors
+learn of it only from its silence.
 """
 
 from __future__ import annotations
@@ -22,8 +31,17 @@ import numpy as np
 from pipeline.association import camera_offsets, check_links
 from pipeline.consistency.detection import detection_step, start_detection
 from pipeline.consistency.network import Network, NetworkOptions
+from pipeline.consistency.reliable import (
+    Channel,
+    ProtocolOptions,
+    detection_done,
+    detection_round,
+    resolution_round,
+    start_detection_reliable,
+    start_resolution_reliable,
+)
 from pipeline.consistency.resolution import resolution_step, start_resolution
-from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, Robot
+from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
 from pipeline.errors import InputError
 from pipeline.types import Links
 
@@ -34,6 +52,8 @@ __all__ = [
     "comm_edges_for",
     "run_detection",
     "run_resolution",
+    "run_detection_reliable",
+    "run_resolution_reliable",
 ]
 
 
@@ -45,11 +65,13 @@ class ConsistencyResult:
     ----------
     links : Links — the input links, ``(L,)``
     deleted : ndarray, (L,) bool
-    reason : ndarray, (L,) str — ``'resolution'`` for a deleted link, ``''`` if kept
+    reason : ndarray, (L,) str — ``'resolution'`` for a link cut by Alg. 1, ``'robot-lost'`` for a
+        link cut because the robot at its other end was declared lost, ``''`` if kept
     iteration : ndarray, (L,) int — detection/resolution iteration that cut it (1-based), -1 if kept
     round : ndarray, (L,) int — resolution round of that iteration in which the receiver of the
         request cut it (1-based), -1 if kept
-    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a deleted link, ``''`` if kept
+    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a link cut by resolution, ``''``
+        otherwise
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
     stats : dict — ``iterations`` (detection + resolution passes that found conflicts; a
@@ -60,8 +82,12 @@ class ConsistencyResult:
         ``resolution_rounds``, ``last_assignment_round``, ``messages``, ``bytes``),
         ``messages``, ``bytes``, ``messages_by_kind``, ``bytes_by_kind``,
         ``max_robot_memory_bytes`` (peak over robots and rounds of :meth:`Robot.memory_bytes`),
-        ``asymmetric_links`` (links deleted at one end only; 0 on a lossless network),
-        ``deleted_links``
+        ``asymmetric_links`` (links between two surviving robots deleted at one end only),
+        ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``survivors`` (n,) bool
+        (robots alive at the end), and ``faults``: what the network injected and its effect
+        (``dropped`` messages, ``crashed`` robots with their crash round, ``robots_lost``
+        (robot -> neighbours that declared it lost), ``links_cut_robot_lost``,
+        ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``)
     """
 
     links: Links
@@ -192,8 +218,58 @@ def run_resolution(robots: list[Robot], network: Network, max_rounds: int | None
     return dict(rounds=t, conflictive_sets=int(sets))
 
 
+def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: Network,
+                           iteration: int, max_rounds: int) -> dict:
+    """One lockstep detection (:mod:`.reliable`) on the robots still alive.
+
+    Returns ``rounds``, ``t_stop`` (n,) logical stop rounds, ``conflictive_features`` and
+    ``lost`` (True when some robot declared a neighbour lost during it).
+    """
+    live = [rb for rb in robots if network.alive(rb.id)]
+    for rb in live:
+        start_detection_reliable(rb, chans[rb.id], iteration, network.round)
+    t = 0
+    while True:
+        live = [rb for rb in live if network.alive(rb.id)]
+        if all(detection_done(rb, chans[rb.id]) for rb in live):
+            break
+        network.end_round()
+        t += 1
+        for rb in live:
+            if network.alive(rb.id):
+                detection_round(rb, chans[rb.id], network.inbox(rb.id), network.round, t)
+        if t > max_rounds:
+            raise RuntimeError(f"detection did not end within {max_rounds} rounds")
+    return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
+                conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)),
+                lost=any(rb.lost_in_phase for rb in robots))
+
+
+def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: Network,
+                            max_rounds: int) -> dict:
+    """One run of Alg. 1 over the reliable channels; ends when everything is acknowledged."""
+    live = [rb for rb in robots if network.alive(rb.id)]
+    sets = sum(start_resolution_reliable(rb, chans[rb.id], network.round) for rb in live)
+    t = 0
+    while True:
+        live = [rb for rb in live if network.alive(rb.id)]
+        if all(chans[rb.id].idle() for rb in live):
+            break
+        network.end_round()
+        t += 1
+        for rb in live:
+            if network.alive(rb.id):
+                resolution_round(rb, chans[rb.id], network.inbox(rb.id), network.round, t)
+        if t > max_rounds:
+            raise RuntimeError(f"resolution did not end within {max_rounds} rounds")
+    for rb in robots:
+        rb.candidates = rb.conflictive & (rb.component < 0)
+    return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in robots))
+
+
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
-                      network_options: NetworkOptions | None = None) -> ConsistencyResult:
+                      network_options: NetworkOptions | None = None,
+                      protocol: ProtocolOptions | None = None) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -206,6 +282,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         The local associations ``A_ij`` (Assumptions 2.1–2.3, checked).
     network_options : NetworkOptions or None
         Fault switches of the simulated network (all off by default).
+    protocol : ProtocolOptions or None
+        The robots' protocol: the paper's (default on a fault-free network) or the
+        fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
 
     Returns
     -------
@@ -220,7 +299,10 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     -----
     Per iteration: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
     ``n + 1`` (Thm. 4.3 (i) plus the delivery of the last rejects); every conflictive set
-    shrinks by ``≥ 4`` features per iteration, so the loop ends (Prop. 4.5).
+    shrinks by ``≥ 4`` features per iteration, so the loop ends (Prop. 4.5). With the
+    fault-tolerant protocol these bounds hold in *logical* rounds of detection; network rounds
+    grow with the loss, and each crash costs at most ``T`` rounds of waiting plus one repeated
+    detection per round in which a neighbour was declared lost.
 
     References
     ----------
@@ -241,25 +323,48 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     edges = comm_edges_for(fpc, links, comm_edges)
     n = fpc.shape[0]
     robots, link_index = build_robots(fpc, links)
-    network = Network(n, edges, network_options)
+    opts = network_options or NetworkOptions()
+    protocol = protocol or ProtocolOptions()
+    reliable = opts.any_fault if protocol.reliable is None else bool(protocol.reliable)
+    network = Network(n, edges, opts)
+    chans = [Channel(i, partial(network.send, i), partial(network.links_up, i), protocol)
+             for i in range(n)] if reliable else []
+    m_total = int(fpc.sum())
+    # generous caps: they only turn a bug into an error, never end a correct run
+    det_cap = (m_total + n + 4) * (protocol.loss_timeout + 4) * 4
+    res_cap = (n + 2) * (protocol.loss_timeout + 4) * 4 + m_total
 
     per_iteration = []
-    max_iterations = int(fpc.sum()) // 4 + 2  # Prop. 4.5: each set loses >= 4 features per pass
+    # Prop. 4.5: each set loses >= 4 features per pass; each repeated detection follows a loss
+    max_iterations = m_total // 4 + 2 + (n * n if reliable else 0)
     iteration = 0
+    repeated = 0
     while True:
         iteration += 1
         if iteration > max_iterations:
             raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
         c0 = network.counters()
-        det = run_detection(robots, network, iteration)
+        if reliable:
+            det = run_detection_reliable(robots, chans, network, iteration, det_cap)
+        else:
+            det = run_detection(robots, network, iteration)
         rec = dict(iteration=iteration, detection_rounds=det["rounds"], t_stop=det["t_stop"],
                    conflictive_features=det["conflictive_features"], conflictive_sets=0,
-                   resolution_rounds=0)
+                   resolution_rounds=0, start_round=int(c0.get("round", 0)))
+        if det.get("lost"):
+            # a robot lost a neighbour during this detection: its result is not trusted
+            rec.update(_delta(c0, network.counters()), repeated=True)
+            per_iteration.append(rec)
+            repeated += 1
+            continue
         if det["conflictive_features"] == 0:
             rec.update(_delta(c0, network.counters()))
             per_iteration.append(rec)
             break
-        res = run_resolution(robots, network)
+        if reliable:
+            res = run_resolution_reliable(robots, chans, network, res_cap)
+        else:
+            res = run_resolution(robots, network)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
                    last_assignment_round=int(max(
                        (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),
@@ -267,7 +372,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
 
-    return _collect(fpc, links, robots, link_index, per_iteration, network)
+    return _collect(fpc, links, robots, link_index, per_iteration, network, chans, repeated)
 
 
 def _delta(c0: dict, c1: dict) -> dict:
@@ -275,16 +380,21 @@ def _delta(c0: dict, c1: dict) -> dict:
 
 
 def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray],
-             per_iteration: list[dict], network: Network) -> ConsistencyResult:
+             per_iteration: list[dict], network: Network, chans: list | None = None,
+             repeated: int = 0) -> ConsistencyResult:
     """Read every robot's own log into per-link arrays (reporting only)."""
     L = len(links)
+    survivors = np.array([network.alive(rb.id) for rb in robots], dtype=bool)
     ends_deleted = np.zeros(L, dtype=np.int64)  # 0, 1 or 2 ends deleted
+    lost_end = np.zeros(L, dtype=bool)
     iteration = np.full(L, -1, dtype=np.int64)
     round_ = np.full(L, -1, dtype=np.int64)
     case = np.full(L, "", dtype="<U6")
     for rb, li in zip(robots, link_index, strict=True):
         gone = ~rb.link_alive
         np.add.at(ends_deleted, li[gone], 1)
+        lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
+        lost_end[li[lost]] = True
         decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C)))
         if decided.size:
             g = li[decided]
@@ -296,18 +406,51 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
             case[g] = [CASE_NAMES[int(c)] for c in rb.deleted_case[d]]
     deleted = ends_deleted > 0
     reason = np.where(deleted, "resolution", "").astype("<U10")
+    # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it
+    robot_lost = deleted & lost_end & (case == "")
+    reason[robot_lost] = "robot-lost"
+    for rb, li in zip(robots, link_index, strict=True):
+        lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
+        g = li[lost]
+        sel = robot_lost[g] & ((round_[g] < 0) | (iteration[g] < 0))
+        iteration[g[sel]] = rb.deleted_iteration[lost[sel]]
+        round_[g[sel]] = rb.deleted_round[lost[sel]]
     component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
     cnt = network.counters()
+    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, dtype=bool)
+    chans = chans or []
+    opts = network.options
+    crash_rounds = {int(i): 0 for i in opts.crashed}
+    crash_rounds.update({int(i): int(r) for i, r in opts.crash_at.items()})
+    faults = dict(
+        drop_probability=float(opts.drop_probability),
+        switching_topology=opts.topology is not None,
+        dropped=int(cnt["dropped"]),
+        crashed={i: r for i, r in sorted(crash_rounds.items()) if not survivors[i]},
+        crashes_not_reached={i: r for i, r in sorted(crash_rounds.items()) if survivors[i]},
+        robots_lost={int(k): sorted(int(rb.id) for rb in robots if k in rb.lost_neighbours)
+                     for k in sorted({k for rb in robots for k in rb.lost_neighbours})},
+        links_cut_robot_lost=int(robot_lost.sum()),
+        retransmissions=int(sum(c.retransmissions for c in chans)),
+        acks=int(sum(c.acks_sent for c in chans)),
+        heartbeats=int(sum(c.heartbeats_sent for c in chans)),
+        repeated_detections=int(repeated),
+        rounds=int(network.round),
+    )
     stats = dict(
-        iterations=sum(1 for p in per_iteration if p["conflictive_features"] > 0),
+        iterations=sum(1 for p in per_iteration
+                       if p["conflictive_features"] > 0 and not p.get("repeated")),
         detection_rounds=int(sum(p["detection_rounds"] for p in per_iteration)),
         resolution_rounds=int(sum(p["resolution_rounds"] for p in per_iteration)),
         per_iteration=per_iteration,
         messages=cnt["messages"], bytes=cnt["bytes"],
         messages_by_kind=cnt["messages_by_kind"], bytes_by_kind=cnt["bytes_by_kind"],
         max_robot_memory_bytes=int(max((rb.peak_memory_bytes for rb in robots), default=0)),
-        asymmetric_links=int((ends_deleted == 1).sum()),
+        asymmetric_links=int(((ends_deleted == 1) & both_alive).sum()),
         deleted_links=int(deleted.sum()),
+        protocol="reliable" if chans else "paper",
+        survivors=survivors,
+        faults=faults,
     )
     return ConsistencyResult(links=links, deleted=deleted, reason=reason, iteration=iteration,
                              round=round_, case=case, component=component, stats=stats)

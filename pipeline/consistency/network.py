@@ -5,8 +5,15 @@ Synchronous rounds: what a robot sends in round ``t`` is in its neighbour's inbo
 every byte is counted. Faults are properties of the network, never of the algorithm code:
 message drop, delivery delay, crashed robots and a topology that changes per round are
 switched on through :class:`NetworkOptions`. Their defaults are off (a lossless, static
-network, the setting of the paper); the hooks are here so a later study can turn them on
-without touching :mod:`robot`, :mod:`detection` or :mod:`resolution`.
+network, the setting of the paper). The network only loses, delays or cuts; what the robots do
+about it (acknowledgements, retransmissions, timeouts) is robot protocol, in :mod:`.reliable`.
+
+What a robot may know about the network (stated): its *current* neighbours, as a radio's
+neighbour table would list them (:meth:`Network.links_up`: the links of the topology in force
+this round, crashed robots included, because a crash cannot be seen, only inferred from
+silence). Sending to a robot that is not a current neighbour is a programming error and raises
+:class:`NotANeighbourError`; the fault-tolerant protocol checks :meth:`Network.links_up` first
+and keeps the message for retransmission while the link is down.
 
 Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
 (sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at
@@ -21,7 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["HEADER_BYTES", "Message", "NetworkOptions", "Network", "NotANeighbourError"]
+__all__ = ["HEADER_BYTES", "Message", "NetworkOptions", "Network", "NotANeighbourError",
+           "recurrent_topology"]
 
 HEADER_BYTES = 12
 
@@ -66,6 +74,9 @@ class NetworkOptions:
         Extra rounds every message spends in flight (0: delivered next round).
     crashed : frozenset of int
         Robots that neither send nor receive (their sends are discarded, counted as dropped).
+    crash_at : dict ``robot -> round``
+        Robots that crash at the start of the given network round (rounds count from 0 over
+        the whole run, all phases); from then on they are as in ``crashed``.
     topology : callable ``round -> iterable of (i, j)`` or None
         Communication edges in force at each round; ``None`` keeps the initial edges.
     seed : int
@@ -82,8 +93,53 @@ class NetworkOptions:
     drop_probability: float = 0.0
     delay_rounds: int = 0
     crashed: frozenset = field(default_factory=frozenset)
+    crash_at: dict = field(default_factory=dict)
     topology: Callable[[int], Iterable[tuple[int, int]]] | None = None
     seed: int = 0
+
+    @property
+    def any_fault(self) -> bool:
+        """True when some switch is on (the network is not the paper's lossless static one)."""
+        return bool(self.drop_probability > 0 or self.delay_rounds or self.crashed
+                    or self.crash_at or self.topology is not None)
+
+
+def recurrent_topology(comm_edges, p_up: float = 0.5, window: int = 4, seed: int = 0):
+    """A topology that changes every round, each edge up at least once per ``window`` rounds.
+
+    Every round each communication edge is up independently with probability ``p_up``; an
+    edge that has been down for ``window - 1`` consecutive rounds is forced up. So the union of
+    the graphs over any ``window`` consecutive rounds is the whole communication graph: if that
+    graph is connected, the sequence is jointly connected over windows of ``window`` rounds
+    (Assumption 2.1 of Montijano et al.), and every single edge recurs, which detection needs
+    (the blocks ``X_kj`` over an association ``W_ik`` can only travel over the edge ``(i, k)``).
+
+    Parameters
+    ----------
+    comm_edges : array_like, (E, 2) int
+    p_up : float in (0, 1]
+    window : int >= 1
+    seed : int
+
+    Returns
+    -------
+    callable ``round -> (E_t, 2) int64``; deterministic, repeatable for any round order.
+    """
+    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    window = max(1, int(window))
+    cache: list[np.ndarray] = []  # up masks of rounds 0, 1, ...
+    rng = np.random.default_rng(seed)
+    down_for = np.zeros(len(edges), dtype=np.int64)
+
+    def topology(t: int) -> np.ndarray:
+        nonlocal down_for
+        while len(cache) <= t:
+            up = (rng.random(len(edges)) < p_up) | (down_for >= window - 1)
+            down_for = np.where(up, 0, down_for + 1)
+            cache.append(up)
+        return edges[cache[int(t)]]
+
+    return topology
 
 
 def _adjacency_sets(n: int, edges) -> list[set]:
@@ -136,9 +192,21 @@ class Network:
 
     def neighbours(self, i: int) -> frozenset:
         """Current communication neighbours of robot ``i`` (a crashed robot has none)."""
-        if i in self.options.crashed:
+        if not self.alive(i):
             return frozenset()
-        return frozenset(j for j in self._nbrs[i] if j not in self.options.crashed)
+        return frozenset(j for j in self._nbrs[i] if self.alive(j))
+
+    def alive(self, i: int) -> bool:
+        """False once robot ``i`` has crashed (simulation side; robots cannot call this)."""
+        opts = self.options
+        if i in opts.crashed:
+            return False
+        at = opts.crash_at.get(i)
+        return at is None or self.round < int(at)
+
+    def links_up(self, i: int) -> frozenset:
+        """Robot ``i``'s neighbour table this round: the topology's links, crashes unseen."""
+        return frozenset(self._nbrs[i])
 
     def is_neighbour(self, i: int, j: int) -> bool:
         return j in self._nbrs[i]
@@ -163,7 +231,7 @@ class Network:
         self.messages_by_kind[kind] = self.messages_by_kind.get(kind, 0) + 1
         self.bytes_by_kind[kind] = self.bytes_by_kind.get(kind, 0) + size
         opts = self.options
-        if src in opts.crashed or dst in opts.crashed:
+        if not self.alive(src) or not self.alive(dst):
             self.dropped += 1
             return
         if opts.drop_probability > 0.0 and self._rng.random() < opts.drop_probability:
@@ -183,7 +251,10 @@ class Network:
         self._outbox = [(r, m) for r, m in self._outbox if r > self.round]
         self._inboxes = [[] for _ in range(self.n)]
         for m in due:
-            self._inboxes[m.dst].append(m)
+            if self.alive(m.dst):
+                self._inboxes[m.dst].append(m)
+            else:
+                self.dropped += 1
 
     @property
     def in_flight(self) -> bool:
@@ -197,6 +268,6 @@ class Network:
 
     def counters(self) -> dict:
         """Message and byte counters so far."""
-        return dict(messages=self.messages, bytes=self.bytes, dropped=self.dropped,
+        return dict(messages=self.messages, bytes=self.bytes, dropped=self.dropped, round=self.round,
                     messages_by_kind=dict(self.messages_by_kind),
                     bytes_by_kind=dict(self.bytes_by_kind))

@@ -24,8 +24,8 @@ import scipy.sparse as sp
 __all__ = ["Robot"]
 
 # deletion log codes
-CASE_B, CASE_C, ON_REJECT = 1, 2, 3
-CASE_NAMES = {CASE_B: "b", CASE_C: "c", ON_REJECT: "reject"}
+CASE_B, CASE_C, ON_REJECT, ROBOT_LOST = 1, 2, 3, 4
+CASE_NAMES = {CASE_B: "b", CASE_C: "c", ON_REJECT: "reject", ROBOT_LOST: "robot-lost"}
 
 
 class Robot:
@@ -87,6 +87,15 @@ class Robot:
         self.iteration = 0
         self.peak_memory_bytes = 0
 
+        # fault-tolerant protocol state (:mod:`.reliable`)
+        self.t_logical = 0
+        self.recv_blocks: dict[int, dict[int, tuple[np.ndarray, sp.csr_matrix]]] = {}
+        self.final_t: dict[int, int] = {}
+        self.block_nbrs: set[int] = set()
+        self.all_nbrs: set[int] = set()
+        self.lost_neighbours: set[int] = set()
+        self.lost_in_phase = False
+
     # --- views ----------------------------------------------------------------------------
     def block(self, j: int) -> sp.csr_matrix:
         """``W_ij`` as a sparse boolean ``(m_i, m_j)`` matrix (Assumption 2.1: ``W_ii = I``)."""
@@ -122,6 +131,9 @@ class Robot:
         total += csr_bytes(self.X)
         for rows, blk in self.last_blocks.values():
             total += int(rows.nbytes) + csr_bytes(blk)
+        for per_round in self.recv_blocks.values():
+            for rows, blk in per_round.values():
+                total += int(rows.nbytes) + csr_bytes(blk)
         total += 16 * len(self.root_of_set)
         return total
 

@@ -1,0 +1,413 @@
+"""Fault-tolerant robot protocol for the consistency stage: lossy links, crashes, switching links.
+
+The paper's algorithms (Aragüés et al., Sec. III and Alg. 1) assume a lossless synchronous
+network. Their only rule for a missing message is "use the last blocks received, because the
+neighbour has finished" (Sec. III, after Def. 3.4), which is true on a lossless network and
+false on a lossy one: measured with ``bench/faults.py``, a dropped block makes a robot see
+"no change" and stop early (Prop. 3.5 fires on stale data) and a dropped component request or
+reject leaves a conflict or a half-deleted link. This module adds what is needed, *in the
+robots* (every extra packet is an algorithm message, sent and counted by the network, which
+itself only drops, delays or cuts):
+
+Reliable channel (:class:`Channel`, one per robot)
+    Every algorithm message to a neighbour gets a sequence number; the receiver acknowledges
+    it (piggybacked on its next message to that neighbour, else in a small ``ack`` message
+    in the same round) and delivers it once (duplicates are discarded by sequence number).
+    An unacknowledged message is sent again every round once ``retransmit_after`` rounds
+    have passed since its first sending (on a lossless network the acknowledgement arrives
+    exactly then, so nothing is ever sent twice). While a link is down (switching topology)
+    messages wait and go out when it is up again.
+
+Lockstep detection (:func:`detection_round`)
+    Eq. (5) is computed on the blocks of the *same* round: robot ``i`` forms ``X_i·(t+1)``
+    only when it holds ``X_k·(t)`` from every neighbour ``k`` it shares an active link with
+    (an α-synchronizer over the reliable channel). Then ``X_i·(t)`` is exactly the lossless
+    one (row ``r`` = features within ``t`` hops of ``f_r^i``), Prop. 3.5 stops exactly at the
+    same ``t_i`` and Cor. 3.6 (``t_i ≤ d + 1`` logical rounds) holds; only the number of
+    network rounds grows with the loss. A robot that stops sends ``final(t_i)`` to every
+    neighbour it has a link with: "my blocks of round ``t_i − 1`` are my blocks for every later
+    round" — the paper's "use the last matrix received" made explicit, since a receiver can no
+    longer tell a finished neighbour from a lost message. A robot's detection is *done* when it
+    has stopped, received every linked neighbour's ``final`` and had all its messages acked.
+
+Reliable resolution
+    Alg. 1 (:mod:`.resolution`) runs unchanged on the messages the channel delivers. Alg. 1
+    is insensitive to delivery delays: case (c) is decided by the receiving robot alone, every
+    feature that joins a component sends requests along all its other links (so every link
+    between two assigned features is examined by one end), and a duplicate request is case
+    (a) or a stale link (rejected again), so nothing is done twice. A resolution ends when no
+    robot has an unacknowledged message.
+
+Crashes and timeouts (stated)
+    A robot *expects* a neighbour ``k`` when it waits for an acknowledgement from ``k``, or
+    for ``k``'s blocks or ``final`` during a detection. A robot that has not stopped its
+    detection sends a ``heartbeat`` to a linked neighbour it sent nothing to for
+    ``heartbeat_every`` rounds. A neighbour that stays silent for ``loss_timeout`` rounds
+    (``T``, default 40) while expected is declared lost: every link to it is cut (reason
+    ``robot-lost``), pending messages to it are dropped, and it is ignored from then on (so a
+    neighbour wrongly suspected also times out on this robot and cuts its side). So no robot
+    waits more than ``T`` rounds for anyone. ``T`` trades detection speed against wrong
+    suspicions: with loss probability ``p`` a live neighbour heard at least every round is
+    missed for ``T`` rounds with probability about ``p^T``; one heard only through acks of
+    retransmissions, about ``(1 - (1 - p)^2)^(T - 2)`` (``p = 0.5``, ``T = 40``: 2e-5).
+    With a switching topology ``T`` must exceed the longest outage of a link.
+
+What a detection in which some robot lost a neighbour found is not trusted (blocks that
+came through the lost robot may reach beyond what the survivors can reach): the driver skips
+the resolution and runs the detection again (:mod:`.engine`); the loop of Prop. 4.5 ends on a
+detection that lost nobody and found no conflict. In a deployment that one bit travels with
+the phase barrier, like the "conflicts found" bit the driver already gathers.
+
+Wire format (counted by the network): every channel message carries ``seq`` (int32, 0 for
+unsequenced ``ack``/``heartbeat``) and, when it acknowledges something, ``ack`` (int32 list of
+the sender's sequence numbers being acknowledged); ``blocks`` carry ``t`` (int32, logical
+round) besides the paper's ``rows``/``indptr``/``indices``; ``final`` carries ``t`` = ``t_i``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from pipeline.consistency.detection import _index_dtype, eq5_next, find_conflictive_sets
+from pipeline.consistency.network import Message
+from pipeline.consistency.resolution import _delete, resolution_step, start_resolution
+from pipeline.consistency.robot import ROBOT_LOST, Robot
+
+__all__ = ["ProtocolOptions", "Channel", "start_detection_reliable", "detection_round",
+           "detection_done", "start_resolution_reliable", "resolution_round"]
+
+_I32 = np.int32
+
+
+@dataclass
+class ProtocolOptions:
+    """Parameters of the robot protocol.
+
+    Attributes
+    ----------
+    reliable : bool or None
+        ``True``: the fault-tolerant protocol of this module; ``False``: the paper's protocol
+        as is (lossless static network assumed); ``None``: fault-tolerant exactly when some
+        fault switch of the network is on.
+    retransmit_after : int
+        Rounds after the first sending before an unacknowledged message is sent again (then
+        every round). 2 = the round trip of a lossless network.
+    heartbeat_every : int
+        A robot still detecting sends a heartbeat to a linked neighbour it has sent nothing to
+        for this many rounds.
+    loss_timeout : int
+        ``T``: rounds of silence from an expected neighbour after which it is declared lost.
+    """
+
+    reliable: bool | None = None
+    retransmit_after: int = 2
+    heartbeat_every: int = 2
+    loss_timeout: int = 40
+
+
+class _Pending:
+    __slots__ = ("kind", "payload", "first", "last")
+
+    def __init__(self, kind: str, payload: dict, first: int, last: int | None):
+        self.kind, self.payload, self.first, self.last = kind, payload, first, last
+
+
+class Channel:
+    """A robot's reliable links to its neighbours (sequence numbers, acks, retransmission).
+
+    Parameters
+    ----------
+    owner : int — the robot's id
+    send : callable ``(dst, kind, payload)`` — the network's send, bound to ``owner``
+    links_up : callable ``() -> frozenset`` — the robot's current neighbour table
+    options : ProtocolOptions
+
+    Attributes
+    ----------
+    lost : set of int — neighbours declared lost (ignored from then on)
+    retransmissions, acks_sent, heartbeats_sent : int — counters of extra packets
+    """
+
+    def __init__(self, owner: int, send: Callable, links_up: Callable, options: ProtocolOptions):
+        self.owner = int(owner)
+        self._send, self._links_up, self.options = send, links_up, options
+        self._next_seq: dict[int, int] = {}
+        self._unacked: dict[int, dict[int, _Pending]] = {}
+        self._to_ack: dict[int, list[int]] = {}
+        self._seen: dict[int, set[int]] = {}
+        self._last_heard: dict[int, int] = {}
+        self._last_sent: dict[int, int] = {}
+        self._expect_since: dict[int, int] = {}
+        self.lost: set[int] = set()
+        self.retransmissions = 0
+        self.acks_sent = 0
+        self.heartbeats_sent = 0
+
+    # --- receiving ------------------------------------------------------------------------
+    def receive(self, inbox: list[Message], now: int) -> list[Message]:
+        """Process acks, record what to acknowledge, return the new algorithm messages."""
+        out = []
+        for m in inbox:
+            k = m.src
+            if k in self.lost:
+                continue
+            self._last_heard[k] = now
+            p = m.payload
+            if "ack" in p:
+                un = self._unacked.get(k)
+                if un:
+                    for s in p["ack"].tolist():
+                        un.pop(int(s), None)
+            seq = int(p["seq"][0]) if "seq" in p else 0
+            if seq > 0:
+                self._to_ack.setdefault(k, []).append(seq)
+                seen = self._seen.setdefault(k, set())
+                if seq not in seen:
+                    seen.add(seq)
+                    out.append(m)
+        return out
+
+    # --- sending --------------------------------------------------------------------------
+    def _transmit(self, dst: int, kind: str, payload: dict, seq: int, now: int) -> None:
+        p = dict(payload)
+        p["seq"] = np.array([seq], dtype=_I32)
+        acks = self._to_ack.pop(dst, None)
+        if acks:
+            p["ack"] = np.array(sorted(set(acks)), dtype=_I32)
+        self._send(dst, kind, p)
+        self._last_sent[dst] = now
+
+    def send(self, dst: int, kind: str, payload: dict, now: int) -> None:
+        """Send reliably (now if the link is up, else when it comes up)."""
+        dst = int(dst)
+        if dst in self.lost:
+            return
+        seq = self._next_seq.get(dst, 0) + 1
+        self._next_seq[dst] = seq
+        up = dst in self._links_up()
+        self._unacked.setdefault(dst, {})[seq] = _Pending(kind, payload, now, now if up else None)
+        if up:
+            self._transmit(dst, kind, payload, seq, now)
+
+    def flush(self, now: int, heartbeat_to=()) -> None:
+        """End of a robot's round: retransmissions, pending acks, heartbeats."""
+        up = self._links_up()
+        rto = self.options.retransmit_after
+        for k, un in self._unacked.items():
+            if k not in up or k in self.lost:
+                continue
+            for seq, pm in un.items():
+                if pm.last is None or (now - pm.first >= rto and pm.last < now):
+                    if pm.last is not None:
+                        self.retransmissions += 1
+                    pm.last = now
+                    self._transmit(k, pm.kind, pm.payload, seq, now)
+        for k in [k for k in self._to_ack if k in up and k not in self.lost]:
+            acks = self._to_ack.pop(k)
+            self._send(k, "ack", {"seq": np.zeros(1, dtype=_I32),
+                                  "ack": np.array(sorted(set(acks)), dtype=_I32)})
+            self._last_sent[k] = now
+            self.acks_sent += 1
+        for k in heartbeat_to:
+            if k in up and k not in self.lost and \
+                    now - self._last_sent.get(k, -10**9) >= self.options.heartbeat_every:
+                self._send(k, "heartbeat", {"seq": np.zeros(1, dtype=_I32)})
+                self._last_sent[k] = now
+                self.heartbeats_sent += 1
+
+    # --- state ----------------------------------------------------------------------------
+    def idle(self) -> bool:
+        """True when every message sent has been acknowledged (or its receiver is lost)."""
+        return not any(un for k, un in self._unacked.items() if k not in self.lost)
+
+    def check_lost(self, now: int, waiting_on=()) -> list[int]:
+        """Neighbours silent for ``loss_timeout`` rounds while expected; marks them lost."""
+        expected = {k for k, un in self._unacked.items() if un} | set(waiting_on)
+        expected -= self.lost
+        for k in list(self._expect_since):
+            if k not in expected:
+                del self._expect_since[k]
+        newly = []
+        for k in expected:
+            since = self._expect_since.setdefault(k, now)
+            quiet_from = max(since, self._last_heard.get(k, -10**9))
+            if now - quiet_from >= self.options.loss_timeout:
+                newly.append(k)
+        for k in sorted(newly):
+            self.lost.add(k)
+            self._unacked.pop(k, None)
+            self._to_ack.pop(k, None)
+            self._expect_since.pop(k, None)
+        return sorted(newly)
+
+
+# ------------------------------------------------------------------------------------------
+# helpers on the robot
+
+def _cut_lost(robot: Robot, lost: list[int], round_: int) -> None:
+    """Cut every alive link to a neighbour declared lost (reason ``robot-lost``)."""
+    if not lost:
+        return
+    links = np.flatnonzero(robot.link_alive & np.isin(robot.link_nbr, lost))
+    _delete(robot, links, round_, ROBOT_LOST)
+    robot.lost_neighbours.update(int(k) for k in lost)
+    robot.lost_in_phase = True
+
+
+def _linked_neighbours(robot: Robot, rows_mask: np.ndarray | None = None) -> set[int]:
+    sel = robot.link_alive if rows_mask is None else robot.link_alive & rows_mask[robot.link_r]
+    return set(np.unique(robot.link_nbr[sel]).tolist())
+
+
+# ------------------------------------------------------------------------------------------
+# detection (Sec. III) in lockstep over the reliable channel
+
+def _send_blocks_reliable(robot: Robot, chan: Channel, now: int) -> None:
+    """Blocks ``X_i·(t)`` rows to each neighbour of an active link, tagged with ``t``."""
+    sel = np.flatnonzero(robot.link_alive & robot.active[robot.link_r])
+    if sel.size == 0:
+        return
+    nbr = robot.link_nbr[sel]
+    cut = np.flatnonzero(np.diff(nbr)) + 1
+    idt = _index_dtype(robot)
+    t = np.array([robot.t_logical], dtype=_I32)
+    for part in np.split(sel, cut):
+        k = int(robot.link_nbr[part[0]])
+        if k in chan.lost:
+            continue
+        rows = np.unique(robot.link_r[part])
+        blk = robot.X[rows]
+        chan.send(k, "blocks", {"t": t, "rows": rows.astype(_I32),
+                                "indptr": blk.indptr.astype(idt),
+                                "indices": blk.indices.astype(idt)}, now)
+
+
+def _stop(robot: Robot, chan: Channel, now: int, t_stop: int) -> None:
+    """Prop. 3.5 fired at ``t_i``: rules (8)-(9), then ``final(t_i)`` to every linked neighbour."""
+    robot.stopped = True
+    robot.t_stop = int(t_stop)
+    find_conflictive_sets(robot)
+    t = np.array([robot.t_stop], dtype=_I32)
+    for k in sorted(robot.all_nbrs - chan.lost):
+        chan.send(k, "final", {"t": t}, now)
+
+
+def start_detection_reliable(robot: Robot, chan: Channel, iteration: int, now: int) -> None:
+    """Round 0: eq. (4) as in :func:`~.detection.start_detection`, blocks sent reliably."""
+    robot.lost_in_phase = False
+    robot.iteration = iteration
+    has_link = np.zeros(robot.m, dtype=bool)
+    has_link[robot.link_r[robot.link_alive]] = True
+    robot.active = robot.candidates & has_link & (robot.component < 0)
+    rows = np.flatnonzero(robot.active)
+    indptr = np.zeros(robot.m + 1, dtype=np.int64)
+    indptr[rows + 1] = 1
+    robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
+                             np.cumsum(indptr)), shape=(robot.m, robot.m_total))
+    robot.last_blocks = {}
+    robot.recv_blocks = {}   # k -> {t: (rows, block)}
+    robot.final_t = {}       # k -> t_k
+    robot.conflictive = np.zeros(robot.m, dtype=bool)
+    robot.set_label = np.full(robot.m, -1, dtype=np.int64)
+    robot.root_of_set = {}
+    robot.t_logical = 0
+    robot.t_stop = 0
+    robot.block_nbrs = _linked_neighbours(robot, robot.active) - chan.lost
+    robot.all_nbrs = _linked_neighbours(robot) - chan.lost
+    robot.stopped = False
+    if rows.size == 0:
+        _stop(robot, chan, now, 0)
+    else:
+        _send_blocks_reliable(robot, chan, now)
+    robot.measure_memory()
+
+
+def _blocks_of_round(robot: Robot, k: int, t: int):
+    """``X_k·(t)`` as received, or ``None`` if it has not arrived yet."""
+    got = robot.recv_blocks.get(k, {})
+    if t in got:
+        return got[t]
+    tk = robot.final_t.get(k)
+    if tk is not None and t >= tk - 1:
+        # k stopped at t_k: X_k(t) = X_k(t_k - 1) for every t >= t_k - 1 (Prop. 3.5)
+        if tk <= 0:
+            return np.zeros(0, _I32), sp.csr_matrix((0, robot.m_total), dtype=bool)
+        return got.get(tk - 1)
+    return None
+
+
+def detection_round(robot: Robot, chan: Channel, inbox: list[Message], now: int,
+                    phase_round: int) -> None:
+    """One network round of the lockstep detection for one robot.
+
+    Receives blocks and finals, declares silent neighbours lost (cutting their links), and
+    computes one step of eq. (5) when the blocks of the current logical round ``t`` from every
+    neighbour of an active link are in; stops by Prop. 3.5.
+    """
+    for m in chan.receive(inbox, now):
+        p = m.payload
+        if m.kind == "blocks":
+            nrows = p["rows"].shape[0]
+            blk = sp.csr_matrix((np.ones(p["indices"].shape[0], dtype=bool), p["indices"],
+                                 p["indptr"]), shape=(nrows, robot.m_total))
+            robot.recv_blocks.setdefault(m.src, {})[int(p["t"][0])] = (p["rows"], blk)
+        elif m.kind == "final":
+            robot.final_t[m.src] = int(p["t"][0])
+    waiting = {k for k in robot.all_nbrs if k not in robot.final_t}
+    if not robot.stopped:
+        waiting |= {k for k in robot.block_nbrs
+                    if _blocks_of_round(robot, k, robot.t_logical) is None}
+    lost = chan.check_lost(now, waiting)
+    if lost:
+        _cut_lost(robot, lost, phase_round)
+        robot.block_nbrs -= set(lost)
+        robot.all_nbrs -= set(lost)
+    if not robot.stopped:
+        t = robot.t_logical
+        blocks = {k: _blocks_of_round(robot, k, t) for k in robot.block_nbrs}
+        if all(b is not None for b in blocks.values()):
+            X_next = eq5_next(robot, blocks)
+            # later rounds need X_k(t + 1), or X_k(t) if k stops at t + 1, or the last
+            # blocks of a k that has stopped: drop the others
+            for k, got in robot.recv_blocks.items():
+                keep = robot.final_t.get(k, 0) - 1
+                for tt in [tt for tt in got if tt < t and tt != keep]:
+                    del got[tt]
+            if X_next.nnz == robot.X.nnz:
+                _stop(robot, chan, now, t + 1)  # Prop. 3.5: X_i(t+1) ~ X_i(t)
+            else:
+                robot.X = X_next
+                robot.t_logical = t + 1
+                _send_blocks_reliable(robot, chan, now)
+    chan.flush(now, heartbeat_to=() if robot.stopped else sorted(robot.all_nbrs))
+    robot.measure_memory()
+
+
+def detection_done(robot: Robot, chan: Channel) -> bool:
+    """Stopped, every linked neighbour's ``final`` received, every message acknowledged."""
+    return robot.stopped and all(k in robot.final_t for k in robot.all_nbrs) and chan.idle()
+
+
+# ------------------------------------------------------------------------------------------
+# resolution (Alg. 1) over the reliable channel
+
+def start_resolution_reliable(robot: Robot, chan: Channel, now: int) -> int:
+    """Alg. 1 lines 2–5 with the requests sent reliably; returns the sets this robot roots."""
+    robot.lost_in_phase = False
+    return start_resolution(robot, lambda dst, kind, p: chan.send(dst, kind, p, now))
+
+
+def resolution_round(robot: Robot, chan: Channel, inbox: list[Message], now: int,
+                     phase_round: int) -> None:
+    """One network round of Alg. 1 (lines 8–19) on the messages the channel delivers."""
+    msgs = chan.receive(inbox, now)
+    lost = chan.check_lost(now)
+    if lost:
+        _cut_lost(robot, lost, phase_round)
+    msgs = [m for m in msgs if m.kind in ("request", "reject")]
+    resolution_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
+    chan.flush(now)
