@@ -242,7 +242,7 @@ def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: N
             raise RuntimeError(f"detection did not end within {max_rounds} rounds")
     return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)),
-                lost=any(rb.lost_in_phase for rb in robots))
+                lost=any(rb.lost_in_phase for rb in live))
 
 
 def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: Network,
@@ -264,7 +264,7 @@ def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: 
             raise RuntimeError(f"resolution did not end within {max_rounds} rounds")
     for rb in robots:
         rb.candidates = rb.conflictive & (rb.component < 0)
-    return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in robots))
+    return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in live))
 
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
