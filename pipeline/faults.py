@@ -1,0 +1,194 @@
+"""Fault injection from the command line: lossy links, crashed robots, a switching topology.
+
+The faults are properties of the simulated network (DESIGN.md, "the one rule"):
+:class:`FaultConfig` turns the user's flags into
+:class:`~pipeline.consistency.network.NetworkOptions` for the consistency stage and into a
+per-round topology for the fusion consensus; the robots then run the fault-tolerant protocol
+of :mod:`pipeline.consistency.reliable`. :func:`fault_report` writes the report's ``faults``
+section: what was injected and its effect next to a fault-free run on the same input.
+
+Flags (``add_fault_arguments``): ``--drop-prob P``, ``--crash ROBOT@ROUND`` (repeatable),
+``--switching-topology``, ``--fault-seed S``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["FaultConfig", "add_fault_arguments", "faults_from_args", "parse_crash",
+           "fault_report"]
+
+_CRASH = re.compile(r"^\s*(\d+)\s*@\s*(\d+)\s*$")
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """Faults to inject into the simulated robot network.
+
+    Attributes
+    ----------
+    drop_prob : float in [0, 1) — each message is lost independently with this probability
+    crash : tuple of (robot, round) — robot ``robot`` crashes at network round ``round``
+        (rounds count from 0 over the whole consistency stage)
+    switching_topology : bool — every communication edge is up with probability
+        ``switch_p_up`` each round and at least once per ``switch_window`` rounds
+        (:func:`~pipeline.consistency.network.recurrent_topology`), for the consistency
+        stage and the fusion consensus alike
+    seed : int — seed of the drops and of the switching topology
+    """
+
+    drop_prob: float = 0.0
+    crash: tuple = ()
+    switching_topology: bool = False
+    seed: int = 0
+    switch_p_up: float = 0.5
+    switch_window: int = 4
+
+    def __post_init__(self):
+        if not 0.0 <= float(self.drop_prob) < 1.0:
+            raise InputError(f"--drop-prob {self.drop_prob}: must be in [0, 1) (1 would lose "
+                             "every message)")
+        robots = [int(r) for r, _ in self.crash]
+        dup = sorted({r for r in robots if robots.count(r) > 1})
+        if dup:
+            raise InputError(f"--crash: robot {dup[0]} is given more than once; a robot crashes "
+                             "once")
+
+    @property
+    def any(self) -> bool:
+        """True when some fault is switched on."""
+        return bool(self.drop_prob > 0 or self.crash or self.switching_topology)
+
+    def check_robots(self, n_robots: int) -> None:
+        """InputError if a crash names a robot outside ``0..n_robots-1``."""
+        for r, t in self.crash:
+            if not 0 <= int(r) < n_robots:
+                raise InputError(f"--crash {r}@{t}: robot {r} does not exist; robots are "
+                                 f"0..{n_robots - 1}")
+
+    def topology(self, comm_edges):
+        """The per-round edge function of the switching topology, or ``None``."""
+        if not self.switching_topology:
+            return None
+        from pipeline.consistency.network import recurrent_topology
+
+        return recurrent_topology(comm_edges, self.switch_p_up, self.switch_window, self.seed)
+
+    def network_options(self, comm_edges, n_robots: int):
+        """:class:`NetworkOptions` of the consistency stage, or ``None`` without faults."""
+        from pipeline.consistency.network import NetworkOptions
+
+        self.check_robots(n_robots)
+        if not self.any:
+            return None
+        return NetworkOptions(drop_probability=float(self.drop_prob),
+                              crash_at={int(r): int(t) for r, t in self.crash},
+                              topology=self.topology(np.asarray(comm_edges).reshape(-1, 2)),
+                              seed=int(self.seed))
+
+    def as_dict(self) -> dict:
+        return {"drop_prob": float(self.drop_prob),
+                "crash": [f"{int(r)}@{int(t)}" for r, t in self.crash],
+                "switching_topology": bool(self.switching_topology),
+                "switch_p_up": float(self.switch_p_up), "switch_window": int(self.switch_window),
+                "seed": int(self.seed)}
+
+
+def parse_crash(text: str) -> tuple[int, int]:
+    """``"3@12"`` → ``(3, 12)``: robot 3 crashes at round 12.
+
+    Raises
+    ------
+    InputError
+        Anything but two non-negative integers joined by ``@``.
+    """
+    m = _CRASH.match(str(text))
+    if not m:
+        raise InputError(f"--crash {text!r}: expected ROBOT@ROUND with two non-negative "
+                         "integers, e.g. --crash 2@15 (robot 2 crashes at round 15)")
+    return int(m.group(1)), int(m.group(2))
+
+
+def _probability(text: str) -> float:
+    try:
+        p = float(text)
+    except ValueError:
+        raise InputError(f"--drop-prob {text!r}: not a number; give a probability in [0, 1), "
+                         "e.g. 0.1") from None
+    if not 0.0 <= p < 1.0:
+        raise InputError(f"--drop-prob {text}: must be in [0, 1)")
+    return p
+
+
+def add_fault_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--drop-prob``, ``--crash``, ``--switching-topology`` and ``--fault-seed``."""
+    g = parser.add_argument_group("faults (simulated robot network)")
+    g.add_argument("--drop-prob", default="0", metavar="P",
+                   help="each message between robots is lost with probability P in [0, 1) "
+                        "(default 0)")
+    g.add_argument("--crash", action="append", default=[], metavar="ROBOT@ROUND",
+                   help="robot ROBOT crashes at network round ROUND of the consistency stage "
+                        "(repeatable)")
+    g.add_argument("--switching-topology", action="store_true",
+                   help="communication links appear and vanish every round (each up with "
+                        "probability 0.5, at least once every 4 rounds)")
+    g.add_argument("--fault-seed", default="0", metavar="S",
+                   help="seed of the message drops and the switching topology (default 0)")
+
+
+def faults_from_args(args) -> FaultConfig:
+    """The :class:`FaultConfig` of parsed arguments; InputError on a bad value."""
+    try:
+        seed = int(args.fault_seed)
+    except ValueError:
+        raise InputError(f"--fault-seed {args.fault_seed!r}: not an integer") from None
+    return FaultConfig(drop_prob=_probability(args.drop_prob),
+                       crash=tuple(parse_crash(c) for c in args.crash),
+                       switching_topology=bool(args.switching_topology), seed=seed)
+
+
+def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
+    """The report's ``faults`` section: what was injected and its effect.
+
+    Parameters
+    ----------
+    config : FaultConfig
+    result : ConsistencyResult — the run with faults
+    fault_free : ConsistencyResult or None — the same input on a fault-free network
+
+    Returns
+    -------
+    dict with ``injected`` (the config), ``protocol``, ``crashed`` (robot -> round, crashes
+    that happened), ``crashes_not_reached`` (the run ended first), ``robots_lost`` (robot ->
+    neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
+    ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``,
+    ``messages``; with ``fault_free``: ``extra_rounds``, ``extra_messages``,
+    ``extra_links_deleted``.
+    """
+    st = result.stats
+    f = st.get("faults", {})
+    rounds = int(st["detection_rounds"] + st["resolution_rounds"])
+    out = {"injected": config.as_dict(), "protocol": st.get("protocol"),
+           "crashed": {str(k): v for k, v in f.get("crashed", {}).items()},
+           "crashes_not_reached": {str(k): v for k, v in f.get("crashes_not_reached", {}).items()},
+           "robots_lost": {str(k): v for k, v in f.get("robots_lost", {}).items()},
+           "links_cut_robot_lost": int(f.get("links_cut_robot_lost", 0)),
+           "messages_dropped": int(f.get("dropped", 0)),
+           "retransmissions": int(f.get("retransmissions", 0)),
+           "acks": int(f.get("acks", 0)), "heartbeats": int(f.get("heartbeats", 0)),
+           "repeated_detections": int(f.get("repeated_detections", 0)),
+           "rounds": rounds, "messages": int(st["messages"])}
+    if fault_free is not None:
+        fs = fault_free.stats
+        out["fault_free_rounds"] = int(fs["detection_rounds"] + fs["resolution_rounds"])
+        out["fault_free_messages"] = int(fs["messages"])
+        out["extra_rounds"] = rounds - out["fault_free_rounds"]
+        out["extra_messages"] = out["messages"] - out["fault_free_messages"]
+        out["extra_links_deleted"] = int(result.deleted.sum()) - int(fault_free.deleted.sum())
+    return out
