@@ -139,6 +139,7 @@ def recurrent_topology(comm_edges, p_up: float = 0.5, window: int = 4, seed: int
             cache.append(up)
         return edges[cache[int(t)]]
 
+    topology.window = window
     return topology
 
 

@@ -79,7 +79,12 @@ from scipy.stats import chi2
 
 from pipeline.association import association_sets
 from pipeline.errors import InputError
-from pipeline.fusion.consensus import FixedTopology, bundle_bytes, ransac_hypotheses
+from pipeline.fusion.consensus import (
+    FixedTopology,
+    SwitchingTopology,
+    bundle_bytes,
+    ransac_hypotheses,
+)
 from pipeline.fusion.voting import dynamic_voting
 from pipeline.types import Features, Links, View
 
@@ -274,10 +279,25 @@ def _check_inputs(views, features, links, comm_edges, sigma_px, local):
     return e
 
 
+def _track_topology(topology, observes: np.ndarray, comm: np.ndarray, n: int):
+    """Round ``t`` -> flat node edges ``b * n + i`` of every track over the comm edges up at ``t``."""
+    key = comm.min(1) * n + comm.max(1) if len(comm) else np.zeros(0, np.int64)
+    per_edge = [np.flatnonzero(observes[:, i] & observes[:, j]) for i, j in comm]
+
+    def edges(t: int) -> np.ndarray:
+        up = np.sort(np.asarray(topology(t), dtype=np.int64).reshape(-1, 2), axis=1)
+        sel = np.flatnonzero(np.isin(key, up[:, 0] * n + up[:, 1]))
+        parts = [np.stack([per_edge[k] * n + comm[k, 0], per_edge[k] * n + comm[k, 1]], 1)
+                 for k in sel]
+        return np.concatenate(parts) if parts else np.zeros((0, 2), np.int64)
+
+    return edges
+
+
 def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_edges,
                 sigma_px: float = 1.0, *, local: str = "robust", p: float = 0.99,
                 gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
-                rounds: int = 100, seed: int = 0) -> FusionResult:
+                rounds: int = 100, seed: int = 0, topology=None) -> FusionResult:
     """Fuse every track's landmark by dynamic voting; flag the observations voted out.
 
     Parameters
@@ -292,6 +312,14 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
     rounds : int — dynamic-voting consensus rounds
     seed : int — max-c random draws
+    topology : callable ``round -> (E_t, 2)`` robot edges, or None
+        The communication graph of each consensus round when it changes over time
+        (Assumption 2.1: jointly connected over windows); edges outside ``comm_edges`` are
+        ignored. If the callable has an attribute ``window`` (rounds within which every edge
+        is up once, as :func:`pipeline.consistency.network.recurrent_topology` sets), max-c
+        consensus runs ``window * (n - 1)`` rounds instead of ``n - 1``. ``None``:
+        ``comm_edges`` in every round. The ``messages`` stat still counts every comm edge in
+        every round (an upper bound under a switching topology).
 
     Returns
     -------
@@ -392,9 +420,13 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     if B == 0 or not estimated.any():
         return empty
 
-    topo = FixedTopology(node_edges, B * n)
+    if topology is None:
+        topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
+    else:
+        topo = SwitchingTopology(_track_topology(topology, observes, comm, n), B * n)
+        maxc_rounds = int(getattr(topology, "window", 1)) * (n - 1)
     res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
-                         observed=estimated, maxc_rounds=n - 1)
+                         observed=estimated, maxc_rounds=maxc_rounds)
     voted_out = estimated & ~res.inlier
     # a robot voted out keeps its observation if its own keypoint reprojects onto the fused
     # landmark within the gate: the fault was in its partner's keypoint

@@ -76,3 +76,50 @@ def test_report_section_records_injection_and_effect():
     assert rep["links_cut_robot_lost"] == 2
     assert rep["extra_rounds"] > 0 and rep["extra_messages"] > 0
     assert rep["extra_rounds"] == rep["rounds"] - rep["fault_free_rounds"]
+
+
+def _planted_rig():
+    """4 cameras observing 30 points, complete comm graph; camera 2's keypoint of point 7 is
+    40 px off (wrong but consistent): fusion must cut it, on a switching topology too."""
+    from pipeline.types import Features, View
+
+    rng = np.random.default_rng(3)
+    n, P = 4, 30
+    K = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    pts = rng.uniform([-1, -1, 4], [1, 1, 7], (P, 3))
+    views, feats = [], []
+    for v in range(n):
+        c = np.array([0.8 * v - 1.2, 0.1 * v, 0.0])
+        z = np.array([0.0, 0.0, 5.0]) - c
+        z /= np.linalg.norm(z)
+        x = np.cross([0.0, -1.0, 0.0], z)
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z])
+        t = -R @ c
+        p = (K @ (pts @ R.T + t).T).T
+        uv = p[:, :2] / p[:, 2:] + rng.normal(0, 0.3, (P, 2))
+        if v == 2:
+            uv[7] += [40.0, 0.0]
+        views.append(View(f"cam{v}", np.zeros((240, 320), np.uint8), K, R, t))
+        feats.append(Features(uv.astype(np.float32), np.zeros((P, 4), np.float32),
+                              np.ones(P, np.float32), "sift"))
+    edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n)])
+    ci, cj = np.repeat(edges[:, 0], P), np.repeat(edges[:, 1], P)
+    f = np.tile(np.arange(P), len(edges))
+    return views, feats, Links(ci, f, cj, f), edges
+
+
+def test_fusion_on_a_switching_topology_cuts_what_the_fixed_one_cuts():
+    from pipeline.fusion.landmarks import fuse_tracks
+
+    views, feats, links, edges = _planted_rig()
+    fixed = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    topo = FaultConfig(switching_topology=True, seed=2).topology(edges)
+    # the graph of a round is often disconnected; over 4 rounds every edge has been up
+    assert any(len(topo(t)) < len(edges) for t in range(10))
+    switching = fuse_tracks(views, feats, links, edges, sigma_px=0.5, topology=topo)
+    planted = ((links.cam_i == 2) | (links.cam_j == 2)) & (links.feat_i == 7)
+    assert fixed.cut_links[planted].all() and not fixed.cut_links[~planted].any()
+    np.testing.assert_array_equal(switching.cut_links, fixed.cut_links)
+    assert switching.stats["maxc_rounds"] > fixed.stats["maxc_rounds"]
+    assert np.abs(switching.points - fixed.points).max() < 1e-3
