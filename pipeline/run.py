@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links, RunRecord, View
@@ -38,6 +39,7 @@ class FormationConfig:
     fusion: bool = True
     out: str | None = None
     rerun: bool = True
+    faults: FaultConfig | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -62,6 +64,7 @@ class Cleaning:
     fusion_stats: dict = field(default_factory=dict)
     fused_points: np.ndarray | None = None
     fused_track_ids: np.ndarray | None = None
+    faults: dict | None = None
 
     @property
     def kept(self) -> np.ndarray:
@@ -111,10 +114,14 @@ def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
 
 
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
-                      *, fusion: bool = True, timer: StageTimer | None = None) -> Cleaning:
+                      *, fusion: bool = True, timer: StageTimer | None = None,
+                      faults: FaultConfig | None = None) -> Cleaning:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
 
     Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
+    With ``faults`` on, the consistency stage runs on the faulty network (and once more
+    fault-free, for the ``faults`` section's extra rounds and messages); a switching topology
+    is used by the fusion consensus too.
     """
     from pipeline.consistency import resolve_conflicts
 
@@ -123,7 +130,9 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     L = len(links)
     with timer.stage("consistency", "distributed detection + resolution"):
         conflictive_before = _conflictive_links(m, links)
-        res = resolve_conflicts(m, comm_edges, links)
+        faulty = faults is not None and faults.any
+        opts = faults.network_options(comm_edges, len(m)) if faulty else None
+        res = resolve_conflicts(m, comm_edges, links, opts)
         status = np.where(res.deleted, "deleted", "kept").astype(object)
         reason = np.asarray(res.reason, dtype=object).copy()
         rnd = np.asarray(res.round, dtype=np.int64).copy()
@@ -133,6 +142,10 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                    f"{res.stats.get('iterations')} iteration(s)")
     cleaning = Cleaning(links, status, reason, rnd, iteration, case, conflictive_before,
                         dict(res.stats))
+    if faulty:
+        from pipeline.faults import fault_report
+
+        cleaning.faults = fault_report(faults, res, resolve_conflicts(m, comm_edges, links))
     has_poses = all(v.R is not None and v.t is not None for v in views)
     if not fusion:
         cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
@@ -143,7 +156,8 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
 
         with timer.stage("fusion", "robust distributed fusion by dynamic voting"):
             kept_idx = np.flatnonzero(cleaning.kept)
-            fr = fuse_tracks(views, features, links.subset(kept_idx), comm_edges)
+            fr = fuse_tracks(views, features, links.subset(kept_idx), comm_edges,
+                             topology=faults.topology(comm_edges) if faulty else None)
             cut = kept_idx[np.asarray(fr.cut_links, dtype=bool)]
             cleaning.status[cut] = "deleted"
             cleaning.reason[cut] = "fusion-outlier"
@@ -229,6 +243,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
                                               config.max_features, timer)
     m = np.array([len(f) for f in feats], dtype=np.int64)
     cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
+                                 faults=config.faults,
                                  timer=timer)
     kept = cleaning.kept
     kept_links = links.subset(kept)
@@ -291,6 +306,8 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         "versions": versions(),
         "config": {**asdict(config), "out": str(out)},
     }
+    if cleaning.faults is not None:
+        report["faults"] = cleaning.faults
     if cleaning.fused_points is not None:
         report["fusion"].update(_fused_point_errors(views, feats, resolved_links, cleaning,
                                                     gt_points))

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 
 __all__ = ["add_arguments", "run", "resolve_file"]
 
@@ -30,11 +31,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
-                 comm_graph_csv: str | Path | None = None) -> dict:
-    """Read, resolve, write; return the summary dict.
+                 comm_graph_csv: str | Path | None = None,
+                 faults: FaultConfig | None = None) -> dict:
+    """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
     Raises
     ------
@@ -75,12 +78,17 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
     before = count_conflicts(AssociationGraph(m, links)).as_dict()
-    res = resolve_conflicts(m, edges, links)
+    opts = None
+    if faults is not None and faults.any:
+        from pipeline.consistency.engine import comm_edges_for
+
+        opts = faults.network_options(comm_edges_for(m, links, edges), n)
+    res = resolve_conflicts(m, edges, links, opts)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     write_links_csv(out_csv, links, np.where(res.deleted, "deleted", "kept"), res.reason,
                     res.round, None)
     st = res.stats
-    return {
+    summary = {
         "input": str(links_csv), "output": str(out_csv), "cameras": int(n),
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
@@ -90,10 +98,15 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "messages", "bytes", "max_robot_memory_bytes")},
     }
+    if opts is not None:
+        from pipeline.faults import fault_report
+
+        summary["faults"] = fault_report(faults, res, resolve_conflicts(m, edges, links))
+    return summary
 
 
 def run(args) -> int:
-    s = resolve_file(args.links, args.out, args.comm_graph)
+    s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -103,6 +116,12 @@ def run(args) -> int:
     print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution; "
           f"{r['messages']} messages, {r['bytes']} bytes, max {r['max_robot_memory_bytes']} "
           "bytes per robot")
+    if "faults" in s:
+        f = s["faults"]
+        print(f"faults: {f['messages_dropped']} messages dropped, crashed {f['crashed'] or 'none'}, "
+              f"{f['links_cut_robot_lost']} links cut robot-lost; {f['retransmissions']} "
+              f"retransmissions; +{f['extra_rounds']} rounds, +{f['extra_messages']} messages "
+              "vs fault-free")
     print(f"written: {s['output']}")
     if args.report:
         from pipeline.runfolder import write_json_atomic

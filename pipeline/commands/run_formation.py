@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.errors import InputError
+from pipeline.faults import add_fault_arguments, faults_from_args
 from pipeline.features import check_method
 from pipeline.run import FormationConfig
 
@@ -37,6 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
     p.add_argument("--out", default=None, help="run folder (default runs/formation-<name>)")
+    add_fault_arguments(p)
 
 
 def config_from_args(args) -> FormationConfig:
@@ -48,7 +50,8 @@ def config_from_args(args) -> FormationConfig:
     return FormationConfig(formation=args.formation, seed=args.seed, size=parse_size(args.size),
                            features=args.features, max_features=args.max_features,
                            robots=args.robots, graph=args.graph, tol_px=args.tol_px,
-                           fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun)
+                           fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
+                           faults=faults_from_args(args))
 
 
 def run(args) -> int:
