@@ -15,8 +15,9 @@ from 4 to 10 robots, 20–50 features each) run under each fault kind:
 For each kind: the fraction of runs that ended conflict-free among the surviving robots
 (target 100 %), the fraction whose first detection was exact (every robot's rows equal
 union-find; loss kinds), runs that raised, and the extra network rounds and messages against
-the fault-free run of the paper's protocol on the same formation (mean and maximum). Prints a
-table and saves ``runs/bench-faults/results.json``.
+the fault-free run of the paper's protocol on the same formation (mean and maximum), and the
+network rounds of the first detection. Prints a table and saves
+``runs/bench-faults/results.json``.
 
 Usage: ``.venv/bin/python bench/faults.py [--quick] [--formations 200] [--seed 0]``
 """
@@ -124,15 +125,18 @@ def run_one(k: int, seed: int) -> list[dict]:
     fpc, edges, links = formation(k, seed)
     base = resolve_conflicts(fpc, edges, links, protocol=PAPER)
     base_reliable = resolve_conflicts(fpc, edges, links, protocol=RELIABLE)
+    det0 = base.stats["per_iteration"][0]["detection_rounds"]
     rows = [dict(kind="none paper", ok=is_conflict_free(fpc, base.kept()), exact=True,
                  error="", extra_rounds=0, extra_messages=0, robot_lost=0, n=len(fpc),
-                 links=len(links)),
+                 links=len(links), det_rounds=det0, base_det_rounds=det0),
             dict(kind="none reliable", ok=is_conflict_free(fpc, base_reliable.kept()), exact=True,
                  error="", extra_rounds=total_rounds(base_reliable) - total_rounds(base),
                  extra_messages=base_reliable.stats["messages"] - base.stats["messages"],
-                 robot_lost=0, n=len(fpc), links=len(links))]
+                 robot_lost=0, n=len(fpc), links=len(links), base_det_rounds=det0,
+                 det_rounds=base_reliable.stats["per_iteration"][0]["detection_rounds"])]
     for name, opts, proto, det_reliable in fault_kinds(k, seed, fpc, edges, links, base_reliable):
-        row = dict(kind=name, n=len(fpc), links=len(links), error="", exact=None)
+        row = dict(kind=name, n=len(fpc), links=len(links), error="", exact=None,
+                   base_det_rounds=det0, det_rounds=None)
         if det_reliable is not None:
             row["exact"] = detection_exact(fpc, edges, links, opts, det_reliable)
         try:
@@ -149,6 +153,7 @@ def run_one(k: int, seed: int) -> list[dict]:
         row.update(ok=bool(ok), extra_rounds=total_rounds(res) - total_rounds(base),
                    extra_messages=int(res.stats["messages"] - base.stats["messages"]),
                    robot_lost=int((res.reason == "robot-lost").sum()),
+                   det_rounds=int(res.stats["per_iteration"][0]["detection_rounds"]),
                    extra_deleted=int(res.deleted.sum() - base.deleted.sum()))
         rows.append(row)
     return rows
@@ -170,7 +175,10 @@ def summarize(rows: list[dict]) -> list[dict]:
             extra_rounds_max=float(er.max()) if er.size else None,
             extra_messages_mean=float(em.mean()) if em.size else None,
             extra_messages_max=float(em.max()) if em.size else None,
-            robot_lost_links_mean=float(np.mean([r["robot_lost"] for r in rs]))))
+            robot_lost_links_mean=float(np.mean([r["robot_lost"] for r in rs])),
+            first_detection_rounds_mean=float(np.mean([r["det_rounds"] for r in done])),
+            fault_free_first_detection_rounds_mean=float(np.mean([r["base_det_rounds"]
+                                                                   for r in done]))))
     return out
 
 
@@ -192,15 +200,18 @@ def main(argv=None) -> int:
         return "-" if v is None else format(v, spec)
 
     print(f"{count} formations, n = 4..10 robots, 20-50 features each; extra rounds/messages "
-          "vs the fault-free run of the paper's protocol")
+          "vs the fault-free run of the paper's protocol; first detection's network rounds, "
+          "fault-free in brackets")
     print(f"{'kind':22s} {'conflict-free':>13s} {'det. exact':>10s} {'errors':>6s} "
-          f"{'+rounds mean/max':>18s} {'+messages mean/max':>20s} {'robot-lost':>10s}")
+          f"{'+rounds mean/max':>18s} {'+messages mean/max':>20s} {'robot-lost':>10s} "
+          f"{'1st det. rounds':>15s}")
     for r in table:
         exact = "-" if r["detection_exact"] is None else f"{100 * r['detection_exact']:.1f}%"
         rounds = f"{fmt(r['extra_rounds_mean'], '.1f')}/{fmt(r['extra_rounds_max'], '.0f')}"
         msgs = f"{fmt(r['extra_messages_mean'], '.1f')}/{fmt(r['extra_messages_max'], '.0f')}"
         print(f"{r['kind']:22s} {100 * r['conflict_free']:12.1f}% {exact:>10s} {r['errors']:6d} "
-              f"{rounds:>18s} {msgs:>20s} {r['robot_lost_links_mean']:10.2f}")
+              f"{rounds:>18s} {msgs:>20s} {r['robot_lost_links_mean']:10.2f} "
+              f"{r['first_detection_rounds_mean']:6.1f} ({r['fault_free_first_detection_rounds_mean']:.1f})")
     print(f"wall time {elapsed:.1f} s")
     OUT.mkdir(parents=True, exist_ok=True)
     write_json_atomic(OUT / "results.json", {
