@@ -3,9 +3,13 @@
 The paper's algorithms (Aragüés et al., Sec. III and Alg. 1) assume a lossless synchronous
 network. Their only rule for a missing message is "use the last blocks received, because the
 neighbour has finished" (Sec. III, after Def. 3.4), which is true on a lossless network and
-false on a lossy one: measured with ``bench/faults.py``, a dropped block makes a robot see
-"no change" and stop early (Prop. 3.5 fires on stale data) and a dropped component request or
-reject leaves a conflict or a half-deleted link. This module adds what is needed, *in the
+false on a lossy one: a dropped block makes a robot see "no change" and stop early (Prop. 3.5
+fires on stale data), and a dropped component request or reject leaves a conflict or a
+half-deleted link. Measured (``bench/faults.py``, 200 formations of 4–10 robots): with the
+paper's rule alone the first detection was exact in 13 % / 0 % / 0 % of the runs at loss
+``p`` = 0.1 / 0.3 / 0.5 (it stopped after 6.3 / 5.2 / 3.9 rounds instead of 6.6) and the
+loop ended conflict-free in 72.5 % / 43.5 % / 38 %. With this protocol: exact and
+conflict-free in 100 % at every ``p``, first detection 17.7 / 27.2 / 43.9 rounds. This module adds what is needed, *in the
 robots* (every extra packet is an algorithm message, sent and counted by the network, which
 itself only drops, delays or cuts):
 
@@ -51,6 +55,21 @@ Crashes and timeouts (stated)
     missed for ``T`` rounds with probability about ``p^T``; one heard only through acks of
     retransmissions, about ``(1 - (1 - p)^2)^(T - 2)`` (``p = 0.5``, ``T = 40``: 2e-5).
     With a switching topology ``T`` must exceed the longest outage of a link.
+
+What detection needs on a topology that changes every round (stated and tested)
+    * Every comm edge that carries associations must *recur* (be up at least once in every
+      window of ``W`` rounds): the blocks ``X_k·`` that ``W_ik`` multiplies can only travel
+      over the edge ``(i, k)``, so the joint connectivity of Assumption 2.1 of the fusion
+      paper is not enough (:func:`~.network.recurrent_topology` makes such sequences).
+    * A robot must not take step ``t + 1`` of eq. (5), and so must not apply Prop. 3.5,
+      while the round-``t`` blocks of a neighbour it was unable to reach are missing: with
+      the paper's rule a neighbour out of range looks "unchanged" and the robot stops early.
+      Lockstep gives this for free.
+    * A robot must not end its detection while a linked neighbour has not confirmed its own
+      end (``final``), nor before that neighbour has its ``final``.
+    * ``T > W`` plus a few rounds of retransmission, or an outage is taken for a crash (the
+      link is then cut as ``robot-lost`` on both sides, which keeps the survivors consistent
+      but loses the link).
 
 What a detection in which some robot lost a neighbour found is not trusted (blocks that
 came through the lost robot may reach beyond what the survivors can reach): the driver skips
