@@ -40,7 +40,8 @@ import scipy.sparse as sp
 from pipeline.consistency.network import Message
 from pipeline.consistency.robot import Robot
 
-__all__ = ["start_detection", "detection_step", "eq5_next", "find_conflictive_sets"]
+__all__ = ["start_detection", "init_detection", "detection_step", "eq5_next",
+           "find_conflictive_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -58,6 +59,19 @@ def start_detection(robot: Robot, iteration: int, send: Send) -> None:
     iteration : int — detection/resolution iteration (1-based)
     send : callable ``(dst, kind, payload)`` bound to this robot
     """
+    rows = init_detection(robot, iteration)
+    robot.stopped = rows.size == 0
+    if not robot.stopped:
+        _send_blocks(robot, send)
+    robot.measure_memory()
+
+
+def init_detection(robot: Robot, iteration: int) -> np.ndarray:
+    """Choose the active rows and set ``X_i·(0)`` by eq. (4); returns the active rows (R,).
+
+    Resets the detection outputs (``conflictive``, ``set_label``, ``root_of_set``,
+    ``t_stop``) and the blocks received.
+    """
     robot.iteration = iteration
     has_link = np.zeros(robot.m, dtype=bool)
     has_link[robot.link_r[robot.link_alive]] = True
@@ -70,14 +84,14 @@ def start_detection(robot: Robot, iteration: int, send: Send) -> None:
     robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
                              indptr), shape=(robot.m, robot.m_total))
     robot.last_blocks = {}
+    robot.recv_blocks = {}
+    robot.final_t = {}
     robot.conflictive = np.zeros(robot.m, dtype=bool)
     robot.set_label = np.full(robot.m, -1, dtype=np.int64)
     robot.root_of_set = {}
-    robot.stopped = rows.size == 0
     robot.t_stop = 0
-    if not robot.stopped:
-        _send_blocks(robot, send)
-    robot.measure_memory()
+    robot.t_logical = 0
+    return rows
 
 
 def _send_blocks(robot: Robot, send: Send) -> None:

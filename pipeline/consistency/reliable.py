@@ -91,7 +91,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from pipeline.consistency.detection import _index_dtype, eq5_next, find_conflictive_sets
+from pipeline.consistency.detection import (
+    _index_dtype,
+    eq5_next,
+    find_conflictive_sets,
+    init_detection,
+)
 from pipeline.consistency.network import Message
 from pipeline.consistency.resolution import _delete, resolution_step, start_resolution
 from pipeline.consistency.robot import ROBOT_LOST, Robot
@@ -209,6 +214,7 @@ class Channel:
         self._next_seq[dst] = seq
         up = dst in self._links_up()
         self._unacked.setdefault(dst, {})[seq] = _Pending(kind, payload, now, now if up else None)
+        self._expect_since.setdefault(dst, now)  # an ack is expected from now on
         if up:
             self._transmit(dst, kind, payload, seq, now)
 
@@ -239,6 +245,12 @@ class Channel:
                 self.heartbeats_sent += 1
 
     # --- state ----------------------------------------------------------------------------
+    def memory_bytes(self) -> int:
+        """Bytes held for retransmission (payload arrays) and for duplicate detection."""
+        held = sum(int(np.asarray(a).nbytes) for un in self._unacked.values()
+                   for pm in un.values() for a in pm.payload.values())
+        return held + 8 * sum(len(v) for v in self._seen.values())
+
     def idle(self) -> bool:
         """True when every message sent has been acknowledged (or its receiver is lost)."""
         return not any(un for k, un in self._unacked.items() if k not in self.lost)
@@ -275,6 +287,12 @@ def _cut_lost(robot: Robot, lost: list[int], round_: int) -> None:
     _delete(robot, links, round_, ROBOT_LOST)
     robot.lost_neighbours.update(int(k) for k in lost)
     robot.lost_in_phase = True
+
+
+def _measure(robot: Robot, chan: Channel) -> None:
+    """Peak memory of the robot including its channel's retransmission buffers."""
+    robot.peak_memory_bytes = max(robot.peak_memory_bytes,
+                                  robot.memory_bytes() + chan.memory_bytes())
 
 
 def _linked_neighbours(robot: Robot, rows_mask: np.ndarray | None = None) -> set[int]:
@@ -318,23 +336,7 @@ def _stop(robot: Robot, chan: Channel, now: int, t_stop: int) -> None:
 def start_detection_reliable(robot: Robot, chan: Channel, iteration: int, now: int) -> None:
     """Round 0: eq. (4) as in :func:`~.detection.start_detection`, blocks sent reliably."""
     robot.lost_in_phase = False
-    robot.iteration = iteration
-    has_link = np.zeros(robot.m, dtype=bool)
-    has_link[robot.link_r[robot.link_alive]] = True
-    robot.active = robot.candidates & has_link & (robot.component < 0)
-    rows = np.flatnonzero(robot.active)
-    indptr = np.zeros(robot.m + 1, dtype=np.int64)
-    indptr[rows + 1] = 1
-    robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
-                             np.cumsum(indptr)), shape=(robot.m, robot.m_total))
-    robot.last_blocks = {}
-    robot.recv_blocks = {}   # k -> {t: (rows, block)}
-    robot.final_t = {}       # k -> t_k
-    robot.conflictive = np.zeros(robot.m, dtype=bool)
-    robot.set_label = np.full(robot.m, -1, dtype=np.int64)
-    robot.root_of_set = {}
-    robot.t_logical = 0
-    robot.t_stop = 0
+    rows = init_detection(robot, iteration)
     robot.block_nbrs = _linked_neighbours(robot, robot.active) - chan.lost
     robot.all_nbrs = _linked_neighbours(robot) - chan.lost
     robot.stopped = False
@@ -403,7 +405,7 @@ def detection_round(robot: Robot, chan: Channel, inbox: list[Message], now: int,
                 robot.t_logical = t + 1
                 _send_blocks_reliable(robot, chan, now)
     chan.flush(now, heartbeat_to=() if robot.stopped else sorted(robot.all_nbrs))
-    robot.measure_memory()
+    _measure(robot, chan)
 
 
 def detection_done(robot: Robot, chan: Channel) -> bool:
@@ -430,3 +432,4 @@ def resolution_round(robot: Robot, chan: Channel, inbox: list[Message], now: int
     msgs = [m for m in msgs if m.kind in ("request", "reject")]
     resolution_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
     chan.flush(now)
+    _measure(robot, chan)

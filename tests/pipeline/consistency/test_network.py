@@ -60,3 +60,31 @@ def test_fault_switches():
     with pytest.raises(NotANeighbourError):
         net.send(0, 1, "blocks", payload(1))
     net.send(0, 2, "blocks", payload(1))
+
+
+def test_crash_at_a_round_and_the_neighbour_table():
+    net = Network(3, EDGES, NetworkOptions(crash_at={1: 2}))
+    assert net.alive(1) and net.neighbours(0) == frozenset({1})
+    net.end_round()
+    net.send(0, 1, "blocks", payload(1))  # sent in round 1, due in round 2: 1 is dead by then
+    net.end_round()
+    assert not net.alive(1) and net.inbox(1) == [] and net.dropped == 1
+    assert net.neighbours(0) == frozenset()
+    # the neighbour table shows the link, not the crash: robots infer crashes from silence
+    assert net.links_up(0) == frozenset({1})
+    net.send(0, 1, "blocks", payload(1))
+    assert net.dropped == 2 and net.messages == 2
+
+
+def test_recurrent_topology_every_edge_up_once_per_window():
+    from pipeline.consistency.network import recurrent_topology
+
+    edges = np.array([[0, 1], [1, 2], [2, 3], [0, 3], [0, 2]])
+    topo = recurrent_topology(edges, p_up=0.2, window=3, seed=4)
+    up = np.array([[tuple(e) in {tuple(x) for x in topo(t).tolist()} for e in edges.tolist()]
+                   for t in range(60)])
+    assert up.mean() < 0.6  # it does switch
+    for w in range(58):
+        assert up[w:w + 3].any(axis=0).all()
+    np.testing.assert_array_equal(topo(5), topo(5))  # repeatable
+    assert topo.window == 3
