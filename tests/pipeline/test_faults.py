@@ -123,3 +123,46 @@ def test_fusion_on_a_switching_topology_cuts_what_the_fixed_one_cuts():
     np.testing.assert_array_equal(switching.cut_links, fixed.cut_links)
     assert switching.stats["maxc_rounds"] > fixed.stats["maxc_rounds"]
     assert np.abs(switching.points - fixed.points).max() < 1e-3
+
+
+def test_resolve_command_records_faults(tmp_path, capsys):
+    import json
+
+    from pipeline.__main__ import main
+
+    src = tmp_path / "in.csv"
+    src.write_text("0,0,3,1\n0,0,1,0\n1,0,2,0\n2,0,3,0\n")  # paper Fig. 1
+    out, rep = tmp_path / "out.csv", tmp_path / "rep.json"
+    rc = main(["resolve", "--links", str(src), "--out", str(out), "--report", str(rep),
+               "--drop-prob", "0.3", "--crash", "3@2", "--switching-topology"])
+    assert rc == 0
+    assert "links cut robot-lost" in capsys.readouterr().out
+    rows = out.read_text().splitlines()[1:]
+    assert [r.split(",")[5] for r in rows] == ["robot-lost", "", "", "robot-lost"]
+    f = json.loads(rep.read_text())["faults"]
+    assert f["injected"] == {"drop_prob": 0.3, "crash": ["3@2"], "switching_topology": True,
+                             "switch_p_up": 0.5, "switch_window": 4, "seed": 0}
+    assert f["crashed"] == {"3": 2} and f["links_cut_robot_lost"] == 2
+    assert f["extra_rounds"] > 0 and f["messages_dropped"] > 0
+
+
+def test_run_formation_report_has_a_faults_section(tmp_path):
+    import json
+
+    from pipeline.__main__ import main
+
+    out = tmp_path / "run"
+    rc = main(["run-formation", "--formation", "a", "--size", "320x240", "--max-features", "300",
+               "--no-rerun", "--drop-prob", "0.2", "--crash", "1@3", "--switching-topology",
+               "--out", str(out)])
+    assert rc == 0
+    report = json.loads((out / "report.json").read_text())
+    f = report["faults"]
+    assert f["injected"]["crash"] == ["1@3"] and f["crashed"] == {"1": 3}
+    assert f["links_cut_robot_lost"] > 0 and f["retransmissions"] > 0
+    assert f["extra_rounds"] > 0 and f["extra_messages"] > 0
+    assert report["after"]["conflictive_sets"] == 0
+    links = (out / "links.csv").read_text().splitlines()
+    cut = [r for r in links[1:] if r.split(",")[5] == "robot-lost"]
+    assert len(cut) == f["links_cut_robot_lost"]
+    assert all("1" in (r.split(",")[0], r.split(",")[2]) for r in cut)
