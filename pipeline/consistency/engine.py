@@ -218,6 +218,24 @@ def run_resolution(robots: list[Robot], network: Network, max_rounds: int | None
     return dict(rounds=t, conflictive_sets=int(sets))
 
 
+def _run_phase(robots: list[Robot], network: Network, step, done, max_rounds: int,
+               phase: str) -> tuple[int, list[Robot]]:
+    """Step the robots still alive, round after round, until every one of them is done."""
+    live = [rb for rb in robots if network.alive(rb.id)]
+    t = 0
+    while True:
+        live = [rb for rb in live if network.alive(rb.id)]
+        if all(done(rb) for rb in live):
+            return t, live
+        network.end_round()
+        t += 1
+        for rb in live:
+            if network.alive(rb.id):
+                step(rb, network.inbox(rb.id), network.round, t)
+        if t > max_rounds:
+            raise RuntimeError(f"{phase} did not end within {max_rounds} rounds")
+
+
 def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: Network,
                            iteration: int, max_rounds: int) -> dict:
     """One lockstep detection (:mod:`.reliable`) on the robots still alive.
@@ -225,21 +243,12 @@ def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: N
     Returns ``rounds``, ``t_stop`` (n,) logical stop rounds, ``conflictive_features`` and
     ``lost`` (True when some robot declared a neighbour lost during it).
     """
-    live = [rb for rb in robots if network.alive(rb.id)]
-    for rb in live:
-        start_detection_reliable(rb, chans[rb.id], iteration, network.round)
-    t = 0
-    while True:
-        live = [rb for rb in live if network.alive(rb.id)]
-        if all(detection_done(rb, chans[rb.id]) for rb in live):
-            break
-        network.end_round()
-        t += 1
-        for rb in live:
-            if network.alive(rb.id):
-                detection_round(rb, chans[rb.id], network.inbox(rb.id), network.round, t)
-        if t > max_rounds:
-            raise RuntimeError(f"detection did not end within {max_rounds} rounds")
+    for rb in robots:
+        if network.alive(rb.id):
+            start_detection_reliable(rb, chans[rb.id], iteration, network.round)
+    t, live = _run_phase(
+        robots, network, lambda rb, inbox, now, t: detection_round(rb, chans[rb.id], inbox, now, t),
+        lambda rb: detection_done(rb, chans[rb.id]), max_rounds, "detection")
     return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)),
                 lost=any(rb.lost_in_phase for rb in live))
@@ -248,20 +257,11 @@ def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: N
 def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: Network,
                             max_rounds: int) -> dict:
     """One run of Alg. 1 over the reliable channels; ends when everything is acknowledged."""
-    live = [rb for rb in robots if network.alive(rb.id)]
-    sets = sum(start_resolution_reliable(rb, chans[rb.id], network.round) for rb in live)
-    t = 0
-    while True:
-        live = [rb for rb in live if network.alive(rb.id)]
-        if all(chans[rb.id].idle() for rb in live):
-            break
-        network.end_round()
-        t += 1
-        for rb in live:
-            if network.alive(rb.id):
-                resolution_round(rb, chans[rb.id], network.inbox(rb.id), network.round, t)
-        if t > max_rounds:
-            raise RuntimeError(f"resolution did not end within {max_rounds} rounds")
+    sets = sum(start_resolution_reliable(rb, chans[rb.id], network.round)
+               for rb in robots if network.alive(rb.id))
+    t, live = _run_phase(
+        robots, network, lambda rb, inbox, now, t: resolution_round(rb, chans[rb.id], inbox, now, t),
+        lambda rb: chans[rb.id].idle(), max_rounds, "resolution")
     for rb in robots:
         rb.candidates = rb.conflictive & (rb.component < 0)
     return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in live))

@@ -92,7 +92,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from pipeline.consistency.detection import (
-    _index_dtype,
+    _send_blocks,
     eq5_next,
     find_conflictive_sets,
     init_detection,
@@ -304,23 +304,9 @@ def _linked_neighbours(robot: Robot, rows_mask: np.ndarray | None = None) -> set
 # detection (Sec. III) in lockstep over the reliable channel
 
 def _send_blocks_reliable(robot: Robot, chan: Channel, now: int) -> None:
-    """Blocks ``X_i·(t)`` rows to each neighbour of an active link, tagged with ``t``."""
-    sel = np.flatnonzero(robot.link_alive & robot.active[robot.link_r])
-    if sel.size == 0:
-        return
-    nbr = robot.link_nbr[sel]
-    cut = np.flatnonzero(np.diff(nbr)) + 1
-    idt = _index_dtype(robot)
+    """The paper's blocks message (eq. 5 rows), tagged with the logical round ``t``."""
     t = np.array([robot.t_logical], dtype=_I32)
-    for part in np.split(sel, cut):
-        k = int(robot.link_nbr[part[0]])
-        if k in chan.lost:
-            continue
-        rows = np.unique(robot.link_r[part])
-        blk = robot.X[rows]
-        chan.send(k, "blocks", {"t": t, "rows": rows.astype(_I32),
-                                "indptr": blk.indptr.astype(idt),
-                                "indices": blk.indices.astype(idt)}, now)
+    _send_blocks(robot, lambda dst, kind, p: chan.send(dst, kind, {"t": t, **p}, now))
 
 
 def _stop(robot: Robot, chan: Channel, now: int, t_stop: int) -> None:
