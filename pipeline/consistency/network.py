@@ -84,10 +84,10 @@ class NetworkOptions:
 
     Notes
     -----
-    The algorithms in this package are proven for the lossless static network; these
-    switches exist so that their behaviour under faults can be studied without editing the
-    algorithm code. Robots already follow the paper's rule for a silent neighbour: they keep
-    using the last blocks received from it (Sec. III, after Cor. 3.6).
+    The paper's algorithms are proven for the lossless static network. With any switch on,
+    :func:`~pipeline.consistency.engine.resolve_conflicts` has the robots run the
+    fault-tolerant protocol of :mod:`.reliable` (unless told otherwise); the network itself
+    only drops, delays and cuts.
     """
 
     drop_probability: float = 0.0

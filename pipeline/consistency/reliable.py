@@ -1,17 +1,18 @@
 """Fault-tolerant robot protocol for the consistency stage: lossy links, crashes, switching links.
 
 The paper's algorithms (Aragüés et al., Sec. III and Alg. 1) assume a lossless synchronous
-network. Their only rule for a missing message is "use the last blocks received, because the
-neighbour has finished" (Sec. III, after Def. 3.4), which is true on a lossless network and
+network. Their only rule for a missing message is "use the last matrix received, because the
+neighbour has finished" (Sec. III, after Cor. 3.6), which is true on a lossless network and
 false on a lossy one: a dropped block makes a robot see "no change" and stop early (Prop. 3.5
 fires on stale data), and a dropped component request or reject leaves a conflict or a
 half-deleted link. Measured (``bench/faults.py``, 200 formations of 4–10 robots): with the
 paper's rule alone the first detection was exact in 13 % / 0 % / 0 % of the runs at loss
-``p`` = 0.1 / 0.3 / 0.5 (it stopped after 6.3 / 5.2 / 3.9 rounds instead of 6.6) and the
-loop ended conflict-free in 72.5 % / 43.5 % / 38 %. With this protocol: exact and
-conflict-free in 100 % at every ``p``, first detection 17.7 / 27.2 / 43.9 rounds. This module adds what is needed, *in the
-robots* (every extra packet is an algorithm message, sent and counted by the network, which
-itself only drops, delays or cuts):
+``p`` = 0.1 / 0.3 / 0.5 (it stopped after 6.3 / 5.2 / 3.9 network rounds on average instead of
+6.6) and the loop ended conflict-free in 72.5 % / 43.5 % / 38 %. With this protocol: exact and
+conflict-free in 100 % at every ``p``, the first detection taking 17.7 / 27.2 / 43.9 rounds.
+
+This module adds what is needed, *in the robots* (every extra packet is an algorithm message,
+sent and counted by the network, which itself only drops, delays or cuts):
 
 Reliable channel (:class:`Channel`, one per robot)
     Every algorithm message to a neighbour gets a sequence number; the receiver acknowledges
