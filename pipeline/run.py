@@ -215,6 +215,11 @@ def report_markdown(report: dict) -> str:
                 "detection_rounds", "resolution_rounds", "messages", "bytes"):
         if key in r:
             lines.append(f"| {key.replace('_', ' ')} | {r[key]} |")
+    fusion, faults = report.get("fusion") or {}, report.get("faults") or {}
+    if "cut_links" in fusion:
+        lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
+    if "links_cut_robot_lost" in faults:
+        lines.append(f"| links cut to lost robots (robot-lost) | {faults['links_cut_robot_lost']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -259,7 +264,8 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
                                                   tol_px=config.tol_px))
         gt_pairs = true_pairs_all(formation, feats, tol_px=config.tol_px)
         m_total = int(m.sum())
-        resolved = cleaning.reason != "resolution"
+        # what the consistency stage kept (fusion ran on exactly these links)
+        resolved = cleaning.kept | (cleaning.reason == "fusion-outlier")
         resolved_links = links.subset(resolved)
         pairwise = {"before": pairwise_scores(association_pairs(m, links), gt_pairs, m_total),
                     "after_resolution": pairwise_scores(association_pairs(m, resolved_links),
