@@ -40,6 +40,7 @@ uint16 (2 bytes) for the Metropolis weights. :class:`CommStats` adds these up;
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -122,7 +123,7 @@ def bundle_bytes(n_reals: int, *, with_degree: bool = True) -> int:
 # topologies
 
 
-class Topology:
+class Topology(ABC):
     """A communication graph sequence ``G(t)`` over ``n_nodes`` flat nodes.
 
     Subclasses implement :meth:`edges`; ``edges(t)`` is the ``(E, 2)`` int64 array of the
@@ -131,8 +132,9 @@ class Topology:
 
     n_nodes: int
 
-    def edges(self, t: int) -> np.ndarray:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def edges(self, t: int) -> np.ndarray:
+        """Edges of round ``t``."""
 
     def weights(self, t: int) -> sp.csr_matrix:
         """Metropolis matrix ``A(t)``, ``(n_nodes, n_nodes)``."""
