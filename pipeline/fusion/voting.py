@@ -221,6 +221,21 @@ def _sq_mahalanobis(r, info):
     return np.einsum("...i,...ij,...j->...", r, info, r)
 
 
+def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds):
+    """Shared start of both voting schemes: checked inputs, topology, χ² gate, and the
+    hypothesis members (max-c consensus, eqs. 6–7, unless given)."""
+    x, cov, obs = _prepare(x, cov, observed)
+    B, N, d = x.shape
+    topo = as_topology(topology, N, B)
+    thr = gate_threshold(d, p, gate)
+    if members is None:
+        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
+    else:
+        members = np.asarray(members, dtype=bool) & obs[..., None]
+        maxc_stats = CommStats()
+    return x, cov, obs, topo, thr, members, maxc_stats
+
+
 def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                   gate: str = "distance", rounds=(100, 100, 100), rng=None, members=None,
                   observed=None, maxc_rounds: int | None = None) -> VotingResult:
@@ -242,16 +257,10 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     -------
     VotingResult
     """
-    x, cov, obs = _prepare(x, cov, observed)
+    x, cov, obs, topo, thr, members, maxc_stats = _voting_setup(
+        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds)
     B, N, d = x.shape
-    topo = as_topology(topology, N, B)
-    thr = gate_threshold(d, p, gate)
     r_hyp, r_vote, r_final = (int(r) for r in rounds)
-    if members is None:
-        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
-    else:
-        members = np.asarray(members, dtype=bool) & obs[..., None]
-        maxc_stats = CommStats()
     K = members.shape[-1]
     info = np.linalg.inv(cov)                                      # (B, N, d, d)
     # step 1: the K partial MLs (eq. 4) by consensus with initial conditions (5)
@@ -320,15 +329,9 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     VotingResult
         ``theta`` is ``θ_i^{h*}(T)``; ``inlier`` is robot ``i``'s gate for ``h*`` at ``T``.
     """
-    x, cov, obs = _prepare(x, cov, observed)
+    x, cov, obs, topo, thr, members, maxc_stats = _voting_setup(
+        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds)
     B, N, d = x.shape
-    topo = as_topology(topology, N, B)
-    thr = gate_threshold(d, p, gate)
-    if members is None:
-        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
-    else:
-        members = np.asarray(members, dtype=bool) & obs[..., None]
-        maxc_stats = CommStats()
     K = members.shape[-1]
     M = B * N
     info = np.linalg.inv(cov).reshape(M, 1, d, d)
