@@ -355,13 +355,17 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         return theta, ok, yes
 
     hist = dict(theta=[], valid=[], yes=[], v=[]) if history else None
-    for t in range(int(rounds)):
-        theta, ok, yes = opinion(P, q)
+
+    def record(theta, ok, yes, v):
         if history:
             hist["theta"].append(theta.reshape(B, N, K, d))
             hist["valid"].append(ok.reshape(B, N, K))
             hist["yes"].append(yes.reshape(B, N, K))
             hist["v"].append(v.reshape(B, N, K))
+
+    for t in range(int(rounds)):
+        theta, ok, yes = opinion(P, q)
+        record(theta, ok, yes, v)
         u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14): ±1 or 0
         prev_yes = yes
         A = topo.weights(t)
@@ -370,11 +374,8 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         q = (A @ q.reshape(M, -1)).reshape(q.shape) + u[..., None] * u_q
         v = A @ v + u
     theta, ok, yes = opinion(P, q)
+    record(theta, ok, yes, v)
     if history:
-        hist["theta"].append(theta.reshape(B, N, K, d))
-        hist["valid"].append(ok.reshape(B, N, K))
-        hist["yes"].append(yes.reshape(B, N, K))
-        hist["v"].append(v.reshape(B, N, K))
         hist = {k: np.stack(val) for k, val in hist.items()}
     v = v.reshape(B, N, K)
     winner = np.argmax(v, axis=-1)
