@@ -192,6 +192,8 @@ def resolution_section(cleaning: Cleaning, truth: np.ndarray | None) -> dict:
         "bytes": stats.get("bytes"),
         "max_robot_memory_bytes": stats.get("max_robot_memory_bytes"),
     }
+    # Alg. 1 line 9: case (b) feature already in another component, (c) its camera already in
+    out["deleted_by_case"] = {c: int((cut & (cleaning.case == c)).sum()) for c in ("b", "c")}
     if truth is not None:
         out["good_deleted"] = int((cut & truth).sum())
         out["spurious_deleted"] = int((cut & ~truth).sum())

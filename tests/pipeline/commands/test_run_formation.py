@@ -37,6 +37,7 @@ def test_conflicts_found_and_resolved(small_run):
     assert report["after"]["conflictive_sets"] == 0
     r = report["resolution"]
     assert r["deleted_links"] == r["good_deleted"] + r["spurious_deleted"]
+    assert sum(r["deleted_by_case"].values()) == r["deleted_links"]
 
 
 def test_report_equals_recount_from_links_csv(small_run):
