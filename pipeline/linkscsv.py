@@ -74,6 +74,10 @@ def _rows(path: Path):
         yield lineno, fields, stripped
 
 
+#: largest camera or feature id accepted (ids index int32 arrays inside the robots)
+MAX_ID = 2**31 - 2
+
+
 def _int_field(path, lineno, raw, name, value) -> int:
     try:
         v = int(value)
@@ -82,6 +86,9 @@ def _int_field(path, lineno, raw, name, value) -> int:
                          "ids are 0-based integers") from None
     if v < 0:
         raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is negative; ids are 0-based")
+    if v > MAX_ID:
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is too large; ids must be at "
+                         f"most {MAX_ID}")
     return v
 
 

@@ -98,3 +98,11 @@ def test_comm_graph_csv(tmp_path):
                           ("0,a\n", "not an integer")]:
         with pytest.raises(InputError, match=message):
             read_comm_graph_csv(write(tmp_path, text, "g.csv"))
+
+
+def test_huge_ids_are_named_not_overflowing(tmp_path):
+    """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
+    with pytest.raises(InputError, match="cam_j 99999999999999999999 is too large"):
+        read_comm_graph_csv(write(tmp_path, "0,99999999999999999999\n", "g.csv"))
+    with pytest.raises(InputError, match="feat_j .* is too large"):
+        read_links_csv(write(tmp_path, "0,0,1,99999999999999999999\n"))
