@@ -42,11 +42,14 @@ __all__ = [
     "DatabaseContents",
     "MappingSummary",
     "quiet_colmap",
+    "version",
     "calibrated",
     "write_database",
     "read_database",
     "write_cleaned_database",
     "incremental_mapping",
+    "write_model",
+    "read_model",
     "registered_poses",
     "similarity_between",
 ]
@@ -54,6 +57,11 @@ __all__ = [
 #: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
 COLMAP_PIXEL_OFFSET = 0.5
 _TVG = pycolmap.TwoViewGeometryConfiguration
+
+
+def version() -> str:
+    """The pycolmap version (for the report's ``versions``)."""
+    return pycolmap.__version__
 
 
 @contextmanager
@@ -513,6 +521,23 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
         mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
         mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
         reconstruction=rec)
+
+
+def write_model(path: str | Path, reconstruction=None) -> Path:
+    """Write ``reconstruction`` (an empty one when ``None``) as a COLMAP model folder that
+    loads back with :func:`read_model`; the folder is created."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    (reconstruction if reconstruction is not None else pycolmap.Reconstruction()).write(path)
+    return path
+
+
+def read_model(path: str | Path):
+    """The ``pycolmap.Reconstruction`` of a COLMAP model folder (e.g. a run's ``sparse/``)."""
+    path = Path(path)
+    if not path.is_dir():
+        raise InputError(f"COLMAP model {str(path)!r}: no such folder")
+    return pycolmap.Reconstruction(str(path))
 
 
 def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:

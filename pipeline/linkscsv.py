@@ -25,7 +25,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.runfolder import atomic_file
-from pipeline.types import Links
+from pipeline.types import LinkLedger, Links
 
 __all__ = [
     "LINK_COLUMNS",
@@ -211,53 +211,40 @@ def features_per_camera_for(links: Links, n_cameras: int | None = None) -> np.nd
     return m
 
 
-def write_links_csv(path: str | os.PathLike, links: Links, status, reason, round_,
-                    truth=None) -> Path:
-    """Write the run-output ``links.csv`` atomically (temp file, then ``os.replace``).
+def write_links_csv(path: str | os.PathLike, ledger: LinkLedger) -> Path:
+    """Write the run-output ``links.csv`` of ``ledger`` atomically (temp file, then
+    ``os.replace``).
 
-    Parameters
-    ----------
-    path : output file
-    links : Links, (L,)
-    status : (L,) str — ``kept`` or ``deleted``
-    reason : (L,) str — stage that cut the link, ``''`` if kept
-    round_ : (L,) int — round in which it was cut; negative is written empty
-    truth : (L,) int or None — ``1``/``0``; ``-1`` or None is written empty (unknown)
+    Columns ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``: a negative round is
+    written empty, and so is an unknown truth (``-1``, or ``ledger.truth`` is ``None``).
 
     Returns
     -------
     Path — the file written
     """
     path = Path(path)
-    L = len(links)
-    status = np.asarray(status).astype(str).reshape(-1)
-    reason = np.asarray(reason).astype(str).reshape(-1)
-    round_ = np.asarray(round_, dtype=np.int64).reshape(-1)
-    truth = np.full(L, -1, dtype=np.int64) if truth is None else np.asarray(truth, dtype=np.int64).reshape(-1)
-    for name, arr in (("status", status), ("reason", reason), ("round", round_), ("truth", truth)):
-        if arr.shape[0] != L:
-            raise ValueError(f"write_links_csv: {name} has length {arr.shape[0]}, expected {L}")
-    bad = ~np.isin(status, ("kept", "deleted"))
-    if bad.any():
-        raise ValueError(f"write_links_csv: status must be 'kept' or 'deleted', got {status[bad][0]!r}")
+    ledger.check()
+    links = ledger.links
+    round_ = ledger.round
+    truth = np.full(len(links), -1, dtype=np.int64) if ledger.truth is None \
+        else ledger.truth.astype(np.int64)
     round_s = np.where(round_ >= 0, round_.astype(str), "")
     truth_s = np.where(truth >= 0, truth.astype(str), "")
     with atomic_file(path, newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(RUN_LINK_COLUMNS)
         w.writerows(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                        links.feat_j.tolist(), status.tolist(), reason.tolist(),
-                        round_s.tolist(), truth_s.tolist(), strict=True))
+                        links.feat_j.tolist(), ledger.status.astype(str).tolist(),
+                        ledger.reason.astype(str).tolist(), round_s.tolist(), truth_s.tolist(),
+                        strict=True))
     return path
 
 
-def read_run_links_csv(path: str | os.PathLike) -> dict:
-    """Read a run-output ``links.csv`` back.
+def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
+    """Read a run-output ``links.csv`` back as a :class:`~pipeline.types.LinkLedger`.
 
-    Returns
-    -------
-    dict with ``links`` (Links), ``status``, ``reason`` (str arrays), ``round``, ``truth``
-    (int arrays, ``-1`` where empty).
+    ``iteration`` and ``case`` are not stored in the file and read back as ``-1`` and ``''``;
+    ``truth`` and ``round`` read back as ``-1`` where empty.
     """
     path = Path(path)
     with open(path, newline="") as f:
@@ -270,10 +257,16 @@ def read_run_links_csv(path: str | os.PathLike) -> dict:
     def ints(vals):
         return np.array([int(v) if v != "" else -1 for v in vals], dtype=np.int64)
 
-    return dict(links=Links(ints(col["cam_i"]), ints(col["feat_i"]), ints(col["cam_j"]),
-                            ints(col["feat_j"])),
-                status=np.array(col["status"], dtype=str), reason=np.array(col["reason"], dtype=str),
-                round=ints(col["round"]), truth=ints(col["truth"]))
+    links = Links(ints(col["cam_i"]), ints(col["feat_i"]), ints(col["cam_j"]),
+                  ints(col["feat_j"]))
+    try:
+        return LinkLedger(links, np.array(col["status"], dtype=str),
+                          np.array(col["reason"], dtype=str), ints(col["round"]),
+                          np.full(len(links), -1, dtype=np.int64),
+                          np.full(len(links), "", dtype=object),
+                          ints(col["truth"]))
+    except ValueError as exc:
+        raise InputError(f"{path}: {exc}") from None
 
 
 def read_comm_graph_csv(path: str | os.PathLike) -> np.ndarray:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["View", "Features", "PairMatches", "Links"]
+__all__ = ["View", "Features", "PairMatches", "Links", "LinkLedger", "RunRecord"]
 
 
 @dataclass
@@ -147,21 +147,125 @@ class Links:
         )
 
 
+LINK_STATUSES = ("kept", "deleted")
+
+
+@dataclass
+class LinkLedger:
+    """What the stages decided for every link matching produced: the one per-link record.
+
+    Every stage that cuts links writes here (:meth:`cut`), the ``links.csv`` writer and the
+    Rerun log read it. A link is never removed from the ledger; a cut link keeps the stage that
+    cut it and when (DESIGN.md "Run outputs").
+
+    Attributes
+    ----------
+    links : Links, (L,) — every link produced by matching (or read from the user's file)
+    status : ndarray, (L,) object str — ``kept`` or ``deleted``
+    reason : ndarray, (L,) object str — stage that cut the link (``resolution``,
+        ``robot-lost``, ``fusion-outlier``, …), ``''`` if kept
+    round : ndarray, (L,) int64 — round of that stage in which it was cut, ``-1`` if kept
+    iteration : ndarray, (L,) int64 — detection/resolution iteration that cut it, ``-1``
+        otherwise
+    case : ndarray, (L,) object str — Alg. 1 case (``b`` or ``c``) of a link cut by
+        resolution, ``''`` otherwise
+    truth : ndarray, (L,) int8 or None — ``1`` good, ``0`` spurious, ``-1`` unknown; ``None``
+        when no link's truth is known (real images, the user's links)
+    conflictive_before : ndarray, (L,) bool — the link lies in a conflictive set before
+        resolution (Aragüés et al., Def. 2.4)
+
+    Examples
+    --------
+    >>> ledger = LinkLedger.all_kept(Links([0, 0], [1, 2], [1, 1], [1, 2]))
+    >>> ledger.cut(np.array([False, True]), "resolution", 3)
+    >>> ledger.status.tolist(), ledger.reason.tolist(), ledger.round.tolist()
+    (['kept', 'deleted'], ['', 'resolution'], [-1, 3])
+    """
+
+    links: Links
+    status: np.ndarray
+    reason: np.ndarray
+    round: np.ndarray
+    iteration: np.ndarray
+    case: np.ndarray
+    truth: np.ndarray | None = None
+    conflictive_before: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        L = len(self.links)
+        self.status = np.asarray(self.status).astype(str).astype(object).reshape(-1)
+        self.reason = np.asarray(self.reason).astype(str).astype(object).reshape(-1)
+        self.round = np.asarray(self.round, dtype=np.int64).reshape(-1)
+        self.iteration = np.asarray(self.iteration, dtype=np.int64).reshape(-1)
+        self.case = np.asarray(self.case).astype(str).astype(object).reshape(-1)
+        if self.truth is not None:
+            self.truth = np.asarray(self.truth, dtype=np.int8).reshape(-1)
+        if self.conflictive_before is None:
+            self.conflictive_before = np.zeros(L, dtype=bool)
+        self.conflictive_before = np.asarray(self.conflictive_before, dtype=bool).reshape(-1)
+        self.check()
+
+    def check(self) -> None:
+        """ValueError unless every per-link array has one entry per link and every status is
+        ``kept`` or ``deleted``."""
+        L = len(self.links)
+        for name in ("status", "reason", "round", "iteration", "case", "truth",
+                     "conflictive_before"):
+            arr = getattr(self, name)
+            if arr is not None and np.asarray(arr).reshape(-1).shape[0] != L:
+                raise ValueError(f"LinkLedger.{name} has length {np.asarray(arr).shape[0]}, "
+                                 f"expected one per link ({L})")
+        bad = ~np.isin(np.asarray(self.status).astype(str), LINK_STATUSES)
+        if bad.any():
+            raise ValueError(f"LinkLedger.status must be 'kept' or 'deleted', got "
+                             f"{np.asarray(self.status)[bad][0]!r}")
+
+    @staticmethod
+    def all_kept(links: Links, truth: np.ndarray | None = None,
+                 conflictive_before: np.ndarray | None = None) -> LinkLedger:
+        """Every link kept, nothing cut yet."""
+        L = len(links)
+        return LinkLedger(links, np.full(L, "kept", dtype=object), np.full(L, "", dtype=object),
+                          np.full(L, -1, dtype=np.int64), np.full(L, -1, dtype=np.int64),
+                          np.full(L, "", dtype=object), truth, conflictive_before)
+
+    def __len__(self) -> int:
+        return len(self.links)
+
+    @property
+    def kept(self) -> np.ndarray:
+        """``(L,)`` bool: the link survived every stage."""
+        return self.status == "kept"
+
+    @property
+    def good(self) -> np.ndarray | None:
+        """``(L,)`` bool: the link is good (synthetic ground truth), or ``None`` if unknown."""
+        return None if self.truth is None else self.truth == 1
+
+    def cut(self, mask: np.ndarray, reason: str, round: int | np.ndarray, *,
+            iteration: int | np.ndarray | None = None,
+            case: str | np.ndarray | None = None) -> None:
+        """Mark the links selected by ``mask`` (bool ``(L,)`` or indices) deleted by ``reason``
+        in ``round`` (a number or one per selected link); ``iteration`` and ``case`` are kept
+        unless given."""
+        self.status[mask] = "deleted"
+        self.reason[mask] = reason
+        self.round[mask] = round
+        if iteration is not None:
+            self.iteration[mask] = iteration
+        if case is not None:
+            self.case[mask] = case
+
+
 @dataclass
 class RunRecord:
-    """Everything a run produced, handed to ``viz`` (which only reads it) and to writers.
+    """Everything a run produced, handed to ``viz`` (which only reads it).
 
     Attributes
     ----------
     views : list[View]
     features : list[Features]
-    links : Links — every link produced by matching, ``(L,)``
-    status : ndarray, (L,) str — ``kept`` or ``deleted``
-    reason : ndarray, (L,) str — stage that cut the link (``resolution``, ``fusion-outlier``…), ``''`` if kept
-    round : ndarray, (L,) int — round of the stage in which the link was cut, ``-1`` if kept
-    iteration : ndarray, (L,) int — detection/resolution iteration that cut it, ``-1`` otherwise
-    conflictive_before : ndarray, (L,) bool — link lies in a conflictive set before resolution
-    truth : ndarray, (L,) int8 — ``1`` good, ``0`` spurious, ``-1`` unknown (real images)
+    ledger : LinkLedger — every link produced by matching and what the stages did to it
     points : ndarray, (P, 3) — triangulated track points after cleaning (world frame)
     point_tracks : ndarray, (P,) int — track id of each point
     gt_points : ndarray, (G, 3) or None — ground-truth points of the kept tracks (synthetic)
@@ -171,13 +275,7 @@ class RunRecord:
 
     views: list
     features: list
-    links: Links
-    status: np.ndarray
-    reason: np.ndarray
-    round: np.ndarray
-    iteration: np.ndarray
-    conflictive_before: np.ndarray
-    truth: np.ndarray
+    ledger: LinkLedger
     points: np.ndarray
     point_tracks: np.ndarray
     gt_points: np.ndarray | None = None

@@ -48,8 +48,6 @@ __all__ = [
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
     "camera_entity",
-    "count_strips",
-    "entity_paths",
     "keypoint_status",
     "link_endpoints_3d",
     "log_run",
@@ -91,14 +89,7 @@ def _check_record(record: RunRecord) -> None:
     n = len(record.views)
     if len(record.features) != n:
         raise ValueError(f"RunRecord: {n} views but {len(record.features)} feature sets")
-    L = len(record.links)
-    for name in ("status", "reason", "round", "iteration", "conflictive_before", "truth"):
-        got = np.asarray(getattr(record, name)).reshape(-1).shape[0]
-        if got != L:
-            raise ValueError(f"RunRecord.{name} has length {got}, expected one per link ({L})")
-    bad = set(np.unique(np.asarray(record.status, dtype=str)).tolist()) - {"kept", "deleted"}
-    if bad:
-        raise ValueError(f"RunRecord.status holds {sorted(bad)}; expected 'kept' or 'deleted'")
+    record.ledger.check()
 
 
 def keypoint_status(record: RunRecord) -> np.ndarray:
@@ -123,11 +114,11 @@ def keypoint_status(record: RunRecord) -> np.ndarray:
     three groups a reader wants to tell apart distinct.
     """
     off = _offsets(record)
-    lk = record.links
+    lk = record.ledger.links
     a = off[lk.cam_i] + lk.feat_i
     b = off[lk.cam_j] + lk.feat_j
-    deleted = np.asarray(record.status) == "deleted"
-    conflictive = np.asarray(record.conflictive_before, dtype=bool)
+    deleted = np.asarray(record.ledger.status) == "deleted"
+    conflictive = np.asarray(record.ledger.conflictive_before, dtype=bool)
     status = np.zeros(int(off[-1]), dtype=np.uint8)
     # Later assignments win: write the classes in increasing precedence.
     for cls, mask in ((1, ~deleted), (2, conflictive), (3, deleted)):
@@ -188,7 +179,7 @@ def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
                   for v, p in zip(views, posed, strict=True)])
     t = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) if p else np.full(3, np.nan)
                   for v, p in zip(views, posed, strict=True)])
-    lk = record.links
+    lk = record.ledger.links
     ends = []
     for cam, feat in ((lk.cam_i, lk.feat_i), (lk.cam_j, lk.feat_j)):
         uv1 = np.concatenate([kp[off[cam] + feat], np.ones((len(cam), 1))], axis=1)
@@ -209,17 +200,17 @@ def replay_steps(record: RunRecord) -> tuple[np.ndarray, list[tuple[str, int, in
         What step ``k`` replays (``keys[k - 1]``): resolution first, then any later stage
         (e.g. ``fusion-outlier``) in name order; within a stage by ``(iteration, round)``.
     """
-    deleted = np.flatnonzero(np.asarray(record.status) == "deleted")
-    reason = np.asarray(record.reason, dtype=str).reshape(-1)
-    it = np.asarray(record.iteration, dtype=np.int64).reshape(-1)
-    rd = np.asarray(record.round, dtype=np.int64).reshape(-1)
+    deleted = np.flatnonzero(np.asarray(record.ledger.status) == "deleted")
+    reason = np.asarray(record.ledger.reason, dtype=str).reshape(-1)
+    it = np.asarray(record.ledger.iteration, dtype=np.int64).reshape(-1)
+    rd = np.asarray(record.ledger.round, dtype=np.int64).reshape(-1)
     names, stage_of = np.unique(reason[deleted], return_inverse=True)
     stages = sorted(names.tolist(), key=lambda s: (s != "resolution", s))
     rank_of_name = np.array([stages.index(s) for s in names.tolist()], dtype=np.int64)
     stage_rank = rank_of_name[stage_of.reshape(-1)]
     triples = np.stack([stage_rank, it[deleted], rd[deleted]], axis=1).reshape(-1, 3)
     uniq, inv = np.unique(triples, axis=0, return_inverse=True)
-    step = np.full(len(record.links), len(uniq) + 1, dtype=np.int64)
+    step = np.full(len(record.ledger.links), len(uniq) + 1, dtype=np.int64)
     step[deleted] = inv.reshape(-1) + 1
     keys = [(stages[s], int(i), int(r)) for s, i, r in uniq]
     return step, keys
@@ -247,16 +238,16 @@ def _log_graph(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray) -> 
     without ``×`` are kept. Node ids, labels and edges are static; only the colours are logged
     per step, so the replay costs 4 bytes per node and step.
     """
-    conf = np.flatnonzero(np.asarray(record.conflictive_before, dtype=bool))
+    conf = np.flatnonzero(np.asarray(record.ledger.conflictive_before, dtype=bool))
     if conf.size == 0:
         return
-    lk = record.links
+    lk = record.ledger.links
     a = _node_ids(lk.cam_i[conf], lk.feat_i[conf])
     b = _node_ids(lk.cam_j[conf], lk.feat_j[conf])
     feat_ids, first = np.unique(np.concatenate([a, b]), return_index=True)
     feat_cams = np.concatenate([lk.cam_i[conf], lk.cam_j[conf]])[first]
     feat_colors = _camera_palette(len(record.views))[feat_cams]
-    cut = np.asarray(record.status)[conf] == "deleted"
+    cut = np.asarray(record.ledger.status)[conf] == "deleted"
     markers = np.char.add("cut:", conf[cut].astype(str))
     edges = np.concatenate([np.stack([a[~cut], b[~cut]], axis=1),
                             np.stack([a[cut], markers], axis=1),
@@ -282,12 +273,13 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
     ends = link_endpoints_3d(record, depth)
     drawable = np.isfinite(ends).all(axis=(1, 2))
     ends, step = ends[drawable], step[drawable]
-    deleted = (np.asarray(record.status) == "deleted")[drawable]
-    reason = np.asarray(record.reason, dtype=str)[drawable]
-    lk = record.links.subset(drawable)
+    deleted = (np.asarray(record.ledger.status) == "deleted")[drawable]
+    reason = np.asarray(record.ledger.reason, dtype=str)[drawable]
+    lk = record.ledger.links.subset(drawable)
     labels = np.char.add(np.char.add(_node_ids(lk.cam_i, lk.feat_i), "–"),
                          _node_ids(lk.cam_j, lk.feat_j))
-    truth = np.asarray(record.truth, dtype=np.int64).reshape(-1)[drawable]
+    truth = (np.full(len(record.ledger), -1, dtype=np.int64) if record.ledger.truth is None
+             else record.ledger.truth.astype(np.int64))[drawable]
     labels = np.char.add(labels, np.array(["", " (spurious)", " (good)"])[np.clip(truth + 1, 0, 2)])
     rec.log("world/links/kept",
             rr.LineStrips3D(ends[~deleted], colors=(*LINK_COLORS["kept"], _KEPT_ALPHA),
@@ -429,13 +421,13 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     -----
     See the module docstring for the entity layout. When every camera has a pose,
     ``world/links/deleted`` holds exactly one strip per deleted link and ``world/links/kept`` one
-    per kept link (:func:`count_strips` reads them back); links touching a camera without a
+    per kept link (:func:`viz.recording_reader.count_strips` reads them back); links touching a camera without a
     pose are left out of both, and both are absent when no camera has a pose.
 
     Examples
     --------
     >>> path = log_run(run_dir / "recording.rrd", record)  # doctest: +SKIP
-    >>> count_strips(path, "world/links/deleted") == (record.status == "deleted").sum()  # doctest: +SKIP
+    >>> count_strips(path, "world/links/deleted") == (record.ledger.status == "deleted").sum()  # doctest: +SKIP
     True
     """
     _check_record(record)
@@ -504,7 +496,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                     static=True)
 
         _log_graph(rec, record, step)
-        _log_replay_text(rec, step, keys, int((np.asarray(record.status) == "kept").sum()))
+        _log_replay_text(rec, step, keys, int((np.asarray(record.ledger.status) == "kept").sum()))
         rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",
                                           media_type=rr.MediaType.MARKDOWN), static=True)
         rec.disconnect()  # writes the footer; the file does not read back without it
@@ -515,33 +507,3 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
             tmp.unlink()
         raise
     return path
-
-
-def entity_paths(path: str | os.PathLike) -> list[str]:
-    """Entity paths stored in a recording, e.g. ``['/world', '/world/links/kept', …]``."""
-    from rerun.chunk import RrdReader
-
-    return list(RrdReader(Path(path)).store().schema().entity_paths())
-
-
-def count_strips(path: str | os.PathLike, entity: str) -> int:
-    """Number of line strips an entity holds in a recording (0 if the entity is absent).
-
-    Reads the static ``LineStrips3D``/``LineStrips2D`` row of ``entity`` (the last one if it was
-    logged more than once). Used to check ``world/links/deleted`` against ``report.json``.
-    """
-    from rerun.chunk import RrdReader
-
-    entity = "/" + entity.strip("/")
-    chunks = RrdReader(Path(path)).store().stream().filter(content=entity, is_static=True).to_chunks()
-    count = 0
-    for chunk in chunks:
-        if chunk.entity_path != entity:
-            continue
-        batch = chunk.to_record_batch()
-        cols = [c for c in batch.schema.names if c.endswith(":strips")]
-        for c in cols:
-            rows = batch.column(c).to_pylist()
-            if rows:
-                count = len(rows[-1] or [])
-    return count

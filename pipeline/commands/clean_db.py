@@ -78,8 +78,8 @@ def clean_database(database: str | Path, out: str | Path,
     """
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.consistency import resolve_conflicts
     from pipeline.io import comm_graph
+    from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
     if out.resolve() == database.resolve():
@@ -101,7 +101,7 @@ def clean_database(database: str | Path, out: str | Path,
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result = resolve_conflicts(m, edges, model_links)
+    result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

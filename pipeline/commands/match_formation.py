@@ -7,7 +7,12 @@ from __future__ import annotations
 import argparse
 import math
 
-from pipeline.commands.run_formation import parse_size
+from pipeline.commands.options import (
+    add_feature_options,
+    add_size_option,
+    feature_options,
+    parse_size,
+)
 from pipeline.errors import InputError
 
 FORMATIONS = ("a", "b", "c", "d")
@@ -37,10 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formation", default="d",
                    help="a|b|c|d (comm graphs of increasing cycles) or all (default d)")
     p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
-    p.add_argument("--features", default="sift", help="sift|orb|akaze|surf (default sift)")
-    p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
-    p.add_argument("--max-features", type=int, default=2000,
-                   help="features per image (default 2000)")
+    add_feature_options(p)
+    add_size_option(p)
     p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default 0.8)")
     p.add_argument("--threshold-px", type=float, default=1.0,
                    help="epipolar RANSAC inlier threshold in pixels (default 1)")
@@ -63,20 +66,15 @@ def match_formation(formation: str, seed: int = 0, size: tuple[int, int] = (640,
     import data_synth
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.evaluate import link_counts
-    from pipeline.features import extract_all
-    from pipeline.matching import match_edges
     from pipeline.progress import StageTimer
-    from pipeline.types import Links
+    from pipeline.run import extract_and_match
 
     timer = timer or StageTimer(verbose=False)
     t0 = dict(timer.timings)
     with timer.stage("render", f"formation {formation}, seed {seed}, {size[0]}x{size[1]}"):
         f = data_synth.render(formation, seed=seed, size=size)
-    with timer.stage("features", f"{features}, at most {max_features} per image"):
-        feats = extract_all(f.views, features, max_features)
-    with timer.stage("matching", f"{len(f.comm_edges)} communication edges"):
-        matches = match_edges(feats, f.views, f.comm_edges, ratio=ratio, threshold_px=threshold_px)
-        links = Links.from_matches(matches)
+    feats, matches, links = extract_and_match(f.views, f.comm_edges, features, max_features,
+                                              timer, ratio=ratio, threshold_px=threshold_px)
     m = [len(x) for x in feats]
     with timer.stage("evaluate", f"ground truth at {tol_px} px"):
         counts = count_conflicts(AssociationGraph(m, links)).as_dict()
@@ -106,7 +104,7 @@ def _fmt(key: str, v) -> str:
 
 def table(results: list[dict]) -> str:
     """Markdown table, one column per formation, and the paper's Table III for reference."""
-    from pipeline.commands.run_formations import PAPER_TABLE_III_IV
+    from pipeline.report import PAPER_TABLE_III_IV
 
     names = [r["formation"] for r in results]
     lines = ["| | " + " | ".join(f"({n})" for n in names) + " | paper (a)–(d) |",
@@ -119,23 +117,19 @@ def table(results: list[dict]) -> str:
 
 
 def run(args) -> int:
-    from pipeline.features import METHODS
     from pipeline.progress import StageTimer
 
     name = str(args.formation).lower()
     if name not in (*FORMATIONS, "all"):
         raise InputError(f"--formation {args.formation!r}: choose one of a, b, c, d or all")
-    if args.features.lower() not in METHODS:
-        raise InputError(f"--features {args.features!r}: choose one of {', '.join(METHODS)}")
-    if args.max_features < 8:
-        raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
+    method, max_features = feature_options(args)
     size = parse_size(args.size)
     timer = StageTimer()
-    results = [match_formation(n, seed=args.seed, size=size, features=args.features.lower(),
-                               max_features=args.max_features, ratio=args.ratio,
+    results = [match_formation(n, seed=args.seed, size=size, features=method,
+                               max_features=max_features, ratio=args.ratio,
                                threshold_px=args.threshold_px, tol_px=args.tol_px, timer=timer)
                for n in (FORMATIONS if name == "all" else (name,))]
-    print(f"# match-formation: seed {args.seed}, {args.features.lower()}, {size[0]}x{size[1]}, "
+    print(f"# match-formation: seed {args.seed}, {method}, {size[0]}x{size[1]}, "
           f"ratio {args.ratio}, epipolar threshold {args.threshold_px} px, "
           f"ground truth at {args.tol_px} px\n")
     print(table(results))

@@ -47,13 +47,13 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.consistency import resolve_conflicts
     from pipeline.linkscsv import (
         features_per_camera_for,
         read_comm_graph_csv,
         read_links_csv,
         write_links_csv,
     )
+    from pipeline.run import consistency_stage, ledger_from_consistency
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
     if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
@@ -78,15 +78,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
     before = count_conflicts(AssociationGraph(m, links)).as_dict()
-    opts = None
-    if faults is not None and faults.any:
-        from pipeline.consistency.engine import comm_edges_for
-
-        opts = faults.network_options(comm_edges_for(m, links, edges), n)
-    res = resolve_conflicts(m, edges, links, opts)
+    res, fault_section = consistency_stage(m, edges, links, faults)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
-    write_links_csv(out_csv, links, np.where(res.deleted, "deleted", "kept"), res.reason,
-                    res.round, None)
+    write_links_csv(out_csv, ledger_from_consistency(res))
     st = res.stats
     summary = {
         "input": str(links_csv), "output": str(out_csv), "cameras": int(n),
@@ -98,10 +92,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "messages", "bytes", "max_robot_memory_bytes")},
     }
-    if opts is not None:
-        from pipeline.faults import fault_report
-
-        summary["faults"] = fault_report(faults, res, resolve_conflicts(m, edges, links))
+    if fault_section is not None:
+        summary["faults"] = fault_section
     return summary
 
 

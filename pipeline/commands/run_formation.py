@@ -4,31 +4,23 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.options import (
+    add_feature_options,
+    add_size_option,
+    feature_options,
+    parse_size,
+)
 from pipeline.errors import InputError
 from pipeline.faults import add_fault_arguments, faults_from_args
-from pipeline.features import check_method
 from pipeline.run import FormationConfig
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``"640x480"`` → ``(640, 480)``; InputError on anything else."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
-    if w < 64 or h < 48:
-        raise InputError(f"--size {text!r}: at least 64x48 pixels are needed")
-    return w, h
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formation", default="d",
                    help="formation a|b|c|d (comm graphs of increasing cycles; default d)")
     p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
-    p.add_argument("--features", default="sift", help="sift|orb|akaze|surf (default sift)")
-    p.add_argument("--max-features", type=int, default=2000,
-                   help="features per image (default 2000)")
-    p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
+    add_feature_options(p)
+    add_size_option(p)
     p.add_argument("--robots", type=int, default=None,
                    help="parametric formation: number of robots (use with --graph)")
     p.add_argument("--graph", default=None,
@@ -44,11 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args) -> FormationConfig:
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
-    check_method(args.features)
-    if args.max_features < 8:
-        raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
+    method, max_features = feature_options(args)
     return FormationConfig(formation=args.formation, seed=args.seed, size=parse_size(args.size),
-                           features=args.features, max_features=args.max_features,
+                           features=method, max_features=max_features,
                            robots=args.robots, graph=args.graph, tol_px=args.tol_px,
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
                            faults=faults_from_args(args))

@@ -7,7 +7,13 @@ import argparse
 import json
 from pathlib import Path
 
-from pipeline.commands.run_formation import parse_size
+from pipeline.commands.options import (
+    add_feature_options,
+    add_size_option,
+    feature_options,
+    parse_size,
+)
+from pipeline.report import PAPER_TABLE_III_IV
 from pipeline.runfolder import atomic_file, write_json_atomic
 
 FORMATIONS = ("a", "b", "c", "d")
@@ -36,22 +42,10 @@ TABLE_ROWS = [
     ("Fusion: spurious among them", "fusion", "cut_spurious"),
 ]
 
-PAPER_TABLE_III_IV = {  # Aragüés et al., Tables III and IV (SURF, real images, no ground truth)
-    "Association sets": (528, 590, 605, 632),
-    "Conflictive sets (c)": (2, 22, 31, 72),
-    "Number of features m_sum": (1335, 1643, 1743, 2069),
-    "Conflictive features": (14, 144, 204, 521),
-    "Deleted links": (2, 26, 46, 131),
-    "Good deleted links": (1, 2, 19, 43),
-    "Spurious deleted links": (1, 24, 27, 88),
-}
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--features", default="sift")
-    p.add_argument("--max-features", type=int, default=2000)
-    p.add_argument("--size", default="640x480")
+    add_feature_options(p)
+    add_size_option(p)
     p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
 
 
@@ -106,11 +100,13 @@ def formations_table(reports: dict[str, dict]) -> str:
 def run(args) -> int:
     from pipeline.run import FormationConfig, run_formation
 
+    method, max_features = feature_options(args)
+    size = parse_size(args.size)
     parent = Path(args.out)
     reports = {}
     for name in FORMATIONS:
-        cfg = FormationConfig(formation=name, seed=args.seed, size=parse_size(args.size),
-                              features=args.features, max_features=args.max_features,
+        cfg = FormationConfig(formation=name, seed=args.seed, size=size,
+                              features=method, max_features=max_features,
                               out=str(parent / f"formation-{name}"))
         out = run_formation(cfg)
         reports[name] = json.loads((out / "report.json").read_text())

@@ -1,61 +1,17 @@
 """``python -m pipeline run-images DIR --graph KIND``: the whole pipeline on real photographs.
 
-The stages of a formation run (DESIGN.md "Data flow") without ground truth: load and
-downscale the images with their own intrinsics (:mod:`pipeline.io`), features, matching on the
-user's comm-graph edges only, the distributed consistency stage (Aragüés et al., Sec. III
-detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
-cleaned tracks a pycolmap incremental reconstruction from the matches before and after
-cleaning (:mod:`pipeline.colmap`). Writes the run folder of DESIGN.md "Run outputs" with
-``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``.
-
-Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
-supplies them (and refines guessed focal lengths). Fusion runs only when it registered every
-image (the fusion stage needs every robot's pose); otherwise it is skipped and the report says
-why.
+The options of the run; the run itself is :func:`pipeline.images.run_images`.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import importlib.util
-import shutil
-import tempfile
-from dataclasses import asdict, dataclass
-from pathlib import Path
 
-import numpy as np
-
+from pipeline.commands.options import add_feature_options, feature_options
 from pipeline.errors import InputError
-from pipeline.progress import StageTimer
-from pipeline.runfolder import atomic_run_folder, write_json_atomic
-from pipeline.types import Links, View
+from pipeline.images import ImagesConfig
 
-__all__ = ["ImagesConfig", "run_images", "add_arguments", "run"]
-
-
-@dataclass
-class ImagesConfig:
-    """Options of ``run-images`` (see ``python -m pipeline run-images --help``)."""
-
-    directory: str
-    graph: str
-    intrinsics: str = "auto"
-    max_size: int | None = 1600
-    features: str = "sift"
-    max_features: int = 2000
-    fusion: bool = True
-    rerun: bool = True
-    export_db: bool = False
-    out: str | None = None
-    threads: int = 1
-
-    def out_dir(self) -> Path:
-        if self.out:
-            return Path(self.out)
-        folder = Path(self.directory).resolve().name or "images"
-        graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
-        return Path("runs") / f"images-{folder}-{graph}"
+__all__ = ["add_arguments", "config_from_args", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -70,9 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "a K.txt at the images' full resolution (default auto)")
     p.add_argument("--max-size", type=int, default=1600, metavar="PX",
                    help="longest image side after downscaling (default 1600; 0 = full size)")
-    p.add_argument("--features", default="sift", help="sift|orb|akaze (default sift)")
-    p.add_argument("--max-features", type=int, default=2000,
-                   help="features per image (default 2000)")
+    add_feature_options(p)
     p.add_argument("--export-db", action="store_true",
                    help="also write the matches as a COLMAP database (run folder/database.db): "
                         "matches table = every link, two-view geometries = kept links")
@@ -88,276 +42,18 @@ def config_from_args(args) -> ImagesConfig:
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
                          f"or 0 for full resolution")
-    if args.max_features < 8:
-        raise InputError(f"--max-features {args.max_features}: at least 8 are needed")
+    method, max_features = feature_options(args)
     return ImagesConfig(directory=args.directory, graph=args.graph, intrinsics=args.intrinsics,
-                        max_size=args.max_size or None, features=args.features,
-                        max_features=args.max_features, fusion=not args.no_fusion,
+                        max_size=args.max_size or None, features=method,
+                        max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
                         threads=args.threads)
 
 
 def run(args) -> int:
+    from pipeline.images import run_images
+
     out = run_images(config_from_args(args))
     print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd"
           f"{', database.db' if args.export_db else ''})")
     return 0
-
-
-# ------------------------------------------------------------------------------------ the run
-
-def _posed(views: list[View], poses: dict) -> list[View]:
-    """Copies of ``views`` with ``R, t`` (and the refined ``K``) of the registered ones."""
-    out = []
-    for v in views:
-        if v.name in poses:
-            R, t, K = poses[v.name]
-            out.append(dataclasses.replace(v, R=R, t=t, K=K))
-        else:
-            out.append(v)
-    return out
-
-
-def _fuse_registered(cleaning, views: list[View], features, links: Links, comm_edges,
-                     mapping, timer: StageTimer) -> None:
-    """Fusion (Montijano et al., dynamic voting) among the robots whose pose is known.
-
-    Real images have no poses; the reconstruction before cleaning gives them (and refines
-    guessed focal lengths). A robot whose image it did not register cannot form a local
-    landmark estimate, so it takes no part: fusion runs on the registered cameras, their kept
-    links and the comm edges between them (like a crashed robot). Links to an unregistered
-    camera are left as the consistency stage left them. Cut links get reason
-    ``fusion-outlier``; ``cleaning`` is updated in place.
-    """
-    from pipeline import colmap
-    from pipeline.fusion.landmarks import fuse_tracks
-
-    poses = colmap.registered_poses(mapping.reconstruction)
-    reg = np.array([k for k, v in enumerate(views) if v.name in poses], dtype=np.int64)
-    if len(reg) < 2:
-        cleaning.fusion_stats = {"enabled": False, "reason": (
-            f"camera poses unknown: the reconstruction before cleaning registered "
-            f"{len(reg)} of {len(views)} images")}
-        return
-    new = np.full(len(views), -1, dtype=np.int64)
-    new[reg] = np.arange(len(reg))
-    kept_idx = np.flatnonzero(cleaning.kept)
-    ci, cj = new[links.cam_i[kept_idx]], new[links.cam_j[kept_idx]]
-    sub_idx = kept_idx[(ci >= 0) & (cj >= 0)]
-    sub_links = Links(new[links.cam_i[sub_idx]], links.feat_i[sub_idx],
-                      new[links.cam_j[sub_idx]], links.feat_j[sub_idx], links.quality[sub_idx])
-    e = new[np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)]
-    sub_edges = e[(e >= 0).all(axis=1)]
-    posed = _posed(views, poses)
-    with timer.stage("fusion", f"robust distributed fusion by dynamic voting, {len(reg)} of "
-                               f"{len(views)} cameras posed"):
-        fr = fuse_tracks([posed[k] for k in reg], [features[k] for k in reg], sub_links,
-                         sub_edges)
-        cut = sub_idx[np.asarray(fr.cut_links, dtype=bool)]
-        cleaning.status[cut] = "deleted"
-        cleaning.reason[cut] = "fusion-outlier"
-        cleaning.round[cut] = int(fr.stats.get("rounds", -1))
-        cleaning.fused_points = np.asarray(fr.points)
-        cleaning.fusion_stats = {
-            "enabled": True, "poses_from": "reconstruction before cleaning",
-            "cameras": int(len(reg)),
-            "cameras_without_pose": [v.name for v in views if v.name not in poses],
-            **dict(fr.stats), "observations_cut_links": int(len(cut))}
-        timer.note(f"{len(cut)} links cut as fusion outliers")
-
-
-def _points_and_tracks(mapping, views: list[View], features, kept: Links):
-    """3D points of the reconstruction and, for each, the association set of its first
-    observation in the kept association graph (``-1`` when that feature is in none)."""
-    from pipeline.association import AssociationGraph
-
-    rec = mapping.reconstruction
-    if rec is None or rec.num_points3D() == 0:
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    cam_of_name = {v.name: k for k, v in enumerate(views)}
-    cam_of_image = {i: cam_of_name[rec.images[i].name] for i in rec.reg_image_ids()}
-    m = np.array([len(f) for f in features], dtype=np.int64)
-    graph = AssociationGraph(m, kept)
-    labels = graph.components()
-    xyz, first = [], []
-    for p in rec.points3D.values():
-        el = p.track.elements[0]
-        xyz.append(p.xyz)
-        first.append(graph.offsets[cam_of_image[el.image_id]] + el.point2D_idx)
-    first = np.asarray(first, dtype=np.int64)
-    sizes = np.bincount(labels, minlength=labels.max() + 1 if labels.size else 0)
-    tracks = np.where(sizes[labels[first]] >= 2, labels[first], -1)
-    return np.asarray(xyz, dtype=np.float64).reshape(-1, 3), tracks
-
-
-def _fusion_section(cleaning) -> dict:
-    cut = cleaning.reason == "fusion-outlier"
-    return {**dict(cleaning.fusion_stats), "cut_links": int(cut.sum())}
-
-
-def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
-    """Run every stage on a folder of photographs and write the run folder; return its path.
-
-    Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
-    consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
-    reconstruction after cleaning → outputs (report.json, links.csv with ``truth`` empty,
-    sparse/ = the reconstruction after cleaning, recording.rrd, database.db with
-    ``export_db``).
-
-    Raises
-    ------
-    InputError
-        Bad folder, images, intrinsics or graph (see :func:`pipeline.io.load_folder` and
-        :func:`pipeline.io.comm_graph`), or a bad feature method.
-    """
-    from pipeline import colmap
-    from pipeline.io import comm_graph, load_folder
-    from pipeline.linkscsv import write_links_csv
-    from pipeline.run import (
-        association_counts,
-        clean_association,
-        extract_and_match,
-        report_markdown,
-        resolution_section,
-        versions,
-    )
-
-    timer = timer or StageTimer()
-    out = config.out_dir()
-    with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
-        intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
-            else Path(config.intrinsics)
-        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
-        names = [v.name for v in views]
-        comm_edges = comm_graph(config.graph, names)
-        sources = sorted({v.intrinsics_source for v in views})
-        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; "
-                   f"graph {config.graph}: {len(comm_edges)} edges")
-    feats, matches, links = extract_and_match(views, comm_edges, config.features,
-                                              config.max_features, timer)
-    m = np.array([len(f) for f in feats], dtype=np.int64)
-
-    with tempfile.TemporaryDirectory(prefix="run-images-") as work:
-        work = Path(work)
-        # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed
-        # focal lengths are refined
-        fixed = [v.name for v in views if colmap.calibrated(v)]
-        with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links"):
-            db_before = colmap.write_database(work / "before.db", views, feats, links)
-            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
-                                                    fixed_intrinsics=fixed)
-            timer.note(_mapping_note(map_before))
-        cleaning = clean_association(views, feats, comm_edges, links, fusion=False, timer=timer)
-        if not config.fusion:
-            cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
-        elif importlib.util.find_spec("pipeline.fusion.landmarks") is None:
-            cleaning.fusion_stats = {"enabled": False,
-                                     "reason": "fusion stage (pipeline.fusion.landmarks) not "
-                                               "available in this build"}
-        else:
-            _fuse_registered(cleaning, views, feats, links, comm_edges, map_before, timer)
-        kept = cleaning.kept
-        kept_links = links.subset(kept)
-        with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
-            db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
-            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads,
-                                                   fixed_intrinsics=fixed)
-            timer.note(_mapping_note(map_after))
-
-        from pipeline.consistency import centralized
-
-        # centralized baselines on the same links, for comparison only (never used by robots)
-        baselines = {}
-        for name, keep_mask in centralized.baselines(m, links).items():
-            keep_mask = np.asarray(keep_mask, dtype=bool)
-            baselines[name] = {**association_counts(m, links.subset(keep_mask), None, None),
-                               "deleted_links": int((~keep_mask).sum())}
-        report = {
-            "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
-            "n_cameras": len(views),
-            "comm_edges": comm_edges.tolist(),
-            "features_per_camera": m.tolist(),
-            "before": association_counts(m, links, None, None),
-            "after": association_counts(m, kept_links, None, None),
-            "resolution": resolution_section(cleaning, None),
-            "fusion": _fusion_section(cleaning),
-            "triangulation": {"method": "pycolmap incremental mapping from the matches "
-                                        "(two-view geometries = links before / kept links after)",
-                              "before": map_before.summary(), "after": map_after.summary()},
-            "baselines": baselines,
-            "matching": {"edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)),
-                                    "putative": int(p.n_putative), "reason": p.reason}
-                                   for p in matches]},
-            "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
-                        "intrinsics_source": v.intrinsics_source,
-                        "intrinsics_known": bool(v.intrinsics_known)} for v in views],
-            "versions": versions(),
-            "config": {**asdict(config), "out": str(out)},
-        }
-        if cleaning.fused_points is not None:
-            report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
-        md = report_markdown(report) + _mapping_markdown(map_before, map_after)
-
-        with timer.stage("write", str(out)):
-            with atomic_run_folder(out) as tmp:
-                write_links_csv(tmp / "links.csv", links, cleaning.status, cleaning.reason,
-                                cleaning.round, np.full(len(links), -1, dtype=np.int8))
-                sparse = tmp / "sparse"
-                sparse.mkdir()
-                rec_after = map_after.reconstruction
-                if rec_after is None:
-                    import pycolmap
-                    rec_after = pycolmap.Reconstruction()
-                rec_after.write(sparse)
-                if config.export_db:
-                    shutil.copyfile(db_after, tmp / "database.db")
-                if config.rerun:
-                    _write_recording(tmp / "recording.rrd", views, feats, links, cleaning,
-                                     map_before, map_after, kept_links, md)
-                report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
-                write_json_atomic(tmp / "report.json", report)
-    print(md)
-    return out
-
-
-def _write_recording(path: Path, views, feats, links: Links, cleaning, map_before, mapping,
-                     kept_links, md: str) -> None:
-    from pipeline import colmap
-    from pipeline.types import RunRecord
-    from viz.rerun_log import log_run
-
-    # cameras registered after cleaning are drawn with their pose and camera in that
-    # reconstruction; fused points, estimated in the frame of the reconstruction before
-    # cleaning, are moved into it by the similarity between the two
-    drawn = _posed(views, colmap.registered_poses(mapping.reconstruction))
-    fused = None
-    if cleaning.fused_points is not None and len(cleaning.fused_points):
-        M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
-        if M is not None:
-            fused = np.asarray(cleaning.fused_points, dtype=np.float64) @ M[:, :3].T + M[:, 3]
-    points, tracks = _points_and_tracks(mapping, views, feats, kept_links)
-    record = RunRecord(
-        views=drawn, features=feats, links=links,
-        status=cleaning.status.astype(str), reason=cleaning.reason.astype(str),
-        round=cleaning.round, iteration=cleaning.iteration,
-        conflictive_before=cleaning.conflictive_before,
-        truth=np.full(len(links), -1, dtype=np.int8),
-        points=points, point_tracks=tracks, gt_points=None,
-        fused_points=fused, report_markdown=md)
-    log_run(path, record)
-
-
-def _mapping_note(mapping) -> str:
-    return (f"{mapping.registered_images} of {mapping.images} images registered, "
-            f"{mapping.points} points, track length {mapping.mean_track_length:.2f}, "
-            f"reprojection error {mapping.mean_reprojection_error:.3f} px")
-
-
-def _mapping_markdown(before, after) -> str:
-    rows = [("Registered images", "registered_images"), ("Points", "points"),
-            ("Mean track length", "mean_track_length"),
-            ("Mean reprojection error [px]", "mean_reprojection_error")]
-    b, a = before.summary(), after.summary()
-    lines = ["", "| Reconstruction | before | after |", "|---|---:|---:|"]
-    lines += [f"| {label} | {b[key]} | {a[key]} |" for label, key in rows]
-    return "\n".join(lines) + "\n"

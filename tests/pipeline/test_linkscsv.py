@@ -12,7 +12,7 @@ from pipeline.linkscsv import (
     read_run_links_csv,
     write_links_csv,
 )
-from pipeline.types import Links
+from pipeline.types import LinkLedger, Links
 
 
 def write(tmp_path, text, name="in.csv"):
@@ -76,19 +76,21 @@ def test_missing_file(tmp_path):
 def test_run_links_csv_round_trip_and_atomic(tmp_path):
     links = Links([0, 0, 1], [0, 1, 2], [1, 2, 2], [3, 4, 5])
     out = tmp_path / "run" / "links.csv"
-    write_links_csv(out, links, np.array(["kept", "deleted", "kept"], dtype=object),
-                    ["", "resolution", ""], [-1, 2, -1], np.array([1, 0, -1], dtype=np.int8))
+    write_links_csv(out, LinkLedger(links, np.array(["kept", "deleted", "kept"], dtype=object),
+                                    ["", "resolution", ""], [-1, 2, -1], [-1, 1, -1],
+                                    ["", "b", ""], np.array([1, 0, -1], dtype=np.int8)))
     lines = out.read_text().splitlines()
     assert lines[0] == ",".join(RUN_LINK_COLUMNS)
     assert lines[1:] == ["0,0,1,3,kept,,,1", "0,1,2,4,deleted,resolution,2,0", "1,2,2,5,kept,,,"]
     back = read_run_links_csv(out)
-    assert back["links"].feat_j.tolist() == [3, 4, 5]
-    assert back["round"].tolist() == [-1, 2, -1] and back["truth"].tolist() == [1, 0, -1]
-    assert back["status"].tolist() == ["kept", "deleted", "kept"]
+    assert back.links.feat_j.tolist() == [3, 4, 5]
+    assert back.round.tolist() == [-1, 2, -1] and back.truth.tolist() == [1, 0, -1]
+    assert back.status.tolist() == ["kept", "deleted", "kept"]
     assert [p.name for p in out.parent.iterdir()] == ["links.csv"]  # no temp file left
     with pytest.raises(ValueError, match="status"):
-        write_links_csv(out, links, ["kept", "gone", "kept"], ["", "", ""], [-1, -1, -1])
-    assert read_run_links_csv(out)["status"].tolist() == ["kept", "deleted", "kept"]  # intact
+        write_links_csv(out, LinkLedger(links, ["kept", "gone", "kept"], ["", "", ""],
+                                        [-1, -1, -1], [-1, -1, -1], ["", "", ""]))
+    assert read_run_links_csv(out).status.tolist() == ["kept", "deleted", "kept"]  # intact
 
 
 def test_comm_graph_csv(tmp_path):

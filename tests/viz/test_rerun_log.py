@@ -7,12 +7,11 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from pipeline.types import Features, Links, RunRecord, View
+from pipeline.types import Features, LinkLedger, Links, RunRecord, View
+from viz.recording_reader import count_strips, entity_paths
 from viz.rerun_log import (
     LINK_COLORS,
     camera_entity,
-    count_strips,
-    entity_paths,
     keypoint_status,
     link_endpoints_3d,
     log_run,
@@ -74,11 +73,12 @@ def make_record(posed: bool = True, n_cams: int = 3, size=(W, H)) -> RunRecord:
     col = list(zip(*rows, strict=True))
     links = Links(col[0], col[1], col[2], col[3])
     L = len(links)
+    ledger = LinkLedger(links, status=np.array(col[4]), reason=np.array(col[5]),
+                        iteration=np.array(col[6]), round=np.array(col[7]),
+                        case=np.full(L, ""), truth=np.ones(L, np.int8),
+                        conflictive_before=np.array(col[8]))
     return RunRecord(
-        views=views, features=feats, links=links,
-        status=np.array(col[4]), reason=np.array(col[5]),
-        iteration=np.array(col[6]), round=np.array(col[7]),
-        conflictive_before=np.array(col[8]), truth=np.ones(L, np.int8),
+        views=views, features=feats, ledger=ledger,
         points=X[:6], point_tracks=np.arange(6), gt_points=X[:6] + 0.01,
         fused_points=None, report_markdown="| metric | value |\n|---|---|\n| deleted | 3 |",
     )
@@ -118,8 +118,8 @@ def test_entities_present(recording):
 def test_one_strip_per_link(recording):
     path, record = recording
     assert count_strips(path, "world/links/deleted") == N_DELETED == 3
-    assert count_strips(path, "world/links/kept") == len(record.links) - N_DELETED
-    assert count_strips(path, "/world/links/replay") == len(record.links)
+    assert count_strips(path, "world/links/kept") == len(record.ledger.links) - N_DELETED
+    assert count_strips(path, "/world/links/replay") == len(record.ledger.links)
     assert count_strips(path, "world/links/absent") == 0
 
 
@@ -161,8 +161,8 @@ def test_strip_endpoints_lie_on_keypoint_rays():
     record = make_record()
     depth = 0.7
     ends = link_endpoints_3d(record, depth)
-    assert ends.shape == (len(record.links), 2, 3)
-    lk = record.links
+    assert ends.shape == (len(record.ledger.links), 2, 3)
+    lk = record.ledger.links
     for side, (cam, feat) in enumerate(((lk.cam_i, lk.feat_i), (lk.cam_j, lk.feat_j))):
         for k in range(len(lk)):
             v = record.views[cam[k]]
@@ -178,7 +178,7 @@ def test_stored_strips_match_geometry(recording):
     d = chunk.to_record_batch().to_pydict()
     strips = np.array(d["LineStrips3D:strips"][-1])
     assert d["LineStrips3D:labels"][-1][0] == "1:5–2:5 (good) cut by fusion-outlier"
-    deleted = record.status == "deleted"
+    deleted = record.ledger.status == "deleted"
     np.testing.assert_allclose(strips, link_endpoints_3d(record, 0.5)[deleted], atol=1e-5)
 
 
@@ -187,9 +187,9 @@ def test_replay_order_and_final_colours(recording):
     step, keys = replay_steps(record)
     # Resolution before fusion; within resolution by (iteration, round).
     assert keys == [("resolution", 0, 1), ("resolution", 0, 2), ("fusion-outlier", -1, 0)]
-    deleted = record.status == "deleted"
+    deleted = record.ledger.status == "deleted"
     assert (step[~deleted] == len(keys) + 1).all()
-    assert step[(record.reason == "resolution") & (record.round == 1)].tolist() == [1]
+    assert step[(record.ledger.reason == "resolution") & (record.ledger.round == 1)].tolist() == [1]
 
     rows = {}
     for chunk in _chunks(path, "/world/links/replay", static=False):
@@ -211,8 +211,8 @@ def test_graph_shows_conflictive_sets_and_cuts(recording):
     (static,) = _chunks(path, "/graph", static=True)
     d = static.to_record_batch().to_pydict()
     nodes, edges = d["GraphNodes:node_ids"][0], d["GraphEdges:edges"][0]
-    conf = record.conflictive_before
-    cut = conf & (record.status == "deleted")
+    conf = record.ledger.conflictive_before
+    cut = conf & (record.ledger.status == "deleted")
     assert {"0:10", "0:11", "2:10", "0:12", "0:13", "1:12"} <= set(nodes)
     markers = [n for n in nodes if n.startswith("cut:")]
     assert sorted(markers) == sorted(f"cut:{k}" for k in np.flatnonzero(cut))
@@ -276,8 +276,8 @@ def test_camera_without_pose_among_posed_ones(tmp_path):
     paths = set(entity_paths(path))
     assert {"/world/cam_00", "/images/cam_02/image", "/graph"} <= paths
     assert "/world/cam_02" not in paths
-    both_posed = (record.links.cam_j < 2)
-    deleted = record.status == "deleted"
+    both_posed = (record.ledger.links.cam_j < 2)
+    deleted = record.ledger.status == "deleted"
     assert count_strips(path, "world/links/deleted") == (deleted & both_posed).sum() == 1
     assert count_strips(path, "world/links/kept") == (~deleted & both_posed).sum()
     ends = link_endpoints_3d(record, 1.0)
@@ -287,10 +287,8 @@ def test_camera_without_pose_among_posed_ones(tmp_path):
 def test_no_links_and_a_camera_without_features(tmp_path):
     record = make_record()
     z = np.zeros(0, np.int64)
-    record.links = Links(z, z, z, z)
-    record.status = record.reason = np.zeros(0, str)
-    record.round = record.iteration = z
-    record.truth, record.conflictive_before = np.zeros(0, np.int8), np.zeros(0, bool)
+    record.ledger = LinkLedger(Links(z, z, z, z), np.zeros(0, str), np.zeros(0, str), z, z,
+                               np.zeros(0, str), np.zeros(0, np.int8), np.zeros(0, bool))
     record.features[1] = Features(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32),
                                   np.zeros(0, np.float32), "sift")
     path = log_run(tmp_path / "empty.rrd", record)
@@ -303,7 +301,7 @@ def test_no_links_and_a_camera_without_features(tmp_path):
 
 def test_failed_write_leaves_no_file(tmp_path):
     record = make_record()
-    record.status = record.status[:-1]
+    record.ledger.status = record.ledger.status[:-1]
     with pytest.raises(ValueError, match="status"):
         log_run(tmp_path / "bad.rrd", record)
     assert list(tmp_path.iterdir()) == []

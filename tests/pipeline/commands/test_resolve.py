@@ -22,12 +22,12 @@ def test_round_trip_fig1(tmp_path, capsys):
     assert "conflictive sets: 1 before, 0 after" in printed and "deleted: 1 links" in printed
     back = read_run_links_csv(out)
     # every input row once, in input order (the 4th row normalised to cam_i < cam_j)
-    assert back["links"].cam_i.tolist() == [0, 0, 1, 2]
-    assert back["status"].tolist() == ["kept", "deleted", "kept", "kept"]
-    assert back["reason"].tolist() == ["", "resolution", "", ""]
-    assert back["round"][1] >= 1 and (back["truth"] == -1).all()
-    kept = back["links"].subset(back["status"] == "kept")
-    m = features_per_camera_for(back["links"])
+    assert back.links.cam_i.tolist() == [0, 0, 1, 2]
+    assert back.status.tolist() == ["kept", "deleted", "kept", "kept"]
+    assert back.reason.tolist() == ["", "resolution", "", ""]
+    assert back.round[1] >= 1 and (back.truth == -1).all()
+    kept = back.links.subset(back.status == "kept")
+    m = features_per_camera_for(back.links)
     assert count_conflicts(AssociationGraph(m, kept)).conflictive_sets == 0
     assert (tmp_path / "r.json").is_file()
     assert src.read_text() == FIG1  # input untouched
@@ -40,7 +40,7 @@ def test_comm_graph_file(tmp_path):
     g.write_text("0,1\n1,2\n2,3\n0,3\n0,2\n3,4\n")
     out = tmp_path / "out.csv"
     assert main(["resolve", "--links", str(src), "--out", str(out), "--comm-graph", str(g)]) == 0
-    assert (read_run_links_csv(out)["status"] == "deleted").sum() == 1
+    assert (read_run_links_csv(out).status == "deleted").sum() == 1
 
 
 @pytest.mark.parametrize("text, graph, message", [
@@ -80,5 +80,5 @@ def test_header_only_file(tmp_path):
     src.write_text("cam_i,feat_i,cam_j,feat_j\n")
     out = tmp_path / "out.csv"
     assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
-    assert len(read_run_links_csv(out)["links"]) == 0
-    assert np.array_equal(read_run_links_csv(out)["round"], np.zeros(0))
+    assert len(read_run_links_csv(out).links) == 0
+    assert np.array_equal(read_run_links_csv(out).round, np.zeros(0))

@@ -76,7 +76,7 @@ def test_sparse_model_loads(small_run):
 
 
 def test_recording_holds_kept_and_deleted_links(small_run):
-    from viz.rerun_log import count_strips
+    from viz.recording_reader import count_strips
 
     out, report, rows = small_run
     deleted = sum(r["status"] == "deleted" for r in rows)
