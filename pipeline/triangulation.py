@@ -1,4 +1,4 @@
-"""pycolmap check of the cleaned tracks with known camera poses (issue: run-formation).
+"""pycolmap check of the cleaned tracks with known camera poses.
 
 Every track (association set: connected component of the links with >= 2 features) is
 triangulated robustly with ``pycolmap.estimate_triangulation`` (LO-RANSAC over the track's
@@ -7,8 +7,8 @@ tell how geometrically sound an association is: a clean track triangulates with 
 observations as inliers; a track that chains two different surface points loses observations
 or fails.
 
-All pycolmap calls for known-pose reconstructions live here; database and incremental mapping
-calls live in :mod:`pipeline.colmap`.
+The pycolmap calls themselves go through the adapter :mod:`pipeline.colmap`
+(:func:`~pipeline.colmap.triangulate_known_poses`, :func:`~pipeline.colmap.write_points_model`).
 """
 
 from __future__ import annotations
@@ -17,19 +17,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
+from pipeline import colmap
 from pipeline.association import association_sets
 from pipeline.types import Features, Links, View
 
 __all__ = ["TriangulationOptions", "TrackTriangulation", "triangulate_tracks",
-           "build_reconstruction", "write_reconstruction", "medoid"]
-
-pycolmap.logging.minloglevel = 2
-
-# COLMAP's pixel convention puts the origin at the top-left corner of the top-left pixel;
-# OpenCV's at its centre (DESIGN.md conventions).
-COLMAP_PIXEL_SHIFT = 0.5
+           "write_reconstruction", "medoid"]
 
 
 @dataclass
@@ -94,21 +88,6 @@ class TrackTriangulation:
         }
 
 
-def _camera(view: View, camera_id: int) -> pycolmap.Camera:
-    w, h = view.size
-    K = view.K
-    return pycolmap.Camera(model="PINHOLE", width=w, height=h, camera_id=camera_id,
-                           params=[K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_SHIFT,
-                                   K[1, 2] + COLMAP_PIXEL_SHIFT])
-
-
-def _pose(view: View) -> pycolmap.Rigid3d:
-    if view.R is None or view.t is None:
-        raise ValueError(f"view {view.name!r} has no pose; known-pose triangulation needs R and t")
-    return pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(view.R, dtype=np.float64)),
-                            np.asarray(view.t, dtype=np.float64).reshape(3))
-
-
 def medoid(points: np.ndarray) -> np.ndarray:
     """Point of ``points`` (k,3) with least summed distance to the others (nan rows ignored)."""
     p = points[np.isfinite(points).all(axis=1)]
@@ -148,33 +127,26 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
     all_gt = np.concatenate(gt_points).astype(np.float64) if gt_points is not None and offsets[-1] else None
     track_of_feature, tracks = association_sets(m_per, links)
 
-    cameras = [_camera(v, k + 1) for k, v in enumerate(views)]
-    poses = [_pose(v) for v in views]
-    opts = pycolmap.EstimateTriangulationOptions()
-    opts.min_tri_angle = float(np.deg2rad(options.min_tri_angle_deg))
-    opts.residual_type = pycolmap.TriangulationResidualType.REPROJECTION_ERROR
-    opts.ransac.max_error = float(options.max_error_px)
-    opts.ransac.random_seed = int(options.seed)
+    solved = colmap.triangulate_known_poses(
+        views, [(cam_of[feats], all_kp[feats]) for feats in tracks],
+        max_error_px=options.max_error_px, min_tri_angle_deg=options.min_tri_angle_deg,
+        seed=options.seed)
 
     T = len(tracks)
     xyz = np.full((T, 3), np.nan)
     ok = np.zeros(T, dtype=bool)
     inliers, errors = [], []
     gt_error = np.full(T, np.nan)
-    for k, feats in enumerate(tracks):
-        cams = cam_of[feats]
-        pts = all_kp[feats] + COLMAP_PIXEL_SHIFT
-        res = pycolmap.estimate_triangulation(pts, [poses[c] for c in cams],
-                                              [cameras[c] for c in cams], opts)
+    for k, (feats, res) in enumerate(zip(tracks, solved, strict=True)):
         if res is None:
             inliers.append(np.zeros(len(feats), dtype=bool))
             errors.append(np.full(len(feats), np.nan))
             continue
-        X = np.asarray(res["xyz"], dtype=np.float64).reshape(3)
+        X, inl = res
         xyz[k] = X
         ok[k] = True
-        inliers.append(np.asarray(res["inliers"], dtype=bool).reshape(-1))
-        errors.append(_reprojection_errors(X, views, cams, all_kp[feats]))
+        inliers.append(inl)
+        errors.append(_reprojection_errors(X, views, cam_of[feats], all_kp[feats]))
         if all_gt is not None:
             gt_error[k] = float(np.linalg.norm(X - medoid(all_gt[feats])))
     return TrackTriangulation(track_of_feature, tracks, xyz, ok, inliers, errors, gt_error)
@@ -190,29 +162,17 @@ def _reprojection_errors(X: np.ndarray, views: list[View], cams: np.ndarray,
     return out
 
 
-def build_reconstruction(views: list[View], features: list[Features]) -> pycolmap.Reconstruction:
-    """A ``pycolmap.Reconstruction`` with one PINHOLE camera, rig and frame per view and its
-    keypoints (shifted to COLMAP's pixel convention). Image ids are ``camera index + 1``."""
-    rec = pycolmap.Reconstruction()
-    for k, (v, f) in enumerate(zip(views, features, strict=True)):
-        cam = _camera(v, k + 1)
-        rec.add_camera_with_trivial_rig(cam)
-        kp = f.keypoints.astype(np.float64) + COLMAP_PIXEL_SHIFT if len(f) else np.zeros((0, 2))
-        image = pycolmap.Image(name=v.name, keypoints=kp, camera_id=k + 1, image_id=k + 1)
-        rec.add_image_with_trivial_frame(image, _pose(v))
-    return rec
-
-
 def write_reconstruction(path: str | Path, views: list[View], features: list[Features],
-                         tri: TrackTriangulation) -> pycolmap.Reconstruction:
+                         tri: TrackTriangulation):
     """Write the triangulated tracks (inlier observations only) as a COLMAP model to ``path``.
 
-    The folder loads back with ``pycolmap.Reconstruction(path)`` and opens in COLMAP.
+    The folder loads back with ``pycolmap.Reconstruction(path)`` and opens in COLMAP; returns
+    the ``pycolmap.Reconstruction`` written (:func:`pipeline.colmap.write_points_model`).
     """
-    rec = build_reconstruction(views, features)
     m_per = np.array([len(f) for f in features], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(m_per)])
     cam_of = np.repeat(np.arange(len(views)), m_per)
+    points = []
     for k, feats in enumerate(tri.track_features):
         if not tri.ok[k]:
             continue
@@ -221,16 +181,10 @@ def write_reconstruction(path: str | Path, views: list[View], features: list[Fea
         if len(np.unique(cams)) < 2 or len(np.unique(cams)) < len(cams):
             # a COLMAP track holds one observation per image at most (a conflictive track)
             continue
-        track = pycolmap.Track()
-        for g, c in zip(keep, cams, strict=True):
-            track.add_element(int(c) + 1, int(g - offsets[c]))
+        elements = [(int(c), int(g - offsets[c])) for g, c in zip(keep, cams, strict=True)]
         color = _color(views, cams[0], features[cams[0]].keypoints[keep[0] - offsets[cams[0]]])
-        rec.add_point3D(tri.xyz[k], track, color)
-    rec.update_point_3d_errors()
-    path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    rec.write(str(path))
-    return rec
+        points.append((tri.xyz[k], elements, color))
+    return colmap.write_points_model(path, views, features, points)
 
 
 def _color(views: list[View], cam: int, xy: np.ndarray) -> np.ndarray:

@@ -73,6 +73,9 @@ _POINT_RADIUS = rr.components.Radius.ui_points(1.5)
 _POINT_COLORS = {"triangulated": (255, 255, 255), "ground_truth": (60, 140, 255),
                  "fused": (230, 60, 230)}
 _CUT_MARKER = "×"
+#: Added to OpenCV pixel coordinates to get Rerun's: Rerun's pixel grid puts the top-left
+#: pixel's centre at (0.5, 0.5), OpenCV's at (0, 0).
+RERUN_PIXEL_OFFSET = 0.5
 
 
 def camera_entity(i: int, posed: bool = True) -> str:
@@ -132,10 +135,9 @@ def _has_pose(view) -> bool:
 
 
 def _pinhole_K(K: np.ndarray) -> np.ndarray:
-    """Rerun's pixel grid puts the top-left pixel's centre at (0.5, 0.5), OpenCV's at (0, 0)."""
+    """``K`` in Rerun's pixel convention (:data:`RERUN_PIXEL_OFFSET`)."""
     K = np.array(K, dtype=np.float64, copy=True)
-    K[0, 2] += 0.5
-    K[1, 2] += 0.5
+    K[:2, 2] += RERUN_PIXEL_OFFSET
     return K
 
 
@@ -471,7 +473,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
             image = np.ascontiguousarray(view.image)
             rec.log(f"{cam}/image", rr.Image(image).compress(jpeg_quality=jpeg_quality),
                     static=True)
-            kp = np.asarray(feats.keypoints, dtype=np.float32).reshape(-1, 2) + 0.5
+            kp = np.asarray(feats.keypoints, dtype=np.float32).reshape(-1, 2) + RERUN_PIXEL_OFFSET
             rec.log(f"{cam}/image/keypoints",
                     rr.Points2D(kp, class_ids=status[off[i]:off[i + 1]],
                                 radii=rr.components.Radius.ui_points(1.5)),

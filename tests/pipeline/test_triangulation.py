@@ -2,11 +2,8 @@ import numpy as np
 import pycolmap
 import pytest
 
-from pipeline.triangulation import (
-    build_reconstruction,
-    triangulate_tracks,
-    write_reconstruction,
-)
+from pipeline.colmap import build_reconstruction
+from pipeline.triangulation import triangulate_tracks, write_reconstruction
 from pipeline.types import Features, Links, View
 
 

@@ -1,10 +1,4 @@
-"""COLMAP databases and incremental mapping: the one adapter for those pycolmap calls.
-
-Every pycolmap *database* and *incremental mapping* call of the project sits here (known-pose
-triangulation lives in :mod:`pipeline.triangulation`), so a pycolmap API change touches one
-file, checked by a write-and-reload test.
-
-What it does for the pipeline (DESIGN.md "Data flow", last stages, real images):
+"""COLMAP databases: write the pipeline's matches into one, read COLMAP's or hloc's back.
 
 - :func:`write_database` — views + features + links as a COLMAP database: cameras, trivial
   rigs and frames (COLMAP >= 3.12), keypoints, the matches table (every link matching
@@ -14,12 +8,6 @@ What it does for the pipeline (DESIGN.md "Data flow", last stages, real images):
   hloc, as the pipeline's :class:`~pipeline.types.Links`.
 - :func:`write_cleaned_database` — a copy of a database with some two-view-geometry inliers
   removed; the input file is never opened for writing.
-- :func:`incremental_mapping` — ``pycolmap.incremental_mapping`` and its figures (registered
-  images, points, mean track length, mean reprojection error).
-
-Pixel convention: the pipeline uses OpenCV's (origin at the centre of the top-left pixel),
-COLMAP the corner of the top-left pixel, so keypoints and principal points get ``+0.5`` on the
-way in and ``-0.5`` on the way out.
 """
 
 from __future__ import annotations
@@ -34,45 +22,14 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.errors import InputError
 from pipeline.types import Features, Links, View
 
-__all__ = [
-    "COLMAP_PIXEL_OFFSET",
-    "DatabaseContents",
-    "MappingSummary",
-    "quiet_colmap",
-    "version",
-    "calibrated",
-    "write_database",
-    "read_database",
-    "write_cleaned_database",
-    "incremental_mapping",
-    "write_model",
-    "read_model",
-    "registered_poses",
-    "similarity_between",
-]
+__all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",
+           "read_database", "write_cleaned_database"]
 
-#: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
-COLMAP_PIXEL_OFFSET = 0.5
 _TVG = pycolmap.TwoViewGeometryConfiguration
-
-
-def version() -> str:
-    """The pycolmap version (for the report's ``versions``)."""
-    return pycolmap.__version__
-
-
-@contextmanager
-def quiet_colmap(level: int = 2):
-    """Silence COLMAP's C++ log below ``level`` (2 = errors only) inside the block."""
-    previous = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = max(previous, level)
-    try:
-        yield
-    finally:
-        pycolmap.logging.minloglevel = previous
 
 
 @contextmanager
@@ -289,7 +246,8 @@ def _xy(keypoints) -> np.ndarray:
     return np.ascontiguousarray(kp[:, :2] - np.float32(COLMAP_PIXEL_OFFSET))
 
 
-def _check_database_file(path: Path) -> None:
+def check_database_file(path: Path) -> None:
+    """InputError unless ``path`` is an existing SQLite file."""
     if not path.is_file():
         raise InputError(f"database {str(path)!r} does not exist")
     with open(path, "rb") as fh:
@@ -315,7 +273,7 @@ def read_database(path: str | Path) -> DatabaseContents:
         geometries (run COLMAP's matcher, or hloc's geometric verification, first).
     """
     path = Path(path)
-    _check_database_file(path)
+    check_database_file(path)
     with tempfile.TemporaryDirectory(prefix="colmap-read-") as tmp:
         copy = Path(tmp) / "read.db"
         shutil.copyfile(path, copy)
@@ -429,146 +387,3 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
             g.inlier_matches = np.ascontiguousarray(m[np.isin(key, kept_key)], dtype=np.uint32)
             db.update_two_view_geometry(id1, id2, g)
     return out_path
-
-
-# ------------------------------------------------------------------------------------- mapping
-
-@dataclass
-class MappingSummary:
-    """Figures of an incremental reconstruction (the largest model when there are several).
-
-    Attributes
-    ----------
-    images : int — images in the database
-    models : int — reconstructions COLMAP produced
-    registered_images : int — images registered in the largest model
-    registered_names : list[str]
-    points : int — 3D points of the largest model
-    observations : int — 2D observations of those points
-    mean_track_length : float — observations per point
-    mean_reprojection_error : float — pixels
-    reconstruction : pycolmap.Reconstruction or None
-    """
-
-    images: int
-    models: int
-    registered_images: int
-    registered_names: list[str]
-    points: int
-    observations: int
-    mean_track_length: float
-    mean_reprojection_error: float
-    reconstruction: object = None
-
-    def summary(self) -> dict:
-        """The figures as a JSON-ready dict (without the reconstruction)."""
-        return {"images": self.images, "models": self.models,
-                "registered_images": self.registered_images,
-                "registered_names": list(self.registered_names), "points": self.points,
-                "observations": self.observations,
-                "mean_track_length": round(float(self.mean_track_length), 4),
-                "mean_reprojection_error": round(float(self.mean_reprojection_error), 4)}
-
-
-def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
-                        output_dir: str | Path | None = None, num_threads: int = -1,
-                        seed: int = 0, fixed_intrinsics=()) -> MappingSummary:
-    """``pycolmap.incremental_mapping`` on a database; figures of the largest model.
-
-    Parameters
-    ----------
-    database_path : database with two-view geometries (e.g. from :func:`write_database`)
-    image_dir : folder of the images, only to colour points; ``""`` skips colours (the
-        pipeline maps downscaled images whose files do not exist at that size)
-    output_dir : where COLMAP writes its models; a temporary folder when None
-    num_threads : COLMAP threads (-1: all cores)
-    seed : COLMAP's random seed, for repeatable figures
-    fixed_intrinsics : iterable of image names whose camera the bundle adjustments keep
-        constant (calibrated cameras: with few views COLMAP otherwise lets the focal length
-        drift far from a known calibration at no cost in reprojection error)
-
-    Returns
-    -------
-    MappingSummary — zeros when no model could be initialised
-    """
-    database_path = Path(database_path)
-    _check_database_file(database_path)
-    options = pycolmap.IncrementalPipelineOptions()
-    options.num_threads = num_threads
-    options.random_seed = seed
-    options.extract_colors = bool(image_dir)
-    with tempfile.TemporaryDirectory(prefix="colmap-map-") as tmp:
-        out = Path(output_dir) if output_dir is not None else Path(tmp)
-        out.mkdir(parents=True, exist_ok=True)
-        with quiet_colmap():
-            with pycolmap.Database.open(database_path) as db:
-                n_images = db.num_images()
-                fixed = set(fixed_intrinsics)
-                options.constant_cameras = {im.camera_id for im in db.read_all_images()
-                                            if im.name in fixed}
-            # COLMAP insists on an existing image folder even when it reads no pixels
-            models = pycolmap.incremental_mapping(database_path, str(image_dir or tmp), out,
-                                                  options)
-    if not models:
-        return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
-    rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
-    rec.update_point_3d_errors()
-    names = sorted(rec.images[i].name for i in rec.reg_image_ids())
-    return MappingSummary(
-        images=n_images, models=len(models), registered_images=rec.num_reg_images(),
-        registered_names=names, points=rec.num_points3D(),
-        observations=int(rec.compute_num_observations()),
-        mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
-        mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
-        reconstruction=rec)
-
-
-def write_model(path: str | Path, reconstruction=None) -> Path:
-    """Write ``reconstruction`` (an empty one when ``None``) as a COLMAP model folder that
-    loads back with :func:`read_model`; the folder is created."""
-    path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    (reconstruction if reconstruction is not None else pycolmap.Reconstruction()).write(path)
-    return path
-
-
-def read_model(path: str | Path):
-    """The ``pycolmap.Reconstruction`` of a COLMAP model folder (e.g. a run's ``sparse/``)."""
-    path = Path(path)
-    if not path.is_dir():
-        raise InputError(f"COLMAP model {str(path)!r}: no such folder")
-    return pycolmap.Reconstruction(str(path))
-
-
-def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """``{image name: (R (3, 3), t (3,), K (3, 3))}`` of the registered images of ``rec``.
-
-    ``R, t`` is ``cam_from_world``; ``K`` is the (possibly refined) camera in the OpenCV pixel
-    convention.
-    """
-    out = {}
-    if rec is None:
-        return out
-    for image_id in rec.reg_image_ids():
-        image = rec.images[image_id]
-        pose = image.cam_from_world()
-        K = np.array(rec.cameras[image.camera_id].calibration_matrix(), dtype=np.float64)
-        K[:2, 2] -= COLMAP_PIXEL_OFFSET
-        out[image.name] = (np.asarray(pose.rotation.matrix(), dtype=np.float64),
-                           np.asarray(pose.translation, dtype=np.float64).reshape(3), K)
-    return out
-
-
-def similarity_between(src, tgt) -> np.ndarray | None:
-    """``tgt_from_src`` similarity ``(3, 4)`` (``x_tgt = M[:, :3] @ x_src + M[:, 3]``) from the
-    projection centres of the images registered in both reconstructions (by name), or None
-    with fewer than three such images. Two reconstructions of one scene have different gauges;
-    this puts points of one into the frame of the other."""
-    a, b = registered_poses(src), registered_poses(tgt)
-    common = sorted(set(a) & set(b))
-    if len(common) < 3:
-        return None
-    src_c = np.stack([-a[k][0].T @ a[k][1] for k in common])  # projection centres
-    tgt_c = np.stack([-b[k][0].T @ b[k][1] for k in common])
-    sim = pycolmap.estimate_sim3d(src_c, tgt_c)
-    return None if sim is None else np.asarray(sim.matrix(), dtype=np.float64)

@@ -1,0 +1,55 @@
+"""The one adapter to pycolmap: every pycolmap call of the pipeline sits in this package, so a
+pycolmap API change touches it alone (checked by write-and-reload tests).
+
+- :mod:`.base` — the pixel offset between OpenCV's and COLMAP's conventions, the log level
+  (quieted inside the adapter's calls only), the version.
+- :mod:`.database` — COLMAP databases: write the pipeline's matches, read COLMAP's or hloc's,
+  write a cleaned copy (``clean-db``).
+- :mod:`.mapping` — incremental mapping and what is read from a reconstruction (poses,
+  similarity between two gauges), model folders.
+- :mod:`.known_poses` — robust triangulation with known poses, models of triangulated tracks
+  (:mod:`pipeline.triangulation`).
+"""
+
+from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, rigid, version
+from pipeline.colmap.database import (
+    DatabaseContents,
+    calibrated,
+    read_database,
+    write_cleaned_database,
+    write_database,
+)
+from pipeline.colmap.known_poses import (
+    build_reconstruction,
+    triangulate_known_poses,
+    write_points_model,
+)
+from pipeline.colmap.mapping import (
+    MappingSummary,
+    incremental_mapping,
+    read_model,
+    registered_poses,
+    similarity_between,
+    write_model,
+)
+
+__all__ = [
+    "COLMAP_PIXEL_OFFSET",
+    "quiet_colmap",
+    "rigid",
+    "version",
+    "DatabaseContents",
+    "calibrated",
+    "read_database",
+    "write_cleaned_database",
+    "write_database",
+    "build_reconstruction",
+    "triangulate_known_poses",
+    "write_points_model",
+    "MappingSummary",
+    "incremental_mapping",
+    "read_model",
+    "registered_poses",
+    "similarity_between",
+    "write_model",
+]

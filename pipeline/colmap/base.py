@@ -1,0 +1,42 @@
+"""What every pycolmap call shares: the pixel convention, the log level, the version.
+
+The pipeline uses OpenCV's pixel convention (origin at the centre of the top-left pixel),
+COLMAP the corner of the top-left pixel (DESIGN.md "Conventions"): keypoints and principal
+points get :data:`COLMAP_PIXEL_OFFSET` added on the way in and subtracted on the way out.
+COLMAP's C++ log is quieted only inside the adapter's calls (:func:`quiet_colmap`), never for
+the whole process.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+import numpy as np
+import pycolmap
+
+__all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid"]
+
+#: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
+COLMAP_PIXEL_OFFSET = 0.5
+
+
+def version() -> str:
+    """The pycolmap version (for the report's ``versions``)."""
+    return pycolmap.__version__
+
+
+@contextmanager
+def quiet_colmap(level: int = 2):
+    """Silence COLMAP's C++ log below ``level`` (2 = errors only) inside the block."""
+    previous = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = max(previous, level)
+    try:
+        yield
+    finally:
+        pycolmap.logging.minloglevel = previous
+
+
+def rigid(R: np.ndarray, t: np.ndarray) -> pycolmap.Rigid3d:
+    """``cam_from_world`` ``(R (3, 3), t (3,))`` as a ``pycolmap.Rigid3d``."""
+    return pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R, dtype=np.float64)),
+                            np.asarray(t, dtype=np.float64).reshape(3))
