@@ -342,9 +342,13 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
 
     Examples
     --------
-    >>> views = load_folder("../shared/data/sceaux_castle", max_size=640)   # doctest: +SKIP
-    >>> views[0].size, views[0].intrinsics_known                            # doctest: +SKIP
-    ((640, 481), True)
+    The copy of the Sceaux castle set kept with the tests (11 photographs and their K.txt):
+
+    >>> import pathlib, pipeline
+    >>> folder = pathlib.Path(pipeline.__file__).parents[1] / "tests/data/sceaux_castle_640"
+    >>> views = load_folder(folder, max_size=320)
+    >>> len(views), views[0].size, views[0].intrinsics_source
+    (11, (320, 240), 'K.txt')
     """
     directory = Path(directory)
     if max_size is not None:

@@ -79,8 +79,14 @@ def atomic_run_folder(out: str | os.PathLike):
 
     Example
     -------
-    >>> with atomic_run_folder("runs/demo") as tmp:   # doctest: +SKIP
-    ...     (tmp / "report.json").write_text("{}")
+    >>> import pathlib, tempfile
+    >>> out = pathlib.Path(tempfile.mkdtemp()) / "demo"
+    >>> with atomic_run_folder(out) as tmp:
+    ...     _ = (tmp / "report.json").write_text("{}")
+    >>> sorted(p.name for p in out.parent.iterdir())  # no temporary folder left
+    ['demo']
+    >>> [p.name for p in out.iterdir()]
+    ['report.json']
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

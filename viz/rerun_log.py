@@ -429,7 +429,9 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     Examples
     --------
     >>> path = log_run(run_dir / "recording.rrd", record)  # doctest: +SKIP
-    >>> count_strips(path, "world/links/deleted") == (record.ledger.status == "deleted").sum()  # doctest: +SKIP
+    >>> from viz.recording_reader import count_strips  # doctest: +SKIP
+    >>> deleted = (record.ledger.status == "deleted").sum()  # doctest: +SKIP
+    >>> count_strips(path, "world/links/deleted") == deleted  # doctest: +SKIP
     True
     """
     _check_record(record)
