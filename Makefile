@@ -30,7 +30,7 @@ bench: $(STAMP)
 	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 bench-voting: $(STAMP)
-	$(PY) bench/voting.py
+	$(PY) bench/voting_table1.py && $(PY) bench/voting_fig23.py && $(PY) bench/voting_pipeline.py
 
 view: $(STAMP)
 	@last=$$(ls -td runs/*/recording.rrd 2>/dev/null | head -n 1); \

@@ -27,6 +27,8 @@ from pipeline.colmap.known_poses import (
 from pipeline.colmap.mapping import (
     MappingSummary,
     incremental_mapping,
+    model_images,
+    model_points,
     read_model,
     registered_poses,
     similarity_between,
@@ -48,6 +50,8 @@ __all__ = [
     "write_points_model",
     "MappingSummary",
     "incremental_mapping",
+    "model_images",
+    "model_points",
     "read_model",
     "registered_poses",
     "similarity_between",

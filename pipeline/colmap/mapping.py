@@ -20,7 +20,7 @@ from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
 
 __all__ = ["MappingSummary", "incremental_mapping", "write_model", "read_model",
-           "registered_poses", "similarity_between"]
+           "model_images", "model_points", "registered_poses", "similarity_between"]
 
 
 @dataclass
@@ -128,6 +128,38 @@ def read_model(path: str | Path):
     if not path.is_dir():
         raise InputError(f"COLMAP model {str(path)!r}: no such folder")
     return pycolmap.Reconstruction(str(path))
+
+
+def model_images(rec) -> dict[str, dict]:
+    """Every image of a reconstruction by name: ``image_id``, ``size`` ``(w, h)``, ``K``
+    (3, 3) and ``keypoints`` (N, 2) in the OpenCV pixel convention, and ``R`` (3, 3), ``t``
+    (3,) ``cam_from_world`` where the image is registered (else ``None``)."""
+    out = {}
+    if rec is None:
+        return out
+    registered = set(rec.reg_image_ids())
+    for image_id, image in rec.images.items():
+        cam = rec.cameras[image.camera_id]
+        K = np.array(cam.calibration_matrix(), dtype=np.float64)
+        K[:2, 2] -= COLMAP_PIXEL_OFFSET
+        kp = np.array([p.xy for p in image.points2D], dtype=np.float64).reshape(-1, 2)
+        R = t = None
+        if image_id in registered:
+            pose = image.cam_from_world()
+            R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+            t = np.asarray(pose.translation, dtype=np.float64).reshape(3)
+        out[image.name] = {"image_id": int(image_id), "size": (int(cam.width), int(cam.height)),
+                           "K": K, "keypoints": kp - COLMAP_PIXEL_OFFSET, "R": R, "t": t}
+    return out
+
+
+def model_points(rec) -> tuple[np.ndarray, np.ndarray]:
+    """``(xyz (P, 3), point ids (P,))`` of the 3D points of a reconstruction."""
+    if rec is None or rec.num_points3D() == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    ids = sorted(rec.points3D)
+    return (np.array([rec.points3D[i].xyz for i in ids], dtype=np.float64).reshape(-1, 3),
+            np.asarray(ids, dtype=np.int64))
 
 
 def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:

@@ -1,14 +1,16 @@
-"""Reproduction of the Monte Carlo of Sec. V (Table I) and of the Figs. 2–3 example.
+"""Reproduction of the Monte Carlo of Sec. V (Table I).
 
 Montijano, Martínez, Sagüés, "Distributed robust data fusion based on dynamic voting".
+The Figs. 2–3 example is :mod:`voting_fig23`, the fusion stage on rendered formations
+:mod:`voting_pipeline`.
 
-    python bench/voting.py                 # 1000 trials, every reading, figure
-    python bench/voting.py --trials 100    # quicker
+    python bench/voting_table1.py                 # 1000 trials, every reading
+    python bench/voting_table1.py --trials 100    # quicker
 
 Writes ``runs/bench-voting/``: ``table.json`` (keys ``ml``, ``static``, ``dynamic`` for the
 best-matching reading, each with ``false_positive_votes``, ``false_negative_votes``,
-``error_mean``, ``error_std``, ``iterations``, ``trials``), ``readings.json`` (every reading),
-``fig2_3.png``.
+``error_mean``, ``error_std``, ``iterations``, ``trials``) and ``readings.json`` (every
+reading).
 
 The setting, as the text gives it
 ---------------------------------
@@ -97,11 +99,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import InputError
 from pipeline.fusion.consensus import (
-    FixedTopology,
     RandomGeometricTopology,
-    graph_diameter,
     ransac_hypotheses,
 )
 from pipeline.fusion.voting import (
@@ -314,221 +313,6 @@ def shape_claims(table: dict) -> list[bool]:
     return [bool(f(table["ml"], table["static"], table["dynamic"])) for _, f in CLAIMS]
 
 
-# --------------------------------------------------------------------------------------------
-# Figs. 2-3
-
-
-def fig23_example(seed: int = 3):
-    """10 robots, 7 inliers, fixed graph, ``c = 1``, 6 hypotheses, Conditions 1–4 hold.
-
-    The observations are drawn (inliers around (3, 5), outliers 8–14 m away) and
-    Conditions 1 and 3 are checked for the squared gate at p = 0.99 (Condition 2 holds for
-    isotropic inlier covariances: every partial ML is then a convex combination); robot
-    positions are redrawn until the communication graph is connected.
-    """
-    rng = np.random.default_rng(seed)
-    n, n_in = 10, 7
-    inl = np.zeros(n, dtype=bool)
-    inl[rng.permutation(n)[:n_in]] = True
-    x = np.empty((n, 2))
-    x[inl] = np.array([3.0, 5.0]) + rng.uniform(-0.6, 0.6, (n_in, 2))
-    ang = rng.uniform(0, 2 * np.pi, n - n_in)
-    x[~inl] = np.array([3.0, 5.0]) + rng.uniform(8, 14, n - n_in)[:, None] * np.stack(
-        [np.cos(ang), np.sin(ang)], 1)
-    s = rng.uniform(0.4, 1.0, n)
-    e2 = rng.uniform(0.5, 1.0, n)
-    a = rng.uniform(0, np.pi, n)
-    R = np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
-    ev = np.stack([s, np.where(inl, s, s * e2)], 1)  # inliers isotropic (Condition 2)
-    cov = R @ (ev[..., None] * np.swapaxes(R, -1, -2))
-    while True:
-        pos = rng.random((n, 2))
-        iu, ju = np.triu_indices(n, 1)
-        keep = ((pos[iu] - pos[ju]) ** 2).sum(1) < 0.45 ** 2
-        edges = np.stack([iu[keep], ju[keep]], 1)
-        try:
-            graph_diameter(edges, n)
-            break
-        except InputError:
-            continue
-    return x, cov, inl, pos, edges
-
-
-def plot_fig23(path: Path, rounds: int = 100, seed: int = 3) -> dict:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Ellipse
-
-    x, cov, inl, pos, edges = fig23_example(seed)
-    n = len(x)
-    thr = gate_threshold(2, 0.99, "squared")
-    info = np.linalg.inv(cov)
-    r = x[inl][:, None] - x[inl][None]
-    cond1 = bool((np.einsum("abi,aij,abj->ab", r, info[inl], r) <= thr).all())
-    far = x[~inl][:, None] - x[inl][None]
-    cond3 = bool((np.einsum("abi,aij,abj->ab", far, info[~inl], far) > thr).all())
-    K = ransac_hypotheses(0.6, 1, SUCCESS)
-    topo = FixedTopology(edges, n)
-    res = dynamic_voting(x, cov, topo, K=K, c=1, p=0.99, gate="squared", rounds=rounds,
-                         rng=seed, history=True)
-    h = int(np.bincount(res.winner[0]).argmax())
-    ml_all = ml_of(x[None], cov[None], np.ones((1, n), bool))[0]
-    ml_in = ml_of(x[None], cov[None], inl[None])[0]
-
-    fig, ax = plt.subplots(2, 3, figsize=(15, 9))
-
-    def ell(a, mu, S, **kw):
-        w, V = np.linalg.eigh(S)
-        ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
-        k = np.sqrt(thr)
-        a.add_patch(Ellipse(mu, 2 * k * np.sqrt(w[1]), 2 * k * np.sqrt(w[0]), angle=ang,
-                            fill=False, **kw))
-
-    a = ax[0, 0]
-    for i, j in edges:
-        a.plot(*pos[[i, j]].T, "k-", lw=0.8)
-    a.plot(*pos[inl].T, "o", color="tab:blue", ms=10, label="inlier robots")
-    a.plot(*pos[~inl].T, "s", color="tab:red", ms=10, label="outlier robots")
-    for i in range(n):
-        a.annotate(str(i), pos[i], textcoords="offset points", xytext=(6, 6))
-    a.set_title("(a) communication network (fixed)")
-    a.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), ncol=2, fontsize=8)
-    a.set_aspect("equal")
-    for a, zoom in ((ax[0, 1], False), (ax[0, 2], True)):
-        for i in range(n):
-            c = "tab:blue" if inl[i] else "tab:red"
-            a.plot(*x[i], "x", color=c, ms=8)
-            ell(a, x[i], cov[i], color=c, ls="-" if inl[i] else "--", lw=0.8)
-        ell(a, ml_all, np.linalg.inv(info.sum(0)), color="k", ls="-.")
-        a.plot(*ml_all, "k+", ms=14, mew=2)
-        a.annotate("ML", ml_all, textcoords="offset points", xytext=(6, -12))
-        a.plot(*ml_in, "g*", ms=14)
-        a.annotate("ML in", ml_in, textcoords="offset points", xytext=(6, 6), color="g")
-        a.set_aspect("equal")
-        if zoom:
-            lo, hi = x[inl].min(0) - 1.5, x[inl].max(0) + 1.5
-            a.set_xlim(lo[0], hi[0])
-            a.set_ylim(lo[1], hi[1])
-            a.set_title("(c) zoom on the inliers")
-        else:
-            a.autoscale_view()
-            a.set_title("(b) observations, χ² ellipses (p = 0.99), ML of all and of inliers")
-    th = res.history["theta"][:, 0, :, h]  # (T+1, N, 2)
-    ok = res.history["valid"][:, 0, :, h]
-    t = np.arange(th.shape[0])
-    for k, a in enumerate(ax[1, :2]):
-        for i in range(n):
-            vals = np.where(ok[:, i], th[:, i, k], np.nan)
-            a.plot(t, vals, color="tab:blue" if inl[i] else "tab:red", lw=0.9)
-        a.axhline(ml_in[k], color="k", ls="--", lw=1.2, label="ML of inliers")
-        a.set_xlabel("iteration t")
-        a.set_title(f"({'ab'[k]}') θ_i(t), coordinate {k + 1}, hypothesis {h}")
-        a.legend(fontsize=8)
-        a.set_ylim(ml_in[k] - 1, ml_in[k] + 1)
-    a = ax[1, 2]
-    v = res.history["v"][:, 0, :, h]
-    for i in range(n):
-        a.plot(t, v[:, i], color="tab:blue" if inl[i] else "tab:red", lw=0.9)
-    a.axhline(inl.mean(), color="k", ls="--", lw=1.2, label=f"|V_in|/N = {inl.mean():.1f}")
-    a.set_xlabel("iteration t")
-    a.set_title(f"(c') v_i(t) of hypothesis {h} (the most voted)")
-    a.legend(fontsize=8)
-    fig.suptitle("Figs. 2-3: dynamic voting, 10 robots (7 inliers), c = 1, "
-                 f"{K} hypotheses, squared gate p = 0.99")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    changes = np.abs(np.diff(res.history["yes"][:, 0, :, h].astype(int), axis=0)).sum(1)
-    last_change = int(np.flatnonzero(changes)[-1] + 1) if changes.any() else 0
-    return dict(path=str(path), ml_all=ml_all.tolist(), ml_in=ml_in.tolist(),
-                winner=h, hypotheses=K, members=np.flatnonzero(res.members[0, :, h]).tolist(),
-                final_theta_max_dev=float(np.abs(res.history["theta"][-1, 0, :, h] - ml_in).max()),
-                final_votes=v[-1].round(6).tolist(), inliers=np.flatnonzero(inl).tolist(),
-                last_opinion_change=last_change, condition1=cond1, condition3=cond3)
-
-
-# --------------------------------------------------------------------------------------------
-# the fusion stage on rendered formations
-
-
-def pipeline_fusion(formations=("a", "b", "c", "d"), seed: int = 0, size=(640, 480)) -> list:
-    """Fusion after resolution on rendered formations, against ground truth and pycolmap.
-
-    For each formation: render → SIFT → matching on comm edges → distributed resolution →
-    :func:`pipeline.fusion.landmarks.fuse_tracks` with each local-estimate mode on the kept
-    links; pycolmap's robust triangulation of the same tracks is the reference. A track's
-    ground-truth point is the medoid of its observations' rendered 3D points.
-    """
-    import data_synth
-    from pipeline.consistency import resolve_conflicts
-    from pipeline.evaluate import link_truth
-    from pipeline.features import extract_all
-    from pipeline.fusion.landmarks import fuse_tracks
-    from pipeline.matching import match_edges
-    from pipeline.triangulation import medoid, triangulate_tracks
-    from pipeline.types import Links
-
-    rows = []
-    for name in formations:
-        f = data_synth.render(name, seed=seed, size=size)
-        feats = extract_all(f.views)
-        links = Links.from_matches(match_edges(feats, f.views, f.comm_edges))
-        m = [len(x) for x in feats]
-        res = resolve_conflicts(m, f.comm_edges, links)
-        kept = links.subset(~np.asarray(res.deleted, dtype=bool))
-        truth = link_truth(f, feats, kept)
-        gt = [data_synth.points_from_keypoints(v, x.keypoints) for v, x in zip(f.views, feats,
-                                                                              strict=True)]
-        gt = [np.where(ok[:, None], P, np.nan) for P, ok in gt]
-        all_gt = np.concatenate(gt)
-        tri = triangulate_tracks(f.views, feats, kept, gt_points=gt)
-        for local in ("robust", "pair", "neighbours"):
-            t0 = time.perf_counter()
-            fr = fuse_tracks(f.views, feats, kept, f.comm_edges, local=local)
-            dt = time.perf_counter() - t0
-            off = np.concatenate([[0], np.cumsum(m)])
-            g = off[fr.obs_cam] + fr.obs_feat
-            gt_pt = np.array([medoid(all_gt[g[fr.obs_track == t]]) for t in fr.track_ids])
-            err = np.linalg.norm(fr.points - gt_pt, axis=1)
-            col = tri.xyz[fr.track_ids]
-            vs_colmap = np.linalg.norm(fr.points - col, axis=1)
-            colmap_err = tri.gt_error[fr.track_ids]
-            cut = fr.cut_links
-            rows.append(dict(
-                formation=name, local=local, links=len(kept), spurious=int((~truth).sum()),
-                links_cut=int(cut.sum()), cut_spurious=int((cut & ~truth).sum()),
-                cut_good=int((cut & truth).sum()), observations=fr.stats["observations"],
-                observations_cut=fr.stats["observations_cut"], tracks=fr.stats["tracks"],
-                tracks_fused=fr.stats["tracks_fused"],
-                fused_err_median=float(np.nanmedian(err)), fused_err_p90=float(np.nanpercentile(err, 90)),
-                colmap_err_median=float(np.nanmedian(colmap_err)),
-                colmap_err_p90=float(np.nanpercentile(colmap_err, 90)),
-                fused_vs_colmap_median=float(np.nanmedian(vs_colmap)),
-                rounds=fr.stats["rounds"], messages=fr.stats["messages"], bytes=fr.stats["bytes"],
-                seconds=dt))
-    return rows
-
-
-def print_pipeline(rows) -> None:
-    print("\nFusion stage after resolution (640x480, seed 0; errors in scene units; GT = medoid "
-          "of the observations' rendered points)")
-    print(f"{'form':5s}{'local':11s}{'links':>6s}{'spur':>5s}{'cut':>5s}{'c.sp':>5s}{'c.gd':>5s}"
-          f"{'obs cut':>8s}{'fused err med/p90':>19s}{'colmap err med/p90':>20s}"
-          f"{'fused-colmap':>13s}{'rounds':>7s}{'msgs':>6s}{'MB':>7s}")
-    for r in rows:
-        print(f"{r['formation']:5s}{r['local']:11s}{r['links']:6d}{r['spurious']:5d}"
-              f"{r['links_cut']:5d}{r['cut_spurious']:5d}{r['cut_good']:5d}{r['observations_cut']:8d}"
-              f"{r['fused_err_median']:10.4f}/{r['fused_err_p90']:.4f}"
-              f"{r['colmap_err_median']:11.4f}/{r['colmap_err_p90']:.4f}"
-              f"{r['fused_vs_colmap_median']:13.4f}{r['rounds']:7d}{r['messages']:6d}"
-              f"{r['bytes'] / 1e6:7.1f}")
-
-
-# --------------------------------------------------------------------------------------------
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -537,8 +321,6 @@ def main(argv=None) -> int:
     ap.add_argument("--radius", type=float, default=0.4,
                     help="communication radius of the per-round random geometric graph")
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
-    ap.add_argument("--no-pipeline", action="store_true",
-                    help="skip the fusion stage on rendered formations a-d")
     args = ap.parse_args(argv)
     if args.trials < 1:
         ap.error(f"--trials must be >= 1, got {args.trials}")
@@ -592,13 +374,6 @@ def main(argv=None) -> int:
             print(f"  ours {m:7s}: FN {fn:.2%} FP {t[m]['false_positive_votes'] / n_out:.1%} "
                   f"(bound {np_bound(fn):.1%})")
 
-    fig = plot_fig23(args.out / "fig2_3.png")
-    print(f"\nFigs. 2-3 example: ML of all {np.round(fig['ml_all'], 2).tolist()}, ML of inliers "
-          f"{np.round(fig['ml_in'], 2).tolist()}; winner h={fig['winner']} (members "
-          f"{fig['members']}), final |θ_i − ML_in| <= {fig['final_theta_max_dev']:.1e}, "
-          f"v_i -> {fig['final_votes'][0]:.3f}; last opinion change at t={fig['last_opinion_change']}")
-    print(f"  Conditions 1 and 3 hold: {fig['condition1']}, {fig['condition3']}; figure: {fig['path']}")
-
     table = {m: {k: best["table"][m][k] for k in ("false_positive_votes", "false_negative_votes",
                                                    "error_mean", "error_std", "iterations",
                                                    "trials")}
@@ -608,14 +383,9 @@ def main(argv=None) -> int:
     table["paper"] = PAPER
     table["details"] = best["table"]
     write_json_atomic(args.out / "table.json", table)
-    write_json_atomic(args.out / "readings.json", dict(rows=rows, fig2_3=fig, radius=args.radius,
+    write_json_atomic(args.out / "readings.json", dict(rows=rows, radius=args.radius,
                                                        seed=args.seed))
     print(f"wrote {args.out / 'table.json'}, {args.out / 'readings.json'}")
-    if not args.no_pipeline:
-        prow = pipeline_fusion()
-        print_pipeline(prow)
-        write_json_atomic(args.out / "pipeline.json", dict(rows=prow))
-        print(f"wrote {args.out / 'pipeline.json'}")
     return 0
 
 

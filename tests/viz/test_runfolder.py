@@ -1,0 +1,51 @@
+"""Tests of viz.runfolder: a saved run folder read back and logged like the run itself."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_rerun_log import N_DELETED, make_record
+
+from pipeline import colmap
+from pipeline.errors import InputError
+from pipeline.linkscsv import write_links_csv
+from viz.recording_reader import count_strips
+from viz.runfolder import log_run_folder, main, read_run_folder
+
+
+def _save(record, folder):
+    folder.mkdir()
+    write_links_csv(folder / "links.csv", record.ledger)
+    colmap.write_model(folder / "sparse",
+                       colmap.build_reconstruction(record.views, record.features))
+    (folder / "report.json").write_text(json.dumps(
+        {"n_cameras": len(record.views),
+         "features_per_camera": [len(f) for f in record.features]}))
+    return folder
+
+
+def test_read_back_what_the_run_wrote(tmp_path):
+    record = make_record()
+    back = read_run_folder(_save(record, tmp_path / "run"))
+    for name in ("status", "reason", "round"):
+        assert getattr(back.ledger, name).tolist() == getattr(record.ledger, name).tolist()
+    assert back.ledger.links.feat_j.tolist() == record.ledger.links.feat_j.tolist()
+    for v, w, f, g in zip(back.views, record.views, back.features, record.features, strict=True):
+        assert v.name == w.name and v.size == w.size
+        np.testing.assert_allclose(v.K, w.K, atol=1e-9)
+        np.testing.assert_allclose(v.R, w.R, atol=1e-9)
+        np.testing.assert_allclose(v.t, w.t, atol=1e-9)
+        np.testing.assert_allclose(f.keypoints, g.keypoints, atol=1e-4)
+
+
+def test_log_a_folder_without_recording(tmp_path, capsys):
+    folder = _save(make_record(), tmp_path / "run")
+    assert main([str(folder)]) == 0
+    path = folder / "recording.rrd"
+    assert count_strips(path, "world/links/deleted") == N_DELETED
+    with pytest.raises(InputError, match="exists"):
+        log_run_folder(folder)  # never replaces the run's own recording
+    assert main([str(tmp_path)]) == 2
+    assert "no report.json" in capsys.readouterr().err

@@ -1,0 +1,130 @@
+"""Log a saved run folder to Rerun: ``python -m viz.runfolder RUN_DIR [--out FILE.rrd]``.
+
+Reads what a run wrote (DESIGN.md "Run outputs": ``links.csv``, ``report.json``, ``sparse/``)
+back into a :class:`~pipeline.types.RunRecord` and logs it with :func:`viz.rerun_log.log_run`,
+e.g. for a run made with ``--no-rerun``. It computes nothing; what the folder does not hold is
+left out of the recording:
+
+- the images (not in a run folder): each camera shows a blank image of its size;
+- the conflictive sets before resolution, and the iteration of each cut (not in
+  ``links.csv``): no conflict graph, and the replay orders cuts by round only;
+- cameras absent from ``sparse/`` (an image the mapper did not register): drawn without a
+  pose, their keypoints unknown;
+- ground-truth and fused points.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.types import Features, RunRecord, View
+
+__all__ = ["read_run_folder", "log_run_folder", "main"]
+
+
+def _camera_names(report: dict, images: dict) -> list[str]:
+    """Camera ``i``'s image name: from the report of a photo run, else (rendered formations,
+    whose ``sparse/`` holds every camera with image id ``i + 1``) in image-id order."""
+    if "images" in report:
+        return [str(im["name"]) for im in report["images"]]
+    return [name for name, _ in sorted(images.items(), key=lambda kv: kv[1]["image_id"])]
+
+
+def read_run_folder(folder: str | Path) -> RunRecord:
+    """The :class:`RunRecord` of a saved run folder (see the module docstring for what a
+    folder does not hold).
+
+    Raises
+    ------
+    InputError
+        A missing ``report.json``, ``links.csv`` or ``sparse/``, or files that disagree (a
+        camera count different from the report's).
+    """
+    from pipeline import colmap
+    from pipeline.linkscsv import read_run_links_csv
+
+    folder = Path(folder)
+    for name in ("report.json", "links.csv", "sparse"):
+        if not (folder / name).exists():
+            raise InputError(f"{folder}: no {name}; not a run folder (DESIGN.md 'Run outputs')")
+    report = json.loads((folder / "report.json").read_text())
+    ledger = read_run_links_csv(folder / "links.csv")
+    rec = colmap.read_model(folder / "sparse")
+    images = colmap.model_images(rec)
+    m = [int(x) for x in report["features_per_camera"]]
+    names = _camera_names(report, images)
+    if len(names) != len(m):
+        raise InputError(f"{folder}: report.json lists {len(m)} cameras but {len(names)} images "
+                         "are known; the folder's files do not belong together")
+    views, feats = [], []
+    for k, name in enumerate(names):
+        im = images.get(name)
+        if im is not None:
+            size, K, R, t, kp = im["size"], im["K"], im["R"], im["t"], im["keypoints"]
+        else:
+            meta = report["images"][k]
+            size, K, R, t = tuple(meta["size"]), np.asarray(meta["K"], float), None, None
+            kp = np.full((m[k], 2), np.nan)
+        if len(kp) != m[k]:
+            raise InputError(f"{folder}: camera {k} ({name}) has {len(kp)} keypoints in sparse/ "
+                             f"but {m[k]} features in report.json")
+        views.append(View(name=name, image=np.full((size[1], size[0]), 128, np.uint8), K=K,
+                          R=R, t=t))
+        feats.append(Features(kp.astype(np.float32), np.zeros((m[k], 0), np.float32),
+                              np.ones(m[k], np.float32), str(report.get("config", {})
+                                                             .get("features", ""))))
+    points, point_ids = colmap.model_points(rec)
+    return RunRecord(views=views, features=feats, ledger=ledger, points=points,
+                     point_tracks=point_ids, report_markdown=_markdown(report))
+
+
+def _markdown(report: dict) -> str:
+    from pipeline.report import report_markdown
+
+    try:
+        return report_markdown(report)
+    except KeyError:  # a report without the before/after/resolution sections
+        return ""
+
+
+def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
+    """Write the Rerun recording of a saved run folder; return its path.
+
+    ``out`` defaults to ``folder/recording.rrd`` when the folder has none (a run made with
+    ``--no-rerun``); an existing recording is never replaced unless named as ``out``.
+    """
+    from viz.rerun_log import log_run
+
+    folder = Path(folder)
+    if out is None:
+        out = folder / "recording.rrd"
+        if out.exists():
+            raise InputError(f"{out} exists; name another file with --out")
+    record = read_run_folder(folder)
+    return log_run(out, record, recording_name=folder.name)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m viz.runfolder",
+                                 description="Log a saved run folder to a Rerun recording.")
+    ap.add_argument("folder", metavar="RUN_DIR", help="run folder (report.json, links.csv, sparse/)")
+    ap.add_argument("--out", default=None, metavar="FILE.rrd",
+                    help="recording to write (default RUN_DIR/recording.rrd if it has none)")
+    args = ap.parse_args(argv)
+    try:
+        path = log_run_folder(args.folder, args.out)
+    except (InputError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
