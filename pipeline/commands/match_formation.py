@@ -9,7 +9,7 @@ import math
 
 from pipeline.commands.options import (
     add_feature_options,
-    add_size_option,
+    add_scene_options,
     feature_options,
     parse_size,
 )
@@ -41,9 +41,8 @@ ROWS = [
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formation", default="d",
                    help="a|b|c|d (comm graphs of increasing cycles) or all (default d)")
-    p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
     add_feature_options(p)
-    add_size_option(p)
+    add_scene_options(p)
     p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default 0.8)")
     p.add_argument("--threshold-px", type=float, default=1.0,
                    help="epipolar RANSAC inlier threshold in pixels (default 1)")

@@ -1,7 +1,7 @@
 """Command-line options shared by several commands, each defined once with one check.
 
-``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.features`) and
-``--size`` (the rendered image size of :mod:`data_synth`).
+``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.features`),
+``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import argparse
 
 from pipeline.errors import InputError
 
-__all__ = ["MIN_FEATURES", "add_feature_options", "add_size_option", "feature_options",
+__all__ = ["MIN_FEATURES", "add_feature_options", "add_scene_options", "feature_options",
            "parse_size"]
 
 #: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
@@ -28,8 +28,10 @@ def add_feature_options(p: argparse.ArgumentParser) -> None:
                    help="features per image (default 2000)")
 
 
-def add_size_option(p: argparse.ArgumentParser) -> None:
-    """``--size WIDTHxHEIGHT`` of rendered images; parse it with :func:`parse_size`."""
+def add_scene_options(p: argparse.ArgumentParser) -> None:
+    """``--seed`` and ``--size WIDTHxHEIGHT`` of rendered formations; parse the size with
+    :func:`parse_size`."""
+    p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
     p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
 
 

@@ -6,7 +6,7 @@ import argparse
 
 from pipeline.commands.options import (
     add_feature_options,
-    add_size_option,
+    add_scene_options,
     feature_options,
     parse_size,
 )
@@ -18,9 +18,8 @@ from pipeline.run import FormationConfig
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formation", default="d",
                    help="formation a|b|c|d (comm graphs of increasing cycles; default d)")
-    p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
     add_feature_options(p)
-    add_size_option(p)
+    add_scene_options(p)
     p.add_argument("--robots", type=int, default=None,
                    help="parametric formation: number of robots (use with --graph)")
     p.add_argument("--graph", default=None,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from pipeline.commands.options import (
     add_feature_options,
-    add_size_option,
+    add_scene_options,
     feature_options,
     parse_size,
 )
@@ -43,9 +43,8 @@ TABLE_ROWS = [
 ]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=0)
     add_feature_options(p)
-    add_size_option(p)
+    add_scene_options(p)
     p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
 
 
@@ -113,7 +112,7 @@ def run(args) -> int:
     table = formations_table(reports)
     md = parent / "formations.md"
     with atomic_file(md) as f:
-        f.write(f"# Formations (a)–(d), seed {args.seed}, {args.features}, {args.size}\n\n"
+        f.write(f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}\n\n"
                 + table)
     write_json_atomic(parent / "formations.json", reports)
     print(table)
