@@ -241,3 +241,18 @@ def test_incremental_mapping_without_verified_pairs_registers_nothing(tmp_path):
     path = colmap.write_database(tmp_path / "few.db", views, feats, Links([0], [1], [1], [2]))
     result = colmap.incremental_mapping(path)
     assert result.registered_images == 0 and result.points == 0
+
+
+def test_colmap_log_quieted_inside_calls_only():
+    """Regression: importing the triangulation module set pycolmap's log level for the
+    whole process; the adapter now quiets COLMAP only inside its calls."""
+    import importlib
+
+    import pipeline.triangulation
+
+    before = pycolmap.logging.minloglevel
+    importlib.reload(pipeline.triangulation)
+    assert pycolmap.logging.minloglevel == before
+    with colmap.quiet_colmap(3):
+        assert pycolmap.logging.minloglevel == max(before, 3)
+    assert pycolmap.logging.minloglevel == before

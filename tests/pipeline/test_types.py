@@ -1,0 +1,42 @@
+"""LinkLedger: the one per-link record of a run."""
+
+import numpy as np
+import pytest
+
+from pipeline.types import LinkLedger, Links
+
+
+def _links():
+    return Links([0, 0, 1], [0, 1, 2], [1, 2, 2], [3, 4, 5])
+
+
+def test_all_kept_then_cut_by_two_stages():
+    ledger = LinkLedger.all_kept(_links())
+    assert ledger.kept.tolist() == [True, True, True] and ledger.good is None
+    ledger.cut(np.array([False, True, False]), "resolution", 2, iteration=1, case="b")
+    ledger.cut(np.array([2]), "fusion-outlier", 7)
+    assert ledger.status.tolist() == ["kept", "deleted", "deleted"]
+    assert ledger.reason.tolist() == ["", "resolution", "fusion-outlier"]
+    assert ledger.round.tolist() == [-1, 2, 7]
+    assert ledger.iteration.tolist() == [-1, 1, -1]  # fusion leaves iteration and case alone
+    assert ledger.case.tolist() == ["", "b", ""]
+    assert len(ledger) == 3 and ledger.kept.tolist() == [True, False, False]
+
+
+def test_truth_codes_give_the_good_links():
+    ledger = LinkLedger.all_kept(_links(), truth=np.array([1, 0, 1]))
+    assert ledger.good.tolist() == [True, False, True]
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("status", ["kept", "gone", "kept"], "status must be 'kept' or 'deleted'"),
+    ("round", [-1, -1], "round has length 2, expected one per link"),
+    ("truth", [1], "truth has length 1"),
+])
+def test_a_malformed_ledger_is_refused(field, value, match):
+    L = 3
+    args = dict(links=_links(), status=["kept"] * L, reason=[""] * L, round=[-1] * L,
+                iteration=[-1] * L, case=[""] * L)
+    args[field] = value
+    with pytest.raises(ValueError, match=match):
+        LinkLedger(**args)
