@@ -1,4 +1,4 @@
-"""Log a saved run folder to Rerun: ``python -m viz.runfolder RUN_DIR [--out FILE.rrd]``.
+"""Log a saved run folder to Rerun: ``python -m viz.saved_run RUN_DIR [--out FILE.rrd]``.
 
 Reads what a run wrote (DESIGN.md "Run outputs": ``links.csv``, ``report.json``, ``sparse/``)
 back into a :class:`~pipeline.types.RunRecord` and logs it with :func:`viz.rerun_log.log_run`,
@@ -111,7 +111,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m viz.runfolder",
+    ap = argparse.ArgumentParser(prog="python -m viz.saved_run",
                                  description="Log a saved run folder to a Rerun recording.")
     ap.add_argument("folder", metavar="RUN_DIR", help="run folder (report.json, links.csv, sparse/)")
     ap.add_argument("--out", default=None, metavar="FILE.rrd",

@@ -1,4 +1,4 @@
-"""Tests of viz.runfolder: a saved run folder read back and logged like the run itself."""
+"""Tests of viz.saved_run: a saved run folder read back and logged like the run itself."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pipeline import colmap
 from pipeline.errors import InputError
 from pipeline.linkscsv import write_links_csv
 from viz.recording_reader import count_strips
-from viz.runfolder import log_run_folder, main, read_run_folder
+from viz.saved_run import log_run_folder, main, read_run_folder
 
 
 def _save(record, folder):
