@@ -9,9 +9,8 @@ cleaning (:mod:`pipeline.colmap`). Writes the run folder of DESIGN.md "Run outpu
 ``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``.
 
 Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
-supplies them (and refines guessed focal lengths). Fusion runs only when it registered every
-image (the fusion stage needs every robot's pose); otherwise it is skipped and the report says
-why.
+supplies them (and refines guessed focal lengths). Fusion runs among the images it registered
+(at least two); the others take no part, like crashed robots, and the report names them.
 """
 
 from __future__ import annotations
@@ -105,25 +104,20 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
 def _points_and_tracks(mapping, views: list[View], features, kept: Links):
     """3D points of the reconstruction and, for each, the association set of its first
     observation in the kept association graph (``-1`` when that feature is in none)."""
+    from pipeline import colmap
     from pipeline.association import AssociationGraph
 
-    rec = mapping.reconstruction
-    if rec is None or rec.num_points3D() == 0:
+    xyz, _, names, point2d = colmap.model_points(mapping.reconstruction)
+    if not len(xyz):
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     cam_of_name = {v.name: k for k, v in enumerate(views)}
-    cam_of_image = {i: cam_of_name[rec.images[i].name] for i in rec.reg_image_ids()}
     m = np.array([len(f) for f in features], dtype=np.int64)
     graph = AssociationGraph(m, kept)
     labels = graph.components()
-    xyz, first = [], []
-    for p in rec.points3D.values():
-        el = p.track.elements[0]
-        xyz.append(p.xyz)
-        first.append(graph.offsets[cam_of_image[el.image_id]] + el.point2D_idx)
-    first = np.asarray(first, dtype=np.int64)
+    first = np.array([graph.offsets[cam_of_name[n]] for n in names], dtype=np.int64) + point2d
     sizes = np.bincount(labels, minlength=labels.max() + 1 if labels.size else 0)
     tracks = np.where(sizes[labels[first]] >= 2, labels[first], -1)
-    return np.asarray(xyz, dtype=np.float64).reshape(-1, 3), tracks
+    return xyz, tracks
 
 
 def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:

@@ -79,7 +79,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         feats.append(Features(kp.astype(np.float32), np.zeros((m[k], 0), np.float32),
                               np.ones(m[k], np.float32), str(report.get("config", {})
                                                              .get("features", ""))))
-    points, point_ids = colmap.model_points(rec)
+    points, point_ids, _, _ = colmap.model_points(rec)
     return RunRecord(views=views, features=feats, ledger=ledger, points=points,
                      point_tracks=point_ids, report_markdown=_markdown(report))
 

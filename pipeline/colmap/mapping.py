@@ -153,13 +153,27 @@ def model_images(rec) -> dict[str, dict]:
     return out
 
 
-def model_points(rec) -> tuple[np.ndarray, np.ndarray]:
-    """``(xyz (P, 3), point ids (P,))`` of the 3D points of a reconstruction."""
+def model_points(rec) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
+    """The 3D points of a reconstruction, in its own order.
+
+    Returns
+    -------
+    xyz : (P, 3) float64
+    point_ids : (P,) int64
+    first_image : list of P str — name of the image of each point's first observation
+    first_keypoint : (P,) int64 — index of that observation's keypoint in its image
+    """
     if rec is None or rec.num_points3D() == 0:
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    ids = sorted(rec.points3D)
-    return (np.array([rec.points3D[i].xyz for i in ids], dtype=np.float64).reshape(-1, 3),
-            np.asarray(ids, dtype=np.int64))
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), [], np.zeros(0, dtype=np.int64)
+    xyz, ids, names, kp = [], [], [], []
+    for point_id, p in rec.points3D.items():
+        el = p.track.elements[0]
+        xyz.append(p.xyz)
+        ids.append(point_id)
+        names.append(rec.images[el.image_id].name)
+        kp.append(el.point2D_idx)
+    return (np.asarray(xyz, dtype=np.float64).reshape(-1, 3), np.asarray(ids, dtype=np.int64),
+            names, np.asarray(kp, dtype=np.int64))
 
 
 def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
