@@ -47,11 +47,11 @@ sys.path.insert(0, str(ROOT / "bench"))
 import numpy as np  # noqa: E402
 from consistency_scale import synthetic_formation  # noqa: E402
 
+from pipeline.commgraph import comm_edges_for  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
 from pipeline.consistency.engine import (  # noqa: E402
     build_robots,
-    comm_edges_for,
     run_detection,
     run_detection_reliable,
 )

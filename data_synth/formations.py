@@ -27,11 +27,10 @@ name  edges                                                      E    cycle rank
 (d)   complete: all 15 pairs                                     15   10
 ====  =========================================================  ===  ==========
 
-For ``n != 6`` robots the same rules apply (``ring``, ring plus chords ``(k, k+2)`` for
-``k ≡ 0 mod 3``, ``ring2``, ``complete``). Parametric graph kinds: ``line``, ``ring``,
-``ring2`` (ring plus 2-hop chords), ``complete`` and ``geometric`` (random geometric graph on
-the robots' positions: an edge where two cameras are closer than a radius drawn from the seed
-between 1.0 and 2.5 times the smallest radius that keeps the graph connected).
+For ``n != 6`` robots the same rules apply (``ring``, ``ring+triangles``, ``ring2``,
+``complete``); parametric kinds ``line``, ``ring``, ``ring2``, ``complete`` and ``geometric``
+(on the robots' positions). The rules live in :mod:`pipeline.commgraph`
+(:func:`~pipeline.commgraph.graph_edges`), shared with the image path.
 """
 
 from __future__ import annotations
@@ -39,11 +38,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse.csgraph import minimum_spanning_tree
-from scipy.spatial.distance import pdist, squareform
 
 from data_synth.scene import FACADE_Y, Scene
-from pipeline.errors import InputError
+from pipeline.commgraph import GRAPH_KINDS, graph_edges
 
 __all__ = [
     "Formation",
@@ -54,8 +51,6 @@ __all__ = [
     "robot_poses",
     "look_at",
 ]
-
-GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
 
 FORMATIONS = {"a": "ring", "b": "ring+triangles", "c": "ring2", "d": "complete"}
 """Formation name -> graph rule (see the module docstring)."""
@@ -148,44 +143,3 @@ def robot_poses(n: int, seed: int, spacing: float = 0.8) -> tuple[np.ndarray, li
                            1.9 + rng.uniform(-0.3, 0.3)])
         poses.append(look_at(centres[i], target))
     return centres, poses
-
-
-def _ring(n: int) -> list:
-    return [(i, i + 1) for i in range(n - 1)] + ([(0, n - 1)] if n > 2 else [])
-
-
-def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
-    """Edges ``(E, 2)`` int64, ``i < j``, sorted, of a communication graph on ``n`` robots.
-
-    Parameters
-    ----------
-    kind : str
-        ``line``, ``ring``, ``ring2``, ``complete``, ``geometric``, or ``ring+triangles``.
-    n : int
-    centres : (n, 3), optional
-        Robot positions, needed for ``geometric``.
-    seed : int
-        Draws the radius of ``geometric``.
-    """
-    if kind == "line":
-        e = [(i, i + 1) for i in range(n - 1)]
-    elif kind == "ring":
-        e = _ring(n)
-    elif kind == "ring+triangles":
-        e = _ring(n) + [(k, k + 2) for k in range(0, n - 2, 3)]
-    elif kind == "ring2":
-        e = _ring(n) + [(i, (i + 2) % n) for i in range(n)] if n > 3 else _ring(n)
-    elif kind == "complete":
-        e = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    elif kind == "geometric":
-        if centres is None:
-            raise InputError("graph 'geometric' needs the robot positions")
-        D = squareform(pdist(centres[:, :2]))
-        r_conn = float(minimum_spanning_tree(D).toarray().max())
-        r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 2.5)
-        ii, jj = np.nonzero(np.triu(D <= r + 1e-9, k=1))
-        e = list(zip(ii.tolist(), jj.tolist(), strict=True))
-    else:
-        raise InputError(f"unknown graph kind {kind!r}; choose one of {', '.join(GRAPH_KINDS)}")
-    a = np.array(sorted({(min(i, j), max(i, j)) for i, j in e if i != j}), np.int64)
-    return a.reshape(-1, 2)

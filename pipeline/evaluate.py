@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
-from pipeline.matching import check_comm_edges
 from pipeline.types import Features, Links
 
 __all__ = ["link_truth", "missing_links", "missing_links_per_edge", "link_counts"]
@@ -90,7 +90,7 @@ def missing_links_per_edge(formation, features: list[Features], links: Links, co
     ----------
     formation, features, links, tol_px : see :func:`link_truth`
     comm_edges : array-like, (E, 2) int — validated with
-        :func:`pipeline.matching.check_comm_edges`
+        :func:`pipeline.commgraph.check_comm_edges`
 
     Returns
     -------

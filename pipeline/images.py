@@ -133,11 +133,12 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
     ------
     InputError
         Bad folder, images, intrinsics or graph (see :func:`pipeline.io.load_folder` and
-        :func:`pipeline.io.comm_graph`), or a bad feature method.
+        :func:`pipeline.commgraph.comm_graph`), or a bad feature method.
     """
     from pipeline import colmap
     from pipeline import report as sections
-    from pipeline.io import comm_graph, load_folder
+    from pipeline.commgraph import comm_graph
+    from pipeline.io import load_folder
     from pipeline.linkscsv import write_links_csv
     from pipeline.run import clean_association, extract_and_match
 

@@ -1,4 +1,4 @@
-"""Real photographs in, :class:`~pipeline.types.View` records out; the user's comm graph.
+"""Real photographs in, :class:`~pipeline.types.View` records out.
 
 This is the entry of the real-image path of DESIGN.md ("real images:
 ``pipeline.io.load_folder(dir)``"): it replaces the renderer of ``data_synth`` when a user
@@ -32,22 +32,18 @@ from pipeline.types import View
 
 __all__ = [
     "IMAGE_SUFFIXES",
-    "GRAPH_KINDS",
     "GUESS_FOCAL_FACTOR",
     "ImageIntrinsics",
     "load_folder",
     "load_image",
     "read_k_txt",
     "exif_focal_px",
-    "comm_graph",
 ]
 
 log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
-#: Named comm-graph kinds accepted by :func:`comm_graph` (plus ``knn:K`` and a file).
-GRAPH_KINDS = ("ring", "ring2", "complete", "knn:K")
 #: Focal length of the stated guess, in units of the longest image side.
 GUESS_FOCAL_FACTOR = 1.2
 #: Diagonal of the 35 mm film frame (36 x 24 mm), the reference of ``FocalLengthIn35mmFilm``.
@@ -389,131 +385,3 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
     log.info("loaded %d images from %s (intrinsics: %s)", len(views), directory,
              ", ".join(sorted({v.intrinsics_source for v in views})))
     return views
-
-
-# ----------------------------------------------------------------------------------- comm graph
-
-def _edges_array(pairs) -> np.ndarray:
-    """Sorted unique undirected edges with ``i < j``, ``(E, 2)`` int64."""
-    e = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if e.size == 0:
-        return e
-    e = np.sort(e, axis=1)
-    return np.unique(e, axis=0)
-
-
-def _knn_edges(n: int, k: int) -> np.ndarray:
-    """Each camera linked to its ``k`` nearest cameras in name order (union of choices)."""
-    idx = np.arange(n)
-    dist = np.abs(idx[:, None] - idx[None, :]).astype(np.float64)
-    # ties broken towards the lower index: key = distance, then index / n
-    key = dist + idx[None, :] / (2.0 * n)
-    np.fill_diagonal(key, np.inf)
-    nearest = np.argsort(key, axis=1, kind="stable")[:, :k]
-    return _edges_array(np.stack([np.repeat(idx, k), nearest.reshape(-1)], axis=1))
-
-
-def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
-    """The communication graph the user chose, as undirected edges.
-
-    Parameters
-    ----------
-    kind_or_file : str or Path
-        - ``ring``: ``(i, i+1 mod n)``.
-        - ``ring2``: ring plus the 2-hop chords ``(i, i+2 mod n)``.
-        - ``complete``: every pair.
-        - ``knn:K``: each camera picks the ``K`` cameras nearest to it in name (capture)
-          order, ``|i - j|`` smallest, ties to the lower index; an edge where either picked the
-          other. Not wrapped around (an ordered sequence has two ends); ``K >= n - 1`` is the
-          complete graph.
-        - a file: one edge per line, ``cam_i,cam_j`` as 0-based indices in name order or as
-          image names (comma or whitespace separated; ``#`` comments, blank lines and a
-          ``cam_i,cam_j`` header allowed). A token equal to an image name is that image;
-          otherwise it must be an index.
-    names : list[str], (n,) — image names in camera order
-
-    Returns
-    -------
-    edges : ndarray, (E, 2) int64, ``i < j``, sorted, no duplicates
-
-    Raises
-    ------
-    InputError
-        Unknown kind, bad ``K``, fewer than two cameras, and for a file: missing file, a line
-        without exactly two entries, an unknown image name or an index out of range (naming the
-        file and line), a self-edge, or no edge at all.
-
-    Examples
-    --------
-    >>> comm_graph("ring", ["a", "b", "c", "d"]).tolist()
-    [[0, 1], [0, 3], [1, 2], [2, 3]]
-    >>> comm_graph("knn:2", ["a", "b", "c", "d"]).tolist()
-    [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
-    """
-    n = len(names)
-    if n < 2:
-        raise InputError(f"a comm graph needs at least two cameras, got {n}")
-    idx = np.arange(n)
-    spec = str(kind_or_file)
-    if spec == "ring":
-        return _edges_array(np.stack([idx, (idx + 1) % n], axis=1))
-    if spec == "ring2":
-        ring = np.stack([idx, (idx + 1) % n], axis=1)
-        chords = np.stack([idx, (idx + 2) % n], axis=1)
-        e = np.concatenate([ring, chords])
-        return _edges_array(e[e[:, 0] != e[:, 1]])
-    if spec == "complete":
-        i, j = np.triu_indices(n, k=1)
-        return np.stack([i, j], axis=1).astype(np.int64)
-    if spec.startswith("knn:"):
-        k_text = spec[4:]
-        if not k_text.isdigit() or int(k_text) < 1:
-            raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. knn:4")
-        return _knn_edges(n, min(int(k_text), n - 1))
-    path = Path(kind_or_file)
-    if not path.is_file():
-        raise InputError(
-            f"graph {spec!r}: not one of {', '.join(GRAPH_KINDS)} and no such file; give a kind "
-            f"or a file of 'cam_i,cam_j' lines (indices or image names)")
-    return _read_graph_file(path, names)
-
-
-def _read_graph_file(path: Path, names: list[str]) -> np.ndarray:
-    n = len(names)
-    by_name = {name: k for k, name in enumerate(names)}
-    edges = []
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"graph file {str(path)!r} is not a text file ({exc})") from None
-    for line_no, raw in enumerate(lines, start=1):
-        line = raw.split("#")[0].strip()
-        if not line:
-            continue
-        tokens = [t.strip() for t in re.split(r"[,\t ]+", line) if t.strip()]
-        if len(tokens) != 2:
-            raise InputError(f"{path}, line {line_no}: {raw.strip()!r} must hold two cameras "
-                             f"'cam_i,cam_j' (indices or image names)")
-        if line_no == 1 and not edges and tokens == ["cam_i", "cam_j"]:
-            continue
-        ends = []
-        for tok in tokens:
-            if tok in by_name:
-                ends.append(by_name[tok])
-            elif re.fullmatch(r"[+-]?\d+", tok):
-                k = int(tok)
-                if not 0 <= k < n:
-                    raise InputError(f"{path}, line {line_no}: camera index {k} out of range "
-                                     f"0..{n - 1} ({n} images)")
-                ends.append(k)
-            else:
-                shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")
-                raise InputError(f"{path}, line {line_no}: image {tok!r} is not one of the {n} "
-                                 f"images ({shown})")
-        if ends[0] == ends[1]:
-            raise InputError(f"{path}, line {line_no}: self-edge {raw.strip()!r}; an edge joins "
-                             f"two different cameras")
-        edges.append(ends)
-    if not edges:
-        raise InputError(f"graph file {str(path)!r} holds no edge")
-    return _edges_array(edges)

@@ -1,4 +1,4 @@
-"""Links as CSV: the user's own links in, the run-output ``links.csv`` out, comm-graph files.
+"""Links as CSV: the user's own links in, the run-output ``links.csv`` out.
 
 Input (``read_links_csv``): one link per row ``cam_i,feat_i,cam_j,feat_j[,quality]``, 0-based
 integer ids, an optional header row naming those columns, blank lines and ``#`` comment lines
@@ -35,7 +35,6 @@ __all__ = [
     "features_per_camera_for",
     "write_links_csv",
     "read_run_links_csv",
-    "read_comm_graph_csv",
 ]
 
 LINK_COLUMNS = ("cam_i", "feat_i", "cam_j", "feat_j", "quality")
@@ -267,40 +266,3 @@ def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
                           ints(col["truth"]))
     except ValueError as exc:
         raise InputError(f"{path}: {exc}") from None
-
-
-def read_comm_graph_csv(path: str | os.PathLike) -> np.ndarray:
-    """Read a communication graph file: rows ``cam_i,cam_j`` (0-based), header optional.
-
-    Blank lines and ``#`` comments are allowed; an edge listed twice (in either orientation)
-    is the same undirected edge.
-
-    Returns
-    -------
-    edges : ndarray, (E, 2) int64, ``i < j``, unique, sorted
-
-    Raises
-    ------
-    InputError
-        Missing file, a row without exactly two columns, a non-integer or negative id, a
-        self-edge — naming the row number and its content.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"comm graph file {str(path)!r}: no such file")
-    edges = []
-    first = True
-    for lineno, fields, raw in _rows(path):
-        if first:
-            first = False
-            if fields and fields[0].lower() == "cam_i":
-                continue
-        if len(fields) != 2:
-            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected "
-                             "2 (cam_i,cam_j)")
-        i, j = (_int_field(path, lineno, raw, name, v)
-                for name, v in zip(("cam_i", "cam_j"), fields, strict=True))
-        if i == j:
-            raise InputError(f"{path}:{lineno}: {raw!r}: camera {i} cannot be its own neighbour")
-        edges.append((min(i, j), max(i, j)))
-    return np.unique(np.asarray(edges, dtype=np.int64).reshape(-1, 2), axis=0)

@@ -23,69 +23,15 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
+from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
 from pipeline.types import Features, PairMatches, View
 
-__all__ = ["check_comm_edges", "mutual_ratio_matches", "epipolar_filter", "sampson_error_px",
+__all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px",
            "match_pair", "match_edges", "MIN_MATCHES"]
 
 #: fewest matches an association may have; below this it is left empty (USAC needs >= 7 points)
 MIN_MATCHES = 8
-
-
-# --------------------------------------------------------------------------- graph checks
-
-
-def check_comm_edges(comm_edges, n_cameras: int) -> np.ndarray:
-    """Validate the communication graph and return its edges as ``(E, 2)`` int64, ``i < j``.
-
-    Parameters
-    ----------
-    comm_edges : array-like, (E, 2) int
-        Undirected edges ``(i, j)``, each listed once in either orientation.
-    n_cameras : int
-
-    Returns
-    -------
-    edges : ndarray, (E, 2) int64, each row sorted (``i < j``), in input order
-
-    Raises
-    ------
-    InputError
-        Wrong shape, non-integer ids, a camera id outside ``0..n_cameras-1``, a self-edge, or an
-        edge listed twice (``(i, j)`` and ``(j, i)`` count as the same edge).
-    """
-    try:
-        raw = np.asarray(comm_edges)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"communication edges are not an (E, 2) array of camera ids: {exc}") from None
-    if raw.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    if raw.ndim != 2 or raw.shape[1] != 2:
-        raise InputError(f"communication edges must have shape (E, 2), got {raw.shape}")
-    if not np.issubdtype(raw.dtype, np.integer):
-        if not np.issubdtype(raw.dtype, np.floating) or not np.all(np.isfinite(raw)) \
-                or not np.all(raw == np.round(raw)):
-            raise InputError(f"communication edges must be integer camera ids, got dtype {raw.dtype}")
-    edges = raw.astype(np.int64)
-    bad = np.flatnonzero(((edges < 0) | (edges >= n_cameras)).any(axis=1))
-    if bad.size:
-        e = edges[bad[0]]
-        raise InputError(f"communication edge ({e[0]}, {e[1]}) names an unknown camera; "
-                         f"camera ids are 0..{n_cameras - 1}")
-    bad = np.flatnonzero(edges[:, 0] == edges[:, 1])
-    if bad.size:
-        e = edges[bad[0]]
-        raise InputError(f"communication edge ({e[0]}, {e[1]}) is a self-edge; "
-                         "a camera is not its own neighbour")
-    edges = np.sort(edges, axis=1)
-    key = edges[:, 0] * n_cameras + edges[:, 1]
-    _, first, counts = np.unique(key, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        e = edges[first[np.flatnonzero(counts > 1)[0]]]
-        raise InputError(f"communication edge ({e[0]}, {e[1]}) is listed more than once; "
-                         "list each undirected edge once")
-    return edges
 
 
 # --------------------------------------------------------------------------- putative matches
@@ -351,7 +297,7 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     features : list[Features], (n,)
     views : list[View], (n,) — ``K`` and ``intrinsics_known`` of each camera
     comm_edges : array-like, (E, 2) int — undirected communication graph (see
-        :func:`check_comm_edges`); a camera without neighbours simply gets no associations
+        :func:`pipeline.commgraph.check_comm_edges`); a camera without neighbours simply gets no associations
     ratio, threshold_px, min_matches, confidence, max_iters : see :func:`match_pair`
     workers : int, optional
         Threads over edges. Default: 1 for float descriptors (the BLAS product behind their

@@ -139,7 +139,7 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     m = np.asarray(features_per_camera, dtype=np.int64)
     if faults is None or not faults.any:
         return resolve_conflicts(m, comm_edges, links), None
-    from pipeline.consistency.engine import comm_edges_for
+    from pipeline.commgraph import comm_edges_for
     from pipeline.faults import fault_report
 
     edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)

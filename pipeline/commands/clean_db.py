@@ -64,7 +64,7 @@ def clean_database(database: str | Path, out: str | Path,
     ----------
     database : input COLMAP database
     out : output database (must differ from the input)
-    comm_graph_file : optional comm-graph file (:func:`pipeline.io.comm_graph` file format)
+    comm_graph_file : optional comm-graph file (:func:`pipeline.commgraph.read_comm_graph`)
 
     Returns
     -------
@@ -78,7 +78,7 @@ def clean_database(database: str | Path, out: str | Path,
     """
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.io import comm_graph
+    from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
@@ -90,10 +90,8 @@ def clean_database(database: str | Path, out: str | Path,
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
-        if not Path(comm_graph_file).is_file():
-            raise InputError(f"--comm-graph {str(comm_graph_file)!r}: no such file")
-        edges = comm_graph(Path(comm_graph_file), contents.names)
-        off_graph = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
+        edges = read_comm_graph(comm_graph_file, contents.names)
+        off_graph = links_off_graph(links, edges, n)
         reason[off_graph & (reason == "")] = "not-comm-edge"
     else:
         edges = None

@@ -47,12 +47,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.linkscsv import (
-        features_per_camera_for,
-        read_comm_graph_csv,
-        read_links_csv,
-        write_links_csv,
-    )
+    from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.linkscsv import features_per_camera_for, read_links_csv, write_links_csv
     from pipeline.run import consistency_stage, ledger_from_consistency
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -64,12 +60,12 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     edges = None
     n_cams = None
     if comm_graph_csv is not None:
-        edges = read_comm_graph_csv(comm_graph_csv)
+        edges = read_comm_graph(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
     m = features_per_camera_for(links, n_cams)
     n = m.size
-    if edges is not None and len(links):
-        off = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
+    if edges is not None:
+        off = links_off_graph(links, edges, n)
         if off.any():
             k = int(np.flatnonzero(off)[0])
             raise InputError(

@@ -29,6 +29,7 @@ from functools import partial
 import numpy as np
 
 from pipeline.association import camera_offsets, check_links
+from pipeline.commgraph import comm_edges_for
 from pipeline.consistency.detection import detection_step, start_detection
 from pipeline.consistency.network import Network, NetworkOptions
 from pipeline.consistency.reliable import (
@@ -42,14 +43,12 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.resolution import resolution_step, start_resolution
 from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
-from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = [
     "ConsistencyResult",
     "resolve_conflicts",
     "build_robots",
-    "comm_edges_for",
     "run_detection",
     "run_resolution",
     "run_detection_reliable",
@@ -102,52 +101,6 @@ class ConsistencyResult:
     def kept(self) -> Links:
         """The links that survived, ``Links`` of length ``(~deleted).sum()``."""
         return self.links.subset(~self.deleted)
-
-
-def comm_edges_for(features_per_camera, links: Links, comm_edges=None) -> np.ndarray:
-    """Validated communication edges ``(E, 2)`` int64, ``i < j``, unique.
-
-    Parameters
-    ----------
-    features_per_camera : (n,) int
-    links : Links
-    comm_edges : array_like (E, 2) or None
-        ``None``: cameras sharing a link are neighbours.
-
-    Raises
-    ------
-    InputError
-        An edge names a camera outside ``0..n-1`` or itself, or a link joins two cameras that
-        are not neighbours (matching only happens on communication edges).
-    """
-    n = len(np.asarray(features_per_camera))
-    if comm_edges is None:
-        e = np.stack([links.cam_i, links.cam_j], axis=1) if len(links) else np.zeros((0, 2), np.int64)
-        return np.unique(e, axis=0).astype(np.int64).reshape(-1, 2)
-    try:
-        e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"communication edges must be integer pairs (i, j): {exc}") from None
-    bad = np.flatnonzero((e < 0).any(axis=1) | (e >= n).any(axis=1))
-    if bad.size:
-        raise InputError(f"communication edge {bad[0]} {tuple(e[bad[0]].tolist())}: camera id "
-                         f"out of range 0..{n - 1}")
-    bad = np.flatnonzero(e[:, 0] == e[:, 1])
-    if bad.size:
-        raise InputError(f"communication edge {bad[0]} {tuple(e[bad[0]].tolist())}: a camera "
-                         "cannot be its own neighbour")
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    if len(links):
-        key_e = e[:, 0] * n + e[:, 1]
-        key_l = links.cam_i * n + links.cam_j
-        bad = np.flatnonzero(~np.isin(key_l, key_e))
-        if bad.size:
-            k = bad[0]
-            raise InputError(
-                f"link {k} ({links.cam_i[k]},{links.feat_i[k]})-({links.cam_j[k]},{links.feat_j[k]}) "
-                f"joins cameras {links.cam_i[k]} and {links.cam_j[k]}, which are not neighbours in "
-                "the communication graph; add the edge or drop the link")
-    return e
 
 
 def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[np.ndarray]]:

@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 
+from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
 
 __all__ = [
@@ -142,20 +143,8 @@ class Topology(ABC):
 
 
 def _check_edges(edges, n_nodes: int) -> np.ndarray:
-    e = np.asarray(edges, dtype=np.int64)
-    if e.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    if e.ndim != 2 or e.shape[1] != 2:
-        raise InputError(f"edges must have shape (E, 2), got {e.shape}")
-    if (e < 0).any() or (e >= n_nodes).any():
-        raise InputError(f"edges must index nodes 0..{n_nodes - 1}, got values "
-                         f"{int(e.min())}..{int(e.max())}")
-    if (e[:, 0] == e[:, 1]).any():
-        k = int(np.flatnonzero(e[:, 0] == e[:, 1])[0])
-        raise InputError(f"edge {k} {e[k].tolist()} is a self-loop; drop it")
-    # store each undirected edge once
-    e = np.sort(e, axis=1)
-    return np.unique(e, axis=0)
+    """The one edge checker (:func:`pipeline.commgraph.check_comm_edges`) on flat nodes; sorted."""
+    return np.unique(check_comm_edges(edges, n_nodes, what="edge", noun="node"), axis=0).reshape(-1, 2)
 
 
 class FixedTopology(Topology):

@@ -78,6 +78,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.stats import chi2
 
 from pipeline.association import association_sets
+from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
 from pipeline.fusion.consensus import (
     FixedTopology,
@@ -272,11 +273,7 @@ def _check_inputs(views, features, links, comm_edges, sigma_px, local):
         raise InputError(f"sigma_px must be > 0, got {sigma_px}")
     if local not in LOCAL_MODES:
         raise InputError(f"local must be one of {LOCAL_MODES}, got {local!r}")
-    e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
-    if e.size and ((e < 0).any() or (e >= n).any() or (e[:, 0] == e[:, 1]).any()):
-        raise InputError(f"comm_edges must join two different cameras 0..{n - 1}; got "
-                         f"{e[((e < 0) | (e >= n)).any(1) | (e[:, 0] == e[:, 1])][0].tolist()}")
-    return e
+    return check_comm_edges(np.asarray(comm_edges).reshape(-1, 2), n)
 
 
 def _track_topology(topology, observes: np.ndarray, comm: np.ndarray, n: int):

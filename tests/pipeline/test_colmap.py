@@ -190,8 +190,9 @@ def test_not_a_database(tmp_path):
 
 @pytest.fixture(scope="module")
 def sceaux_matches(sceaux_small):
+    from pipeline.commgraph import comm_graph
     from pipeline.features import extract_all
-    from pipeline.io import comm_graph, load_folder
+    from pipeline.io import load_folder
     from pipeline.matching import match_edges
 
     views = load_folder(sceaux_small, max_size=640)

@@ -1,20 +1,15 @@
-"""pipeline.io: image folders, intrinsics (K.txt / EXIF / guess) and the user's comm graph."""
+"""pipeline.io: image folders, intrinsics (K.txt / EXIF / guess)."""
 
 import shutil
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from PIL import ExifTags, Image
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from pipeline.errors import InputError
 from pipeline.io import (
     GUESS_FOCAL_FACTOR,
     _scaled_K,
-    comm_graph,
     exif_focal_px,
     load_folder,
     read_k_txt,
@@ -224,85 +219,3 @@ def test_k_txt_for_another_resolution(tmp_path):
 def test_bad_max_size(tmp_path, size):
     with pytest.raises(InputError, match="max_size"):
         load_folder(tmp_path, max_size=size)
-
-
-# ------------------------------------------------------------------------------------ comm graph
-
-NAMES6 = [f"im{k}.jpg" for k in range(6)]
-
-
-def test_named_graphs_hand_computed():
-    assert comm_graph("ring", NAMES6[:4]).tolist() == [[0, 1], [0, 3], [1, 2], [2, 3]]
-    assert comm_graph("ring2", NAMES6[:5]).tolist() == [
-        [0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [1, 3], [1, 4], [2, 3], [2, 4], [3, 4]]
-    assert comm_graph("ring2", NAMES6).tolist() == [
-        [0, 1], [0, 2], [0, 4], [0, 5], [1, 2], [1, 3], [1, 5], [2, 3], [2, 4], [3, 4], [3, 5],
-        [4, 5]]
-    assert comm_graph("complete", NAMES6[:3]).tolist() == [[0, 1], [0, 2], [1, 2]]
-    assert comm_graph("ring", NAMES6[:2]).tolist() == [[0, 1]]
-    # knn by name order, K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
-    assert comm_graph("knn:2", NAMES6[:5]).tolist() == [
-        [0, 1], [0, 2], [1, 2], [2, 3], [2, 4], [3, 4]]
-    # K=1 ties go to the lower index: 1 picks 0, 2 picks 1, ...
-    assert comm_graph("knn:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
-    assert comm_graph("knn:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
-
-
-@settings(max_examples=60, deadline=None)
-@given(n=st.integers(2, 40), k=st.integers(1, 8),
-       kind=st.sampled_from(["ring", "ring2", "complete", "knn"]))
-def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
-    spec = f"knn:{k}" if kind == "knn" else kind
-    e = comm_graph(spec, [str(i) for i in range(n)])
-    assert e.dtype == np.int64 and e.ndim == 2 and e.shape[1] == 2
-    assert (e[:, 0] < e[:, 1]).all() and (e >= 0).all() and (e < n).all()
-    assert len(np.unique(e, axis=0)) == len(e)
-    adj = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    assert connected_components(adj, directed=False)[0] == 1
-    deg = np.bincount(e.ravel(), minlength=n)
-    if kind == "ring" and n >= 3:
-        assert (deg == 2).all()
-    if kind == "complete":
-        assert len(e) == n * (n - 1) // 2
-    if kind == "knn":
-        assert (deg >= min(k, n - 1)).all()
-    if kind == "ring2":
-        ring = {tuple(r) for r in comm_graph("ring", [str(i) for i in range(n)]).tolist()}
-        assert ring <= {tuple(r) for r in e.tolist()}
-
-
-def test_graph_file_with_names_indices_header_and_comments(tmp_path):
-    f = tmp_path / "edges.csv"
-    f.write_text("cam_i,cam_j\n# a comment\nim0.jpg, im2.jpg\n3 1\n\nim5.jpg,0\n2,im0.jpg\n")
-    assert comm_graph(f, NAMES6).tolist() == [[0, 2], [0, 5], [1, 3]]
-
-
-def test_graph_file_naming_unknown_image(tmp_path):
-    f = tmp_path / "edges.csv"
-    f.write_text("im0.jpg,im1.jpg\nim1.jpg,castle.jpg\n")
-    with pytest.raises(InputError, match=r"edges\.csv, line 2: image 'castle\.jpg' is not one of the"):
-        comm_graph(f, NAMES6)
-
-
-@pytest.mark.parametrize("text, match", [
-    ("0,9\n", "line 1: camera index 9 out of range 0..5"),
-    ("0,1\n2,2\n", "line 2: self-edge"),
-    ("0,1,2\n", "line 1: .* must hold two cameras"),
-    ("# nothing\n", "holds no edge"),
-])
-def test_graph_file_errors(tmp_path, text, match):
-    f = tmp_path / "g.txt"
-    f.write_text(text)
-    with pytest.raises(InputError, match=match):
-        comm_graph(f, NAMES6)
-
-
-@pytest.mark.parametrize("spec", ["star", "knn:0", "knn:x", "knn:"])
-def test_unknown_graph_kind(spec):
-    with pytest.raises(InputError, match="graph"):
-        comm_graph(spec, NAMES6)
-
-
-def test_graph_needs_two_cameras():
-    with pytest.raises(InputError, match="at least two"):
-        comm_graph("ring", ["a"])

@@ -1,4 +1,4 @@
-"""Strict reading of users' links files; atomic run-output links.csv; comm-graph files."""
+"""Strict reading of users' links files; atomic run-output links.csv."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,6 @@ from pipeline.errors import InputError
 from pipeline.linkscsv import (
     RUN_LINK_COLUMNS,
     features_per_camera_for,
-    read_comm_graph_csv,
     read_links_csv,
     read_run_links_csv,
     write_links_csv,
@@ -93,18 +92,7 @@ def test_run_links_csv_round_trip_and_atomic(tmp_path):
     assert read_run_links_csv(out).status.tolist() == ["kept", "deleted", "kept"]  # intact
 
 
-def test_comm_graph_csv(tmp_path):
-    e = read_comm_graph_csv(write(tmp_path, "cam_i,cam_j\n1,0\n1,2\n0,1\n", "g.csv"))
-    assert e.tolist() == [[0, 1], [1, 2]]
-    for text, message in [("0,0\n", "own neighbour"), ("0,1,2\n", "3 columns"),
-                          ("0,a\n", "not an integer")]:
-        with pytest.raises(InputError, match=message):
-            read_comm_graph_csv(write(tmp_path, text, "g.csv"))
-
-
 def test_huge_ids_are_named_not_overflowing(tmp_path):
     """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
-    with pytest.raises(InputError, match="cam_j 99999999999999999999 is too large"):
-        read_comm_graph_csv(write(tmp_path, "0,99999999999999999999\n", "g.csv"))
     with pytest.raises(InputError, match="feat_j .* is too large"):
         read_links_csv(write(tmp_path, "0,0,1,99999999999999999999\n"))

@@ -9,7 +9,6 @@ from pipeline.association import check_links
 from pipeline.errors import InputError
 from pipeline.features import extract, extract_all
 from pipeline.matching import (
-    check_comm_edges,
     match_edges,
     match_pair,
     mutual_ratio_matches,
@@ -52,28 +51,6 @@ def transfer_error(H, x0, x1):
 def pair():
     views, H = plane_pair()
     return views, H, extract_all(views, "sift", 800)
-
-
-# ------------------------------------------------------------------ communication graph checks
-
-
-def test_check_comm_edges_sorts_and_keeps_order():
-    e = check_comm_edges([[2, 0], [0, 1]], 3)
-    np.testing.assert_array_equal(e, [[0, 2], [0, 1]])
-    assert check_comm_edges([], 3).shape == (0, 2)
-
-
-@pytest.mark.parametrize("edges,match", [
-    ([[0, 5]], r"\(0, 5\) names an unknown camera; camera ids are 0..2"),
-    ([[-1, 0]], "unknown camera"),
-    ([[1, 1]], r"\(1, 1\) is a self-edge"),
-    ([[0, 1], [1, 0]], r"\(0, 1\) is listed more than once"),
-    ([[0, 1, 2]], r"shape \(E, 2\)"),
-    ([[0.5, 1]], "integer camera ids"),
-])
-def test_bad_comm_edges_are_named(edges, match):
-    with pytest.raises(InputError, match=match):
-        check_comm_edges(edges, 3)
 
 
 # ------------------------------------------------------------------ putative matches

@@ -86,8 +86,9 @@ def test_comm_graph_file_cuts_links_between_non_neighbours(tmp_path):
 
 def test_sceaux_database_round_trip(tmp_path, sceaux_small):
     """A database built with pycolmap from real matches (all pairs of 4 Sceaux images)."""
+    from pipeline.commgraph import comm_graph
     from pipeline.features import extract_all
-    from pipeline.io import comm_graph, load_folder
+    from pipeline.io import load_folder
     from pipeline.matching import match_edges
 
     views = load_folder(sceaux_small, max_size=640)

@@ -3,7 +3,7 @@
 ``resolve`` (links csv, comm-graph csv, fault flags) is driven through the command line
 (:func:`pipeline.__main__.main`): it must exit with 0, or with 2 and an ``error:`` line that
 names what was wrong. ``run-images`` graph files are fuzzed through
-:func:`pipeline.io.comm_graph`, which must return valid edges or raise ``InputError``.
+:func:`pipeline.commgraph.comm_graph`, which must return valid edges or raise ``InputError``.
 Inputs are mostly CSV-shaped text built from hostile tokens (negative, huge, fractional,
 non-numeric, empty, non-ASCII), plus raw bytes.
 """
@@ -16,8 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pipeline.__main__ import main
+from pipeline.commgraph import comm_graph
 from pipeline.errors import InputError
-from pipeline.io import comm_graph
 
 FUZZ = settings(max_examples=400, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,

@@ -14,11 +14,11 @@ from consistency_graphs import instances, random_instance
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
 from pipeline.consistency.engine import (
     build_robots,
-    comm_edges_for,
     run_detection,
     run_detection_reliable,
 )

@@ -3,8 +3,9 @@
 import numpy as np
 
 from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
-from pipeline.consistency.engine import build_robots, comm_edges_for, run_detection
+from pipeline.consistency.engine import build_robots, run_detection
 from pipeline.consistency.network import Network
 from pipeline.types import Links
 

@@ -8,9 +8,10 @@ from hypothesis import HealthCheck, given, settings
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 from pipeline.association import AssociationGraph
+from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
-from pipeline.consistency.engine import build_robots, comm_edges_for, run_detection
+from pipeline.consistency.engine import build_robots, run_detection
 from pipeline.consistency.network import Network
 
 SETTINGS = settings(max_examples=250, deadline=None,

@@ -1,0 +1,363 @@
+"""The communication graph ``G_com``: its kinds, its file format and its one checker.
+
+Robot ``i`` may talk to robot ``j`` only along an edge of ``G_com`` (Aragüés et al., Sec. II:
+local association is computed only between neighbours; Montijano et al., Sec. II: the
+consensus exchanges values between neighbours). Every stage that takes a communication graph
+gets it from here:
+
+* :func:`graph_edges` — the named kinds ``line``, ``ring``, ``ring2``, ``complete``,
+  ``ring+triangles`` (formation b of the paper's Fig. 4), ``geometric`` (needs positions) and
+  ``knn:K``;
+* :func:`comm_graph` — a kind or a file, for a set of named images (``run-images``);
+* :func:`read_comm_graph` — the one file reader (indices, or image names when given);
+* :func:`check_comm_edges` — the one checker of an edge array;
+* :func:`comm_edges_for` — the checked graph of the consistency stage, with every link on an
+  edge.
+
+Definitions (stated)
+--------------------
+A graph on ``n`` robots is a set of undirected edges ``(i, j)``, ``0 <= i < j < n``. The
+kinds are built from their rule and then reduced to that form (self-loops dropped, each edge
+once), which fixes the small cases: ``ring`` is ``(i, i + 1 mod n)`` — no edge for
+``n = 1``, the single edge for ``n = 2``, the triangle for ``n = 3``; ``ring2`` adds
+``(i, i + 2 mod n)`` and is the complete graph for ``n <= 4``; ``ring+triangles`` adds
+``(k, k + 2)`` for ``k ≡ 0 mod 3``, ``k + 2 < n``; ``knn:K`` links each camera to the ``K``
+cameras nearest in index (capture) order, ties to the lower index, not wrapped; ``geometric``
+links robots closer than a radius drawn from the seed between 1.0 and 2.5 times the smallest
+radius that keeps the graph connected.
+
+Self-loops and duplicated edges (one policy)
+--------------------------------------------
+* A self-loop ``(i, i)`` is an error everywhere (a camera is not its own neighbour).
+* An edge *array* handed to a stage is a set: an edge listed twice (``(i, j)`` and ``(j, i)``
+  are the same edge) is an :class:`~pipeline.errors.InputError` naming it, never dropped
+  silently.
+* A graph *file* is a list of lines, where writing a symmetric adjacency list is natural:
+  :func:`read_comm_graph` merges a line that repeats an edge (in either orientation) and
+  returns the set, sorted.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy.spatial.distance import pdist, squareform
+
+from pipeline.errors import InputError
+
+__all__ = ["GRAPH_KINDS", "MAX_ID", "graph_edges", "comm_graph", "read_comm_graph",
+           "check_comm_edges", "comm_edges_for", "links_off_graph", "edge_set"]
+
+#: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``knn:K``).
+GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
+_ALL_KINDS = GRAPH_KINDS + ("ring+triangles", "knn:K")
+#: largest camera id a file may name (ids index int32 arrays inside the robots)
+MAX_ID = 2**31 - 2
+
+
+# ---------------------------------------------------------------------------------- kinds
+
+def edge_set(pairs) -> np.ndarray:
+    """``(E, 2)`` int64 pairs reduced to the set form: ``i < j``, no self-loop, sorted, unique."""
+    e = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    e = np.sort(e[e[:, 0] != e[:, 1]], axis=1)
+    return np.unique(e, axis=0).reshape(-1, 2)
+
+
+def _knn_edges(n: int, k: int) -> np.ndarray:
+    """Each camera linked to its ``k`` nearest cameras in index order (union of choices)."""
+    idx = np.arange(n)
+    dist = np.abs(idx[:, None] - idx[None, :]).astype(np.float64)
+    # ties broken towards the lower index: key = distance, then index / n
+    key = dist + idx[None, :] / (2.0 * n)
+    np.fill_diagonal(key, np.inf)
+    nearest = np.argsort(key, axis=1, kind="stable")[:, :k]
+    return edge_set(np.stack([np.repeat(idx, k), nearest.reshape(-1)], axis=1))
+
+
+def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+    """Edges of a communication graph of a named kind on ``n`` robots (module docstring).
+
+    Parameters
+    ----------
+    kind : str
+        ``line``, ``ring``, ``ring2``, ``complete``, ``ring+triangles``, ``geometric`` or
+        ``knn:K`` (``K`` a positive integer).
+    n : int
+    centres : ndarray, (n, >= 2), optional — robot positions, needed by ``geometric``
+    seed : int — draws the radius of ``geometric``
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, ``i < j``, sorted, unique
+
+    Raises
+    ------
+    InputError
+        Unknown kind, a bad ``K``, ``geometric`` without positions.
+
+    Examples
+    --------
+    >>> graph_edges("ring", 4).tolist()
+    [[0, 1], [0, 3], [1, 2], [2, 3]]
+    >>> graph_edges("knn:2", 4).tolist()
+    [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
+    >>> graph_edges("ring", 2).tolist(), graph_edges("ring", 1).tolist()
+    ([[0, 1]], [])
+    """
+    n = int(n)
+    idx = np.arange(n)
+    ring = np.stack([idx, (idx + 1) % n], axis=1)
+    if kind == "line":
+        e = ring[:-1]
+    elif kind == "ring":
+        e = ring
+    elif kind == "ring+triangles":
+        k = np.arange(0, n - 2, 3)
+        e = np.concatenate([ring, np.stack([k, k + 2], axis=1)])
+    elif kind == "ring2":
+        e = np.concatenate([ring, np.stack([idx, (idx + 2) % n], axis=1)])
+    elif kind == "complete":
+        e = np.stack(np.triu_indices(n, k=1), axis=1)
+    elif kind == "geometric":
+        if centres is None:
+            raise InputError("graph 'geometric' needs the robot positions")
+        D = squareform(pdist(np.asarray(centres)[:, :2]))
+        r_conn = float(minimum_spanning_tree(D).toarray().max())
+        r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 2.5)
+        e = np.stack(np.nonzero(np.triu(D <= r + 1e-9, k=1)), axis=1)
+    elif kind.startswith("knn:"):
+        k_text = kind[4:]
+        if not k_text.isdigit() or int(k_text) < 1:
+            raise InputError(f"graph {kind!r}: K must be a positive integer, e.g. knn:4")
+        return _knn_edges(n, min(int(k_text), max(n - 1, 0)))
+    else:
+        raise InputError(f"unknown graph kind {kind!r}; choose one of {', '.join(_ALL_KINDS)}")
+    return edge_set(e)
+
+
+def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
+    """The communication graph the user chose for a set of images, as undirected edges.
+
+    Parameters
+    ----------
+    kind_or_file : str or Path
+        A kind of :func:`graph_edges` other than ``geometric`` (images have no positions), or
+        a file of :func:`read_comm_graph` (indices in name order or image names).
+    names : list[str], (n,) — image names in camera order
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, ``i < j``, sorted, no duplicates
+
+    Raises
+    ------
+    InputError
+        Fewer than two cameras, an unknown kind that is no file either, a bad ``K``, or any
+        error of :func:`read_comm_graph`.
+
+    Examples
+    --------
+    >>> comm_graph("ring", ["a", "b", "c", "d"]).tolist()
+    [[0, 1], [0, 3], [1, 2], [2, 3]]
+    """
+    n = len(names)
+    if n < 2:
+        raise InputError(f"a comm graph needs at least two cameras, got {n}")
+    spec = str(kind_or_file)
+    if spec in _ALL_KINDS and spec not in ("geometric", "knn:K") or spec.startswith("knn:"):
+        return graph_edges(spec, n)
+    path = Path(kind_or_file)
+    if not path.is_file():
+        kinds = ", ".join(k for k in _ALL_KINDS if k != "geometric")
+        raise InputError(
+            f"graph {spec!r}: not one of {kinds} and no such file; give a kind "
+            f"or a file of 'cam_i,cam_j' lines (indices or image names)")
+    return read_comm_graph(path, names)
+
+
+# ----------------------------------------------------------------------------------- file
+
+def _camera(path, line_no, column, tok, names, by_name) -> int:
+    """One end of an edge line: an image name (when names are known) or a 0-based index."""
+    if by_name is not None and tok in by_name:
+        return by_name[tok]
+    if not re.fullmatch(r"[+-]?\d+", tok):
+        if by_name is not None:
+            n = len(names)
+            shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")
+            raise InputError(f"{path}, line {line_no}: image {tok!r} is not one of the {n} "
+                             f"images ({shown})")
+        raise InputError(f"{path}, line {line_no}: {column} {tok!r} is not an integer camera id; "
+                         "ids are 0-based integers")
+    k = int(tok)
+    if k < 0:
+        raise InputError(f"{path}, line {line_no}: {column} {k} is negative; ids are 0-based")
+    if k > MAX_ID:
+        raise InputError(f"{path}, line {line_no}: {column} {k} is too large; ids must be at "
+                         f"most {MAX_ID}")
+    if names is not None and k >= len(names):
+        n = len(names)
+        raise InputError(f"{path}, line {line_no}: camera index {k} out of range 0..{n - 1} "
+                         f"({n} images)")
+    return k
+
+
+def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> np.ndarray:
+    """Read a communication-graph file: one edge ``cam_i,cam_j`` per line.
+
+    Format: two cameras per line separated by a comma, tab or spaces; each a 0-based index,
+    or, when ``names`` is given, an image name (a token equal to an image name is that image,
+    otherwise it must be an index). ``#`` starts a comment; blank lines and a first line
+    ``cam_i,cam_j`` are skipped. A line repeating an edge (either orientation) is merged.
+
+    Parameters
+    ----------
+    path : path of a UTF-8 text file
+    names : list[str] or None — image names in camera order (also bounds the indices)
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, ``i < j``, sorted, unique, ``E >= 1``
+
+    Raises
+    ------
+    InputError
+        Missing or non-text file, a line without exactly two cameras, an unknown image name, a
+        non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
+        — naming the file and line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"comm graph file {str(path)!r}: no such file")
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except (UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"graph file {str(path)!r} is not a text file ({exc})") from None
+    by_name = None if names is None else {name: k for k, name in enumerate(names)}
+    edges = []
+    header_allowed = True
+    for line_no, raw in enumerate(lines, start=1):
+        line = raw.split("#")[0].strip()
+        if not line:
+            continue
+        tokens = [t for t in re.split(r"[,\t ]+", line) if t]
+        if header_allowed and [t.lower() for t in tokens] == ["cam_i", "cam_j"]:
+            header_allowed = False
+            continue
+        header_allowed = False
+        if len(tokens) != 2:
+            raise InputError(f"{path}, line {line_no}: {raw.strip()!r} has {len(tokens)} columns; "
+                             "it must hold two cameras 'cam_i,cam_j' (indices or image names)")
+        i, j = (_camera(path, line_no, col, tok, names, by_name)
+                for col, tok in zip(("cam_i", "cam_j"), tokens, strict=True))
+        if i == j:
+            raise InputError(f"{path}, line {line_no}: self-edge {raw.strip()!r} ({path}:{line_no}: "
+                             f"camera {i} twice); a camera cannot be its own neighbour, an edge "
+                             "joins two different cameras")
+        edges.append((i, j))
+    if not edges:
+        raise InputError(f"graph file {str(path)!r} holds no edge; list one 'cam_i,cam_j' "
+                         "per line")
+    return edge_set(edges)
+
+
+# -------------------------------------------------------------------------------- checker
+
+def check_comm_edges(comm_edges, n_cameras: int, *, what: str = "communication edge",
+                     noun: str = "camera") -> np.ndarray:
+    """The one checker of an edge array: ``(E, 2)`` int64, each row ``i < j``, input order.
+
+    Parameters
+    ----------
+    comm_edges : array-like, (E, 2) int
+        Undirected edges ``(i, j)``, each listed once in either orientation.
+    n_cameras : int — ids must be ``0..n_cameras - 1``
+    what, noun : str — how the error names an edge and its ends (``edge``/``node`` for the
+        flat node graphs of the fusion consensus)
+
+    Returns
+    -------
+    edges : ndarray, (E, 2) int64, each row sorted, in input order
+
+    Raises
+    ------
+    InputError
+        Wrong shape, non-integer ids, an id outside ``0..n_cameras-1``, a self-edge, or an
+        edge listed twice (``(i, j)`` and ``(j, i)`` are the same edge), naming the edge.
+    """
+    try:
+        raw = np.asarray(comm_edges)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{what}s are not an (E, 2) array of {noun} ids: {exc}") from None
+    if raw.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if raw.ndim != 2 or raw.shape[1] != 2:
+        raise InputError(f"{what}s must have shape (E, 2), got {raw.shape}")
+    if not np.issubdtype(raw.dtype, np.integer):
+        if not np.issubdtype(raw.dtype, np.floating) or not np.all(np.isfinite(raw)) \
+                or not np.all(raw == np.round(raw)):
+            raise InputError(f"{what}s must be integer {noun} ids, got dtype {raw.dtype}")
+    edges = raw.astype(np.int64)
+    n = int(n_cameras)
+    bad = np.flatnonzero(((edges < 0) | (edges >= n)).any(axis=1))
+    if bad.size:
+        a, b = edges[bad[0]].tolist()
+        raise InputError(f"{what} ({a}, {b}) names an unknown {noun}; {noun} ids are 0..{n - 1}: "
+                         f"list edges between {noun}s 0..{n - 1}")
+    bad = np.flatnonzero(edges[:, 0] == edges[:, 1])
+    if bad.size:
+        a, b = edges[bad[0]].tolist()
+        raise InputError(f"{what} ({a}, {b}) is a self-edge (self-loop); a {noun} is not its own "
+                         "neighbour, drop it")
+    edges = np.sort(edges, axis=1)
+    key = edges[:, 0] * n + edges[:, 1]
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        a, b = edges[first[np.flatnonzero(counts > 1)[0]]].tolist()
+        raise InputError(f"{what} ({a}, {b}) is listed more than once; list each undirected "
+                         "edge once")
+    return edges
+
+
+def links_off_graph(links, edges: np.ndarray, n: int) -> np.ndarray:
+    """``(L,)`` bool: the links joining two cameras that are not neighbours in ``edges``."""
+    if not len(links):
+        return np.zeros(0, dtype=bool)
+    e = np.sort(np.asarray(edges, dtype=np.int64).reshape(-1, 2), axis=1)
+    return ~np.isin(links.cam_i * n + links.cam_j, e[:, 0] * n + e[:, 1])
+
+
+def comm_edges_for(features_per_camera, links, comm_edges=None) -> np.ndarray:
+    """The checked graph of the consistency stage: ``(E, 2)`` int64, ``i < j``, sorted.
+
+    Parameters
+    ----------
+    features_per_camera : (n,) int
+    links : pipeline.types.Links
+    comm_edges : array_like (E, 2) or None
+        ``None``: cameras sharing a link are neighbours.
+
+    Raises
+    ------
+    InputError
+        Any error of :func:`check_comm_edges`, or a link joining two cameras that are not
+        neighbours (matching only happens on communication edges).
+    """
+    n = len(np.asarray(features_per_camera))
+    if comm_edges is None:
+        e = np.stack([links.cam_i, links.cam_j], axis=1) if len(links) else np.zeros((0, 2), np.int64)
+        return np.unique(e, axis=0).astype(np.int64).reshape(-1, 2)
+    e = np.unique(check_comm_edges(comm_edges, n), axis=0).reshape(-1, 2)
+    bad = np.flatnonzero(links_off_graph(links, e, n))
+    if bad.size:
+        k = bad[0]
+        raise InputError(
+            f"link {k} ({links.cam_i[k]},{links.feat_i[k]})-({links.cam_j[k]},{links.feat_j[k]}) "
+            f"joins cameras {links.cam_i[k]} and {links.cam_j[k]}, which are not neighbours in "
+            "the communication graph; add the edge or drop the link")
+    return e

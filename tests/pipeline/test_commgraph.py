@@ -1,0 +1,163 @@
+"""pipeline.commgraph: graph kinds, the one file reader, the one checker."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from pipeline.commgraph import (
+    check_comm_edges,
+    comm_graph,
+    graph_edges,
+    read_comm_graph,
+)
+from pipeline.errors import InputError
+
+
+def write(tmp_path, text, name="in.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+# ------------------------------------------------------------------------------------ comm graph
+
+NAMES6 = [f"im{k}.jpg" for k in range(6)]
+
+
+def test_named_graphs_hand_computed():
+    assert comm_graph("ring", NAMES6[:4]).tolist() == [[0, 1], [0, 3], [1, 2], [2, 3]]
+    assert comm_graph("ring2", NAMES6[:5]).tolist() == [
+        [0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [1, 3], [1, 4], [2, 3], [2, 4], [3, 4]]
+    assert comm_graph("ring2", NAMES6).tolist() == [
+        [0, 1], [0, 2], [0, 4], [0, 5], [1, 2], [1, 3], [1, 5], [2, 3], [2, 4], [3, 4], [3, 5],
+        [4, 5]]
+    assert comm_graph("complete", NAMES6[:3]).tolist() == [[0, 1], [0, 2], [1, 2]]
+    assert comm_graph("ring", NAMES6[:2]).tolist() == [[0, 1]]
+    # knn by name order, K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
+    assert comm_graph("knn:2", NAMES6[:5]).tolist() == [
+        [0, 1], [0, 2], [1, 2], [2, 3], [2, 4], [3, 4]]
+    # K=1 ties go to the lower index: 1 picks 0, 2 picks 1, ...
+    assert comm_graph("knn:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
+    assert comm_graph("knn:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 40), k=st.integers(1, 8),
+       kind=st.sampled_from(["ring", "ring2", "complete", "knn"]))
+def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
+    spec = f"knn:{k}" if kind == "knn" else kind
+    e = comm_graph(spec, [str(i) for i in range(n)])
+    assert e.dtype == np.int64 and e.ndim == 2 and e.shape[1] == 2
+    assert (e[:, 0] < e[:, 1]).all() and (e >= 0).all() and (e < n).all()
+    assert len(np.unique(e, axis=0)) == len(e)
+    adj = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    assert connected_components(adj, directed=False)[0] == 1
+    deg = np.bincount(e.ravel(), minlength=n)
+    if kind == "ring" and n >= 3:
+        assert (deg == 2).all()
+    if kind == "complete":
+        assert len(e) == n * (n - 1) // 2
+    if kind == "knn":
+        assert (deg >= min(k, n - 1)).all()
+    if kind == "ring2":
+        ring = {tuple(r) for r in comm_graph("ring", [str(i) for i in range(n)]).tolist()}
+        assert ring <= {tuple(r) for r in e.tolist()}
+
+
+def test_graph_file_with_names_indices_header_and_comments(tmp_path):
+    f = tmp_path / "edges.csv"
+    f.write_text("cam_i,cam_j\n# a comment\nim0.jpg, im2.jpg\n3 1\n\nim5.jpg,0\n2,im0.jpg\n")
+    assert comm_graph(f, NAMES6).tolist() == [[0, 2], [0, 5], [1, 3]]
+
+
+def test_graph_file_naming_unknown_image(tmp_path):
+    f = tmp_path / "edges.csv"
+    f.write_text("im0.jpg,im1.jpg\nim1.jpg,castle.jpg\n")
+    with pytest.raises(InputError, match=r"edges\.csv, line 2: image 'castle\.jpg' is not one of the"):
+        comm_graph(f, NAMES6)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("0,9\n", "line 1: camera index 9 out of range 0..5"),
+    ("0,1\n2,2\n", "line 2: self-edge"),
+    ("0,1,2\n", "line 1: .* must hold two cameras"),
+    ("# nothing\n", "holds no edge"),
+])
+def test_graph_file_errors(tmp_path, text, match):
+    f = tmp_path / "g.txt"
+    f.write_text(text)
+    with pytest.raises(InputError, match=match):
+        comm_graph(f, NAMES6)
+
+
+@pytest.mark.parametrize("spec", ["star", "knn:0", "knn:x", "knn:"])
+def test_unknown_graph_kind(spec):
+    with pytest.raises(InputError, match="graph"):
+        comm_graph(spec, NAMES6)
+
+
+def test_graph_needs_two_cameras():
+    with pytest.raises(InputError, match="at least two"):
+        comm_graph("ring", ["a"])
+
+
+def test_comm_graph_csv(tmp_path):
+    e = read_comm_graph(write(tmp_path, "cam_i,cam_j\n1,0\n1,2\n0,1\n", "g.csv"))
+    assert e.tolist() == [[0, 1], [1, 2]]
+    for text, message in [("0,0\n", "own neighbour"), ("0,1,2\n", "3 columns"),
+                          ("0,a\n", "not an integer")]:
+        with pytest.raises(InputError, match=message):
+            read_comm_graph(write(tmp_path, text, "g.csv"))
+
+
+def test_huge_ids_are_named_not_overflowing(tmp_path):
+    """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
+    with pytest.raises(InputError, match="cam_j 99999999999999999999 is too large"):
+        read_comm_graph(write(tmp_path, "0,99999999999999999999\n", "g.csv"))
+
+
+# ------------------------------------------------------------------ communication graph checks
+
+
+def test_check_comm_edges_sorts_and_keeps_order():
+    e = check_comm_edges([[2, 0], [0, 1]], 3)
+    np.testing.assert_array_equal(e, [[0, 2], [0, 1]])
+    assert check_comm_edges([], 3).shape == (0, 2)
+
+
+@pytest.mark.parametrize("edges,match", [
+    ([[0, 5]], r"\(0, 5\) names an unknown camera; camera ids are 0..2"),
+    ([[-1, 0]], "unknown camera"),
+    ([[1, 1]], r"\(1, 1\) is a self-edge"),
+    ([[0, 1], [1, 0]], r"\(0, 1\) is listed more than once"),
+    ([[0, 1, 2]], r"shape \(E, 2\)"),
+    ([[0.5, 1]], "integer camera ids"),
+])
+def test_bad_comm_edges_are_named(edges, match):
+    with pytest.raises(InputError, match=match):
+        check_comm_edges(edges, 3)
+
+
+def test_kinds_of_the_small_cases():
+    """One definition for every n: the rule, then self-loops dropped and each edge once."""
+    assert graph_edges("ring", 1).tolist() == [] and graph_edges("line", 1).tolist() == []
+    assert graph_edges("ring", 2).tolist() == [[0, 1]] == graph_edges("ring2", 2).tolist()
+    assert graph_edges("ring", 3).tolist() == graph_edges("complete", 3).tolist()
+    assert graph_edges("ring2", 4).tolist() == graph_edges("complete", 4).tolist()
+    for n in range(2, 9):
+        names = [str(k) for k in range(n)]
+        for kind in ("ring", "ring2", "complete", "line", "knn:2", "ring+triangles"):
+            assert comm_graph(kind, names).tolist() == graph_edges(kind, n).tolist()
+
+
+def test_edge_array_duplicates_are_rejected_but_file_repeats_merged(tmp_path):
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.types import Links
+
+    links = Links([0], [0], [1], [0])
+    with pytest.raises(InputError, match=r"\(0, 1\) is listed more than once"):
+        comm_edges_for([1, 1], links, [[0, 1], [1, 0]])
+    assert read_comm_graph(write(tmp_path, "0,1\n1,0\n", "g.csv")).tolist() == [[0, 1]]
