@@ -50,13 +50,14 @@ from consistency_scale import synthetic_formation  # noqa: E402
 from pipeline.commgraph import comm_edges_for  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
+from pipeline.consistency.channel import Channel  # noqa: E402
 from pipeline.consistency.engine import (  # noqa: E402
     build_robots,
     run_detection,
     run_detection_reliable,
 )
 from pipeline.consistency.network import Network, NetworkOptions, recurrent_topology  # noqa: E402
-from pipeline.consistency.reliable import Channel, ProtocolOptions  # noqa: E402
+from pipeline.consistency.reliable import ProtocolOptions, ReliableState  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-faults"
@@ -78,7 +79,7 @@ def detection_exact(fpc, edges, links, options, reliable: bool) -> bool:
     robots, _ = build_robots(fpc, links)
     net = Network(len(fpc), comm_edges_for(fpc, links, edges), options)
     if reliable:
-        chans = [Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE)
+        chans = [ReliableState(Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE))
                  for i in range(len(fpc))]
         run_detection_reliable(robots, chans, net, 1, max_rounds=10**6)
     else:

@@ -40,8 +40,8 @@ import scipy.sparse as sp
 from pipeline.consistency.network import Message
 from pipeline.consistency.robot import Robot
 
-__all__ = ["start_detection", "init_detection", "detection_step", "eq5_next",
-           "find_conflictive_sets"]
+__all__ = ["start_detection", "init_detection", "detection_step", "eq5_next", "eq5_step",
+           "send_blocks", "blocks_from_payload", "find_conflictive_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -62,7 +62,7 @@ def start_detection(robot: Robot, iteration: int, send: Send) -> None:
     rows = init_detection(robot, iteration)
     robot.stopped = rows.size == 0
     if not robot.stopped:
-        _send_blocks(robot, send)
+        send_blocks(robot, send)
     robot.measure_memory()
 
 
@@ -70,7 +70,7 @@ def init_detection(robot: Robot, iteration: int) -> np.ndarray:
     """Choose the active rows and set ``X_i·(0)`` by eq. (4); returns the active rows (R,).
 
     Resets the detection outputs (``conflictive``, ``set_label``, ``root_of_set``,
-    ``t_stop``) and the blocks received.
+    ``t_stop``) and the blocks received (``last_blocks``).
     """
     robot.iteration = iteration
     has_link = np.zeros(robot.m, dtype=bool)
@@ -84,18 +84,19 @@ def init_detection(robot: Robot, iteration: int) -> np.ndarray:
     robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
                              indptr), shape=(robot.m, robot.m_total))
     robot.last_blocks = {}
-    robot.recv_blocks = {}
-    robot.final_t = {}
     robot.conflictive = np.zeros(robot.m, dtype=bool)
     robot.set_label = np.full(robot.m, -1, dtype=np.int64)
     robot.root_of_set = {}
     robot.t_stop = 0
-    robot.t_logical = 0
     return rows
 
 
-def _send_blocks(robot: Robot, send: Send) -> None:
-    """Send each linked neighbour the rows of ``X_i·(t)`` it multiplies by (eq. 5)."""
+def send_blocks(robot: Robot, send: Send) -> None:
+    """Send each linked neighbour the rows of ``X_i·(t)`` it multiplies by (eq. 5).
+
+    One ``blocks`` message per neighbour ``k``: ``rows`` (this robot's local ids ``r`` with
+    ``[W_ik]_{r,·} ≠ 0``), CSR ``indptr`` and column ``indices`` of those rows.
+    """
     sel = np.flatnonzero(robot.link_alive & robot.active[robot.link_r])
     if sel.size == 0:
         return
@@ -110,15 +111,39 @@ def _send_blocks(robot: Robot, send: Send) -> None:
               "indices": blk.indices.astype(idt)})
 
 
-def _receive_blocks(robot: Robot, inbox: list[Message]) -> None:
-    for msg in inbox:
-        if msg.kind != "blocks":
-            continue
-        p = msg.payload
-        nrows = p["rows"].shape[0]
-        blk = sp.csr_matrix((np.ones(p["indices"].shape[0], dtype=bool), p["indices"], p["indptr"]),
-                            shape=(nrows, robot.m_total))
-        robot.last_blocks[msg.src] = (p["rows"], blk)
+def blocks_from_payload(robot: Robot, payload: dict) -> tuple[np.ndarray, sp.csr_matrix]:
+    """A neighbour's ``blocks`` message as ``(rows (R,) int32, X_k·(t)[rows] (R, m_total) csr)``."""
+    nrows = payload["rows"].shape[0]
+    blk = sp.csr_matrix((np.ones(payload["indices"].shape[0], dtype=bool), payload["indices"],
+                         payload["indptr"]), shape=(nrows, robot.m_total))
+    return payload["rows"], blk
+
+
+def eq5_step(robot: Robot, blocks: dict, t_next: int) -> bool:
+    """One step of eq. (5) to ``X_i·(t_next)``, or the stop of Prop. 3.5; True if stopped.
+
+    Parameters
+    ----------
+    robot : Robot
+    blocks : dict ``k -> (rows, block)`` — the neighbours' ``X_k·(t_next - 1)`` (see
+        :func:`eq5_next`)
+    t_next : int — the round ``t + 1`` being computed
+
+    Notes
+    -----
+    Prop. 3.5: robot ``i`` stops at the first ``t_i`` with ``X_i·(t_i) ~ X_i·(t_i − 1)``;
+    ``W_ii = I`` makes the rows grow monotonically, so "nothing changed" is "the number of
+    non-zeros did not grow". On a stop, rules (8)-(9) and eq. (10) run
+    (:func:`find_conflictive_sets`); otherwise ``robot.X`` becomes ``X_i·(t_next)``.
+    """
+    X_next = eq5_next(robot, blocks)
+    if X_next.nnz == robot.X.nnz:
+        robot.stopped = True
+        robot.t_stop = int(t_next)
+        find_conflictive_sets(robot)
+        return True
+    robot.X = X_next
+    return False
 
 
 def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
@@ -129,18 +154,11 @@ def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) 
     """
     if robot.stopped:
         return
-    _receive_blocks(robot, inbox)
-    X = robot.X
-    X_next = eq5_next(robot, robot.last_blocks)
-    X_next.sort_indices()
-    if X_next.nnz == X.nnz:
-        # Prop. 3.5: X_i·(t) ~ X_i·(t-1); W_ii = I makes X grow monotonically
-        robot.stopped = True
-        robot.t_stop = round_
-        find_conflictive_sets(robot)
-    else:
-        robot.X = X_next
-        _send_blocks(robot, send)
+    for msg in inbox:
+        if msg.kind == "blocks":
+            robot.last_blocks[msg.src] = blocks_from_payload(robot, msg.payload)
+    if not eq5_step(robot, robot.last_blocks, round_):
+        send_blocks(robot, send)
     robot.measure_memory()
 
 

@@ -30,18 +30,19 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
+from pipeline.consistency.channel import Channel
 from pipeline.consistency.detection import detection_step, start_detection
 from pipeline.consistency.network import Network, NetworkOptions
 from pipeline.consistency.reliable import (
-    Channel,
     ProtocolOptions,
+    ReliableState,
     detection_done,
     detection_round,
     resolution_round,
     start_detection_reliable,
     start_resolution_reliable,
 )
-from pipeline.consistency.resolution import resolution_step, start_resolution
+from pipeline.consistency.resolution import finish_resolution, resolution_step, start_resolution
 from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
 from pipeline.types import Links
 
@@ -166,8 +167,7 @@ def run_resolution(robots: list[Robot], network: Network, max_rounds: int | None
         if t > cap:
             raise RuntimeError(f"resolution did not end within {cap} rounds")
     for rb in robots:
-        # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
-        rb.candidates = rb.conflictive & (rb.component < 0)
+        finish_resolution(rb)
     return dict(rounds=t, conflictive_sets=int(sets))
 
 
@@ -189,7 +189,7 @@ def _run_phase(robots: list[Robot], network: Network, step, done, max_rounds: in
             raise RuntimeError(f"{phase} did not end within {max_rounds} rounds")
 
 
-def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: Network,
+def run_detection_reliable(robots: list[Robot], chans: list[ReliableState], network: Network,
                            iteration: int, max_rounds: int) -> dict:
     """One lockstep detection (:mod:`.reliable`) on the robots still alive.
 
@@ -204,20 +204,20 @@ def run_detection_reliable(robots: list[Robot], chans: list[Channel], network: N
         lambda rb: detection_done(rb, chans[rb.id]), max_rounds, "detection")
     return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)),
-                lost=any(rb.lost_in_phase for rb in live))
+                lost=any(chans[rb.id].lost_in_phase for rb in live))
 
 
-def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: Network,
+def run_resolution_reliable(robots: list[Robot], chans: list[ReliableState], network: Network,
                             max_rounds: int) -> dict:
     """One run of Alg. 1 over the reliable channels; ends when everything is acknowledged."""
     sets = sum(start_resolution_reliable(rb, chans[rb.id], network.round)
                for rb in robots if network.alive(rb.id))
     t, live = _run_phase(
         robots, network, lambda rb, inbox, now, t: resolution_round(rb, chans[rb.id], inbox, now, t),
-        lambda rb: chans[rb.id].idle(), max_rounds, "resolution")
+        lambda rb: chans[rb.id].chan.idle(), max_rounds, "resolution")
     for rb in robots:
-        rb.candidates = rb.conflictive & (rb.component < 0)
-    return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in live))
+        finish_resolution(rb)
+    return dict(rounds=t, conflictive_sets=int(sets), lost=any(chans[rb.id].lost_in_phase for rb in live))
 
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
@@ -280,7 +280,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     protocol = protocol or ProtocolOptions()
     reliable = opts.any_fault if protocol.reliable is None else bool(protocol.reliable)
     network = Network(n, edges, opts)
-    chans = [Channel(i, partial(network.send, i), partial(network.links_up, i), protocol)
+    chans = [ReliableState(Channel(i, partial(network.send, i), partial(network.links_up, i), protocol))
              for i in range(n)] if reliable else []
     m_total = int(fpc.sum())
     # generous caps: they only turn a bug into an error, never end a correct run
@@ -381,12 +381,12 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         dropped=int(cnt["dropped"]),
         crashed={i: r for i, r in sorted(crash_rounds.items()) if not survivors[i]},
         crashes_not_reached={i: r for i, r in sorted(crash_rounds.items()) if survivors[i]},
-        robots_lost={int(k): sorted(int(rb.id) for rb in robots if k in rb.lost_neighbours)
-                     for k in sorted({k for rb in robots for k in rb.lost_neighbours})},
+        robots_lost={int(k): sorted(int(i) for i, c in enumerate(chans) if k in c.lost_neighbours)
+                     for k in sorted({k for c in chans for k in c.lost_neighbours})},
         links_cut_robot_lost=int(robot_lost.sum()),
-        retransmissions=int(sum(c.retransmissions for c in chans)),
-        acks=int(sum(c.acks_sent for c in chans)),
-        heartbeats=int(sum(c.heartbeats_sent for c in chans)),
+        retransmissions=int(sum(c.chan.retransmissions for c in chans)),
+        acks=int(sum(c.chan.acks_sent for c in chans)),
+        heartbeats=int(sum(c.chan.heartbeats_sent for c in chans)),
         repeated_detections=int(repeated),
         rounds=int(network.round),
     )

@@ -86,23 +86,24 @@ round) besides the paper's ``rows``/``indptr``/``indices``; ``final`` carries ``
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
+from pipeline.consistency.channel import Channel
 from pipeline.consistency.detection import (
-    _send_blocks,
-    eq5_next,
+    blocks_from_payload,
+    eq5_step,
     find_conflictive_sets,
     init_detection,
+    send_blocks,
 )
 from pipeline.consistency.network import Message
-from pipeline.consistency.resolution import _delete, resolution_step, start_resolution
-from pipeline.consistency.robot import ROBOT_LOST, Robot
+from pipeline.consistency.resolution import resolution_step, start_resolution
+from pipeline.consistency.robot import ROBOT_LOST, Robot, blocks_bytes
 
-__all__ = ["ProtocolOptions", "Channel", "start_detection_reliable", "detection_round",
+__all__ = ["ProtocolOptions", "ReliableState", "start_detection_reliable", "detection_round",
            "detection_done", "start_resolution_reliable", "resolution_round"]
 
 _I32 = np.int32
@@ -134,166 +135,53 @@ class ProtocolOptions:
     loss_timeout: int = 40
 
 
-class _Pending:
-    __slots__ = ("kind", "payload", "first", "last")
-
-    def __init__(self, kind: str, payload: dict, first: int, last: int | None):
-        self.kind, self.payload, self.first, self.last = kind, payload, first, last
-
-
-class Channel:
-    """A robot's reliable links to its neighbours (sequence numbers, acks, retransmission).
-
-    Parameters
-    ----------
-    owner : int — the robot's id
-    send : callable ``(dst, kind, payload)`` — the network's send, bound to ``owner``
-    links_up : callable ``() -> frozenset`` — the robot's current neighbour table
-    options : ProtocolOptions
+@dataclass
+class ReliableState:
+    """What one robot keeps for the fault-tolerant protocol (besides its :class:`Robot` state).
 
     Attributes
     ----------
-    lost : set of int — neighbours declared lost (ignored from then on)
-    retransmissions, acks_sent, heartbeats_sent : int — counters of extra packets
+    chan : Channel — its reliable links
+    t_logical : int — logical round ``t`` of the lockstep detection
+    recv_blocks : dict ``k -> {t: (rows, block)}`` — neighbours' blocks ``X_k·(t)`` by round
+    final_t : dict ``k -> t_k`` — neighbours' ``final`` markers (their stop round)
+    block_nbrs : set — neighbours whose blocks the next step of eq. (5) waits for
+    all_nbrs : set — neighbours it shares an alive link with (they get its ``final``)
+    lost_neighbours : set — neighbours it declared lost (over the whole run)
+    lost_in_phase : bool — it declared a neighbour lost during the current phase
     """
 
-    def __init__(self, owner: int, send: Callable, links_up: Callable, options: ProtocolOptions):
-        self.owner = int(owner)
-        self._send, self._links_up, self.options = send, links_up, options
-        self._next_seq: dict[int, int] = {}
-        self._unacked: dict[int, dict[int, _Pending]] = {}
-        self._to_ack: dict[int, list[int]] = {}
-        self._seen: dict[int, set[int]] = {}
-        self._last_heard: dict[int, int] = {}
-        self._last_sent: dict[int, int] = {}
-        self._expect_since: dict[int, int] = {}
-        self.lost: set[int] = set()
-        self.retransmissions = 0
-        self.acks_sent = 0
-        self.heartbeats_sent = 0
+    chan: Channel
+    t_logical: int = 0
+    recv_blocks: dict = field(default_factory=dict)
+    final_t: dict = field(default_factory=dict)
+    block_nbrs: set = field(default_factory=set)
+    all_nbrs: set = field(default_factory=set)
+    lost_neighbours: set = field(default_factory=set)
+    lost_in_phase: bool = False
 
-    # --- receiving ------------------------------------------------------------------------
-    def receive(self, inbox: list[Message], now: int) -> list[Message]:
-        """Process acks, record what to acknowledge, return the new algorithm messages."""
-        out = []
-        for m in inbox:
-            k = m.src
-            if k in self.lost:
-                continue
-            self._last_heard[k] = now
-            p = m.payload
-            if "ack" in p:
-                un = self._unacked.get(k)
-                if un:
-                    for s in p["ack"].tolist():
-                        un.pop(int(s), None)
-            seq = int(p["seq"][0]) if "seq" in p else 0
-            if seq > 0:
-                self._to_ack.setdefault(k, []).append(seq)
-                seen = self._seen.setdefault(k, set())
-                if seq not in seen:
-                    seen.add(seq)
-                    out.append(m)
-        return out
-
-    # --- sending --------------------------------------------------------------------------
-    def _transmit(self, dst: int, kind: str, payload: dict, seq: int, now: int) -> None:
-        p = dict(payload)
-        p["seq"] = np.array([seq], dtype=_I32)
-        acks = self._to_ack.pop(dst, None)
-        if acks:
-            p["ack"] = np.array(sorted(set(acks)), dtype=_I32)
-        self._send(dst, kind, p)
-        self._last_sent[dst] = now
-
-    def send(self, dst: int, kind: str, payload: dict, now: int) -> None:
-        """Send reliably (now if the link is up, else when it comes up)."""
-        dst = int(dst)
-        if dst in self.lost:
-            return
-        seq = self._next_seq.get(dst, 0) + 1
-        self._next_seq[dst] = seq
-        up = dst in self._links_up()
-        self._unacked.setdefault(dst, {})[seq] = _Pending(kind, payload, now, now if up else None)
-        self._expect_since.setdefault(dst, now)  # an ack is expected from now on
-        if up:
-            self._transmit(dst, kind, payload, seq, now)
-
-    def flush(self, now: int, heartbeat_to=()) -> None:
-        """End of a robot's round: retransmissions, pending acks, heartbeats."""
-        up = self._links_up()
-        rto = self.options.retransmit_after
-        for k, un in self._unacked.items():
-            if k not in up or k in self.lost:
-                continue
-            for seq, pm in un.items():
-                if pm.last is None or (now - pm.first >= rto and pm.last < now):
-                    if pm.last is not None:
-                        self.retransmissions += 1
-                    pm.last = now
-                    self._transmit(k, pm.kind, pm.payload, seq, now)
-        for k in [k for k in self._to_ack if k in up and k not in self.lost]:
-            acks = self._to_ack.pop(k)
-            self._send(k, "ack", {"seq": np.zeros(1, dtype=_I32),
-                                  "ack": np.array(sorted(set(acks)), dtype=_I32)})
-            self._last_sent[k] = now
-            self.acks_sent += 1
-        for k in heartbeat_to:
-            if k in up and k not in self.lost and \
-                    now - self._last_sent.get(k, -10**9) >= self.options.heartbeat_every:
-                self._send(k, "heartbeat", {"seq": np.zeros(1, dtype=_I32)})
-                self._last_sent[k] = now
-                self.heartbeats_sent += 1
-
-    # --- state ----------------------------------------------------------------------------
     def memory_bytes(self) -> int:
-        """Bytes held for retransmission (payload arrays) and for duplicate detection."""
-        held = sum(int(np.asarray(a).nbytes) for un in self._unacked.values()
-                   for pm in un.values() for a in pm.payload.values())
-        return held + 8 * sum(len(v) for v in self._seen.values())
-
-    def idle(self) -> bool:
-        """True when every message sent has been acknowledged (or its receiver is lost)."""
-        return not any(un for k, un in self._unacked.items() if k not in self.lost)
-
-    def check_lost(self, now: int, waiting_on=()) -> list[int]:
-        """Neighbours silent for ``loss_timeout`` rounds while expected; marks them lost."""
-        expected = {k for k, un in self._unacked.items() if un} | set(waiting_on)
-        expected -= self.lost
-        for k in list(self._expect_since):
-            if k not in expected:
-                del self._expect_since[k]
-        newly = []
-        for k in expected:
-            since = self._expect_since.setdefault(k, now)
-            quiet_from = max(since, self._last_heard.get(k, -10**9))
-            if now - quiet_from >= self.options.loss_timeout:
-                newly.append(k)
-        for k in sorted(newly):
-            self.lost.add(k)
-            self._unacked.pop(k, None)
-            self._to_ack.pop(k, None)
-            self._expect_since.pop(k, None)
-        return sorted(newly)
+        """Bytes of the blocks held by round plus the channel's buffers."""
+        held = sum(blocks_bytes(per_round.values()) for per_round in self.recv_blocks.values())
+        return held + self.chan.memory_bytes()
 
 
 # ------------------------------------------------------------------------------------------
 # helpers on the robot
 
-def _cut_lost(robot: Robot, lost: list[int], round_: int) -> None:
+def _cut_lost(robot: Robot, st: ReliableState, lost: list[int], round_: int) -> None:
     """Cut every alive link to a neighbour declared lost (reason ``robot-lost``)."""
     if not lost:
         return
     links = np.flatnonzero(robot.link_alive & np.isin(robot.link_nbr, lost))
-    _delete(robot, links, round_, ROBOT_LOST)
-    robot.lost_neighbours.update(int(k) for k in lost)
-    robot.lost_in_phase = True
+    robot.delete_links(links, round_, ROBOT_LOST)
+    st.lost_neighbours.update(int(k) for k in lost)
+    st.lost_in_phase = True
 
 
-def _measure(robot: Robot, chan: Channel) -> None:
-    """Peak memory of the robot including its channel's retransmission buffers."""
-    robot.peak_memory_bytes = max(robot.peak_memory_bytes,
-                                  robot.memory_bytes() + chan.memory_bytes())
+def _measure(robot: Robot, st: ReliableState) -> None:
+    """Peak memory of the robot including the protocol's blocks and retransmission buffers."""
+    robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.memory_bytes())
 
 
 def _linked_neighbours(robot: Robot, rows_mask: np.ndarray | None = None) -> set[int]:
@@ -304,42 +192,45 @@ def _linked_neighbours(robot: Robot, rows_mask: np.ndarray | None = None) -> set
 # ------------------------------------------------------------------------------------------
 # detection (Sec. III) in lockstep over the reliable channel
 
-def _send_blocks_reliable(robot: Robot, chan: Channel, now: int) -> None:
+def _send_blocks_reliable(robot: Robot, st: ReliableState, now: int) -> None:
     """The paper's blocks message (eq. 5 rows), tagged with the logical round ``t``."""
-    t = np.array([robot.t_logical], dtype=_I32)
-    _send_blocks(robot, lambda dst, kind, p: chan.send(dst, kind, {"t": t, **p}, now))
+    t = np.array([st.t_logical], dtype=_I32)
+    send_blocks(robot, lambda dst, kind, p: st.chan.send(dst, kind, {"t": t, **p}, now))
 
 
-def _stop(robot: Robot, chan: Channel, now: int, t_stop: int) -> None:
-    """Prop. 3.5 fired at ``t_i``: rules (8)-(9), then ``final(t_i)`` to every linked neighbour."""
-    robot.stopped = True
-    robot.t_stop = int(t_stop)
-    find_conflictive_sets(robot)
+def _send_finals(robot: Robot, st: ReliableState, now: int) -> None:
+    """After Prop. 3.5 fired at ``t_i``: ``final(t_i)`` to every linked neighbour."""
     t = np.array([robot.t_stop], dtype=_I32)
-    for k in sorted(robot.all_nbrs - chan.lost):
-        chan.send(k, "final", {"t": t}, now)
+    for k in sorted(st.all_nbrs - st.chan.lost):
+        st.chan.send(k, "final", {"t": t}, now)
 
 
-def start_detection_reliable(robot: Robot, chan: Channel, iteration: int, now: int) -> None:
+def start_detection_reliable(robot: Robot, st: ReliableState, iteration: int, now: int) -> None:
     """Round 0: eq. (4) as in :func:`~.detection.start_detection`, blocks sent reliably."""
-    robot.lost_in_phase = False
+    st.lost_in_phase = False
+    st.recv_blocks = {}
+    st.final_t = {}
+    st.t_logical = 0
     rows = init_detection(robot, iteration)
-    robot.block_nbrs = _linked_neighbours(robot, robot.active) - chan.lost
-    robot.all_nbrs = _linked_neighbours(robot) - chan.lost
+    st.block_nbrs = _linked_neighbours(robot, robot.active) - st.chan.lost
+    st.all_nbrs = _linked_neighbours(robot) - st.chan.lost
     robot.stopped = False
     if rows.size == 0:
-        _stop(robot, chan, now, 0)
+        robot.stopped = True  # Prop. 3.5 at t_i = 0: no active row
+        robot.t_stop = 0
+        find_conflictive_sets(robot)
+        _send_finals(robot, st, now)
     else:
-        _send_blocks_reliable(robot, chan, now)
+        _send_blocks_reliable(robot, st, now)
     robot.measure_memory()
 
 
-def _blocks_of_round(robot: Robot, k: int, t: int):
+def _blocks_of_round(robot: Robot, st: ReliableState, k: int, t: int):
     """``X_k·(t)`` as received, or ``None`` if it has not arrived yet."""
-    got = robot.recv_blocks.get(k, {})
+    got = st.recv_blocks.get(k, {})
     if t in got:
         return got[t]
-    tk = robot.final_t.get(k)
+    tk = st.final_t.get(k)
     if tk is not None and t >= tk - 1:
         # k stopped at t_k: X_k(t) = X_k(t_k - 1) for every t >= t_k - 1 (Prop. 3.5)
         if tk <= 0:
@@ -348,75 +239,71 @@ def _blocks_of_round(robot: Robot, k: int, t: int):
     return None
 
 
-def detection_round(robot: Robot, chan: Channel, inbox: list[Message], now: int,
+def detection_round(robot: Robot, st: ReliableState, inbox: list[Message], now: int,
                     phase_round: int) -> None:
     """One network round of the lockstep detection for one robot.
 
     Receives blocks and finals, declares silent neighbours lost (cutting their links), and
-    computes one step of eq. (5) when the blocks of the current logical round ``t`` from every
-    neighbour of an active link are in; stops by Prop. 3.5.
+    computes one step of eq. (5) (:func:`~.detection.eq5_step`) when the blocks of the current
+    logical round ``t`` from every neighbour of an active link are in; stops by Prop. 3.5.
     """
+    chan = st.chan
     for m in chan.receive(inbox, now):
         p = m.payload
         if m.kind == "blocks":
-            nrows = p["rows"].shape[0]
-            blk = sp.csr_matrix((np.ones(p["indices"].shape[0], dtype=bool), p["indices"],
-                                 p["indptr"]), shape=(nrows, robot.m_total))
-            robot.recv_blocks.setdefault(m.src, {})[int(p["t"][0])] = (p["rows"], blk)
+            st.recv_blocks.setdefault(m.src, {})[int(p["t"][0])] = blocks_from_payload(robot, p)
         elif m.kind == "final":
-            robot.final_t[m.src] = int(p["t"][0])
-    waiting = {k for k in robot.all_nbrs if k not in robot.final_t}
+            st.final_t[m.src] = int(p["t"][0])
+    waiting = {k for k in st.all_nbrs if k not in st.final_t}
     if not robot.stopped:
-        waiting |= {k for k in robot.block_nbrs
-                    if _blocks_of_round(robot, k, robot.t_logical) is None}
+        waiting |= {k for k in st.block_nbrs
+                    if _blocks_of_round(robot, st, k, st.t_logical) is None}
     lost = chan.check_lost(now, waiting)
     if lost:
-        _cut_lost(robot, lost, phase_round)
-        robot.block_nbrs -= set(lost)
-        robot.all_nbrs -= set(lost)
+        _cut_lost(robot, st, lost, phase_round)
+        st.block_nbrs -= set(lost)
+        st.all_nbrs -= set(lost)
     if not robot.stopped:
-        t = robot.t_logical
-        blocks = {k: _blocks_of_round(robot, k, t) for k in robot.block_nbrs}
+        t = st.t_logical
+        blocks = {k: _blocks_of_round(robot, st, k, t) for k in st.block_nbrs}
         if all(b is not None for b in blocks.values()):
-            X_next = eq5_next(robot, blocks)
+            if eq5_step(robot, blocks, t + 1):
+                _send_finals(robot, st, now)
+            else:
+                st.t_logical = t + 1
+                _send_blocks_reliable(robot, st, now)
             # later rounds need X_k(t + 1), or X_k(t) if k stops at t + 1, or the last
             # blocks of a k that has stopped: drop the others
-            for k, got in robot.recv_blocks.items():
-                keep = robot.final_t.get(k, 0) - 1
+            for k, got in st.recv_blocks.items():
+                keep = st.final_t.get(k, 0) - 1
                 for tt in [tt for tt in got if tt < t and tt != keep]:
                     del got[tt]
-            if X_next.nnz == robot.X.nnz:
-                _stop(robot, chan, now, t + 1)  # Prop. 3.5: X_i(t+1) ~ X_i(t)
-            else:
-                robot.X = X_next
-                robot.t_logical = t + 1
-                _send_blocks_reliable(robot, chan, now)
-    chan.flush(now, heartbeat_to=() if robot.stopped else sorted(robot.all_nbrs))
-    _measure(robot, chan)
+    chan.flush(now, heartbeat_to=() if robot.stopped else sorted(st.all_nbrs))
+    _measure(robot, st)
 
 
-def detection_done(robot: Robot, chan: Channel) -> bool:
+def detection_done(robot: Robot, st: ReliableState) -> bool:
     """Stopped, every linked neighbour's ``final`` received, every message acknowledged."""
-    return robot.stopped and all(k in robot.final_t for k in robot.all_nbrs) and chan.idle()
+    return robot.stopped and all(k in st.final_t for k in st.all_nbrs) and st.chan.idle()
 
 
 # ------------------------------------------------------------------------------------------
 # resolution (Alg. 1) over the reliable channel
 
-def start_resolution_reliable(robot: Robot, chan: Channel, now: int) -> int:
+def start_resolution_reliable(robot: Robot, st: ReliableState, now: int) -> int:
     """Alg. 1 lines 2–5 with the requests sent reliably; returns the sets this robot roots."""
-    robot.lost_in_phase = False
-    return start_resolution(robot, lambda dst, kind, p: chan.send(dst, kind, p, now))
+    st.lost_in_phase = False
+    return start_resolution(robot, lambda dst, kind, p: st.chan.send(dst, kind, p, now))
 
 
-def resolution_round(robot: Robot, chan: Channel, inbox: list[Message], now: int,
+def resolution_round(robot: Robot, st: ReliableState, inbox: list[Message], now: int,
                      phase_round: int) -> None:
     """One network round of Alg. 1 (lines 8–19) on the messages the channel delivers."""
-    msgs = chan.receive(inbox, now)
-    lost = chan.check_lost(now)
+    msgs = st.chan.receive(inbox, now)
+    lost = st.chan.check_lost(now)
     if lost:
-        _cut_lost(robot, lost, phase_round)
+        _cut_lost(robot, st, lost, phase_round)
     msgs = [m for m in msgs if m.kind in ("request", "reject")]
-    resolution_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
-    chan.flush(now)
-    _measure(robot, chan)
+    resolution_step(robot, msgs, lambda dst, kind, p: st.chan.send(dst, kind, p, now), phase_round)
+    st.chan.flush(now)
+    _measure(robot, st)

@@ -42,7 +42,7 @@ import numpy as np
 from pipeline.consistency.network import Message
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
 
-__all__ = ["start_resolution", "resolution_step"]
+__all__ = ["start_resolution", "resolution_step", "finish_resolution"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -97,14 +97,6 @@ def _send_rejects(robot: Robot, links: np.ndarray, send: Send) -> None:
         send(int(robot.link_nbr[part[0]]), "reject",
              {"src_feat": robot.link_r[part].astype(np.int32),
               "dst_feat": robot.link_s[part].astype(np.int32)})
-
-
-def _delete(robot: Robot, links: np.ndarray, round_: int, case: int) -> None:
-    fresh = links[robot.link_alive[links]]
-    robot.link_alive[fresh] = False
-    robot.deleted_round[fresh] = round_
-    robot.deleted_case[fresh] = case
-    robot.deleted_iteration[fresh] = robot.iteration
 
 
 def _settle_contention(q: np.ndarray, r: np.ndarray, outcome: np.ndarray, cand: np.ndarray) -> None:
@@ -162,8 +154,8 @@ def resolution_step(robot: Robot, inbox: list[Message], send: Send, round_: int)
 
         cut_b = link[outcome == _B]
         cut_c = link[outcome == _C]
-        _delete(robot, cut_b, round_, CASE_B)         # line 10
-        _delete(robot, cut_c, round_, CASE_C)
+        robot.delete_links(cut_b, round_, CASE_B)     # line 10
+        robot.delete_links(cut_c, round_, CASE_C)
         _send_rejects(robot, np.concatenate([cut_b, cut_c, stale]),
                       send)                           # line 11
 
@@ -183,5 +175,14 @@ def resolution_step(robot: Robot, inbox: list[Message], send: Send, round_: int)
         link = robot.find_links(np.full(m.payload["src_feat"].shape[0], m.src), m.payload["src_feat"])
         ok = link >= 0
         ok[ok] = robot.link_r[link[ok]] == m.payload["dst_feat"][ok]
-        _delete(robot, link[ok], round_, ON_REJECT)
+        robot.delete_links(link[ok], round_, ON_REJECT)
     robot.measure_memory()
+
+
+def finish_resolution(robot: Robot) -> None:
+    """End of a resolution: the next detection re-examines the unassigned conflictive features.
+
+    Sec. IV, after Cor. 4.4: "the detection algorithm can be executed on the subgraph defined
+    by this smaller subset of features" — those conflictive and left without a component.
+    """
+    robot.candidates = robot.conflictive & (robot.component < 0)

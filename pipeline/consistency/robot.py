@@ -21,11 +21,21 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["Robot"]
+__all__ = ["Robot", "csr_bytes", "blocks_bytes"]
 
 # deletion log codes
 CASE_B, CASE_C, ON_REJECT, ROBOT_LOST = 1, 2, 3, 4
 CASE_NAMES = {CASE_B: "b", CASE_C: "c", ON_REJECT: "reject", ROBOT_LOST: "robot-lost"}
+
+
+def csr_bytes(a: sp.csr_matrix) -> int:
+    """Bytes of a CSR matrix as held: data + indices + indptr."""
+    return int(a.data.nbytes + a.indices.nbytes + a.indptr.nbytes)
+
+
+def blocks_bytes(blocks) -> int:
+    """Bytes of received blocks ``(rows, csr block)``."""
+    return sum(int(rows.nbytes) + csr_bytes(blk) for rows, blk in blocks)
 
 
 class Robot:
@@ -87,15 +97,6 @@ class Robot:
         self.iteration = 0
         self.peak_memory_bytes = 0
 
-        # fault-tolerant protocol state (:mod:`.reliable`)
-        self.t_logical = 0
-        self.recv_blocks: dict[int, dict[int, tuple[np.ndarray, sp.csr_matrix]]] = {}
-        self.final_t: dict[int, int] = {}
-        self.block_nbrs: set[int] = set()
-        self.all_nbrs: set[int] = set()
-        self.lost_neighbours: set[int] = set()
-        self.lost_in_phase = False
-
     # --- views ----------------------------------------------------------------------------
     def block(self, j: int) -> sp.csr_matrix:
         """``W_ij`` as a sparse boolean ``(m_i, m_j)`` matrix (Assumption 2.1: ``W_ii = I``)."""
@@ -118,22 +119,27 @@ class Robot:
         pos = np.minimum(np.searchsorted(self.link_key, key), self.link_key.size - 1)
         return np.where(self.link_key[pos] == key, pos, -1)
 
+    # --- operations -----------------------------------------------------------------------
+    def delete_links(self, links: np.ndarray, round_: int, case: int) -> None:
+        """Delete the alive links among ``links`` (indices in the link table) and log why.
+
+        ``case`` is one of ``CASE_B``, ``CASE_C`` (Alg. 1 line 10), ``ON_REJECT`` (line 18)
+        or ``ROBOT_LOST``; a link already deleted keeps its first log entry.
+        """
+        fresh = links[self.link_alive[links]]
+        self.link_alive[fresh] = False
+        self.deleted_round[fresh] = round_
+        self.deleted_case[fresh] = case
+        self.deleted_iteration[fresh] = self.iteration
+
     # --- memory ---------------------------------------------------------------------------
     def memory_bytes(self) -> int:
         """Bytes of the arrays this robot holds (sparse matrices: data + indices + indptr)."""
-        def csr_bytes(a: sp.csr_matrix) -> int:
-            return int(a.data.nbytes + a.indices.nbytes + a.indptr.nbytes)
-
         total = sum(int(a.nbytes) for a in (
             self.link_nbr, self.link_r, self.link_s, self.link_alive, self.link_key,
             self.candidates, self.active, self.conflictive, self.set_label, self.component,
             self.assigned_round, self.deleted_round, self.deleted_case, self.deleted_iteration))
-        total += csr_bytes(self.X)
-        for rows, blk in self.last_blocks.values():
-            total += int(rows.nbytes) + csr_bytes(blk)
-        for per_round in self.recv_blocks.values():
-            for rows, blk in per_round.values():
-                total += int(rows.nbytes) + csr_bytes(blk)
+        total += csr_bytes(self.X) + blocks_bytes(self.last_blocks.values())
         total += 16 * len(self.root_of_set)
         return total
 

@@ -17,13 +17,14 @@ from hypothesis import strategies as st
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
+from pipeline.consistency.channel import Channel
 from pipeline.consistency.engine import (
     build_robots,
     run_detection,
     run_detection_reliable,
 )
 from pipeline.consistency.network import Network, NetworkOptions, recurrent_topology
-from pipeline.consistency.reliable import Channel, ProtocolOptions
+from pipeline.consistency.reliable import ProtocolOptions, ReliableState
 from pipeline.types import Links
 
 RELIABLE = ProtocolOptions(reliable=True)
@@ -37,7 +38,7 @@ def detect(fpc, edges, links, options=None, reliable=True):
     robots, _ = build_robots(fpc, links)
     net = Network(len(fpc), comm_edges_for(fpc, links, edges), options)
     if reliable:
-        chans = [Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE)
+        chans = [ReliableState(Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE))
                  for i in range(len(fpc))]
         run_detection_reliable(robots, chans, net, 1, max_rounds=100_000)
     else:
