@@ -37,7 +37,6 @@ import argparse
 import platform
 import sys
 import time
-from functools import partial
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,14 +49,9 @@ from consistency_scale import synthetic_formation  # noqa: E402
 from pipeline.commgraph import comm_edges_for  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
-from pipeline.consistency.channel import Channel  # noqa: E402
-from pipeline.consistency.engine import (  # noqa: E402
-    build_robots,
-    run_detection,
-    run_detection_reliable,
-)
-from pipeline.consistency.network import Network, NetworkOptions, recurrent_topology  # noqa: E402
-from pipeline.consistency.reliable import ProtocolOptions, ReliableState  # noqa: E402
+from pipeline.consistency.engine import detect_once  # noqa: E402
+from pipeline.consistency.network import NetworkOptions, recurrent_topology  # noqa: E402
+from pipeline.consistency.protocols import ProtocolOptions  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-faults"
@@ -76,14 +70,8 @@ def formation(k: int, seed: int):
 
 def detection_exact(fpc, edges, links, options, reliable: bool) -> bool:
     """First detection: every robot's rows and flags equal union-find (Def. 2.4)."""
-    robots, _ = build_robots(fpc, links)
-    net = Network(len(fpc), comm_edges_for(fpc, links, edges), options)
-    if reliable:
-        chans = [ReliableState(Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE))
-                 for i in range(len(fpc))]
-        run_detection_reliable(robots, chans, net, 1, max_rounds=10**6)
-    else:
-        run_detection(robots, net, 1)
+    robots = detect_once(fpc, links, edges, options, RELIABLE if reliable else PAPER,
+                         max_rounds=10**6).robots
     labels, conflictive = union_find_conflicts(fpc, links)
     off = np.concatenate([[0], np.cumsum(fpc)])
     for rb in robots:

@@ -8,7 +8,7 @@ never use it.
 
 from pipeline.consistency.engine import ConsistencyResult, resolve_conflicts
 from pipeline.consistency.network import Network, NetworkOptions, recurrent_topology
-from pipeline.consistency.reliable import ProtocolOptions
+from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
 
 __all__ = ["ConsistencyResult", "resolve_conflicts", "Network", "NetworkOptions",

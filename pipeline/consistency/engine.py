@@ -4,9 +4,11 @@ Implements the loop of Prop. 4.5 (Aragüés et al.): every robot runs the detect
 (:mod:`.detection`), then the resolution of Sec. IV, Alg. 1 (:mod:`.resolution`), on what
 remains, until no robot finds a conflictive feature.
 
-The driver only plays the clock and the phase barrier of a synchronous system: it tells
-every robot that a round or a phase begins, hands it its inbox and a ``send`` bound to its
-id, and after the run it reads each robot's own log to report what happened. It never passes
+One loop runs every phase (:func:`run_phase`) with one of two protocol objects
+(:mod:`.protocols`: the paper's, or the fault-tolerant one). The driver only plays the clock
+and the phase barrier of a synchronous system: it tells every robot that a round or a phase
+begins, hands it its inbox (the protocol holds each robot's endpoint to send through), and
+after the run it reads each robot's own log to report what happened. It never passes
 one robot's state to another. Phase ends are decided by the simulation (a detection ends
 when every robot has stopped, Prop. 3.5; a resolution when no message is in flight); a
 deployment would wait the proven bounds instead (``d + 1`` and ``n + 1`` rounds).
@@ -24,25 +26,19 @@ learn of it only from its silence.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import partial
 
 import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency.channel import Channel
-from pipeline.consistency.detection import detection_step, start_detection
 from pipeline.consistency.network import Network, NetworkOptions
-from pipeline.consistency.reliable import (
+from pipeline.consistency.protocols import (
+    DETECTION,
+    RESOLUTION,
     ProtocolOptions,
-    ReliableState,
-    detection_done,
-    detection_round,
-    resolution_round,
-    start_detection_reliable,
-    start_resolution_reliable,
+    end_phase,
+    make_protocol,
 )
-from pipeline.consistency.resolution import finish_resolution, resolution_step, start_resolution
 from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
 from pipeline.types import Links
 
@@ -50,10 +46,9 @@ __all__ = [
     "ConsistencyResult",
     "resolve_conflicts",
     "build_robots",
-    "run_detection",
-    "run_resolution",
-    "run_detection_reliable",
-    "run_resolution_reliable",
+    "run_phase",
+    "detect_once",
+    "Detection",
 ]
 
 
@@ -134,90 +129,86 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
     return robots, link_index
 
 
-def run_detection(robots: list[Robot], network: Network, iteration: int,
-                  max_rounds: int | None = None) -> dict:
-    """One detection (Sec. III) on all robots; returns ``rounds`` and per-robot ``t_stop``."""
-    sends = [partial(network.send, rb.id) for rb in robots]
-    for rb in robots:
-        start_detection(rb, iteration, sends[rb.id])
-    cap = max_rounds if max_rounds is not None else robots[0].m_total + 2 if robots else 0
-    t = 0
-    while not all(rb.stopped for rb in robots) or network.pending:
-        network.end_round()
-        t += 1
-        for rb in robots:
-            detection_step(rb, network.inbox(rb.id), sends[rb.id], t)
-        if t > cap:
-            raise RuntimeError(f"detection did not stop within {cap} rounds")
-    return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
-                conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
+def run_phase(robots: list[Robot], network: Network, protocol, phase: str, iteration: int = 0,
+              max_rounds: int | None = None) -> dict:
+    """One phase (``detection`` or ``resolution``) on all robots: the one loop of the stage.
 
+    Round 0: every robot of the protocol's team starts the phase. Then, round after round,
+    the network delivers and every robot of the team (those still alive, for the reliable
+    protocol) takes one step on its inbox, until the protocol says the phase is over.
 
-def run_resolution(robots: list[Robot], network: Network, max_rounds: int | None = None) -> dict:
-    """One run of Alg. 1 on all robots; returns ``rounds``, ``conflictive_sets`` (roots)."""
-    sends = [partial(network.send, rb.id) for rb in robots]
-    sets = sum(start_resolution(rb, sends[rb.id]) for rb in robots)
-    cap = max_rounds if max_rounds is not None else len(robots) + 2
-    t = 0
-    while network.pending:
-        network.end_round()
-        t += 1
-        for rb in robots:
-            resolution_step(rb, network.inbox(rb.id), sends[rb.id], t)
-        if t > cap:
-            raise RuntimeError(f"resolution did not end within {cap} rounds")
-    for rb in robots:
-        finish_resolution(rb)
-    return dict(rounds=t, conflictive_sets=int(sets))
-
-
-def _run_phase(robots: list[Robot], network: Network, step, done, max_rounds: int,
-               phase: str) -> tuple[int, list[Robot]]:
-    """Step the robots still alive, round after round, until every one of them is done."""
-    live = [rb for rb in robots if network.alive(rb.id)]
+    Returns
+    -------
+    dict — ``rounds``; detection: ``t_stop`` (n,) the round each robot stopped (Prop. 3.5),
+    ``conflictive_features``, ``lost`` (some robot declared a neighbour lost); resolution:
+    ``conflictive_sets`` (sets rooted, eq. 10), ``lost``
+    """
+    live = protocol.team(robots)
+    rooted = sum(protocol.start(phase, rb, iteration) for rb in live)
+    cap = protocol.max_rounds(phase, robots) if max_rounds is None else max_rounds
     t = 0
     while True:
-        live = [rb for rb in live if network.alive(rb.id)]
-        if all(done(rb) for rb in live):
-            return t, live
+        live = protocol.team(live)
+        if protocol.done(phase, live):
+            break
         network.end_round()
         t += 1
-        for rb in live:
-            if network.alive(rb.id):
-                step(rb, network.inbox(rb.id), network.round, t)
-        if t > max_rounds:
-            raise RuntimeError(f"{phase} did not end within {max_rounds} rounds")
+        for rb in protocol.team(live):
+            protocol.step(phase, rb, network.inbox(rb.id), t)
+        if t > cap:
+            raise RuntimeError(f"{phase} did not end within {cap} rounds")
+    end_phase(phase, robots)
+    out = dict(rounds=t, lost=protocol.lost_in_phase(live))
+    if phase == DETECTION:
+        out.update(t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
+                   conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)))
+    else:
+        out.update(conflictive_sets=int(rooted))
+    return out
 
 
-def run_detection_reliable(robots: list[Robot], chans: list[ReliableState], network: Network,
-                           iteration: int, max_rounds: int) -> dict:
-    """One lockstep detection (:mod:`.reliable`) on the robots still alive.
+@dataclass
+class Detection:
+    """One detection (Sec. III) run by :func:`detect_once`.
 
-    Returns ``rounds``, ``t_stop`` (n,) logical stop rounds, ``conflictive_features`` and
-    ``lost`` (True when some robot declared a neighbour lost during it).
+    Attributes
+    ----------
+    robots : list[Robot] — after the detection (``X``, ``conflictive``, ``t_stop``, ...)
+    stats : dict — as returned by :func:`run_phase`
+    network : Network — the network it ran on (counters)
+    protocol : the protocol object it ran
     """
-    for rb in robots:
-        if network.alive(rb.id):
-            start_detection_reliable(rb, chans[rb.id], iteration, network.round)
-    t, live = _run_phase(
-        robots, network, lambda rb, inbox, now, t: detection_round(rb, chans[rb.id], inbox, now, t),
-        lambda rb: detection_done(rb, chans[rb.id]), max_rounds, "detection")
-    return dict(rounds=t, t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
-                conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)),
-                lost=any(chans[rb.id].lost_in_phase for rb in live))
+
+    robots: list[Robot]
+    stats: dict
+    network: Network
+    protocol: object
 
 
-def run_resolution_reliable(robots: list[Robot], chans: list[ReliableState], network: Network,
-                            max_rounds: int) -> dict:
-    """One run of Alg. 1 over the reliable channels; ends when everything is acknowledged."""
-    sets = sum(start_resolution_reliable(rb, chans[rb.id], network.round)
-               for rb in robots if network.alive(rb.id))
-    t, live = _run_phase(
-        robots, network, lambda rb, inbox, now, t: resolution_round(rb, chans[rb.id], inbox, now, t),
-        lambda rb: chans[rb.id].chan.idle(), max_rounds, "resolution")
-    for rb in robots:
-        finish_resolution(rb)
-    return dict(rounds=t, conflictive_sets=int(sets), lost=any(chans[rb.id].lost_in_phase for rb in live))
+def detect_once(features_per_camera, links: Links, comm_edges=None,
+                network_options: NetworkOptions | None = None,
+                protocol: ProtocolOptions | None = None, *, network: Network | None = None,
+                max_rounds: int | None = None) -> Detection:
+    """Run one detection (Sec. III) with protocol P on a fresh team; for benches and tests.
+
+    Parameters
+    ----------
+    features_per_camera, comm_edges, links, network_options, protocol
+        As in :func:`resolve_conflicts`.
+    network : Network or None — a network to run on instead of a new one
+    max_rounds : int or None — cap of the phase (default: the protocol's)
+
+    Returns
+    -------
+    Detection
+    """
+    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    robots, _ = build_robots(fpc, links)
+    if network is None:
+        network = Network(fpc.shape[0], comm_edges_for(fpc, links, comm_edges), network_options)
+    proto = make_protocol(protocol, network, fpc)
+    stats = run_phase(robots, network, proto, DETECTION, iteration=1, max_rounds=max_rounds)
+    return Detection(robots, stats, network, proto)
 
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
@@ -276,16 +267,10 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     edges = comm_edges_for(fpc, links, comm_edges)
     n = fpc.shape[0]
     robots, link_index = build_robots(fpc, links)
-    opts = network_options or NetworkOptions()
-    protocol = protocol or ProtocolOptions()
-    reliable = opts.any_fault if protocol.reliable is None else bool(protocol.reliable)
-    network = Network(n, edges, opts)
-    chans = [ReliableState(Channel(i, partial(network.send, i), partial(network.links_up, i), protocol))
-             for i in range(n)] if reliable else []
+    network = Network(n, edges, network_options)
+    proto = make_protocol(protocol, network, fpc)
+    reliable = proto.name == "reliable"
     m_total = int(fpc.sum())
-    # generous caps: they only turn a bug into an error, never end a correct run
-    det_cap = (m_total + n + 4) * (protocol.loss_timeout + 4) * 4
-    res_cap = (n + 2) * (protocol.loss_timeout + 4) * 4 + m_total
 
     per_iteration = []
     # Prop. 4.5: each set loses >= 4 features per pass; each repeated detection follows a loss
@@ -297,10 +282,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         if iteration > max_iterations:
             raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
         c0 = network.counters()
-        if reliable:
-            det = run_detection_reliable(robots, chans, network, iteration, det_cap)
-        else:
-            det = run_detection(robots, network, iteration)
+        det = run_phase(robots, network, proto, DETECTION, iteration)
         rec = dict(iteration=iteration, detection_rounds=det["rounds"], t_stop=det["t_stop"],
                    conflictive_features=det["conflictive_features"], conflictive_sets=0,
                    resolution_rounds=0, start_round=int(c0.get("round", 0)))
@@ -314,10 +296,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             rec.update(_delta(c0, network.counters()))
             per_iteration.append(rec)
             break
-        if reliable:
-            res = run_resolution_reliable(robots, chans, network, res_cap)
-        else:
-            res = run_resolution(robots, network)
+        res = run_phase(robots, network, proto, RESOLUTION, iteration)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
                    last_assignment_round=int(max(
                        (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),
@@ -325,7 +304,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
 
-    return _collect(fpc, links, robots, link_index, per_iteration, network, chans, repeated)
+    return _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated)
 
 
 def _delta(c0: dict, c1: dict) -> dict:
@@ -333,7 +312,7 @@ def _delta(c0: dict, c1: dict) -> dict:
 
 
 def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray],
-             per_iteration: list[dict], network: Network, chans: list | None = None,
+             per_iteration: list[dict], network: Network, protocol,
              repeated: int = 0) -> ConsistencyResult:
     """Read every robot's own log into per-link arrays (reporting only)."""
     L = len(links)
@@ -371,8 +350,9 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
     component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
     cnt = network.counters()
     both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, dtype=bool)
-    chans = chans or []
     opts = network.options
+    extra = protocol.counters()
+    lost_by = [protocol.lost_neighbours(rb.id) for rb in robots]
     crash_rounds = {int(i): 0 for i in opts.crashed}
     crash_rounds.update({int(i): int(r) for i, r in opts.crash_at.items()})
     faults = dict(
@@ -381,12 +361,12 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         dropped=int(cnt["dropped"]),
         crashed={i: r for i, r in sorted(crash_rounds.items()) if not survivors[i]},
         crashes_not_reached={i: r for i, r in sorted(crash_rounds.items()) if survivors[i]},
-        robots_lost={int(k): sorted(int(i) for i, c in enumerate(chans) if k in c.lost_neighbours)
-                     for k in sorted({k for c in chans for k in c.lost_neighbours})},
+        robots_lost={int(k): sorted(int(i) for i, lost in enumerate(lost_by) if k in lost)
+                     for k in sorted({k for lost in lost_by for k in lost})},
         links_cut_robot_lost=int(robot_lost.sum()),
-        retransmissions=int(sum(c.chan.retransmissions for c in chans)),
-        acks=int(sum(c.chan.acks_sent for c in chans)),
-        heartbeats=int(sum(c.chan.heartbeats_sent for c in chans)),
+        retransmissions=extra["retransmissions"],
+        acks=extra["acks"],
+        heartbeats=extra["heartbeats"],
         repeated_detections=int(repeated),
         rounds=int(network.round),
     )
@@ -401,7 +381,7 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         max_robot_memory_bytes=int(max((rb.peak_memory_bytes for rb in robots), default=0)),
         asymmetric_links=int(((ends_deleted == 1) & both_alive).sum()),
         deleted_links=int(deleted.sum()),
-        protocol="reliable" if chans else "paper",
+        protocol=protocol.name,
         survivors=survivors,
         faults=faults,
     )

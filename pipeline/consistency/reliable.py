@@ -103,36 +103,10 @@ from pipeline.consistency.network import Message
 from pipeline.consistency.resolution import resolution_step, start_resolution
 from pipeline.consistency.robot import ROBOT_LOST, Robot, blocks_bytes
 
-__all__ = ["ProtocolOptions", "ReliableState", "start_detection_reliable", "detection_round",
+__all__ = ["ReliableState", "start_detection_reliable", "detection_round",
            "detection_done", "start_resolution_reliable", "resolution_round"]
 
 _I32 = np.int32
-
-
-@dataclass
-class ProtocolOptions:
-    """Parameters of the robot protocol.
-
-    Attributes
-    ----------
-    reliable : bool or None
-        ``True``: the fault-tolerant protocol of this module; ``False``: the paper's protocol
-        as is (lossless static network assumed); ``None``: fault-tolerant exactly when some
-        fault switch of the network is on.
-    retransmit_after : int
-        Rounds after the first sending before an unacknowledged message is sent again (then
-        every round). 2 = the round trip of a lossless network.
-    heartbeat_every : int
-        A robot still detecting sends a heartbeat to a linked neighbour it has sent nothing to
-        for this many rounds.
-    loss_timeout : int
-        ``T``: rounds of silence from an expected neighbour after which it is declared lost.
-    """
-
-    reliable: bool | None = None
-    retransmit_after: int = 2
-    heartbeat_every: int = 2
-    loss_timeout: int = 40
 
 
 @dataclass

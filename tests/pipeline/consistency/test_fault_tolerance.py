@@ -18,13 +18,9 @@ from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
 from pipeline.consistency.channel import Channel
-from pipeline.consistency.engine import (
-    build_robots,
-    run_detection,
-    run_detection_reliable,
-)
+from pipeline.consistency.engine import detect_once
 from pipeline.consistency.network import Network, NetworkOptions, recurrent_topology
-from pipeline.consistency.reliable import ProtocolOptions, ReliableState
+from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.types import Links
 
 RELIABLE = ProtocolOptions(reliable=True)
@@ -33,17 +29,8 @@ FAST = settings(max_examples=40, deadline=None, suppress_health_check=[HealthChe
 
 def detect(fpc, edges, links, options=None, reliable=True):
     """One detection; returns the robots (their ``X``, ``conflictive``, ``t_stop``)."""
-    from functools import partial
-
-    robots, _ = build_robots(fpc, links)
-    net = Network(len(fpc), comm_edges_for(fpc, links, edges), options)
-    if reliable:
-        chans = [ReliableState(Channel(i, partial(net.send, i), partial(net.links_up, i), RELIABLE))
-                 for i in range(len(fpc))]
-        run_detection_reliable(robots, chans, net, 1, max_rounds=100_000)
-    else:
-        run_detection(robots, net, 1)
-    return robots
+    proto = RELIABLE if reliable else ProtocolOptions(reliable=False)
+    return detect_once(fpc, links, edges, options, proto, max_rounds=100_000).robots
 
 
 def exact(fpc, links, robots) -> bool:

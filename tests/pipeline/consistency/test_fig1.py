@@ -5,7 +5,7 @@ import numpy as np
 from pipeline.association import AssociationGraph, count_conflicts
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
-from pipeline.consistency.engine import build_robots, run_detection
+from pipeline.consistency.engine import detect_once
 from pipeline.consistency.network import Network
 from pipeline.types import Links
 
@@ -18,9 +18,8 @@ def fig1_links():
 
 def test_fig1_detected_by_the_robots_whose_features_it_involves():
     links = fig1_links()
-    robots, _ = build_robots(FPC, links)
-    net = Network(4, comm_edges_for(FPC, links))
-    det = run_detection(robots, net, iteration=1)
+    once = detect_once(FPC, links)
+    robots, det = once.robots, once.stats
     # every robot holds a feature of the set, so every robot finds it (rules 8 and 9)
     for rb in robots:
         assert rb.conflictive.all(), rb.id
@@ -63,7 +62,6 @@ def test_fig1_with_explicit_comm_graph_including_an_idle_edge():
 
 def test_stopped_robot_stays_silent_and_neighbours_use_its_last_blocks():
     links = fig1_links()
-    robots, _ = build_robots(FPC, links)
     net = Network(4, comm_edges_for(FPC, links))
     sent = []
     send = net.send
@@ -73,8 +71,8 @@ def test_stopped_robot_stays_silent_and_neighbours_use_its_last_blocks():
         send(src, dst, kind, payload)
 
     net.send = spy
-    det = run_detection(robots, net, iteration=1)
-    t_stop = det["t_stop"]
+    once = detect_once(FPC, links, network=net)
+    robots, t_stop = once.robots, once.stats["t_stop"]
     assert t_stop[1] < t_stop[3]  # B stops before D
     for rnd, src, _, kind in sent:
         assert kind == "blocks" and rnd < t_stop[src]  # nothing after Prop. 3.5 fires

@@ -11,7 +11,7 @@ from pipeline.association import AssociationGraph
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
-from pipeline.consistency.engine import build_robots, run_detection
+from pipeline.consistency.engine import detect_once
 from pipeline.consistency.network import Network
 
 SETTINGS = settings(max_examples=250, deadline=None,
@@ -31,8 +31,8 @@ def diameter(fpc, links) -> int:
 @given(instances())
 def test_detection_equals_union_find_for_every_robot(inst):
     fpc, edges, links = inst
-    robots, _ = build_robots(fpc, links)
-    det = run_detection(robots, Network(len(fpc), edges), iteration=1)
+    once = detect_once(fpc, links, network=Network(len(fpc), edges))
+    robots, det = once.robots, once.stats
     labels, conflictive = union_find_conflicts(fpc, links)
     off = np.concatenate([[0], np.cumsum(fpc)])
     for rb in robots:
@@ -65,8 +65,7 @@ def _roots_by_eq10(fpc, links):
 @given(instances())
 def test_roots_agree_with_eq10(inst):
     fpc, edges, links = inst
-    robots, _ = build_robots(fpc, links)
-    run_detection(robots, Network(len(fpc), edges), iteration=1)
+    robots = detect_once(fpc, links, network=Network(len(fpc), edges)).robots
     expected = _roots_by_eq10(fpc, links)
     for rb in robots:
         for label, root in rb.root_of_set.items():

@@ -1,0 +1,187 @@
+"""The two robot protocols of the consistency stage, behind one interface for the phase loop.
+
+A *protocol* says what a robot does when a phase (``detection``, Sec. III, or ``resolution``,
+Alg. 1) starts, what it does in each network round, and when the phase is over:
+
+* :class:`PaperProtocol` — the paper's algorithms as they are (:mod:`.detection`,
+  :mod:`.resolution`), for the lossless static network they are proven on. A detection is
+  over when every robot has stopped (Prop. 3.5) and nothing is in flight, a resolution when
+  nothing is in flight. The paper's model has no crashes: every robot is stepped (the
+  network discards what a crashed one sends or would receive).
+* :class:`ReliableProtocol` — the fault-tolerant protocol of :mod:`.reliable` (acknowledged
+  messages, lockstep detection, timeouts). A crashed robot is no longer stepped; a phase is
+  over when every robot still alive is done.
+
+Each protocol holds every robot's endpoint on the transport (and, for the reliable one, the
+per-robot :class:`~.reliable.ReliableState`); the driver (:func:`.engine.run_phase`) only plays
+the clock and the phase barrier.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from pipeline.consistency.channel import Channel
+from pipeline.consistency.detection import detection_step, start_detection
+from pipeline.consistency.reliable import (
+    ReliableState,
+    detection_done,
+    detection_round,
+    resolution_round,
+    start_detection_reliable,
+    start_resolution_reliable,
+)
+from pipeline.consistency.resolution import finish_resolution, resolution_step, start_resolution
+from pipeline.consistency.robot import Robot
+
+__all__ = ["ProtocolOptions", "PaperProtocol", "ReliableProtocol", "make_protocol", "end_phase",
+           "DETECTION", "RESOLUTION"]
+
+DETECTION, RESOLUTION = "detection", "resolution"
+
+
+@dataclass
+class ProtocolOptions:
+    """Parameters of the robot protocol.
+
+    Attributes
+    ----------
+    reliable : bool or None
+        ``True``: the fault-tolerant protocol of this module; ``False``: the paper's protocol
+        as is (lossless static network assumed); ``None``: fault-tolerant exactly when some
+        fault switch of the network is on.
+    retransmit_after : int
+        Rounds after the first sending before an unacknowledged message is sent again (then
+        every round). 2 = the round trip of a lossless network.
+    heartbeat_every : int
+        A robot still detecting sends a heartbeat to a linked neighbour it has sent nothing to
+        for this many rounds.
+    loss_timeout : int
+        ``T``: rounds of silence from an expected neighbour after which it is declared lost.
+    """
+
+    reliable: bool | None = None
+    retransmit_after: int = 2
+    heartbeat_every: int = 2
+    loss_timeout: int = 40
+
+
+class PaperProtocol:
+    """The paper's protocol (Secs. III–IV as written) on the transport ``network``."""
+
+    name = "paper"
+
+    def __init__(self, network, n: int):
+        self.network = network
+        self._send = [partial(network.send, i) for i in range(n)]
+
+    def team(self, robots: list[Robot]) -> list[Robot]:
+        """The robots stepped this round: all of them (the paper's model has no crashes)."""
+        return robots
+
+    def max_rounds(self, phase: str, robots: list[Robot]) -> int:
+        """A cap that only turns a bug into an error: ``m + 2`` (detection), ``n + 2``."""
+        if phase == DETECTION:
+            return robots[0].m_total + 2 if robots else 0
+        return len(robots) + 2
+
+    def start(self, phase: str, robot: Robot, iteration: int) -> int:
+        """Round 0 of a phase; returns the conflictive sets the robot roots (resolution)."""
+        if phase == DETECTION:
+            start_detection(robot, iteration, self._send[robot.id])
+            return 0
+        return start_resolution(robot, self._send[robot.id])
+
+    def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
+        """Round ``phase_round >= 1`` of the phase for one robot."""
+        step = detection_step if phase == DETECTION else resolution_step
+        step(robot, inbox, self._send[robot.id], phase_round)
+
+    def done(self, phase: str, live: list[Robot]) -> bool:
+        """Detection: every robot stopped and nothing in flight; resolution: nothing in flight."""
+        if phase == DETECTION and not all(rb.stopped for rb in live):
+            return False
+        return not self.network.pending
+
+    def lost_in_phase(self, live: list[Robot]) -> bool:
+        return False
+
+    def lost_neighbours(self, i: int) -> set:
+        return set()
+
+    def counters(self) -> dict:
+        return dict(retransmissions=0, acks=0, heartbeats=0)
+
+
+class ReliableProtocol:
+    """The fault-tolerant protocol of :mod:`.reliable` on the transport ``network``."""
+
+    name = "reliable"
+
+    def __init__(self, network, n: int, options: ProtocolOptions, m_total: int):
+        self.network = network
+        self.options = options
+        self.state = [ReliableState(Channel(i, partial(network.send, i),
+                                            partial(network.links_up, i), options))
+                      for i in range(n)]
+        # generous caps: they only turn a bug into an error, never end a correct run
+        T = options.loss_timeout
+        self._caps = {DETECTION: (m_total + n + 4) * (T + 4) * 4,
+                      RESOLUTION: (n + 2) * (T + 4) * 4 + m_total}
+
+    def team(self, robots: list[Robot]) -> list[Robot]:
+        """The robots still alive (a crashed robot is dead: it is no longer stepped)."""
+        return [rb for rb in robots if self.network.alive(rb.id)]
+
+    def max_rounds(self, phase: str, robots: list[Robot]) -> int:
+        return self._caps[phase]
+
+    def start(self, phase: str, robot: Robot, iteration: int) -> int:
+        st, now = self.state[robot.id], self.network.round
+        if phase == DETECTION:
+            start_detection_reliable(robot, st, iteration, now)
+            return 0
+        return start_resolution_reliable(robot, st, now)
+
+    def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
+        step = detection_round if phase == DETECTION else resolution_round
+        step(robot, self.state[robot.id], inbox, self.network.round, phase_round)
+
+    def done(self, phase: str, live: list[Robot]) -> bool:
+        """Every robot alive done: detection (:func:`~.reliable.detection_done`), or idle."""
+        if phase == DETECTION:
+            return all(detection_done(rb, self.state[rb.id]) for rb in live)
+        return all(self.state[rb.id].chan.idle() for rb in live)
+
+    def lost_in_phase(self, live: list[Robot]) -> bool:
+        """Some robot declared a neighbour lost during the phase."""
+        return any(self.state[rb.id].lost_in_phase for rb in live)
+
+    def lost_neighbours(self, i: int) -> set:
+        return self.state[i].lost_neighbours
+
+    def counters(self) -> dict:
+        chans = [s.chan for s in self.state]
+        return dict(retransmissions=int(sum(c.retransmissions for c in chans)),
+                    acks=int(sum(c.acks_sent for c in chans)),
+                    heartbeats=int(sum(c.heartbeats_sent for c in chans)))
+
+
+def make_protocol(options: ProtocolOptions | None, network, features_per_camera):
+    """The protocol the robots run: reliable iff asked, or (by default) iff a fault is on."""
+    options = options or ProtocolOptions()
+    fpc = np.asarray(features_per_camera)
+    reliable = network.options.any_fault if options.reliable is None else bool(options.reliable)
+    if reliable:
+        return ReliableProtocol(network, len(fpc), options, int(fpc.sum()))
+    return PaperProtocol(network, len(fpc))
+
+
+def end_phase(phase: str, robots: list[Robot]) -> None:
+    """Phase barrier: after a resolution every robot prepares its next detection."""
+    if phase == RESOLUTION:
+        for rb in robots:
+            finish_resolution(rb)
