@@ -2,7 +2,7 @@
 
 The faults are properties of the simulated network (DESIGN.md, "the one rule"):
 :class:`FaultConfig` turns the user's flags into
-:class:`~pipeline.consistency.network.NetworkOptions` for the consistency stage and into a
+:class:`~pipeline.transport.simulated.NetworkOptions` for the consistency stage and into a
 per-round topology for the fusion consensus; the robots then run the fault-tolerant protocol
 of :mod:`pipeline.consistency.reliable`. :func:`fault_report` writes the report's ``faults``
 section: what was injected and its effect next to a fault-free run on the same input.
@@ -38,7 +38,7 @@ class FaultConfig:
         (rounds count from 0 over the whole consistency stage)
     switching_topology : bool — every communication edge is up with probability
         ``switch_p_up`` each round and at least once per ``switch_window`` rounds
-        (:func:`~pipeline.consistency.network.recurrent_topology`), for the consistency
+        (:func:`~pipeline.transport.simulated.recurrent_topology`), for the consistency
         stage and the fusion consensus alike
     seed : int — seed of the drops and of the switching topology
     """
@@ -76,13 +76,19 @@ class FaultConfig:
         """The per-round edge function of the switching topology, or ``None``."""
         if not self.switching_topology:
             return None
-        from pipeline.consistency.network import recurrent_topology
+        from pipeline.transport.simulated import recurrent_topology
 
         return recurrent_topology(comm_edges, self.switch_p_up, self.switch_window, self.seed)
 
+    def transport(self, comm_edges, n_robots: int):
+        """A simulated network with these faults (fault-free without any), for a new stage."""
+        from pipeline.transport.simulated import Network
+
+        return Network(n_robots, comm_edges, self.network_options(comm_edges, n_robots))
+
     def network_options(self, comm_edges, n_robots: int):
         """:class:`NetworkOptions` of the consistency stage, or ``None`` without faults."""
-        from pipeline.consistency.network import NetworkOptions
+        from pipeline.transport.simulated import NetworkOptions
 
         self.check_robots(n_robots)
         if not self.any:

@@ -155,14 +155,16 @@ def ledger_from_consistency(result, conflictive_before: np.ndarray | None = None
 
 
 def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edges, *,
-                 cameras: np.ndarray | None = None, topology=None,
+                 cameras: np.ndarray | None = None, transport=None,
                  timer: StageTimer | None = None, detail: str = ""):
     """Robust distributed fusion (Montijano et al., dynamic voting) of the kept links among
     ``cameras``; observations voted out cut their links as ``fusion-outlier`` in ``ledger``.
 
     ``cameras`` (default all) are the robots that take part: they need a pose in ``views``.
     The others act as crashed robots: their links and comm edges are left out, and links to
-    them stay as the consistency stage left them.
+    them stay as the consistency stage left them. ``transport`` (a
+    :class:`~pipeline.transport.Transport` over all ``n`` cameras, or None) is the network the
+    consensus runs on; it needs every camera to take part.
 
     Returns
     -------
@@ -174,6 +176,8 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
     timer = timer or StageTimer(verbose=False)
     n = len(views)
     reg = np.arange(n, dtype=np.int64) if cameras is None else np.asarray(cameras, np.int64)
+    if transport is not None and len(reg) != n:
+        raise ValueError("fusion_stage: a transport needs every camera to take part")
     new = np.full(n, -1, dtype=np.int64)
     new[reg] = np.arange(len(reg))
     links = ledger.links
@@ -185,7 +189,7 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
     e = new[np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)]
     with timer.stage("fusion", "robust distributed fusion by dynamic voting" + detail):
         fr = fuse_tracks([views[k] for k in reg], [features[k] for k in reg], sub_links,
-                         e[(e >= 0).all(axis=1)], topology=topology)
+                         e[(e >= 0).all(axis=1)], transport=transport)
         cut = sub_idx[np.asarray(fr.cut_links, dtype=bool)]
         ledger.cut(cut, "fusion-outlier", int(fr.stats.get("rounds", -1)))
         timer.note(f"{len(cut)} links cut as fusion outliers")
@@ -219,7 +223,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     else:
         faulty = faults is not None and faults.any
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
-                                 topology=faults.topology(comm_edges) if faulty else None)
+                                 transport=faults.transport(comm_edges, len(m)) if faulty else None)
         cleaning.fusion_stats = {"enabled": True, **dict(fr.stats),
                                  "observations_cut_links": n_cut}
         cleaning.fused_points = np.asarray(fr.points)

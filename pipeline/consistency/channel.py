@@ -5,16 +5,14 @@ for the rules and the wire format): every algorithm message to a neighbour gets 
 number, the receiver acknowledges it and delivers it once, an unacknowledged message is sent
 again every round once ``retransmit_after`` rounds have passed, and a neighbour that stays
 silent for ``loss_timeout`` rounds while expected is declared lost. The channel only sends
-through the robot's own ``send`` and reads its own neighbour table.
+through the robot's own :class:`~pipeline.transport.Endpoint` (``send``, neighbour table).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from pipeline.consistency.network import Message
+from pipeline.transport import Endpoint, Message
 
 __all__ = ["Channel"]
 
@@ -33,9 +31,7 @@ class Channel:
 
     Parameters
     ----------
-    owner : int — the robot's id
-    send : callable ``(dst, kind, payload)`` — the network's send, bound to ``owner``
-    links_up : callable ``() -> frozenset`` — the robot's current neighbour table
+    endpoint : Endpoint — the robot's side of the transport (``id``, ``send``, ``links_up``)
     options : ProtocolOptions — ``retransmit_after``, ``heartbeat_every``, ``loss_timeout``
 
     Attributes
@@ -44,9 +40,9 @@ class Channel:
     retransmissions, acks_sent, heartbeats_sent : int — counters of extra packets
     """
 
-    def __init__(self, owner: int, send: Callable, links_up: Callable, options):
-        self.owner = int(owner)
-        self._send, self._links_up, self.options = send, links_up, options
+    def __init__(self, endpoint: Endpoint, options):
+        self.owner = int(endpoint.id)
+        self._send, self._links_up, self.options = endpoint.send, endpoint.links_up, options
         self._next_seq: dict[int, int] = {}
         self._unacked: dict[int, dict[int, _Pending]] = {}
         self._to_ack: dict[int, list[int]] = {}

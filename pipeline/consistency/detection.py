@@ -37,8 +37,8 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from pipeline.consistency.network import Message
 from pipeline.consistency.robot import Robot
+from pipeline.transport import Message
 
 __all__ = ["start_detection", "init_detection", "detection_step", "eq5_next", "eq5_step",
            "send_blocks", "blocks_from_payload", "find_conflictive_sets"]

@@ -31,7 +31,6 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency.network import Network, NetworkOptions
 from pipeline.consistency.protocols import (
     DETECTION,
     RESOLUTION,
@@ -40,6 +39,8 @@ from pipeline.consistency.protocols import (
     make_protocol,
 )
 from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
+from pipeline.transport import Transport
+from pipeline.transport.simulated import Network, NetworkOptions
 from pipeline.types import Links
 
 __all__ = [
@@ -129,7 +130,7 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
     return robots, link_index
 
 
-def run_phase(robots: list[Robot], network: Network, protocol, phase: str, iteration: int = 0,
+def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, iteration: int = 0,
               max_rounds: int | None = None) -> dict:
     """One phase (``detection`` or ``resolution``) on all robots: the one loop of the stage.
 
@@ -175,19 +176,19 @@ class Detection:
     ----------
     robots : list[Robot] — after the detection (``X``, ``conflictive``, ``t_stop``, ...)
     stats : dict — as returned by :func:`run_phase`
-    network : Network — the network it ran on (counters)
+    network : Transport — the network it ran on (counters)
     protocol : the protocol object it ran
     """
 
     robots: list[Robot]
     stats: dict
-    network: Network
+    network: Transport
     protocol: object
 
 
 def detect_once(features_per_camera, links: Links, comm_edges=None,
                 network_options: NetworkOptions | None = None,
-                protocol: ProtocolOptions | None = None, *, network: Network | None = None,
+                protocol: ProtocolOptions | None = None, *, network: Transport | None = None,
                 max_rounds: int | None = None) -> Detection:
     """Run one detection (Sec. III) with protocol P on a fresh team; for benches and tests.
 
@@ -195,7 +196,7 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     ----------
     features_per_camera, comm_edges, links, network_options, protocol
         As in :func:`resolve_conflicts`.
-    network : Network or None — a network to run on instead of a new one
+    network : Transport or None — a network to run on instead of a new simulated one
     max_rounds : int or None — cap of the phase (default: the protocol's)
 
     Returns
@@ -378,7 +379,7 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         per_iteration=per_iteration,
         messages=cnt["messages"], bytes=cnt["bytes"],
         messages_by_kind=cnt["messages_by_kind"], bytes_by_kind=cnt["bytes_by_kind"],
-        max_robot_memory_bytes=int(max((rb.peak_memory_bytes for rb in robots), default=0)),
+        max_robot_memory_bytes=int(max((network.peak_memory(rb.id) for rb in robots), default=0)),
         asymmetric_links=int(((ends_deleted == 1) & both_alive).sum()),
         deleted_links=int(deleted.sum()),
         protocol=protocol.name,

@@ -20,7 +20,6 @@ the clock and the phase barrier.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 
@@ -36,6 +35,7 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.resolution import finish_resolution, resolution_step, start_resolution
 from pipeline.consistency.robot import Robot
+from pipeline.transport import Transport
 
 __all__ = ["ProtocolOptions", "PaperProtocol", "ReliableProtocol", "make_protocol", "end_phase",
            "DETECTION", "RESOLUTION"]
@@ -74,9 +74,9 @@ class PaperProtocol:
 
     name = "paper"
 
-    def __init__(self, network, n: int):
+    def __init__(self, network: Transport, n: int):
         self.network = network
-        self._send = [partial(network.send, i) for i in range(n)]
+        self.endpoints = [network.endpoint(i) for i in range(n)]
 
     def team(self, robots: list[Robot]) -> list[Robot]:
         """The robots stepped this round: all of them (the paper's model has no crashes)."""
@@ -90,15 +90,21 @@ class PaperProtocol:
 
     def start(self, phase: str, robot: Robot, iteration: int) -> int:
         """Round 0 of a phase; returns the conflictive sets the robot roots (resolution)."""
+        ep = self.endpoints[robot.id]
+        rooted = 0
         if phase == DETECTION:
-            start_detection(robot, iteration, self._send[robot.id])
-            return 0
-        return start_resolution(robot, self._send[robot.id])
+            start_detection(robot, iteration, ep.send)
+        else:
+            rooted = start_resolution(robot, ep.send)
+        ep.note_memory(robot.peak_memory_bytes)
+        return rooted
 
     def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
         """Round ``phase_round >= 1`` of the phase for one robot."""
         step = detection_step if phase == DETECTION else resolution_step
-        step(robot, inbox, self._send[robot.id], phase_round)
+        ep = self.endpoints[robot.id]
+        step(robot, inbox, ep.send, phase_round)
+        ep.note_memory(robot.peak_memory_bytes)
 
     def done(self, phase: str, live: list[Robot]) -> bool:
         """Detection: every robot stopped and nothing in flight; resolution: nothing in flight."""
@@ -121,12 +127,11 @@ class ReliableProtocol:
 
     name = "reliable"
 
-    def __init__(self, network, n: int, options: ProtocolOptions, m_total: int):
+    def __init__(self, network: Transport, n: int, options: ProtocolOptions, m_total: int):
         self.network = network
         self.options = options
-        self.state = [ReliableState(Channel(i, partial(network.send, i),
-                                            partial(network.links_up, i), options))
-                      for i in range(n)]
+        self.endpoints = [network.endpoint(i) for i in range(n)]
+        self.state = [ReliableState(Channel(ep, options)) for ep in self.endpoints]
         # generous caps: they only turn a bug into an error, never end a correct run
         T = options.loss_timeout
         self._caps = {DETECTION: (m_total + n + 4) * (T + 4) * 4,
@@ -140,15 +145,20 @@ class ReliableProtocol:
         return self._caps[phase]
 
     def start(self, phase: str, robot: Robot, iteration: int) -> int:
-        st, now = self.state[robot.id], self.network.round
+        st, ep = self.state[robot.id], self.endpoints[robot.id]
+        rooted = 0
         if phase == DETECTION:
-            start_detection_reliable(robot, st, iteration, now)
-            return 0
-        return start_resolution_reliable(robot, st, now)
+            start_detection_reliable(robot, st, iteration, ep.now)
+        else:
+            rooted = start_resolution_reliable(robot, st, ep.now)
+        ep.note_memory(robot.peak_memory_bytes)
+        return rooted
 
     def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
         step = detection_round if phase == DETECTION else resolution_round
-        step(robot, self.state[robot.id], inbox, self.network.round, phase_round)
+        ep = self.endpoints[robot.id]
+        step(robot, self.state[robot.id], inbox, ep.now, phase_round)
+        ep.note_memory(robot.peak_memory_bytes)
 
     def done(self, phase: str, live: list[Robot]) -> bool:
         """Every robot alive done: detection (:func:`~.reliable.detection_done`), or idle."""
@@ -170,11 +180,11 @@ class ReliableProtocol:
                     heartbeats=int(sum(c.heartbeats_sent for c in chans)))
 
 
-def make_protocol(options: ProtocolOptions | None, network, features_per_camera):
+def make_protocol(options: ProtocolOptions | None, network: Transport, features_per_camera):
     """The protocol the robots run: reliable iff asked, or (by default) iff a fault is on."""
     options = options or ProtocolOptions()
     fpc = np.asarray(features_per_camera)
-    reliable = network.options.any_fault if options.reliable is None else bool(options.reliable)
+    reliable = network.faulty if options.reliable is None else bool(options.reliable)
     if reliable:
         return ReliableProtocol(network, len(fpc), options, int(fpc.sum()))
     return PaperProtocol(network, len(fpc))

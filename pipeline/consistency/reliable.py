@@ -99,9 +99,9 @@ from pipeline.consistency.detection import (
     init_detection,
     send_blocks,
 )
-from pipeline.consistency.network import Message
 from pipeline.consistency.resolution import resolution_step, start_resolution
 from pipeline.consistency.robot import ROBOT_LOST, Robot, blocks_bytes
+from pipeline.transport import Message
 
 __all__ = ["ReliableState", "start_detection_reliable", "detection_round",
            "detection_done", "start_resolution_reliable", "resolution_round"]

@@ -39,8 +39,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pipeline.consistency.network import Message
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
+from pipeline.transport import Message
 
 __all__ = ["start_resolution", "resolution_step", "finish_resolution"]
 

@@ -87,6 +87,7 @@ from pipeline.fusion.consensus import (
     ransac_hypotheses,
 )
 from pipeline.fusion.voting import dynamic_voting
+from pipeline.transport import Transport
 from pipeline.types import Features, Links, View
 
 __all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of"]
@@ -276,13 +277,16 @@ def _check_inputs(views, features, links, comm_edges, sigma_px, local):
     return check_comm_edges(np.asarray(comm_edges).reshape(-1, 2), n)
 
 
-def _track_topology(topology, observes: np.ndarray, comm: np.ndarray, n: int):
-    """Round ``t`` -> flat node edges ``b * n + i`` of every track over the comm edges up at ``t``."""
+def _track_topology(edges_up, observes: np.ndarray, comm: np.ndarray, n: int):
+    """Round ``t`` -> flat node edges ``b * n + i`` of every track over the comm edges up at ``t``.
+
+    ``edges_up`` is the transport's :meth:`~pipeline.transport.Transport.edges`.
+    """
     key = comm.min(1) * n + comm.max(1) if len(comm) else np.zeros(0, np.int64)
     per_edge = [np.flatnonzero(observes[:, i] & observes[:, j]) for i, j in comm]
 
     def edges(t: int) -> np.ndarray:
-        up = np.sort(np.asarray(topology(t), dtype=np.int64).reshape(-1, 2), axis=1)
+        up = np.sort(np.asarray(edges_up(t), dtype=np.int64).reshape(-1, 2), axis=1)
         sel = np.flatnonzero(np.isin(key, up[:, 0] * n + up[:, 1]))
         parts = [np.stack([per_edge[k] * n + comm[k, 0], per_edge[k] * n + comm[k, 1]], 1)
                  for k in sel]
@@ -294,7 +298,7 @@ def _track_topology(topology, observes: np.ndarray, comm: np.ndarray, n: int):
 def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_edges,
                 sigma_px: float = 1.0, *, local: str = "robust", p: float = 0.99,
                 gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
-                rounds: int = 100, seed: int = 0, topology=None) -> FusionResult:
+                rounds: int = 100, seed: int = 0, transport: Transport | None = None) -> FusionResult:
     """Fuse every track's landmark by dynamic voting; flag the observations voted out.
 
     Parameters
@@ -309,14 +313,16 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
     rounds : int — dynamic-voting consensus rounds
     seed : int — max-c random draws
-    topology : callable ``round -> (E_t, 2)`` robot edges, or None
-        The communication graph of each consensus round when it changes over time
-        (Assumption 2.1: jointly connected over windows); edges outside ``comm_edges`` are
-        ignored. If the callable has an attribute ``window`` (rounds within which every edge
-        is up once, as :func:`pipeline.consistency.network.recurrent_topology` sets), max-c
-        consensus runs ``window * (n - 1)`` rounds instead of ``n - 1``. ``None``:
-        ``comm_edges`` in every round. The ``messages`` stat still counts every comm edge in
-        every round (an upper bound under a switching topology).
+    transport : Transport or None
+        The network the robots' consensus messages travel on. On a switching one
+        (:attr:`~pipeline.transport.Transport.switching`), the graph of consensus round ``t``
+        is ``transport.edges(t)`` (Assumption 2.1: jointly connected over windows; edges
+        outside ``comm_edges`` are ignored) and max-c consensus runs
+        ``transport.window * (n - 1)`` rounds instead of ``n - 1``. ``None`` or a static
+        transport: ``comm_edges`` in every round. The traffic is counted on the transport
+        (kind ``fusion``); the ``messages`` stat counts every comm edge in every round (an
+        upper bound under a switching topology). Loss and crashes are not applied to the
+        fusion stage (stated; they are modelled in the consistency stage).
 
     Returns
     -------
@@ -417,11 +423,11 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     if B == 0 or not estimated.any():
         return empty
 
-    if topology is None:
+    if transport is None or not transport.switching:
         topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
     else:
-        topo = SwitchingTopology(_track_topology(topology, observes, comm, n), B * n)
-        maxc_rounds = int(getattr(topology, "window", 1)) * (n - 1)
+        topo = SwitchingTopology(_track_topology(transport.edges, observes, comm, n), B * n)
+        maxc_rounds = transport.window * (n - 1)
     res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
                          observed=estimated, maxc_rounds=maxc_rounds)
     voted_out = estimated & ~res.inlier
@@ -481,6 +487,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         tracks_split_winner=int((split & has_pt).sum()),
         max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
             res.theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0)
+    if transport is not None:
+        transport.count("fusion-setup", stats["setup_messages"], stats["setup_bytes"])
+        transport.count("fusion", stats["messages"], stats["bytes"])
     return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track,
                         obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
                         obs_inlier=obs_in, cut_links=cut, stats=stats)

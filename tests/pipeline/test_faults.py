@@ -14,6 +14,7 @@ from pipeline.faults import (
     faults_from_args,
     parse_crash,
 )
+from pipeline.transport.simulated import Network, NetworkOptions
 from pipeline.types import Links
 
 
@@ -117,7 +118,8 @@ def test_fusion_on_a_switching_topology_cuts_what_the_fixed_one_cuts():
     topo = FaultConfig(switching_topology=True, seed=2).topology(edges)
     # the graph of a round is often disconnected; over 4 rounds every edge has been up
     assert any(len(topo(t)) < len(edges) for t in range(10))
-    switching = fuse_tracks(views, feats, links, edges, sigma_px=0.5, topology=topo)
+    net = Network(len(views), edges, NetworkOptions(topology=topo))
+    switching = fuse_tracks(views, feats, links, edges, sigma_px=0.5, transport=net)
     planted = ((links.cam_i == 2) | (links.cam_j == 2)) & (links.feat_i == 7)
     assert fixed.cut_links[planted].all() and not fixed.cut_links[~planted].any()
     np.testing.assert_array_equal(switching.cut_links, fixed.cut_links)

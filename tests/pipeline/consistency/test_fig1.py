@@ -6,7 +6,7 @@ from pipeline.association import AssociationGraph, count_conflicts
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.engine import detect_once
-from pipeline.consistency.network import Network
+from pipeline.transport.simulated import Network
 from pipeline.types import Links
 
 FPC = [1, 1, 1, 2]

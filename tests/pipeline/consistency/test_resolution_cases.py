@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from pipeline.consistency.network import Message
 from pipeline.consistency.resolution import resolution_step
 from pipeline.consistency.robot import Robot
+from pipeline.transport import Message
 
 # robot 0 has 3 features; robots 1 and 2 have 3 each; links (0,r)-(1,r) and (0,r)-(2,r)
 FPC = [3, 3, 3]

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from pipeline.consistency.network import HEADER_BYTES, Network, NetworkOptions, NotANeighbourError
+from pipeline.transport import HEADER_BYTES, NotANeighbourError
+from pipeline.transport.simulated import Network, NetworkOptions
 
 EDGES = [[0, 1], [1, 2]]
 
@@ -77,7 +78,7 @@ def test_crash_at_a_round_and_the_neighbour_table():
 
 
 def test_recurrent_topology_every_edge_up_once_per_window():
-    from pipeline.consistency.network import recurrent_topology
+    from pipeline.transport.simulated import recurrent_topology
 
     edges = np.array([[0, 1], [1, 2], [2, 3], [0, 3], [0, 2]])
     topo = recurrent_topology(edges, p_up=0.2, window=3, seed=4)
@@ -88,3 +89,32 @@ def test_recurrent_topology_every_edge_up_once_per_window():
         assert up[w:w + 3].any(axis=0).all()
     np.testing.assert_array_equal(topo(5), topo(5))  # repeatable
     assert topo.window == 3
+
+
+def test_endpoint_is_a_robots_view_of_the_network():
+    net = Network(3, EDGES)
+    ep = net.endpoint(1)
+    assert ep.links_up() == frozenset({0, 2}) and ep.now == 0
+    ep.send(0, "blocks", payload(2))
+    with pytest.raises(NotANeighbourError):
+        net.endpoint(0).send(2, "blocks", payload(1))
+    net.end_round()
+    assert [m.src for m in net.endpoint(0).inbox()] == [1] and net.endpoint(0).now == 1
+    ep.note_memory(50)
+    ep.note_memory(20)
+    assert net.peak_memory(1) == 50 and net.peak_memory(0) == 0
+
+
+def test_graph_per_round_window_and_bulk_counts():
+    from pipeline.transport.simulated import recurrent_topology
+
+    static = Network(3, EDGES)
+    assert static.edges(7).tolist() == EDGES and static.window == 1
+    assert not static.switching and not static.faulty
+    topo = recurrent_topology(EDGES, p_up=0.3, window=3, seed=1)
+    net = Network(3, EDGES, NetworkOptions(topology=topo))
+    assert net.switching and net.faulty and net.window == 3
+    assert all(np.array_equal(net.edges(t), topo(t)) for t in range(6))
+    net.count("fusion", 4, 100)
+    c = net.counters()
+    assert c["messages"] == 4 and c["bytes"] == 100 and c["messages_by_kind"] == {"fusion": 4}

@@ -1,4 +1,4 @@
-"""The in-process transport the robots talk through (DESIGN.md, "the one rule").
+"""The in-process simulator of the :class:`~pipeline.transport.Transport` interface.
 
 Synchronous rounds: what a robot sends in round ``t`` is in its neighbour's inbox in round
 ``t + 1``. A robot may send only to its *current* communication neighbours; every message and
@@ -6,19 +6,22 @@ every byte is counted. Faults are properties of the network, never of the algori
 message drop, delivery delay, crashed robots and a topology that changes per round are
 switched on through :class:`NetworkOptions`. Their defaults are off (a lossless, static
 network, the setting of the paper). The network only loses, delays or cuts; what the robots do
-about it (acknowledgements, retransmissions, timeouts) is robot protocol, in :mod:`.reliable`.
+about it (acknowledgements, retransmissions, timeouts) is robot protocol, in
+:mod:`pipeline.consistency.reliable`.
 
 What a robot may know about the network (stated): its *current* neighbours, as a radio's
 neighbour table would list them (:meth:`Network.links_up`: the links of the topology in force
 this round, crashed robots included, because a crash cannot be seen, only inferred from
 silence). Sending to a robot that is not a current neighbour is a programming error and raises
-:class:`NotANeighbourError`; the fault-tolerant protocol checks :meth:`Network.links_up` first
-and keeps the message for retransmission while the link is down.
+:class:`~pipeline.transport.NotANeighbourError`; the fault-tolerant protocol checks
+:meth:`Network.links_up` first and keeps the message for retransmission while the link is down.
 
-Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
-(sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at
-its numpy ``nbytes`` — all index lists are int32, so a sparse boolean block travels as its
-row ids, CSR ``indptr`` and column ``indices`` (4 bytes each).
+Vectorized stages (the fusion consensus) read :meth:`Network.edges` — the topology's links of
+any round, crashes and drops not applied (stated: the consensus of Montijano et al. is run on
+the switching graph; loss and crashes are modelled in the consistency stage only) — and count
+their traffic with :meth:`Network.count`.
+
+Byte encoding: see :mod:`pipeline.transport`.
 """
 
 from __future__ import annotations
@@ -28,38 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["HEADER_BYTES", "Message", "NetworkOptions", "Network", "NotANeighbourError",
-           "recurrent_topology"]
+from pipeline.transport import Message, NotANeighbourError, Transport
 
-HEADER_BYTES = 12
-
-
-class NotANeighbourError(RuntimeError):
-    """A robot tried to send to a robot that is not its current communication neighbour."""
-
-
-@dataclass
-class Message:
-    """One packet between two neighbouring robots.
-
-    Attributes
-    ----------
-    src, dst : int — sending and receiving robot
-    kind : str — ``blocks`` (detection), ``request`` or ``reject`` (resolution)
-    payload : dict[str, ndarray] — int32 index arrays (see the module docstring)
-    sent_round : int — round in which it was sent
-    """
-
-    src: int
-    dst: int
-    kind: str
-    payload: dict
-    sent_round: int = 0
-
-    @property
-    def nbytes(self) -> int:
-        """Size on the wire: header plus the payload arrays."""
-        return HEADER_BYTES + int(sum(np.asarray(a).nbytes for a in self.payload.values()))
+__all__ = ["NetworkOptions", "Network", "recurrent_topology"]
 
 
 @dataclass
@@ -86,7 +60,7 @@ class NetworkOptions:
     -----
     The paper's algorithms are proven for the lossless static network. With any switch on,
     :func:`~pipeline.consistency.engine.resolve_conflicts` has the robots run the
-    fault-tolerant protocol of :mod:`.reliable` (unless told otherwise); the network itself
+    fault-tolerant protocol of :mod:`pipeline.consistency.reliable` (unless told otherwise); the network itself
     only drops, delays and cuts.
     """
 
@@ -153,8 +127,8 @@ def _adjacency_sets(n: int, edges) -> list[set]:
     return nbrs
 
 
-class Network:
-    """Synchronous message passing between neighbouring robots.
+class Network(Transport):
+    """Synchronous message passing between neighbouring robots, simulated in process.
 
     Parameters
     ----------
@@ -175,7 +149,8 @@ class Network:
         self.options = options or NetworkOptions()
         self._initial_edges = [tuple(map(int, e)) for e in np.asarray(comm_edges).reshape(-1, 2)]
         self._nbrs = _adjacency_sets(self.n, self._initial_edges)
-        self.round = 0
+        self._round = 0
+        self._peak_memory = [0] * self.n
         self._outbox: list[tuple[int, Message]] = []  # (delivery round, message)
         self._inboxes: list[list[Message]] = [[] for _ in range(self.n)]
         self._rng = np.random.default_rng(self.options.seed)
@@ -187,9 +162,32 @@ class Network:
         self._apply_topology()
 
     # --- topology -------------------------------------------------------------------------
+    @property
+    def round(self) -> int:
+        return self._round
+
     def _apply_topology(self) -> None:
         if self.options.topology is not None:
             self._nbrs = _adjacency_sets(self.n, self.options.topology(self.round))
+
+    def edges(self, t: int) -> np.ndarray:
+        """Links of the topology in round ``t``, ``(E_t, 2)`` int64 (crashes not applied)."""
+        if self.options.topology is None:
+            return np.asarray(self._initial_edges, dtype=np.int64).reshape(-1, 2)
+        return np.asarray(self.options.topology(t), dtype=np.int64).reshape(-1, 2)
+
+    @property
+    def switching(self) -> bool:
+        return self.options.topology is not None
+
+    @property
+    def window(self) -> int:
+        """The topology's recurrence window (:func:`recurrent_topology` states it), else 1."""
+        return int(getattr(self.options.topology, "window", 1))
+
+    @property
+    def faulty(self) -> bool:
+        return self.options.any_fault
 
     def neighbours(self, i: int) -> frozenset:
         """Current communication neighbours of robot ``i`` (a crashed robot has none)."""
@@ -246,7 +244,7 @@ class Network:
 
     def end_round(self) -> None:
         """Close the round: advance the clock and deliver what is due."""
-        self.round += 1
+        self._round += 1
         self._apply_topology()
         due = [m for r, m in self._outbox if r <= self.round]
         self._outbox = [(r, m) for r, m in self._outbox if r > self.round]
@@ -266,6 +264,19 @@ class Network:
     def pending(self) -> bool:
         """True while some sent message has not been delivered yet."""
         return bool(self._outbox)
+
+    def count(self, kind: str, messages: int, nbytes: int) -> None:
+        """Count ``messages`` exchanged in bulk, ``nbytes`` in all, under ``kind``."""
+        self.messages += int(messages)
+        self.bytes += int(nbytes)
+        self.messages_by_kind[kind] = self.messages_by_kind.get(kind, 0) + int(messages)
+        self.bytes_by_kind[kind] = self.bytes_by_kind.get(kind, 0) + int(nbytes)
+
+    def note_memory(self, i: int, nbytes: int) -> None:
+        self._peak_memory[i] = max(self._peak_memory[i], int(nbytes))
+
+    def peak_memory(self, i: int) -> int:
+        return self._peak_memory[i]
 
     def counters(self) -> dict:
         """Message and byte counters so far."""

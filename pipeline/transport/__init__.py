@@ -1,0 +1,187 @@
+"""The transport robots talk through: the one interface of every robot-to-robot message.
+
+DESIGN.md, "the one rule": robot code sees only its own state and its inbox; all exchange goes
+through a transport with synchronous rounds, ``send`` only to current neighbours, every
+message and byte counted, per-robot memory measured, and faults (drop, delay, crash, a
+topology that changes per round) as properties of the network, never of the algorithm code.
+
+* :class:`Transport` — the team's network, as the driver sees it (the round clock, the
+  barrier, the counters). :class:`~pipeline.transport.simulated.Network` is its in-process
+  simulator; a middleware with the robots as separate processes implements the same methods.
+* :class:`Endpoint` — one robot's view of it: ``send`` to a neighbour, its ``inbox`` of the
+  current round, its neighbour table, the round number, its memory report. Robot-side code
+  (the consistency protocols) sends only through an endpoint.
+* :class:`Message` — one packet and its size on the wire.
+
+Who uses it: the consistency stage (:mod:`pipeline.consistency`) sends every message through
+endpoints; the fusion consensus (:mod:`pipeline.fusion.landmarks`) is a vectorized
+evaluation of every robot's update, so it reads the links up in each of its rounds
+(:meth:`Transport.edges`, :attr:`Transport.window`) and counts its traffic in bulk
+(:meth:`Transport.count`).
+
+Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
+(sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at
+its numpy ``nbytes``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["HEADER_BYTES", "Message", "NotANeighbourError", "Transport", "Endpoint"]
+
+HEADER_BYTES = 12
+
+
+class NotANeighbourError(RuntimeError):
+    """A robot tried to send to a robot that is not its current communication neighbour."""
+
+
+@dataclass
+class Message:
+    """One packet between two neighbouring robots.
+
+    Attributes
+    ----------
+    src, dst : int — sending and receiving robot
+    kind : str — e.g. ``blocks`` (detection), ``request`` or ``reject`` (resolution)
+    payload : dict[str, ndarray] — index or value arrays
+    sent_round : int — round in which it was sent
+    """
+
+    src: int
+    dst: int
+    kind: str
+    payload: dict
+    sent_round: int = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Size on the wire: header plus the payload arrays."""
+        return HEADER_BYTES + int(sum(np.asarray(a).nbytes for a in self.payload.values()))
+
+
+class Transport(ABC):
+    """Synchronous message passing between the ``n`` robots of a team.
+
+    Per round: every robot reads its inbox and sends; then the driver calls
+    :meth:`end_round`, and what was sent is in the inboxes of a later round (the next one on a
+    lossless network).
+    """
+
+    n: int
+
+    # --- the clock and the barrier (driver side) -----------------------------------------
+    @property
+    @abstractmethod
+    def round(self) -> int:
+        """The current round (counted from 0 over the transport's life)."""
+
+    @abstractmethod
+    def end_round(self) -> None:
+        """Close the round: advance the clock and deliver what is due."""
+
+    @property
+    @abstractmethod
+    def pending(self) -> bool:
+        """True while some sent message has not been delivered yet."""
+
+    @abstractmethod
+    def alive(self, i: int) -> bool:
+        """False once robot ``i`` has crashed (the driver's view; robots cannot call this)."""
+
+    # --- what a robot does (through its :class:`Endpoint`) --------------------------------
+    @abstractmethod
+    def send(self, src: int, dst: int, kind: str, payload: dict) -> None:
+        """Queue a message from ``src`` to its current neighbour ``dst`` (counted).
+
+        Raises :class:`NotANeighbourError` if ``dst`` is not a current neighbour of ``src``.
+        """
+
+    @abstractmethod
+    def inbox(self, i: int) -> list[Message]:
+        """Messages delivered to robot ``i`` at the start of the current round."""
+
+    @abstractmethod
+    def links_up(self, i: int) -> frozenset:
+        """Robot ``i``'s neighbour table this round (crashes unseen: inferred from silence)."""
+
+    # --- the graph per round (vectorized stages) ------------------------------------------
+    @abstractmethod
+    def edges(self, t: int) -> np.ndarray:
+        """Communication links up in round ``t``, ``(E_t, 2)`` int64 (every robot's table)."""
+
+    @property
+    @abstractmethod
+    def switching(self) -> bool:
+        """True when the links change from round to round."""
+
+    @property
+    @abstractmethod
+    def window(self) -> int:
+        """Rounds within which every link is up at least once (1 on a static network)."""
+
+    @property
+    @abstractmethod
+    def faulty(self) -> bool:
+        """True unless this is the paper's lossless static network."""
+
+    # --- accounting -----------------------------------------------------------------------
+    @abstractmethod
+    def count(self, kind: str, messages: int, nbytes: int) -> None:
+        """Count traffic exchanged in bulk (a vectorized stage's rounds) under ``kind``."""
+
+    @abstractmethod
+    def counters(self) -> dict:
+        """``messages``, ``bytes``, ``dropped``, ``round``, ``messages_by_kind``,
+        ``bytes_by_kind`` so far."""
+
+    @abstractmethod
+    def note_memory(self, i: int, nbytes: int) -> None:
+        """Robot ``i`` reports the bytes it holds; the transport keeps the peak."""
+
+    @abstractmethod
+    def peak_memory(self, i: int) -> int:
+        """Peak of the bytes robot ``i`` reported."""
+
+    def endpoint(self, i: int) -> Endpoint:
+        """Robot ``i``'s view of the transport."""
+        return Endpoint(self, i)
+
+
+class Endpoint:
+    """One robot's side of a :class:`Transport`: all a robot may do with the network.
+
+    Parameters
+    ----------
+    transport : Transport
+    robot_id : int
+    """
+
+    def __init__(self, transport: Transport, robot_id: int) -> None:
+        self._transport = transport
+        self.id = int(robot_id)
+
+    def send(self, dst: int, kind: str, payload: dict) -> None:
+        """Send to a current neighbour ``dst``."""
+        self._transport.send(self.id, dst, kind, payload)
+
+    def inbox(self) -> list[Message]:
+        """Messages delivered to this robot at the start of the current round."""
+        return self._transport.inbox(self.id)
+
+    def links_up(self) -> frozenset:
+        """This robot's neighbour table in the current round."""
+        return self._transport.links_up(self.id)
+
+    @property
+    def now(self) -> int:
+        """The current round."""
+        return self._transport.round
+
+    def note_memory(self, nbytes: int) -> None:
+        """Report the bytes this robot holds (the transport keeps the peak)."""
+        self._transport.note_memory(self.id, nbytes)
