@@ -48,15 +48,14 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial.distance import pdist, squareform
 
 from pipeline.errors import InputError
+from pipeline.linkscsv import MAX_ID
 
-__all__ = ["GRAPH_KINDS", "MAX_ID", "graph_edges", "comm_graph", "read_comm_graph",
+__all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "links_off_graph", "edge_set"]
 
 #: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``knn:K``).
 GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
 _ALL_KINDS = GRAPH_KINDS + ("ring+triangles", "knn:K")
-#: largest camera id a file may name (ids index int32 arrays inside the robots)
-MAX_ID = 2**31 - 2
 
 
 # ---------------------------------------------------------------------------------- kinds

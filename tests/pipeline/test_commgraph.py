@@ -7,19 +7,13 @@ from hypothesis import strategies as st
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from pipeline.commgraph import (
-    check_comm_edges,
-    comm_graph,
-    graph_edges,
-    read_comm_graph,
-)
+from pipeline.commgraph import check_comm_edges, comm_graph, graph_edges, read_comm_graph
 from pipeline.errors import InputError
 
 
-def write(tmp_path, text, name="in.csv"):
-    p = tmp_path / name
-    p.write_text(text)
-    return p
+def write(tmp_path, text, name):
+    (tmp_path / name).write_text(text)
+    return tmp_path / name
 
 
 # ------------------------------------------------------------------------------------ comm graph
