@@ -14,7 +14,7 @@ conflict-free in 100 % at every ``p``, the first detection taking 17.7 / 27.2 / 
 This module adds what is needed, *in the robots* (every extra packet is an algorithm message,
 sent and counted by the network, which itself only drops, delays or cuts):
 
-Reliable channel (:class:`Channel`, one per robot)
+Reliable channel (:class:`~.channel.Channel`, one per robot, in :class:`ReliableState`)
     Every algorithm message to a neighbour gets a sequence number; the receiver acknowledges
     it (piggybacked on its next message to that neighbour, else in a small ``ack`` message
     in the same round) and delivers it once (duplicates are discarded by sequence number).
@@ -23,7 +23,7 @@ Reliable channel (:class:`Channel`, one per robot)
     exactly then, so nothing is ever sent twice). While a link is down (switching topology)
     messages wait and go out when it is up again.
 
-Lockstep detection (:func:`detection_round`)
+Lockstep detection (:func:`detection_round`; eq. (5) itself is :func:`~.detection.eq5_step`)
     Eq. (5) is computed on the blocks of the *same* round: robot ``i`` forms ``X_i·(t+1)``
     only when it holds ``X_k·(t)`` from every neighbour ``k`` it shares an active link with
     (an α-synchronizer over the reliable channel). Then ``X_i·(t)`` is exactly the lossless
@@ -61,7 +61,7 @@ What detection needs on a topology that changes every round (stated and tested)
     * Every comm edge that carries associations must *recur* (be up at least once in every
       window of ``W`` rounds): the blocks ``X_k·`` that ``W_ik`` multiplies can only travel
       over the edge ``(i, k)``, so the joint connectivity of Assumption 2.1 of the fusion
-      paper is not enough (:func:`~.network.recurrent_topology` makes such sequences).
+      paper is not enough (:func:`~pipeline.transport.simulated.recurrent_topology` makes such sequences).
     * A robot must not take step ``t + 1`` of eq. (5), and so must not apply Prop. 3.5,
       while the round-``t`` blocks of a neighbour it was unable to reach are missing: with
       the paper's rule a neighbour out of range looks "unchanged" and the robot stops early.

@@ -5,8 +5,8 @@ A :class:`Robot` holds only its own state: its id, its feature count, its associ
 each neighbour, its component assignments and a log of the links it deleted. Public
 knowledge shared by all robots is the team size ``n`` and every robot's feature count (so
 every robot can turn ``(j, s)`` into the global column ``offsets[j] + s``). A robot never
-reads another robot or a global matrix: it acts on its inbox and sends through the
-:class:`~pipeline.transport.simulated.Network`. The algorithms themselves are in
+reads another robot or a global matrix: it acts on its inbox and sends through its
+:class:`~pipeline.transport.Endpoint` of the transport. The algorithms themselves are in
 :mod:`.detection` (Sec. III) and :mod:`.resolution` (Sec. IV, Alg. 1).
 
 Storage of ``W_i·``: the blocks ``W_ij`` for all neighbours ``j`` are kept together as one
