@@ -50,6 +50,7 @@ from scipy.sparse.csgraph import shortest_path
 
 from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
+from pipeline.transport import Transport
 
 __all__ = [
     "CommStats",
@@ -57,6 +58,7 @@ __all__ = [
     "FixedTopology",
     "SwitchingTopology",
     "RandomGeometricTopology",
+    "TransportTopology",
     "replicate",
     "as_topology",
     "metropolis_weights",
@@ -239,6 +241,23 @@ class RandomGeometricTopology(Topology):
         return e
 
 
+class TransportTopology(Topology):
+    """The graph sequence of a :class:`~pipeline.transport.Transport`: ``G(t)`` = its links up
+    in round ``t`` (:meth:`~pipeline.transport.Transport.edges`), over its ``n`` robots.
+
+    Parameters
+    ----------
+    transport : Transport
+    """
+
+    def __init__(self, transport: Transport):
+        self.transport = transport
+        self.n_nodes = int(transport.n)
+
+    def edges(self, t: int) -> np.ndarray:
+        return _check_edges(self.transport.edges(t), self.n_nodes)
+
+
 class _Replicated(Topology):
     def __init__(self, base: Topology, n_problems: int):
         self.base, self.n_problems = base, int(n_problems)
@@ -274,8 +293,12 @@ def as_topology(topology, n_robots: int, n_problems: int = 1) -> Topology:
     """Normalize a topology argument to a :class:`Topology` over ``n_robots * n_problems`` nodes.
 
     Accepts a :class:`Topology` over all flat nodes, a :class:`Topology` over ``n_robots``
-    (replicated to every problem), or an ``(E, 2)`` edge array over ``n_robots`` (fixed).
+    (replicated to every problem), a :class:`~pipeline.transport.Transport` of ``n_robots``
+    (its links per round, :class:`TransportTopology`), or an ``(E, 2)`` edge array over
+    ``n_robots`` (fixed).
     """
+    if isinstance(topology, Transport):
+        topology = TransportTopology(topology)
     if not isinstance(topology, Topology):
         topology = FixedTopology(topology, n_robots)
     if topology.n_nodes == n_robots * n_problems:

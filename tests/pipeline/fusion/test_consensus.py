@@ -183,3 +183,18 @@ def test_closed_form_3x3_eigenvalues_match_lapack():
         scale = np.abs(ev).max(-1) + 1e-300
         assert np.all(np.abs(lo - ev[:, 0]) <= 1e-12 * scale)
         assert np.all(np.abs(hi - ev[:, -1]) <= 1e-12 * scale)
+
+
+def test_consensus_runs_on_a_transport_graph():
+    """A transport's links per round are the consensus graph G(t) (same as its edges)."""
+    from pipeline.transport.simulated import Network, NetworkOptions, recurrent_topology
+
+    n, edges = 6, ring(6)
+    x0 = np.arange(n, dtype=float)
+    on_net, _ = average_consensus(x0, Network(n, edges), 30)
+    on_edges, _ = average_consensus(x0, edges, 30)
+    np.testing.assert_array_equal(on_net, on_edges)
+    topo = recurrent_topology(edges, p_up=0.5, window=3, seed=2)
+    switching, stats = average_consensus(x0, Network(n, edges, NetworkOptions(topology=topo)), 200)
+    assert stats.messages == sum(2 * len(topo(t)) for t in range(200))
+    np.testing.assert_allclose(switching, x0.mean(), atol=1e-6)
