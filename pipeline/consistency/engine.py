@@ -351,14 +351,13 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
     component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
     cnt = network.counters()
     both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, dtype=bool)
-    opts = network.options
     extra = protocol.counters()
     lost_by = [protocol.lost_neighbours(rb.id) for rb in robots]
-    crash_rounds = {int(i): 0 for i in opts.crashed}
-    crash_rounds.update({int(i): int(r) for i, r in opts.crash_at.items()})
+    injected = network.injected_faults()
+    crash_rounds = injected["crash_rounds"]
     faults = dict(
-        drop_probability=float(opts.drop_probability),
-        switching_topology=opts.topology is not None,
+        drop_probability=float(injected["drop_probability"]),
+        switching_topology=bool(injected["switching_topology"]),
         dropped=int(cnt["dropped"]),
         crashed={i: r for i, r in sorted(crash_rounds.items()) if not survivors[i]},
         crashes_not_reached={i: r for i, r in sorted(crash_rounds.items()) if survivors[i]},

@@ -129,6 +129,12 @@ class Transport(ABC):
     def faulty(self) -> bool:
         """True unless this is the paper's lossless static network."""
 
+    def injected_faults(self) -> dict:
+        """What a simulator injects, for the report: ``drop_probability``,
+        ``switching_topology``, ``crash_rounds`` (robot -> round). A real network injects
+        nothing (its losses are counted as they happen)."""
+        return dict(drop_probability=0.0, switching_topology=self.switching, crash_rounds={})
+
     # --- accounting -----------------------------------------------------------------------
     @abstractmethod
     def count(self, kind: str, messages: int, nbytes: int) -> None:

@@ -265,6 +265,14 @@ class Network(Transport):
         """True while some sent message has not been delivered yet."""
         return bool(self._outbox)
 
+    def injected_faults(self) -> dict:
+        """The fault switches: drop probability, switching topology, crash round per robot."""
+        opts = self.options
+        crash_rounds = {int(i): 0 for i in opts.crashed}
+        crash_rounds.update({int(i): int(r) for i, r in opts.crash_at.items()})
+        return dict(drop_probability=float(opts.drop_probability),
+                    switching_topology=opts.topology is not None, crash_rounds=crash_rounds)
+
     def count(self, kind: str, messages: int, nbytes: int) -> None:
         """Count ``messages`` exchanged in bulk, ``nbytes`` in all, under ``kind``."""
         self.messages += int(messages)
