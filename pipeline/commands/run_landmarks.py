@@ -6,15 +6,21 @@ known exactly: landmark ``k`` of one image is landmark ``k`` of every other.
 
 Stages: load (keypoints and descriptors; ``--frames N`` takes ``N`` images at a fixed
 stride) → each robot matches its landmarks to its communication neighbours' one-to-one
-(Hungarian on the descriptor distance, ratio gate; :mod:`pipeline.landmark_matching`) →
-the distributed consistency stage (``--resolution``) → the centralized baselines on the same
-links → evaluation.
+(Hungarian on the descriptor distance, optional ratio gate; :mod:`pipeline.landmark_matching`)
+→ ``--refine votes``: the robots refine those matches by two-hop votes through common
+neighbours (:mod:`pipeline.match_votes`) → the distributed consistency stage
+(``--resolution``) → the centralized baselines on the same links → evaluation.
+
+Defaults (stated): the whole Hungarian assignment (``--ratio none``) refined by votes. The
+votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
+vote for the right match, and gating before voting removes them.
 
 Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
 matches it implies, i.e. every two landmarks in one association set of the kept links (the
 transitive closure), against the true pairs of *every* image pair (:mod:`pipeline.metrics`).
-``pairwise.before_links`` scores the matched links themselves, the way CLEAR scores its
-input. ``cycle_consistent`` is true when no association set holds two landmarks of one image
+``pairwise.input_links`` scores the Hungarian matches themselves, the way CLEAR scores its
+input; ``before`` / ``before_links`` are the links the consistency stage receives (after the
+refinement), over their closure and as they are. ``cycle_consistent`` is true when no association set holds two landmarks of one image
 (then the implied pairwise matching is cycle-consistent).
 
 Writes ``report.json`` and ``links.csv`` (DESIGN.md "Run outputs"; ``truth`` is 1 when the
@@ -49,6 +55,8 @@ def _resolve_paper(features_per_camera, comm_edges, links: Links):
 
 #: resolution methods of the distributed stage: name -> (description, function
 #: ``(features_per_camera, comm_edges, links) -> ConsistencyResult``)
+REFINEMENTS = ("votes", "none")
+
 RESOLUTIONS = {
     "paper": ("detection (Sec. III) + resolution (Alg. 1) of Aragüés et al.", _resolve_paper),
 }
@@ -62,7 +70,9 @@ class LandmarksConfig:
     graph: str = "complete"
     frames: int | None = None
     descriptors: str = "given"
-    ratio: float | None = 0.8
+    ratio: float | None = None
+    refine: str = "votes"
+    vote_iterations: int = 10
     resolution: str = "paper"
     baselines: bool = True
     out: str | None = None
@@ -98,10 +108,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--descriptors", default="given", choices=("given", "sift"),
                    help="given: one NAME.scf per image (rows = landmarks; histograms compared "
                         "by chi-square); sift: SIFT at the keypoints (L2). Default given")
-    p.add_argument("--ratio", type=_ratio, default=0.8, metavar="R|none",
+    p.add_argument("--ratio", type=_ratio, default=None, metavar="R|none",
                    help="gate of the Hungarian matches: keep a pair if its distance is at most "
-                        "R times the nearest alternative in its row or column (Lowe's ratio; "
-                        "default 0.8); none keeps the whole assignment")
+                        "R times the nearest alternative in its row or column (Lowe's ratio, "
+                        "e.g. 0.8); none (default) keeps the whole assignment")
+    p.add_argument("--refine", default="votes", choices=REFINEMENTS,
+                   help="votes (default): robots refine their matches by two-hop votes through "
+                        "common neighbours until a fixed point; none: use the matches as they are")
+    p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
+                   help="cap on the vote iterations (two rounds each; default 10)")
     p.add_argument("--resolution", default="paper", choices=tuple(RESOLUTIONS),
                    help="resolution of the distributed stage: "
                         + "; ".join(f"{k}: {v[0]}" for k, v in RESOLUTIONS.items()))
@@ -114,6 +129,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args) -> LandmarksConfig:
     return LandmarksConfig(directory=args.directory, graph=args.graph, frames=args.frames,
                            descriptors=args.descriptors, ratio=args.ratio,
+                           refine=args.refine, vote_iterations=args.vote_iterations,
                            resolution=args.resolution, baselines=not args.no_baselines,
                            out=args.out)
 
@@ -173,6 +189,10 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.linkscsv import write_links_csv
     from pipeline.run import versions
 
+    if config.refine not in REFINEMENTS:
+        raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
+    if config.vote_iterations < 1:
+        raise InputError(f"--vote-iterations {config.vote_iterations}: expected at least 1")
     if config.resolution not in RESOLUTIONS:
         raise InputError(f"--resolution {config.resolution!r}: expected one of "
                          f"{', '.join(RESOLUTIONS)}")
@@ -191,8 +211,25 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         links = match_landmark_edges([f.descriptors for f in frames], comm_edges, kind,
                                      config.ratio)
         timer.note(f"{len(links)} links")
+    # times: wall (StageTimer) and CPU of this process (all simulated robots run in it, one
+    # after another; a team would run them in parallel)
+    refinement = {"method": config.refine}
+    if config.refine == "votes":
+        from pipeline.match_votes import refine_by_votes
+
+        input_links = links
+        with timer.stage("refine", "two-hop votes through common neighbours"):
+            c0 = time.process_time()
+            links, vstats = refine_by_votes(m, comm_edges, links, config.vote_iterations)
+            refinement.update(vstats, cpu_s=round(time.process_time() - c0, 4))
+            timer.note(f"{len(links)} links after {vstats['iterations']} iteration(s); "
+                       f"changed per iteration {vstats['changed_per_iteration']}")
+    else:
+        input_links = links
     with timer.stage("resolution", RESOLUTIONS[config.resolution][0]):
+        c0 = time.process_time()
         res = RESOLUTIONS[config.resolution][1](m, comm_edges, links)
+        resolution_cpu = time.process_time() - c0
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")
     kept_links = links.subset(kept)
@@ -209,7 +246,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             return c
 
         before, after = counts(links, truth), counts(kept_links, truth[kept])
-        pairwise = {"before": _scores(m, links, tp), "before_links": _link_scores(m, links, tp),
+        pairwise = {"input_links": _link_scores(m, input_links, tp),
+                    "before": _scores(m, links, tp), "before_links": _link_scores(m, links, tp),
                     "after": _scores(m, kept_links, tp)}
     baselines = {}
     if config.baselines:
@@ -241,6 +279,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "pairwise": pairwise,
         "cycle_consistent": bool(after["conflictive_sets"] == 0),
         "cycle_consistent_before": bool(before["conflictive_sets"] == 0),
+        "refinement": refinement,
         "resolution": {
             "method": config.resolution,
             "iterations": st.get("iterations"),
@@ -254,6 +293,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             "bytes": st.get("bytes"),
             "max_robot_memory_bytes": st.get("max_robot_memory_bytes"),
             "time_s": round(timer.timings.get("resolution", 0.0), 4),
+            "cpu_s": round(resolution_cpu, 4),
         },
         "baselines": baselines,
         "ground_truth": {"kind": "labelled landmarks: row k of every image is landmark k"},
@@ -281,9 +321,17 @@ def landmarks_markdown(report: dict) -> str:
     for key in ("precision", "recall", "f1"):
         lines.append(f"| Pairwise {key} (closure) | {pw['before'][key]:.3f} | "
                      f"{pw['after'][key]:.3f} |")
+    lines.append(f"| Pairwise F1 of the Hungarian matches themselves | "
+                 f"{pw['input_links']['f1']:.3f} | |")
     lines.append(f"| Pairwise F1 of the links themselves | {pw['before_links']['f1']:.3f} | |")
     lines.append(f"| Cycle-consistent | {report['cycle_consistent_before']} | "
                  f"{report['cycle_consistent']} |")
+    ref = report["refinement"]
+    if ref["method"] == "votes":
+        lines += ["", f"Refinement (votes): {ref['iterations']} iteration(s), fixed point "
+                      f"{ref['fixed_point']}, {ref['rounds']} rounds, {ref['messages']} messages, "
+                      f"{ref['bytes']} bytes, changed {ref['changed_per_iteration']}, "
+                      f"{report['timings_s'].get('refine', 0.0):.2f} s"]
     lines += ["", f"Resolution ({r['method']}): {r['deleted_links']} links cut "
                   f"({r['good_deleted']} good / {r['spurious_deleted']} spurious) in "
                   f"{r['iterations']} iteration(s), {r['detection_rounds']} + "
