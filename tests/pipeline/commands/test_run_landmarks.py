@@ -16,10 +16,12 @@ from pipeline.types import Links
 HOTEL = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"
 
 
-@pytest.fixture(scope="module", params=["complete", "ring"])
+@pytest.fixture(scope="module", params=[("complete", "votes", "none"), ("ring", "none", "0.8")])
 def hotel_run(request, tmp_path_factory):
-    out = tmp_path_factory.mktemp("runs") / f"hotel-{request.param}"
-    assert main(["run-landmarks", str(HOTEL), "--graph", request.param, "--out", str(out)]) == 0
+    graph, refine, ratio = request.param
+    out = tmp_path_factory.mktemp("runs") / f"hotel-{graph}"
+    assert main(["run-landmarks", str(HOTEL), "--graph", graph, "--refine", refine, "--ratio",
+                 ratio, "--out", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
     with open(out / "links.csv", newline="") as f:
         rows = list(csv.DictReader(f))
@@ -38,6 +40,12 @@ def test_report_contract(hotel_run):
     r = report["resolution"]
     assert r["method"] == "paper" and r["messages"] > 0 and r["bytes"] > 0
     assert len(rows) == report["before"]["links"]
+    ref = report["refinement"]
+    assert ref["method"] in ("votes", "none")
+    if ref["method"] == "votes":
+        assert ref["rounds"] == 2 * ref["iterations"] and ref["bytes"] > 0
+    else:
+        assert report["pairwise"]["input_links"] == report["pairwise"]["before_links"]
 
 
 def test_scores_recomputed_from_links_csv(hotel_run):
