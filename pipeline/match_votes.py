@@ -67,6 +67,7 @@ class VoteRobot:
         self.quality = np.zeros((self.nbrs.size, self.m))
         self.received: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.last_table: np.ndarray | None = None
+        self.last_R: np.ndarray | None = None
 
     def slot(self, j: int) -> int:
         return int(np.searchsorted(self.nbrs, j))
@@ -93,20 +94,24 @@ class VoteRobot:
         n_total = int(m_of.size)
         kmax = int(m_of.max())
         d = self.nbrs.size
-        # which (neighbour k -> robot j) tables changed since the last iteration
-        dirty_kj = np.zeros((d, n_total), dtype=bool)
         # R[a, j, t]: landmark of j that neighbour nbrs[a] matched to its landmark t
         R = np.full((d, n_total, kmax), -1, dtype=np.int64)
-        for a, k in enumerate(self.nbrs.tolist()):
-            if k not in received:
-                continue
-            k_nbrs, k_table = received[k]
-            R[a, k_nbrs, :k_table.shape[1]] = k_table
-            old = self.received.get(k)
-            if old is None or old[1].shape != k_table.shape or not np.array_equal(old[0], k_nbrs):
-                dirty_kj[a, k_nbrs] = True
-            else:
-                dirty_kj[a, k_nbrs[(old[1] != k_table).any(axis=1)]] = True
+        got = [(a, received[k]) for a, k in enumerate(self.nbrs.tolist()) if k in received]
+        if got:
+            rows = np.concatenate([np.full(kn.size, a) for a, (kn, _) in got])
+            cols = np.concatenate([kn for _, (kn, _) in got])
+            tabs = [kt for _, (_, kt) in got]
+            width = max(kt.shape[1] for kt in tabs)
+            block = np.full((rows.size, kmax), -1, dtype=np.int64)
+            block[:, :width] = np.concatenate(
+                [np.pad(kt, ((0, 0), (0, width - kt.shape[1])), constant_values=-1)
+                 for kt in tabs])
+            R[rows, cols] = block
+        # which (neighbour k -> robot j) tables changed since the last iteration
+        prev = self.last_R
+        dirty_kj = np.ones((d, n_total), dtype=bool) if prev is None or prev.shape != R.shape \
+            else (prev != R).any(axis=2)
+        self.last_R = R
         own_dirty = (self.last_table is None or self.last_table.shape != self.table.shape)
         own_changed = np.ones(d, dtype=bool) if own_dirty else \
             (self.last_table != self.table).any(axis=1)
@@ -205,12 +210,18 @@ def refine_by_votes(features_per_camera, comm_edges, links: Links,
         nbrs[j].append(i)
     robots = [VoteRobot(i, m[i], np.unique(np.asarray(nb, dtype=np.int64))) for i, nb in
               enumerate(nbrs)]
-    for ci, fi, cj, fj in zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                              links.feat_j.tolist(), strict=True):
-        robots[ci].table[robots[ci].slot(cj), fi] = fj
-        robots[ci].quality[robots[ci].slot(cj), fi] = 1.0
-        robots[cj].table[robots[cj].slot(ci), fj] = fi
-        robots[cj].quality[robots[cj].slot(ci), fj] = 1.0
+    # each robot's own matches (what its matching produced), at both ends of every link
+    owner = np.concatenate([links.cam_i, links.cam_j])
+    other = np.concatenate([links.cam_j, links.cam_i])
+    own_f = np.concatenate([links.feat_i, links.feat_j])
+    other_f = np.concatenate([links.feat_j, links.feat_i])
+    order = np.argsort(owner, kind="stable")
+    bounds = np.searchsorted(owner[order], np.arange(n + 1))
+    for rb in robots:
+        sel = order[bounds[rb.id]:bounds[rb.id + 1]]
+        slots = np.searchsorted(rb.nbrs, other[sel])
+        rb.table[slots, own_f[sel]] = other_f[sel]
+        rb.quality[slots, own_f[sel]] = 1.0
     net = Network(n, edges)
     sends = [partial(net.send, i) for i in range(n)]
     changed = []
