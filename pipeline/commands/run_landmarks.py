@@ -295,6 +295,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             "time_s": round(timer.timings.get("resolution", 0.0), 4),
             "cpu_s": round(resolution_cpu, 4),
         },
+        "fusion": {"enabled": False, "reason": "labelled landmarks come without camera poses"},
+        "triangulation": {"enabled": False, "reason": "no camera poses"},
         "baselines": baselines,
         "ground_truth": {"kind": "labelled landmarks: row k of every image is landmark k"},
         "versions": versions(),
