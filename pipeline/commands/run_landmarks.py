@@ -187,7 +187,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.landmark_matching import match_landmark_edges
     from pipeline.landmarks_io import load_landmark_folder
     from pipeline.linkscsv import write_links_csv
-    from pipeline.run import versions
+    from pipeline.report import versions
+    from pipeline.run import ledger_from_consistency
 
     if config.refine not in REFINEMENTS:
         raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
@@ -304,8 +305,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     }
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
-            write_links_csv(tmp / "links.csv", links, np.where(cut, "deleted", "kept"),
-                            res.reason, res.round, truth.astype(np.int8))
+            ledger = ledger_from_consistency(res)
+            ledger.truth = truth.astype(np.int8)
+            write_links_csv(tmp / "links.csv", ledger)
             report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
             write_json_atomic(tmp / "report.json", report)
     return out, report
