@@ -9,17 +9,18 @@ CLEAR's figures, not ours; this script runs what we can run ourselves on the sam
 For 20 frames (stride 5: frames 0, 5, …, 95 — the subset whose input F1 is CLEAR's 0.910)
 and all 101 frames, on the complete graph, a ring and ``knn:4`` (each frame with its 4
 nearest in sequence order): ``run-landmarks`` on the ungated Hungarian matches (CLEAR's
-input) with each resolution method, in the configurations ``--configs`` (default
-``votes:none`` = the default run, refined by votes; ``none:none`` = the Hungarian matches
-straight into the resolution; ``votes:0.8`` / ``none:0.8`` add the ratio gate), plus the
-centralized baselines on the same links. Times: wall and CPU of the one process that
+input) with each resolution method, in the configurations ``--configs``
+``REFINE:RATIO:GEOMETRY`` (default ``votes:none:epipolar`` = the default run: guided
+matching, refined by votes; ``votes:none:none`` = descriptor-only matches refined by votes;
+``none:none:none`` = CLEAR's input straight into the resolution; a ratio such as 0.8 adds
+the gate), plus the centralized baselines on the same links. Times: wall and CPU of the one process that
 simulates every robot in turn (``refine`` + ``resolution``, the stages CLEAR's time
 compares to; matching is the shared input). Scores are CLEAR's: pairwise P/R/F1 of the matches
 implied by the closure of the kept links, against the labels.
 
 Prints a table; saves ``runs/bench-landmarks/results.json`` (one record per run).
 
-Usage: ``.venv/bin/python bench/landmarks_clear.py [--data DIR] [--frames 20 101]
+Usage: ``.venv/bin/python bench/landmarks_clear.py [--data DIR] [--frames 20 101] [--configs ...]
 [--graphs complete ring knn:4] [--quick]`` (``--quick``: 20 frames only).
 """
 
@@ -49,8 +50,11 @@ def main() -> int:
     ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
     ap.add_argument("--graphs", nargs="+", default=["complete", "ring", "knn:4"])
-    ap.add_argument("--configs", nargs="+", default=["votes:none", "none:none"],
-                    help="REFINE:RATIO pairs (refine votes|none, ratio none|R)")
+    ap.add_argument("--configs", nargs="+",
+                    default=["votes:none:epipolar", "votes:none:none", "none:none:none"],
+                    help="REFINE:RATIO:GEOMETRY (refine votes|none, ratio none|R, geometry "
+                         "epipolar|none)")
+    ap.add_argument("--results", default="results.json", help="file name under --out")
     ap.add_argument("--quick", action="store_true", help="20 frames only")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-landmarks")
     args = ap.parse_args()
@@ -59,19 +63,21 @@ def main() -> int:
     for n in frames:
         for graph in args.graphs:
             for conf in args.configs:
-                refine, ratio_text = conf.split(":")
+                refine, ratio_text, geometry = conf.split(":")
                 ratio = None if ratio_text == "none" else float(ratio_text)
                 for method in RESOLUTIONS:
-                    name = f"f{n}-{graph.replace(':', '')}-{refine}-r{ratio_text}-{method}"
+                    name = (f"f{n}-{graph.replace(':', '')}-{geometry}-{refine}-r{ratio_text}"
+                            f"-{method}")
                     cfg = LandmarksConfig(directory=str(args.data), graph=graph, frames=n,
-                                          ratio=ratio, refine=refine, resolution=method,
-                                          out=str(args.out / name))
+                                          ratio=ratio, geometry=geometry, refine=refine,
+                                          resolution=method, out=str(args.out / name))
                     t0 = time.perf_counter()
                     _, rep = run_landmarks(cfg, StageTimer(verbose=False))
                     wall = time.perf_counter() - t0
                     r, pw = rep["resolution"], rep["pairwise"]
                     rec = {
-                        "frames": n, "graph": graph, "ratio": ratio, "refine": refine,
+                        "frames": n, "graph": graph, "ratio": ratio, "geometry": geometry,
+                        "refine": refine, "matching": rep["matching"],
                         "method": method, "refinement": rep["refinement"],
                         "comm_edges": len(rep["comm_edges"]), "links": rep["before"]["links"],
                         "input_links": pw["input_links"], "before": pw["before"],
@@ -96,12 +102,12 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     meta = {"python": platform.python_version(), "machine": platform.machine(),
             "cpus": __import__("os").cpu_count(), "data": str(args.data)}
-    write_json_atomic(args.out / "results.json", {"meta": meta, "records": records})
-    print(f"saved {args.out / 'results.json'}")
+    write_json_atomic(args.out / args.results, {"meta": meta, "records": records})
+    print(f"saved {args.out / args.results}")
     return 0
 
 
-HEADER = ("| frames | graph | refine | gate | resolution | Hungarian F1 | P / R / F1 after "
+HEADER = ("| frames | graph | geometry | refine | gate | resolution | Hungarian F1 | P / R / F1 after "
           "| cycle-consistent | rounds | messages | MB | wall s | CPU s | quality_merge F1 | "
           "keep_first F1 | drop_sets F1 |")
 
@@ -109,7 +115,7 @@ HEADER = ("| frames | graph | refine | gate | resolution | Hungarian F1 | P / R 
 def _row(r: dict) -> str:
     a, b = r["after"], r["baselines"]
     gate = "none" if r["ratio"] is None else f"ratio {r['ratio']}"
-    return (f"| {r['frames']} | {r['graph']} | {r['refine']} | {gate} | {r['method']} | "
+    return (f"| {r['frames']} | {r['graph']} | {r['geometry']} | {r['refine']} | {gate} | {r['method']} | "
             f"{r['input_links']['f1']:.3f} | "
             f"{a['precision']:.3f} / {a['recall']:.3f} / {a['f1']:.3f} | {r['cycle_consistent']} | "
             f"{r['rounds']} | {r['messages']} | {r['bytes'] / 1e6:.1f} | "

@@ -11,6 +11,14 @@ its distance is at most ``ratio`` times the best alternative either robot had �
 nearest other landmark in its row or its column (Lowe, IJCV 2004; default 0.8, the value
 the rest of the pipeline uses for its mutual ratio test). ``ratio=None`` keeps the whole
 assignment (the ungated input).
+
+*Guided matching* (Hartley & Zisserman, *Multiple View Geometry*, Sec. 11.6 / 4.8): the
+robot fits a fundamental matrix to the assignment by RANSAC (``cv2.USAC_MAGSAC``, the
+image pipeline's 1 px inlier threshold, :func:`pipeline.matching.epipolar_filter`), then
+solves the assignment again with every pair whose Sampson error exceeds the threshold
+forbidden. The labelled keypoints' own positions thus settle pairs whose descriptors are
+ambiguous (two nearby landmarks with similar shape contexts). Where no model is found
+(fewer than 8 assigned pairs, or RANSAC fails) the descriptor assignment is kept.
 """
 
 from __future__ import annotations
@@ -21,7 +29,13 @@ from scipy.optimize import linear_sum_assignment
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["chi2_distance", "l2_distance", "hungarian_match", "match_landmark_edges"]
+__all__ = ["chi2_distance", "l2_distance", "hungarian_match", "guided_match",
+           "match_landmark_edges", "GEOMETRY", "EPIPOLAR_PX"]
+
+GEOMETRY = ("epipolar", "none")
+#: inlier threshold of the epipolar check, pixels (the image pipeline's default)
+EPIPOLAR_PX = 1.0
+_FORBIDDEN = 1e12
 
 
 def chi2_distance(h_i: np.ndarray, h_j: np.ndarray) -> np.ndarray:
@@ -98,8 +112,56 @@ def hungarian_match(cost: np.ndarray, ratio: float | None = 0.8
     return np.stack([r[keep], s[keep]], axis=1).astype(np.int64), d[keep], rho[keep]
 
 
+def guided_match(cost: np.ndarray, x_i: np.ndarray, x_j: np.ndarray,
+                 threshold_px: float = EPIPOLAR_PX) -> tuple[np.ndarray, bool]:
+    """Assignment, epipolar RANSAC on it, assignment again within the epipolar band.
+
+    Parameters
+    ----------
+    cost : (K_i, K_j) float — descriptor distances
+    x_i : (K_i, 2), x_j : (K_j, 2) — keypoints, pixels
+    threshold_px : float — Sampson error bound
+
+    Returns
+    -------
+    pairs : (M, 2) int64 — rows ``(r, s)``
+    model_found : bool — ``False``: no fundamental matrix, ``pairs`` is the plain assignment
+    """
+    from pipeline.matching import epipolar_filter, sampson_error_px
+
+    cost = np.asarray(cost, dtype=np.float64)
+    r, s = linear_sum_assignment(cost)
+    if r.size < 8:
+        return np.stack([r, s], axis=1).astype(np.int64), False
+    _, F, why = epipolar_filter(x_i[r], x_j[s], None, None, False, threshold_px)
+    if F is None:
+        return np.stack([r, s], axis=1).astype(np.int64), False
+    ki, kj = cost.shape
+    err = sampson_error_px(F, np.repeat(x_i, kj, axis=0), np.tile(x_j, (ki, 1))).reshape(ki, kj)
+    band = np.where(err <= threshold_px, cost, _FORBIDDEN)
+    r, s = linear_sum_assignment(band)
+    ok = band[r, s] < _FORBIDDEN
+    return np.stack([r[ok], s[ok]], axis=1).astype(np.int64), True
+
+
+def _ratio_of(cost: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Distance of each pair over the nearest alternative in its row or column."""
+    if not len(pairs):
+        return np.zeros(0)
+    r, s = pairs[:, 0], pairs[:, 1]
+    masked = np.asarray(cost, dtype=np.float64).copy()
+    d = masked[r, s].copy()
+    masked[r, s] = np.inf
+    alt = np.minimum(masked[r].min(axis=1), masked[:, s].min(axis=0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(alt > 0, d / alt, np.where(d > 0, np.inf, 1.0))
+
+
 def match_landmark_edges(descriptors: list[np.ndarray], comm_edges: np.ndarray,
-                         kind: str = "histogram", ratio: float | None = 0.8) -> Links:
+                         kind: str = "histogram", ratio: float | None = 0.8,
+                         keypoints: list[np.ndarray] | None = None,
+                         geometry: str = "none", epipolar_px: float = EPIPOLAR_PX
+                         ) -> tuple[Links, dict]:
     """Links of every communication edge ``(i, j)``: Hungarian on the descriptor distance.
 
     Each edge is matched once, as robot ``i`` would after receiving ``j``'s descriptors.
@@ -109,27 +171,52 @@ def match_landmark_edges(descriptors: list[np.ndarray], comm_edges: np.ndarray,
     descriptors : list of (K_i, D) arrays, one per robot
     comm_edges : (E, 2) int, ``i < j``
     kind : ``histogram`` (χ²) or ``vector`` (L2)
-    ratio : gate of :func:`hungarian_match`
+    ratio : gate of :func:`hungarian_match` (on the final pairs)
+    keypoints : list of (K_i, 2) or None — needed for ``geometry="epipolar"``
+    geometry : ``none`` (descriptors only) or ``epipolar`` (:func:`guided_match`)
+    epipolar_px : float — Sampson error bound of the epipolar check
 
     Returns
     -------
-    Links — quality ``1 − ratio_of_pair`` (higher is better, as for the image pipeline)
+    links : Links — quality ``1 − ratio_of_pair`` (higher is better, as for the image pipeline)
+    stats : dict — ``edges``, ``edges_without_model`` (epipolar: plain assignment kept)
     """
     if kind not in ("histogram", "vector"):
         raise InputError(f"descriptor kind {kind!r}: expected histogram or vector")
     if ratio is not None and not 0 < ratio <= 1:
         raise InputError(f"--ratio {ratio}: expected a value in (0, 1], or none")
+    if geometry not in GEOMETRY:
+        raise InputError(f"--geometry {geometry!r}: expected one of {', '.join(GEOMETRY)}")
+    if geometry == "epipolar" and keypoints is None:
+        raise InputError("--geometry epipolar needs the keypoints of every image")
+    if not epipolar_px > 0:
+        raise InputError(f"--epipolar-px {epipolar_px}: expected a positive number of pixels")
     dist = chi2_distance if kind == "histogram" else l2_distance
     ci, fi, cj, fj, q = [], [], [], [], []
-    for i, j in np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2).tolist():
-        pairs, _, rho = hungarian_match(dist(descriptors[i], descriptors[j]), ratio)
+    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    no_model = 0
+    for i, j in edges.tolist():
+        cost = dist(descriptors[i], descriptors[j])
+        if geometry == "epipolar":
+            pairs, found = guided_match(cost, np.asarray(keypoints[i], dtype=np.float64),
+                                        np.asarray(keypoints[j], dtype=np.float64), epipolar_px)
+            no_model += not found
+            rho = _ratio_of(cost, pairs)
+            if ratio is not None:
+                pairs, rho = pairs[rho <= ratio], rho[rho <= ratio]
+        else:
+            pairs, _, rho = hungarian_match(cost, ratio)
         ci.append(np.full(len(pairs), i))
         cj.append(np.full(len(pairs), j))
         fi.append(pairs[:, 0])
         fj.append(pairs[:, 1])
         q.append(1.0 - rho)
+    stats = {"edges": int(len(edges)), "geometry": geometry,
+             "edges_without_model": int(no_model)}
+    if geometry == "epipolar":
+        stats["epipolar_px"] = float(epipolar_px)
     if not ci:
         z = np.zeros(0, dtype=np.int64)
-        return Links(z, z, z, z, np.zeros(0))
+        return Links(z, z, z, z, np.zeros(0)), stats
     return Links(np.concatenate(ci), np.concatenate(fi), np.concatenate(cj), np.concatenate(fj),
-                 np.concatenate(q))
+                 np.concatenate(q)), stats

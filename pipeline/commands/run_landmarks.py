@@ -6,12 +6,14 @@ known exactly: landmark ``k`` of one image is landmark ``k`` of every other.
 
 Stages: load (keypoints and descriptors; ``--frames N`` takes ``N`` images at a fixed
 stride) → each robot matches its landmarks to its communication neighbours' one-to-one
-(Hungarian on the descriptor distance, optional ratio gate; :mod:`pipeline.landmark_matching`)
+(Hungarian on the descriptor distance, guided by the epipolar geometry of the labelled
+keypoints, optional ratio gate; :mod:`pipeline.landmark_matching`)
 → ``--refine votes``: the robots refine those matches by two-hop votes through common
 neighbours (:mod:`pipeline.match_votes`) → the distributed consistency stage
 (``--resolution``) → the centralized baselines on the same links → evaluation.
 
-Defaults (stated): the whole Hungarian assignment (``--ratio none``) refined by votes. The
+Defaults (stated): guided matching at the image pipeline's 1 px epipolar threshold, the
+whole assignment kept (``--ratio none``), refined by votes. The
 votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
 vote for the right match, and gating before voting removes them.
 
@@ -71,6 +73,8 @@ class LandmarksConfig:
     frames: int | None = None
     descriptors: str = "given"
     ratio: float | None = None
+    geometry: str = "epipolar"
+    epipolar_px: float = 1.0
     refine: str = "votes"
     vote_iterations: int = 10
     resolution: str = "paper"
@@ -112,6 +116,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="gate of the Hungarian matches: keep a pair if its distance is at most "
                         "R times the nearest alternative in its row or column (Lowe's ratio, "
                         "e.g. 0.8); none (default) keeps the whole assignment")
+    p.add_argument("--geometry", default="epipolar", choices=("epipolar", "none"),
+                   help="epipolar (default): after the assignment, fit a fundamental matrix by "
+                        "RANSAC and assign again within the epipolar band (guided matching); "
+                        "none: descriptors only (the input CLEAR is benchmarked on)")
+    p.add_argument("--epipolar-px", type=float, default=1.0, metavar="PX",
+                   help="Sampson error bound of --geometry epipolar (default 1 px)")
     p.add_argument("--refine", default="votes", choices=REFINEMENTS,
                    help="votes (default): robots refine their matches by two-hop votes through "
                         "common neighbours until a fixed point; none: use the matches as they are")
@@ -129,6 +139,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args) -> LandmarksConfig:
     return LandmarksConfig(directory=args.directory, graph=args.graph, frames=args.frames,
                            descriptors=args.descriptors, ratio=args.ratio,
+                           geometry=args.geometry, epipolar_px=args.epipolar_px,
                            refine=args.refine, vote_iterations=args.vote_iterations,
                            resolution=args.resolution, baselines=not args.no_baselines,
                            out=args.out)
@@ -208,10 +219,12 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors; graph "
                    f"{config.graph}: {len(comm_edges)} edges")
     with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
-                                 f"ratio gate {config.ratio}"):
-        links = match_landmark_edges([f.descriptors for f in frames], comm_edges, kind,
-                                     config.ratio)
-        timer.note(f"{len(links)} links")
+                                 f"geometry {config.geometry}, ratio gate {config.ratio}"):
+        links, matching = match_landmark_edges(
+            [f.descriptors for f in frames], comm_edges, kind, config.ratio,
+            [f.keypoints for f in frames], config.geometry, config.epipolar_px)
+        timer.note(f"{len(links)} links; {matching['edges_without_model']} edges without an "
+                   "epipolar model" if config.geometry == "epipolar" else f"{len(links)} links")
     # times: wall (StageTimer) and CPU of this process (all simulated robots run in it, one
     # after another; a team would run them in parallel)
     refinement = {"method": config.refine}
@@ -280,6 +293,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "pairwise": pairwise,
         "cycle_consistent": bool(after["conflictive_sets"] == 0),
         "cycle_consistent_before": bool(before["conflictive_sets"] == 0),
+        "matching": matching,
         "refinement": refinement,
         "resolution": {
             "method": config.resolution,

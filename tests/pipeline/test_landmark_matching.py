@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from pipeline.errors import InputError
 from pipeline.landmark_matching import (
     chi2_distance,
+    guided_match,
     hungarian_match,
     l2_distance,
     match_landmark_edges,
@@ -51,7 +52,7 @@ def test_edges_recover_a_permutation():
     rng = np.random.default_rng(0)
     base = rng.random((6, 10))
     perm = rng.permutation(6)
-    links = match_landmark_edges([base, base[perm]], np.array([[0, 1]]), "histogram", 0.8)
+    links, _ = match_landmark_edges([base, base[perm]], np.array([[0, 1]]), "histogram", 0.8)
     assert len(links) == 6
     assert (perm[links.feat_j] == links.feat_i).all()
     assert (links.quality == 1.0).all()  # distance 0, so ratio 0
@@ -63,3 +64,45 @@ def test_bad_ratio_and_kind():
         match_landmark_edges(d, np.array([[0, 1]]), "histogram", 1.5)
     with pytest.raises(InputError, match="descriptor kind"):
         match_landmark_edges(d, np.array([[0, 1]]), "binary", 0.8)
+
+
+def _two_views(n=20, seed=0):
+    """Projections of random 3D points into two cameras (a real epipolar geometry)."""
+    rng = np.random.default_rng(seed)
+    X = rng.uniform([-1, -1, 4], [1, 1, 8], size=(n, 3))
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    a = 0.2
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    t = np.array([-1.0, 0.1, 0.2])
+
+    def project(P):
+        p = P @ K.T
+        return p[:, :2] / p[:, 2:]
+
+    return project(X), project(X @ R.T + t)
+
+
+def test_guided_matching_undoes_a_descriptor_swap():
+    x_i, x_j = _two_views()
+    cost = np.ones((20, 20))
+    cost[np.arange(20), np.arange(20)] = 0.1
+    far = int(np.argmax(np.abs(x_i[:, 1] - x_i[0, 1])))  # far from landmark 0's epipolar line
+    cost[0, 0] = cost[far, far] = 0.5
+    cost[0, far] = cost[far, 0] = 0.05  # the descriptors prefer the swap
+    plain, _, _ = hungarian_match(cost, ratio=None)
+    assert {(0, far), (far, 0)} <= set(map(tuple, plain.tolist()))
+    pairs, found = guided_match(cost, x_i, x_j, 1.0)
+    assert found
+    assert sorted(map(tuple, pairs.tolist())) == [(k, k) for k in range(20)]
+
+
+def test_guided_matching_without_enough_pairs_keeps_the_assignment():
+    x_i, x_j = _two_views(n=5)
+    pairs, found = guided_match(np.eye(5)[::-1], x_i, x_j)
+    assert not found and len(pairs) == 5
+
+
+def test_epipolar_needs_keypoints():
+    d = [np.ones((2, 3)), np.ones((2, 3))]
+    with pytest.raises(InputError, match="needs the keypoints"):
+        match_landmark_edges(d, np.array([[0, 1]]), "histogram", None, None, "epipolar")
