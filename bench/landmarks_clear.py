@@ -52,8 +52,8 @@ def main() -> int:
     ap.add_argument("--graphs", nargs="+", default=["complete", "ring", "knn:4"])
     ap.add_argument("--configs", nargs="+",
                     default=["votes:none:epipolar", "votes:none:none", "none:none:none"],
-                    help="REFINE:RATIO:GEOMETRY (refine votes|none, ratio none|R, geometry "
-                         "epipolar|none)")
+                    help="REFINE:RATIO:GEOMETRY[:PX] (refine votes|none, ratio none|R, geometry "
+                         "epipolar|none, epipolar bound PX, default 3)")
     ap.add_argument("--results", default="results.json", help="file name under --out")
     ap.add_argument("--quick", action="store_true", help="20 frames only")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-landmarks")
@@ -63,20 +63,23 @@ def main() -> int:
     for n in frames:
         for graph in args.graphs:
             for conf in args.configs:
-                refine, ratio_text, geometry = conf.split(":")
+                refine, ratio_text, geometry, *px = conf.split(":")
                 ratio = None if ratio_text == "none" else float(ratio_text)
                 for method in RESOLUTIONS:
-                    name = (f"f{n}-{graph.replace(':', '')}-{geometry}-{refine}-r{ratio_text}"
+                    name = (f"f{n}-{graph.replace(':', '')}-{geometry}{''.join(px)}-{refine}"
+                            f"-r{ratio_text}"
                             f"-{method}")
                     cfg = LandmarksConfig(directory=str(args.data), graph=graph, frames=n,
                                           ratio=ratio, geometry=geometry, refine=refine,
+                                          epipolar_px=float(px[0]) if px else 3.0,
                                           resolution=method, out=str(args.out / name))
                     t0 = time.perf_counter()
                     _, rep = run_landmarks(cfg, StageTimer(verbose=False))
                     wall = time.perf_counter() - t0
                     r, pw = rep["resolution"], rep["pairwise"]
                     rec = {
-                        "frames": n, "graph": graph, "ratio": ratio, "geometry": geometry,
+                        "frames": n, "graph": graph, "ratio": ratio,
+                        "geometry": geometry + (f" {px[0]} px" if px else ""),
                         "refine": refine, "matching": rep["matching"],
                         "method": method, "refinement": rep["refinement"],
                         "comm_edges": len(rep["comm_edges"]), "links": rep["before"]["links"],

@@ -12,7 +12,8 @@ keypoints, optional ratio gate; :mod:`pipeline.landmark_matching`)
 neighbours (:mod:`pipeline.match_votes`) → the distributed consistency stage
 (``--resolution``) → the centralized baselines on the same links → evaluation.
 
-Defaults (stated): guided matching at the image pipeline's 1 px epipolar threshold, the
+Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
+:mod:`pipeline.landmark_matching`), the
 whole assignment kept (``--ratio none``), refined by votes. The
 votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
 vote for the right match, and gating before voting removes them.
@@ -74,7 +75,7 @@ class LandmarksConfig:
     descriptors: str = "given"
     ratio: float | None = None
     geometry: str = "epipolar"
-    epipolar_px: float = 1.0
+    epipolar_px: float = 3.0
     refine: str = "votes"
     vote_iterations: int = 10
     resolution: str = "paper"
@@ -120,8 +121,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="epipolar (default): after the assignment, fit a fundamental matrix by "
                         "RANSAC and assign again within the epipolar band (guided matching); "
                         "none: descriptors only (the input CLEAR is benchmarked on)")
-    p.add_argument("--epipolar-px", type=float, default=1.0, metavar="PX",
-                   help="Sampson error bound of --geometry epipolar (default 1 px)")
+    p.add_argument("--epipolar-px", type=float, default=3.0, metavar="PX",
+                   help="Sampson error bound of --geometry epipolar (default 3 px: hand-labelled "
+                        "positions)")
     p.add_argument("--refine", default="votes", choices=REFINEMENTS,
                    help="votes (default): robots refine their matches by two-hop votes through "
                         "common neighbours until a fixed point; none: use the matches as they are")
