@@ -18,7 +18,11 @@ robot fits a fundamental matrix to the assignment by RANSAC (``cv2.USAC_MAGSAC``
 solves the assignment again with every pair whose Sampson error exceeds the threshold
 forbidden. The labelled keypoints' own positions thus settle pairs whose descriptors are
 ambiguous (two nearby landmarks with similar shape contexts). Where no model is found
-(fewer than 8 assigned pairs, or RANSAC fails) the descriptor assignment is kept.
+(fewer than 8 assigned pairs, or RANSAC fails) the descriptor assignment is kept. It is
+kept too when a homography explains the assignment almost as well as the fundamental
+matrix — more than ``MAX_H_INLIER_RATIO`` = 0.8 of the F inliers are H inliers, COLMAP's
+default test for a degenerate (planar or short-baseline) two-view geometry — because F is
+then poorly constrained and its band would cut true pairs.
 
 Threshold (stated): 3 px. Hand-labelled landmarks are integer pixel positions clicked by a
 person, far coarser than the sub-pixel keypoints the image pipeline checks at 1 px; 3 px is
@@ -42,6 +46,8 @@ GEOMETRY = ("epipolar", "none")
 #: inlier threshold of the epipolar check for hand-labelled keypoints, pixels (module notes)
 EPIPOLAR_PX = 3.0
 _FORBIDDEN = 1e12
+#: COLMAP's ``TwoViewGeometryOptions.max_H_inlier_ratio``: above it F is degenerate
+MAX_H_INLIER_RATIO = 0.8
 
 
 def chi2_distance(h_i: np.ndarray, h_j: np.ndarray) -> np.ndarray:
@@ -131,16 +137,27 @@ def guided_match(cost: np.ndarray, x_i: np.ndarray, x_j: np.ndarray,
     Returns
     -------
     pairs : (M, 2) int64 — rows ``(r, s)``
-    model_found : bool — ``False``: no fundamental matrix, ``pairs`` is the plain assignment
+    model_found : bool — ``False``: no usable fundamental matrix (none found, or degenerate:
+        a homography explains the assignment as well), ``pairs`` is the plain assignment
     """
+    import cv2
+
     from pipeline.matching import epipolar_filter, sampson_error_px
 
     cost = np.asarray(cost, dtype=np.float64)
     r, s = linear_sum_assignment(cost)
     if r.size < 8:
         return np.stack([r, s], axis=1).astype(np.int64), False
-    _, F, why = epipolar_filter(x_i[r], x_j[s], None, None, False, threshold_px)
+    inl, F, _ = epipolar_filter(x_i[r], x_j[s], None, None, False, threshold_px)
     if F is None:
+        return np.stack([r, s], axis=1).astype(np.int64), False
+    try:
+        H, h_mask = cv2.findHomography(x_i[r].astype(np.float64), x_j[s].astype(np.float64),
+                                       cv2.USAC_MAGSAC, threshold_px)
+    except cv2.error:
+        H, h_mask = None, None
+    if H is not None and h_mask is not None and \
+            int(h_mask.sum()) > MAX_H_INLIER_RATIO * int(inl.sum()):
         return np.stack([r, s], axis=1).astype(np.int64), False
     ki, kj = cost.shape
     err = sampson_error_px(F, np.repeat(x_i, kj, axis=0), np.tile(x_j, (ki, 1))).reshape(ki, kj)
