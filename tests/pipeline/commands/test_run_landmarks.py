@@ -40,6 +40,8 @@ def test_report_contract(hotel_run):
     r = report["resolution"]
     assert r["method"] == "paper" and r["messages"] > 0 and r["bytes"] > 0
     assert len(rows) == report["before"]["links"]
+    assert report["matching"]["geometry"] == "epipolar"  # the default
+    assert report["matching"]["edges"] == len(report["comm_edges"])
     ref = report["refinement"]
     assert ref["method"] in ("votes", "none")
     if ref["method"] == "votes":
