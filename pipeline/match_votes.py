@@ -85,7 +85,7 @@ class VoteRobot:
         inputs changed since the last iteration keeps its matches without recomputing.
         """
         received = {msg.src: (msg.payload["nbrs"].astype(np.int64),
-                              msg.payload["table"].astype(np.int64))
+                              msg.payload["table"])
                     for msg in inbox if msg.kind == "matches"}
         owned = self.nbrs[self.nbrs > self.id]
         if owned.size == 0:
@@ -95,17 +95,20 @@ class VoteRobot:
         kmax = int(m_of.max())
         d = self.nbrs.size
         # R[a, j, t]: landmark of j that neighbour nbrs[a] matched to its landmark t
-        R = np.full((d, n_total, kmax), -1, dtype=np.int64)
+        R = np.full((d, n_total, kmax), -1, dtype=np.int32)
         got = [(a, received[k]) for a, k in enumerate(self.nbrs.tolist()) if k in received]
         if got:
             rows = np.concatenate([np.full(kn.size, a) for a, (kn, _) in got])
             cols = np.concatenate([kn for _, (kn, _) in got])
             tabs = [kt for _, (_, kt) in got]
-            width = max(kt.shape[1] for kt in tabs)
-            block = np.full((rows.size, kmax), -1, dtype=np.int64)
-            block[:, :width] = np.concatenate(
-                [np.pad(kt, ((0, 0), (0, width - kt.shape[1])), constant_values=-1)
-                 for kt in tabs])
+            if all(kt.shape[1] == kmax for kt in tabs):
+                block = np.concatenate(tabs)
+            else:  # robots with fewer landmarks than the largest: pad their tables with -1
+                block = np.full((rows.size, kmax), -1, dtype=np.int32)
+                start = 0
+                for kt in tabs:
+                    block[start:start + kt.shape[0], :kt.shape[1]] = kt
+                    start += kt.shape[0]
             R[rows, cols] = block
         # which (neighbour k -> robot j) tables changed since the last iteration
         prev = self.last_R
@@ -126,13 +129,13 @@ class VoteRobot:
         # S[a, j, r]: the landmark of j reached from own r through neighbour nbrs[a]
         t = self.table                                    # (d, m)
         aa, rr = np.nonzero(t >= 0)
-        S = np.full((d, todo.size, self.m), -1, dtype=np.int64)
+        S = np.full((d, todo.size, self.m), -1, dtype=np.int32)
         S[aa, :, rr] = R[aa[:, None], todo[None, :], t[aa, rr][:, None]]
         # the path through j itself is the direct link, counted once below
         slots = np.searchsorted(self.nbrs, todo)
         S[slots, np.arange(todo.size), :] = -1
         a_idx, e_idx, r_idx = np.nonzero(S >= 0)
-        s_idx = S[a_idx, e_idx, r_idx]
+        s_idx = S[a_idx, e_idx, r_idx].astype(np.int64)
         W_all = np.bincount((e_idx * self.m + r_idx) * kmax + s_idx,
                             minlength=todo.size * self.m * kmax
                             ).reshape(todo.size, self.m, kmax).astype(np.float64)
