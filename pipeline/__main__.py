@@ -20,6 +20,8 @@ COMMANDS = {
     "resolve": ("resolve", "make your own links conflict-free (links.csv in, links.csv out)"),
     "run-images": ("run_images", "full pipeline on a folder of real photographs"),
     "clean-db": ("clean_db", "remove inconsistent matches from a COLMAP database"),
+    "run-landmarks": ("run_landmarks", "labelled-landmark benchmark (e.g. CMU hotel): match, "
+                      "resolve, score pairwise against the labels"),
 }
 
 

@@ -6,7 +6,9 @@ user's comm-graph edges only, the distributed consistency stage (Aragüés et al
 detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
 cleaned tracks a pycolmap incremental reconstruction from the matches before and after
 cleaning (:mod:`pipeline.colmap`). Writes the run folder of DESIGN.md "Run outputs" with
-``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``.
+``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``. With
+``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.truth`)
+the ``truth`` column and every ground-truth figure of a formation run are filled in.
 
 Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
 supplies them (and refines guessed focal lengths). Fusion runs among the images it registered
@@ -46,6 +48,8 @@ class ImagesConfig:
     export_db: bool = False
     out: str | None = None
     threads: int = 1
+    truth: str = "none"
+    truth_tol_px: float = 2.0
 
     def out_dir(self) -> Path:
         if self.out:
@@ -207,6 +211,12 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         }
         if cleaning.fused_points is not None:
             report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+        if config.truth == "homographies":
+            from pipeline.truth import fill_report
+
+            with timer.stage("evaluate", "ground truth from the homographies"):
+                fill_report(report, config.directory, views, feats, comm_edges, ledger,
+                            config.truth_tol_px)
         md = sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
 
         with timer.stage("write", str(out)):

@@ -34,6 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
     p.add_argument("--threads", type=int, default=1,
                    help="threads of COLMAP's mapper (default 1: repeatable figures; -1: all cores)")
+    p.add_argument("--truth", default="none", choices=("none", "homographies"),
+                   help="ground truth: homographies = DIR/H1to{k}p.txt (planar scene, image 1 "
+                        "to image k at full resolution); a link is good when each keypoint maps "
+                        "within --truth-tol of the other (pipeline.truth). Default none")
+    p.add_argument("--truth-tol", type=float, default=2.0, metavar="PX",
+                   help="tolerance of --truth in pixels of the processed images (default 2)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
 
@@ -42,12 +48,15 @@ def config_from_args(args) -> ImagesConfig:
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
                          f"or 0 for full resolution")
+    if not args.truth_tol > 0:
+        raise InputError(f"--truth-tol {args.truth_tol}: expected a positive number of pixels")
     method, max_features = feature_options(args)
     return ImagesConfig(directory=args.directory, graph=args.graph, intrinsics=args.intrinsics,
                         max_size=args.max_size or None, features=method,
                         max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
-                        threads=args.threads)
+                        threads=args.threads, truth=args.truth,
+                        truth_tol_px=args.truth_tol)
 
 
 def run(args) -> int:

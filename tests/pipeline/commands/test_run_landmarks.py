@@ -1,0 +1,83 @@
+"""run-landmarks on six CMU hotel frames: the report contract, scores that agree with
+links.csv, and clear errors."""
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.commands.run_landmarks import RESOLUTIONS, true_landmark_pairs
+from pipeline.metrics import association_pairs, pairwise_scores
+from pipeline.types import Links
+
+HOTEL = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"
+
+
+@pytest.fixture(scope="module", params=[("complete", "votes", "none"), ("ring", "none", "0.8")])
+def hotel_run(request, tmp_path_factory):
+    graph, refine, ratio = request.param
+    out = tmp_path_factory.mktemp("runs") / f"hotel-{graph}"
+    assert main(["run-landmarks", str(HOTEL), "--graph", graph, "--refine", refine, "--ratio",
+                 ratio, "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return report, rows
+
+
+def test_report_contract(hotel_run):
+    report, rows = hotel_run
+    for side in ("before", "after"):
+        assert set(report["pairwise"][side]) >= {"precision", "recall", "f1"}
+    assert report["cycle_consistent"] is True
+    assert report["after"]["conflictive_sets"] == 0
+    assert report["features_per_camera"] == [30] * 6
+    assert set(report["baselines"]) == {"drop_conflictive_sets", "keep_first_per_image",
+                                        "quality_merge"}
+    r = report["resolution"]
+    assert r["method"] == "paper" and r["messages"] > 0 and r["bytes"] > 0
+    assert len(rows) == report["before"]["links"]
+    assert report["matching"]["geometry"] == "epipolar"  # the default
+    assert report["matching"]["edges"] == len(report["comm_edges"])
+    ref = report["refinement"]
+    assert ref["method"] in ("votes", "none")
+    if ref["method"] == "votes":
+        assert ref["rounds"] == 2 * ref["iterations"] and ref["bytes"] > 0
+    else:
+        assert report["pairwise"]["input_links"] == report["pairwise"]["before_links"]
+
+
+def test_scores_recomputed_from_links_csv(hotel_run):
+    report, rows = hotel_run
+    kept = [r for r in rows if r["status"] == "kept"]
+    links = Links(*[np.array([int(r[k]) for r in kept]) for k in ("cam_i", "feat_i", "cam_j", "feat_j")])
+    m = report["features_per_camera"]
+    s = pairwise_scores(association_pairs(m, links), true_landmark_pairs(m), sum(m))
+    assert s["f1"] == pytest.approx(report["pairwise"]["after"]["f1"])
+    # truth column: the two ends carry the same label row
+    assert all(r["truth"] == str(int(r["feat_i"] == r["feat_j"])) for r in rows)
+    assert report["after"]["good_links"] == sum(r["truth"] == "1" for r in kept)
+
+
+def test_true_pairs_count():
+    assert len(true_landmark_pairs([3, 3, 3])) == 9
+
+
+def test_only_existing_resolution_methods_are_offered(tmp_path, capsys):
+    assert "paper" in RESOLUTIONS
+    with pytest.raises(SystemExit):
+        main(["run-landmarks", str(HOTEL), "--resolution", "nope", "--out", str(tmp_path / "o")])
+    assert "invalid choice" in capsys.readouterr().err
+
+
+def test_bad_inputs_fail_cleanly(tmp_path, capsys):
+    assert main(["run-landmarks", str(tmp_path / "none"), "--out", str(tmp_path / "o")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    assert main(["run-landmarks", str(HOTEL), "--frames", "9", "--out", str(tmp_path / "o")]) == 2
+    assert "--frames 9" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["run-landmarks", str(HOTEL), "--ratio", "2"])
+    assert not (tmp_path / "o").exists()
