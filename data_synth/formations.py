@@ -89,6 +89,12 @@ class Formation:
         The rendered scene (faces and named landmarks).
     centres : ndarray, (n, 3)
         Camera centres in the world frame.
+
+    Notes
+    -----
+    A formation is not modified after rendering: ground truth computed from its views (the
+    true pairs of a camera pair, :func:`data_synth.ground_truth.true_pairs`) is remembered
+    with it.
     """
 
     name: str
@@ -98,6 +104,7 @@ class Formation:
     seed: int
     scene: Scene = field(repr=False)
     centres: np.ndarray = field(repr=False)
+    _truth_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n_robots(self) -> int:
