@@ -42,7 +42,7 @@ import numpy as np
 from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial.distance import pdist, squareform
 
-from data_synth.scene import FACADE_Y, Scene
+from data_synth.scene import FACADE_Y, Scene, build_scene
 from pipeline.errors import InputError
 
 __all__ = [
@@ -86,7 +86,8 @@ class Formation:
         Graph rule that produced ``comm_edges``.
     seed : int
     scene : data_synth.scene.Scene
-        The rendered scene (faces and named landmarks).
+        The rendered scene (faces and named landmarks), built from ``seed`` when first asked
+        for (views read from the render cache need no scene).
     centres : ndarray, (n, 3)
         Camera centres in the world frame.
 
@@ -102,9 +103,12 @@ class Formation:
     comm_edges: np.ndarray
     graph: str
     seed: int
-    scene: Scene = field(repr=False)
     centres: np.ndarray = field(repr=False)
     _truth_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def scene(self) -> Scene:
+        return build_scene(self.seed)
 
     @property
     def n_robots(self) -> int:
