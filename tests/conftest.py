@@ -1,15 +1,28 @@
-"""Fixtures of the whole suite."""
+"""Settings of the whole test session."""
 
-import pytest
+import os
+import shutil
+import tempfile
 
 from data_synth.cache import ENV
 
+_saved: dict = {}
 
-@pytest.fixture(scope="session", autouse=True)
-def _render_cache_in_tmp(tmp_path_factory):
-    """Rendered views are cached in a folder of this test session, never in the user's cache
-    (subprocesses inherit the variable)."""
-    patch = pytest.MonkeyPatch()
-    patch.setenv(ENV, str(tmp_path_factory.mktemp("render-cache")))
-    yield
-    patch.undo()
+
+def pytest_configure(config):
+    """Rendered views are cached in a folder of this session, never in the user's cache.
+
+    Set before collection, so the doctests of ``data_synth`` and subprocesses (which inherit
+    the variable) use it too; removed with the session.
+    """
+    _saved["value"] = os.environ.get(ENV)
+    _saved["dir"] = tempfile.mkdtemp(prefix="formation-match-render-cache-")
+    os.environ[ENV] = _saved["dir"]
+
+
+def pytest_unconfigure(config):
+    if _saved.get("value") is None:
+        os.environ.pop(ENV, None)
+    else:
+        os.environ[ENV] = _saved["value"]
+    shutil.rmtree(_saved.get("dir", ""), ignore_errors=True)
