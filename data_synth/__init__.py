@@ -20,6 +20,7 @@ import numbers
 
 import numpy as np
 
+from data_synth import cache as render_cache
 from data_synth.formations import (
     FIG4_EDGES,
     FORMATIONS,
@@ -57,7 +58,8 @@ def _check_int(value, name: str, minimum: int) -> int:
 
 
 def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 480),
-           n_robots: int | None = None, graph: str | None = None) -> Formation:
+           n_robots: int | None = None, graph: str | None = None,
+           cache: bool = True) -> Formation:
     """Render a formation: one view per robot plus the communication graph.
 
     Parameters
@@ -76,6 +78,10 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
         (ring, ring + triangles, ring2, complete).
     graph : str, optional
         Overrides the communication graph kind.
+    cache : bool
+        Read and write the views through the on-disk render cache (:mod:`data_synth.cache`;
+        ``FORMATION_MATCH_CACHE=off`` turns it off for every call). The cached views are the
+        rendered ones bit for bit.
 
     Returns
     -------
@@ -107,7 +113,6 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
         kind = graph
     name = formation if (formation in FORMATIONS and graph is None and n == 6) else f"{kind}-n{n}"
 
-    scene = build_scene(seed)
     centres, poses = robot_poses(n, seed)
     if name in FIG4_EDGES:
         edges = np.array(FIG4_EDGES[name], np.int64)
@@ -115,10 +120,17 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
     else:
         edges = graph_edges(kind, n, centres, seed)
     K = intrinsics((W, H))
-    views = []
-    for i, (R, t) in enumerate(poses):
-        image, depth = render_view(scene, K, R, t, (W, H), rng=np.random.default_rng([seed, 3, i]))
-        views.append(View(name=f"cam{i:02d}", image=image, K=K.copy(), R=R, t=t, depth=depth,
-                          intrinsics_known=True))
-    return Formation(name=name, views=views, comm_edges=edges, graph=kind, seed=seed, scene=scene,
+    # the views depend on seed, size and robots only (not on the graph): one cache entry each
+    pixels = render_cache.load_views(seed, (W, H), n) if cache else None
+    if pixels is None:
+        scene = build_scene(seed)
+        rendered = [render_view(scene, K, R, t, (W, H), rng=np.random.default_rng([seed, 3, i]))
+                    for i, (R, t) in enumerate(poses)]
+        pixels = {"image": [im for im, _ in rendered], "depth": [d for _, d in rendered]}
+        if cache:
+            render_cache.save_views(seed, (W, H), {k: np.stack(v) for k, v in pixels.items()})
+    views = [View(name=f"cam{i:02d}", image=pixels["image"][i], K=K.copy(), R=R, t=t,
+                  depth=pixels["depth"][i], intrinsics_known=True)
+             for i, (R, t) in enumerate(poses)]
+    return Formation(name=name, views=views, comm_edges=edges, graph=kind, seed=seed,
                      centres=centres)

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from data_synth.scene import FACADE_Y, Scene
+from data_synth.scene import FACADE_Y, Scene, build_scene
 from pipeline.commgraph import GRAPH_KINDS, graph_edges
 
 __all__ = [
@@ -81,9 +81,16 @@ class Formation:
         Graph rule that produced ``comm_edges``.
     seed : int
     scene : data_synth.scene.Scene
-        The rendered scene (faces and named landmarks).
+        The rendered scene (faces and named landmarks), built from ``seed`` when first asked
+        for (views read from the render cache need no scene).
     centres : ndarray, (n, 3)
         Camera centres in the world frame.
+
+    Notes
+    -----
+    A formation is not modified after rendering: ground truth computed from its views (the
+    true pairs of a camera pair, :func:`data_synth.ground_truth.true_pairs`) is remembered
+    with it.
     """
 
     name: str
@@ -91,8 +98,12 @@ class Formation:
     comm_edges: np.ndarray
     graph: str
     seed: int
-    scene: Scene = field(repr=False)
     centres: np.ndarray = field(repr=False)
+    _truth_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def scene(self) -> Scene:
+        return build_scene(self.seed)
 
     @property
     def n_robots(self) -> int:

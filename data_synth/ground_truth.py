@@ -24,6 +24,8 @@ pixel.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -51,6 +53,14 @@ def _check_xy(xy, what: str) -> np.ndarray:
     return a
 
 
+def _inverse_depth(z: np.ndarray) -> np.ndarray:
+    """``1/z`` in float64, ``0`` where ``z`` is not finite (no surface hit); elementwise, so
+    only the sampled pixels of a depth map are ever converted."""
+    z = z.astype(np.float64)
+    with np.errstate(divide="ignore"):
+        return np.where(np.isfinite(z), 1.0 / z, 0.0)
+
+
 def sample_depth(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Depth at sub-pixel positions, ``inf`` outside the image or where nothing was hit.
 
@@ -71,16 +81,14 @@ def sample_depth(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
     if not inside.any():
         return out
     x, y = x[inside], y[inside]
-    with np.errstate(divide="ignore"):
-        inv = np.where(np.isfinite(depth), 1.0 / depth.astype(np.float64), 0.0)
     ix = np.clip(np.rint(x).astype(np.int64), 0, W - 1)
     iy = np.clip(np.rint(y).astype(np.int64), 0, H - 1)
-    nearest = inv[iy, ix]
+    nearest = _inverse_depth(depth[iy, ix])
     x0 = np.clip(np.floor(x).astype(np.int64), 0, W - 2)
     y0 = np.clip(np.floor(y).astype(np.int64), 0, H - 2)
     fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
-    q00, q10 = inv[y0, x0], inv[y0, x0 + 1]
-    q01, q11 = inv[y0 + 1, x0], inv[y0 + 1, x0 + 1]
+    q00, q10 = _inverse_depth(depth[y0, x0]), _inverse_depth(depth[y0, x0 + 1])
+    q01, q11 = _inverse_depth(depth[y0 + 1, x0]), _inverse_depth(depth[y0 + 1, x0 + 1])
     q = np.stack([q00, q10, q01, q11])
     lo, hi = q.min(axis=0), q.max(axis=0)
     # one plane: all hit, close in depth, and affine (q00 + q11 = q10 + q01)
@@ -203,6 +211,27 @@ def true_pairs(formation, i: int, xy_i, j: int, xy_j, tol_px: float = 2.0) -> np
     """
     vi, vj = _view(formation, i), _view(formation, j)
     xy_i, xy_j = _check_xy(xy_i, "xy_i"), _check_xy(xy_j, "xy_j")
+    # evaluation asks for the pairs of one camera pair several times (the links before and
+    # after each stage, each baseline): computed once per formation, cameras, keypoints, tol
+    cache = getattr(formation, "_truth_cache", None)
+    key = ("true_pairs", int(i), int(j), float(tol_px), _fingerprint(xy_i), _fingerprint(xy_j))
+    if cache is not None and key in cache:
+        return cache[key].copy()
+    pairs = _true_pairs(vi, xy_i, vj, xy_j, tol_px)
+    if cache is not None:
+        cache[key] = pairs.copy()
+    return pairs
+
+
+def _fingerprint(a: np.ndarray) -> tuple:
+    """Shape, dtype and a digest of the bytes of ``a``: equal iff the contents are equal."""
+    return a.shape, a.dtype.str, hashlib.blake2b(np.ascontiguousarray(a).tobytes(),
+                                                  digest_size=16).digest()
+
+
+def _true_pairs(vi: View, xy_i: np.ndarray, vj: View, xy_j: np.ndarray,
+                tol_px: float) -> np.ndarray:
+    """:func:`true_pairs` on validated input, ``(P, 2)`` int64."""
     r1, s1, d1 = _candidates(vi, xy_i, vj, xy_j, tol_px)
     s2, r2, d2 = _candidates(vj, xy_j, vi, xy_i, tol_px)
     r = np.concatenate([r1, r2])

@@ -1,7 +1,8 @@
 """Command line: ``python -m pipeline <command> ...``.
 
 Each command lives in ``pipeline/commands/<name>.py`` with ``add_arguments(parser)`` and
-``run(args) -> int``; modules are imported only when their command runs, so ``--help`` is fast.
+``run(args) -> int``. Only the module of the command being run is imported (its arguments are
+defined on demand), so ``python -m pipeline --help`` loads no OpenCV, SciPy, pycolmap or Rerun.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from collections.abc import Iterable
 
 from pipeline.errors import InputError
 
@@ -25,7 +27,23 @@ COMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _command_module(module: str):
+    """The command's module, or None if this build does not ship it."""
+    try:
+        return importlib.import_module(f"pipeline.commands.{module}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"pipeline.commands.{module}":
+            raise
+        return None
+
+
+def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser; the arguments of ``commands`` (default: all) are defined.
+
+    The other commands are listed with their help line only, which is all the top-level
+    ``--help`` shows; defining a command's arguments imports its module.
+    """
+    full = set(COMMANDS) if commands is None else set(commands)
     parser = argparse.ArgumentParser(
         prog="python -m pipeline",
         description="formation-match: consistent decentralized multi-camera data association.")
@@ -33,20 +51,34 @@ def build_parser() -> argparse.ArgumentParser:
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         p.set_defaults(_module=module)
-        # argument definitions are cheap; import the module only to define them
-        try:
-            mod = importlib.import_module(f"pipeline.commands.{module}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"pipeline.commands.{module}":
-                raise
+        if name not in full:
+            continue
+        mod = _command_module(module)
+        if mod is None:
             p.set_defaults(_missing=True)
             continue
         mod.add_arguments(p)
     return parser
 
 
+def _requested_command(argv: list[str]) -> str | None:
+    """The command named on the command line (the first positional argument), if any.
+
+    The top-level parser has no options besides ``-h``, so the first argument that is not an
+    option is the command; a ``-h`` before it asks for the top-level help.
+    """
+    for arg in argv:
+        if arg in ("-h", "--help"):
+            return None
+        if not arg.startswith("-"):
+            return arg if arg in COMMANDS else None
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = _requested_command(argv)
+    parser = build_parser([command] if command else [])
     args = parser.parse_args(argv)
     if getattr(args, "_missing", False):
         parser.error(f"command {args.command!r} is not available in this build")

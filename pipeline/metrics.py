@@ -25,15 +25,19 @@ __all__ = ["association_pairs", "pairwise_scores", "true_pairs_all"]
 def association_pairs(features_per_camera, links: Links) -> np.ndarray:
     """All feature pairs implied by ``links``: ``(P, 2)`` global ids, ``a < b``, sorted.
 
-    Complexity: sum over association sets of size^2.
+    Complexity: sum over association sets of size^2; vectorized over the sets of one size.
     """
     _, tracks = association_sets(features_per_camera, links)
     if not tracks:
         return np.zeros((0, 2), dtype=np.int64)
+    sizes = np.fromiter((len(t) for t in tracks), dtype=np.int64, count=len(tracks))
+    members = np.concatenate(tracks).astype(np.int64, copy=False)
+    starts = np.cumsum(sizes) - sizes
     parts = []
-    for t in tracks:
-        a, b = np.triu_indices(len(t), k=1)
-        parts.append(np.stack([t[a], t[b]], axis=1))
+    for k in np.unique(sizes).tolist():
+        rows = members[starts[sizes == k][:, None] + np.arange(k)]   # (sets of size k, k)
+        a, b = np.triu_indices(k, k=1)
+        parts.append(np.stack([rows[:, a].ravel(), rows[:, b].ravel()], axis=1))
     pairs = np.concatenate(parts)
     pairs.sort(axis=1)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]

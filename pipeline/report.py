@@ -33,15 +33,25 @@ PAPER_TABLE_III_IV = {
 
 
 def versions() -> dict:
-    """Versions of Python and the libraries whose behaviour the figures depend on."""
+    """Versions of Python and the libraries whose behaviour the figures depend on.
+
+    Rerun's is read from the installed package metadata, so that a run without a recording
+    (``--no-rerun``) does not import Rerun only to name its version.
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
     import cv2
-    import rerun
     import scipy
 
     from pipeline import __version__, colmap
+
+    try:
+        rerun_version = version("rerun-sdk")
+    except PackageNotFoundError:
+        rerun_version = None
     return {"formation-match": __version__, "python": platform.python_version(),
             "numpy": np.__version__, "scipy": scipy.__version__, "opencv": cv2.__version__,
-            "pycolmap": colmap.version(), "rerun-sdk": rerun.__version__}
+            "pycolmap": colmap.version(), "rerun-sdk": rerun_version}
 
 
 def association_counts(m, links: Links, good: np.ndarray | None, missing: int | None) -> dict:

@@ -243,7 +243,6 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     from pipeline.evaluate import link_truth, missing_links
     from pipeline.linkscsv import write_links_csv
     from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
-    from pipeline.triangulation import triangulate_tracks, write_reconstruction
 
     timer = timer or StageTimer()
     out = config.out_dir()
@@ -283,6 +282,9 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         pairwise = {"before": pairwise_of(links), "after_resolution": pairwise_of(resolved_links),
                     "after": pairwise_of(kept_links)}
         baselines = sections.baselines_section(m, links, truth, missing, pairwise_of)
+    # pycolmap is loaded only now: the earlier stages' peak memory does not include it
+    from pipeline.triangulation import triangulate_tracks, write_reconstruction
+
     with timer.stage("triangulation", "pycolmap, known poses, before and after"):
         gt_points = [points_from_keypoints(v, f.keypoints)[0] if len(f) else np.zeros((0, 3))
                      for v, f in zip(views, feats, strict=True)]

@@ -75,7 +75,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.stats import chi2
 
 from pipeline.association import association_sets
 from pipeline.commgraph import check_comm_edges
@@ -86,7 +85,7 @@ from pipeline.fusion.consensus import (
     bundle_bytes,
     ransac_hypotheses,
 )
-from pipeline.fusion.voting import dynamic_voting
+from pipeline.fusion.voting import chi2_ppf, dynamic_voting
 from pipeline.transport import Transport
 from pipeline.types import Features, Links, View
 
@@ -370,7 +369,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     Ks = np.stack([np.asarray(v.K, dtype=np.float64) for v in views])
 
     # pixel gate of the reprojection checks: squared error / σ_px² against χ²_{2,p}
-    px_thr = float(chi2.ppf(p, 2))
+    px_thr = chi2_ppf(p, 2)
     # observing neighbours of each observer: nb[b, i, j]
     nb = observes[:, :, None] & observes[:, None, :] & adj[None]
     if local == "pair":

@@ -46,7 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from pipeline.errors import InputError
 from pipeline.fusion.consensus import (
@@ -63,6 +63,7 @@ from pipeline.fusion.consensus import (
 
 __all__ = [
     "VotingResult",
+    "chi2_ppf",
     "gate_threshold",
     "distributed_ml",
     "static_voting",
@@ -111,6 +112,16 @@ class VotingResult:
     history: dict | None = None
 
 
+def chi2_ppf(p: float, d: int) -> float:
+    """Quantile ``χ²_{d,p}`` of the chi-square distribution with ``d`` degrees of freedom.
+
+    ``2 · P⁻¹(d/2, p)`` with ``P`` the regularized lower incomplete gamma function: the same
+    formula (and so the same float) as ``scipy.stats.chi2.ppf(p, d)``, without importing
+    ``scipy.stats``.
+    """
+    return float(2.0 * gammaincinv(d / 2, p))
+
+
 def gate_threshold(d: int, p: float, gate: str) -> float:
     """Threshold on the *squared* Mahalanobis distance for the chi-square gate.
 
@@ -121,7 +132,7 @@ def gate_threshold(d: int, p: float, gate: str) -> float:
         raise InputError(f"gate must be one of {GATES}, got {gate!r}")
     if not 0 < p < 1:
         raise InputError(f"chi-square confidence p must be in (0, 1), got {p}")
-    q = float(chi2.ppf(p, d))
+    q = chi2_ppf(p, d)
     return q * q if gate == "distance" else q
 
 

@@ -105,3 +105,54 @@ def test_ground_truth_bad_input(formation):
         good_links(formation, 0, np.zeros((3, 2)), 1, np.zeros((4, 2)))
     with pytest.raises(InputError, match="camera 9"):
         good_links(formation, 0, np.zeros((1, 2)), 9, np.zeros((1, 2)))
+
+
+def _sample_depth_whole_map(depth, xy):
+    """The reference: ``1/z`` of the whole map first, then the same sampling rule."""
+    H, W = depth.shape
+    out = np.full(len(xy), np.inf)
+    x, y = xy[:, 0], xy[:, 1]
+    inside = (x >= -0.5) & (x <= W - 0.5) & (y >= -0.5) & (y <= H - 0.5)
+    x, y = x[inside], y[inside]
+    with np.errstate(divide="ignore"):
+        inv = np.where(np.isfinite(depth), 1.0 / depth.astype(np.float64), 0.0)
+    nearest = inv[np.clip(np.rint(y).astype(int), 0, H - 1), np.clip(np.rint(x).astype(int), 0, W - 1)]
+    x0 = np.clip(np.floor(x).astype(int), 0, W - 2)
+    y0 = np.clip(np.floor(y).astype(int), 0, H - 2)
+    fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
+    q00, q10, q01, q11 = inv[y0, x0], inv[y0, x0 + 1], inv[y0 + 1, x0], inv[y0 + 1, x0 + 1]
+    q = np.stack([q00, q10, q01, q11])
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    planar = (lo > 0) & (hi - lo <= 0.05 * hi) & (np.abs(q00 + q11 - q10 - q01) <= 1e-3 * hi)
+    bil = q00 * (1 - fx) * (1 - fy) + q10 * fx * (1 - fy) + q01 * (1 - fx) * fy + q11 * fx * fy
+    inv_s = np.where(planar, bil, nearest)
+    with np.errstate(divide="ignore"):
+        out[inside] = np.where(inv_s > 0, 1.0 / inv_s, np.inf)
+    return out
+
+
+def test_sample_depth_converts_only_sampled_pixels_bit_for_bit(formation):
+    rng = np.random.default_rng(3)
+    depth = formation.views[2].depth.copy()
+    depth[:40] = np.inf  # sky and depth edges too
+    xy = np.concatenate([rng.uniform(-2, [SIZE[0] + 1, SIZE[1] + 1], (4000, 2)),
+                         np.array([[-0.5, -0.5], [SIZE[0] - 0.5, SIZE[1] - 0.5], [10.0, 39.5]])])
+    np.testing.assert_array_equal(sample_depth(depth, xy), _sample_depth_whole_map(depth, xy))
+
+
+def test_true_pairs_are_remembered_per_keypoints_and_tolerance(formation, samples):
+    f = data_synth.render("d", seed=0, size=SIZE)  # a fresh formation: empty memory
+    xy_i = samples[:800]
+    X, _ = points_from_keypoints(f.views[0], xy_i)
+    xy_j, _ = project(f.views[1].K, f.views[1].R, f.views[1].t, np.nan_to_num(X))
+    first = true_pairs(f, 0, xy_i, 1, xy_j)
+    assert len(first) > 100 and len(f._truth_cache) == 1
+    first[:] = -1  # the caller's copy, not the remembered one
+    again = true_pairs(f, 0, xy_i, 1, xy_j)
+    assert len(f._truth_cache) == 1
+    np.testing.assert_array_equal(again, true_pairs(formation, 0, xy_i, 1, xy_j))
+    # other keypoints or another tolerance are new questions, answered afresh
+    moved = xy_j + 3.0
+    assert len(true_pairs(f, 0, xy_i, 1, moved)) < len(again)
+    assert len(true_pairs(f, 0, xy_i, 1, xy_j, tol_px=0.01)) <= len(again)
+    assert len(f._truth_cache) == 3

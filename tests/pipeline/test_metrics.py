@@ -24,3 +24,30 @@ def test_scores_hand_computed():
 def test_empty_prediction_scores_zero():
     s = pairwise_scores(np.zeros((0, 2), int), np.array([[0, 1]]), m_total=2)
     assert (s["precision"], s["recall"], s["f1"]) == (0.0, 0.0, 0.0)
+
+
+def _pairs_set_by_set(m, links):
+    """Reference: the pairs of every association set, one set at a time."""
+    from pipeline.association import association_sets
+
+    _, tracks = association_sets(m, links)
+    pairs = [(min(a, b), max(a, b)) for t in tracks for k, a in enumerate(t.tolist())
+             for b in t.tolist()[k + 1:]]
+    return sorted(pairs)
+
+
+def test_association_pairs_match_set_by_set_enumeration():
+    rng = np.random.default_rng(7)
+    m = [40, 35, 50, 45]
+    for _ in range(20):
+        rows = []  # one-to-one per camera pair (Assumption 2.2), random sizes
+        for i in range(4):
+            for j in range(i + 1, 4):
+                k = int(rng.integers(0, 25))
+                rows += zip([i] * k, rng.permutation(m[i])[:k], [j] * k,
+                            rng.permutation(m[j])[:k], strict=True)
+        ci, fi, cj, fj = (np.array(c, dtype=np.int64) for c in zip(*rows, strict=True))
+        links = Links(ci, fi, cj, fj)
+        got = association_pairs(m, links)
+        assert got.dtype == np.int64
+        assert [tuple(p) for p in got.tolist()] == _pairs_set_by_set(m, links)

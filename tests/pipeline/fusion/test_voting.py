@@ -4,6 +4,7 @@ import pytest
 from pipeline.errors import InputError
 from pipeline.fusion.consensus import RandomGeometricTopology
 from pipeline.fusion.voting import (
+    chi2_ppf,
     distributed_ml,
     dynamic_voting,
     gate_threshold,
@@ -125,6 +126,14 @@ def test_gate_readings():
     assert gate_threshold(2, 0.95, "distance") == pytest.approx(5.991 ** 2, abs=1e-2)
     with pytest.raises(InputError, match="gate"):
         gate_threshold(2, 0.95, "mahalanobis")
+
+
+def test_chi2_ppf_is_scipy_stats_bit_for_bit():
+    from scipy.stats import chi2
+
+    for d in (1, 2, 3, 4, 6, 10):
+        for p in (1e-9, 0.01, 0.5, 0.9, 0.95, 0.99, 0.999, 1 - 1e-12):
+            assert chi2_ppf(p, d) == float(chi2.ppf(p, d)), (p, d)
 
 
 def test_bad_covariance_is_named():

@@ -1,0 +1,59 @@
+"""The OpenCV-only floor of the default run: what matching the same images costs without the
+pipeline around it.
+
+Reads the images of a folder (``cam00.png`` …) and their intrinsics ``K.txt`` (3x3, shared),
+extracts SIFT (at most 2000 features per image), and on every pair of cameras (the complete
+graph: formation d) matches by kNN (k = 2) with Lowe's ratio test (0.8) and fits an essential
+matrix with ``cv2.USAC_MAGSAC`` (1 px, confidence 0.999, 1000 iterations) — the calls of the
+default run's features and matching stages, and nothing else: no duplicate merging, no mutual
+check, no consistency, fusion, triangulation, evaluation or output. Prints one line of JSON
+with its wall time and its inlier count.
+
+Run by ``bench/run_formation.py`` in a subprocess of its own (imports count, as they do for
+the run it is compared with)::
+
+    python bench/opencv_floor.py IMAGE_DIR
+"""
+
+import time
+
+T0 = time.perf_counter()
+
+import json  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def main(folder: Path) -> dict:
+    paths = sorted(folder.glob("cam*.png"))
+    K = np.loadtxt(folder / "K.txt").reshape(3, 3)
+    f_mean = (K[0, 0] + K[1, 1]) / 2
+    sift = cv2.SIFT_create(nfeatures=2000)
+    feats = []
+    for p in paths:
+        kps, desc = sift.detectAndCompute(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), None)
+        xy = cv2.KeyPoint_convert(kps).reshape(-1, 1, 2).astype(np.float64)
+        feats.append((cv2.undistortPoints(xy, K, None), desc))
+    matcher = cv2.BFMatcher(cv2.NORM_L2)
+    inliers = 0
+    for i in range(len(feats)):
+        for j in range(i + 1, len(feats)):
+            (x_i, d_i), (x_j, d_j) = feats[i], feats[j]
+            good = [m[0] for m in matcher.knnMatch(d_i, d_j, k=2)
+                    if len(m) == 2 and m[0].distance < 0.8 * m[1].distance]
+            if len(good) < 8:
+                continue
+            a = x_i[[m.queryIdx for m in good]]
+            b = x_j[[m.trainIdx for m in good]]
+            E, mask = cv2.findEssentialMat(a, b, np.eye(3), cv2.USAC_MAGSAC, 0.999,
+                                           1.0 / f_mean, 1000)
+            inliers += int(mask.sum()) if mask is not None else 0
+    return {"images": len(paths), "edges": len(paths) * (len(paths) - 1) // 2,
+            "inliers": inliers, "wall_s": time.perf_counter() - T0}
+
+
+if __name__ == "__main__":
+    print(json.dumps(main(Path(sys.argv[1]))))

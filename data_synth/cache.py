@@ -1,0 +1,117 @@
+"""On-disk cache of rendered views, so that a formation is rendered once per machine.
+
+Rendering (scene textures, then every camera) is deterministic: the same seed, image size,
+number of robots and rendering code give the same pixels. The views of a formation do not
+depend on its communication graph (formations ``a``–``d`` with one seed share their images),
+so an entry holds the views of one ``(seed, size, robots)`` and the graph is rebuilt from its
+rule. The key also holds a digest of the ``data_synth`` source files and the NumPy and OpenCV
+versions, so that changed rendering code never reads old pixels.
+
+Where: ``$FORMATION_MATCH_CACHE`` if set, else ``$XDG_CACHE_HOME/formation-match``, else
+``~/.cache/formation-match``. ``FORMATION_MATCH_CACHE=off`` (or ``0``, ``no``, ``false``)
+turns the cache off. One uncompressed ``.npz`` per entry (~13 MB at 640x480 with 6 robots),
+written to a temporary file and renamed (concurrent runs never see half a file). An entry that
+cannot be read or does not hold what its name says is ignored and written again. Entries of
+older code versions are not removed: delete the folder to reclaim the space.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+__all__ = ["ENV", "cache_dir", "code_version", "load_views", "save_views", "entry_path"]
+
+ENV = "FORMATION_MATCH_CACHE"
+"""Environment variable: the cache folder, or ``off`` to disable the cache."""
+
+_OFF = {"off", "0", "no", "false", "none"}
+
+
+def cache_dir() -> Path | None:
+    """The cache folder, or ``None`` when the cache is turned off (see the module docstring)."""
+    value = os.environ.get(ENV)
+    if value is not None:
+        if value.strip().lower() in _OFF or not value.strip():
+            return None
+        return Path(value).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or ""
+    # XDG: a relative XDG_CACHE_HOME is invalid and is ignored
+    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".cache"
+    return root / "formation-match"
+
+
+@functools.cache
+def code_version() -> str:
+    """Digest of the ``data_synth`` sources and the NumPy and OpenCV versions, 16 hex digits."""
+    h = hashlib.blake2b(digest_size=8)
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    h.update(f"numpy {np.__version__} opencv {cv2.__version__}".encode())
+    return h.hexdigest()
+
+
+def _key(seed: int, size: tuple[int, int], n: int) -> str:
+    return f"views-seed{seed}-{size[0]}x{size[1]}-n{n}-{code_version()}"
+
+
+def entry_path(seed: int, size: tuple[int, int], n: int) -> Path | None:
+    """Where the views of ``(seed, size, n robots)`` are cached; ``None`` with the cache off."""
+    root = cache_dir()
+    return None if root is None else root / f"{_key(seed, size, n)}.npz"
+
+
+def load_views(seed: int, size: tuple[int, int], n: int) -> dict | None:
+    """The cached arrays of ``(seed, size, n)``, or ``None`` (cache off, no entry, bad entry).
+
+    Returns
+    -------
+    dict or None
+        ``image`` (n, H, W, 3) uint8 RGB and ``depth`` (n, H, W) float32 of every camera
+        (intrinsics and poses are cheap and always recomputed).
+    """
+    path = entry_path(seed, size, n)
+    if path is None or not path.is_file():
+        return None
+    W, H = size
+    shapes = {"image": ((n, H, W, 3), np.uint8), "depth": ((n, H, W), np.float32)}
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != _key(seed, size, n):
+                return None
+            out = {name: z[name] for name in shapes}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    for name, (shape, dtype) in shapes.items():
+        if out[name].shape != shape or out[name].dtype != dtype:
+            return None
+    return out
+
+
+def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
+    """Store the arrays of :func:`load_views` atomically; returns the entry, ``None`` if the
+    cache is off or the folder cannot be written (the cache is an optimisation: never fatal)."""
+    n = int(len(arrays["image"]))
+    path = entry_path(seed, size, n)
+    if path is None:
+        return None
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".tmp-", suffix=".npz",
+                                         delete=False) as f:
+            tmp = Path(f.name)
+            np.savez(f, key=np.array(_key(seed, size, n)), **arrays)
+        os.replace(tmp, path)
+    except OSError:
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        return None
+    return path

@@ -1,0 +1,28 @@
+"""Settings of the whole test session."""
+
+import os
+import shutil
+import tempfile
+
+from data_synth.cache import ENV
+
+_saved: dict = {}
+
+
+def pytest_configure(config):
+    """Rendered views are cached in a folder of this session, never in the user's cache.
+
+    Set before collection, so the doctests of ``data_synth`` and subprocesses (which inherit
+    the variable) use it too; removed with the session.
+    """
+    _saved["value"] = os.environ.get(ENV)
+    _saved["dir"] = tempfile.mkdtemp(prefix="formation-match-render-cache-")
+    os.environ[ENV] = _saved["dir"]
+
+
+def pytest_unconfigure(config):
+    if _saved.get("value") is None:
+        os.environ.pop(ENV, None)
+    else:
+        os.environ[ENV] = _saved["value"]
+    shutil.rmtree(_saved.get("dir", ""), ignore_errors=True)

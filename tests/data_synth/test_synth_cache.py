@@ -1,0 +1,123 @@
+"""The on-disk render cache: hits give the rendered views bit for bit and render nothing;
+bad entries are ignored and rewritten; it lives where the user's environment says."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import data_synth
+from data_synth import cache
+
+SIZE = (96, 72)
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch) -> Path:
+    d = tmp_path / "cache"
+    monkeypatch.setenv(cache.ENV, str(d))
+    return d
+
+
+def _fail(*args, **kwargs):
+    raise AssertionError("rendered although the views are cached")
+
+
+def _same_views(f, g):
+    assert f.name == g.name and f.graph == g.graph and f.seed == g.seed
+    np.testing.assert_array_equal(f.comm_edges, g.comm_edges)
+    np.testing.assert_array_equal(f.centres, g.centres)
+    for a, b in zip(f.views, g.views, strict=True):
+        assert a.name == b.name
+        for field in ("image", "depth", "K", "R", "t"):
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.dtype == y.dtype and x.shape == y.shape, field
+            assert x.tobytes() == y.tobytes(), field
+
+
+def test_hit_gives_the_rendered_views_without_rendering(cache_dir, monkeypatch):
+    fresh = data_synth.render("c", seed=2, size=SIZE, cache=False)
+    assert not cache_dir.exists()  # cache=False neither reads nor writes
+    first = data_synth.render("c", seed=2, size=SIZE)
+    assert list(cache_dir.glob("*.npz")) == [cache.entry_path(2, SIZE, 6)]
+    _same_views(fresh, first)
+
+    monkeypatch.setattr(data_synth, "render_view", _fail)
+    monkeypatch.setattr(data_synth, "build_scene", _fail)
+    _same_views(fresh, data_synth.render("c", seed=2, size=SIZE))
+    # another graph on the same robots shares the images: the same entry
+    d = data_synth.render("d", seed=2, size=SIZE)
+    assert d.name == "d" and len(d.comm_edges) == 15
+    np.testing.assert_array_equal(d.views[3].image, fresh.views[3].image)
+    assert len(list(cache_dir.glob("*.npz"))) == 1
+    # another size or number of robots is another entry
+    with pytest.raises(AssertionError, match="rendered although"):
+        data_synth.render("c", seed=2, size=(SIZE[0] + 2, SIZE[1]))
+    with pytest.raises(AssertionError, match="rendered although"):
+        data_synth.render("c", seed=2, size=SIZE, n_robots=5)
+
+
+def test_scene_is_built_on_demand(cache_dir):
+    f = data_synth.render("a", seed=1, size=SIZE)
+    assert "crate2.corner1" in f.scene.landmarks
+    assert f.scene is data_synth.build_scene(1)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "empty", "wrong-shape"])
+def test_bad_entry_is_ignored_and_rewritten(cache_dir, damage):
+    good = data_synth.render("a", seed=1, size=SIZE)
+    path = cache.entry_path(1, SIZE, 6)
+    data = path.read_bytes()
+    if damage == "garbage":
+        path.write_bytes(b"not a zip file at all" * 100)
+    elif damage == "truncated":
+        path.write_bytes(data[:len(data) // 2])
+    elif damage == "empty":
+        path.write_bytes(b"")
+    else:
+        arrays = cache.load_views(1, SIZE, 6)
+        arrays["depth"] = arrays["depth"][:, :-1]
+        np.savez(path, key=np.array(cache._key(1, SIZE, 6)), **arrays)
+    assert cache.load_views(1, SIZE, 6) is None
+    again = data_synth.render("a", seed=1, size=SIZE)
+    _same_views(good, again)
+    assert cache.load_views(1, SIZE, 6) is not None  # rewritten
+    assert not list(cache_dir.glob(".tmp-*"))
+
+
+def test_entry_of_other_code_is_not_read(cache_dir, monkeypatch):
+    data_synth.render("a", seed=1, size=SIZE)
+    old = cache.entry_path(1, SIZE, 6)
+    monkeypatch.setattr(cache, "code_version", lambda: "0123456789abcdef")
+    assert cache.entry_path(1, SIZE, 6) != old
+    assert cache.load_views(1, SIZE, 6) is None
+    old.rename(cache.entry_path(1, SIZE, 6))  # right name, wrong key inside
+    assert cache.load_views(1, SIZE, 6) is None
+
+
+@pytest.mark.parametrize("value", ["off", "0", "OFF", "false", ""])
+def test_cache_can_be_turned_off(tmp_path, monkeypatch, value):
+    monkeypatch.setenv(cache.ENV, value)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cache.cache_dir() is None
+    data_synth.render("a", seed=1, size=SIZE)
+    assert not list(tmp_path.rglob("*.npz"))
+
+
+def test_cache_folder_follows_xdg_then_home(tmp_path, monkeypatch):
+    monkeypatch.delenv(cache.ENV)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache.cache_dir() == tmp_path / "xdg" / "formation-match"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert cache.cache_dir() == tmp_path / "home" / ".cache" / "formation-match"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert cache.cache_dir() == tmp_path / "home" / ".cache" / "formation-match"
+
+
+def test_unwritable_cache_is_not_fatal(tmp_path, monkeypatch):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    monkeypatch.setenv(cache.ENV, str(blocker / "cache"))
+    f = data_synth.render("a", seed=1, size=SIZE)
+    assert len(f.views) == 6

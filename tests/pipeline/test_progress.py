@@ -1,0 +1,38 @@
+"""StageTimer: stage times, progress lines, freed memory handed back at the end of a stage."""
+
+import io
+
+import pipeline.progress as progress
+from pipeline.progress import StageTimer, release_free_memory
+
+
+def test_stage_times_add_up_and_lines_are_printed():
+    out = io.StringIO()
+    timer = StageTimer(stream=out)
+    for _ in range(2):
+        with timer.stage("features", "sift"):
+            timer.note("1000 features")
+    assert list(timer.timings) == ["features"] and timer.timings["features"] >= 0
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "[features] sift ..." and lines[1] == "    1000 features"
+    assert lines[2].startswith("[features] done in ")
+
+
+def test_each_stage_end_releases_free_memory(monkeypatch):
+    calls = []
+    monkeypatch.setattr(progress, "release_free_memory", lambda: calls.append(1))
+    timer = StageTimer(verbose=False)
+    with timer.stage("a"):
+        assert calls == []
+    with timer.stage("b"):
+        pass
+    assert len(calls) == 2
+    with StageTimer(verbose=False, release_memory=False).stage("c"):
+        pass
+    assert len(calls) == 2
+
+
+def test_release_free_memory_is_safe_to_call():
+    blocks = [bytearray(1 << 20) for _ in range(32)]
+    del blocks
+    assert release_free_memory() in (True, False)
