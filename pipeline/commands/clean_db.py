@@ -54,6 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "matches are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUT.db / --report if they exist (default: refuse)")
 
 
 def clean_database(database: str | Path, out: str | Path,
@@ -120,6 +122,11 @@ def clean_database(database: str | Path, out: str | Path,
 
 
 def run(args) -> int:
+    from pipeline.outputs import check_output_files
+
+    check_output_files([("--out", args.out), ("--report", args.report)],
+                       [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
+                       overwrite=args.overwrite)
     res = clean_database(args.database, args.out, args.comm_graph)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")

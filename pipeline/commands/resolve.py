@@ -31,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace --out / --report if they exist (default: refuse)")
     add_fault_arguments(p)
 
 
@@ -98,6 +100,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
 
 
 def run(args) -> int:
+    from pipeline.outputs import check_output_files
+
+    check_output_files([("--out", args.out), ("--report", args.report)],
+                       [("--links", args.links), ("--comm-graph", args.comm_graph)],
+                       overwrite=args.overwrite)
     s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")

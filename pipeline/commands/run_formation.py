@@ -46,6 +46,10 @@ def config_from_args(args) -> FormationConfig:
 def run(args) -> int:
     from pipeline.run import run_formation
 
-    out = run_formation(config_from_args(args))
+    from pipeline.runfolder import claim_run_folder
+
+    config = config_from_args(args)
+    with claim_run_folder(config.out_dir()):
+        out = run_formation(config)
     print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd)")
     return 0

@@ -50,10 +50,22 @@ def config_from_args(args) -> ImagesConfig:
                         threads=args.threads)
 
 
+def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
+    """``(flag, path)`` of what the run reads (a run folder may not hold them)."""
+    from pathlib import Path
+
+    return [("DIR", config.directory)] + [
+        (flag, v) for flag, v in (("--graph", config.graph), ("--intrinsics", config.intrinsics))
+        if Path(v).exists()]
+
+
 def run(args) -> int:
     from pipeline.images import run_images
+    from pipeline.runfolder import claim_run_folder
 
-    out = run_images(config_from_args(args))
+    config = config_from_args(args)
+    with claim_run_folder(config.out_dir(), inputs=_inputs(config)):
+        out = run_images(config)
     print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd"
           f"{', database.db' if args.export_db else ''})")
     return 0
