@@ -45,7 +45,6 @@ def config_from_args(args) -> FormationConfig:
 
 def run(args) -> int:
     from pipeline.run import run_formation
-
     from pipeline.runfolder import claim_run_folder
 
     config = config_from_args(args)
