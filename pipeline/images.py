@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links, View
@@ -206,6 +207,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         }
         if cleaning.fused_points is not None:
             report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+        flag_result(report, names)
         md = sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
 
         with timer.stage("write", str(out)):

@@ -27,8 +27,11 @@ import cv2
 import numpy as np
 from PIL import ExifTags, Image, UnidentifiedImageError
 
+from pipeline.csvfields import line_fields
 from pipeline.errors import InputError
+from pipeline.outputs import require_input_file
 from pipeline.types import View
+from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -235,6 +238,15 @@ def _rational(value) -> float | None:
     return v if np.isfinite(v) and v > 0 else None
 
 
+def _exif_int(value) -> int | None:
+    """An EXIF SHORT tag as int (2 when absent or 0); None when it is not a number (the tag
+    comes from the file and may hold anything, e.g. a string)."""
+    try:
+        return int(value or 2)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
 def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, str] | None:
     """Focal length in pixels from EXIF, at the stored ``width x height``, or ``None``.
 
@@ -262,7 +274,7 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
         return f35 * float(np.hypot(width, height)) / _FILM_DIAGONAL_MM, "exif-35mm"
     f_mm = _rational(tags.get(ExifTags.Base.FocalLength))
     xres = _rational(tags.get(ExifTags.Base.FocalPlaneXResolution))
-    unit_mm = _EXIF_UNIT_MM.get(int(tags.get(ExifTags.Base.FocalPlaneResolutionUnit, 2) or 2))
+    unit_mm = _EXIF_UNIT_MM.get(_exif_int(tags.get(ExifTags.Base.FocalPlaneResolutionUnit, 2)))
     if f_mm is None or xres is None or unit_mm is None:
         return None
     focal = f_mm * xres / unit_mm
@@ -280,8 +292,8 @@ def _guess_K(width: int, height: int) -> np.ndarray:
 
 def _exif_K(header: Image.Image, width: int, height: int) -> tuple[np.ndarray, str] | None:
     found = exif_focal_px(header, width, height)
-    if found is None:
-        return None
+    if found is None or not focal_px_ok(found[0], width, height):
+        return None  # no EXIF focal length, or one no lens has (a corrupt tag)
     f, source = found
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]]), source
 
@@ -364,6 +376,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
         if mode == "file":
             K, source, known = K_file, "K.txt", True
             cx, cy = K[0, 2], K[1, 2]
+            check_focal(K, w, h, str(k_path), path.name)
             if not (0 <= cx <= w and 0 <= cy <= h):
                 raise InputError(
                     f"{k_path}: principal point ({cx:g}, {cy:g}) lies outside image {path.name} "
@@ -471,7 +484,9 @@ def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
             raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. knn:4")
         return _knn_edges(n, min(int(k_text), n - 1))
     path = Path(kind_or_file)
-    if not path.is_file():
+    if path.exists():
+        require_input_file(path, "graph file")
+    else:
         raise InputError(
             f"graph {spec!r}: not one of {', '.join(GRAPH_KINDS)} and no such file; give a kind "
             f"or a file of 'cam_i,cam_j' lines (indices or image names)")
@@ -483,14 +498,13 @@ def _read_graph_file(path: Path, names: list[str]) -> np.ndarray:
     by_name = {name: k for k, name in enumerate(names)}
     edges = []
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (UnicodeDecodeError, OSError) as exc:
         raise InputError(f"graph file {str(path)!r} is not a text file ({exc})") from None
     for line_no, raw in enumerate(lines, start=1):
-        line = raw.split("#")[0].strip()
-        if not line:
+        tokens = line_fields(raw)
+        if not tokens:
             continue
-        tokens = [t.strip() for t in re.split(r"[,\t ]+", line) if t.strip()]
         if len(tokens) != 2:
             raise InputError(f"{path}, line {line_no}: {raw.strip()!r} must hold two cameras "
                              f"'cam_i,cam_j' (indices or image names)")

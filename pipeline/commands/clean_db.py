@@ -122,6 +122,7 @@ def clean_database(database: str | Path, out: str | Path,
 
 
 def run(args) -> int:
+    from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
 
     check_output_files([("--out", args.out), ("--report", args.report)],
@@ -137,8 +138,9 @@ def run(args) -> int:
           f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
           f"{cut['not-comm-edge']} outside the comm graph")
     print(f"cleaned database written to {res.output}")
+    summary = flag_result(res.summary())
     if args.report:
         from pipeline.runfolder import write_json_atomic
 
-        write_json_atomic(args.report, res.summary())
-    return 0
+        write_json_atomic(args.report, summary)
+    return exit_status(summary)

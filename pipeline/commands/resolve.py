@@ -100,12 +100,13 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
 
 
 def run(args) -> int:
+    from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
 
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args))
+    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args)))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -126,4 +127,4 @@ def run(args) -> int:
         from pipeline.runfolder import write_json_atomic
 
         write_json_atomic(args.report, s)
-    return 0
+    return exit_status(s)
