@@ -49,12 +49,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.linkscsv import (
-        features_per_camera_for,
-        read_comm_graph_csv,
-        read_links_csv,
-        write_links_csv,
-    )
+    from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
+    from pipeline.linkscsv import read_comm_graph_csv, read_links_csv, write_links_csv
     from pipeline.run import consistency_stage, ledger_from_consistency
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -68,8 +64,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if comm_graph_csv is not None:
         edges = read_comm_graph_csv(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
-    m = features_per_camera_for(links, n_cams)
-    n = m.size
+    # ids as given, or made compact when sparse (pipeline.compact): memory follows the links
+    ids = compact_ids(links, edges, n_cameras=n_cams)
+    n = int(ids.cameras.max(initial=-1)) + 1
     if edges is not None and len(links):
         off = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
         if off.any():
@@ -79,13 +76,17 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"({links.cam_j[k]},{links.feat_j[k]}) joins cameras {links.cam_i[k]} and "
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
-    before = count_conflicts(AssociationGraph(m, links)).as_dict()
-    res, fault_section = consistency_stage(m, edges, links, faults)
+    m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
+    before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
+    res, fault_section = consistency_stage(
+        m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
-    write_links_csv(out_csv, ledger_from_consistency(res))
+    ledger = ledger_from_consistency(res)
+    ledger.links = links  # the ids as given (the stage may have run on compact ones)
+    write_links_csv(out_csv, ledger)
     st = res.stats
     summary = {
-        "input": str(links_csv), "output": str(out_csv), "cameras": int(n),
+        "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
         "links": len(links), "deleted": int(res.deleted.sum()),
@@ -95,7 +96,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                                           "messages", "bytes", "max_robot_memory_bytes")},
     }
     if fault_section is not None:
-        summary["faults"] = fault_section
+        summary["faults"] = fault_section_in_ids(fault_section, ids)
     return summary
 
 
