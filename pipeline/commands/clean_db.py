@@ -81,6 +81,7 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.io import comm_graph
+    from pipeline.outputs import require_input_file
     from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
@@ -92,8 +93,7 @@ def clean_database(database: str | Path, out: str | Path,
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
-        if not Path(comm_graph_file).is_file():
-            raise InputError(f"--comm-graph {str(comm_graph_file)!r}: no such file")
+        require_input_file(comm_graph_file, "--comm-graph")
         edges = comm_graph(Path(comm_graph_file), contents.names)
         off_graph = ~np.isin(links.cam_i * n + links.cam_j, edges[:, 0] * n + edges[:, 1])
         reason[off_graph & (reason == "")] = "not-comm-edge"
