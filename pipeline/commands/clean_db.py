@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.errors import InputError
 
 __all__ = ["CleanDbResult", "clean_database", "add_arguments", "run"]
@@ -56,10 +57,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also save the summary as JSON")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUT.db / --report if they exist (default: refuse)")
+    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose distributed detection would need more memory "
+                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
 
 
 def clean_database(database: str | Path, out: str | Path,
-                   comm_graph_file: str | Path | None = None) -> CleanDbResult:
+                   comm_graph_file: str | Path | None = None,
+                   max_memory_gb: float = DEFAULT_LIMIT_GB) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     Parameters
@@ -80,6 +85,7 @@ def clean_database(database: str | Path, out: str | Path,
     """
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import check_detection_memory
     from pipeline.io import comm_graph
     from pipeline.outputs import require_input_file
     from pipeline.run import consistency_stage
@@ -102,6 +108,7 @@ def clean_database(database: str | Path, out: str | Path,
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
+    check_detection_memory(m, model_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(model_ok)
@@ -128,7 +135,7 @@ def run(args) -> int:
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    res = clean_database(args.database, args.out, args.comm_graph)
+    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "

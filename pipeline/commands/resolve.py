@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 
@@ -33,12 +34,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
     p.add_argument("--overwrite", action="store_true",
                    help="replace --out / --report if they exist (default: refuse)")
+    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose distributed detection would need more memory "
+                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
     add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
-                 faults: FaultConfig | None = None) -> dict:
+                 faults: FaultConfig | None = None,
+                 max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
     Raises
@@ -49,6 +54,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import check_detection_memory
     from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.linkscsv import read_comm_graph_csv, read_links_csv, write_links_csv
     from pipeline.run import consistency_stage, ledger_from_consistency
@@ -77,6 +83,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
+    check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     res, fault_section = consistency_stage(
         m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
@@ -107,7 +114,8 @@ def run(args) -> int:
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args)))
+    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
+                                  args.max_memory_gb))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "

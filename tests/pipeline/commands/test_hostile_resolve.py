@@ -191,6 +191,23 @@ def test_one_line_with_huge_ids_runs_in_small_memory(tmp_path, links, graph, fir
     assert rows[1].startswith(first_row)  # ids written back as given
 
 
+def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_path):
+    """90,000 random links among 10 cameras: one association set of ~40,000 features, whose
+    detection would need ~57 GB; refused at once under a 1.5 GB cap."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for i in range(10):
+        for j in range(i + 1, 10):
+            r, s = rng.permutation(4000)[:2000], rng.permutation(4000)[:2000]
+            rows += [f"{i},{a},{j},{b}\n" for a, b in zip(r, s, strict=True)]
+    src = tmp_path / "noisy.csv"
+    src.write_text("".join(rows))
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv"])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
+    assert not (tmp_path / "o.csv").exists()
+
+
 # ---------------------------------------------------------------------------- Ctrl-C
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys, monkeypatch):
