@@ -88,6 +88,7 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline.budget import check_detection_memory
     from pipeline.io import comm_graph
     from pipeline.outputs import require_input_file
+    from pipeline.progress import ticker
     from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
@@ -110,7 +111,8 @@ def clean_database(database: str | Path, out: str | Path,
     # the association graph the robots start from: one-to-one links on comm edges
     check_detection_memory(m, model_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links)
+    with ticker(f"consistency stage: {n} robots, {len(model_links)} links"):
+        result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

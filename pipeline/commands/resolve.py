@@ -57,6 +57,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.budget import check_detection_memory
     from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.linkscsv import read_comm_graph_csv, read_links_csv, write_links_csv
+    from pipeline.progress import ticker
     from pipeline.run import consistency_stage, ledger_from_consistency
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -85,8 +86,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
     check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
-    res, fault_section = consistency_stage(
-        m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
+    with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
+        res, fault_section = consistency_stage(
+            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)
