@@ -3,6 +3,10 @@
 Each command lives in ``pipeline/commands/<name>.py`` with ``add_arguments(parser)`` and
 ``run(args) -> int``. Only the module of the command being run is imported (its arguments are
 defined on demand), so ``python -m pipeline --help`` loads no OpenCV, SciPy, pycolmap or Rerun.
+
+Exit codes: 0 done; 2 bad input or a file that cannot be read or written (one line on stderr,
+nothing written); 3 the run finished but its result is not conflict-free (written, flagged in
+the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written).
 """
 
 from __future__ import annotations
@@ -85,9 +89,20 @@ def main(argv: list[str] | None = None) -> int:
     mod = importlib.import_module(f"pipeline.commands.{args._module}")
     try:
         return int(mod.run(args) or 0)
-    except (InputError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+    except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"error: {args.command} ran out of memory; try a smaller input", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"interrupted: {args.command} stopped, nothing was written or replaced",
+              file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -209,7 +209,8 @@ def _camera(path, line_no, column, tok, names, by_name) -> int:
 def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> np.ndarray:
     """Read a communication-graph file: one edge ``cam_i,cam_j`` per line.
 
-    Format: two cameras per line separated by a comma, tab or spaces; each a 0-based index,
+    Format: two cameras per line separated by a comma, tab or spaces (CSV double quotes for
+    names holding spaces, commas or ``#``, see :mod:`pipeline.csvfields`); each a 0-based index,
     or, when ``names`` is given, an image name (a token equal to an image name is that image,
     otherwise it must be an index). ``#`` starts a comment; blank lines and a first line
     ``cam_i,cam_j`` are skipped. A line repeating an edge (either orientation) is merged.
@@ -230,9 +231,11 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
         non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
         — naming the file and line.
     """
+    from pipeline.csvfields import line_fields
+    from pipeline.outputs import require_input_file
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"comm graph file {str(path)!r}: no such file")
+    require_input_file(path, "comm graph file")
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (UnicodeDecodeError, OSError) as exc:
@@ -241,10 +244,9 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
     edges = []
     header_allowed = True
     for line_no, raw in enumerate(lines, start=1):
-        line = raw.split("#")[0].strip()
-        if not line:
+        tokens = line_fields(raw)
+        if not tokens:
             continue
-        tokens = [t for t in re.split(r"[,\t ]+", line) if t]
         if header_allowed and [t.lower() for t in tokens] == ["cam_i", "cam_j"]:
             header_allowed = False
             continue

@@ -150,10 +150,9 @@ def add_fault_arguments(parser: argparse.ArgumentParser) -> None:
 
 def faults_from_args(args) -> FaultConfig:
     """The :class:`FaultConfig` of parsed arguments; InputError on a bad value."""
-    try:
-        seed = int(args.fault_seed)
-    except ValueError:
-        raise InputError(f"--fault-seed {args.fault_seed!r}: not an integer") from None
+    from pipeline.validate import seed as checked_seed
+
+    seed = checked_seed(args.fault_seed, "--fault-seed")
     return FaultConfig(drop_prob=_probability(args.drop_prob),
                        crash=tuple(parse_crash(c) for c in args.crash),
                        switching_topology=bool(args.switching_topology), seed=seed)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links, View
@@ -217,6 +218,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             with timer.stage("evaluate", "ground truth from the homographies"):
                 fill_report(report, config.directory, views, feats, comm_edges, ledger,
                             config.truth_tol_px)
+        flag_result(report, names)
         md = sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
 
         with timer.stage("write", str(out)):

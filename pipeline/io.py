@@ -29,6 +29,7 @@ from PIL import ExifTags, Image, UnidentifiedImageError
 
 from pipeline.errors import InputError
 from pipeline.types import View
+from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -231,6 +232,15 @@ def _rational(value) -> float | None:
     return v if np.isfinite(v) and v > 0 else None
 
 
+def _exif_int(value) -> int | None:
+    """An EXIF SHORT tag as int (2 when absent or 0); None when it is not a number (the tag
+    comes from the file and may hold anything, e.g. a string)."""
+    try:
+        return int(value or 2)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
 def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, str] | None:
     """Focal length in pixels from EXIF, at the stored ``width x height``, or ``None``.
 
@@ -258,7 +268,7 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
         return f35 * float(np.hypot(width, height)) / _FILM_DIAGONAL_MM, "exif-35mm"
     f_mm = _rational(tags.get(ExifTags.Base.FocalLength))
     xres = _rational(tags.get(ExifTags.Base.FocalPlaneXResolution))
-    unit_mm = _EXIF_UNIT_MM.get(int(tags.get(ExifTags.Base.FocalPlaneResolutionUnit, 2) or 2))
+    unit_mm = _EXIF_UNIT_MM.get(_exif_int(tags.get(ExifTags.Base.FocalPlaneResolutionUnit, 2)))
     if f_mm is None or xres is None or unit_mm is None:
         return None
     focal = f_mm * xres / unit_mm
@@ -276,8 +286,8 @@ def _guess_K(width: int, height: int) -> np.ndarray:
 
 def _exif_K(header: Image.Image, width: int, height: int) -> tuple[np.ndarray, str] | None:
     found = exif_focal_px(header, width, height)
-    if found is None:
-        return None
+    if found is None or not focal_px_ok(found[0], width, height):
+        return None  # no EXIF focal length, or one no lens has (a corrupt tag)
     f, source = found
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]]), source
 
@@ -360,6 +370,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
         if mode == "file":
             K, source, known = K_file, "K.txt", True
             cx, cy = K[0, 2], K[1, 2]
+            check_focal(K, w, h, str(k_path), path.name)
             if not (0 <= cx <= w and 0 <= cy <= h):
                 raise InputError(
                     f"{k_path}: principal point ({cx:g}, {cy:g}) lies outside image {path.name} "

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.outputs import require_input_file
 from pipeline.runfolder import atomic_file
 from pipeline.types import LinkLedger, Links
 
@@ -59,8 +60,7 @@ class LinksFile:
 
 def _rows(path: Path):
     """Yield ``(line number, fields, raw text)`` of the data rows and the header flag."""
-    if not path.is_file():
-        raise InputError(f"links file {str(path)!r}: no such file")
+    require_input_file(path, "links file")
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:

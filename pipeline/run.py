@@ -21,6 +21,7 @@ import numpy as np
 
 from pipeline.association import AssociationGraph
 from pipeline.faults import FaultConfig
+from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import LinkLedger, Links, RunRecord, View
@@ -318,6 +319,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
             views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
             gt_points))
 
+    flag_result(report, [v.name for v in views])
     md = sections.report_markdown(report)
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:

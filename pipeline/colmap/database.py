@@ -23,6 +23,7 @@ import numpy as np
 import pycolmap
 
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
+from pipeline.dbcheck import check_database_tables
 from pipeline.errors import InputError
 from pipeline.types import Features, Links, View
 
@@ -277,6 +278,7 @@ def read_database(path: str | Path) -> DatabaseContents:
     with tempfile.TemporaryDirectory(prefix="colmap-read-") as tmp:
         copy = Path(tmp) / "read.db"
         shutil.copyfile(path, copy)
+        check_database_tables(copy, shown=path)
         try:
             with quiet_colmap(), pycolmap.Database.open(copy) as db:
                 images = db.read_all_images()

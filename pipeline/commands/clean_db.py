@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.errors import InputError
 
 __all__ = ["CleanDbResult", "clean_database", "add_arguments", "run"]
@@ -54,10 +55,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "matches are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUT.db / --report if they exist (default: refuse)")
+    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose distributed detection would need more memory "
+                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
 
 
 def clean_database(database: str | Path, out: str | Path,
-                   comm_graph_file: str | Path | None = None) -> CleanDbResult:
+                   comm_graph_file: str | Path | None = None,
+                   max_memory_gb: float = DEFAULT_LIMIT_GB) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     Parameters
@@ -78,7 +85,10 @@ def clean_database(database: str | Path, out: str | Path,
     """
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.outputs import require_input_file
+    from pipeline.progress import ticker
     from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
@@ -90,6 +100,7 @@ def clean_database(database: str | Path, out: str | Path,
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
+        require_input_file(comm_graph_file, "--comm-graph")
         edges = read_comm_graph(comm_graph_file, contents.names)
         off_graph = links_off_graph(links, edges, n)
         reason[off_graph & (reason == "")] = "not-comm-edge"
@@ -98,8 +109,10 @@ def clean_database(database: str | Path, out: str | Path,
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
+    check_detection_memory(m, model_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links)
+    with ticker(f"consistency stage: {n} robots, {len(model_links)} links"):
+        result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
@@ -118,7 +131,13 @@ def clean_database(database: str | Path, out: str | Path,
 
 
 def run(args) -> int:
-    res = clean_database(args.database, args.out, args.comm_graph)
+    from pipeline.outcome import exit_status, flag_result
+    from pipeline.outputs import check_output_files
+
+    check_output_files([("--out", args.out), ("--report", args.report)],
+                       [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
+                       overwrite=args.overwrite)
+    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -128,8 +147,9 @@ def run(args) -> int:
           f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
           f"{cut['not-comm-edge']} outside the comm graph")
     print(f"cleaned database written to {res.output}")
+    summary = flag_result(res.summary())
     if args.report:
         from pipeline.runfolder import write_json_atomic
 
-        write_json_atomic(args.report, res.summary())
-    return 0
+        write_json_atomic(args.report, summary)
+    return exit_status(summary)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
     add_scene_options,
@@ -123,6 +124,8 @@ def run(args) -> int:
         raise InputError(f"--formation {args.formation!r}: choose one of a, b, c, d or all")
     method, max_features = feature_options(args)
     size = parse_size(args.size)
+    args.tol_px = validate.tolerance_px(args.tol_px)
+    args.seed = validate.seed(args.seed, "--seed")
     timer = StageTimer()
     results = [match_formation(n, seed=args.seed, size=size, features=method,
                                max_features=max_features, ratio=args.ratio,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.errors import InputError
+from pipeline.validate import render_size
 
 __all__ = ["MIN_FEATURES", "add_feature_options", "add_scene_options", "feature_options",
            "parse_size"]
@@ -66,6 +67,4 @@ def parse_size(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
-    if w < 64 or h < 48:
-        raise InputError(f"--size {text!r}: at least 64x48 pixels are needed")
-    return w, h
+    return render_size(w, h, text)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 
@@ -31,12 +32,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace --out / --report if they exist (default: refuse)")
+    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose distributed detection would need more memory "
+                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
     add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
-                 faults: FaultConfig | None = None) -> dict:
+                 faults: FaultConfig | None = None,
+                 max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
     Raises
@@ -47,8 +54,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.linkscsv import features_per_camera_for, read_links_csv, write_links_csv
+    from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
+    from pipeline.linkscsv import read_links_csv, write_links_csv
+    from pipeline.progress import ticker
     from pipeline.run import consistency_stage, ledger_from_consistency
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -62,9 +72,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if comm_graph_csv is not None:
         edges = read_comm_graph(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
-    m = features_per_camera_for(links, n_cams)
-    n = m.size
-    if edges is not None:
+    # ids as given, or made compact when sparse (pipeline.compact): memory follows the links
+    ids = compact_ids(links, edges, n_cameras=n_cams)
+    n = int(ids.cameras.max(initial=-1)) + 1
+    if edges is not None and len(links):
         off = links_off_graph(links, edges, n)
         if off.any():
             k = int(np.flatnonzero(off)[0])
@@ -73,13 +84,19 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"({links.cam_j[k]},{links.feat_j[k]}) joins cameras {links.cam_i[k]} and "
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
-    before = count_conflicts(AssociationGraph(m, links)).as_dict()
-    res, fault_section = consistency_stage(m, edges, links, faults)
+    m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
+    check_detection_memory(m, run_links, max_memory_gb)
+    before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
+    with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
+        res, fault_section = consistency_stage(
+            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
-    write_links_csv(out_csv, ledger_from_consistency(res))
+    ledger = ledger_from_consistency(res)
+    ledger.links = links  # the ids as given (the stage may have run on compact ones)
+    write_links_csv(out_csv, ledger)
     st = res.stats
     summary = {
-        "input": str(links_csv), "output": str(out_csv), "cameras": int(n),
+        "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
         "links": len(links), "deleted": int(res.deleted.sum()),
@@ -89,12 +106,19 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                                           "messages", "bytes", "max_robot_memory_bytes")},
     }
     if fault_section is not None:
-        summary["faults"] = fault_section
+        summary["faults"] = fault_section_in_ids(fault_section, ids)
     return summary
 
 
 def run(args) -> int:
-    s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args))
+    from pipeline.outcome import exit_status, flag_result
+    from pipeline.outputs import check_output_files
+
+    check_output_files([("--out", args.out), ("--report", args.report)],
+                       [("--links", args.links), ("--comm-graph", args.comm_graph)],
+                       overwrite=args.overwrite)
+    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
+                                  args.max_memory_gb))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -115,4 +139,4 @@ def run(args) -> int:
         from pipeline.runfolder import write_json_atomic
 
         write_json_atomic(args.report, s)
-    return 0
+    return exit_status(s)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 
+from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
     add_scene_options,
@@ -36,16 +38,22 @@ def config_from_args(args) -> FormationConfig:
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
     method, max_features = feature_options(args)
-    return FormationConfig(formation=args.formation, seed=args.seed, size=parse_size(args.size),
+    return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
+                           size=parse_size(args.size),
                            features=method, max_features=max_features,
-                           robots=args.robots, graph=args.graph, tol_px=args.tol_px,
+                           robots=args.robots, graph=args.graph,
+                           tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
                            faults=faults_from_args(args))
 
 
 def run(args) -> int:
+    from pipeline.outcome import exit_status
     from pipeline.run import run_formation
+    from pipeline.runfolder import claim_run_folder
 
-    out = run_formation(config_from_args(args))
+    config = config_from_args(args)
+    with claim_run_folder(config.out_dir()):
+        out = run_formation(config)
     print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd)")
-    return 0
+    return exit_status(json.loads((out / "report.json").read_text()))

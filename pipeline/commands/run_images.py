@@ -6,10 +6,14 @@ The options of the run; the run itself is :func:`pipeline.images.run_images`.
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
+from pipeline import validate
 from pipeline.commands.options import add_feature_options, feature_options
 from pipeline.errors import InputError
 from pipeline.images import ImagesConfig
+from pipeline.outcome import exit_status
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -55,14 +59,24 @@ def config_from_args(args) -> ImagesConfig:
                         max_size=args.max_size or None, features=method,
                         max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
-                        threads=args.threads, truth=args.truth,
+                        threads=validate.threads(args.threads), truth=args.truth,
                         truth_tol_px=args.truth_tol)
+
+
+def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
+    """``(flag, path)`` of what the run reads (a run folder may not hold them)."""
+    return [("DIR", config.directory)] + [
+        (flag, v) for flag, v in (("--graph", config.graph), ("--intrinsics", config.intrinsics))
+        if Path(v).exists()]
 
 
 def run(args) -> int:
     from pipeline.images import run_images
+    from pipeline.runfolder import claim_run_folder
 
-    out = run_images(config_from_args(args))
+    config = config_from_args(args)
+    with claim_run_folder(config.out_dir(), inputs=_inputs(config)):
+        out = run_images(config)
     print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd"
           f"{', database.db' if args.export_db else ''})")
-    return 0
+    return exit_status(json.loads((out / "report.json").read_text()))

@@ -1,9 +1,11 @@
-"""StageTimer: stage times, progress lines, freed memory handed back at the end of a stage."""
+"""StageTimer (stage times, progress lines, freed memory handed back at the end of a stage) and
+the elapsed-time ticker of long stages."""
 
 import io
+import time
 
 import pipeline.progress as progress
-from pipeline.progress import StageTimer, release_free_memory
+from pipeline.progress import StageTimer, release_free_memory, ticker
 
 
 def test_stage_times_add_up_and_lines_are_printed():
@@ -36,3 +38,27 @@ def test_release_free_memory_is_safe_to_call():
     blocks = [bytearray(1 << 20) for _ in range(32)]
     del blocks
     assert release_free_memory() in (True, False)
+
+
+def _terminal():
+    f = io.StringIO()
+    f.isatty = lambda: True
+    return f
+
+
+def test_ticker_shows_elapsed_time_on_a_terminal_after_its_delay():
+    f = _terminal()
+    with ticker("consistency stage", delay=0.1, stream=f):
+        time.sleep(1.3)
+    assert "consistency stage: 00:01" in f.getvalue()
+
+
+def test_ticker_is_silent_for_short_stages_and_off_a_terminal():
+    f = _terminal()
+    with ticker("quick", delay=5, stream=f):
+        pass
+    assert f.getvalue() == ""
+    g = io.StringIO()
+    with ticker("long", delay=0.1, stream=g):
+        time.sleep(0.5)
+    assert g.getvalue() == ""

@@ -1,0 +1,96 @@
+"""Is a finished run what the user asked for? Checks of the final result, for every command.
+
+The consistency stage promises a conflict-free association (Aragüés et al., Prop. 4.5). Under
+injected faults (crashed robots, heavy message loss) the stage can end without keeping that
+promise, or keep it only by cutting everything; a run must then not look like a success.
+:func:`flag_result` checks a finished report centrally (the counts of
+:func:`pipeline.association.count_conflicts` on the final links, already in the report's
+``after`` section) and adds to it, only when something is wrong:
+
+- ``conflict_free: false`` — conflictive sets remain in the written result;
+- ``warnings`` — a list of ``{"code", "message"}``: ``not-conflict-free``,
+  ``all-links-cut`` (every input link was cut), ``robots-lost-without-crash`` (robots were
+  declared lost from silence although they never crashed: the message loss defeated the
+  timeouts), ``no-features`` (images where no feature was found, named).
+
+:func:`exit_status` prints them on stderr and gives the exit code. The rule: ``3`` when the
+result is not conflict-free (it is still written, and flagged), else ``0``; warnings alone do
+not change the exit code. A clean run's report is left byte-identical.
+"""
+
+from __future__ import annotations
+
+import sys
+
+__all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "exit_status"]
+
+#: Exit code of a run whose written result still holds conflictive sets.
+EXIT_NOT_CONFLICT_FREE = 3
+
+
+def _warning(code: str, message: str) -> dict:
+    return {"code": code, "message": message}
+
+
+def flag_result(report: dict, names: list[str] | None = None) -> dict:
+    """Add ``conflict_free: false`` and ``warnings`` to ``report`` (in place) where due.
+
+    Parameters
+    ----------
+    report : a command's summary / ``report.json`` dict with ``after`` (conflict counts of the
+        final links) and, where present, ``links`` or ``before.links`` (input links),
+        ``faults`` (:func:`pipeline.faults.fault_report`), ``features_per_camera``
+    names : image names in camera order (for ``no-features``); default ``camera K``
+
+    Returns
+    -------
+    report (the same dict)
+    """
+    warnings = []
+    after = report.get("after") or {}
+    faults = report.get("faults") or {}
+    left = int(after.get("conflictive_sets") or 0)
+    if left:
+        report["conflict_free"] = False
+        crashed = sorted(faults.get("crashed", {}), key=int)
+        why = f" (robot(s) {', '.join(crashed)} crashed before it ended)" if crashed else ""
+        warnings.append(_warning(
+            "not-conflict-free",
+            f"the result is not conflict-free: {left} conflictive set(s) with "
+            f"{after.get('conflictive_features')} feature(s) remain after the consistency "
+            f"stage{why}; do not use it as a clean association"))
+    total = report.get("links")
+    if not isinstance(total, int):
+        total = (report.get("before") or {}).get("links")
+    kept = after.get("links")
+    if total and kept == 0:
+        warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
+                                                  "cut; the result holds no association"))
+    false_lost = sorted(set(faults.get("robots_lost", {})) - set(faults.get("crashed", {})),
+                        key=int)
+    if false_lost:
+        warnings.append(_warning(
+            "robots-lost-without-crash",
+            f"robot(s) {', '.join(false_lost)} were declared lost by their neighbours although "
+            f"they never crashed ({faults.get('messages_dropped')} messages dropped); "
+            f"{faults.get('links_cut_robot_lost')} link(s) were cut as robot-lost"))
+    m = report.get("features_per_camera")
+    if m is not None:
+        empty = [k for k, v in enumerate(m) if int(v) == 0]
+        if empty:
+            shown = [names[k] if names else f"camera {k}" for k in empty]
+            warnings.append(_warning(
+                "no-features", f"no features found in {len(empty)} image(s): "
+                f"{', '.join(shown)} (blank, too small or too narrow); they take no part"))
+    if warnings:
+        report["warnings"] = warnings
+    return report
+
+
+def exit_status(report: dict, stream=None) -> int:
+    """Print the report's warnings on ``stream`` (stderr); the exit code (module rule)."""
+    stream = stream if stream is not None else sys.stderr
+    for w in report.get("warnings", []):
+        kind = "error" if w["code"] == "not-conflict-free" else "warning"
+        print(f"{kind}: {w['message']}", file=stream)
+    return EXIT_NOT_CONFLICT_FREE if report.get("conflict_free") is False else 0

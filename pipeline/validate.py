@@ -1,0 +1,90 @@
+"""Checks of numbers a user gives on the command line or in a file, before any work is done.
+
+Each check returns the value (converted) or raises :class:`~pipeline.errors.InputError`
+naming the flag, the value and the accepted range. The stated limits:
+
+- ``--tol-px``: a finite number of pixels > 0.
+- ``--threads``: ``-1`` (all cores) or ``1 .. MAX_THREADS``.
+- a seed (``--fault-seed``, ``--seed``): an integer in ``0 .. 2**63 - 1`` (numpy's seeding
+  takes non-negative integers).
+- ``--size WxH`` of a rendered formation: each side ``64x48`` at least and at most
+  :data:`MAX_RENDER_SIDE`, at most :data:`MAX_RENDER_PIXELS` pixels (the renderer holds
+  several full-size float arrays per camera: ~100 bytes a pixel over all of them).
+- a focal length in pixels: finite and within ``FOCAL_RANGE`` times the image's longest
+  side (outside it the field of view is either wider than a fisheye's or under 0.06°; such
+  a K is a typo or a corrupt file).
+"""
+
+from __future__ import annotations
+
+import math
+
+from pipeline.errors import InputError
+
+__all__ = ["MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "FOCAL_RANGE", "tolerance_px",
+           "threads", "seed", "render_size", "focal_px_ok", "check_focal"]
+
+MAX_THREADS = 1024
+MAX_RENDER_SIDE = 8192
+MAX_RENDER_PIXELS = 4096 * 4096
+#: focal length / longest image side must lie in this range
+FOCAL_RANGE = (0.05, 1000.0)
+
+
+def tolerance_px(value, flag: str = "--tol-px") -> float:
+    """A positive finite tolerance in pixels."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{flag} {value!r}: not a number; give a tolerance in pixels, e.g. 2") \
+            from None
+    if not math.isfinite(v) or v <= 0:
+        raise InputError(f"{flag} {value!r}: must be a finite number of pixels > 0, e.g. 2")
+    return v
+
+
+def threads(value, flag: str = "--threads") -> int:
+    """``-1`` (all cores) or ``1 .. MAX_THREADS``."""
+    v = int(value)
+    if v != -1 and not 1 <= v <= MAX_THREADS:
+        raise InputError(f"{flag} {value}: give -1 (all cores) or a count from 1 to "
+                         f"{MAX_THREADS}")
+    return v
+
+
+def seed(value, flag: str) -> int:
+    """A non-negative integer seed below ``2**63``."""
+    try:
+        v = int(str(value).strip())
+    except ValueError:
+        raise InputError(f"{flag} {value!r}: not an integer; give a seed >= 0, e.g. 0") from None
+    if not 0 <= v < 2**63:
+        raise InputError(f"{flag} {value}: a seed must be an integer from 0 to 2**63 - 1")
+    return v
+
+
+def render_size(w: int, h: int, text: str, flag: str = "--size") -> tuple[int, int]:
+    """Check a rendered image size against the stated limits; ``(w, h)``."""
+    if w < 64 or h < 48:
+        raise InputError(f"{flag} {text!r}: at least 64x48 pixels are needed")
+    if w > MAX_RENDER_SIDE or h > MAX_RENDER_SIDE or w * h > MAX_RENDER_PIXELS:
+        raise InputError(f"{flag} {text!r}: too large; each side at most {MAX_RENDER_SIDE} and "
+                         f"at most {MAX_RENDER_PIXELS} pixels in all (e.g. 4096x4096)")
+    return w, h
+
+
+def focal_px_ok(f: float, width: int, height: int) -> bool:
+    """Whether a focal length of ``f`` pixels is plausible for a ``width x height`` image."""
+    side = max(int(width), int(height), 1)
+    return math.isfinite(f) and FOCAL_RANGE[0] * side <= f <= FOCAL_RANGE[1] * side
+
+
+def check_focal(K, width: int, height: int, source: str, image: str) -> None:
+    """InputError if ``fx`` or ``fy`` of ``K`` is implausible for ``image`` (``source`` named)."""
+    for name, f in (("fx", float(K[0][0])), ("fy", float(K[1][1]))):
+        if not focal_px_ok(f, width, height):
+            side = max(width, height)
+            raise InputError(
+                f"{source}: {name} = {f:g} px is not a usable focal length for {image} "
+                f"({width}x{height}); expected {FOCAL_RANGE[0]:g} to {FOCAL_RANGE[1]:g} times "
+                f"the longest side ({FOCAL_RANGE[0] * side:g} to {FOCAL_RANGE[1] * side:g} px)")

@@ -1,0 +1,24 @@
+"""Helpers of the hostile-input tests: run the CLI in a subprocess under a memory cap."""
+
+import resource
+import subprocess
+import sys
+
+#: address-space cap of a subprocess run (bytes): a case that needs more fails
+MEMORY_CAP = 1536 * 1024 * 1024
+
+
+def _cap():
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+
+
+def run_capped(args, cwd=None, timeout=120):
+    """``python -m pipeline ARGS`` with at most :data:`MEMORY_CAP` of address space."""
+    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout, preexec_fn=_cap)
+
+
+def tree(path):
+    """``{relative path: bytes}`` of every file under ``path`` (to prove nothing changed)."""
+    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*"))
+            if p.is_file()}

@@ -1,0 +1,224 @@
+"""resolve, as a hostile user would run it: every case ends in one line on stderr and the
+documented exit code, with nothing of the user's touched."""
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).parents[1] / "consistency"))
+from consistency_graphs import random_instance  # noqa: E402
+from hostile import run_capped  # noqa: E402
+
+FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
+
+
+@pytest.fixture
+def fig1(tmp_path):
+    src = tmp_path / "in.csv"
+    src.write_text(FIG1)
+    return src
+
+
+def _one_line_error(capsys, *needles):
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+    return lines[0]
+
+
+# ------------------------------------------------------------------------------ data loss
+
+def test_report_onto_the_input_is_refused(fig1, tmp_path, capsys):
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(fig1)]) == 2
+    _one_line_error(capsys, "--report", "input file given as --links")
+    assert fig1.read_text() == FIG1 and not (tmp_path / "o.csv").exists()
+
+
+def test_out_onto_the_comm_graph_is_refused(fig1, tmp_path, capsys):
+    graph = tmp_path / "g.csv"
+    graph.write_text("0,1\n1,2\n2,3\n0,3\n")
+    assert main(["resolve", "--links", str(fig1), "--comm-graph", str(graph),
+                 "--out", str(graph), "--overwrite"]) == 2
+    _one_line_error(capsys, "--comm-graph")
+    assert graph.read_text() == "0,1\n1,2\n2,3\n0,3\n"
+
+
+def test_out_through_a_symlink_to_the_input_is_refused(fig1, tmp_path, capsys):
+    (tmp_path / "alias.csv").symlink_to(fig1)
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "alias.csv"),
+                 "--overwrite"]) == 2
+    _one_line_error(capsys, "symbolic link")
+    assert fig1.read_text() == FIG1 and (tmp_path / "alias.csv").is_symlink()
+
+
+@pytest.mark.parametrize("special", ["fifo", "/dev/null"])
+def test_special_files_are_never_replaced(fig1, tmp_path, capsys, special):
+    target = tmp_path / "fifo" if special == "fifo" else Path(special)
+    if special == "fifo":
+        os.mkfifo(target)
+    assert main(["resolve", "--links", str(fig1), "--out", str(target), "--overwrite"]) == 2
+    _one_line_error(capsys, "not a regular file")
+    assert not target.is_file()
+
+
+def test_existing_output_needs_overwrite(fig1, tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    out.write_text("keep me")
+    assert main(["resolve", "--links", str(fig1), "--out", str(out)]) == 2
+    _one_line_error(capsys, "already exists; pass --overwrite")
+    assert out.read_text() == "keep me"
+    assert main(["resolve", "--links", str(fig1), "--out", str(out), "--overwrite"]) == 0
+    assert out.read_text().startswith("cam_i,feat_i,cam_j,feat_j,status")
+
+
+def test_out_naming_a_folder_is_refused(fig1, tmp_path, capsys):
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path)]) == 2
+    _one_line_error(capsys, "is a folder")
+
+
+def test_read_only_location_is_a_one_line_error(fig1, tmp_path, capsys, monkeypatch):
+    from pipeline import outputs
+
+    monkeypatch.setattr(outputs.os, "access", lambda p, mode: False)
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "ro" / "o.csv")]) == 2
+    _one_line_error(capsys, "cannot write in")
+
+
+def test_links_naming_a_folder_says_it_is_a_folder(tmp_path, capsys):
+    assert main(["resolve", "--links", str(tmp_path), "--out", str(tmp_path / "o.csv")]) == 2
+    _one_line_error(capsys, "is a folder, not a file")
+
+
+# ------------------------------------------------------------------ meaningless values
+
+@pytest.mark.parametrize("flag,value,message", [
+    ("--fault-seed", "-5", "--fault-seed -5"),
+    ("--fault-seed", "x", "not an integer"),
+    ("--drop-prob", "1", "--drop-prob"),
+    ("--drop-prob", "nan", "--drop-prob"),
+])
+def test_bad_fault_values(fig1, tmp_path, capsys, flag, value, message):
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                 flag, value]) == 2
+    _one_line_error(capsys, message)
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_crash_of_a_robot_that_does_not_exist(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    src.write_text("0,0,2147483646,0\n")  # compact ids: robots are cameras 0 and 2147483646
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--crash", "5@1"]) == 2
+    _one_line_error(capsys, "robot 5 does not exist")
+
+
+# ------------------------------------------------------------- wrong results as success
+
+def _write_links(path, links):
+    path.write_text("".join(f"{a},{b},{c},{d}\n" for a, b, c, d in zip(
+        links.cam_i, links.feat_i, links.cam_j, links.feat_j, strict=True)))
+
+
+def test_result_left_with_conflicts_exits_3_and_is_flagged(tmp_path, capsys):
+    _, _, links = random_instance(np.random.default_rng(0), 6, 6, 1.0, 0.8)
+    src, out, rep = tmp_path / "in.csv", tmp_path / "o.csv", tmp_path / "r.json"
+    _write_links(src, links)
+    crashes = [a for k in range(1, 6) for a in ("--crash", f"{k}@{k}")]
+    code = main(["resolve", "--links", str(src), "--out", str(out), "--report", str(rep),
+                 *crashes])
+    report = json.loads(rep.read_text())
+    assert report["after"]["conflictive_sets"] > 0  # the case this test is about
+    assert code == 3
+    assert report["conflict_free"] is False
+    assert [w["code"] for w in report["warnings"]][0] == "not-conflict-free"
+    err = capsys.readouterr().err
+    assert "error: the result is not conflict-free" in err and "Traceback" not in err
+    assert out.is_file()  # written, and flagged
+
+
+def test_every_link_cut_as_robot_lost_is_said(tmp_path, capsys):
+    _, _, links = random_instance(np.random.default_rng(0), 6, 6, 1.0, 0.8)
+    src, rep = tmp_path / "in.csv", tmp_path / "r.json"
+    _write_links(src, links)
+    code = main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(rep), "--drop-prob", "0.99"])
+    report = json.loads(rep.read_text())
+    assert report["faults"]["links_cut_robot_lost"] == len(links)  # the case of this test
+    assert code == 0  # conflict-free (nothing is left), but not silently
+    codes = [w["code"] for w in report["warnings"]]
+    assert "all-links-cut" in codes and "robots-lost-without-crash" in codes
+    err = capsys.readouterr().err
+    assert "warning: every one of the" in err and "never crashed" in err
+
+
+def test_a_clean_run_has_no_flags(fig1, tmp_path):
+    rep = tmp_path / "r.json"
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(rep)]) == 0
+    report = json.loads(rep.read_text())
+    assert "warnings" not in report and "conflict_free" not in report
+
+
+# ----------------------------------------------------- memory follows the links, not the ids
+
+@pytest.mark.parametrize("links,graph,first_row", [
+    ("2147483646,0,0,0\n", None, "0,0,2147483646,0,kept"),
+    ("0,100000000,1,0\n", None, "0,100000000,1,0,kept"),
+    ("0,0,1,0\n1,1,2,1\n", "0,1\n1,2\n0,99999\n", "0,0,1,0,kept"),
+])
+def test_one_line_with_huge_ids_runs_in_small_memory(tmp_path, links, graph, first_row):
+    src, out = tmp_path / "in.csv", tmp_path / "o.csv"
+    src.write_text(links)
+    args = ["resolve", "--links", src, "--out", out]
+    if graph:
+        (tmp_path / "g.csv").write_text(graph)
+        args += ["--comm-graph", tmp_path / "g.csv"]
+    proc = run_capped(args)  # under a 1.5 GB address-space cap
+    assert proc.returncode == 0, proc.stderr
+    rows = out.read_text().splitlines()
+    assert len(rows) == 1 + links.count("\n")
+    assert rows[1].startswith(first_row)  # ids written back as given
+
+
+def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_path):
+    """90,000 random links among 10 cameras: one association set of ~40,000 features, whose
+    detection would need ~57 GB; refused at once under a 1.5 GB cap."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for i in range(10):
+        for j in range(i + 1, 10):
+            r, s = rng.permutation(4000)[:2000], rng.permutation(4000)[:2000]
+            rows += [f"{i},{a},{j},{b}\n" for a, b in zip(r, s, strict=True)]
+    src = tmp_path / "noisy.csv"
+    src.write_text("".join(rows))
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv"])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
+    assert not (tmp_path / "o.csv").exists()
+
+
+# ---------------------------------------------------------------------------- Ctrl-C
+
+def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys, monkeypatch):
+    import pipeline.consistency as consistency
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(consistency, "resolve_conflicts", interrupted)
+    out = tmp_path / "o.csv"
+    assert main(["resolve", "--links", str(fig1), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err.strip().startswith("interrupted:") and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == [fig1]

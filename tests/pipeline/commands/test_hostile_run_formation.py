@@ -1,0 +1,98 @@
+"""run-formation (and its run folder), as a hostile user would run it: a bad --out or a
+meaningless value is refused at once with one line on stderr and exit 2, nothing touched."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline.__main__ import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+from hostile import run_capped, tree  # noqa: E402
+
+FAST = ["--size", "256x192", "--max-features", "200", "--no-rerun", "--no-fusion"]
+
+
+def _one_line_error(capsys, *needles):
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+@pytest.fixture
+def checkout(tmp_path, monkeypatch):
+    """A folder that looks like a user's checkout, made the current folder."""
+    (tmp_path / ".git").mkdir()
+    (tmp_path / ".git" / "HEAD").write_text("ref: refs/heads/main\n")
+    (tmp_path / "notes.txt").write_text("mine")
+    (tmp_path / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "sub")
+    return tmp_path
+
+
+@pytest.mark.parametrize("out", [".", "..", "/", "CWD", "PARENT"])
+def test_out_naming_the_cwd_a_parent_or_root_is_refused(checkout, capsys, out):
+    before = tree(checkout)
+    out = {"CWD": str(checkout / "sub"), "PARENT": str(checkout)}.get(out, out)
+    assert main(["run-formation", "--out", out, *FAST]) == 2
+    _one_line_error(capsys, "replaced as a whole")
+    assert tree(checkout) == before
+
+
+def test_out_naming_a_foreign_folder_is_refused(checkout, capsys):
+    before = tree(checkout)
+    assert main(["run-formation", "--out", str(checkout), *FAST]) == 2
+    assert main(["run-formation", "--out", str(checkout / ".git"), *FAST]) == 2
+    err = capsys.readouterr().err
+    assert "not a formation-match run folder" in err and "Traceback" not in err
+    assert tree(checkout) == before
+
+
+def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
+    (checkout / "link").symlink_to(checkout / ".git")
+    assert main(["run-formation", "--out", str(checkout / "notes.txt"), *FAST]) == 2
+    _one_line_error(capsys, "is a file")
+    assert main(["run-formation", "--out", str(checkout / "link"), *FAST]) == 2
+    _one_line_error(capsys, "symbolic link")
+    assert (checkout / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("flag,value,message", [
+    ("--tol-px", "-1", "--tol-px -1.0"),
+    ("--tol-px", "nan", "--tol-px nan"),
+    ("--tol-px", "0", "> 0"),
+    ("--size", "100000x100000", "too large"),
+    ("--size", "8192x8192", "too large"),
+    ("--fault-seed", "-5", "--fault-seed -5"),
+    ("--seed", "-5", "--seed -5"),
+    ("--drop-prob", "-0.1", "--drop-prob"),
+    ("--crash", "x@1", "--crash"),
+])
+def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
+    out = tmp_path / "run"
+    assert main(["run-formation", "--out", str(out), *FAST, flag, value]) == 2
+    _one_line_error(capsys, message)
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_huge_size_is_refused_under_a_small_memory_cap(tmp_path):
+    proc = run_capped(["run-formation", "--size", "100000x100000", "--out", tmp_path / "r"])
+    assert proc.returncode == 2 and "too large" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_result_left_with_conflicts_exits_3_and_is_flagged(tmp_path, capsys):
+    out = tmp_path / "run"
+    crashes = [a for k in range(1, 6) for a in ("--crash", f"{k}@{k}")]
+    code = main(["run-formation", "--formation", "d", "--out", str(out), *FAST, *crashes])
+    report = json.loads((out / "report.json").read_text())
+    assert report["after"]["conflictive_sets"] > 0  # the case this test is about
+    assert code == 3 and report["conflict_free"] is False
+    assert "error: the result is not conflict-free" in capsys.readouterr().err
+    # and the folder carries the marker: the next run may replace it
+    assert (out / ".formation-match-run").is_file()

@@ -1,0 +1,149 @@
+"""run-images, as a hostile user would run it: the photos are never touched, a bad value or
+file is one line on stderr (exit 2), images without features are named in a warning."""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from pipeline.__main__ import main
+from pipeline.errors import InputError
+from pipeline.io import comm_graph, exif_focal_px, load_folder
+
+sys.path.insert(0, str(Path(__file__).parent))
+from hostile import tree  # noqa: E402
+
+
+@pytest.fixture
+def photos(sceaux_small, tmp_path):
+    folder = tmp_path / "photos"
+    shutil.copytree(sceaux_small, folder)
+    return folder
+
+
+def _one_line_error(capsys, *needles):
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("where", ["photos", "parent"])
+def test_out_onto_the_photos_or_their_parent_is_refused(photos, capsys, where):
+    before = tree(photos.parent)
+    out = photos if where == "photos" else photos.parent
+    assert main(["run-images", str(photos), "--graph", "ring", "--out", str(out)]) == 2
+    _one_line_error(capsys, "holds the input DIR")
+    assert tree(photos.parent) == before
+
+
+def test_out_holding_the_graph_file_is_refused(photos, tmp_path, capsys):
+    (tmp_path / "cfg").mkdir()
+    graph = tmp_path / "cfg" / "g.csv"
+    graph.write_text("0,1\n1,2\n2,3\n")
+    assert main(["run-images", str(photos), "--graph", str(graph), "--out",
+                 str(tmp_path / "cfg")]) == 2
+    _one_line_error(capsys, "holds the input --graph")
+    assert graph.read_text() == "0,1\n1,2\n2,3\n"
+
+
+@pytest.mark.parametrize("threads", ["-5", "0", "100000"])
+def test_bad_thread_count_is_refused_before_any_work(photos, tmp_path, capsys, threads):
+    assert main(["run-images", str(photos), "--graph", "ring", "--threads", threads,
+                 "--out", str(tmp_path / "run")]) == 2
+    _one_line_error(capsys, f"--threads {threads}")
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("fx", ["1e300", "1e-9", "0.5"])
+def test_k_with_an_absurd_focal_length_is_refused(photos, tmp_path, capsys, fx):
+    (photos / "K.txt").write_text(f"{fx} 0 320\n0 {fx} 240\n0 0 1\n")
+    assert main(["run-images", str(photos), "--graph", "ring", "--out",
+                 str(tmp_path / "run")]) == 2
+    _one_line_error(capsys, "not a usable focal length")
+
+
+def test_graph_naming_a_folder_says_so(photos, tmp_path, capsys):
+    (tmp_path / "gdir").mkdir()
+    assert main(["run-images", str(photos), "--graph", str(tmp_path / "gdir"), "--out",
+                 str(tmp_path / "run")]) == 2
+    _one_line_error(capsys, "is a folder")
+
+
+def _jpeg_with_exif(path, unit):
+    im = Image.fromarray(np.random.default_rng(0).integers(0, 255, (48, 64, 3), np.uint8))
+    exif = Image.Exif()
+    ifd = exif.get_ifd(0x8769)
+    ifd[0x920A] = 35.0      # FocalLength, mm
+    ifd[0xA20E] = 4000.0    # FocalPlaneXResolution
+    ifd[0xA210] = unit      # FocalPlaneResolutionUnit
+    im.save(path, exif=exif)
+
+
+def test_exif_unit_that_is_a_string_is_ignored_not_a_traceback(tmp_path):
+    for k in range(2):
+        _jpeg_with_exif(tmp_path / f"{k}.jpg", "centimetres")
+    assert exif_focal_px(Image.open(tmp_path / "0.jpg"), 64, 48) is None
+    views = load_folder(tmp_path)
+    assert [v.intrinsics_source for v in views] == ["guess", "guess"]
+
+
+def test_exif_focal_length_no_lens_has_is_ignored(tmp_path):
+    for k in range(2):
+        _jpeg_with_exif(tmp_path / f"{k}.jpg", 4)  # 4000 px per mm: f = 140,000 px on 64 px
+    assert exif_focal_px(Image.open(tmp_path / "0.jpg"), 64, 48) is not None
+    assert [v.intrinsics_source for v in load_folder(tmp_path)] == ["guess", "guess"]
+    with pytest.raises(InputError, match="no EXIF focal length"):
+        load_folder(tmp_path, intrinsics="exif")
+
+
+def test_graph_file_may_quote_names_with_spaces_commas_and_hashes(tmp_path):
+    names = ["a b.jpg", "c,d.jpg", "#e.jpg", 'say "hi".jpg']
+    g = tmp_path / "g.csv"
+    g.write_text('cam_i,cam_j\n"a b.jpg","c,d.jpg"  # a comment\n"c,d.jpg"\t"#e.jpg"\n'
+                 '# a comment line\n"#e.jpg", "say ""hi"".jpg"\n3 0\n')
+    assert comm_graph(g, names).tolist() == [[0, 1], [0, 3], [1, 2], [2, 3]]
+
+
+def test_images_without_features_are_named_in_a_warning(photos, tmp_path, capsys):
+    (photos / "K.txt").unlink()  # one K cannot fit these odd sizes: EXIF or the guess
+    Image.fromarray(np.full((480, 640, 3), 128, np.uint8)).save(photos / "z_blank.png")
+    Image.fromarray(np.zeros((10, 10), np.uint8)).save(photos / "z_tiny.png")
+    Image.fromarray(np.random.default_rng(0).integers(0, 255, (16, 8496), np.uint8)).save(
+        photos / "z_strip.png")
+    out = tmp_path / "run"
+    code = main(["run-images", str(photos), "--graph", "ring", "--max-size", "320",
+                 "--no-rerun", "--no-fusion", "--out", str(out)])
+    report = json.loads((out / "report.json").read_text())
+    empty = [im["name"] for im, m in zip(report["images"], report["features_per_camera"],
+                                         strict=True) if m == 0]
+    assert set(empty) >= {"z_blank.png", "z_tiny.png"}  # the case this test is about
+    warning = next(w for w in report["warnings"] if w["code"] == "no-features")
+    assert all(name in warning["message"] for name in empty)
+    err = capsys.readouterr().err
+    assert "warning: no features found" in err and "z_blank.png" in err
+    assert code in (0, 3)  # warnings alone do not change the exit code
+    assert code == (3 if report["after"]["conflictive_sets"] else 0)
+
+
+def test_ctrl_c_is_one_line_exit_130_and_nothing_written(photos, tmp_path, capsys,
+                                                         monkeypatch):
+    import pipeline.run as run
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run, "extract_and_match", interrupted)
+    before = tree(photos)
+    assert main(["run-images", str(photos), "--graph", "ring", "--out",
+                 str(tmp_path / "run")]) == 130
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("interrupted:") and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["photos"]
+    assert tree(photos) == before
