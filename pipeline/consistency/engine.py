@@ -30,6 +30,7 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.consistency.detection import detection_step, start_detection
+from pipeline.consistency.evidence import CASE_EVIDENCE, equip, run_evidence_resolution
 from pipeline.consistency.network import Network, NetworkOptions
 from pipeline.consistency.reliable import (
     Channel,
@@ -70,7 +71,7 @@ class ConsistencyResult:
     iteration : ndarray, (L,) int — detection/resolution iteration that cut it (1-based), -1 if kept
     round : ndarray, (L,) int — resolution round of that iteration in which the receiver of the
         request cut it (1-based), -1 if kept
-    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a link cut by resolution, ``''``
+    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) or ``'evidence'`` for a link cut by resolution, ``''``
         otherwise
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
@@ -267,9 +268,13 @@ def run_resolution_reliable(robots: list[Robot], chans: list[Channel], network: 
     return dict(rounds=t, conflictive_sets=int(sets), lost=any(rb.lost_in_phase for rb in live))
 
 
+RESOLUTIONS = ("paper", "evidence")
+
+
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       network_options: NetworkOptions | None = None,
-                      protocol: ProtocolOptions | None = None) -> ConsistencyResult:
+                      protocol: ProtocolOptions | None = None, resolution: str = "paper",
+                      link_weight=None, keypoints=None, projections=None) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -285,6 +290,17 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     protocol : ProtocolOptions or None
         The robots' protocol: the paper's (default on a fault-free network) or the
         fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
+    resolution : ``paper`` or ``evidence``
+        ``paper``: Alg. 1. ``evidence``: the flood-and-solve rule of :mod:`.evidence` (on a
+        fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
+        ``stats['resolution']`` says so).
+    link_weight : array_like (L,) float or None
+        ``evidence`` only: local evidence of each link (:mod:`pipeline.link_evidence`);
+        ``None``: the Lowe-ratio term of ``links.quality``.
+    keypoints : list of (m_i, 2) arrays or None
+        ``evidence`` only: each robot's keypoints (for the geometric test).
+    projections : list of (3, 4) arrays (or None entries) or None
+        ``evidence`` only: each robot's ``K [R | t]``; the geometric test needs all of a set's.
 
     Returns
     -------
@@ -293,11 +309,14 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     Raises
     ------
     InputError
-        Links break Assumptions 2.1–2.3, or join cameras that are not neighbours.
+        Links break Assumptions 2.1–2.3, or join cameras that are not neighbours, or an
+        unknown ``resolution``.
 
     Notes
     -----
-    Per iteration: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
+    With ``evidence``, one pass suffices: it takes at most ``diam(C) + 1 ≤ d + 1`` rounds
+    and leaves the graph conflict-free, so the loop ends with the next detection. Per
+    iteration of Alg. 1: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
     ``n + 1`` (Thm. 4.3 (i) plus the delivery of the last rejects); every conflictive set
     shrinks by ``≥ 4`` features per iteration, so the loop ends (Prop. 4.5). With the
     fault-tolerant protocol these bounds hold in *logical* rounds of detection; network rounds
@@ -317,6 +336,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     >>> int(res.deleted.sum())
     1
     """
+    if resolution not in RESOLUTIONS:
+        raise InputError(f"resolution {resolution!r} is unknown; use one of {', '.join(RESOLUTIONS)}")
     fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
     camera_offsets(fpc)
     check_links(links, fpc)
@@ -326,6 +347,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     opts = network_options or NetworkOptions()
     protocol = protocol or ProtocolOptions()
     reliable = opts.any_fault if protocol.reliable is None else bool(protocol.reliable)
+    use_evidence = resolution == "evidence" and not reliable
+    if use_evidence:
+        _equip_evidence(robots, link_index, links, fpc, link_weight, keypoints, projections)
     network = Network(n, edges, opts)
     chans = [Channel(i, partial(network.send, i), partial(network.links_up, i), protocol)
              for i in range(n)] if reliable else []
@@ -363,6 +387,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             break
         if reliable:
             res = run_resolution_reliable(robots, chans, network, res_cap)
+        elif use_evidence:
+            res = run_evidence_resolution(robots, network)
         else:
             res = run_resolution(robots, network)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
@@ -372,7 +398,25 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
 
-    return _collect(fpc, links, robots, link_index, per_iteration, network, chans, repeated)
+    result = _collect(fpc, links, robots, link_index, per_iteration, network, chans, repeated)
+    result.stats["resolution"] = "evidence" if use_evidence else "paper"
+    return result
+
+
+def _equip_evidence(robots, link_index, links: Links, fpc, link_weight, keypoints,
+                    projections) -> None:
+    """Hand every robot its own evidence (its rows of the inputs only)."""
+    from pipeline.link_evidence import ratio_llr
+
+    L = len(links)
+    w = ratio_llr(1.0 - links.quality) if link_weight is None else \
+        np.asarray(link_weight, dtype=np.float64).reshape(-1)
+    if w.shape[0] != L:
+        raise InputError(f"link_weight has {w.shape[0]} entries for {L} links")
+    for rb, li in zip(robots, link_index, strict=True):
+        kp = np.zeros((rb.m, 2)) if keypoints is None else keypoints[rb.id]
+        P = None if projections is None else projections[rb.id]
+        equip(rb, w[li], kp, P)
 
 
 def _delta(c0: dict, c1: dict) -> dict:
@@ -389,13 +433,13 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
     lost_end = np.zeros(L, dtype=bool)
     iteration = np.full(L, -1, dtype=np.int64)
     round_ = np.full(L, -1, dtype=np.int64)
-    case = np.full(L, "", dtype="<U6")
+    case = np.full(L, "", dtype="<U8")
     for rb, li in zip(robots, link_index, strict=True):
         gone = ~rb.link_alive
         np.add.at(ends_deleted, li[gone], 1)
         lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
         lost_end[li[lost]] = True
-        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C)))
+        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C, CASE_EVIDENCE)))
         if decided.size:
             g = li[decided]
             # if both ends cut the link as receivers (crossing requests), keep the earlier round
@@ -403,7 +447,7 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
             g, d = g[better], decided[better]
             iteration[g] = rb.deleted_iteration[d]
             round_[g] = rb.deleted_round[d]
-            case[g] = [CASE_NAMES[int(c)] for c in rb.deleted_case[d]]
+            case[g] = [CASE_NAMES.get(int(c), "evidence") for c in rb.deleted_case[d]]
     deleted = ends_deleted > 0
     reason = np.where(deleted, "resolution", "").astype("<U10")
     # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it
