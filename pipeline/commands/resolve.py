@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.commands.options import add_resolution_option
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 
@@ -31,13 +32,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    add_resolution_option(p)
     add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
-                 faults: FaultConfig | None = None) -> dict:
+                 faults: FaultConfig | None = None, resolution: str = "evidence") -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``resolution``: ``paper`` (Alg. 1) or ``evidence``; the evidence of a link here is its
+    ``quality`` column read as ``1 − Lowe ratio`` (and the triangle support the robots
+    compute), as a links file carries no keypoints or geometry.
 
     Raises
     ------
@@ -78,7 +84,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
     before = count_conflicts(AssociationGraph(m, links)).as_dict()
-    res, fault_section = consistency_stage(m, edges, links, faults)
+    res, fault_section = consistency_stage(m, edges, links, faults, resolution=resolution)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     write_links_csv(out_csv, ledger_from_consistency(res))
     st = res.stats
@@ -87,7 +93,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
         "links": len(links), "deleted": int(res.deleted.sum()),
-        "deleted_by_case": {c: int((res.case == c).sum()) for c in ("b", "c")},
+        "resolution_method": res.stats["resolution"],
+        "deleted_by_case": {c: int((res.case == c).sum()) for c in
+                            ("b", "c", "evidence") if c != "evidence" or resolution == "evidence"},
         "before": before, "after": after,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "messages", "bytes", "max_robot_memory_bytes")},
@@ -98,13 +106,18 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
 
 
 def run(args) -> int:
-    s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args))
+    s = resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
+                     resolution=args.resolution)
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
-    print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
-          f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
+    if s["resolution_method"] == "paper":
+        print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
+              f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
+    else:
+        print(f"deleted: {s['deleted']} links by the evidence rule in {r['iterations']} "
+              "iteration(s)")
     print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution; "
           f"{r['messages']} messages, {r['bytes']} bytes, max {r['max_robot_memory_bytes']} "
           "bytes per robot")

@@ -7,7 +7,12 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.options import add_feature_options, feature_options
+from pipeline.commands.options import (
+    add_feature_options,
+    add_merge_radius_option,
+    add_resolution_option,
+    feature_options,
+)
 from pipeline.errors import InputError
 from pipeline.images import ImagesConfig
 
@@ -36,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="threads of COLMAP's mapper (default 1: repeatable figures; -1: all cores)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
+    add_resolution_option(p)
+    add_merge_radius_option(p)
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -47,7 +54,8 @@ def config_from_args(args) -> ImagesConfig:
                         max_size=args.max_size or None, features=method,
                         max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
-                        threads=args.threads)
+                        threads=args.threads, resolution=args.resolution,
+                        merge_radius=args.merge_radius)
 
 
 def run(args) -> int:
