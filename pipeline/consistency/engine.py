@@ -84,7 +84,8 @@ class ConsistencyResult:
         ``messages``, ``bytes``, ``messages_by_kind``, ``bytes_by_kind``,
         ``max_robot_memory_bytes`` (peak over robots and rounds of :meth:`Robot.memory_bytes`),
         ``asymmetric_links`` (links between two surviving robots deleted at one end only),
-        ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``survivors`` (n,) bool
+        ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``resolution`` (the rule
+        that cut: ``paper`` or ``evidence``), ``survivors`` (n,) bool
         (robots alive at the end), and ``faults``: what the network injected and its effect
         (``dropped`` messages, ``crashed`` robots with their crash round, ``robots_lost``
         (robot -> neighbours that declared it lost), ``links_cut_robot_lost``,
