@@ -51,6 +51,8 @@ class ImagesConfig:
     threads: int = 1
     truth: str = "none"
     truth_tol_px: float = 2.0
+    resolution: str = "evidence"
+    merge_radius: float | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -145,7 +147,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
     from pipeline.commgraph import comm_graph
     from pipeline.io import load_folder
     from pipeline.linkscsv import write_links_csv
-    from pipeline.run import clean_association, extract_and_match
+    from pipeline.run import clean_association, extract_and_match, merge_radius_for
 
     timer = timer or StageTimer()
     out = config.out_dir()
@@ -158,8 +160,9 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         sources = sorted({v.intrinsics_source for v in views})
         timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; "
                    f"graph {config.graph}: {len(comm_edges)} edges")
-    feats, matches, links = extract_and_match(views, comm_edges, config.features,
-                                              config.max_features, timer)
+    feats, matches, links = extract_and_match(
+        views, comm_edges, config.features, config.max_features, timer,
+        merge_radius=merge_radius_for(config.resolution, config.merge_radius))
     m = np.array([len(f) for f in feats], dtype=np.int64)
 
     with tempfile.TemporaryDirectory(prefix="run-images-") as work:
@@ -172,7 +175,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
                                                     fixed_intrinsics=fixed)
             timer.note(_mapping_note(map_before))
-        cleaning = clean_association(views, feats, comm_edges, links, fusion=False, timer=timer)
+        cleaning = clean_association(views, feats, comm_edges, links, fusion=False, timer=timer,
+                                     resolution=config.resolution, matches=matches)
         if not config.fusion:
             cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
         elif importlib.util.find_spec("pipeline.fusion.landmarks") is None:

@@ -17,7 +17,8 @@ from pipeline.association import AssociationGraph, count_conflicts
 from pipeline.types import LinkLedger, Links
 
 __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
-           "fusion_section", "baselines_section", "matching_section", "report_markdown",
+           "fusion_section", "baselines_section", "resolution_quality_section",
+           "matching_section", "report_markdown",
            "mapping_markdown", "track_gt_points", "fused_point_errors"]
 
 #: Aragüés et al., Tables III and IV (SURF, real images, no ground truth), formations (a)–(d).
@@ -67,9 +68,11 @@ def association_counts(m, links: Links, good: np.ndarray | None, missing: int | 
 
 
 def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
-    """The report's ``resolution`` section: links cut by Alg. 1 and the stage's costs."""
+    """The report's ``resolution`` section: links cut by the resolution (``method``: Alg. 1
+    ``paper`` or ``evidence``) and the stage's costs."""
     cut = ledger.reason == "resolution"
     out = {
+        "method": stats.get("resolution", "paper"),
         "iterations": stats.get("iterations"),
         "deleted_links": int(cut.sum()),
         "detection_rounds": stats.get("detection_rounds"),
@@ -80,11 +83,13 @@ def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
     }
     # Alg. 1 line 9: case (b) feature already in another component, (c) its camera already in
     out["deleted_by_case"] = {c: int((cut & (ledger.case == c)).sum()) for c in ("b", "c")}
+    if out["method"] == "evidence":
+        out["deleted_by_case"]["evidence"] = int((cut & (ledger.case == "evidence")).sum())
     good = ledger.good
     if good is not None:
         out["good_deleted"] = int((cut & good).sum())
         out["spurious_deleted"] = int((cut & ~good).sum())
-    out["details"] = {k: v for k, v in stats.items() if k not in out}
+    out["details"] = {k: v for k, v in stats.items() if k not in out and k != "resolution"}
     return out
 
 
@@ -129,6 +134,32 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
             row["pairwise"] = pairwise(kept)
         out[name] = row
     return out
+
+
+def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
+                               kept_masks: dict) -> dict:
+    """Which links each resolution cut on the same input, against the truth.
+
+    Parameters
+    ----------
+    m : (n,) int — features per camera
+    links : Links, (L,) — the input of the resolution
+    good : (L,) bool — ground truth of ``links``
+    pairwise : callable ``Links -> dict`` — pairwise scores of a kept subset
+    kept_masks : dict ``method -> (L,) bool`` — what each method kept (distributed methods,
+        centralized baselines, the oracle of :func:`pipeline.oracle.oracle_cut`)
+
+    Returns
+    -------
+    dict ``method ->`` good cut, spurious cut, spurious links inside the input's conflictive
+    sets, spurious left there, links in those sets
+    (:func:`pipeline.oracle.resolution_scores`) and ``pairwise_f1`` of the result.
+    """
+    from pipeline.oracle import resolution_scores
+
+    return {name: {**resolution_scores(m, links, good, kept),
+                   "pairwise_f1": pairwise(links.subset(kept))["f1"]}
+            for name, kept in kept_masks.items()}
 
 
 def matching_section(matches: list) -> dict:

@@ -26,8 +26,14 @@ from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import LinkLedger, Links, RunRecord, View
 
-__all__ = ["FormationConfig", "CleaningResult", "extract_and_match", "consistency_stage",
-           "ledger_from_consistency", "fusion_stage", "clean_association", "run_formation"]
+__all__ = ["FormationConfig", "CleaningResult", "NEAR_DUPLICATE_PX", "merge_radius_for",
+           "extract_and_match", "evidence_inputs", "consistency_stage", "ledger_from_consistency",
+           "fusion_stage", "clean_association", "run_formation"]
+
+#: radius (pixels) within which keypoints of one image are one observation with the evidence
+#: rule: the ground-truth tolerance of a good link, so that two keypoints that would both be
+#: "good" for one point are not kept as two features of one camera (Def. 2.4)
+NEAR_DUPLICATE_PX = 2.0
 
 
 @dataclass
@@ -46,6 +52,8 @@ class FormationConfig:
     out: str | None = None
     rerun: bool = True
     faults: FaultConfig | None = None
+    resolution: str = "evidence"
+    merge_radius: float | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -86,22 +94,44 @@ def _conflictive_links(features_per_camera, links: Links) -> np.ndarray:
     return conflictive[labels[a]] if len(links) else np.zeros(0, dtype=bool)
 
 
+def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
+    """The keypoint merge radius: as given, else :data:`NEAR_DUPLICATE_PX` with the evidence
+    rule and the co-location radius of :mod:`pipeline.features` with the paper's Alg. 1.
+
+    Raises
+    ------
+    InputError
+        A negative or non-finite radius.
+    """
+    from pipeline.errors import InputError
+    from pipeline.features import MERGE_RADIUS_PX
+
+    if merge_radius is None:
+        return NEAR_DUPLICATE_PX if resolution == "evidence" else MERGE_RADIUS_PX
+    if not np.isfinite(merge_radius) or merge_radius < 0:
+        raise InputError(f"--merge-radius {merge_radius}: expected pixels >= 0 (0 merges nothing)")
+    return float(merge_radius)
+
+
 def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
                       max_features: int, timer: StageTimer, *, ratio: float = 0.8,
-                      threshold_px: float = 1.0) -> tuple[list, list, Links]:
+                      threshold_px: float = 1.0,
+                      merge_radius: float | None = None) -> tuple[list, list, Links]:
     """Features of every camera, then matching on the communication edges only.
 
     ``ratio`` (Lowe ratio test) and ``threshold_px`` (epipolar RANSAC inlier threshold) go to
-    :func:`pipeline.matching.match_edges`.
+    :func:`pipeline.matching.match_edges`; keypoints of one image closer than
+    ``merge_radius`` pixels are merged (``None``: :data:`pipeline.features.MERGE_RADIUS_PX`).
 
     Returns ``(features, matches, links)``: per-camera Features, per-edge PairMatches and all
     links (``Links.from_matches``).
     """
-    from pipeline.features import extract_all
+    from pipeline.features import MERGE_RADIUS_PX, extract_all
     from pipeline.matching import match_edges
 
+    radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
     with timer.stage("features", f"{method}, at most {max_features} per image"):
-        feats = extract_all(views, method, max_features)
+        feats = extract_all(views, method, max_features, radius)
         timer.note(f"features per camera: {[len(f) for f in feats]}")
     with timer.stage("matching", f"{len(comm_edges)} communication edges"):
         matches = match_edges(feats, views, comm_edges, ratio=ratio, threshold_px=threshold_px)
@@ -110,10 +140,25 @@ def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
     return feats, matches, links
 
 
+def evidence_inputs(views: list[View], features: list, links: Links, matches=None) -> dict:
+    """Keyword arguments of ``resolve_conflicts`` for the evidence rule: each link's local
+    weight (:mod:`pipeline.link_evidence`; from ``links.quality`` without ``matches``), each
+    robot's keypoints and, where every pose is known, its projection ``K [R | t]``."""
+    from pipeline.link_evidence import LinkEvidence, link_evidence
+
+    ev = link_evidence(matches, links, views, features) if matches is not None \
+        else LinkEvidence.from_quality(links)
+    poses = all(v.R is not None and v.t is not None for v in views)
+    return dict(link_weight=ev.weight, keypoints=[f.keypoints for f in features],
+                projections=[v.K @ np.c_[v.R, v.t] for v in views] if poses else None)
+
+
 def consistency_stage(features_per_camera, comm_edges, links: Links,
-                      faults: FaultConfig | None = None):
-    """The consistency stage once: detection (Sec. III) and resolution (Alg. 1) until
-    conflict-free, on a faulty network when ``faults`` switch one on.
+                      faults: FaultConfig | None = None, *, resolution: str = "paper",
+                      evidence: dict | None = None):
+    """The consistency stage once: detection (Sec. III) and resolution (Alg. 1, or the
+    evidence rule of :mod:`pipeline.consistency.evidence`) until conflict-free, on a faulty
+    network when ``faults`` switch one on.
 
     Parameters
     ----------
@@ -121,6 +166,9 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     comm_edges : (E, 2) int or None — ``None``: cameras sharing a link are neighbours
     links : Links, (L,)
     faults : FaultConfig or None
+    resolution : ``paper`` or ``evidence``
+    evidence : dict or None — with ``evidence``: ``link_weight``, ``keypoints``,
+        ``projections`` for ``resolve_conflicts`` (:func:`evidence_inputs`)
 
     Returns
     -------
@@ -138,14 +186,15 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     from pipeline.consistency import resolve_conflicts
 
     m = np.asarray(features_per_camera, dtype=np.int64)
+    kw = dict(resolution=resolution, **(evidence or {}))
     if faults is None or not faults.any:
-        return resolve_conflicts(m, comm_edges, links), None
+        return resolve_conflicts(m, comm_edges, links, **kw), None
     from pipeline.commgraph import comm_edges_for
     from pipeline.faults import fault_report
 
     edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
-    result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)))
-    return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links))
+    result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)), **kw)
+    return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links, **kw))
 
 
 def ledger_from_consistency(result, conflictive_before: np.ndarray | None = None) -> LinkLedger:
@@ -199,8 +248,12 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
 
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
                       *, fusion: bool = True, timer: StageTimer | None = None,
-                      faults: FaultConfig | None = None) -> CleaningResult:
+                      faults: FaultConfig | None = None, resolution: str = "evidence",
+                      matches: list | None = None) -> CleaningResult:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
+
+    ``resolution``: ``paper`` (Alg. 1) or ``evidence`` (:mod:`pipeline.consistency.evidence`,
+    with the link evidence of ``matches`` when given, see :func:`evidence_inputs`).
 
     Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
     With ``faults`` on, the consistency stage runs on the faulty network (and once more
@@ -209,9 +262,12 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     """
     timer = timer or StageTimer(verbose=False)
     m = np.array([len(f) for f in features], dtype=np.int64)
-    with timer.stage("consistency", "distributed detection + resolution"):
+    with timer.stage("consistency", f"distributed detection + resolution ({resolution})"):
         conflictive_before = _conflictive_links(m, links)
-        res, fault_section = consistency_stage(m, comm_edges, links, faults)
+        evidence = evidence_inputs(views, features, links, matches) \
+            if resolution == "evidence" else None
+        res, fault_section = consistency_stage(m, comm_edges, links, faults,
+                                               resolution=resolution, evidence=evidence)
         ledger = ledger_from_consistency(res, conflictive_before)
         timer.note(f"{int(res.deleted.sum())} of {len(links)} links cut in "
                    f"{res.stats.get('iterations')} iteration(s)")
@@ -252,11 +308,13 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
                                       n_robots=config.robots, graph=config.graph)
         views, comm_edges = formation.views, np.asarray(formation.comm_edges)
-    feats, matches, links = extract_and_match(views, comm_edges, config.features,
-                                              config.max_features, timer)
+    feats, matches, links = extract_and_match(
+        views, comm_edges, config.features, config.max_features, timer,
+        merge_radius=merge_radius_for(config.resolution, config.merge_radius))
     m = np.array([len(f) for f in feats], dtype=np.int64)
     cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
-                                 faults=config.faults, timer=timer)
+                                 faults=config.faults, timer=timer,
+                                 resolution=config.resolution, matches=matches)
     ledger = cleaning.ledger
     kept = ledger.kept
     kept_links = links.subset(kept)
@@ -283,6 +341,11 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         pairwise = {"before": pairwise_of(links), "after_resolution": pairwise_of(resolved_links),
                     "after": pairwise_of(kept_links)}
         baselines = sections.baselines_section(m, links, truth, missing, pairwise_of)
+        quality = sections.resolution_quality_section(
+            m, links, truth, pairwise_of,
+            _resolution_masks(views, feats, matches, comm_edges, links, truth,
+                              config.resolution, resolved))
+
     # pycolmap is loaded only now: the earlier stages' peak memory does not include it
     from pipeline.triangulation import triangulate_tracks, write_reconstruction
 
@@ -307,6 +370,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
         "triangulation": triangulation,
         "pairwise": pairwise,
         "baselines": baselines,
+        "resolution_quality": quality,
         "matching": sections.matching_section(matches),
         "ground_truth": {"tolerance_px": config.tol_px},
         "versions": sections.versions(),
@@ -343,3 +407,28 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     return out
 
 
+
+
+def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,
+                      method: str, resolved: np.ndarray) -> dict:
+    """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
+
+    The run's own method (``resolved``: what its consistency stage kept), the other
+    distributed method (run here on the fault-free network), every centralized baseline and
+    the oracle (:func:`pipeline.oracle.oracle_cut`, which knows the truth).
+    """
+    from pipeline.consistency import centralized
+    from pipeline.oracle import oracle_cut
+
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    masks = {method: np.asarray(resolved, dtype=bool)}
+    for other in ("paper", "evidence"):
+        if other not in masks:
+            evidence = evidence_inputs(views, feats, links, matches) if other == "evidence" \
+                else None
+            res, _ = consistency_stage(m, comm_edges, links, resolution=other, evidence=evidence)
+            masks[other] = ~res.deleted
+    ordered = {k: masks[k] for k in ("paper", "evidence")}
+    ordered.update({k: np.asarray(v, dtype=bool) for k, v in centralized.baselines(m, links).items()})
+    ordered["oracle"] = oracle_cut(m, links, truth)
+    return ordered

@@ -214,6 +214,8 @@ class DatabaseContents:
         feature of the same other image by an earlier inlier of that pair (COLMAP allows this
         when cross-check is off; the paper's Assumption 2.2 does not)
     pairs_without_inliers : int — two-view geometries with no inliers (failed verification)
+    fundamental : dict ``(i, j) -> (3, 3)`` — the pair's fundamental matrix in OpenCV pixels
+        (``x_jᵀ F x_i = 0``), ``i < j``, for the pairs whose geometry has one
     """
 
     path: Path
@@ -223,6 +225,7 @@ class DatabaseContents:
     links: Links
     not_one_to_one: np.ndarray
     pairs_without_inliers: int = 0
+    fundamental: dict = field(default_factory=dict)
     cameras: list = field(default_factory=list)
 
     @property
@@ -312,12 +315,17 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
             f"database {str(path)!r} has {what}: it holds no verified matches. Run COLMAP's "
             f"matcher (e.g. 'colmap exhaustive_matcher') or hloc's geometric verification first")
     parts = []
+    fundamental = {}
     for pid, g in usable:
         id1, id2 = pycolmap.pair_id_to_image_pair(pid)
         a, b = cam_of_id[int(id1)], cam_of_id[int(id2)]
         m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
+        F = _fundamental_px(g)
         if a > b:
             a, b, m = b, a, m[:, ::-1]
+            F = None if F is None else F.T
+        if F is not None:
+            fundamental[(a, b)] = F
         parts.append((np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]))
     ci, fi, cj, fj = (np.concatenate(col) for col in zip(*parts, strict=True))
     m = np.array([len(k) for k in kps], dtype=np.int64)
@@ -337,7 +345,25 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     return DatabaseContents(path=path, names=names, image_ids=image_ids, keypoints=kps,
                             links=links, not_one_to_one=~one_to_one,
                             pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
-                            cameras=[cameras.get(im.camera_id) for im in images])
+                            cameras=[cameras.get(im.camera_id) for im in images],
+                            fundamental=fundamental)
+
+
+def _fundamental_px(geometry) -> np.ndarray | None:
+    """A two-view geometry's ``F`` in OpenCV pixels, or ``None`` if it has none.
+
+    COLMAP's pixel origin is the corner of the top-left pixel (``x_colmap = T x_cv``, ``T``
+    the shift by :data:`COLMAP_PIXEL_OFFSET`), so ``F_cv = Tᵀ F T``.
+    """
+    F = getattr(geometry, "F", None)
+    if F is None:
+        return None
+    F = np.asarray(F, dtype=np.float64)
+    if F.shape != (3, 3) or not np.isfinite(F).all() or not np.abs(F).max(initial=0) > 0:
+        return None
+    T = np.array([[1.0, 0.0, COLMAP_PIXEL_OFFSET], [0.0, 1.0, COLMAP_PIXEL_OFFSET],
+                  [0.0, 0.0, 1.0]])
+    return T.T @ F @ T
 
 
 def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,

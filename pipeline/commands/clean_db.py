@@ -20,9 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
+from pipeline.commands.options import add_resolution_option
 from pipeline.errors import InputError
 
-__all__ = ["CleanDbResult", "clean_database", "add_arguments", "run"]
+__all__ = ["CleanDbResult", "clean_database", "add_arguments", "run", "COLMAP_MAX_ERROR_PX"]
+
+#: COLMAP's default two-view verification threshold (``max_error``, pixels)
+COLMAP_MAX_ERROR_PX = 4.0
 
 
 @dataclass
@@ -60,12 +64,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
                    help="refuse inputs whose distributed detection would need more memory "
                         f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    add_resolution_option(p)
 
 
 def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
-                   max_memory_gb: float = DEFAULT_LIMIT_GB) -> CleanDbResult:
+                   max_memory_gb: float = DEFAULT_LIMIT_GB,
+                   resolution: str = "evidence") -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
+
+    With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
+    stored fundamental matrix (:func:`pipeline.link_evidence.geometric_llr`, ``T`` =
+    :data:`COLMAP_MAX_ERROR_PX`) plus the triangle support the robots compute; a database
+    holds no Lowe ratios.
 
     Parameters
     ----------
@@ -111,8 +122,11 @@ def clean_database(database: str | Path, out: str | Path,
     # the association graph the robots start from: one-to-one links on comm edges
     check_detection_memory(m, model_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
+    evidence = dict(link_weight=_link_weight(contents, model_links),
+                    keypoints=contents.keypoints) if resolution == "evidence" else None
     with ticker(f"consistency stage: {n} robots, {len(model_links)} links"):
-        result, _ = consistency_stage(m, edges, model_links)
+        result, _ = consistency_stage(m, edges, model_links, resolution=resolution,
+                                      evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
@@ -125,9 +139,28 @@ def clean_database(database: str | Path, out: str | Path,
         input=database, output=out, images=n, comm_edges=n_edges, links=len(links),
         before=before, after=after,
         cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge", "resolution")},
-        resolution={k: stats.get(k) for k in ("iterations", "detection_rounds",
-                                              "resolution_rounds", "messages", "bytes",
-                                              "max_robot_memory_bytes")})
+        resolution={"method": stats.get("resolution"), **{k: stats.get(k) for k in (
+            "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
+            "max_robot_memory_bytes")}})
+
+
+def _link_weight(contents, links) -> np.ndarray:
+    """Geometric log-likelihood ratio of each link from the pair's stored ``F``, ``(L,)``."""
+    from pipeline.link_evidence import geometric_llr
+    from pipeline.matching import sampson_error_px
+
+    err = np.full(len(links), np.nan)
+    n = len(contents.names)
+    pair = links.cam_i * n + links.cam_j
+    for key in np.unique(pair).tolist():
+        i, j = divmod(key, n)
+        F = contents.fundamental.get((i, j))
+        if F is None:
+            continue
+        sel = pair == key
+        err[sel] = sampson_error_px(F, contents.keypoints[i][links.feat_i[sel]],
+                                    contents.keypoints[j][links.feat_j[sel]])
+    return geometric_llr(err, pair, COLMAP_MAX_ERROR_PX)
 
 
 def run(args) -> int:
@@ -137,7 +170,8 @@ def run(args) -> int:
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb)
+    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
+                         args.resolution)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "

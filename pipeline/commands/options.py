@@ -1,7 +1,8 @@
 """Command-line options shared by several commands, each defined once with one check.
 
 ``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.features`),
-``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`).
+``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
+(the consistency stage's resolution rule) and ``--merge-radius`` (near-duplicate keypoints).
 """
 
 from __future__ import annotations
@@ -11,8 +12,11 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["MIN_FEATURES", "add_feature_options", "add_scene_options", "feature_options",
-           "parse_size"]
+__all__ = ["MIN_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
+           "add_resolution_option", "add_merge_radius_option", "feature_options", "parse_size"]
+
+#: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
+RESOLUTIONS = ("paper", "evidence")
 
 #: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
 MIN_FEATURES = 8
@@ -34,6 +38,22 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
     :func:`parse_size`."""
     p.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
     p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
+
+
+def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence") -> None:
+    """``--resolution paper|evidence``: Alg. 1 of the paper, or the evidence-aware rule."""
+    p.add_argument("--resolution", choices=RESOLUTIONS, default=default,
+                   help="how the robots cut conflictive sets: paper = Alg. 1 of Aragues et al.; "
+                        "evidence = the robots of each set agree on the cut that keeps the "
+                        f"best-supported links (default {default})")
+
+
+def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
+    """``--merge-radius PX``: keypoints of one image closer than this are one feature."""
+    p.add_argument("--merge-radius", type=float, default=None, metavar="PX",
+                   help="keypoints of one image closer than this are one feature (default: "
+                        "2 px, the truth tolerance, with --resolution evidence; 0.5 px with "
+                        "paper)")
 
 
 def feature_options(args) -> tuple[str, int]:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
+from pipeline.commands.options import add_resolution_option
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 
@@ -37,14 +38,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
                    help="refuse inputs whose distributed detection would need more memory "
                         f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    add_resolution_option(p)
     add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
-                 max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
+                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence") -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``resolution``: ``paper`` (Alg. 1) or ``evidence``; the evidence of a link here is its
+    ``quality`` column read as ``1 − Lowe ratio`` (and the triangle support the robots
+    compute), as a links file carries no keypoints or geometry.
 
     Raises
     ------
@@ -89,7 +95,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
         res, fault_section = consistency_stage(
-            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids))
+            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids),
+            resolution=resolution)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)
@@ -100,7 +107,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
         "links": len(links), "deleted": int(res.deleted.sum()),
-        "deleted_by_case": {c: int((res.case == c).sum()) for c in ("b", "c")},
+        "resolution_method": res.stats["resolution"],
+        "deleted_by_case": {c: int((res.case == c).sum()) for c in
+                            ("b", "c", "evidence") if c != "evidence" or resolution == "evidence"},
         "before": before, "after": after,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "messages", "bytes", "max_robot_memory_bytes")},
@@ -118,13 +127,17 @@ def run(args) -> int:
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
-                                  args.max_memory_gb))
+                                  args.max_memory_gb, resolution=args.resolution))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
-    print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
-          f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
+    if s["resolution_method"] == "paper":
+        print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
+              f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
+    else:
+        print(f"deleted: {s['deleted']} links by the evidence rule in {r['iterations']} "
+              "iteration(s)")
     print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution; "
           f"{r['messages']} messages, {r['bytes']} bytes, max {r['max_robot_memory_bytes']} "
           "bytes per robot")

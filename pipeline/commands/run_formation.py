@@ -8,6 +8,8 @@ import json
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
+    add_merge_radius_option,
+    add_resolution_option,
     add_scene_options,
     feature_options,
     parse_size,
@@ -31,6 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
     p.add_argument("--out", default=None, help="run folder (default runs/formation-<name>)")
+    add_resolution_option(p)
+    add_merge_radius_option(p)
     add_fault_arguments(p)
 
 
@@ -44,7 +48,8 @@ def config_from_args(args) -> FormationConfig:
                            robots=args.robots, graph=args.graph,
                            tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
-                           faults=faults_from_args(args))
+                           faults=faults_from_args(args), resolution=args.resolution,
+                           merge_radius=args.merge_radius)
 
 
 def run(args) -> int:

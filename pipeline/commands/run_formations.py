@@ -9,6 +9,8 @@ from pathlib import Path
 
 from pipeline.commands.options import (
     add_feature_options,
+    add_merge_radius_option,
+    add_resolution_option,
     add_scene_options,
     feature_options,
     parse_size,
@@ -46,6 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_feature_options(p)
     add_scene_options(p)
     p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
+    # the paper's Tables III and IV are Alg. 1's figures
+    add_resolution_option(p, default="paper")
+    add_merge_radius_option(p)
 
 
 def _fmt(v) -> str:
@@ -82,6 +87,18 @@ def formations_table(reports: dict[str, dict]) -> str:
     for bl in reports[names[0]].get("baselines", {}):
         lines.append(f"| {bl} (centralized) | " + " | ".join(
             prf(reports[n]["baselines"][bl]["pairwise"]) for n in names) + " |")
+    quality = [reports[n].get("resolution_quality") for n in names]
+    if all(quality):
+        lines += ["", "Links cut by each resolution on the same input, against the truth: good cut / "
+                  "spurious cut / spurious left inside the input's conflictive sets (of those "
+                  "present) / pairwise F1:", "",
+                  "| method | " + " | ".join(f"({n})" for n in names) + " |",
+                  "|---|" + "---|" * len(names)]
+        for method in quality[0]:
+            lines.append(f"| {method} | " + " | ".join(
+                f"{q[method]['good_cut']} / {q[method]['spurious_cut']} / "
+                f"{q[method]['spurious_left']} ({q[method]['spurious_in_sets']}) / "
+                f"{q[method]['pairwise_f1']:.3f}" for q in quality) + " |")
     lines += ["", "Deleted links (good / spurious) per method:", "",
               "| method | " + " | ".join(f"({n})" for n in names) + " |",
               "|---|" + "---|" * len(names)]
@@ -106,13 +123,15 @@ def run(args) -> int:
     for name in FORMATIONS:
         cfg = FormationConfig(formation=name, seed=args.seed, size=size,
                               features=method, max_features=max_features,
-                              out=str(parent / f"formation-{name}"))
+                              out=str(parent / f"formation-{name}"),
+                              resolution=args.resolution, merge_radius=args.merge_radius)
         out = run_formation(cfg)
         reports[name] = json.loads((out / "report.json").read_text())
     table = formations_table(reports)
     md = parent / "formations.md"
     with atomic_file(md) as f:
-        f.write(f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}\n\n"
+        f.write(f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}, "
+                f"resolution {args.resolution}\n\n"
                 + table)
     write_json_atomic(parent / "formations.json", reports)
     print(table)

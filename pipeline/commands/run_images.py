@@ -10,7 +10,12 @@ import json
 from pathlib import Path
 
 from pipeline import validate
-from pipeline.commands.options import add_feature_options, feature_options
+from pipeline.commands.options import (
+    add_feature_options,
+    add_merge_radius_option,
+    add_resolution_option,
+    feature_options,
+)
 from pipeline.errors import InputError
 from pipeline.images import ImagesConfig
 from pipeline.outcome import exit_status
@@ -46,6 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="tolerance of --truth in pixels of the processed images (default 2)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
+    add_resolution_option(p)
+    add_merge_radius_option(p)
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -60,7 +67,8 @@ def config_from_args(args) -> ImagesConfig:
                         max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
                         threads=validate.threads(args.threads), truth=args.truth,
-                        truth_tol_px=args.truth_tol)
+                        truth_tol_px=args.truth_tol,
+                        resolution=args.resolution, merge_radius=args.merge_radius)
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:

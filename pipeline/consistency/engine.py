@@ -31,6 +31,7 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
+from pipeline.consistency.evidence import CASE_EVIDENCE, equip, run_evidence_resolution
 from pipeline.consistency.protocols import (
     DETECTION,
     RESOLUTION,
@@ -39,6 +40,7 @@ from pipeline.consistency.protocols import (
     make_protocol,
 )
 from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
+from pipeline.errors import InputError
 from pipeline.transport import Transport
 from pipeline.transport.simulated import Network, NetworkOptions
 from pipeline.types import Links
@@ -66,7 +68,7 @@ class ConsistencyResult:
     iteration : ndarray, (L,) int — detection/resolution iteration that cut it (1-based), -1 if kept
     round : ndarray, (L,) int — resolution round of that iteration in which the receiver of the
         request cut it (1-based), -1 if kept
-    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) for a link cut by resolution, ``''``
+    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) or ``'evidence'`` for a link cut by resolution, ``''``
         otherwise
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
@@ -79,7 +81,8 @@ class ConsistencyResult:
         ``messages``, ``bytes``, ``messages_by_kind``, ``bytes_by_kind``,
         ``max_robot_memory_bytes`` (peak over robots and rounds of :meth:`Robot.memory_bytes`),
         ``asymmetric_links`` (links between two surviving robots deleted at one end only),
-        ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``survivors`` (n,) bool
+        ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``resolution`` (the rule
+        that cut: ``paper`` or ``evidence``), ``survivors`` (n,) bool
         (robots alive at the end), and ``faults``: what the network injected and its effect
         (``dropped`` messages, ``crashed`` robots with their crash round, ``robots_lost``
         (robot -> neighbours that declared it lost), ``links_cut_robot_lost``,
@@ -212,9 +215,13 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     return Detection(robots, stats, network, proto)
 
 
+RESOLUTIONS = ("paper", "evidence")
+
+
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       network_options: NetworkOptions | None = None,
-                      protocol: ProtocolOptions | None = None) -> ConsistencyResult:
+                      protocol: ProtocolOptions | None = None, resolution: str = "paper",
+                      link_weight=None, keypoints=None, projections=None) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -231,6 +238,18 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         The robots' protocol: the paper's (default on a fault-free network) or the
         fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
 
+    resolution : ``paper`` or ``evidence``
+        ``paper``: Alg. 1. ``evidence``: the flood-and-solve rule of :mod:`.evidence` (on a
+        fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
+        ``stats['resolution']`` says so).
+    link_weight : array_like (L,) float or None
+        ``evidence`` only: local evidence of each link (:mod:`pipeline.link_evidence`);
+        ``None``: the Lowe-ratio term of ``links.quality``.
+    keypoints : list of (m_i, 2) arrays or None
+        ``evidence`` only: each robot's keypoints (for the geometric test).
+    projections : list of (3, 4) arrays (or None entries) or None
+        ``evidence`` only: each robot's ``K [R | t]``; the geometric test needs all of a set's.
+
     Returns
     -------
     ConsistencyResult
@@ -242,7 +261,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
 
     Notes
     -----
-    Per iteration: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
+    With ``evidence``, one pass suffices: it takes at most ``diam(C) + 1 ≤ d + 1`` rounds
+    and leaves the graph conflict-free, so the loop ends with the next detection. Per
+    iteration of Alg. 1: detection takes at most ``d + 1`` rounds (Cor. 3.6), resolution at most
     ``n + 1`` (Thm. 4.3 (i) plus the delivery of the last rejects); every conflictive set
     shrinks by ``≥ 4`` features per iteration, so the loop ends (Prop. 4.5). With the
     fault-tolerant protocol these bounds hold in *logical* rounds of detection; network rounds
@@ -262,6 +283,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     >>> int(res.deleted.sum())
     1
     """
+    if resolution not in RESOLUTIONS:
+        raise InputError(f"resolution {resolution!r}: choose one of {', '.join(RESOLUTIONS)}")
     fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
     camera_offsets(fpc)
     check_links(links, fpc)
@@ -271,6 +294,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     network = Network(n, edges, network_options)
     proto = make_protocol(protocol, network, fpc)
     reliable = proto.name == "reliable"
+    # the evidence rule (pipeline.consistency.evidence) runs on a fault-free network; with
+    # faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
+    use_evidence = resolution == "evidence" and not reliable
+    if use_evidence:
+        _equip_evidence(robots, link_index, links, link_weight, keypoints, projections)
     m_total = int(fpc.sum())
 
     per_iteration = []
@@ -297,7 +325,10 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             rec.update(_delta(c0, network.counters()))
             per_iteration.append(rec)
             break
-        res = run_phase(robots, network, proto, RESOLUTION, iteration)
+        if use_evidence:
+            res = run_evidence_resolution(robots, network)
+        else:
+            res = run_phase(robots, network, proto, RESOLUTION, iteration)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
                    last_assignment_round=int(max(
                        (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),
@@ -305,7 +336,25 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
 
-    return _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated)
+    result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated)
+    result.stats["resolution"] = "evidence" if use_evidence else "paper"
+    return result
+
+
+def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
+                    projections) -> None:
+    """Hand every robot its own evidence (its rows of the inputs only)."""
+    from pipeline.link_evidence import ratio_llr
+
+    L = len(links)
+    w = ratio_llr(1.0 - links.quality) if link_weight is None else \
+        np.asarray(link_weight, dtype=np.float64).reshape(-1)
+    if w.shape[0] != L:
+        raise InputError(f"link_weight has {w.shape[0]} entries for {L} links")
+    for rb, li in zip(robots, link_index, strict=True):
+        kp = np.zeros((rb.m, 2)) if keypoints is None else keypoints[rb.id]
+        P = None if projections is None else projections[rb.id]
+        equip(rb, w[li], kp, P)
 
 
 def _delta(c0: dict, c1: dict) -> dict:
@@ -322,13 +371,13 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
     lost_end = np.zeros(L, dtype=bool)
     iteration = np.full(L, -1, dtype=np.int64)
     round_ = np.full(L, -1, dtype=np.int64)
-    case = np.full(L, "", dtype="<U6")
+    case = np.full(L, "", dtype="<U8")
     for rb, li in zip(robots, link_index, strict=True):
         gone = ~rb.link_alive
         np.add.at(ends_deleted, li[gone], 1)
         lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
         lost_end[li[lost]] = True
-        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C)))
+        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C, CASE_EVIDENCE)))
         if decided.size:
             g = li[decided]
             # if both ends cut the link as receivers (crossing requests), keep the earlier round
@@ -336,7 +385,7 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
             g, d = g[better], decided[better]
             iteration[g] = rb.deleted_iteration[d]
             round_[g] = rb.deleted_round[d]
-            case[g] = [CASE_NAMES[int(c)] for c in rb.deleted_case[d]]
+            case[g] = [CASE_NAMES.get(int(c), "evidence") for c in rb.deleted_case[d]]
     deleted = ends_deleted > 0
     reason = np.where(deleted, "resolution", "").astype("<U10")
     # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it

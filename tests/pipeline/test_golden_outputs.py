@@ -68,9 +68,19 @@ def test_formation_outputs_unchanged(formation, tmp_path):
     _check(f"run-formation-{formation}", _digest(out, tmp_path))
 
 
-def test_resolve_output_unchanged(tmp_path):
+@pytest.mark.parametrize("formation", ["a", "b", "c", "d"])
+def test_formation_paper_outputs_unchanged(formation, tmp_path):
+    # the paper's Alg. 1 (and its keypoint merge radius), whatever the default
+    out = tmp_path / f"formation-{formation}"
+    run_formation(FormationConfig(formation=formation, out=str(out), resolution="paper", **SMALL))
+    _check(f"run-formation-{formation}-paper", _digest(out, tmp_path))
+
+
+@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+def test_resolve_output_unchanged(resolution, tmp_path):
     out = tmp_path / "formation-d"
-    run_formation(FormationConfig(formation="d", out=str(out), fusion=False, **SMALL))
+    run_formation(FormationConfig(formation="d", out=str(out), fusion=False, resolution="paper",
+                                  **SMALL))
     with open(out / "links.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     src = tmp_path / "in.csv"
@@ -81,12 +91,16 @@ def test_resolve_output_unchanged(tmp_path):
     res = tmp_path / "resolved"
     res.mkdir()
     assert main(["resolve", "--links", str(src), "--comm-graph", str(graph),
-                 "--out", str(res / "links.csv"), "--report", str(res / "report.json")]) == 0
-    _check("resolve-formation-d-complete", _digest(res, tmp_path))
+                 "--out", str(res / "links.csv"), "--report", str(res / "report.json"),
+                 "--resolution", resolution]) == 0
+    suffix = "-paper" if resolution == "paper" else ""
+    _check(f"resolve-formation-d-complete{suffix}", _digest(res, tmp_path))
 
 
-def test_run_images_outputs_unchanged(sceaux_small, tmp_path):
+@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+def test_run_images_outputs_unchanged(resolution, sceaux_small, tmp_path):
     out = tmp_path / "sceaux-ring2"
     assert main(["run-images", str(sceaux_small), "--graph", "ring2", "--max-size", "640",
-                 "--no-rerun", "--out", str(out)]) == 0
-    _check("run-images-sceaux4-ring2", _digest(out, tmp_path, sceaux_small))
+                 "--no-rerun", "--out", str(out), "--resolution", resolution]) == 0
+    suffix = "-paper" if resolution == "paper" else ""
+    _check(f"run-images-sceaux4-ring2{suffix}", _digest(out, tmp_path, sceaux_small))

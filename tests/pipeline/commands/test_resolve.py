@@ -16,7 +16,7 @@ def test_round_trip_fig1(tmp_path, capsys):
     src = tmp_path / "in.csv"
     src.write_text(FIG1)
     out = tmp_path / "out.csv"
-    assert main(["resolve", "--links", str(src), "--out", str(out),
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "paper",
                  "--report", str(tmp_path / "r.json")]) == 0
     printed = capsys.readouterr().out
     assert "conflictive sets: 1 before, 0 after" in printed and "deleted: 1 links" in printed
@@ -31,6 +31,20 @@ def test_round_trip_fig1(tmp_path, capsys):
     assert count_conflicts(AssociationGraph(m, kept)).conflictive_sets == 0
     assert (tmp_path / "r.json").is_file()
     assert src.read_text() == FIG1  # input untouched
+
+
+def test_evidence_cuts_the_weakest_link_of_the_cycle(tmp_path, capsys):
+    # Fig. 1 with a quality column: the link (1,0)-(2,0) has the worst Lowe ratio (0.9);
+    # Alg. 1 cuts (0,0)-(1,0) where its waves meet, the evidence rule the weak link
+    src = tmp_path / "in.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j,quality\n0,0,3,1,0.8\n0,0,1,0,0.8\n"
+                   "1,0,2,0,0.1\n3,0,2,0,0.8\n")
+    out = tmp_path / "out.csv"
+    assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
+    assert "deleted: 1 links by the evidence rule" in capsys.readouterr().out
+    back = read_run_links_csv(out)
+    assert back.status.tolist() == ["kept", "kept", "deleted", "kept"]
+    assert back.reason.tolist() == ["", "", "resolution", ""]
 
 
 def test_comm_graph_file(tmp_path):

@@ -40,6 +40,26 @@ def test_conflicts_found_and_resolved(small_run):
     assert sum(r["deleted_by_case"].values()) == r["deleted_links"]
 
 
+def test_resolution_quality_recounts_from_links_csv(small_run):
+    _, report, rows = small_run
+    q = report["resolution_quality"]
+    assert report["resolution"]["method"] == "evidence"
+    assert list(q) == ["paper", "evidence", "drop_conflictive_sets", "keep_first_per_image",
+                       "quality_merge", "oracle"]
+    # the run's own method: what its consistency stage cut, read back from links.csv
+    cut = [r for r in rows if r["reason"] == "resolution"]
+    assert q["evidence"]["good_cut"] == sum(r["truth"] == "1" for r in cut)
+    assert q["evidence"]["spurious_cut"] == sum(r["truth"] == "0" for r in cut)
+    spurious_in = q["oracle"]["spurious_in_sets"]
+    assert spurious_in > 0 and q["oracle"]["spurious_left"] == 0
+    for name, s in q.items():
+        assert s["spurious_in_sets"] == spurious_in, name
+        assert 0 <= s["spurious_left"] <= spurious_in <= s["spurious_left"] + s["spurious_cut"]
+        # nobody cuts fewer good links than the oracle while leaving no spurious link
+        assert s["good_cut"] >= q["oracle"]["good_cut"] or s["spurious_left"] > 0, name
+    assert q["evidence"]["pairwise_f1"] == report["pairwise"]["after_resolution"]["f1"]
+
+
 def test_report_equals_recount_from_links_csv(small_run):
     _, report, rows = small_run
     assert list(rows[0]) == ["cam_i", "feat_i", "cam_j", "feat_j", "status", "reason", "round",

@@ -1,0 +1,396 @@
+"""Evidence-aware decentralized resolution of conflictive sets (alternative to Alg. 1).
+
+The detection of Sec. III (Aragüés et al.) leaves every robot of a conflictive set ``C`` with
+the list of its features (the row ``X_i·(t_i)`` of any conflictive feature). The paper's
+Alg. 1 then cuts where breadth-first waves from the root meet, ignoring which links are
+likely wrong. Here the robots of ``C`` instead agree on the cut by *flooding and solving*:
+
+1. **Flood** (rounds ``1 … diam(C)``). Every robot sends, for each of its features in ``C``,
+   a *bundle*: the feature's id, its keypoint, its alive links in ``C`` with each link's local
+   evidence weight (:mod:`pipeline.link_evidence`, held by both ends of the link since
+   matching), and, where its pose is known, its projection matrix ``P = K [R | t]``. Bundles
+   go to the neighbours it shares a link of ``C`` with; a robot forwards each bundle it
+   receives for the first time to those neighbours. A bundle travels one robot-hop per round,
+   and two robots of ``C`` are never more hops apart than two of its features, so every robot
+   of ``C`` holds every bundle after ``diam(C) ≤ d`` rounds (``d`` the diameter of the
+   association graph, Cor. 3.6).
+2. **Solve** (no messages). A robot knows it holds the whole set when it has a bundle for every
+   feature of the row ``X_i·(t_i)``; it then runs :func:`evidence_cut` — a deterministic
+   function of the set's bundles only — and deletes its own side of every link the solution
+   cuts. All robots of ``C`` solve the same problem on the same data, so both ends of every
+   link decide alike: deletions are symmetric without reject messages.
+
+:func:`evidence_cut` is a Kruskal merge (the QuickMatch idea of a consistent merge) in order
+of decreasing evidence: a link's weight is its local log-likelihood ratio plus
+:data:`TRIANGLE_WEIGHT` per *third camera* in which both its ends match one common feature
+(triangle support, computed from the set's links). Two clusters merge only if they share no
+camera (Def. 2.4) and, when every camera of the set has a known pose, if the point
+triangulated (linear DLT) from all their observations lies in front of every camera and
+reprojects within :data:`REPROJECTION_TOL_PX` of each (the inlier test of robust fusion, on
+the merged track). A link is kept iff its two ends end in one cluster. Hence:
+
+* conflict-free at the end (no cluster holds two features of one camera; every kept link lies
+  inside a cluster), after one pass — the next detection finds nothing;
+* nothing cut outside conflictive sets (only robots of a set take part, only set links cut);
+* a stated round bound: ``diam(C) ≤ d`` rounds to flood, plus one round in which the last
+  forwarded copies (redundant) are delivered;
+* the one rule: a robot reads its own state and its inbox only; :func:`evidence_cut` sees
+  only the bundles the robot received.
+
+Stated choices: ties in weight are broken by the smaller link ``(min gid, max gid)``; the
+weight of a link is the one its bundles carry (both ends hold the same value); a robot whose
+pose is unknown sends no ``P`` and the geometric test is then skipped for the whole set.
+
+Payload of a ``bundle`` message (counted at ``nbytes``): ``set`` (F,) int64 set labels,
+``feat`` (F,) int64 feature ids, ``kp`` (F, 2) float32, ``deg`` (F,) int32, ``nbr`` (D,) int64
+the other ends, ``w`` (D,) float64, ``cam`` (F,) int32 and ``P`` (F, 3, 4) float64 (only with
+known poses).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+
+from pipeline.consistency.robot import Robot
+from pipeline.transport import Message, Transport
+
+__all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_evidence",
+           "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
+           "CASE_EVIDENCE"]
+
+Send = Callable[[int, str, dict], None]
+
+#: deletion-log code of a link cut by the evidence rule (next to Alg. 1's b, c in robot.py)
+CASE_EVIDENCE = 5
+#: log-likelihood ratio added per third camera supporting a link (a triangle of links): a good
+#: link's point is matched in a third camera about half the time, two ends of a spurious link
+#: meet one common feature in a third camera rarely (≲ 1 in 20): log(0.5 / 0.05) ≈ 2.3
+TRIANGLE_WEIGHT = float(np.log(10.0))
+#: largest reprojection error (pixels) of a merged track's observations; the tolerance at which
+#: two observations count as one point
+REPROJECTION_TOL_PX = 2.0
+
+
+@dataclass
+class EvidenceState:
+    """What a robot holds for the evidence rule.
+
+    Attributes
+    ----------
+    link_weight : ndarray, (L_i,) float64 — local evidence of each row of the link table
+    keypoints : ndarray, (m_i, 2) float32
+    projection : ndarray (3, 4) float64 or None — ``K [R | t]`` when the pose is known
+    bundles : dict ``set label -> {feature gid -> (kp (2,), nbr (k,), w (k,), cam, P)}``
+    solved : set of set labels already solved
+    set_members : dict ``set label -> (F,) int64`` the features of the set (from ``X``)
+    set_nbrs : dict ``set label -> sorted list of robots`` sharing a link of the set
+    """
+
+    link_weight: np.ndarray
+    keypoints: np.ndarray
+    projection: np.ndarray | None
+    bundles: dict = field(default_factory=dict)
+    solved: set = field(default_factory=set)
+    set_members: dict = field(default_factory=dict)
+    set_nbrs: dict = field(default_factory=dict)
+
+    def nbytes(self) -> int:
+        total = self.link_weight.nbytes + self.keypoints.nbytes
+        for per_set in self.bundles.values():
+            for kp, nbr, w, _, P in per_set.values():
+                total += kp.nbytes + nbr.nbytes + w.nbytes + 12 + (P.nbytes if P is not None else 0)
+        return int(total + sum(m.nbytes for m in self.set_members.values()))
+
+
+def equip(robot: Robot, link_weight, keypoints, projection) -> None:
+    """Give a robot its own evidence: weights of its link table rows, keypoints, projection."""
+    robot.evidence = EvidenceState(np.asarray(link_weight, dtype=np.float64),
+                                   np.asarray(keypoints, dtype=np.float32).reshape(-1, 2),
+                                   None if projection is None else
+                                   np.asarray(projection, dtype=np.float64).reshape(3, 4))
+
+
+# --------------------------------------------------------------------------- the set's solution
+
+
+def triangle_support(a: np.ndarray, b: np.ndarray, cam_of) -> np.ndarray:
+    """Number of third cameras in which both ends of each link match one common feature.
+
+    Parameters
+    ----------
+    a, b : ndarray, (E,) int — link ends (feature ids), each link once
+    cam_of : callable ``(k,) ids -> (k,) cameras``
+
+    Returns
+    -------
+    ndarray, (E,) int64
+    """
+    if a.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
+    ia, ib = inv[:a.size], inv[a.size:]
+    nbrs: list[set] = [set() for _ in range(nodes.size)]
+    for x, y in zip(ia.tolist(), ib.tolist(), strict=True):
+        nbrs[x].add(y)
+        nbrs[y].add(x)
+    cams = cam_of(nodes)
+    return np.array([len({int(cams[c]) for c in nbrs[x] & nbrs[y]})
+                     for x, y in zip(ia.tolist(), ib.tolist(), strict=True)], dtype=np.int64)
+
+
+def _consistent(members: list[int], kp: dict, P: dict, tol: float) -> bool:
+    """DLT point of the observations ``members`` in front of all and within ``tol`` px."""
+    A = np.empty((2 * len(members), 4))
+    for k, g in enumerate(members):
+        x, y = kp[g]
+        Pg = P[g]
+        A[2 * k] = x * Pg[2] - Pg[0]
+        A[2 * k + 1] = y * Pg[2] - Pg[1]
+    X = np.linalg.svd(A)[2][-1]
+    if abs(X[3]) < 1e-12:
+        return False
+    X = X / X[3]
+    for g in members:
+        p = P[g] @ X
+        if p[2] <= 0 or np.hypot(p[0] / p[2] - kp[g][0], p[1] / p[2] - kp[g][1]) > tol:
+            return False
+    return True
+
+
+def evidence_cut(a, b, cam_a, cam_b, weight, keypoints: dict | None = None,
+                 projections: dict | None = None,
+                 tol_px: float = REPROJECTION_TOL_PX) -> np.ndarray:
+    """Cut mask ``(E,)`` of one conflictive set: Kruskal merge by decreasing evidence.
+
+    Parameters
+    ----------
+    a, b : array_like, (E,) int — link ends (feature ids), each link once
+    cam_a, cam_b : array_like, (E,) int — their cameras
+    weight : array_like, (E,) float — evidence (log-likelihood ratio, triangle support included)
+    keypoints, projections : dict ``feature id -> (2,)`` and ``-> (3, 4)`` or None
+        Observations and projection matrices; ``None`` skips the geometric test.
+    tol_px : float — reprojection tolerance of a merged track
+
+    Returns
+    -------
+    cut : ndarray, (E,) bool — after it, no two features of one camera are connected
+
+    Notes
+    -----
+    ``O(E log E)`` plus one ``(2k × 4)`` SVD per attempted merge of ``k`` observations.
+    Deterministic: order by ``(-weight, a, b)``.
+    """
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    weight = np.asarray(weight, dtype=np.float64)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((hi, lo, -weight))
+    parent: dict[int, int] = {}
+    cams: dict[int, int] = {}
+    members: dict[int, list[int]] = {}
+
+    def find(x: int) -> int:
+        root = x
+        while parent.get(root, root) != root:
+            root = parent[root]
+        while parent.get(x, x) != root:
+            parent[x], x = root, parent[x]
+        return root
+
+    geometric = keypoints is not None and projections is not None
+    cut = np.zeros(a.size, dtype=bool)
+    ca, cb = np.asarray(cam_a).tolist(), np.asarray(cam_b).tolist()
+    al, bl = a.tolist(), b.tolist()
+    for k in order.tolist():
+        ra, rb = find(al[k]), find(bl[k])
+        if ra == rb:
+            continue
+        sa, sb = cams.get(ra, 1 << ca[k]), cams.get(rb, 1 << cb[k])
+        if sa & sb:  # Def. 2.4: the merged cluster would hold two features of one camera
+            cut[k] = True
+            continue
+        ma, mb = members.get(ra, [ra]), members.get(rb, [rb])
+        if geometric and not _consistent(ma + mb, keypoints, projections, tol_px):
+            cut[k] = True
+            continue
+        parent[rb] = ra
+        cams[ra] = sa | sb
+        members[ra] = ma + mb
+        members.pop(rb, None)
+    # a link cut earlier whose ends were joined later by other links lies inside a cluster
+    roots_a = np.array([find(x) for x in al], dtype=np.int64)
+    roots_b = np.array([find(x) for x in bl], dtype=np.int64)
+    return cut & (roots_a != roots_b)
+
+
+# --------------------------------------------------------------------------- the robots' rule
+
+
+def _my_set_links(robot: Robot) -> dict:
+    """``label -> link table rows`` of alive links from this robot's conflictive features."""
+    out = {}
+    sel = robot.link_alive & robot.conflictive[robot.link_r]
+    idx = np.flatnonzero(sel)
+    labels = robot.set_label[robot.link_r[idx]]
+    for lab in np.unique(labels).tolist():
+        out[int(lab)] = idx[labels == lab]
+    return out
+
+
+def start_evidence(robot: Robot, send: Send) -> int:
+    """Round 0: bundle every own conflictive feature and send it to the set neighbours.
+
+    Returns the number of conflictive sets this robot takes part in.
+    """
+    st: EvidenceState = robot.evidence
+    st.bundles, st.solved, st.set_members, st.set_nbrs = {}, set(), {}, {}
+    per_set = _my_set_links(robot)
+    out: dict[int, list] = {}
+    for lab, rows in per_set.items():
+        feats = np.unique(robot.link_r[rows])
+        st.set_members[lab] = robot.X[feats[0]].indices.astype(np.int64)  # the set (Sec. III)
+        st.set_nbrs[lab] = sorted(set(robot.link_nbr[rows].tolist()))
+        st.bundles[lab] = {}
+        for r in feats.tolist():
+            mine = rows[robot.link_r[rows] == r]
+            other = robot.offsets[robot.link_nbr[mine]] + robot.link_s[mine]
+            st.bundles[lab][robot.gid0 + r] = (st.keypoints[r].copy(), other.astype(np.int64),
+                                               st.link_weight[mine].copy(), robot.id,
+                                               st.projection)
+        new = list(st.bundles[lab])
+        for j in st.set_nbrs[lab]:
+            out.setdefault(j, []).extend((lab, g) for g in new)
+    _send_bundles(robot, out, send)
+    robot.measure_memory()
+    robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
+    return len(per_set)
+
+
+def _send_bundles(robot: Robot, out: dict, send: Send) -> None:
+    st: EvidenceState = robot.evidence
+    for j in sorted(out):
+        items = out[j]
+        if not items:
+            continue
+        lab = np.array([x for x, _ in items], dtype=np.int64)
+        feat = np.array([g for _, g in items], dtype=np.int64)
+        bund = [st.bundles[x][g] for x, g in items]
+        payload = {"set": lab, "feat": feat,
+                   "kp": np.stack([bb[0] for bb in bund]).astype(np.float32),
+                   "deg": np.array([bb[1].size for bb in bund], dtype=np.int32),
+                   "nbr": np.concatenate([bb[1] for bb in bund]).astype(np.int64),
+                   "w": np.concatenate([bb[2] for bb in bund]).astype(np.float64),
+                   "cam": np.array([bb[3] for bb in bund], dtype=np.int32)}
+        if all(bb[4] is not None for bb in bund):
+            payload["P"] = np.stack([bb[4] for bb in bund]).astype(np.float64)
+        send(j, "bundle", payload)
+
+
+def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
+    """One round: keep the new bundles, forward them, solve every set now complete."""
+    st: EvidenceState = robot.evidence
+    out: dict[int, list] = {}
+    for msg in inbox:
+        if msg.kind != "bundle":
+            continue
+        p = msg.payload
+        ends = np.r_[0, np.cumsum(p["deg"])]
+        for k, (lab, g) in enumerate(zip(p["set"].tolist(), p["feat"].tolist(), strict=True)):
+            have = st.bundles.get(lab)
+            if have is None or g in have:
+                continue
+            have[g] = (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]], p["w"][ends[k]:ends[k + 1]],
+                       int(p["cam"][k]), p["P"][k] if "P" in p else None)
+            for j in st.set_nbrs[lab]:
+                if j != msg.src:
+                    out.setdefault(j, []).append((lab, g))
+    _send_bundles(robot, out, send)
+    for lab, have in st.bundles.items():
+        if lab in st.solved or len(have) < st.set_members[lab].size:
+            continue
+        st.solved.add(lab)
+        _solve_and_cut(robot, lab, round_)
+    robot.measure_memory()
+    robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
+
+
+def set_problem(bundles: dict) -> tuple:
+    """The set's links (each once) with their weights and the geometric data, from bundles.
+
+    Returns ``(a, b, cam_a, cam_b, weight, keypoints, projections)``; ``keypoints`` and
+    ``projections`` are ``None`` unless every bundle carries a projection.
+    """
+    cam = {g: bb[3] for g, bb in bundles.items()}
+    a = np.concatenate([np.full(bb[1].size, g, dtype=np.int64) for g, bb in bundles.items()])
+    b = np.concatenate([bb[1] for bb in bundles.values()])
+    w = np.concatenate([bb[2] for bb in bundles.values()])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key, first = np.unique(np.stack([lo, hi], axis=1), axis=0, return_index=True)
+    a, b, w = key[:, 0], key[:, 1], w[first]
+    cam_a = np.array([cam[g] for g in a.tolist()], dtype=np.int64)
+    cam_b = np.array([cam[g] for g in b.tolist()], dtype=np.int64)
+
+    def cam_of(ids):
+        return np.array([cam[int(g)] for g in ids], dtype=np.int64)
+
+    w = w + TRIANGLE_WEIGHT * triangle_support(a, b, cam_of)
+    if all(bb[4] is not None for bb in bundles.values()):
+        kp = {g: bb[0].astype(np.float64) for g, bb in bundles.items()}
+        P = {g: bb[4] for g, bb in bundles.items()}
+    else:
+        kp = P = None
+    return a, b, cam_a, cam_b, w, kp, P
+
+
+def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
+    st: EvidenceState = robot.evidence
+    a, b, cam_a, cam_b, w, kp, P = set_problem(st.bundles[lab])
+    cut = evidence_cut(a, b, cam_a, cam_b, w, kp, P)
+    mine = (cam_a == robot.id) | (cam_b == robot.id)
+    sel = cut & mine
+    if not sel.any():
+        return
+    own = np.where(cam_a[sel] == robot.id, a[sel], b[sel]) - robot.gid0
+    other = np.where(cam_a[sel] == robot.id, b[sel], a[sel])
+    other_cam = np.where(cam_a[sel] == robot.id, cam_b[sel], cam_a[sel])
+    link = robot.find_links(other_cam, other - robot.offsets[other_cam])
+    ok = link >= 0
+    ok[ok] = robot.link_r[link[ok]] == own[ok]
+    fresh = link[ok][robot.link_alive[link[ok]]]
+    robot.link_alive[fresh] = False
+    robot.deleted_round[fresh] = round_
+    robot.deleted_case[fresh] = CASE_EVIDENCE
+    robot.deleted_iteration[fresh] = robot.iteration
+
+
+def run_evidence_resolution(robots: list[Robot], network: Transport,
+                            max_rounds: int | None = None) -> dict:
+    """One flood-and-solve pass on all robots (the driver only plays the clock).
+
+    Returns ``rounds`` and ``conflictive_sets`` (sets, counted at their smallest robot).
+    """
+    sends = [partial(network.send, rb.id) for rb in robots]
+    touched = [start_evidence(rb, sends[rb.id]) for rb in robots]
+    cap = max_rounds if max_rounds is not None else len(robots) + 2
+    t = 0
+    while network.pending:
+        network.end_round()
+        t += 1
+        for rb in robots:
+            evidence_step(rb, network.inbox(rb.id), sends[rb.id], t)
+        if t > cap:
+            raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
+    unsolved = [rb.id for rb in robots if set(rb.evidence.bundles) - rb.evidence.solved]
+    if unsolved:
+        raise RuntimeError(f"robots {unsolved} did not receive their whole conflictive set")
+    for rb in robots:
+        # the next detection examines the solved sets again and finds them conflict-free
+        rb.candidates = rb.conflictive.copy()
+    labels = set()
+    for rb in robots:
+        labels.update(rb.evidence.bundles)
+    return dict(rounds=t, conflictive_sets=len(labels), robots_in_sets=sum(1 for x in touched if x))
