@@ -192,11 +192,11 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     ------
     InputError
         Bad folder or files (:func:`pipeline.landmarks_io.load_landmark_folder`), graph
-        (:func:`pipeline.io.comm_graph`), ratio or resolution method.
+        (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
     """
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.commgraph import comm_graph
     from pipeline.consistency import centralized
-    from pipeline.io import comm_graph
     from pipeline.landmark_matching import match_landmark_edges
     from pipeline.landmarks_io import load_landmark_folder
     from pipeline.linkscsv import write_links_csv

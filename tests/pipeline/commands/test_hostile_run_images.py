@@ -11,8 +11,9 @@ import pytest
 from PIL import Image
 
 from pipeline.__main__ import main
+from pipeline.commgraph import comm_graph
 from pipeline.errors import InputError
-from pipeline.io import comm_graph, exif_focal_px, load_folder
+from pipeline.io import exif_focal_px, load_folder
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hostile import tree  # noqa: E402
