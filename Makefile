@@ -26,16 +26,21 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(PY) -m ruff check pipeline data_synth viz tests bench
 
+# make bench: every bench script, about 15-25 min on 2 cores; make bench QUICK=1: only the quick
+# ones (bench/voting.py, bench/foundation.py, bench/images_vs_colmap.py on the 640 px photos), ~5 min
+QUICK_BENCH := bench/foundation.py bench/voting.py bench/images_vs_colmap.py
 bench: $(STAMP)
-	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+	@if [ -n "$(QUICK)" ]; then set -- $(QUICK_BENCH); echo "quick bench: $$*"; \
+	else set -- bench/*.py; echo "full bench, about 15-25 min on 2 cores (make bench QUICK=1 for ~5 min)"; fi; \
+	for b in "$$@"; do echo "== $$b"; start=$$(date +%s); $(PY) $$b || exit 1; \
+	echo "== $$b took $$(( $$(date +%s) - start )) s"; done
 
 bench-voting: $(STAMP)
 	$(PY) bench/voting_table1.py && $(PY) bench/voting_fig23.py && $(PY) bench/voting_pipeline.py
 
+# make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (URL printed)
 view: $(STAMP)
-	@last=$$(ls -td runs/*/recording.rrd 2>/dev/null | head -n 1); \
-	if [ -z "$$last" ]; then echo "no recording yet: run 'make run-formation' first"; exit 1; fi; \
-	echo "opening $$last"; $(VENV)/bin/rerun "$$last"
+	$(PY) -m viz.view $(RUN)
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

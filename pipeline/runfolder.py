@@ -1,4 +1,4 @@
-"""Atomic run folders (DESIGN.md "Run outputs — a contract").
+"""Atomic run folders (docs/DESIGN.md "Run outputs — a contract").
 
 A run writes into a temporary sibling folder; only when everything is written is it renamed
 over ``runs/<name>/``. A run that fails midway leaves the previous run of that name intact.

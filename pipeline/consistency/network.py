@@ -1,4 +1,4 @@
-"""The in-process transport the robots talk through (DESIGN.md, "the one rule").
+"""The in-process transport the robots talk through (docs/DESIGN.md, "the one rule").
 
 Synchronous rounds: what a robot sends in round ``t`` is in its neighbour's inbox in round
 ``t + 1``. A robot may send only to its *current* communication neighbours; every message and
