@@ -1,6 +1,6 @@
 """Real photographs in, :class:`~pipeline.types.View` records out; the user's comm graph.
 
-This is the entry of the real-image path of DESIGN.md ("real images:
+This is the entry of the real-image path of docs/DESIGN.md ("real images:
 ``pipeline.io.load_folder(dir)``"): it replaces the renderer of ``data_synth`` when a user
 brings their own photos. The papers assume every robot knows its calibration; internet photo
 sets do not, so each image gets its own intrinsics and says whether they are known
@@ -9,7 +9,7 @@ sets do not, so each image gets its own intrinsics and says whether they are kno
 
 Conventions
 -----------
-- Images are taken in name order; camera ``i`` is the ``i``-th image (DESIGN.md "Conventions").
+- Images are taken in name order; camera ``i`` is the ``i``-th image (docs/DESIGN.md "Conventions").
 - Pixel coordinates follow OpenCV (origin at the centre of the top-left pixel). Downscaling by
   ``s`` maps ``x + 0.5 -> s (x + 0.5)``, so ``cx' = s (cx + 0.5) - 0.5`` and ``fx' = s fx``.
 - The EXIF orientation tag is not applied (as in COLMAP): pixels are used as stored, so a
@@ -46,8 +46,8 @@ log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
-#: Named comm-graph kinds accepted by :func:`comm_graph` (plus ``knn:K`` and a file).
-GRAPH_KINDS = ("ring", "ring2", "complete", "knn:K")
+#: Named comm-graph kinds accepted by :func:`comm_graph` (plus a file).
+GRAPH_KINDS = ("ring", "ring2", "complete", "seq:K", "knn:K")
 #: Focal length of the stated guess, in units of the longest image side.
 GUESS_FOCAL_FACTOR = 1.2
 #: Diagonal of the 35 mm film frame (36 x 24 mm), the reference of ``FocalLengthIn35mmFilm``.
@@ -413,7 +413,15 @@ def _knn_edges(n: int, k: int) -> np.ndarray:
     return _edges_array(np.stack([np.repeat(idx, k), nearest.reshape(-1)], axis=1))
 
 
-def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
+def _positive_k(spec: str) -> int:
+    k_text = spec.split(":", 1)[1]
+    if not k_text.isdigit() or int(k_text) < 1:
+        raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. "
+                         f"{spec.split(':', 1)[0]}:4")
+    return int(k_text)
+
+
+def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.ndarray:
     """The communication graph the user chose, as undirected edges.
 
     Parameters
@@ -422,15 +430,19 @@ def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
         - ``ring``: ``(i, i+1 mod n)``.
         - ``ring2``: ring plus the 2-hop chords ``(i, i+2 mod n)``.
         - ``complete``: every pair.
-        - ``knn:K``: each camera picks the ``K`` cameras nearest to it in name (capture)
+        - ``seq:K``: each camera picks the ``K`` cameras nearest to it in name (capture)
           order, ``|i - j|`` smallest, ties to the lower index; an edge where either picked the
           other. Not wrapped around (an ordered sequence has two ends); ``K >= n - 1`` is the
-          complete graph.
+          complete graph. For ordered sequences (video frames, numbered shots).
+        - ``knn:K``: each camera picks the ``K`` most similar images by a global descriptor
+          of its features (:func:`pipeline.retrieval.knn_edges`); needs ``features``. For
+          unordered photos, whose names say nothing.
         - a file: one edge per line, ``cam_i,cam_j`` as 0-based indices in name order or as
           image names (comma or whitespace separated; ``#`` comments, blank lines and a
           ``cam_i,cam_j`` header allowed). A token equal to an image name is that image;
           otherwise it must be an index.
     names : list[str], (n,) — image names in camera order
+    features : list[Features], (n,), optional — needed by ``knn:K`` only
 
     Returns
     -------
@@ -447,7 +459,7 @@ def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
     --------
     >>> comm_graph("ring", ["a", "b", "c", "d"]).tolist()
     [[0, 1], [0, 3], [1, 2], [2, 3]]
-    >>> comm_graph("knn:2", ["a", "b", "c", "d"]).tolist()
+    >>> comm_graph("seq:2", ["a", "b", "c", "d"]).tolist()
     [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
     """
     n = len(names)
@@ -465,11 +477,16 @@ def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
     if spec == "complete":
         i, j = np.triu_indices(n, k=1)
         return np.stack([i, j], axis=1).astype(np.int64)
+    if spec.startswith("seq:"):
+        return _knn_edges(n, min(_positive_k(spec), n - 1))
     if spec.startswith("knn:"):
-        k_text = spec[4:]
-        if not k_text.isdigit() or int(k_text) < 1:
-            raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. knn:4")
-        return _knn_edges(n, min(int(k_text), n - 1))
+        k = _positive_k(spec)
+        if features is None:
+            raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
+                             f"the images' features; use seq:K for neighbours in name order")
+        from pipeline.retrieval import knn_edges
+
+        return knn_edges(features, k)[0]
     path = Path(kind_or_file)
     if not path.is_file():
         raise InputError(

@@ -240,19 +240,19 @@ def test_named_graphs_hand_computed():
         [4, 5]]
     assert comm_graph("complete", NAMES6[:3]).tolist() == [[0, 1], [0, 2], [1, 2]]
     assert comm_graph("ring", NAMES6[:2]).tolist() == [[0, 1]]
-    # knn by name order, K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
-    assert comm_graph("knn:2", NAMES6[:5]).tolist() == [
+    # seq (neighbours in name order), K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
+    assert comm_graph("seq:2", NAMES6[:5]).tolist() == [
         [0, 1], [0, 2], [1, 2], [2, 3], [2, 4], [3, 4]]
     # K=1 ties go to the lower index: 1 picks 0, 2 picks 1, ...
-    assert comm_graph("knn:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
-    assert comm_graph("knn:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
+    assert comm_graph("seq:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
+    assert comm_graph("seq:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
 
 
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(2, 40), k=st.integers(1, 8),
-       kind=st.sampled_from(["ring", "ring2", "complete", "knn"]))
+       kind=st.sampled_from(["ring", "ring2", "complete", "seq"]))
 def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
-    spec = f"knn:{k}" if kind == "knn" else kind
+    spec = f"seq:{k}" if kind == "seq" else kind
     e = comm_graph(spec, [str(i) for i in range(n)])
     assert e.dtype == np.int64 and e.ndim == 2 and e.shape[1] == 2
     assert (e[:, 0] < e[:, 1]).all() and (e >= 0).all() and (e < n).all()
@@ -264,7 +264,7 @@ def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
         assert (deg == 2).all()
     if kind == "complete":
         assert len(e) == n * (n - 1) // 2
-    if kind == "knn":
+    if kind == "seq":
         assert (deg >= min(k, n - 1)).all()
     if kind == "ring2":
         ring = {tuple(r) for r in comm_graph("ring", [str(i) for i in range(n)]).tolist()}
@@ -297,10 +297,30 @@ def test_graph_file_errors(tmp_path, text, match):
         comm_graph(f, NAMES6)
 
 
-@pytest.mark.parametrize("spec", ["star", "knn:0", "knn:x", "knn:"])
+@pytest.mark.parametrize("spec", ["star", "knn:0", "knn:x", "knn:", "seq:0", "seq:-1"])
 def test_unknown_graph_kind(spec):
     with pytest.raises(InputError, match="graph"):
         comm_graph(spec, NAMES6)
+
+
+def test_knn_needs_features_and_says_seq_is_name_order():
+    with pytest.raises(InputError, match="image similarity.*seq:K"):
+        comm_graph("knn:2", NAMES6)
+
+
+def test_knn_uses_image_similarity_not_names():
+    from pipeline.types import Features
+
+    rng = np.random.default_rng(0)
+    scene = {g: rng.random((400, 16)).astype(np.float32) for g in (0, 1)}
+    groups = [0, 1, 0, 1, 0, 1]  # name order alternates the two scenes
+    feats = [Features(np.zeros((200, 2), np.float32),
+                      scene[g][rng.choice(400, 200, replace=False)], np.ones(200, np.float32),
+                      "sift") for g in groups]
+    e = comm_graph("knn:2", NAMES6, features=feats)
+    g = np.array(groups)
+    assert (g[e[:, 0]] == g[e[:, 1]]).all()
+    assert comm_graph("seq:1", NAMES6).tolist() == [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5]]
 
 
 def test_graph_needs_two_cameras():
