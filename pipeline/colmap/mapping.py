@@ -122,6 +122,57 @@ def write_model(path: str | Path, reconstruction=None) -> Path:
     return path
 
 
+def rescale_to_files(rec, sizes: dict[str, tuple[int, int]]) -> None:
+    """Scale a reconstruction made on downscaled images back to the image files, in place.
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction — cameras and 2D points at the size that was mapped
+    sizes : ``{image name: (width, height)}`` of the files the images were loaded from
+
+    Notes
+    -----
+    In COLMAP's pixel convention (origin at the top-left *corner*) resizing an image by
+    ``(sx, sy)`` multiplies every pixel coordinate by ``(sx, sy)``: ``Camera.rescale`` scales
+    focal lengths and principal point, each 2D point is scaled likewise. A camera shared by
+    several images is rescaled once. Poses and 3D points do not change.
+    """
+    factor: dict[int, tuple[float, float]] = {}
+    for image in rec.images.values():
+        if image.name not in sizes:
+            continue
+        W, H = (int(v) for v in sizes[image.name])
+        if image.camera_id not in factor:
+            cam = rec.cameras[image.camera_id]
+            factor[image.camera_id] = (W / cam.width, H / cam.height)
+            if (W, H) != (cam.width, cam.height):
+                cam.rescale(W, H)
+        sx, sy = factor[image.camera_id]
+        if (sx, sy) == (1.0, 1.0):
+            continue
+        for p in image.points2D:
+            xy = p.xy
+            p.xy = np.array([xy[0] * sx, xy[1] * sy])
+
+
+def write_model_for_files(path: str | Path, reconstruction, sizes: dict[str, tuple[int, int]],
+                          image_dir: str | Path) -> Path:
+    """Write ``reconstruction`` as a model folder at the resolution of its image files.
+
+    A copy is scaled (:func:`rescale_to_files`) and its points take their colours from the
+    files in ``image_dir``; ``reconstruction`` itself is left at the size it was mapped at.
+    """
+    path = write_model(path, reconstruction)
+    if reconstruction is None:
+        return path
+    full = pycolmap.Reconstruction(str(path))
+    rescale_to_files(full, sizes)
+    with quiet_colmap():
+        full.extract_colors_for_all_images(str(image_dir))
+    full.write(path)
+    return path
+
+
 def read_model(path: str | Path):
     """The ``pycolmap.Reconstruction`` of a COLMAP model folder (e.g. a run's ``sparse/``)."""
     path = Path(path)

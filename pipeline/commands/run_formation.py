@@ -47,5 +47,6 @@ def run(args) -> int:
     from pipeline.run import run_formation
 
     out = run_formation(config_from_args(args))
-    print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd)")
+    written = "report.json, links.csv, sparse/" + ("" if args.no_rerun else ", recording.rrd")
+    print(f"run written to {out}/ ({written})")
     return 0
