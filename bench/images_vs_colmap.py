@@ -31,6 +31,8 @@ Quick mode takes about 3-5 minutes on 2 cores; the 2832x2128 Sceaux photos about
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import os
 import platform
@@ -100,7 +102,7 @@ def run_colmap(images: Path, work: Path) -> dict:
 
 
 def run_ours(images: Path, work: Path, graph: str, legacy: bool) -> dict:
-    from pipeline.commands.run_images import ImagesConfig, run_images
+    from pipeline.images import ImagesConfig, run_images
     from pipeline.progress import StageTimer
 
     cfg = ImagesConfig(directory=str(images), graph=graph, out=str(work / "run"), rerun=False,
@@ -109,7 +111,8 @@ def run_ours(images: Path, work: Path, graph: str, legacy: bool) -> dict:
         cfg.max_features, cfg.contrast_threshold, cfg.rootsift = 2000, None, False
         cfg.threshold_px, cfg.budget_after_merge = 1.0, False
     t0 = time.perf_counter()
-    out = run_images(cfg, StageTimer(verbose=False))
+    with contextlib.redirect_stdout(io.StringIO()):  # the run's own report table
+        out = run_images(cfg, StageTimer(verbose=False))
     dt = time.perf_counter() - t0
     report = json.loads((out / "report.json").read_text())
     after, before = report["triangulation"]["after"], report["triangulation"]["before"]

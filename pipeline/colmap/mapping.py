@@ -96,9 +96,15 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
                 fixed = set(fixed_intrinsics)
                 options.constant_cameras = {im.camera_id for im in db.read_all_images()
                                             if im.name in fixed}
-            # COLMAP insists on an existing image folder even when it reads no pixels
-            models = pycolmap.incremental_mapping(database_path, str(image_dir or tmp), out,
-                                                  options)
+            # COLMAP insists on an existing image folder even when it reads no pixels;
+            # a progress bar counts the images as the mapper registers them
+            from pipeline.progress import progress
+
+            with progress(None, total=n_images, desc="mapping (images registered)") as bar:
+                models = pycolmap.incremental_mapping(
+                    database_path, str(image_dir or tmp), out, options,
+                    initial_image_pair_callback=lambda: bar.update(2),
+                    next_image_callback=lambda: bar.update(1))
     if not models:
         return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
     rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
