@@ -240,13 +240,25 @@ def test_few_registered_images_are_flagged_in_report_and_on_stderr(tmp_path, sce
     graph = tmp_path / "g.txt"
     graph.write_text("0,1\n2,3\n4,5\n")
     out = tmp_path / "run"
-    assert main(["run-images", str(d), "--graph", str(graph), "--no-rerun", "--no-fusion",
+    assert main(["run-images", str(d), "--graph", str(graph), "--no-rerun",
                  "--out", str(out)]) == 0
     err = capsys.readouterr().err
     report = json.loads((out / "report.json").read_text())
     flags = {f["flag"]: f for f in report["flags"]}
     assert "few-registered" in flags and "3 groups" in flags["few-registered"]["likely_cause"]
     assert "registered only" in err and "3 groups" in err
+    # fusion never runs on a camera whose pose is unknown: no fusion cut touches one
+    registered = set(report["triangulation"]["before"]["registered_names"])
+    unposed = {k for k, im in enumerate(report["images"]) if im["name"] not in registered}
+    assert unposed
+    with open(out / "links.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["reason"] == "fusion-outlier":
+                assert int(r["cam_i"]) not in unposed and int(r["cam_j"]) not in unposed
+    fusion = report["fusion"]
+    if fusion["enabled"]:
+        assert set(fusion["cameras_without_pose"]) == {report["images"][k]["name"]
+                                                       for k in unposed}
 
 
 def test_sparse_is_at_the_resolution_of_the_files_with_one_shared_camera(tmp_path, sceaux_small):
@@ -276,3 +288,27 @@ def test_no_rerun_does_not_announce_a_recording(tmp_path, sceaux_small, capsys):
     printed = capsys.readouterr().out
     assert "run written to" in printed and "recording.rrd" not in printed.splitlines()[-1]
     assert not (out / "recording.rrd").exists()
+
+
+def test_internet_style_photos_register_at_the_defaults(tmp_path, sceaux_small):
+    """Shuffled random names, no K.txt, no EXIF: knn:2 by image similarity and the photo
+    defaults register every image; the similarity graph is connected although the names are
+    in random order."""
+    from PIL import Image
+
+    d = tmp_path / "internet"
+    d.mkdir()
+    rng = np.random.default_rng(7)
+    names = sorted(p.name for p in sceaux_small.glob("*.JPG"))
+    for name, new in zip(names, rng.permutation(len(names)), strict=True):
+        with Image.open(sceaux_small / name) as im:
+            Image.frombytes(im.mode, im.size, im.tobytes()).save(d / f"{9000 + new * 37}.png")
+    out = tmp_path / "run"
+    assert main(["run-images", str(d), "--graph", "knn:2", "--no-rerun", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert {im["intrinsics_source"] for im in report["images"]} == {"guess"}
+    assert report["triangulation"]["before"]["registered_images"] == 4
+    assert report["triangulation"]["after"]["registered_images"] == 4
+    assert report["flags"] == []
+    # the feature budget scaled with the 640x481 images: 2000, not the old cap's ~1600 left
+    assert min(report["features_per_camera"]) > 1800
