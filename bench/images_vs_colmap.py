@@ -25,7 +25,9 @@ cleaning beside it. Prints a markdown table and writes ``runs/bench-images/resul
     python bench/images_vs_colmap.py                       # quick: the 640 px Sceaux copy
     python bench/images_vs_colmap.py DIR [DIR ...]         # e.g. the full-size photos
 
-Quick mode takes about 3-5 minutes on 2 cores; the 2832x2128 Sceaux photos about 20-30.
+Measured on 2 cores: the quick default about 65 s; the 2832x2128 Sceaux photos (both inputs,
+every method) about 25 min while the cores were shared, of which COLMAP's feature extraction
+is the largest part.
 """
 
 from __future__ import annotations
