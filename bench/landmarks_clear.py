@@ -7,7 +7,7 @@ matching of the shape contexts (χ²) of all 101 frames, complete graph: input p
 CLEAR's figures, not ours; this script runs what we can run ourselves on the same inputs.
 
 For 20 frames (stride 5: frames 0, 5, …, 95 — the subset whose input F1 is CLEAR's 0.910)
-and all 101 frames, on the complete graph, a ring and ``knn:4`` (each frame with its 4
+and all 101 frames, on the complete graph, a ring and ``seq:4`` (each frame with its 4
 nearest in sequence order): ``run-landmarks`` on the ungated Hungarian matches (CLEAR's
 input) with each resolution method, in the configurations ``--configs``
 ``REFINE:RATIO:GEOMETRY`` (default ``votes:none:epipolar`` = the default run: guided
@@ -21,7 +21,7 @@ implied by the closure of the kept links, against the labels.
 Prints a table; saves ``runs/bench-landmarks/results.json`` (one record per run).
 
 Usage: ``.venv/bin/python bench/landmarks_clear.py [--data DIR] [--frames 20 101] [--configs ...]
-[--graphs complete ring knn:4] [--quick]`` (``--quick``: 20 frames only).
+[--graphs complete ring seq:4] [--quick]`` (``--quick``: 20 frames only).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
-    ap.add_argument("--graphs", nargs="+", default=["complete", "ring", "knn:4"])
+    ap.add_argument("--graphs", nargs="+", default=["complete", "ring", "seq:4"])
     ap.add_argument("--configs", nargs="+",
                     default=["votes:none:epipolar", "votes:none:none", "none:none:none"],
                     help="REFINE:RATIO:GEOMETRY[:PX] (refine votes|none, ratio none|R, geometry "

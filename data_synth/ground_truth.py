@@ -1,6 +1,6 @@
 """Ground truth for rendered formations: 3D points of keypoints, good links, true pairs.
 
-Implements DESIGN.md's definitions (synthetic data only), which give the paper's Table I rows
+Implements the definitions of docs/DESIGN.md (synthetic data only), which give the paper's Table I rows
 "good links", "spurious links" and "missing links" (Aragüés et al., Sec. V-A) for the image
 experiment of Sec. V-B, where the paper itself had no ground truth:
 
@@ -152,7 +152,7 @@ def reprojection_errors(formation, i: int, xy_i, j: int, xy_j) -> np.ndarray:
 
 
 def good_links(formation, cam_i: int, xy_i, cam_j: int, xy_j, tol_px: float = 2.0) -> np.ndarray:
-    """Which keypoint pairs are good links (DESIGN.md), ``(M,)`` bool.
+    """Which keypoint pairs are good links (docs/DESIGN.md), ``(M,)`` bool.
 
     Parameters
     ----------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Iterable
 
@@ -28,6 +29,7 @@ COMMANDS = {
     "clean-db": ("clean_db", "remove inconsistent matches from a COLMAP database"),
     "run-landmarks": ("run_landmarks", "labelled-landmark benchmark (e.g. CMU hotel): match, "
                       "resolve, score pairwise against the labels"),
+    "clean-h5": ("clean_h5", "remove inconsistent matches from hloc's features.h5/matches.h5"),
 }
 
 
@@ -41,19 +43,52 @@ def _command_module(module: str):
         return None
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time of each message."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value):
+        pass
+
+
+def configure_logging(quiet: bool = False) -> None:
+    """Messages of the ``pipeline`` loggers go to stderr as plain lines; ``quiet`` keeps only
+    warnings and errors (and turns progress bars off, see :mod:`pipeline.progress`)."""
+    log = logging.getLogger("pipeline")
+    if not any(getattr(h, "_formation_match", False) for h in log.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        handler._formation_match = True
+        log.addHandler(handler)
+        log.propagate = False
+    log.setLevel(logging.WARNING if quiet else logging.INFO)
+
+
 def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser; the arguments of ``commands`` (default: all) are defined.
 
     The other commands are listed with their help line only, which is all the top-level
     ``--help`` shows; defining a command's arguments imports its module.
     """
+    from pipeline import __version__
+
     full = set(COMMANDS) if commands is None else set(commands)
     parser = argparse.ArgumentParser(
-        prog="python -m pipeline",
-        description="formation-match: consistent decentralized multi-camera data association.")
+        prog="formation-match",
+        description="formation-match: consistent decentralized multi-camera data association. "
+                    "Also run as 'python -m pipeline'.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    quiet = argparse.ArgumentParser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true",
+                       help="print only warnings, errors and the final result (no stage lines, "
+                            "no progress bars)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module, help_text) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        p = sub.add_parser(name, help=help_text, description=help_text, parents=[quiet])
         p.set_defaults(_module=module)
         if name not in full:
             continue
@@ -68,7 +103,7 @@ def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentPars
 def _requested_command(argv: list[str]) -> str | None:
     """The command named on the command line (the first positional argument), if any.
 
-    The top-level parser has no options besides ``-h``, so the first argument that is not an
+    The top-level parser's only options (``-h``, ``--version``) take no value, so the first argument that is not an
     option is the command; a ``-h`` before it asks for the top-level help.
     """
     for arg in argv:
@@ -84,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     command = _requested_command(argv)
     parser = build_parser([command] if command else [])
     args = parser.parse_args(argv)
+    configure_logging(quiet=bool(getattr(args, "quiet", False)))
     if getattr(args, "_missing", False):
         parser.error(f"command {args.command!r} is not available in this build")
     mod = importlib.import_module(f"pipeline.commands.{args._module}")

@@ -7,8 +7,9 @@ gets it from here:
 
 * :func:`graph_edges` — the named kinds ``line``, ``ring``, ``ring2``, ``complete``,
   ``ring+triangles`` (formation b of the paper's Fig. 4), ``geometric`` (needs positions) and
-  ``knn:K``;
-* :func:`comm_graph` — a kind or a file, for a set of named images (``run-images``);
+  ``seq:K``;
+* :func:`comm_graph` — a kind or a file, for a set of named images (``run-images``), plus
+  ``knn:K`` (neighbours by image similarity, :mod:`pipeline.retrieval`);
 * :func:`read_comm_graph` — the one file reader (indices, or image names when given);
 * :func:`check_comm_edges` — the one checker of an edge array;
 * :func:`comm_edges_for` — the checked graph of the consistency stage, with every link on an
@@ -21,8 +22,10 @@ kinds are built from their rule and then reduced to that form (self-loops droppe
 once), which fixes the small cases: ``ring`` is ``(i, i + 1 mod n)`` — no edge for
 ``n = 1``, the single edge for ``n = 2``, the triangle for ``n = 3``; ``ring2`` adds
 ``(i, i + 2 mod n)`` and is the complete graph for ``n <= 4``; ``ring+triangles`` adds
-``(k, k + 2)`` for ``k ≡ 0 mod 3``, ``k + 2 < n``; ``knn:K`` links each camera to the ``K``
-cameras nearest in index (capture) order, ties to the lower index, not wrapped; ``geometric``
+``(k, k + 2)`` for ``k ≡ 0 mod 3``, ``k + 2 < n``; ``seq:K`` links each camera to the ``K``
+cameras nearest in index (capture) order, ties to the lower index, not wrapped (for ordered
+sequences); ``knn:K`` links each image to its ``K`` most similar images by a global descriptor
+of its features (for unordered photos, whose names say nothing); ``geometric``
 links robots closer than a radius drawn from the seed between 1.0 and 2.5 times the smallest
 radius that keeps the graph connected.
 
@@ -53,9 +56,9 @@ from pipeline.linkscsv import MAX_ID
 __all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "links_off_graph", "edge_set"]
 
-#: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``knn:K``).
+#: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``seq:K``).
 GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
-_ALL_KINDS = GRAPH_KINDS + ("ring+triangles", "knn:K")
+_ALL_KINDS = GRAPH_KINDS + ("ring+triangles", "seq:K")
 
 
 # ---------------------------------------------------------------------------------- kinds
@@ -67,7 +70,7 @@ def edge_set(pairs) -> np.ndarray:
     return np.unique(e, axis=0).reshape(-1, 2)
 
 
-def _knn_edges(n: int, k: int) -> np.ndarray:
+def _seq_edges(n: int, k: int) -> np.ndarray:
     """Each camera linked to its ``k`` nearest cameras in index order (union of choices)."""
     idx = np.arange(n)
     dist = np.abs(idx[:, None] - idx[None, :]).astype(np.float64)
@@ -85,7 +88,7 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
     ----------
     kind : str
         ``line``, ``ring``, ``ring2``, ``complete``, ``ring+triangles``, ``geometric`` or
-        ``knn:K`` (``K`` a positive integer).
+        ``seq:K`` (``K`` a positive integer).
     n : int
     centres : ndarray, (n, >= 2), optional — robot positions, needed by ``geometric``
     seed : int — draws the radius of ``geometric``
@@ -103,7 +106,7 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
     --------
     >>> graph_edges("ring", 4).tolist()
     [[0, 1], [0, 3], [1, 2], [2, 3]]
-    >>> graph_edges("knn:2", 4).tolist()
+    >>> graph_edges("seq:2", 4).tolist()
     [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
     >>> graph_edges("ring", 2).tolist(), graph_edges("ring", 1).tolist()
     ([[0, 1]], [])
@@ -129,25 +132,33 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
         r_conn = float(minimum_spanning_tree(D).toarray().max())
         r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 2.5)
         e = np.stack(np.nonzero(np.triu(D <= r + 1e-9, k=1)), axis=1)
-    elif kind.startswith("knn:"):
-        k_text = kind[4:]
-        if not k_text.isdigit() or int(k_text) < 1:
-            raise InputError(f"graph {kind!r}: K must be a positive integer, e.g. knn:4")
-        return _knn_edges(n, min(int(k_text), max(n - 1, 0)))
+    elif kind.startswith("seq:"):
+        return _seq_edges(n, min(_positive_k(kind), max(n - 1, 0)))
     else:
         raise InputError(f"unknown graph kind {kind!r}; choose one of {', '.join(_ALL_KINDS)}")
     return edge_set(e)
 
 
-def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
+def _positive_k(spec: str) -> int:
+    k_text = spec.split(":", 1)[1]
+    if not k_text.isdigit() or int(k_text) < 1:
+        raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. "
+                         f"{spec.split(':', 1)[0]}:4")
+    return int(k_text)
+
+
+def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
 
     Parameters
     ----------
     kind_or_file : str or Path
-        A kind of :func:`graph_edges` other than ``geometric`` (images have no positions), or
-        a file of :func:`read_comm_graph` (indices in name order or image names).
+        A kind of :func:`graph_edges` other than ``geometric`` (images have no positions);
+        ``knn:K``: each image picks the ``K`` most similar images by a global descriptor of
+        its features (:func:`pipeline.retrieval.knn_edges`), for unordered photos; or a file
+        of :func:`read_comm_graph` (indices in name order or image names).
     names : list[str], (n,) — image names in camera order
+    features : list[Features], (n,), optional — needed by ``knn:K`` only
 
     Returns
     -------
@@ -168,11 +179,19 @@ def comm_graph(kind_or_file: str | Path, names: list[str]) -> np.ndarray:
     if n < 2:
         raise InputError(f"a comm graph needs at least two cameras, got {n}")
     spec = str(kind_or_file)
-    if spec in _ALL_KINDS and spec not in ("geometric", "knn:K") or spec.startswith("knn:"):
+    if spec in _ALL_KINDS and spec not in ("geometric", "seq:K") or spec.startswith("seq:"):
         return graph_edges(spec, n)
+    if spec.startswith("knn:"):
+        k = _positive_k(spec)
+        if features is None:
+            raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
+                             f"the images' features; use seq:K for neighbours in name order")
+        from pipeline.retrieval import knn_edges
+
+        return knn_edges(features, k)[0]
     path = Path(kind_or_file)
     if not path.is_file():
-        kinds = ", ".join(k for k in _ALL_KINDS if k != "geometric")
+        kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"] + ["knn:K"])
         raise InputError(
             f"graph {spec!r}: not one of {kinds} and no such file; give a kind "
             f"or a file of 'cam_i,cam_j' lines (indices or image names)")

@@ -4,7 +4,7 @@ The rows "good links", "spurious links" and "missing links" of the paper's Table
 (Aragüés et al., Sec. V-A: true positives, false positives and false negatives of the local
 associations) for the synthetic formations, where the truth is known from depth:
 
-- a *good link* joins two keypoints that image the same surface point (DESIGN.md: the 3D point
+- a *good link* joins two keypoints that image the same surface point (docs/DESIGN.md: the 3D point
   of one reprojects within ``tol_px`` of the other, visible in both — depth test);
 - a *spurious link* is any other link;
 - a *missing link* is a true pair between detected keypoints on a communication edge that the

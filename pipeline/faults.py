@@ -1,6 +1,6 @@
 """Fault injection from the command line: lossy links, crashed robots, a switching topology.
 
-The faults are properties of the simulated network (DESIGN.md, "the one rule"):
+The faults are properties of the simulated network (docs/DESIGN.md, "the one rule"):
 :class:`FaultConfig` turns the user's flags into
 :class:`~pipeline.transport.simulated.NetworkOptions` for the consistency stage and into a
 per-round topology for the fusion consensus; the robots then run the fault-tolerant protocol

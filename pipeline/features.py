@@ -23,7 +23,9 @@ from scipy.spatial import cKDTree
 from pipeline.errors import InputError
 from pipeline.types import Features, View
 
-__all__ = ["METHODS", "check_method", "extract", "extract_all", "merge_colocated", "surf_available"]
+__all__ = ["METHODS", "available_methods", "check_method", "extract", "extract_all",
+           "merge_colocated", "surf_available", "root_sift", "photo_max_features",
+           "PHOTO_CONTRAST_THRESHOLD"]
 
 #: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
 METHODS = ("sift", "orb", "akaze", "surf")
@@ -33,6 +35,58 @@ MERGE_RADIUS_PX = 0.5
 
 #: images with a side shorter than this give zero features (smaller than any descriptor patch)
 MIN_IMAGE_PX = 16
+
+#: feature budget of a 640x480 image (the rendered formations), scaled with the image area by
+#: :func:`photo_max_features`
+BASE_FEATURES, BASE_AREA = 2000, 640 * 480
+#: largest feature budget per image: COLMAP's ``SiftExtraction.max_num_features`` default
+MAX_PHOTO_FEATURES = 8192
+#: SIFT contrast threshold for photographs: OpenCV divides it by the 3 layers per octave, so
+#: 0.02 is the DoG peak threshold of COLMAP's SIFT (``peak_threshold = 0.02 / 3``); OpenCV's own
+#: default 0.04 keeps about half as many keypoints (6.3k vs 12.2k on a 1600x1200 photograph)
+PHOTO_CONTRAST_THRESHOLD = 0.02
+
+
+def photo_max_features(width: int, height: int) -> int:
+    """Feature budget of one photograph: ``2000`` per 640x480 pixels, capped at 8192.
+
+    The density of the rendered 640x480 formations (2000 features), scaled with the image
+    area, between 2000 and COLMAP's default 8192. A 1024x768 image gets 5120, a 1600x1200 one
+    8192.
+
+    Examples
+    --------
+    >>> photo_max_features(640, 480), photo_max_features(1024, 768), photo_max_features(1600, 1200)
+    (2000, 5120, 8192)
+    """
+    area = max(int(width), 1) * max(int(height), 1)
+    return int(np.clip(round(BASE_FEATURES * area / BASE_AREA), BASE_FEATURES, MAX_PHOTO_FEATURES))
+
+
+def root_sift(descriptors: np.ndarray) -> np.ndarray:
+    """RootSIFT (Arandjelović & Zisserman, CVPR 2012): L1-normalise, then square root.
+
+    Euclidean distance between RootSIFT vectors is the Hellinger kernel between the original
+    histograms, which matches SIFT better than L2 (COLMAP's default normalisation,
+    ``L1_ROOT``). Rows come out unit-length in L2.
+
+    Parameters
+    ----------
+    descriptors : ndarray, (N, D) float, non-negative
+
+    Returns
+    -------
+    ndarray, (N, D) float32
+    """
+    d = np.asarray(descriptors, dtype=np.float32)
+    norm = np.abs(d).sum(axis=1, keepdims=True)
+    d = np.divide(d, norm, out=np.zeros_like(d), where=norm > 0)
+    return np.sqrt(np.maximum(d, 0.0))
+
+
+def available_methods() -> tuple[str, ...]:
+    """The feature methods this OpenCV build offers (``surf`` only with non-free algorithms)."""
+    return tuple(m for m in METHODS if m != "surf" or surf_available())
 
 
 def surf_available() -> bool:
@@ -50,9 +104,11 @@ def check_method(method: str) -> None:
     _detector(method, 2000)
 
 
-def _detector(method: str, max_features: int):
+def _detector(method: str, max_features: int, contrast_threshold: float | None = None):
     """The OpenCV detector for ``method``; raises :class:`InputError` for unknown/unavailable ones."""
     if method == "sift":
+        if contrast_threshold is not None:
+            return cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
         return cv2.SIFT_create(nfeatures=max_features)
     if method == "orb":
         return cv2.ORB_create(nfeatures=max_features)
@@ -65,8 +121,10 @@ def _detector(method: str, max_features: int):
         except (cv2.error, AttributeError):
             raise InputError(
                 "feature method 'surf' is not available: this OpenCV build has no non-free "
-                "algorithms (OPENCV_ENABLE_NONFREE); use one of sift, orb, akaze") from None
-    raise InputError(f"unknown feature method {method!r}; choose one of {', '.join(METHODS)}")
+                "algorithms (OPENCV_ENABLE_NONFREE); use one of "
+                f"{', '.join(available_methods())}") from None
+    raise InputError(f"unknown feature method {method!r}; choose one of "
+                     f"{', '.join(available_methods())}")
 
 
 def _gray(image_or_view) -> np.ndarray:
@@ -138,7 +196,8 @@ def merge_colocated(keypoints: np.ndarray, response: np.ndarray,
 
 
 def extract(image_or_view, method: str = "sift", max_features: int = 2000,
-            merge_radius: float = MERGE_RADIUS_PX) -> Features:
+            merge_radius: float = MERGE_RADIUS_PX, *, contrast_threshold: float | None = None,
+            rootsift: bool = False, budget_after_merge: bool = False) -> Features:
     """Detect and describe local features in one image.
 
     Parameters
@@ -154,6 +213,17 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
         after detection, so fewer may be returned.
     merge_radius : float
         Keypoints closer than this many pixels are one feature (strongest kept); ``0`` disables.
+    contrast_threshold : float, optional
+        SIFT only: OpenCV's ``contrastThreshold`` (default: OpenCV's, 0.04; photographs use
+        :data:`PHOTO_CONTRAST_THRESHOLD`).
+    rootsift : bool
+        SIFT/SURF only: return RootSIFT descriptors (:func:`root_sift`).
+    budget_after_merge : bool
+        ``True``: detect without a budget, merge co-located keypoints, then keep the
+        ``max_features`` strongest locations (the budget counts distinct points, as the
+        photographs' defaults do). ``False``: the detector's own budget, then the merge, which
+        leaves fewer (SIFT's extra orientations count against the budget; the formations'
+        figures were measured so).
 
     Returns
     -------
@@ -177,7 +247,8 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     if isinstance(max_features, bool) or not isinstance(max_features, (int, np.integer)) or max_features < 1:
         raise InputError(f"max_features must be a positive integer, got {max_features!r}")
     max_features = int(max_features)
-    detector = _detector(method, max_features)
+    detector = _detector(method, 0 if budget_after_merge and method == "sift" else max_features,
+                         contrast_threshold if method == "sift" else None)
     gray = _gray(image_or_view)
     dim = int(detector.descriptorSize())
     dtype = np.uint8 if detector.descriptorType() == cv2.CV_8U else np.float32
@@ -197,27 +268,45 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     scales = np.fromiter((k.size for k in kps), dtype=np.float32, count=len(kps))
     keep = (merge_colocated(xy, response, merge_radius) if merge_radius > 0
             else np.arange(len(kps)))
-    if len(keep) > max_features:  # AKAZE has no feature budget of its own
+    if len(keep) > max_features:  # AKAZE has no feature budget of its own (nor SIFT here
+        # with budget_after_merge)
         strongest = np.argsort(-response[keep], kind="stable")[:max_features]
         keep = np.sort(keep[strongest])
-    return Features(np.ascontiguousarray(xy[keep]), np.ascontiguousarray(desc[keep].astype(dtype, copy=False)),
-                    scales[keep], method)
+    desc = desc[keep].astype(dtype, copy=False)
+    if rootsift and dtype == np.float32:
+        desc = root_sift(desc)
+    return Features(np.ascontiguousarray(xy[keep]), np.ascontiguousarray(desc), scales[keep], method)
 
 
-def extract_all(views, method: str = "sift", max_features: int = 2000,
-                merge_radius: float = MERGE_RADIUS_PX, workers: int = 2) -> list[Features]:
+def extract_all(views, method: str = "sift", max_features: int | None = 2000,
+                merge_radius: float = MERGE_RADIUS_PX, workers: int = 2, *,
+                contrast_threshold: float | None = None, rootsift: bool = False,
+                budget_after_merge: bool = False) -> list[Features]:
     """:func:`extract` for every camera, ``list[Features]`` in camera order.
 
     Parameters
     ----------
     views : sequence of View or image arrays, (n,)
-    method, max_features, merge_radius : see :func:`extract`
+    method, merge_radius, contrast_threshold, rootsift, budget_after_merge : see :func:`extract`
+    max_features : int or None
+        Per image; ``None``: :func:`photo_max_features` of each image's size.
     workers : int
         Threads; OpenCV releases the GIL inside ``detectAndCompute``. ``1`` runs serially.
     """
+    from pipeline.progress import progress
+
     views = list(views)
     _detector(str(method).lower(), 1)  # fail on a bad method before starting any thread
+
+    def one(v):
+        budget = max_features
+        if budget is None:
+            h, w = (v.image if isinstance(v, View) else np.asarray(v)).shape[:2]
+            budget = photo_max_features(w, h)
+        return extract(v, method, budget, merge_radius, contrast_threshold=contrast_threshold,
+                       rootsift=rootsift, budget_after_merge=budget_after_merge)
+
     if workers <= 1 or len(views) <= 1:
-        return [extract(v, method, max_features, merge_radius) for v in views]
+        return [one(v) for v in progress(views, desc="features")]
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(lambda v: extract(v, method, max_features, merge_radius), views))
+        return list(progress(pool.map(one, views), total=len(views), desc="features"))

@@ -1,11 +1,11 @@
 """The whole pipeline on real photographs (``python -m pipeline run-images DIR --graph KIND``).
 
-The stages of a formation run (DESIGN.md "Data flow") without ground truth: load and
+The stages of a formation run (docs/DESIGN.md "Data flow") without ground truth: load and
 downscale the images with their own intrinsics (:mod:`pipeline.io`), features, matching on the
 user's comm-graph edges only, the distributed consistency stage (Aragüés et al., Sec. III
 detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
 cleaned tracks a pycolmap incremental reconstruction from the matches before and after
-cleaning (:mod:`pipeline.colmap`). Writes the run folder of DESIGN.md "Run outputs" with
+cleaning (:mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run outputs" with
 ``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``. With
 ``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.truth`)
 the ``truth`` column and every ground-truth figure of a formation run are filled in.
@@ -43,7 +43,16 @@ class ImagesConfig:
     intrinsics: str = "auto"
     max_size: int | None = 1600
     features: str = "sift"
-    max_features: int = 2000
+    #: per image; None = scaled with the image size (pipeline.features.photo_max_features)
+    max_features: int | None = None
+    #: SIFT contrast threshold (None = OpenCV's 0.04; 0.02 = COLMAP's DoG peak threshold,
+    #: pipeline.features.PHOTO_CONTRAST_THRESHOLD); RootSIFT descriptors; epipolar threshold in
+    #: pixels (None = scaled with the image size, pipeline.matching.photo_threshold_px); the
+    #: feature budget counts distinct locations (pipeline.features.extract)
+    contrast_threshold: float | None = 0.02
+    rootsift: bool = True
+    threshold_px: float | None = None
+    budget_after_merge: bool = True
     fusion: bool = True
     rerun: bool = True
     export_db: bool = False
@@ -53,6 +62,8 @@ class ImagesConfig:
     truth_tol_px: float = 2.0
     resolution: str = "evidence"
     merge_radius: float | None = None
+    #: also stream the recording to a live viewer: "spawn", "connect" or a gRPC URL
+    live: str | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -109,14 +120,15 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
 
 
 def _points_and_tracks(mapping, views: list[View], features, kept: Links):
-    """3D points of the reconstruction and, for each, the association set of its first
-    observation in the kept association graph (``-1`` when that feature is in none)."""
+    """3D points of the reconstruction, for each the association set of its first
+    observation in the kept association graph (``-1`` when that feature is in none), and its
+    RGB colour at that observation, ``(P, 3)`` uint8."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph
 
     xyz, _, names, point2d = colmap.model_points(mapping.reconstruction)
     if not len(xyz):
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3), np.uint8)
     cam_of_name = {v.name: k for k, v in enumerate(views)}
     m = np.array([len(f) for f in features], dtype=np.int64)
     graph = AssociationGraph(m, kept)
@@ -124,7 +136,15 @@ def _points_and_tracks(mapping, views: list[View], features, kept: Links):
     first = np.array([graph.offsets[cam_of_name[n]] for n in names], dtype=np.int64) + point2d
     sizes = np.bincount(labels, minlength=labels.max() + 1 if labels.size else 0)
     tracks = np.where(sizes[labels[first]] >= 2, labels[first], -1)
-    return xyz, tracks
+    # colour of each point: its first observation's pixel in that image
+    colors = np.zeros((len(xyz), 3), np.uint8)
+    for k, (name, idx) in enumerate(zip(names, point2d, strict=True)):
+        cam = cam_of_name[name]
+        img = views[cam].image
+        u, v = np.rint(features[cam].keypoints[idx]).astype(int)
+        px = img[min(max(v, 0), img.shape[0] - 1), min(max(u, 0), img.shape[1] - 1)]
+        colors[k] = px if np.ndim(px) == 0 else px[:3]
+    return xyz, tracks, colors
 
 
 def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
@@ -132,9 +152,9 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 
     Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
     consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
-    reconstruction after cleaning → outputs (report.json, links.csv with ``truth`` empty,
-    sparse/ = the reconstruction after cleaning, recording.rrd, database.db with
-    ``export_db``).
+    reconstruction after cleaning → outputs (report.json with ``flags``, links.csv with
+    ``truth`` empty, sparse/ = the reconstruction after cleaning at the resolution of the image
+    files, with colours, recording.rrd, database.db with ``export_db``).
 
     Raises
     ------
@@ -156,13 +176,28 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             else Path(config.intrinsics)
         views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
         names = [v.name for v in views]
-        comm_edges = comm_graph(config.graph, names)
+        by_similarity = str(config.graph).startswith("knn:")
+        comm_edges = None if by_similarity else comm_graph(config.graph, names)
         sources = sorted({v.intrinsics_source for v in views})
-        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; "
-                   f"graph {config.graph}: {len(comm_edges)} edges")
+        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
+                   f"{config.graph}: " + ("chosen by image similarity after the features"
+                                          if by_similarity else f"{len(comm_edges)} edges"))
+    chosen = {}
+
+    def graph_from_features(features):
+        # knn:K: neighbours by image similarity (pipeline.retrieval), once the features exist
+        chosen["edges"] = comm_graph(config.graph, names, features=features)
+        timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
+        return chosen["edges"]
+
     feats, matches, links = extract_and_match(
-        views, comm_edges, config.features, config.max_features, timer,
-        merge_radius=merge_radius_for(config.resolution, config.merge_radius))
+        views, graph_from_features if by_similarity else comm_edges, config.features,
+        config.max_features, timer, contrast_threshold=config.contrast_threshold,
+        merge_radius=merge_radius_for(config.resolution, config.merge_radius),
+        rootsift=config.rootsift, threshold_px=config.threshold_px,
+        budget_after_merge=config.budget_after_merge)
+    if by_similarity:
+        comm_edges = chosen["edges"]
     m = np.array([len(f) for f in feats], dtype=np.int64)
 
     with tempfile.TemporaryDirectory(prefix="run-images-") as work:
@@ -223,25 +258,70 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
                 fill_report(report, config.directory, views, feats, comm_edges, ledger,
                             config.truth_tol_px)
         flag_result(report, names)
-        md = sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
+        report["flags"] = _flags(views, feats, ledger, comm_edges, matches, map_before,
+                                 map_after)
+        for f in report["flags"]:
+            timer.warn(f"{f['message']}. Likely cause: {f['likely_cause']}.")
+        from pipeline.flags import flags_markdown
+
+        md = (sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
+              + flags_markdown(report["flags"]))
 
         with timer.stage("write", str(out)):
             with atomic_run_folder(out) as tmp:
                 write_links_csv(tmp / "links.csv", ledger)
-                colmap.write_model(tmp / "sparse", map_after.reconstruction)
+                # sparse/ at the resolution of the image files it names (the mapping ran on
+                # downscaled copies), with colours from those files
+                colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction,
+                                             _file_sizes(views, Path(config.directory)),
+                                             config.directory)
                 if config.export_db:
                     shutil.copyfile(db_after, tmp / "database.db")
                 if config.rerun:
                     _write_recording(tmp / "recording.rrd", views, feats, cleaning,
-                                     map_before, map_after, kept_links, md)
+                                     map_before, map_after, kept_links, md, live=config.live)
                 report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
                 write_json_atomic(tmp / "report.json", report)
     print(md)
     return out
 
 
+def _file_sizes(views: list[View], directory: Path) -> dict[str, tuple[int, int]]:
+    """``{name: (width, height)}`` of the image files (read from their headers)."""
+    from PIL import Image
+
+    sizes = {}
+    for v in views:
+        with Image.open(directory / v.name) as im:
+            sizes[v.name] = im.size
+    return sizes
+
+
+def _flags(views, feats, ledger, comm_edges, matches, map_before, map_after) -> list[dict]:
+    """Flags of :func:`pipeline.flags.reconstruction_flags` for this run."""
+    from pipeline.flags import reconstruction_flags
+
+    links = ledger.links
+    reason = np.asarray(ledger.reason, dtype=str)
+    cut = reason != ""
+    lost = set(map_before.registered_names) - set(map_after.registered_names)
+    per_image = {}
+    for k, v in enumerate(views):
+        if v.name in lost:
+            touch = cut & ((links.cam_i == k) | (links.cam_j == k))
+            names, counts = np.unique(reason[touch], return_counts=True)
+            per_image[v.name] = dict(zip(names.tolist(), counts.tolist(), strict=True))
+    names, counts = np.unique(reason[cut], return_counts=True)
+    return reconstruction_flags(
+        len(views), map_before.summary(), map_after.summary(), comm_edges,
+        [len(p.pairs) for p in matches], [len(f) for f in feats],
+        intrinsics_guessed=sum(not v.intrinsics_known for v in views),
+        cut_by_reason=dict(zip(names.tolist(), counts.tolist(), strict=True)),
+        lost_image_cuts=per_image)
+
+
 def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
-                     kept_links, md: str) -> None:
+                     kept_links, md: str, live: str | None = None) -> None:
     from pipeline import colmap
     from pipeline.types import RunRecord
     from viz.rerun_log import log_run
@@ -255,12 +335,12 @@ def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
         M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
         if M is not None:
             fused = np.asarray(cleaning.fused_points, dtype=np.float64) @ M[:, :3].T + M[:, 3]
-    points, tracks = _points_and_tracks(mapping, views, feats, kept_links)
+    points, tracks, colors = _points_and_tracks(mapping, views, feats, kept_links)
     record = RunRecord(
         views=drawn, features=feats, ledger=cleaning.ledger,
         points=points, point_tracks=tracks, gt_points=None,
-        fused_points=fused, report_markdown=md)
-    log_run(path, record)
+        fused_points=fused, report_markdown=md, point_colors=colors)
+    log_run(path, record, live=live)
 
 
 def _mapping_note(mapping) -> str:

@@ -1,6 +1,6 @@
 """Real photographs in, :class:`~pipeline.types.View` records out.
 
-This is the entry of the real-image path of DESIGN.md ("real images:
+This is the entry of the real-image path of docs/DESIGN.md ("real images:
 ``pipeline.io.load_folder(dir)``"): it replaces the renderer of ``data_synth`` when a user
 brings their own photos. The papers assume every robot knows its calibration; internet photo
 sets do not, so each image gets its own intrinsics and says whether they are known
@@ -9,7 +9,7 @@ sets do not, so each image gets its own intrinsics and says whether they are kno
 
 Conventions
 -----------
-- Images are taken in name order; camera ``i`` is the ``i``-th image (DESIGN.md "Conventions").
+- Images are taken in name order; camera ``i`` is the ``i``-th image (docs/DESIGN.md "Conventions").
 - Pixel coordinates follow OpenCV (origin at the centre of the top-left pixel). Downscaling by
   ``s`` maps ``x + 0.5 -> s (x + 0.5)``, so ``cx' = s (cx + 0.5) - 0.5`` and ``fx' = s fx``.
 - The EXIF orientation tag is not applied (as in COLMAP): pixels are used as stored, so a

@@ -6,9 +6,9 @@ allowed. Validation is strict and never drops input silently: a non-integer or n
 bad quality, a wrong number of columns, a self-link, a duplicate link or a link that breaks
 one-to-one-ness (Assumption 2.2 of Aragüés et al.) is an :class:`~pipeline.errors.InputError`
 naming the file, the row number and its content. A row with ``cam_i > cam_j`` is normalised by
-swapping its two ends (DESIGN.md: each undirected link is stored once with ``cam_i < cam_j``).
+swapping its two ends (docs/DESIGN.md: each undirected link is stored once with ``cam_i < cam_j``).
 
-Output (``write_links_csv``): the ``links.csv`` of DESIGN.md "Run outputs", header
+Output (``write_links_csv``): the ``links.csv`` of docs/DESIGN.md "Run outputs", header
 ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``, written atomically (temp file in the
 same folder, then ``os.replace``).
 """
@@ -56,6 +56,11 @@ class LinksFile:
     links: Links
     line: np.ndarray
     has_quality: bool
+    #: for a run-output links.csv read back as input (its own output, e.g. of ``resolve``):
+    #: ``status``, ``reason`` (str) and ``round`` (int, -1 where empty) of every row; else None
+    status: np.ndarray | None = None
+    reason: np.ndarray | None = None
+    round: np.ndarray | None = None
 
 
 def _rows(path: Path):
@@ -114,7 +119,9 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
 
     Parameters
     ----------
-    path : path to a CSV with rows ``cam_i,feat_i,cam_j,feat_j[,quality]``
+    path : path to a CSV with rows ``cam_i,feat_i,cam_j,feat_j[,quality]``, or a run-output
+        ``links.csv`` (header ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``), whose
+        status, reason and round are returned too
 
     Returns
     -------
@@ -138,23 +145,37 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     """
     path = Path(path)
     lines, raws, vals, quals = [], [], [], []
+    run_cols: list[tuple[str, str, int]] = []
     ncols = None
     first = True
     for lineno, fields, raw in _rows(path):
         if first:
             first = False
+            if tuple(f.lower() for f in fields) == RUN_LINK_COLUMNS:
+                ncols = len(RUN_LINK_COLUMNS)  # a run-output links.csv, e.g. resolve's own
+                continue
             if fields and fields[0].lower() == "cam_i":
                 if tuple(f.lower() for f in fields) not in (LINK_COLUMNS[:4], LINK_COLUMNS):
                     raise InputError(f"{path}:{lineno}: header {raw!r} must be "
                                      f"'cam_i,feat_i,cam_j,feat_j' or with ',quality'")
                 ncols = len(fields)
                 continue
-        if len(fields) not in (4, 5):
+        if ncols == len(RUN_LINK_COLUMNS):
+            if len(fields) != ncols:
+                raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; the "
+                                 f"header names {ncols} ({','.join(RUN_LINK_COLUMNS)})")
+            if fields[4] not in ("kept", "deleted"):
+                raise InputError(f"{path}:{lineno}: {raw!r}: status {fields[4]!r} is not "
+                                 "'kept' or 'deleted'")
+            rnd = -1 if fields[6] == "" else _int_field(path, lineno, raw, "round", fields[6])
+            run_cols.append((fields[4], fields[5], rnd))
+            fields = fields[:4]
+        elif len(fields) not in (4, 5):
             raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected 4 "
                              "(cam_i,feat_i,cam_j,feat_j) or 5 (with quality)")
         if ncols is None:
             ncols = len(fields)
-        elif len(fields) != ncols:
+        elif len(fields) != ncols and not run_cols:
             raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns but the file "
                              f"started with {ncols}; give quality on every row or on none")
         ids = [_int_field(path, lineno, raw, name, v)
@@ -193,7 +214,13 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                              f"{raws[k0]!r}); matching must give a one-to-one association per "
                              "camera pair")
     quality = np.asarray(quals, dtype=np.float64) if ncols == 5 else None
-    return LinksFile(Links(ci, fi, cj, fj, quality), np.asarray(lines, dtype=np.int64), ncols == 5)
+    out = LinksFile(Links(ci, fi, cj, fj, quality), np.asarray(lines, dtype=np.int64), ncols == 5)
+    if ncols == len(RUN_LINK_COLUMNS):
+        st, rs, rd = zip(*run_cols, strict=True) if run_cols else ((), (), ())
+        out.status = np.asarray(st, dtype=object).astype(str)
+        out.reason = np.asarray(rs, dtype=object).astype(str)
+        out.round = np.asarray(rd, dtype=np.int64)
+    return out
 
 
 def features_per_camera_for(links: Links, n_cameras: int | None = None) -> np.ndarray:

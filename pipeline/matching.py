@@ -28,19 +28,41 @@ from pipeline.errors import InputError
 from pipeline.types import Features, PairMatches, View
 
 __all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px",
-           "match_pair", "match_edges", "MIN_MATCHES"]
+           "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES"]
 
 #: fewest matches an association may have; below this it is left empty (USAC needs >= 7 points)
 MIN_MATCHES = 8
+
+#: image side (pixels) per pixel of epipolar threshold in :func:`photo_threshold_px`
+PX_PER_THRESHOLD_PX = 800
+
+
+def photo_threshold_px(width: int, height: int) -> float:
+    """Epipolar inlier threshold for a photograph: 1 px per 800 px of its longest side, >= 1.
+
+    COLMAP verifies with 4 px (``TwoViewGeometry.max_error``) at its default 3200 px image
+    size; the threshold is scaled with the image so that it bounds the same fraction of the
+    image: 1 px at 640-800 px (the rendered formations' own 1 px), 2 px at 1600 px, 4 px at
+    3200 px. Real lenses are not pinholes: a fixed 1 px at 1600 px rejects the true matches
+    near the borders of a slightly distorted photograph.
+
+    Examples
+    --------
+    >>> photo_threshold_px(640, 480), photo_threshold_px(1600, 1200), photo_threshold_px(3200, 2400)
+    (1.0, 2.0, 4.0)
+    """
+    return max(1.0, max(int(width), int(height)) / PX_PER_THRESHOLD_PX)
 
 
 # --------------------------------------------------------------------------- putative matches
 
 
-def _distance_matrix(d_i: np.ndarray, d_j: np.ndarray) -> np.ndarray:
+def _distance_matrix(d_i: np.ndarray, d_j: np.ndarray, squared: bool = False) -> np.ndarray:
     """Exact descriptor distances, ``(N_i, N_j)`` float32 (L2, or Hamming for uint8).
 
-    One matrix serves both matching directions, so the mutual test costs one product.
+    One matrix serves both matching directions, so the mutual test costs one product. With
+    ``squared`` the L2 distances are left squared (the caller takes the square root of the few
+    it needs: same values, one pass over the matrix fewer); Hamming distances are never squared.
     """
     if d_i.dtype == np.uint8:
         # Hamming: popcount(a xor b), 64 bits at a time (exact; faster than unpacked-bit BLAS
@@ -54,9 +76,15 @@ def _distance_matrix(d_i: np.ndarray, d_j: np.ndarray) -> np.ndarray:
         return dist.astype(np.float32)
     a = d_i.astype(np.float32, copy=False)
     b = d_j.astype(np.float32, copy=False)
-    sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    # |a|^2 + |b|^2 - 2 a.b, computed in place (the products are the expensive part; the
+    # temporaries of a naive expression cost more than the BLAS product at 8k x 8k)
+    gram = a @ b.T
+    gram *= np.float32(2.0)
+    sq = np.add.outer((a * a).sum(1), (b * b).sum(1)).astype(np.float32, copy=False)
+    sq -= gram
+    del gram
     np.maximum(sq, 0.0, out=sq)
-    return np.sqrt(sq, out=sq)
+    return sq if squared else np.sqrt(sq, out=sq)
 
 
 def _two_nearest(dist: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -101,9 +129,13 @@ def mutual_ratio_matches(desc_i: np.ndarray, desc_j: np.ndarray, ratio: float = 
     n_i, n_j = len(desc_i), len(desc_j)
     if n_i == 0 or n_j == 0:
         return np.zeros((0, 2), np.int32), np.zeros(0, np.float32)
-    dist = _distance_matrix(desc_i, desc_j)
+    squared = desc_i.dtype != np.uint8
+    dist = _distance_matrix(desc_i, desc_j, squared=squared)
     fwd, f1, f2 = _two_nearest(dist, axis=1)  # for each r: best s
     bwd, b1, b2 = _two_nearest(dist, axis=0)  # for each s: best r
+    del dist
+    if squared:
+        f1, f2, b1, b2 = (np.sqrt(v) for v in (f1, f2, b1, b2))
     r = np.arange(n_i)
     mutual = bwd[fwd] == r
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -287,7 +319,7 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
 
 
 def match_edges(features: list[Features], views: list[View], comm_edges, ratio: float = 0.8,
-                threshold_px: float = 1.0, min_matches: int = MIN_MATCHES,
+                threshold_px: float | None = 1.0, min_matches: int = MIN_MATCHES,
                 confidence: float = 0.999, max_iters: int = 1000,
                 workers: int | None = None) -> list[PairMatches]:
     """Local associations for every communication edge, and only for those (Sec. II, V-B).
@@ -298,7 +330,10 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     views : list[View], (n,) — ``K`` and ``intrinsics_known`` of each camera
     comm_edges : array-like, (E, 2) int — undirected communication graph (see
         :func:`pipeline.commgraph.check_comm_edges`); a camera without neighbours simply gets no associations
-    ratio, threshold_px, min_matches, confidence, max_iters : see :func:`match_pair`
+    ratio, min_matches, confidence, max_iters : see :func:`match_pair`
+    threshold_px : float or None
+        See :func:`match_pair`; ``None``: :func:`photo_threshold_px` of the larger image of
+        each pair.
     workers : int, optional
         Threads over edges. Default: 1 for float descriptors (the BLAS product behind their
         distances already uses every core), ``min(2, cores)`` for binary ones (the popcount is
@@ -328,14 +363,20 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
         i, j = int(e[0]), int(e[1])
         # a fundamental matrix unless both cameras are calibrated
         known = bool(views[i].intrinsics_known and views[j].intrinsics_known)
+        thr = threshold_px
+        if thr is None:
+            (wi, hi), (wj, hj) = views[i].size, views[j].size
+            thr = photo_threshold_px(max(wi, wj), max(hi, hj))
         return match_pair(i, j, features[i], features[j], views[i].K, views[j].K, known,
-                          ratio=ratio, threshold_px=threshold_px, min_matches=min_matches,
+                          ratio=ratio, threshold_px=thr, min_matches=min_matches,
                           confidence=confidence, max_iters=max_iters)
+
+    from pipeline.progress import progress
 
     if workers is None:
         binary = any(f.descriptors.dtype == np.uint8 for f in features)
         workers = min(2, os.cpu_count() or 1) if binary else 1
     if workers <= 1 or len(edges) <= 1:
-        return [one(e) for e in edges]
+        return [one(e) for e in progress(edges, desc="matching pairs")]
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(one, edges))
+        return list(progress(pool.map(one, edges), total=len(edges), desc="matching pairs"))

@@ -1,4 +1,9 @@
-"""One line per pipeline stage with its wall time, so a run is never silent for long.
+"""Stage lines and progress bars, so a run is never silent for long.
+
+Messages go through :mod:`logging` (logger ``pipeline.progress``): the command line shows
+them on stderr at level INFO and hides them with ``--quiet``; a library user configures
+logging as usual. Progress bars (:func:`progress`) are tqdm bars on stderr, shown only on a
+terminal and only when INFO messages are shown.
 
 At the end of each stage the heap memory it freed is handed back to the operating system
 (:func:`release_free_memory`), so that the peak memory of a run is that of its largest stage
@@ -10,12 +15,15 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+import logging
 import sys
 import threading
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimer", "release_free_memory", "ticker"]
+__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker"]
+
+log = logging.getLogger("pipeline.progress")
 
 
 @functools.cache
@@ -72,8 +80,33 @@ def ticker(description: str, delay: float = 2.0, stream=None):
         thread.join(timeout=2.0)
 
 
+def progress(iterable, total: int | None = None, desc: str = "", min_items: int = 2):
+    """``iterable`` wrapped in a tqdm bar (stderr, cleared when done).
+
+    The bar is off when INFO messages are hidden (``--quiet``), when stderr is not a terminal
+    (tqdm's ``disable=None``), or when there are fewer than ``min_items`` items.
+    """
+    from tqdm.auto import tqdm
+
+    if total is None:
+        try:
+            total = len(iterable)
+        except TypeError:
+            total = None
+    off = (not log.isEnabledFor(logging.INFO)) or (total is not None and total < min_items)
+    return tqdm(iterable, total=total, desc=desc, leave=False, file=sys.stderr,
+                disable=True if off else None, dynamic_ncols=True)
+
+
 class StageTimer:
-    """Times named stages and prints ``[stage] ... done in X s`` lines to ``stream``.
+    """Times named stages and logs ``[stage] ... done in X s`` lines.
+
+    Parameters
+    ----------
+    verbose : bool
+        ``False``: time only, log nothing.
+    stream : file, optional
+        Write the lines to this stream instead of the ``pipeline.progress`` logger.
 
     With ``release_memory`` (default) the end of each stage returns freed heap memory to the
     operating system (:func:`release_free_memory`; counted in the stage's time).
@@ -89,24 +122,33 @@ class StageTimer:
 
     def __init__(self, verbose: bool = True, stream=None, release_memory: bool = True):
         self.verbose = verbose
-        self.stream = stream if stream is not None else sys.stderr
+        self.stream = stream
         self.release_memory = release_memory
         self.timings: dict[str, float] = {}
 
+    def _emit(self, text: str) -> None:
+        if not self.verbose:
+            return
+        if self.stream is not None:
+            print(text, file=self.stream, flush=True)
+        else:
+            log.info(text)
+
     @contextmanager
     def stage(self, name: str, detail: str = ""):
-        if self.verbose:
-            print(f"[{name}] {detail}".rstrip() + " ...", file=self.stream, flush=True)
+        self._emit(f"[{name}] {detail}".rstrip() + " ...")
         t0 = time.perf_counter()
         yield
         if self.release_memory:
             release_free_memory()
         dt = time.perf_counter() - t0
         self.timings[name] = self.timings.get(name, 0.0) + dt
-        if self.verbose:
-            print(f"[{name}] done in {dt:.2f} s", file=self.stream, flush=True)
+        self._emit(f"[{name}] done in {dt:.2f} s")
 
     def note(self, text: str) -> None:
-        """Print a result line under the current stage."""
-        if self.verbose:
-            print(f"    {text}", file=self.stream, flush=True)
+        """Log a result line under the current stage."""
+        self._emit(f"    {text}")
+
+    def warn(self, text: str) -> None:
+        """Log a warning (shown even with ``--quiet``)."""
+        log.warning("warning: %s", text)

@@ -1,4 +1,4 @@
-"""The sections of ``report.json`` and its markdown tables (DESIGN.md "Run outputs").
+"""The sections of ``report.json`` and its markdown tables (docs/DESIGN.md "Run outputs").
 
 Every run path (rendered formations, real photographs) builds its report from these pieces,
 so one figure is computed in one place: counts of the association graph (Aragüés et al.,

@@ -1,4 +1,4 @@
-"""The pipeline's one stage chain, used by every command (DESIGN.md "Data flow").
+"""The pipeline's one stage chain, used by every command (docs/DESIGN.md "Data flow").
 
 Stages, each a function here: :func:`extract_and_match` (features, then matching on the
 communication edges only), :func:`consistency_stage` (Aragüés et al., Sec. III detection and
@@ -113,15 +113,22 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     return float(merge_radius)
 
 
-def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
-                      max_features: int, timer: StageTimer, *, ratio: float = 0.8,
-                      threshold_px: float = 1.0,
-                      merge_radius: float | None = None) -> tuple[list, list, Links]:
+def extract_and_match(views: list[View], comm_edges, method: str,
+                      max_features: int | None, timer: StageTimer, *, ratio: float = 0.8,
+                      threshold_px: float | None = 1.0, merge_radius: float | None = None,
+                      contrast_threshold: float | None = None, rootsift: bool = False,
+                      budget_after_merge: bool = False) -> tuple[list, list, Links]:
     """Features of every camera, then matching on the communication edges only.
 
     ``ratio`` (Lowe ratio test) and ``threshold_px`` (epipolar RANSAC inlier threshold) go to
     :func:`pipeline.matching.match_edges`; keypoints of one image closer than
-    ``merge_radius`` pixels are merged (``None``: :data:`pipeline.features.MERGE_RADIUS_PX`).
+    ``merge_radius`` pixels are merged (``None``: :data:`pipeline.features.MERGE_RADIUS_PX`);
+    ``contrast_threshold``, ``rootsift`` and ``budget_after_merge`` go to
+    :func:`pipeline.features.extract`. ``max_features=None`` and ``threshold_px=None`` scale
+    with each image's size (:func:`pipeline.features.photo_max_features`,
+    :func:`pipeline.matching.photo_threshold_px`). ``comm_edges`` may be a callable
+    ``features -> edges`` (a graph chosen from the features, e.g. ``knn:K`` by image
+    similarity).
 
     Returns ``(features, matches, links)``: per-camera Features, per-edge PairMatches and all
     links (``Links.from_matches``).
@@ -130,9 +137,14 @@ def extract_and_match(views: list[View], comm_edges: np.ndarray, method: str,
     from pipeline.matching import match_edges
 
     radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
-    with timer.stage("features", f"{method}, at most {max_features} per image"):
-        feats = extract_all(views, method, max_features, radius)
+    budget = "a budget scaled with image size" if max_features is None else max_features
+    with timer.stage("features", f"{method}, at most {budget} per image"):
+        feats = extract_all(views, method, max_features, radius,
+                            contrast_threshold=contrast_threshold, rootsift=rootsift,
+                            budget_after_merge=budget_after_merge)
         timer.note(f"features per camera: {[len(f) for f in feats]}")
+    if callable(comm_edges):
+        comm_edges = comm_edges(feats)
     with timer.stage("matching", f"{len(comm_edges)} communication edges"):
         matches = match_edges(feats, views, comm_edges, ratio=ratio, threshold_px=threshold_px)
         links = Links.from_matches(matches)

@@ -1,4 +1,4 @@
-"""Atomic run folders (DESIGN.md "Run outputs — a contract").
+"""Atomic run folders (docs/DESIGN.md "Run outputs — a contract").
 
 A run writes into a staging folder ``.NAME.tmp-*`` beside ``NAME``; only when everything is
 written is it put in place. Guarantees:

@@ -1,6 +1,6 @@
 """Plain data records passed between the pipeline stages.
 
-Conventions (DESIGN.md): camera ``i`` is robot ``i`` (0-based); feature ``r`` of camera ``i`` is
+Conventions (docs/DESIGN.md): camera ``i`` is robot ``i`` (0-based); feature ``r`` of camera ``i`` is
 ``(i, r)``; poses are ``cam_from_world`` (``x_cam = R @ x_world + t``); pixel coordinates follow
 OpenCV (origin at the centre of the top-left pixel).
 """
@@ -156,7 +156,7 @@ class LinkLedger:
 
     Every stage that cuts links writes here (:meth:`cut`), the ``links.csv`` writer and the
     Rerun log read it. A link is never removed from the ledger; a cut link keeps the stage that
-    cut it and when (DESIGN.md "Run outputs").
+    cut it and when (docs/DESIGN.md "Run outputs").
 
     Attributes
     ----------
@@ -281,3 +281,5 @@ class RunRecord:
     gt_points: np.ndarray | None = None
     fused_points: np.ndarray | None = None
     report_markdown: str = ""
+    #: (P, 3) uint8 RGB of ``points`` taken from the images, or None (drawn white)
+    point_colors: np.ndarray | None = None

@@ -5,11 +5,16 @@ results and never spawns a viewer (``make view`` opens the file). The layout fol
 structure-from-motion example:
 
 ``world``                          axis convention, static
-``world/cam_XX``                   ``Transform3D`` from ``cam_from_world`` (``x_cam = R x_world + t``)
-``world/cam_XX/image``             ``Pinhole`` + JPEG image
-``world/cam_XX/image/keypoints``   ``Points2D``, class = keypoint status (see :data:`KEYPOINT_CLASSES`)
+``world/NAME``                     ``Transform3D`` from ``cam_from_world`` (``x_cam = R x_world + t``);
+                                   ``NAME`` is the image (file) name, escaped for Rerun
+``world/NAME/image``               ``Pinhole`` + JPEG image
+``world/NAME/image/keypoints``     ``Points2D``, class = keypoint status (see :data:`KEYPOINT_CLASSES`)
 ``world/links/kept``               ``LineStrips3D``, one green strip per kept link
-``world/links/deleted``            ``LineStrips3D``, one red strip per deleted link
+``world/links/deleted``            ``LineStrips3D``, one strip per deleted link, coloured by the
+                                   stage that cut it (:data:`CUT_COLORS`: resolution red, fusion
+                                   purple)
+``matches/A--B``                   the images ``A`` and ``B`` side by side with their links as
+                                   2D strips, kept vs cut (one pair per ``view_pairs`` entry)
 ``world/links/replay``             the same links, coloured per step of the ``round`` timeline
 ``world/points/{triangulated,ground_truth,fused}``  ``Points3D``
 ``graph``                          ``GraphNodes``/``GraphEdges``: conflictive sets before resolution
@@ -18,7 +23,7 @@ structure-from-motion example:
 ``report``                         ``TextDocument`` (markdown)
 
 Cameras without a pose (real images, ``R`` or ``t`` is ``None``; e.g. not registered by the
-mapper) are logged under ``images/cam_XX`` instead of ``world/``, with their image and keypoints
+mapper) are logged under ``images/NAME`` instead of ``world/``, with their image and keypoints
 but no frustum, and ``world/links/*`` leave out every link that touches one of them: a strip
 needs both of its cameras. The conflict graph, the text panels and the ``round`` timeline of
 the graph need no pose and are always logged.
@@ -45,9 +50,11 @@ import rerun.blueprint as rrb
 from pipeline.types import RunRecord
 
 __all__ = [
+    "CUT_COLORS",
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
     "camera_entity",
+    "default_view_pairs",
     "keypoint_status",
     "link_endpoints_3d",
     "log_run",
@@ -61,10 +68,19 @@ KEYPOINT_CLASSES = {
     0: ("other", (150, 150, 150)),
     1: ("kept in a track", (40, 200, 60)),
     2: ("conflictive before resolution", (255, 170, 0)),
-    3: ("cut (endpoint of a deleted link)", (230, 40, 40)),
+    3: ("cut by resolution (endpoint of a deleted link)", (230, 40, 40)),
+    4: ("cut by fusion or another stage (endpoint of a deleted link)", (160, 60, 255)),
 }
-#: Link colours (RGB): a candidate during the replay, kept, cut.
+#: Link colours (RGB): a candidate during the replay, kept, cut (by resolution).
 LINK_COLORS = {"candidate": (190, 190, 190), "kept": (40, 200, 60), "cut": (230, 40, 40)}
+#: Colour of a deleted link by the stage that cut it (``reason``); other reasons: ``other``.
+CUT_COLORS = {"resolution": (230, 40, 40), "fusion-outlier": (160, 60, 255),
+              "robot-lost": (255, 200, 0), "other": (255, 110, 180)}
+
+
+def cut_color(reason: str) -> tuple[int, int, int]:
+    """RGB of a link cut for ``reason`` (:data:`CUT_COLORS`)."""
+    return CUT_COLORS.get(str(reason), CUT_COLORS["other"])
 # Kept links outnumber cut ones by 10-100x: draw them thin and translucent so the cut ones show.
 _KEPT_ALPHA = 70
 _KEPT_RADIUS = rr.components.Radius.ui_points(0.5)
@@ -78,9 +94,22 @@ _CUT_MARKER = "×"
 RERUN_PIXEL_OFFSET = 0.5
 
 
-def camera_entity(i: int, posed: bool = True) -> str:
-    """Entity path of camera ``i``: ``world/cam_XX`` if it has a pose, else ``images/cam_XX``."""
-    return f"{'world' if posed else 'images'}/cam_{i:02d}"
+def camera_entity(i: int, posed: bool = True, name: str | None = None) -> str:
+    """Entity path of camera ``i``: ``world/NAME`` if it has a pose, else ``images/NAME``.
+
+    ``NAME`` is the image name escaped for Rerun (``rr.escape_entity_path_part``), or
+    ``cam_XX`` without a name.
+    """
+    part = rr.escape_entity_path_part(str(name)) if name else f"cam_{i:02d}"
+    return f"{'world' if posed else 'images'}/{part}"
+
+
+def _camera_names(record: RunRecord) -> list[str | None]:
+    """Names for the camera entities: the image names when they are unique and non-empty."""
+    names = [str(v.name) if getattr(v, "name", "") else None for v in record.views]
+    if None in names or len(set(names)) != len(names):
+        return [None] * len(names)
+    return names
 
 
 def _offsets(record: RunRecord) -> np.ndarray:
@@ -105,10 +134,10 @@ def keypoint_status(record: RunRecord) -> np.ndarray:
     Returns
     -------
     ndarray, (m_sum,) uint8
-        Class ids of :data:`KEYPOINT_CLASSES`. Precedence, highest first: *cut* (endpoint of a
-        deleted link), *conflictive* (endpoint of a link in a conflictive set before
-        resolution, none of whose links was cut), *kept in a track* (endpoint of a kept link),
-        *other*.
+        Class ids of :data:`KEYPOINT_CLASSES`. Precedence, highest first: *cut by resolution*,
+        *cut by another stage* (endpoint of a deleted link), *conflictive* (endpoint of a link
+        in a conflictive set before resolution, none of whose links was cut), *kept in a track*
+        (endpoint of a kept link), *other*.
 
     Notes
     -----
@@ -121,10 +150,12 @@ def keypoint_status(record: RunRecord) -> np.ndarray:
     a = off[lk.cam_i] + lk.feat_i
     b = off[lk.cam_j] + lk.feat_j
     deleted = np.asarray(record.ledger.status) == "deleted"
+    by_resolution = deleted & (np.asarray(record.ledger.reason, dtype=str) == "resolution")
     conflictive = np.asarray(record.ledger.conflictive_before, dtype=bool)
     status = np.zeros(int(off[-1]), dtype=np.uint8)
     # Later assignments win: write the classes in increasing precedence.
-    for cls, mask in ((1, ~deleted), (2, conflictive), (3, deleted)):
+    for cls, mask in ((1, ~deleted), (2, conflictive), (4, deleted & ~by_resolution),
+                      (3, by_resolution)):
         status[a[mask]] = cls
         status[b[mask]] = cls
     return status
@@ -288,18 +319,77 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
                             radii=_KEPT_RADIUS,
                             labels=labels[~deleted], show_labels=False), static=True)
     del_labels = np.char.add(np.char.add(labels[deleted], " cut by "), reason[deleted])
+    cut_rgb = np.array([cut_color(r) for r in reason], dtype=np.uint8).reshape(-1, 3)
     rec.log("world/links/deleted",
-            rr.LineStrips3D(ends[deleted], colors=LINK_COLORS["cut"], radii=_LINE_RADIUS,
+            rr.LineStrips3D(ends[deleted], colors=cut_rgb[deleted], radii=_LINE_RADIUS,
                             labels=del_labels, show_labels=False), static=True)
     # Replay: geometry once (static), colours per step (temporal).
     rec.log("world/links/replay",
             rr.LineStrips3D(ends, radii=_KEPT_RADIUS), static=True)
-    palette = np.array([(*LINK_COLORS["candidate"], _KEPT_ALPHA), (*LINK_COLORS["cut"], 255),
-                        (*LINK_COLORS["kept"], _KEPT_ALPHA)], dtype=np.uint8)
+    candidate = np.array((*LINK_COLORS["candidate"], _KEPT_ALPHA), dtype=np.uint8)
+    kept = np.array((*LINK_COLORS["kept"], _KEPT_ALPHA), dtype=np.uint8)
+    cut = np.concatenate([cut_rgb, np.full((len(cut_rgb), 1), 255, np.uint8)], axis=1)
     for s in range(len(keys) + 2):
-        state = np.where(step <= s, np.where(deleted, 1, 2), 0)
+        shown = (step <= s)[:, None]
+        colors = np.where(shown, np.where(deleted[:, None], cut, kept), candidate)
         rec.set_time("round", sequence=s)
-        rec.log("world/links/replay", rr.LineStrips3D.from_fields(colors=palette[state]))
+        rec.log("world/links/replay", rr.LineStrips3D.from_fields(colors=colors.astype(np.uint8)))
+
+
+def default_view_pairs(record: RunRecord, count: int = 1) -> list[tuple[int, int]]:
+    """Camera pairs worth a 2D matches view: most cut links first, then most links."""
+    lk = record.ledger.links
+    if len(lk) == 0:
+        return []
+    n = len(record.views)
+    key = lk.cam_i * n + lk.cam_j
+    deleted = np.asarray(record.ledger.status) == "deleted"
+    pairs, total = np.unique(key, return_counts=True)
+    cut = np.array([int(deleted[key == k].sum()) for k in pairs])
+    order = np.lexsort((pairs, -total, -cut))[:count]
+    return [(int(pairs[k] // n), int(pairs[k] % n)) for k in order]
+
+
+def _gray_to_rgb(image: np.ndarray) -> np.ndarray:
+    return np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image[..., :3]
+
+
+def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
+              names: list, jpeg_quality: int) -> str:
+    """Images ``i`` and ``j`` side by side with their links as 2D strips, kept vs cut."""
+    import cv2
+
+    a, b = _gray_to_rgb(record.views[i].image), _gray_to_rgb(record.views[j].image)
+    h = max(a.shape[0], b.shape[0])
+    sa, sb = h / a.shape[0], h / b.shape[0]
+    a = cv2.resize(a, (round(a.shape[1] * sa), h)) if sa != 1 else a
+    b = cv2.resize(b, (round(b.shape[1] * sb), h)) if sb != 1 else b
+    canvas = np.concatenate([a, b], axis=1)
+    lk = record.ledger.links
+    ni = names[i] or f"cam_{i:02d}"
+    nj = names[j] or f"cam_{j:02d}"
+    sel = np.flatnonzero(((lk.cam_i == i) & (lk.cam_j == j)) | ((lk.cam_i == j) & (lk.cam_j == i)))
+    fi = np.where(lk.cam_i[sel] == i, lk.feat_i[sel], lk.feat_j[sel])
+    fj = np.where(lk.cam_i[sel] == i, lk.feat_j[sel], lk.feat_i[sel])
+    pa = (np.asarray(record.features[i].keypoints, np.float64)[fi] + 0.5) * sa
+    pb = (np.asarray(record.features[j].keypoints, np.float64)[fj] + 0.5) * sb
+    pb[:, 0] += a.shape[1]
+    strips = np.stack([pa, pb], axis=1).astype(np.float32)
+    deleted = np.asarray(record.ledger.status)[sel] == "deleted"
+    reason = np.asarray(record.ledger.reason, dtype=str)[sel]
+    entity = "matches/" + rr.escape_entity_path_part(f"{ni}--{nj}")
+    rec.log(entity, rr.Image(np.ascontiguousarray(canvas)).compress(jpeg_quality=jpeg_quality),
+            static=True)
+    rec.log(f"{entity}/kept", rr.LineStrips2D(strips[~deleted],
+                                              colors=(*LINK_COLORS["kept"], 150),
+                                              radii=rr.components.Radius.ui_points(0.75)),
+            static=True)
+    rec.log(f"{entity}/cut", rr.LineStrips2D(
+        strips[deleted], colors=np.array([cut_color(r) for r in reason[deleted]],
+                                         dtype=np.uint8).reshape(-1, 3),
+        labels=np.char.add("cut by ", reason[deleted]), show_labels=False,
+        radii=rr.components.Radius.ui_points(1.25)), static=True)
+    return entity
 
 
 def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_kept: int) -> None:
@@ -356,11 +446,15 @@ def _default_eye(views) -> rrb.EyeControls3D | None:
                              look_target=centre + 0.5 * spread * forward, eye_up=-down)
 
 
-def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int) -> rrb.Blueprint:
-    image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p)}/image", name=v.name)
+def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int,
+               pair_entities: list[str] = ()) -> rrb.Blueprint:
+    names = _camera_names(record)
+    image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p, names[i])}/image", name=v.name)
                    for i, (v, p) in enumerate(zip(record.views, posed, strict=True))][:max_image_views]
     side = [rrb.Grid(*image_views)] if image_views else []
     side.append(rrb.Tabs(
+        *[rrb.Spatial2DView(origin=e, name="Matches " + e.split("/", 1)[1].replace("\\", ""))
+          for e in pair_entities],
         rrb.GraphView(origin="graph", name="Conflictive sets before resolution"),
         rrb.TextDocumentView(origin="report", name="Report"),
         rrb.TextLogView(origin="resolution", name="Resolution steps"),
@@ -388,7 +482,8 @@ def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int) -> rr
 def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
             recording_name: str | None = None, *, image_plane_distance: float | None = None,
             world_axes=None, jpeg_quality: int = 85,
-            max_image_views: int = 4) -> Path:
+            max_image_views: int = 4, view_pairs: list[tuple[int, int]] | None = None,
+            live: str | None = None) -> Path:
     """Write the Rerun recording of one run to ``path`` (headless; no viewer is spawned).
 
     Parameters
@@ -413,6 +508,12 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         0.38 MB at 85; the whole recording of that run is 1.1 MB).
     max_image_views : int
         How many cameras get a 2D view in the default blueprint.
+    view_pairs : list of (i, j), optional
+        Camera pairs drawn side by side with their links, kept vs cut (``matches/A--B``).
+        Default: :func:`default_view_pairs` (the pair with the most cut links).
+    live : str, optional
+        Also stream to a live viewer: ``"spawn"`` starts one, ``"connect"`` or a
+        ``rerun+http://…`` URL connects to a running one. The file is written either way.
 
     Returns
     -------
@@ -447,9 +548,20 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     off = _offsets(record)
     cam_colors = _camera_palette(len(record.views))  # frusta match the graph's node colours
 
+    names = _camera_names(record)
+    pairs = default_view_pairs(record) if view_pairs is None else list(view_pairs)
+    pair_entities = ["matches/" + rr.escape_entity_path_part(
+        f"{names[i] or f'cam_{i:02d}'}--{names[j] or f'cam_{j:02d}'}") for i, j in pairs]
+    blueprint = _blueprint(record, posed, max_image_views, pair_entities)
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
-        rec.save(tmp, default_blueprint=_blueprint(record, posed, max_image_views))
+        if live:
+            if live == "spawn":
+                rr.spawn(connect=False)
+            url = None if live in ("spawn", "connect") else live
+            rec.set_sinks(rr.FileSink(tmp), rr.GrpcSink(url), default_blueprint=blueprint)
+        else:
+            rec.save(tmp, default_blueprint=blueprint)
         rec.set_log_time_enabled(False)
         if recording_name:
             rec.send_recording_name(recording_name)
@@ -460,7 +572,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                 else world_axes_from_cameras(record.views), static=True)
 
         for i, (view, feats) in enumerate(zip(record.views, record.features, strict=True)):
-            cam = camera_entity(i, posed[i])
+            cam = camera_entity(i, posed[i], names[i])
             w, h = view.size
             if posed[i]:
                 rec.log(cam, rr.Transform3D(mat3x3=np.asarray(view.R, dtype=np.float64),
@@ -494,11 +606,17 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
             if name == "triangulated" and record.point_tracks is not None \
                     and len(record.point_tracks) == len(pts):
                 labels = np.char.add("track ", np.asarray(record.point_tracks).astype(str))
+            colors = _POINT_COLORS[name]
+            own = getattr(record, "point_colors", None)
+            if name == "triangulated" and own is not None and len(own) == len(pts):
+                colors = np.asarray(own, dtype=np.uint8).reshape(-1, 3)  # from the images
             rec.log(f"world/points/{name}",
-                    rr.Points3D(pts, colors=_POINT_COLORS[name], radii=_POINT_RADIUS,
+                    rr.Points3D(pts, colors=colors, radii=_POINT_RADIUS,
                                 labels=labels, show_labels=False if labels is not None else None),
                     static=True)
 
+        for i, j in pairs:
+            _log_pair(rec, record, int(i), int(j), names, jpeg_quality)
         _log_graph(rec, record, step)
         _log_replay_text(rec, step, keys, int((np.asarray(record.ledger.status) == "kept").sum()))
         rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",

@@ -1,6 +1,6 @@
 """Log a saved run folder to Rerun: ``python -m viz.saved_run RUN_DIR [--out FILE.rrd]``.
 
-Reads what a run wrote (DESIGN.md "Run outputs": ``links.csv``, ``report.json``, ``sparse/``)
+Reads what a run wrote (docs/DESIGN.md "Run outputs": ``links.csv``, ``report.json``, ``sparse/``)
 back into a :class:`~pipeline.types.RunRecord` and logs it with :func:`viz.rerun_log.log_run`,
 e.g. for a run made with ``--no-rerun``. It computes nothing; what the folder does not hold is
 left out of the recording:
@@ -52,7 +52,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     folder = Path(folder)
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
-            raise InputError(f"{folder}: no {name}; not a run folder (DESIGN.md 'Run outputs')")
+            raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
     report = json.loads((folder / "report.json").read_text())
     ledger = read_run_links_csv(folder / "links.csv")
     rec = colmap.read_model(folder / "sparse")

@@ -31,8 +31,10 @@ from pipeline.colmap.mapping import (
     model_points,
     read_model,
     registered_poses,
+    rescale_to_files,
     similarity_between,
     write_model,
+    write_model_for_files,
 )
 
 __all__ = [
@@ -54,6 +56,8 @@ __all__ = [
     "model_points",
     "read_model",
     "registered_poses",
+    "rescale_to_files",
     "similarity_between",
     "write_model",
+    "write_model_for_files",
 ]

@@ -1,7 +1,7 @@
 """What every pycolmap call shares: the pixel convention, the log level, the version.
 
 The pipeline uses OpenCV's pixel convention (origin at the centre of the top-left pixel),
-COLMAP the corner of the top-left pixel (DESIGN.md "Conventions"): keypoints and principal
+COLMAP the corner of the top-left pixel (docs/DESIGN.md "Conventions"): keypoints and principal
 points get :data:`COLMAP_PIXEL_OFFSET` added on the way in and subtracted on the way out.
 COLMAP's C++ log is quieted only inside the adapter's calls (:func:`quiet_colmap`), never for
 the whole process.
@@ -16,7 +16,7 @@ import pycolmap
 
 __all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid"]
 
-#: Added to OpenCV pixel coordinates to get COLMAP's (DESIGN.md "Conventions").
+#: Added to OpenCV pixel coordinates to get COLMAP's (docs/DESIGN.md "Conventions").
 COLMAP_PIXEL_OFFSET = 0.5
 
 

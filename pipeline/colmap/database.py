@@ -82,13 +82,31 @@ def _camera(view: View) -> pycolmap.Camera:
     return cam
 
 
-def _write_image_with_trivial_rig(db, view: View) -> int:
-    """Camera, one-sensor rig, image and frame, as COLMAP's feature extractor writes them."""
-    camera_id = db.write_camera(_camera(view))
-    sensor = pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=camera_id)
-    rig = pycolmap.Rig()
-    rig.add_ref_sensor(sensor)
-    rig_id = db.write_rig(rig)
+def _camera_key(cam: pycolmap.Camera) -> tuple:
+    return (str(cam.model), int(cam.width), int(cam.height),
+            tuple(float(p) for p in cam.params), bool(cam.has_prior_focal_length))
+
+
+def _write_image_with_trivial_rig(db, view: View, shared: dict | None = None) -> int:
+    """Camera, one-sensor rig, image and frame, as COLMAP's feature extractor writes them.
+
+    ``shared`` maps a camera (model, size, parameters) to its ``(camera_id, rig_id)``: images
+    with identical intrinsics share one camera and its rig (COLMAP's ``single_camera``), so
+    one K (e.g. a K.txt) is one camera in the database and in ``sparse/``.
+    """
+    cam = _camera(view)
+    key = _camera_key(cam)
+    if shared is not None and key in shared:
+        camera_id, rig_id = shared[key]
+        sensor = pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=camera_id)
+    else:
+        camera_id = db.write_camera(cam)
+        sensor = pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=camera_id)
+        rig = pycolmap.Rig()
+        rig.add_ref_sensor(sensor)
+        rig_id = db.write_rig(rig)
+        if shared is not None:
+            shared[key] = (camera_id, rig_id)
     image_id = db.write_image(pycolmap.Image(name=view.name, camera_id=camera_id))
     frame = pycolmap.Frame()
     frame.rig_id = rig_id
@@ -168,8 +186,8 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
 
     Notes
     -----
-    Image ``i`` gets image id ``i + 1`` and camera id ``i + 1``; each image has its own camera
-    and a trivial rig and frame. Pairs with links get a two-view geometry, even when none of
+    Image ``i`` gets image id ``i + 1``; images with identical intrinsics (model, size,
+    parameters) share one camera and its trivial rig, each image has its own frame. Pairs with links get a two-view geometry, even when none of
     their links is kept (then with no inliers, COLMAP's own way of saying "not verified").
     """
     path = Path(path)
@@ -181,7 +199,8 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
     if keep.shape != (len(links),):
         raise InputError(f"write_database: keep has shape {keep.shape}, expected ({len(links)},)")
     with _atomic_database(path) as tmp, quiet_colmap(), pycolmap.Database.open(tmp) as db:
-        image_ids = [_write_image_with_trivial_rig(db, v) for v in views]
+        shared: dict = {}
+        image_ids = [_write_image_with_trivial_rig(db, v, shared) for v in views]
         for image_id, f in zip(image_ids, features, strict=True):
             kp = np.asarray(f.keypoints, dtype=np.float32).reshape(-1, 2)
             db.write_keypoints(image_id, kp + np.float32(COLMAP_PIXEL_OFFSET))

@@ -96,9 +96,15 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
                 fixed = set(fixed_intrinsics)
                 options.constant_cameras = {im.camera_id for im in db.read_all_images()
                                             if im.name in fixed}
-            # COLMAP insists on an existing image folder even when it reads no pixels
-            models = pycolmap.incremental_mapping(database_path, str(image_dir or tmp), out,
-                                                  options)
+            # COLMAP insists on an existing image folder even when it reads no pixels;
+            # a progress bar counts the images as the mapper registers them
+            from pipeline.progress import progress
+
+            with progress(None, total=n_images, desc="mapping (images registered)") as bar:
+                models = pycolmap.incremental_mapping(
+                    database_path, str(image_dir or tmp), out, options,
+                    initial_image_pair_callback=lambda: bar.update(2),
+                    next_image_callback=lambda: bar.update(1))
     if not models:
         return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
     rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
@@ -119,6 +125,57 @@ def write_model(path: str | Path, reconstruction=None) -> Path:
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     (reconstruction if reconstruction is not None else pycolmap.Reconstruction()).write(path)
+    return path
+
+
+def rescale_to_files(rec, sizes: dict[str, tuple[int, int]]) -> None:
+    """Scale a reconstruction made on downscaled images back to the image files, in place.
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction — cameras and 2D points at the size that was mapped
+    sizes : ``{image name: (width, height)}`` of the files the images were loaded from
+
+    Notes
+    -----
+    In COLMAP's pixel convention (origin at the top-left *corner*) resizing an image by
+    ``(sx, sy)`` multiplies every pixel coordinate by ``(sx, sy)``: ``Camera.rescale`` scales
+    focal lengths and principal point, each 2D point is scaled likewise. A camera shared by
+    several images is rescaled once. Poses and 3D points do not change.
+    """
+    factor: dict[int, tuple[float, float]] = {}
+    for image in rec.images.values():
+        if image.name not in sizes:
+            continue
+        W, H = (int(v) for v in sizes[image.name])
+        if image.camera_id not in factor:
+            cam = rec.cameras[image.camera_id]
+            factor[image.camera_id] = (W / cam.width, H / cam.height)
+            if (W, H) != (cam.width, cam.height):
+                cam.rescale(W, H)
+        sx, sy = factor[image.camera_id]
+        if (sx, sy) == (1.0, 1.0):
+            continue
+        for p in image.points2D:
+            xy = p.xy
+            p.xy = np.array([xy[0] * sx, xy[1] * sy])
+
+
+def write_model_for_files(path: str | Path, reconstruction, sizes: dict[str, tuple[int, int]],
+                          image_dir: str | Path) -> Path:
+    """Write ``reconstruction`` as a model folder at the resolution of its image files.
+
+    A copy is scaled (:func:`rescale_to_files`) and its points take their colours from the
+    files in ``image_dir``; ``reconstruction`` itself is left at the size it was mapped at.
+    """
+    path = write_model(path, reconstruction)
+    if reconstruction is None:
+        return path
+    full = pycolmap.Reconstruction(str(path))
+    rescale_to_files(full, sizes)
+    with quiet_colmap():
+        full.extract_colors_for_all_images(str(image_dir))
+    full.write(path)
     return path
 
 

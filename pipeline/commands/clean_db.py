@@ -5,8 +5,9 @@ made consistent by the distributed consistency stage (Aragüés et al., Sec. III
 Sec. IV Alg. 1 resolution, one robot per image), and a NEW database is written with the cut
 links removed from the two-view geometries. Run COLMAP's mapper on OUT.db as usual.
 
-Before the distributed stage, links the paper's model cannot hold are cut too, each with its
-reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
+Beside OUT.db it writes ``OUT.links.csv`` (every verified link, kept or deleted with its reason)
+and ``OUT.rrd`` (:mod:`pipeline.cleaned`). Before the distributed stage, links the paper's
+model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
 the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
 between images that are not neighbours: those robots could not have matched).
 """
@@ -57,6 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph: 'cam_i,cam_j' lines, 0-based indices of the images "
                         "in name order or image names (default: images sharing verified "
                         "matches are neighbours)")
+    p.add_argument("--image-dir", default=None, metavar="DIR",
+                   help="the images, to draw them in OUT.rrd (default: gray canvases)")
+    p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
     p.add_argument("--overwrite", action="store_true",
@@ -70,7 +74,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
-                   resolution: str = "evidence") -> CleanDbResult:
+                   resolution: str = "evidence", *, rerun: bool = True,
+                   image_dir: str | Path | None = None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -83,6 +88,9 @@ def clean_database(database: str | Path, out: str | Path,
     database : input COLMAP database
     out : output database (must differ from the input)
     comm_graph_file : optional comm-graph file (:func:`pipeline.commgraph.read_comm_graph`)
+    rerun : also write ``OUT.rrd`` beside ``out`` (``OUT.links.csv`` is always written;
+        :mod:`pipeline.cleaned`)
+    image_dir : the images, drawn in the recording
 
     Returns
     -------
@@ -132,6 +140,8 @@ def clean_database(database: str | Path, out: str | Path,
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     colmap.write_cleaned_database(contents, out, keep)
+    _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
+                  before, after)
     n_edges = len(edges) if edges is not None else \
         len(np.unique(model_links.cam_i * n + model_links.cam_j))
     stats = result.stats
@@ -163,15 +173,40 @@ def _link_weight(contents, links) -> np.ndarray:
     return geometric_llr(err, pair, COLMAP_MAX_ERROR_PX)
 
 
+def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
+                  before, after) -> None:
+    """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.cleaned`)."""
+    from pipeline.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.run import _conflictive_links
+
+    rnd = np.full(len(links), -1, dtype=np.int64)
+    it = np.full(len(links), -1, dtype=np.int64)
+    rnd[idx], it[idx] = result.round, result.iteration
+    conflictive = np.zeros(len(links), dtype=bool)
+    conflictive[idx] = _conflictive_links(m, model_links)
+    sizes = [(int(c.width), int(c.height)) if c is not None else (0, 0)
+             for c in contents.cameras]
+    md = (f"## clean-db {Path(contents.path).name}\n\n| | before | after |\n|---|---:|---:|\n"
+          f"| Verified links | {len(links)} | {int((reason == '').sum())} |\n"
+          f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n")
+    write_side_outputs(CleaningOutcome(contents.names, sizes, contents.keypoints, links,
+                                       reason.astype(str), rnd, it, conflictive),
+                       out, rerun=rerun, image_dir=image_dir, report_markdown=md)
+
+
 def run(args) -> int:
+    from pipeline.cleaned import side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
 
-    check_output_files([("--out", args.out), ("--report", args.report)],
+    links_out, rrd_out = side_paths(args.out)
+    check_output_files([("--out", args.out), ("--report", args.report),
+                        ("OUT.links.csv", links_out)]
+                       + ([] if args.no_rerun else [("OUT.rrd", rrd_out)]),
                        [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
-                         args.resolution)
+                         args.resolution, rerun=not args.no_rerun, image_dir=args.image_dir)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -180,7 +215,9 @@ def run(args) -> int:
           f"({r['detection_rounds']} detection + {r['resolution_rounds']} resolution rounds, "
           f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
           f"{cut['not-comm-edge']} outside the comm graph")
-    print(f"cleaned database written to {res.output}")
+    links_csv, rrd = side_paths(res.output)
+    print(f"cleaned database written to {res.output}; what was cut: {links_csv}"
+          + ("" if args.no_rerun else f", recording: {rrd}"))
     summary = flag_result(res.summary())
     if args.report:
         from pipeline.runfolder import write_json_atomic

@@ -22,15 +22,25 @@ RESOLUTIONS = ("paper", "evidence")
 MIN_FEATURES = 8
 
 
-def add_feature_options(p: argparse.ArgumentParser) -> None:
-    """``--features`` and ``--max-features``; check them with :func:`feature_options`."""
-    from pipeline.features import METHODS
+def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
+    """``--features`` and ``--max-features``; check them with :func:`feature_options`.
+
+    ``--features`` lists only the methods this OpenCV build offers. With ``photos``,
+    ``--max-features`` defaults to ``auto`` (scaled with each image,
+    :func:`pipeline.features.photo_max_features`).
+    """
+    from pipeline.features import available_methods
 
     p.add_argument("--features", default="sift",
-                   help=f"feature method: {'|'.join(METHODS)} (default sift; surf only where "
-                        "the OpenCV build has non-free algorithms)")
-    p.add_argument("--max-features", type=int, default=2000,
-                   help="features per image (default 2000)")
+                   help=f"feature method: {'|'.join(available_methods())} (the ones this OpenCV "
+                        "build offers; default sift)")
+    if photos:
+        p.add_argument("--max-features", default="auto", metavar="N|auto",
+                       help="features per image; auto (default) scales with the image: 2000 "
+                            "per 640x480 pixels, at most 8192 (COLMAP's default)")
+    else:
+        p.add_argument("--max-features", type=int, default=2000,
+                       help="features per image (default 2000)")
 
 
 def add_scene_options(p: argparse.ArgumentParser) -> None:
@@ -56,21 +66,30 @@ def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
                         "paper)")
 
 
-def feature_options(args) -> tuple[str, int]:
-    """The checked ``(method, max_features)`` of :func:`add_feature_options`' options.
+def feature_options(args) -> tuple[str, int | None]:
+    """The checked ``(method, max_features)`` of :func:`add_feature_options`' options
+    (``max_features`` is ``None`` for ``auto``).
 
     Raises
     ------
     InputError
         An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`.
     """
-    from pipeline.features import METHODS, check_method
+    from pipeline.features import METHODS, available_methods, check_method
 
     method = str(args.features).lower()
     if method not in METHODS:
-        raise InputError(f"--features {args.features!r}: choose one of {', '.join(METHODS)} "
-                         f"(unknown feature method {args.features!r})")
+        raise InputError(f"--features {args.features!r}: choose one of "
+                         f"{', '.join(available_methods())} (unknown feature method "
+                         f"{args.features!r})")
     check_method(method)
+    if str(args.max_features).lower() == "auto":
+        return method, None
+    try:
+        args.max_features = int(args.max_features)
+    except ValueError:
+        raise InputError(f"--max-features {args.max_features!r}: expected a number of features "
+                         f"or 'auto'") from None
     if args.max_features < MIN_FEATURES:
         raise InputError(f"--max-features {args.max_features}: at least {MIN_FEATURES} are "
                          "needed")

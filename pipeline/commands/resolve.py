@@ -2,10 +2,12 @@
 
 Makes a user's own links conflict-free with the distributed consistency stage (Aragüés et
 al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot per camera) and writes the
-run-output ``links.csv`` (DESIGN.md): every input row once, ``status`` ``kept`` or
+run-output ``links.csv`` (docs/DESIGN.md): every input row once, ``status`` ``kept`` or
 ``deleted``, ``reason`` ``resolution`` for a cut link, the resolution ``round`` that cut it,
 ``truth`` empty (unknown). Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
-``--comm-graph``, cameras that share a link are neighbours.
+``--comm-graph``, cameras that share a link are neighbours. A run-output ``links.csv`` (this
+command's own output, or a run folder's) is accepted as input too: its deleted rows are
+written back unchanged and its kept rows are made consistent.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ __all__ = ["add_arguments", "run", "resolve_file"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--links", required=True, metavar="IN.csv",
                    help="links, one per row: cam_i,feat_i,cam_j,feat_j[,quality] (0-based ids, "
-                        "header optional); never modified")
+                        "header optional), or a run-output links.csv (e.g. this command's own "
+                        "output: deleted rows stay deleted); never modified")
     p.add_argument("--out", required=True, metavar="OUT.csv",
                    help="links.csv to write: cam_i,feat_i,cam_j,feat_j,status,reason,round,truth")
     p.add_argument("--comm-graph", default=None, metavar="EDGES.csv",
@@ -66,6 +69,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.linkscsv import read_links_csv, write_links_csv
     from pipeline.progress import ticker
     from pipeline.run import consistency_stage, ledger_from_consistency
+    from pipeline.types import LinkLedger
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
     if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
@@ -90,6 +94,13 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"({links.cam_j[k]},{links.feat_j[k]}) joins cameras {links.cam_i[k]} and "
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
+    all_links = links
+    # a run-output links.csv (e.g. our own output): its deleted rows stay deleted with their
+    # reason and round; its kept rows are the links to make consistent
+    active = lf.status == "kept" if lf.status is not None else np.ones(len(links), dtype=bool)
+    if not active.all():
+        links = all_links.subset(active)
+        ids = compact_ids(links, edges, n_cameras=n_cams)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
     check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
@@ -100,13 +111,23 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)
+    if lf.status is not None:
+        # rows the input file had already deleted stay deleted with their reason and round
+        full = LinkLedger.all_kept(all_links)
+        idx = np.flatnonzero(active)
+        for name in ("status", "reason", "round", "iteration", "case"):
+            getattr(full, name)[idx] = getattr(ledger, name)
+        old = np.flatnonzero(~active)
+        full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
+        ledger = full
     write_links_csv(out_csv, ledger)
     st = res.stats
     summary = {
         "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
-        "links": len(links), "deleted": int(res.deleted.sum()),
+        "links": len(all_links), "deleted": int(res.deleted.sum()),
+        "previously_deleted": int((~active).sum()),
         "resolution_method": res.stats["resolution"],
         "deleted_by_case": {c: int((res.case == c).sum()) for c in
                             ("b", "c", "evidence") if c != "evidence" or resolution == "evidence"},

@@ -60,5 +60,6 @@ def run(args) -> int:
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):
         out = run_formation(config)
-    print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd)")
+    written = "report.json, links.csv, sparse/" + ("" if args.no_rerun else ", recording.rrd")
+    print(f"run written to {out}/ ({written})")
     return exit_status(json.loads((out / "report.json").read_text()))

@@ -26,21 +26,29 @@ __all__ = ["add_arguments", "config_from_args", "run"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
                    help="folder of photographs (JPEG/PNG/TIFF; taken in name order)")
-    p.add_argument("--graph", required=True, metavar="ring|ring2|complete|knn:K|FILE",
+    p.add_argument("--graph", required=True, metavar="ring|ring2|complete|knn:K|seq:K|FILE",
                    help="communication graph: ring, ring2 (ring + 2-hop chords), complete, "
-                        "knn:K (each image with the K nearest in name order), or a file of "
+                        "knn:K (each image with the K images most similar to it, by a global "
+                        "descriptor of its features: for unordered photos), seq:K (each image "
+                        "with the K nearest in name order: for ordered sequences), or a file of "
                         "'cam_i,cam_j' lines (0-based indices in name order, or image names)")
     p.add_argument("--intrinsics", default="auto", metavar="auto|exif|K.txt",
                    help="auto (DIR/K.txt, else EXIF, else a guessed focal length), exif, or "
                         "a K.txt at the images' full resolution (default auto)")
     p.add_argument("--max-size", type=int, default=1600, metavar="PX",
                    help="longest image side after downscaling (default 1600; 0 = full size)")
-    add_feature_options(p)
+    add_feature_options(p, photos=True)
     p.add_argument("--export-db", action="store_true",
                    help="also write the matches as a COLMAP database (run folder/database.db): "
                         "matches table = every link, two-view geometries = kept links")
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
+    live = p.add_mutually_exclusive_group()
+    live.add_argument("--spawn", action="store_true",
+                      help="also show the recording in a new Rerun viewer (needs a display)")
+    live.add_argument("--connect", nargs="?", const="connect", default=None, metavar="URL",
+                      help="also stream the recording to a running Rerun viewer (default URL: "
+                           "Rerun's, rerun+http://127.0.0.1:9876/proxy)")
     p.add_argument("--threads", type=int, default=1,
                    help="threads of COLMAP's mapper (default 1: repeatable figures; -1: all cores)")
     p.add_argument("--truth", default="none", choices=("none", "homographies"),
@@ -68,7 +76,8 @@ def config_from_args(args) -> ImagesConfig:
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
                         threads=validate.threads(args.threads), truth=args.truth,
                         truth_tol_px=args.truth_tol,
-                        resolution=args.resolution, merge_radius=args.merge_radius)
+                        resolution=args.resolution, merge_radius=args.merge_radius,
+                        live="spawn" if args.spawn else args.connect)
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
@@ -85,6 +94,8 @@ def run(args) -> int:
     config = config_from_args(args)
     with claim_run_folder(config.out_dir(), inputs=_inputs(config)):
         out = run_images(config)
-    print(f"run written to {out}/ (report.json, links.csv, sparse/, recording.rrd"
-          f"{', database.db' if args.export_db else ''})")
+    written = ["report.json", "links.csv", "sparse/"]
+    written += [] if args.no_rerun else ["recording.rrd"]
+    written += ["database.db"] if args.export_db else []
+    print(f"run written to {out}/ ({', '.join(written)})")
     return exit_status(json.loads((out / "report.json").read_text()))

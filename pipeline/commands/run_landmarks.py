@@ -106,7 +106,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
                    help="folder of images, each with NAME.txt (K rows 'x y') or NAME.mat "
                         "(pts_coord 2 x K): the same K labelled landmarks in the same order")
-    p.add_argument("--graph", default="complete", metavar="complete|ring|ring2|knn:K|FILE",
+    p.add_argument("--graph", default="complete", metavar="complete|ring|ring2|seq:K|FILE",
                    help="communication graph over the images in name order (default complete)")
     p.add_argument("--frames", type=int, default=None, metavar="N",
                    help="use N images at a fixed stride floor(n/N) from the first (default all)")

@@ -10,7 +10,7 @@ Implements, for a robot network whose communication graph ``G(t)`` may change ev
 * max-c consensus on random draws, which picks the ``c`` robots of a hypothesis (eqs. 6–7);
 * the RANSAC number of hypotheses and its success probability (Sec. III, ref. [5]).
 
-The distributed model (DESIGN.md, "the one rule")
+The distributed model (docs/DESIGN.md, "the one rule")
 -------------------------------------------------
 A robot uses only its own state and the messages received from its current neighbours.
 One round of consensus over all robots is computed here in matrix form,

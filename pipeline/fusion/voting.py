@@ -374,7 +374,9 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
             hist["yes"].append(yes.reshape(B, N, K))
             hist["v"].append(v.reshape(B, N, K))
 
-    for t in range(int(rounds)):
+    from pipeline.progress import progress
+
+    for t in progress(range(int(rounds)), desc="fusion rounds (dynamic voting)"):
         theta, ok, yes = opinion(P, q)
         record(theta, ok, yes, v)
         u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14): ±1 or 0

@@ -30,19 +30,19 @@ def test_named_graphs_hand_computed():
         [4, 5]]
     assert comm_graph("complete", NAMES6[:3]).tolist() == [[0, 1], [0, 2], [1, 2]]
     assert comm_graph("ring", NAMES6[:2]).tolist() == [[0, 1]]
-    # knn by name order, K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
-    assert comm_graph("knn:2", NAMES6[:5]).tolist() == [
+    # seq (name order), K=2: 0 picks 1,2; 1 picks 0,2; 2 picks 1,3; 3 picks 2,4; 4 picks 3,2
+    assert comm_graph("seq:2", NAMES6[:5]).tolist() == [
         [0, 1], [0, 2], [1, 2], [2, 3], [2, 4], [3, 4]]
     # K=1 ties go to the lower index: 1 picks 0, 2 picks 1, ...
-    assert comm_graph("knn:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
-    assert comm_graph("knn:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
+    assert comm_graph("seq:1", NAMES6[:4]).tolist() == [[0, 1], [1, 2], [2, 3]]
+    assert comm_graph("seq:99", NAMES6[:4]).tolist() == comm_graph("complete", NAMES6[:4]).tolist()
 
 
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(2, 40), k=st.integers(1, 8),
-       kind=st.sampled_from(["ring", "ring2", "complete", "knn"]))
+       kind=st.sampled_from(["ring", "ring2", "complete", "seq"]))
 def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
-    spec = f"knn:{k}" if kind == "knn" else kind
+    spec = f"seq:{k}" if kind == "seq" else kind
     e = comm_graph(spec, [str(i) for i in range(n)])
     assert e.dtype == np.int64 and e.ndim == 2 and e.shape[1] == 2
     assert (e[:, 0] < e[:, 1]).all() and (e >= 0).all() and (e < n).all()
@@ -54,7 +54,7 @@ def test_graph_kinds_are_simple_connected_graphs(n, k, kind):
         assert (deg == 2).all()
     if kind == "complete":
         assert len(e) == n * (n - 1) // 2
-    if kind == "knn":
+    if kind == "seq":
         assert (deg >= min(k, n - 1)).all()
     if kind == "ring2":
         ring = {tuple(r) for r in comm_graph("ring", [str(i) for i in range(n)]).tolist()}
@@ -87,7 +87,7 @@ def test_graph_file_errors(tmp_path, text, match):
         comm_graph(f, NAMES6)
 
 
-@pytest.mark.parametrize("spec", ["star", "knn:0", "knn:x", "knn:"])
+@pytest.mark.parametrize("spec", ["star", "seq:0", "seq:x", "seq:", "knn:0", "knn:2"])
 def test_unknown_graph_kind(spec):
     with pytest.raises(InputError, match="graph"):
         comm_graph(spec, NAMES6)
@@ -143,7 +143,7 @@ def test_kinds_of_the_small_cases():
     assert graph_edges("ring2", 4).tolist() == graph_edges("complete", 4).tolist()
     for n in range(2, 9):
         names = [str(k) for k in range(n)]
-        for kind in ("ring", "ring2", "complete", "line", "knn:2", "ring+triangles"):
+        for kind in ("ring", "ring2", "complete", "line", "seq:2", "ring+triangles"):
             assert comm_graph(kind, names).tolist() == graph_edges(kind, n).tolist()
 
 

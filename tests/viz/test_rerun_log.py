@@ -10,6 +10,7 @@ from rerun.chunk import RrdReader
 from pipeline.types import Features, LinkLedger, Links, RunRecord, View
 from viz.recording_reader import count_strips, entity_paths
 from viz.rerun_log import (
+    CUT_COLORS,
     LINK_COLORS,
     camera_entity,
     keypoint_status,
@@ -108,7 +109,7 @@ def test_entities_present(recording):
     path, _ = recording
     paths = set(entity_paths(path))
     for cam in range(3):
-        e = "/" + camera_entity(cam)
+        e = "/" + camera_entity(cam, name=f"cam{cam:02d}")
         assert {e, e + "/image", e + "/image/keypoints"} <= paths
     assert {"/world", "/world/links/kept", "/world/links/deleted", "/world/links/replay",
             "/world/points/triangulated", "/world/points/ground_truth", "/graph",
@@ -141,13 +142,13 @@ def test_blueprint_saved(recording):
     path, _ = recording
     assert len(RrdReader(path).recordings()) == 1
     views = blueprint_views(path)
-    assert {("3D", "world"), ("2D", "world/cam_00/image"), ("Graph", "graph"),
+    assert {("3D", "world"), ("2D", "world/cam00/image"), ("Graph", "graph"),
             ("TextDocument", "report")} <= views
 
 
 def test_camera_pose_is_child_from_parent(recording):
     path, record = recording
-    (chunk,) = _chunks(path, "/world/cam_01", static=True)
+    (chunk,) = _chunks(path, "/world/cam01", static=True)
     batch = chunk.to_record_batch().to_pydict()
     np.testing.assert_allclose(batch["Transform3D:translation"][0][0], record.views[1].t, rtol=1e-6)
     # Rerun stores Mat3x3 column-major.
@@ -200,7 +201,11 @@ def test_replay_order_and_final_colours(recording):
 
     assert (rows[0] == rgb24(LINK_COLORS["candidate"])).all()
     final = rows[len(keys) + 1]
-    assert (final[deleted] == rgb24(LINK_COLORS["cut"])).all()
+    # resolution cuts red, fusion cuts purple: the two stages are told apart
+    by_res = deleted & (record.ledger.reason == "resolution")
+    assert (final[by_res] == rgb24(CUT_COLORS["resolution"])).all()
+    assert (final[deleted & ~by_res] == rgb24(CUT_COLORS["fusion-outlier"])).all()
+    assert CUT_COLORS["resolution"] != CUT_COLORS["fusion-outlier"]
     assert (final[~deleted] == rgb24(LINK_COLORS["kept"])).all()
     # After step 1 only the link cut in resolution round 1 is red.
     assert (rows[1] == rgb24(LINK_COLORS["cut"])).sum() == 1
@@ -239,12 +244,12 @@ def test_keypoint_status_hand_computed():
     assert cam0[11] == 3           # endpoint of a link cut by resolution
     assert cam0[12] == 3
     assert cam0[14] == 0           # never linked
-    assert status[m + 5] == 3      # camera 1 feature 5: cut by fusion
+    assert status[m + 5] == 4      # camera 1 feature 5: cut by fusion
 
 
 def test_keypoints_logged_with_status_classes(recording):
     path, record = recording
-    (chunk,) = _chunks(path, "/world/cam_00/image/keypoints", static=True)
+    (chunk,) = _chunks(path, "/world/cam00/image/keypoints", static=True)
     d = chunk.to_record_batch().to_pydict()
     np.testing.assert_array_equal(d["Points2D:class_ids"][0],
                                   keypoint_status(record)[:len(record.features[0])])
@@ -260,11 +265,11 @@ def test_real_images_without_poses(tmp_path):
     record.points, record.point_tracks, record.gt_points = np.zeros((0, 3)), np.zeros(0), None
     path = log_run(tmp_path / "real.rrd", record)
     paths = set(entity_paths(path))
-    assert {"/images/cam_00/image", "/images/cam_02/image/keypoints", "/graph", "/report"} <= paths
+    assert {"/images/cam00/image", "/images/cam02/image/keypoints", "/graph", "/report"} <= paths
     assert not any(p.startswith("/world/links") or p.startswith("/world/cam") for p in paths)
     assert count_strips(path, "world/links/deleted") == 0
     views = blueprint_views(path)
-    assert ("2D", "images/cam_00/image") in views and ("Graph", "graph") in views
+    assert ("2D", "images/cam00/image") in views and ("Graph", "graph") in views
     assert not any(kind == "3D" for kind, _ in views)  # no poses and no points: nothing 3D
 
 
@@ -274,8 +279,8 @@ def test_camera_without_pose_among_posed_ones(tmp_path):
     record.views[2].R = record.views[2].t = None
     path = log_run(tmp_path / "mixed.rrd", record)
     paths = set(entity_paths(path))
-    assert {"/world/cam_00", "/images/cam_02/image", "/graph"} <= paths
-    assert "/world/cam_02" not in paths
+    assert {"/world/cam00", "/images/cam02/image", "/graph"} <= paths
+    assert "/world/cam02" not in paths
     both_posed = (record.ledger.links.cam_j < 2)
     deleted = record.ledger.status == "deleted"
     assert count_strips(path, "world/links/deleted") == (deleted & both_posed).sum() == 1
@@ -293,7 +298,7 @@ def test_no_links_and_a_camera_without_features(tmp_path):
                                   np.zeros(0, np.float32), "sift")
     path = log_run(tmp_path / "empty.rrd", record)
     assert count_strips(path, "world/links/kept") == count_strips(path, "world/links/deleted") == 0
-    assert {"/world/links/kept", "/world/links/deleted", "/world/cam_01/image"} <= set(
+    assert {"/world/links/kept", "/world/links/deleted", "/world/cam01/image"} <= set(
         entity_paths(path))
     assert "/graph" not in entity_paths(path)  # no conflictive sets
     assert "/world/points/fused" not in entity_paths(path)  # fused_points is None
@@ -335,3 +340,26 @@ def test_world_axes_follow_the_cameras_up_direction():
     for v in record.views:
         v.R = None
     assert world_axes_from_cameras(record.views) == rr.ViewCoordinates.RIGHT_HAND_Z_UP
+
+
+def test_entities_named_after_the_images_and_a_pair_view(tmp_path):
+    record = make_record()
+    for k, v in enumerate(record.views):
+        v.name = f"IMG {k}.jpg"  # a file name with a space
+    record.point_colors = np.tile(np.array([[10, 200, 30]], np.uint8), (len(record.points), 1))
+    path = log_run(tmp_path / "named.rrd", record, view_pairs=[(0, 2)])
+    paths = set(entity_paths(path))
+    assert "/" + camera_entity(0, True, "IMG 0.jpg") + "/image" in paths
+    assert not any("cam_0" in p for p in paths)
+    pair = "/matches/" + rr.escape_entity_path_part("IMG 0.jpg--IMG 2.jpg")
+    assert {pair, pair + "/kept", pair + "/cut"} <= paths
+    sel = ((record.ledger.links.cam_i == 0) & (record.ledger.links.cam_j == 2))
+    deleted = record.ledger.status == "deleted"
+    (chunk,) = _chunks(path, pair + "/cut", static=True)
+    assert len(chunk.to_record_batch().to_pydict()["LineStrips2D:strips"][0]) == (sel & deleted).sum()
+    (chunk,) = _chunks(path, pair + "/kept", static=True)
+    assert len(chunk.to_record_batch().to_pydict()["LineStrips2D:strips"][0]) == (sel & ~deleted).sum()
+    assert count_strips(path, "world/links/deleted") == deleted.sum()
+    (chunk,) = _chunks(path, "/world/points/triangulated", static=True)
+    colors = np.array(chunk.to_record_batch().to_pydict()["Points3D:colors"][0], np.uint32) >> 8
+    assert (colors == rgb24((10, 200, 30))).all()

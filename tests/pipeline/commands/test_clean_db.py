@@ -185,3 +185,27 @@ def test_not_a_database(tmp_path, capsys):
 def test_out_is_required(tmp_path):
     with pytest.raises(SystemExit):
         main(["clean-db", str(tmp_path / "in.db")])
+
+
+def test_writes_links_csv_and_recording_beside_the_database(tmp_path, capsys):
+    from pipeline.linkscsv import read_run_links_csv
+    from viz.recording_reader import entity_paths
+
+    src = tmp_path / "in.db"
+    _, _, links = _db_with_planted_conflicts(src)
+    out = tmp_path / "clean.db"
+    assert main(["clean-db", str(src), "--out", str(out)]) == 0
+    assert "clean.links.csv" in capsys.readouterr().out
+    side = read_run_links_csv(tmp_path / "clean.links.csv")
+    assert len(side.links) == len(links)
+    deleted = side.status == "deleted"
+    assert deleted.sum() == 2 and set(side.reason[deleted]) == {"resolution"}
+    assert (side.round[deleted] >= 1).all()
+    cleaned = colmap.read_database(out)
+    assert len(cleaned.links) == len(links) - deleted.sum()
+    paths = entity_paths(tmp_path / "clean.rrd")
+    assert any("keypoints" in p for p in paths)
+    # resolve reads the side file back: nothing left to cut
+    assert main(["resolve", "--links", str(tmp_path / "clean.links.csv"),
+                 "--out", str(tmp_path / "again.csv")]) == 0
+    assert "deleted: 0 links" in capsys.readouterr().out

@@ -28,7 +28,7 @@ def test_defaults_and_case():
 
 
 @pytest.mark.parametrize("argv,match", [
-    (["--features", "brief"], "--features 'brief': choose one of sift, orb, akaze, surf"),
+    (["--features", "brief"], "--features 'brief': choose one of sift, orb, akaze"),
     (["--max-features", "7"], "--max-features 7: at least 8"),
 ])
 def test_bad_feature_options(argv, match):
@@ -41,3 +41,12 @@ def test_bad_feature_options(argv, match):
 def test_bad_size(text, match):
     with pytest.raises(InputError, match=match):
         parse_size(text)
+
+
+def test_photo_options_default_to_a_budget_scaled_with_the_image():
+    p = argparse.ArgumentParser()
+    add_feature_options(p, photos=True)
+    assert feature_options(p.parse_args([])) == ("sift", None)
+    assert feature_options(p.parse_args(["--max-features", "4096"])) == ("sift", 4096)
+    with pytest.raises(InputError, match="expected a number of features or 'auto'"):
+        feature_options(p.parse_args(["--max-features", "many"]))

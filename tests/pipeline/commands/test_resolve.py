@@ -96,3 +96,25 @@ def test_header_only_file(tmp_path):
     assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
     assert len(read_run_links_csv(out).links) == 0
     assert np.array_equal(read_run_links_csv(out).round, np.zeros(0))
+
+
+
+def test_own_output_is_accepted_as_input(tmp_path, capsys):
+    src, out1, out2 = tmp_path / "in.csv", tmp_path / "out1.csv", tmp_path / "out2.csv"
+    src.write_text(FIG1)
+    assert main(["resolve", "--links", str(src), "--out", str(out1)]) == 0
+    assert main(["resolve", "--links", str(out1), "--out", str(out2)]) == 0
+    printed = capsys.readouterr().out
+    assert "conflictive sets: 0 before, 0 after" in printed and "deleted: 0 links" in printed
+    first, second = read_run_links_csv(out1), read_run_links_csv(out2)
+    # the deleted row stays deleted with its reason and round; nothing else is cut
+    for key in ("status", "reason", "round"):
+        assert getattr(second, key).tolist() == getattr(first, key).tolist()
+    assert second.links.feat_j.tolist() == first.links.feat_j.tolist()
+
+
+def test_run_links_csv_with_a_bad_status_names_the_row(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n0,0,1,0,maybe,,,\n")
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")]) == 2
+    assert re.search(r"in.csv:2: .*status 'maybe'", capsys.readouterr().err)

@@ -208,3 +208,107 @@ def test_bad_graph_kind(tmp_path, sceaux_small, capsys):
     out = tmp_path / "run"
     _fails(["run-images", str(sceaux_small), "--graph", "star", "--out", str(out)], out, capsys,
            "graph 'star'")
+
+
+def test_help_lists_only_available_features_and_surf_fails_first(tmp_path, capsys):
+    from pipeline.features import available_methods, surf_available
+
+    with pytest.raises(SystemExit):
+        main(["run-images", "--help"])
+    help_text = capsys.readouterr().out
+    assert "|".join(available_methods()) in help_text
+    assert ("surf" in help_text) == surf_available()
+    assert "most similar" in help_text and "seq:K" in help_text  # what knn means
+    if not surf_available():
+        out = tmp_path / "run"
+        assert main(["run-images", str(tmp_path / "no-such-dir"), "--graph", "ring",
+                     "--features", "surf", "--out", str(out)]) == 2
+        assert "surf" in capsys.readouterr().err and not out.exists()
+
+
+def test_few_registered_images_are_flagged_in_report_and_on_stderr(tmp_path, sceaux_small,
+                                                                   capsys):
+    d = tmp_path / "six"
+    d.mkdir()
+    for name in sorted(p.name for p in sceaux_small.glob("*.JPG")):
+        shutil.copy(sceaux_small / name, d / name)
+    rng = np.random.default_rng(0)
+    from PIL import Image
+
+    for k in range(2):  # two images of nothing in common with the others
+        Image.fromarray(rng.integers(0, 255, (240, 320, 3), dtype=np.uint8)).save(d / f"z{k}.png")
+    graph = tmp_path / "g.txt"
+    graph.write_text("0,1\n2,3\n4,5\n")
+    out = tmp_path / "run"
+    assert main(["run-images", str(d), "--graph", str(graph), "--no-rerun",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    flags = {f["flag"]: f for f in report["flags"]}
+    assert "few-registered" in flags and "3 groups" in flags["few-registered"]["likely_cause"]
+    assert "registered only" in err and "3 groups" in err
+    # fusion never runs on a camera whose pose is unknown: no fusion cut touches one
+    registered = set(report["triangulation"]["before"]["registered_names"])
+    unposed = {k for k, im in enumerate(report["images"]) if im["name"] not in registered}
+    assert unposed
+    with open(out / "links.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["reason"] == "fusion-outlier":
+                assert int(r["cam_i"]) not in unposed and int(r["cam_j"]) not in unposed
+    fusion = report["fusion"]
+    if fusion["enabled"]:
+        assert set(fusion["cameras_without_pose"]) == {report["images"][k]["name"]
+                                                       for k in unposed}
+
+
+def test_sparse_is_at_the_resolution_of_the_files_with_one_shared_camera(tmp_path, sceaux_small):
+    """Mapped at 320 px, sparse/ names the 640 px files: cameras and 2D points scaled back; one
+    K.txt for all images is one camera; points take their colours from the images."""
+    out = tmp_path / "run"
+    assert main(["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
+                 "--no-rerun", "--no-fusion", "--out", str(out)]) == 0
+    rec = pycolmap.Reconstruction(out / "sparse")
+    assert rec.num_cameras() == 1
+    cam = next(iter(rec.cameras.values()))
+    assert (cam.width, cam.height) == (640, 481)
+    K = np.loadtxt(sceaux_small / "K.txt")
+    assert np.allclose(cam.calibration_matrix()[0, 0], K[0, 0], rtol=1e-3)
+    rec.update_point_3d_errors()
+    assert 0 < rec.compute_mean_reprojection_error() < 2.0  # 2D points scaled with the camera
+    xy = np.concatenate([[p.xy for p in rec.images[i].points2D] for i in rec.reg_image_ids()])
+    assert xy[:, 0].max() > 330  # beyond the 320 px that was mapped
+    colours = np.array([p.color for p in rec.points3D.values()])
+    assert colours.std() > 0
+
+
+def test_no_rerun_does_not_announce_a_recording(tmp_path, sceaux_small, capsys):
+    out = tmp_path / "run"
+    assert main(["run-images", str(sceaux_small), "--graph", "ring", "--max-size", "320",
+                 "--no-rerun", "--no-fusion", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "run written to" in printed and "recording.rrd" not in printed.splitlines()[-1]
+    assert not (out / "recording.rrd").exists()
+
+
+def test_internet_style_photos_register_at_the_defaults(tmp_path, sceaux_small):
+    """Shuffled random names, no K.txt, no EXIF: knn:2 by image similarity and the photo
+    defaults register every image; the similarity graph is connected although the names are
+    in random order."""
+    from PIL import Image
+
+    d = tmp_path / "internet"
+    d.mkdir()
+    rng = np.random.default_rng(7)
+    names = sorted(p.name for p in sceaux_small.glob("*.JPG"))
+    for name, new in zip(names, rng.permutation(len(names)), strict=True):
+        with Image.open(sceaux_small / name) as im:
+            Image.frombytes(im.mode, im.size, im.tobytes()).save(d / f"{9000 + new * 37}.png")
+    out = tmp_path / "run"
+    assert main(["run-images", str(d), "--graph", "knn:2", "--no-rerun", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert {im["intrinsics_source"] for im in report["images"]} == {"guess"}
+    assert report["triangulation"]["before"]["registered_images"] == 4
+    assert report["triangulation"]["after"]["registered_images"] == 4
+    assert report["flags"] == []
+    # the feature budget scaled with the 640x481 images: 2000, not the old cap's ~1600 left
+    assert min(report["features_per_camera"]) > 1800

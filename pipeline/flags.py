@@ -1,0 +1,139 @@
+"""Warnings a photo run must not keep to itself: a weak reconstruction, and cleaning that hurt.
+
+:func:`reconstruction_flags` compares the reconstruction before cleaning (all links) with the
+one after (kept links) and looks at what matching produced, and returns one flag per problem,
+each with a likely cause that names what to try. The runner puts them in ``report.json``
+(``flags``), in the markdown report and on stderr.
+
+Flags
+-----
+``few-registered``
+    The reconstruction before cleaning registered fewer than half the images.
+``images-lost``
+    Cleaning lost images: registered after < registered before.
+``cleaning-worse``
+    Cleaning made another figure worse by more than 5 %: fewer points, a shorter mean track,
+    or a larger mean reprojection error.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["reconstruction_flags", "flags_markdown"]
+
+#: relative change of points / reprojection error below which cleaning is not flagged
+TOLERANCE = 0.05
+
+
+def _graph_parts(n: int, edges: np.ndarray) -> int:
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return int(connected_components(adj, directed=False)[0])
+
+
+def _weak_matching_causes(n: int, edges: np.ndarray, pair_links: list[int],
+                          features_per_camera: list[int], intrinsics_guessed: int) -> list[str]:
+    causes = []
+    parts = _graph_parts(n, edges)
+    if parts > 1:
+        causes.append(f"the comm graph splits the {n} images into {parts} groups that never "
+                      f"match each other (choose a denser --graph, e.g. complete or knn:K "
+                      f"with a larger K)")
+    links = np.asarray(pair_links, dtype=np.int64)
+    if len(links):
+        empty = int((links == 0).sum())
+        if empty > len(links) / 2:
+            causes.append(f"{empty} of {len(links)} image pairs got no association (too few "
+                          f"matches survived the ratio and epipolar tests): the images overlap "
+                          f"little or have too few features (try --max-features 8192 or a "
+                          f"larger --max-size)")
+    m = np.asarray(features_per_camera, dtype=np.int64)
+    if len(m) and int(np.median(m)) < 1000:
+        causes.append(f"few features per image (median {int(np.median(m))}): textureless or "
+                      f"small images (try a larger --max-size or --max-features)")
+    if intrinsics_guessed:
+        causes.append(f"{intrinsics_guessed} image(s) without known intrinsics (focal length "
+                      f"guessed): add a K.txt to the folder or use photos with EXIF")
+    return causes or ["the images may not show one common scene"]
+
+
+def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
+                         pair_links: list[int], features_per_camera: list[int],
+                         intrinsics_guessed: int = 0, cut_by_reason: dict | None = None,
+                         lost_image_cuts: dict | None = None) -> list[dict]:
+    """Flags of a photo run (module notes).
+
+    Parameters
+    ----------
+    n_images : int
+    before, after : dict — :meth:`pipeline.colmap.MappingSummary.summary` of the
+        reconstruction before / after cleaning (``registered_images``, ``registered_names``,
+        ``points``, ``mean_track_length``, ``mean_reprojection_error``)
+    comm_edges : (E, 2) int — the comm graph
+    pair_links : list[int], (E,) — links matching produced per comm edge
+    features_per_camera : list[int], (n,)
+    intrinsics_guessed : int — images whose focal length was guessed
+    cut_by_reason : dict — links cut per reason (``resolution``, ``fusion-outlier``…)
+    lost_image_cuts : dict — for each image lost by cleaning, ``{reason: links cut}`` of its
+        links
+
+    Returns
+    -------
+    list of dict — ``{"flag", "message", "likely_cause"}``, empty when nothing is wrong
+    """
+    flags = []
+    reg_b, reg_a = int(before["registered_images"]), int(after["registered_images"])
+    if reg_b < n_images / 2:
+        causes = _weak_matching_causes(n_images, np.asarray(comm_edges), pair_links,
+                                       features_per_camera, intrinsics_guessed)
+        flags.append({"flag": "few-registered",
+                      "message": f"the reconstruction registered only {reg_b} of {n_images} "
+                                 f"images (fewer than half)",
+                      "likely_cause": "; ".join(causes)})
+    cut = {k: int(v) for k, v in (cut_by_reason or {}).items() if v}
+    cut_text = ", ".join(f"{v} by {k}" for k, v in sorted(cut.items())) or "none"
+    if reg_a < reg_b:
+        lost = sorted(set(before.get("registered_names", [])) - set(after.get("registered_names", [])))
+        per = lost_image_cuts or {}
+        detail = "; ".join(
+            f"{name}: " + (", ".join(f"{v} links cut by {k}" for k, v in sorted(per[name].items()))
+                           if per.get(name) else "no link of it cut")
+            for name in lost) if lost else ""
+        flags.append({"flag": "images-lost",
+                      "message": f"cleaning lost {reg_b - reg_a} registered image(s) "
+                                 f"({reg_b} -> {reg_a}){': ' + ', '.join(lost) if lost else ''}",
+                      "likely_cause": (f"the links cut ({cut_text}) left those images with too "
+                                       f"few matches to register"
+                                       + (f" ({detail})" if detail else "")
+                                       + "; the reconstruction before cleaning is better for "
+                                         "them (run with --no-fusion to keep fusion's cuts "
+                                         "out)")})
+    worse = []
+    p_b, p_a = int(before["points"]), int(after["points"])
+    if p_b and p_a < (1 - TOLERANCE) * p_b:
+        worse.append(f"points {p_b} -> {p_a}")
+    t_b, t_a = float(before["mean_track_length"]), float(after["mean_track_length"])
+    if p_a and t_a < (1 - TOLERANCE) * t_b:
+        worse.append(f"mean track length {t_b:.2f} -> {t_a:.2f}")
+    e_b, e_a = float(before["mean_reprojection_error"]), float(after["mean_reprojection_error"])
+    if e_b and e_a > (1 + TOLERANCE) * e_b:
+        worse.append(f"mean reprojection error {e_b:.3f} -> {e_a:.3f} px")
+    if worse and reg_b:
+        flags.append({"flag": "cleaning-worse",
+                      "message": "cleaning made the reconstruction worse: " + "; ".join(worse),
+                      "likely_cause": f"links cut: {cut_text}; cutting links shortens tracks "
+                                      f"and removes points whose only support was cut"})
+    return flags
+
+
+def flags_markdown(flags: list[dict]) -> str:
+    """The flags as a markdown list for the report ('' when there are none)."""
+    if not flags:
+        return ""
+    lines = ["", "**Warnings**", ""]
+    lines += [f"- **{f['flag']}**: {f['message']}. Likely cause: {f['likely_cause']}."
+              for f in flags]
+    return "\n".join(lines) + "\n"

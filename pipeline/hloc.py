@@ -1,0 +1,317 @@
+"""hloc's feature and match files (HDF5) read as links, and written back cleaned.
+
+hloc (Hierarchical-Localization) keeps local features and matches in two HDF5 files:
+
+- ``features.h5``: one group per image, named by the image's path relative to the image folder
+  (a name with ``/`` is a nested group), holding ``keypoints`` ``(N, 2)`` float in pixels with
+  the origin at the centre of the top-left pixel (the OpenCV convention used here; hloc adds
+  0.5 itself when it writes a COLMAP database), plus ``descriptors``, ``scores``,
+  ``image_size``, which are not needed here.
+- ``matches.h5``: one group per image pair, named ``names_to_pair(name0, name1)`` =
+  ``name0/name1`` with every ``/`` inside a name replaced by ``-`` (so a pair is two nested
+  groups), holding ``matches0`` ``(N0,)`` int (for each keypoint of ``name0`` the index of its
+  match in ``name1``, ``-1`` for none) and optionally ``matching_scores0`` ``(N0,)`` float. Older
+  hloc files name the pair ``name0_name1`` (one group); both are read. A pair may be stored in
+  either order.
+- ``pairs.txt``: one pair per line, ``name0 name1``.
+
+:func:`read_h5` turns the matches into the pipeline's :class:`~pipeline.types.Links` (camera
+``i`` = the ``i``-th image name in sorted order); :func:`write_cleaned_matches` writes a new
+``matches.h5`` equal to the input except that the cut matches read ``-1`` (and score 0), so
+hloc's ``reconstruction.main`` (or ``triangulation``) runs on it unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+__all__ = ["names_to_pair", "H5Matches", "read_features", "read_pairs", "read_h5",
+           "write_cleaned_matches"]
+
+
+def names_to_pair(name0: str, name1: str, separator: str = "/") -> str:
+    """hloc's key of an image pair in ``matches.h5`` (``separator="_"``: the older key)."""
+    return separator.join((name0.replace("/", "-"), name1.replace("/", "-")))
+
+
+def _h5py():
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is a dependency
+        raise InputError("reading hloc files needs h5py: pip install 'h5py>=3.10,<4'") from None
+    return h5py
+
+
+def _open(path: Path, what: str):
+    h5py = _h5py()
+    if not path.is_file():
+        raise InputError(f"{what} {str(path)!r}: no such file")
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"{what} {str(path)!r} is not an HDF5 file ({exc})") from None
+
+
+def read_features(path: str | Path) -> dict[str, np.ndarray]:
+    """``{image name: keypoints (N, 2) float32}`` of an hloc ``features.h5``.
+
+    Raises
+    ------
+    InputError
+        Missing or non-HDF5 file, no group with ``keypoints``, keypoints not ``(N, 2)``.
+    """
+    path = Path(path)
+    h5py = _h5py()
+    out: dict[str, np.ndarray] = {}
+    with _open(path, "features file") as fd:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "keypoints":
+                kp = np.asarray(obj[()])
+                image = obj.parent.name.strip("/")
+                if kp.ndim != 2 or kp.shape[1] != 2 and kp.shape[0] != 0:
+                    raise InputError(f"{path}: keypoints of {image!r} have shape {kp.shape}; "
+                                     f"expected (N, 2)")
+                out[image] = kp.reshape(-1, 2).astype(np.float32)
+        fd.visititems(visit)
+    if not out:
+        raise InputError(f"{path}: no image group with a 'keypoints' dataset; is this hloc's "
+                         f"features.h5?")
+    return out
+
+
+def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:
+    """Image pairs of an hloc ``pairs.txt`` (``name0 name1`` per line), unique, input order.
+
+    Raises
+    ------
+    InputError
+        Missing file, a line without two names, a name not in ``names`` (with its line).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"--pairs {str(path)!r}: no such file")
+    out, seen = [], set()
+    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        if len(parts) != 2:
+            raise InputError(f"{path}:{lineno}: {line!r} must hold two image names")
+        for p in parts:
+            if p not in names:
+                raise InputError(f"{path}:{lineno}: image {p!r} has no keypoints in the "
+                                 f"features file")
+        if parts[0] == parts[1]:
+            raise InputError(f"{path}:{lineno}: {line!r} pairs an image with itself")
+        key = tuple(sorted(parts))
+        if key not in seen:
+            seen.add(key)
+            out.append((parts[0], parts[1]))
+    if not out:
+        raise InputError(f"--pairs {str(path)!r} holds no pair")
+    return out
+
+
+@dataclass
+class H5Matches:
+    """The matches of an hloc ``matches.h5`` as links.
+
+    Attributes
+    ----------
+    features_path, matches_path : Path
+    names : list[str], (n,) — image names, sorted; camera ``i`` is ``names[i]``
+    keypoints : list[ndarray], (n,) each (m_i, 2) float32
+    links : Links, (L,) — ``cam_i < cam_j``; ``quality`` = matching score when stored
+    pair_key : list[str] — the HDF5 group of each stored pair that was read
+    link_pair : ndarray, (L,) int64 — index into ``pair_key`` of each link
+    link_row : ndarray, (L,) int64 — row of ``matches0`` holding the link
+    not_one_to_one : ndarray, (L,) bool — a second row of ``matches0`` pointing at an already
+        matched keypoint (hloc's nearest-neighbour matchers allow it; Assumption 2.2 does not)
+    """
+
+    features_path: Path
+    matches_path: Path
+    names: list[str]
+    keypoints: list[np.ndarray]
+    links: Links
+    pair_key: list[str]
+    link_pair: np.ndarray
+    link_row: np.ndarray
+    not_one_to_one: np.ndarray
+
+    @property
+    def features_per_camera(self) -> np.ndarray:
+        return np.array([len(k) for k in self.keypoints], dtype=np.int64)
+
+
+def _find_pair(fd, a: str, b: str) -> tuple[str, bool] | None:
+    """``(key, reversed)`` of the stored pair ``a, b`` (either order, new or old key)."""
+    for sep in ("/", "_"):
+        for x, y, rev in ((a, b, False), (b, a, True)):
+            key = names_to_pair(x, y, sep)
+            if key in fd and "matches0" in fd[key]:
+                return key, rev
+    return None
+
+
+def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
+    """Every pair group of the file as ``(key, name0, name1)``."""
+    by_flat = {}
+    for n in names:
+        by_flat.setdefault(n.replace("/", "-"), []).append(n)
+    keys = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "matches0":
+            keys.append(obj.parent.name.strip("/"))
+    fd.visititems(visit)
+    out = []
+    for key in keys:
+        parts = key.split("/")
+        found = None
+        if len(parts) == 2 and all(len(by_flat.get(p, [])) == 1 for p in parts):
+            found = (by_flat[parts[0]][0], by_flat[parts[1]][0])
+        elif len(parts) == 1:  # old key name0_name1: try every split at '_'
+            for k in range(len(key)):
+                if key[k] == "_" and len(by_flat.get(key[:k], [])) == 1 \
+                        and len(by_flat.get(key[k + 1:], [])) == 1:
+                    found = (by_flat[key[:k]][0], by_flat[key[k + 1:]][0])
+                    break
+        if found is None:
+            raise InputError(f"matches file: pair group {key!r} does not name two images of the "
+                             f"features file; give --pairs")
+        out.append((key, *found))
+    return out
+
+
+def read_h5(features: str | Path, matches: str | Path,
+            pairs: str | Path | None = None) -> H5Matches:
+    """Read hloc's ``features.h5`` and ``matches.h5`` (and optionally ``pairs.txt``).
+
+    Parameters
+    ----------
+    features, matches : paths of the two HDF5 files; never modified
+    pairs : pairs.txt; without it every pair stored in ``matches`` is read
+
+    Returns
+    -------
+    H5Matches
+
+    Raises
+    ------
+    InputError
+        Missing or non-HDF5 files, fewer than two images, a pair of ``pairs`` not stored,
+        ``matches0`` of the wrong length or naming a keypoint that does not exist, no match.
+    """
+    features, matches = Path(features), Path(matches)
+    h5py = _h5py()
+    kps = read_features(features)
+    names = sorted(kps)
+    if len(names) < 2:
+        raise InputError(f"{features}: {len(names)} image(s); at least two are needed")
+    cam = {n: k for k, n in enumerate(names)}
+    m = np.array([len(kps[n]) for n in names], dtype=np.int64)
+    wanted = read_pairs(pairs, set(names)) if pairs is not None else None
+    ci, fi, cj, fj, q, lp, lr = [], [], [], [], [], [], []
+    keys: list[str] = []
+    with _open(matches, "matches file") as fd:
+        if wanted is None:
+            stored = _stored_pairs(fd, h5py, names)
+        else:
+            stored = []
+            for a, b in wanted:
+                hit = _find_pair(fd, a, b)
+                if hit is None:
+                    raise InputError(f"{matches}: no matches stored for pair {a} {b} of "
+                                     f"{pairs}")
+                key, rev = hit
+                stored.append((key, b, a) if rev else (key, a, b))
+        done = set()
+        for key, n0, n1 in stored:
+            if key in done:
+                continue
+            done.add(key)
+            grp = fd[key]
+            m0 = np.asarray(grp["matches0"][()]).astype(np.int64).reshape(-1)
+            if len(m0) != m[cam[n0]]:
+                raise InputError(f"{matches}: matches0 of pair {key!r} has {len(m0)} entries but "
+                                 f"{n0} has {m[cam[n0]]} keypoints")
+            rows = np.flatnonzero(m0 >= 0)
+            if rows.size and m0[rows].max() >= m[cam[n1]]:
+                raise InputError(f"{matches}: pair {key!r} matches keypoint {m0[rows].max()} of "
+                                 f"{n1}, which has {m[cam[n1]]} keypoints")
+            score = (np.asarray(grp["matching_scores0"][()], dtype=np.float64).reshape(-1)[rows]
+                     if "matching_scores0" in grp else np.ones(rows.size))
+            a, b = cam[n0], cam[n1]
+            fa, fb = rows, m0[rows]
+            if a > b:
+                a, b, fa, fb = b, a, fb, fa
+            keys.append(key)
+            ci.append(np.full(rows.size, a)), fi.append(fa)
+            cj.append(np.full(rows.size, b)), fj.append(fb)
+            q.append(score), lp.append(np.full(rows.size, len(keys) - 1)), lr.append(rows)
+    if not keys or sum(len(x) for x in fi) == 0:
+        raise InputError(f"{matches}: no matches to clean")
+
+    def cat(parts):
+        return np.concatenate(parts).astype(np.int64)
+
+    links = Links(cat(ci), cat(fi), cat(cj), cat(fj), np.concatenate(q).astype(np.float64))
+    # Assumption 2.2: a feature linked twice into the same other image (later rows are cut)
+    n = len(names)
+    offs = np.concatenate([[0], np.cumsum(m)])
+    ga, gb = offs[links.cam_i] + links.feat_i, offs[links.cam_j] + links.feat_j
+    first = np.zeros(len(links), dtype=bool)
+    for key in (ga * n + links.cam_j, gb * n + links.cam_i):
+        f = np.zeros(len(links), dtype=bool)
+        f[np.unique(key, return_index=True)[1]] = True
+        first = f if not first.any() else first & f
+    return H5Matches(features, matches, names, [kps[x] for x in names], links, keys,
+                     cat(lp), cat(lr), ~first)
+
+
+def write_cleaned_matches(contents: H5Matches, out: str | Path, keep: np.ndarray) -> Path:
+    """Copy ``contents.matches_path`` to ``out`` with the links not in ``keep`` removed.
+
+    A removed link's ``matches0`` entry becomes ``-1`` and its ``matching_scores0`` 0; every
+    other group and dataset is copied unchanged. Written atomically (temp file, then rename);
+    ``out`` must differ from the input.
+    """
+    h5py = _h5py()
+    src, out = Path(contents.matches_path), Path(out)
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != (len(contents.links),):
+        raise InputError(f"keep has shape {keep.shape}, expected ({len(contents.links)},)")
+    if out.exists() and out.resolve() == src.resolve():
+        raise InputError(f"--out {str(out)!r} is the input matches file; the input is never "
+                         f"modified, choose a new file")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd_tmp, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".h5", dir=out.parent)
+    os.close(fd_tmp)
+    try:
+        shutil.copyfile(src, tmp)
+        cut = np.flatnonzero(~keep)
+        with h5py.File(tmp, "r+") as fd:
+            for p in np.unique(contents.link_pair[cut]):
+                rows = np.sort(contents.link_row[cut[contents.link_pair[cut] == p]])
+                grp = fd[contents.pair_key[int(p)]]
+                m0 = grp["matches0"]
+                m0[rows] = -1
+                if "matching_scores0" in grp:
+                    grp["matching_scores0"][rows] = 0
+        os.replace(tmp, out)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return out

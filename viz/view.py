@@ -1,0 +1,98 @@
+"""Open a run's recording in Rerun: ``python -m viz.view [RUN_DIR | FILE.rrd]`` (``make view``).
+
+Without a path it opens the newest ``runs/**/recording.rrd``. On a machine with a display it
+starts the native viewer; without one (no ``DISPLAY`` / ``WAYLAND_DISPLAY``, e.g. over SSH) it
+serves the web viewer (``rerun FILE --web-viewer``) and prints the URL to open, with the SSH
+port forwarding to reach it from another machine. ``--web`` / ``--native`` force either.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["find_recording", "viewer_command", "main"]
+
+WEB_PORT = 9090
+GRPC_PORT = 9876
+
+
+def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) -> Path:
+    """The ``.rrd`` to open: ``target`` itself, ``target/recording.rrd`` (or the only ``.rrd``
+    in a folder), or the newest ``recording.rrd`` under ``runs``.
+
+    Raises
+    ------
+    FileNotFoundError
+        Nothing to open (with what to run first).
+    """
+    if target:
+        p = Path(target)
+        if p.is_file():
+            return p
+        if p.is_dir():
+            if (p / "recording.rrd").is_file():
+                return p / "recording.rrd"
+            found = sorted(p.glob("*.rrd"))
+            if len(found) == 1:
+                return found[0]
+            raise FileNotFoundError(f"{p}: no recording.rrd in this folder (was it written with "
+                                    f"--no-rerun?)")
+        raise FileNotFoundError(f"{p}: no such run folder or .rrd file")
+    found = sorted(runs.glob("**/recording.rrd"), key=lambda q: q.stat().st_mtime)
+    if not found:
+        raise FileNotFoundError(f"no recording under {runs}/ yet: run 'make run-formation' first")
+    return found[-1]
+
+
+def has_display(env=None) -> bool:
+    env = os.environ if env is None else env
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
+def viewer_command(path: Path, web: bool, port: int = WEB_PORT) -> list[str]:
+    """The ``rerun`` command line that opens ``path`` natively or in the web viewer."""
+    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
+        or "rerun"
+    cmd = [exe, str(path)]
+    if web:
+        cmd += ["--web-viewer", "--web-viewer-port", str(port)]
+    return cmd
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m viz.view", description=__doc__.split("\n\n")[0])
+    ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd")
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--web", action="store_true", help="serve the web viewer")
+    mode.add_argument("--native", action="store_true", help="start the native viewer")
+    ap.add_argument("--port", type=int, default=WEB_PORT, help="web viewer port (default 9090)")
+    ap.add_argument("--dry-run", action="store_true", help="print the command, do not run it")
+    args = ap.parse_args(argv)
+    try:
+        path = find_recording(args.target)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    web = args.web or (not args.native and not has_display())
+    cmd = viewer_command(path, web, args.port)
+    print(f"opening {path}")
+    if web:
+        print(f"web viewer: http://localhost:{args.port}  (from another machine: "
+              f"ssh -L {args.port}:localhost:{args.port} -L {GRPC_PORT}:localhost:{GRPC_PORT} "
+              f"HOST, then open that URL); Ctrl-C stops it", flush=True)
+    if args.dry_run:
+        print(" ".join(cmd))
+        return 0
+    try:
+        return subprocess.call(cmd)
+    except KeyboardInterrupt:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
