@@ -16,7 +16,7 @@ paths leaving ``r`` towards ``j`` and those reaching ``s`` from ``i`` mostly agr
 common neighbours (a ring) ``W_ij = A_ij`` and nothing changes.
 
 Protocol (one iteration = two synchronous rounds, every message through the
-:class:`~pipeline.consistency.network.Network`, which counts messages and bytes):
+:class:`~pipeline.transport.simulated.Network`, which counts messages and bytes):
 
 1. every robot sends each neighbour its current matches with all its neighbours (kind
    ``matches``: neighbour ids ``(d,)`` and a table ``(d, K_i)`` of matched landmark ids,
@@ -38,7 +38,7 @@ from functools import partial
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.consistency.network import Network
+from pipeline.transport.simulated import Network
 from pipeline.errors import InputError
 from pipeline.types import Links
 
