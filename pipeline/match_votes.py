@@ -38,8 +38,8 @@ from functools import partial
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.transport.simulated import Network
 from pipeline.errors import InputError
+from pipeline.transport.simulated import Network
 from pipeline.types import Links
 
 __all__ = ["VoteRobot", "refine_by_votes", "DEFAULT_ITERATIONS"]
