@@ -190,6 +190,9 @@ def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.
 
         return knn_edges(features, k)[0]
     path = Path(kind_or_file)
+    if path.is_dir():
+        raise InputError(f"graph {spec!r} is a folder, not a file; give a kind or a file of "
+                         "'cam_i,cam_j' lines")
     if not path.is_file():
         kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"] + ["knn:K"])
         raise InputError(

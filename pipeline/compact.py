@@ -1,7 +1,7 @@
 """Camera and feature ids of a user's links file, made compact when they are sparse.
 
 The consistency stage lays features out by id (feature ``r`` of camera ``i`` is global id
-``offset[i] + r``, DESIGN.md "Conventions") and every robot knows every ``m_i``, so its
+``offset[i] + r``, docs/DESIGN.md "Conventions") and every robot knows every ``m_i``, so its
 memory follows the *largest* camera and feature ids, not the links. A links file is not a
 matcher's output: its ids may be anything, and one line ``2147483646,0,0,0`` would ask for
 two billion cameras.

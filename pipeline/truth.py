@@ -7,7 +7,7 @@ the synthetic-only figures of a run (good / spurious / missing links, pairwise P
 baselines' scores) exist for these photographs too.
 
 Definitions (tolerance ``tol_px`` in pixels of the images as processed, default 2 px as for
-the rendered formations, DESIGN.md "Conventions"):
+the rendered formations, docs/DESIGN.md "Conventions"):
 
 * *good link* ``(i, r)–(j, s)``: ``H_ij`` maps keypoint ``r`` within ``tol_px`` of keypoint
   ``s`` **and** ``H_ji`` maps ``s`` within ``tol_px`` of ``r`` (mutually); *spurious*

@@ -26,7 +26,7 @@ input; ``before`` / ``before_links`` are the links the consistency stage receive
 refinement), over their closure and as they are. ``cycle_consistent`` is true when no association set holds two landmarks of one image
 (then the implied pairwise matching is cycle-consistent).
 
-Writes ``report.json`` and ``links.csv`` (DESIGN.md "Run outputs"; ``truth`` is 1 when the
+Writes ``report.json`` and ``links.csv`` (docs/DESIGN.md "Run outputs"; ``truth`` is 1 when the
 two ends carry the same label) atomically. There are no camera poses and no 3D points, so
 no ``sparse/`` and no recording.
 """

@@ -1,6 +1,6 @@
 """The transport robots talk through: the one interface of every robot-to-robot message.
 
-DESIGN.md, "the one rule": robot code sees only its own state and its inbox; all exchange goes
+docs/DESIGN.md, "the one rule": robot code sees only its own state and its inbox; all exchange goes
 through a transport with synchronous rounds, ``send`` only to current neighbours, every
 message and byte counted, per-robot memory measured, and faults (drop, delay, crash, a
 topology that changes per round) as properties of the network, never of the algorithm code.

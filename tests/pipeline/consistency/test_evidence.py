@@ -172,7 +172,7 @@ def test_unknown_resolution_is_an_input_error():
 
 
 def test_faulty_network_falls_back_to_reliable_alg1():
-    from pipeline.consistency import NetworkOptions
+    from pipeline.transport.simulated import NetworkOptions
 
     rng = np.random.default_rng(3)
     fpc, edges, links = random_instance(rng, n=6, max_feat=5, p_edge=0.8, p_link=0.9)
