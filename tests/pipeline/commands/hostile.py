@@ -22,3 +22,15 @@ def tree(path):
     """``{relative path: bytes}`` of every file under ``path`` (to prove nothing changed)."""
     return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*"))
             if p.is_file()}
+
+
+def one_line_error(capsys, *needles) -> str:
+    """The single ``error:`` line a command printed on stderr (no traceback), holding every
+    one of ``needles``."""
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+    return lines[0]

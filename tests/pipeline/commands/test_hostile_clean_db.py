@@ -11,6 +11,7 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
+from hostile import one_line_error  # noqa: E402
 from test_clean_db import _db_with_planted_conflicts  # noqa: E402
 
 
@@ -32,27 +33,20 @@ def _sha(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _one_line_error(capsys, *needles):
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1, err
-    for n in needles:
-        assert n in lines[0], lines[0]
 
 
 def test_report_onto_the_database_is_refused(db, tmp_path, capsys):
     digest = _sha(db)
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db"), "--report", str(db),
                  "--overwrite"]) == 2
-    _one_line_error(capsys, "--report", "input file given as IN.db")
+    one_line_error(capsys, "--report", "input file given as IN.db")
     assert _sha(db) == digest and not (tmp_path / "o.db").exists()
 
 
 def test_out_naming_a_folder_is_refused(db, tmp_path, capsys):
     (tmp_path / "folder").mkdir()
     assert main(["clean-db", str(db), "--out", str(tmp_path / "folder")]) == 2
-    _one_line_error(capsys, "is a folder")
+    one_line_error(capsys, "is a folder")
     assert list((tmp_path / "folder").iterdir()) == []
 
 
@@ -60,7 +54,7 @@ def test_existing_output_is_refused_unless_overwrite(db, tmp_path, capsys):
     out = tmp_path / "o.db"
     out.write_bytes(b"precious")
     assert main(["clean-db", str(db), "--out", str(out)]) == 2
-    _one_line_error(capsys, "already exists; pass --overwrite")
+    one_line_error(capsys, "already exists; pass --overwrite")
     assert out.read_bytes() == b"precious"
     assert main(["clean-db", str(db), "--out", str(out), "--overwrite"]) == 0
 
@@ -70,15 +64,15 @@ def test_out_through_a_hard_link_to_the_input_is_refused(db, tmp_path, capsys):
 
     os.link(db, tmp_path / "alias.db")
     assert main(["clean-db", str(db), "--out", str(tmp_path / "alias.db"), "--overwrite"]) == 2
-    _one_line_error(capsys, "input file")
+    one_line_error(capsys, "input file")
 
 
-def test_read_only_location_is_a_one_line_error(db, tmp_path, capsys, monkeypatch):
+def test_read_only_location_is_aone_line_error(db, tmp_path, capsys, monkeypatch):
     from pipeline import outputs
 
     monkeypatch.setattr(outputs.os, "access", lambda p, mode: False)
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db")]) == 2
-    _one_line_error(capsys, "cannot write in")
+    one_line_error(capsys, "cannot write in")
 
 
 @pytest.mark.parametrize("sql,message", [
@@ -99,14 +93,14 @@ def test_corrupt_tables_are_one_line_errors(db, tmp_path, capsys, sql, message):
     con.close()
     digest = _sha(db)
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db")]) == 2
-    _one_line_error(capsys, message, str(db))
+    one_line_error(capsys, message, str(db))
     assert _sha(db) == digest and not (tmp_path / "o.db").exists()
 
 
 def test_comm_graph_naming_a_folder_says_so(db, tmp_path, capsys):
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db"),
                  "--comm-graph", str(tmp_path)]) == 2
-    _one_line_error(capsys, "is a folder")
+    one_line_error(capsys, "is a folder")
 
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(db, tmp_path, capsys, monkeypatch):

@@ -14,7 +14,7 @@ from pipeline.__main__ import main
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1] / "consistency"))
 from consistency_graphs import random_instance  # noqa: E402
-from hostile import run_capped  # noqa: E402
+from hostile import one_line_error, run_capped  # noqa: E402
 
 FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
 
@@ -26,14 +26,6 @@ def fig1(tmp_path):
     return src
 
 
-def _one_line_error(capsys, *needles):
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1, err
-    for n in needles:
-        assert n in lines[0], lines[0]
-    return lines[0]
 
 
 # ------------------------------------------------------------------------------ data loss
@@ -41,7 +33,7 @@ def _one_line_error(capsys, *needles):
 def test_report_onto_the_input_is_refused(fig1, tmp_path, capsys):
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
                  "--report", str(fig1)]) == 2
-    _one_line_error(capsys, "--report", "input file given as --links")
+    one_line_error(capsys, "--report", "input file given as --links")
     assert fig1.read_text() == FIG1 and not (tmp_path / "o.csv").exists()
 
 
@@ -50,7 +42,7 @@ def test_out_onto_the_comm_graph_is_refused(fig1, tmp_path, capsys):
     graph.write_text("0,1\n1,2\n2,3\n0,3\n")
     assert main(["resolve", "--links", str(fig1), "--comm-graph", str(graph),
                  "--out", str(graph), "--overwrite"]) == 2
-    _one_line_error(capsys, "--comm-graph")
+    one_line_error(capsys, "--comm-graph")
     assert graph.read_text() == "0,1\n1,2\n2,3\n0,3\n"
 
 
@@ -58,7 +50,7 @@ def test_out_through_a_symlink_to_the_input_is_refused(fig1, tmp_path, capsys):
     (tmp_path / "alias.csv").symlink_to(fig1)
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "alias.csv"),
                  "--overwrite"]) == 2
-    _one_line_error(capsys, "symbolic link")
+    one_line_error(capsys, "symbolic link")
     assert fig1.read_text() == FIG1 and (tmp_path / "alias.csv").is_symlink()
 
 
@@ -68,7 +60,7 @@ def test_special_files_are_never_replaced(fig1, tmp_path, capsys, special):
     if special == "fifo":
         os.mkfifo(target)
     assert main(["resolve", "--links", str(fig1), "--out", str(target), "--overwrite"]) == 2
-    _one_line_error(capsys, "not a regular file")
+    one_line_error(capsys, "not a regular file")
     assert not target.is_file()
 
 
@@ -76,7 +68,7 @@ def test_existing_output_needs_overwrite(fig1, tmp_path, capsys):
     out = tmp_path / "o.csv"
     out.write_text("keep me")
     assert main(["resolve", "--links", str(fig1), "--out", str(out)]) == 2
-    _one_line_error(capsys, "already exists; pass --overwrite")
+    one_line_error(capsys, "already exists; pass --overwrite")
     assert out.read_text() == "keep me"
     assert main(["resolve", "--links", str(fig1), "--out", str(out), "--overwrite"]) == 0
     assert out.read_text().startswith("cam_i,feat_i,cam_j,feat_j,status")
@@ -84,20 +76,20 @@ def test_existing_output_needs_overwrite(fig1, tmp_path, capsys):
 
 def test_out_naming_a_folder_is_refused(fig1, tmp_path, capsys):
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path)]) == 2
-    _one_line_error(capsys, "is a folder")
+    one_line_error(capsys, "is a folder")
 
 
-def test_read_only_location_is_a_one_line_error(fig1, tmp_path, capsys, monkeypatch):
+def test_read_only_location_is_aone_line_error(fig1, tmp_path, capsys, monkeypatch):
     from pipeline import outputs
 
     monkeypatch.setattr(outputs.os, "access", lambda p, mode: False)
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "ro" / "o.csv")]) == 2
-    _one_line_error(capsys, "cannot write in")
+    one_line_error(capsys, "cannot write in")
 
 
 def test_links_naming_a_folder_says_it_is_a_folder(tmp_path, capsys):
     assert main(["resolve", "--links", str(tmp_path), "--out", str(tmp_path / "o.csv")]) == 2
-    _one_line_error(capsys, "is a folder, not a file")
+    one_line_error(capsys, "is a folder, not a file")
 
 
 # ------------------------------------------------------------------ meaningless values
@@ -111,7 +103,7 @@ def test_links_naming_a_folder_says_it_is_a_folder(tmp_path, capsys):
 def test_bad_fault_values(fig1, tmp_path, capsys, flag, value, message):
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
                  flag, value]) == 2
-    _one_line_error(capsys, message)
+    one_line_error(capsys, message)
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -120,7 +112,7 @@ def test_crash_of_a_robot_that_does_not_exist(tmp_path, capsys):
     src.write_text("0,0,2147483646,0\n")  # compact ids: robots are cameras 0 and 2147483646
     assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
                  "--crash", "5@1"]) == 2
-    _one_line_error(capsys, "robot 5 does not exist")
+    one_line_error(capsys, "robot 5 does not exist")
 
 
 # ------------------------------------------------------------- wrong results as success

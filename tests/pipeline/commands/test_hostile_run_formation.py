@@ -10,18 +10,11 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import run_capped, tree  # noqa: E402
+from hostile import one_line_error, run_capped, tree  # noqa: E402
 
 FAST = ["--size", "256x192", "--max-features", "200", "--no-rerun", "--no-fusion"]
 
 
-def _one_line_error(capsys, *needles):
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1, err
-    for n in needles:
-        assert n in lines[0], lines[0]
 
 
 @pytest.fixture
@@ -40,7 +33,7 @@ def test_out_naming_the_cwd_a_parent_or_root_is_refused(checkout, capsys, out):
     before = tree(checkout)
     out = {"CWD": str(checkout / "sub"), "PARENT": str(checkout)}.get(out, out)
     assert main(["run-formation", "--out", out, *FAST]) == 2
-    _one_line_error(capsys, "replaced as a whole")
+    one_line_error(capsys, "replaced as a whole")
     assert tree(checkout) == before
 
 
@@ -56,9 +49,9 @@ def test_out_naming_a_foreign_folder_is_refused(checkout, capsys):
 def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     (checkout / "link").symlink_to(checkout / ".git")
     assert main(["run-formation", "--out", str(checkout / "notes.txt"), *FAST]) == 2
-    _one_line_error(capsys, "is a file")
+    one_line_error(capsys, "is a file")
     assert main(["run-formation", "--out", str(checkout / "link"), *FAST]) == 2
-    _one_line_error(capsys, "symbolic link")
+    one_line_error(capsys, "symbolic link")
     assert (checkout / "notes.txt").read_text() == "mine"
 
 
@@ -76,7 +69,7 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"
     assert main(["run-formation", "--out", str(out), *FAST, flag, value]) == 2
-    _one_line_error(capsys, message)
+    one_line_error(capsys, message)
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 

@@ -16,7 +16,7 @@ from pipeline.errors import InputError
 from pipeline.io import exif_focal_px, load_folder
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import tree  # noqa: E402
+from hostile import one_line_error, tree  # noqa: E402
 
 
 @pytest.fixture
@@ -26,13 +26,6 @@ def photos(sceaux_small, tmp_path):
     return folder
 
 
-def _one_line_error(capsys, *needles):
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1, err
-    for n in needles:
-        assert n in lines[0], lines[0]
 
 
 @pytest.mark.parametrize("where", ["photos", "parent"])
@@ -40,7 +33,7 @@ def test_out_onto_the_photos_or_their_parent_is_refused(photos, capsys, where):
     before = tree(photos.parent)
     out = photos if where == "photos" else photos.parent
     assert main(["run-images", str(photos), "--graph", "ring", "--out", str(out)]) == 2
-    _one_line_error(capsys, "holds the input DIR")
+    one_line_error(capsys, "holds the input DIR")
     assert tree(photos.parent) == before
 
 
@@ -50,7 +43,7 @@ def test_out_holding_the_graph_file_is_refused(photos, tmp_path, capsys):
     graph.write_text("0,1\n1,2\n2,3\n")
     assert main(["run-images", str(photos), "--graph", str(graph), "--out",
                  str(tmp_path / "cfg")]) == 2
-    _one_line_error(capsys, "holds the input --graph")
+    one_line_error(capsys, "holds the input --graph")
     assert graph.read_text() == "0,1\n1,2\n2,3\n"
 
 
@@ -58,7 +51,7 @@ def test_out_holding_the_graph_file_is_refused(photos, tmp_path, capsys):
 def test_bad_thread_count_is_refused_before_any_work(photos, tmp_path, capsys, threads):
     assert main(["run-images", str(photos), "--graph", "ring", "--threads", threads,
                  "--out", str(tmp_path / "run")]) == 2
-    _one_line_error(capsys, f"--threads {threads}")
+    one_line_error(capsys, f"--threads {threads}")
     assert not (tmp_path / "run").exists()
 
 
@@ -67,14 +60,14 @@ def test_k_with_an_absurd_focal_length_is_refused(photos, tmp_path, capsys, fx):
     (photos / "K.txt").write_text(f"{fx} 0 320\n0 {fx} 240\n0 0 1\n")
     assert main(["run-images", str(photos), "--graph", "ring", "--out",
                  str(tmp_path / "run")]) == 2
-    _one_line_error(capsys, "not a usable focal length")
+    one_line_error(capsys, "not a usable focal length")
 
 
 def test_graph_naming_a_folder_says_so(photos, tmp_path, capsys):
     (tmp_path / "gdir").mkdir()
     assert main(["run-images", str(photos), "--graph", str(tmp_path / "gdir"), "--out",
                  str(tmp_path / "run")]) == 2
-    _one_line_error(capsys, "is a folder")
+    one_line_error(capsys, "is a folder")
 
 
 def _jpeg_with_exif(path, unit):
