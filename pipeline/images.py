@@ -109,7 +109,7 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
             f"{len(reg)} of {len(views)} images")}
         return
     fr, n_cut = fusion_stage(cleaning.ledger, _posed(views, poses), features, comm_edges,
-                             cameras=reg, timer=timer,
+                             cameras=reg, timer=timer, track_labels=cleaning.track_labels,
                              detail=f", {len(reg)} of {len(views)} cameras posed")
     cleaning.fused_points = np.asarray(fr.points)
     cleaning.fusion_stats = {

@@ -313,6 +313,20 @@ def _scaled_K(K: np.ndarray, sx: float, sy: float) -> np.ndarray:
     return S @ K
 
 
+def downscale(pixels: np.ndarray, K: np.ndarray, max_size: int | None):
+    """The image with its longest side at most ``max_size`` (never upscaled) and its scaled K.
+
+    Returns ``(pixels, K)``; unchanged when ``max_size`` is ``None`` or already met.
+    """
+    h, w = pixels.shape[:2]
+    if max_size is None or max(w, h) <= max_size:
+        return pixels, K
+    s = max_size / max(w, h)
+    nw, nh = max(1, round(w * s)), max(1, round(h * s))
+    pixels = cv2.resize(pixels, (nw, nh), interpolation=cv2.INTER_AREA)
+    return pixels, _scaled_K(K, nw / w, nh / h)
+
+
 def load_folder(directory: str | Path, max_size: int | None = 1600,
                 intrinsics: str | Path = "auto") -> list[View]:
     """Load every image of a folder as a :class:`View`, in name order.
@@ -386,11 +400,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
             else:
                 K, source, known = _guess_K(w, h), "guess", False
         header.close()
-        if max_size is not None and max(w, h) > max_size:
-            s = max_size / max(w, h)
-            nw, nh = max(1, round(w * s)), max(1, round(h * s))
-            pixels = cv2.resize(pixels, (nw, nh), interpolation=cv2.INTER_AREA)
-            K = _scaled_K(K, nw / w, nh / h)
+        pixels, K = downscale(pixels, K, max_size)
         views.append(View(name=path.name, image=pixels, K=np.array(K, dtype=np.float64),
                           intrinsics_known=known, intrinsics_source=source))
     log.info("loaded %d images from %s (intrinsics: %s)", len(views), directory,

@@ -28,7 +28,7 @@ from pipeline.types import LinkLedger, Links, RunRecord, View
 
 __all__ = ["FormationConfig", "CleaningResult", "NEAR_DUPLICATE_PX", "merge_radius_for",
            "extract_and_match", "evidence_inputs", "consistency_stage", "ledger_from_consistency",
-           "fusion_stage", "clean_association", "run_formation"]
+           "fusion_stage", "clean_association", "run_formation", "write_formation_run"]
 
 #: radius (pixels) within which keypoints of one image are one observation with the evidence
 #: rule: the ground-truth tolerance of a good link, so that two keypoints that would both be
@@ -75,6 +75,8 @@ class CleaningResult:
     fused_points : ndarray, (F, 3) or None — fused landmark of each fused track
     fused_track_ids : ndarray, (F,) or None — track (association set) of each fused landmark
     faults : dict or None — the report's ``faults`` section when faults were injected
+    track_labels : ndarray, (m_total,) or None — each robot's own name for the track of each
+        of its features (``ConsistencyResult.track_label``), what fusion's tracks come from
     """
 
     ledger: LinkLedger
@@ -83,6 +85,7 @@ class CleaningResult:
     fused_points: np.ndarray | None = None
     fused_track_ids: np.ndarray | None = None
     faults: dict | None = None
+    track_labels: np.ndarray | None = None
 
 
 def _conflictive_links(features_per_camera, links: Links) -> np.ndarray:
@@ -218,11 +221,14 @@ def ledger_from_consistency(result, conflictive_before: np.ndarray | None = None
 
 def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edges, *,
                  cameras: np.ndarray | None = None, transport=None,
-                 timer: StageTimer | None = None, detail: str = ""):
+                 timer: StageTimer | None = None, detail: str = "",
+                 track_labels=None):
     """Robust distributed fusion (Montijano et al., dynamic voting) of the kept links among
     ``cameras``; observations voted out cut their links as ``fusion-outlier`` in ``ledger``.
 
     ``cameras`` (default all) are the robots that take part: they need a pose in ``views``.
+    ``track_labels`` (``CleaningResult.track_labels``): the robots' own track names, from
+    which the tracks are formed (default: a union-find over the kept links).
     The others act as crashed robots: their links and comm edges are left out, and links to
     them stay as the consistency stage left them. ``transport`` (a
     :class:`~pipeline.transport.Transport` over all ``n`` cameras, or None) is the network the
@@ -250,8 +256,13 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
                       new[links.cam_j[sub_idx]], links.feat_j[sub_idx], links.quality[sub_idx])
     e = new[np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)]
     with timer.stage("fusion", "robust distributed fusion by dynamic voting" + detail):
+        labels = None
+        if track_labels is not None:
+            off = np.concatenate([[0], np.cumsum([len(f) for f in features])])
+            labels = np.concatenate([np.asarray(track_labels)[off[k]:off[k + 1]] for k in reg])
         fr = fuse_tracks([views[k] for k in reg], [features[k] for k in reg], sub_links,
-                         e[(e >= 0).all(axis=1)], transport=transport)
+                         e[(e >= 0).all(axis=1)], transport=transport,
+                         track_labels=labels)
         cut = sub_idx[np.asarray(fr.cut_links, dtype=bool)]
         ledger.cut(cut, "fusion-outlier", int(fr.stats.get("rounds", -1)))
         timer.note(f"{len(cut)} links cut as fusion outliers")
@@ -283,7 +294,8 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
         ledger = ledger_from_consistency(res, conflictive_before)
         timer.note(f"{int(res.deleted.sum())} of {len(links)} links cut in "
                    f"{res.stats.get('iterations')} iteration(s)")
-    cleaning = CleaningResult(ledger, dict(res.stats), faults=fault_section)
+    cleaning = CleaningResult(ledger, dict(res.stats), faults=fault_section,
+                              track_labels=res.track_label)
     has_poses = all(v.R is not None and v.t is not None for v in views)
     if not fusion:
         cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
@@ -292,6 +304,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     else:
         faulty = faults is not None and faults.any
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
+                                 track_labels=cleaning.track_labels,
                                  transport=faults.transport(comm_edges, len(m)) if faulty else None)
         cleaning.fusion_stats = {"enabled": True, **dict(fr.stats),
                                  "observations_cut_links": n_cut}
@@ -300,21 +313,22 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     return cleaning
 
 
-def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> Path:
+def run_formation(config: FormationConfig, timer: StageTimer | None = None,
+                  transport: str = "sim") -> Path:
     """Render a formation, run every stage, write the run folder; return its path.
 
     Stages: render → features → matching → consistency → fusion → triangulation (before and
     after, pycolmap with known poses) → evaluation against ground truth → outputs.
+    ``transport="zenoh"``: the robots run as separate processes over Zenoh
+    (:func:`pipeline.teamrun.run_formation_team`); the same run folder is written.
     """
     import data_synth
-    from data_synth.ground_truth import points_from_keypoints
-    from pipeline import report as sections
-    from pipeline.evaluate import link_truth, missing_links
-    from pipeline.linkscsv import write_links_csv
-    from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
 
+    if transport == "zenoh":
+        from pipeline.teamrun import run_formation_team
+
+        return run_formation_team(config, timer)
     timer = timer or StageTimer()
-    out = config.out_dir()
     with timer.stage("render", f"formation {config.formation}, seed {config.seed}, "
                      f"{config.size[0]}x{config.size[1]}"):
         formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
@@ -323,11 +337,30 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     feats, matches, links = extract_and_match(
         views, comm_edges, config.features, config.max_features, timer,
         merge_radius=merge_radius_for(config.resolution, config.merge_radius))
-    m = np.array([len(f) for f in feats], dtype=np.int64)
     cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
                                  faults=config.faults, timer=timer,
                                  resolution=config.resolution, matches=matches)
+    return write_formation_run(config, formation, feats, matches, cleaning, timer)
+
+
+def write_formation_run(config: FormationConfig, formation, feats: list, matches: list,
+                        cleaning: CleaningResult, timer: StageTimer,
+                        extra: dict | None = None) -> Path:
+    """Evaluate a formation run against ground truth and write its run folder.
+
+    ``extra`` adds sections to ``report.json`` (e.g. ``team`` for a run over Zenoh).
+    """
+    from data_synth.ground_truth import points_from_keypoints
+    from pipeline import report as sections
+    from pipeline.evaluate import link_truth, missing_links
+    from pipeline.linkscsv import write_links_csv
+    from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
+
+    out = config.out_dir()
+    views, comm_edges = formation.views, np.asarray(formation.comm_edges)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
     ledger = cleaning.ledger
+    links = ledger.links
     kept = ledger.kept
     kept_links = links.subset(kept)
 
@@ -390,6 +423,7 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
     }
     if cleaning.faults is not None:
         report["faults"] = cleaning.faults
+    report.update(extra or {})
     if cleaning.fused_points is not None:
         report["fusion"].update(sections.fused_point_errors(
             views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
@@ -417,8 +451,6 @@ def run_formation(config: FormationConfig, timer: StageTimer | None = None) -> P
             write_json_atomic(tmp / "report.json", report)
     print(md)
     return out
-
-
 
 
 def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,

@@ -206,8 +206,9 @@ def find_conflictive_sets(robot: Robot) -> None:
     """Rules (8) and (9) on ``X_i·(t_i)`` and the root of every set touched (eq. 10).
 
     Sets ``robot.conflictive`` (m_i,), ``robot.set_label`` (m_i,) — the smallest global id in
-    the feature's conflictive set, ``-1`` otherwise — and ``robot.root_of_set``
-    ``{label: root robot}``.
+    the feature's conflictive set, ``-1`` otherwise — ``robot.root_of_set``
+    ``{label: root robot}``, and ``robot.track_label`` of the active features found
+    non-conflictive (see :meth:`Robot.final_tracks`).
     """
     X = robot.X
     X.sort_indices()
@@ -220,6 +221,10 @@ def find_conflictive_sets(robot: Robot) -> None:
     conflictive = np.zeros(robot.m, dtype=bool)
     conflictive[row[1:][twice]] = True
     robot.conflictive = conflictive
+    # a non-conflictive row is the feature's whole association set: name its track by the
+    # set's smallest global id (indices sorted), the same at every robot of the set
+    named = np.flatnonzero(robot.active & ~conflictive & (counts >= 2))
+    robot.track_label[named] = X.indices[X.indptr[named]]
     label = np.full(robot.m, -1, dtype=np.int64)
     crow = np.flatnonzero(conflictive)
     if crow.size == 0:

@@ -31,7 +31,8 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency.evidence import CASE_EVIDENCE, equip, run_evidence_resolution
+from pipeline.consistency.evidence import equip, run_evidence_resolution
+from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
     DETECTION,
     RESOLUTION,
@@ -39,7 +40,7 @@ from pipeline.consistency.protocols import (
     end_phase,
     make_protocol,
 )
-from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST, Robot
+from pipeline.consistency.robot import Robot
 from pipeline.errors import InputError
 from pipeline.transport import Transport
 from pipeline.transport.simulated import Network, NetworkOptions
@@ -72,6 +73,8 @@ class ConsistencyResult:
         otherwise
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
+    track_label : ndarray, (m_total,) int64 — each robot's own name for the track of each of
+        its features (:meth:`Robot.final_tracks`), -1 outside tracks
     stats : dict — ``iterations`` (detection + resolution passes that found conflicts; a
         last detection that finds none ends the loop and is counted in the rounds),
         ``detection_rounds``, ``resolution_rounds`` (totals over all passes),
@@ -97,6 +100,7 @@ class ConsistencyResult:
     case: np.ndarray
     component: np.ndarray
     stats: dict = field(default_factory=dict)
+    track_label: np.ndarray | None = None
 
     def kept(self) -> Links:
         """The links that survived, ``Links`` of length ``(~deleted).sum()``."""
@@ -367,37 +371,15 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
     """Read every robot's own log into per-link arrays (reporting only)."""
     L = len(links)
     survivors = np.array([network.alive(rb.id) for rb in robots], dtype=bool)
-    ends_deleted = np.zeros(L, dtype=np.int64)  # 0, 1 or 2 ends deleted
-    lost_end = np.zeros(L, dtype=bool)
-    iteration = np.full(L, -1, dtype=np.int64)
-    round_ = np.full(L, -1, dtype=np.int64)
-    case = np.full(L, "", dtype="<U8")
-    for rb, li in zip(robots, link_index, strict=True):
-        gone = ~rb.link_alive
-        np.add.at(ends_deleted, li[gone], 1)
-        lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
-        lost_end[li[lost]] = True
-        decided = np.flatnonzero(np.isin(rb.deleted_case, (CASE_B, CASE_C, CASE_EVIDENCE)))
-        if decided.size:
-            g = li[decided]
-            # if both ends cut the link as receivers (crossing requests), keep the earlier round
-            better = (round_[g] < 0) | (rb.deleted_round[decided] < round_[g])
-            g, d = g[better], decided[better]
-            iteration[g] = rb.deleted_iteration[d]
-            round_[g] = rb.deleted_round[d]
-            case[g] = [CASE_NAMES.get(int(c), "evidence") for c in rb.deleted_case[d]]
-    deleted = ends_deleted > 0
-    reason = np.where(deleted, "resolution", "").astype("<U10")
-    # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it
-    robot_lost = deleted & lost_end & (case == "")
-    reason[robot_lost] = "robot-lost"
-    for rb, li in zip(robots, link_index, strict=True):
-        lost = np.flatnonzero(rb.deleted_case == ROBOT_LOST)
-        g = li[lost]
-        sel = robot_lost[g] & ((round_[g] < 0) | (iteration[g] < 0))
-        iteration[g[sel]] = rb.deleted_iteration[lost[sel]]
-        round_[g[sel]] = rb.deleted_round[lost[sel]]
+    d = merge_link_logs(L, [(li, rb.link_alive, rb.deleted_case, rb.deleted_round,
+                             rb.deleted_iteration)
+                            for rb, li in zip(robots, link_index, strict=True)])
+    deleted, reason, iteration, round_, case = (d[k] for k in ("deleted", "reason", "iteration",
+                                                               "round", "case"))
+    ends_deleted, robot_lost = d["ends_deleted"], d["robot_lost"]
     component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
+    track_label = np.concatenate([rb.final_tracks() for rb in robots]) if robots else \
+        np.zeros(0, np.int64)
     cnt = network.counters()
     both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, dtype=bool)
     extra = protocol.counters()
@@ -435,4 +417,5 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         faults=faults,
     )
     return ConsistencyResult(links=links, deleted=deleted, reason=reason, iteration=iteration,
-                             round=round_, case=case, component=component, stats=stats)
+                             round=round_, case=case, component=component, stats=stats,
+                             track_label=track_label)

@@ -88,6 +88,10 @@ class Robot:
         self.set_label = np.full(self.m, -1, dtype=np.int64)
         self.root_of_set: dict[int, int] = {}
 
+        # the track of each own feature as learnt by detection (smallest global id of its
+        # non-conflictive row), -1 until then; see final_tracks
+        self.track_label = np.full(self.m, -1, dtype=np.int64)
+
         # resolution state (Sec. IV, Alg. 1)
         self.component = np.full(self.m, -1, dtype=np.int64)
         self.assigned_round = np.full(self.m, -1, dtype=np.int32)
@@ -132,12 +136,30 @@ class Robot:
         self.deleted_case[fresh] = case
         self.deleted_iteration[fresh] = self.iteration
 
+    def final_tracks(self) -> np.ndarray:
+        """Track of each own feature from this robot's own knowledge, ``(m_i,)`` int64.
+
+        A feature with an alive link belongs to a track (an association set of the kept links)
+        named by the robot alone: the component ``q`` of Alg. 1 if the feature was assigned to
+        one (a component keeps no link to the outside, Alg. 1 cases (b)–(c), so it is a whole
+        set), else the smallest global id of its row ``X_i·`` in the detection that found it
+        non-conflictive (Prop. 3.5: that row is its whole association set, and resolution
+        never touches a set without conflict). Every robot of a track computes the same name.
+        ``-1``: no alive link. Links cut after that detection for a lost robot (``robot-lost``)
+        can split a set whose name stays shared.
+        """
+        has_link = np.zeros(self.m, dtype=bool)
+        has_link[self.link_r[self.link_alive]] = True
+        label = np.where(self.component >= 0, self.component, self.track_label)
+        return np.where(has_link, label, -1)
+
     # --- memory ---------------------------------------------------------------------------
     def memory_bytes(self) -> int:
         """Bytes of the arrays this robot holds (sparse matrices: data + indices + indptr)."""
         total = sum(int(a.nbytes) for a in (
             self.link_nbr, self.link_r, self.link_s, self.link_alive, self.link_key,
             self.candidates, self.active, self.conflictive, self.set_label, self.component,
+            self.track_label,
             self.assigned_round, self.deleted_round, self.deleted_case, self.deleted_iteration))
         total += csr_bytes(self.X) + blocks_bytes(self.last_blocks.values())
         total += 16 * len(self.root_of_set)

@@ -1,7 +1,7 @@
 """Robust distributed fusion of every track's landmark by dynamic voting (pipeline stage).
 
 For each track (association set of the kept links: a connected component with at least two
-features, found by union-find in :mod:`pipeline.association`), every robot that observes it
+features) every robot that observes it
 forms a local 3D estimate of the landmark and the observers fuse these estimates by dynamic
 voting (Montijano et al., Sec. IV-B, :func:`pipeline.fusion.voting.dynamic_voting`). A robot
 whose estimate is voted out, and whose own keypoint does not reproject within the pixel gate
@@ -10,6 +10,16 @@ of the fused landmark, declares its observation an outlier; the links to it are 
 
 The distributed model
 ---------------------
+Tracks come from what each robot learnt in the consistency stage, not from a global
+union-find: every robot names the track of each of its features itself
+(:meth:`pipeline.consistency.robot.Robot.final_tracks`: its Alg. 1 component, or the smallest
+feature id of its detection row), and tells its neighbours, with its keypoint, pose and
+intrinsics, which track each of its observations belongs to (the setup message counted in
+``setup_*``). Robot ``i`` takes part in track ``b`` with neighbour ``j`` exactly when both
+named an observation ``b``; the keypoint of ``j`` it uses is the one ``j`` sent. The tracks
+are processed in the order of their names (which sets the max-c random draws); the result's
+``track_ids`` are renumbered like :func:`tracks_of` for reporting only.
+
 All tracks run at once on the flat node set of :mod:`pipeline.fusion.consensus`: node
 ``b * n + i`` is robot ``i`` in track ``b``; it is linked to node ``b * n + j`` when robots
 ``i`` and ``j`` are communication neighbours and both observe track ``b``. Robots that do not
@@ -137,6 +147,22 @@ def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
     """
     track_of, tracks = association_sets(features_per_camera, links)
     return track_of, len(tracks)
+
+
+def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int]:
+    """Track index of every feature from the robots' own track names (in name order)."""
+    lab = np.asarray(track_labels, dtype=np.int64).reshape(-1)
+    if lab.shape[0] != m_total:
+        raise InputError(f"track_labels must have one entry per feature ({m_total}), got "
+                         f"{lab.shape[0]}")
+    track_of = np.full(m_total, -1, dtype=np.int64)
+    valid = np.flatnonzero(lab >= 0)
+    names, inv, counts = np.unique(lab[valid], return_inverse=True, return_counts=True)
+    real = counts >= 2  # a name held by one feature only is no association set
+    renum = np.cumsum(real) - 1
+    keep = real[inv]
+    track_of[valid[keep]] = renum[inv[keep]]
+    return track_of, int(real.sum())
 
 
 # --------------------------------------------------------------------------------------------
@@ -297,7 +323,8 @@ def _track_topology(edges_up, observes: np.ndarray, comm: np.ndarray, n: int):
 def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_edges,
                 sigma_px: float = 1.0, *, local: str = "robust", p: float = 0.99,
                 gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
-                rounds: int = 100, seed: int = 0, transport: Transport | None = None) -> FusionResult:
+                rounds: int = 100, seed: int = 0, transport: Transport | None = None,
+                track_labels=None) -> FusionResult:
     """Fuse every track's landmark by dynamic voting; flag the observations voted out.
 
     Parameters
@@ -322,6 +349,12 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         (kind ``fusion``); the ``messages`` stat counts every comm edge in every round (an
         upper bound under a switching topology). Loss and crashes are not applied to the
         fusion stage (stated; they are modelled in the consistency stage).
+    track_labels : array_like, (m_total,) int or None
+        Each robot's own name for the track of each of its features, as it learnt it in the
+        consistency stage (:meth:`pipeline.consistency.robot.Robot.final_tracks`; ``-1``
+        outside tracks). Robots then fuse the tracks they know themselves, in the order of
+        these names. ``None``: tracks by a union-find over ``links`` (for inputs that did not
+        go through the consistency stage).
 
     Returns
     -------
@@ -336,7 +369,10 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     n = len(views)
     m = np.array([len(f) for f in features], dtype=np.int64)
     off = np.concatenate([[0], np.cumsum(m)])
-    track_of, T = tracks_of(m, links)
+    if track_labels is None:
+        track_of, T = tracks_of(m, links)
+    else:
+        track_of, T = _tracks_from_labels(track_labels, int(off[-1]))
     cam_of = np.repeat(np.arange(n), m)
     feat_of = np.arange(off[-1]) - off[cam_of]
     obs_g = np.flatnonzero(track_of >= 0)
@@ -417,7 +453,13 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                  hypotheses=int(K), c=int(c), local=local, gate=gate, p=float(p),
                  sigma_px=float(sigma_px), rounds=0, consensus_rounds=int(rounds),
                  maxc_rounds=0, messages=0, bytes=0, logical_messages=0)
-    empty = FusionResult(np.zeros((0, 3)), np.zeros(0, np.int64), obs_track, obs_cam, obs_feat,
+    obs_track_out = obs_track
+    if track_labels is not None:
+        # reporting only: number the tracks like tracks_of (smallest feature id), the
+        # contract of FusionResult; the robots never use this numbering
+        uf, _ = tracks_of(m, links)
+        obs_track_out = uf[obs_g]
+    empty = FusionResult(np.zeros((0, 3)), np.zeros(0, np.int64), obs_track_out, obs_cam, obs_feat,
                          np.zeros(n_obs, bool), np.ones(n_obs, bool), np.zeros(L, bool), stats)
     if B == 0 or not estimated.any():
         return empty
@@ -489,6 +531,10 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     if transport is not None:
         transport.count("fusion-setup", stats["setup_messages"], stats["setup_bytes"])
         transport.count("fusion", stats["messages"], stats["bytes"])
-    return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track,
+    if track_labels is not None:
+        first_obs = np.full(T, -1, dtype=np.int64)
+        first_obs[obs_track[::-1]] = obs_g[::-1]
+        tr = uf[first_obs[tr]]
+    return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track_out,
                         obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
                         obs_inlier=obs_in, cut_links=cut, stats=stats)

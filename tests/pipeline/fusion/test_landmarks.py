@@ -145,3 +145,28 @@ def test_fusion_inputs_are_checked():
     views[1].R = None
     with pytest.raises(InputError, match="no pose"):
         fuse_tracks(views, feats, links, edges)
+
+
+def test_tracks_from_robot_names_equal_the_union_find_tracks():
+    """Named by their smallest feature id, the robots' tracks give the union-find's result;
+    any other names give the same tracks (renumbered like tracks_of in the output)."""
+    views, feats, links, edges, _ = planted_rig()
+    m = [len(f) for f in feats]
+    ref = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    track_of, T = tracks_of(m, links)
+    off = np.concatenate([[0], np.cumsum(m)])
+    first = np.full(T, np.iinfo(np.int64).max)
+    np.minimum.at(first, track_of[track_of >= 0], np.flatnonzero(track_of >= 0))
+    names = np.where(track_of >= 0, first[track_of], -1)
+    same = fuse_tracks(views, feats, links, edges, sigma_px=0.5, track_labels=names)
+    assert np.array_equal(same.cut_links, ref.cut_links)
+    assert np.array_equal(same.track_ids, ref.track_ids)
+    assert np.array_equal(same.obs_track, ref.obs_track)
+    assert np.allclose(same.points, ref.points)
+    # other names (e.g. an Alg. 1 component id), one singleton name: still the same tracks
+    other = np.where(names >= 0, off[-1] - names, -1)
+    other[int(off[1])] = 10**6 if names[int(off[1])] < 0 else other[int(off[1])]
+    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5, track_labels=other)
+    assert res.stats["tracks"] == ref.stats["tracks"]
+    assert sorted(res.track_ids.tolist()) == sorted(ref.track_ids.tolist())
+    assert np.array_equal(res.obs_track, ref.obs_track)

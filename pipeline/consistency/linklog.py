@@ -1,0 +1,71 @@
+"""Per-link decisions from the robots' own deletion logs (reporting only, never robot code).
+
+Each robot logs, for every row of its link table, whether it still holds the link and, if
+not, why (Alg. 1 case (b)/(c) as the receiver of a request, on a reject, by the evidence rule, or
+``robot-lost``),
+in which iteration and round. A link is deleted when either end deleted it; its reason is
+``resolution`` unless the only cut was a ``robot-lost`` one; its round and case are those of
+the end that cut it as the receiver of a request (the earlier one if both did).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.consistency.evidence import CASE_EVIDENCE
+from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST
+
+__all__ = ["merge_link_logs"]
+
+
+def merge_link_logs(n_links: int, logs) -> dict:
+    """Fold the robots' logs into per-link arrays.
+
+    Parameters
+    ----------
+    n_links : int — ``L``
+    logs : iterable of ``(link_index, link_alive, deleted_case, deleted_round,
+        deleted_iteration)``, one per robot whose log is known, each array ``(L_i,)``;
+        ``link_index`` maps the robot's rows to the links ``0..L-1``
+
+    Returns
+    -------
+    dict of ``(L,)`` arrays: ``deleted`` bool, ``reason`` str, ``iteration``, ``round``,
+    ``case`` str, ``ends_deleted`` int (0, 1 or 2), ``robot_lost`` bool
+    """
+    L = int(n_links)
+    logs = list(logs)
+    ends_deleted = np.zeros(L, dtype=np.int64)
+    lost_end = np.zeros(L, dtype=bool)
+    iteration = np.full(L, -1, dtype=np.int64)
+    round_ = np.full(L, -1, dtype=np.int64)
+    case = np.full(L, "", dtype="<U8")
+    for li, alive, dcase, dround, diter in logs:
+        li = np.asarray(li, dtype=np.int64)
+        gone = ~np.asarray(alive, dtype=bool)
+        np.add.at(ends_deleted, li[gone], 1)
+        lost = np.flatnonzero(dcase == ROBOT_LOST)
+        lost_end[li[lost]] = True
+        decided = np.flatnonzero(np.isin(dcase, (CASE_B, CASE_C, CASE_EVIDENCE)))
+        if decided.size:
+            g = li[decided]
+            # if both ends cut the link as receivers (crossing requests), keep the earlier round
+            better = (round_[g] < 0) | (dround[decided] < round_[g])
+            g, d = g[better], decided[better]
+            iteration[g] = diter[d]
+            round_[g] = dround[d]
+            case[g] = [CASE_NAMES.get(int(c), "evidence") for c in dcase[d]]
+    deleted = ends_deleted > 0
+    reason = np.where(deleted, "resolution", "").astype("<U10")
+    # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it
+    robot_lost = deleted & lost_end & (case == "")
+    reason[robot_lost] = "robot-lost"
+    for li, _, dcase, dround, diter in logs:
+        li = np.asarray(li, dtype=np.int64)
+        lost = np.flatnonzero(dcase == ROBOT_LOST)
+        g = li[lost]
+        sel = robot_lost[g] & ((round_[g] < 0) | (iteration[g] < 0))
+        iteration[g[sel]] = diter[lost[sel]]
+        round_[g[sel]] = dround[lost[sel]]
+    return dict(deleted=deleted, reason=reason, iteration=iteration, round=round_, case=case,
+                ends_deleted=ends_deleted, robot_lost=robot_lost)
