@@ -12,6 +12,12 @@ topology that changes per round) as properties of the network, never of the algo
   current round, its neighbour table, the round number, its memory report. Robot-side code
   (the consistency protocols) sends only through an endpoint.
 * :class:`Message` — one packet and its size on the wire.
+* :class:`RoundEndpoint` — an :class:`Endpoint` with no driver behind it: a robot running as
+  its own program closes each round itself (:meth:`RoundEndpoint.end_round`), and the round
+  carries a small *round state* to the neighbours (the termination wave of
+  :mod:`pipeline.consistency.termination`). Implementations: the robots as threads over the
+  simulator (:class:`pipeline.transport.local.LocalTeam`) and one process per robot over
+  Zenoh (:class:`pipeline.transport.zenoh_transport.ZenohTransport`).
 
 Who uses it: the consistency stage (:mod:`pipeline.consistency`) sends every message through
 endpoints; the fusion consensus (:mod:`pipeline.fusion.landmarks`) is a vectorized
@@ -31,13 +37,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HEADER_BYTES", "Message", "NotANeighbourError", "Transport", "Endpoint"]
+__all__ = ["HEADER_BYTES", "Message", "NotANeighbourError", "Transport", "Endpoint",
+           "RoundEndpoint", "RobotMissingError"]
 
 HEADER_BYTES = 12
 
 
 class NotANeighbourError(RuntimeError):
     """A robot tried to send to a robot that is not its current communication neighbour."""
+
+
+class RobotMissingError(RuntimeError):
+    """A neighbour never answered the start handshake of a team (the message names it)."""
 
 
 @dataclass
@@ -191,3 +202,75 @@ class Endpoint:
     def note_memory(self, nbytes: int) -> None:
         """Report the bytes this robot holds (the transport keeps the peak)."""
         self._transport.note_memory(self.id, nbytes)
+
+
+class RoundEndpoint(Endpoint):
+    """One robot's side of a network of synchronous rounds with no driver behind it.
+
+    A robot in its own program has no driver playing the clock: it closes each round itself
+    with :meth:`end_round` — what it sent leaves, and what its neighbours sent in the same
+    round comes back as the next round's inbox, with each neighbour's round state. Messages
+    and bytes are counted as :class:`Transport` counts them; faults (loss, a neighbour that
+    stops answering) are properties of the transport, never of the robot code. Robot-side
+    code (the reliable protocol's :class:`~pipeline.consistency.channel.Channel`) uses it
+    exactly as an :class:`Endpoint`.
+
+    Attributes
+    ----------
+    robot_id : int
+    neighbours : frozenset of int — communication neighbours in the comm graph
+    round : int — current logical round (0 before the first :meth:`end_round`)
+    """
+
+    robot_id: int
+    neighbours: frozenset
+    round: int = 0
+    _last_inbox: list = []
+    _peak_memory: int = 0
+
+    @property
+    def id(self) -> int:  # the Endpoint attribute
+        return int(self.robot_id)
+
+    @abstractmethod
+    def send(self, dst: int, kind: str, payload: dict) -> None:
+        """Queue an algorithm message to neighbour ``dst`` for this round (counted)."""
+
+    @abstractmethod
+    def end_round(self, state: dict | None = None) -> tuple[list[Message], dict[int, dict]]:
+        """Close the round; return the next round's inbox and the neighbours' round states.
+
+        ``state`` (small JSON-able dict) travels to every neighbour with this round's packet;
+        the returned dict maps each neighbour still heard to the state it sent this round.
+        A neighbour that stopped answering (crash) is absent from it; the inbox then simply
+        holds nothing from it, as when a message is lost.
+        """
+
+    def inbox(self) -> list[Message]:
+        """The inbox returned by the last :meth:`end_round`."""
+        return list(self._last_inbox)
+
+    def links_up(self) -> frozenset:
+        """The robot's neighbour table (a crash cannot be seen, only inferred from silence)."""
+        return self.neighbours
+
+    @property
+    def now(self) -> int:
+        return int(self.round)
+
+    def note_memory(self, nbytes: int) -> None:
+        self._peak_memory = max(self._peak_memory, int(nbytes))
+
+    def peak_memory(self) -> int:
+        """Peak of the bytes this robot reported."""
+        return int(self._peak_memory)
+
+    @abstractmethod
+    def counters(self) -> dict:
+        """``messages``, ``bytes`` (counted as the simulator does), ``dropped``,
+        ``messages_by_kind``, ``bytes_by_kind``, and for a real middleware ``wire_bytes`` and
+        ``wire_packets``."""
+
+    def close(self) -> None:
+        """Release the connection (default: nothing)."""
+        return None

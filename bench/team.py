@@ -1,0 +1,142 @@
+"""Benchmark: the robots as objects of one process (sim) vs one process per robot (zenoh).
+
+For formation d (6 robots) and a 20-robot formation, side by side in one run, each as a
+command-line run (so process start is included on both sides): wall time, consistency rounds,
+messages, bytes counted (the simulator's encoding) and bytes on the wire (zenoh packets), peak
+RSS per process, and for zenoh the time from ``kill -9`` of one robot to the survivors'
+finish, plus a run with message loss. Both sides run without fusion, which does not run over
+zenoh; ``sim (default)`` adds the in-process default run with fusion for reference.
+Saves ``runs/bench-team/results.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+
+FORMATIONS = {"d (6 robots)": ["--formation", "d"],
+              "ring2 (20 robots)": ["--robots", "20", "--graph", "ring2"]}
+
+
+def _cli(args: list[str], out: Path) -> dict:
+    """Run ``python -m pipeline run-formation ARGS`` and read its report; wall and RSS."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline", "run-formation", *args,
+                             "--no-rerun", "--out", str(out)], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"run-formation {' '.join(args)} failed: {err[-500:]}")
+    report = json.loads((out / "report.json").read_text())
+    return {"wall_s": wall, "report": report, "launcher_rss_bytes": usage.ru_maxrss * 1024}
+
+
+def _row(name: str, res: dict) -> dict:
+    rep = res["report"]
+    r = rep["resolution"]
+    team = rep.get("team")
+    row = {"run": name, "wall_s": round(res["wall_s"], 2),
+           "rounds": int(r["detection_rounds"] + r["resolution_rounds"]),
+           "messages": r["messages"], "bytes_counted": r["bytes"],
+           "links_deleted": int(rep["before"]["links"] - rep["after"]["links"]),
+           "conflictive_sets_after": rep["after"]["conflictive_sets"],
+           "rss_launcher_mb": round(res["launcher_rss_bytes"] / 2**20, 1)}
+    if team:
+        rob = [v for v in team["robots"].values() if "rounds" in v]
+        row["wire_bytes"] = sum(v["wire_bytes"] for v in rob)
+        row["bytes_counted_all_kinds"] = sum(v["bytes"] for v in rob)
+        row["rss_robot_max_mb"] = round(max(v["peak_rss_bytes"] for v in rob) / 2**20, 1)
+        row["process_start_s"] = team["process_start_s"]
+        row["team_wall_s"] = team["wall_s"]
+    faults = rep.get("faults")
+    if faults:
+        row["links_cut_robot_lost"] = faults["links_cut_robot_lost"]
+        row["messages_dropped"] = faults["messages_dropped"]
+    return row
+
+
+def _kill_run(args: list[str], size, out: Path) -> dict:
+    """zenoh run with ``kill -9`` of robot 2 as its consistency stage starts."""
+    from pipeline.commands.run_formation import add_arguments, config_from_args
+    from pipeline.teamrun import run_formation_team
+
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    cfg = config_from_args(ap.parse_args([*args, "--no-fusion", "--no-rerun", "--size", size,
+                                          "--out", str(out)]))
+    runs = []
+    t0 = time.perf_counter()
+    run_formation_team(cfg, kill=(2, "consistency", 0.0), keep_run=runs)
+    wall = time.perf_counter() - t0
+    run = runs[0]
+    rep = json.loads((out / "report.json").read_text())
+    return {"wall_s": round(wall, 2),
+            "kill_to_finish_s": round(max(run.finished_at.values()) - run.killed[2], 2),
+            "survivors": sorted(run.results), "robots_lost": rep["faults"]["robots_lost"],
+            "links_cut_robot_lost": rep["faults"]["links_cut_robot_lost"],
+            "conflictive_sets_after": rep["after"]["conflictive_sets"]}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team"))
+    ap.add_argument("--only", default=None, help="run one formation key only")
+    args = ap.parse_args()
+    results = {"size": args.size, "formations": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for k, (name, fargs) in enumerate(FORMATIONS.items()):
+            if args.only and args.only not in name:
+                continue
+            base = [*fargs, "--size", args.size]
+            rows = []
+            if k == 0:
+                rows.append(_row("sim (default, fusion)", _cli(base, tmp / f"s{k}f")))
+            rows.append(_row("sim", _cli([*base, "--no-fusion"], tmp / f"s{k}")))
+            rows.append(_row("zenoh", _cli([*base, "--no-fusion", "--transport", "zenoh"],
+                                           tmp / f"z{k}")))
+            rows.append(_row("zenoh --drop-prob 0.2",
+                             _cli([*base, "--no-fusion", "--transport", "zenoh",
+                                   "--drop-prob", "0.2"], tmp / f"zd{k}")))
+            kill = _kill_run(fargs, args.size, tmp / f"zk{k}")
+            sim = next(r for r in rows if r["run"] == "sim")
+            zen = next(r for r in rows if r["run"] == "zenoh")
+            results["formations"][name] = {
+                "rows": rows, "kill_9": kill,
+                "zenoh_over_sim_wall": round(zen["wall_s"] / sim["wall_s"], 2),
+                "same_links_deleted": zen["links_deleted"] == sim["links_deleted"]}
+            print(f"\n== formation {name}, {args.size}")
+            cols = ["run", "wall_s", "rounds", "messages", "bytes_counted",
+                    "bytes_counted_all_kinds", "wire_bytes", "rss_launcher_mb", "rss_robot_max_mb", "links_deleted",
+                    "conflictive_sets_after", "links_cut_robot_lost"]
+            print(" | ".join(f"{c:>14}" for c in cols))
+            for r in rows:
+                print(" | ".join(f"{str(r.get(c, '-')):>14}" for c in cols))
+            print(f"kill -9 of robot 2: survivors {kill['survivors']} finished "
+                  f"{kill['kill_to_finish_s']} s after the kill; {kill['links_cut_robot_lost']} "
+                  f"links cut robot-lost; conflictive sets after: {kill['conflictive_sets_after']}")
+            ratio = results["formations"][name]["zenoh_over_sim_wall"]
+            print(f"zenoh / sim wall time (both without fusion): {ratio}x "
+                  f"(target <= 3x: {'met' if ratio <= 3 else 'NOT met'})")
+    write_json_atomic(Path(args.out) / "results.json", results)
+    print(f"saved {args.out}/results.json")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,36 @@
+"""``python -m pipeline robot --team TEAM.json --id I``: run one robot of a team.
+
+The robot listens on its endpoint of the team file, connects to its comm-graph neighbours,
+and runs features, matching, detection and resolution with them over Zenoh
+(:mod:`pipeline.teamrobot`). Start one per robot, on one machine or several; the robots wait
+for each other (``start_timeout_s`` of the team options) and name any that never answers.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--team", required=True, metavar="TEAM.json",
+                   help="team file: robots, endpoints, comm graph, data (see README)")
+    p.add_argument("--id", required=True, help="this robot's id in the team (0..n-1)")
+    p.add_argument("--result", default=None, metavar="JSON",
+                   help="also write this robot's result (counters, its links and their "
+                        "status) to a JSON file")
+
+
+def run(args) -> int:
+    from pipeline.team import load_team
+    from pipeline.teamrobot import run_robot_process
+    from pipeline.transport import RobotMissingError
+
+    team = load_team(args.team)
+    i = team.check_id(args.id)
+    try:
+        return run_robot_process(team, i, args.result)
+    except RobotMissingError as exc:
+        import sys
+
+        print(f"error: {exc}", file=sys.stderr)
+        return 3

@@ -1,0 +1,217 @@
+"""The consistency stage run by one robot alone, deciding by itself when each phase ends.
+
+In the simulator a driver (:mod:`.engine`) sees every robot and ends a phase when all are
+done. A robot in its own process has no such driver: it runs this loop over its end of the
+network (:class:`pipeline.transport.RoundEndpoint`) with the same phase code —
+detection and Alg. 1 of :mod:`.reliable` — and decides locally when a phase is over.
+
+Phases (as in :func:`.engine.resolve_conflicts`, fault-tolerant protocol)
+    detection (Sec. III, lockstep) → if some robot lost a neighbour during it: detection
+    again; else if no robot found a conflictive feature: stop; else resolution (Alg. 1) and
+    the next detection (Prop. 4.5).
+
+Local termination rule (the termination wave)
+    Each robot ``i`` has a *done* predicate that it evaluates on its own state after every
+    round: detection — stopped by Prop. 3.5, every linked neighbour's ``final`` received and
+    all its messages acknowledged (:func:`.reliable.detection_done`); resolution — all its
+    messages acknowledged (``Channel.idle``). With every round's packet it tells its
+    neighbours a counter ``c_i``::
+
+        c_i(t) = 0                                                   if not done_i(t)
+        c_i(t) = 1 + min(c_i(t-1), min_{k ∈ N_i} c_k(t-1))           otherwise
+
+    and ends the phase at the first round with ``c_i(t) >= n`` (``n`` = team size, public).
+
+    Why it is correct. Unrolling the recursion, ``c_i(t) >= h`` holds exactly when every robot
+    ``j`` was done throughout the rounds ``[t-h+1, t-dist(i, j)]`` (``dist`` in the comm graph
+    of robots still heard). With ``h = n >= diameter + 1`` these windows share the round
+    ``t - n + 1``: all robots were done *at the same round*. That is a stable state: a robot
+    done with nothing unacknowledged has no message in flight (an unacknowledged message keeps
+    its sender not done), so nobody can be woken again, and every later round is done too.
+    Conversely once all robots are done from round ``t0`` on, every ``c_i`` reaches ``n``
+    first at ``t0 + n - 1``, and not before (the last robot to become done was not done at
+    ``t0 - 1``, which is inside every window of an earlier round). So every robot of a
+    connected team ends the phase at the *same* round ``t0 + n - 1`` and starts the next one
+    together, as the simulator's driver would, ``n - 1`` rounds later than the driver.
+
+    The phase's two outcome bits (``conflict``: some robot found a conflictive feature;
+    ``lost``: some robot declared a neighbour lost) are OR-flooded the same way
+    (``b_i(t) = own_i(t) | b_i(t-1) | OR_k b_k(t-1)``). A robot's bits are final once it is
+    done, so at ``t0 + n - 1`` every robot holds the OR over all robots within ``n - 1`` hops
+    — the whole connected team.
+
+    A crashed robot: its neighbours' transport stops hearing it; the protocol declares it lost
+    after ``T`` silent rounds and cuts its links (``robot-lost``), which sets ``lost``; the
+    survivors repeat the detection (as the simulator does) and end without it. If the crash
+    splits the team, each part ends on its own, which is all it can do.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.consistency.channel import Channel
+from pipeline.consistency.protocols import RESOLUTION, ProtocolOptions, end_phase
+from pipeline.consistency.reliable import (
+    ReliableState,
+    detection_done,
+    detection_round,
+    resolution_round,
+    start_detection_reliable,
+    start_resolution_reliable,
+)
+from pipeline.consistency.robot import Robot
+
+__all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
+
+CONFLICT, LOST = 1, 2
+
+
+class TerminationWave:
+    """The counter ``c_i`` and the OR-flooded bits of one phase (module docstring).
+
+    Parameters
+    ----------
+    n : int — team size (the threshold of the rule)
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = int(n)
+        self.c = 0
+        self.bits = 0
+
+    def start(self, done: bool, own_bits: int) -> None:
+        """Round of the phase start: no history yet."""
+        self.c = 1 if done else 0
+        self.bits = int(own_bits)
+
+    def update(self, done: bool, own_bits: int, neighbour_states: dict) -> bool:
+        """Fold in the neighbours' states of the previous round; True when the phase ends."""
+        cs = [int(s.get("c", 0)) for s in neighbour_states.values()]
+        bits = self.bits | int(own_bits)
+        for s in neighbour_states.values():
+            bits |= int(s.get("b", 0))
+        self.c = (1 + min([self.c, *cs])) if done else 0
+        self.bits = bits
+        return self.c >= self.n
+
+    def state(self) -> dict:
+        """What travels to the neighbours with this round's packet."""
+        return {"c": self.c, "b": self.bits}
+
+
+@dataclass
+class RobotRun:
+    """What one robot did in the consistency stage (its own log, for reporting)."""
+
+    iterations: int = 0
+    repeated_detections: int = 0
+    phases: list = field(default_factory=list)
+    detection_rounds: int = 0
+    resolution_rounds: int = 0
+    seconds: float = 0.0
+
+
+def _own_bits(robot: Robot, st: ReliableState) -> int:
+    return (CONFLICT if robot.conflictive.any() else 0) | (LOST if st.lost_in_phase else 0)
+
+
+def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave, step, done,
+               max_rounds: int, phase: str) -> tuple[int, int]:
+    """Rounds of one phase until the wave ends it; returns (rounds, OR of the bits)."""
+    wave.start(done(), _own_bits(robot, st))
+    t = 0
+    while True:
+        inbox, states = transport.end_round({**wave.state(), "phase": phase})
+        t += 1
+        step(inbox, transport.round, t)
+        transport.note_memory(robot.peak_memory_bytes)
+        if wave.update(done(), _own_bits(robot, st), states):
+            return t, wave.bits
+        if t > max_rounds:
+            raise RuntimeError(f"robot {robot.id}: {phase} did not end within {max_rounds} rounds")
+
+
+def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
+                            n_robots: int | None = None) -> RobotRun:
+    """Detection and resolution until conflict-free, ended by the local rule (module docstring).
+
+    Parameters
+    ----------
+    robot : Robot — this robot's associations (its blocks ``W_ij``)
+    transport : RoundEndpoint — its end of the network
+    protocol : ProtocolOptions or None — the fault-tolerant protocol's parameters
+    n_robots : int or None — team size ``n`` (default ``robot.n``)
+
+    Returns
+    -------
+    RobotRun
+    """
+    protocol = protocol or ProtocolOptions(reliable=True)
+    n = int(n_robots or robot.n)
+    # the reliable protocol's own state, exactly as the simulator's ReliableProtocol holds it
+    st = ReliableState(Channel(transport, protocol))
+    chan = st.chan
+    wave = TerminationWave(n)
+    m_total = robot.m_total
+    # generous caps, as in the simulator's driver: they only turn a bug into an error
+    det_cap = (m_total + n + 4) * (protocol.loss_timeout + 4) * 4 + n
+    res_cap = (n + 2) * (protocol.loss_timeout + 4) * 4 + m_total + n
+    max_iterations = m_total // 4 + 2 + n * n
+    log = RobotRun()
+    t_start = time.perf_counter()
+    iteration = 0
+    while True:
+        iteration += 1
+        if iteration > max_iterations:
+            raise RuntimeError(f"robot {robot.id}: conflicts remain after {max_iterations} "
+                               "iterations (Prop. 4.5 bound)")
+        start = transport.round
+        start_detection_reliable(robot, st, iteration, transport.round)
+        rounds, bits = _run_phase(
+            robot, st, transport, wave,
+            lambda inbox, now, t: detection_round(robot, st, inbox, now, t),
+            lambda: detection_done(robot, st), det_cap, "detection")
+        log.detection_rounds += rounds
+        log.phases.append(dict(phase="detection", iteration=iteration, start_round=start,
+                               rounds=rounds, t_stop=int(robot.t_stop),
+                               conflictive_features=int(robot.conflictive.sum()),
+                               conflict_somewhere=bool(bits & CONFLICT),
+                               lost_somewhere=bool(bits & LOST)))
+        if bits & LOST:
+            log.repeated_detections += 1
+            continue
+        if not bits & CONFLICT:
+            break
+        log.iterations += 1
+        start = transport.round
+        roots = start_resolution_reliable(robot, st, transport.round)
+        rounds, bits = _run_phase(
+            robot, st, transport, wave,
+            lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
+            chan.idle, res_cap, "resolution")
+        # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
+        end_phase(RESOLUTION, [robot])
+        log.resolution_rounds += rounds
+        log.phases.append(dict(phase="resolution", iteration=iteration, start_round=start,
+                               rounds=rounds, roots=int(roots), lost_somewhere=bool(bits & LOST)))
+    log.seconds = time.perf_counter() - t_start
+    log.retransmissions = chan.retransmissions
+    log.acks = chan.acks_sent
+    log.heartbeats = chan.heartbeats_sent
+    log.lost_neighbours = sorted(int(k) for k in st.lost_neighbours)
+    return log
+
+
+def robot_link_log(robot: Robot) -> dict:
+    """The robot's link table and deletion log as arrays (what it publishes at the end)."""
+    return {"link_nbr": robot.link_nbr.astype(np.int32), "link_r": robot.link_r.astype(np.int32),
+            "link_s": robot.link_s.astype(np.int32),
+            "link_alive": robot.link_alive.astype(np.uint8),
+            "deleted_case": robot.deleted_case.astype(np.int8),
+            "deleted_round": robot.deleted_round.astype(np.int32),
+            "deleted_iteration": robot.deleted_iteration.astype(np.int32),
+            "component": robot.component.astype(np.int64)}

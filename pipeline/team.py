@@ -1,0 +1,295 @@
+"""``TEAM.json``: who is in a robot team, where each robot listens, who talks to whom, what
+each robot looks at.
+
+A team file lets every robot run as its own program (``python -m pipeline robot --team
+TEAM.json --id I``), on one machine or several. The launcher of ``--transport zenoh`` writes
+one; a user may write one by hand. Schema (``version`` 1)::
+
+    {
+      "version": 1,
+      "name": "formation-d",                      # key-expression prefix of this team
+      "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"}, ...],   # ids 0..n-1, each once
+      "comm_edges": [[0, 1], [1, 2], ...],        # undirected, robots talk only along these
+      "observer": {"endpoint": "tcp/127.0.0.1:7400"},                 # optional
+      "data": {"kind": "formation", "formation": "d", "seed": 0, "size": [640, 480],
+               "robots": null, "graph": null}
+          or {"kind": "images", "images": ["a.jpg", ...], "intrinsics": [[[fx,0,cx],...], ...],
+              "intrinsics_known": [true, ...], "max_size": 1600}
+              # K of the image as the robot uses it (after downscaling to max_size)
+          or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
+      "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
+                  "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40},
+      "robot_options": {"3": {"drop_prob": 0.2}}  # optional per-robot overrides of "options"
+    }
+
+Relative paths in ``data`` are relative to the team file. Every problem is one
+:class:`~pipeline.errors.InputError` line naming the bad value.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["Team", "RobotEntry", "load_team", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
+
+DATA_KINDS = ("formation", "images", "links")
+DEFAULT_OPTIONS = {
+    "features": "sift",
+    "max_features": 2000,
+    "drop_prob": 0.0,
+    "fault_seed": 0,
+    "round_timeout_s": 5.0,
+    "start_timeout_s": 60.0,
+    "loss_timeout": 40,
+    "fusion": False,
+}
+_ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
+_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+@dataclass
+class RobotEntry:
+    """One robot: its id and the Zenoh endpoint it listens on (``tcp/HOST:PORT``)."""
+
+    id: int
+    endpoint: str
+
+
+@dataclass
+class Team:
+    """A parsed, checked team file (see the module docstring)."""
+
+    name: str
+    robots: list[RobotEntry]
+    comm_edges: np.ndarray
+    data: dict
+    options: dict = field(default_factory=lambda: dict(DEFAULT_OPTIONS))
+    robot_options: dict = field(default_factory=dict)
+    observer: str | None = None
+    path: Path | None = None
+
+    @property
+    def n(self) -> int:
+        return len(self.robots)
+
+    def endpoint(self, i: int) -> str:
+        return self.robots[i].endpoint
+
+    def neighbours(self, i: int) -> list[int]:
+        """Comm-graph neighbours of robot ``i``, sorted."""
+        e = self.comm_edges
+        return sorted(set(e[e[:, 0] == i, 1].tolist()) | set(e[e[:, 1] == i, 0].tolist()))
+
+    def options_for(self, i: int) -> dict:
+        """``options`` with robot ``i``'s overrides applied."""
+        return {**self.options, **self.robot_options.get(int(i), {})}
+
+    def check_id(self, i) -> int:
+        """The robot id as int; InputError if it is not a robot of this team."""
+        try:
+            k = int(i)
+        except (TypeError, ValueError):
+            k = -1
+        if str(i).strip() != str(k) or not 0 <= k < self.n:
+            raise InputError(f"--id {i}: not a robot of team {self.name!r}; its robots are "
+                             f"0..{self.n - 1}")
+        return k
+
+    def resolve_path(self, p: str) -> Path:
+        q = Path(p)
+        return q if q.is_absolute() or self.path is None else self.path.parent / q
+
+    def to_json(self) -> dict:
+        out = {"version": 1, "name": self.name,
+               "robots": [{"id": r.id, "endpoint": r.endpoint} for r in self.robots],
+               "comm_edges": self.comm_edges.tolist(), "data": self.data,
+               "options": self.options}
+        if self.robot_options:
+            out["robot_options"] = {str(k): v for k, v in self.robot_options.items()}
+        if self.observer:
+            out["observer"] = {"endpoint": self.observer}
+        return out
+
+
+def _where(path) -> str:
+    return f"team file {str(path)!r}" if path else "team"
+
+
+def parse_team(doc, path: Path | None = None) -> Team:
+    """Check a decoded team document and return a :class:`Team` (InputError on any problem)."""
+    where = _where(path)
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: expected a JSON object at the top, got {type(doc).__name__}")
+    unknown = set(doc) - {"version", "name", "robots", "comm_edges", "data", "options",
+                          "robot_options", "observer"}
+    if unknown:
+        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r}; see the TEAM.json "
+                         "schema in the README")
+    if doc.get("version", 1) != 1:
+        raise InputError(f"{where}: version {doc.get('version')!r} is not supported (use 1)")
+    name = doc.get("name", "team")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputError(f"{where}: name {name!r} must be letters, digits, '_', '.', '-'")
+
+    robots_doc = doc.get("robots")
+    if not isinstance(robots_doc, list) or len(robots_doc) < 2:
+        raise InputError(f"{where}: 'robots' must list at least 2 robots "
+                         "({\"id\": I, \"endpoint\": \"tcp/HOST:PORT\"})")
+    robots: dict[int, RobotEntry] = {}
+    endpoints: dict[str, int] = {}
+    for k, r in enumerate(robots_doc):
+        if not isinstance(r, dict) or "id" not in r or "endpoint" not in r:
+            raise InputError(f"{where}: robots[{k}] must be an object with 'id' and 'endpoint'")
+        rid, ep = r["id"], r["endpoint"]
+        if isinstance(rid, bool) or not isinstance(rid, int) or rid < 0:
+            raise InputError(f"{where}: robots[{k}] id {rid!r} must be an integer >= 0")
+        if rid in robots:
+            raise InputError(f"{where}: robot id {rid} is listed twice")
+        m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
+        if not m or not 0 < int(m.group(2)) < 65536:
+            raise InputError(f"{where}: robot {rid} endpoint {ep!r} must look like "
+                             "tcp/HOST:PORT with a port in 1..65535")
+        if ep in endpoints:
+            raise InputError(f"{where}: robots {endpoints[ep]} and {rid} share endpoint {ep!r}; "
+                             "each robot listens on its own")
+        endpoints[ep] = rid
+        robots[rid] = RobotEntry(rid, ep)
+    n = len(robots)
+    if sorted(robots) != list(range(n)):
+        missing = sorted(set(range(n)) - set(robots))
+        raise InputError(f"{where}: robot ids must be 0..{n - 1}; id {missing[0]} is missing")
+
+    edges_doc = doc.get("comm_edges")
+    try:
+        e = np.asarray(edges_doc, dtype=np.int64).reshape(-1, 2)
+        if isinstance(edges_doc, (str, bytes)) or edges_doc is None:
+            raise ValueError
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: 'comm_edges' must be a list of [i, j] robot pairs") from None
+    if e.size:
+        bad = np.flatnonzero((e < 0).any(1) | (e >= n).any(1) | (e[:, 0] == e[:, 1]))
+        if bad.size:
+            raise InputError(f"{where}: comm edge {e[bad[0]].tolist()} must join two different "
+                             f"robots 0..{n - 1}")
+    e = np.unique(np.sort(e, axis=1), axis=0) if e.size else np.zeros((0, 2), np.int64)
+
+    data = doc.get("data")
+    if not isinstance(data, dict) or data.get("kind") not in DATA_KINDS:
+        raise InputError(f"{where}: 'data' must be an object with kind one of "
+                         f"{', '.join(DATA_KINDS)}")
+    _check_data(data, n, where)
+
+    opts = dict(DEFAULT_OPTIONS)
+    given = doc.get("options", {}) or {}
+    if not isinstance(given, dict):
+        raise InputError(f"{where}: 'options' must be an object")
+    _check_options(given, where)
+    opts.update(given)
+    per = {}
+    for key, val in (doc.get("robot_options", {}) or {}).items():
+        try:
+            rid = int(key)
+        except ValueError:
+            rid = -1
+        if not 0 <= rid < n or not isinstance(val, dict):
+            raise InputError(f"{where}: robot_options key {key!r} must be a robot id 0..{n - 1} "
+                             "with an object of options")
+        _check_options(val, where)
+        per[rid] = val
+    obs = doc.get("observer")
+    observer = None
+    if obs is not None:
+        ep = obs.get("endpoint") if isinstance(obs, dict) else None
+        if not isinstance(ep, str) or not _ENDPOINT.match(ep):
+            raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT")
+        if ep in endpoints:
+            raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
+        observer = ep
+    return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+def _check_data(data: dict, n: int, where: str) -> None:
+    kind = data["kind"]
+    if kind == "formation":
+        size = data.get("size", [640, 480])
+        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) for v in size)):
+            raise InputError(f"{where}: data.size {size!r} must be [WIDTH, HEIGHT]")
+        expected = data.get("robots") or 6
+        if expected != n:
+            raise InputError(f"{where}: data describes {expected} robots but 'robots' lists {n}")
+    elif kind == "images":
+        imgs = data.get("images")
+        if not isinstance(imgs, list) or len(imgs) != n or not all(isinstance(p, str) for p in imgs):
+            raise InputError(f"{where}: data.images must list one image path per robot ({n})")
+        K = data.get("intrinsics")
+        if K is not None:
+            if not isinstance(K, list) or len(K) != n:
+                raise InputError(f"{where}: data.intrinsics must give one 3x3 K (or null) per robot")
+            for i, k in enumerate(K):
+                if k is not None and np.shape(k) != (3, 3):
+                    raise InputError(f"{where}: data.intrinsics[{i}] must be a 3x3 matrix or null")
+    elif kind == "links":
+        if not isinstance(data.get("links"), str):
+            raise InputError(f"{where}: data.links must be the path of a links CSV file")
+        fpc = data.get("features_per_camera")
+        if not isinstance(fpc, list) or len(fpc) != n or not all(
+                isinstance(v, int) and v >= 0 for v in fpc):
+            raise InputError(f"{where}: data.features_per_camera must list {n} counts >= 0")
+
+
+def _check_options(opts: dict, where: str) -> None:
+    unknown = set(opts) - set(DEFAULT_OPTIONS)
+    if unknown:
+        raise InputError(f"{where}: unknown option {sorted(unknown)[0]!r}; known: "
+                         f"{', '.join(DEFAULT_OPTIONS)}")
+    p = opts.get("drop_prob", 0.0)
+    if not isinstance(p, (int, float)) or not 0.0 <= p < 1.0:
+        raise InputError(f"{where}: option drop_prob {p!r} must be in [0, 1)")
+    for k in ("round_timeout_s", "start_timeout_s"):
+        v = opts.get(k, 1.0)
+        if not isinstance(v, (int, float)) or not v > 0:
+            raise InputError(f"{where}: option {k} {v!r} must be a number > 0")
+    for k in ("max_features", "loss_timeout"):
+        v = opts.get(k, 8)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise InputError(f"{where}: option {k} {v!r} must be an integer >= 1")
+
+
+def load_team(path) -> Team:
+    """Read and check a team file; InputError (one line) on a missing or malformed file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"team file {str(p)!r} not found")
+    try:
+        doc = json.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"team file {str(p)!r} is not valid JSON: {exc}") from None
+    return parse_team(doc, p)
+
+
+def write_team(path, team: Team) -> Path:
+    """Write ``team`` as JSON atomically; return the path."""
+    p = Path(path)
+    tmp = p.with_name(p.name + f".tmp{os.getpid()}")
+    tmp.write_text(json.dumps(team.to_json(), indent=1))
+    os.replace(tmp, p)
+    return p
+
+
+TRANSPORTS = ("sim", "zenoh")
+
+
+def add_transport_argument(parser) -> None:
+    """``--transport sim|zenoh`` (shared by the commands that run the robots)."""
+    parser.add_argument("--transport", default="sim", choices=TRANSPORTS,
+                        help="sim: robots are objects of this process (default, fastest); "
+                             "zenoh: one process per robot on this machine, talking over "
+                             "Zenoh (see README, 'Transports')")

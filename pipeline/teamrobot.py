@@ -1,0 +1,244 @@
+"""One robot of a team as its own program (``python -m pipeline robot --team TEAM.json --id I``).
+
+The robot holds nothing global: no other robot's image, no union-find, no driver. In order:
+
+1. **Its own data.** A rendered formation: it renders only its own camera
+   (:func:`data_synth.render_robot`; the scene model is the world it looks at, the other
+   cameras are not rendered). A links file (``resolve``): it keeps only the rows that touch
+   it. Public knowledge, as in the simulator: the team size ``n`` and the comm graph.
+2. **Its own features** (:func:`pipeline.features.extract`).
+3. **Exchange for matching.** Round 0: it sends every neighbour its keypoints, descriptors
+   and intrinsics (``features`` message, counted in bytes). Matching of edge ``(i, j)`` is done
+   by exactly one side, the lower id ``i``, with the very function the simulator uses
+   (:func:`pipeline.matching.match_pair`), which then sends ``j`` the result (``matches``:
+   pairs, ratios, epipolar errors). So both ends hold the same ``A_ij`` and it equals the
+   simulator's links of that edge.
+4. **Feature counts** (public knowledge of Sec. II: every robot's ``m_j`` gives the column
+   offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
+   learnt something new), enough on any connected graph of ``n`` robots.
+5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
+   run_consistency_locally`): detection, Alg. 1, repeated until conflict-free.
+6. **Publishes** its link table with every deletion (reason, round, iteration), the matches
+   it holds, its keypoints (for the observer's evaluation only) and its counters.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import sys
+import time
+
+import numpy as np
+
+from pipeline.consistency.reliable import ProtocolOptions
+from pipeline.consistency.robot import Robot
+from pipeline.consistency.termination import robot_link_log, run_consistency_locally
+from pipeline.errors import InputError
+from pipeline.transport.wire import encode_packet
+
+__all__ = ["robot_main", "run_robot_process", "own_links_from_file"]
+
+
+def _log(i: int, text: str) -> None:
+    print(f"[robot {i}] {text}", file=sys.stderr, flush=True)
+
+
+def peak_rss_bytes() -> int:
+    """Peak resident set size of this process (Linux reports KiB)."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def own_links_from_file(path, i: int):
+    """The rows of a links file that touch robot ``i``: ``(nbr, r, s)`` arrays and the file's
+    row index of each (the robot reads the shared file and keeps its own rows)."""
+    from pipeline.linkscsv import read_links_csv
+
+    lf = read_links_csv(path)
+    L = lf.links
+    a = np.flatnonzero(L.cam_i == i)
+    b = np.flatnonzero(L.cam_j == i)
+    nbr = np.concatenate([L.cam_j[a], L.cam_i[b]])
+    r = np.concatenate([L.feat_i[a], L.feat_j[b]])
+    s = np.concatenate([L.feat_j[a], L.feat_i[b]])
+    return nbr, r, s
+
+
+def _load_view(team, i: int):
+    data = team.data
+    if data["kind"] == "formation":
+        import data_synth
+
+        view, _ = data_synth.render_robot(i, data.get("formation", "d"), int(data.get("seed", 0)),
+                                          tuple(data.get("size", [640, 480])),
+                                          data.get("robots"), data.get("graph"))
+        return view
+    if data["kind"] == "images":
+        from pipeline.io import _guess_K, downscale, load_image
+        from pipeline.types import View
+
+        path = team.resolve_path(data["images"][i])
+        pixels, header = load_image(path)
+        header.close()
+        # intrinsics are those of the image the robot uses (after max_size)
+        K = (data.get("intrinsics") or [None] * team.n)[i]
+        known = (data.get("intrinsics_known") or [K is not None] * team.n)[i]
+        pixels, _ = downscale(pixels, np.eye(3), data.get("max_size"))
+        h, w = pixels.shape[:2]
+        K = _guess_K(w, h) if K is None else np.asarray(K, np.float64)
+        return View(name=path.name, image=pixels, K=np.asarray(K, np.float64),
+                    intrinsics_known=bool(known))
+    raise InputError(f"data kind {data['kind']!r} has no images")
+
+
+def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
+    """Steps 1–4 of the module docstring; returns (features, matches, fpc, nbr, r, s)."""
+    from pipeline.features import extract
+    from pipeline.matching import match_pair
+    from pipeline.types import PairMatches
+
+    t = time.perf_counter()
+    view = _load_view(team, i)
+    timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    feats = extract(view, opts["features"], int(opts["max_features"]))
+    timings["features"] = time.perf_counter() - t
+    n = team.n
+    known = np.full(n, -1, dtype=np.int32)
+    known[i] = len(feats)
+    payload = {"keypoints": feats.keypoints, "descriptors": feats.descriptors,
+               "K": np.asarray(view.K, np.float64),
+               "intrinsics_known": np.array([view.intrinsics_known], np.uint8)}
+    for k in sorted(transport.neighbours):
+        transport.send(k, "features", payload)
+        transport.send(k, "counts", {"m": known.copy()})
+    sent = known.copy()
+    t = time.perf_counter()
+    matches: dict[int, PairMatches] = {}
+    rounds = max(n - 1, 2)
+    for rnd in range(1, rounds + 1):
+        inbox, _ = transport.end_round()
+        for msg in inbox:
+            p = msg.payload
+            if msg.kind == "counts":
+                upd = (known < 0) & (p["m"] >= 0)
+                known[upd] = p["m"][upd]
+            elif msg.kind == "features" and msg.src > i:
+                from pipeline.types import Features
+
+                other = Features(p["keypoints"], p["descriptors"],
+                                 np.zeros(len(p["keypoints"]), np.float32), feats.method)
+                both_known = bool(view.intrinsics_known and p["intrinsics_known"][0])
+                pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known)
+                matches[msg.src] = pm
+                transport.send(msg.src, "matches", {
+                    "pairs": pm.pairs.astype(np.int32), "ratio": pm.ratio.astype(np.float32),
+                    "epipolar_error": pm.epipolar_error.astype(np.float32),
+                    "n_putative": np.array([pm.n_putative], np.int32),
+                    "reason": np.frombuffer(pm.reason.encode(), np.uint8)})
+            elif msg.kind == "matches":
+                matches[msg.src] = PairMatches(
+                    msg.src, i, p["pairs"].reshape(-1, 2), p["ratio"], p["epipolar_error"],
+                    int(p["n_putative"][0]), bytes(p["reason"]).decode())
+        if rnd < rounds and (known != sent).any():
+            for k in sorted(transport.neighbours):
+                transport.send(k, "counts", {"m": known.copy()})
+            sent = known.copy()
+    timings["matching_exchange"] = time.perf_counter() - t
+    missing = sorted(k for k in transport.neighbours if k not in matches and k not in
+                     getattr(transport, "silent", ()))
+    if missing:
+        raise RuntimeError(f"robot {i}: no matching with neighbour {missing[0]} after "
+                           f"{rounds} rounds")
+    fpc = np.where(known < 0, 0, known).astype(np.int64)
+    nbr, r, s = [], [], []
+    for k, pm in sorted(matches.items()):
+        mine, theirs = (0, 1) if pm.i == i else (1, 0)
+        nbr.append(np.full(len(pm.pairs), k, np.int64))
+        r.append(pm.pairs[:, mine].astype(np.int64))
+        s.append(pm.pairs[:, theirs].astype(np.int64))
+    def cat(parts):
+        return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
+    return feats, matches, fpc, cat(nbr), cat(r), cat(s)
+
+
+def robot_main(team, i: int, transport) -> tuple[dict, dict]:
+    """Run robot ``i`` over ``transport`` (already connected); return (header, arrays).
+
+    The header is JSON-able (counters, phases, timings); the arrays are the link log,
+    keypoints and matches (see :func:`pipeline.consistency.termination.robot_link_log`).
+    """
+    opts = team.options_for(i)
+    timings: dict = {}
+    t0 = time.perf_counter()
+    arrays: dict = {}
+    matches_hdr = []
+    if team.data["kind"] == "links":
+        fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
+        nbr, r, s = own_links_from_file(team.resolve_path(team.data["links"]), i)
+        bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
+        if bad.size:
+            raise InputError(f"robot {i}: link to camera {int(nbr[bad[0]])}, which is not its "
+                             "neighbour in the team's comm graph")
+    else:
+        feats, matches, fpc, nbr, r, s = _features_and_matches(team, i, transport, opts, timings)
+        arrays["keypoints"] = feats.keypoints
+        for k, pm in sorted(matches.items()):
+            matches_hdr.append({"i": pm.i, "j": pm.j, "n_putative": pm.n_putative,
+                                "reason": pm.reason})
+            arrays[f"pairs_{k}"] = pm.pairs.astype(np.int32)
+            arrays[f"ratio_{k}"] = pm.ratio.astype(np.float32)
+            arrays[f"eperr_{k}"] = pm.epipolar_error.astype(np.float32)
+    robot = Robot(i, fpc, nbr, r, s)
+    if hasattr(transport, "status"):
+        transport.status("consistency")
+        transport.lossy = True  # faults are injected into the consistency stage, as simulated
+    protocol = ProtocolOptions(reliable=True, loss_timeout=int(opts["loss_timeout"]))
+    t = time.perf_counter()
+    run = run_consistency_locally(robot, transport, protocol, team.n)
+    timings["consistency"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    arrays.update(robot_link_log(robot))
+    header = {"id": i, "features_per_camera": fpc.tolist(), "matches": matches_hdr,
+              "counters": transport.counters(), "run": {k: v for k, v in vars(run).items()},
+              "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
+              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid()}
+    return header, arrays
+
+
+def run_robot_process(team, i: int, result_path=None) -> int:
+    """The ``robot`` command: connect, handshake, run, publish; returns an exit code."""
+    from pipeline.transport.zenoh_transport import ZenohTransport
+
+    opts = team.options_for(i)
+    transport = ZenohTransport(team, i, drop_prob=float(opts["drop_prob"]),
+                               seed=int(opts["fault_seed"]),
+                               round_timeout_s=float(opts["round_timeout_s"]),
+                               log=lambda s: _log(i, s))
+    try:
+        transport.status("started")
+        waited = transport.handshake(float(opts["start_timeout_s"]))
+        _log(i, f"all {len(transport.neighbours)} neighbours heard after {waited:.2f} s")
+        try:
+            header, arrays = robot_main(team, i, transport)
+        except Exception as exc:
+            transport.status(f"failed: {exc}")
+            raise
+        header["handshake_s"] = round(waited, 4)
+        kept = int(arrays["link_alive"].sum())
+        _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
+                f"{len(arrays['link_alive'])}")
+        if result_path:
+            from pipeline.runfolder import write_json_atomic
+
+            write_json_atomic(result_path, {**header, "links": {
+                k: arrays[k].tolist() for k in ("link_nbr", "link_r", "link_s", "link_alive",
+                                                "deleted_case", "deleted_round")}})
+        acked = transport.publish_result(encode_packet(header, [("result", arrays)]))
+        _log(i, f"done in {header['timings_s']['total']:.2f} s, {transport.round} rounds"
+                f"{'' if acked or not team.observer else ' (observer did not acknowledge)'}")
+        time.sleep(0.2)  # let the last packets leave before the session closes
+    finally:
+        transport.close()
+    return 0

@@ -1,0 +1,285 @@
+"""Runs over ``--transport zenoh``: a team of robot processes, then the usual run outputs.
+
+The robots compute everything (:mod:`pipeline.teamrobot`); the observer here only reads what
+they published and turns it into the run outputs of DESIGN.md: the links of every comm edge
+(from the matches the robots hold, in the comm-graph order the simulator uses), the decision
+on every link (:func:`pipeline.consistency.linklog.merge_link_logs` over the robots' own
+logs), and the report. Evaluation against ground truth is centralized checking code: it
+renders the formation itself, as ``run-formation`` does, and never feeds anything back.
+
+Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
+(so compare it with a simulator run with ``--no-fusion``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.consistency.engine import ConsistencyResult
+from pipeline.consistency.linklog import merge_link_logs
+from pipeline.errors import InputError
+from pipeline.launcher import launch_team, make_team, team_summary
+from pipeline.progress import StageTimer
+from pipeline.types import Links, PairMatches
+
+__all__ = ["run_formation_team", "resolve_conflicts_team", "team_options", "links_of_team",
+           "consistency_of_team"]
+
+CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "ack", "heartbeat")
+FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport"}
+
+
+def team_options(features: str = "sift", max_features: int = 2000, faults=None,
+                 round_timeout_s: float = 5.0) -> dict:
+    """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
+
+    Raises
+    ------
+    InputError
+        ``--crash`` or ``--switching-topology`` (faults of the simulated network; over Zenoh
+        kill a robot process instead).
+    """
+    opts = {"features": features, "max_features": int(max_features),
+            "round_timeout_s": float(round_timeout_s)}
+    if faults is not None:
+        if faults.crash or faults.switching_topology:
+            raise InputError("--crash and --switching-topology are faults of the simulated "
+                             "network (--transport sim); over zenoh, kill a robot process "
+                             "instead; --drop-prob works on both")
+        opts["drop_prob"] = float(faults.drop_prob)
+        opts["fault_seed"] = int(faults.seed)
+    return opts
+
+
+def _pm_from(i: int, k: int, header: dict, arrays: dict) -> PairMatches | None:
+    if f"pairs_{k}" not in arrays:
+        return None
+    meta = next((m for m in header["matches"] if {m["i"], m["j"]} == {i, k}), None)
+    if meta is None:
+        return None
+    return PairMatches(meta["i"], meta["j"], arrays[f"pairs_{k}"].reshape(-1, 2),
+                       arrays[f"ratio_{k}"], arrays[f"eperr_{k}"], int(meta["n_putative"]),
+                       meta["reason"])
+
+
+def links_of_team(team, results: dict) -> tuple[list[PairMatches], Links]:
+    """Matches of every comm edge (from whichever end published them) and all links."""
+    from pipeline.matching import check_comm_edges
+
+    matches = []
+    for i, j in check_comm_edges(team.comm_edges, team.n):
+        i, j = int(i), int(j)
+        pm = None
+        for a, b in ((i, j), (j, i)):
+            if a in results:
+                pm = _pm_from(a, b, *results[a])
+                if pm is not None:
+                    break
+        if pm is None:
+            pm = PairMatches(i, j, np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                             np.zeros(0, np.float32), 0, "both robots lost before publishing")
+        matches.append(pm)
+    return matches, Links.from_matches(matches)
+
+
+def _link_keys(cam_i, feat_i, cam_j, feat_j, n: int, M: int) -> np.ndarray:
+    return ((cam_i * n + cam_j) * M + feat_i) * M + feat_j
+
+
+def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> ConsistencyResult:
+    """The :class:`ConsistencyResult` of a team run, read from the robots' published logs."""
+    n = team.n
+    L = len(links)
+    fpc = np.asarray(fpc, dtype=np.int64)
+    M = int(fpc.max(initial=0)) + 1
+    key = _link_keys(links.cam_i, links.feat_i, links.cam_j, links.feat_j, n, M)
+    order = np.argsort(key)
+    logs = []
+    survivors = np.array([i in results for i in range(n)], dtype=bool)
+    for i, (_, a) in sorted(results.items()):
+        nbr = a["link_nbr"].astype(np.int64)
+        r, s = a["link_r"].astype(np.int64), a["link_s"].astype(np.int64)
+        lo = i < nbr
+        k = _link_keys(np.where(lo, i, nbr), np.where(lo, r, s), np.where(lo, nbr, i),
+                       np.where(lo, s, r), n, M)
+        pos = order[np.searchsorted(key[order], k)] if L else np.zeros(0, np.int64)
+        if L and not np.array_equal(key[pos], k):
+            raise RuntimeError(f"robot {i} published a link that no matching produced")
+        logs.append((pos, a["link_alive"].astype(bool), a["deleted_case"],
+                     a["deleted_round"], a["deleted_iteration"]))
+    d = merge_link_logs(L, logs)
+    comp = np.concatenate([results[i][1]["component"] if i in results
+                           else np.full(int(fpc[i]), -1, np.int64) for i in range(n)])
+    heads = {i: h for i, (h, _) in results.items()}
+    any_run = heads[min(heads)]["run"] if heads else {}
+    msgs = {k: 0 for k in CONSISTENCY_KINDS}
+    byts = {k: 0 for k in CONSISTENCY_KINDS}
+    for h in heads.values():
+        for k in CONSISTENCY_KINDS:
+            msgs[k] += h["counters"]["messages_by_kind"].get(k, 0)
+            byts[k] += h["counters"]["bytes_by_kind"].get(k, 0)
+    lost_by = {}
+    for i, h in heads.items():
+        for k in h["run"].get("lost_neighbours", []):
+            lost_by.setdefault(int(k), []).append(int(i))
+    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, bool)
+    faults = dict(
+        drop_probability=float(team.options.get("drop_prob", 0.0)), switching_topology=False,
+        dropped=int(sum(h["counters"]["dropped"] for h in heads.values())),
+        crashed={int(k): None for k in killed},
+        crashes_not_reached={},
+        robots_lost={k: sorted(v) for k, v in sorted(lost_by.items())},
+        links_cut_robot_lost=int(d["robot_lost"].sum()),
+        retransmissions=int(sum(h["run"].get("retransmissions", 0) for h in heads.values())),
+        acks=int(sum(h["run"].get("acks", 0) for h in heads.values())),
+        heartbeats=int(sum(h["run"].get("heartbeats", 0) for h in heads.values())),
+        repeated_detections=int(any_run.get("repeated_detections", 0)),
+        rounds=int(max((h["counters"]["round"] for h in heads.values()), default=0)))
+    stats = dict(
+        iterations=int(any_run.get("iterations", 0)),
+        detection_rounds=int(any_run.get("detection_rounds", 0)),
+        resolution_rounds=int(any_run.get("resolution_rounds", 0)),
+        per_iteration=any_run.get("phases", []),
+        messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
+        messages_by_kind={k: v for k, v in msgs.items() if v},
+        bytes_by_kind={k: v for k, v in byts.items() if v},
+        max_robot_memory_bytes=int(max((h["peak_memory_bytes"] for h in heads.values()),
+                                       default=0)),
+        asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
+        deleted_links=int(d["deleted"].sum()), protocol="reliable", survivors=survivors,
+        termination="local (termination wave)", faults=faults)
+    return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
+                             iteration=d["iteration"], round=d["round"], case=d["case"],
+                             component=comp, stats=stats)
+
+
+def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
+                       workdir=None, keep_run: list | None = None,
+                       round_timeout_s: float = 5.0):
+    """``run-formation --transport zenoh``: one robot process per camera; returns the run path.
+
+    Parameters
+    ----------
+    config : FormationConfig
+    kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
+    round_timeout_s : float — wait for a neighbour's packet before it counts as silent
+    workdir : folder for TEAM.json and the robots' logs (default: temporary)
+    keep_run : list or None — the :class:`~pipeline.launcher.TeamRun` is appended to it
+    """
+    import data_synth
+    from pipeline.features import extract
+    from pipeline.run import (
+        CleaningResult,
+        _conflictive_links,
+        ledger_from_consistency,
+        write_formation_run,
+    )
+    from pipeline.types import Features
+
+    timer = timer or StageTimer()
+    opts = team_options(config.features, config.max_features, config.faults, round_timeout_s)
+    edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
+                                       config.graph)
+    n = config.robots or 6
+    data = {"kind": "formation", "formation": config.formation, "seed": int(config.seed),
+            "size": [int(v) for v in config.size], "robots": config.robots,
+            "graph": config.graph}
+    name = f"formation-{config.formation}" if config.robots is None else \
+        f"formation-n{config.robots}-{config.graph}"
+    team = make_team(name, edges, data, opts, n=n)
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir, kill=kill)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    with timer.stage("render", "observer: ground truth for the evaluation"):
+        formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
+                                      n_robots=config.robots, graph=config.graph)
+    feats = []
+    for i, v in enumerate(formation.views):
+        if i in run.results:
+            kp = run.results[i][1]["keypoints"].reshape(-1, 2)
+            feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                                  np.zeros(len(kp), np.float32), config.features))
+        else:  # a robot lost before publishing: the evaluation extracts its features itself
+            feats.append(extract(v, config.features, config.max_features))
+    matches, links = links_of_team(team, run.results)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    cleaning = CleaningResult(ledger_from_consistency(res, _conflictive_links(m, links)),
+                              dict(res.stats), fusion_stats=dict(FUSION_SKIPPED))
+    if run.killed or float(opts.get("drop_prob", 0)) > 0:
+        from pipeline.faults import FaultConfig, fault_report
+
+        fc = config.faults or FaultConfig()
+        cleaning.faults = fault_report(fc, res)
+        cleaning.faults["killed"] = sorted(int(k) for k in run.killed)
+    return write_formation_run(config, formation, feats, matches, cleaning, timer,
+                               extra={"team": team_summary(run)})
+
+
+def resolve_conflicts_team(links_csv, fpc, comm_edges, options: dict | None = None, *,
+                           kill=None, workdir=None, keep_run: list | None = None
+                           ) -> ConsistencyResult:
+    """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``."""
+    from pathlib import Path
+
+    from pipeline.linkscsv import read_links_csv
+
+    fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
+    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    data = {"kind": "links", "links": str(Path(links_csv).resolve()),
+            "features_per_camera": fpc}
+    team = make_team("resolve", edges, data, options, n=len(fpc))
+    run = launch_team(team, workdir, kill=kill)
+    if keep_run is not None:
+        keep_run.append(run)
+    links = read_links_csv(links_csv).links
+    res = consistency_of_team(team, run.results, links, fpc, run.killed)
+    res.stats["team"] = team_summary(run)
+    return res
+
+
+def team_images(config, views, comm_edges, timer: StageTimer):
+    """``run-images --transport zenoh``: robots load their own photograph (the path, the
+    downscaling and the intrinsics the observer found for it) and run features, matching and
+    the consistency stage; returns ``(features, matches, links, CleaningResult)``.
+
+    The features returned hold the robots' keypoints (descriptors are not published); the
+    observer uses them for its checks only (the pycolmap reconstructions).
+    """
+    from pathlib import Path
+
+    from pipeline.run import CleaningResult, _conflictive_links, ledger_from_consistency
+    from pipeline.types import Features
+
+    folder = Path(config.directory).resolve()
+    data = {"kind": "images", "images": [str(folder / v.name) for v in views],
+            "intrinsics": [np.asarray(v.K).tolist() for v in views],
+            "intrinsics_known": [bool(v.intrinsics_known) for v in views],
+            "max_size": config.max_size}
+    team = make_team(f"images-{len(views)}", comm_edges, data,
+                     team_options(config.features, config.max_features), n=len(views))
+    with timer.stage("team", f"{len(views)} robot processes over zenoh"):
+        run = launch_team(team)
+        timer.note(f"{len(run.results)} of {len(views)} robots published")
+    missing = sorted(set(range(len(views))) - set(run.results))
+    if missing:
+        from pipeline.errors import TeamError
+
+        raise TeamError(f"robot {missing[0]} ({views[missing[0]].name}) published no result; "
+                        "run-images needs every robot's keypoints")
+    feats = []
+    for i in range(len(views)):
+        kp = run.results[i][1]["keypoints"].reshape(-1, 2)
+        feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                              np.zeros(len(kp), np.float32), config.features))
+    matches, links = links_of_team(team, run.results)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    stats = dict(res.stats)
+    stats["team"] = team_summary(run)
+    cleaning = CleaningResult(ledger_from_consistency(res, _conflictive_links(m, links)),
+                              stats, fusion_stats=dict(FUSION_SKIPPED))
+    return feats, matches, links, cleaning

@@ -1,0 +1,85 @@
+"""Byte encoding of the packets robots exchange over a real middleware.
+
+One *packet* per logical round and ordered pair of neighbouring robots: a header (sender,
+receiver, logical round, sequence number, the robot's phase and its termination-wave state)
+and the algorithm messages of that round, each a ``kind`` and a payload of named numpy
+arrays — exactly the :class:`~pipeline.transport.Message` payloads that the
+in-process network counts. The header is JSON (small, self-describing); the arrays follow as
+raw little-endian bytes, each described in the header by name, dtype and shape.
+
+Two byte counts are kept apart: *counted* bytes are the algorithm messages measured like the
+simulator does (:attr:`Message.nbytes`: 12-byte header plus the arrays' ``nbytes``), so the two
+transports report comparable figures; *wire* bytes are the encoded packet lengths handed to
+the middleware (JSON header, array descriptions, the per-round packet of a silent robot).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+
+__all__ = ["encode_packet", "decode_packet", "WireError"]
+
+_MAGIC = b"FMP1"
+_LEN = struct.Struct("<I")
+
+
+class WireError(ValueError):
+    """A packet that does not decode (truncated, wrong magic, inconsistent sizes)."""
+
+
+def encode_packet(header: dict, messages: list[tuple[str, dict]]) -> bytes:
+    """Encode one packet.
+
+    Parameters
+    ----------
+    header : dict — JSON-serialisable fields (ints, floats, bools, strings, lists)
+    messages : list of ``(kind, payload)`` — payload maps names to numpy arrays
+
+    Returns
+    -------
+    bytes — ``MAGIC | len(json) | json | array bytes...``
+    """
+    descr, blobs = [], []
+    for kind, payload in messages:
+        arrays = []
+        for name, a in payload.items():
+            a = np.ascontiguousarray(a)
+            if a.dtype.byteorder == ">":
+                a = a.astype(a.dtype.newbyteorder("<"))
+            arrays.append([name, a.dtype.str, list(a.shape)])
+            blobs.append(a.tobytes())
+        descr.append([kind, arrays])
+    head = json.dumps({**header, "msgs": descr}, separators=(",", ":")).encode()
+    return b"".join([_MAGIC, _LEN.pack(len(head)), head, *blobs])
+
+
+def decode_packet(data: bytes) -> tuple[dict, list[tuple[str, dict]]]:
+    """Inverse of :func:`encode_packet`; raises :class:`WireError` on a malformed packet."""
+    mv = memoryview(data)
+    if len(mv) < 8 or bytes(mv[:4]) != _MAGIC:
+        raise WireError("not a formation-match packet (bad magic)")
+    (hlen,) = _LEN.unpack(mv[4:8])
+    if 8 + hlen > len(mv):
+        raise WireError("truncated packet header")
+    try:
+        header = json.loads(bytes(mv[8:8 + hlen]))
+    except ValueError as exc:
+        raise WireError(f"packet header is not JSON: {exc}") from None
+    pos = 8 + hlen
+    messages = []
+    for kind, arrays in header.pop("msgs", []):
+        payload = {}
+        for name, dtype, shape in arrays:
+            dt = np.dtype(dtype)
+            size = dt.itemsize * int(np.prod(shape, dtype=np.int64))
+            if pos + size > len(mv):
+                raise WireError(f"truncated array {name!r} in a {kind!r} message")
+            payload[name] = np.frombuffer(mv[pos:pos + size], dtype=dt).reshape(shape).copy()
+            pos += size
+        messages.append((kind, payload))
+    if pos != len(mv):
+        raise WireError(f"{len(mv) - pos} trailing bytes after the last array")
+    return header, messages
