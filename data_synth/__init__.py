@@ -37,6 +37,8 @@ from pipeline.types import View
 
 __all__ = [
     "render",
+    "render_robot",
+    "formation_edges",
     "Formation",
     "FORMATIONS",
     "FIG4_EDGES",
@@ -92,6 +94,67 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
     InputError
         Unknown formation or graph kind, ``n_robots < 2``, image smaller than ``MIN_SIZE``.
     """
+    name, kind, n, (W, H), centres, poses, edges, K = _setup(formation, seed, size, n_robots,
+                                                             graph)
+    # the views depend on seed, size and robots only (not on the graph): one cache entry each
+    pixels = render_cache.load_views(seed, (W, H), n) if cache else None
+    if pixels is None:
+        scene = build_scene(seed)
+        rendered = [render_view(scene, K, R, t, (W, H), rng=np.random.default_rng([seed, 3, i]))
+                    for i, (R, t) in enumerate(poses)]
+        pixels = {"image": [im for im, _ in rendered], "depth": [d for _, d in rendered]}
+        if cache:
+            render_cache.save_views(seed, (W, H), {k: np.stack(v) for k, v in pixels.items()})
+    views = [View(name=f"cam{i:02d}", image=pixels["image"][i], K=K.copy(), R=R, t=t,
+                  depth=pixels["depth"][i], intrinsics_known=True)
+             for i, (R, t) in enumerate(poses)]
+    return Formation(name=name, views=views, comm_edges=edges, graph=kind, seed=seed,
+                     centres=centres)
+
+
+def formation_edges(formation: str = "d", seed: int = 0, n_robots: int | None = None,
+                    graph: str | None = None) -> np.ndarray:
+    """The communication graph ``(E, 2)`` of a formation, without rendering anything."""
+    return _setup(formation, seed, MIN_SIZE, n_robots, graph)[6]
+
+
+def render_robot(robot: int, formation: str = "d", seed: int = 0,
+                 size: tuple[int, int] = (640, 480), n_robots: int | None = None,
+                 graph: str | None = None) -> tuple[View, np.ndarray]:
+    """Render only robot ``robot``'s camera of a formation (what a robot process needs).
+
+    The view is identical to ``render(...).views[robot]`` (same scene, pose and noise seed).
+    It is read from the machine's render cache when the formation's views are there
+    (:mod:`data_synth.cache`); otherwise only this camera is rendered (the cache is not
+    written: it holds whole formations).
+
+    Returns
+    -------
+    view : View
+    comm_edges : ndarray, (E, 2) int64 — the formation's communication graph
+
+    Raises
+    ------
+    InputError
+        As :func:`render`, or ``robot`` outside ``0..n-1``.
+    """
+    _, _, n, (W, H), _, poses, edges, K = _setup(formation, seed, size, n_robots, graph)
+    if isinstance(robot, bool) or not isinstance(robot, numbers.Integral) or not 0 <= robot < n:
+        raise InputError(f"robot {robot!r} is not in the formation; robots are 0..{n - 1}")
+    i = int(robot)
+    R, t = poses[i]
+    pixels = render_cache.load_views(seed, (W, H), n)
+    if pixels is not None:
+        image, depth = pixels["image"][i], pixels["depth"][i]
+    else:
+        image, depth = render_view(build_scene(seed), K, R, t, (W, H),
+                                   rng=np.random.default_rng([seed, 3, i]))
+    return View(name=f"cam{i:02d}", image=image, K=K.copy(), R=R, t=t, depth=depth,
+                intrinsics_known=True), edges
+
+
+def _setup(formation, seed, size, n_robots, graph):
+    """Checked parameters, poses, comm edges and intrinsics shared by all robots."""
     if not isinstance(formation, str) or (formation not in FORMATIONS and formation not in GRAPH_KINDS):
         raise InputError(f"unknown formation {formation!r}; choose one of "
                          f"{', '.join(FORMATIONS)} (the paper's Fig. 4) or a graph kind "
@@ -120,17 +183,4 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
     else:
         edges = graph_edges(kind, n, centres, seed)
     K = intrinsics((W, H))
-    # the views depend on seed, size and robots only (not on the graph): one cache entry each
-    pixels = render_cache.load_views(seed, (W, H), n) if cache else None
-    if pixels is None:
-        scene = build_scene(seed)
-        rendered = [render_view(scene, K, R, t, (W, H), rng=np.random.default_rng([seed, 3, i]))
-                    for i, (R, t) in enumerate(poses)]
-        pixels = {"image": [im for im, _ in rendered], "depth": [d for _, d in rendered]}
-        if cache:
-            render_cache.save_views(seed, (W, H), {k: np.stack(v) for k, v in pixels.items()})
-    views = [View(name=f"cam{i:02d}", image=pixels["image"][i], K=K.copy(), R=R, t=t,
-                  depth=pixels["depth"][i], intrinsics_known=True)
-             for i, (R, t) in enumerate(poses)]
-    return Formation(name=name, views=views, comm_edges=edges, graph=kind, seed=seed,
-                     centres=centres)
+    return name, kind, n, (W, H), centres, poses, edges, K

@@ -4,8 +4,8 @@ Each command lives in ``pipeline/commands/<name>.py`` with ``add_arguments(parse
 ``run(args) -> int``. Only the module of the command being run is imported (its arguments are
 defined on demand), so ``python -m pipeline --help`` loads no OpenCV, SciPy, pycolmap or Rerun.
 
-Exit codes: 0 done; 2 bad input or a file that cannot be read or written (one line on stderr,
-nothing written); 3 the run finished but its result is not conflict-free (written, flagged in
+Exit codes: 0 done; 2 bad input, a file that cannot be read or written, or a team of robot
+processes that did not finish (one line on stderr naming the robot, nothing written); 3 the run finished but its result is not conflict-free (written, flagged in
 the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written).
 """
 
@@ -17,7 +17,7 @@ import logging
 import sys
 from collections.abc import Iterable
 
-from pipeline.errors import InputError
+from pipeline.errors import InputError, TeamError
 
 # command name -> (module, one-line help)
 COMMANDS = {
@@ -30,6 +30,7 @@ COMMANDS = {
     "run-landmarks": ("run_landmarks", "labelled-landmark benchmark (e.g. CMU hotel): match, "
                       "resolve, score pairwise against the labels"),
     "clean-h5": ("clean_h5", "remove inconsistent matches from hloc's features.h5/matches.h5"),
+    "robot": ("robot", "run one robot of a team over Zenoh (TEAM.json)"),
 }
 
 
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     mod = importlib.import_module(f"pipeline.commands.{args._module}")
     try:
         return int(mod.run(args) or 0)
-    except InputError as exc:
+    except (InputError, TeamError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

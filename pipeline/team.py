@@ -44,6 +44,7 @@ DATA_KINDS = ("formation", "images", "links")
 DEFAULT_OPTIONS = {
     "features": "sift",
     "max_features": 2000,
+    "merge_radius": 0.5,
     "drop_prob": 0.0,
     "fault_seed": 0,
     "round_timeout_s": 5.0,
@@ -292,4 +293,25 @@ def add_transport_argument(parser) -> None:
     parser.add_argument("--transport", default="sim", choices=TRANSPORTS,
                         help="sim: robots are objects of this process (default, fastest); "
                              "zenoh: one process per robot on this machine, talking over "
-                             "Zenoh (see README, 'Transports')")
+                             "Zenoh, resolving by Alg. 1 (--resolution paper); see README, "
+                             "'Transports'")
+
+
+def resolution_for_transport(args) -> str:
+    """The resolution a command runs with: ``--resolution`` on ``sim``; ``paper`` on ``zenoh``.
+
+    Robot processes run the fault-tolerant Alg. 1 (:mod:`pipeline.consistency.termination`);
+    the evidence rule (:mod:`pipeline.consistency.evidence`) runs only in the simulator.
+
+    Raises
+    ------
+    InputError
+        ``--transport zenoh`` with an explicit ``--resolution evidence``.
+    """
+    if getattr(args, "transport", "sim") != "zenoh":
+        return args.resolution
+    if args.resolution == "evidence" and getattr(args, "resolution_given", False):
+        raise InputError("--resolution evidence runs only with --transport sim; robot "
+                         "processes over zenoh run Alg. 1 (--resolution paper, the default "
+                         "with --transport zenoh)")
+    return "paper"

@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from pipeline.consistency.reliable import ProtocolOptions
+from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
@@ -93,7 +93,7 @@ def _load_view(team, i: int):
 
 def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     """Steps 1–4 of the module docstring; returns (features, matches, fpc, nbr, r, s)."""
-    from pipeline.features import extract
+    from pipeline.features import MERGE_RADIUS_PX, extract
     from pipeline.matching import match_pair
     from pipeline.types import PairMatches
 
@@ -101,7 +101,8 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     view = _load_view(team, i)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
-    feats = extract(view, opts["features"], int(opts["max_features"]))
+    feats = extract(view, opts["features"], int(opts["max_features"]),
+                    float(opts.get("merge_radius", MERGE_RADIUS_PX)))
     timings["features"] = time.perf_counter() - t
     n = team.n
     known = np.full(n, -1, dtype=np.int32)

@@ -7,7 +7,8 @@ on every link (:func:`pipeline.consistency.linklog.merge_link_logs` over the rob
 logs), and the report. Evaluation against ground truth is centralized checking code: it
 renders the formation itself, as ``run-formation`` does, and never feeds anything back.
 
-Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
+The robots resolve by Alg. 1 (``resolution="paper"``); the evidence rule runs only in the
+simulator. Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
 (so compare it with a simulator run with ``--no-fusion``).
 """
 
@@ -30,7 +31,7 @@ FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zeno
 
 
 def team_options(features: str = "sift", max_features: int = 2000, faults=None,
-                 round_timeout_s: float = 5.0) -> dict:
+                 round_timeout_s: float = 5.0, merge_radius: float | None = None) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
 
     Raises
@@ -39,8 +40,11 @@ def team_options(features: str = "sift", max_features: int = 2000, faults=None,
         ``--crash`` or ``--switching-topology`` (faults of the simulated network; over Zenoh
         kill a robot process instead).
     """
+    from pipeline.features import MERGE_RADIUS_PX
+
     opts = {"features": features, "max_features": int(max_features),
-            "round_timeout_s": float(round_timeout_s)}
+            "round_timeout_s": float(round_timeout_s),
+            "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius)}
     if faults is not None:
         if faults.crash or faults.switching_topology:
             raise InputError("--crash and --switching-topology are faults of the simulated "
@@ -64,7 +68,7 @@ def _pm_from(i: int, k: int, header: dict, arrays: dict) -> PairMatches | None:
 
 def links_of_team(team, results: dict) -> tuple[list[PairMatches], Links]:
     """Matches of every comm edge (from whichever end published them) and all links."""
-    from pipeline.matching import check_comm_edges
+    from pipeline.commgraph import check_comm_edges
 
     matches = []
     for i, j in check_comm_edges(team.comm_edges, team.n):
@@ -147,6 +151,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
                                        default=0)),
         asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
         deleted_links=int(d["deleted"].sum()), protocol="reliable", survivors=survivors,
+        resolution="paper",
         termination="local (termination wave)", faults=faults)
     return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
                              iteration=d["iteration"], round=d["round"], case=d["case"],
@@ -172,12 +177,17 @@ def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
         CleaningResult,
         _conflictive_links,
         ledger_from_consistency,
+        merge_radius_for,
         write_formation_run,
     )
     from pipeline.types import Features
 
+    if config.resolution != "paper":
+        raise InputError(f"resolution {config.resolution!r} runs only in the simulator; robot "
+                         "processes over zenoh run Alg. 1 (resolution 'paper')")
     timer = timer or StageTimer()
-    opts = team_options(config.features, config.max_features, config.faults, round_timeout_s)
+    opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
+                        merge_radius_for(config.resolution, config.merge_radius))
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6
@@ -203,7 +213,8 @@ def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
             feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
                                   np.zeros(len(kp), np.float32), config.features))
         else:  # a robot lost before publishing: the evaluation extracts its features itself
-            feats.append(extract(v, config.features, config.max_features))
+            feats.append(extract(v, config.features, config.max_features,
+                                 opts["merge_radius"]))
     matches, links = links_of_team(team, run.results)
     m = np.array([len(f) for f in feats], dtype=np.int64)
     res = consistency_of_team(team, run.results, links, m, run.killed)
@@ -240,46 +251,3 @@ def resolve_conflicts_team(links_csv, fpc, comm_edges, options: dict | None = No
     res.stats["team"] = team_summary(run)
     return res
 
-
-def team_images(config, views, comm_edges, timer: StageTimer):
-    """``run-images --transport zenoh``: robots load their own photograph (the path, the
-    downscaling and the intrinsics the observer found for it) and run features, matching and
-    the consistency stage; returns ``(features, matches, links, CleaningResult)``.
-
-    The features returned hold the robots' keypoints (descriptors are not published); the
-    observer uses them for its checks only (the pycolmap reconstructions).
-    """
-    from pathlib import Path
-
-    from pipeline.run import CleaningResult, _conflictive_links, ledger_from_consistency
-    from pipeline.types import Features
-
-    folder = Path(config.directory).resolve()
-    data = {"kind": "images", "images": [str(folder / v.name) for v in views],
-            "intrinsics": [np.asarray(v.K).tolist() for v in views],
-            "intrinsics_known": [bool(v.intrinsics_known) for v in views],
-            "max_size": config.max_size}
-    team = make_team(f"images-{len(views)}", comm_edges, data,
-                     team_options(config.features, config.max_features), n=len(views))
-    with timer.stage("team", f"{len(views)} robot processes over zenoh"):
-        run = launch_team(team)
-        timer.note(f"{len(run.results)} of {len(views)} robots published")
-    missing = sorted(set(range(len(views))) - set(run.results))
-    if missing:
-        from pipeline.errors import TeamError
-
-        raise TeamError(f"robot {missing[0]} ({views[missing[0]].name}) published no result; "
-                        "run-images needs every robot's keypoints")
-    feats = []
-    for i in range(len(views)):
-        kp = run.results[i][1]["keypoints"].reshape(-1, 2)
-        feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
-                              np.zeros(len(kp), np.float32), config.features))
-    matches, links = links_of_team(team, run.results)
-    m = np.array([len(f) for f in feats], dtype=np.int64)
-    res = consistency_of_team(team, run.results, links, m, run.killed)
-    stats = dict(res.stats)
-    stats["team"] = team_summary(run)
-    cleaning = CleaningResult(ledger_from_consistency(res, _conflictive_links(m, links)),
-                              stats, fusion_stats=dict(FUSION_SKIPPED))
-    return feats, matches, links, cleaning

@@ -21,6 +21,7 @@ from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.commands.options import add_resolution_option
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
+from pipeline.team import add_transport_argument, resolution_for_transport
 
 __all__ = ["add_arguments", "run", "resolve_file"]
 
@@ -42,13 +43,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="refuse inputs whose distributed detection would need more memory "
                         f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
     add_resolution_option(p)
+    add_transport_argument(p)
     add_fault_arguments(p)
 
 
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
-                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence") -> dict:
+                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence",
+                 transport: str = "sim") -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
     ``resolution``: ``paper`` (Alg. 1) or ``evidence``; the evidence of a link here is its
@@ -104,10 +107,14 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
     check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
-    with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
-        res, fault_section = consistency_stage(
-            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids),
-            resolution=resolution)
+    if transport == "zenoh":
+        res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults)
+    else:
+        with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
+            res, fault_section = consistency_stage(
+                m, run_edges, run_links,
+                None if faults is None else faults_in_layout(faults, ids),
+                resolution=resolution)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)
@@ -137,7 +144,35 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     }
     if fault_section is not None:
         summary["faults"] = fault_section_in_ids(fault_section, ids)
+    if transport == "zenoh":
+        summary["team"] = res.stats["team"]
     return summary
+
+
+def _resolve_over_zenoh(m, edges, links, faults):
+    """The consistency stage as one robot process per camera over Zenoh.
+
+    The links to make consistent (kept rows, compact ids) go to a file in a temporary team
+    folder; each robot reads its own rows of it (:func:`pipeline.teamrun.resolve_conflicts_team`).
+    Returns ``(ConsistencyResult, faults section or None)``.
+    """
+    import tempfile
+
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.faults import fault_report
+    from pipeline.linkscsv import write_links_csv
+    from pipeline.teamrun import resolve_conflicts_team, team_options
+    from pipeline.types import LinkLedger
+
+    with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
+        path = f"{work}/links.csv"
+        write_links_csv(path, LinkLedger.all_kept(links))
+        res = resolve_conflicts_team(path, m, comm_edges_for(m, links, edges),
+                                     team_options(faults=faults), workdir=work)
+    fault_section = None
+    if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
+        fault_section = fault_report(faults or FaultConfig(), res)
+    return res, fault_section
 
 
 def run(args) -> int:
@@ -148,7 +183,8 @@ def run(args) -> int:
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
-                                  args.max_memory_gb, resolution=args.resolution))
+                                  args.max_memory_gb, resolution=resolution_for_transport(args),
+                                  transport=args.transport))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -166,7 +202,8 @@ def run(args) -> int:
         f = s["faults"]
         print(f"faults: {f['messages_dropped']} messages dropped, crashed {f['crashed'] or 'none'}, "
               f"{f['links_cut_robot_lost']} links cut robot-lost; {f['retransmissions']} "
-              f"retransmissions; +{f['extra_rounds']} rounds, +{f['extra_messages']} messages "
+              f"retransmissions; +{f.get('extra_rounds', '?')} rounds, "
+              f"+{f.get('extra_messages', '?')} messages "
               "vs fault-free")
     print(f"written: {s['output']}")
     if args.report:

@@ -17,6 +17,7 @@ from pipeline.commands.options import (
 from pipeline.errors import InputError
 from pipeline.faults import add_fault_arguments, faults_from_args
 from pipeline.run import FormationConfig
+from pipeline.team import add_transport_argument, resolution_for_transport
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_resolution_option(p)
     add_merge_radius_option(p)
     add_fault_arguments(p)
+    add_transport_argument(p)
 
 
 def config_from_args(args) -> FormationConfig:
@@ -48,7 +50,8 @@ def config_from_args(args) -> FormationConfig:
                            robots=args.robots, graph=args.graph,
                            tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
-                           faults=faults_from_args(args), resolution=args.resolution,
+                           faults=faults_from_args(args),
+                           resolution=resolution_for_transport(args),
                            merge_radius=args.merge_radius)
 
 
@@ -59,7 +62,7 @@ def run(args) -> int:
 
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):
-        out = run_formation(config)
+        out = run_formation(config, transport=args.transport)
     written = "report.json, links.csv, sparse/" + ("" if args.no_rerun else ", recording.rrd")
     print(f"run written to {out}/ ({written})")
     return exit_status(json.loads((out / "report.json").read_text()))

@@ -17,6 +17,7 @@ from pipeline.commands.options import (
 )
 from pipeline.report import PAPER_TABLE_III_IV
 from pipeline.runfolder import atomic_file, write_json_atomic
+from pipeline.team import add_transport_argument, resolution_for_transport
 
 FORMATIONS = ("a", "b", "c", "d")
 
@@ -50,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
     # the paper's Tables III and IV are Alg. 1's figures
     add_resolution_option(p, default="paper")
+    add_transport_argument(p)
     add_merge_radius_option(p)
 
 
@@ -117,6 +119,7 @@ def run(args) -> int:
     from pipeline.run import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
+    resolution = resolution_for_transport(args)
     size = parse_size(args.size)
     parent = Path(args.out)
     reports = {}
@@ -124,8 +127,8 @@ def run(args) -> int:
         cfg = FormationConfig(formation=name, seed=args.seed, size=size,
                               features=method, max_features=max_features,
                               out=str(parent / f"formation-{name}"),
-                              resolution=args.resolution, merge_radius=args.merge_radius)
-        out = run_formation(cfg)
+                              resolution=resolution, merge_radius=args.merge_radius)
+        out = run_formation(cfg, transport=args.transport)
         reports[name] = json.loads((out / "report.json").read_text())
     table = formations_table(reports)
     md = parent / "formations.md"

