@@ -5,7 +5,8 @@ command-line run (so process start is included on both sides): wall time, consis
 messages, bytes counted (the simulator's encoding) and bytes on the wire (zenoh packets), peak
 RSS per process, and for zenoh the time from ``kill -9`` of one robot to the survivors'
 finish, plus a run with message loss. Both sides run without fusion, which does not run over
-zenoh; ``sim (default)`` adds the in-process default run with fusion for reference.
+zenoh, and with ``--resolution paper`` (Alg. 1, what the robot processes run); ``sim
+(default)`` adds the in-process default run (evidence rule, fusion) for reference.
 Saves ``runs/bench-team/results.json``.
 """
 
@@ -76,8 +77,8 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
 
     ap = argparse.ArgumentParser()
     add_arguments(ap)
-    cfg = config_from_args(ap.parse_args([*args, "--no-fusion", "--no-rerun", "--size", size,
-                                          "--out", str(out)]))
+    cfg = config_from_args(ap.parse_args([*args, "--no-fusion", "--no-rerun", "--resolution",
+                                          "paper", "--size", size, "--out", str(out)]))
     runs = []
     t0 = time.perf_counter()
     run_formation_team(cfg, kill=(2, "consistency", 0.0), keep_run=runs)
@@ -103,10 +104,11 @@ def main() -> int:
         for k, (name, fargs) in enumerate(FORMATIONS.items()):
             if args.only and args.only not in name:
                 continue
-            base = [*fargs, "--size", args.size]
+            # robot processes resolve by Alg. 1: the simulator runs it too, side by side
+            base = [*fargs, "--size", args.size, "--resolution", "paper"]
             rows = []
             if k == 0:
-                rows.append(_row("sim (default, fusion)", _cli(base, tmp / f"s{k}f")))
+                rows.append(_row("sim (default, fusion)", _cli([*fargs, "--size", args.size], tmp / f"s{k}f")))
             rows.append(_row("sim", _cli([*base, "--no-fusion"], tmp / f"s{k}")))
             rows.append(_row("zenoh", _cli([*base, "--no-fusion", "--transport", "zenoh"],
                                            tmp / f"z{k}")))

@@ -217,3 +217,13 @@ def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
     with pytest.raises(TeamError, match=r"robot \d \(tcp/127\.0\.0\.1:\d+\) failed with exit "
                                         r"code 2: error: .*missing\.csv"):
         launch_team(team, tmp_path / "team", timeout_s=60)
+
+
+def test_zenoh_with_an_explicit_evidence_resolution_is_a_one_line_error(links_input, tmp_path,
+                                                                         capsys):
+    args = ["resolve", "--links", str(links_input / "in.csv"), "--out", str(tmp_path / "z.csv"),
+            "--transport", "zenoh", "--resolution", "evidence"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --resolution evidence runs only with --transport sim")
+    assert "\n" not in err and not (tmp_path / "z.csv").exists()
