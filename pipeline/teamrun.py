@@ -1,7 +1,7 @@
 """Runs over ``--transport zenoh``: a team of robot processes, then the usual run outputs.
 
 The robots compute everything (:mod:`pipeline.teamrobot`); the observer here only reads what
-they published and turns it into the run outputs of DESIGN.md: the links of every comm edge
+they published and turns it into the run outputs of docs/DESIGN.md: the links of every comm edge
 (from the matches the robots hold, in the comm-graph order the simulator uses), the decision
 on every link (:func:`pipeline.consistency.linklog.merge_link_logs` over the robots' own
 logs), and the report. Evaluation against ground truth is centralized checking code: it
