@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
-from pipeline.commands.options import add_resolution_option
+from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
 from pipeline.errors import InputError
 
 __all__ = ["CleanDbResult", "clean_database", "add_arguments", "run", "COLMAP_MAX_ERROR_PX"]
@@ -63,11 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace OUT.db / --report if they exist (default: refuse)")
-    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
-                   help="refuse inputs whose distributed detection would need more memory "
-                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p)
 
 

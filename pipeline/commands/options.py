@@ -13,7 +13,8 @@ from pipeline.errors import InputError
 from pipeline.validate import render_size
 
 __all__ = ["MIN_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
-           "add_resolution_option", "add_merge_radius_option", "feature_options", "parse_size"]
+           "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
+           "feature_options", "parse_size"]
 
 #: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
 RESOLUTIONS = ("paper", "evidence")
@@ -116,3 +117,16 @@ def parse_size(text: str) -> tuple[int, int]:
     except ValueError:
         raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
     return render_size(w, h, text)
+
+
+def add_overwrite_and_memory_options(p: argparse.ArgumentParser, outputs: str) -> None:
+    """``--overwrite`` (replace existing ``outputs``, else refuse) and ``--max-memory-gb`` (the
+    memory budget of the distributed detection, :mod:`pipeline.budget`), shared by the
+    commands that clean a user's matches (``resolve``, ``clean-db``)."""
+    from pipeline.budget import DEFAULT_LIMIT_GB
+
+    p.add_argument("--overwrite", action="store_true",
+                   help=f"replace {outputs} if they exist (default: refuse)")
+    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose distributed detection would need more memory "
+                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
-from pipeline.commands.options import add_resolution_option
+from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 from pipeline.team import add_transport_argument, resolution_for_transport
@@ -37,11 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace --out / --report if they exist (default: refuse)")
-    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
-                   help="refuse inputs whose distributed detection would need more memory "
-                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    add_overwrite_and_memory_options(p, "--out / --report")
     add_resolution_option(p)
     add_transport_argument(p)
     add_fault_arguments(p)
