@@ -20,8 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import InputError
-
 __all__ = ["clean_h5", "add_arguments", "run"]
 
 
@@ -40,6 +38,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the images, to draw them in OUT.rrd (default: gray canvases)")
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUT.h5, its side files and --report if they exist "
+                        "(default: refuse)")
 
 
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
@@ -55,19 +56,16 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     Raises
     ------
     InputError
-        Bad input files (see :func:`pipeline.hloc.read_h5`), ``out`` equal to an input.
+        Bad input files (see :func:`pipeline.hloc.read_h5`), ``out`` equal to the matches file
+        (the command checks every output against every input first,
+        :func:`pipeline.outputs.check_output_files`).
     """
     from pipeline import hloc
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.consistency import resolve_conflicts
-    from pipeline.run import _conflictive_links
+    from pipeline.run import _conflictive_links, consistency_stage
 
     out = Path(out)
-    for given in (features, matches):
-        if out.exists() and out.resolve() == Path(given).resolve():
-            raise InputError(f"--out {str(out)!r} is an input file; the input is never "
-                             f"modified, choose a new file")
     contents = hloc.read_h5(features, matches, pairs)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     cam = {name: k for k, name in enumerate(contents.names)}
@@ -82,7 +80,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     ok = reason == ""
     model_links = links.subset(ok)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result = resolve_conflicts(m, edges, model_links)
+    result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     rnd = np.full(len(links), -1, dtype=np.int64)
@@ -124,8 +122,19 @@ def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
 
 
 def run(args) -> int:
-    s = clean_h5(args.features, args.matches, args.out, args.pairs, rerun=not args.no_rerun,
-                 image_dir=args.image_dir)
+    from pipeline.cleaned import side_paths
+    from pipeline.outcome import exit_status, flag_result
+    from pipeline.outputs import check_output_files
+
+    links_out, rrd_out = side_paths(args.out)
+    check_output_files([("--out", args.out), ("--report", args.report),
+                        ("OUT.links.csv", links_out)]
+                       + ([] if args.no_rerun else [("OUT.rrd", rrd_out)]),
+                       [("--features", args.features), ("--matches", args.matches),
+                        ("--pairs", args.pairs)],
+                       overwrite=args.overwrite)
+    s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
+                             rerun=not args.no_rerun, image_dir=args.image_dir))
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]
     print(f"{s['images']} images, {s['comm_edges']} image pairs, {s['links']} matches")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -137,4 +146,4 @@ def run(args) -> int:
         from pipeline.runfolder import write_json_atomic
 
         write_json_atomic(args.report, s)
-    return 0
+    return exit_status(s)

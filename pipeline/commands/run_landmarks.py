@@ -148,7 +148,11 @@ def config_from_args(args) -> LandmarksConfig:
 
 
 def run(args) -> int:
-    out, report = run_landmarks(config_from_args(args))
+    from pipeline.runfolder import claim_run_folder
+
+    config = config_from_args(args)
+    with claim_run_folder(config.out_dir(), inputs=[("DIR", config.directory)]):
+        out, report = run_landmarks(config)
     print(landmarks_markdown(report))
     print(f"run written to {out}/ (report.json, links.csv)")
     return 0

@@ -117,3 +117,16 @@ def test_bad_input_is_one_line(tmp_path, capsys, case, message):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_existing_output_needs_overwrite(tmp_path, capsys):
+    feats, matches = _write(tmp_path)
+    out = tmp_path / "o.h5"
+    argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out", str(out)]
+    out.write_bytes(b"keep me")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "already exists; pass --overwrite" in err and err.count("\n") == 1
+    assert out.read_bytes() == b"keep me"
+    assert main(argv + ["--overwrite"]) == 0
+    assert out.read_bytes() != b"keep me"

@@ -3,6 +3,7 @@ links.csv, and clear errors."""
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -81,3 +82,12 @@ def test_bad_inputs_fail_cleanly(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["run-landmarks", str(HOTEL), "--ratio", "2"])
     assert not (tmp_path / "o").exists()
+
+
+def test_out_holding_the_input_folder_is_refused(tmp_path, capsys):
+    data = tmp_path / "hotel"
+    shutil.copytree(HOTEL, data)
+    before = sorted(p.name for p in data.iterdir())
+    assert main(["run-landmarks", str(data), "--out", str(tmp_path)]) == 2
+    assert "holds the input DIR" in capsys.readouterr().err
+    assert sorted(p.name for p in data.iterdir()) == before
