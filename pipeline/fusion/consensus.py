@@ -535,7 +535,7 @@ def ml_consensus(P0, q0, topology, rounds: int, *, history: bool = False):
 # max-c consensus: choosing the robots of each hypothesis
 
 
-def max_c_consensus(draws, topology, c: int, rounds: int):
+def max_c_consensus(draws, topology, c: int, rounds: int, *, before_round=None):
     """Max-c consensus ``h_i(t+1) = max^c(h_i(t) ∪_{j∈N_i} h_j(t))`` (eq. 6), per hypothesis.
 
     Parameters
@@ -548,6 +548,10 @@ def max_c_consensus(draws, topology, c: int, rounds: int):
         Robots per hypothesis.
     rounds : int
         ``Diam(G)`` for a fixed graph (the paper's bound); more on a switching graph.
+    before_round : callable ``(t, changed) -> None`` or None
+        Called at the start of round ``t`` with the nodes whose set changed in round
+        ``t - 1`` (all in round 0), ``(n_nodes,)`` bool: what their messages must carry
+        (:mod:`pipeline.fusion.protocol`); it may change what ``topology.edges(t)`` returns.
 
     Returns
     -------
@@ -571,10 +575,14 @@ def max_c_consensus(draws, topology, c: int, rounds: int):
     sets[:, :, 0] = h
     stats = CommStats()
     msg = bundle_bytes(K * c, with_degree=False)
+    changed = np.ones(n, dtype=bool)
     for t in range(int(rounds)):
+        if before_round is not None:
+            before_round(t, changed)
         e = topo.edges(t)
         stats.add_round(len(e), msg)
         if len(e) == 0:
+            changed = np.zeros(n, dtype=bool)
             continue
         src = np.concatenate([e[:, 0], e[:, 1]])  # receiver
         dst = np.concatenate([e[:, 1], e[:, 0]])  # sender
@@ -590,7 +598,9 @@ def max_c_consensus(draws, topology, c: int, rounds: int):
         dup = np.zeros(cand.shape, dtype=bool)
         dup[..., 1:] = cand[..., 1:] == cand[..., :-1]
         cand[dup] = -np.inf
-        sets = -np.sort(-cand, axis=-1)[..., :c]
+        new_sets = -np.sort(-cand, axis=-1)[..., :c]
+        changed = (new_sets != sets).any(axis=(1, 2))
+        sets = new_sets
     return sets, stats
 
 

@@ -95,8 +95,9 @@ from pipeline.fusion.consensus import (
     bundle_bytes,
     ransac_hypotheses,
 )
-from pipeline.fusion.voting import chi2_ppf, dynamic_voting
-from pipeline.transport import Transport
+from pipeline.fusion.protocol import CountingExchange, LinkTraffic, LockstepExchange
+from pipeline.fusion.voting import RoundProtocol, chi2_ppf, dynamic_voting
+from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.types import Features, Links, View
 
 __all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of"]
@@ -324,7 +325,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                 sigma_px: float = 1.0, *, local: str = "robust", p: float = 0.99,
                 gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
                 rounds: int = 100, seed: int = 0, transport: Transport | None = None,
-                track_labels=None) -> FusionResult:
+                track_labels=None, wire: str = "float32", stop: bool = True) -> FusionResult:
     """Fuse every track's landmark by dynamic voting; flag the observations voted out.
 
     Parameters
@@ -337,18 +338,23 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     local : ``"robust"``, ``"pair"`` or ``"neighbours"`` — local estimate (module docstring)
     p, gate : chi-square gate of the vote (and of the reprojection check)
     p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
-    rounds : int — dynamic-voting consensus rounds
+    rounds : int — dynamic-voting consensus rounds (with ``stop``: the cap)
     seed : int — max-c random draws
     transport : Transport or None
-        The network the robots' consensus messages travel on. On a switching one
-        (:attr:`~pipeline.transport.Transport.switching`), the graph of consensus round ``t``
-        is ``transport.edges(t)`` (Assumption 2.1: jointly connected over windows; edges
-        outside ``comm_edges`` are ignored) and max-c consensus runs
-        ``transport.window * (n - 1)`` rounds instead of ``n - 1``. ``None`` or a static
-        transport: ``comm_edges`` in every round. The traffic is counted on the transport
-        (kind ``fusion``); the ``messages`` stat counts every comm edge in every round (an
-        upper bound under a switching topology). Loss and crashes are not applied to the
-        fusion stage (stated; they are modelled in the consistency stage).
+        The network the robots' messages travel on. ``None`` or a fault-free one: one
+        network round per logical round. A faulty one (:attr:`~pipeline.transport.Transport.faulty`:
+        loss, delay, crashes, a switching topology): every logical round is carried by the
+        reliable channel in lockstep (:class:`~pipeline.fusion.protocol.LockstepExchange`),
+        so the consensus is the fault-free one and a crashed robot leaves the graph once its
+        neighbours declare it lost; its observations are not judged and its links not cut.
+        Traffic is counted on the transport (kinds ``fusion-setup``, ``fusion-maxc``,
+        ``fusion``).
+    wire : ``"float32"`` or ``"float64"`` — precision of the consensus messages (and state)
+    stop : bool
+        ``True``: per-link delta messages and the distributed stop rule of
+        :mod:`pipeline.fusion.protocol` (``W = n − 1``). ``False``: the fixed-round scheme
+        (``rounds`` rounds, full float64 bundles on every edge every round) on the
+        transport's per-round graph, kept for comparison.
     track_labels : array_like, (m_total,) int or None
         Each robot's own name for the track of each of its features, as it learnt it in the
         consistency stage (:meth:`pipeline.consistency.robot.Robot.final_tracks`; ``-1``
@@ -440,11 +446,13 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         estimated[est_b, est_i] = oke
 
     # the voting network: observers of a track linked by comm edges
-    node_edges = []
-    for i, j in comm:
+    node_edges, edge_link = [], []
+    for k, (i, j) in enumerate(comm):
         b = np.flatnonzero(observes[:, i] & observes[:, j])
         node_edges.append(np.stack([b * n + i, b * n + j], 1))
+        edge_link.append(np.full(len(b), k, dtype=np.int64))
     node_edges = np.concatenate(node_edges) if node_edges else np.zeros((0, 2), np.int64)
+    edge_link = np.concatenate(edge_link) if edge_link else np.zeros(0, np.int64)
     active_comm = int(sum(bool((observes[:, i] & observes[:, j]).any()) for i, j in comm))
     K = ransac_hypotheses(p_in, c, success)
     stats = dict(tracks=int(T), tracks_fused=0, tracks_conflictive=int(conflictive.sum()),
@@ -464,20 +472,37 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     if B == 0 or not estimated.any():
         return empty
 
-    if transport is None or not transport.switching:
+    protocol = None
+    if stop:
+        exchange = (LockstepExchange(transport, comm) if transport is not None
+                    and transport.faulty else CountingExchange(len(comm)))
+        # setup: each robot tells each neighbour its pose and intrinsics (12 + 4 float64)
+        # and, per track it observes, the track's name (int64) and its keypoint (2 float32)
+        n_obs_robot = observes.sum(0)
+        src = np.stack([comm[:, 0], comm[:, 1]], 1).reshape(-1)
+        exchange.round("fusion-setup", HEADER_BYTES + 16 * 8 + 16 * n_obs_robot[src])
+        protocol = RoundProtocol(LinkTraffic(node_edges, edge_link, comm), n, n - 1, wire,
+                                 exchange)
+        topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
+    elif transport is None or not transport.switching:
         topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
     else:
         topo = SwitchingTopology(_track_topology(transport.edges, observes, comm, n), B * n)
         maxc_rounds = transport.window * (n - 1)
     res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
-                         observed=estimated, maxc_rounds=maxc_rounds)
+                         observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol)
+    crashed = np.zeros(n, dtype=bool)
+    if protocol is not None:
+        protocol.exchange.finish()
+        crashed[sorted(protocol.exchange.crashed)] = True
     voted_out = estimated & ~res.inlier
     # a robot voted out keeps its observation if its own keypoint reprojects onto the fused
     # landmark within the gate: the fault was in its partner's keypoint
     u, _, z = _project(res.theta, Rs[None], ts[None], Ks[None])
     e2 = ((u - kp) ** 2).sum(-1) / sigma_px ** 2
     reproj_ok = res.valid & (z > 0) & (e2 <= px_thr)
-    outlier = voted_out & res.valid & ~reproj_ok
+    # a robot that crashed never finished: its observations are not judged
+    outlier = voted_out & res.valid & ~reproj_ok & ~crashed[None]
 
     # fused point: largest connected group of observers per track
     ncomp, lab = connected_components(
@@ -514,23 +539,44 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     bad_feature = np.zeros(off[-1], dtype=bool)
     bad_feature[obs_g[~obs_in]] = True
     cut = bad_feature[off[links.cam_i] + links.feat_i] | bad_feature[off[links.cam_j] + links.feat_j]
+    cut &= ~(crashed[links.cam_i] | crashed[links.cam_j])
 
     setup_bytes = 2 * len(node_edges) * bundle_bytes(2 + 12 + 4, with_degree=False)
     total_rounds = res.maxc_stats.rounds + res.stats.rounds
+    if protocol is not None:
+        ex = protocol.exchange.summary()
+        kinds = ex["by_kind"]
+        stats.update(
+            rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
+            consensus_rounds=int(res.stats.rounds), settled=bool(res.settled),
+            stop_window=int(protocol.stop_window), wire=wire,
+            network_rounds=int(ex["network_rounds"]), messages=int(ex["messages"]),
+            bytes=int(ex["bytes"]), setup_messages=int(kinds["fusion-setup"].get("messages", 0)),
+            setup_bytes=int(kinds["fusion-setup"].get("bytes", 0)),
+            bytes_by_kind={k: int(v["bytes"]) for k, v in kinds.items() if "bytes" in v},
+            logical_messages=int(2 * len(node_edges) * total_rounds),
+            retransmissions=int(ex["retransmissions"]), dropped=int(ex["dropped"]),
+            crashed=[int(i) for i in np.flatnonzero(crashed)],
+            robots_lost={str(k): v for k, v in ex.get("robots_lost", {}).items()})
+    else:
+        stats.update(rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
+                     messages=int(2 * active_comm * total_rounds),
+                     logical_messages=int(res.stats.messages + res.maxc_stats.messages),
+                     bytes=int(res.stats.bytes + res.maxc_stats.bytes),
+                     setup_messages=int(2 * len(node_edges)), setup_bytes=int(setup_bytes))
     stats.update(
         tracks_fused=int(has_pt.sum()), observations_voted_out=int(voted_out.sum()),
         observations_cut=int((~obs_in).sum()), links_cut=int(cut.sum()),
-        rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
-        messages=int(2 * active_comm * total_rounds),
-        logical_messages=int(res.stats.messages + res.maxc_stats.messages),
-        bytes=int(res.stats.bytes + res.maxc_stats.bytes),
-        setup_messages=int(2 * len(node_edges)), setup_bytes=int(setup_bytes),
         tracks_split_winner=int((split & has_pt).sum()),
         max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
             res.theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0)
-    if transport is not None:
+    if transport is not None and protocol is None:
         transport.count("fusion-setup", stats["setup_messages"], stats["setup_bytes"])
         transport.count("fusion", stats["messages"], stats["bytes"])
+    elif transport is not None and not transport.faulty:
+        # (a lockstep exchange sent its packets through the transport itself)
+        for kind, v in kinds.items():
+            transport.count(kind, v["messages"], v["bytes"])
     if track_labels is not None:
         first_obs = np.full(T, -1, dtype=np.int64)
         first_obs[obs_track[::-1]] = obs_g[::-1]

@@ -51,6 +51,7 @@ from scipy.special import gammaincinv
 from pipeline.errors import InputError
 from pipeline.fusion.consensus import (
     CommStats,
+    Topology,
     as_topology,
     average_consensus,
     bundle_bytes,
@@ -110,6 +111,7 @@ class VotingResult:
     stats: CommStats
     maxc_stats: CommStats = field(default_factory=CommStats)
     history: dict | None = None
+    settled: bool | None = None  # a round protocol's stop rule fired (not the cap)
 
 
 def chi2_ppf(p: float, d: int) -> float:
@@ -168,7 +170,8 @@ def _prepare(x, cov, observed):
     return x, cov, obs
 
 
-def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int | None = None):
+def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int | None = None,
+                      *, before_round=None):
     """``V_h`` for ``K`` hypotheses by max-c consensus on random draws (eqs. 6–7).
 
     Parameters
@@ -179,6 +182,7 @@ def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int 
     rng : numpy Generator or seed
     maxc_rounds : int or None — default ``N − 1``, a bound on the diameter of a connected
         graph of ``N`` robots
+    before_round : callable or None — see :func:`~pipeline.fusion.consensus.max_c_consensus`
 
     Returns
     -------
@@ -191,7 +195,7 @@ def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int 
     draws[~obs.reshape(-1)] = -np.inf
     topo = as_topology(topology, N, B)
     rounds = N - 1 if maxc_rounds is None else int(maxc_rounds)
-    sets, stats = max_c_consensus(draws, topo, c, rounds)
+    sets, stats = max_c_consensus(draws, topo, c, rounds, before_round=before_round)
     return hypothesis_members(draws, sets).reshape(B, N, K), stats
 
 
@@ -232,7 +236,8 @@ def _sq_mahalanobis(r, info):
     return np.einsum("...i,...ij,...j->...", r, info, r)
 
 
-def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds):
+def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds,
+                  before_round=None):
     """Shared start of both voting schemes: checked inputs, topology, χ² gate, and the
     hypothesis members (max-c consensus, eqs. 6–7, unless given)."""
     x, cov, obs = _prepare(x, cov, observed)
@@ -240,7 +245,8 @@ def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_
     topo = as_topology(topology, N, B)
     thr = gate_threshold(d, p, gate)
     if members is None:
-        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds)
+        members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds,
+                                                before_round=before_round)
     else:
         members = np.asarray(members, dtype=bool) & obs[..., None]
         maxc_stats = CommStats()
@@ -312,10 +318,31 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                         maxc_stats=maxc_stats)
 
 
+@dataclass
+class RoundProtocol:
+    """How a dynamic-voting run meets the robots' network (:mod:`pipeline.fusion.protocol`).
+
+    Attributes
+    ----------
+    traffic : LinkTraffic — the flat-node edges (the consensus graph) and their comm links
+    n_robots : int — team size (public): bounds every observer graph's diameter
+    stop_window : int — ``W`` of the stop rule (``>=`` every observer graph's diameter)
+    wire : ``"float32"`` or ``"float64"`` — precision of the consensus messages (and so of the
+        robots' consensus state, which is what they send)
+    exchange : CountingExchange or LockstepExchange — carries every logical round
+    """
+
+    traffic: object
+    n_robots: int
+    stop_window: int
+    wire: str = "float32"
+    exchange: object = None
+
+
 def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                    gate: str = "distance", rounds: int = 100, rng=None, members=None,
                    observed=None, maxc_rounds: int | None = None,
-                   history: bool = False) -> VotingResult:
+                   history: bool = False, protocol: RoundProtocol | None = None) -> VotingResult:
     """Distributed dynamic voting (Sec. IV-B, eqs. 10–14).
 
     Every hypothesis ``h`` carries ``(P_i, q_i, v_i)`` per robot, initialized by eqs. (5) and
@@ -334,14 +361,32 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     members : ndarray, (B, N, K) bool or None — give ``V_h`` directly instead of drawing
     maxc_rounds : int or None — see :func:`choose_hypotheses`
     history : bool — keep ``θ_i^h(t)``, the gate outcome and ``v_i^h(t)`` of every round
+    protocol : RoundProtocol or None
+        ``None``: ``rounds`` rounds on ``topology``, messages counted as full float64 bundles
+        (the paper's fixed-round scheme). Given: the robots run on ``protocol.traffic``'s
+        graph (``topology`` must be the same graph), send only the tracks a link carries and
+        only what changed, at ``protocol.wire`` precision, and stop by the distributed rule
+        of :mod:`pipeline.fusion.protocol` (``rounds`` is then a cap); every logical round,
+        max-c ones included, is carried by ``protocol.exchange``.
 
     Returns
     -------
     VotingResult
         ``theta`` is ``θ_i^{h*}(T)``; ``inlier`` is robot ``i``'s gate for ``h*`` at ``T``.
     """
+    before_round = None
+    if protocol is not None:
+        if history:
+            raise InputError("dynamic_voting: history is not kept with a round protocol")
+        live = _LiveGraph(protocol, int(np.asarray(x).shape[-2]) * (
+            1 if np.asarray(x).ndim == 2 else int(np.asarray(x).shape[0])))
+        topology = live
+        before_round = live.maxc_round(K, c)
     x, cov, obs, topo, thr, members, maxc_stats = _voting_setup(
-        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds)
+        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds, before_round)
+    if protocol is not None:
+        return _dynamic_voting_protocol(x, cov, obs, live, thr, members, maxc_stats, rounds,
+                                        protocol)
     B, N, d = x.shape
     K = members.shape[-1]
     M = B * N
@@ -399,3 +444,144 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
                         inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
                         stats=stats, maxc_stats=maxc_stats, history=hist)
+
+
+class _LiveGraph(Topology):
+    """The consensus graph of a :class:`RoundProtocol` run: its flat-node edges minus the
+    comm links the exchange reported lost (a crashed robot leaves the graph)."""
+
+    def __init__(self, protocol: RoundProtocol, n_nodes: int):
+        from pipeline.fusion.consensus import metropolis_weights
+
+        self.protocol = protocol
+        self.n_nodes = int(n_nodes)
+        self.edges_all = protocol.traffic.node_edges
+        self.alive = np.ones(len(self.edges_all), dtype=bool)
+        self._weights = metropolis_weights
+        self._A = None
+
+    def edges(self, t: int) -> np.ndarray:
+        return self.edges_all[self.alive]
+
+    def weights(self, t: int = 0):
+        if self._A is None:
+            self._A = self._weights(self.edges(t), self.n_nodes)
+        return self._A
+
+    def degree(self) -> np.ndarray:
+        e = self.edges(0)
+        return np.bincount(e.reshape(-1), minlength=self.n_nodes)
+
+    def carry(self, kind: str, running: np.ndarray, changed: np.ndarray, changed_bytes: int,
+              counter_bytes: int) -> bool:
+        """Send one logical round through the exchange; True when the graph lost links."""
+        from pipeline.fusion.protocol import message_bytes
+
+        pr = self.protocol
+        run, chg = pr.traffic.directed(running, changed, self.alive)
+        up = pr.exchange.round(kind, message_bytes(run, chg, changed_bytes, counter_bytes))
+        alive = self.alive & up[pr.traffic.edge_link]
+        if (alive != self.alive).any():
+            self.alive = alive
+            self._A = None
+            return True
+        return False
+
+    def maxc_round(self, K: int, c: int):
+        everyone = np.ones(self.n_nodes, dtype=bool)
+
+        def before_round(t, changed):
+            self.carry("fusion-maxc", everyone, changed, 8 * K * c, 0)
+
+        return before_round
+
+
+def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_stats,
+                             rounds: int, protocol: RoundProtocol) -> VotingResult:
+    """Dynamic voting (eqs. 10–14) with per-link delta messages and the distributed stop
+    rule of :mod:`pipeline.fusion.protocol`; vectorized over all robots and tracks: row
+    ``i`` of every array is robot ``i``'s own state, and its update reads only that and its
+    neighbours' messages (their wire images)."""
+    from pipeline.fusion.protocol import bundle_reals, index_bytes, stop_counters, to_wire
+
+    B, N, d = x.shape
+    K = members.shape[-1]
+    M = B * N
+    wire = protocol.wire
+    W = int(protocol.stop_window)
+    counter_bytes = index_bytes(W + 1)
+    changed_bytes = (index_bytes(protocol.n_robots) + bundle_reals(K, d)
+                     * np.dtype(np.float32 if wire == "float32" else np.float64).itemsize)
+    info = np.linalg.inv(cov).reshape(M, 1, d, d)
+    xf = x.reshape(M, 1, d)
+    obs_f = obs.reshape(M, 1)
+    u_P = info
+    u_q = (info @ xf[..., None])[..., 0]
+    m = members.reshape(M, K).astype(np.float64)
+    P = to_wire(u_P * m[..., None, None], wire)                     # eq. (5)
+    q = to_wire(u_q * m[..., None], wire)
+    v = m.copy()                                                    # eq. (10)
+    prev_yes = members.reshape(M, K).copy()
+    stopped = np.zeros(M, dtype=bool)
+    counter = np.zeros(M, dtype=np.int64)
+    sent = None
+    deg = live.degree()
+    deg_changed = np.zeros(M, dtype=bool)
+    theta = np.zeros((M, K, d))
+    ok = np.zeros((M, K), dtype=bool)
+    yes = prev_yes.copy()
+
+    from pipeline.progress import progress
+
+    t_run = 0
+    for t in progress(range(int(rounds)), desc="fusion rounds (dynamic voting)"):
+        run = ~stopped
+        th, okr = solve_information(P[run], q[run])                  # θ_i = P_i⁻¹ q_i
+        theta[run], ok[run] = th, okr
+        yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)  # eq. 12
+        u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14)
+        prev_yes = yes.copy()
+        # what the messages of this round carry: the state's wire image, sent again only
+        # where it changed (or the sender's degree did)
+        image = (to_wire(P, wire), to_wire(q, wire), to_wire(v, wire))
+        changed = np.ones(M, dtype=bool) if sent is None else deg_changed.copy()
+        if sent is not None:
+            for now_, before in zip(image, sent, strict=True):
+                changed |= (now_ != before).reshape(M, -1).any(1)
+        sent = image
+        # the stop rule's flag: nothing changed in the last round and no opinion changes now
+        flag = ~changed & (u == 0).all(1)
+        counter = stop_counters(counter, flag, live.edges(t), stopped)
+        stopping = run & (counter >= W + 1)
+        if live.carry("fusion", run, changed, changed_bytes, counter_bytes):
+            new_deg = live.degree()
+            deg_changed = new_deg != deg
+            deg = new_deg
+        else:
+            deg_changed = np.zeros(M, dtype=bool)
+        stopped |= stopping
+        t_run = t + 1
+        if stopped.all():
+            break
+        run = ~stopped
+        # eq. (11) on the values as sent: a robot's state is what it puts on the wire
+        A = live.weights(t)
+        Pn = (A @ image[0].reshape(M, -1)).reshape(P.shape) + u[..., None, None] * u_P
+        qn = (A @ image[1].reshape(M, -1)).reshape(q.shape) + u[..., None] * u_q
+        vn = A @ image[2] + u
+        P[run], q[run], v[run] = (to_wire(a[run], wire) for a in (Pn, qn, vn))
+    run = ~stopped
+    if run.any():                                                   # the cap was reached
+        th, okr = solve_information(P[run], q[run])
+        theta[run], ok[run] = th, okr
+        yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)
+    stats = CommStats(rounds=t_run)
+    v = v.reshape(B, N, K)
+    winner = np.argmax(v, axis=-1)
+    pick = winner.reshape(M, 1)
+    theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
+    ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
+    yes_w = np.take_along_axis(yes, pick, 1)[:, 0]
+    return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
+                        inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
+                        stats=stats, maxc_stats=maxc_stats, settled=bool(stopped.all()))
