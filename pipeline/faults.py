@@ -86,6 +86,30 @@ class FaultConfig:
 
         return Network(n_robots, comm_edges, self.network_options(comm_edges, n_robots))
 
+    def fusion_transport(self, comm_edges, survivors, start_round: int):
+        """The faulty network of the fusion stage, over the robots still alive after the
+        consistency stage (``survivors``, renumbered ``0..k-1`` in their order).
+
+        The clock goes on from ``start_round`` (the consistency stage's network rounds): a
+        crash at round ``r >= start_round`` happens ``r - start_round`` rounds into fusion;
+        robots crashed before take no part (they are not in ``survivors``). Loss and its
+        seed are the same; a switching topology is drawn afresh on the survivors' links.
+        """
+        from pipeline.transport.simulated import Network, NetworkOptions
+
+        survivors = np.asarray(survivors, dtype=np.int64)
+        new = np.full(int(survivors.max(initial=-1)) + 1, -1, dtype=np.int64)
+        new[survivors] = np.arange(len(survivors))
+        e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+        e = e[(e < len(new)).all(1)]
+        e = new[e]
+        e = e[(e >= 0).all(1)]
+        crash_at = {int(new[r]): max(int(t) - int(start_round), 0) for r, t in self.crash
+                    if int(r) < len(new) and new[int(r)] >= 0}
+        opts = NetworkOptions(drop_probability=float(self.drop_prob), crash_at=crash_at,
+                              topology=self.topology(e), seed=int(self.seed))
+        return Network(len(survivors), e, opts)
+
     def network_options(self, comm_edges, n_robots: int):
         """:class:`NetworkOptions` of the consistency stage, or ``None`` without faults."""
         from pipeline.transport.simulated import NetworkOptions

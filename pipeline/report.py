@@ -187,6 +187,12 @@ def report_markdown(report: dict) -> str:
     fusion, faults = report.get("fusion") or {}, report.get("faults") or {}
     if "cut_links" in fusion:
         lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
+    if "rounds" in fusion:
+        settled = {True: "stop rule", False: "round cap"}.get(fusion.get("settled"), "fixed")
+        lines.append(f"| fusion rounds (max-c + consensus, {settled}) | {fusion['rounds']} "
+                     f"({fusion.get('maxc_rounds', 0)} + {fusion.get('consensus_rounds', 0)}) |")
+        lines.append(f"| fusion messages / bytes | {fusion.get('messages', 0)} / "
+                     f"{fusion.get('bytes', 0)} |")
     if "links_cut_robot_lost" in faults:
         lines.append(f"| links cut to lost robots (robot-lost) | {faults['links_cut_robot_lost']} |")
     return "\n".join(lines) + "\n"

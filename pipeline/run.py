@@ -231,8 +231,8 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
     which the tracks are formed (default: a union-find over the kept links).
     The others act as crashed robots: their links and comm edges are left out, and links to
     them stay as the consistency stage left them. ``transport`` (a
-    :class:`~pipeline.transport.Transport` over all ``n`` cameras, or None) is the network the
-    consensus runs on; it needs every camera to take part.
+    :class:`~pipeline.transport.Transport` over the ``cameras`` in their order, or None) is
+    the network the fusion messages travel on (:func:`pipeline.fusion.landmarks.fuse_tracks`).
 
     Returns
     -------
@@ -244,8 +244,8 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
     timer = timer or StageTimer(verbose=False)
     n = len(views)
     reg = np.arange(n, dtype=np.int64) if cameras is None else np.asarray(cameras, np.int64)
-    if transport is not None and len(reg) != n:
-        raise ValueError("fusion_stage: a transport needs every camera to take part")
+    if transport is not None and transport.n != len(reg):
+        raise ValueError("fusion_stage: the transport must be over the cameras taking part")
     new = np.full(n, -1, dtype=np.int64)
     new[reg] = np.arange(len(reg))
     links = ledger.links
@@ -302,12 +302,29 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     elif not has_poses:
         cleaning.fusion_stats = {"enabled": False, "reason": "camera poses unknown"}
     else:
-        faulty = faults is not None and faults.any
+        cameras, transport, crashed = None, None, []
+        if faults is not None and faults.any:
+            # robots crashed during consistency take no part; the others run fusion on the
+            # same faulty network, its clock going on (pipeline.fusion.protocol)
+            from pipeline.commgraph import comm_edges_for
+
+            edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
+            crashed = sorted(int(k) for k in res.stats.get("faults", {}).get("crashed", {}))
+            cameras = np.array([i for i in range(len(m)) if i not in crashed], dtype=np.int64)
+            start = int(res.stats.get("detection_rounds", 0) + res.stats.get("resolution_rounds", 0))
+            transport = faults.fusion_transport(edges, cameras, start)
+            comm_edges = edges
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
-                                 track_labels=cleaning.track_labels,
-                                 transport=faults.transport(comm_edges, len(m)) if faulty else None)
-        cleaning.fusion_stats = {"enabled": True, **dict(fr.stats),
-                                 "observations_cut_links": n_cut}
+                                 track_labels=cleaning.track_labels, cameras=cameras,
+                                 transport=transport)
+        stats = dict(fr.stats)
+        if cameras is not None:
+            # the fusion stage numbers the taking-part robots 0..k-1: report team ids
+            stats["crashed"] = [int(cameras[i]) for i in stats.get("crashed", [])]
+            stats["crashed_before_fusion"] = crashed
+            stats["robots_lost"] = {str(int(cameras[int(k)])): [int(cameras[j]) for j in v]
+                                    for k, v in stats.get("robots_lost", {}).items()}
+        cleaning.fusion_stats = {"enabled": True, **stats, "observations_cut_links": n_cut}
         cleaning.fused_points = np.asarray(fr.points)
         cleaning.fused_track_ids = np.asarray(fr.track_ids)
     return cleaning

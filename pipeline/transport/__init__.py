@@ -21,9 +21,9 @@ topology that changes per round) as properties of the network, never of the algo
 
 Who uses it: the consistency stage (:mod:`pipeline.consistency`) sends every message through
 endpoints; the fusion consensus (:mod:`pipeline.fusion.landmarks`) is a vectorized
-evaluation of every robot's update, so it reads the links up in each of its rounds
-(:meth:`Transport.edges`, :attr:`Transport.window`) and counts its traffic in bulk
-(:meth:`Transport.count`).
+evaluation of every robot's update: on a faulty network each of its logical rounds goes
+through the robots' reliable channels in lockstep (:mod:`pipeline.fusion.protocol`), on a
+fault-free one it counts its traffic in bulk (:meth:`Transport.count`).
 
 Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
 (sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at

@@ -16,10 +16,11 @@ silence). Sending to a robot that is not a current neighbour is a programming er
 :class:`~pipeline.transport.NotANeighbourError`; the fault-tolerant protocol checks
 :meth:`Network.links_up` first and keeps the message for retransmission while the link is down.
 
-Vectorized stages (the fusion consensus) read :meth:`Network.edges` — the topology's links of
-any round, crashes and drops not applied (stated: the consensus of Montijano et al. is run on
-the switching graph; loss and crashes are modelled in the consistency stage only) — and count
-their traffic with :meth:`Network.count`.
+The fusion stage sends its rounds through this network too when it is faulty (lockstep over
+the reliable channel, :class:`pipeline.fusion.protocol.LockstepExchange`); on a fault-free
+network it counts its traffic in bulk with :meth:`Network.count`. :meth:`Network.edges` gives
+the topology's links of any round (crashes and drops not applied) to vectorized code that runs
+the paper's switching-graph consensus.
 
 Byte encoding: see :mod:`pipeline.transport`.
 """
