@@ -143,9 +143,9 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
         raise InputError(f"robot {robot!r} is not in the formation; robots are 0..{n - 1}")
     i = int(robot)
     R, t = poses[i]
-    pixels = render_cache.load_views(seed, (W, H), n)
+    pixels = render_cache.load_view(seed, (W, H), n, i)
     if pixels is not None:
-        image, depth = pixels["image"][i], pixels["depth"][i]
+        image, depth = pixels["image"], pixels["depth"]
     else:
         image, depth = render_view(build_scene(seed), K, R, t, (W, H),
                                    rng=np.random.default_rng([seed, 3, i]))

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import io
 import os
 import tempfile
 import zipfile
@@ -27,7 +28,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["ENV", "cache_dir", "code_version", "load_views", "save_views", "entry_path"]
+__all__ = ["ENV", "cache_dir", "code_version", "load_views", "load_view", "save_views",
+           "entry_path"]
 
 ENV = "FORMATION_MATCH_CACHE"
 """Environment variable: the cache folder, or ``off`` to disable the cache."""
@@ -93,6 +95,61 @@ def load_views(seed: int, size: tuple[int, int], n: int) -> dict | None:
         if out[name].shape != shape or out[name].dtype != dtype:
             return None
     return out
+
+
+def _stored_array_slice(f, z: zipfile.ZipFile, name: str, shape: tuple, dtype, i: int):
+    """Item ``i`` of the array ``name`` of an uncompressed ``.npz`` opened as ``z`` on ``f``,
+    read at its offset in the file (the other items are not read); ``None`` if it does not
+    hold an array of ``shape`` and ``dtype``."""
+    info = z.getinfo(f"{name}.npy")
+    if info.compress_type != zipfile.ZIP_STORED:
+        return None
+    f.seek(info.header_offset)
+    local = f.read(30)  # the zip local file header: name and extra-field lengths at 26, 28
+    if len(local) != 30 or local[:4] != b"PK\x03\x04":
+        return None
+    start = info.header_offset + 30 + int.from_bytes(local[26:28], "little") \
+        + int.from_bytes(local[28:30], "little")
+    f.seek(start)
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        got_shape, fortran, got_dtype = np.lib.format.read_array_header_1_0(f)
+    else:
+        got_shape, fortran, got_dtype = np.lib.format.read_array_header_2_0(f)
+    if tuple(got_shape) != shape or got_dtype != np.dtype(dtype) or fortran:
+        return None
+    item = shape[1:]
+    count = int(np.prod(item))
+    f.seek(f.tell() + i * count * np.dtype(dtype).itemsize)
+    out = np.fromfile(f, dtype=dtype, count=count)
+    return out.reshape(item) if out.size == count else None
+
+
+def load_view(seed: int, size: tuple[int, int], n: int, i: int) -> dict | None:
+    """Camera ``i``'s arrays of the entry ``(seed, size, n)``, or ``None`` (as :func:`load_views`).
+
+    Reads only that camera's pixels and depth from the file (a robot process needs its own
+    view only).
+
+    Returns
+    -------
+    dict or None
+        ``image`` (H, W, 3) uint8 RGB and ``depth`` (H, W) float32.
+    """
+    path = entry_path(seed, size, n)
+    if path is None or not path.is_file() or not 0 <= i < n:
+        return None
+    W, H = size
+    shapes = {"image": ((n, H, W, 3), np.uint8), "depth": ((n, H, W), np.float32)}
+    try:
+        with open(path, "rb") as f, zipfile.ZipFile(f) as z:
+            if str(np.load(io.BytesIO(z.read("key.npy")))) != _key(seed, size, n):
+                return None
+            out = {name: _stored_array_slice(f, z, name, shape, dtype, i)
+                   for name, (shape, dtype) in shapes.items()}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    return None if any(v is None for v in out.values()) else out
 
 
 def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import TeamError
-from pipeline.team import DEFAULT_OPTIONS, RobotEntry, Team, write_team
+from pipeline.team import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry, Team, write_team
 from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError"]
@@ -88,6 +88,7 @@ class TeamRun:
     finished_at: dict = field(default_factory=dict)  # id -> monotonic time of the result
     wall_s: float = 0.0
     start_s: float = 0.0
+    published_s: float = 0.0  # from the launch to the last result received
     stderr: dict = field(default_factory=dict)      # id -> last lines of the robot's stderr
 
     @property
@@ -192,6 +193,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
         for i in range(team.n):
+            env[LAUNCHED_AT_ENV] = repr(time.time())
             errfiles[i] = open(workdir / f"robot{i}.log", "wb")  # noqa: SIM115
             procs[i] = subprocess.Popen(
                 [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
@@ -239,6 +241,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                                     f"{who[0]} ({team.endpoint(who[0])}) "
                                     f"{'never started' if never else 'did not publish a result'}")
                 observer.cv.wait(0.05)
+        run.published_s = time.monotonic() - t0
         # wait for the processes that published to exit
         for i, p in procs.items():
             with contextlib.suppress(subprocess.TimeoutExpired):

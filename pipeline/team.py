@@ -52,6 +52,9 @@ DEFAULT_OPTIONS = {
     "loss_timeout": 40,
     "fusion": False,
 }
+#: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
+#: which it started a robot process, so the robot can report how long its start took
+LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 

@@ -35,6 +35,7 @@ from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
+from pipeline.team import LAUNCHED_AT_ENV
 from pipeline.transport.wire import encode_packet
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file"]
@@ -208,8 +209,17 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     return header, arrays
 
 
+def _since_launch() -> float | None:
+    """Seconds since the launcher started this process (None when started by hand)."""
+    try:
+        return round(time.time() - float(os.environ[LAUNCHED_AT_ENV]), 4)
+    except (KeyError, ValueError):
+        return None
+
+
 def run_robot_process(team, i: int, result_path=None) -> int:
     """The ``robot`` command: connect, handshake, run, publish; returns an exit code."""
+    startup = {"entered": _since_launch()}
     from pipeline.transport.zenoh_transport import ZenohTransport
 
     opts = team.options_for(i)
@@ -217,9 +227,11 @@ def run_robot_process(team, i: int, result_path=None) -> int:
                                seed=int(opts["fault_seed"]),
                                round_timeout_s=float(opts["round_timeout_s"]),
                                log=lambda s: _log(i, s))
+    startup["session_open"] = _since_launch()
     try:
         transport.status("started")
         waited = transport.handshake(float(opts["start_timeout_s"]))
+        startup["handshake_done"] = _since_launch()
         _log(i, f"all {len(transport.neighbours)} neighbours heard after {waited:.2f} s")
         try:
             header, arrays = robot_main(team, i, transport)
@@ -227,6 +239,10 @@ def run_robot_process(team, i: int, result_path=None) -> int:
             transport.status(f"failed: {exc}")
             raise
         header["handshake_s"] = round(waited, 4)
+        startup["main_done"] = _since_launch()
+        # seconds from the launcher's start of this process to each step (profile of the
+        # process start; None when the robot was started by hand)
+        header["since_launch_s"] = startup
         kept = int(arrays["link_alive"].sum())
         _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
                 f"{len(arrays['link_alive'])}")
@@ -239,7 +255,9 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         acked = transport.publish_result(encode_packet(header, [("result", arrays)]))
         _log(i, f"done in {header['timings_s']['total']:.2f} s, {transport.round} rounds"
                 f"{'' if acked or not team.observer else ' (observer did not acknowledge)'}")
-        time.sleep(0.2)  # let the last packets leave before the session closes
+        # the last round's packets were handed to Zenoh before the result, and closing the
+        # session drains what it still queues; a short pause covers a slow neighbour link
+        time.sleep(0.05)
     finally:
         transport.close()
     return 0

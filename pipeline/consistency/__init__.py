@@ -11,10 +11,25 @@ association graph is conflict-free (Prop. 4.5).
 * :mod:`.centralized` — the union-find check and the baselines; robots never use it.
 
 Robots talk only through :mod:`pipeline.transport`.
+
+The names below are imported on first use (PEP 562), so that a robot process that imports
+one robot-side module (e.g. :mod:`.termination`) does not load the simulator's driver and
+its dependencies.
 """
 
-from pipeline.consistency.engine import ConsistencyResult, detect_once, resolve_conflicts
-from pipeline.consistency.protocols import ProtocolOptions
-from pipeline.consistency.robot import Robot
+import importlib
 
 __all__ = ["ConsistencyResult", "resolve_conflicts", "detect_once", "ProtocolOptions", "Robot"]
+
+_HOME = {"ConsistencyResult": "engine", "resolve_conflicts": "engine", "detect_once": "engine",
+         "ProtocolOptions": "protocols", "Robot": "robot"}
+
+
+def __getattr__(name: str):
+    if name in _HOME:
+        return getattr(importlib.import_module(f"{__name__}.{_HOME[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *__all__])

@@ -57,6 +57,23 @@ def test_hit_gives_the_rendered_views_without_rendering(cache_dir, monkeypatch):
         data_synth.render("c", seed=2, size=SIZE, n_robots=5)
 
 
+def test_one_camera_is_read_alone_and_equals_its_slice(cache_dir, monkeypatch):
+    fresh = data_synth.render("d", seed=2, size=SIZE)
+    for i in (0, 3, 5):
+        one = cache.load_view(2, SIZE, 6, i)
+        assert one["image"].tobytes() == fresh.views[i].image.tobytes()
+        assert one["depth"].tobytes() == fresh.views[i].depth.tobytes()
+    assert cache.load_view(2, SIZE, 6, 6) is None
+    assert cache.load_view(2, SIZE, 5, 0) is None  # no such entry
+    monkeypatch.setattr(data_synth, "render_view", _fail)
+    view, _ = data_synth.render_robot(4, "d", seed=2, size=SIZE)
+    assert view.image.tobytes() == fresh.views[4].image.tobytes()
+    # a damaged entry: no view, never a wrong one
+    path = cache.entry_path(2, SIZE, 6)
+    path.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+    assert cache.load_view(2, SIZE, 6, 5) is None
+
+
 def test_scene_is_built_on_demand(cache_dir):
     f = data_synth.render("a", seed=1, size=SIZE)
     assert "crate2.corner1" in f.scene.landmarks
