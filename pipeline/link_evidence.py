@@ -33,7 +33,7 @@ from pipeline.errors import InputError
 from pipeline.matching import sampson_error_px
 from pipeline.types import Links, PairMatches
 
-__all__ = ["LinkEvidence", "link_evidence", "geometric_llr", "ratio_llr", "pose_fundamental",
+__all__ = ["LinkEvidence", "link_evidence", "edge_evidence", "geometric_llr", "ratio_llr", "pose_fundamental",
            "MIN_SCALE_PX"]
 
 #: smallest epipolar error scale (pixels) a good link is assumed to have
@@ -148,4 +148,33 @@ def link_evidence(matches: list[PairMatches], links: Links, views=None, features
                                          features[m.j].keypoints[links.feat_j[sel]])
     geo = np.where(np.isfinite(pose), pose, epi)
     weight = geometric_llr(geo, edge, threshold_px) + ratio_llr(ratio)
+    return LinkEvidence(ratio, epi, pose, weight)
+
+
+def edge_evidence(pm: PairMatches, keypoints_i: np.ndarray, keypoints_j: np.ndarray,
+                  pose_i=None, pose_j=None, threshold_px: float = 1.0) -> LinkEvidence:
+    """Evidence of the links of one communication edge, as its two robots compute it.
+
+    The per-edge form of :func:`link_evidence` (the same models, the scale ``β`` from this
+    edge's own links), for a robot that holds only its own keypoints and what its neighbour
+    sent it: ``pm`` (``pm.pairs[:, 0]`` indexes robot ``pm.i``'s keypoints, ``[:, 1]``
+    robot ``pm.j``'s), both keypoint arrays ``(m_i, 2)``, ``(m_j, 2)`` and, where both poses
+    are known, ``pose_i = (K, R, t)`` and ``pose_j``. On every edge of a run where all poses
+    are known, or none, it gives :func:`link_evidence`'s values bit for bit.
+
+    Returns
+    -------
+    LinkEvidence, each array ``(len(pm.pairs),)``
+    """
+    L = len(pm.pairs)
+    ratio = np.asarray(pm.ratio, dtype=np.float64).reshape(L)
+    epi = np.asarray(pm.epipolar_error, dtype=np.float64).reshape(L)
+    pose = np.full(L, np.nan)
+    if L and pose_i is not None and pose_j is not None:
+        (Ki, Ri, ti), (Kj, Rj, tj) = pose_i, pose_j
+        F = pose_fundamental(Ki, Ri, ti, Kj, Rj, tj)
+        pairs = np.asarray(pm.pairs).reshape(-1, 2)
+        pose[:] = sampson_error_px(F, keypoints_i[pairs[:, 0]], keypoints_j[pairs[:, 1]])
+    geo = np.where(np.isfinite(pose), pose, epi)
+    weight = geometric_llr(geo, np.zeros(L, dtype=np.int64), threshold_px) + ratio_llr(ratio)
     return LinkEvidence(ratio, epi, pose, weight)

@@ -18,7 +18,11 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # K of the image as the robot uses it (after downscaling to max_size)
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
-                  "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40},
+                  "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40,
+                  "resolution": "paper",          # or "evidence" (paper with drop_prob > 0)
+                  "merge_radius": 0.5, "contrast_threshold": null, "rootsift": false,
+                  "budget_after_merge": false, "threshold_px": 1.0},
+              # max_features / threshold_px null: scaled with the image size (photos)
       "robot_options": {"3": {"drop_prob": 0.2}}  # optional per-robot overrides of "options"
     }
 
@@ -51,7 +55,13 @@ DEFAULT_OPTIONS = {
     "start_timeout_s": 60.0,
     "loss_timeout": 40,
     "fusion": False,
+    "resolution": "paper",
+    "contrast_threshold": None,
+    "rootsift": False,
+    "budget_after_merge": False,
+    "threshold_px": 1.0,
 }
+RESOLUTIONS = ("paper", "evidence")
 #: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
 #: which it started a robot process, so the robot can report how long its start took
 LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
@@ -263,8 +273,18 @@ def _check_options(opts: dict, where: str) -> None:
             raise InputError(f"{where}: option {k} {v!r} must be a number > 0")
     for k in ("max_features", "loss_timeout"):
         v = opts.get(k, 8)
+        if k == "max_features" and v is None:
+            continue  # scaled with the image size (photo_max_features)
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise InputError(f"{where}: option {k} {v!r} must be an integer >= 1")
+    for k in ("threshold_px", "contrast_threshold"):
+        v = opts.get(k)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
+                              or not v > 0):
+            raise InputError(f"{where}: option {k} {v!r} must be a number > 0 or null")
+    if opts.get("resolution", "paper") not in RESOLUTIONS:
+        raise InputError(f"{where}: option resolution {opts['resolution']!r} must be one of "
+                         f"{', '.join(RESOLUTIONS)}")
 
 
 def load_team(path) -> Team:
@@ -296,25 +316,14 @@ def add_transport_argument(parser) -> None:
     parser.add_argument("--transport", default="sim", choices=TRANSPORTS,
                         help="sim: robots are objects of this process (default, fastest); "
                              "zenoh: one process per robot on this machine, talking over "
-                             "Zenoh, resolving by Alg. 1 (--resolution paper); see README, "
-                             "'Transports'")
+                             "Zenoh (no fusion); see README, 'Transports'")
 
 
 def resolution_for_transport(args) -> str:
-    """The resolution a command runs with: ``--resolution`` on ``sim``; ``paper`` on ``zenoh``.
+    """The resolution a command runs with: ``--resolution`` on either transport.
 
-    Robot processes run the fault-tolerant Alg. 1 (:mod:`pipeline.consistency.termination`);
-    the evidence rule (:mod:`pipeline.consistency.evidence`) runs only in the simulator.
-
-    Raises
-    ------
-    InputError
-        ``--transport zenoh`` with an explicit ``--resolution evidence``.
+    Robot processes run Alg. 1 or the evidence rule like the simulator
+    (:func:`pipeline.teamrobot.team_resolution`: with ``--drop-prob`` both fall back to the
+    fault-tolerant Alg. 1).
     """
-    if getattr(args, "transport", "sim") != "zenoh":
-        return args.resolution
-    if args.resolution == "evidence" and getattr(args, "resolution_given", False):
-        raise InputError("--resolution evidence runs only with --transport sim; robot "
-                         "processes over zenoh run Alg. 1 (--resolution paper, the default "
-                         "with --transport zenoh)")
-    return "paper"
+    return args.resolution

@@ -4,20 +4,25 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
 
 1. **Its own data.** A rendered formation: it renders only its own camera
    (:func:`data_synth.render_robot`; the scene model is the world it looks at, the other
-   cameras are not rendered). A links file (``resolve``): it keeps only the rows that touch
-   it. Public knowledge, as in the simulator: the team size ``n`` and the comm graph.
-2. **Its own features** (:func:`pipeline.features.extract`).
-3. **Exchange for matching.** Round 0: it sends every neighbour its keypoints, descriptors
-   and intrinsics (``features`` message, counted in bytes). Matching of edge ``(i, j)`` is done
-   by exactly one side, the lower id ``i``, with the very function the simulator uses
-   (:func:`pipeline.matching.match_pair`), which then sends ``j`` the result (``matches``:
-   pairs, ratios, epipolar errors). So both ends hold the same ``A_ij`` and it equals the
-   simulator's links of that edge.
+   cameras are not rendered). A photograph (``run-images``): it loads only its own file, with
+   the intrinsics the team file gives it. A links file (``resolve``): it keeps only the rows
+   that touch it. Public knowledge, as in the simulator: the team size ``n`` and the comm
+   graph.
+2. **Its own features** (:func:`pipeline.features.extract`, with the team's feature options:
+   the photo defaults of ``run-images`` or the formations').
+3. **Exchange for matching.** Round 0: it sends every neighbour its keypoints, descriptors,
+   intrinsics, image size and, when known, its pose (``features`` message, counted in
+   bytes). Matching of edge ``(i, j)`` is done by exactly one side, the lower id ``i``, with
+   the very function the simulator uses (:func:`pipeline.matching.match_pair`), which then
+   sends ``j`` the result (``matches``: pairs, ratios, epipolar errors and each link's local
+   evidence, :func:`pipeline.link_evidence.edge_evidence`). So both ends hold the same
+   ``A_ij`` and the same evidence, equal to the simulator's for that edge.
 4. **Feature counts** (public knowledge of Sec. II: every robot's ``m_j`` gives the column
    offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
    learnt something new), enough on any connected graph of ``n`` robots.
 5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
-   run_consistency_locally`): detection, Alg. 1, repeated until conflict-free.
+   run_consistency_locally`): detection, then Alg. 1 or the evidence rule
+   (:func:`team_resolution`), repeated until conflict-free.
 6. **Publishes** its link table with every deletion (reason, round, iteration), the matches
    it holds, its keypoints (for the observer's evaluation only) and its counters.
 """
@@ -38,7 +43,7 @@ from pipeline.errors import InputError
 from pipeline.team import LAUNCHED_AT_ENV
 from pipeline.transport.wire import encode_packet
 
-__all__ = ["robot_main", "run_robot_process", "own_links_from_file"]
+__all__ = ["robot_main", "run_robot_process", "own_links_from_file", "team_resolution"]
 
 
 def _log(i: int, text: str) -> None:
@@ -51,8 +56,8 @@ def peak_rss_bytes() -> int:
 
 
 def own_links_from_file(path, i: int):
-    """The rows of a links file that touch robot ``i``: ``(nbr, r, s)`` arrays and the file's
-    row index of each (the robot reads the shared file and keeps its own rows)."""
+    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays (the
+    robot reads the shared file and keeps its own rows)."""
     from pipeline.linkscsv import read_links_csv
 
     lf = read_links_csv(path)
@@ -62,7 +67,7 @@ def own_links_from_file(path, i: int):
     nbr = np.concatenate([L.cam_j[a], L.cam_i[b]])
     r = np.concatenate([L.feat_i[a], L.feat_j[b]])
     s = np.concatenate([L.feat_j[a], L.feat_i[b]])
-    return nbr, r, s
+    return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
 
 
 def _load_view(team, i: int):
@@ -92,31 +97,56 @@ def _load_view(team, i: int):
     raise InputError(f"data kind {data['kind']!r} has no images")
 
 
+def _pose(view):
+    """``(K, R, t)`` of a view whose pose is known, else None."""
+    if view.R is None or view.t is None:
+        return None
+    return (np.asarray(view.K, np.float64), np.asarray(view.R, np.float64),
+            np.asarray(view.t, np.float64).reshape(3))
+
+
 def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
-    """Steps 1–4 of the module docstring; returns (features, matches, fpc, nbr, r, s)."""
-    from pipeline.features import MERGE_RADIUS_PX, extract
-    from pipeline.matching import match_pair
-    from pipeline.types import PairMatches
+    """Steps 1–4 of the module docstring.
+
+    Returns ``(features, view, matches, weights, fpc)``: ``matches`` and ``weights`` (the
+    local evidence of each link, :func:`pipeline.link_evidence.edge_evidence`, computed by the
+    matching end and sent with the matches) per neighbour.
+    """
+    from pipeline.features import MERGE_RADIUS_PX, extract, photo_max_features
+    from pipeline.link_evidence import edge_evidence
+    from pipeline.matching import match_pair, photo_threshold_px
+    from pipeline.types import Features, PairMatches
 
     t = time.perf_counter()
     view = _load_view(team, i)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
-    feats = extract(view, opts["features"], int(opts["max_features"]),
-                    float(opts.get("merge_radius", MERGE_RADIUS_PX)))
+    h, w = view.image.shape[:2]
+    budget = opts.get("max_features")
+    feats = extract(view, opts["features"],
+                    photo_max_features(w, h) if budget is None else int(budget),
+                    float(opts.get("merge_radius", MERGE_RADIUS_PX)),
+                    contrast_threshold=opts.get("contrast_threshold"),
+                    rootsift=bool(opts.get("rootsift", False)),
+                    budget_after_merge=bool(opts.get("budget_after_merge", False)))
     timings["features"] = time.perf_counter() - t
     n = team.n
     known = np.full(n, -1, dtype=np.int32)
     known[i] = len(feats)
+    pose = _pose(view)
     payload = {"keypoints": feats.keypoints, "descriptors": feats.descriptors,
                "K": np.asarray(view.K, np.float64),
-               "intrinsics_known": np.array([view.intrinsics_known], np.uint8)}
+               "intrinsics_known": np.array([view.intrinsics_known], np.uint8),
+               "size": np.array([w, h], np.int32)}
+    if pose is not None:  # a robot that knows its pose tells it (known-pose evidence)
+        payload["R"], payload["t"] = pose[1], pose[2]
     for k in sorted(transport.neighbours):
         transport.send(k, "features", payload)
         transport.send(k, "counts", {"m": known.copy()})
     sent = known.copy()
     t = time.perf_counter()
     matches: dict[int, PairMatches] = {}
+    weights: dict[int, np.ndarray] = {}
     rounds = max(n - 1, 2)
     for rnd in range(1, rounds + 1):
         inbox, _ = transport.end_round()
@@ -126,22 +156,31 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
                 upd = (known < 0) & (p["m"] >= 0)
                 known[upd] = p["m"][upd]
             elif msg.kind == "features" and msg.src > i:
-                from pipeline.types import Features
-
                 other = Features(p["keypoints"], p["descriptors"],
                                  np.zeros(len(p["keypoints"]), np.float32), feats.method)
                 both_known = bool(view.intrinsics_known and p["intrinsics_known"][0])
-                pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known)
+                thr = opts.get("threshold_px", 1.0)
+                if thr is None:  # scaled with the larger image, as matching does
+                    wj, hj = (int(v) for v in p["size"])
+                    thr = photo_threshold_px(max(w, wj), max(h, hj))
+                pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known,
+                                threshold_px=float(thr))
+                other_pose = (p["K"], p["R"], p["t"]) if "R" in p else None
+                ev = edge_evidence(pm, feats.keypoints, other.keypoints,
+                                   pose if other_pose is not None else None, other_pose)
                 matches[msg.src] = pm
+                weights[msg.src] = ev.weight
                 transport.send(msg.src, "matches", {
                     "pairs": pm.pairs.astype(np.int32), "ratio": pm.ratio.astype(np.float32),
                     "epipolar_error": pm.epipolar_error.astype(np.float32),
+                    "weight": ev.weight.astype(np.float64),
                     "n_putative": np.array([pm.n_putative], np.int32),
                     "reason": np.frombuffer(pm.reason.encode(), np.uint8)})
             elif msg.kind == "matches":
                 matches[msg.src] = PairMatches(
                     msg.src, i, p["pairs"].reshape(-1, 2), p["ratio"], p["epipolar_error"],
                     int(p["n_putative"][0]), bytes(p["reason"]).decode())
+                weights[msg.src] = p["weight"]
         if rnd < rounds and (known != sent).any():
             for k in sorted(transport.neighbours):
                 transport.send(k, "counts", {"m": known.copy()})
@@ -153,16 +192,31 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
         raise RuntimeError(f"robot {i}: no matching with neighbour {missing[0]} after "
                            f"{rounds} rounds")
     fpc = np.where(known < 0, 0, known).astype(np.int64)
-    nbr, r, s = [], [], []
+    return feats, view, matches, weights, fpc
+
+
+def _own_rows(i: int, matches: dict, weights: dict):
+    """This robot's link table ``(nbr, r, s, weight)`` from the matches it holds."""
+    nbr, r, s, w = [], [], [], []
     for k, pm in sorted(matches.items()):
         mine, theirs = (0, 1) if pm.i == i else (1, 0)
         nbr.append(np.full(len(pm.pairs), k, np.int64))
         r.append(pm.pairs[:, mine].astype(np.int64))
         s.append(pm.pairs[:, theirs].astype(np.int64))
-    def cat(parts):
-        return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        w.append(np.asarray(weights[k], np.float64).reshape(len(pm.pairs)))
 
-    return feats, matches, fpc, cat(nbr), cat(r), cat(s)
+    def cat(parts, dtype=np.int64):
+        return np.concatenate(parts) if parts else np.zeros(0, dtype)
+
+    return cat(nbr), cat(r), cat(s), cat(w, np.float64)
+
+
+def team_resolution(team) -> str:
+    """The rule the robots resolve by: the team's ``resolution`` option, except that with
+    message loss injected at any robot the fault-tolerant Alg. 1 runs (as the simulator
+    does on a faulty network). Public knowledge: every robot reads the same team file."""
+    lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
+    return "paper" if lossy else str(team.options.get("resolution", "paper"))
 
 
 def robot_main(team, i: int, transport) -> tuple[dict, dict]:
@@ -176,15 +230,25 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     t0 = time.perf_counter()
     arrays: dict = {}
     matches_hdr = []
+    keypoints, projection = None, None
     if team.data["kind"] == "links":
+        from pipeline.link_evidence import ratio_llr
+
         fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
-        nbr, r, s = own_links_from_file(team.resolve_path(team.data["links"]), i)
+        nbr, r, s, quality = own_links_from_file(team.resolve_path(team.data["links"]), i)
+        weight = ratio_llr(1.0 - quality)  # the evidence a links file carries
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
             raise InputError(f"robot {i}: link to camera {int(nbr[bad[0]])}, which is not its "
                              "neighbour in the team's comm graph")
     else:
-        feats, matches, fpc, nbr, r, s = _features_and_matches(team, i, transport, opts, timings)
+        feats, view, matches, weights, fpc = _features_and_matches(team, i, transport, opts,
+                                                                   timings)
+        nbr, r, s, weight = _own_rows(i, matches, weights)
+        keypoints = feats.keypoints
+        pose = _pose(view)
+        if pose is not None:
+            projection = pose[0] @ np.c_[pose[1], pose[2]]
         arrays["keypoints"] = feats.keypoints
         for k, pm in sorted(matches.items()):
             matches_hdr.append({"i": pm.i, "j": pm.j, "n_putative": pm.n_putative,
@@ -192,17 +256,25 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             arrays[f"pairs_{k}"] = pm.pairs.astype(np.int32)
             arrays[f"ratio_{k}"] = pm.ratio.astype(np.float32)
             arrays[f"eperr_{k}"] = pm.epipolar_error.astype(np.float32)
-    robot = Robot(i, fpc, nbr, r, s)
+    order = np.lexsort((s, nbr))  # the order of the Robot's link table
+    robot = Robot(i, fpc, nbr[order], r[order], s[order])
+    resolution = team_resolution(team)
+    if resolution == "evidence":
+        from pipeline.consistency.evidence import equip
+
+        equip(robot, weight[order],
+              np.zeros((robot.m, 2)) if keypoints is None else keypoints, projection)
     if hasattr(transport, "status"):
         transport.status("consistency")
         transport.lossy = True  # faults are injected into the consistency stage, as simulated
     protocol = ProtocolOptions(reliable=True, loss_timeout=int(opts["loss_timeout"]))
     t = time.perf_counter()
-    run = run_consistency_locally(robot, transport, protocol, team.n)
+    run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
     timings["consistency"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     arrays.update(robot_link_log(robot))
     header = {"id": i, "features_per_camera": fpc.tolist(), "matches": matches_hdr,
+              "resolution": resolution,
               "counters": transport.counters(), "run": {k: v for k, v in vars(run).items()},
               "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
               "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid()}

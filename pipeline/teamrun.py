@@ -7,8 +7,8 @@ on every link (:func:`pipeline.consistency.linklog.merge_link_logs` over the rob
 logs), and the report. Evaluation against ground truth is centralized checking code: it
 renders the formation itself, as ``run-formation`` does, and never feeds anything back.
 
-The robots resolve by Alg. 1 (``resolution="paper"``); the evidence rule runs only in the
-simulator. Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
+The robots resolve by Alg. 1 or by the evidence rule, as the simulator does
+(:func:`pipeline.teamrobot.team_resolution`). Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
 (so compare it with a simulator run with ``--no-fusion``).
 """
 
@@ -30,9 +30,13 @@ CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "ack", "heartbeat")
 FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport"}
 
 
-def team_options(features: str = "sift", max_features: int = 2000, faults=None,
-                 round_timeout_s: float = 5.0, merge_radius: float | None = None) -> dict:
+def team_options(features: str = "sift", max_features: int | None = 2000, faults=None,
+                 round_timeout_s: float = 5.0, merge_radius: float | None = None,
+                 resolution: str = "paper", **feature_options) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
+
+    ``feature_options``: ``contrast_threshold``, ``rootsift``, ``budget_after_merge``,
+    ``threshold_px`` (see :data:`pipeline.team.DEFAULT_OPTIONS`).
 
     Raises
     ------
@@ -42,9 +46,11 @@ def team_options(features: str = "sift", max_features: int = 2000, faults=None,
     """
     from pipeline.features import MERGE_RADIUS_PX
 
-    opts = {"features": features, "max_features": int(max_features),
+    opts = {"features": features,
+            "max_features": None if max_features is None else int(max_features),
             "round_timeout_s": float(round_timeout_s),
-            "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius)}
+            "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius),
+            "resolution": resolution, **feature_options}
     if faults is not None:
         if faults.crash or faults.switching_topology:
             raise InputError("--crash and --switching-topology are faults of the simulated "
@@ -115,7 +121,8 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     comp = np.concatenate([results[i][1]["component"] if i in results
                            else np.full(int(fpc[i]), -1, np.int64) for i in range(n)])
     heads = {i: h for i, (h, _) in results.items()}
-    any_run = heads[min(heads)]["run"] if heads else {}
+    any_run_head = heads[min(heads)] if heads else {}
+    any_run = any_run_head.get("run", {})
     msgs = {k: 0 for k in CONSISTENCY_KINDS}
     byts = {k: 0 for k in CONSISTENCY_KINDS}
     for h in heads.values():
@@ -151,7 +158,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
                                        default=0)),
         asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
         deleted_links=int(d["deleted"].sum()), protocol="reliable", survivors=survivors,
-        resolution="paper",
+        resolution=str(any_run_head.get("resolution", "paper")),
         termination="local (termination wave)", faults=faults)
     return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
                              iteration=d["iteration"], round=d["round"], case=d["case"],
@@ -182,12 +189,10 @@ def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
     )
     from pipeline.types import Features
 
-    if config.resolution != "paper":
-        raise InputError(f"resolution {config.resolution!r} runs only in the simulator; robot "
-                         "processes over zenoh run Alg. 1 (resolution 'paper')")
     timer = timer or StageTimer()
     opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
-                        merge_radius_for(config.resolution, config.merge_radius))
+                        merge_radius_for(config.resolution, config.merge_radius),
+                        config.resolution)
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6

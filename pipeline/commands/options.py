@@ -53,19 +53,11 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
 
 def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence") -> None:
     """``--resolution paper|evidence``: Alg. 1 of the paper, or the evidence-aware rule."""
-    p.add_argument("--resolution", choices=RESOLUTIONS, default=default, action=_Given,
+    p.add_argument("--resolution", choices=RESOLUTIONS, default=default,
                    help="how the robots cut conflictive sets: paper = Alg. 1 of Aragues et al.; "
                         "evidence = the robots of each set agree on the cut that keeps the "
-                        f"best-supported links (default {default}; with --transport zenoh "
-                        "always paper)")
-
-
-class _Given(argparse.Action):
-    """Store the value and remember that the user gave it (``args.<dest>_given``)."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        setattr(namespace, self.dest, values)
-        setattr(namespace, f"{self.dest}_given", True)
+                        f"best-supported links (default {default}; on a lossy network, "
+                        "--drop-prob, the fault-tolerant Alg. 1 runs instead)")
 
 
 def add_merge_radius_option(p: argparse.ArgumentParser) -> None:

@@ -104,7 +104,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     if transport == "zenoh":
-        res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults)
+        res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults, resolution)
     else:
         with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
             res, fault_section = consistency_stage(
@@ -145,26 +145,29 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     return summary
 
 
-def _resolve_over_zenoh(m, edges, links, faults):
+def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
     """The consistency stage as one robot process per camera over Zenoh.
 
-    The links to make consistent (kept rows, compact ids) go to a file in a temporary team
-    folder; each robot reads its own rows of it (:func:`pipeline.teamrun.resolve_conflicts_team`).
+    The links to make consistent (kept rows, compact ids, with their quality: the evidence
+    of the evidence rule) go to a file in a temporary team folder; each robot reads its own
+    rows of it (:func:`pipeline.teamrun.resolve_conflicts_team`).
     Returns ``(ConsistencyResult, faults section or None)``.
     """
     import tempfile
 
     from pipeline.commgraph import comm_edges_for
     from pipeline.faults import fault_report
-    from pipeline.linkscsv import write_links_csv
     from pipeline.teamrun import resolve_conflicts_team, team_options
-    from pipeline.types import LinkLedger
 
     with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
-        path = f"{work}/links.csv"
-        write_links_csv(path, LinkLedger.all_kept(links))
+        path = Path(work) / "links.csv"
+        path.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+            f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
+                links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                links.feat_j.tolist(), links.quality.tolist(), strict=True)))
         res = resolve_conflicts_team(path, m, comm_edges_for(m, links, edges),
-                                     team_options(faults=faults), workdir=work)
+                                     team_options(faults=faults, resolution=resolution),
+                                     workdir=work)
     fault_section = None
     if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
         fault_section = fault_report(faults or FaultConfig(), res)

@@ -60,7 +60,7 @@ from pipeline.transport import Message, Transport
 
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
-           "CASE_EVIDENCE"]
+           "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -394,3 +394,64 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     for rb in robots:
         labels.update(rb.evidence.bundles)
     return dict(rounds=t, conflictive_sets=len(labels), robots_in_sets=sum(1 for x in touched if x))
+
+
+# --------------------------------------------------------------------------- one robot alone
+
+
+def _set_neighbours(robot: Robot) -> set[int]:
+    st: EvidenceState = robot.evidence
+    return set().union(*st.set_nbrs.values()) if st.set_nbrs else set()
+
+
+def start_evidence_reliable(robot: Robot, rel, now: int) -> int:
+    """Round 0 of the rule run by a robot alone (its own process): bundles over the reliable
+    channel of ``rel`` (a :class:`~.reliable.ReliableState`); returns its conflictive sets.
+
+    With no driver to end the flood when nothing is in flight, each robot ends the phase by
+    the termination wave of :mod:`.termination` with :func:`evidence_done` as its *done*
+    predicate. The bundles and the solution are those of :func:`start_evidence` and
+    :func:`evidence_step`, so every robot cuts what it cuts in the simulator.
+    """
+    rel.lost_in_phase = False
+    return start_evidence(robot, lambda dst, kind, p: rel.chan.send(dst, kind, p, now))
+
+
+def evidence_round(robot: Robot, rel, inbox: list[Message], now: int, phase_round: int) -> None:
+    """One network round of the rule for a robot alone (see :func:`start_evidence_reliable`).
+
+    Bundles arrive through the reliable channel (acknowledged, delivered once). A robot hears
+    every neighbour it shares a conflictive set with at least every ``heartbeat_every``
+    rounds (heartbeats), so a neighbour silent for ``loss_timeout`` rounds has crashed: it is
+    declared lost and its links are cut (``robot-lost``), as in the reliable Alg. 1.
+    """
+    from pipeline.consistency.reliable import _cut_lost, _measure
+
+    chan = rel.chan
+    msgs = [m for m in chan.receive(inbox, now) if m.kind == "bundle"]
+    nbrs = _set_neighbours(robot) - chan.lost
+    lost = chan.check_lost(now, nbrs)
+    if lost:
+        _cut_lost(robot, rel, lost, phase_round)
+    evidence_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
+    chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+    _measure(robot, rel)
+
+
+def evidence_done(robot: Robot, rel, lost_somewhere: bool) -> bool:
+    """The *done* predicate of the rule for a robot alone.
+
+    Done when every bundle it sent is acknowledged and either every conflictive set it takes
+    part in is solved, or some robot of the team declared a neighbour lost in this phase
+    (``lost_somewhere``: its own loss or the wave's bit). A set is solved only from all its
+    bundles, so a robot that cut its side of a link has forwarded to the other end, before
+    being done, every bundle that end lacked: the other end solves the same set alike (cuts
+    stay symmetric). A set that lost a robot before all its bundles were out is never
+    complete; its robots stop waiting once the loss is known, cut nothing in it, and the
+    detection that follows (repeated after a loss, :mod:`.termination`) finds it again
+    without the lost robot.
+    """
+    st: EvidenceState = robot.evidence
+    if not rel.chan.idle():
+        return False
+    return lost_somewhere or rel.lost_in_phase or not (set(st.bundles) - st.solved)

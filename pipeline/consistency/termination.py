@@ -7,14 +7,16 @@ detection and Alg. 1 of :mod:`.reliable` — and decides locally when a phase is
 
 Phases (as in :func:`.engine.resolve_conflicts`, fault-tolerant protocol)
     detection (Sec. III, lockstep) → if some robot lost a neighbour during it: detection
-    again; else if no robot found a conflictive feature: stop; else resolution (Alg. 1) and
-    the next detection (Prop. 4.5).
+    again; else if no robot found a conflictive feature: stop; else resolution (Alg. 1, or
+    the evidence rule of :mod:`.evidence`) and the next detection (Prop. 4.5).
 
 Local termination rule (the termination wave)
     Each robot ``i`` has a *done* predicate that it evaluates on its own state after every
     round: detection — stopped by Prop. 3.5, every linked neighbour's ``final`` received and
     all its messages acknowledged (:func:`.reliable.detection_done`); resolution — all its
-    messages acknowledged (``Channel.idle``). With every round's packet it tells its
+    messages acknowledged (``Channel.idle``); evidence rule — all its messages acknowledged
+    and every set it takes part in solved, or a loss known (:func:`.evidence.evidence_done`;
+    its bit is sticky, so the predicate stays stable). With every round's packet it tells its
     neighbours a counter ``c_i``::
 
         c_i(t) = 0                                                   if not done_i(t)
@@ -54,6 +56,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.consistency.channel import Channel
+from pipeline.consistency.evidence import (
+    evidence_done,
+    evidence_round,
+    start_evidence_reliable,
+)
 from pipeline.consistency.protocols import RESOLUTION, ProtocolOptions, end_phase
 from pipeline.consistency.reliable import (
     ReliableState,
@@ -136,7 +143,7 @@ def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave
 
 
 def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
-                            n_robots: int | None = None) -> RobotRun:
+                            n_robots: int | None = None, resolution: str = "paper") -> RobotRun:
     """Detection and resolution until conflict-free, ended by the local rule (module docstring).
 
     Parameters
@@ -145,6 +152,11 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
     transport : RoundEndpoint — its end of the network
     protocol : ProtocolOptions or None — the fault-tolerant protocol's parameters
     n_robots : int or None — team size ``n`` (default ``robot.n``)
+    resolution : ``paper`` or ``evidence``
+        ``paper``: Alg. 1 over the reliable channel. ``evidence``: the flood-and-solve rule of
+        :mod:`.evidence` (the robot must hold its evidence, :func:`.evidence.equip`), ended by
+        the same wave with :func:`.evidence.evidence_done`; like the simulator, one pass
+        leaves the sets it solved conflict-free for the next detection.
 
     Returns
     -------
@@ -188,13 +200,22 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
             break
         log.iterations += 1
         start = transport.round
-        roots = start_resolution_reliable(robot, st, transport.round)
-        rounds, bits = _run_phase(
-            robot, st, transport, wave,
-            lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
-            chan.idle, res_cap, "resolution")
-        # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
-        end_phase(RESOLUTION, [robot])
+        if resolution == "evidence":
+            roots = start_evidence_reliable(robot, st, transport.round)
+            rounds, bits = _run_phase(
+                robot, st, transport, wave,
+                lambda inbox, now, t: evidence_round(robot, st, inbox, now, t),
+                lambda: evidence_done(robot, st, bool(wave.bits & LOST)), res_cap, "resolution")
+            # the next detection examines the sets again (solved ones are conflict-free)
+            robot.candidates = robot.conflictive.copy()
+        else:
+            roots = start_resolution_reliable(robot, st, transport.round)
+            rounds, bits = _run_phase(
+                robot, st, transport, wave,
+                lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
+                chan.idle, res_cap, "resolution")
+            # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
+            end_phase(RESOLUTION, [robot])
         log.resolution_rounds += rounds
         log.phases.append(dict(phase="resolution", iteration=iteration, start_round=start,
                                rounds=rounds, roots=int(roots), lost_somewhere=bool(bits & LOST)))

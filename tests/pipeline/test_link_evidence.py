@@ -7,6 +7,7 @@ from pipeline.errors import InputError
 from pipeline.link_evidence import (
     MIN_SCALE_PX,
     LinkEvidence,
+    edge_evidence,
     geometric_llr,
     link_evidence,
     pose_fundamental,
@@ -78,3 +79,21 @@ def test_from_quality_reads_one_minus_ratio():
     ev = LinkEvidence.from_quality(Links([0, 0], [0, 1], [1, 1], [0, 1], [0.5, 0.8]))
     np.testing.assert_allclose(ev.ratio, [0.5, 0.2])
     np.testing.assert_allclose(ev.weight, ratio_llr([0.5, 0.2]))
+
+
+def test_edge_evidence_equals_link_evidence_edge_by_edge():
+    """What two robots compute for their edge is the centralized evidence of its links."""
+    views, feats, pm = _scene()
+    rng = np.random.default_rng(2)
+    # a second edge with other errors: the scale is per edge in both forms
+    pm2 = PairMatches(0, 1, np.array([[0, 1], [2, 0]], np.int32),
+                      rng.uniform(0.2, 0.8, 2).astype(np.float32),
+                      rng.uniform(0.0, 1.0, 2).astype(np.float32))
+    pm.epipolar_error = rng.uniform(0.0, 1.0, 3).astype(np.float32)
+    links = Links.from_matches([pm, pm2])
+    for v, f in ((views, feats), (None, None)):
+        whole = link_evidence([pm, pm2], links, v, f)
+        poses = [None, None] if v is None else [(x.K, x.R, x.t) for x in v]
+        parts = [edge_evidence(m, feats[0].keypoints, feats[1].keypoints, *poses)
+                 for m in (pm, pm2)]
+        assert np.concatenate([p.weight for p in parts]).tobytes() == whole.weight.tobytes()

@@ -22,7 +22,7 @@ from pipeline.run import FormationConfig, run_formation
 from pipeline.teamrun import run_formation_team
 from pipeline.types import Links
 
-SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False, resolution="paper")
+SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False)
 
 
 @pytest.fixture(autouse=True)
@@ -32,7 +32,8 @@ def _scene_cache(tmp_path_factory, monkeypatch):
 
 @pytest.fixture(scope="module")
 def links_input(tmp_path_factory):
-    """A 4-camera links file with conflictive sets, and its complete comm graph."""
+    """A 4-camera links file with conflictive sets and a quality per link, and its complete
+    comm graph."""
     rng = np.random.default_rng(1)
     rows = set()
     for _ in range(120):
@@ -46,8 +47,10 @@ def links_input(tmp_path_factory):
         seen |= {(i, r, j), (j, s, i)}
         keep.append((i, r, j, s))
     d = tmp_path_factory.mktemp("links")
-    (d / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n"
-                              + "".join(f"{i},{r},{j},{s}\n" for i, r, j, s in keep))
+    # a quality (1 - Lowe ratio) per link: the evidence of the evidence rule
+    quality = rng.uniform(0.05, 0.95, len(keep)).round(3)
+    (d / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+        f"{i},{r},{j},{s},{q}\n" for (i, r, j, s), q in zip(keep, quality, strict=True)))
     (d / "graph.csv").write_text("".join(f"{i},{j}\n" for i in range(4) for j in range(i + 1, 4)))
     return d
 
@@ -58,26 +61,34 @@ def _rows(path):
     return [tuple(line.split(",")[:6]) for line in Path(path).read_text().splitlines()]
 
 
-@pytest.mark.parametrize("formation", ["a", "b", "c", "d"])
-def test_zenoh_links_equal_the_simulators_formation(formation, tmp_path):
+@pytest.mark.parametrize("formation,resolution", [("a", "evidence"), ("b", "evidence"),
+                                                   ("c", "evidence"), ("d", "evidence"),
+                                                   ("d", "paper")])
+def test_zenoh_links_equal_the_simulators_formation(formation, resolution, tmp_path):
     sim, zen = tmp_path / "sim", tmp_path / "zenoh"
-    run_formation(FormationConfig(formation=formation, out=str(sim), **SMALL))
-    run_formation(FormationConfig(formation=formation, out=str(zen), **SMALL),
-                  transport="zenoh")
-    assert _rows(zen / "links.csv") == _rows(sim / "links.csv")
+    cfg = dict(formation=formation, resolution=resolution, **SMALL)
+    run_formation(FormationConfig(out=str(sim), **cfg))
+    run_formation(FormationConfig(out=str(zen), **cfg), transport="zenoh")
+    sim_rows = _rows(sim / "links.csv")
+    assert _rows(zen / "links.csv") == sim_rows
+    assert any(r[4] == "deleted" for r in sim_rows[1:])  # the formation had conflicts to cut
     report = json.loads((zen / "report.json").read_text())
+    assert report["resolution"]["method"] == resolution
     assert report["team"]["transport"] == "zenoh"
     assert all(r["wire_bytes"] >= r["bytes"] for r in report["team"]["robots"].values())
 
 
-def test_zenoh_links_equal_the_simulators_resolve(links_input, tmp_path):
+@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+def test_zenoh_links_equal_the_simulators_resolve(links_input, tmp_path, resolution):
     args = ["resolve", "--links", str(links_input / "in.csv"), "--comm-graph",
-            str(links_input / "graph.csv")]
-    assert main([*args, "--out", str(tmp_path / "sim.csv"), "--resolution", "paper"]) == 0
-    assert main([*args, "--out", str(tmp_path / "zen.csv"), "--transport", "zenoh"]) == 0
+            str(links_input / "graph.csv"), "--resolution", resolution]
+    assert main([*args, "--out", str(tmp_path / "sim.csv")]) == 0
+    assert main([*args, "--out", str(tmp_path / "zen.csv"), "--transport", "zenoh",
+                 "--report", str(tmp_path / "zen.json")]) == 0
     sim = _rows(tmp_path / "sim.csv")
     assert _rows(tmp_path / "zen.csv") == sim
     assert sum(r[4] == "deleted" for r in sim[1:]) > 0  # the input had conflicts to cut
+    assert json.loads((tmp_path / "zen.json").read_text())["resolution_method"] == resolution
 
 
 def _kept_links(path):
@@ -114,6 +125,8 @@ def test_message_loss_at_the_zenoh_transport_is_handled(links_input, tmp_path):
                  str(tmp_path / "z.csv"), "--transport", "zenoh", "--drop-prob", "0.3",
                  "--report", str(rep)]) == 0
     s = json.loads(rep.read_text())
+    # as in the simulator, a lossy network runs the fault-tolerant Alg. 1
+    assert s["resolution_method"] == "paper"
     assert s["faults"]["messages_dropped"] > 0 and s["faults"]["retransmissions"] > 0
     assert s["faults"]["links_cut_robot_lost"] == 0  # nothing lost, only delayed
     assert s["after"]["conflictive_sets"] == 0
@@ -217,13 +230,3 @@ def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
     with pytest.raises(TeamError, match=r"robot \d \(tcp/127\.0\.0\.1:\d+\) failed with exit "
                                         r"code 2: error: .*missing\.csv"):
         launch_team(team, tmp_path / "team", timeout_s=60)
-
-
-def test_zenoh_with_an_explicit_evidence_resolution_is_a_one_line_error(links_input, tmp_path,
-                                                                         capsys):
-    args = ["resolve", "--links", str(links_input / "in.csv"), "--out", str(tmp_path / "z.csv"),
-            "--transport", "zenoh", "--resolution", "evidence"]
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("error: --resolution evidence runs only with --transport sim")
-    assert "\n" not in err and not (tmp_path / "z.csv").exists()

@@ -125,3 +125,56 @@ def test_local_termination_with_a_crash_ends_conflict_free():
     assert is_conflict_free(fpc, kept)
     assert all(2 in lg.lost_neighbours for i, lg in enumerate(logs)
                if lg is not None and i in {int(k) for e in edges for k in e if 2 in e})
+
+
+def _run_team_evidence(fpc, edges, links, weight, options=None):
+    from pipeline.consistency.evidence import equip
+
+    robots, link_index = build_robots(fpc, links)
+    for rb, li in zip(robots, link_index, strict=True):
+        equip(rb, weight[li], np.zeros((rb.m, 2)), None)
+    team = LocalTeam(len(fpc), edges, options)
+    logs = team.run(lambda tr: run_consistency_locally(robots[tr.robot_id], tr,
+                                                       resolution="evidence"))
+    deleted = np.zeros(len(links), dtype=bool)
+    for rb, li in zip(robots, link_index, strict=True):
+        if team.network.alive(rb.id):
+            deleted[li[~rb.link_alive]] = True
+    return deleted, logs, robots, link_index
+
+
+@settings(max_examples=25, deadline=None)
+@given(instances())
+def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst):
+    from pipeline.link_evidence import ratio_llr
+
+    fpc, edges, links = inst
+    edges = comm_edges_for(fpc, links, edges)
+    weight = ratio_llr(1.0 - links.quality)
+    ref = resolve_conflicts(fpc, edges, links, resolution="evidence", link_weight=weight)
+    deleted, logs, robots, link_index = _run_team_evidence(fpc, edges, links, weight)
+    assert np.array_equal(deleted, ref.deleted)
+    # both ends cut alike, with the evidence rule's case
+    ends = np.zeros(len(links), dtype=int)
+    for rb, li in zip(robots, link_index, strict=True):
+        np.add.at(ends, li[~rb.link_alive], 1)
+        assert set(rb.deleted_case[~rb.link_alive].tolist()) <= {5}
+    assert set(ends.tolist()) <= {0, 2}
+    assert all(lg.iterations == ref.stats["iterations"] for lg in logs)
+
+
+def test_evidence_rule_alone_with_a_crash_ends_conflict_free():
+    from pipeline.link_evidence import ratio_llr
+
+    fpc, edges, links = random_instance(np.random.default_rng(5), 6, 5, 1.0, 0.9)
+    edges = comm_edges_for(fpc, links, edges)
+    weight = ratio_llr(1.0 - links.quality)
+    # robot 2 crashes in the first evidence pass (detection takes a few rounds before it)
+    for crash in (4, 14, 20):
+        deleted, logs, _, _ = _run_team_evidence(
+            fpc, edges, links, weight,
+            NetworkOptions(crash_at={2: crash}, seed=1))
+        alive = np.array([i != 2 for i in range(len(fpc))])
+        kept = links.subset(~deleted & alive[links.cam_i] & alive[links.cam_j])
+        assert is_conflict_free(fpc, kept), crash
+        assert logs[2] is None
