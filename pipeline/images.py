@@ -64,6 +64,8 @@ class ImagesConfig:
     merge_radius: float | None = None
     #: also stream the recording to a live viewer: "spawn", "connect" or a gRPC URL
     live: str | None = None
+    #: "sim" (robots in this process) or "zenoh" (one robot process per photograph; no fusion)
+    transport: str = "sim"
 
     def out_dir(self) -> Path:
         if self.out:
@@ -190,12 +192,19 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
         return chosen["edges"]
 
-    feats, matches, links = extract_and_match(
-        views, graph_from_features if by_similarity else comm_edges, config.features,
-        config.max_features, timer, contrast_threshold=config.contrast_threshold,
-        merge_radius=merge_radius_for(config.resolution, config.merge_radius),
-        rootsift=config.rootsift, threshold_px=config.threshold_px,
-        budget_after_merge=config.budget_after_merge)
+    cleaning = team = None
+    if config.transport == "zenoh":
+        # the robots extract, match, detect and resolve; this process only observes
+        from pipeline.teamrun import images_team
+
+        feats, matches, links, cleaning, team = images_team(config, views, comm_edges, timer)
+    else:
+        feats, matches, links = extract_and_match(
+            views, graph_from_features if by_similarity else comm_edges, config.features,
+            config.max_features, timer, contrast_threshold=config.contrast_threshold,
+            merge_radius=merge_radius_for(config.resolution, config.merge_radius),
+            rootsift=config.rootsift, threshold_px=config.threshold_px,
+            budget_after_merge=config.budget_after_merge)
     if by_similarity:
         comm_edges = chosen["edges"]
     m = np.array([len(f) for f in feats], dtype=np.int64)
@@ -210,9 +219,13 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
                                                     fixed_intrinsics=fixed)
             timer.note(_mapping_note(map_before))
-        cleaning = clean_association(views, feats, comm_edges, links, fusion=False, timer=timer,
-                                     resolution=config.resolution, matches=matches)
-        if not config.fusion:
+        if cleaning is None:
+            cleaning = clean_association(views, feats, comm_edges, links, fusion=False,
+                                         timer=timer, resolution=config.resolution,
+                                         matches=matches)
+        if team is not None:
+            pass  # fusion does not run over the zenoh transport (cleaning.fusion_stats says so)
+        elif not config.fusion:
             cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
         elif importlib.util.find_spec("pipeline.fusion.landmarks") is None:
             cleaning.fusion_stats = {"enabled": False,
@@ -249,6 +262,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
             "versions": sections.versions(),
             "config": {**asdict(config), "out": str(out)},
         }
+        if team is not None:
+            report["team"] = team
         if cleaning.fused_points is not None:
             report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
         if config.truth == "homographies":

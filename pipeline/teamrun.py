@@ -14,17 +14,19 @@ The robots resolve by Alg. 1 or by the evidence rule, as the simulator does
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from pipeline.consistency.engine import ConsistencyResult
 from pipeline.consistency.linklog import merge_link_logs
-from pipeline.errors import InputError
+from pipeline.errors import InputError, TeamError
 from pipeline.launcher import launch_team, make_team, team_summary
 from pipeline.progress import StageTimer
 from pipeline.types import Links, PairMatches
 
-__all__ = ["run_formation_team", "resolve_conflicts_team", "team_options", "links_of_team",
-           "consistency_of_team"]
+__all__ = ["run_formation_team", "resolve_conflicts_team", "images_team", "team_options",
+           "links_of_team", "consistency_of_team"]
 
 CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "ack", "heartbeat")
 FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport"}
@@ -239,8 +241,6 @@ def resolve_conflicts_team(links_csv, fpc, comm_edges, options: dict | None = No
                            kill=None, workdir=None, keep_run: list | None = None
                            ) -> ConsistencyResult:
     """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``."""
-    from pathlib import Path
-
     from pipeline.linkscsv import read_links_csv
 
     fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
@@ -256,3 +256,73 @@ def resolve_conflicts_team(links_csv, fpc, comm_edges, options: dict | None = No
     res.stats["team"] = team_summary(run)
     return res
 
+
+
+def images_team(config, views, comm_edges, timer: StageTimer | None = None, *, workdir=None,
+                keep_run: list | None = None):
+    """``run-images --transport zenoh``: one robot process per photograph.
+
+    Each robot loads only its own photograph (downscaled to ``config.max_size``, with the
+    intrinsics the observer resolved for it, written into ``TEAM.json``), extracts with the
+    run's feature options (the photo defaults unless changed), and matches with its
+    comm-graph neighbours; the team then runs detection and resolution (``config.resolution``).
+
+    Returns
+    -------
+    (features, matches, links, CleaningResult, team section)
+        ``features`` hold the keypoints the robots published (descriptors are not sent to the
+        observer), in camera order.
+
+    Raises
+    ------
+    InputError
+        A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
+        a graph kind or file).
+    """
+    from pipeline.run import (
+        CleaningResult,
+        _conflictive_links,
+        ledger_from_consistency,
+        merge_radius_for,
+    )
+    from pipeline.types import Features
+
+    timer = timer or StageTimer()
+    if comm_edges is None:
+        raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
+                         "features at once; with --transport zenoh give ring, ring2, complete, "
+                         "seq:K or a graph file")
+    directory = Path(config.directory).resolve()
+    data = {"kind": "images", "images": [str(directory / v.name) for v in views],
+            "intrinsics": [np.asarray(v.K, np.float64).tolist() for v in views],
+            "intrinsics_known": [bool(v.intrinsics_known) for v in views],
+            "max_size": config.max_size}
+    opts = team_options(config.features, config.max_features, None,
+                        merge_radius=merge_radius_for(config.resolution, config.merge_radius),
+                        resolution=config.resolution,
+                        contrast_threshold=config.contrast_threshold,
+                        rootsift=bool(config.rootsift),
+                        budget_after_merge=bool(config.budget_after_merge),
+                        threshold_px=config.threshold_px)
+    n = len(views)
+    team = make_team(f"images-{n}", comm_edges, data, opts, n=n)
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    lost = sorted(set(range(n)) - set(run.results))
+    if lost:
+        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result")
+    feats = []
+    for i in range(n):
+        kp = run.results[i][1]["keypoints"].reshape(-1, 2)
+        feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                              np.zeros(len(kp), np.float32), config.features))
+    matches, links = links_of_team(team, run.results)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    cleaning = CleaningResult(ledger_from_consistency(res, _conflictive_links(m, links)),
+                              dict(res.stats), fusion_stats=dict(FUSION_SKIPPED))
+    return feats, matches, links, cleaning, team_summary(run)

@@ -19,6 +19,7 @@ from pipeline.commands.options import (
 from pipeline.errors import InputError
 from pipeline.images import ImagesConfig
 from pipeline.outcome import exit_status
+from pipeline.team import add_transport_argument
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -61,6 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run folder (default runs/images-<DIR name>-<graph>)")
     add_resolution_option(p)
     add_merge_radius_option(p)
+    add_transport_argument(p)
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -77,7 +79,8 @@ def config_from_args(args) -> ImagesConfig:
                         threads=validate.threads(args.threads), truth=args.truth,
                         truth_tol_px=args.truth_tol,
                         resolution=args.resolution, merge_radius=args.merge_radius,
-                        live="spawn" if args.spawn else args.connect)
+                        live="spawn" if args.spawn else args.connect,
+                        transport=args.transport)
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:

@@ -230,3 +230,28 @@ def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
     with pytest.raises(TeamError, match=r"robot \d \(tcp/127\.0\.0\.1:\d+\) failed with exit "
                                         r"code 2: error: .*missing\.csv"):
         launch_team(team, tmp_path / "team", timeout_s=60)
+
+
+def test_zenoh_links_equal_the_simulators_run_images(sceaux_small, tmp_path):
+    """Four photographs, photo defaults: each robot loads and extracts its own."""
+    args = ["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
+            "--no-fusion", "--no-rerun"]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*args, "--out", str(tmp_path / "zen"), "--transport", "zenoh"]) == 0
+    sim = Path(tmp_path / "sim" / "links.csv").read_text().splitlines()
+    assert Path(tmp_path / "zen" / "links.csv").read_text().splitlines() == sim
+    assert len(sim) > 500
+    rep = json.loads((tmp_path / "zen" / "report.json").read_text())
+    sim_rep = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert rep["features_per_camera"] == sim_rep["features_per_camera"]
+    assert rep["resolution"]["method"] == "evidence" and rep["team"]["transport"] == "zenoh"
+    assert rep["fusion"]["enabled"] is False
+
+
+def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceaux_small,
+                                                                           tmp_path, capsys):
+    assert main(["run-images", str(sceaux_small), "--graph", "knn:2", "--max-size", "320",
+                 "--out", str(tmp_path / "z"), "--transport", "zenoh"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: --graph knn:2: knn:K chooses neighbours from every image")
+    assert not (tmp_path / "z").exists()
