@@ -290,11 +290,13 @@ def team_summary(run: TeamRun) -> dict:
                            "dropped": c["dropped"], "silent": c["silent"],
                            "peak_rss_bytes": h["peak_rss_bytes"],
                            "peak_memory_bytes": h["peak_memory_bytes"],
-                           "timings_s": h["timings_s"], "handshake_s": h.get("handshake_s")}
+                           "timings_s": h["timings_s"], "handshake_s": h.get("handshake_s"),
+                           "since_launch_s": h.get("since_launch_s")}
         else:
             rob[str(i)] = {"result": None, "exit_code": run.exit_codes.get(i),
                            "killed": i in run.killed}
     return {"transport": "zenoh", "robots": rob, "wall_s": round(run.wall_s, 4),
             "process_start_s": round(run.start_s, 4),
+            "last_result_s": round(run.published_s, 4),
             "killed": {str(k): True for k in run.killed},
             "team": json.loads(json.dumps(run.team.to_json()))}
