@@ -160,7 +160,8 @@ def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst):
         np.add.at(ends, li[~rb.link_alive], 1)
         assert set(rb.deleted_case[~rb.link_alive].tolist()) <= {5}
     assert set(ends.tolist()) <= {0, 2}
-    assert all(lg.iterations == ref.stats["iterations"] for lg in logs)
+    # one pass, as in the simulator (a robot cut off from the sets' part of the team sees none)
+    assert max(lg.iterations for lg in logs) == ref.stats["iterations"]
 
 
 def test_evidence_rule_alone_with_a_crash_ends_conflict_free():
