@@ -59,13 +59,13 @@ def ticker(description: str, delay: float = 2.0, stream=None):
     ``n`` robots for up to ``d + 1`` rounds per detection): it says the run is alive and for
     how long, not how much is left.
     """
-    from tqdm import tqdm
-
     stop = threading.Event()
 
     def tick():
         if stop.wait(delay):
             return
+        from tqdm.std import tqdm
+
         with tqdm(desc=description, total=None, unit="s", file=stream or sys.stderr,
                   disable=None, leave=False, ncols=100, bar_format="{desc}: {elapsed}") as bar:
             while not stop.wait(1.0):
@@ -80,22 +80,60 @@ def ticker(description: str, delay: float = 2.0, stream=None):
         thread.join(timeout=2.0)
 
 
+class _NoBar:
+    """What :func:`progress` returns when no bar is shown: iterates ``iterable`` and accepts
+    the calls made on a tqdm bar (``update``, ``close``, ``with``) as no-ops, so that a run
+    whose bar would stay hidden does not import tqdm at all."""
+
+    def __init__(self, iterable=None):
+        self.iterable = iterable
+
+    def __iter__(self):
+        return iter(self.iterable if self.iterable is not None else ())
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _stream_is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
 def progress(iterable, total: int | None = None, desc: str = "", min_items: int = 2):
     """``iterable`` wrapped in a tqdm bar (stderr, cleared when done).
 
     The bar is off when INFO messages are hidden (``--quiet``), when stderr is not a terminal
-    (tqdm's ``disable=None``), or when there are fewer than ``min_items`` items.
+    (what tqdm's ``disable=None`` would decide), or when there are fewer than ``min_items``
+    items; then tqdm is not even imported and a no-op stand-in (:class:`_NoBar`) is returned.
     """
-    from tqdm.auto import tqdm
-
     if total is None:
         try:
             total = len(iterable)
         except TypeError:
             total = None
-    off = (not log.isEnabledFor(logging.INFO)) or (total is not None and total < min_items)
+    off = (not log.isEnabledFor(logging.INFO)) or (total is not None and total < min_items) \
+        or not _stream_is_terminal(sys.stderr)
+    if off:
+        return _NoBar(iterable)
+    from tqdm.std import tqdm
+
     return tqdm(iterable, total=total, desc=desc, leave=False, file=sys.stderr,
-                disable=True if off else None, dynamic_ncols=True)
+                dynamic_ncols=True)
 
 
 class StageTimer:

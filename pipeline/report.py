@@ -211,10 +211,9 @@ def mapping_markdown(before, after) -> str:
 
 def track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
     """Ground-truth point of each triangulated track (medoid of its observations' points)."""
-    from pipeline.triangulation import medoid
+    from pipeline.triangulation import medoids
 
-    pts = [medoid(all_gt[t]) for t, ok in zip(tri.track_features, tri.ok, strict=True) if ok]
-    pts = np.array(pts).reshape(-1, 3)
+    pts = medoids(all_gt, [t for t, ok in zip(tri.track_features, tri.ok, strict=True) if ok])
     return pts[np.isfinite(pts).all(axis=1)]
 
 
@@ -227,7 +226,7 @@ def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.nda
     the pycolmap triangulation of the same links gives the point to compare with.
     """
     from pipeline.association import association_sets
-    from pipeline.triangulation import medoid, triangulate_tracks
+    from pipeline.triangulation import medoids, triangulate_tracks
 
     m = np.array([len(f) for f in feats], dtype=np.int64)
     _, tracks = association_sets(m, resolved_links)
@@ -235,7 +234,7 @@ def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.nda
     all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
     ids = np.asarray(fused_track_ids, dtype=np.int64)
     pts = np.asarray(fused_points, dtype=np.float64).reshape(-1, 3)
-    gt = np.array([medoid(all_gt[tracks[k]]) for k in ids]).reshape(-1, 3)
+    gt = medoids(all_gt, [tracks[k] for k in ids])
     err_gt = np.linalg.norm(pts - gt, axis=1)
     err_gt = err_gt[np.isfinite(err_gt)]
     ok = tri.ok[ids]

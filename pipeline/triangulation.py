@@ -23,7 +23,7 @@ from pipeline.association import association_sets
 from pipeline.types import Features, Links, View
 
 __all__ = ["TriangulationOptions", "TrackTriangulation", "triangulate_tracks",
-           "write_reconstruction", "medoid"]
+           "write_reconstruction", "medoid", "medoids", "reprojection_errors"]
 
 
 @dataclass
@@ -97,6 +97,50 @@ def medoid(points: np.ndarray) -> np.ndarray:
     return p[int(np.argmin(d))]
 
 
+def medoids(points: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
+    """:func:`medoid` of ``points[g]`` for every ``g`` in ``groups``, vectorized.
+
+    Groups with the same number of finite points are solved together (one batched distance
+    matrix each), with the same arithmetic as :func:`medoid`, so the results are equal to it
+    bit for bit.
+
+    Parameters
+    ----------
+    points : ndarray, (M, 3) float — nan rows are ignored
+    groups : list of (k_g,) int arrays — indices into ``points``
+
+    Returns
+    -------
+    ndarray, (G, 3) float64 — ``nan`` rows for groups without a finite point
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pts = np.array([[0., 0, 0], [1, 0, 0], [5, 0, 0], [np.nan, 0, 0]])
+    >>> medoids(pts, [np.array([0, 1, 2]), np.array([3])])
+    array([[ 1.,  0.,  0.],
+           [nan, nan, nan]])
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.full((len(groups), 3), np.nan)
+    if not groups:
+        return out
+    sizes = np.fromiter((len(g) for g in groups), dtype=np.int64, count=len(groups))
+    members = np.concatenate([np.asarray(g, dtype=np.int64) for g in groups]) \
+        if sizes.sum() else np.zeros(0, dtype=np.int64)
+    finite = np.isfinite(points).all(axis=1)[members]
+    group_of = np.repeat(np.arange(len(groups)), sizes)
+    members, group_of = members[finite], group_of[finite]
+    k_of = np.bincount(group_of, minlength=len(groups))
+    starts = np.cumsum(k_of) - k_of
+    for k in np.unique(k_of[k_of > 0]).tolist():
+        gs = np.flatnonzero(k_of == k)
+        p = points[members[starts[gs][:, None] + np.arange(k)]]          # (G_k, k, 3)
+        d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1).sum(axis=2)
+        out[gs] = p[np.arange(len(gs)), np.argmin(d, axis=1)]
+    return out
+
+
 def triangulate_tracks(views: list[View], features: list[Features], links: Links,
                        options: TriangulationOptions | None = None,
                        gt_points: list[np.ndarray] | None = None) -> TrackTriangulation:
@@ -134,31 +178,64 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
 
     T = len(tracks)
     xyz = np.full((T, 3), np.nan)
-    ok = np.zeros(T, dtype=bool)
+    ok = np.array([res is not None for res in solved], dtype=bool).reshape(T)
+    for k in np.flatnonzero(ok):
+        xyz[k] = solved[k][0]
+    sizes = np.fromiter((len(f) for f in tracks), dtype=np.int64, count=T)
+    obs = np.concatenate(tracks) if T else np.zeros(0, dtype=np.int64)
+    # every observation of the triangulated tracks at once, then split per track
+    X_obs = np.repeat(xyz, sizes, axis=0)
+    errors_all = reprojection_errors(views, X_obs[np.repeat(ok, sizes)],
+                                     cam_of[obs[np.repeat(ok, sizes)]],
+                                     all_kp[obs[np.repeat(ok, sizes)]])
+    ok_sizes = sizes[ok]
+    ok_errors = np.split(errors_all, np.cumsum(ok_sizes)[:-1]) if len(ok_sizes) else []
     inliers, errors = [], []
-    gt_error = np.full(T, np.nan)
-    for k, (feats, res) in enumerate(zip(tracks, solved, strict=True)):
-        if res is None:
+    ok_k = iter(range(len(ok_sizes)))
+    for k, feats in enumerate(tracks):
+        if ok[k]:
+            inliers.append(solved[k][1])
+            errors.append(ok_errors[next(ok_k)])
+        else:
             inliers.append(np.zeros(len(feats), dtype=bool))
             errors.append(np.full(len(feats), np.nan))
-            continue
-        X, inl = res
-        xyz[k] = X
-        ok[k] = True
-        inliers.append(inl)
-        errors.append(_reprojection_errors(X, views, cam_of[feats], all_kp[feats]))
-        if all_gt is not None:
-            gt_error[k] = float(np.linalg.norm(X - medoid(all_gt[feats])))
+    gt_error = np.full(T, np.nan)
+    if all_gt is not None and ok.any():
+        gt = medoids(all_gt, [tracks[k] for k in np.flatnonzero(ok)])
+        gt_error[ok] = [float(np.linalg.norm(X - g)) for X, g in zip(xyz[ok], gt, strict=True)]
     return TrackTriangulation(track_of_feature, tracks, xyz, ok, inliers, errors, gt_error)
 
 
-def _reprojection_errors(X: np.ndarray, views: list[View], cams: np.ndarray,
-                         kp: np.ndarray) -> np.ndarray:
-    out = np.empty(len(cams))
-    for a, c in enumerate(cams):
-        v = views[c]
-        x = v.K @ (v.R @ X + v.t)
-        out[a] = np.inf if x[2] <= 0 else float(np.linalg.norm(x[:2] / x[2] - kp[a]))
+def reprojection_errors(views: list[View], X: np.ndarray, cams: np.ndarray,
+                        kp: np.ndarray) -> np.ndarray:
+    """Reprojection error of each observation, pixels.
+
+    Parameters
+    ----------
+    views : list of View, (n,) with K, R, t
+    X : ndarray, (N, 3) — world point of each observation
+    cams : ndarray, (N,) int — camera of each observation
+    kp : ndarray, (N, 2) — its keypoint (OpenCV pixel convention)
+
+    Returns
+    -------
+    ndarray, (N,) float64 — ``|π(K (R X + t)) - kp|``; ``inf`` where the point is not in
+    front of the camera
+    """
+    X = np.asarray(X, dtype=np.float64).reshape(-1, 3)
+    cams = np.asarray(cams, dtype=np.int64).reshape(-1)
+    if not len(cams):
+        return np.zeros(0)
+    K = np.stack([np.asarray(v.K, dtype=np.float64) for v in views])
+    R = np.stack([np.asarray(v.R, dtype=np.float64) for v in views])
+    t = np.stack([np.asarray(v.t, dtype=np.float64).reshape(3) for v in views])
+    # stacked (3,3) @ (3,1) products: the arithmetic of K @ (R @ X + t) per observation
+    y = (R[cams] @ X[:, :, None])[:, :, 0] + t[cams]
+    x = (K[cams] @ y[:, :, None])[:, :, 0]
+    out = np.full(len(cams), np.inf)
+    front = x[:, 2] > 0
+    out[front] = np.linalg.norm(x[front, :2] / x[front, 2:3] - np.asarray(kp, np.float64)
+                                .reshape(-1, 2)[front], axis=1)
     return out
 
 
@@ -172,25 +249,38 @@ def write_reconstruction(path: str | Path, views: list[View], features: list[Fea
     m_per = np.array([len(f) for f in features], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(m_per)])
     cam_of = np.repeat(np.arange(len(views)), m_per)
+    all_kp = np.concatenate([np.asarray(f.keypoints, dtype=np.float64).reshape(-1, 2)
+                             for f in features] + [np.zeros((0, 2))])
+    n = len(views)
     points = []
-    for k, feats in enumerate(tri.track_features):
-        if not tri.ok[k]:
-            continue
-        keep = feats[tri.inliers[k]]
+    for k in np.flatnonzero(tri.ok):
+        keep = tri.track_features[k][tri.inliers[k]]
         cams = cam_of[keep]
-        if len(np.unique(cams)) < 2 or len(np.unique(cams)) < len(cams):
+        seen = np.bincount(cams, minlength=n)
+        if int((seen > 0).sum()) < 2 or (seen > 1).any():
             # a COLMAP track holds one observation per image at most (a conflictive track)
             continue
-        elements = [(int(c), int(g - offsets[c])) for g, c in zip(keep, cams, strict=True)]
-        color = _color(views, cams[0], features[cams[0]].keypoints[keep[0] - offsets[cams[0]]])
-        points.append((tri.xyz[k], elements, color))
+        elements = list(zip(cams.tolist(), (keep - offsets[cams]).tolist(), strict=True))
+        points.append((tri.xyz[k], elements, int(keep[0])))
+    colors = _colors(views, cam_of, all_kp, np.array([p[2] for p in points], dtype=np.int64))
+    points = [(xyz, elements, color) for (xyz, elements, _), color
+              in zip(points, colors, strict=True)]
     return colmap.write_points_model(path, views, features, points)
 
 
-def _color(views: list[View], cam: int, xy: np.ndarray) -> np.ndarray:
-    img = views[cam].image
-    h, w = img.shape[:2]
-    u = int(np.clip(round(float(xy[0])), 0, w - 1))
-    v = int(np.clip(round(float(xy[1])), 0, h - 1))
-    px = img[v, u]
-    return np.asarray(np.broadcast_to(px, (3,)), dtype=np.uint8)
+def _colors(views: list[View], cam_of: np.ndarray, all_kp: np.ndarray,
+            feature_ids: np.ndarray) -> np.ndarray:
+    """RGB of each feature's image at its keypoint (nearest pixel, clipped to the image),
+    ``(F,)`` ids in, ``(F, 3)`` uint8 out; a gray image gives gray triples."""
+    out = np.zeros((len(feature_ids), 3), dtype=np.uint8)
+    cams = cam_of[feature_ids]
+    for c in np.unique(cams).tolist():
+        sel = np.flatnonzero(cams == c)
+        img = views[c].image
+        h, w = img.shape[:2]
+        xy = all_kp[feature_ids[sel]]
+        u = np.clip(np.rint(xy[:, 0]).astype(np.int64), 0, w - 1)   # round half to even, as
+        v = np.clip(np.rint(xy[:, 1]).astype(np.int64), 0, h - 1)   # Python's round()
+        px = img[v, u]
+        out[sel] = px.reshape(len(sel), -1)[:, :3] if px.ndim > 1 else px[:, None]
+    return out

@@ -62,3 +62,32 @@ def test_ticker_is_silent_for_short_stages_and_off_a_terminal():
     with ticker("long", delay=0.1, stream=g):
         time.sleep(0.5)
     assert g.getvalue() == ""
+
+
+def test_progress_off_a_terminal_yields_the_items_without_a_bar(monkeypatch):
+    err = io.StringIO()
+    monkeypatch.setattr(progress.sys, "stderr", err)
+    items = progress.progress([1, 2, 3], desc="features")
+    assert list(items) == [1, 2, 3] and err.getvalue() == ""
+    with progress.progress(None, total=5, desc="mapping") as bar:  # the calls made on a bar
+        bar.update(2)
+    assert err.getvalue() == ""
+
+
+def test_progress_on_a_terminal_draws_a_bar(monkeypatch):
+    import logging
+
+    level = progress.log.level
+    try:
+        term = _terminal()
+        monkeypatch.setattr(progress.sys, "stderr", term)
+        progress.log.setLevel(logging.INFO)
+        assert list(progress.progress(range(3), desc="matching pairs")) == [0, 1, 2]
+        assert "matching pairs" in term.getvalue()
+        quiet = _terminal()
+        monkeypatch.setattr(progress.sys, "stderr", quiet)
+        progress.log.setLevel(logging.WARNING)  # --quiet
+        assert list(progress.progress(range(3), desc="matching pairs")) == [0, 1, 2]
+        assert quiet.getvalue() == ""
+    finally:
+        progress.log.setLevel(level)

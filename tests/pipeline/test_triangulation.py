@@ -3,7 +3,13 @@ import pycolmap
 import pytest
 
 from pipeline.colmap import build_reconstruction
-from pipeline.triangulation import triangulate_tracks, write_reconstruction
+from pipeline.triangulation import (
+    medoid,
+    medoids,
+    reprojection_errors,
+    triangulate_tracks,
+    write_reconstruction,
+)
 from pipeline.types import Features, Links, View
 
 
@@ -88,3 +94,59 @@ def test_written_model_loads_back(scene, tmp_path):
     assert build_reconstruction(views, feats).num_images() == 3
     lengths = sorted(p.track.length() for p in rec.points3D.values())
     assert lengths == [3] * 5
+
+
+def test_written_points_take_the_colour_of_their_first_observation(scene, tmp_path):
+    views, feats, gts, X = scene
+    for k, v in enumerate(views):  # each camera's image a distinct colour per column
+        v.image[:] = 0
+        v.image[:, :, 0] = np.arange(320, dtype=np.uint8)[None, :]
+        v.image[:, :, 1] = 10 * (k + 1)
+    rec = write_reconstruction(tmp_path / "sparse", views, feats,
+                               triangulate_tracks(views, feats, _chain_links(5)))
+    for point in rec.points3D.values():
+        first = min(point.track.elements, key=lambda e: e.image_id)
+        assert first.image_id == 1  # camera 0 is the first observation of every track
+        u = int(np.clip(round(float(feats[0].keypoints[first.point2D_idx][0])), 0, 319))
+        assert point.color.tolist() == [u % 256, 10, 0]
+
+
+def test_conflictive_track_is_not_written(scene, tmp_path):
+    views, feats, gts, X = scene
+    # features 0 and 1 of camera 0 half a pixel apart, both in point 0's track: both are
+    # inliers, and a COLMAP track holds one observation per image
+    feats[0].keypoints[1] = feats[0].keypoints[0] + 0.5
+    links = Links(np.r_[0, 1, 0], np.r_[0, 0, 1], np.r_[1, 2, 2], np.r_[0, 0, 0])
+    tri = triangulate_tracks(views, feats, links)
+    rec = write_reconstruction(tmp_path / "sparse", views, feats, tri)
+    assert len(tri.track_features) == 1 and tri.ok[0] and tri.inliers[0].all()
+    assert rec.num_points3D() == 0
+
+
+def test_medoids_equal_medoid_bit_for_bit():
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(200, 3)) * 10
+    pts[rng.random(200) < 0.1, 1] = np.nan
+    groups = [rng.choice(200, size=int(k), replace=False) for k in rng.integers(1, 9, size=60)]
+    groups.append(np.flatnonzero(np.isnan(pts[:, 1]))[:3])   # no finite point: nan row
+    got = medoids(pts, groups)
+    want = np.stack([medoid(pts[g]) for g in groups])
+    assert got.tobytes() == want.tobytes()
+    assert np.isnan(got[-1]).all()
+    assert medoids(pts, []).shape == (0, 3)
+
+
+def test_reprojection_errors_match_the_projection(scene):
+    views, feats, gts, X = scene
+    cams = np.array([0, 1, 2, 1])
+    pts = np.stack([X[0], X[1], X[2], X[3]])
+    kp = np.stack([feats[c].keypoints[r] for c, r in zip(cams, [0, 1, 2, 3], strict=True)]).astype(float)
+    kp[3] += [3.0, 4.0]  # 5 px off
+    err = reprojection_errors(views, pts, cams, kp)
+    assert np.allclose(err[:3], 0, atol=1e-3) and err[3] == pytest.approx(5.0, abs=1e-3)
+    behind = reprojection_errors(views, np.array([[0.0, 0.0, -5.0]]), np.array([1]), kp[:1])
+    assert np.isinf(behind).all()
+    for k, c in enumerate(cams):  # the arithmetic of one K (R X + t) at a time
+        v = views[c]
+        x = v.K @ (v.R @ pts[k] + v.t)
+        assert err[k] == float(np.linalg.norm(x[:2] / x[2] - kp[k]))
