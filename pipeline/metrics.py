@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.association import association_sets, camera_offsets
+from pipeline.association import AssociationGraph, association_sets, camera_offsets
 from pipeline.types import Links
 
-__all__ = ["association_pairs", "pairwise_scores", "true_pairs_all"]
+__all__ = ["association_pairs", "pairwise_scores", "PairwiseTruth", "true_pairs_all"]
 
 
 def association_pairs(features_per_camera, links: Links) -> np.ndarray:
@@ -57,6 +57,58 @@ def pairwise_scores(predicted: np.ndarray, truth: np.ndarray, m_total: int) -> d
     f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
     return {"precision": precision, "recall": recall, "f1": f1,
             "predicted_pairs": int(len(pk)), "true_pairs": int(len(tk)), "correct_pairs": correct}
+
+
+class PairwiseTruth:
+    """The true pairs of one input, to score many associations of it (the links before and
+    after each stage, each baseline) without listing the pairs they imply.
+
+    ``PairwiseTruth(truth, m_total).scores(m, links)`` equals
+    ``pairwise_scores(association_pairs(m, links), truth, m_total)``: an association set of
+    ``k`` features implies ``k (k - 1) / 2`` pairs, and a true pair is implied iff its two
+    features lie in one connected component of ``links``. ``O(m + L + Q)`` per call instead
+    of sorting every implied pair.
+
+    Parameters
+    ----------
+    truth : ndarray, (Q, 2) int — true pairs of global feature ids, either order
+    m_total : int — number of features
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pipeline.types import Links
+    >>> chain = Links([0, 1], [0, 0], [1, 2], [0, 0])   # 0:0 - 1:0 - 2:0
+    >>> s = PairwiseTruth(np.array([[2, 0], [1, 2]]), 3).scores([1, 1, 1], chain)
+    >>> s["predicted_pairs"], s["correct_pairs"], s["recall"]
+    (3, 2, 1.0)
+    """
+
+    def __init__(self, truth: np.ndarray, m_total: int):
+        self.m_total = int(m_total)
+        keys = np.unique(_keys(np.sort(np.asarray(truth, dtype=np.int64).reshape(-1, 2),
+                                       axis=1), self.m_total))
+        a, b = keys // (self.m_total + 1), keys % (self.m_total + 1)
+        # only pairs of two distinct existing features can ever be implied by links
+        can = (a != b) & (a >= 0) & (b < self.m_total)
+        self.n_true = int(len(keys))
+        self._a, self._b = a[can], b[can]
+
+    def scores(self, features_per_camera, links: Links) -> dict:
+        """The dict of :func:`pairwise_scores` for the pairs implied by ``links``."""
+        labels = AssociationGraph(features_per_camera, links).components()
+        if labels.size != self.m_total:
+            raise ValueError(f"PairwiseTruth of {self.m_total} features scored on "
+                             f"{labels.size} features")
+        sizes = np.bincount(labels) if labels.size else np.zeros(0, dtype=np.int64)
+        predicted = int((sizes * (sizes - 1) // 2).sum())
+        correct = int((labels[self._a] == labels[self._b]).sum())
+        precision = correct / predicted if predicted else 0.0
+        recall = correct / self.n_true if self.n_true else 0.0
+        f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+        return {"precision": precision, "recall": recall, "f1": f1,
+                "predicted_pairs": predicted, "true_pairs": self.n_true,
+                "correct_pairs": correct}
 
 
 def true_pairs_all(formation, features, tol_px: float = 2.0) -> np.ndarray:

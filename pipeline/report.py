@@ -218,19 +218,20 @@ def track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
 
 
 def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.ndarray,
-                       fused_track_ids: np.ndarray, gt_points: list) -> dict:
+                       fused_track_ids: np.ndarray, gt_points: list,
+                       solved_tracks: dict | None = None) -> dict:
     """Fused landmarks against ground truth and against pycolmap on the same tracks.
 
     Fusion runs on the links kept by resolution; its tracks are numbered like
     :func:`pipeline.association.association_sets` on those links (smallest feature id), so
     the pycolmap triangulation of the same links gives the point to compare with.
+    ``solved_tracks``: the tracks the run has triangulated already
+    (:func:`pipeline.triangulation.triangulate_tracks`).
     """
-    from pipeline.association import association_sets
     from pipeline.triangulation import medoids, triangulate_tracks
 
-    m = np.array([len(f) for f in feats], dtype=np.int64)
-    _, tracks = association_sets(m, resolved_links)
-    tri = triangulate_tracks(views, feats, resolved_links)
+    tri = triangulate_tracks(views, feats, resolved_links, solved_tracks=solved_tracks)
+    tracks = tri.track_features
     all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
     ids = np.asarray(fused_track_ids, dtype=np.int64)
     pts = np.asarray(fused_points, dtype=np.float64).reshape(-1, 3)

@@ -371,7 +371,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     from pipeline import report as sections
     from pipeline.evaluate import link_truth, missing_links
     from pipeline.linkscsv import write_links_csv
-    from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all
+    from pipeline.metrics import PairwiseTruth, true_pairs_all
 
     out = config.out_dir()
     views, comm_edges = formation.views, np.asarray(formation.comm_edges)
@@ -389,11 +389,11 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         def missing(kept_subset: Links) -> int:
             return missing_links(formation, feats, kept_subset, comm_edges, tol_px=config.tol_px)
 
-        gt_pairs = true_pairs_all(formation, feats, tol_px=config.tol_px)
-        m_total = int(m.sum())
+        gt_pairs = PairwiseTruth(true_pairs_all(formation, feats, tol_px=config.tol_px),
+                                 int(m.sum()))
 
         def pairwise_of(kept_subset: Links) -> dict:
-            return pairwise_scores(association_pairs(m, kept_subset), gt_pairs, m_total)
+            return gt_pairs.scores(m, kept_subset)
 
         before = sections.association_counts(m, links, truth, missing(links))
         after = sections.association_counts(m, kept_links, truth[kept], missing(kept_links))
@@ -414,11 +414,19 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     with timer.stage("triangulation", "pycolmap, known poses, before and after"):
         gt_points = [points_from_keypoints(v, f.keypoints)[0] if len(f) else np.zeros((0, 3))
                      for v, f in zip(views, feats, strict=True)]
-        tri_before = triangulate_tracks(views, feats, links, gt_points=gt_points)
-        tri_after = triangulate_tracks(views, feats, kept_links, gt_points=gt_points)
+        solved_tracks = {}  # the link sets below share most of their tracks
+        tri_before = triangulate_tracks(views, feats, links, gt_points=gt_points,
+                                        solved_tracks=solved_tracks)
+        tri_after = triangulate_tracks(views, feats, kept_links, gt_points=gt_points,
+                                       solved_tracks=solved_tracks)
         triangulation = {"before": tri_before.summary(), "after": tri_after.summary()}
         timer.note(f"after: {triangulation['after']['triangulated_tracks']} of "
                    f"{triangulation['after']['tracks']} tracks triangulated")
+        fused_errors = None
+        if cleaning.fused_points is not None:  # fused landmarks against pycolmap and the truth
+            fused_errors = sections.fused_point_errors(
+                views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
+                gt_points, solved_tracks=solved_tracks)
 
     report = {
         "title": f"formation {config.formation} (seed {config.seed})",
@@ -441,10 +449,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     if cleaning.faults is not None:
         report["faults"] = cleaning.faults
     report.update(extra or {})
-    if cleaning.fused_points is not None:
-        report["fusion"].update(sections.fused_point_errors(
-            views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
-            gt_points))
+    if fused_errors is not None:
+        report["fusion"].update(fused_errors)
 
     flag_result(report, [v.name for v in views])
     md = sections.report_markdown(report)

@@ -143,7 +143,8 @@ def medoids(points: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
 
 def triangulate_tracks(views: list[View], features: list[Features], links: Links,
                        options: TriangulationOptions | None = None,
-                       gt_points: list[np.ndarray] | None = None) -> TrackTriangulation:
+                       gt_points: list[np.ndarray] | None = None,
+                       solved_tracks: dict | None = None) -> TrackTriangulation:
     """Triangulate every track of ``links`` robustly with the known poses of ``views``.
 
     Parameters
@@ -156,6 +157,11 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
         (nan where unknown). A track's ground-truth point is the medoid of its observations'
         points, which a minority of wrong observations cannot move; its 3D error is the
         distance from the triangulated point to it.
+    solved_tracks : dict, optional
+        Tracks already triangulated with these views, features and options, keyed by their
+        feature ids; filled with the new ones. Several link sets of one run (before and
+        after each stage) share most of their tracks, and a track's triangulation depends on
+        its observations only (the RANSAC is seeded), so each is solved once.
 
     Returns
     -------
@@ -171,10 +177,14 @@ def triangulate_tracks(views: list[View], features: list[Features], links: Links
     all_gt = np.concatenate(gt_points).astype(np.float64) if gt_points is not None and offsets[-1] else None
     track_of_feature, tracks = association_sets(m_per, links)
 
-    solved = colmap.triangulate_known_poses(
-        views, [(cam_of[feats], all_kp[feats]) for feats in tracks],
+    cache = {} if solved_tracks is None else solved_tracks
+    keys = [feats.tobytes() for feats in tracks]
+    new = {key: feats for key, feats in zip(keys, tracks, strict=True) if key not in cache}
+    cache.update(zip(new, colmap.triangulate_known_poses(
+        views, [(cam_of[feats], all_kp[feats]) for feats in new.values()],
         max_error_px=options.max_error_px, min_tri_angle_deg=options.min_tri_angle_deg,
-        seed=options.seed)
+        seed=options.seed), strict=True))
+    solved = [cache[key] for key in keys]
 
     T = len(tracks)
     xyz = np.full((T, 3), np.nan)

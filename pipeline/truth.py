@@ -206,7 +206,7 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
         Missing or bad homography files (:func:`read_homographies`).
     """
     from pipeline import report as sections
-    from pipeline.metrics import association_pairs, pairwise_scores
+    from pipeline.metrics import PairwiseTruth
 
     directory = Path(directory)
     H1 = read_homographies(directory, len(views))
@@ -218,13 +218,13 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
     good = homography_link_truth(kps, links, H1, scales, tol_px)
     ledger.truth = good.astype(np.int8)
     tp = homography_true_pairs(kps, H1, scales, tol_px)
-    m_total = int(m.sum())
+    scorer = PairwiseTruth(tp, int(m.sum()))
 
     def missing(kept_links: Links) -> int:
         return _missing(tp, kept_links, edges, m)
 
     def pairwise(kept_links: Links) -> dict:
-        return pairwise_scores(association_pairs(m, kept_links), tp, m_total)
+        return scorer.scores(m, kept_links)
 
     kept = ledger.kept
     resolved = kept | (ledger.reason == "fusion-outlier")

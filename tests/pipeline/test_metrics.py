@@ -1,6 +1,9 @@
 import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pipeline.metrics import association_pairs, pairwise_scores
+from pipeline.metrics import PairwiseTruth, association_pairs, pairwise_scores
 from pipeline.types import Links
 
 
@@ -51,3 +54,40 @@ def test_association_pairs_match_set_by_set_enumeration():
         got = association_pairs(m, links)
         assert got.dtype == np.int64
         assert [tuple(p) for p in got.tolist()] == _pairs_set_by_set(m, links)
+
+
+@st.composite
+def _links_and_truth(draw):
+    """Features per camera, one-to-one links per camera pair, and true pairs (some repeated,
+    some reversed, some between features of one camera)."""
+    n = draw(st.integers(2, 5))
+    m = draw(st.lists(st.integers(0, 12), min_size=n, max_size=n))
+    off = np.concatenate([[0], np.cumsum(m)])
+    rows = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            k = draw(st.integers(0, min(m[i], m[j])))
+            fi = draw(st.permutations(range(m[i])))[:k]
+            fj = draw(st.permutations(range(m[j])))[:k]
+            rows += zip([i] * k, fi, [j] * k, fj, strict=True)
+    cols = list(zip(*rows, strict=True)) if rows else [(), (), (), ()]
+    links = Links(*(np.array(c, dtype=np.int64) for c in cols))
+    total = int(off[-1])
+    truth = draw(st.lists(st.tuples(st.integers(0, max(total - 1, 0)),
+                                    st.integers(0, max(total - 1, 0))), max_size=40)) \
+        if total else []
+    return m, links, np.array(truth, dtype=np.int64).reshape(-1, 2), total
+
+
+@settings(max_examples=150, deadline=None)
+@given(_links_and_truth())
+def test_pairwise_truth_scores_equal_the_scores_of_the_listed_pairs(case):
+    m, links, truth, total = case
+    assert PairwiseTruth(truth, total).scores(m, links) == \
+        pairwise_scores(association_pairs(m, links), truth, total)
+
+
+def test_pairwise_truth_refuses_another_feature_count():
+    links = Links([0], [0], [1], [0])
+    with pytest.raises(ValueError, match="3 features scored on 2"):
+        PairwiseTruth(np.array([[0, 1]]), 3).scores([1, 1], links)
