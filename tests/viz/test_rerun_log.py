@@ -11,8 +11,10 @@ from pipeline.types import Features, LinkLedger, Links, RunRecord, View
 from viz.recording_reader import count_strips, entity_paths
 from viz.rerun_log import (
     CUT_COLORS,
+    KEYPOINT_CLASSES,
     LINK_COLORS,
     camera_entity,
+    keypoint_annotation_context,
     keypoint_status,
     link_endpoints_3d,
     log_run,
@@ -256,6 +258,23 @@ def test_keypoints_logged_with_status_classes(recording):
     # Rerun puts the top-left pixel's centre at (0.5, 0.5), OpenCV at (0, 0).
     np.testing.assert_allclose(d["Points2D:positions"][0],
                                record.features[0].keypoints + 0.5, atol=1e-4)
+
+
+def test_annotation_context_equals_rerun_own_conversion():
+    ours = keypoint_annotation_context().context.as_arrow_array()
+    theirs = rr.AnnotationContext([(k, label, rgb) for k, (label, rgb)
+                                   in KEYPOINT_CLASSES.items()]).context.as_arrow_array()
+    assert ours.type == theirs.type and ours.equals(theirs)
+
+
+def test_annotation_context_logged_at_the_root(recording):
+    path, _ = recording
+    (chunk,) = _chunks(path, "/", static=True)
+    (context,) = chunk.to_record_batch().to_pydict()["AnnotationContext:context"]
+    got = {c["class_id"]: (c["class_description"]["info"]["label"],
+                           c["class_description"]["info"]["color"]) for c in context[0]}
+    assert got == {k: (label, (r << 24) | (g << 16) | (b << 8) | 0xFF)
+                   for k, (label, (r, g, b)) in KEYPOINT_CLASSES.items()}
 
 
 def test_real_images_without_poses(tmp_path):
