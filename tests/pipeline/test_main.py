@@ -86,6 +86,40 @@ def test_run_without_rerun_or_fusion_imports_neither(tmp_path):
     assert (tmp_path / "run" / "report.json").is_file()
 
 
+#: optional libraries that the default run-formation never needs (team transport, plots,
+#: hloc files, tests, progress bars off a terminal, pandas that Rerun would use if present)
+NEVER_ON_THE_DEFAULT_PATH = ("zenoh", "matplotlib", "h5py", "hypothesis", "pytest", "tqdm",
+                             "pandas", "scipy.stats", "pyarrow.compute", "pipeline.teamrun",
+                             "pipeline.transport.zenoh", "pipeline.images")
+#: the modules of the default run-formation, in stage order
+DEFAULT_RUN_MODULES = ("pipeline.__main__", "pipeline.commands.run_formation", "pipeline.run",
+                       "data_synth", "pipeline.features", "pipeline.matching",
+                       "pipeline.consistency", "pipeline.fusion.landmarks", "pipeline.evaluate",
+                       "pipeline.metrics", "pipeline.report", "pipeline.oracle")
+
+
+def test_default_run_modules_load_no_optional_library():
+    loaded = _imported_after("\n".join(f"import {m}" for m in DEFAULT_RUN_MODULES))
+    assert set(DEFAULT_RUN_MODULES) <= loaded
+    unwanted = set(NEVER_ON_THE_DEFAULT_PATH) | {"rerun", "pyarrow", "pycolmap"}
+    # pycolmap and Rerun are loaded by the stages that use them (triangulation, write), so
+    # that the peak memory of the earlier stages does not hold them
+    assert not loaded & unwanted, sorted(loaded & unwanted)
+
+
+@pytest.mark.parametrize("rerun", [True, False])
+def test_default_command_imports_only_what_it_uses(rerun, tmp_path):
+    argv = ["run-formation", "--formation", "a", "--size", "160x120", "--max-features", "200",
+            "--out", str(tmp_path / "run")] + ([] if rerun else ["--no-rerun"])
+    code = ("from pipeline.__main__ import main\n"
+            f"assert main({argv!r}) in (0, 3)\n")
+    loaded = _imported_after(code, {"FORMATION_MATCH_CACHE": str(tmp_path / "cache")})
+    assert {"pipeline.fusion.voting", "pycolmap"} <= loaded  # fusion ran, pycolmap checked
+    unwanted = set(NEVER_ON_THE_DEFAULT_PATH) | (set() if rerun else {"rerun", "pyarrow", "PIL"})
+    assert not loaded & unwanted, sorted(loaded & unwanted)
+    assert ("rerun" in loaded) == rerun == (tmp_path / "run" / "recording.rrd").is_file()
+
+
 def test_fusion_does_not_import_scipy_stats():
     loaded = _imported_after("import pipeline.fusion.landmarks")
     assert "pipeline.fusion.voting" in loaded
