@@ -28,12 +28,12 @@ lint: $(STAMP)
 
 # make bench: every bench script (each prints how long it took; the full-size photo comparison
 # is not among them: python bench/images_vs_colmap.py DIR). make bench QUICK=1: three quick ones,
-# measured at 72 s (run_formation, 5 rounds, at a load average of 5), 15 s (foundation) and 65 s
+# measured at 45 s (run_formation, 5 rounds, at a load average of 5), 15 s (foundation) and 65 s
 # (images_vs_colmap on the 640 px Sceaux copy) on 2 cores
 QUICK_BENCH := bench/run_formation.py bench/foundation.py bench/images_vs_colmap.py
 bench: $(STAMP)
-	@if [ -n "$(QUICK)" ]; then set -- $(QUICK_BENCH); echo "quick bench (about 2.5 min): $$*"; \
-	else set -- bench/*.py; echo "full bench: every script in bench/, several minutes each for the voting and scale ones; make bench QUICK=1 takes about 2.5 min"; fi; \
+	@if [ -n "$(QUICK)" ]; then set -- $(QUICK_BENCH); echo "quick bench (about 2 min): $$*"; \
+	else set -- bench/*.py; echo "full bench: every script in bench/, several minutes each for the voting and scale ones; make bench QUICK=1 takes about 2 min"; fi; \
 	for b in "$$@"; do echo "== $$b"; start=$$(date +%s); $(PY) $$b || exit 1; \
 	echo "== $$b took $$(( $$(date +%s) - start )) s"; done
 
