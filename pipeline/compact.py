@@ -156,7 +156,7 @@ def fault_section_in_ids(section: dict, ids: CompactIds) -> dict:
     def cam(k):
         return str(ids.robot_ids([int(k)])[0])
 
-    for key in ("crashed", "crashes_not_reached"):
+    for key in ("crashed", "crashed_after_close", "crashes_not_reached"):
         out[key] = {cam(k): v for k, v in section.get(key, {}).items()}
     out["robots_lost"] = {cam(k): ids.robot_ids(v) for k, v in
                           section.get("robots_lost", {}).items()}

@@ -194,17 +194,22 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
     Returns
     -------
     dict with ``injected`` (the config), ``protocol``, ``crashed`` (robot -> round, crashes
-    that happened), ``crashes_not_reached`` (the run ended first), ``robots_lost`` (robot ->
+    that happened), ``crashed_after_close`` (those of them after the robot had confirmed the
+    stage's closing phase: its links stay kept, see :mod:`pipeline.consistency.reliable`),
+    ``crashes_not_reached`` (the run ended first), ``robots_lost`` (robot ->
     neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
-    ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``,
+    ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``
+    (detection, resolution and closing),
     ``messages``; with ``fault_free``: ``extra_rounds``, ``extra_messages``,
     ``extra_links_deleted``.
     """
     st = result.stats
     f = st.get("faults", {})
-    rounds = int(st["detection_rounds"] + st["resolution_rounds"])
+    rounds = int(st["detection_rounds"] + st["resolution_rounds"] + st.get("closing_rounds", 0))
     out = {"injected": config.as_dict(), "protocol": st.get("protocol"),
            "crashed": {str(k): v for k, v in f.get("crashed", {}).items()},
+           "crashed_after_close": {str(k): v
+                                   for k, v in f.get("crashed_after_close", {}).items()},
            "crashes_not_reached": {str(k): v for k, v in f.get("crashes_not_reached", {}).items()},
            "robots_lost": {str(k): v for k, v in f.get("robots_lost", {}).items()},
            "links_cut_robot_lost": int(f.get("links_cut_robot_lost", 0)),

@@ -28,7 +28,7 @@ from pipeline.types import Links, PairMatches
 __all__ = ["run_formation_team", "resolve_conflicts_team", "images_team", "team_options",
            "links_of_team", "consistency_of_team"]
 
-CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "ack", "heartbeat")
+CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "closing", "ack", "heartbeat")
 FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport"}
 
 
@@ -152,6 +152,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         iterations=int(any_run.get("iterations", 0)),
         detection_rounds=int(any_run.get("detection_rounds", 0)),
         resolution_rounds=int(any_run.get("resolution_rounds", 0)),
+        closing_rounds=int(any_run.get("closing_rounds", 0)),
         per_iteration=any_run.get("phases", []),
         messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
         messages_by_kind={k: v for k, v in msgs.items() if v},

@@ -18,9 +18,11 @@ With a fault switch of the network on, the robots run the fault-tolerant protoco
 ``T`` rounds on silent neighbours). Then a phase ends when every robot still alive is done
 (detection: stopped, every linked neighbour's ``final`` in, everything acknowledged;
 resolution: everything acknowledged); a detection in which a robot lost a neighbour is run
-again before any resolution, and the loop ends on a detection that lost nobody and found no
-conflictive feature. A crashed robot is simply no longer stepped (it is dead); the survivors
-learn of it only from its silence.
+again before any resolution. A detection that lost nobody and found no conflictive feature
+is followed by the closing phase (:mod:`.reliable`, "Closing round": every robot has each
+linked neighbour acknowledge a ``closing`` message); the loop ends when that phase lost
+nobody, else the detection runs again. A crashed robot is simply no longer stepped (it is
+dead); the survivors learn of it only from its silence.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from pipeline.commgraph import comm_edges_for
 from pipeline.consistency.evidence import equip, run_evidence_resolution
 from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
+    CLOSING,
     DETECTION,
     RESOLUTION,
     ProtocolOptions,
@@ -78,6 +81,7 @@ class ConsistencyResult:
     stats : dict — ``iterations`` (detection + resolution passes that found conflicts; a
         last detection that finds none ends the loop and is counted in the rounds),
         ``detection_rounds``, ``resolution_rounds`` (totals over all passes),
+        ``closing_rounds`` (total of the closing phases; reliable protocol only),
         ``per_iteration`` (one dict per detection: ``detection_rounds``, ``t_stop`` (n,) the
         round each robot stopped (Prop. 3.5), ``conflictive_features``, ``conflictive_sets``,
         ``resolution_rounds``, ``last_assignment_round``, ``messages``, ``bytes``),
@@ -87,7 +91,11 @@ class ConsistencyResult:
         ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``resolution`` (the rule
         that cut: ``paper`` or ``evidence``), ``survivors`` (n,) bool
         (robots alive at the end), and ``faults``: what the network injected and its effect
-        (``dropped`` messages, ``crashed`` robots with their crash round, ``robots_lost``
+        (``dropped`` messages, ``crashed`` robots with their crash round,
+        ``crashed_after_close`` (those of them that crashed after the last closing phase
+        began and were not declared lost: they acknowledged every ``closing`` sent to them,
+        so their links were kept by the close), ``close_round`` (network round at which the
+        last closing phase began, ``None`` without one), ``robots_lost``
         (robot -> neighbours that declared it lost), ``links_cut_robot_lost``,
         ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``)
     """
@@ -147,10 +155,12 @@ def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, ite
 
     Returns
     -------
-    dict — ``rounds``; detection: ``t_stop`` (n,) the round each robot stopped (Prop. 3.5),
-    ``conflictive_features``, ``lost`` (some robot declared a neighbour lost); resolution:
-    ``conflictive_sets`` (sets rooted, eq. 10), ``lost``
+    dict — ``rounds``, ``start_round`` (network round of round 0), ``lost`` (some robot
+    declared a neighbour lost); detection: ``t_stop`` (n,) the round each robot stopped
+    (Prop. 3.5), ``conflictive_features``; resolution: ``conflictive_sets`` (sets rooted,
+    eq. 10); closing: nothing more
     """
+    start_round = int(network.round)
     live = protocol.team(robots)
     rooted = sum(protocol.start(phase, rb, iteration) for rb in live)
     cap = protocol.max_rounds(phase, robots) if max_rounds is None else max_rounds
@@ -166,11 +176,11 @@ def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, ite
         if t > cap:
             raise RuntimeError(f"{phase} did not end within {cap} rounds")
     end_phase(phase, robots)
-    out = dict(rounds=t, lost=protocol.lost_in_phase(live))
+    out = dict(rounds=t, start_round=start_round, lost=protocol.lost_in_phase(live))
     if phase == DETECTION:
         out.update(t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
                    conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)))
-    else:
+    elif phase == RESOLUTION:
         out.update(conflictive_sets=int(rooted))
     return out
 
@@ -310,6 +320,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     max_iterations = m_total // 4 + 2 + (n * n if reliable else 0)
     iteration = 0
     repeated = 0
+    close_round = None
     while True:
         iteration += 1
         if iteration > max_iterations:
@@ -326,6 +337,17 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             repeated += 1
             continue
         if det["conflictive_features"] == 0:
+            if proto.closing:
+                # every linked neighbour confirms it is alive (reliable.py, "Closing round")
+                clo = run_phase(robots, network, proto, CLOSING, iteration)
+                rec.update(closing_rounds=clo["rounds"], close_round=clo["start_round"])
+                if clo["lost"]:
+                    # a neighbour found dead at the close: detect again without it
+                    rec.update(_delta(c0, network.counters()), repeated=True)
+                    per_iteration.append(rec)
+                    repeated += 1
+                    continue
+                close_round = clo["start_round"]
             rec.update(_delta(c0, network.counters()))
             per_iteration.append(rec)
             break
@@ -340,7 +362,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
 
-    result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated)
+    result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
+                      close_round)
     result.stats["resolution"] = "evidence" if use_evidence else "paper"
     return result
 
@@ -367,7 +390,7 @@ def _delta(c0: dict, c1: dict) -> dict:
 
 def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray],
              per_iteration: list[dict], network: Network, protocol,
-             repeated: int = 0) -> ConsistencyResult:
+             repeated: int = 0, close_round: int | None = None) -> ConsistencyResult:
     """Read every robot's own log into per-link arrays (reporting only)."""
     L = len(links)
     survivors = np.array([network.alive(rb.id) for rb in robots], dtype=bool)
@@ -416,6 +439,12 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         survivors=survivors,
         faults=faults,
     )
+    if protocol.closing:
+        stats["closing_rounds"] = int(sum(p.get("closing_rounds", 0) for p in per_iteration))
+        faults.update(close_round=close_round, crashed_after_close={
+            i: r for i, r in faults["crashed"].items()
+            if close_round is not None and r > close_round
+            and not any(i in lost for lost in lost_by)})
     return ConsistencyResult(links=links, deleted=deleted, reason=reason, iteration=iteration,
                              round=round_, case=case, component=component, stats=stats,
                              track_label=track_label)

@@ -10,7 +10,10 @@ Alg. 1) starts, what it does in each network round, and when the phase is over:
   network discards what a crashed one sends or would receive).
 * :class:`ReliableProtocol` — the fault-tolerant protocol of :mod:`.reliable` (acknowledged
   messages, lockstep detection, timeouts). A crashed robot is no longer stepped; a phase is
-  over when every robot still alive is done.
+  over when every robot still alive is done. It has a third phase, ``closing``
+  (:attr:`ReliableProtocol.closing`): after the last detection every robot has each linked
+  neighbour confirm that it is alive, so that a crash after a robot's last detection is
+  noticed (:mod:`.reliable`, "Closing round").
 
 Each protocol holds every robot's endpoint on the transport (and, for the reliable one, the
 per-robot :class:`~.reliable.ReliableState`); the driver (:func:`.engine.run_phase`) only plays
@@ -27,9 +30,11 @@ from pipeline.consistency.channel import Channel
 from pipeline.consistency.detection import detection_step, start_detection
 from pipeline.consistency.reliable import (
     ReliableState,
+    closing_round,
     detection_done,
     detection_round,
     resolution_round,
+    start_closing,
     start_detection_reliable,
     start_resolution_reliable,
 )
@@ -38,9 +43,9 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Transport
 
 __all__ = ["ProtocolOptions", "PaperProtocol", "ReliableProtocol", "make_protocol", "end_phase",
-           "DETECTION", "RESOLUTION"]
+           "DETECTION", "RESOLUTION", "CLOSING"]
 
-DETECTION, RESOLUTION = "detection", "resolution"
+DETECTION, RESOLUTION, CLOSING = "detection", "resolution", "closing"
 
 
 @dataclass
@@ -73,6 +78,8 @@ class PaperProtocol:
     """The paper's protocol (Secs. III–IV as written) on the transport ``network``."""
 
     name = "paper"
+    #: the paper's loop ends on the detection that finds no conflict (no closing phase)
+    closing = False
 
     def __init__(self, network: Transport, n: int):
         self.network = network
@@ -126,6 +133,8 @@ class ReliableProtocol:
     """The fault-tolerant protocol of :mod:`.reliable` on the transport ``network``."""
 
     name = "reliable"
+    #: the loop ends with a closing phase after the last detection (:mod:`.reliable`)
+    closing = True
 
     def __init__(self, network: Transport, n: int, options: ProtocolOptions, m_total: int):
         self.network = network
@@ -135,7 +144,8 @@ class ReliableProtocol:
         # generous caps: they only turn a bug into an error, never end a correct run
         T = options.loss_timeout
         self._caps = {DETECTION: (m_total + n + 4) * (T + 4) * 4,
-                      RESOLUTION: (n + 2) * (T + 4) * 4 + m_total}
+                      RESOLUTION: (n + 2) * (T + 4) * 4 + m_total,
+                      CLOSING: (n + 2) * (T + 4) * 4}
 
     def team(self, robots: list[Robot]) -> list[Robot]:
         """The robots still alive (a crashed robot is dead: it is no longer stepped)."""
@@ -149,19 +159,23 @@ class ReliableProtocol:
         rooted = 0
         if phase == DETECTION:
             start_detection_reliable(robot, st, iteration, ep.now)
+        elif phase == CLOSING:
+            start_closing(robot, st, ep.now)
         else:
             rooted = start_resolution_reliable(robot, st, ep.now)
         ep.note_memory(robot.peak_memory_bytes)
         return rooted
 
     def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
-        step = detection_round if phase == DETECTION else resolution_round
+        step = {DETECTION: detection_round, RESOLUTION: resolution_round,
+                CLOSING: closing_round}[phase]
         ep = self.endpoints[robot.id]
         step(robot, self.state[robot.id], inbox, ep.now, phase_round)
         ep.note_memory(robot.peak_memory_bytes)
 
     def done(self, phase: str, live: list[Robot]) -> bool:
-        """Every robot alive done: detection (:func:`~.reliable.detection_done`), or idle."""
+        """Every robot alive done: detection (:func:`~.reliable.detection_done`), or idle
+        (resolution, closing)."""
         if phase == DETECTION:
             return all(detection_done(rb, self.state[rb.id]) for rb in live)
         return all(self.state[rb.id].chan.idle() for rb in live)

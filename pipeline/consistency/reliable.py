@@ -72,6 +72,35 @@ What detection needs on a topology that changes every round (stated and tested)
       link is then cut as ``robot-lost`` on both sides, which keeps the survivors consistent
       but loses the link).
 
+Closing round (stated): no crash before the end goes unnoticed
+    A detection that lost nobody and found no conflictive feature would end the loop, but a
+    robot may crash after it sent everything that detection needed from it (its blocks, its
+    ``final``, its acknowledgements): nobody expects anything from it any more, so nobody
+    notices, and its links stay kept although it is dead. So the loop does not end on that
+    detection but on a *closing phase* after it (:func:`start_closing`, :func:`closing_round`):
+    every robot alive sends an acknowledged ``closing`` message to every neighbour it still
+    shares an alive link with, and its closing is done when all of them are acknowledged
+    (``Channel.idle``). A neighbour that does not acknowledge within ``T`` rounds is declared
+    lost like any silent neighbour: its links are cut (``robot-lost``), and the phase's
+    ``lost`` bit makes the driver run the detection again (whose result then no longer
+    includes the lost robot), followed by a new closing phase.
+
+    Rule: a robot that crashed before it acknowledged the closing message of every neighbour
+    it shares a link with — in particular any robot dead when the last closing phase starts,
+    or before the closing messages reach it (``1 + delay`` rounds later) — has every link
+    to a survivor cut as ``robot-lost``. A robot that crashes after acknowledging all of them
+    has completed the stage (the driver reports it under ``crashed_after_close``); its links
+    stay kept, as every robot alive at the close holds them.
+
+    Why the end state is conflict-free among the survivors. The last detection lost nobody,
+    so its lockstep rows are exact (Prop. 3.5) for the links alive among the robots that took
+    part in it, and it found no conflictive feature: those links form no conflictive set
+    (Def. 2.4). The closing phase after it cuts nothing (else it would not be the last), so
+    the final links are exactly those; every survivor, and every robot that crashed after the
+    close, took part in it. The survivors' links are a subset, hence conflict-free too.
+    Links held *only* by robots that crashed before the close (between two crashed robots)
+    are no survivor's; nobody can cut them, and the driver reports them as they were left.
+
 What a detection in which some robot lost a neighbour found is not trusted (blocks that
 came through the lost robot may reach beyond what the survivors can reach): the driver skips
 the resolution and runs the detection again (:mod:`.engine`); the loop of Prop. 4.5 ends on a
@@ -81,7 +110,8 @@ the phase barrier, like the "conflicts found" bit the driver already gathers.
 Wire format (counted by the network): every channel message carries ``seq`` (int32, 0 for
 unsequenced ``ack``/``heartbeat``) and, when it acknowledges something, ``ack`` (int32 list of
 the sender's sequence numbers being acknowledged); ``blocks`` carry ``t`` (int32, logical
-round) besides the paper's ``rows``/``indptr``/``indices``; ``final`` carries ``t`` = ``t_i``.
+round) besides the paper's ``rows``/``indptr``/``indices``; ``final`` carries ``t`` = ``t_i``;
+``closing`` carries only its ``seq``.
 """
 
 from __future__ import annotations
@@ -104,7 +134,8 @@ from pipeline.consistency.robot import ROBOT_LOST, Robot, blocks_bytes
 from pipeline.transport import Message
 
 __all__ = ["ReliableState", "start_detection_reliable", "detection_round",
-           "detection_done", "start_resolution_reliable", "resolution_round"]
+           "detection_done", "start_resolution_reliable", "resolution_round", "start_closing",
+           "closing_round"]
 
 _I32 = np.int32
 
@@ -279,5 +310,36 @@ def resolution_round(robot: Robot, st: ReliableState, inbox: list[Message], now:
         _cut_lost(robot, st, lost, phase_round)
     msgs = [m for m in msgs if m.kind in ("request", "reject")]
     resolution_step(robot, msgs, lambda dst, kind, p: st.chan.send(dst, kind, p, now), phase_round)
+    st.chan.flush(now)
+    _measure(robot, st)
+
+
+# ------------------------------------------------------------------------------------------
+# closing phase: every linked neighbour confirms it is alive (module docstring)
+
+def start_closing(robot: Robot, st: ReliableState, now: int) -> None:
+    """Round 0 of the closing phase: an acknowledged ``closing`` to every linked neighbour.
+
+    Done when all of them are acknowledged (``st.chan.idle()``); a neighbour silent for ``T``
+    rounds is declared lost in :func:`closing_round`.
+    """
+    st.lost_in_phase = False
+    for k in sorted(_linked_neighbours(robot) - st.chan.lost):
+        st.chan.send(k, "closing", {}, now)
+    _measure(robot, st)
+
+
+def closing_round(robot: Robot, st: ReliableState, inbox: list[Message], now: int,
+                  phase_round: int) -> None:
+    """One network round of the closing phase: acknowledge, retransmit, time out the silent.
+
+    The channel acknowledges every ``closing`` received (and discards late duplicates of
+    earlier phases); a neighbour that leaves a ``closing`` unacknowledged for ``T`` rounds is
+    declared lost and its links cut (``robot-lost``).
+    """
+    st.chan.receive(inbox, now)
+    lost = st.chan.check_lost(now)
+    if lost:
+        _cut_lost(robot, st, lost, phase_round)
     st.chan.flush(now)
     _measure(robot, st)

@@ -7,17 +7,19 @@ detection and Alg. 1 of :mod:`.reliable` — and decides locally when a phase is
 
 Phases (as in :func:`.engine.resolve_conflicts`, fault-tolerant protocol)
     detection (Sec. III, lockstep) → if some robot lost a neighbour during it: detection
-    again; else if no robot found a conflictive feature: stop; else resolution (Alg. 1, or
-    the evidence rule of :mod:`.evidence`) and the next detection (Prop. 4.5).
+    again; else if no robot found a conflictive feature: the closing phase (every linked
+    neighbour acknowledges a ``closing`` message, :mod:`.reliable`) and stop, or detection
+    again if it lost a neighbour; else resolution (Alg. 1, or the evidence rule of
+    :mod:`.evidence`) and the next detection (Prop. 4.5).
 
 Local termination rule (the termination wave)
     Each robot ``i`` has a *done* predicate that it evaluates on its own state after every
     round: detection — stopped by Prop. 3.5, every linked neighbour's ``final`` received and
-    all its messages acknowledged (:func:`.reliable.detection_done`); resolution — all its
-    messages acknowledged (``Channel.idle``); evidence rule — all its messages acknowledged
-    and every set it takes part in solved, or a loss known (:func:`.evidence.evidence_done`;
-    its bit is sticky, so the predicate stays stable). With every round's packet it tells its
-    neighbours a counter ``c_i``::
+    all its messages acknowledged (:func:`.reliable.detection_done`); resolution and closing —
+    all its messages acknowledged (``Channel.idle``); evidence rule — all its messages
+    acknowledged and every set it takes part in solved, or a loss known
+    (:func:`.evidence.evidence_done`; its bit is sticky, so the predicate stays stable). With
+    every round's packet it tells its neighbours a counter ``c_i``::
 
         c_i(t) = 0                                                   if not done_i(t)
         c_i(t) = 1 + min(c_i(t-1), min_{k ∈ N_i} c_k(t-1))           otherwise
@@ -64,9 +66,11 @@ from pipeline.consistency.evidence import (
 from pipeline.consistency.protocols import RESOLUTION, ProtocolOptions, end_phase
 from pipeline.consistency.reliable import (
     ReliableState,
+    closing_round,
     detection_done,
     detection_round,
     resolution_round,
+    start_closing,
     start_detection_reliable,
     start_resolution_reliable,
 )
@@ -119,6 +123,7 @@ class RobotRun:
     phases: list = field(default_factory=list)
     detection_rounds: int = 0
     resolution_rounds: int = 0
+    closing_rounds: int = 0
     seconds: float = 0.0
 
 
@@ -197,6 +202,19 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
             log.repeated_detections += 1
             continue
         if not bits & CONFLICT:
+            # every linked neighbour confirms it is alive (reliable.py, "Closing round")
+            start = transport.round
+            start_closing(robot, st, transport.round)
+            rounds, bits = _run_phase(
+                robot, st, transport, wave,
+                lambda inbox, now, t: closing_round(robot, st, inbox, now, t),
+                chan.idle, res_cap, "closing")
+            log.closing_rounds += rounds
+            log.phases.append(dict(phase="closing", iteration=iteration, start_round=start,
+                                   rounds=rounds, lost_somewhere=bool(bits & LOST)))
+            if bits & LOST:
+                log.repeated_detections += 1
+                continue
             break
         log.iterations += 1
         start = transport.round
