@@ -7,8 +7,16 @@ per-round topology for the fusion consensus; the robots then run the fault-toler
 of :mod:`pipeline.consistency.reliable`. :func:`fault_report` writes the report's ``faults``
 section: what was injected and its effect next to a fault-free run on the same input.
 
-Flags (``add_fault_arguments``): ``--drop-prob P``, ``--crash ROBOT@ROUND`` (repeatable),
-``--switching-topology``, ``--fault-seed S``.
+Flags (``add_fault_arguments``): ``--drop-prob P``, ``--delay-rounds D``, ``--crash
+ROBOT@ROUND`` (repeatable), ``--switching-topology``, ``--fault-seed S``.
+
+Delay and the robots' timers (stated): with ``--delay-rounds D`` every message spends ``D``
+extra rounds in flight, so a lossless round trip takes ``2 (D + 1)`` rounds instead of 2. The
+robots are configured for that link latency, as a deployment would set its timers from the
+radio's: a message is retransmitted once ``2 (D + 1)`` rounds passed without its
+acknowledgement (instead of 2) and a neighbour is declared lost after ``T + 2 D`` silent rounds
+(``T`` = 40, :class:`~pipeline.consistency.protocols.ProtocolOptions`), so a delay alone never
+makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`).
 """
 
 from __future__ import annotations
@@ -22,7 +30,11 @@ import numpy as np
 from pipeline.errors import InputError
 
 __all__ = ["FaultConfig", "add_fault_arguments", "faults_from_args", "parse_crash",
-           "fault_report"]
+           "fault_report", "MAX_DELAY_ROUNDS"]
+
+#: Largest ``--delay-rounds``: every phase takes ``D + 1`` times its rounds, so the run's time
+#: grows with ``D``; beyond this a run is refused before it starts.
+MAX_DELAY_ROUNDS = 100
 
 _CRASH = re.compile(r"^\s*(\d+)\s*@\s*(\d+)\s*$")
 
@@ -34,6 +46,7 @@ class FaultConfig:
     Attributes
     ----------
     drop_prob : float in [0, 1) — each message is lost independently with this probability
+    delay_rounds : int in [0, MAX_DELAY_ROUNDS] — extra rounds every message spends in flight
     crash : tuple of (robot, round) — robot ``robot`` crashes at network round ``round``
         (rounds count from 0 over the whole consistency stage)
     switching_topology : bool — every communication edge is up with probability
@@ -44,6 +57,7 @@ class FaultConfig:
     """
 
     drop_prob: float = 0.0
+    delay_rounds: int = 0
     crash: tuple = ()
     switching_topology: bool = False
     seed: int = 0
@@ -54,6 +68,7 @@ class FaultConfig:
         if not 0.0 <= float(self.drop_prob) < 1.0:
             raise InputError(f"--drop-prob {self.drop_prob}: must be in [0, 1) (1 would lose "
                              "every message)")
+        _check_delay(self.delay_rounds)
         robots = [int(r) for r, _ in self.crash]
         dup = sorted({r for r in robots if robots.count(r) > 1})
         if dup:
@@ -63,7 +78,8 @@ class FaultConfig:
     @property
     def any(self) -> bool:
         """True when some fault is switched on."""
-        return bool(self.drop_prob > 0 or self.crash or self.switching_topology)
+        return bool(self.drop_prob > 0 or self.delay_rounds or self.crash
+                    or self.switching_topology)
 
     def check_robots(self, n_robots: int) -> None:
         """InputError if a crash names a robot outside ``0..n_robots-1``."""
@@ -118,12 +134,25 @@ class FaultConfig:
         if not self.any:
             return None
         return NetworkOptions(drop_probability=float(self.drop_prob),
+                              delay_rounds=int(self.delay_rounds),
                               crash_at={int(r): int(t) for r, t in self.crash},
                               topology=self.topology(np.asarray(comm_edges).reshape(-1, 2)),
                               seed=int(self.seed))
 
+    def protocol_options(self):
+        """The robots' protocol for this network: timers set for the link latency (module
+        docstring), or ``None`` (the defaults) without delay."""
+        from pipeline.consistency.protocols import ProtocolOptions
+
+        d = int(self.delay_rounds)
+        if not d:
+            return None
+        base = ProtocolOptions()
+        return ProtocolOptions(retransmit_after=base.retransmit_after * (d + 1),
+                               loss_timeout=base.loss_timeout + 2 * d)
+
     def as_dict(self) -> dict:
-        return {"drop_prob": float(self.drop_prob),
+        return {"drop_prob": float(self.drop_prob), "delay_rounds": int(self.delay_rounds),
                 "crash": [f"{int(r)}@{int(t)}" for r, t in self.crash],
                 "switching_topology": bool(self.switching_topology),
                 "switch_p_up": float(self.switch_p_up), "switch_window": int(self.switch_window),
@@ -145,6 +174,24 @@ def parse_crash(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
+def _check_delay(d) -> int:
+    if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or \
+            not 0 <= int(d) <= MAX_DELAY_ROUNDS:
+        raise InputError(f"--delay-rounds {d!r}: must be a whole number of rounds from 0 to "
+                         f"{MAX_DELAY_ROUNDS}, e.g. 3")
+    return int(d)
+
+
+def _delay(text: str) -> int:
+    try:
+        d = int(str(text).strip())
+    except ValueError:
+        raise InputError(f"--delay-rounds {text!r}: not a whole number; give the extra rounds "
+                         f"every message spends in flight, 0 to {MAX_DELAY_ROUNDS}, e.g. "
+                         "3") from None
+    return _check_delay(d)
+
+
 def _probability(text: str) -> float:
     try:
         p = float(text)
@@ -157,11 +204,15 @@ def _probability(text: str) -> float:
 
 
 def add_fault_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--drop-prob``, ``--crash``, ``--switching-topology`` and ``--fault-seed``."""
+    """Add ``--drop-prob``, ``--delay-rounds``, ``--crash``, ``--switching-topology`` and
+    ``--fault-seed``."""
     g = parser.add_argument_group("faults (simulated robot network)")
     g.add_argument("--drop-prob", default="0", metavar="P",
                    help="each message between robots is lost with probability P in [0, 1) "
                         "(default 0)")
+    g.add_argument("--delay-rounds", default="0", metavar="D",
+                   help="every message between robots arrives D rounds late, 0 to "
+                        f"{MAX_DELAY_ROUNDS} (default 0; the robots' timers are set for it)")
     g.add_argument("--crash", action="append", default=[], metavar="ROBOT@ROUND",
                    help="robot ROBOT crashes at network round ROUND of the consistency stage "
                         "(repeatable)")
@@ -178,6 +229,7 @@ def faults_from_args(args) -> FaultConfig:
 
     seed = checked_seed(args.fault_seed, "--fault-seed")
     return FaultConfig(drop_prob=_probability(args.drop_prob),
+                       delay_rounds=_delay(args.delay_rounds),
                        crash=tuple(parse_crash(c) for c in args.crash),
                        switching_topology=bool(args.switching_topology), seed=seed)
 
@@ -196,6 +248,7 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
     dict with ``injected`` (the config), ``protocol``, ``crashed`` (robot -> round, crashes
     that happened), ``crashed_after_close`` (those of them after the robot had confirmed the
     stage's closing phase: its links stay kept, see :mod:`pipeline.consistency.reliable`),
+    ``close_round`` (network round at which the last closing phase began, or ``None``),
     ``crashes_not_reached`` (the run ended first), ``robots_lost`` (robot ->
     neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
     ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``
@@ -210,6 +263,7 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
            "crashed": {str(k): v for k, v in f.get("crashed", {}).items()},
            "crashed_after_close": {str(k): v
                                    for k, v in f.get("crashed_after_close", {}).items()},
+           "close_round": f.get("close_round"),
            "crashes_not_reached": {str(k): v for k, v in f.get("crashes_not_reached", {}).items()},
            "robots_lost": {str(k): v for k, v in f.get("robots_lost", {}).items()},
            "links_cut_robot_lost": int(f.get("links_cut_robot_lost", 0)),

@@ -208,7 +208,8 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     from pipeline.faults import fault_report
 
     edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
-    result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)), **kw)
+    result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)),
+                               protocol=faults.protocol_options(), **kw)
     return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links, **kw))
 
 

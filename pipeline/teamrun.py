@@ -43,8 +43,8 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
     Raises
     ------
     InputError
-        ``--crash`` or ``--switching-topology`` (faults of the simulated network; over Zenoh
-        kill a robot process instead).
+        ``--crash``, ``--delay-rounds`` or ``--switching-topology`` (faults of the simulated
+        network; over Zenoh kill a robot process instead).
     """
     from pipeline.features import MERGE_RADIUS_PX
 
@@ -54,10 +54,10 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
             "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius),
             "resolution": resolution, **feature_options}
     if faults is not None:
-        if faults.crash or faults.switching_topology:
-            raise InputError("--crash and --switching-topology are faults of the simulated "
-                             "network (--transport sim); over zenoh, kill a robot process "
-                             "instead; --drop-prob works on both")
+        if faults.crash or faults.switching_topology or faults.delay_rounds:
+            raise InputError("--crash, --delay-rounds and --switching-topology are faults of "
+                             "the simulated network (--transport sim); over zenoh, kill a "
+                             "robot process instead; --drop-prob works on both")
         opts["drop_prob"] = float(faults.drop_prob)
         opts["fault_seed"] = int(faults.seed)
     return opts

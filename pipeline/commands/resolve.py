@@ -136,7 +136,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                             ("b", "c", "evidence") if c != "evidence" or resolution == "evidence"},
         "before": before, "after": after,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
-                                          "messages", "bytes", "max_robot_memory_bytes")},
+                                          "closing_rounds", "messages", "bytes",
+                                          "max_robot_memory_bytes") if k in st},
     }
     if fault_section is not None:
         summary["faults"] = fault_section_in_ids(fault_section, ids)
@@ -194,7 +195,9 @@ def run(args) -> int:
     else:
         print(f"deleted: {s['deleted']} links by the evidence rule in {r['iterations']} "
               "iteration(s)")
-    print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution; "
+    closing = f" + {r['closing_rounds']} closing" if "closing_rounds" in r else ""
+    print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution"
+          f"{closing}; "
           f"{r['messages']} messages, {r['bytes']} bytes, max {r['max_robot_memory_bytes']} "
           "bytes per robot")
     if "faults" in s:

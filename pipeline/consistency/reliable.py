@@ -56,6 +56,14 @@ Crashes and timeouts (stated)
     missed for ``T`` rounds with probability about ``p^T``; one heard only through acks of
     retransmissions, about ``(1 - (1 - p)^2)^(T - 2)`` (``p = 0.5``, ``T = 40``: 2e-5).
     With a switching topology ``T`` must exceed the longest outage of a link.
+    A phase ends when every robot *alive* is done, so messages a robot sent just before it
+    crashed may still be in flight (with a delay) and arrive in a later phase: the channel
+    acknowledges them (to a dead robot: nobody hears it) and the phase code ignores a kind
+    that is not its own. A receiver that still holds a link to the crashed robot declares it
+    lost in the next detection, where it waits for that robot's blocks and ``final`` in vain
+    (``T`` rounds; late messages from it arrive within ``1 + delay`` rounds, after which
+    the channel ignores the lost robot). A message to a robot that crashed while it was in flight is lost,
+    like a dropped one.
 
 What detection needs on a topology that changes every round (stated and tested)
     * Every comm edge that carries associations must *recur* (be up at least once in every

@@ -9,6 +9,14 @@ network, the setting of the paper). The network only loses, delays or cuts; what
 about it (acknowledgements, retransmissions, timeouts) is robot protocol, in
 :mod:`pipeline.consistency.reliable`.
 
+Delay (stated): a message is transmitted in the round it is sent, over a link up in that
+round, and spends ``delay_rounds`` extra rounds in flight (what a robot sends in round ``t``
+is in its neighbour's inbox in round ``t + 1 + delay_rounds``). When it is due it is delivered
+if its receiver is alive: a sender that crashed meanwhile does not recall it, and a link that
+went down meanwhile (switching topology) does not either, since it already left; a receiver
+that crashed meanwhile never gets it (counted as dropped). :attr:`Network.lost_in_flight` and
+:attr:`Network.delivered_after_sender_crash` count the two crash cases.
+
 What a robot may know about the network (stated): its *current* neighbours, as a radio's
 neighbour table would list them (:meth:`Network.links_up`: the links of the topology in force
 this round, crashed robots included, because a crash cannot be seen, only inferred from
@@ -142,7 +150,14 @@ class Network(Transport):
     Notes
     -----
     Usage per round: each robot reads ``inbox(i)`` and calls ``send``; then the driver calls
-    :meth:`end_round`, which moves the sent messages to the inboxes of the next round.
+    :meth:`end_round`, which moves the sent messages to the inboxes of the next round (or of
+    ``delay_rounds`` rounds later).
+
+    Attributes
+    ----------
+    messages, bytes, dropped : int — sent messages and bytes; messages lost (drop, crash)
+    lost_in_flight : int — messages whose receiver crashed while they were in flight
+    delivered_after_sender_crash : int — messages delivered after their sender crashed
     """
 
     def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None) -> None:
@@ -158,6 +173,8 @@ class Network(Transport):
         self.messages = 0
         self.bytes = 0
         self.dropped = 0
+        self.lost_in_flight = 0
+        self.delivered_after_sender_crash = 0
         self.messages_by_kind: dict[str, int] = {}
         self.bytes_by_kind: dict[str, int] = {}
         self._apply_topology()
@@ -253,8 +270,10 @@ class Network(Transport):
         for m in due:
             if self.alive(m.dst):
                 self._inboxes[m.dst].append(m)
+                self.delivered_after_sender_crash += not self.alive(m.src)
             else:
                 self.dropped += 1
+                self.lost_in_flight += 1
 
     @property
     def in_flight(self) -> bool:

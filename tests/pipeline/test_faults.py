@@ -144,7 +144,8 @@ def test_resolve_command_records_faults(tmp_path, capsys):
     rows = out.read_text().splitlines()[1:]
     assert [r.split(",")[5] for r in rows] == ["robot-lost", "", "", "robot-lost"]
     f = json.loads(rep.read_text())["faults"]
-    assert f["injected"] == {"drop_prob": 0.3, "crash": ["3@2"], "switching_topology": True,
+    assert f["injected"] == {"drop_prob": 0.3, "delay_rounds": 0, "crash": ["3@2"],
+                             "switching_topology": True,
                              "switch_p_up": 0.5, "switch_window": 4, "seed": 0}
     assert f["crashed"] == {"3": 2} and f["links_cut_robot_lost"] == 2
     assert f["extra_rounds"] > 0 and f["messages_dropped"] > 0

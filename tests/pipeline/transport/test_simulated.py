@@ -118,3 +118,33 @@ def test_graph_per_round_window_and_bulk_counts():
     net.count("fusion", 4, 100)
     c = net.counters()
     assert c["messages"] == 4 and c["bytes"] == 100 and c["messages_by_kind"] == {"fusion": 4}
+
+
+def test_delayed_message_to_a_receiver_that_crashes_in_flight_is_lost():
+    net = Network(3, EDGES, NetworkOptions(delay_rounds=3, crash_at={1: 2}))
+    net.send(0, 1, "blocks", payload(1))  # round 0, due in round 4; robot 1 dies in round 2
+    for _ in range(4):
+        net.end_round()
+        assert net.inbox(1) == []
+    assert not net.pending and net.dropped == 1 and net.lost_in_flight == 1
+
+
+def test_delayed_message_from_a_sender_that_crashes_in_flight_arrives():
+    net = Network(3, EDGES, NetworkOptions(delay_rounds=3, crash_at={0: 1}))
+    net.send(0, 1, "blocks", payload(1))  # it left in round 0, before the crash
+    rounds = 0
+    while not net.inbox(1):
+        net.end_round()
+        rounds += 1
+    assert rounds == 4 and not net.alive(0)
+    assert net.delivered_after_sender_crash == 1 and net.dropped == 0
+
+
+def test_delayed_message_over_a_link_that_went_down_in_flight_arrives():
+    # the link 0-1 is up in round 0 only: the message left then, it is not recalled
+    net = Network(3, EDGES, NetworkOptions(delay_rounds=2,
+                                           topology=lambda t: EDGES if t == 0 else [[1, 2]]))
+    net.send(0, 1, "blocks", payload(1))
+    for _ in range(3):
+        net.end_round()
+    assert not net.is_neighbour(0, 1) and len(net.inbox(1)) == 1
