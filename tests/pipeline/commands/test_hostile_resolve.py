@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from pipeline.__main__ import main
 
@@ -99,11 +101,23 @@ def test_links_naming_a_folder_says_it_is_a_folder(tmp_path, capsys):
     ("--fault-seed", "x", "not an integer"),
     ("--drop-prob", "1", "--drop-prob"),
     ("--drop-prob", "nan", "--drop-prob"),
+    ("--delay-rounds", "-1", "--delay-rounds -1"),
+    ("--delay-rounds", "nan", "--delay-rounds 'nan'"),
+    ("--delay-rounds", "1.5", "not a whole number"),
+    ("--delay-rounds", "101", "from 0 to 100"),
+    ("--delay-rounds", "99999999999999999999", "from 0 to 100"),
 ])
 def test_bad_fault_values(fig1, tmp_path, capsys, flag, value, message):
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
                  flag, value]) == 2
     one_line_error(capsys, message)
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_delay_over_zenoh_is_refused(fig1, tmp_path, capsys):
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                 "--transport", "zenoh", "--delay-rounds", "2"]) == 2
+    one_line_error(capsys, "--delay-rounds")
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -137,6 +151,57 @@ def test_result_left_with_conflicts_exits_3_and_is_flagged(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "error: the result is not conflict-free" in err and "Traceback" not in err
     assert out.is_file()  # written, and flagged
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 2**32 - 1), st.data())
+def test_crashes_at_any_round_come_back_cut_with_a_reason_and_the_exit_status_says_so(
+        tmp_path_factory, capsys, seed, data):
+    """Crashes anywhere in the run (also after a robot's last detection): every input row is
+    written back once; a crashed robot's links to the survivors are cut with a reason unless
+    it confirmed the close (``crashed_after_close``); the exit status is 3 exactly when the
+    written kept links hold a conflictive set (links left between crashed robots)."""
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.consistency.protocols import ProtocolOptions
+    from pipeline.types import Links
+
+    fpc, _, links = random_instance(np.random.default_rng(seed), 6, 4, 0.7, 0.8)
+    cams = sorted(set(links.cam_i.tolist()) | set(links.cam_j.tolist()))
+    if not cams:
+        return
+    delay = data.draw(st.sampled_from([0, 0, 2]))
+    total = resolve_conflicts(fpc, None, links, protocol=ProtocolOptions(reliable=True))
+    total = (delay + 1) * total.stats["faults"]["rounds"]
+    crashes = data.draw(st.dictionaries(st.sampled_from(cams), st.integers(0, total + 2),
+                                        min_size=1, max_size=3))
+    tmp = tmp_path_factory.mktemp("crash")
+    src, out, rep = tmp / "in.csv", tmp / "o.csv", tmp / "r.json"
+    _write_links(src, links)
+    argv = ["resolve", "--links", str(src), "--out", str(out), "--report", str(rep),
+            "--delay-rounds", str(delay)] + [f"--crash={k}@{r}" for k, r in crashes.items()]
+    code = main(argv)
+    assert "Traceback" not in capsys.readouterr().err
+    report = json.loads(rep.read_text())
+    rows = [r.split(",") for r in out.read_text().splitlines()[1:]]
+    got = sorted(tuple(map(int, r[:4])) for r in rows)
+    assert got == sorted(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                             links.feat_j.tolist(), strict=True))  # every row once
+    assert all((r[4] == "deleted") == (r[5] != "") for r in rows)  # cut <=> a reason
+    f = report["faults"]
+    dead = {int(k) for k in f["crashed"]}
+    confirmed = {int(k) for k in f["crashed_after_close"]}
+    for r in rows:
+        a, b = int(r[0]), int(r[2])
+        if (a in dead) != (b in dead) and not {a, b} & confirmed:
+            assert r[4] == "deleted" and r[5] in ("robot-lost", "resolution"), (r, f)
+    kept = [r for r in rows if r[4] == "kept"]
+    kl = Links(*([int(r[c]) for r in kept] for c in range(4)))
+    left = count_conflicts(AssociationGraph(fpc, kl)).conflictive_sets
+    assert report["after"]["conflictive_sets"] == left
+    assert code == (3 if left else 0)
+    assert (report.get("conflict_free") is False) == bool(left)
 
 
 def test_every_link_cut_as_robot_lost_is_said(tmp_path, capsys):

@@ -65,6 +65,8 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     ("--seed", "-5", "--seed -5"),
     ("--drop-prob", "-0.1", "--drop-prob"),
     ("--crash", "x@1", "--crash"),
+    ("--delay-rounds", "-2", "--delay-rounds -2"),
+    ("--delay-rounds", "1e3", "not a whole number"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"
