@@ -22,7 +22,7 @@ import math
 from pipeline.errors import InputError
 
 __all__ = ["MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "FOCAL_RANGE", "tolerance_px",
-           "threads", "seed", "render_size", "focal_px_ok", "check_focal"]
+           "lowe_ratio", "threads", "seed", "render_size", "focal_px_ok", "check_focal"]
 
 MAX_THREADS = 1024
 MAX_RENDER_SIDE = 8192
@@ -40,6 +40,18 @@ def tolerance_px(value, flag: str = "--tol-px") -> float:
             from None
     if not math.isfinite(v) or v <= 0:
         raise InputError(f"{flag} {value!r}: must be a finite number of pixels > 0, e.g. 2")
+    return v
+
+
+def lowe_ratio(value, flag: str = "--ratio") -> float:
+    """A Lowe ratio in ``(0, 1]``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{flag} {value!r}: not a number; give a ratio in (0, 1], e.g. 0.8") \
+            from None
+    if not 0.0 < v <= 1.0:  # also refuses nan
+        raise InputError(f"{flag} {value!r}: must be a ratio in (0, 1], e.g. 0.8")
     return v
 
 

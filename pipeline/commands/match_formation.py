@@ -125,6 +125,8 @@ def run(args) -> int:
     method, max_features = feature_options(args)
     size = parse_size(args.size)
     args.tol_px = validate.tolerance_px(args.tol_px)
+    args.ratio = validate.lowe_ratio(args.ratio)
+    args.threshold_px = validate.tolerance_px(args.threshold_px, "--threshold-px")
     args.seed = validate.seed(args.seed, "--seed")
     timer = StageTimer()
     results = [match_formation(n, seed=args.seed, size=size, features=method,

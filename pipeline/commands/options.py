@@ -12,7 +12,7 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["MIN_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
+__all__ = ["MIN_FEATURES", "MAX_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
            "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
 
@@ -21,6 +21,11 @@ RESOLUTIONS = ("paper", "evidence")
 
 #: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
 MIN_FEATURES = 8
+
+#: Most features per image a run accepts: over a hundred times COLMAP's default of 8192, and
+#: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
+#: or overflow (beyond 2**31: a traceback).
+MAX_FEATURES = 1_000_000
 
 
 def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
@@ -75,7 +80,8 @@ def feature_options(args) -> tuple[str, int | None]:
     Raises
     ------
     InputError
-        An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`.
+        An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`
+        or more than :data:`MAX_FEATURES`.
     """
     from pipeline.features import METHODS, available_methods, check_method
 
@@ -95,6 +101,9 @@ def feature_options(args) -> tuple[str, int | None]:
     if args.max_features < MIN_FEATURES:
         raise InputError(f"--max-features {args.max_features}: at least {MIN_FEATURES} are "
                          "needed")
+    if args.max_features > MAX_FEATURES:
+        raise InputError(f"--max-features {args.max_features}: at most {MAX_FEATURES} per image; "
+                         "give a smaller count (e.g. 2000) or 'auto' for photos")
     return method, int(args.max_features)
 
 

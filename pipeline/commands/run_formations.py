@@ -116,9 +116,11 @@ def formations_table(reports: dict[str, dict]) -> str:
 
 
 def run(args) -> int:
+    from pipeline import validate
     from pipeline.run import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
+    args.seed = validate.seed(args.seed, "--seed")
     resolution = resolution_for_transport(args)
     size = parse_size(args.size)
     parent = Path(args.out)

@@ -67,6 +67,7 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     ("--crash", "x@1", "--crash"),
     ("--delay-rounds", "-2", "--delay-rounds -2"),
     ("--delay-rounds", "1e3", "not a whole number"),
+    ("--max-features", "99999999999999999999", "at most 1000000"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"
