@@ -92,3 +92,17 @@ def test_result_left_with_conflicts_exits_3_and_is_flagged(tmp_path, capsys):
     assert "error: the result is not conflict-free" in capsys.readouterr().err
     # and the folder carries the marker: the next run may replace it
     assert (out / ".formation-match-run").is_file()
+
+
+def test_ctrl_c_is_one_line_exit_130_and_nothing_written(tmp_path, capsys, monkeypatch):
+    import pipeline.run as run
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run, "extract_and_match", interrupted)
+    out = tmp_path / "run"
+    assert main(["run-formation", "--formation", "a", "--out", str(out), *FAST]) == 130
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("interrupted:") and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
