@@ -16,7 +16,9 @@ robots are configured for that link latency, as a deployment would set its timer
 radio's: a message is retransmitted once ``2 (D + 1)`` rounds passed without its
 acknowledgement (instead of 2) and a neighbour is declared lost after ``T + 2 D`` silent rounds
 (``T`` = 40, :class:`~pipeline.consistency.protocols.ProtocolOptions`), so a delay alone never
-makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`).
+makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The delay is a
+fault of the consistency stage's network; the fusion stage's network (:meth:`fusion_transport`)
+delivers without it.
 """
 
 from __future__ import annotations

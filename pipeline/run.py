@@ -312,7 +312,8 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
             edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
             crashed = sorted(int(k) for k in res.stats.get("faults", {}).get("crashed", {}))
             cameras = np.array([i for i in range(len(m)) if i not in crashed], dtype=np.int64)
-            start = int(res.stats.get("detection_rounds", 0) + res.stats.get("resolution_rounds", 0))
+            start = int(res.stats.get("detection_rounds", 0) + res.stats.get("resolution_rounds", 0)
+                        + res.stats.get("closing_rounds", 0))
             transport = faults.fusion_transport(edges, cameras, start)
             comm_edges = edges
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
