@@ -49,6 +49,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_feature_options(p)
     add_scene_options(p)
     p.add_argument("--out", default="runs", help="parent folder of the runs (default runs)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace formations.md / formations.json in --out even when they were "
+                        "not written by run-formations (default: refuse)")
     # the paper's Tables III and IV are Alg. 1's figures
     add_resolution_option(p, default="paper")
     add_transport_argument(p)
@@ -115,6 +118,44 @@ def formations_table(reports: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+SUMMARY_FILES = ("formations.md", "formations.json")
+
+
+def _written_by_us(path: Path) -> bool:
+    """True when ``path`` is a summary a previous ``run-formations`` wrote (its title line for
+    the Markdown table; an object keyed by formation names for the JSON)."""
+    try:
+        if path.suffix == ".md":
+            with path.open(encoding="utf-8") as f:
+                return f.readline().startswith("# Formations (a)–(d)")
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(data, dict) and bool(data) and set(data) <= set(FORMATIONS)
+
+
+def check_outputs(parent: Path, overwrite: bool) -> None:
+    """Refuse, before any formation runs, an ``--out`` that is not a folder, a formation run
+    folder that may not be replaced (:func:`pipeline.outputs.check_run_folder`) and a summary
+    file that is a link, a special file, or a file run-formations did not write (unless
+    ``overwrite``)."""
+    from pipeline.errors import InputError
+    from pipeline.outputs import check_run_folder, refuse_unsafe_target
+
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"--out {str(parent)!r} is a file; run-formations writes a folder of "
+                         "runs: give a folder name, e.g. runs")
+    for name in FORMATIONS:
+        check_run_folder(parent / f"formation-{name}", flag="--out")
+    for file_name in SUMMARY_FILES:
+        path = parent / file_name
+        refuse_unsafe_target(path, "--out")
+        if path.exists() and not overwrite and not _written_by_us(path):
+            raise InputError(f"--out {str(parent)!r} holds {file_name}, which run-formations "
+                             "did not write; pass --overwrite to replace it, or choose another "
+                             "--out")
+
+
 def run(args) -> int:
     from pipeline import validate
     from pipeline.run import FormationConfig, run_formation
@@ -124,6 +165,7 @@ def run(args) -> int:
     resolution = resolution_for_transport(args)
     size = parse_size(args.size)
     parent = Path(args.out)
+    check_outputs(parent, args.overwrite)
     reports = {}
     for name in FORMATIONS:
         cfg = FormationConfig(formation=name, seed=args.seed, size=size,

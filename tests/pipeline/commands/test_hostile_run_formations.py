@@ -30,3 +30,53 @@ def test_meaningless_values_are_refused_before_any_work(tmp_path, monkeypatch, c
     assert main(["run-formations", "--out", str(out), flag, value]) == 2
     one_line_error(capsys, message)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("file_name,text", [
+    ("formations.md", "my own notes\n"),
+    ("formations.json", '{"budget": 3}'),
+])
+def test_a_summary_file_it_did_not_write_is_never_replaced(tmp_path, monkeypatch, capsys,
+                                                           file_name, text):
+    import pipeline.run as run
+
+    def never(*a, **k):
+        raise AssertionError("a formation ran although --out holds a user's file")
+
+    monkeypatch.setattr(run, "run_formation", never)
+    out = tmp_path / "runs"
+    out.mkdir()
+    (out / file_name).write_text(text)
+    assert main(["run-formations", "--out", str(out)]) == 2
+    one_line_error(capsys, "--overwrite")
+    assert (out / file_name).read_text() == text
+
+
+def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_path):
+    from pipeline.commands.run_formations import check_outputs
+
+    out = tmp_path / "runs"
+    out.mkdir()
+    (out / "formations.md").write_text("# Formations (a)–(d), seed 0, sift, 320x240\n")
+    (out / "formations.json").write_text('{"a": {}, "d": {}}')
+    check_outputs(out, overwrite=False)  # a previous run's summary: replaced without asking
+    (out / "formations.md").write_text("my own notes\n")
+    check_outputs(out, overwrite=True)
+
+
+def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(
+        tmp_path, monkeypatch, capsys):
+    import pipeline.run as run
+
+    monkeypatch.setattr(run, "run_formation", lambda *a, **k: pytest.fail("a formation ran"))
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine")
+    assert main(["run-formations", "--out", str(a_file)]) == 2
+    one_line_error(capsys, "is a file")
+    assert a_file.read_text() == "mine"
+    out = tmp_path / "runs"
+    (out / "formation-c").mkdir(parents=True)
+    (out / "formation-c" / "thesis.tex").write_text("mine")
+    assert main(["run-formations", "--out", str(out)]) == 2
+    one_line_error(capsys, "formation-c")
+    assert (out / "formation-c" / "thesis.tex").read_text() == "mine"
