@@ -19,6 +19,20 @@ Interpretations (stated):
 * Message content. Robot ``k`` sends to neighbour ``i`` only the rows ``s`` of ``X_k·(t)`` with
   ``[W_ki]_{s,·} ≠ 0`` — the only rows ``W_ik X_k·(t)`` reads — as ``rows`` (k's local ids),
   CSR ``indptr`` and column ``indices`` (int32). It sends only while it has not stopped.
+* Delta messages (the paper's protocol on a lossless network, the default there). A robot
+  sends only the entries of those rows that are new since its last message,
+  ``Δ_k·(t) = X_k·(t) ∖ X_k·(t−1)`` (``Δ_k·(0) = X_k·(0)``), and only the rows with a new
+  entry; a neighbour with nothing new gets no message. The receiver needs no copy of its
+  neighbours' blocks: since ``X_i·(t) ⊇ W_ik X_k·(t−1)`` (it applied eq. 5 in round ``t``),
+
+      X_i·(t+1) = X_i·(t) + Σ_k W_ik X_k·(t) = X_i·(t) + Σ_k W_ik Δ_k·(t),
+
+  so eq. (5) on the deltas of the round gives exactly ``X_i·(t+1)``, Prop. 3.5 fires at the
+  same ``t_i``, and a silent (stopped) neighbour, whose ``X_k·`` no longer changes, adds
+  nothing — the paper's "use the last matrix received". Each message still carries
+  ``rows``, ``indptr`` and ``indices``: what the receiver needs to decode it. This relies on
+  every message arriving in the next round; on a faulty network the robots send whole
+  blocks (:class:`~.protocols.ProtocolOptions`).
 * Rows. Only *active* features get a row: in the first iteration every feature with a link
   (an isolated feature's row is its own id and can never be conflictive); in later iterations
   the features that were conflictive and left unassigned by Alg. 1, whose links all stay
@@ -83,6 +97,7 @@ def init_detection(robot: Robot, iteration: int) -> np.ndarray:
     indptr = np.cumsum(indptr)
     robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
                              indptr), shape=(robot.m, robot.m_total))
+    robot.X_new = robot.X  # everything in X_i·(0) is new
     robot.last_blocks = {}
     robot.conflictive = np.zeros(robot.m, dtype=bool)
     robot.set_label = np.full(robot.m, -1, dtype=np.int64)
@@ -92,20 +107,25 @@ def init_detection(robot: Robot, iteration: int) -> np.ndarray:
 
 
 def send_blocks(robot: Robot, send: Send) -> None:
-    """Send each linked neighbour the rows of ``X_i·(t)`` it multiplies by (eq. 5).
+    """Send each linked neighbour the rows of ``robot.X_new`` it multiplies by (eq. 5).
 
-    One ``blocks`` message per neighbour ``k``: ``rows`` (this robot's local ids ``r`` with
-    ``[W_ik]_{r,·} ≠ 0``), CSR ``indptr`` and column ``indices`` of those rows.
+    ``X_new`` is ``X_i·(t)`` itself (whole blocks) or its entries new since the last message
+    (delta messages, see the module notes). One ``blocks`` message per neighbour ``k`` that
+    has a non-empty row to receive: ``rows`` (this robot's local ids ``r`` with
+    ``[W_ik]_{r,·} ≠ 0`` and a non-empty row), CSR ``indptr`` and column ``indices``.
     """
-    sel = np.flatnonzero(robot.link_alive & robot.active[robot.link_r])
+    src = robot.X_new
+    sel = robot.link_alive & robot.active[robot.link_r]
+    sel &= np.diff(src.indptr)[robot.link_r] > 0
+    sel = np.flatnonzero(sel)
     if sel.size == 0:
         return
     nbr = robot.link_nbr[sel]
     cut = np.flatnonzero(np.diff(nbr)) + 1
     idt = _index_dtype(robot)
     for part in np.split(sel, cut):
-        rows = np.sort(robot.link_r[part])
-        blk = robot.X[rows]
+        rows = np.unique(robot.link_r[part])
+        blk = src[rows]
         send(int(robot.link_nbr[part[0]]), "blocks",
              {"rows": rows.astype(np.int32), "indptr": blk.indptr.astype(idt),
               "indices": blk.indices.astype(idt)})
@@ -119,15 +139,17 @@ def blocks_from_payload(robot: Robot, payload: dict) -> tuple[np.ndarray, sp.csr
     return payload["rows"], blk
 
 
-def eq5_step(robot: Robot, blocks: dict, t_next: int) -> bool:
+def eq5_step(robot: Robot, blocks: dict, t_next: int, delta: bool = False) -> bool:
     """One step of eq. (5) to ``X_i·(t_next)``, or the stop of Prop. 3.5; True if stopped.
 
     Parameters
     ----------
     robot : Robot
-    blocks : dict ``k -> (rows, block)`` — the neighbours' ``X_k·(t_next - 1)`` (see
-        :func:`eq5_next`)
+    blocks : dict ``k -> (rows, block)`` — the neighbours' ``X_k·(t_next - 1)``, or with
+        ``delta`` their new entries ``Δ_k·(t_next - 1)`` (see :func:`eq5_next`)
     t_next : int — the round ``t + 1`` being computed
+    delta : bool — keep the new entries in ``robot.X_new`` (delta messages); else
+        ``robot.X_new`` is ``robot.X`` (whole blocks are sent)
 
     Notes
     -----
@@ -140,26 +162,37 @@ def eq5_step(robot: Robot, blocks: dict, t_next: int) -> bool:
     if X_next.nnz == robot.X.nnz:
         robot.stopped = True
         robot.t_stop = int(t_next)
+        robot.X_new = sp.csr_matrix(robot.X.shape, dtype=bool) if delta else robot.X
         find_conflictive_sets(robot)
         return True
+    # X(t) ⊆ X(t+1) (W_ii = I): the entries that differ are the new ones
+    robot.X_new = (X_next != robot.X).tocsr() if delta else X_next
     robot.X = X_next
     return False
 
 
-def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
+def detection_step(robot: Robot, inbox: list[Message], send: Send, round_: int,
+                   delta: bool = False) -> None:
     """One round ``t = round_`` (≥ 1) of eq. (5) for one robot; stops by Prop. 3.5.
 
-    A silent neighbour's last received blocks are used (Sec. III, after Cor. 3.6). Once
-    stopped, the robot neither computes nor sends.
+    Whole blocks (``delta`` False): a silent neighbour's last received blocks are used
+    (Sec. III, after Cor. 3.6). Delta messages: eq. (5) runs on the deltas of this round
+    alone (module notes), and a stopped robot drops them. Once stopped, the robot neither
+    computes nor sends.
     """
     if robot.stopped:
         return
-    for msg in inbox:
-        if msg.kind == "blocks":
-            robot.last_blocks[msg.src] = blocks_from_payload(robot, msg.payload)
-    if not eq5_step(robot, robot.last_blocks, round_):
+    received = {msg.src: blocks_from_payload(robot, msg.payload) for msg in inbox
+                if msg.kind == "blocks"}
+    if delta:
+        robot.last_blocks = received
+    else:
+        robot.last_blocks.update(received)
+    if not eq5_step(robot, robot.last_blocks, round_, delta):
         send_blocks(robot, send)
     robot.measure_memory()
+    if delta and robot.stopped:
+        robot.last_blocks = {}
 
 
 def eq5_next(robot: Robot, blocks: dict) -> sp.csr_matrix:

@@ -40,6 +40,7 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.resolution import finish_resolution, resolution_step, start_resolution
 from pipeline.consistency.robot import Robot
+from pipeline.errors import InputError
 from pipeline.transport import Transport
 
 __all__ = ["ProtocolOptions", "PaperProtocol", "ReliableProtocol", "make_protocol", "end_phase",
@@ -66,12 +67,18 @@ class ProtocolOptions:
         for this many rounds.
     loss_timeout : int
         ``T``: rounds of silence from an expected neighbour after which it is declared lost.
+    delta_messages : bool or None
+        The paper's protocol only. ``True``: detection messages carry only the entries new
+        since the last message (:mod:`.detection`, module notes); ``False``: whole blocks;
+        ``None``: deltas exactly on the lossless static network they rely on (every message
+        arrives in the next round). The fault-tolerant protocol always sends whole blocks.
     """
 
     reliable: bool | None = None
     retransmit_after: int = 2
     heartbeat_every: int = 2
     loss_timeout: int = 40
+    delta_messages: bool | None = None
 
 
 class PaperProtocol:
@@ -81,8 +88,9 @@ class PaperProtocol:
     #: the paper's loop ends on the detection that finds no conflict (no closing phase)
     closing = False
 
-    def __init__(self, network: Transport, n: int):
+    def __init__(self, network: Transport, n: int, delta: bool = False):
         self.network = network
+        self.delta = bool(delta)
         self.endpoints = [network.endpoint(i) for i in range(n)]
 
     def team(self, robots: list[Robot]) -> list[Robot]:
@@ -108,9 +116,11 @@ class PaperProtocol:
 
     def step(self, phase: str, robot: Robot, inbox: list, phase_round: int) -> None:
         """Round ``phase_round >= 1`` of the phase for one robot."""
-        step = detection_step if phase == DETECTION else resolution_step
         ep = self.endpoints[robot.id]
-        step(robot, inbox, ep.send, phase_round)
+        if phase == DETECTION:
+            detection_step(robot, inbox, ep.send, phase_round, self.delta)
+        else:
+            resolution_step(robot, inbox, ep.send, phase_round)
         ep.note_memory(robot.peak_memory_bytes)
 
     def done(self, phase: str, live: list[Robot]) -> bool:
@@ -200,8 +210,13 @@ def make_protocol(options: ProtocolOptions | None, network: Transport, features_
     fpc = np.asarray(features_per_camera)
     reliable = network.faulty if options.reliable is None else bool(options.reliable)
     if reliable:
+        if options.delta_messages:
+            raise InputError("delta messages need the paper's protocol on a lossless network; "
+                             "the fault-tolerant protocol sends whole blocks: leave "
+                             "delta_messages unset or False")
         return ReliableProtocol(network, len(fpc), options, int(fpc.sum()))
-    return PaperProtocol(network, len(fpc))
+    delta = (not network.faulty) if options.delta_messages is None else bool(options.delta_messages)
+    return PaperProtocol(network, len(fpc), delta)
 
 
 def end_phase(phase: str, robots: list[Robot]) -> None:

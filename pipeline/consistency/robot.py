@@ -54,6 +54,9 @@ class Robot:
     X : scipy.sparse.csr_matrix, (m_i, m_total) bool
         ``X_i·(t)``: row ``r`` holds the global ids of the features reachable from ``f_r^i``
         (Def. 3.4: kept boolean). Rows of features outside the current detection are empty.
+    X_new : scipy.sparse.csr_matrix, (m_i, m_total) bool
+        What the next ``blocks`` messages carry: the entries of ``X`` new in the last step
+        (delta messages), or ``X`` itself (whole blocks).
     component : ndarray, (m_i,) int64
         Component ``C_q`` of each feature (``q`` = global id of the root feature), ``-1`` if
         unassigned.
@@ -79,6 +82,7 @@ class Robot:
 
         # detection state (Sec. III)
         self.X = sp.csr_matrix((self.m, self.m_total), dtype=bool)
+        self.X_new = self.X
         self.last_blocks: dict[int, tuple[np.ndarray, sp.csr_matrix]] = {}
         self.candidates = np.ones(self.m, dtype=bool)  # features (re)examined next detection
         self.active = np.zeros(self.m, dtype=bool)
@@ -154,14 +158,20 @@ class Robot:
         return np.where(has_link, label, -1)
 
     # --- memory ---------------------------------------------------------------------------
-    def memory_bytes(self) -> int:
-        """Bytes of the arrays this robot holds (sparse matrices: data + indices + indptr)."""
-        total = sum(int(a.nbytes) for a in (
+    def fixed_bytes(self) -> int:
+        """Bytes of the arrays whose size does not change during a phase."""
+        return sum(int(a.nbytes) for a in (
             self.link_nbr, self.link_r, self.link_s, self.link_alive, self.link_key,
             self.candidates, self.active, self.conflictive, self.set_label, self.component,
             self.track_label,
             self.assigned_round, self.deleted_round, self.deleted_case, self.deleted_iteration))
+
+    def memory_bytes(self) -> int:
+        """Bytes of the arrays this robot holds (sparse matrices: data + indices + indptr)."""
+        total = self.fixed_bytes()
         total += csr_bytes(self.X) + blocks_bytes(self.last_blocks.values())
+        if self.X_new is not self.X:
+            total += csr_bytes(self.X_new)
         total += 16 * len(self.root_of_set)
         return total
 
