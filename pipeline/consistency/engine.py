@@ -33,6 +33,7 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
+from pipeline.consistency import batched
 from pipeline.consistency.evidence import equip, run_evidence_resolution
 from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
@@ -206,7 +207,7 @@ class Detection:
 def detect_once(features_per_camera, links: Links, comm_edges=None,
                 network_options: NetworkOptions | None = None,
                 protocol: ProtocolOptions | None = None, *, network: Transport | None = None,
-                max_rounds: int | None = None) -> Detection:
+                max_rounds: int | None = None, engine: str = "auto") -> Detection:
     """Run one detection (Sec. III) with protocol P on a fresh team; for benches and tests.
 
     Parameters
@@ -215,6 +216,7 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
         As in :func:`resolve_conflicts`.
     network : Transport or None — a network to run on instead of a new simulated one
     max_rounds : int or None — cap of the phase (default: the protocol's)
+    engine : ``auto``, ``batched`` or ``per-robot`` — as in :func:`resolve_conflicts`
 
     Returns
     -------
@@ -225,17 +227,34 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     if network is None:
         network = Network(fpc.shape[0], comm_edges_for(fpc, links, comm_edges), network_options)
     proto = make_protocol(protocol, network, fpc)
-    stats = run_phase(robots, network, proto, DETECTION, iteration=1, max_rounds=max_rounds)
+    if _use_batched(engine, network, proto):
+        stats = batched.run_detection(robots, network, proto, 1, max_rounds=max_rounds)
+    else:
+        stats = run_phase(robots, network, proto, DETECTION, iteration=1, max_rounds=max_rounds)
     return Detection(robots, stats, network, proto)
 
 
 RESOLUTIONS = ("paper", "evidence")
+ENGINES = ("auto", "batched", "per-robot")
+
+
+def _use_batched(engine: str, network: Transport, protocol) -> bool:
+    """Whether to evaluate the robots in batch (:mod:`.batched`): ``auto`` where it applies."""
+    if engine not in ENGINES:
+        raise InputError(f"engine {engine!r}: choose one of {', '.join(ENGINES)}")
+    applies = batched.batched_applies(network, protocol)
+    if engine == "batched" and not applies:
+        raise InputError("engine 'batched' needs the in-process network with no fault and the "
+                         "paper's protocol with delta messages; use engine 'auto' or "
+                         "'per-robot'")
+    return applies and engine != "per-robot"
 
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       network_options: NetworkOptions | None = None,
                       protocol: ProtocolOptions | None = None, resolution: str = "paper",
-                      link_weight=None, keypoints=None, projections=None) -> ConsistencyResult:
+                      link_weight=None, keypoints=None, projections=None,
+                      engine: str = "auto") -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -263,6 +282,13 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         ``evidence`` only: each robot's keypoints (for the geometric test).
     projections : list of (3, 4) arrays (or None entries) or None
         ``evidence`` only: each robot's ``K [R | t]``; the geometric test needs all of a set's.
+    engine : ``auto``, ``batched`` or ``per-robot``
+        How the simulator evaluates the robots' rounds. ``per-robot``: every robot steps on
+        its inbox, one by one (the code robots run under faults and over a middleware).
+        ``batched``: the same updates, all robots' detection rows in one sparse product per
+        round and only robots with a message stepped in a resolution (:mod:`.batched`; same
+        results, rounds, messages and bytes); it needs the paper's protocol with delta
+        messages on a fault-free network. ``auto``: batched exactly there.
 
     Returns
     -------
@@ -307,6 +333,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     robots, link_index = build_robots(fpc, links)
     network = Network(n, edges, network_options)
     proto = make_protocol(protocol, network, fpc)
+    in_batch = _use_batched(engine, network, proto)
     reliable = proto.name == "reliable"
     # the evidence rule (pipeline.consistency.evidence) runs on a fault-free network; with
     # faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
@@ -326,7 +353,10 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         if iteration > max_iterations:
             raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
         c0 = network.counters()
-        det = run_phase(robots, network, proto, DETECTION, iteration)
+        if in_batch:
+            det = batched.run_detection(robots, network, proto, iteration)
+        else:
+            det = run_phase(robots, network, proto, DETECTION, iteration)
         rec = dict(iteration=iteration, detection_rounds=det["rounds"], t_stop=det["t_stop"],
                    conflictive_features=det["conflictive_features"], conflictive_sets=0,
                    resolution_rounds=0, start_round=int(c0.get("round", 0)))
@@ -353,6 +383,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             break
         if use_evidence:
             res = run_evidence_resolution(robots, network)
+        elif in_batch:
+            res = batched.run_resolution(robots, network, proto, iteration)
         else:
             res = run_phase(robots, network, proto, RESOLUTION, iteration)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],

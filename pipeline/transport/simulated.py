@@ -260,6 +260,10 @@ class Network(Transport):
         """Messages delivered to robot ``i`` at the start of the current round."""
         return self._inboxes[i]
 
+    def receivers(self) -> list[int]:
+        """Robots with a message delivered this round, ascending (simulation side)."""
+        return [i for i, box in enumerate(self._inboxes) if box]
+
     def end_round(self) -> None:
         """Close the round: advance the clock and deliver what is due."""
         self._round += 1

@@ -1,0 +1,381 @@
+"""Batched evaluation of the robots' detection (Sec. III, eq. 5) in the in-process simulator.
+
+The per-robot engine (:func:`.engine.run_phase`) steps every robot in every round: each robot
+turns its inbox into sparse blocks, applies eq. (5) and slices the rows for each neighbour.
+That is the code the robots run under faults and over a real middleware. On the simulator's
+lossless static network with the paper's protocol and delta messages
+(:mod:`.detection`, module notes), this module computes the *same* updates of all robots at
+once: one sparse product per round over the rows of every robot, stacked.
+
+Why it obeys the one rule (docs/DESIGN.md: a robot sees only its own state and its inbox)
+    Stack every robot's active rows into one matrix ``X`` (rows: the active features of
+    robot 0, then robot 1, ...; columns: active features). Row ``r`` of robot ``i`` of the
+    round's product ``P Δ(t)`` is ``Σ_k [W_ik]_{r,s} Δ_k(t)_{s,·}``: the entries of ``P`` in
+    that row are robot ``i``'s own links ``W_ik`` (alive, active at ``i``, and restricted to
+    the rows ``s`` that robot ``k`` sends to ``i`` — exactly the rows the per-robot receiver
+    finds in its messages), and the rows ``Δ_k(t)_{s,·}`` it reads are what robot ``k``'s
+    delta message to ``i`` carries in round ``t``: k's entries new since its last message
+    (:func:`~.detection.send_blocks`). So each robot's rows of ``X(t+1) = X(t) + P Δ(t)``
+    read only its own rows of ``X(t)``, its own ``W`` and its inbox of the round; no row ever
+    reads another robot's state that was not sent to it. The rows of a robot that has
+    stopped (Prop. 3.5) are not updated and it sends nothing, as in
+    :func:`~.detection.detection_step`. The stop test, rules (8)–(9), the set names and
+    roots of eq. (10) are evaluated row by row on each robot's own rows, as
+    :func:`~.detection.find_conflictive_sets` does.
+
+Equivalence (tested: ``tests/pipeline/consistency/test_batched.py``)
+    Same ``X``, ``t_stop``, conflictive features, set labels, roots and track labels in every
+    robot, same rounds, and the same messages and bytes: each delta message robot ``k`` would
+    send to ``i`` is counted (:meth:`~pipeline.transport.Transport.count`) with the size
+    :func:`~.detection.send_blocks` gives it (header, ``rows`` int32, ``indptr`` and
+    ``indices`` in the robot's index type). Each robot's peak memory is computed with the
+    formula of :meth:`~.robot.Robot.memory_bytes` on the state it would hold in each round.
+
+Resolution (Alg. 1) is not batched: :func:`run_resolution` runs the robots' own
+:func:`~.resolution.resolution_step`, stepping in each round only the robots with a message
+(on the paper's protocol a robot with an empty inbox does nothing in a resolution round), so
+a resolution of ``n`` rounds costs what its messages cost, not ``n`` × ``n`` steps.
+
+Where it applies (:func:`batched_applies`): the in-process :class:`Network` with no fault
+switch on, the paper's protocol with delta messages. Everywhere else (faults, the reliable
+protocol, robots as threads or processes) the robots run one by one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from pipeline.consistency.detection import init_detection
+from pipeline.consistency.protocols import RESOLUTION, PaperProtocol, end_phase
+from pipeline.consistency.robot import Robot
+from pipeline.transport import HEADER_BYTES, Transport
+from pipeline.transport.simulated import Network
+
+__all__ = ["batched_applies", "run_detection", "run_resolution"]
+
+_EMPTY = np.zeros(0, dtype=np.int64)
+
+
+def batched_applies(network: Transport, protocol) -> bool:
+    """True where the batched evaluation gives the per-robot results: the in-process
+    simulator with no fault on, and the paper's protocol with delta messages."""
+    return (type(network) is Network and not network.faulty
+            and isinstance(protocol, PaperProtocol) and protocol.delta)
+
+
+class _SortedKeys:
+    """A growing set of int64 keys: a large sorted run and a small recent one, merged when
+    the recent run exceeds an eighth of the large one (amortized linear time)."""
+
+    def __init__(self, keys: np.ndarray) -> None:
+        self.main = keys
+        self.recent = _EMPTY
+
+    def contains(self, q: np.ndarray) -> np.ndarray:
+        return _isin_sorted(q, self.main) | _isin_sorted(q, self.recent)
+
+    def add(self, new_sorted: np.ndarray) -> None:
+        self.recent = _merge(self.recent, new_sorted)
+        if self.recent.size * 8 > self.main.size:
+            self.main = _merge(self.main, self.recent)
+            self.recent = _EMPTY
+
+    def all(self) -> np.ndarray:
+        return _merge(self.main, self.recent)
+
+
+def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
+    if a.size == 0 or q.size == 0:
+        return np.zeros(q.shape, dtype=bool)
+    pos = np.minimum(np.searchsorted(a, q), a.size - 1)
+    return a[pos] == q
+
+
+def _unique(a: np.ndarray) -> np.ndarray:
+    """Sorted unique values of an int64 array (by sorting: faster here than hashing)."""
+    a = np.sort(a)
+    return a[np.r_[True, a[1:] != a[:-1]]] if a.size else a
+
+
+def _merge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    if a.size == 0:
+        return b
+    if b.size == 0:
+        return a
+    out = np.concatenate([a, b])
+    out.sort(kind="stable")  # two sorted runs: linear
+    return out
+
+
+class _Team:
+    """The robots' own tables, stacked for one detection (compact ids of the active rows).
+
+    Attributes
+    ----------
+    A : int — active features of all robots (rows and columns of the stacked ``X``)
+    gid : (A,) int64 — global id of each active feature (sorted: robot by robot)
+    owner : (A,) int64 — its robot
+    row_bounds : (n + 1,) int64 — robot ``i``'s rows are ``row_bounds[i]:row_bounds[i+1]``
+    P : csr (A, A) bool — row of ``(i, r)``: ``[W_ik]_{r,s}`` for the rows ``s`` robot ``k``
+        sends to ``i``
+    send_row, send_pair : (S,) int64 — robot ``k`` sends row ``send_row`` to the neighbour of
+        message ``send_pair`` (pairs ``(k, i)`` numbered ``0..n_pairs-1``)
+    pair_dst : (n_pairs,) int64 — receiving robot of each pair
+    """
+
+    def __init__(self, robots: list[Robot]) -> None:
+        n = len(robots)
+        self.n = n
+        act = [np.flatnonzero(rb.active) for rb in robots]
+        counts = np.array([a.size for a in act], dtype=np.int64)
+        self.row_bounds = np.concatenate([[0], np.cumsum(counts)])
+        self.A = A = int(self.row_bounds[-1])
+        self.gid = np.concatenate([rb.gid0 + a for rb, a in zip(robots, act, strict=True)]
+                                  + [_EMPTY]).astype(np.int64)
+        self.owner = np.repeat(np.arange(n, dtype=np.int64), counts)
+        m_total = robots[0].m_total if robots else 0
+        offsets = robots[0].offsets if robots else np.zeros(1, dtype=np.int64)
+        compact = np.full(m_total, -1, dtype=np.int64)  # the public layout: one id per feature
+        compact[self.gid] = np.arange(A)
+        # every robot's alive links of its active rows, in its table order (nbr, s):
+        # (own robot, own row, neighbour k, k's row s)
+        sel = [rb.link_alive & rb.active[rb.link_r] for rb in robots]
+        own = np.repeat(np.arange(n, dtype=np.int64), [int(x.sum()) for x in sel])
+        r = np.concatenate([rb.link_r[x] for rb, x in zip(robots, sel, strict=True)] + [_EMPTY])
+        k = np.concatenate([rb.link_nbr[x] for rb, x in zip(robots, sel, strict=True)] + [_EMPTY])
+        s = np.concatenate([rb.link_s[x] for rb, x in zip(robots, sel, strict=True)] + [_EMPTY])
+        row = compact[offsets[own] + r]  # active: always found
+        # what each robot sends (send_blocks): each active row with an alive link to the
+        # neighbour, once (one-to-one, Assumption 2.2: a row has one link per neighbour); the
+        # table order groups the entries by (robot, neighbour): one group per message
+        self.send_row = row
+        head = np.r_[True, (own[1:] != own[:-1]) | (k[1:] != k[:-1])][:k.size]
+        self.send_pair = np.cumsum(head) - 1
+        self.pair_dst = k[head]
+        sends = sp.csr_matrix((np.ones(row.size, dtype=bool), (row, k)), shape=(A, max(n, 1)))
+        # what each robot multiplies by (eq5_next): its links to rows the neighbour sends it
+        col = compact[offsets[k] + s]
+        ok = col >= 0
+        ok[ok] = np.asarray(sends[col[ok], own[ok]]).ravel()
+        self.P = sp.csr_matrix((np.ones(int(ok.sum()), dtype=bool), (row[ok], col[ok])),
+                               shape=(A, A))
+
+    def messages(self, new_per_row: np.ndarray, idx_size: int):
+        """The delta messages of a round whose new entries per row are ``new_per_row`` (A,).
+
+        Returns ``(messages, bytes, received (n,) bytes each robot holds as received blocks)``
+        — sizes as :func:`~.detection.send_blocks` and :func:`~.detection.blocks_from_payload`
+        give them.
+        """
+        d = new_per_row[self.send_row]
+        n_pairs = self.pair_dst.size
+        R = np.bincount(self.send_pair, weights=d > 0, minlength=n_pairs).astype(np.int64)
+        nnz = np.bincount(self.send_pair, weights=d, minlength=n_pairs).astype(np.int64)
+        sent = R > 0
+        R, nnz, dst = R[sent], nnz[sent], self.pair_dst[sent]
+        payload = 4 * R + idx_size * (R + 1) + idx_size * nnz  # rows int32, indptr, indices
+        held = payload + nnz  # the receiver's csr also holds one bool per entry
+        received = np.bincount(dst, weights=held, minlength=self.n).astype(np.int64)
+        return int(sent.sum()), int((HEADER_BYTES + payload).sum()), received
+
+
+def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtocol,
+                  iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
+    """One detection (Sec. III) of all robots, evaluated in batch; returns what
+    :func:`.engine.run_phase` returns for it.
+
+    Parameters
+    ----------
+    robots : list[Robot], (n,)
+    network : Transport — the in-process :class:`Network` (clock advanced, traffic counted)
+    protocol : PaperProtocol — with ``delta`` on (see :func:`batched_applies`)
+    iteration : int — detection/resolution iteration (1-based)
+    max_rounds : int or None — cap of the phase (default: the protocol's)
+    on_round : callable ``(round) -> None`` or None — progress report
+
+    Returns
+    -------
+    dict — ``rounds``, ``lost`` (False), ``t_stop`` (n,), ``conflictive_features``
+    """
+    n = len(robots)
+    for rb in robots:
+        rb.stopped = init_detection(rb, iteration).size == 0
+    team = _Team(robots)
+    A = team.A
+    idx_size = np.dtype(np.int32 if (robots and robots[0].m_total < 2**31) else np.int64).itemsize
+    m = np.array([rb.m for rb in robots], dtype=np.int64)
+    fixed = np.array([rb.fixed_bytes() for rb in robots], dtype=np.int64)
+    idx_bytes = (m + 1) * idx_size  # indptr of an (m_i, m_total) csr
+
+    def csr_bytes(nnz):
+        return nnz * (1 + idx_size) + idx_bytes
+
+    # round 0 (start_detection): X(0) = I on the active rows (eq. 4), all of it sent
+    nnz_x = np.diff(team.row_bounds)
+    diag = np.arange(A, dtype=np.int64) * (A + 1)
+    X = _SortedKeys(diag)
+    delta = diag
+    running = nnz_x > 0
+    t_stop = np.zeros(n, dtype=np.int64)
+    peak = np.array([rb.peak_memory_bytes for rb in robots], dtype=np.int64)
+    peak = np.maximum(peak, fixed + csr_bytes(nnz_x))  # X_new is X itself
+    stop_mem = np.zeros(n, dtype=np.int64)
+    msgs, nbytes, received = team.messages(np.ones(A, dtype=np.int64), idx_size)
+    if msgs:
+        network.count("blocks", msgs, nbytes)
+    cap = protocol.max_rounds("detection", robots) if max_rounds is None else max_rounds
+    t = 0
+    while running.any():
+        network.end_round()
+        t += 1
+        if on_round is not None:
+            on_round(t)
+        # eq. (5) on the deltas of round t - 1, every running robot's rows at once
+        new = _step(team.P, delta, A)
+        new = new[running[team.owner[new // A]]]
+        new = new[~X.contains(new)]
+        new_rows = new // A
+        new_per_robot = np.bincount(team.owner[new_rows], minlength=n)
+        stops = running & (new_per_robot == 0)
+        go = running & ~stops
+        X.add(new)
+        delta = new
+        nnz_x = nnz_x + new_per_robot
+        # memory after the step: X, X_new (empty on a stop), the blocks received this round
+        mem = fixed + csr_bytes(nnz_x) + received + np.where(stops, idx_bytes,
+                                                            csr_bytes(new_per_robot))
+        peak[go] = np.maximum(peak[go], mem[go])
+        stop_mem[stops] = mem[stops]
+        t_stop[stops] = t
+        running = go
+        msgs, nbytes, received = team.messages(np.bincount(new_rows, minlength=A), idx_size)
+        if msgs:
+            network.count("blocks", msgs, nbytes)
+        if t > cap:
+            raise RuntimeError(f"detection did not end within {cap} rounds")
+    ran = np.diff(team.row_bounds) > 0
+    n_sets = _finish(robots, team, X.all(), t_stop, ran)
+    peak[ran] = np.maximum(peak[ran], stop_mem[ran] + 16 * n_sets[ran])
+    for rb in robots:
+        rb.peak_memory_bytes = int(peak[rb.id])
+        network.note_memory(rb.id, rb.peak_memory_bytes)
+    return dict(rounds=t, lost=False, t_stop=t_stop,
+                conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
+
+
+def _step(P: sp.csr_matrix, delta: np.ndarray, A: int) -> np.ndarray:
+    """Keys (row * A + col) of ``P Δ``, sorted and unique; ``Δ`` given by its sorted keys."""
+    if delta.size == 0:
+        return _EMPTY
+    rows = delta // A
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=A))])
+    D = sp.csr_matrix((np.ones(delta.size, dtype=bool), delta % A, indptr), shape=(A, A))
+    C = (P @ D).tocsr()
+    C.sort_indices()  # entries of a row are unique: the keys come out sorted and unique
+    return np.repeat(np.arange(A, dtype=np.int64), np.diff(C.indptr)) * A + C.indices
+
+
+def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarray,
+            ran: np.ndarray) -> np.ndarray:
+    """Hand every robot that ran its final state: ``X``, the stop, rules (8)–(9), eq. (10).
+
+    Row by row as :func:`~.detection.find_conflictive_sets` on each robot's own ``X_i·``;
+    returns the number of sets each robot knows (its ``root_of_set``), ``(n,)``.
+    """
+    A, gid, owner = team.A, team.gid, team.owner
+    rows, cols = keys // A, keys % A
+    counts = np.bincount(rows, minlength=A)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    cam = owner[cols]
+    # rules (8)-(9): a camera twice in a row (columns sorted within a row)
+    twice = (rows[1:] == rows[:-1]) & (cam[1:] == cam[:-1])
+    conflictive = np.zeros(A, dtype=bool)
+    conflictive[rows[1:][twice]] = True
+    first = gid[cols[starts[:-1][counts > 0]]] if A else _EMPTY
+    smallest = np.full(A, -1, dtype=np.int64)
+    smallest[counts > 0] = first  # smallest global id of each row
+    # eq. (10) on one representative row per (robot, set): its lowest conflictive row
+    crow = np.flatnonzero(conflictive)
+    order = np.lexsort((crow, smallest[crow], owner[crow]))
+    crow = crow[order]
+    head = np.r_[True, (owner[crow][1:] != owner[crow][:-1])
+                 | (smallest[crow][1:] != smallest[crow][:-1])] if crow.size else \
+        np.zeros(0, dtype=bool)
+    reps = crow[head]
+    root = _roots(reps, starts, counts, cam)
+    rep_bounds = np.searchsorted(owner[reps], np.arange(team.n + 1))
+    n_sets = np.diff(rep_bounds)
+    idt = np.int32 if (robots and robots[0].m_total < 2**31) else np.int64
+    for rb in robots:
+        i = rb.id
+        if not ran[i]:
+            continue  # no active row: stopped at round 0, nothing evaluated (start_detection)
+        a, b = team.row_bounds[i], team.row_bounds[i + 1]
+        ka, kb = starts[a], starts[b]
+        local = (gid[a:b] - rb.gid0).astype(np.int64)
+        per_row = np.zeros(rb.m, dtype=np.int64)
+        per_row[local] = counts[a:b]
+        indptr = np.concatenate([[0], np.cumsum(per_row)]).astype(idt)
+        rb.X = sp.csr_matrix((np.ones(int(kb - ka), dtype=bool), gid[cols[ka:kb]].astype(idt),
+                              indptr), shape=(rb.m, rb.m_total))
+        rb.X_new = sp.csr_matrix((rb.m, rb.m_total), dtype=bool)
+        rb.last_blocks = {}
+        rb.stopped = True
+        rb.t_stop = int(t_stop[i])
+        conf = np.zeros(rb.m, dtype=bool)
+        conf[local] = conflictive[a:b]
+        rb.conflictive = conf
+        label = np.full(rb.m, -1, dtype=np.int64)
+        label[local[conflictive[a:b]]] = smallest[a:b][conflictive[a:b]]
+        rb.set_label = label
+        named = ~conflictive[a:b] & (counts[a:b] >= 2)
+        rb.track_label[local[named]] = smallest[a:b][named]
+        ra, rb_ = rep_bounds[i], rep_bounds[i + 1]
+        rb.root_of_set = dict(zip(smallest[reps[ra:rb_]].tolist(), root[ra:rb_].tolist(),
+                                  strict=True))
+    return n_sets
+
+
+def _roots(reps: np.ndarray, starts: np.ndarray, counts: np.ndarray,
+           cam: np.ndarray) -> np.ndarray:
+    """Eq. (10) for each representative row: the robot with most features, ties lowest id."""
+    if reps.size == 0:
+        return _EMPTY
+    c = counts[reps]
+    srow = np.repeat(np.arange(reps.size), c)
+    entry = np.repeat(starts[reps] - np.concatenate([[0], np.cumsum(c)[:-1]]), c) + \
+        np.arange(int(c.sum()))
+    scam = cam[entry]
+    # features per (set, robot): m~_j of Def. 4.1, by run lengths (cams sorted within a row)
+    start = np.flatnonzero(np.r_[True, (srow[1:] != srow[:-1]) | (scam[1:] != scam[:-1])])
+    run_len = np.diff(np.r_[start, srow.size])
+    run_set, run_cam = srow[start], scam[start]
+    order = np.lexsort((run_cam, -run_len, run_set))
+    firsts = order[np.r_[True, run_set[order][1:] != run_set[order][:-1]]]
+    return run_cam[firsts]
+
+
+def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProtocol,
+                   iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
+    """Alg. 1 on the paper's protocol, stepping only the robots with a message; returns what
+    :func:`.engine.run_phase` returns for it (``rounds``, ``lost``, ``conflictive_sets``).
+
+    On the paper's protocol :func:`~.resolution.resolution_step` on an empty inbox changes
+    nothing (no request to answer, no reject to apply, memory unchanged), so skipping it is
+    the per-robot loop without its no-op calls. The phase ends when nothing is in flight.
+    """
+    rooted = sum(protocol.start(RESOLUTION, rb, iteration) for rb in robots)
+    cap = protocol.max_rounds(RESOLUTION, robots) if max_rounds is None else max_rounds
+    t = 0
+    while network.pending:
+        network.end_round()
+        t += 1
+        if on_round is not None:
+            on_round(t)
+        for i in network.receivers():
+            protocol.step(RESOLUTION, robots[i], network.inbox(i), t)
+        if t > cap:
+            raise RuntimeError(f"resolution did not end within {cap} rounds")
+    end_phase(RESOLUTION, robots)
+    return dict(rounds=t, lost=False, conflictive_sets=int(rooted))
