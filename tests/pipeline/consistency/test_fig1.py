@@ -71,8 +71,9 @@ def test_stopped_robot_stays_silent_and_neighbours_use_its_last_blocks():
         send(src, dst, kind, payload)
 
     net.send = spy
-    once = detect_once(FPC, links, network=net)
+    once = detect_once(FPC, links, network=net, engine="per-robot")  # robots send one by one
     robots, t_stop = once.robots, once.stats["t_stop"]
+    assert sent
     assert t_stop[1] < t_stop[3]  # B stops before D
     for rnd, src, _, kind in sent:
         assert kind == "blocks" and rnd < t_stop[src]  # nothing after Prop. 3.5 fires
