@@ -97,13 +97,17 @@ class EvidenceState:
     solved: set = field(default_factory=set)
     set_members: dict = field(default_factory=dict)
     set_nbrs: dict = field(default_factory=dict)
+    held_bytes: int = 0  # bytes of the bundles and set members held, kept as they arrive
+
+    def keep(self, lab: int, g: int, bundle: tuple) -> None:
+        """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""
+        self.bundles[lab][g] = bundle
+        kp, nbr, w, _, P = bundle
+        self.held_bytes += kp.nbytes + nbr.nbytes + w.nbytes + 12 + (P.nbytes if P is not None
+                                                                      else 0)
 
     def nbytes(self) -> int:
-        total = self.link_weight.nbytes + self.keypoints.nbytes
-        for per_set in self.bundles.values():
-            for kp, nbr, w, _, P in per_set.values():
-                total += kp.nbytes + nbr.nbytes + w.nbytes + 12 + (P.nbytes if P is not None else 0)
-        return int(total + sum(m.nbytes for m in self.set_members.values()))
+        return int(self.link_weight.nbytes + self.keypoints.nbytes + self.held_bytes)
 
 
 def equip(robot: Robot, link_weight, keypoints, projection) -> None:
@@ -248,19 +252,20 @@ def start_evidence(robot: Robot, send: Send) -> int:
     """
     st: EvidenceState = robot.evidence
     st.bundles, st.solved, st.set_members, st.set_nbrs = {}, set(), {}, {}
+    st.held_bytes = 0
     per_set = _my_set_links(robot)
     out: dict[int, list] = {}
     for lab, rows in per_set.items():
         feats = np.unique(robot.link_r[rows])
         st.set_members[lab] = robot.X[feats[0]].indices.astype(np.int64)  # the set (Sec. III)
+        st.held_bytes += st.set_members[lab].nbytes
         st.set_nbrs[lab] = sorted(set(robot.link_nbr[rows].tolist()))
         st.bundles[lab] = {}
         for r in feats.tolist():
             mine = rows[robot.link_r[rows] == r]
             other = robot.offsets[robot.link_nbr[mine]] + robot.link_s[mine]
-            st.bundles[lab][robot.gid0 + r] = (st.keypoints[r].copy(), other.astype(np.int64),
-                                               st.link_weight[mine].copy(), robot.id,
-                                               st.projection)
+            st.keep(lab, robot.gid0 + r, (st.keypoints[r].copy(), other.astype(np.int64),
+                                          st.link_weight[mine].copy(), robot.id, st.projection))
         new = list(st.bundles[lab])
         for j in st.set_nbrs[lab]:
             out.setdefault(j, []).extend((lab, g) for g in new)
@@ -303,8 +308,9 @@ def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -
             have = st.bundles.get(lab)
             if have is None or g in have:
                 continue
-            have[g] = (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]], p["w"][ends[k]:ends[k + 1]],
-                       int(p["cam"][k]), p["P"][k] if "P" in p else None)
+            st.keep(lab, g, (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]],
+                             p["w"][ends[k]:ends[k + 1]], int(p["cam"][k]),
+                             p["P"][k] if "P" in p else None))
             for j in st.set_nbrs[lab]:
                 if j != msg.src:
                     out.setdefault(j, []).append((lab, g))
@@ -371,6 +377,10 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
                             max_rounds: int | None = None) -> dict:
     """One flood-and-solve pass on all robots (the driver only plays the clock).
 
+    A robot with an empty inbox has nothing to keep, forward or solve (its sets are solved
+    when their last bundle arrives), so each round steps only the robots with a message
+    (all of them on a transport that cannot tell).
+
     Returns ``rounds`` and ``conflictive_sets`` (sets, counted at their smallest robot).
     """
     sends = [partial(network.send, rb.id) for rb in robots]
@@ -380,8 +390,9 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     while network.pending:
         network.end_round()
         t += 1
-        for rb in robots:
-            evidence_step(rb, network.inbox(rb.id), sends[rb.id], t)
+        receivers = network.receivers() if hasattr(network, "receivers") else range(len(robots))
+        for i in receivers:
+            evidence_step(robots[i], network.inbox(i), sends[i], t)
         if t > cap:
             raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
     unsolved = [rb.id for rb in robots if set(rb.evidence.bundles) - rb.evidence.solved]

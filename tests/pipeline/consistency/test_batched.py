@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from consistency_graphs import instances, random_instance
 from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from pipeline.consistency import ProtocolOptions, resolve_conflicts
 from pipeline.consistency.engine import detect_once
@@ -42,13 +43,14 @@ def _same_result(a, b, tmp_path) -> None:
 
 
 @SETTINGS
-@given(inst=instances(max_n=8, max_feat=5))
-def test_batched_and_per_robot_engines_give_identical_results(inst, tmp_path):
+@given(inst=instances(max_n=8, max_feat=5), resolution=st.sampled_from(["paper", "evidence"]))
+def test_batched_and_per_robot_engines_give_identical_results(inst, resolution, tmp_path):
     fpc, edges, links = inst
-    per_robot = resolve_conflicts(fpc, edges, links, engine="per-robot")
-    batched = resolve_conflicts(fpc, edges, links, engine="batched")
+    per_robot = resolve_conflicts(fpc, edges, links, resolution=resolution, engine="per-robot")
+    batched = resolve_conflicts(fpc, edges, links, resolution=resolution, engine="batched")
     _same_result(per_robot, batched, tmp_path)
-    assert resolve_conflicts(fpc, edges, links).stats["bytes"] == batched.stats["bytes"]  # auto
+    auto = resolve_conflicts(fpc, edges, links, resolution=resolution)
+    assert auto.stats["bytes"] == batched.stats["bytes"]
 
 
 @SETTINGS
