@@ -160,6 +160,13 @@ class _Team:
         ok[ok] = np.asarray(sends[col[ok], own[ok]]).ravel()
         self.P = sp.csr_matrix((np.ones(int(ok.sum()), dtype=bool), (row[ok], col[ok])),
                                shape=(A, A))
+        # the same entries by column: who multiplies row s (the receivers of s's deltas)
+        PT = self.P.T.tocsr()
+        self.readers_ptr, self.readers = PT.indptr.astype(np.int64), PT.indices.astype(np.int64)
+        # the send entries of each row, to count a round's messages from its new rows only
+        by_row = np.argsort(row, kind="stable")
+        self.send_by_row = by_row
+        self.send_ptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=A))])
 
     def messages(self, new_per_row: np.ndarray, idx_size: int):
         """The delta messages of a round whose new entries per row are ``new_per_row`` (A,).
@@ -168,10 +175,13 @@ class _Team:
         — sizes as :func:`~.detection.send_blocks` and :func:`~.detection.blocks_from_payload`
         give them.
         """
-        d = new_per_row[self.send_row]
+        rows = np.flatnonzero(new_per_row)
+        entries = self.send_by_row[_ranges(self.send_ptr[rows], self.send_ptr[rows + 1])]
+        pair = self.send_pair[entries]
+        d = new_per_row[self.send_row[entries]]
         n_pairs = self.pair_dst.size
-        R = np.bincount(self.send_pair, weights=d > 0, minlength=n_pairs).astype(np.int64)
-        nnz = np.bincount(self.send_pair, weights=d, minlength=n_pairs).astype(np.int64)
+        R = np.bincount(pair, minlength=n_pairs)
+        nnz = np.bincount(pair, weights=d, minlength=n_pairs).astype(np.int64)
         sent = R > 0
         R, nnz, dst = R[sent], nnz[sent], self.pair_dst[sent]
         payload = 4 * R + idx_size * (R + 1) + idx_size * nnz  # rows int32, indptr, indices
@@ -232,8 +242,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         if on_round is not None:
             on_round(t)
         # eq. (5) on the deltas of round t - 1, every running robot's rows at once
-        new = _step(team.P, delta, A)
-        new = new[running[team.owner[new // A]]]
+        new = _step(team, delta, running)
         new = new[~X.contains(new)]
         new_rows = new // A
         new_per_robot = np.bincount(team.owner[new_rows], minlength=n)
@@ -264,16 +273,31 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
 
 
-def _step(P: sp.csr_matrix, delta: np.ndarray, A: int) -> np.ndarray:
-    """Keys (row * A + col) of ``P Δ``, sorted and unique; ``Δ`` given by its sorted keys."""
+def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Concatenation of ``arange(start[k], stop[k])`` over ``k``."""
+    length = stop - start
+    total = int(length.sum())
+    if total == 0:
+        return _EMPTY
+    first = np.cumsum(length) - length
+    return np.repeat(start - first, length) + np.arange(total)
+
+
+def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
+    """Keys (row * A + col) of the rows of running robots of ``P Δ``, sorted and unique.
+
+    ``Δ`` is given by its sorted keys; each entry ``(s, c)`` of ``Δ`` reaches the rows ``r``
+    with ``P[r, s]`` (the robots that read row ``s`` of the sender's delta message).
+    """
     if delta.size == 0:
         return _EMPTY
-    rows = delta // A
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=A))])
-    D = sp.csr_matrix((np.ones(delta.size, dtype=bool), delta % A, indptr), shape=(A, A))
-    C = (P @ D).tocsr()
-    C.sort_indices()  # entries of a row are unique: the keys come out sorted and unique
-    return np.repeat(np.arange(A, dtype=np.int64), np.diff(C.indptr)) * A + C.indices
+    A = team.A
+    s, c = delta // A, delta % A
+    start, stop = team.readers_ptr[s], team.readers_ptr[s + 1]
+    pos = _ranges(start, stop)
+    r = team.readers[pos]
+    keys = r * A + np.repeat(c, stop - start)
+    return _unique(keys[running[team.owner[r]]])
 
 
 def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarray,

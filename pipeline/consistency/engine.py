@@ -135,7 +135,11 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
     r = np.concatenate([links.feat_i, links.feat_j])
     s = np.concatenate([links.feat_j, links.feat_i])
     li = np.concatenate([idx, idx])
-    order = np.lexsort((s, nbr, owner))
+    span = int(fpc.max(initial=0)) + 1
+    if n * n * span < 2**62:  # one int64 key: faster than a three-key lexsort
+        order = np.argsort((owner.astype(np.int64) * n + nbr) * span + s, kind="stable")
+    else:
+        order = np.lexsort((s, nbr, owner))
     owner, nbr, r, s, li = owner[order], nbr[order], r[order], s[order], li[order]
     bounds = np.searchsorted(owner, np.arange(n + 1))
     robots, link_index = [], []

@@ -72,12 +72,15 @@ class Robot:
         nbr = np.asarray(link_nbr, dtype=np.int32)
         r = np.asarray(link_r, dtype=np.int32)
         s = np.asarray(link_s, dtype=np.int32)
-        order = np.lexsort((s, nbr))
-        self.link_nbr, self.link_r, self.link_s = nbr[order], r[order], s[order]
-        self.link_alive = np.ones(order.shape[0], dtype=bool)
         # key used to find the link (j, s) named by a neighbour's message
         self._key_base = int(fpc.max(initial=0)) + 1
-        self.link_key = self.link_nbr.astype(np.int64) * self._key_base + self.link_s
+        key = nbr.astype(np.int64) * self._key_base + s
+        if key.size > 1 and not (key[1:] > key[:-1]).all():  # else already in (j, s) order
+            order = np.lexsort((s, nbr))
+            nbr, r, s, key = nbr[order], r[order], s[order], key[order]
+        self.link_nbr, self.link_r, self.link_s = nbr, r, s
+        self.link_alive = np.ones(key.shape[0], dtype=bool)
+        self.link_key = key
         self.gid0 = int(self.offsets[self.id])
 
         # detection state (Sec. III)
