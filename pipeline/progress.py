@@ -21,7 +21,7 @@ import threading
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker"]
+__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar"]
 
 log = logging.getLogger("pipeline.progress")
 
@@ -103,6 +103,9 @@ class _NoBar:
     def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
         pass
 
+    def set_description_str(self, desc: str = "", refresh: bool = True) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
@@ -134,6 +137,23 @@ def progress(iterable, total: int | None = None, desc: str = "", min_items: int 
 
     return tqdm(iterable, total=total, desc=desc, leave=False, file=sys.stderr,
                 dynamic_ncols=True)
+
+
+def rounds_bar(description: str, delay: float = 2.0, stream=None):
+    """A tqdm counter of rounds (stderr) for the simulated robot network, cleared when done.
+
+    Shown only past ``delay`` seconds, on a terminal and when INFO messages are shown; a
+    short run prints nothing, and off a terminal (or with ``--quiet``) tqdm is not imported
+    (:class:`_NoBar`). Use as a context manager; the caller names the phase with
+    ``set_description_str`` and counts rounds with ``update``.
+    """
+    stream = stream or sys.stderr
+    if not log.isEnabledFor(logging.INFO) or not _stream_is_terminal(stream):
+        return _NoBar()
+    from tqdm.std import tqdm
+
+    return tqdm(total=None, desc=description, unit=" rounds", file=stream, leave=False,
+                delay=delay, dynamic_ncols=True, mininterval=0.5)
 
 
 class StageTimer:

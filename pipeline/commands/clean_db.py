@@ -103,7 +103,6 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.outputs import require_input_file
-    from pipeline.progress import ticker
     from pipeline.run import consistency_stage
 
     database, out = Path(database), Path(out)
@@ -128,9 +127,8 @@ def clean_database(database: str | Path, out: str | Path,
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if resolution == "evidence" else None
-    with ticker(f"consistency stage: {n} robots, {len(model_links)} links"):
-        result, _ = consistency_stage(m, edges, model_links, resolution=resolution,
-                                      evidence=evidence)
+    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
+    result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

@@ -66,7 +66,6 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.linkscsv import read_links_csv, write_links_csv
-    from pipeline.progress import ticker
     from pipeline.run import consistency_stage, ledger_from_consistency
     from pipeline.types import LinkLedger
 
@@ -106,11 +105,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if transport == "zenoh":
         res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults, resolution)
     else:
-        with ticker(f"consistency stage: {m.size} robots, {len(links)} links"):
-            res, fault_section = consistency_stage(
-                m, run_edges, run_links,
-                None if faults is None else faults_in_layout(faults, ids),
-                resolution=resolution)
+        # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
+        res, fault_section = consistency_stage(
+            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids),
+            resolution=resolution)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)

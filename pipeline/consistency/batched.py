@@ -206,9 +206,11 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
 
     Returns
     -------
-    dict — ``rounds``, ``lost`` (False), ``t_stop`` (n,), ``conflictive_features``
+    dict — ``rounds``, ``start_round``, ``lost`` (False), ``t_stop`` (n,),
+    ``conflictive_features``
     """
     n = len(robots)
+    start_round = int(network.round)
     for rb in robots:
         rb.stopped = init_detection(rb, iteration).size == 0
     team = _Team(robots)
@@ -269,7 +271,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
     for rb in robots:
         rb.peak_memory_bytes = int(peak[rb.id])
         network.note_memory(rb.id, rb.peak_memory_bytes)
-    return dict(rounds=t, lost=False, t_stop=t_stop,
+    return dict(rounds=t, start_round=start_round, lost=False, t_stop=t_stop,
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
 
 
@@ -383,12 +385,14 @@ def _roots(reps: np.ndarray, starts: np.ndarray, counts: np.ndarray,
 def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProtocol,
                    iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
     """Alg. 1 on the paper's protocol, stepping only the robots with a message; returns what
-    :func:`.engine.run_phase` returns for it (``rounds``, ``lost``, ``conflictive_sets``).
+    :func:`.engine.run_phase` returns for it (``rounds``, ``start_round``, ``lost``,
+    ``conflictive_sets``).
 
     On the paper's protocol :func:`~.resolution.resolution_step` on an empty inbox changes
     nothing (no request to answer, no reject to apply, memory unchanged), so skipping it is
     the per-robot loop without its no-op calls. The phase ends when nothing is in flight.
     """
+    start_round = int(network.round)
     rooted = sum(protocol.start(RESOLUTION, rb, iteration) for rb in robots)
     cap = protocol.max_rounds(RESOLUTION, robots) if max_rounds is None else max_rounds
     t = 0
@@ -402,4 +406,4 @@ def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProto
         if t > cap:
             raise RuntimeError(f"resolution did not end within {cap} rounds")
     end_phase(RESOLUTION, robots)
-    return dict(rounds=t, lost=False, conflictive_sets=int(rooted))
+    return dict(rounds=t, start_round=start_round, lost=False, conflictive_sets=int(rooted))

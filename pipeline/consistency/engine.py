@@ -46,6 +46,7 @@ from pipeline.consistency.protocols import (
 )
 from pipeline.consistency.robot import Robot
 from pipeline.errors import InputError
+from pipeline.progress import rounds_bar
 from pipeline.transport import Transport
 from pipeline.transport.simulated import Network, NetworkOptions
 from pipeline.types import Links
@@ -151,12 +152,14 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
 
 
 def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, iteration: int = 0,
-              max_rounds: int | None = None) -> dict:
+              max_rounds: int | None = None, on_round=None) -> dict:
     """One phase (``detection`` or ``resolution``) on all robots: the one loop of the stage.
 
     Round 0: every robot of the protocol's team starts the phase. Then, round after round,
     the network delivers and every robot of the team (those still alive, for the reliable
     protocol) takes one step on its inbox, until the protocol says the phase is over.
+
+    ``on_round`` (callable ``(round) -> None`` or None) is told each round (progress).
 
     Returns
     -------
@@ -176,6 +179,8 @@ def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, ite
             break
         network.end_round()
         t += 1
+        if on_round is not None:
+            on_round(t)
         for rb in protocol.team(live):
             protocol.step(phase, rb, network.inbox(rb.id), t)
         if t > cap:
@@ -346,6 +351,27 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections)
     m_total = int(fpc.sum())
 
+    with rounds_bar(f"consistency: {n} robots") as bar:
+        per_iteration, repeated, close_round = _loop(robots, network, proto, in_batch,
+                                                     use_evidence, reliable, m_total, bar)
+    result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
+                      close_round)
+    result.stats["resolution"] = "evidence" if use_evidence else "paper"
+    return result
+
+
+def _loop(robots, network, proto, in_batch: bool, use_evidence: bool, reliable: bool,
+          m_total: int, bar) -> tuple[list[dict], int, int | None]:
+    """The loop of Prop. 4.5: detection, then resolution, until a detection finds nothing.
+
+    Returns the per-iteration records, the repeated detections and the round of the closing
+    (reliable protocol; ``None`` otherwise)."""
+    n = len(robots)
+
+    def counting(phase: str, iteration: int):
+        bar.set_description_str(f"consistency ({n} robots): {phase} {iteration}", refresh=False)
+        return lambda t: bar.update(1)
+
     per_iteration = []
     # Prop. 4.5: each set loses >= 4 features per pass; each repeated detection follows a loss
     max_iterations = m_total // 4 + 2 + (n * n if reliable else 0)
@@ -357,10 +383,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         if iteration > max_iterations:
             raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
         c0 = network.counters()
+        on_round = counting(DETECTION, iteration)
         if in_batch:
-            det = batched.run_detection(robots, network, proto, iteration)
+            det = batched.run_detection(robots, network, proto, iteration, on_round=on_round)
         else:
-            det = run_phase(robots, network, proto, DETECTION, iteration)
+            det = run_phase(robots, network, proto, DETECTION, iteration, on_round=on_round)
         rec = dict(iteration=iteration, detection_rounds=det["rounds"], t_stop=det["t_stop"],
                    conflictive_features=det["conflictive_features"], conflictive_sets=0,
                    resolution_rounds=0, start_round=int(c0.get("round", 0)))
@@ -373,7 +400,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         if det["conflictive_features"] == 0:
             if proto.closing:
                 # every linked neighbour confirms it is alive (reliable.py, "Closing round")
-                clo = run_phase(robots, network, proto, CLOSING, iteration)
+                clo = run_phase(robots, network, proto, CLOSING, iteration,
+                                on_round=counting(CLOSING, iteration))
                 rec.update(closing_rounds=clo["rounds"], close_round=clo["start_round"])
                 if clo["lost"]:
                     # a neighbour found dead at the close: detect again without it
@@ -385,23 +413,20 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             rec.update(_delta(c0, network.counters()))
             per_iteration.append(rec)
             break
+        on_round = counting(RESOLUTION, iteration)
         if use_evidence:
-            res = run_evidence_resolution(robots, network)
+            res = run_evidence_resolution(robots, network, on_round=on_round)
         elif in_batch:
-            res = batched.run_resolution(robots, network, proto, iteration)
+            res = batched.run_resolution(robots, network, proto, iteration, on_round=on_round)
         else:
-            res = run_phase(robots, network, proto, RESOLUTION, iteration)
+            res = run_phase(robots, network, proto, RESOLUTION, iteration, on_round=on_round)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
                    last_assignment_round=int(max(
                        (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),
                        default=-1)))
         rec.update(_delta(c0, network.counters()))
         per_iteration.append(rec)
-
-    result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
-                      close_round)
-    result.stats["resolution"] = "evidence" if use_evidence else "paper"
-    return result
+    return per_iteration, repeated, close_round
 
 
 def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,

@@ -374,7 +374,7 @@ def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,
-                            max_rounds: int | None = None) -> dict:
+                            max_rounds: int | None = None, on_round=None) -> dict:
     """One flood-and-solve pass on all robots (the driver only plays the clock).
 
     A robot with an empty inbox has nothing to keep, forward or solve (its sets are solved
@@ -390,6 +390,8 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     while network.pending:
         network.end_round()
         t += 1
+        if on_round is not None:
+            on_round(t)
         receivers = network.receivers() if hasattr(network, "receivers") else range(len(robots))
         for i in receivers:
             evidence_step(robots[i], network.inbox(i), sends[i], t)

@@ -91,3 +91,24 @@ def test_progress_on_a_terminal_draws_a_bar(monkeypatch):
         assert quiet.getvalue() == ""
     finally:
         progress.log.setLevel(level)
+
+
+def test_rounds_bar_counts_rounds_on_a_terminal_and_is_silent_otherwise(caplog):
+    import logging
+
+    caplog.set_level(logging.INFO, logger="pipeline.progress")
+    f = _terminal()
+    with progress.rounds_bar("consistency", delay=0, stream=f) as bar:
+        bar.set_description_str("consistency: detection 1")
+        bar.update(3)
+        bar.refresh()  # the counter redraws at most every 0.5 s
+    assert "consistency: detection 1: 3 rounds" in f.getvalue()
+    quiet = io.StringIO()  # not a terminal
+    with progress.rounds_bar("consistency", delay=0, stream=quiet) as bar:
+        bar.update(3)
+    assert quiet.getvalue() == ""
+    caplog.set_level(logging.WARNING, logger="pipeline.progress")  # --quiet
+    f = _terminal()
+    with progress.rounds_bar("consistency", delay=0, stream=f) as bar:
+        bar.update(3)
+    assert f.getvalue() == ""
