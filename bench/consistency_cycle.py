@@ -1,0 +1,104 @@
+"""Benchmark: one cycle through ``n`` cameras through ``python -m pipeline resolve``.
+
+The input is a links file of ``n`` lines: camera ``i`` linked to ``i + 1`` by feature 0, the
+last camera back to camera 0 by its feature 1 — one conflictive set as long as the team, the
+worst case of the detection's ``d + 1`` rounds (Cor. 3.6) and of Alg. 1's ``n`` rounds
+(Thm. 4.3). Each run is a whole process (start-up included); its wall time and peak resident
+memory (``ru_maxrss`` of that child alone, by ``os.wait4``) are measured, with both
+resolutions (Alg. 1: ``--resolution paper``; the default ``evidence`` rule, up to
+``--evidence-max-n``). Target (1000 cameras): under 5 s and 500 MB.
+
+Prints a table and saves ``runs/bench-consistency-cycle/results.json``.
+
+Usage: ``.venv/bin/python bench/consistency_cycle.py [--n 100 1000] [--evidence-max-n 200]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+
+OUT = ROOT / "runs" / "bench-consistency-cycle"
+TARGET_N, TARGET_S, TARGET_MB = 1000, 5.0, 500.0
+
+
+def write_cycle(path: Path, n: int) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        for i in range(n - 1):
+            w.writerow([i, 0, i + 1, 0])
+        w.writerow([0, 1, n - 1, 0])
+
+
+def run_resolve(links: Path, out: Path, resolution: str) -> dict:
+    """One ``resolve`` process: wall time, peak RSS (MB), exit code, links cut."""
+    cmd = [sys.executable, "-m", "pipeline", "resolve", "--links", str(links), "--out",
+           str(out), "--resolution", resolution, "--quiet"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace").strip() if proc.stderr else ""
+    cut = 0
+    if proc.returncode == 0:
+        with open(out, newline="") as f:
+            cut = sum(1 for r in csv.DictReader(f) if r["status"] == "deleted")
+    return dict(wall_s=round(wall, 3), peak_rss_mb=round(usage.ru_maxrss / 1024, 1),
+                exit_code=proc.returncode, deleted=cut, stderr=err[-300:])
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[100, 1000])
+    ap.add_argument("--evidence-max-n", type=int, default=200,
+                    help="run the evidence rule up to this n (it floods every bundle round the "
+                         "cycle: n^2 bundle transfers)")
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args()
+
+    records = []
+    print(f"{'n':>6} {'resolution':>10} {'wall s':>8} {'peak MB':>8} {'exit':>4} {'cut':>4}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in args.n:
+            links = Path(tmp) / f"cycle{n}.csv"
+            write_cycle(links, n)
+            for resolution in ("paper", "evidence"):
+                if resolution == "evidence" and n > args.evidence_max_n:
+                    continue
+                r = run_resolve(links, Path(tmp) / f"out{n}-{resolution}.csv", resolution)
+                r.update(n=n, resolution=resolution)
+                records.append(r)
+                print(f"{n:>6} {resolution:>10} {r['wall_s']:>8.2f} {r['peak_rss_mb']:>8.1f} "
+                      f"{r['exit_code']:>4} {r['deleted']:>4}", flush=True)
+                if r["exit_code"] != 0:
+                    print(f"       stderr: {r['stderr']}")
+    for r in records:
+        if r["n"] == TARGET_N:
+            ok = r["wall_s"] < TARGET_S and r["peak_rss_mb"] < TARGET_MB
+            print(f"target: {TARGET_N}-camera cycle, {r['resolution']}: {r['wall_s']:.2f} s, "
+                  f"{r['peak_rss_mb']:.0f} MB ({'within' if ok else 'OVER'} {TARGET_S:.0f} s "
+                  f"and {TARGET_MB:.0f} MB)")
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "results.json", records)
+    write_json_atomic(args.out / "meta.json", dict(python=platform.python_version(),
+                                                    machine=platform.machine(),
+                                                    command=" ".join(sys.argv)))
+    print(f"saved {args.out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
