@@ -10,7 +10,8 @@ random unmatched features (one-to-one kept, Assumption 2.2).
 
 In one run, for each ``n``: the whole distributed simulation (:func:`resolve_conflicts`: all
 robots, all rounds, every message counted) against centralized union-find detection plus the
-"drop every link of a conflictive set" baseline on the same input. The simulation runs with
+"drop every link of a conflictive set" baseline on the same input, run alternately
+(``--repeat`` times, medians: the ratio survives a busy machine). The simulation runs with
 the batched evaluation (the default where it applies, :mod:`pipeline.consistency.batched`)
 and, up to ``--per-robot-max-n``, also robot by robot; both must give the same cuts, rounds,
 messages and bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json``
@@ -134,9 +135,16 @@ def bench_one(n: int, args) -> dict:
                                                    args.detect)
     before = count_conflicts(AssociationGraph(fpc, links))
 
-    t0 = time.perf_counter()
-    res = resolve_conflicts(fpc, edges, links)  # batched where it applies (here: always)
-    distributed_s = time.perf_counter() - t0
+    # the distributed stage and the centralized baseline alternately, medians of --repeat runs
+    dist_t, cent_t = [], []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        res = resolve_conflicts(fpc, edges, links)  # batched where it applies (here: always)
+        dist_t.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        kept_drop = drop_conflictive_sets(fpc, links)  # union-find detection + drop-the-set
+        cent_t.append(time.perf_counter() - t0)
+    distributed_s, centralized_s = float(np.median(dist_t)), float(np.median(cent_t))
     per_robot_s = None
     if n <= args.per_robot_max_n:
         t0 = time.perf_counter()
@@ -147,9 +155,6 @@ def bench_one(n: int, args) -> dict:
         for k in ("messages", "bytes", "detection_rounds", "resolution_rounds"):
             assert one_by_one.stats[k] == res.stats[k], k
 
-    t0 = time.perf_counter()
-    kept_drop = drop_conflictive_sets(fpc, links)  # union-find detection + drop-the-set
-    centralized_s = time.perf_counter() - t0
 
     assert is_conflict_free(fpc, res.kept()) and is_conflict_free(fpc, links.subset(kept_drop))
     d = association_diameter(fpc, links)
@@ -221,6 +226,8 @@ def plot(records: list[dict], path: Path) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[6, 10, 20, 50, 100, 200, 500, 1000])
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="alternating runs of the distributed stage and union-find (medians)")
     ap.add_argument("--per-robot-max-n", type=int, default=200,
                     help="also run robot by robot (the engine of faults and middleware) up to this n")
     ap.add_argument("--quick", action="store_true", help="small n only (6, 10, 20)")
@@ -268,7 +275,7 @@ def main() -> int:
         print(f"target: n={TARGET_MB_N} sent {mb:.2f} MB "
               f"({'within' if mb <= TARGET_MB else 'OVER'} {TARGET_MB:.0f} MB)")
     args.out.mkdir(parents=True, exist_ok=True)
-    meta = dict(python=platform.python_version(), machine=platform.machine(),
+    meta = dict(python=platform.python_version(), machine=platform.machine(), repeat=args.repeat,
                 features_per_robot=args.features, spurious=args.spurious, detect=args.detect,
                 seed=args.seed, command=" ".join(sys.argv))
     write_json_atomic(args.out / "results.json", records)

@@ -117,8 +117,8 @@ class _Team:
     gid : (A,) int64 — global id of each active feature (sorted: robot by robot)
     owner : (A,) int64 — its robot
     row_bounds : (n + 1,) int64 — robot ``i``'s rows are ``row_bounds[i]:row_bounds[i+1]``
-    P : csr (A, A) bool — row of ``(i, r)``: ``[W_ik]_{r,s}`` for the rows ``s`` robot ``k``
-        sends to ``i``
+    readers_ptr, readers : the matrix ``P`` (A, A) by column, CSR of its transpose: row
+        ``(i, r)`` of ``P`` holds ``[W_ik]_{r,s}`` for the rows ``s`` robot ``k`` sends to ``i``
     send_row, send_pair : (S,) int64 — robot ``k`` sends row ``send_row`` to the neighbour of
         message ``send_pair`` (pairs ``(k, i)`` numbered ``0..n_pairs-1``)
     pair_dst : (n_pairs,) int64 — receiving robot of each pair
@@ -158,10 +158,9 @@ class _Team:
         col = compact[offsets[k] + s]
         ok = col >= 0
         ok[ok] = np.asarray(sends[col[ok], own[ok]]).ravel()
-        self.P = sp.csr_matrix((np.ones(int(ok.sum()), dtype=bool), (row[ok], col[ok])),
-                               shape=(A, A))
-        # the same entries by column: who multiplies row s (the receivers of s's deltas)
-        PT = self.P.T.tocsr()
+        # P[r, s] = [W_ik]_{r,s}, stored by column: who multiplies row s (its delta's readers)
+        PT = sp.csr_matrix((np.ones(int(ok.sum()), dtype=bool), (col[ok], row[ok])),
+                           shape=(A, A))
         self.readers_ptr, self.readers = PT.indptr.astype(np.int64), PT.indices.astype(np.int64)
         # the send entries of each row, to count a round's messages from its new rows only
         by_row = np.argsort(row, kind="stable")
