@@ -1,0 +1,125 @@
+"""Exact dynamic voting by flooding: the vectorized simulator equals the robots one by one, the
+flood closes at eccentricity + 1, and the decision is the fixed point of the gate map."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.sparse.csgraph import shortest_path
+
+from pipeline.fusion.flooding import FloodRobot, decide, flood, run_robots
+from pipeline.fusion.protocol import to_wire
+from pipeline.fusion.voting import gate_threshold
+
+
+def _instance(seed, n, B, K, wire="float32"):
+    rng = np.random.default_rng(seed)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    comm = np.array([p for p in pairs if rng.random() < 0.6] or [pairs[0]], dtype=np.int64)
+    observes = rng.random((B, n)) < 0.75
+    estimated = observes & (rng.random((B, n)) < 0.85)
+    ne, el = [], []
+    for k, (i, j) in enumerate(comm):
+        b = np.flatnonzero(observes[:, i] & observes[:, j])
+        ne.append(np.stack([b * n + i, b * n + j], 1))
+        el.append(np.full(len(b), k))
+    ne = np.concatenate(ne).astype(np.int64)
+    el = np.concatenate(el).astype(np.int64)
+    centre = rng.normal(0, 1, (B, 1, 3))
+    x = centre + rng.normal(0, 0.05, (B, n, 3))
+    out = rng.random((B, n)) < 0.3
+    x[out] += rng.normal(0, 2, (out.sum(), 3))
+    A = rng.normal(0, 1, (B, n, 3, 3))
+    info = A @ np.swapaxes(A, -1, -2) * 50 + 10 * np.eye(3)
+    draws = np.where(estimated[..., None], 1.0 - rng.random((B, n, K)), -np.inf)
+    return comm, observes, estimated, ne, el, to_wire(x, wire), to_wire(info, wire), draws
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(2, 6), B=st.integers(1, 4),
+       K=st.integers(1, 4), c=st.integers(1, 2), wire=st.sampled_from(["float32", "float64"]))
+def test_vectorized_flood_equals_the_robots_one_by_one(seed, n, B, K, c, wire):
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, B, K, wire)
+    thr = gate_threshold(3, 0.99, "squared")
+    run = flood(observes, ne, el, len(comm), estimated=est, K=K, d=3, wire=wire)
+    rows = np.flatnonzero(observes.reshape(-1))
+    tb = rows // n
+    dec = decide(run.known[rows], est[tb], draws[tb], x[tb], info[tb], c=c, thr=thr)
+
+    nbr = np.zeros((B * n, n), dtype=bool)
+    nbr[ne[:, 0], ne[:, 1] % n] = nbr[ne[:, 1], ne[:, 0] % n] = True
+    robots = [FloodRobot(i, n, {b: dict(neighbours=nbr[b * n + i], estimated=est[b, i],
+                                        draws=draws[b, i], x=x[b, i], info=info[b, i])
+                                for b in np.flatnonzero(observes[:, i])},
+                         K=K, d=3, wire=wire, c=c, thr=thr) for i in range(n)]
+    rounds, sizes = run_robots(robots)
+    assert rounds == run.rounds == len(run.sizes)
+    for t in range(rounds):
+        want = {}
+        for k, (i, j) in enumerate(comm):
+            for s_, d_, v in ((i, j, run.sizes[t][2 * k]), (j, i, run.sizes[t][2 * k + 1])):
+                if v:
+                    want[(int(s_), int(d_))] = int(v)
+        assert sizes[t] == want
+    for r, node in enumerate(rows):
+        b, i = divmod(int(node), n)
+        one = robots[i].decisions[b]
+        assert robots[i].tracks[b].decided_round == run.decided_round[node]
+        np.testing.assert_array_equal(robots[i].tracks[b].known_at_decision, run.known[node])
+        assert one.winner == dec.winner[r] and one.valid == dec.valid[r]
+        np.testing.assert_array_equal(one.counts, dec.counts[r])
+        np.testing.assert_array_equal(one.yes, dec.yes[r])
+        np.testing.assert_array_equal(one.members, dec.members[r])
+        np.testing.assert_array_equal(one.theta, dec.theta[r])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(2, 7))
+def test_each_robot_holds_its_component_and_decides_after_its_eccentricity(seed, n):
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, 3, 2)
+    run = flood(observes, ne, el, len(comm), estimated=est, K=2, d=3, wire="float32")
+    B = observes.shape[0]
+    adj = np.zeros((B * n, B * n))
+    adj[ne[:, 0], ne[:, 1]] = adj[ne[:, 1], ne[:, 0]] = 1
+    dist = shortest_path(adj, unweighted=True)
+    assert run.settled
+    for node in np.flatnonzero(observes.reshape(-1)):
+        b = node // n
+        comp = np.isfinite(dist[node, b * n:(b + 1) * n])
+        np.testing.assert_array_equal(run.known[node], comp)
+        ecc = int(dist[node, b * n:(b + 1) * n][comp].max())
+        assert run.decided_round[node] == ecc
+    # a robot sends its last message the round after it decided (unless every neighbour
+    # stopped before): Diam + 1 rounds at most
+    decided = run.decided_round[observes.reshape(-1)]
+    if len(ne):
+        assert decided.max() <= run.rounds <= decided.max() + 1
+    else:
+        assert run.rounds == 0
+
+
+def test_decision_is_the_ml_of_a_fixed_point_of_the_gate():
+    rng = np.random.default_rng(0)
+    n = 7
+    x = rng.normal(0, 0.01, (1, n, 3))
+    x[0, [2, 5]] += [5.0, 0, 0]                                     # two outliers
+    info = np.broadcast_to(np.eye(3) * 1e4, (1, n, 3, 3)).copy()
+    draws = np.array([[[0.1, 0.2], [0.9, 0.3], [0.5, 0.95], [0.2, 0.1], [0.3, 0.4],
+                       [0.4, 0.5], [0.6, 0.7]]])                     # h0: robot 1, h1: robot 2
+    thr = gate_threshold(3, 0.99, "squared")
+    dec = decide(np.ones((1, n), bool), np.ones((1, n), bool), draws, x, info, c=1, thr=thr)
+    inl = np.ones(n, bool)
+    inl[[2, 5]] = False
+    np.testing.assert_array_equal(dec.yes[0, 0], inl)
+    np.testing.assert_array_equal(dec.yes[0, 1], ~inl)
+    assert dec.counts[0].tolist() == [5, 2] and dec.winner[0] == 0
+    np.testing.assert_allclose(dec.theta[0], x[0, inl].mean(0), atol=1e-12)
+    # votes are counts: a tie goes to the lowest hypothesis index, whatever the values
+    x2 = x.copy()
+    x2[0, [2, 5, 6]] = x[0, [2, 5]].mean(0) + rng.normal(0, 0.01, (3, 3))
+    x2[0, 0] += [0, 5.0, 0]
+    dec2 = decide(np.ones((1, n), bool), np.ones((1, n), bool), draws, x2, info, c=1, thr=thr)
+    assert dec2.counts[0].tolist() == [3, 3] and dec2.winner[0] == 0
+    dec3 = decide(np.ones((1, n), bool), np.ones((1, n), bool), draws[:, :, ::-1], x2, info,
+                  c=1, thr=thr)
+    assert dec3.counts[0].tolist() == [3, 3] and dec3.winner[0] == 0
+    assert not dec3.yes[0, 0, 1] and dec3.yes[0, 1, 1]
