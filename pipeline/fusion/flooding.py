@@ -81,7 +81,7 @@ from pipeline.fusion.protocol import WIRE_DTYPES, index_bytes, to_wire
 from pipeline.transport import HEADER_BYTES
 
 __all__ = ["Decision", "decide", "entry_bytes", "FloodEntry", "FloodMessage", "FloodRobot",
-           "FloodRun", "flood", "run_robots"]
+           "FloodRun", "flood", "run_robots", "exact_dynamic_voting"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -583,3 +583,69 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
         dec_known[now] = known[now]
     return FloodRun(known=dec_known, decided_round=decided, rounds=int(t_last),
                     settled=not bool(forced.any()), sizes=sizes)
+
+
+# --------------------------------------------------------------------------------------------
+# the fusion stage's entry point
+
+
+def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_links: int, *,
+                         K: int, c: int, thr: float, rng, wire: str = "float32",
+                         exchange=None):
+    """Dynamic voting at its consensus limit, by flooding (module docstring).
+
+    Parameters
+    ----------
+    x : ndarray, (B, n, d) — each robot's observation of each track
+    cov : ndarray, (B, n, d, d) — its covariance (any positive definite matrix where not
+        ``estimated``)
+    estimated : ndarray, (B, n) bool — the robot has an observation (it votes and may be drawn)
+    observes : ndarray, (B, n) bool — the robot takes part in the track (relays at least)
+    node_edges, edge_link, n_links : the observer graphs on the comm links (:func:`flood`)
+    K, c : int — hypotheses and robots per hypothesis
+    thr : float — gate on the squared Mahalanobis distance
+    rng : seed or Generator — the max-c draws, drawn as
+        :func:`pipeline.fusion.voting.choose_hypotheses` draws them (same seed, same ``V_h``)
+    wire : ``"float32"`` or ``"float64"`` — precision of ``x`` and ``Λ⁻¹`` in the entries
+    exchange : CountingExchange / LockstepExchange or None — carries every round
+
+    Returns
+    -------
+    VotingResult — ``votes`` are ``|Y_h| / N`` (exact counts over the component's size),
+    ``stats.rounds`` the flood's rounds, ``maxc_stats`` empty (max-c is part of the flood)
+    """
+    from pipeline.fusion.consensus import CommStats
+    from pipeline.fusion.voting import VotingResult
+
+    x = np.asarray(x, dtype=np.float64)
+    B, n, d = x.shape
+    est = np.asarray(estimated, dtype=bool) & np.asarray(observes, dtype=bool)
+    draws = 1.0 - np.random.default_rng(rng).random((B * n, K))   # h_i in (0, 1], eq. (6)
+    draws[~est.reshape(-1)] = -np.inf
+    draws = draws.reshape(B, n, K)
+    xw = to_wire(np.where(est[..., None], x, 0.0), wire)
+    info = np.linalg.inv(np.where(est[..., None, None], cov, np.eye(d)))
+    infow = to_wire(np.where(est[..., None, None], info, 0.0), wire)
+    run = flood(observes, node_edges, edge_link, n_links, estimated=est, K=K, d=d, wire=wire,
+                exchange=exchange)
+    rows = np.flatnonzero(np.asarray(observes, dtype=bool).reshape(-1))
+    tb = rows // n
+    dec = decide(run.known[rows], est[tb], draws[tb], xw[tb], infow[tb], c=c, thr=thr)
+    theta = np.zeros((B * n, d))
+    valid = np.zeros(B * n, dtype=bool)
+    inlier = np.zeros(B * n, dtype=bool)
+    winner = np.zeros(B * n, dtype=np.int64)
+    votes = np.zeros((B * n, K))
+    members = np.zeros((B * n, K), dtype=bool)
+    own = rows % n
+    theta[rows], valid[rows], winner[rows] = dec.theta, dec.valid, dec.winner
+    inlier[rows] = dec.yes[np.arange(len(rows)), dec.winner, own] & dec.valid
+    votes[rows] = dec.counts / np.maximum(dec.size, 1)[:, None]
+    members[rows] = dec.members[np.arange(len(rows)), own]
+    stats = CommStats(rounds=run.rounds)
+    res = VotingResult(theta=theta.reshape(B, n, d), valid=valid.reshape(B, n),
+                       inlier=inlier.reshape(B, n), winner=winner.reshape(B, n),
+                       votes=votes.reshape(B, n, K), members=members.reshape(B, n, K),
+                       stats=stats, maxc_stats=CommStats(), settled=run.settled,
+                       cycles=int(dec.cycles.any(1).sum()))
+    return res

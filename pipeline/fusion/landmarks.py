@@ -96,13 +96,15 @@ from pipeline.fusion.consensus import (
     ransac_hypotheses,
 )
 from pipeline.fusion.protocol import CountingExchange, LinkTraffic, LockstepExchange
-from pipeline.fusion.voting import RoundProtocol, chi2_ppf, dynamic_voting
+from pipeline.fusion.flooding import exact_dynamic_voting
+from pipeline.fusion.voting import RoundProtocol, chi2_ppf, dynamic_voting, gate_threshold
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.types import Features, Links, View
 
 __all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of"]
 
 LOCAL_MODES = ("robust", "pair", "neighbours")
+CONSENSUS_MODES = ("exact", "metropolis")
 
 
 @dataclass
@@ -325,7 +327,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                 sigma_px: float = 1.0, *, local: str = "robust", p: float = 0.99,
                 gate: str = "squared", p_in: float = 0.7, c: int = 1, success: float = 0.99,
                 rounds: int = 100, seed: int = 0, transport: Transport | None = None,
-                track_labels=None, wire: str = "float32", stop: bool = True) -> FusionResult:
+                track_labels=None, wire: str = "float32", stop: bool = True,
+                consensus: str = "exact") -> FusionResult:
     """Fuse every track's landmark by dynamic voting; flag the observations voted out.
 
     Parameters
@@ -355,6 +358,12 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         :mod:`pipeline.fusion.protocol` (``W = n − 1``). ``False``: the fixed-round scheme
         (``rounds`` rounds, full float64 bundles on every edge every round) on the
         transport's per-round graph, kept for comparison.
+    consensus : ``"exact"`` or ``"metropolis"``
+        ``"exact"`` (default): every track's observations are flooded over its observer
+        graph and each robot computes the limit of max-c consensus and dynamic voting on its
+        component (:mod:`pipeline.fusion.flooding`; ``Diam + 1`` rounds, votes as integer
+        counts). ``"metropolis"``: the paper's Metropolis iteration (eqs. 2, 6, 11) with the
+        stop rule of :mod:`pipeline.fusion.protocol` (``stop``) or fixed rounds.
     track_labels : array_like, (m_total,) int or None
         Each robot's own name for the track of each of its features, as it learnt it in the
         consistency stage (:meth:`pipeline.consistency.robot.Robot.final_tracks`; ``-1``
@@ -372,6 +381,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         A view without pose, mismatched views/features, bad links or comm edges.
     """
     comm = _check_inputs(views, features, links, comm_edges, sigma_px, local)
+    if consensus not in CONSENSUS_MODES:
+        raise InputError(f"consensus must be one of {CONSENSUS_MODES}, got {consensus!r}")
     n = len(views)
     m = np.array([len(f) for f in features], dtype=np.int64)
     off = np.concatenate([[0], np.cumsum(m)])
@@ -489,8 +500,13 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     else:
         topo = SwitchingTopology(_track_topology(transport.edges, observes, comm, n), B * n)
         maxc_rounds = transport.window * (n - 1)
-    res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
-                         observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol)
+    if protocol is not None and consensus == "exact":
+        res = exact_dynamic_voting(X, cov, estimated, observes, node_edges, edge_link,
+                                   len(comm), K=K, c=c, thr=gate_threshold(3, p, gate),
+                                   rng=seed, wire=wire, exchange=protocol.exchange)
+    else:
+        res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
+                             observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol)
     crashed = np.zeros(n, dtype=bool)
     if protocol is not None:
         protocol.exchange.finish()
@@ -549,7 +565,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         stats.update(
             rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
             consensus_rounds=int(res.stats.rounds), settled=bool(res.settled),
-            stop_window=int(protocol.stop_window), wire=wire,
+            consensus=consensus, gate_cycles=int(res.cycles or 0),
+            stop_window=int(protocol.stop_window) if consensus == "metropolis" else None,
+            wire=wire,
             network_rounds=int(ex["network_rounds"]), messages=int(ex["messages"]),
             bytes=int(ex["bytes"]), setup_messages=int(kinds["fusion-setup"].get("messages", 0)),
             setup_bytes=int(kinds["fusion-setup"].get("bytes", 0)),

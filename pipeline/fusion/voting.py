@@ -112,6 +112,7 @@ class VotingResult:
     maxc_stats: CommStats = field(default_factory=CommStats)
     history: dict | None = None
     settled: bool | None = None  # a round protocol's stop rule fired (not the cap)
+    cycles: int | None = None    # exact mode: rows whose gate iteration ended in a cycle
 
 
 def chi2_ppf(p: float, d: int) -> float:

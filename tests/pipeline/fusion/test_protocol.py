@@ -1,6 +1,7 @@
 """The fusion stage's rounds: message sizes, the distributed stop rule, lockstep under faults."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.sparse.csgraph import shortest_path
@@ -58,12 +59,18 @@ def test_link_traffic_bundles_only_the_tracks_a_link_carries():
 def test_stop_rule_keeps_the_cuts_and_the_float64_wire_is_the_fixed_round_scheme():
     views, feats, links, edges = _planted_rig()
     fixed = fuse_tracks(views, feats, links, edges, sigma_px=0.5, stop=False)
-    stopped = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
-    np.testing.assert_array_equal(stopped.cut_links, fixed.cut_links)
-    assert stopped.stats["settled"] and stopped.stats["rounds"] < fixed.stats["rounds"]
-    assert stopped.stats["bytes"] < fixed.stats["bytes"] / 10
+    for mode in ("exact", "metropolis"):
+        stopped = fuse_tracks(views, feats, links, edges, sigma_px=0.5, consensus=mode)
+        np.testing.assert_array_equal(stopped.cut_links, fixed.cut_links)
+        assert stopped.stats["settled"] and stopped.stats["rounds"] < fixed.stats["rounds"]
+        assert stopped.stats["bytes"] < fixed.stats["bytes"] / 10
+    # the exact mode on a complete graph of 4: entries in round 1, the last flags in round 2
+    exact = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    assert exact.stats["rounds"] == 2 and exact.stats["maxc_rounds"] == 0
+    np.testing.assert_allclose(exact.points, fixed.points, atol=1e-6)
     # a float64 wire runs the very arithmetic of the fixed-round scheme
-    f64 = fuse_tracks(views, feats, links, edges, sigma_px=0.5, wire="float64", rounds=30)
+    f64 = fuse_tracks(views, feats, links, edges, sigma_px=0.5, wire="float64", rounds=30,
+                      consensus="metropolis")
     ref = fuse_tracks(views, feats, links, edges, sigma_px=0.5, stop=False, rounds=30)
     np.testing.assert_array_equal(f64.points, ref.points)
     np.testing.assert_array_equal(f64.cut_links, ref.cut_links)
@@ -83,10 +90,11 @@ def test_fusion_under_message_loss_ends_with_the_fault_free_result():
     assert net.counters()["bytes_by_kind"]["fusion"] > 0
 
 
-def test_robot_crashed_during_fusion_leaves_the_graph_and_is_not_judged():
+@pytest.mark.parametrize("mode,crash_round", [("exact", 1), ("exact", 2), ("metropolis", 4)])
+def test_robot_crashed_during_fusion_leaves_the_graph_and_is_not_judged(mode, crash_round):
     views, feats, links, edges = _planted_rig()
-    net = Network(len(views), edges, NetworkOptions(crash_at={2: 4}))
-    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5, transport=net)
+    net = Network(len(views), edges, NetworkOptions(crash_at={2: crash_round}))
+    res = fuse_tracks(views, feats, links, edges, sigma_px=0.5, transport=net, consensus=mode)
     touches_2 = (links.cam_i == 2) | (links.cam_j == 2)
     assert res.stats["crashed"] == [2]
     assert set(res.stats["robots_lost"]) == {"0", "1", "3"}
