@@ -95,9 +95,15 @@ from pipeline.fusion.consensus import (
     bundle_bytes,
     ransac_hypotheses,
 )
-from pipeline.fusion.protocol import CountingExchange, LinkTraffic, LockstepExchange
 from pipeline.fusion.flooding import exact_dynamic_voting
-from pipeline.fusion.voting import RoundProtocol, chi2_ppf, dynamic_voting, gate_threshold
+from pipeline.fusion.protocol import CountingExchange, LinkTraffic, LockstepExchange
+from pipeline.fusion.voting import (
+    VOTE_TIE_TOL,
+    RoundProtocol,
+    chi2_ppf,
+    dynamic_voting,
+    gate_threshold,
+)
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.types import Features, Links, View
 
@@ -126,6 +132,9 @@ class FusionResult:
         Not declared an outlier (true also for observations that were not estimated).
     cut_links : ndarray, (L,) bool
         Links with an end at an outlier observation (to cut with reason ``fusion-outlier``).
+    obs_votes : ndarray, (O, K)
+        The observing robot's final vote vector ``v_i`` for its track (NaN where the track
+        was not fused): what decided its winner.
     stats : dict
         ``rounds`` (max-c + consensus), ``messages`` (robot-to-robot, one per neighbour pair
         and direction per round, bundling all shared tracks), ``bytes``, and counts.
@@ -140,6 +149,7 @@ class FusionResult:
     obs_inlier: np.ndarray
     cut_links: np.ndarray
     stats: dict = field(default_factory=dict)
+    obs_votes: np.ndarray | None = None
 
 
 def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
@@ -505,8 +515,10 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                                    len(comm), K=K, c=c, thr=gate_threshold(3, p, gate),
                                    rng=seed, wire=wire, exchange=protocol.exchange)
     else:
+        # the fixed-round scheme keeps its plain argmax: it is the reference as it ran before
         res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
-                             observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol)
+                             observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol,
+                             tie_tol=VOTE_TIE_TOL if stop else 0.0)
     crashed = np.zeros(n, dtype=bool)
     if protocol is not None:
         protocol.exchange.finish()
@@ -552,6 +564,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     sel = bo >= 0
     obs_est[sel] = estimated[bo[sel], obs_cam[sel]]
     obs_in[sel] = ~outlier[bo[sel], obs_cam[sel]]
+    obs_votes = np.full((n_obs, K), np.nan)
+    obs_votes[sel] = res.votes[bo[sel], obs_cam[sel]]
     bad_feature = np.zeros(off[-1], dtype=bool)
     bad_feature[obs_g[~obs_in]] = True
     cut = bad_feature[off[links.cam_i] + links.feat_i] | bad_feature[off[links.cam_j] + links.feat_j]
@@ -601,4 +615,4 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         tr = uf[first_obs[tr]]
     return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track_out,
                         obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
-                        obs_inlier=obs_in, cut_links=cut, stats=stats)
+                        obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes)

@@ -33,8 +33,15 @@ Readings of the text (where the paper leaves a choice open)
 * **Λ_ML^h in eq. (9)** is the robot's local ``(1/N) P_i⁻¹(t)`` after the hypothesis rounds
   (Sec. III: ``Λ_ML^h = (1/N) lim P_i⁻¹``); robots know ``N``.
 * **Winner and inliers**: each robot picks ``h* = argmax_h v_i^h`` from its own vote vector
-  (ties: lowest index) and counts itself an inlier iff its own current vote for ``h*`` is
-  yes (static: its eq.-(8) vote; dynamic: its gate at the last round).
+  and counts itself an inlier iff its own current vote for ``h*`` is yes (static: its eq.-(8)
+  vote; dynamic: its gate at the last round). Ties (:func:`pick_winner`): votes within
+  ``tie_tol`` of the largest count as tied and the lowest index among them wins. A vote is a
+  count over ``N`` (``|Y_h| / N`` at the limit), so two different counts differ by at least
+  ``1 / N``; :data:`VOTE_TIE_TOL` (``1e-4``) lies far above the round-off a float32 consensus
+  accumulates over its rounds and far below ``1 / N``, so neither the wire precision nor a
+  summation order decides a tie. ``tie_tol = 0`` is the plain ``argmax`` (the fixed-round
+  scheme as it ran before, kept as the reference). The exact mode
+  (:mod:`pipeline.fusion.flooding`) compares integer counts.
 * **Initial opinion** (eq. 13 at ``t = 0``): a member of ``V_h`` starts voting (eq. 10), so
   its previous opinion is "yes"; every other robot's is "no".
 * **Rounds**: max-c consensus runs ``maxc_rounds`` rounds before the consensus; they are
@@ -70,9 +77,28 @@ __all__ = [
     "static_voting",
     "dynamic_voting",
     "choose_hypotheses",
+    "pick_winner",
+    "VOTE_TIE_TOL",
 ]
 
 GATES = ("distance", "squared")
+#: votes closer than this to the largest count as tied (module docstring, "Winner")
+VOTE_TIE_TOL = 1e-4
+
+
+def pick_winner(v: np.ndarray, tie_tol: float = VOTE_TIE_TOL) -> np.ndarray:
+    """``h* = argmax_h v^h`` over the last axis; votes within ``tie_tol`` of the largest are
+    tied and the lowest index among them wins (``tie_tol = 0``: plain ``argmax``).
+
+    Examples
+    --------
+    >>> pick_winner(np.array([[0.5, 0.50000004, 0.2], [0.2, 0.6, 0.2]])).tolist()
+    [0, 1]
+    """
+    v = np.asarray(v, dtype=np.float64)
+    if tie_tol <= 0:
+        return np.argmax(v, axis=-1)
+    return np.argmax(v >= v.max(axis=-1, keepdims=True) - tie_tol, axis=-1)
 
 
 @dataclass
@@ -256,7 +282,8 @@ def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_
 
 def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                   gate: str = "distance", rounds=(100, 100, 100), rng=None, members=None,
-                  observed=None, maxc_rounds: int | None = None) -> VotingResult:
+                  observed=None, maxc_rounds: int | None = None,
+                  tie_tol: float = VOTE_TIE_TOL) -> VotingResult:
     """Distributed static voting (Sec. IV-A): hypotheses, votes, vote averaging, final ML.
 
     Parameters
@@ -270,6 +297,7 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     rng : seed or Generator for the max-c draws
     members : ndarray, (B, N, K) bool or None — give ``V_h`` directly instead of drawing
     maxc_rounds : int or None — see :func:`choose_hypotheses`
+    tie_tol : float — votes this close count as tied (:func:`pick_winner`)
 
     Returns
     -------
@@ -308,7 +336,7 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     # step 3: average the votes
     v, st2 = average_consensus(vote0.astype(np.float64).reshape(B * N, K), topo, r_vote)
     v = v.reshape(B, N, K)
-    winner = np.argmax(v, axis=-1)
+    winner = pick_winner(v, tie_tol)
     inlier = np.take_along_axis(vote0, winner[..., None], -1)[..., 0]
     # step 4: final ML of the robots that voted for the winner
     P0, q0 = information_form(x, cov, inlier)
@@ -343,7 +371,8 @@ class RoundProtocol:
 def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                    gate: str = "distance", rounds: int = 100, rng=None, members=None,
                    observed=None, maxc_rounds: int | None = None,
-                   history: bool = False, protocol: RoundProtocol | None = None) -> VotingResult:
+                   history: bool = False, protocol: RoundProtocol | None = None,
+                   tie_tol: float = VOTE_TIE_TOL) -> VotingResult:
     """Distributed dynamic voting (Sec. IV-B, eqs. 10–14).
 
     Every hypothesis ``h`` carries ``(P_i, q_i, v_i)`` per robot, initialized by eqs. (5) and
@@ -369,6 +398,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         only what changed, at ``protocol.wire`` precision, and stop by the distributed rule
         of :mod:`pipeline.fusion.protocol` (``rounds`` is then a cap); every logical round,
         max-c ones included, is carried by ``protocol.exchange``.
+    tie_tol : float — votes this close count as tied (:func:`pick_winner`)
 
     Returns
     -------
@@ -387,7 +417,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds, before_round)
     if protocol is not None:
         return _dynamic_voting_protocol(x, cov, obs, live, thr, members, maxc_stats, rounds,
-                                        protocol)
+                                        protocol, tie_tol)
     B, N, d = x.shape
     K = members.shape[-1]
     M = B * N
@@ -437,7 +467,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     if history:
         hist = {k: np.stack(val) for k, val in hist.items()}
     v = v.reshape(B, N, K)
-    winner = np.argmax(v, axis=-1)
+    winner = pick_winner(v, tie_tol)
     pick = winner.reshape(M, 1)
     theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
     ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
@@ -498,7 +528,8 @@ class _LiveGraph(Topology):
 
 
 def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_stats,
-                             rounds: int, protocol: RoundProtocol) -> VotingResult:
+                             rounds: int, protocol: RoundProtocol,
+                             tie_tol: float = VOTE_TIE_TOL) -> VotingResult:
     """Dynamic voting (eqs. 10–14) with per-link delta messages and the distributed stop
     rule of :mod:`pipeline.fusion.protocol`; vectorized over all robots and tracks: row
     ``i`` of every array is robot ``i``'s own state, and its update reads only that and its
@@ -578,7 +609,7 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
         yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)
     stats = CommStats(rounds=t_run)
     v = v.reshape(B, N, K)
-    winner = np.argmax(v, axis=-1)
+    winner = pick_winner(v, tie_tol)
     pick = winner.reshape(M, 1)
     theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
     ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
