@@ -182,10 +182,30 @@ def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int]:
 # triangulation
 
 
+def _inv3(A):
+    """Inverse of (..., 3, 3) matrices by the adjugate, elementwise; det 0 gives inf/nan."""
+    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
+    d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
+    g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
+    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * c00 + b * c01 + c * c02
+    adj = np.stack([np.stack([c00, c * h - b * i, b * f - c * e], -1),
+                    np.stack([c01, a * i - c * g, c * d - a * f], -1),
+                    np.stack([c02, b * g - a * h, a * e - b * d], -1)], -2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return adj / det[..., None, None]
+
+
+def _mv3(A, v):
+    """``A v`` for (..., 3, 3) and (..., 3), written out."""
+    return (A[..., :, 0] * v[..., None, 0] + A[..., :, 1] * v[..., None, 1]
+            + A[..., :, 2] * v[..., None, 2])
+
+
 def _project(X, R, t, K):
     """Pixels and ``2 × 3`` Jacobians of ``X`` (..., 3) in cameras (..., 3, 3)/(..., 3)."""
-    Xc = (R @ X[..., None])[..., 0] + t
-    p = (K @ Xc[..., None])[..., 0]
+    Xc = _mv3(R, X) + t
+    p = _mv3(K, Xc)
     z = p[..., 2:3]
     u = p[..., :2] / z
     # d u / d Xc = (K[:2] - u K[2]) / z ; d Xc / d X = R
@@ -201,6 +221,7 @@ def triangulate_views(uv, views_mask, R, t, K, sigma_px: float = 1.0, iterations
     uv : ndarray, (M, V, 2) — pixel of each candidate view
     views_mask : ndarray, (M, V) bool — views used by each estimate (>= 2 for a solution)
     R, t, K : ndarrays, (M, V, 3, 3), (M, V, 3), (M, V, 3, 3) — cam_from_world and intrinsics
+        (or (V, ...) arrays shared by all M estimates)
     sigma_px : float — keypoint noise
     iterations : int — Gauss–Newton steps after the DLT
 
@@ -210,41 +231,49 @@ def triangulate_views(uv, views_mask, R, t, K, sigma_px: float = 1.0, iterations
     cov : ndarray, (M, 3, 3) — ``σ_px² (Σ J_vᵀ J_v)⁻¹``
     ok : ndarray, (M,) bool — finite, covariance positive definite, >= 2 views
     rms_px : ndarray, (M,) — RMS reprojection error over the used views
+
+    Notes
+    -----
+    The DLT is the smallest right singular vector of the stacked, row-normalized equations;
+    the normal matrix ``Σ J_vᵀ J_v`` is checked by its closed-form extreme eigenvalues
+    (:func:`pipeline.fusion.consensus.solve_information`'s helper) and inverted by its
+    adjugate: every small solve is closed form and vectorized.
     """
+    from pipeline.fusion.consensus import _extreme_eigenvalues_sym3
+
+    M, V = uv.shape[:2]
     w = views_mask.astype(np.float64)
-    ones = np.ones(uv.shape[:-1] + (1,))
-    xn = np.linalg.solve(K, np.concatenate([uv, ones], -1)[..., None])[..., 0]
+    xn = _mv3(_inv3(K), np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1))
     xn = xn[..., :2] / xn[..., 2:3]
     P = np.concatenate([R, t[..., None]], -1)                         # (M, V, 3, 4)
     rows = np.stack([xn[..., 0:1] * P[..., 2, :] - P[..., 0, :],
                      xn[..., 1:2] * P[..., 2, :] - P[..., 1, :]], -2)  # (M, V, 2, 4)
     rows = rows / np.maximum(np.linalg.norm(rows, axis=-1, keepdims=True), 1e-300)
-    A = (rows * w[..., None, None]).reshape(len(uv), -1, 4)
+    A = (rows * w[..., None, None]).reshape(M, -1, 4)
     _, _, Vt = np.linalg.svd(A)
     Xh = Vt[:, -1]
     with np.errstate(divide="ignore", invalid="ignore"):
         X = Xh[:, :3] / Xh[:, 3:4]
     ok = (views_mask.sum(1) >= 2) & np.isfinite(X).all(1)
     X = np.where(ok[:, None], X, 0.0)
-    H = np.zeros((len(uv), 3, 3))
+    mask3 = views_mask[..., None]
     for step_no in range(int(iterations) + 1):
         with np.errstate(all="ignore"):
             u, J, _ = _project(X[:, None], R, t, K)
-        r = np.where(views_mask[..., None], u - uv, 0.0)
-        J = np.where(views_mask[..., None, None], J, 0.0)
+        r = np.where(mask3, u - uv, 0.0)
+        J = np.where(mask3[..., None], J, 0.0)
         H = np.einsum("mvij,mvik->mjk", J, J)
         g = np.einsum("mvij,mvi->mj", J, r)
         good = ok & np.isfinite(H).all((1, 2)) & np.isfinite(g).all(1)
         Hs = np.where(good[:, None, None], H, np.eye(3))
-        ev = np.linalg.eigvalsh(Hs)
-        good &= ev[:, 0] > 1e-12 * np.maximum(ev[:, -1], 1e-300)
+        lo, hi = _extreme_eigenvalues_sym3(Hs)
+        good &= lo > 1e-12 * np.maximum(hi, 1e-300)
         ok = good
+        Hinv = _inv3(np.where(ok[:, None, None], H, np.eye(3)))
         if step_no == iterations:
             break
-        step = np.linalg.solve(np.where(ok[:, None, None], H, np.eye(3)), g[..., None])[..., 0]
-        X = np.where(ok[:, None], X - step, X)
-    Hs = np.where(ok[:, None, None], H, np.eye(3))
-    cov = sigma_px ** 2 * np.linalg.inv(Hs)
+        X = np.where(ok[:, None], X - _mv3(Hinv, g), X)
+    cov = sigma_px ** 2 * Hinv
     cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
     n_used = np.maximum(views_mask.sum(1), 1)
     rms = np.sqrt((r ** 2).sum((1, 2)) / n_used)
@@ -259,7 +288,9 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     triangulated; its support is the set of observing neighbours whose keypoints reproject
     within the pixel gate (robot ``i``'s own keypoint must too). Robot ``i`` keeps the
     support of the pair with the largest support (ties: lowest reprojection RMS) — a local
-    RANSAC over its neighbours' keypoints in which its own keypoint is always kept.
+    RANSAC over its neighbours' keypoints in which its own keypoint is always kept. The
+    two-view point of ``(i, j)`` is the one of ``(j, i)`` (robot ``j`` computes it from the
+    same two keypoints): it is triangulated once per unordered pair.
     """
     B, n = nb.shape[:2]
     bb, ii, jj = np.nonzero(nb)
@@ -267,12 +298,18 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     if not len(bb):
         return use
     P = len(bb)
+    # each unordered pair once: (b, lo, hi) with lo < hi
+    ub, ui, uj = np.nonzero(np.triu(nb, k=1))
+    pair_id = np.full((B, n, n), -1, dtype=np.int64)
+    pair_id[ub, ui, uj] = pair_id[ub, uj, ui] = np.arange(len(ub))
+    two = np.stack([ui, uj], 1)                                        # (U, 2)
+    Xu, _, oku, _ = triangulate_views(kp[ub[:, None], two], np.ones((len(ub), 2), dtype=bool),
+                                      Rs[two], ts[two], Ks[two], sigma_px)
+    pid = pair_id[bb, ii, jj]
+    Xp, okp = Xu[pid], oku[pid]
     pair = np.zeros((P, n), dtype=bool)
     pair[np.arange(P), ii] = True
     pair[np.arange(P), jj] = True
-    Xp, _, okp, _ = triangulate_views(kp[bb], pair, np.broadcast_to(Rs, (P, n, 3, 3)),
-                                      np.broadcast_to(ts, (P, n, 3)),
-                                      np.broadcast_to(Ks, (P, n, 3, 3)), sigma_px)
     with np.errstate(all="ignore"):
         u, _, z = _project(Xp[:, None], Rs[None], ts[None], Ks[None])    # (P, n, 2), (P, n)
     e2 = ((u - kp[bb]) ** 2).sum(-1) / sigma_px ** 2
@@ -458,10 +495,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     cov = np.broadcast_to(np.eye(3), (B, n, 3, 3)).copy()
     estimated = np.zeros((B, n), dtype=bool)
     if len(est_b):
-        Xe, Ce, oke, _ = triangulate_views(
-            kp[est_b], use[est_b, est_i], np.broadcast_to(Rs, (len(est_b), n, 3, 3)),
-            np.broadcast_to(ts, (len(est_b), n, 3)), np.broadcast_to(Ks, (len(est_b), n, 3, 3)),
-            sigma_px)
+        Xe, Ce, oke, _ = triangulate_views(kp[est_b], use[est_b, est_i], Rs, ts, Ks, sigma_px)
         X[est_b, est_i] = Xe
         cov[est_b[oke], est_i[oke]] = Ce[oke]
         estimated[est_b, est_i] = oke
