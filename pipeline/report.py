@@ -189,6 +189,8 @@ def report_markdown(report: dict) -> str:
         lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
     if "rounds" in fusion:
         settled = {True: "stop rule", False: "round cap"}.get(fusion.get("settled"), "fixed")
+        if fusion.get("consensus") == "exact":
+            settled = "exact flood" if fusion.get("settled") else "exact flood, round cap"
         lines.append(f"| fusion rounds (max-c + consensus, {settled}) | {fusion['rounds']} "
                      f"({fusion.get('maxc_rounds', 0)} + {fusion.get('consensus_rounds', 0)}) |")
         lines.append(f"| fusion messages / bytes | {fusion.get('messages', 0)} / "
