@@ -21,9 +21,9 @@ cut differs from the fixed scheme. Every such link is explained and classified:
 
 - *not converged at 100*: the fixed scheme run ``--long-rounds`` rounds cuts it as the exact
   mode does (the 100-round scheme read its votes before they settled);
-- *tie*: the robot's two best hypotheses have equal votes in one of the two runs (exact
-  counts, or fixed votes within 1e-3): the winner is decided by the tie rule (exact: lowest
-  hypothesis index) or, in the fixed scheme, by round-off;
+- *tie in <run>*: the robot's two best hypotheses have equal votes in that run (exact counts,
+  or Metropolis votes within 1e-3): the winner is decided by the tie rule (lowest hypothesis
+  index) or, in the fixed scheme (plain argmax), by round-off;
 - *other fixed point*: neither — the paper's iteration, with robots deciding on partially
   mixed estimates, settled on another fixed point of the gate map than the exact one;
 
@@ -152,16 +152,17 @@ def _explain(inputs, cuts, frs, long_cut) -> dict:
     out = {}
     for mode in ("metropolis", "exact"):
         diff = np.flatnonzero(cuts[mode] != cuts["fixed"])
-        ties = [_obs_tie(frs["fixed"], 1e-3), _obs_tie(frs[mode], 1e-9 if mode == "exact"
-                                                       else 1e-3)]
+        ties = {"fixed": _obs_tie(frs["fixed"], 1e-3),
+                mode: _obs_tie(frs[mode], 1e-9 if mode == "exact" else 1e-3)}
         rows = []
         for k in diff:
             ends = [(int(np.flatnonzero(reg == links.cam_i[k])[0]), int(links.feat_i[k])),
                     (int(np.flatnonzero(reg == links.cam_j[k])[0]), int(links.feat_j[k]))]
             if long_cut is not None and long_cut[k] == cuts[mode][k]:
                 why = "not converged at 100"
-            elif any(t.get(e, False) for t in ties for e in ends):
-                why = "tie"
+            elif any(t.get(e, False) for t in ties.values() for e in ends):
+                why = "tie in " + " and ".join(m for m, t in ties.items()
+                                               if any(t.get(e, False) for e in ends))
             else:
                 why = "other fixed point"
             rows.append(dict(link=int(k), cut_by=mode if cuts[mode][k] else "fixed", why=why,
