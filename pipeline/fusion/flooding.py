@@ -81,7 +81,7 @@ from pipeline.fusion.protocol import WIRE_DTYPES, index_bytes, to_wire
 from pipeline.transport import HEADER_BYTES
 
 __all__ = ["Decision", "decide", "entry_bytes", "FloodEntry", "FloodMessage", "FloodRobot",
-           "FloodRun", "flood", "run_robots", "exact_dynamic_voting"]
+           "FloodRun", "flood", "robot_step", "run_robots", "exact_dynamic_voting"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -433,9 +433,24 @@ class FloodRobot:
         return list(out.values())
 
 
+def robot_step(state: FloodRobot, inbox: list, lost=()) -> tuple[FloodRobot, list]:
+    """One robot's logical round as a function: ``(state, inbox) -> (new state, outbox)``.
+
+    What a robot process calls once per round (:meth:`FloodRobot.step` on a copy, so
+    ``state`` is left as it was): ``inbox`` are the :class:`FloodMessage` s it received in
+    the round ``state.round``, ``lost`` the neighbours its channel declared lost; the outbox
+    is what it sends in round ``state.round + 1``. Decisions of the tracks it closed are in
+    ``new.decisions``.
+    """
+    import copy
+
+    new = copy.deepcopy(state)
+    return new, new.step(inbox, lost)
+
+
 def run_robots(robots: list, max_rounds: int | None = None):
-    """Drive :class:`FloodRobot` s over a lossless network, one :meth:`~FloodRobot.step` each
-    per round. Returns ``(rounds, sizes)`` with ``sizes`` a list per round of
+    """Drive :class:`FloodRobot` s over a lossless network, one :func:`robot_step` each per
+    round (``robots`` is updated in place with the new states). Returns ``(rounds, sizes)`` with ``sizes`` a list per round of
     ``{(src, dst): bytes}`` (rounds in which no message was sent are not counted)."""
     inbox: dict[int, list] = {r.robot: [] for r in robots}
     sizes = []
@@ -445,10 +460,11 @@ def run_robots(robots: list, max_rounds: int | None = None):
             break
         nxt: dict[int, list] = {r.robot: [] for r in robots}
         this = {}
-        for r in robots:
+        for k, r in enumerate(robots):
             if r.finished:
                 continue
-            for m in r.step(inbox[r.robot]):
+            robots[k], outbox = robot_step(r, inbox[r.robot])
+            for m in outbox:
                 nxt[m.dst].append(m)
                 this[(m.src, m.dst)] = m.nbytes(r.n, r.K, r.d, r.wire)
         if this:

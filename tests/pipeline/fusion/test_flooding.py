@@ -123,3 +123,41 @@ def test_decision_is_the_ml_of_a_fixed_point_of_the_gate():
                   c=1, thr=thr)
     assert dec3.counts[0].tolist() == [3, 3] and dec3.winner[0] == 0
     assert not dec3.yes[0, 0, 1] and dec3.yes[0, 1, 1]
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(2, 8), K=st.integers(1, 4))
+def test_decided_sets_are_fixed_points_of_the_gate_and_votes_are_counts(seed, n, K):
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, 2, K, "float64")
+    thr = gate_threshold(3, 0.99, "squared")
+    known = observes
+    dec = decide(known, est, draws, x, info, c=1, thr=thr)
+    obs = known & est
+    for r in range(len(known)):
+        for h in range(K):
+            S = dec.yes[r, h]
+            assert dec.counts[r, h] == S.sum() and not (S & ~obs[r]).any()
+            if dec.cycles[r, h] or not S.any():
+                continue
+            Pi = info[r, S].sum(0)
+            theta = np.linalg.solve(Pi, (info[r, S] @ x[r, S][..., None]).sum(0)[:, 0])
+            res = x[r] - theta
+            m2 = np.einsum("ni,nij,nj->n", res, info[r], res)
+            # a fixed point of F up to round-off at the gate's edge
+            clear = np.abs(m2 - thr) > 1e-6 * thr
+            np.testing.assert_array_equal(S[clear], (obs[r] & (m2 <= thr))[clear])
+        best = dec.counts[r].max()
+        assert dec.winner[r] == np.flatnonzero(dec.counts[r] == best)[0]
+
+
+def test_robot_step_returns_a_new_state_and_leaves_the_old_one():
+    from pipeline.fusion.flooding import robot_step
+
+    nb = np.array([False, True, False])
+    r = FloodRobot(0, 3, {7: dict(neighbours=nb, estimated=True, draws=[0.5], x=np.zeros(3),
+                                  info=np.eye(3))}, K=1, d=3, wire="float32", c=1, thr=11.3)
+    new, out = robot_step(r, [])
+    assert r.round == 0 and new.round == 1
+    assert [(m.src, m.dst, list(m.tracks)) for m in out] == [(0, 1, [7])]
+    last, entries = out[0].tracks[7]
+    assert not last and [e.robot for e in entries] == [0]
