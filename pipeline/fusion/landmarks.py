@@ -3,7 +3,9 @@
 For each track (association set of the kept links: a connected component with at least two
 features) every robot that observes it
 forms a local 3D estimate of the landmark and the observers fuse these estimates by dynamic
-voting (Montijano et al., Sec. IV-B, :func:`pipeline.fusion.voting.dynamic_voting`). A robot
+voting (Montijano et al., Sec. IV-B): by default at its consensus limit, computed by each
+robot after flooding its track's observations (:mod:`pipeline.fusion.flooding`), or by the
+paper's Metropolis iteration (:func:`pipeline.fusion.voting.dynamic_voting`). A robot
 whose estimate is voted out, and whose own keypoint does not reproject within the pixel gate
 of the fused landmark, declares its observation an outlier; the links to it are cut with reason
 ``fusion-outlier``.
@@ -388,7 +390,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     local : ``"robust"``, ``"pair"`` or ``"neighbours"`` — local estimate (module docstring)
     p, gate : chi-square gate of the vote (and of the reprojection check)
     p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
-    rounds : int — dynamic-voting consensus rounds (with ``stop``: the cap)
+    rounds : int — Metropolis consensus rounds (with ``stop``: the cap); the exact mode needs
+        none (it closes each track at ``Diam + 1`` rounds, at most ``n``)
     seed : int — max-c random draws
     transport : Transport or None
         The network the robots' messages travel on. ``None`` or a fault-free one: one
@@ -399,12 +402,15 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         neighbours declare it lost; its observations are not judged and its links not cut.
         Traffic is counted on the transport (kinds ``fusion-setup``, ``fusion-maxc``,
         ``fusion``).
-    wire : ``"float32"`` or ``"float64"`` — precision of the consensus messages (and state)
+    wire : ``"float32"`` or ``"float64"`` — precision of the reals on the wire: the
+        observations ``x_i``, ``Λ_i⁻¹`` of the exact mode's entries, the Metropolis state
+        (float32 cut the same links as float64 on formations a–d and Sceaux, ``bench/fusion.py``)
     stop : bool
-        ``True``: per-link delta messages and the distributed stop rule of
-        :mod:`pipeline.fusion.protocol` (``W = n − 1``). ``False``: the fixed-round scheme
-        (``rounds`` rounds, full float64 bundles on every edge every round) on the
-        transport's per-round graph, kept for comparison.
+        ``True``: the ``consensus`` mode's own messages and end (Metropolis: per-link delta
+        messages and the stop rule of :mod:`pipeline.fusion.protocol`, ``W = n − 1``).
+        ``False``: the fixed-round Metropolis scheme (``rounds`` rounds, full float64 bundles
+        on every edge every round, plain ``argmax`` winner) on the transport's per-round
+        graph, whatever ``consensus`` says: the reference the others are compared with.
     consensus : ``"exact"`` or ``"metropolis"``
         ``"exact"`` (default): every track's observations are flooded over its observer
         graph and each robot computes the limit of max-c consensus and dynamic voting on its

@@ -1,6 +1,12 @@
 """The fusion stage's rounds on the robots' network: what a message carries, when the robots
 stop, and how a round travels over a faulty network (Montijano et al., eqs. 2, 6, 11).
 
+The messages and the stop rule below are those of the Metropolis mode
+(``fuse_tracks(consensus="metropolis")``). The default exact mode floods each track's
+observations instead (:mod:`pipeline.fusion.flooding`: its own message layout, ``Diam + 1``
+rounds) and travels through the same exchanges (:class:`CountingExchange`,
+:class:`LockstepExchange`).
+
 Messages (what a link carries)
 ------------------------------
 Robots ``i`` and ``j`` exchange, per round, one message in each direction that bundles only
