@@ -18,7 +18,7 @@ settle to float precision). Here every robot learns its component's observations
 it: it holds the limit after ``Diam + 1`` rounds, with no stop threshold and no round cap.
 
 Why it is the default: it is the paper's estimator read at its limit, in ``Diam + 1`` rounds
-and a few bytes per observer (each entry crosses each link at most once), with no round cap to
+and a few bytes per observer (each entry crosses each link at most once in each direction), with no round cap to
 tune and no decision left to round-off. Measured (``bench/fusion.py``, formations a–d under
 both resolutions and Sceaux): it cuts what the paper's Metropolis iteration cuts once that has
 settled — the links where the 100-round scheme differs are vote ties or votes not settled at

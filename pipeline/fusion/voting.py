@@ -37,9 +37,9 @@ Readings of the text (where the paper leaves a choice open)
   vote; dynamic: its gate at the last round). Ties (:func:`pick_winner`): votes within
   ``tie_tol`` of the largest count as tied and the lowest index among them wins. A vote is a
   count over ``N`` (``|Y_h| / N`` at the limit), so two different counts differ by at least
-  ``1 / N``; :data:`VOTE_TIE_TOL` (``1e-4``) lies far above the round-off a float32 consensus
-  accumulates over its rounds and far below ``1 / N``, so neither the wire precision nor a
-  summation order decides a tie. ``tie_tol = 0`` is the plain ``argmax`` (the fixed-round
+  ``1 / N``; :data:`VOTE_TIE_TOL` (``1e-4``) is chosen far above float32 rounding (``6e-8``
+  relative per round, accumulated over a 100-round cap) and far below ``1 / N``, so neither
+  the wire precision nor a summation order decides a tie. ``tie_tol = 0`` is the plain ``argmax`` (the fixed-round
   scheme as it ran before, kept as the reference). The exact mode
   (:mod:`pipeline.fusion.flooding`) compares integer counts.
 * **Initial opinion** (eq. 13 at ``t = 0``): a member of ``V_h`` starts voting (eq. 10), so
