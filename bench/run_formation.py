@@ -12,6 +12,8 @@ times on the same machine in the same minutes, so that a busy machine slows all 
 - **imports**: a process that only imports the modules the run imports (read from one
   ``python -X importtime`` run of it, untimed), i.e. the start-up cost of the run's code;
 - **help**: ``python -m pipeline --help``.
+- **run --no-rerun**: the same run without its Rerun recording, to show what writing the
+  recording costs.
 
 Wall time is measured from spawn to exit, CPU time (user + system) and peak RSS are the
 child's own (``os.wait4``). CPU time is the steadier figure on a shared machine: a process
@@ -138,7 +140,7 @@ def main() -> int:
                        "    except ImportError:\n        pass\n"]
         _write_images(images, args.formation, env)
         load = [os.getloadavg()[0]]
-        runs, floors, imports, helps = [], [], [], []
+        runs, floors, imports, helps, bare = [], [], [], [], []
         for k in range(args.repeat):
             f = _timed(floor_cmd, env)
             floors.append({"wall_s": f["wall_s"], "cpu_s": f["cpu_s"],
@@ -153,12 +155,15 @@ def main() -> int:
             runs.append({"wall_s": r["wall_s"], "cpu_s": r["cpu_s"],
                          "peak_rss_mib": r["peak_rss_mib"], **stages,
                          "outside_stages_s": r["wall_s"] - sum(stages.values())})
+            # the same run without its Rerun recording (--no-rerun): what the recording costs
+            b = _timed([*run_cmd[:-1], str(tmp / "run-no-rerun"), "--no-rerun"], env)
+            bare.append({k2: b[k2] for k2 in ("wall_s", "cpu_s", "peak_rss_mib")})
             i = _timed(imports_cmd, env)
             imports.append({k2: i[k2] for k2 in ("wall_s", "cpu_s", "peak_rss_mib")})
             h = _timed(help_cmd, env)
             helps.append({k2: h[k2] for k2 in ("wall_s", "cpu_s", "peak_rss_mib")})
             print(f"round {k + 1}/{args.repeat}: floor {f['wall_s']:.2f} s, run "
-                  f"{r['wall_s']:.2f} s, imports {i['wall_s']:.2f} s, --help {h['wall_s']:.2f} s",
+                  f"{r['wall_s']:.2f} s, run --no-rerun {b['wall_s']:.2f} s, imports {i['wall_s']:.2f} s, --help {h['wall_s']:.2f} s",
                   file=sys.stderr)
         load.append(os.getloadavg()[0])
 
@@ -202,6 +207,11 @@ def main() -> int:
           f"{spread(cpu_ratios)}   ({cpu:.2f} s / {floor_cpu:.2f} s)")
     print(f"everything but consistency + fusion / floor  {statistics.median(rest_ratios):.2f}"
           f"   pair by pair {spread(rest_ratios)}")
+    bare_ratios = [r["wall_s"] / f["wall_s"] for r, f in zip(bare, floors, strict=True)]
+    bare_cpu_ratios = [r["cpu_s"] / f["cpu_s"] for r, f in zip(bare, floors, strict=True)]
+    print(f"ratio run --no-rerun / floor, wall {statistics.median(bare_ratios):>5.2f}   pair by "
+          f"pair {spread(bare_ratios)}   CPU {statistics.median(bare_cpu_ratios):.2f}   "
+          f"(peak RSS {med(bare, 'peak_rss_mib'):.0f} MiB)")
     print(f"peak RSS run / floor              {rss:>6.0f} MiB / {floor_rss:.0f} MiB")
     print(f"python -m pipeline --help         {help_s:>6.2f} s")
 
@@ -229,10 +239,14 @@ def main() -> int:
                "target_ratio": TARGET_RATIO, "target_peak_rss_mib": TARGET_RSS_MIB,
                "target_help_s": TARGET_HELP_S,
                "load_average": load, "cpu_count": os.cpu_count(),
-               "runs": runs, "floors": floors, "imports": imports, "helps": helps,
+               "no_rerun_ratio": statistics.median(bare_ratios),
+               "no_rerun_cpu_ratio": statistics.median(bare_cpu_ratios),
+               "no_rerun_peak_rss_mib": med(bare, "peak_rss_mib"),
+               "runs": runs, "no_rerun_runs": bare, "floors": floors, "imports": imports, "helps": helps,
                "commands": {"run": "python -m pipeline run-formation --formation "
                                    f"{args.formation} (render cache warm)",
                             "floor": "python bench/opencv_floor.py IMAGES",
+                            "no_rerun": "the run with --no-rerun",
                             "imports": "python -c 'import <the run's top-level modules>'",
                             "help": "python -m pipeline --help"}}
     write_json_atomic(Path(args.out) / "results.json", results)
