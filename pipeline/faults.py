@@ -16,9 +16,8 @@ robots are configured for that link latency, as a deployment would set its timer
 radio's: a message is retransmitted once ``2 (D + 1)`` rounds passed without its
 acknowledgement (instead of 2) and a neighbour is declared lost after ``T + 2 D`` silent rounds
 (``T`` = 40, :class:`~pipeline.consistency.protocols.ProtocolOptions`), so a delay alone never
-makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The delay is a
-fault of the consistency stage's network; the fusion stage's network (:meth:`fusion_transport`)
-delivers without it.
+makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The fusion
+stage's network (:meth:`fusion_transport`) has the same delay and its robots the same timers.
 """
 
 from __future__ import annotations
@@ -110,8 +109,11 @@ class FaultConfig:
 
         The clock goes on from ``start_round`` (the consistency stage's network rounds): a
         crash at round ``r >= start_round`` happens ``r - start_round`` rounds into fusion;
-        robots crashed before take no part (they are not in ``survivors``). Loss and its
-        seed are the same; a switching topology is drawn afresh on the survivors' links.
+        robots crashed before take no part (they are not in ``survivors``). Loss, its seed
+        and the delay are the same (the robots' timers are set for the delay as in the
+        consistency stage: the fusion stage's
+        :class:`~pipeline.fusion.protocol.LockstepExchange` reads it from this network); a
+        switching topology is drawn afresh on the survivors' links.
         """
         from pipeline.transport.simulated import Network, NetworkOptions
 
@@ -124,7 +126,8 @@ class FaultConfig:
         e = e[(e >= 0).all(1)]
         crash_at = {int(new[r]): max(int(t) - int(start_round), 0) for r, t in self.crash
                     if int(r) < len(new) and new[int(r)] >= 0}
-        opts = NetworkOptions(drop_probability=float(self.drop_prob), crash_at=crash_at,
+        opts = NetworkOptions(drop_probability=float(self.drop_prob),
+                              delay_rounds=int(self.delay_rounds), crash_at=crash_at,
                               topology=self.topology(e), seed=int(self.seed))
         return Network(len(survivors), e, opts)
 
@@ -147,11 +150,7 @@ class FaultConfig:
         from pipeline.consistency.protocols import ProtocolOptions
 
         d = int(self.delay_rounds)
-        if not d:
-            return None
-        base = ProtocolOptions()
-        return ProtocolOptions(retransmit_after=base.retransmit_after * (d + 1),
-                               loss_timeout=base.loss_timeout + 2 * d)
+        return ProtocolOptions.for_delay(d) if d else None
 
     def as_dict(self) -> dict:
         return {"drop_prob": float(self.drop_prob), "delay_rounds": int(self.delay_rounds),

@@ -80,6 +80,17 @@ class ProtocolOptions:
     loss_timeout: int = 40
     delta_messages: bool | None = None
 
+    @classmethod
+    def for_delay(cls, delay_rounds: int) -> ProtocolOptions:
+        """The defaults with the timers set for a link latency of ``delay_rounds`` extra
+        rounds: a lossless round trip takes ``2 (D + 1)`` rounds, so a message is resent after
+        ``retransmit_after (D + 1)`` rounds and a neighbour is lost after ``loss_timeout + 2 D``
+        silent rounds (a delay alone never makes a live neighbour look crashed)."""
+        d = int(delay_rounds)
+        base = cls()
+        return cls(retransmit_after=base.retransmit_after * (d + 1),
+                   loss_timeout=base.loss_timeout + 2 * d)
+
 
 class PaperProtocol:
     """The paper's protocol (Secs. III–IV as written) on the transport ``network``."""

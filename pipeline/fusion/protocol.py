@@ -233,7 +233,9 @@ class LockstepExchange(CountingExchange):
     network : pipeline.transport.simulated.Network — over the fusion stage's robots
     link_ends : ndarray, (C, 2) int — the comm links the fusion messages travel on
     options : ProtocolOptions or None — ``retransmit_after``, ``heartbeat_every``,
-        ``loss_timeout`` (defaults of the consistency stage)
+        ``loss_timeout``; ``None``: those of the consistency stage with the timers set for the
+        network's ``delay_rounds`` (:meth:`ProtocolOptions.for_delay`), as a deployment sets
+        them from the radio's latency
     """
 
     def __init__(self, network, link_ends: np.ndarray, options=None):
@@ -243,7 +245,8 @@ class LockstepExchange(CountingExchange):
         super().__init__(len(np.asarray(link_ends).reshape(-1, 2)))
         self.network = network
         self.link_ends = np.asarray(link_ends, dtype=np.int64).reshape(-1, 2)
-        self.options = options or ProtocolOptions()
+        delay = int(getattr(getattr(network, "options", None), "delay_rounds", 0) or 0)
+        self.options = options or ProtocolOptions.for_delay(delay)
         self.channels = [Channel(network.endpoint(i), self.options) for i in range(network.n)]
         self._start = (int(network.messages), int(network.bytes), int(network.dropped))
         self._start_round = int(network.round)

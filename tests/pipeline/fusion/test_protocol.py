@@ -116,3 +116,38 @@ def test_robot_crashed_during_consistency_takes_no_part_in_fusion():
     assert not (led.reason[touches_2] == "fusion-outlier").any()
     # the planted wrong keypoint was robot 2's: with robot 2 gone nothing else is cut
     assert not (led.reason == "fusion-outlier").any()
+
+
+@pytest.mark.parametrize("drop", [0.0, 0.3])
+def test_fusion_under_delay_ends_with_the_fault_free_result_and_more_network_rounds(drop):
+    views, feats, links, edges = _planted_rig()
+    clean = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    rounds = {}
+    for delay in (0, 3):
+        net = Network(len(views), edges, NetworkOptions(drop_probability=drop, delay_rounds=delay,
+                                                        seed=4))
+        if not drop and not delay:
+            continue
+        late = fuse_tracks(views, feats, links, edges, sigma_px=0.5, transport=net)
+        np.testing.assert_array_equal(late.cut_links, clean.cut_links)
+        np.testing.assert_array_equal(late.points, clean.points)
+        st_ = late.stats
+        # the timers are set for the delay: a late message is never taken for a lost robot
+        assert st_["settled"] and st_["rounds"] == clean.stats["rounds"]
+        assert st_["crashed"] == [] and st_["robots_lost"] == {}
+        rounds[delay] = st_["network_rounds"]
+    # every logical round waits D rounds more for each message
+    assert rounds[3] >= 4 * clean.stats["rounds"]
+    if drop:
+        assert rounds[3] > rounds[0]
+
+
+def test_fusion_transport_carries_the_delay_and_its_timers():
+    from pipeline.faults import FaultConfig
+    from pipeline.fusion.protocol import LockstepExchange
+
+    edges = np.array([[0, 1], [1, 2], [2, 3]])
+    net = FaultConfig(delay_rounds=5).fusion_transport(edges, np.array([0, 1, 3]), 10)
+    assert net.options.delay_rounds == 5
+    ex = LockstepExchange(net, np.array([[0, 1]]))
+    assert ex.options.retransmit_after == 12 and ex.options.loss_timeout == 50
