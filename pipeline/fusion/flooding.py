@@ -87,8 +87,9 @@ from pipeline.fusion.consensus import solve_information
 from pipeline.fusion.protocol import WIRE_DTYPES, index_bytes, to_wire
 from pipeline.transport import HEADER_BYTES
 
-__all__ = ["Decision", "decide", "entry_bytes", "FloodEntry", "FloodMessage", "FloodRobot",
-           "FloodRun", "flood", "robot_step", "run_robots", "exact_dynamic_voting"]
+__all__ = ["Decision", "decide", "entry_bytes", "tombstone_bytes", "FloodEntry", "FloodMessage",
+           "FloodRobot", "FloodRun", "flood", "robot_step", "run_robots", "run_robots_on",
+           "exact_dynamic_voting"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -278,21 +279,35 @@ class FloodEntry:
     info: np.ndarray
 
 
+def tombstone_bytes(n: int, n_tombstones: int) -> int:
+    """Bytes of a message's tombstone section: a record count (``uint32``) and per record the
+    track's position among the link's shared tracks (``uint32``) and the two robot ids of the
+    lost link; 0 without tombstones (fault-free messages carry no such section)."""
+    if not n_tombstones:
+        return 0
+    return int(4 + int(n_tombstones) * (4 + 2 * index_bytes(n)))
+
+
 @dataclass
 class FloodMessage:
     """One message of a logical round from ``src`` to ``dst``: per open track (by name) its
-    *last* flag and its entries."""
+    *last* flag and its entries; per track with news of lost links, its tombstones."""
 
     src: int
     dst: int
     round: int
     tracks: dict = field(default_factory=dict)   # name -> (last: bool, [FloodEntry])
+    down: dict = field(default_factory=dict)     # name -> [(a, b)] lost links, a < b
 
     def nbytes(self, n: int, K: int, d: int, wire: str) -> int:
         """Size on the wire (module docstring)."""
         n_est = sum(e.estimated for _, ents in self.tracks.values() for e in ents)
         n_all = sum(len(ents) for _, ents in self.tracks.values())
-        return int(_message_bytes(len(self.tracks), n_est, n_all - n_est, n, K, d, wire))
+        size = int(_message_bytes(len(self.tracks), n_est, n_all - n_est, n, K, d, wire))
+        n_tomb = sum(len(v) for v in self.down.values())
+        if n_tomb:
+            size = (size or HEADER_BYTES) + tombstone_bytes(n, n_tomb)
+        return size
 
 
 @dataclass
@@ -308,10 +323,16 @@ class _TrackState:
     sent_by: dict                   # neighbour -> (n,) bool entries it sent me
     closed: set                     # neighbours that sent their last message
     gone: np.ndarray                # (n,) bool, neighbours declared lost
+    down: dict = field(default_factory=dict)          # lost link (a, b), a < b -> round learned
+    down_sent_by: dict = field(default_factory=dict)  # neighbour -> set of links it sent me
+    resend: dict = field(default_factory=dict)        # neighbour -> entries to send it again
+    last_down: int = 0              # round the latest lost link was learned
     done: bool = False
     stopped: bool = False
     decided_round: int = -1
     known_at_decision: np.ndarray | None = None
+    revisions: int = 0              # decisions taken again after a lost link shrank the set
+    forced: bool = False            # decided by the round cap, ball not closed
 
 
 class FloodRobot:
@@ -370,6 +391,52 @@ class FloodRobot:
         """Every track stopped: the robot sends nothing more."""
         return all(s.stopped for s in self.tracks.values())
 
+    def component(self, name) -> np.ndarray:
+        """The robots this robot reaches in track ``name`` over the links it holds (from the
+        neighbour lists of the entries it holds), lost links removed; (n,) bool.
+
+        The ball is *closed* when every robot of it is known; the decision is taken on it
+        (module docstring, "Crashes during the flood").
+        """
+        s = self.tracks[name]
+        adj = s.nb | s.nb.T
+        for a, b in s.down:
+            adj[a, b] = adj[b, a] = False
+        reach = np.zeros(self.n, dtype=bool)
+        reach[self.robot] = True
+        front = reach.copy()
+        while front.any():
+            nxt = adj[front].any(0) & ~reach
+            reach |= nxt
+            front = nxt & s.known        # an unknown robot's own links are not known yet
+        return reach
+
+    def _lose(self, s: _TrackState, a: int, b: int, t: int) -> None:
+        """Take in the lost link ``(a, b)`` at round ``t``: a tombstone to pass on, and the
+        entries this robot kept from a neighbour at one end because that neighbour heard the
+        other end in round 1 (no longer sure) are sent to it again."""
+        e = (min(a, b), max(a, b))
+        if e in s.down:
+            return
+        s.down[e] = t
+        s.last_down = t
+        for j, k in ((e[0], e[1]), (e[1], e[0])):
+            if j != self.robot and s.neighbours[j] and s.known[k] and k != self.robot:
+                got = s.sent_by.get(j)
+                if got is None or not got[k]:
+                    s.resend.setdefault(j, set()).add(k)
+
+    def _decide(self, names: list, masks: list) -> None:
+        rows = [self.tracks[k] for k in names]
+        dec = decide(np.stack(masks), np.stack([s.est for s in rows]),
+                     np.stack([s.draws for s in rows]), np.stack([s.x for s in rows]),
+                     np.stack([s.info for s in rows]), c=self.c, thr=self.thr)
+        for r, name in enumerate(names):
+            self.decisions[name] = Decision(
+                members=dec.members[r], yes=dec.yes[r], counts=dec.counts[r],
+                size=dec.size[r], winner=dec.winner[r], theta=dec.theta[r],
+                valid=dec.valid[r], cycles=dec.cycles[r])
+
     def step(self, inbox: list, lost=()) -> list:
         """One logical round: take in the messages of the last round, decide the tracks whose
         component is now complete, and return this round's messages.
@@ -377,7 +444,8 @@ class FloodRobot:
         Parameters
         ----------
         inbox : list of FloodMessage — received in round ``self.round`` (empty before round 1)
-        lost : iterable of int — neighbours the network declared lost
+        lost : iterable of int — neighbours the network declared lost (by now; giving one
+            again changes nothing)
 
         Returns
         -------
@@ -396,42 +464,60 @@ class FloodRobot:
                         self._learn(s, e, t_prev)
                 if last:
                     s.closed.add(msg.src)
-        decide_now = []
+            for name, links in getattr(msg, "down", {}).items():
+                s = self.tracks[name]
+                s.down_sent_by.setdefault(msg.src, set()).update(links)
+                for a, b in links:
+                    self._lose(s, int(a), int(b), t_prev)
+        decide_now, masks, again, again_masks = [], [], [], []
         for name, s in self.tracks.items():
             for j in lost:
                 if s.neighbours[j]:
                     s.gone[j] = True
                     s.closed.add(j)
-            if s.done:
+                    self._lose(s, self.robot, j, t_prev)
+            fresh_down = s.last_down == t_prev and bool(s.down)
+            if s.done and not fresh_down:
                 continue
-            reach = (s.nb[s.known]).any(0)
-            if not (reach & ~s.known & ~s.gone).any() or t_prev >= self.n - 1:
-                s.done, s.decided_round = True, t_prev
-                s.known_at_decision = s.known.copy()
+            comp = self.component(name)
+            closed = not (comp & ~s.known).any()
+            if s.done:
+                # a lost link learned after the decision: decide again on what is left
+                keep = comp & s.known
+                if not np.array_equal(keep, s.known_at_decision):
+                    s.known_at_decision, s.decided_round = keep, t_prev
+                    s.revisions += 1
+                    again.append(name)
+                    again_masks.append(keep)
+                continue
+            if closed or t_prev >= self.n - 1 + s.last_down:
+                s.done, s.decided_round, s.forced = True, t_prev, not closed
+                s.known_at_decision = comp & s.known
                 decide_now.append(name)
+                masks.append(s.known_at_decision)
         if decide_now:
-            rows = [self.tracks[k] for k in decide_now]
-            dec = decide(np.stack([s.known for s in rows]), np.stack([s.est for s in rows]),
-                         np.stack([s.draws for s in rows]), np.stack([s.x for s in rows]),
-                         np.stack([s.info for s in rows]), c=self.c, thr=self.thr)
-            for r, name in enumerate(decide_now):
-                self.decisions[name] = Decision(
-                    members=dec.members[r], yes=dec.yes[r], counts=dec.counts[r],
-                    size=dec.size[r], winner=dec.winner[r], theta=dec.theta[r],
-                    valid=dec.valid[r], cycles=dec.cycles[r])
+            self._decide(decide_now, masks)
+        if again:
+            self._decide(again, again_masks)
         t = t_prev + 1
         out: dict[int, FloodMessage] = {}
         for name, s in self.tracks.items():
-            if s.stopped:
+            news = [e for e, r in s.down.items() if r == t - 1]
+            if s.stopped and not news:
                 continue
             fresh = np.flatnonzero(s.learned == t - 1)
             for j in np.flatnonzero(s.neighbours & ~s.gone):
                 j = int(j)
-                if j in s.closed:
+                tomb = [e for e in news if j not in e
+                        and e not in s.down_sent_by.get(j, ())]
+                if tomb:
+                    out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
+                if s.stopped or j in s.closed:
                     continue
                 got = s.sent_by.get(j, np.zeros(self.n, dtype=bool))
                 send = [k for k in fresh if k != j and not got[k]
                         and not (k != self.robot and s.nb[j, k])]
+                send += sorted(k for k in s.resend.pop(j, ()) if k not in send and not got[k])
                 msg = out.setdefault(j, FloodMessage(self.robot, j, t))
                 msg.tracks[name] = (bool(s.done), [self._entry(s, k) for k in send])
             if s.done:
@@ -457,18 +543,19 @@ def robot_step(state: FloodRobot, inbox: list, lost=()) -> tuple[FloodRobot, lis
 
 def run_robots(robots: list, max_rounds: int | None = None):
     """Drive :class:`FloodRobot` s over a lossless network, one :func:`robot_step` each per
-    round (``robots`` is updated in place with the new states). Returns ``(rounds, sizes)`` with ``sizes`` a list per round of
-    ``{(src, dst): bytes}`` (rounds in which no message was sent are not counted)."""
+    round (``robots`` is updated in place with the new states). Returns ``(rounds, sizes)`` with
+    ``sizes`` a list per round of ``{(src, dst): bytes}`` (rounds in which no message was sent
+    are not counted)."""
     inbox: dict[int, list] = {r.robot: [] for r in robots}
     sizes = []
     cap = max_rounds if max_rounds is not None else 2 * max(r.n for r in robots) + 2
     for _ in range(cap):
-        if all(r.finished for r in robots):
+        if all(r.finished and not inbox[r.robot] for r in robots):
             break
         nxt: dict[int, list] = {r.robot: [] for r in robots}
         this = {}
         for k, r in enumerate(robots):
-            if r.finished:
+            if r.finished and not inbox[r.robot]:
                 continue
             robots[k], outbox = robot_step(r, inbox[r.robot])
             for m in outbox:
@@ -477,6 +564,74 @@ def run_robots(robots: list, max_rounds: int | None = None):
         if this:
             sizes.append(this)
         inbox = nxt
+    return len(sizes), sizes
+
+
+def run_robots_on(robots: list, link_ends, exchange, max_rounds: int | None = None):
+    """Drive :class:`FloodRobot` s over an exchange of the fusion stage (a faulty network's
+    :class:`~pipeline.fusion.protocol.LockstepExchange`), one :meth:`FloodRobot.step` each per
+    logical round.
+
+    Each round the robots' messages are sized per directed comm link (``link_ends`` order:
+    ``2 k`` first end to second, ``2 k + 1`` back) and carried by ``exchange.round``; a
+    message on a link the exchange reports down is not delivered, and from the next round
+    both ends are told the other is lost (``lost`` of :meth:`FloodRobot.step`). A robot the
+    network crashed takes no more steps. Ends when a round sends nothing.
+
+    Parameters
+    ----------
+    robots : list of FloodRobot — updated in place
+    link_ends : ndarray, (C, 2) int — the comm links
+    exchange : CountingExchange or LockstepExchange
+    max_rounds : int or None — a guard (default ``(C + 2)(n + 1)``: each lost link can
+        delay a closure by at most ``n - 1`` rounds)
+
+    Returns
+    -------
+    (rounds, sizes) — logical rounds in which a message was sent, and per such round the
+    bytes per directed comm link, ``(2C,)``
+    """
+    ends = np.asarray(link_ends, dtype=np.int64).reshape(-1, 2)
+    index = {}
+    for k, (a, b) in enumerate(ends):
+        index[(int(a), int(b))], index[(int(b), int(a))] = 2 * k, 2 * k + 1
+    n = max(r.n for r in robots) if robots else 0
+    by_id = {r.robot: k for k, r in enumerate(robots)}
+    inbox: dict[int, list] = {r.robot: [] for r in robots}
+    lost: dict[int, set] = {r.robot: set() for r in robots}
+    told: dict[int, int] = {r.robot: 0 for r in robots}
+    link_up = np.ones(len(ends), dtype=bool)
+    sizes = []
+    cap = max_rounds if max_rounds is not None else (len(ends) + 2) * (n + 1)
+    for _ in range(cap):
+        crashed = exchange.crashed
+        size = np.zeros(2 * len(ends), dtype=np.int64)
+        sent = []
+        for i, k in by_id.items():
+            r = robots[k]
+            if i in crashed or (r.finished and not inbox[i] and told[i] == len(lost[i])):
+                continue
+            told[i] = len(lost[i])
+            outbox = r.step(inbox[i], sorted(lost[i]))
+            inbox[i] = []
+            for m in outbox:
+                e = index[(m.src, m.dst)]
+                size[e] = m.nbytes(r.n, r.K, r.d, r.wire)
+                sent.append((e, m))
+        if not sent:
+            break
+        sizes.append(size)
+        up = np.asarray(exchange.round("fusion", size), dtype=bool)
+        for k in np.flatnonzero(link_up & ~up):
+            a, b = int(ends[k, 0]), int(ends[k, 1])
+            if a in lost:
+                lost[a].add(b)
+            if b in lost:
+                lost[b].add(a)
+        link_up &= up
+        for e, m in sent:
+            if link_up[e // 2] and m.dst in inbox:
+                inbox[m.dst].append(m)
     return len(sizes), sizes
 
 
@@ -608,6 +763,34 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
                     settled=not bool(forced.any()), sizes=sizes)
 
 
+def _flood_by_robots(observes, node_edges, edge_link, exchange, *, estimated, draws, x, info,
+                     K: int, c: int, thr: float, wire: str) -> FloodRun:
+    """The flood of every track by :class:`FloodRobot` s over ``exchange``
+    (:func:`run_robots_on`), as a :class:`FloodRun` (``known``: each robot's last decision
+    set; rows of robots that crashed before deciding: what they held)."""
+    observes = np.asarray(observes, dtype=bool)
+    B, n = observes.shape
+    ne = np.asarray(node_edges, dtype=np.int64).reshape(-1, 2)
+    nbr = np.zeros((B * n, n), dtype=bool)
+    nbr[ne[:, 0], ne[:, 1] % n] = nbr[ne[:, 1], ne[:, 0] % n] = True
+    robots = [FloodRobot(i, n, {int(b): dict(neighbours=nbr[b * n + i], estimated=estimated[b, i],
+                                             draws=draws[b, i], x=x[b, i], info=info[b, i])
+                                for b in np.flatnonzero(observes[:, i])},
+                         K=K, d=x.shape[-1], wire=wire, c=c, thr=thr) for i in range(n)]
+    rounds, sizes = run_robots_on(robots, exchange.link_ends, exchange)
+    known = np.zeros((B * n, n), dtype=bool)
+    decided = np.full(B * n, -1, dtype=np.int64)
+    forced = False
+    for r in robots:
+        for b, st in r.tracks.items():
+            row = b * n + r.robot
+            known[row] = st.known_at_decision if st.known_at_decision is not None else st.known
+            decided[row] = st.decided_round
+            forced |= st.forced and r.robot not in exchange.crashed
+    return FloodRun(known=known, decided_round=decided, rounds=int(rounds),
+                    settled=not forced, sizes=sizes)
+
+
 # --------------------------------------------------------------------------------------------
 # the fusion stage's entry point
 
@@ -649,8 +832,15 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
     xw = to_wire(np.where(est[..., None], x, 0.0), wire)
     info = np.linalg.inv(np.where(est[..., None, None], cov, np.eye(d)))
     infow = to_wire(np.where(est[..., None, None], info, 0.0), wire)
-    run = flood(observes, node_edges, edge_link, n_links, estimated=est, K=K, d=d, wire=wire,
-                exchange=exchange)
+    from pipeline.fusion.protocol import LockstepExchange
+
+    if isinstance(exchange, LockstepExchange):
+        # a faulty network: links can go down, so the robots run one by one with tombstones
+        run = _flood_by_robots(observes, node_edges, edge_link, exchange, estimated=est,
+                               draws=draws, x=x, info=info, K=K, c=c, thr=thr, wire=wire)
+    else:
+        run = flood(observes, node_edges, edge_link, n_links, estimated=est, K=K, d=d,
+                    wire=wire, exchange=exchange)
     rows = np.flatnonzero(np.asarray(observes, dtype=bool).reshape(-1))
     tb = rows // n
     dec = decide(run.known[rows], est[tb], draws[tb], xw[tb], infow[tb], c=c, thr=thr)

@@ -577,7 +577,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         sp.csr_matrix((np.ones(len(node_edges)), (node_edges[:, 0], node_edges[:, 1])),
                       shape=(B * n, B * n)), directed=False)
     lab = lab.reshape(B, n)
-    good = res.valid & estimated
+    good = res.valid & estimated & ~crashed[None]    # a crashed robot's estimate is no part
     size = np.bincount(lab[good], minlength=ncomp)
     best = np.full(B, -1)
     score = np.where(good, size[lab], -1)

@@ -258,6 +258,12 @@ class LockstepExchange(CountingExchange):
         their observations unjudged: they never finished)."""
         return {i for i in range(self.network.n) if not self.network.alive(i)}
 
+    @property
+    def link_up(self) -> np.ndarray:
+        """(C,) bool — the comm links still in use (not down since a robot crashed or an end
+        declared the other lost)."""
+        return self._link_up.copy()
+
     def _lost(self, i: int, j: int) -> bool:
         return j in self.channels[i].lost or i in self.channels[j].lost
 

@@ -6,9 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.sparse.csgraph import shortest_path
 
-from pipeline.fusion.flooding import FloodRobot, decide, flood, run_robots
-from pipeline.fusion.protocol import to_wire
+from pipeline.fusion.flooding import FloodRobot, decide, flood, run_robots, run_robots_on
+from pipeline.fusion.protocol import CountingExchange, LockstepExchange, to_wire
 from pipeline.fusion.voting import gate_threshold
+from pipeline.transport.simulated import Network, NetworkOptions
 
 
 def _instance(seed, n, B, K, wire="float32"):
@@ -161,3 +162,77 @@ def test_robot_step_returns_a_new_state_and_leaves_the_old_one():
     assert [(m.src, m.dst, list(m.tracks)) for m in out] == [(0, 1, [7])]
     last, entries = out[0].tracks[7]
     assert not last and [e.robot for e in entries] == [0]
+
+
+def _robots(n, observes, est, ne, x, info, draws, K, wire="float32", c=1):
+    B = observes.shape[0]
+    thr = gate_threshold(3, 0.99, "squared")
+    nbr = np.zeros((B * n, n), dtype=bool)
+    nbr[ne[:, 0], ne[:, 1] % n] = nbr[ne[:, 1], ne[:, 0] % n] = True
+    return [FloodRobot(i, n, {int(b): dict(neighbours=nbr[b * n + i], estimated=est[b, i],
+                                           draws=draws[b, i], x=x[b, i], info=info[b, i])
+                              for b in np.flatnonzero(observes[:, i])},
+                       K=K, d=3, wire=wire, c=c, thr=thr) for i in range(n)]
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(2, 6), B=st.integers(1, 3))
+def test_robots_over_a_lossless_exchange_are_the_vectorized_flood(seed, n, B):
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, B, 2)
+    run = flood(observes, ne, el, len(comm), estimated=est, K=2, d=3, wire="float32")
+    robots = _robots(n, observes, est, ne, x, info, draws, 2)
+    ex = CountingExchange(len(comm))
+    rounds, sizes = run_robots_on(robots, comm, ex)
+    assert rounds == run.rounds and ex.rounds == rounds
+    for a, b in zip(sizes, run.sizes, strict=True):
+        np.testing.assert_array_equal(a, b)
+    for node in np.flatnonzero(observes.reshape(-1)):
+        b, i = divmod(int(node), n)
+        np.testing.assert_array_equal(robots[i].tracks[b].known_at_decision, run.known[node])
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(3, 7), B=st.integers(1, 3),
+       dead=st.integers(0, 6), when=st.floats(0, 1), drop=st.sampled_from([0.0, 0.3]))
+def test_a_crash_during_the_flood_leaves_every_survivor_of_a_track_with_one_decision(
+        seed, n, B, dead, when, drop):
+    """Every surviving observer of a track decides on the survivors of its connected remainder
+    (the same set, so the same winner, inliers and point); the crashed robot is in no decision.
+    The crash falls anywhere in the fault-free run's network rounds (``when``)."""
+    from scipy.sparse.csgraph import connected_components
+
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, B, 2)
+    dead = dead % n
+    free = Network(n, comm, NetworkOptions(drop_probability=drop, seed=seed))
+    run_robots_on(_robots(n, observes, est, ne, x, info, draws, 2), comm,
+                  LockstepExchange(free, comm))
+    at = int(when * free.round)
+    net = Network(n, comm, NetworkOptions(crash_at={dead: at}, drop_probability=drop,
+                                          seed=seed))
+    ex = LockstepExchange(net, comm)
+    robots = _robots(n, observes, est, ne, x, info, draws, 2)
+    run_robots_on(robots, comm, ex)
+    crashed = ex.crashed
+    assert crashed <= {dead}
+    up = ex.link_up
+    for b in range(B):
+        alive_edges = [(i, j) for k, (i, j) in enumerate(comm) if up[k]
+                       and observes[b, i] and observes[b, j]
+                       and i not in crashed and j not in crashed]
+        adj = np.zeros((n, n))
+        for i, j in alive_edges:
+            adj[i, j] = adj[j, i] = 1
+        _, lab = connected_components(adj, directed=False)
+        survivors = [i for i in range(n) if observes[b, i] and i not in crashed]
+        for i in survivors:
+            st_ = robots[i].tracks[b]
+            assert st_.done and not st_.forced
+            want = np.array([k in survivors and lab[k] == lab[i] for k in range(n)])
+            np.testing.assert_array_equal(st_.known_at_decision, want)
+            ref = robots[min(k for k in survivors if lab[k] == lab[i])].decisions[b]
+            one = robots[i].decisions[b]
+            assert one.winner == ref.winner and one.valid == ref.valid
+            np.testing.assert_array_equal(one.yes, ref.yes)
+            np.testing.assert_array_equal(one.theta, ref.theta)
+            if crashed:
+                assert not one.yes[:, dead].any()
