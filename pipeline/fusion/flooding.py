@@ -484,6 +484,7 @@ class FloodRobot:
             if s.done:
                 # a lost link learned after the decision: decide again on what is left
                 keep = comp & s.known
+                s.forced = s.forced and not closed
                 if not np.array_equal(keep, s.known_at_decision):
                     s.known_at_decision, s.decided_round = keep, t_prev
                     s.revisions += 1
@@ -503,7 +504,7 @@ class FloodRobot:
         out: dict[int, FloodMessage] = {}
         for name, s in self.tracks.items():
             news = [e for e, r in s.down.items() if r == t - 1]
-            if s.stopped and not news:
+            if s.stopped and not news and not s.resend:
                 continue
             fresh = np.flatnonzero(s.learned == t - 1)
             for j in np.flatnonzero(s.neighbours & ~s.gone):
@@ -512,14 +513,20 @@ class FloodRobot:
                         and e not in s.down_sent_by.get(j, ())]
                 if tomb:
                     out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
-                if s.stopped or j in s.closed:
+                if j in s.closed:
                     continue
                 got = s.sent_by.get(j, np.zeros(self.n, dtype=bool))
-                send = [k for k in fresh if k != j and not got[k]
-                        and not (k != self.robot and s.nb[j, k])]
+                # j heard its neighbours' entries in round 1, unless the link went down
+                send = [] if s.stopped else [
+                    k for k in fresh if k != j and not got[k]
+                    and not (k != self.robot and s.nb[j, k]
+                             and (min(j, k), max(j, k)) not in s.down)]
                 send += sorted(k for k in s.resend.pop(j, ()) if k not in send and not got[k])
+                if s.stopped and not send:
+                    continue
                 msg = out.setdefault(j, FloodMessage(self.robot, j, t))
                 msg.tracks[name] = (bool(s.done), [self._entry(s, k) for k in send])
+            s.resend.clear()
             if s.done:
                 s.stopped = True
         self.round = t
