@@ -250,7 +250,9 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
     that happened), ``crashed_after_close`` (those of them after the robot had confirmed the
     stage's closing phase: its links stay kept, see :mod:`pipeline.consistency.reliable`),
     ``close_round`` (network round at which the last closing phase began, or ``None``),
-    ``crashes_not_reached`` (the run ended first), ``robots_lost`` (robot ->
+    ``crashes_not_reached`` (the stage ended first; a run with fusion moves those that hit
+    the fusion stage to ``crashed_during_fusion``, :func:`pipeline.run.clean_association`),
+    ``robots_lost`` (robot ->
     neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
     ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``
     (detection, resolution and closing),

@@ -326,6 +326,14 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
             stats["crashed_before_fusion"] = crashed
             stats["robots_lost"] = {str(int(cameras[int(k)])): [int(cameras[j]) for j in v]
                                     for k, v in stats.get("robots_lost", {}).items()}
+            if fault_section is not None:
+                # a crash the consistency stage did not reach may have hit fusion
+                later = fault_section.get("crashes_not_reached", {})
+                fault_section["crashed_during_fusion"] = {
+                    str(r): later[str(r)] for r in stats["crashed"] if str(r) in later}
+                fault_section["crashes_not_reached"] = {
+                    k: v for k, v in later.items()
+                    if k not in fault_section["crashed_during_fusion"]}
         cleaning.fusion_stats = {"enabled": True, **stats, "observations_cut_links": n_cut}
         cleaning.fused_points = np.asarray(fr.points)
         cleaning.fused_track_ids = np.asarray(fr.track_ids)

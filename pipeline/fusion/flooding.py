@@ -38,8 +38,59 @@ once more, with a *last* flag, the entries it heard in that round; a neighbour s
 a robot once it received its last message. So robot ``i`` takes part in ``ecc(i) + 1`` rounds
 and a track in ``Diam + 1``, the bound of max-c consensus (eq. 6) plus one. No global knowledge
 is used beyond the team size ``n``: a component has at most ``n`` robots, so ``ecc ≤ n − 1``;
-a robot that has not closed its ball by round ``n − 1`` (a crashed robot's entry never came)
-decides on what it holds (``cap``). A neighbour the network declares lost counts as known-gone.
+a robot that has not closed its ball by round ``n − 1`` after the last lost link it learned
+decides on what it holds (a guard, ``settled`` false; never reached in the tests).
+
+Crashes during the flood (tombstones; :meth:`FloodRobot.step`)
+-------------------------------------------------------------
+On a faulty network (:class:`~pipeline.fusion.protocol.LockstepExchange`) a comm link goes
+down for good when a robot at one end crashes or one end declares the other lost (the
+reliable channel's timeout); both ends are told (``lost``). Without more, a robot whose
+entry never arrived makes robots farther away wait until the guard, and robots of one track
+could decide on different sets. So:
+
+* a robot told that its link to neighbour ``j`` is down floods a *tombstone* ``(i, j)`` on
+  every track the two share: each robot passes a tombstone it learns, once, to each live
+  neighbour in the track (stopped or not; not to the link's ends, nor back to its senders);
+* the *ball* of robot ``i`` is the set it reaches from itself over the links it knows — the
+  neighbour lists of the entries it holds — with the links it holds tombstones of removed
+  (:meth:`FloodRobot.component`). It decides when every robot of its ball is known, on the
+  entries of its ball. A crashed robot's entry, even if held, is in no ball once the
+  tombstones of its links arrived: *a crashed robot does not vote*;
+* a tombstone learned after the decision shrinks the ball; the robot then decides again on
+  the smaller ball (``revisions``), so every decision reflects every crash it heard of;
+* an entry is not sent to a neighbour that heard it in round 1 (the entry's robot is that
+  neighbour's neighbour) only while their link is up; once it is down the entry is sent again.
+
+Claim: when the flood has ended, the surviving observers of a track that are connected over
+live links (a component ``A`` of the track's observer graph without the crashed robots and
+the down links) all decide on the entries of exactly ``A``, hence identically.
+Proof, in the lockstep model (a message between live robots over an up link arrives in its
+logical round; a down link stays down and both ends are told):
+(1) Every robot of ``A`` gets every entry of ``A``. Along a path ``k = p_0, …, p_m`` in ``A``
+(its links up throughout), ``p_{l−1}`` passes ``k``'s entry to ``p_l`` the round after it first
+holds it unless ``p_l`` surely holds it: its own, sent by ``p_l``, or ``k`` a neighbour of
+``p_l`` over a link that is up — then ``p_l`` heard it in round 1. If that link went down, the
+entry is sent again (also by a robot that stopped). (2) Every robot of ``A`` learns every down
+link with an end in ``A``: that end is told, floods the tombstone, and tombstones cross ``A``'s
+links as entries do, stopped robots included. (3) Every link of the observer graph from ``A``
+to a robot outside ``A`` is down (the outside robot crashed — all its links go down — or the
+link itself was lost), so by (1)–(2) the ball of any ``i ∈ A`` is ``A``, all known: ``i``
+closes on ``A``. Before that, a ball only contains ``A`` (links inside ``A`` are never down,
+and closing requires every robot reached to be known, so by induction along paths all of
+``A`` was known when ``i`` first decided); later tombstones only remove robots outside ``A``,
+and each one makes ``i`` decide again. So the last decision of every robot of ``A`` is
+:func:`decide` on the same entries (copies of the same wire images), which is deterministic
+and row-independent: the same ``V_h``, ``Y_h``, winner, ``θ`` and inliers. ∎
+
+If the crash disconnects a track's observer graph, each component decides on its own
+survivors (the claim per component): a track seen on both sides of a crashed robot can then
+have two fused points and two sets of cut links, each consistent within its side. A crash
+after every observer of a track decided is heard of all the same while any flood still runs
+(its links go down, tombstones follow) and the track is decided again without the crashed
+robot; once no robot sends anything the stage is over and later crashes change nothing.
+The faulty path runs the robots one by one (:func:`run_robots_on`); the vectorized
+:func:`flood` is the fault-free path, tested equal to the robots.
 
 The decision (:func:`decide`, the same function for every robot, row by row)
 ---------------------------------------------------------------------------

@@ -171,3 +171,55 @@ def test_run_formation_report_has_a_faults_section(tmp_path):
     cut = [r for r in links[1:] if r.split(",")[5] == "robot-lost"]
     assert len(cut) == f["links_cut_robot_lost"]
     assert all("1" in (r.split(",")[0], r.split(",")[2]) for r in cut)
+
+
+def _formation_run(tmp_path, name, *crash):
+    import csv
+    import json
+
+    from pipeline.__main__ import main
+
+    out = tmp_path / name
+    rc = main(["run-formation", "--formation", "a", "--size", "320x240", "--max-features", "300",
+               "--no-rerun", "-q", "--out", str(out), *[a for c in crash for a in ("--crash", c)]])
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    # every link matching produced comes back exactly once, every cut with a reason
+    keys = [(r["cam_i"], r["feat_i"], r["cam_j"], r["feat_j"]) for r in rows]
+    assert len(keys) == len(set(keys)) == report["before"]["links"]
+    assert all((r["status"] == "deleted") == bool(r["reason"]) for r in rows)
+    return rc, report, rows
+
+
+def test_run_formation_crashes_before_and_during_fusion(tmp_path, capsys):
+    """A robot crashed during consistency takes no part in fusion; one crashed during the
+    fusion flood is listed in the fusion section and its links are not cut by fusion."""
+    def touches(rows, robot):
+        return [r for r in rows if str(robot) in (r["cam_i"], r["cam_j"])]
+
+    # during consistency
+    rc, report, rows = _formation_run(tmp_path, "early", "2@5")
+    fs = report["fusion"]
+    assert rc == 0 and report.get("conflict_free", True) and report["after"]["conflictive_sets"] == 0
+    assert report["faults"]["crashed"] == {"2": 5}
+    assert fs["crashed_before_fusion"] == [2] and fs["crashed"] == [] and fs["settled"]
+    assert not any(r["reason"] == "fusion-outlier" for r in touches(rows, 2))
+    assert "2" not in fs["robots_lost"] and not any(2 in v for v in fs["robots_lost"].values())
+
+    # the consistency stage's rounds on this input, then a crash just after them
+    _, probe, _ = _formation_run(tmp_path, "probe", "3@100000")
+    start = probe["faults"]["rounds"]
+    assert probe["fusion"]["crashed"] == [] and probe["faults"]["crashes_not_reached"]
+    rc, report, rows = _formation_run(tmp_path, "late", f"3@{start + 1}")
+    fs, f = report["fusion"], report["faults"]
+    assert rc == 0 and report["after"]["conflictive_sets"] == 0
+    assert f["crashed"] == {} and f["crashes_not_reached"] == {}
+    assert f["crashed_during_fusion"] == {"3": start + 1}
+    assert fs["crashed"] == [3] and fs["crashed_before_fusion"] == [] and fs["settled"]
+    assert sorted(fs["robots_lost"]) and all(v == [3] for v in fs["robots_lost"].values())
+    assert fs["network_rounds"] > probe["fusion"]["network_rounds"]
+    assert not any(r["reason"] == "fusion-outlier" for r in touches(rows, 3))
+    # the robots that did not crash judged the rest: fusion still cut links among them
+    assert fs["links_cut"] > 0
+    assert "warning" not in capsys.readouterr().err.lower()
