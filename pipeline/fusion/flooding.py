@@ -730,8 +730,10 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
     n_links : int — comm links ``C``
     estimated : ndarray, (B, n) bool — whose entry carries an observation
     K, d, wire : entry layout (:func:`entry_bytes`)
-    exchange : CountingExchange / LockstepExchange or None — carries every round; the comm
-        links it reports down leave the graph (their far end counts as gone)
+    exchange : CountingExchange or None — carries every round. (A faulty network's
+        :class:`~pipeline.fusion.protocol.LockstepExchange` goes through the robots,
+        :func:`run_robots_on`, which handle lost links with tombstones; here a link reported
+        down only marks its far end as gone for the robot at the near end.)
 
     Returns
     -------

@@ -58,10 +58,14 @@ rounds while expected is declared lost) with a lockstep barrier (an α-synchroni
 consistency stage's detection): robot ``i`` computes round ``t + 1`` only once it holds the
 round-``t`` message of every neighbour still running a shared track. So with message loss,
 delay or a switching topology (messages wait while a link is down) the logical computation is
-the fault-free one, bit for bit; only network rounds and retransmissions grow. A crash is a
+the fault-free one, bit for bit; only network rounds and retransmissions grow. The timers
+are set for the network's delay as in the consistency stage
+(:meth:`~pipeline.consistency.protocols.ProtocolOptions.for_delay`). A crash is a
 robot leaving the graph: once its neighbours declare it lost, the links to it leave the
 consensus graph (Metropolis weights on the remaining graph, doubly stochastic again — the
-switching graphs of Assumption 2.1). Robots crashed before the fusion stage starts take no
+switching graphs of Assumption 2.1); in the exact mode the lost links are flooded as
+tombstones and every survivor decides on its connected remainder
+(:mod:`pipeline.fusion.flooding`, "Crashes during the flood"). Robots crashed before the fusion stage starts take no
 part in it (:func:`pipeline.run.fusion_stage`). Network rounds are counted with a barrier at
 the end of every logical round (every robot waits for the slowest), an upper bound on the
 rounds an α-synchronizer needs.
