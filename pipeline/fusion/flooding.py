@@ -450,6 +450,8 @@ class FloodRobot:
         (module docstring, "Crashes during the flood").
         """
         s = self.tracks[name]
+        if not s.down and not (s.nb[s.known].any(0) & ~s.known).any():
+            return s.known.copy()       # no lost link and the ball closed: it is what it holds
         adj = s.nb | s.nb.T
         for a, b in s.down:
             adj[a, b] = adj[b, a] = False
