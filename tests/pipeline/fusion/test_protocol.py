@@ -151,3 +151,30 @@ def test_fusion_transport_carries_the_delay_and_its_timers():
     assert net.options.delay_rounds == 5
     ex = LockstepExchange(net, np.array([[0, 1]]))
     assert ex.options.retransmit_after == 12 and ex.options.loss_timeout == 50
+
+
+@settings(max_examples=15, deadline=None)
+@given(robot=st.integers(0, 3), when=st.integers(0, 14), drop=st.sampled_from([0.0, 0.3]),
+       seed=st.integers(0, 50))
+def test_a_crash_anywhere_in_consistency_or_fusion_never_cuts_the_crashed_robots_links_by_fusion(
+        robot, when, drop, seed):
+    """Through both stages: a robot crashed in either is no fusion voter and fusion never cuts
+    its links; every cut link keeps one reason; fusion ends settled."""
+    from pipeline.faults import FaultConfig
+    from pipeline.run import clean_association
+
+    views, feats, links, edges = _planted_rig()
+    faults = FaultConfig(crash=((robot, when),), drop_prob=drop, seed=seed)
+    cleaning = clean_association(views, feats, edges, links, resolution="paper", faults=faults)
+    fs, f = cleaning.fusion_stats, cleaning.faults
+    led = cleaning.ledger
+    assert len(led.links) == len(links)
+    assert ((led.status == "deleted") == (led.reason != "")).all()
+    hit = [int(k) for k in f["crashed"]] + fs["crashed"]
+    assert len(hit) <= 1 and fs["settled"]
+    assert sorted(hit + [int(k) for k in f["crashes_not_reached"]]) == [robot]
+    if hit:
+        touches = (led.links.cam_i == robot) | (led.links.cam_j == robot)
+        assert not (led.reason[touches] == "fusion-outlier").any()
+    if fs["crashed"]:
+        assert f["crashed_during_fusion"] == {str(robot): when}
