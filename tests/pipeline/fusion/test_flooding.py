@@ -194,29 +194,32 @@ def test_robots_over_a_lossless_exchange_are_the_vectorized_flood(seed, n, B):
 @settings(max_examples=80, deadline=None)
 @given(seed=st.integers(0, 100_000), n=st.integers(3, 7), B=st.integers(1, 3),
        dead=st.integers(0, 6), when=st.floats(0, 1), drop=st.sampled_from([0.0, 0.3]),
-       fault=st.sampled_from(["crash", "link"]))
+       fault=st.sampled_from(["crash", "link"]), delay=st.sampled_from([0, 2]))
 def test_a_crash_during_the_flood_leaves_every_survivor_of_a_track_with_one_decision(
-        seed, n, B, dead, when, drop, fault):
+        seed, n, B, dead, when, drop, fault, delay):
     """Every surviving observer of a track decides on the survivors of its connected remainder
     (the same set, so the same winner, inliers and point); the crashed robot is in no decision.
     The crash falls anywhere in the fault-free run's network rounds (``when``); ``link``: no
-    robot crashes but one comm link fails for good (both ends live, declared lost)."""
+    robot crashes but one comm link fails for good (both ends live, declared lost), possibly
+    with messages in flight on it (``delay``)."""
     from scipy.sparse.csgraph import connected_components
 
     comm, observes, est, ne, el, x, info, draws = _instance(seed, n, B, 2)
-    free = Network(n, comm, NetworkOptions(drop_probability=drop, seed=seed))
+    free = Network(n, comm, NetworkOptions(drop_probability=drop, delay_rounds=delay,
+                                           seed=seed))
     run_robots_on(_robots(n, observes, est, ne, x, info, draws, 2), comm,
                   LockstepExchange(free, comm))
     at = int(when * free.round)
     if fault == "crash":
         dead = dead % n
-        opts = NetworkOptions(crash_at={dead: at}, drop_probability=drop, seed=seed)
+        opts = NetworkOptions(crash_at={dead: at}, drop_probability=drop, delay_rounds=delay,
+                              seed=seed)
     else:
         broken = comm[dead % len(comm)]
         rest = comm[(comm != broken).any(1)]
         dead = -1
         opts = NetworkOptions(topology=lambda t: comm if t < at else rest,
-                              drop_probability=drop, seed=seed)
+                              drop_probability=drop, delay_rounds=delay, seed=seed)
     net = Network(n, comm, opts)
     ex = LockstepExchange(net, comm)
     robots = _robots(n, observes, est, ne, x, info, draws, 2)
