@@ -43,8 +43,10 @@ pose is unknown sends no ``P`` and the geometric test is then skipped for the wh
 
 Payload of a ``bundle`` message (counted at ``nbytes``): ``set`` (F,) int64 set labels,
 ``feat`` (F,) int64 feature ids, ``kp`` (F, 2) float32, ``deg`` (F,) int32, ``nbr`` (D,) int64
-the other ends, ``w`` (D,) float64, ``cam`` (F,) int32 and ``P`` (F, 3, 4) float64 (only with
-known poses).
+the other ends, ``w`` (D,) float64, ``cam`` (F,) int32 and ``P`` (F_P, 3, 4) float64, the
+projections of the ``F_P`` bundles that carry one (omitted when none does); when some but not
+all do, ``has_P`` (F,) bool says which. A bundle thus arrives exactly as its robot made it,
+whatever other bundles share its message, and every robot of a set solves the same problem.
 """
 
 from __future__ import annotations
@@ -290,9 +292,25 @@ def _send_bundles(robot: Robot, out: dict, send: Send) -> None:
                    "nbr": np.concatenate([bb[1] for bb in bund]).astype(np.int64),
                    "w": np.concatenate([bb[2] for bb in bund]).astype(np.float64),
                    "cam": np.array([bb[3] for bb in bund], dtype=np.int32)}
-        if all(bb[4] is not None for bb in bund):
-            payload["P"] = np.stack([bb[4] for bb in bund]).astype(np.float64)
+        has_P = np.array([bb[4] is not None for bb in bund], dtype=bool)
+        if has_P.any():
+            payload["P"] = np.stack([bb[4] for bb in bund if bb[4] is not None]).astype(np.float64)
+            if not has_P.all():
+                payload["has_P"] = has_P
         send(j, "bundle", payload)
+
+
+def _projections(p: dict) -> list:
+    """The projection each bundle of a ``bundle`` payload carries (``None`` where none)."""
+    F = p["feat"].size
+    if "P" not in p:
+        return [None] * F
+    if "has_P" not in p:
+        return list(p["P"])
+    out: list = [None] * F
+    for k, P in zip(np.flatnonzero(p["has_P"]).tolist(), p["P"], strict=True):
+        out[k] = P
+    return out
 
 
 def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
@@ -304,13 +322,13 @@ def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -
             continue
         p = msg.payload
         ends = np.r_[0, np.cumsum(p["deg"])]
+        proj = _projections(p)
         for k, (lab, g) in enumerate(zip(p["set"].tolist(), p["feat"].tolist(), strict=True)):
             have = st.bundles.get(lab)
             if have is None or g in have:
                 continue
             st.keep(lab, g, (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]],
-                             p["w"][ends[k]:ends[k + 1]], int(p["cam"][k]),
-                             p["P"][k] if "P" in p else None))
+                             p["w"][ends[k]:ends[k + 1]], int(p["cam"][k]), proj[k]))
             for j in st.set_nbrs[lab]:
                 if j != msg.src:
                     out.setdefault(j, []).append((lab, g))
