@@ -33,7 +33,7 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency import batched
+from pipeline.consistency import batched, batched_evidence
 from pipeline.consistency.evidence import equip, run_evidence_resolution
 from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
@@ -415,7 +415,9 @@ def _loop(robots, network, proto, in_batch: bool, use_evidence: bool, reliable: 
             break
         on_round = counting(RESOLUTION, iteration)
         if use_evidence:
-            res = run_evidence_resolution(robots, network, on_round=on_round)
+            run_pass = batched_evidence.run_evidence_resolution if in_batch else \
+                run_evidence_resolution
+            res = run_pass(robots, network, on_round=on_round)
         elif in_batch:
             res = batched.run_resolution(robots, network, proto, iteration, on_round=on_round)
         else:

@@ -62,7 +62,9 @@ from pipeline.transport import Message, Transport
 
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
-           "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done"]
+           "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
+           "own_sets", "bundle_nbytes", "set_problem", "solve_set", "cut_own_side",
+           "finish_evidence"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -104,12 +106,17 @@ class EvidenceState:
     def keep(self, lab: int, g: int, bundle: tuple) -> None:
         """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""
         self.bundles[lab][g] = bundle
-        kp, nbr, w, _, P = bundle
-        self.held_bytes += kp.nbytes + nbr.nbytes + w.nbytes + 12 + (P.nbytes if P is not None
-                                                                      else 0)
+        self.held_bytes += bundle_nbytes(bundle)
 
     def nbytes(self) -> int:
         return int(self.link_weight.nbytes + self.keypoints.nbytes + self.held_bytes)
+
+
+def bundle_nbytes(bundle: tuple) -> int:
+    """Bytes a robot holds for one bundle ``(kp, nbr, w, cam, P)``: its arrays, the feature
+    id (8) and the camera (4)."""
+    kp, nbr, w, _, P = bundle
+    return int(kp.nbytes + nbr.nbytes + w.nbytes + 12 + (P.nbytes if P is not None else 0))
 
 
 def equip(robot: Robot, link_weight, keypoints, projection) -> None:
@@ -247,6 +254,32 @@ def _my_set_links(robot: Robot) -> dict:
     return out
 
 
+def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
+    """The conflictive sets this robot takes part in, from its own state only.
+
+    Returns
+    -------
+    dict ``set label -> (members, set_nbrs, bundles)``: ``members`` (F,) int64 the features
+    of the set (its row of ``X``, Sec. III), ``set_nbrs`` the sorted robots it shares an
+    alive link of the set with, ``bundles`` ``{feature gid -> (kp (2,), nbr (k,), w (k,),
+    cam, P)}`` of its own features of the set, in ascending gid: what it floods.
+    """
+    st: EvidenceState = robot.evidence
+    out = {}
+    for lab, rows in _my_set_links(robot).items():
+        feats = np.unique(robot.link_r[rows])
+        members = robot.X[feats[0]].indices.astype(np.int64)
+        nbrs = sorted(set(robot.link_nbr[rows].tolist()))
+        bundles = {}
+        for r in feats.tolist():
+            mine = rows[robot.link_r[rows] == r]
+            other = robot.offsets[robot.link_nbr[mine]] + robot.link_s[mine]
+            bundles[robot.gid0 + r] = (st.keypoints[r].copy(), other.astype(np.int64),
+                                       st.link_weight[mine].copy(), robot.id, st.projection)
+        out[lab] = (members, nbrs, bundles)
+    return out
+
+
 def start_evidence(robot: Robot, send: Send) -> int:
     """Round 0: bundle every own conflictive feature and send it to the set neighbours.
 
@@ -255,26 +288,21 @@ def start_evidence(robot: Robot, send: Send) -> int:
     st: EvidenceState = robot.evidence
     st.bundles, st.solved, st.set_members, st.set_nbrs = {}, set(), {}, {}
     st.held_bytes = 0
-    per_set = _my_set_links(robot)
+    sets = own_sets(robot)
     out: dict[int, list] = {}
-    for lab, rows in per_set.items():
-        feats = np.unique(robot.link_r[rows])
-        st.set_members[lab] = robot.X[feats[0]].indices.astype(np.int64)  # the set (Sec. III)
-        st.held_bytes += st.set_members[lab].nbytes
-        st.set_nbrs[lab] = sorted(set(robot.link_nbr[rows].tolist()))
+    for lab, (members, nbrs, bundles) in sets.items():
+        st.set_members[lab] = members
+        st.held_bytes += members.nbytes
+        st.set_nbrs[lab] = nbrs
         st.bundles[lab] = {}
-        for r in feats.tolist():
-            mine = rows[robot.link_r[rows] == r]
-            other = robot.offsets[robot.link_nbr[mine]] + robot.link_s[mine]
-            st.keep(lab, robot.gid0 + r, (st.keypoints[r].copy(), other.astype(np.int64),
-                                          st.link_weight[mine].copy(), robot.id, st.projection))
-        new = list(st.bundles[lab])
-        for j in st.set_nbrs[lab]:
-            out.setdefault(j, []).extend((lab, g) for g in new)
+        for g, bundle in bundles.items():
+            st.keep(lab, g, bundle)
+        for j in nbrs:
+            out.setdefault(j, []).extend((lab, g) for g in bundles)
     _send_bundles(robot, out, send)
     robot.measure_memory()
     robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
-    return len(per_set)
+    return len(sets)
 
 
 def _send_bundles(robot: Robot, out: dict, send: Send) -> None:
@@ -370,10 +398,19 @@ def set_problem(bundles: dict) -> tuple:
     return a, b, cam_a, cam_b, w, kp, P
 
 
-def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
-    st: EvidenceState = robot.evidence
-    a, b, cam_a, cam_b, w, kp, P = set_problem(st.bundles[lab])
-    cut = evidence_cut(a, b, cam_a, cam_b, w, kp, P)
+def solve_set(bundles: dict) -> tuple:
+    """The set's solution from its bundles: ``(a, b, cam_a, cam_b, cut)``, each ``(E,)``.
+
+    :func:`set_problem` then :func:`evidence_cut`: a deterministic function of the bundles
+    only, so every robot that holds all of a set's bundles computes the same cut.
+    """
+    a, b, cam_a, cam_b, w, kp, P = set_problem(bundles)
+    return a, b, cam_a, cam_b, evidence_cut(a, b, cam_a, cam_b, w, kp, P)
+
+
+def cut_own_side(robot: Robot, solution: tuple, round_: int) -> None:
+    """Delete this robot's side of every link the set's ``solution`` (:func:`solve_set`) cuts."""
+    a, b, cam_a, cam_b, cut = solution
     mine = (cam_a == robot.id) | (cam_b == robot.id)
     sel = cut & mine
     if not sel.any():
@@ -389,6 +426,10 @@ def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
     robot.deleted_round[fresh] = round_
     robot.deleted_case[fresh] = CASE_EVIDENCE
     robot.deleted_iteration[fresh] = robot.iteration
+
+
+def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
+    cut_own_side(robot, solve_set(robot.evidence.bundles[lab]), round_)
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,
@@ -416,15 +457,23 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
         if t > cap:
             raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
     unsolved = [rb.id for rb in robots if set(rb.evidence.bundles) - rb.evidence.solved]
+    labels = set()
+    for rb in robots:
+        labels.update(rb.evidence.bundles)
+    return finish_evidence(robots, t, unsolved, len(labels), sum(1 for x in touched if x))
+
+
+def finish_evidence(robots: list[Robot], rounds: int, unsolved: list[int], n_sets: int,
+                    robots_in_sets: int) -> dict:
+    """End of a pass: an error if some robot lacks part of a set, else every robot's next
+    detection re-examines its solved sets; returns ``rounds``, ``conflictive_sets`` and
+    ``robots_in_sets``."""
     if unsolved:
         raise RuntimeError(f"robots {unsolved} did not receive their whole conflictive set")
     for rb in robots:
         # the next detection examines the solved sets again and finds them conflict-free
         rb.candidates = rb.conflictive.copy()
-    labels = set()
-    for rb in robots:
-        labels.update(rb.evidence.bundles)
-    return dict(rounds=t, conflictive_sets=len(labels), robots_in_sets=sum(1 for x in touched if x))
+    return dict(rounds=rounds, conflictive_sets=n_sets, robots_in_sets=robots_in_sets)
 
 
 # --------------------------------------------------------------------------- one robot alone

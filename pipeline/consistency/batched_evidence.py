@@ -1,0 +1,335 @@
+"""Batched evaluation of the evidence rule's flood and solve (:mod:`.evidence`) in the simulator.
+
+The per-robot engine (:func:`.evidence.run_evidence_resolution`) steps every robot with a
+message and handles its inbox bundle by bundle; every robot of a conflictive set keeps every
+bundle of the set and solves the set itself. On a cycle through ``n`` cameras that is about
+``n²`` bundles kept and forwarded one by one, and ``n`` solutions of one problem. This module
+computes the *same* pass — the same cuts in the same rounds, the same messages and bytes,
+the same memory per robot — in two parts.
+
+Flood: one vectorized step per round for all robots
+    The bundles one robot floods for one set (a *group*: set ``C``, origin robot ``o``) travel
+    together: they leave ``o`` in round 0 in one message to each set neighbour, and a robot
+    that receives one for the first time receives all of them in the same message and
+    forwards them together (:func:`.evidence.evidence_step`). So the flood is evaluated on
+    groups. Each round, every *(group, robot)* pair first received in the last round (the
+    frontier; round 0: every group at its origin) is forwarded by that robot to its set
+    neighbours but the sender it came from — the robot's own ``set_nbrs`` and the ``src`` of
+    the message in its inbox; a receiving robot keeps a group it does not hold yet, taking the
+    first copy of its inbox, the one from the lowest-numbered sender (the simulator delivers a
+    round's messages by sender, ascending), and that sender becomes the one it will not
+    forward to. Whether the receiver already holds the group is read from its own holdings:
+    the set's robot graph is symmetric (checked), so breadth-first levels of neighbours differ
+    by at most one and a copy that reaches a robot which holds the group found it holding it
+    since the last round or the one before; the frontiers of those two rounds are those
+    holdings. Every step reads only the sender's own state (its set neighbours, the group's
+    sender), what it sent, and the receiver's own holdings, as the per-robot step does.
+
+    Messages and bytes: a message is one sender-receiver pair in one round, carrying the
+    groups forwarded over it; with ``F`` bundles, ``D`` links, ``F_P`` bundles with a
+    projection, its size is that of :func:`.evidence._send_bundles`'s payload: ``12 (header)
+    + 32 F (set, feat, kp, deg, cam) + 16 D (nbr, w) + 96 F_P (P) + F`` if ``0 < F_P < F``
+    (``has_P``). Rounds: the pass ends one round after the last forward, as the per-robot
+    loop ends when nothing is in flight.
+
+Solve: once per set, each robot handed its own side in its own round
+    A robot solves a set in the round its last group arrives. What it computes,
+    :func:`.evidence.solve_set`, is a deterministic function of the set's bundles, and the
+    bundles it holds are bit for bit those their robots made (forwarded unchanged, each with
+    the projection its robot sent): every robot of the set would compute the same value. The
+    simulator computes it once per set, from the bundles as their robots make them
+    (:func:`.evidence.own_sets`), and hands it to a robot only when that robot holds the whole
+    set — every other group of the set reached it, and the set's groups hold exactly the
+    features of the robot's row ``X_i·`` (checked) — in the round it does; the robot then
+    cuts its own side (:func:`.evidence.cut_own_side`). This is an evaluation strategy of the
+    simulator, not a change of the distributed algorithm: each robot gets exactly the value
+    it would compute from what it holds, in the round it would compute it.
+
+Memory: what a robot holds only grows within a pass, so its peak is at its last step, when
+it holds every bundle of its sets: :meth:`.evidence.EvidenceState.nbytes` on that holding
+(``8`` per set member plus :func:`.evidence.bundle_nbytes` of each bundle) plus
+:meth:`~.robot.Robot.memory_bytes`, as the per-robot step measures it. No per-bundle copy is
+materialized: the counts follow from the groups' sizes. After the pass each robot's
+:class:`~.evidence.EvidenceState` holds its own bundles only (``held_bytes`` is what it would
+hold).
+
+Equivalence (tested: ``tests/pipeline/consistency/test_batched.py``): same ``links.csv``,
+rounds, messages, bytes and peak memory per robot as the per-robot engine.
+
+Where it applies: the engine's batched evaluation (:func:`.batched.batched_applies`: the
+in-process network, no fault, the paper's protocol). A set whose robot graph is not symmetric,
+or whose groups do not hold exactly the members a robot lists, is outside what the flood
+above evaluates; the pass then runs robot by robot (:func:`.evidence.run_evidence_resolution`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.consistency.evidence import (
+    EvidenceState,
+    bundle_nbytes,
+    cut_own_side,
+    finish_evidence,
+    own_sets,
+    solve_set,
+)
+from pipeline.consistency.evidence import (
+    run_evidence_resolution as run_robot_by_robot,
+)
+from pipeline.consistency.robot import Robot
+from pipeline.transport import HEADER_BYTES, Transport
+
+__all__ = ["run_evidence_resolution"]
+
+_EMPTY = np.zeros(0, dtype=np.int64)
+#: forwards a chunk of groups may make in one round at most (bounds the arrays of a round)
+CHUNK_FORWARDS = 1 << 20
+
+
+class _SetGraphs:
+    """The robot graphs of all conflictive sets, one node per (set, robot), from each robot's
+    own ``own_sets``.
+
+    Attributes
+    ----------
+    N : int — nodes (= groups: node ``v`` is also the group that robot floods for that set)
+    robot, F, D, P, members, own_held : (N,) — robot, own bundles, their links, 1 if they
+        carry a projection, set members it lists, bytes of its own bundles
+    label : (N,) int64 — set label; nodes sorted by (label, robot)
+    label_start : (S + 1,) — nodes of set ``k`` are ``label_start[k]:label_start[k+1]``
+    indptr, indices : CSR of the directed graph node -> set neighbour nodes (targets
+        ascending, i.e. by robot)
+    pair : (nnz,) int64 — sender-receiver robot pair of each edge (numbered ``0..n_pairs-1``)
+    """
+
+    def __init__(self, n: int, sets: list[dict], projected: list[bool]) -> None:
+        lab, rob, F, D, mem, held, nbrs = [], [], [], [], [], [], []
+        for i, s in enumerate(sets):
+            for label, (members, set_nbrs, bundles) in s.items():
+                lab.append(label)
+                rob.append(i)
+                F.append(len(bundles))
+                D.append(sum(bb[1].size for bb in bundles.values()))
+                mem.append(members.size)
+                held.append(sum(bundle_nbytes(bb) for bb in bundles.values()))
+                nbrs.append(set_nbrs)
+        order = np.lexsort((np.asarray(rob, dtype=np.int64), np.asarray(lab, dtype=np.int64)))
+        self.N = N = order.size
+        self.robot = np.asarray(rob, dtype=np.int64)[order]
+        self.label = np.asarray(lab, dtype=np.int64)[order]
+        self.F = np.asarray(F, dtype=np.int64)[order]
+        self.D = np.asarray(D, dtype=np.int64)[order]
+        self.members = np.asarray(mem, dtype=np.int64)[order]
+        self.own_held = np.asarray(held, dtype=np.int64)[order]
+        self.P = np.asarray(projected, dtype=np.int64)[self.robot] if N else _EMPTY
+        head = np.r_[True, self.label[1:] != self.label[:-1]] if N else np.zeros(0, bool)
+        self.label_start = np.r_[np.flatnonzero(head), N].astype(np.int64)
+        lab_idx = np.cumsum(head) - 1
+        key = lab_idx * n + self.robot  # ascending
+        deg = np.array([len(nbrs[k]) for k in order.tolist()], dtype=np.int64)
+        src = np.repeat(np.arange(N, dtype=np.int64), deg)
+        dst_robot = np.array([j for k in order.tolist() for j in nbrs[k]], dtype=np.int64)
+        want = np.repeat(lab_idx, deg) * n + dst_robot
+        pos = np.minimum(np.searchsorted(key, want), max(N - 1, 0))
+        self.closed = bool(N == 0 or (key[pos] == want).all())  # every neighbour holds the set
+        dst = pos
+        self.indptr = np.r_[0, np.cumsum(deg)].astype(np.int64)
+        self.indices = dst  # per source, ascending robot within the set: ascending node
+        pair_key = self.robot[src] * n + dst_robot
+        uniq, self.pair = np.unique(pair_key, return_inverse=True)
+        self.n_pairs = int(uniq.size)
+        self.pair = self.pair.astype(np.int64).reshape(-1)
+        fwd = np.sort(src * max(N, 1) + dst)
+        rev = np.sort(dst * max(N, 1) + src)
+        self.symmetric = bool(self.closed and np.array_equal(fwd, rev))
+        # a robot solves when it holds as many bundles as its row X_i. lists: all groups
+        set_F = np.add.reduceat(self.F, self.label_start[:-1]) if N else _EMPTY
+        self.set_size = np.diff(self.label_start)
+        self.whole = bool(N == 0 or (np.repeat(set_F, self.set_size) == self.members).all())
+        self.set_F = set_F
+
+    @property
+    def applies(self) -> bool:
+        return self.symmetric and self.whole
+
+
+class _Chunk:
+    """The flood of a run of consecutive groups ``[a, b)``: its frontier and holdings."""
+
+    def __init__(self, a: int, b: int, N: int) -> None:
+        g = np.arange(a, b, dtype=np.int64)
+        self.g, self.node, self.parent = g, g.copy(), np.full(g.size, -1, dtype=np.int64)
+        self.cur = g * N + g  # (group, node) keys held since the last round (sorted)
+        self.prev = _EMPTY  # ... since the round before
+
+    @property
+    def done(self) -> bool:
+        return self.g.size == 0
+
+
+def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Concatenation of ``arange(start[k], stop[k])`` over ``k``."""
+    length = stop - start
+    total = int(length.sum())
+    if total == 0:
+        return _EMPTY
+    first = np.cumsum(length) - length
+    return np.repeat(start - first, length) + np.arange(total)
+
+
+def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
+    if a.size == 0 or q.size == 0:
+        return np.zeros(q.shape, dtype=bool)
+    pos = np.minimum(np.searchsorted(a, q), a.size - 1)
+    return a[pos] == q
+
+
+def _forward(sg: _SetGraphs, ch: _Chunk, t: int, solve_round: np.ndarray,
+             received: np.ndarray) -> tuple[np.ndarray, ...]:
+    """One round of a chunk: its frontier forwards (sent in round ``t``), the receivers keep
+    the groups new to them (round ``t + 1``). Returns the round's messages of the chunk as
+    ``(pair, F, D, F_P)`` per sender-receiver pair."""
+    N = sg.N
+    start, stop = sg.indptr[ch.node], sg.indptr[ch.node + 1]
+    pos = _ranges(start, stop)
+    cnt = stop - start
+    tj = sg.indices[pos]
+    keep = tj != np.repeat(ch.parent, cnt)  # not back to the sender it came from
+    pos, tj = pos[keep], tj[keep]
+    tg = np.repeat(ch.g, cnt)[keep]
+    tk = np.repeat(ch.node, cnt)[keep]
+    # the round's messages: groups forwarded over each sender-receiver pair
+    pair, inv = np.unique(sg.pair[pos], return_inverse=True)
+    inv = inv.reshape(-1)
+    msgs = (pair, np.bincount(inv, sg.F[tg], pair.size), np.bincount(inv, sg.D[tg], pair.size),
+            np.bincount(inv, sg.F[tg] * sg.P[tg], pair.size))
+    # receivers keep what they do not hold: the first copy, from the lowest sender
+    key = tg * N + tj
+    new = ~(_isin_sorted(key, ch.cur) | _isin_sorted(key, ch.prev))
+    key, tk = key[new], tk[new]
+    order = np.lexsort((tk, key))  # nodes of a set ascend with their robot
+    key, tk = key[order], tk[order]
+    first = np.r_[True, key[1:] != key[:-1]] if key.size else np.zeros(0, dtype=bool)
+    key, tk = key[first], tk[first]
+    ch.g, ch.node, ch.parent = key // N, key % N, tk
+    ch.prev, ch.cur = ch.cur, key
+    solve_round[ch.node] = t + 1  # levels only grow: the last arrival wins
+    np.add.at(received, ch.node, 1)
+    return msgs
+
+
+def _message_bytes(F: np.ndarray, D: np.ndarray, FP: np.ndarray) -> int:
+    """Bytes of bundle messages with ``F`` bundles, ``D`` links, ``FP`` projections each."""
+    mixed = (FP > 0) & (FP < F)
+    return int((HEADER_BYTES + 32 * F + 16 * D + 96 * FP + np.where(mixed, F, 0)).sum())
+
+
+def _flood(sg: _SetGraphs, cap: int) -> tuple[int, int, int, np.ndarray, np.ndarray]:
+    """Evaluate the flood; returns rounds, messages, bytes, each node's solve round (its last
+    arrival) and the groups it received, ``(N,)`` each."""
+    N = sg.N
+    solve_round = np.full(N, -1, dtype=np.int64)
+    received = np.zeros(N, dtype=np.int64)
+    # a group forwards at most over every edge of its set once: chunk groups by that
+    per_group = np.repeat(np.add.reduceat(np.diff(sg.indptr), sg.label_start[:-1])
+                          if N else _EMPTY, sg.set_size)
+    chunks, a, acc = [], 0, 0
+    for v in range(N):
+        if acc and acc + per_group[v] > CHUNK_FORWARDS:
+            chunks.append(_Chunk(a, v, N))
+            a, acc = v, 0
+        acc += int(per_group[v])
+    if N:
+        chunks.append(_Chunk(a, N, N))
+    t, messages, nbytes, rounds = 0, 0, 0, 0
+    while True:
+        parts = [_forward(sg, ch, t, solve_round, received) for ch in chunks if not ch.done]
+        parts = [p for p in parts if p[0].size]
+        if not parts:
+            break
+        if len(parts) == 1:
+            pair, F, D, FP = parts[0]
+        else:
+            pair, inv = np.unique(np.concatenate([p[0] for p in parts]), return_inverse=True)
+            F, D, FP = (np.bincount(inv.reshape(-1), np.concatenate([p[c] for p in parts]),
+                                    pair.size) for c in (1, 2, 3))
+        F, D, FP = (x.astype(np.int64) for x in (F, D, FP))
+        messages += int(pair.size)
+        nbytes += _message_bytes(F, D, FP)
+        t += 1
+        rounds = t
+        if t > cap:
+            raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
+    return rounds, messages, nbytes, solve_round, received
+
+
+def run_evidence_resolution(robots: list[Robot], network: Transport,
+                            max_rounds: int | None = None, on_round=None) -> dict:
+    """One flood-and-solve pass of the evidence rule on all robots, evaluated in batch;
+    returns what :func:`.evidence.run_evidence_resolution` returns.
+
+    Parameters
+    ----------
+    robots : list[Robot], (n,) — equipped with their evidence (:func:`.evidence.equip`)
+    network : Transport — the in-process network (clock advanced, traffic counted)
+    max_rounds : int or None — cap of the pass (default ``n + 2``, as robot by robot)
+    on_round : callable ``(round) -> None`` or None — progress report
+
+    Returns
+    -------
+    dict — ``rounds``, ``conflictive_sets``, ``robots_in_sets``
+
+    Notes
+    -----
+    Time and memory grow with the bundle transfers of the flood grouped by (set, origin):
+    ``O(Σ_C |C_robots| · |C_links| log)`` numpy work in ``diam(C) + 1`` vectorized rounds,
+    arrays of a round bounded by :data:`CHUNK_FORWARDS` forwards, plus one solution per set.
+    """
+    n = len(robots)
+    sets = [own_sets(rb) for rb in robots]
+    projected = [rb.evidence.projection is not None for rb in robots]
+    sg = _SetGraphs(n, sets, projected)
+    if not sg.applies:
+        return run_robot_by_robot(robots, network, max_rounds=max_rounds, on_round=on_round)
+    cap = max_rounds if max_rounds is not None else n + 2
+    rounds, messages, nbytes, solve_round, received = _flood(sg, cap)
+    if messages:
+        network.count("bundle", messages, nbytes)
+    for t in range(1, rounds + 1):
+        network.end_round()
+        if on_round is not None:
+            on_round(t)
+    # a robot holds a set when every other group of it arrived
+    complete = received == np.repeat(sg.set_size, sg.set_size) - 1
+    held_set = 8 * sg.members + np.repeat(np.add.reduceat(sg.own_held, sg.label_start[:-1])
+                                          if sg.N else _EMPTY, sg.set_size)
+    held = np.where(complete, held_set, 8 * sg.members + sg.own_held)
+    held_by_robot = np.bincount(sg.robot, weights=held, minlength=n).astype(np.int64)
+    for rb, s in zip(robots, sets, strict=True):
+        st: EvidenceState = rb.evidence
+        st.bundles = {lab: dict(v[2]) for lab, v in s.items()}
+        st.set_members = {lab: v[0] for lab, v in s.items()}
+        st.set_nbrs = {lab: v[1] for lab, v in s.items()}
+        st.solved = set()
+        st.held_bytes = int(held_by_robot[rb.id])
+        rb.measure_memory()
+        rb.peak_memory_bytes = max(rb.peak_memory_bytes, rb.memory_bytes() + st.nbytes())
+    # one solution per set, each robot's side cut in its own solve round
+    for k in range(sg.label_start.size - 1):
+        a, b = sg.label_start[k], sg.label_start[k + 1]
+        nodes = np.arange(a, b)[complete[a:b]]
+        if nodes.size == 0:
+            continue
+        label = int(sg.label[a])
+        bundles: dict = {}
+        for i in sg.robot[a:b].tolist():
+            bundles.update(sets[i][label][2])
+        solution = solve_set(bundles)
+        for v in nodes.tolist():
+            i = int(sg.robot[v])
+            robots[i].evidence.solved.add(label)
+            cut_own_side(robots[i], solution, int(solve_round[v]))
+    unsolved = sorted(set(sg.robot[~complete].tolist()))
+    return finish_evidence(robots, rounds, unsolved, int(sg.label_start.size - 1),
+                           sum(1 for s in sets if s))
