@@ -1,5 +1,7 @@
-"""The batched evaluation (pipeline.consistency.batched) against the per-robot engine, and the
-delta messages against whole blocks: same results, rounds, messages and bytes."""
+"""The batched evaluation (pipeline.consistency.batched, .batched_evidence) against the per-robot
+engine, and the delta messages against whole blocks: same results, rounds, messages and bytes."""
+
+from unittest.mock import patch
 
 import numpy as np
 import pytest
@@ -7,8 +9,16 @@ from consistency_graphs import instances, random_instance
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pipeline.consistency import ProtocolOptions, resolve_conflicts
-from pipeline.consistency.engine import detect_once
+from pipeline.commgraph import comm_edges_for
+from pipeline.consistency import (
+    ProtocolOptions,
+    batched,
+    batched_evidence,
+    evidence,
+    resolve_conflicts,
+)
+from pipeline.consistency.engine import _equip_evidence, build_robots, detect_once
+from pipeline.consistency.protocols import make_protocol
 from pipeline.errors import InputError
 from pipeline.linkscsv import write_links_csv
 from pipeline.run import ledger_from_consistency
@@ -42,15 +52,113 @@ def _same_result(a, b, tmp_path) -> None:
             np.testing.assert_array_equal(pa[k], pb[k], err_msg=k)
 
 
+def _poses(fpc, which: str, seed: int):
+    """Keypoints and projections of every robot: none, all, or some poses known."""
+    if which == "none":
+        return None, None
+    rng = np.random.default_rng(seed)
+    keypoints = [rng.uniform(0, 100, size=(m, 2)).astype(np.float32) for m in fpc]
+    K = np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
+    projections = [None if which == "some" and rng.random() < 0.3 else
+                   K @ np.c_[np.eye(3), rng.normal(0, 0.1, 3) + [0, 0, 5]] for _ in fpc]
+    return keypoints, projections
+
+
+def _no_fallback(*args, **kwargs):
+    raise AssertionError("the batched evidence pass fell back to robot by robot")
+
+
 @SETTINGS
-@given(inst=instances(max_n=8, max_feat=5), resolution=st.sampled_from(["paper", "evidence"]))
-def test_batched_and_per_robot_engines_give_identical_results(inst, resolution, tmp_path):
+@given(inst=instances(max_n=8, max_feat=5), resolution=st.sampled_from(["paper", "evidence"]),
+       poses=st.sampled_from(["none", "all", "some"]), seed=st.integers(0, 2**32 - 1))
+def test_batched_and_per_robot_engines_give_identical_results(inst, resolution, poses, seed,
+                                                              tmp_path):
     fpc, edges, links = inst
-    per_robot = resolve_conflicts(fpc, edges, links, resolution=resolution, engine="per-robot")
-    batched = resolve_conflicts(fpc, edges, links, resolution=resolution, engine="batched")
-    _same_result(per_robot, batched, tmp_path)
-    auto = resolve_conflicts(fpc, edges, links, resolution=resolution)
-    assert auto.stats["bytes"] == batched.stats["bytes"]
+    kp, P = _poses(fpc, poses, seed)
+    kw = dict(resolution=resolution, keypoints=kp, projections=P)
+    per_robot = resolve_conflicts(fpc, edges, links, engine="per-robot", **kw)
+    with patch.object(batched_evidence, "run_robot_by_robot", _no_fallback):
+        in_batch = resolve_conflicts(fpc, edges, links, engine="batched", **kw)
+    _same_result(per_robot, in_batch, tmp_path)
+    auto = resolve_conflicts(fpc, edges, links, **kw)
+    assert auto.stats["bytes"] == in_batch.stats["bytes"]
+
+
+def _evidence_pass(inst, poses, seed, run_pass):
+    """One detection, then one evidence pass by ``run_pass``: the robots and the network."""
+    fpc, edges, links = inst
+    robots, link_index = build_robots(fpc, links)
+    network = Network(len(fpc), comm_edges_for(fpc, links, edges))
+    det = batched.run_detection(robots, network, make_protocol(None, network, fpc), 1)
+    kp, P = _poses(fpc, poses, seed)
+    _equip_evidence(robots, link_index, links, None, kp, P)
+    out = run_pass(robots, network) if det["conflictive_features"] else None
+    return robots, network, out
+
+
+@SETTINGS
+@given(inst=instances(max_n=9, max_feat=6), poses=st.sampled_from(["none", "all", "some"]),
+       seed=st.integers(0, 2**32 - 1), chunk=st.sampled_from([1, 5, 1 << 20]))
+def test_batched_evidence_pass_leaves_every_robot_in_the_per_robot_state(inst, poses, seed,
+                                                                        chunk):
+    # chunk: the groups flooded side by side in one round's arrays (1: one group a chunk)
+    ra, na, oa = _evidence_pass(inst, poses, seed, evidence.run_evidence_resolution)
+    with patch.object(batched_evidence, "run_robot_by_robot", _no_fallback), \
+            patch.object(batched_evidence, "CHUNK_FORWARDS", chunk):
+        rb_, nb, ob = _evidence_pass(inst, poses, seed, batched_evidence.run_evidence_resolution)
+    assert oa == ob  # rounds, sets, robots in sets
+    assert na.counters() == nb.counters()  # messages and bytes by kind, the clock
+    for a, b in zip(ra, rb_, strict=True):
+        for f in ("link_alive", "deleted_round", "deleted_case", "deleted_iteration",
+                  "candidates"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+        assert a.peak_memory_bytes == b.peak_memory_bytes
+        assert a.evidence.held_bytes == b.evidence.held_bytes
+        assert a.evidence.solved == b.evidence.solved
+        assert set(a.evidence.bundles) == set(b.evidence.bundles)
+
+
+def test_batched_evidence_pass_on_a_long_cycle_matches_robot_by_robot():
+    # one conflictive set around a cycle of 40 robots: every robot receives every bundle
+    n = 40
+    links = Links(list(range(n - 1)) + [0], [0] * (n - 1) + [1], list(range(1, n)) + [n - 1],
+                  [0] * n, np.linspace(0.2, 0.9, n))
+    fpc = np.ones(n, dtype=np.int64)
+    fpc[0] = 2
+    inst = (fpc, None, links)
+    ra, na, oa = _evidence_pass(inst, "all", 0, evidence.run_evidence_resolution)
+    with patch.object(batched_evidence, "run_robot_by_robot", _no_fallback):
+        rb_, nb, ob = _evidence_pass(inst, "all", 0, batched_evidence.run_evidence_resolution)
+    assert oa == ob and oa["rounds"] == n // 2 + 1
+    assert na.counters() == nb.counters()
+    assert [r.peak_memory_bytes for r in ra] == [r.peak_memory_bytes for r in rb_]
+    assert [r.deleted_round.tolist() for r in ra] == [r.deleted_round.tolist() for r in rb_]
+
+
+def test_batched_evidence_falls_back_where_a_set_graph_is_not_symmetric():
+    # a robot has cut its side of its links to a neighbour that still holds them: the flood
+    # is not the one the batched evaluation covers, so the pass runs robot by robot
+    fpc, edges, links = random_instance(np.random.default_rng(5), 5, 4, 1.0, 1.0)
+    inst = (fpc, edges, links)
+    calls = []
+
+    def count_fallback(*args, **kwargs):
+        calls.append(1)
+        return evidence.run_evidence_resolution(*args, **kwargs)
+
+    def cut_one_end(robots, network):
+        rb = next(r for r in robots if (r.link_alive & r.conflictive[r.link_r]).any())
+        rows = rb.link_alive & rb.conflictive[rb.link_r]
+        j = rb.link_nbr[np.flatnonzero(rows)[0]]
+        rb.link_alive[rows & (rb.link_nbr == j)] = False  # robot j still lists rb, not back
+        with patch.object(batched_evidence, "run_robot_by_robot", count_fallback):
+            try:
+                return batched_evidence.run_evidence_resolution(robots, network)
+            except RuntimeError as e:  # robot by robot may find a set it cannot complete
+                return str(e)
+
+    _evidence_pass(inst, "none", 0, cut_one_end)
+    assert calls == [1]
 
 
 @SETTINGS
