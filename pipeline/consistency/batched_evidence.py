@@ -83,7 +83,7 @@ from pipeline.transport import HEADER_BYTES, Transport
 __all__ = ["run_evidence_resolution"]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
-#: forwards a chunk of groups may make in one round at most (bounds the arrays of a round)
+#: forwards evaluated in one piece of a round (bounds its arrays; a round is cut between groups)
 CHUNK_FORWARDS = 1 << 20
 
 
@@ -154,20 +154,6 @@ class _SetGraphs:
         return self.symmetric and self.whole
 
 
-class _Chunk:
-    """The flood of a run of consecutive groups ``[a, b)``: its frontier and holdings."""
-
-    def __init__(self, a: int, b: int, N: int) -> None:
-        g = np.arange(a, b, dtype=np.int64)
-        self.g, self.node, self.parent = g, g.copy(), np.full(g.size, -1, dtype=np.int64)
-        self.cur = g * N + g  # (group, node) keys held since the last round (sorted)
-        self.prev = _EMPTY  # ... since the round before
-
-    @property
-    def done(self) -> bool:
-        return self.g.size == 0
-
-
 def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
     """Concatenation of ``arange(start[k], stop[k])`` over ``k``."""
     length = stop - start
@@ -185,38 +171,62 @@ def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
     return a[pos] == q
 
 
-def _forward(sg: _SetGraphs, ch: _Chunk, t: int, solve_round: np.ndarray,
-             received: np.ndarray) -> tuple[np.ndarray, ...]:
-    """One round of a chunk: its frontier forwards (sent in round ``t``), the receivers keep
-    the groups new to them (round ``t + 1``). Returns the round's messages of the chunk as
-    ``(pair, F, D, F_P)`` per sender-receiver pair."""
+class _Frontier:
+    """The (group, node) pairs first received in the last round, with the node each came
+    from, sorted by ``key = group * N + node``; ``prev``: the keys of the round before."""
+
+    def __init__(self, N: int) -> None:
+        self.g = np.arange(N, dtype=np.int64)  # round 0: every group at its origin
+        self.node = self.g.copy()
+        self.parent = np.full(N, -1, dtype=np.int64)
+        self.key = self.g * N + self.g
+        self.prev = _EMPTY
+
+
+def _slices(fr: _Frontier, out_degree: np.ndarray, budget: int) -> list[slice]:
+    """Runs of the frontier of at most ``budget`` forwards, cut only between groups (the
+    receivers of a group must see all its copies of the round at once)."""
+    cnt = out_degree[fr.node]
+    if int(cnt.sum()) <= budget:
+        return [slice(0, fr.g.size)]
+    head = np.flatnonzero(np.r_[True, fr.g[1:] != fr.g[:-1]])  # first entry of each group
+    upto = np.r_[0, np.cumsum(cnt)][head]  # forwards before each group
+    out, start, base = [], 0, 0
+    for h, u in zip(head[1:].tolist(), upto[1:].tolist(), strict=True):
+        if u - base > budget and h > start:
+            out.append(slice(start, h))
+            start, base = h, u
+    out.append(slice(start, fr.g.size))
+    return out
+
+
+def _forward(sg: _SetGraphs, fr: _Frontier, part: slice) -> tuple:
+    """Part ``part`` of a round: its frontier entries forward, the receivers keep the groups
+    new to them. Returns the part's messages ``(pair, F, D, F_P)`` (one entry per
+    sender-receiver pair) and its next frontier ``key``, ``parent``."""
     N = sg.N
-    start, stop = sg.indptr[ch.node], sg.indptr[ch.node + 1]
+    g, node, parent = fr.g[part], fr.node[part], fr.parent[part]
+    start, stop = sg.indptr[node], sg.indptr[node + 1]
     pos = _ranges(start, stop)
     cnt = stop - start
     tj = sg.indices[pos]
-    keep = tj != np.repeat(ch.parent, cnt)  # not back to the sender it came from
+    keep = tj != np.repeat(parent, cnt)  # not back to the sender it came from
     pos, tj = pos[keep], tj[keep]
-    tg = np.repeat(ch.g, cnt)[keep]
-    tk = np.repeat(ch.node, cnt)[keep]
-    # the round's messages: groups forwarded over each sender-receiver pair
+    tg = np.repeat(g, cnt)[keep]
+    tk = np.repeat(node, cnt)[keep]
+    # the round's messages: the groups forwarded over each sender-receiver pair
     pair, inv = np.unique(sg.pair[pos], return_inverse=True)
     inv = inv.reshape(-1)
     msgs = (pair, np.bincount(inv, sg.F[tg], pair.size), np.bincount(inv, sg.D[tg], pair.size),
             np.bincount(inv, sg.F[tg] * sg.P[tg], pair.size))
     # receivers keep what they do not hold: the first copy, from the lowest sender
     key = tg * N + tj
-    new = ~(_isin_sorted(key, ch.cur) | _isin_sorted(key, ch.prev))
+    new = ~(_isin_sorted(key, fr.key) | _isin_sorted(key, fr.prev))
     key, tk = key[new], tk[new]
-    order = np.lexsort((tk, key))  # nodes of a set ascend with their robot
+    order = np.lexsort((tk, key))  # the nodes of a set ascend with their robot
     key, tk = key[order], tk[order]
     first = np.r_[True, key[1:] != key[:-1]] if key.size else np.zeros(0, dtype=bool)
-    key, tk = key[first], tk[first]
-    ch.g, ch.node, ch.parent = key // N, key % N, tk
-    ch.prev, ch.cur = ch.cur, key
-    solve_round[ch.node] = t + 1  # levels only grow: the last arrival wins
-    np.add.at(received, ch.node, 1)
-    return msgs
+    return msgs, key[first], tk[first]
 
 
 def _message_bytes(F: np.ndarray, D: np.ndarray, FP: np.ndarray) -> int:
@@ -231,37 +241,32 @@ def _flood(sg: _SetGraphs, cap: int) -> tuple[int, int, int, np.ndarray, np.ndar
     N = sg.N
     solve_round = np.full(N, -1, dtype=np.int64)
     received = np.zeros(N, dtype=np.int64)
-    # a group forwards at most over every edge of its set once: chunk groups by that
-    per_group = np.repeat(np.add.reduceat(np.diff(sg.indptr), sg.label_start[:-1])
-                          if N else _EMPTY, sg.set_size)
-    chunks, a, acc = [], 0, 0
-    for v in range(N):
-        if acc and acc + per_group[v] > CHUNK_FORWARDS:
-            chunks.append(_Chunk(a, v, N))
-            a, acc = v, 0
-        acc += int(per_group[v])
-    if N:
-        chunks.append(_Chunk(a, N, N))
-    t, messages, nbytes, rounds = 0, 0, 0, 0
-    while True:
-        parts = [_forward(sg, ch, t, solve_round, received) for ch in chunks if not ch.done]
-        parts = [p for p in parts if p[0].size]
-        if not parts:
+    out_degree = np.diff(sg.indptr)
+    fr = _Frontier(N)
+    t, messages, nbytes = 0, 0, 0
+    while fr.g.size:
+        parts = [_forward(sg, fr, part) for part in _slices(fr, out_degree, CHUNK_FORWARDS)]
+        key = np.concatenate([p[1] for p in parts])  # the parts follow the groups: sorted
+        fr.prev, fr.key = fr.key, key
+        fr.g, fr.node, fr.parent = key // N, key % N, np.concatenate([p[2] for p in parts])
+        msgs = [p[0] for p in parts if p[0][0].size]
+        if not msgs:
             break
-        if len(parts) == 1:
-            pair, F, D, FP = parts[0]
-        else:
-            pair, inv = np.unique(np.concatenate([p[0] for p in parts]), return_inverse=True)
-            F, D, FP = (np.bincount(inv.reshape(-1), np.concatenate([p[c] for p in parts]),
+        if len(msgs) == 1:
+            pair, F, D, FP = msgs[0]
+        else:  # a pair's message carries the groups of every part
+            pair, inv = np.unique(np.concatenate([m[0] for m in msgs]), return_inverse=True)
+            F, D, FP = (np.bincount(inv.reshape(-1), np.concatenate([m[c] for m in msgs]),
                                     pair.size) for c in (1, 2, 3))
         F, D, FP = (x.astype(np.int64) for x in (F, D, FP))
         messages += int(pair.size)
         nbytes += _message_bytes(F, D, FP)
-        t += 1
-        rounds = t
+        t += 1  # delivered in round t; the groups kept are forwarded in it
+        solve_round[fr.node] = t  # levels only grow: a node's last arrival wins
+        np.add.at(received, fr.node, 1)
         if t > cap:
             raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
-    return rounds, messages, nbytes, solve_round, received
+    return t, messages, nbytes, solve_round, received
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,

@@ -169,6 +169,7 @@ class Network(Transport):
         self._peak_memory = [0] * self.n
         self._outbox: list[tuple[int, Message]] = []  # (delivery round, message)
         self._inboxes: list[list[Message]] = [[] for _ in range(self.n)]
+        self._filled: list[int] = []  # robots whose inbox holds messages, in delivery order
         self._rng = np.random.default_rng(self.options.seed)
         self.messages = 0
         self.bytes = 0
@@ -262,7 +263,7 @@ class Network(Transport):
 
     def receivers(self) -> list[int]:
         """Robots with a message delivered this round, ascending (simulation side)."""
-        return [i for i, box in enumerate(self._inboxes) if box]
+        return sorted(self._filled)
 
     def end_round(self) -> None:
         """Close the round: advance the clock and deliver what is due."""
@@ -270,10 +271,17 @@ class Network(Transport):
         self._apply_topology()
         due = [m for r, m in self._outbox if r <= self.round]
         self._outbox = [(r, m) for r, m in self._outbox if r > self.round]
-        self._inboxes = [[] for _ in range(self.n)]
+        # fresh lists for the inboxes that held messages (a caller may keep the old one);
+        # the others are empty already: a round with little traffic costs what it carries
+        for i in self._filled:
+            self._inboxes[i] = []
+        self._filled = []
         for m in due:
             if self.alive(m.dst):
-                self._inboxes[m.dst].append(m)
+                box = self._inboxes[m.dst]
+                if not box:
+                    self._filled.append(m.dst)
+                box.append(m)
                 self.delivered_after_sender_crash += not self.alive(m.src)
             else:
                 self.dropped += 1
@@ -282,7 +290,7 @@ class Network(Transport):
     @property
     def in_flight(self) -> bool:
         """True while some message is queued or sits undelivered in an inbox."""
-        return bool(self._outbox) or any(self._inboxes)
+        return bool(self._outbox) or bool(self._filled)
 
     @property
     def pending(self) -> bool:
