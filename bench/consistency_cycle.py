@@ -5,12 +5,15 @@ last camera back to camera 0 by its feature 1 — one conflictive set as long as
 worst case of the detection's ``d + 1`` rounds (Cor. 3.6) and of Alg. 1's ``n`` rounds
 (Thm. 4.3). Each run is a whole process (start-up included); its wall time and peak resident
 memory (``ru_maxrss`` of that child alone, by ``os.wait4``) are measured, with both
-resolutions (Alg. 1: ``--resolution paper``; the default ``evidence`` rule, up to
-``--evidence-max-n``). Target (1000 cameras): under 5 s and 500 MB.
+resolutions (Alg. 1: ``--resolution paper``; the default ``evidence`` rule, whose robots flood
+every bundle round the cycle: about ``n²`` bundle transfers, evaluated in batch by the
+simulator), the two side by side for each ``n``, ``--repeat`` times in turn (medians).
+Target (1000 cameras): under 5 s and 500 MB.
 
 Prints a table and saves ``runs/bench-consistency-cycle/results.json``.
 
-Usage: ``.venv/bin/python bench/consistency_cycle.py [--n 100 1000] [--evidence-max-n 200]``
+Usage: ``.venv/bin/python bench/consistency_cycle.py [--n 100 1000] [--repeat 3]
+[--evidence-max-n N]``
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
 
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -63,26 +68,41 @@ def run_resolve(links: Path, out: Path, resolution: str) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[100, 1000])
-    ap.add_argument("--evidence-max-n", type=int, default=200,
-                    help="run the evidence rule up to this n (it floods every bundle round the "
-                         "cycle: n^2 bundle transfers)")
+    ap.add_argument("--evidence-max-n", type=int, default=None,
+                    help="run the evidence rule only up to this n (default: every n)")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="runs of each process, the resolutions in turn (medians reported)")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args()
 
     records = []
-    print(f"{'n':>6} {'resolution':>10} {'wall s':>8} {'peak MB':>8} {'exit':>4} {'cut':>4}")
+    print(f"{'n':>6} {'resolution':>10} {'wall s':>8} {'peak MB':>8} {'exit':>4} {'cut':>4} "
+          f"{'wall s of each run':>20}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.n:
             links = Path(tmp) / f"cycle{n}.csv"
             write_cycle(links, n)
-            for resolution in ("paper", "evidence"):
-                if resolution == "evidence" and n > args.evidence_max_n:
-                    continue
-                r = run_resolve(links, Path(tmp) / f"out{n}-{resolution}.csv", resolution)
-                r.update(n=n, resolution=resolution)
+            resolutions = [r for r in ("paper", "evidence")
+                           if r == "paper" or args.evidence_max_n is None
+                           or n <= args.evidence_max_n]
+            runs: dict[str, list[dict]] = {r: [] for r in resolutions}
+            for k in range(max(1, args.repeat)):
+                for resolution in resolutions:
+                    runs[resolution].append(run_resolve(
+                        links, Path(tmp) / f"out{n}-{resolution}-{k}.csv", resolution))
+            for resolution in resolutions:
+                rs = runs[resolution]
+                r = dict(rs[len(rs) // 2])
+                r.update(wall_s=round(float(np.median([x["wall_s"] for x in rs])), 3),
+                         peak_rss_mb=round(float(np.median([x["peak_rss_mb"] for x in rs])), 1),
+                         exit_code=max(x["exit_code"] for x in rs),
+                         runs_wall_s=[x["wall_s"] for x in rs],
+                         runs_peak_rss_mb=[x["peak_rss_mb"] for x in rs],
+                         n=n, resolution=resolution)
                 records.append(r)
+                each = " ".join(f"{x:.2f}" for x in r["runs_wall_s"])
                 print(f"{n:>6} {resolution:>10} {r['wall_s']:>8.2f} {r['peak_rss_mb']:>8.1f} "
-                      f"{r['exit_code']:>4} {r['deleted']:>4}", flush=True)
+                      f"{r['exit_code']:>4} {r['deleted']:>4} {each:>20}", flush=True)
                 if r["exit_code"] != 0:
                     print(f"       stderr: {r['stderr']}")
     for r in records:
@@ -95,6 +115,8 @@ def main() -> int:
     write_json_atomic(args.out / "results.json", records)
     write_json_atomic(args.out / "meta.json", dict(python=platform.python_version(),
                                                     machine=platform.machine(),
+                                                    repeat=args.repeat,
+                                                    load_average=os.getloadavg(),
                                                     command=" ".join(sys.argv)))
     print(f"saved {args.out / 'results.json'}")
     return 0

@@ -8,14 +8,16 @@ landmark is seen by a run of consecutive robots on the ring (run length geometri
 ``--detect`` (missing links), and ``--spurious`` × (links of the edge) spurious links join
 random unmatched features (one-to-one kept, Assumption 2.2).
 
-In one run, for each ``n``: the whole distributed simulation (:func:`resolve_conflicts`: all
-robots, all rounds, every message counted) against centralized union-find detection plus the
-"drop every link of a conflictive set" baseline on the same input, run alternately
-(``--repeat`` times, medians: the ratio survives a busy machine). The simulation runs with
-the batched evaluation (the default where it applies, :mod:`pipeline.consistency.batched`)
-and, up to ``--per-robot-max-n``, also robot by robot; both must give the same cuts, rounds,
-messages and bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json``
-(one record per ``n``) and ``time_bytes.png`` (time and MB sent against ``n``).
+In one run, for each ``n`` and each resolution (``--resolution``: Alg. 1, ``paper``, and the
+evidence rule, ``evidence``, the default of the command line): the whole distributed
+simulation (:func:`resolve_conflicts`: all robots, all rounds, every message counted) against
+centralized union-find detection plus the "drop every link of a conflictive set" baseline on
+the same input, run alternately (``--repeat`` times, medians: the ratio survives a busy
+machine). The simulation runs with the batched evaluation (the default where it applies,
+:mod:`pipeline.consistency.batched`, :mod:`pipeline.consistency.batched_evidence`) and, up to
+``--per-robot-max-n``, also robot by robot; both must give the same cuts, rounds, messages and
+bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json`` (one record
+per ``n`` and resolution) and ``time_bytes.png`` (time and MB sent against ``n``).
 
 Targets: distributed ≤ 10× union-find at ``n`` = 100 and 1000, ``n`` = 1000 in ≤ 10 s, and
 ≤ 8 MB sent at ``n`` = 100 (delta messages; bytes as a robot puts them on the wire).
@@ -24,12 +26,14 @@ Targets: distributed ≤ 10× union-find at ``n`` = 100 and 1000, ``n`` = 1000 i
 computed centrally by breadth-first search within each association set; ``rounds`` is the
 total of detection and resolution rounds over all iterations.
 
-Usage: ``.venv/bin/python bench/consistency_scale.py [--quick] [--n 6 10 …] [--per-robot-max-n 200]``
+Usage: ``.venv/bin/python bench/consistency_scale.py [--quick] [--n 6 10 …] [--per-robot-max-n 200]
+[--resolution paper evidence]``
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import sys
 import time
@@ -130,16 +134,16 @@ def association_diameter(fpc, links: Links, batch_nodes: int = 3000) -> int:
     return d
 
 
-def bench_one(n: int, args) -> dict:
-    fpc, edges, links, truth = synthetic_formation(n, args.features, args.seed + n, args.spurious,
-                                                   args.detect)
+def bench_one(n: int, resolution: str, formation: tuple, args) -> dict:
+    fpc, edges, links, truth = formation
     before = count_conflicts(AssociationGraph(fpc, links))
 
     # the distributed stage and the centralized baseline alternately, medians of --repeat runs
     dist_t, cent_t = [], []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        res = resolve_conflicts(fpc, edges, links)  # batched where it applies (here: always)
+        # batched where it applies (here: always)
+        res = resolve_conflicts(fpc, edges, links, resolution=resolution)
         dist_t.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         kept_drop = drop_conflictive_sets(fpc, links)  # union-find detection + drop-the-set
@@ -148,11 +152,13 @@ def bench_one(n: int, args) -> dict:
     per_robot_s = None
     if n <= args.per_robot_max_n:
         t0 = time.perf_counter()
-        one_by_one = resolve_conflicts(fpc, edges, links, engine="per-robot")
+        one_by_one = resolve_conflicts(fpc, edges, links, resolution=resolution,
+                                       engine="per-robot")
         per_robot_s = time.perf_counter() - t0
         assert np.array_equal(one_by_one.deleted, res.deleted)
         assert np.array_equal(one_by_one.round, res.round)
-        for k in ("messages", "bytes", "detection_rounds", "resolution_rounds"):
+        for k in ("messages", "bytes", "detection_rounds", "resolution_rounds",
+                  "max_robot_memory_bytes"):
             assert one_by_one.stats[k] == res.stats[k], k
 
 
@@ -161,7 +167,7 @@ def bench_one(n: int, args) -> dict:
     st = res.stats
     it = st["per_iteration"]
     rec = dict(
-        n=n, comm_edges=int(len(edges)), features=int(fpc.sum()), m_sum=before.m_sum,
+        n=n, resolution=resolution, comm_edges=int(len(edges)), features=int(fpc.sum()), m_sum=before.m_sum,
         links=len(links), spurious_links=int((~truth).sum()),
         conflictive_sets=before.conflictive_sets, conflictive_features=before.conflictive_features,
         distributed_s=round(distributed_s, 4), centralized_s=round(centralized_s, 4),
@@ -191,28 +197,38 @@ def plot(records: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = [r["n"] for r in records]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
-    a1.plot(n, [r["distributed_s"] for r in records], "o-",
-            label="distributed, batched evaluation")
-    pr = [(r["n"], r["per_robot_s"]) for r in records if r["per_robot_s"] is not None]
-    if pr:
-        a1.plot(*zip(*pr, strict=True), "^-", label="distributed, robot by robot")
-    a1.plot(n, [r["centralized_s"] for r in records], "s-", label="centralized union-find + drop set")
-    a1.plot(n, [TARGET_RATIO * r["centralized_s"] for r in records], ":", color="gray",
+    resolutions = list(dict.fromkeys(r["resolution"] for r in records))
+    for k, resolution in enumerate(resolutions):
+        rs = [r for r in records if r["resolution"] == resolution]
+        a1.plot([r["n"] for r in rs], [r["distributed_s"] for r in rs], "o-", color=f"C{k}",
+                label=f"distributed ({resolution}), batched evaluation")
+        pr = [(r["n"], r["per_robot_s"]) for r in rs if r["per_robot_s"] is not None]
+        if pr:
+            a1.plot(*zip(*pr, strict=True), "^--", color=f"C{k}",
+                    label=f"distributed ({resolution}), robot by robot")
+    base = [r for r in records if r["resolution"] == resolutions[0]]
+    n = [r["n"] for r in base]
+    a1.plot(n, [r["centralized_s"] for r in base], "s-", color="k",
+            label="centralized union-find + drop set")
+    a1.plot(n, [TARGET_RATIO * r["centralized_s"] for r in base], ":", color="gray",
             label=f"{TARGET_RATIO:.0f}x union-find")
     a1.set_xlabel("robots n")
     a1.set_ylabel("wall time [s]")
     a1.set_xscale("log")
     a1.set_yscale("log")
     a1.legend(fontsize=8)
-    a2.plot(n, [r["bytes"] / 1e6 for r in records], "o-", label="MB sent (delta messages)")
+    b = a2.twinx()
+    for k, resolution in enumerate(resolutions):
+        rs = [r for r in records if r["resolution"] == resolution]
+        a2.plot([r["n"] for r in rs], [r["bytes"] / 1e6 for r in rs], "o-", color=f"C{k}",
+                label=f"MB sent ({resolution})")
+        b.plot([r["n"] for r in rs], [r["messages"] for r in rs], "s:", color=f"C{k}",
+               label=f"messages ({resolution})")
     a2.set_xlabel("robots n")
-    a2.set_ylabel("MB sent")
+    a2.set_ylabel("MB sent (delta detection messages)")
     a2.set_xscale("log")
     a2.set_yscale("log")
-    b = a2.twinx()
-    b.plot(n, [r["messages"] for r in records], "s--", color="C1", label="messages")
     b.set_ylabel("messages")
     b.set_yscale("log")
     a2.legend(loc="upper left", fontsize=8)
@@ -230,6 +246,8 @@ def main() -> int:
                     help="alternating runs of the distributed stage and union-find (medians)")
     ap.add_argument("--per-robot-max-n", type=int, default=200,
                     help="also run robot by robot (the engine of faults and middleware) up to this n")
+    ap.add_argument("--resolution", nargs="+", choices=("paper", "evidence"),
+                    default=["paper", "evidence"], help="resolutions to run, side by side")
     ap.add_argument("--quick", action="store_true", help="small n only (6, 10, 20)")
     ap.add_argument("--features", type=int, default=2000, help="features per robot")
     ap.add_argument("--spurious", type=float, default=0.03,
@@ -240,49 +258,62 @@ def main() -> int:
     args = ap.parse_args()
     ns = [6, 10, 20] if args.quick else args.n
 
-    header = (f"{'n':>5} {'m_sum':>8} {'links':>7} {'confl':>5} {'dist_s':>7} {'robot_s':>7} "
+    header = (f"{'n':>5} {'resolution':>10} {'m_sum':>8} {'links':>7} {'confl':>5} {'dist_s':>7} {'robot_s':>7} "
               f"{'uf_s':>6} {'ratio':>5} {'r_ratio':>7} {'it':>2} {'det1':>4} {'d+1':>4} "
               f"{'res':>4} {'n+1':>5} {'rounds':>6} {'messages':>9} {'MB':>7} "
               f"{'mem/robot KB':>12} {'cut dist/drop':>14}")
     print(header)
     records = []
     for n in ns:
-        r = bench_one(n, args)
-        records.append(r)
-        robot_s = "-" if r["per_robot_s"] is None else f"{r['per_robot_s']:.2f}"
-        r_ratio = "-" if r["per_robot_ratio"] is None else f"{r['per_robot_ratio']:.0f}"
-        print(f"{r['n']:>5} {r['m_sum']:>8} {r['links']:>7} {r['conflictive_sets']:>5} "
-              f"{r['distributed_s']:>7.2f} {robot_s:>7} {r['centralized_s']:>6.3f} "
-              f"{r['ratio']:>5.1f} {r_ratio:>7} {r['iterations']:>2} "
-              f"{r['first_detection_rounds']:>4} {r['diameter_bound']:>4} "
-              f"{r['max_resolution_rounds']:>4} {r['resolution_bound']:>5} {r['rounds']:>6} "
-              f"{r['messages']:>9} {r['bytes'] / 1e6:>7.2f} "
-              f"{r['max_robot_memory_bytes'] / 1e3:>12.1f} "
-              f"{r['distributed']['deleted']:>6}/{r['drop_set']['deleted']:<7}", flush=True)
-    by_n = {r["n"]: r for r in records}
-    for tn in TARGET_N_RATIO:
-        if tn in by_n:
-            x = by_n[tn]["ratio"]
-            print(f"target: n={tn} distributed {by_n[tn]['distributed_s']:.2f} s = {x:.1f}x "
-                  f"union-find ({'within' if x <= TARGET_RATIO else 'OVER'} "
-                  f"{TARGET_RATIO:.0f}x)")
-    if TARGET_BIG_N in by_n:
-        t = by_n[TARGET_BIG_N]["distributed_s"]
-        print(f"target: n={TARGET_BIG_N} distributed {t:.2f} s "
-              f"({'within' if t <= TARGET_BIG_S else 'OVER'} {TARGET_BIG_S:.0f} s)")
-    if TARGET_MB_N in by_n:
-        mb = by_n[TARGET_MB_N]["bytes"] / 1e6
-        print(f"target: n={TARGET_MB_N} sent {mb:.2f} MB "
-              f"({'within' if mb <= TARGET_MB else 'OVER'} {TARGET_MB:.0f} MB)")
+        formation = synthetic_formation(n, args.features, args.seed + n, args.spurious,
+                                        args.detect)
+        for resolution in args.resolution:
+            r = bench_one(n, resolution, formation, args)
+            records.append(r)
+            _print_row(r)
+    _print_targets(records)
     args.out.mkdir(parents=True, exist_ok=True)
     meta = dict(python=platform.python_version(), machine=platform.machine(), repeat=args.repeat,
                 features_per_robot=args.features, spurious=args.spurious, detect=args.detect,
-                seed=args.seed, command=" ".join(sys.argv))
+                seed=args.seed, load_average=os.getloadavg(), command=" ".join(sys.argv))
     write_json_atomic(args.out / "results.json", records)
     write_json_atomic(args.out / "meta.json", meta)
     plot(records, args.out / "time_bytes.png")
     print(f"saved {args.out / 'results.json'} and {args.out / 'time_bytes.png'}")
     return 0
+
+
+def _print_row(r: dict) -> None:
+    robot_s = "-" if r["per_robot_s"] is None else f"{r['per_robot_s']:.2f}"
+    r_ratio = "-" if r["per_robot_ratio"] is None else f"{r['per_robot_ratio']:.0f}"
+    print(f"{r['n']:>5} {r['resolution']:>10} {r['m_sum']:>8} {r['links']:>7} "
+          f"{r['conflictive_sets']:>5} "
+          f"{r['distributed_s']:>7.2f} {robot_s:>7} {r['centralized_s']:>6.3f} "
+          f"{r['ratio']:>5.1f} {r_ratio:>7} {r['iterations']:>2} "
+          f"{r['first_detection_rounds']:>4} {r['diameter_bound']:>4} "
+          f"{r['max_resolution_rounds']:>4} {r['resolution_bound']:>5} {r['rounds']:>6} "
+          f"{r['messages']:>9} {r['bytes'] / 1e6:>7.2f} "
+          f"{r['max_robot_memory_bytes'] / 1e3:>12.1f} "
+          f"{r['distributed']['deleted']:>6}/{r['drop_set']['deleted']:<7}", flush=True)
+
+
+def _print_targets(records: list[dict]) -> None:
+    for resolution in dict.fromkeys(r["resolution"] for r in records):
+        by_n = {r["n"]: r for r in records if r["resolution"] == resolution}
+        for tn in TARGET_N_RATIO:
+            if tn in by_n:
+                x = by_n[tn]["ratio"]
+                print(f"target ({resolution}): n={tn} distributed {by_n[tn]['distributed_s']:.2f} s"
+                      f" = {x:.1f}x union-find ({'within' if x <= TARGET_RATIO else 'OVER'} "
+                      f"{TARGET_RATIO:.0f}x)")
+        if TARGET_BIG_N in by_n:
+            t = by_n[TARGET_BIG_N]["distributed_s"]
+            print(f"target ({resolution}): n={TARGET_BIG_N} distributed {t:.2f} s "
+                  f"({'within' if t <= TARGET_BIG_S else 'OVER'} {TARGET_BIG_S:.0f} s)")
+        if TARGET_MB_N in by_n:
+            mb = by_n[TARGET_MB_N]["bytes"] / 1e6
+            print(f"target ({resolution}): n={TARGET_MB_N} sent {mb:.2f} MB "
+                  f"({'within' if mb <= TARGET_MB else 'OVER'} {TARGET_MB:.0f} MB)")
 
 
 if __name__ == "__main__":
