@@ -85,6 +85,28 @@ class _SortedKeys:
         return _merge(self.main, self.recent)
 
 
+class _DenseKeys:
+    """The same set of keys ``row * A + col`` as a boolean array of ``A²`` entries, for a
+    small ``A`` (:data:`DENSE_KEYS_MAX` at most): a lookup per key instead of a search."""
+
+    def __init__(self, keys: np.ndarray, A: int) -> None:
+        self.has = np.zeros(A * A, dtype=bool)
+        self.has[keys] = True
+
+    def contains(self, q: np.ndarray) -> np.ndarray:
+        return self.has[q]
+
+    def add(self, new_sorted: np.ndarray) -> None:
+        self.has[new_sorted] = True
+
+    def all(self) -> np.ndarray:
+        return np.flatnonzero(self.has).astype(np.int64)
+
+
+#: largest ``A²`` (bytes) for which the detection keeps ``X`` as a dense boolean array
+DENSE_KEYS_MAX = 1 << 24
+
+
 def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
     if a.size == 0 or q.size == 0:
         return np.zeros(q.shape, dtype=bool)
@@ -225,7 +247,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
     # round 0 (start_detection): X(0) = I on the active rows (eq. 4), all of it sent
     nnz_x = np.diff(team.row_bounds)
     diag = np.arange(A, dtype=np.int64) * (A + 1)
-    X = _SortedKeys(diag)
+    X = _DenseKeys(diag, A) if A * A <= DENSE_KEYS_MAX else _SortedKeys(diag)
     delta = diag
     running = nnz_x > 0
     t_stop = np.zeros(n, dtype=np.int64)
@@ -376,8 +398,11 @@ def _roots(reps: np.ndarray, starts: np.ndarray, counts: np.ndarray,
     start = np.flatnonzero(np.r_[True, (srow[1:] != srow[:-1]) | (scam[1:] != scam[:-1])])
     run_len = np.diff(np.r_[start, srow.size])
     run_set, run_cam = srow[start], scam[start]
-    order = np.lexsort((run_cam, -run_len, run_set))
-    firsts = order[np.r_[True, run_set[order][1:] != run_set[order][:-1]]]
+    # per set (runs in camera order): the first run of the greatest length
+    set_start = np.flatnonzero(np.r_[True, run_set[1:] != run_set[:-1]])
+    best = np.maximum.reduceat(run_len, set_start)
+    cand = np.flatnonzero(run_len == best[run_set])
+    firsts = cand[np.r_[True, run_set[cand][1:] != run_set[cand][:-1]]]
     return run_cam[firsts]
 
 
