@@ -295,9 +295,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         How the simulator evaluates the robots' rounds. ``per-robot``: every robot steps on
         its inbox, one by one (the code robots run under faults and over a middleware).
         ``batched``: the same updates, all robots' detection rows in one sparse product per
-        round and only robots with a message stepped in a resolution (:mod:`.batched`; same
-        results, rounds, messages and bytes); it needs the paper's protocol with delta
-        messages on a fault-free network. ``auto``: batched exactly there.
+        round and only robots with a message stepped in a resolution (:mod:`.batched`), the
+        evidence rule's flood in one vectorized step per round and each set solved once
+        (:mod:`.batched_evidence`); same results, rounds, messages, bytes and memory; it
+        needs the paper's protocol with delta messages on a fault-free network. ``auto``:
+        batched exactly there.
 
     Returns
     -------
