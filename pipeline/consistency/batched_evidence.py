@@ -20,9 +20,9 @@ Flood: one vectorized step per round for all robots
     round's messages by sender, ascending), and that sender becomes the one it will not
     forward to. Whether the receiver already holds the group is read from its own holdings:
     the set's robot graph is symmetric (checked), so breadth-first levels of neighbours differ
-    by at most one and a copy that reaches a robot which holds the group found it holding it
-    since the last round or the one before; the frontiers of those two rounds are those
-    holdings. Every step reads only the sender's own state (its set neighbours, the group's
+    by at most one, and a copy that reaches a robot already holding the group reaches it one
+    or two rounds after the robot received it: the frontiers of those two rounds are the
+    part of its holdings that can answer yes. Every step reads only the sender's own state (its set neighbours, the group's
     sender), what it sent, and the receiver's own holdings, as the per-robot step does.
 
     Messages and bytes: a message is one sender-receiver pair in one round, carrying the
