@@ -858,8 +858,8 @@ def _flood_by_robots(observes, node_edges, edge_link, exchange, *, estimated, dr
 
 
 def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_links: int, *,
-                         K: int, c: int, thr: float, rng, wire: str = "float32",
-                         exchange=None):
+                         K: int, c: int, thr: float, rng=None, wire: str = "float32",
+                         exchange=None, draws=None):
     """Dynamic voting at its consensus limit, by flooding (module docstring).
 
     Parameters
@@ -876,6 +876,8 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
         :func:`pipeline.fusion.voting.choose_hypotheses` draws them (same seed, same ``V_h``)
     wire : ``"float32"`` or ``"float64"`` — precision of ``x`` and ``Λ⁻¹`` in the entries
     exchange : CountingExchange / LockstepExchange or None — carries every round
+    draws : ndarray, (B, n, K) or None — each robot's own draws
+        (:func:`pipeline.fusion.protocol.hypothesis_draws`) instead of ``rng``'s
 
     Returns
     -------
@@ -883,16 +885,20 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
     ``stats.rounds`` the flood's rounds, ``maxc_stats`` empty (max-c is part of the flood)
     """
     from pipeline.fusion.consensus import CommStats
-    from pipeline.fusion.voting import VotingResult
+    from pipeline.fusion.voting import VotingResult, information_matrix
 
     x = np.asarray(x, dtype=np.float64)
     B, n, d = x.shape
     est = np.asarray(estimated, dtype=bool) & np.asarray(observes, dtype=bool)
-    draws = 1.0 - np.random.default_rng(rng).random((B * n, K))   # h_i in (0, 1], eq. (6)
+    if draws is None:
+        draws = 1.0 - np.random.default_rng(rng).random((B * n, K))   # h_i in (0, 1], eq. (6)
+    else:  # each robot's own draws (pipeline.fusion.protocol.hypothesis_draws)
+        draws = np.array(draws, dtype=np.float64).reshape(B * n, K)
     draws[~est.reshape(-1)] = -np.inf
     draws = draws.reshape(B, n, K)
     xw = to_wire(np.where(est[..., None], x, 0.0), wire)
-    info = np.linalg.inv(np.where(est[..., None, None], cov, np.eye(d)))
+    # exactly symmetric, so the upper triangle an entry carries on the wire is all of it
+    info = information_matrix(np.where(est[..., None, None], cov, np.eye(d)))
     infow = to_wire(np.where(est[..., None, None], info, 0.0), wire)
     from pipeline.fusion.protocol import LockstepExchange
 

@@ -18,9 +18,11 @@ union-find: every robot names the track of each of its features itself
 feature id of its detection row), and tells its neighbours, with its keypoint, pose and
 intrinsics, which track each of its observations belongs to (the setup message counted in
 ``setup_*``). Robot ``i`` takes part in track ``b`` with neighbour ``j`` exactly when both
-named an observation ``b``; the keypoint of ``j`` it uses is the one ``j`` sent. The tracks
-are processed in the order of their names (which sets the max-c random draws); the result's
-``track_ids`` are renumbered like :func:`tracks_of` for reporting only.
+named an observation ``b``; the keypoint of ``j`` it uses is the one ``j`` sent. A robot's
+max-c draws in a track are a hash of the run's seed, the track's name and its own id
+(:func:`pipeline.fusion.protocol.hypothesis_draws`), so a robot in its own process draws what
+the simulator draws for it; the result's ``track_ids`` are renumbered like :func:`tracks_of`
+for reporting only.
 
 All tracks run at once on the flat node set of :mod:`pipeline.fusion.consensus`: node
 ``b * n + i`` is robot ``i`` in track ``b``; it is linked to node ``b * n + j`` when robots
@@ -98,7 +100,12 @@ from pipeline.fusion.consensus import (
     ransac_hypotheses,
 )
 from pipeline.fusion.flooding import exact_dynamic_voting
-from pipeline.fusion.protocol import CountingExchange, LinkTraffic, LockstepExchange
+from pipeline.fusion.protocol import (
+    CountingExchange,
+    LinkTraffic,
+    LockstepExchange,
+    hypothesis_draws,
+)
 from pipeline.fusion.voting import (
     VOTE_TIE_TOL,
     RoundProtocol,
@@ -109,7 +116,7 @@ from pipeline.fusion.voting import (
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.types import Features, Links, View
 
-__all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of"]
+__all__ = ["FusionResult", "fuse_tracks", "triangulate_views", "tracks_of", "local_estimates"]
 
 LOCAL_MODES = ("robust", "pair", "neighbours")
 CONSENSUS_MODES = ("exact", "metropolis")
@@ -164,8 +171,9 @@ def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
     return track_of, len(tracks)
 
 
-def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int]:
-    """Track index of every feature from the robots' own track names (in name order)."""
+def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int, np.ndarray]:
+    """Track index of every feature from the robots' own track names (in name order), the
+    track count and each track's name."""
     lab = np.asarray(track_labels, dtype=np.int64).reshape(-1)
     if lab.shape[0] != m_total:
         raise InputError(f"track_labels must have one entry per feature ({m_total}), got "
@@ -177,7 +185,7 @@ def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int]:
     renum = np.cumsum(real) - 1
     keep = real[inv]
     track_of[valid[keep]] = renum[inv[keep]]
-    return track_of, int(real.sum())
+    return track_of, int(real.sum()), names[real]
 
 
 # --------------------------------------------------------------------------------------------
@@ -335,6 +343,66 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     return use
 
 
+def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: float,
+                    local: str = "robust", *, robots=None):
+    """Each observer's local estimate of each track's landmark (module docstring, ``local=``).
+
+    Parameters
+    ----------
+    kp : ndarray, (B, n, 2) float64 — keypoint of robot ``i`` in track ``b`` (any finite value
+        where it does not observe)
+    observes : ndarray, (B, n) bool
+    adj : ndarray, (n, n) bool — communication neighbours
+    Rs, ts, Ks : ndarrays, (n, 3, 3), (n, 3), (n, 3, 3) — poses and intrinsics (any camera
+        with an invertible ``K`` for a robot that is neither in ``robots`` nor a neighbour of
+        one: it is never used)
+    sigma_px : float — keypoint noise
+    px_thr : float — pixel gate on the squared reprojection error over ``σ_px²``
+    local : ``"robust"``, ``"pair"`` or ``"neighbours"``
+    robots : ndarray, (n,) bool or None — form the estimates of these robots only (default
+        all). Every row ``(b, i)`` is computed from robot ``i``'s keypoint and camera and its
+        observing neighbours' alone, independently of the other rows, so a robot forming
+        only its own gets the values the simulator gets for it.
+
+    Returns
+    -------
+    X : ndarray, (B, n, 3);  cov : ndarray, (B, n, 3, 3);  estimated : ndarray, (B, n) bool
+    """
+    B, n = observes.shape
+    # observing neighbours of each observer: nb[b, i, j]
+    nb = observes[:, :, None] & observes[:, None, :] & adj[None]
+    if robots is not None:
+        nb &= np.asarray(robots, dtype=bool)[None, :, None]
+    if local == "pair":
+        # ray directions in the world frame; partner = widest angle among observing neighbours
+        xn = np.linalg.solve(Ks[None], np.concatenate([kp, np.ones((B, n, 1))], -1)[..., None])
+        ray = np.einsum("nji,bnj->bni", Rs, xn[..., 0])  # R^T x
+        ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+        cosang = np.einsum("bid,bjd->bij", ray, ray)
+        cosang = np.where(nb, cosang, np.inf)
+        partner = np.argmin(cosang, axis=-1)
+        use = np.zeros((B, n, n), dtype=bool)
+        has = nb.any(-1)
+        bb, ii = np.nonzero(has)
+        use[bb, ii, partner[bb, ii]] = True
+    elif local == "robust":
+        use = _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr)
+    else:
+        use = nb.copy()
+    has_nb = use.any(-1)
+    use |= np.eye(n, dtype=bool)[None] & has_nb[..., None]
+    est_b, est_i = np.nonzero(has_nb)
+    X = np.zeros((B, n, 3))
+    cov = np.broadcast_to(np.eye(3), (B, n, 3, 3)).copy()
+    estimated = np.zeros((B, n), dtype=bool)
+    if len(est_b):
+        Xe, Ce, oke, _ = triangulate_views(kp[est_b], use[est_b, est_i], Rs, ts, Ks, sigma_px)
+        X[est_b, est_i] = Xe
+        cov[est_b[oke], est_i[oke]] = Ce[oke]
+        estimated[est_b, est_i] = oke
+    return X, cov, estimated
+
+
 # --------------------------------------------------------------------------------------------
 # the stage
 
@@ -392,7 +460,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     p_in, c, success : RANSAC: number of hypotheses ``K`` (Sec. III)
     rounds : int — Metropolis consensus rounds (with ``stop``: the cap); the exact mode needs
         none (it closes each track at ``Diam + 1`` rounds, at most ``n``)
-    seed : int — max-c random draws
+    seed : int — max-c draws: robot ``i``'s draws in a track are
+        ``hypothesis_draws(seed, name, i)`` (:func:`pipeline.fusion.protocol.hypothesis_draws`,
+        the track's name as the robots know it), so they do not depend on the other tracks
     transport : Transport or None
         The network the robots' messages travel on. ``None`` or a fault-free one: one
         network round per logical round. A faulty one (:attr:`~pipeline.transport.Transport.faulty`:
@@ -441,8 +511,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     off = np.concatenate([[0], np.cumsum(m)])
     if track_labels is None:
         track_of, T = tracks_of(m, links)
+        track_names = np.arange(T, dtype=np.int64)
     else:
-        track_of, T = _tracks_from_labels(track_labels, int(off[-1]))
+        track_of, T, track_names = _tracks_from_labels(track_labels, int(off[-1]))
     cam_of = np.repeat(np.arange(n), m)
     feat_of = np.arange(off[-1]) - off[cam_of]
     obs_g = np.flatnonzero(track_of >= 0)
@@ -476,35 +547,11 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
 
     # pixel gate of the reprojection checks: squared error / σ_px² against χ²_{2,p}
     px_thr = chi2_ppf(p, 2)
-    # observing neighbours of each observer: nb[b, i, j]
-    nb = observes[:, :, None] & observes[:, None, :] & adj[None]
-    if local == "pair":
-        # ray directions in the world frame; partner = widest angle among observing neighbours
-        xn = np.linalg.solve(Ks[None], np.concatenate([kp, np.ones((B, n, 1))], -1)[..., None])
-        ray = np.einsum("nji,bnj->bni", Rs, xn[..., 0])  # R^T x
-        ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
-        cosang = np.einsum("bid,bjd->bij", ray, ray)
-        cosang = np.where(nb, cosang, np.inf)
-        partner = np.argmin(cosang, axis=-1)
-        use = np.zeros((B, n, n), dtype=bool)
-        has = nb.any(-1)
-        bb, ii = np.nonzero(has)
-        use[bb, ii, partner[bb, ii]] = True
-    elif local == "robust":
-        use = _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr)
-    else:
-        use = nb.copy()
-    has_nb = use.any(-1)
-    use |= np.eye(n, dtype=bool)[None] & has_nb[..., None]
-    est_b, est_i = np.nonzero(has_nb)
-    X = np.zeros((B, n, 3))
-    cov = np.broadcast_to(np.eye(3), (B, n, 3, 3)).copy()
-    estimated = np.zeros((B, n), dtype=bool)
-    if len(est_b):
-        Xe, Ce, oke, _ = triangulate_views(kp[est_b], use[est_b, est_i], Rs, ts, Ks, sigma_px)
-        X[est_b, est_i] = Xe
-        cov[est_b[oke], est_i[oke]] = Ce[oke]
-        estimated[est_b, est_i] = oke
+    K = ransac_hypotheses(p_in, c, success)
+    X, cov, estimated = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px, px_thr, local)
+    # each robot's own max-c draws, from its id and the track's name (public once exchanged)
+    draws = hypothesis_draws(seed, np.repeat(track_names[tr], n), np.tile(np.arange(n), B),
+                             K).reshape(B, n, K)
 
     # the voting network: observers of a track linked by comm edges
     node_edges, edge_link = [], []
@@ -515,7 +562,6 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     node_edges = np.concatenate(node_edges) if node_edges else np.zeros((0, 2), np.int64)
     edge_link = np.concatenate(edge_link) if edge_link else np.zeros(0, np.int64)
     active_comm = int(sum(bool((observes[:, i] & observes[:, j]).any()) for i, j in comm))
-    K = ransac_hypotheses(p_in, c, success)
     stats = dict(tracks=int(T), tracks_fused=0, tracks_conflictive=int(conflictive.sum()),
                  observations=int(n_obs), observations_estimated=int(estimated.sum()),
                  observations_voted_out=0, observations_cut=0, links_cut=0,
@@ -553,12 +599,12 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     if protocol is not None and consensus == "exact":
         res = exact_dynamic_voting(X, cov, estimated, observes, node_edges, edge_link,
                                    len(comm), K=K, c=c, thr=gate_threshold(3, p, gate),
-                                   rng=seed, wire=wire, exchange=protocol.exchange)
+                                   draws=draws, wire=wire, exchange=protocol.exchange)
     else:
         # the fixed-round scheme keeps its plain argmax: it is the reference as it ran before
-        res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds, rng=seed,
+        res = dynamic_voting(X, cov, topo, K=K, c=c, p=p, gate=gate, rounds=rounds,
                              observed=estimated, maxc_rounds=maxc_rounds, protocol=protocol,
-                             tie_tol=VOTE_TIE_TOL if stop else 0.0)
+                             tie_tol=VOTE_TIE_TOL if stop else 0.0, draws=draws)
     crashed = np.zeros(n, dtype=bool)
     if protocol is not None:
         protocol.exchange.finish()

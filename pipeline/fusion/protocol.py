@@ -78,9 +78,57 @@ import numpy as np
 from pipeline.transport import HEADER_BYTES
 
 __all__ = ["WIRE_DTYPES", "LinkTraffic", "CountingExchange", "LockstepExchange",
-           "stop_counters", "message_bytes", "bundle_reals", "to_wire"]
+           "stop_counters", "message_bytes", "bundle_reals", "to_wire", "hypothesis_draws"]
 
 WIRE_DTYPES = {"float32": np.float32, "float64": np.float64}
+
+_MASK64 = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+def _splitmix64(z: np.ndarray) -> np.ndarray:
+    """The splitmix64 finalizer, elementwise on uint64 (wrapping arithmetic)."""
+    z = (z + np.uint64(0x9E3779B97F4A7C15)) & _MASK64
+    z = ((z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)) & _MASK64
+    z = ((z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)) & _MASK64
+    return z ^ (z >> np.uint64(31))
+
+
+def hypothesis_draws(seed: int, names, robots, K: int) -> np.ndarray:
+    """Max-c draws ``h_i ∈ (0, 1]`` (eq. 6) of robot ``robots[r]`` in track ``names[r]``.
+
+    A robot draws its own numbers: each is a hash of public data only (the run's ``seed``,
+    the track's name as the robots learnt it, the robot's id, the hypothesis index), so a
+    robot in its own process draws exactly what the simulator draws for it, whatever other
+    tracks the team holds. Uniform on the 2⁵³ doubles ``(k + 1) 2⁻⁵³``, like
+    ``1 − Generator.random()``.
+
+    Parameters
+    ----------
+    seed : int
+    names : array_like, (R,) int — track names (``>= 0``)
+    robots : array_like, (R,) int
+    K : int — hypotheses
+
+    Returns
+    -------
+    ndarray, (R, K) float64
+
+    Examples
+    --------
+    >>> d = hypothesis_draws(0, [5, 5], [0, 1], 3)
+    >>> d.shape, bool(((d > 0) & (d <= 1)).all()), bool((d[0] != d[1]).all())
+    ((2, 3), True, True)
+    >>> bool((hypothesis_draws(0, [5], [1], 3) == d[1]).all())
+    True
+    """
+    names = np.asarray(names, dtype=np.int64).reshape(-1).astype(np.uint64)
+    robots = np.asarray(robots, dtype=np.int64).reshape(-1).astype(np.uint64)
+    z = _splitmix64(np.full(names.shape, int(seed) & 0xFFFFFFFFFFFFFFFF, dtype=np.uint64))
+    z = _splitmix64(z ^ names)
+    z = _splitmix64(z ^ robots)
+    z = _splitmix64(z[:, None] ^ np.arange(int(K), dtype=np.uint64)[None])
+    return ((z >> np.uint64(11)).astype(np.float64) + 1.0) * 2.0 ** -53
+
 
 def bundle_reals(K: int, d: int) -> int:
     """Reals in one track's ``K`` bundles ``(P, q, v)``: ``K (d (d + 1) / 2 + d + 1)``."""

@@ -198,7 +198,7 @@ def _prepare(x, cov, observed):
 
 
 def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int | None = None,
-                      *, before_round=None):
+                      *, before_round=None, draws=None):
     """``V_h`` for ``K`` hypotheses by max-c consensus on random draws (eqs. 6–7).
 
     Parameters
@@ -210,6 +210,8 @@ def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int 
     maxc_rounds : int or None — default ``N − 1``, a bound on the diameter of a connected
         graph of ``N`` robots
     before_round : callable or None — see :func:`~pipeline.fusion.consensus.max_c_consensus`
+    draws : ndarray, (B, N, K) or None — each robot's own draws ``h_i ∈ (0, 1]``
+        (:func:`pipeline.fusion.protocol.hypothesis_draws`) instead of drawing from ``rng``
 
     Returns
     -------
@@ -217,8 +219,10 @@ def choose_hypotheses(observed, topology, K: int, c: int, rng, maxc_rounds: int 
     """
     obs = np.asarray(observed, dtype=bool)
     B, N = obs.shape
-    rng = np.random.default_rng(rng)
-    draws = 1.0 - rng.random((B * N, K))  # h_i in (0, 1]
+    if draws is None:
+        draws = 1.0 - np.random.default_rng(rng).random((B * N, K))  # h_i in (0, 1]
+    else:
+        draws = np.array(draws, dtype=np.float64).reshape(B * N, K)
     draws[~obs.reshape(-1)] = -np.inf
     topo = as_topology(topology, N, B)
     rounds = N - 1 if maxc_rounds is None else int(maxc_rounds)
@@ -264,7 +268,7 @@ def _sq_mahalanobis(r, info):
 
 
 def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds,
-                  before_round=None):
+                  before_round=None, draws=None):
     """Shared start of both voting schemes: checked inputs, topology, χ² gate, and the
     hypothesis members (max-c consensus, eqs. 6–7, unless given)."""
     x, cov, obs = _prepare(x, cov, observed)
@@ -273,7 +277,7 @@ def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_
     thr = gate_threshold(d, p, gate)
     if members is None:
         members, maxc_stats = choose_hypotheses(obs, topo, K, c, rng, maxc_rounds,
-                                                before_round=before_round)
+                                                before_round=before_round, draws=draws)
     else:
         members = np.asarray(members, dtype=bool) & obs[..., None]
         maxc_stats = CommStats()
@@ -372,7 +376,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
                    gate: str = "distance", rounds: int = 100, rng=None, members=None,
                    observed=None, maxc_rounds: int | None = None,
                    history: bool = False, protocol: RoundProtocol | None = None,
-                   tie_tol: float = VOTE_TIE_TOL) -> VotingResult:
+                   tie_tol: float = VOTE_TIE_TOL, draws=None) -> VotingResult:
     """Distributed dynamic voting (Sec. IV-B, eqs. 10–14).
 
     Every hypothesis ``h`` carries ``(P_i, q_i, v_i)`` per robot, initialized by eqs. (5) and
@@ -399,6 +403,8 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         of :mod:`pipeline.fusion.protocol` (``rounds`` is then a cap); every logical round,
         max-c ones included, is carried by ``protocol.exchange``.
     tie_tol : float — votes this close count as tied (:func:`pick_winner`)
+    draws : ndarray, (B, N, K) or None — the robots' own max-c draws instead of ``rng``'s
+        (see :func:`choose_hypotheses`)
 
     Returns
     -------
@@ -414,7 +420,8 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
         topology = live
         before_round = live.maxc_round(K, c)
     x, cov, obs, topo, thr, members, maxc_stats = _voting_setup(
-        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds, before_round)
+        x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds, before_round,
+        draws)
     if protocol is not None:
         return _dynamic_voting_protocol(x, cov, obs, live, thr, members, maxc_stats, rounds,
                                         protocol, tie_tol)
@@ -475,6 +482,13 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
                         inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
                         stats=stats, maxc_stats=maxc_stats, history=hist)
+
+
+def information_matrix(cov: np.ndarray) -> np.ndarray:
+    """``Λ⁻¹`` of covariances ``(..., d, d)``, exactly symmetric: ``(L + Lᵀ) / 2`` of the
+    inverse ``L`` (the two halves of the sum are the same floats, so the result is)."""
+    info = np.linalg.inv(cov)
+    return 0.5 * (info + np.swapaxes(info, -1, -2))
 
 
 class _LiveGraph(Topology):
@@ -544,7 +558,9 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
     counter_bytes = index_bytes(W + 1)
     changed_bytes = (index_bytes(protocol.n_robots) + bundle_reals(K, d)
                      * np.dtype(np.float32 if wire == "float32" else np.float64).itemsize)
-    info = np.linalg.inv(cov).reshape(M, 1, d, d)
+    # Λ⁻¹ made exactly symmetric (an LU inverse may differ in the last bit across the
+    # diagonal), so every P is too and the upper triangle a message carries is all of it
+    info = information_matrix(cov).reshape(M, 1, d, d)
     xf = x.reshape(M, 1, d)
     obs_f = obs.reshape(M, 1)
     u_P = info

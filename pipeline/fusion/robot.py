@@ -1,0 +1,554 @@
+"""The fusion stage run by one robot alone over its end of the network (Montijano et al.).
+
+:func:`pipeline.fusion.landmarks.fuse_tracks` evaluates every robot's update at once; here one
+robot computes only its own rows of it, from its own state and its inbox, and sends what the
+vectorized protocol counts (:mod:`pipeline.fusion.protocol`). With no fault the two agree bit
+for bit: same local estimates, same draws, same consensus states, same cuts (tested).
+
+What the robot knows
+--------------------
+Its own features' track names (:meth:`pipeline.consistency.robot.Robot.final_tracks`), its own
+keypoints, pose and intrinsics, the team size ``n`` and the comm graph (public). Everything else
+comes in messages from its comm-graph neighbours.
+
+Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
+-----------------------------------------------------------------------------
+1. **Setup** (``fusion-setup``, one message per neighbour): its camera (``R``, ``t`` and
+   ``fx, fy, cx, cy``: 16 reals, the full ``K`` if it has skew) and, per track it observes,
+   the track's name and its keypoint. A name it holds twice (a conflictive set, which the
+   simulator leaves unfused) is sent apart, and every robot that hears it leaves the track out.
+   From the setups the robot forms its local estimate of each track
+   (:func:`pipeline.fusion.landmarks.local_estimates`, its own row) and its max-c draws
+   (:func:`pipeline.fusion.protocol.hypothesis_draws`).
+2. **Max-c consensus** (eq. 6, ``fusion-maxc``), ``n − 1`` rounds: per shared track a bit of a
+   *changed* bitmap and the ``K c`` values of the changed ones; the members of eq. (7) follow.
+3. **Dynamic voting** (eqs. 10–14, ``fusion``), per-link delta messages and the distributed
+   stop rule of :mod:`pipeline.fusion.protocol`: per running shared track its stop counter and
+   a changed bit, per changed track the robot's degree in the track's observer graph (for the
+   Metropolis weight) and its ``K`` bundles ``(P, q, v)`` (``P`` as its upper triangle: every
+   ``P`` is exactly symmetric, :func:`pipeline.fusion.voting.information_matrix`). A track
+   ends for the robot when its counter reaches ``W + 1`` (``W = n − 1``), or at the round cap.
+   The update ``P_i(t + 1) = Σ_j a_ij P_j(t) + u_i Λ_i⁻¹`` sums its terms in the order of
+   neighbour ids (the simulator's sparse row order), and ``a_ii`` subtracts the weights in the
+   order of the comm edges (the simulator's), so the floats are the same.
+4. **Decision**: the winner ``argmax_h v_i^h`` and the outlier test of
+   :func:`~pipeline.fusion.landmarks.fuse_tracks` (voted out, and its own keypoint does not
+   reproject onto the fused landmark within the pixel gate). The robot cuts its own links at
+   its outlier features and tells each neighbour which of its features it declared outliers
+   (``fusion-cut``, only when there are some); the neighbour cuts its ends of those links.
+
+Termination
+-----------
+The phase ends by the termination wave of :mod:`pipeline.consistency.termination`: a robot is
+*done* once every track it observes has stopped and its ``fusion-cut`` messages left; done is
+stable (nothing can restart a stopped track), so when the wave ends every robot has decided and
+every cut has arrived. The wave also floods the largest round count (max-c rounds plus the
+robot's own consensus rounds), which names the round of the fusion cuts as the simulator does.
+
+Faults
+------
+A neighbour the transport reports silent (its process died) leaves every track's observer graph
+at once: its terms leave the update (the robot's own weight takes them, so its row still sums to
+one and the weights stay symmetric: both ends of a link use the degrees their messages of that
+round carried), its degree changes are sent with the next round, and the robot cuts every link
+to it as ``robot-lost``. Message loss is not injected into this stage over a real transport
+(the robots' round packets carry it; see :mod:`pipeline.transport.zenoh_transport`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.fusion.consensus import ransac_hypotheses, solve_information
+from pipeline.fusion.landmarks import _project, local_estimates
+from pipeline.fusion.protocol import bundle_reals, hypothesis_draws, index_bytes, to_wire
+from pipeline.fusion.voting import (
+    _sq_mahalanobis,
+    chi2_ppf,
+    gate_threshold,
+    information_matrix,
+)
+
+__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "CUT"]
+
+SETUP, MAXC, FUSION, CUT = "fusion-setup", "fusion-maxc", "fusion", "fusion-cut"
+_TRIU = np.triu_indices(3)
+_BIG = np.iinfo(np.int64).max // 2
+
+
+@dataclass
+class FusionOptions:
+    """The options of :func:`pipeline.fusion.landmarks.fuse_tracks` a robot runs with (its
+    defaults, the stage's)."""
+
+    sigma_px: float = 1.0
+    local: str = "robust"
+    p: float = 0.99
+    gate: str = "squared"
+    p_in: float = 0.7
+    c: int = 1
+    success: float = 0.99
+    rounds: int = 100
+    seed: int = 0
+    wire: str = "float32"
+
+
+def _camera_payload(K, R, t) -> np.ndarray:
+    K = np.asarray(K, np.float64)
+    cam = [np.asarray(R, np.float64).reshape(9), np.asarray(t, np.float64).reshape(3)]
+    if K[0, 1] == 0 and K[1, 0] == 0 and (K[2] == [0, 0, 1]).all():
+        cam.append(np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]))
+    else:
+        cam.append(K.reshape(9))
+    return np.concatenate(cam)
+
+
+def _camera_from(cam: np.ndarray):
+    R, t = cam[:9].reshape(3, 3), cam[9:12]
+    if len(cam) == 16:
+        fx, fy, cx, cy = cam[12:]
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    else:
+        K = cam[12:21].reshape(3, 3)
+    return K, R, t
+
+
+class FusionRobot:
+    """Robot ``i``'s fusion: its own state, what it sends each round, what it does with its
+    inbox (module docstring).
+
+    Parameters
+    ----------
+    i : int — its id
+    n : int — team size (public)
+    comm_edges : array_like, (E, 2) int — the comm graph, in the team's order (public)
+    track_names : ndarray, (m_i,) int — its own name for the track of each of its features,
+        ``-1`` outside tracks
+    keypoints : ndarray, (m_i, 2) float32
+    K, R, t : its intrinsics and pose (``cam_from_world``)
+    options : FusionOptions or None
+    """
+
+    def __init__(self, i: int, n: int, comm_edges, track_names, keypoints, K, R, t,
+                 options: FusionOptions | None = None) -> None:
+        self.i, self.n = int(i), int(n)
+        self.opt = options or FusionOptions()
+        comm = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+        self.neighbours = sorted({int(b) for a, b in comm if a == self.i}
+                                 | {int(a) for a, b in comm if b == self.i})
+        # a node's edges are ordered like the comm edges: first those where it is the first end
+        self._first = [int(b) for a, b in comm if a == self.i]
+        self._second = [int(a) for a, b in comm if b == self.i]
+        self.alive = set(self.neighbours)
+        lab = np.asarray(track_names, dtype=np.int64).reshape(-1)
+        have = np.flatnonzero(lab >= 0)
+        names, inv, counts = np.unique(lab[have], return_inverse=True, return_counts=True)
+        single = counts[inv] == 1
+        self.names = names[counts == 1]
+        self.feat = np.empty(len(self.names), dtype=np.int64)
+        self.feat[np.searchsorted(self.names, lab[have[single]])] = have[single]
+        self.conflictive = names[counts > 1]
+        self.keypoints = np.asarray(keypoints, dtype=np.float32).reshape(-1, 2)
+        self.K = np.asarray(K, np.float64)
+        self.R = np.asarray(R, np.float64)
+        self.t = np.asarray(t, np.float64).reshape(3)
+        self.px_thr = chi2_ppf(self.opt.p, 2)
+        self.thr = gate_threshold(3, self.opt.p, self.opt.gate)
+        self.Kh = ransac_hypotheses(self.opt.p_in, self.opt.c, self.opt.success)
+        self.W = self.n - 1
+        self.setups: dict[int, dict] = {}
+        self.phase = "setup"
+        self.maxc_round = 0
+        self.round = 0            # consensus round
+        self.local_rounds = 0     # max-c rounds + consensus rounds until all own tracks stopped
+        self.outlier_feats = np.zeros(0, dtype=np.int64)
+        self.cuts_from: dict[int, np.ndarray] = {}
+        self.lost: list[int] = []
+        self.counts = {"messages": 0, "bytes": 0}
+
+    # --- round 1: setup -------------------------------------------------------------------
+    def setup_messages(self) -> list[tuple[int, str, dict]]:
+        payload = {"names": self.names.astype(np.int64),
+                   "keypoints": self.keypoints[self.feat].astype(np.float32),
+                   "camera": _camera_payload(self.K, self.R, self.t),
+                   "conflictive": self.conflictive.astype(np.int64)}
+        return [(j, SETUP, payload) for j in self.neighbours if j in self.alive]
+
+    def _prepare(self) -> None:
+        """Local estimates, draws and the consensus state, once the setups are in."""
+        n, i = self.n, self.i
+        drop = set(int(x) for x in self.conflictive)
+        for s in self.setups.values():
+            drop |= set(int(x) for x in s["conflictive"])
+            u, c = np.unique(s["names"], return_counts=True)
+            drop |= set(int(x) for x in u[c > 1])
+        keep = ~np.isin(self.names, sorted(drop))
+        self.names, self.feat = self.names[keep], self.feat[keep]
+        B = len(self.names)
+        observes = np.zeros((B, n), dtype=bool)
+        observes[:, i] = True
+        kp = np.zeros((B, n, 2))
+        kp[:, i] = self.keypoints[self.feat].astype(np.float64)
+        Rs = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        ts = np.zeros((n, 3))
+        Ks = Rs.copy()
+        Ks[i], Rs[i], ts[i] = self.K, self.R, self.t
+        adj = np.zeros((n, n), dtype=bool)
+        for j, s in self.setups.items():
+            Ks[j], Rs[j], ts[j] = _camera_from(s["camera"])
+            adj[i, j] = adj[j, i] = True
+            pos = np.searchsorted(self.names, s["names"])
+            ok = (pos < B) & (self.names[np.minimum(pos, max(B - 1, 0))] == s["names"]) \
+                if B else np.zeros(len(s["names"]), bool)
+            observes[pos[ok], j] = True
+            kp[pos[ok], j] = s["keypoints"][ok].astype(np.float64)
+        own = np.zeros(n, dtype=bool)
+        own[i] = True
+        X, cov, est = local_estimates(kp, observes, adj, Rs, ts, Ks, self.opt.sigma_px,
+                                      self.px_thr, self.opt.local, robots=own)
+        self.kp_own = kp[:, i]
+        self.est = est[:, i]
+        # the voting inputs as dynamic_voting prepares them (pipeline.fusion.voting._prepare)
+        self.x = np.where(self.est[:, None], X[:, i], 0.0)
+        cov_i = np.where(self.est[:, None, None], cov[:, i], np.eye(3))
+        self.nb_obs = observes & adj[i][None]          # (B, n): observing neighbours per track
+        self.nb_obs[:, i] = False
+        self.shared = {j: np.flatnonzero(self.nb_obs[:, j]) for j in self.neighbours}
+        Kh, c = self.Kh, self.opt.c
+        draws = hypothesis_draws(self.opt.seed, self.names, np.full(B, i), Kh)
+        draws[~self.est] = -np.inf
+        self.draws = draws
+        self.sets = np.full((B, Kh, c), -np.inf)
+        self.sets[:, :, 0] = draws
+        self.nb_sets = np.full((B, n, Kh, c), -np.inf)
+        self.maxc_changed = np.ones(B, dtype=bool)
+        # consensus state (pipeline.fusion.voting._dynamic_voting_protocol, this robot's rows)
+        self.info = information_matrix(cov_i).reshape(B, 1, 3, 3)
+        self.xf = self.x.reshape(B, 1, 3)
+        self.u_P = self.info
+        self.u_q = (self.info @ self.xf[..., None])[..., 0]
+        self.B = B
+
+    # --- rounds ---------------------------------------------------------------------------
+    def messages(self) -> list[tuple[int, str, dict]]:
+        """What this robot sends in the current round: ``(neighbour, kind, payload)``."""
+        if self.phase == "setup":
+            return self.setup_messages()
+        if self.phase == "maxc":
+            return self._maxc_messages()
+        if self.phase == "consensus":
+            return self._consensus_messages()
+        if self.phase == "cut":
+            return self._cut_messages()
+        return []
+
+    def receive(self, inbox, lost=()) -> None:
+        """Take in the inbox of the round just closed (``lost``: neighbours silent from now on)."""
+        for k in lost:
+            self._lose(int(k))
+        for msg in inbox:
+            if msg.src not in self.alive:
+                continue
+            if msg.kind == CUT:
+                self.cuts_from[msg.src] = np.concatenate(
+                    [self.cuts_from.get(msg.src, np.zeros(0, np.int64)),
+                     msg.payload["feat"].astype(np.int64)])
+        if self.phase == "setup":
+            for msg in inbox:
+                if msg.kind == SETUP and msg.src in self.alive:
+                    self.setups[msg.src] = msg.payload
+            self._prepare()
+            self.phase = "maxc" if self.n > 1 else "consensus"
+            if self.phase == "consensus":
+                self._start_consensus()
+        elif self.phase == "maxc":
+            self._maxc_receive(inbox)
+        elif self.phase == "consensus":
+            self._consensus_receive(inbox)
+        elif self.phase == "cut":
+            self.phase = "done"
+
+    @property
+    def done(self) -> bool:
+        return self.phase == "done"
+
+    def _lose(self, k: int) -> None:
+        if k not in self.alive:
+            return
+        self.alive.discard(k)
+        self.lost.append(k)
+        if hasattr(self, "nb_obs"):
+            self.nb_obs[:, k] = False
+
+    # --- max-c consensus (eq. 6) ----------------------------------------------------------
+    def _maxc_messages(self):
+        out = []
+        for j in self.neighbours:
+            S = self.shared[j]
+            if j not in self.alive or not len(S):
+                continue
+            ch = self.maxc_changed[S]
+            out.append((j, MAXC, {"changed": np.packbits(ch), "sets": self.sets[S[ch]]}))
+        return out
+
+    def _maxc_receive(self, inbox) -> None:
+        for msg in inbox:
+            if msg.kind != MAXC or msg.src not in self.alive:
+                continue
+            S = self.shared[msg.src]
+            ch = np.unpackbits(msg.payload["changed"], count=len(S)).astype(bool)
+            self.nb_sets[S[ch], msg.src] = msg.payload["sets"]
+        B, Kh, c = self.sets.shape
+        nb = np.where(self.nb_obs[:, :, None, None], self.nb_sets, -np.inf)   # (B, n, K, c)
+        cand = np.concatenate([self.sets[:, None], nb], axis=1)                # (B, 1+n, K, c)
+        cand = cand.transpose(0, 2, 1, 3).reshape(B, Kh, -1)
+        cand = -np.sort(-cand, axis=-1)
+        dup = np.zeros(cand.shape, dtype=bool)
+        dup[..., 1:] = cand[..., 1:] == cand[..., :-1]
+        cand[dup] = -np.inf
+        new_sets = -np.sort(-cand, axis=-1)[..., :c]
+        self.maxc_changed = (new_sets != self.sets).any(axis=(1, 2))
+        self.sets = new_sets
+        self.maxc_round += 1
+        if self.maxc_round >= self.n - 1:
+            self._start_consensus()
+
+    # --- dynamic voting (eqs. 10-14) with the stop rule ------------------------------------
+    def _start_consensus(self) -> None:
+        B, Kh = self.B, self.Kh
+        wire = self.opt.wire
+        self.members = np.isfinite(self.draws) & (self.sets == self.draws[..., None]).any(-1)
+        m = self.members.astype(np.float64)
+        self.P = to_wire(self.u_P * m[..., None, None], wire)                # eq. (5)
+        self.q = to_wire(self.u_q * m[..., None], wire)
+        self.v = m.copy()                                                    # eq. (10)
+        self.prev_yes = self.members.copy()
+        self.stopped = np.zeros(B, dtype=bool)
+        self.counter = np.zeros(B, dtype=np.int64)
+        self.sent = None
+        self.deg = self.nb_obs.sum(1)
+        self.deg_changed = np.zeros(B, dtype=bool)
+        self.theta = np.zeros((B, Kh, 3))
+        self.ok = np.zeros((B, Kh), dtype=bool)
+        self.yes = self.prev_yes.copy()
+        n = self.n
+        self.nb_P = np.zeros((B, n, Kh, 3, 3))
+        self.nb_q = np.zeros((B, n, Kh, 3))
+        self.nb_v = np.zeros((B, n, Kh))
+        self.nb_deg = np.zeros((B, n), dtype=np.int64)
+        self.nb_counter = np.zeros((B, n), dtype=np.int64)
+        self.nb_stopped = np.zeros((B, n), dtype=bool)
+        self.counter_dtype = np.dtype(f"u{index_bytes(self.W + 1)}")
+        self.deg_dtype = np.dtype(f"u{index_bytes(self.n)}")
+        self.wire_dtype = np.float32 if wire == "float32" else np.float64
+        self.changed_bytes = (index_bytes(self.n) + bundle_reals(Kh, 3)
+                              * np.dtype(self.wire_dtype).itemsize)
+        self.phase = "consensus"
+        self.round = 0
+        if B == 0:
+            self._finish()
+
+    def _opinion(self, run) -> None:
+        th, okr = solve_information(self.P[run], self.q[run])            # θ_i = P_i⁻¹ q_i
+        self.theta[run], self.ok[run] = th, okr
+        obs_f = self.est.reshape(-1, 1)
+        self.yes[run] = okr & obs_f[run] & (
+            _sq_mahalanobis(self.xf[run] - th, self.info[run]) <= self.thr)   # eq. (12)
+
+    def _consensus_messages(self):
+        wire = self.opt.wire
+        run = ~self.stopped
+        self.run = run
+        self._opinion(run)
+        u = self.yes.astype(np.float64) - self.prev_yes                    # eqs. (13)-(14)
+        self.prev_yes = self.yes.copy()
+        image = (to_wire(self.P, wire), to_wire(self.q, wire), to_wire(self.v, wire))
+        changed = np.ones(self.B, dtype=bool) if self.sent is None else self.deg_changed.copy()
+        if self.sent is not None:
+            for now_, before in zip(image, self.sent, strict=True):
+                changed |= (now_ != before).reshape(self.B, -1).any(1)
+        self.sent = image
+        self.image, self.u = image, u
+        # the stop rule's counters (pipeline.fusion.protocol.stop_counters, this robot's rows)
+        flag = ~changed & (u == 0).all(1)
+        prev = np.where(self.stopped, _BIG, self.counter)
+        nbc = np.where(self.nb_obs & ~self.nb_stopped, self.nb_counter, _BIG).min(1)
+        self.counter = np.where(flag, 1 + np.minimum(prev, nbc), 0)
+        self.stopping = run & (self.counter >= self.W + 1)
+        self.deg_sent = self.deg.copy()
+        out = []
+        for j in self.neighbours:
+            S = self.shared[j]
+            if j not in self.alive or not len(S):
+                continue
+            R = S[run[S]]
+            if not len(R):
+                continue
+            ch = changed[R]
+            C = R[ch]
+            out.append((j, FUSION, {
+                "c": self.counter[R].astype(self.counter_dtype),
+                "changed": np.packbits(ch),
+                "deg": self.deg[C].astype(self.deg_dtype),
+                "P": image[0][C][..., _TRIU[0], _TRIU[1]].astype(self.wire_dtype),
+                "q": image[1][C].astype(self.wire_dtype),
+                "v": image[2][C].astype(self.wire_dtype)}))
+        return out
+
+    def _consensus_receive(self, inbox) -> None:
+        wire = self.opt.wire
+        Kh = self.Kh
+        for msg in inbox:
+            if msg.kind != FUSION or msg.src not in self.alive:
+                continue
+            j, p = msg.src, msg.payload
+            S = self.shared[j]
+            R = S[~self.nb_stopped[S, j]]
+            ch = np.unpackbits(p["changed"], count=len(R)).astype(bool)
+            C = R[ch]
+            self.nb_counter[R, j] = p["c"].astype(np.int64)
+            self.nb_deg[C, j] = p["deg"].astype(np.int64)
+            Pm = np.zeros((len(C), Kh, 3, 3))
+            Pm[..., _TRIU[0], _TRIU[1]] = p["P"].astype(np.float64)
+            Pm[..., _TRIU[1], _TRIU[0]] = p["P"].astype(np.float64)
+            self.nb_P[C, j] = Pm
+            self.nb_q[C, j] = p["q"].astype(np.float64)
+            self.nb_v[C, j] = p["v"].astype(np.float64)
+            self.nb_stopped[R[self.nb_counter[R, j] >= self.W + 1], j] = True
+        self.stopped |= self.stopping
+        self.round += 1
+        new_deg = self.nb_obs.sum(1)
+        self.deg_changed = new_deg != self.deg
+        self.deg = new_deg
+        if self.stopped.all():
+            self._finish()
+            return
+        run = ~self.stopped
+        P, q, v = self._mix()
+        u = self.u
+        Pn = P + u[..., None, None] * self.u_P                               # eq. (11)
+        qn = q + u[..., None] * self.u_q
+        vn = v + u
+        self.P[run], self.q[run], self.v[run] = (to_wire(a[run], wire) for a in (Pn, qn, vn))
+        if self.round >= self.opt.rounds:                                   # the cap
+            self._finish()
+
+    def _mix(self):
+        """``Σ_j a_ij X_j(t)`` over the images of the round: Metropolis weights from the degrees
+        this round's messages carried, terms in neighbour-id order (the simulator's sparse row
+        order), ``a_ii`` with the weights subtracted in comm-edge order (its ``bincount``)."""
+        n, i = self.n, self.i
+        contrib = self.nb_obs                                               # alive neighbours
+        w = np.where(contrib, 1.0 / (1.0 + np.maximum(self.deg_sent[:, None], self.nb_deg)), 0.0)
+        s1 = np.zeros(self.B)
+        for j in self._first:
+            s1 = s1 + np.where(contrib[:, j], w[:, j], 0.0)
+        s2 = np.zeros(self.B)
+        for j in self._second:
+            s2 = s2 + np.where(contrib[:, j], w[:, j], 0.0)
+        diag = 1.0 - s1 - s2
+        P = np.zeros_like(self.P)
+        q = np.zeros_like(self.q)
+        v = np.zeros_like(self.v)
+        img = self.image
+        for j in range(n):
+            if j == i:
+                a = diag
+                Pj, qj, vj = img
+                sel = np.ones(self.B, dtype=bool)
+            else:
+                if j not in self.alive:
+                    continue
+                a = w[:, j]
+                Pj, qj, vj = self.nb_P[:, j], self.nb_q[:, j], self.nb_v[:, j]
+                sel = contrib[:, j]
+            P = P + np.where(sel[:, None, None, None], a[:, None, None, None] * Pj, 0.0)
+            q = q + np.where(sel[:, None, None], a[:, None, None] * qj, 0.0)
+            v = v + np.where(sel[:, None], a[:, None] * vj, 0.0)
+        return P, q, v
+
+    def _finish(self) -> None:
+        """Decisions on every own track (:func:`~pipeline.fusion.landmarks.fuse_tracks`)."""
+        B = self.B
+        if B:
+            run = ~self.stopped
+            if run.any():                                                   # the cap was reached
+                self._opinion(run)
+            winner = np.argmax(self.v, axis=-1)
+            pick = winner.reshape(B, 1)
+            self.winner = winner
+            self.theta_w = np.take_along_axis(self.theta, pick[..., None], 1)[:, 0]
+            self.ok_w = np.take_along_axis(self.ok, pick, 1)[:, 0]
+            self.yes_w = np.take_along_axis(self.yes, pick, 1)[:, 0]
+            voted_out = self.est & ~self.yes_w
+            u, _, z = _project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
+                               self.K[None, None])
+            e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.opt.sigma_px ** 2
+            reproj_ok = self.ok_w & (z[:, 0] > 0) & (e2 <= self.px_thr)
+            self.outlier = voted_out & self.ok_w & ~reproj_ok
+            self.outlier_feats = self.feat[self.outlier]
+        else:
+            self.winner = np.zeros(0, np.int64)
+            self.theta_w = np.zeros((0, 3))
+            self.ok_w = self.yes_w = self.outlier = np.zeros(0, bool)
+        self.local_rounds = (self.n - 1 if self.n > 1 else 0) + (self.round if B else 0)
+        self.phase = "cut"
+
+    # --- the decision's cuts ----------------------------------------------------------------
+    def _cut_messages(self):
+        if not len(self.outlier_feats):
+            return []
+        return [(j, CUT, {"feat": self.outlier_feats.astype(np.int32)})
+                for j in self.neighbours if j in self.alive]
+
+    def cut_rows(self, link_nbr, link_r, link_s) -> np.ndarray:
+        """Rows of the robot's link table cut by the fusion stage (its own outlier features,
+        and its neighbours' as they told it), ``(L_i,)`` bool."""
+        cut = np.isin(link_r, self.outlier_feats)
+        for j, feats in self.cuts_from.items():
+            cut |= (link_nbr == j) & np.isin(link_s, feats)
+        return cut
+
+
+def run_fusion_locally(fusion: FusionRobot, transport, n_robots: int | None = None,
+                       max_rounds: int | None = None) -> dict:
+    """Run robot ``fusion.i``'s fusion over ``transport`` (a
+    :class:`~pipeline.transport.RoundEndpoint`) until the termination wave ends the phase.
+
+    Returns
+    -------
+    dict — ``rounds`` (transport rounds of the phase), ``fusion_rounds`` (the largest max-c
+    plus consensus round count of the team, flooded with the wave), ``local_rounds``, ``lost``
+    (neighbours that fell silent during the phase)
+    """
+    from pipeline.consistency.termination import TerminationWave
+
+    n = int(n_robots or fusion.n)
+    wave = TerminationWave(n)
+    cap = max_rounds or (n + fusion.opt.rounds + 2 * n + 8)
+    silent_before = set(getattr(transport, "silent", ()))
+    heard_max = 0
+    wave.start(fusion.done, 0)
+    t = 0
+    while True:
+        for dst, kind, payload in fusion.messages():
+            transport.send(dst, kind, payload)
+        inbox, states = transport.end_round({**wave.state(), "r": int(heard_max),
+                                             "phase": "fusion"})
+        t += 1
+        silent = set(getattr(transport, "silent", ())) - silent_before
+        # a neighbour whose packet did not come this round is gone for the phase
+        gone = {k for k in fusion.alive if k not in states} | silent
+        fusion.receive(inbox, sorted(gone))
+        if fusion.done:
+            heard_max = max(heard_max, fusion.local_rounds)
+        for s in states.values():
+            heard_max = max(heard_max, int(s.get("r", 0)))
+        transport.note_memory(0)
+        if wave.update(fusion.done, 0, states):
+            return dict(rounds=t, fusion_rounds=int(heard_max),
+                        local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost))
+        if t > cap:
+            raise RuntimeError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
