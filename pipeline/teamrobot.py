@@ -23,8 +23,14 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
 5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
    run_consistency_locally`): detection, then Alg. 1 or the evidence rule
    (:func:`team_resolution`), repeated until conflict-free.
-6. **Publishes** its link table with every deletion (reason, round, iteration), the matches
-   it holds, its keypoints (for the observer's evaluation only) and its counters.
+6. **Fusion** (a rendered formation, whose robots know their poses; team option ``fusion``):
+   the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
+   tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
+   by the termination wave. It cuts its links at the observations it or a neighbour declared
+   outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
+7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
+   cuts, the matches it holds, its keypoints and its fused landmarks (for the observer's
+   evaluation only) and its counters.
 """
 
 from __future__ import annotations
@@ -230,7 +236,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     t0 = time.perf_counter()
     arrays: dict = {}
     matches_hdr = []
-    keypoints, projection = None, None
+    keypoints, projection, pose = None, None, None
     if team.data["kind"] == "links":
         from pipeline.link_evidence import ratio_llr
 
@@ -271,14 +277,51 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     t = time.perf_counter()
     run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
     timings["consistency"] = time.perf_counter() - t
+    fusion = None
+    if bool(opts.get("fusion")) and team.data["kind"] == "formation" and pose is not None:
+        t = time.perf_counter()
+        fusion = _robot_fusion(team, i, robot, run, transport, keypoints, pose, arrays)
+        timings["fusion"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     arrays.update(robot_link_log(robot))
     header = {"id": i, "features_per_camera": fpc.tolist(), "matches": matches_hdr,
               "resolution": resolution,
               "counters": transport.counters(), "run": {k: v for k, v in vars(run).items()},
               "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
-              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid()}
+              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid(), "fusion": fusion}
     return header, arrays
+
+
+def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict) -> dict:
+    """Step 6 of the module docstring; fills ``arrays`` and returns the header's ``fusion``."""
+    from pipeline.consistency.robot import ROBOT_LOST
+    from pipeline.fusion.robot import FusionRobot, run_fusion_locally
+
+    if hasattr(transport, "status"):
+        transport.status("fusion")
+        # loss is injected into the consistency stage only (the fusion rounds have no
+        # retransmission over this transport yet)
+        transport.lossy = False
+    K, R, t = pose
+    fusion = FusionRobot(i, team.n, team.comm_edges, robot.final_tracks(), keypoints, K, R, t)
+    out = run_fusion_locally(fusion, transport, team.n)
+    if out["lost"]:
+        gone = np.flatnonzero(robot.link_alive & np.isin(robot.link_nbr, out["lost"]))
+        robot.delete_links(gone, transport.round, ROBOT_LOST)
+        run.lost_neighbours = sorted(set(run.lost_neighbours) | set(out["lost"]))
+    cut = fusion.cut_rows(robot.link_nbr, robot.link_r, robot.link_s) & robot.link_alive
+    arrays["fusion_cut"] = cut.astype(np.uint8)
+    arrays["fusion_names"] = fusion.names.astype(np.int64)
+    arrays["fusion_feat"] = fusion.feat.astype(np.int32)
+    arrays["fusion_theta"] = np.asarray(fusion.theta_w, np.float64).reshape(-1, 3)
+    arrays["fusion_valid"] = np.asarray(fusion.ok_w, np.uint8)
+    arrays["fusion_estimated"] = np.asarray(fusion.est, np.uint8)
+    arrays["fusion_inlier"] = np.asarray(fusion.yes_w, np.uint8)
+    arrays["fusion_outlier"] = np.asarray(fusion.outlier, np.uint8)
+    arrays["fusion_winner"] = np.asarray(fusion.winner, np.int32)
+    return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
+            "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
+            "hypotheses": int(fusion.Kh)}
 
 
 def _since_launch() -> float | None:

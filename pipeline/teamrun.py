@@ -8,8 +8,11 @@ logs), and the report. Evaluation against ground truth is centralized checking c
 renders the formation itself, as ``run-formation`` does, and never feeds anything back.
 
 The robots resolve by Alg. 1 or by the evidence rule, as the simulator does
-(:func:`pipeline.teamrobot.team_resolution`). Fusion is not distributed over this transport yet: a zenoh run reports ``fusion`` as not run
-(so compare it with a simulator run with ``--no-fusion``).
+(:func:`pipeline.teamrobot.team_resolution`). On a rendered formation they then run fusion
+themselves (:mod:`pipeline.fusion.robot`); the observer cuts the links any robot cut as
+``fusion-outlier`` (:func:`fusion_of_team`) and reports the stage from their counters.
+``run-images`` over zenoh runs no fusion (its poses come from a reconstruction of every
+photograph at once, which no robot holds).
 """
 
 from __future__ import annotations
@@ -29,12 +32,14 @@ __all__ = ["run_formation_team", "resolve_conflicts_team", "images_team", "team_
            "links_of_team", "consistency_of_team"]
 
 CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "closing", "ack", "heartbeat")
-FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport"}
+FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut")
+FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport "
+                  "for photographs (their poses come from a reconstruction of all of them)"}
 
 
 def team_options(features: str = "sift", max_features: int | None = 2000, faults=None,
                  round_timeout_s: float = 5.0, merge_radius: float | None = None,
-                 resolution: str = "paper", **feature_options) -> dict:
+                 resolution: str = "paper", fusion: bool = False, **feature_options) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
 
     ``feature_options``: ``contrast_threshold``, ``rootsift``, ``budget_after_merge``,
@@ -52,7 +57,7 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
             "max_features": None if max_features is None else int(max_features),
             "round_timeout_s": float(round_timeout_s),
             "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius),
-            "resolution": resolution, **feature_options}
+            "resolution": resolution, "fusion": bool(fusion), **feature_options}
     if faults is not None:
         if faults.crash or faults.switching_topology or faults.delay_rounds:
             raise InputError("--crash, --delay-rounds and --switching-topology are faults of "
@@ -98,25 +103,39 @@ def _link_keys(cam_i, feat_i, cam_j, feat_j, n: int, M: int) -> np.ndarray:
     return ((cam_i * n + cam_j) * M + feat_i) * M + feat_j
 
 
+class _LinkIndex:
+    """Maps a robot's link-table rows to the links ``0..L-1`` (reporting only)."""
+
+    def __init__(self, links: Links, n: int, fpc) -> None:
+        self.n, self.L = int(n), len(links)
+        self.M = int(np.asarray(fpc, dtype=np.int64).max(initial=0)) + 1
+        self.key = _link_keys(links.cam_i, links.feat_i, links.cam_j, links.feat_j, n, self.M)
+        self.order = np.argsort(self.key)
+
+    def rows(self, i: int, a: dict) -> np.ndarray:
+        nbr = a["link_nbr"].astype(np.int64)
+        r, s = a["link_r"].astype(np.int64), a["link_s"].astype(np.int64)
+        lo = i < nbr
+        k = _link_keys(np.where(lo, i, nbr), np.where(lo, r, s), np.where(lo, nbr, i),
+                       np.where(lo, s, r), self.n, self.M)
+        if not self.L:
+            return np.zeros(0, np.int64)
+        pos = self.order[np.searchsorted(self.key[self.order], k)]
+        if not np.array_equal(self.key[pos], k):
+            raise RuntimeError(f"robot {i} published a link that no matching produced")
+        return pos
+
+
 def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> ConsistencyResult:
     """The :class:`ConsistencyResult` of a team run, read from the robots' published logs."""
     n = team.n
     L = len(links)
     fpc = np.asarray(fpc, dtype=np.int64)
-    M = int(fpc.max(initial=0)) + 1
-    key = _link_keys(links.cam_i, links.feat_i, links.cam_j, links.feat_j, n, M)
-    order = np.argsort(key)
+    index = _LinkIndex(links, n, fpc)
     logs = []
     survivors = np.array([i in results for i in range(n)], dtype=bool)
     for i, (_, a) in sorted(results.items()):
-        nbr = a["link_nbr"].astype(np.int64)
-        r, s = a["link_r"].astype(np.int64), a["link_s"].astype(np.int64)
-        lo = i < nbr
-        k = _link_keys(np.where(lo, i, nbr), np.where(lo, r, s), np.where(lo, nbr, i),
-                       np.where(lo, s, r), n, M)
-        pos = order[np.searchsorted(key[order], k)] if L else np.zeros(0, np.int64)
-        if L and not np.array_equal(key[pos], k):
-            raise RuntimeError(f"robot {i} published a link that no matching produced")
+        pos = index.rows(i, a)
         logs.append((pos, a["link_alive"].astype(bool), a["deleted_case"],
                      a["deleted_round"], a["deleted_iteration"]))
     d = merge_link_logs(L, logs)
@@ -168,6 +187,108 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
                              component=comp, stats=stats)
 
 
+def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, np.ndarray]:
+    """Cut in ``ledger`` the links a robot cut in its fusion stage; the stage's figures and
+    fused landmarks, read from what the robots published (reporting only).
+
+    A link still kept after consistency is cut as ``fusion-outlier`` when either end's robot
+    cut it (its own outlier observation, or its neighbour's as the neighbour told it), in the
+    team's fusion round count (the largest a robot heard with the termination wave). The fused
+    landmark of a track is formed as :func:`pipeline.fusion.landmarks.fuse_tracks` forms it:
+    the final estimates of the largest connected group of robots with a valid estimate, among
+    them those that picked the group's most common winner, averaged; its id is the union-find
+    track (:func:`pipeline.fusion.landmarks.tracks_of` over the kept links) of its smallest
+    feature.
+
+    Returns
+    -------
+    (stats, points (F, 3), track_ids (F,))
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    from pipeline.fusion.landmarks import tracks_of
+
+    n = team.n
+    fpc = np.asarray(fpc, dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    links = ledger.links
+    before = ledger.kept.copy()
+    index = _LinkIndex(links, n, fpc)
+    cut = np.zeros(len(links), dtype=bool)
+    heads = {i: h for i, (h, _) in results.items()}
+    rounds = max((int((h.get("fusion") or {}).get("fusion_rounds", 0)) for h in heads.values()),
+                 default=0)
+    for i, (_, a) in results.items():
+        if "fusion_cut" in a:
+            cut[index.rows(i, a)[a["fusion_cut"].astype(bool)]] = True
+    cut &= before
+    ledger.cut(cut, "fusion-outlier", rounds)
+    msgs = {k: 0 for k in FUSION_KINDS}
+    byts = {k: 0 for k in FUSION_KINDS}
+    for h in heads.values():
+        for k in FUSION_KINDS:
+            msgs[k] += h["counters"]["messages_by_kind"].get(k, 0)
+            byts[k] += h["counters"]["bytes_by_kind"].get(k, 0)
+    # fused landmarks: every robot's final estimate of every track it observes
+    rows = [(i, a) for i, (_, a) in sorted(results.items()) if "fusion_names" in a]
+    names = np.unique(np.concatenate([a["fusion_names"] for _, a in rows])) if rows \
+        else np.zeros(0, np.int64)
+    T = len(names)
+    obs = np.zeros((T, n), dtype=bool)
+    good = np.zeros((T, n), dtype=bool)
+    theta = np.zeros((T, n, 3))
+    winner = np.zeros((T, n), dtype=np.int64)
+    gid = np.full((T, n), np.iinfo(np.int64).max, dtype=np.int64)
+    for i, a in rows:
+        b = np.searchsorted(names, a["fusion_names"])
+        obs[b, i] = True
+        good[b, i] = a["fusion_valid"].astype(bool) & a["fusion_estimated"].astype(bool)
+        theta[b, i] = a["fusion_theta"]
+        winner[b, i] = a["fusion_winner"]
+        gid[b, i] = off[i] + a["fusion_feat"].astype(np.int64)
+    edges = np.asarray(team.comm_edges, dtype=np.int64).reshape(-1, 2)
+    ne = [np.stack([np.flatnonzero(obs[:, u] & obs[:, v]) * n + u,
+                    np.flatnonzero(obs[:, u] & obs[:, v]) * n + v], 1) for u, v in edges]
+    ne = np.concatenate(ne) if ne else np.zeros((0, 2), np.int64)
+    import scipy.sparse as sp
+
+    ncomp, lab = connected_components(sp.csr_matrix(
+        (np.ones(len(ne)), (ne[:, 0], ne[:, 1])), shape=(T * n, T * n)), directed=False)
+    lab = lab.reshape(T, n)
+    size = np.bincount(lab[good], minlength=ncomp)
+    score = np.where(good, size[lab], -1)
+    best_node = np.argmax(score, axis=1) if T else np.zeros(0, np.int64)
+    has_pt = score[np.arange(T), best_node] > 0
+    grp = good & (lab == lab[np.arange(T), best_node][:, None]) & has_pt[:, None]
+    K = int(winner.max(initial=0)) + 1
+    wcount = np.zeros((T, K), dtype=np.int64)
+    gb, gi = np.nonzero(grp)
+    np.add.at(wcount, (gb, winner[gb, gi]), 1)
+    grp &= winner == np.argmax(wcount, axis=1)[:, None]
+    cnt = grp.sum(1)
+    pts = (theta * grp[..., None]).sum(1) / np.maximum(cnt, 1)[:, None]
+    uf, _ = tracks_of(fpc, links.subset(before))
+    ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
+    fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]
+    stats = dict(
+        enabled=True, transport="zenoh", rounds=int(rounds), maxc_rounds=max(n - 1, 0),
+        consensus_rounds=max(int(rounds) - max(n - 1, 0), 0),
+        settled=bool(rounds - max(n - 1, 0) < 100) if fusion_heads else None,
+        messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
+        messages_by_kind={k: v for k, v in msgs.items() if v},
+        bytes_by_kind={k: v for k, v in byts.items() if v},
+        setup_messages=int(msgs["fusion-setup"]), setup_bytes=int(byts["fusion-setup"]),
+        tracks_fused=int(has_pt.sum()),
+        observations_estimated=int(sum(h["estimated"] for h in fusion_heads)),
+        observations_cut=int(sum(h["outliers"] for h in fusion_heads)),
+        links_cut=int(cut.sum()),
+        hypotheses=int(fusion_heads[0]["hypotheses"]) if fusion_heads else 0,
+        phase_rounds=max((int(h["rounds"]) for h in fusion_heads), default=0),
+        robots_lost={str(i): h["lost"] for i, h in sorted(
+            (i, (hh.get("fusion") or {})) for i, hh in heads.items()) if h.get("lost")})
+    return stats, pts[has_pt], ids[has_pt]
+
+
 def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
                        workdir=None, keep_run: list | None = None,
                        round_timeout_s: float = 5.0):
@@ -195,7 +316,7 @@ def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
     timer = timer or StageTimer()
     opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
                         merge_radius_for(config.resolution, config.merge_radius),
-                        config.resolution)
+                        config.resolution, fusion=bool(config.fusion))
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6
@@ -227,7 +348,15 @@ def run_formation_team(config, timer: StageTimer | None = None, *, kill=None,
     m = np.array([len(f) for f in feats], dtype=np.int64)
     res = consistency_of_team(team, run.results, links, m, run.killed)
     cleaning = CleaningResult(ledger_from_consistency(res, _conflictive_links(m, links)),
-                              dict(res.stats), fusion_stats=dict(FUSION_SKIPPED))
+                              dict(res.stats))
+    if config.fusion:
+        with timer.stage("fusion", "observer: the links the robots cut in their fusion stage"):
+            stats, pts, ids = fusion_of_team(team, run.results, cleaning.ledger, m)
+            cleaning.fusion_stats = stats
+            cleaning.fused_points, cleaning.fused_track_ids = pts, ids
+            timer.note(f"{stats['links_cut']} links cut as fusion outliers")
+    else:
+        cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
     if run.killed or float(opts.get("drop_prob", 0)) > 0:
         from pipeline.faults import FaultConfig, fault_report
 
