@@ -316,7 +316,8 @@ def add_transport_argument(parser) -> None:
     parser.add_argument("--transport", default="sim", choices=TRANSPORTS,
                         help="sim: robots are objects of this process (default, fastest); "
                              "zenoh: one process per robot on this machine, talking over "
-                             "Zenoh (no fusion); see README, 'Transports'")
+                             "Zenoh (fusion on rendered formations; none on photographs); see "
+                             "README, 'Transports'")
 
 
 def resolution_for_transport(args) -> str:

@@ -61,18 +61,25 @@ def _rows(path):
     return [tuple(line.split(",")[:6]) for line in Path(path).read_text().splitlines()]
 
 
-@pytest.mark.parametrize("formation,resolution", [("a", "evidence"), ("b", "evidence"),
-                                                   ("c", "evidence"), ("d", "evidence"),
-                                                   ("d", "paper")])
-def test_zenoh_links_equal_the_simulators_formation(formation, resolution, tmp_path):
+@pytest.mark.parametrize("formation,resolution,fusion", [
+    ("a", "evidence", True), ("b", "evidence", False), ("c", "evidence", False),
+    ("d", "evidence", True), ("d", "paper", False)])
+def test_zenoh_links_equal_the_simulators_formation(formation, resolution, fusion, tmp_path):
     sim, zen = tmp_path / "sim", tmp_path / "zenoh"
-    cfg = dict(formation=formation, resolution=resolution, **SMALL)
+    cfg = dict(formation=formation, resolution=resolution, **{**SMALL, "fusion": fusion})
     run_formation(FormationConfig(out=str(sim), **cfg))
     run_formation(FormationConfig(out=str(zen), **cfg), transport="zenoh")
     sim_rows = _rows(sim / "links.csv")
     assert _rows(zen / "links.csv") == sim_rows
     assert any(r[4] == "deleted" for r in sim_rows[1:])  # the formation had conflicts to cut
     report = json.loads((zen / "report.json").read_text())
+    if fusion:  # the robots' own fusion cut what the simulator's cut, in as many rounds
+        assert any(r[5] == "fusion-outlier" for r in sim_rows[1:])
+        sim_fusion = json.loads((sim / "report.json").read_text())["fusion"]
+        assert report["fusion"]["rounds"] == sim_fusion["rounds"]
+        assert report["fusion"]["fused_points"] == sim_fusion["fused_points"]
+        for kind, nbytes in sim_fusion["bytes_by_kind"].items():
+            assert report["fusion"]["bytes_by_kind"][kind] == nbytes
     assert report["resolution"]["method"] == resolution
     assert report["team"]["transport"] == "zenoh"
     assert all(r["wire_bytes"] >= r["bytes"] for r in report["team"]["robots"].values())
@@ -115,6 +122,23 @@ def test_kill_9_of_one_robot_survivors_finish_conflict_free(tmp_path):
     kept, rows = _kept_links(out / "links.csv")
     assert all(r[5] == "robot-lost" or r[4] == "kept" or r[5] == "resolution" for r in rows)
     assert not any(r[4] == "kept" and "2" in (r[0], r[2]) for r in rows)
+    m = report["features_per_camera"]
+    assert is_conflict_free(m, kept) and report["after"]["conflictive_sets"] == 0
+
+
+def test_kill_9_of_one_robot_during_fusion(tmp_path):
+    runs = []
+    cfg = FormationConfig(formation="d", out=str(tmp_path / "run"), **{**SMALL, "fusion": True})
+    out = run_formation_team(cfg, kill=(2, "fusion", 0.0), keep_run=runs, round_timeout_s=1.0)
+    run = runs[0]
+    assert 2 in run.killed and sorted(run.results) == [0, 1, 3, 4, 5]
+    assert all(t - run.killed[2] < 30 for t in run.finished_at.values())
+    report = json.loads((out / "report.json").read_text())
+    assert report["fusion"]["enabled"] and report["fusion"]["robots_lost"]
+    kept, rows = _kept_links(out / "links.csv")
+    touching = [r for r in rows if "2" in (r[0], r[2])]
+    assert touching and all(r[4] == "deleted" for r in touching)
+    assert any(r[5] == "robot-lost" for r in touching)
     m = report["features_per_camera"]
     assert is_conflict_free(m, kept) and report["after"]["conflictive_sets"] == 0
 
