@@ -1,16 +1,15 @@
 """Benchmark: the robots as objects of one process (sim) vs one process per robot (zenoh).
 
 For formation d (6 robots) and a 20-robot formation, side by side in one run, each as a
-command-line run (so process start is included on both sides): wall time, consistency rounds,
-messages, bytes counted (the simulator's encoding) and bytes on the wire (zenoh packets), peak
-RSS per process, and for zenoh the time from ``kill -9`` of one robot to the survivors'
-finish, plus a run with message loss. Both sides run without fusion, which does not run over
-zenoh, with the default resolution (the evidence rule) and, for formation d, also with
-``--resolution paper`` (Alg. 1); ``sim (default, fusion)`` adds the in-process default run
-for reference. For zenoh runs, the robots' start profile: seconds from the launch of a
-robot process to entering the robot code (interpreter and imports), to its Zenoh session
-being open, to the end of the start handshake and to its result, median over the robots.
-Saves ``runs/bench-team/results.json``.
+command-line run (so process start is included on both sides): wall time, consistency and
+fusion rounds, messages, bytes counted (the simulator's encoding) and bytes on the wire (zenoh
+packets), peak RSS per process, whether ``links.csv`` is the same (statuses and reasons), and
+for zenoh the time from ``kill -9`` of one robot during its fusion stage to the survivors'
+finish, plus a run with message loss. Both sides run the default command (the evidence rule,
+then fusion) and, for formation d, also ``--resolution paper`` (Alg. 1). For zenoh runs, the
+robots' start profile: seconds from the launch of a robot process to entering the robot code
+(interpreter and imports), to its Zenoh session being open, to the end of the start handshake
+and to its result, median over the robots. Saves ``runs/bench-team/results.json``.
 """
 
 from __future__ import annotations
@@ -42,6 +41,7 @@ def _median(runs: list[dict]) -> dict:
     ordered = sorted(runs, key=lambda r: r["wall_s"])
     best = dict(ordered[len(ordered) // 2])
     best["walls_s"] = [round(r["wall_s"], 2) for r in runs]
+    best["links_rows"] = runs[0]["links_rows"]
     return best
 
 
@@ -58,7 +58,9 @@ def _cli_once(args: list[str], out: Path) -> dict:
     if os.waitstatus_to_exitcode(status) != 0:
         raise RuntimeError(f"run-formation {' '.join(args)} failed: {err[-500:]}")
     report = json.loads((out / "report.json").read_text())
-    return {"wall_s": wall, "report": report, "launcher_rss_bytes": usage.ru_maxrss * 1024}
+    rows = [tuple(line.split(",")[:6]) for line in (out / "links.csv").read_text().splitlines()]
+    return {"wall_s": wall, "report": report, "launcher_rss_bytes": usage.ru_maxrss * 1024,
+            "links_rows": rows}
 
 
 def _row(name: str, res: dict) -> dict:
@@ -69,6 +71,10 @@ def _row(name: str, res: dict) -> dict:
            "rounds": int(r["detection_rounds"] + r["resolution_rounds"]),
            "messages": r["messages"], "bytes_counted": r["bytes"],
            "links_deleted": int(rep["before"]["links"] - rep["after"]["links"]),
+           "fusion_rounds": rep["fusion"].get("rounds"),
+           "fusion_messages": rep["fusion"].get("messages"),
+           "fusion_bytes": rep["fusion"].get("bytes"),
+           "fusion_cut": rep["fusion"].get("cut_links"),
            "conflictive_sets_after": rep["after"]["conflictive_sets"],
            "rss_launcher_mb": round(res["launcher_rss_bytes"] / 2**20, 1)}
     if team:
@@ -91,17 +97,17 @@ def _row(name: str, res: dict) -> dict:
 
 
 def _kill_run(args: list[str], size, out: Path) -> dict:
-    """zenoh run with ``kill -9`` of robot 2 as its consistency stage starts."""
+    """zenoh run with ``kill -9`` of robot 2 as its fusion stage starts."""
     from pipeline.commands.run_formation import add_arguments, config_from_args
     from pipeline.teamrun import run_formation_team
 
     ap = argparse.ArgumentParser()
     add_arguments(ap)
-    cfg = config_from_args(ap.parse_args([*args, "--no-fusion", "--no-rerun", "--size", size,
+    cfg = config_from_args(ap.parse_args([*args, "--no-rerun", "--size", size,
                                           "--out", str(out)]))
     runs = []
     t0 = time.perf_counter()
-    run_formation_team(cfg, kill=(2, "consistency", 0.0), keep_run=runs)
+    run_formation_team(cfg, kill=(2, "fusion", 0.0), keep_run=runs)
     wall = time.perf_counter() - t0
     run = runs[0]
     rep = json.loads((out / "report.json").read_text())
@@ -109,6 +115,7 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
             "kill_to_finish_s": round(max(run.finished_at.values()) - run.killed[2], 2),
             "survivors": sorted(run.results), "robots_lost": rep["faults"]["robots_lost"],
             "links_cut_robot_lost": rep["faults"]["links_cut_robot_lost"],
+            "fusion_robots_lost": rep["fusion"].get("robots_lost"),
             "conflictive_sets_after": rep["after"]["conflictive_sets"]}
 
 
@@ -129,49 +136,52 @@ def main() -> int:
                 continue
             # the default resolution (evidence rule) on both sides, side by side
             base = [*fargs, "--size", args.size]
-            rows = []
-            if k == 0:
-                rows.append(_row("sim (default, fusion)", _cli(base, tmp / f"s{k}f")))
+            rows, same = [], {}
             # alternate the two sides so that a busy spell of the machine hits both
             sim_runs, zen_runs = [], []
             for r in range(args.repeat):
-                sim_runs.append(_cli_once([*base, "--no-fusion"], tmp / f"s{k}-{r}"))
-                zen_runs.append(_cli_once([*base, "--no-fusion", "--transport", "zenoh"],
-                                          tmp / f"z{k}-{r}"))
-            rows.append(_row("sim", _median(sim_runs)))
-            rows.append(_row("zenoh", _median(zen_runs)))
+                sim_runs.append(_cli_once(base, tmp / f"s{k}-{r}"))
+                zen_runs.append(_cli_once([*base, "--transport", "zenoh"], tmp / f"z{k}-{r}"))
+            sim_med, zen_med = _median(sim_runs), _median(zen_runs)
+            same["default"] = sim_med["links_rows"] == zen_med["links_rows"]
+            rows.append(_row("sim", sim_med))
+            rows.append(_row("zenoh", zen_med))
             if k == 0:
-                paper = [*base, "--no-fusion", "--resolution", "paper"]
+                paper = [*base, "--resolution", "paper"]
                 sim_runs, zen_runs = [], []
                 for r in range(args.repeat):
                     sim_runs.append(_cli_once(paper, tmp / f"sp{k}-{r}"))
                     zen_runs.append(_cli_once([*paper, "--transport", "zenoh"],
                                               tmp / f"zp{k}-{r}"))
-                rows.append(_row("sim paper", _median(sim_runs)))
-                rows.append(_row("zenoh paper", _median(zen_runs)))
+                sim_med, zen_med = _median(sim_runs), _median(zen_runs)
+                same["paper"] = sim_med["links_rows"] == zen_med["links_rows"]
+                rows.append(_row("sim paper", sim_med))
+                rows.append(_row("zenoh paper", zen_med))
             rows.append(_row("zenoh --drop-prob 0.2",
-                             _cli([*base, "--no-fusion", "--transport", "zenoh",
-                                   "--drop-prob", "0.2"], tmp / f"zd{k}")))
+                             _cli([*base, "--transport", "zenoh", "--drop-prob", "0.2"],
+                                  tmp / f"zd{k}")))
             kill = _kill_run(fargs, args.size, tmp / f"zk{k}")
             sim = next(r for r in rows if r["run"] == "sim")
             zen = next(r for r in rows if r["run"] == "zenoh")
             results["formations"][name] = {
                 "rows": rows, "kill_9": kill,
                 "zenoh_over_sim_wall": round(zen["wall_s"] / sim["wall_s"], 2),
-                "same_links_deleted": zen["links_deleted"] == sim["links_deleted"]}
+                "same_links_csv": same}
             if k == 0:
                 sp = next(r for r in rows if r["run"] == "sim paper")
                 zp = next(r for r in rows if r["run"] == "zenoh paper")
                 results["formations"][name]["zenoh_over_sim_wall_paper"] = round(
                     zp["wall_s"] / sp["wall_s"], 2)
             print(f"\n== formation {name}, {args.size}")
-            cols = ["run", "wall_s", "rounds", "messages", "bytes_counted",
-                    "bytes_counted_all_kinds", "wire_bytes", "rss_launcher_mb", "rss_robot_max_mb", "links_deleted",
+            cols = ["run", "wall_s", "rounds", "messages", "bytes_counted", "fusion_rounds",
+                    "fusion_messages", "fusion_bytes", "bytes_counted_all_kinds", "wire_bytes",
+                    "rss_launcher_mb", "rss_robot_max_mb", "links_deleted", "fusion_cut",
                     "conflictive_sets_after", "links_cut_robot_lost"]
             print(" | ".join(f"{c:>14}" for c in cols))
             for r in rows:
                 print(" | ".join(f"{str(r.get(c, '-')):>14}" for c in cols))
-            print(f"kill -9 of robot 2: survivors {kill['survivors']} finished "
+            print(f"links.csv the same over both transports (statuses, reasons): {same}")
+            print(f"kill -9 of robot 2 in its fusion stage: survivors {kill['survivors']} finished "
                   f"{kill['kill_to_finish_s']} s after the kill; {kill['links_cut_robot_lost']} "
                   f"links cut robot-lost; conflictive sets after: {kill['conflictive_sets_after']}")
             prof = ["start_entered_s", "start_session_open_s", "start_handshake_done_s",
@@ -182,7 +192,7 @@ def main() -> int:
                 for r in rows if r["run"].startswith("zenoh")))
             ratio = results["formations"][name]["zenoh_over_sim_wall"]
             print(f"walls (s), sim: {sim['walls_s']}, zenoh: {zen['walls_s']}")
-            print(f"zenoh / sim wall time (both without fusion, evidence rule): {ratio}x "
+            print(f"zenoh / sim wall time (default run: evidence rule, fusion): {ratio}x "
                   f"(target <= 3x: {'met' if ratio <= 3 else 'NOT met'})")
             if k == 0:
                 print("zenoh / sim wall time with --resolution paper: "
