@@ -2,15 +2,18 @@
 
 ``--transport zenoh`` of ``run-formation``, ``run-formations`` and ``resolve`` comes here:
 :func:`launch_team` finds free loopback ports, writes ``TEAM.json``, starts one process per
-robot (``python -m pipeline robot --team TEAM.json --id I``) and an *observer* in this process
+robot (by default forked from one *zygote* process that imported the robot program once,
+:mod:`pipeline.zygote`; with ``fork=False`` each is ``python -m pipeline robot --team
+TEAM.json --id I``, its own interpreter) and an *observer* in this process
 that only subscribes to the robots' published results (it holds a Zenoh session listening on
 its own endpoint; robots connect to it besides their neighbours, and it never relays between
 robots: peers do not route for others). The caller builds the usual run folder from the
 results.
 
-No process is left behind: all robots run in one process group that is killed on any exit
-of the launcher (normal end, error, Ctrl-C, SIGTERM); on Linux each robot also asks the kernel
-to kill it if the launcher itself dies (``PR_SET_PDEATHSIG``).
+No process is left behind: all robots (and the zygote) run in one process group that is
+killed on any exit of the launcher (normal end, error, Ctrl-C, SIGTERM); on Linux each robot
+also asks the kernel to kill it if its parent (the launcher, or the zygote) dies
+(``PR_SET_PDEATHSIG``), and the zygote asks it of the launcher.
 """
 
 from __future__ import annotations
@@ -74,6 +77,52 @@ def _pdeathsig():  # runs in the child between fork and exec
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except OSError:
         pass
+
+
+class _ForkedRobot:
+    """A robot forked by the zygote, seen like a :class:`subprocess.Popen` (pid, poll, wait,
+    kill); its exit code comes from the zygote's ``exit`` line."""
+
+    def __init__(self, i: int, pid: int, codes: dict, cv: threading.Condition) -> None:
+        self.i, self.pid, self._codes, self._cv = int(i), int(pid), codes, cv
+
+    @property
+    def returncode(self):
+        return self._codes.get(self.i)
+
+    def poll(self):
+        return self._codes.get(self.i)
+
+    def wait(self, timeout: float | None = None):
+        end = None if timeout is None else time.monotonic() + timeout
+        with self._cv:
+            while self.i not in self._codes:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    raise subprocess.TimeoutExpired(f"robot {self.i}", timeout)
+                self._cv.wait(0.05 if left is None else min(left, 0.05))
+        return self._codes[self.i]
+
+    def kill(self) -> None:
+        if self.i in self._codes:  # reaped: its pid may belong to another process by now
+            return
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGKILL)
+
+
+def _read_zygote(stream, procs: dict, codes: dict, cv: threading.Condition) -> None:
+    """Reader thread: the zygote's ``pid I PID`` and ``exit I CODE`` lines."""
+    for raw in stream:
+        parts = raw.decode(errors="replace").split()
+        if len(parts) != 3 or parts[0] not in ("pid", "exit"):
+            continue
+        i, v = int(parts[1]), int(parts[2])
+        with cv:
+            if parts[0] == "pid":
+                procs[i] = _ForkedRobot(i, v, codes, cv)
+            else:
+                codes[i] = v
+            cv.notify_all()
 
 
 @dataclass
@@ -140,7 +189,8 @@ class _Observer:
 
 
 def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float = 600.0,
-                kill: tuple[int, str, float] | None = None, log=None) -> TeamRun:
+                kill: tuple[int, str, float] | None = None, log=None,
+                fork: bool = True) -> TeamRun:
     """Run every robot of ``team`` as a process on this machine; return what they published.
 
     Parameters
@@ -151,6 +201,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     kill : ``(robot, status, delay_s)`` or None — fault injection: ``kill -9`` of ``robot``
         ``delay_s`` seconds after it published ``status`` (``started``, ``consistency``)
     log : callable(str) or None
+    fork : bool — fork the robots from one zygote that imported the robot program once
+        (:mod:`pipeline.zygote`; default), or start each as its own interpreter
 
     Raises
     ------
@@ -189,26 +241,42 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         for sig in (signal.SIGINT, signal.SIGTERM):
             old_handlers[sig] = signal.signal(sig, on_signal)
     t0 = time.monotonic()
+    zygote = None
     try:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
-        for i in range(team.n):
+        if fork:
             env[LAUNCHED_AT_ENV] = repr(time.time())
-            errfiles[i] = open(workdir / f"robot{i}.log", "wb")  # noqa: SIM115
-            procs[i] = subprocess.Popen(
-                [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
-                 "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
-                process_group=0 if pgid is None else pgid, preexec_fn=_pdeathsig)
-            if pgid is None:
-                pgid = procs[i].pid
+            errfiles["zygote"] = open(workdir / "zygote.log", "wb")  # noqa: SIM115
+            zygote = subprocess.Popen(
+                [sys.executable, "-m", "pipeline.zygote", str(team_path), str(workdir)],
+                stdout=subprocess.PIPE, stderr=errfiles["zygote"], env=env, process_group=0,
+                preexec_fn=_pdeathsig)
+            pgid = zygote.pid
+            threading.Thread(target=_read_zygote, daemon=True,
+                             args=(zygote.stdout, procs, run.exit_codes, observer.cv)).start()
+        else:
+            for i in range(team.n):
+                env[LAUNCHED_AT_ENV] = repr(time.time())
+                errfiles[i] = open(workdir / f"robot{i}.log", "wb")  # noqa: SIM115
+                procs[i] = subprocess.Popen(
+                    [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
+                     "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
+                    process_group=0 if pgid is None else pgid, preexec_fn=_pdeathsig)
+                if pgid is None:
+                    pgid = procs[i].pid
         run.start_s = time.monotonic() - t0
         deadline = t0 + timeout_s
         with observer.cv:
             while True:
-                for i, p in procs.items():
+                for i, p in list(procs.items()):
                     if i not in run.exit_codes and p.poll() is not None:
                         run.exit_codes[i] = p.returncode
-                if kill is not None and kill[0] not in run.killed:
+                if zygote is not None and zygote.poll() is not None and len(procs) < team.n:
+                    raise TeamError("the robots' zygote (python -m pipeline.zygote) ended "
+                                    f"with exit code {zygote.returncode} before starting "
+                                    f"every robot: {_tail(workdir / 'zygote.log')}")
+                if kill is not None and kill[0] not in run.killed and kill[0] in procs:
                     k, status, delay = kill
                     if status in observer.seen.get(k, ()):
                         observer.cv.release()
@@ -255,9 +323,17 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         return run
     finally:
         kill_all()
-        for p in procs.values():
+        if zygote is not None:
+            # the zygote reaps its robots; killed with them, it reports no more exits, and
+            # robots it did not reap are reaped by init
             with contextlib.suppress(Exception):
-                p.wait(timeout=5)
+                zygote.wait(timeout=5)
+            if zygote.stdout is not None:
+                zygote.stdout.close()
+        else:
+            for p in procs.values():
+                with contextlib.suppress(Exception):
+                    p.wait(timeout=5)
         for f in errfiles.values():
             f.close()
         observer.close()

@@ -215,6 +215,11 @@ def _children(pid):
     return [int(p) for p in out]
 
 
+def _descendants(pid):
+    kids = _children(pid)
+    return kids + [g for k in kids for g in _children(k)]
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
 def test_interrupted_launcher_leaves_no_robot_behind(links_input, tmp_path, sig):
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
@@ -225,10 +230,11 @@ def test_interrupted_launcher_leaves_no_robot_behind(links_input, tmp_path, sig)
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     kids = []
     t0 = time.monotonic()
-    while len(kids) < 6 and time.monotonic() - t0 < 30:
-        kids = _children(proc.pid)
+    # the robots' zygote and the six robots it forked
+    while len(kids) < 7 and time.monotonic() - t0 < 30:
+        kids = _descendants(proc.pid)
         time.sleep(0.05)
-    assert len(kids) == 6
+    assert len(kids) == 7
     proc.send_signal(sig)
     proc.wait(timeout=20)
     t0 = time.monotonic()
@@ -254,6 +260,24 @@ def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
     with pytest.raises(TeamError, match=r"robot \d \(tcp/127\.0\.0\.1:\d+\) failed with exit "
                                         r"code 2: error: .*missing\.csv"):
         launch_team(team, tmp_path / "team", timeout_s=60)
+
+
+def test_forked_and_separately_started_robots_give_the_same_result(links_input, tmp_path):
+    from pipeline.launcher import launch_team, make_team
+
+    fpc = [12, 12, 12, 12]
+    data = {"kind": "links", "links": str(links_input / "in.csv"), "features_per_camera": fpc}
+    edges = [[i, j] for i in range(4) for j in range(i + 1, 4)]
+    runs = {fork: launch_team(make_team("f", edges, data, n=4), tmp_path / str(fork),
+                              fork=fork, timeout_s=120) for fork in (True, False)}
+    assert (tmp_path / "True" / "zygote.log").exists()
+    assert not (tmp_path / "False" / "zygote.log").exists()
+    for run in runs.values():
+        assert sorted(run.results) == [0, 1, 2, 3] and set(run.exit_codes.values()) == {0}
+    for i in range(4):
+        a, b = runs[True].results[i][1], runs[False].results[i][1]
+        for k in ("link_alive", "deleted_case", "deleted_round"):
+            np.testing.assert_array_equal(a[k], b[k])
 
 
 def test_zenoh_links_equal_the_simulators_run_images(sceaux_small, tmp_path):
