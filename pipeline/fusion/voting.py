@@ -428,7 +428,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     B, N, d = x.shape
     K = members.shape[-1]
     M = B * N
-    info = np.linalg.inv(cov).reshape(M, 1, d, d)
+    info = information_matrix(cov).reshape(M, 1, d, d)
     xf = x.reshape(M, 1, d)
     obs_f = obs.reshape(M, 1)
     # the input bundle u of eq. (14): (Λ_i⁻¹, Λ_i⁻¹ x_i, 1) per node
