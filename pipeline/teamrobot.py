@@ -26,7 +26,8 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
 6. **Fusion** (a rendered formation, whose robots know their poses; team option ``fusion``):
    the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
    tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
-   by the termination wave. It cuts its links at the observations it or a neighbour declared
+   by the termination wave; with message loss injected (``drop_prob``), every logical round
+   over the reliable channel in lockstep (:func:`pipeline.fusion.robot.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
    outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
 7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
    cuts, the matches it holds, its keypoints and its fused landmarks (for the observer's
@@ -294,17 +295,21 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
 
 def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict) -> dict:
     """Step 6 of the module docstring; fills ``arrays`` and returns the header's ``fusion``."""
+    from pipeline.consistency.protocols import ProtocolOptions
     from pipeline.consistency.robot import ROBOT_LOST
-    from pipeline.fusion.robot import FusionRobot, run_fusion_locally
+    from pipeline.fusion.robot import FusionRobot, run_fusion_locally, run_fusion_reliably
 
     if hasattr(transport, "status"):
         transport.status("fusion")
-        # loss is injected into the consistency stage only (the fusion rounds have no
-        # retransmission over this transport yet)
-        transport.lossy = False
     K, R, t = pose
     fusion = FusionRobot(i, team.n, team.comm_edges, robot.final_tracks(), keypoints, K, R, t)
-    out = run_fusion_locally(fusion, transport, team.n)
+    if any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n)):
+        # loss injected (public: the team file): every logical round over the reliable
+        # channel in lockstep, as the simulator's fusion runs on a lossy network
+        out = run_fusion_reliably(fusion, transport, ProtocolOptions(
+            reliable=True, loss_timeout=int(team.options_for(i)["loss_timeout"])), team.n)
+    else:
+        out = run_fusion_locally(fusion, transport, team.n)
     if out["lost"]:
         gone = np.flatnonzero(robot.link_alive & np.isin(robot.link_nbr, out["lost"]))
         robot.delete_links(gone, transport.round, ROBOT_LOST)

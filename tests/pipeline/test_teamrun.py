@@ -156,6 +156,21 @@ def test_message_loss_at_the_zenoh_transport_is_handled(links_input, tmp_path):
     assert s["after"]["conflictive_sets"] == 0
 
 
+def test_message_loss_during_fusion_over_zenoh_is_handled(tmp_path):
+    from pipeline.faults import FaultConfig
+
+    cfg = FormationConfig(formation="d", out=str(tmp_path / "run"),
+                          faults=FaultConfig(drop_prob=0.2, seed=3), **{**SMALL, "fusion": True})
+    out = run_formation_team(cfg)
+    report = json.loads((out / "report.json").read_text())
+    fusion = report["fusion"]
+    # the fusion rounds went over the reliable channel: losses were retransmitted
+    assert fusion["enabled"] and fusion["retransmissions"] > 0 and not fusion["robots_lost"]
+    assert fusion["cut_links"] > 0 and report["faults"]["links_cut_robot_lost"] == 0
+    kept, _ = _kept_links(out / "links.csv")
+    assert is_conflict_free(report["features_per_camera"], kept)
+
+
 def _team_file(tmp_path, ports, links_input, **opts):
     doc = {"name": "t", "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p}"}
                                    for i, p in enumerate(ports)],

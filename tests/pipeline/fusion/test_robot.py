@@ -5,7 +5,7 @@ import pytest
 
 from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.fusion.protocol import hypothesis_draws
-from pipeline.fusion.robot import FusionRobot, run_fusion_locally
+from pipeline.fusion.robot import FusionRobot, run_fusion_locally, run_fusion_reliably
 from pipeline.transport.local import LocalTeam
 from pipeline.transport.simulated import NetworkOptions
 from pipeline.types import Features, Links, View
@@ -102,6 +102,19 @@ def test_a_robot_crashed_during_fusion_leaves_the_graph_and_the_others_finish():
     for i in (2, 4):  # its neighbours
         assert outs[i]["lost"] == [3]
     assert all(outs[i] is not None and robots[i].done for i in range(6) if i != 3)
+
+
+def test_under_message_loss_the_reliable_lockstep_gives_the_fault_free_cuts():
+    views, feats, links, edges, labels = _ring_rig()
+    ref = fuse_tracks(views, feats, links, edges, track_labels=np.concatenate(labels))
+    robots = _robots(views, feats, edges, labels)
+    team = LocalTeam(len(views), edges, NetworkOptions(drop_probability=0.25, seed=4))
+    outs = team.run(lambda end: run_fusion_reliably(robots[end.id], end))
+    assert team.network.counters()["dropped"] > 0
+    assert all(o["lost"] == [] for o in outs)
+    assert sum(o["retransmissions"] for o in outs) > 0
+    np.testing.assert_array_equal(_cuts(robots, links, feats), ref.cut_links)
+    assert {o["fusion_rounds"] for o in outs} == {ref.stats["rounds"]}
 
 
 def test_hypothesis_draws_depend_only_on_seed_name_robot():
