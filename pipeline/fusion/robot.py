@@ -51,8 +51,8 @@ A neighbour the transport reports silent (its process died) leaves every track's
 at once: its terms leave the update (the robot's own weight takes them, so its row still sums to
 one and the weights stay symmetric: both ends of a link use the degrees their messages of that
 round carried), its degree changes are sent with the next round, and the robot cuts every link
-to it as ``robot-lost``. Message loss is not injected into this stage over a real transport
-(the robots' round packets carry it; see :mod:`pipeline.transport.zenoh_transport`).
+to it as ``robot-lost``. On a lossy network every logical round goes over the reliable
+channel in lockstep (:func:`run_fusion_reliably`), so the computation is the fault-free one.
 """
 
 from __future__ import annotations
