@@ -128,7 +128,10 @@ def main() -> int:
                     help="runs of each sim/zenoh configuration, the median wall kept "
                          "(default 3; the machine may be shared)")
     args = ap.parse_args()
-    results = {"size": args.size, "formations": {}}
+    load = [round(x, 2) for x in os.getloadavg()]
+    results = {"size": args.size, "formations": {}, "cpus": os.cpu_count(),
+               "load_average_at_start": load}
+    print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for k, (name, fargs) in enumerate(FORMATIONS.items()):

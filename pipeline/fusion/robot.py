@@ -546,7 +546,6 @@ def run_fusion_locally(fusion: FusionRobot, transport, n_robots: int | None = No
             heard_max = max(heard_max, fusion.local_rounds)
         for s in states.values():
             heard_max = max(heard_max, int(s.get("r", 0)))
-        transport.note_memory(0)
         if wave.update(fusion.done, 0, states):
             return dict(rounds=t, fusion_rounds=int(heard_max),
                         local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost))
