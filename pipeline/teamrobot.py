@@ -326,7 +326,7 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     arrays["fusion_winner"] = np.asarray(fusion.winner, np.int32)
     return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
             "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
-            "hypotheses": int(fusion.Kh)}
+            "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus}
 
 
 def _since_launch() -> float | None:

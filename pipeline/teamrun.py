@@ -270,10 +270,13 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     uf, _ = tracks_of(fpc, links.subset(before))
     ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
     fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]
+    mode = fusion_heads[0].get("consensus", "metropolis") if fusion_heads else None
+    # the exact mode floods (no separate max-c rounds); Metropolis: n - 1 max-c rounds first
+    maxc = max(n - 1, 0) if mode == "metropolis" else 0
     stats = dict(
-        enabled=True, transport="zenoh", rounds=int(rounds), maxc_rounds=max(n - 1, 0),
-        consensus_rounds=max(int(rounds) - max(n - 1, 0), 0),
-        settled=bool(rounds - max(n - 1, 0) < 100) if fusion_heads else None,
+        enabled=True, transport="zenoh", consensus=mode, rounds=int(rounds), maxc_rounds=maxc,
+        consensus_rounds=max(int(rounds) - maxc, 0),
+        settled=bool(rounds - maxc < 100) if mode == "metropolis" else None,
         messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
         messages_by_kind={k: v for k, v in msgs.items() if v},
         bytes_by_kind={k: v for k, v in byts.items() if v},

@@ -308,8 +308,9 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     if not len(bb):
         return use
     P = len(bb)
-    # each unordered pair once: (b, lo, hi) with lo < hi
-    ub, ui, uj = np.nonzero(np.triu(nb, k=1))
+    # each unordered pair once: (b, lo, hi) with lo < hi (from either robot's row: a robot
+    # forming only its own estimates holds only its row of nb)
+    ub, ui, uj = np.nonzero(np.triu(nb | np.swapaxes(nb, 1, 2), k=1))
     pair_id = np.full((B, n, n), -1, dtype=np.int64)
     pair_id[ub, ui, uj] = pair_id[ub, uj, ui] = np.arange(len(ub))
     two = np.stack([ui, uj], 1)                                        # (U, 2)

@@ -20,9 +20,19 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    From the setups the robot forms its local estimate of each track
    (:func:`pipeline.fusion.landmarks.local_estimates`, its own row) and its max-c draws
    (:func:`pipeline.fusion.protocol.hypothesis_draws`).
-2. **Max-c consensus** (eq. 6, ``fusion-maxc``), ``n − 1`` rounds: per shared track a bit of a
+2. **Consensus**, in the mode of :func:`~pipeline.fusion.landmarks.fuse_tracks`
+   (``FusionOptions.consensus``):
+
+   * ``exact`` (default): the robot's :class:`pipeline.fusion.flooding.FloodRobot`, one
+     :meth:`~pipeline.fusion.flooding.FloodRobot.step` per round, its messages on the wire in
+     the layout that module counts (:func:`encode_flood`: the open tracks of a link are known
+     at both ends, so they go unnamed), until every track it observes is decided at the
+     consensus limit (``Diam + 1`` rounds);
+   * ``metropolis``: steps 2a and 2b below.
+
+2a. **Max-c consensus** (eq. 6, ``fusion-maxc``), ``n − 1`` rounds: per shared track a bit of a
    *changed* bitmap and the ``K c`` values of the changed ones; the members of eq. (7) follow.
-3. **Dynamic voting** (eqs. 10–14, ``fusion``), per-link delta messages and the distributed
+2b. **Dynamic voting** (eqs. 10–14, ``fusion``), per-link delta messages and the distributed
    stop rule of :mod:`pipeline.fusion.protocol`: per running shared track its stop counter and
    a changed bit, per changed track the robot's degree in the track's observer graph (for the
    Metropolis weight) and its ``K`` bundles ``(P, q, v)`` (``P`` as its upper triangle: every
@@ -31,7 +41,8 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    The update ``P_i(t + 1) = Σ_j a_ij P_j(t) + u_i Λ_i⁻¹`` sums its terms in the order of
    neighbour ids (the simulator's sparse row order), and ``a_ii`` subtracts the weights in the
    order of the comm edges (the simulator's), so the floats are the same.
-4. **Decision**: the winner ``argmax_h v_i^h`` and the outlier test of
+3. **Decision**: the winner (``argmax_h v_i^h``; exact mode: the decision of the flood) and the
+   outlier test of
    :func:`~pipeline.fusion.landmarks.fuse_tracks` (voted out, and its own keypoint does not
    reproject onto the fused landmark within the pixel gate). The robot cuts its own links at
    its outlier features and tells each neighbour which of its features it declared outliers
@@ -63,7 +74,13 @@ import numpy as np
 
 from pipeline.fusion.consensus import ransac_hypotheses, solve_information
 from pipeline.fusion.landmarks import _project, local_estimates
-from pipeline.fusion.protocol import bundle_reals, hypothesis_draws, index_bytes, to_wire
+from pipeline.fusion.protocol import (
+    WIRE_DTYPES,
+    bundle_reals,
+    hypothesis_draws,
+    index_bytes,
+    to_wire,
+)
 from pipeline.fusion.voting import (
     _sq_mahalanobis,
     chi2_ppf,
@@ -71,9 +88,11 @@ from pipeline.fusion.voting import (
     information_matrix,
 )
 
-__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "CUT"]
+__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT", "encode_flood",
+           "decode_flood"]
 
 SETUP, MAXC, FUSION, CUT = "fusion-setup", "fusion-maxc", "fusion", "fusion-cut"
+FLOOD = FUSION  # the simulator counts the flood as the consensus: kind "fusion"
 _TRIU = np.triu_indices(3)
 _BIG = np.iinfo(np.int64).max // 2
 
@@ -93,6 +112,7 @@ class FusionOptions:
     rounds: int = 100
     seed: int = 0
     wire: str = "float32"
+    consensus: str = "exact"
 
 
 def _camera_payload(K, R, t) -> np.ndarray:
@@ -213,6 +233,7 @@ class FusionRobot:
         # the voting inputs as dynamic_voting prepares them (pipeline.fusion.voting._prepare)
         self.x = np.where(self.est[:, None], X[:, i], 0.0)
         cov_i = np.where(self.est[:, None, None], cov[:, i], np.eye(3))
+        self._cov_i = cov_i
         self.nb_obs = observes & adj[i][None]          # (B, n): observing neighbours per track
         self.nb_obs[:, i] = False
         self.shared = {j: np.flatnonzero(self.nb_obs[:, j]) for j in self.neighbours}
@@ -236,6 +257,8 @@ class FusionRobot:
         """What this robot sends in the current round: ``(neighbour, kind, payload)``."""
         if self.phase == "setup":
             return self.setup_messages()
+        if self.phase == "flood":
+            return self._flood_messages()
         if self.phase == "maxc":
             return self._maxc_messages()
         if self.phase == "consensus":
@@ -260,9 +283,14 @@ class FusionRobot:
                 if msg.kind == SETUP and msg.src in self.alive:
                     self.setups[msg.src] = msg.payload
             self._prepare()
+            if self.opt.consensus == "exact":
+                self._start_flood()
+                return
             self.phase = "maxc" if self.n > 1 else "consensus"
             if self.phase == "consensus":
                 self._start_consensus()
+        elif self.phase == "flood":
+            self._flood_receive(inbox)
         elif self.phase == "maxc":
             self._maxc_receive(inbox)
         elif self.phase == "consensus":
@@ -482,18 +510,86 @@ class FusionRobot:
             self.theta_w = np.take_along_axis(self.theta, pick[..., None], 1)[:, 0]
             self.ok_w = np.take_along_axis(self.ok, pick, 1)[:, 0]
             self.yes_w = np.take_along_axis(self.yes, pick, 1)[:, 0]
+            self._outliers()
+        else:
+            self.winner = np.zeros(0, np.int64)
+            self.theta_w = np.zeros((0, 3))
+            self.ok_w = self.yes_w = self.outlier = np.zeros(0, bool)
+        self.local_rounds = (self.n - 1 if self.n > 1 else 0) + (self.round if B else 0)
+        self.phase = "cut"
+
+    def _outliers(self) -> None:
+        """The outlier test of :func:`~pipeline.fusion.landmarks.fuse_tracks` on the decided
+        ``θ``, validity and own vote of every own track."""
+        if self.B:
             voted_out = self.est & ~self.yes_w
             u, _, z = _project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
                                self.K[None, None])
             e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.opt.sigma_px ** 2
             reproj_ok = self.ok_w & (z[:, 0] > 0) & (e2 <= self.px_thr)
             self.outlier = voted_out & self.ok_w & ~reproj_ok
-            self.outlier_feats = self.feat[self.outlier]
         else:
-            self.winner = np.zeros(0, np.int64)
-            self.theta_w = np.zeros((0, 3))
-            self.ok_w = self.yes_w = self.outlier = np.zeros(0, bool)
-        self.local_rounds = (self.n - 1 if self.n > 1 else 0) + (self.round if B else 0)
+            self.outlier = np.zeros(0, bool)
+        self.outlier_feats = self.feat[self.outlier]
+
+    # --- the exact consensus (pipeline.fusion.flooding) ------------------------------------
+    def _start_flood(self) -> None:
+        """Exact consensus: the robot's FloodRobot over its own tracks (after the setup)."""
+        from pipeline.fusion.flooding import FloodRobot
+
+        cov_i = self._cov_i
+        info = information_matrix(cov_i)
+        tracks = {int(b): dict(neighbours=self.nb_obs[k].copy(), estimated=bool(self.est[k]),
+                               draws=self.draws[k], x=self.x[k], info=info[k])
+                  for k, b in enumerate(self.names)}
+        self.flood = FloodRobot(self.i, self.n, tracks, K=self.Kh, d=3, wire=self.opt.wire,
+                                c=self.opt.c, thr=self.thr)
+        self.flood_out = self.flood.step([], ())
+        self.flood_last_send = 1 if self.flood_out else 0
+        self.phase = "flood"
+
+
+    def _flood_messages(self):
+        return [(m.dst, FLOOD, encode_flood(m, self.n, self.opt.wire)) for m in self.flood_out
+                if m.dst in self.alive]
+
+
+    def _flood_receive(self, inbox) -> None:
+        if self.flood.finished:
+            self._finish_flood()
+            return
+        msgs = [decode_flood(m.src, self.i, self.flood.round, self._open_tracks(m.src),
+                             m.payload, self.n, self.Kh)
+                for m in inbox if m.kind == FLOOD and m.src in self.alive]
+        self.flood_out = self.flood.step(msgs, sorted(set(self.lost)))
+        if self.flood_out:
+            self.flood_last_send = self.flood.round
+
+
+    def _open_tracks(self, j: int) -> list:
+        """Names of the tracks neighbour ``j``'s message of this round carries: shared, ``j``
+        has not sent its last, and this robot's last (if any) was sent this round or later
+        (``j`` sends a track until it has received this robot's last)."""
+        t = self.flood.round
+        out = []
+        for k in self.shared[j]:
+            s = self.flood.tracks[int(self.names[k])]
+            if j in s.closed or s.gone[j]:
+                continue
+            if s.stopped and s.decided_round + 1 < t:
+                continue
+            out.append(int(self.names[k]))
+        return out
+
+    def _finish_flood(self) -> None:
+        B, i = self.B, self.i
+        dec = [self.flood.decisions[int(b)] for b in self.names]
+        self.winner = np.array([int(d.winner) for d in dec], dtype=np.int64)
+        self.theta_w = np.array([d.theta for d in dec], dtype=np.float64).reshape(B, 3)
+        self.ok_w = np.array([bool(d.valid) for d in dec], dtype=bool)
+        self.yes_w = np.array([bool(d.yes[d.winner, i]) and bool(d.valid) for d in dec], dtype=bool)
+        self._outliers()
+        self.local_rounds = int(self.flood_last_send)
         self.phase = "cut"
 
     # --- the decision's cuts ----------------------------------------------------------------
@@ -645,3 +741,67 @@ def run_fusion_reliably(fusion: FusionRobot, transport, options=None,
                 local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost),
                 logical_rounds=state["t"], retransmissions=chan.retransmissions,
                 acks=chan.acks_sent)
+
+
+# --------------------------------------------------------------------------------------------
+# the exact consensus (pipeline.fusion.flooding): the robot's FloodRobot on the wire
+
+
+
+def encode_flood(msg, n: int, wire: str) -> dict:
+    """A :class:`~pipeline.fusion.flooding.FloodMessage` as named arrays, byte for byte the
+    layout :mod:`pipeline.fusion.flooding` counts: per open track (in name order; both ends
+    know which tracks are open on the link) its entry count and a bit of a *last* bitmap; per
+    entry the robot id, its neighbour bitmap and a flags byte (it carries an observation); per
+    estimated entry its ``K`` draws (float64), ``x_i`` and the upper triangle of ``Λ_i⁻¹`` at
+    the wire's precision (``Λ_i⁻¹`` is exactly symmetric)."""
+    names = sorted(msg.tracks)
+    last = np.array([bool(msg.tracks[b][0]) for b in names], dtype=bool)
+    ents = [e for b in names for e in msg.tracks[b][1]]
+    count = np.array([len(msg.tracks[b][1]) for b in names], dtype=np.int64)
+    E = [e for e in ents if e.estimated]
+    dt = WIRE_DTYPES[wire]
+    K = len(E[0].draws) if E else 0
+    return {"count": count.astype(np.dtype(f"u{index_bytes(n + 1)}")), "last": np.packbits(last),
+            "robot": np.array([e.robot for e in ents], dtype=np.dtype(f"u{index_bytes(n)}")),
+            "nbrs": np.packbits(np.array([e.neighbours for e in ents], dtype=bool).reshape(
+                len(ents), n), axis=1),
+            "flags": np.array([bool(e.estimated) for e in ents], dtype=np.uint8),
+            "draws": np.array([e.draws for e in E], dtype=np.float64).reshape(len(E), K),
+            "x": np.array([e.x for e in E], dtype=dt).reshape(len(E), 3),
+            "info": np.array([np.asarray(e.info)[_TRIU] for e in E], dtype=dt).reshape(len(E), 6)}
+
+
+def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int):
+    """Inverse of :func:`encode_flood`, given the names of the open tracks (in order)."""
+    from pipeline.fusion.flooding import FloodEntry, FloodMessage
+
+    count = p["count"].astype(np.int64)
+    if len(count) != len(names):
+        raise RuntimeError(f"robot {dst}: a fusion message of robot {src} carries "
+                           f"{len(count)} tracks, {len(names)} are open on the link")
+    last = np.unpackbits(p["last"], count=len(names)).astype(bool)
+    E = int(count.sum())
+    est = p["flags"].astype(bool)
+    nbrs = np.unpackbits(p["nbrs"], axis=1, count=n).astype(bool) if E else \
+        np.zeros((0, n), bool)
+    pos = np.cumsum(est) - 1
+    msg = FloodMessage(src, dst, round_)
+    k = 0
+    for b, lb, c in zip(names, last, count, strict=True):
+        entries = []
+        for _ in range(int(c)):
+            if est[k]:
+                e = int(pos[k])
+                info = np.zeros((3, 3))
+                info[_TRIU] = p["info"][e].astype(np.float64)
+                info[_TRIU[1], _TRIU[0]] = p["info"][e].astype(np.float64)
+                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], True,
+                                          p["draws"][e].astype(np.float64),
+                                          p["x"][e].astype(np.float64), info))
+            else:
+                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], False,
+                                          np.full(K, -np.inf), np.zeros(3), np.zeros((3, 3))))
+            k += 1
+        msg.tracks[int(b)] = (bool(lb), entries)
+    return msg

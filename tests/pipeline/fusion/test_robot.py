@@ -5,7 +5,12 @@ import pytest
 
 from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.fusion.protocol import hypothesis_draws
-from pipeline.fusion.robot import FusionRobot, run_fusion_locally, run_fusion_reliably
+from pipeline.fusion.robot import (
+    FusionOptions,
+    FusionRobot,
+    run_fusion_locally,
+    run_fusion_reliably,
+)
 from pipeline.transport.local import LocalTeam
 from pipeline.transport.simulated import NetworkOptions
 from pipeline.types import Features, Links, View
@@ -53,10 +58,10 @@ def _ring_rig(n=6, P=40, seed=5, chord=True):
     return views, feats, Links(ci, fi, cj, fj), edges, labels
 
 
-def _robots(views, feats, edges, labels):
+def _robots(views, feats, edges, labels, consensus="exact"):
     n = len(views)
     return [FusionRobot(i, n, edges, labels[i], feats[i].keypoints, views[i].K, views[i].R,
-                        views[i].t) for i in range(n)]
+                        views[i].t, FusionOptions(consensus=consensus)) for i in range(n)]
 
 
 def _cuts(robots, links, feats):
@@ -67,11 +72,13 @@ def _cuts(robots, links, feats):
     return bad[off[links.cam_i] + links.feat_i] | bad[off[links.cam_j] + links.feat_j]
 
 
+@pytest.mark.parametrize("consensus", ["exact", "metropolis"])
 @pytest.mark.parametrize("chord", [True, False])
-def test_robots_one_by_one_equal_the_vectorized_stage(chord):
+def test_robots_one_by_one_equal_the_vectorized_stage(chord, consensus):
     views, feats, links, edges, labels = _ring_rig(chord=chord)
-    ref = fuse_tracks(views, feats, links, edges, track_labels=np.concatenate(labels))
-    robots = _robots(views, feats, edges, labels)
+    ref = fuse_tracks(views, feats, links, edges, track_labels=np.concatenate(labels),
+                      consensus=consensus)
+    robots = _robots(views, feats, edges, labels, consensus)
     team = LocalTeam(len(views), edges)
     outs = team.run(lambda end: run_fusion_locally(robots[end.id], end))
     assert ref.cut_links.any()                         # the planted keypoints were cut
@@ -92,11 +99,14 @@ def test_robots_one_by_one_equal_the_vectorized_stage(chord):
                                       ref.cut_links[np.concatenate([mine, other])])
 
 
-def test_a_robot_crashed_during_fusion_leaves_the_graph_and_the_others_finish():
+@pytest.mark.parametrize("consensus", ["exact", "metropolis"])
+def test_a_robot_crashed_during_fusion_leaves_the_graph_and_the_others_finish(consensus):
     views, feats, links, edges, labels = _ring_rig()
-    robots = _robots(views, feats, edges, labels)
-    # the fusion setup is round 1, max-c rounds 2-6: robot 3 crashes in the consensus
-    team = LocalTeam(len(views), edges, NetworkOptions(crash_at={3: 9}))
+    robots = _robots(views, feats, edges, labels, consensus)
+    # the fusion setup is round 1, then the flood (exact: Diam + 1 <= 4 rounds) or max-c
+    # (metropolis: rounds 2-6): robot 3 crashes in the consensus
+    team = LocalTeam(len(views), edges, NetworkOptions(crash_at={3: 3 if consensus == "exact"
+                                                                  else 9}))
     outs = team.run(lambda end: run_fusion_locally(robots[end.id], end))
     assert outs[3] is None
     for i in (2, 4):  # its neighbours
