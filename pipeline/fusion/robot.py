@@ -53,13 +53,16 @@ Termination
 The phase ends by the termination wave of :mod:`pipeline.consistency.termination`: a robot is
 *done* once every track it observes has stopped and its ``fusion-cut`` messages left; done is
 stable (nothing can restart a stopped track), so when the wave ends every robot has decided and
-every cut has arrived. The wave also floods the largest round count (max-c rounds plus the
-robot's own consensus rounds), which names the round of the fusion cuts as the simulator does.
+every cut has arrived. The wave also floods the largest round count (exact mode: the last
+round in which the robot sent a flood message; Metropolis: max-c rounds plus its own consensus
+rounds), which names the round of the fusion cuts as the simulator does.
 
 Faults
 ------
 A neighbour the transport reports silent (its process died) leaves every track's observer graph
-at once: its terms leave the update (the robot's own weight takes them, so its row still sums to
+at once. Exact mode: it is handed to :meth:`~pipeline.fusion.flooding.FloodRobot.step` as lost
+(its entry counts as known-gone, so the robot's ball can close without it). Metropolis: its
+terms leave the update (the robot's own weight takes them, so its row still sums to
 one and the weights stay symmetric: both ends of a link use the degrees their messages of that
 round carried), its degree changes are sent with the next round, and the robot cuts every link
 to it as ``robot-lost``. On a lossy network every logical round goes over the reliable
