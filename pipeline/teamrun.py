@@ -103,6 +103,17 @@ def _link_keys(cam_i, feat_i, cam_j, feat_j, n: int, M: int) -> np.ndarray:
     return ((cam_i * n + cam_j) * M + feat_i) * M + feat_j
 
 
+def _counted(heads: dict, kinds) -> tuple[dict, dict]:
+    """Messages and bytes of each kind, summed over the robots' published counters."""
+    msgs = {k: 0 for k in kinds}
+    byts = {k: 0 for k in kinds}
+    for h in heads.values():
+        for k in kinds:
+            msgs[k] += h["counters"]["messages_by_kind"].get(k, 0)
+            byts[k] += h["counters"]["bytes_by_kind"].get(k, 0)
+    return msgs, byts
+
+
 class _LinkIndex:
     """Maps a robot's link-table rows to the links ``0..L-1`` (reporting only)."""
 
@@ -144,12 +155,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     heads = {i: h for i, (h, _) in results.items()}
     any_run_head = heads[min(heads)] if heads else {}
     any_run = any_run_head.get("run", {})
-    msgs = {k: 0 for k in CONSISTENCY_KINDS}
-    byts = {k: 0 for k in CONSISTENCY_KINDS}
-    for h in heads.values():
-        for k in CONSISTENCY_KINDS:
-            msgs[k] += h["counters"]["messages_by_kind"].get(k, 0)
-            byts[k] += h["counters"]["bytes_by_kind"].get(k, 0)
+    msgs, byts = _counted(heads, CONSISTENCY_KINDS)
     lost_by = {}
     for i, h in heads.items():
         for k in h["run"].get("lost_neighbours", []):
@@ -223,12 +229,7 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
             cut[index.rows(i, a)[a["fusion_cut"].astype(bool)]] = True
     cut &= before
     ledger.cut(cut, "fusion-outlier", rounds)
-    msgs = {k: 0 for k in FUSION_KINDS}
-    byts = {k: 0 for k in FUSION_KINDS}
-    for h in heads.values():
-        for k in FUSION_KINDS:
-            msgs[k] += h["counters"]["messages_by_kind"].get(k, 0)
-            byts[k] += h["counters"]["bytes_by_kind"].get(k, 0)
+    msgs, byts = _counted(heads, FUSION_KINDS)
     # fused landmarks: every robot's final estimate of every track it observes
     rows = [(i, a) for i, (_, a) in sorted(results.items()) if "fusion_names" in a]
     names = np.unique(np.concatenate([a["fusion_names"] for _, a in rows])) if rows \

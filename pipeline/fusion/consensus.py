@@ -67,6 +67,7 @@ __all__ = [
     "average_consensus",
     "ml_consensus",
     "max_c_consensus",
+    "top_c_distinct",
     "hypothesis_members",
     "information_form",
     "solve_information",
@@ -593,15 +594,26 @@ def max_c_consensus(draws, topology, c: int, rounds: int, *, before_round=None):
         cand = np.full((n, deg.max() + 1, K, c), -np.inf)
         cand[:, 0] = sets
         cand[src, 1 + slot] = sets[dst]
-        cand = cand.transpose(0, 2, 1, 3).reshape(n, K, -1)
-        cand = -np.sort(-cand, axis=-1)
-        dup = np.zeros(cand.shape, dtype=bool)
-        dup[..., 1:] = cand[..., 1:] == cand[..., :-1]
-        cand[dup] = -np.inf
-        new_sets = -np.sort(-cand, axis=-1)[..., :c]
+        new_sets = top_c_distinct(cand.transpose(0, 2, 1, 3).reshape(n, K, -1), c)
         changed = (new_sets != sets).any(axis=(1, 2))
         sets = new_sets
     return sets, stats
+
+
+def top_c_distinct(cand: np.ndarray, c: int) -> np.ndarray:
+    """The ``c`` largest *distinct* values along the last axis, descending, ``-inf`` padded:
+    ``max^c`` of eq. (6) over a union of sets (a value heard twice counts once).
+
+    Examples
+    --------
+    >>> top_c_distinct(np.array([[0.2, 0.9, 0.2, -np.inf]]), 2)
+    array([[0.9, 0.2]])
+    """
+    cand = -np.sort(-np.asarray(cand, dtype=np.float64), axis=-1)
+    dup = np.zeros(cand.shape, dtype=bool)
+    dup[..., 1:] = cand[..., 1:] == cand[..., :-1]
+    cand[dup] = -np.inf
+    return -np.sort(-cand, axis=-1)[..., :c]
 
 
 def hypothesis_members(draws, sets) -> np.ndarray:

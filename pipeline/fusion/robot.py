@@ -75,7 +75,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.fusion.consensus import ransac_hypotheses, solve_information
+from pipeline.fusion.consensus import ransac_hypotheses, solve_information, top_c_distinct
 from pipeline.fusion.landmarks import _project, local_estimates
 from pipeline.fusion.protocol import (
     WIRE_DTYPES,
@@ -334,12 +334,7 @@ class FusionRobot:
         B, Kh, c = self.sets.shape
         nb = np.where(self.nb_obs[:, :, None, None], self.nb_sets, -np.inf)   # (B, n, K, c)
         cand = np.concatenate([self.sets[:, None], nb], axis=1)                # (B, 1+n, K, c)
-        cand = cand.transpose(0, 2, 1, 3).reshape(B, Kh, -1)
-        cand = -np.sort(-cand, axis=-1)
-        dup = np.zeros(cand.shape, dtype=bool)
-        dup[..., 1:] = cand[..., 1:] == cand[..., :-1]
-        cand[dup] = -np.inf
-        new_sets = -np.sort(-cand, axis=-1)[..., :c]
+        new_sets = top_c_distinct(cand.transpose(0, 2, 1, 3).reshape(B, Kh, -1), c)
         self.maxc_changed = (new_sets != self.sets).any(axis=(1, 2))
         self.sets = new_sets
         self.maxc_round += 1

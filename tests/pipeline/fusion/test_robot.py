@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from data_synth.formations import look_at
 from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.fusion.protocol import hypothesis_draws
 from pipeline.fusion.robot import (
@@ -29,13 +30,7 @@ def _ring_rig(n=6, P=40, seed=5, chord=True):
     sees = rng.random((n, P)) < 0.7
     views, feats, feat_of, labels = [], [], [], []
     for v in range(n):
-        c = np.array([0.6 * v - 1.5, 0.1 * v, 0.0])
-        z = np.array([0.0, 0.0, 5.5]) - c
-        z /= np.linalg.norm(z)
-        x = np.cross([0.0, -1.0, 0.0], z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        t = -R @ c
+        R, t = look_at([0.6 * v - 1.5, 0.1 * v, 0.0], [0.0, 0.0, 5.5], up=(0.0, 1.0, 0.0))
         seen = rng.permutation(np.flatnonzero(sees[v]))
         p = (K @ (pts[seen] @ R.T + t).T).T
         uv = p[:, :2] / p[:, 2:] + rng.normal(0, 0.3, (len(seen), 2))
