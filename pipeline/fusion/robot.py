@@ -26,8 +26,10 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    * ``exact`` (default): the robot's :class:`pipeline.fusion.flooding.FloodRobot`, one
      :meth:`~pipeline.fusion.flooding.FloodRobot.step` per round, its messages on the wire in
      the layout that module counts (:func:`encode_flood`: the open tracks of a link are known
-     at both ends, so they go unnamed), until every track it observes is decided at the
-     consensus limit (``Diam + 1`` rounds);
+     at both ends, so they go unnamed; tombstones of lost links as that module counts them;
+     once a robot has seen a lost link it names its open tracks, since tombstones can reopen
+     a decision), until every track it observes is decided at the consensus limit
+     (``Diam + 1`` rounds without faults);
    * ``metropolis``: steps 2a and 2b below.
 
 2a. **Max-c consensus** (eq. 6, ``fusion-maxc``), ``n − 1`` rounds: per shared track a bit of a
@@ -542,14 +544,29 @@ class FusionRobot:
                   for k, b in enumerate(self.names)}
         self.flood = FloodRobot(self.i, self.n, tracks, K=self.Kh, d=3, wire=self.opt.wire,
                                 c=self.opt.c, thr=self.thr)
+        self.saw_tombstone = False
+        self.last_sent: dict = {}      # (track, neighbour) -> round of this robot's last to it
+        self.closed_from: set = set()  # (track, neighbour) whose last this robot received
         self.flood_out = self.flood.step([], ())
         self.flood_last_send = 1 if self.flood_out else 0
         self.phase = "flood"
 
 
     def _flood_messages(self):
-        return [(m.dst, FLOOD, encode_flood(m, self.n, self.opt.wire)) for m in self.flood_out
-                if m.dst in self.alive]
+        named = bool(self.lost) or self.saw_tombstone
+        out = []
+        for m in self.flood_out:
+            if m.dst not in self.alive:
+                continue
+            for b, (last, _) in m.tracks.items():
+                if last:
+                    self.last_sent.setdefault((int(b), m.dst), self.flood.round)
+            out.append((m.dst, FLOOD, encode_flood(m, self.n, self.opt.wire,
+                                                   self._shared_names(m.dst), named)))
+        return out
+
+    def _shared_names(self, j: int) -> list:
+        return [int(self.names[k]) for k in self.shared.get(j, ())]
 
 
     def _flood_receive(self, inbox) -> None:
@@ -557,27 +574,26 @@ class FusionRobot:
             self._finish_flood()
             return
         msgs = [decode_flood(m.src, self.i, self.flood.round, self._open_tracks(m.src),
-                             m.payload, self.n, self.Kh)
+                             m.payload, self.n, self.Kh, self._shared_names(m.src))
                 for m in inbox if m.kind == FLOOD and m.src in self.alive]
+        self.saw_tombstone |= any(m.down for m in msgs)
+        for m in msgs:
+            for b, (last, _) in m.tracks.items():
+                if last:
+                    self.closed_from.add((int(b), m.src))
         self.flood_out = self.flood.step(msgs, sorted(set(self.lost)))
         if self.flood_out:
             self.flood_last_send = self.flood.round
 
 
     def _open_tracks(self, j: int) -> list:
-        """Names of the tracks neighbour ``j``'s message of this round carries: shared, ``j``
-        has not sent its last, and this robot's last (if any) was sent this round or later
-        (``j`` sends a track until it has received this robot's last)."""
+        """Names of the tracks neighbour ``j``'s message of this round carries when it does not
+        name them (it has seen no lost link, so it follows the fault-free rule): the shared
+        tracks whose last ``j`` has not sent, unless this robot's own last for the track
+        reached ``j`` before this round (``j`` sends a track until it holds that last)."""
         t = self.flood.round
-        out = []
-        for k in self.shared[j]:
-            s = self.flood.tracks[int(self.names[k])]
-            if j in s.closed or s.gone[j]:
-                continue
-            if s.stopped and s.decided_round + 1 < t:
-                continue
-            out.append(int(self.names[k]))
-        return out
+        return [b for b in self._shared_names(j) if (b, j) not in self.closed_from
+                and not self.last_sent.get((b, j), t) < t]
 
     def _finish_flood(self) -> None:
         B, i = self.B, self.i
@@ -746,13 +762,16 @@ def run_fusion_reliably(fusion: FusionRobot, transport, options=None,
 
 
 
-def encode_flood(msg, n: int, wire: str) -> dict:
+def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
     """A :class:`~pipeline.fusion.flooding.FloodMessage` as named arrays, byte for byte the
     layout :mod:`pipeline.fusion.flooding` counts: per open track (in name order; both ends
     know which tracks are open on the link) its entry count and a bit of a *last* bitmap; per
     entry the robot id, its neighbour bitmap and a flags byte (it carries an observation); per
     estimated entry its ``K`` draws (float64), ``x_i`` and the upper triangle of ``Λ_i⁻¹`` at
-    the wire's precision (``Λ_i⁻¹`` is exactly symmetric)."""
+    the wire's precision (``Λ_i⁻¹`` is exactly symmetric); per tombstone the track's position
+    among the link's ``shared`` tracks (sorted names) and the two ends of the lost link.
+    ``named``: the open tracks' names are sent too (8 bytes each), which a robot does once it
+    has seen a lost link, when tombstones may reopen a track the other end considers closed."""
     names = sorted(msg.tracks)
     last = np.array([bool(msg.tracks[b][0]) for b in names], dtype=bool)
     ents = [e for b in names for e in msg.tracks[b][1]]
@@ -760,20 +779,33 @@ def encode_flood(msg, n: int, wire: str) -> dict:
     E = [e for e in ents if e.estimated]
     dt = WIRE_DTYPES[wire]
     K = len(E[0].draws) if E else 0
-    return {"count": count.astype(np.dtype(f"u{index_bytes(n + 1)}")), "last": np.packbits(last),
-            "robot": np.array([e.robot for e in ents], dtype=np.dtype(f"u{index_bytes(n)}")),
-            "nbrs": np.packbits(np.array([e.neighbours for e in ents], dtype=bool).reshape(
-                len(ents), n), axis=1),
-            "flags": np.array([bool(e.estimated) for e in ents], dtype=np.uint8),
-            "draws": np.array([e.draws for e in E], dtype=np.float64).reshape(len(E), K),
-            "x": np.array([e.x for e in E], dtype=dt).reshape(len(E), 3),
-            "info": np.array([np.asarray(e.info)[_TRIU] for e in E], dtype=dt).reshape(len(E), 6)}
+    ib = np.dtype(f"u{index_bytes(n)}")
+    out = {"count": count.astype(np.dtype(f"u{index_bytes(n + 1)}")), "last": np.packbits(last),
+           "robot": np.array([e.robot for e in ents], dtype=ib),
+           "nbrs": np.packbits(np.array([e.neighbours for e in ents], dtype=bool).reshape(
+               len(ents), n), axis=1),
+           "flags": np.array([bool(e.estimated) for e in ents], dtype=np.uint8),
+           "draws": np.array([e.draws for e in E], dtype=np.float64).reshape(len(E), K),
+           "x": np.array([e.x for e in E], dtype=dt).reshape(len(E), 3),
+           "info": np.array([np.asarray(e.info)[_TRIU] for e in E], dtype=dt).reshape(len(E), 6)}
+    if named:
+        out["names"] = np.asarray(names, dtype=np.int64)
+    tomb = [(b, a_, b_) for b in sorted(msg.down) for a_, b_ in msg.down[b]]
+    if tomb:
+        pos = np.searchsorted(np.asarray(shared, dtype=np.int64), [t[0] for t in tomb])
+        out["tomb_count"] = np.array([len(tomb)], dtype=np.uint32)
+        out["tomb_track"] = pos.astype(np.uint32)
+        out["tomb_ends"] = np.array([t[1:] for t in tomb], dtype=ib).reshape(len(tomb), 2)
+    return out
 
 
-def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int):
-    """Inverse of :func:`encode_flood`, given the names of the open tracks (in order)."""
+def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int, shared=()):
+    """Inverse of :func:`encode_flood`, given the names of the open tracks (in order) unless
+    the message names them, and the link's shared tracks (sorted names, for tombstones)."""
     from pipeline.fusion.flooding import FloodEntry, FloodMessage
 
+    if "names" in p:
+        names = [int(b) for b in p["names"]]
     count = p["count"].astype(np.int64)
     if len(count) != len(names):
         raise RuntimeError(f"robot {dst}: a fusion message of robot {src} carries "
@@ -802,4 +834,8 @@ def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int
                                           np.full(K, -np.inf), np.zeros(3), np.zeros((3, 3))))
             k += 1
         msg.tracks[int(b)] = (bool(lb), entries)
+    shared = list(shared)
+    for t, (a_, b_) in zip(p.get("tomb_track", []), p.get("tomb_ends", np.zeros((0, 2))),
+                           strict=True):
+        msg.down.setdefault(int(shared[int(t)]), []).append((int(a_), int(b_)))
     return msg
