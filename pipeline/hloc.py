@@ -52,13 +52,49 @@ def _h5py():
 
 
 def _open(path: Path, what: str):
+    from pipeline.outputs import require_input_file
+
     h5py = _h5py()
-    if not path.is_file():
-        raise InputError(f"{what} {str(path)!r}: no such file")
+    require_input_file(path, what)
     try:
         return h5py.File(path, "r")
     except OSError as exc:
         raise InputError(f"{what} {str(path)!r} is not an HDF5 file ({exc})") from None
+
+
+#: a dataset larger than this (bytes) must be backed by at least 1/:data:`MAX_EXPANSION` of
+#: its size on disk: a file of a few kilobytes may declare terabytes of unwritten (fill-value)
+#: data, and reading it would allocate all of it
+LAZY_LIMIT_BYTES = 64 * 2**20
+#: largest ratio of a dataset's size in memory to its storage in the file (gzip of a column of
+#: -1 reaches a few hundred; beyond this the data is not in the file)
+MAX_EXPANSION = 1024
+
+
+def _read_dataset(ds, path: Path, what: str, kinds: str) -> np.ndarray:
+    """Read an HDF5 dataset after checking its dtype kind and that its data is in the file.
+
+    Parameters
+    ----------
+    ds : h5py.Dataset
+    path : the file (for the message); what : the dataset's role, e.g. ``"keypoints of 'a'"``
+    kinds : accepted numpy dtype kinds, e.g. ``"iu"`` (integers) or ``"fiu"`` (numbers)
+
+    Raises
+    ------
+    InputError
+        Another dtype (strings, compound, floats where integers are expected), or more
+        declared data than the file stores (checked before anything is allocated).
+    """
+    if ds.dtype.kind not in kinds or ds.dtype.fields is not None:
+        expected = "integers" if kinds == "iu" else "numbers"
+        raise InputError(f"{path}: {what} have dtype {ds.dtype}; expected {expected}")
+    stored = ds.id.get_storage_size()
+    if ds.nbytes > LAZY_LIMIT_BYTES and stored * MAX_EXPANSION < ds.nbytes:
+        raise InputError(f"{path}: {what} declare shape {ds.shape} ({ds.nbytes} bytes) but the "
+                         f"file stores {stored} bytes of them; the file is damaged or not "
+                         "written by hloc")
+    return np.asarray(ds[()])
 
 
 def read_features(path: str | Path) -> dict[str, np.ndarray]:
@@ -75,11 +111,15 @@ def read_features(path: str | Path) -> dict[str, np.ndarray]:
     with _open(path, "features file") as fd:
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "keypoints":
-                kp = np.asarray(obj[()])
                 image = obj.parent.name.strip("/")
-                if kp.ndim != 2 or kp.shape[1] != 2 and kp.shape[0] != 0:
-                    raise InputError(f"{path}: keypoints of {image!r} have shape {kp.shape}; "
-                                     f"expected (N, 2)")
+                what = f"keypoints of {image!r}"
+                if len(obj.shape) != 2 or obj.shape[1] != 2 and obj.shape[0] != 0:
+                    raise InputError(f"{path}: {what} have shape {obj.shape}; expected (N, 2)")
+                kp = _read_dataset(obj, path, what, "fc")
+                if not np.isfinite(kp).all():
+                    row = int(np.flatnonzero(~np.isfinite(kp).all(axis=1))[0])
+                    raise InputError(f"{path}: {what}: keypoint {row} is {kp[row].tolist()}; "
+                                     "every keypoint needs finite pixel coordinates")
                 out[image] = kp.reshape(-1, 2).astype(np.float32)
         fd.visititems(visit)
     if not out:
@@ -96,11 +136,16 @@ def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:
     InputError
         Missing file, a line without two names, a name not in ``names`` (with its line).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"--pairs {str(path)!r}: no such file")
+    from pipeline.outputs import require_input_file
+
+    path = require_input_file(path, "--pairs")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"--pairs {str(path)!r} is not a UTF-8 text file ({exc.reason} at byte "
+                         f"{exc.start}); give hloc's pairs.txt") from None
     out, seen = [], set()
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -190,6 +235,9 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
         if found is None:
             raise InputError(f"matches file: pair group {key!r} does not name two images of the "
                              f"features file; give --pairs")
+        if found[0] == found[1]:
+            raise InputError(f"matches file: pair group {key!r} pairs image {found[0]!r} with "
+                             "itself; remove it or give --pairs")
         out.append((key, *found))
     return out
 
@@ -242,16 +290,30 @@ def read_h5(features: str | Path, matches: str | Path,
                 continue
             done.add(key)
             grp = fd[key]
-            m0 = np.asarray(grp["matches0"][()]).astype(np.int64).reshape(-1)
-            if len(m0) != m[cam[n0]]:
-                raise InputError(f"{matches}: matches0 of pair {key!r} has {len(m0)} entries but "
-                                 f"{n0} has {m[cam[n0]]} keypoints")
-            rows = np.flatnonzero(m0 >= 0)
-            if rows.size and m0[rows].max() >= m[cam[n1]]:
-                raise InputError(f"{matches}: pair {key!r} matches keypoint {m0[rows].max()} of "
+            ds = grp["matches0"]
+            if int(np.prod(ds.shape)) != m[cam[n0]]:
+                raise InputError(f"{matches}: matches0 of pair {key!r} has shape {ds.shape} but "
+                                 f"{n0} has {m[cam[n0]]} keypoints; expected ({m[cam[n0]]},)")
+            raw = _read_dataset(ds, matches, f"matches0 of pair {key!r}", "iu").reshape(-1)
+            if raw.size and raw.max() >= m[cam[n1]]:
+                raise InputError(f"{matches}: pair {key!r} matches keypoint {raw.max()} of "
                                  f"{n1}, which has {m[cam[n1]]} keypoints")
-            score = (np.asarray(grp["matching_scores0"][()], dtype=np.float64).reshape(-1)[rows]
-                     if "matching_scores0" in grp else np.ones(rows.size))
+            m0 = raw.astype(np.int64)
+            if raw.size and raw.min() < -1:
+                raise InputError(f"{matches}: matches0 of pair {key!r} holds {raw.min()}; "
+                                 "entries are -1 (no match) or a keypoint index")
+            rows = np.flatnonzero(m0 >= 0)
+            score = np.ones(rows.size)
+            if "matching_scores0" in grp:
+                sd = grp["matching_scores0"]
+                if int(np.prod(sd.shape)) != len(m0):
+                    raise InputError(f"{matches}: matching_scores0 of pair {key!r} has shape "
+                                     f"{sd.shape}; expected ({len(m0)},) like matches0")
+                score = _read_dataset(sd, matches, f"matching_scores0 of pair {key!r}",
+                                      "fiu").astype(np.float64).reshape(-1)[rows]
+                if not np.isfinite(score).all():
+                    raise InputError(f"{matches}: matching_scores0 of pair {key!r} holds "
+                                     f"{score[~np.isfinite(score)][0]}; scores must be finite")
             a, b = cam[n0], cam[n1]
             fa, fb = rows, m0[rows]
             if a > b:

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import InputError
+
 __all__ = ["clean_h5", "add_arguments", "run"]
 
 
@@ -113,12 +115,17 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
                                                   "resolution_rounds", "messages", "bytes")}}
 
 
+#: largest side of a gray canvas drawn for an image (keypoints beyond it are off the canvas)
+MAX_CANVAS_SIDE = 8192
+
+
 def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
-    """A canvas that holds every keypoint (hloc's features.h5 may omit ``image_size``)."""
+    """A canvas that holds every keypoint (hloc's features.h5 may omit ``image_size``), at most
+    :data:`MAX_CANVAS_SIDE` on a side."""
     if len(keypoints) == 0:
         return (64, 64)
-    w, h = np.ceil(keypoints.max(axis=0) + 1).astype(int)
-    return (max(int(w), 16), max(int(h), 16))
+    w, h = np.clip(np.ceil(keypoints.max(axis=0) + 1), 16, MAX_CANVAS_SIDE).astype(int)
+    return (int(w), int(h))
 
 
 def run(args) -> int:
@@ -126,6 +133,12 @@ def run(args) -> int:
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
 
+    if not args.out:
+        raise InputError("--out '': give the name of the cleaned matches file to write, e.g. "
+                         "matches-clean.h5")
+    if args.image_dir is not None and not Path(args.image_dir).is_dir():
+        raise InputError(f"--image-dir {args.image_dir!r} is not a folder; give the folder of "
+                         "the images (or leave it out: gray canvases are drawn)")
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]
