@@ -212,8 +212,9 @@ def match_landmark_edges(descriptors: list[np.ndarray], comm_edges: np.ndarray,
         raise InputError(f"--geometry {geometry!r}: expected one of {', '.join(GEOMETRY)}")
     if geometry == "epipolar" and keypoints is None:
         raise InputError("--geometry epipolar needs the keypoints of every image")
-    if not epipolar_px > 0:
-        raise InputError(f"--epipolar-px {epipolar_px}: expected a positive number of pixels")
+    if not 0 < epipolar_px < float("inf"):
+        raise InputError(f"--epipolar-px {epipolar_px}: expected a positive, finite number of "
+                         "pixels")
     dist = chi2_distance if kind == "histogram" else l2_distance
     ci, fi, cj, fj, q = [], [], [], [], []
     edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)

@@ -33,6 +33,9 @@ __all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frame
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
 DESCRIPTOR_SOURCES = ("given", "sift")
+#: most labelled landmarks per image: matching builds a K x K cost matrix per image pair
+#: (5000: 200 MB in float64; labelled benchmarks carry tens to hundreds)
+MAX_LANDMARKS = 5000
 #: SIFT support region at a labelled keypoint: this fraction of the image's longest side
 #: (the labels carry no scale; 5 % covers a local patch in both small and large images)
 SIFT_SIZE_FRACTION = 0.05
@@ -108,6 +111,35 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
     return pts.T.copy()
 
 
+def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
+    """InputError if a labelled keypoint of ``path`` is not finite or lies outside ``image``.
+
+    A keypoint may lie anywhere on the image's pixels in the 0-based (OpenCV, centres
+    ``0..W-1``) or the 1-based (MATLAB, centres ``1..W``) convention: ``-0.5 <= x <= W + 0.5``
+    and likewise for ``y``. Only the image's header is read.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise InputError(f"{path}: landmark row {row + 1} is {pts[row].tolist()}; every "
+                         "landmark needs finite pixel coordinates")
+    try:
+        with Image.open(image) as im:
+            w, h = im.size
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError,
+            Image.DecompressionBombError) as exc:
+        raise InputError(f"{image.name}: cannot read it as an image ({exc}); remove or replace "
+                         "the file (a truncated or non-image file)") from None
+    out = (pts[:, 0] < -0.5) | (pts[:, 0] > w + 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h + 0.5)
+    if out.any():
+        row = int(np.flatnonzero(out)[0])
+        raise InputError(f"{path}: landmark row {row + 1} at {pts[row].tolist()} lies outside "
+                         f"the {w}x{h} image {image.name}; fix the label (pixel coordinates, "
+                         "x to the right, y down)")
+
+
 def _read_descriptors(path: Path) -> np.ndarray:
     try:
         d = np.loadtxt(path, dtype=np.float64, ndmin=2)
@@ -166,6 +198,7 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
         raise InputError(f"{directory}: found {len(images)} image(s); a labelled-landmark "
                          "folder needs at least two (image + NAME.txt or NAME.mat each)")
     kp_files: list[tuple[Path, np.ndarray]] = []
+    rejected: dict[str, Path] = {}  # stem -> a .txt / .mat that is not a keypoint table
     for p in files:
         if p.suffix.lower() == ".txt":
             pts = _read_txt_keypoints(p)
@@ -175,6 +208,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
             continue
         if pts is not None:
             kp_files.append((p, pts))
+        else:
+            rejected.setdefault(p.stem, p)
     by_stem = {p.stem: (p, pts) for p, pts in kp_files}
     if all(im.stem in by_stem for im in images):
         pairing = "name"
@@ -183,6 +218,11 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
         pairing = "order"
         kps = kp_files
     else:
+        named = [rejected[im.stem] for im in images
+                 if im.stem not in by_stem and im.stem in rejected]
+        if named:
+            raise InputError(f"{named[0]}: not a keypoint table (every line must be two numbers "
+                             "'x y'; a .mat file needs pts_coord 2 x K); fix or remove the file")
         raise InputError(
             f"{directory}: {len(images)} images but {len(kp_files)} keypoint files (NAME.txt "
             "with K rows 'x y', or NAME.mat with pts_coord 2 x K); give each image a keypoint "
@@ -195,6 +235,13 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
         raise InputError(f"{directory}: keypoint files hold different numbers of landmarks "
                          f"({first}: {sizes[first]}, {other}: {sizes[other]}); every image must "
                          "carry the same labelled landmarks in the same order")
+    k = next(iter(K))
+    if k > MAX_LANDMARKS:
+        raise InputError(f"{kps[0][0]}: {k} landmarks per image; at most {MAX_LANDMARKS} "
+                         "(matching compares every landmark of one image with every landmark "
+                         "of another)")
+    for im, (p, pts) in zip(images, kps, strict=True):
+        _check_keypoints(p, pts, im)
     out = [LandmarkFrame(name=im.name, image_path=im, keypoints=pts, keypoint_file=p.name)
            for im, (p, pts) in zip(images, kps, strict=True)]
     if descriptors == "given":
@@ -208,12 +255,21 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
             raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
                              f"(found {len(desc_files)} for {len(images)} images); or use "
                              "--descriptors sift")
+        first = None
         for fr, dp in zip(out, dfiles, strict=True):
             d = _read_descriptors(dp)
             if d.shape[0] != fr.keypoints.shape[0]:
                 raise InputError(f"{dp}: {d.shape[0]} descriptor rows for "
                                  f"{fr.keypoints.shape[0]} landmarks of {fr.name}; expected one "
                                  "row per landmark")
+            if not np.isfinite(d).all():
+                row = int(np.flatnonzero(~np.isfinite(d).all(axis=1))[0])
+                raise InputError(f"{dp}: descriptor row {row + 1} holds a non-finite value "
+                                 "(nan or inf); every descriptor must be finite numbers")
+            first = first or (dp, d.shape[1])
+            if d.shape[1] != first[1]:
+                raise InputError(f"{dp}: descriptors of {d.shape[1]} values but {first[0].name} "
+                                 f"has {first[1]}; every descriptor file needs the same width")
             fr.descriptors, fr.descriptor_file = d, dp.name
             # non-negative rows are histograms (shape contexts): compared by χ²
             fr.descriptor_kind = "histogram" if (d >= 0).all() else "vector"

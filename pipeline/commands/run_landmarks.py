@@ -151,6 +151,11 @@ def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
 
     config = config_from_args(args)
+    if config.out is not None and not config.out:
+        raise InputError("--out '': give the name of the run folder, e.g. runs/hotel")
+    if not 0 < config.epipolar_px < float("inf"):
+        raise InputError(f"--epipolar-px {config.epipolar_px}: expected a positive, finite "
+                         "number of pixels")
     with claim_run_folder(config.out_dir(), inputs=[("DIR", config.directory)]):
         out, report = run_landmarks(config)
     print(landmarks_markdown(report))
@@ -211,6 +216,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
     if config.vote_iterations < 1:
         raise InputError(f"--vote-iterations {config.vote_iterations}: expected at least 1")
+    if not 0 < config.epipolar_px < float("inf"):
+        raise InputError(f"--epipolar-px {config.epipolar_px}: expected a positive, finite "
+                         "number of pixels")
     if config.resolution not in RESOLUTIONS:
         raise InputError(f"--resolution {config.resolution!r}: expected one of "
                          f"{', '.join(RESOLUTIONS)}")
