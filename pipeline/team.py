@@ -33,6 +33,7 @@ Relative paths in ``data`` are relative to the team file. Every problem is one
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -42,7 +43,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 
-__all__ = ["Team", "RobotEntry", "load_team", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
+__all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
 
 DATA_KINDS = ("formation", "images", "links")
 DEFAULT_OPTIONS = {
@@ -62,9 +63,22 @@ DEFAULT_OPTIONS = {
     "threshold_px": 1.0,
 }
 RESOLUTIONS = ("paper", "evidence")
+#: feature methods a team file may name (``pipeline.features.METHODS``; whether this machine's
+#: OpenCV offers one is checked when the robot extracts)
+FEATURE_METHODS = ("sift", "orb", "akaze", "surf")
 #: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
 #: which it started a robot process, so the robot can report how long its start took
 LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
+#: longest round / start timeout a team file may ask for (one day): beyond it a robot would
+#: wait for a neighbour that never answers for ever, in practice
+MAX_TIMEOUT_S = 86400.0
+#: most rounds of silence before a neighbour is declared lost (``loss_timeout``)
+MAX_LOSS_TIMEOUT = 100_000
+#: keys a robot entry and each kind of ``data`` may hold
+_ROBOT_KEYS = {"id", "endpoint"}
+_DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
+              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size"},
+              "links": {"kind", "links", "features_per_camera"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -162,6 +176,10 @@ def parse_team(doc, path: Path | None = None) -> Team:
     for k, r in enumerate(robots_doc):
         if not isinstance(r, dict) or "id" not in r or "endpoint" not in r:
             raise InputError(f"{where}: robots[{k}] must be an object with 'id' and 'endpoint'")
+        if set(r) - _ROBOT_KEYS:
+            raise InputError(f"{where}: robots[{k}] has unknown key "
+                             f"{sorted(set(r) - _ROBOT_KEYS)[0]!r}; a robot is "
+                             "{\"id\": I, \"endpoint\": \"tcp/HOST:PORT\"}")
         rid, ep = r["id"], r["endpoint"]
         if isinstance(rid, bool) or not isinstance(rid, int) or rid < 0:
             raise InputError(f"{where}: robots[{k}] id {rid!r} must be an integer >= 0")
@@ -182,17 +200,17 @@ def parse_team(doc, path: Path | None = None) -> Team:
         raise InputError(f"{where}: robot ids must be 0..{n - 1}; id {missing[0]} is missing")
 
     edges_doc = doc.get("comm_edges")
-    try:
-        e = np.asarray(edges_doc, dtype=np.int64).reshape(-1, 2)
-        if isinstance(edges_doc, (str, bytes)) or edges_doc is None:
-            raise ValueError
-    except (TypeError, ValueError):
-        raise InputError(f"{where}: 'comm_edges' must be a list of [i, j] robot pairs") from None
-    if e.size:
-        bad = np.flatnonzero((e < 0).any(1) | (e >= n).any(1) | (e[:, 0] == e[:, 1]))
-        if bad.size:
-            raise InputError(f"{where}: comm edge {e[bad[0]].tolist()} must join two different "
-                             f"robots 0..{n - 1}")
+    if not isinstance(edges_doc, list):
+        raise InputError(f"{where}: 'comm_edges' must be a list of [i, j] robot pairs")
+    for pair in edges_doc:
+        if not (isinstance(pair, list) and len(pair) == 2
+                and all(type(v) is int for v in pair)):
+            raise InputError(f"{where}: comm edge {pair!r} must be a pair [i, j] of integer "
+                             "robot ids")
+        if not (0 <= pair[0] < n and 0 <= pair[1] < n) or pair[0] == pair[1]:
+            raise InputError(f"{where}: comm edge {pair} must join two different robots "
+                             f"0..{n - 1}")
+    e = np.array(edges_doc, dtype=np.int64).reshape(-1, 2)
     e = np.unique(np.sort(e, axis=1), axis=0) if e.size else np.zeros((0, 2), np.int64)
 
     data = doc.get("data")
@@ -208,7 +226,10 @@ def parse_team(doc, path: Path | None = None) -> Team:
     _check_options(given, where)
     opts.update(given)
     per = {}
-    for key, val in (doc.get("robot_options", {}) or {}).items():
+    ro = doc.get("robot_options", {}) or {}
+    if not isinstance(ro, dict):
+        raise InputError(f"{where}: 'robot_options' must be an object {{\"ID\": {{options}}}}")
+    for key, val in ro.items():
         try:
             rid = int(key)
         except ValueError:
@@ -221,7 +242,10 @@ def parse_team(doc, path: Path | None = None) -> Team:
     obs = doc.get("observer")
     observer = None
     if obs is not None:
-        ep = obs.get("endpoint") if isinstance(obs, dict) else None
+        if not isinstance(obs, dict):
+            raise InputError(f"{where}: 'observer' {obs!r} must be an object "
+                             "{\"endpoint\": \"tcp/HOST:PORT\"}")
+        ep = obs.get("endpoint")
         if not isinstance(ep, str) or not _ENDPOINT.match(ep):
             raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT")
         if ep in endpoints:
@@ -230,12 +254,37 @@ def parse_team(doc, path: Path | None = None) -> Team:
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def _check_data(data: dict, n: int, where: str) -> None:
+    from pipeline.validate import render_size
+
     kind = data["kind"]
+    unknown = set(data) - _DATA_KEYS[kind]
+    if unknown:
+        raise InputError(f"{where}: data of kind {kind} has unknown key {sorted(unknown)[0]!r}; "
+                         f"known: {', '.join(sorted(_DATA_KEYS[kind]))}")
     if kind == "formation":
         size = data.get("size", [640, 480])
-        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) for v in size)):
+        if not (isinstance(size, list) and len(size) == 2 and all(_is_int(v) for v in size)):
             raise InputError(f"{where}: data.size {size!r} must be [WIDTH, HEIGHT]")
+        render_size(size[0], size[1], f"{size[0]}x{size[1]}", flag=f"{where}: data.size")
+        for key in ("formation", "graph"):
+            if data.get(key) is not None and not isinstance(data[key], str):
+                raise InputError(f"{where}: data.{key} {data[key]!r} must be a name, e.g. "
+                                 f"{'d' if key == 'formation' else 'ring'}")
+        seed = data.get("seed", 0)
+        if not _is_int(seed) or seed < 0:
+            raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")
+        if data.get("robots") is not None and not _is_int(data["robots"]):
+            raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer or "
+                             "null")
         expected = data.get("robots") or 6
         if expected != n:
             raise InputError(f"{where}: data describes {expected} robots but 'robots' lists {n}")
@@ -248,15 +297,30 @@ def _check_data(data: dict, n: int, where: str) -> None:
             if not isinstance(K, list) or len(K) != n:
                 raise InputError(f"{where}: data.intrinsics must give one 3x3 K (or null) per robot")
             for i, k in enumerate(K):
-                if k is not None and np.shape(k) != (3, 3):
-                    raise InputError(f"{where}: data.intrinsics[{i}] must be a 3x3 matrix or null")
+                if k is not None and not (isinstance(k, list) and len(k) == 3 and all(
+                        isinstance(row, list) and len(row) == 3 and all(map(_is_number, row))
+                        for row in k)):
+                    raise InputError(f"{where}: data.intrinsics[{i}] must be a 3x3 matrix of "
+                                     "finite numbers or null")
+        known = data.get("intrinsics_known")
+        if known is not None and not (isinstance(known, list) and len(known) == n
+                                      and all(isinstance(v, bool) for v in known)):
+            raise InputError(f"{where}: data.intrinsics_known must list {n} true/false values "
+                             "or be null")
+        ms = data.get("max_size")
+        if ms is not None and (not _is_int(ms) or ms < 0):
+            raise InputError(f"{where}: data.max_size {ms!r} must be a number of pixels >= 0 "
+                             "(0: full size) or null")
     elif kind == "links":
         if not isinstance(data.get("links"), str):
             raise InputError(f"{where}: data.links must be the path of a links CSV file")
+        from pipeline.linkscsv import MAX_ID
+
         fpc = data.get("features_per_camera")
         if not isinstance(fpc, list) or len(fpc) != n or not all(
-                isinstance(v, int) and v >= 0 for v in fpc):
-            raise InputError(f"{where}: data.features_per_camera must list {n} counts >= 0")
+                _is_int(v) and 0 <= v <= MAX_ID + 1 for v in fpc):
+            raise InputError(f"{where}: data.features_per_camera must list {n} counts in "
+                             f"0..{MAX_ID + 1}")
 
 
 def _check_options(opts: dict, where: str) -> None:
@@ -269,19 +333,35 @@ def _check_options(opts: dict, where: str) -> None:
         raise InputError(f"{where}: option drop_prob {p!r} must be in [0, 1)")
     for k in ("round_timeout_s", "start_timeout_s"):
         v = opts.get(k, 1.0)
-        if not isinstance(v, (int, float)) or not v > 0:
-            raise InputError(f"{where}: option {k} {v!r} must be a number > 0")
-    for k in ("max_features", "loss_timeout"):
+        if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
+            raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "
+                             f"(0, {MAX_TIMEOUT_S:g}]")
+    from pipeline.commands.options import MAX_FEATURES
+
+    for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
         v = opts.get(k, 8)
         if k == "max_features" and v is None:
             continue  # scaled with the image size (photo_max_features)
-        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-            raise InputError(f"{where}: option {k} {v!r} must be an integer >= 1")
+        if not _is_int(v) or not 1 <= v <= top:
+            raise InputError(f"{where}: option {k} {v!r} must be an integer in 1..{top}")
     for k in ("threshold_px", "contrast_threshold"):
         v = opts.get(k)
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
-                              or not v > 0):
-            raise InputError(f"{where}: option {k} {v!r} must be a number > 0 or null")
+        if v is not None and (not _is_number(v) or not v > 0):
+            raise InputError(f"{where}: option {k} {v!r} must be a finite number > 0 or null")
+    seed = opts.get("fault_seed", 0)
+    if not _is_int(seed) or seed < 0:
+        raise InputError(f"{where}: option fault_seed {seed!r} must be an integer >= 0")
+    r = opts.get("merge_radius", 0.0)
+    if not _is_number(r) or r < 0:
+        raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
+                         "pixels >= 0")
+    for k in ("fusion", "rootsift", "budget_after_merge"):
+        if not isinstance(opts.get(k, False), bool):
+            raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
+    method = opts.get("features", "sift")
+    if method not in FEATURE_METHODS:
+        raise InputError(f"{where}: option features {method!r} must be one of "
+                         f"{', '.join(FEATURE_METHODS)}")
     if opts.get("resolution", "paper") not in RESOLUTIONS:
         raise InputError(f"{where}: option resolution {opts['resolution']!r} must be one of "
                          f"{', '.join(RESOLUTIONS)}")
@@ -289,14 +369,58 @@ def _check_options(opts: dict, where: str) -> None:
 
 def load_team(path) -> Team:
     """Read and check a team file; InputError (one line) on a missing or malformed file."""
+    from pipeline.outputs import require_input_file
+
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise InputError(f"team file {str(p)!r} not found")
+    require_input_file(p, "team file")
     try:
         doc = json.loads(p.read_text())
     except (ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"team file {str(p)!r} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"team file {str(p)!r} nests lists or objects too deeply to be a "
+                         "team file; see the TEAM.json schema in the README") from None
     return parse_team(doc, p)
+
+
+def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
+    """Check, before a robot opens its session, what robot ``i`` will read; return the files.
+
+    Formation data: the formation, graph, seed and robot count are known to
+    :mod:`data_synth` (nothing is rendered). Images: robot ``i``'s image file exists. Links:
+    the links file exists.
+
+    Returns
+    -------
+    list of ``(what, path)`` — the data files robot ``i`` reads (to keep outputs off them)
+
+    Raises
+    ------
+    InputError
+        Naming the bad value or the missing file.
+    """
+    from pipeline.outputs import require_input_file
+
+    data = team.data
+    where = _where(team.path)
+    if data["kind"] != "links":
+        from pipeline.features import check_method
+
+        check_method(team.options_for(i)["features"])
+    if data["kind"] == "formation":
+        import data_synth
+
+        data_synth.formation_edges(data.get("formation", "d"), data.get("seed", 0),
+                                   data.get("robots"), data.get("graph"))
+        return []
+    if data["kind"] == "images":
+        path = team.resolve_path(data["images"][i])
+        return [(f"data.images[{i}] of the team file",
+                 require_input_file(path, f"{where}: data.images[{i}]"))]
+    return [("data.links of the team file",
+             require_input_file(team.resolve_path(data["links"]), f"{where}: data.links"))]
 
 
 def write_team(path, team: Team) -> Path:

@@ -18,18 +18,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--result", default=None, metavar="JSON",
                    help="also write this robot's result (counters, its links and their "
                         "status) to a JSON file")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace --result if it exists (default: refuse)")
 
 
 def run(args) -> int:
     import os
     import sys
 
-    from pipeline.team import LAUNCHED_AT_ENV, load_team
+    from pipeline.outputs import check_output_files
+    from pipeline.team import LAUNCHED_AT_ENV, check_data_files, load_team
     from pipeline.teamrobot import run_robot_process
     from pipeline.transport import RobotMissingError
 
     team = load_team(args.team)
     i = team.check_id(args.id)
+    # everything this robot reads and writes is checked before its session opens
+    inputs = check_data_files(team, i)
+    check_output_files([("--result", args.result)], [("--team", args.team), *inputs],
+                       overwrite=args.overwrite)
     try:
         code = run_robot_process(team, i, args.result)
     except RobotMissingError as exc:
