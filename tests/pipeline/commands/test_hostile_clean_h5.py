@@ -1,0 +1,288 @@
+"""clean-h5, as a hostile user would run it: one line on stderr naming the bad value, exit 2,
+no traceback, the input files untouched and nothing written."""
+
+import os
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.hloc import names_to_pair
+
+sys.path.insert(0, str(Path(__file__).parent))
+from hostile import one_line_error, run_capped, tree  # noqa: E402
+from test_clean_h5 import M, _write  # noqa: E402
+
+P01 = names_to_pair("a.jpg", "sub/b.jpg")
+
+
+@pytest.fixture
+def files(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    feats, matches = _write(d)
+    return d, feats, matches
+
+
+def _argv(feats, matches, out, *extra):
+    return ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out", str(out),
+            "--no-rerun", *map(str, extra)]
+
+
+def _replace(fd, key, data):
+    del fd[key]
+    fd.create_dataset(key, data=data)
+
+
+def _fails(capsys, argv, folder, *needles):
+    """The command exits 2 with one error line holding ``needles``; ``folder`` unchanged."""
+    before = tree(folder)
+    assert main(argv) == 2
+    line = one_line_error(capsys, *needles)
+    assert tree(folder) == before
+    return line
+
+
+# --- the features file ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("case, needle", [
+    ("missing", "no such file"),
+    ("folder", "is a folder"),
+    ("empty", "is not an HDF5 file"),
+    ("binary", "is not an HDF5 file"),
+    ("truncated", "is not an HDF5 file"),
+])
+def test_unreadable_features_file(files, tmp_path, capsys, case, needle):
+    d, feats, matches = files
+    if case == "missing":
+        feats.unlink()
+    elif case == "folder":
+        feats.unlink()
+        feats.mkdir()
+    elif case == "empty":
+        feats.write_bytes(b"")
+    elif case == "binary":
+        feats.write_bytes(np.random.default_rng(0).bytes(4000))
+    else:
+        feats.write_bytes(feats.read_bytes()[:3000])
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, "features file")
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_device_as_features_file(files, tmp_path, capsys):
+    d, _, matches = files
+    _fails(capsys, _argv("/dev/null", matches, tmp_path / "o.h5"), d, "not a regular file")
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda fd: [fd[n].__delitem__("keypoints") for n in ("a.jpg", "sub/b.jpg", "c.jpg")],
+     "no image group with a 'keypoints' dataset"),
+    (lambda fd: _replace(fd, "a.jpg/keypoints", np.zeros((M, 3), np.float32)), "shape (20, 3)"),
+    (lambda fd: _replace(fd, "a.jpg/keypoints", np.zeros(M, np.float32)), "shape (20,)"),
+    (lambda fd: _replace(fd, "a.jpg/keypoints", 5.0), "shape ()"),
+    (lambda fd: _replace(fd, "a.jpg/keypoints", np.array([[b"x", b"y"]] * M)), "dtype |S1"),
+    (lambda fd: fd["a.jpg/keypoints"].__setitem__(3, [np.nan, 1]), "keypoint 3 is [nan, 1.0]"),
+    (lambda fd: fd["a.jpg/keypoints"].__setitem__(0, [np.inf, 1]), "keypoint 0 is [inf, 1.0]"),
+    (lambda fd: [fd.__delitem__(n) for n in ("c.jpg", "sub")], "1 image(s)"),
+], ids=["no-keypoints", "3-columns", "1-d", "scalar", "strings", "nan", "inf", "one-image"])
+def test_malformed_keypoints(files, tmp_path, capsys, edit, needle):
+    d, feats, matches = files
+    with h5py.File(feats, "a") as fd:
+        edit(fd)
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, str(feats))
+
+
+def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp_path):
+    """A few-kB file declaring 8 GB of keypoints (unwritten chunks): refused, under the cap."""
+    d, feats, matches = files
+    with h5py.File(feats, "a") as fd:
+        del fd["a.jpg/keypoints"]
+        fd["a.jpg"].create_dataset("keypoints", shape=(2**30, 2), dtype=np.float32,
+                                   chunks=(1024, 2))
+    assert feats.stat().st_size < 100_000
+    p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert "declare shape (1073741824, 2)" in p.stderr and "stores 0 bytes" in p.stderr
+
+
+def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
+    from pipeline.commands.clean_h5 import MAX_CANVAS_SIDE, _size_of
+
+    assert _size_of(np.array([[1e30, 1e30]], np.float32)) == (MAX_CANVAS_SIDE, MAX_CANVAS_SIDE)
+    assert _size_of(np.array([[-5.0, 3.0]], np.float32)) == (16, 16)
+
+
+# --- the matches file ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("case, needle", [
+    ("missing", "no such file"),
+    ("folder", "is a folder"),
+    ("empty", "is not an HDF5 file"),
+    ("binary", "is not an HDF5 file"),
+    ("truncated", "is not an HDF5 file"),
+])
+def test_unreadable_matches_file(files, tmp_path, capsys, case, needle):
+    d, feats, matches = files
+    if case == "missing":
+        matches.unlink()
+    elif case == "folder":
+        matches.unlink()
+        matches.mkdir()
+    elif case == "empty":
+        matches.write_bytes(b"")
+    elif case == "binary":
+        matches.write_bytes(np.random.default_rng(1).bytes(3000))
+    else:
+        matches.write_bytes(matches.read_bytes()[:2500])
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, "matches file")
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda fd: [fd.__delitem__(k) for k in list(fd)], "no matches to clean"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(3, -1, np.int16)), "has shape (3,)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 2), -1, np.int16)),
+     "has shape (20, 2)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, np.nan)), "dtype float64"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 0.5)), "expected integers"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.array([b"ab"] * M)), "dtype |S2"),
+    (lambda fd: fd[P01 + "/matches0"].__setitem__(3, 5000), "matches keypoint 5000"),
+    (lambda fd: fd[P01 + "/matches0"].__setitem__(3, -5), "holds -5"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 2**62, np.int64)),
+     "matches keypoint 4611686018427387904"),
+    # 2**64 - 1 would read -1 (no match) once cast to int64
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 2**64 - 1, np.uint64)),
+     "matches keypoint 18446744073709551615"),
+    (lambda fd: _replace(fd, P01 + "/matching_scores0", np.ones(3, np.float16)),
+     "matching_scores0 of pair 'a.jpg/sub-b.jpg' has shape (3,)"),
+    (lambda fd: _replace(fd, P01 + "/matching_scores0", np.full(M, np.nan, np.float32)),
+     "holds nan"),
+    (lambda fd: _replace(fd, P01 + "/matching_scores0", np.array([b"ab"] * M)),
+     "matching_scores0 of pair 'a.jpg/sub-b.jpg' have dtype |S2"),
+    (lambda fd: fd.create_group("zz.jpg/yy.jpg").create_dataset("matches0",
+                                                                data=np.full(M, -1)),
+     "'zz.jpg/yy.jpg' does not name two images"),
+    (lambda fd: fd.create_group("a.jpg/a.jpg").create_dataset("matches0", data=np.arange(M)),
+     "pairs image 'a.jpg' with itself"),
+], ids=["no-pairs", "short", "2-d", "float-nan", "float-fraction", "strings", "out-of-range",
+        "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
+        "scores-strings", "unknown-pair", "self-pair"])
+def test_malformed_matches(files, tmp_path, capsys, edit, needle):
+    d, feats, matches = files
+    with h5py.File(matches, "a") as fd:
+        edit(fd)
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle)
+    assert not (tmp_path / "o.h5").exists()
+
+
+# --- the pairs file ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("content, needle", [
+    (b"", "holds no pair"),
+    (b"\x90\x00\xff binary", "is not a UTF-8 text file"),
+    ("a.jpg \xe9.jpg\n".encode("latin-1"), "is not a UTF-8 text file"),
+    (b"a.jpg sub/b.jpg c.jpg\n", "must hold two image names"),
+    (b"a.jpg a.jpg\n", "pairs an image with itself"),
+    (b"a.jpg x.jpg\n", "image 'x.jpg' has no keypoints"),
+], ids=["empty", "binary", "latin-1", "three-names", "self", "unknown-image"])
+def test_malformed_pairs_file(files, tmp_path, capsys, content, needle):
+    d, feats, matches = files
+    (d / "pairs.txt").write_bytes(content)
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", d / "pairs.txt"), d,
+           needle)
+
+
+@pytest.mark.parametrize("case, needle", [("missing", "no such file"), ("folder", "is a folder")])
+def test_pairs_not_a_file(files, tmp_path, capsys, case, needle):
+    d, feats, matches = files
+    pairs = d / "nope.txt" if case == "missing" else d
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", pairs), d, needle,
+           "--pairs")
+
+
+# --- outputs -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case, needle", [
+    ("features", "is the input file given as --features"),
+    ("matches", "is the input file given as --matches"),
+    ("folder", "is a folder"),
+    ("devnull", "is not a regular file"),
+    ("dangling-symlink", "is a symbolic link"),
+    ("symlink-to-matches", "is a symbolic link"),
+    ("empty", "--out ''"),
+], ids=str)
+def test_out_that_names_an_input_or_a_special_entry(files, tmp_path, capsys, case, needle):
+    d, feats, matches = files
+    out = {"features": feats, "matches": matches, "folder": tmp_path / "od",
+           "devnull": "/dev/null", "dangling-symlink": tmp_path / "ln.h5",
+           "symlink-to-matches": tmp_path / "ln.h5", "empty": ""}[case]
+    if case == "folder":
+        (tmp_path / "od").mkdir()
+    elif case == "dangling-symlink":
+        os.symlink(tmp_path / "target.h5", out)
+    elif case == "symlink-to-matches":
+        os.symlink(matches, out)
+    before = tree(tmp_path)
+    assert main(_argv(feats, matches, out, "--overwrite")) == 2
+    one_line_error(capsys, needle)
+    assert tree(tmp_path) == before
+    assert not (tmp_path / "target.h5").exists()
+
+
+def test_existing_out_needs_overwrite(files, tmp_path, capsys):
+    d, feats, matches = files
+    (tmp_path / "o.h5").write_bytes(b"precious")
+    assert main(_argv(feats, matches, tmp_path / "o.h5")) == 2
+    one_line_error(capsys, "already exists; pass --overwrite")
+    assert (tmp_path / "o.h5").read_bytes() == b"precious"
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("features", "--report"), ("devnull", "is not a regular file"),
+    ("out", "--out and --report name the same file"),
+])
+def test_report_onto_an_input_or_another_output(files, tmp_path, capsys, case, needle):
+    d, feats, matches = files
+    report = {"features": feats, "devnull": "/dev/null", "out": tmp_path / "o.h5"}[case]
+    before = tree(d)
+    assert main(_argv(feats, matches, tmp_path / "o.h5", "--report", report,
+                      "--overwrite")) == 2
+    one_line_error(capsys, needle)
+    assert tree(d) == before and not (tmp_path / "o.h5").exists()
+
+
+def test_side_file_onto_the_matches_file_is_refused(files, tmp_path, capsys):
+    """OUT.links.csv beside --out may not land on an input either."""
+    d, feats, matches = files
+    links = d / "o.links.csv"
+    links.write_text("precious")
+    assert main(_argv(feats, matches, d / "o.h5")) == 2
+    one_line_error(capsys, "OUT.links.csv", "already exists")
+    assert links.read_text() == "precious"
+
+
+@pytest.mark.parametrize("case", ["missing", "file"])
+def test_image_dir_that_is_not_a_folder(files, tmp_path, capsys, case):
+    d, feats, matches = files
+    image_dir = d / "nope" if case == "missing" else feats
+    argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+            str(tmp_path / "o.h5"), "--image-dir", str(image_dir)]
+    _fails(capsys, argv, d, "--image-dir", "is not a folder")
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_ctrl_c_is_one_line_exit_130_and_nothing_written(files, tmp_path, capsys, monkeypatch):
+    import pipeline.run as run
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run, "consistency_stage", interrupted)
+    d, feats, matches = files
+    before = tree(d)
+    assert main(_argv(feats, matches, tmp_path / "o.h5")) == 130
+    err = capsys.readouterr().err
+    assert err.startswith("interrupted: clean-h5") and err.count("\n") == 1
+    assert tree(d) == before and sorted(p.name for p in tmp_path.iterdir()) == ["in"]
