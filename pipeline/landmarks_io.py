@@ -21,6 +21,7 @@ keypoint files and are ignored.
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,7 +143,9 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
 
 def _read_descriptors(path: Path) -> np.ndarray:
     try:
-        d = np.loadtxt(path, dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an empty file: its row count says it
+            d = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except ValueError as exc:
         raise InputError(f"{path}: not a numeric table of descriptors ({exc})") from None
     return d

@@ -1,0 +1,231 @@
+"""run-landmarks, as a hostile user would run it: one line on stderr naming the bad value,
+exit 2, no traceback, the labelled folder untouched and no run folder written."""
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from pipeline.__main__ import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+from hostile import one_line_error, tree  # noqa: E402
+
+K = 8
+W, H = 64, 48
+
+
+@pytest.fixture
+def folder(tmp_path):
+    """Four 64x48 images, each with K labelled landmarks (NAME.txt) and descriptors (NAME.scf)."""
+    d = tmp_path / "labelled"
+    d.mkdir()
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(5, [W - 5, H - 5], (K, 2))
+    for k in range(4):
+        Image.fromarray(rng.integers(0, 255, (H, W), dtype=np.uint8)).save(d / f"v{k}.png")
+        np.savetxt(d / f"v{k}.txt", pts + rng.normal(0, 0.5, pts.shape))
+        np.savetxt(d / f"v{k}.scf", rng.random((K, 6)) + np.eye(K, 6))
+    return d
+
+
+def _argv(folder, *extra, out=None):
+    return ["run-landmarks", str(folder), "--no-baselines", "--out",
+            str(out if out is not None else folder.parent / "run"), *map(str, extra)]
+
+
+def _fails(capsys, argv, folder, *needles):
+    before = tree(folder.parent)
+    assert main(argv) == 2
+    line = one_line_error(capsys, *needles)
+    assert tree(folder.parent) == before
+    return line
+
+
+def test_the_fixture_runs(folder, capsys):
+    assert main(_argv(folder)) == 0
+    assert (folder.parent / "run" / "links.csv").is_file()
+
+
+# --- flags ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("flag, value, needle", [
+    ("--frames", "-1", "--frames -1: expected 2..4"),
+    ("--frames", "1", "--frames 1: expected 2..4"),
+    ("--frames", "99", "--frames 99: expected 2..4"),
+    ("--epipolar-px", "-1", "--epipolar-px -1.0"),
+    ("--epipolar-px", "0", "--epipolar-px 0.0"),
+    ("--epipolar-px", "nan", "--epipolar-px nan"),
+    ("--epipolar-px", "inf", "--epipolar-px inf"),
+    ("--vote-iterations", "0", "--vote-iterations 0"),
+    ("--vote-iterations", "-5", "--vote-iterations -5"),
+    ("--graph", "nope", "graph 'nope'"),
+    ("--graph", "seq:0", "graph 'seq:0'"),
+    ("--graph", "seq:nan", "graph 'seq:nan'"),
+])
+def test_meaningless_flag_values(folder, capsys, flag, value, needle):
+    _fails(capsys, _argv(folder, flag, value), folder, needle)
+
+
+@pytest.mark.parametrize("flag, value", [
+    ("--frames", "nan"), ("--frames", "1e9"), ("--vote-iterations", "x"), ("--ratio", "nan"),
+    ("--ratio", "inf"), ("--ratio", "-1"), ("--ratio", "0"), ("--descriptors", "foo"),
+    ("--geometry", "foo"),
+])
+def test_wrong_types_are_usage_errors(folder, capsys, flag, value):
+    """argparse's own check: exit 2 with 'error: argument FLAG' and no traceback."""
+    with pytest.raises(SystemExit) as e:
+        main(_argv(folder, flag, value))
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert f"error: argument {flag}" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("content, needle", [
+    ("0,1\n1,2\n2,99\n", "camera index 99 out of range 0..3"),
+    ("0,1\n2,2147483646\n", "camera index 2147483646 out of range"),
+    ("0,-1\n", "cam_j -1 is negative"),
+    (b"\xa0\xff\x00", "is not a text file"),
+], ids=["id-outside", "huge-id", "negative", "binary"])
+def test_bad_graph_file(folder, tmp_path, capsys, content, needle):
+    g = tmp_path / "g.csv"
+    g.write_bytes(content if isinstance(content, bytes) else content.encode())
+    _fails(capsys, _argv(folder, "--graph", g), folder, needle)
+
+
+def test_graph_naming_a_folder(folder, tmp_path, capsys):
+    _fails(capsys, _argv(folder, "--graph", tmp_path), folder, "is a folder")
+
+
+# --- the labelled folder -------------------------------------------------------------------
+
+def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
+    _fails(capsys, _argv(tmp_path / "nope"), folder, "no such folder")
+    _fails(capsys, _argv(folder / "v0.txt"), folder, "no such folder")
+    (tmp_path / "empty").mkdir()
+    _fails(capsys, _argv(tmp_path / "empty"), folder, "found 0 image(s)")
+    for k in (1, 2, 3):
+        for suffix in (".png", ".txt", ".scf"):
+            (folder / f"v{k}{suffix}").unlink()
+    _fails(capsys, _argv(folder), folder, "found 1 image(s)")
+
+
+@pytest.mark.parametrize("name, content, needle", [
+    ("v1.txt", "nan nan\n" + "1 2\n" * (K - 1), "landmark row 1 is [nan, nan]"),
+    ("v1.txt", "inf 3\n" + "1 2\n" * (K - 1), "landmark row 1 is [inf, 3.0]"),
+    ("v1.txt", "1 2\n" * (K - 1) + "1e300 3\n", "landmark row 8 at [1e+300, 3.0] lies outside "
+                                                "the 64x48 image v1.png"),
+    ("v1.txt", "-500 -500\n" + "1 2\n" * (K - 1), "lies outside the 64x48 image"),
+    ("v1.txt", "1 2 3\n" + "1 2\n" * (K - 1), "v1.txt: not a keypoint table"),
+    ("v1.txt", "x y\n" + "1 2\n" * (K - 1), "v1.txt: not a keypoint table"),
+    ("v1.txt", b"\x00\xff\xfe" * 50, "v1.txt: not a keypoint table"),
+    ("v1.txt", "", "v1.txt: not a keypoint table"),
+    ("v1.txt", "1 2\n" * (K - 1), "different numbers of landmarks (v0.txt: 8, v1.txt: 7)"),
+    ("v1.scf", ("nan " * 6 + "\n") * K, "v1.scf: descriptor row 1 holds a non-finite value"),
+    ("v1.scf", ("1 " * 5 + "inf\n") * K, "v1.scf: descriptor row 1 holds a non-finite value"),
+    ("v1.scf", "1 2 3\n1 2\n" * (K // 2), "v1.scf: not a numeric table"),
+    ("v1.scf", b"\xff\x00" * 100, "v1.scf: not a numeric table"),
+    ("v1.scf", "", "v1.scf: 0 descriptor rows for 8 landmarks"),  # no loadtxt warning
+    ("v1.scf", "1 2 3 4 5 6\n" * (K - 1), "v1.scf: 7 descriptor rows for 8 landmarks"),
+    ("v1.scf", "1 2 3\n" * K, "v1.scf: descriptors of 3 values but v0.scf has 6"),
+], ids=["kp-nan", "kp-inf", "kp-huge", "kp-outside", "kp-3-columns", "kp-text", "kp-binary",
+        "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-binary",
+        "scf-empty", "scf-fewer-rows", "scf-other-width"])
+def test_bad_label_or_descriptor_file(folder, capsys, name, content, needle):
+    (folder / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    _fails(capsys, _argv(folder), folder, needle)
+    assert not (folder.parent / "run").exists()
+
+
+def test_labels_on_the_last_pixel_in_either_convention_are_accepted(folder, capsys):
+    """1-based labels reach (W, H) (the CMU hotel labels do): not outside the image."""
+    pts = np.loadtxt(folder / "v1.txt")
+    pts[0] = [W, H]
+    pts[1] = [-0.5, -0.5]
+    np.savetxt(folder / "v1.txt", pts)
+    assert main(_argv(folder)) == 0
+
+
+def test_too_many_landmarks_is_refused_before_matching(folder, capsys, monkeypatch):
+    import pipeline.landmarks_io as lio
+
+    monkeypatch.setattr(lio, "MAX_LANDMARKS", K - 1)
+    _fails(capsys, _argv(folder), folder, "8 landmarks per image; at most 7")
+
+
+@pytest.mark.parametrize("damage, extra", [("binary", []), ("truncated", ["--descriptors",
+                                                                         "sift"])])
+def test_an_image_that_is_not_an_image(folder, capsys, damage, extra):
+    """Given descriptors read only the image's header (for its size): a truncated image whose
+    header is intact fails once its pixels are needed (SIFT)."""
+    png = folder / "v1.png"
+    png.write_bytes(png.read_bytes()[:60] if damage == "truncated" else b"\x89PNG" + b"x" * 200)
+    _fails(capsys, _argv(folder, *extra), folder, "v1.png: cannot read it as an image")
+
+
+def test_missing_descriptor_file(folder, capsys):
+    (folder / "v2.scf").unlink()
+    _fails(capsys, _argv(folder), folder, "needs one NAME.scf per image (found 3 for 4 images)")
+
+
+def test_corrupt_mat_labels_are_named(folder, capsys):
+    (folder / "v1.txt").unlink()
+    (folder / "v1.mat").write_bytes(b"MATLAB 5.0" + bytes(range(256)))
+    _fails(capsys, _argv(folder), folder, "v1.mat: not a keypoint table")
+
+
+# --- the run folder ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case, needle", [
+    ("input", "holds the input DIR"),
+    ("parent", "holds the input DIR"),
+    ("file-in-input", "is a file"),
+    ("file", "is a file"),
+    ("devnull", "is a file"),
+    ("symlink", "is a symbolic link"),
+    ("not-a-run", "is not a formation-match run folder"),
+    ("empty", "--out ''"),
+])
+def test_out_that_is_not_a_new_run_folder(folder, tmp_path, capsys, case, needle):
+    other = tmp_path / "other"
+    other.mkdir()
+    out = {"input": folder, "parent": tmp_path, "file-in-input": folder / "v0.txt",
+           "file": other / "f", "devnull": "/dev/null", "symlink": other / "ln",
+           "not-a-run": other, "empty": ""}[case]
+    if case == "file":
+        (other / "f").write_text("precious")
+    elif case == "symlink":
+        os.symlink(other / "target", other / "ln")
+    elif case == "not-a-run":
+        (other / "notes.txt").write_text("precious")
+    before = tree(tmp_path)
+    assert main(_argv(folder, out=out)) == 2
+    one_line_error(capsys, needle)
+    assert tree(tmp_path) == before
+    assert not (other / "target").exists()
+
+
+def test_out_naming_the_current_folder(folder, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    before = tree(tmp_path)
+    assert main(_argv(folder, out=".")) == 2
+    one_line_error(capsys, "is the current folder")
+    assert tree(tmp_path) == before
+
+
+def test_ctrl_c_is_one_line_exit_130_and_nothing_written(folder, capsys, monkeypatch):
+    import pipeline.landmark_matching as lm
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(lm, "match_landmark_edges", interrupted)
+    before = tree(folder.parent)
+    assert main(_argv(folder)) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("interrupted:") == 1
+    assert err.splitlines()[-1].startswith("interrupted: run-landmarks")
+    assert tree(folder.parent) == before
