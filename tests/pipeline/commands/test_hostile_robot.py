@@ -274,3 +274,10 @@ def test_port_in_use_is_one_line(team_dir):
     assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
     assert len(lines) == 1 and f"cannot listen on tcp/127.0.0.1:{port}" in lines[0]
+
+
+def test_team_feature_methods_are_the_pipelines():
+    from pipeline.features import METHODS
+    from pipeline.team import FEATURE_METHODS
+
+    assert FEATURE_METHODS == METHODS
