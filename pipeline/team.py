@@ -74,6 +74,10 @@ LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
 MAX_TIMEOUT_S = 86400.0
 #: most rounds of silence before a neighbour is declared lost (``loss_timeout``)
 MAX_LOSS_TIMEOUT = 100_000
+#: most features a team file may give one robot (``data.features_per_camera``): a robot holds
+#: per-feature arrays (a 10,000,000-feature robot measured 277 MB at construction, before its
+#: link tables); ``resolve`` writes compact counts, so this bounds a hand-written file only
+MAX_ROBOT_FEATURES = 5_000_000
 #: keys a robot entry and each kind of ``data`` may hold
 _ROBOT_KEYS = {"id", "endpoint"}
 _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
@@ -314,13 +318,11 @@ def _check_data(data: dict, n: int, where: str) -> None:
     elif kind == "links":
         if not isinstance(data.get("links"), str):
             raise InputError(f"{where}: data.links must be the path of a links CSV file")
-        from pipeline.linkscsv import MAX_ID
-
         fpc = data.get("features_per_camera")
         if not isinstance(fpc, list) or len(fpc) != n or not all(
-                _is_int(v) and 0 <= v <= MAX_ID + 1 for v in fpc):
+                _is_int(v) and 0 <= v <= MAX_ROBOT_FEATURES for v in fpc):
             raise InputError(f"{where}: data.features_per_camera must list {n} counts in "
-                             f"0..{MAX_ID + 1}")
+                             f"0..{MAX_ROBOT_FEATURES} (a robot's memory follows its count)")
 
 
 def _check_options(opts: dict, where: str) -> None:

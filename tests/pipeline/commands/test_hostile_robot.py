@@ -127,7 +127,7 @@ def _three(first):
     ({"data": {"kind": "video"}}, "'data' must be an object with kind"),
     ({"data": {"kind": "links"}}, "data.links must be the path"),
     ({"data": {"kind": "links", "links": "in.csv", "features_per_camera": [2**62, 2, 2]}},
-     "data.features_per_camera must list 3 counts in 0..2147483647"),
+     "data.features_per_camera must list 3 counts in 0..5000000"),
     ({"data": {"kind": "links", "links": "in.csv", "features_per_camera": [2.5, 2, 2]}},
      "data.features_per_camera"),
     ({"data": {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2], "x": 1}},
