@@ -248,6 +248,13 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         if bad.size:
             raise InputError(f"robot {i}: link to camera {int(nbr[bad[0]])}, which is not its "
                              "neighbour in the team's comm graph")
+        bad = np.flatnonzero((r >= fpc[i]) | (s >= fpc[nbr]))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"robot {i}: link ({i},{int(r[k])})-({int(nbr[k])},{int(s[k])}) of "
+                             f"{team.data['links']} names a feature beyond data."
+                             f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
+                             "give counts that cover every feature id of the links file")
     else:
         feats, view, matches, weights, fpc = _features_and_matches(team, i, transport, opts,
                                                                    timings)

@@ -281,3 +281,17 @@ def test_team_feature_methods_are_the_pipelines():
     from pipeline.team import FEATURE_METHODS
 
     assert FEATURE_METHODS == METHODS
+
+
+def test_links_beyond_the_declared_feature_counts_are_named(tmp_path):
+    """A case that needs the robots' sessions: the ids are known only once a robot reads its
+    rows of the links file; it fails with one line, which the launcher names."""
+    from pipeline.errors import TeamError
+    from pipeline.launcher import launch_team, make_team
+
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,5,1,0\n")
+    team = make_team("t", [[0, 1]], {"kind": "links", "links": str(tmp_path / "in.csv"),
+                                      "features_per_camera": [2, 2]}, n=2)
+    with pytest.raises(TeamError, match=r"exit code 2: error: robot \d: link \(0,5\)-\(1,0\)|"
+                                        r"exit code 2: error: robot 1: link \(1,0\)-\(0,5\)"):
+        launch_team(team, tmp_path / "team", timeout_s=60)
