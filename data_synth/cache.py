@@ -11,8 +11,12 @@ Where: ``$FORMATION_MATCH_CACHE`` if set, else ``$XDG_CACHE_HOME/formation-match
 ``~/.cache/formation-match``. ``FORMATION_MATCH_CACHE=off`` (or ``0``, ``no``, ``false``)
 turns the cache off. One uncompressed ``.npz`` per entry (~13 MB at 640x480 with 6 robots),
 written to a temporary file and renamed (concurrent runs never see half a file). An entry that
-cannot be read or does not hold what its name says is ignored and written again. Entries of
-older code versions are not removed: delete the folder to reclaim the space.
+cannot be read or does not hold what its name says is ignored and written again.
+
+The folder is kept under a size cap, ``$FORMATION_MATCH_CACHE_MAX_MB`` (default 1024 MB): each
+write removes the least recently used entries (a hit marks its entry used) until the folder
+fits, never the entry just written, so entries of older code versions, which are never used
+again, go first. Temporary files left by killed runs are removed after an hour.
 """
 
 from __future__ import annotations
@@ -28,13 +32,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["ENV", "cache_dir", "code_version", "load_views", "load_view", "save_views",
-           "entry_path"]
+__all__ = ["ENV", "MAX_MB_ENV", "DEFAULT_MAX_MB", "cache_dir", "code_version", "load_views",
+           "load_view", "save_views", "entry_path", "prune", "max_bytes"]
 
 ENV = "FORMATION_MATCH_CACHE"
 """Environment variable: the cache folder, or ``off`` to disable the cache."""
 
 _OFF = {"off", "0", "no", "false", "none"}
+
+MAX_MB_ENV = "FORMATION_MATCH_CACHE_MAX_MB"
+"""Environment variable: the cache folder's size cap in MB (see the module docstring)."""
+
+DEFAULT_MAX_MB = 1024
+
+#: a temporary file older than this (seconds) is a leftover of a killed run
+_STALE_TMP_S = 3600.0
 
 
 def cache_dir() -> Path | None:
@@ -58,6 +70,67 @@ def code_version() -> str:
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     h.update(f"numpy {np.__version__} opencv {cv2.__version__}".encode())
     return h.hexdigest()
+
+
+def max_bytes() -> int:
+    """The size cap in bytes from ``$FORMATION_MATCH_CACHE_MAX_MB``; the default when it is
+    unset or not a number >= 0 (the cache is an optimisation: a bad value is never fatal)."""
+    value = os.environ.get(MAX_MB_ENV, "")
+    try:
+        mb = float(value)
+    except ValueError:
+        mb = float(DEFAULT_MAX_MB)
+    if not mb >= 0 or mb == float("inf"):
+        mb = float(DEFAULT_MAX_MB)
+    return int(mb * 1024 * 1024)
+
+
+def _mark_used(path: Path) -> None:
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
+def prune(root: Path, keep: Path | None = None, limit: int | None = None) -> list[Path]:
+    """Remove the least recently used entries of ``root`` until it holds at most ``limit``
+    bytes (default :func:`max_bytes`), never ``keep``; remove temporary files older than an
+    hour. Returns the removed paths. Errors (a file gone meanwhile, no permission) are skipped.
+    """
+    import time
+
+    limit = max_bytes() if limit is None else limit
+    removed: list[Path] = []
+    entries = []
+    now = time.time()
+    for path in root.glob("*.npz"):
+        try:
+            st = path.stat()
+        except OSError:
+            continue
+        if path.name.startswith(".tmp-"):
+            continue
+        entries.append((st.st_mtime, st.st_size, path))
+    for path in root.glob(".tmp-*.npz"):
+        try:
+            if now - path.stat().st_mtime > _STALE_TMP_S:
+                path.unlink()
+                removed.append(path)
+        except OSError:
+            continue
+    total = sum(size for _, size, _ in entries)
+    for _, size, path in sorted(entries):
+        if total <= limit:
+            break
+        if keep is not None and path == keep:
+            continue
+        try:
+            path.unlink()
+        except OSError:
+            continue
+        total -= size
+        removed.append(path)
+    return removed
 
 
 def _key(seed: int, size: tuple[int, int], n: int) -> str:
@@ -94,6 +167,7 @@ def load_views(seed: int, size: tuple[int, int], n: int) -> dict | None:
     for name, (shape, dtype) in shapes.items():
         if out[name].shape != shape or out[name].dtype != dtype:
             return None
+    _mark_used(path)
     return out
 
 
@@ -149,7 +223,10 @@ def load_view(seed: int, size: tuple[int, int], n: int, i: int) -> dict | None:
                    for name, (shape, dtype) in shapes.items()}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
-    return None if any(v is None for v in out.values()) else out
+    if any(v is None for v in out.values()):
+        return None
+    _mark_used(path)
+    return out
 
 
 def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
@@ -171,4 +248,5 @@ def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
         return None
+    prune(path.parent, keep=path)
     return path

@@ -138,3 +138,53 @@ def test_unwritable_cache_is_not_fatal(tmp_path, monkeypatch):
     monkeypatch.setenv(cache.ENV, str(blocker / "cache"))
     f = data_synth.render("a", seed=1, size=SIZE)
     assert len(f.views) == 6
+
+
+def _entry(folder: Path, name: str, size: int, mtime: float) -> Path:
+    import os
+
+    path = folder / name
+    path.write_bytes(b"\0" * size)
+    os.utime(path, (mtime, mtime))
+    return path
+
+
+def test_prune_removes_least_recently_used_entries_down_to_the_cap(tmp_path):
+    old = _entry(tmp_path, "views-old.npz", 400, 1_000)
+    mid = _entry(tmp_path, "views-mid.npz", 400, 2_000)
+    new = _entry(tmp_path, "views-new.npz", 400, 3_000)
+    removed = cache.prune(tmp_path, limit=900)
+    assert removed == [old]
+    assert mid.exists() and new.exists()
+    # the entry just written is kept even when it alone exceeds the cap
+    removed = cache.prune(tmp_path, keep=mid, limit=100)
+    assert removed == [new] and mid.exists()
+
+
+def test_prune_removes_only_stale_temporary_files(tmp_path):
+    import time
+
+    stale = _entry(tmp_path, ".tmp-abc.npz", 10, time.time() - 7200)
+    live = _entry(tmp_path, ".tmp-def.npz", 10, time.time())
+    assert cache.prune(tmp_path, limit=10**9) == [stale]
+    assert live.exists()
+
+
+def test_a_hit_marks_its_entry_used_and_a_write_prunes_to_the_cap(cache_dir, monkeypatch):
+    import os
+
+    data_synth.render("a", seed=1, size=SIZE)
+    first = cache.entry_path(1, SIZE, 6)
+    os.utime(first, (1_000, 1_000))
+    assert cache.load_views(1, SIZE, 6) is not None
+    assert first.stat().st_mtime > 1_000  # the hit marked it used
+    # a cap smaller than two entries: writing a second one evicts the first
+    monkeypatch.setenv(cache.MAX_MB_ENV, str(first.stat().st_size * 1.5 / 2**20))
+    data_synth.render("a", seed=2, size=SIZE)
+    assert not first.exists() and cache.entry_path(2, SIZE, 6).exists()
+
+
+@pytest.mark.parametrize("value", ["", "lots", "-3", "nan", "inf"])
+def test_a_meaningless_cap_falls_back_to_the_default(monkeypatch, value):
+    monkeypatch.setenv(cache.MAX_MB_ENV, value)
+    assert cache.max_bytes() == cache.DEFAULT_MAX_MB * 2**20
