@@ -31,10 +31,8 @@ Equivalence (tested: ``tests/pipeline/consistency/test_batched.py``)
     ``indices`` in the robot's index type). Each robot's peak memory is computed with the
     formula of :meth:`~.robot.Robot.memory_bytes` on the state it would hold in each round.
 
-Resolution (Alg. 1) is not batched: :func:`run_resolution` runs the robots' own
-:func:`~.resolution.resolution_step`, stepping in each round only the robots with a message
-(on the paper's protocol a robot with an empty inbox does nothing in a resolution round), so
-a resolution of ``n`` rounds costs what its messages cost, not ``n`` × ``n`` steps.
+Resolution (Alg. 1): :func:`run_resolution` (:mod:`.batched_resolution`) evaluates every
+robot's rounds on the link tables stacked, under the same rule.
 
 Where it applies (:func:`batched_applies`): the in-process :class:`Network` with no fault
 switch on, the paper's protocol with delta messages. Everywhere else (faults, the reliable
@@ -46,8 +44,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from pipeline.consistency.batched_resolution import run_resolution
 from pipeline.consistency.detection import init_detection
-from pipeline.consistency.protocols import RESOLUTION, PaperProtocol, end_phase
+from pipeline.consistency.protocols import PaperProtocol
 from pipeline.consistency.robot import Robot
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.transport.simulated import Network
@@ -404,30 +403,3 @@ def _roots(reps: np.ndarray, starts: np.ndarray, counts: np.ndarray,
     cand = np.flatnonzero(run_len == best[run_set])
     firsts = cand[np.r_[True, run_set[cand][1:] != run_set[cand][:-1]]]
     return run_cam[firsts]
-
-
-def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProtocol,
-                   iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
-    """Alg. 1 on the paper's protocol, stepping only the robots with a message; returns what
-    :func:`.engine.run_phase` returns for it (``rounds``, ``start_round``, ``lost``,
-    ``conflictive_sets``).
-
-    On the paper's protocol :func:`~.resolution.resolution_step` on an empty inbox changes
-    nothing (no request to answer, no reject to apply, memory unchanged), so skipping it is
-    the per-robot loop without its no-op calls. The phase ends when nothing is in flight.
-    """
-    start_round = int(network.round)
-    rooted = sum(protocol.start(RESOLUTION, rb, iteration) for rb in robots)
-    cap = protocol.max_rounds(RESOLUTION, robots) if max_rounds is None else max_rounds
-    t = 0
-    while network.pending:
-        network.end_round()
-        t += 1
-        if on_round is not None:
-            on_round(t)
-        for i in network.receivers():
-            protocol.step(RESOLUTION, robots[i], network.inbox(i), t)
-        if t > cap:
-            raise RuntimeError(f"resolution did not end within {cap} rounds")
-    end_phase(RESOLUTION, robots)
-    return dict(rounds=t, start_round=start_round, lost=False, conflictive_sets=int(rooted))

@@ -14,11 +14,12 @@ from pipeline.consistency import (
     ProtocolOptions,
     batched,
     batched_evidence,
+    batched_resolution,
     evidence,
     resolve_conflicts,
 )
-from pipeline.consistency.engine import _equip_evidence, build_robots, detect_once
-from pipeline.consistency.protocols import make_protocol
+from pipeline.consistency.engine import _equip_evidence, build_robots, detect_once, run_phase
+from pipeline.consistency.protocols import RESOLUTION, make_protocol
 from pipeline.errors import InputError
 from pipeline.linkscsv import write_links_csv
 from pipeline.run import ledger_from_consistency
@@ -65,7 +66,7 @@ def _poses(fpc, which: str, seed: int):
 
 
 def _no_fallback(*args, **kwargs):
-    raise AssertionError("the batched evidence pass fell back to robot by robot")
+    raise AssertionError("the batched pass fell back to robot by robot")
 
 
 @SETTINGS
@@ -77,7 +78,8 @@ def test_batched_and_per_robot_engines_give_identical_results(inst, resolution, 
     kp, P = _poses(fpc, poses, seed)
     kw = dict(resolution=resolution, keypoints=kp, projections=P)
     per_robot = resolve_conflicts(fpc, edges, links, engine="per-robot", **kw)
-    with patch.object(batched_evidence, "run_robot_by_robot", _no_fallback):
+    with patch.object(batched_evidence, "run_robot_by_robot", _no_fallback), \
+            patch.object(batched_resolution, "_run_stepped", _no_fallback):
         in_batch = resolve_conflicts(fpc, edges, links, engine="batched", **kw)
     _same_result(per_robot, in_batch, tmp_path)
     auto = resolve_conflicts(fpc, edges, links, **kw)
@@ -178,6 +180,52 @@ def test_batched_detection_leaves_every_robot_in_the_per_robot_state(inst):
         assert (ra.stopped, ra.t_stop, ra.peak_memory_bytes) == \
             (rb.stopped, rb.t_stop, rb.peak_memory_bytes)
         assert ra.memory_bytes() == rb.memory_bytes()
+
+
+@SETTINGS
+@given(inst=instances(max_n=8, max_feat=5))
+def test_batched_resolution_leaves_every_robot_in_the_per_robot_state(inst):
+    fpc, edges, links = inst
+    runs = []
+    for engine in ("per-robot", "batched"):
+        det = detect_once(fpc, links, network=Network(len(fpc), edges), engine="per-robot")
+        if engine == "per-robot":
+            stats = run_phase(det.robots, det.network, det.protocol, RESOLUTION, iteration=1)
+        else:
+            with patch.object(batched_resolution, "_run_stepped", _no_fallback):
+                stats = batched.run_resolution(det.robots, det.network, det.protocol, 1)
+        runs.append((det, stats))
+    (a, sa), (b, sb) = runs
+    assert sa == sb
+    assert a.network.counters() == b.network.counters()
+    for i in range(len(fpc)):
+        assert a.network.peak_memory(i) == b.network.peak_memory(i)
+    for ra, rb in zip(a.robots, b.robots, strict=True):
+        for f in ("component", "assigned_round", "link_alive", "deleted_round", "deleted_case",
+                  "deleted_iteration", "candidates"):
+            np.testing.assert_array_equal(getattr(ra, f), getattr(rb, f), err_msg=f)
+        assert ra.peak_memory_bytes == rb.peak_memory_bytes
+
+
+def test_batched_resolution_settles_contention_in_the_receivers_order():
+    """Two roots ask one feature in round 1 and one root asks two features of one robot: the
+    receiver's order (component, sender robot, sender feature) decides, as robot by robot."""
+    # robot 1 feature 0 is asked by components of robots 0 and 2 (one set, two roots' sides);
+    # robot 3 has two features in one set reached from robot 2's feature
+    fpc = np.array([2, 2, 2, 2])
+    links = Links(np.array([0, 1, 0, 2, 2, 0]), np.array([0, 0, 1, 0, 1, 0]),
+                  np.array([1, 2, 2, 3, 3, 3]), np.array([0, 0, 0, 0, 1, 1]),
+                  np.ones(6))
+    edges = comm_edges_for(fpc, links, None)
+    res = {}
+    for engine in ("per-robot", "batched"):
+        with patch.object(batched_resolution, "_run_stepped", _no_fallback):
+            res[engine] = resolve_conflicts(fpc, edges, links, engine=engine)
+    a, b = res["per-robot"], res["batched"]
+    assert a.deleted.any()
+    for f in ("deleted", "case", "round", "component"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert a.stats["bytes_by_kind"] == b.stats["bytes_by_kind"]
 
 
 @SETTINGS
