@@ -295,7 +295,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         How the simulator evaluates the robots' rounds. ``per-robot``: every robot steps on
         its inbox, one by one (the code robots run under faults and over a middleware).
         ``batched``: the same updates, all robots' detection rows in one sparse product per
-        round and only robots with a message stepped in a resolution (:mod:`.batched`), the
+        round (:mod:`.batched`), Alg. 1's rounds on the link tables stacked
+        (:mod:`.batched_resolution`), the
         evidence rule's flood in one vectorized step per round and each set solved once
         (:mod:`.batched_evidence`); same results, rounds, messages, bytes and memory; it
         needs the paper's protocol with delta messages on a fault-free network. ``auto``:
