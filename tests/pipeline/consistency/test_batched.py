@@ -208,21 +208,28 @@ def test_batched_resolution_leaves_every_robot_in_the_per_robot_state(inst):
 
 
 def test_batched_resolution_settles_contention_in_the_receivers_order():
-    """Two roots ask one feature in round 1 and one root asks two features of one robot: the
-    receiver's order (component, sender robot, sender feature) decides, as robot by robot."""
-    # robot 1 feature 0 is asked by components of robots 0 and 2 (one set, two roots' sides);
-    # robot 3 has two features in one set reached from robot 2's feature
-    fpc = np.array([2, 2, 2, 2])
-    links = Links(np.array([0, 1, 0, 2, 2, 0]), np.array([0, 0, 1, 0, 1, 0]),
-                  np.array([1, 2, 2, 3, 3, 3]), np.array([0, 0, 0, 0, 1, 1]),
-                  np.ones(6))
+    """Robot 0 roots one set with two features (two components); each reaches robot 3's one
+    feature in round 2, through robots 1 and 2: the receiver's order (component, sender
+    robot, sender feature) lets the first join and cuts the other (b), as robot by robot."""
+    fpc = np.array([2, 1, 1, 1])
+    links = Links(np.array([0, 0, 1, 2]), np.array([0, 1, 0, 0]), np.array([1, 2, 3, 3]),
+                  np.array([0, 0, 0, 0]), np.ones(4))
     edges = comm_edges_for(fpc, links, None)
+    settled = []
+
+    def counting(q, r, outcome, cand):
+        settled.append(cand.size)
+        return settle(q, r, outcome, cand)
+
+    settle = batched_resolution._settle_contention
     res = {}
     for engine in ("per-robot", "batched"):
-        with patch.object(batched_resolution, "_run_stepped", _no_fallback):
+        with patch.object(batched_resolution, "_run_stepped", _no_fallback), \
+                patch.object(batched_resolution, "_settle_contention", counting):
             res[engine] = resolve_conflicts(fpc, edges, links, engine=engine)
+    assert settled == [2]  # the batched round met the contention
     a, b = res["per-robot"], res["batched"]
-    assert a.deleted.any()
+    assert a.case.tolist() == ["", "", "", "b"]
     for f in ("deleted", "case", "round", "component"):
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
     assert a.stats["bytes_by_kind"] == b.stats["bytes_by_kind"]
