@@ -333,7 +333,17 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     arrays["fusion_winner"] = np.asarray(fusion.winner, np.int32)
     return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
             "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
-            "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus}
+            "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus,
+            "forced": _forced(fusion)}
+
+
+def _forced(fusion) -> bool:
+    """True when, in the exact mode, this robot decided a track by the round cap before its
+    ball closed (the simulator's ``settled`` false); False otherwise."""
+    flood = getattr(fusion, "flood", None)
+    if flood is None:
+        return False
+    return any(bool(st.forced) for st in flood.tracks.values())
 
 
 def _since_launch() -> float | None:

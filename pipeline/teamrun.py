@@ -277,7 +277,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     stats = dict(
         enabled=True, transport="zenoh", consensus=mode, rounds=int(rounds), maxc_rounds=maxc,
         consensus_rounds=max(int(rounds) - maxc, 0),
-        settled=bool(rounds - maxc < 100) if mode == "metropolis" else None,
+        settled=(bool(rounds - maxc < 100) if mode == "metropolis"
+                 else not any(h.get("forced", False) for h in fusion_heads)),
         messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
         messages_by_kind={k: v for k, v in msgs.items() if v},
         bytes_by_kind={k: v for k, v in byts.items() if v},

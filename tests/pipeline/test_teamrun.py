@@ -77,6 +77,7 @@ def test_zenoh_links_equal_the_simulators_formation(formation, resolution, fusio
         assert any(r[5] == "fusion-outlier" for r in sim_rows[1:])
         sim_fusion = json.loads((sim / "report.json").read_text())["fusion"]
         assert report["fusion"]["rounds"] == sim_fusion["rounds"]
+        assert report["fusion"]["settled"] is sim_fusion["settled"] is True
         assert report["fusion"]["fused_points"] == sim_fusion["fused_points"]
         for kind, nbytes in sim_fusion["bytes_by_kind"].items():
             assert report["fusion"]["bytes_by_kind"][kind] == nbytes
