@@ -1,4 +1,4 @@
-"""Soak benchmark: the distributed consistency stage under faults (issue 6).
+"""Soak benchmark: the distributed consistency stage under faults.
 
 Random small formations (the synthetic associations of ``bench/consistency_scale.py``: a ring
 with chords, landmarks seen by runs of consecutive robots, missing and spurious links; ``n``
