@@ -46,6 +46,7 @@ import scipy.sparse as sp
 
 from pipeline.consistency.batched_resolution import run_resolution
 from pipeline.consistency.detection import init_detection
+from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.protocols import PaperProtocol
 from pipeline.consistency.robot import Robot
 from pipeline.transport import HEADER_BYTES, Transport
@@ -72,7 +73,7 @@ class _SortedKeys:
         self.recent = _EMPTY
 
     def contains(self, q: np.ndarray) -> np.ndarray:
-        return _isin_sorted(q, self.main) | _isin_sorted(q, self.recent)
+        return isin_sorted(q, self.main) | isin_sorted(q, self.recent)
 
     def add(self, new_sorted: np.ndarray) -> None:
         self.recent = _merge(self.recent, new_sorted)
@@ -105,12 +106,6 @@ class _DenseKeys:
 #: largest ``A²`` (bytes) for which the detection keeps ``X`` as a dense boolean array
 DENSE_KEYS_MAX = 1 << 24
 
-
-def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
-    if a.size == 0 or q.size == 0:
-        return np.zeros(q.shape, dtype=bool)
-    pos = np.minimum(np.searchsorted(a, q), a.size - 1)
-    return a[pos] == q
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
@@ -196,7 +191,7 @@ class _Team:
         give them.
         """
         rows = np.flatnonzero(new_per_row)
-        entries = self.send_by_row[_ranges(self.send_ptr[rows], self.send_ptr[rows + 1])]
+        entries = self.send_by_row[ranges(self.send_ptr[rows], self.send_ptr[rows + 1])]
         pair = self.send_pair[entries]
         d = new_per_row[self.send_row[entries]]
         n_pairs = self.pair_dst.size
@@ -295,15 +290,6 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))
 
 
-def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
-    """Concatenation of ``arange(start[k], stop[k])`` over ``k``."""
-    length = stop - start
-    total = int(length.sum())
-    if total == 0:
-        return _EMPTY
-    first = np.cumsum(length) - length
-    return np.repeat(start - first, length) + np.arange(total)
-
 
 def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
     """Keys (row * A + col) of the rows of running robots of ``P Δ``, sorted and unique.
@@ -316,7 +302,7 @@ def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
     A = team.A
     s, c = delta // A, delta % A
     start, stop = team.readers_ptr[s], team.readers_ptr[s + 1]
-    pos = _ranges(start, stop)
+    pos = ranges(start, stop)
     r = team.readers[pos]
     keys = r * A + np.repeat(c, stop - start)
     return _unique(keys[running[team.owner[r]]])

@@ -77,6 +77,7 @@ from pipeline.consistency.evidence import (
 from pipeline.consistency.evidence import (
     run_evidence_resolution as run_robot_by_robot,
 )
+from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
 from pipeline.transport import HEADER_BYTES, Transport
 
@@ -154,21 +155,6 @@ class _SetGraphs:
         return self.symmetric and self.whole
 
 
-def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
-    """Concatenation of ``arange(start[k], stop[k])`` over ``k``."""
-    length = stop - start
-    total = int(length.sum())
-    if total == 0:
-        return _EMPTY
-    first = np.cumsum(length) - length
-    return np.repeat(start - first, length) + np.arange(total)
-
-
-def _isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:
-    if a.size == 0 or q.size == 0:
-        return np.zeros(q.shape, dtype=bool)
-    pos = np.minimum(np.searchsorted(a, q), a.size - 1)
-    return a[pos] == q
 
 
 class _Frontier:
@@ -207,7 +193,7 @@ def _forward(sg: _SetGraphs, fr: _Frontier, part: slice) -> tuple:
     N = sg.N
     g, node, parent = fr.g[part], fr.node[part], fr.parent[part]
     start, stop = sg.indptr[node], sg.indptr[node + 1]
-    pos = _ranges(start, stop)
+    pos = ranges(start, stop)
     cnt = stop - start
     tj = sg.indices[pos]
     keep = tj != np.repeat(parent, cnt)  # not back to the sender it came from
@@ -221,7 +207,7 @@ def _forward(sg: _SetGraphs, fr: _Frontier, part: slice) -> tuple:
             np.bincount(inv, sg.F[tg] * sg.P[tg], pair.size))
     # receivers keep what they do not hold: the first copy, from the lowest sender
     key = tg * N + tj
-    new = ~(_isin_sorted(key, fr.key) | _isin_sorted(key, fr.prev))
+    new = ~(isin_sorted(key, fr.key) | isin_sorted(key, fr.prev))
     key, tk = key[new], tk[new]
     order = np.lexsort((tk, key))  # the nodes of a set ascend with their robot
     key, tk = key[order], tk[order]

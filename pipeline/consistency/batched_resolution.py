@@ -37,14 +37,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.consistency.keys import isin_sorted
 from pipeline.consistency.protocols import RESOLUTION, PaperProtocol, end_phase
-from pipeline.consistency.resolution import _settle_contention, start_resolution
+from pipeline.consistency.resolution import (
+    _B,
+    _C,
+    _D,
+    _settle_contention,
+    classify_requests,
+    start_resolution,
+)
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
 from pipeline.transport import HEADER_BYTES, Transport
 
 __all__ = ["run_resolution"]
 
-_A, _B, _C, _D = 0, 1, 2, 3  # request outcomes (cases of Alg. 1 lines 8-16)
 _EMPTY = np.zeros(0, dtype=np.int64)
 
 
@@ -218,13 +225,7 @@ def _round(tab: _Tables, req_link: np.ndarray, req_q: np.ndarray, rej_link: np.n
     has = tab.comp >= 0
     held_keys = np.unique(tab.f_owner[has] * tab.m_total + tab.comp[has])
     key_q = i * tab.m_total + q
-    pos = np.minimum(np.searchsorted(held_keys, key_q), max(held_keys.size - 1, 0))
-    held = held_keys[pos] == key_q if held_keys.size else np.zeros(q.size, dtype=bool)
-    outcome = np.full(q.size, -1, dtype=np.int8)
-    outcome[cur == q] = _A                        # (a)
-    outcome[(cur >= 0) & (cur != q)] = _B         # (b)
-    outcome[(cur < 0) & held] = _C                # (c)
-    cand = np.flatnonzero((cur < 0) & ~held)
+    outcome, cand = classify_requests(cur, q, isin_sorted(key_q, held_keys))
     if cand.size:
         # (d) unless two candidates of one receiver share a feature or a component: those
         # settle in order (each receiver's requests are contiguous and in its order)
@@ -259,19 +260,7 @@ def _duplicated(a: np.ndarray) -> np.ndarray:
 
 
 def _run_stepped(robots, network, protocol, iteration, max_rounds, on_round) -> dict:
-    """Alg. 1 stepping only the robots with a message (an empty inbox is a no-op step)."""
-    start_round = int(network.round)
-    rooted = sum(protocol.start(RESOLUTION, rb, iteration) for rb in robots)
-    cap = protocol.max_rounds(RESOLUTION, robots) if max_rounds is None else max_rounds
-    t = 0
-    while network.pending:
-        network.end_round()
-        t += 1
-        if on_round is not None:
-            on_round(t)
-        for i in network.receivers():
-            protocol.step(RESOLUTION, robots[i], network.inbox(i), t)
-        if t > cap:
-            raise RuntimeError(f"resolution did not end within {cap} rounds")
-    end_phase(RESOLUTION, robots)
-    return dict(rounds=t, start_round=start_round, lost=False, conflictive_sets=int(rooted))
+    """The fallback: the engine's one loop, robot by robot (:func:`.engine.run_phase`)."""
+    from pipeline.consistency.engine import run_phase  # the engine imports this module
+
+    return run_phase(robots, network, protocol, RESOLUTION, iteration, max_rounds, on_round)

@@ -99,6 +99,29 @@ def _send_rejects(robot: Robot, links: np.ndarray, send: Send) -> None:
               "dst_feat": robot.link_s[part].astype(np.int32)})
 
 
+def classify_requests(cur: np.ndarray, q: np.ndarray, held: np.ndarray):
+    """Alg. 1 lines 8–12 for received requests: the cases that need no ordering.
+
+    Parameters
+    ----------
+    cur : (k,) int — the component of each request's target feature (``-1``: unassigned)
+    q : (k,) int — the component each request offers
+    held : (k,) bool — the receiver already holds component ``q`` on another feature
+
+    Returns
+    -------
+    outcome : (k,) int8 — ``_A`` (already in ``q``), ``_B`` (in another component), ``_C``
+        (target free, ``q`` held), ``-1`` for the candidates
+    cand : (k',) int — indices of the candidates (target free, ``q`` not held), settled by
+        :func:`_settle_contention`
+    """
+    outcome = np.full(q.size, -1, dtype=np.int8)
+    outcome[cur == q] = _A                        # (a)
+    outcome[(cur >= 0) & (cur != q)] = _B         # (b)
+    outcome[(cur < 0) & held] = _C                # (c)
+    return outcome, np.flatnonzero((cur < 0) & ~held)
+
+
 def _settle_contention(q: np.ndarray, r: np.ndarray, outcome: np.ndarray, cand: np.ndarray) -> None:
     """Cases for the candidate requests (target unassigned, ``q`` not held), in order.
 
@@ -144,11 +167,7 @@ def resolution_step(robot: Robot, inbox: list[Message], send: Send, round_: int)
 
         cur = robot.component[r]
         held = np.isin(q, robot.component[robot.component >= 0])
-        outcome = np.full(q.size, -1, dtype=np.int8)
-        outcome[cur == q] = _A                        # (a)
-        outcome[(cur >= 0) & (cur != q)] = _B         # (b)
-        outcome[(cur < 0) & held] = _C                # (c)
-        cand = np.flatnonzero((cur < 0) & ~held)
+        outcome, cand = classify_requests(cur, q, held)
         if cand.size:
             _settle_contention(q, r, outcome, cand)
 
