@@ -87,10 +87,12 @@ from pipeline.fusion.protocol import (
     to_wire,
 )
 from pipeline.fusion.voting import (
+    VOTE_TIE_TOL,
     _sq_mahalanobis,
     chi2_ppf,
     gate_threshold,
     information_matrix,
+    winning_view,
 )
 
 __all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT", "encode_flood",
@@ -504,12 +506,9 @@ class FusionRobot:
             run = ~self.stopped
             if run.any():                                                   # the cap was reached
                 self._opinion(run)
-            winner = np.argmax(self.v, axis=-1)
-            pick = winner.reshape(B, 1)
-            self.winner = winner
-            self.theta_w = np.take_along_axis(self.theta, pick[..., None], 1)[:, 0]
-            self.ok_w = np.take_along_axis(self.ok, pick, 1)[:, 0]
-            self.yes_w = np.take_along_axis(self.yes, pick, 1)[:, 0]
+            # the simulator's rule with the stop rule on (fuse_tracks: ties within VOTE_TIE_TOL)
+            self.winner, self.theta_w, self.ok_w, self.yes_w = winning_view(
+                self.theta, self.ok, self.yes, self.v, VOTE_TIE_TOL)
             self._outliers()
         else:
             self.winner = np.zeros(0, np.int64)

@@ -101,6 +101,25 @@ def pick_winner(v: np.ndarray, tie_tol: float = VOTE_TIE_TOL) -> np.ndarray:
     return np.argmax(v >= v.max(axis=-1, keepdims=True) - tie_tol, axis=-1)
 
 
+def winning_view(theta: np.ndarray, ok: np.ndarray, yes: np.ndarray, v: np.ndarray,
+                 tie_tol: float = VOTE_TIE_TOL):
+    """Each robot's view under its winning hypothesis (:func:`pick_winner` on ``v``).
+
+    Parameters
+    ----------
+    theta : (M, K, d); ok, yes : (M, K) — per robot-node and hypothesis
+    v : (..., K) votes with ``prod(...) == M``
+
+    Returns
+    -------
+    winner : (...) int; theta_w : (M, d); ok_w, yes_w : (M,)
+    """
+    winner = pick_winner(v, tie_tol)
+    pick = winner.reshape(-1, 1)
+    return (winner, np.take_along_axis(theta, pick[..., None], 1)[:, 0],
+            np.take_along_axis(ok, pick, 1)[:, 0], np.take_along_axis(yes, pick, 1)[:, 0])
+
+
 @dataclass
 class VotingResult:
     """Each robot's final view after a fusion run.
@@ -474,11 +493,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     if history:
         hist = {k: np.stack(val) for k, val in hist.items()}
     v = v.reshape(B, N, K)
-    winner = pick_winner(v, tie_tol)
-    pick = winner.reshape(M, 1)
-    theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
-    ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
-    yes_w = np.take_along_axis(yes, pick, 1)[:, 0]
+    winner, theta_w, ok_w, yes_w = winning_view(theta, ok, yes, v, tie_tol)
     return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
                         inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
                         stats=stats, maxc_stats=maxc_stats, history=hist)
@@ -625,11 +640,7 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
         yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)
     stats = CommStats(rounds=t_run)
     v = v.reshape(B, N, K)
-    winner = pick_winner(v, tie_tol)
-    pick = winner.reshape(M, 1)
-    theta_w = np.take_along_axis(theta, pick[..., None], 1)[:, 0]
-    ok_w = np.take_along_axis(ok, pick, 1)[:, 0]
-    yes_w = np.take_along_axis(yes, pick, 1)[:, 0]
+    winner, theta_w, ok_w, yes_w = winning_view(theta, ok, yes, v, tie_tol)
     return VotingResult(theta=theta_w.reshape(B, N, d), valid=ok_w.reshape(B, N),
                         inlier=yes_w.reshape(B, N), winner=winner, votes=v, members=members,
                         stats=stats, maxc_stats=maxc_stats, settled=bool(stopped.all()))
