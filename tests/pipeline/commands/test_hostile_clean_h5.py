@@ -48,27 +48,32 @@ def _fails(capsys, argv, folder, *needles):
 
 # --- the features file ---------------------------------------------------------------------
 
-@pytest.mark.parametrize("case, needle", [
-    ("missing", "no such file"),
-    ("folder", "is a folder"),
-    ("empty", "is not an HDF5 file"),
-    ("binary", "is not an HDF5 file"),
-    ("truncated", "is not an HDF5 file"),
-])
-def test_unreadable_features_file(files, tmp_path, capsys, case, needle):
-    d, feats, matches = files
-    if case == "missing":
-        feats.unlink()
-    elif case == "folder":
-        feats.unlink()
-        feats.mkdir()
+UNREADABLE = [("missing", "no such file"), ("folder", "is a folder"),
+              ("empty", "is not an HDF5 file"), ("binary", "is not an HDF5 file"),
+              ("truncated", "is not an HDF5 file")]
+
+
+def _spoil(path: Path, case: str, seed: int, keep: int) -> None:
+    """Make ``path`` unreadable as ``case`` says (random bytes from ``seed``, or its first
+    ``keep`` bytes)."""
+    if case in ("missing", "folder"):
+        path.unlink()
+        if case == "folder":
+            path.mkdir()
     elif case == "empty":
-        feats.write_bytes(b"")
+        path.write_bytes(b"")
     elif case == "binary":
-        feats.write_bytes(np.random.default_rng(0).bytes(4000))
+        path.write_bytes(np.random.default_rng(seed).bytes(keep + 1000))
     else:
-        feats.write_bytes(feats.read_bytes()[:3000])
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, "features file")
+        path.write_bytes(path.read_bytes()[:keep])
+
+
+@pytest.mark.parametrize("case, needle", UNREADABLE)
+@pytest.mark.parametrize("which, seed, keep", [("features", 0, 3000), ("matches", 1, 2500)])
+def test_unreadable_input_file(files, tmp_path, capsys, which, seed, keep, case, needle):
+    d, feats, matches = files
+    _spoil(feats if which == "features" else matches, case, seed, keep)
+    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, f"{which} file")
     assert not (tmp_path / "o.h5").exists()
 
 
@@ -117,27 +122,6 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
 
 # --- the matches file ----------------------------------------------------------------------
 
-@pytest.mark.parametrize("case, needle", [
-    ("missing", "no such file"),
-    ("folder", "is a folder"),
-    ("empty", "is not an HDF5 file"),
-    ("binary", "is not an HDF5 file"),
-    ("truncated", "is not an HDF5 file"),
-])
-def test_unreadable_matches_file(files, tmp_path, capsys, case, needle):
-    d, feats, matches = files
-    if case == "missing":
-        matches.unlink()
-    elif case == "folder":
-        matches.unlink()
-        matches.mkdir()
-    elif case == "empty":
-        matches.write_bytes(b"")
-    elif case == "binary":
-        matches.write_bytes(np.random.default_rng(1).bytes(3000))
-    else:
-        matches.write_bytes(matches.read_bytes()[:2500])
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, "matches file")
 
 
 @pytest.mark.parametrize("edit, needle", [
