@@ -122,8 +122,6 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
 
 # --- the matches file ----------------------------------------------------------------------
 
-
-
 @pytest.mark.parametrize("edit, needle", [
     (lambda fd: [fd.__delitem__(k) for k in list(fd)], "no matches to clean"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(3, -1, np.int16)), "has shape (3,)"),
