@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Iterable
 
@@ -142,5 +143,27 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def entry() -> None:
+    """Run :func:`main` as a program and end the process with its exit code.
+
+    When a command returns, everything it writes is already on disk: run folders and files are
+    written to a temporary sibling, closed and renamed into place (the Rerun recording is
+    disconnected, which writes its footer, before the rename), and robot processes have been
+    waited for. What is left is the interpreter's teardown, which frees every object of every
+    imported module (NumPy, OpenCV, SciPy, pycolmap, Rerun) one by one: 0.1-0.25 s of a 1.8 s
+    default ``run-formation`` on a 2-core machine, for nothing the user sees. So, after flushing
+    stdout and stderr, the process ends at once (:func:`os._exit`). An exception that escapes
+    :func:`main` (a bug) still takes the normal path, with its traceback and the usual clean-up.
+    """
+    code = main()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (``| head``) or a closed stream
+            pass
+    logging.shutdown()
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

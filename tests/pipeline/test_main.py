@@ -120,6 +120,23 @@ def test_default_command_imports_only_what_it_uses(rerun, tmp_path):
     assert ("rerun" in loaded) == rerun == (tmp_path / "run" / "recording.rrd").is_file()
 
 
+def test_program_exit_keeps_output_and_exit_code(tmp_path):
+    """Run as a program, the process ends without the interpreter's teardown: what it printed
+    to a pipe is all there, and the exit code is the command's (0, then 2 for bad input)."""
+    env = {**os.environ, "FORMATION_MATCH_CACHE": str(tmp_path / "cache")}
+    ok = subprocess.run([sys.executable, "-m", "pipeline", "match-formation", "--formation", "a",
+                         "--size", "160x120", "--max-features", "200"],
+                        cwd=ROOT, capture_output=True, text=True, env=env)
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.rstrip().endswith("|")  # the table's last row, flushed before the exit
+    assert "time evaluate [s]" in ok.stdout
+    assert "[evaluate] done" in ok.stderr
+    bad = subprocess.run([sys.executable, "-m", "pipeline", "match-formation", "--formation",
+                          "zz"], cwd=ROOT, capture_output=True, text=True, env=env)
+    assert bad.returncode == 2
+    assert "--formation 'zz'" in bad.stderr
+
+
 def test_fusion_does_not_import_scipy_stats():
     loaded = _imported_after("import pipeline.fusion.landmarks")
     assert "pipeline.fusion.voting" in loaded
