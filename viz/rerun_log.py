@@ -373,6 +373,30 @@ def _gray_to_rgb(image: np.ndarray) -> np.ndarray:
     return np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image[..., :3]
 
 
+def jpeg_bytes(image: np.ndarray, quality: int) -> bytes | None:
+    """JPEG bytes of an 8-bit gray ``(H, W)`` or RGB ``(H, W, 3)`` image, encoded by OpenCV;
+    ``None`` for any other image."""
+    import cv2
+
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or not (image.ndim == 2
+                                       or (image.ndim == 3 and image.shape[2] == 3)):
+        return None
+    bgr = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    return buf.tobytes() if ok else None
+
+
+def _jpeg(image: np.ndarray, quality: int):
+    """``image`` as a JPEG for the recording: :func:`jpeg_bytes` (OpenCV, already loaded by
+    the run, which spares loading Pillow, the encoder of ``rr.Image.compress``) for 8-bit gray
+    and RGB images; any other image goes through ``rr.Image.compress`` as before."""
+    data = jpeg_bytes(image, quality)
+    if data is not None:
+        return rr.EncodedImage(contents=data, media_type="image/jpeg")
+    return rr.Image(np.ascontiguousarray(image)).compress(jpeg_quality=quality)
+
+
 def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
               names: list, jpeg_quality: int) -> str:
     """Images ``i`` and ``j`` side by side with their links as 2D strips, kept vs cut."""
@@ -397,8 +421,7 @@ def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
     deleted = np.asarray(record.ledger.status)[sel] == "deleted"
     reason = np.asarray(record.ledger.reason, dtype=str)[sel]
     entity = "matches/" + rr.escape_entity_path_part(f"{ni}--{nj}")
-    rec.log(entity, rr.Image(np.ascontiguousarray(canvas)).compress(jpeg_quality=jpeg_quality),
-            static=True)
+    rec.log(entity, _jpeg(canvas, jpeg_quality), static=True)
     rec.log(f"{entity}/kept", rr.LineStrips2D(strips[~deleted],
                                               colors=(*LINK_COLORS["kept"], 150),
                                               radii=rr.components.Radius.ui_points(0.75)),
@@ -602,9 +625,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                                camera_xyz=rr.ViewCoordinates.RDF,
                                image_plane_distance=depth, color=cam_colors[i]),
                     static=True)
-            image = np.ascontiguousarray(view.image)
-            rec.log(f"{cam}/image", rr.Image(image).compress(jpeg_quality=jpeg_quality),
-                    static=True)
+            rec.log(f"{cam}/image", _jpeg(view.image, jpeg_quality), static=True)
             kp = np.asarray(feats.keypoints, dtype=np.float32).reshape(-1, 2) + RERUN_PIXEL_OFFSET
             rec.log(f"{cam}/image/keypoints",
                     rr.Points2D(kp, class_ids=status[off[i]:off[i + 1]],

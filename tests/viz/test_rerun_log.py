@@ -14,6 +14,7 @@ from viz.rerun_log import (
     KEYPOINT_CLASSES,
     LINK_COLORS,
     camera_entity,
+    jpeg_bytes,
     keypoint_annotation_context,
     keypoint_status,
     link_endpoints_3d,
@@ -382,3 +383,24 @@ def test_entities_named_after_the_images_and_a_pair_view(tmp_path):
     (chunk,) = _chunks(path, "/world/points/triangulated", static=True)
     colors = np.array(chunk.to_record_batch().to_pydict()["Points3D:colors"][0], np.uint32) >> 8
     assert (colors == rgb24((10, 200, 30))).all()
+
+
+@pytest.mark.parametrize("shape", [(24, 32, 3), (24, 32)])
+def test_jpeg_bytes_keep_colour_order_and_size(shape):
+    """The recording's JPEGs decode (by Pillow, as any viewer would) to the logged image:
+    same size, red stays red (OpenCV encodes BGR, the views are RGB)."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    image = np.zeros(shape, np.uint8)
+    image[..., 0] = 200  # red in RGB; the whole image for a gray one
+    data = jpeg_bytes(image, 90)
+    decoded = np.asarray(Image.open(BytesIO(data)))
+    assert decoded.shape == image.shape
+    assert np.abs(decoded.astype(int) - image).max() <= 3
+
+
+def test_jpeg_bytes_refuse_what_they_cannot_encode():
+    assert jpeg_bytes(np.zeros((4, 4, 4), np.uint8), 85) is None  # RGBA
+    assert jpeg_bytes(np.zeros((4, 4), np.float32), 85) is None
