@@ -23,11 +23,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    import os
     import sys
 
     from pipeline.outputs import check_output_files
-    from pipeline.team import LAUNCHED_AT_ENV, check_data_files, load_team
+    from pipeline.team import check_data_files, load_team
     from pipeline.teamrobot import run_robot_process
     from pipeline.transport import RobotMissingError
 
@@ -42,11 +41,4 @@ def run(args) -> int:
     except RobotMissingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
-    if os.environ.get(LAUNCHED_AT_ENV):
-        # started by the launcher, which only waits for this process to end: its result is
-        # published and its session closed, so skip the interpreter's teardown (a third of a
-        # second of module finalisation on a loaded machine)
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
     return code
