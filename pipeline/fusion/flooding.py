@@ -911,7 +911,15 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
                     wire=wire, exchange=exchange)
     rows = np.flatnonzero(np.asarray(observes, dtype=bool).reshape(-1))
     tb = rows // n
-    dec = decide(run.known[rows], est[tb], draws[tb], xw[tb], infow[tb], c=c, thr=thr)
+    # a row's decision is a function of its track's entries and the set it holds alone
+    # (decide's rows are independent): robots of one track holding the same set decide the
+    # same, so each distinct (track, set) is decided once
+    key = np.concatenate([tb[:, None], np.packbits(run.known[rows], axis=1)], 1)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    tf = tb[first]
+    dec = decide(run.known[rows[first]], est[tf], draws[tf], xw[tf], infow[tf], c=c, thr=thr)
+    dec = Decision(**{f: getattr(dec, f)[inv] for f in Decision.__dataclass_fields__})
     theta = np.zeros((B * n, d))
     valid = np.zeros(B * n, dtype=bool)
     inlier = np.zeros(B * n, dtype=bool)

@@ -212,12 +212,16 @@ def _mv3(A, v):
             + A[..., :, 2] * v[..., None, 2])
 
 
-def _project(X, R, t, K):
-    """Pixels and ``2 × 3`` Jacobians of ``X`` (..., 3) in cameras (..., 3, 3)/(..., 3)."""
+def _project(X, R, t, K, jacobian: bool = True):
+    """Pixels and ``2 × 3`` Jacobians of ``X`` (..., 3) in cameras (..., 3, 3)/(..., 3).
+
+    ``jacobian=False``: the Jacobians are not computed (``None`` in their place)."""
     Xc = _mv3(R, X) + t
     p = _mv3(K, Xc)
     z = p[..., 2:3]
     u = p[..., :2] / z
+    if not jacobian:
+        return u, None, Xc[..., 2]
     # d u / d Xc = (K[:2] - u K[2]) / z ; d Xc / d X = R
     dU = (K[..., :2, :] - u[..., :, None] * K[..., 2:3, :]) / z[..., None]
     return u, dU @ R, Xc[..., 2]
@@ -317,14 +321,16 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     Xu, _, oku, _ = triangulate_views(kp[ub[:, None], two], np.ones((len(ub), 2), dtype=bool),
                                       Rs[two], ts[two], Ks[two], sigma_px)
     pid = pair_id[bb, ii, jj]
-    Xp, okp = Xu[pid], oku[pid]
     pair = np.zeros((P, n), dtype=bool)
     pair[np.arange(P), ii] = True
     pair[np.arange(P), jj] = True
+    # every keypoint of the track against each two-view point, once per unordered pair (the
+    # reprojection of a point does not depend on which of its two robots checks it)
     with np.errstate(all="ignore"):
-        u, _, z = _project(Xp[:, None], Rs[None], ts[None], Ks[None])    # (P, n, 2), (P, n)
-    e2 = ((u - kp[bb]) ** 2).sum(-1) / sigma_px ** 2
-    fits = okp[:, None] & (z > 0) & (e2 <= px_thr)
+        u, _, z = _project(Xu[:, None], Rs[None], ts[None], Ks[None], jacobian=False)  # (U, n)
+    e2u = ((u - kp[ub]) ** 2).sum(-1) / sigma_px ** 2
+    fitsu = oku[:, None] & (z > 0) & (e2u <= px_thr)
+    e2, fits = e2u[pid], fitsu[pid]
     support = nb[bb, ii] & fits
     own = fits[np.arange(P), ii]
     count = np.where(own, support.sum(1), -1)
@@ -397,7 +403,14 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
     cov = np.broadcast_to(np.eye(3), (B, n, 3, 3)).copy()
     estimated = np.zeros((B, n), dtype=bool)
     if len(est_b):
-        Xe, Ce, oke, _ = triangulate_views(kp[est_b], use[est_b, est_i], Rs, ts, Ks, sigma_px)
+        # robots of one track that chose the same views form the same estimate from the same
+        # keypoints and cameras: each distinct (track, views) is triangulated once
+        sets = use[est_b, est_i]
+        key = np.concatenate([est_b[:, None], np.packbits(sets, axis=1)], 1)
+        _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        inv = inv.reshape(-1)
+        Xe, Ce, oke, _ = triangulate_views(kp[est_b[first]], sets[first], Rs, ts, Ks, sigma_px)
+        Xe, Ce, oke = Xe[inv], Ce[inv], oke[inv]
         X[est_b, est_i] = Xe
         cov[est_b[oke], est_i[oke]] = Ce[oke]
         estimated[est_b, est_i] = oke
