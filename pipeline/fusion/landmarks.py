@@ -604,7 +604,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         exchange.round("fusion-setup", HEADER_BYTES + 16 * 8 + 16 * n_obs_robot[src])
         protocol = RoundProtocol(LinkTraffic(node_edges, edge_link, comm), n, n - 1, wire,
                                  exchange)
-        topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
+        # the exact mode floods over node_edges itself: no Metropolis weights to build
+        maxc_rounds = n - 1
+        topo = FixedTopology(node_edges, B * n) if consensus == "metropolis" else None
     elif transport is None or not transport.switching:
         topo, maxc_rounds = FixedTopology(node_edges, B * n), n - 1
     else:
@@ -626,7 +628,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     voted_out = estimated & ~res.inlier
     # a robot voted out keeps its observation if its own keypoint reprojects onto the fused
     # landmark within the gate: the fault was in its partner's keypoint
-    u, _, z = _project(res.theta, Rs[None], ts[None], Ks[None])
+    u, _, z = _project(res.theta, Rs[None], ts[None], Ks[None], jacobian=False)
     e2 = ((u - kp) ** 2).sum(-1) / sigma_px ** 2
     reproj_ok = res.valid & (z > 0) & (e2 <= px_thr)
     # a robot that crashed never finished: its observations are not judged
