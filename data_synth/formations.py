@@ -89,8 +89,8 @@ class Formation:
     Notes
     -----
     A formation is not modified after rendering: ground truth computed from its views (the
-    true pairs of a camera pair, :func:`data_synth.ground_truth.true_pairs`) is remembered
-    with it.
+    true pairs of a camera pair, :func:`data_synth.ground_truth.true_pairs`, and the world
+    points of each camera's keypoints they come from) is remembered with it.
     """
 
     name: str
@@ -100,6 +100,7 @@ class Formation:
     seed: int
     centres: np.ndarray = field(repr=False)
     _truth_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _camera_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def scene(self) -> Scene:

@@ -125,9 +125,12 @@ def points_from_keypoints(view: View, xy) -> tuple[np.ndarray, np.ndarray]:
     return xyz, valid
 
 
-def _transfer(src: View, xy_src: np.ndarray, dst: View) -> tuple[np.ndarray, np.ndarray]:
-    """Project keypoints of ``src`` into ``dst``: ``(M, 2)`` pixels and ``(M,)`` visibility."""
-    X, valid = points_from_keypoints(src, xy_src)
+def _transfer(src: View, xy_src: np.ndarray, dst: View,
+              points: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Project keypoints of ``src`` into ``dst``: ``(M, 2)`` pixels and ``(M,)`` visibility.
+
+    ``points``: ``points_from_keypoints(src, xy_src)`` when the caller already has it."""
+    X, valid = points_from_keypoints(src, xy_src) if points is None else points
     p, z = project(dst.K, dst.R, dst.t, np.nan_to_num(X))
     d = sample_depth(dst.depth, p)
     visible = valid & (z > 0) & np.isfinite(d) & (np.abs(d - z) <= DEPTH_EPS * np.abs(z))
@@ -177,13 +180,17 @@ def _view(formation, i) -> View:
     return formation.views[int(i)]
 
 
-def _candidates(src: View, xy_src, dst: View, xy_dst, tol_px: float, k: int = 4):
-    """(src index, dst index, distance) of reprojections within ``tol_px``."""
+def _candidates(src: View, xy_src, dst: View, xy_dst, tol_px: float, k: int = 4, *,
+                src_points=None, dst_tree=None):
+    """(src index, dst index, distance) of reprojections within ``tol_px``.
+
+    ``src_points`` (``points_from_keypoints(src, xy_src)``) and ``dst_tree``
+    (``cKDTree(xy_dst)``): when the caller already has them."""
     if len(xy_src) == 0 or len(xy_dst) == 0:
         z = np.zeros(0, np.int64)
         return z, z, np.zeros(0)
-    p, vis = _transfer(src, xy_src, dst)
-    tree = cKDTree(xy_dst)
+    p, vis = _transfer(src, xy_src, dst, src_points)
+    tree = cKDTree(xy_dst) if dst_tree is None else dst_tree
     kk = min(k, len(xy_dst))
     d, idx = tree.query(np.where(vis[:, None], p, 1e9), k=kk, distance_upper_bound=tol_px)
     d, idx = d.reshape(len(p), kk), idx.reshape(len(p), kk)
@@ -217,7 +224,8 @@ def true_pairs(formation, i: int, xy_i, j: int, xy_j, tol_px: float = 2.0) -> np
     key = ("true_pairs", int(i), int(j), float(tol_px), _fingerprint(xy_i), _fingerprint(xy_j))
     if cache is not None and key in cache:
         return cache[key].copy()
-    pairs = _true_pairs(vi, xy_i, vj, xy_j, tol_px)
+    pairs = _true_pairs(vi, xy_i, vj, xy_j, tol_px,
+                        _camera_geometry(formation, i, xy_i), _camera_geometry(formation, j, xy_j))
     if cache is not None:
         cache[key] = pairs.copy()
     return pairs
@@ -229,11 +237,31 @@ def _fingerprint(a: np.ndarray) -> tuple:
                                                   digest_size=16).digest()
 
 
+def _camera_geometry(formation, i: int, xy: np.ndarray) -> dict:
+    """What :func:`true_pairs` needs of camera ``i``'s keypoints ``xy`` whatever the other
+    camera: their world points (:func:`points_from_keypoints`) and a k-d tree of them, built
+    on first use and kept with the formation (``_camera_cache``) when it has one."""
+    cache = getattr(formation, "_camera_cache", None)
+    key = (int(i), _fingerprint(xy))
+    if cache is not None and key in cache:
+        return cache[key]
+    view = _view(formation, i)
+    geometry = {"points": points_from_keypoints(view, xy) if len(xy) else None,
+                "tree": cKDTree(xy) if len(xy) else None}
+    if cache is not None:
+        cache[key] = geometry
+    return geometry
+
+
 def _true_pairs(vi: View, xy_i: np.ndarray, vj: View, xy_j: np.ndarray,
-                tol_px: float) -> np.ndarray:
-    """:func:`true_pairs` on validated input, ``(P, 2)`` int64."""
-    r1, s1, d1 = _candidates(vi, xy_i, vj, xy_j, tol_px)
-    s2, r2, d2 = _candidates(vj, xy_j, vi, xy_i, tol_px)
+                tol_px: float, geo_i: dict | None = None, geo_j: dict | None = None) -> np.ndarray:
+    """:func:`true_pairs` on validated input, ``(P, 2)`` int64 (``geo_i``, ``geo_j``: the
+    cameras' :func:`_camera_geometry`, when the caller has it)."""
+    geo_i, geo_j = geo_i or {}, geo_j or {}
+    r1, s1, d1 = _candidates(vi, xy_i, vj, xy_j, tol_px, src_points=geo_i.get("points"),
+                             dst_tree=geo_j.get("tree"))
+    s2, r2, d2 = _candidates(vj, xy_j, vi, xy_i, tol_px, src_points=geo_j.get("points"),
+                             dst_tree=geo_i.get("tree"))
     r = np.concatenate([r1, r2])
     s = np.concatenate([s1, s2])
     d = np.concatenate([d1, d2])

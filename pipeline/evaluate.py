@@ -23,7 +23,7 @@ from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
 from pipeline.types import Features, Links
 
-__all__ = ["link_truth", "missing_links", "missing_links_per_edge", "link_counts"]
+__all__ = ["link_truth", "missing_links", "missing_links_per_edge", "MissingLinks", "link_counts"]
 
 
 def _check(formation, features: list[Features], links: Links) -> None:
@@ -96,24 +96,56 @@ def missing_links_per_edge(formation, features: list[Features], links: Links, co
     -------
     missing : ndarray, (E,) int64, in the order of ``comm_edges``
     """
-    from data_synth.ground_truth import true_pairs
-
     _check(formation, features, links)
-    edges = check_comm_edges(comm_edges, len(features))
-    out = np.zeros(len(edges), dtype=np.int64)
-    for e, (i, j) in enumerate(edges.tolist()):
-        if not len(features[i]) or not len(features[j]):
-            continue
-        truth = np.asarray(true_pairs(formation, i, features[i].keypoints, j,
-                                      features[j].keypoints, tol_px=tol_px),
-                           dtype=np.int64).reshape(-1, 2)
-        if not len(truth):
-            continue
-        sel = (links.cam_i == i) & (links.cam_j == j)
-        m_j = len(features[j])
-        found = links.feat_i[sel] * m_j + links.feat_j[sel]
-        out[e] = int((~np.isin(truth[:, 0] * m_j + truth[:, 1], found)).sum())
-    return out
+    return MissingLinks(formation, features, comm_edges, tol_px).per_edge(links)
+
+
+class MissingLinks:
+    """:func:`missing_links_per_edge` of many link sets on one formation's features: the true
+    pairs of every communication edge are looked up once, each link set then costs one
+    vectorized membership test.
+
+    Parameters
+    ----------
+    formation, features, comm_edges, tol_px : see :func:`missing_links_per_edge`
+    """
+
+    def __init__(self, formation, features: list[Features], comm_edges, tol_px: float = 2.0):
+        from data_synth.ground_truth import true_pairs
+
+        self.n = len(features)
+        self.m = np.array([len(f) for f in features], dtype=np.int64)
+        self._features = features
+        self._formation = formation
+        edges = check_comm_edges(comm_edges, self.n)
+        self.n_edges = len(edges)
+        self._base = int(max(self.m.max(initial=0), 1))
+        keys, edge_of = [], []
+        for e, (i, j) in enumerate(edges.tolist()):
+            if not self.m[i] or not self.m[j]:
+                continue
+            truth = np.asarray(true_pairs(formation, i, features[i].keypoints, j,
+                                          features[j].keypoints, tol_px=tol_px),
+                               dtype=np.int64).reshape(-1, 2)
+            keys.append(self._key(i, j, truth[:, 0], truth[:, 1]))
+            edge_of.append(np.full(len(truth), e, dtype=np.int64))
+        self._truth = np.concatenate(keys) if keys else np.zeros(0, np.int64)
+        self._edge = np.concatenate(edge_of) if edge_of else np.zeros(0, np.int64)
+
+    def _key(self, i, j, r, s) -> np.ndarray:
+        """One integer per (camera i, camera j, feature r of i, feature s of j)."""
+        return ((np.asarray(i, np.int64) * self.n + j) * self._base + r) * self._base + s
+
+    def per_edge(self, links: Links) -> np.ndarray:
+        """Missing links of each communication edge, ``(E,)`` int64."""
+        _check(self._formation, self._features, links)
+        found = self._key(links.cam_i, links.cam_j, links.feat_i, links.feat_j)
+        missing = ~np.isin(self._truth, found)
+        return np.bincount(self._edge[missing], minlength=self.n_edges).astype(np.int64)
+
+    def __call__(self, links: Links) -> int:
+        """Total missing links of ``links`` over all communication edges."""
+        return int(self.per_edge(links).sum())
 
 
 def missing_links(formation, features: list[Features], links: Links, comm_edges,

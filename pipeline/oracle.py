@@ -30,7 +30,8 @@ from pipeline.association import camera_offsets
 from pipeline.consistency.centralized import union_find_conflicts
 from pipeline.types import Links
 
-__all__ = ["oracle_cut", "min_conflict_cut", "resolution_scores"]
+__all__ = ["oracle_cut", "min_conflict_cut", "resolution_scores",
+           "links_in_conflictive_sets"]
 
 
 def _ends(features_per_camera, links: Links) -> tuple[np.ndarray, np.ndarray]:
@@ -153,7 +154,7 @@ def oracle_cut(features_per_camera, links: Links, truth: np.ndarray) -> np.ndarr
 
 
 def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
-                      kept: np.ndarray) -> dict:
+                      kept: np.ndarray, *, in_sets: np.ndarray | None = None) -> dict:
     """Good cut, spurious cut, spurious in the input's conflictive sets, spurious left there.
 
     Parameters
@@ -162,6 +163,8 @@ def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
     links : Links, (L,) — the input of the resolution
     truth : ndarray, (L,) bool — good links
     kept : ndarray, (L,) bool — what the resolution kept
+    in_sets : ndarray, (L,) bool or None — which links lie in the input's conflictive sets
+        (:func:`links_in_conflictive_sets`), when the caller scores several masks of one input
 
     Returns
     -------
@@ -170,12 +173,17 @@ def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
     """
     truth = np.asarray(truth, dtype=bool)
     kept = np.asarray(kept, dtype=bool)
-    if len(links):
-        _, conflictive = union_find_conflicts(features_per_camera, links)
-        in_sets = conflictive[_ends(features_per_camera, links)[0]]
-    else:
-        in_sets = np.zeros(0, dtype=bool)
+    if in_sets is None:
+        in_sets = links_in_conflictive_sets(features_per_camera, links)
     return {"good_cut": int((~kept & truth).sum()), "spurious_cut": int((~kept & ~truth).sum()),
             "spurious_in_sets": int((in_sets & ~truth).sum()),
             "spurious_left": int((in_sets & ~truth & kept).sum()),
             "links_in_sets": int(in_sets.sum())}
+
+
+def links_in_conflictive_sets(features_per_camera, links: Links) -> np.ndarray:
+    """Which links lie in a conflictive set of ``links`` (Def. 2.4), ``(L,)`` bool."""
+    if not len(links):
+        return np.zeros(0, dtype=bool)
+    _, conflictive = union_find_conflicts(features_per_camera, links)
+    return conflictive[_ends(features_per_camera, links)[0]]

@@ -106,7 +106,7 @@ def fusion_section(ledger: LinkLedger, stats: dict) -> dict:
 
 
 def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=None,
-                      pairwise=None) -> dict:
+                      pairwise=None, masks: dict | None = None) -> dict:
     """The centralized baselines (:func:`pipeline.consistency.centralized.baselines`) on the
     same links, for comparison only (never used by the robots).
 
@@ -117,11 +117,12 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
     good : (L,) bool or None — ground truth of ``links``
     missing : callable ``Links -> int`` or None — missing links of a kept subset
     pairwise : callable ``Links -> dict`` or None — pairwise scores of a kept subset
+    masks : dict or None — ``centralized.baselines(m, links)`` when the caller has it
     """
     from pipeline.consistency import centralized
 
     out = {}
-    for name, keep_mask in centralized.baselines(m, links).items():
+    for name, keep_mask in (centralized.baselines(m, links) if masks is None else masks).items():
         keep_mask = np.asarray(keep_mask, dtype=bool)
         kept = links.subset(keep_mask)
         row = {**association_counts(m, kept, None if good is None else good[keep_mask],
@@ -155,9 +156,10 @@ def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
     sets, spurious left there, links in those sets
     (:func:`pipeline.oracle.resolution_scores`) and ``pairwise_f1`` of the result.
     """
-    from pipeline.oracle import resolution_scores
+    from pipeline.oracle import links_in_conflictive_sets, resolution_scores
 
-    return {name: {**resolution_scores(m, links, good, kept),
+    in_sets = links_in_conflictive_sets(m, links)  # the same input for every method
+    return {name: {**resolution_scores(m, links, good, kept, in_sets=in_sets),
                    "pairwise_f1": pairwise(links.subset(kept))["f1"]}
             for name, kept in kept_masks.items()}
 

@@ -379,7 +379,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     """
     from data_synth.ground_truth import points_from_keypoints
     from pipeline import report as sections
-    from pipeline.evaluate import link_truth, missing_links
+    from pipeline.consistency import centralized
+    from pipeline.evaluate import MissingLinks, link_truth
     from pipeline.linkscsv import write_links_csv
     from pipeline.metrics import PairwiseTruth, true_pairs_all
 
@@ -396,14 +397,16 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         truth = np.asarray(truth, dtype=bool)
         ledger.truth = truth.astype(np.int8)
 
-        def missing(kept_subset: Links) -> int:
-            return missing_links(formation, feats, kept_subset, comm_edges, tol_px=config.tol_px)
-
+        missing = MissingLinks(formation, feats, comm_edges, tol_px=config.tol_px)
         gt_pairs = PairwiseTruth(true_pairs_all(formation, feats, tol_px=config.tol_px),
                                  int(m.sum()))
+        scored: dict = {}  # several sections score the same kept subsets
 
         def pairwise_of(kept_subset: Links) -> dict:
-            return gt_pairs.scores(m, kept_subset)
+            key = _links_key(kept_subset)
+            if key not in scored:
+                scored[key] = gt_pairs.scores(m, kept_subset)
+            return dict(scored[key])
 
         before = sections.association_counts(m, links, truth, missing(links))
         after = sections.association_counts(m, kept_links, truth[kept], missing(kept_links))
@@ -412,11 +415,13 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         resolved_links = links.subset(resolved)
         pairwise = {"before": pairwise_of(links), "after_resolution": pairwise_of(resolved_links),
                     "after": pairwise_of(kept_links)}
-        baselines = sections.baselines_section(m, links, truth, missing, pairwise_of)
+        baseline_masks = centralized.baselines(m, links)
+        baselines = sections.baselines_section(m, links, truth, missing, pairwise_of,
+                                               masks=baseline_masks)
         quality = sections.resolution_quality_section(
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
-                              config.resolution, resolved))
+                              config.resolution, resolved, baseline_masks))
 
     # pycolmap is loaded only now: the earlier stages' peak memory does not include it
     from pipeline.triangulation import triangulate_tracks, write_reconstruction
@@ -486,12 +491,20 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     return out
 
 
+def _links_key(links: Links) -> bytes:
+    """The contents of ``links`` as one hashable value (equal iff the links are equal)."""
+    return b"".join(np.ascontiguousarray(a, dtype=np.int64).tobytes() + b"|" for a in
+                    (links.cam_i, links.feat_i, links.cam_j, links.feat_j))
+
+
 def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,
-                      method: str, resolved: np.ndarray) -> dict:
+                      method: str, resolved: np.ndarray, baseline_masks: dict | None = None
+                      ) -> dict:
     """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
 
     The run's own method (``resolved``: what its consistency stage kept), the other
-    distributed method (run here on the fault-free network), every centralized baseline and
+    distributed method (run here on the fault-free network), every centralized baseline
+    (``baseline_masks``: ``centralized.baselines(m, links)`` when the caller has it) and
     the oracle (:func:`pipeline.oracle.oracle_cut`, which knows the truth).
     """
     from pipeline.consistency import centralized
@@ -506,6 +519,8 @@ def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np
             res, _ = consistency_stage(m, comm_edges, links, resolution=other, evidence=evidence)
             masks[other] = ~res.deleted
     ordered = {k: masks[k] for k in ("paper", "evidence")}
-    ordered.update({k: np.asarray(v, dtype=bool) for k, v in centralized.baselines(m, links).items()})
+    if baseline_masks is None:
+        baseline_masks = centralized.baselines(m, links)
+    ordered.update({k: np.asarray(v, dtype=bool) for k, v in baseline_masks.items()})
     ordered["oracle"] = oracle_cut(m, links, truth)
     return ordered

@@ -59,21 +59,23 @@ def _link_ends(features_per_camera, links) -> tuple[np.ndarray, np.ndarray]:
     return off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
 
 
-def drop_conflictive_sets(features_per_camera, links) -> np.ndarray:
-    """Kept mask ``(L,)``: every link of a conflictive set is dropped ("filter tracks")."""
-    _, conflictive = union_find_conflicts(features_per_camera, links)
+def drop_conflictive_sets(features_per_camera, links, *, _uf=None) -> np.ndarray:
+    """Kept mask ``(L,)``: every link of a conflictive set is dropped ("filter tracks").
+
+    (``_uf``: :func:`union_find_conflicts` of the same input, when the caller has it.)"""
+    _, conflictive = union_find_conflicts(features_per_camera, links) if _uf is None else _uf
     a, _ = _link_ends(features_per_camera, links)
     return ~conflictive[a] if len(links) else np.zeros(0, dtype=bool)
 
 
-def keep_first_per_image(features_per_camera, links) -> np.ndarray:
+def keep_first_per_image(features_per_camera, links, *, _uf=None) -> np.ndarray:
     """Kept mask ``(L,)``: in each set, each image keeps its first (lowest-id) feature only.
 
     A link is kept when both its features are kept; the surviving links of a set then join
     features of distinct images, so the result is conflict-free.
     """
     fpc = np.asarray(features_per_camera, dtype=np.int64)
-    labels, _ = union_find_conflicts(fpc, links)
+    labels, _ = union_find_conflicts(fpc, links) if _uf is None else _uf
     if not len(links):
         return np.zeros(0, dtype=bool)
     cam = np.repeat(np.arange(fpc.size), fpc)
@@ -88,7 +90,7 @@ def keep_first_per_image(features_per_camera, links) -> np.ndarray:
     return kept_feature[a] & kept_feature[b]
 
 
-def quality_merge(features_per_camera, links) -> np.ndarray:
+def quality_merge(features_per_camera, links, *, _uf=None) -> np.ndarray:
     """Kept mask ``(L,)`` of a Kruskal merge by decreasing quality that never joins two
     clusters sharing a camera (QuickMatch idea, centralized).
 
@@ -107,7 +109,7 @@ def quality_merge(features_per_camera, links) -> np.ndarray:
     kept = np.ones(L, dtype=bool)
     if L == 0:
         return kept
-    _, conflictive = union_find_conflicts(fpc, links)
+    _, conflictive = union_find_conflicts(fpc, links) if _uf is None else _uf
     a, b = _link_ends(fpc, links)
     todo = np.flatnonzero(conflictive[a])
     if todo.size == 0:
@@ -147,8 +149,9 @@ def baselines(features_per_camera, links) -> dict[str, np.ndarray]:
     -------
     dict with ``drop_conflictive_sets``, ``keep_first_per_image`` and ``quality_merge``.
     """
+    uf = union_find_conflicts(features_per_camera, links)  # the same sets for all three
     return {
-        "drop_conflictive_sets": drop_conflictive_sets(features_per_camera, links),
-        "keep_first_per_image": keep_first_per_image(features_per_camera, links),
-        "quality_merge": quality_merge(features_per_camera, links),
+        "drop_conflictive_sets": drop_conflictive_sets(features_per_camera, links, _uf=uf),
+        "keep_first_per_image": keep_first_per_image(features_per_camera, links, _uf=uf),
+        "quality_merge": quality_merge(features_per_camera, links, _uf=uf),
     }
