@@ -83,13 +83,14 @@ def sample_depth(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
     x, y = x[inside], y[inside]
     ix = np.clip(np.rint(x).astype(np.int64), 0, W - 1)
     iy = np.clip(np.rint(y).astype(np.int64), 0, H - 1)
-    nearest = _inverse_depth(depth[iy, ix])
     x0 = np.clip(np.floor(x).astype(np.int64), 0, W - 2)
     y0 = np.clip(np.floor(y).astype(np.int64), 0, H - 2)
     fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
-    q00, q10 = _inverse_depth(depth[y0, x0]), _inverse_depth(depth[y0, x0 + 1])
-    q01, q11 = _inverse_depth(depth[y0 + 1, x0]), _inverse_depth(depth[y0 + 1, x0 + 1])
-    q = np.stack([q00, q10, q01, q11])
+    # the nearest pixel and the four around the point, read and converted in one go
+    inv = _inverse_depth(depth[np.stack([iy, y0, y0, y0 + 1, y0 + 1]),
+                               np.stack([ix, x0, x0 + 1, x0, x0 + 1])])
+    nearest, q = inv[0], inv[1:]
+    q00, q10, q01, q11 = q
     lo, hi = q.min(axis=0), q.max(axis=0)
     # one plane: all hit, close in depth, and affine (q00 + q11 = q10 + q01)
     planar = (lo > 0) & (hi - lo <= 0.05 * hi) & (np.abs(q00 + q11 - q10 - q01) <= 1e-3 * hi)
@@ -192,10 +193,11 @@ def _candidates(src: View, xy_src, dst: View, xy_dst, tol_px: float, k: int = 4,
     p, vis = _transfer(src, xy_src, dst, src_points)
     tree = cKDTree(xy_dst) if dst_tree is None else dst_tree
     kk = min(k, len(xy_dst))
-    d, idx = tree.query(np.where(vis[:, None], p, 1e9), k=kk, distance_upper_bound=tol_px)
-    d, idx = d.reshape(len(p), kk), idx.reshape(len(p), kk)
-    ok = np.isfinite(d) & vis[:, None]
-    rows = np.repeat(np.arange(len(p)), kk).reshape(len(p), kk)
+    src = np.flatnonzero(vis)  # only visible reprojections can be candidates
+    d, idx = tree.query(p[src], k=kk, distance_upper_bound=tol_px)
+    d, idx = d.reshape(len(src), kk), idx.reshape(len(src), kk)
+    ok = np.isfinite(d)
+    rows = np.repeat(src, kk).reshape(len(src), kk)
     return rows[ok], idx[ok], d[ok]
 
 
