@@ -95,6 +95,7 @@ class AssociationGraph:
         self.features_per_camera = np.asarray(self.features_per_camera, dtype=np.int64)
         check_links(self.links, self.features_per_camera)
         self.offsets = camera_offsets(self.features_per_camera)
+        self._labels = None  # components(), once computed
 
     @property
     def n_cameras(self) -> int:
@@ -132,9 +133,11 @@ class AssociationGraph:
         return sp.csr_matrix((np.ones(len(r), dtype=bool), (r, s)), shape=(mi, mj))
 
     def components(self) -> np.ndarray:
-        """Connected-component label of every feature, ``(m,)`` (union-find via csgraph)."""
-        _, labels = connected_components(self.adjacency(), directed=False)
-        return labels
+        """Connected-component label of every feature, ``(m,)`` (union-find via csgraph;
+        computed once per graph, a copy is returned)."""
+        if self._labels is None:
+            _, self._labels = connected_components(self.adjacency(), directed=False)
+        return self._labels.copy()
 
 
 @dataclass

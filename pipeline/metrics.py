@@ -94,9 +94,13 @@ class PairwiseTruth:
         self.n_true = int(len(keys))
         self._a, self._b = a[can], b[can]
 
-    def scores(self, features_per_camera, links: Links) -> dict:
-        """The dict of :func:`pairwise_scores` for the pairs implied by ``links``."""
-        labels = AssociationGraph(features_per_camera, links).components()
+    def scores(self, features_per_camera, links: Links,
+               graph: AssociationGraph | None = None) -> dict:
+        """The dict of :func:`pairwise_scores` for the pairs implied by ``links``
+        (``graph``: their :class:`AssociationGraph`, when the caller has it)."""
+        if graph is None:
+            graph = AssociationGraph(features_per_camera, links)
+        labels = graph.components()
         if labels.size != self.m_total:
             raise ValueError(f"PairwiseTruth of {self.m_total} features scored on "
                              f"{labels.size} features")

@@ -55,10 +55,12 @@ def versions() -> dict:
             "pycolmap": colmap.version(), "rerun-sdk": rerun_version}
 
 
-def association_counts(m, links: Links, good: np.ndarray | None, missing: int | None) -> dict:
+def association_counts(m, links: Links, good: np.ndarray | None, missing: int | None,
+                       graph: AssociationGraph | None = None) -> dict:
     """Counts of the association graph of ``links`` (Tables III–IV rows) and, with ``good``
-    (``(L,)`` bool ground truth of ``links``), the good / spurious / missing links."""
-    counts = count_conflicts(AssociationGraph(m, links)).as_dict()
+    (``(L,)`` bool ground truth of ``links``), the good / spurious / missing links.
+    ``graph``: the :class:`AssociationGraph` of ``links``, when the caller has it."""
+    counts = count_conflicts(AssociationGraph(m, links) if graph is None else graph).as_dict()
     if good is not None:
         counts["good_links"] = int(good.sum())
         counts["spurious_links"] = int((~good).sum())
@@ -106,7 +108,7 @@ def fusion_section(ledger: LinkLedger, stats: dict) -> dict:
 
 
 def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=None,
-                      pairwise=None, masks: dict | None = None) -> dict:
+                      pairwise=None, masks: dict | None = None, graph_of=None) -> dict:
     """The centralized baselines (:func:`pipeline.consistency.centralized.baselines`) on the
     same links, for comparison only (never used by the robots).
 
@@ -118,6 +120,8 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
     missing : callable ``Links -> int`` or None — missing links of a kept subset
     pairwise : callable ``Links -> dict`` or None — pairwise scores of a kept subset
     masks : dict or None — ``centralized.baselines(m, links)`` when the caller has it
+    graph_of : callable ``Links -> AssociationGraph`` or None — the graph of a kept subset,
+        when the caller keeps them
     """
     from pipeline.consistency import centralized
 
@@ -126,7 +130,8 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
         keep_mask = np.asarray(keep_mask, dtype=bool)
         kept = links.subset(keep_mask)
         row = {**association_counts(m, kept, None if good is None else good[keep_mask],
-                                    None if missing is None else missing(kept)),
+                                    None if missing is None else missing(kept),
+                                    None if graph_of is None else graph_of(kept)),
                "deleted_links": int((~keep_mask).sum())}
         if good is not None:
             row["good_deleted"] = int((~keep_mask & good).sum())

@@ -400,16 +400,26 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         missing = MissingLinks(formation, feats, comm_edges, tol_px=config.tol_px)
         gt_pairs = PairwiseTruth(true_pairs_all(formation, feats, tol_px=config.tol_px),
                                  int(m.sum()))
-        scored: dict = {}  # several sections score the same kept subsets
+        # several sections count and score the same kept subsets: each subset's association
+        # graph (and its components) and pairwise scores are computed once
+        graphs: dict = {}
+        scored: dict = {}
+
+        def graph_of(kept_subset: Links) -> AssociationGraph:
+            key = _links_key(kept_subset)
+            if key not in graphs:
+                graphs[key] = AssociationGraph(m, kept_subset)
+            return graphs[key]
 
         def pairwise_of(kept_subset: Links) -> dict:
             key = _links_key(kept_subset)
             if key not in scored:
-                scored[key] = gt_pairs.scores(m, kept_subset)
+                scored[key] = gt_pairs.scores(m, kept_subset, graph_of(kept_subset))
             return dict(scored[key])
 
-        before = sections.association_counts(m, links, truth, missing(links))
-        after = sections.association_counts(m, kept_links, truth[kept], missing(kept_links))
+        before = sections.association_counts(m, links, truth, missing(links), graph_of(links))
+        after = sections.association_counts(m, kept_links, truth[kept], missing(kept_links),
+                                            graph_of(kept_links))
         # what the consistency stage kept (fusion ran on exactly these links)
         resolved = kept | (ledger.reason == "fusion-outlier")
         resolved_links = links.subset(resolved)
@@ -417,7 +427,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
                     "after": pairwise_of(kept_links)}
         baseline_masks = centralized.baselines(m, links)
         baselines = sections.baselines_section(m, links, truth, missing, pairwise_of,
-                                               masks=baseline_masks)
+                                               masks=baseline_masks, graph_of=graph_of)
         quality = sections.resolution_quality_section(
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
