@@ -181,9 +181,10 @@ def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
             "links_in_sets": int(in_sets.sum())}
 
 
-def links_in_conflictive_sets(features_per_camera, links: Links) -> np.ndarray:
-    """Which links lie in a conflictive set of ``links`` (Def. 2.4), ``(L,)`` bool."""
+def links_in_conflictive_sets(features_per_camera, links: Links, *, graph=None) -> np.ndarray:
+    """Which links lie in a conflictive set of ``links`` (Def. 2.4), ``(L,)`` bool
+    (``graph``: the :class:`~pipeline.association.AssociationGraph` of ``links``, if built)."""
     if not len(links):
         return np.zeros(0, dtype=bool)
-    _, conflictive = union_find_conflicts(features_per_camera, links)
+    _, conflictive = union_find_conflicts(features_per_camera, links, graph=graph)
     return conflictive[_ends(features_per_camera, links)[0]]

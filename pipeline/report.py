@@ -143,7 +143,7 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
 
 
 def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
-                               kept_masks: dict) -> dict:
+                               kept_masks: dict, graph: AssociationGraph | None = None) -> dict:
     """Which links each resolution cut on the same input, against the truth.
 
     Parameters
@@ -154,6 +154,7 @@ def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
     pairwise : callable ``Links -> dict`` — pairwise scores of a kept subset
     kept_masks : dict ``method -> (L,) bool`` — what each method kept (distributed methods,
         centralized baselines, the oracle of :func:`pipeline.oracle.oracle_cut`)
+    graph : AssociationGraph or None — the graph of ``links``, when the caller has it
 
     Returns
     -------
@@ -163,7 +164,7 @@ def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
     """
     from pipeline.oracle import links_in_conflictive_sets, resolution_scores
 
-    in_sets = links_in_conflictive_sets(m, links)  # the same input for every method
+    in_sets = links_in_conflictive_sets(m, links, graph=graph)  # one input for every method
     return {name: {**resolution_scores(m, links, good, kept, in_sets=in_sets),
                    "pairwise_f1": pairwise(links.subset(kept))["f1"]}
             for name, kept in kept_masks.items()}

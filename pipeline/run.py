@@ -425,13 +425,14 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         resolved_links = links.subset(resolved)
         pairwise = {"before": pairwise_of(links), "after_resolution": pairwise_of(resolved_links),
                     "after": pairwise_of(kept_links)}
-        baseline_masks = centralized.baselines(m, links)
+        baseline_masks = centralized.baselines(m, links, graph=graph_of(links))
         baselines = sections.baselines_section(m, links, truth, missing, pairwise_of,
                                                masks=baseline_masks, graph_of=graph_of)
         quality = sections.resolution_quality_section(
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
-                              config.resolution, resolved, baseline_masks))
+                              config.resolution, resolved, baseline_masks),
+            graph=graph_of(links))
 
     # pycolmap is loaded only now: the earlier stages' peak memory does not include it
     from pipeline.triangulation import triangulate_tracks, write_reconstruction

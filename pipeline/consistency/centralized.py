@@ -31,20 +31,22 @@ __all__ = [
 ]
 
 
-def union_find_conflicts(features_per_camera, links) -> tuple[np.ndarray, np.ndarray]:
+def union_find_conflicts(features_per_camera, links, *,
+                         graph: AssociationGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Component label and conflict flag of every feature (Def. 2.4), by union-find.
 
     Parameters
     ----------
     features_per_camera : (n,) int
     links : Links, (L,)
+    graph : AssociationGraph or None — the graph of ``links``, when the caller has it
 
     Returns
     -------
     labels : ndarray, (m_total,) int — connected component (scipy.sparse.csgraph)
     conflictive : ndarray, (m_total,) bool — the feature's set holds two features of one camera
     """
-    g = AssociationGraph(features_per_camera, links)
+    g = AssociationGraph(features_per_camera, links) if graph is None else graph
     labels, _, conflictive = conflictive_labels(g)
     return labels, conflictive[labels] if labels.size else np.zeros(0, dtype=bool)
 
@@ -142,14 +144,16 @@ def quality_merge(features_per_camera, links, *, _uf=None) -> np.ndarray:
     return kept
 
 
-def baselines(features_per_camera, links) -> dict[str, np.ndarray]:
-    """Kept masks ``(L,)`` of every centralized baseline on the same input, by name.
+def baselines(features_per_camera, links, *,
+              graph: AssociationGraph | None = None) -> dict[str, np.ndarray]:
+    """Kept masks ``(L,)`` of every centralized baseline on the same input, by name
+    (``graph``: the :class:`AssociationGraph` of ``links``, when the caller has it).
 
     Returns
     -------
     dict with ``drop_conflictive_sets``, ``keep_first_per_image`` and ``quality_merge``.
     """
-    uf = union_find_conflicts(features_per_camera, links)  # the same sets for all three
+    uf = union_find_conflicts(features_per_camera, links, graph=graph)  # the same sets for all
     return {
         "drop_conflictive_sets": drop_conflictive_sets(features_per_camera, links, _uf=uf),
         "keep_first_per_image": keep_first_per_image(features_per_camera, links, _uf=uf),
