@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.evaluate import link_counts, link_truth, missing_links, missing_links_per_edge
+from pipeline.evaluate import (
+    MissingLinks,
+    link_counts,
+    link_truth,
+    missing_links,
+    missing_links_per_edge,
+)
 from pipeline.types import Features, Links
 
 
@@ -54,6 +60,20 @@ def test_missing_links_only_on_comm_edges(identity_truth):
         missing_links_per_edge(identity_truth, f, links, [[0, 1], [2, 0], [1, 2]]), [1, 1, 1])
     assert missing_links(identity_truth, f, links, [[0, 1]]) == 1
     assert missing_links(identity_truth, f, links, []) == 0
+
+
+def test_one_missing_links_counter_scores_many_link_sets(identity_truth):
+    f, links = three_cameras()
+    edges = [[0, 1], [2, 0], [1, 2]]
+    count = MissingLinks(identity_truth, f, edges)
+    # each subset: its own missing links, whatever was scored before (the 0-1 pair (2,1)
+    # and the 1-2 pair (0,1) are never linked; a dropped good link becomes missing)
+    for keep, want in (([True, True, True, True], [1, 1, 1]), ([False, True, True, True], [2, 1, 1]),
+                       ([True, True, False, False], [1, 2, 1]), ([True, True, True, True], [1, 1, 1])):
+        np.testing.assert_array_equal(count.per_edge(links.subset(np.array(keep))), want)
+        assert count(links.subset(np.array(keep))) == sum(want)
+    with pytest.raises(InputError):
+        count.per_edge(Links([0], [5], [1], [0]))  # a feature camera 0 does not have
 
 
 def test_link_counts(identity_truth):

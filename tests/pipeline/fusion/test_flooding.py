@@ -151,6 +151,36 @@ def test_decided_sets_are_fixed_points_of_the_gate_and_votes_are_counts(seed, n,
         assert dec.winner[r] == np.flatnonzero(dec.counts[r] == best)[0]
 
 
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 100_000), n=st.integers(2, 6), B=st.integers(1, 6),
+       K=st.integers(1, 4))
+def test_exact_dynamic_voting_decides_every_robot_as_decide_does(seed, n, B, K):
+    # the stage decides each distinct (track, entries held) once and hands the result to
+    # every robot holding those entries: it must equal every robot deciding for itself
+    from pipeline.fusion.flooding import exact_dynamic_voting
+    from pipeline.fusion.voting import information_matrix
+
+    comm, observes, est, ne, el, x, info, draws = _instance(seed, n, B, K, "float64")
+    cov = np.linalg.inv(info)
+    thr = gate_threshold(3, 0.99, "squared")
+    res = exact_dynamic_voting(x, cov, est, observes, ne, el, len(comm), K=K, c=1, thr=thr,
+                               draws=np.where(est[..., None], draws, 0.5), wire="float32")
+    infow = to_wire(np.where(est[..., None, None], information_matrix(
+        np.where(est[..., None, None], cov, np.eye(3))), 0.0), "float32")
+    xw = to_wire(np.where(est[..., None], x, 0.0), "float32")
+    run = flood(observes, ne, el, len(comm), estimated=est, K=K, d=3, wire="float32")
+    rows = np.flatnonzero(observes.reshape(-1))
+    tb, own = rows // n, rows % n
+    dec = decide(run.known[rows], est[tb], draws[tb], xw[tb], infow[tb], c=1, thr=thr)
+    np.testing.assert_array_equal(res.theta.reshape(-1, 3)[rows], dec.theta)
+    np.testing.assert_array_equal(res.valid.reshape(-1)[rows], dec.valid)
+    np.testing.assert_array_equal(res.winner.reshape(-1)[rows], dec.winner)
+    np.testing.assert_array_equal(res.votes.reshape(-1, K)[rows],
+                                  dec.counts / np.maximum(dec.size, 1)[:, None])
+    np.testing.assert_array_equal(res.inlier.reshape(-1)[rows],
+                                  dec.yes[np.arange(len(rows)), dec.winner, own] & dec.valid)
+
+
 def test_robot_step_returns_a_new_state_and_leaves_the_old_one():
     from pipeline.fusion.flooding import robot_step
 

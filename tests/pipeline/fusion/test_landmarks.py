@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.fusion.landmarks import fuse_tracks, tracks_of, triangulate_views
+from pipeline.fusion.landmarks import fuse_tracks, local_estimates, tracks_of, triangulate_views
 from pipeline.types import Links
 
 
@@ -170,3 +170,27 @@ def test_tracks_from_robot_names_equal_the_union_find_tracks():
     assert res.stats["tracks"] == ref.stats["tracks"]
     assert sorted(res.track_ids.tolist()) == sorted(ref.track_ids.tolist())
     assert np.array_equal(res.obs_track, ref.obs_track)
+
+
+@pytest.mark.parametrize("local", ["robust", "pair", "neighbours"])
+def test_local_estimates_of_all_robots_equal_each_robot_alone(local):
+    # robots of one track that pick the same views share one triangulation in the
+    # simulator; each row must still be exactly what the robot computes on its own
+    rng = np.random.default_rng(11)
+    n, B = 5, 40
+    R, t, K = rig(n)
+    X = rng.uniform([-1, -1, 4], [1, 1, 6], (B, 3))
+    kp = project(X[:, None], R[None], t[None], K[None]) + rng.normal(0, 0.3, (B, n, 2))
+    off = rng.random((B, n)) < 0.15
+    kp[off] += rng.uniform(10, 30, (int(off.sum()), 2))
+    observes = rng.random((B, n)) < 0.8
+    adj = ~np.eye(n, dtype=bool)
+    adj[0, 4] = adj[4, 0] = False
+    all_X, all_cov, all_est = local_estimates(kp, observes, adj, R, t, K, 1.0, 9.21, local)
+    assert all_est.sum() > B  # tracks with several estimating robots
+    for i in range(n):
+        X_i, cov_i, est_i = local_estimates(kp, observes, adj, R, t, K, 1.0, 9.21, local,
+                                            robots=np.arange(n) == i)
+        np.testing.assert_array_equal(all_est[:, i], est_i[:, i])
+        np.testing.assert_array_equal(all_X[:, i], X_i[:, i])
+        np.testing.assert_array_equal(all_cov[:, i], cov_i[:, i])
