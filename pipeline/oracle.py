@@ -120,7 +120,7 @@ def min_conflict_cut(cam: np.ndarray, a: np.ndarray, b: np.ndarray,
     raise RuntimeError(f"oracle cut did not converge in {max_rounds} rounds")
 
 
-def oracle_cut(features_per_camera, links: Links, truth: np.ndarray) -> np.ndarray:
+def oracle_cut(features_per_camera, links: Links, truth: np.ndarray, *, graph=None) -> np.ndarray:
     """Kept mask ``(L,)`` of the oracle: spurious links of conflictive sets cut, then the
     fewest good links there that leave the graph conflict-free.
 
@@ -129,6 +129,7 @@ def oracle_cut(features_per_camera, links: Links, truth: np.ndarray) -> np.ndarr
     features_per_camera : (n,) int
     links : Links, (L,)
     truth : ndarray, (L,) bool — good links
+    graph : AssociationGraph or None — the graph of ``links``, when the caller has it
 
     Returns
     -------
@@ -139,7 +140,7 @@ def oracle_cut(features_per_camera, links: Links, truth: np.ndarray) -> np.ndarr
     kept = np.ones(len(links), dtype=bool)
     if not len(links):
         return kept
-    _, conflictive = union_find_conflicts(fpc, links)
+    _, conflictive = union_find_conflicts(fpc, links, graph=graph)
     a, b = _ends(fpc, links)
     in_sets = conflictive[a]
     kept[in_sets & ~truth] = False

@@ -431,7 +431,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         quality = sections.resolution_quality_section(
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
-                              config.resolution, resolved, baseline_masks),
+                              config.resolution, resolved, baseline_masks, graph_of(links)),
             graph=graph_of(links))
 
     # pycolmap is loaded only now: the earlier stages' peak memory does not include it
@@ -509,14 +509,15 @@ def _links_key(links: Links) -> bytes:
 
 
 def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,
-                      method: str, resolved: np.ndarray, baseline_masks: dict | None = None
-                      ) -> dict:
+                      method: str, resolved: np.ndarray, baseline_masks: dict | None = None,
+                      graph: AssociationGraph | None = None) -> dict:
     """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
 
     The run's own method (``resolved``: what its consistency stage kept), the other
     distributed method (run here on the fault-free network), every centralized baseline
     (``baseline_masks``: ``centralized.baselines(m, links)`` when the caller has it) and
-    the oracle (:func:`pipeline.oracle.oracle_cut`, which knows the truth).
+    the oracle (:func:`pipeline.oracle.oracle_cut`, which knows the truth); ``graph``: the
+    :class:`AssociationGraph` of ``links``, when the caller has it.
     """
     from pipeline.consistency import centralized
     from pipeline.oracle import oracle_cut
@@ -531,7 +532,7 @@ def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np
             masks[other] = ~res.deleted
     ordered = {k: masks[k] for k in ("paper", "evidence")}
     if baseline_masks is None:
-        baseline_masks = centralized.baselines(m, links)
+        baseline_masks = centralized.baselines(m, links, graph=graph)
     ordered.update({k: np.asarray(v, dtype=bool) for k, v in baseline_masks.items()})
-    ordered["oracle"] = oracle_cut(m, links, truth)
+    ordered["oracle"] = oracle_cut(m, links, truth, graph=graph)
     return ordered
