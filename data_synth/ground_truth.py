@@ -193,11 +193,11 @@ def _candidates(src: View, xy_src, dst: View, xy_dst, tol_px: float, k: int = 4,
     p, vis = _transfer(src, xy_src, dst, src_points)
     tree = cKDTree(xy_dst) if dst_tree is None else dst_tree
     kk = min(k, len(xy_dst))
-    src = np.flatnonzero(vis)  # only visible reprojections can be candidates
-    d, idx = tree.query(p[src], k=kk, distance_upper_bound=tol_px)
-    d, idx = d.reshape(len(src), kk), idx.reshape(len(src), kk)
+    seen = np.flatnonzero(vis)  # only visible reprojections can be candidates
+    d, idx = tree.query(p[seen], k=kk, distance_upper_bound=tol_px)
+    d, idx = d.reshape(len(seen), kk), idx.reshape(len(seen), kk)
     ok = np.isfinite(d)
-    rows = np.repeat(src, kk).reshape(len(src), kk)
+    rows = np.repeat(seen, kk).reshape(len(seen), kk)
     return rows[ok], idx[ok], d[ok]
 
 
