@@ -12,10 +12,12 @@ the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written).
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
 import logging
 import os
 import sys
+import threading
 from collections.abc import Iterable
 
 from pipeline.errors import InputError, TeamError
@@ -151,17 +153,26 @@ def entry() -> None:
     disconnected, which writes its footer, before the rename), and robot processes have been
     waited for. What is left is the interpreter's teardown, which frees every object of every
     imported module (NumPy, OpenCV, SciPy, pycolmap, Rerun) one by one: 0.1-0.25 s of a 1.8 s
-    default ``run-formation`` on a 2-core machine, for nothing the user sees. So, after flushing
-    stdout and stderr, the process ends at once (:func:`os._exit`). An exception that escapes
-    :func:`main` (a bug) still takes the normal path, with its traceback and the usual clean-up.
+    default ``run-formation`` on a 2-core machine, for nothing the user sees. So, after
+    flushing stdout and stderr and running the exit handlers (``atexit``: logging's flush,
+    the libraries' own), the process ends at once (:func:`os._exit`).
+
+    The normal exit is kept where something still runs after :func:`main` returns: an exception
+    that escapes it (a bug: traceback and usual clean-up), a profiler or tracer (``python -m
+    cProfile``, coverage), which writes its data afterwards, and any thread of the program
+    that is not a daemon, which the normal exit waits for.
     """
     code = main()
+    others = [t for t in threading.enumerate()
+              if t is not threading.main_thread() and not t.daemon]
+    if sys.gettrace() is not None or sys.getprofile() is not None or others:
+        sys.exit(code)
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):  # a closed pipe (``| head``) or a closed stream
             pass
-    logging.shutdown()
+    atexit._run_exitfuncs()  # what the normal exit runs first; then only the teardown is left
     os._exit(code)
 
 

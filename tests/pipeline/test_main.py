@@ -137,6 +137,17 @@ def test_program_exit_keeps_output_and_exit_code(tmp_path):
     assert "--formation 'zz'" in bad.stderr
 
 
+def test_program_under_a_profiler_exits_normally(tmp_path):
+    """A profiler writes its data after the program's main returns: the early exit must not
+    cut it off."""
+    stats = tmp_path / "run.prof"
+    out = subprocess.run([sys.executable, "-m", "cProfile", "-o", str(stats), "-m", "pipeline",
+                          "match-formation", "--formation", "zz"], cwd=ROOT,
+                         capture_output=True, text=True)
+    assert "--formation 'zz'" in out.stderr  # the command ran (cProfile swallows its exit code)
+    assert stats.is_file() and stats.stat().st_size > 0
+
+
 def test_fusion_does_not_import_scipy_stats():
     loaded = _imported_after("import pipeline.fusion.landmarks")
     assert "pipeline.fusion.voting" in loaded
