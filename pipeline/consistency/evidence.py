@@ -243,17 +243,6 @@ def evidence_cut(a, b, cam_a, cam_b, weight, keypoints: dict | None = None,
 # --------------------------------------------------------------------------- the robots' rule
 
 
-def _my_set_links(robot: Robot) -> dict:
-    """``label -> link table rows`` of alive links from this robot's conflictive features."""
-    out = {}
-    sel = robot.link_alive & robot.conflictive[robot.link_r]
-    idx = np.flatnonzero(sel)
-    labels = robot.set_label[robot.link_r[idx]]
-    for lab in np.unique(labels).tolist():
-        out[int(lab)] = idx[labels == lab]
-    return out
-
-
 def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
     """The conflictive sets this robot takes part in, from its own state only.
 
@@ -262,21 +251,44 @@ def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
     dict ``set label -> (members, set_nbrs, bundles)``: ``members`` (F,) int64 the features
     of the set (its row of ``X``, Sec. III), ``set_nbrs`` the sorted robots it shares an
     alive link of the set with, ``bundles`` ``{feature gid -> (kp (2,), nbr (k,), w (k,),
-    cam, P)}`` of its own features of the set, in ascending gid: what it floods.
+    cam, P)}`` of its own features of the set, in ascending gid: what it floods (a bundle's
+    links in the order of the link table). Labels ascend.
     """
     st: EvidenceState = robot.evidence
+    # alive links from this robot's conflictive features, grouped by (set, own feature); the
+    # sort is stable, so a feature's links keep the table order
+    idx = np.flatnonzero(robot.link_alive & robot.conflictive[robot.link_r])
+    if idx.size == 0:
+        return {}
+    r = robot.link_r[idx]
+    order = np.lexsort((r, robot.set_label[r]))
+    idx, r = idx[order], r[order]
+    nbr = robot.link_nbr[idx]
+    other = robot.offsets[nbr] + robot.link_s[idx]  # int64: the offsets are
+    w = st.link_weight[idx]
+    labels = robot.set_label[r]
+    # a feature lies in one set: its runs start where r changes; a set's where the label does
+    f_start = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
+    f_stop = np.r_[f_start[1:], r.size]
+    set_start = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])
+    set_stop = np.r_[set_start[1:], r.size]
+    X = robot.X
+    ptr, ind = X.indptr, X.indices
     out = {}
-    for lab, rows in _my_set_links(robot).items():
-        feats = np.unique(robot.link_r[rows])
-        members = robot.X[feats[0]].indices.astype(np.int64)
-        nbrs = sorted(set(robot.link_nbr[rows].tolist()))
+    feats = r[f_start].tolist()
+    fs, fe = f_start.tolist(), f_stop.tolist()
+    k = 0
+    for a, b in zip(set_start.tolist(), set_stop.tolist(), strict=True):
+        f0 = feats[k]
+        members = ind[ptr[f0]:ptr[f0 + 1]].astype(np.int64)  # its row of X (Sec. III)
+        nbrs = np.unique(nbr[a:b]).tolist()
         bundles = {}
-        for r in feats.tolist():
-            mine = rows[robot.link_r[rows] == r]
-            other = robot.offsets[robot.link_nbr[mine]] + robot.link_s[mine]
-            bundles[robot.gid0 + r] = (st.keypoints[r].copy(), other.astype(np.int64),
-                                       st.link_weight[mine].copy(), robot.id, st.projection)
-        out[lab] = (members, nbrs, bundles)
+        while k < len(fs) and fs[k] < b:
+            f, u, v = feats[k], fs[k], fe[k]
+            bundles[robot.gid0 + f] = (st.keypoints[f].copy(), other[u:v], w[u:v], robot.id,
+                                       st.projection)
+            k += 1
+        out[int(labels[a])] = (members, nbrs, bundles)
     return out
 
 
