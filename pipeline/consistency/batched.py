@@ -135,9 +135,12 @@ class _Team:
     row_bounds : (n + 1,) int64 — robot ``i``'s rows are ``row_bounds[i]:row_bounds[i+1]``
     readers_ptr, readers : the matrix ``P`` (A, A) by column, CSR of its transpose: row
         ``(i, r)`` of ``P`` holds ``[W_ik]_{r,s}`` for the rows ``s`` robot ``k`` sends to ``i``
-    send_row, send_pair : (S,) int64 — robot ``k`` sends row ``send_row`` to the neighbour of
-        message ``send_pair`` (pairs ``(k, i)`` numbered ``0..n_pairs-1``)
+    send_ptr, send_pair_by_row : what each row's owner sends, by row: row ``s`` goes in the
+        messages ``send_pair_by_row[send_ptr[s]:send_ptr[s+1]]`` (pairs ``(k, i)`` numbered
+        ``0..n_pairs-1``)
     pair_dst : (n_pairs,) int64 — receiving robot of each pair
+    symmetric : bool — every alive link of an active row is alive at its other end too (then
+        ``P`` is symmetric; :func:`run_detection` uses it)
     """
 
     def __init__(self, robots: list[Robot]) -> None:
@@ -162,16 +165,31 @@ class _Team:
         k = np.concatenate([rb.link_nbr[x] for rb, x in zip(robots, sel, strict=True)] + [_EMPTY])
         s = np.concatenate([rb.link_s[x] for rb, x in zip(robots, sel, strict=True)] + [_EMPTY])
         row = compact[offsets[own] + r]  # active: always found
+        col = compact[offsets[k] + s]
         # what each robot sends (send_blocks): each active row with an alive link to the
         # neighbour, once (one-to-one, Assumption 2.2: a row has one link per neighbour); the
         # table order groups the entries by (robot, neighbour): one group per message
-        self.send_row = row
         head = np.r_[True, (own[1:] != own[:-1]) | (k[1:] != k[:-1])][:k.size]
-        self.send_pair = np.cumsum(head) - 1
+        pair = np.cumsum(head) - 1
         self.pair_dst = k[head]
+        # Symmetric tables: every entry (i, r, k, s) has its mate (k, s, i, r) among the
+        # entries (both ends alive, both rows active). The entries are in (i, k, s) order, so
+        # this holds iff the mates' keys, sorted, are the entries' keys. Then robot k sends
+        # row s to i (its mate is an alive link of an active row) and i multiplies by it:
+        # P[r, s] = 1 for every entry, P is symmetric, and the rows robot k sends are P's.
+        span = int(max((rb.m for rb in robots), default=0)) + 1
+        self.symmetric = bool(n * n * span < 2**62) and np.array_equal(
+            (own * n + k) * span + s, np.sort((k * n + own) * span + r))
+        if self.symmetric:
+            # P by row: who reads row s's delta (P[s, ·] = P[·, s]) and, with each entry, the
+            # message (pair) that carries row s to that reader
+            Pm = sp.csr_matrix((pair + 1, (row, col)), shape=(A, A))
+            self.readers_ptr = self.send_ptr = Pm.indptr.astype(np.int64)
+            self.readers = Pm.indices.astype(np.int64)
+            self.send_pair_by_row = Pm.data.astype(np.int64) - 1
+            return
         sends = sp.csr_matrix((np.ones(row.size, dtype=bool), (row, k)), shape=(A, max(n, 1)))
         # what each robot multiplies by (eq5_next): its links to rows the neighbour sends it
-        col = compact[offsets[k] + s]
         ok = col >= 0
         ok[ok] = np.asarray(sends[col[ok], own[ok]]).ravel()
         # P[r, s] = [W_ik]_{r,s}, stored by column: who multiplies row s (its delta's readers)
@@ -180,7 +198,7 @@ class _Team:
         self.readers_ptr, self.readers = PT.indptr.astype(np.int64), PT.indices.astype(np.int64)
         # the send entries of each row, to count a round's messages from its new rows only
         by_row = np.argsort(row, kind="stable")
-        self.send_by_row = by_row
+        self.send_pair_by_row = pair[by_row]
         self.send_ptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=A))])
 
     def messages(self, new_per_row: np.ndarray, idx_size: int):
@@ -191,9 +209,9 @@ class _Team:
         give them.
         """
         rows = np.flatnonzero(new_per_row)
-        entries = self.send_by_row[ranges(self.send_ptr[rows], self.send_ptr[rows + 1])]
-        pair = self.send_pair[entries]
-        d = new_per_row[self.send_row[entries]]
+        start, stop = self.send_ptr[rows], self.send_ptr[rows + 1]
+        pair = self.send_pair_by_row[ranges(start, stop)]
+        d = np.repeat(new_per_row[rows], stop - start)
         n_pairs = self.pair_dst.size
         R = np.bincount(pair, minlength=n_pairs)
         nnz = np.bincount(pair, weights=d, minlength=n_pairs).astype(np.int64)

@@ -19,7 +19,7 @@ from pipeline.consistency import (
     resolve_conflicts,
 )
 from pipeline.consistency.engine import _equip_evidence, build_robots, detect_once, run_phase
-from pipeline.consistency.protocols import RESOLUTION, make_protocol
+from pipeline.consistency.protocols import DETECTION, RESOLUTION, make_protocol
 from pipeline.errors import InputError
 from pipeline.linkscsv import write_links_csv
 from pipeline.run import ledger_from_consistency
@@ -180,6 +180,52 @@ def test_batched_detection_leaves_every_robot_in_the_per_robot_state(inst):
         assert (ra.stopped, ra.t_stop, ra.peak_memory_bytes) == \
             (rb.stopped, rb.t_stop, rb.peak_memory_bytes)
         assert ra.memory_bytes() == rb.memory_bytes()
+
+
+def _detect_on(robots, network, engine: str) -> dict:
+    proto = make_protocol(None, network, robots[0].offsets[1:] - robots[0].offsets[:-1])
+    if engine == "batched":
+        return batched.run_detection(robots, network, proto, 1)
+    return run_phase(robots, network, proto, DETECTION, iteration=1)
+
+
+@SETTINGS
+@given(inst=instances(max_n=8, max_feat=5), seed=st.integers(0, 2**32 - 1),
+       p_cut=st.sampled_from([0.0, 0.3, 1.0]))
+def test_batched_detection_matches_per_robot_on_links_alive_at_one_end(inst, seed, p_cut):
+    # some robots have cut their side of some links whose other end still holds them: the
+    # tables are not symmetric, P is not, and the batched detection takes the general path
+    fpc, edges, links = inst
+    runs = []
+    for engine in ("per-robot", "batched"):
+        robots, _ = build_robots(fpc, links)
+        rng = np.random.default_rng(seed)
+        for rb in robots:
+            rb.link_alive &= rng.random(rb.link_alive.size) >= p_cut * 0.5
+        network = Network(len(fpc), comm_edges_for(fpc, links, edges))
+        runs.append((robots, network, _detect_on(robots, network, engine)))
+    (ra, na, sa), (rb_, nb, sb) = runs
+    if p_cut == 0.0 and len(links):
+        assert batched._Team(rb_).symmetric
+    assert sa["rounds"] == sb["rounds"] and na.counters() == nb.counters()
+    np.testing.assert_array_equal(sa["t_stop"], sb["t_stop"])
+    for a, b in zip(ra, rb_, strict=True):
+        assert (a.X != b.X).nnz == 0
+        for f in ("conflictive", "set_label", "track_label"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+        assert a.root_of_set == b.root_of_set
+        assert a.peak_memory_bytes == b.peak_memory_bytes
+
+
+def test_batched_detection_takes_the_general_path_on_a_link_alive_at_one_end():
+    fpc = np.array([1, 1, 1])
+    links = Links([0, 1], [0, 0], [1, 2], [0, 0])
+    robots, _ = build_robots(fpc, links)
+    for rb in robots:
+        rb.active[:] = True
+    assert batched._Team(robots).symmetric
+    robots[1].link_alive[robots[1].link_nbr == 2] = False  # robot 2 still lists its side
+    assert not batched._Team(robots).symmetric
 
 
 @SETTINGS
