@@ -45,7 +45,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from pipeline.consistency.batched_resolution import run_resolution
-from pipeline.consistency.detection import init_detection
+from pipeline.consistency.detection import reset_detection, set_identity_rows
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.protocols import PaperProtocol
 from pipeline.consistency.robot import Robot
@@ -245,7 +245,11 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
     n = len(robots)
     start_round = int(network.round)
     for rb in robots:
-        rb.stopped = init_detection(rb, iteration).size == 0
+        # init_detection, but X(0): the rows of a robot that runs are set at the end (_finish)
+        rows = reset_detection(rb, iteration)
+        rb.stopped = rows.size == 0
+        if rb.stopped:
+            set_identity_rows(rb, rows)
     team = _Team(robots)
     A = team.A
     idx_size = np.dtype(np.int32 if (robots and robots[0].m_total < 2**31) else np.int64).itemsize

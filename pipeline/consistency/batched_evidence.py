@@ -306,7 +306,9 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
         st.held_bytes = int(held_by_robot[rb.id])
         rb.measure_memory()
         rb.peak_memory_bytes = max(rb.peak_memory_bytes, rb.memory_bytes() + st.nbytes())
-    # one solution per set, each robot's side cut in its own solve round
+    # one solution per set, each robot's side cut in its own solve round (a robot's sets at
+    # once: each link lies in one set, so the order of the sets does not matter)
+    handed: dict[int, list] = {}
     for k in range(sg.label_start.size - 1):
         a, b = sg.label_start[k], sg.label_start[k + 1]
         nodes = np.arange(a, b)[complete[a:b]]
@@ -320,7 +322,11 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
         for v in nodes.tolist():
             i = int(sg.robot[v])
             robots[i].evidence.solved.add(label)
-            cut_own_side(robots[i], solution, int(solve_round[v]))
+            handed.setdefault(i, []).append((solution, int(solve_round[v])))
+    for i, got in handed.items():
+        parts = list(zip(*(sol for sol, _ in got), strict=True))
+        when = np.concatenate([np.full(sol[0].size, t, dtype=np.int64) for sol, t in got])
+        cut_own_side(robots[i], tuple(np.concatenate(p) for p in parts), when)
     unsolved = sorted(set(sg.robot[~complete].tolist()))
     return finish_evidence(robots, rounds, unsolved, int(sg.label_start.size - 1),
                            sum(1 for s in sets if s))

@@ -54,7 +54,8 @@ import scipy.sparse as sp
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
-__all__ = ["start_detection", "init_detection", "detection_step", "eq5_next", "eq5_step",
+__all__ = ["start_detection", "init_detection", "reset_detection", "set_identity_rows",
+           "detection_step", "eq5_next", "eq5_step",
            "send_blocks", "blocks_from_payload", "find_conflictive_sets"]
 
 Send = Callable[[int, str, dict], None]
@@ -86,24 +87,34 @@ def init_detection(robot: Robot, iteration: int) -> np.ndarray:
     Resets the detection outputs (``conflictive``, ``set_label``, ``root_of_set``,
     ``t_stop``) and the blocks received (``last_blocks``).
     """
+    rows = reset_detection(robot, iteration)
+    set_identity_rows(robot, rows)
+    return rows
+
+
+def reset_detection(robot: Robot, iteration: int) -> np.ndarray:
+    """:func:`init_detection` but ``X``: the active rows (R,), the outputs reset."""
     robot.iteration = iteration
     has_link = np.zeros(robot.m, dtype=bool)
     has_link[robot.link_r[robot.link_alive]] = True
     robot.active = robot.candidates & has_link & (robot.component < 0)
     rows = np.flatnonzero(robot.active)
-    # eq. (4): X_ii(0) = I, X_ij(0) = 0 (rows of the active features only)
-    indptr = np.zeros(robot.m + 1, dtype=np.int64)
-    indptr[rows + 1] = 1
-    indptr = np.cumsum(indptr)
-    robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
-                             indptr), shape=(robot.m, robot.m_total))
-    robot.X_new = robot.X  # everything in X_i·(0) is new
     robot.last_blocks = {}
     robot.conflictive = np.zeros(robot.m, dtype=bool)
     robot.set_label = np.full(robot.m, -1, dtype=np.int64)
     robot.root_of_set = {}
     robot.t_stop = 0
     return rows
+
+
+def set_identity_rows(robot: Robot, rows: np.ndarray) -> None:
+    """``X_i·(0)`` by eq. (4): ``X_ii(0) = I``, ``X_ij(0) = 0`` on the rows ``rows``; all new."""
+    indptr = np.zeros(robot.m + 1, dtype=np.int64)
+    indptr[rows + 1] = 1
+    indptr = np.cumsum(indptr)
+    robot.X = sp.csr_matrix((np.ones(rows.size, dtype=bool), (robot.gid0 + rows).astype(np.int64),
+                             indptr), shape=(robot.m, robot.m_total))
+    robot.X_new = robot.X  # everything in X_i·(0) is new
 
 
 def send_blocks(robot: Robot, send: Send) -> None:

@@ -281,7 +281,7 @@ def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
     for a, b in zip(set_start.tolist(), set_stop.tolist(), strict=True):
         f0 = feats[k]
         members = ind[ptr[f0]:ptr[f0 + 1]].astype(np.int64)  # its row of X (Sec. III)
-        nbrs = np.unique(nbr[a:b]).tolist()
+        nbrs = sorted(set(nbr[a:b].tolist()))
         bundles = {}
         while k < len(fs) and fs[k] < b:
             f, u, v = feats[k], fs[k], fe[k]
@@ -420,24 +420,32 @@ def solve_set(bundles: dict) -> tuple:
     return a, b, cam_a, cam_b, evidence_cut(a, b, cam_a, cam_b, w, kp, P)
 
 
-def cut_own_side(robot: Robot, solution: tuple, round_: int) -> None:
-    """Delete this robot's side of every link the set's ``solution`` (:func:`solve_set`) cuts."""
+def cut_own_side(robot: Robot, solution: tuple, round_) -> None:
+    """Delete this robot's side of every link the set's ``solution`` (:func:`solve_set`) cuts.
+
+    ``round_`` : int, the round it solved in, or (E,) int, one per link of ``solution`` (the
+    solutions of several sets concatenated, each with its own round).
+    """
     a, b, cam_a, cam_b, cut = solution
     mine = (cam_a == robot.id) | (cam_b == robot.id)
     sel = cut & mine
     if not sel.any():
         return
-    own = np.where(cam_a[sel] == robot.id, a[sel], b[sel]) - robot.gid0
-    other = np.where(cam_a[sel] == robot.id, b[sel], a[sel])
-    other_cam = np.where(cam_a[sel] == robot.id, cam_b[sel], cam_a[sel])
+    rounds = np.broadcast_to(np.asarray(round_), sel.shape)[sel]
+    here = cam_a[sel] == robot.id
+    own = np.where(here, a[sel], b[sel]) - robot.gid0
+    other = np.where(here, b[sel], a[sel])
+    other_cam = np.where(here, cam_b[sel], cam_a[sel])
     link = robot.find_links(other_cam, other - robot.offsets[other_cam])
     ok = link >= 0
     ok[ok] = robot.link_r[link[ok]] == own[ok]
-    fresh = link[ok][robot.link_alive[link[ok]]]
-    robot.link_alive[fresh] = False
-    robot.deleted_round[fresh] = round_
-    robot.deleted_case[fresh] = CASE_EVIDENCE
-    robot.deleted_iteration[fresh] = robot.iteration
+    link, rounds = link[ok], rounds[ok]
+    fresh = robot.link_alive[link]
+    link, rounds = link[fresh], rounds[fresh]
+    robot.link_alive[link] = False
+    robot.deleted_round[link] = rounds
+    robot.deleted_case[link] = CASE_EVIDENCE
+    robot.deleted_iteration[link] = robot.iteration
 
 
 def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:
