@@ -393,8 +393,10 @@ def set_problem(bundles: dict) -> tuple:
     b = np.concatenate([bb[1] for bb in bundles.values()])
     w = np.concatenate([bb[2] for bb in bundles.values()])
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key, first = np.unique(np.stack([lo, hi], axis=1), axis=0, return_index=True)
-    a, b, w = key[:, 0], key[:, 1], w[first]
+    # each link once, ordered by (lo, hi), with the weight of its first bundle entry
+    span = int(hi.max(initial=0)) + 1
+    key, first = np.unique(lo * span + hi, return_index=True)
+    a, b, w = key // span, key % span, w[first]
     cam_a = np.array([cam[g] for g in a.tolist()], dtype=np.int64)
     cam_b = np.array([cam[g] for g in b.tolist()], dtype=np.int64)
 
