@@ -107,6 +107,37 @@ class _DenseKeys:
 DENSE_KEYS_MAX = 1 << 24
 
 
+class _Balls:
+    """The same set of keys when ``P`` is symmetric (:attr:`_Team.symmetric`): the deltas of
+    every round, of which only the last two answer :meth:`contains`.
+
+    Why two suffice. With ``P`` symmetric it is the adjacency of an undirected graph on the
+    active features, and row ``r`` of ``X(t)`` is the ball ``B(r, t)`` of radius ``t`` about
+    ``r`` (eq. 5 with ``W_ii = I``; a stopped robot's rows are whole components, Prop. 3.5, so
+    its silence changes no ball), and its delta ``Δ_r(t)`` is the sphere ``S(r, t)``. A key
+    ``(r, c)`` that round ``t + 1`` computes comes from a neighbour ``s`` of ``r`` with
+    ``c ∈ Δ_s(t) = S(s, t)``, so ``t - 1 ≤ d(r, c) ≤ t + 1``: it is already in ``X(t)`` iff
+    ``c ∈ S(r, t) ∪ S(r, t - 1) = Δ_r(t) ∪ Δ_r(t - 1)``. (Round ``t + 1`` computes the rows of
+    robots still running, whose rows were computed in rounds ``t`` and ``t - 1`` too.)
+    """
+
+    def __init__(self, keys: np.ndarray) -> None:
+        self.runs = [keys]
+        self.last, self.before = keys, _EMPTY
+
+    def contains(self, q: np.ndarray) -> np.ndarray:
+        return isin_sorted(q, self.last) | isin_sorted(q, self.before)
+
+    def add(self, new_sorted: np.ndarray) -> None:
+        self.runs.append(new_sorted)
+        self.last, self.before = new_sorted, self.last
+
+    def all(self) -> np.ndarray:
+        out = np.concatenate(self.runs)
+        out.sort(kind="stable")  # sorted runs: merged
+        return out
+
+
 
 def _unique(a: np.ndarray) -> np.ndarray:
     """Sorted unique values of an int64 array (by sorting: faster here than hashing)."""
@@ -263,8 +294,21 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
     # round 0 (start_detection): X(0) = I on the active rows (eq. 4), all of it sent
     nnz_x = np.diff(team.row_bounds)
     diag = np.arange(A, dtype=np.int64) * (A + 1)
-    X = _DenseKeys(diag, A) if A * A <= DENSE_KEYS_MAX else _SortedKeys(diag)
-    delta = diag
+    lone = np.zeros(A, dtype=bool)
+    if team.symmetric:
+        # a row whose component is one link (its one neighbour has no other): its ball is
+        # complete at radius 1, so round 1 adds its neighbour and nothing else ever comes;
+        # such rows are left out of the keys computed round by round and added in round 1
+        deg = np.diff(team.readers_ptr)
+        one = np.flatnonzero(deg == 1)
+        mate = team.readers[team.readers_ptr[one]]
+        lone[one[deg[mate] == 1]] = True
+        X = _Balls(diag[~lone])
+        X.runs += [diag[lone], np.flatnonzero(lone) * A + mate[deg[mate] == 1]]  # final keys
+    else:
+        X = _DenseKeys(diag, A) if A * A <= DENSE_KEYS_MAX else _SortedKeys(diag)
+    delta = diag[~lone]
+    lone_per_robot = np.bincount(team.owner[lone], minlength=n)
     running = nnz_x > 0
     t_stop = np.zeros(n, dtype=np.int64)
     peak = np.array([rb.peak_memory_bytes for rb in robots], dtype=np.int64)
@@ -285,6 +329,10 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         new = new[~X.contains(new)]
         new_rows = new // A
         new_per_robot = np.bincount(team.owner[new_rows], minlength=n)
+        new_per_row = np.bincount(new_rows, minlength=A)
+        if t == 1:  # the rows of one-link components take their neighbour
+            new_per_robot += lone_per_robot
+            new_per_row += lone
         stops = running & (new_per_robot == 0)
         go = running & ~stops
         X.add(new)
@@ -297,7 +345,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         stop_mem[stops] = mem[stops]
         t_stop[stops] = t
         running = go
-        msgs, nbytes, received = team.messages(np.bincount(new_rows, minlength=A), idx_size)
+        msgs, nbytes, received = team.messages(new_per_row, idx_size)
         if msgs:
             network.count("blocks", msgs, nbytes)
         if t > cap:

@@ -191,10 +191,12 @@ def _detect_on(robots, network, engine: str) -> dict:
 
 @SETTINGS
 @given(inst=instances(max_n=8, max_feat=5), seed=st.integers(0, 2**32 - 1),
-       p_cut=st.sampled_from([0.0, 0.3, 1.0]))
-def test_batched_detection_matches_per_robot_on_links_alive_at_one_end(inst, seed, p_cut):
+       p_cut=st.sampled_from([0.0, 0.3, 1.0]), dense_max=st.sampled_from([0, 1 << 24]))
+def test_batched_detection_matches_per_robot_on_links_alive_at_one_end(inst, seed, p_cut,
+                                                                      dense_max):
     # some robots have cut their side of some links whose other end still holds them: the
     # tables are not symmetric, P is not, and the batched detection takes the general path
+    # (X as sorted keys, dense_max 0, or as a dense array)
     fpc, edges, links = inst
     runs = []
     for engine in ("per-robot", "batched"):
@@ -203,7 +205,8 @@ def test_batched_detection_matches_per_robot_on_links_alive_at_one_end(inst, see
         for rb in robots:
             rb.link_alive &= rng.random(rb.link_alive.size) >= p_cut * 0.5
         network = Network(len(fpc), comm_edges_for(fpc, links, edges))
-        runs.append((robots, network, _detect_on(robots, network, engine)))
+        with patch.object(batched, "DENSE_KEYS_MAX", dense_max):
+            runs.append((robots, network, _detect_on(robots, network, engine)))
     (ra, na, sa), (rb_, nb, sb) = runs
     if p_cut == 0.0 and len(links):
         assert batched._Team(rb_).symmetric
