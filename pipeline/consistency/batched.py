@@ -126,7 +126,16 @@ class _Balls:
         self.last, self.before = keys, _EMPTY
 
     def contains(self, q: np.ndarray) -> np.ndarray:
-        return isin_sorted(q, self.last) | isin_sorted(q, self.before)
+        # q, last and before sorted and unique, last and before disjoint: merge the three
+        # runs (a stable sort merges sorted runs in linear time); a key of q also in last or
+        # before lands right after its twin
+        known = self.last.size + self.before.size
+        c = np.concatenate([self.last, self.before, q])
+        order = np.argsort(c, kind="stable")
+        c = c[order]
+        out = np.zeros(q.size, dtype=bool)
+        out[order[1:][c[1:] == c[:-1]] - known] = True
+        return out
 
     def add(self, new_sorted: np.ndarray) -> None:
         self.runs.append(new_sorted)
@@ -409,30 +418,39 @@ def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarr
     rep_bounds = np.searchsorted(owner[reps], np.arange(team.n + 1))
     n_sets = np.diff(rep_bounds)
     idt = np.int32 if (robots and robots[0].m_total < 2**31) else np.int64
+    if not robots:
+        return n_sets
+    # every robot's rows laid out by global feature id (robot by robot, as the keys): a
+    # robot's X, flags and labels are then slices
+    m_total, offsets = robots[0].m_total, robots[0].offsets
+    per_feature = np.zeros(m_total, dtype=np.int64)
+    per_feature[gid] = counts
+    ptr = np.concatenate([[0], np.cumsum(per_feature)])
+    indices = gid[cols].astype(idt)
+    conflictive_f = np.zeros(m_total, dtype=bool)
+    conflictive_f[gid] = conflictive
+    label_f = np.full(m_total, -1, dtype=np.int64)
+    label_f[gid[conflictive]] = smallest[conflictive]
+    named_f = np.zeros(m_total, dtype=bool)
+    named_f[gid] = ~conflictive & (counts >= 2)
+    smallest_f = np.full(m_total, -1, dtype=np.int64)
+    smallest_f[gid] = smallest
     for rb in robots:
         i = rb.id
         if not ran[i]:
             continue  # no active row: stopped at round 0, nothing evaluated (start_detection)
-        a, b = team.row_bounds[i], team.row_bounds[i + 1]
-        ka, kb = starts[a], starts[b]
-        local = (gid[a:b] - rb.gid0).astype(np.int64)
-        per_row = np.zeros(rb.m, dtype=np.int64)
-        per_row[local] = counts[a:b]
-        indptr = np.concatenate([[0], np.cumsum(per_row)]).astype(idt)
-        rb.X = sp.csr_matrix((np.ones(int(kb - ka), dtype=bool), gid[cols[ka:kb]].astype(idt),
-                              indptr), shape=(rb.m, rb.m_total))
+        o0, o1 = int(offsets[i]), int(offsets[i + 1])
+        ka, kb = int(ptr[o0]), int(ptr[o1])
+        rb.X = sp.csr_matrix((np.ones(kb - ka, dtype=bool), indices[ka:kb].copy(),
+                              (ptr[o0:o1 + 1] - ka).astype(idt)), shape=(rb.m, rb.m_total))
         rb.X_new = sp.csr_matrix((rb.m, rb.m_total), dtype=bool)
         rb.last_blocks = {}
         rb.stopped = True
         rb.t_stop = int(t_stop[i])
-        conf = np.zeros(rb.m, dtype=bool)
-        conf[local] = conflictive[a:b]
-        rb.conflictive = conf
-        label = np.full(rb.m, -1, dtype=np.int64)
-        label[local[conflictive[a:b]]] = smallest[a:b][conflictive[a:b]]
-        rb.set_label = label
-        named = ~conflictive[a:b] & (counts[a:b] >= 2)
-        rb.track_label[local[named]] = smallest[a:b][named]
+        rb.conflictive = conflictive_f[o0:o1].copy()
+        rb.set_label = label_f[o0:o1].copy()
+        named = named_f[o0:o1]
+        rb.track_label[named] = smallest_f[o0:o1][named]
         ra, rb_ = rep_bounds[i], rep_bounds[i + 1]
         rb.root_of_set = dict(zip(smallest[reps[ra:rb_]].tolist(), root[ra:rb_].tolist(),
                                   strict=True))
