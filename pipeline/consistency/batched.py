@@ -86,11 +86,12 @@ class _SortedKeys:
 
 
 class _DenseKeys:
-    """The same set of keys ``row * A + col`` as a boolean array of ``A²`` entries, for a
+    """The same set of keys ``row << shift | col`` as a boolean array of ``A << shift``
+    entries, for a
     small ``A`` (:data:`DENSE_KEYS_MAX` at most): a lookup per key instead of a search."""
 
     def __init__(self, keys: np.ndarray, A: int) -> None:
-        self.has = np.zeros(A * A, dtype=bool)
+        self.has = np.zeros(A << _shift(A), dtype=bool)
         self.has[keys] = True
 
     def contains(self, q: np.ndarray) -> np.ndarray:
@@ -146,6 +147,11 @@ class _Balls:
         out.sort(kind="stable")  # sorted runs: merged
         return out
 
+
+
+def _shift(A: int) -> int:
+    """Bits of a column in the keys ``row << shift | col`` of ``A`` rows and columns."""
+    return max(int(A).bit_length(), 1)
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
@@ -302,7 +308,10 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
 
     # round 0 (start_detection): X(0) = I on the active rows (eq. 4), all of it sent
     nnz_x = np.diff(team.row_bounds)
-    diag = np.arange(A, dtype=np.int64) * (A + 1)
+    # keys of X: row << sh | col (a shift and a mask to split them: cheaper than // and %)
+    sh = _shift(A)
+    diag = np.arange(A, dtype=np.int64)
+    diag = diag << sh | diag
     lone = np.zeros(A, dtype=bool)
     if team.symmetric:
         # a row whose component is one link (its one neighbour has no other): its ball is
@@ -313,9 +322,9 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         mate = team.readers[team.readers_ptr[one]]
         lone[one[deg[mate] == 1]] = True
         X = _Balls(diag[~lone])
-        X.runs += [diag[lone], np.flatnonzero(lone) * A + mate[deg[mate] == 1]]  # final keys
+        X.runs += [diag[lone], np.flatnonzero(lone) << sh | mate[deg[mate] == 1]]  # final keys
     else:
-        X = _DenseKeys(diag, A) if A * A <= DENSE_KEYS_MAX else _SortedKeys(diag)
+        X = _DenseKeys(diag, A) if A << sh <= DENSE_KEYS_MAX else _SortedKeys(diag)
     delta = diag[~lone]
     lone_per_robot = np.bincount(team.owner[lone], minlength=n)
     running = nnz_x > 0
@@ -336,7 +345,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         # eq. (5) on the deltas of round t - 1, every running robot's rows at once
         new = _step(team, delta, running)
         new = new[~X.contains(new)]
-        new_rows = new // A
+        new_rows = new >> sh
         new_per_robot = np.bincount(team.owner[new_rows], minlength=n)
         new_per_row = np.bincount(new_rows, minlength=A)
         if t == 1:  # the rows of one-link components take their neighbour
@@ -371,7 +380,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
 
 
 def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
-    """Keys (row * A + col) of the rows of running robots of ``P Δ``, sorted and unique.
+    """Keys (row << shift | col) of the rows of running robots of ``P Δ``, sorted and unique.
 
     ``Δ`` is given by its sorted keys; each entry ``(s, c)`` of ``Δ`` reaches the rows ``r``
     with ``P[r, s]`` (the robots that read row ``s`` of the sender's delta message).
@@ -379,11 +388,12 @@ def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
     if delta.size == 0:
         return _EMPTY
     A = team.A
-    s, c = delta // A, delta % A
+    sh = _shift(A)
+    s, c = delta >> sh, delta & ((1 << sh) - 1)
     start, stop = team.readers_ptr[s], team.readers_ptr[s + 1]
     pos = ranges(start, stop)
     r = team.readers[pos]
-    keys = r * A + np.repeat(c, stop - start)
+    keys = r << sh | np.repeat(c, stop - start)
     return _unique(keys[running[team.owner[r]]])
 
 
@@ -395,7 +405,8 @@ def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarr
     returns the number of sets each robot knows (its ``root_of_set``), ``(n,)``.
     """
     A, gid, owner = team.A, team.gid, team.owner
-    rows, cols = keys // A, keys % A
+    sh = _shift(A)
+    rows, cols = keys >> sh, keys & ((1 << sh) - 1)
     counts = np.bincount(rows, minlength=A)
     starts = np.concatenate([[0], np.cumsum(counts)])
     cam = owner[cols]
