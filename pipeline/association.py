@@ -69,7 +69,10 @@ def check_links(links: Links, features_per_camera) -> None:
     for name, key in (("duplicate link", a * off[-1] + b),
                       ("not one-to-one (Assumption 2.2): a feature of camera i is linked twice to camera j", a * n + cj),
                       ("not one-to-one (Assumption 2.2): a feature of camera j is linked twice to camera i", b * n + ci)):
-        order = np.argsort(key, kind="stable")
+        sk = np.sort(key)
+        if not (sk[1:] == sk[:-1]).any():
+            continue
+        order = np.argsort(key, kind="stable")  # name the first pair
         dup = np.flatnonzero(key[order][1:] == key[order][:-1])
         if dup.size:
             k0, k1 = order[dup[0]], order[dup[0] + 1]

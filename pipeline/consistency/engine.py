@@ -138,7 +138,12 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
     li = np.concatenate([idx, idx])
     span = int(fpc.max(initial=0)) + 1
     if n * n * span < 2**62:  # one int64 key: faster than a three-key lexsort
-        order = np.argsort((owner.astype(np.int64) * n + nbr) * span + s, kind="stable")
+        key = (owner.astype(np.int64) * n + nbr) * span + s
+        # the keys are distinct when no feature is linked twice to one camera (Assumption
+        # 2.2): any sort gives the stable order then
+        order = np.argsort(key)
+        if (key[order][1:] == key[order][:-1]).any():
+            order = np.argsort(key, kind="stable")
     else:
         order = np.lexsort((s, nbr, owner))
     owner, nbr, r, s, li = owner[order], nbr[order], r[order], s[order], li[order]

@@ -35,26 +35,33 @@ def merge_link_logs(n_links: int, logs) -> dict:
     """
     L = int(n_links)
     logs = list(logs)
-    ends_deleted = np.zeros(L, dtype=np.int64)
-    lost_end = np.zeros(L, dtype=bool)
     iteration = np.full(L, -1, dtype=np.int64)
     round_ = np.full(L, -1, dtype=np.int64)
     case = np.full(L, "", dtype="<U8")
-    for li, alive, dcase, dround, diter in logs:
-        li = np.asarray(li, dtype=np.int64)
-        gone = ~np.asarray(alive, dtype=bool)
-        np.add.at(ends_deleted, li[gone], 1)
-        lost = np.flatnonzero(dcase == ROBOT_LOST)
-        lost_end[li[lost]] = True
-        decided = np.flatnonzero(np.isin(dcase, (CASE_B, CASE_C, CASE_EVIDENCE)))
-        if decided.size:
-            g = li[decided]
-            # if both ends cut the link as receivers (crossing requests), keep the earlier round
-            better = (round_[g] < 0) | (dround[decided] < round_[g])
-            g, d = g[better], decided[better]
-            iteration[g] = diter[d]
-            round_[g] = dround[d]
-            case[g] = [CASE_NAMES.get(int(c), "evidence") for c in dcase[d]]
+    if logs:
+        li = np.concatenate([np.asarray(x[0], dtype=np.int64) for x in logs])
+        alive = np.concatenate([np.asarray(x[1], dtype=bool) for x in logs])
+        dcase = np.concatenate([x[2] for x in logs])
+        dround = np.concatenate([x[3] for x in logs]).astype(np.int64)
+        diter = np.concatenate([x[4] for x in logs]).astype(np.int64)
+    else:
+        li = dround = diter = np.zeros(0, dtype=np.int64)
+        alive, dcase = np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8)
+    ends_deleted = np.bincount(li[~alive], minlength=L).astype(np.int64)
+    lost_end = np.zeros(L, dtype=bool)
+    lost_end[li[dcase == ROBOT_LOST]] = True
+    decided = np.flatnonzero(np.isin(dcase, (CASE_B, CASE_C, CASE_EVIDENCE)))
+    if decided.size:
+        # if both ends cut the link as receivers (crossing requests), keep the earlier round
+        # (on a tie, the end whose log comes first)
+        order = decided[np.lexsort((decided, dround[decided], li[decided]))]
+        first = order[np.r_[True, li[order][1:] != li[order][:-1]]]
+        g = li[first]
+        iteration[g] = diter[first]
+        round_[g] = dround[first]
+        names = np.array(["evidence"] + [CASE_NAMES.get(c, "evidence")
+                                         for c in range(1, CASE_EVIDENCE + 1)], dtype="<U8")
+        case[g] = names[np.clip(dcase[first], 0, CASE_EVIDENCE)]
     deleted = ends_deleted > 0
     reason = np.where(deleted, "resolution", "").astype("<U10")
     # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it
