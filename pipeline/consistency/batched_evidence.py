@@ -38,10 +38,12 @@ Solve: once per set, each robot handed its own side in its own round
     bundles it holds are bit for bit those their robots made (forwarded unchanged, each with
     the projection its robot sent): every robot of the set would compute the same value. The
     simulator computes it once per set, from the bundles as their robots make them
-    (:func:`.evidence.own_sets`), and hands it to a robot only when that robot holds the whole
-    set — every other group of the set reached it, and the set's groups hold exactly the
-    features of the robot's row ``X_i·`` (checked) — in the round it does; the robot then
-    cuts its own side (:func:`.evidence.cut_own_side`). This is an evaluation strategy of the
+    (:func:`.evidence.own_sets`; the links, cameras and weights of
+    :func:`.evidence.set_problem` for all sets at once from the same rows,
+    :class:`_SetProblems`, then :func:`.evidence.evidence_cut` set by set), and hands it to
+    a robot only when that robot holds the whole set — every other group of the set
+    reached it, and the set's groups hold exactly the features of the robot's row ``X_i·``
+    (checked) — in the round it does; the robot then cuts its own side (:func:`.evidence.cut_own_side`). This is an evaluation strategy of the
     simulator, not a change of the distributed algorithm: each robot gets exactly the value
     it would compute from what it holds, in the round it would compute it.
 
@@ -67,12 +69,14 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.consistency.evidence import (
+    TRIANGLE_WEIGHT,
     EvidenceState,
     bundle_nbytes,
     cut_own_side,
+    evidence_cut,
     finish_evidence,
+    own_set_links,
     own_sets,
-    solve_set,
 )
 from pipeline.consistency.evidence import (
     run_evidence_resolution as run_robot_by_robot,
@@ -255,6 +259,84 @@ def _flood(sg: _SetGraphs, cap: int) -> tuple[int, int, int, np.ndarray, np.ndar
     return t, messages, nbytes, solve_round, received
 
 
+class _SetProblems:
+    """:func:`.evidence.set_problem` of every set at once, from the robots' own set links
+    (:func:`.evidence.own_set_links`): the same links, order, cameras and weights.
+
+    Each set's links once, ordered by ``(lo, hi)`` (their ends' global ids), with the weight
+    of the first bundle entry in the set's bundle order (ascending gid) and the triangle
+    support (:func:`.evidence.triangle_support`: third cameras of the common neighbours of
+    the two ends, among the set's links). The sets are disjoint, so the common neighbours
+    are found on all their links together.
+
+    Attributes
+    ----------
+    label : (S,) int64 — set labels, ascending; set ``k``'s links are ``start[k]:start[k+1]``
+    a, b, cam_a, cam_b, w : (E,) — as :func:`.evidence.set_problem` returns them
+    """
+
+    def __init__(self, robots: list[Robot], links: list[tuple]) -> None:
+        lab = np.concatenate([x[0] for x in links] + [_EMPTY])
+        ga = np.concatenate([rb.gid0 + x[1] for rb, x in zip(robots, links, strict=True)]
+                            + [_EMPTY]).astype(np.int64)
+        gb = np.concatenate([x[3] for x in links] + [_EMPTY]).astype(np.int64)
+        w = np.concatenate([x[4] for x in links] + [np.zeros(0)]).astype(np.float64)
+        # bundle order within a set: ascending gid (robots ascend, gids are theirs), a
+        # bundle's links in table order: entries of each robot come so, a stable sort by set
+        # keeps it
+        lo, hi = np.minimum(ga, gb), np.maximum(ga, gb)
+        order = np.lexsort((np.arange(lab.size), hi, lo, lab))
+        lab, lo, hi = lab[order], lo[order], hi[order]
+        first = np.r_[True, (lab[1:] != lab[:-1]) | (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])] \
+            if lab.size else np.zeros(0, dtype=bool)
+        self.a, self.b, w = lo[first], hi[first], w[order[first]]
+        lab = lab[first]
+        head = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]]) if lab.size else _EMPTY
+        self.label = lab[head]
+        self.start = np.r_[head, lab.size].astype(np.int64)
+        offsets = robots[0].offsets if robots else np.zeros(1, dtype=np.int64)
+        self.cam_a = np.searchsorted(offsets, self.a, side="right") - 1
+        self.cam_b = np.searchsorted(offsets, self.b, side="right") - 1
+        self.w = w + TRIANGLE_WEIGHT * _triangles(self.a, self.b, self.cam_a, self.cam_b)
+
+    def of(self, label: int) -> slice:
+        k = int(np.searchsorted(self.label, label))
+        return slice(int(self.start[k]), int(self.start[k + 1]))
+
+
+def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
+    """Triangle support of every link ``(a, b)`` (each once): distinct cameras of the features
+    linked to both ends, ``(E,)`` int64."""
+    E = a.size
+    if E == 0:
+        return _EMPTY
+    nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
+    N = nodes.size
+    ia, ib = inv[:E], inv[E:]
+    cam = np.empty(N, dtype=np.int64)
+    cam[ia], cam[ib] = cam_a, cam_b
+    src, dst = np.r_[ia, ib], np.r_[ib, ia]
+    adj = np.sort(src * N + dst)  # each link in both directions
+    ptr = np.searchsorted(adj // N, np.arange(N + 1))
+    start, stop = ptr[ia], ptr[ia + 1]
+    pos = ranges(start, stop)
+    z = adj[pos] % N  # the neighbours of each link's first end
+    e = np.repeat(np.arange(E), stop - start)
+    common = isin_sorted(z * N + ib[e], adj)  # ... that are neighbours of its second end
+    n_cam = int(cam.max()) + 1
+    pairs = np.unique(e[common] * n_cam + cam[z[common]])
+    return np.bincount(pairs // n_cam, minlength=E).astype(np.int64)
+
+
+def _geometry(bundles: dict) -> tuple:
+    """Keypoints and projections of a set's bundles as :func:`.evidence.set_problem` gives
+    them (``None, None`` unless every bundle carries a projection)."""
+    if all(bb[4] is not None for bb in bundles.values()):
+        return ({g: bb[0].astype(np.float64) for g, bb in bundles.items()},
+                {g: bb[4] for g, bb in bundles.items()})
+    return None, None
+
+
 def run_evidence_resolution(robots: list[Robot], network: Transport,
                             max_rounds: int | None = None, on_round=None) -> dict:
     """One flood-and-solve pass of the evidence rule on all robots, evaluated in batch;
@@ -278,7 +360,8 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     arrays of a round bounded by :data:`CHUNK_FORWARDS` forwards, plus one solution per set.
     """
     n = len(robots)
-    sets = [own_sets(rb) for rb in robots]
+    links = [own_set_links(rb) for rb in robots]
+    sets = [own_sets(rb, x) for rb, x in zip(robots, links, strict=True)]
     projected = [rb.evidence.projection is not None for rb in robots]
     sg = _SetGraphs(n, sets, projected)
     if not sg.applies:
@@ -309,16 +392,22 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     # one solution per set, each robot's side cut in its own solve round (a robot's sets at
     # once: each link lies in one set, so the order of the sets does not matter)
     handed: dict[int, list] = {}
+    pb = _SetProblems(robots, links)
     for k in range(sg.label_start.size - 1):
         a, b = sg.label_start[k], sg.label_start[k + 1]
         nodes = np.arange(a, b)[complete[a:b]]
         if nodes.size == 0:
             continue
         label = int(sg.label[a])
-        bundles: dict = {}
-        for i in sg.robot[a:b].tolist():
-            bundles.update(sets[i][label][2])
-        solution = solve_set(bundles)
+        kp = P = None
+        if all(projected[i] for i in sg.robot[a:b].tolist()):
+            bundles: dict = {}
+            for i in sg.robot[a:b].tolist():
+                bundles.update(sets[i][label][2])
+            kp, P = _geometry(bundles)
+        e = pb.of(label)
+        sol = (pb.a[e], pb.b[e], pb.cam_a[e], pb.cam_b[e])
+        solution = (*sol, evidence_cut(*sol, pb.w[e], kp, P))
         for v in nodes.tolist():
             i = int(sg.robot[v])
             robots[i].evidence.solved.add(label)

@@ -63,7 +63,8 @@ from pipeline.transport import Message, Transport
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
-           "own_sets", "bundle_nbytes", "set_problem", "solve_set", "cut_own_side",
+           "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "solve_set",
+           "cut_own_side",
            "finish_evidence"]
 
 Send = Callable[[int, str, dict], None]
@@ -243,8 +244,28 @@ def evidence_cut(a, b, cam_a, cam_b, weight, keypoints: dict | None = None,
 # --------------------------------------------------------------------------- the robots' rule
 
 
-def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
+def own_set_links(robot: Robot) -> tuple[np.ndarray, ...]:
+    """This robot's alive links from its conflictive features, from its own state only.
+
+    Returns ``(label, r, nbr, other, w)``, each ``(D,)``: the set label, own feature, the
+    neighbour, the other end's global id and the link's evidence weight, grouped by (set,
+    own feature) in ascending order, a feature's links in the order of the link table.
+    """
+    st: EvidenceState = robot.evidence
+    idx = np.flatnonzero(robot.link_alive & robot.conflictive[robot.link_r])
+    r = robot.link_r[idx]
+    order = np.lexsort((r, robot.set_label[r]))  # stable: table order within a feature
+    idx, r = idx[order], r[order]
+    nbr = robot.link_nbr[idx]
+    other = robot.offsets[nbr] + robot.link_s[idx]  # int64: the offsets are
+    return robot.set_label[r], r, nbr, other, st.link_weight[idx]
+
+
+def own_sets(robot: Robot, links: tuple | None = None) -> dict[int, tuple[np.ndarray, list[int],
+                                                                         dict]]:
     """The conflictive sets this robot takes part in, from its own state only.
+
+    ``links``: :func:`own_set_links` of the robot, if already computed.
 
     Returns
     -------
@@ -255,18 +276,9 @@ def own_sets(robot: Robot) -> dict[int, tuple[np.ndarray, list[int], dict]]:
     links in the order of the link table). Labels ascend.
     """
     st: EvidenceState = robot.evidence
-    # alive links from this robot's conflictive features, grouped by (set, own feature); the
-    # sort is stable, so a feature's links keep the table order
-    idx = np.flatnonzero(robot.link_alive & robot.conflictive[robot.link_r])
-    if idx.size == 0:
+    labels, r, nbr, other, w = own_set_links(robot) if links is None else links
+    if r.size == 0:
         return {}
-    r = robot.link_r[idx]
-    order = np.lexsort((r, robot.set_label[r]))
-    idx, r = idx[order], r[order]
-    nbr = robot.link_nbr[idx]
-    other = robot.offsets[nbr] + robot.link_s[idx]  # int64: the offsets are
-    w = st.link_weight[idx]
-    labels = robot.set_label[r]
     # a feature lies in one set: its runs start where r changes; a set's where the label does
     f_start = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
     f_stop = np.r_[f_start[1:], r.size]
