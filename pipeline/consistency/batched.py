@@ -453,8 +453,10 @@ def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarr
         o0, o1 = int(offsets[i]), int(offsets[i + 1])
         ka, kb = int(ptr[o0]), int(ptr[o1])
         rb.X = sp.csr_matrix((np.ones(kb - ka, dtype=bool), indices[ka:kb].copy(),
-                              (ptr[o0:o1 + 1] - ka).astype(idt)), shape=(rb.m, rb.m_total))
-        rb.X_new = sp.csr_matrix((rb.m, rb.m_total), dtype=bool)
+                              (ptr[o0:o1 + 1] - ka).astype(idt)), shape=(rb.m, rb.m_total),
+                             copy=False)
+        if rb.X_new is rb.X or rb.X_new.nnz:  # else already empty (a stop): kept
+            rb.X_new = sp.csr_matrix((rb.m, rb.m_total), dtype=bool)
         rb.last_blocks = {}
         rb.stopped = True
         rb.t_stop = int(t_stop[i])

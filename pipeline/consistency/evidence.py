@@ -280,17 +280,16 @@ def own_sets(robot: Robot, links: tuple | None = None) -> dict[int, tuple[np.nda
     if r.size == 0:
         return {}
     # a feature lies in one set: its runs start where r changes; a set's where the label does
-    f_start = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
-    f_stop = np.r_[f_start[1:], r.size]
-    set_start = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])
-    set_stop = np.r_[set_start[1:], r.size]
+    fs = [0, *(np.flatnonzero(r[1:] != r[:-1]) + 1).tolist()]
+    fe = [*fs[1:], r.size]
+    set_start = [0, *(np.flatnonzero(labels[1:] != labels[:-1]) + 1).tolist()]
+    set_stop = [*set_start[1:], r.size]
     X = robot.X
     ptr, ind = X.indptr, X.indices
     out = {}
-    feats = r[f_start].tolist()
-    fs, fe = f_start.tolist(), f_stop.tolist()
+    feats = r[fs].tolist()
     k = 0
-    for a, b in zip(set_start.tolist(), set_stop.tolist(), strict=True):
+    for a, b in zip(set_start, set_stop, strict=True):
         f0 = feats[k]
         members = ind[ptr[f0]:ptr[f0 + 1]].astype(np.int64)  # its row of X (Sec. III)
         nbrs = sorted(set(nbr[a:b].tolist()))
