@@ -247,17 +247,17 @@ class _Team:
         self.send_pair_by_row = pair[by_row]
         self.send_ptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=A))])
 
-    def messages(self, new_per_row: np.ndarray, idx_size: int):
-        """The delta messages of a round whose new entries per row are ``new_per_row`` (A,).
+    def messages(self, rows: np.ndarray, count: np.ndarray, idx_size: int):
+        """The delta messages of a round whose rows ``rows`` (R,) have ``count`` (R,) > 0 new
+        entries each (the other rows none).
 
         Returns ``(messages, bytes, received (n,) bytes each robot holds as received blocks)``
         — sizes as :func:`~.detection.send_blocks` and :func:`~.detection.blocks_from_payload`
         give them.
         """
-        rows = np.flatnonzero(new_per_row)
         start, stop = self.send_ptr[rows], self.send_ptr[rows + 1]
         pair = self.send_pair_by_row[ranges(start, stop)]
-        d = np.repeat(new_per_row[rows], stop - start)
+        d = np.repeat(count, stop - start)
         n_pairs = self.pair_dst.size
         R = np.bincount(pair, minlength=n_pairs)
         nnz = np.bincount(pair, weights=d, minlength=n_pairs).astype(np.int64)
@@ -326,13 +326,13 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
     else:
         X = _DenseKeys(diag, A) if A << sh <= DENSE_KEYS_MAX else _SortedKeys(diag)
     delta = diag[~lone]
-    lone_per_robot = np.bincount(team.owner[lone], minlength=n)
+    lone_rows = np.flatnonzero(lone)
     running = nnz_x > 0
     t_stop = np.zeros(n, dtype=np.int64)
     peak = np.array([rb.peak_memory_bytes for rb in robots], dtype=np.int64)
     peak = np.maximum(peak, fixed + csr_bytes(nnz_x))  # X_new is X itself
     stop_mem = np.zeros(n, dtype=np.int64)
-    msgs, nbytes, received = team.messages(np.ones(A, dtype=np.int64), idx_size)
+    msgs, nbytes, received = team.messages(np.arange(A), np.ones(A, dtype=np.int64), idx_size)
     if msgs:
         network.count("blocks", msgs, nbytes)
     cap = protocol.max_rounds("detection", robots) if max_rounds is None else max_rounds
@@ -345,12 +345,15 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         # eq. (5) on the deltas of round t - 1, every running robot's rows at once
         new = _step(team, delta, running)
         new = new[~X.contains(new)]
+        # the rows with new entries and how many (keys sorted: rows in runs)
         new_rows = new >> sh
-        new_per_robot = np.bincount(team.owner[new_rows], minlength=n)
-        new_per_row = np.bincount(new_rows, minlength=A)
-        if t == 1:  # the rows of one-link components take their neighbour
-            new_per_robot += lone_per_robot
-            new_per_row += lone
+        head = np.flatnonzero(new_rows[1:] != new_rows[:-1]) + 1
+        rows = new_rows[np.r_[0, head]] if new.size else _EMPTY
+        count = np.diff(np.r_[0, head, new.size]) if new.size else _EMPTY
+        if t == 1 and lone_rows.size:  # the rows of one-link components take their neighbour
+            rows = np.r_[rows, lone_rows]
+            count = np.r_[count, np.ones(lone_rows.size, dtype=np.int64)]
+        new_per_robot = np.bincount(team.owner[rows], weights=count, minlength=n).astype(np.int64)
         stops = running & (new_per_robot == 0)
         go = running & ~stops
         X.add(new)
@@ -363,7 +366,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         stop_mem[stops] = mem[stops]
         t_stop[stops] = t
         running = go
-        msgs, nbytes, received = team.messages(new_per_row, idx_size)
+        msgs, nbytes, received = team.messages(rows, count, idx_size)
         if msgs:
             network.count("blocks", msgs, nbytes)
         if t > cap:
