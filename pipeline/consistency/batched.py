@@ -439,8 +439,9 @@ def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarr
     m_total, offsets = robots[0].m_total, robots[0].offsets
     per_feature = np.zeros(m_total, dtype=np.int64)
     per_feature[gid] = counts
-    ptr = np.concatenate([[0], np.cumsum(per_feature)])
-    indices = gid[cols].astype(idt)
+    ptr = np.zeros(m_total + 1, dtype=np.int64)
+    np.cumsum(per_feature, out=ptr[1:])
+    indices = gid.astype(idt)[cols]
     conflictive_f = np.zeros(m_total, dtype=bool)
     conflictive_f[gid] = conflictive
     label_f = np.full(m_total, -1, dtype=np.int64)
