@@ -396,8 +396,9 @@ def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
     start, stop = team.readers_ptr[s], team.readers_ptr[s + 1]
     pos = ranges(start, stop)
     r = team.readers[pos]
-    keys = r << sh | np.repeat(c, stop - start)
-    return _unique(keys[running[team.owner[r]]])
+    c = np.repeat(c, stop - start)
+    # a row's own column is in X from round 0 (eq. 4): not computed again
+    return _unique((r << sh | c)[running[team.owner[r]] & (r != c)])
 
 
 def _finish(robots: list[Robot], team: _Team, keys: np.ndarray, t_stop: np.ndarray,
