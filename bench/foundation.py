@@ -5,8 +5,10 @@ For each feature method (SIFT, ORB, AKAZE) renders the formation (default d: 6 c
 prints the median (and minimum) wall time of each stage next to the 3 s target for
 render + extract + match with SIFT.
 
-It also times extraction serially (default: a 2-thread pool) and matching serially and with
-2 threads (default: serial for float descriptors, 2 threads for binary ones); the defaults of
+It also times extraction serially (default: a 2-thread pool) and matching serially (float
+descriptors: one product at a time on every BLAS thread) and with 2 threads (float
+descriptors: one BLAS thread per product; the default for both kinds, except float
+distance matrices over 64 MiB); the defaults of
 :func:`pipeline.features.extract_all` and :func:`pipeline.matching.match_edges` follow these
 figures. Saves ``runs/bench-foundation/results.json``. Run 0 of each method is a warm-up and
 not counted.

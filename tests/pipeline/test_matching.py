@@ -225,8 +225,27 @@ def test_threaded_edges_match_serial(four_cameras):
     views, f = four_cameras
     edges = [[0, 1], [1, 2], [0, 2]]
     a = match_edges(f, views, edges, workers=1)
-    b = match_edges(f, views, edges, workers=2)
+    b = match_edges(f, views, edges, workers=2)  # one BLAS thread per product
     for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.pairs, y.pairs)
+        np.testing.assert_array_equal(x.ratio, y.ratio)
+
+
+def test_large_float_matrices_match_on_one_thread(four_cameras, monkeypatch):
+    """Above the size limit float descriptors are matched serially (memory), with the same
+    result."""
+    import pipeline.matching as matching
+
+    views, f = four_cameras
+    edges = [[0, 1], [1, 2]]
+    used = []
+    monkeypatch.setattr(matching, "ThreadPoolExecutor",
+                        lambda **kw: used.append(kw) or pytest.fail("threads used"))
+    monkeypatch.setattr(matching, "PARALLEL_MAX_MATRIX_BYTES", 0)
+    serial = match_edges(f, views, edges)
+    assert used == []
+    monkeypatch.undo()
+    for x, y in zip(serial, match_edges(f, views, edges), strict=True):
         np.testing.assert_array_equal(x.pairs, y.pairs)
 
 
