@@ -10,7 +10,8 @@ times on the same machine in the same minutes, so that a busy machine slows all 
 - **floor**: ``bench/opencv_floor.py`` on the same 6 images (SIFT + kNN ratio matching +
   ``USAC_MAGSAC`` on the 15 edges, nothing else);
 - **imports**: a process that only imports the modules the run imports (read from one
-  ``python -X importtime`` run of it, untimed), i.e. the start-up cost of the run's code;
+  ``python -X importtime`` run of it, untimed) and ends as the run does, without the
+  interpreter's teardown, i.e. the start-up cost of the run's code;
 - **help**: ``python -m pipeline --help``.
 - **run --no-rerun**: the same run without its Rerun recording, to show what writing the
   recording costs.
@@ -141,7 +142,10 @@ def main() -> int:
         imports_cmd = [sys.executable, "-c", "import importlib\n"
                        f"for m in {modules!r}:\n"
                        "    try:\n        importlib.import_module(m)\n"
-                       "    except ImportError:\n        pass\n"]
+                       "    except ImportError:\n        pass\n"
+                       # the run ends without the interpreter's teardown (pipeline.__main__.
+                       # entry); so does this process, or the teardown would count as imports
+                       "import os\nos._exit(0)\n"]
         _write_images(images, args.formation, env)
         load = [os.getloadavg()[0]]
         runs, floors, imports, helps, bare = [], [], [], [], []
