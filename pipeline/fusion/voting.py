@@ -281,6 +281,23 @@ def distributed_ml(x, cov, topology, rounds: int = 100, *, observed=None,
                         members=obs[..., None].copy(), stats=stats, history=hist)
 
 
+def _input_bundles(x, cov, obs, members):
+    """Every node's input bundle and the vote's start, rows flattened to ``M = B·N``.
+
+    Returns ``info`` (M, 1, d, d) — ``Λ_i⁻¹``, also the ``P`` part of the input bundle ``u``
+    of eq. (14) —, ``xf`` (M, 1, d), ``obs_f`` (M, 1), ``u_q = Λ_i⁻¹ x_i`` (M, 1, d), and the
+    start ``P(0)``, ``q(0)`` of eq. (5) and ``v(0)`` of eq. (10), masked by ``members``.
+    """
+    B, N, d = x.shape
+    M = B * N
+    info = information_matrix(cov).reshape(M, 1, d, d)
+    xf = x.reshape(M, 1, d)
+    u_q = (info @ xf[..., None])[..., 0]
+    m = members.reshape(M, members.shape[-1]).astype(np.float64)
+    return (info, xf, obs.reshape(M, 1), u_q, info * m[..., None, None],   # eq. (5)
+            u_q * m[..., None], m)                                         # eq. (10)
+
+
 def _sq_mahalanobis(r, info):
     """``r' Λ⁻¹ r`` batched; ``r`` (..., d), ``info`` (..., d, d)."""
     return np.einsum("...i,...ij,...j->...", r, info, r)
@@ -447,16 +464,8 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     B, N, d = x.shape
     K = members.shape[-1]
     M = B * N
-    info = information_matrix(cov).reshape(M, 1, d, d)
-    xf = x.reshape(M, 1, d)
-    obs_f = obs.reshape(M, 1)
-    # the input bundle u of eq. (14): (Λ_i⁻¹, Λ_i⁻¹ x_i, 1) per node
+    info, xf, obs_f, u_q, P, q, v = _input_bundles(x, cov, obs, members)
     u_P = info
-    u_q = (info @ xf[..., None])[..., 0]
-    m = members.reshape(M, K).astype(np.float64)
-    P = u_P * m[..., None, None]                                   # eq. (5)
-    q = u_q * m[..., None]
-    v = m.copy()                                                   # eq. (10)
     prev_yes = members.reshape(M, K).copy()
     stats = CommStats()
     msg = bundle_bytes(K * (d * (d + 1) // 2 + d + 1))
@@ -573,17 +582,11 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
     counter_bytes = index_bytes(W + 1)
     changed_bytes = (index_bytes(protocol.n_robots) + bundle_reals(K, d)
                      * np.dtype(np.float32 if wire == "float32" else np.float64).itemsize)
-    # Λ⁻¹ made exactly symmetric (an LU inverse may differ in the last bit across the
-    # diagonal), so every P is too and the upper triangle a message carries is all of it
-    info = information_matrix(cov).reshape(M, 1, d, d)
-    xf = x.reshape(M, 1, d)
-    obs_f = obs.reshape(M, 1)
+    # Λ⁻¹ is exactly symmetric (information_matrix), so every P is too and the upper
+    # triangle a message carries is all of it
+    info, xf, obs_f, u_q, P, q, v = _input_bundles(x, cov, obs, members)
     u_P = info
-    u_q = (info @ xf[..., None])[..., 0]
-    m = members.reshape(M, K).astype(np.float64)
-    P = to_wire(u_P * m[..., None, None], wire)                     # eq. (5)
-    q = to_wire(u_q * m[..., None], wire)
-    v = m.copy()                                                    # eq. (10)
+    P, q = to_wire(P, wire), to_wire(q, wire)
     prev_yes = members.reshape(M, K).copy()
     stopped = np.zeros(M, dtype=bool)
     counter = np.zeros(M, dtype=np.int64)
