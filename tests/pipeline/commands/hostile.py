@@ -34,3 +34,15 @@ def one_line_error(capsys, *needles) -> str:
     for n in needles:
         assert n in lines[0], lines[0]
     return lines[0]
+
+
+def refused(capsys, argv, folder, *needles) -> str:
+    """``main(argv)`` exits 2 with one error line holding ``needles`` (see
+    :func:`one_line_error`), and every file under ``folder`` is as it was."""
+    from pipeline.__main__ import main
+
+    before = tree(folder)
+    assert main(argv) == 2
+    line = one_line_error(capsys, *needles)
+    assert tree(folder) == before
+    return line

@@ -13,7 +13,7 @@ from pipeline.__main__ import main
 from pipeline.hloc import names_to_pair
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import one_line_error, run_capped, tree  # noqa: E402
+from hostile import one_line_error, refused, run_capped, tree  # noqa: E402
 from test_clean_h5 import M, _write  # noqa: E402
 
 P01 = names_to_pair("a.jpg", "sub/b.jpg")
@@ -36,14 +36,6 @@ def _replace(fd, key, data):
     del fd[key]
     fd.create_dataset(key, data=data)
 
-
-def _fails(capsys, argv, folder, *needles):
-    """The command exits 2 with one error line holding ``needles``; ``folder`` unchanged."""
-    before = tree(folder)
-    assert main(argv) == 2
-    line = one_line_error(capsys, *needles)
-    assert tree(folder) == before
-    return line
 
 
 # --- the features file ---------------------------------------------------------------------
@@ -73,13 +65,13 @@ def _spoil(path: Path, case: str, seed: int, keep: int) -> None:
 def test_unreadable_input_file(files, tmp_path, capsys, which, seed, keep, case, needle):
     d, feats, matches = files
     _spoil(feats if which == "features" else matches, case, seed, keep)
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, f"{which} file")
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, f"{which} file")
     assert not (tmp_path / "o.h5").exists()
 
 
 def test_a_device_as_features_file(files, tmp_path, capsys):
     d, _, matches = files
-    _fails(capsys, _argv("/dev/null", matches, tmp_path / "o.h5"), d, "not a regular file")
+    refused(capsys, _argv("/dev/null", matches, tmp_path / "o.h5"), d, "not a regular file")
 
 
 @pytest.mark.parametrize("edit, needle", [
@@ -97,7 +89,7 @@ def test_malformed_keypoints(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(feats, "a") as fd:
         edit(fd)
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, str(feats))
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, str(feats))
 
 
 def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp_path):
@@ -155,7 +147,7 @@ def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(matches, "a") as fd:
         edit(fd)
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle)
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle)
     assert not (tmp_path / "o.h5").exists()
 
 
@@ -172,16 +164,16 @@ def test_malformed_matches(files, tmp_path, capsys, edit, needle):
 def test_malformed_pairs_file(files, tmp_path, capsys, content, needle):
     d, feats, matches = files
     (d / "pairs.txt").write_bytes(content)
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", d / "pairs.txt"), d,
-           needle)
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", d / "pairs.txt"), d,
+            needle)
 
 
 @pytest.mark.parametrize("case, needle", [("missing", "no such file"), ("folder", "is a folder")])
 def test_pairs_not_a_file(files, tmp_path, capsys, case, needle):
     d, feats, matches = files
     pairs = d / "nope.txt" if case == "missing" else d
-    _fails(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", pairs), d, needle,
-           "--pairs")
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--pairs", pairs), d, needle,
+            "--pairs")
 
 
 # --- outputs -------------------------------------------------------------------------------
@@ -251,7 +243,7 @@ def test_image_dir_that_is_not_a_folder(files, tmp_path, capsys, case):
     image_dir = d / "nope" if case == "missing" else feats
     argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
             str(tmp_path / "o.h5"), "--image-dir", str(image_dir)]
-    _fails(capsys, argv, d, "--image-dir", "is not a folder")
+    refused(capsys, argv, d, "--image-dir", "is not a folder")
     assert not (tmp_path / "o.h5").exists()
 
 

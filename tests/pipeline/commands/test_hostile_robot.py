@@ -13,7 +13,7 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import one_line_error, run_capped, tree  # noqa: E402
+from hostile import refused, run_capped, tree  # noqa: E402
 
 
 def _doc(**over):
@@ -52,14 +52,6 @@ def _write(folder, doc=None, raw=None):
     return p
 
 
-def _fails(capsys, folder, argv, *needles):
-    before = tree(folder)
-    assert main(argv) == 2
-    line = one_line_error(capsys, *needles)
-    assert tree(folder) == before
-    return line
-
-
 def _robot(team, rid="0", *extra):
     return ["robot", "--team", str(team), "--id", str(rid), *map(str, extra)]
 
@@ -67,9 +59,9 @@ def _robot(team, rid="0", *extra):
 # --- the team file itself ------------------------------------------------------------------
 
 def test_team_file_missing_folder_or_device(team_dir, capsys):
-    _fails(capsys, team_dir, _robot(team_dir / "nope.json"), "not found")
-    _fails(capsys, team_dir, _robot(team_dir), "is a folder")
-    _fails(capsys, team_dir, _robot("/dev/null"), "not a regular file")
+    refused(capsys, _robot(team_dir / "nope.json"), team_dir, "not found")
+    refused(capsys, _robot(team_dir), team_dir, "is a folder")
+    refused(capsys, _robot("/dev/null"), team_dir, "not a regular file")
 
 
 @pytest.mark.parametrize("raw, needle", [
@@ -85,13 +77,13 @@ def test_team_file_missing_folder_or_device(team_dir, capsys):
      "option start_timeout_s inf"),
 ], ids=["empty", "binary", "truncated", "array", "deep-nesting", "nan", "infinity"])
 def test_malformed_team_file(team_dir, capsys, raw, needle):
-    _fails(capsys, team_dir, _robot(_write(team_dir, raw=raw)), needle)
+    refused(capsys, _robot(_write(team_dir, raw=raw)), team_dir, needle)
 
 
 @pytest.mark.parametrize("rid", ["-1", "3", "abc", "1.0", "nan", "99999999999999999999", ""])
 def test_id_outside_the_team(team_dir, capsys, rid):
-    _fails(capsys, team_dir, _robot(_write(team_dir), rid), f"--id {rid}: not a robot of team "
-                                                             "'t'; its robots are 0..2")
+    refused(capsys, _robot(_write(team_dir), rid), team_dir,
+            f"--id {rid}: not a robot of team 't'; its robots are 0..2")
 
 
 def _three(first):
@@ -190,7 +182,7 @@ def _three(first):
     ({"colour": 1}, "unknown key 'colour'"),
 ])
 def test_malformed_team(team_dir, capsys, over, needle):
-    _fails(capsys, team_dir, _robot(_write(team_dir, _doc(**over))), needle, "TEAM.json")
+    refused(capsys, _robot(_write(team_dir, _doc(**over))), team_dir, needle, "TEAM.json")
 
 
 @pytest.mark.parametrize("endpoint", [
@@ -199,16 +191,16 @@ def test_malformed_team(team_dir, capsys, over, needle):
 ])
 def test_endpoint_that_is_not_host_port(team_dir, capsys, endpoint):
     doc = _doc(robots=_three({"id": 0, "endpoint": endpoint}))
-    _fails(capsys, team_dir, _robot(_write(team_dir, doc)), f"robot 0 endpoint {endpoint!r} "
-                                                            "must look like tcp/HOST:PORT")
+    refused(capsys, _robot(_write(team_dir, doc)), team_dir,
+            f"robot 0 endpoint {endpoint!r} must look like tcp/HOST:PORT")
 
 
 def test_shared_endpoint_in_a_huge_team_is_found_in_bounded_time(team_dir, capsys):
     """200,000 robots: parsed in about a second; the first shared endpoint is named."""
     doc = _doc(robots=[{"id": i, "endpoint": f"tcp/127.0.0.1:{1 + i % 65000}"}
                        for i in range(200_000)])
-    _fails(capsys, team_dir, _robot(_write(team_dir, doc)),
-           "robots 0 and 65000 share endpoint 'tcp/127.0.0.1:1'")
+    refused(capsys, _robot(_write(team_dir, doc)), team_dir,
+            "robots 0 and 65000 share endpoint 'tcp/127.0.0.1:1'")
 
 
 # --- what the robot reads and writes -------------------------------------------------------
@@ -222,7 +214,7 @@ def test_shared_endpoint_in_a_huge_team_is_found_in_bounded_time(team_dir, capsy
      "unknown graph kind 'nope'"),
 ], ids=["links-missing", "links-folder", "image-missing", "formation", "graph"])
 def test_data_the_robot_cannot_use_fails_before_its_session(team_dir, capsys, data, needle):
-    _fails(capsys, team_dir, _robot(_write(team_dir, _doc(data=data))), needle)
+    refused(capsys, _robot(_write(team_dir, _doc(data=data))), team_dir, needle)
 
 
 @pytest.mark.parametrize("case, needle", [
@@ -242,7 +234,7 @@ def test_result_that_names_an_input_or_a_special_entry(team_dir, capsys, case, n
         os.symlink(team_dir / "target.json", result)
     elif case == "exists":
         result.write_text("precious")
-    _fails(capsys, team_dir, _robot(team, "0", "--result", result), needle, "--result")
+    refused(capsys, _robot(team, "0", "--result", result), team_dir, needle, "--result")
     assert not (team_dir / "target.json").exists()
 
 
