@@ -92,17 +92,22 @@ def test_evidence_properties_larger(inst):
     check_evidence(*inst)
 
 
+def _random_cameras(fpc, seed, p_unknown=0.0):
+    """Random keypoints per camera and a projection matrix near ``[I | (0, 0, 5)]`` for each,
+    ``None`` (pose unknown) with probability ``p_unknown``."""
+    rng = np.random.default_rng(seed)
+    keypoints = [rng.uniform(0, 100, size=(m, 2)).astype(np.float32) for m in fpc]
+    K = np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
+    projections = [None if p_unknown and rng.random() < p_unknown else
+                   K @ np.c_[np.eye(3), rng.normal(0, 0.1, 3) + [0, 0, 5]] for _ in fpc]
+    return keypoints, projections
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(instances(max_n=6, max_feat=5), st.integers(0, 2**32 - 1))
 def test_evidence_properties_with_the_geometric_test(inst, seed):
     fpc, edges, links = inst
-    rng = np.random.default_rng(seed)
-    keypoints = [rng.uniform(0, 100, size=(m, 2)).astype(np.float32) for m in fpc]
-    projections = []
-    for _ in fpc:
-        K = np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
-        projections.append(K @ np.c_[np.eye(3), rng.normal(0, 0.1, 3) + [0, 0, 5]])
-    check_evidence(fpc, edges, links, keypoints, projections)
+    check_evidence(fpc, edges, links, *_random_cameras(fpc, seed))
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -111,12 +116,7 @@ def test_evidence_with_some_poses_unknown_solves_each_set_as_its_robots_hold_it(
     # a set with a robot of unknown pose skips the geometric test; a set whose robots all
     # know theirs keeps it, even when its bundles share messages with the other set's
     fpc, edges, links = inst
-    rng = np.random.default_rng(seed)
-    keypoints = [rng.uniform(0, 100, size=(m, 2)).astype(np.float32) for m in fpc]
-    K = np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
-    projections = [None if rng.random() < 0.3 else
-                   K @ np.c_[np.eye(3), rng.normal(0, 0.1, 3) + [0, 0, 5]] for _ in fpc]
-    check_evidence(fpc, edges, links, keypoints, projections)
+    check_evidence(fpc, edges, links, *_random_cameras(fpc, seed, p_unknown=0.3))
 
 
 def test_a_bundle_keeps_its_projection_in_a_message_shared_with_a_set_of_unknown_pose():
