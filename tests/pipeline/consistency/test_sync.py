@@ -1,0 +1,150 @@
+"""The ``sync`` rule (pipeline.consistency.sync): the robots' Borůvka rounds reach exactly the
+clusters of the sequential constrained greedy merge, computed here independently (brute-force
+triangle counts, a plain list-based merge), and the result is cycle-consistent."""
+
+from itertools import combinations
+
+import numpy as np
+from hypothesis import event, given, settings
+from hypothesis import strategies as st
+
+from pipeline.consistency.engine import build_robots
+from pipeline.consistency.evidence import TRIANGLE_WEIGHT
+from pipeline.consistency.sync import CASE_SYNC, equip_sync, greedy_merge, run_sync
+from pipeline.transport.simulated import Network
+from pipeline.types import Links
+
+
+def _instance(seed: int, n: int, m: int, p_link: float, p_swap: float, ties: bool):
+    """``n`` cameras seeing the same ``m`` landmarks (feature order shuffled per camera), every
+    pair matched one-to-one with probability ``p_link`` per landmark; on a pair, with
+    probability ``p_swap`` two matches are swapped (wrong links that make conflicts)."""
+    rng = np.random.default_rng(seed)
+    perm = [rng.permutation(m) for _ in range(n)]  # perm[i][k]: feature of landmark k in i
+    ci, fi, cj, fj, w = [], [], [], [], []
+    for i, j in combinations(range(n), 2):
+        ks = np.flatnonzero(rng.random(m) < p_link)
+        tgt = ks.copy()
+        if ks.size >= 2 and rng.random() < p_swap:
+            a, b = rng.choice(ks.size, 2, replace=False)
+            tgt[a], tgt[b] = tgt[b], tgt[a]
+        for k, t in zip(ks.tolist(), tgt.tolist(), strict=True):
+            ci.append(i), fi.append(int(perm[i][k])), cj.append(j), fj.append(int(perm[j][t]))
+            w.append(float(rng.integers(0, 3)) if ties else float(rng.normal()))
+    fpc = np.full(n, m, dtype=np.int64)
+    return fpc, Links(ci, fi, cj, fj), np.array(w)
+
+
+def _reference(fpc, links: Links, weight) -> list[set]:
+    """Clusters of the sequential greedy merge, written plainly: triangle support by brute
+    force, links sorted by (weight desc, smaller end, larger end), lists of sets."""
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    a = (off[links.cam_i] + links.feat_i).tolist()
+    b = (off[links.cam_j] + links.feat_j).tolist()
+    cam = {g: c for c in range(len(fpc)) for g in range(off[c], off[c + 1])}
+    nbrs = {g: set() for g in range(off[-1])}
+    for x, y in zip(a, b, strict=True):
+        nbrs[x].add(y)
+        nbrs[y].add(x)
+    tau = [len({cam[t] for t in nbrs[x] & nbrs[y]}) for x, y in zip(a, b, strict=True)]
+    w = [float(weight[k]) + TRIANGLE_WEIGHT * tau[k] for k in range(len(a))]
+    order = sorted(range(len(a)), key=lambda k: (-w[k], min(a[k], b[k]), max(a[k], b[k])))
+    cluster = {g: {g} for g in range(off[-1])}
+    for k in order:
+        x, y = cluster[a[k]], cluster[b[k]]
+        if x is y or {cam[g] for g in x} & {cam[g] for g in y}:
+            continue
+        merged = x | y
+        for g in merged:
+            cluster[g] = merged
+    return sorted({frozenset(c) for c in cluster.values()}, key=min)
+
+
+def _run(fpc, links, weight):
+    robots, index = build_robots(fpc, links)
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    for rb, li in zip(robots, index, strict=True):
+        equip_sync(rb, weight[li])
+    net = Network(len(fpc), np.array(sorted({(int(i), int(j)) for i, j in
+                                             zip(links.cam_i, links.cam_j, strict=True)}),
+                                            dtype=np.int64).reshape(-1, 2))
+    stats = run_sync(robots, net)
+    labels = np.concatenate([rb.sync.label for rb in robots])
+    kept = np.zeros(len(links), dtype=bool)
+    for rb, li in zip(robots, index, strict=True):
+        kept[li] = rb.link_alive
+        assert set(np.unique(rb.deleted_case[~rb.link_alive]).tolist()) <= {CASE_SYNC}
+    clusters = sorted({frozenset(np.flatnonzero(labels == g).tolist()) for g in
+                       np.unique(labels)}, key=min)
+    return clusters, labels, kept, stats, off, net
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 6), m=st.integers(2, 5),
+       p_link=st.sampled_from([0.5, 0.9, 1.0]), p_swap=st.sampled_from([0.6, 0.9]),
+       ties=st.booleans())
+def test_robots_reach_the_greedy_merge(seed, n, m, p_link, p_swap, ties):
+    fpc, links, weight = _instance(seed, n, m, p_link, p_swap, ties)
+    clusters, labels, kept, _, off, _ = _run(fpc, links, weight)
+    event("a conflictive input" if _has_conflict(fpc, links) else "a conflict-free input")
+    assert clusters == _reference(fpc, links, weight)
+    # kept iff both ends in one cluster; no cluster holds two features of one camera
+    a = off[links.cam_i] + links.feat_i
+    b = off[links.cam_j] + links.feat_j
+    np.testing.assert_array_equal(kept, labels[a] == labels[b])
+    cam = np.repeat(np.arange(len(fpc)), fpc)
+    for c in clusters:
+        assert len({int(cam[g]) for g in c}) == len(c)
+
+
+def _has_conflict(fpc, links) -> bool:
+    from pipeline.consistency.centralized import is_conflict_free
+
+    return not is_conflict_free(fpc, links)
+
+
+def test_generator_plants_conflicts_in_most_examples():
+    hits = sum(_has_conflict(*_instance(s, 4, 4, 0.9, 0.8, False)[:2]) for s in range(50))
+    assert hits >= 30
+
+
+def test_a_swapped_pair_is_undone_and_the_rest_kept():
+    # 4 cameras x 2 landmarks, all pairs matched; (0, 1) swaps both matches (weak ratio)
+    ci, fi, cj, fj, w = [], [], [], [], []
+    for i, j in combinations(range(4), 2):
+        for k in range(2):
+            t = 1 - k if (i, j) == (0, 1) else k
+            ci.append(i), fi.append(k), cj.append(j), fj.append(t)
+            w.append(-1.0 if (i, j) == (0, 1) else 1.0)
+    fpc = np.full(4, 2)
+    links = Links(ci, fi, cj, fj)
+    clusters, _, kept, stats, _, net = _run(fpc, links, np.array(w))
+    assert clusters == [frozenset({0, 2, 4, 6}), frozenset({1, 3, 5, 7})]
+    assert kept.tolist() == [(i, j) != (0, 1) for i, j in zip(ci, cj, strict=True)]
+    assert stats["boruvka_rounds"] >= 1
+    assert net.counters()["messages"] > 0
+
+
+def test_greedy_merge_labels_are_the_smallest_id_of_each_cluster():
+    fpc, links, weight = _instance(3, 5, 4, 1.0, 0.8, False)
+    clusters, labels, _, _, off, _ = _run(fpc, links, weight)
+    for c in clusters:
+        assert {int(labels[g]) for g in c} == {min(c)}
+    # the module's own centralized counterpart agrees with the robots (used by benches)
+    a = off[links.cam_i] + links.feat_i
+    b = off[links.cam_j] + links.feat_j
+    ref = _reference(fpc, links, weight)
+    g = greedy_merge(int(fpc.sum()), a, b, links.cam_i, links.cam_j,
+                     _weights_with_support(fpc, links, weight))
+    assert sorted({frozenset(np.flatnonzero(g == x).tolist()) for x in np.unique(g)},
+                  key=min) == ref
+
+
+def _weights_with_support(fpc, links, weight):
+    from pipeline.consistency.evidence import triangle_support
+
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    cam = np.repeat(np.arange(len(fpc)), fpc)
+    a = off[links.cam_i] + links.feat_i
+    b = off[links.cam_j] + links.feat_j
+    return weight + TRIANGLE_WEIGHT * triangle_support(a, b, lambda x: cam[x])
