@@ -103,6 +103,8 @@ class SyncState:
     other : (L,) int64 — cluster of each link's far end, as last heard
     open : (L,) bool — ends in different clusters and not found ineligible
     heard : (L,) bool — the far end's cluster was heard in this phase A
+    tree : (L,) bool — the link merged two clusters (the cluster's spanning tree)
+    tau : (L,) int64 — triangle support counted so far (support round)
     cams : dict label -> int — camera bit sets of the clusters it knows
     best : dict label -> Key — best eligible link known for each own cluster (phase A)
     relabels : set — merges ``(A, B)`` applied in this phase B
@@ -118,6 +120,7 @@ class SyncState:
     open: np.ndarray
     heard: np.ndarray
     tree: np.ndarray
+    tau: np.ndarray
     nbytes_cams: int
     cams: dict = field(default_factory=dict)
     best: dict = field(default_factory=dict)
@@ -126,7 +129,7 @@ class SyncState:
 
     def nbytes(self) -> int:
         arrays = (self.weight, self.w, self.lo, self.hi, self.label, self.other, self.open,
-                  self.heard, self.tree)
+                  self.heard, self.tree, self.tau)
         return (int(sum(a.nbytes for a in arrays)) + len(self.cams) * (8 + self.nbytes_cams)
                 + 32 * len(self.best) + 16 * len(self.relabels))
 
@@ -141,7 +144,7 @@ def equip_sync(robot: Robot, link_weight) -> None:
     robot.sync = SyncState(weight=w, w=w.copy(), lo=np.minimum(own, far), hi=np.maximum(own, far),
                            label=gid, other=far.copy(), open=robot.link_alive.copy(),
                            heard=np.zeros(L, dtype=bool), tree=np.zeros(L, dtype=bool),
-                           nbytes_cams=(robot.n + 7) // 8)
+                           tau=np.zeros(L, dtype=np.int64), nbytes_cams=(robot.n + 7) // 8)
     for g in gid.tolist():
         robot.sync.cams[g] = 1 << robot.id
     for g, j in zip(far.tolist(), robot.link_nbr.tolist(), strict=True):
@@ -186,7 +189,7 @@ def support_step(robot: Robot, inbox: list[Message], send: Send, round_: int) ->
     far = robot.offsets[robot.link_nbr] + robot.link_s.astype(np.int64)
     m_total = np.int64(robot.m_total)
     own_keys = np.sort(robot.link_r[alive].astype(np.int64) * m_total + far[alive])
-    tau = np.zeros(robot.link_r.shape[0], dtype=np.int64)
+    tau = st.tau  # accumulated: on a reliable channel the lists may arrive in several rounds
     for msg in inbox:
         if msg.kind != SUPPORT:
             continue

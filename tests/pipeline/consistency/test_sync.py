@@ -148,3 +148,38 @@ def _weights_with_support(fpc, links, weight):
     a = off[links.cam_i] + links.feat_i
     b = off[links.cam_j] + links.feat_j
     return weight + TRIANGLE_WEIGHT * triangle_support(a, b, lambda x: cam[x])
+
+
+def _alone(fpc, links, weight, options=None):
+    """Every robot in its own thread runs the rule alone (reliable channel, termination wave)."""
+    from pipeline.consistency.protocols import ProtocolOptions
+    from pipeline.consistency.sync_alone import run_sync_locally
+    from pipeline.transport.local import LocalTeam
+
+    robots, index = build_robots(fpc, links)
+    for rb, li in zip(robots, index, strict=True):
+        equip_sync(rb, weight[li])
+    edges = np.array(sorted({(int(i), int(j)) for i, j in
+                             zip(links.cam_i, links.cam_j, strict=True)}),
+                     dtype=np.int64).reshape(-1, 2)
+    team = LocalTeam(len(fpc), edges, options)
+    proto = ProtocolOptions(reliable=True)
+    runs = team.run(lambda end: run_sync_locally(robots[end.robot_id], end, proto, len(fpc)))
+    kept = np.zeros(len(links), dtype=bool)
+    for rb, li in zip(robots, index, strict=True):
+        kept[li] = rb.link_alive
+    return kept, runs
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), drop=st.sampled_from([0.0, 0.3]))
+def test_a_robot_alone_ends_with_the_simulators_association(seed, drop):
+    from pipeline.transport.simulated import NetworkOptions
+
+    fpc, links, weight = _instance(seed, 4, 3, 0.9, 0.8, False)
+    _, _, kept_sim, stats, _, _ = _run(fpc, links, weight)
+    kept, runs = _alone(fpc, links, weight, NetworkOptions(drop_probability=drop, seed=seed % 1000))
+    np.testing.assert_array_equal(kept, kept_sim)
+    # every robot took the same Borůvka rounds and phases (the wave ends them together)
+    assert {r.iterations for r in runs} == {stats["boruvka_rounds"]}
+    assert len({len(r.phases) for r in runs}) == 1
