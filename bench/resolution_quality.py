@@ -34,14 +34,14 @@ import data_synth  # noqa: E402
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
-from pipeline.evaluate import link_truth  # noqa: E402
-from pipeline.features import MERGE_RADIUS_PX, extract_all  # noqa: E402
-from pipeline.link_evidence import link_evidence  # noqa: E402
-from pipeline.matching import match_edges  # noqa: E402
-from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
-from pipeline.oracle import oracle_cut, resolution_scores  # noqa: E402
-from pipeline.run import NEAR_DUPLICATE_PX  # noqa: E402
+from pipeline.evaluation.links import link_truth  # noqa: E402
+from pipeline.evaluation.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
+from pipeline.evaluation.oracle import oracle_cut, resolution_scores  # noqa: E402
+from pipeline.matching.features import MERGE_RADIUS_PX, extract_all  # noqa: E402
+from pipeline.matching.link_evidence import link_evidence  # noqa: E402
+from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.stages import NEAR_DUPLICATE_PX  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
 METHODS = ("paper", "evidence", "drop_conflictive_sets", "keep_first_per_image",

@@ -99,7 +99,7 @@ def _row(name: str, res: dict) -> dict:
 def _kill_run(args: list[str], size, out: Path) -> dict:
     """zenoh run with ``kill -9`` of robot 2 as its fusion stage starts."""
     from pipeline.commands.run_formation import add_arguments, config_from_args
-    from pipeline.teamrun import run_formation_team
+    from pipeline.team.assemble import run_formation_team
 
     ap = argparse.ArgumentParser()
     add_arguments(ap)

@@ -6,7 +6,7 @@ Sec. IV Alg. 1 resolution, one robot per image), and a NEW database is written w
 links removed from the two-view geometries. Run COLMAP's mapper on OUT.db as usual.
 
 Beside OUT.db it writes ``OUT.links.csv`` (every verified link, kept or deleted with its reason)
-and ``OUT.rrd`` (:mod:`pipeline.cleaned`). Before the distributed stage, links the paper's
+and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`). Before the distributed stage, links the paper's
 model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
 the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
 between images that are not neighbours: those robots could not have matched).
@@ -75,7 +75,7 @@ def clean_database(database: str | Path, out: str | Path,
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
-    stored fundamental matrix (:func:`pipeline.link_evidence.geometric_llr`, ``T`` =
+    stored fundamental matrix (:func:`pipeline.matching.link_evidence.geometric_llr`, ``T`` =
     :data:`COLMAP_MAX_ERROR_PX`) plus the triangle support the robots compute; a database
     holds no Lowe ratios.
 
@@ -85,7 +85,7 @@ def clean_database(database: str | Path, out: str | Path,
     out : output database (must differ from the input)
     comm_graph_file : optional comm-graph file (:func:`pipeline.commgraph.read_comm_graph`)
     rerun : also write ``OUT.rrd`` beside ``out`` (``OUT.links.csv`` is always written;
-        :mod:`pipeline.cleaned`)
+        :mod:`pipeline.runs.cleaned`)
     image_dir : the images, drawn in the recording
 
     Returns
@@ -103,7 +103,7 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.outputs import require_input_file
-    from pipeline.run import consistency_stage
+    from pipeline.stages import consistency_stage
 
     database, out = Path(database), Path(out)
     if out.resolve() == database.resolve():
@@ -150,8 +150,8 @@ def clean_database(database: str | Path, out: str | Path,
 
 def _link_weight(contents, links) -> np.ndarray:
     """Geometric log-likelihood ratio of each link from the pair's stored ``F``, ``(L,)``."""
-    from pipeline.link_evidence import geometric_llr
-    from pipeline.matching import sampson_error_px
+    from pipeline.matching.link_evidence import geometric_llr
+    from pipeline.matching.pairs import sampson_error_px
 
     err = np.full(len(links), np.nan)
     n = len(contents.names)
@@ -169,9 +169,9 @@ def _link_weight(contents, links) -> np.ndarray:
 
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
                   before, after) -> None:
-    """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.cleaned`)."""
-    from pipeline.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.run import _conflictive_links
+    """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
+    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.stages import _conflictive_links
 
     rnd = np.full(len(links), -1, dtype=np.int64)
     it = np.full(len(links), -1, dtype=np.int64)
@@ -189,9 +189,9 @@ def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rer
 
 
 def run(args) -> int:
-    from pipeline.cleaned import side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runs.cleaned import side_paths
 
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),

@@ -4,13 +4,13 @@ For hloc users: the matches of hloc's ``matches.h5`` are made consistent by the 
 consistency stage (Aragüés et al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot
 per image), and a NEW ``matches.h5`` is written in hloc's format with the cut matches removed
 (``matches0 = -1``), ready for ``hloc.reconstruction.main(..., matches=OUT.h5)``. The file
-layout is described in :mod:`pipeline.hloc`.
+layout is described in :mod:`pipeline.inputs.hloc`.
 
 The communication graph is the list of image pairs: ``--pairs pairs.txt`` (hloc's pairs file;
 only those pairs are read), else every pair stored in ``matches.h5``. Before the distributed
 stage, matches the paper's model cannot hold are cut with reason ``not-one-to-one`` (a
 keypoint matched twice into the same other image, Assumption 2.2). Beside OUT.h5 it writes
-``OUT.links.csv`` and ``OUT.rrd`` (:mod:`pipeline.cleaned`).
+``OUT.links.csv`` and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`).
 """
 
 from __future__ import annotations
@@ -58,14 +58,14 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     Raises
     ------
     InputError
-        Bad input files (see :func:`pipeline.hloc.read_h5`), ``out`` equal to the matches file
+        Bad input files (see :func:`pipeline.inputs.hloc.read_h5`), ``out`` equal to the matches file
         (the command checks every output against every input first,
         :func:`pipeline.outputs.check_output_files`).
     """
-    from pipeline import hloc
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.run import _conflictive_links, consistency_stage
+    from pipeline.inputs import hloc
+    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.stages import _conflictive_links, consistency_stage
 
     out = Path(out)
     contents = hloc.read_h5(features, matches, pairs)
@@ -129,9 +129,9 @@ def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
 
 
 def run(args) -> int:
-    from pipeline.cleaned import side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runs.cleaned import side_paths
 
     if not args.out:
         raise InputError("--out '': give the name of the cleaned matches file to write, e.g. "

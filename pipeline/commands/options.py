@@ -1,6 +1,6 @@
 """Command-line options shared by several commands, each defined once with one check.
 
-``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.features`),
+``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.matching.features`),
 ``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
 (the consistency stage's resolution rule) and ``--merge-radius`` (near-duplicate keypoints).
 """
@@ -33,9 +33,9 @@ def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> Non
 
     ``--features`` lists only the methods this OpenCV build offers. With ``photos``,
     ``--max-features`` defaults to ``auto`` (scaled with each image,
-    :func:`pipeline.features.photo_max_features`).
+    :func:`pipeline.matching.features.photo_max_features`).
     """
-    from pipeline.features import available_methods
+    from pipeline.matching.features import available_methods
 
     p.add_argument("--features", default="sift",
                    help=f"feature method: {'|'.join(available_methods())} (the ones this OpenCV "
@@ -83,7 +83,7 @@ def feature_options(args) -> tuple[str, int | None]:
         An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`
         or more than :data:`MAX_FEATURES`.
     """
-    from pipeline.features import METHODS, available_methods, check_method
+    from pipeline.matching.features import METHODS, available_methods, check_method
 
     method = str(args.features).lower()
     if method not in METHODS:

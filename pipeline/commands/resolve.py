@@ -21,7 +21,7 @@ from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
-from pipeline.team import add_transport_argument, resolution_for_transport
+from pipeline.team.teamfile import add_transport_argument, resolution_for_transport
 
 __all__ = ["add_arguments", "run", "resolve_file"]
 
@@ -57,16 +57,16 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     Raises
     ------
     InputError
-        Bad input rows (see :func:`pipeline.linkscsv.read_links_csv`), a bad comm-graph file,
+        Bad input rows (see :func:`pipeline.inputs.linkscsv.read_links_csv`), a bad comm-graph file,
         ``out`` equal to the input, or a link between cameras that are not neighbours in the
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
-    from pipeline.linkscsv import read_links_csv, write_links_csv
-    from pipeline.run import consistency_stage, ledger_from_consistency
+    from pipeline.inputs.compact import compact_ids, fault_section_in_ids, faults_in_layout
+    from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
+    from pipeline.stages import consistency_stage, ledger_from_consistency
     from pipeline.types import LinkLedger
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -80,7 +80,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if comm_graph_csv is not None:
         edges = read_comm_graph(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
-    # ids as given, or made compact when sparse (pipeline.compact): memory follows the links
+    # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the links
     ids = compact_ids(links, edges, n_cameras=n_cams)
     n = int(ids.cameras.max(initial=-1)) + 1
     if edges is not None and len(links):
@@ -149,14 +149,14 @@ def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
 
     The links to make consistent (kept rows, compact ids, with their quality: the evidence
     of the evidence rule) go to a file in a temporary team folder; each robot reads its own
-    rows of it (:func:`pipeline.teamrun.resolve_conflicts_team`).
+    rows of it (:func:`pipeline.team.assemble.resolve_conflicts_team`).
     Returns ``(ConsistencyResult, faults section or None)``.
     """
     import tempfile
 
     from pipeline.commgraph import comm_edges_for
     from pipeline.faults import fault_report
-    from pipeline.teamrun import resolve_conflicts_team, team_options
+    from pipeline.team.assemble import resolve_conflicts_team, team_options
 
     with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
         path = Path(work) / "links.csv"

@@ -16,8 +16,8 @@ from pipeline.commands.options import (
 )
 from pipeline.errors import InputError
 from pipeline.faults import add_fault_arguments, faults_from_args
-from pipeline.run import FormationConfig
-from pipeline.team import add_transport_argument, resolution_for_transport
+from pipeline.stages import FormationConfig
+from pipeline.team.teamfile import add_transport_argument, resolution_for_transport
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -57,8 +57,8 @@ def config_from_args(args) -> FormationConfig:
 
 def run(args) -> int:
     from pipeline.outcome import exit_status
-    from pipeline.run import run_formation
     from pipeline.runfolder import claim_run_folder
+    from pipeline.stages import run_formation
 
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):

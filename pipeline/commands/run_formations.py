@@ -15,9 +15,9 @@ from pipeline.commands.options import (
     feature_options,
     parse_size,
 )
-from pipeline.report import PAPER_TABLE_III_IV
+from pipeline.evaluation.report import PAPER_TABLE_III_IV
 from pipeline.runfolder import atomic_file, write_json_atomic
-from pipeline.team import add_transport_argument, resolution_for_transport
+from pipeline.team.teamfile import add_transport_argument, resolution_for_transport
 
 FORMATIONS = ("a", "b", "c", "d")
 
@@ -158,7 +158,7 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 
 def run(args) -> int:
     from pipeline import validate
-    from pipeline.run import FormationConfig, run_formation
+    from pipeline.stages import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")

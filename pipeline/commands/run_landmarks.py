@@ -1,26 +1,26 @@
 """``python -m pipeline run-landmarks DIR --graph KIND``: labelled-landmark benchmarks.
 
 For folders where every image carries the same hand-labelled keypoints in the same order
-(:mod:`pipeline.landmarks_io`; e.g. the CMU hotel sequence), so the true association is
+(:mod:`pipeline.inputs.landmarks`; e.g. the CMU hotel sequence), so the true association is
 known exactly: landmark ``k`` of one image is landmark ``k`` of every other.
 
 Stages: load (keypoints and descriptors; ``--frames N`` takes ``N`` images at a fixed
 stride) → each robot matches its landmarks to its communication neighbours' one-to-one
 (Hungarian on the descriptor distance, guided by the epipolar geometry of the labelled
-keypoints, optional ratio gate; :mod:`pipeline.landmark_matching`)
+keypoints, optional ratio gate; :mod:`pipeline.matching.landmarks`)
 → ``--refine votes``: the robots refine those matches by two-hop votes through common
-neighbours (:mod:`pipeline.match_votes`) → the distributed consistency stage
+neighbours (:mod:`pipeline.matching.votes`) → the distributed consistency stage
 (``--resolution``) → the centralized baselines on the same links → evaluation.
 
 Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
-:mod:`pipeline.landmark_matching`), the
+:mod:`pipeline.matching.landmarks`), the
 whole assignment kept (``--ratio none``), refined by votes. The
 votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
 vote for the right match, and gating before voting removes them.
 
 Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
 matches it implies, i.e. every two landmarks in one association set of the kept links (the
-transitive closure), against the true pairs of *every* image pair (:mod:`pipeline.metrics`).
+transitive closure), against the true pairs of *every* image pair (:mod:`pipeline.evaluation.metrics`).
 ``pairwise.input_links`` scores the Hungarian matches themselves, the way CLEAR scores its
 input; ``before`` / ``before_links`` are the links the consistency stage receives (after the
 refinement), over their closure and as they are. ``cycle_consistent`` is true when no association set holds two landmarks of one image
@@ -179,7 +179,7 @@ def true_landmark_pairs(features_per_camera) -> np.ndarray:
 
 
 def _scores(m, links: Links, true_pairs: np.ndarray) -> dict:
-    from pipeline.metrics import association_pairs, pairwise_scores
+    from pipeline.evaluation.metrics import association_pairs, pairwise_scores
 
     return pairwise_scores(association_pairs(m, links), true_pairs, int(np.sum(m)))
 
@@ -187,7 +187,7 @@ def _scores(m, links: Links, true_pairs: np.ndarray) -> dict:
 def _link_scores(m, links: Links, true_pairs: np.ndarray) -> dict:
     """The links themselves as the predicted pairs (how CLEAR scores its pairwise input)."""
     from pipeline.association import camera_offsets
-    from pipeline.metrics import pairwise_scores
+    from pipeline.evaluation.metrics import pairwise_scores
 
     off = camera_offsets(m)
     pred = np.stack([off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j], axis=1)
@@ -200,17 +200,17 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     Raises
     ------
     InputError
-        Bad folder or files (:func:`pipeline.landmarks_io.load_landmark_folder`), graph
+        Bad folder or files (:func:`pipeline.inputs.landmarks.load_landmark_folder`), graph
         (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
     """
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.commgraph import comm_graph
     from pipeline.consistency import centralized
-    from pipeline.landmark_matching import match_landmark_edges
-    from pipeline.landmarks_io import load_landmark_folder
-    from pipeline.linkscsv import write_links_csv
-    from pipeline.report import versions
-    from pipeline.run import ledger_from_consistency
+    from pipeline.evaluation.report import versions
+    from pipeline.inputs.landmarks import load_landmark_folder
+    from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.matching.landmarks import match_landmark_edges
+    from pipeline.stages import ledger_from_consistency
 
     if config.refine not in REFINEMENTS:
         raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
@@ -243,7 +243,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     # after another; a team would run them in parallel)
     refinement = {"method": config.refine}
     if config.refine == "votes":
-        from pipeline.match_votes import refine_by_votes
+        from pipeline.matching.votes import refine_by_votes
 
         input_links = links
         with timer.stage("refine", "two-hop votes through common neighbours"):

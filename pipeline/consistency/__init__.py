@@ -21,7 +21,8 @@ import importlib
 
 __all__ = ["ConsistencyResult", "resolve_conflicts", "detect_once", "ProtocolOptions", "Robot"]
 
-_HOME = {"ConsistencyResult": "engine", "resolve_conflicts": "engine", "detect_once": "engine",
+_HOME = {"ConsistencyResult": "engines.driver", "resolve_conflicts": "engines.driver",
+         "detect_once": "engines.driver",
          "ProtocolOptions": "protocols", "Robot": "robot"}
 
 

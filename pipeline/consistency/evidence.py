@@ -7,7 +7,7 @@ likely wrong. Here the robots of ``C`` instead agree on the cut by *flooding and
 
 1. **Flood** (rounds ``1 … diam(C)``). Every robot sends, for each of its features in ``C``,
    a *bundle*: the feature's id, its keypoint, its alive links in ``C`` with each link's local
-   evidence weight (:mod:`pipeline.link_evidence`, held by both ends of the link since
+   evidence weight (:mod:`pipeline.matching.link_evidence`, held by both ends of the link since
    matching), and, where its pose is known, its projection matrix ``P = K [R | t]``. Bundles
    go to the neighbours it shares a link of ``C`` with; a robot forwards each bundle it
    receives for the first time to those neighbours. A bundle travels one robot-hop per round,

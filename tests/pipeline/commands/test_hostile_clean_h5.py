@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.__main__ import main
-from pipeline.hloc import names_to_pair
+from pipeline.inputs.hloc import names_to_pair
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hostile import one_line_error, refused, run_capped, tree  # noqa: E402
@@ -248,7 +248,7 @@ def test_image_dir_that_is_not_a_folder(files, tmp_path, capsys, case):
 
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(files, tmp_path, capsys, monkeypatch):
-    import pipeline.run as run
+    import pipeline.stages as run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

@@ -1,0 +1,538 @@
+"""The pipeline's one stage chain, used by every command (docs/DESIGN.md "Data flow").
+
+Stages, each a function here: :func:`extract_and_match` (features, then matching on the
+communication edges only), :func:`consistency_stage` (Aragüés et al., Sec. III detection and
+Sec. IV Alg. 1 resolution by message passing, with the network's faults),
+:func:`fusion_stage` (Montijano et al., robust distributed fusion by dynamic voting) and
+:func:`clean_association` (consistency then fusion, on any input, rendered or real). Every
+decision about a link is written to one :class:`~pipeline.types.LinkLedger`.
+
+:func:`run_formation` chains them for a rendered formation with ground truth and writes
+``report.json`` (built by :mod:`pipeline.evaluation.report`), ``links.csv``, ``sparse/`` and
+``recording.rrd`` atomically; :mod:`pipeline.runs.images` does the same for photographs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.association import AssociationGraph
+from pipeline.faults import FaultConfig
+from pipeline.outcome import flag_result
+from pipeline.progress import StageTimer
+from pipeline.runfolder import atomic_run_folder, write_json_atomic
+from pipeline.types import LinkLedger, Links, RunRecord, View
+
+__all__ = ["FormationConfig", "CleaningResult", "NEAR_DUPLICATE_PX", "merge_radius_for",
+           "extract_and_match", "evidence_inputs", "consistency_stage", "ledger_from_consistency",
+           "fusion_stage", "clean_association", "run_formation", "write_formation_run"]
+
+#: radius (pixels) within which keypoints of one image are one observation with the evidence
+#: rule: the ground-truth tolerance of a good link, so that two keypoints that would both be
+#: "good" for one point are not kept as two features of one camera (Def. 2.4)
+NEAR_DUPLICATE_PX = 2.0
+
+
+@dataclass
+class FormationConfig:
+    """Options of ``run-formation`` (defaults = ``make run-formation``)."""
+
+    formation: str = "d"
+    seed: int = 0
+    size: tuple[int, int] = (640, 480)
+    features: str = "sift"
+    max_features: int = 2000
+    robots: int | None = None
+    graph: str | None = None
+    tol_px: float = 2.0
+    fusion: bool = True
+    out: str | None = None
+    rerun: bool = True
+    faults: FaultConfig | None = None
+    resolution: str = "evidence"
+    merge_radius: float | None = None
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        name = f"formation-{self.formation}" if self.robots is None else \
+            f"formation-n{self.robots}-{self.graph}"
+        return Path("runs") / name
+
+
+@dataclass
+class CleaningResult:
+    """What the consistency and fusion stages produced besides the per-link decisions.
+
+    Attributes
+    ----------
+    ledger : LinkLedger — every link and what the stages decided for it
+    resolution_stats : dict — :attr:`ConsistencyResult.stats` of the consistency stage
+    fusion_stats : dict — what fusion did, or ``enabled: False`` with the reason it did not run
+    fused_points : ndarray, (F, 3) or None — fused landmark of each fused track
+    fused_track_ids : ndarray, (F,) or None — track (association set) of each fused landmark
+    faults : dict or None — the report's ``faults`` section when faults were injected
+    track_labels : ndarray, (m_total,) or None — each robot's own name for the track of each
+        of its features (``ConsistencyResult.track_label``), what fusion's tracks come from
+    """
+
+    ledger: LinkLedger
+    resolution_stats: dict
+    fusion_stats: dict = field(default_factory=dict)
+    fused_points: np.ndarray | None = None
+    fused_track_ids: np.ndarray | None = None
+    faults: dict | None = None
+    track_labels: np.ndarray | None = None
+
+
+def _conflictive_links(features_per_camera, links: Links) -> np.ndarray:
+    from pipeline.association import conflictive_labels
+
+    graph = AssociationGraph(features_per_camera, links)
+    labels, _, conflictive = conflictive_labels(graph)
+    a, _ = graph.global_ids()
+    return conflictive[labels[a]] if len(links) else np.zeros(0, dtype=bool)
+
+
+def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
+    """The keypoint merge radius: as given, else :data:`NEAR_DUPLICATE_PX` with the evidence
+    rule and the co-location radius of :mod:`pipeline.matching.features` with the paper's Alg. 1.
+
+    Raises
+    ------
+    InputError
+        A negative or non-finite radius.
+    """
+    from pipeline.errors import InputError
+    from pipeline.matching.features import MERGE_RADIUS_PX
+
+    if merge_radius is None:
+        return NEAR_DUPLICATE_PX if resolution == "evidence" else MERGE_RADIUS_PX
+    if not np.isfinite(merge_radius) or merge_radius < 0:
+        raise InputError(f"--merge-radius {merge_radius}: expected pixels >= 0 (0 merges nothing)")
+    return float(merge_radius)
+
+
+def extract_and_match(views: list[View], comm_edges, method: str,
+                      max_features: int | None, timer: StageTimer, *, ratio: float = 0.8,
+                      threshold_px: float | None = 1.0, merge_radius: float | None = None,
+                      contrast_threshold: float | None = None, rootsift: bool = False,
+                      budget_after_merge: bool = False) -> tuple[list, list, Links]:
+    """Features of every camera, then matching on the communication edges only.
+
+    ``ratio`` (Lowe ratio test) and ``threshold_px`` (epipolar RANSAC inlier threshold) go to
+    :func:`pipeline.matching.pairs.match_edges`; keypoints of one image closer than
+    ``merge_radius`` pixels are merged (``None``: :data:`pipeline.matching.features.MERGE_RADIUS_PX`);
+    ``contrast_threshold``, ``rootsift`` and ``budget_after_merge`` go to
+    :func:`pipeline.matching.features.extract`. ``max_features=None`` and ``threshold_px=None`` scale
+    with each image's size (:func:`pipeline.matching.features.photo_max_features`,
+    :func:`pipeline.matching.pairs.photo_threshold_px`). ``comm_edges`` may be a callable
+    ``features -> edges`` (a graph chosen from the features, e.g. ``knn:K`` by image
+    similarity).
+
+    Returns ``(features, matches, links)``: per-camera Features, per-edge PairMatches and all
+    links (``Links.from_matches``).
+    """
+    from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
+    from pipeline.matching.pairs import match_edges
+
+    radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
+    budget = "a budget scaled with image size" if max_features is None else max_features
+    with timer.stage("features", f"{method}, at most {budget} per image"):
+        feats = extract_all(views, method, max_features, radius,
+                            contrast_threshold=contrast_threshold, rootsift=rootsift,
+                            budget_after_merge=budget_after_merge)
+        timer.note(f"features per camera: {[len(f) for f in feats]}")
+    if callable(comm_edges):
+        comm_edges = comm_edges(feats)
+    with timer.stage("matching", f"{len(comm_edges)} communication edges"):
+        matches = match_edges(feats, views, comm_edges, ratio=ratio, threshold_px=threshold_px)
+        links = Links.from_matches(matches)
+        timer.note(f"{len(links)} links")
+    return feats, matches, links
+
+
+def evidence_inputs(views: list[View], features: list, links: Links, matches=None) -> dict:
+    """Keyword arguments of ``resolve_conflicts`` for the evidence rule: each link's local
+    weight (:mod:`pipeline.matching.link_evidence`; from ``links.quality`` without ``matches``), each
+    robot's keypoints and, where every pose is known, its projection ``K [R | t]``."""
+    from pipeline.matching.link_evidence import LinkEvidence, link_evidence
+
+    ev = link_evidence(matches, links, views, features) if matches is not None \
+        else LinkEvidence.from_quality(links)
+    poses = all(v.R is not None and v.t is not None for v in views)
+    return dict(link_weight=ev.weight, keypoints=[f.keypoints for f in features],
+                projections=[v.K @ np.c_[v.R, v.t] for v in views] if poses else None)
+
+
+def consistency_stage(features_per_camera, comm_edges, links: Links,
+                      faults: FaultConfig | None = None, *, resolution: str = "paper",
+                      evidence: dict | None = None):
+    """The consistency stage once: detection (Sec. III) and resolution (Alg. 1, or the
+    evidence rule of :mod:`pipeline.consistency.evidence`) until conflict-free, on a faulty
+    network when ``faults`` switch one on.
+
+    Parameters
+    ----------
+    features_per_camera : (n,) int
+    comm_edges : (E, 2) int or None — ``None``: cameras sharing a link are neighbours
+    links : Links, (L,)
+    faults : FaultConfig or None
+    resolution : ``paper`` or ``evidence``
+    evidence : dict or None — with ``evidence``: ``link_weight``, ``keypoints``,
+        ``projections`` for ``resolve_conflicts`` (:func:`evidence_inputs`)
+
+    Returns
+    -------
+    (ConsistencyResult, dict or None)
+        The result and, with faults on, the report's ``faults`` section
+        (:func:`pipeline.faults.fault_report`), which compares with the same input on a
+        fault-free network (a second run, for the extra rounds and messages).
+
+    Raises
+    ------
+    InputError
+        Links break Assumptions 2.1–2.3 or join cameras that are not neighbours, or a crash
+        names a robot that does not exist.
+    """
+    from pipeline.consistency import resolve_conflicts
+
+    m = np.asarray(features_per_camera, dtype=np.int64)
+    kw = dict(resolution=resolution, **(evidence or {}))
+    if faults is None or not faults.any:
+        return resolve_conflicts(m, comm_edges, links, **kw), None
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.faults import fault_report
+
+    edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
+    result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)),
+                               protocol=faults.protocol_options(), **kw)
+    return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links, **kw))
+
+
+def ledger_from_consistency(result, conflictive_before: np.ndarray | None = None) -> LinkLedger:
+    """A :class:`LinkLedger` of the consistency stage's decisions (``ConsistencyResult``)."""
+    return LinkLedger(result.links, np.where(result.deleted, "deleted", "kept"),
+                      result.reason, result.round, result.iteration, result.case,
+                      conflictive_before=conflictive_before)
+
+
+def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edges, *,
+                 cameras: np.ndarray | None = None, transport=None,
+                 timer: StageTimer | None = None, detail: str = "",
+                 track_labels=None):
+    """Robust distributed fusion (Montijano et al., dynamic voting) of the kept links among
+    ``cameras``; observations voted out cut their links as ``fusion-outlier`` in ``ledger``.
+
+    ``cameras`` (default all) are the robots that take part: they need a pose in ``views``.
+    ``track_labels`` (``CleaningResult.track_labels``): the robots' own track names, from
+    which the tracks are formed (default: a union-find over the kept links).
+    The others act as crashed robots: their links and comm edges are left out, and links to
+    them stay as the consistency stage left them. ``transport`` (a
+    :class:`~pipeline.transport.Transport` over the ``cameras`` in their order, or None) is
+    the network the fusion messages travel on (:func:`pipeline.fusion.landmarks.fuse_tracks`).
+
+    Returns
+    -------
+    (FusionResult, int) — the fusion result (on the cameras renumbered ``0..k-1``) and the
+    number of links it cut.
+    """
+    from pipeline.fusion.landmarks import fuse_tracks
+
+    timer = timer or StageTimer(verbose=False)
+    n = len(views)
+    reg = np.arange(n, dtype=np.int64) if cameras is None else np.asarray(cameras, np.int64)
+    if transport is not None and transport.n != len(reg):
+        raise ValueError("fusion_stage: the transport must be over the cameras taking part")
+    new = np.full(n, -1, dtype=np.int64)
+    new[reg] = np.arange(len(reg))
+    links = ledger.links
+    kept_idx = np.flatnonzero(ledger.kept)
+    ci, cj = new[links.cam_i[kept_idx]], new[links.cam_j[kept_idx]]
+    sub_idx = kept_idx[(ci >= 0) & (cj >= 0)]
+    sub_links = Links(new[links.cam_i[sub_idx]], links.feat_i[sub_idx],
+                      new[links.cam_j[sub_idx]], links.feat_j[sub_idx], links.quality[sub_idx])
+    e = new[np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)]
+    with timer.stage("fusion", "robust distributed fusion by dynamic voting" + detail):
+        labels = None
+        if track_labels is not None:
+            off = np.concatenate([[0], np.cumsum([len(f) for f in features])])
+            labels = np.concatenate([np.asarray(track_labels)[off[k]:off[k + 1]] for k in reg])
+        fr = fuse_tracks([views[k] for k in reg], [features[k] for k in reg], sub_links,
+                         e[(e >= 0).all(axis=1)], transport=transport,
+                         track_labels=labels)
+        cut = sub_idx[np.asarray(fr.cut_links, dtype=bool)]
+        ledger.cut(cut, "fusion-outlier", int(fr.stats.get("rounds", -1)))
+        timer.note(f"{len(cut)} links cut as fusion outliers")
+    return fr, int(len(cut))
+
+
+def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
+                      *, fusion: bool = True, timer: StageTimer | None = None,
+                      faults: FaultConfig | None = None, resolution: str = "evidence",
+                      matches: list | None = None) -> CleaningResult:
+    """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
+
+    ``resolution``: ``paper`` (Alg. 1) or ``evidence`` (:mod:`pipeline.consistency.evidence`,
+    with the link evidence of ``matches`` when given, see :func:`evidence_inputs`).
+
+    Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
+    With ``faults`` on, the consistency stage runs on the faulty network (and once more
+    fault-free, for the ``faults`` section's extra rounds and messages); a switching topology
+    is used by the fusion consensus too.
+    """
+    timer = timer or StageTimer(verbose=False)
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    with timer.stage("consistency", f"distributed detection + resolution ({resolution})"):
+        conflictive_before = _conflictive_links(m, links)
+        evidence = evidence_inputs(views, features, links, matches) \
+            if resolution == "evidence" else None
+        res, fault_section = consistency_stage(m, comm_edges, links, faults,
+                                               resolution=resolution, evidence=evidence)
+        ledger = ledger_from_consistency(res, conflictive_before)
+        timer.note(f"{int(res.deleted.sum())} of {len(links)} links cut in "
+                   f"{res.stats.get('iterations')} iteration(s)")
+    cleaning = CleaningResult(ledger, dict(res.stats), faults=fault_section,
+                              track_labels=res.track_label)
+    has_poses = all(v.R is not None and v.t is not None for v in views)
+    if not fusion:
+        cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
+    elif not has_poses:
+        cleaning.fusion_stats = {"enabled": False, "reason": "camera poses unknown"}
+    else:
+        cameras, transport, crashed = None, None, []
+        if faults is not None and faults.any:
+            # robots crashed during consistency take no part; the others run fusion on the
+            # same faulty network, its clock going on (pipeline.fusion.protocol)
+            from pipeline.commgraph import comm_edges_for
+
+            edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
+            crashed = sorted(int(k) for k in res.stats.get("faults", {}).get("crashed", {}))
+            cameras = np.array([i for i in range(len(m)) if i not in crashed], dtype=np.int64)
+            start = int(res.stats.get("detection_rounds", 0) + res.stats.get("resolution_rounds", 0)
+                        + res.stats.get("closing_rounds", 0))
+            transport = faults.fusion_transport(edges, cameras, start)
+            comm_edges = edges
+        fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
+                                 track_labels=cleaning.track_labels, cameras=cameras,
+                                 transport=transport)
+        stats = dict(fr.stats)
+        if cameras is not None:
+            # the fusion stage numbers the taking-part robots 0..k-1: report team ids
+            stats["crashed"] = [int(cameras[i]) for i in stats.get("crashed", [])]
+            stats["crashed_before_fusion"] = crashed
+            stats["robots_lost"] = {str(int(cameras[int(k)])): [int(cameras[j]) for j in v]
+                                    for k, v in stats.get("robots_lost", {}).items()}
+            if fault_section is not None:
+                # a crash the consistency stage did not reach may have hit fusion
+                later = fault_section.get("crashes_not_reached", {})
+                fault_section["crashed_during_fusion"] = {
+                    str(r): later[str(r)] for r in stats["crashed"] if str(r) in later}
+                fault_section["crashes_not_reached"] = {
+                    k: v for k, v in later.items()
+                    if k not in fault_section["crashed_during_fusion"]}
+        cleaning.fusion_stats = {"enabled": True, **stats, "observations_cut_links": n_cut}
+        cleaning.fused_points = np.asarray(fr.points)
+        cleaning.fused_track_ids = np.asarray(fr.track_ids)
+    return cleaning
+
+
+def run_formation(config: FormationConfig, timer: StageTimer | None = None,
+                  transport: str = "sim") -> Path:
+    """Render a formation, run every stage, write the run folder; return its path.
+
+    Stages: render → features → matching → consistency → fusion → triangulation (before and
+    after, pycolmap with known poses) → evaluation against ground truth → outputs.
+    ``transport="zenoh"``: the robots run as separate processes over Zenoh
+    (:func:`pipeline.team.assemble.run_formation_team`); the same run folder is written.
+    """
+    import data_synth
+
+    if transport == "zenoh":
+        from pipeline.team.assemble import run_formation_team
+
+        return run_formation_team(config, timer)
+    timer = timer or StageTimer()
+    with timer.stage("render", f"formation {config.formation}, seed {config.seed}, "
+                     f"{config.size[0]}x{config.size[1]}"):
+        formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
+                                      n_robots=config.robots, graph=config.graph)
+        views, comm_edges = formation.views, np.asarray(formation.comm_edges)
+    feats, matches, links = extract_and_match(
+        views, comm_edges, config.features, config.max_features, timer,
+        merge_radius=merge_radius_for(config.resolution, config.merge_radius))
+    cleaning = clean_association(views, feats, comm_edges, links, fusion=config.fusion,
+                                 faults=config.faults, timer=timer,
+                                 resolution=config.resolution, matches=matches)
+    return write_formation_run(config, formation, feats, matches, cleaning, timer)
+
+
+def write_formation_run(config: FormationConfig, formation, feats: list, matches: list,
+                        cleaning: CleaningResult, timer: StageTimer,
+                        extra: dict | None = None) -> Path:
+    """Evaluate a formation run against ground truth and write its run folder.
+
+    ``extra`` adds sections to ``report.json`` (e.g. ``team`` for a run over Zenoh).
+    """
+    from data_synth.ground_truth import points_from_keypoints
+    from pipeline.consistency import centralized
+    from pipeline.evaluation import report as sections
+    from pipeline.evaluation.links import MissingLinks, link_truth
+    from pipeline.evaluation.metrics import PairwiseTruth, true_pairs_all
+    from pipeline.inputs.linkscsv import write_links_csv
+
+    out = config.out_dir()
+    views, comm_edges = formation.views, np.asarray(formation.comm_edges)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    ledger = cleaning.ledger
+    links = ledger.links
+    kept = ledger.kept
+    kept_links = links.subset(kept)
+
+    with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
+        truth = link_truth(formation, feats, links, tol_px=config.tol_px)
+        truth = np.asarray(truth, dtype=bool)
+        ledger.truth = truth.astype(np.int8)
+
+        missing = MissingLinks(formation, feats, comm_edges, tol_px=config.tol_px)
+        gt_pairs = PairwiseTruth(true_pairs_all(formation, feats, tol_px=config.tol_px),
+                                 int(m.sum()))
+        # several sections count and score the same kept subsets: each subset's association
+        # graph (and its components) and pairwise scores are computed once
+        graphs: dict = {}
+        scored: dict = {}
+
+        def graph_of(kept_subset: Links) -> AssociationGraph:
+            key = _links_key(kept_subset)
+            if key not in graphs:
+                graphs[key] = AssociationGraph(m, kept_subset)
+            return graphs[key]
+
+        def pairwise_of(kept_subset: Links) -> dict:
+            key = _links_key(kept_subset)
+            if key not in scored:
+                scored[key] = gt_pairs.scores(m, kept_subset, graph_of(kept_subset))
+            return dict(scored[key])
+
+        before = sections.association_counts(m, links, truth, missing(links), graph_of(links))
+        after = sections.association_counts(m, kept_links, truth[kept], missing(kept_links),
+                                            graph_of(kept_links))
+        # what the consistency stage kept (fusion ran on exactly these links)
+        resolved = kept | (ledger.reason == "fusion-outlier")
+        resolved_links = links.subset(resolved)
+        pairwise = {"before": pairwise_of(links), "after_resolution": pairwise_of(resolved_links),
+                    "after": pairwise_of(kept_links)}
+        baseline_masks = centralized.baselines(m, links, graph=graph_of(links))
+        baselines = sections.baselines_section(m, links, truth, missing, pairwise_of,
+                                               masks=baseline_masks, graph_of=graph_of)
+        quality = sections.resolution_quality_section(
+            m, links, truth, pairwise_of,
+            _resolution_masks(views, feats, matches, comm_edges, links, truth,
+                              config.resolution, resolved, baseline_masks, graph_of(links)),
+            graph=graph_of(links))
+
+    # pycolmap is loaded only now: the earlier stages' peak memory does not include it
+    from pipeline.evaluation.triangulation import triangulate_tracks, write_reconstruction
+
+    with timer.stage("triangulation", "pycolmap, known poses, before and after"):
+        gt_points = [points_from_keypoints(v, f.keypoints)[0] if len(f) else np.zeros((0, 3))
+                     for v, f in zip(views, feats, strict=True)]
+        solved_tracks = {}  # the link sets below share most of their tracks
+        tri_before = triangulate_tracks(views, feats, links, gt_points=gt_points,
+                                        solved_tracks=solved_tracks)
+        tri_after = triangulate_tracks(views, feats, kept_links, gt_points=gt_points,
+                                       solved_tracks=solved_tracks)
+        triangulation = {"before": tri_before.summary(), "after": tri_after.summary()}
+        timer.note(f"after: {triangulation['after']['triangulated_tracks']} of "
+                   f"{triangulation['after']['tracks']} tracks triangulated")
+        fused_errors = None
+        if cleaning.fused_points is not None:  # fused landmarks against pycolmap and the truth
+            fused_errors = sections.fused_point_errors(
+                views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
+                gt_points, solved_tracks=solved_tracks)
+
+    report = {
+        "title": f"formation {config.formation} (seed {config.seed})",
+        "n_cameras": len(views),
+        "comm_edges": comm_edges.tolist(),
+        "features_per_camera": m.tolist(),
+        "before": before,
+        "after": after,
+        "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
+        "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
+        "triangulation": triangulation,
+        "pairwise": pairwise,
+        "baselines": baselines,
+        "resolution_quality": quality,
+        "matching": sections.matching_section(matches),
+        "ground_truth": {"tolerance_px": config.tol_px},
+        "versions": sections.versions(),
+        "config": {**asdict(config), "out": str(out)},
+    }
+    if cleaning.faults is not None:
+        report["faults"] = cleaning.faults
+    report.update(extra or {})
+    if fused_errors is not None:
+        report["fusion"].update(fused_errors)
+
+    flag_result(report, [v.name for v in views])
+    md = sections.report_markdown(report)
+    with timer.stage("write", str(out)):
+        with atomic_run_folder(out) as tmp:
+            write_links_csv(tmp / "links.csv", ledger)
+            write_reconstruction(tmp / "sparse", views, feats, tri_after)
+            if config.rerun:
+                from viz.rerun_log import log_run
+
+                all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
+                record = RunRecord(
+                    views=views, features=feats, ledger=ledger,
+                    points=tri_after.xyz[tri_after.ok],
+                    point_tracks=np.flatnonzero(tri_after.ok),
+                    gt_points=sections.track_gt_points(all_gt, tri_after),
+                    fused_points=cleaning.fused_points,
+                    report_markdown=md)
+                log_run(tmp / "recording.rrd", record)
+            report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+            write_json_atomic(tmp / "report.json", report)
+    print(md)
+    return out
+
+
+def _links_key(links: Links) -> bytes:
+    """The contents of ``links`` as one hashable value (equal iff the links are equal)."""
+    return b"".join(np.ascontiguousarray(a, dtype=np.int64).tobytes() + b"|" for a in
+                    (links.cam_i, links.feat_i, links.cam_j, links.feat_j))
+
+
+def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,
+                      method: str, resolved: np.ndarray, baseline_masks: dict | None = None,
+                      graph: AssociationGraph | None = None) -> dict:
+    """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
+
+    The run's own method (``resolved``: what its consistency stage kept), the other
+    distributed method (run here on the fault-free network), every centralized baseline
+    (``baseline_masks``: ``centralized.baselines(m, links)`` when the caller has it) and
+    the oracle (:func:`pipeline.evaluation.oracle.oracle_cut`, which knows the truth); ``graph``: the
+    :class:`AssociationGraph` of ``links``, when the caller has it.
+    """
+    from pipeline.consistency import centralized
+    from pipeline.evaluation.oracle import oracle_cut
+
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    masks = {method: np.asarray(resolved, dtype=bool)}
+    for other in ("paper", "evidence"):
+        if other not in masks:
+            evidence = evidence_inputs(views, feats, links, matches) if other == "evidence" \
+                else None
+            res, _ = consistency_stage(m, comm_edges, links, resolution=other, evidence=evidence)
+            masks[other] = ~res.deleted
+    ordered = {k: masks[k] for k in ("paper", "evidence")}
+    if baseline_masks is None:
+        baseline_masks = centralized.baselines(m, links, graph=graph)
+    ordered.update({k: np.asarray(v, dtype=bool) for k, v in baseline_masks.items()})
+    ordered["oracle"] = oracle_cut(m, links, truth, graph=graph)
+    return ordered
