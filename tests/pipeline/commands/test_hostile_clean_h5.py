@@ -106,7 +106,7 @@ def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp
 
 
 def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
-    from pipeline.commands.clean_h5 import MAX_CANVAS_SIDE, _size_of
+    from pipeline.runs.clean_h5 import MAX_CANVAS_SIDE, _size_of
 
     assert _size_of(np.array([[1e30, 1e30]], np.float32)) == (MAX_CANVAS_SIDE, MAX_CANVAS_SIDE)
     assert _size_of(np.array([[-5.0, 3.0]], np.float32)) == (16, 16)
