@@ -538,17 +538,17 @@ def evidence_round(robot: Robot, rel, inbox: list[Message], now: int, phase_roun
     rounds (heartbeats), so a neighbour silent for ``loss_timeout`` rounds has crashed: it is
     declared lost and its links are cut (``robot-lost``), as in the reliable Alg. 1.
     """
-    from pipeline.consistency.reliable import _cut_lost, _measure
+    from pipeline.consistency.reliable import cut_lost, measure_state
 
     chan = rel.chan
     msgs = [m for m in chan.receive(inbox, now) if m.kind == "bundle"]
     nbrs = _set_neighbours(robot) - chan.lost
     lost = chan.check_lost(now, nbrs)
     if lost:
-        _cut_lost(robot, rel, lost, phase_round)
+        cut_lost(robot, rel, lost, phase_round)
     evidence_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
     chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
-    _measure(robot, rel)
+    measure_state(robot, rel)
 
 
 def evidence_done(robot: Robot, rel, lost_somewhere: bool) -> bool:

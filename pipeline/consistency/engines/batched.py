@@ -1,6 +1,6 @@
 """Batched evaluation of the robots' detection (Sec. III, eq. 5) in the in-process simulator.
 
-The per-robot engine (:func:`.engine.run_phase`) steps every robot in every round: each robot
+The per-robot engine (:func:`.phases.run_phase`) steps every robot in every round: each robot
 turns its inbox into sparse blocks, applies eq. (5) and slices the rows for each neighbour.
 That is the code the robots run under faults and over a real middleware. On the simulator's
 lossless static network with the paper's protocol and delta messages
@@ -272,7 +272,7 @@ class _Team:
 def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtocol,
                   iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
     """One detection (Sec. III) of all robots, evaluated in batch; returns what
-    :func:`.engine.run_phase` returns for it.
+    :func:`.phases.run_phase` returns for it.
 
     Parameters
     ----------

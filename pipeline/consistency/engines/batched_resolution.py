@@ -14,7 +14,7 @@ Why it obeys the one rule (docs/DESIGN.md: a robot sees only its own state and i
     own links and the entries addressed to ``i``: the cases (a)–(d) of lines 8–16 are
     classified against ``i``'s components before the round, contention is settled in the
     order ``(q, sender robot, sender feature)`` within ``i``'s requests
-    (:func:`~.resolution._settle_contention`), the new requests go along ``i``'s alive links
+    (:func:`~.resolution.settle_contention`), the new requests go along ``i``'s alive links
     not settled this round (line 14), and rejects delete ``i``'s side (lines 17–19) after
     its requests are handled, as one step of :func:`~.resolution.resolution_step` does. No
     update mixes two receivers, so stacking them changes nothing.
@@ -37,14 +37,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.consistency.engines.phases import run_phase
 from pipeline.consistency.keys import isin_sorted
 from pipeline.consistency.protocols import RESOLUTION, PaperProtocol, end_phase
 from pipeline.consistency.resolution import (
-    _B,
-    _C,
-    _D,
-    _settle_contention,
+    OUTCOME_B,
+    OUTCOME_C,
+    OUTCOME_D,
     classify_requests,
+    settle_contention,
     start_resolution,
 )
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
@@ -161,7 +162,7 @@ def _requests_from(tab: _Tables, new: np.ndarray, settled: np.ndarray | None):
 
 def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProtocol,
                    iteration: int, max_rounds: int | None = None, on_round=None) -> dict:
-    """Alg. 1 of all robots, evaluated in batch; returns what :func:`.engine.run_phase`
+    """Alg. 1 of all robots, evaluated in batch; returns what :func:`.phases.run_phase`
     returns for it (``rounds``, ``start_round``, ``lost``, ``conflictive_sets``)."""
     tab = _Tables(robots)
     if not tab.mirrored:
@@ -236,15 +237,15 @@ def _round(tab: _Tables, req_link: np.ndarray, req_q: np.ndarray, rej_link: np.n
         # (d) unless two candidates of one receiver share a feature or a component: those
         # settle in order (each receiver's requests are contiguous and in its order)
         dup = _duplicated(g[cand]) | _duplicated(key_q[cand])
-        outcome[cand[~dup]] = _D
+        outcome[cand[~dup]] = OUTCOME_D
         if dup.any():
-            _settle_contention(key_q, g, outcome, cand[dup])
-    cut_b, cut_c = e[outcome == _B], e[outcome == _C]
+            settle_contention(key_q, g, outcome, cand[dup])
+    cut_b, cut_c = e[outcome == OUTCOME_B], e[outcome == OUTCOME_C]
     tab.delete(cut_b, t, CASE_B)                  # line 10
     tab.delete(cut_c, t, CASE_C)
     rejects = np.concatenate([cut_b, cut_c, stale])  # line 11
     _count(network, "reject", tab.owner[rejects], tab.nbr[rejects], n, rej_bytes)
-    joined = outcome == _D
+    joined = outcome == OUTCOME_D
     new = np.zeros(tab.m_total, dtype=bool)
     sent_link, sent_q = _EMPTY, _EMPTY
     if joined.any():
@@ -266,7 +267,5 @@ def _duplicated(a: np.ndarray) -> np.ndarray:
 
 
 def _run_stepped(robots, network, protocol, iteration, max_rounds, on_round) -> dict:
-    """The fallback: the engine's one loop, robot by robot (:func:`.engine.run_phase`)."""
-    from pipeline.consistency.engines.driver import run_phase  # the engine imports this module
-
+    """The fallback: the engine's one loop, robot by robot (:func:`.phases.run_phase`)."""
     return run_phase(robots, network, protocol, RESOLUTION, iteration, max_rounds, on_round)

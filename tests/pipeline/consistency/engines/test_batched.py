@@ -20,8 +20,8 @@ from pipeline.consistency.engines.driver import (
     _equip_evidence,
     build_robots,
     detect_once,
-    run_phase,
 )
+from pipeline.consistency.engines.phases import run_phase
 from pipeline.consistency.protocols import DETECTION, RESOLUTION, make_protocol
 from pipeline.errors import InputError
 from pipeline.inputs.linkscsv import write_links_csv
@@ -294,11 +294,11 @@ def test_batched_resolution_settles_contention_in_the_receivers_order():
         settled.append(cand.size)
         return settle(q, r, outcome, cand)
 
-    settle = batched_resolution._settle_contention
+    settle = batched_resolution.settle_contention
     res = {}
     for engine in ("per-robot", "batched"):
         with patch.object(batched_resolution, "_run_stepped", _no_fallback), \
-                patch.object(batched_resolution, "_settle_contention", counting):
+                patch.object(batched_resolution, "settle_contention", counting):
             res[engine] = resolve_conflicts(fpc, edges, links, engine=engine)
     assert settled == [2]  # the batched round met the contention
     a, b = res["per-robot"], res["batched"]
