@@ -12,20 +12,12 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["MIN_FEATURES", "MAX_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
-           "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
+__all__ = ["RESOLUTIONS", "add_feature_options", "add_scene_options",
+           "add_resolution_option", "add_transport_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
 
 #: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
 RESOLUTIONS = ("paper", "evidence")
-
-#: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
-MIN_FEATURES = 8
-
-#: Most features per image a run accepts: over a hundred times COLMAP's default of 8192, and
-#: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
-#: or overflow (beyond 2**31: a traceback).
-MAX_FEATURES = 1_000_000
 
 
 def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
@@ -65,6 +57,15 @@ def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence")
                         "--drop-prob, the fault-tolerant Alg. 1 runs instead)")
 
 
+def add_transport_option(p: argparse.ArgumentParser) -> None:
+    """``--transport NAME``: where the robots run, one of :mod:`pipeline.runs.transports`
+    (shared by the commands that run the robots)."""
+    from pipeline.runs.transports import transport_help, transport_names
+
+    p.add_argument("--transport", default="sim", choices=transport_names(),
+                   help=transport_help())
+
+
 def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
     """``--merge-radius PX``: keypoints of one image closer than this are one feature."""
     p.add_argument("--merge-radius", type=float, default=None, metavar="PX",
@@ -80,10 +81,16 @@ def feature_options(args) -> tuple[str, int | None]:
     Raises
     ------
     InputError
-        An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`
-        or more than :data:`MAX_FEATURES`.
+        An unknown method, one this OpenCV build lacks, or fewer than :data:`~pipeline.matching.features.MIN_FEATURES`
+        or more than :data:`~pipeline.matching.features.MAX_FEATURES`.
     """
-    from pipeline.matching.features import METHODS, available_methods, check_method
+    from pipeline.matching.features import (
+        MAX_FEATURES,
+        METHODS,
+        MIN_FEATURES,
+        available_methods,
+        check_method,
+    )
 
     method = str(args.features).lower()
     if method not in METHODS:

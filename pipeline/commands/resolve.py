@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
+from pipeline.commands.options import (
+    add_overwrite_and_memory_options,
+    add_resolution_option,
+    add_transport_option,
+)
 from pipeline.faults import add_fault_arguments, faults_from_args
-from pipeline.team.teamfile import add_transport_argument, resolution_for_transport
 
 __all__ = ["add_arguments", "run"]
 
@@ -34,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
     add_overwrite_and_memory_options(p, "--out / --report")
     add_resolution_option(p)
-    add_transport_argument(p)
+    add_transport_option(p)
     add_fault_arguments(p)
 
 
@@ -47,7 +50,7 @@ def run(args) -> int:
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
-                                  args.max_memory_gb, resolution=resolution_for_transport(args),
+                                  args.max_memory_gb, resolution=args.resolution,
                                   transport=args.transport))
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")

@@ -14,12 +14,12 @@ from pipeline.commands.options import (
     add_feature_options,
     add_merge_radius_option,
     add_resolution_option,
+    add_transport_option,
     feature_options,
 )
 from pipeline.errors import InputError
 from pipeline.outcome import exit_status
 from pipeline.runs.images import ImagesConfig
-from pipeline.team.teamfile import add_transport_argument
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -62,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run folder (default runs/images-<DIR name>-<graph>)")
     add_resolution_option(p)
     add_merge_radius_option(p)
-    add_transport_argument(p)
+    add_transport_option(p)
 
 
 def config_from_args(args) -> ImagesConfig:

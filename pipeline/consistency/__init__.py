@@ -21,7 +21,7 @@ import importlib
 
 __all__ = ["ConsistencyResult", "resolve_conflicts", "detect_once", "ProtocolOptions", "Robot"]
 
-_HOME = {"ConsistencyResult": "engines.driver", "resolve_conflicts": "engines.driver",
+_HOME = {"ConsistencyResult": "result", "resolve_conflicts": "engines.driver",
          "detect_once": "engines.driver",
          "ProtocolOptions": "protocols", "Robot": "robot"}
 

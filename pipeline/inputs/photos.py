@@ -34,6 +34,7 @@ from pipeline.validate import check_focal, focal_px_ok
 __all__ = [
     "IMAGE_SUFFIXES",
     "GUESS_FOCAL_FACTOR",
+    "guess_K",
     "ImageIntrinsics",
     "load_folder",
     "load_image",
@@ -278,7 +279,7 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
     return focal, "exif-focal-plane"
 
 
-def _guess_K(width: int, height: int) -> np.ndarray:
+def guess_K(width: int, height: int) -> np.ndarray:
     """The stated guess: ``f = 1.2 max(w, h)``, principal point at the image centre."""
     f = GUESS_FOCAL_FACTOR * max(width, height)
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
@@ -398,7 +399,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                     f"{path.name}: no EXIF focal length (FocalLengthIn35mmFilm, or FocalLength "
                     f"with FocalPlaneXResolution); use --intrinsics auto (guess) or a K.txt")
             else:
-                K, source, known = _guess_K(w, h), "guess", False
+                K, source, known = guess_K(w, h), "guess", False
         header.close()
         pixels, K = downscale(pixels, K, max_size)
         views.append(View(name=path.name, image=pixels, K=np.array(K, dtype=np.float64),

@@ -25,13 +25,21 @@ from pipeline.types import Features, View
 
 __all__ = ["METHODS", "available_methods", "check_method", "extract", "extract_all",
            "merge_colocated", "surf_available", "root_sift", "photo_max_features",
-           "PHOTO_CONTRAST_THRESHOLD"]
+           "PHOTO_CONTRAST_THRESHOLD", "MIN_FEATURES", "MAX_FEATURES"]
 
 #: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
 METHODS = ("sift", "orb", "akaze", "surf")
 
 #: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
 MERGE_RADIUS_PX = 0.5
+
+#: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
+MIN_FEATURES = 8
+
+#: Most features per image a run accepts: over a hundred times COLMAP's default of 8192, and
+#: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
+#: or overflow (beyond 2**31: a traceback).
+MAX_FEATURES = 1_000_000
 
 #: images with a side shorter than this give zero features (smaller than any descriptor patch)
 MIN_IMAGE_PX = 16

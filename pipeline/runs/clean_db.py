@@ -153,13 +153,13 @@ def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rer
                   before, after) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
     from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.stages import _conflictive_links
+    from pipeline.association import conflictive_links
 
     rnd = np.full(len(links), -1, dtype=np.int64)
     it = np.full(len(links), -1, dtype=np.int64)
     rnd[idx], it[idx] = result.round, result.iteration
     conflictive = np.zeros(len(links), dtype=bool)
-    conflictive[idx] = _conflictive_links(m, model_links)
+    conflictive[idx] = conflictive_links(m, model_links)
     sizes = [(int(c.width), int(c.height)) if c is not None else (0, 0)
              for c in contents.cameras]
     md = (f"## clean-db {Path(contents.path).name}\n\n| | before | after |\n|---|---:|---:|\n"

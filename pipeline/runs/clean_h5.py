@@ -45,7 +45,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.inputs import hloc
     from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.stages import _conflictive_links, consistency_stage
+    from pipeline.association import conflictive_links
+    from pipeline.stages import consistency_stage
 
     out = Path(out)
     contents = hloc.read_h5(features, matches, pairs)
@@ -70,7 +71,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     rnd[idx] = result.round
     it[idx] = result.iteration
     conflictive = np.zeros(len(links), dtype=bool)
-    conflictive[idx] = _conflictive_links(m, model_links)
+    conflictive[idx] = conflictive_links(m, model_links)
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     hloc.write_cleaned_matches(contents, out, keep)

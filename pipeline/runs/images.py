@@ -169,7 +169,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
     from pipeline.commgraph import comm_graph
     from pipeline.inputs.photos import load_folder
     from pipeline.inputs.linkscsv import write_links_csv
-    from pipeline.stages import clean_association, extract_and_match, merge_radius_for
+    from pipeline.runs.transports import get_transport
+    from pipeline.stages import clean_association
 
     timer = timer or StageTimer()
     out = config.out_dir()
@@ -192,19 +193,12 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
         return chosen["edges"]
 
-    cleaning = team = None
-    if config.transport == "zenoh":
-        # the robots extract, match, detect and resolve; this process only observes
-        from pipeline.team.assemble import images_team
-
-        feats, matches, links, cleaning, team = images_team(config, views, comm_edges, timer)
-    else:
-        feats, matches, links = extract_and_match(
-            views, graph_from_features if by_similarity else comm_edges, config.features,
-            config.max_features, timer, contrast_threshold=config.contrast_threshold,
-            merge_radius=merge_radius_for(config.resolution, config.merge_radius),
-            rootsift=config.rootsift, threshold_px=config.threshold_px,
-            budget_after_merge=config.budget_after_merge)
+    # features and matching, by the robots of the transport (over zenoh they also detect
+    # and resolve; this process then only observes)
+    robots = get_transport(config.transport).load().images(config, views, comm_edges, timer,
+                                                            graph_from_features)
+    feats, matches, links, cleaning, team = (robots.features, robots.matches, robots.links,
+                                             robots.cleaning, robots.team)
     if by_similarity:
         comm_edges = chosen["edges"]
     m = np.array([len(f) for f in feats], dtype=np.int64)

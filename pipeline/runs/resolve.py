@@ -45,9 +45,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.inputs.compact import compact_ids, fault_section_in_ids, faults_in_layout
+    from pipeline.inputs.compact import compact_ids, fault_section_in_ids
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
-    from pipeline.stages import consistency_stage, ledger_from_consistency
+    from pipeline.runs.transports import get_transport
+    from pipeline.stages import ledger_from_consistency
     from pipeline.types import LinkLedger
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -83,13 +84,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
     check_detection_memory(m, run_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
-    if transport == "zenoh":
-        res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults, resolution)
-    else:
-        # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
-        res, fault_section = consistency_stage(
-            m, run_edges, run_links, None if faults is None else faults_in_layout(faults, ids),
-            resolution=resolution)
+    res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
+                                                                 resolution, ids)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)
@@ -120,37 +116,6 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     }
     if fault_section is not None:
         summary["faults"] = fault_section_in_ids(fault_section, ids)
-    if transport == "zenoh":
+    if "team" in res.stats:
         summary["team"] = res.stats["team"]
     return summary
-
-
-def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
-    """The consistency stage as one robot process per camera over Zenoh.
-
-    The links to make consistent (kept rows, compact ids, with their quality: the evidence
-    of the evidence rule) go to a file in a temporary team folder; each robot reads its own
-    rows of it (:func:`pipeline.team.assemble.resolve_conflicts_team`).
-    Returns ``(ConsistencyResult, faults section or None)``.
-    """
-    import tempfile
-
-    from pipeline.commgraph import comm_edges_for
-    from pipeline.faults import fault_report
-    from pipeline.team.assemble import resolve_conflicts_team, team_options
-
-    with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
-        path = Path(work) / "links.csv"
-        path.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
-            f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
-                links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                links.feat_j.tolist(), links.quality.tolist(), strict=True)))
-        res = resolve_conflicts_team(path, m, comm_edges_for(m, links, edges),
-                                     team_options(faults=faults, resolution=resolution),
-                                     workdir=work)
-    fault_section = None
-    if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
-        fault_section = fault_report(faults or FaultConfig(), res)
-    return res, fault_section
-
-

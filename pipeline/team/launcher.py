@@ -38,7 +38,7 @@ from pipeline.errors import TeamError
 from pipeline.team.teamfile import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry, Team, write_team
 from pipeline.transport.wire import WireError, decode_packet
 
-__all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError"]
+__all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent"]
 
 
 def free_ports(k: int, host: str = "127.0.0.1") -> list[int]:
@@ -71,7 +71,9 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     return parse_team(team.to_json())  # the same checks as a hand-written file
 
 
-def _pdeathsig():  # runs in the child between fork and exec
+def die_with_parent() -> None:
+    """Ask the kernel to kill this process when its parent dies (``PR_SET_PDEATHSIG``); runs in
+    a child between fork and exec, and in every robot the zygote forks."""
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
@@ -251,7 +253,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             zygote = subprocess.Popen(
                 [sys.executable, "-m", "pipeline.team.zygote", str(team_path), str(workdir)],
                 stdout=subprocess.PIPE, stderr=errfiles["zygote"], env=env, process_group=0,
-                preexec_fn=_pdeathsig)
+                preexec_fn=die_with_parent)
             pgid = zygote.pid
             threading.Thread(target=_read_zygote, daemon=True,
                              args=(zygote.stdout, procs, run.exit_codes, observer.cv)).start()
@@ -262,7 +264,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 procs[i] = subprocess.Popen(
                     [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
                      "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
-                    process_group=0 if pgid is None else pgid, preexec_fn=_pdeathsig)
+                    process_group=0 if pgid is None else pgid, preexec_fn=die_with_parent)
                 if pgid is None:
                     pgid = procs[i].pid
         run.start_s = time.monotonic() - t0

@@ -87,7 +87,7 @@ def _load_view(team, i: int):
                                           data.get("robots"), data.get("graph"))
         return view
     if data["kind"] == "images":
-        from pipeline.inputs.photos import _guess_K, downscale, load_image
+        from pipeline.inputs.photos import downscale, guess_K, load_image
         from pipeline.types import View
 
         path = team.resolve_path(data["images"][i])
@@ -98,7 +98,7 @@ def _load_view(team, i: int):
         known = (data.get("intrinsics_known") or [K is not None] * team.n)[i]
         pixels, _ = downscale(pixels, np.eye(3), data.get("max_size"))
         h, w = pixels.shape[:2]
-        K = _guess_K(w, h) if K is None else np.asarray(K, np.float64)
+        K = guess_K(w, h) if K is None else np.asarray(K, np.float64)
         return View(name=path.name, image=pixels, K=np.asarray(K, np.float64),
                     intrinsics_known=bool(known))
     raise InputError(f"data kind {data['kind']!r} has no images")

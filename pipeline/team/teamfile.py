@@ -338,7 +338,7 @@ def _check_options(opts: dict, where: str) -> None:
         if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
             raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "
                              f"(0, {MAX_TIMEOUT_S:g}]")
-    from pipeline.commands.options import MAX_FEATURES
+    from pipeline.matching.features import MAX_FEATURES
 
     for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
         v = opts.get(k, 8)
@@ -432,25 +432,3 @@ def write_team(path, team: Team) -> Path:
     tmp.write_text(json.dumps(team.to_json(), indent=1))
     os.replace(tmp, p)
     return p
-
-
-TRANSPORTS = ("sim", "zenoh")
-
-
-def add_transport_argument(parser) -> None:
-    """``--transport sim|zenoh`` (shared by the commands that run the robots)."""
-    parser.add_argument("--transport", default="sim", choices=TRANSPORTS,
-                        help="sim: robots are objects of this process (default, fastest); "
-                             "zenoh: one process per robot on this machine, talking over "
-                             "Zenoh (fusion on rendered formations; none on photographs); see "
-                             "README, 'Transports'")
-
-
-def resolution_for_transport(args) -> str:
-    """The resolution a command runs with: ``--resolution`` on either transport.
-
-    Robot processes run Alg. 1 or the evidence rule like the simulator
-    (:func:`pipeline.team.robot.team_resolution`: with ``--drop-prob`` both fall back to the
-    fault-tolerant Alg. 1).
-    """
-    return args.resolution

@@ -41,9 +41,9 @@ def _robot(team_path: str, i: int, log_path: str) -> None:
         os.dup2(fd, 1)
         os.dup2(fd, 2)
         os.close(fd)
-        from pipeline.team.launcher import _pdeathsig
+        from pipeline.team.launcher import die_with_parent
 
-        _pdeathsig()
+        die_with_parent()
         from pipeline.__main__ import main as cli
 
         code = cli(["robot", "--team", team_path, "--id", str(i)])

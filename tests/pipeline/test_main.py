@@ -76,7 +76,7 @@ def test_unknown_command_is_an_argparse_error(capsys):
 
 
 def test_run_without_rerun_or_fusion_imports_neither(tmp_path):
-    code = ("from pipeline.stages import FormationConfig, run_formation\n"
+    code = ("from pipeline.runs.formation import FormationConfig, run_formation\n"
             f"run_formation(FormationConfig(formation='a', size=(160, 120), max_features=200, "
             f"fusion=False, rerun=False, out={str(tmp_path / 'run')!r}))\n"
             "assert 'pipeline.fusion.voting' not in sys.modules\n")

@@ -9,7 +9,7 @@ import pycolmap
 import pytest
 
 from pipeline.association import AssociationGraph, count_conflicts
-from pipeline.stages import FormationConfig, run_formation
+from pipeline.runs.formation import FormationConfig, run_formation
 from pipeline.types import Links
 
 SMALL = dict(formation="d", seed=0, size=(320, 240), max_features=600)

@@ -18,8 +18,7 @@ import pytest
 
 from pipeline.__main__ import main
 from pipeline.consistency.centralized import is_conflict_free
-from pipeline.stages import FormationConfig, run_formation
-from pipeline.team.assemble import run_formation_team
+from pipeline.runs.formation import FormationConfig, run_formation
 from pipeline.types import Links
 
 SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False)
@@ -110,7 +109,7 @@ def test_kill_9_of_one_robot_survivors_finish_conflict_free(tmp_path):
     runs = []
     cfg = FormationConfig(formation="complete", robots=4, graph="complete",
                           out=str(tmp_path / "run"), **SMALL)
-    out = run_formation_team(cfg, kill=(2, "consistency", 0.0), keep_run=runs,
+    out = run_formation(cfg, transport="zenoh", kill=(2, "consistency", 0.0), keep_run=runs,
                              round_timeout_s=1.0)
     run = runs[0]
     assert 2 in run.killed and 2 not in run.results
@@ -130,7 +129,7 @@ def test_kill_9_of_one_robot_survivors_finish_conflict_free(tmp_path):
 def test_kill_9_of_one_robot_during_fusion(tmp_path):
     runs = []
     cfg = FormationConfig(formation="d", out=str(tmp_path / "run"), **{**SMALL, "fusion": True})
-    out = run_formation_team(cfg, kill=(2, "fusion", 0.0), keep_run=runs, round_timeout_s=1.0)
+    out = run_formation(cfg, transport="zenoh", kill=(2, "fusion", 0.0), keep_run=runs, round_timeout_s=1.0)
     run = runs[0]
     assert 2 in run.killed and sorted(run.results) == [0, 1, 3, 4, 5]
     assert all(t - run.killed[2] < 30 for t in run.finished_at.values())
@@ -162,7 +161,7 @@ def test_message_loss_during_fusion_over_zenoh_is_handled(tmp_path):
 
     cfg = FormationConfig(formation="d", out=str(tmp_path / "run"),
                           faults=FaultConfig(drop_prob=0.2, seed=3), **{**SMALL, "fusion": True})
-    out = run_formation_team(cfg)
+    out = run_formation(cfg, transport="zenoh")
     report = json.loads((out / "report.json").read_text())
     fusion = report["fusion"]
     # the fusion rounds went over the reliable channel: losses were retransmitted
