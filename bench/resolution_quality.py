@@ -34,6 +34,7 @@ import data_synth  # noqa: E402
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
+from pipeline.consistency.rules import get_rule  # noqa: E402
 from pipeline.evaluation.links import link_truth  # noqa: E402
 from pipeline.evaluation.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
 from pipeline.evaluation.oracle import oracle_cut, resolution_scores  # noqa: E402
@@ -41,7 +42,6 @@ from pipeline.matching.features import MERGE_RADIUS_PX, extract_all  # noqa: E40
 from pipeline.matching.link_evidence import link_evidence  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
-from pipeline.stages import NEAR_DUPLICATE_PX  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
 METHODS = ("paper", "evidence", "drop_conflictive_sets", "keep_first_per_image",
@@ -123,7 +123,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formations", default="abcd")
     ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{NEAR_DUPLICATE_PX}",
+    ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{get_rule('evidence').merge_radius_px}",
                     help="comma-separated radii in pixels")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-resolution"))
     args = ap.parse_args()

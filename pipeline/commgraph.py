@@ -147,7 +147,7 @@ def _positive_k(spec: str) -> int:
     return int(k_text)
 
 
-def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.ndarray:
+def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
 
     Parameters
@@ -158,7 +158,8 @@ def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.
         its features (:func:`pipeline.matching.retrieval.knn_edges`), for unordered photos; or a file
         of :func:`read_comm_graph` (indices in name order or image names).
     names : list[str], (n,) — image names in camera order
-    features : list[Features], (n,), optional — needed by ``knn:K`` only
+    knn : callable ``K -> (E, 2) edges``, optional — needed by ``knn:K`` only: the ``K``
+        most similar images of each (e.g. ``knn_edges`` of the images' features)
 
     Returns
     -------
@@ -183,12 +184,10 @@ def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.
         return graph_edges(spec, n)
     if spec.startswith("knn:"):
         k = _positive_k(spec)
-        if features is None:
+        if knn is None:
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")
-        from pipeline.matching.retrieval import knn_edges
-
-        return knn_edges(features, k)[0]
+        return knn(k)
     path = Path(kind_or_file)
     if path.is_dir():
         raise InputError(f"graph {spec!r} is a folder, not a file; give a kind or a file of "

@@ -18,18 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.association import conflictive_links
+from pipeline.consistency.rules import get_rule
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.types import LinkLedger, Links, View
 
-__all__ = ["CleaningResult", "NEAR_DUPLICATE_PX", "merge_radius_for", "extract_and_match",
+__all__ = ["CleaningResult", "merge_radius_for", "extract_and_match",
            "evidence_inputs", "consistency_stage", "ledger_from_consistency", "fusion_stage",
            "clean_association"]
-
-#: radius (pixels) within which keypoints of one image are one observation with the evidence
-#: rule: the ground-truth tolerance of a good link, so that two keypoints that would both be
-#: "good" for one point are not kept as two features of one camera (Def. 2.4)
-NEAR_DUPLICATE_PX = 2.0
 
 
 @dataclass
@@ -58,8 +54,11 @@ class CleaningResult:
 
 
 def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
-    """The keypoint merge radius: as given, else :data:`NEAR_DUPLICATE_PX` with the evidence
-    rule and the co-location radius of :mod:`pipeline.matching.features` with the paper's Alg. 1.
+    """The keypoint merge radius: as given, else the rule's own (``merge_radius_px`` of
+    :mod:`pipeline.consistency.rules`: the evidence rule's is the ground-truth tolerance of a
+    good link, 2 px, so that two keypoints that would both be "good" for one point are not
+    kept as two features of one camera, Def. 2.4), else the co-location radius of
+    :mod:`pipeline.matching.features` (the paper's Alg. 1).
 
     Raises
     ------
@@ -70,7 +69,8 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     from pipeline.matching.features import MERGE_RADIUS_PX
 
     if merge_radius is None:
-        return NEAR_DUPLICATE_PX if resolution == "evidence" else MERGE_RADIUS_PX
+        own = get_rule(resolution).merge_radius_px
+        return MERGE_RADIUS_PX if own is None else own
     if not np.isfinite(merge_radius) or merge_radius < 0:
         raise InputError(f"--merge-radius {merge_radius}: expected pixels >= 0 (0 merges nothing)")
     return float(merge_radius)
@@ -116,7 +116,8 @@ def extract_and_match(views: list[View], comm_edges, method: str,
 
 
 def evidence_inputs(views: list[View], features: list, links: Links, matches=None) -> dict:
-    """Keyword arguments of ``resolve_conflicts`` for the evidence rule: each link's local
+    """Keyword arguments of ``resolve_conflicts`` for a rule that needs evidence (the evidence
+    rule, :mod:`pipeline.consistency.rules`): each link's local
     weight (:mod:`pipeline.matching.link_evidence`; from ``links.quality`` without ``matches``), each
     robot's keypoints and, where every pose is known, its projection ``K [R | t]``."""
     from pipeline.matching.link_evidence import LinkEvidence, link_evidence
@@ -141,8 +142,8 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     comm_edges : (E, 2) int or None — ``None``: cameras sharing a link are neighbours
     links : Links, (L,)
     faults : FaultConfig or None
-    resolution : ``paper`` or ``evidence``
-    evidence : dict or None — with ``evidence``: ``link_weight``, ``keypoints``,
+    resolution : a rule of :mod:`pipeline.consistency.rules` (``paper``, ``evidence``, ...)
+    evidence : dict or None — for a rule that needs evidence: ``link_weight``, ``keypoints``,
         ``projections`` for ``resolve_conflicts`` (:func:`evidence_inputs`)
 
     Returns
@@ -236,8 +237,9 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                       matches: list | None = None) -> CleaningResult:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
 
-    ``resolution``: ``paper`` (Alg. 1) or ``evidence`` (:mod:`pipeline.consistency.evidence`,
-    with the link evidence of ``matches`` when given, see :func:`evidence_inputs`).
+    ``resolution``: a rule of :mod:`pipeline.consistency.rules`, e.g. ``paper`` (Alg. 1) or
+    ``evidence`` (:mod:`pipeline.consistency.evidence`, with the link evidence of ``matches``
+    when given, see :func:`evidence_inputs`).
 
     Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
     With ``faults`` on, the consistency stage runs on the faulty network (and once more
@@ -249,7 +251,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     with timer.stage("consistency", f"distributed detection + resolution ({resolution})"):
         conflictive_before = conflictive_links(m, links)
         evidence = evidence_inputs(views, features, links, matches) \
-            if resolution == "evidence" else None
+            if get_rule(resolution).needs_evidence else None
         res, fault_section = consistency_stage(m, comm_edges, links, faults,
                                                resolution=resolution, evidence=evidence)
         ledger = ledger_from_consistency(res, conflictive_before)

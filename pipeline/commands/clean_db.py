@@ -1,15 +1,8 @@
 """``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE]``.
 
-For COLMAP and hloc users: the verified matches of a database (its two-view geometries) are
-made consistent by the distributed consistency stage (Aragüés et al., Sec. III detection and
-Sec. IV Alg. 1 resolution, one robot per image), and a NEW database is written with the cut
-links removed from the two-view geometries. Run COLMAP's mapper on OUT.db as usual.
-
-Beside OUT.db it writes ``OUT.links.csv`` (every verified link, kept or deleted with its reason)
-and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`). Before the distributed stage, links the paper's
-model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
-the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
-between images that are not neighbours: those robots could not have matched).
+A COLMAP database's verified matches made consistent; the job and what it writes are
+described in :mod:`pipeline.runs.clean_db`. This module parses the options and prints the
+summary.
 """
 
 from __future__ import annotations

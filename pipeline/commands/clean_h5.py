@@ -1,16 +1,7 @@
 """``formation-match clean-h5 --features features.h5 --matches matches.h5 --out OUT.h5``.
 
-For hloc users: the matches of hloc's ``matches.h5`` are made consistent by the distributed
-consistency stage (Aragüés et al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot
-per image), and a NEW ``matches.h5`` is written in hloc's format with the cut matches removed
-(``matches0 = -1``), ready for ``hloc.reconstruction.main(..., matches=OUT.h5)``. The file
-layout is described in :mod:`pipeline.inputs.hloc`.
-
-The communication graph is the list of image pairs: ``--pairs pairs.txt`` (hloc's pairs file;
-only those pairs are read), else every pair stored in ``matches.h5``. Before the distributed
-stage, matches the paper's model cannot hold are cut with reason ``not-one-to-one`` (a
-keypoint matched twice into the same other image, Assumption 2.2). Beside OUT.h5 it writes
-``OUT.links.csv`` and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`).
+hloc's matches made consistent; the job and what it writes are described in
+:mod:`pipeline.runs.clean_h5`. This module parses the options and prints the summary.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 ``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.matching.features`),
 ``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
-(the consistency stage's resolution rule) and ``--merge-radius`` (near-duplicate keypoints).
+(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`) and ``--merge-radius`` (near-duplicate keypoints).
 """
 
 from __future__ import annotations
@@ -12,12 +12,9 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["RESOLUTIONS", "add_feature_options", "add_scene_options",
+__all__ = ["add_feature_options", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
-
-#: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
-RESOLUTIONS = ("paper", "evidence")
 
 
 def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
@@ -49,12 +46,15 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence") -> None:
-    """``--resolution paper|evidence``: Alg. 1 of the paper, or the evidence-aware rule."""
-    p.add_argument("--resolution", choices=RESOLUTIONS, default=default,
-                   help="how the robots cut conflictive sets: paper = Alg. 1 of Aragues et al.; "
-                        "evidence = the robots of each set agree on the cut that keeps the "
-                        f"best-supported links (default {default}; on a lossy network, "
-                        "--drop-prob, the fault-tolerant Alg. 1 runs instead)")
+    """``--resolution RULE``: a rule of :mod:`pipeline.consistency.rules` (Alg. 1 of the
+    paper, the evidence-aware rule, ...)."""
+    from pipeline.consistency.rules import RULES
+
+    p.add_argument("--resolution", choices=tuple(RULES), default=default,
+                   help="how the robots cut conflictive sets: "
+                        + "; ".join(rule.help for rule in RULES.values())
+                        + f" (default {default}; on a lossy network, --drop-prob, the "
+                          "fault-tolerant Alg. 1 runs instead)")
 
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:

@@ -1,13 +1,8 @@
 """``python -m pipeline resolve --links IN.csv --out OUT.csv [--comm-graph EDGES.csv]``.
 
-Makes a user's own links conflict-free with the distributed consistency stage (Aragüés et
-al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot per camera) and writes the
-run-output ``links.csv`` (docs/DESIGN.md): every input row once, ``status`` ``kept`` or
-``deleted``, ``reason`` ``resolution`` for a cut link, the resolution ``round`` that cut it,
-``truth`` empty (unknown). Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
-``--comm-graph``, cameras that share a link are neighbours. A run-output ``links.csv`` (this
-command's own output, or a run folder's) is accepted as input too: its deleted rows are
-written back unchanged and its kept rows are made consistent.
+A user's own links made conflict-free by the distributed consistency stage; the job and
+what it writes are described in :mod:`pipeline.runs.resolve`. This module parses the
+options and prints the summary.
 """
 
 from __future__ import annotations
@@ -42,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from pipeline.consistency.rules import get_rule
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
     from pipeline.runs.resolve import resolve_file
@@ -56,12 +52,8 @@ def run(args) -> int:
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
-    if s["resolution_method"] == "paper":
-        print(f"deleted: {s['deleted']} links (case b: {s['deleted_by_case']['b']}, case c: "
-              f"{s['deleted_by_case']['c']}) in {r['iterations']} iteration(s)")
-    else:
-        print(f"deleted: {s['deleted']} links by the evidence rule in {r['iterations']} "
-              "iteration(s)")
+    cut = get_rule(s["resolution_method"]).summary.format(**s["deleted_by_case"])
+    print(f"deleted: {s['deleted']} links {cut} in {r['iterations']} iteration(s)")
     closing = f" + {r['closing_rounds']} closing" if "closing_rounds" in r else ""
     print(f"rounds: {r['detection_rounds']} detection + {r['resolution_rounds']} resolution"
           f"{closing}; "

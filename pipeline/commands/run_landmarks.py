@@ -1,34 +1,7 @@
 """``python -m pipeline run-landmarks DIR --graph KIND``: labelled-landmark benchmarks.
 
-For folders where every image carries the same hand-labelled keypoints in the same order
-(:mod:`pipeline.inputs.landmarks`; e.g. the CMU hotel sequence), so the true association is
-known exactly: landmark ``k`` of one image is landmark ``k`` of every other.
-
-Stages: load (keypoints and descriptors; ``--frames N`` takes ``N`` images at a fixed
-stride) → each robot matches its landmarks to its communication neighbours' one-to-one
-(Hungarian on the descriptor distance, guided by the epipolar geometry of the labelled
-keypoints, optional ratio gate; :mod:`pipeline.matching.landmarks`)
-→ ``--refine votes``: the robots refine those matches by two-hop votes through common
-neighbours (:mod:`pipeline.matching.votes`) → the distributed consistency stage
-(``--resolution``) → the centralized baselines on the same links → evaluation.
-
-Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
-:mod:`pipeline.matching.landmarks`), the
-whole assignment kept (``--ratio none``), refined by votes. The
-votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
-vote for the right match, and gating before voting removes them.
-
-Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
-matches it implies, i.e. every two landmarks in one association set of the kept links (the
-transitive closure), against the true pairs of *every* image pair (:mod:`pipeline.evaluation.metrics`).
-``pairwise.input_links`` scores the Hungarian matches themselves, the way CLEAR scores its
-input; ``before`` / ``before_links`` are the links the consistency stage receives (after the
-refinement), over their closure and as they are. ``cycle_consistent`` is true when no association set holds two landmarks of one image
-(then the implied pairwise matching is cycle-consistent).
-
-Writes ``report.json`` and ``links.csv`` (docs/DESIGN.md "Run outputs"; ``truth`` is 1 when the
-two ends carry the same label) atomically. There are no camera poses and no 3D points, so
-no ``sparse/`` and no recording.
+The job (stages, defaults, scoring, outputs) is described in
+:mod:`pipeline.runs.landmarks`. This module parses the options and prints the report.
 """
 
 from __future__ import annotations
@@ -38,7 +11,6 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.runs.landmarks import (
     REFINEMENTS,
-    RESOLUTIONS,
     LandmarksConfig,
     landmarks_markdown,
     run_landmarks,
@@ -86,9 +58,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "common neighbours until a fixed point; none: use the matches as they are")
     p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
                    help="cap on the vote iterations (two rounds each; default 10)")
-    p.add_argument("--resolution", default="paper", choices=tuple(RESOLUTIONS),
+    from pipeline.consistency.rules import RULES
+
+    p.add_argument("--resolution", default="paper", choices=tuple(RULES),
                    help="resolution of the distributed stage: "
-                        + "; ".join(f"{k}: {v[0]}" for k, v in RESOLUTIONS.items()))
+                        + "; ".join(f"{k}: {rule.title}" for k, rule in RULES.items()))
     p.add_argument("--no-baselines", action="store_true",
                    help="skip the centralized baselines")
     p.add_argument("--out", default=None,

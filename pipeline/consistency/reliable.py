@@ -143,7 +143,7 @@ from pipeline.transport import Message
 
 __all__ = ["ReliableState", "start_detection_reliable", "detection_round",
            "detection_done", "start_resolution_reliable", "resolution_round", "start_closing",
-           "closing_round", "cut_lost", "measure_state"]
+           "closing_round", "cut_lost", "measure_state", "resolution_done"]
 
 _I32 = np.int32
 
@@ -324,6 +324,12 @@ def resolution_round(robot: Robot, st: ReliableState, inbox: list[Message], now:
 
 # ------------------------------------------------------------------------------------------
 # closing phase: every linked neighbour confirms it is alive (module docstring)
+
+def resolution_done(robot: Robot, st: ReliableState, lost_somewhere: bool) -> bool:
+    """The *done* predicate of Alg. 1 for a robot alone (:mod:`.termination`): every message
+    it sent is acknowledged."""
+    return st.chan.idle()
+
 
 def start_closing(robot: Robot, st: ReliableState, now: int) -> None:
     """Round 0 of the closing phase: an acknowledged ``closing`` to every linked neighbour.

@@ -14,6 +14,7 @@ import platform
 import numpy as np
 
 from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.consistency.rules import deleted_cases
 from pipeline.types import LinkLedger, Links
 
 __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
@@ -70,8 +71,9 @@ def association_counts(m, links: Links, good: np.ndarray | None, missing: int | 
 
 
 def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
-    """The report's ``resolution`` section: links cut by the resolution (``method``: Alg. 1
-    ``paper`` or ``evidence``) and the stage's costs."""
+    """The report's ``resolution`` section: links cut by the resolution (``method``: the rule
+    of :mod:`pipeline.consistency.rules` that ran, e.g. Alg. 1 ``paper`` or ``evidence``) and
+    the stage's costs."""
     cut = ledger.reason == "resolution"
     out = {
         "method": stats.get("resolution", "paper"),
@@ -83,10 +85,10 @@ def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
         "bytes": stats.get("bytes"),
         "max_robot_memory_bytes": stats.get("max_robot_memory_bytes"),
     }
-    # Alg. 1 line 9: case (b) feature already in another component, (c) its camera already in
-    out["deleted_by_case"] = {c: int((cut & (ledger.case == c)).sum()) for c in ("b", "c")}
-    if out["method"] == "evidence":
-        out["deleted_by_case"]["evidence"] = int((cut & (ledger.case == "evidence")).sum())
+    # Alg. 1 line 9: case (b) feature already in another component, (c) its camera already in;
+    # then the cases of the rule that ran (pipeline.consistency.rules)
+    out["deleted_by_case"] = {c: int((cut & (ledger.case == c)).sum())
+                              for c in deleted_cases(out["method"])}
     good = ledger.good
     if good is not None:
         out["good_deleted"] = int((cut & good).sum())

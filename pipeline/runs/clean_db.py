@@ -84,6 +84,7 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.consistency.rules import get_rule
     from pipeline.outputs import require_input_file
     from pipeline.stages import consistency_stage
 
@@ -108,7 +109,7 @@ def clean_database(database: str | Path, out: str | Path,
     check_detection_memory(m, model_links, max_memory_gb)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
-                    keypoints=contents.keypoints) if resolution == "evidence" else None
+                    keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None
     # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
     result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
     idx = np.flatnonzero(model_ok)
@@ -152,8 +153,8 @@ def _link_weight(contents, links) -> np.ndarray:
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
                   before, after) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
-    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
     from pipeline.association import conflictive_links
+    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
 
     rnd = np.full(len(links), -1, dtype=np.int64)
     it = np.full(len(links), -1, dtype=np.int64)

@@ -20,8 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import InputError
-
 __all__ = ["clean_h5"]
 
 
@@ -42,10 +40,9 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         (the command checks every output against every input first,
         :func:`pipeline.outputs.check_output_files`).
     """
-    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.association import AssociationGraph, conflictive_links, count_conflicts
     from pipeline.inputs import hloc
     from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
-    from pipeline.association import conflictive_links
     from pipeline.stages import consistency_stage
 
     out = Path(out)

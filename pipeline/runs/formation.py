@@ -216,24 +216,25 @@ def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np
                       graph: AssociationGraph | None = None) -> dict:
     """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
 
-    The run's own method (``resolved``: what its consistency stage kept), the other
-    distributed method (run here on the fault-free network), every centralized baseline
+    The run's own method (``resolved``: what its consistency stage kept), every other
+    resolution rule (:mod:`pipeline.consistency.rules`, run here on the fault-free network), every centralized baseline
     (``baseline_masks``: ``centralized.baselines(m, links)`` when the caller has it) and
     the oracle (:func:`pipeline.evaluation.oracle.oracle_cut`, which knows the truth); ``graph``: the
     :class:`AssociationGraph` of ``links``, when the caller has it.
     """
     from pipeline.consistency import centralized
+    from pipeline.consistency.rules import get_rule, rule_names
     from pipeline.evaluation.oracle import oracle_cut
 
     m = np.array([len(f) for f in feats], dtype=np.int64)
     masks = {method: np.asarray(resolved, dtype=bool)}
-    for other in ("paper", "evidence"):
+    for other in rule_names():
         if other not in masks:
-            evidence = evidence_inputs(views, feats, links, matches) if other == "evidence" \
-                else None
+            evidence = evidence_inputs(views, feats, links, matches) \
+                if get_rule(other).needs_evidence else None
             res, _ = consistency_stage(m, comm_edges, links, resolution=other, evidence=evidence)
             masks[other] = ~res.deleted
-    ordered = {k: masks[k] for k in ("paper", "evidence")}
+    ordered = {k: masks[k] for k in rule_names()}
     if baseline_masks is None:
         baseline_masks = centralized.baselines(m, links, graph=graph)
     ordered.update({k: np.asarray(v, dtype=bool) for k, v in baseline_masks.items()})

@@ -165,10 +165,11 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
         :func:`pipeline.commgraph.comm_graph`), or a bad feature method.
     """
     from pipeline import colmap
-    from pipeline.evaluation import report as sections
     from pipeline.commgraph import comm_graph
-    from pipeline.inputs.photos import load_folder
+    from pipeline.evaluation import report as sections
     from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.inputs.photos import load_folder
+    from pipeline.matching.retrieval import knn_edges
     from pipeline.runs.transports import get_transport
     from pipeline.stages import clean_association
 
@@ -189,7 +190,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 
     def graph_from_features(features):
         # knn:K: neighbours by image similarity (pipeline.matching.retrieval), once the features exist
-        chosen["edges"] = comm_graph(config.graph, names, features=features)
+        chosen["edges"] = comm_graph(config.graph, names,
+                                     knn=lambda k: knn_edges(features, k)[0])
         timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
         return chosen["edges"]
 

@@ -45,24 +45,12 @@ from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links
 
-__all__ = ["LandmarksConfig", "RESOLUTIONS", "REFINEMENTS", "run_landmarks",
+__all__ = ["LandmarksConfig", "REFINEMENTS", "run_landmarks",
            "true_landmark_pairs", "landmarks_markdown"]
 
 
-def _resolve_paper(features_per_camera, comm_edges, links: Links):
-    """Aragüés et al., Sec. III detection + Sec. IV Alg. 1 resolution, until conflict-free."""
-    from pipeline.consistency import resolve_conflicts
-
-    return resolve_conflicts(features_per_camera, comm_edges, links)
-
-
-#: resolution methods of the distributed stage: name -> (description, function
-#: ``(features_per_camera, comm_edges, links) -> ConsistencyResult``)
+#: refinements of the landmark matches before the consistency stage
 REFINEMENTS = ("votes", "none")
-
-RESOLUTIONS = {
-    "paper": ("detection (Sec. III) + resolution (Alg. 1) of Aragüés et al.", _resolve_paper),
-}
 
 
 @dataclass
@@ -132,7 +120,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     """
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.commgraph import comm_graph
-    from pipeline.consistency import centralized
+    from pipeline.consistency import centralized, resolve_conflicts
+    from pipeline.consistency.rules import get_rule, rule_names
     from pipeline.evaluation.report import versions
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
@@ -146,9 +135,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     if not 0 < config.epipolar_px < float("inf"):
         raise InputError(f"--epipolar-px {config.epipolar_px}: expected a positive, finite "
                          "number of pixels")
-    if config.resolution not in RESOLUTIONS:
+    if config.resolution not in rule_names():
         raise InputError(f"--resolution {config.resolution!r}: expected one of "
-                         f"{', '.join(RESOLUTIONS)}")
+                         f"{', '.join(rule_names())}")
     timer = timer or StageTimer()
     out = config.out_dir()
     with timer.stage("load", f"{config.directory}, descriptors {config.descriptors}"):
@@ -181,9 +170,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                        f"changed per iteration {vstats['changed_per_iteration']}")
     else:
         input_links = links
-    with timer.stage("resolution", RESOLUTIONS[config.resolution][0]):
+    with timer.stage("resolution", get_rule(config.resolution).title):
         c0 = time.process_time()
-        res = RESOLUTIONS[config.resolution][1](m, comm_edges, links)
+        res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
         resolution_cpu = time.process_time() - c0
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")

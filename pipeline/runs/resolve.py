@@ -31,7 +31,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  transport: str = "sim") -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
-    ``resolution``: ``paper`` (Alg. 1) or ``evidence``; the evidence of a link here is its
+    ``resolution``: a rule of :mod:`pipeline.consistency.rules`, e.g. ``paper`` (Alg. 1) or
+    ``evidence``; the evidence of a link here is its
     ``quality`` column read as ``1 − Lowe ratio`` (and the triangle support the robots
     compute), as a links file carries no keypoints or geometry.
 
@@ -45,6 +46,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import check_detection_memory
     from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.consistency.rules import deleted_cases
     from pipeline.inputs.compact import compact_ids, fault_section_in_ids
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
     from pipeline.runs.transports import get_transport
@@ -107,8 +109,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "links": len(all_links), "deleted": int(res.deleted.sum()),
         "previously_deleted": int((~active).sum()),
         "resolution_method": res.stats["resolution"],
-        "deleted_by_case": {c: int((res.case == c).sum()) for c in
-                            ("b", "c", "evidence") if c != "evidence" or resolution == "evidence"},
+        "deleted_by_case": {c: int((res.case == c).sum()) for c in deleted_cases(resolution)},
         "before": before, "after": after,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "closing_rounds", "messages", "bytes",

@@ -45,6 +45,7 @@ import numpy as np
 
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.rules import get_rule, rule_for_network
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
 from pipeline.team.teamfile import LAUNCHED_AT_ENV
@@ -221,9 +222,10 @@ def _own_rows(i: int, matches: dict, weights: dict):
 def team_resolution(team) -> str:
     """The rule the robots resolve by: the team's ``resolution`` option, except that with
     message loss injected at any robot the fault-tolerant Alg. 1 runs (as the simulator
-    does on a faulty network). Public knowledge: every robot reads the same team file."""
+    does on a faulty network) instead of a rule that is not fault-tolerant. Public
+    knowledge: every robot reads the same team file."""
     lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
-    return "paper" if lossy else str(team.options.get("resolution", "paper"))
+    return rule_for_network(str(team.options.get("resolution", "paper")), lossy).name
 
 
 def robot_main(team, i: int, transport) -> tuple[dict, dict]:
@@ -273,7 +275,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     order = np.lexsort((s, nbr))  # the order of the Robot's link table
     robot = Robot(i, fpc, nbr[order], r[order], s[order])
     resolution = team_resolution(team)
-    if resolution == "evidence":
+    if get_rule(resolution).needs_evidence:
         from pipeline.consistency.evidence import equip
 
         equip(robot, weight[order],

@@ -19,7 +19,8 @@ one; a user may write one by hand. Schema (``version`` 1)::
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40,
-                  "resolution": "paper",          # or "evidence" (paper with drop_prob > 0)
+                  "resolution": "paper",          # a rule of pipeline.consistency.rules, e.g.
+                                                  # "evidence" (paper with drop_prob > 0)
                   "merge_radius": 0.5, "contrast_threshold": null, "rootsift": false,
                   "budget_after_merge": false, "threshold_px": 1.0},
               # max_features / threshold_px null: scaled with the image size (photos)
@@ -62,7 +63,6 @@ DEFAULT_OPTIONS = {
     "budget_after_merge": False,
     "threshold_px": 1.0,
 }
-RESOLUTIONS = ("paper", "evidence")
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
 #: OpenCV offers one is checked when the robot extracts)
 FEATURE_METHODS = ("sift", "orb", "akaze", "surf")
@@ -364,9 +364,11 @@ def _check_options(opts: dict, where: str) -> None:
     if method not in FEATURE_METHODS:
         raise InputError(f"{where}: option features {method!r} must be one of "
                          f"{', '.join(FEATURE_METHODS)}")
-    if opts.get("resolution", "paper") not in RESOLUTIONS:
+    from pipeline.consistency.rules import rule_names
+
+    if opts.get("resolution", "paper") not in rule_names():
         raise InputError(f"{where}: option resolution {opts['resolution']!r} must be one of "
-                         f"{', '.join(RESOLUTIONS)}")
+                         f"{', '.join(rule_names())}")
 
 
 def load_team(path) -> Team:

@@ -85,7 +85,7 @@ from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
 from pipeline.transport import HEADER_BYTES, Transport
 
-__all__ = ["run_evidence_resolution"]
+__all__ = ["run_evidence_resolution", "evidence_pass"]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
 #: forwards evaluated in one piece of a round (bounds its arrays; a round is cut between groups)
@@ -419,3 +419,10 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     unsolved = sorted(set(sg.robot[~complete].tolist()))
     return finish_evidence(robots, rounds, unsolved, int(sg.label_start.size - 1),
                            sum(1 for s in sets if s))
+
+
+def evidence_pass(robots: list[Robot], network: Transport, protocol=None, iteration: int = 0,
+                  on_round=None) -> dict:
+    """The ``evidence`` rule's batched engine (:mod:`pipeline.consistency.rules`):
+    :func:`run_evidence_resolution`; the rule needs no protocol object or iteration number."""
+    return run_evidence_resolution(robots, network, on_round=on_round)

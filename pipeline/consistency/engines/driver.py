@@ -33,9 +33,9 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency.engines import batched, batched_evidence
+from pipeline.consistency.engines import batched
 from pipeline.consistency.engines.phases import run_phase
-from pipeline.consistency.evidence import equip, run_evidence_resolution
+from pipeline.consistency.evidence import equip
 from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
     CLOSING,
@@ -46,6 +46,7 @@ from pipeline.consistency.protocols import (
 )
 from pipeline.consistency.result import ConsistencyResult
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.rules import get_rule, rule_for_network
 from pipeline.errors import InputError
 from pipeline.progress import rounds_bar
 from pipeline.transport import Transport
@@ -148,7 +149,6 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     return Detection(robots, stats, network, proto)
 
 
-RESOLUTIONS = ("paper", "evidence")
 ENGINES = ("auto", "batched", "per-robot")
 
 
@@ -185,12 +185,13 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         The robots' protocol: the paper's (default on a fault-free network) or the
         fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
 
-    resolution : ``paper`` or ``evidence``
-        ``paper``: Alg. 1. ``evidence``: the flood-and-solve rule of :mod:`.evidence` (on a
-        fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
-        ``stats['resolution']`` says so).
+    resolution : str
+        A rule of :mod:`pipeline.consistency.rules`: ``paper`` (Alg. 1), ``evidence`` (the
+        flood-and-solve rule of :mod:`.evidence`), ... A rule that is not fault-tolerant runs
+        on a fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
+        ``stats['resolution']`` says so.
     link_weight : array_like (L,) float or None
-        ``evidence`` only: local evidence of each link (:mod:`pipeline.matching.link_evidence`);
+        A rule that ``needs_evidence`` only (``evidence``): local evidence of each link (:mod:`pipeline.matching.link_evidence`);
         ``None``: the Lowe-ratio term of ``links.quality``.
     keypoints : list of (m_i, 2) arrays or None
         ``evidence`` only: each robot's keypoints (for the geometric test).
@@ -240,8 +241,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     >>> int(res.deleted.sum())
     1
     """
-    if resolution not in RESOLUTIONS:
-        raise InputError(f"resolution {resolution!r}: choose one of {', '.join(RESOLUTIONS)}")
+    get_rule(resolution)
     fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
     camera_offsets(fpc)
     check_links(links, fpc)
@@ -252,28 +252,30 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     proto = make_protocol(protocol, network, fpc)
     in_batch = _use_batched(engine, network, proto)
     reliable = proto.name == "reliable"
-    # the evidence rule (pipeline.consistency.evidence) runs on a fault-free network; with
-    # faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
-    use_evidence = resolution == "evidence" and not reliable
-    if use_evidence:
+    # a rule that is not fault-tolerant (e.g. the evidence rule) runs on a fault-free network;
+    # with faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
+    rule = rule_for_network(resolution, reliable)
+    if rule.needs_evidence:
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections)
+    run_pass = (in_batch and rule.hook("batched")) or rule.hook("simulate")
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:
         per_iteration, repeated, close_round = _loop(robots, network, proto, in_batch,
-                                                     use_evidence, reliable, m_total, bar)
+                                                     run_pass, reliable, m_total, bar)
     result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
                       close_round)
-    result.stats["resolution"] = "evidence" if use_evidence else "paper"
+    result.stats["resolution"] = rule.name
     return result
 
 
-def _loop(robots, network, proto, in_batch: bool, use_evidence: bool, reliable: bool,
+def _loop(robots, network, proto, in_batch: bool, run_pass, reliable: bool,
           m_total: int, bar) -> tuple[list[dict], int, int | None]:
     """The loop of Prop. 4.5: detection, then resolution, until a detection finds nothing.
 
     Returns the per-iteration records, the repeated detections and the round of the closing
-    (reliable protocol; ``None`` otherwise)."""
+    (reliable protocol; ``None`` otherwise). ``run_pass``: the resolution rule's pass
+    (:mod:`pipeline.consistency.rules`: its batched engine or its per-robot ``simulate``)."""
     n = len(robots)
 
     def counting(phase: str, iteration: int):
@@ -322,14 +324,7 @@ def _loop(robots, network, proto, in_batch: bool, use_evidence: bool, reliable: 
             per_iteration.append(rec)
             break
         on_round = counting(RESOLUTION, iteration)
-        if use_evidence:
-            run_pass = batched_evidence.run_evidence_resolution if in_batch else \
-                run_evidence_resolution
-            res = run_pass(robots, network, on_round=on_round)
-        elif in_batch:
-            res = batched.run_resolution(robots, network, proto, iteration, on_round=on_round)
-        else:
-            res = run_phase(robots, network, proto, RESOLUTION, iteration, on_round=on_round)
+        res = run_pass(robots, network, proto, iteration, on_round=on_round)
         rec.update(conflictive_sets=res["conflictive_sets"], resolution_rounds=res["rounds"],
                    last_assignment_round=int(max(
                        (int(rb.assigned_round[rb.component >= 0].max(initial=-1)) for rb in robots),

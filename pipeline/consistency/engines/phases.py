@@ -12,7 +12,7 @@ from pipeline.consistency.protocols import DETECTION, RESOLUTION, end_phase
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Transport
 
-__all__ = ["run_phase"]
+__all__ = ["run_phase", "run_resolution_phase"]
 
 
 def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, iteration: int = 0,
@@ -57,3 +57,10 @@ def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, ite
     elif phase == RESOLUTION:
         out.update(conflictive_sets=int(rooted))
     return out
+
+
+def run_resolution_phase(robots: list[Robot], network: Transport, protocol, iteration: int,
+                         on_round=None) -> dict:
+    """Alg. 1 (the ``paper`` rule's pass, :mod:`pipeline.consistency.rules`): the resolution
+    phase of :func:`run_phase` with the protocol's robot steps."""
+    return run_phase(robots, network, protocol, RESOLUTION, iteration, on_round=on_round)

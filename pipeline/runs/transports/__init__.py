@@ -10,7 +10,7 @@ transport's name.
 What a transport provides: a module (loaded only when a job runs on it, so that ``--help``
 loads nothing heavy) with one function per job:
 
-``formation(config, timer, **options) -> FormationRobots``
+``formation(config, timer, **options) -> FormationRobots`` (:mod:`.results`)
     ``run-formation``: render the formation (or have the robots render their own cameras),
     features, matching, consistency and, with ``config.fusion``, fusion; ``options`` are the
     transport's own (e.g. ``kill``, ``workdir``, ``keep_run``, ``round_timeout_s`` of zenoh).
@@ -25,47 +25,19 @@ loads nothing heavy) with one function per job:
 
 A new transport (e.g. ROS 2) is one module with these three functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
+What the jobs hand back is in :mod:`.results`.
+
+May import: the transports' modules (this package), which may import everything below the
+runners (:mod:`pipeline.stages`, :mod:`pipeline.team`, ...); never a runner or a command.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-__all__ = ["TransportEntry", "FormationRobots", "ImagesRobots", "TRANSPORTS", "register",
+__all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help"]
-
-
-@dataclass
-class FormationRobots:
-    """What the robots of a rendered formation produced, for the evaluation and the outputs.
-
-    Attributes
-    ----------
-    formation : data_synth.Formation — the views and the comm graph (with ground truth)
-    features : list[Features] — per camera
-    matches : list[PairMatches] — per comm edge
-    cleaning : CleaningResult — the consistency (and fusion) stages' decisions
-    extra : dict — sections the transport adds to ``report.json`` (e.g. ``team``)
-    """
-
-    formation: object
-    features: list
-    matches: list
-    cleaning: object
-    extra: dict = field(default_factory=dict)
-
-
-@dataclass
-class ImagesRobots:
-    """What the robots of a folder of photographs produced (``cleaning`` None: the runner
-    runs the consistency stage itself; ``team`` the report's ``team`` section or None)."""
-
-    features: list
-    matches: list
-    links: object
-    cleaning: object = None
-    team: dict | None = None
 
 
 @dataclass(frozen=True)

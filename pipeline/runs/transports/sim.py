@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline import stages
-from pipeline.runs.transports import FormationRobots, ImagesRobots
+from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
 __all__ = ["formation", "images", "resolve"]
 

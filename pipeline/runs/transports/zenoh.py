@@ -17,7 +17,7 @@ from pipeline.consistency.result import ConsistencyResult
 from pipeline.errors import InputError, TeamError
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
-from pipeline.runs.transports import FormationRobots, ImagesRobots
+from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 from pipeline.stages import CleaningResult, ledger_from_consistency, merge_radius_for
 from pipeline.team.assemble import (
     FUSION_SKIPPED,
