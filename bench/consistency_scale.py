@@ -14,7 +14,7 @@ simulation (:func:`resolve_conflicts`: all robots, all rounds, every message cou
 centralized union-find detection plus the "drop every link of a conflictive set" baseline on
 the same input, run alternately (``--repeat`` times, medians: the ratio survives a busy
 machine). The simulation runs with the batched evaluation (the default where it applies,
-:mod:`pipeline.consistency.batched`, :mod:`pipeline.consistency.batched_evidence`) and, up to
+:mod:`pipeline.consistency.engines.batched`, :mod:`pipeline.consistency.engines.batched_evidence`) and, up to
 ``--per-robot-max-n``, also robot by robot; both must give the same cuts, rounds, messages and
 bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json`` (one record
 per ``n`` and resolution) and ``time_bytes.png`` (time and MB sent against ``n``).

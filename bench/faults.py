@@ -49,7 +49,7 @@ from consistency_scale import synthetic_formation  # noqa: E402
 from pipeline.commgraph import comm_edges_for  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
-from pipeline.consistency.engine import detect_once  # noqa: E402
+from pipeline.consistency.engines.driver import detect_once  # noqa: E402
 from pipeline.consistency.protocols import ProtocolOptions  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.transport.simulated import NetworkOptions, recurrent_topology  # noqa: E402

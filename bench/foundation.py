@@ -9,7 +9,7 @@ It also times extraction serially (default: a 2-thread pool) and matching serial
 descriptors: one product at a time on every BLAS thread) and with 2 threads (float
 descriptors: one BLAS thread per product; the default for both kinds, except float
 distance matrices over 64 MiB); the defaults of
-:func:`pipeline.features.extract_all` and :func:`pipeline.matching.match_edges` follow these
+:func:`pipeline.matching.features.extract_all` and :func:`pipeline.matching.pairs.match_edges` follow these
 figures. Saves ``runs/bench-foundation/results.json``. Run 0 of each method is a warm-up and
 not counted.
 """
@@ -31,8 +31,8 @@ import numpy as np  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
-from pipeline.features import extract_all  # noqa: E402
-from pipeline.matching import match_edges  # noqa: E402
+from pipeline.matching.features import extract_all  # noqa: E402
+from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 

@@ -60,9 +60,9 @@ def _formation_inputs(formation: str, size, resolution: str):
     """The fusion stage's input after the consistency stage on a rendered formation, and the
     ground truth of every link."""
     import data_synth
-    from pipeline.evaluate import link_truth
+    from pipeline.evaluation.links import link_truth
     from pipeline.progress import StageTimer
-    from pipeline.run import (
+    from pipeline.stages import (
         consistency_stage,
         evidence_inputs,
         extract_and_match,
@@ -87,9 +87,9 @@ def _sceaux_inputs(resolution: str):
     """The fusion stage's input inside ``run-images`` on four Sceaux photographs (ring2)."""
     import shutil
 
-    import pipeline.run as run_mod
-    from pipeline.images import ImagesConfig, run_images
+    import pipeline.stages as run_mod
     from pipeline.progress import StageTimer
+    from pipeline.runs.images import ImagesConfig, run_images
 
     captured = {}
     orig = run_mod.fusion_stage
@@ -119,7 +119,7 @@ def _fuse(inputs, **mode):
     """One fusion stage on a copy of the input in a mode; (wall s, FusionResult, cut mask over
     the ledger's links, rounds of fusion per cut)."""
     import pipeline.fusion.landmarks as landmarks
-    from pipeline.run import fusion_stage
+    from pipeline.stages import fusion_stage
 
     ledger = copy.deepcopy(inputs["args"][0])
     orig = landmarks.fuse_tracks

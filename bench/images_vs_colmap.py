@@ -104,8 +104,8 @@ def run_colmap(images: Path, work: Path) -> dict:
 
 
 def run_ours(images: Path, work: Path, graph: str, legacy: bool) -> dict:
-    from pipeline.images import ImagesConfig, run_images
     from pipeline.progress import StageTimer
+    from pipeline.runs.images import ImagesConfig, run_images
 
     cfg = ImagesConfig(directory=str(images), graph=graph, out=str(work / "run"), rerun=False,
                        threads=-1)

@@ -35,9 +35,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.commands.run_landmarks import RESOLUTIONS, LandmarksConfig, run_landmarks  # noqa: E402
+from pipeline.consistency.rules import RULES as RESOLUTIONS  # noqa: E402
 from pipeline.progress import StageTimer  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.runs.landmarks import LandmarksConfig, run_landmarks  # noqa: E402
 
 CLEAR_MEASURED = {  # measured on this machine with CLEAR's public code (not our figures)
     (101, "complete"): {"input_f1": 0.907, "f1": 0.983, "time_s": 41.0},

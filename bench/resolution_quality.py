@@ -34,13 +34,13 @@ import data_synth  # noqa: E402
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
-from pipeline.evaluate import link_truth  # noqa: E402
-from pipeline.features import MERGE_RADIUS_PX, extract_all  # noqa: E402
-from pipeline.link_evidence import link_evidence  # noqa: E402
-from pipeline.matching import match_edges  # noqa: E402
-from pipeline.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
-from pipeline.oracle import oracle_cut, resolution_scores  # noqa: E402
-from pipeline.run import NEAR_DUPLICATE_PX  # noqa: E402
+from pipeline.consistency.rules import get_rule  # noqa: E402
+from pipeline.evaluation.links import link_truth  # noqa: E402
+from pipeline.evaluation.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
+from pipeline.evaluation.oracle import oracle_cut, resolution_scores  # noqa: E402
+from pipeline.matching.features import MERGE_RADIUS_PX, extract_all  # noqa: E402
+from pipeline.matching.link_evidence import link_evidence  # noqa: E402
+from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
@@ -123,7 +123,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formations", default="abcd")
     ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{NEAR_DUPLICATE_PX}",
+    ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{get_rule('evidence').merge_radius_px}",
                     help="comma-separated radii in pixels")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-resolution"))
     args = ap.parse_args()

@@ -99,7 +99,7 @@ def _row(name: str, res: dict) -> dict:
 def _kill_run(args: list[str], size, out: Path) -> dict:
     """zenoh run with ``kill -9`` of robot 2 as its fusion stage starts."""
     from pipeline.commands.run_formation import add_arguments, config_from_args
-    from pipeline.teamrun import run_formation_team
+    from pipeline.runs.formation import run_formation
 
     ap = argparse.ArgumentParser()
     add_arguments(ap)
@@ -107,7 +107,7 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
                                           "--out", str(out)]))
     runs = []
     t0 = time.perf_counter()
-    run_formation_team(cfg, kill=(2, "fusion", 0.0), keep_run=runs)
+    run_formation(cfg, transport="zenoh", kill=(2, "fusion", 0.0), keep_run=runs)
     wall = time.perf_counter() - t0
     run = runs[0]
     rep = json.loads((out / "report.json").read_text())

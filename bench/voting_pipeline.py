@@ -27,11 +27,11 @@ def pipeline_fusion(formations=("a", "b", "c", "d"), seed: int = 0, size=(640, 4
     ground-truth point is the medoid of its observations' rendered 3D points.
     """
     import data_synth
-    from pipeline.evaluate import link_truth
+    from pipeline.evaluation.links import link_truth
+    from pipeline.evaluation.triangulation import medoid, triangulate_tracks
     from pipeline.fusion.landmarks import fuse_tracks
     from pipeline.progress import StageTimer
-    from pipeline.run import consistency_stage, extract_and_match
-    from pipeline.triangulation import medoid, triangulate_tracks
+    from pipeline.stages import consistency_stage, extract_and_match
 
     rows = []
     for name in formations:

@@ -15,7 +15,7 @@ experiment of Sec. V-B, where the paper itself had no ground truth:
   :func:`sample_depth`.
 * **true pairs** of a communication edge: the good pairs between detected keypoints made
   one-to-one by mutual nearest reprojection distance; **missing links** are true pairs that
-  matching did not return (counted per link set by :mod:`pipeline.evaluate`).
+  matching did not return (counted per link set by :mod:`pipeline.evaluation.links`).
 
 Depth is sampled with bilinear interpolation of ``1/z`` (exact on a plane, where ``1/z`` is
 affine in the pixel) when the four neighbouring pixels lie on one plane, else from the nearest

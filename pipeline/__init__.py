@@ -1,8 +1,17 @@
 """formation-match: consistent, decentralized multi-camera data association.
 
-Stages (one module each, see docs/DESIGN.md): ``features`` → ``matching`` → ``association`` →
-``consistency`` (Aragüés et al., detection Sec. III + resolution Alg. 1) → ``fusion``
-(Montijano et al., distributed RANSAC with dynamic voting) → ``triangulation`` → ``evaluate``.
+Stages (see docs/DESIGN.md): ``matching`` (features, pairs) → ``association`` →
+``consistency`` (Aragüés et al., detection Sec. III + a resolution rule, Alg. 1 by default)
+→ ``fusion`` (Montijano et al., distributed RANSAC with dynamic voting) → ``evaluation``
+(triangulation, metrics, report). The folders are the architecture, bottom to top
+(docs/architecture.md, checked by tests/pipeline/test_architecture.py): the shared words of
+this root (``errors``, ``types``, ``validate``, ``progress``, ``outcome``, ``outputs``,
+``runfolder``) → ``inputs`` → ``colmap`` → the graphs (``association``, ``commgraph``,
+``budget``) → ``transport`` → ``matching`` → ``consistency`` → ``fusion`` → ``faults`` →
+``evaluation`` → ``stages`` (the stage chain) → ``team`` → ``runs`` → ``commands`` → the
+programs (``__main__``, ``team.zygote``).
+
+May import: a module imports its own layer and the layers below it, never one above.
 """
 
 __version__ = "0.1.0"

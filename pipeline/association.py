@@ -24,6 +24,7 @@ __all__ = [
     "check_links",
     "ConflictCounts",
     "count_conflicts",
+    "conflictive_links",
     "association_sets",
 ]
 
@@ -181,6 +182,15 @@ def conflictive_labels(graph: AssociationGraph) -> tuple[np.ndarray, np.ndarray,
         rows = np.repeat(np.arange(k), np.diff(per.indptr))
         conflictive[rows[per.data >= 2]] = True
     return labels, sizes, conflictive
+
+
+def conflictive_links(features_per_camera, links: Links) -> np.ndarray:
+    """``(L,)`` bool: the links that lie in a conflictive set of their association graph
+    (Def. 2.4), e.g. the ledger's ``conflictive_before``."""
+    graph = AssociationGraph(features_per_camera, links)
+    labels, _, conflictive = conflictive_labels(graph)
+    a, _ = graph.global_ids()
+    return conflictive[labels[a]] if len(links) else np.zeros(0, dtype=bool)
 
 
 def count_conflicts(graph: AssociationGraph) -> ConflictCounts:

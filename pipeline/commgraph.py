@@ -9,7 +9,7 @@ gets it from here:
   ``ring+triangles`` (formation b of the paper's Fig. 4), ``geometric`` (needs positions) and
   ``seq:K``;
 * :func:`comm_graph` — a kind or a file, for a set of named images (``run-images``), plus
-  ``knn:K`` (neighbours by image similarity, :mod:`pipeline.retrieval`);
+  ``knn:K`` (neighbours by image similarity, :mod:`pipeline.matching.retrieval`);
 * :func:`read_comm_graph` — the one file reader (indices, or image names when given);
 * :func:`check_comm_edges` — the one checker of an edge array;
 * :func:`comm_edges_for` — the checked graph of the consistency stage, with every link on an
@@ -51,7 +51,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial.distance import pdist, squareform
 
 from pipeline.errors import InputError
-from pipeline.linkscsv import MAX_ID
+from pipeline.inputs.linkscsv import MAX_ID
 
 __all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "links_off_graph", "edge_set"]
@@ -147,7 +147,7 @@ def _positive_k(spec: str) -> int:
     return int(k_text)
 
 
-def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.ndarray:
+def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
 
     Parameters
@@ -155,10 +155,11 @@ def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.
     kind_or_file : str or Path
         A kind of :func:`graph_edges` other than ``geometric`` (images have no positions);
         ``knn:K``: each image picks the ``K`` most similar images by a global descriptor of
-        its features (:func:`pipeline.retrieval.knn_edges`), for unordered photos; or a file
+        its features (:func:`pipeline.matching.retrieval.knn_edges`), for unordered photos; or a file
         of :func:`read_comm_graph` (indices in name order or image names).
     names : list[str], (n,) — image names in camera order
-    features : list[Features], (n,), optional — needed by ``knn:K`` only
+    knn : callable ``K -> (E, 2) edges``, optional — needed by ``knn:K`` only: the ``K``
+        most similar images of each (e.g. ``knn_edges`` of the images' features)
 
     Returns
     -------
@@ -183,12 +184,10 @@ def comm_graph(kind_or_file: str | Path, names: list[str], features=None) -> np.
         return graph_edges(spec, n)
     if spec.startswith("knn:"):
         k = _positive_k(spec)
-        if features is None:
+        if knn is None:
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")
-        from pipeline.retrieval import knn_edges
-
-        return knn_edges(features, k)[0]
+        return knn(k)
     path = Path(kind_or_file)
     if path.is_dir():
         raise InputError(f"graph {spec!r} is a folder, not a file; give a kind or a file of "
@@ -232,7 +231,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
     """Read a communication-graph file: one edge ``cam_i,cam_j`` per line.
 
     Format: two cameras per line separated by a comma, tab or spaces (CSV double quotes for
-    names holding spaces, commas or ``#``, see :mod:`pipeline.csvfields`); each a 0-based index,
+    names holding spaces, commas or ``#``, see :mod:`pipeline.inputs.csvfields`); each a 0-based index,
     or, when ``names`` is given, an image name (a token equal to an image name is that image,
     otherwise it must be an index). ``#`` starts a comment; blank lines and a first line
     ``cam_i,cam_j`` are skipped. A line repeating an edge (either orientation) is merged.
@@ -253,7 +252,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
         non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
         — naming the file and line.
     """
-    from pipeline.csvfields import line_fields
+    from pipeline.inputs.csvfields import line_fields
     from pipeline.outputs import require_input_file
 
     path = Path(path)

@@ -251,7 +251,7 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
     stage's closing phase: its links stay kept, see :mod:`pipeline.consistency.reliable`),
     ``close_round`` (network round at which the last closing phase began, or ``None``),
     ``crashes_not_reached`` (the stage ended first; a run with fusion moves those that hit
-    the fusion stage to ``crashed_during_fusion``, :func:`pipeline.run.clean_association`),
+    the fusion stage to ``crashed_during_fusion``, :func:`pipeline.stages.clean_association`),
     ``robots_lost`` (robot ->
     neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
     ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``

@@ -47,7 +47,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         camera count different from the report's).
     """
     from pipeline import colmap
-    from pipeline.linkscsv import read_run_links_csv
+    from pipeline.inputs.linkscsv import read_run_links_csv
 
     folder = Path(folder)
     for name in ("report.json", "links.csv", "sparse"):
@@ -85,7 +85,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
 
 
 def _markdown(report: dict) -> str:
-    from pipeline.report import report_markdown
+    from pipeline.evaluation.report import report_markdown
 
     try:
         return report_markdown(report)

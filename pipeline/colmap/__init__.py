@@ -8,7 +8,10 @@ pycolmap API change touches it alone (checked by write-and-reload tests).
 - :mod:`.mapping` — incremental mapping and what is read from a reconstruction (poses,
   similarity between two gauges), model folders.
 - :mod:`.known_poses` — robust triangulation with known poses, models of triangulated tracks
-  (:mod:`pipeline.triangulation`).
+  (:mod:`pipeline.evaluation.triangulation`).
+
+May import: pycolmap, the shared words of the root and :mod:`pipeline.inputs` (a database's
+tables checked before pycolmap reads them).
 """
 
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, rigid, version

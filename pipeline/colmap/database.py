@@ -23,8 +23,8 @@ import numpy as np
 import pycolmap
 
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
-from pipeline.dbcheck import check_database_tables
 from pipeline.errors import InputError
+from pipeline.inputs.dbcheck import check_database_tables
 from pipeline.types import Features, Links, View
 
 __all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",

@@ -1,6 +1,6 @@
 """pycolmap with known camera poses: robust triangulation of tracks and writing them as a model.
 
-Used by :mod:`pipeline.triangulation` (the check of the cleaned tracks of a rendered
+Used by :mod:`pipeline.evaluation.triangulation` (the check of the cleaned tracks of a rendered
 formation). Cameras are ``PINHOLE`` with ids ``camera index + 1``; image ids likewise.
 """
 

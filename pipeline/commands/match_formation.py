@@ -65,9 +65,9 @@ def match_formation(formation: str, seed: int = 0, size: tuple[int, int] = (640,
     """
     import data_synth
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.evaluate import link_counts
+    from pipeline.evaluation.links import link_counts
     from pipeline.progress import StageTimer
-    from pipeline.run import extract_and_match
+    from pipeline.stages import extract_and_match
 
     timer = timer or StageTimer(verbose=False)
     t0 = dict(timer.timings)
@@ -104,7 +104,7 @@ def _fmt(key: str, v) -> str:
 
 def table(results: list[dict]) -> str:
     """Markdown table, one column per formation, and the paper's Table III for reference."""
-    from pipeline.report import PAPER_TABLE_III_IV
+    from pipeline.evaluation.report import PAPER_TABLE_III_IV
 
     names = [r["formation"] for r in results]
     lines = ["| | " + " | ".join(f"({n})" for n in names) + " | paper (a)–(d) |",

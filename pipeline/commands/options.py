@@ -1,8 +1,8 @@
 """Command-line options shared by several commands, each defined once with one check.
 
-``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.features`),
+``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.matching.features`),
 ``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
-(the consistency stage's resolution rule) and ``--merge-radius`` (near-duplicate keypoints).
+(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`) and ``--merge-radius`` (near-duplicate keypoints).
 """
 
 from __future__ import annotations
@@ -12,20 +12,9 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["MIN_FEATURES", "MAX_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
-           "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
+__all__ = ["add_feature_options", "add_scene_options",
+           "add_resolution_option", "add_transport_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
-
-#: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
-RESOLUTIONS = ("paper", "evidence")
-
-#: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
-MIN_FEATURES = 8
-
-#: Most features per image a run accepts: over a hundred times COLMAP's default of 8192, and
-#: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
-#: or overflow (beyond 2**31: a traceback).
-MAX_FEATURES = 1_000_000
 
 
 def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
@@ -33,9 +22,9 @@ def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> Non
 
     ``--features`` lists only the methods this OpenCV build offers. With ``photos``,
     ``--max-features`` defaults to ``auto`` (scaled with each image,
-    :func:`pipeline.features.photo_max_features`).
+    :func:`pipeline.matching.features.photo_max_features`).
     """
-    from pipeline.features import available_methods
+    from pipeline.matching.features import available_methods
 
     p.add_argument("--features", default="sift",
                    help=f"feature method: {'|'.join(available_methods())} (the ones this OpenCV "
@@ -57,12 +46,24 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence") -> None:
-    """``--resolution paper|evidence``: Alg. 1 of the paper, or the evidence-aware rule."""
-    p.add_argument("--resolution", choices=RESOLUTIONS, default=default,
-                   help="how the robots cut conflictive sets: paper = Alg. 1 of Aragues et al.; "
-                        "evidence = the robots of each set agree on the cut that keeps the "
-                        f"best-supported links (default {default}; on a lossy network, "
-                        "--drop-prob, the fault-tolerant Alg. 1 runs instead)")
+    """``--resolution RULE``: a rule of :mod:`pipeline.consistency.rules` (Alg. 1 of the
+    paper, the evidence-aware rule, ...)."""
+    from pipeline.consistency.rules import RULES
+
+    p.add_argument("--resolution", choices=tuple(RULES), default=default,
+                   help="how the robots cut conflictive sets: "
+                        + "; ".join(rule.help for rule in RULES.values())
+                        + f" (default {default}; on a lossy network, --drop-prob, the "
+                          "fault-tolerant Alg. 1 runs instead)")
+
+
+def add_transport_option(p: argparse.ArgumentParser) -> None:
+    """``--transport NAME``: where the robots run, one of :mod:`pipeline.runs.transports`
+    (shared by the commands that run the robots)."""
+    from pipeline.runs.transports import transport_help, transport_names
+
+    p.add_argument("--transport", default="sim", choices=transport_names(),
+                   help=transport_help())
 
 
 def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
@@ -80,10 +81,16 @@ def feature_options(args) -> tuple[str, int | None]:
     Raises
     ------
     InputError
-        An unknown method, one this OpenCV build lacks, or fewer than :data:`MIN_FEATURES`
-        or more than :data:`MAX_FEATURES`.
+        An unknown method, one this OpenCV build lacks, or fewer than :data:`~pipeline.matching.features.MIN_FEATURES`
+        or more than :data:`~pipeline.matching.features.MAX_FEATURES`.
     """
-    from pipeline.features import METHODS, available_methods, check_method
+    from pipeline.matching.features import (
+        MAX_FEATURES,
+        METHODS,
+        MIN_FEATURES,
+        available_methods,
+        check_method,
+    )
 
     method = str(args.features).lower()
     if method not in METHODS:

@@ -2,7 +2,7 @@
 
 The robot listens on its endpoint of the team file, connects to its comm-graph neighbours,
 and runs features, matching, detection and resolution with them over Zenoh
-(:mod:`pipeline.teamrobot`). Start one per robot, on one machine or several; the robots wait
+(:mod:`pipeline.team.robot`). Start one per robot, on one machine or several; the robots wait
 for each other (``start_timeout_s`` of the team options) and name any that never answers.
 """
 
@@ -26,8 +26,8 @@ def run(args) -> int:
     import sys
 
     from pipeline.outputs import check_output_files
-    from pipeline.team import check_data_files, load_team
-    from pipeline.teamrobot import run_robot_process
+    from pipeline.team.robot import run_robot_process
+    from pipeline.team.teamfile import check_data_files, load_team
     from pipeline.transport import RobotMissingError
 
     team = load_team(args.team)

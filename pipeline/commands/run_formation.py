@@ -11,13 +11,13 @@ from pipeline.commands.options import (
     add_merge_radius_option,
     add_resolution_option,
     add_scene_options,
+    add_transport_option,
     feature_options,
     parse_size,
 )
 from pipeline.errors import InputError
 from pipeline.faults import add_fault_arguments, faults_from_args
-from pipeline.run import FormationConfig
-from pipeline.team import add_transport_argument, resolution_for_transport
+from pipeline.runs.formation import FormationConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_resolution_option(p)
     add_merge_radius_option(p)
     add_fault_arguments(p)
-    add_transport_argument(p)
+    add_transport_option(p)
 
 
 def config_from_args(args) -> FormationConfig:
@@ -51,14 +51,14 @@ def config_from_args(args) -> FormationConfig:
                            tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
                            faults=faults_from_args(args),
-                           resolution=resolution_for_transport(args),
+                           resolution=args.resolution,
                            merge_radius=args.merge_radius)
 
 
 def run(args) -> int:
     from pipeline.outcome import exit_status
-    from pipeline.run import run_formation
     from pipeline.runfolder import claim_run_folder
+    from pipeline.runs.formation import run_formation
 
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):

@@ -12,12 +12,12 @@ from pipeline.commands.options import (
     add_merge_radius_option,
     add_resolution_option,
     add_scene_options,
+    add_transport_option,
     feature_options,
     parse_size,
 )
-from pipeline.report import PAPER_TABLE_III_IV
+from pipeline.evaluation.report import PAPER_TABLE_III_IV
 from pipeline.runfolder import atomic_file, write_json_atomic
-from pipeline.team import add_transport_argument, resolution_for_transport
 
 FORMATIONS = ("a", "b", "c", "d")
 
@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "not written by run-formations (default: refuse)")
     # the paper's Tables III and IV are Alg. 1's figures
     add_resolution_option(p, default="paper")
-    add_transport_argument(p)
+    add_transport_option(p)
     add_merge_radius_option(p)
 
 
@@ -158,11 +158,11 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 
 def run(args) -> int:
     from pipeline import validate
-    from pipeline.run import FormationConfig, run_formation
+    from pipeline.runs.formation import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")
-    resolution = resolution_for_transport(args)
+    resolution = args.resolution
     size = parse_size(args.size)
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)

@@ -1,6 +1,6 @@
 """``python -m pipeline run-images DIR --graph KIND``: the whole pipeline on real photographs.
 
-The options of the run; the run itself is :func:`pipeline.images.run_images`.
+The options of the run; the run itself is :func:`pipeline.runs.images.run_images`.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from pipeline.commands.options import (
     add_feature_options,
     add_merge_radius_option,
     add_resolution_option,
+    add_transport_option,
     feature_options,
 )
 from pipeline.errors import InputError
-from pipeline.images import ImagesConfig
 from pipeline.outcome import exit_status
-from pipeline.team import add_transport_argument
+from pipeline.runs.images import ImagesConfig
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -55,14 +55,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", default="none", choices=("none", "homographies"),
                    help="ground truth: homographies = DIR/H1to{k}p.txt (planar scene, image 1 "
                         "to image k at full resolution); a link is good when each keypoint maps "
-                        "within --truth-tol of the other (pipeline.truth). Default none")
+                        "within --truth-tol of the other (pipeline.evaluation.truth). Default none")
     p.add_argument("--truth-tol", type=float, default=2.0, metavar="PX",
                    help="tolerance of --truth in pixels of the processed images (default 2)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
     add_resolution_option(p)
     add_merge_radius_option(p)
-    add_transport_argument(p)
+    add_transport_option(p)
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -91,8 +91,8 @@ def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
 
 
 def run(args) -> int:
-    from pipeline.images import run_images
     from pipeline.runfolder import claim_run_folder
+    from pipeline.runs.images import run_images
 
     config = config_from_args(args)
     with claim_run_folder(config.out_dir(), inputs=_inputs(config)):

@@ -1,93 +1,22 @@
 """``python -m pipeline run-landmarks DIR --graph KIND``: labelled-landmark benchmarks.
 
-For folders where every image carries the same hand-labelled keypoints in the same order
-(:mod:`pipeline.landmarks_io`; e.g. the CMU hotel sequence), so the true association is
-known exactly: landmark ``k`` of one image is landmark ``k`` of every other.
-
-Stages: load (keypoints and descriptors; ``--frames N`` takes ``N`` images at a fixed
-stride) → each robot matches its landmarks to its communication neighbours' one-to-one
-(Hungarian on the descriptor distance, guided by the epipolar geometry of the labelled
-keypoints, optional ratio gate; :mod:`pipeline.landmark_matching`)
-→ ``--refine votes``: the robots refine those matches by two-hop votes through common
-neighbours (:mod:`pipeline.match_votes`) → the distributed consistency stage
-(``--resolution``) → the centralized baselines on the same links → evaluation.
-
-Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
-:mod:`pipeline.landmark_matching`), the
-whole assignment kept (``--ratio none``), refined by votes. The
-votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
-vote for the right match, and gating before voting removes them.
-
-Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
-matches it implies, i.e. every two landmarks in one association set of the kept links (the
-transitive closure), against the true pairs of *every* image pair (:mod:`pipeline.metrics`).
-``pairwise.input_links`` scores the Hungarian matches themselves, the way CLEAR scores its
-input; ``before`` / ``before_links`` are the links the consistency stage receives (after the
-refinement), over their closure and as they are. ``cycle_consistent`` is true when no association set holds two landmarks of one image
-(then the implied pairwise matching is cycle-consistent).
-
-Writes ``report.json`` and ``links.csv`` (docs/DESIGN.md "Run outputs"; ``truth`` is 1 when the
-two ends carry the same label) atomically. There are no camera poses and no 3D points, so
-no ``sparse/`` and no recording.
+The job (stages, defaults, scoring, outputs) is described in
+:mod:`pipeline.runs.landmarks`. This module parses the options and prints the report.
 """
 
 from __future__ import annotations
 
 import argparse
-import time
-from dataclasses import asdict, dataclass
-from pathlib import Path
-
-import numpy as np
 
 from pipeline.errors import InputError
-from pipeline.progress import StageTimer
-from pipeline.runfolder import atomic_run_folder, write_json_atomic
-from pipeline.types import Links
+from pipeline.runs.landmarks import (
+    REFINEMENTS,
+    LandmarksConfig,
+    landmarks_markdown,
+    run_landmarks,
+)
 
-__all__ = ["LandmarksConfig", "RESOLUTIONS", "run_landmarks", "true_landmark_pairs",
-           "add_arguments", "run"]
-
-
-def _resolve_paper(features_per_camera, comm_edges, links: Links):
-    """Aragüés et al., Sec. III detection + Sec. IV Alg. 1 resolution, until conflict-free."""
-    from pipeline.consistency import resolve_conflicts
-
-    return resolve_conflicts(features_per_camera, comm_edges, links)
-
-
-#: resolution methods of the distributed stage: name -> (description, function
-#: ``(features_per_camera, comm_edges, links) -> ConsistencyResult``)
-REFINEMENTS = ("votes", "none")
-
-RESOLUTIONS = {
-    "paper": ("detection (Sec. III) + resolution (Alg. 1) of Aragüés et al.", _resolve_paper),
-}
-
-
-@dataclass
-class LandmarksConfig:
-    """Options of ``run-landmarks`` (see ``python -m pipeline run-landmarks --help``)."""
-
-    directory: str
-    graph: str = "complete"
-    frames: int | None = None
-    descriptors: str = "given"
-    ratio: float | None = None
-    geometry: str = "epipolar"
-    epipolar_px: float = 3.0
-    refine: str = "votes"
-    vote_iterations: int = 10
-    resolution: str = "paper"
-    baselines: bool = True
-    out: str | None = None
-
-    def out_dir(self) -> Path:
-        if self.out:
-            return Path(self.out)
-        folder = Path(self.directory).resolve().name or "landmarks"
-        frames = f"-f{self.frames}" if self.frames else ""
-        return Path("runs") / f"landmarks-{folder}{frames}-{self.graph.replace(':', '')}"
+__all__ = ["add_arguments", "config_from_args", "run"]
 
 
 def _ratio(text: str) -> float | None:
@@ -129,9 +58,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "common neighbours until a fixed point; none: use the matches as they are")
     p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
                    help="cap on the vote iterations (two rounds each; default 10)")
-    p.add_argument("--resolution", default="paper", choices=tuple(RESOLUTIONS),
+    from pipeline.consistency.rules import RULES
+
+    p.add_argument("--resolution", default="paper", choices=tuple(RULES),
                    help="resolution of the distributed stage: "
-                        + "; ".join(f"{k}: {v[0]}" for k, v in RESOLUTIONS.items()))
+                        + "; ".join(f"{k}: {rule.title}" for k, rule in RULES.items()))
     p.add_argument("--no-baselines", action="store_true",
                    help="skip the centralized baselines")
     p.add_argument("--out", default=None,
@@ -161,219 +92,3 @@ def run(args) -> int:
     print(landmarks_markdown(report))
     print(f"run written to {out}/ (report.json, links.csv)")
     return 0
-
-
-def true_landmark_pairs(features_per_camera) -> np.ndarray:
-    """True pairs ``(Q, 2)`` (global ids) of every image pair: equal label rows.
-
-    Images with fewer landmarks than others contribute their rows ``0..K_i-1``.
-    """
-    m = np.asarray(features_per_camera, dtype=np.int64)
-    off = np.concatenate([[0], np.cumsum(m)])
-    parts = []
-    for i in range(m.size):
-        for j in range(i + 1, m.size):
-            k = np.arange(min(m[i], m[j]))
-            parts.append(np.stack([off[i] + k, off[j] + k], axis=1))
-    return np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
-
-
-def _scores(m, links: Links, true_pairs: np.ndarray) -> dict:
-    from pipeline.metrics import association_pairs, pairwise_scores
-
-    return pairwise_scores(association_pairs(m, links), true_pairs, int(np.sum(m)))
-
-
-def _link_scores(m, links: Links, true_pairs: np.ndarray) -> dict:
-    """The links themselves as the predicted pairs (how CLEAR scores its pairwise input)."""
-    from pipeline.association import camera_offsets
-    from pipeline.metrics import pairwise_scores
-
-    off = camera_offsets(m)
-    pred = np.stack([off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j], axis=1)
-    return pairwise_scores(pred, true_pairs, int(np.sum(m)))
-
-
-def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> tuple[Path, dict]:
-    """Run every stage and write the run folder; return its path and the report.
-
-    Raises
-    ------
-    InputError
-        Bad folder or files (:func:`pipeline.landmarks_io.load_landmark_folder`), graph
-        (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
-    """
-    from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.commgraph import comm_graph
-    from pipeline.consistency import centralized
-    from pipeline.landmark_matching import match_landmark_edges
-    from pipeline.landmarks_io import load_landmark_folder
-    from pipeline.linkscsv import write_links_csv
-    from pipeline.report import versions
-    from pipeline.run import ledger_from_consistency
-
-    if config.refine not in REFINEMENTS:
-        raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
-    if config.vote_iterations < 1:
-        raise InputError(f"--vote-iterations {config.vote_iterations}: expected at least 1")
-    if not 0 < config.epipolar_px < float("inf"):
-        raise InputError(f"--epipolar-px {config.epipolar_px}: expected a positive, finite "
-                         "number of pixels")
-    if config.resolution not in RESOLUTIONS:
-        raise InputError(f"--resolution {config.resolution!r}: expected one of "
-                         f"{', '.join(RESOLUTIONS)}")
-    timer = timer or StageTimer()
-    out = config.out_dir()
-    with timer.stage("load", f"{config.directory}, descriptors {config.descriptors}"):
-        frames = load_landmark_folder(config.directory, config.descriptors, config.frames)
-        names = [f.name for f in frames]
-        comm_edges = comm_graph(config.graph, names)
-        m = np.array([len(f.keypoints) for f in frames], dtype=np.int64)
-        kind = frames[0].descriptor_kind
-        timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors; graph "
-                   f"{config.graph}: {len(comm_edges)} edges")
-    with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
-                                 f"geometry {config.geometry}, ratio gate {config.ratio}"):
-        links, matching = match_landmark_edges(
-            [f.descriptors for f in frames], comm_edges, kind, config.ratio,
-            [f.keypoints for f in frames], config.geometry, config.epipolar_px)
-        timer.note(f"{len(links)} links; {matching['edges_without_model']} edges without an "
-                   "epipolar model" if config.geometry == "epipolar" else f"{len(links)} links")
-    # times: wall (StageTimer) and CPU of this process (all simulated robots run in it, one
-    # after another; a team would run them in parallel)
-    refinement = {"method": config.refine}
-    if config.refine == "votes":
-        from pipeline.match_votes import refine_by_votes
-
-        input_links = links
-        with timer.stage("refine", "two-hop votes through common neighbours"):
-            c0 = time.process_time()
-            links, vstats = refine_by_votes(m, comm_edges, links, config.vote_iterations)
-            refinement.update(vstats, cpu_s=round(time.process_time() - c0, 4))
-            timer.note(f"{len(links)} links after {vstats['iterations']} iteration(s); "
-                       f"changed per iteration {vstats['changed_per_iteration']}")
-    else:
-        input_links = links
-    with timer.stage("resolution", RESOLUTIONS[config.resolution][0]):
-        c0 = time.process_time()
-        res = RESOLUTIONS[config.resolution][1](m, comm_edges, links)
-        resolution_cpu = time.process_time() - c0
-        kept = ~res.deleted
-        timer.note(f"{int(res.deleted.sum())} links cut")
-    kept_links = links.subset(kept)
-    truth = links.feat_i == links.feat_j
-    with timer.stage("evaluate", "pairwise scores over the closure of the links"):
-        tp = true_landmark_pairs(m)
-        n_true_on_edges = int(sum(min(m[i], m[j]) for i, j in comm_edges.tolist()))
-
-        def counts(lk: Links, t: np.ndarray) -> dict:
-            c = count_conflicts(AssociationGraph(m, lk)).as_dict()
-            c.update(good_links=int(t.sum()), spurious_links=int((~t).sum()),
-                     missing_links=n_true_on_edges - int(t.sum()),
-                     precision=float(t.mean()) if len(t) else None)
-            return c
-
-        before, after = counts(links, truth), counts(kept_links, truth[kept])
-        pairwise = {"input_links": _link_scores(m, input_links, tp),
-                    "before": _scores(m, links, tp), "before_links": _link_scores(m, links, tp),
-                    "after": _scores(m, kept_links, tp)}
-    baselines = {}
-    if config.baselines:
-        with timer.stage("baselines", "centralized, same links"):
-            for name, fn in (("drop_conflictive_sets", centralized.drop_conflictive_sets),
-                             ("keep_first_per_image", centralized.keep_first_per_image),
-                             ("quality_merge", centralized.quality_merge)):
-                t0 = time.perf_counter()
-                keep = np.asarray(fn(m, links), dtype=bool)
-                dt = time.perf_counter() - t0
-                bl = links.subset(keep)
-                baselines[name] = {"pairwise": _scores(m, bl, tp),
-                                   "cycle_consistent": bool(centralized.is_conflict_free(m, bl)),
-                                   "deleted_links": int((~keep).sum()),
-                                   "good_deleted": int((~keep & truth).sum()),
-                                   "spurious_deleted": int((~keep & ~truth).sum()),
-                                   "time_s": round(dt, 4)}
-    st = res.stats
-    cut = res.deleted
-    report = {
-        "title": f"landmarks {Path(config.directory).resolve().name}, {len(frames)} images, "
-                 f"graph {config.graph}",
-        "n_cameras": len(frames),
-        "comm_edges": comm_edges.tolist(),
-        "features_per_camera": m.tolist(),
-        "images": names,
-        "before": before,
-        "after": after,
-        "pairwise": pairwise,
-        "cycle_consistent": bool(after["conflictive_sets"] == 0),
-        "cycle_consistent_before": bool(before["conflictive_sets"] == 0),
-        "matching": matching,
-        "refinement": refinement,
-        "resolution": {
-            "method": config.resolution,
-            "iterations": st.get("iterations"),
-            "deleted_links": int(cut.sum()),
-            "good_deleted": int((cut & truth).sum()),
-            "spurious_deleted": int((cut & ~truth).sum()),
-            "deleted_by_case": {c: int((res.case == c).sum()) for c in ("b", "c")},
-            "detection_rounds": st.get("detection_rounds"),
-            "resolution_rounds": st.get("resolution_rounds"),
-            "messages": st.get("messages"),
-            "bytes": st.get("bytes"),
-            "max_robot_memory_bytes": st.get("max_robot_memory_bytes"),
-            "time_s": round(timer.timings.get("resolution", 0.0), 4),
-            "cpu_s": round(resolution_cpu, 4),
-        },
-        "fusion": {"enabled": False, "reason": "labelled landmarks come without camera poses"},
-        "triangulation": {"enabled": False, "reason": "no camera poses"},
-        "baselines": baselines,
-        "ground_truth": {"kind": "labelled landmarks: row k of every image is landmark k"},
-        "versions": versions(),
-        "config": {**asdict(config), "out": str(out)},
-    }
-    with timer.stage("write", str(out)):
-        with atomic_run_folder(out) as tmp:
-            ledger = ledger_from_consistency(res)
-            ledger.truth = truth.astype(np.int8)
-            write_links_csv(tmp / "links.csv", ledger)
-            report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
-            write_json_atomic(tmp / "report.json", report)
-    return out, report
-
-
-def landmarks_markdown(report: dict) -> str:
-    """The run's table: links, sets, pairwise P/R/F1 before and after, baselines."""
-    b, a, r, pw = report["before"], report["after"], report["resolution"], report["pairwise"]
-    lines = [f"## {report['title']}", "", "| | before | after |", "|---|---:|---:|"]
-    for label, key in (("Links", "links"), ("Good links", "good_links"),
-                       ("Spurious links", "spurious_links"), ("Missing links", "missing_links"),
-                       ("Association sets", "association_sets"),
-                       ("Conflictive sets", "conflictive_sets")):
-        lines.append(f"| {label} | {b[key]} | {a[key]} |")
-    for key in ("precision", "recall", "f1"):
-        lines.append(f"| Pairwise {key} (closure) | {pw['before'][key]:.3f} | "
-                     f"{pw['after'][key]:.3f} |")
-    lines.append(f"| Pairwise F1 of the Hungarian matches themselves | "
-                 f"{pw['input_links']['f1']:.3f} | |")
-    lines.append(f"| Pairwise F1 of the links themselves | {pw['before_links']['f1']:.3f} | |")
-    lines.append(f"| Cycle-consistent | {report['cycle_consistent_before']} | "
-                 f"{report['cycle_consistent']} |")
-    ref = report["refinement"]
-    if ref["method"] == "votes":
-        lines += ["", f"Refinement (votes): {ref['iterations']} iteration(s), fixed point "
-                      f"{ref['fixed_point']}, {ref['rounds']} rounds, {ref['messages']} messages, "
-                      f"{ref['bytes']} bytes, changed {ref['changed_per_iteration']}, "
-                      f"{report['timings_s'].get('refine', 0.0):.2f} s"]
-    lines += ["", f"Resolution ({r['method']}): {r['deleted_links']} links cut "
-                  f"({r['good_deleted']} good / {r['spurious_deleted']} spurious) in "
-                  f"{r['iterations']} iteration(s), {r['detection_rounds']} + "
-                  f"{r['resolution_rounds']} rounds, {r['messages']} messages, {r['bytes']} bytes, "
-                  f"{r['time_s']:.2f} s"]
-    if report["baselines"]:
-        lines += ["", "| Centralized baseline | precision | recall | F1 | time [s] |",
-                  "|---|---:|---:|---:|---:|"]
-        for name, bl in report["baselines"].items():
-            p = bl["pairwise"]
-            lines.append(f"| {name} | {p['precision']:.3f} | {p['recall']:.3f} | "
-                         f"{p['f1']:.3f} | {bl['time_s']:.2f} |")
-    return "\n".join(lines) + "\n"

@@ -7,7 +7,7 @@ likely wrong. Here the robots of ``C`` instead agree on the cut by *flooding and
 
 1. **Flood** (rounds ``1 … diam(C)``). Every robot sends, for each of its features in ``C``,
    a *bundle*: the feature's id, its keypoint, its alive links in ``C`` with each link's local
-   evidence weight (:mod:`pipeline.link_evidence`, held by both ends of the link since
+   evidence weight (:mod:`pipeline.matching.link_evidence`, held by both ends of the link since
    matching), and, where its pose is known, its projection matrix ``P = K [R | t]``. Bundles
    go to the neighbours it shares a link of ``C`` with; a robot forwards each bundle it
    receives for the first time to those neighbours. A bundle travels one robot-hop per round,
@@ -64,8 +64,7 @@ __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
            "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "solve_set",
-           "cut_own_side",
-           "finish_evidence"]
+           "cut_own_side", "finish_evidence", "evidence_pass", "reexamine_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -496,6 +495,19 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
     return finish_evidence(robots, t, unsolved, len(labels), sum(1 for x in touched if x))
 
 
+def evidence_pass(robots: list[Robot], network: Transport, protocol=None, iteration: int = 0,
+                  on_round=None) -> dict:
+    """The ``evidence`` rule's pass in the simulator (:mod:`pipeline.consistency.rules`):
+    :func:`run_evidence_resolution`; the rule needs no protocol object or iteration number."""
+    return run_evidence_resolution(robots, network, on_round=on_round)
+
+
+def reexamine_sets(robot: Robot) -> None:
+    """After a pass: the next detection examines the robot's sets again (the solved ones are
+    conflict-free then)."""
+    robot.candidates = robot.conflictive.copy()
+
+
 def finish_evidence(robots: list[Robot], rounds: int, unsolved: list[int], n_sets: int,
                     robots_in_sets: int) -> dict:
     """End of a pass: an error if some robot lacks part of a set, else every robot's next
@@ -504,8 +516,7 @@ def finish_evidence(robots: list[Robot], rounds: int, unsolved: list[int], n_set
     if unsolved:
         raise RuntimeError(f"robots {unsolved} did not receive their whole conflictive set")
     for rb in robots:
-        # the next detection examines the solved sets again and finds them conflict-free
-        rb.candidates = rb.conflictive.copy()
+        reexamine_sets(rb)
     return dict(rounds=rounds, conflictive_sets=n_sets, robots_in_sets=robots_in_sets)
 
 
@@ -538,17 +549,17 @@ def evidence_round(robot: Robot, rel, inbox: list[Message], now: int, phase_roun
     rounds (heartbeats), so a neighbour silent for ``loss_timeout`` rounds has crashed: it is
     declared lost and its links are cut (``robot-lost``), as in the reliable Alg. 1.
     """
-    from pipeline.consistency.reliable import _cut_lost, _measure
+    from pipeline.consistency.reliable import cut_lost, measure_state
 
     chan = rel.chan
     msgs = [m for m in chan.receive(inbox, now) if m.kind == "bundle"]
     nbrs = _set_neighbours(robot) - chan.lost
     lost = chan.check_lost(now, nbrs)
     if lost:
-        _cut_lost(robot, rel, lost, phase_round)
+        cut_lost(robot, rel, lost, phase_round)
     evidence_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), phase_round)
     chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
-    _measure(robot, rel)
+    measure_state(robot, rel)
 
 
 def evidence_done(robot: Robot, rel, lost_somewhere: bool) -> bool:

@@ -1,8 +1,8 @@
 """Per-link decisions from the robots' own deletion logs (reporting only, never robot code).
 
 Each robot logs, for every row of its link table, whether it still holds the link and, if
-not, why (Alg. 1 case (b)/(c) as the receiver of a request, on a reject, by the evidence rule, or
-``robot-lost``),
+not, why (Alg. 1 case (b)/(c) as the receiver of a request, on a reject, by another
+resolution rule of :mod:`.rules` such as the evidence rule, or ``robot-lost``),
 in which iteration and round. A link is deleted when either end deleted it; its reason is
 ``resolution`` unless the only cut was a ``robot-lost`` one; its round and case are those of
 the end that cut it as the receiver of a request (the earlier one if both did).
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.evidence import CASE_EVIDENCE
-from pipeline.consistency.robot import CASE_B, CASE_C, CASE_NAMES, ROBOT_LOST
+from pipeline.consistency.robot import ROBOT_LOST
+from pipeline.consistency.rules import case_names
 
 __all__ = ["merge_link_logs"]
 
@@ -37,7 +37,8 @@ def merge_link_logs(n_links: int, logs) -> dict:
     logs = list(logs)
     iteration = np.full(L, -1, dtype=np.int64)
     round_ = np.full(L, -1, dtype=np.int64)
-    case = np.full(L, "", dtype="<U8")
+    names = case_names()  # deletion-log code -> case, of every resolution rule
+    case = np.full(L, "", dtype=f"<U{max(map(len, names.values()), default=1)}")
     if logs:
         li = np.concatenate([np.asarray(x[0], dtype=np.int64) for x in logs])
         alive = np.concatenate([np.asarray(x[1], dtype=bool) for x in logs])
@@ -50,7 +51,7 @@ def merge_link_logs(n_links: int, logs) -> dict:
     ends_deleted = np.bincount(li[~alive], minlength=L).astype(np.int64)
     lost_end = np.zeros(L, dtype=bool)
     lost_end[li[dcase == ROBOT_LOST]] = True
-    decided = np.flatnonzero(np.isin(dcase, (CASE_B, CASE_C, CASE_EVIDENCE)))
+    decided = np.flatnonzero(np.isin(dcase, list(names)))
     if decided.size:
         # if both ends cut the link as receivers (crossing requests), keep the earlier round
         # (on a tie, the end whose log comes first)
@@ -59,9 +60,8 @@ def merge_link_logs(n_links: int, logs) -> dict:
         g = li[first]
         iteration[g] = diter[first]
         round_[g] = dround[first]
-        names = np.array(["evidence"] + [CASE_NAMES.get(c, "evidence")
-                                         for c in range(1, CASE_EVIDENCE + 1)], dtype="<U8")
-        case[g] = names[np.clip(dcase[first], 0, CASE_EVIDENCE)]
+        for code, name in names.items():
+            case[g[dcase[first] == code]] = name
     deleted = ends_deleted > 0
     reason = np.where(deleted, "resolution", "").astype("<U10")
     # a link whose far end was declared lost: robot-lost, unless Alg. 1 had already cut it

@@ -16,7 +16,7 @@ Alg. 1) starts, what it does in each network round, and when the phase is over:
   noticed (:mod:`.reliable`, "Closing round").
 
 Each protocol holds every robot's endpoint on the transport (and, for the reliable one, the
-per-robot :class:`~.reliable.ReliableState`); the driver (:func:`.engine.run_phase`) only plays
+per-robot :class:`~.reliable.ReliableState`); the driver (:func:`.engines.phases.run_phase`) only plays
 the clock and the phase barrier.
 """
 

@@ -143,7 +143,7 @@ from pipeline.transport import Message
 
 __all__ = ["ReliableState", "start_detection_reliable", "detection_round",
            "detection_done", "start_resolution_reliable", "resolution_round", "start_closing",
-           "closing_round"]
+           "closing_round", "cut_lost", "measure_state", "resolution_done"]
 
 _I32 = np.int32
 
@@ -182,7 +182,7 @@ class ReliableState:
 # ------------------------------------------------------------------------------------------
 # helpers on the robot
 
-def _cut_lost(robot: Robot, st: ReliableState, lost: list[int], round_: int) -> None:
+def cut_lost(robot: Robot, st: ReliableState, lost: list[int], round_: int) -> None:
     """Cut every alive link to a neighbour declared lost (reason ``robot-lost``)."""
     if not lost:
         return
@@ -192,7 +192,7 @@ def _cut_lost(robot: Robot, st: ReliableState, lost: list[int], round_: int) -> 
     st.lost_in_phase = True
 
 
-def _measure(robot: Robot, st: ReliableState) -> None:
+def measure_state(robot: Robot, st: ReliableState) -> None:
     """Peak memory of the robot including the protocol's blocks and retransmission buffers."""
     robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.memory_bytes())
 
@@ -273,7 +273,7 @@ def detection_round(robot: Robot, st: ReliableState, inbox: list[Message], now: 
                     if _blocks_of_round(robot, st, k, st.t_logical) is None}
     lost = chan.check_lost(now, waiting)
     if lost:
-        _cut_lost(robot, st, lost, phase_round)
+        cut_lost(robot, st, lost, phase_round)
         st.block_nbrs -= set(lost)
         st.all_nbrs -= set(lost)
     if not robot.stopped:
@@ -292,7 +292,7 @@ def detection_round(robot: Robot, st: ReliableState, inbox: list[Message], now: 
                 for tt in [tt for tt in got if tt < t and tt != keep]:
                     del got[tt]
     chan.flush(now, heartbeat_to=() if robot.stopped else sorted(st.all_nbrs))
-    _measure(robot, st)
+    measure_state(robot, st)
 
 
 def detection_done(robot: Robot, st: ReliableState) -> bool:
@@ -315,15 +315,21 @@ def resolution_round(robot: Robot, st: ReliableState, inbox: list[Message], now:
     msgs = st.chan.receive(inbox, now)
     lost = st.chan.check_lost(now)
     if lost:
-        _cut_lost(robot, st, lost, phase_round)
+        cut_lost(robot, st, lost, phase_round)
     msgs = [m for m in msgs if m.kind in ("request", "reject")]
     resolution_step(robot, msgs, lambda dst, kind, p: st.chan.send(dst, kind, p, now), phase_round)
     st.chan.flush(now)
-    _measure(robot, st)
+    measure_state(robot, st)
 
 
 # ------------------------------------------------------------------------------------------
 # closing phase: every linked neighbour confirms it is alive (module docstring)
+
+def resolution_done(robot: Robot, st: ReliableState, lost_somewhere: bool) -> bool:
+    """The *done* predicate of Alg. 1 for a robot alone (:mod:`.termination`): every message
+    it sent is acknowledged."""
+    return st.chan.idle()
+
 
 def start_closing(robot: Robot, st: ReliableState, now: int) -> None:
     """Round 0 of the closing phase: an acknowledged ``closing`` to every linked neighbour.
@@ -334,7 +340,7 @@ def start_closing(robot: Robot, st: ReliableState, now: int) -> None:
     st.lost_in_phase = False
     for k in sorted(_linked_neighbours(robot) - st.chan.lost):
         st.chan.send(k, "closing", {}, now)
-    _measure(robot, st)
+    measure_state(robot, st)
 
 
 def closing_round(robot: Robot, st: ReliableState, inbox: list[Message], now: int,
@@ -348,6 +354,6 @@ def closing_round(robot: Robot, st: ReliableState, inbox: list[Message], now: in
     st.chan.receive(inbox, now)
     lost = st.chan.check_lost(now)
     if lost:
-        _cut_lost(robot, st, lost, phase_round)
+        cut_lost(robot, st, lost, phase_round)
     st.chan.flush(now)
-    _measure(robot, st)
+    measure_state(robot, st)

@@ -42,12 +42,13 @@ import numpy as np
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
 from pipeline.transport import Message
 
-__all__ = ["start_resolution", "resolution_step", "finish_resolution"]
+__all__ = ["start_resolution", "resolution_step", "finish_resolution", "classify_requests",
+           "settle_contention", "OUTCOME_A", "OUTCOME_B", "OUTCOME_C", "OUTCOME_D"]
 
 Send = Callable[[int, str, dict], None]
 
-# request outcomes
-_A, _B, _C, _D = 0, 1, 2, 3
+# outcomes of a request at its receiver: Alg. 1 lines 8-16, cases (a)-(d)
+OUTCOME_A, OUTCOME_B, OUTCOME_C, OUTCOME_D = 0, 1, 2, 3
 
 
 def start_resolution(robot: Robot, send: Send) -> int:
@@ -110,19 +111,19 @@ def classify_requests(cur: np.ndarray, q: np.ndarray, held: np.ndarray):
 
     Returns
     -------
-    outcome : (k,) int8 — ``_A`` (already in ``q``), ``_B`` (in another component), ``_C``
+    outcome : (k,) int8 — ``OUTCOME_A`` (already in ``q``), ``OUTCOME_B`` (in another component), ``OUTCOME_C``
         (target free, ``q`` held), ``-1`` for the candidates
     cand : (k',) int — indices of the candidates (target free, ``q`` not held), settled by
-        :func:`_settle_contention`
+        :func:`settle_contention`
     """
     outcome = np.full(q.size, -1, dtype=np.int8)
-    outcome[cur == q] = _A                        # (a)
-    outcome[(cur >= 0) & (cur != q)] = _B         # (b)
-    outcome[(cur < 0) & held] = _C                # (c)
+    outcome[cur == q] = OUTCOME_A                        # (a)
+    outcome[(cur >= 0) & (cur != q)] = OUTCOME_B         # (b)
+    outcome[(cur < 0) & held] = OUTCOME_C                # (c)
     return outcome, np.flatnonzero((cur < 0) & ~held)
 
 
-def _settle_contention(q: np.ndarray, r: np.ndarray, outcome: np.ndarray, cand: np.ndarray) -> None:
+def settle_contention(q: np.ndarray, r: np.ndarray, outcome: np.ndarray, cand: np.ndarray) -> None:
     """Cases for the candidate requests (target unassigned, ``q`` not held), in order.
 
     ``cand`` indexes the requests already sorted by (component, sender robot, sender feature).
@@ -131,18 +132,18 @@ def _settle_contention(q: np.ndarray, r: np.ndarray, outcome: np.ndarray, cand: 
     """
     qc, rc = q[cand], r[cand]
     if np.unique(qc).size == qc.size and np.unique(rc).size == rc.size:
-        outcome[cand] = _D
+        outcome[cand] = OUTCOME_D
         return
     taken_r: dict[int, int] = {}
     taken_q: set[int] = set()
     # only requests that compete for a feature or a component reach this loop
     for k, qq, rr in zip(cand.tolist(), qc.tolist(), rc.tolist(), strict=True):
         if rr in taken_r:
-            outcome[k] = _A if taken_r[rr] == qq else _B
+            outcome[k] = OUTCOME_A if taken_r[rr] == qq else OUTCOME_B
         elif qq in taken_q:
-            outcome[k] = _C
+            outcome[k] = OUTCOME_C
         else:
-            outcome[k] = _D
+            outcome[k] = OUTCOME_D
             taken_r[rr] = qq
             taken_q.add(qq)
 
@@ -169,16 +170,16 @@ def resolution_step(robot: Robot, inbox: list[Message], send: Send, round_: int)
         held = np.isin(q, robot.component[robot.component >= 0])
         outcome, cand = classify_requests(cur, q, held)
         if cand.size:
-            _settle_contention(q, r, outcome, cand)
+            settle_contention(q, r, outcome, cand)
 
-        cut_b = link[outcome == _B]
-        cut_c = link[outcome == _C]
+        cut_b = link[outcome == OUTCOME_B]
+        cut_c = link[outcome == OUTCOME_C]
         robot.delete_links(cut_b, round_, CASE_B)     # line 10
         robot.delete_links(cut_c, round_, CASE_C)
         _send_rejects(robot, np.concatenate([cut_b, cut_c, stale]),
                       send)                           # line 11
 
-        joined = outcome == _D
+        joined = outcome == OUTCOME_D
         new = np.zeros(robot.m, dtype=bool)
         if joined.any():
             robot.component[r[joined]] = q[joined]    # line 13

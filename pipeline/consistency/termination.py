@@ -58,23 +58,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.consistency.channel import Channel
-from pipeline.consistency.evidence import (
-    evidence_done,
-    evidence_round,
-    start_evidence_reliable,
-)
-from pipeline.consistency.protocols import RESOLUTION, ProtocolOptions, end_phase
+from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.reliable import (
     ReliableState,
     closing_round,
     detection_done,
     detection_round,
-    resolution_round,
     start_closing,
     start_detection_reliable,
-    start_resolution_reliable,
 )
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.rules import get_rule
 
 __all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
 
@@ -157,17 +151,21 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
     transport : RoundEndpoint — its end of the network
     protocol : ProtocolOptions or None — the fault-tolerant protocol's parameters
     n_robots : int or None — team size ``n`` (default ``robot.n``)
-    resolution : ``paper`` or ``evidence``
-        ``paper``: Alg. 1 over the reliable channel. ``evidence``: the flood-and-solve rule of
-        :mod:`.evidence` (the robot must hold its evidence, :func:`.evidence.equip`), ended by
-        the same wave with :func:`.evidence.evidence_done`; like the simulator, one pass
-        leaves the sets it solved conflict-free for the next detection.
+    resolution : str
+        A rule of :mod:`.rules`, run by its robot-alone functions (``start``, ``step``,
+        ``done``, ``finish``) and ended by the same wave: ``paper``, Alg. 1 over the reliable
+        channel; ``evidence``, the flood-and-solve rule of :mod:`.evidence` (the robot must
+        hold its evidence, :func:`.evidence.equip`), whose one pass leaves the sets it solved
+        conflict-free for the next detection, as in the simulator.
 
     Returns
     -------
     RobotRun
     """
     protocol = protocol or ProtocolOptions(reliable=True)
+    rule = get_rule(resolution)
+    rule_start, rule_step, rule_done, rule_finish = (
+        rule.hook(h) for h in ("start", "step", "done", "finish"))
     n = int(n_robots or robot.n)
     # the reliable protocol's own state, exactly as the simulator's ReliableProtocol holds it
     st = ReliableState(Channel(transport, protocol))
@@ -218,22 +216,14 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
             break
         log.iterations += 1
         start = transport.round
-        if resolution == "evidence":
-            roots = start_evidence_reliable(robot, st, transport.round)
-            rounds, bits = _run_phase(
-                robot, st, transport, wave,
-                lambda inbox, now, t: evidence_round(robot, st, inbox, now, t),
-                lambda: evidence_done(robot, st, bool(wave.bits & LOST)), res_cap, "resolution")
-            # the next detection examines the sets again (solved ones are conflict-free)
-            robot.candidates = robot.conflictive.copy()
-        else:
-            roots = start_resolution_reliable(robot, st, transport.round)
-            rounds, bits = _run_phase(
-                robot, st, transport, wave,
-                lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
-                chan.idle, res_cap, "resolution")
-            # unassigned conflictive features are examined again (Sec. IV after Cor. 4.4)
-            end_phase(RESOLUTION, [robot])
+        roots = rule_start(robot, st, transport.round)
+        rounds, bits = _run_phase(
+            robot, st, transport, wave,
+            lambda inbox, now, t: rule_step(robot, st, inbox, now, t),
+            lambda: rule_done(robot, st, bool(wave.bits & LOST)), res_cap, "resolution")
+        # what the next detection examines again (Alg. 1: the unassigned conflictive
+        # features, Sec. IV after Cor. 4.4; the evidence rule: its sets, now conflict-free)
+        rule_finish(robot)
         log.resolution_rounds += rounds
         log.phases.append(dict(phase="resolution", iteration=iteration, start_round=start,
                                rounds=rounds, roots=int(roots), lost_somewhere=bool(bits & LOST)))

@@ -3,5 +3,15 @@
 * :mod:`pipeline.fusion.consensus` — Metropolis weights, average/ML consensus (eqs. 1–3, 5),
   max-c consensus (eqs. 6–7), RANSAC hypothesis counts;
 * :mod:`pipeline.fusion.voting` — distributed ML, static voting (Sec. IV-A) and dynamic
-  voting (Sec. IV-B, eqs. 10–14).
+  voting (Sec. IV-B, eqs. 10–14);
+* :mod:`pipeline.fusion.flooding` — the exact mode: each track's observations flooded over
+  its observer graph, every robot computing the consensus limit (``FloodRobot``);
+* :mod:`pipeline.fusion.protocol` — the logical rounds over the transport (counted, or the
+  reliable channel in lockstep on a faulty network);
+* :mod:`pipeline.fusion.landmarks` — the stage: tracks, fusion of every track, outliers cut;
+* :mod:`pipeline.fusion.robot` — one robot's fusion over its own endpoint (its own process).
+
+May import: the shared words and graphs of the root, :mod:`pipeline.transport` and the
+robot side of :mod:`pipeline.consistency` (its reliable channel, protocol options and
+termination wave).
 """

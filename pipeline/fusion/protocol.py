@@ -66,7 +66,7 @@ consensus graph (Metropolis weights on the remaining graph, doubly stochastic ag
 switching graphs of Assumption 2.1); in the exact mode the lost links are flooded as
 tombstones and every survivor decides on its connected remainder
 (:mod:`pipeline.fusion.flooding`, "Crashes during the flood"). Robots crashed before the fusion stage starts take no
-part in it (:func:`pipeline.run.fusion_stage`). Network rounds are counted with a barrier at
+part in it (:func:`pipeline.stages.fusion_stage`). Network rounds are counted with a barrier at
 the end of every logical round (every robot waits for the slowest), an upper bound on the
 rounds an α-synchronizer needs.
 """

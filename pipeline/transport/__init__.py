@@ -28,6 +28,8 @@ fault-free one it counts its traffic in bulk (:meth:`Transport.count`).
 Byte encoding (stated, so numbers are comparable): a message is a fixed 12-byte header
 (sender, receiver, kind/length as three int32) followed by its payload arrays, each counted at
 its numpy ``nbytes``.
+
+May import: the shared words of the root (and, in :mod:`.zenoh_transport`, Zenoh).
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ class NetworkOptions:
     Notes
     -----
     The paper's algorithms are proven for the lossless static network. With any switch on,
-    :func:`~pipeline.consistency.engine.resolve_conflicts` has the robots run the
+    :func:`~pipeline.consistency.engines.driver.resolve_conflicts` has the robots run the
     fault-tolerant protocol of :mod:`pipeline.consistency.reliable` (unless told otherwise); the network itself
     only drops, delays and cuts.
     """

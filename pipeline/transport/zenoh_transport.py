@@ -98,7 +98,7 @@ class ZenohTransport(RoundEndpoint):
 
     Parameters
     ----------
-    team : pipeline.team.Team
+    team : pipeline.team.teamfile.Team
     robot_id : int
     drop_prob : float in [0, 1) — loss injected on outgoing algorithm messages
     seed : int — seed of the drops (combined with the robot id)

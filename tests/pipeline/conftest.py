@@ -1,4 +1,4 @@
-"""Shared fixtures of the real-image tests (pipeline.io, pipeline.colmap, run-images, clean-db)."""
+"""Shared fixtures of the real-image tests (pipeline.inputs.photos, pipeline.colmap, run-images, clean-db)."""
 
 import shutil
 from pathlib import Path

@@ -191,9 +191,9 @@ def test_not_a_database(tmp_path):
 @pytest.fixture(scope="module")
 def sceaux_matches(sceaux_small):
     from pipeline.commgraph import comm_graph
-    from pipeline.features import extract_all
-    from pipeline.io import load_folder
-    from pipeline.matching import match_edges
+    from pipeline.inputs.photos import load_folder
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.pairs import match_edges
 
     views = load_folder(sceaux_small, max_size=640)
     feats = extract_all(views, "sift", 1500)
@@ -249,10 +249,10 @@ def test_colmap_log_quieted_inside_calls_only():
     whole process; the adapter now quiets COLMAP only inside its calls."""
     import importlib
 
-    import pipeline.triangulation
+    import pipeline.evaluation.triangulation
 
     before = pycolmap.logging.minloglevel
-    importlib.reload(pipeline.triangulation)
+    importlib.reload(pipeline.evaluation.triangulation)
     assert pycolmap.logging.minloglevel == before
     with colmap.quiet_colmap(3):
         assert pycolmap.logging.minloglevel == max(before, 3)

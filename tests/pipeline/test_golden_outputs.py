@@ -37,7 +37,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.__main__ import main
-from pipeline.run import FormationConfig, run_formation
+from pipeline.runs.formation import FormationConfig, run_formation
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "golden_outputs.json"
 RECORD = os.environ.get("FORMATION_MATCH_RECORD_GOLDEN") == "1"
@@ -172,7 +172,7 @@ def test_guard_holds_on_another_cpu_kernel(tmp_path):
     the earlier, byte-exact guard failed on formations c and d; the decisions do not move."""
     out = tmp_path / "formation-d"
     env = dict(os.environ, OPENBLAS_CORETYPE="SandyBridge")
-    code = ("from pipeline.run import FormationConfig, run_formation; "
+    code = ("from pipeline.runs.formation import FormationConfig, run_formation; "
             f"run_formation(FormationConfig(formation='d', out={str(out)!r}, resolution='paper', "
             f"**{SMALL!r}))")
     subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)

@@ -76,7 +76,7 @@ def test_unknown_command_is_an_argparse_error(capsys):
 
 
 def test_run_without_rerun_or_fusion_imports_neither(tmp_path):
-    code = ("from pipeline.run import FormationConfig, run_formation\n"
+    code = ("from pipeline.runs.formation import FormationConfig, run_formation\n"
             f"run_formation(FormationConfig(formation='a', size=(160, 120), max_features=200, "
             f"fusion=False, rerun=False, out={str(tmp_path / 'run')!r}))\n"
             "assert 'pipeline.fusion.voting' not in sys.modules\n")
@@ -89,13 +89,13 @@ def test_run_without_rerun_or_fusion_imports_neither(tmp_path):
 #: optional libraries that the default run-formation never needs (team transport, plots,
 #: hloc files, tests, progress bars off a terminal, pandas that Rerun would use if present)
 NEVER_ON_THE_DEFAULT_PATH = ("zenoh", "matplotlib", "h5py", "hypothesis", "pytest", "tqdm",
-                             "pandas", "scipy.stats", "pyarrow.compute", "pipeline.teamrun",
-                             "pipeline.transport.zenoh", "pipeline.images")
+                             "pandas", "scipy.stats", "pyarrow.compute", "pipeline.team.assemble",
+                             "pipeline.transport.zenoh", "pipeline.runs.images")
 #: the modules of the default run-formation, in stage order
-DEFAULT_RUN_MODULES = ("pipeline.__main__", "pipeline.commands.run_formation", "pipeline.run",
-                       "data_synth", "pipeline.features", "pipeline.matching",
-                       "pipeline.consistency", "pipeline.fusion.landmarks", "pipeline.evaluate",
-                       "pipeline.metrics", "pipeline.report", "pipeline.oracle")
+DEFAULT_RUN_MODULES = ("pipeline.__main__", "pipeline.commands.run_formation", "pipeline.stages",
+                       "data_synth", "pipeline.matching.features", "pipeline.matching.pairs",
+                       "pipeline.consistency", "pipeline.fusion.landmarks", "pipeline.evaluation.links",
+                       "pipeline.evaluation.metrics", "pipeline.evaluation.report", "pipeline.evaluation.oracle")
 
 
 def test_default_run_modules_load_no_optional_library():

@@ -10,7 +10,7 @@ from test_rerun_log import N_DELETED, make_record
 
 from pipeline import colmap
 from pipeline.errors import InputError
-from pipeline.linkscsv import write_links_csv
+from pipeline.inputs.linkscsv import write_links_csv
 from viz.recording_reader import count_strips
 from viz.saved_run import log_run_folder, main, read_run_folder
 

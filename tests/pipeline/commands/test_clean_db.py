@@ -87,9 +87,9 @@ def test_comm_graph_file_cuts_links_between_non_neighbours(tmp_path):
 def test_sceaux_database_round_trip(tmp_path, sceaux_small):
     """A database built with pycolmap from real matches (all pairs of 4 Sceaux images)."""
     from pipeline.commgraph import comm_graph
-    from pipeline.features import extract_all
-    from pipeline.io import load_folder
-    from pipeline.matching import match_edges
+    from pipeline.inputs.photos import load_folder
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.pairs import match_edges
 
     views = load_folder(sceaux_small, max_size=640)
     feats = extract_all(views, "sift", 1500)
@@ -188,7 +188,7 @@ def test_out_is_required(tmp_path):
 
 
 def test_writes_links_csv_and_recording_beside_the_database(tmp_path, capsys):
-    from pipeline.linkscsv import read_run_links_csv
+    from pipeline.inputs.linkscsv import read_run_links_csv
     from viz.recording_reader import entity_paths
 
     src = tmp_path / "in.db"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pipeline.__main__ import main
-from pipeline.hloc import names_to_pair, read_h5
-from pipeline.linkscsv import read_run_links_csv
+from pipeline.inputs.hloc import names_to_pair, read_h5
+from pipeline.inputs.linkscsv import read_run_links_csv
 
 NAMES = ["a.jpg", "sub/b.jpg", "c.jpg"]  # a name with '/' is a nested group, as in hloc
 M = 20

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.__main__ import main
-from pipeline.hloc import names_to_pair
+from pipeline.inputs.hloc import names_to_pair
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hostile import one_line_error, refused, run_capped, tree  # noqa: E402
@@ -106,7 +106,7 @@ def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp
 
 
 def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
-    from pipeline.commands.clean_h5 import MAX_CANVAS_SIDE, _size_of
+    from pipeline.runs.clean_h5 import MAX_CANVAS_SIDE, _size_of
 
     assert _size_of(np.array([[1e30, 1e30]], np.float32)) == (MAX_CANVAS_SIDE, MAX_CANVAS_SIDE)
     assert _size_of(np.array([[-5.0, 3.0]], np.float32)) == (16, 16)
@@ -248,7 +248,7 @@ def test_image_dir_that_is_not_a_folder(files, tmp_path, capsys, case):
 
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(files, tmp_path, capsys, monkeypatch):
-    import pipeline.run as run
+    import pipeline.stages as run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

@@ -47,7 +47,7 @@ def test_meaningless_values_are_refused_before_any_work(no_render, capsys, flag,
 
 
 def test_ctrl_c_is_one_line_and_exit_130(monkeypatch, capsys):
-    import pipeline.run as run
+    import pipeline.stages as run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

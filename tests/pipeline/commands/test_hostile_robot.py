@@ -35,7 +35,7 @@ def team_dir(tmp_path):
 def no_session(monkeypatch):
     """A case that reached the robot's session would fail here instead of waiting for its
     neighbours: every case below must stop before."""
-    import pipeline.teamrobot as teamrobot
+    import pipeline.team.robot as teamrobot
 
     def opened(*a, **k):
         raise AssertionError("the robot opened its session")
@@ -239,7 +239,7 @@ def test_result_that_names_an_input_or_a_special_entry(team_dir, capsys, case, n
 
 
 def test_ctrl_c_is_one_line_exit_130(team_dir, capsys, monkeypatch):
-    import pipeline.teamrobot as teamrobot
+    import pipeline.team.robot as teamrobot
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
@@ -269,8 +269,8 @@ def test_port_in_use_is_one_line(team_dir):
 
 
 def test_team_feature_methods_are_the_pipelines():
-    from pipeline.features import METHODS
-    from pipeline.team import FEATURE_METHODS
+    from pipeline.matching.features import METHODS
+    from pipeline.team.teamfile import FEATURE_METHODS
 
     assert FEATURE_METHODS == METHODS
 
@@ -279,7 +279,7 @@ def test_links_beyond_the_declared_feature_counts_are_named(tmp_path):
     """A case that needs the robots' sessions: the ids are known only once a robot reads its
     rows of the links file; it fails with one line, which the launcher names."""
     from pipeline.errors import TeamError
-    from pipeline.launcher import launch_team, make_team
+    from pipeline.team.launcher import launch_team, make_team
 
     (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,5,1,0\n")
     team = make_team("t", [[0, 1]], {"kind": "links", "links": str(tmp_path / "in.csv"),

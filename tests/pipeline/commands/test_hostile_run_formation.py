@@ -95,7 +95,7 @@ def test_result_left_with_conflicts_exits_3_and_is_flagged(tmp_path, capsys):
 
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(tmp_path, capsys, monkeypatch):
-    import pipeline.run as run
+    import pipeline.stages as run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

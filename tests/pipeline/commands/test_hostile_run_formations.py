@@ -20,7 +20,7 @@ from hostile import one_line_error  # noqa: E402
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, monkeypatch, capsys, flag,
                                                         value, message):
-    import pipeline.run as run
+    import pipeline.runs.formation as run
 
     def never(*a, **k):
         raise AssertionError("a formation ran although the arguments are meaningless")
@@ -38,7 +38,7 @@ def test_meaningless_values_are_refused_before_any_work(tmp_path, monkeypatch, c
 ])
 def test_a_summary_file_it_did_not_write_is_never_replaced(tmp_path, monkeypatch, capsys,
                                                            file_name, text):
-    import pipeline.run as run
+    import pipeline.runs.formation as run
 
     def never(*a, **k):
         raise AssertionError("a formation ran although --out holds a user's file")
@@ -66,7 +66,7 @@ def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_pat
 
 def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(
         tmp_path, monkeypatch, capsys):
-    import pipeline.run as run
+    import pipeline.runs.formation as run
 
     monkeypatch.setattr(run, "run_formation", lambda *a, **k: pytest.fail("a formation ran"))
     a_file = tmp_path / "notes.txt"

@@ -13,7 +13,7 @@ from PIL import Image
 from pipeline.__main__ import main
 from pipeline.commgraph import comm_graph
 from pipeline.errors import InputError
-from pipeline.io import exif_focal_px, load_folder
+from pipeline.inputs.photos import exif_focal_px, load_folder
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hostile import one_line_error, tree  # noqa: E402
@@ -128,7 +128,7 @@ def test_images_without_features_are_named_in_a_warning(photos, tmp_path, capsys
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(photos, tmp_path, capsys,
                                                          monkeypatch):
-    import pipeline.run as run
+    import pipeline.stages as run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

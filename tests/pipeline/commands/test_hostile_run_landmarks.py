@@ -147,7 +147,7 @@ def test_labels_on_the_last_pixel_in_either_convention_are_accepted(folder, caps
 
 
 def test_too_many_landmarks_is_refused_before_matching(folder, capsys, monkeypatch):
-    import pipeline.landmarks_io as lio
+    import pipeline.inputs.landmarks as lio
 
     monkeypatch.setattr(lio, "MAX_LANDMARKS", K - 1)
     _fails(capsys, _argv(folder), folder, "8 landmarks per image; at most 7")
@@ -214,7 +214,7 @@ def test_out_naming_the_current_folder(folder, tmp_path, capsys, monkeypatch):
 
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(folder, capsys, monkeypatch):
-    import pipeline.landmark_matching as lm
+    import pipeline.matching.landmarks as lm
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

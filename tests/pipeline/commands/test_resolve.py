@@ -7,7 +7,7 @@ import pytest
 
 from pipeline.__main__ import main
 from pipeline.association import AssociationGraph, count_conflicts
-from pipeline.linkscsv import features_per_camera_for, read_run_links_csv
+from pipeline.inputs.linkscsv import features_per_camera_for, read_run_links_csv
 
 FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
 

@@ -9,7 +9,7 @@ import pycolmap
 import pytest
 
 from pipeline.association import AssociationGraph, count_conflicts
-from pipeline.run import FormationConfig, run_formation
+from pipeline.runs.formation import FormationConfig, run_formation
 from pipeline.types import Links
 
 SMALL = dict(formation="d", seed=0, size=(320, 240), max_features=600)
@@ -105,7 +105,7 @@ def test_recording_holds_kept_and_deleted_links(small_run):
 
 
 def test_failed_run_keeps_previous_run(small_run, monkeypatch):
-    import pipeline.triangulation as tri
+    import pipeline.evaluation.triangulation as tri
 
     out, report, _ = small_run
     before = (out / "report.json").read_bytes()

@@ -211,7 +211,7 @@ def test_bad_graph_kind(tmp_path, sceaux_small, capsys):
 
 
 def test_help_lists_only_available_features_and_surf_fails_first(tmp_path, capsys):
-    from pipeline.features import available_methods, surf_available
+    from pipeline.matching.features import available_methods, surf_available
 
     with pytest.raises(SystemExit):
         main(["run-images", "--help"])

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from pipeline.__main__ import main
-from pipeline.commands.run_landmarks import RESOLUTIONS, true_landmark_pairs
-from pipeline.metrics import association_pairs, pairwise_scores
+from pipeline.consistency.rules import RULES as RESOLUTIONS
+from pipeline.evaluation.metrics import association_pairs, pairwise_scores
+from pipeline.runs.landmarks import true_landmark_pairs
 from pipeline.types import Links
 
 HOTEL = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"

@@ -15,8 +15,9 @@ from test_closing import check_end_state, protocol, run
 from test_fault_tolerance import exact
 
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency import engine, resolve_conflicts
-from pipeline.consistency.engine import detect_once
+from pipeline.consistency import resolve_conflicts
+from pipeline.consistency.engines import driver as engine
+from pipeline.consistency.engines.driver import detect_once
 from pipeline.transport.simulated import Network, NetworkOptions, recurrent_topology
 
 FAST = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -16,7 +16,7 @@ from pipeline.consistency.evidence import (
     triangle_support,
 )
 from pipeline.errors import InputError
-from pipeline.link_evidence import ratio_llr
+from pipeline.matching.link_evidence import ratio_llr
 from pipeline.types import Links
 
 SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])

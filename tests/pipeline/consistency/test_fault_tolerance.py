@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
-from pipeline.consistency.engine import detect_once
+from pipeline.consistency.engines.driver import detect_once
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.transport.simulated import NetworkOptions, recurrent_topology
 from pipeline.types import Links

@@ -5,7 +5,7 @@ import numpy as np
 from pipeline.association import AssociationGraph, count_conflicts
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
-from pipeline.consistency.engine import detect_once
+from pipeline.consistency.engines.driver import detect_once
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
 

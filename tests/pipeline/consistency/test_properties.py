@@ -11,7 +11,7 @@ from pipeline.association import AssociationGraph
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
-from pipeline.consistency.engine import detect_once
+from pipeline.consistency.engines.driver import detect_once
 from pipeline.transport.simulated import Network
 
 SETTINGS = settings(max_examples=250, deadline=None,

@@ -10,8 +10,8 @@ from pipeline.types import Links
 
 def test_rendered_formation_d_conflicts_cut_to_zero():
     import data_synth
-    from pipeline.features import extract_all
-    from pipeline.matching import match_edges
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.pairs import match_edges
 
     f = data_synth.render("d", seed=0, size=(320, 240))
     feats = extract_all(f.views)

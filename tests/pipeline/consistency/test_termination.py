@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free
-from pipeline.consistency.engine import build_robots
+from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.termination import TerminationWave, run_consistency_locally
 from pipeline.transport.local import LocalTeam
 from pipeline.transport.simulated import NetworkOptions
@@ -146,7 +146,7 @@ def _run_team_evidence(fpc, edges, links, weight, options=None):
 @settings(max_examples=25, deadline=None)
 @given(instances())
 def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst):
-    from pipeline.link_evidence import ratio_llr
+    from pipeline.matching.link_evidence import ratio_llr
 
     fpc, edges, links = inst
     edges = comm_edges_for(fpc, links, edges)
@@ -165,7 +165,7 @@ def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst):
 
 
 def test_evidence_rule_alone_with_a_crash_ends_conflict_free():
-    from pipeline.link_evidence import ratio_llr
+    from pipeline.matching.link_evidence import ratio_llr
 
     fpc, edges, links = random_instance(np.random.default_rng(5), 6, 5, 1.0, 0.9)
     edges = comm_edges_for(fpc, links, edges)

@@ -104,9 +104,9 @@ def test_fusion_cuts_planted_wrong_but_consistent_observation(local):
 
 def test_fusion_cuts_planted_link_on_rendered_formation():
     import data_synth
-    from pipeline.evaluate import link_truth
-    from pipeline.features import extract_all
-    from pipeline.matching import match_edges
+    from pipeline.evaluation.links import link_truth
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.pairs import match_edges
 
     f = data_synth.render("d", seed=0, size=(320, 240))
     feats = extract_all(f.views)

@@ -104,7 +104,7 @@ def test_robot_crashed_during_fusion_leaves_the_graph_and_is_not_judged(mode, cr
 
 def test_robot_crashed_during_consistency_takes_no_part_in_fusion():
     from pipeline.faults import FaultConfig
-    from pipeline.run import clean_association
+    from pipeline.stages import clean_association
 
     views, feats, links, edges = _planted_rig()
     cleaning = clean_association(views, feats, edges, links, resolution="paper",
@@ -161,7 +161,7 @@ def test_a_crash_anywhere_in_consistency_or_fusion_never_cuts_the_crashed_robots
     """Through both stages: a robot crashed in either is no fusion voter and fusion never cuts
     its links; every cut link keeps one reason; fusion ends settled."""
     from pipeline.faults import FaultConfig
-    from pipeline.run import clean_association
+    from pipeline.stages import clean_association
 
     views, feats, links, edges = _planted_rig()
     faults = FaultConfig(crash=((robot, when),), drop_prob=drop, seed=seed)

@@ -1,0 +1,66 @@
+"""The one phase loop of the simulator: every robot of a team steps on its inbox, round after round.
+
+Used by the per-robot engine (:mod:`.driver`) for every phase and by the batched resolution
+(:mod:`.batched_resolution`) where it falls back to stepping the robots one by one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.consistency.protocols import DETECTION, RESOLUTION, end_phase
+from pipeline.consistency.robot import Robot
+from pipeline.transport import Transport
+
+__all__ = ["run_phase", "run_resolution_phase"]
+
+
+def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, iteration: int = 0,
+              max_rounds: int | None = None, on_round=None) -> dict:
+    """One phase (``detection`` or ``resolution``) on all robots: the one loop of the stage.
+
+    Round 0: every robot of the protocol's team starts the phase. Then, round after round,
+    the network delivers and every robot of the team (those still alive, for the reliable
+    protocol) takes one step on its inbox, until the protocol says the phase is over.
+
+    ``on_round`` (callable ``(round) -> None`` or None) is told each round (progress).
+
+    Returns
+    -------
+    dict — ``rounds``, ``start_round`` (network round of round 0), ``lost`` (some robot
+    declared a neighbour lost); detection: ``t_stop`` (n,) the round each robot stopped
+    (Prop. 3.5), ``conflictive_features``; resolution: ``conflictive_sets`` (sets rooted,
+    eq. 10); closing: nothing more
+    """
+    start_round = int(network.round)
+    live = protocol.team(robots)
+    rooted = sum(protocol.start(phase, rb, iteration) for rb in live)
+    cap = protocol.max_rounds(phase, robots) if max_rounds is None else max_rounds
+    t = 0
+    while True:
+        live = protocol.team(live)
+        if protocol.done(phase, live):
+            break
+        network.end_round()
+        t += 1
+        if on_round is not None:
+            on_round(t)
+        for rb in protocol.team(live):
+            protocol.step(phase, rb, network.inbox(rb.id), t)
+        if t > cap:
+            raise RuntimeError(f"{phase} did not end within {cap} rounds")
+    end_phase(phase, robots)
+    out = dict(rounds=t, start_round=start_round, lost=protocol.lost_in_phase(live))
+    if phase == DETECTION:
+        out.update(t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
+                   conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in live)))
+    elif phase == RESOLUTION:
+        out.update(conflictive_sets=int(rooted))
+    return out
+
+
+def run_resolution_phase(robots: list[Robot], network: Transport, protocol, iteration: int,
+                         on_round=None) -> dict:
+    """Alg. 1 (the ``paper`` rule's pass, :mod:`pipeline.consistency.rules`): the resolution
+    phase of :func:`run_phase` with the protocol's robot steps."""
+    return run_phase(robots, network, protocol, RESOLUTION, iteration, on_round=on_round)

@@ -1,0 +1,212 @@
+"""The resolution rules of the consistency stage, by name: the one registry.
+
+After a detection (Aragüés et al., Sec. III) every robot of a conflictive set holds the row
+``X_i·(t_i)`` of each of its conflictive features (``robot.conflictive``, ``robot.X``). A
+*resolution rule* decides which links the robots of each set cut so that the next detection
+finds fewer conflicts, talking only to their neighbours; the loop of Prop. 4.5 repeats
+detection and resolution until a detection finds none. ``paper`` is the paper's Alg. 1
+(:mod:`.resolution`; over the reliable channel :mod:`.reliable`); ``evidence`` floods each
+set's costed links and cuts the same deterministic solution at every robot
+(:mod:`.evidence`).
+
+Everything that names a rule reads this registry: the command line's ``--resolution``
+choices and help (:func:`pipeline.commands.options.add_resolution_option`), the check of
+``TEAM.json`` (:mod:`pipeline.team.teamfile`), the simulator's engines
+(:mod:`pipeline.consistency.engines.driver`), the robot program (:mod:`pipeline.team.robot`,
+through :mod:`.termination`), the per-link report (:mod:`.linklog`) and the report text
+(:mod:`pipeline.evaluation.report`, ``resolve``'s summary).
+
+What a rule provides (:class:`ResolutionRule`)
+----------------------------------------------
+Its functions are named ``"module:function"`` and imported on first use (as hloc loads its
+matchers by name), so that reading the registry loads nothing, and a robot process never
+loads the simulator's engines. Every rule runs after the paper's detection (Sec. III), on
+the sets it found.
+
+``simulate(robots, network, protocol, iteration, on_round=None) -> dict``
+    One resolution pass of all robots of the in-process simulator, each robot stepping on its
+    own inbox (the per-robot engine); returns at least ``rounds`` and ``conflictive_sets``.
+    On return every robot is ready for the next detection (what it re-examines is set).
+``batched`` (optional, same signature and result)
+    The same pass of all robots evaluated at once, used by the simulator where the batched
+    detection applies (fault-free network, the paper's protocol with delta messages); it must
+    give the per-robot engine's results, rounds, messages, bytes and memory (property-test it
+    as ``tests/pipeline/consistency/engines/test_batched.py`` does). ``None``: the per-robot
+    ``simulate`` runs after the batched detection.
+``start(robot, rel, now) -> int``, ``step(robot, rel, inbox, now, phase_round)``, ``done(robot, rel, lost_somewhere) -> bool``, ``finish(robot)``
+    The rule run by one robot alone, in its own process (``--transport zenoh``), over the
+    reliable channel of ``rel`` (a :class:`~.reliable.ReliableState`): round 0 (returns the
+    sets it takes part in), one network round on its inbox, its *done* predicate for the
+    termination wave of :mod:`.termination` (``lost_somewhere``: some robot declared a
+    neighbour lost in this phase), and what the next detection re-examines after the pass.
+``cases``
+    The deletion-log codes the rule writes in ``robot.deleted_case`` for a link it cuts, with
+    the name each gets in the per-link ``case`` (codes 1–4 are Alg. 1's and the protocol's,
+    :mod:`.robot`; take a new one).
+``fault_tolerant``
+    Whether the rule runs on a faulty network (the simulator's faults, message loss over
+    Zenoh). If not, the fault-tolerant Alg. 1 (``paper`` over the reliable protocol) runs
+    instead there, and the report says so.
+``needs_evidence``
+    Whether every robot must hold its links' evidence weights, its keypoints and (where its
+    pose is known) its projection before the stage (:func:`.evidence.equip`).
+``merge_radius_px``
+    The default radius of near-duplicate keypoints merged into one feature with this rule
+    (``None``: the co-location radius of :mod:`pipeline.matching.features`).
+``help``, ``title``, ``summary``
+    Its part of ``--resolution``'s help; what the stage line and reports call it; the text
+    of ``resolve``'s summary after ``deleted: N links``, formatted with the counts of
+    ``deleted_by_case`` (e.g. ``"(case b: {b}, case c: {c})"``).
+
+A new rule is one module (its robot side; a batched engine under :mod:`.engines` if wanted)
+and one :func:`register` call below. A rule kept outside the package registers itself when
+its module is imported; naming that module in the environment variable
+``FORMATION_MATCH_RULES`` (comma-separated module names) imports it with this registry, in
+every process, robot processes included.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass, field
+
+__all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rule_names",
+           "rule_for_network", "case_names", "deleted_cases", "ALG1_CASES"]
+
+#: the cases of Alg. 1 every report lists (line 10: (b) the feature is already in another
+#: component, (c) its camera already is); the fault-tolerant fallback cuts only these
+ALG1_CASES = ("b", "c")
+
+#: environment variable naming modules that register more rules (module docstring)
+PLUGINS_ENV = "FORMATION_MATCH_RULES"
+
+_HOOKS = ("simulate", "batched", "start", "step", "done", "finish")
+
+
+@dataclass(frozen=True)
+class ResolutionRule:
+    """One resolution rule (the module docstring says what each field is)."""
+
+    name: str
+    help: str
+    title: str
+    summary: str
+    cases: dict
+    simulate: str
+    start: str
+    step: str
+    done: str
+    finish: str
+    batched: str | None = None
+    fault_tolerant: bool = False
+    needs_evidence: bool = False
+    merge_radius_px: float | None = None
+    _loaded: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def hook(self, name: str):
+        """The function of field ``name`` (``simulate``, ``batched``, ``start``, ``step``,
+        ``done``, ``finish``), imported on first use; ``None`` for an absent ``batched``."""
+        if name not in _HOOKS:
+            raise KeyError(f"resolution rule hook {name!r}: one of {', '.join(_HOOKS)}")
+        if name not in self._loaded:
+            path = getattr(self, name)
+            if path is None:
+                self._loaded[name] = None
+            else:
+                module, _, function = path.partition(":")
+                self._loaded[name] = getattr(importlib.import_module(module), function)
+        return self._loaded[name]
+
+
+RULES: dict[str, ResolutionRule] = {}
+
+
+def register(rule: ResolutionRule) -> ResolutionRule:
+    """Add ``rule`` to the registry (ValueError if its name or a case code is taken)."""
+    if rule.name in RULES:
+        raise ValueError(f"resolution rule {rule.name!r} is already registered")
+    taken = {code for r in RULES.values() for code in r.cases}
+    if taken & set(rule.cases):
+        raise ValueError(f"resolution rule {rule.name!r}: case codes {sorted(taken & set(rule.cases))} "
+                         "are another rule's")
+    RULES[rule.name] = rule
+    return rule
+
+
+def unregister(name: str) -> None:
+    """Remove a rule from the registry (tests register toy ones)."""
+    del RULES[name]
+
+
+def rule_names() -> tuple[str, ...]:
+    """The registered rules' names, in registration order."""
+    return tuple(RULES)
+
+
+def get_rule(name: str) -> ResolutionRule:
+    """The registered rule ``name``.
+
+    Raises
+    ------
+    InputError
+        No rule of that name.
+    """
+    from pipeline.errors import InputError
+
+    if name not in RULES:
+        raise InputError(f"resolution {name!r}: choose one of {', '.join(RULES)}")
+    return RULES[name]
+
+
+def rule_for_network(name: str, faulty: bool) -> ResolutionRule:
+    """The rule that runs when ``name`` is asked for: itself, or on a faulty network the
+    fault-tolerant Alg. 1 when the rule is not fault-tolerant."""
+    rule = get_rule(name)
+    return RULES["paper"] if faulty and not rule.fault_tolerant else rule
+
+
+def deleted_cases(name: str) -> tuple[str, ...]:
+    """The ``case`` names a report counts the cuts of rule ``name`` by: Alg. 1's (b) and (c)
+    (the fault-tolerant fallback), then the rule's own."""
+    return tuple(dict.fromkeys((*ALG1_CASES, *get_rule(name).cases.values())))
+
+
+def case_names() -> dict[int, str]:
+    """Deletion-log code → per-link ``case`` name of every cut a rule decides."""
+    return {code: case for rule in RULES.values() for code, case in rule.cases.items()}
+
+
+# codes of robot.py (CASE_B, CASE_C) and evidence.py (CASE_EVIDENCE); a rule's cases are
+# written here literally so that reading the registry imports no robot code
+register(ResolutionRule(
+    name="paper",
+    help="paper = Alg. 1 of Aragues et al.",
+    title="detection (Sec. III) + resolution (Alg. 1) of Aragüés et al.",
+    summary="(case b: {b}, case c: {c})",
+    cases={1: "b", 2: "c"},
+    simulate="pipeline.consistency.engines.phases:run_resolution_phase",
+    batched="pipeline.consistency.engines.batched:run_resolution",
+    start="pipeline.consistency.reliable:start_resolution_reliable",
+    step="pipeline.consistency.reliable:resolution_round",
+    done="pipeline.consistency.reliable:resolution_done",
+    finish="pipeline.consistency.resolution:finish_resolution",
+    fault_tolerant=True))
+register(ResolutionRule(
+    name="evidence",
+    help="evidence = the robots of each set agree on the cut that keeps the best-supported "
+         "links",
+    title="detection (Sec. III) + the evidence-aware resolution (robots of a set agree on the "
+          "cut that keeps the best-supported links)",
+    summary="by the evidence rule",
+    cases={5: "evidence"},
+    simulate="pipeline.consistency.evidence:evidence_pass",
+    batched="pipeline.consistency.engines.batched_evidence:evidence_pass",
+    start="pipeline.consistency.evidence:start_evidence_reliable",
+    step="pipeline.consistency.evidence:evidence_round",
+    done="pipeline.consistency.evidence:evidence_done",
+    finish="pipeline.consistency.evidence:reexamine_sets",
+    needs_evidence=True,
+    merge_radius_px=2.0))
+for _module in filter(None, (m.strip() for m in os.environ.get(PLUGINS_ENV, "").split(","))):
+    importlib.import_module(_module)

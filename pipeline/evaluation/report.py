@@ -1,0 +1,265 @@
+"""The sections of ``report.json`` and its markdown tables (docs/DESIGN.md "Run outputs").
+
+Every run path (rendered formations, real photographs) builds its report from these pieces,
+so one figure is computed in one place: counts of the association graph (Aragüés et al.,
+Tables III–IV rows), the resolution and fusion sections read from the
+:class:`~pipeline.types.LinkLedger`, the centralized baselines, the matching section, and
+the paper's own Tables III–IV for side-by-side printing.
+"""
+
+from __future__ import annotations
+
+import platform
+
+import numpy as np
+
+from pipeline.association import AssociationGraph, count_conflicts
+from pipeline.consistency.rules import deleted_cases
+from pipeline.types import LinkLedger, Links
+
+__all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
+           "fusion_section", "baselines_section", "resolution_quality_section",
+           "matching_section", "report_markdown",
+           "mapping_markdown", "track_gt_points", "fused_point_errors"]
+
+#: Aragüés et al., Tables III and IV (SURF, real images, no ground truth), formations (a)–(d).
+PAPER_TABLE_III_IV = {
+    "Association sets": (528, 590, 605, 632),
+    "Conflictive sets (c)": (2, 22, 31, 72),
+    "Number of features m_sum": (1335, 1643, 1743, 2069),
+    "Conflictive features": (14, 144, 204, 521),
+    "Deleted links": (2, 26, 46, 131),
+    "Good deleted links": (1, 2, 19, 43),
+    "Spurious deleted links": (1, 24, 27, 88),
+}
+
+
+def versions() -> dict:
+    """Versions of Python and the libraries whose behaviour the figures depend on.
+
+    Rerun's is read from the installed package metadata, so that a run without a recording
+    (``--no-rerun``) does not import Rerun only to name its version.
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
+    import cv2
+    import scipy
+
+    from pipeline import __version__, colmap
+
+    try:
+        rerun_version = version("rerun-sdk")
+    except PackageNotFoundError:
+        rerun_version = None
+    return {"formation-match": __version__, "python": platform.python_version(),
+            "numpy": np.__version__, "scipy": scipy.__version__, "opencv": cv2.__version__,
+            "pycolmap": colmap.version(), "rerun-sdk": rerun_version}
+
+
+def association_counts(m, links: Links, good: np.ndarray | None, missing: int | None,
+                       graph: AssociationGraph | None = None) -> dict:
+    """Counts of the association graph of ``links`` (Tables III–IV rows) and, with ``good``
+    (``(L,)`` bool ground truth of ``links``), the good / spurious / missing links.
+    ``graph``: the :class:`AssociationGraph` of ``links``, when the caller has it."""
+    counts = count_conflicts(AssociationGraph(m, links) if graph is None else graph).as_dict()
+    if good is not None:
+        counts["good_links"] = int(good.sum())
+        counts["spurious_links"] = int((~good).sum())
+        counts["missing_links"] = int(missing) if missing is not None else None
+        counts["precision"] = float(good.mean()) if len(good) else None
+    return counts
+
+
+def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
+    """The report's ``resolution`` section: links cut by the resolution (``method``: the rule
+    of :mod:`pipeline.consistency.rules` that ran, e.g. Alg. 1 ``paper`` or ``evidence``) and
+    the stage's costs."""
+    cut = ledger.reason == "resolution"
+    out = {
+        "method": stats.get("resolution", "paper"),
+        "iterations": stats.get("iterations"),
+        "deleted_links": int(cut.sum()),
+        "detection_rounds": stats.get("detection_rounds"),
+        "resolution_rounds": stats.get("resolution_rounds"),
+        "messages": stats.get("messages"),
+        "bytes": stats.get("bytes"),
+        "max_robot_memory_bytes": stats.get("max_robot_memory_bytes"),
+    }
+    # Alg. 1 line 9: case (b) feature already in another component, (c) its camera already in;
+    # then the cases of the rule that ran (pipeline.consistency.rules)
+    out["deleted_by_case"] = {c: int((cut & (ledger.case == c)).sum())
+                              for c in deleted_cases(out["method"])}
+    good = ledger.good
+    if good is not None:
+        out["good_deleted"] = int((cut & good).sum())
+        out["spurious_deleted"] = int((cut & ~good).sum())
+    out["details"] = {k: v for k, v in stats.items() if k not in out and k != "resolution"}
+    return out
+
+
+def fusion_section(ledger: LinkLedger, stats: dict) -> dict:
+    """The report's ``fusion`` section: the stage's own figures and the links it cut (good and
+    spurious among them when the truth is known)."""
+    cut = ledger.reason == "fusion-outlier"
+    out = {**dict(stats), "cut_links": int(cut.sum())}
+    good = ledger.good
+    if good is not None:
+        out["cut_spurious"] = int((cut & ~good).sum())
+        out["cut_good"] = int((cut & good).sum())
+    return out
+
+
+def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=None,
+                      pairwise=None, masks: dict | None = None, graph_of=None) -> dict:
+    """The centralized baselines (:func:`pipeline.consistency.centralized.baselines`) on the
+    same links, for comparison only (never used by the robots).
+
+    Parameters
+    ----------
+    m : (n,) int — features per camera
+    links : Links, (L,)
+    good : (L,) bool or None — ground truth of ``links``
+    missing : callable ``Links -> int`` or None — missing links of a kept subset
+    pairwise : callable ``Links -> dict`` or None — pairwise scores of a kept subset
+    masks : dict or None — ``centralized.baselines(m, links)`` when the caller has it
+    graph_of : callable ``Links -> AssociationGraph`` or None — the graph of a kept subset,
+        when the caller keeps them
+    """
+    from pipeline.consistency import centralized
+
+    out = {}
+    for name, keep_mask in (centralized.baselines(m, links) if masks is None else masks).items():
+        keep_mask = np.asarray(keep_mask, dtype=bool)
+        kept = links.subset(keep_mask)
+        row = {**association_counts(m, kept, None if good is None else good[keep_mask],
+                                    None if missing is None else missing(kept),
+                                    None if graph_of is None else graph_of(kept)),
+               "deleted_links": int((~keep_mask).sum())}
+        if good is not None:
+            row["good_deleted"] = int((~keep_mask & good).sum())
+            row["spurious_deleted"] = int((~keep_mask & ~good).sum())
+        if pairwise is not None:
+            row["pairwise"] = pairwise(kept)
+        out[name] = row
+    return out
+
+
+def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,
+                               kept_masks: dict, graph: AssociationGraph | None = None) -> dict:
+    """Which links each resolution cut on the same input, against the truth.
+
+    Parameters
+    ----------
+    m : (n,) int — features per camera
+    links : Links, (L,) — the input of the resolution
+    good : (L,) bool — ground truth of ``links``
+    pairwise : callable ``Links -> dict`` — pairwise scores of a kept subset
+    kept_masks : dict ``method -> (L,) bool`` — what each method kept (distributed methods,
+        centralized baselines, the oracle of :func:`pipeline.evaluation.oracle.oracle_cut`)
+    graph : AssociationGraph or None — the graph of ``links``, when the caller has it
+
+    Returns
+    -------
+    dict ``method ->`` good cut, spurious cut, spurious links inside the input's conflictive
+    sets, spurious left there, links in those sets
+    (:func:`pipeline.evaluation.oracle.resolution_scores`) and ``pairwise_f1`` of the result.
+    """
+    from pipeline.evaluation.oracle import links_in_conflictive_sets, resolution_scores
+
+    in_sets = links_in_conflictive_sets(m, links, graph=graph)  # one input for every method
+    return {name: {**resolution_scores(m, links, good, kept, in_sets=in_sets),
+                   "pairwise_f1": pairwise(links.subset(kept))["f1"]}
+            for name, kept in kept_masks.items()}
+
+
+def matching_section(matches: list) -> dict:
+    """The report's ``matching`` section: links, putative matches and empty reason per edge."""
+    return {"edges": [{"i": p.i, "j": p.j, "links": int(len(p.pairs)),
+                       "putative": int(p.n_putative), "reason": p.reason} for p in matches]}
+
+
+def report_markdown(report: dict) -> str:
+    """The paper-style table (Tables III/IV rows) of one run as markdown."""
+    b, a, r = report["before"], report["after"], report["resolution"]
+    rows = [("Association sets", "association_sets"), ("Conflictive sets (c)", "conflictive_sets"),
+            ("Number of features m_sum", "m_sum"), ("Conflictive features", "conflictive_features"),
+            ("Links", "links"), ("Good links", "good_links"), ("Spurious links", "spurious_links"),
+            ("Missing links", "missing_links")]
+    lines = [f"## {report.get('title', 'run')}", "", "| | before | after |", "|---|---:|---:|"]
+    for label, key in rows:
+        if key in b:
+            lines.append(f"| {label} | {b[key]} | {a[key]} |")
+    lines += ["", "| Resolution | |", "|---|---:|"]
+    for key in ("iterations", "deleted_links", "good_deleted", "spurious_deleted",
+                "detection_rounds", "resolution_rounds", "messages", "bytes"):
+        if key in r:
+            lines.append(f"| {key.replace('_', ' ')} | {r[key]} |")
+    fusion, faults = report.get("fusion") or {}, report.get("faults") or {}
+    if "cut_links" in fusion:
+        lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
+    if "rounds" in fusion:
+        settled = {True: "stop rule", False: "round cap"}.get(fusion.get("settled"), "fixed")
+        if fusion.get("consensus") == "exact":
+            settled = "exact flood" if fusion.get("settled") else "exact flood, round cap"
+        lines.append(f"| fusion rounds (max-c + consensus, {settled}) | {fusion['rounds']} "
+                     f"({fusion.get('maxc_rounds', 0)} + {fusion.get('consensus_rounds', 0)}) |")
+        lines.append(f"| fusion messages / bytes | {fusion.get('messages', 0)} / "
+                     f"{fusion.get('bytes', 0)} |")
+    if "links_cut_robot_lost" in faults:
+        lines.append(f"| links cut to lost robots (robot-lost) | {faults['links_cut_robot_lost']} |")
+    return "\n".join(lines) + "\n"
+
+
+def mapping_markdown(before, after) -> str:
+    """Markdown rows of two incremental reconstructions (:class:`pipeline.colmap.MappingSummary`)."""
+    rows = [("Registered images", "registered_images"), ("Points", "points"),
+            ("Mean track length", "mean_track_length"),
+            ("Mean reprojection error [px]", "mean_reprojection_error")]
+    b, a = before.summary(), after.summary()
+    lines = ["", "| Reconstruction | before | after |", "|---|---:|---:|"]
+    lines += [f"| {label} | {b[key]} | {a[key]} |" for label, key in rows]
+    return "\n".join(lines) + "\n"
+
+
+def track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
+    """Ground-truth point of each triangulated track (medoid of its observations' points)."""
+    from pipeline.evaluation.triangulation import medoids
+
+    pts = medoids(all_gt, [t for t, ok in zip(tri.track_features, tri.ok, strict=True) if ok])
+    return pts[np.isfinite(pts).all(axis=1)]
+
+
+def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.ndarray,
+                       fused_track_ids: np.ndarray, gt_points: list,
+                       solved_tracks: dict | None = None) -> dict:
+    """Fused landmarks against ground truth and against pycolmap on the same tracks.
+
+    Fusion runs on the links kept by resolution; its tracks are numbered like
+    :func:`pipeline.association.association_sets` on those links (smallest feature id), so
+    the pycolmap triangulation of the same links gives the point to compare with.
+    ``solved_tracks``: the tracks the run has triangulated already
+    (:func:`pipeline.evaluation.triangulation.triangulate_tracks`).
+    """
+    from pipeline.evaluation.triangulation import medoids, triangulate_tracks
+
+    tri = triangulate_tracks(views, feats, resolved_links, solved_tracks=solved_tracks)
+    tracks = tri.track_features
+    all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
+    ids = np.asarray(fused_track_ids, dtype=np.int64)
+    pts = np.asarray(fused_points, dtype=np.float64).reshape(-1, 3)
+    gt = medoids(all_gt, [tracks[k] for k in ids])
+    err_gt = np.linalg.norm(pts - gt, axis=1)
+    err_gt = err_gt[np.isfinite(err_gt)]
+    ok = tri.ok[ids]
+    err_colmap = np.linalg.norm(pts[ok] - tri.xyz[ids[ok]], axis=1)
+    err_colmap_gt = np.linalg.norm(tri.xyz[ids[ok]] - gt[ok], axis=1)
+    err_colmap_gt = err_colmap_gt[np.isfinite(err_colmap_gt)]
+
+    def med(a):
+        return float(np.median(a)) if len(a) else None
+
+    return {"fused_points": int(len(pts)),
+            "median_error_vs_ground_truth": med(err_gt),
+            "p90_error_vs_ground_truth": float(np.percentile(err_gt, 90)) if len(err_gt) else None,
+            "median_pycolmap_error_vs_ground_truth": med(err_colmap_gt),
+            "median_distance_to_pycolmap": med(err_colmap)}

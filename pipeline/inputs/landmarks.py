@@ -1,0 +1,311 @@
+"""Folders of images with hand-labelled landmarks (multi-view matching benchmarks).
+
+Every image of such a folder comes with the same ``K`` labelled keypoints in the same order
+(row ``k`` is the same physical landmark in every image), so the true association of any two
+images is the identity on rows. Layout:
+
+* images: ``.png``, ``.jpg``, ``.jpeg``, ``.tif``, ``.tiff``, ``.bmp``, ``.ppm``, ``.pgm``;
+* keypoints, one file per image: ``NAME.txt`` (``K`` rows ``x y``, whitespace or comma
+  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``); OpenCV pixel convention;
+* optional descriptors, one file per image: ``NAME.scf`` (``K`` rows of numbers, e.g. the
+  60-bin shape contexts of the CMU hotel benchmark), or SIFT computed at the keypoints.
+
+Pairing of the files: when every image has a keypoint file of the same stem, by name.
+Otherwise (the CMU hotel files are ``hotel.seq0.png`` / ``hotel1.txt`` / ``hotel001.scf``)
+by *natural* name order (``seq2`` before ``seq10``) — the ``i``-th image with the ``i``-th
+keypoint file and the ``i``-th descriptor file — which needs equal counts. Text and MAT files
+that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
+keypoint files and are ignored.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frames",
+           "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+DESCRIPTOR_SOURCES = ("given", "sift")
+#: most labelled landmarks per image: matching builds a K x K cost matrix per image pair
+#: (5000: 200 MB in float64; labelled benchmarks carry tens to hundreds)
+MAX_LANDMARKS = 5000
+#: SIFT support region at a labelled keypoint: this fraction of the image's longest side
+#: (the labels carry no scale; 5 % covers a local patch in both small and large images)
+SIFT_SIZE_FRACTION = 0.05
+
+
+@dataclass
+class LandmarkFrame:
+    """One image of a labelled-landmark folder.
+
+    Attributes
+    ----------
+    name : str — image file name
+    image_path : Path
+    keypoints : ndarray, (K, 2) float64 — landmark ``k`` at row ``k``
+    descriptors : ndarray, (K, D) float64 or None — row ``k`` describes landmark ``k``
+    descriptor_kind : str — ``histogram`` (χ² distance) or ``vector`` (L2 distance)
+    keypoint_file, descriptor_file : str
+    """
+
+    name: str
+    image_path: Path
+    keypoints: np.ndarray
+    descriptors: np.ndarray | None = None
+    descriptor_kind: str = ""
+    keypoint_file: str = ""
+    descriptor_file: str = ""
+
+
+def natural_key(name: str) -> list:
+    """Sort key that orders embedded numbers by value: ``a2 < a10``."""
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower())
+            for t in re.split(r"(\d+)", name) if t]
+
+
+def _read_txt_keypoints(path: Path) -> np.ndarray | None:
+    """``(K, 2)`` from a text table, ``None`` if the file is not a 2-column numeric table."""
+    try:
+        text = path.read_text(errors="strict")
+    except (UnicodeDecodeError, OSError):
+        return None
+    rows = []
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        toks = line.replace(",", " ").split()
+        try:
+            vals = [float(t) for t in toks]
+        except ValueError:
+            return None
+        if len(vals) != 2:
+            return None
+        rows.append(vals)
+    if not rows:
+        return None
+    return np.asarray(rows, dtype=np.float64)
+
+
+def _read_mat_keypoints(path: Path) -> np.ndarray | None:
+    """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable."""
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(path, variable_names=["pts_coord"])
+    except Exception:  # noqa: BLE001 — any unreadable MAT file is simply not a keypoint file
+        return None
+    if "pts_coord" not in data:
+        return None
+    pts = np.asarray(data["pts_coord"], dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[0] != 2:
+        raise InputError(f"{path}: pts_coord has shape {pts.shape}, expected 2 x K "
+                         "(row 0 = x, row 1 = y)")
+    return pts.T.copy()
+
+
+def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
+    """InputError if a labelled keypoint of ``path`` is not finite or lies outside ``image``.
+
+    A keypoint may lie anywhere on the image's pixels in the 0-based (OpenCV, centres
+    ``0..W-1``) or the 1-based (MATLAB, centres ``1..W``) convention: ``-0.5 <= x <= W + 0.5``
+    and likewise for ``y``. Only the image's header is read.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise InputError(f"{path}: landmark row {row + 1} is {pts[row].tolist()}; every "
+                         "landmark needs finite pixel coordinates")
+    try:
+        with Image.open(image) as im:
+            w, h = im.size
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError,
+            Image.DecompressionBombError) as exc:
+        raise InputError(f"{image.name}: cannot read it as an image ({exc}); remove or replace "
+                         "the file (a truncated or non-image file)") from None
+    out = (pts[:, 0] < -0.5) | (pts[:, 0] > w + 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h + 0.5)
+    if out.any():
+        row = int(np.flatnonzero(out)[0])
+        raise InputError(f"{path}: landmark row {row + 1} at {pts[row].tolist()} lies outside "
+                         f"the {w}x{h} image {image.name}; fix the label (pixel coordinates, "
+                         "x to the right, y down)")
+
+
+def _read_descriptors(path: Path) -> np.ndarray:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an empty file: its row count says it
+            d = np.loadtxt(path, dtype=np.float64, ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"{path}: not a numeric table of descriptors ({exc})") from None
+    return d
+
+
+def select_frames(n_total: int, frames: int | None) -> np.ndarray:
+    """Indices of ``frames`` images taken at a fixed stride from the first.
+
+    The stride is ``floor(n_total / frames)``: frames ``0, s, 2s, ..., (frames - 1) s``, so a
+    subset spans the sequence (e.g. 20 of 101 → 0, 5, …, 95). ``None``: every frame.
+    """
+    if frames is None:
+        return np.arange(n_total)
+    if frames < 2 or frames > n_total:
+        raise InputError(f"--frames {frames}: expected 2..{n_total} (the folder holds "
+                         f"{n_total} labelled images)")
+    step = n_total // frames
+    return np.arange(frames) * step
+
+
+def load_landmark_folder(directory: str | Path, descriptors: str = "given",
+                         frames: int | None = None) -> list[LandmarkFrame]:
+    """Read a labelled-landmark folder (module notes) in natural name order.
+
+    Parameters
+    ----------
+    directory : folder
+    descriptors : ``given`` (one ``.scf`` file per image) or ``sift`` (computed at the
+        keypoints, :func:`sift_at_keypoints`)
+    frames : int or None — take this many images at a fixed stride (:func:`select_frames`)
+
+    Returns
+    -------
+    list[LandmarkFrame], (n,) — every frame with the same ``K``
+
+    Raises
+    ------
+    InputError
+        Missing folder, fewer than two images, images and keypoint files that cannot be
+        paired, keypoint files with different ``K``, ``given`` without one descriptor file
+        per image or with a row count other than ``K``, a bad ``descriptors`` value.
+    """
+    directory = Path(directory)
+    if descriptors not in DESCRIPTOR_SOURCES:
+        raise InputError(f"--descriptors {descriptors!r}: expected one of "
+                         f"{', '.join(DESCRIPTOR_SOURCES)}")
+    if not directory.is_dir():
+        raise InputError(f"{directory}: no such folder of labelled images")
+    files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
+                   key=lambda p: natural_key(p.name))
+    images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    if len(images) < 2:
+        raise InputError(f"{directory}: found {len(images)} image(s); a labelled-landmark "
+                         "folder needs at least two (image + NAME.txt or NAME.mat each)")
+    kp_files: list[tuple[Path, np.ndarray]] = []
+    rejected: dict[str, Path] = {}  # stem -> a .txt / .mat that is not a keypoint table
+    for p in files:
+        if p.suffix.lower() == ".txt":
+            pts = _read_txt_keypoints(p)
+        elif p.suffix.lower() == ".mat":
+            pts = _read_mat_keypoints(p)
+        else:
+            continue
+        if pts is not None:
+            kp_files.append((p, pts))
+        else:
+            rejected.setdefault(p.stem, p)
+    by_stem = {p.stem: (p, pts) for p, pts in kp_files}
+    if all(im.stem in by_stem for im in images):
+        pairing = "name"
+        kps = [by_stem[im.stem] for im in images]
+    elif len(kp_files) == len(images):
+        pairing = "order"
+        kps = kp_files
+    else:
+        named = [rejected[im.stem] for im in images
+                 if im.stem not in by_stem and im.stem in rejected]
+        if named:
+            raise InputError(f"{named[0]}: not a keypoint table (every line must be two numbers "
+                             "'x y'; a .mat file needs pts_coord 2 x K); fix or remove the file")
+        raise InputError(
+            f"{directory}: {len(images)} images but {len(kp_files)} keypoint files (NAME.txt "
+            "with K rows 'x y', or NAME.mat with pts_coord 2 x K); give each image a keypoint "
+            "file of the same name, or exactly one per image in the same name order")
+    K = {pts.shape[0] for _, pts in kps}
+    if len(K) != 1:
+        sizes = {p.name: pts.shape[0] for p, pts in kps}
+        first = next(iter(sizes))
+        other = next(n for n, k in sizes.items() if k != sizes[first])
+        raise InputError(f"{directory}: keypoint files hold different numbers of landmarks "
+                         f"({first}: {sizes[first]}, {other}: {sizes[other]}); every image must "
+                         "carry the same labelled landmarks in the same order")
+    k = next(iter(K))
+    if k > MAX_LANDMARKS:
+        raise InputError(f"{kps[0][0]}: {k} landmarks per image; at most {MAX_LANDMARKS} "
+                         "(matching compares every landmark of one image with every landmark "
+                         "of another)")
+    for im, (p, pts) in zip(images, kps, strict=True):
+        _check_keypoints(p, pts, im)
+    out = [LandmarkFrame(name=im.name, image_path=im, keypoints=pts, keypoint_file=p.name)
+           for im, (p, pts) in zip(images, kps, strict=True)]
+    if descriptors == "given":
+        desc_files = [p for p in files if p.suffix.lower() == ".scf"]
+        by_stem_d = {p.stem: p for p in desc_files}
+        if pairing == "name" and all(im.stem in by_stem_d for im in images):
+            dfiles = [by_stem_d[im.stem] for im in images]
+        elif len(desc_files) == len(images):
+            dfiles = desc_files
+        else:
+            raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
+                             f"(found {len(desc_files)} for {len(images)} images); or use "
+                             "--descriptors sift")
+        first = None
+        for fr, dp in zip(out, dfiles, strict=True):
+            d = _read_descriptors(dp)
+            if d.shape[0] != fr.keypoints.shape[0]:
+                raise InputError(f"{dp}: {d.shape[0]} descriptor rows for "
+                                 f"{fr.keypoints.shape[0]} landmarks of {fr.name}; expected one "
+                                 "row per landmark")
+            if not np.isfinite(d).all():
+                row = int(np.flatnonzero(~np.isfinite(d).all(axis=1))[0])
+                raise InputError(f"{dp}: descriptor row {row + 1} holds a non-finite value "
+                                 "(nan or inf); every descriptor must be finite numbers")
+            first = first or (dp, d.shape[1])
+            if d.shape[1] != first[1]:
+                raise InputError(f"{dp}: descriptors of {d.shape[1]} values but {first[0].name} "
+                                 f"has {first[1]}; every descriptor file needs the same width")
+            fr.descriptors, fr.descriptor_file = d, dp.name
+            # non-negative rows are histograms (shape contexts): compared by χ²
+            fr.descriptor_kind = "histogram" if (d >= 0).all() else "vector"
+        kinds = {fr.descriptor_kind for fr in out}
+        if len(kinds) > 1:
+            for fr in out:
+                fr.descriptor_kind = "vector"
+    sel = select_frames(len(out), frames)
+    out = [out[k] for k in sel]
+    if descriptors == "sift":
+        for fr in out:
+            fr.descriptors = sift_at_keypoints(fr.image_path, fr.keypoints)
+            fr.descriptor_kind, fr.descriptor_file = "vector", "sift"
+    return out
+
+
+def sift_at_keypoints(image_path: str | Path, keypoints: np.ndarray) -> np.ndarray:
+    """SIFT descriptors ``(K, 128)`` at the given keypoints (OpenCV ``compute``).
+
+    The labels carry no scale or orientation: every keypoint gets the diameter
+    ``SIFT_SIZE_FRACTION`` × the image's longest side and OpenCV's upright angle (0).
+    """
+    import cv2
+
+    from pipeline.inputs.photos import load_image
+
+    pixels, header = load_image(image_path)
+    header.close()
+    gray = pixels if pixels.ndim == 2 else cv2.cvtColor(pixels, cv2.COLOR_RGB2GRAY)
+    size = SIFT_SIZE_FRACTION * max(gray.shape[:2])
+    kps = [cv2.KeyPoint(float(x), float(y), float(size), 0.0) for x, y in keypoints]
+    _, desc = cv2.SIFT_create().compute(gray, kps)
+    if desc is None or desc.shape[0] != len(kps):
+        raise InputError(f"{image_path}: SIFT could not describe every labelled keypoint "
+                         "(keypoints outside the image?)")
+    return desc.astype(np.float64)

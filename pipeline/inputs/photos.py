@@ -1,0 +1,409 @@
+"""Real photographs in, :class:`~pipeline.types.View` records out.
+
+This is the entry of the real-image path of docs/DESIGN.md ("real images:
+``pipeline.inputs.photos.load_folder(dir)``"): it replaces the renderer of ``data_synth`` when a user
+brings their own photos. The papers assume every robot knows its calibration; internet photo
+sets do not, so each image gets its own intrinsics and says whether they are known
+(``View.intrinsics_known``), which decides between the essential and the fundamental matrix in
+``pipeline.matching.pairs``.
+
+Conventions
+-----------
+- Images are taken in name order; camera ``i`` is the ``i``-th image (docs/DESIGN.md "Conventions").
+- Pixel coordinates follow OpenCV (origin at the centre of the top-left pixel). Downscaling by
+  ``s`` maps ``x + 0.5 -> s (x + 0.5)``, so ``cx' = s (cx + 0.5) - 0.5`` and ``fx' = s fx``.
+- The EXIF orientation tag is not applied (as in COLMAP): pixels are used as stored, so a
+  ``K.txt`` written for the stored image stays valid.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from PIL import ExifTags, Image, UnidentifiedImageError
+
+from pipeline.errors import InputError
+from pipeline.types import View
+from pipeline.validate import check_focal, focal_px_ok
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "GUESS_FOCAL_FACTOR",
+    "guess_K",
+    "ImageIntrinsics",
+    "load_folder",
+    "load_image",
+    "read_k_txt",
+    "exif_focal_px",
+]
+
+log = logging.getLogger(__name__)
+
+#: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+#: Focal length of the stated guess, in units of the longest image side.
+GUESS_FOCAL_FACTOR = 1.2
+#: Diagonal of the 35 mm film frame (36 x 24 mm), the reference of ``FocalLengthIn35mmFilm``.
+_FILM_DIAGONAL_MM = float(np.hypot(36.0, 24.0))
+#: EXIF ``FocalPlaneResolutionUnit`` values -> millimetres per unit.
+_EXIF_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}
+
+
+@dataclass
+class ImageIntrinsics:
+    """Where the intrinsics of one image came from.
+
+    Attributes
+    ----------
+    K : ndarray, (3, 3) float64 — at the image's full (stored) resolution
+    source : str — ``K.txt``, ``exif-35mm``, ``exif-focal-plane`` or ``guess``
+    known : bool — ``False`` for the guess
+    """
+
+    K: np.ndarray
+    source: str
+    known: bool
+
+
+# --------------------------------------------------------------------------------------- images
+
+def _image_files(directory: Path) -> list[Path]:
+    if not directory.exists():
+        raise InputError(f"image folder {str(directory)!r} does not exist")
+    if not directory.is_dir():
+        raise InputError(f"{str(directory)!r} is not a folder: give the folder that holds the images")
+    files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
+                   key=lambda p: p.name)
+    images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    skipped = [p.name for p in files if p.suffix.lower() not in IMAGE_SUFFIXES]
+    if skipped:
+        log.info("skipping %d file(s) that are not images by suffix: %s", len(skipped),
+                 ", ".join(skipped))
+    if not images:
+        raise InputError(
+            f"no images in {str(directory)!r}: expected files ending in "
+            f"{', '.join(IMAGE_SUFFIXES)} (found {len(files)} other file(s))")
+    if len(images) == 1:
+        raise InputError(
+            f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "
+            f"two cameras; add more images")
+    return images
+
+
+def _to_uint8(arr: np.ndarray) -> np.ndarray:
+    """Map any integer/float pixel array to uint8.
+
+    8-bit data is returned as is. Deeper data (16-bit PNG/TIFF, 32-bit integer or float) is
+    stretched linearly from 0 to its maximum, because many 16-bit cameras use only 10–12 bits
+    and a fixed ``/ 257`` would leave the image nearly black (few SIFT detections).
+    """
+    if arr.dtype == np.uint8:
+        return arr
+    a = arr.astype(np.float64)
+    a = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
+    lo = min(float(a.min()), 0.0)
+    hi = float(a.max())
+    if hi <= lo:
+        return np.zeros(arr.shape, dtype=np.uint8)
+    return np.clip(np.rint((a - lo) * (255.0 / (hi - lo))), 0, 255).astype(np.uint8)
+
+
+def _pixels(im: Image.Image) -> np.ndarray:
+    """(H, W) gray or (H, W, 3) RGB uint8 pixels of a decoded Pillow image; alpha dropped."""
+    mode = im.mode
+    if mode in ("L", "RGB"):
+        return np.asarray(im)
+    if mode in ("1", "P", "PA", "LA", "La"):
+        im = im.convert("RGBA" if mode in ("P", "PA") else "L")
+        arr = np.asarray(im)
+        return arr[..., :3] if arr.ndim == 3 else arr
+    if mode in ("RGBA", "RGBa", "RGBX", "CMYK", "YCbCr", "LAB", "HSV"):
+        return np.asarray(im.convert("RGB"))
+    # I;16, I;16B, I;16L, I;16N, I (int32), F (float32): single-channel deep images
+    arr = np.asarray(im)
+    if arr.ndim == 3:
+        arr = arr[..., :3]
+    return _to_uint8(arr)
+
+
+def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
+    """Decode one image file completely.
+
+    Parameters
+    ----------
+    path : path of a JPEG, PNG or TIFF file
+
+    Returns
+    -------
+    pixels : ndarray, (H, W) uint8 gray or (H, W, 3) uint8 RGB, at full resolution
+    header : PIL.Image.Image — the opened file (for EXIF); its pixel data is already loaded
+
+    Raises
+    ------
+    InputError
+        The file is not an image Pillow can decode, or it is truncated / corrupt.
+    """
+    path = Path(path)
+    try:
+        im = Image.open(path)
+        im.load()  # forces the full decode: a truncated JPEG raises here, not later
+        pixels = _pixels(im)
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
+        raise InputError(
+            f"{path.name}: cannot read it as an image ({exc}); remove or replace the file "
+            f"(a truncated or non-image file)") from None
+    if pixels.ndim not in (2, 3) or min(pixels.shape[:2]) < 2:
+        raise InputError(f"{path.name}: image of shape {pixels.shape} is too small or not 2-D")
+    return np.ascontiguousarray(pixels), im
+
+
+# ----------------------------------------------------------------------------------- intrinsics
+
+def read_k_txt(path: str | Path) -> np.ndarray:
+    """Read pinhole intrinsics from a text file.
+
+    Accepted layouts: the 3x3 matrix ``fx 0 cx / 0 fy cy / 0 0 1`` (the Sceaux ``K.txt``;
+    a skew in ``K[0, 1]`` is kept), or the four numbers ``fx fy cx cy`` on one line.
+    Separators may be spaces, tabs or commas; ``#`` starts a comment.
+
+    Returns
+    -------
+    K : ndarray, (3, 3) float64
+
+    Raises
+    ------
+    InputError
+        The file is missing, does not hold 9 or 4 numbers, the last row is not ``0 0 1``,
+        ``K[1, 0]`` is not 0, or a focal length is not positive.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"intrinsics file {str(path)!r} does not exist")
+    try:
+        text = path.read_text(encoding="utf-8", errors="strict")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"intrinsics file {str(path)!r} is not a text file ({exc})") from None
+    tokens = [t for line in text.splitlines() for t in re.split(r"[\s,;]+", line.split("#")[0]) if t]
+    try:
+        values = np.array([float(t) for t in tokens], dtype=np.float64)
+    except ValueError:
+        bad = next(t for t in tokens if not _is_float(t))
+        raise InputError(
+            f"intrinsics file {str(path)!r}: {bad!r} is not a number; expected the 3x3 matrix "
+            f"'fx 0 cx / 0 fy cy / 0 0 1' or 'fx fy cx cy'") from None
+    if values.size == 4:
+        fx, fy, cx, cy = values
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    elif values.size == 9:
+        K = values.reshape(3, 3)
+    else:
+        raise InputError(
+            f"intrinsics file {str(path)!r} holds {values.size} numbers; expected 9 (the 3x3 "
+            f"matrix 'fx 0 cx / 0 fy cy / 0 0 1') or 4 ('fx fy cx cy')")
+    if not np.all(np.isfinite(K)):
+        raise InputError(f"intrinsics file {str(path)!r}: non-finite value in K = {K.tolist()}")
+    if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0:
+        raise InputError(
+            f"intrinsics file {str(path)!r}: K = {K.tolist()} is not a pinhole matrix "
+            f"(expected the rows 'fx s cx', '0 fy cy', '0 0 1')")
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError(f"intrinsics file {str(path)!r}: focal lengths must be positive, got "
+                         f"fx={K[0, 0]}, fy={K[1, 1]}")
+    return K
+
+
+def _is_float(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _rational(value) -> float | None:
+    try:
+        v = float(value)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+    return v if np.isfinite(v) and v > 0 else None
+
+
+def _exif_int(value) -> int | None:
+    """An EXIF SHORT tag as int (2 when absent or 0); None when it is not a number (the tag
+    comes from the file and may hold anything, e.g. a string)."""
+    try:
+        return int(value or 2)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
+def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, str] | None:
+    """Focal length in pixels from EXIF, at the stored ``width x height``, or ``None``.
+
+    Two routes, in this order:
+
+    1. ``FocalLengthIn35mmFilm`` ``f35``: the 35 mm equivalent is defined through the crop
+       factor on the diagonal, so ``f = f35 * hypot(w, h) / hypot(36, 24)``.
+    2. ``FocalLength`` (mm) times ``FocalPlaneXResolution`` (pixels per unit of
+       ``FocalPlaneResolutionUnit``); that resolution refers to ``ExifImageWidth`` pixels, so
+       it is rescaled when the stored width differs (the file was resized after capture).
+
+    Returns
+    -------
+    (focal_px, source) with source ``exif-35mm`` or ``exif-focal-plane``; ``None`` when
+    neither route has usable tags.
+    """
+    try:
+        exif = header.getexif()
+        sub = exif.get_ifd(ExifTags.IFD.Exif)
+    except Exception:  # noqa: BLE001 - a broken EXIF block just means "no EXIF"
+        return None
+    tags = {**dict(exif), **dict(sub)}
+    f35 = _rational(tags.get(ExifTags.Base.FocalLengthIn35mmFilm))
+    if f35 is not None:
+        return f35 * float(np.hypot(width, height)) / _FILM_DIAGONAL_MM, "exif-35mm"
+    f_mm = _rational(tags.get(ExifTags.Base.FocalLength))
+    xres = _rational(tags.get(ExifTags.Base.FocalPlaneXResolution))
+    unit_mm = _EXIF_UNIT_MM.get(_exif_int(tags.get(ExifTags.Base.FocalPlaneResolutionUnit, 2)))
+    if f_mm is None or xres is None or unit_mm is None:
+        return None
+    focal = f_mm * xres / unit_mm
+    exif_width = _rational(tags.get(ExifTags.Base.ExifImageWidth))
+    if exif_width is not None:
+        focal *= width / exif_width
+    return focal, "exif-focal-plane"
+
+
+def guess_K(width: int, height: int) -> np.ndarray:
+    """The stated guess: ``f = 1.2 max(w, h)``, principal point at the image centre."""
+    f = GUESS_FOCAL_FACTOR * max(width, height)
+    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def _exif_K(header: Image.Image, width: int, height: int) -> tuple[np.ndarray, str] | None:
+    found = exif_focal_px(header, width, height)
+    if found is None or not focal_px_ok(found[0], width, height):
+        return None  # no EXIF focal length, or one no lens has (a corrupt tag)
+    f, source = found
+    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]]), source
+
+
+def _resolve_intrinsics(intrinsics, directory: Path) -> tuple[str, np.ndarray | None, Path | None]:
+    """Normalise the ``intrinsics`` argument to (mode, K from file or None, file or None)."""
+    if isinstance(intrinsics, Path) or (isinstance(intrinsics, str) and intrinsics not in ("auto", "exif")):
+        path = Path(intrinsics)
+        return "file", read_k_txt(path), path
+    if intrinsics == "exif":
+        return "exif", None, None
+    if intrinsics == "auto":
+        k_file = directory / "K.txt"
+        if k_file.is_file():
+            return "file", read_k_txt(k_file), k_file
+        return "auto", None, None
+    raise InputError(f"intrinsics {intrinsics!r}: expected 'auto', 'exif' or the path of a K.txt file")
+
+
+def _scaled_K(K: np.ndarray, sx: float, sy: float) -> np.ndarray:
+    """Intrinsics after resizing by ``(sx, sy)`` in the OpenCV pixel convention (module notes)."""
+    S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+    return S @ K
+
+
+def downscale(pixels: np.ndarray, K: np.ndarray, max_size: int | None):
+    """The image with its longest side at most ``max_size`` (never upscaled) and its scaled K.
+
+    Returns ``(pixels, K)``; unchanged when ``max_size`` is ``None`` or already met.
+    """
+    h, w = pixels.shape[:2]
+    if max_size is None or max(w, h) <= max_size:
+        return pixels, K
+    s = max_size / max(w, h)
+    nw, nh = max(1, round(w * s)), max(1, round(h * s))
+    pixels = cv2.resize(pixels, (nw, nh), interpolation=cv2.INTER_AREA)
+    return pixels, _scaled_K(K, nw / w, nh / h)
+
+
+def load_folder(directory: str | Path, max_size: int | None = 1600,
+                intrinsics: str | Path = "auto") -> list[View]:
+    """Load every image of a folder as a :class:`View`, in name order.
+
+    Parameters
+    ----------
+    directory : folder of JPEG / PNG / TIFF images (gray, RGB, RGBA, 8 or 16 bit). Files with
+        other suffixes (e.g. ``K.txt``, ``SOURCE.txt``) are skipped; hidden files too.
+    max_size : int or None
+        Longest image side after downscaling (images are never upscaled); ``None`` keeps the
+        full resolution. The intrinsics are scaled with the image.
+    intrinsics : ``"auto"``, ``"exif"`` or path of a K.txt
+        - path: that ``K`` (at the images' full resolution) for every image; known.
+        - ``"exif"``: each image's EXIF focal length (:func:`exif_focal_px`), principal point
+          at the centre; known. An image without one is an error.
+        - ``"auto"``: ``DIR/K.txt`` if present (as the path case), otherwise per image EXIF if
+          present, otherwise the stated guess ``f = 1.2 max(w, h)``, principal point at the
+          centre, with ``intrinsics_known=False`` (matching then uses the fundamental matrix).
+
+    Returns
+    -------
+    views : list[View], (n,) with n >= 2
+        ``image`` (H, W) or (H, W, 3) uint8; ``K`` (3, 3) at the downscaled size; ``R, t`` None.
+        ``intrinsics_source`` is ``K.txt``, ``exif-35mm``, ``exif-focal-plane`` or ``guess``.
+
+    Raises
+    ------
+    InputError
+        Missing or empty folder, a single image, a file with an image suffix that cannot be
+        decoded (non-image or truncated), a K.txt that does not parse or whose principal point
+        lies outside an image, ``intrinsics="exif"`` on an image without EXIF focal length,
+        a bad ``max_size``.
+
+    Examples
+    --------
+    The copy of the Sceaux castle set kept with the tests (11 photographs and their K.txt):
+
+    >>> import pathlib, pipeline
+    >>> folder = pathlib.Path(pipeline.__file__).parents[1] / "tests/data/sceaux_castle_640"
+    >>> views = load_folder(folder, max_size=320)
+    >>> len(views), views[0].size, views[0].intrinsics_source
+    (11, (320, 240), 'K.txt')
+    """
+    directory = Path(directory)
+    if max_size is not None:
+        if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) or max_size < 16:
+            raise InputError(f"max_size {max_size!r}: expected an integer >= 16 (pixels of the "
+                             f"longest side), or None for full resolution")
+    files = _image_files(directory)
+    mode, K_file, k_path = _resolve_intrinsics(intrinsics, directory)
+    views: list[View] = []
+    for path in files:
+        pixels, header = load_image(path)
+        h, w = pixels.shape[:2]
+        if mode == "file":
+            K, source, known = K_file, "K.txt", True
+            cx, cy = K[0, 2], K[1, 2]
+            check_focal(K, w, h, str(k_path), path.name)
+            if not (0 <= cx <= w and 0 <= cy <= h):
+                raise InputError(
+                    f"{k_path}: principal point ({cx:g}, {cy:g}) lies outside image {path.name} "
+                    f"({w}x{h}); K.txt must be given at the images' full resolution")
+        else:
+            found = _exif_K(header, w, h)
+            if found is not None:
+                (K, source), known = found, True
+            elif mode == "exif":
+                raise InputError(
+                    f"{path.name}: no EXIF focal length (FocalLengthIn35mmFilm, or FocalLength "
+                    f"with FocalPlaneXResolution); use --intrinsics auto (guess) or a K.txt")
+            else:
+                K, source, known = guess_K(w, h), "guess", False
+        header.close()
+        pixels, K = downscale(pixels, K, max_size)
+        views.append(View(name=path.name, image=pixels, K=np.array(K, dtype=np.float64),
+                          intrinsics_known=known, intrinsics_source=source))
+    log.info("loaded %d images from %s (intrinsics: %s)", len(views), directory,
+             ", ".join(sorted({v.intrinsics_source for v in views})))
+    return views

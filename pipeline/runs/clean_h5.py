@@ -1,0 +1,108 @@
+"""The ``clean-h5`` job (:mod:`pipeline.commands.clean_h5` parses its options): hloc's
+``features.h5`` / ``matches.h5`` in, a cleaned ``matches.h5`` out.
+
+For hloc users: the matches of hloc's ``matches.h5`` are made consistent by the distributed
+consistency stage (Aragüés et al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot
+per image), and a NEW ``matches.h5`` is written in hloc's format with the cut matches removed
+(``matches0 = -1``), ready for ``hloc.reconstruction.main(..., matches=OUT.h5)``. The file
+layout is described in :mod:`pipeline.inputs.hloc`.
+
+The communication graph is the list of image pairs: ``--pairs pairs.txt`` (hloc's pairs file;
+only those pairs are read), else every pair stored in ``matches.h5``. Before the distributed
+stage, matches the paper's model cannot hold are cut with reason ``not-one-to-one`` (a
+keypoint matched twice into the same other image, Assumption 2.2). Beside OUT.h5 it writes
+``OUT.links.csv`` and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["clean_h5"]
+
+
+def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
+             pairs: str | Path | None = None, *, rerun: bool = True,
+             image_dir: str | Path | None = None) -> dict:
+    """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    Returns
+    -------
+    dict — the summary printed by the command (counts before/after, links cut by reason,
+    resolution figures, files written)
+
+    Raises
+    ------
+    InputError
+        Bad input files (see :func:`pipeline.inputs.hloc.read_h5`), ``out`` equal to the matches file
+        (the command checks every output against every input first,
+        :func:`pipeline.outputs.check_output_files`).
+    """
+    from pipeline.association import AssociationGraph, conflictive_links, count_conflicts
+    from pipeline.inputs import hloc
+    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.stages import consistency_stage
+
+    out = Path(out)
+    contents = hloc.read_h5(features, matches, pairs)
+    links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    cam = {name: k for k, name in enumerate(contents.names)}
+    if pairs is not None:
+        pair_list = hloc.read_pairs(pairs, set(contents.names))
+        edges = np.unique(np.sort(np.array([[cam[a], cam[b]] for a, b in pair_list]), axis=1),
+                          axis=0)
+    else:
+        edges = np.unique(np.stack([links.cam_i, links.cam_j], axis=1), axis=0)
+    reason = np.full(len(links), "", dtype=object)
+    reason[contents.not_one_to_one] = "not-one-to-one"
+    ok = reason == ""
+    model_links = links.subset(ok)
+    before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
+    result, _ = consistency_stage(m, edges, model_links)
+    idx = np.flatnonzero(ok)
+    reason[idx[result.deleted]] = "resolution"
+    rnd = np.full(len(links), -1, dtype=np.int64)
+    it = np.full(len(links), -1, dtype=np.int64)
+    rnd[idx] = result.round
+    it[idx] = result.iteration
+    conflictive = np.zeros(len(links), dtype=bool)
+    conflictive[idx] = conflictive_links(m, model_links)
+    keep = reason == ""
+    after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
+    hloc.write_cleaned_matches(contents, out, keep)
+    cut = {k: int((reason == k).sum()) for k in ("not-one-to-one", "resolution")}
+    md = (f"## clean-h5 {Path(matches).name}\n\n| | before | after |\n|---|---:|---:|\n"
+          f"| Matches | {len(links)} | {int(keep.sum())} |\n"
+          f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n"
+          f"| Cut not one-to-one | | {cut['not-one-to-one']} |\n"
+          f"| Cut by resolution | | {cut['resolution']} |\n")
+    outcome = CleaningOutcome(
+        names=contents.names, sizes=[_size_of(k) for k in contents.keypoints],
+        keypoints=contents.keypoints, links=links, reason=reason.astype(str), round=rnd,
+        iteration=it, conflictive_before=conflictive)
+    written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
+                                 report_markdown=md)
+    st = result.stats
+    return {"features": str(features), "matches": str(matches), "output": str(out),
+            "written": [str(out)] + [str(p) for p in written], "images": n,
+            "comm_edges": int(len(edges)), "links": int(len(links)), "before": before,
+            "after": after, "cut": cut,
+            "resolution": {k: st.get(k) for k in ("iterations", "detection_rounds",
+                                                  "resolution_rounds", "messages", "bytes")}}
+
+
+#: largest side of a gray canvas drawn for an image (keypoints beyond it are off the canvas)
+MAX_CANVAS_SIDE = 8192
+
+
+def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
+    """A canvas that holds every keypoint (hloc's features.h5 may omit ``image_size``), at most
+    :data:`MAX_CANVAS_SIDE` on a side."""
+    if len(keypoints) == 0:
+        return (64, 64)
+    w, h = np.clip(np.ceil(keypoints.max(axis=0) + 1), 16, MAX_CANVAS_SIDE).astype(int)
+    return (int(w), int(h))
+
+

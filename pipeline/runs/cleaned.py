@@ -1,0 +1,111 @@
+"""What the cleaning commands (``clean-db``, ``clean-h5``) cut, and why, as files a user opens.
+
+Both commands make another tool's matches consistent (Aragüés et al., Sec. III detection and
+Sec. IV Alg. 1 resolution, one robot per image) and write the cleaned matches in that tool's
+format. Beside them they write, with the same stem:
+
+- ``STEM.links.csv`` — the run-output ``links.csv`` (docs/DESIGN.md "Run outputs"): every link read,
+  ``kept`` or ``deleted`` with its reason (``not-one-to-one``, ``not-comm-edge``,
+  ``resolution``) and the resolution round that cut it; camera ``i`` is the ``i``-th image name
+  in sorted order. ``resolve --links STEM.links.csv`` reads it back.
+- ``STEM.rrd`` — a Rerun recording: each image (from ``--image-dir``, else a gray canvas of the
+  camera's size) with its keypoints coloured by status, the conflict graph, the report. The
+  cameras have no pose (the input holds none), so they are drawn as images only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.types import Features, Links, View
+
+__all__ = ["side_paths", "CleaningOutcome", "write_side_outputs"]
+
+
+def side_paths(out: str | Path) -> tuple[Path, Path]:
+    """``(STEM.links.csv, STEM.rrd)`` beside the cleaned file ``out``."""
+    out = Path(out)
+    stem = out.with_suffix("") if out.suffix else out
+    return stem.with_name(stem.name + ".links.csv"), stem.with_name(stem.name + ".rrd")
+
+
+@dataclass
+class CleaningOutcome:
+    """Per-link decisions of a cleaning command, ``(L,)`` arrays aligned with ``links``."""
+
+    names: list[str]
+    sizes: list[tuple[int, int]]
+    keypoints: list[np.ndarray]
+    links: Links
+    reason: np.ndarray
+    round: np.ndarray
+    iteration: np.ndarray
+    conflictive_before: np.ndarray
+
+    @property
+    def kept(self) -> np.ndarray:
+        return np.asarray(self.reason, dtype=str) == ""
+
+
+def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View:
+    w, h = (max(int(size[0]), 1), max(int(size[1]), 1))
+    image = None
+    if image_dir is not None:
+        from pipeline.inputs.photos import load_image
+
+        path = image_dir / name
+        if not path.is_file():
+            raise InputError(f"--image-dir {str(image_dir)!r}: no image {name!r} in it")
+        image, header = load_image(path)
+        header.close()
+    if image is None:
+        image = np.full((h, w), 96, dtype=np.uint8)
+    ih, iw = image.shape[:2]
+    f = 1.2 * max(iw, ih)
+    K = np.array([[f, 0.0, (iw - 1) / 2.0], [0.0, f, (ih - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return View(name=name, image=image, K=K, intrinsics_known=False)
+
+
+def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool = True,
+                       image_dir: str | Path | None = None, report_markdown: str = "") -> list[Path]:
+    """Write ``STEM.links.csv`` and (with ``rerun``) ``STEM.rrd`` beside ``out``.
+
+    Returns the paths written. Keypoints read from another tool are scaled to the images of
+    ``image_dir`` when those differ in size from the stored camera size.
+    """
+    from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.types import LinkLedger
+
+    links_csv, rrd = side_paths(out)
+    kept = outcome.kept
+    L = len(outcome.links)
+    ledger = LinkLedger(outcome.links, np.where(kept, "kept", "deleted"), outcome.reason,
+                        outcome.round, outcome.iteration, np.full(L, "", dtype=object),
+                        None, outcome.conflictive_before)
+    write_links_csv(links_csv, ledger)
+    written = [links_csv]
+    if rerun:
+        from pipeline.types import RunRecord
+        from viz.rerun_log import log_run
+
+        image_dir = Path(image_dir) if image_dir is not None else None
+        views, feats = [], []
+        for name, size, kp in zip(outcome.names, outcome.sizes, outcome.keypoints, strict=True):
+            v = _load_view(name, size, image_dir)
+            kp = np.asarray(kp, dtype=np.float32).reshape(-1, 2)
+            if image_dir is not None and size[0] > 0 and v.size != tuple(size):
+                s = np.array([v.size[0] / size[0], v.size[1] / size[1]], np.float32)
+                kp = (kp + 0.5) * s - 0.5
+            views.append(v)
+            feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                                  np.ones(len(kp), np.float32), "external"))
+        record = RunRecord(
+            views=views, features=feats, ledger=ledger, points=np.zeros((0, 3)),
+            point_tracks=np.zeros(0, dtype=np.int64), report_markdown=report_markdown)
+        log_run(rrd, record)
+        written.append(rrd)
+    return written

@@ -1,0 +1,360 @@
+"""The whole pipeline on real photographs (``python -m pipeline run-images DIR --graph KIND``).
+
+The stages of a formation run (docs/DESIGN.md "Data flow") without ground truth: load and
+downscale the images with their own intrinsics (:mod:`pipeline.inputs.photos`), features, matching on the
+user's comm-graph edges only, the distributed consistency stage (Aragüés et al., Sec. III
+detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
+cleaned tracks a pycolmap incremental reconstruction from the matches before and after
+cleaning (:mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run outputs" with
+``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``. With
+``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.evaluation.truth`)
+the ``truth`` column and every ground-truth figure of a formation run are filled in.
+
+Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
+supplies them (and refines guessed focal lengths). Fusion runs among the images it registered
+(at least two); the others take no part, like crashed robots, and the report names them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.outcome import flag_result
+from pipeline.progress import StageTimer
+from pipeline.runfolder import atomic_run_folder, write_json_atomic
+from pipeline.types import Links, View
+
+__all__ = ["ImagesConfig", "run_images"]
+
+
+@dataclass
+class ImagesConfig:
+    """Options of ``run-images`` (see ``python -m pipeline run-images --help``)."""
+
+    directory: str
+    graph: str
+    intrinsics: str = "auto"
+    max_size: int | None = 1600
+    features: str = "sift"
+    #: per image; None = scaled with the image size (pipeline.matching.features.photo_max_features)
+    max_features: int | None = None
+    #: SIFT contrast threshold (None = OpenCV's 0.04; 0.02 = COLMAP's DoG peak threshold,
+    #: pipeline.matching.features.PHOTO_CONTRAST_THRESHOLD); RootSIFT descriptors; epipolar threshold in
+    #: pixels (None = scaled with the image size, pipeline.matching.pairs.photo_threshold_px); the
+    #: feature budget counts distinct locations (pipeline.matching.features.extract)
+    contrast_threshold: float | None = 0.02
+    rootsift: bool = True
+    threshold_px: float | None = None
+    budget_after_merge: bool = True
+    fusion: bool = True
+    rerun: bool = True
+    export_db: bool = False
+    out: str | None = None
+    threads: int = 1
+    truth: str = "none"
+    truth_tol_px: float = 2.0
+    resolution: str = "evidence"
+    merge_radius: float | None = None
+    #: also stream the recording to a live viewer: "spawn", "connect" or a gRPC URL
+    live: str | None = None
+    #: "sim" (robots in this process) or "zenoh" (one robot process per photograph; no fusion)
+    transport: str = "sim"
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        folder = Path(self.directory).resolve().name or "images"
+        graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
+        return Path("runs") / f"images-{folder}-{graph}"
+
+
+# ------------------------------------------------------------------------------------ the run
+
+def _posed(views: list[View], poses: dict) -> list[View]:
+    """Copies of ``views`` with ``R, t`` (and the refined ``K``) of the registered ones."""
+    out = []
+    for v in views:
+        if v.name in poses:
+            R, t, K = poses[v.name]
+            out.append(dataclasses.replace(v, R=R, t=t, K=K))
+        else:
+            out.append(v)
+    return out
+
+
+def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
+                     timer: StageTimer) -> None:
+    """Fusion (Montijano et al., dynamic voting) among the robots whose pose is known.
+
+    Real images have no poses; the reconstruction before cleaning gives them (and refines
+    guessed focal lengths). A robot whose image it did not register cannot form a local
+    landmark estimate, so it takes no part: fusion runs on the registered cameras, their kept
+    links and the comm edges between them (like a crashed robot). Links to an unregistered
+    camera are left as the consistency stage left them. Cut links get reason
+    ``fusion-outlier`` in ``cleaning.ledger``; ``cleaning`` is updated in place.
+    """
+    from pipeline import colmap
+    from pipeline.stages import fusion_stage
+
+    poses = colmap.registered_poses(mapping.reconstruction)
+    reg = np.array([k for k, v in enumerate(views) if v.name in poses], dtype=np.int64)
+    if len(reg) < 2:
+        cleaning.fusion_stats = {"enabled": False, "reason": (
+            f"camera poses unknown: the reconstruction before cleaning registered "
+            f"{len(reg)} of {len(views)} images")}
+        return
+    fr, n_cut = fusion_stage(cleaning.ledger, _posed(views, poses), features, comm_edges,
+                             cameras=reg, timer=timer, track_labels=cleaning.track_labels,
+                             detail=f", {len(reg)} of {len(views)} cameras posed")
+    cleaning.fused_points = np.asarray(fr.points)
+    cleaning.fusion_stats = {
+        "enabled": True, "poses_from": "reconstruction before cleaning",
+        "cameras": int(len(reg)),
+        "cameras_without_pose": [v.name for v in views if v.name not in poses],
+        **dict(fr.stats), "observations_cut_links": n_cut}
+
+
+def _points_and_tracks(mapping, views: list[View], features, kept: Links):
+    """3D points of the reconstruction, for each the association set of its first
+    observation in the kept association graph (``-1`` when that feature is in none), and its
+    RGB colour at that observation, ``(P, 3)`` uint8."""
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph
+
+    xyz, _, names, point2d = colmap.model_points(mapping.reconstruction)
+    if not len(xyz):
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3), np.uint8)
+    cam_of_name = {v.name: k for k, v in enumerate(views)}
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    graph = AssociationGraph(m, kept)
+    labels = graph.components()
+    first = np.array([graph.offsets[cam_of_name[n]] for n in names], dtype=np.int64) + point2d
+    sizes = np.bincount(labels, minlength=labels.max() + 1 if labels.size else 0)
+    tracks = np.where(sizes[labels[first]] >= 2, labels[first], -1)
+    # colour of each point: its first observation's pixel in that image
+    colors = np.zeros((len(xyz), 3), np.uint8)
+    for k, (name, idx) in enumerate(zip(names, point2d, strict=True)):
+        cam = cam_of_name[name]
+        img = views[cam].image
+        u, v = np.rint(features[cam].keypoints[idx]).astype(int)
+        px = img[min(max(v, 0), img.shape[0] - 1), min(max(u, 0), img.shape[1] - 1)]
+        colors[k] = px if np.ndim(px) == 0 else px[:3]
+    return xyz, tracks, colors
+
+
+def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
+    """Run every stage on a folder of photographs and write the run folder; return its path.
+
+    Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
+    consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
+    reconstruction after cleaning → outputs (report.json with ``flags``, links.csv with
+    ``truth`` empty, sparse/ = the reconstruction after cleaning at the resolution of the image
+    files, with colours, recording.rrd, database.db with ``export_db``).
+
+    Raises
+    ------
+    InputError
+        Bad folder, images, intrinsics or graph (see :func:`pipeline.inputs.photos.load_folder` and
+        :func:`pipeline.commgraph.comm_graph`), or a bad feature method.
+    """
+    from pipeline import colmap
+    from pipeline.commgraph import comm_graph
+    from pipeline.evaluation import report as sections
+    from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.inputs.photos import load_folder
+    from pipeline.matching.retrieval import knn_edges
+    from pipeline.runs.transports import get_transport
+    from pipeline.stages import clean_association
+
+    timer = timer or StageTimer()
+    out = config.out_dir()
+    with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
+        intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
+            else Path(config.intrinsics)
+        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
+        names = [v.name for v in views]
+        by_similarity = str(config.graph).startswith("knn:")
+        comm_edges = None if by_similarity else comm_graph(config.graph, names)
+        sources = sorted({v.intrinsics_source for v in views})
+        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
+                   f"{config.graph}: " + ("chosen by image similarity after the features"
+                                          if by_similarity else f"{len(comm_edges)} edges"))
+    chosen = {}
+
+    def graph_from_features(features):
+        # knn:K: neighbours by image similarity (pipeline.matching.retrieval), once the features exist
+        chosen["edges"] = comm_graph(config.graph, names,
+                                     knn=lambda k: knn_edges(features, k)[0])
+        timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
+        return chosen["edges"]
+
+    # features and matching, by the robots of the transport (over zenoh they also detect
+    # and resolve; this process then only observes)
+    robots = get_transport(config.transport).load().images(config, views, comm_edges, timer,
+                                                            graph_from_features)
+    feats, matches, links, cleaning, team = (robots.features, robots.matches, robots.links,
+                                             robots.cleaning, robots.team)
+    if by_similarity:
+        comm_edges = chosen["edges"]
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+
+    with tempfile.TemporaryDirectory(prefix="run-images-") as work:
+        work = Path(work)
+        # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed
+        # focal lengths are refined
+        fixed = [v.name for v in views if colmap.calibrated(v)]
+        with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links"):
+            db_before = colmap.write_database(work / "before.db", views, feats, links)
+            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
+                                                    fixed_intrinsics=fixed)
+            timer.note(_mapping_note(map_before))
+        if cleaning is None:
+            cleaning = clean_association(views, feats, comm_edges, links, fusion=False,
+                                         timer=timer, resolution=config.resolution,
+                                         matches=matches)
+        if team is not None:
+            pass  # fusion does not run over the zenoh transport (cleaning.fusion_stats says so)
+        elif not config.fusion:
+            cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
+        elif importlib.util.find_spec("pipeline.fusion.landmarks") is None:
+            cleaning.fusion_stats = {"enabled": False,
+                                     "reason": "fusion stage (pipeline.fusion.landmarks) not "
+                                               "available in this build"}
+        else:
+            _fuse_registered(cleaning, views, feats, comm_edges, map_before, timer)
+        ledger = cleaning.ledger
+        kept = ledger.kept
+        kept_links = links.subset(kept)
+        with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
+            db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
+            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads,
+                                                   fixed_intrinsics=fixed)
+            timer.note(_mapping_note(map_after))
+
+        report = {
+            "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
+            "n_cameras": len(views),
+            "comm_edges": comm_edges.tolist(),
+            "features_per_camera": m.tolist(),
+            "before": sections.association_counts(m, links, None, None),
+            "after": sections.association_counts(m, kept_links, None, None),
+            "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
+            "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
+            "triangulation": {"method": "pycolmap incremental mapping from the matches "
+                                        "(two-view geometries = links before / kept links after)",
+                              "before": map_before.summary(), "after": map_after.summary()},
+            "baselines": sections.baselines_section(m, links),
+            "matching": sections.matching_section(matches),
+            "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
+                        "intrinsics_source": v.intrinsics_source,
+                        "intrinsics_known": bool(v.intrinsics_known)} for v in views],
+            "versions": sections.versions(),
+            "config": {**asdict(config), "out": str(out)},
+        }
+        if team is not None:
+            report["team"] = team
+        if cleaning.fused_points is not None:
+            report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+        if config.truth == "homographies":
+            from pipeline.evaluation.truth import fill_report
+
+            with timer.stage("evaluate", "ground truth from the homographies"):
+                fill_report(report, config.directory, views, feats, comm_edges, ledger,
+                            config.truth_tol_px)
+        flag_result(report, names)
+        report["flags"] = _flags(views, feats, ledger, comm_edges, matches, map_before,
+                                 map_after)
+        for f in report["flags"]:
+            timer.warn(f"{f['message']}. Likely cause: {f['likely_cause']}.")
+        from pipeline.evaluation.flags import flags_markdown
+
+        md = (sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
+              + flags_markdown(report["flags"]))
+
+        with timer.stage("write", str(out)):
+            with atomic_run_folder(out) as tmp:
+                write_links_csv(tmp / "links.csv", ledger)
+                # sparse/ at the resolution of the image files it names (the mapping ran on
+                # downscaled copies), with colours from those files
+                colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction,
+                                             _file_sizes(views, Path(config.directory)),
+                                             config.directory)
+                if config.export_db:
+                    shutil.copyfile(db_after, tmp / "database.db")
+                if config.rerun:
+                    _write_recording(tmp / "recording.rrd", views, feats, cleaning,
+                                     map_before, map_after, kept_links, md, live=config.live)
+                report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+                write_json_atomic(tmp / "report.json", report)
+    print(md)
+    return out
+
+
+def _file_sizes(views: list[View], directory: Path) -> dict[str, tuple[int, int]]:
+    """``{name: (width, height)}`` of the image files (read from their headers)."""
+    from PIL import Image
+
+    sizes = {}
+    for v in views:
+        with Image.open(directory / v.name) as im:
+            sizes[v.name] = im.size
+    return sizes
+
+
+def _flags(views, feats, ledger, comm_edges, matches, map_before, map_after) -> list[dict]:
+    """Flags of :func:`pipeline.evaluation.flags.reconstruction_flags` for this run."""
+    from pipeline.evaluation.flags import reconstruction_flags
+
+    links = ledger.links
+    reason = np.asarray(ledger.reason, dtype=str)
+    cut = reason != ""
+    lost = set(map_before.registered_names) - set(map_after.registered_names)
+    per_image = {}
+    for k, v in enumerate(views):
+        if v.name in lost:
+            touch = cut & ((links.cam_i == k) | (links.cam_j == k))
+            names, counts = np.unique(reason[touch], return_counts=True)
+            per_image[v.name] = dict(zip(names.tolist(), counts.tolist(), strict=True))
+    names, counts = np.unique(reason[cut], return_counts=True)
+    return reconstruction_flags(
+        len(views), map_before.summary(), map_after.summary(), comm_edges,
+        [len(p.pairs) for p in matches], [len(f) for f in feats],
+        intrinsics_guessed=sum(not v.intrinsics_known for v in views),
+        cut_by_reason=dict(zip(names.tolist(), counts.tolist(), strict=True)),
+        lost_image_cuts=per_image)
+
+
+def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
+                     kept_links, md: str, live: str | None = None) -> None:
+    from pipeline import colmap
+    from pipeline.types import RunRecord
+    from viz.rerun_log import log_run
+
+    # cameras registered after cleaning are drawn with their pose and camera in that
+    # reconstruction; fused points, estimated in the frame of the reconstruction before
+    # cleaning, are moved into it by the similarity between the two
+    drawn = _posed(views, colmap.registered_poses(mapping.reconstruction))
+    fused = None
+    if cleaning.fused_points is not None and len(cleaning.fused_points):
+        M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
+        if M is not None:
+            fused = np.asarray(cleaning.fused_points, dtype=np.float64) @ M[:, :3].T + M[:, 3]
+    points, tracks, colors = _points_and_tracks(mapping, views, feats, kept_links)
+    record = RunRecord(
+        views=drawn, features=feats, ledger=cleaning.ledger,
+        points=points, point_tracks=tracks, gt_points=None,
+        fused_points=fused, report_markdown=md, point_colors=colors)
+    log_run(path, record, live=live)
+
+
+def _mapping_note(mapping) -> str:
+    return (f"{mapping.registered_images} of {mapping.images} images registered, "
+            f"{mapping.points} points, track length {mapping.mean_track_length:.2f}, "
+            f"reprojection error {mapping.mean_reprojection_error:.3f} px")

@@ -1,0 +1,122 @@
+"""The ``resolve`` job (:mod:`pipeline.commands.resolve` parses its options): a links file in,
+a conflict-free ``links.csv`` out.
+
+Makes a user's own links conflict-free with the distributed consistency stage (Aragüés et
+al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot per camera) and writes the
+run-output ``links.csv`` (docs/DESIGN.md): every input row once, ``status`` ``kept`` or
+``deleted``, ``reason`` ``resolution`` for a cut link, the resolution ``round`` that cut it,
+``truth`` empty (unknown). Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
+``--comm-graph``, cameras that share a link are neighbours. A run-output ``links.csv`` (this
+command's own output, or a run folder's) is accepted as input too: its deleted rows are
+written back unchanged and its kept rows are made consistent.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.budget import DEFAULT_LIMIT_GB
+from pipeline.errors import InputError
+from pipeline.faults import FaultConfig
+
+__all__ = ["resolve_file"]
+
+
+def resolve_file(links_csv: str | Path, out_csv: str | Path,
+                 comm_graph_csv: str | Path | None = None,
+                 faults: FaultConfig | None = None,
+                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence",
+                 transport: str = "sim") -> dict:
+    """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``resolution``: a rule of :mod:`pipeline.consistency.rules`, e.g. ``paper`` (Alg. 1) or
+    ``evidence``; the evidence of a link here is its
+    ``quality`` column read as ``1 − Lowe ratio`` (and the triangle support the robots
+    compute), as a links file carries no keypoints or geometry.
+
+    Raises
+    ------
+    InputError
+        Bad input rows (see :func:`pipeline.inputs.linkscsv.read_links_csv`), a bad comm-graph file,
+        ``out`` equal to the input, or a link between cameras that are not neighbours in the
+        given comm graph (naming its row).
+    """
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import check_detection_memory
+    from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.consistency.rules import deleted_cases
+    from pipeline.inputs.compact import compact_ids, fault_section_in_ids
+    from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
+    from pipeline.runs.transports import get_transport
+    from pipeline.stages import ledger_from_consistency
+    from pipeline.types import LinkLedger
+
+    links_csv, out_csv = Path(links_csv), Path(out_csv)
+    if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
+        raise InputError(f"--out {str(out_csv)!r} is the input file; the input is never "
+                         "modified, choose a new file")
+    lf = read_links_csv(links_csv)
+    links = lf.links
+    edges = None
+    n_cams = None
+    if comm_graph_csv is not None:
+        edges = read_comm_graph(comm_graph_csv)
+        n_cams = int(edges.max(initial=-1)) + 1
+    # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the links
+    ids = compact_ids(links, edges, n_cameras=n_cams)
+    n = int(ids.cameras.max(initial=-1)) + 1
+    if edges is not None and len(links):
+        off = links_off_graph(links, edges, n)
+        if off.any():
+            k = int(np.flatnonzero(off)[0])
+            raise InputError(
+                f"{links_csv}:{lf.line[k]}: link ({links.cam_i[k]},{links.feat_i[k]})-"
+                f"({links.cam_j[k]},{links.feat_j[k]}) joins cameras {links.cam_i[k]} and "
+                f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
+                "or remove the link")
+    all_links = links
+    # a run-output links.csv (e.g. our own output): its deleted rows stay deleted with their
+    # reason and round; its kept rows are the links to make consistent
+    active = lf.status == "kept" if lf.status is not None else np.ones(len(links), dtype=bool)
+    if not active.all():
+        links = all_links.subset(active)
+        ids = compact_ids(links, edges, n_cameras=n_cams)
+    m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
+    check_detection_memory(m, run_links, max_memory_gb)
+    before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
+    res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
+                                                                 resolution, ids)
+    after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
+    ledger = ledger_from_consistency(res)
+    ledger.links = links  # the ids as given (the stage may have run on compact ones)
+    if lf.status is not None:
+        # rows the input file had already deleted stay deleted with their reason and round
+        full = LinkLedger.all_kept(all_links)
+        idx = np.flatnonzero(active)
+        for name in ("status", "reason", "round", "iteration", "case"):
+            getattr(full, name)[idx] = getattr(ledger, name)
+        old = np.flatnonzero(~active)
+        full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
+        ledger = full
+    write_links_csv(out_csv, ledger)
+    st = res.stats
+    summary = {
+        "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
+        "comm_edges": int(len(edges)) if edges is not None else
+        int(np.unique(links.cam_i * n + links.cam_j).size),
+        "links": len(all_links), "deleted": int(res.deleted.sum()),
+        "previously_deleted": int((~active).sum()),
+        "resolution_method": res.stats["resolution"],
+        "deleted_by_case": {c: int((res.case == c).sum()) for c in deleted_cases(resolution)},
+        "before": before, "after": after,
+        "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
+                                          "closing_rounds", "messages", "bytes",
+                                          "max_robot_memory_bytes") if k in st},
+    }
+    if fault_section is not None:
+        summary["faults"] = fault_section_in_ids(fault_section, ids)
+    if "team" in res.stats:
+        summary["team"] = res.stats["team"]
+    return summary

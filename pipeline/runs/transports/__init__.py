@@ -1,0 +1,111 @@
+"""The transports a job's robots can run on, by name: the one registry.
+
+A transport is how the robots of a job exchange their messages, and so where they run:
+``sim`` — every robot is an object of this process, on the simulated network of
+:mod:`pipeline.transport.simulated` (with its faults); ``zenoh`` — one process per robot,
+talking over Zenoh (:mod:`pipeline.team`). The command line's ``--transport`` choices and
+help, and the runners of :mod:`pipeline.runs`, read this registry; nothing else compares a
+transport's name.
+
+What a transport provides: a module (loaded only when a job runs on it, so that ``--help``
+loads nothing heavy) with one function per job:
+
+``formation(config, timer, **options) -> FormationRobots`` (:mod:`.results`)
+    ``run-formation``: render the formation (or have the robots render their own cameras),
+    features, matching, consistency and, with ``config.fusion``, fusion; ``options`` are the
+    transport's own (e.g. ``kill``, ``workdir``, ``keep_run``, ``round_timeout_s`` of zenoh).
+``images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobots``
+    ``run-images``: features and matching of the photographs (``comm_edges`` None: the
+    ``knn:K`` graph, chosen by ``graph_from_features(features)``); the consistency stage when
+    the robots run it themselves (else ``cleaning`` is None and the runner runs it).
+``resolve(features_per_camera, comm_edges, links, faults, resolution, ids) -> (ConsistencyResult, dict or None)``
+    ``resolve``: the consistency stage on a user's links (``ids``: the compact renumbering
+    of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
+    faults were injected or a robot was lost.
+
+A new transport (e.g. ROS 2) is one module with these three functions and one
+:func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
+What the jobs hand back is in :mod:`.results`.
+
+May import: the transports' modules (this package), which may import everything below the
+runners (:mod:`pipeline.stages`, :mod:`pipeline.team`, ...); never a runner or a command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+__all__ = ["TransportEntry", "TRANSPORTS", "register",
+           "unregister", "get_transport", "transport_names", "transport_help"]
+
+
+@dataclass(frozen=True)
+class TransportEntry:
+    """One transport: its name, its ``--transport`` help and ``load``, which imports and
+    returns its module (the one holding the job functions of the module docstring)."""
+
+    name: str
+    help: str
+    load: Callable
+
+
+TRANSPORTS: dict[str, TransportEntry] = {}
+
+
+def register(entry: TransportEntry) -> TransportEntry:
+    """Add ``entry`` to the registry (ValueError if its name is taken); return it."""
+    if entry.name in TRANSPORTS:
+        raise ValueError(f"transport {entry.name!r} is already registered")
+    TRANSPORTS[entry.name] = entry
+    return entry
+
+
+def unregister(name: str) -> None:
+    """Remove a transport from the registry (tests register toy ones)."""
+    del TRANSPORTS[name]
+
+
+def transport_names() -> tuple[str, ...]:
+    """The registered transports' names, in registration order."""
+    return tuple(TRANSPORTS)
+
+
+def get_transport(name: str) -> TransportEntry:
+    """The registered transport ``name``.
+
+    Raises
+    ------
+    InputError
+        No transport of that name.
+    """
+    from pipeline.errors import InputError
+
+    if name not in TRANSPORTS:
+        raise InputError(f"transport {name!r}: choose one of {', '.join(TRANSPORTS)}")
+    return TRANSPORTS[name]
+
+
+def transport_help() -> str:
+    """The ``--transport`` help: every transport's own line."""
+    return "; ".join(f"{e.name}: {e.help}" for e in TRANSPORTS.values()) + \
+        "; see README, 'Transports'"
+
+
+def _sim():
+    from pipeline.runs.transports import sim
+
+    return sim
+
+
+def _zenoh():
+    from pipeline.runs.transports import zenoh
+
+    return zenoh
+
+
+register(TransportEntry(
+    "sim", "robots are objects of this process (default, fastest)", _sim))
+register(TransportEntry(
+    "zenoh", "one process per robot on this machine, talking over Zenoh (fusion on rendered "
+             "formations; none on photographs)", _zenoh))

@@ -1,0 +1,54 @@
+"""The ``sim`` transport: every robot is an object of this process, on the simulated network.
+
+The jobs chain the stages of :mod:`pipeline.stages` (faults, when asked for, are properties
+of the simulated network, :mod:`pipeline.faults`). The job functions are those of the
+registry (:mod:`pipeline.runs.transports`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline import stages
+from pipeline.runs.transports.results import FormationRobots, ImagesRobots
+
+__all__ = ["formation", "images", "resolve"]
+
+
+def formation(config, timer) -> FormationRobots:
+    """Render the formation, then features, matching, consistency and fusion in this process."""
+    import data_synth
+
+    with timer.stage("render", f"formation {config.formation}, seed {config.seed}, "
+                     f"{config.size[0]}x{config.size[1]}"):
+        rendered = data_synth.render(config.formation, seed=config.seed, size=config.size,
+                                     n_robots=config.robots, graph=config.graph)
+        views, comm_edges = rendered.views, np.asarray(rendered.comm_edges)
+    feats, matches, links = stages.extract_and_match(
+        views, comm_edges, config.features, config.max_features, timer,
+        merge_radius=stages.merge_radius_for(config.resolution, config.merge_radius))
+    cleaning = stages.clean_association(views, feats, comm_edges, links, fusion=config.fusion,
+                                 faults=config.faults, timer=timer,
+                                 resolution=config.resolution, matches=matches)
+    return FormationRobots(rendered, feats, matches, cleaning)
+
+
+def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobots:
+    """Features and matching of the photographs; the runner runs the consistency stage."""
+    feats, matches, links = stages.extract_and_match(
+        views, graph_from_features if comm_edges is None else comm_edges, config.features,
+        config.max_features, timer, contrast_threshold=config.contrast_threshold,
+        merge_radius=stages.merge_radius_for(config.resolution, config.merge_radius),
+        rootsift=config.rootsift, threshold_px=config.threshold_px,
+        budget_after_merge=config.budget_after_merge)
+    return ImagesRobots(feats, matches, links)
+
+
+def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
+    """The consistency stage on the simulated network, its faults in the layout of ``ids``."""
+    from pipeline.inputs.compact import faults_in_layout
+
+    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
+    return stages.consistency_stage(features_per_camera, comm_edges, links,
+                             None if faults is None else faults_in_layout(faults, ids),
+                             resolution=resolution)

@@ -1,0 +1,214 @@
+"""The ``zenoh`` transport: one process per robot, talking over Zenoh (:mod:`pipeline.team`).
+
+The robots compute everything (:mod:`pipeline.team.robot`); this process launches them
+(:mod:`pipeline.team.launcher`) and, as the observer, turns what they published into the
+job's results (:mod:`pipeline.team.assemble`). The job functions are those of the registry
+(:mod:`pipeline.runs.transports`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.association import conflictive_links
+from pipeline.consistency.result import ConsistencyResult
+from pipeline.errors import InputError, TeamError
+from pipeline.faults import FaultConfig
+from pipeline.progress import StageTimer
+from pipeline.runs.transports.results import FormationRobots, ImagesRobots
+from pipeline.stages import CleaningResult, ledger_from_consistency, merge_radius_for
+from pipeline.team.assemble import (
+    FUSION_SKIPPED,
+    consistency_of_team,
+    fusion_of_team,
+    links_of_team,
+    team_options,
+)
+from pipeline.team.launcher import launch_team, make_team, team_summary
+
+__all__ = ["formation", "images", "resolve", "resolve_links_file"]
+
+
+def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
+              round_timeout_s: float = 5.0) -> FormationRobots:
+    """``run-formation --transport zenoh``: one robot process per camera.
+
+    The robots render their own cameras, extract, match, resolve and fuse; this process (the
+    observer) renders the formation once more for the evaluation only.
+
+    Parameters
+    ----------
+    config : FormationConfig
+    kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
+    round_timeout_s : float — wait for a neighbour's packet before it counts as silent
+    workdir : folder for TEAM.json and the robots' logs (default: temporary)
+    keep_run : list or None — the :class:`~pipeline.team.launcher.TeamRun` is appended to it
+    """
+    import data_synth
+    from pipeline.matching.features import extract
+    from pipeline.types import Features
+
+    opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
+                        merge_radius_for(config.resolution, config.merge_radius),
+                        config.resolution, fusion=bool(config.fusion))
+    edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
+                                       config.graph)
+    n = config.robots or 6
+    data = {"kind": "formation", "formation": config.formation, "seed": int(config.seed),
+            "size": [int(v) for v in config.size], "robots": config.robots,
+            "graph": config.graph}
+    name = f"formation-{config.formation}" if config.robots is None else \
+        f"formation-n{config.robots}-{config.graph}"
+    team = make_team(name, edges, data, opts, n=n)
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir, kill=kill)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    with timer.stage("render", "observer: ground truth for the evaluation"):
+        formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
+                                      n_robots=config.robots, graph=config.graph)
+    feats = []
+    for i, v in enumerate(formation.views):
+        if i in run.results:
+            kp = run.results[i][1]["keypoints"].reshape(-1, 2)
+            feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                                  np.zeros(len(kp), np.float32), config.features))
+        else:  # a robot lost before publishing: the evaluation extracts its features itself
+            feats.append(extract(v, config.features, config.max_features,
+                                 opts["merge_radius"]))
+    matches, links = links_of_team(team, run.results)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    cleaning = CleaningResult(ledger_from_consistency(res, conflictive_links(m, links)),
+                              dict(res.stats))
+    if config.fusion:
+        with timer.stage("fusion", "observer: the links the robots cut in their fusion stage"):
+            stats, pts, ids = fusion_of_team(team, run.results, cleaning.ledger, m)
+            cleaning.fusion_stats = stats
+            cleaning.fused_points, cleaning.fused_track_ids = pts, ids
+            timer.note(f"{stats['links_cut']} links cut as fusion outliers")
+    else:
+        cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
+    if run.killed or float(opts.get("drop_prob", 0)) > 0:
+        from pipeline.faults import FaultConfig, fault_report
+
+        fc = config.faults or FaultConfig()
+        cleaning.faults = fault_report(fc, res)
+        cleaning.faults["killed"] = sorted(int(k) for k in run.killed)
+    return FormationRobots(formation, feats, matches, cleaning, {"team": team_summary(run)})
+
+
+def images(config, views, comm_edges, timer: StageTimer, graph_from_features=None, *,
+           workdir=None, keep_run: list | None = None) -> ImagesRobots:
+    """``run-images --transport zenoh``: one robot process per photograph.
+
+    Each robot loads only its own photograph (downscaled to ``config.max_size``, with the
+    intrinsics the observer resolved for it, written into ``TEAM.json``), extracts with the
+    run's feature options (the photo defaults unless changed), and matches with its
+    comm-graph neighbours; the team then runs detection and resolution (``config.resolution``).
+
+    Returns
+    -------
+    ImagesRobots
+        ``features`` hold the keypoints the robots published (descriptors are not sent to the
+        observer), in camera order; ``cleaning`` the team's consistency stage.
+
+    Raises
+    ------
+    InputError
+        A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
+        a graph kind or file).
+    """
+    from pipeline.types import Features
+
+    if comm_edges is None:
+        raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
+                         "features at once; with --transport zenoh give ring, ring2, complete, "
+                         "seq:K or a graph file")
+    directory = Path(config.directory).resolve()
+    data = {"kind": "images", "images": [str(directory / v.name) for v in views],
+            "intrinsics": [np.asarray(v.K, np.float64).tolist() for v in views],
+            "intrinsics_known": [bool(v.intrinsics_known) for v in views],
+            "max_size": config.max_size}
+    opts = team_options(config.features, config.max_features, None,
+                        merge_radius=merge_radius_for(config.resolution, config.merge_radius),
+                        resolution=config.resolution,
+                        contrast_threshold=config.contrast_threshold,
+                        rootsift=bool(config.rootsift),
+                        budget_after_merge=bool(config.budget_after_merge),
+                        threshold_px=config.threshold_px)
+    n = len(views)
+    team = make_team(f"images-{n}", comm_edges, data, opts, n=n)
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    lost = sorted(set(range(n)) - set(run.results))
+    if lost:
+        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result")
+    feats = []
+    for i in range(n):
+        kp = run.results[i][1]["keypoints"].reshape(-1, 2)
+        feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
+                              np.zeros(len(kp), np.float32), config.features))
+    matches, links = links_of_team(team, run.results)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    cleaning = CleaningResult(ledger_from_consistency(res, conflictive_links(m, links)),
+                              dict(res.stats), fusion_stats=dict(FUSION_SKIPPED))
+    return ImagesRobots(feats, matches, links, cleaning, team_summary(run))
+
+
+def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, *,
+                           kill=None, workdir=None, keep_run: list | None = None
+                           ) -> ConsistencyResult:
+    """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``."""
+    from pipeline.inputs.linkscsv import read_links_csv
+
+    fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
+    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    data = {"kind": "links", "links": str(Path(links_csv).resolve()),
+            "features_per_camera": fpc}
+    team = make_team("resolve", edges, data, options, n=len(fpc))
+    run = launch_team(team, workdir, kill=kill)
+    if keep_run is not None:
+        keep_run.append(run)
+    links = read_links_csv(links_csv).links
+    res = consistency_of_team(team, run.results, links, fpc, run.killed)
+    res.stats["team"] = team_summary(run)
+    return res
+
+
+def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
+    """``resolve --transport zenoh``: the consistency stage as one robot process per camera.
+
+    The links to make consistent (kept rows, compact ids, with their quality: the evidence
+    of the evidence rule) go to a file in a temporary team folder; each robot reads its own
+    rows of it (:func:`resolve_links_file`). ``ids`` is not needed: the robots are the
+    cameras of the compact layout. Returns ``(ConsistencyResult, faults section or None)``.
+    """
+    import tempfile
+
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.faults import fault_report
+
+    m = features_per_camera
+    with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
+        path = Path(work) / "links.csv"
+        path.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+            f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
+                links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                links.feat_j.tolist(), links.quality.tolist(), strict=True)))
+        res = resolve_links_file(path, m, comm_edges_for(m, links, comm_edges),
+                                 team_options(faults=faults, resolution=resolution),
+                                 workdir=work)
+    fault_section = None
+    if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
+        fault_section = fault_report(faults or FaultConfig(), res)
+    return res, fault_section

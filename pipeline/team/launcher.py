@@ -1,0 +1,380 @@
+"""Start a team of robot processes on this machine and observe their results.
+
+``--transport zenoh`` of ``run-formation``, ``run-formations`` and ``resolve`` comes here:
+:func:`launch_team` finds free loopback ports, writes ``TEAM.json``, starts one process per
+robot (by default forked from one *zygote* process that imported the robot program once,
+:mod:`pipeline.team.zygote`; with ``fork=False`` each is ``python -m pipeline robot --team
+TEAM.json --id I``, its own interpreter) and an *observer* in this process
+that only subscribes to the robots' published results (it holds a Zenoh session listening on
+its own endpoint; robots connect to it besides their neighbours, and it never relays between
+robots: peers do not route for others). The caller builds the usual run folder from the
+results.
+
+No process is left behind: all robots (and the zygote) run in one process group that is
+killed on any exit of the launcher (normal end, error, Ctrl-C, SIGTERM); on Linux each robot
+also asks the kernel to kill it if its parent (the launcher, or the zygote) dies
+(``PR_SET_PDEATHSIG``), and the zygote asks it of the launcher.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import TeamError
+from pipeline.team.teamfile import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry, Team, write_team
+from pipeline.transport.wire import WireError, decode_packet
+
+__all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent"]
+
+
+def free_ports(k: int, host: str = "127.0.0.1") -> list[int]:
+    """``k`` distinct TCP ports that were free on ``host`` a moment ago."""
+    socks, ports = [], []
+    try:
+        for _ in range(k):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.bind((host, 0))
+            socks.append(s)
+            ports.append(s.getsockname()[1])
+    finally:
+        for s in socks:
+            s.close()
+    return ports
+
+
+def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
+              host: str = "127.0.0.1", n: int | None = None) -> Team:
+    """A loopback team with free ports for every robot and the observer."""
+    e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    n = int(n if n is not None else e.max() + 1)
+    ports = free_ports(n + 1, host)
+    robots = [RobotEntry(i, f"tcp/{host}:{p}") for i, p in enumerate(ports[:n])]
+    opts = {**DEFAULT_OPTIONS, **(options or {})}
+    team = Team(name, robots, np.unique(np.sort(e, axis=1), axis=0), data, opts,
+                observer=f"tcp/{host}:{ports[n]}")
+    from pipeline.team.teamfile import parse_team
+
+    return parse_team(team.to_json())  # the same checks as a hand-written file
+
+
+def die_with_parent() -> None:
+    """Ask the kernel to kill this process when its parent dies (``PR_SET_PDEATHSIG``); runs in
+    a child between fork and exec, and in every robot the zygote forks."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+class _ForkedRobot:
+    """A robot forked by the zygote, seen like a :class:`subprocess.Popen` (pid, poll, wait,
+    kill); its exit code comes from the zygote's ``exit`` line."""
+
+    def __init__(self, i: int, pid: int, codes: dict, cv: threading.Condition) -> None:
+        self.i, self.pid, self._codes, self._cv = int(i), int(pid), codes, cv
+
+    @property
+    def returncode(self):
+        return self._codes.get(self.i)
+
+    def poll(self):
+        return self._codes.get(self.i)
+
+    def wait(self, timeout: float | None = None):
+        end = None if timeout is None else time.monotonic() + timeout
+        with self._cv:
+            while self.i not in self._codes:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    raise subprocess.TimeoutExpired(f"robot {self.i}", timeout)
+                self._cv.wait(0.05 if left is None else min(left, 0.05))
+        return self._codes[self.i]
+
+    def kill(self) -> None:
+        if self.i in self._codes:  # reaped: its pid may belong to another process by now
+            return
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGKILL)
+
+
+def _read_zygote(stream, procs: dict, codes: dict, cv: threading.Condition) -> None:
+    """Reader thread: the zygote's ``pid I PID`` and ``exit I CODE`` lines."""
+    for raw in stream:
+        parts = raw.decode(errors="replace").split()
+        if len(parts) != 3 or parts[0] not in ("pid", "exit"):
+            continue
+        i, v = int(parts[1]), int(parts[2])
+        with cv:
+            if parts[0] == "pid":
+                procs[i] = _ForkedRobot(i, v, codes, cv)
+            else:
+                codes[i] = v
+            cv.notify_all()
+
+
+@dataclass
+class TeamRun:
+    """What the observer collected and how the processes ended."""
+
+    team: Team
+    results: dict = field(default_factory=dict)     # id -> (header, arrays)
+    status: dict = field(default_factory=dict)      # id -> last status line
+    exit_codes: dict = field(default_factory=dict)  # id -> return code
+    killed: dict = field(default_factory=dict)      # id -> monotonic time of the kill
+    finished_at: dict = field(default_factory=dict)  # id -> monotonic time of the result
+    wall_s: float = 0.0
+    start_s: float = 0.0
+    published_s: float = 0.0  # from the launch to the last result received
+    stderr: dict = field(default_factory=dict)      # id -> last lines of the robot's stderr
+
+    @property
+    def survivors(self) -> list[int]:
+        return sorted(self.results)
+
+
+class _Observer:
+    """Subscribes to results and statuses; acknowledges every result."""
+
+    def __init__(self, team: Team) -> None:
+        from pipeline.transport.zenoh_transport import key, open_session
+
+        self.team = team
+        self.results: dict = {}
+        self.status: dict = {}
+        self.seen: dict = {}
+        self.finished_at: dict = {}
+        self.cv = threading.Condition()
+        self.session = open_session([team.observer], [], "observer")
+        self._key = key
+        self._subs = [
+            self.session.declare_subscriber(key(team.name, "result", "*"), self._on_result),
+            self.session.declare_subscriber(key(team.name, "status", "*"), self._on_status)]
+
+    def _on_result(self, sample) -> None:
+        try:
+            header, msgs = decode_packet(sample.payload.to_bytes())
+        except WireError:
+            return
+        i = int(header["id"])
+        self.session.put(self._key(self.team.name, "ack", i), b"ok")
+        with self.cv:
+            if i not in self.results:
+                self.results[i] = (header, msgs[0][1] if msgs else {})
+                self.finished_at[i] = time.monotonic()
+            self.cv.notify_all()
+
+    def _on_status(self, sample) -> None:
+        i = int(str(sample.key_expr).rsplit("/", 1)[-1])
+        with self.cv:
+            self.status[i] = sample.payload.to_string()
+            self.seen.setdefault(i, []).append(self.status[i])
+            self.cv.notify_all()
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.session.close()
+
+
+def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float = 600.0,
+                kill: tuple[int, str, float] | None = None, log=None,
+                fork: bool = True) -> TeamRun:
+    """Run every robot of ``team`` as a process on this machine; return what they published.
+
+    Parameters
+    ----------
+    team : Team — loopback endpoints (see :func:`make_team`), with an observer endpoint
+    workdir : folder for ``TEAM.json`` and the robots' logs (default: a temporary folder)
+    timeout_s : float — overall limit; the team is killed after it
+    kill : ``(robot, status, delay_s)`` or None — fault injection: ``kill -9`` of ``robot``
+        ``delay_s`` seconds after it published ``status`` (``started``, ``consistency``)
+    log : callable(str) or None
+    fork : bool — fork the robots from one zygote that imported the robot program once
+        (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
+
+    Raises
+    ------
+    TeamError
+        A robot exited with an error before publishing its result (named, with its last
+        stderr line), or the team did not finish within ``timeout_s``.
+    """
+    log = log or (lambda s: print(s, file=sys.stderr, flush=True))
+    tmp = None
+    if workdir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="fm-team-")
+        workdir = tmp.name
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    team_path = write_team(workdir / "TEAM.json", team)
+    run = TeamRun(team)
+    observer = _Observer(team)
+    procs: dict[int, subprocess.Popen] = {}
+    errfiles = {}
+    pgid = None
+    old_handlers = {}
+
+    def kill_all(*_):
+        if pgid is not None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pgid, signal.SIGKILL)
+        for p in procs.values():
+            with contextlib.suppress(ProcessLookupError):
+                p.kill()
+
+    def on_signal(signum, frame):
+        kill_all()
+        raise KeyboardInterrupt if signum == signal.SIGINT else SystemExit(128 + signum)
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old_handlers[sig] = signal.signal(sig, on_signal)
+    t0 = time.monotonic()
+    zygote = None
+    try:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
+               "OPENBLAS_NUM_THREADS": "1"}
+        if fork:
+            env[LAUNCHED_AT_ENV] = repr(time.time())
+            errfiles["zygote"] = open(workdir / "zygote.log", "wb")  # noqa: SIM115
+            zygote = subprocess.Popen(
+                [sys.executable, "-m", "pipeline.team.zygote", str(team_path), str(workdir)],
+                stdout=subprocess.PIPE, stderr=errfiles["zygote"], env=env, process_group=0,
+                preexec_fn=die_with_parent)
+            pgid = zygote.pid
+            threading.Thread(target=_read_zygote, daemon=True,
+                             args=(zygote.stdout, procs, run.exit_codes, observer.cv)).start()
+        else:
+            for i in range(team.n):
+                env[LAUNCHED_AT_ENV] = repr(time.time())
+                errfiles[i] = open(workdir / f"robot{i}.log", "wb")  # noqa: SIM115
+                procs[i] = subprocess.Popen(
+                    [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
+                     "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
+                    process_group=0 if pgid is None else pgid, preexec_fn=die_with_parent)
+                if pgid is None:
+                    pgid = procs[i].pid
+        run.start_s = time.monotonic() - t0
+        deadline = t0 + timeout_s
+        with observer.cv:
+            while True:
+                for i, p in list(procs.items()):
+                    if i not in run.exit_codes and p.poll() is not None:
+                        run.exit_codes[i] = p.returncode
+                if zygote is not None and zygote.poll() is not None and len(procs) < team.n:
+                    raise TeamError("the robots' zygote (python -m pipeline.team.zygote) ended "
+                                    f"with exit code {zygote.returncode} before starting "
+                                    f"every robot: {_tail(workdir / 'zygote.log')}")
+                if kill is not None and kill[0] not in run.killed and kill[0] in procs:
+                    k, status, delay = kill
+                    if status in observer.seen.get(k, ()):
+                        observer.cv.release()
+                        try:
+                            time.sleep(delay)
+                            os.kill(procs[k].pid, signal.SIGKILL)
+                        finally:
+                            observer.cv.acquire()
+                        run.killed[k] = time.monotonic()
+                        log(f"kill -9 robot {k} (pid {procs[k].pid})")
+                failed = [i for i, c in run.exit_codes.items()
+                          if c not in (0, -signal.SIGKILL) and i not in observer.results]
+                if failed:
+                    i = failed[0]
+                    last = _tail(workdir / f"robot{i}.log")
+                    raise TeamError(f"robot {i} ({team.endpoint(i)}) failed with exit code "
+                                    f"{run.exit_codes[i]}: {last}")
+                ended = set(observer.results) | set(run.exit_codes)
+                if len(ended) == team.n and all(i in observer.results or i in run.exit_codes
+                                                for i in range(team.n)):
+                    # every robot published or is gone
+                    if all(p.poll() is not None or i in observer.results
+                           for i, p in procs.items()):
+                        break
+                if time.monotonic() > deadline:
+                    missing = sorted(set(range(team.n)) - set(observer.results))
+                    never = [i for i in missing if i not in observer.status]
+                    who = never or missing
+                    raise TeamError(f"team did not finish within {timeout_s:g} s; robot "
+                                    f"{who[0]} ({team.endpoint(who[0])}) "
+                                    f"{'never started' if never else 'did not publish a result'}")
+                observer.cv.wait(0.05)
+        run.published_s = time.monotonic() - t0
+        # wait for the processes that published to exit
+        for i, p in procs.items():
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=5)
+            run.exit_codes[i] = p.poll()
+        run.wall_s = time.monotonic() - t0
+        run.results = dict(observer.results)
+        run.status = dict(observer.status)
+        run.finished_at = dict(observer.finished_at)
+        run.stderr = {i: _tail(workdir / f"robot{i}.log", 20) for i in procs}
+        return run
+    finally:
+        kill_all()
+        if zygote is not None:
+            # the zygote reaps its robots; killed with them, it reports no more exits, and
+            # robots it did not reap are reaped by init
+            with contextlib.suppress(Exception):
+                zygote.wait(timeout=5)
+            if zygote.stdout is not None:
+                zygote.stdout.close()
+        else:
+            for p in procs.values():
+                with contextlib.suppress(Exception):
+                    p.wait(timeout=5)
+        for f in errfiles.values():
+            f.close()
+        observer.close()
+        for sig, h in old_handlers.items():
+            signal.signal(sig, h)
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _tail(path: Path, lines: int = 1) -> str:
+    try:
+        text = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return ""
+    if lines == 1:
+        errs = [t for t in text if t.startswith("error:") or "Error" in t]
+        return (errs or text or [""])[-1]
+    return "\n".join(text[-lines:])
+
+
+def team_summary(run: TeamRun) -> dict:
+    """Per-robot figures of a team run (for the report's ``team`` section)."""
+    rob = {}
+    for i in range(run.team.n):
+        if i in run.results:
+            h = run.results[i][0]
+            c = h["counters"]
+            rob[str(i)] = {"rounds": c["round"], "messages": c["messages"], "bytes": c["bytes"],
+                           "wire_bytes": c["wire_bytes"], "wire_packets": c["wire_packets"],
+                           "dropped": c["dropped"], "silent": c["silent"],
+                           "peak_rss_bytes": h["peak_rss_bytes"],
+                           "peak_memory_bytes": h["peak_memory_bytes"],
+                           "timings_s": h["timings_s"], "handshake_s": h.get("handshake_s"),
+                           "since_launch_s": h.get("since_launch_s")}
+        else:
+            rob[str(i)] = {"result": None, "exit_code": run.exit_codes.get(i),
+                           "killed": i in run.killed}
+    return {"transport": "zenoh", "robots": rob, "wall_s": round(run.wall_s, 4),
+            "process_start_s": round(run.start_s, 4),
+            "last_result_s": round(run.published_s, 4),
+            "killed": {str(k): True for k in run.killed},
+            "team": json.loads(json.dumps(run.team.to_json()))}

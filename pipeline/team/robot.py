@@ -1,0 +1,402 @@
+"""One robot of a team as its own program (``python -m pipeline robot --team TEAM.json --id I``).
+
+The robot holds nothing global: no other robot's image, no union-find, no driver. In order:
+
+1. **Its own data.** A rendered formation: it renders only its own camera
+   (:func:`data_synth.render_robot`; the scene model is the world it looks at, the other
+   cameras are not rendered). A photograph (``run-images``): it loads only its own file, with
+   the intrinsics the team file gives it. A links file (``resolve``): it keeps only the rows
+   that touch it. Public knowledge, as in the simulator: the team size ``n`` and the comm
+   graph.
+2. **Its own features** (:func:`pipeline.matching.features.extract`, with the team's feature options:
+   the photo defaults of ``run-images`` or the formations').
+3. **Exchange for matching.** Round 0: it sends every neighbour its keypoints, descriptors,
+   intrinsics, image size and, when known, its pose (``features`` message, counted in
+   bytes). Matching of edge ``(i, j)`` is done by exactly one side, the lower id ``i``, with
+   the very function the simulator uses (:func:`pipeline.matching.pairs.match_pair`), which then
+   sends ``j`` the result (``matches``: pairs, ratios, epipolar errors and each link's local
+   evidence, :func:`pipeline.matching.link_evidence.edge_evidence`). So both ends hold the same
+   ``A_ij`` and the same evidence, equal to the simulator's for that edge.
+4. **Feature counts** (public knowledge of Sec. II: every robot's ``m_j`` gives the column
+   offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
+   learnt something new), enough on any connected graph of ``n`` robots.
+5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
+   run_consistency_locally`): detection, then Alg. 1 or the evidence rule
+   (:func:`team_resolution`), repeated until conflict-free.
+6. **Fusion** (a rendered formation, whose robots know their poses; team option ``fusion``):
+   the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
+   tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
+   by the termination wave; with message loss injected (``drop_prob``), every logical round
+   over the reliable channel in lockstep (:func:`pipeline.fusion.robot.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
+   outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
+7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
+   cuts, the matches it holds, its keypoints and its fused landmarks (for the observer's
+   evaluation only) and its counters.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import sys
+import time
+
+import numpy as np
+
+from pipeline.consistency.protocols import ProtocolOptions
+from pipeline.consistency.robot import Robot
+from pipeline.consistency.rules import get_rule, rule_for_network
+from pipeline.consistency.termination import robot_link_log, run_consistency_locally
+from pipeline.errors import InputError
+from pipeline.team.teamfile import LAUNCHED_AT_ENV
+from pipeline.transport.wire import encode_packet
+
+__all__ = ["robot_main", "run_robot_process", "own_links_from_file", "team_resolution"]
+
+
+def _log(i: int, text: str) -> None:
+    print(f"[robot {i}] {text}", file=sys.stderr, flush=True)
+
+
+def peak_rss_bytes() -> int:
+    """Peak resident set size of this process (Linux reports KiB)."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def own_links_from_file(path, i: int):
+    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays (the
+    robot reads the shared file and keeps its own rows)."""
+    from pipeline.inputs.linkscsv import read_links_csv
+
+    lf = read_links_csv(path)
+    L = lf.links
+    a = np.flatnonzero(L.cam_i == i)
+    b = np.flatnonzero(L.cam_j == i)
+    nbr = np.concatenate([L.cam_j[a], L.cam_i[b]])
+    r = np.concatenate([L.feat_i[a], L.feat_j[b]])
+    s = np.concatenate([L.feat_j[a], L.feat_i[b]])
+    return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
+
+
+def _load_view(team, i: int):
+    data = team.data
+    if data["kind"] == "formation":
+        import data_synth
+
+        view, _ = data_synth.render_robot(i, data.get("formation", "d"), int(data.get("seed", 0)),
+                                          tuple(data.get("size", [640, 480])),
+                                          data.get("robots"), data.get("graph"))
+        return view
+    if data["kind"] == "images":
+        from pipeline.inputs.photos import downscale, guess_K, load_image
+        from pipeline.types import View
+
+        path = team.resolve_path(data["images"][i])
+        pixels, header = load_image(path)
+        header.close()
+        # intrinsics are those of the image the robot uses (after max_size)
+        K = (data.get("intrinsics") or [None] * team.n)[i]
+        known = (data.get("intrinsics_known") or [K is not None] * team.n)[i]
+        pixels, _ = downscale(pixels, np.eye(3), data.get("max_size"))
+        h, w = pixels.shape[:2]
+        K = guess_K(w, h) if K is None else np.asarray(K, np.float64)
+        return View(name=path.name, image=pixels, K=np.asarray(K, np.float64),
+                    intrinsics_known=bool(known))
+    raise InputError(f"data kind {data['kind']!r} has no images")
+
+
+def _pose(view):
+    """``(K, R, t)`` of a view whose pose is known, else None."""
+    if view.R is None or view.t is None:
+        return None
+    return (np.asarray(view.K, np.float64), np.asarray(view.R, np.float64),
+            np.asarray(view.t, np.float64).reshape(3))
+
+
+def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
+    """Steps 1–4 of the module docstring.
+
+    Returns ``(features, view, matches, weights, fpc)``: ``matches`` and ``weights`` (the
+    local evidence of each link, :func:`pipeline.matching.link_evidence.edge_evidence`, computed by the
+    matching end and sent with the matches) per neighbour.
+    """
+    from pipeline.matching.features import MERGE_RADIUS_PX, extract, photo_max_features
+    from pipeline.matching.link_evidence import edge_evidence
+    from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.types import Features, PairMatches
+
+    t = time.perf_counter()
+    view = _load_view(team, i)
+    timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    h, w = view.image.shape[:2]
+    budget = opts.get("max_features")
+    feats = extract(view, opts["features"],
+                    photo_max_features(w, h) if budget is None else int(budget),
+                    float(opts.get("merge_radius", MERGE_RADIUS_PX)),
+                    contrast_threshold=opts.get("contrast_threshold"),
+                    rootsift=bool(opts.get("rootsift", False)),
+                    budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    timings["features"] = time.perf_counter() - t
+    n = team.n
+    known = np.full(n, -1, dtype=np.int32)
+    known[i] = len(feats)
+    pose = _pose(view)
+    payload = {"keypoints": feats.keypoints, "descriptors": feats.descriptors,
+               "K": np.asarray(view.K, np.float64),
+               "intrinsics_known": np.array([view.intrinsics_known], np.uint8),
+               "size": np.array([w, h], np.int32)}
+    if pose is not None:  # a robot that knows its pose tells it (known-pose evidence)
+        payload["R"], payload["t"] = pose[1], pose[2]
+    for k in sorted(transport.neighbours):
+        transport.send(k, "features", payload)
+        transport.send(k, "counts", {"m": known.copy()})
+    sent = known.copy()
+    t = time.perf_counter()
+    matches: dict[int, PairMatches] = {}
+    weights: dict[int, np.ndarray] = {}
+    rounds = max(n - 1, 2)
+    for rnd in range(1, rounds + 1):
+        inbox, _ = transport.end_round()
+        for msg in inbox:
+            p = msg.payload
+            if msg.kind == "counts":
+                upd = (known < 0) & (p["m"] >= 0)
+                known[upd] = p["m"][upd]
+            elif msg.kind == "features" and msg.src > i:
+                other = Features(p["keypoints"], p["descriptors"],
+                                 np.zeros(len(p["keypoints"]), np.float32), feats.method)
+                both_known = bool(view.intrinsics_known and p["intrinsics_known"][0])
+                thr = opts.get("threshold_px", 1.0)
+                if thr is None:  # scaled with the larger image, as matching does
+                    wj, hj = (int(v) for v in p["size"])
+                    thr = photo_threshold_px(max(w, wj), max(h, hj))
+                pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known,
+                                threshold_px=float(thr))
+                other_pose = (p["K"], p["R"], p["t"]) if "R" in p else None
+                ev = edge_evidence(pm, feats.keypoints, other.keypoints,
+                                   pose if other_pose is not None else None, other_pose)
+                matches[msg.src] = pm
+                weights[msg.src] = ev.weight
+                transport.send(msg.src, "matches", {
+                    "pairs": pm.pairs.astype(np.int32), "ratio": pm.ratio.astype(np.float32),
+                    "epipolar_error": pm.epipolar_error.astype(np.float32),
+                    "weight": ev.weight.astype(np.float64),
+                    "n_putative": np.array([pm.n_putative], np.int32),
+                    "reason": np.frombuffer(pm.reason.encode(), np.uint8)})
+            elif msg.kind == "matches":
+                matches[msg.src] = PairMatches(
+                    msg.src, i, p["pairs"].reshape(-1, 2), p["ratio"], p["epipolar_error"],
+                    int(p["n_putative"][0]), bytes(p["reason"]).decode())
+                weights[msg.src] = p["weight"]
+        if rnd < rounds and (known != sent).any():
+            for k in sorted(transport.neighbours):
+                transport.send(k, "counts", {"m": known.copy()})
+            sent = known.copy()
+    timings["matching_exchange"] = time.perf_counter() - t
+    missing = sorted(k for k in transport.neighbours if k not in matches and k not in
+                     getattr(transport, "silent", ()))
+    if missing:
+        raise RuntimeError(f"robot {i}: no matching with neighbour {missing[0]} after "
+                           f"{rounds} rounds")
+    fpc = np.where(known < 0, 0, known).astype(np.int64)
+    return feats, view, matches, weights, fpc
+
+
+def _own_rows(i: int, matches: dict, weights: dict):
+    """This robot's link table ``(nbr, r, s, weight)`` from the matches it holds."""
+    nbr, r, s, w = [], [], [], []
+    for k, pm in sorted(matches.items()):
+        mine, theirs = (0, 1) if pm.i == i else (1, 0)
+        nbr.append(np.full(len(pm.pairs), k, np.int64))
+        r.append(pm.pairs[:, mine].astype(np.int64))
+        s.append(pm.pairs[:, theirs].astype(np.int64))
+        w.append(np.asarray(weights[k], np.float64).reshape(len(pm.pairs)))
+
+    def cat(parts, dtype=np.int64):
+        return np.concatenate(parts) if parts else np.zeros(0, dtype)
+
+    return cat(nbr), cat(r), cat(s), cat(w, np.float64)
+
+
+def team_resolution(team) -> str:
+    """The rule the robots resolve by: the team's ``resolution`` option, except that with
+    message loss injected at any robot the fault-tolerant Alg. 1 runs (as the simulator
+    does on a faulty network) instead of a rule that is not fault-tolerant. Public
+    knowledge: every robot reads the same team file."""
+    lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
+    return rule_for_network(str(team.options.get("resolution", "paper")), lossy).name
+
+
+def robot_main(team, i: int, transport) -> tuple[dict, dict]:
+    """Run robot ``i`` over ``transport`` (already connected); return (header, arrays).
+
+    The header is JSON-able (counters, phases, timings); the arrays are the link log,
+    keypoints and matches (see :func:`pipeline.consistency.termination.robot_link_log`).
+    """
+    opts = team.options_for(i)
+    timings: dict = {}
+    t0 = time.perf_counter()
+    arrays: dict = {}
+    matches_hdr = []
+    keypoints, projection, pose = None, None, None
+    if team.data["kind"] == "links":
+        from pipeline.matching.link_evidence import ratio_llr
+
+        fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
+        nbr, r, s, quality = own_links_from_file(team.resolve_path(team.data["links"]), i)
+        weight = ratio_llr(1.0 - quality)  # the evidence a links file carries
+        bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
+        if bad.size:
+            raise InputError(f"robot {i}: link to camera {int(nbr[bad[0]])}, which is not its "
+                             "neighbour in the team's comm graph")
+        bad = np.flatnonzero((r >= fpc[i]) | (s >= fpc[nbr]))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"robot {i}: link ({i},{int(r[k])})-({int(nbr[k])},{int(s[k])}) of "
+                             f"{team.data['links']} names a feature beyond data."
+                             f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
+                             "give counts that cover every feature id of the links file")
+    else:
+        feats, view, matches, weights, fpc = _features_and_matches(team, i, transport, opts,
+                                                                   timings)
+        nbr, r, s, weight = _own_rows(i, matches, weights)
+        keypoints = feats.keypoints
+        pose = _pose(view)
+        if pose is not None:
+            projection = pose[0] @ np.c_[pose[1], pose[2]]
+        arrays["keypoints"] = feats.keypoints
+        for k, pm in sorted(matches.items()):
+            matches_hdr.append({"i": pm.i, "j": pm.j, "n_putative": pm.n_putative,
+                                "reason": pm.reason})
+            arrays[f"pairs_{k}"] = pm.pairs.astype(np.int32)
+            arrays[f"ratio_{k}"] = pm.ratio.astype(np.float32)
+            arrays[f"eperr_{k}"] = pm.epipolar_error.astype(np.float32)
+    order = np.lexsort((s, nbr))  # the order of the Robot's link table
+    robot = Robot(i, fpc, nbr[order], r[order], s[order])
+    resolution = team_resolution(team)
+    if get_rule(resolution).needs_evidence:
+        from pipeline.consistency.evidence import equip
+
+        equip(robot, weight[order],
+              np.zeros((robot.m, 2)) if keypoints is None else keypoints, projection)
+    if hasattr(transport, "status"):
+        transport.status("consistency")
+        transport.lossy = True  # faults are injected into the consistency stage, as simulated
+    protocol = ProtocolOptions(reliable=True, loss_timeout=int(opts["loss_timeout"]))
+    t = time.perf_counter()
+    run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
+    timings["consistency"] = time.perf_counter() - t
+    fusion = None
+    if bool(opts.get("fusion")) and team.data["kind"] == "formation" and pose is not None:
+        t = time.perf_counter()
+        fusion = _robot_fusion(team, i, robot, run, transport, keypoints, pose, arrays)
+        timings["fusion"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    arrays.update(robot_link_log(robot))
+    header = {"id": i, "features_per_camera": fpc.tolist(), "matches": matches_hdr,
+              "resolution": resolution,
+              "counters": transport.counters(), "run": {k: v for k, v in vars(run).items()},
+              "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
+              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid(), "fusion": fusion}
+    return header, arrays
+
+
+def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict) -> dict:
+    """Step 6 of the module docstring; fills ``arrays`` and returns the header's ``fusion``."""
+    from pipeline.consistency.protocols import ProtocolOptions
+    from pipeline.consistency.robot import ROBOT_LOST
+    from pipeline.fusion.robot import FusionRobot, run_fusion_locally, run_fusion_reliably
+
+    if hasattr(transport, "status"):
+        transport.status("fusion")
+    K, R, t = pose
+    fusion = FusionRobot(i, team.n, team.comm_edges, robot.final_tracks(), keypoints, K, R, t)
+    if any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n)):
+        # loss injected (public: the team file): every logical round over the reliable
+        # channel in lockstep, as the simulator's fusion runs on a lossy network
+        out = run_fusion_reliably(fusion, transport, ProtocolOptions(
+            reliable=True, loss_timeout=int(team.options_for(i)["loss_timeout"])), team.n)
+    else:
+        out = run_fusion_locally(fusion, transport, team.n)
+    if out["lost"]:
+        gone = np.flatnonzero(robot.link_alive & np.isin(robot.link_nbr, out["lost"]))
+        robot.delete_links(gone, transport.round, ROBOT_LOST)
+        run.lost_neighbours = sorted(set(run.lost_neighbours) | set(out["lost"]))
+    cut = fusion.cut_rows(robot.link_nbr, robot.link_r, robot.link_s) & robot.link_alive
+    arrays["fusion_cut"] = cut.astype(np.uint8)
+    arrays["fusion_names"] = fusion.names.astype(np.int64)
+    arrays["fusion_feat"] = fusion.feat.astype(np.int32)
+    arrays["fusion_theta"] = np.asarray(fusion.theta_w, np.float64).reshape(-1, 3)
+    arrays["fusion_valid"] = np.asarray(fusion.ok_w, np.uint8)
+    arrays["fusion_estimated"] = np.asarray(fusion.est, np.uint8)
+    arrays["fusion_inlier"] = np.asarray(fusion.yes_w, np.uint8)
+    arrays["fusion_outlier"] = np.asarray(fusion.outlier, np.uint8)
+    arrays["fusion_winner"] = np.asarray(fusion.winner, np.int32)
+    return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
+            "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
+            "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus,
+            "forced": _forced(fusion)}
+
+
+def _forced(fusion) -> bool:
+    """True when, in the exact mode, this robot decided a track by the round cap before its
+    ball closed (the simulator's ``settled`` false); False otherwise."""
+    flood = getattr(fusion, "flood", None)
+    if flood is None:
+        return False
+    return any(bool(st.forced) for st in flood.tracks.values())
+
+
+def _since_launch() -> float | None:
+    """Seconds since the launcher started this process (None when started by hand)."""
+    try:
+        return round(time.time() - float(os.environ[LAUNCHED_AT_ENV]), 4)
+    except (KeyError, ValueError):
+        return None
+
+
+def run_robot_process(team, i: int, result_path=None) -> int:
+    """The ``robot`` command: connect, handshake, run, publish; returns an exit code."""
+    startup = {"entered": _since_launch()}
+    from pipeline.transport.zenoh_transport import ZenohTransport
+
+    opts = team.options_for(i)
+    transport = ZenohTransport(team, i, drop_prob=float(opts["drop_prob"]),
+                               seed=int(opts["fault_seed"]),
+                               round_timeout_s=float(opts["round_timeout_s"]),
+                               log=lambda s: _log(i, s))
+    startup["session_open"] = _since_launch()
+    try:
+        transport.status("started")
+        waited = transport.handshake(float(opts["start_timeout_s"]))
+        startup["handshake_done"] = _since_launch()
+        _log(i, f"all {len(transport.neighbours)} neighbours heard after {waited:.2f} s")
+        try:
+            header, arrays = robot_main(team, i, transport)
+        except Exception as exc:
+            transport.status(f"failed: {exc}")
+            raise
+        header["handshake_s"] = round(waited, 4)
+        startup["main_done"] = _since_launch()
+        # seconds from the launcher's start of this process to each step (profile of the
+        # process start; None when the robot was started by hand)
+        header["since_launch_s"] = startup
+        kept = int(arrays["link_alive"].sum())
+        _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
+                f"{len(arrays['link_alive'])}")
+        if result_path:
+            from pipeline.runfolder import write_json_atomic
+
+            write_json_atomic(result_path, {**header, "links": {
+                k: arrays[k].tolist() for k in ("link_nbr", "link_r", "link_s", "link_alive",
+                                                "deleted_case", "deleted_round")}})
+        acked = transport.publish_result(encode_packet(header, [("result", arrays)]))
+        _log(i, f"done in {header['timings_s']['total']:.2f} s, {transport.round} rounds"
+                f"{'' if acked or not team.observer else ' (observer did not acknowledge)'}")
+        # the last round's packets were handed to Zenoh before the result, and closing the
+        # session drains what it still queues; a short pause covers a slow neighbour link
+        time.sleep(0.05)
+    finally:
+        transport.close()
+    return 0

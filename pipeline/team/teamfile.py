@@ -1,0 +1,436 @@
+"""``TEAM.json``: who is in a robot team, where each robot listens, who talks to whom, what
+each robot looks at.
+
+A team file lets every robot run as its own program (``python -m pipeline robot --team
+TEAM.json --id I``), on one machine or several. The launcher of ``--transport zenoh`` writes
+one; a user may write one by hand. Schema (``version`` 1)::
+
+    {
+      "version": 1,
+      "name": "formation-d",                      # key-expression prefix of this team
+      "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"}, ...],   # ids 0..n-1, each once
+      "comm_edges": [[0, 1], [1, 2], ...],        # undirected, robots talk only along these
+      "observer": {"endpoint": "tcp/127.0.0.1:7400"},                 # optional
+      "data": {"kind": "formation", "formation": "d", "seed": 0, "size": [640, 480],
+               "robots": null, "graph": null}
+          or {"kind": "images", "images": ["a.jpg", ...], "intrinsics": [[[fx,0,cx],...], ...],
+              "intrinsics_known": [true, ...], "max_size": 1600}
+              # K of the image as the robot uses it (after downscaling to max_size)
+          or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
+      "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
+                  "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40,
+                  "resolution": "paper",          # a rule of pipeline.consistency.rules, e.g.
+                                                  # "evidence" (paper with drop_prob > 0)
+                  "merge_radius": 0.5, "contrast_threshold": null, "rootsift": false,
+                  "budget_after_merge": false, "threshold_px": 1.0},
+              # max_features / threshold_px null: scaled with the image size (photos)
+      "robot_options": {"3": {"drop_prob": 0.2}}  # optional per-robot overrides of "options"
+    }
+
+Relative paths in ``data`` are relative to the team file. Every problem is one
+:class:`~pipeline.errors.InputError` line naming the bad value.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+__all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
+
+DATA_KINDS = ("formation", "images", "links")
+DEFAULT_OPTIONS = {
+    "features": "sift",
+    "max_features": 2000,
+    "merge_radius": 0.5,
+    "drop_prob": 0.0,
+    "fault_seed": 0,
+    "round_timeout_s": 5.0,
+    "start_timeout_s": 60.0,
+    "loss_timeout": 40,
+    "fusion": False,
+    "resolution": "paper",
+    "contrast_threshold": None,
+    "rootsift": False,
+    "budget_after_merge": False,
+    "threshold_px": 1.0,
+}
+#: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
+#: OpenCV offers one is checked when the robot extracts)
+FEATURE_METHODS = ("sift", "orb", "akaze", "surf")
+#: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
+#: which it started a robot process, so the robot can report how long its start took
+LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
+#: longest round / start timeout a team file may ask for (one day): beyond it a robot would
+#: wait for a neighbour that never answers for ever, in practice
+MAX_TIMEOUT_S = 86400.0
+#: most rounds of silence before a neighbour is declared lost (``loss_timeout``)
+MAX_LOSS_TIMEOUT = 100_000
+#: most features a team file may give one robot (``data.features_per_camera``): a robot holds
+#: per-feature arrays (a 10,000,000-feature robot measured 277 MB at construction, before its
+#: link tables); ``resolve`` writes compact counts, so this bounds a hand-written file only
+MAX_ROBOT_FEATURES = 5_000_000
+#: keys a robot entry and each kind of ``data`` may hold
+_ROBOT_KEYS = {"id", "endpoint"}
+_DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
+              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size"},
+              "links": {"kind", "links", "features_per_camera"}}
+_ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
+_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+@dataclass
+class RobotEntry:
+    """One robot: its id and the Zenoh endpoint it listens on (``tcp/HOST:PORT``)."""
+
+    id: int
+    endpoint: str
+
+
+@dataclass
+class Team:
+    """A parsed, checked team file (see the module docstring)."""
+
+    name: str
+    robots: list[RobotEntry]
+    comm_edges: np.ndarray
+    data: dict
+    options: dict = field(default_factory=lambda: dict(DEFAULT_OPTIONS))
+    robot_options: dict = field(default_factory=dict)
+    observer: str | None = None
+    path: Path | None = None
+
+    @property
+    def n(self) -> int:
+        return len(self.robots)
+
+    def endpoint(self, i: int) -> str:
+        return self.robots[i].endpoint
+
+    def neighbours(self, i: int) -> list[int]:
+        """Comm-graph neighbours of robot ``i``, sorted."""
+        e = self.comm_edges
+        return sorted(set(e[e[:, 0] == i, 1].tolist()) | set(e[e[:, 1] == i, 0].tolist()))
+
+    def options_for(self, i: int) -> dict:
+        """``options`` with robot ``i``'s overrides applied."""
+        return {**self.options, **self.robot_options.get(int(i), {})}
+
+    def check_id(self, i) -> int:
+        """The robot id as int; InputError if it is not a robot of this team."""
+        try:
+            k = int(i)
+        except (TypeError, ValueError):
+            k = -1
+        if str(i).strip() != str(k) or not 0 <= k < self.n:
+            raise InputError(f"--id {i}: not a robot of team {self.name!r}; its robots are "
+                             f"0..{self.n - 1}")
+        return k
+
+    def resolve_path(self, p: str) -> Path:
+        q = Path(p)
+        return q if q.is_absolute() or self.path is None else self.path.parent / q
+
+    def to_json(self) -> dict:
+        out = {"version": 1, "name": self.name,
+               "robots": [{"id": r.id, "endpoint": r.endpoint} for r in self.robots],
+               "comm_edges": self.comm_edges.tolist(), "data": self.data,
+               "options": self.options}
+        if self.robot_options:
+            out["robot_options"] = {str(k): v for k, v in self.robot_options.items()}
+        if self.observer:
+            out["observer"] = {"endpoint": self.observer}
+        return out
+
+
+def _where(path) -> str:
+    return f"team file {str(path)!r}" if path else "team"
+
+
+def parse_team(doc, path: Path | None = None) -> Team:
+    """Check a decoded team document and return a :class:`Team` (InputError on any problem)."""
+    where = _where(path)
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: expected a JSON object at the top, got {type(doc).__name__}")
+    unknown = set(doc) - {"version", "name", "robots", "comm_edges", "data", "options",
+                          "robot_options", "observer"}
+    if unknown:
+        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r}; see the TEAM.json "
+                         "schema in the README")
+    if doc.get("version", 1) != 1:
+        raise InputError(f"{where}: version {doc.get('version')!r} is not supported (use 1)")
+    name = doc.get("name", "team")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputError(f"{where}: name {name!r} must be letters, digits, '_', '.', '-'")
+
+    robots_doc = doc.get("robots")
+    if not isinstance(robots_doc, list) or len(robots_doc) < 2:
+        raise InputError(f"{where}: 'robots' must list at least 2 robots "
+                         "({\"id\": I, \"endpoint\": \"tcp/HOST:PORT\"})")
+    robots: dict[int, RobotEntry] = {}
+    endpoints: dict[str, int] = {}
+    for k, r in enumerate(robots_doc):
+        if not isinstance(r, dict) or "id" not in r or "endpoint" not in r:
+            raise InputError(f"{where}: robots[{k}] must be an object with 'id' and 'endpoint'")
+        if set(r) - _ROBOT_KEYS:
+            raise InputError(f"{where}: robots[{k}] has unknown key "
+                             f"{sorted(set(r) - _ROBOT_KEYS)[0]!r}; a robot is "
+                             "{\"id\": I, \"endpoint\": \"tcp/HOST:PORT\"}")
+        rid, ep = r["id"], r["endpoint"]
+        if isinstance(rid, bool) or not isinstance(rid, int) or rid < 0:
+            raise InputError(f"{where}: robots[{k}] id {rid!r} must be an integer >= 0")
+        if rid in robots:
+            raise InputError(f"{where}: robot id {rid} is listed twice")
+        m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
+        if not m or not 0 < int(m.group(2)) < 65536:
+            raise InputError(f"{where}: robot {rid} endpoint {ep!r} must look like "
+                             "tcp/HOST:PORT with a port in 1..65535")
+        if ep in endpoints:
+            raise InputError(f"{where}: robots {endpoints[ep]} and {rid} share endpoint {ep!r}; "
+                             "each robot listens on its own")
+        endpoints[ep] = rid
+        robots[rid] = RobotEntry(rid, ep)
+    n = len(robots)
+    if sorted(robots) != list(range(n)):
+        missing = sorted(set(range(n)) - set(robots))
+        raise InputError(f"{where}: robot ids must be 0..{n - 1}; id {missing[0]} is missing")
+
+    edges_doc = doc.get("comm_edges")
+    if not isinstance(edges_doc, list):
+        raise InputError(f"{where}: 'comm_edges' must be a list of [i, j] robot pairs")
+    for pair in edges_doc:
+        if not (isinstance(pair, list) and len(pair) == 2
+                and all(type(v) is int for v in pair)):
+            raise InputError(f"{where}: comm edge {pair!r} must be a pair [i, j] of integer "
+                             "robot ids")
+        if not (0 <= pair[0] < n and 0 <= pair[1] < n) or pair[0] == pair[1]:
+            raise InputError(f"{where}: comm edge {pair} must join two different robots "
+                             f"0..{n - 1}")
+    e = np.array(edges_doc, dtype=np.int64).reshape(-1, 2)
+    e = np.unique(np.sort(e, axis=1), axis=0) if e.size else np.zeros((0, 2), np.int64)
+
+    data = doc.get("data")
+    if not isinstance(data, dict) or data.get("kind") not in DATA_KINDS:
+        raise InputError(f"{where}: 'data' must be an object with kind one of "
+                         f"{', '.join(DATA_KINDS)}")
+    _check_data(data, n, where)
+
+    opts = dict(DEFAULT_OPTIONS)
+    given = doc.get("options", {}) or {}
+    if not isinstance(given, dict):
+        raise InputError(f"{where}: 'options' must be an object")
+    _check_options(given, where)
+    opts.update(given)
+    per = {}
+    ro = doc.get("robot_options", {}) or {}
+    if not isinstance(ro, dict):
+        raise InputError(f"{where}: 'robot_options' must be an object {{\"ID\": {{options}}}}")
+    for key, val in ro.items():
+        try:
+            rid = int(key)
+        except ValueError:
+            rid = -1
+        if not 0 <= rid < n or not isinstance(val, dict):
+            raise InputError(f"{where}: robot_options key {key!r} must be a robot id 0..{n - 1} "
+                             "with an object of options")
+        _check_options(val, where)
+        per[rid] = val
+    obs = doc.get("observer")
+    observer = None
+    if obs is not None:
+        if not isinstance(obs, dict):
+            raise InputError(f"{where}: 'observer' {obs!r} must be an object "
+                             "{\"endpoint\": \"tcp/HOST:PORT\"}")
+        ep = obs.get("endpoint")
+        if not isinstance(ep, str) or not _ENDPOINT.match(ep):
+            raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT")
+        if ep in endpoints:
+            raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
+        observer = ep
+    return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_data(data: dict, n: int, where: str) -> None:
+    from pipeline.validate import render_size
+
+    kind = data["kind"]
+    unknown = set(data) - _DATA_KEYS[kind]
+    if unknown:
+        raise InputError(f"{where}: data of kind {kind} has unknown key {sorted(unknown)[0]!r}; "
+                         f"known: {', '.join(sorted(_DATA_KEYS[kind]))}")
+    if kind == "formation":
+        size = data.get("size", [640, 480])
+        if not (isinstance(size, list) and len(size) == 2 and all(_is_int(v) for v in size)):
+            raise InputError(f"{where}: data.size {size!r} must be [WIDTH, HEIGHT]")
+        render_size(size[0], size[1], f"{size[0]}x{size[1]}", flag=f"{where}: data.size")
+        for key in ("formation", "graph"):
+            if data.get(key) is not None and not isinstance(data[key], str):
+                raise InputError(f"{where}: data.{key} {data[key]!r} must be a name, e.g. "
+                                 f"{'d' if key == 'formation' else 'ring'}")
+        seed = data.get("seed", 0)
+        if not _is_int(seed) or seed < 0:
+            raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")
+        if data.get("robots") is not None and not _is_int(data["robots"]):
+            raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer or "
+                             "null")
+        expected = data.get("robots") or 6
+        if expected != n:
+            raise InputError(f"{where}: data describes {expected} robots but 'robots' lists {n}")
+    elif kind == "images":
+        imgs = data.get("images")
+        if not isinstance(imgs, list) or len(imgs) != n or not all(isinstance(p, str) for p in imgs):
+            raise InputError(f"{where}: data.images must list one image path per robot ({n})")
+        K = data.get("intrinsics")
+        if K is not None:
+            if not isinstance(K, list) or len(K) != n:
+                raise InputError(f"{where}: data.intrinsics must give one 3x3 K (or null) per robot")
+            for i, k in enumerate(K):
+                if k is not None and not (isinstance(k, list) and len(k) == 3 and all(
+                        isinstance(row, list) and len(row) == 3 and all(map(_is_number, row))
+                        for row in k)):
+                    raise InputError(f"{where}: data.intrinsics[{i}] must be a 3x3 matrix of "
+                                     "finite numbers or null")
+        known = data.get("intrinsics_known")
+        if known is not None and not (isinstance(known, list) and len(known) == n
+                                      and all(isinstance(v, bool) for v in known)):
+            raise InputError(f"{where}: data.intrinsics_known must list {n} true/false values "
+                             "or be null")
+        ms = data.get("max_size")
+        if ms is not None and (not _is_int(ms) or ms < 0):
+            raise InputError(f"{where}: data.max_size {ms!r} must be a number of pixels >= 0 "
+                             "(0: full size) or null")
+    elif kind == "links":
+        if not isinstance(data.get("links"), str):
+            raise InputError(f"{where}: data.links must be the path of a links CSV file")
+        fpc = data.get("features_per_camera")
+        if not isinstance(fpc, list) or len(fpc) != n or not all(
+                _is_int(v) and 0 <= v <= MAX_ROBOT_FEATURES for v in fpc):
+            raise InputError(f"{where}: data.features_per_camera must list {n} counts in "
+                             f"0..{MAX_ROBOT_FEATURES} (a robot's memory follows its count)")
+
+
+def _check_options(opts: dict, where: str) -> None:
+    unknown = set(opts) - set(DEFAULT_OPTIONS)
+    if unknown:
+        raise InputError(f"{where}: unknown option {sorted(unknown)[0]!r}; known: "
+                         f"{', '.join(DEFAULT_OPTIONS)}")
+    p = opts.get("drop_prob", 0.0)
+    if not isinstance(p, (int, float)) or not 0.0 <= p < 1.0:
+        raise InputError(f"{where}: option drop_prob {p!r} must be in [0, 1)")
+    for k in ("round_timeout_s", "start_timeout_s"):
+        v = opts.get(k, 1.0)
+        if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
+            raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "
+                             f"(0, {MAX_TIMEOUT_S:g}]")
+    from pipeline.matching.features import MAX_FEATURES
+
+    for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
+        v = opts.get(k, 8)
+        if k == "max_features" and v is None:
+            continue  # scaled with the image size (photo_max_features)
+        if not _is_int(v) or not 1 <= v <= top:
+            raise InputError(f"{where}: option {k} {v!r} must be an integer in 1..{top}")
+    for k in ("threshold_px", "contrast_threshold"):
+        v = opts.get(k)
+        if v is not None and (not _is_number(v) or not v > 0):
+            raise InputError(f"{where}: option {k} {v!r} must be a finite number > 0 or null")
+    seed = opts.get("fault_seed", 0)
+    if not _is_int(seed) or seed < 0:
+        raise InputError(f"{where}: option fault_seed {seed!r} must be an integer >= 0")
+    r = opts.get("merge_radius", 0.0)
+    if not _is_number(r) or r < 0:
+        raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
+                         "pixels >= 0")
+    for k in ("fusion", "rootsift", "budget_after_merge"):
+        if not isinstance(opts.get(k, False), bool):
+            raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
+    method = opts.get("features", "sift")
+    if method not in FEATURE_METHODS:
+        raise InputError(f"{where}: option features {method!r} must be one of "
+                         f"{', '.join(FEATURE_METHODS)}")
+    from pipeline.consistency.rules import rule_names
+
+    if opts.get("resolution", "paper") not in rule_names():
+        raise InputError(f"{where}: option resolution {opts['resolution']!r} must be one of "
+                         f"{', '.join(rule_names())}")
+
+
+def load_team(path) -> Team:
+    """Read and check a team file; InputError (one line) on a missing or malformed file."""
+    from pipeline.outputs import require_input_file
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"team file {str(p)!r} not found")
+    require_input_file(p, "team file")
+    try:
+        doc = json.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"team file {str(p)!r} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"team file {str(p)!r} nests lists or objects too deeply to be a "
+                         "team file; see the TEAM.json schema in the README") from None
+    return parse_team(doc, p)
+
+
+def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
+    """Check, before a robot opens its session, what robot ``i`` will read; return the files.
+
+    Formation data: the formation, graph, seed and robot count are known to
+    :mod:`data_synth` (nothing is rendered). Images: robot ``i``'s image file exists. Links:
+    the links file exists.
+
+    Returns
+    -------
+    list of ``(what, path)`` — the data files robot ``i`` reads (to keep outputs off them)
+
+    Raises
+    ------
+    InputError
+        Naming the bad value or the missing file.
+    """
+    from pipeline.outputs import require_input_file
+
+    data = team.data
+    where = _where(team.path)
+    if data["kind"] != "links":
+        from pipeline.matching.features import check_method
+
+        check_method(team.options_for(i)["features"])
+    if data["kind"] == "formation":
+        import data_synth
+
+        data_synth.formation_edges(data.get("formation", "d"), data.get("seed", 0),
+                                   data.get("robots"), data.get("graph"))
+        return []
+    if data["kind"] == "images":
+        path = team.resolve_path(data["images"][i])
+        return [(f"data.images[{i}] of the team file",
+                 require_input_file(path, f"{where}: data.images[{i}]"))]
+    return [("data.links of the team file",
+             require_input_file(team.resolve_path(data["links"]), f"{where}: data.links"))]
+
+
+def write_team(path, team: Team) -> Path:
+    """Write ``team`` as JSON atomically; return the path."""
+    p = Path(path)
+    tmp = p.with_name(p.name + f".tmp{os.getpid()}")
+    tmp.write_text(json.dumps(team.to_json(), indent=1))
+    os.replace(tmp, p)
+    return p

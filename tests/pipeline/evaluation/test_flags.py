@@ -1,0 +1,54 @@
+"""Flags of a photo run: a weak reconstruction and cleaning that hurt are never silent."""
+
+import numpy as np
+
+from pipeline.evaluation.flags import flags_markdown, reconstruction_flags
+
+
+def _summary(reg, names, points, track=4.0, err=0.5):
+    return {"registered_images": reg, "registered_names": names, "points": points,
+            "mean_track_length": track, "mean_reprojection_error": err}
+
+
+NAMES = [f"{k}.jpg" for k in range(6)]
+RING = np.array([[k, (k + 1) % 6] for k in range(6)])
+
+
+def test_a_good_run_has_no_flags():
+    s = _summary(6, NAMES, 1000)
+    assert reconstruction_flags(6, s, s, RING, [100] * 6, [5000] * 6) == []
+    assert flags_markdown([]) == ""
+
+
+def test_few_registered_names_the_likely_causes():
+    before = _summary(2, NAMES[:2], 40)
+    split = np.array([[0, 1], [2, 3], [4, 5]])
+    flags = reconstruction_flags(6, before, before, split, [50, 0, 0], [600] * 6,
+                                 intrinsics_guessed=6)
+    assert [f["flag"] for f in flags] == ["few-registered"]
+    cause = flags[0]["likely_cause"]
+    assert "3 groups" in cause and "2 of 3 image pairs got no association" in cause
+    assert "few features" in cause and "guessed" in cause
+    assert "registered only 2 of 6" in flags_markdown(flags)
+
+
+def test_images_lost_after_cleaning_name_the_images_and_the_cuts():
+    before, after = _summary(6, NAMES, 1000), _summary(5, NAMES[:5], 990)
+    flags = reconstruction_flags(6, before, after, RING, [100] * 6, [5000] * 6,
+                                 cut_by_reason={"fusion-outlier": 30, "resolution": 2},
+                                 lost_image_cuts={"5.jpg": {"fusion-outlier": 25}})
+    assert [f["flag"] for f in flags] == ["images-lost"]
+    assert "5.jpg" in flags[0]["message"] and "25 links cut by fusion-outlier" in \
+        flags[0]["likely_cause"]
+
+
+def test_cleaning_that_costs_points_or_accuracy_is_flagged_not_small_noise():
+    before = _summary(6, NAMES, 1000, track=4.0, err=0.50)
+    assert reconstruction_flags(6, before, _summary(6, NAMES, 980, 3.95, 0.51), RING,
+                                [100] * 6, [5000] * 6) == []
+    flags = reconstruction_flags(6, before, _summary(6, NAMES, 700, 3.0, 0.7), RING,
+                                 [100] * 6, [5000] * 6, cut_by_reason={"resolution": 9})
+    assert [f["flag"] for f in flags] == ["cleaning-worse"]
+    msg = flags[0]["message"]
+    assert "points 1000 -> 700" in msg and "track length" in msg and "reprojection" in msg
+    assert "9 by resolution" in flags[0]["likely_cause"]

@@ -1,0 +1,85 @@
+"""The resolution oracle: exact against brute force; the scores by hand."""
+
+import itertools
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
+from pipeline.evaluation.oracle import min_conflict_cut, oracle_cut, resolution_scores
+from pipeline.types import Links
+
+FIG1 = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])  # camera 3 twice
+
+
+@st.composite
+def small_instances(draw):
+    """A few cameras, one-to-one links on every camera pair, a random truth; ≤ 12 links."""
+    n = draw(st.integers(2, 4))
+    fpc = np.array([draw(st.integers(1, 3)) for _ in range(n)])
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    ci, fi, cj, fj = [], [], [], []
+    for i, j in itertools.combinations(range(n), 2):
+        k = int(min(fpc[i], fpc[j]))
+        r, s = rng.permutation(fpc[i])[:k], rng.permutation(fpc[j])[:k]
+        keep = rng.random(k) < 0.8
+        ci += [i] * int(keep.sum())
+        cj += [j] * int(keep.sum())
+        fi += r[keep].tolist()
+        fj += s[keep].tolist()
+    links = Links(ci[:12], fi[:12], cj[:12], fj[:12])
+    truth = rng.random(len(links)) < 0.8
+    return fpc, links, truth
+
+
+def brute_force_good_cuts(fpc, links, truth) -> int:
+    """Fewest good links of conflictive sets to cut, after their spurious ones, by enumeration."""
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    _, conflictive = union_find_conflicts(fpc, links)
+    in_sets = conflictive[off[links.cam_i] + links.feat_i]
+    base = ~(in_sets & ~truth)
+    cand = np.flatnonzero(in_sets & truth)
+    for k in range(cand.size + 1):
+        for combo in itertools.combinations(cand.tolist(), k):
+            kept = base.copy()
+            kept[list(combo)] = False
+            if is_conflict_free(fpc, links.subset(kept)):
+                return k
+    raise AssertionError("unreachable: cutting every link is conflict-free")
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(small_instances())
+def test_oracle_is_exact(inst):
+    fpc, links, truth = inst
+    kept = oracle_cut(fpc, links, truth)
+    assert is_conflict_free(fpc, links.subset(kept))
+    sc = resolution_scores(fpc, links, truth, kept)
+    assert sc["spurious_left"] == 0
+    assert sc["spurious_cut"] == sc["spurious_in_sets"]
+    assert sc["good_cut"] == brute_force_good_cuts(fpc, links, truth)
+
+
+def test_oracle_on_fig1():
+    # all good: one link must go; one spurious link in the cycle: that one alone
+    assert (~oracle_cut([1, 1, 1, 2], FIG1, np.ones(4, bool))).sum() == 1
+    truth = np.array([True, True, False, True])
+    assert oracle_cut([1, 1, 1, 2], FIG1, truth).tolist() == [True, True, False, True]
+
+
+def test_min_conflict_cut_two_disjoint_paths():
+    # features 0 and 3 of camera 0 joined by two disjoint paths through cameras 1 and 2
+    cam = np.array([0, 1, 2, 0, 1, 2])
+    a = np.array([0, 1, 2, 0, 4, 5])
+    b = np.array([1, 2, 3, 4, 5, 3])
+    cut = min_conflict_cut(cam, a, b)
+    assert cut.sum() == 2
+
+
+def test_resolution_scores_by_hand():
+    truth = np.array([True, False, True, True])
+    kept = np.array([True, True, False, True])
+    sc = resolution_scores([1, 1, 1, 2], FIG1, truth, kept)
+    assert sc == {"good_cut": 1, "spurious_cut": 0, "spurious_in_sets": 1, "spurious_left": 1,
+                  "links_in_sets": 4}

@@ -1,0 +1,56 @@
+"""Report sections read from a hand-built ledger, against hand-counted answers."""
+
+import numpy as np
+
+from pipeline.evaluation.report import (
+    PAPER_TABLE_III_IV,
+    association_counts,
+    fusion_section,
+    report_markdown,
+    resolution_section,
+)
+from pipeline.types import LinkLedger, Links
+
+# paper Fig. 1 plus a link (1,1)-(2,1) outside the conflictive set
+LINKS = Links(cam_i=[0, 0, 1, 2, 1], feat_i=[0, 0, 0, 0, 1], cam_j=[3, 1, 2, 3, 2],
+              feat_j=[1, 0, 0, 0, 1])
+M = [1, 2, 2, 2]
+
+
+def _ledger(truth=None):
+    ledger = LinkLedger.all_kept(LINKS, truth=truth)
+    ledger.cut(np.array([1]), "resolution", 3, iteration=1, case="c")
+    ledger.cut(np.array([4]), "fusion-outlier", 40)
+    return ledger
+
+
+def test_sections_with_ground_truth():
+    ledger = _ledger(truth=np.array([1, 0, 1, 1, 1]))
+    stats = {"iterations": 1, "detection_rounds": 5, "resolution_rounds": 3, "messages": 12,
+             "bytes": 480, "max_robot_memory_bytes": 64, "protocol": "paper"}
+    r = resolution_section(ledger, stats)
+    assert (r["deleted_links"], r["good_deleted"], r["spurious_deleted"]) == (1, 0, 1)
+    assert r["deleted_by_case"] == {"b": 0, "c": 1} and r["details"] == {"protocol": "paper"}
+    f = fusion_section(ledger, {"enabled": True, "rounds": 40})
+    assert f == {"enabled": True, "rounds": 40, "cut_links": 1, "cut_spurious": 0, "cut_good": 1}
+    before = association_counts(M, LINKS, ledger.good, 2)
+    assert (before["conflictive_sets"], before["good_links"], before["spurious_links"],
+            before["missing_links"], before["precision"]) == (1, 4, 1, 2, 0.8)
+    md = report_markdown({"before": before, "after": association_counts(
+        M, LINKS.subset(ledger.kept), ledger.good[ledger.kept], 2), "resolution": r,
+        "fusion": f})
+    assert "| Conflictive sets (c) | 1 | 0 |" in md and "| spurious deleted | 1 |" in md
+    assert "| links cut by fusion (fusion-outlier) | 1 |" in md
+
+
+def test_sections_without_ground_truth_leave_good_and_spurious_out():
+    ledger = _ledger()
+    r = resolution_section(ledger, {})
+    assert "good_deleted" not in r and r["deleted_links"] == 1
+    assert fusion_section(ledger, {}) == {"cut_links": 1}
+    assert "good_links" not in association_counts(M, LINKS, None, None)
+
+
+def test_paper_tables_have_one_value_per_formation():
+    assert all(len(v) == 4 for v in PAPER_TABLE_III_IV.values())
+    assert PAPER_TABLE_III_IV["Deleted links"] == (2, 26, 46, 131)

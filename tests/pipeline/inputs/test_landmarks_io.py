@@ -1,0 +1,90 @@
+"""Labelled-landmark folders: pairing by name or by natural order, txt / mat keypoints,
+given or SIFT descriptors, frame selection, and clear errors."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+from scipy.io import savemat
+
+from pipeline.errors import InputError
+from pipeline.inputs.landmarks import load_landmark_folder, natural_key, select_frames
+
+HOTEL = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"
+
+
+def _image(path: Path, size=(64, 48)) -> None:
+    rng = np.random.default_rng(len(path.name))
+    Image.fromarray(rng.integers(0, 255, size[::-1], dtype=np.uint8)).save(path)
+
+
+def test_natural_order():
+    names = ["hotel.seq10.png", "hotel.seq2.png", "hotel.seq0.png"]
+    assert sorted(names, key=natural_key) == ["hotel.seq0.png", "hotel.seq2.png", "hotel.seq10.png"]
+
+
+def test_select_frames_stride_from_first():
+    assert select_frames(101, 20).tolist() == list(range(0, 100, 5))
+    assert select_frames(6, None).tolist() == list(range(6))
+    with pytest.raises(InputError, match="--frames 1"):
+        select_frames(6, 1)
+    with pytest.raises(InputError, match="--frames 7"):
+        select_frames(6, 7)
+
+
+def test_hotel_subset_pairs_files_by_natural_order():
+    frames = load_landmark_folder(HOTEL)
+    assert [f.name for f in frames] == [f"hotel.seq{k}.png" for k in (0, 20, 40, 60, 80, 100)]
+    assert [f.keypoint_file for f in frames] == [f"hotel{k}.txt" for k in (1, 21, 41, 61, 81, 101)]
+    assert [f.descriptor_file for f in frames] == [f"hotel{k:03d}.scf" for k in (1, 21, 41, 61, 81, 101)]
+    assert all(f.keypoints.shape == (30, 2) and f.descriptors.shape == (30, 60) for f in frames)
+    assert frames[0].descriptor_kind == "histogram"
+    np.testing.assert_allclose(frames[0].keypoints[0], [164, 82])
+
+
+def test_pairing_by_name_with_mat_and_txt(tmp_path):
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0]])
+    for k in range(3):
+        _image(tmp_path / f"view{k}.png")
+    np.savetxt(tmp_path / "view0.txt", pts)
+    savemat(tmp_path / "view1.mat", {"pts_coord": pts.T})
+    np.savetxt(tmp_path / "view2.txt", pts + 1, delimiter=",")
+    (tmp_path / "SOURCE.txt").write_text("not a keypoint table\n")
+    frames = load_landmark_folder(tmp_path, descriptors="sift")
+    assert [f.keypoint_file for f in frames] == ["view0.txt", "view1.mat", "view2.txt"]
+    np.testing.assert_allclose(frames[1].keypoints, pts)
+    assert frames[0].descriptors.shape == (3, 128) and frames[0].descriptor_kind == "vector"
+
+
+def test_different_landmark_counts_is_an_input_error(tmp_path):
+    for k in range(2):
+        _image(tmp_path / f"v{k}.png")
+    np.savetxt(tmp_path / "v0.txt", np.ones((3, 2)))
+    np.savetxt(tmp_path / "v1.txt", np.ones((4, 2)))
+    with pytest.raises(InputError, match="different numbers of landmarks"):
+        load_landmark_folder(tmp_path, descriptors="sift")
+
+
+def test_unpaired_files_and_missing_descriptors(tmp_path):
+    for k in range(3):
+        _image(tmp_path / f"v{k}.png")
+    np.savetxt(tmp_path / "a.txt", np.ones((3, 2)))
+    with pytest.raises(InputError, match="3 images but 1 keypoint files"):
+        load_landmark_folder(tmp_path)
+    for k in range(3):
+        np.savetxt(tmp_path / f"v{k}.txt", np.ones((3, 2)))
+    (tmp_path / "a.txt").unlink()
+    with pytest.raises(InputError, match="NAME.scf"):
+        load_landmark_folder(tmp_path, descriptors="given")
+    for k in range(3):
+        np.savetxt(tmp_path / f"v{k}.scf", np.ones((2, 5)))
+    with pytest.raises(InputError, match="2 descriptor rows for 3 landmarks"):
+        load_landmark_folder(tmp_path, descriptors="given")
+
+
+def test_missing_folder_and_bad_descriptor_source(tmp_path):
+    with pytest.raises(InputError, match="no such folder"):
+        load_landmark_folder(tmp_path / "nope")
+    with pytest.raises(InputError, match="--descriptors 'orb'"):
+        load_landmark_folder(HOTEL, descriptors="orb")

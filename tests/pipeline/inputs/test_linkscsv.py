@@ -1,0 +1,98 @@
+"""Strict reading of users' links files; atomic run-output links.csv."""
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.inputs.linkscsv import (
+    RUN_LINK_COLUMNS,
+    features_per_camera_for,
+    read_links_csv,
+    read_run_links_csv,
+    write_links_csv,
+)
+from pipeline.types import LinkLedger, Links
+
+
+def write(tmp_path, text, name="in.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_reads_header_quality_comments_and_swaps_ends(tmp_path):
+    p = write(tmp_path, "cam_i,feat_i,cam_j,feat_j,quality\n# a comment\n0,1,1,2,0.5\n\n"
+                        "2, 7, 1, 3, 0.25\n")
+    lf = read_links_csv(p)
+    assert lf.has_quality
+    assert lf.links.cam_i.tolist() == [0, 1] and lf.links.feat_i.tolist() == [1, 3]
+    assert lf.links.cam_j.tolist() == [1, 2] and lf.links.feat_j.tolist() == [2, 7]
+    assert lf.links.quality.tolist() == [0.5, 0.25]
+    assert lf.line.tolist() == [3, 5]
+    assert features_per_camera_for(lf.links).tolist() == [2, 4, 8]
+    assert features_per_camera_for(lf.links, n_cameras=5).tolist() == [2, 4, 8, 0, 0]
+
+
+def test_reads_without_header_and_quality(tmp_path):
+    lf = read_links_csv(write(tmp_path, "0,0,1,0\n1,0,2,0\n"))
+    assert not lf.has_quality and len(lf.links) == 2
+    assert (lf.links.quality == 1.0).all()
+
+
+@pytest.mark.parametrize("text, line, message", [
+    ("0,0,1,0\n0,x,1,1\n", 2, "'x' is not an integer"),
+    ("0,0,1,0\n0,1.5,1,1\n", 2, "not an integer"),
+    ("0,0,1,-1\n", 1, "negative"),
+    ("0,0,1\n", 1, "has 3 columns"),
+    ("0,0,1,0,0.5,7\n", 1, "has 6 columns"),
+    ("0,0,1,0,0.5\n0,1,1,1\n", 2, "started with 5"),
+    ("0,0,1,0,abc\n", 1, "quality 'abc'"),
+    ("0,0,1,0,nan\n", 1, "quality 'nan'"),
+    ("0,0,1,0\n2,3,2,4\n", 2, "self-link within camera 2"),
+    ("0,0,1,0\n0,1,1,1\n1,0,0,0\n", 3, "duplicate link"),
+    ("0,0,1,0\n0,0,1,1\n", 2, "feature 0,0 is linked twice to camera 1"),
+    ("0,0,1,5\n0,1,1,5\n", 2, "feature 1,5 is linked twice to camera 0"),
+    ("cam_i,cam_j,feat_i,feat_j\n0,0,1,0\n", 1, "header"),
+])
+def test_bad_rows_are_named(tmp_path, text, line, message):
+    p = write(tmp_path, text)
+    with pytest.raises(InputError, match=message) as err:
+        read_links_csv(p)
+    assert f"in.csv:{line}:" in str(err.value)
+
+
+def test_duplicate_error_names_both_rows(tmp_path):
+    p = write(tmp_path, "0,0,1,0\n0,1,1,1\n1,0,0,0\n")
+    with pytest.raises(InputError, match="also row 1"):
+        read_links_csv(p)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_links_csv(tmp_path / "nope.csv")
+
+
+def test_run_links_csv_round_trip_and_atomic(tmp_path):
+    links = Links([0, 0, 1], [0, 1, 2], [1, 2, 2], [3, 4, 5])
+    out = tmp_path / "run" / "links.csv"
+    write_links_csv(out, LinkLedger(links, np.array(["kept", "deleted", "kept"], dtype=object),
+                                    ["", "resolution", ""], [-1, 2, -1], [-1, 1, -1],
+                                    ["", "b", ""], np.array([1, 0, -1], dtype=np.int8)))
+    lines = out.read_text().splitlines()
+    assert lines[0] == ",".join(RUN_LINK_COLUMNS)
+    assert lines[1:] == ["0,0,1,3,kept,,,1", "0,1,2,4,deleted,resolution,2,0", "1,2,2,5,kept,,,"]
+    back = read_run_links_csv(out)
+    assert back.links.feat_j.tolist() == [3, 4, 5]
+    assert back.round.tolist() == [-1, 2, -1] and back.truth.tolist() == [1, 0, -1]
+    assert back.status.tolist() == ["kept", "deleted", "kept"]
+    assert [p.name for p in out.parent.iterdir()] == ["links.csv"]  # no temp file left
+    with pytest.raises(ValueError, match="status"):
+        write_links_csv(out, LinkLedger(links, ["kept", "gone", "kept"], ["", "", ""],
+                                        [-1, -1, -1], [-1, -1, -1], ["", "", ""]))
+    assert read_run_links_csv(out).status.tolist() == ["kept", "deleted", "kept"]  # intact
+
+
+def test_huge_ids_are_named_not_overflowing(tmp_path):
+    """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
+    with pytest.raises(InputError, match="feat_j .* is too large"):
+        read_links_csv(write(tmp_path, "0,0,1,99999999999999999999\n"))

@@ -1,0 +1,320 @@
+"""Robots as processes over Zenoh: same links as the simulator, real faults, bad inputs.
+
+Small inputs (a 6-robot formation at 160x120, a 4-robot links file) keep each case to a few
+seconds of process start-up.
+"""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.consistency.centralized import is_conflict_free
+from pipeline.runs.formation import FormationConfig, run_formation
+from pipeline.types import Links
+
+SMALL = dict(seed=0, size=(160, 120), fusion=False, rerun=False)
+
+
+@pytest.fixture(autouse=True)
+def _scene_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+@pytest.fixture(scope="module")
+def links_input(tmp_path_factory):
+    """A 4-camera links file with conflictive sets and a quality per link, and its complete
+    comm graph."""
+    rng = np.random.default_rng(1)
+    rows = set()
+    for _ in range(120):
+        i, j = sorted(rng.choice(4, 2, replace=False))
+        rows.add((int(i), int(rng.integers(12)), int(j), int(rng.integers(12))))
+    # one-to-one per camera pair
+    seen, keep = set(), []
+    for i, r, j, s in sorted(rows):
+        if (i, r, j) in seen or (j, s, i) in seen:
+            continue
+        seen |= {(i, r, j), (j, s, i)}
+        keep.append((i, r, j, s))
+    d = tmp_path_factory.mktemp("links")
+    # a quality (1 - Lowe ratio) per link: the evidence of the evidence rule
+    quality = rng.uniform(0.05, 0.95, len(keep)).round(3)
+    (d / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+        f"{i},{r},{j},{s},{q}\n" for (i, r, j, s), q in zip(keep, quality, strict=True)))
+    (d / "graph.csv").write_text("".join(f"{i},{j}\n" for i in range(4) for j in range(i + 1, 4)))
+    return d
+
+
+def _rows(path):
+    """Every row's link, status and reason (the round column may differ: the zenoh team
+    counts its rounds with the termination wave's)."""
+    return [tuple(line.split(",")[:6]) for line in Path(path).read_text().splitlines()]
+
+
+@pytest.mark.parametrize("formation,resolution,fusion", [
+    ("a", "evidence", True), ("b", "evidence", False), ("c", "evidence", False),
+    ("d", "evidence", True), ("d", "paper", False)])
+def test_zenoh_links_equal_the_simulators_formation(formation, resolution, fusion, tmp_path):
+    sim, zen = tmp_path / "sim", tmp_path / "zenoh"
+    cfg = dict(formation=formation, resolution=resolution, **{**SMALL, "fusion": fusion})
+    run_formation(FormationConfig(out=str(sim), **cfg))
+    run_formation(FormationConfig(out=str(zen), **cfg), transport="zenoh")
+    sim_rows = _rows(sim / "links.csv")
+    assert _rows(zen / "links.csv") == sim_rows
+    assert any(r[4] == "deleted" for r in sim_rows[1:])  # the formation had conflicts to cut
+    report = json.loads((zen / "report.json").read_text())
+    if fusion:  # the robots' own fusion cut what the simulator's cut, in as many rounds
+        assert any(r[5] == "fusion-outlier" for r in sim_rows[1:])
+        sim_fusion = json.loads((sim / "report.json").read_text())["fusion"]
+        assert report["fusion"]["rounds"] == sim_fusion["rounds"]
+        assert report["fusion"]["settled"] is sim_fusion["settled"] is True
+        assert report["fusion"]["fused_points"] == sim_fusion["fused_points"]
+        for kind, nbytes in sim_fusion["bytes_by_kind"].items():
+            assert report["fusion"]["bytes_by_kind"][kind] == nbytes
+    assert report["resolution"]["method"] == resolution
+    assert report["team"]["transport"] == "zenoh"
+    assert all(r["wire_bytes"] >= r["bytes"] for r in report["team"]["robots"].values())
+
+
+@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+def test_zenoh_links_equal_the_simulators_resolve(links_input, tmp_path, resolution):
+    args = ["resolve", "--links", str(links_input / "in.csv"), "--comm-graph",
+            str(links_input / "graph.csv"), "--resolution", resolution]
+    assert main([*args, "--out", str(tmp_path / "sim.csv")]) == 0
+    assert main([*args, "--out", str(tmp_path / "zen.csv"), "--transport", "zenoh",
+                 "--report", str(tmp_path / "zen.json")]) == 0
+    sim = _rows(tmp_path / "sim.csv")
+    assert _rows(tmp_path / "zen.csv") == sim
+    assert sum(r[4] == "deleted" for r in sim[1:]) > 0  # the input had conflicts to cut
+    assert json.loads((tmp_path / "zen.json").read_text())["resolution_method"] == resolution
+
+
+def _kept_links(path):
+    rows = [r.split(",") for r in Path(path).read_text().splitlines()[1:]]
+    kept = [r for r in rows if r[4] == "kept"]
+    return Links([int(r[0]) for r in kept], [int(r[1]) for r in kept],
+                 [int(r[2]) for r in kept], [int(r[3]) for r in kept]), rows
+
+
+def test_kill_9_of_one_robot_survivors_finish_conflict_free(tmp_path):
+    runs = []
+    cfg = FormationConfig(formation="complete", robots=4, graph="complete",
+                          out=str(tmp_path / "run"), **SMALL)
+    out = run_formation(cfg, transport="zenoh", kill=(2, "consistency", 0.0), keep_run=runs,
+                             round_timeout_s=1.0)
+    run = runs[0]
+    assert 2 in run.killed and 2 not in run.results
+    assert sorted(run.results) == [0, 1, 3]
+    # bounded: the survivors finished within the round timeout plus T silent rounds
+    assert all(t - run.killed[2] < 30 for t in run.finished_at.values())
+    report = json.loads((out / "report.json").read_text())
+    assert report["faults"]["robots_lost"] == {"2": [0, 1, 3]}
+    assert report["faults"]["links_cut_robot_lost"] > 0
+    kept, rows = _kept_links(out / "links.csv")
+    assert all(r[5] == "robot-lost" or r[4] == "kept" or r[5] == "resolution" for r in rows)
+    assert not any(r[4] == "kept" and "2" in (r[0], r[2]) for r in rows)
+    m = report["features_per_camera"]
+    assert is_conflict_free(m, kept) and report["after"]["conflictive_sets"] == 0
+
+
+def test_kill_9_of_one_robot_during_fusion(tmp_path):
+    runs = []
+    cfg = FormationConfig(formation="d", out=str(tmp_path / "run"), **{**SMALL, "fusion": True})
+    out = run_formation(cfg, transport="zenoh", kill=(2, "fusion", 0.0), keep_run=runs, round_timeout_s=1.0)
+    run = runs[0]
+    assert 2 in run.killed and sorted(run.results) == [0, 1, 3, 4, 5]
+    assert all(t - run.killed[2] < 30 for t in run.finished_at.values())
+    report = json.loads((out / "report.json").read_text())
+    assert report["fusion"]["enabled"] and report["fusion"]["robots_lost"]
+    kept, rows = _kept_links(out / "links.csv")
+    touching = [r for r in rows if "2" in (r[0], r[2])]
+    assert touching and all(r[4] == "deleted" for r in touching)
+    assert any(r[5] == "robot-lost" for r in touching)
+    m = report["features_per_camera"]
+    assert is_conflict_free(m, kept) and report["after"]["conflictive_sets"] == 0
+
+
+def test_message_loss_at_the_zenoh_transport_is_handled(links_input, tmp_path):
+    rep = tmp_path / "r.json"
+    assert main(["resolve", "--links", str(links_input / "in.csv"), "--out",
+                 str(tmp_path / "z.csv"), "--transport", "zenoh", "--drop-prob", "0.3",
+                 "--report", str(rep)]) == 0
+    s = json.loads(rep.read_text())
+    # as in the simulator, a lossy network runs the fault-tolerant Alg. 1
+    assert s["resolution_method"] == "paper"
+    assert s["faults"]["messages_dropped"] > 0 and s["faults"]["retransmissions"] > 0
+    assert s["faults"]["links_cut_robot_lost"] == 0  # nothing lost, only delayed
+    assert s["after"]["conflictive_sets"] == 0
+
+
+def test_message_loss_during_fusion_over_zenoh_is_handled(tmp_path):
+    from pipeline.faults import FaultConfig
+
+    cfg = FormationConfig(formation="d", out=str(tmp_path / "run"),
+                          faults=FaultConfig(drop_prob=0.2, seed=3), **{**SMALL, "fusion": True})
+    out = run_formation(cfg, transport="zenoh")
+    report = json.loads((out / "report.json").read_text())
+    fusion = report["fusion"]
+    # the fusion rounds went over the reliable channel: losses were retransmitted
+    assert fusion["enabled"] and fusion["retransmissions"] > 0 and not fusion["robots_lost"]
+    assert fusion["cut_links"] > 0 and report["faults"]["links_cut_robot_lost"] == 0
+    kept, _ = _kept_links(out / "links.csv")
+    assert is_conflict_free(report["features_per_camera"], kept)
+
+
+def _team_file(tmp_path, ports, links_input, **opts):
+    doc = {"name": "t", "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p}"}
+                                   for i, p in enumerate(ports)],
+           "comm_edges": [[0, 1]],
+           "data": {"kind": "links", "links": str(links_input / "two.csv"),
+                    "features_per_camera": [3, 3]},
+           "options": opts}
+    (links_input / "two.csv").write_text("0,1,1,2\n")
+    p = tmp_path / "TEAM.json"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def _free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def test_robot_bad_inputs_are_one_line_errors(links_input, tmp_path, capsys):
+    team = _team_file(tmp_path, [_free_port(), _free_port()], links_input)
+    assert main(["robot", "--team", str(team), "--id", "5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: --id 5: not a robot of team 't'; its robots are 0..1"
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"robots": [}')
+    assert main(["robot", "--team", str(bad), "--id", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: team file") and "not valid JSON" in err and "\n" not in err
+
+
+def test_port_in_use_is_a_one_line_error(links_input, tmp_path, capsys):
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        team = _team_file(tmp_path, [busy.getsockname()[1], _free_port()], links_input)
+        assert main(["robot", "--team", str(team), "--id", "0"]) == 2
+    finally:
+        busy.close()
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: robot 0: cannot listen on tcp/127.0.0.1:")
+
+
+def test_a_robot_that_never_starts_is_named(links_input, tmp_path, capsys):
+    team = _team_file(tmp_path, [_free_port(), _free_port()], links_input, start_timeout_s=1.5)
+    assert main(["robot", "--team", str(team), "--id", "0"]) == 3
+    err = capsys.readouterr().err
+    assert "neighbour robot 1 (tcp/127.0.0.1:" in err and "never started" in err
+
+
+def _children(pid):
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True,
+                         text=True).stdout.split()
+    return [int(p) for p in out]
+
+
+def _descendants(pid):
+    kids = _children(pid)
+    return kids + [g for k in kids for g in _children(k)]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_interrupted_launcher_leaves_no_robot_behind(links_input, tmp_path, sig):
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
+    # a full-size formation keeps the six robots busy for seconds
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline", "run-formation", "--formation", "a", "--no-fusion",
+         "--no-rerun", "--out", str(tmp_path / "run"), "--transport", "zenoh"], env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    kids = []
+    t0 = time.monotonic()
+    # the robots' zygote and the six robots it forked
+    while len(kids) < 7 and time.monotonic() - t0 < 30:
+        kids = _descendants(proc.pid)
+        time.sleep(0.05)
+    assert len(kids) == 7
+    proc.send_signal(sig)
+    proc.wait(timeout=20)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 10 and any(os.path.exists(f"/proc/{k}") and
+                                             "Z" not in _state(k) for k in kids):
+        time.sleep(0.05)
+    assert not [k for k in kids if os.path.exists(f"/proc/{k}") and "Z" not in _state(k)]
+
+
+def _state(pid):
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2]
+    except OSError:
+        return "Z"
+
+
+def test_a_robot_that_fails_is_named_by_the_launcher(tmp_path):
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import launch_team, make_team
+
+    team = make_team("t", [[0, 1]], {"kind": "links", "links": str(tmp_path / "missing.csv"),
+                                      "features_per_camera": [2, 2]}, n=2)
+    with pytest.raises(TeamError, match=r"robot \d \(tcp/127\.0\.0\.1:\d+\) failed with exit "
+                                        r"code 2: error: .*missing\.csv"):
+        launch_team(team, tmp_path / "team", timeout_s=60)
+
+
+def test_forked_and_separately_started_robots_give_the_same_result(links_input, tmp_path):
+    from pipeline.team.launcher import launch_team, make_team
+
+    fpc = [12, 12, 12, 12]
+    data = {"kind": "links", "links": str(links_input / "in.csv"), "features_per_camera": fpc}
+    edges = [[i, j] for i in range(4) for j in range(i + 1, 4)]
+    runs = {fork: launch_team(make_team("f", edges, data, n=4), tmp_path / str(fork),
+                              fork=fork, timeout_s=120) for fork in (True, False)}
+    assert (tmp_path / "True" / "zygote.log").exists()
+    assert not (tmp_path / "False" / "zygote.log").exists()
+    for run in runs.values():
+        assert sorted(run.results) == [0, 1, 2, 3] and set(run.exit_codes.values()) == {0}
+    for i in range(4):
+        a, b = runs[True].results[i][1], runs[False].results[i][1]
+        for k in ("link_alive", "deleted_case", "deleted_round"):
+            np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_zenoh_links_equal_the_simulators_run_images(sceaux_small, tmp_path):
+    """Four photographs, photo defaults: each robot loads and extracts its own."""
+    args = ["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
+            "--no-fusion", "--no-rerun"]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*args, "--out", str(tmp_path / "zen"), "--transport", "zenoh"]) == 0
+    sim = Path(tmp_path / "sim" / "links.csv").read_text().splitlines()
+    assert Path(tmp_path / "zen" / "links.csv").read_text().splitlines() == sim
+    assert len(sim) > 500
+    rep = json.loads((tmp_path / "zen" / "report.json").read_text())
+    sim_rep = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert rep["features_per_camera"] == sim_rep["features_per_camera"]
+    assert rep["resolution"]["method"] == "evidence" and rep["team"]["transport"] == "zenoh"
+    assert rep["fusion"]["enabled"] is False
+
+
+def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceaux_small,
+                                                                           tmp_path, capsys):
+    assert main(["run-images", str(sceaux_small), "--graph", "knn:2", "--max-size", "320",
+                 "--out", str(tmp_path / "z"), "--transport", "zenoh"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: --graph knn:2: knn:K chooses neighbours from every image")
+    assert not (tmp_path / "z").exists()

@@ -1,0 +1,64 @@
+import json
+
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.team.teamfile import load_team, parse_team
+
+
+def _doc(**over):
+    doc = {"version": 1, "name": "t", "comm_edges": [[0, 1], [1, 2]],
+           "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{7000 + i}"} for i in range(3)],
+           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}}
+    doc.update(over)
+    return doc
+
+
+def test_a_valid_team_parses():
+    t = parse_team(_doc(options={"drop_prob": 0.1}, robot_options={"2": {"loss_timeout": 9}}))
+    assert t.n == 3 and t.neighbours(1) == [0, 2] and t.neighbours(0) == [1]
+    assert t.options_for(2)["loss_timeout"] == 9 and t.options_for(2)["drop_prob"] == 0.1
+    assert parse_team(t.to_json()).to_json() == t.to_json()
+
+
+@pytest.mark.parametrize("over, words", [
+    ({"robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:1"}]}, "at least 2"),
+    ({"robots": [{"id": 0, "endpoint": "tcp/h:1"}, {"id": 2, "endpoint": "tcp/h:2"}]},
+     "id 1 is missing"),
+    ({"robots": [{"id": 0, "endpoint": "tcp/h:1"}, {"id": 1, "endpoint": "tcp/h:1"}]},
+     "share endpoint"),
+    ({"robots": [{"id": 0, "endpoint": "h:1"}, {"id": 1, "endpoint": "tcp/h:2"}]},
+     "tcp/HOST:PORT"),
+    ({"robots": [{"id": 0, "endpoint": "tcp/h:99999"}, {"id": 1, "endpoint": "tcp/h:2"}]},
+     "1..65535"),
+    ({"comm_edges": [[0, 3]]}, "[0, 3]"),
+    ({"comm_edges": "0-1"}, "comm_edges"),
+    ({"data": {"kind": "video"}}, "kind"),
+    ({"data": {"kind": "links", "links": "x", "features_per_camera": [1]}}, "3 counts"),
+    ({"options": {"drop_prob": 1.5}}, "drop_prob"),
+    ({"options": {"speed": 1}}, "unknown option 'speed'"),
+    ({"colour": 1}, "unknown key 'colour'"),
+])
+def test_malformed_team_is_one_line_error(over, words):
+    with pytest.raises(InputError) as e:
+        parse_team(_doc(**over))
+    assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_robot_id_outside_the_team(tmp_path):
+    p = tmp_path / "TEAM.json"
+    p.write_text(json.dumps(_doc()))
+    team = load_team(p)
+    assert team.check_id("2") == 2
+    for bad in ("3", "-1", "x", "1.0"):
+        with pytest.raises(InputError, match="not a robot of team 't'; its robots are 0..2"):
+            team.check_id(bad)
+
+
+def test_missing_or_invalid_json_file(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        load_team(tmp_path / "nope.json")
+    p = tmp_path / "TEAM.json"
+    p.write_text("{robots: 1")
+    with pytest.raises(InputError, match="not valid JSON"):
+        load_team(p)

@@ -1,0 +1,50 @@
+"""The stage chain of pipeline.stages: the consistency entry (with faults) and the fusion stage."""
+
+import numpy as np
+from fusion.test_landmarks import planted_rig
+
+from pipeline.consistency import resolve_conflicts
+from pipeline.faults import FaultConfig
+from pipeline.stages import consistency_stage, fusion_stage, ledger_from_consistency
+from pipeline.types import LinkLedger, Links
+
+FIG1 = Links(cam_i=[0, 0, 1, 2], feat_i=[0, 0, 0, 0], cam_j=[3, 1, 2, 3], feat_j=[1, 0, 0, 0])
+
+
+def test_consistency_stage_is_resolve_conflicts_without_faults():
+    res, faults = consistency_stage([1, 1, 1, 2], None, FIG1)
+    direct = resolve_conflicts([1, 1, 1, 2], None, FIG1)
+    assert faults is None and res.deleted.tolist() == direct.deleted.tolist()
+    ledger = ledger_from_consistency(res)
+    assert ledger.status.tolist().count("deleted") == 1  # paper Fig. 1: one link cut
+    assert ledger.reason[res.deleted].tolist() == ["resolution"]
+    assert ledger.case[res.deleted].tolist() == direct.case[direct.deleted].tolist()
+
+
+def test_consistency_stage_with_faults_reports_them_against_a_fault_free_run():
+    fpc = [1, 1, 1, 2]
+    res, faults = consistency_stage(fpc, None, FIG1, FaultConfig(crash=((1, 1),)))
+    assert faults["injected"]["crash"] == ["1@1"] and faults["crashed"] == {"1": 1}
+    fault_free = resolve_conflicts(fpc, None, FIG1).stats
+    assert faults["fault_free_messages"] == fault_free["messages"]
+    assert faults["extra_messages"] == faults["messages"] - fault_free["messages"]
+    assert "messages_dropped" in faults and res.stats["protocol"] == "reliable"
+
+
+def test_fusion_stage_cuts_the_planted_observation_in_the_ledger():
+    views, feats, links, edges, _ = planted_rig()
+    planted = ((links.cam_i == 2) & (links.feat_i == 30)) | ((links.cam_j == 2) & (links.feat_j == 30))
+    ledger = LinkLedger.all_kept(links)
+    fr, n_cut = fusion_stage(ledger, views, feats, edges)
+    assert n_cut == planted.sum() == (ledger.reason == "fusion-outlier").sum()
+    assert (ledger.status[planted] == "deleted").all() and ledger.kept[~planted].all()
+    assert (ledger.round[planted] == fr.stats["rounds"]).all()
+
+
+def test_fusion_stage_among_posed_cameras_leaves_the_others_alone():
+    views, feats, links, edges, _ = planted_rig()
+    ledger = LinkLedger.all_kept(links)
+    fr, n_cut = fusion_stage(ledger, views, feats, edges, cameras=np.array([0, 1, 3]))
+    # camera 2 holds the planted observation and takes no part: nothing is cut
+    assert n_cut == 0 and ledger.kept.all()
+    assert fr.stats["tracks_fused"] == 30
