@@ -53,6 +53,18 @@ the sets it found.
 ``merge_radius_px``
     The default radius of near-duplicate keypoints merged into one feature with this rule
     (``None``: the co-location radius of :mod:`pipeline.matching.features`).
+``detection`` (default ``True``), ``stage``, ``stage_batched``, ``alone``
+    A rule with ``detection=False`` is the whole stage: it runs *instead of* the detection
+    loop (no Sec. III rows, memory that follows the links). It provides ``stage(robots,
+    network, on_round=None) -> dict`` (the simulator: all robots, each on its own inbox;
+    returns at least ``rounds``; every robot's ``link_alive``, deletion log and ``component``
+    set at the end), optionally ``stage_batched`` (same signature and results, evaluated at
+    once where the batched engines apply), and ``alone(robot, transport, protocol, n_robots)
+    -> RobotRun`` (one robot in its own process, ending its phases by the termination wave of
+    :mod:`.termination`) instead of ``simulate``/``start``/``step``/``done``/``finish``.
+``equip``
+    With ``needs_evidence``: ``equip(robot, link_weight, keypoints, projection)`` hands a
+    robot its own evidence (default :func:`.evidence.equip`).
 ``help``, ``title``, ``summary``
     Its part of ``--resolution``'s help; what the stage line and reports call it; the text
     of ``resolve``'s summary after ``deleted: N links``, formatted with the counts of
@@ -81,7 +93,10 @@ ALG1_CASES = ("b", "c")
 #: environment variable naming modules that register more rules (module docstring)
 PLUGINS_ENV = "FORMATION_MATCH_RULES"
 
-_HOOKS = ("simulate", "batched", "start", "step", "done", "finish")
+_HOOKS = ("simulate", "batched", "start", "step", "done", "finish", "stage", "stage_batched",
+          "alone", "equip")
+_LOOP_HOOKS = ("simulate", "start", "step", "done", "finish")
+_STAGE_HOOKS = ("stage", "alone")
 
 
 @dataclass(frozen=True)
@@ -93,12 +108,17 @@ class ResolutionRule:
     title: str
     summary: str
     cases: dict
-    simulate: str
-    start: str
-    step: str
-    done: str
-    finish: str
+    simulate: str | None = None
+    start: str | None = None
+    step: str | None = None
+    done: str | None = None
+    finish: str | None = None
     batched: str | None = None
+    detection: bool = True
+    stage: str | None = None
+    stage_batched: str | None = None
+    alone: str | None = None
+    equip: str | None = "pipeline.consistency.evidence:equip"
     fault_tolerant: bool = False
     needs_evidence: bool = False
     merge_radius_px: float | None = None
@@ -123,7 +143,13 @@ RULES: dict[str, ResolutionRule] = {}
 
 
 def register(rule: ResolutionRule) -> ResolutionRule:
-    """Add ``rule`` to the registry (ValueError if its name or a case code is taken)."""
+    """Add ``rule`` to the registry (ValueError if its name or a case code is taken, or a
+    function its kind needs is missing)."""
+    needed = _LOOP_HOOKS if rule.detection else _STAGE_HOOKS
+    missing = [h for h in needed if getattr(rule, h) is None]
+    if missing:
+        raise ValueError(f"resolution rule {rule.name!r}: no {', '.join(missing)} (a rule "
+                         f"{'after' if rule.detection else 'without'} detection needs them)")
     if rule.name in RULES:
         raise ValueError(f"resolution rule {rule.name!r} is already registered")
     taken = {code for r in RULES.values() for code in r.cases}
@@ -206,6 +232,20 @@ register(ResolutionRule(
     step="pipeline.consistency.evidence:evidence_round",
     done="pipeline.consistency.evidence:evidence_done",
     finish="pipeline.consistency.evidence:reexamine_sets",
+    needs_evidence=True,
+    merge_radius_px=2.0))
+register(ResolutionRule(
+    name="sync",
+    help="sync = distributed multi-way matching: the robots merge features into landmarks "
+         "by the best-supported links, never two of one camera (no detection)",
+    title="distributed multi-way matching (Borůvka rounds of the constrained greedy merge, "
+          "no detection)",
+    summary="by the multi-way matching",
+    cases={6: "sync"},
+    detection=False,
+    stage="pipeline.consistency.sync:run_sync",
+    alone="pipeline.consistency.sync_alone:run_sync_locally",
+    equip="pipeline.consistency.sync:equip_robot",
     needs_evidence=True,
     merge_radius_px=2.0))
 for _module in filter(None, (m.strip() for m in os.environ.get(PLUGINS_ENV, "").split(","))):

@@ -77,7 +77,7 @@ from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message, Transport
 
-__all__ = ["SyncState", "equip_sync", "start_support", "support_step", "start_exchange",
+__all__ = ["SyncState", "equip_sync", "equip_robot", "start_support", "support_step", "start_exchange",
            "exchange_step", "start_merge", "merge_step", "finish_sync", "has_best",
            "run_sync", "greedy_merge", "CASE_SYNC", "SUPPORT", "EXCHANGE", "MERGE"]
 
@@ -149,6 +149,11 @@ def equip_sync(robot: Robot, link_weight) -> None:
         robot.sync.cams[g] = 1 << robot.id
     for g, j in zip(far.tolist(), robot.link_nbr.tolist(), strict=True):
         robot.sync.cams[g] = 1 << j
+
+
+def equip_robot(robot: Robot, link_weight, keypoints=None, projection=None) -> None:
+    """The registry's ``equip`` (:mod:`.rules`): the rule uses the links' evidence only."""
+    equip_sync(robot, link_weight)
 
 
 def _measure(robot: Robot) -> None:

@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from pipeline.consistency.channel import Channel
-from pipeline.consistency.reliable import ReliableState, _cut_lost
+from pipeline.consistency.reliable import ReliableState, cut_lost
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.sync import (
     equip_sync,
@@ -42,7 +42,7 @@ from pipeline.consistency.sync import (
     start_support,
     support_step,
 )
-from pipeline.consistency.termination import CONFLICT, LOST, RobotRun, TerminationWave
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
 
 __all__ = ["run_sync_locally"]
 
@@ -91,7 +91,7 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
             msgs = chan.receive(inbox, now)
             lost = chan.check_lost(now, nbrs - chan.lost)
             if lost:
-                _cut_lost(robot, st, lost, now)
+                cut_lost(robot, st, lost, now)
             step(robot, msgs, lambda dst, kind, p, now=now: chan.send(dst, kind, p, now), now)
             chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
             robot.peak_memory_bytes = max(robot.peak_memory_bytes,

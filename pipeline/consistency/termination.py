@@ -53,7 +53,6 @@ Local termination rule (the termination wave)
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,57 +68,9 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import get_rule
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
 
 __all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
-
-CONFLICT, LOST = 1, 2
-
-
-class TerminationWave:
-    """The counter ``c_i`` and the OR-flooded bits of one phase (module docstring).
-
-    Parameters
-    ----------
-    n : int — team size (the threshold of the rule)
-    """
-
-    def __init__(self, n: int) -> None:
-        self.n = int(n)
-        self.c = 0
-        self.bits = 0
-
-    def start(self, done: bool, own_bits: int) -> None:
-        """Round of the phase start: no history yet."""
-        self.c = 1 if done else 0
-        self.bits = int(own_bits)
-
-    def update(self, done: bool, own_bits: int, neighbour_states: dict) -> bool:
-        """Fold in the neighbours' states of the previous round; True when the phase ends."""
-        cs = [int(s.get("c", 0)) for s in neighbour_states.values()]
-        bits = self.bits | int(own_bits)
-        for s in neighbour_states.values():
-            bits |= int(s.get("b", 0))
-        self.c = (1 + min([self.c, *cs])) if done else 0
-        self.bits = bits
-        return self.c >= self.n
-
-    def state(self) -> dict:
-        """What travels to the neighbours with this round's packet."""
-        return {"c": self.c, "b": self.bits}
-
-
-@dataclass
-class RobotRun:
-    """What one robot did in the consistency stage (its own log, for reporting)."""
-
-    iterations: int = 0
-    repeated_detections: int = 0
-    phases: list = field(default_factory=list)
-    detection_rounds: int = 0
-    resolution_rounds: int = 0
-    closing_rounds: int = 0
-    seconds: float = 0.0
-
 
 def _own_bits(robot: Robot, st: ReliableState) -> int:
     return (CONFLICT if robot.conflictive.any() else 0) | (LOST if st.lost_in_phase else 0)
@@ -164,6 +115,9 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
     """
     protocol = protocol or ProtocolOptions(reliable=True)
     rule = get_rule(resolution)
+    if not rule.detection:
+        # a rule that is the whole stage (no detection) ends its own phases by the same wave
+        return rule.hook("alone")(robot, transport, protocol, n_robots)
     rule_start, rule_step, rule_done, rule_finish = (
         rule.hook(h) for h in ("start", "step", "done", "finish"))
     n = int(n_robots or robot.n)

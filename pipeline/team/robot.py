@@ -275,11 +275,11 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     order = np.lexsort((s, nbr))  # the order of the Robot's link table
     robot = Robot(i, fpc, nbr[order], r[order], s[order])
     resolution = team_resolution(team)
-    if get_rule(resolution).needs_evidence:
-        from pipeline.consistency.evidence import equip
-
-        equip(robot, weight[order],
-              np.zeros((robot.m, 2)) if keypoints is None else keypoints, projection)
+    rule = get_rule(resolution)
+    if rule.needs_evidence:
+        rule.hook("equip")(robot, weight[order],
+                           np.zeros((robot.m, 2)) if keypoints is None else keypoints,
+                           projection)
     if hasattr(transport, "status"):
         transport.status("consistency")
         transport.lossy = True  # faults are injected into the consistency stage, as simulated

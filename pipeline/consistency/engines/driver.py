@@ -256,13 +256,18 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     # with faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
     rule = rule_for_network(resolution, reliable)
     if rule.needs_evidence:
-        _equip_evidence(robots, link_index, links, link_weight, keypoints, projections)
-    run_pass = (in_batch and rule.hook("batched")) or rule.hook("simulate")
+        _equip_evidence(robots, link_index, links, link_weight, keypoints, projections,
+                        rule.hook("equip"))
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:
-        per_iteration, repeated, close_round = _loop(robots, network, proto, in_batch,
-                                                     run_pass, reliable, m_total, bar)
+        if not rule.detection:
+            per_iteration, repeated, close_round = _whole_stage(robots, network, in_batch,
+                                                                rule, bar), 0, None
+        else:
+            run_pass = (in_batch and rule.hook("batched")) or rule.hook("simulate")
+            per_iteration, repeated, close_round = _loop(robots, network, proto, in_batch,
+                                                         run_pass, reliable, m_total, bar)
     result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
                       close_round)
     result.stats["resolution"] = rule.name
@@ -334,8 +339,24 @@ def _loop(robots, network, proto, in_batch: bool, run_pass, reliable: bool,
     return per_iteration, repeated, close_round
 
 
+def _whole_stage(robots, network, in_batch: bool, rule, bar) -> list[dict]:
+    """A rule without detection (:mod:`pipeline.consistency.rules`, ``detection=False``): its
+    stage on all robots; one record in the per-iteration form of :func:`_loop`."""
+    c0 = network.counters()
+    bar.set_description_str(f"consistency ({len(robots)} robots): {rule.name}", refresh=False)
+    run = (in_batch and rule.hook("stage_batched")) or rule.hook("stage")
+    res = run(robots, network, on_round=lambda t: bar.update(1))
+    cut = any(bool((~rb.link_alive).any()) for rb in robots)
+    rec = dict(iteration=1, detection_rounds=0, t_stop=np.zeros(len(robots), dtype=np.int64),
+               conflictive_features=int(cut), conflictive_sets=0,
+               resolution_rounds=int(res["rounds"]), start_round=int(c0.get("round", 0)),
+               stage=res)
+    rec.update(_delta(c0, network.counters()))
+    return [rec]
+
+
 def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
-                    projections) -> None:
+                    projections, equip_robot=equip) -> None:
     """Hand every robot its own evidence (its rows of the inputs only)."""
     from pipeline.matching.link_evidence import ratio_llr
 
@@ -347,7 +368,7 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
     for rb, li in zip(robots, link_index, strict=True):
         kp = np.zeros((rb.m, 2)) if keypoints is None else keypoints[rb.id]
         P = None if projections is None else projections[rb.id]
-        equip(rb, w[li], kp, P)
+        equip_robot(rb, w[li], kp, P)
 
 
 def _delta(c0: dict, c1: dict) -> dict:

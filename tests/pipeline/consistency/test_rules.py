@@ -18,8 +18,36 @@ LINKS = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n0,1,1,1\
 
 
 def test_the_rules_codes_are_the_robots_own():
+    from pipeline.consistency import sync
+
     assert get_rule("paper").cases == {robot.CASE_B: "b", robot.CASE_C: "c"}
     assert get_rule("evidence").cases == {evidence.CASE_EVIDENCE: "evidence"}
+    assert get_rule("sync").cases == {sync.CASE_SYNC: "sync"}
+
+
+def test_every_hook_of_a_rule_without_detection_loads():
+    rule = get_rule("sync")
+    assert not rule.detection
+    for hook in ("stage", "alone", "equip"):
+        assert callable(rule.hook(hook)), hook
+
+
+@pytest.mark.parametrize("transport", ["sim", "zenoh"])
+def test_the_sync_rule_runs_through_resolve_on_both_transports(transport, tmp_path, capsys):
+    # Fig. 1 (global ids 0,1 | 2,3 | 4 | 5,6): equal weights and no triangle, so the greedy
+    # merge takes the links by their smaller ends: (0,2), (0,6), (1,3), (2,4); then (4,5)
+    # would join feature 5 to a cluster holding 6, both of camera 3: (3,0)-(2,0) is cut
+    src, out, report = tmp_path / "in.csv", tmp_path / "out.csv", tmp_path / "r.json"
+    src.write_text(LINKS)
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "sync",
+                 "--transport", transport, "--report", str(report)]) == 0
+    assert "deleted: 1 links by the multi-way matching" in capsys.readouterr().out
+    s = json.loads(report.read_text())
+    assert s["resolution_method"] == "sync"
+    assert s["deleted_by_case"] == {"b": 0, "c": 0, "sync": 1}
+    assert s["after"]["conflictive_sets"] == 0
+    rows = out.read_text().splitlines()[1:]
+    assert [r.split(",")[4] for r in rows] == ["kept", "kept", "kept", "deleted", "kept"]
 
 
 @pytest.mark.parametrize("name", ["paper", "evidence"])
@@ -30,7 +58,7 @@ def test_every_hook_of_a_registered_rule_loads(name):
 
 
 def test_an_unknown_rule_is_named_with_the_choices():
-    with pytest.raises(InputError, match="resolution 'best': choose one of paper, evidence"):
+    with pytest.raises(InputError, match="resolution 'best': choose one of paper, evidence, sync"):
         get_rule("best")
     with pytest.raises(ValueError, match="already registered"):
         register(get_rule("paper"))

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from pipeline.consistency.engine import build_robots
+from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.sync import CASE_SYNC, equip_sync, greedy_merge, run_sync
 from pipeline.transport.simulated import Network
