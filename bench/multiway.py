@@ -1,0 +1,301 @@
+"""Benchmark: multi-way matching on labelled data — every rule and every baseline on one input.
+
+For each case (data set × comm graph × input) the same links go to
+
+* the distributed rules of :mod:`pipeline.consistency.rules` (``paper``, ``evidence``,
+  ``sync``), run by :func:`pipeline.consistency.resolve_conflicts` in the simulator, and
+* the centralized baselines: spectral synchronization (Pachauri et al. 2013) and a
+  CLEAR-style normalized spectral method with its universe-size estimate (Fathian et al.
+  2020) from :mod:`pipeline.consistency.spectral` where present, union-find dropping the
+  conflictive sets and the constrained greedy merge by link quality
+  (:mod:`pipeline.consistency.centralized`).
+
+Each method runs in a child process of its own (fork), so its peak memory is its own
+(``peak_rss_mb``: the child's peak resident set, including what it inherited at the fork,
+``base_rss_mb``); a child is capped at ``--cap-gb`` of address space and ``--cap-s`` seconds
+and reported as refused/out of memory/timed out rather than killing the bench.
+
+Scores are CLEAR's: pairwise precision, recall and F1 of the matches implied by the closure
+of the kept links (every two features in one association set), against the labels.
+``cycle_consistent``: no association set holds two features of one image.
+
+Cases
+    * Labelled landmarks (default ``../shared/data/cmu_hotel``, ``--frames 20 101``), graphs
+      ``complete``, ``seq:4``, ``ring2``; inputs ``descriptors`` (Hungarian matches of the
+      given descriptors only: the input CLEAR is benchmarked on) and ``defaults`` (what
+      ``run-landmarks`` does by default: epipolar guidance and two-hop votes). Every image's
+      landmarks are presented in a seeded random order (``--shuffle-seed``): the files list
+      them in label order, and any tie broken by index would otherwise read the truth.
+    * A synthetic team (``--team 300``): ``n`` cameras on a ring2 graph, each seeing the same
+      30 landmarks in its own random order; every linked pair matched one-to-one, and 30 % of
+      the pairs swap two of their matches (wrong links). Methods: the default rule and the
+      baselines that fit in memory.
+
+Prints one table per case and saves ``runs/bench-multiway/results.json``.
+
+Usage: ``.venv/bin/python bench/multiway.py [--data DIR] [--frames 20 101] [--graphs ...]
+[--inputs descriptors defaults] [--methods ...] [--team 300 3000] [--quick]``
+(``--quick``: 20 frames, complete graph, descriptors only, team of 100).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import signal
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.types import Links  # noqa: E402
+
+DISTRIBUTED = ("paper", "evidence", "sync")
+CENTRALIZED = ("spectral", "clear", "drop_conflictive_sets", "quality_merge")
+
+
+# --------------------------------------------------------------------------- the cases
+
+
+def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, seed: int):
+    """Links, features per camera and the true landmark of every feature (shuffled order)."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.inputs.landmarks import load_landmark_folder
+    from pipeline.matching.landmarks import match_landmark_edges
+    from pipeline.matching.votes import refine_by_votes
+
+    fr = load_landmark_folder(directory, "given", frames)
+    rng = np.random.default_rng(seed)
+    perms = [rng.permutation(len(f.keypoints)) for f in fr]
+    m = np.array([len(f.keypoints) for f in fr], dtype=np.int64)
+    edges = comm_graph(graph, [f.name for f in fr])
+    geometry = "none" if inputs == "descriptors" else "epipolar"
+    links, _ = match_landmark_edges([f.descriptors[p] for f, p in zip(fr, perms, strict=True)],
+                                    edges, fr[0].descriptor_kind, None,
+                                    [f.keypoints[p] for f, p in zip(fr, perms, strict=True)],
+                                    geometry, 3.0)
+    if inputs == "defaults":
+        links, _ = refine_by_votes(m, edges, links, 10)
+    return m, edges, links, np.concatenate(perms)
+
+
+def team_case(n: int, k: int = 30, p_swap: float = 0.3, seed: int = 0):
+    """``n`` cameras on a ring2 graph, each seeing the same ``k`` landmarks (own order)."""
+    from pipeline.commgraph import graph_edges
+
+    rng = np.random.default_rng(seed)
+    perms = [rng.permutation(k) for _ in range(n)]
+    inv = [np.argsort(p) for p in perms]  # inv[i][landmark] = feature of camera i
+    edges = graph_edges("ring2", n)
+    ci, fi, cj, fj, q = [], [], [], [], []
+    for i, j in edges.tolist():
+        tgt = np.arange(k)
+        if rng.random() < p_swap:
+            a, b = rng.choice(k, 2, replace=False)
+            tgt[a], tgt[b] = tgt[b], tgt[a]
+        ci.append(np.full(k, i)), fi.append(inv[i]), cj.append(np.full(k, j))
+        fj.append(inv[j][tgt]), q.append(rng.uniform(0.2, 0.6, k))
+    links = Links(np.concatenate(ci), np.concatenate(fi), np.concatenate(cj),
+                  np.concatenate(fj), np.concatenate(q))
+    return np.full(n, k, dtype=np.int64), edges, links, np.concatenate(perms)
+
+
+# --------------------------------------------------------------------------- scoring
+
+
+def scores(m, kept: Links, truth_id) -> dict:
+    """Pairwise P/R/F1 of the closure of ``kept`` against equal labels; cycle consistency.
+
+    Counted per association set without listing pairs: a set of ``s`` features implies
+    ``s (s-1) / 2`` pairs, of which ``c (c-1) / 2`` are right for each label it holds ``c``
+    times; the true pairs are ``n (n-1) / 2`` per label seen ``n`` times (each image holds
+    each label once, so every true pair joins two images)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from pipeline.consistency.centralized import is_conflict_free
+
+    off = np.concatenate([[0], np.cumsum(m)])
+    total = int(off[-1])
+    a = off[kept.cam_i] + kept.feat_i
+    b = off[kept.cam_j] + kept.feat_j
+    g = coo_matrix((np.ones(a.size), (a, b)), shape=(total, total))
+    _, comp = connected_components(g, directed=False)
+
+    def pairs(counts):
+        counts = counts.astype(np.int64)
+        return int((counts * (counts - 1) // 2).sum())
+
+    predicted = pairs(np.bincount(comp))
+    _, per = np.unique(comp.astype(np.int64) * (int(truth_id.max()) + 1) + truth_id,
+                       return_counts=True)
+    correct = pairs(per)
+    true = pairs(np.unique(truth_id, return_counts=True)[1])
+    p = correct / predicted if predicted else 0.0
+    r = correct / true if true else 0.0
+    return dict(precision=p, recall=r, f1=2 * p * r / (p + r) if p + r else 0.0,
+                cycle_consistent=bool(is_conflict_free(m, kept)))
+
+
+# --------------------------------------------------------------------------- the methods
+
+
+def run_method(method: str, m, edges, links: Links) -> dict:
+    """Kept mask and the method's own figures (rounds, messages, bytes where distributed)."""
+    if method in DISTRIBUTED:
+        from pipeline.consistency import resolve_conflicts
+
+        res = resolve_conflicts(m, edges, links, resolution=method)
+        st = res.stats
+        return dict(kept=~res.deleted, rounds=int(st["detection_rounds"] +
+                                                   st["resolution_rounds"]),
+                    messages=int(st["messages"]), bytes=int(st["bytes"]),
+                    max_robot_memory_bytes=int(st["max_robot_memory_bytes"]))
+    if method in ("spectral", "clear"):
+        from pipeline.consistency import spectral
+
+        fn = spectral.spectral_sync if method == "spectral" else spectral.clear_sync
+        labels = fn(m, links, None)
+        return dict(kept=spectral.labels_to_kept(m, links, labels))
+    from pipeline.consistency import centralized
+
+    return dict(kept=np.asarray(getattr(centralized, method)(m, links), dtype=bool))
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def measured(method: str, case, cap_gb: float, cap_s: float) -> dict:
+    """Run ``method`` on ``case`` in a forked child; its scores, times and peak memory."""
+    m, edges, links, truth_id = case
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: one method, then its figures through the pipe
+        os.close(r)
+        out: dict
+        try:
+            base = _rss_mb()
+            resource.setrlimit(resource.RLIMIT_AS, (int(cap_gb * 2**30), int(cap_gb * 2**30)))
+            signal.alarm(int(cap_s))
+            t0, c0 = time.perf_counter(), time.process_time()
+            res = run_method(method, m, edges, links)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            kept = res.pop("kept")
+            out = dict(status="ok", wall_s=round(wall, 3), cpu_s=round(cpu, 3),
+                       base_rss_mb=round(base, 1),
+                       peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                                         / 1024, 1),
+                       **scores(m, links.subset(kept), truth_id), **res)
+        except MemoryError:
+            out = dict(status=f"out of memory (cap {cap_gb:g} GB)")
+        except Exception as exc:  # noqa: BLE001 - reported in the table
+            name = type(exc).__name__
+            out = dict(status=f"{name}: {str(exc).splitlines()[0][:120]}",
+                       trace=traceback.format_exc()[-2000:])
+        with os.fdopen(w, "w") as f:
+            json.dump(out, f)
+        os._exit(0)
+    os.close(w)
+    with os.fdopen(r) as f:
+        text = f.read()
+    _, status = os.waitpid(pid, 0)
+    if not text:
+        sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
+        return dict(status=f"timed out after {cap_s:g} s" if sig == signal.SIGALRM
+                    else f"killed (signal {sig})")
+    return json.loads(text)
+
+
+# --------------------------------------------------------------------------- the table
+
+
+def table(title: str, rows: list[dict]) -> str:
+    lines = [f"## {title}", "",
+             "| method | P | R | F1 | consistent | wall [s] | CPU [s] | peak RSS [MB] | rounds "
+             "| bytes |", "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for row in rows:
+        if row.get("status") != "ok":
+            lines.append(f"| {row['method']} | {row.get('status')} | | | | | | | | |")
+            continue
+        lines.append(
+            f"| {row['method']} | {row['precision']:.3f} | {row['recall']:.3f} | "
+            f"{row['f1']:.4f} | {row['cycle_consistent']} | {row['wall_s']:.2f} | "
+            f"{row['cpu_s']:.2f} | {row['peak_rss_mb']:.0f} | {row.get('rounds', '')} | "
+            f"{row.get('bytes', '')} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "cmu_hotel"))
+    p.add_argument("--frames", type=int, nargs="+", default=[20, 101])
+    p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
+    p.add_argument("--inputs", nargs="+", default=["descriptors", "defaults"],
+                   choices=("descriptors", "defaults"))
+    p.add_argument("--methods", nargs="+", default=[*DISTRIBUTED, *CENTRALIZED])
+    p.add_argument("--team", type=int, nargs="*", default=[300])
+    p.add_argument("--team-methods", nargs="+", default=["sync", "drop_conflictive_sets",
+                                                         "quality_merge", "spectral"])
+    p.add_argument("--shuffle-seed", type=int, default=0)
+    p.add_argument("--cap-gb", type=float, default=6.0)
+    p.add_argument("--cap-s", type=float, default=600.0)
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--out", default=str(ROOT / "runs" / "bench-multiway"))
+    a = p.parse_args(argv)
+    if a.quick:
+        a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
+    records = []
+    load = os.getloadavg()[0]
+    for frames in a.frames:
+        for graph in a.graphs:
+            for inputs in a.inputs:
+                case = landmark_case(a.data, frames, graph, inputs, a.shuffle_seed)
+                rows = []
+                input_scores = scores(case[0], case[2], case[3])
+                for method in a.methods:
+                    row = dict(case="landmarks", data=Path(a.data).name, frames=frames,
+                               graph=graph, inputs=inputs, method=method,
+                               **measured(method, case, a.cap_gb, a.cap_s))
+                    rows.append(row)
+                    records.append(row)
+                print(table(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs} "
+                            f"(input closure F1 {input_scores['f1']:.3f}, {len(case[2])} links)",
+                            rows), flush=True)
+    for n in a.team:
+        case = team_case(n)
+        rows = []
+        for method in a.team_methods:
+            row = dict(case="team", cameras=n, graph="ring2", method=method,
+                       **measured(method, case, a.cap_gb, a.cap_s))
+            rows.append(row)
+            records.append(row)
+        print(table(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap "
+                    f"({len(case[2])} links)", rows), flush=True)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "results.json", {
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                    "load_average_at_start": round(load, 2),
+                    "load_average_at_end": round(os.getloadavg()[0], 2)},
+        "args": vars(a), "records": records})
+    print(f"saved {out / 'results.json'} (load average {load:.1f} at start, "
+          f"{os.getloadavg()[0]:.1f} at end)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
