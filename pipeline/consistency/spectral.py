@@ -426,7 +426,8 @@ def _by_component(prob: _Problem, spectrum: _Spectrum, counts: np.ndarray,
 # ------------------------------------------------------------------------- baselines
 
 
-def _round_sync(U: np.ndarray, camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _round_sync(U: np.ndarray, camera: np.ndarray, min_cosine: float
+                ) -> tuple[np.ndarray, np.ndarray]:
     """spectral_sync steps 4-6 on one component's embedding ``U`` (``m_c x k``)."""
     k = U.shape[1]
     Un, ok = _unit_rows(U)
@@ -438,12 +439,13 @@ def _round_sync(U: np.ndarray, camera: np.ndarray) -> tuple[np.ndarray, np.ndarr
     col = _assign(S, camera, maximize=True)
     got = np.flatnonzero(col >= 0)
     keep = np.zeros(col.size, dtype=bool)
-    keep[got] = ok[got] & (S[got, col[got]] > MAJORITY)
+    keep[got] = ok[got] & (S[got, col[got]] > min_cosine)
     return col, keep
 
 
 def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None = None,
-                  universe_size: int | None = None) -> np.ndarray:
+                  universe_size: int | None = None, *,
+                  min_cosine: float = MAJORITY) -> np.ndarray:
     """Permutation synchronization (Pachauri, Kondor, Singh, NIPS 2013), partial visibility.
 
     Steps (module notes for the notation):
@@ -466,9 +468,10 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
        1 (a row's energy split over the points). Per camera, the Hungarian method
        (``linear_sum_assignment``, maximizing) assigns its features to distinct points —
        Pachauri's ``argmax_P <P, U_i U_1^T>`` with the representatives for image 1.
-    6. Unassigned (``-1``): a feature whose assigned cosine is at most ``1/sqrt(2)``
-       (:data:`MAJORITY` — less than half of its energy on that point; more than half can lie
-       on one point only), a feature without a link, a feature whose row of ``U`` is zero
+    6. Unassigned (``-1``): a feature whose assigned cosine is at most ``min_cosine``,
+       by default ``1/sqrt(2)`` (:data:`MAJORITY` — less than half of its energy on that
+       point; more than half can lie on one point only; ``min_cosine=-1`` keeps every
+       assignment, as Pachauri et al. do with full visibility), a feature without a link, a feature whose row of ``U`` is zero
        (its component got no point), or one left over when its camera has more features
        than points.
 
@@ -480,6 +483,7 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
     links : Links, (L,)
     weight : (L,) float >= 0 or None — link weights (None: every link 1)
     universe_size : int or None — number of universe points ``k`` (None: estimated, step 2)
+    min_cosine : float — the least cosine of a kept assignment (step 6)
 
     Returns
     -------
@@ -508,7 +512,8 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
                            for mu, kc in zip(heads, prob.k_min_comp.tolist(), strict=True)])
     else:
         counts = spectrum.top_counts(int(universe_size))
-    return _by_component(prob, spectrum, counts, _round_sync)
+    return _by_component(prob, spectrum, counts,
+                         lambda U, cam: _round_sync(U, cam, float(min_cosine)))
 
 
 def _clear_pivots(U: np.ndarray, Un: np.ndarray, ok: np.ndarray, k: int) -> np.ndarray:
@@ -572,7 +577,7 @@ def clear_sync(features_per_camera, links: Links, weight: np.ndarray | None = No
     one component, so a centre of another is at distance 1 from every row (CLEAR's global
     pivot search and assignment can only pair such rows at random).
 
-    Parameters and return value as :func:`spectral_sync`.
+    Parameters and return value as :func:`spectral_sync` (no ``min_cosine``).
 
     Examples
     --------

@@ -122,6 +122,23 @@ def test_link_weights_decide(method):
         assert labels[2 - partner] != labels[0]
 
 
+def test_weak_features_left_unassigned_unless_asked():
+    # 6 cameras see 3 points; a 7th camera's one feature is linked to each point twice, so
+    # a third of its embedding's energy lies on each: cosine about 0.58 < 1/sqrt(2)
+    point = shuffled_cameras(6, 3, seed=7)
+    ci, fi, cj, fj = truth_links(point, complete(6))
+    for cam in range(6):
+        ci.append(cam), fi.append(int(np.flatnonzero(point[cam] == cam // 2)[0]))
+        cj.append(6), fj.append(0)
+    links, fpc = Links(ci, fi, cj, fj), [3] * 6 + [1]
+    truth = np.concatenate(point + [np.array([-1])])
+    labels = spectral_sync(fpc, links)
+    assert labels[-1] == -1 and same_partition(labels, truth)
+    plain = spectral_sync(fpc, links, min_cosine=-1.0)
+    assert plain[-1] >= 0 and (plain[:-1] == labels[:-1]).all()
+    assert clear_sync(fpc, links)[-1] >= 0                     # CLEAR assigns every feature
+
+
 def test_universe_size_rules():
     # clean spectrum of a consistent complete association: 0 per point, 1 elsewhere
     mu = np.array([1.0, 1.0, 1.0, 0.0, 0.0])
