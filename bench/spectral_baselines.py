@@ -33,9 +33,9 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.commgraph import comm_graph  # noqa: E402
 from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E402
-from pipeline.landmark_matching import match_landmark_edges  # noqa: E402
-from pipeline.landmarks_io import load_landmark_folder  # noqa: E402
-from pipeline.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
+from pipeline.evaluation.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
+from pipeline.inputs.landmarks import load_landmark_folder  # noqa: E402
+from pipeline.matching.landmarks import match_landmark_edges  # noqa: E402
 
 
 def label_pairs(labels: np.ndarray) -> np.ndarray:

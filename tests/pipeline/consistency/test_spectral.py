@@ -17,8 +17,8 @@ from pipeline.consistency.spectral import (
     universe_size_count,
     universe_size_gap,
 )
-from pipeline.landmark_matching import match_landmark_edges
-from pipeline.landmarks_io import load_landmark_folder
+from pipeline.inputs.landmarks import load_landmark_folder
+from pipeline.matching.landmarks import match_landmark_edges
 from pipeline.types import Links
 
 METHODS = [spectral_sync, clear_sync]
