@@ -1,9 +1,9 @@
 """Benchmark: which links each resolution cuts, against the truth and an oracle.
 
-For formations a–d × seeds 0–4 (SIFT, 640x480, truth at 2 px) runs on the same matches:
-the paper's Alg. 1 and the evidence-aware rule (both distributed, by message passing), the
-three centralized baselines and the oracle (spurious links of conflictive sets cut, then the
-fewest good links). One record per formation × seed × method: good cut, spurious cut,
+For formations a–d × seeds 0–4 (``--first-seed``, ``--seeds``: unseen seeds; SIFT, 640x480,
+truth at 2 px) runs on the same matches: the paper's Alg. 1 and the evidence-aware rule (both
+distributed, by message passing), the three centralized baselines and the oracle (spurious
+links of conflictive sets cut, then the fewest good links). One record per formation × seed × method: good cut, spurious cut,
 spurious links inside the input's conflictive sets, spurious left there, pairwise F1 after
 resolution, and for the distributed methods rounds, messages, bytes and the round bound
 (detection ``≤ d + 1`` per pass; resolution ``≤ n + 1`` per pass for Alg. 1, ``≤ diam(C) + 1``
@@ -122,7 +122,9 @@ def one_run(formation: str, seed: int, merge_radius: float) -> list[dict]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formations", default="abcd")
-    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=5, help="how many seeds")
+    ap.add_argument("--first-seed", type=int, default=0,
+                    help="seeds FIRST .. FIRST + SEEDS - 1 (unseen seeds: e.g. 5)")
     ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{get_rule('evidence').merge_radius_px}",
                     help="comma-separated radii in pixels")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-resolution"))
@@ -140,7 +142,7 @@ def main() -> int:
 def one_pass(args, merge_radius: float) -> dict:
     records = []
     for f in args.formations:
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             t0 = time.perf_counter()
             records += one_run(f, seed, merge_radius)
             print(f"formation {f} seed {seed}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
@@ -158,7 +160,8 @@ def one_pass(args, merge_radius: float) -> dict:
     inputs = [r for r in records if r["method"] == "oracle"]
     input_sums = {k: int(sum(r[k] for r in inputs))
                   for k in ("links", "conflictive_features", "links_in_sets", "spurious_in_sets")}
-    print(f"\nsums over {runs} runs (formations {args.formations}, seeds 0-{args.seeds - 1}, "
+    print(f"\nsums over {runs} runs (formations {args.formations}, seeds {args.first_seed}-"
+          f"{args.first_seed + args.seeds - 1}, "
           f"merge radius {merge_radius} px)")
     print(f"input: {input_sums['links']} links, {input_sums['conflictive_features']} conflictive "
           f"features, {input_sums['links_in_sets']} links in conflictive sets "

@@ -77,6 +77,8 @@ from pipeline.consistency.evidence import (
     finish_evidence,
     own_set_links,
     own_sets,
+    set_geometry,
+    triangle_support,
 )
 from pipeline.consistency.evidence import (
     run_evidence_resolution as run_robot_by_robot,
@@ -267,12 +269,16 @@ class _SetProblems:
     of the first bundle entry in the set's bundle order (ascending gid) and the triangle
     support (:func:`.evidence.triangle_support`: third cameras of the common neighbours of
     the two ends, among the set's links). The sets are disjoint, so the common neighbours
-    are found on all their links together.
+    are found on all their links together. A set with known poses counts only the triangles
+    that pass the three-view test, set by set (:meth:`weight`).
 
     Attributes
     ----------
     label : (S,) int64 — set labels, ascending; set ``k``'s links are ``start[k]:start[k+1]``
-    a, b, cam_a, cam_b, w : (E,) — as :func:`.evidence.set_problem` returns them
+    a, b, cam_a, cam_b : (E,) — as :func:`.evidence.set_problem` returns them
+    local : (E,) float64 — the links' local weights (what their bundles carry)
+    w : (E,) float64 — ``local`` plus the triangle support of every common feature (the
+        weight of a set without poses)
     """
 
     def __init__(self, robots: list[Robot], links: list[tuple]) -> None:
@@ -297,11 +303,27 @@ class _SetProblems:
         offsets = robots[0].offsets if robots else np.zeros(1, dtype=np.int64)
         self.cam_a = np.searchsorted(offsets, self.a, side="right") - 1
         self.cam_b = np.searchsorted(offsets, self.b, side="right") - 1
+        self.local = w
         self.w = w + TRIANGLE_WEIGHT * _triangles(self.a, self.b, self.cam_a, self.cam_b)
 
     def of(self, label: int) -> slice:
         k = int(np.searchsorted(self.label, label))
         return slice(int(self.start[k]), int(self.start[k + 1]))
+
+    def weight(self, e: slice, keypoints: dict | None, projections: dict | None) -> np.ndarray:
+        """The weights of set ``e`` (:meth:`of`) as :func:`.evidence.set_problem` gives them
+        with the set's geometry (:func:`.evidence.set_geometry`; ``None``: ``w[e]``)."""
+        if keypoints is None or projections is None:
+            return self.w[e]
+        a, b = self.a[e], self.b[e]
+        cam = dict(zip(np.r_[a, b].tolist(), np.r_[self.cam_a[e], self.cam_b[e]].tolist(),
+                       strict=True))
+
+        def cam_of(ids):
+            return np.array([cam[int(g)] for g in ids], dtype=np.int64)
+
+        return self.local[e] + TRIANGLE_WEIGHT * triangle_support(a, b, cam_of, keypoints,
+                                                                  projections)
 
 
 def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
@@ -326,15 +348,6 @@ def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarra
     n_cam = int(cam.max()) + 1
     pairs = np.unique(e[common] * n_cam + cam[z[common]])
     return np.bincount(pairs // n_cam, minlength=E).astype(np.int64)
-
-
-def _geometry(bundles: dict) -> tuple:
-    """Keypoints and projections of a set's bundles as :func:`.evidence.set_problem` gives
-    them (``None, None`` unless every bundle carries a projection)."""
-    if all(bb[4] is not None for bb in bundles.values()):
-        return ({g: bb[0].astype(np.float64) for g, bb in bundles.items()},
-                {g: bb[4] for g, bb in bundles.items()})
-    return None, None
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,
@@ -404,10 +417,10 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
             bundles: dict = {}
             for i in sg.robot[a:b].tolist():
                 bundles.update(sets[i][label][2])
-            kp, P = _geometry(bundles)
+            kp, P = set_geometry(bundles)
         e = pb.of(label)
         sol = (pb.a[e], pb.b[e], pb.cam_a[e], pb.cam_b[e])
-        solution = (*sol, evidence_cut(*sol, pb.w[e], kp, P))
+        solution = (*sol, evidence_cut(*sol, pb.weight(e, kp, P), kp, P))
         for v in nodes.tolist():
             i = int(sg.robot[v])
             robots[i].evidence.solved.add(label)

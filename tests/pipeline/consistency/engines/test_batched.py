@@ -124,11 +124,13 @@ def test_batched_evidence_pass_leaves_every_robot_in_the_per_robot_state(inst, p
 
 
 @SETTINGS
-@given(inst=instances(max_n=9, max_feat=6), seed=st.integers(0, 2**32 - 1))
-def test_batched_set_problems_are_each_sets_own(inst, seed):
-    # every set's links, cameras and weights (triangle support included) computed for all
-    # sets at once are those evidence.set_problem computes from the set's bundles
-    robots, _, _ = _evidence_pass(inst, "none", seed, lambda robots, network: None)
+@given(inst=instances(max_n=9, max_feat=6), poses=st.sampled_from(["none", "all", "some"]),
+       seed=st.integers(0, 2**32 - 1))
+def test_batched_set_problems_are_each_sets_own(inst, poses, seed):
+    # every set's links, cameras and weights (triangle support included, three-view tested
+    # where the set's poses are known) computed for all sets at once are those
+    # evidence.set_problem computes from the set's bundles
+    robots, _, _ = _evidence_pass(inst, poses, seed, lambda robots, network: None)
     links = [evidence.own_set_links(rb) for rb in robots]
     pb = batched_evidence._SetProblems(robots, links)
     by_label: dict = {}
@@ -137,9 +139,11 @@ def test_batched_set_problems_are_each_sets_own(inst, seed):
             by_label.setdefault(label, {}).update(bundles)
     assert pb.label.tolist() == sorted(by_label)
     for label, bundles in by_label.items():
-        want = evidence.set_problem(dict(sorted(bundles.items())))
+        bundles = dict(sorted(bundles.items()))
+        want = evidence.set_problem(bundles)
         e = pb.of(label)
-        for got, exp in zip((pb.a[e], pb.b[e], pb.cam_a[e], pb.cam_b[e], pb.w[e]), want[:5],
+        w = pb.weight(e, *evidence.set_geometry(bundles))
+        for got, exp in zip((pb.a[e], pb.b[e], pb.cam_a[e], pb.cam_b[e], w), want[:5],
                             strict=True):
             np.testing.assert_array_equal(got, exp)
 
