@@ -13,6 +13,11 @@ Nothing here is used by a robot: every function sees the whole association graph
   - :func:`quality_merge` — a centralized consistent merge (QuickMatch idea): Kruskal over
     the links by decreasing ``Links.quality``, never merging two clusters that share an
     image; an upper reference for how many good links can be kept.
+  - :func:`spectral_sync_kept`, :func:`clear_kept` — the multi-way matching baselines of
+    :mod:`.spectral` (permutation synchronization, Pachauri et al. 2013; CLEAR-style,
+    Fathian et al. 2020), universe size estimated: a link is kept iff both ends get one point.
+
+:data:`BASELINES` names them all; every report lists them on the same input.
 """
 
 from __future__ import annotations
@@ -28,6 +33,9 @@ __all__ = [
     "quality_merge",
     "is_conflict_free",
     "baselines",
+    "BASELINES",
+    "spectral_sync_kept",
+    "clear_kept",
 ]
 
 
@@ -151,11 +159,36 @@ def baselines(features_per_camera, links, *,
 
     Returns
     -------
-    dict with ``drop_conflictive_sets``, ``keep_first_per_image`` and ``quality_merge``.
+    dict with ``drop_conflictive_sets``, ``keep_first_per_image``, ``quality_merge``, and the
+    multi-way matching baselines of :mod:`.spectral`: ``spectral_sync`` (Pachauri et al.
+    2013) and ``clear`` (CLEAR-style, Fathian et al. 2020), each with its universe size
+    estimated, a link kept iff its two ends get one universe point.
     """
     uf = union_find_conflicts(features_per_camera, links, graph=graph)  # the same sets for all
-    return {
-        "drop_conflictive_sets": drop_conflictive_sets(features_per_camera, links, _uf=uf),
-        "keep_first_per_image": keep_first_per_image(features_per_camera, links, _uf=uf),
-        "quality_merge": quality_merge(features_per_camera, links, _uf=uf),
-    }
+    return {name: fn(features_per_camera, links, _uf=uf) for name, fn in BASELINES.items()}
+
+
+def spectral_sync_kept(features_per_camera, links, *, _uf=None) -> np.ndarray:
+    """Kept mask of :func:`.spectral.spectral_sync` (universe size estimated)."""
+    from pipeline.consistency import spectral
+
+    return spectral.labels_to_kept(features_per_camera, links,
+                                   spectral.spectral_sync(features_per_camera, links))
+
+
+def clear_kept(features_per_camera, links, *, _uf=None) -> np.ndarray:
+    """Kept mask of :func:`.spectral.clear_sync` (universe size estimated)."""
+    from pipeline.consistency import spectral
+
+    return spectral.labels_to_kept(features_per_camera, links,
+                                   spectral.clear_sync(features_per_camera, links))
+
+
+#: every centralized baseline by name: ``(features_per_camera, links, *, _uf=None) -> kept``
+BASELINES = {
+    "drop_conflictive_sets": drop_conflictive_sets,
+    "keep_first_per_image": keep_first_per_image,
+    "quality_merge": quality_merge,
+    "spectral_sync": spectral_sync_kept,
+    "clear": clear_kept,
+}

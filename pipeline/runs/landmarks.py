@@ -196,9 +196,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     baselines = {}
     if config.baselines:
         with timer.stage("baselines", "centralized, same links"):
-            for name, fn in (("drop_conflictive_sets", centralized.drop_conflictive_sets),
-                             ("keep_first_per_image", centralized.keep_first_per_image),
-                             ("quality_merge", centralized.quality_merge)):
+            for name, fn in centralized.BASELINES.items():
                 t0 = time.perf_counter()
                 keep = np.asarray(fn(m, links), dtype=bool)
                 dt = time.perf_counter() - t0

@@ -38,7 +38,7 @@ def test_report_contract(hotel_run):
     assert report["after"]["conflictive_sets"] == 0
     assert report["features_per_camera"] == [30] * 6
     assert set(report["baselines"]) == {"drop_conflictive_sets", "keep_first_per_image",
-                                        "quality_merge"}
+                                        "quality_merge", "spectral_sync", "clear"}
     r = report["resolution"]
     assert r["method"] == "paper" and r["messages"] > 0 and r["bytes"] > 0
     assert len(rows) == report["before"]["links"]
