@@ -41,6 +41,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         :func:`pipeline.outputs.check_output_files`).
     """
     from pipeline.association import AssociationGraph, conflictive_links, count_conflicts
+    from pipeline.commgraph import comm_edges_for
     from pipeline.inputs import hloc
     from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
     from pipeline.stages import consistency_stage
@@ -49,12 +50,11 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     contents = hloc.read_h5(features, matches, pairs)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     cam = {name: k for k, name in enumerate(contents.names)}
-    if pairs is not None:
-        pair_list = hloc.read_pairs(pairs, set(contents.names))
-        edges = np.unique(np.sort(np.array([[cam[a], cam[b]] for a, b in pair_list]), axis=1),
-                          axis=0)
-    else:
-        edges = np.unique(np.stack([links.cam_i, links.cam_j], axis=1), axis=0)
+    # the pairs file (its repeated lines merged, as a graph file's) or, without one, the
+    # images that share a match; checked as every comm graph is (pipeline.commgraph)
+    pair_edges = None if pairs is None else \
+        [[cam[a], cam[b]] for a, b in hloc.read_pairs(pairs, set(contents.names))]
+    edges = comm_edges_for(m, links, pair_edges)
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""

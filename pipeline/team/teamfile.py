@@ -117,8 +117,9 @@ class Team:
 
     def neighbours(self, i: int) -> list[int]:
         """Comm-graph neighbours of robot ``i``, sorted."""
-        e = self.comm_edges
-        return sorted(set(e[e[:, 0] == i, 1].tolist()) | set(e[e[:, 1] == i, 0].tolist()))
+        from pipeline.commgraph import neighbour_table
+
+        return sorted(neighbour_table(self.comm_edges, self.n)[int(i)])
 
     def options_for(self, i: int) -> dict:
         """``options`` with robot ``i``'s overrides applied."""
