@@ -87,8 +87,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from pipeline.association import association_sets
 from pipeline.commgraph import check_comm_edges
@@ -100,6 +98,7 @@ from pipeline.fusion.consensus import (
     ransac_hypotheses,
 )
 from pipeline.fusion.flooding import exact_dynamic_voting
+from pipeline.fusion.points import fused_points
 from pipeline.fusion.protocol import (
     CountingExchange,
     LinkTraffic,
@@ -634,28 +633,11 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     # a robot that crashed never finished: its observations are not judged
     outlier = voted_out & res.valid & ~reproj_ok & ~crashed[None]
 
-    # fused point: largest connected group of observers per track
-    ncomp, lab = connected_components(
-        sp.csr_matrix((np.ones(len(node_edges)), (node_edges[:, 0], node_edges[:, 1])),
-                      shape=(B * n, B * n)), directed=False)
-    lab = lab.reshape(B, n)
+    # fused point: largest connected group of observers per track, its most common winner
+    # (a tie of votes between hypotheses can split a group; the split is counted in the stats)
     good = res.valid & estimated & ~crashed[None]    # a crashed robot's estimate is no part
-    size = np.bincount(lab[good], minlength=ncomp)
-    best = np.full(B, -1)
-    score = np.where(good, size[lab], -1)
-    best_node = np.argmax(score, axis=1)
-    has_pt = score[np.arange(B), best_node] > 0
-    best[has_pt] = lab[np.arange(B), best_node][has_pt]
-    grp = good & (lab == best[:, None])
-    # within the group, the robots that picked the group's most common winner (a tie of
-    # votes between hypotheses can split a group; the split is counted in the stats)
-    wcount = np.zeros((B, K), dtype=np.int64)
-    gb, gi = np.nonzero(grp)
-    np.add.at(wcount, (gb, res.winner[gb, gi]), 1)
-    split = (wcount > 0).sum(1) > 1
-    grp &= res.winner == np.argmax(wcount, axis=1)[:, None]
-    cnt = grp.sum(1)
-    pts = (res.theta * grp[..., None]).sum(1) / np.maximum(cnt, 1)[:, None]
+    fused = fused_points(node_edges, good, res.theta, res.winner, K)
+    pts, has_pt, grp, split = fused.points, fused.has_point, fused.group, fused.split
 
     # back to observations and links
     obs_est = np.zeros(n_obs, dtype=bool)

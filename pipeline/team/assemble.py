@@ -197,9 +197,9 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     A link still kept after consistency is cut as ``fusion-outlier`` when either end's robot
     cut it (its own outlier observation, or its neighbour's as the neighbour told it), in the
     team's fusion round count (the largest a robot heard with the termination wave). The fused
-    landmark of a track is formed as :func:`pipeline.fusion.landmarks.fuse_tracks` forms it:
-    the final estimates of the largest connected group of robots with a valid estimate, among
-    them those that picked the group's most common winner, averaged; its id is the union-find
+    landmark of a track is formed as the simulator forms it
+    (:func:`pipeline.fusion.points.fused_points`, from every robot's final estimate); its id
+    is the union-find
     track (:func:`pipeline.fusion.landmarks.tracks_of` over the kept links) of its smallest
     feature.
 
@@ -207,9 +207,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     -------
     (stats, points (F, 3), track_ids (F,))
     """
-    from scipy.sparse.csgraph import connected_components
-
     from pipeline.fusion.landmarks import tracks_of
+    from pipeline.fusion.points import fused_points
 
     n = team.n
     fpc = np.asarray(fpc, dtype=np.int64)
@@ -248,23 +247,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     ne = [np.stack([np.flatnonzero(obs[:, u] & obs[:, v]) * n + u,
                     np.flatnonzero(obs[:, u] & obs[:, v]) * n + v], 1) for u, v in edges]
     ne = np.concatenate(ne) if ne else np.zeros((0, 2), np.int64)
-    import scipy.sparse as sp
-
-    ncomp, lab = connected_components(sp.csr_matrix(
-        (np.ones(len(ne)), (ne[:, 0], ne[:, 1])), shape=(T * n, T * n)), directed=False)
-    lab = lab.reshape(T, n)
-    size = np.bincount(lab[good], minlength=ncomp)
-    score = np.where(good, size[lab], -1)
-    best_node = np.argmax(score, axis=1) if T else np.zeros(0, np.int64)
-    has_pt = score[np.arange(T), best_node] > 0
-    grp = good & (lab == lab[np.arange(T), best_node][:, None]) & has_pt[:, None]
-    K = int(winner.max(initial=0)) + 1
-    wcount = np.zeros((T, K), dtype=np.int64)
-    gb, gi = np.nonzero(grp)
-    np.add.at(wcount, (gb, winner[gb, gi]), 1)
-    grp &= winner == np.argmax(wcount, axis=1)[:, None]
-    cnt = grp.sum(1)
-    pts = (theta * grp[..., None]).sum(1) / np.maximum(cnt, 1)[:, None]
+    fused = fused_points(ne, good, theta, winner)
+    pts, has_pt = fused.points, fused.has_point
     uf, _ = tracks_of(fpc, links.subset(before))
     ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
     fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]
