@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.linklog import merge_link_logs
-from pipeline.consistency.result import ConsistencyResult
+from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.errors import InputError
 from pipeline.types import Links, PairMatches
 
@@ -137,7 +136,6 @@ class _LinkIndex:
 def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> ConsistencyResult:
     """The :class:`ConsistencyResult` of a team run, read from the robots' published logs."""
     n = team.n
-    L = len(links)
     fpc = np.asarray(fpc, dtype=np.int64)
     index = _LinkIndex(links, n, fpc)
     logs = []
@@ -146,7 +144,6 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         pos = index.rows(i, a)
         logs.append((pos, a["link_alive"].astype(bool), a["deleted_case"],
                      a["deleted_round"], a["deleted_iteration"]))
-    d = merge_link_logs(L, logs)
     comp = np.concatenate([results[i][1]["component"] if i in results
                            else np.full(int(fpc[i]), -1, np.int64) for i in range(n)])
     heads = {i: h for i, (h, _) in results.items()}
@@ -157,14 +154,12 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     for i, h in heads.items():
         for k in h["run"].get("lost_neighbours", []):
             lost_by.setdefault(int(k), []).append(int(i))
-    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, bool)
     faults = dict(
         drop_probability=float(team.options.get("drop_prob", 0.0)), switching_topology=False,
         dropped=int(sum(h["counters"]["dropped"] for h in heads.values())),
         crashed={int(k): None for k in killed},
         crashes_not_reached={},
         robots_lost={k: sorted(v) for k, v in sorted(lost_by.items())},
-        links_cut_robot_lost=int(d["robot_lost"].sum()),
         retransmissions=int(sum(h["run"].get("retransmissions", 0) for h in heads.values())),
         acks=int(sum(h["run"].get("acks", 0) for h in heads.values())),
         heartbeats=int(sum(h["run"].get("heartbeats", 0) for h in heads.values())),
@@ -181,13 +176,9 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         bytes_by_kind={k: v for k, v in byts.items() if v},
         max_robot_memory_bytes=int(max((h["peak_memory_bytes"] for h in heads.values()),
                                        default=0)),
-        asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
-        deleted_links=int(d["deleted"].sum()), protocol="reliable", survivors=survivors,
-        resolution=str(any_run_head.get("resolution", "paper")),
-        termination="local (termination wave)", faults=faults)
-    return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
-                             iteration=d["iteration"], round=d["round"], case=d["case"],
-                             component=comp, stats=stats)
+        protocol="reliable", resolution=str(any_run_head.get("resolution", "paper")),
+        termination="local (termination wave)")
+    return result_from_logs(links, logs, survivors, comp, stats=stats, faults=faults)
 
 
 def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, np.ndarray]:
