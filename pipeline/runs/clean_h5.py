@@ -40,10 +40,10 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         (the command checks every output against every input first,
         :func:`pipeline.outputs.check_output_files`).
     """
-    from pipeline.association import AssociationGraph, conflictive_links, count_conflicts
+    from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.commgraph import comm_edges_for
     from pipeline.inputs import hloc
-    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
     from pipeline.stages import consistency_stage
 
     out = Path(out)
@@ -63,12 +63,6 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
-    rnd = np.full(len(links), -1, dtype=np.int64)
-    it = np.full(len(links), -1, dtype=np.int64)
-    rnd[idx] = result.round
-    it[idx] = result.iteration
-    conflictive = np.zeros(len(links), dtype=bool)
-    conflictive[idx] = conflictive_links(m, model_links)
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     hloc.write_cleaned_matches(contents, out, keep)
@@ -80,8 +74,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
           f"| Cut by resolution | | {cut['resolution']} |\n")
     outcome = CleaningOutcome(
         names=contents.names, sizes=[_size_of(k) for k in contents.keypoints],
-        keypoints=contents.keypoints, links=links, reason=reason.astype(str), round=rnd,
-        iteration=it, conflictive_before=conflictive)
+        keypoints=contents.keypoints,
+        ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
                                  report_markdown=md)
     st = result.stats
