@@ -23,8 +23,8 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
 2. **Consensus**, in the mode of :func:`~pipeline.fusion.landmarks.fuse_tracks`
    (``FusionOptions.consensus``):
 
-   * ``exact`` (default): the robot's :class:`pipeline.fusion.flooding.FloodRobot`, one
-     :meth:`~pipeline.fusion.flooding.FloodRobot.step` per round, its messages on the wire in
+   * ``exact`` (default): the robot's :class:`pipeline.fusion.flood_robot.FloodRobot`, one
+     :meth:`~pipeline.fusion.flood_robot.FloodRobot.step` per round, its messages on the wire in
      the layout that module counts (:func:`encode_flood`: the open tracks of a link are known
      at both ends, so they go unnamed; tombstones of lost links as that module counts them;
      once a robot has seen a lost link it names its open tracks, since tombstones can reopen
@@ -62,7 +62,7 @@ rounds), which names the round of the fusion cuts as the simulator does.
 Faults
 ------
 A neighbour the transport reports silent (its process died) leaves every track's observer graph
-at once. Exact mode: it is handed to :meth:`~pipeline.fusion.flooding.FloodRobot.step` as lost
+at once. Exact mode: it is handed to :meth:`~pipeline.fusion.flood_robot.FloodRobot.step` as lost
 (its entry counts as known-gone, so the robot's ball can close without it). Metropolis: its
 terms leave the update (the robot's own weight takes them, so its row still sums to
 one and the weights stay symmetric: both ends of a link use the degrees their messages of that
@@ -534,7 +534,7 @@ class FusionRobot:
     # --- the exact consensus (pipeline.fusion.flooding) ------------------------------------
     def _start_flood(self) -> None:
         """Exact consensus: the robot's FloodRobot over its own tracks (after the setup)."""
-        from pipeline.fusion.flooding import FloodRobot
+        from pipeline.fusion.flood_robot import FloodRobot
 
         cov_i = self._cov_i
         info = information_matrix(cov_i)
@@ -762,7 +762,7 @@ def run_fusion_reliably(fusion: FusionRobot, transport, options=None,
 
 
 def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
-    """A :class:`~pipeline.fusion.flooding.FloodMessage` as named arrays, byte for byte the
+    """A :class:`~pipeline.fusion.flood_robot.FloodMessage` as named arrays, byte for byte the
     layout :mod:`pipeline.fusion.flooding` counts: per open track (in name order; both ends
     know which tracks are open on the link) its entry count and a bit of a *last* bitmap; per
     entry the robot id, its neighbour bitmap and a flags byte (it carries an observation); per
@@ -801,7 +801,7 @@ def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
 def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int, shared=()):
     """Inverse of :func:`encode_flood`, given the names of the open tracks (in order) unless
     the message names them, and the link's shared tracks (sorted names, for tombstones)."""
-    from pipeline.fusion.flooding import FloodEntry, FloodMessage
+    from pipeline.fusion.flood_robot import FloodEntry, FloodMessage
 
     if "names" in p:
         names = [int(b) for b in p["names"]]
