@@ -11,6 +11,7 @@
 * :mod:`pipeline.fusion.protocol` — the logical rounds over the transport (counted, or the
   reliable channel in lockstep on a faulty network);
 * :mod:`pipeline.fusion.landmarks` — the stage: tracks, fusion of every track, outliers cut;
+* :mod:`pipeline.fusion.local` — each robot's local estimate of the landmarks it observes;
 * :mod:`pipeline.fusion.robot` — one robot's fusion over its own endpoint (its own process),
   run round after round by :mod:`pipeline.fusion.robot_loops`;
 * :mod:`pipeline.fusion.points` — the fused landmark of each track from the robots' estimates.

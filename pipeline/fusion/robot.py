@@ -18,7 +18,7 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    the track's name and its keypoint. A name it holds twice (a conflictive set, which the
    simulator leaves unfused) is sent apart, and every robot that hears it leaves the track out.
    From the setups the robot forms its local estimate of each track
-   (:func:`pipeline.fusion.landmarks.local_estimates`, its own row) and its max-c draws
+   (:func:`pipeline.fusion.local.local_estimates`, its own row) and its max-c draws
    (:func:`pipeline.fusion.protocol.hypothesis_draws`).
 2. **Consensus**, in the mode of :func:`~pipeline.fusion.landmarks.fuse_tracks`
    (``FusionOptions.consensus``):
@@ -79,7 +79,7 @@ import numpy as np
 
 from pipeline.fusion.consensus import ransac_hypotheses, solve_information, top_c_distinct
 from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
-from pipeline.fusion.landmarks import _project, local_estimates
+from pipeline.fusion.local import local_estimates, project
 from pipeline.fusion.protocol import (
     bundle_reals,
     hypothesis_draws,
@@ -88,10 +88,10 @@ from pipeline.fusion.protocol import (
 )
 from pipeline.fusion.voting import (
     VOTE_TIE_TOL,
-    _sq_mahalanobis,
     chi2_ppf,
     gate_threshold,
     information_matrix,
+    sq_mahalanobis,
     winning_view,
 )
 
@@ -383,7 +383,7 @@ class FusionRobot:
         self.theta[run], self.ok[run] = th, okr
         obs_f = self.est.reshape(-1, 1)
         self.yes[run] = okr & obs_f[run] & (
-            _sq_mahalanobis(self.xf[run] - th, self.info[run]) <= self.thr)   # eq. (12)
+            sq_mahalanobis(self.xf[run] - th, self.info[run]) <= self.thr)   # eq. (12)
 
     def _consensus_messages(self):
         wire = self.opt.wire
@@ -520,7 +520,7 @@ class FusionRobot:
         ``θ``, validity and own vote of every own track."""
         if self.B:
             voted_out = self.est & ~self.yes_w
-            u, _, z = _project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
+            u, _, z = project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
                                self.K[None, None])
             e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.opt.sigma_px ** 2
             reproj_ok = self.ok_w & (z[:, 0] > 0) & (e2 <= self.px_thr)
