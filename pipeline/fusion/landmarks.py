@@ -338,15 +338,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     draws = hypothesis_draws(seed, np.repeat(track_names[tr], n), np.tile(np.arange(n), B),
                              K).reshape(B, n, K)
 
-    # the voting network: observers of a track linked by comm edges
-    node_edges, edge_link = [], []
-    for k, (i, j) in enumerate(comm):
-        b = np.flatnonzero(observes[:, i] & observes[:, j])
-        node_edges.append(np.stack([b * n + i, b * n + j], 1))
-        edge_link.append(np.full(len(b), k, dtype=np.int64))
-    node_edges = np.concatenate(node_edges) if node_edges else np.zeros((0, 2), np.int64)
-    edge_link = np.concatenate(edge_link) if edge_link else np.zeros(0, np.int64)
-    active_comm = int(sum(bool((observes[:, i] & observes[:, j]).any()) for i, j in comm))
+    node_edges, edge_link, active_comm = _observer_graph(comm, observes)
     stats = dict(tracks=int(T), tracks_fused=0, tracks_conflictive=int(conflictive.sum()),
                  observations=int(n_obs), observations_estimated=int(estimated.sum()),
                  observations_voted_out=0, observations_cut=0, links_cut=0,
@@ -411,22 +403,75 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     fused = fused_points(node_edges, good, res.theta, res.winner, K)
     pts, has_pt, grp, split = fused.points, fused.has_point, fused.group, fused.split
 
-    # back to observations and links
+    obs_est, obs_in, obs_votes, cut = _observations_and_cuts(
+        tr, T, obs_track, obs_cam, obs_g, off, links, estimated, outlier, crashed, res.votes, K)
+    kinds = _stage_stats(stats, res, protocol, consensus, wire, node_edges, active_comm, crashed)
+    stats.update(
+        tracks_fused=int(has_pt.sum()), observations_voted_out=int(voted_out.sum()),
+        observations_cut=int((~obs_in).sum()), links_cut=int(cut.sum()),
+        tracks_split_winner=int((split & has_pt).sum()),
+        max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
+            res.theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0)
+    if transport is not None and protocol is None:
+        transport.count("fusion-setup", stats["setup_messages"], stats["setup_bytes"])
+        transport.count("fusion", stats["messages"], stats["bytes"])
+    elif transport is not None and not transport.faulty:
+        # (a lockstep exchange sent its packets through the transport itself)
+        for kind, v in kinds.items():
+            transport.count(kind, v["messages"], v["bytes"])
+    if track_labels is not None:
+        first_obs = np.full(T, -1, dtype=np.int64)
+        first_obs[obs_track[::-1]] = obs_g[::-1]
+        tr = uf[first_obs[tr]]
+    return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track_out,
+                        obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
+                        obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes)
+
+
+def _observer_graph(comm: np.ndarray, observes: np.ndarray):
+    """The voting network: observers of a track linked by comm edges. Returns
+    ``(node_edges (E, 2), edge_link (E,), active comm links)``, nodes ``track * n + robot``,
+    ``edge_link`` the comm link of each edge."""
+    n = observes.shape[1]
+    node_edges, edge_link = [], []
+    for k, (i, j) in enumerate(comm):
+        b = np.flatnonzero(observes[:, i] & observes[:, j])
+        node_edges.append(np.stack([b * n + i, b * n + j], 1))
+        edge_link.append(np.full(len(b), k, dtype=np.int64))
+    node_edges = np.concatenate(node_edges) if node_edges else np.zeros((0, 2), np.int64)
+    edge_link = np.concatenate(edge_link) if edge_link else np.zeros(0, np.int64)
+    active_comm = int(sum(bool((observes[:, i] & observes[:, j]).any()) for i, j in comm))
+    return node_edges, edge_link, active_comm
+
+
+def _observations_and_cuts(tr, T: int, obs_track, obs_cam, obs_g, off, links: Links, estimated,
+                           outlier, crashed, votes, K: int):
+    """Back from the fused tracks' rows to every observation and link: each observation's
+    ``estimated``, ``inlier`` and votes, and the links cut at an outlier observation (never
+    a crashed robot's)."""
+    n_obs = len(obs_g)
     obs_est = np.zeros(n_obs, dtype=bool)
     obs_in = np.ones(n_obs, dtype=bool)
     pos_of_track = np.full(T, -1)
-    pos_of_track[tr] = np.arange(B)
+    pos_of_track[tr] = np.arange(len(tr))
     bo = pos_of_track[obs_track]
     sel = bo >= 0
     obs_est[sel] = estimated[bo[sel], obs_cam[sel]]
     obs_in[sel] = ~outlier[bo[sel], obs_cam[sel]]
     obs_votes = np.full((n_obs, K), np.nan)
-    obs_votes[sel] = res.votes[bo[sel], obs_cam[sel]]
+    obs_votes[sel] = votes[bo[sel], obs_cam[sel]]
     bad_feature = np.zeros(off[-1], dtype=bool)
     bad_feature[obs_g[~obs_in]] = True
     cut = bad_feature[off[links.cam_i] + links.feat_i] | bad_feature[off[links.cam_j] + links.feat_j]
     cut &= ~(crashed[links.cam_i] | crashed[links.cam_j])
+    return obs_est, obs_in, obs_votes, cut
 
+
+def _stage_stats(stats: dict, res, protocol, consensus: str, wire: str, node_edges,
+                 active_comm: int, crashed) -> dict | None:
+    """The stage's rounds, messages and bytes: counted by the exchange of the round protocol
+    (returns its figures by message kind), or in bulk (fixed rounds; returns None)."""
+    kinds = None
     setup_bytes = 2 * len(node_edges) * bundle_bytes(2 + 12 + 4, with_degree=False)
     total_rounds = res.maxc_stats.rounds + res.stats.rounds
     if protocol is not None:
@@ -452,23 +497,4 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                      logical_messages=int(res.stats.messages + res.maxc_stats.messages),
                      bytes=int(res.stats.bytes + res.maxc_stats.bytes),
                      setup_messages=int(2 * len(node_edges)), setup_bytes=int(setup_bytes))
-    stats.update(
-        tracks_fused=int(has_pt.sum()), observations_voted_out=int(voted_out.sum()),
-        observations_cut=int((~obs_in).sum()), links_cut=int(cut.sum()),
-        tracks_split_winner=int((split & has_pt).sum()),
-        max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
-            res.theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0)
-    if transport is not None and protocol is None:
-        transport.count("fusion-setup", stats["setup_messages"], stats["setup_bytes"])
-        transport.count("fusion", stats["messages"], stats["bytes"])
-    elif transport is not None and not transport.faulty:
-        # (a lockstep exchange sent its packets through the transport itself)
-        for kind, v in kinds.items():
-            transport.count(kind, v["messages"], v["bytes"])
-    if track_labels is not None:
-        first_obs = np.full(T, -1, dtype=np.int64)
-        first_obs[obs_track[::-1]] = obs_g[::-1]
-        tr = uf[first_obs[tr]]
-    return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track_out,
-                        obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
-                        obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes)
+    return kinds
