@@ -12,6 +12,7 @@ gets it from here:
   ``knn:K`` (neighbours by image similarity, :mod:`pipeline.matching.retrieval`);
 * :func:`read_comm_graph` — the one file reader (indices, or image names when given);
 * :func:`check_comm_edges` — the one checker of an edge array;
+* :func:`neighbour_table` — every robot's neighbours (the simulated network, ``TEAM.json``);
 * :func:`comm_edges_for` — the checked graph of the consistency stage, with every link on an
   edge.
 
@@ -383,3 +384,18 @@ def comm_edges_for(features_per_camera, links, comm_edges=None) -> np.ndarray:
             f"joins cameras {links.cam_i[k]} and {links.cam_j[k]}, which are not neighbours in "
             "the communication graph; add the edge or drop the link")
     return e
+
+
+def neighbour_table(edges, n: int) -> list[frozenset]:
+    """Every robot's comm-graph neighbours: ``(n,)`` frozensets of robot ids, from the
+    undirected ``edges`` (a self-loop, which a checked graph never holds, is no neighbour).
+
+    >>> [sorted(k) for k in neighbour_table([[0, 1], [2, 1]], 3)]
+    [[1], [0, 2], [1]]
+    """
+    table: list[set] = [set() for _ in range(int(n))]
+    for a, b in np.asarray(edges, dtype=np.int64).reshape(-1, 2).tolist():
+        if a != b:
+            table[a].add(b)
+            table[b].add(a)
+    return [frozenset(k) for k in table]

@@ -256,6 +256,21 @@ class LinkLedger:
         if case is not None:
             self.case[mask] = case
 
+    def place(self, rows: np.ndarray, sub: LinkLedger) -> None:
+        """Write the decisions of ``sub``, a ledger of the links ``rows`` (indices) of this one
+        (e.g. the consistency stage run on the links no earlier check cut), into these rows:
+        ``status``, ``reason``, ``round``, ``iteration``, ``case`` and ``conflictive_before``.
+
+        >>> ledger = LinkLedger.all_kept(Links([0, 0, 1], [0, 1, 0], [1, 1, 2], [0, 1, 0]))
+        >>> sub = LinkLedger.all_kept(ledger.links.subset(np.array([False, True, True])))
+        >>> sub.cut(np.array([True, False]), "resolution", 2)
+        >>> ledger.place(np.array([1, 2]), sub)
+        >>> ledger.status.tolist(), ledger.round.tolist()
+        (['kept', 'deleted', 'kept'], [-1, 2, -1])
+        """
+        for name in ("status", "reason", "round", "iteration", "case", "conflictive_before"):
+            getattr(self, name)[rows] = getattr(sub, name)
+
 
 @dataclass
 class RunRecord:

@@ -11,9 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.consistency.linklog import merge_link_logs
 from pipeline.types import Links
 
-__all__ = ["ConsistencyResult"]
+__all__ = ["ConsistencyResult", "result_from_logs"]
 
 
 @dataclass
@@ -70,3 +71,26 @@ class ConsistencyResult:
     def kept(self) -> Links:
         """The links that survived, ``Links`` of length ``(~deleted).sum()``."""
         return self.links.subset(~self.deleted)
+
+
+def result_from_logs(links: Links, logs, survivors: np.ndarray, component: np.ndarray, *,
+                     stats: dict, faults: dict,
+                     track_label: np.ndarray | None = None) -> ConsistencyResult:
+    """The :class:`ConsistencyResult` of a run, from the robots' own deletion logs.
+
+    ``logs`` as :func:`~pipeline.consistency.linklog.merge_link_logs` takes them;
+    ``survivors`` (n,) bool, the robots alive at the end; ``stats`` and ``faults``: the
+    figures that depend on how the robots ran (rounds, counters, crashes: the simulator's
+    network or the robots' published counters). Added here, read from the logs alike for
+    every run: ``deleted_links``, ``asymmetric_links`` (links between two surviving robots
+    deleted at one end only), ``survivors``, ``faults`` and its ``links_cut_robot_lost``.
+    """
+    L = len(links)
+    d = merge_link_logs(L, logs)
+    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, bool)
+    faults["links_cut_robot_lost"] = int(d["robot_lost"].sum())
+    stats.update(asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
+                 deleted_links=int(d["deleted"].sum()), survivors=survivors, faults=faults)
+    return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
+                             iteration=d["iteration"], round=d["round"], case=d["case"],
+                             component=component, stats=stats, track_label=track_label)

@@ -402,7 +402,7 @@ def average_consensus(x0, topology, rounds: int, *, history: bool = False):
     return x, stats
 
 
-def _extreme_eigenvalues_sym3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def extreme_eigenvalues_sym3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Smallest and largest eigenvalue of symmetric ``(..., 3, 3)`` matrices, closed form.
 
     Smith's trigonometric solution (O. K. Smith, "Eigenvalues of a symmetric 3 × 3 matrix",
@@ -453,7 +453,7 @@ def solve_information(P: np.ndarray, q: np.ndarray, *, rtol: float = 1e-10):
     P = np.asarray(P, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     if P.shape[-1] == 3:
-        lo, hi = _extreme_eigenvalues_sym3(P)
+        lo, hi = extreme_eigenvalues_sym3(P)
     else:
         ev = np.linalg.eigvalsh(P)
         lo, hi = ev[..., 0], ev[..., -1]

@@ -18,14 +18,14 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    the track's name and its keypoint. A name it holds twice (a conflictive set, which the
    simulator leaves unfused) is sent apart, and every robot that hears it leaves the track out.
    From the setups the robot forms its local estimate of each track
-   (:func:`pipeline.fusion.landmarks.local_estimates`, its own row) and its max-c draws
+   (:func:`pipeline.fusion.local.local_estimates`, its own row) and its max-c draws
    (:func:`pipeline.fusion.protocol.hypothesis_draws`).
 2. **Consensus**, in the mode of :func:`~pipeline.fusion.landmarks.fuse_tracks`
    (``FusionOptions.consensus``):
 
-   * ``exact`` (default): the robot's :class:`pipeline.fusion.flooding.FloodRobot`, one
-     :meth:`~pipeline.fusion.flooding.FloodRobot.step` per round, its messages on the wire in
-     the layout that module counts (:func:`encode_flood`: the open tracks of a link are known
+   * ``exact`` (default): the robot's :class:`pipeline.fusion.flood_robot.FloodRobot`, one
+     :meth:`~pipeline.fusion.flood_robot.FloodRobot.step` per round, its messages on the wire in
+     the layout that module counts (:func:`~pipeline.fusion.flood_wire.encode_flood`: the open tracks of a link are known
      at both ends, so they go unnamed; tombstones of lost links as that module counts them;
      once a robot has seen a lost link it names its open tracks, since tombstones can reopen
      a decision), until every track it observes is decided at the consensus limit
@@ -62,13 +62,13 @@ rounds), which names the round of the fusion cuts as the simulator does.
 Faults
 ------
 A neighbour the transport reports silent (its process died) leaves every track's observer graph
-at once. Exact mode: it is handed to :meth:`~pipeline.fusion.flooding.FloodRobot.step` as lost
+at once. Exact mode: it is handed to :meth:`~pipeline.fusion.flood_robot.FloodRobot.step` as lost
 (its entry counts as known-gone, so the robot's ball can close without it). Metropolis: its
 terms leave the update (the robot's own weight takes them, so its row still sums to
 one and the weights stay symmetric: both ends of a link use the degrees their messages of that
 round carried), its degree changes are sent with the next round, and the robot cuts every link
 to it as ``robot-lost``. On a lossy network every logical round goes over the reliable
-channel in lockstep (:func:`run_fusion_reliably`), so the computation is the fault-free one.
+channel in lockstep (:func:`~pipeline.fusion.robot_loops.run_fusion_reliably`), so the computation is the fault-free one.
 """
 
 from __future__ import annotations
@@ -78,9 +78,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.fusion.consensus import ransac_hypotheses, solve_information, top_c_distinct
-from pipeline.fusion.landmarks import _project, local_estimates
+from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
+from pipeline.fusion.local import local_estimates, project
 from pipeline.fusion.protocol import (
-    WIRE_DTYPES,
     bundle_reals,
     hypothesis_draws,
     index_bytes,
@@ -88,19 +88,17 @@ from pipeline.fusion.protocol import (
 )
 from pipeline.fusion.voting import (
     VOTE_TIE_TOL,
-    _sq_mahalanobis,
     chi2_ppf,
     gate_threshold,
     information_matrix,
+    sq_mahalanobis,
     winning_view,
 )
 
-__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT", "encode_flood",
-           "decode_flood"]
+__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT"]
 
 SETUP, MAXC, FUSION, CUT = "fusion-setup", "fusion-maxc", "fusion", "fusion-cut"
 FLOOD = FUSION  # the simulator counts the flood as the consensus: kind "fusion"
-_TRIU = np.triu_indices(3)
 _BIG = np.iinfo(np.int64).max // 2
 
 
@@ -385,7 +383,7 @@ class FusionRobot:
         self.theta[run], self.ok[run] = th, okr
         obs_f = self.est.reshape(-1, 1)
         self.yes[run] = okr & obs_f[run] & (
-            _sq_mahalanobis(self.xf[run] - th, self.info[run]) <= self.thr)   # eq. (12)
+            sq_mahalanobis(self.xf[run] - th, self.info[run]) <= self.thr)   # eq. (12)
 
     def _consensus_messages(self):
         wire = self.opt.wire
@@ -422,7 +420,7 @@ class FusionRobot:
                 "c": self.counter[R].astype(self.counter_dtype),
                 "changed": np.packbits(ch),
                 "deg": self.deg[C].astype(self.deg_dtype),
-                "P": image[0][C][..., _TRIU[0], _TRIU[1]].astype(self.wire_dtype),
+                "P": image[0][C][..., TRIU[0], TRIU[1]].astype(self.wire_dtype),
                 "q": image[1][C].astype(self.wire_dtype),
                 "v": image[2][C].astype(self.wire_dtype)}))
         return out
@@ -441,8 +439,8 @@ class FusionRobot:
             self.nb_counter[R, j] = p["c"].astype(np.int64)
             self.nb_deg[C, j] = p["deg"].astype(np.int64)
             Pm = np.zeros((len(C), Kh, 3, 3))
-            Pm[..., _TRIU[0], _TRIU[1]] = p["P"].astype(np.float64)
-            Pm[..., _TRIU[1], _TRIU[0]] = p["P"].astype(np.float64)
+            Pm[..., TRIU[0], TRIU[1]] = p["P"].astype(np.float64)
+            Pm[..., TRIU[1], TRIU[0]] = p["P"].astype(np.float64)
             self.nb_P[C, j] = Pm
             self.nb_q[C, j] = p["q"].astype(np.float64)
             self.nb_v[C, j] = p["v"].astype(np.float64)
@@ -522,7 +520,7 @@ class FusionRobot:
         ``θ``, validity and own vote of every own track."""
         if self.B:
             voted_out = self.est & ~self.yes_w
-            u, _, z = _project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
+            u, _, z = project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
                                self.K[None, None])
             e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.opt.sigma_px ** 2
             reproj_ok = self.ok_w & (z[:, 0] > 0) & (e2 <= self.px_thr)
@@ -534,7 +532,7 @@ class FusionRobot:
     # --- the exact consensus (pipeline.fusion.flooding) ------------------------------------
     def _start_flood(self) -> None:
         """Exact consensus: the robot's FloodRobot over its own tracks (after the setup)."""
-        from pipeline.fusion.flooding import FloodRobot
+        from pipeline.fusion.flood_robot import FloodRobot
 
         cov_i = self._cov_i
         info = information_matrix(cov_i)
@@ -621,220 +619,7 @@ class FusionRobot:
         return cut
 
 
-def run_fusion_locally(fusion: FusionRobot, transport, n_robots: int | None = None,
-                       max_rounds: int | None = None) -> dict:
-    """Run robot ``fusion.i``'s fusion over ``transport`` (a
-    :class:`~pipeline.transport.RoundEndpoint`) until the termination wave ends the phase.
-
-    Returns
-    -------
-    dict — ``rounds`` (transport rounds of the phase), ``fusion_rounds`` (the largest max-c
-    plus consensus round count of the team, flooded with the wave), ``local_rounds``, ``lost``
-    (neighbours that fell silent during the phase)
-    """
-    from pipeline.consistency.termination import TerminationWave
-
-    n = int(n_robots or fusion.n)
-    wave = TerminationWave(n)
-    cap = max_rounds or (n + fusion.opt.rounds + 2 * n + 8)
-    silent_before = set(getattr(transport, "silent", ()))
-    heard_max = 0
-    wave.start(fusion.done, 0)
-    t = 0
-    while True:
-        for dst, kind, payload in fusion.messages():
-            transport.send(dst, kind, payload)
-        inbox, states = transport.end_round({**wave.state(), "r": int(heard_max),
-                                             "phase": "fusion"})
-        t += 1
-        silent = set(getattr(transport, "silent", ())) - silent_before
-        # a neighbour whose packet did not come this round is gone for the phase
-        gone = {k for k in fusion.alive if k not in states} | silent
-        fusion.receive(inbox, sorted(gone))
-        if fusion.done:
-            heard_max = max(heard_max, fusion.local_rounds)
-        for s in states.values():
-            heard_max = max(heard_max, int(s.get("r", 0)))
-        if wave.update(fusion.done, 0, states):
-            return dict(rounds=t, fusion_rounds=int(heard_max),
-                        local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost))
-        if t > cap:
-            raise RuntimeError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
-
-
-TICK = "fusion-tick"
-
-
-def run_fusion_reliably(fusion: FusionRobot, transport, options=None,
-                        n_robots: int | None = None, max_rounds: int | None = None) -> dict:
-    """Like :func:`run_fusion_locally` on a lossy network: every logical round over the
-    reliable channel of the consistency stage, in lockstep.
-
-    Each logical round the robot sends every neighbour still heard exactly one message through
-    its :class:`~pipeline.consistency.channel.Channel` (sequence numbers, acknowledgements,
-    retransmission; an empty ``fusion-tick`` when the round has nothing for it), tagged with
-    the round and whether it is the robot's last; it then turns network rounds until it holds
-    the message of that round from every neighbour that has not sent its last (or has been
-    declared lost: silent for ``loss_timeout`` rounds while expected, or its process gone).
-    So the logical computation is the fault-free one (an α-synchronizer, as
-    :class:`pipeline.fusion.protocol.LockstepExchange` in the simulator); only network rounds
-    and retransmissions grow. The phase ends by the termination wave once the robot is done
-    and everything it sent is acknowledged.
-    """
-    from pipeline.consistency.channel import Channel
-    from pipeline.consistency.protocols import ProtocolOptions
-    from pipeline.consistency.termination import TerminationWave
-
-    n = int(n_robots or fusion.n)
-    chan = Channel(transport, options or ProtocolOptions(reliable=True))
-    wave = TerminationWave(n)
-    cap = max_rounds or 200 * (n + fusion.opt.rounds + 8)
-    silent_before = set(getattr(transport, "silent", ()))
-    held: dict[int, dict[int, object]] = {}   # logical round -> sender -> message
-    fin_at: dict[int, int] = {}               # neighbour -> its last logical round
-    heard_max = 0
-    lost_now: set[int] = set()
-    state = {"t": 0, "rounds": 0}
-    wave.start(False, 0)
-
-    def turn() -> bool:
-        """One network round; True when the wave ends the phase."""
-        nonlocal heard_max
-        inbox, states = transport.end_round({**wave.state(), "r": int(heard_max),
-                                             "phase": "fusion"})
-        state["rounds"] += 1
-        now = transport.round
-        for m in chan.receive(inbox, now):
-            t = int(m.payload["t"][0])
-            held.setdefault(t, {})[m.src] = m
-            if int(m.payload["fin"][0]):
-                fin_at[m.src] = t
-        chan.flush(now)
-        waiting = {j for j in fusion.alive - chan.lost - lost_now
-                   if fin_at.get(j, 1 << 30) >= state["t"]
-                   and j not in held.get(state["t"], {})} if not fusion.done else set()
-        gone = set(chan.check_lost(now, waiting_on=waiting))
-        gone |= (set(getattr(transport, "silent", ())) - silent_before) & fusion.alive
-        for k in gone:
-            chan.lost.add(k)
-        lost_now.update(gone)
-        if fusion.done:
-            heard_max = max(heard_max, fusion.local_rounds)
-            late = [m for t in sorted(held) for m in held.pop(t).values()]
-            fusion.receive([m for m in late if m.kind != TICK], sorted(lost_now))
-            lost_now.clear()
-        for s in states.values():
-            heard_max = max(heard_max, int(s.get("r", 0)))
-        if state["rounds"] > cap:
-            raise RuntimeError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
-        return wave.update(fusion.done and chan.idle(), 0, states)
-
-    while not fusion.done:
-        t = state["t"]
-        out = {dst: (kind, payload) for dst, kind, payload in fusion.messages()}
-        fin = fusion.phase == "cut"
-        for j in sorted(fusion.alive - chan.lost):
-            kind, payload = out.get(j, (TICK, {}))
-            chan.send(j, kind, {**payload, "t": np.array([t], np.int32),
-                                "fin": np.array([int(fin)], np.uint8)}, transport.round)
-        while True:
-            expect = {j for j in fusion.alive - chan.lost - lost_now
-                      if fin_at.get(j, 1 << 30) >= t}
-            if expect <= set(held.get(t, {})):
-                break
-            if turn():
-                break
-        got = held.pop(t, {})
-        fusion.receive([m for m in got.values() if m.kind != TICK], sorted(lost_now))
-        lost_now.clear()
-        state["t"] = t + 1
-    while not turn():
-        pass
-    return dict(rounds=state["rounds"], fusion_rounds=int(heard_max),
-                local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost),
-                logical_rounds=state["t"], retransmissions=chan.retransmissions,
-                acks=chan.acks_sent)
-
-
 # --------------------------------------------------------------------------------------------
 # the exact consensus (pipeline.fusion.flooding): the robot's FloodRobot on the wire
 
 
-
-def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
-    """A :class:`~pipeline.fusion.flooding.FloodMessage` as named arrays, byte for byte the
-    layout :mod:`pipeline.fusion.flooding` counts: per open track (in name order; both ends
-    know which tracks are open on the link) its entry count and a bit of a *last* bitmap; per
-    entry the robot id, its neighbour bitmap and a flags byte (it carries an observation); per
-    estimated entry its ``K`` draws (float64), ``x_i`` and the upper triangle of ``Λ_i⁻¹`` at
-    the wire's precision (``Λ_i⁻¹`` is exactly symmetric); per tombstone the track's position
-    among the link's ``shared`` tracks (sorted names) and the two ends of the lost link.
-    ``named``: the open tracks' names are sent too (8 bytes each), which a robot does once it
-    has seen a lost link, when tombstones may reopen a track the other end considers closed."""
-    names = sorted(msg.tracks)
-    last = np.array([bool(msg.tracks[b][0]) for b in names], dtype=bool)
-    ents = [e for b in names for e in msg.tracks[b][1]]
-    count = np.array([len(msg.tracks[b][1]) for b in names], dtype=np.int64)
-    E = [e for e in ents if e.estimated]
-    dt = WIRE_DTYPES[wire]
-    K = len(E[0].draws) if E else 0
-    ib = np.dtype(f"u{index_bytes(n)}")
-    out = {"count": count.astype(np.dtype(f"u{index_bytes(n + 1)}")), "last": np.packbits(last),
-           "robot": np.array([e.robot for e in ents], dtype=ib),
-           "nbrs": np.packbits(np.array([e.neighbours for e in ents], dtype=bool).reshape(
-               len(ents), n), axis=1),
-           "flags": np.array([bool(e.estimated) for e in ents], dtype=np.uint8),
-           "draws": np.array([e.draws for e in E], dtype=np.float64).reshape(len(E), K),
-           "x": np.array([e.x for e in E], dtype=dt).reshape(len(E), 3),
-           "info": np.array([np.asarray(e.info)[_TRIU] for e in E], dtype=dt).reshape(len(E), 6)}
-    if named:
-        out["names"] = np.asarray(names, dtype=np.int64)
-    tomb = [(b, a_, b_) for b in sorted(msg.down) for a_, b_ in msg.down[b]]
-    if tomb:
-        pos = np.searchsorted(np.asarray(shared, dtype=np.int64), [t[0] for t in tomb])
-        out["tomb_count"] = np.array([len(tomb)], dtype=np.uint32)
-        out["tomb_track"] = pos.astype(np.uint32)
-        out["tomb_ends"] = np.array([t[1:] for t in tomb], dtype=ib).reshape(len(tomb), 2)
-    return out
-
-
-def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int, shared=()):
-    """Inverse of :func:`encode_flood`, given the names of the open tracks (in order) unless
-    the message names them, and the link's shared tracks (sorted names, for tombstones)."""
-    from pipeline.fusion.flooding import FloodEntry, FloodMessage
-
-    if "names" in p:
-        names = [int(b) for b in p["names"]]
-    count = p["count"].astype(np.int64)
-    if len(count) != len(names):
-        raise RuntimeError(f"robot {dst}: a fusion message of robot {src} carries "
-                           f"{len(count)} tracks, {len(names)} are open on the link")
-    last = np.unpackbits(p["last"], count=len(names)).astype(bool)
-    E = int(count.sum())
-    est = p["flags"].astype(bool)
-    nbrs = np.unpackbits(p["nbrs"], axis=1, count=n).astype(bool) if E else \
-        np.zeros((0, n), bool)
-    pos = np.cumsum(est) - 1
-    msg = FloodMessage(src, dst, round_)
-    k = 0
-    for b, lb, c in zip(names, last, count, strict=True):
-        entries = []
-        for _ in range(int(c)):
-            if est[k]:
-                e = int(pos[k])
-                info = np.zeros((3, 3))
-                info[_TRIU] = p["info"][e].astype(np.float64)
-                info[_TRIU[1], _TRIU[0]] = p["info"][e].astype(np.float64)
-                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], True,
-                                          p["draws"][e].astype(np.float64),
-                                          p["x"][e].astype(np.float64), info))
-            else:
-                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], False,
-                                          np.full(K, -np.inf), np.zeros(3), np.zeros((3, 3))))
-            k += 1
-        msg.tracks[int(b)] = (bool(lb), entries)
-    shared = list(shared)
-    for t, (a_, b_) in zip(p.get("tomb_track", []), p.get("tomb_ends", np.zeros((0, 2))),
-                           strict=True):
-        msg.down.setdefault(int(shared[int(t)]), []).append((int(a_), int(b_)))
-    return msg

@@ -79,6 +79,7 @@ __all__ = [
     "choose_hypotheses",
     "pick_winner",
     "VOTE_TIE_TOL",
+    "sq_mahalanobis",
 ]
 
 GATES = ("distance", "squared")
@@ -298,7 +299,7 @@ def _input_bundles(x, cov, obs, members):
             u_q * m[..., None], m)                                         # eq. (10)
 
 
-def _sq_mahalanobis(r, info):
+def sq_mahalanobis(r, info):
     """``r' Λ⁻¹ r`` batched; ``r`` (..., d), ``info`` (..., d, d)."""
     return np.einsum("...i,...ij,...j->...", r, info, r)
 
@@ -371,7 +372,7 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     pd = ev[..., 0] > 1e-8 * scale
     safe_c = np.where(pd[..., None, None], cov_ih, np.eye(d))
     r = x[:, :, None] - theta_h
-    dist_sq = _sq_mahalanobis(r, np.linalg.inv(safe_c))
+    dist_sq = sq_mahalanobis(r, np.linalg.inv(safe_c))
     vote0 = ok_h & obs[..., None] & np.where(pd, dist_sq <= thr, members)
     # step 3: average the votes
     v, st2 = average_consensus(vote0.astype(np.float64).reshape(B * N, K), topo, r_vote)
@@ -473,7 +474,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     def opinion(P, q):
         theta, ok = solve_information(P, q)
         r = xf - theta
-        yes = ok & obs_f & (_sq_mahalanobis(r, info) <= thr)      # eq. (12), gate
+        yes = ok & obs_f & (sq_mahalanobis(r, info) <= thr)      # eq. (12), gate
         return theta, ok, yes
 
     hist = dict(theta=[], valid=[], yes=[], v=[]) if history else None
@@ -604,7 +605,7 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
         run = ~stopped
         th, okr = solve_information(P[run], q[run])                  # θ_i = P_i⁻¹ q_i
         theta[run], ok[run] = th, okr
-        yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)  # eq. 12
+        yes[run] = okr & obs_f[run] & (sq_mahalanobis(xf[run] - th, info[run]) <= thr)  # eq. 12
         u = yes.astype(np.float64) - prev_yes                       # eqs. (13)–(14)
         prev_yes = yes.copy()
         # what the messages of this round carry: the state's wire image, sent again only
@@ -640,7 +641,7 @@ def _dynamic_voting_protocol(x, cov, obs, live: _LiveGraph, thr, members, maxc_s
     if run.any():                                                   # the cap was reached
         th, okr = solve_information(P[run], q[run])
         theta[run], ok[run] = th, okr
-        yes[run] = okr & obs_f[run] & (_sq_mahalanobis(xf[run] - th, info[run]) <= thr)
+        yes[run] = okr & obs_f[run] & (sq_mahalanobis(xf[run] - th, info[run]) <= thr)
     stats = CommStats(rounds=t_run)
     v = v.reshape(B, N, K)
     winner, theta_w, ok_w, yes_w = winning_view(theta, ok, yes, v, tie_tol)

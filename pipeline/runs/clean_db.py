@@ -153,21 +153,15 @@ def _link_weight(contents, links) -> np.ndarray:
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
                   before, after) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
-    from pipeline.association import conflictive_links
-    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
 
-    rnd = np.full(len(links), -1, dtype=np.int64)
-    it = np.full(len(links), -1, dtype=np.int64)
-    rnd[idx], it[idx] = result.round, result.iteration
-    conflictive = np.zeros(len(links), dtype=bool)
-    conflictive[idx] = conflictive_links(m, model_links)
     sizes = [(int(c.width), int(c.height)) if c is not None else (0, 0)
              for c in contents.cameras]
     md = (f"## clean-db {Path(contents.path).name}\n\n| | before | after |\n|---|---:|---:|\n"
           f"| Verified links | {len(links)} | {int((reason == '').sum())} |\n"
           f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n")
-    write_side_outputs(CleaningOutcome(contents.names, sizes, contents.keypoints, links,
-                                       reason.astype(str), rnd, it, conflictive),
+    ledger = cleaning_ledger(links, reason, idx, result, model_links, m)
+    write_side_outputs(CleaningOutcome(contents.names, sizes, contents.keypoints, ledger),
                        out, rerun=rerun, image_dir=image_dir, report_markdown=md)
 
 

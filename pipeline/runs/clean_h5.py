@@ -40,21 +40,21 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         (the command checks every output against every input first,
         :func:`pipeline.outputs.check_output_files`).
     """
-    from pipeline.association import AssociationGraph, conflictive_links, count_conflicts
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.commgraph import comm_edges_for
     from pipeline.inputs import hloc
-    from pipeline.runs.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
     from pipeline.stages import consistency_stage
 
     out = Path(out)
     contents = hloc.read_h5(features, matches, pairs)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     cam = {name: k for k, name in enumerate(contents.names)}
-    if pairs is not None:
-        pair_list = hloc.read_pairs(pairs, set(contents.names))
-        edges = np.unique(np.sort(np.array([[cam[a], cam[b]] for a, b in pair_list]), axis=1),
-                          axis=0)
-    else:
-        edges = np.unique(np.stack([links.cam_i, links.cam_j], axis=1), axis=0)
+    # the pairs file (its repeated lines merged, as a graph file's) or, without one, the
+    # images that share a match; checked as every comm graph is (pipeline.commgraph)
+    pair_edges = None if pairs is None else \
+        [[cam[a], cam[b]] for a, b in hloc.read_pairs(pairs, set(contents.names))]
+    edges = comm_edges_for(m, links, pair_edges)
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
@@ -63,12 +63,6 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
-    rnd = np.full(len(links), -1, dtype=np.int64)
-    it = np.full(len(links), -1, dtype=np.int64)
-    rnd[idx] = result.round
-    it[idx] = result.iteration
-    conflictive = np.zeros(len(links), dtype=bool)
-    conflictive[idx] = conflictive_links(m, model_links)
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     hloc.write_cleaned_matches(contents, out, keep)
@@ -80,8 +74,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
           f"| Cut by resolution | | {cut['resolution']} |\n")
     outcome = CleaningOutcome(
         names=contents.names, sizes=[_size_of(k) for k in contents.keypoints],
-        keypoints=contents.keypoints, links=links, reason=reason.astype(str), round=rnd,
-        iteration=it, conflictive_before=conflictive)
+        keypoints=contents.keypoints,
+        ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
                                  report_markdown=md)
     st = result.stats

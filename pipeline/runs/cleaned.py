@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
-from pipeline.types import Features, Links, View
+from pipeline.types import Features, LinkLedger, Links, View
 
-__all__ = ["side_paths", "CleaningOutcome", "write_side_outputs"]
+__all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "write_side_outputs"]
 
 
 def side_paths(out: str | Path) -> tuple[Path, Path]:
@@ -35,20 +35,29 @@ def side_paths(out: str | Path) -> tuple[Path, Path]:
 
 @dataclass
 class CleaningOutcome:
-    """Per-link decisions of a cleaning command, ``(L,)`` arrays aligned with ``links``."""
+    """What a cleaning command read and decided: the images (names, sizes, keypoints) and the
+    per-link record of every link read (:class:`~pipeline.types.LinkLedger`)."""
 
     names: list[str]
     sizes: list[tuple[int, int]]
     keypoints: list[np.ndarray]
-    links: Links
-    reason: np.ndarray
-    round: np.ndarray
-    iteration: np.ndarray
-    conflictive_before: np.ndarray
+    ledger: LinkLedger
 
-    @property
-    def kept(self) -> np.ndarray:
-        return np.asarray(self.reason, dtype=str) == ""
+
+def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
+                    model_links: Links, features_per_camera) -> LinkLedger:
+    """The ledger of a cleaning command: the links an earlier check cut (``reason`` not
+    empty, e.g. ``not-one-to-one``), then the consistency stage's decisions (``result`` on
+    ``model_links``, the links ``rows``) with each link's place in a conflictive set before."""
+    from pipeline.association import conflictive_links
+    from pipeline.stages import ledger_from_consistency
+
+    ledger = LinkLedger.all_kept(links)
+    for why in sorted(set(np.asarray(reason, dtype=str)) - {"", "resolution"}):
+        ledger.cut(np.asarray(reason, dtype=str) == why, why, -1)
+    ledger.place(rows, ledger_from_consistency(
+        result, conflictive_links(features_per_camera, model_links)))
+    return ledger
 
 
 def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View:
@@ -78,14 +87,9 @@ def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool
     ``image_dir`` when those differ in size from the stored camera size.
     """
     from pipeline.inputs.linkscsv import write_links_csv
-    from pipeline.types import LinkLedger
 
     links_csv, rrd = side_paths(out)
-    kept = outcome.kept
-    L = len(outcome.links)
-    ledger = LinkLedger(outcome.links, np.where(kept, "kept", "deleted"), outcome.reason,
-                        outcome.round, outcome.iteration, np.full(L, "", dtype=object),
-                        None, outcome.conflictive_before)
+    ledger = outcome.ledger
     write_links_csv(links_csv, ledger)
     written = [links_csv]
     if rerun:

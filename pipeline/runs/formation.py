@@ -79,22 +79,66 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     """Evaluate a formation run against ground truth and write its run folder.
 
     ``extra`` adds sections to ``report.json`` (e.g. ``team`` for a run over Zenoh).
+    Steps: :func:`_evaluate` (the ledger's truth and every ground-truth section),
+    :func:`_triangulate` (pycolmap with known poses, before and after; the fused landmarks'
+    errors), then the report and the outputs (:func:`_write`).
     """
-    from data_synth.ground_truth import points_from_keypoints
-    from pipeline.consistency import centralized
     from pipeline.evaluation import report as sections
-    from pipeline.evaluation.links import MissingLinks, link_truth
-    from pipeline.evaluation.metrics import PairwiseTruth, true_pairs_all
-    from pipeline.inputs.linkscsv import write_links_csv
 
     out = config.out_dir()
     views, comm_edges = formation.views, np.asarray(formation.comm_edges)
     m = np.array([len(f) for f in feats], dtype=np.int64)
     ledger = cleaning.ledger
+    evaluated = _evaluate(config, formation, feats, matches, ledger, timer)
+    triangulation, tri_after, gt_points, fused_errors = _triangulate(
+        views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
+    report = {
+        "title": f"formation {config.formation} (seed {config.seed})",
+        "n_cameras": len(views),
+        "comm_edges": comm_edges.tolist(),
+        "features_per_camera": m.tolist(),
+        "before": evaluated["before"],
+        "after": evaluated["after"],
+        "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
+        "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
+        "triangulation": triangulation,
+        "pairwise": evaluated["pairwise"],
+        "baselines": evaluated["baselines"],
+        "resolution_quality": evaluated["resolution_quality"],
+        "matching": sections.matching_section(matches),
+        "ground_truth": {"tolerance_px": config.tol_px},
+        "versions": sections.versions(),
+        "config": {**asdict(config), "out": str(out)},
+    }
+    if cleaning.faults is not None:
+        report["faults"] = cleaning.faults
+    report.update(extra or {})
+    if fused_errors is not None:
+        report["fusion"].update(fused_errors)
+
+    flag_result(report, [v.name for v in views])
+    md = sections.report_markdown(report)
+    _write(out, config, report, md, views, feats, ledger, tri_after, gt_points,
+           cleaning.fused_points, timer)
+    print(md)
+    return out
+
+
+def _evaluate(config: FormationConfig, formation, feats: list, matches: list, ledger,
+              timer: StageTimer) -> dict:
+    """The ground-truth sections of the report (``before``, ``after``, ``pairwise``,
+    ``baselines``, ``resolution_quality``); sets ``ledger.truth``. Also returns
+    ``resolved_links``, what the consistency stage kept (fusion ran on exactly these)."""
+    from pipeline.consistency import centralized
+    from pipeline.evaluation import report as sections
+    from pipeline.evaluation.links import MissingLinks, link_truth
+    from pipeline.evaluation.metrics import PairwiseTruth, true_pairs_all
+
+    views, comm_edges = formation.views, np.asarray(formation.comm_edges)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
     links = ledger.links
     kept = ledger.kept
     kept_links = links.subset(kept)
-
     with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
         truth = link_truth(formation, feats, links, tol_px=config.tol_px)
         truth = np.asarray(truth, dtype=bool)
@@ -136,10 +180,22 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
                               config.resolution, resolved, baseline_masks, graph_of(links)),
             graph=graph_of(links))
+    return {"before": before, "after": after, "pairwise": pairwise, "baselines": baselines,
+            "resolution_quality": quality, "resolved_links": resolved_links}
 
+
+def _triangulate(views, feats: list, ledger, cleaning: CleaningResult, resolved_links: Links,
+                 timer: StageTimer):
+    """pycolmap with known poses on all links and on the kept ones; the fused landmarks
+    against pycolmap and the truth. Returns ``(triangulation section, the kept links'
+    triangulation, ground-truth points per camera, fused-point errors or None)``."""
     # pycolmap is loaded only now: the earlier stages' peak memory does not include it
-    from pipeline.evaluation.triangulation import triangulate_tracks, write_reconstruction
+    from data_synth.ground_truth import points_from_keypoints
+    from pipeline.evaluation import report as sections
+    from pipeline.evaluation.triangulation import triangulate_tracks
 
+    links = ledger.links
+    kept_links = links.subset(ledger.kept)
     with timer.stage("triangulation", "pycolmap, known poses, before and after"):
         gt_points = [points_from_keypoints(v, f.keypoints)[0] if len(f) else np.zeros((0, 3))
                      for v, f in zip(views, feats, strict=True)]
@@ -156,33 +212,17 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
             fused_errors = sections.fused_point_errors(
                 views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
                 gt_points, solved_tracks=solved_tracks)
+    return triangulation, tri_after, gt_points, fused_errors
 
-    report = {
-        "title": f"formation {config.formation} (seed {config.seed})",
-        "n_cameras": len(views),
-        "comm_edges": comm_edges.tolist(),
-        "features_per_camera": m.tolist(),
-        "before": before,
-        "after": after,
-        "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
-        "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
-        "triangulation": triangulation,
-        "pairwise": pairwise,
-        "baselines": baselines,
-        "resolution_quality": quality,
-        "matching": sections.matching_section(matches),
-        "ground_truth": {"tolerance_px": config.tol_px},
-        "versions": sections.versions(),
-        "config": {**asdict(config), "out": str(out)},
-    }
-    if cleaning.faults is not None:
-        report["faults"] = cleaning.faults
-    report.update(extra or {})
-    if fused_errors is not None:
-        report["fusion"].update(fused_errors)
 
-    flag_result(report, [v.name for v in views])
-    md = sections.report_markdown(report)
+def _write(out: Path, config: FormationConfig, report: dict, md: str, views, feats: list,
+           ledger, tri_after, gt_points: list, fused_points, timer: StageTimer) -> None:
+    """The run folder, atomically: ``links.csv``, ``sparse/``, ``recording.rrd`` (with
+    ``config.rerun``) and ``report.json`` (with the stage timings)."""
+    from pipeline.evaluation import report as sections
+    from pipeline.evaluation.triangulation import write_reconstruction
+    from pipeline.inputs.linkscsv import write_links_csv
+
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             write_links_csv(tmp / "links.csv", ledger)
@@ -196,13 +236,11 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
                     points=tri_after.xyz[tri_after.ok],
                     point_tracks=np.flatnonzero(tri_after.ok),
                     gt_points=sections.track_gt_points(all_gt, tri_after),
-                    fused_points=cleaning.fused_points,
+                    fused_points=fused_points,
                     report_markdown=md)
                 log_run(tmp / "recording.rrd", record)
             report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
             write_json_atomic(tmp / "report.json", report)
-    print(md)
-    return out
 
 
 def _links_key(links: Links) -> bytes:

@@ -166,26 +166,15 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
     """
     from pipeline import colmap
     from pipeline.commgraph import comm_graph
-    from pipeline.evaluation import report as sections
-    from pipeline.inputs.linkscsv import write_links_csv
-    from pipeline.inputs.photos import load_folder
     from pipeline.matching.retrieval import knn_edges
     from pipeline.runs.transports import get_transport
     from pipeline.stages import clean_association
 
     timer = timer or StageTimer()
     out = config.out_dir()
-    with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
-        intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
-            else Path(config.intrinsics)
-        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
-        names = [v.name for v in views]
-        by_similarity = str(config.graph).startswith("knn:")
-        comm_edges = None if by_similarity else comm_graph(config.graph, names)
-        sources = sorted({v.intrinsics_source for v in views})
-        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
-                   f"{config.graph}: " + ("chosen by image similarity after the features"
-                                          if by_similarity else f"{len(comm_edges)} edges"))
+    views, comm_edges = _load(config, timer)
+    names = [v.name for v in views]
+    by_similarity = comm_edges is None
     chosen = {}
 
     def graph_from_features(features):
@@ -203,7 +192,6 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
                                              robots.cleaning, robots.team)
     if by_similarity:
         comm_edges = chosen["edges"]
-    m = np.array([len(f) for f in feats], dtype=np.int64)
 
     with tempfile.TemporaryDirectory(prefix="run-images-") as work:
         work = Path(work)
@@ -229,72 +217,117 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
                                                "available in this build"}
         else:
             _fuse_registered(cleaning, views, feats, comm_edges, map_before, timer)
-        ledger = cleaning.ledger
-        kept = ledger.kept
-        kept_links = links.subset(kept)
+        kept = cleaning.ledger.kept
         with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
             db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
             map_after = colmap.incremental_mapping(db_after, num_threads=config.threads,
                                                    fixed_intrinsics=fixed)
             timer.note(_mapping_note(map_after))
 
-        report = {
-            "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
-            "n_cameras": len(views),
-            "comm_edges": comm_edges.tolist(),
-            "features_per_camera": m.tolist(),
-            "before": sections.association_counts(m, links, None, None),
-            "after": sections.association_counts(m, kept_links, None, None),
-            "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
-            "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
-            "triangulation": {"method": "pycolmap incremental mapping from the matches "
-                                        "(two-view geometries = links before / kept links after)",
-                              "before": map_before.summary(), "after": map_after.summary()},
-            "baselines": sections.baselines_section(m, links),
-            "matching": sections.matching_section(matches),
-            "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
-                        "intrinsics_source": v.intrinsics_source,
-                        "intrinsics_known": bool(v.intrinsics_known)} for v in views],
-            "versions": sections.versions(),
-            "config": {**asdict(config), "out": str(out)},
-        }
-        if team is not None:
-            report["team"] = team
-        if cleaning.fused_points is not None:
-            report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
-        if config.truth == "homographies":
-            from pipeline.evaluation.truth import fill_report
+        report, md = _report(config, out, views, feats, matches, comm_edges, cleaning, team,
+                             map_before, map_after, timer)
 
-            with timer.stage("evaluate", "ground truth from the homographies"):
-                fill_report(report, config.directory, views, feats, comm_edges, ledger,
-                            config.truth_tol_px)
-        flag_result(report, names)
-        report["flags"] = _flags(views, feats, ledger, comm_edges, matches, map_before,
-                                 map_after)
-        for f in report["flags"]:
-            timer.warn(f"{f['message']}. Likely cause: {f['likely_cause']}.")
-        from pipeline.evaluation.flags import flags_markdown
-
-        md = (sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
-              + flags_markdown(report["flags"]))
-
-        with timer.stage("write", str(out)):
-            with atomic_run_folder(out) as tmp:
-                write_links_csv(tmp / "links.csv", ledger)
-                # sparse/ at the resolution of the image files it names (the mapping ran on
-                # downscaled copies), with colours from those files
-                colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction,
-                                             _file_sizes(views, Path(config.directory)),
-                                             config.directory)
-                if config.export_db:
-                    shutil.copyfile(db_after, tmp / "database.db")
-                if config.rerun:
-                    _write_recording(tmp / "recording.rrd", views, feats, cleaning,
-                                     map_before, map_after, kept_links, md, live=config.live)
-                report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
-                write_json_atomic(tmp / "report.json", report)
+        _write(out, config, report, md, views, feats, cleaning, map_before, map_after, db_after,
+               timer)
     print(md)
     return out
+
+
+def _load(config: ImagesConfig, timer: StageTimer):
+    """The photographs and the comm graph (``None`` for ``knn:K``, chosen after the features)."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.inputs.photos import load_folder
+
+    with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
+        intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
+            else Path(config.intrinsics)
+        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
+        names = [v.name for v in views]
+        by_similarity = str(config.graph).startswith("knn:")
+        comm_edges = None if by_similarity else comm_graph(config.graph, names)
+        sources = sorted({v.intrinsics_source for v in views})
+        timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
+                   f"{config.graph}: " + ("chosen by image similarity after the features"
+                                          if by_similarity else f"{len(comm_edges)} edges"))
+    return views, comm_edges
+
+
+def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, cleaning, team,
+            map_before, map_after, timer: StageTimer) -> tuple[dict, str]:
+    """``report.json`` of a photo run (with its ``flags``, warned on stderr) and its markdown."""
+    from pipeline.evaluation import report as sections
+
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    ledger = cleaning.ledger
+    links = ledger.links
+    kept_links = links.subset(ledger.kept)
+    names = [v.name for v in views]
+    report = {
+        "title": f"images {Path(config.directory).resolve().name}, graph {config.graph}",
+        "n_cameras": len(views),
+        "comm_edges": comm_edges.tolist(),
+        "features_per_camera": m.tolist(),
+        "before": sections.association_counts(m, links, None, None),
+        "after": sections.association_counts(m, kept_links, None, None),
+        "resolution": sections.resolution_section(ledger, cleaning.resolution_stats),
+        "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
+        "triangulation": {"method": "pycolmap incremental mapping from the matches "
+                                    "(two-view geometries = links before / kept links after)",
+                          "before": map_before.summary(), "after": map_after.summary()},
+        "baselines": sections.baselines_section(m, links),
+        "matching": sections.matching_section(matches),
+        "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
+                    "intrinsics_source": v.intrinsics_source,
+                    "intrinsics_known": bool(v.intrinsics_known)} for v in views],
+        "versions": sections.versions(),
+        "config": {**asdict(config), "out": str(out)},
+    }
+    if team is not None:
+        report["team"] = team
+    if cleaning.fused_points is not None:
+        report["fusion"]["fused_points"] = int(len(cleaning.fused_points))
+    if config.truth == "homographies":
+        from pipeline.evaluation.truth import fill_report
+
+        with timer.stage("evaluate", "ground truth from the homographies"):
+            fill_report(report, config.directory, views, feats, comm_edges, ledger,
+                        config.truth_tol_px)
+    flag_result(report, names)
+    report["flags"] = _flags(views, feats, ledger, comm_edges, matches, map_before,
+                             map_after)
+    for f in report["flags"]:
+        timer.warn(f"{f['message']}. Likely cause: {f['likely_cause']}.")
+    from pipeline.evaluation.flags import flags_markdown
+
+    md = (sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
+          + flags_markdown(report["flags"]))
+    return report, md
+
+
+def _write(out: Path, config: ImagesConfig, report: dict, md: str, views, feats, cleaning,
+           map_before, map_after, db_after: Path, timer: StageTimer) -> None:
+    """The run folder, atomically: ``links.csv``, ``sparse/`` (at the resolution of the image
+    files), ``database.db`` (with ``export_db``), ``recording.rrd`` and ``report.json``."""
+    from pipeline import colmap
+    from pipeline.inputs.linkscsv import write_links_csv
+
+    ledger = cleaning.ledger
+    kept_links = ledger.links.subset(ledger.kept)
+    with timer.stage("write", str(out)):
+        with atomic_run_folder(out) as tmp:
+            write_links_csv(tmp / "links.csv", ledger)
+            # sparse/ at the resolution of the image files it names (the mapping ran on
+            # downscaled copies), with colours from those files
+            colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction,
+                                         _file_sizes(views, Path(config.directory)),
+                                         config.directory)
+            if config.export_db:
+                shutil.copyfile(db_after, tmp / "database.db")
+            if config.rerun:
+                _write_recording(tmp / "recording.rrd", views, feats, cleaning,
+                                 map_before, map_after, kept_links, md, live=config.live)
+            report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+            write_json_atomic(tmp / "report.json", report)
 
 
 def _file_sizes(views: list[View], directory: Path) -> dict[str, tuple[int, int]]:

@@ -94,9 +94,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if lf.status is not None:
         # rows the input file had already deleted stay deleted with their reason and round
         full = LinkLedger.all_kept(all_links)
-        idx = np.flatnonzero(active)
-        for name in ("status", "reason", "round", "iteration", "case"):
-            getattr(full, name)[idx] = getattr(ledger, name)
+        full.place(np.flatnonzero(active), ledger)
         old = np.flatnonzero(~active)
         full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
         ledger = full

@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.linklog import merge_link_logs
-from pipeline.consistency.result import ConsistencyResult
+from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.errors import InputError
 from pipeline.types import Links, PairMatches
 
@@ -137,7 +136,6 @@ class _LinkIndex:
 def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> ConsistencyResult:
     """The :class:`ConsistencyResult` of a team run, read from the robots' published logs."""
     n = team.n
-    L = len(links)
     fpc = np.asarray(fpc, dtype=np.int64)
     index = _LinkIndex(links, n, fpc)
     logs = []
@@ -146,7 +144,6 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         pos = index.rows(i, a)
         logs.append((pos, a["link_alive"].astype(bool), a["deleted_case"],
                      a["deleted_round"], a["deleted_iteration"]))
-    d = merge_link_logs(L, logs)
     comp = np.concatenate([results[i][1]["component"] if i in results
                            else np.full(int(fpc[i]), -1, np.int64) for i in range(n)])
     heads = {i: h for i, (h, _) in results.items()}
@@ -157,14 +154,12 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     for i, h in heads.items():
         for k in h["run"].get("lost_neighbours", []):
             lost_by.setdefault(int(k), []).append(int(i))
-    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, bool)
     faults = dict(
         drop_probability=float(team.options.get("drop_prob", 0.0)), switching_topology=False,
         dropped=int(sum(h["counters"]["dropped"] for h in heads.values())),
         crashed={int(k): None for k in killed},
         crashes_not_reached={},
         robots_lost={k: sorted(v) for k, v in sorted(lost_by.items())},
-        links_cut_robot_lost=int(d["robot_lost"].sum()),
         retransmissions=int(sum(h["run"].get("retransmissions", 0) for h in heads.values())),
         acks=int(sum(h["run"].get("acks", 0) for h in heads.values())),
         heartbeats=int(sum(h["run"].get("heartbeats", 0) for h in heads.values())),
@@ -181,13 +176,9 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         bytes_by_kind={k: v for k, v in byts.items() if v},
         max_robot_memory_bytes=int(max((h["peak_memory_bytes"] for h in heads.values()),
                                        default=0)),
-        asymmetric_links=int(((d["ends_deleted"] == 1) & both_alive).sum()),
-        deleted_links=int(d["deleted"].sum()), protocol="reliable", survivors=survivors,
-        resolution=str(any_run_head.get("resolution", "paper")),
-        termination="local (termination wave)", faults=faults)
-    return ConsistencyResult(links=links, deleted=d["deleted"], reason=d["reason"],
-                             iteration=d["iteration"], round=d["round"], case=d["case"],
-                             component=comp, stats=stats)
+        protocol="reliable", resolution=str(any_run_head.get("resolution", "paper")),
+        termination="local (termination wave)")
+    return result_from_logs(links, logs, survivors, comp, stats=stats, faults=faults)
 
 
 def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, np.ndarray]:
@@ -197,9 +188,9 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     A link still kept after consistency is cut as ``fusion-outlier`` when either end's robot
     cut it (its own outlier observation, or its neighbour's as the neighbour told it), in the
     team's fusion round count (the largest a robot heard with the termination wave). The fused
-    landmark of a track is formed as :func:`pipeline.fusion.landmarks.fuse_tracks` forms it:
-    the final estimates of the largest connected group of robots with a valid estimate, among
-    them those that picked the group's most common winner, averaged; its id is the union-find
+    landmark of a track is formed as the simulator forms it
+    (:func:`pipeline.fusion.points.fused_points`, from every robot's final estimate); its id
+    is the union-find
     track (:func:`pipeline.fusion.landmarks.tracks_of` over the kept links) of its smallest
     feature.
 
@@ -207,9 +198,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     -------
     (stats, points (F, 3), track_ids (F,))
     """
-    from scipy.sparse.csgraph import connected_components
-
     from pipeline.fusion.landmarks import tracks_of
+    from pipeline.fusion.points import fused_points
 
     n = team.n
     fpc = np.asarray(fpc, dtype=np.int64)
@@ -248,23 +238,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     ne = [np.stack([np.flatnonzero(obs[:, u] & obs[:, v]) * n + u,
                     np.flatnonzero(obs[:, u] & obs[:, v]) * n + v], 1) for u, v in edges]
     ne = np.concatenate(ne) if ne else np.zeros((0, 2), np.int64)
-    import scipy.sparse as sp
-
-    ncomp, lab = connected_components(sp.csr_matrix(
-        (np.ones(len(ne)), (ne[:, 0], ne[:, 1])), shape=(T * n, T * n)), directed=False)
-    lab = lab.reshape(T, n)
-    size = np.bincount(lab[good], minlength=ncomp)
-    score = np.where(good, size[lab], -1)
-    best_node = np.argmax(score, axis=1) if T else np.zeros(0, np.int64)
-    has_pt = score[np.arange(T), best_node] > 0
-    grp = good & (lab == lab[np.arange(T), best_node][:, None]) & has_pt[:, None]
-    K = int(winner.max(initial=0)) + 1
-    wcount = np.zeros((T, K), dtype=np.int64)
-    gb, gi = np.nonzero(grp)
-    np.add.at(wcount, (gb, winner[gb, gi]), 1)
-    grp &= winner == np.argmax(wcount, axis=1)[:, None]
-    cnt = grp.sum(1)
-    pts = (theta * grp[..., None]).sum(1) / np.maximum(cnt, 1)[:, None]
+    fused = fused_points(ne, good, theta, winner)
+    pts, has_pt = fused.points, fused.has_point
     uf, _ = tracks_of(fpc, links.subset(before))
     ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
     fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]

@@ -58,14 +58,17 @@ def free_ports(k: int, host: str = "127.0.0.1") -> list[int]:
 
 def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
               host: str = "127.0.0.1", n: int | None = None) -> Team:
-    """A loopback team with free ports for every robot and the observer."""
+    """A loopback team with free ports for every robot and the observer.
+
+    ``comm_edges`` is an edge array: an edge listed twice is an InputError naming it
+    (:func:`pipeline.commgraph.check_comm_edges`, through the team file's own check).
+    """
     e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
     n = int(n if n is not None else e.max() + 1)
     ports = free_ports(n + 1, host)
     robots = [RobotEntry(i, f"tcp/{host}:{p}") for i, p in enumerate(ports[:n])]
     opts = {**DEFAULT_OPTIONS, **(options or {})}
-    team = Team(name, robots, np.unique(np.sort(e, axis=1), axis=0), data, opts,
-                observer=f"tcp/{host}:{ports[n]}")
+    team = Team(name, robots, e, data, opts, observer=f"tcp/{host}:{ports[n]}")
     from pipeline.team.teamfile import parse_team
 
     return parse_team(team.to_json())  # the same checks as a hand-written file

@@ -27,7 +27,7 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
    tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
    by the termination wave; with message loss injected (``drop_prob``), every logical round
-   over the reliable channel in lockstep (:func:`pipeline.fusion.robot.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
+   over the reliable channel in lockstep (:func:`pipeline.fusion.robot_loops.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
    outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
 7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
    cuts, the matches it holds, its keypoints and its fused landmarks (for the observer's
@@ -306,7 +306,8 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     """Step 6 of the module docstring; fills ``arrays`` and returns the header's ``fusion``."""
     from pipeline.consistency.protocols import ProtocolOptions
     from pipeline.consistency.robot import ROBOT_LOST
-    from pipeline.fusion.robot import FusionRobot, run_fusion_locally, run_fusion_reliably
+    from pipeline.fusion.robot import FusionRobot
+    from pipeline.fusion.robot_loops import run_fusion_locally, run_fusion_reliably
 
     if hasattr(transport, "status"):
         transport.status("fusion")

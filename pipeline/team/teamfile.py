@@ -117,8 +117,9 @@ class Team:
 
     def neighbours(self, i: int) -> list[int]:
         """Comm-graph neighbours of robot ``i``, sorted."""
-        e = self.comm_edges
-        return sorted(set(e[e[:, 0] == i, 1].tolist()) | set(e[e[:, 1] == i, 0].tolist()))
+        from pipeline.commgraph import neighbour_table
+
+        return sorted(neighbour_table(self.comm_edges, self.n)[int(i)])
 
     def options_for(self, i: int) -> dict:
         """``options`` with robot ``i``'s overrides applied."""
@@ -214,8 +215,12 @@ def parse_team(doc, path: Path | None = None) -> Team:
         if not (0 <= pair[0] < n and 0 <= pair[1] < n) or pair[0] == pair[1]:
             raise InputError(f"{where}: comm edge {pair} must join two different robots "
                              f"0..{n - 1}")
-    e = np.array(edges_doc, dtype=np.int64).reshape(-1, 2)
-    e = np.unique(np.sort(e, axis=1), axis=0) if e.size else np.zeros((0, 2), np.int64)
+    from pipeline.commgraph import check_comm_edges
+
+    # the graph's one policy for an edge array: an edge listed twice is an error naming it
+    e = check_comm_edges(np.array(edges_doc, dtype=np.int64).reshape(-1, 2), n,
+                         what=f"{where}: comm edge", noun="robot")
+    e = np.unique(e, axis=0) if e.size else np.zeros((0, 2), np.int64)
 
     data = doc.get("data")
     if not isinstance(data, dict) or data.get("kind") not in DATA_KINDS:

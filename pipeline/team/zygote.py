@@ -29,7 +29,8 @@ __all__ = ["main", "PRELOAD"]
 PRELOAD = ("numpy", "scipy.sparse", "scipy.sparse.csgraph", "scipy.special", "cv2", "zenoh",
            "data_synth", "pipeline.matching.features", "pipeline.matching.pairs", "pipeline.matching.link_evidence",
            "pipeline.inputs.photos", "pipeline.inputs.linkscsv", "pipeline.consistency.termination",
-           "pipeline.consistency.evidence", "pipeline.fusion.robot", "pipeline.team.robot",
+           "pipeline.consistency.evidence", "pipeline.fusion.robot", "pipeline.fusion.robot_loops",
+           "pipeline.team.robot",
            "pipeline.transport.zenoh_transport", "pipeline.commands.robot", "pipeline.__main__")
 
 

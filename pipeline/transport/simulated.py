@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.commgraph import neighbour_table
 from pipeline.transport import Message, NotANeighbourError, Transport
 
 __all__ = ["NetworkOptions", "Network", "recurrent_topology"]
@@ -126,15 +127,6 @@ def recurrent_topology(comm_edges, p_up: float = 0.5, window: int = 4, seed: int
     return topology
 
 
-def _adjacency_sets(n: int, edges) -> list[set]:
-    nbrs: list[set] = [set() for _ in range(n)]
-    for a, b in edges:
-        a, b = int(a), int(b)
-        if a != b:
-            nbrs[a].add(b)
-            nbrs[b].add(a)
-    return nbrs
-
 
 class Network(Transport):
     """Synchronous message passing between neighbouring robots, simulated in process.
@@ -164,7 +156,7 @@ class Network(Transport):
         self.n = int(n)
         self.options = options or NetworkOptions()
         self._initial_edges = [tuple(map(int, e)) for e in np.asarray(comm_edges).reshape(-1, 2)]
-        self._nbrs = _adjacency_sets(self.n, self._initial_edges)
+        self._nbrs = neighbour_table(self._initial_edges, self.n)
         self._round = 0
         self._peak_memory = [0] * self.n
         self._outbox: list[tuple[int, Message]] = []  # (delivery round, message)
@@ -187,7 +179,7 @@ class Network(Transport):
 
     def _apply_topology(self) -> None:
         if self.options.topology is not None:
-            self._nbrs = _adjacency_sets(self.n, self.options.topology(self.round))
+            self._nbrs = neighbour_table(self.options.topology(self.round), self.n)
 
     def edges(self, t: int) -> np.ndarray:
         """Links of the topology in round ``t``, ``(E_t, 2)`` int64 (crashes not applied)."""

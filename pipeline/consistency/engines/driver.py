@@ -36,7 +36,6 @@ from pipeline.commgraph import comm_edges_for
 from pipeline.consistency.engines import batched
 from pipeline.consistency.engines.phases import run_phase
 from pipeline.consistency.evidence import equip
-from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
     CLOSING,
     DETECTION,
@@ -44,7 +43,7 @@ from pipeline.consistency.protocols import (
     ProtocolOptions,
     make_protocol,
 )
-from pipeline.consistency.result import ConsistencyResult
+from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import get_rule, rule_for_network
 from pipeline.errors import InputError
@@ -379,19 +378,13 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
              per_iteration: list[dict], network: Network, protocol,
              repeated: int = 0, close_round: int | None = None) -> ConsistencyResult:
     """Read every robot's own log into per-link arrays (reporting only)."""
-    L = len(links)
     survivors = np.array([network.alive(rb.id) for rb in robots], dtype=bool)
-    d = merge_link_logs(L, [(li, rb.link_alive, rb.deleted_case, rb.deleted_round,
-                             rb.deleted_iteration)
-                            for rb, li in zip(robots, link_index, strict=True)])
-    deleted, reason, iteration, round_, case = (d[k] for k in ("deleted", "reason", "iteration",
-                                                               "round", "case"))
-    ends_deleted, robot_lost = d["ends_deleted"], d["robot_lost"]
+    logs = [(li, rb.link_alive, rb.deleted_case, rb.deleted_round, rb.deleted_iteration)
+            for rb, li in zip(robots, link_index, strict=True)]
     component = np.concatenate([rb.component for rb in robots]) if robots else np.zeros(0, np.int64)
     track_label = np.concatenate([rb.final_tracks() for rb in robots]) if robots else \
         np.zeros(0, np.int64)
     cnt = network.counters()
-    both_alive = survivors[links.cam_i] & survivors[links.cam_j] if L else np.zeros(0, dtype=bool)
     extra = protocol.counters()
     lost_by = [protocol.lost_neighbours(rb.id) for rb in robots]
     injected = network.injected_faults()
@@ -404,7 +397,6 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         crashes_not_reached={i: r for i, r in sorted(crash_rounds.items()) if survivors[i]},
         robots_lost={int(k): sorted(int(i) for i, lost in enumerate(lost_by) if k in lost)
                      for k in sorted({k for lost in lost_by for k in lost})},
-        links_cut_robot_lost=int(robot_lost.sum()),
         retransmissions=extra["retransmissions"],
         acks=extra["acks"],
         heartbeats=extra["heartbeats"],
@@ -420,11 +412,7 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
         messages=cnt["messages"], bytes=cnt["bytes"],
         messages_by_kind=cnt["messages_by_kind"], bytes_by_kind=cnt["bytes_by_kind"],
         max_robot_memory_bytes=int(max((network.peak_memory(rb.id) for rb in robots), default=0)),
-        asymmetric_links=int(((ends_deleted == 1) & both_alive).sum()),
-        deleted_links=int(deleted.sum()),
         protocol=protocol.name,
-        survivors=survivors,
-        faults=faults,
     )
     if protocol.closing:
         stats["closing_rounds"] = int(sum(p.get("closing_rounds", 0) for p in per_iteration))
@@ -432,6 +420,5 @@ def _collect(fpc, links: Links, robots: list[Robot], link_index: list[np.ndarray
             i: r for i, r in faults["crashed"].items()
             if close_round is not None and r > close_round
             and not any(i in lost for lost in lost_by)})
-    return ConsistencyResult(links=links, deleted=deleted, reason=reason, iteration=iteration,
-                             round=round_, case=case, component=component, stats=stats,
-                             track_label=track_label)
+    return result_from_logs(links, logs, survivors, component, stats=stats, faults=faults,
+                            track_label=track_label)

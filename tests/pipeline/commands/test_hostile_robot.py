@@ -113,6 +113,7 @@ def _three(first):
     ({"comm_edges": [[0, 10**30]]}, "must join two different robots 0..2"),
     ({"comm_edges": [[1, 1]]}, "comm edge [1, 1] must join two different robots"),
     ({"comm_edges": [[0, 1], [2]]}, "comm edge [2] must be a pair"),
+    ({"comm_edges": [[0, 1], [1, 0]]}, "comm edge (0, 1) is listed more than once"),
     ({"comm_edges": None}, "'comm_edges' must be a list"),
     ({"comm_edges": {"0": 1}}, "'comm_edges' must be a list"),
     ({"data": None}, "'data' must be an object with kind"),

@@ -170,7 +170,7 @@ def test_fixed_topology_weights_are_sparse_matrix():
 
 
 def test_closed_form_3x3_eigenvalues_match_lapack():
-    from pipeline.fusion.consensus import _extreme_eigenvalues_sym3
+    from pipeline.fusion.consensus import extreme_eigenvalues_sym3
 
     rng = np.random.default_rng(1)
     A = rng.normal(size=(2000, 3, 3))
@@ -178,7 +178,7 @@ def test_closed_form_3x3_eigenvalues_match_lapack():
     B = rng.normal(size=(500, 3, 2))
     singular = B @ np.swapaxes(B, 1, 2)  # rank 2: smallest eigenvalue 0
     for M in (A, 1e6 * singular, np.broadcast_to(2.0 * np.eye(3), (3, 3, 3)), np.zeros((2, 3, 3))):
-        lo, hi = _extreme_eigenvalues_sym3(M)
+        lo, hi = extreme_eigenvalues_sym3(M)
         ev = np.linalg.eigvalsh(M)
         scale = np.abs(ev).max(-1) + 1e-300
         assert np.all(np.abs(lo - ev[:, 0]) <= 1e-12 * scale)

@@ -6,7 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.sparse.csgraph import shortest_path
 
-from pipeline.fusion.flooding import FloodRobot, decide, flood, run_robots, run_robots_on
+from pipeline.fusion.decision import decide
+from pipeline.fusion.flood_robot import FloodRobot
+from pipeline.fusion.flooding import flood, run_robots, run_robots_on
 from pipeline.fusion.protocol import CountingExchange, LockstepExchange, to_wire
 from pipeline.fusion.voting import gate_threshold
 from pipeline.transport.simulated import Network, NetworkOptions
@@ -182,7 +184,7 @@ def test_exact_dynamic_voting_decides_every_robot_as_decide_does(seed, n, B, K):
 
 
 def test_robot_step_returns_a_new_state_and_leaves_the_old_one():
-    from pipeline.fusion.flooding import robot_step
+    from pipeline.fusion.flood_robot import robot_step
 
     nb = np.array([False, True, False])
     r = FloodRobot(0, 3, {7: dict(neighbours=nb, estimated=True, draws=[0.5], x=np.zeros(3),

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.fusion.landmarks import fuse_tracks, local_estimates, tracks_of, triangulate_views
+from pipeline.fusion.landmarks import fuse_tracks, tracks_of
+from pipeline.fusion.local import local_estimates, triangulate_views
 from pipeline.types import Links
 
 

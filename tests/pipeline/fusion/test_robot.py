@@ -6,12 +6,8 @@ import pytest
 from data_synth.formations import look_at
 from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.fusion.protocol import hypothesis_draws
-from pipeline.fusion.robot import (
-    FusionOptions,
-    FusionRobot,
-    run_fusion_locally,
-    run_fusion_reliably,
-)
+from pipeline.fusion.robot import FusionOptions, FusionRobot
+from pipeline.fusion.robot_loops import run_fusion_locally, run_fusion_reliably
 from pipeline.transport.local import LocalTeam
 from pipeline.transport.simulated import NetworkOptions
 from pipeline.types import Features, Links, View

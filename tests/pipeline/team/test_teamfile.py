@@ -62,3 +62,11 @@ def test_missing_or_invalid_json_file(tmp_path):
     p.write_text("{robots: 1")
     with pytest.raises(InputError, match="not valid JSON"):
         load_team(p)
+
+
+def test_the_launcher_refuses_an_edge_listed_twice():
+    from pipeline.team.launcher import make_team
+
+    data = {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1, 1]}
+    with pytest.raises(InputError, match=r"comm edge \(0, 1\) is listed more than once"):
+        make_team("t", [[0, 1], [1, 0], [1, 2]], data, n=3)
