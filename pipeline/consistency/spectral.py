@@ -61,6 +61,7 @@ __all__ = [
     "universe_size_count",
     "DENSE_MAX",
     "DENSE_VALUES_MAX",
+    "ARPACK_MAX_K",
     "CLEAR_THRESHOLD",
     "MAJORITY",
     "ZERO_EIG",
@@ -72,6 +73,9 @@ DENSE_MAX = 500
 #: universe-size estimate needs more eigenvalues than a first ARPACK window gives (4000: a
 #: 128 MB matrix)
 DENSE_VALUES_MAX = 4000
+#: most eigenpairs asked of ARPACK for a matrix that could be solved densely (measured on a
+#: 2323-feature ring2 component: 124 eigenpairs by ARPACK took as long as all by ``eigh``)
+ARPACK_MAX_K = 64
 #: CLEAR's universe size: eigenvalues of the normalized Laplacian below this are counted.
 #: For a consistent association on a complete graph the spectrum is exactly {0, 1} (0 once per
 #: universe point, 1 for the rest, see :func:`universe_size_count`): 0.5 is the midpoint.
@@ -196,13 +200,15 @@ def _normalized(W: sp.csr_matrix) -> sp.csr_matrix:
 
 
 def _top_eigen(M: sp.csr_matrix, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` largest eigenvalues (descending) of symmetric ``M`` and their eigenvectors
-    (dense ``eigh`` for a small matrix or a large ``k``, else ARPACK)."""
+    """The ``k`` largest eigenvalues (descending) of symmetric ``M`` and their eigenvectors:
+    dense ``eigh`` for a small matrix, for ``k`` a quarter of ``m`` or more, or for ``k`` above
+    :data:`ARPACK_MAX_K` when ``m`` is at most :data:`DENSE_VALUES_MAX` (Lanczos then costs
+    more than the dense solver); else ARPACK."""
     m = M.shape[0]
     k = min(k, m)
     if k <= 0:
         return np.zeros(0), np.zeros((m, 0))
-    if m <= DENSE_MAX or 4 * k >= m:
+    if m <= DENSE_MAX or 4 * k >= m or (k > ARPACK_MAX_K and m <= DENSE_VALUES_MAX):
         vals, vecs = scipy.linalg.eigh(M.toarray(), subset_by_index=[m - k, m - 1],
                                        driver="evr")
     else:
@@ -222,13 +228,14 @@ class _Spectrum:
     components (clean data) repeats every eigenvalue ``c`` times. Components of at most
     :data:`DENSE_MAX` features are solved densely, batched by size. A larger one starts with
     the leading eigenpairs asked for (:func:`_top_eigen`); when more eigenvalues are needed,
-    all of them are computed densely (values only) if it has at most
-    :data:`DENSE_VALUES_MAX` features, else the ARPACK window doubles. Eigenvectors are
-    computed only for the eigenvalues finally used.
+    all of them are computed densely (with their eigenvectors when ``keep_vectors``, else
+    values only) if it has at most :data:`DENSE_VALUES_MAX` features, else the ARPACK window
+    doubles. Other eigenvectors are computed only for the eigenvalues finally used.
     """
 
-    def __init__(self, M: sp.csr_matrix, prob: _Problem):
+    def __init__(self, M: sp.csr_matrix, prob: _Problem, keep_vectors: bool = True):
         self.M = M
+        self.keep_vectors = keep_vectors
         self.members = prob.members
         self.size = np.array([mem.size for mem in prob.members], dtype=np.int64)
         n_comp = self.size.size
@@ -269,7 +276,11 @@ class _Spectrum:
         if self.vals[c].size >= count:
             return
         if self.vals[c].size and size <= DENSE_VALUES_MAX:
-            self.vals[c] = scipy.linalg.eigvalsh(self._sub(c).toarray())[::-1].copy()
+            if self.keep_vectors:     # all pairs at once: one dense solve instead of two
+                w, v = scipy.linalg.eigh(self._sub(c).toarray(), driver="evd")
+                self.vals[c], self.vecs[c] = w[::-1].copy(), v[:, ::-1].copy()
+            else:
+                self.vals[c] = scipy.linalg.eigvalsh(self._sub(c).toarray())[::-1].copy()
         else:
             if self.vals[c].size:
                 count = max(count, min(size, 2 * self.vals[c].size))
@@ -471,9 +482,9 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
     6. Unassigned (``-1``): a feature whose assigned cosine is at most ``min_cosine``,
        by default ``1/sqrt(2)`` (:data:`MAJORITY` — less than half of its energy on that
        point; more than half can lie on one point only; ``min_cosine=-1`` keeps every
-       assignment, as Pachauri et al. do with full visibility), a feature without a link, a feature whose row of ``U`` is zero
-       (its component got no point), or one left over when its camera has more features
-       than points.
+       assignment, as Pachauri et al. do with full visibility), a feature without a link,
+       a feature whose row of ``U`` is zero (its component got no point), or one left over
+       when its camera has more features than points.
 
     Steps 3-6 run per connected component (:func:`_by_component`, same result).
 
@@ -506,8 +517,8 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
         return np.full(prob.m_total, -1, dtype=np.int64)
     spectrum = _Spectrum(prob.W, prob)
     if universe_size is None:
-        heads = _Spectrum(_normalized(prob.W), prob).down_to(1.0 - CLEAR_THRESHOLD,
-                                                             2 * prob.k_min_comp + 2)
+        normalized = _Spectrum(_normalized(prob.W), prob, keep_vectors=False)
+        heads = normalized.down_to(1.0 - CLEAR_THRESHOLD, 2 * prob.k_min_comp + 2)
         counts = np.array([universe_size_gap(mu, int(kc))
                            for mu, kc in zip(heads, prob.k_min_comp.tolist(), strict=True)])
     else:
