@@ -11,15 +11,16 @@ features at global ids ``offset[i] + r`` (``offset`` = cumulative ``features_per
 The *association matrix* ``W`` (``m x m``, symmetric) has the blocks ``W_ij`` = the links
 between cameras ``i`` and ``j`` (0/1, or the link weights) and ``W_ii = I``. A consistent
 association into ``k`` universe points is ``W = X X^T`` with ``X`` (``m x k``) 0/1, each
-camera's rows a partial permutation (Pachauri et al. 2013, Sec. 2; Fathian et al. 2020, the
-"lifting" ``X`` to the universe).
+camera's rows a partial permutation (Pachauri et al. 2013, with full permutations; Fathian et
+al. 2020, the "lifting" ``X`` to the universe).
 
 * :func:`spectral_sync` — Pachauri, Kondor, Singh, "Solving the multi-way matching problem by
   permutation synchronization", NIPS 2013. The top-``k`` eigenvectors ``U`` of ``W`` span the
-  column space of ``X`` when the links are consistent (``W = X X^T``, so ``W U = U Λ``, Sec. 3);
-  each image's block ``U_i`` is then rounded to a (partial) permutation by the Hungarian method
-  against a reference. Pachauri et al. take image 1 as the reference (``P_i = argmax <P, U_i
-  U_1^T>``), which needs every point seen by image 1; here every point is seen by *some*
+  column space of ``X`` when the links are consistent (``W = X X^T``, so ``W U = U Λ``); each
+  image's block ``U_i`` is then rounded to a (partial) permutation by the Hungarian method
+  against a reference. Pachauri et al. (Alg. 1) take image 1 as the reference
+  (``sigma_i = argmax_sigma <U_i U_1^T, sigma>`` by Kuhn–Munkres), which needs every point
+  seen by image 1; here every point is seen by *some*
   feature, so the reference is ``k`` representative features found by column-pivoted QR of the
   row-normalised ``U^T`` (Damle, Minden, Ying, "Simple, direct and efficient multi-way spectral
   clustering", Inf. Inference 2019, Alg. 1) — the ``k`` most linearly independent rows.
@@ -29,9 +30,15 @@ camera's rows a partial permutation (Pachauri et al. 2013, Sec. 2; Fathian et al
   the universe size from its spectrum, its kernel as the spectral embedding, pivot rows as
   cluster centres and a per-image assignment to them.
 
-Eigenvectors: dense (``scipy.linalg.eigh``) for at most :data:`DENSE_MAX` features, else ARPACK
-Lanczos on the sparse matrix (``scipy.sparse.linalg.eigsh``), with a fixed random start vector
-(deterministic). Memory is ``O(L + m k)``; no ``m x m`` dense matrix above ``DENSE_MAX``.
+Eigenvectors, one connected component of the association graph at a time (its spectrum is
+the union of theirs; :class:`_Spectrum`): dense (``scipy.linalg.eigh``) for a component of
+at most :data:`DENSE_MAX` features, else ARPACK Lanczos on the sparse matrix
+(``scipy.sparse.linalg.eigsh``, fixed random start vector: deterministic). Memory is
+``O(L + m k)`` while the leading eigenpairs suffice (complete graphs: CMU hotel, 3030
+features, about 25 MB traced). A universe-size estimate that needs more eigenvalues than a
+first window (sparse graphs, where a point seen along a chain of cameras has many small
+Laplacian eigenvalues) solves a component of at most :data:`DENSE_VALUES_MAX` features
+densely: ``O(m_c^2)`` memory, ``O(m_c^3)`` time.
 
 Features without any link are left out of the eigenproblem and unassigned (``-1``): their row
 of ``W`` is a unit vector, an eigenvector of eigenvalue 1 that carries no information and is
@@ -120,7 +127,7 @@ def association_matrix(features_per_camera, links: Links,
     ``A`` holds every link between two cameras in both directions with its weight (1 when
     ``weight`` is None); a pair listed twice counts once, with its larger weight. A link
     inside one camera is ignored: ``W_ii = I`` (the distinctness constraint, Fathian et al.
-    2020, and Pachauri et al. 2013, Sec. 2).
+    2020; Pachauri et al. 2013 likewise set the diagonal blocks to the identity).
 
     Parameters
     ----------
@@ -467,7 +474,7 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
        gets ``k_c`` points: the largest eigengap, as a ratio, of its normalized Laplacian
        ``I - D^-1/2 W D^-1/2`` among its eigenvalues below 0.5, at least the most features of
        one camera in it (:func:`universe_size_gap`).
-    3. ``U`` = the leading eigenvectors of ``W`` (Pachauri et al., Sec. 3: for consistent
+    3. ``U`` = the leading eigenvectors of ``W`` (Pachauri et al., Alg. 1: for consistent
        links ``W = X X^T`` and ``U`` spans the columns of ``X``). Every row of ``U`` is scaled
        to length 1: then all features of one universe point share one row (``X``'s rows are
        unit vectors, mixed by an orthogonal ``k x k`` matrix).
