@@ -11,15 +11,16 @@ features at global ids ``offset[i] + r`` (``offset`` = cumulative ``features_per
 The *association matrix* ``W`` (``m x m``, symmetric) has the blocks ``W_ij`` = the links
 between cameras ``i`` and ``j`` (0/1, or the link weights) and ``W_ii = I``. A consistent
 association into ``k`` universe points is ``W = X X^T`` with ``X`` (``m x k``) 0/1, each
-camera's rows a partial permutation (Pachauri et al. 2013, Sec. 2; Fathian et al. 2020, the
-"lifting" ``X`` to the universe).
+camera's rows a partial permutation (Pachauri et al. 2013, with full permutations; Fathian et
+al. 2020, the "lifting" ``X`` to the universe).
 
 * :func:`spectral_sync` — Pachauri, Kondor, Singh, "Solving the multi-way matching problem by
   permutation synchronization", NIPS 2013. The top-``k`` eigenvectors ``U`` of ``W`` span the
-  column space of ``X`` when the links are consistent (``W = X X^T``, so ``W U = U Λ``, Sec. 3);
-  each image's block ``U_i`` is then rounded to a (partial) permutation by the Hungarian method
-  against a reference. Pachauri et al. take image 1 as the reference (``P_i = argmax <P, U_i
-  U_1^T>``), which needs every point seen by image 1; here every point is seen by *some*
+  column space of ``X`` when the links are consistent (``W = X X^T``, so ``W U = U Λ``); each
+  image's block ``U_i`` is then rounded to a (partial) permutation by the Hungarian method
+  against a reference. Pachauri et al. (Alg. 1) take image 1 as the reference
+  (``sigma_i = argmax_sigma <U_i U_1^T, sigma>`` by Kuhn–Munkres), which needs every point
+  seen by image 1; here every point is seen by *some*
   feature, so the reference is ``k`` representative features found by column-pivoted QR of the
   row-normalised ``U^T`` (Damle, Minden, Ying, "Simple, direct and efficient multi-way spectral
   clustering", Inf. Inference 2019, Alg. 1) — the ``k`` most linearly independent rows.
@@ -29,9 +30,15 @@ camera's rows a partial permutation (Pachauri et al. 2013, Sec. 2; Fathian et al
   the universe size from its spectrum, its kernel as the spectral embedding, pivot rows as
   cluster centres and a per-image assignment to them.
 
-Eigenvectors: dense (``scipy.linalg.eigh``) for at most :data:`DENSE_MAX` features, else ARPACK
-Lanczos on the sparse matrix (``scipy.sparse.linalg.eigsh``), with a fixed random start vector
-(deterministic). Memory is ``O(L + m k)``; no ``m x m`` dense matrix above ``DENSE_MAX``.
+Eigenvectors, one connected component of the association graph at a time (its spectrum is
+the union of theirs; :class:`_Spectrum`): dense (``scipy.linalg.eigh``) for a component of
+at most :data:`DENSE_MAX` features, else ARPACK Lanczos on the sparse matrix
+(``scipy.sparse.linalg.eigsh``, fixed random start vector: deterministic). Memory is
+``O(L + m k)`` while the leading eigenpairs suffice (complete graphs: CMU hotel, 3030
+features, about 25 MB traced). A universe-size estimate that needs more eigenvalues than a
+first window (sparse graphs, where a point seen along a chain of cameras has many small
+Laplacian eigenvalues) solves a component of at most :data:`DENSE_VALUES_MAX` features
+densely: ``O(m_c^2)`` memory, ``O(m_c^3)`` time.
 
 Features without any link are left out of the eigenproblem and unassigned (``-1``): their row
 of ``W`` is a unit vector, an eigenvector of eigenvalue 1 that carries no information and is
@@ -61,6 +68,7 @@ __all__ = [
     "universe_size_count",
     "DENSE_MAX",
     "DENSE_VALUES_MAX",
+    "ARPACK_MAX_K",
     "CLEAR_THRESHOLD",
     "MAJORITY",
     "ZERO_EIG",
@@ -72,6 +80,9 @@ DENSE_MAX = 500
 #: universe-size estimate needs more eigenvalues than a first ARPACK window gives (4000: a
 #: 128 MB matrix)
 DENSE_VALUES_MAX = 4000
+#: most eigenpairs asked of ARPACK for a matrix that could be solved densely (measured on a
+#: 2323-feature ring2 component: 124 eigenpairs by ARPACK took as long as all by ``eigh``)
+ARPACK_MAX_K = 64
 #: CLEAR's universe size: eigenvalues of the normalized Laplacian below this are counted.
 #: For a consistent association on a complete graph the spectrum is exactly {0, 1} (0 once per
 #: universe point, 1 for the rest, see :func:`universe_size_count`): 0.5 is the midpoint.
@@ -116,7 +127,7 @@ def association_matrix(features_per_camera, links: Links,
     ``A`` holds every link between two cameras in both directions with its weight (1 when
     ``weight`` is None); a pair listed twice counts once, with its larger weight. A link
     inside one camera is ignored: ``W_ii = I`` (the distinctness constraint, Fathian et al.
-    2020, and Pachauri et al. 2013, Sec. 2).
+    2020; Pachauri et al. 2013 likewise set the diagonal blocks to the identity).
 
     Parameters
     ----------
@@ -196,13 +207,15 @@ def _normalized(W: sp.csr_matrix) -> sp.csr_matrix:
 
 
 def _top_eigen(M: sp.csr_matrix, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` largest eigenvalues (descending) of symmetric ``M`` and their eigenvectors
-    (dense ``eigh`` for a small matrix or a large ``k``, else ARPACK)."""
+    """The ``k`` largest eigenvalues (descending) of symmetric ``M`` and their eigenvectors:
+    dense ``eigh`` for a small matrix, for ``k`` a quarter of ``m`` or more, or for ``k`` above
+    :data:`ARPACK_MAX_K` when ``m`` is at most :data:`DENSE_VALUES_MAX` (Lanczos then costs
+    more than the dense solver); else ARPACK."""
     m = M.shape[0]
     k = min(k, m)
     if k <= 0:
         return np.zeros(0), np.zeros((m, 0))
-    if m <= DENSE_MAX or 4 * k >= m:
+    if m <= DENSE_MAX or 4 * k >= m or (k > ARPACK_MAX_K and m <= DENSE_VALUES_MAX):
         vals, vecs = scipy.linalg.eigh(M.toarray(), subset_by_index=[m - k, m - 1],
                                        driver="evr")
     else:
@@ -222,13 +235,14 @@ class _Spectrum:
     components (clean data) repeats every eigenvalue ``c`` times. Components of at most
     :data:`DENSE_MAX` features are solved densely, batched by size. A larger one starts with
     the leading eigenpairs asked for (:func:`_top_eigen`); when more eigenvalues are needed,
-    all of them are computed densely (values only) if it has at most
-    :data:`DENSE_VALUES_MAX` features, else the ARPACK window doubles. Eigenvectors are
-    computed only for the eigenvalues finally used.
+    all of them are computed densely (with their eigenvectors when ``keep_vectors``, else
+    values only) if it has at most :data:`DENSE_VALUES_MAX` features, else the ARPACK window
+    doubles. Other eigenvectors are computed only for the eigenvalues finally used.
     """
 
-    def __init__(self, M: sp.csr_matrix, prob: _Problem):
+    def __init__(self, M: sp.csr_matrix, prob: _Problem, keep_vectors: bool = True):
         self.M = M
+        self.keep_vectors = keep_vectors
         self.members = prob.members
         self.size = np.array([mem.size for mem in prob.members], dtype=np.int64)
         n_comp = self.size.size
@@ -269,7 +283,11 @@ class _Spectrum:
         if self.vals[c].size >= count:
             return
         if self.vals[c].size and size <= DENSE_VALUES_MAX:
-            self.vals[c] = scipy.linalg.eigvalsh(self._sub(c).toarray())[::-1].copy()
+            if self.keep_vectors:     # all pairs at once: one dense solve instead of two
+                w, v = scipy.linalg.eigh(self._sub(c).toarray(), driver="evd")
+                self.vals[c], self.vecs[c] = w[::-1].copy(), v[:, ::-1].copy()
+            else:
+                self.vals[c] = scipy.linalg.eigvalsh(self._sub(c).toarray())[::-1].copy()
         else:
             if self.vals[c].size:
                 count = max(count, min(size, 2 * self.vals[c].size))
@@ -456,7 +474,7 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
        gets ``k_c`` points: the largest eigengap, as a ratio, of its normalized Laplacian
        ``I - D^-1/2 W D^-1/2`` among its eigenvalues below 0.5, at least the most features of
        one camera in it (:func:`universe_size_gap`).
-    3. ``U`` = the leading eigenvectors of ``W`` (Pachauri et al., Sec. 3: for consistent
+    3. ``U`` = the leading eigenvectors of ``W`` (Pachauri et al., Alg. 1: for consistent
        links ``W = X X^T`` and ``U`` spans the columns of ``X``). Every row of ``U`` is scaled
        to length 1: then all features of one universe point share one row (``X``'s rows are
        unit vectors, mixed by an orthogonal ``k x k`` matrix).
@@ -471,9 +489,9 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
     6. Unassigned (``-1``): a feature whose assigned cosine is at most ``min_cosine``,
        by default ``1/sqrt(2)`` (:data:`MAJORITY` — less than half of its energy on that
        point; more than half can lie on one point only; ``min_cosine=-1`` keeps every
-       assignment, as Pachauri et al. do with full visibility), a feature without a link, a feature whose row of ``U`` is zero
-       (its component got no point), or one left over when its camera has more features
-       than points.
+       assignment, as Pachauri et al. do with full visibility), a feature without a link,
+       a feature whose row of ``U`` is zero (its component got no point), or one left over
+       when its camera has more features than points.
 
     Steps 3-6 run per connected component (:func:`_by_component`, same result).
 
@@ -506,8 +524,8 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
         return np.full(prob.m_total, -1, dtype=np.int64)
     spectrum = _Spectrum(prob.W, prob)
     if universe_size is None:
-        heads = _Spectrum(_normalized(prob.W), prob).down_to(1.0 - CLEAR_THRESHOLD,
-                                                             2 * prob.k_min_comp + 2)
+        normalized = _Spectrum(_normalized(prob.W), prob, keep_vectors=False)
+        heads = normalized.down_to(1.0 - CLEAR_THRESHOLD, 2 * prob.k_min_comp + 2)
         counts = np.array([universe_size_gap(mu, int(kc))
                            for mu, kc in zip(heads, prob.k_min_comp.tolist(), strict=True)])
     else:
