@@ -66,8 +66,8 @@ from pipeline.outputs import (
     write_run_marker,
 )
 
-__all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "publish",
-           "write_json_atomic"]
+__all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
+           "publish", "write_json_atomic"]
 
 
 def _umask() -> int:
@@ -254,6 +254,13 @@ class OutputFiles:
         try:
             if exc_type is None:
                 self._commit()
+            elif isinstance(exc, OSError) and exc.filename is not None:
+                # an error writing a temporary file (or a writer's own temporary beside it)
+                # names the output the user gave
+                name = os.path.basename(os.fsdecode(exc.filename))
+                for tmp, target, _ in self._items:
+                    if name == tmp.name or name.startswith(f".{tmp.name}."):
+                        raise OSError(exc.errno, exc.strerror, str(target)) from None
         finally:
             for tmp, _, _ in self._items:
                 if os.path.lexists(tmp):
@@ -281,6 +288,12 @@ class OutputFiles:
                     if os.path.lexists(target):
                         os.unlink(target)
             raise
+
+
+def output_path(outputs: OutputFiles | None, target: str | os.PathLike, flag: str) -> Path:
+    """Where to write the output ``target``: a temporary file of ``outputs``, or ``target``
+    itself without ``outputs`` (a library call writing one file at once)."""
+    return Path(target) if outputs is None else outputs.path(target, flag)
 
 
 # ------------------------------------------------------------------------------ the lock

@@ -71,7 +71,7 @@ def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
                    resolution: str = "evidence", *, rerun: bool = True,
-                   image_dir: str | Path | None = None) -> CleanDbResult:
+                   image_dir: str | Path | None = None, outputs=None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -87,6 +87,8 @@ def clean_database(database: str | Path, out: str | Path,
     rerun : also write ``OUT.rrd`` beside ``out`` (``OUT.links.csv`` is always written;
         :mod:`pipeline.cleaned`)
     image_dir : the images, drawn in the recording
+    outputs : a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
+        together (default: each written at once)
 
     Returns
     -------
@@ -101,9 +103,11 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import check_detection_memory
+    from pipeline.cleaned import check_image_dir
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.outputs import require_input_file
     from pipeline.run import consistency_stage
+    from pipeline.runfolder import output_path
 
     database, out = Path(database), Path(out)
     if out.resolve() == database.resolve():
@@ -111,6 +115,8 @@ def clean_database(database: str | Path, out: str | Path,
                          f"modified, choose a new file")
     contents = colmap.read_database(database)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    if rerun:
+        check_image_dir(image_dir, contents.names)
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
@@ -133,9 +139,9 @@ def clean_database(database: str | Path, out: str | Path,
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
-    colmap.write_cleaned_database(contents, out, keep)
+    colmap.write_cleaned_database(contents, output_path(outputs, out, "--out"), keep)
     _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
-                  before, after)
+                  before, after, outputs)
     n_edges = len(edges) if edges is not None else \
         len(np.unique(model_links.cam_i * n + model_links.cam_j))
     stats = result.stats
@@ -168,7 +174,7 @@ def _link_weight(contents, links) -> np.ndarray:
 
 
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
-                  before, after) -> None:
+                  before, after, outputs) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.cleaned`)."""
     from pipeline.cleaned import CleaningOutcome, write_side_outputs
     from pipeline.run import _conflictive_links
@@ -185,13 +191,15 @@ def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rer
           f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n")
     write_side_outputs(CleaningOutcome(contents.names, sizes, contents.keypoints, links,
                                        reason.astype(str), rnd, it, conflictive),
-                       out, rerun=rerun, image_dir=image_dir, report_markdown=md)
+                       out, rerun=rerun, image_dir=image_dir, report_markdown=md,
+                       outputs=outputs)
 
 
 def run(args) -> int:
-    from pipeline.cleaned import side_paths
+    from pipeline.cleaned import check_image_dir, side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
 
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
@@ -199,8 +207,16 @@ def run(args) -> int:
                        + ([] if args.no_rerun else [("OUT.rrd", rrd_out)]),
                        [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
-                         args.resolution, rerun=not args.no_rerun, image_dir=args.image_dir)
+    if not args.no_rerun:
+        check_image_dir(args.image_dir, [])  # the folder; its images once the names are read
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
+                             args.resolution, rerun=not args.no_rerun,
+                             image_dir=args.image_dir, outputs=outputs)
+        summary = flag_result(res.summary())
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), summary)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -212,9 +228,4 @@ def run(args) -> int:
     links_csv, rrd = side_paths(res.output)
     print(f"cleaned database written to {res.output}; what was cut: {links_csv}"
           + ("" if args.no_rerun else f", recording: {rrd}"))
-    summary = flag_result(res.summary())
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, summary)
     return exit_status(summary)

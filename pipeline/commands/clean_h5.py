@@ -47,8 +47,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
              pairs: str | Path | None = None, *, rerun: bool = True,
-             image_dir: str | Path | None = None) -> dict:
+             image_dir: str | Path | None = None, outputs=None) -> dict:
     """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
+    together (default: each written at once).
 
     Returns
     -------
@@ -64,12 +67,15 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     """
     from pipeline import hloc
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.cleaned import CleaningOutcome, write_side_outputs
+    from pipeline.cleaned import CleaningOutcome, check_image_dir, write_side_outputs
     from pipeline.run import _conflictive_links, consistency_stage
+    from pipeline.runfolder import output_path
 
     out = Path(out)
     contents = hloc.read_h5(features, matches, pairs)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    if rerun:
+        check_image_dir(image_dir, contents.names)
     cam = {name: k for k, name in enumerate(contents.names)}
     if pairs is not None:
         pair_list = hloc.read_pairs(pairs, set(contents.names))
@@ -93,7 +99,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     conflictive[idx] = _conflictive_links(m, model_links)
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
-    hloc.write_cleaned_matches(contents, out, keep)
+    hloc.write_cleaned_matches(contents, output_path(outputs, out, "--out"), keep)
     cut = {k: int((reason == k).sum()) for k in ("not-one-to-one", "resolution")}
     md = (f"## clean-h5 {Path(matches).name}\n\n| | before | after |\n|---|---:|---:|\n"
           f"| Matches | {len(links)} | {int(keep.sum())} |\n"
@@ -105,7 +111,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         keypoints=contents.keypoints, links=links, reason=reason.astype(str), round=rnd,
         iteration=it, conflictive_before=conflictive)
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
-                                 report_markdown=md)
+                                 report_markdown=md, outputs=outputs)
     st = result.stats
     return {"features": str(features), "matches": str(matches), "output": str(out),
             "written": [str(out)] + [str(p) for p in written], "images": n,
@@ -129,16 +135,16 @@ def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
 
 
 def run(args) -> int:
-    from pipeline.cleaned import side_paths
+    from pipeline.cleaned import check_image_dir, side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
 
     if not args.out:
         raise InputError("--out '': give the name of the cleaned matches file to write, e.g. "
                          "matches-clean.h5")
-    if args.image_dir is not None and not Path(args.image_dir).is_dir():
-        raise InputError(f"--image-dir {args.image_dir!r} is not a folder; give the folder of "
-                         "the images (or leave it out: gray canvases are drawn)")
+    if not args.no_rerun:
+        check_image_dir(args.image_dir, [])  # the folder; its images once the names are read
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]
@@ -146,17 +152,18 @@ def run(args) -> int:
                        [("--features", args.features), ("--matches", args.matches),
                         ("--pairs", args.pairs)],
                        overwrite=args.overwrite)
-    s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
-                             rerun=not args.no_rerun, image_dir=args.image_dir))
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
+                                 rerun=not args.no_rerun, image_dir=args.image_dir,
+                                 outputs=outputs))
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]
     print(f"{s['images']} images, {s['comm_edges']} image pairs, {s['links']} matches")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
     print(f"matches cut: {cut['resolution']} by resolution in {r['iterations']} iteration(s), "
           f"{cut['not-one-to-one']} not one-to-one")
-    print("written: " + ", ".join(s["written"]))
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, s)
+    print("written: " + ", ".join(s["written"] + ([args.report] if args.report else [])))
     return exit_status(s)

@@ -47,8 +47,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
                  max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence",
-                 transport: str = "sim") -> dict:
+                 transport: str = "sim", outputs=None) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts ``out_csv`` in place
+    with the command's other outputs (default: ``out_csv`` is written at once).
 
     ``resolution``: ``paper`` (Alg. 1) or ``evidence``; the evidence of a link here is its
     ``quality`` column read as ``1 − Lowe ratio`` (and the triangle support the robots
@@ -67,6 +70,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.linkscsv import read_links_csv, write_links_csv
     from pipeline.run import consistency_stage, ledger_from_consistency
+    from pipeline.runfolder import output_path
     from pipeline.types import LinkLedger
 
     links_csv, out_csv = Path(links_csv), Path(out_csv)
@@ -121,7 +125,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         old = np.flatnonzero(~active)
         full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
         ledger = full
-    write_links_csv(out_csv, ledger)
+    write_links_csv(output_path(outputs, out_csv, "--out"), ledger)
     st = res.stats
     summary = {
         "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
@@ -176,13 +180,19 @@ def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
 def run(args) -> int:
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
 
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
-                                  args.max_memory_gb, resolution=resolution_for_transport(args),
-                                  transport=args.transport))
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        s = flag_result(resolve_file(args.links, args.out, args.comm_graph,
+                                     faults_from_args(args), args.max_memory_gb,
+                                     resolution=resolution_for_transport(args),
+                                     transport=args.transport, outputs=outputs))
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -205,9 +215,5 @@ def run(args) -> int:
               f"retransmissions; +{f.get('extra_rounds', '?')} rounds, "
               f"+{f.get('extra_messages', '?')} messages "
               "vs fault-free")
-    print(f"written: {s['output']}")
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, s)
+    print(f"written: {s['output']}" + (f", {args.report}" if args.report else ""))
     return exit_status(s)

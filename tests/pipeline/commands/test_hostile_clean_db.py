@@ -11,7 +11,7 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import one_line_error  # noqa: E402
+from hostile import one_line_error, refused  # noqa: E402
 from test_clean_db import _db_with_planted_conflicts  # noqa: E402
 
 
@@ -113,3 +113,31 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(db, tmp_path, capsys, m
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db")]) == 130
     assert capsys.readouterr().err.startswith("interrupted:")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.db"]
+
+
+@pytest.mark.parametrize("case", ["missing", "lacks-an-image"])
+def test_an_image_dir_that_cannot_serve_is_refused_before_anything_is_written(db, tmp_path,
+                                                                             capsys, case):
+    images = tmp_path / "images"
+    if case == "lacks-an-image":
+        images.mkdir()
+        (images / "view_0.jpg").write_bytes(b"")
+    refused(capsys, ["clean-db", str(db), "--out", str(tmp_path / "o.db"), "--image-dir",
+                     str(images)], tmp_path, "--image-dir",
+            "is not a folder" if case == "missing" else "no image 'view_1.jpg'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == (
+        ["in.db"] if case == "missing" else ["images", "in.db"])
+
+
+def test_outputs_follow_the_umask(db, tmp_path, capsys):
+    import os
+
+    out = tmp_path / "o.db"
+    mask = os.umask(0o022)
+    try:
+        assert main(["clean-db", str(db), "--out", str(out), "--report",
+                     str(tmp_path / "r.json")]) == 0
+    finally:
+        os.umask(mask)
+    for name in ("o.db", "o.links.csv", "o.rrd", "r.json"):
+        assert oct((tmp_path / name).stat().st_mode & 0o777) == oct(0o644), name

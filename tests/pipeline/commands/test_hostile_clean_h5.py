@@ -260,3 +260,28 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(files, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith("interrupted: clean-h5") and err.count("\n") == 1
     assert tree(d) == before and sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_an_image_dir_lacking_an_image_is_refused_before_anything_is_written(files, tmp_path,
+                                                                            capsys):
+    d, feats, matches = files
+    images = tmp_path / "images"
+    images.mkdir()
+    (images / "a.jpg").write_bytes(b"")
+    (images / "c.jpg").write_bytes(b"")
+    argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+            str(tmp_path / "o.h5"), "--image-dir", str(images)]
+    refused(capsys, argv, tmp_path, "--image-dir", "no image 'sub/b.jpg'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["images", "in"]
+
+
+def test_outputs_follow_the_umask(files, tmp_path, capsys):
+    d, feats, matches = files
+    mask = os.umask(0o022)
+    try:
+        assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                     str(tmp_path / "o.h5"), "--report", str(tmp_path / "r.json")]) == 0
+    finally:
+        os.umask(mask)
+    for name in ("o.h5", "o.links.csv", "o.rrd", "r.json"):
+        assert oct((tmp_path / name).stat().st_mode & 0o777) == oct(0o644), name

@@ -279,3 +279,38 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys,
     err = capsys.readouterr().err
     assert err.strip().startswith("interrupted:") and "Traceback" not in err
     assert list(tmp_path.iterdir()) == [fig1]
+
+
+def test_an_output_created_while_the_run_works_is_kept(fig1, tmp_path, capsys, monkeypatch):
+    import pipeline.run
+
+    out, report = tmp_path / "o.csv", tmp_path / "r.json"
+    stage = pipeline.run.consistency_stage
+
+    def someone_writes_out_meanwhile(*a, **k):
+        out.write_text("made by another program")
+        return stage(*a, **k)
+
+    monkeypatch.setattr(pipeline.run, "consistency_stage", someone_writes_out_meanwhile)
+    assert main(["resolve", "--links", str(fig1), "--out", str(out), "--report",
+                 str(report)]) == 2
+    one_line_error(capsys, "--out", "created by someone else while this command worked")
+    assert out.read_text() == "made by another program" and not report.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv", "o.csv"]
+
+
+def test_a_report_that_cannot_be_written_names_it_and_leaves_no_output(fig1, tmp_path):
+    import resource
+    import subprocess
+
+    def small_files():  # the links file fits, the report does not
+        resource.setrlimit(resource.RLIMIT_FSIZE, (400, 400))
+
+    out, report = tmp_path / "o.csv", tmp_path / "r.json"
+    r = subprocess.run([sys.executable, "-m", "pipeline", "resolve", "--links", str(fig1),
+                        "--out", str(out), "--report", str(report)], capture_output=True,
+                       text=True, timeout=120, preexec_fn=small_files)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and f"error: {report}: File too large" in r.stderr
+    assert "written" not in r.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv"]
