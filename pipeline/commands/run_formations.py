@@ -16,7 +16,6 @@ from pipeline.commands.options import (
     parse_size,
 )
 from pipeline.report import PAPER_TABLE_III_IV
-from pipeline.runfolder import atomic_file, write_json_atomic
 from pipeline.team import add_transport_argument, resolution_for_transport
 
 FORMATIONS = ("a", "b", "c", "d")
@@ -119,19 +118,69 @@ def formations_table(reports: dict[str, dict]) -> str:
 
 
 SUMMARY_FILES = ("formations.md", "formations.json")
+#: the last line of formations.md: digests of both summaries as written (module notes)
+_PROOF = "<!-- written by formation-match run-formations: {md} {json} -->\n"
+#: largest summary file read to check it
+_MAX_SUMMARY_BYTES = 64 * 2**20
 
 
-def _written_by_us(path: Path) -> bool:
-    """True when ``path`` is a summary a previous ``run-formations`` wrote (its title line for
-    the Markdown table; an object keyed by formation names for the JSON)."""
+def _digest(text: str) -> str:
+    import hashlib
+
+    return hashlib.blake2b(text.encode("utf-8"), digest_size=16,
+                           key=b"formation-match: run-formations summary").hexdigest()
+
+
+def _read_summary(path: Path) -> str | None:
+    """The text of ``path`` (never through a symbolic link), or None."""
+    import os
+    import stat
+
     try:
-        if path.suffix == ".md":
-            with path.open(encoding="utf-8") as f:
-                return f.readline().startswith("# Formations (a)–(d)")
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return False
-    return isinstance(data, dict) and bool(data) and set(data) <= set(FORMATIONS)
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            return None
+        data = f.read(_MAX_SUMMARY_BYTES + 1)
+    try:
+        return data.decode("utf-8") if len(data) <= _MAX_SUMMARY_BYTES else None
+    except UnicodeDecodeError:
+        return None
+
+
+def _written_by_us(parent: Path) -> set[str]:
+    """The summary files of ``parent`` that a previous ``run-formations`` wrote and nobody
+    changed since: ``formations.md`` ends with a line holding the digests of its own text
+    and of ``formations.json`` as they were written."""
+    md = _read_summary(parent / "formations.md")
+    if md is None or not md.endswith("-->\n"):
+        return set()
+    body, _, last = md[:-1].rpartition("\n")
+    body += "\n"
+    ours = set()
+    text = _read_summary(parent / "formations.json")
+    if text is not None and last == _PROOF.format(md=_digest(body), json=_digest(text))[:-1]:
+        ours.add("formations.json")
+    parts = last.split()
+    if len(parts) == 8 and last == _PROOF.format(md=_digest(body), json=parts[6])[:-1]:
+        ours.add("formations.md")
+    return ours
+
+
+def write_summaries(parent: Path, markdown: str, reports: dict) -> tuple[Path, Path]:
+    """Write ``formations.md`` (``markdown`` and the proof line) and ``formations.json``
+    (``reports``) into ``parent``, both put in place together."""
+    from pipeline.runfolder import OutputFiles
+
+    text = json.dumps(reports, indent=2) + "\n"
+    md, js = parent / "formations.md", parent / "formations.json"
+    with OutputFiles(replace=True) as outputs:
+        outputs.path(md, "--out").write_text(
+            markdown + _PROOF.format(md=_digest(markdown), json=_digest(text)), encoding="utf-8")
+        outputs.path(js, "--out").write_text(text, encoding="utf-8")
+    return md, js
 
 
 def check_outputs(parent: Path, overwrite: bool) -> None:
@@ -147,10 +196,11 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
                          "runs: give a folder name, e.g. runs")
     for name in FORMATIONS:
         check_run_folder(parent / f"formation-{name}", flag="--out")
+    ours = _written_by_us(parent)
     for file_name in SUMMARY_FILES:
         path = parent / file_name
         refuse_unsafe_target(path, "--out")
-        if path.exists() and not overwrite and not _written_by_us(path):
+        if path.exists() and not overwrite and file_name not in ours:
             raise InputError(f"--out {str(parent)!r} holds {file_name}, which run-formations "
                              "did not write; pass --overwrite to replace it, or choose another "
                              "--out")
@@ -175,12 +225,9 @@ def run(args) -> int:
         out = run_formation(cfg, transport=args.transport)
         reports[name] = json.loads((out / "report.json").read_text())
     table = formations_table(reports)
-    md = parent / "formations.md"
-    with atomic_file(md) as f:
-        f.write(f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}, "
-                f"resolution {args.resolution}\n\n"
-                + table)
-    write_json_atomic(parent / "formations.json", reports)
+    check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
+    md, js = write_summaries(parent, f"# Formations (a)–(d), seed {args.seed}, {method}, "
+                             f"{args.size}, resolution {args.resolution}\n\n" + table, reports)
     print(table)
-    print(f"saved {md} and {parent / 'formations.json'}")
+    print(f"saved {md} and {js}")
     return 0
