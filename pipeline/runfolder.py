@@ -67,7 +67,7 @@ from pipeline.outputs import (
 )
 
 __all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
-           "publish", "write_json_atomic"]
+           "publish", "publish_mode", "write_json_atomic"]
 
 
 def _umask() -> int:
@@ -76,7 +76,7 @@ def _umask() -> int:
     return mask
 
 
-def _publish_mode(path: str | os.PathLike, directory: bool) -> None:
+def publish_mode(path: str | os.PathLike, directory: bool) -> None:
     """Give a temp file/folder the mode a plain ``open``/``mkdir`` would have given it
     (``mkstemp``/``mkdtemp`` create them private, 0600/0700)."""
     os.chmod(path, (0o777 if directory else 0o666) & ~_umask())
@@ -189,7 +189,7 @@ def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = 
                 yield f
         except OSError as exc:
             raise _named(exc, path) from None
-        _publish_mode(tmp, directory=False)
+        publish_mode(tmp, directory=False)
         refuse_unsafe_target(path, flag)
         try:
             publish(tmp, path, replace)
@@ -273,7 +273,7 @@ class OutputFiles:
                 if not tmp.is_file():
                     raise InputError(f"{flag} {str(target)!r}: its temporary file {str(tmp)!r} "
                                      "was removed while the command worked; nothing was written")
-                _publish_mode(tmp, directory=False)
+                publish_mode(tmp, directory=False)
                 refuse_unsafe_target(target, flag)
                 try:
                     publish(tmp, target, self.replace)
@@ -549,7 +549,7 @@ def atomic_run_folder(out: str | os.PathLike, inputs=()):
             write_run_marker(tmp, finished=False)
             yield tmp
             write_run_marker(tmp, finished=True)
-            _publish_mode(tmp, directory=True)
+            publish_mode(tmp, directory=True)
             check_run_folder(out, inputs)  # nothing foreign was put there meanwhile
             _put_in_place(tmp, out)
         except BaseException:

@@ -102,7 +102,15 @@ def clean_database(database: str | Path, out: str | Path,
     """
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import check_detection_memory
+    from pipeline.budget import (
+        BYTES_PER_CAMERA,
+        BYTES_PER_EDGE,
+        BYTES_PER_ROW,
+        COPIES_OF_READ_DATA,
+        MemoryBudget,
+        check_detection_memory,
+        count_lines,
+    )
     from pipeline.cleaned import check_image_dir
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.outputs import require_input_file
@@ -113,14 +121,25 @@ def clean_database(database: str | Path, out: str | Path,
     if out.resolve() == database.resolve():
         raise InputError(f"--out {str(out)!r} is the input database; the input is never "
                          f"modified, choose a new file")
-    contents = colmap.read_database(database)
+    # every allocation that grows with the input is counted before it is made
+    budget = MemoryBudget(max_memory_gb)
+
+    def count_tables(sizes) -> None:
+        budget.add("the keypoints and verified matches of the database",
+                   sizes["keypoint_bytes"] * COPIES_OF_READ_DATA
+                   + sizes["inliers"] * BYTES_PER_ROW)
+        budget.add(f"the robots of its {sizes['images']} images",
+                   sizes["images"] * BYTES_PER_CAMERA)
+
+    contents = colmap.read_database(database, check_sizes=count_tables)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     if rerun:
         check_image_dir(image_dir, contents.names)
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
-        require_input_file(comm_graph_file, "--comm-graph")
+        budget.add("the communication graph", count_lines(
+            require_input_file(comm_graph_file, "--comm-graph")) * BYTES_PER_EDGE)
         edges = read_comm_graph(comm_graph_file, contents.names)
         off_graph = links_off_graph(links, edges, n)
         reason[off_graph & (reason == "")] = "not-comm-edge"
@@ -129,7 +148,7 @@ def clean_database(database: str | Path, out: str | Path,
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
-    check_detection_memory(m, model_links, max_memory_gb)
+    check_detection_memory(m, model_links, budget)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if resolution == "evidence" else None
@@ -196,11 +215,13 @@ def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rer
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.cleaned import check_image_dir, side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
     from pipeline.runfolder import OutputFiles, write_json_atomic
 
+    limit_gb(args.max_memory_gb)
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]

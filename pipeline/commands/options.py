@@ -122,12 +122,14 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def add_overwrite_and_memory_options(p: argparse.ArgumentParser, outputs: str) -> None:
     """``--overwrite`` (replace existing ``outputs``, else refuse) and ``--max-memory-gb`` (the
-    memory budget of the distributed detection, :mod:`pipeline.budget`), shared by the
-    commands that clean a user's matches (``resolve``, ``clean-db``)."""
+    memory budget of the job, :mod:`pipeline.budget`; checked by
+    :func:`pipeline.budget.limit_gb`), shared by the commands that clean a user's matches
+    (``resolve``, ``clean-db``, ``clean-h5``)."""
     from pipeline.budget import DEFAULT_LIMIT_GB
 
     p.add_argument("--overwrite", action="store_true",
                    help=f"replace {outputs} if they exist (default: refuse)")
-    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
-                   help="refuse inputs whose distributed detection would need more memory "
-                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    p.add_argument("--max-memory-gb", default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose reading and distributed detection would need more "
+                        "memory than this, before allocating it (estimate, see "
+                        f"pipeline.budget; default {DEFAULT_LIMIT_GB:g})")

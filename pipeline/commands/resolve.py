@@ -65,10 +65,18 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import check_detection_memory
+    from pipeline.budget import (
+        BYTES_PER_CAMERA,
+        BYTES_PER_EDGE,
+        BYTES_PER_ROW,
+        MemoryBudget,
+        check_detection_memory,
+        count_lines,
+    )
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.linkscsv import read_links_csv, write_links_csv
+    from pipeline.outputs import require_input_file
     from pipeline.run import consistency_stage, ledger_from_consistency
     from pipeline.runfolder import output_path
     from pipeline.types import LinkLedger
@@ -77,6 +85,14 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
         raise InputError(f"--out {str(out_csv)!r} is the input file; the input is never "
                          "modified, choose a new file")
+    # every allocation that grows with the input is counted before it is made
+    budget = MemoryBudget(max_memory_gb)
+    budget.add("the rows of the links file",
+               count_lines(require_input_file(links_csv, "links file")) * BYTES_PER_ROW,
+               "split the links file")
+    if comm_graph_csv is not None:
+        budget.add("the communication graph", count_lines(
+            require_input_file(comm_graph_csv, "comm graph file")) * BYTES_PER_EDGE)
     lf = read_links_csv(links_csv)
     links = lf.links
     edges = None
@@ -87,6 +103,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     # ids as given, or made compact when sparse (pipeline.compact): memory follows the links
     ids = compact_ids(links, edges, n_cameras=n_cams)
     n = int(ids.cameras.max(initial=-1)) + 1
+    robots = len(ids.features_per_camera)  # the cameras of the run (compact ids)
+    budget.add(f"the robots of the {robots} cameras", robots * BYTES_PER_CAMERA,
+               "fewer cameras (a comm graph naming only those with links)")
     if edges is not None and len(links):
         off = links_off_graph(links, edges, n)
         if off.any():
@@ -104,7 +123,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         links = all_links.subset(active)
         ids = compact_ids(links, edges, n_cameras=n_cams)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
-    check_detection_memory(m, run_links, max_memory_gb)
+    check_detection_memory(m, run_links, budget)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     if transport == "zenoh":
         res, fault_section = _resolve_over_zenoh(m, run_edges, run_links, faults, resolution)
@@ -178,10 +197,12 @@ def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
     from pipeline.runfolder import OutputFiles, write_json_atomic
 
+    limit_gb(args.max_memory_gb)
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)

@@ -16,7 +16,7 @@ from pipeline.__main__ import main
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1] / "consistency"))
 from consistency_graphs import random_instance  # noqa: E402
-from hostile import one_line_error, run_capped  # noqa: E402
+from hostile import one_line_error, refused, run_capped  # noqa: E402
 
 FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
 
@@ -263,6 +263,32 @@ def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_pa
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_memory_follows_the_links_not_the_cameras_squared(tmp_path):
+    """12,000 cameras in 4,000 separate triangles: every robot held the offsets of all the
+    cameras (1.3 GB); under the 1.5 GB cap it runs."""
+    src = tmp_path / "triangles.csv"
+    src.write_text("".join(f"{3 * k},0,{3 * k + 1},0\n{3 * k + 1},0,{3 * k + 2},0\n"
+                           f"{3 * k},0,{3 * k + 2},0\n" for k in range(4000)))
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q"])
+    assert proc.returncode == 0, proc.stderr
+    assert "12000 cameras" in proc.stdout
+
+
+def test_the_memory_guard_counts_the_robots_of_every_camera(tmp_path, capsys):
+    src = tmp_path / "pairs.csv"
+    src.write_text("".join(f"{2 * k},0,{2 * k + 1},0\n" for k in range(1000)))
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                     "--max-memory-gb", "0.01"], tmp_path, "robots of the 2000 cameras",
+            "--max-memory-gb")
+
+
+@pytest.mark.parametrize("value", ["nan", "0", "-1", "inf", "lots"])
+def test_a_memory_limit_that_is_no_limit_is_refused(fig1, tmp_path, capsys, value):
+    refused(capsys, ["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                     "--max-memory-gb", value], tmp_path, f"--max-memory-gb {value!r}",
+            "GB")
 
 
 # ---------------------------------------------------------------------------- Ctrl-C
