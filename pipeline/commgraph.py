@@ -253,20 +253,16 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
         non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
         — naming the file and line.
     """
-    from pipeline.csvfields import line_fields
+    from pipeline.csvfields import line_fields, text_lines
     from pipeline.outputs import require_input_file
 
     path = Path(path)
     require_input_file(path, "comm graph file")
-    try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except (UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"graph file {str(path)!r} is not a text file ({exc})") from None
     by_name = None if names is None else {name: k for k, name in enumerate(names)}
     edges = []
     header_allowed = True
-    for line_no, raw in enumerate(lines, start=1):
-        tokens = line_fields(raw)
+    for line_no, raw in text_lines(path, "graph file"):
+        tokens = line_fields(raw, f"{path}, line {line_no}")
         if not tokens:
             continue
         if header_allowed and [t.lower() for t in tokens] == ["cam_i", "cam_j"]:

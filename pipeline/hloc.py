@@ -136,16 +136,12 @@ def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:
     InputError
         Missing file, a line without two names, a name not in ``names`` (with its line).
     """
+    from pipeline.csvfields import text_lines
     from pipeline.outputs import require_input_file
 
     path = require_input_file(path, "--pairs")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"--pairs {str(path)!r} is not a UTF-8 text file ({exc.reason} at byte "
-                         f"{exc.start}); give hloc's pairs.txt") from None
     out, seen = [], set()
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in text_lines(path, "--pairs"):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue

@@ -160,7 +160,10 @@ def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     (b"a.jpg sub/b.jpg c.jpg\n", "must hold two image names"),
     (b"a.jpg a.jpg\n", "pairs an image with itself"),
     (b"a.jpg x.jpg\n", "image 'x.jpg' has no keypoints"),
-], ids=["empty", "binary", "latin-1", "three-names", "self", "unknown-image"])
+    (b"a.jpg sub/b.jpg\n" + b"a" * 200_000 + b" sub/b.jpg\n", "line 2: longer than 65536"),
+    ("a.jpg sub/b.jpg\u2028a.jpg c.jpg\n".encode(), "must hold two image names"),
+], ids=["empty", "binary", "latin-1", "three-names", "self", "unknown-image", "long-line",
+        "u2028"])
 def test_malformed_pairs_file(files, tmp_path, capsys, content, needle):
     d, feats, matches = files
     (d / "pairs.txt").write_bytes(content)

@@ -291,6 +291,50 @@ def test_a_memory_limit_that_is_no_limit_is_refused(fig1, tmp_path, capsys, valu
             "GB")
 
 
+# ------------------------------------------------------------------ rows of a text file
+
+@pytest.mark.parametrize("which", ["--links", "--comm-graph"])
+def test_a_field_longer_than_csv_reads_is_one_line(fig1, tmp_path, capsys, which):
+    """CSV stops at fields of 131,072 characters (a _csv.Error traceback); such a line is
+    refused, naming it, before CSV sees it."""
+    graph = tmp_path / "g.csv"
+    graph.write_text("0,1\n1,2\n2,3\n0,3\n")
+    bad = tmp_path / "bad.csv"
+    first = "0,0,1,0\n" if which == "--links" else "0,1\n"
+    bad.write_text(first + '"' + "x" * 200_000 + '",2\n')
+    argv = ["resolve", "--links", str(fig1), "--comm-graph", str(graph), "--out",
+            str(tmp_path / "o.csv")]
+    argv[argv.index(which) + 1] = str(bad)
+    refused(capsys, argv, tmp_path, str(bad), "line 2", "longer than 65536 bytes")
+
+
+def test_a_one_line_file_of_megabytes_is_refused_at_its_first_line(tmp_path, capsys):
+    big = tmp_path / "big.csv"
+    big.write_bytes(b"0," * 4_000_000)  # 8 MB, no line break
+    refused(capsys, ["resolve", "--links", str(big), "--out", str(tmp_path / "o.csv")],
+            tmp_path, "line 1", "longer than 65536 bytes")
+
+
+@pytest.mark.parametrize("inside", ["\f", "\v", "\u2028", "\u2029", "\x85", "\x1c"])
+def test_only_line_breaks_end_a_row(tmp_path, capsys, inside):
+    """A form feed or U+2028 inside a row stays inside it: the row is wrong (named at its own
+    line), never split into two rows."""
+    src = tmp_path / "in.csv"
+    src.write_text(f"0,0,1,0\n0,1,1,x{inside}\n", encoding="utf-8")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:2:")
+    src.write_text(f"0,0,1,0{inside}1,0,2,0\n", encoding="utf-8")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:1:", "columns")
+
+
+def test_a_carriage_return_inside_a_row_is_one_line(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    src.write_bytes(b"0,0,1,0\r\n1,0,\r2,0\n")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:2", "not a CSV row")
+
+
 # ---------------------------------------------------------------------------- Ctrl-C
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys, monkeypatch):
