@@ -287,7 +287,7 @@ def read_h5(features: str | Path, matches: str | Path,
             done.add(key)
             grp = fd[key]
             ds = grp["matches0"]
-            if int(np.prod(ds.shape)) != m[cam[n0]]:
+            if tuple(ds.shape) != (m[cam[n0]],):  # one entry per keypoint, as hloc writes
                 raise InputError(f"{matches}: matches0 of pair {key!r} has shape {ds.shape} but "
                                  f"{n0} has {m[cam[n0]]} keypoints; expected ({m[cam[n0]]},)")
             raw = _read_dataset(ds, matches, f"matches0 of pair {key!r}", "iu").reshape(-1)
@@ -302,7 +302,7 @@ def read_h5(features: str | Path, matches: str | Path,
             score = np.ones(rows.size)
             if "matching_scores0" in grp:
                 sd = grp["matching_scores0"]
-                if int(np.prod(sd.shape)) != len(m0):
+                if tuple(sd.shape) != (len(m0),):
                     raise InputError(f"{matches}: matching_scores0 of pair {key!r} has shape "
                                      f"{sd.shape}; expected ({len(m0)},) like matches0")
                 score = _read_dataset(sd, matches, f"matching_scores0 of pair {key!r}",

@@ -119,6 +119,12 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(3, -1, np.int16)), "has shape (3,)"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 2), -1, np.int16)),
      "has shape (20, 2)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full((1, M), -1, np.int16)),
+     "has shape (1, 20) but a.jpg has 20 keypoints; expected (20,)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 1), -1, np.int16)),
+     "has shape (20, 1)"),
+    (lambda fd: _replace(fd, P01 + "/matching_scores0", np.ones((M, 1), np.float16)),
+     "matching_scores0 of pair 'a.jpg/sub-b.jpg' has shape (20, 1)"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, np.nan)), "dtype float64"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 0.5)), "expected integers"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.array([b"ab"] * M)), "dtype |S2"),
@@ -140,7 +146,7 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
      "'zz.jpg/yy.jpg' does not name two images"),
     (lambda fd: fd.create_group("a.jpg/a.jpg").create_dataset("matches0", data=np.arange(M)),
      "pairs image 'a.jpg' with itself"),
-], ids=["no-pairs", "short", "2-d", "float-nan", "float-fraction", "strings", "out-of-range",
+], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
         "scores-strings", "unknown-pair", "self-pair"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
