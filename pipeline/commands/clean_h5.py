@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
+from pipeline.commands.options import add_overwrite_and_memory_options
 from pipeline.errors import InputError
 
 __all__ = ["clean_h5", "add_arguments", "run"]
@@ -40,15 +42,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the images, to draw them in OUT.rrd (default: gray canvases)")
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace OUT.h5, its side files and --report if they exist "
-                        "(default: refuse)")
+    add_overwrite_and_memory_options(p, "OUT.h5, its side files and --report")
 
 
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
              pairs: str | Path | None = None, *, rerun: bool = True,
-             image_dir: str | Path | None = None, outputs=None) -> dict:
+             image_dir: str | Path | None = None, outputs=None,
+             max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
     """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    Memory: what the files declare and what the detection needs are counted against
+    ``max_memory_gb`` before they are allocated (:mod:`pipeline.budget`).
 
     ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
     together (default: each written at once).
@@ -67,12 +71,14 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     """
     from pipeline import hloc
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import MemoryBudget, check_detection_memory
     from pipeline.cleaned import CleaningOutcome, check_image_dir, write_side_outputs
     from pipeline.run import _conflictive_links, consistency_stage
     from pipeline.runfolder import output_path
 
     out = Path(out)
-    contents = hloc.read_h5(features, matches, pairs)
+    budget = MemoryBudget(max_memory_gb)
+    contents = hloc.read_h5(features, matches, pairs, budget)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     if rerun:
         check_image_dir(image_dir, contents.names)
@@ -87,6 +93,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
     model_links = links.subset(ok)
+    check_detection_memory(m, model_links, budget)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(ok)
@@ -135,11 +142,13 @@ def _size_of(keypoints: np.ndarray) -> tuple[int, int]:
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.cleaned import check_image_dir, side_paths
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
     from pipeline.runfolder import OutputFiles, write_json_atomic
 
+    limit_gb(args.max_memory_gb)
     if not args.out:
         raise InputError("--out '': give the name of the cleaned matches file to write, e.g. "
                          "matches-clean.h5")
@@ -156,7 +165,7 @@ def run(args) -> int:
     with OutputFiles(replace=args.overwrite) as outputs:
         s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
                                  rerun=not args.no_rerun, image_dir=args.image_dir,
-                                 outputs=outputs))
+                                 outputs=outputs, max_memory_gb=args.max_memory_gb))
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]

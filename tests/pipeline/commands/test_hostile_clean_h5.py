@@ -102,7 +102,51 @@ def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp
     assert feats.stat().st_size < 100_000
     p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
     assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
-    assert "declare shape (1073741824, 2)" in p.stderr and "stores 0 bytes" in p.stderr
+    assert "declare 8589934912 bytes in all but the file stores 320 bytes" in p.stderr
+
+
+def test_many_datasets_each_under_the_check_are_counted_in_all(files, tmp_path):
+    """80 unwritten datasets of 63 MB each (each under the per-dataset check): 5 GB in all."""
+    d, feats, matches = files
+    rows = 63 * 2**20 // 8
+    with h5py.File(feats, "a") as fd:
+        for k in range(80):
+            fd.create_group(f"extra{k}.jpg").create_dataset(
+                "keypoints", shape=(rows, 2), dtype=np.float32, chunks=(4096, 2))
+    assert feats.stat().st_size < 2_000_000
+    p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert "its 83 keypoints datasets declare" in p.stderr, p.stderr
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["in"]
+
+
+def test_links_chaining_thousands_of_features_are_refused_before_the_detection(tmp_path):
+    """3 images of 3,000 keypoints whose matches chain all 9,000 into one association set:
+    the detection would need ~2.9 GB (a ~110 kB input); refused under the cap, naming it."""
+    n = 3000
+    feats, matches = tmp_path / "features.h5", tmp_path / "matches.h5"
+    rng = np.random.default_rng(0)
+    with h5py.File(feats, "w") as fd:
+        for name in ("a.jpg", "b.jpg", "c.jpg"):
+            fd.create_group(name).create_dataset(
+                "keypoints", data=rng.uniform(0, 300, (n, 2)).astype(np.float32))
+    with h5py.File(matches, "w") as fd:
+        ident = np.arange(n, dtype=np.int32)
+        for a, b, m0 in (("a.jpg", "b.jpg", ident), ("b.jpg", "c.jpg", ident),
+                         ("a.jpg", "c.jpg", np.roll(ident, 1))):
+            fd.create_group(names_to_pair(a, b)).create_dataset("matches0", data=m0)
+    p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert "the distributed detection" in p.stderr and "9000 features" in p.stderr, p.stderr
+    assert "--max-memory-gb" in p.stderr and not (tmp_path / "o.h5").exists()
+
+
+def test_the_memory_limit_of_clean_h5_is_checked(files, tmp_path, capsys):
+    d, feats, matches = files
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--max-memory-gb", "nan"), d,
+            "--max-memory-gb 'nan'")
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--max-memory-gb", "0.000001"), d,
+            "keypoints of the features file", "--max-memory-gb")
 
 
 def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
