@@ -291,6 +291,23 @@ def test_a_memory_limit_that_is_no_limit_is_refused(fig1, tmp_path, capsys, valu
             "GB")
 
 
+def test_a_faulty_run_that_would_take_minutes_is_refused_before_it_starts(tmp_path, capsys,
+                                                                           monkeypatch):
+    """--delay-rounds 100 (the stated maximum) on a 300-link path: (D + 1)(d + 3) = 30,603
+    rounds of 301 robots ran past 120 s; refused at once, saying why."""
+    import pipeline.consistency as consistency
+
+    def never(*a, **k):
+        raise AssertionError("the simulation started")
+
+    src = tmp_path / "path.csv"
+    src.write_text("".join(f"{i},0,{i + 1},0\n" for i in range(300)))
+    monkeypatch.setattr(consistency, "resolve_conflicts", never)
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                     "--delay-rounds", "100"], tmp_path, "30603 rounds", "--delay-rounds 100",
+            "diameter 300")
+
+
 # ------------------------------------------------------------------ rows of a text file
 
 @pytest.mark.parametrize("which", ["--links", "--comm-graph"])
