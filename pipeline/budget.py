@@ -28,6 +28,9 @@ the interpreter and libraries, rounded up):
   in flight and the per-round work arrays).
 - data read from a database or an HDF5 file: its declared bytes times the copies made of
   them (:data:`COPIES_OF_READ_DATA`), counted from the declared sizes before any is read.
+- :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
+  (rendering, features, matching, cleaning and the report; ring formations of 10 and 30
+  robots: 87 bytes at 640x480, 78 at 320x240).
 """
 
 from __future__ import annotations
@@ -40,9 +43,10 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW",
+__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROBOT_PIXEL",
+           "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
-           "check_detection_memory", "count_lines", "detection_entries", "limit_gb"]
+           "check_detection_memory", "check_formation_memory", "count_lines", "detection_entries", "limit_gb"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
 BYTES_PER_ENTRY = 36
@@ -52,6 +56,8 @@ BYTES_PER_ROW = 1500
 BYTES_PER_CAMERA = 12_000
 #: bytes per communication edge (measured 0.4 KB)
 BYTES_PER_EDGE = 600
+#: bytes per robot and pixel of a rendered formation (measured 78-87)
+BYTES_PER_ROBOT_PIXEL = 90
 #: copies made of data read from a file (the library's array, ours, a converted one)
 COPIES_OF_READ_DATA = 3
 #: default limit of the estimate, in GB (10^9 bytes)
@@ -143,3 +149,13 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
                "one association set; every robot holds every feature of its sets, eq. 5)",
                entries * BYTES_PER_ENTRY,
                "such sets come from wrong links: clean them first")
+
+
+def check_formation_memory(n_robots: int, size: tuple[int, int], limit,
+                           flag: str = "--max-memory-gb") -> None:
+    """InputError, before anything is rendered, when a formation of ``n_robots`` robots at
+    ``size`` would need more than ``limit`` GB (:data:`BYTES_PER_ROBOT_PIXEL`)."""
+    w, h = size
+    MemoryBudget(limit, flag).add(
+        f"rendering and cleaning the views of {n_robots} robots at {w}x{h}",
+        n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")

@@ -13,7 +13,8 @@ from pipeline.errors import InputError
 from pipeline.validate import render_size
 
 __all__ = ["MIN_FEATURES", "MAX_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
-           "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
+           "add_resolution_option", "add_merge_radius_option", "add_memory_option",
+           "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
 
 #: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
@@ -125,11 +126,17 @@ def add_overwrite_and_memory_options(p: argparse.ArgumentParser, outputs: str) -
     memory budget of the job, :mod:`pipeline.budget`; checked by
     :func:`pipeline.budget.limit_gb`), shared by the commands that clean a user's matches
     (``resolve``, ``clean-db``, ``clean-h5``)."""
-    from pipeline.budget import DEFAULT_LIMIT_GB
-
     p.add_argument("--overwrite", action="store_true",
                    help=f"replace {outputs} if they exist (default: refuse)")
+    add_memory_option(p)
+
+
+def add_memory_option(p: argparse.ArgumentParser) -> None:
+    """``--max-memory-gb``: the memory budget of the job (:mod:`pipeline.budget`; checked by
+    :func:`pipeline.budget.limit_gb`)."""
+    from pipeline.budget import DEFAULT_LIMIT_GB
+
     p.add_argument("--max-memory-gb", default=DEFAULT_LIMIT_GB, metavar="GB",
-                   help="refuse inputs whose reading and distributed detection would need more "
-                        "memory than this, before allocating it (estimate, see "
-                        f"pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+                   help="refuse inputs whose run would need more memory than this, before "
+                        "allocating it (estimate, see pipeline.budget; default "
+                        f"{DEFAULT_LIMIT_GB:g})")

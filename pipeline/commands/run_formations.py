@@ -9,6 +9,7 @@ from pathlib import Path
 
 from pipeline.commands.options import (
     add_feature_options,
+    add_memory_option,
     add_merge_radius_option,
     add_resolution_option,
     add_scene_options,
@@ -55,6 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_resolution_option(p, default="paper")
     add_transport_argument(p)
     add_merge_radius_option(p)
+    add_memory_option(p)
 
 
 def _fmt(v) -> str:
@@ -208,12 +210,14 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 
 def run(args) -> int:
     from pipeline import validate
+    from pipeline.budget import check_formation_memory
     from pipeline.run import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")
     resolution = resolution_for_transport(args)
     size = parse_size(args.size)
+    check_formation_memory(6, size, args.max_memory_gb)  # one formation of 6 at a time
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)
     reports = {}

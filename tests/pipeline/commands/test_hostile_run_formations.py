@@ -17,6 +17,7 @@ from hostile import one_line_error  # noqa: E402
     ("--size", "100000x100000", "too large"),
     ("--max-features", "99999999999999999999", "at most 1000000"),
     ("--max-features", "3", "at least 8"),
+    ("--size", "4096x4096", "6 robots at 4096x4096 would need about 9.1 GB"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, monkeypatch, capsys, flag,
                                                         value, message):
