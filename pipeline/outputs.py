@@ -30,7 +30,7 @@ from pathlib import Path
 from pipeline.errors import InputError
 
 __all__ = ["RUN_MARKER", "check_output_files", "check_run_folder", "ownership_proof",
-           "refuse_unsafe_target", "require_input_file", "run_folder_problem",
+           "read_small_text", "refuse_unsafe_target", "require_input_file", "run_folder_problem",
            "own_folder", "write_run_marker"]
 
 #: File written into every run folder; only a folder holding it may be replaced by a new run.
@@ -106,23 +106,29 @@ def write_run_marker(folder: str | os.PathLike, finished: bool) -> None:
     os.replace(tmp, folder / RUN_MARKER)
 
 
-def _read_marker(folder: Path) -> list[str] | None:
-    """The marker's lines, or None when it is missing, not a regular file (a symbolic link is
-    never followed), too large or not text."""
+def read_small_text(path: str | os.PathLike, max_bytes: int) -> str | None:
+    """The UTF-8 text of the regular file ``path``; None when it is missing, not a regular
+    file (a symbolic link is never followed, a FIFO never waited on), larger than
+    ``max_bytes`` or not text. For files this program wrote and checks (markers,
+    summaries)."""
     try:
-        fd = os.open(folder / RUN_MARKER, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
         return None
     with os.fdopen(fd, "rb") as f:
         if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
             return None
-        data = f.read(_MARKER_MAX_BYTES + 1)
-    if len(data) > _MARKER_MAX_BYTES:
-        return None
+        data = f.read(max_bytes + 1)
     try:
-        return data.decode("utf-8").splitlines()
+        return data.decode("utf-8") if len(data) <= max_bytes else None
     except UnicodeDecodeError:
         return None
+
+
+def _read_marker(folder: Path) -> list[str] | None:
+    """The marker's lines, or None (see :func:`read_small_text`)."""
+    text = read_small_text(folder / RUN_MARKER, _MARKER_MAX_BYTES)
+    return None if text is None else text.splitlines()
 
 
 def _examples(names: list[str], k: int = 3) -> str:

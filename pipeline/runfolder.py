@@ -368,11 +368,7 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
             yield out
         finally:
             del _held[key]
-            try:  # while still locked: see _lock; only our own file
-                if os.lstat(lock).st_ino == os.fstat(fd).st_ino:
-                    os.unlink(lock)
-            except FileNotFoundError:
-                pass
+            _unlink_if_same(lock, fd)  # while still locked: see _lock; only our own file
     finally:
         os.close(fd)  # releases the flock
 
@@ -459,13 +455,18 @@ def _clear_stale_lock(lock: Path, out: Path, flag: str) -> None:
         except BlockingIOError:
             raise InputError(f"{flag} {str(out)!r} is being written by another run (pid {pid}); "
                              "wait for it to finish or choose another --out") from None
-        try:  # its run died: remove it, if it is still the file at `lock`
-            if os.lstat(lock).st_ino == os.fstat(efd).st_ino:
-                os.unlink(lock)
-        except FileNotFoundError:
-            pass
+        _unlink_if_same(lock, efd)  # its run died
     finally:
         os.close(efd)
+
+
+def _unlink_if_same(path: Path, fd: int) -> None:
+    """Remove ``path`` if it is still the file open as ``fd`` (nobody put another there)."""
+    try:
+        if os.lstat(path).st_ino == os.fstat(fd).st_ino:
+            os.unlink(path)
+    except FileNotFoundError:
+        pass
 
 
 def _drop_dead_lock(path: Path) -> None:
@@ -483,8 +484,7 @@ def _drop_dead_lock(path: Path) -> None:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return  # a live run is taking its lock
-        if os.lstat(path).st_ino == os.fstat(fd).st_ino:
-            os.unlink(path)
+        _unlink_if_same(path, fd)
     except OSError:
         return
     finally:

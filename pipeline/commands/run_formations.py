@@ -133,36 +133,19 @@ def _digest(text: str) -> str:
                            key=b"formation-match: run-formations summary").hexdigest()
 
 
-def _read_summary(path: Path) -> str | None:
-    """The text of ``path`` (never through a symbolic link), or None."""
-    import os
-    import stat
-
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
-    except OSError:
-        return None
-    with os.fdopen(fd, "rb") as f:
-        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-            return None
-        data = f.read(_MAX_SUMMARY_BYTES + 1)
-    try:
-        return data.decode("utf-8") if len(data) <= _MAX_SUMMARY_BYTES else None
-    except UnicodeDecodeError:
-        return None
-
-
 def _written_by_us(parent: Path) -> set[str]:
     """The summary files of ``parent`` that a previous ``run-formations`` wrote and nobody
     changed since: ``formations.md`` ends with a line holding the digests of its own text
     and of ``formations.json`` as they were written."""
-    md = _read_summary(parent / "formations.md")
+    from pipeline.outputs import read_small_text
+
+    md = read_small_text(parent / "formations.md", _MAX_SUMMARY_BYTES)
     if md is None or not md.endswith("-->\n"):
         return set()
     body, _, last = md[:-1].rpartition("\n")
     body += "\n"
     ours = set()
-    text = _read_summary(parent / "formations.json")
+    text = read_small_text(parent / "formations.json", _MAX_SUMMARY_BYTES)
     if text is not None and last == _PROOF.format(md=_digest(body), json=_digest(text))[:-1]:
         ours.add("formations.json")
     parts = last.split()
