@@ -501,6 +501,11 @@ def _exchange(a: Path, b: Path) -> bool:
 def _discard_previous(old: Path, out: Path) -> None:
     """Delete the previous run, now at ``old``, unless something of a user's came into it
     while this run worked: then it is kept under that name, and a warning says so."""
+    try:
+        os.rmdir(old)  # an empty folder given as --out: nothing to lose
+        return
+    except OSError:
+        pass
     problem = run_folder_problem(old)
     if problem is None:
         shutil.rmtree(old, ignore_errors=True)

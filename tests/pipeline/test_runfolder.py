@@ -71,10 +71,12 @@ def test_a_folder_without_the_marker_is_never_replaced(tmp_path, content):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
 
 
-def test_an_empty_folder_may_become_a_run(tmp_path):
+def test_an_empty_folder_may_become_a_run(tmp_path, capsys):
     (tmp_path / "new").mkdir()
     _run(tmp_path / "new", 1)
     assert (tmp_path / "new" / RUN_MARKER).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new"]
+    assert capsys.readouterr().err == ""
 
 
 def test_without_the_exchange_syscall_the_two_step_swap_works(tmp_path, monkeypatch):
