@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -267,6 +268,12 @@ class DatabaseContents:
         """Keypoints per camera, ``(n,)``."""
         return np.array([len(k) for k in self.keypoints], dtype=np.int64)
 
+    def close(self) -> None:
+        """Remove the private snapshot (also done when the object is collected)."""
+        if self._snapshot_dir is not None:
+            self._snapshot_dir()  # runs the removal once
+            self._snapshot_dir, self.snapshot = None, None
+
 
 def _first_occurrence(key: np.ndarray) -> np.ndarray:
     """``(L,)`` bool: True where ``key`` appears for the first time (in input order)."""
@@ -324,12 +331,12 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
         sizes = check_database_tables(con, path)
         if check_sizes is not None:
             check_sizes(sizes)
-        snapshot_dir = tempfile.TemporaryDirectory(prefix="colmap-read-")
-        copy = Path(snapshot_dir.name) / "read.db"
+        snapshot_dir = tempfile.mkdtemp(prefix="colmap-read-")
+        copy = Path(snapshot_dir) / "read.db"
         try:
             con.execute("VACUUM INTO ?", (str(copy),))
         except sqlite3.Error as exc:
-            snapshot_dir.cleanup()
+            shutil.rmtree(snapshot_dir, ignore_errors=True)
             raise InputError(f"database {str(path)!r} cannot be read ({exc})") from None
     finally:
         con.close()
@@ -353,9 +360,10 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
             raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
         contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras)
     except BaseException:
-        snapshot_dir.cleanup()
+        shutil.rmtree(snapshot_dir, ignore_errors=True)
         raise
-    contents.snapshot, contents._snapshot_dir = copy, snapshot_dir
+    contents.snapshot = copy
+    contents._snapshot_dir = weakref.finalize(contents, shutil.rmtree, snapshot_dir, True)
     return contents
 
 

@@ -101,21 +101,7 @@ def clean_database(database: str | Path, out: str | Path,
         the input, a bad comm-graph file.
     """
     from pipeline import colmap
-    from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import (
-        BYTES_PER_CAMERA,
-        BYTES_PER_EDGE,
-        BYTES_PER_ROW,
-        COPIES_OF_READ_DATA,
-        MemoryBudget,
-        check_detection_memory,
-        count_lines,
-    )
-    from pipeline.cleaned import check_image_dir
-    from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.outputs import require_input_file
-    from pipeline.run import consistency_stage
-    from pipeline.runfolder import output_path
+    from pipeline.budget import BYTES_PER_CAMERA, BYTES_PER_ROW, COPIES_OF_READ_DATA, MemoryBudget
 
     database, out = Path(database), Path(out)
     if out.resolve() == database.resolve():
@@ -132,6 +118,25 @@ def clean_database(database: str | Path, out: str | Path,
                    sizes["images"] * BYTES_PER_CAMERA)
 
     contents = colmap.read_database(database, check_sizes=count_tables)
+    try:
+        return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
+                      image_dir, outputs)
+    finally:
+        contents.close()
+
+
+def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
+           rerun: bool, image_dir, outputs) -> CleanDbResult:
+    """:func:`clean_database` on the database read as ``contents``."""
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import BYTES_PER_EDGE, check_detection_memory, count_lines
+    from pipeline.cleaned import check_image_dir
+    from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.outputs import require_input_file
+    from pipeline.run import consistency_stage
+    from pipeline.runfolder import output_path
+
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     if rerun:
         check_image_dir(image_dir, contents.names)
