@@ -62,3 +62,16 @@ def test_missing_or_invalid_json_file(tmp_path):
     p.write_text("{robots: 1")
     with pytest.raises(InputError, match="not valid JSON"):
         load_team(p)
+
+
+def test_writing_a_team_file_never_writes_through_a_name_beside_it(tmp_path):
+    import os
+
+    from pipeline.team.teamfile import write_team
+
+    precious = tmp_path / "precious.txt"
+    precious.write_text("precious")
+    (tmp_path / f"TEAM.json.tmp{os.getpid()}").symlink_to(precious)
+    write_team(tmp_path / "TEAM.json", parse_team(_doc()))
+    assert precious.read_text() == "precious"
+    assert load_team(tmp_path / "TEAM.json").n == 3
