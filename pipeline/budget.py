@@ -113,6 +113,22 @@ class MemoryBudget:
                 f"the limit of {self.limit:g} GB; {advice + ', or ' if advice else ''}raise the "
                 f"limit with {self.flag}")
 
+    # The parts in the units a reader knows: a module below this layer (an input reader)
+    # is handed the budget and counts through these, without importing this module.
+
+    def add_read(self, what: str, declared_bytes: float, advice: str = "") -> None:
+        """Count data a file declares, before it is read: its bytes times
+        :data:`COPIES_OF_READ_DATA`."""
+        self.add(what, declared_bytes * COPIES_OF_READ_DATA, advice)
+
+    def add_cameras(self, what: str, n: int, advice: str = "") -> None:
+        """Count ``n`` robots of the simulated team (:data:`BYTES_PER_CAMERA` each)."""
+        self.add(what, n * BYTES_PER_CAMERA, advice)
+
+    def add_rows(self, what: str, n: int, advice: str = "") -> None:
+        """Count ``n`` links held with their ledger (:data:`BYTES_PER_ROW` each)."""
+        self.add(what, n * BYTES_PER_ROW, advice)
+
 
 def _size(nbytes: float) -> str:
     return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.2g} MB"

@@ -123,8 +123,9 @@ def _check_declared_total(datasets, path: Path, what: str) -> int:
 def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
     """``{image name: keypoints (N, 2) float32}`` of an hloc ``features.h5``.
 
-    ``budget``: a :class:`pipeline.budget.MemoryBudget` counting the keypoints the file
-    declares, in all, before any is read.
+    ``budget``: a :class:`pipeline.budget.MemoryBudget` (handed in by the caller: inputs sit
+    below the budget's layer) counting the keypoints the file declares, in all, before any
+    is read.
 
     Raises
     ------
@@ -132,15 +133,13 @@ def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
         Missing or non-HDF5 file, no group with ``keypoints``, keypoints not ``(N, 2)``,
         more declared than the file stores or the budget allows.
     """
-    from pipeline.budget import COPIES_OF_READ_DATA
-
     path = Path(path)
     h5py = _h5py()
     out: dict[str, np.ndarray] = {}
     with _open(path, "features file") as fd:
         declared = _check_declared_total(_declared(fd, h5py, "keypoints"), path, "keypoints")
         if budget is not None:
-            budget.add("the keypoints of the features file", declared * COPIES_OF_READ_DATA)
+            budget.add_read("the keypoints of the features file", declared)
 
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "keypoints":
@@ -293,8 +292,6 @@ def read_h5(features: str | Path, matches: str | Path,
         Missing or non-HDF5 files, fewer than two images, a pair of ``pairs`` not stored,
         ``matches0`` of the wrong length or naming a keypoint that does not exist, no match.
     """
-    from pipeline.budget import BYTES_PER_CAMERA, BYTES_PER_ROW, COPIES_OF_READ_DATA
-
     features, matches = Path(features), Path(matches)
     h5py = _h5py()
     kps = read_features(features, budget)
@@ -302,7 +299,7 @@ def read_h5(features: str | Path, matches: str | Path,
     if len(names) < 2:
         raise InputError(f"{features}: {len(names)} image(s); at least two are needed")
     if budget is not None:
-        budget.add(f"the robots of the {len(names)} images", len(names) * BYTES_PER_CAMERA)
+        budget.add_cameras(f"the robots of the {len(names)} images", len(names))
     cam = {n: k for k, n in enumerate(names)}
     m = np.array([len(kps[n]) for n in names], dtype=np.int64)
     wanted = read_pairs(pairs, set(names)) if pairs is not None else None
@@ -312,8 +309,8 @@ def read_h5(features: str | Path, matches: str | Path,
         found = _declared(fd, h5py, "matches0") + _declared(fd, h5py, "matching_scores0")
         _check_declared_total(found, matches, "matches")
         if budget is not None:  # one pair is read at a time
-            budget.add("reading the largest pair of the matches file",
-                       max((ds.nbytes for ds in found), default=0) * COPIES_OF_READ_DATA)
+            budget.add_read("reading the largest pair of the matches file",
+                            max((ds.nbytes for ds in found), default=0))
         if wanted is None:
             stored = _stored_pairs(fd, h5py, names)
         else:
@@ -356,8 +353,8 @@ def read_h5(features: str | Path, matches: str | Path,
                     raise InputError(f"{matches}: matching_scores0 of pair {key!r} holds "
                                      f"{score[~np.isfinite(score)][0]}; scores must be finite")
             if budget is not None:
-                budget.add("the matches of the matches file", rows.size * BYTES_PER_ROW,
-                           "give --pairs with fewer pairs")
+                budget.add_rows("the matches of the matches file", rows.size,
+                                "give --pairs with fewer pairs")
             a, b = cam[n0], cam[n1]
             fa, fb = rows, m0[rows]
             if a > b:
