@@ -17,6 +17,11 @@ The folder is kept under a size cap, ``$FORMATION_MATCH_CACHE_MAX_MB`` (default 
 write removes the least recently used entries (a hit marks its entry used) until the folder
 fits, never the entry just written, so entries of older code versions, which are never used
 again, go first. Temporary files left by killed runs are removed after an hour.
+
+The folder may be one of the user's (``FORMATION_MATCH_CACHE=~/data``): only files this
+module wrote are ever removed, those whose name is an entry's (``views-…-<digest>.npz``, or
+``.views-….tmp-*.npz`` while written) and whose first stored array, ``key`` (written first),
+holds that same name. Any other file, and a symbolic link, is left alone.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ import functools
 import hashlib
 import io
 import os
+import re
+import stat
 import tempfile
 import zipfile
 from pathlib import Path
@@ -92,10 +99,49 @@ def _mark_used(path: Path) -> None:
         pass
 
 
+#: an entry's name, and a temporary file's while it is written (the key in group 1)
+_ENTRY_NAME = re.compile(r"(views-seed\d+-\d+x\d+-n\d+-[0-9a-f]{16})\.npz")
+_TMP_NAME = re.compile(r"\.(views-seed\d+-\d+x\d+-n\d+-[0-9a-f]{16})\.tmp-[^/]+\.npz")
+
+
+def _stored_key(path: Path) -> str | None:
+    """The ``key`` an entry file stores first (read from the zip's first local header, so a
+    temporary file still being written has it too); None when ``path`` is a symbolic link,
+    not a regular file, or does not start with that array."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    try:
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                return None
+            local = f.read(30)
+            if len(local) != 30 or local[:4] != b"PK\x03\x04" or local[8:10] != b"\0\0":
+                return None
+            n, extra = int.from_bytes(local[26:28], "little"), int.from_bytes(local[28:30], "little")
+            if f.read(n) != b"key.npy":
+                return None
+            f.seek(30 + n + extra)
+            version = np.lib.format.read_magic(f)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) \
+                else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read_header(f)
+            if shape != () or dtype.kind != "U" or dtype.itemsize > 4096:
+                return None
+            data = f.read(dtype.itemsize)
+            if len(data) != dtype.itemsize:
+                return None
+            return str(np.frombuffer(data, dtype=dtype)[0])
+    except (OSError, ValueError):
+        return None
+
+
 def prune(root: Path, keep: Path | None = None, limit: int | None = None) -> list[Path]:
     """Remove the least recently used entries of ``root`` until it holds at most ``limit``
     bytes (default :func:`max_bytes`), never ``keep``; remove temporary files older than an
-    hour. Returns the removed paths. Errors (a file gone meanwhile, no permission) are skipped.
+    hour. Only files this module wrote are counted or removed (module notes). Returns the
+    removed paths. Errors (a file gone meanwhile, no permission) are skipped.
     """
     import time
 
@@ -103,21 +149,25 @@ def prune(root: Path, keep: Path | None = None, limit: int | None = None) -> lis
     removed: list[Path] = []
     entries = []
     now = time.time()
-    for path in root.glob("*.npz"):
-        try:
-            st = path.stat()
-        except OSError:
+    try:
+        names = sorted(os.listdir(root))
+    except OSError:
+        return removed
+    for name in names:
+        path = root / name
+        entry, tmp = _ENTRY_NAME.fullmatch(name), _TMP_NAME.fullmatch(name)
+        if not (entry or tmp) or _stored_key(path) != (entry or tmp).group(1):
             continue
-        if path.name.startswith(".tmp-"):
+        try:
+            st = path.lstat()
+            if tmp:
+                if now - st.st_mtime > _STALE_TMP_S:
+                    path.unlink()
+                    removed.append(path)
+                continue
+        except OSError:
             continue
         entries.append((st.st_mtime, st.st_size, path))
-    for path in root.glob(".tmp-*.npz"):
-        try:
-            if now - path.stat().st_mtime > _STALE_TMP_S:
-                path.unlink()
-                removed.append(path)
-        except OSError:
-            continue
     total = sum(size for _, size, _ in entries)
     for _, size, path in sorted(entries):
         if total <= limit:
@@ -239,8 +289,8 @@ def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
     tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".tmp-", suffix=".npz",
-                                         delete=False) as f:
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.tmp-",
+                                         suffix=".npz", delete=False) as f:
             tmp = Path(f.name)
             np.savez(f, key=np.array(_key(seed, size, n)), **arrays)
         os.replace(tmp, path)

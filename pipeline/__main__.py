@@ -11,16 +11,51 @@ the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written).
 
 from __future__ import annotations
 
-import argparse
-import atexit
-import importlib
-import logging
 import os
 import sys
-import threading
-from collections.abc import Iterable
 
-from pipeline.errors import InputError, TeamError
+
+def _caused_by_interrupt(exc: BaseException | None) -> bool:
+    """``exc`` is a KeyboardInterrupt, or an error raised because of one (a C++ extension
+    interrupted while it loads reports an ImportError, which its package may turn into
+    another error: pycolmap's "Cannot import the C++ backend")."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted(command: str) -> int:
+    print(f"interrupted: {command} stopped, nothing was written or replaced", file=sys.stderr)
+    return 130
+
+
+def _uncaught(exc_type, exc, tb) -> None:
+    """The program's last word on an exception nothing caught: a Ctrl-C (however early)
+    ends with one line and exit 130, never a traceback or a death by signal."""
+    if _caused_by_interrupt(exc):
+        _interrupted("formation-match")
+        try:
+            sys.stderr.flush()
+        finally:
+            os._exit(130)
+    sys.__excepthook__(exc_type, exc, tb)
+
+
+if __name__ == "__main__":  # run as a program: from here on, before the imports below
+    sys.excepthook = _uncaught
+
+import argparse  # noqa: E402
+import atexit  # noqa: E402
+import importlib  # noqa: E402
+import logging  # noqa: E402
+import threading  # noqa: E402
+from collections.abc import Iterable  # noqa: E402
+
+from pipeline.errors import InputError, TeamError  # noqa: E402
 
 # command name -> (module, one-line help)
 COMMANDS = {
@@ -121,6 +156,19 @@ def _requested_command(argv: list[str]) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = _requested_command(argv)
+    try:
+        return _run(argv, command)
+    except KeyboardInterrupt:
+        return _interrupted(command or "formation-match")
+    except Exception as exc:
+        if _caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
+            return _interrupted(command or "formation-match")
+        raise
+
+
+def _run(argv: list[str], command: str | None) -> int:
+    """Parse, import the command (its libraries load here) and run it; errors of the user's
+    input as one line (exit 2)."""
     parser = build_parser([command] if command else [])
     args = parser.parse_args(argv)
     configure_logging(quiet=bool(getattr(args, "quiet", False)))
@@ -139,10 +187,6 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         print(f"error: {args.command} ran out of memory; try a smaller input", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"interrupted: {args.command} stopped, nothing was written or replaced",
-              file=sys.stderr)
-        return 130
 
 
 def entry() -> None:
@@ -162,6 +206,7 @@ def entry() -> None:
     cProfile``, coverage), which writes its data afterwards, and any thread of the program
     that is not a daemon, which the normal exit waits for.
     """
+    sys.excepthook = _uncaught  # a Ctrl-C that escapes main (module notes)
     code = main()
     others = [t for t in threading.enumerate()
               if t is not threading.main_thread() and not t.daemon]

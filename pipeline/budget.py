@@ -1,32 +1,148 @@
-"""Memory the distributed detection will need, estimated before it starts.
+"""The one memory guard: what a job will allocate, counted before it allocates it.
 
-In the detection of Aragüés et al. (Sec. III, eq. 5) every robot ``i`` propagates the rows
-``X_ij(t)`` of the powers of the association matrix: after ``d`` rounds robot ``i`` holds,
-for each of its features, every feature of that feature's association set. Summed over the
-robots this is ``sum_s |s|^2`` entries over the association sets ``s`` (Def. 2.4), whatever
-the ids — a few noisy links among 10 cameras that chain 10,000 features into one set need
-10^8 entries. Measured on such inputs (``bench``-style runs of ``resolve``, 11,250 and 22,500
-random links among 10 cameras, sets of 8,844 and 9,975 features): about
-:data:`BYTES_PER_ENTRY` bytes of peak memory per entry (the robots' sparse blocks, the
-copies in flight and the per-round work arrays).
+A command that reads a user's files (``resolve``, ``clean-db``, ``clean-h5``) holds one
+:class:`MemoryBudget` with the ``--max-memory-gb`` limit (:func:`limit_gb`: a finite number
+of GB above 0). Before each allocation that grows with the input it adds that allocation's
+estimate, from what the input declares (rows of a file, sizes a database or an HDF5 file
+declares, cameras, links, association sets), and the first estimate that takes the total
+above the limit is an InputError naming that part, the total and what to do; nothing of
+that size has been allocated then. The parts, each measured on inputs made to grow only
+it (peak resident memory of ``resolve`` / ``clean-db`` / ``clean-h5`` beyond the ~75 MB of
+the interpreter and libraries, rounded up):
 
-:func:`check_detection_memory` turns an input whose estimate exceeds the limit into an
-InputError before any allocation, naming the largest set and the estimate.
+- :data:`BYTES_PER_ROW`: a row of a links or comm-graph file, parsed, checked and held as a
+  link with its ledger (300,000 links between 8 cameras: 1.3 KB a link, the detection's own
+  share below included).
+- :data:`BYTES_PER_CAMERA`: a robot of the simulated team, its state, blocks and network
+  queues (30,000 cameras in 10,000 separate triangles: 9.3 KB a camera).
+- :data:`BYTES_PER_EDGE`: a communication edge (20,000 cameras, 200,000 edges: 0.4 KB an
+  edge).
+- :data:`BYTES_PER_ENTRY`: the distributed detection. In the detection of Aragüés et al.
+  (Sec. III, eq. 5) every robot ``i`` propagates the rows ``X_ij(t)`` of the powers of the
+  association matrix: after ``d`` rounds robot ``i`` holds, for each of its features, every
+  feature of that feature's association set. Summed over the robots this is ``sum_s |s|^2``
+  entries over the association sets ``s`` (Def. 2.4), whatever the ids — a few noisy links
+  among 10 cameras that chain 10,000 features into one set need 10^8 entries. Measured on
+  such inputs (11,250 and 22,500 random links among 10 cameras, sets of 8,844 and 9,975
+  features): about 36 bytes of peak memory per entry (the robots' sparse blocks, the copies
+  in flight and the per-round work arrays).
+- data read from a database or an HDF5 file: its declared bytes times the copies made of
+  them (:data:`COPIES_OF_READ_DATA`), counted from the declared sizes before any is read.
+- :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
+  (rendering, features, matching, cleaning and the report; ring formations of 10 and 30
+  robots: 87 bytes at 640x480, 78 at 320x240).
 """
 
 from __future__ import annotations
+
+import math
+import os
 
 import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BYTES_PER_ENTRY", "DEFAULT_LIMIT_GB", "detection_entries", "check_detection_memory"]
+__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROBOT_PIXEL",
+           "BYTES_PER_ROW",
+           "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
+           "check_detection_memory", "check_formation_memory", "count_lines", "detection_entries", "limit_gb"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
 BYTES_PER_ENTRY = 36
+#: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
+BYTES_PER_ROW = 1500
+#: bytes per camera (robot) of the simulated team (measured 9.3 KB)
+BYTES_PER_CAMERA = 12_000
+#: bytes per communication edge (measured 0.4 KB)
+BYTES_PER_EDGE = 600
+#: bytes per robot and pixel of a rendered formation (measured 78-87)
+BYTES_PER_ROBOT_PIXEL = 90
+#: copies made of data read from a file (the library's array, ours, a converted one)
+COPIES_OF_READ_DATA = 3
 #: default limit of the estimate, in GB (10^9 bytes)
 DEFAULT_LIMIT_GB = 2.0
+#: largest limit accepted (a number beyond any machine turns the guard off in effect)
+MAX_LIMIT_GB = 1e6
+
+
+def limit_gb(value, flag: str = "--max-memory-gb") -> float:
+    """``value`` as a limit in GB: a finite number above 0 (``nan`` would turn every
+    comparison false, and so the guard off)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{flag} {value!r}: not a number; give the memory limit in GB, e.g. "
+                         f"{flag} 4") from None
+    if not (math.isfinite(v) and 0 < v <= MAX_LIMIT_GB):
+        raise InputError(f"{flag} {value!r}: must be a finite number of GB above 0 (at most "
+                         f"{MAX_LIMIT_GB:g}), e.g. {flag} 4")
+    return v
+
+
+class MemoryBudget:
+    """The memory one job will allocate, counted part by part (module notes).
+
+    Example
+    -------
+    >>> b = MemoryBudget(1.0)
+    >>> b.add("rows of the links file", 2_000 * BYTES_PER_ROW)
+    >>> b.add("robots (30,000 cameras)", 30_000 * BYTES_PER_CAMERA)
+    >>> round(b.total / 1e9, 2)
+    0.36
+    """
+
+    def __init__(self, limit: float = DEFAULT_LIMIT_GB, flag: str = "--max-memory-gb"):
+        self.limit = limit_gb(limit, flag)
+        self.flag = flag
+        self.parts: dict[str, float] = {}
+
+    @property
+    def total(self) -> float:
+        return float(sum(self.parts.values()))
+
+    def add(self, what: str, nbytes: float, advice: str = "") -> None:
+        """Count ``nbytes`` for ``what``; InputError if the total then exceeds the limit
+        (``advice``: what the user can change in the input, said first)."""
+        self.parts[what] = self.parts.get(what, 0.0) + float(nbytes)
+        if self.total > self.limit * 1e9:
+            others = self.total - self.parts[what]
+            also = f" (with {_size(others)} counted before it)" if others else ""
+            raise InputError(
+                f"{what} would need about {_size(self.parts[what])} of memory{also}, above "
+                f"the limit of {self.limit:g} GB; {advice + ', or ' if advice else ''}raise the "
+                f"limit with {self.flag}")
+
+    # The parts in the units a reader knows: a module below this layer (an input reader)
+    # is handed the budget and counts through these, without importing this module.
+
+    def add_read(self, what: str, declared_bytes: float, advice: str = "") -> None:
+        """Count data a file declares, before it is read: its bytes times
+        :data:`COPIES_OF_READ_DATA`."""
+        self.add(what, declared_bytes * COPIES_OF_READ_DATA, advice)
+
+    def add_cameras(self, what: str, n: int, advice: str = "") -> None:
+        """Count ``n`` robots of the simulated team (:data:`BYTES_PER_CAMERA` each)."""
+        self.add(what, n * BYTES_PER_CAMERA, advice)
+
+    def add_rows(self, what: str, n: int, advice: str = "") -> None:
+        """Count ``n`` links held with their ledger (:data:`BYTES_PER_ROW` each)."""
+        self.add(what, n * BYTES_PER_ROW, advice)
+
+
+def _size(nbytes: float) -> str:
+    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.2g} MB"
+
+
+def count_lines(path: str | os.PathLike) -> int:
+    """Lines of a text file (``\\n`` count, plus a last line without one), read in blocks:
+    an upper bound on its rows, known before any is parsed."""
+    n, last = 0, b"\n"
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            n += block.count(b"\n")
+            last = block[-1:]
+    return n + (last != b"\n")
 
 
 def detection_entries(features_per_camera, links: Links) -> tuple[int, int]:
@@ -38,14 +154,24 @@ def detection_entries(features_per_camera, links: Links) -> tuple[int, int]:
     return int((s * s).sum()), int(s.max(initial=0))
 
 
-def check_detection_memory(features_per_camera, links: Links, limit_gb: float,
+def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
                            flag: str = "--max-memory-gb") -> None:
-    """InputError if the detection's estimated memory exceeds ``limit_gb`` (module notes)."""
+    """Count the detection's memory in ``budget`` (or a limit in GB): InputError if it takes
+    the total above the limit (module notes)."""
+    if not isinstance(budget, MemoryBudget):
+        budget = MemoryBudget(budget, flag)
     entries, largest = detection_entries(features_per_camera, links)
-    need = entries * BYTES_PER_ENTRY / 1e9
-    if need > limit_gb:
-        raise InputError(
-            f"the links chain up to {largest} features into one association set; the "
-            f"distributed detection (every robot holds every feature of its sets, eq. 5) "
-            f"would need about {need:.1f} GB, above the limit of {limit_gb:g} GB; such sets "
-            f"come from wrong links: clean them first, or raise the limit with {flag}")
+    budget.add(f"the distributed detection (the links chain up to {largest} features into "
+               "one association set; every robot holds every feature of its sets, eq. 5)",
+               entries * BYTES_PER_ENTRY,
+               "such sets come from wrong links: clean them first")
+
+
+def check_formation_memory(n_robots: int, size: tuple[int, int], limit,
+                           flag: str = "--max-memory-gb") -> None:
+    """InputError, before anything is rendered, when a formation of ``n_robots`` robots at
+    ``size`` would need more than ``limit`` GB (:data:`BYTES_PER_ROBOT_PIXEL`)."""
+    w, h = size
+    MemoryBudget(limit, flag).add(
+        f"rendering and cleaning the views of {n_robots} robots at {w}x{h}",
+        n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")

@@ -55,7 +55,8 @@ from pipeline.errors import InputError
 from pipeline.inputs.linkscsv import MAX_ID
 
 __all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
-           "check_comm_edges", "comm_edges_for", "links_off_graph", "edge_set"]
+           "check_comm_edges", "comm_edges_for", "diameter_lower_bound", "links_off_graph",
+           "edge_set"]
 
 #: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``seq:K``).
 GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
@@ -253,20 +254,16 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
         non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
         — naming the file and line.
     """
-    from pipeline.inputs.csvfields import line_fields
+    from pipeline.inputs.csvfields import line_fields, text_lines
     from pipeline.outputs import require_input_file
 
     path = Path(path)
     require_input_file(path, "comm graph file")
-    try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except (UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"graph file {str(path)!r} is not a text file ({exc})") from None
     by_name = None if names is None else {name: k for k, name in enumerate(names)}
     edges = []
     header_allowed = True
-    for line_no, raw in enumerate(lines, start=1):
-        tokens = line_fields(raw)
+    for line_no, raw in text_lines(path, "graph file"):
+        tokens = line_fields(raw, f"{path}, line {line_no}")
         if not tokens:
             continue
         if header_allowed and [t.lower() for t in tokens] == ["cam_i", "cam_j"]:
@@ -345,6 +342,39 @@ def check_comm_edges(comm_edges, n_cameras: int, *, what: str = "communication e
         raise InputError(f"{what} ({a}, {b}) is listed more than once; list each undirected "
                          "edge once")
     return edges
+
+
+def diameter_lower_bound(n: int, edges: np.ndarray) -> int:
+    """The largest hop distance found by two breadth-first sweeps in every connected
+    component of the graph on ``n`` nodes: a lower bound of the largest component's
+    diameter, exact on paths and trees (the second sweep starts at a farthest node of the
+    first). Linear in the nodes and edges."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if n <= 1 or not len(e):
+        return 0
+    graph = sp.csr_matrix((np.ones(2 * len(e), dtype=bool),
+                           (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+
+    def depths(sources: np.ndarray) -> np.ndarray:
+        # one BFS from a virtual node n joined to one source per component
+        a = np.r_[np.repeat(np.arange(n), np.diff(graph.indptr)), np.full(len(sources), n)]
+        b = np.r_[graph.indices, sources]
+        g = sp.csr_matrix((np.ones(len(a), dtype=bool), (a, b)), shape=(n + 1, n + 1))
+        order, pred = breadth_first_order(g, n, directed=True, return_predecessors=True)
+        depth = np.zeros(n + 1, dtype=np.int64)
+        for u in order[1:].tolist():
+            depth[u] = depth[pred[u]] + 1
+        return depth[:n] - 1
+
+    first = np.unique(label, return_index=True)[1]
+    d1 = depths(first)
+    far = np.lexsort((-d1, label))  # per component, a farthest node first
+    starts = far[np.r_[True, label[far][1:] != label[far][:-1]]]
+    return int(depths(starts).max(initial=0))
 
 
 def links_off_graph(links, edges: np.ndarray, n: int) -> np.ndarray:

@@ -9,9 +9,10 @@ and what to do, raised before any work is done):
   a socket or a symbolic link is never replaced or written through.
 - An existing output file is replaced only with ``--overwrite``.
 - A run folder (``--out`` of ``run-formation`` / ``run-images``) is replaced as a whole, so it
-  must be a new name, an empty folder or a folder that carries the run marker
-  (:data:`RUN_MARKER`, written into every run folder); it may not be a symbolic link, ``/``,
-  the current folder or one of its parents, nor an input or a folder holding an input.
+  must be a new name, an empty folder or a folder whose run marker (:data:`RUN_MARKER`,
+  written into every run folder) proves that a run wrote it and that every entry in it is one
+  that run wrote, unchanged (see :func:`run_folder_problem`); it may not be a symbolic link,
+  ``/``, the current folder or one of its parents, nor an input or a folder holding an input.
 - The folder an output goes into must be writable.
 
 Reading: :func:`require_input_file` says "is a folder" or "no such file" for a bad input file.
@@ -19,6 +20,8 @@ Reading: :func:`require_input_file` says "is a folder" or "no such file" for a b
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import stat
 from collections.abc import Iterable
@@ -26,11 +29,177 @@ from pathlib import Path
 
 from pipeline.errors import InputError
 
-__all__ = ["RUN_MARKER", "check_output_files", "check_run_folder", "refuse_unsafe_target",
-           "require_input_file"]
+__all__ = ["RUN_MARKER", "check_output_files", "check_run_folder", "ownership_proof",
+           "read_small_text", "refuse_unsafe_target", "require_input_file", "run_folder_problem",
+           "own_folder", "write_run_marker"]
 
 #: File written into every run folder; only a folder holding it may be replaced by a new run.
 RUN_MARKER = ".formation-match-run"
+#: first line of :data:`RUN_MARKER` in a finished run / in a staging folder being written
+_RUN_HEAD, _STAGING_HEAD = "formation-match run folder", "formation-match staging folder"
+#: largest marker read (its listing grows with the files of the run: a few hundred bytes each)
+_MARKER_MAX_BYTES = 4 * 2**20
+
+
+def ownership_proof(st: os.stat_result, kind: str) -> str:
+    """A digest tying an entry this program created to its inode (``kind``: what it is, e.g.
+    ``"folder"``, ``"lock"``). Written into the entry when it is made, it tells the entry apart
+    from anything a user put under a similar name: a copy, a rename of another file or a
+    hand-written one does not carry the digest of its own inode."""
+    h = hashlib.blake2b(f"{kind} {st.st_ino}".encode(), digest_size=16,
+                        key=b"formation-match: entry created by this program")
+    return h.hexdigest()
+
+
+def _listing(folder: Path) -> list[list]:
+    """``[relative path, kind, size, mtime_ns]`` of every entry below ``folder`` but the
+    marker, sorted; symbolic links are listed, never followed (kind ``l``; ``d`` folder,
+    ``f`` file, ``o`` other)."""
+    out = []
+
+    def walk(d: Path, rel: str) -> None:
+        with os.scandir(d) as it:
+            entries = sorted(it, key=lambda e: e.name)
+        for e in entries:
+            name = f"{rel}{e.name}"
+            if name == RUN_MARKER:
+                continue
+            st = e.stat(follow_symlinks=False)
+            if stat.S_ISDIR(st.st_mode):
+                out.append([name, "d", 0, 0])
+                walk(Path(e.path), name + "/")
+            elif stat.S_ISREG(st.st_mode):
+                out.append([name, "f", st.st_size, st.st_mtime_ns])
+            else:
+                out.append([name, "l" if stat.S_ISLNK(st.st_mode) else "o", 0, 0])
+
+    walk(folder, "")
+    return out
+
+
+def _files_digest(listing: list[list]) -> str:
+    body = json.dumps(listing, separators=(",", ":")).encode()
+    return hashlib.blake2b(body, digest_size=16,
+                           key=b"formation-match: files of a finished run").hexdigest()
+
+
+def write_run_marker(folder: str | os.PathLike, finished: bool) -> None:
+    """Write :data:`RUN_MARKER` into ``folder``, a folder this program just created.
+
+    Both states carry :func:`ownership_proof` of the folder's inode. A ``finished`` run's
+    marker also lists every entry of the folder (path, size, modification time) with a digest
+    of that list, so that a later run replaces it only while it holds nothing else
+    (:func:`run_folder_problem`); a staging folder's marker (``finished=False``) only says that
+    this program made it, so that a run killed while writing it leaves a folder the next run
+    may remove.
+    """
+    folder = Path(folder)
+    lines = [_RUN_HEAD if finished else _STAGING_HEAD,
+             f"own {ownership_proof(os.lstat(folder), 'folder')}"]
+    if finished:
+        listing = _listing(folder)
+        lines += [f"files {_files_digest(listing)}", json.dumps(listing)]
+    tmp = folder / f"{RUN_MARKER}.new"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o666)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+    os.replace(tmp, folder / RUN_MARKER)
+
+
+def read_small_text(path: str | os.PathLike, max_bytes: int) -> str | None:
+    """The UTF-8 text of the regular file ``path``; None when it is missing, not a regular
+    file (a symbolic link is never followed, a FIFO never waited on), larger than
+    ``max_bytes`` or not text. For files this program wrote and checks (markers,
+    summaries)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            return None
+        data = f.read(max_bytes + 1)
+    try:
+        return data.decode("utf-8") if len(data) <= max_bytes else None
+    except UnicodeDecodeError:
+        return None
+
+
+def _read_marker(folder: Path) -> list[str] | None:
+    """The marker's lines, or None (see :func:`read_small_text`)."""
+    text = read_small_text(folder / RUN_MARKER, _MARKER_MAX_BYTES)
+    return None if text is None else text.splitlines()
+
+
+def _examples(names: list[str], k: int = 3) -> str:
+    shown = ", ".join(repr(n) for n in names[:k])
+    return shown + (f" and {len(names) - k} more" if len(names) > k else "")
+
+
+def run_folder_problem(folder: str | os.PathLike, own: bool = False) -> str | None:
+    """Why the existing folder ``folder`` may not be replaced (deleted) as a run, or None.
+
+    It may be when its :data:`RUN_MARKER` is a finished run's, the marker's digest matches the
+    list it holds, and every entry now in the folder is in that list with the same size and
+    modification time (a file a user added or changed would be lost). With ``own``, the
+    marker must also prove that this program created the folder itself (its inode), which a
+    copy does not. The reason, when there is one, names what would be lost.
+    """
+    folder = Path(folder)
+    try:
+        listing = _listing(folder)
+    except OSError as exc:
+        return f"cannot list it ({exc.strerror})"
+    lines = _read_marker(folder)
+    marker = os.path.lexists(folder / RUN_MARKER)
+    names = [e[0] for e in listing if "/" not in e[0]]
+    holds = (f"it holds {len(names)} entr{'y' if len(names) == 1 else 'ies'} "
+             f"({_examples(names)}) that replacing it would delete")
+    if not marker:
+        return f"it is not a formation-match run folder (no {RUN_MARKER} file in it); {holds}"
+    valid = (lines is not None and len(lines) == 4 and lines[0] == _RUN_HEAD
+             and lines[2] == f"files {_files_digest(_parse(lines[3]))}")
+    if valid and own:
+        valid = lines[1] == f"own {ownership_proof(os.lstat(folder), 'folder')}"
+    if not valid:
+        return (f"its {RUN_MARKER} was not written by a finished formation-match run (its "
+                f"content does not check out); {holds}")
+    recorded = {e[0]: e for e in _parse(lines[3])}
+    foreign = [e[0] for e in listing if recorded.get(e[0]) != e]
+    if foreign:
+        return (f"{len(foreign)} entr{'y' if len(foreign) == 1 else 'ies'} in it "
+                f"({_examples(foreign)}) {'was' if len(foreign) == 1 else 'were'} added or "
+                "changed after the run wrote it; replacing the folder would delete "
+                f"{'it' if len(foreign) == 1 else 'them'}")
+    return None
+
+
+def _parse(text: str) -> list[list]:
+    try:
+        data = json.loads(text)
+    except ValueError:
+        return []
+    return data if isinstance(data, list) else []
+
+
+def own_folder(folder: str | os.PathLike) -> bool:
+    """True when ``folder`` (not a symbolic link) is a staging folder this program created and
+    left (a run killed while writing it), holding nothing a user added later; or a finished
+    run folder this program created, with nothing of a user's in it (see
+    :func:`run_folder_problem`)."""
+    folder = Path(folder)
+    try:
+        st = os.lstat(folder)
+    except OSError:
+        return False
+    if not stat.S_ISDIR(st.st_mode):
+        return False
+    lines = _read_marker(folder)
+    if not lines or len(lines) < 2 or lines[1] != f"own {ownership_proof(st, 'folder')}":
+        return False
+    if lines[0] == _STAGING_HEAD and len(lines) == 2:
+        return True
+    return run_folder_problem(folder, own=True) is None
 
 Named = Iterable[tuple[str, "str | os.PathLike | None"]]
 
@@ -172,15 +341,13 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
         if not p.is_dir():
             raise InputError(f"{flag} {str(out)!r} is a file; a run is written as a folder: "
                              "choose a folder name")
-        if not (p / RUN_MARKER).is_file():
-            try:
-                empty = next(p.iterdir(), None) is None
-            except OSError as exc:
-                raise InputError(f"{flag} {str(out)!r}: cannot list it ({exc.strerror})") from None
-            if not empty:
-                raise InputError(
-                    f"{flag} {str(out)!r} exists and is not a formation-match run folder (no "
-                    f"{RUN_MARKER} file in it); it is never replaced: choose another --out, or "
-                    "move it away yourself")
+        try:
+            empty = next(p.iterdir(), None) is None
+        except OSError as exc:
+            raise InputError(f"{flag} {str(out)!r}: cannot list it ({exc.strerror})") from None
+        problem = None if empty else run_folder_problem(p)
+        if problem is not None:
+            raise InputError(f"{flag} {str(out)!r} exists and may not be replaced: {problem}; "
+                             "choose another --out, or move what you keep away yourself")
     _check_writable_folder(p, flag)
     return p

@@ -1,25 +1,42 @@
-"""Atomic run folders (docs/DESIGN.md "Run outputs — a contract").
+"""Atomic run folders and output files (docs/DESIGN.md "Run outputs — a contract").
 
 A run writes into a staging folder ``.NAME.tmp-*`` beside ``NAME``; only when everything is
 written is it put in place. Guarantees:
 
 - **Only our own run folders are replaced.** Every run folder carries the marker file
-  :data:`~pipeline.outputs.RUN_MARKER`; :func:`~pipeline.outputs.check_run_folder` refuses any
-  other existing non-empty folder, a file, a symbolic link, ``/``, the current folder or its
-  parents, and a folder holding an input.
+  :data:`~pipeline.outputs.RUN_MARKER`, which lists what the run wrote;
+  :func:`~pipeline.outputs.check_run_folder` refuses any other existing non-empty folder, a run
+  folder holding anything a user added or changed, a file, a symbolic link, ``/``, the
+  current folder or its parents, and a folder holding an input.
+- **Only our own sibling entries are touched.** Beside ``NAME`` a run uses ``.NAME.tmp-R``
+  (staging), ``.NAME.old-R`` (the previous run, see below), ``.NAME.lock`` and
+  ``.NAME.lock-R`` (``R`` a random part). Each one carries, from the instant it appears under
+  its name, a digest of its own inode (:func:`~pipeline.outputs.ownership_proof`): in the
+  folder's marker, in the lock file's first line. An entry of such a name without it (a
+  user's folder, file or symbolic link) is never removed, renamed or written through:
+  a foreign ``.NAME.lock`` stops the run with an error naming it; a foreign
+  ``.NAME.tmp-*`` / ``.NAME.old-*`` is left alone. Entries are opened with ``O_NOFOLLOW`` and
+  created with ``O_EXCL`` (or renamed into place without replacing, ``RENAME_NOREPLACE``).
 - **One writer per run folder.** A run holds an exclusive ``fcntl.flock`` on ``.NAME.lock``
-  beside the folder (holding its pid) from :func:`claim_run_folder` (the start of a command)
-  until its folder is in place. A second run into the same ``--out`` does not wait: it stops
-  at once with an InputError naming the pid that holds the folder.
+  (holding its pid) from :func:`claim_run_folder` (the start of a command) until its folder
+  is in place. The lock file is written and locked under a random name and then linked to
+  ``.NAME.lock`` without replacing anything, so it is never seen half-written. A second run
+  into the same ``--out`` does not wait: it stops at once with an InputError naming the pid
+  that holds the folder.
 - **Either the old or the new run is in place at every instant.** The staging folder and the
   old run are swapped in one ``renameat2(RENAME_EXCHANGE)`` system call (Linux); where the file
-  system lacks it, the old run is renamed ``.NAME.old-PID`` and the new one renamed into place
+  system lacks it, the old run is renamed ``.NAME.old-R`` and the new one renamed into place
   (two steps). A run killed between those two steps leaves ``NAME`` missing and
-  ``.NAME.old-PID`` present: the next run into ``NAME`` restores it when it takes the lock.
+  ``.NAME.old-R`` present: the next run into ``NAME`` restores it when it takes the lock.
 - **No leftovers.** Under the lock no other run can be staging ``NAME``, so every
-  ``.NAME.tmp-*`` and ``.NAME.old-*`` found then belongs to a dead run and is removed.
-  The lock file is removed by its holder while still locked; a run that locked a file
-  already removed retries on the new one.
+  ``.NAME.tmp-*`` and ``.NAME.old-*`` of ours found then belongs to a dead run and is removed
+  (one holding anything a user added is left alone). The lock file is removed by its holder
+  while still locked; a run that locked a file already removed retries on the new one.
+
+Output files (:func:`atomic_file`, :class:`OutputFiles`) are written to a temporary name and
+renamed into place; a command's outputs are all written before any is put in place, and one
+that may not replace an existing file is put in place without replacing (an output created
+by someone else while the command worked is kept, and the command says so).
 """
 
 from __future__ import annotations
@@ -29,7 +46,9 @@ import errno
 import fcntl
 import json
 import os
+import secrets
 import shutil
+import stat
 import sys
 import tempfile
 from contextlib import contextmanager
@@ -38,9 +57,17 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
-from pipeline.outputs import RUN_MARKER, check_run_folder, refuse_unsafe_target
+from pipeline.outputs import (
+    check_run_folder,
+    own_folder,
+    ownership_proof,
+    refuse_unsafe_target,
+    run_folder_problem,
+    write_run_marker,
+)
 
-__all__ = ["atomic_file", "atomic_run_folder", "claim_run_folder", "write_json_atomic"]
+__all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
+           "publish", "publish_mode", "write_json_atomic"]
 
 
 def _umask() -> int:
@@ -49,7 +76,7 @@ def _umask() -> int:
     return mask
 
 
-def _publish_mode(path: str | os.PathLike, directory: bool) -> None:
+def publish_mode(path: str | os.PathLike, directory: bool) -> None:
     """Give a temp file/folder the mode a plain ``open``/``mkdir`` would have given it
     (``mkstemp``/``mkdtemp`` create them private, 0600/0700)."""
     os.chmod(path, (0o777 if directory else 0o666) & ~_umask())
@@ -67,36 +94,206 @@ def _json_default(obj):
     raise TypeError(f"not JSON serializable: {type(obj).__name__}")
 
 
+# ------------------------------------------------------------------------------ renames
+
+_RENAME_NOREPLACE = 1
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _renameat2():
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return None
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    fn.restype = ctypes.c_int
+    return fn
+
+
+def _rename2(a: str | os.PathLike, b: str | os.PathLike, flags: int) -> bool:
+    """``renameat2(a, b, flags)``; False where the system or the file system lacks it."""
+    fn = _renameat2()
+    if fn is None:
+        return False
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), flags) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP, errno.EPERM):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _rename_noreplace(a: str | os.PathLike, b: str | os.PathLike) -> None:
+    """Rename ``a`` to ``b``; FileExistsError if ``b`` exists (even as a dangling link)."""
+    if _rename2(a, b, _RENAME_NOREPLACE):
+        return
+    if os.path.lexists(b):
+        raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(b))
+    os.rename(a, b)
+
+
+def publish(tmp: str | os.PathLike, path: str | os.PathLike, replace: bool) -> None:
+    """Put the finished file ``tmp`` at ``path`` in one step.
+
+    With ``replace`` an existing ``path`` is replaced (``os.replace``); without, nothing is:
+    FileExistsError if ``path`` exists, however it came there (an output made by someone else
+    while the command worked is kept). A symbolic link at ``path`` is never followed.
+    """
+    if replace:
+        os.replace(tmp, path)
+        return
+    if _rename2(tmp, path, _RENAME_NOREPLACE):
+        return
+    try:
+        os.link(tmp, path)  # atomic, and fails on any existing entry
+    except FileExistsError:
+        raise
+    except OSError:  # a file system without hard links
+        _rename_noreplace(tmp, path)
+        return
+    os.unlink(tmp)
+
+
+def _appeared(path: Path, flag: str) -> InputError:
+    return InputError(f"{flag} {str(path)!r} was created by someone else while this command "
+                      "worked; it is kept as it is and nothing was written there: pass "
+                      "--overwrite to replace it, or choose a new name")
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming ``path`` when it names no file (a full disk, a file-size limit)."""
+    if exc.filename is None and exc.errno is not None:
+        return OSError(exc.errno, exc.strerror, str(path))
+    return exc
+
+
 @contextmanager
-def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = None):
-    """Open a temporary file beside ``path``; on success it replaces ``path`` in one rename.
+def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = None,
+                replace: bool = True, flag: str = "output"):
+    """Open a temporary file beside ``path``; on success it is put at ``path`` in one rename.
 
     On any error the temporary file is removed and ``path`` is left as it was. A ``path``
     that is a symbolic link, a folder or a special file (``/dev/null``, a FIFO) is refused
-    (InputError) rather than replaced.
+    (InputError) rather than replaced. Without ``replace`` an existing ``path`` is never
+    replaced, even one that appeared while the file was written (InputError naming
+    ``flag``). An error writing the file names ``path``.
     """
     path = Path(path)
-    refuse_unsafe_target(path)
+    refuse_unsafe_target(path, flag)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, mode, newline=newline) as f:
-            yield f
-        _publish_mode(tmp, directory=False)
-        refuse_unsafe_target(path)
-        os.replace(tmp, path)
+        try:
+            with os.fdopen(fd, mode, newline=newline) as f:
+                yield f
+        except OSError as exc:
+            raise _named(exc, path) from None
+        publish_mode(tmp, directory=False)
+        refuse_unsafe_target(path, flag)
+        try:
+            publish(tmp, path, replace)
+        except FileExistsError:
+            raise _appeared(path, flag) from None
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
 
 
-def write_json_atomic(path: str | os.PathLike, data) -> Path:
+def write_json_atomic(path: str | os.PathLike, data, replace: bool = True,
+                      flag: str = "output") -> Path:
     """Write ``data`` as indented JSON to ``path`` atomically (see :func:`atomic_file`)."""
-    with atomic_file(path) as f:
+    with atomic_file(path, replace=replace, flag=flag) as f:
         json.dump(data, f, indent=2, default=_json_default)
         f.write("\n")
     return Path(path)
+
+
+class OutputFiles:
+    """The output files of one command, written first and put in place together at the end.
+
+    :meth:`path` gives a temporary file beside each output for any writer to fill (or replace
+    atomically); leaving the ``with`` block normally puts every one in place
+    (:func:`publish`, replacing existing files only with ``replace``, i.e. ``--overwrite``),
+    with the mode a plain ``open`` gives (the umask). On any error, or an output that appeared
+    meanwhile without ``replace``, none is left: the temporary files are removed, and so are
+    the outputs this block had already put in place as new files.
+
+    Example
+    -------
+    >>> import pathlib, tempfile
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> with OutputFiles(replace=False) as out:
+    ...     _ = out.path(d / "a.csv", "--out").write_text("a")
+    ...     _ = out.path(d / "b.json", "--report").write_text("{}")
+    >>> sorted(p.name for p in d.iterdir())
+    ['a.csv', 'b.json']
+    """
+
+    def __init__(self, replace: bool):
+        self.replace = bool(replace)
+        self._items: list[tuple[Path, Path, str]] = []
+
+    def path(self, target: str | os.PathLike, flag: str = "output") -> Path:
+        """A new empty temporary file beside ``target`` (kept extension), put at ``target``
+        when the block ends."""
+        target = Path(target)
+        refuse_unsafe_target(target, flag)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{target.suffix}",
+                                   dir=target.parent)
+        os.close(fd)
+        self._items.append((Path(tmp), target, flag))
+        return Path(tmp)
+
+    def __enter__(self) -> OutputFiles:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                self._commit()
+            elif isinstance(exc, OSError) and exc.filename is not None:
+                # an error writing a temporary file (or a writer's own temporary beside it)
+                # names the output the user gave
+                name = os.path.basename(os.fsdecode(exc.filename))
+                for tmp, target, _ in self._items:
+                    if name == tmp.name or name.startswith(f".{tmp.name}."):
+                        raise OSError(exc.errno, exc.strerror, str(target)) from None
+        finally:
+            for tmp, _, _ in self._items:
+                if os.path.lexists(tmp):
+                    os.unlink(tmp)
+
+    def _commit(self) -> None:
+        done: list[Path] = []
+        try:
+            for tmp, target, flag in self._items:
+                if not tmp.is_file():
+                    raise InputError(f"{flag} {str(target)!r}: its temporary file {str(tmp)!r} "
+                                     "was removed while the command worked; nothing was written")
+                publish_mode(tmp, directory=False)
+                refuse_unsafe_target(target, flag)
+                try:
+                    publish(tmp, target, self.replace)
+                except FileExistsError:
+                    raise _appeared(target, flag) from None
+                except OSError as exc:
+                    raise _named(exc, target) from None
+                done.append(target)
+        except BaseException:
+            if not self.replace:  # files this block created: leave none
+                for target in done:
+                    if os.path.lexists(target):
+                        os.unlink(target)
+            raise
+
+
+def output_path(outputs: OutputFiles | None, target: str | os.PathLike, flag: str) -> Path:
+    """Where to write the output ``target``: a temporary file of ``outputs``, or ``target``
+    itself without ``outputs`` (a library call writing one file at once)."""
+    return Path(target) if outputs is None else outputs.path(target, flag)
 
 
 # ------------------------------------------------------------------------------ the lock
@@ -109,25 +306,32 @@ def _key(out: Path) -> str:
     return os.path.join(os.path.realpath(out.parent), out.name)
 
 
-def _leftovers(out: Path, kind: str) -> list[Path]:
+def _siblings(out: Path, kind: str) -> list[Path]:
+    """Entries named ``.NAME.KIND-*`` beside ``out`` (whoever made them)."""
     prefix = f".{out.name}.{kind}-"
     try:
         return sorted(p for p in out.parent.iterdir() if p.name.startswith(prefix))
-    except FileNotFoundError:
+    except OSError:
         return []
 
 
 def _recover(out: Path) -> None:
-    """Under the lock: restore a run lost between the two renames, drop dead leftovers."""
-    olds = _leftovers(out, "old")
+    """Under the lock: restore a run lost between the two renames, drop dead leftovers.
+
+    Only entries this program made are touched (:func:`pipeline.outputs.own_folder`, the lock
+    file's proof); a user's entry of the same name is left as it is.
+    """
+    olds = [p for p in _siblings(out, "old") if own_folder(p)]
     if olds and not os.path.lexists(out):
-        newest = max(olds, key=lambda p: p.stat().st_mtime)
-        os.rename(newest, out)
+        newest = max(olds, key=lambda p: p.lstat().st_ctime)
+        _rename_noreplace(newest, out)
         olds.remove(newest)
         print(f"note: restored the previous run {out} from {newest.name} (a run was stopped "
               "while putting its folder in place)", file=sys.stderr)
-    for p in olds + _leftovers(out, "tmp"):
+    for p in olds + [p for p in _siblings(out, "tmp") if own_folder(p)]:
         shutil.rmtree(p, ignore_errors=True)
+    for p in _siblings(out, "lock"):
+        _drop_dead_lock(p)
 
 
 @contextmanager
@@ -140,8 +344,8 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
     Raises
     ------
     InputError
-        ``out`` may not be replaced (see :mod:`pipeline.outputs`), or another live run holds
-        it (the message names its pid).
+        ``out`` may not be replaced (see :mod:`pipeline.outputs`), another live run holds
+        it (the message names its pid), or ``.NAME.lock`` beside it is not a lock of ours.
     """
     out = Path(out)
     key = _key(out)
@@ -157,7 +361,6 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
     lock = out.parent / f".{out.name}.lock"
     fd = _lock(lock, out, flag)
     try:
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         _held[key] = [fd, 1]
         try:
             _recover(out)
@@ -165,82 +368,173 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
             yield out
         finally:
             del _held[key]
-            os.unlink(lock)  # while still locked: see _lock
+            _unlink_if_same(lock, fd)  # while still locked: see _lock; only our own file
     finally:
         os.close(fd)  # releases the flock
 
 
+_LOCK_HEAD = "formation-match lock"
+
+
+def _lock_pid(fd: int) -> str | None:
+    """The pid written in the open lock file ``fd``; None when it is not a lock this program
+    wrote (not a regular file, or its first line lacks the proof of its own inode)."""
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    lines = os.pread(fd, 256, 0).decode("utf-8", errors="replace").splitlines()
+    if len(lines) < 2 or lines[0] != f"{_LOCK_HEAD} {ownership_proof(st, 'lock')}" \
+            or not lines[1].startswith("pid "):
+        return None
+    return lines[1][4:].strip() or "?"
+
+
+def _new_lock(lock: Path) -> tuple[int, Path]:
+    """A locked lock file of ours under a random name ``.NAME.lock-R``, its content written."""
+    fd, tmp = tempfile.mkstemp(prefix=f"{lock.name}-", dir=lock.parent)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # a new file: nobody else holds it
+        os.write(fd, f"{_LOCK_HEAD} {ownership_proof(os.fstat(fd), 'lock')}\n"
+                     f"pid {os.getpid()}\n".encode())
+        os.fchmod(fd, 0o666 & ~_umask())
+    except BaseException:
+        os.close(fd)
+        os.unlink(tmp)
+        raise
+    return fd, Path(tmp)
+
+
 def _lock(lock: Path, out: Path, flag: str) -> int:
-    """Open and flock ``lock``; the fd. The holder unlinks the file before unlocking, so a
-    lock taken on a file that is no longer at ``lock`` is stale: drop it and try again."""
-    while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    """Hold ``lock``: our own lock file, locked and written first, is put at ``lock`` without
+    replacing anything; an existing lock of a dead run is removed first. The fd."""
+    fd, tmp = _new_lock(lock)
+    try:
+        while True:
+            try:
+                publish(tmp, lock, replace=False)
+                return fd
+            except FileExistsError:
+                _clear_stale_lock(lock, out, flag)
+    except BaseException:
+        os.close(fd)
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _open_entry(path: Path) -> int | None:
+    """``path`` opened read only without following a link or blocking; None if gone."""
+    try:
+        return os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except FileNotFoundError:
+        return None
+
+
+def _clear_stale_lock(lock: Path, out: Path, flag: str) -> None:
+    """``lock`` exists: InputError when a live run holds it or it is not ours; removed when
+    its run died."""
+    where = f"{flag} {str(out)!r}: {str(lock)!r} beside it"
+    try:
+        efd = _open_entry(lock)
+    except OSError as exc:
+        if exc.errno != errno.ELOOP:
+            raise
+        raise InputError(f"{where} is a symbolic link, not a lock file of formation-match; it "
+                         "is never written through or removed: move it away yourself, or "
+                         "choose another --out") from None
+    if efd is None:
+        return
+    try:
+        pid = _lock_pid(efd)
+        if pid is None:
+            raise InputError(f"{where} is not a lock file of formation-match (it lacks the "
+                             "first line a run writes there); it is never replaced or removed: "
+                             "move it away yourself, or choose another --out")
+        try:
+            fcntl.flock(efd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{flag} {str(out)!r} is being written by another run (pid {pid}); "
+                             "wait for it to finish or choose another --out") from None
+        _unlink_if_same(lock, efd)  # its run died
+    finally:
+        os.close(efd)
+
+
+def _unlink_if_same(path: Path, fd: int) -> None:
+    """Remove ``path`` if it is still the file open as ``fd`` (nobody put another there)."""
+    try:
+        if os.lstat(path).st_ino == os.fstat(fd).st_ino:
+            os.unlink(path)
+    except FileNotFoundError:
+        pass
+
+
+def _drop_dead_lock(path: Path) -> None:
+    """Remove ``.NAME.lock-R`` if it is a lock file of ours that no live process holds."""
+    try:
+        fd = _open_entry(path)
+    except OSError:
+        return
+    if fd is None:
+        return
+    try:
+        if _lock_pid(fd) is None:
+            return
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            pid = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-            os.close(fd)
-            raise InputError(f"{flag} {str(out)!r} is being written by another run (pid {pid}); "
-                             "wait for it to finish or choose another --out") from None
-        try:
-            same = os.stat(lock).st_ino == os.fstat(fd).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            return fd
+            return  # a live run is taking its lock
+        _unlink_if_same(path, fd)
+    except OSError:
+        return
+    finally:
         os.close(fd)
 
 
 # ------------------------------------------------------------------------------ the swap
 
-_RENAME_EXCHANGE = 2
-_AT_FDCWD = -100
-
-
-def _renameat2():
-    try:
-        fn = ctypes.CDLL(None, use_errno=True).renameat2
-    except (AttributeError, OSError):
-        return None
-    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    fn.restype = ctypes.c_int
-    return fn
-
-
 def _exchange(a: Path, b: Path) -> bool:
     """Swap ``a`` and ``b`` in one system call; False where the system cannot."""
-    fn = _renameat2()
-    if fn is None:
-        return False
-    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP, errno.EPERM):
-        return False
-    raise OSError(err, os.strerror(err), str(b))
+    return _rename2(a, b, _RENAME_EXCHANGE)
+
+
+def _discard_previous(old: Path, out: Path) -> None:
+    """Delete the previous run, now at ``old``, unless something of a user's came into it
+    while this run worked: then it is kept under that name, and a warning says so."""
+    try:
+        os.rmdir(old)  # an empty folder given as --out: nothing to lose
+        return
+    except OSError:
+        pass
+    problem = run_folder_problem(old)
+    if problem is None:
+        shutil.rmtree(old, ignore_errors=True)
+        return
+    print(f"warning: the previous run in {out} was not deleted: {problem}; it is kept as "
+          f"{old}", file=sys.stderr)
 
 
 def _put_in_place(staged: Path, out: Path) -> None:
     """Replace ``out`` by ``staged`` so that one of the two complete runs is always at ``out``."""
     if not os.path.lexists(out):
-        os.rename(staged, out)
+        _rename_noreplace(staged, out)
         return
     if _exchange(staged, out):
-        shutil.rmtree(staged, ignore_errors=True)  # now holds the old run
+        _discard_previous(staged, out)  # now holds the old run
         return
-    old = out.parent / f".{out.name}.old-{os.getpid()}"
-    os.rename(out, old)
+    old = out.parent / f".{out.name}.old-{secrets.token_hex(6)}"
+    _rename_noreplace(out, old)
     os.rename(staged, out)  # a kill before this line is repaired by _recover
-    shutil.rmtree(old, ignore_errors=True)
+    _discard_previous(old, out)
 
 
 @contextmanager
 def atomic_run_folder(out: str | os.PathLike, inputs=()):
     """Yield a staging folder; on success it is put in place of ``out`` atomically.
 
-    The staging folder gets the run marker. Holds (or reuses) the lock of
-    :func:`claim_run_folder`. On any error the staging folder is removed and ``out`` is left
-    as it was.
+    The staging folder gets the run marker (first saying that this program made it, at the
+    end listing what the run wrote). Holds (or reuses) the lock of :func:`claim_run_folder`.
+    On any error the staging folder is removed and ``out`` is left as it was.
 
     Example
     -------
@@ -257,10 +551,10 @@ def atomic_run_folder(out: str | os.PathLike, inputs=()):
     with claim_run_folder(out, inputs):
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
         try:
+            write_run_marker(tmp, finished=False)
             yield tmp
-            (tmp / RUN_MARKER).write_text("formation-match run folder: a new run may replace "
-                                          "this folder\n")
-            _publish_mode(tmp, directory=True)
+            write_run_marker(tmp, finished=True)
+            publish_mode(tmp, directory=True)
             check_run_folder(out, inputs)  # nothing foreign was put there meanwhile
             _put_in_place(tmp, out)
         except BaseException:

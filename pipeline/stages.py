@@ -156,8 +156,9 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     Raises
     ------
     InputError
-        Links break Assumptions 2.1–2.3 or join cameras that are not neighbours, or a crash
-        names a robot that does not exist.
+        Links break Assumptions 2.1–2.3 or join cameras that are not neighbours, a crash
+        names a robot that does not exist, or the faulty run would take too long
+        (:func:`pipeline.faults.check_simulated_work`).
     """
     from pipeline.consistency import resolve_conflicts
 
@@ -166,9 +167,10 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     if faults is None or not faults.any:
         return resolve_conflicts(m, comm_edges, links, **kw), None
     from pipeline.commgraph import comm_edges_for
-    from pipeline.faults import fault_report
+    from pipeline.faults import check_simulated_work, fault_report
 
     edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
+    check_simulated_work(len(m), edges, faults)
     result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)),
                                protocol=faults.protocol_options(), **kw)
     return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links, **kw))

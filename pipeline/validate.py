@@ -10,6 +10,9 @@ naming the flag, the value and the accepted range. The stated limits:
 - ``--size WxH`` of a rendered formation: each side ``64x48`` at least and at most
   :data:`MAX_RENDER_SIDE`, at most :data:`MAX_RENDER_PIXELS` pixels (the renderer holds
   several full-size float arrays per camera: ~100 bytes a pixel over all of them).
+- ``--robots`` of a parametric formation: ``2 .. MAX_ROBOTS`` (robots drive 0.8 m apart, line
+  abreast: beyond a few hundred most see nothing of the facade; the memory of a run is
+  counted by :mod:`pipeline.budget` on top).
 - a focal length in pixels: finite and within ``FOCAL_RANGE`` times the image's longest
   side (outside it the field of view is either wider than a fisheye's or under 0.06°; such
   a K is a typo or a corrupt file).
@@ -21,12 +24,14 @@ import math
 
 from pipeline.errors import InputError
 
-__all__ = ["MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "FOCAL_RANGE", "tolerance_px",
-           "lowe_ratio", "threads", "seed", "render_size", "focal_px_ok", "check_focal"]
+__all__ = ["MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
+           "tolerance_px", "lowe_ratio", "threads", "seed", "render_size", "robots",
+           "focal_px_ok", "check_focal"]
 
 MAX_THREADS = 1024
 MAX_RENDER_SIDE = 8192
 MAX_RENDER_PIXELS = 4096 * 4096
+MAX_ROBOTS = 1000
 #: focal length / longest image side must lie in this range
 FOCAL_RANGE = (0.05, 1000.0)
 
@@ -72,6 +77,18 @@ def seed(value, flag: str) -> int:
         raise InputError(f"{flag} {value!r}: not an integer; give a seed >= 0, e.g. 0") from None
     if not 0 <= v < 2**63:
         raise InputError(f"{flag} {value}: a seed must be an integer from 0 to 2**63 - 1")
+    return v
+
+
+def robots(value, flag: str = "--robots") -> int:
+    """The number of robots of a parametric formation, ``2 .. MAX_ROBOTS``."""
+    try:
+        v = int(str(value).strip())
+    except ValueError:
+        raise InputError(f"{flag} {value!r}: not a whole number; give the number of robots, "
+                         "e.g. 10") from None
+    if not 2 <= v <= MAX_ROBOTS:
+        raise InputError(f"{flag} {value}: give a number of robots from 2 to {MAX_ROBOTS}")
     return v
 
 

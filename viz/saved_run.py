@@ -97,8 +97,12 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     """Write the Rerun recording of a saved run folder; return its path.
 
     ``out`` defaults to ``folder/recording.rrd`` when the folder has none (a run made with
-    ``--no-rerun``); an existing recording is never replaced unless named as ``out``.
+    ``--no-rerun``); an existing recording is never replaced unless named as ``out``. A
+    recording written into a run folder that held only what its run wrote is added to the
+    folder's marker, so that a next run may still replace the folder
+    (:func:`pipeline.outputs.run_folder_problem`).
     """
+    from pipeline.outputs import run_folder_problem, write_run_marker
     from viz.rerun_log import log_run
 
     folder = Path(folder)
@@ -106,8 +110,13 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
         out = folder / "recording.rrd"
         if out.exists():
             raise InputError(f"{out} exists; name another file with --out")
+    inside = Path(out).resolve().parent == folder.resolve()
+    pure_run = inside and run_folder_problem(folder) is None
     record = read_run_folder(folder)
-    return log_run(out, record, recording_name=folder.name)
+    path = log_run(out, record, recording_name=folder.name)
+    if pure_run:
+        write_run_marker(folder, finished=True)
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -8,6 +8,11 @@
   hloc, as the pipeline's :class:`~pipeline.types.Links`.
 - :func:`write_cleaned_database` — a copy of a database with some two-view-geometry inliers
   removed; the input file is never opened for writing.
+
+A user's database is read through SQLite, never by copying its bytes: its tables are checked
+first (:mod:`pipeline.inputs.dbcheck`), then ``VACUUM INTO`` takes a consistent private snapshot of
+it (with the changes still in its write-ahead log), which pycolmap reads and from which the
+cleaned copy is made.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +30,7 @@ import pycolmap
 
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.errors import InputError
-from pipeline.inputs.dbcheck import check_database_tables
+from pipeline.inputs.dbcheck import MAX_PAIR_ID_IMAGE, check_database_tables, open_readonly
 from pipeline.types import Features, Links, View
 
 __all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",
@@ -40,6 +46,8 @@ def _atomic_database(path: Path, copy_from: Path | None = None):
     With ``copy_from`` the temporary file starts as a copy of that database. On failure the
     temporary file and its SQLite side files are removed, so no half-written database is left.
     """
+    from pipeline.runfolder import publish_mode
+
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".db", dir=path.parent)
     os.close(fd)
@@ -49,6 +57,7 @@ def _atomic_database(path: Path, copy_from: Path | None = None):
         else:
             os.unlink(tmp)  # COLMAP creates the file itself
         yield tmp
+        publish_mode(tmp, directory=False)
         os.replace(tmp, path)
     except BaseException:
         for leftover in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
@@ -232,6 +241,10 @@ class DatabaseContents:
     not_one_to_one : ndarray, (L,) bool — a link whose feature is already linked to another
         feature of the same other image by an earlier inlier of that pair (COLMAP allows this
         when cross-check is off; the paper's Assumption 2.2 does not)
+    link_pair_id : ndarray, (L,) int64 — the ``pair_id`` of the two-view-geometry row holding
+        each link, as stored (its links are in the row's inlier order)
+    snapshot : Path or None — the private snapshot of the database that was read (kept while
+        this object lives; the cleaned copy is made from it)
     pairs_without_inliers : int — two-view geometries with no inliers (failed verification)
     fundamental : dict ``(i, j) -> (3, 3)`` — the pair's fundamental matrix in OpenCV pixels
         (``x_jᵀ F x_i = 0``), ``i < j``, for the pairs whose geometry has one
@@ -246,11 +259,20 @@ class DatabaseContents:
     pairs_without_inliers: int = 0
     fundamental: dict = field(default_factory=dict)
     cameras: list = field(default_factory=list)
+    link_pair_id: np.ndarray | None = None
+    snapshot: Path | None = None
+    _snapshot_dir: object = field(default=None, repr=False)
 
     @property
     def features_per_camera(self) -> np.ndarray:
         """Keypoints per camera, ``(n,)``."""
         return np.array([len(k) for k in self.keypoints], dtype=np.int64)
+
+    def close(self) -> None:
+        """Remove the private snapshot (also done when the object is collected)."""
+        if self._snapshot_dir is not None:
+            self._snapshot_dir()  # runs the removal once
+            self._snapshot_dir, self.snapshot = None, None
 
 
 def _first_occurrence(key: np.ndarray) -> np.ndarray:
@@ -270,20 +292,24 @@ def _xy(keypoints) -> np.ndarray:
 
 
 def check_database_file(path: Path) -> None:
-    """InputError unless ``path`` is an existing SQLite file."""
-    if not path.is_file():
-        raise InputError(f"database {str(path)!r} does not exist")
+    """InputError unless ``path`` is an existing regular file starting as an SQLite file
+    (a folder, a FIFO or a device is named as such, never opened for reading)."""
+    from pipeline.outputs import require_input_file
+
+    require_input_file(path, "database")
     with open(path, "rb") as fh:
         if fh.read(16) != b"SQLite format 3\x00":
             raise InputError(f"{str(path)!r} is not a COLMAP database (not an SQLite file)")
 
 
-def read_database(path: str | Path) -> DatabaseContents:
+def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
     """Read keypoints and two-view geometries from a COLMAP database (COLMAP or hloc made).
 
     Parameters
     ----------
-    path : the ``.db`` file; opened on a private copy so the file itself is never touched
+    path : the ``.db`` file; read through SQLite, read only (see the module notes)
+    check_sizes : called with the :class:`~pipeline.inputs.dbcheck.DatabaseSizes` the tables
+        declare before anything is copied or read (e.g. a memory guard that raises)
 
     Returns
     -------
@@ -292,15 +318,34 @@ def read_database(path: str | Path) -> DatabaseContents:
     Raises
     ------
     InputError
-        Missing file, not an SQLite/COLMAP database, fewer than two images, or no two-view
-        geometries (run COLMAP's matcher, or hloc's geometric verification, first).
+        Missing file, not an SQLite/COLMAP database, inconsistent tables, fewer than two
+        images, or no two-view geometries (run COLMAP's matcher, or hloc's geometric
+        verification, first).
     """
+    import sqlite3
+
     path = Path(path)
     check_database_file(path)
-    with tempfile.TemporaryDirectory(prefix="colmap-read-") as tmp:
-        copy = Path(tmp) / "read.db"
-        shutil.copyfile(path, copy)
-        check_database_tables(copy, shown=path)
+    con = open_readonly(path)
+    try:
+        sizes = check_database_tables(con, path)
+        if check_sizes is not None:
+            check_sizes(sizes)
+        snapshot_dir = tempfile.mkdtemp(prefix="colmap-read-")
+        copy = Path(snapshot_dir) / "read.db"
+        try:
+            con.execute("VACUUM INTO ?", (str(copy),))
+        except sqlite3.Error as exc:
+            shutil.rmtree(snapshot_dir, ignore_errors=True)
+            raise InputError(f"database {str(path)!r} cannot be read ({exc})") from None
+    finally:
+        con.close()
+    try:
+        snap = sqlite3.connect(copy)
+        try:
+            check_database_tables(snap, path)  # what pycolmap reads is what was checked
+        finally:
+            snap.close()
         try:
             with quiet_colmap(), pycolmap.Database.open(copy) as db:
                 images = db.read_all_images()
@@ -313,7 +358,13 @@ def read_database(path: str | Path) -> DatabaseContents:
                 cameras = {c.camera_id: c for c in db.read_all_cameras()}
         except (RuntimeError, ValueError, IndexError) as exc:
             raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
-    return _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras)
+        contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras)
+    except BaseException:
+        shutil.rmtree(snapshot_dir, ignore_errors=True)
+        raise
+    contents.snapshot = copy
+    contents._snapshot_dir = weakref.finalize(contents, shutil.rmtree, snapshot_dir, True)
+    return contents
 
 
 def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
@@ -336,7 +387,7 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     parts = []
     fundamental = {}
     for pid, g in usable:
-        id1, id2 = pycolmap.pair_id_to_image_pair(pid)
+        id1, id2 = divmod(int(pid), MAX_PAIR_ID_IMAGE)  # as stored (checked: both exist)
         a, b = cam_of_id[int(id1)], cam_of_id[int(id2)]
         m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
         F = _fundamental_px(g)
@@ -345,8 +396,9 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
             F = None if F is None else F.T
         if F is not None:
             fundamental[(a, b)] = F
-        parts.append((np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]))
-    ci, fi, cj, fj = (np.concatenate(col) for col in zip(*parts, strict=True))
+        parts.append((np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1],
+                      np.full(len(m), int(pid), dtype=np.int64)))
+    ci, fi, cj, fj, source = (np.concatenate(col) for col in zip(*parts, strict=True))
     m = np.array([len(k) for k in kps], dtype=np.int64)
     bad = np.flatnonzero((fi >= m[ci]) | (fj >= m[cj]))
     if bad.size:
@@ -365,7 +417,7 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
                             links=links, not_one_to_one=~one_to_one,
                             pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
                             cameras=[cameras.get(im.camera_id) for im in images],
-                            fundamental=fundamental)
+                            fundamental=fundamental, link_pair_id=source)
 
 
 def _fundamental_px(geometry) -> np.ndarray | None:
@@ -387,11 +439,13 @@ def _fundamental_px(geometry) -> np.ndarray | None:
 
 def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
                            keep: np.ndarray) -> Path:
-    """Copy ``contents.path`` to ``out_path`` keeping only the ``keep`` two-view inliers.
+    """Copy the database read as ``contents`` to ``out_path`` keeping only the ``keep``
+    two-view inliers.
 
     Parameters
     ----------
-    contents : DatabaseContents — from :func:`read_database`
+    contents : DatabaseContents — from :func:`read_database` (its snapshot is copied, so the
+        copy holds exactly what was read, even if the input changed since)
     out_path : new database file; must differ from the input
     keep : ndarray, (L,) bool — aligned with ``contents.links``
 
@@ -401,10 +455,14 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
 
     Notes
     -----
+    Every two-view-geometry row that holds links is rewritten with exactly the kept ones, in
+    its own stored orientation and order (the row is found by its stored ``pair_id``).
     Everything else (cameras, rigs, frames, keypoints, descriptors, the raw ``matches`` table,
     F/E/H of each pair) is copied unchanged; a pair left without inliers keeps its row with an
     empty inlier list, which COLMAP's mapper ignores like any pair below its match minimum.
     """
+    import sqlite3
+
     src, out_path = Path(contents.path), Path(out_path)
     keep = np.asarray(keep, dtype=bool)
     if keep.shape != (len(contents.links),):
@@ -412,25 +470,24 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
     if out_path.exists() and out_path.resolve() == src.resolve():
         raise InputError(f"--out {str(out_path)!r} is the input database; the input is never "
                          f"modified, choose a new file")
-    L = contents.links
-    # kept links as (image_id1, image_id2, idx1, idx2) keys in COLMAP's pair orientation
-    id_i, id_j = contents.image_ids[L.cam_i], contents.image_ids[L.cam_j]
-    swap = id_i > id_j
-    a_id, b_id = np.where(swap, id_j, id_i), np.where(swap, id_i, id_j)
-    a_f, b_f = np.where(swap, L.feat_j, L.feat_i), np.where(swap, L.feat_i, L.feat_j)
-    kept_by_pair = {(int(a), int(b)): np.stack([fa, fb], axis=1) for (a, b), (fa, fb) in
-                    _group_by_pair(a_id[keep], b_id[keep], a_f[keep], b_f[keep]).items()}
-    with _atomic_database(out_path, copy_from=src) as tmp, quiet_colmap(), \
-            pycolmap.Database.open(tmp) as db:
-        pair_ids, geometries = db.read_two_view_geometries()
-        for pid, g in zip(pair_ids, geometries, strict=True):
-            m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
-            if not len(m):
-                continue
-            id1, id2 = (int(v) for v in pycolmap.pair_id_to_image_pair(pid))
-            kept = kept_by_pair.get((id1, id2), np.zeros((0, 2), dtype=np.int64))
-            key = m[:, 0] * (1 << 32) + m[:, 1]
-            kept_key = kept[:, 0] * (1 << 32) + kept[:, 1]
-            g.inlier_matches = np.ascontiguousarray(m[np.isin(key, kept_key)], dtype=np.uint32)
-            db.update_two_view_geometry(id1, id2, g)
+    if contents.snapshot is None or contents.link_pair_id is None:
+        raise InputError("write_cleaned_database needs the contents returned by read_database")
+    source = contents.link_pair_id
+    with _atomic_database(out_path, copy_from=contents.snapshot) as tmp:
+        con = sqlite3.connect(tmp)
+        try:
+            for pid in np.unique(source).tolist():
+                sel = source == pid
+                rows, data = con.execute("SELECT rows, data FROM two_view_geometries WHERE "
+                                         "pair_id = ?", (pid,)).fetchone()
+                m = np.frombuffer(data or b"", dtype=np.uint32).reshape(-1, 2)
+                if len(m) != int(sel.sum()):
+                    raise InputError(f"database {str(src)!r}: pair_id {pid} holds {len(m)} "
+                                     f"inliers but {int(sel.sum())} were read")
+                kept = np.ascontiguousarray(m[keep[sel]])
+                con.execute("UPDATE two_view_geometries SET rows = ?, cols = 2, data = ? "
+                            "WHERE pair_id = ?", (len(kept), kept.tobytes(), pid))
+            con.commit()
+        finally:
+            con.close()
     return out_path

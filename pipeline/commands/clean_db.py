@@ -32,19 +32,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
     from pipeline.runs.clean_db import clean_database
-    from pipeline.runs.cleaned import side_paths
+    from pipeline.runs.cleaned import check_image_dir, side_paths
 
+    limit_gb(args.max_memory_gb)
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]
                        + ([] if args.no_rerun else [("OUT.rrd", rrd_out)]),
                        [("IN.db", args.database), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
-                         args.resolution, rerun=not args.no_rerun, image_dir=args.image_dir)
+    if not args.no_rerun:
+        check_image_dir(args.image_dir, [])  # the folder; its images once the names are read
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
+                             args.resolution, rerun=not args.no_rerun,
+                             image_dir=args.image_dir, outputs=outputs)
+        summary = flag_result(res.summary())
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), summary)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -56,9 +67,4 @@ def run(args) -> int:
     links_csv, rrd = side_paths(res.output)
     print(f"cleaned database written to {res.output}; what was cut: {links_csv}"
           + ("" if args.no_rerun else f", recording: {rrd}"))
-    summary = flag_result(res.summary())
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, summary)
     return exit_status(summary)

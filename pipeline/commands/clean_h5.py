@@ -7,8 +7,8 @@ hloc's matches made consistent; the job and what it writes are described in
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
+from pipeline.commands.options import add_overwrite_and_memory_options
 from pipeline.errors import InputError
 
 __all__ = ["add_arguments", "run"]
@@ -29,23 +29,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the images, to draw them in OUT.rrd (default: gray canvases)")
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace OUT.h5, its side files and --report if they exist "
-                        "(default: refuse)")
+    add_overwrite_and_memory_options(p, "OUT.h5, its side files and --report")
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
     from pipeline.runs.clean_h5 import clean_h5
-    from pipeline.runs.cleaned import side_paths
+    from pipeline.runs.cleaned import check_image_dir, side_paths
 
+    limit_gb(args.max_memory_gb)
     if not args.out:
         raise InputError("--out '': give the name of the cleaned matches file to write, e.g. "
                          "matches-clean.h5")
-    if args.image_dir is not None and not Path(args.image_dir).is_dir():
-        raise InputError(f"--image-dir {args.image_dir!r} is not a folder; give the folder of "
-                         "the images (or leave it out: gray canvases are drawn)")
+    if not args.no_rerun:
+        check_image_dir(args.image_dir, [])  # the folder; its images once the names are read
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]
@@ -53,17 +53,18 @@ def run(args) -> int:
                        [("--features", args.features), ("--matches", args.matches),
                         ("--pairs", args.pairs)],
                        overwrite=args.overwrite)
-    s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
-                             rerun=not args.no_rerun, image_dir=args.image_dir))
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
+                                 rerun=not args.no_rerun, image_dir=args.image_dir,
+                                 outputs=outputs, max_memory_gb=args.max_memory_gb))
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]
     print(f"{s['images']} images, {s['comm_edges']} image pairs, {s['links']} matches")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
     print(f"matches cut: {cut['resolution']} by resolution in {r['iterations']} iteration(s), "
           f"{cut['not-one-to-one']} not one-to-one")
-    print("written: " + ", ".join(s["written"]))
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, s)
+    print("written: " + ", ".join(s["written"] + ([args.report] if args.report else [])))
     return exit_status(s)

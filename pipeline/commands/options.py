@@ -13,7 +13,8 @@ from pipeline.errors import InputError
 from pipeline.validate import render_size
 
 __all__ = ["add_feature_options", "add_scene_options",
-           "add_resolution_option", "add_transport_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
+           "add_resolution_option", "add_transport_option", "add_merge_radius_option",
+           "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
 
 
@@ -129,12 +130,20 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def add_overwrite_and_memory_options(p: argparse.ArgumentParser, outputs: str) -> None:
     """``--overwrite`` (replace existing ``outputs``, else refuse) and ``--max-memory-gb`` (the
-    memory budget of the distributed detection, :mod:`pipeline.budget`), shared by the
-    commands that clean a user's matches (``resolve``, ``clean-db``)."""
-    from pipeline.budget import DEFAULT_LIMIT_GB
-
+    memory budget of the job, :mod:`pipeline.budget`; checked by
+    :func:`pipeline.budget.limit_gb`), shared by the commands that clean a user's matches
+    (``resolve``, ``clean-db``, ``clean-h5``)."""
     p.add_argument("--overwrite", action="store_true",
                    help=f"replace {outputs} if they exist (default: refuse)")
-    p.add_argument("--max-memory-gb", type=float, default=DEFAULT_LIMIT_GB, metavar="GB",
-                   help="refuse inputs whose distributed detection would need more memory "
-                        f"than this (estimate, see pipeline.budget; default {DEFAULT_LIMIT_GB:g})")
+    add_memory_option(p)
+
+
+def add_memory_option(p: argparse.ArgumentParser) -> None:
+    """``--max-memory-gb``: the memory budget of the job (:mod:`pipeline.budget`; checked by
+    :func:`pipeline.budget.limit_gb`)."""
+    from pipeline.budget import DEFAULT_LIMIT_GB
+
+    p.add_argument("--max-memory-gb", default=DEFAULT_LIMIT_GB, metavar="GB",
+                   help="refuse inputs whose run would need more memory than this, before "
+                        "allocating it (estimate, see pipeline.budget; default "
+                        f"{DEFAULT_LIMIT_GB:g})")

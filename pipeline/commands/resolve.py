@@ -37,17 +37,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from pipeline.budget import limit_gb
     from pipeline.consistency.rules import get_rule
     from pipeline.outcome import exit_status, flag_result
     from pipeline.outputs import check_output_files
+    from pipeline.runfolder import OutputFiles, write_json_atomic
     from pipeline.runs.resolve import resolve_file
 
+    limit_gb(args.max_memory_gb)
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
-    s = flag_result(resolve_file(args.links, args.out, args.comm_graph, faults_from_args(args),
-                                  args.max_memory_gb, resolution=args.resolution,
-                                  transport=args.transport))
+    # every output is written before any is put in place: an error leaves none of them
+    with OutputFiles(replace=args.overwrite) as outputs:
+        s = flag_result(resolve_file(args.links, args.out, args.comm_graph,
+                                     faults_from_args(args), args.max_memory_gb,
+                                     resolution=args.resolution, transport=args.transport,
+                                     outputs=outputs))
+        if args.report:
+            write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, r = s["before"], s["after"], s["resolution"]
     print(f"{s['cameras']} cameras, {s['comm_edges']} comm edges, {s['links']} links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
@@ -66,9 +74,5 @@ def run(args) -> int:
               f"retransmissions; +{f.get('extra_rounds', '?')} rounds, "
               f"+{f.get('extra_messages', '?')} messages "
               "vs fault-free")
-    print(f"written: {s['output']}")
-    if args.report:
-        from pipeline.runfolder import write_json_atomic
-
-        write_json_atomic(args.report, s)
+    print(f"written: {s['output']}" + (f", {args.report}" if args.report else ""))
     return exit_status(s)

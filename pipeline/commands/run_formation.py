@@ -8,6 +8,7 @@ import json
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
+    add_memory_option,
     add_merge_radius_option,
     add_resolution_option,
     add_scene_options,
@@ -25,8 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="formation a|b|c|d (comm graphs of increasing cycles; default d)")
     add_feature_options(p)
     add_scene_options(p)
-    p.add_argument("--robots", type=int, default=None,
-                   help="parametric formation: number of robots (use with --graph)")
+    p.add_argument("--robots", default=None,
+                   help=f"parametric formation: number of robots, 2 to {validate.MAX_ROBOTS} "
+                        "(use with --graph)")
     p.add_argument("--graph", default=None,
                    help="parametric formation: line|ring|ring2|complete|geometric")
     p.add_argument("--tol-px", type=float, default=2.0,
@@ -38,16 +40,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_merge_radius_option(p)
     add_fault_arguments(p)
     add_transport_option(p)
+    add_memory_option(p)
 
 
 def config_from_args(args) -> FormationConfig:
+    from pipeline.budget import check_formation_memory
+
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
     method, max_features = feature_options(args)
+    robots = None if args.robots is None else validate.robots(args.robots)
+    size = parse_size(args.size)
+    # formations a-d: the paper's 6 robots
+    check_formation_memory(robots if robots is not None else 6, size, args.max_memory_gb)
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
-                           size=parse_size(args.size),
+                           size=size,
                            features=method, max_features=max_features,
-                           robots=args.robots, graph=args.graph,
+                           robots=robots, graph=args.graph,
                            tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
                            faults=faults_from_args(args),

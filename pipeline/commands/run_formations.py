@@ -9,6 +9,7 @@ from pathlib import Path
 
 from pipeline.commands.options import (
     add_feature_options,
+    add_memory_option,
     add_merge_radius_option,
     add_resolution_option,
     add_scene_options,
@@ -17,7 +18,6 @@ from pipeline.commands.options import (
     parse_size,
 )
 from pipeline.evaluation.report import PAPER_TABLE_III_IV
-from pipeline.runfolder import atomic_file, write_json_atomic
 
 FORMATIONS = ("a", "b", "c", "d")
 
@@ -56,6 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_resolution_option(p, default="paper")
     add_transport_option(p)
     add_merge_radius_option(p)
+    add_memory_option(p)
 
 
 def _fmt(v) -> str:
@@ -119,19 +120,52 @@ def formations_table(reports: dict[str, dict]) -> str:
 
 
 SUMMARY_FILES = ("formations.md", "formations.json")
+#: the last line of formations.md: digests of both summaries as written (module notes)
+_PROOF = "<!-- written by formation-match run-formations: {md} {json} -->\n"
+#: largest summary file read to check it
+_MAX_SUMMARY_BYTES = 64 * 2**20
 
 
-def _written_by_us(path: Path) -> bool:
-    """True when ``path`` is a summary a previous ``run-formations`` wrote (its title line for
-    the Markdown table; an object keyed by formation names for the JSON)."""
-    try:
-        if path.suffix == ".md":
-            with path.open(encoding="utf-8") as f:
-                return f.readline().startswith("# Formations (a)–(d)")
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return False
-    return isinstance(data, dict) and bool(data) and set(data) <= set(FORMATIONS)
+def _digest(text: str) -> str:
+    import hashlib
+
+    return hashlib.blake2b(text.encode("utf-8"), digest_size=16,
+                           key=b"formation-match: run-formations summary").hexdigest()
+
+
+def _written_by_us(parent: Path) -> set[str]:
+    """The summary files of ``parent`` that a previous ``run-formations`` wrote and nobody
+    changed since: ``formations.md`` ends with a line holding the digests of its own text
+    and of ``formations.json`` as they were written."""
+    from pipeline.outputs import read_small_text
+
+    md = read_small_text(parent / "formations.md", _MAX_SUMMARY_BYTES)
+    if md is None or not md.endswith("-->\n"):
+        return set()
+    body, _, last = md[:-1].rpartition("\n")
+    body += "\n"
+    ours = set()
+    text = read_small_text(parent / "formations.json", _MAX_SUMMARY_BYTES)
+    if text is not None and last == _PROOF.format(md=_digest(body), json=_digest(text))[:-1]:
+        ours.add("formations.json")
+    parts = last.split()
+    if len(parts) == 8 and last == _PROOF.format(md=_digest(body), json=parts[6])[:-1]:
+        ours.add("formations.md")
+    return ours
+
+
+def write_summaries(parent: Path, markdown: str, reports: dict) -> tuple[Path, Path]:
+    """Write ``formations.md`` (``markdown`` and the proof line) and ``formations.json``
+    (``reports``) into ``parent``, both put in place together."""
+    from pipeline.runfolder import OutputFiles
+
+    text = json.dumps(reports, indent=2) + "\n"
+    md, js = parent / "formations.md", parent / "formations.json"
+    with OutputFiles(replace=True) as outputs:
+        outputs.path(md, "--out").write_text(
+            markdown + _PROOF.format(md=_digest(markdown), json=_digest(text)), encoding="utf-8")
+        outputs.path(js, "--out").write_text(text, encoding="utf-8")
+    return md, js
 
 
 def check_outputs(parent: Path, overwrite: bool) -> None:
@@ -147,10 +181,11 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
                          "runs: give a folder name, e.g. runs")
     for name in FORMATIONS:
         check_run_folder(parent / f"formation-{name}", flag="--out")
+    ours = _written_by_us(parent)
     for file_name in SUMMARY_FILES:
         path = parent / file_name
         refuse_unsafe_target(path, "--out")
-        if path.exists() and not overwrite and not _written_by_us(path):
+        if path.exists() and not overwrite and file_name not in ours:
             raise InputError(f"--out {str(parent)!r} holds {file_name}, which run-formations "
                              "did not write; pass --overwrite to replace it, or choose another "
                              "--out")
@@ -158,12 +193,14 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 
 def run(args) -> int:
     from pipeline import validate
+    from pipeline.budget import check_formation_memory
     from pipeline.runs.formation import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")
     resolution = args.resolution
     size = parse_size(args.size)
+    check_formation_memory(6, size, args.max_memory_gb)  # one formation of 6 at a time
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)
     reports = {}
@@ -175,12 +212,9 @@ def run(args) -> int:
         out = run_formation(cfg, transport=args.transport)
         reports[name] = json.loads((out / "report.json").read_text())
     table = formations_table(reports)
-    md = parent / "formations.md"
-    with atomic_file(md) as f:
-        f.write(f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}, "
-                f"resolution {args.resolution}\n\n"
-                + table)
-    write_json_atomic(parent / "formations.json", reports)
+    check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
+    md, js = write_summaries(parent, f"# Formations (a)–(d), seed {args.seed}, {method}, "
+                             f"{args.size}, resolution {args.resolution}\n\n" + table, reports)
     print(table)
-    print(f"saved {md} and {parent / 'formations.json'}")
+    print(f"saved {md} and {js}")
     return 0

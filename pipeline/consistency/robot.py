@@ -48,6 +48,9 @@ class Robot:
         Public feature counts of all robots (column offsets of ``X_i·``).
     link_nbr, link_r, link_s : array_like, (L_i,) int
         The robot's own associations: ``[W_{i, nbr}]_{r, s} = 1``.
+    offsets : ndarray, (n + 1,) int64, optional
+        The same public counts as read-only column offsets, shared by the robots of one team
+        (``features_per_camera`` is then not read), with ``key_base`` the largest count + 1.
 
     Attributes
     ----------
@@ -62,18 +65,27 @@ class Robot:
         unassigned.
     """
 
-    def __init__(self, robot_id: int, features_per_camera, link_nbr, link_r, link_s) -> None:
+    def __init__(self, robot_id: int, features_per_camera, link_nbr, link_r, link_s,
+                 offsets: np.ndarray | None = None, key_base: int | None = None) -> None:
         self.id = int(robot_id)
-        fpc = np.asarray(features_per_camera, dtype=np.int64)
-        self.n = int(fpc.shape[0])
-        self.offsets = np.concatenate([[0], np.cumsum(fpc)]).astype(np.int64)
-        self.m = int(fpc[self.id])
+        if offsets is None:
+            fpc = np.asarray(features_per_camera, dtype=np.int64)
+            offsets = np.concatenate([[0], np.cumsum(fpc)]).astype(np.int64)
+            offsets.flags.writeable = False
+            key_base = int(fpc.max(initial=0)) + 1
+        else:  # the team's public layout, one read-only array for all robots (memory
+            # then follows the links, not cameras squared)
+            if key_base is None:
+                key_base = int(np.diff(offsets).max(initial=0)) + 1
+        self.n = int(offsets.shape[0]) - 1
+        self.offsets = offsets
+        self.m = int(offsets[self.id + 1] - offsets[self.id])
         self.m_total = int(self.offsets[-1])
         nbr = np.asarray(link_nbr, dtype=np.int32)
         r = np.asarray(link_r, dtype=np.int32)
         s = np.asarray(link_s, dtype=np.int32)
         # key used to find the link (j, s) named by a neighbour's message
-        self._key_base = int(fpc.max(initial=0)) + 1
+        self._key_base = key_base
         key = nbr.astype(np.int64) * self._key_base + s
         if key.size > 1 and not (key[1:] > key[:-1]).all():  # else already in (j, s) order
             order = np.lexsort((s, nbr))

@@ -1,16 +1,73 @@
-"""Fields of one line of a user's text file (comm graphs): CSV quoting, comments, either
-comma- or whitespace-separated.
+"""Lines and fields of a user's text file (links, comm graphs, pairs, label tables).
 
-A line is split on commas when it has a comma outside double quotes, otherwise on runs of
-spaces or tabs. Double quotes follow CSV (:mod:`csv`): ``"my photo, #2.jpg"`` is one field,
-``""`` inside quotes is one quote. ``#`` outside quotes starts a comment.
+Lines (:func:`text_lines`, the one reader of these files): UTF-8 (a byte-order mark at the
+start is dropped), read line by line; a row ends only at ``\n`` or ``\r\n``, so a form feed,
+a vertical tab, U+2028 or any other character inside a row stays inside it (and makes that
+row wrong, naming it). A line longer than :data:`MAX_LINE_BYTES` is refused as soon as it is
+seen: no row of these files comes near it, and memory stays bounded whatever the file.
+
+Fields (:func:`line_fields`, comm graphs): a line is split on commas when it has a comma
+outside double quotes, otherwise on runs of spaces or tabs. Double quotes follow CSV
+(:mod:`csv`): ``"my photo, #2.jpg"`` is one field, ``""`` inside quotes is one quote. ``#``
+outside quotes starts a comment. :func:`csv_row` splits one CSV row; a row CSV cannot read
+(a carriage return inside it) is an InputError naming the file and line.
 """
 
 from __future__ import annotations
 
 import csv
+import os
+from collections.abc import Iterator
 
-__all__ = ["line_fields"]
+from pipeline.errors import InputError
+
+__all__ = ["MAX_LINE_BYTES", "csv_row", "line_fields", "text_lines"]
+
+#: longest line of a user's text file, in bytes (a row of these files holds a few numbers or
+#: two file names; :mod:`csv` itself stops at fields of 131,072 characters)
+MAX_LINE_BYTES = 65536
+
+
+def text_lines(path: str | os.PathLike, what: str) -> Iterator[tuple[int, str]]:
+    """``(line number, line)`` of each line of ``path``, without its ``\n`` / ``\r\n``.
+
+    Parameters
+    ----------
+    path : a regular file (checked by the caller)
+    what : how the messages name the file, e.g. ``"links file"``
+
+    Raises
+    ------
+    InputError
+        A line longer than :data:`MAX_LINE_BYTES`, or one that is not UTF-8 (naming it).
+    """
+    with open(path, "rb") as f:
+        lineno = 0
+        while raw := f.readline(MAX_LINE_BYTES + 1):
+            lineno += 1
+            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                raise InputError(f"{what} {os.fspath(path)!r}, line {lineno}: longer than "
+                                 f"{MAX_LINE_BYTES} bytes; a row of this file is a short line "
+                                 "of text: is it the right file?")
+            if lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise InputError(f"{what} {os.fspath(path)!r} is not a UTF-8 text file "
+                                 f"({exc.reason} at line {lineno}); give the text file "
+                                 "itself") from None
+            yield lineno, line.removesuffix("\n").removesuffix("\r")
+
+
+def csv_row(line: str, where: str, **fmt) -> list[str]:
+    """The fields of one CSV row ``line`` (``fmt``: :func:`csv.reader` options); InputError
+    naming ``where`` (e.g. ``FILE:LINE``) when CSV cannot read it."""
+    try:
+        return next(csv.reader([line], **fmt), [])
+    except csv.Error as exc:
+        raise InputError(f"{where}: {line[:80]!r}: not a CSV row ({exc}); a row ends only "
+                         "with a line break") from None
 
 
 def _uncomment(line: str) -> tuple[str, bool]:
@@ -31,8 +88,9 @@ def _uncomment(line: str) -> tuple[str, bool]:
     return "".join(out), comma
 
 
-def line_fields(raw: str) -> list[str]:
-    """Non-empty, stripped fields of ``raw``; ``[]`` for a blank or comment line.
+def line_fields(raw: str, where: str = "graph file") -> list[str]:
+    """Non-empty, stripped fields of ``raw``; ``[]`` for a blank or comment line (``where``
+    names the line in an error).
 
     Examples
     --------
@@ -47,5 +105,5 @@ def line_fields(raw: str) -> list[str]:
     line = line.strip()
     if not line:
         return []
-    fields = next(csv.reader([line], delimiter="," if comma else " ", skipinitialspace=True))
+    fields = csv_row(line, where, delimiter="," if comma else " ", skipinitialspace=True)
     return [f.strip() for f in fields if f.strip()]

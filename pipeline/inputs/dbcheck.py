@@ -8,28 +8,53 @@ it is read here first with :mod:`sqlite3` (read only) and every problem becomes 
 
 Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows >= 0``, a usable ``cols``
 (keypoints 2, 4 or 6 float32 columns; inlier matches 2 uint32 columns) and a blob of exactly
-``rows * cols * 4`` bytes; every two-view geometry's pair id names two images of the
-``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``, ``id1 < id2``).
+``rows * cols * 4`` bytes; image ids and pair ids are stored as integers (not text, real
+numbers or blobs); a pair id appears once and names two different images of the ``images``
+table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
+images the other way round is read in its own orientation).
+
+The user's file is opened through SQLite, read only (:func:`open_readonly`), so changes
+another program still holds in its write-ahead log are read too.
 """
 
 from __future__ import annotations
 
+import os
 import sqlite3
+from collections import Counter
 from pathlib import Path
 
 from pipeline.errors import InputError
 
-__all__ = ["MAX_PAIR_ID_IMAGE", "check_database_tables"]
+__all__ = ["MAX_PAIR_ID_IMAGE", "DatabaseSizes", "check_database_tables", "open_readonly"]
 
 #: COLMAP's pair id base (``kMaxNumImages``)
 MAX_PAIR_ID_IMAGE = 2147483647
 
 
-def _rows(con, sql):
+def open_readonly(path: str | os.PathLike) -> sqlite3.Connection:
+    """A read-only SQLite connection to the user's database ``path``.
+
+    With a write-ahead log (``-wal``) or a rollback journal beside it (another program has it
+    open, or stopped while writing) it is opened ``mode=ro``: SQLite reads the committed
+    changes still in the log. Without one it is opened ``immutable=1``, which creates no
+    side file beside it.
+    """
+    path = Path(path)
+    side = any(os.path.lexists(f"{path}{s}") for s in ("-wal", "-journal"))
+    uri = f"{path.resolve().as_uri()}?{'mode=ro' if side else 'immutable=1'}"
+    try:
+        return sqlite3.connect(uri, uri=True)
+    except sqlite3.Error as exc:
+        raise InputError(f"database {str(path)!r} cannot be opened ({exc})") from None
+
+
+def _rows(con, sql, path: Path):
     try:
         return con.execute(sql).fetchall()
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"cannot read the COLMAP tables ({exc})") from None
+        raise InputError(f"database {str(path)!r}: cannot read its COLMAP tables ({exc}); "
+                         "give a database made by COLMAP or hloc") from None
 
 
 def _check_matrix_rows(path: Path, table: str, key: str, rows, allowed_cols) -> None:
@@ -47,37 +72,69 @@ def _check_matrix_rows(path: Path, table: str, key: str, rows, allowed_cols) -> 
                              "with COLMAP)")
 
 
-def check_database_tables(path: str | Path, shown: str | Path | None = None) -> None:
+class DatabaseSizes(dict):
+    """What the tables declare, counted before anything is read: ``images``,
+    ``keypoint_bytes`` (float32 keypoint data), ``inliers`` (verified matches)."""
+
+
+def _integer_ids(path: Path, table: str, column: str, rows) -> None:
+    for value, kind in rows:
+        if kind != "integer":
+            shown = repr(value)
+            shown = shown if len(shown) <= 40 else shown[:37] + "..."
+            raise InputError(
+                f"database {str(path)!r}, table {table}: {column} {shown} is stored as {kind}, "
+                "not an integer; COLMAP stores integer ids: the database is corrupt (rebuild "
+                "it with COLMAP)")
+
+
+def check_database_tables(con: sqlite3.Connection, path: str | Path) -> DatabaseSizes:
     """Raise InputError on the first inconsistent row (module docstring); read only.
 
     Parameters
     ----------
-    path : SQLite file (a private copy: it is opened read only anyway)
-    shown : the name to give in messages (the user's file), default ``path``
+    con : a connection to the database (:func:`open_readonly`, or a private copy)
+    path : the name to give in messages (the user's file)
+
+    Returns
+    -------
+    DatabaseSizes — what the tables hold, for the memory estimate of reading them
     """
-    con = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True)
-    path = Path(shown if shown is not None else path)
-    try:
-        tables = {r[0] for r in _rows(con, "SELECT name FROM sqlite_master WHERE type='table'")}
-        missing = {"images", "keypoints", "two_view_geometries"} - tables
-        if missing:
-            raise InputError(f"database {str(path)!r} has no {', '.join(sorted(missing))} "
-                             "table(s); it is not a COLMAP database")
-        images = {r[0] for r in _rows(con, "SELECT image_id FROM images")}
-        _check_matrix_rows(path, "keypoints", "image_id", _rows(
-            con, "SELECT image_id, rows, cols, length(data) FROM keypoints"), (2, 4, 6))
-        tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries")
-        _check_matrix_rows(path, "two_view_geometries", "pair_id", tvg, (2,))
-        if "matches" in tables:
-            _check_matrix_rows(path, "matches", "pair_id", _rows(
-                con, "SELECT pair_id, rows, cols, length(data) FROM matches"), (2,))
-        for pair_id, *_ in tvg:
-            id1, id2 = divmod(int(pair_id), MAX_PAIR_ID_IMAGE)
-            for iid in (id1, id2):
-                if iid not in images:
-                    raise InputError(
-                        f"database {str(path)!r}, table two_view_geometries, pair_id {pair_id}: "
-                        f"names image_id {iid}, which is not in the images table; the database "
-                        "is inconsistent (rebuild it with COLMAP)")
-    finally:
-        con.close()
+    path = Path(path)
+    tables = {r[0] for r in _rows(con, "SELECT name FROM sqlite_master WHERE type='table'",
+                                  path)}
+    missing = {"images", "keypoints", "two_view_geometries"} - tables
+    if missing:
+        raise InputError(f"database {str(path)!r} has no {', '.join(sorted(missing))} "
+                         "table(s); it is not a COLMAP database")
+    _integer_ids(path, "images", "image_id",
+                 _rows(con, "SELECT image_id, typeof(image_id) FROM images", path))
+    _integer_ids(path, "keypoints", "image_id",
+                 _rows(con, "SELECT image_id, typeof(image_id) FROM keypoints", path))
+    _integer_ids(path, "two_view_geometries", "pair_id",
+                 _rows(con, "SELECT pair_id, typeof(pair_id) FROM two_view_geometries", path))
+    images = {r[0] for r in _rows(con, "SELECT image_id FROM images", path)}
+    kp = _rows(con, "SELECT image_id, rows, cols, length(data) FROM keypoints", path)
+    _check_matrix_rows(path, "keypoints", "image_id", kp, (2, 4, 6))
+    tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries", path)
+    _check_matrix_rows(path, "two_view_geometries", "pair_id", tvg, (2,))
+    if "matches" in tables:
+        _check_matrix_rows(path, "matches", "pair_id", _rows(
+            con, "SELECT pair_id, rows, cols, length(data) FROM matches", path), (2,))
+    twice = [(p, k) for p, k in Counter(r[0] for r in tvg).items() if k > 1]
+    if twice:
+        raise InputError(f"database {str(path)!r}, table two_view_geometries: pair_id "
+                         f"{twice[0][0]} is stored in {twice[0][1]} rows; a pair has one row: "
+                         "the database is inconsistent (rebuild it with COLMAP)")
+    for pair_id, *_ in tvg:
+        id1, id2 = divmod(int(pair_id), MAX_PAIR_ID_IMAGE)
+        where = f"database {str(path)!r}, table two_view_geometries, pair_id {pair_id}"
+        for iid in (id1, id2):
+            if iid not in images:
+                raise InputError(f"{where}: names image_id {iid}, which is not in the images "
+                                 "table; the database is inconsistent (rebuild it with COLMAP)")
+        if id1 == id2:
+            raise InputError(f"{where}: pairs image_id {id1} with itself; the database is "
+                             "inconsistent (rebuild it with COLMAP)")
+    return DatabaseSizes(images=len(images), keypoint_bytes=sum(r * c * 4 for _, r, c, _ in kp),
+                         inliers=sum(r for _, r, _, _ in tvg))

@@ -97,18 +97,50 @@ def _read_dataset(ds, path: Path, what: str, kinds: str) -> np.ndarray:
     return np.asarray(ds[()])
 
 
-def read_features(path: str | Path) -> dict[str, np.ndarray]:
+def _declared(fd, h5py, leaf: str) -> list:
+    """Every dataset named ``leaf`` in the open file ``fd`` (metadata only, nothing read)."""
+    found = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == leaf:
+            found.append(obj)
+    fd.visititems(visit)
+    return found
+
+
+def _check_declared_total(datasets, path: Path, what: str) -> int:
+    """Bytes ``datasets`` declare in all; InputError when, in all, far more is declared than
+    the file stores (each may stay under :data:`LAZY_LIMIT_BYTES`, their sum does not)."""
+    declared = sum(int(ds.nbytes) for ds in datasets)
+    stored = sum(int(ds.id.get_storage_size()) for ds in datasets)
+    if declared > LAZY_LIMIT_BYTES and stored * MAX_EXPANSION < declared:
+        raise InputError(f"{path}: its {len(datasets)} {what} datasets declare {declared} bytes "
+                         f"in all but the file stores {stored} bytes of them; the file is "
+                         "damaged or not written by hloc")
+    return declared
+
+
+def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
     """``{image name: keypoints (N, 2) float32}`` of an hloc ``features.h5``.
+
+    ``budget``: a :class:`pipeline.budget.MemoryBudget` (handed in by the caller: inputs sit
+    below the budget's layer) counting the keypoints the file declares, in all, before any
+    is read.
 
     Raises
     ------
     InputError
-        Missing or non-HDF5 file, no group with ``keypoints``, keypoints not ``(N, 2)``.
+        Missing or non-HDF5 file, no group with ``keypoints``, keypoints not ``(N, 2)``,
+        more declared than the file stores or the budget allows.
     """
     path = Path(path)
     h5py = _h5py()
     out: dict[str, np.ndarray] = {}
     with _open(path, "features file") as fd:
+        declared = _check_declared_total(_declared(fd, h5py, "keypoints"), path, "keypoints")
+        if budget is not None:
+            budget.add_read("the keypoints of the features file", declared)
+
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "keypoints":
                 image = obj.parent.name.strip("/")
@@ -136,16 +168,12 @@ def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:
     InputError
         Missing file, a line without two names, a name not in ``names`` (with its line).
     """
+    from pipeline.inputs.csvfields import text_lines
     from pipeline.outputs import require_input_file
 
     path = require_input_file(path, "--pairs")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"--pairs {str(path)!r} is not a UTF-8 text file ({exc.reason} at byte "
-                         f"{exc.start}); give hloc's pairs.txt") from None
     out, seen = [], set()
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in text_lines(path, "--pairs"):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -243,13 +271,16 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
 
 
 def read_h5(features: str | Path, matches: str | Path,
-            pairs: str | Path | None = None) -> H5Matches:
+            pairs: str | Path | None = None, budget=None) -> H5Matches:
     """Read hloc's ``features.h5`` and ``matches.h5`` (and optionally ``pairs.txt``).
 
     Parameters
     ----------
     features, matches : paths of the two HDF5 files; never modified
     pairs : pairs.txt; without it every pair stored in ``matches`` is read
+    budget : a :class:`pipeline.budget.MemoryBudget` counting, before it is allocated, what
+        is read: the keypoints declared in all, the robots of the images, the largest pair
+        read at once, and the links of each pair before they are kept
 
     Returns
     -------
@@ -263,16 +294,23 @@ def read_h5(features: str | Path, matches: str | Path,
     """
     features, matches = Path(features), Path(matches)
     h5py = _h5py()
-    kps = read_features(features)
+    kps = read_features(features, budget)
     names = sorted(kps)
     if len(names) < 2:
         raise InputError(f"{features}: {len(names)} image(s); at least two are needed")
+    if budget is not None:
+        budget.add_cameras(f"the robots of the {len(names)} images", len(names))
     cam = {n: k for k, n in enumerate(names)}
     m = np.array([len(kps[n]) for n in names], dtype=np.int64)
     wanted = read_pairs(pairs, set(names)) if pairs is not None else None
     ci, fi, cj, fj, q, lp, lr = [], [], [], [], [], [], []
     keys: list[str] = []
     with _open(matches, "matches file") as fd:
+        found = _declared(fd, h5py, "matches0") + _declared(fd, h5py, "matching_scores0")
+        _check_declared_total(found, matches, "matches")
+        if budget is not None:  # one pair is read at a time
+            budget.add_read("reading the largest pair of the matches file",
+                            max((ds.nbytes for ds in found), default=0))
         if wanted is None:
             stored = _stored_pairs(fd, h5py, names)
         else:
@@ -291,7 +329,7 @@ def read_h5(features: str | Path, matches: str | Path,
             done.add(key)
             grp = fd[key]
             ds = grp["matches0"]
-            if int(np.prod(ds.shape)) != m[cam[n0]]:
+            if tuple(ds.shape) != (m[cam[n0]],):  # one entry per keypoint, as hloc writes
                 raise InputError(f"{matches}: matches0 of pair {key!r} has shape {ds.shape} but "
                                  f"{n0} has {m[cam[n0]]} keypoints; expected ({m[cam[n0]]},)")
             raw = _read_dataset(ds, matches, f"matches0 of pair {key!r}", "iu").reshape(-1)
@@ -306,7 +344,7 @@ def read_h5(features: str | Path, matches: str | Path,
             score = np.ones(rows.size)
             if "matching_scores0" in grp:
                 sd = grp["matching_scores0"]
-                if int(np.prod(sd.shape)) != len(m0):
+                if tuple(sd.shape) != (len(m0),):
                     raise InputError(f"{matches}: matching_scores0 of pair {key!r} has shape "
                                      f"{sd.shape}; expected ({len(m0)},) like matches0")
                 score = _read_dataset(sd, matches, f"matching_scores0 of pair {key!r}",
@@ -314,6 +352,9 @@ def read_h5(features: str | Path, matches: str | Path,
                 if not np.isfinite(score).all():
                     raise InputError(f"{matches}: matching_scores0 of pair {key!r} holds "
                                      f"{score[~np.isfinite(score)][0]}; scores must be finite")
+            if budget is not None:
+                budget.add_rows("the matches of the matches file", rows.size,
+                                "give --pairs with fewer pairs")
             a, b = cam[n0], cam[n1]
             fa, fb = rows, m0[rows]
             if a > b:
@@ -349,6 +390,8 @@ def write_cleaned_matches(contents: H5Matches, out: str | Path, keep: np.ndarray
     other group and dataset is copied unchanged. Written atomically (temp file, then rename);
     ``out`` must differ from the input.
     """
+    from pipeline.runfolder import publish_mode
+
     h5py = _h5py()
     src, out = Path(contents.matches_path), Path(out)
     keep = np.asarray(keep, dtype=bool)
@@ -371,6 +414,7 @@ def write_cleaned_matches(contents: H5Matches, out: str | Path, keep: np.ndarray
                 m0[rows] = -1
                 if "matching_scores0" in grp:
                     grp["matching_scores0"][rows] = 0
+        publish_mode(tmp, directory=False)
         os.replace(tmp, out)
     except BaseException:
         if os.path.exists(tmp):

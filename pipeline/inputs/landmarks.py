@@ -73,12 +73,14 @@ def natural_key(name: str) -> list:
 
 def _read_txt_keypoints(path: Path) -> np.ndarray | None:
     """``(K, 2)`` from a text table, ``None`` if the file is not a 2-column numeric table."""
-    try:
-        text = path.read_text(errors="strict")
-    except (UnicodeDecodeError, OSError):
-        return None
+    from pipeline.inputs.csvfields import text_lines
+
     rows = []
-    for line in text.splitlines():
+    try:
+        lines = list(text_lines(path, "label file"))
+    except (InputError, OSError):
+        return None
+    for _, line in lines:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue

@@ -64,17 +64,16 @@ class LinksFile:
 
 
 def _rows(path: Path):
-    """Yield ``(line number, fields, raw text)`` of the data rows and the header flag."""
+    """Yield ``(line number, fields, raw text)`` of the data rows (rows end only at ``\n`` or
+    ``\r\n``, :func:`pipeline.inputs.csvfields.text_lines`)."""
+    from pipeline.inputs.csvfields import csv_row, text_lines
+
     require_input_file(path, "links file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not a UTF-8 text file ({exc.reason})") from None
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in text_lines(path, "links file"):
         stripped = raw.strip()
         if not stripped or stripped.startswith("#"):
             continue
-        fields = [f.strip() for f in next(csv.reader([stripped]))]
+        fields = [f.strip() for f in csv_row(stripped, f"{path}:{lineno}")]
         yield lineno, fields, stripped
 
 
@@ -272,9 +271,10 @@ def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
     ``iteration`` and ``case`` are not stored in the file and read back as ``-1`` and ``''``;
     ``truth`` and ``round`` read back as ``-1`` where empty.
     """
+    from pipeline.inputs.csvfields import csv_row, text_lines
+
     path = Path(path)
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
+    rows = [csv_row(line, f"{path}:{n}") for n, line in text_lines(path, "links file")]
     if not rows or tuple(rows[0]) != RUN_LINK_COLUMNS:
         raise InputError(f"{path}: not a run links.csv (header must be {','.join(RUN_LINK_COLUMNS)})")
     body = rows[1:]

@@ -52,6 +52,16 @@ GUESS_FOCAL_FACTOR = 1.2
 _FILM_DIAGONAL_MM = float(np.hypot(36.0, 24.0))
 #: EXIF ``FocalPlaneResolutionUnit`` values -> millimetres per unit.
 _EXIF_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}
+#: Most pixels an image may declare: decoding holds them all at full resolution (3 bytes
+#: each in RGB, 8 in 16-bit RGBA) before any downscaling; 100 megapixels is a
+#: medium-format photograph.
+MAX_IMAGE_PIXELS = 100_000_000
+#: An image file may be at most this many times the bytes of its decoded pixels, plus
+#: :data:`FILE_HEADROOM_BYTES` (metadata, an embedded preview); an uncompressed TIFF or PNG
+#: is about once its pixels. A larger file holds something else (a 1 GB file behind a
+#: 640x480 JPEG header), and is refused without reading it.
+MAX_FILE_TO_PIXELS = 4
+FILE_HEADROOM_BYTES = 16 * 2**20
 
 
 @dataclass
@@ -131,6 +141,24 @@ def _pixels(im: Image.Image) -> np.ndarray:
     return _to_uint8(arr)
 
 
+def _check_declared_size(path: Path, im: Image.Image) -> None:
+    """InputError, before anything is decoded, for an image declaring more than
+    :data:`MAX_IMAGE_PIXELS` pixels or a file far larger than the pixels it declares."""
+    w, h = im.size
+    if w * h > MAX_IMAGE_PIXELS:
+        im.close()
+        raise InputError(f"{path.name}: declares {w}x{h} = {w * h:,} pixels, above the "
+                         f"{MAX_IMAGE_PIXELS:,} an image may have (decoding holds them all); "
+                         "downscale it, or remove it")
+    decoded = w * h * max(len(im.getbands()), 1) * (2 if "16" in im.mode else 1)
+    size = path.stat().st_size
+    if size > MAX_FILE_TO_PIXELS * decoded + FILE_HEADROOM_BYTES:
+        im.close()
+        raise InputError(f"{path.name}: {size:,} bytes for a {w}x{h} image ({decoded:,} bytes "
+                         "of pixels); the file holds something else than that image: remove "
+                         "or replace it")
+
+
 def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     """Decode one image file completely.
 
@@ -146,13 +174,22 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     Raises
     ------
     InputError
-        The file is not an image Pillow can decode, or it is truncated / corrupt.
+        The file is not an image Pillow can decode, or it is truncated / corrupt; it declares
+        more than :data:`MAX_IMAGE_PIXELS`, or the file is far larger than its pixels
+        (checked on the header, before decoding).
     """
+    import warnings
+
     path = Path(path)
     try:
-        im = Image.open(path)
+        with warnings.catch_warnings():  # the size is judged here (MAX_IMAGE_PIXELS)
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(path)  # reads the header only
+        _check_declared_size(path, im)
         im.load()  # forces the full decode: a truncated JPEG raises here, not later
         pixels = _pixels(im)
+    except InputError:
+        raise
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
         raise InputError(
             f"{path.name}: cannot read it as an image ({exc}); remove or replace the file "

@@ -53,7 +53,7 @@ def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
                    resolution: str = "evidence", *, rerun: bool = True,
-                   image_dir: str | Path | None = None) -> CleanDbResult:
+                   image_dir: str | Path | None = None, outputs=None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -69,6 +69,8 @@ def clean_database(database: str | Path, out: str | Path,
     rerun : also write ``OUT.rrd`` beside ``out`` (``OUT.links.csv`` is always written;
         :mod:`pipeline.runs.cleaned`)
     image_dir : the images, drawn in the recording
+    outputs : a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
+        together (default: each written at once)
 
     Returns
     -------
@@ -81,23 +83,51 @@ def clean_database(database: str | Path, out: str | Path,
         the input, a bad comm-graph file.
     """
     from pipeline import colmap
-    from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import check_detection_memory
-    from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.consistency.rules import get_rule
-    from pipeline.outputs import require_input_file
-    from pipeline.stages import consistency_stage
+    from pipeline.budget import BYTES_PER_CAMERA, BYTES_PER_ROW, COPIES_OF_READ_DATA, MemoryBudget
 
     database, out = Path(database), Path(out)
     if out.resolve() == database.resolve():
         raise InputError(f"--out {str(out)!r} is the input database; the input is never "
                          f"modified, choose a new file")
-    contents = colmap.read_database(database)
+    # every allocation that grows with the input is counted before it is made
+    budget = MemoryBudget(max_memory_gb)
+
+    def count_tables(sizes) -> None:
+        budget.add("the keypoints and verified matches of the database",
+                   sizes["keypoint_bytes"] * COPIES_OF_READ_DATA
+                   + sizes["inliers"] * BYTES_PER_ROW)
+        budget.add(f"the robots of its {sizes['images']} images",
+                   sizes["images"] * BYTES_PER_CAMERA)
+
+    contents = colmap.read_database(database, check_sizes=count_tables)
+    try:
+        return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
+                      image_dir, outputs)
+    finally:
+        contents.close()
+
+
+def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
+           rerun: bool, image_dir, outputs) -> CleanDbResult:
+    """:func:`clean_database` on the database read as ``contents``."""
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import BYTES_PER_EDGE, check_detection_memory, count_lines
+    from pipeline.commgraph import links_off_graph, read_comm_graph
+    from pipeline.consistency.rules import get_rule
+    from pipeline.outputs import require_input_file
+    from pipeline.runfolder import output_path
+    from pipeline.runs.cleaned import check_image_dir
+    from pipeline.stages import consistency_stage
+
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    if rerun:
+        check_image_dir(image_dir, contents.names)
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
-        require_input_file(comm_graph_file, "--comm-graph")
+        budget.add("the communication graph", count_lines(
+            require_input_file(comm_graph_file, "--comm-graph")) * BYTES_PER_EDGE)
         edges = read_comm_graph(comm_graph_file, contents.names)
         off_graph = links_off_graph(links, edges, n)
         reason[off_graph & (reason == "")] = "not-comm-edge"
@@ -106,7 +136,7 @@ def clean_database(database: str | Path, out: str | Path,
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
-    check_detection_memory(m, model_links, max_memory_gb)
+    check_detection_memory(m, model_links, budget)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None
@@ -116,9 +146,9 @@ def clean_database(database: str | Path, out: str | Path,
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
-    colmap.write_cleaned_database(contents, out, keep)
+    colmap.write_cleaned_database(contents, output_path(outputs, out, "--out"), keep)
     _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
-                  before, after)
+                  before, after, outputs)
     n_edges = len(edges) if edges is not None else \
         len(np.unique(model_links.cam_i * n + model_links.cam_j))
     stats = result.stats
@@ -151,7 +181,7 @@ def _link_weight(contents, links) -> np.ndarray:
 
 
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
-                  before, after) -> None:
+                  before, after, outputs) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
     from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
 
@@ -162,6 +192,7 @@ def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rer
           f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n")
     ledger = cleaning_ledger(links, reason, idx, result, model_links, m)
     write_side_outputs(CleaningOutcome(contents.names, sizes, contents.keypoints, ledger),
-                       out, rerun=rerun, image_dir=image_dir, report_markdown=md)
+                       out, rerun=rerun, image_dir=image_dir, report_markdown=md,
+                       outputs=outputs)
 
 

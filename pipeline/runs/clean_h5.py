@@ -20,13 +20,22 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
+
 __all__ = ["clean_h5"]
 
 
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
              pairs: str | Path | None = None, *, rerun: bool = True,
-             image_dir: str | Path | None = None) -> dict:
+             image_dir: str | Path | None = None, outputs=None,
+             max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
     """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    Memory: what the files declare and what the detection needs are counted against
+    ``max_memory_gb`` before they are allocated (:mod:`pipeline.budget`).
+
+    ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
+    together (default: each written at once).
 
     Returns
     -------
@@ -41,14 +50,24 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         :func:`pipeline.outputs.check_output_files`).
     """
     from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.budget import MemoryBudget, check_detection_memory
     from pipeline.commgraph import comm_edges_for
     from pipeline.inputs import hloc
-    from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
+    from pipeline.runfolder import output_path
+    from pipeline.runs.cleaned import (
+        CleaningOutcome,
+        check_image_dir,
+        cleaning_ledger,
+        write_side_outputs,
+    )
     from pipeline.stages import consistency_stage
 
     out = Path(out)
-    contents = hloc.read_h5(features, matches, pairs)
+    budget = MemoryBudget(max_memory_gb)
+    contents = hloc.read_h5(features, matches, pairs, budget)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    if rerun:
+        check_image_dir(image_dir, contents.names)
     cam = {name: k for k, name in enumerate(contents.names)}
     # the pairs file (its repeated lines merged, as a graph file's) or, without one, the
     # images that share a match; checked as every comm graph is (pipeline.commgraph)
@@ -59,13 +78,14 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
     model_links = links.subset(ok)
+    check_detection_memory(m, model_links, budget)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result, _ = consistency_stage(m, edges, model_links)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
-    hloc.write_cleaned_matches(contents, out, keep)
+    hloc.write_cleaned_matches(contents, output_path(outputs, out, "--out"), keep)
     cut = {k: int((reason == k).sum()) for k in ("not-one-to-one", "resolution")}
     md = (f"## clean-h5 {Path(matches).name}\n\n| | before | after |\n|---|---:|---:|\n"
           f"| Matches | {len(links)} | {int(keep.sum())} |\n"
@@ -77,7 +97,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         keypoints=contents.keypoints,
         ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
-                                 report_markdown=md)
+                                 report_markdown=md, outputs=outputs)
     st = result.stats
     return {"features": str(features), "matches": str(matches), "output": str(out),
             "written": [str(out)] + [str(p) for p in written], "images": n,

@@ -23,7 +23,8 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Features, LinkLedger, Links, View
 
-__all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "write_side_outputs"]
+__all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "check_image_dir",
+           "write_side_outputs"]
 
 
 def side_paths(out: str | Path) -> tuple[Path, Path]:
@@ -60,6 +61,24 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
     return ledger
 
 
+def check_image_dir(image_dir: str | Path | None, names: list[str]) -> None:
+    """InputError unless ``image_dir`` (when given) is a folder holding every image of
+    ``names``; checked before any work, so that nothing is written for a run that cannot
+    finish."""
+    if image_dir is None:
+        return
+    d = Path(image_dir)
+    if not d.is_dir():
+        raise InputError(f"--image-dir {str(image_dir)!r} is not a folder; give the folder of "
+                         "the images (or leave it out: gray canvases are drawn)")
+    missing = [n for n in names if not (d / n).is_file()]
+    if missing:
+        raise InputError(f"--image-dir {str(image_dir)!r}: no image {missing[0]!r} in it"
+                         + (f" (nor {len(missing) - 1} other(s))" if len(missing) > 1 else "")
+                         + "; give the folder the images were matched from, or leave "
+                         "--image-dir out (gray canvases are drawn)")
+
+
 def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View:
     w, h = (max(int(size[0]), 1), max(int(size[1]), 1))
     image = None
@@ -80,17 +99,21 @@ def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View
 
 
 def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool = True,
-                       image_dir: str | Path | None = None, report_markdown: str = "") -> list[Path]:
+                       image_dir: str | Path | None = None, report_markdown: str = "",
+                       outputs=None) -> list[Path]:
     """Write ``STEM.links.csv`` and (with ``rerun``) ``STEM.rrd`` beside ``out``.
 
     Returns the paths written. Keypoints read from another tool are scaled to the images of
-    ``image_dir`` when those differ in size from the stored camera size.
+    ``image_dir`` when those differ in size from the stored camera size. ``outputs``: a
+    :class:`pipeline.runfolder.OutputFiles` that puts them in place with the command's other
+    outputs (default: written at once).
     """
     from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.runfolder import output_path
 
     links_csv, rrd = side_paths(out)
     ledger = outcome.ledger
-    write_links_csv(links_csv, ledger)
+    write_links_csv(output_path(outputs, links_csv, "OUT.links.csv"), ledger)
     written = [links_csv]
     if rerun:
         from pipeline.types import RunRecord
@@ -110,6 +133,6 @@ def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool
         record = RunRecord(
             views=views, features=feats, ledger=ledger, points=np.zeros((0, 3)),
             point_tracks=np.zeros(0, dtype=np.int64), report_markdown=report_markdown)
-        log_run(rrd, record)
+        log_run(output_path(outputs, rrd, "OUT.rrd"), record)
         written.append(rrd)
     return written

@@ -28,8 +28,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
                  max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence",
-                 transport: str = "sim") -> dict:
+                 transport: str = "sim", outputs=None) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts ``out_csv`` in place
+    with the command's other outputs (default: ``out_csv`` is written at once).
 
     ``resolution``: a rule of :mod:`pipeline.consistency.rules`, e.g. ``paper`` (Alg. 1) or
     ``evidence``; the evidence of a link here is its
@@ -44,11 +47,20 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         given comm graph (naming its row).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import check_detection_memory
+    from pipeline.budget import (
+        BYTES_PER_CAMERA,
+        BYTES_PER_EDGE,
+        BYTES_PER_ROW,
+        MemoryBudget,
+        check_detection_memory,
+        count_lines,
+    )
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.consistency.rules import deleted_cases
     from pipeline.inputs.compact import compact_ids, fault_section_in_ids
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
+    from pipeline.outputs import require_input_file
+    from pipeline.runfolder import output_path
     from pipeline.runs.transports import get_transport
     from pipeline.stages import ledger_from_consistency
     from pipeline.types import LinkLedger
@@ -57,6 +69,14 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if out_csv.exists() and out_csv.resolve() == links_csv.resolve():
         raise InputError(f"--out {str(out_csv)!r} is the input file; the input is never "
                          "modified, choose a new file")
+    # every allocation that grows with the input is counted before it is made
+    budget = MemoryBudget(max_memory_gb)
+    budget.add("the rows of the links file",
+               count_lines(require_input_file(links_csv, "links file")) * BYTES_PER_ROW,
+               "split the links file")
+    if comm_graph_csv is not None:
+        budget.add("the communication graph", count_lines(
+            require_input_file(comm_graph_csv, "comm graph file")) * BYTES_PER_EDGE)
     lf = read_links_csv(links_csv)
     links = lf.links
     edges = None
@@ -67,6 +87,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the links
     ids = compact_ids(links, edges, n_cameras=n_cams)
     n = int(ids.cameras.max(initial=-1)) + 1
+    robots = len(ids.features_per_camera)  # the cameras of the run (compact ids)
+    budget.add(f"the robots of the {robots} cameras", robots * BYTES_PER_CAMERA,
+               "fewer cameras (a comm graph naming only those with links)")
     if edges is not None and len(links):
         off = links_off_graph(links, edges, n)
         if off.any():
@@ -84,7 +107,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         links = all_links.subset(active)
         ids = compact_ids(links, edges, n_cameras=n_cams)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
-    check_detection_memory(m, run_links, max_memory_gb)
+    check_detection_memory(m, run_links, budget)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
                                                                  resolution, ids)
@@ -98,7 +121,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         old = np.flatnonzero(~active)
         full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
         ledger = full
-    write_links_csv(out_csv, ledger)
+    write_links_csv(output_path(outputs, out_csv, "--out"), ledger)
     st = res.stats
     summary = {
         "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -434,8 +433,9 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
 
 def write_team(path, team: Team) -> Path:
     """Write ``team`` as JSON atomically; return the path."""
+    from pipeline.runfolder import atomic_file
+
     p = Path(path)
-    tmp = p.with_name(p.name + f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps(team.to_json(), indent=1))
-    os.replace(tmp, p)
+    with atomic_file(p) as f:  # a new temporary name: nothing beside it is written through
+        f.write(json.dumps(team.to_json(), indent=1))
     return p

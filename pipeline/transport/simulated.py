@@ -159,7 +159,9 @@ class Network(Transport):
         self._nbrs = neighbour_table(self._initial_edges, self.n)
         self._round = 0
         self._peak_memory = [0] * self.n
-        self._outbox: list[tuple[int, Message]] = []  # (delivery round, message)
+        # delivery round -> messages due then, in send order: a round touches only its own
+        # (with a delay of D rounds, D rounds of traffic are in flight at once)
+        self._outbox: dict[int, list[Message]] = {}
         self._inboxes: list[list[Message]] = [[] for _ in range(self.n)]
         self._filled: list[int] = []  # robots whose inbox holds messages, in delivery order
         self._rng = np.random.default_rng(self.options.seed)
@@ -247,7 +249,7 @@ class Network(Transport):
         if opts.drop_probability > 0.0 and self._rng.random() < opts.drop_probability:
             self.dropped += 1
             return
-        self._outbox.append((self.round + 1 + int(opts.delay_rounds), msg))
+        self._outbox.setdefault(self.round + 1 + int(opts.delay_rounds), []).append(msg)
 
     def inbox(self, i: int) -> list[Message]:
         """Messages delivered to robot ``i`` at the start of the current round."""
@@ -261,8 +263,7 @@ class Network(Transport):
         """Close the round: advance the clock and deliver what is due."""
         self._round += 1
         self._apply_topology()
-        due = [m for r, m in self._outbox if r <= self.round]
-        self._outbox = [(r, m) for r, m in self._outbox if r > self.round]
+        due = self._outbox.pop(self.round, [])
         # fresh lists for the inboxes that held messages (a caller may keep the old one);
         # the others are empty already: a round with little traffic costs what it carries
         for i in self._filled:

@@ -140,20 +140,28 @@ def test_unwritable_cache_is_not_fatal(tmp_path, monkeypatch):
     assert len(f.views) == 6
 
 
-def _entry(folder: Path, name: str, size: int, mtime: float) -> Path:
+def _entry(folder: Path, name: str, size: int, mtime: float, key: str | None = None) -> Path:
+    """A file written the way the cache writes (``key`` stored first; default: its name)."""
     import os
 
     path = folder / name
-    path.write_bytes(b"\0" * size)
+    with open(path, "wb") as f:
+        np.savez(f, key=np.array(key or name.removesuffix(".npz")),
+                 image=np.zeros(size, np.uint8))
     os.utime(path, (mtime, mtime))
     return path
 
 
+def _name(k: int) -> str:
+    return f"views-seed{k}-96x72-n6-{k:016x}.npz"
+
+
 def test_prune_removes_least_recently_used_entries_down_to_the_cap(tmp_path):
-    old = _entry(tmp_path, "views-old.npz", 400, 1_000)
-    mid = _entry(tmp_path, "views-mid.npz", 400, 2_000)
-    new = _entry(tmp_path, "views-new.npz", 400, 3_000)
-    removed = cache.prune(tmp_path, limit=900)
+    old = _entry(tmp_path, _name(1), 400, 1_000)
+    mid = _entry(tmp_path, _name(2), 400, 2_000)
+    new = _entry(tmp_path, _name(3), 400, 3_000)
+    one = old.stat().st_size
+    removed = cache.prune(tmp_path, limit=int(2.5 * one))
     assert removed == [old]
     assert mid.exists() and new.exists()
     # the entry just written is kept even when it alone exceeds the cap
@@ -164,10 +172,37 @@ def test_prune_removes_least_recently_used_entries_down_to_the_cap(tmp_path):
 def test_prune_removes_only_stale_temporary_files(tmp_path):
     import time
 
-    stale = _entry(tmp_path, ".tmp-abc.npz", 10, time.time() - 7200)
-    live = _entry(tmp_path, ".tmp-def.npz", 10, time.time())
+    stale = _entry(tmp_path, f".{_name(1)[:-4]}.tmp-abc.npz", 10, time.time() - 7200,
+                   key=_name(1)[:-4])
+    live = _entry(tmp_path, f".{_name(1)[:-4]}.tmp-def.npz", 10, time.time(),
+                  key=_name(1)[:-4])
     assert cache.prune(tmp_path, limit=10**9) == [stale]
     assert live.exists()
+
+
+def test_prune_never_touches_a_users_files_in_the_cache_folder(tmp_path):
+    """FORMATION_MATCH_CACHE may name a user's folder: only the cache's own files go."""
+    import os
+    import time
+
+    old = time.time() - 10 * 86400
+    users = [_entry(tmp_path, "results.npz", 4000, old),          # any .npz of the user's
+             _entry(tmp_path, ".tmp-x.npz", 4000, old),             # the old temporary name
+             _entry(tmp_path, _name(7), 4000, old, key="mine"),     # an entry's name only
+             _entry(tmp_path, f".{_name(8)[:-4]}.tmp-1.npz", 4000, old, key="mine")]
+    (tmp_path / _name(9)).write_bytes(b"\0" * 4000)                # not even an npz
+    target = _entry(tmp_path, "precious.npz", 4000, old)
+    (tmp_path / _name(5)).symlink_to(target)                       # a link named as an entry
+    users += [tmp_path / _name(9), target]
+    os.utime(tmp_path / _name(5), (old, old), follow_symlinks=False)
+    assert cache.prune(tmp_path, limit=0) == []
+    assert all(p.exists() for p in users) and (tmp_path / _name(5)).is_symlink()
+
+
+def test_entries_written_by_the_cache_are_its_own(cache_dir):
+    data_synth.render("a", seed=1, size=SIZE)
+    entry = cache.entry_path(1, SIZE, 6)
+    assert cache.prune(cache_dir, limit=0) == [entry]
 
 
 def test_a_hit_marks_its_entry_used_and_a_write_prunes_to_the_cap(cache_dir, monkeypatch):

@@ -184,7 +184,7 @@ def test_not_a_database(tmp_path):
     (tmp_path / "x.db").write_text("hello")
     with pytest.raises(InputError, match="not an SQLite file"):
         colmap.read_database(tmp_path / "x.db")
-    with pytest.raises(InputError, match="does not exist"):
+    with pytest.raises(InputError, match="no such file"):
         colmap.read_database(tmp_path / "missing.db")
 
 

@@ -155,3 +155,16 @@ def test_edge_array_duplicates_are_rejected_but_file_repeats_merged(tmp_path):
     with pytest.raises(InputError, match=r"\(0, 1\) is listed more than once"):
         comm_edges_for([1, 1], links, [[0, 1], [1, 0]])
     assert read_comm_graph(write(tmp_path, "0,1\n1,0\n", "g.csv")).tolist() == [[0, 1]]
+
+
+def test_the_diameter_bound_of_the_time_guard():
+    from pipeline.commgraph import diameter_lower_bound
+
+    path = np.array([[i, i + 1] for i in range(50)])
+    assert diameter_lower_bound(51, path) == 50
+    assert diameter_lower_bound(60, path) == 50  # isolated cameras beside it
+    ring = np.array([[i, (i + 1) % 8] for i in range(8)])
+    assert diameter_lower_bound(8, ring) == 4
+    two = np.r_[path, [[51, 52]]]  # two components: the larger diameter
+    assert diameter_lower_bound(53, two) == 50
+    assert diameter_lower_bound(3, np.zeros((0, 2), int)) == 0

@@ -197,3 +197,65 @@ def test_licence_file_matches_pyproject():
     assert "LICENSE" in meta.get("license-files", [])
     text = (ROOT / "LICENSE").read_text()
     assert text.startswith("MIT License") and "WITHOUT WARRANTY OF ANY KIND" in text
+
+
+# ----------------------------------------------------------------------- Ctrl-C, however early
+
+def test_ctrl_c_while_the_command_module_loads_is_one_line_exit_130(monkeypatch, capsys):
+    import pipeline.__main__ as entry
+
+    def interrupted(commands):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(entry, "build_parser", interrupted)
+    assert main(["resolve", "--links", "x", "--out", "y"]) == 130
+    err = capsys.readouterr().err
+    assert err == "interrupted: resolve stopped, nothing was written or replaced\n"
+
+
+def test_ctrl_c_while_a_cxx_extension_loads_is_not_an_import_error(monkeypatch, capsys):
+    """pybind11 turns a KeyboardInterrupt during a module's initialisation into an
+    ImportError, which pycolmap turns into 'Cannot import the C++ backend'."""
+    import importlib
+
+    import pipeline.__main__ as entry
+
+    real = importlib.import_module
+
+    def interrupted_load(name, *a):
+        if name == "pipeline.commands.resolve":
+            try:
+                try:
+                    raise KeyboardInterrupt
+                except KeyboardInterrupt as exc:
+                    raise ImportError("initialization failed") from exc
+            except ImportError as exc:
+                raise RuntimeError("Cannot import the C++ backend pycolmap._core.") from exc
+        return real(name, *a)
+
+    monkeypatch.setattr(entry.importlib, "import_module", interrupted_load)
+    assert main(["resolve", "--links", "x", "--out", "y"]) == 130
+    err = capsys.readouterr().err
+    assert err.startswith("interrupted: resolve stopped") and "C++" not in err
+
+
+@pytest.mark.parametrize("delay", [0.1, 0.25, 0.5])
+def test_ctrl_c_in_the_first_second_ends_with_130_and_no_traceback(tmp_path, delay):
+    """A real process, interrupted while Python loads NumPy, SciPy and the command (after
+    the interpreter's own start, which runs before any of the program's code)."""
+    import signal
+    import time
+
+    src = tmp_path / "in.csv"
+    src.write_text("0,0,1,0\n1,0,2,0\n0,1,2,0\n")
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline", "resolve", "--links", str(src),
+                             "--out", str(tmp_path / "o.csv")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err and "C++" not in err, err
+    assert proc.returncode in (0, 130), (proc.returncode, err)  # 0: it was done already
+    if proc.returncode == 130:
+        assert err.strip().splitlines()[-1].startswith("interrupted:")
+        assert not (tmp_path / "o.csv").exists()

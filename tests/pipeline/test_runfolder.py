@@ -71,14 +71,16 @@ def test_a_folder_without_the_marker_is_never_replaced(tmp_path, content):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
 
 
-def test_an_empty_folder_may_become_a_run(tmp_path):
+def test_an_empty_folder_may_become_a_run(tmp_path, capsys):
     (tmp_path / "new").mkdir()
     _run(tmp_path / "new", 1)
     assert (tmp_path / "new" / RUN_MARKER).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new"]
+    assert capsys.readouterr().err == ""
 
 
 def test_without_the_exchange_syscall_the_two_step_swap_works(tmp_path, monkeypatch):
-    monkeypatch.setattr(runfolder, "_exchange", lambda a, b: False)
+    monkeypatch.setattr(runfolder, "_rename2", lambda a, b, flags: False)
     for k in (1, 2):
         _run(tmp_path / "demo", k)
     assert json.loads((tmp_path / "demo" / "report.json").read_text()) == {"run": 2}
@@ -88,7 +90,7 @@ def test_without_the_exchange_syscall_the_two_step_swap_works(tmp_path, monkeypa
 def test_a_kill_between_the_two_renames_is_repaired_by_the_next_run(tmp_path, monkeypatch):
     out = tmp_path / "demo"
     _run(out, 1)
-    monkeypatch.setattr(runfolder, "_exchange", lambda a, b: False)
+    monkeypatch.setattr(runfolder, "_rename2", lambda a, b, flags: False)
     real_rename = os.rename
 
     def killed_after_first(src, dst):
@@ -110,12 +112,116 @@ def test_a_kill_between_the_two_renames_is_repaired_by_the_next_run(tmp_path, mo
     assert sorted(p.name for p in tmp_path.iterdir()) == ["demo"]
 
 
-def test_leftovers_of_dead_runs_are_removed(tmp_path):
+def test_leftovers_of_dead_runs_are_removed(tmp_path, monkeypatch):
     _run(tmp_path / "demo", 1)
-    for name in (".demo.tmp-abc", ".demo.old-4242", ".other.tmp-x"):
-        (tmp_path / name).mkdir()
+    # a run killed while staging (its clean-up never ran) and one killed holding a lock file
+    monkeypatch.setattr(runfolder.shutil, "rmtree", lambda *a, **k: None)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_run_folder(tmp_path / "demo") as d:
+            write_json_atomic(d / "report.json", {"run": "killed"})
+            raise KeyboardInterrupt
+    monkeypatch.undo()
+    fd, _ = runfolder._new_lock(tmp_path / ".demo.lock")
+    os.close(fd)  # its process died: the flock is gone, the file stays
+    (tmp_path / ".other.tmp-x").mkdir()
+    assert len(list(tmp_path.glob(".demo.*"))) == 2
     _run(tmp_path / "demo", 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".other.tmp-x", "demo"]
+
+
+# ------------------------------------------------- nothing of a user's is ever touched
+
+
+def _user_entries(tmp_path):
+    """A user's folders, files and a link whose names look like a run's siblings."""
+    made = {}
+    for name in (".demo.tmp-mine", ".demo.old-mine", ".demo.old-1"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "notes.txt").write_text(name)
+        made[name + "/notes.txt"] = name
+    (tmp_path / ".demo.lock-x").write_text("mine")
+    made[".demo.lock-x"] = "mine"
+    return made
+
+
+def _unchanged(tmp_path, made):
+    for rel, text in made.items():
+        assert (tmp_path / rel).read_text() == text, rel
+
+
+def test_a_users_entries_named_like_a_runs_siblings_are_never_touched(tmp_path):
+    made = _user_entries(tmp_path)
+    # a copy of a real run under an old-run name is still the user's (it is not the folder
+    # this program made)
+    _run(tmp_path / "src", 0)
+    import shutil
+
+    shutil.copytree(tmp_path / "src", tmp_path / ".demo.old-copy", symlinks=True)
+    made[".demo.old-copy/report.json"] = (tmp_path / "src" / "report.json").read_text()
+    for k in (1, 2):  # demo is missing at first: no old-run name is restored in its place
+        _run(tmp_path / "demo", k)
+        assert json.loads((tmp_path / "demo" / "report.json").read_text()) == {"run": k}
+    _unchanged(tmp_path, made)
+
+
+def test_a_users_lock_file_is_never_replaced_nor_removed(tmp_path):
+    (tmp_path / ".demo.lock").write_text("my lock notes")
+    with pytest.raises(InputError, match=r"\.demo\.lock.*not a lock file of formation-match"):
+        _run(tmp_path / "demo", 1)
+    assert (tmp_path / ".demo.lock").read_text() == "my lock notes"
+    assert not (tmp_path / "demo").exists()
+
+
+def test_a_lock_name_that_is_a_link_is_never_written_through(tmp_path):
+    target = tmp_path / "precious.txt"
+    target.write_text("precious")
+    (tmp_path / ".demo.lock").symlink_to(target)
+    with pytest.raises(InputError, match="symbolic link"):
+        _run(tmp_path / "demo", 1)
+    assert target.read_text() == "precious" and (tmp_path / ".demo.lock").is_symlink()
+    (tmp_path / ".demo.lock").unlink()
+    (tmp_path / ".demo.lock").symlink_to(tmp_path / "nothing-there")  # dangling
+    with pytest.raises(InputError, match="symbolic link"):
+        _run(tmp_path / "demo", 1)
+    assert not (tmp_path / "nothing-there").exists()
+
+
+@pytest.mark.parametrize("forge", ["text", "copied-marker", "link"])
+def test_a_forged_marker_does_not_make_a_folder_replaceable(tmp_path, forge):
+    _run(tmp_path / "real", 1)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("precious")
+    marker = mine / RUN_MARKER
+    if forge == "text":
+        marker.write_text("formation-match run folder: a new run may replace this folder\n")
+    elif forge == "copied-marker":
+        marker.write_bytes((tmp_path / "real" / RUN_MARKER).read_bytes())
+    else:
+        marker.symlink_to(tmp_path / "real" / RUN_MARKER)
+    with pytest.raises(InputError, match="thesis.tex"):
+        _run(mine, 2)
+    assert (mine / "thesis.tex").read_text() == "precious"
+
+
+@pytest.mark.parametrize("change", ["added", "edited", "link"])
+def test_a_run_folder_a_user_added_to_is_not_replaced(tmp_path, change):
+    out = tmp_path / "demo"
+    _run(out, 1)
+    if change == "added":
+        (out / "sparse").mkdir()
+        (out / "sparse" / "my-notes.txt").write_text("mine")
+        name = "sparse/my-notes.txt"
+    elif change == "edited":
+        (out / "report.json").write_text('{"run": 1, "my": "comment"}')
+        name = "report.json"
+    else:
+        (out / "elsewhere").symlink_to(tmp_path)
+        name = "elsewhere"
+    with pytest.raises(InputError, match=f"{name}.*added or changed after the run wrote it"):
+        _run(out, 2)
+    assert json.loads((out / "report.json").read_text())["run"] == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo"]
 
 
 def test_a_second_run_into_the_same_folder_is_refused_at_once(tmp_path):

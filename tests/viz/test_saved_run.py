@@ -49,3 +49,24 @@ def test_log_a_folder_without_recording(tmp_path, capsys):
         log_run_folder(folder)  # never replaces the run's own recording
     assert main([str(tmp_path)]) == 2
     assert "no report.json" in capsys.readouterr().err
+
+
+def test_a_recording_added_to_a_run_folder_keeps_it_replaceable(tmp_path):
+    """The recording is the run's own output: the folder's marker lists it, so a next run
+    may still replace the folder; a folder holding a user's file stays protected."""
+    from pipeline.outputs import run_folder_problem
+    from pipeline.runfolder import atomic_run_folder
+
+    record = make_record()
+    run = tmp_path / "run"
+    with atomic_run_folder(run) as staged:
+        _save(record, staged / "x")
+        for p in (staged / "x").iterdir():
+            p.rename(staged / p.name)
+        (staged / "x").rmdir()
+    log_run_folder(run)
+    assert (run / "recording.rrd").is_file() and run_folder_problem(run) is None
+    (run / "recording.rrd").unlink()
+    (run / "notes.txt").write_text("mine")
+    log_run_folder(run)
+    assert "notes.txt" in run_folder_problem(run)

@@ -92,10 +92,12 @@ def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[n
         order = np.lexsort((s, nbr, owner))
     owner, nbr, r, s, li = owner[order], nbr[order], r[order], s[order], li[order]
     bounds = np.searchsorted(owner, np.arange(n + 1))
+    offsets = np.concatenate([[0], np.cumsum(fpc)]).astype(np.int64)
+    offsets.flags.writeable = False  # the public layout, shared by every robot
     robots, link_index = [], []
     for i in range(n):
         a, b = bounds[i], bounds[i + 1]
-        robots.append(Robot(i, fpc, nbr[a:b], r[a:b], s[a:b]))
+        robots.append(Robot(i, fpc, nbr[a:b], r[a:b], s[a:b], offsets=offsets, key_base=span))
         link_index.append(li[a:b])  # Robot keeps the (nbr, s) order given here
     return robots, link_index
 

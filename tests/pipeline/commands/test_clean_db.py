@@ -154,7 +154,7 @@ def test_database_without_two_view_geometries(tmp_path, capsys):
 
 def test_missing_database(tmp_path, capsys):
     _fails(["clean-db", str(tmp_path / "nope.db"), "--out", str(tmp_path / "o.db")], capsys,
-           "does not exist")
+           "no such file")
 
 
 def test_output_equal_to_input(tmp_path, capsys):

@@ -102,7 +102,51 @@ def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp
     assert feats.stat().st_size < 100_000
     p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
     assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
-    assert "declare shape (1073741824, 2)" in p.stderr and "stores 0 bytes" in p.stderr
+    assert "declare 8589934912 bytes in all but the file stores 320 bytes" in p.stderr
+
+
+def test_many_datasets_each_under_the_check_are_counted_in_all(files, tmp_path):
+    """80 unwritten datasets of 63 MB each (each under the per-dataset check): 5 GB in all."""
+    d, feats, matches = files
+    rows = 63 * 2**20 // 8
+    with h5py.File(feats, "a") as fd:
+        for k in range(80):
+            fd.create_group(f"extra{k}.jpg").create_dataset(
+                "keypoints", shape=(rows, 2), dtype=np.float32, chunks=(4096, 2))
+    assert feats.stat().st_size < 2_000_000
+    p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert "its 83 keypoints datasets declare" in p.stderr, p.stderr
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["in"]
+
+
+def test_links_chaining_thousands_of_features_are_refused_before_the_detection(tmp_path):
+    """3 images of 3,000 keypoints whose matches chain all 9,000 into one association set:
+    the detection would need ~2.9 GB (a ~110 kB input); refused under the cap, naming it."""
+    n = 3000
+    feats, matches = tmp_path / "features.h5", tmp_path / "matches.h5"
+    rng = np.random.default_rng(0)
+    with h5py.File(feats, "w") as fd:
+        for name in ("a.jpg", "b.jpg", "c.jpg"):
+            fd.create_group(name).create_dataset(
+                "keypoints", data=rng.uniform(0, 300, (n, 2)).astype(np.float32))
+    with h5py.File(matches, "w") as fd:
+        ident = np.arange(n, dtype=np.int32)
+        for a, b, m0 in (("a.jpg", "b.jpg", ident), ("b.jpg", "c.jpg", ident),
+                         ("a.jpg", "c.jpg", np.roll(ident, 1))):
+            fd.create_group(names_to_pair(a, b)).create_dataset("matches0", data=m0)
+    p = run_capped(_argv(feats, matches, tmp_path / "o.h5"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert "the distributed detection" in p.stderr and "9000 features" in p.stderr, p.stderr
+    assert "--max-memory-gb" in p.stderr and not (tmp_path / "o.h5").exists()
+
+
+def test_the_memory_limit_of_clean_h5_is_checked(files, tmp_path, capsys):
+    d, feats, matches = files
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--max-memory-gb", "nan"), d,
+            "--max-memory-gb 'nan'")
+    refused(capsys, _argv(feats, matches, tmp_path / "o.h5", "--max-memory-gb", "0.000001"), d,
+            "keypoints of the features file", "--max-memory-gb")
 
 
 def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
@@ -119,6 +163,12 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(3, -1, np.int16)), "has shape (3,)"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 2), -1, np.int16)),
      "has shape (20, 2)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full((1, M), -1, np.int16)),
+     "has shape (1, 20) but a.jpg has 20 keypoints; expected (20,)"),
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 1), -1, np.int16)),
+     "has shape (20, 1)"),
+    (lambda fd: _replace(fd, P01 + "/matching_scores0", np.ones((M, 1), np.float16)),
+     "matching_scores0 of pair 'a.jpg/sub-b.jpg' has shape (20, 1)"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, np.nan)), "dtype float64"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 0.5)), "expected integers"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.array([b"ab"] * M)), "dtype |S2"),
@@ -140,7 +190,7 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
      "'zz.jpg/yy.jpg' does not name two images"),
     (lambda fd: fd.create_group("a.jpg/a.jpg").create_dataset("matches0", data=np.arange(M)),
      "pairs image 'a.jpg' with itself"),
-], ids=["no-pairs", "short", "2-d", "float-nan", "float-fraction", "strings", "out-of-range",
+], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
         "scores-strings", "unknown-pair", "self-pair"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
@@ -160,7 +210,10 @@ def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     (b"a.jpg sub/b.jpg c.jpg\n", "must hold two image names"),
     (b"a.jpg a.jpg\n", "pairs an image with itself"),
     (b"a.jpg x.jpg\n", "image 'x.jpg' has no keypoints"),
-], ids=["empty", "binary", "latin-1", "three-names", "self", "unknown-image"])
+    (b"a.jpg sub/b.jpg\n" + b"a" * 200_000 + b" sub/b.jpg\n", "line 2: longer than 65536"),
+    ("a.jpg sub/b.jpg\u2028a.jpg c.jpg\n".encode(), "must hold two image names"),
+], ids=["empty", "binary", "latin-1", "three-names", "self", "unknown-image", "long-line",
+        "u2028"])
 def test_malformed_pairs_file(files, tmp_path, capsys, content, needle):
     d, feats, matches = files
     (d / "pairs.txt").write_bytes(content)
@@ -260,3 +313,28 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(files, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith("interrupted: clean-h5") and err.count("\n") == 1
     assert tree(d) == before and sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_an_image_dir_lacking_an_image_is_refused_before_anything_is_written(files, tmp_path,
+                                                                            capsys):
+    d, feats, matches = files
+    images = tmp_path / "images"
+    images.mkdir()
+    (images / "a.jpg").write_bytes(b"")
+    (images / "c.jpg").write_bytes(b"")
+    argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+            str(tmp_path / "o.h5"), "--image-dir", str(images)]
+    refused(capsys, argv, tmp_path, "--image-dir", "no image 'sub/b.jpg'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["images", "in"]
+
+
+def test_outputs_follow_the_umask(files, tmp_path, capsys):
+    d, feats, matches = files
+    mask = os.umask(0o022)
+    try:
+        assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                     str(tmp_path / "o.h5"), "--report", str(tmp_path / "r.json")]) == 0
+    finally:
+        os.umask(mask)
+    for name in ("o.h5", "o.links.csv", "o.rrd", "r.json"):
+        assert oct((tmp_path / name).stat().st_mode & 0o777) == oct(0o644), name

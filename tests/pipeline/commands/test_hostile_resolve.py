@@ -16,7 +16,7 @@ from pipeline.__main__ import main
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1] / "consistency"))
 from consistency_graphs import random_instance  # noqa: E402
-from hostile import one_line_error, run_capped  # noqa: E402
+from hostile import one_line_error, refused, run_capped  # noqa: E402
 
 FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
 
@@ -265,6 +265,93 @@ def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_pa
     assert not (tmp_path / "o.csv").exists()
 
 
+def test_memory_follows_the_links_not_the_cameras_squared(tmp_path):
+    """12,000 cameras in 4,000 separate triangles: every robot held the offsets of all the
+    cameras (1.3 GB); under the 1.5 GB cap it runs."""
+    src = tmp_path / "triangles.csv"
+    src.write_text("".join(f"{3 * k},0,{3 * k + 1},0\n{3 * k + 1},0,{3 * k + 2},0\n"
+                           f"{3 * k},0,{3 * k + 2},0\n" for k in range(4000)))
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q"])
+    assert proc.returncode == 0, proc.stderr
+    assert "12000 cameras" in proc.stdout
+
+
+def test_the_memory_guard_counts_the_robots_of_every_camera(tmp_path, capsys):
+    src = tmp_path / "pairs.csv"
+    src.write_text("".join(f"{2 * k},0,{2 * k + 1},0\n" for k in range(1000)))
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                     "--max-memory-gb", "0.01"], tmp_path, "robots of the 2000 cameras",
+            "--max-memory-gb")
+
+
+@pytest.mark.parametrize("value", ["nan", "0", "-1", "inf", "lots"])
+def test_a_memory_limit_that_is_no_limit_is_refused(fig1, tmp_path, capsys, value):
+    refused(capsys, ["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                     "--max-memory-gb", value], tmp_path, f"--max-memory-gb {value!r}",
+            "GB")
+
+
+def test_a_faulty_run_that_would_take_minutes_is_refused_before_it_starts(tmp_path, capsys,
+                                                                           monkeypatch):
+    """--delay-rounds 100 (the stated maximum) on a 300-link path: (D + 1)(d + 3) = 30,603
+    rounds of 301 robots ran past 120 s; refused at once, saying why."""
+    import pipeline.consistency as consistency
+
+    def never(*a, **k):
+        raise AssertionError("the simulation started")
+
+    src = tmp_path / "path.csv"
+    src.write_text("".join(f"{i},0,{i + 1},0\n" for i in range(300)))
+    monkeypatch.setattr(consistency, "resolve_conflicts", never)
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                     "--delay-rounds", "100"], tmp_path, "30603 rounds", "--delay-rounds 100",
+            "diameter 300")
+
+
+# ------------------------------------------------------------------ rows of a text file
+
+@pytest.mark.parametrize("which", ["--links", "--comm-graph"])
+def test_a_field_longer_than_csv_reads_is_one_line(fig1, tmp_path, capsys, which):
+    """CSV stops at fields of 131,072 characters (a _csv.Error traceback); such a line is
+    refused, naming it, before CSV sees it."""
+    graph = tmp_path / "g.csv"
+    graph.write_text("0,1\n1,2\n2,3\n0,3\n")
+    bad = tmp_path / "bad.csv"
+    first = "0,0,1,0\n" if which == "--links" else "0,1\n"
+    bad.write_text(first + '"' + "x" * 200_000 + '",2\n')
+    argv = ["resolve", "--links", str(fig1), "--comm-graph", str(graph), "--out",
+            str(tmp_path / "o.csv")]
+    argv[argv.index(which) + 1] = str(bad)
+    refused(capsys, argv, tmp_path, str(bad), "line 2", "longer than 65536 bytes")
+
+
+def test_a_one_line_file_of_megabytes_is_refused_at_its_first_line(tmp_path, capsys):
+    big = tmp_path / "big.csv"
+    big.write_bytes(b"0," * 4_000_000)  # 8 MB, no line break
+    refused(capsys, ["resolve", "--links", str(big), "--out", str(tmp_path / "o.csv")],
+            tmp_path, "line 1", "longer than 65536 bytes")
+
+
+@pytest.mark.parametrize("inside", ["\f", "\v", "\u2028", "\u2029", "\x85", "\x1c"])
+def test_only_line_breaks_end_a_row(tmp_path, capsys, inside):
+    """A form feed or U+2028 inside a row stays inside it: the row is wrong (named at its own
+    line), never split into two rows."""
+    src = tmp_path / "in.csv"
+    src.write_text(f"0,0,1,0\n0,1,1,x{inside}\n", encoding="utf-8")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:2:")
+    src.write_text(f"0,0,1,0{inside}1,0,2,0\n", encoding="utf-8")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:1:", "columns")
+
+
+def test_a_carriage_return_inside_a_row_is_one_line(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    src.write_bytes(b"0,0,1,0\r\n1,0,\r2,0\n")
+    refused(capsys, ["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")],
+            tmp_path, f"{src}:2", "not a CSV row")
+
+
 # ---------------------------------------------------------------------------- Ctrl-C
 
 def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys, monkeypatch):
@@ -279,3 +366,38 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(fig1, tmp_path, capsys,
     err = capsys.readouterr().err
     assert err.strip().startswith("interrupted:") and "Traceback" not in err
     assert list(tmp_path.iterdir()) == [fig1]
+
+
+def test_an_output_created_while_the_run_works_is_kept(fig1, tmp_path, capsys, monkeypatch):
+    import pipeline.stages
+
+    out, report = tmp_path / "o.csv", tmp_path / "r.json"
+    stage = pipeline.stages.consistency_stage
+
+    def someone_writes_out_meanwhile(*a, **k):
+        out.write_text("made by another program")
+        return stage(*a, **k)
+
+    monkeypatch.setattr(pipeline.stages, "consistency_stage", someone_writes_out_meanwhile)
+    assert main(["resolve", "--links", str(fig1), "--out", str(out), "--report",
+                 str(report)]) == 2
+    one_line_error(capsys, "--out", "created by someone else while this command worked")
+    assert out.read_text() == "made by another program" and not report.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv", "o.csv"]
+
+
+def test_a_report_that_cannot_be_written_names_it_and_leaves_no_output(fig1, tmp_path):
+    import resource
+    import subprocess
+
+    def small_files():  # the links file fits, the report does not
+        resource.setrlimit(resource.RLIMIT_FSIZE, (400, 400))
+
+    out, report = tmp_path / "o.csv", tmp_path / "r.json"
+    r = subprocess.run([sys.executable, "-m", "pipeline", "resolve", "--links", str(fig1),
+                        "--out", str(out), "--report", str(report)], capture_output=True,
+                       text=True, timeout=120, preexec_fn=small_files)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and f"error: {report}: File too large" in r.stderr
+    assert "written" not in r.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv"]

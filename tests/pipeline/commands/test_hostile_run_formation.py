@@ -106,3 +106,24 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(tmp_path, capsys, monke
     err = capsys.readouterr().err
     assert err.splitlines()[-1].startswith("interrupted:") and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--robots", "100000", "--graph", "ring"], "--robots 100000: give a number of robots "
+                                                "from 2 to 1000"),
+    (["--robots", "lots", "--graph", "ring"], "--robots 'lots': not a whole number"),
+    (["--robots", "500", "--graph", "ring"], "500 robots at 640x480 would need about 13.8 GB"),
+    (["--size", "4096x4096"], "6 robots at 4096x4096"),
+    (["--robots", "20", "--graph", "ring", "--max-memory-gb", "nan"], "--max-memory-gb 'nan'"),
+], ids=["robots-100000", "robots-text", "robots-500", "size-4096", "limit-nan"])
+def test_a_formation_too_large_for_memory_is_refused_before_rendering(tmp_path, capsys,
+                                                                      monkeypatch, argv,
+                                                                      needle):
+    """--robots 100000 ran to 3.3 GB and out of memory: the robots' views are counted
+    first."""
+    import pipeline.runs.formation as run
+
+    monkeypatch.setattr(run, "run_formation", lambda *a, **k: pytest.fail("it rendered"))
+    assert main(["run-formation", "--out", str(tmp_path / "run"), *argv]) == 2
+    one_line_error(capsys, needle)
+    assert not (tmp_path / "run").exists()

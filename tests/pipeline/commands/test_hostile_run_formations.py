@@ -17,6 +17,7 @@ from hostile import one_line_error  # noqa: E402
     ("--size", "100000x100000", "too large"),
     ("--max-features", "99999999999999999999", "at most 1000000"),
     ("--max-features", "3", "at least 8"),
+    ("--size", "4096x4096", "6 robots at 4096x4096 would need about 9.1 GB"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, monkeypatch, capsys, flag,
                                                         value, message):
@@ -53,15 +54,27 @@ def test_a_summary_file_it_did_not_write_is_never_replaced(tmp_path, monkeypatch
 
 
 def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_path):
-    from pipeline.commands.run_formations import check_outputs
+    from pipeline.commands.run_formations import check_outputs, write_summaries
+    from pipeline.errors import InputError
 
     out = tmp_path / "runs"
     out.mkdir()
-    (out / "formations.md").write_text("# Formations (a)–(d), seed 0, sift, 320x240\n")
-    (out / "formations.json").write_text('{"a": {}, "d": {}}')
+    write_summaries(out, "# Formations (a)–(d), seed 0, sift, 320x240\n\n| |\n",
+                    {"a": {"n_cameras": 4}, "d": {}})
     check_outputs(out, overwrite=False)  # a previous run's summary: replaced without asking
-    (out / "formations.md").write_text("my own notes\n")
-    check_outputs(out, overwrite=True)
+    # a user's files that look like ours (the title line, formation names as keys), or ours
+    # edited since, are the user's
+    for name, text in (("formations.json", '{"a": {"my": "own data"}}'),
+                       ("formations.md", "# Formations (a)–(d), seed 0, my notes\n")):
+        saved = (out / name).read_text()
+        (out / name).write_text(text)
+        with pytest.raises(InputError, match=f"holds {name}, which run-formations did not"):
+            check_outputs(out, overwrite=False)
+        check_outputs(out, overwrite=True)
+        (out / name).write_text(saved)
+    (out / "formations.md").write_text((out / "formations.md").read_text() + "my note\n")
+    with pytest.raises(InputError, match="formations.md"):
+        check_outputs(out, overwrite=False)
 
 
 def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(

@@ -141,3 +141,39 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(photos, tmp_path, capsy
     assert err.splitlines()[-1].startswith("interrupted:") and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photos"]
     assert tree(photos) == before
+
+
+def _jpeg_header(width: int, height: int) -> bytes:
+    """The start of a JPEG declaring ``width`` x ``height`` (up to its first scan)."""
+    import io
+
+    buf = io.BytesIO()
+    Image.fromarray(np.zeros((16, 16, 3), np.uint8)).save(buf, "JPEG")
+    data = bytearray(buf.getvalue())
+    k = data.find(b"\xff\xc0")
+    data[k + 5:k + 7], data[k + 7:k + 9] = height.to_bytes(2, "big"), width.to_bytes(2, "big")
+    sos = data.find(b"\xff\xda")
+    return bytes(data[:sos + 2 + int.from_bytes(data[sos + 2:sos + 4], "big")])
+
+
+@pytest.mark.parametrize("width,height,size,needle", [
+    (640, 480, 2**30, "1,073,741,824 bytes for a 640x480 image"),   # a 1 GB sparse file
+    (12000, 12000, 2**30, "declares 12000x12000 = 144,000,000 pixels"),
+], ids=["sparse-1GB", "144-megapixels"])
+def test_an_image_file_is_judged_on_its_header_before_decoding(photos, tmp_path, capsys,
+                                                               monkeypatch, width, height,
+                                                               size, needle):
+    """Decoding a 1 GB file behind a JPEG header took 42 s before it was refused."""
+    from PIL import ImageFile
+
+    big = photos / "000_big.jpg"  # the first in name order
+    with open(big, "wb") as f:
+        f.write(_jpeg_header(width, height))
+        f.truncate(size)
+    stat = big.stat()
+    monkeypatch.setattr(ImageFile.ImageFile, "load",
+                        lambda self: pytest.fail("an image was decoded before the check"))
+    assert main(["run-images", str(photos), "--graph", "ring", "--out",
+                 str(tmp_path / "run")]) == 2
+    one_line_error(capsys, "000_big.jpg", needle)
+    assert big.stat().st_mtime_ns == stat.st_mtime_ns and not (tmp_path / "run").exists()

@@ -85,7 +85,7 @@ def test_wrong_types_are_usage_errors(folder, capsys, flag, value):
     ("0,1\n1,2\n2,99\n", "camera index 99 out of range 0..3"),
     ("0,1\n2,2147483646\n", "camera index 2147483646 out of range"),
     ("0,-1\n", "cam_j -1 is negative"),
-    (b"\xa0\xff\x00", "is not a text file"),
+    (b"\xa0\xff\x00", "is not a UTF-8 text file"),
 ], ids=["id-outside", "huge-id", "negative", "binary"])
 def test_bad_graph_file(folder, tmp_path, capsys, content, needle):
     g = tmp_path / "g.csv"

@@ -70,3 +70,16 @@ def test_the_launcher_refuses_an_edge_listed_twice():
     data = {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1, 1]}
     with pytest.raises(InputError, match=r"comm edge \(0, 1\) is listed more than once"):
         make_team("t", [[0, 1], [1, 0], [1, 2]], data, n=3)
+
+
+def test_writing_a_team_file_never_writes_through_a_name_beside_it(tmp_path):
+    import os
+
+    from pipeline.team.teamfile import write_team
+
+    precious = tmp_path / "precious.txt"
+    precious.write_text("precious")
+    (tmp_path / f"TEAM.json.tmp{os.getpid()}").symlink_to(precious)
+    write_team(tmp_path / "TEAM.json", parse_team(_doc()))
+    assert precious.read_text() == "precious"
+    assert load_team(tmp_path / "TEAM.json").n == 3
