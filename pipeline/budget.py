@@ -46,12 +46,15 @@ from pipeline.types import Links
 __all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROBOT_PIXEL",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
-           "check_detection_memory", "check_formation_memory", "count_lines", "detection_entries", "limit_gb"]
+           "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
 BYTES_PER_ENTRY = 36
 #: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
 BYTES_PER_ROW = 1500
+#: peak bytes per link of the ``sync`` rule in the simulator (measured: CMU hotel, 101 frames,
+#: 151,500 links, peak RSS 410 MB of which ~90 MB before the rule, bench/multiway.py)
+BYTES_PER_SYNC_LINK = 2_200
 #: bytes per camera (robot) of the simulated team (measured 9.3 KB)
 BYTES_PER_CAMERA = 12_000
 #: bytes per communication edge (measured 0.4 KB)
@@ -155,16 +158,25 @@ def detection_entries(features_per_camera, links: Links) -> tuple[int, int]:
 
 
 def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
-                           flag: str = "--max-memory-gb") -> None:
-    """Count the detection's memory in ``budget`` (or a limit in GB): InputError if it takes
-    the total above the limit (module notes)."""
+                           flag: str = "--max-memory-gb", *, detection: bool = True) -> None:
+    """Count the consistency stage's memory in ``budget`` (or a limit in GB): InputError if it
+    takes the total above the limit (module notes).
+
+    ``detection``: the rule runs the paper's detection (Sec. III), whose rows hold every
+    feature of a set (``Σ |C|²``); ``False`` for a rule without it (``sync``), whose robots
+    hold their links and the far ends' clusters: :data:`BYTES_PER_SYNC_LINK` per link."""
     if not isinstance(budget, MemoryBudget):
         budget = MemoryBudget(budget, flag)
+    if not detection:
+        budget.add(f"the robots' links and the clusters at their far ends ({len(links)} links)",
+                   len(links) * BYTES_PER_SYNC_LINK, "split the input or raise the limit")
+        return
     entries, largest = detection_entries(features_per_camera, links)
     budget.add(f"the distributed detection (the links chain up to {largest} features into "
                "one association set; every robot holds every feature of its sets, eq. 5)",
                entries * BYTES_PER_ENTRY,
-               "such sets come from wrong links: clean them first")
+               "such sets come from wrong links: clean them first, or use --resolution sync "
+               "(no detection: its memory follows the links)")
 
 
 def check_formation_memory(n_robots: int, size: tuple[int, int], limit,

@@ -136,7 +136,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
-    check_detection_memory(m, model_links, budget)
+    check_detection_memory(m, model_links, budget, detection=get_rule(resolution).detection)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None

@@ -56,7 +56,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         count_lines,
     )
     from pipeline.commgraph import links_off_graph, read_comm_graph
-    from pipeline.consistency.rules import deleted_cases
+    from pipeline.consistency.rules import deleted_cases, get_rule
     from pipeline.inputs.compact import compact_ids, fault_section_in_ids
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
     from pipeline.outputs import require_input_file
@@ -107,7 +107,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         links = all_links.subset(active)
         ids = compact_ids(links, edges, n_cameras=n_cams)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
-    check_detection_memory(m, run_links, budget)
+    check_detection_memory(m, run_links, budget, detection=get_rule(resolution).detection)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
                                                                  resolution, ids)

@@ -262,7 +262,27 @@ def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_pa
     proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
+    assert "--resolution sync" in proc.stderr  # the rule whose memory follows the links
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_the_sync_rule_counts_its_links_not_the_detections_sets(tmp_path):
+    """300 cameras in a ring, 10 features each, every pair of neighbours swapping two matches:
+    sets of up to 900 features, 2.5e6 detection entries (~90 MB): refused with the detection
+    at 0.05 GB, counted per link by the sync rule (3,000 links: ~7 MB)."""
+    rows = []
+    for i in range(300):
+        lo, hi = sorted((i, (i + 1) % 300))
+        a = i % 9  # features a and 9 swapped on this pair
+        rows += [f"{lo},{k},{hi},{ {a: 9, 9: a}.get(k, k)}\n" for k in range(10)]
+    src = tmp_path / "ring.csv"
+    src.write_text("".join(rows))
+    refused = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv",
+                          "--resolution", "evidence", "--max-memory-gb", "0.05"])
+    assert refused.returncode == 2 and "into one association set" in refused.stderr
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q",
+                       "--resolution", "sync", "--max-memory-gb", "0.05"])
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_memory_follows_the_links_not_the_cameras_squared(tmp_path):
