@@ -5,12 +5,13 @@ triangle counts, a plain list-based merge), and the result is cycle-consistent."
 from itertools import combinations
 
 import numpy as np
+import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
 from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
-from pipeline.consistency.sync import CASE_SYNC, equip_sync, greedy_merge, run_sync
+from pipeline.consistency.sync import CASE_SYNC, FLOODS, equip_sync, greedy_merge, run_sync
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
 
@@ -60,11 +61,11 @@ def _reference(fpc, links: Links, weight) -> list[set]:
     return sorted({frozenset(c) for c in cluster.values()}, key=min)
 
 
-def _run(fpc, links, weight):
+def _run(fpc, links, weight, flood="links"):
     robots, index = build_robots(fpc, links)
     off = np.concatenate([[0], np.cumsum(fpc)])
     for rb, li in zip(robots, index, strict=True):
-        equip_sync(rb, weight[li])
+        equip_sync(rb, weight[li], flood)
     net = Network(len(fpc), np.array(sorted({(int(i), int(j)) for i, j in
                                              zip(links.cam_i, links.cam_j, strict=True)}),
                                             dtype=np.int64).reshape(-1, 2))
@@ -82,10 +83,10 @@ def _run(fpc, links, weight):
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 6), m=st.integers(2, 5),
        p_link=st.sampled_from([0.5, 0.9, 1.0]), p_swap=st.sampled_from([0.6, 0.9]),
-       ties=st.booleans())
-def test_robots_reach_the_greedy_merge(seed, n, m, p_link, p_swap, ties):
+       ties=st.booleans(), flood=st.sampled_from(FLOODS))
+def test_robots_reach_the_greedy_merge(seed, n, m, p_link, p_swap, ties, flood):
     fpc, links, weight = _instance(seed, n, m, p_link, p_swap, ties)
-    clusters, labels, kept, _, off, _ = _run(fpc, links, weight)
+    clusters, labels, kept, _, off, _ = _run(fpc, links, weight, flood)
     event("a conflictive input" if _has_conflict(fpc, links) else "a conflict-free input")
     assert clusters == _reference(fpc, links, weight)
     # kept iff both ends in one cluster; no cluster holds two features of one camera
@@ -183,3 +184,15 @@ def test_a_robot_alone_ends_with_the_simulators_association(seed, drop):
     # every robot took the same Borůvka rounds and phases (the wave ends them together)
     assert {r.iterations for r in runs} == {stats["boruvka_rounds"]}
     assert len({len(r.phases) for r in runs}) == 1
+
+
+def test_both_flood_graphs_reach_the_same_clusters_with_their_own_costs():
+    fpc, links, weight = _instance(7, 6, 5, 1.0, 0.9, False)
+    a, _, kept_a, stats_a, _, net_a = _run(fpc, links, weight, "links")
+    b, _, kept_b, stats_b, _, net_b = _run(fpc, links, weight, "tree")
+    assert a == b
+    np.testing.assert_array_equal(kept_a, kept_b)
+    assert stats_a["boruvka_rounds"] == stats_b["boruvka_rounds"]
+    assert stats_a["rounds"] < stats_b["rounds"]  # here: all links inside are shallower
+    with pytest.raises(ValueError, match="flood"):
+        equip_sync(build_robots(fpc, links)[0][0], weight[:0], "star")
