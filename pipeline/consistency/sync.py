@@ -11,11 +11,15 @@ at a time; here the robots reach the *same* clusters with Borůvka phases of *lo
 dominant* links (the idea of Hoepman's distributed greedy matching, 2004):
 
 Weights (Sec. "evidence" of the rule; both ends of a link compute the same value)
-    ``w = λ + TRIANGLE_WEIGHT · τ``: ``λ`` the link's local log-likelihood ratio
-    (:mod:`pipeline.link_evidence`, held by both robots of the link since matching), ``τ``
-    the number of third cameras in which both ends match one common feature. Phase 0
-    (*support*, one round): every robot sends each linked neighbour the other ends of its
-    features linked to it; both ends of a link then count ``τ`` from the same two lists.
+    ``w = λ + TRIANGLE_WEIGHT · (τ + q)``: ``λ`` the link's local log-likelihood ratio
+    (:mod:`pipeline.matching.link_evidence`, held by both robots of the link since matching),
+    ``τ`` the number of third cameras in which both ends match one common feature, and
+    ``q = 1`` for a link without triangle over which a quadrangle through four cameras closes
+    (:mod:`.cycles`: a good link beside a pair that swapped two matches loses its triangles,
+    not its quadrangle). Phase 0 (*support*, one round): every robot sends each linked
+    neighbour the other ends of its features linked to it; both ends of a link then count
+    ``τ`` and decide ``q`` from the same lists (the far end's, and those of the features
+    linked to its own end), once every linked neighbour's list is in.
     Order: ``(w, -lo, -hi)`` decreasing (``lo < hi`` the link's global feature ids), a strict
     total order every robot evaluates alike.
 
@@ -161,6 +165,10 @@ class SyncState:
     robot_fixed : int — :meth:`~.robot.Robot.fixed_bytes` of its robot (fixed sizes too)
     tau : (L,) int64 — triangle support counted so far (on a reliable channel the lists of
         the support round may arrive in several rounds)
+    quad : (L,) bool — a quadrangle closes over a link without triangle (:mod:`.cycles`),
+        decided once every linked neighbour's list is in
+    support_lists, support_heard — the lists received in the support round (freed once the
+        quadrangles are decided) and the neighbours heard from
     """
 
     weight: np.ndarray
@@ -184,18 +192,30 @@ class SyncState:
     fixed: int = 0
     robot_fixed: int = 0
     tau: np.ndarray | None = None
+    quad: np.ndarray | None = None
+    support_lists: list | None = None
+    support_heard: set | None = None
 
     def __post_init__(self) -> None:
+        if self.quad is None:
+            self.quad = np.zeros(self.weight.shape[0], dtype=bool)
+        if self.support_lists is None:
+            self.support_lists = []
+        if self.support_heard is None:
+            self.support_heard = set()
         if self.tau is None:
             self.tau = np.zeros(self.weight.shape[0], dtype=np.int64)
         self.fixed = int(sum(a.nbytes for a in (
             self.weight, self.w, self.lo, self.hi, self.other, self.open, self.tree,
             self.label, self.has_best, self.best_w, self.best_lo, self.best_hi,
-            self.relabeled, self.tau)))
+            self.relabeled, self.tau, self.quad)))
 
     def nbytes(self) -> int:
-        """Bytes held: the fixed-size arrays (``fixed``) and ``8 + 8 · words`` per camera set."""
-        return self.fixed + len(self.cams) * (8 + 8 * self.words)
+        """Bytes held: the fixed-size arrays (``fixed``), ``8 + 8 · words`` per camera set, and
+        during the support round the neighbours' lists kept for the quadrangle test."""
+        lists = 0 if not self.support_lists else sum(
+            int(f.nbytes + d.nbytes + g.nbytes) for _, f, d, g in self.support_lists)
+        return self.fixed + len(self.cams) * (8 + 8 * self.words) + lists
 
     @property
     def words(self) -> int:
@@ -365,6 +385,8 @@ def support_step(robot: Robot, inbox: list[Message], send: Send, round_: int) ->
             continue
         p = msg.payload
         feats, deg = p["feat"].astype(np.int64), p["deg"].astype(np.int64)
+        st.support_lists.append((msg.src, feats, deg, p["gid"].astype(np.int64)))
+        st.support_heard.add(int(msg.src))
         links = a + np.flatnonzero(alive[a:b])
         if links.size == 0 or feats.size == 0:
             continue
@@ -377,8 +399,48 @@ def support_step(robot: Robot, inbox: list[Message], send: Send, round_: int) ->
         idx = ranges(starts[pos], starts[pos + 1])
         keys = robot.link_r[rep].astype(np.int64) * m_total + p["gid"][idx].astype(np.int64)
         tau += np.bincount(rep[isin_sorted(keys, own_keys)], minlength=tau.size)
-    st.w = st.weight + TRIANGLE_WEIGHT * tau
+    expected = set(np.unique(robot.link_nbr[alive]).tolist())
+    if st.support_lists and expected <= st.support_heard:
+        _measure(robot)  # the peak, with every list held
+        st.quad = _quadrangles(robot, st)
+        st.support_lists = []
+    st.w = st.weight + TRIANGLE_WEIGHT * (tau + (st.quad & (tau == 0)))
     _measure(robot)
+
+
+def _quadrangles(robot: Robot, st: SyncState) -> np.ndarray:
+    """Quadrangle flag of the own links without triangle (:func:`.cycles.cycle_support`),
+    from the own links and the lists every linked neighbour sent in the support round."""
+    from pipeline.consistency.cycles import cycle_support
+
+    alive = robot.link_alive
+    quad = np.zeros(robot.link_r.shape[0], dtype=bool)
+    sel = np.flatnonzero(alive & (st.tau == 0))
+    if sel.size == 0:
+        return quad
+    far = robot.offsets[robot.link_nbr] + robot.link_s.astype(np.int64)
+    lists: dict[int, np.ndarray] = {}
+    for src, feats, deg, gid in st.support_lists:
+        starts = np.concatenate([[0], np.cumsum(deg)])
+        base = int(robot.offsets[src])
+        for f, a, b in zip(feats.tolist(), starts[:-1].tolist(), starts[1:].tolist(),
+                           strict=True):
+            lists[base + f] = gid[a:b]
+    k = np.flatnonzero(alive)
+    order = np.argsort(robot.link_r[k], kind="stable")
+    rk, fk = robot.link_r[k][order], far[k][order]
+    cut = np.flatnonzero(np.diff(rk)) + 1
+    own_lists = {robot.gid0 + int(r[0]): f for r, f in zip(np.split(rk, cut), np.split(fk, cut),
+                                                          strict=True) if r.size}
+    offsets = robot.offsets
+
+    def camera_of(g):
+        return np.searchsorted(offsets, np.asarray(g), side="right") - 1
+
+    _, q = cycle_support(robot.gid0 + robot.link_r[sel].astype(np.int64), far[sel], lists,
+                         own_lists, camera_of)
+    quad[sel] = q
+    return quad
 
 
 # --------------------------------------------------------------------------- phase A

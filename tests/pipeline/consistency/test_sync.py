@@ -39,6 +39,22 @@ def _instance(seed: int, n: int, m: int, p_link: float, p_swap: float, ties: boo
 def _reference(fpc, links: Links, weight) -> list[set]:
     """Clusters of the sequential greedy merge, written plainly: triangle support by brute
     force, links sorted by (weight desc, smaller end, larger end), lists of sets."""
+    a, b, cam, w = _reference_weights(fpc, links, weight)
+    order = sorted(range(len(a)), key=lambda k: (-w[k], min(a[k], b[k]), max(a[k], b[k])))
+    cluster = {g: {g} for g in range(int(np.sum(fpc)))}
+    for k in order:
+        x, y = cluster[a[k]], cluster[b[k]]
+        if x is y or {cam[g] for g in x} & {cam[g] for g in y}:
+            continue
+        merged = x | y
+        for g in merged:
+            cluster[g] = merged
+    return sorted({frozenset(c) for c in cluster.values()}, key=min)
+
+
+def _reference_weights(fpc, links: Links, weight):
+    """Link ends, camera of every feature and each link's weight: local evidence plus one
+    per triangle, plus one where no triangle but a quadrangle closes (brute force)."""
     off = np.concatenate([[0], np.cumsum(fpc)])
     a = (off[links.cam_i] + links.feat_i).tolist()
     b = (off[links.cam_j] + links.feat_j).tolist()
@@ -48,17 +64,12 @@ def _reference(fpc, links: Links, weight) -> list[set]:
         nbrs[x].add(y)
         nbrs[y].add(x)
     tau = [len({cam[t] for t in nbrs[x] & nbrs[y]}) for x, y in zip(a, b, strict=True)]
-    w = [float(weight[k]) + TRIANGLE_WEIGHT * tau[k] for k in range(len(a))]
-    order = sorted(range(len(a)), key=lambda k: (-w[k], min(a[k], b[k]), max(a[k], b[k])))
-    cluster = {g: {g} for g in range(off[-1])}
-    for k in order:
-        x, y = cluster[a[k]], cluster[b[k]]
-        if x is y or {cam[g] for g in x} & {cam[g] for g in y}:
-            continue
-        merged = x | y
-        for g in merged:
-            cluster[g] = merged
-    return sorted({frozenset(c) for c in cluster.values()}, key=min)
+    # a link without triangle counts one when a cycle through four cameras closes over it
+    quad = [tau[k] == 0 and any(u in nbrs[y] and len({cam[x], cam[t], cam[u], cam[y]}) == 4
+                                for t in nbrs[x] - {y} for u in nbrs[t])
+            for k, (x, y) in enumerate(zip(a, b, strict=True))]
+    return a, b, cam, [float(weight[k]) + TRIANGLE_WEIGHT * (tau[k] + quad[k])
+                       for k in range(len(a))]
 
 
 def _run(fpc, links, weight, flood="links"):
@@ -136,19 +147,9 @@ def test_greedy_merge_labels_are_the_smallest_id_of_each_cluster():
     b = off[links.cam_j] + links.feat_j
     ref = _reference(fpc, links, weight)
     g = greedy_merge(int(fpc.sum()), a, b, links.cam_i, links.cam_j,
-                     _weights_with_support(fpc, links, weight))
+                     np.array(_reference_weights(fpc, links, weight)[3]))
     assert sorted({frozenset(np.flatnonzero(g == x).tolist()) for x in np.unique(g)},
                   key=min) == ref
-
-
-def _weights_with_support(fpc, links, weight):
-    from pipeline.consistency.evidence import triangle_support
-
-    off = np.concatenate([[0], np.cumsum(fpc)])
-    cam = np.repeat(np.arange(len(fpc)), fpc)
-    a = off[links.cam_i] + links.feat_i
-    b = off[links.cam_j] + links.feat_j
-    return weight + TRIANGLE_WEIGHT * triangle_support(a, b, lambda x: cam[x])
 
 
 def _alone(fpc, links, weight, options=None):
