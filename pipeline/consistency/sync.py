@@ -85,6 +85,10 @@ Bounds and cost
     only grows (camera sets are dropped at phase A's start only), so its peak is at the
     end of a phase B (or of the support round).
 
+Drivers: :func:`run_sync` steps the robots one by one (the reference, and the code a robot
+runs alone); :func:`.sync_batched.run_sync_batched` evaluates the same rounds for all robots
+at once in the simulator, with the same per-robot state, rounds, messages, bytes and memory.
+
 Missing links are not invented: a kept association set is connected by input links; the
 pairs it implies between its features (the closure) are the association's output.
 
