@@ -48,11 +48,13 @@ Flood links (:data:`FLOODS`, chosen per team at :func:`equip_sync`)
     holds both labels); a flood crosses the cluster's link diameter in hops. ``"tree"``: the
     links that merged the cluster (its merge tree, ``|C| - 1`` links); fewer messages, but
     Borůvka's trees grow deep, and so do the floods. Measured (``bench/sync_scaling.py``,
-    CMU hotel, 101 frames): on the complete graph ``links`` takes 428 rounds and 2.1 M
-    messages, ``tree`` 3803 rounds and 1.8 M messages; on ``ring2`` 1297 rounds and 127 k
-    messages against 2361 and 85 k. A round costs a round-state message on every
-    communication link when the robots run as their own programs (the synchronizer of
-    :mod:`pipeline.transport`), so ``links`` is the default.
+    ``links`` against ``tree``): CMU hotel, 101 frames, complete graph, 428 rounds, 2.1 M
+    messages, 444 MB against 3803 rounds, 1.8 M messages, 209 MB; the same on ``ring2``,
+    1297 rounds, 127 k messages, 8 MB against 2361, 85 k, 5 MB; 3000 cameras on ``ring2``
+    (30 landmarks each), 25 k rounds, 8.2 M messages, 1.6 GB against 44 k, 4.3 M, 0.8 GB
+    (camera sets of ``⌈n/8⌉`` bytes dominate). ``links`` trades bytes for rounds; when the
+    robots run as their own programs every round costs a packet to every neighbour (the
+    round state of :class:`pipeline.transport.RoundEndpoint`), so it is the default.
 
 Why the result equals the centralized greedy merge (with the same weights and order)
     Induction on the merges. A locally dominant link ``e`` between ``A`` and ``B`` is the
@@ -88,6 +90,10 @@ Bounds and cost
     open link of it. Every start and step measures the robot's memory; within a phase it
     only grows (camera sets are dropped at phase A's start only), so its peak is at the
     end of a phase B (or of the support round).
+
+Drivers: :func:`run_sync` steps the robots one by one (the reference, and the code a robot
+runs alone); :func:`.sync_batched.run_sync_batched` evaluates the same rounds for all robots
+at once in the simulator, with the same per-robot state, rounds, messages, bytes and memory.
 
 Missing links are not invented: a kept association set is connected by input links; the
 pairs it implies between its features (the closure) are the association's output.

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
+from sync_instances import comm_edges, planted_instance
 
 from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
@@ -17,23 +18,7 @@ from pipeline.types import Links
 
 
 def _instance(seed: int, n: int, m: int, p_link: float, p_swap: float, ties: bool):
-    """``n`` cameras seeing the same ``m`` landmarks (feature order shuffled per camera), every
-    pair matched one-to-one with probability ``p_link`` per landmark; on a pair, with
-    probability ``p_swap`` two matches are swapped (wrong links that make conflicts)."""
-    rng = np.random.default_rng(seed)
-    perm = [rng.permutation(m) for _ in range(n)]  # perm[i][k]: feature of landmark k in i
-    ci, fi, cj, fj, w = [], [], [], [], []
-    for i, j in combinations(range(n), 2):
-        ks = np.flatnonzero(rng.random(m) < p_link)
-        tgt = ks.copy()
-        if ks.size >= 2 and rng.random() < p_swap:
-            a, b = rng.choice(ks.size, 2, replace=False)
-            tgt[a], tgt[b] = tgt[b], tgt[a]
-        for k, t in zip(ks.tolist(), tgt.tolist(), strict=True):
-            ci.append(i), fi.append(int(perm[i][k])), cj.append(j), fj.append(int(perm[j][t]))
-            w.append(float(rng.integers(0, 3)) if ties else float(rng.normal()))
-    fpc = np.full(n, m, dtype=np.int64)
-    return fpc, Links(ci, fi, cj, fj), np.array(w)
+    return planted_instance(seed, n, m, p_link, p_swap, ties)
 
 
 def _reference(fpc, links: Links, weight) -> list[set]:
@@ -77,9 +62,7 @@ def _run(fpc, links, weight, flood="links"):
     off = np.concatenate([[0], np.cumsum(fpc)])
     for rb, li in zip(robots, index, strict=True):
         equip_sync(rb, weight[li], flood)
-    net = Network(len(fpc), np.array(sorted({(int(i), int(j)) for i, j in
-                                             zip(links.cam_i, links.cam_j, strict=True)}),
-                                            dtype=np.int64).reshape(-1, 2))
+    net = Network(len(fpc), comm_edges(links))
     stats = run_sync(robots, net)
     labels = np.concatenate([rb.sync.label for rb in robots])
     kept = np.zeros(len(links), dtype=bool)

@@ -1,0 +1,111 @@
+"""The batched ``sync`` engine (pipeline.consistency.sync_batched) against robot-by-robot
+stepping (pipeline.consistency.sync.run_sync): the same per-robot final state, rounds,
+messages and bytes per kind, and peak memory per robot, on random instances with planted
+conflicts."""
+
+from unittest.mock import patch
+
+import numpy as np
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+from sync_instances import comm_edges, planted_instance
+
+from pipeline.consistency import sync_batched
+from pipeline.consistency.engine import build_robots
+from pipeline.consistency.sync import FLOODS, equip_sync, run_sync
+from pipeline.consistency.sync_batched import run_sync_batched, sync_batched_applies
+from pipeline.transport.simulated import Network, NetworkOptions
+
+SETTINGS = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+SYNC_ARRAYS = ("label", "other", "open", "tree", "w", "has_best", "best_w", "best_lo",
+               "best_hi", "relabeled")
+ROBOT_ARRAYS = ("link_alive", "deleted_round", "deleted_case", "deleted_iteration",
+                "component")
+
+
+def _team(fpc, links, weight, flood, options=None):
+    robots, index = build_robots(fpc, links)
+    for rb, li in zip(robots, index, strict=True):
+        equip_sync(rb, weight[li], flood)
+    return robots, Network(len(fpc), comm_edges(links), options)
+
+
+def _both(fpc, links, weight, flood, options=None, batched_only=True):
+    """Robot by robot and batched on two copies of one team: (result, rounds seen, network,
+    robots) of each."""
+    out = []
+    for run in (run_sync, run_sync_batched):
+        robots, net = _team(fpc, links, weight, flood, options)
+        seen: list[int] = []
+        if run is run_sync_batched and batched_only:
+            assert sync_batched_applies(robots, net)
+            with patch.object(sync_batched, "run_sync", side_effect=AssertionError("fell back")):
+                res = run(robots, net, on_round=seen.append)
+        else:
+            res = run(robots, net, on_round=seen.append)
+        out.append((res, seen, net, robots))
+    return out
+
+
+def _assert_same(a, b) -> None:
+    (res_a, seen_a, net_a, robots_a), (res_b, seen_b, net_b, robots_b) = a, b
+    assert res_a == res_b
+    assert seen_a == seen_b
+    assert net_a.counters() == net_b.counters()
+    for ra, rb in zip(robots_a, robots_b, strict=True):
+        for k in SYNC_ARRAYS:
+            np.testing.assert_array_equal(getattr(ra.sync, k), getattr(rb.sync, k),
+                                          err_msg=f"robot {ra.id} {k}")
+        assert sorted(ra.sync.cams) == sorted(rb.sync.cams), f"robot {ra.id} camera sets"
+        for g, row in ra.sync.cams.items():
+            np.testing.assert_array_equal(row, rb.sync.cams[g])
+        assert ra.sync.rounds == rb.sync.rounds
+        for k in ROBOT_ARRAYS:
+            np.testing.assert_array_equal(getattr(ra, k), getattr(rb, k),
+                                          err_msg=f"robot {ra.id} {k}")
+        assert ra.peak_memory_bytes == rb.peak_memory_bytes, f"robot {ra.id} memory"
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 9), m=st.integers(2, 6),
+       p_link=st.sampled_from([0.5, 0.9, 1.0]), p_swap=st.sampled_from([0.3, 0.6, 0.9]),
+       ties=st.booleans(), flood=st.sampled_from(FLOODS),
+       graph=st.sampled_from(["complete", "ring2"]))
+def test_batched_equals_robot_by_robot(seed, n, m, p_link, p_swap, ties, flood, graph):
+    fpc, links, weight = planted_instance(seed, n, m, p_link, p_swap, ties, graph)
+    a, b = _both(fpc, links, weight, flood)
+    event(f"{a[0]['boruvka_rounds']} Borůvka rounds" if a[0]["boruvka_rounds"] < 3
+          else "3 or more Borůvka rounds")
+    _assert_same(a, b)
+
+
+def test_small_pieces_and_a_compacted_camera_store_change_nothing():
+    fpc, links, weight = planted_instance(11, 12, 8, 0.9, 0.6, False, "ring2")
+    with patch.object(sync_batched, "CHUNK", 5):
+        a, b = _both(fpc, links, weight, "links")
+    _assert_same(a, b)
+    assert a[0]["boruvka_rounds"] >= 3
+
+
+def test_a_team_without_links():
+    fpc = np.array([3, 2, 4])
+    links = planted_instance(0, 3, 2, 0.0, 0.0, False)[1]
+    robots, _ = _team(fpc, links, np.zeros(0), "links")
+    net = Network(3, np.array([[0, 1], [1, 2]]))
+    res = run_sync_batched(robots, net)
+    assert res == dict(rounds=0, boruvka_rounds=0, support_rounds=0)
+    assert net.counters()["messages"] == 0
+    assert all((rb.component == -1).all() for rb in robots)
+
+
+def test_where_it_does_not_apply_the_robots_run_one_by_one():
+    fpc, links, weight = planted_instance(5, 5, 4, 1.0, 0.9, False)
+    delayed = NetworkOptions(delay_rounds=1)
+    robots, net = _team(fpc, links, weight, "links", delayed)
+    assert not sync_batched_applies(robots, net)
+    a, b = _both(fpc, links, weight, "links", delayed, batched_only=False)
+    _assert_same(a, b)
+    robots, net = _team(fpc, links, weight, "tree")
+    equip_sync(robots[0], robots[0].sync.weight, "links")  # one robot floods otherwise
+    assert not sync_batched_applies(robots, net)
