@@ -48,9 +48,9 @@ DEFAULT_CASES = ["hotel:20:complete", "hotel:all:complete", "hotel:all:ring2",
 
 def hotel(data: Path, frames: str, graph: str):
     from pipeline.commgraph import comm_graph
-    from pipeline.landmark_matching import match_landmark_edges
-    from pipeline.landmarks_io import load_landmark_folder
-    from pipeline.link_evidence import ratio_llr
+    from pipeline.inputs.landmarks import load_landmark_folder
+    from pipeline.matching.landmarks import match_landmark_edges
+    from pipeline.matching.link_evidence import ratio_llr
 
     fr = load_landmark_folder(data, "given", None if frames == "all" else int(frames))
     edges = comm_graph(graph, [f.name for f in fr])
@@ -83,7 +83,7 @@ def ring2_team(n: int, m: int = 30, p_swap: float = 0.3, seed: int = 0):
 def child(engine: str, flood: str, case: str, data: Path) -> dict:
     import resource
 
-    from pipeline.consistency.engine import build_robots
+    from pipeline.consistency.engines.driver import build_robots
     from pipeline.consistency.sync import equip_sync, run_sync
     from pipeline.transport.simulated import Network
 
@@ -97,7 +97,7 @@ def child(engine: str, flood: str, case: str, data: Path) -> dict:
         equip_sync(rb, w[li], flood)
     net = Network(len(fpc), edges)
     if engine == "batched":
-        from pipeline.consistency.sync_batched import run_sync_batched as run
+        from pipeline.consistency.engines.sync_batched import run_sync_batched as run
     else:
         run = run_sync
     t0, c0 = time.perf_counter(), time.process_time()

@@ -244,6 +244,7 @@ register(ResolutionRule(
     cases={6: "sync"},
     detection=False,
     stage="pipeline.consistency.sync:run_sync",
+    stage_batched="pipeline.consistency.engines.sync_batched:run_sync_batched",
     alone="pipeline.consistency.sync_alone:run_sync_locally",
     equip="pipeline.consistency.sync:equip_robot",
     needs_evidence=True,

@@ -1,4 +1,4 @@
-"""The batched ``sync`` engine (pipeline.consistency.sync_batched) against robot-by-robot
+"""The batched ``sync`` engine (pipeline.consistency.engines.sync_batched) against robot-by-robot
 stepping (pipeline.consistency.sync.run_sync): the same per-robot final state, rounds,
 messages and bytes per kind, and peak memory per robot, on random instances with planted
 conflicts."""
@@ -10,10 +10,10 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from sync_instances import comm_edges, planted_instance
 
-from pipeline.consistency import sync_batched
-from pipeline.consistency.engine import build_robots
+from pipeline.consistency.engines import sync_batched
+from pipeline.consistency.engines.driver import build_robots
+from pipeline.consistency.engines.sync_batched import run_sync_batched, sync_batched_applies
 from pipeline.consistency.sync import FLOODS, equip_sync, run_sync
-from pipeline.consistency.sync_batched import run_sync_batched, sync_batched_applies
 from pipeline.transport.simulated import Network, NetworkOptions
 
 SETTINGS = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -1,4 +1,4 @@
-"""Batched evaluation of the ``sync`` rule (:mod:`.sync`) in the in-process simulator.
+"""Batched evaluation of the ``sync`` rule (:mod:`..sync`) in the in-process simulator.
 
 The per-robot driver (:func:`.sync.run_sync`) steps every robot with a message in every
 round, robot by robot. That is the code the robots run one at a time over a reliable
@@ -10,7 +10,7 @@ messages and bytes, that robot-by-robot stepping gives.
 
 Why each robot's update still reads only its own state and its inbox (docs/DESIGN.md)
     Every quantity below is the value a robot computes from its own rows and from what its
-    inbox holds in that round (:mod:`.sync`, "What each end knows"): at the start of each
+    inbox holds in that round (:mod:`..sync`, "What each end knows"): at the start of each
     phase A both ends of an open or inside link hold the clusters' current labels and camera
     sets, so one array ``label`` of every feature's cluster (each robot's own ``label``
     rows, stacked) and one camera bit set per cluster serve both ends; where a robot's
@@ -20,7 +20,7 @@ Why each robot's update still reads only its own state and its inbox (docs/DESIG
     is the largest key of its own open links, then the largest heard; a merge needs the link
     to be the best held at both ends.
 
-Steps (one vectorized step per network round; the phases of :mod:`.sync`)
+Steps (one vectorized step per network round; the phases of :mod:`..sync`)
     Support (1 round). Robot ``i``'s message to ``j`` lists, for each of the ``F`` own
     features linked to ``j``, its ``deg`` far ends: ``12 + 8 F + id · Σ deg`` bytes. ``τ`` of a
     link is what the robot counts from the list: the far ends of the far feature that are
@@ -44,7 +44,7 @@ Steps (one vectorized step per network round; the phases of :mod:`.sync`)
     ``2 + d``. The phase ends in the round of the last delivery.
 
     Messages: the sends of one kind in one round grouped by sender-receiver pair, one
-    message each, ``12`` bytes plus the entries at their wire sizes (:mod:`.sync`, payloads):
+    message each, ``12`` bytes plus the entries at their wire sizes (:mod:`..sync`, payloads):
     ``sync-best`` ``12 + 2 id``, ``sync-merge`` ``8 + 2 id``, ``sync-relabel``
     ``4 + 2 id + ⌈n/8⌉``, ``sync-x`` ``4 + id + ⌈n/8⌉``; counted with
     :meth:`~pipeline.transport.Transport.count` per kind.
@@ -269,10 +269,44 @@ def _support(team: _Team, counts: _Counts) -> tuple[int, np.ndarray]:
         hit = isin_sorted(np.repeat(team.f[h], c) * M + x, akeys)
         tau[h] = np.bincount(np.repeat(np.arange(h.size), c)[hit], minlength=h.size)
         start = stop
+    quad = _quadrangles(team, tau, adj, ptr)
     stepped = np.zeros(team.n, dtype=bool)  # robots that receive a support message
     stepped[team.nbr[A]] = True
-    w = np.where(stepped[team.rob], team.weight + TRIANGLE_WEIGHT * tau, team.weight)
+    w = np.where(stepped[team.rob], team.weight + TRIANGLE_WEIGHT * (tau + quad), team.weight)
+    # each robot holds every list it received until its quadrangles are decided (int64
+    # feature, degree and far ends, as :func:`..sync.support_step` keeps them)
+    ukeys, first = np.unique(team.pair[A] * M + team.f[A], return_index=True)
+    dst = team.nbr[A][first]
+    team.lists_bytes = (16 * np.bincount(dst, minlength=team.n)
+                        + 8 * np.bincount(dst, weights=deg[ukeys % M], minlength=team.n)
+                        ).astype(np.int64)
     return (1 if msgs else 0), w
+
+
+def _quadrangles(team: _Team, tau: np.ndarray, adj: np.ndarray, ptr: np.ndarray) -> np.ndarray:
+    """Every alive half-link's quadrangle flag (:func:`..cycles.cycle_support`), as its robot
+    decides it from its own links and the lists of the support round: the lists a robot
+    receives are its neighbours' features' alive links, i.e. the alive graph's rows, so one
+    evaluation per link on those rows gives both halves' flags."""
+    from pipeline.consistency.cycles import cycle_support
+
+    quad = np.zeros(team.H, dtype=bool)
+    A = np.flatnonzero(team.alive & (tau == 0))
+    rep = A[A < team.twin[A]]
+    if rep.size == 0:
+        return quad
+    ends = np.unique(np.concatenate([team.f[rep], team.g[rep]]))
+    near = np.unique(team.g[adj[ranges(ptr[ends], ptr[ends + 1])]])
+    rows = {int(x): team.g[adj[ptr[x]:ptr[x + 1]]] for x in np.union1d(ends, near).tolist()}
+    offsets = team.offsets
+
+    def camera_of(g):
+        return np.searchsorted(offsets, np.asarray(g), side="right") - 1
+
+    _, q = cycle_support(team.f[rep], team.g[rep], rows, rows, camera_of)
+    quad[rep] = q
+    quad[team.twin[rep]] = q
+    return quad
 
 
 def _ranks(team: _Team, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -439,6 +473,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         st.cams = {int(x): row for x, row in zip(mine.tolist(), cams.of(mine), strict=True)}
         st.rounds = boruvka
         rb.peak_memory_bytes = max(rb.peak_memory_bytes,
-                                   st.robot_fixed + st.fixed + int(held_max[i]) * per_set)
+                                   st.robot_fixed + st.fixed + int(held_max[i]) * per_set,
+                                   st.robot_fixed + st.fixed + int(team.lists_bytes[i]))
         finish_sync(rb, t)
     return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)
