@@ -28,8 +28,9 @@ Cases
       them in label order, and any tie broken by index would otherwise read the truth.
     * A synthetic team (``--team 300``): ``n`` cameras on a ring2 graph, each seeing the same
       30 landmarks in its own random order; every linked pair matched one-to-one, and 30 % of
-      the pairs swap two of their matches (wrong links). Methods: the default rule and the
-      baselines that fit in memory.
+      the pairs swap two of their matches (wrong links). Methods: ``resolve:sync`` (the
+      ``resolve`` command on the links written as a file, as a user runs it: its wall time and
+      peak RSS in ``resolve_wall_s``, ``resolve_peak_rss_mb``), the rules and the baselines.
 
 Prints one table per case and saves ``runs/bench-multiway/results.json``.
 
@@ -149,8 +150,38 @@ def scores(m, kept: Links, truth_id) -> dict:
 # --------------------------------------------------------------------------- the methods
 
 
+def run_resolve_cli(rule: str, m, edges, links: Links) -> dict:
+    """``formation-match resolve --resolution RULE`` on the links written as a CSV file, as a
+    user runs it (reading, checks, memory guard, the stage, writing): kept mask, the child's
+    wall time and peak RSS."""
+    import csv
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, graph, out = Path(tmp, "links.csv"), Path(tmp, "graph.csv"), Path(tmp, "out.csv")
+        np.savetxt(src, np.stack([links.cam_i, links.feat_i, links.cam_j, links.feat_j,
+                                  links.quality], axis=1), fmt=["%d"] * 4 + ["%.6f"],
+                   delimiter=",", header="cam_i,feat_i,cam_j,feat_j,quality", comments="")
+        np.savetxt(graph, edges, fmt="%d", delimiter=",")
+        t0 = time.perf_counter()
+        proc = subprocess.run(["/usr/bin/time", "-f", "%M", sys.executable, "-m", "pipeline",
+                               "resolve", "--links", str(src), "--comm-graph", str(graph),
+                               "--out", str(out), "--resolution", rule, "-q"],
+                              capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise RuntimeError(proc.stderr.strip().splitlines()[-1])
+        with open(out, newline="") as f:
+            kept = np.array([r["status"] == "kept" for r in csv.DictReader(f)])
+    rss = int(proc.stderr.strip().splitlines()[-1]) / 1024
+    return dict(kept=kept, resolve_wall_s=round(wall, 2), resolve_peak_rss_mb=round(rss, 1))
+
+
 def run_method(method: str, m, edges, links: Links) -> dict:
     """Kept mask and the method's own figures (rounds, messages, bytes where distributed)."""
+    if method.startswith("resolve:"):
+        return run_resolve_cli(method.split(":", 1)[1], m, edges, links)
     if method in DISTRIBUTED:
         from pipeline.consistency import resolve_conflicts
 
@@ -248,8 +279,10 @@ def main(argv=None) -> int:
                    choices=("descriptors", "defaults"))
     p.add_argument("--methods", nargs="+", default=[*DISTRIBUTED, *CENTRALIZED])
     p.add_argument("--team", type=int, nargs="*", default=[300])
-    p.add_argument("--team-methods", nargs="+", default=["sync", "drop_conflictive_sets",
-                                                         "quality_merge", "spectral"])
+    p.add_argument("--team-methods", nargs="+",
+                   default=["resolve:sync", "sync", "evidence", "drop_conflictive_sets",
+                            "quality_merge", "spectral", "clear"],
+                   help="methods of the team rows; resolve:RULE runs the resolve command")
     p.add_argument("--shuffle-seed", type=int, default=0)
     p.add_argument("--cap-gb", type=float, default=6.0)
     p.add_argument("--cap-s", type=float, default=600.0)
