@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.__main__ import main
+from pipeline.errors import InputError
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hostile import one_line_error  # noqa: E402
@@ -61,7 +62,10 @@ def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_pat
     (out / "formations.json").write_text('{"a": {}, "d": {}}')
     check_outputs(out, overwrite=False)  # a previous run's summary: replaced without asking
     (out / "formations.md").write_text("my own notes\n")
+    with pytest.raises(InputError, match="holds formations.md, which run-formations did not"):
+        check_outputs(out, overwrite=False)
     check_outputs(out, overwrite=True)
+    assert (out / "formations.md").read_text() == "my own notes\n"  # checked, not touched
 
 
 def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(
