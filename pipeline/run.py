@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.association import AssociationGraph
+from pipeline.consistency import DEFAULT_RESOLUTION
 from pipeline.faults import FaultConfig
 from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
@@ -52,7 +53,7 @@ class FormationConfig:
     out: str | None = None
     rerun: bool = True
     faults: FaultConfig | None = None
-    resolution: str = "evidence"
+    resolution: str = DEFAULT_RESOLUTION
     merge_radius: float | None = None
 
     def out_dir(self) -> Path:
@@ -169,7 +170,8 @@ def evidence_inputs(views: list[View], features: list, links: Links, matches=Non
 
 
 def consistency_stage(features_per_camera, comm_edges, links: Links,
-                      faults: FaultConfig | None = None, *, resolution: str = "paper",
+                      faults: FaultConfig | None = None, *,
+                      resolution: str = DEFAULT_RESOLUTION,
                       evidence: dict | None = None):
     """The consistency stage once: detection (Sec. III) and resolution (Alg. 1, or the
     evidence rule of :mod:`pipeline.consistency.evidence`) until conflict-free, on a faulty
@@ -272,7 +274,7 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
 
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
                       *, fusion: bool = True, timer: StageTimer | None = None,
-                      faults: FaultConfig | None = None, resolution: str = "evidence",
+                      faults: FaultConfig | None = None, resolution: str = DEFAULT_RESOLUTION,
                       matches: list | None = None) -> CleaningResult:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
 

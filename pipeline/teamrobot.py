@@ -43,6 +43,7 @@ import time
 
 import numpy as np
 
+from pipeline.consistency import DEFAULT_RESOLUTION
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
@@ -119,9 +120,10 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     local evidence of each link, :func:`pipeline.link_evidence.edge_evidence`, computed by the
     matching end and sent with the matches) per neighbour.
     """
-    from pipeline.features import MERGE_RADIUS_PX, extract, photo_max_features
+    from pipeline.features import extract, photo_max_features
     from pipeline.link_evidence import edge_evidence
     from pipeline.matching import match_pair, photo_threshold_px
+    from pipeline.run import merge_radius_for
     from pipeline.types import Features, PairMatches
 
     t = time.perf_counter()
@@ -132,7 +134,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     budget = opts.get("max_features")
     feats = extract(view, opts["features"],
                     photo_max_features(w, h) if budget is None else int(budget),
-                    float(opts.get("merge_radius", MERGE_RADIUS_PX)),
+                    merge_radius_for(team_resolution(team), opts.get("merge_radius")),
                     contrast_threshold=opts.get("contrast_threshold"),
                     rootsift=bool(opts.get("rootsift", False)),
                     budget_after_merge=bool(opts.get("budget_after_merge", False)))
@@ -223,7 +225,7 @@ def team_resolution(team) -> str:
     message loss injected at any robot the fault-tolerant Alg. 1 runs (as the simulator
     does on a faulty network). Public knowledge: every robot reads the same team file."""
     lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
-    return "paper" if lossy else str(team.options.get("resolution", "paper"))
+    return "paper" if lossy else str(team.options.get("resolution", DEFAULT_RESOLUTION))
 
 
 def robot_main(team, i: int, transport) -> tuple[dict, dict]:

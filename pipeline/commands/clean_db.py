@@ -22,6 +22,7 @@ import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
+from pipeline.consistency import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["CleanDbResult", "clean_database", "add_arguments", "run", "COLMAP_MAX_ERROR_PX"]
@@ -70,7 +71,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
-                   resolution: str = "evidence", *, rerun: bool = True,
+                   resolution: str = DEFAULT_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 

@@ -82,7 +82,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     ok = reason == ""
     model_links = links.subset(ok)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links)
+    result, _ = consistency_stage(m, edges, model_links, resolution="paper")
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     rnd = np.full(len(links), -1, dtype=np.int64)

@@ -9,15 +9,13 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.consistency import DEFAULT_RESOLUTION, RESOLUTIONS
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
 __all__ = ["MIN_FEATURES", "MAX_FEATURES", "RESOLUTIONS", "add_feature_options", "add_scene_options",
            "add_resolution_option", "add_merge_radius_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
-
-#: resolution rules of the consistency stage (:func:`pipeline.consistency.resolve_conflicts`)
-RESOLUTIONS = ("paper", "evidence")
 
 #: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
 MIN_FEATURES = 8
@@ -56,7 +54,7 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
 
 
-def add_resolution_option(p: argparse.ArgumentParser, default: str = "evidence") -> None:
+def add_resolution_option(p: argparse.ArgumentParser, default: str = DEFAULT_RESOLUTION) -> None:
     """``--resolution paper|evidence``: Alg. 1 of the paper, or the evidence-aware rule."""
     p.add_argument("--resolution", choices=RESOLUTIONS, default=default,
                    help="how the robots cut conflictive sets: paper = Alg. 1 of Aragues et al.; "

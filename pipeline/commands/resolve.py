@@ -19,6 +19,7 @@ import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
+from pipeline.consistency import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig, add_fault_arguments, faults_from_args
 from pipeline.team import add_transport_argument, resolution_for_transport
@@ -46,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
-                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = "evidence",
+                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = DEFAULT_RESOLUTION,
                  transport: str = "sim") -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 
@@ -144,7 +145,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     return summary
 
 
-def _resolve_over_zenoh(m, edges, links, faults, resolution="paper"):
+def _resolve_over_zenoh(m, edges, links, faults, resolution=DEFAULT_RESOLUTION):
     """The consistency stage as one robot process per camera over Zenoh.
 
     The links to make consistent (kept rows, compact ids, with their quality: the evidence

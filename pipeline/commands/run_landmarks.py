@@ -53,7 +53,7 @@ def _resolve_paper(features_per_camera, comm_edges, links: Links):
     """Aragüés et al., Sec. III detection + Sec. IV Alg. 1 resolution, until conflict-free."""
     from pipeline.consistency import resolve_conflicts
 
-    return resolve_conflicts(features_per_camera, comm_edges, links)
+    return resolve_conflicts(features_per_camera, comm_edges, links, resolution="paper")
 
 
 #: resolution methods of the distributed stage: name -> (description, function

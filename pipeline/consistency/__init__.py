@@ -19,7 +19,15 @@ its dependencies.
 
 import importlib
 
-__all__ = ["ConsistencyResult", "resolve_conflicts", "detect_once", "ProtocolOptions", "Robot"]
+__all__ = ["ConsistencyResult", "resolve_conflicts", "detect_once", "ProtocolOptions", "Robot",
+           "RESOLUTIONS", "DEFAULT_RESOLUTION"]
+
+#: the resolution rules: ``paper`` (Alg. 1) and ``evidence`` (:mod:`.evidence`)
+RESOLUTIONS = ("paper", "evidence")
+#: the rule every entry point uses unless told otherwise (the Python API, the commands, a
+#: TEAM.json without ``resolution``); ``run-formations`` reproduces the paper's tables with
+#: ``paper``
+DEFAULT_RESOLUTION = "evidence"
 
 _HOME = {"ConsistencyResult": "engine", "resolve_conflicts": "engine", "detect_once": "engine",
          "ProtocolOptions": "protocols", "Robot": "robot"}

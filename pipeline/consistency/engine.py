@@ -33,7 +33,7 @@ import numpy as np
 
 from pipeline.association import camera_offsets, check_links
 from pipeline.commgraph import comm_edges_for
-from pipeline.consistency import batched, batched_evidence
+from pipeline.consistency import DEFAULT_RESOLUTION, RESOLUTIONS, batched, batched_evidence
 from pipeline.consistency.evidence import equip, run_evidence_resolution
 from pipeline.consistency.linklog import merge_link_logs
 from pipeline.consistency.protocols import (
@@ -248,7 +248,6 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     return Detection(robots, stats, network, proto)
 
 
-RESOLUTIONS = ("paper", "evidence")
 ENGINES = ("auto", "batched", "per-robot")
 
 
@@ -266,7 +265,8 @@ def _use_batched(engine: str, network: Transport, protocol) -> bool:
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       network_options: NetworkOptions | None = None,
-                      protocol: ProtocolOptions | None = None, resolution: str = "paper",
+                      protocol: ProtocolOptions | None = None,
+                      resolution: str = DEFAULT_RESOLUTION,
                       link_weight=None, keypoints=None, projections=None,
                       engine: str = "auto") -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
@@ -285,7 +285,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         The robots' protocol: the paper's (default on a fault-free network) or the
         fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
 
-    resolution : ``paper`` or ``evidence``
+    resolution : ``paper`` or ``evidence`` (default :data:`.DEFAULT_RESOLUTION`)
         ``paper``: Alg. 1. ``evidence``: the flood-and-solve rule of :mod:`.evidence` (on a
         fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
         ``stats['resolution']`` says so).

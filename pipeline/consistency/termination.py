@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.consistency import DEFAULT_RESOLUTION
 from pipeline.consistency.channel import Channel
 from pipeline.consistency.evidence import (
     evidence_done,
@@ -148,7 +149,8 @@ def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave
 
 
 def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
-                            n_robots: int | None = None, resolution: str = "paper") -> RobotRun:
+                            n_robots: int | None = None,
+                            resolution: str = DEFAULT_RESOLUTION) -> RobotRun:
     """Detection and resolution until conflict-free, ended by the local rule (module docstring).
 
     Parameters

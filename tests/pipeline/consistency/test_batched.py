@@ -310,7 +310,7 @@ def test_batched_resolution_settles_contention_in_the_receivers_order():
     for engine in ("per-robot", "batched"):
         with patch.object(batched_resolution, "_run_stepped", _no_fallback), \
                 patch.object(batched_resolution, "_settle_contention", counting):
-            res[engine] = resolve_conflicts(fpc, edges, links, engine=engine)
+            res[engine] = resolve_conflicts(fpc, edges, links, engine=engine, resolution="paper")
     assert settled == [2]  # the batched round met the contention
     a, b = res["per-robot"], res["batched"]
     assert a.case.tolist() == ["", "", "", "b"]
@@ -323,9 +323,10 @@ def test_batched_resolution_settles_contention_in_the_receivers_order():
 @given(inst=instances(max_n=7, max_feat=4))
 def test_delta_messages_change_traffic_only(inst, tmp_path):
     fpc, edges, links = inst
-    whole = resolve_conflicts(fpc, edges, links, protocol=ProtocolOptions(delta_messages=False))
+    whole = resolve_conflicts(fpc, edges, links, protocol=ProtocolOptions(delta_messages=False),
+                              resolution="paper")
     delta = resolve_conflicts(fpc, edges, links, protocol=ProtocolOptions(delta_messages=True),
-                              engine="per-robot")
+                              engine="per-robot", resolution="paper")
     for f in ("deleted", "reason", "iteration", "round", "case", "component", "track_label"):
         np.testing.assert_array_equal(getattr(whole, f), getattr(delta, f), err_msg=f)
     assert whole.stats["detection_rounds"] == delta.stats["detection_rounds"]
@@ -339,8 +340,9 @@ def test_delta_messages_cut_the_bytes_of_a_long_chain():
     n = 30
     links = Links(np.arange(n - 1), np.zeros(n - 1, int), np.arange(1, n), np.zeros(n - 1, int))
     fpc = np.ones(n, dtype=np.int64)
-    whole = resolve_conflicts(fpc, None, links, protocol=ProtocolOptions(delta_messages=False))
-    delta = resolve_conflicts(fpc, None, links)
+    whole = resolve_conflicts(fpc, None, links, protocol=ProtocolOptions(delta_messages=False),
+                              resolution="paper")
+    delta = resolve_conflicts(fpc, None, links, resolution="paper")
     assert whole.stats["detection_rounds"] == delta.stats["detection_rounds"] == n
     blocks_w = whole.stats["bytes_by_kind"]["blocks"]
     blocks_d = delta.stats["bytes_by_kind"]["blocks"]
@@ -353,13 +355,14 @@ def test_auto_engine_is_per_robot_under_faults_and_batched_cannot_be_forced_ther
     fpc, edges, links = random_instance(np.random.default_rng(3), 6, 4, 0.6, 0.8)
     opts = NetworkOptions(drop_probability=0.2, seed=1)
     with pytest.raises(InputError, match="engine 'batched' needs"):
-        resolve_conflicts(fpc, edges, links, opts, engine="batched")
+        resolve_conflicts(fpc, edges, links, opts, engine="batched", resolution="paper")
     with pytest.raises(InputError, match="engine 'fast'"):
-        resolve_conflicts(fpc, edges, links, engine="fast")
-    auto = resolve_conflicts(fpc, edges, links, opts)
-    per_robot = resolve_conflicts(fpc, edges, links, opts, engine="per-robot")
+        resolve_conflicts(fpc, edges, links, engine="fast", resolution="paper")
+    auto = resolve_conflicts(fpc, edges, links, opts, resolution="paper")
+    per_robot = resolve_conflicts(fpc, edges, links, opts, engine="per-robot", resolution="paper")
     assert auto.stats["messages"] == per_robot.stats["messages"]
     assert auto.stats["protocol"] == "reliable"
     with pytest.raises(InputError, match="delta messages need"):
         resolve_conflicts(fpc, edges, links, opts,
-                          protocol=ProtocolOptions(reliable=True, delta_messages=True))
+                          protocol=ProtocolOptions(reliable=True, delta_messages=True),
+                          resolution="paper")
