@@ -117,6 +117,29 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     return float(merge_radius)
 
 
+def budget_line(views: list[View], max_features: int | None) -> str:
+    """The feature budget as the stage line says it: ``2000 per image``, or with budgets
+    scaled with each image (``max_features=None``) the numbers, e.g. ``3300 per image (2000
+    per 640x480 pixels, at most 8192)`` or ``2000-8192 per image (…)`` for mixed sizes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> budget_line([View("a", np.zeros((640, 800)), np.eye(3))] * 6, None)
+    '3333 per image (2000 per 640x480 pixels, at most 8192)'
+    >>> budget_line([], 2000)
+    '2000 per image'
+    """
+    from pipeline.features import BASE_FEATURES, MAX_PHOTO_FEATURES, photo_max_features
+
+    if max_features is not None:
+        return f"{max_features} per image"
+    budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})
+    span = "-".join(str(b) for b in {budgets[0]: 0, budgets[-1]: 0}) if budgets else "?"
+    return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, at most "
+            f"{MAX_PHOTO_FEATURES})")
+
+
 def extract_and_match(views: list[View], comm_edges, method: str,
                       max_features: int | None, timer: StageTimer, *, ratio: float = 0.8,
                       threshold_px: float | None = 1.0, merge_radius: float | None = None,
@@ -141,8 +164,7 @@ def extract_and_match(views: list[View], comm_edges, method: str,
     from pipeline.matching import match_edges
 
     radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
-    budget = "a budget scaled with image size" if max_features is None else max_features
-    with timer.stage("features", f"{method}, at most {budget} per image"):
+    with timer.stage("features", f"{method}, at most {budget_line(views, max_features)}"):
         feats = extract_all(views, method, max_features, radius,
                             contrast_threshold=contrast_threshold, rootsift=rootsift,
                             budget_after_merge=budget_after_merge)

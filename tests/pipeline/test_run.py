@@ -50,3 +50,21 @@ def test_fusion_stage_among_posed_cameras_leaves_the_others_alone():
     assert n_cut == 0 and ledger.kept.all()
     assert fr.stats["tracks_fused"] == 30
 
+
+def test_the_features_stage_line_says_the_budget_of_the_images():
+    import io
+
+    from pipeline.progress import StageTimer
+    from pipeline.run import extract_and_match
+    from pipeline.types import View
+
+    rng = np.random.default_rng(0)
+    views = [View(f"v{k}", rng.integers(0, 255, size=(640, 800), dtype=np.uint8), np.eye(3))
+             for k in range(2)]
+    for budget, line in ((None, "[features] sift, at most 3333 per image (2000 per 640x480 "
+                                "pixels, at most 8192)"),
+                         (500, "[features] sift, at most 500 per image")):
+        out = io.StringIO()
+        extract_and_match(views, np.zeros((0, 2), dtype=np.int64), "sift", budget,
+                          StageTimer(stream=out))
+        assert line in out.getvalue().splitlines()[0], out.getvalue()
