@@ -46,7 +46,8 @@ bench: $(BENCH_STAMP)
 bench-voting: $(BENCH_STAMP)
 	$(PY) bench/voting_table1.py && $(PY) bench/voting_fig23.py && $(PY) bench/voting_pipeline.py
 
-# make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (URL printed)
+# make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (its URL,
+# with the recording's address, printed; python -m viz.browser checks it in headless Chromium)
 view: $(STAMP)
 	$(PY) -m viz.view $(RUN)
 
