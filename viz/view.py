@@ -86,6 +86,18 @@ def web_url(port: int = WEB_PORT, grpc_port: int = GRPC_PORT, host: str = "local
                                                  safe="")
 
 
+def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Namespace,
+                                                                      Path | None]:
+    """``ap``'s arguments (its ``target`` a run folder or ``.rrd``) and the recording to open,
+    or ``None`` after printing why there is none."""
+    args = ap.parse_args(argv)
+    try:
+        return args, find_recording(args.target)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return args, None
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m viz.view", description=__doc__.split("\n\n")[0])
     ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd")
@@ -96,11 +108,8 @@ def main(argv=None) -> int:
     ap.add_argument("--grpc-port", type=int, default=GRPC_PORT,
                     help="port of the gRPC proxy that serves the recording (default 9876)")
     ap.add_argument("--dry-run", action="store_true", help="print the command, do not run it")
-    args = ap.parse_args(argv)
-    try:
-        path = find_recording(args.target)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    args, path = parse_with_recording(ap, argv)
+    if path is None:
         return 2
     web = args.web or (not args.native and not has_display())
     cmd = viewer_command(path, web, args.port, args.grpc_port)

@@ -2,12 +2,19 @@
 display, opens any run folder."""
 
 import os
-import subprocess
 
 import pytest
 from test_rerun_log import make_record
 
-from viz.browser import coloured_share, find_browser, free_port, screenshot, shows_recording
+from viz.browser import (
+    coloured_share,
+    find_browser,
+    free_port,
+    screenshot,
+    serve,
+    shows_recording,
+    stop,
+)
 from viz.rerun_log import log_run
 from viz.view import find_recording, has_display, main, viewer_command, web_url
 
@@ -57,14 +64,12 @@ def test_the_printed_url_shows_the_recording_in_a_headless_browser(tmp_path):
                     "viewer's URL is not opened in a browser")
     path = log_run(tmp_path / "recording.rrd", make_record())
     port, grpc_port = free_port(), free_port()
-    server = subprocess.Popen(viewer_command(path, True, port, grpc_port),
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server = serve(path, port, grpc_port)
     try:
         shown = screenshot(web_url(port, grpc_port), timeout_s=90)
         # the same page without its data source: the empty viewer the check must refuse
         bare = screenshot(f"http://localhost:{port}", timeout_s=8)
     finally:
-        server.terminate()
-        server.wait()
-    assert shows_recording(shown), f"{coloured_share(shown):.2%} of the screen coloured"
-    assert not shows_recording(bare), f"{coloured_share(bare):.2%} of the screen coloured"
+        stop(server)
+    assert shows_recording(shown), f"{coloured_share(shown):.2%} of the views area coloured"
+    assert not shows_recording(bare), f"{coloured_share(bare):.2%} of the views area coloured"
