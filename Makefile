@@ -14,6 +14,12 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+# the bench extra (matplotlib, for the plots of two benches): only `make bench` needs it
+BENCH_STAMP := $(VENV)/.installed-bench
+$(BENCH_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e '.[dev,bench]'
+	@touch $(BENCH_STAMP)
+
 run-formation: $(STAMP)
 	$(PY) -m pipeline run-formation
 
@@ -31,16 +37,17 @@ lint: $(STAMP)
 # measured at 45 s (run_formation, 5 rounds, at a load average of 5), 15 s (foundation) and 65 s
 # (images_vs_colmap on the 640 px Sceaux copy) on 2 cores
 QUICK_BENCH := bench/run_formation.py bench/foundation.py bench/images_vs_colmap.py
-bench: $(STAMP)
+bench: $(BENCH_STAMP)
 	@if [ -n "$(QUICK)" ]; then set -- $(QUICK_BENCH); echo "quick bench (about 2 min): $$*"; \
 	else set -- bench/*.py; echo "full bench: every script in bench/, several minutes each for the voting and scale ones; make bench QUICK=1 takes about 2 min"; fi; \
 	for b in "$$@"; do echo "== $$b"; start=$$(date +%s); $(PY) $$b || exit 1; \
 	echo "== $$b took $$(( $$(date +%s) - start )) s"; done
 
-bench-voting: $(STAMP)
+bench-voting: $(BENCH_STAMP)
 	$(PY) bench/voting_table1.py && $(PY) bench/voting_fig23.py && $(PY) bench/voting_pipeline.py
 
-# make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (URL printed)
+# make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (its URL,
+# with the recording's address, printed; python -m viz.browser checks it in headless Chromium)
 view: $(STAMP)
 	$(PY) -m viz.view $(RUN)
 

@@ -121,8 +121,8 @@ def fault_kinds(k: int, seed: int, fpc, edges, links, base_reliable):
 
 def run_one(k: int, seed: int) -> list[dict]:
     fpc, edges, links = formation(k, seed)
-    base = resolve_conflicts(fpc, edges, links, protocol=PAPER)
-    base_reliable = resolve_conflicts(fpc, edges, links, protocol=RELIABLE)
+    base = resolve_conflicts(fpc, edges, links, protocol=PAPER, resolution="paper")
+    base_reliable = resolve_conflicts(fpc, edges, links, protocol=RELIABLE, resolution="paper")
     det0 = base.stats["per_iteration"][0]["detection_rounds"]
     rows = [dict(kind="none paper", ok=is_conflict_free(fpc, base.kept()), exact=True,
                  error="", extra_rounds=0, extra_messages=0, robot_lost=0, n=len(fpc),
@@ -138,7 +138,7 @@ def run_one(k: int, seed: int) -> list[dict]:
         if det_reliable is not None:
             row["exact"] = detection_exact(fpc, edges, links, opts, det_reliable)
         try:
-            res = resolve_conflicts(fpc, edges, links, opts, protocol=proto)
+            res = resolve_conflicts(fpc, edges, links, opts, protocol=proto, resolution="paper")
         except RuntimeError as exc:  # the paper's protocol may never settle under loss
             row.update(ok=False, error=str(exc)[:80], extra_rounds=None, extra_messages=None,
                        robot_lost=0)

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import os
 import statistics
 import sys
 import tempfile
@@ -190,6 +191,9 @@ def main(argv=None) -> int:
     size = tuple(int(v) for v in args.size.lower().split("x"))
     import pipeline.fusion.landmarks  # noqa: F401  (imports outside the timings)
 
+    load = [round(x, 2) for x in os.getloadavg()]
+    print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
+
     cases = [(f"{name}/{res}", lambda name=name, res=res: _formation_inputs(name, size, res))
              for name in args.formations for res in args.resolutions]
     if args.sceaux:
@@ -245,9 +249,12 @@ def main(argv=None) -> int:
               f"{ratios[case]['exact']['time_ratio']:.1f}x faster than fixed; metropolis "
               f"{ratios[case]['metropolis']['bytes_ratio']:.0f}x, "
               f"{ratios[case]['metropolis']['time_ratio']:.1f}x")
+    load_end = [round(x, 2) for x in os.getloadavg()]
+    print(f"load average at the end: {load_end}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "results.json", dict(size=list(size), repeat=args.repeat,
+                                                 load_average=dict(start=load, end=load_end),
                                                  long_rounds=args.long_rounds, rows=rows,
                                                  differences=diffs, ratios=ratios,
                                                  targets=dict(d_bytes_max=25_000_000,

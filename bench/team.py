@@ -200,6 +200,8 @@ def main() -> int:
             if k == 0:
                 print("zenoh / sim wall time with --resolution paper: "
                       f"{results['formations'][name]['zenoh_over_sim_wall_paper']}x")
+    results["load_average_at_end"] = [round(x, 2) for x in os.getloadavg()]
+    print(f"load average at the end (1, 5, 15 min): {results['load_average_at_end']}")
     write_json_atomic(Path(args.out) / "results.json", results)
     print(f"saved {args.out}/results.json")
     return 0

@@ -39,7 +39,7 @@ def pipeline_fusion(formations=("a", "b", "c", "d"), seed: int = 0, size=(640, 4
         feats, _, links = extract_and_match(f.views, f.comm_edges, "sift", 2000,
                                             StageTimer(verbose=False))
         m = [len(x) for x in feats]
-        res, _ = consistency_stage(m, f.comm_edges, links)
+        res, _ = consistency_stage(m, f.comm_edges, links, resolution="paper")
         kept = links.subset(~np.asarray(res.deleted, dtype=bool))
         truth = link_truth(f, feats, kept)
         gt = [data_synth.points_from_keypoints(v, x.keypoints) for v, x in zip(f.views, feats,

@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.association import conflictive_links
-from pipeline.consistency.rules import get_rule
+from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.types import LinkLedger, Links, View
 
-__all__ = ["CleaningResult", "merge_radius_for", "extract_and_match",
+__all__ = ["CleaningResult", "merge_radius_for", "budget_line", "extract_and_match",
            "evidence_inputs", "consistency_stage", "ledger_from_consistency", "fusion_stage",
            "clean_association"]
 
@@ -76,6 +76,29 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     return float(merge_radius)
 
 
+def budget_line(views: list[View], max_features: int | None) -> str:
+    """The feature budget as the stage line says it: ``2000 per image``, or with budgets
+    scaled with each image (``max_features=None``) the numbers, e.g. ``3300 per image (2000
+    per 640x480 pixels, at most 8192)`` or ``2000-8192 per image (…)`` for mixed sizes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> budget_line([View("a", np.zeros((640, 800)), np.eye(3))] * 6, None)
+    '3333 per image (2000 per 640x480 pixels, at most 8192)'
+    >>> budget_line([], 2000)
+    '2000 per image'
+    """
+    from pipeline.matching.features import BASE_FEATURES, MAX_PHOTO_FEATURES, photo_max_features
+
+    if max_features is not None:
+        return f"{max_features} per image"
+    budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})
+    span = "-".join(str(b) for b in {budgets[0]: 0, budgets[-1]: 0}) if budgets else "?"
+    return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, at most "
+            f"{MAX_PHOTO_FEATURES})")
+
+
 def extract_and_match(views: list[View], comm_edges, method: str,
                       max_features: int | None, timer: StageTimer, *, ratio: float = 0.8,
                       threshold_px: float | None = 1.0, merge_radius: float | None = None,
@@ -100,8 +123,7 @@ def extract_and_match(views: list[View], comm_edges, method: str,
     from pipeline.matching.pairs import match_edges
 
     radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
-    budget = "a budget scaled with image size" if max_features is None else max_features
-    with timer.stage("features", f"{method}, at most {budget} per image"):
+    with timer.stage("features", f"{method}, at most {budget_line(views, max_features)}"):
         feats = extract_all(views, method, max_features, radius,
                             contrast_threshold=contrast_threshold, rootsift=rootsift,
                             budget_after_merge=budget_after_merge)
@@ -130,7 +152,8 @@ def evidence_inputs(views: list[View], features: list, links: Links, matches=Non
 
 
 def consistency_stage(features_per_camera, comm_edges, links: Links,
-                      faults: FaultConfig | None = None, *, resolution: str = "paper",
+                      faults: FaultConfig | None = None, *,
+                      resolution: str = DEFAULT_RESOLUTION,
                       evidence: dict | None = None):
     """The consistency stage once: detection (Sec. III) and resolution (Alg. 1, or the
     evidence rule of :mod:`pipeline.consistency.evidence`) until conflict-free, on a faulty
@@ -142,7 +165,8 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     comm_edges : (E, 2) int or None — ``None``: cameras sharing a link are neighbours
     links : Links, (L,)
     faults : FaultConfig or None
-    resolution : a rule of :mod:`pipeline.consistency.rules` (``paper``, ``evidence``, ...)
+    resolution : a rule of :mod:`pipeline.consistency.rules` (``paper``, ``evidence``, ...;
+        default its ``DEFAULT_RESOLUTION``)
     evidence : dict or None — for a rule that needs evidence: ``link_weight``, ``keypoints``,
         ``projections`` for ``resolve_conflicts`` (:func:`evidence_inputs`)
 
@@ -235,7 +259,7 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
 
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
                       *, fusion: bool = True, timer: StageTimer | None = None,
-                      faults: FaultConfig | None = None, resolution: str = "evidence",
+                      faults: FaultConfig | None = None, resolution: str = DEFAULT_RESOLUTION,
                       matches: list | None = None) -> CleaningResult:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
 

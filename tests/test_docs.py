@@ -26,3 +26,18 @@ def test_readme_python_example_runs():
     namespace: dict = {}
     exec(compile(example, "README.md", "exec"), namespace)  # noqa: S102 - our own example
     assert namespace["result"].deleted.sum() == 1
+
+
+def test_readme_run_images_line_names_every_option():
+    from pipeline.__main__ import build_parser
+
+    readme = (ROOT / "README.md").read_text()
+    block = re.search(r"^formation-match run-images .*?(?=^formation-match )", readme,
+                      flags=re.M | re.S).group(0)
+    sub = build_parser(["run-images"])._subparsers._group_actions[0].choices["run-images"]
+    options = {o for a in sub._actions for o in a.option_strings if o.startswith("--")}
+    missing = sorted(o for o in options - {"--help", "--quiet", "--transport"}
+                     if not re.search(re.escape(o) + r"(?![\w-])", block))
+    assert not missing
+    assert "`run-formation`, `run-formations`, `run-images` and `resolve` take `--transport" \
+        in readme

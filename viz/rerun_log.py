@@ -14,13 +14,21 @@ structure-from-motion example:
                                    stage that cut it (:data:`CUT_COLORS`: resolution red, fusion
                                    purple)
 ``matches/A--B``                   the images ``A`` and ``B`` side by side with their links as
-                                   2D strips, kept vs cut (one pair per ``view_pairs`` entry)
+                                   2D strips: every cut link (``cut``) and an even sample of at
+                                   most :data:`PAIR_KEPT_SAMPLE` kept ones (``kept``), one pair per
+                                   ``view_pairs`` entry
 ``world/links/replay``             the same links, coloured per step of the ``round`` timeline
 ``world/points/{triangulated,ground_truth,fused}``  ``Points3D``
 ``graph``                          ``GraphNodes``/``GraphEdges``: conflictive sets before resolution
                                    (Aragüés et al., Def. 2.4), cuts replayed on ``round``
 ``resolution/log``                 ``TextLog``: what each step of the replay cut
+``cuts``                           ``TextDocument``: how many links each stage cut, and why
 ``report``                         ``TextDocument`` (markdown)
+
+The default blueprint answers "what was cut, where, and why" first: its first 3D view shows
+the cut links (kept ones hidden: one click on ``world/links/kept`` shows them), beside it the
+``cuts`` summary and the conflictive sets; the other tabs hold every link, the replay, the
+pair view, the report.
 
 Cameras without a pose (real images, ``R`` or ``t`` is ``None``; e.g. not registered by the
 mapper) are logged under ``images/NAME`` instead of ``world/``, with their image and keypoints
@@ -51,6 +59,9 @@ from pipeline.types import RunRecord
 
 __all__ = [
     "CUT_COLORS",
+    "CUT_WHY",
+    "PAIR_KEPT_SAMPLE",
+    "cut_summary",
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
     "camera_entity",
@@ -77,6 +88,26 @@ LINK_COLORS = {"candidate": (190, 190, 190), "kept": (40, 200, 60), "cut": (230,
 #: Colour of a deleted link by the stage that cut it (``reason``); other reasons: ``other``.
 CUT_COLORS = {"resolution": (230, 40, 40), "fusion-outlier": (160, 60, 255),
               "robot-lost": (255, 200, 0), "other": (255, 110, 180)}
+
+
+#: Why a stage cuts a link (``reason`` of the ledger), for the ``cuts`` panel.
+CUT_WHY = {
+    "resolution": "it lay in a conflictive set (a chain of matches joining two features of one "
+                  "camera, Def. 2.4: the graph view) and the resolution rule cut the set until "
+                  "each camera appears once in it",
+    "fusion-outlier": "the robust fusion of its landmark (distributed RANSAC, dynamic voting) "
+                      "declared one of its two observations an outlier",
+    "robot-lost": "one of its robots fell silent and its neighbours declared it lost",
+    "not-one-to-one": "the input matched one keypoint to several of the other image",
+    "not-comm-edge": "its two images are not neighbours in the communication graph",
+}
+#: How a resolution cut was decided (``case`` of the ledger).
+CASE_WHY = {"evidence": "evidence rule: the least-supported links of the set",
+            "b": "Alg. 1, case (b)", "c": "Alg. 1, case (c)", "reject": "Alg. 1, a reject",
+            "robot-lost": "its robot was lost"}
+_COLOUR_NAMES = {(230, 40, 40): "red", (160, 60, 255): "purple", (255, 200, 0): "yellow"}
+#: Kept links drawn in a pair view: an even sample of them, so that the cut ones stay readable.
+PAIR_KEPT_SAMPLE = 25
 
 
 def cut_color(reason: str) -> tuple[int, int, int]:
@@ -337,7 +368,10 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
             rr.LineStrips3D(ends[~deleted], colors=(*LINK_COLORS["kept"], _KEPT_ALPHA),
                             radii=_KEPT_RADIUS,
                             labels=labels[~deleted], show_labels=False), static=True)
-    del_labels = np.char.add(np.char.add(labels[deleted], " cut by "), reason[deleted])
+    case = np.asarray(record.ledger.case, dtype=str)[drawable]
+    how = np.array([f" ({CASE_WHY.get(c, c)})" if c else "" for c in case[deleted]], dtype=str)
+    del_labels = np.char.add(np.char.add(np.char.add(labels[deleted], " cut by "),
+                                         reason[deleted]), how)
     cut_rgb = np.array([cut_color(r) for r in reason], dtype=np.uint8).reshape(-1, 3)
     rec.log("world/links/deleted",
             rr.LineStrips3D(ends[deleted], colors=cut_rgb[deleted], radii=_LINE_RADIUS,
@@ -422,8 +456,10 @@ def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
     reason = np.asarray(record.ledger.reason, dtype=str)[sel]
     entity = "matches/" + rr.escape_entity_path_part(f"{ni}--{nj}")
     rec.log(entity, _jpeg(canvas, jpeg_quality), static=True)
-    rec.log(f"{entity}/kept", rr.LineStrips2D(strips[~deleted],
-                                              colors=(*LINK_COLORS["kept"], 150),
+    kept = np.flatnonzero(~deleted)
+    kept = kept[_even_sample(kept.size, PAIR_KEPT_SAMPLE)]
+    rec.log(f"{entity}/kept", rr.LineStrips2D(strips[kept],
+                                              colors=(*LINK_COLORS["kept"], 110),
                                               radii=rr.components.Radius.ui_points(0.75)),
             static=True)
     rec.log(f"{entity}/cut", rr.LineStrips2D(
@@ -432,6 +468,55 @@ def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
         labels=np.char.add("cut by ", reason[deleted]), show_labels=False,
         radii=rr.components.Radius.ui_points(1.25)), static=True)
     return entity
+
+
+def _even_sample(n: int, k: int) -> np.ndarray:
+    """Indices of ``min(n, k)`` of ``range(n)``, evenly spread, in order."""
+    return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(np.int64)) if n else \
+        np.zeros(0, dtype=np.int64)
+
+
+def _pair_counts(record: RunRecord, i: int, j: int) -> tuple[int, int]:
+    """``(cut, kept)`` links between cameras ``i`` and ``j``."""
+    lk = record.ledger.links
+    sel = ((lk.cam_i == i) & (lk.cam_j == j)) | ((lk.cam_i == j) & (lk.cam_j == i))
+    cut = int((sel & (np.asarray(record.ledger.status) == "deleted")).sum())
+    return cut, int(sel.sum()) - cut
+
+
+def cut_summary(record: RunRecord) -> str:
+    """Markdown of the ``cuts`` panel: the links each stage cut, the colour they are drawn
+    in, and why that stage cuts a link (:data:`CUT_WHY`, :data:`CASE_WHY`); read from the
+    ledger only."""
+    status = np.asarray(record.ledger.status)
+    reason = np.asarray(record.ledger.reason, dtype=str)
+    case = np.asarray(record.ledger.case, dtype=str)
+    deleted = status == "deleted"
+    n_conf = int(np.asarray(record.ledger.conflictive_before, dtype=bool).sum())
+    lines = ["## What was cut, where, and why", "",
+             f"**{int(deleted.sum())} of {len(status)} links cut**, "
+             f"{int((~deleted).sum())} kept; {n_conf} links lay in conflictive sets before "
+             "the resolution.", ""]
+    names, counts = np.unique(reason[deleted], return_counts=True)
+    order = sorted(range(len(names)), key=lambda k: (names[k] != "resolution", names[k]))
+    for k in order:
+        name = str(names[k])
+        why = CUT_WHY.get(name, "cut by that stage")
+        cases, c_counts = np.unique(case[deleted & (reason == name)], return_counts=True)
+        how = [f"{CASE_WHY.get(str(c), str(c))}: {int(n)}"
+               for c, n in zip(cases, c_counts, strict=True) if c]
+        if name == "resolution" and how:
+            why += " (" + "; ".join(how) + ")"
+        lines.append(f"* **{_links(int(counts[k]))} cut by {name}** (drawn "
+                     f"{_COLOUR_NAMES.get(cut_color(name), 'pink')}): {why}.")
+    lines += ["", "The first 3D view shows the cut links between the cameras that made them; "
+              "the kept links (green) are hidden there: show them with the eye of "
+              "`world/links/kept`, or open the tab *All links*. A cut link's label (hover) "
+              "names its two features, its stage and, with ground truth, whether it was good "
+              "or spurious. The graph shows each conflictive set as it was before the "
+              "resolution, a `×` on every link the run cut; the pair view draws every cut "
+              f"link of one image pair and at most {PAIR_KEPT_SAMPLE} of its kept links."]
+    return "\n".join(lines)
 
 
 def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_kept: int) -> None:
@@ -489,34 +574,50 @@ def _default_eye(views) -> rrb.EyeControls3D | None:
 
 
 def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int,
-               pair_entities: list[str] = ()) -> rrb.Blueprint:
+               pairs: list[tuple[str, int, int]] = ()) -> rrb.Blueprint:
+    """The default layout: what was cut, where and why first (see the module docstring).
+
+    ``pairs``: ``(entity, i, j)`` of every pair view."""
     names = _camera_names(record)
     image_views = [rrb.Spatial2DView(origin=f"{camera_entity(i, p, names[i])}/image", name=v.name)
                    for i, (v, p) in enumerate(zip(record.views, posed, strict=True))][:max_image_views]
-    side = [rrb.Grid(*image_views)] if image_views else []
-    side.append(rrb.Tabs(
-        *[rrb.Spatial2DView(origin=e, name="Matches " + e.split("/", 1)[1].replace("\\", ""))
-          for e in pair_entities],
-        rrb.GraphView(origin="graph", name="Conflictive sets before resolution"),
-        rrb.TextDocumentView(origin="report", name="Report"),
-        rrb.TextLogView(origin="resolution", name="Resolution steps"),
-    ))
+    pair_views = []
+    for entity, i, j in pairs:
+        cut, kept = _pair_counts(record, i, j)
+        pair_views.append(rrb.Spatial2DView(
+            origin=entity, name=f"Matches {entity.split('/', 1)[1].replace(chr(92), '')}: "
+                                f"{cut} cut, {min(kept, PAIR_KEPT_SAMPLE)} of {kept} kept"))
+    side = [rrb.TextDocumentView(origin="cuts", name="What was cut, and why"),
+            rrb.Tabs(rrb.GraphView(origin="graph", name="Conflictive sets (× = link cut)"),
+                     *pair_views,
+                     rrb.TextDocumentView(origin="report", name="Report"),
+                     rrb.TextLogView(origin="resolution", name="Resolution steps"))]
+    if image_views:
+        side.append(rrb.Grid(*image_views))
+    side_panel = rrb.Vertical(*side, row_shares=[2, 3, 2][:len(side)])
     eye = _default_eye(record.views)
     if any(posed):
         main = rrb.Tabs(
-            rrb.Spatial3DView(origin="world", name="Kept (green) and cut (red) links",
+            rrb.Spatial3DView(origin="world",
+                              name="Cut links (red: resolution, purple: fusion); kept hidden",
+                              contents=["+ $origin/**", "- $origin/links/replay"],
+                              overrides={path: rrb.EntityBehavior(visible=False) for path in (
+                                  "/world/links/kept", "/world/points/ground_truth",
+                                  "/world/points/fused")},
+                              eye_controls=eye),
+            rrb.Spatial3DView(origin="world", name="All links: kept (faint green) and cut",
                               contents=["+ $origin/**", "- $origin/links/replay"],
                               eye_controls=eye),
             rrb.Spatial3DView(origin="world", name="Resolution replay (round timeline)",
                               contents=["+ $origin/**", "- $origin/links/kept",
                                         "- $origin/links/deleted"], eye_controls=eye),
         )
-        layout = rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2])
+        layout = rrb.Horizontal(main, side_panel, column_shares=[3, 2])
     elif record.points is not None and len(record.points):
         layout = rrb.Horizontal(rrb.Spatial3DView(origin="world", name="Triangulated points"),
-                                rrb.Vertical(*side), column_shares=[3, 2])
+                                side_panel, column_shares=[3, 2])
     else:
-        layout = rrb.Vertical(*side)
+        layout = side_panel
     return rrb.Blueprint(layout, rrb.TimePanel(timeline="round", play_state="following"),
                          collapse_panels=False)
 
@@ -592,8 +693,9 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
 
     names = _camera_names(record)
     pairs = default_view_pairs(record) if view_pairs is None else list(view_pairs)
-    pair_entities = ["matches/" + rr.escape_entity_path_part(
-        f"{names[i] or f'cam_{i:02d}'}--{names[j] or f'cam_{j:02d}'}") for i, j in pairs]
+    pair_entities = [("matches/" + rr.escape_entity_path_part(
+        f"{names[i] or f'cam_{i:02d}'}--{names[j] or f'cam_{j:02d}'}"), int(i), int(j))
+        for i, j in pairs]
     blueprint = _blueprint(record, posed, max_image_views, pair_entities)
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
@@ -658,6 +760,8 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
             _log_pair(rec, record, int(i), int(j), names, jpeg_quality)
         _log_graph(rec, record, step)
         _log_replay_text(rec, step, keys, int((np.asarray(record.ledger.status) == "kept").sum()))
+        rec.log("cuts", rr.TextDocument(cut_summary(record), media_type=rr.MediaType.MARKDOWN),
+                static=True)
         rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",
                                           media_type=rr.MediaType.MARKDOWN), static=True)
         rec.disconnect()  # writes the footer; the file does not read back without it

@@ -4,6 +4,11 @@ Without a path it opens the newest ``runs/**/recording.rrd``. On a machine with 
 starts the native viewer; without one (no ``DISPLAY`` / ``WAYLAND_DISPLAY``, e.g. over SSH) it
 serves the web viewer (``rerun FILE --web-viewer``) and prints the URL to open, with the SSH
 port forwarding to reach it from another machine. ``--web`` / ``--native`` force either.
+
+The web viewer's page takes its data source only from its ``?url=`` parameter (the gRPC
+proxy that serves the recording): the printed URL carries it (:func:`web_url`); the bare
+``http://localhost:9090`` opens an empty viewer. ``python -m viz.browser`` checks the URL in
+headless Chromium.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["find_recording", "viewer_command", "main"]
+__all__ = ["find_recording", "viewer_command", "web_url", "main"]
 
 WEB_PORT = 9090
 GRPC_PORT = 9876
@@ -54,14 +59,43 @@ def has_display(env=None) -> bool:
     return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
 
 
-def viewer_command(path: Path, web: bool, port: int = WEB_PORT) -> list[str]:
-    """The ``rerun`` command line that opens ``path`` natively or in the web viewer."""
+def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
+                   grpc_port: int = GRPC_PORT) -> list[str]:
+    """The ``rerun`` command line that opens ``path`` natively or in the web viewer (page on
+    ``port``, the recording served by the gRPC proxy on ``grpc_port``)."""
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
         or "rerun"
     cmd = [exe, str(path)]
     if web:
-        cmd += ["--web-viewer", "--web-viewer-port", str(port)]
+        cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port)]
     return cmd
+
+
+def web_url(port: int = WEB_PORT, grpc_port: int = GRPC_PORT, host: str = "localhost") -> str:
+    """The URL that opens the served recording in the web viewer: the page, with the gRPC
+    proxy it must read as its ``url`` parameter (as Rerun's own log line gives it).
+
+    Examples
+    --------
+    >>> web_url()
+    'http://localhost:9090/?url=rerun%2Bhttp%3A%2F%2Flocalhost%3A9876%2Fproxy'
+    """
+    from urllib.parse import quote
+
+    return f"http://{host}:{port}/?url=" + quote(f"rerun+http://{host}:{grpc_port}/proxy",
+                                                 safe="")
+
+
+def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Namespace,
+                                                                      Path | None]:
+    """``ap``'s arguments (its ``target`` a run folder or ``.rrd``) and the recording to open,
+    or ``None`` after printing why there is none."""
+    args = ap.parse_args(argv)
+    try:
+        return args, find_recording(args.target)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return args, None
 
 
 def main(argv=None) -> int:
@@ -71,20 +105,19 @@ def main(argv=None) -> int:
     mode.add_argument("--web", action="store_true", help="serve the web viewer")
     mode.add_argument("--native", action="store_true", help="start the native viewer")
     ap.add_argument("--port", type=int, default=WEB_PORT, help="web viewer port (default 9090)")
+    ap.add_argument("--grpc-port", type=int, default=GRPC_PORT,
+                    help="port of the gRPC proxy that serves the recording (default 9876)")
     ap.add_argument("--dry-run", action="store_true", help="print the command, do not run it")
-    args = ap.parse_args(argv)
-    try:
-        path = find_recording(args.target)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    args, path = parse_with_recording(ap, argv)
+    if path is None:
         return 2
     web = args.web or (not args.native and not has_display())
-    cmd = viewer_command(path, web, args.port)
+    cmd = viewer_command(path, web, args.port, args.grpc_port)
     print(f"opening {path}")
     if web:
-        print(f"web viewer: http://localhost:{args.port}  (from another machine: "
-              f"ssh -L {args.port}:localhost:{args.port} -L {GRPC_PORT}:localhost:{GRPC_PORT} "
-              f"HOST, then open that URL); Ctrl-C stops it", flush=True)
+        print(f"web viewer: {web_url(args.port, args.grpc_port)}\n(from another machine: "
+              f"ssh -L {args.port}:localhost:{args.port} -L {args.grpc_port}:localhost:"
+              f"{args.grpc_port} HOST, then open that URL); Ctrl-C stops it", flush=True)
     if args.dry_run:
         print(" ".join(cmd))
         return 0

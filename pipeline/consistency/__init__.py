@@ -1,6 +1,7 @@
 """Distributed consistency stage (Aragüés et al., Secs. III–IV): robots that only talk to
-their neighbours detect conflictive sets (Sec. III) and cut them by a resolution rule (Alg. 1
-by default) until the association graph is conflict-free (Prop. 4.5).
+their neighbours detect conflictive sets (Sec. III) and cut them by a resolution rule (the
+evidence rule by default, :data:`.rules.DEFAULT_RESOLUTION`; ``paper``: Alg. 1) until the
+association graph is conflict-free (Prop. 4.5).
 
 Robot side (what a robot runs, in the simulator or in its own process):
 
@@ -14,7 +15,8 @@ Robot side (what a robot runs, in the simulator or in its own process):
 
 Around the robots:
 
-* :mod:`.rules` — the registry of resolution rules (the one list of their names);
+* :mod:`.rules` — the registry of resolution rules (the one list of their names, and
+  ``DEFAULT_RESOLUTION``, the rule every entry point runs unless told otherwise);
 * :mod:`.engines` — the simulator: the per-robot driver (the loop of Prop. 4.5,
   ``resolve_conflicts``, ``detect_once``), the one phase loop, the batched engines;
 * :mod:`.result` and :mod:`.linklog` — what the stage did to every link, from the robots' logs;

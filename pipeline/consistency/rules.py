@@ -9,6 +9,12 @@ detection and resolution until a detection finds none. ``paper`` is the paper's 
 set's costed links and cuts the same deterministic solution at every robot
 (:mod:`.evidence`).
 
+``DEFAULT_RESOLUTION`` (``evidence``) is the rule every entry point runs unless told otherwise:
+``resolve_conflicts``, the stage functions of :mod:`pipeline.stages`, the runners' configs,
+the commands' ``--resolution`` (``run-formations`` keeps ``paper`` to reproduce the paper's
+tables; ``clean-h5`` and ``run-landmarks`` name theirs) and a ``TEAM.json`` without
+``resolution``.
+
 Everything that names a rule reads this registry: the command line's ``--resolution``
 choices and help (:func:`pipeline.commands.options.add_resolution_option`), the check of
 ``TEAM.json`` (:mod:`pipeline.team.teamfile`), the simulator's engines
@@ -84,7 +90,13 @@ import os
 from dataclasses import dataclass, field
 
 __all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rule_names",
-           "rule_for_network", "case_names", "deleted_cases", "ALG1_CASES"]
+           "rule_for_network", "case_names", "deleted_cases", "ALG1_CASES",
+           "DEFAULT_RESOLUTION"]
+
+#: the rule every entry point runs unless told otherwise (the Python API, the stage functions,
+#: the runners' configs, the commands, a TEAM.json without ``resolution``); ``run-formations``
+#: reproduces the paper's tables with ``paper``. Registered below.
+DEFAULT_RESOLUTION = "evidence"
 
 #: the cases of Alg. 1 every report lists (line 10: (b) the feature is already in another
 #: component, (c) its camera already is); the fault-tolerant fallback cuts only these

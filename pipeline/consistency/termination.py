@@ -67,7 +67,7 @@ from pipeline.consistency.reliable import (
     start_detection_reliable,
 )
 from pipeline.consistency.robot import Robot
-from pipeline.consistency.rules import get_rule
+from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
 
 __all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
@@ -93,7 +93,8 @@ def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave
 
 
 def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
-                            n_robots: int | None = None, resolution: str = "paper") -> RobotRun:
+                            n_robots: int | None = None,
+                            resolution: str = DEFAULT_RESOLUTION) -> RobotRun:
     """Detection and resolution until conflict-free, ended by the local rule (module docstring).
 
     Parameters

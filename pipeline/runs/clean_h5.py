@@ -80,7 +80,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     model_links = links.subset(ok)
     check_detection_memory(m, model_links, budget)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links)
+    result, _ = consistency_stage(m, edges, model_links, resolution="paper")
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.association import AssociationGraph
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.faults import FaultConfig
 from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
@@ -43,7 +44,7 @@ class FormationConfig:
     out: str | None = None
     rerun: bool = True
     faults: FaultConfig | None = None
-    resolution: str = "evidence"
+    resolution: str = DEFAULT_RESOLUTION
     merge_radius: float | None = None
 
     def out_dir(self) -> Path:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
@@ -60,7 +61,7 @@ class ImagesConfig:
     threads: int = 1
     truth: str = "none"
     truth_tol_px: float = 2.0
-    resolution: str = "evidence"
+    resolution: str = DEFAULT_RESOLUTION
     merge_radius: float | None = None
     #: also stream the recording to a live viewer: "spawn", "connect" or a gRPC URL
     live: str | None = None

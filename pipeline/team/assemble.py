@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 from pipeline.types import Links, PairMatches
 
@@ -35,7 +36,8 @@ FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zeno
 
 def team_options(features: str = "sift", max_features: int | None = 2000, faults=None,
                  round_timeout_s: float = 5.0, merge_radius: float | None = None,
-                 resolution: str = "paper", fusion: bool = False, **feature_options) -> dict:
+                 resolution: str = DEFAULT_RESOLUTION, fusion: bool = False,
+                 **feature_options) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
 
     ``feature_options``: ``contrast_threshold``, ``rootsift``, ``budget_after_merge``,

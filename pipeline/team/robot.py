@@ -45,7 +45,7 @@ import numpy as np
 
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.robot import Robot
-from pipeline.consistency.rules import get_rule, rule_for_network
+from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_network
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
 from pipeline.team.teamfile import LAUNCHED_AT_ENV
@@ -120,9 +120,10 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     local evidence of each link, :func:`pipeline.matching.link_evidence.edge_evidence`, computed by the
     matching end and sent with the matches) per neighbour.
     """
-    from pipeline.matching.features import MERGE_RADIUS_PX, extract, photo_max_features
+    from pipeline.matching.features import extract, photo_max_features
     from pipeline.matching.link_evidence import edge_evidence
     from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.stages import merge_radius_for
     from pipeline.types import Features, PairMatches
 
     t = time.perf_counter()
@@ -133,7 +134,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     budget = opts.get("max_features")
     feats = extract(view, opts["features"],
                     photo_max_features(w, h) if budget is None else int(budget),
-                    float(opts.get("merge_radius", MERGE_RADIUS_PX)),
+                    merge_radius_for(team_resolution(team), opts.get("merge_radius")),
                     contrast_threshold=opts.get("contrast_threshold"),
                     rootsift=bool(opts.get("rootsift", False)),
                     budget_after_merge=bool(opts.get("budget_after_merge", False)))
@@ -225,7 +226,7 @@ def team_resolution(team) -> str:
     does on a faulty network) instead of a rule that is not fault-tolerant. Public
     knowledge: every robot reads the same team file."""
     lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
-    return rule_for_network(str(team.options.get("resolution", "paper")), lossy).name
+    return rule_for_network(str(team.options.get("resolution", DEFAULT_RESOLUTION)), lossy).name
 
 
 def robot_main(team, i: int, transport) -> tuple[dict, dict]:

@@ -19,11 +19,14 @@ one; a user may write one by hand. Schema (``version`` 1)::
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40,
-                  "resolution": "paper",          # a rule of pipeline.consistency.rules, e.g.
-                                                  # "evidence" (paper with drop_prob > 0)
-                  "merge_radius": 0.5, "contrast_threshold": null, "rootsift": false,
+                  "resolution": "evidence",       # a rule of pipeline.consistency.rules,
+                                                  # default its DEFAULT_RESOLUTION; e.g.
+                                                  # "paper" (paper with drop_prob > 0)
+                  "merge_radius": null, "contrast_threshold": null, "rootsift": false,
                   "budget_after_merge": false, "threshold_px": 1.0},
-              # max_features / threshold_px null: scaled with the image size (photos)
+              # max_features / threshold_px null: scaled with the image size (photos);
+              # merge_radius null: that of the resolution, as on the command line (2 px
+              # with evidence, 0.5 px with paper)
       "robot_options": {"3": {"drop_prob": 0.2}}  # optional per-robot overrides of "options"
     }
 
@@ -41,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
@@ -49,14 +53,14 @@ DATA_KINDS = ("formation", "images", "links")
 DEFAULT_OPTIONS = {
     "features": "sift",
     "max_features": 2000,
-    "merge_radius": 0.5,
+    "merge_radius": None,
     "drop_prob": 0.0,
     "fault_seed": 0,
     "round_timeout_s": 5.0,
     "start_timeout_s": 60.0,
     "loss_timeout": 40,
     "fusion": False,
-    "resolution": "paper",
+    "resolution": DEFAULT_RESOLUTION,
     "contrast_threshold": None,
     "rootsift": False,
     "budget_after_merge": False,
@@ -357,8 +361,8 @@ def _check_options(opts: dict, where: str) -> None:
     seed = opts.get("fault_seed", 0)
     if not _is_int(seed) or seed < 0:
         raise InputError(f"{where}: option fault_seed {seed!r} must be an integer >= 0")
-    r = opts.get("merge_radius", 0.0)
-    if not _is_number(r) or r < 0:
+    r = opts.get("merge_radius")
+    if r is not None and (not _is_number(r) or r < 0):
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
                          "pixels >= 0")
     for k in ("fusion", "rootsift", "budget_after_merge"):
@@ -370,7 +374,7 @@ def _check_options(opts: dict, where: str) -> None:
                          f"{', '.join(FEATURE_METHODS)}")
     from pipeline.consistency.rules import rule_names
 
-    if opts.get("resolution", "paper") not in rule_names():
+    if opts.get("resolution", DEFAULT_RESOLUTION) not in rule_names():
         raise InputError(f"{where}: option resolution {opts['resolution']!r} must be one of "
                          f"{', '.join(rule_names())}")
 

@@ -69,8 +69,9 @@ def test_crash_of_an_unknown_robot_names_it():
 def test_report_section_records_injection_and_effect():
     links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])  # paper Fig. 1
     cfg = FaultConfig(drop_prob=0.2, crash=((3, 2),), seed=1)
-    res = resolve_conflicts([1, 1, 1, 2], None, links, cfg.network_options([[0, 1]], 4))
-    base = resolve_conflicts([1, 1, 1, 2], None, links)
+    res = resolve_conflicts([1, 1, 1, 2], None, links, cfg.network_options([[0, 1]], 4),
+                            resolution="paper")
+    base = resolve_conflicts([1, 1, 1, 2], None, links, resolution="paper")
     rep = fault_report(cfg, res, base)
     assert rep["injected"]["crash"] == ["3@2"] and rep["protocol"] == "reliable"
     assert rep["crashed"] == {"3": 2} and rep["robots_lost"] == {"3": [0, 2]}

@@ -5,6 +5,7 @@ metadata."""
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -199,6 +200,27 @@ def test_licence_file_matches_pyproject():
     assert text.startswith("MIT License") and "WITHOUT WARRANTY OF ANY KIND" in text
 
 
+def _imports_of(path: Path) -> set[str]:
+    """Top-level names of every module ``path`` imports, at any depth of its code."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_matplotlib_is_an_extra_of_the_benches_only():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert not [d for d in meta["dependencies"] if d.startswith("matplotlib")]
+    assert [d for d in meta["optional-dependencies"]["bench"] if d.startswith("matplotlib")]
+    users = sorted(str(p.relative_to(ROOT)) for pkg in ("pipeline", "viz", "data_synth")
+                   for p in (ROOT / pkg).rglob("*.py") if "matplotlib" in _imports_of(p))
+    assert users == []
+    assert "matplotlib" in _imports_of(ROOT / "bench" / "voting_fig23.py")  # the scan sees it
+
+
 # ----------------------------------------------------------------------- Ctrl-C, however early
 
 def test_ctrl_c_while_the_command_module_loads_is_one_line_exit_130(monkeypatch, capsys):
@@ -259,3 +281,4 @@ def test_ctrl_c_in_the_first_second_ends_with_130_and_no_traceback(tmp_path, del
     if proc.returncode == 130:
         assert err.strip().splitlines()[-1].startswith("interrupted:")
         assert not (tmp_path / "o.csv").exists()
+

@@ -11,7 +11,10 @@ from pipeline.outputs import check_output_files, check_run_folder, require_input
 
 
 def test_new_file_is_accepted(tmp_path):
-    check_output_files([("--out", tmp_path / "sub" / "o.csv")], [("--links", tmp_path / "i")])
+    # in a folder still to be made, beside an input still missing: accepted, nothing created
+    out = tmp_path / "sub" / "o.csv"
+    assert check_output_files([("--out", out)], [("--links", tmp_path / "i")]) is None
+    assert sorted(tmp_path.iterdir()) == []
 
 
 def test_existing_file_needs_overwrite(tmp_path):

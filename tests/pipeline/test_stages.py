@@ -12,8 +12,8 @@ FIG1 = Links(cam_i=[0, 0, 1, 2], feat_i=[0, 0, 0, 0], cam_j=[3, 1, 2, 3], feat_j
 
 
 def test_consistency_stage_is_resolve_conflicts_without_faults():
-    res, faults = consistency_stage([1, 1, 1, 2], None, FIG1)
-    direct = resolve_conflicts([1, 1, 1, 2], None, FIG1)
+    res, faults = consistency_stage([1, 1, 1, 2], None, FIG1, resolution="paper")
+    direct = resolve_conflicts([1, 1, 1, 2], None, FIG1, resolution="paper")
     assert faults is None and res.deleted.tolist() == direct.deleted.tolist()
     ledger = ledger_from_consistency(res)
     assert ledger.status.tolist().count("deleted") == 1  # paper Fig. 1: one link cut
@@ -23,9 +23,10 @@ def test_consistency_stage_is_resolve_conflicts_without_faults():
 
 def test_consistency_stage_with_faults_reports_them_against_a_fault_free_run():
     fpc = [1, 1, 1, 2]
-    res, faults = consistency_stage(fpc, None, FIG1, FaultConfig(crash=((1, 1),)))
+    res, faults = consistency_stage(fpc, None, FIG1, FaultConfig(crash=((1, 1),)),
+                                    resolution="paper")
     assert faults["injected"]["crash"] == ["1@1"] and faults["crashed"] == {"1": 1}
-    fault_free = resolve_conflicts(fpc, None, FIG1).stats
+    fault_free = resolve_conflicts(fpc, None, FIG1, resolution="paper").stats
     assert faults["fault_free_messages"] == fault_free["messages"]
     assert faults["extra_messages"] == faults["messages"] - fault_free["messages"]
     assert "messages_dropped" in faults and res.stats["protocol"] == "reliable"
@@ -48,3 +49,22 @@ def test_fusion_stage_among_posed_cameras_leaves_the_others_alone():
     # camera 2 holds the planted observation and takes no part: nothing is cut
     assert n_cut == 0 and ledger.kept.all()
     assert fr.stats["tracks_fused"] == 30
+
+
+def test_the_features_stage_line_says_the_budget_of_the_images():
+    import io
+
+    from pipeline.progress import StageTimer
+    from pipeline.stages import extract_and_match
+    from pipeline.types import View
+
+    rng = np.random.default_rng(0)
+    views = [View(f"v{k}", rng.integers(0, 255, size=(640, 800), dtype=np.uint8), np.eye(3))
+             for k in range(2)]
+    for budget, line in ((None, "[features] sift, at most 3333 per image (2000 per 640x480 "
+                                "pixels, at most 8192)"),
+                         (500, "[features] sift, at most 500 per image")):
+        out = io.StringIO()
+        extract_and_match(views, np.zeros((0, 2), dtype=np.int64), "sift", budget,
+                          StageTimer(stream=out))
+        assert line in out.getvalue().splitlines()[0], out.getvalue()

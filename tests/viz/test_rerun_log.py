@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import uuid
+
 import numpy as np
 import pytest
 import rerun as rr
@@ -13,7 +15,9 @@ from viz.rerun_log import (
     CUT_COLORS,
     KEYPOINT_CLASSES,
     LINK_COLORS,
+    PAIR_KEPT_SAMPLE,
     camera_entity,
+    cut_summary,
     jpeg_bytes,
     keypoint_annotation_context,
     keypoint_status,
@@ -129,16 +133,74 @@ def test_one_strip_per_link(recording):
 
 def blueprint_views(path) -> set[tuple[str, str]]:
     """``(view class, origin)`` of every view in the recording's default blueprint."""
+    return {(kind, origin.lstrip("/")) for kind, origin, _ in blueprint_layout(path)[0].values()}
+
+
+#: ``ContainerBlueprint:container_kind`` values
+CONTAINER_KINDS = {1: "Tabs", 2: "Horizontal", 3: "Vertical", 4: "Grid"}
+
+
+def blueprint_layout(path) -> tuple[dict, dict, dict, str]:
+    """The default blueprint as saved: ``views`` {path: (class, origin, name)}, ``containers``
+    {path: (kind, [child paths])}, ``hidden`` {view path: {entities hidden in it}} and the
+    root container's path."""
     reader = RrdReader(path)
     (entry,) = reader.blueprints()
-    views = set()
+    views, containers, hidden, root = {}, {}, {}, None
     for chunk in reader.store(store=entry).stream().to_chunks():
         batch = chunk.to_record_batch()
-        if "ViewBlueprint:class_identifier" in batch.schema.names:
-            kind = batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0]
-            origin = batch.column("ViewBlueprint:space_origin").to_pylist()[-1][0]
-            views.add((kind, origin))
-    return views
+        cols = batch.schema.names
+        entity = str(chunk.entity_path)
+
+        def last(name, batch=batch):
+            return batch.column(name).to_pylist()[-1]
+
+        if "ViewBlueprint:class_identifier" in cols:
+            views[entity] = (last("ViewBlueprint:class_identifier")[0],
+                             "/" + last("ViewBlueprint:space_origin")[0].lstrip("/"),
+                             last("ViewBlueprint:display_name")[0])
+        if "ContainerBlueprint:container_kind" in cols:
+            containers[entity] = (CONTAINER_KINDS[last("ContainerBlueprint:container_kind")[0]],
+                                  ["/" + c for c in last("ContainerBlueprint:contents")])
+        if "EntityBehavior:visible" in cols and last("EntityBehavior:visible") == [False]:
+            view, _, rest = entity.partition("/ViewContents/overrides/")
+            hidden.setdefault(view, set()).add("/" + rest.removesuffix("/visualizers"))
+        if "ViewportBlueprint:root_container" in cols:
+            root = "/container/" + str(uuid.UUID(bytes=bytes(
+                last("ViewportBlueprint:root_container")[0])))
+    return views, containers, hidden, root
+
+
+def test_the_first_views_show_what_was_cut_and_why(recording):
+    path, record = recording
+    views, containers, hidden, root = blueprint_layout(path)
+    assert containers[root][0] == "Horizontal"
+    main, side = containers[root][1]
+    assert (containers[main][0], containers[side][0]) == ("Tabs", "Vertical")
+    # the main area opens on the cut links, kept links (and the comparison points) hidden
+    first = containers[main][1][0]
+    assert views[first][:2] == ("3D", "/world") and views[first][2].startswith("Cut links")
+    assert hidden[first] == {"/world/links/kept", "/world/points/ground_truth",
+                             "/world/points/fused"}
+    assert [views[v][2].split(":")[0] for v in containers[main][1][1:]] == [
+        "All links", "Resolution replay (round timeline)"]
+    # beside it, why: the cut summary, then the conflictive sets
+    side_first, side_tabs = containers[side][1][:2]
+    assert views[side_first][:2] == ("TextDocument", "/cuts")
+    assert views[containers[side_tabs][1][0]][:2] == ("Graph", "/graph")
+    (chunk,) = _chunks(path, "/cuts", static=True)
+    assert chunk.to_record_batch().to_pydict()["TextDocument:text"][0][0] == cut_summary(record)
+
+
+def test_cut_summary_counts_each_stage_and_says_why():
+    record = make_record()
+    text = cut_summary(record)
+    deleted = record.ledger.status == "deleted"
+    assert f"**{deleted.sum()} of {len(deleted)} links cut**" in text
+    assert "* **2 links cut by resolution** (drawn red): it lay in a conflictive set" in text
+    assert "* **1 link cut by fusion-outlier** (drawn purple): the robust fusion" in text
+    record.ledger.case[deleted & (record.ledger.reason == "resolution")] = "evidence"
+    assert "(evidence rule: the least-supported links of the set: 2)" in cut_summary(record)
 
 
 def test_blueprint_saved(recording):
@@ -362,11 +424,14 @@ def test_world_axes_follow_the_cameras_up_direction():
     assert world_axes_from_cameras(record.views) == rr.ViewCoordinates.RIGHT_HAND_Z_UP
 
 
-def test_entities_named_after_the_images_and_a_pair_view(tmp_path):
+def test_entities_named_after_the_images_and_a_pair_view(tmp_path, monkeypatch):
+    from viz import rerun_log
+
     record = make_record()
     for k, v in enumerate(record.views):
         v.name = f"IMG {k}.jpg"  # a file name with a space
     record.point_colors = np.tile(np.array([[10, 200, 30]], np.uint8), (len(record.points), 1))
+    monkeypatch.setattr(rerun_log, "PAIR_KEPT_SAMPLE", 1)  # of the pair's kept links, one
     path = log_run(tmp_path / "named.rrd", record, view_pairs=[(0, 2)])
     paths = set(entity_paths(path))
     assert "/" + camera_entity(0, True, "IMG 0.jpg") + "/image" in paths
@@ -378,7 +443,12 @@ def test_entities_named_after_the_images_and_a_pair_view(tmp_path):
     (chunk,) = _chunks(path, pair + "/cut", static=True)
     assert len(chunk.to_record_batch().to_pydict()["LineStrips2D:strips"][0]) == (sel & deleted).sum()
     (chunk,) = _chunks(path, pair + "/kept", static=True)
-    assert len(chunk.to_record_batch().to_pydict()["LineStrips2D:strips"][0]) == (sel & ~deleted).sum()
+    assert (sel & ~deleted).sum() > 1
+    assert len(chunk.to_record_batch().to_pydict()["LineStrips2D:strips"][0]) == 1
+    views, _, _, _ = blueprint_layout(path)
+    name = next(n for kind, origin, n in views.values() if origin == pair)
+    assert name.endswith(f": {(sel & deleted).sum()} cut, 1 of {(sel & ~deleted).sum()} kept")
+    assert PAIR_KEPT_SAMPLE == 25
     assert count_strips(path, "world/links/deleted") == deleted.sum()
     (chunk,) = _chunks(path, "/world/points/triangulated", static=True)
     colors = np.array(chunk.to_record_batch().to_pydict()["Points3D:colors"][0], np.uint32) >> 8

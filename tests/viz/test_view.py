@@ -4,8 +4,19 @@ display, opens any run folder."""
 import os
 
 import pytest
+from test_rerun_log import make_record
 
-from viz.view import find_recording, has_display, main, viewer_command
+from viz.browser import (
+    coloured_share,
+    find_browser,
+    free_port,
+    screenshot,
+    serve,
+    shows_recording,
+    stop,
+)
+from viz.rerun_log import log_run
+from viz.view import find_recording, has_display, main, viewer_command, web_url
 
 
 def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, monkeypatch):
@@ -16,8 +27,14 @@ def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, mon
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main([str(run), "--dry-run"]) == 0
     out = capsys.readouterr().out
-    assert "http://localhost:9090" in out and "--web-viewer" in out
+    # the page with its data source: the bare http://localhost:9090 opens an empty viewer
+    url = "http://localhost:9090/?url=rerun%2Bhttp%3A%2F%2Flocalhost%3A9876%2Fproxy"
+    assert f"web viewer: {url}\n" in out and "--web-viewer" in out
+    assert "--web-viewer-port 9090 --port 9876" in out  # the ports the URL names
     assert str(run / "recording.rrd") in out
+    assert main([str(run), "--dry-run", "--port", "8000", "--grpc-port", "8001"]) == 0
+    out = capsys.readouterr().out
+    assert web_url(8000, 8001) in out and "--web-viewer-port 8000 --port 8001" in out
 
 
 def test_display_starts_the_native_viewer():
@@ -39,3 +56,20 @@ def test_newest_recording_and_missing_ones(tmp_path, capsys):
     (runs / "c").mkdir()
     assert main([str(runs / "c"), "--dry-run"]) == 2
     assert "no recording.rrd" in capsys.readouterr().err
+
+
+def test_the_printed_url_shows_the_recording_in_a_headless_browser(tmp_path):
+    if find_browser() is None:
+        pytest.skip("no Chromium on this machine (Debian: apt-get install chromium): the web "
+                    "viewer's URL is not opened in a browser")
+    path = log_run(tmp_path / "recording.rrd", make_record())
+    port, grpc_port = free_port(), free_port()
+    server = serve(path, port, grpc_port)
+    try:
+        shown = screenshot(web_url(port, grpc_port), timeout_s=90)
+        # the same page without its data source: the empty viewer the check must refuse
+        bare = screenshot(f"http://localhost:{port}", timeout_s=8)
+    finally:
+        stop(server)
+    assert shows_recording(shown), f"{coloured_share(shown):.2%} of the views area coloured"
+    assert not shows_recording(bare), f"{coloured_share(bare):.2%} of the views area coloured"

@@ -45,7 +45,7 @@ from pipeline.consistency.protocols import (
 )
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.consistency.robot import Robot
-from pipeline.consistency.rules import get_rule, rule_for_network
+from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_network
 from pipeline.errors import InputError
 from pipeline.progress import rounds_bar
 from pipeline.transport import Transport
@@ -167,7 +167,8 @@ def _use_batched(engine: str, network: Transport, protocol) -> bool:
 
 def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       network_options: NetworkOptions | None = None,
-                      protocol: ProtocolOptions | None = None, resolution: str = "paper",
+                      protocol: ProtocolOptions | None = None,
+                      resolution: str = DEFAULT_RESOLUTION,
                       link_weight=None, keypoints=None, projections=None,
                       engine: str = "auto") -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
@@ -187,10 +188,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         fault-tolerant one of :mod:`.reliable` (default when a fault switch is on).
 
     resolution : str
-        A rule of :mod:`pipeline.consistency.rules`: ``paper`` (Alg. 1), ``evidence`` (the
-        flood-and-solve rule of :mod:`.evidence`), ... A rule that is not fault-tolerant runs
-        on a fault-free network; with a fault switch on, the fault-tolerant Alg. 1 is used and
-        ``stats['resolution']`` says so.
+        A rule of :mod:`pipeline.consistency.rules` (default
+        :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`, ``evidence``): ``paper``
+        (Alg. 1), ``evidence`` (the flood-and-solve rule of :mod:`.evidence`), ... A rule that
+        is not fault-tolerant runs on a fault-free network; with a fault switch on, the
+        fault-tolerant Alg. 1 is used and ``stats['resolution']`` says so.
     link_weight : array_like (L,) float or None
         A rule that ``needs_evidence`` only (``evidence``): local evidence of each link (:mod:`pipeline.matching.link_evidence`);
         ``None``: the Lowe-ratio term of ``links.quality``.

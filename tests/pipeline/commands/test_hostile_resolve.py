@@ -172,7 +172,8 @@ def test_crashes_at_any_round_come_back_cut_with_a_reason_and_the_exit_status_sa
     if not cams:
         return
     delay = data.draw(st.sampled_from([0, 0, 2]))
-    total = resolve_conflicts(fpc, None, links, protocol=ProtocolOptions(reliable=True))
+    total = resolve_conflicts(fpc, None, links, protocol=ProtocolOptions(reliable=True),
+                              resolution="paper")
     total = (delay + 1) * total.stats["faults"]["rounds"]
     crashes = data.draw(st.dictionaries(st.sampled_from(cams), st.integers(0, total + 2),
                                         min_size=1, max_size=3))

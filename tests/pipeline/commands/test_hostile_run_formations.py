@@ -63,7 +63,7 @@ def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_pat
                     {"a": {"n_cameras": 4}, "d": {}})
     check_outputs(out, overwrite=False)  # a previous run's summary: replaced without asking
     # a user's files that look like ours (the title line, formation names as keys), or ours
-    # edited since, are the user's
+    # edited since, are the user's: refused, and with --overwrite checked, not touched
     for name, text in (("formations.json", '{"a": {"my": "own data"}}'),
                        ("formations.md", "# Formations (a)–(d), seed 0, my notes\n")):
         saved = (out / name).read_text()
@@ -71,10 +71,18 @@ def test_its_own_summary_is_replaced_and_a_user_file_only_with_overwrite(tmp_pat
         with pytest.raises(InputError, match=f"holds {name}, which run-formations did not"):
             check_outputs(out, overwrite=False)
         check_outputs(out, overwrite=True)
+        assert (out / name).read_text() == text
         (out / name).write_text(saved)
     (out / "formations.md").write_text((out / "formations.md").read_text() + "my note\n")
-    with pytest.raises(InputError, match="formations.md"):
+    with pytest.raises(InputError, match="holds formations.md, which run-formations did not"):
         check_outputs(out, overwrite=False)
+    check_outputs(out, overwrite=True)
+    assert (out / "formations.md").read_text().endswith("my note\n")
+    (out / "formations.md").write_text("my own notes\n")
+    with pytest.raises(InputError, match="holds formations.md, which run-formations did not"):
+        check_outputs(out, overwrite=False)
+    check_outputs(out, overwrite=True)
+    assert (out / "formations.md").read_text() == "my own notes\n"  # checked, not touched
 
 
 def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(

@@ -50,3 +50,54 @@ def test_photo_options_default_to_a_budget_scaled_with_the_image():
     assert feature_options(p.parse_args(["--max-features", "4096"])) == ("sift", 4096)
     with pytest.raises(InputError, match="expected a number of features or 'auto'"):
         feature_options(p.parse_args(["--max-features", "many"]))
+
+
+def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
+    # the Python API, the stage functions, every command that resolves, the configs, the
+    # robot program and a hand-written TEAM.json all read DEFAULT_RESOLUTION from the
+    # registry of rules; run-formations keeps the paper's rule, run-landmarks names its own
+    import inspect
+    import json
+
+    from pipeline.__main__ import build_parser
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.consistency.rules import DEFAULT_RESOLUTION, rule_names
+    from pipeline.consistency.termination import run_consistency_locally
+    from pipeline.runs.clean_db import clean_database
+    from pipeline.runs.formation import FormationConfig
+    from pipeline.runs.images import ImagesConfig
+    from pipeline.runs.resolve import resolve_file
+    from pipeline.stages import clean_association, consistency_stage
+    from pipeline.team.assemble import team_options
+    from pipeline.team.robot import team_resolution
+    from pipeline.team.teamfile import DEFAULT_OPTIONS, load_team
+    from pipeline.types import Links
+
+    assert DEFAULT_RESOLUTION == "evidence" and DEFAULT_RESOLUTION in rule_names()
+    for fn in (resolve_conflicts, consistency_stage, clean_association, clean_database,
+               resolve_file, run_consistency_locally, team_options):
+        assert inspect.signature(fn).parameters["resolution"].default == DEFAULT_RESOLUTION, fn
+    assert FormationConfig().resolution == DEFAULT_RESOLUTION
+    assert ImagesConfig("photos", "ring").resolution == DEFAULT_RESOLUTION
+    assert DEFAULT_OPTIONS["resolution"] == DEFAULT_RESOLUTION
+    parser = build_parser()
+    for command, argv, want in (
+            ("run-formation", [], DEFAULT_RESOLUTION),
+            ("run-images", ["DIR", "--graph", "ring"], DEFAULT_RESOLUTION),
+            ("resolve", ["--links", "a", "--out", "b"], DEFAULT_RESOLUTION),
+            ("clean-db", ["in.db", "--out", "out.db"], DEFAULT_RESOLUTION),
+            ("run-formations", [], "paper"),
+            ("run-landmarks", ["DIR"], "paper")):
+        args = parser.parse_args([command, *argv])
+        assert args.resolution == want, command
+    team_file = tmp_path / "TEAM.json"
+    team_file.write_text(json.dumps({
+        "version": 1, "name": "two", "comm_edges": [[0, 1]],
+        "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
+                   {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
+        "data": {"kind": "formation", "formation": "line", "robots": 2, "seed": 0}}))
+    assert team_resolution(load_team(team_file)) == DEFAULT_RESOLUTION
+    # and the default is what runs: the paper's Fig. 1, its weakest link cut by the evidence
+    links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0], [0.8, 0.8, 0.2, 0.8])
+    res = resolve_conflicts([1, 1, 1, 2], None, links)
+    assert res.stats["resolution"] == "evidence" and res.deleted.tolist() == [0, 0, 1, 0]

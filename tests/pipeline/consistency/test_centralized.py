@@ -41,4 +41,4 @@ def test_every_baseline_is_conflict_free(inst):
         assert is_conflict_free(fpc, links.subset(kept))
     # the quality merge and the distributed stage only cut inside conflictive sets
     assert (quality_merge(fpc, links) >= drop).all()
-    assert (~resolve_conflicts(fpc, edges, links).deleted >= drop).all()
+    assert (~resolve_conflicts(fpc, edges, links, resolution="paper").deleted >= drop).all()

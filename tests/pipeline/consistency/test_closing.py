@@ -32,7 +32,7 @@ def protocol(delay: int) -> ProtocolOptions:
 def run(fpc, edges, links, crashes=None, p=0.0, delay=0, seed=0):
     opts = NetworkOptions(drop_probability=p, delay_rounds=delay, crash_at=dict(crashes or {}),
                           seed=seed)
-    return resolve_conflicts(fpc, edges, links, opts, protocol=protocol(delay))
+    return resolve_conflicts(fpc, edges, links, opts, protocol=protocol(delay), resolution="paper")
 
 
 def check_end_state(fpc, links: Links, res, delay: int = 0) -> None:
@@ -129,7 +129,7 @@ def test_crash_after_confirming_the_close_keeps_its_links_and_says_so():
 
 def test_closing_on_a_lossless_network_costs_one_round_trip_and_cuts_nothing():
     fpc, edges, links = _instance()
-    paper = resolve_conflicts(fpc, edges, links)
+    paper = resolve_conflicts(fpc, edges, links, resolution="paper")
     res = run(fpc, edges, links)
     np.testing.assert_array_equal(res.deleted, paper.deleted)
     assert res.stats["closing_rounds"] == 2 and "closing_rounds" not in paper.stats

@@ -22,7 +22,7 @@ def cycle(n: int):
 def test_cycle_through_1000_cameras_is_cut_once_where_the_waves_meet():
     n = 1000
     fpc, links = cycle(n)
-    res = resolve_conflicts(fpc, None, links)
+    res = resolve_conflicts(fpc, None, links, resolution="paper")
     assert is_conflict_free(fpc, res.kept())
     assert res.deleted.sum() == 1 and res.reason[res.deleted].tolist() == ["resolution"]
     # root: camera 0 (two features of the set, eq. 10); its components C_(0,0) and C_(0,1)

@@ -39,7 +39,7 @@ def test_lockstep_detection_is_exact_under_delay(inst, delay, p, seed):
 @given(instances(), st.integers(1, 8))
 def test_delay_alone_costs_rounds_not_links(inst, delay):
     fpc, edges, links = inst
-    paper = resolve_conflicts(fpc, edges, links)
+    paper = resolve_conflicts(fpc, edges, links, resolution="paper")
     res = run(fpc, edges, links, delay=delay)
     np.testing.assert_array_equal(res.deleted, paper.deleted)
     f = res.stats["faults"]
@@ -54,9 +54,9 @@ def test_default_timers_under_delay_retransmit_but_lose_nobody(delay):
     from pipeline.consistency.protocols import ProtocolOptions
 
     fpc, edges, links = random_instance(np.random.default_rng(2), 7, 5, 0.6, 0.9)
-    paper = resolve_conflicts(fpc, edges, links)
+    paper = resolve_conflicts(fpc, edges, links, resolution="paper")
     res = resolve_conflicts(fpc, edges, links, NetworkOptions(delay_rounds=delay),
-                            protocol=ProtocolOptions(reliable=True))
+                            protocol=ProtocolOptions(reliable=True), resolution="paper")
     np.testing.assert_array_equal(res.deleted, paper.deleted)
     assert not res.stats["faults"]["robots_lost"]
     assert res.stats["faults"]["retransmissions"] > 0
@@ -101,7 +101,7 @@ def test_delayed_messages_with_crashes_and_switching_links_end_correctly(recorde
     topo = recurrent_topology(e, 0.5, 3, seed) if switching else None
     opts = NetworkOptions(drop_probability=p, delay_rounds=delay, crash_at=crashes,
                           topology=topo, seed=seed)
-    res = resolve_conflicts(fpc, edges, links, opts, protocol=protocol(delay))
+    res = resolve_conflicts(fpc, edges, links, opts, protocol=protocol(delay), resolution="paper")
     check_end_state(fpc, links, res, delay)
 
 

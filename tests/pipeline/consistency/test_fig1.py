@@ -37,7 +37,7 @@ def test_fig1_detected_by_the_robots_whose_features_it_involves():
 
 def test_fig1_resolution_cuts_the_conflict():
     links = fig1_links()
-    res = resolve_conflicts(FPC, None, links)
+    res = resolve_conflicts(FPC, None, links, resolution="paper")
     assert res.deleted.sum() >= 1
     assert count_conflicts(AssociationGraph(FPC, res.kept())).conflictive_sets == 0
     # the root D opens one component per own feature: C_3 = {f1^D, ...}, C_4 = {f2^D, ...}
@@ -56,7 +56,8 @@ def test_fig1_resolution_cuts_the_conflict():
 
 
 def test_fig1_with_explicit_comm_graph_including_an_idle_edge():
-    res = resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3], [0, 3], [0, 2]], fig1_links())
+    res = resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3], [0, 3], [0, 2]], fig1_links(),
+                            resolution="paper")
     assert res.deleted.sum() == 1
 
 
@@ -88,6 +89,6 @@ def test_link_between_non_neighbours_is_an_input_error():
     from pipeline.errors import InputError
 
     with pytest.raises(InputError, match=r"link 0 \(0,0\)-\(3,1\) joins cameras 0 and 3, which are not neighbours"):
-        resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3]], fig1_links())
+        resolve_conflicts(FPC, [[0, 1], [1, 2], [2, 3]], fig1_links(), resolution="paper")
     with pytest.raises(InputError, match="own neighbour"):
-        resolve_conflicts(FPC, [[0, 0]], fig1_links())
+        resolve_conflicts(FPC, [[0, 0]], fig1_links(), resolution="paper")

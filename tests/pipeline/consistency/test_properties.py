@@ -95,7 +95,7 @@ def test_resolution_properties_over_several_iterations(n, max_feat, p_edge, p_li
 def check_resolution(fpc, edges, links):
     """All the guarantees of Sec. IV on one instance; returns the result."""
     n = len(fpc)
-    res = resolve_conflicts(fpc, edges, links)
+    res = resolve_conflicts(fpc, edges, links, resolution="paper")
     kept = res.kept()
     off = np.concatenate([[0], np.cumsum(fpc)])
     cam_of = np.repeat(np.arange(n), fpc)
@@ -137,7 +137,7 @@ def test_larger_random_graph_matches_union_find_and_ends_conflict_free():
     fpc, edges, links = random_instance(rng, n=15, max_feat=30, p_edge=0.3, p_link=0.7)
     labels, conflictive = union_find_conflicts(fpc, links)
     assert conflictive.any()  # the instance is a real test
-    res = resolve_conflicts(fpc, edges, links)
+    res = resolve_conflicts(fpc, edges, links, resolution="paper")
     assert is_conflict_free(fpc, res.kept())
     assert res.stats["asymmetric_links"] == 0
     assert 0 < res.deleted.sum() < len(links)
@@ -149,6 +149,6 @@ def test_comm_graph_none_uses_linked_cameras():
     fpc, edges, links = random_instance(rng, n=6, max_feat=5, p_edge=0.8, p_link=0.9)
     e = comm_edges_for(fpc, links, None)
     assert sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(6, 6)).nnz == len(e)
-    a = resolve_conflicts(fpc, None, links)
-    b = resolve_conflicts(fpc, edges, links)
+    a = resolve_conflicts(fpc, None, links, resolution="paper")
+    b = resolve_conflicts(fpc, edges, links, resolution="paper")
     np.testing.assert_array_equal(a.deleted, b.deleted)

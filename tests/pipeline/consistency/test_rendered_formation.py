@@ -20,7 +20,7 @@ def test_rendered_formation_d_conflicts_cut_to_zero():
     before = count_conflicts(AssociationGraph(m, links))
     assert before.conflictive_sets > 0  # real matching on cycles does create conflicts
 
-    res = resolve_conflicts(m, f.comm_edges, links)
+    res = resolve_conflicts(m, f.comm_edges, links, resolution="paper")
     after = count_conflicts(AssociationGraph(m, res.kept()))
     assert after.conflictive_sets == 0 and after.conflictive_features == 0
     # cuts are few and only inside the conflictive sets found before

@@ -18,7 +18,7 @@ from pipeline.transport.simulated import NetworkOptions
 def _run_team(fpc, edges, links, options=None):
     robots, link_index = build_robots(fpc, links)
     team = LocalTeam(len(fpc), edges, options)
-    logs = team.run(lambda tr: run_consistency_locally(robots[tr.robot_id], tr))
+    logs = team.run(lambda tr: run_consistency_locally(robots[tr.robot_id], tr, resolution="paper"))
     deleted = np.zeros(len(links), dtype=bool)
     for rb, li in zip(robots, link_index, strict=True):
         if team.network.alive(rb.id):
@@ -31,7 +31,7 @@ def _run_team(fpc, edges, links, options=None):
 def test_local_termination_gives_the_drivers_links(inst):
     fpc, edges, links = inst
     edges = comm_edges_for(fpc, links, edges)
-    ref = resolve_conflicts(fpc, edges, links)
+    ref = resolve_conflicts(fpc, edges, links, resolution="paper")
     deleted, logs, _ = _run_team(fpc, edges, links)
     assert np.array_equal(deleted, ref.deleted)
     # every robot ran the same phase sequence, ending each phase at the same round

@@ -23,7 +23,7 @@ def _same_partition(a, b):
 @given(instances())
 def test_robot_track_names_are_the_sets_of_the_kept_links(inst):
     fpc, edges, links = inst
-    res = resolve_conflicts(fpc, None, links)
+    res = resolve_conflicts(fpc, None, links, resolution="paper")
     track_of, _ = tracks_of(fpc, res.kept())
     assert _same_partition(track_of, res.track_label)
 
@@ -32,6 +32,7 @@ def test_robot_track_names_are_the_sets_of_the_kept_links(inst):
 @given(instances())
 def test_robot_track_names_under_loss(inst):
     fpc, edges, links = inst
-    res = resolve_conflicts(fpc, None, links, NetworkOptions(drop_probability=0.3, seed=1))
+    res = resolve_conflicts(fpc, None, links, NetworkOptions(drop_probability=0.3, seed=1),
+                            resolution="paper")
     track_of, _ = tracks_of(fpc, res.kept())
     assert _same_partition(track_of, res.track_label)

@@ -35,8 +35,9 @@ def test_compacting_sparse_ids_changes_no_cut(inst):
     dense, compact = (compact_ids(links, edges, force=f) for f in (False, True))
     assert compact.compacted and not dense.compacted
     assert compact.features_per_camera.sum() <= 2 * len(links)
-    a = resolve_conflicts(dense.features_per_camera, dense.edges, dense.links)
-    b = resolve_conflicts(compact.features_per_camera, compact.edges, compact.links)
+    a = resolve_conflicts(dense.features_per_camera, dense.edges, dense.links, resolution="paper")
+    b = resolve_conflicts(compact.features_per_camera, compact.edges, compact.links,
+                          resolution="paper")
     _same(a, b)
 
 
@@ -52,7 +53,8 @@ def test_crashes_are_renumbered_and_reported_in_original_ids(inst):
     for ids in (dense, compact):
         f = faults_in_layout(faults, ids)
         opts = f.network_options(ids.edges, ids.features_per_camera.size)
-        res = resolve_conflicts(ids.features_per_camera, ids.edges, ids.links, opts)
+        res = resolve_conflicts(ids.features_per_camera, ids.edges, ids.links, opts,
+                                resolution="paper")
         reports.append((res, fault_section_in_ids(fault_report(f, res), ids)))
     _same(reports[0][0], reports[1][0])
     assert reports[0][1] == reports[1][1]
