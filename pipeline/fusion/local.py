@@ -142,7 +142,7 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     pair_id[ub, ui, uj] = pair_id[ub, uj, ui] = np.arange(len(ub))
     two = np.stack([ui, uj], 1)                                        # (U, 2)
     Xu, _, oku, _ = triangulate_views(kp[ub[:, None], two], np.ones((len(ub), 2), dtype=bool),
-                                      Rs[two], ts[two], Ks[two], sigma_px)
+                                      Rs[two], ts[two], Ks[two])
     pid = pair_id[bb, ii, jj]
     pair = np.zeros((P, n), dtype=bool)
     pair[np.arange(P), ii] = True
@@ -151,9 +151,9 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     # reprojection of a point does not depend on which of its two robots checks it)
     with np.errstate(all="ignore"):
         u, _, z = project(Xu[:, None], Rs[None], ts[None], Ks[None], jacobian=False)  # (U, n)
-    e2u = ((u - kp[ub]) ** 2).sum(-1) / sigma_px ** 2
-    fitsu = oku[:, None] & (z > 0) & (e2u <= px_thr)
-    e2, fits = e2u[pid], fitsu[pid]
+    e2u = ((u - kp[ub]) ** 2).sum(-1)                                  # px², (U, n)
+    e2 = e2u[pid] / sigma_px[ii, None] ** 2
+    fits = oku[pid, None] & (z[pid] > 0) & (e2 <= px_thr)
     support = nb[bb, ii] & fits
     own = fits[np.arange(P), ii]
     count = np.where(own, support.sum(1), -1)
@@ -186,7 +186,9 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
     Rs, ts, Ks : ndarrays, (n, 3, 3), (n, 3), (n, 3, 3) — poses and intrinsics (any camera
         with an invertible ``K`` for a robot that is neither in ``robots`` nor a neighbour of
         one: it is never used)
-    sigma_px : float — keypoint noise
+    sigma_px : float or ndarray, (n,) — keypoint noise (pixels), one for all robots or each
+        robot's own (:mod:`pipeline.fusion.noise`): robot ``i``'s covariances are
+        ``σ_i² (Σ_v J_vᵀ J_v)⁻¹`` and its pixel gate tests ``‖e‖² / σ_i²``
     px_thr : float — pixel gate on the squared reprojection error over ``σ_px²``
     local : ``"robust"``, ``"pair"`` or ``"neighbours"``
     robots : ndarray, (n,) bool or None — form the estimates of these robots only (default
@@ -199,6 +201,7 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
     X : ndarray, (B, n, 3);  cov : ndarray, (B, n, 3, 3);  estimated : ndarray, (B, n) bool
     """
     B, n = observes.shape
+    sigma = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (n,))
     # observing neighbours of each observer: nb[b, i, j]
     nb = observes[:, :, None] & observes[:, None, :] & adj[None]
     if robots is not None:
@@ -216,7 +219,7 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
         bb, ii = np.nonzero(has)
         use[bb, ii, partner[bb, ii]] = True
     elif local == "robust":
-        use = _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr)
+        use = _robust_views(kp, nb, Rs, ts, Ks, sigma, px_thr)
     else:
         use = nb.copy()
     has_nb = use.any(-1)
@@ -232,8 +235,9 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
         key = np.concatenate([est_b[:, None], np.packbits(sets, axis=1)], 1)
         _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
         inv = inv.reshape(-1)
-        Xe, Ce, oke, _ = triangulate_views(kp[est_b[first]], sets[first], Rs, ts, Ks, sigma_px)
-        Xe, Ce, oke = Xe[inv], Ce[inv], oke[inv]
+        # unit noise here; each robot scales the covariance by its own σ_i²
+        Xe, Ce, oke, _ = triangulate_views(kp[est_b[first]], sets[first], Rs, ts, Ks, 1.0)
+        Xe, Ce, oke = Xe[inv], Ce[inv] * sigma[est_i, None, None] ** 2, oke[inv]
         X[est_b, est_i] = Xe
         cov[est_b[oke], est_i[oke]] = Ce[oke]
         estimated[est_b, est_i] = oke
