@@ -109,7 +109,12 @@ from pipeline.fusion.consensus import (
     ransac_hypotheses,
 )
 from pipeline.fusion.flooding import exact_dynamic_voting
-from pipeline.fusion.local import local_estimates, project
+from pipeline.fusion.local import (
+    local_estimates,
+    observing_neighbours,
+    project,
+    two_view_points,
+)
 from pipeline.fusion.noise import NOISE_MODES, robot_noise
 from pipeline.fusion.points import fused_points
 from pipeline.fusion.protocol import (
@@ -355,8 +360,13 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     # each robot's keypoint noise σ_i, measured from its own two-view residuals (floor
     # sigma_px): the scale of its Λ_i = σ_i² (Σ J_vᵀ J_v)⁻¹, so of its chi-square vote
     # d(x_i, θ_i(t), Λ_i) <= χ²_{3,p} (eqs. 12–13), and of its pixel check below
-    sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px, p, noise)
-    X, cov, estimated = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma, px_thr, local)
+    # (the two-view points of every observer pair, shared with the robust local estimate)
+    pairs = two_view_points(kp, observing_neighbours(observes, adj), Rs, ts, Ks) \
+        if noise == "measured" and local == "robust" else None
+    sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px, p, noise,
+                                   pairs=pairs)
+    X, cov, estimated = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma, px_thr, local,
+                                        pairs=pairs)
     # each robot's own max-c draws, from its id and the track's name (public once exchanged)
     draws = hypothesis_draws(seed, np.repeat(track_names[tr], n), np.tile(np.arange(n), B),
                              K).reshape(B, n, K)

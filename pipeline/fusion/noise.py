@@ -56,7 +56,12 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from pipeline.errors import InputError
-from pipeline.fusion.local import project, triangulate_views
+from pipeline.fusion.local import (
+    TwoViewPoints,
+    observing_neighbours,
+    project,
+    two_view_points,
+)
 
 __all__ = ["NOISE_MODES", "MIN_RESIDUALS", "two_view_residuals", "gate_scale", "robot_noise"]
 
@@ -65,7 +70,7 @@ NOISE_MODES = ("measured", "fixed")
 MIN_RESIDUALS = 5
 
 
-def two_view_residuals(kp, nb, Rs, ts, Ks):
+def two_view_residuals(kp, nb, Rs, ts, Ks, pairs: TwoViewPoints | None = None):
     """The two-view residual of every pair of observers of a track, once per unordered pair.
 
     Parameters
@@ -74,6 +79,8 @@ def two_view_residuals(kp, nb, Rs, ts, Ks):
     nb : ndarray, (B, n, n) bool — ``nb[b, i, j]``: ``i`` and ``j`` are neighbours and both
         observe ``b`` (a robot that forms only its own row may hold only that row)
     Rs, ts, Ks : ndarrays, (n, 3, 3), (n, 3), (n, 3, 3)
+    pairs : TwoViewPoints or None — :func:`pipeline.fusion.local.two_view_points` of ``nb``,
+        if already computed (the ``robust`` local estimate triangulates the same pairs)
 
     Returns
     -------
@@ -82,14 +89,11 @@ def two_view_residuals(kp, nb, Rs, ts, Ks):
         the two keypoints at their two-view point
     ok : ndarray, (U,) bool — the point is defined and in front of both cameras
     """
-    ub, ui, uj = np.nonzero(np.triu(nb | np.swapaxes(nb, 1, 2), k=1))
+    ub, ui, uj, X, ok = two_view_points(kp, nb, Rs, ts, Ks) if pairs is None else pairs
     if not len(ub):
-        z = np.zeros(0)
-        return ub, ui, uj, z, z.astype(bool)
+        return ub, ui, uj, np.zeros(0), np.zeros(0, dtype=bool)
     two = np.stack([ui, uj], 1)
     uv = kp[ub[:, None], two]
-    X, _, ok, _ = triangulate_views(uv, np.ones((len(ub), 2), dtype=bool), Rs[two], ts[two],
-                                    Ks[two])
     with np.errstate(all="ignore"):
         u, _, z = project(X[:, None], Rs[two], ts[two], Ks[two], jacobian=False)
         d = np.sqrt(((u - uv) ** 2).sum((-1, -2)))
@@ -111,7 +115,8 @@ def gate_scale(median_px, p: float):
 
 
 def robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px: float = 1.0, p: float = 0.99,
-                noise: str = "measured", *, robots=None) -> tuple[np.ndarray, np.ndarray]:
+                noise: str = "measured", *, robots=None,
+                pairs: TwoViewPoints | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each robot's keypoint noise ``σ_i`` (pixels) for its covariances and gates.
 
     Parameters
@@ -122,6 +127,8 @@ def robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px: float = 1.0, p: float =
     noise : ``"measured"`` or ``"fixed"``
     robots : ndarray, (n,) bool or None — measure these robots only (default all); the others
         get ``sigma_px``
+    pairs : TwoViewPoints or None — :func:`pipeline.fusion.local.two_view_points` of
+        ``observing_neighbours(observes, adj, robots)``, if already computed
 
     Returns
     -------
@@ -138,11 +145,9 @@ def robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px: float = 1.0, p: float =
     count = np.zeros(n, dtype=np.int64)
     if noise == "fixed" or not B:
         return sigma, count
-    nb = observes[:, :, None] & observes[:, None, :] & np.asarray(adj, dtype=bool)[None]
-    nb &= ~np.eye(n, dtype=bool)[None]
     mine = np.ones(n, dtype=bool) if robots is None else np.asarray(robots, dtype=bool)
-    nb &= mine[None, :, None]
-    _, lo, hi, d, ok = two_view_residuals(kp, nb, Rs, ts, Ks)
+    nb = observing_neighbours(observes, adj, mine)
+    _, lo, hi, d, ok = two_view_residuals(kp, nb, Rs, ts, Ks, pairs)
     # each residual counts for both its robots; the median of each robot's, sorted by value
     who = np.concatenate([lo[ok], hi[ok]])
     val = np.concatenate([d[ok], d[ok]])

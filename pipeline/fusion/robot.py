@@ -80,7 +80,12 @@ import numpy as np
 
 from pipeline.fusion.consensus import ransac_hypotheses, solve_information, top_c_distinct
 from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
-from pipeline.fusion.local import local_estimates, project
+from pipeline.fusion.local import (
+    local_estimates,
+    observing_neighbours,
+    project,
+    two_view_points,
+)
 from pipeline.fusion.noise import robot_noise
 from pipeline.fusion.protocol import (
     bundle_reals,
@@ -235,12 +240,15 @@ class FusionRobot:
             kp[pos[ok], j] = s["keypoints"][ok].astype(np.float64)
         own = np.zeros(n, dtype=bool)
         own[i] = True
-        # its own keypoint noise (the scale of its Λ_i, its vote and its pixel check)
+        # its own keypoint noise (the scale of its Λ_i, its vote and its pixel check), from
+        # the two-view points its robust local estimate is built from
+        pairs = two_view_points(kp, observing_neighbours(observes, adj, own), Rs, ts, Ks) \
+            if self.opt.noise == "measured" and self.opt.local == "robust" else None
         sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, self.opt.sigma_px,
-                                       self.opt.p, self.opt.noise, robots=own)
+                                       self.opt.p, self.opt.noise, robots=own, pairs=pairs)
         self.sigma, self.noise_residuals = float(sigma[i]), int(residuals[i])
         X, cov, est = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma,
-                                      self.px_thr, self.opt.local, robots=own)
+                                      self.px_thr, self.opt.local, robots=own, pairs=pairs)
         self.kp_own = kp[:, i]
         self.est = est[:, i]
         # the voting inputs as dynamic_voting prepares them (pipeline.fusion.voting._prepare)
