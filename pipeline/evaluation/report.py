@@ -197,6 +197,11 @@ def report_markdown(report: dict) -> str:
     fusion, faults = report.get("fusion") or {}, report.get("faults") or {}
     if "cut_links" in fusion:
         lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
+    if fusion.get("robot_sigma_px"):
+        sig = " ".join("–" if x is None else f"{x:.2f}" for x in fusion["robot_sigma_px"])
+        how = "measured, floor" if fusion.get("noise") == "measured" else "fixed"
+        lines.append(f"| fusion keypoint noise per robot [px] ({how} "
+                     f"{fusion.get('sigma_px', 1.0):g}) | {sig} |")
     if "rounds" in fusion:
         settled = {True: "stop rule", False: "round cap"}.get(fusion.get("settled"), "fixed")
         if fusion.get("consensus") == "exact":

@@ -12,6 +12,8 @@
   reliable channel in lockstep on a faulty network);
 * :mod:`pipeline.fusion.landmarks` — the stage: tracks, fusion of every track, outliers cut;
 * :mod:`pipeline.fusion.local` — each robot's local estimate of the landmarks it observes;
+* :mod:`pipeline.fusion.noise` — each robot's keypoint noise, measured from its own two-view
+  residuals: the scale of its covariances and gates;
 * :mod:`pipeline.fusion.robot` — one robot's fusion over its own endpoint (its own process),
   run round after round by :mod:`pipeline.fusion.robot_loops`;
 * :mod:`pipeline.fusion.points` — the fused landmark of each track from the robots' estimates.

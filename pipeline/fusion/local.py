@@ -10,9 +10,12 @@ vectorized stage (:mod:`pipeline.fusion.landmarks`) and one robot alone
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["triangulate_views", "local_estimates", "project"]
+__all__ = ["triangulate_views", "local_estimates", "project", "observing_neighbours",
+           "two_view_points", "TwoViewPoints"]
 
 
 def _inv3(A):
@@ -118,7 +121,44 @@ def triangulate_views(uv, views_mask, R, t, K, sigma_px: float = 1.0, iterations
     return X, cov, ok, rms
 
 
-def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
+class TwoViewPoints(NamedTuple):
+    """The two-view point of every unordered pair of observers of a track (:func:`two_view_points`)."""
+
+    b: np.ndarray    # (U,) int — the track
+    lo: np.ndarray   # (U,) int — the pair's robots, lo < hi
+    hi: np.ndarray
+    X: np.ndarray    # (U, 3) — the point (linear triangulation, Gauss–Newton on the pixels)
+    ok: np.ndarray   # (U,) bool — the point is defined (normal matrix positive definite)
+
+
+def observing_neighbours(observes, adj, robots=None) -> np.ndarray:
+    """``nb[b, i, j]``: robots ``i`` and ``j`` are neighbours and both observe track ``b``,
+    ``(B, n, n)`` bool; with ``robots`` (``(n,)`` bool) only their rows."""
+    nb = observes[:, :, None] & observes[:, None, :] & np.asarray(adj, dtype=bool)[None]
+    if robots is not None:
+        nb &= np.asarray(robots, dtype=bool)[None, :, None]
+    return nb
+
+
+def two_view_points(kp, nb, Rs, ts, Ks) -> TwoViewPoints:
+    """The two-view point of each pair ``(b, i, j)`` of ``nb``, once per unordered pair.
+
+    The point of ``(i, j)`` is the one of ``(j, i)``: it is triangulated in the order
+    ``(lo, hi)`` from the same two keypoints and cameras, so a robot holding only its own row
+    of ``nb`` gets the bits the simulator gets. Shared by the ``robust`` local estimate
+    (:func:`local_estimates`) and the noise measurement (:mod:`pipeline.fusion.noise`).
+    """
+    # from either robot's row: a robot forming only its own estimates holds only its row
+    ub, ui, uj = np.nonzero(np.triu(nb | np.swapaxes(nb, 1, 2), k=1))
+    if not len(ub):
+        return TwoViewPoints(ub, ui, uj, np.zeros((0, 3)), np.zeros(0, dtype=bool))
+    two = np.stack([ui, uj], 1)                                        # (U, 2)
+    X, _, ok, _ = triangulate_views(kp[ub[:, None], two], np.ones((len(ub), 2), dtype=bool),
+                                    Rs[two], ts[two], Ks[two])
+    return TwoViewPoints(ub, ui, uj, X, ok)
+
+
+def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr, pairs: TwoViewPoints | None = None):
     """Views of each robot's ``robust`` local estimate, ``(B, n, n)`` bool (without itself).
 
     For every observing neighbour ``j`` of robot ``i`` the two-view point of ``(i, j)`` is
@@ -127,7 +167,9 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     support of the pair with the largest support (ties: lowest reprojection RMS) — a local
     RANSAC over its neighbours' keypoints in which its own keypoint is always kept. The
     two-view point of ``(i, j)`` is the one of ``(j, i)`` (robot ``j`` computes it from the
-    same two keypoints): it is triangulated once per unordered pair.
+    same two keypoints): it is triangulated once per unordered pair (``pairs``: those of
+    :func:`two_view_points` on this ``nb``, when already computed). ``sigma_px`` is each
+    robot's keypoint noise ``(n,)``: robot ``i`` tests the reprojections with its own.
     """
     B, n = nb.shape[:2]
     bb, ii, jj = np.nonzero(nb)
@@ -135,14 +177,12 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     if not len(bb):
         return use
     P = len(bb)
-    # each unordered pair once: (b, lo, hi) with lo < hi (from either robot's row: a robot
-    # forming only its own estimates holds only its row of nb)
-    ub, ui, uj = np.nonzero(np.triu(nb | np.swapaxes(nb, 1, 2), k=1))
+    # each unordered pair once: (b, lo, hi) with lo < hi
+    if pairs is None:
+        pairs = two_view_points(kp, nb, Rs, ts, Ks)
+    ub, ui, uj, Xu, oku = pairs
     pair_id = np.full((B, n, n), -1, dtype=np.int64)
     pair_id[ub, ui, uj] = pair_id[ub, uj, ui] = np.arange(len(ub))
-    two = np.stack([ui, uj], 1)                                        # (U, 2)
-    Xu, _, oku, _ = triangulate_views(kp[ub[:, None], two], np.ones((len(ub), 2), dtype=bool),
-                                      Rs[two], ts[two], Ks[two], sigma_px)
     pid = pair_id[bb, ii, jj]
     pair = np.zeros((P, n), dtype=bool)
     pair[np.arange(P), ii] = True
@@ -151,9 +191,9 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
     # reprojection of a point does not depend on which of its two robots checks it)
     with np.errstate(all="ignore"):
         u, _, z = project(Xu[:, None], Rs[None], ts[None], Ks[None], jacobian=False)  # (U, n)
-    e2u = ((u - kp[ub]) ** 2).sum(-1) / sigma_px ** 2
-    fitsu = oku[:, None] & (z > 0) & (e2u <= px_thr)
-    e2, fits = e2u[pid], fitsu[pid]
+    e2u = ((u - kp[ub]) ** 2).sum(-1)                                  # px², (U, n)
+    e2 = e2u[pid] / sigma_px[ii, None] ** 2
+    fits = oku[pid, None] & (z[pid] > 0) & (e2 <= px_thr)
     support = nb[bb, ii] & fits
     own = fits[np.arange(P), ii]
     count = np.where(own, support.sum(1), -1)
@@ -174,7 +214,7 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr):
 
 
 def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: float,
-                    local: str = "robust", *, robots=None):
+                    local: str = "robust", *, robots=None, pairs: TwoViewPoints | None = None):
     """Each observer's local estimate of each track's landmark (module docstring, ``local=``).
 
     Parameters
@@ -186,23 +226,26 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
     Rs, ts, Ks : ndarrays, (n, 3, 3), (n, 3), (n, 3, 3) — poses and intrinsics (any camera
         with an invertible ``K`` for a robot that is neither in ``robots`` nor a neighbour of
         one: it is never used)
-    sigma_px : float — keypoint noise
+    sigma_px : float or ndarray, (n,) — keypoint noise (pixels), one for all robots or each
+        robot's own (:mod:`pipeline.fusion.noise`): robot ``i``'s covariances are
+        ``σ_i² (Σ_v J_vᵀ J_v)⁻¹`` and its pixel gate tests ``‖e‖² / σ_i²``
     px_thr : float — pixel gate on the squared reprojection error over ``σ_px²``
     local : ``"robust"``, ``"pair"`` or ``"neighbours"``
     robots : ndarray, (n,) bool or None — form the estimates of these robots only (default
         all). Every row ``(b, i)`` is computed from robot ``i``'s keypoint and camera and its
         observing neighbours' alone, independently of the other rows, so a robot forming
         only its own gets the values the simulator gets for it.
+    pairs : TwoViewPoints or None — :func:`two_view_points` of
+        ``observing_neighbours(observes, adj, robots)``, if already computed (``robust``)
 
     Returns
     -------
     X : ndarray, (B, n, 3);  cov : ndarray, (B, n, 3, 3);  estimated : ndarray, (B, n) bool
     """
     B, n = observes.shape
+    sigma = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (n,))
     # observing neighbours of each observer: nb[b, i, j]
-    nb = observes[:, :, None] & observes[:, None, :] & adj[None]
-    if robots is not None:
-        nb &= np.asarray(robots, dtype=bool)[None, :, None]
+    nb = observing_neighbours(observes, adj, robots)
     if local == "pair":
         # ray directions in the world frame; partner = widest angle among observing neighbours
         xn = np.linalg.solve(Ks[None], np.concatenate([kp, np.ones((B, n, 1))], -1)[..., None])
@@ -216,7 +259,7 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
         bb, ii = np.nonzero(has)
         use[bb, ii, partner[bb, ii]] = True
     elif local == "robust":
-        use = _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr)
+        use = _robust_views(kp, nb, Rs, ts, Ks, sigma, px_thr, pairs)
     else:
         use = nb.copy()
     has_nb = use.any(-1)
@@ -232,8 +275,9 @@ def local_estimates(kp, observes, adj, Rs, ts, Ks, sigma_px: float, px_thr: floa
         key = np.concatenate([est_b[:, None], np.packbits(sets, axis=1)], 1)
         _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
         inv = inv.reshape(-1)
-        Xe, Ce, oke, _ = triangulate_views(kp[est_b[first]], sets[first], Rs, ts, Ks, sigma_px)
-        Xe, Ce, oke = Xe[inv], Ce[inv], oke[inv]
+        # unit noise here; each robot scales the covariance by its own σ_i²
+        Xe, Ce, oke, _ = triangulate_views(kp[est_b[first]], sets[first], Rs, ts, Ks, 1.0)
+        Xe, Ce, oke = Xe[inv], Ce[inv] * sigma[est_i, None, None] ** 2, oke[inv]
         X[est_b, est_i] = Xe
         cov[est_b[oke], est_i[oke]] = Ce[oke]
         estimated[est_b, est_i] = oke

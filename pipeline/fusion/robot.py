@@ -17,9 +17,10 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    ``fx, fy, cx, cy``: 16 reals, the full ``K`` if it has skew) and, per track it observes,
    the track's name and its keypoint. A name it holds twice (a conflictive set, which the
    simulator leaves unfused) is sent apart, and every robot that hears it leaves the track out.
-   From the setups the robot forms its local estimate of each track
-   (:func:`pipeline.fusion.local.local_estimates`, its own row) and its max-c draws
-   (:func:`pipeline.fusion.protocol.hypothesis_draws`).
+   From the setups the robot measures its keypoint noise ``σ_i``
+   (:func:`pipeline.fusion.noise.robot_noise`, its own two-view residuals), forms its local
+   estimate of each track (:func:`pipeline.fusion.local.local_estimates`, its own row) and its
+   max-c draws (:func:`pipeline.fusion.protocol.hypothesis_draws`).
 2. **Consensus**, in the mode of :func:`~pipeline.fusion.landmarks.fuse_tracks`
    (``FusionOptions.consensus``):
 
@@ -79,7 +80,13 @@ import numpy as np
 
 from pipeline.fusion.consensus import ransac_hypotheses, solve_information, top_c_distinct
 from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
-from pipeline.fusion.local import local_estimates, project
+from pipeline.fusion.local import (
+    local_estimates,
+    observing_neighbours,
+    project,
+    two_view_points,
+)
+from pipeline.fusion.noise import robot_noise
 from pipeline.fusion.protocol import (
     bundle_reals,
     hypothesis_draws,
@@ -118,6 +125,7 @@ class FusionOptions:
     seed: int = 0
     wire: str = "float32"
     consensus: str = "exact"
+    noise: str = "measured"
 
 
 def _camera_payload(K, R, t) -> np.ndarray:
@@ -180,6 +188,7 @@ class FusionRobot:
         self.R = np.asarray(R, np.float64)
         self.t = np.asarray(t, np.float64).reshape(3)
         self.px_thr = chi2_ppf(self.opt.p, 2)
+        self.sigma, self.noise_residuals = float(self.opt.sigma_px), 0  # measured in the setup
         self.thr = gate_threshold(3, self.opt.p, self.opt.gate)
         self.Kh = ransac_hypotheses(self.opt.p_in, self.opt.c, self.opt.success)
         self.W = self.n - 1
@@ -231,8 +240,15 @@ class FusionRobot:
             kp[pos[ok], j] = s["keypoints"][ok].astype(np.float64)
         own = np.zeros(n, dtype=bool)
         own[i] = True
-        X, cov, est = local_estimates(kp, observes, adj, Rs, ts, Ks, self.opt.sigma_px,
-                                      self.px_thr, self.opt.local, robots=own)
+        # its own keypoint noise (the scale of its Λ_i, its vote and its pixel check), from
+        # the two-view points its robust local estimate is built from
+        pairs = two_view_points(kp, observing_neighbours(observes, adj, own), Rs, ts, Ks) \
+            if self.opt.noise == "measured" and self.opt.local == "robust" else None
+        sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, self.opt.sigma_px,
+                                       self.opt.p, self.opt.noise, robots=own, pairs=pairs)
+        self.sigma, self.noise_residuals = float(sigma[i]), int(residuals[i])
+        X, cov, est = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma,
+                                      self.px_thr, self.opt.local, robots=own, pairs=pairs)
         self.kp_own = kp[:, i]
         self.est = est[:, i]
         # the voting inputs as dynamic_voting prepares them (pipeline.fusion.voting._prepare)
@@ -522,7 +538,7 @@ class FusionRobot:
             voted_out = self.est & ~self.yes_w
             u, _, z = project(self.theta_w[:, None], self.R[None, None], self.t[None, None],
                                self.K[None, None])
-            e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.opt.sigma_px ** 2
+            e2 = ((u[:, 0] - self.kp_own) ** 2).sum(-1) / self.sigma ** 2
             reproj_ok = self.ok_w & (z[:, 0] > 0) & (e2 <= self.px_thr)
             self.outlier = voted_out & self.ok_w & ~reproj_ok
         else:

@@ -338,6 +338,7 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
             "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
             "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus,
+            "noise": fusion.opt.noise, "sigma_px": fusion.sigma,
             "forced": _forced(fusion)}
 
 

@@ -13,11 +13,12 @@ from pipeline.transport.simulated import NetworkOptions
 from pipeline.types import Features, Links, View
 
 
-def _ring_rig(n=6, P=40, seed=5, chord=True):
+def _ring_rig(n=6, P=40, seed=5, chord=True, noise=0.3):
     """``n`` cameras on a ring (and one chord) observing ``P`` points, each seen by a random
     subset; links join the features of one point on every comm edge; some keypoints planted
     off (wrong but consistent). Features are numbered per camera in a shuffled order, and
-    each feature's track name is its point's id plus 1000 (names the robots agree on)."""
+    each feature's track name is its point's id plus 1000 (names the robots agree on);
+    ``noise``: the keypoints' Gaussian noise (pixels), one value or one per camera."""
     rng = np.random.default_rng(seed)
     K = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
     pts = rng.uniform([-1, -1, 4], [1, 1, 7], (P, 3))
@@ -29,7 +30,7 @@ def _ring_rig(n=6, P=40, seed=5, chord=True):
         R, t = look_at([0.6 * v - 1.5, 0.1 * v, 0.0], [0.0, 0.0, 5.5], up=(0.0, 1.0, 0.0))
         seen = rng.permutation(np.flatnonzero(sees[v]))
         p = (K @ (pts[seen] @ R.T + t).T).T
-        uv = p[:, :2] / p[:, 2:] + rng.normal(0, 0.3, (len(seen), 2))
+        uv = p[:, :2] / p[:, 2:] + rng.normal(0, np.broadcast_to(noise, (n,))[v], (len(seen), 2))
         bad = rng.random(len(seen)) < 0.08
         uv[bad] += rng.choice([-1, 1], (int(bad.sum()), 2)) * rng.uniform(15, 40, (int(bad.sum()), 2))
         views.append(View(f"cam{v}", np.zeros((240, 320), np.uint8), K, R, t))
@@ -88,6 +89,21 @@ def test_robots_one_by_one_equal_the_vectorized_stage(chord, consensus):
         far = np.concatenate([links.feat_j[mine], links.feat_i[other]])
         np.testing.assert_array_equal(r.cut_rows(nbr, own, far),
                                       ref.cut_links[np.concatenate([mine, other])])
+
+
+@pytest.mark.parametrize("consensus", ["exact", "metropolis"])
+def test_robots_measure_their_own_noise_as_the_stage_does(consensus):
+    # keypoint noise above the 1 px floor, different per camera: every robot's σ_i, and so
+    # its covariances, vote and pixel check, are the simulator's
+    views, feats, links, edges, labels = _ring_rig(P=80, noise=[0.3, 2.0, 1.0, 3.0, 0.5, 2.5])
+    ref = fuse_tracks(views, feats, links, edges, track_labels=np.concatenate(labels),
+                      consensus=consensus)
+    robots = _robots(views, feats, edges, labels, consensus)
+    LocalTeam(len(views), edges).run(lambda end: run_fusion_locally(robots[end.id], end))
+    assert [r.sigma for r in robots] == ref.stats["robot_sigma_px"]
+    assert sum(s > 1.0 for s in ref.stats["robot_sigma_px"]) >= 3
+    assert ref.cut_links.any()
+    np.testing.assert_array_equal(_cuts(robots, links, feats), ref.cut_links)
 
 
 @pytest.mark.parametrize("consensus", ["exact", "metropolis"])
