@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
-    add_resolution_option(p)
+    add_resolution_option(p, links_only=True)
 
 
 def run(args) -> int:

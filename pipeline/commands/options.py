@@ -46,13 +46,16 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT (default 640x480)")
 
 
-def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None) -> None:
+def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None, *,
+                          links_only: bool = False) -> None:
     """``--resolution RULE``: a rule of :mod:`pipeline.consistency.rules` (Alg. 1 of the
     paper, the evidence-aware rule, ...); ``default`` None: the registry's
-    ``DEFAULT_RESOLUTION``."""
-    from pipeline.consistency.rules import DEFAULT_RESOLUTION, RULES
+    ``DEFAULT_RESOLUTION``, or ``DEFAULT_LINKS_RESOLUTION`` for a job that receives links
+    only (``links_only``)."""
+    from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, DEFAULT_RESOLUTION, RULES
 
-    default = DEFAULT_RESOLUTION if default is None else default
+    if default is None:
+        default = DEFAULT_LINKS_RESOLUTION if links_only else DEFAULT_RESOLUTION
 
     p.add_argument("--resolution", choices=tuple(RULES), default=default,
                    help="how the robots cut conflictive sets: "

@@ -31,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
     add_overwrite_and_memory_options(p, "--out / --report")
-    add_resolution_option(p)
+    add_resolution_option(p, links_only=True)
     add_transport_option(p)
     add_fault_arguments(p)
 

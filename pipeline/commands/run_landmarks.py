@@ -58,11 +58,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "common neighbours until a fixed point; none: use the matches as they are")
     p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
                    help="cap on the vote iterations (two rounds each; default 10)")
-    from pipeline.consistency.rules import RULES
+    from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, RULES
 
-    p.add_argument("--resolution", default="paper", choices=tuple(RULES),
+    p.add_argument("--resolution", default=DEFAULT_LINKS_RESOLUTION, choices=tuple(RULES),
                    help="resolution of the distributed stage: "
-                        + "; ".join(f"{k}: {rule.title}" for k, rule in RULES.items()))
+                        + "; ".join(f"{k}: {rule.title}" for k, rule in RULES.items())
+                        + f" (default {DEFAULT_LINKS_RESOLUTION})")
     p.add_argument("--no-baselines", action="store_true",
                    help="skip the centralized baselines")
     p.add_argument("--out", default=None,

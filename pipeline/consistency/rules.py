@@ -12,8 +12,10 @@ set's costed links and cuts the same deterministic solution at every robot
 ``DEFAULT_RESOLUTION`` (``evidence``) is the rule every entry point runs unless told otherwise:
 ``resolve_conflicts``, the stage functions of :mod:`pipeline.stages`, the runners' configs,
 the commands' ``--resolution`` (``run-formations`` keeps ``paper`` to reproduce the paper's
-tables; ``clean-h5`` and ``run-landmarks`` name theirs) and a ``TEAM.json`` without
-``resolution``.
+tables) and a ``TEAM.json`` without ``resolution``. The jobs that receive links only
+(``resolve``, ``clean-db``, ``clean-h5``, ``run-landmarks``) run
+``DEFAULT_LINKS_RESOLUTION`` (``sync``): without poses its decisions are the evidence rule's
+greedy merge (plus quadrangle support) and its memory follows the links.
 
 Everything that names a rule reads this registry: the command line's ``--resolution``
 choices and help (:func:`pipeline.commands.options.add_resolution_option`), the check of
@@ -91,12 +93,19 @@ from dataclasses import dataclass, field
 
 __all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rule_names",
            "rule_for_network", "case_names", "deleted_cases", "ALG1_CASES",
-           "DEFAULT_RESOLUTION"]
+           "DEFAULT_RESOLUTION", "DEFAULT_LINKS_RESOLUTION"]
 
 #: the rule every entry point runs unless told otherwise (the Python API, the stage functions,
 #: the runners' configs, the commands, a TEAM.json without ``resolution``); ``run-formations``
 #: reproduces the paper's tables with ``paper``. Registered below.
 DEFAULT_RESOLUTION = "evidence"
+#: the rule of the jobs that receive links only (``resolve``, ``clean-db``, ``clean-h5``,
+#: ``run-landmarks``): no camera poses, so the evidence rule's geometric tests cannot run and
+#: its decisions are the greedy merge ``sync`` computes too, while its detection needs memory
+#: in ``Σ |C|²`` (refused on a 101-frame CMU hotel input at 8 GB; ``sync`` 0.4 GB); ``sync``
+#: also counts quadrangles (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras).
+#: Measured by ``bench/multiway.py``.
+DEFAULT_LINKS_RESOLUTION = "sync"
 
 #: the cases of Alg. 1 every report lists (line 10: (b) the feature is already in another
 #: component, (c) its camera already is); the fault-tolerant fallback cuts only these

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
-from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["CleanDbResult", "clean_database", "COLMAP_MAX_ERROR_PX"]
@@ -53,7 +53,7 @@ class CleanDbResult:
 def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
-                   resolution: str = DEFAULT_RESOLUTION, *, rerun: bool = True,
+                   resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None, outputs=None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 

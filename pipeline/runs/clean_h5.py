@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
+from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 
 __all__ = ["clean_h5"]
 
@@ -78,9 +79,9 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
     model_links = links.subset(ok)
-    check_detection_memory(m, model_links, budget)
+    check_detection_memory(m, model_links, budget, detection=False)  # sync: no detection
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links, resolution="paper")
+    result, _ = consistency_stage(m, edges, model_links, resolution=DEFAULT_LINKS_RESOLUTION)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
@@ -66,7 +67,7 @@ class LandmarksConfig:
     epipolar_px: float = 3.0
     refine: str = "votes"
     vote_iterations: int = 10
-    resolution: str = "paper"
+    resolution: str = DEFAULT_LINKS_RESOLUTION
     baselines: bool = True
     out: str | None = None
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
-from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 from pipeline.faults import FaultConfig
 
@@ -28,7 +28,7 @@ __all__ = ["resolve_file"]
 def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
-                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = DEFAULT_RESOLUTION,
+                 max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = DEFAULT_LINKS_RESOLUTION,
                  transport: str = "sim", outputs=None) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
 

@@ -260,7 +260,8 @@ def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_pa
             rows += [f"{i},{a},{j},{b}\n" for a, b in zip(r, s, strict=True)]
     src = tmp_path / "noisy.csv"
     src.write_text("".join(rows))
-    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv"])
+    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv",
+                       "--resolution", "evidence"])  # a rule with the detection (Sec. III)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
     assert "--resolution sync" in proc.stderr  # the rule whose memory follows the links

@@ -55,13 +55,18 @@ def test_photo_options_default_to_a_budget_scaled_with_the_image():
 def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
     # the Python API, the stage functions, every command that resolves, the configs, the
     # robot program and a hand-written TEAM.json all read DEFAULT_RESOLUTION from the
-    # registry of rules; run-formations keeps the paper's rule, run-landmarks names its own
+    # registry of rules; run-formations keeps the paper's rule; the jobs that receive links
+    # only (resolve, clean-db, clean-h5, run-landmarks) read DEFAULT_LINKS_RESOLUTION
     import inspect
     import json
 
     from pipeline.__main__ import build_parser
     from pipeline.consistency import resolve_conflicts
-    from pipeline.consistency.rules import DEFAULT_RESOLUTION, rule_names
+    from pipeline.consistency.rules import (
+        DEFAULT_LINKS_RESOLUTION,
+        DEFAULT_RESOLUTION,
+        rule_names,
+    )
     from pipeline.consistency.termination import run_consistency_locally
     from pipeline.runs.clean_db import clean_database
     from pipeline.runs.formation import FormationConfig
@@ -74,9 +79,13 @@ def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
     from pipeline.types import Links
 
     assert DEFAULT_RESOLUTION == "evidence" and DEFAULT_RESOLUTION in rule_names()
-    for fn in (resolve_conflicts, consistency_stage, clean_association, clean_database,
-               resolve_file, run_consistency_locally, team_options):
+    assert DEFAULT_LINKS_RESOLUTION == "sync" and DEFAULT_LINKS_RESOLUTION in rule_names()
+    for fn in (resolve_conflicts, consistency_stage, clean_association,
+               run_consistency_locally, team_options):
         assert inspect.signature(fn).parameters["resolution"].default == DEFAULT_RESOLUTION, fn
+    for fn in (clean_database, resolve_file):
+        assert inspect.signature(fn).parameters["resolution"].default == \
+            DEFAULT_LINKS_RESOLUTION, fn
     assert FormationConfig().resolution == DEFAULT_RESOLUTION
     assert ImagesConfig("photos", "ring").resolution == DEFAULT_RESOLUTION
     assert DEFAULT_OPTIONS["resolution"] == DEFAULT_RESOLUTION
@@ -84,10 +93,10 @@ def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
     for command, argv, want in (
             ("run-formation", [], DEFAULT_RESOLUTION),
             ("run-images", ["DIR", "--graph", "ring"], DEFAULT_RESOLUTION),
-            ("resolve", ["--links", "a", "--out", "b"], DEFAULT_RESOLUTION),
-            ("clean-db", ["in.db", "--out", "out.db"], DEFAULT_RESOLUTION),
+            ("resolve", ["--links", "a", "--out", "b"], DEFAULT_LINKS_RESOLUTION),
+            ("clean-db", ["in.db", "--out", "out.db"], DEFAULT_LINKS_RESOLUTION),
             ("run-formations", [], "paper"),
-            ("run-landmarks", ["DIR"], "paper")):
+            ("run-landmarks", ["DIR"], DEFAULT_LINKS_RESOLUTION)):
         args = parser.parse_args([command, *argv])
         assert args.resolution == want, command
     team_file = tmp_path / "TEAM.json"

@@ -40,7 +40,8 @@ def test_evidence_cuts_the_weakest_link_of_the_cycle(tmp_path, capsys):
     src.write_text("cam_i,feat_i,cam_j,feat_j,quality\n0,0,3,1,0.8\n0,0,1,0,0.8\n"
                    "1,0,2,0,0.1\n3,0,2,0,0.8\n")
     out = tmp_path / "out.csv"
-    assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution",
+                 "evidence"]) == 0
     assert "deleted: 1 links by the evidence rule" in capsys.readouterr().out
     back = read_run_links_csv(out)
     assert back.status.tolist() == ["kept", "kept", "deleted", "kept"]

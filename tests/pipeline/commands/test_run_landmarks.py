@@ -40,7 +40,7 @@ def test_report_contract(hotel_run):
     assert set(report["baselines"]) == {"drop_conflictive_sets", "keep_first_per_image",
                                         "quality_merge", "spectral_sync", "clear"}
     r = report["resolution"]
-    assert r["method"] == "paper" and r["messages"] > 0 and r["bytes"] > 0
+    assert r["method"] == "sync" and r["messages"] > 0 and r["bytes"] > 0  # links only
     assert len(rows) == report["before"]["links"]
     assert report["matching"]["geometry"] == "epipolar"  # the default
     assert report["matching"]["edges"] == len(report["comm_edges"])
