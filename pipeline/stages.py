@@ -2,7 +2,8 @@
 
 Stages, each a function here: :func:`extract_and_match` (features, then matching on the
 communication edges only), :func:`consistency_stage` (Aragüés et al., Sec. III detection and
-Sec. IV Alg. 1 resolution by message passing, with the network's faults),
+a resolution rule of :mod:`pipeline.consistency.rules` by message passing, by default its
+``DEFAULT_RESOLUTION``, with the network's faults),
 :func:`fusion_stage` (Montijano et al., robust distributed fusion by dynamic voting) and
 :func:`clean_association` (consistency then fusion, on any input, rendered or real). Every
 decision about a link is written to one :class:`~pipeline.types.LinkLedger`.

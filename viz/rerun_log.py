@@ -61,6 +61,7 @@ __all__ = [
     "CUT_COLORS",
     "CUT_WHY",
     "PAIR_KEPT_SAMPLE",
+    "case_why",
     "cut_summary",
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
@@ -103,11 +104,25 @@ CUT_WHY = {
 }
 #: How a resolution cut was decided (``case`` of the ledger).
 CASE_WHY = {"evidence": "evidence rule: the least-supported links of the set",
+            "sync": "multi-way matching: the link would have joined two features of one "
+                    "camera in one landmark",
             "b": "Alg. 1, case (b)", "c": "Alg. 1, case (c)", "reject": "Alg. 1, a reject",
             "robot-lost": "its robot was lost"}
 _COLOUR_NAMES = {(230, 40, 40): "red", (160, 60, 255): "purple", (255, 200, 0): "yellow"}
 #: Kept links drawn in a pair view: an even sample of them, so that the cut ones stay readable.
 PAIR_KEPT_SAMPLE = 25
+
+
+def case_why(case: str) -> str:
+    """How a resolution cut of ``case`` was decided: :data:`CASE_WHY`, else the title of the
+    registered rule that writes that case (:mod:`pipeline.consistency.rules`: a rule added
+    later), else the case itself."""
+    if case in CASE_WHY:
+        return CASE_WHY[case]
+    from pipeline.consistency.rules import RULES
+
+    rule = next((r for r in RULES.values() if case in r.cases.values()), None)
+    return case if rule is None else f"{rule.name} rule: {rule.title}"
 
 
 def cut_color(reason: str) -> tuple[int, int, int]:
@@ -369,7 +384,7 @@ def _log_links(rec: rr.RecordingStream, record: RunRecord, step: np.ndarray,
                             radii=_KEPT_RADIUS,
                             labels=labels[~deleted], show_labels=False), static=True)
     case = np.asarray(record.ledger.case, dtype=str)[drawable]
-    how = np.array([f" ({CASE_WHY.get(c, c)})" if c else "" for c in case[deleted]], dtype=str)
+    how = np.array([f" ({case_why(c)})" if c else "" for c in case[deleted]], dtype=str)
     del_labels = np.char.add(np.char.add(np.char.add(labels[deleted], " cut by "),
                                          reason[deleted]), how)
     cut_rgb = np.array([cut_color(r) for r in reason], dtype=np.uint8).reshape(-1, 3)
@@ -486,7 +501,7 @@ def _pair_counts(record: RunRecord, i: int, j: int) -> tuple[int, int]:
 
 def cut_summary(record: RunRecord) -> str:
     """Markdown of the ``cuts`` panel: the links each stage cut, the colour they are drawn
-    in, and why that stage cuts a link (:data:`CUT_WHY`, :data:`CASE_WHY`); read from the
+    in, and why that stage cuts a link (:data:`CUT_WHY`, :func:`case_why`); read from the
     ledger only."""
     status = np.asarray(record.ledger.status)
     reason = np.asarray(record.ledger.reason, dtype=str)
@@ -503,7 +518,7 @@ def cut_summary(record: RunRecord) -> str:
         name = str(names[k])
         why = CUT_WHY.get(name, "cut by that stage")
         cases, c_counts = np.unique(case[deleted & (reason == name)], return_counts=True)
-        how = [f"{CASE_WHY.get(str(c), str(c))}: {int(n)}"
+        how = [f"{case_why(str(c))}: {int(n)}"
                for c, n in zip(cases, c_counts, strict=True) if c]
         if name == "resolution" and how:
             why += " (" + "; ".join(how) + ")"

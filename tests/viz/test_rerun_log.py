@@ -201,6 +201,18 @@ def test_cut_summary_counts_each_stage_and_says_why():
     assert "* **1 link cut by fusion-outlier** (drawn purple): the robust fusion" in text
     record.ledger.case[deleted & (record.ledger.reason == "resolution")] = "evidence"
     assert "(evidence rule: the least-supported links of the set: 2)" in cut_summary(record)
+    # every registered rule's cuts are named: sync's, and a rule registered later by its title
+    record.ledger.case[deleted & (record.ledger.reason == "resolution")] = "sync"
+    assert "(multi-way matching: the link would have joined" in cut_summary(record)
+    from pipeline.consistency.rules import ResolutionRule, register, unregister
+
+    register(ResolutionRule(name="toy-why", help="", title="a toy rule", summary="",
+                            cases={99: "toy-why"}, detection=False, stage="x:y", alone="x:y"))
+    try:
+        record.ledger.case[deleted & (record.ledger.reason == "resolution")] = "toy-why"
+        assert "(toy-why rule: a toy rule: 2)" in cut_summary(record)
+    finally:
+        unregister("toy-why")
 
 
 def test_blueprint_saved(recording):
