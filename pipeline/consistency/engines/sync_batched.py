@@ -67,8 +67,8 @@ fault switch, robots freshly equipped by :func:`.sync.equip_sync` with one flood
 every link held by both ends (alive at both or at neither) with the same weight at both.
 Elsewhere :func:`run_sync_batched` runs the robots one by one (:func:`.sync.run_sync`).
 
-Cost: ``O(H log H)`` per Borůvka round (``H`` half-links) plus, per network round, work in
-proportion to that round's sends; camera-set tests ``O(K ⌈n/64⌉)`` for the ``K`` open links
+Cost: ``O((H + M) log H)`` per Borůvka round (``H`` half-links, ``M`` features) plus, per
+network round, work in proportion to that round's sends; camera-set tests ``O(K ⌈n/64⌉)`` for the ``K`` open links
 whose clusters merged, in chunks of :data:`CHUNK` words.
 """
 
