@@ -275,7 +275,8 @@ def table(title: str, rows: list[dict]) -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "cmu_hotel"))
-    p.add_argument("--frames", type=int, nargs="+", default=[20, 101])
+    p.add_argument("--frames", type=int, nargs="*", default=[20, 101],
+                   help="labelled cases with these frame counts (none: only the team rows)")
     p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
     p.add_argument("--inputs", nargs="+", default=["descriptors", "defaults"],
                    choices=("descriptors", "defaults"))
