@@ -17,6 +17,18 @@ HERE = Path(__file__).resolve().parent
 LINKS = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n0,1,1,1\n"
 
 
+def _resolve_fig1(rule: str, transport: str, tmp_path, capsys):
+    """``resolve`` on :data:`LINKS` with ``rule`` over ``transport``: what it printed, its
+    report and every row's status."""
+    src, out, report = tmp_path / "in.csv", tmp_path / "out.csv", tmp_path / "r.json"
+    src.write_text(LINKS)
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", rule,
+                 "--transport", transport, "--report", str(report)]) == 0
+    rows = out.read_text().splitlines()[1:]
+    return (capsys.readouterr().out, json.loads(report.read_text()),
+            [r.split(",")[4] for r in rows])
+
+
 def test_the_rules_codes_are_the_robots_own():
     from pipeline.consistency import sync
 
@@ -37,17 +49,12 @@ def test_the_sync_rule_runs_through_resolve_on_both_transports(transport, tmp_pa
     # Fig. 1 (global ids 0,1 | 2,3 | 4 | 5,6): equal weights and no triangle, so the greedy
     # merge takes the links by their smaller ends: (0,2), (0,6), (1,3), (2,4); then (4,5)
     # would join feature 5 to a cluster holding 6, both of camera 3: (3,0)-(2,0) is cut
-    src, out, report = tmp_path / "in.csv", tmp_path / "out.csv", tmp_path / "r.json"
-    src.write_text(LINKS)
-    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "sync",
-                 "--transport", transport, "--report", str(report)]) == 0
-    assert "deleted: 1 links by the multi-way matching" in capsys.readouterr().out
-    s = json.loads(report.read_text())
+    printed, s, statuses = _resolve_fig1("sync", transport, tmp_path, capsys)
+    assert "deleted: 1 links by the multi-way matching" in printed
     assert s["resolution_method"] == "sync"
     assert s["deleted_by_case"] == {"b": 0, "c": 0, "sync": 1}
     assert s["after"]["conflictive_sets"] == 0
-    rows = out.read_text().splitlines()[1:]
-    assert [r.split(",")[4] for r in rows] == ["kept", "kept", "kept", "deleted", "kept"]
+    assert statuses == ["kept", "kept", "kept", "deleted", "kept"]
 
 
 @pytest.mark.parametrize("name", ["paper", "evidence"])
@@ -90,17 +97,12 @@ def toy_rule(monkeypatch):
 
 @pytest.mark.parametrize("transport", ["sim", "zenoh"])
 def test_a_toy_rule_runs_end_to_end_through_resolve(toy_rule, transport, tmp_path, capsys):
-    src, out, report = tmp_path / "in.csv", tmp_path / "out.csv", tmp_path / "r.json"
-    src.write_text(LINKS)
-    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "toy",
-                 "--transport", transport, "--report", str(report)]) == 0
-    assert "deleted: 4 links by the toy rule" in capsys.readouterr().out
-    s = json.loads(report.read_text())
+    printed, s, statuses = _resolve_fig1("toy", transport, tmp_path, capsys)
+    assert "deleted: 4 links by the toy rule" in printed
     assert s["resolution_method"] == "toy"
     assert s["deleted_by_case"] == {"b": 0, "c": 0, "toy": 4}
     assert s["before"]["conflictive_sets"] == 1 and s["after"]["conflictive_sets"] == 0
-    rows = out.read_text().splitlines()[1:]
-    assert [r.split(",")[4] for r in rows] == ["deleted"] * 4 + ["kept"]
+    assert statuses == ["deleted"] * 4 + ["kept"]
 
 
 def test_a_toy_transport_runs_resolve(tmp_path, capsys):
