@@ -6,7 +6,7 @@ For each case (data set × comm graph × input) the same links go to
   ``sync``), run by :func:`pipeline.consistency.resolve_conflicts` in the simulator, and
 * the centralized baselines: spectral synchronization (Pachauri et al. 2013) and a
   CLEAR-style normalized spectral method with its universe-size estimate (Fathian et al.
-  2020) from :mod:`pipeline.consistency.spectral` where present, union-find dropping the
+  2020) from :mod:`pipeline.consistency.spectral`, union-find dropping the
   conflictive sets and the constrained greedy merge by link quality
   (:mod:`pipeline.consistency.centralized`).
 
@@ -31,7 +31,7 @@ Cases
       the pairs swap two of their matches (wrong links). Methods: ``resolve:sync`` (the
       ``resolve`` command on the links written as a file, as a user runs it: its wall time and
       peak RSS in ``resolve_wall_s``, ``resolve_peak_rss_mb``), the rules and the cheap
-      baselines (``--team-methods`` adds ``spectral`` or ``clear``: minutes from a few hundred
+      baselines (``--team-methods`` adds ``spectral_sync`` or ``clear``: minutes from a few hundred
       cameras on, their sparse eigenproblems converge slowly on a ring).
 
 Prints one table per case and saves ``runs/bench-multiway/results.json``.
@@ -63,7 +63,7 @@ from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
 DISTRIBUTED = ("paper", "evidence", "sync")
-CENTRALIZED = ("spectral", "clear", "drop_conflictive_sets", "quality_merge")
+CENTRALIZED = ("spectral_sync", "clear", "drop_conflictive_sets", "quality_merge")
 
 
 # --------------------------------------------------------------------------- the cases
@@ -193,15 +193,9 @@ def run_method(method: str, m, edges, links: Links) -> dict:
                                                    st["resolution_rounds"]),
                     messages=int(st["messages"]), bytes=int(st["bytes"]),
                     max_robot_memory_bytes=int(st["max_robot_memory_bytes"]))
-    if method in ("spectral", "clear"):
-        from pipeline.consistency import spectral
+    from pipeline.consistency.centralized import BASELINES
 
-        fn = spectral.spectral_sync if method == "spectral" else spectral.clear_sync
-        labels = fn(m, links, None)
-        return dict(kept=spectral.labels_to_kept(m, links, labels))
-    from pipeline.consistency import centralized
-
-    return dict(kept=np.asarray(getattr(centralized, method)(m, links), dtype=bool))
+    return dict(kept=np.asarray(BASELINES[method](m, links), dtype=bool))
 
 
 def _rss_mb() -> float:

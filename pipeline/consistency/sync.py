@@ -122,7 +122,7 @@ from pipeline.transport import Message, Transport
 
 __all__ = ["SyncState", "equip_sync", "equip_robot", "start_support", "support_step", "start_exchange",
            "exchange_step", "start_merge", "merge_step", "finish_sync", "has_best",
-           "run_sync", "greedy_merge", "id_dtype", "CASE_SYNC", "SUPPORT", "BEST", "MERGE",
+           "run_sync", "id_dtype", "CASE_SYNC", "SUPPORT", "BEST", "MERGE",
            "RELABEL", "EXCHANGE", "FLOODS"]
 
 Send = Callable[[int, str, dict], None]
@@ -692,42 +692,3 @@ def run_sync(robots: list[Robot], network: Transport, on_round=None) -> dict:
         rb.sync.rounds = boruvka
         finish_sync(rb, t)
     return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)
-
-
-# --------------------------------------------------------------------------- reference
-
-
-def greedy_merge(m_total: int, a, b, cam_a, cam_b, w) -> np.ndarray:
-    """Cluster label of every feature after the sequential constrained greedy merge.
-
-    Links ``(a[k], b[k])`` (global ids, cameras ``cam_a``, ``cam_b``) in decreasing
-    ``(w, -min, -max)``; a link joins its two clusters unless they share a camera. Labels are
-    the smallest global id of each cluster. The centralized counterpart of :func:`run_sync`.
-    """
-    a, b = np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    order = np.lexsort((hi, lo, -np.asarray(w, dtype=np.float64)))
-    parent = np.arange(m_total)
-    cams: dict[int, int] = {}
-    cam_of = np.full(m_total, -1, dtype=np.int64)
-    cam_of[a] = cam_a
-    cam_of[b] = cam_b
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = int(parent[x])
-        return x
-
-    for k in order.tolist():
-        x, y = find(int(lo[k])), find(int(hi[k]))
-        if x == y:
-            continue
-        cx = cams.get(x, 1 << int(cam_of[x]) if cam_of[x] >= 0 else 0)
-        cy = cams.get(y, 1 << int(cam_of[y]) if cam_of[y] >= 0 else 0)
-        if cx & cy:
-            continue
-        x, y = min(x, y), max(x, y)
-        parent[y] = x
-        cams[x] = cx | cy
-    return np.array([find(x) for x in range(m_total)], dtype=np.int64)
