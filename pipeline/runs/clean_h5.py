@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
-from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
+from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, get_rule
 
 __all__ = ["clean_h5"]
 
@@ -79,7 +79,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
     model_links = links.subset(ok)
-    check_detection_memory(m, model_links, budget, detection=False)  # sync: no detection
+    check_detection_memory(m, model_links, budget,
+                           detection=get_rule(DEFAULT_LINKS_RESOLUTION).detection)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result, _ = consistency_stage(m, edges, model_links, resolution=DEFAULT_LINKS_RESOLUTION)
     idx = np.flatnonzero(ok)

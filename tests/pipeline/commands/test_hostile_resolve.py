@@ -285,6 +285,10 @@ def test_the_sync_rule_counts_its_links_not_the_detections_sets(tmp_path):
     proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q",
                        "--resolution", "sync", "--max-memory-gb", "0.05"])
     assert proc.returncode == 0, proc.stderr
+    # with message loss the fault-tolerant Alg. 1 runs instead, and its detection is counted
+    lossy = run_capped(["resolve", "--links", src, "--out", tmp_path / "o2.csv",
+                        "--resolution", "sync", "--drop-prob", "0.1", "--max-memory-gb", "0.05"])
+    assert lossy.returncode == 2 and "into one association set" in lossy.stderr
 
 
 def test_memory_follows_the_links_not_the_cameras_squared(tmp_path):
