@@ -349,9 +349,11 @@ def _whole_stage(robots, network, in_batch: bool, rule, bar) -> list[dict]:
     bar.set_description_str(f"consistency ({len(robots)} robots): {rule.name}", refresh=False)
     run = (in_batch and rule.hook("stage_batched")) or rule.hook("stage")
     res = run(robots, network, on_round=lambda t: bar.update(1))
-    cut = any(bool((~rb.link_alive).any()) for rb in robots)
+    # no detection: the features the rule had to act on are those with a cut link (one pass,
+    # counted as an iteration when it cut anything)
+    acted = sum(int(np.unique(rb.link_r[~rb.link_alive]).size) for rb in robots)
     rec = dict(iteration=1, detection_rounds=0, t_stop=np.zeros(len(robots), dtype=np.int64),
-               conflictive_features=int(cut), conflictive_sets=0,
+               conflictive_features=acted, conflictive_sets=0,
                resolution_rounds=int(res["rounds"]), start_round=int(c0.get("round", 0)),
                stage=res)
     rec.update(_delta(c0, network.counters()))
