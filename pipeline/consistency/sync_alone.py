@@ -42,7 +42,7 @@ from pipeline.consistency.sync import (
     start_support,
     support_step,
 )
-from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
 __all__ = ["run_sync_locally"]
 
@@ -81,32 +81,28 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
         start(robot, lambda dst, kind, p: chan.send(dst, kind, p, now))
         chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
         st.lost_in_phase = False
-        wave.start(chan.idle(), 0)
-        t = 0
         begin = transport.round
-        while True:
-            inbox, states = transport.end_round({**wave.state(), "phase": name})
-            t += 1
-            now = transport.round
+
+        def round_(inbox, now, t):
             msgs = chan.receive(inbox, now)
             lost = chan.check_lost(now, nbrs - chan.lost)
             if lost:
                 cut_lost(robot, st, lost, now)
-            step(robot, msgs, lambda dst, kind, p, now=now: chan.send(dst, kind, p, now), now)
+            step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), now)
             chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
             robot.peak_memory_bytes = max(robot.peak_memory_bytes,
                                           robot.fixed_bytes() + robot.sync.nbytes()
                                           + chan.memory_bytes())
-            transport.note_memory(robot.peak_memory_bytes)
-            bits = (CONFLICT if name == "sync-exchange" and has_best(robot) else 0) | \
+
+        def bits():
+            return (CONFLICT if name == "sync-exchange" and has_best(robot) else 0) | \
                    (LOST if st.lost_in_phase else 0)
-            if wave.update(chan.idle(), bits, states):
-                log.phases.append(dict(phase=name, start_round=begin, rounds=t,
-                                       bits=int(wave.bits)))
-                log.resolution_rounds += t
-                return wave.bits
-            if t > cap:
-                raise RuntimeError(f"robot {robot.id}: {name} did not end within {cap} rounds")
+
+        t, out = run_wave_phase(transport, wave, round_, chan.idle, bits, cap, name, robot.id,
+                                lambda: robot.peak_memory_bytes)
+        log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
+        log.resolution_rounds += t
+        return out
 
     restarts = 0
     while True:

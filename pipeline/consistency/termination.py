@@ -68,7 +68,7 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
 __all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
 
@@ -79,17 +79,8 @@ def _own_bits(robot: Robot, st: ReliableState) -> int:
 def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave, step, done,
                max_rounds: int, phase: str) -> tuple[int, int]:
     """Rounds of one phase until the wave ends it; returns (rounds, OR of the bits)."""
-    wave.start(done(), _own_bits(robot, st))
-    t = 0
-    while True:
-        inbox, states = transport.end_round({**wave.state(), "phase": phase})
-        t += 1
-        step(inbox, transport.round, t)
-        transport.note_memory(robot.peak_memory_bytes)
-        if wave.update(done(), _own_bits(robot, st), states):
-            return t, wave.bits
-        if t > max_rounds:
-            raise RuntimeError(f"robot {robot.id}: {phase} did not end within {max_rounds} rounds")
+    return run_wave_phase(transport, wave, step, done, lambda: _own_bits(robot, st), max_rounds,
+                          phase, robot.id, lambda: robot.peak_memory_bytes)
 
 
 def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,

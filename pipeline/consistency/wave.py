@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["TerminationWave", "RobotRun", "CONFLICT", "LOST"]
+__all__ = ["TerminationWave", "RobotRun", "run_wave_phase", "CONFLICT", "LOST"]
 
 CONFLICT, LOST = 1, 2
 
@@ -59,3 +59,25 @@ class RobotRun:
     resolution_rounds: int = 0
     closing_rounds: int = 0
     seconds: float = 0.0
+
+
+def run_wave_phase(transport, wave: TerminationWave, step, done, bits, max_rounds: int,
+                   phase: str, robot_id: int, memory) -> tuple[int, int]:
+    """Rounds of one phase of a robot alone until the wave ends it (:mod:`.termination`).
+
+    ``step(inbox, now, t)`` is the robot's round on its inbox, ``done()`` its *done* predicate,
+    ``bits()`` its own outcome bits, ``memory()`` its current peak bytes (reported to the
+    transport each round). Returns ``(rounds, OR of the bits over the team)``; a phase not
+    ended within ``max_rounds`` raises ``RuntimeError`` (a bug, never a correct run).
+    """
+    wave.start(done(), bits())
+    t = 0
+    while True:
+        inbox, states = transport.end_round({**wave.state(), "phase": phase})
+        t += 1
+        step(inbox, transport.round, t)
+        transport.note_memory(memory())
+        if wave.update(done(), bits(), states):
+            return t, wave.bits
+        if t > max_rounds:
+            raise RuntimeError(f"robot {robot_id}: {phase} did not end within {max_rounds} rounds")
