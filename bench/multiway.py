@@ -69,6 +69,88 @@ CENTRALIZED = ("spectral_sync", "clear", "drop_conflictive_sets", "quality_merge
 # --------------------------------------------------------------------------- the cases
 
 
+class Case:
+    """One input of the bench: links, features per camera, comm graph and how to score.
+
+    Truth comes as ``truth_id`` (the landmark of every feature: labelled data, the synthetic
+    team) or as ``true_pairs`` (every true pair of global feature ids: rendered formations,
+    Graffiti's homographies) with ``link_good`` (each link good or spurious). ``evidence``
+    holds what the evidence rule reads where the input has it (link weights, keypoints,
+    projections); without it every rule reads the links' quality."""
+
+    def __init__(self, m, edges, links, *, truth_id=None, true_pairs=None, link_good=None,
+                 evidence=None):
+        self.m, self.edges, self.links = m, edges, links
+        self.truth_id, self.true_pairs, self.link_good = truth_id, true_pairs, link_good
+        self.evidence = evidence or {}
+
+    def scores(self, kept: np.ndarray) -> dict:
+        out = scores(self.m, self.links.subset(kept), self.truth_id) if self.truth_id is not None \
+            else pair_scores(self.m, self.links.subset(kept), self.true_pairs)
+        if self.link_good is not None:
+            good = self.link_good
+            out.update(good_cut=int((~kept & good).sum()), spurious_cut=int((~kept & ~good).sum()))
+        return out
+
+
+def formation_case(formation: str, seed: int) -> Case:
+    """A rendered formation with its own comm graph, matched as ``run-formation`` matches it
+    (SIFT, 640x480, merge radius of the default rule), truth at 2 px."""
+    import data_synth
+    from pipeline.evaluation.links import link_truth
+    from pipeline.evaluation.metrics import true_pairs_all
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.link_evidence import link_evidence
+    from pipeline.matching.pairs import match_edges
+    from pipeline.stages import merge_radius_for
+
+    fm = data_synth.render(formation, seed=seed, size=(640, 480))
+    views, edges = fm.views, np.asarray(fm.comm_edges)
+    feats = extract_all(views, "sift", 2000, merge_radius_for("evidence", None))
+    matches = match_edges(feats, views, edges)
+    links = Links.from_matches(matches)
+    m = np.array([len(f) for f in feats], dtype=np.int64)
+    ev = link_evidence(matches, links, views, feats)
+    return Case(m, edges, links, true_pairs=true_pairs_all(fm, feats, tol_px=2.0),
+                link_good=np.asarray(link_truth(fm, feats, links, tol_px=2.0), dtype=bool),
+                evidence=dict(link_weight=ev.weight, keypoints=[f.keypoints for f in feats],
+                              projections=[v.K @ np.c_[v.R, v.t] for v in views]))
+
+
+def graffiti_case(directory: str, graph: str) -> Case:
+    """Graffiti matched as ``run-images`` matches it at its defaults; truth from the data
+    set's homographies at 2 px (mutual)."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.evaluation.truth import (
+        _image_scales,
+        homography_link_truth,
+        homography_true_pairs,
+        read_homographies,
+    )
+    from pipeline.inputs.photos import load_folder
+    from pipeline.matching.link_evidence import link_evidence
+    from pipeline.progress import StageTimer
+    from pipeline.runs.images import ImagesConfig
+    from pipeline.stages import extract_and_match, merge_radius_for
+
+    c = ImagesConfig(directory=directory, graph=graph)
+    views = load_folder(directory, max_size=c.max_size, intrinsics="auto")
+    edges = comm_graph(graph, [v.name for v in views])
+    feats, matches, links = extract_and_match(
+        views, edges, c.features, c.max_features, StageTimer(verbose=False),
+        contrast_threshold=c.contrast_threshold, merge_radius=merge_radius_for(c.resolution, None),
+        rootsift=c.rootsift, threshold_px=c.threshold_px, budget_after_merge=c.budget_after_merge)
+    kps = [np.asarray(f.keypoints, dtype=np.float64) for f in feats]
+    H1 = read_homographies(directory, len(views))
+    scales = _image_scales(Path(directory), views)
+    m = np.array([len(k) for k in kps], dtype=np.int64)
+    ev = link_evidence(matches, links, views, feats)
+    return Case(m, edges, links, true_pairs=homography_true_pairs(kps, H1, scales, 2.0),
+                link_good=homography_link_truth(kps, links, H1, scales, 2.0),
+                evidence=dict(link_weight=ev.weight, keypoints=[f.keypoints for f in feats]))
+
+
+
 def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, seed: int):
     """Links, features per camera and the true landmark of every feature (shuffled order)."""
     from pipeline.commgraph import comm_graph
@@ -88,7 +170,7 @@ def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, s
                                     geometry, 3.0)
     if inputs == "defaults":
         links, _ = refine_by_votes(m, edges, links, 10)
-    return m, edges, links, np.concatenate(perms)
+    return Case(m, edges, links, truth_id=np.concatenate(perms))
 
 
 def team_case(n: int, k: int = 30, p_swap: float = 0.3, seed: int = 0):
@@ -109,7 +191,7 @@ def team_case(n: int, k: int = 30, p_swap: float = 0.3, seed: int = 0):
         fj.append(inv[j][tgt]), q.append(rng.uniform(0.2, 0.6, k))
     links = Links(np.concatenate(ci), np.concatenate(fi), np.concatenate(cj),
                   np.concatenate(fj), np.concatenate(q))
-    return np.full(n, k, dtype=np.int64), edges, links, np.concatenate(perms)
+    return Case(np.full(n, k, dtype=np.int64), edges, links, truth_id=np.concatenate(perms))
 
 
 # --------------------------------------------------------------------------- scoring
@@ -149,6 +231,16 @@ def scores(m, kept: Links, truth_id) -> dict:
                 cycle_consistent=bool(is_conflict_free(m, kept)))
 
 
+def pair_scores(m, kept: Links, true_pairs) -> dict:
+    """Pairwise P/R/F1 of the closure of ``kept`` against listed true pairs; consistency."""
+    from pipeline.consistency.centralized import is_conflict_free
+    from pipeline.evaluation.metrics import PairwiseTruth
+
+    s = PairwiseTruth(true_pairs, int(np.sum(m))).scores(m, kept)
+    return dict(precision=s["precision"], recall=s["recall"], f1=s["f1"],
+                cycle_consistent=bool(is_conflict_free(m, kept)))
+
+
 # --------------------------------------------------------------------------- the methods
 
 
@@ -180,14 +272,19 @@ def run_resolve_cli(rule: str, m, edges, links: Links) -> dict:
     return dict(kept=kept, resolve_wall_s=round(wall, 2), resolve_peak_rss_mb=round(rss, 1))
 
 
-def run_method(method: str, m, edges, links: Links) -> dict:
+def run_method(method: str, case: Case) -> dict:
     """Kept mask and the method's own figures (rounds, messages, bytes where distributed)."""
+    m, edges, links = case.m, case.edges, case.links
     if method.startswith("resolve:"):
         return run_resolve_cli(method.split(":", 1)[1], m, edges, links)
+    if method == "oracle":
+        from pipeline.evaluation.oracle import oracle_cut
+
+        return dict(kept=np.asarray(oracle_cut(m, links, case.link_good), dtype=bool))
     if method in DISTRIBUTED:
         from pipeline.consistency import resolve_conflicts
 
-        res = resolve_conflicts(m, edges, links, resolution=method)
+        res = resolve_conflicts(m, edges, links, resolution=method, **case.evidence)
         st = res.stats
         return dict(kept=~res.deleted, rounds=int(st["detection_rounds"] +
                                                    st["resolution_rounds"]),
@@ -208,7 +305,6 @@ def _rss_mb() -> float:
 
 def measured(method: str, case, cap_gb: float, cap_s: float) -> dict:
     """Run ``method`` on ``case`` in a forked child; its scores, times and peak memory."""
-    m, edges, links, truth_id = case
     r, w = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: one method, then its figures through the pipe
@@ -219,14 +315,14 @@ def measured(method: str, case, cap_gb: float, cap_s: float) -> dict:
             resource.setrlimit(resource.RLIMIT_AS, (int(cap_gb * 2**30), int(cap_gb * 2**30)))
             signal.alarm(int(cap_s))
             t0, c0 = time.perf_counter(), time.process_time()
-            res = run_method(method, m, edges, links)
+            res = run_method(method, case)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             kept = res.pop("kept")
             out = dict(status="ok", wall_s=round(wall, 3), cpu_s=round(cpu, 3),
                        base_rss_mb=round(base, 1),
                        peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
                                          / 1024, 1),
-                       **scores(m, links.subset(kept), truth_id), **res)
+                       **case.scores(kept), **res)
         except MemoryError:
             out = dict(status=f"out of memory (cap {cap_gb:g} GB)")
         except Exception as exc:  # noqa: BLE001 - reported in the table
@@ -251,19 +347,37 @@ def measured(method: str, case, cap_gb: float, cap_s: float) -> dict:
 
 
 def table(title: str, rows: list[dict]) -> str:
+    cut = any("good_cut" in row for row in rows)
+    extra = " good cut | spurious cut |" if cut else ""
     lines = [f"## {title}", "",
-             "| method | P | R | F1 | consistent | wall [s] | CPU [s] | peak RSS [MB] | rounds "
-             "| bytes |", "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+             "| method | P | R | F1 | consistent |" + extra + " wall [s] | CPU [s] | peak RSS [MB] "
+             "| rounds | bytes |",
+             "|---|---:|---:|---:|---|" + ("---:|---:|" if cut else "") + "---:|---:|---:|---:|---:|"]
     for row in rows:
         if row.get("status") != "ok":
-            lines.append(f"| {row['method']} | {row.get('status')} | | | | | | | | |")
+            lines.append(f"| {row['method']} | {row.get('status')} |" + " |" * (8 + 2 * cut))
             continue
+        cuts = f" {row.get('good_cut', '')} | {row.get('spurious_cut', '')} |" if cut else ""
         lines.append(
             f"| {row['method']} | {row['precision']:.3f} | {row['recall']:.3f} | "
-            f"{row['f1']:.4f} | {row['cycle_consistent']} | {row['wall_s']:.2f} | "
+            f"{row['f1']:.4f} | {row['cycle_consistent']} |{cuts} {row['wall_s']:.2f} | "
             f"{row['cpu_s']:.2f} | {row['peak_rss_mb']:.0f} | {row.get('rounds', '')} | "
             f"{row.get('bytes', '')} |")
     return "\n".join(lines) + "\n"
+
+
+def run_case(title: str, case: Case, methods, base: dict, a, records: list) -> None:
+    """Every method on one case: rows appended to ``records``, the table printed."""
+    rows = []
+    for method in methods:
+        if method == "oracle" and case.link_good is None:
+            continue
+        row = dict(**base, method=method, **measured(method, case, a.cap_gb, a.cap_s))
+        rows.append(row)
+        records.append(row)
+    before = case.scores(np.ones(len(case.links), dtype=bool))
+    print(table(f"{title} (input closure F1 {before['f1']:.3f}, {len(case.links)} links)", rows),
+          flush=True)
 
 
 def main(argv=None) -> int:
@@ -275,6 +389,10 @@ def main(argv=None) -> int:
     p.add_argument("--inputs", nargs="+", default=["descriptors", "defaults"],
                    choices=("descriptors", "defaults"))
     p.add_argument("--methods", nargs="+", default=[*DISTRIBUTED, *CENTRALIZED])
+    p.add_argument("--graffiti", default=str(ROOT.parent / "shared" / "data" / "graffiti"),
+                   help="the Graffiti folder (H1to{k}p); '' skips it")
+    p.add_argument("--formations", default="abcd", help="formations to render ('' none)")
+    p.add_argument("--formation-seeds", type=int, nargs="*", default=[5, 6, 7, 8, 9])
     p.add_argument("--team", type=int, nargs="*", default=[300])
     p.add_argument("--team-methods", nargs="+",
                    default=["resolve:sync", "sync", "evidence", "drop_conflictive_sets",
@@ -288,33 +406,33 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.quick:
         a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
+        a.graffiti, a.formations, a.formation_seeds = "", "a", [5]
     records = []
     load = os.getloadavg()[0]
     for frames in a.frames:
         for graph in a.graphs:
             for inputs in a.inputs:
                 case = landmark_case(a.data, frames, graph, inputs, a.shuffle_seed)
-                rows = []
-                input_scores = scores(case[0], case[2], case[3])
-                for method in a.methods:
-                    row = dict(case="landmarks", data=Path(a.data).name, frames=frames,
-                               graph=graph, inputs=inputs, method=method,
-                               **measured(method, case, a.cap_gb, a.cap_s))
-                    rows.append(row)
-                    records.append(row)
-                print(table(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs} "
-                            f"(input closure F1 {input_scores['f1']:.3f}, {len(case[2])} links)",
-                            rows), flush=True)
+                run_case(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}", case,
+                         a.methods, dict(case="landmarks", data=Path(a.data).name, frames=frames,
+                                         graph=graph, inputs=inputs), a, records)
+    if a.graffiti:
+        for graph in a.graphs:
+            case = graffiti_case(a.graffiti, graph)
+            run_case(f"{Path(a.graffiti).name}, {graph}, run-images defaults", case,
+                     [*a.methods, "oracle"], dict(case="graffiti", data=Path(a.graffiti).name,
+                                                  graph=graph, inputs="defaults"), a, records)
+    for formation in a.formations:
+        for seed in a.formation_seeds:
+            case = formation_case(formation, seed)
+            run_case(f"formation {formation}, seed {seed}, its comm graph, run-formation matching",
+                     case, [*a.methods, "oracle"],
+                     dict(case="formation", formation=formation, seed=seed, graph="formation",
+                          inputs="defaults"), a, records)
     for n in a.team:
-        case = team_case(n)
-        rows = []
-        for method in a.team_methods:
-            row = dict(case="team", cameras=n, graph="ring2", method=method,
-                       **measured(method, case, a.cap_gb, a.cap_s))
-            rows.append(row)
-            records.append(row)
-        print(table(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap "
-                    f"({len(case[2])} links)", rows), flush=True)
+        run_case(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap",
+                 team_case(n), a.team_methods, dict(case="team", cameras=n, graph="ring2"),
+                 a, records)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "results.json", {
