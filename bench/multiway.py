@@ -62,7 +62,7 @@ sys.path.insert(0, str(ROOT))
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
-DISTRIBUTED = ("paper", "evidence", "sync")
+DISTRIBUTED = ("paper", "paper-labels", "evidence", "sync")
 CENTRALIZED = ("spectral_sync", "clear", "drop_conflictive_sets", "quality_merge")
 
 

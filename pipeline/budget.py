@@ -163,8 +163,9 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
     takes the total above the limit (module notes).
 
     ``detection``: the rule runs the paper's detection (Sec. III), whose rows hold every
-    feature of a set (``Σ |C|²``); ``False`` for a rule without it (``sync``), whose robots
-    hold their links and the far ends' clusters: :data:`BYTES_PER_SYNC_LINK` per link."""
+    feature of a set (``Σ |C|²``); ``False`` for a rule without it (``sync``, whose robots
+    hold their links and the far ends' clusters; ``paper-labels``, four numbers per feature
+    besides its links): :data:`BYTES_PER_SYNC_LINK` per link, the larger of the two."""
     if not isinstance(budget, MemoryBudget):
         budget = MemoryBudget(budget, flag)
     if not detection:
@@ -176,7 +177,8 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
                "one association set; every robot holds every feature of its sets, eq. 5)",
                entries * BYTES_PER_ENTRY,
                "such sets come from wrong links: clean them first, or use --resolution sync "
-               "(no detection: its memory follows the links)")
+               "(no detection) or paper-labels (Alg. 1 after a label-flooding detection): "
+               "their memory follows the links")
 
 
 def check_formation_memory(n_robots: int, size: tuple[int, int], limit,

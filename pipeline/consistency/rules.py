@@ -70,6 +70,10 @@ the sets it found.
     once where the batched engines apply), and ``alone(robot, transport, protocol, n_robots)
     -> RobotRun`` (one robot in its own process, ending its phases by the termination wave of
     :mod:`.termination`) instead of ``simulate``/``start``/``step``/``done``/``finish``.
+``cuts_as``
+    The rule whose cuts this one makes on a fault-free network by construction (another
+    protocol for the same decisions, property-tested): reports that compare every rule on
+    one input reuse that rule's cuts instead of running both.
 ``equip``
     With ``needs_evidence``: ``equip(robot, link_weight, keypoints, projection)`` hands a
     robot its own evidence (default :func:`.evidence.equip`).
@@ -143,6 +147,7 @@ class ResolutionRule:
     fault_tolerant: bool = False
     needs_evidence: bool = False
     merge_radius_px: float | None = None
+    cuts_as: str | None = None
     _loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
     def hook(self, name: str):
@@ -270,5 +275,18 @@ register(ResolutionRule(
     equip="pipeline.consistency.sync:equip_robot",
     needs_evidence=True,
     merge_radius_px=2.0))
+register(ResolutionRule(
+    name="paper-labels",
+    help="paper-labels = Alg. 1 after a detection by label flooding (the paper's outcome, "
+         "memory that follows the links)",
+    title="detection by label flooding (the outcome of Sec. III) + resolution (Alg. 1) of "
+          "Aragüés et al.",
+    summary="(case b: {b}, case c: {c})",
+    # its cuts are Alg. 1's cases (b) and (c), codes of the paper rule (counted for every rule)
+    cases={},
+    detection=False,
+    stage="pipeline.consistency.engines.paper_labels:run_paper_labels",
+    alone="pipeline.consistency.labels:run_paper_labels_locally",
+    cuts_as="paper"))
 for _module in filter(None, (m.strip() for m in os.environ.get(PLUGINS_ENV, "").split(","))):
     importlib.import_module(_module)

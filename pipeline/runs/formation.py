@@ -268,7 +268,10 @@ def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np
     m = np.array([len(f) for f in feats], dtype=np.int64)
     masks = {method: np.asarray(resolved, dtype=bool)}
     for other in rule_names():
-        if other not in masks:
+        same = get_rule(other).cuts_as
+        if other not in masks and same in masks:
+            masks[other] = masks[same]  # the same cuts by construction (rules.py, cuts_as)
+        elif other not in masks:
             evidence = evidence_inputs(views, feats, links, matches) \
                 if get_rule(other).needs_evidence else None
             res, _ = consistency_stage(m, comm_edges, links, resolution=other, evidence=evidence)

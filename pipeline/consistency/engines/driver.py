@@ -352,9 +352,11 @@ def _whole_stage(robots, network, in_batch: bool, rule, bar) -> list[dict]:
     # no detection: the features the rule had to act on are those with a cut link (one pass,
     # counted as an iteration when it cut anything)
     acted = sum(int(np.unique(rb.link_r[~rb.link_alive]).size) for rb in robots)
-    rec = dict(iteration=1, detection_rounds=0, t_stop=np.zeros(len(robots), dtype=np.int64),
-               conflictive_features=acted, conflictive_sets=0,
-               resolution_rounds=int(res["rounds"]), start_round=int(c0.get("round", 0)),
+    # a rule that detects by its own means (``paper-labels``) reports its detection rounds
+    det = int(res.get("detection_rounds", 0))
+    rec = dict(iteration=1, detection_rounds=det, t_stop=np.zeros(len(robots), dtype=np.int64),
+               conflictive_features=acted, conflictive_sets=int(res.get("conflictive_sets", 0)),
+               resolution_rounds=int(res["rounds"]) - det, start_round=int(c0.get("round", 0)),
                stage=res)
     rec.update(_delta(c0, network.counters()))
     return [rec]

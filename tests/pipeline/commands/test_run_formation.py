@@ -44,8 +44,9 @@ def test_resolution_quality_recounts_from_links_csv(small_run):
     _, report, rows = small_run
     q = report["resolution_quality"]
     assert report["resolution"]["method"] == "evidence"
-    assert list(q) == ["paper", "evidence", "sync", "drop_conflictive_sets", "keep_first_per_image",
-                       "quality_merge", "spectral_sync", "clear", "oracle"]
+    assert list(q) == ["paper", "evidence", "sync", "paper-labels", "drop_conflictive_sets",
+                       "keep_first_per_image", "quality_merge", "spectral_sync", "clear", "oracle"]
+    assert q["paper-labels"] == q["paper"]  # the same cuts (rules.py, cuts_as)
     # the run's own method: what its consistency stage cut, read back from links.csv
     cut = [r for r in rows if r["reason"] == "resolution"]
     assert q["evidence"]["good_cut"] == sum(r["truth"] == "1" for r in cut)

@@ -1,0 +1,300 @@
+"""Detection by label flooding: the outcome of Sec. III with memory that follows the links.
+
+The detection of Aragüés et al. (Sec. III, eq. 5) makes every robot hold, for each of its
+features, the whole row ``X_i·(t)``: every feature of its association set (memory and
+messages in ``Σ |C|²``: a dense 101-frame input joins thousands of features into one set).
+What Alg. 1 reads from a detection is much less: for each own feature, whether it is
+*conflictive* (rules 8–9: its set holds two features of one camera), the set's *label* (its
+smallest global feature id) and the set's *root* (eq. 10: the robot with the most features
+in the set, ties to the lowest id), and for a feature found non-conflictive the name of its
+track (the same smallest id). This module computes exactly these by flooding, per feature,
+three values along the links, each combined by an order-insensitive, idempotent operation:
+
+``label``
+    the smallest global id heard of (``min``): starts at the feature's own id;
+``dup``
+    "some robot holds two features of this set" (``or``): a robot sets it on every own
+    feature of a group of its features that share a label (two features that share a label
+    are in one set: a label travels only along the set's links);
+``key``
+    the best root candidate heard of (``max``), ``count · (n + 1) + (n − robot)``: ``count``
+    the number of the robot's own features that share the feature's label.
+
+A robot re-derives its groups after every round (features with equal labels), merges their
+``dup`` and ``key`` and sends each changed feature's triple to the robots it is linked to.
+
+Why the outcome equals the rows of Sec. III (the phase ends when nothing is in flight)
+    Let ``C`` be a connected set of active features over alive links (the graph eq. 5 runs
+    on: both ends active, Sec. IV after Cor. 4.4). (i) *label*: the minimum of a set of ids
+    flooded over a connected graph: at the end every feature of ``C`` holds ``min C``, which
+    is the first column of its row of ``X`` (:func:`.detection.find_conflictive_sets`).
+    (ii) *dup*: a feature's ``dup`` is true only if two features of one robot shared a label,
+    hence a set, so it never lies; conversely when ``C`` holds two features of robot ``j``,
+    both end with label ``min C``, ``j`` sets ``dup`` on them, and the ``or`` reaches all of
+    ``C``: at the end ``dup`` is rule (8)/(9) exactly. (iii) *key*: a robot's count for any
+    label it ever held is at most its number of features in ``C`` (features sharing a label
+    are in ``C``), and at the end it counts exactly those; so the ``max`` over ``C`` is the
+    largest true count with the lowest robot id among its ties: eq. (10). Every feature of a
+    set ends with the same triple, so every robot names the set and its root alike.
+    A feature that never hears of a linked active feature is alone (its row would be itself):
+    it is not named as a track, as in :func:`.detection.find_conflictive_sets`.
+
+Bounds and cost
+    A value moves one link per round and changes only by improving, so the phase ends within
+    ``diam(C) + 1`` rounds after the start for every set (the rows of eq. 5 need ``d + 1``
+    too, Cor. 3.6). Memory per robot: its links and four numbers per own feature
+    (``O(L_i + m_i)``), never ``Σ |C|²``. Messages: one per linked neighbour and round in
+    which some feature linked to it changed; payload per changed feature ``feat`` (int32,
+    the sender's local id), ``label`` (id), ``dup`` (uint8), ``key`` (int64).
+
+The phases: :func:`.engines.paper_labels.run_paper_labels` (the simulator: every robot on
+its own inbox, phases ended when nothing is in flight) and :func:`run_paper_labels_locally` (a robot in its own
+process, phases ended by the termination wave of :mod:`.termination`) alternate this
+detection with Alg. 1 (:mod:`.resolution`) until a detection finds no conflictive feature
+(Prop. 4.5) — the rule ``paper-labels`` of :mod:`.rules`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.consistency.detection import reset_detection
+from pipeline.consistency.robot import Robot
+from pipeline.transport import Message
+
+__all__ = ["LabelState", "start_labels", "labels_step", "finish_labels",
+           "run_paper_labels_locally", "KIND"]
+
+KIND = "labels"
+
+
+@dataclass
+class LabelState:
+    """A robot's flooded values, one entry per own feature (only active ones are used)."""
+
+    label: np.ndarray  # (m,) int64 — smallest global id heard of
+    dup: np.ndarray  # (m,) bool — a robot holds two features of the set
+    key: np.ndarray  # (m,) int64 — best root candidate heard of
+    heard: np.ndarray  # (m,) bool — a linked active feature was heard of
+    changed: np.ndarray  # (m,) bool — to send in the next message
+
+    def nbytes(self) -> int:
+        return sum(int(a.nbytes) for a in (self.label, self.dup, self.key, self.heard,
+                                           self.changed))
+
+
+def _id_dtype(robot: Robot):
+    return np.int32 if robot.m_total < 2**31 else np.int64
+
+
+def _own_key(robot: Robot, count: np.ndarray) -> np.ndarray:
+    n = int(robot.n)
+    return count.astype(np.int64) * (n + 1) + (n - int(robot.id))
+
+
+def _regroup(robot: Robot) -> None:
+    """Merge ``dup`` and ``key`` over each group of own active features with one label."""
+    st: LabelState = robot.labels
+    rows = np.flatnonzero(robot.active)
+    if rows.size == 0:
+        return
+    groups, inv, count = np.unique(st.label[rows], return_inverse=True, return_counts=True)
+    dup = np.zeros(groups.size, dtype=bool)
+    np.logical_or.at(dup, inv, st.dup[rows])
+    dup |= count >= 2
+    key = _own_key(robot, count)
+    np.maximum.at(key, inv, st.key[rows])
+    new_dup, new_key = dup[inv], key[inv]
+    st.changed[rows] |= (new_dup != st.dup[rows]) | (new_key != st.key[rows])
+    st.dup[rows] = new_dup
+    st.key[rows] = new_key
+    st.heard[rows] |= count[inv] >= 2
+
+
+def _send_changed(robot: Robot, send) -> None:
+    """The changed features' triples to every robot they are linked to (alive links)."""
+    st: LabelState = robot.labels
+    sel = robot.link_alive & robot.active[robot.link_r] & st.changed[robot.link_r]
+    st.changed[:] = False
+    idx = np.flatnonzero(sel)
+    if idx.size == 0:
+        return
+    nbr = robot.link_nbr[idx]
+    order = np.argsort(nbr, kind="stable")
+    idx, nbr = idx[order], nbr[order]
+    idt = _id_dtype(robot)
+    for part in np.split(idx, np.flatnonzero(np.diff(nbr)) + 1):
+        r = np.unique(robot.link_r[part])
+        send(int(robot.link_nbr[part[0]]), KIND,
+             {"feat": r.astype(np.int32), "label": st.label[r].astype(idt),
+              "dup": st.dup[r].astype(np.uint8), "key": st.key[r].astype(np.int64)})
+
+
+def start_labels(robot: Robot, iteration: int, send) -> None:
+    """Round 0: the active features (as the rows of Sec. III choose them, Sec. IV after
+    Cor. 4.4) start with their own id, count one, and send it along their alive links."""
+    reset_detection(robot, iteration)
+    m = robot.m
+    robot.labels = LabelState(label=robot.gid0 + np.arange(m, dtype=np.int64),
+                              dup=np.zeros(m, dtype=bool),
+                              key=_own_key(robot, np.ones(m, dtype=np.int64)),
+                              heard=np.zeros(m, dtype=bool), changed=robot.active.copy())
+    robot.stopped = not robot.active.any()
+    _send_changed(robot, send)
+    _measure(robot)
+
+
+def labels_step(robot: Robot, inbox: list[Message], send, round_: int = 0) -> None:
+    """One round: fold in the neighbours' triples (``min``, ``or``, ``max`` over each alive
+    link between two active features), regroup, send what changed."""
+    st: LabelState = robot.labels
+    sel = robot.link_alive & robot.active[robot.link_r]
+    for msg in inbox:
+        if msg.kind != KIND:
+            continue
+        p = msg.payload
+        feat = np.asarray(p["feat"], dtype=np.int64)
+        mine = np.flatnonzero(sel & (robot.link_nbr == msg.src))
+        if mine.size == 0 or feat.size == 0:
+            continue
+        s = robot.link_s[mine]
+        pos = np.minimum(np.searchsorted(feat, s), feat.size - 1)
+        ok = feat[pos] == s
+        r, pos = robot.link_r[mine][ok], pos[ok]
+        if r.size == 0:
+            continue
+        lab = np.asarray(p["label"], dtype=np.int64)[pos]
+        dup = np.asarray(p["dup"], dtype=bool)[pos]
+        key = np.asarray(p["key"], dtype=np.int64)[pos]
+        old_l, old_d, old_k = st.label[r].copy(), st.dup[r].copy(), st.key[r].copy()
+        np.minimum.at(st.label, r, lab)
+        np.logical_or.at(st.dup, r, dup)
+        np.maximum.at(st.key, r, key)
+        st.heard[r] = True
+        st.changed[r] |= ((st.label[r] != old_l) | (st.dup[r] != old_d) | (st.key[r] != old_k))
+    _regroup(robot)
+    _send_changed(robot, send)
+    robot.t_stop = int(round_)
+    _measure(robot)
+
+
+def finish_labels(robot: Robot) -> None:
+    """The detection's outputs, as :func:`.detection.find_conflictive_sets` sets them."""
+    st: LabelState = robot.labels
+    n = int(robot.n)
+    conflictive = robot.active & st.dup
+    robot.conflictive = conflictive
+    label = np.full(robot.m, -1, dtype=np.int64)
+    label[conflictive] = st.label[conflictive]
+    robot.set_label = label
+    named = np.flatnonzero(robot.active & ~st.dup & st.heard)
+    robot.track_label[named] = st.label[named]
+    labs, first = np.unique(label[conflictive], return_index=True)
+    keys = st.key[np.flatnonzero(conflictive)[first]]
+    robot.root_of_set = dict(zip(labs.tolist(), (n - keys % (n + 1)).tolist(), strict=True))
+    robot.stopped = True
+
+
+def _measure(robot: Robot) -> None:
+    robot.peak_memory_bytes = max(robot.peak_memory_bytes,
+                                  robot.memory_bytes() + robot.labels.nbytes())
+
+
+def run_paper_labels_locally(robot: Robot, transport, protocol, n_robots: int | None = None):
+    """The ``paper-labels`` rule for one robot in its own process: each detection is one
+    flooding phase over the reliable channel of :mod:`.reliable` (acknowledged messages, so
+    *done* = everything acknowledged, and all robots done means nothing in flight: the
+    simulator's phase end), its outcome bit ``CONFLICT`` (some own feature flagged ``dup``:
+    the flag only turns true, and only on a conflictive set) OR-flooded by the termination
+    wave so every robot takes the same branch; then Alg. 1 by the ``paper`` rule's
+    robot-alone functions. A lost neighbour (``LOST``) repeats the detection, as in
+    :func:`.termination.run_consistency_locally`. Returns a :class:`~.wave.RobotRun`."""
+    from pipeline.consistency.channel import Channel
+    from pipeline.consistency.reliable import (
+        ReliableState,
+        cut_lost,
+        resolution_done,
+        resolution_round,
+        start_resolution_reliable,
+    )
+    from pipeline.consistency.resolution import finish_resolution
+    from pipeline.consistency.wave import (
+        CONFLICT,
+        LOST,
+        RobotRun,
+        TerminationWave,
+        run_wave_phase,
+    )
+
+    n = int(n_robots or robot.n)
+    st = ReliableState(Channel(transport, protocol))
+    chan = st.chan
+    wave = TerminationWave(n)
+    cap = (robot.m_total + n + 4) * (protocol.loss_timeout + 4) * 4
+    log = RobotRun()
+    t_start = time.perf_counter()
+
+    def flood_phase(iteration: int) -> int:
+        now = transport.round
+        nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist())
+        start_labels(robot, iteration, lambda dst, kind, p: chan.send(dst, kind, p, now))
+        chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+        st.lost_in_phase = False
+
+        def round_(inbox, now, t):
+            msgs = chan.receive(inbox, now)
+            lost = chan.check_lost(now, nbrs - chan.lost)
+            if lost:
+                cut_lost(robot, st, lost, now)
+            labels_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), t)
+            chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+
+        def bits():
+            return (CONFLICT if (robot.active & robot.labels.dup).any() else 0) | \
+                   (LOST if st.lost_in_phase else 0)
+
+        begin = transport.round
+        t, out = run_wave_phase(transport, wave, round_, chan.idle, bits, cap, "detection",
+                                robot.id, lambda: robot.peak_memory_bytes)
+        finish_labels(robot)
+        log.detection_rounds += t
+        log.phases.append(dict(phase="detection", iteration=iteration, start_round=begin,
+                               rounds=t, conflictive_features=int(robot.conflictive.sum()),
+                               conflict_somewhere=bool(out & CONFLICT),
+                               lost_somewhere=bool(out & LOST)))
+        return out
+
+    iteration = 0
+    max_iterations = robot.m_total // 4 + 2 + n * n
+    while True:
+        iteration += 1
+        if iteration > max_iterations:
+            raise RuntimeError(f"robot {robot.id}: conflicts remain after {max_iterations} "
+                               "iterations (Prop. 4.5 bound)")
+        bits = flood_phase(iteration)
+        if bits & LOST:
+            log.repeated_detections += 1
+            continue
+        if not bits & CONFLICT:
+            break
+        log.iterations += 1
+        begin = transport.round
+        roots = start_resolution_reliable(robot, st, transport.round)
+        t, out = run_wave_phase(
+            transport, wave, lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
+            lambda: resolution_done(robot, st, bool(wave.bits & LOST)),
+            lambda: LOST if st.lost_in_phase else 0, cap, "resolution", robot.id,
+            lambda: robot.peak_memory_bytes)
+        finish_resolution(robot)
+        log.resolution_rounds += t
+        log.phases.append(dict(phase="resolution", iteration=iteration, start_round=begin,
+                               rounds=t, roots=int(roots), lost_somewhere=bool(out & LOST)))
+    log.seconds = time.perf_counter() - t_start
+    log.retransmissions = chan.retransmissions
+    log.acks = chan.acks_sent
+    log.heartbeats = chan.heartbeats_sent
+    log.lost_neighbours = sorted(int(k) for k in st.lost_neighbours)
+    return log
