@@ -33,12 +33,21 @@ Cases
       peak RSS in ``resolve_wall_s``, ``resolve_peak_rss_mb``), the rules and the cheap
       baselines (``--team-methods`` adds ``spectral_sync`` or ``clear``: minutes from a few hundred
       cameras on, their sparse eigenproblems converge slowly on a ring).
+    * Graffiti (``--graffiti DIR``, default ``../shared/data/graffiti``; ``''`` skips it) on
+      the same graphs, matched as ``run-images`` matches it at its defaults, truth from the
+      data set's homographies at 2 px; the oracle too.
+    * Rendered formations (``--formations abcd``, ``--formation-seeds 5 6 7 8 9``: seeds the
+      rules were not developed on), each on its own comm graph, matched as ``run-formation``
+      matches it (SIFT, 640x480), truth at 2 px; the oracle too.
+
+Where each link is known good or spurious (every case but none), ``good_cut`` and
+``spurious_cut`` count what each method cut.
 
 Prints one table per case and saves ``runs/bench-multiway/results.json``.
 
 Usage: ``.venv/bin/python bench/multiway.py [--data DIR] [--frames 20 101] [--graphs ...]
 [--inputs descriptors defaults] [--methods ...] [--team 300 3000] [--quick]``
-(``--quick``: 20 frames, complete graph, descriptors only, team of 100).
+(``--quick``: 20 frames, complete graph, descriptors only, formation a seed 5, team of 100).
 """
 
 from __future__ import annotations
@@ -81,6 +90,10 @@ class Case:
     def __init__(self, m, edges, links, *, truth_id=None, true_pairs=None, link_good=None,
                  evidence=None):
         self.m, self.edges, self.links = m, edges, links
+        if link_good is None and truth_id is not None:
+            off = np.concatenate([[0], np.cumsum(m)])
+            link_good = truth_id[off[links.cam_i] + links.feat_i] == \
+                truth_id[off[links.cam_j] + links.feat_j]
         self.truth_id, self.true_pairs, self.link_good = truth_id, true_pairs, link_good
         self.evidence = evidence or {}
 
