@@ -84,7 +84,8 @@ def child(engine: str, flood: str, case: str, data: Path) -> dict:
     import resource
 
     from pipeline.consistency.engines.driver import build_robots
-    from pipeline.consistency.sync import equip_sync, run_sync
+    from pipeline.consistency.engines.sync_batched import run_sync
+    from pipeline.consistency.sync import equip_sync
     from pipeline.transport.simulated import Network
 
     if case.startswith("hotel:"):

@@ -48,15 +48,15 @@ Bounds and cost
     the sender's local id), ``label`` (id), ``dup`` (uint8), ``key`` (int64).
 
 The phases: :func:`.engines.paper_labels.run_paper_labels` (the simulator: every robot on
-its own inbox, phases ended when nothing is in flight) and :func:`run_paper_labels_locally` (a robot in its own
-process, phases ended by the termination wave of :mod:`.termination`) alternate this
-detection with Alg. 1 (:mod:`.resolution`) until a detection finds no conflictive feature
-(Prop. 4.5) — the rule ``paper-labels`` of :mod:`.rules`.
+its own inbox, phases ended when nothing is in flight) and
+:func:`.alone.run_paper_labels_locally` (a robot in its own process over the reliable
+channel, phases ended by the termination wave, with the closing round of the paper rule)
+alternate this detection with Alg. 1 (:mod:`.resolution`) until a detection finds no
+conflictive feature (Prop. 4.5) — the rule ``paper-labels`` of :mod:`.rules`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,7 +66,7 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
 __all__ = ["LabelState", "start_labels", "labels_step", "finish_labels",
-           "run_paper_labels_locally", "KIND"]
+           "start_labels_reliable", "labels_round", "labels_done", "KIND"]
 
 KIND = "labels"
 
@@ -203,98 +203,36 @@ def _measure(robot: Robot) -> None:
                                   robot.memory_bytes() + robot.labels.nbytes())
 
 
-def run_paper_labels_locally(robot: Robot, transport, protocol, n_robots: int | None = None):
-    """The ``paper-labels`` rule for one robot in its own process: each detection is one
-    flooding phase over the reliable channel of :mod:`.reliable` (acknowledged messages, so
-    *done* = everything acknowledged, and all robots done means nothing in flight: the
-    simulator's phase end), its outcome bit ``CONFLICT`` (some own feature flagged ``dup``:
-    the flag only turns true, and only on a conflictive set) OR-flooded by the termination
-    wave so every robot takes the same branch; then Alg. 1 by the ``paper`` rule's
-    robot-alone functions. A lost neighbour (``LOST``) repeats the detection, as in
-    :func:`.termination.run_consistency_locally`. Returns a :class:`~.wave.RobotRun`."""
-    from pipeline.consistency.channel import Channel
-    from pipeline.consistency.reliable import (
-        ReliableState,
-        cut_lost,
-        resolution_done,
-        resolution_round,
-        start_resolution_reliable,
-    )
-    from pipeline.consistency.resolution import finish_resolution
-    from pipeline.consistency.wave import (
-        CONFLICT,
-        LOST,
-        RobotRun,
-        TerminationWave,
-        run_wave_phase,
-    )
+# ------------------------------------------------------------------------------------------
+# over the reliable channel (a robot alone: pipeline.consistency.termination)
 
-    n = int(n_robots or robot.n)
-    st = ReliableState(Channel(transport, protocol))
-    chan = st.chan
-    wave = TerminationWave(n)
-    cap = (robot.m_total + n + 4) * (protocol.loss_timeout + 4) * 4
-    log = RobotRun()
-    t_start = time.perf_counter()
+def start_labels_reliable(robot: Robot, st, iteration: int, now: int) -> None:
+    """Round 0 of the flooding with its messages sent reliably (``st`` a
+    :class:`~.reliable.ReliableState`); every linked neighbour is waited on (heartbeats)."""
+    st.lost_in_phase = False
+    st.all_nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist()) - st.chan.lost
+    start_labels(robot, iteration, lambda dst, kind, p: st.chan.send(dst, kind, p, now))
+    finish_labels(robot)
+    st.chan.flush(now, heartbeat_to=sorted(st.all_nbrs))
 
-    def flood_phase(iteration: int) -> int:
-        now = transport.round
-        nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist())
-        start_labels(robot, iteration, lambda dst, kind, p: chan.send(dst, kind, p, now))
-        chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
-        st.lost_in_phase = False
 
-        def round_(inbox, now, t):
-            msgs = chan.receive(inbox, now)
-            lost = chan.check_lost(now, nbrs - chan.lost)
-            if lost:
-                cut_lost(robot, st, lost, now)
-            labels_step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), t)
-            chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+def labels_round(robot: Robot, st, inbox: list[Message], now: int, phase_round: int) -> None:
+    """One network round: the channel's messages folded in (:func:`labels_step`), a silent
+    neighbour cut (``robot-lost``), the outcome so far published on the robot (its flags only
+    turn true, so the termination wave's ``CONFLICT`` bit may read it every round)."""
+    from pipeline.consistency.reliable import cut_lost
 
-        def bits():
-            return (CONFLICT if (robot.active & robot.labels.dup).any() else 0) | \
-                   (LOST if st.lost_in_phase else 0)
+    msgs = st.chan.receive(inbox, now)
+    lost = st.chan.check_lost(now, st.all_nbrs)
+    if lost:
+        cut_lost(robot, st, lost, phase_round)
+        st.all_nbrs -= set(lost)
+    labels_step(robot, msgs, lambda dst, kind, p: st.chan.send(dst, kind, p, now), phase_round)
+    finish_labels(robot)
+    st.chan.flush(now, heartbeat_to=sorted(st.all_nbrs))
 
-        begin = transport.round
-        t, out = run_wave_phase(transport, wave, round_, chan.idle, bits, cap, "detection",
-                                robot.id, lambda: robot.peak_memory_bytes)
-        finish_labels(robot)
-        log.detection_rounds += t
-        log.phases.append(dict(phase="detection", iteration=iteration, start_round=begin,
-                               rounds=t, conflictive_features=int(robot.conflictive.sum()),
-                               conflict_somewhere=bool(out & CONFLICT),
-                               lost_somewhere=bool(out & LOST)))
-        return out
 
-    iteration = 0
-    max_iterations = robot.m_total // 4 + 2 + n * n
-    while True:
-        iteration += 1
-        if iteration > max_iterations:
-            raise RuntimeError(f"robot {robot.id}: conflicts remain after {max_iterations} "
-                               "iterations (Prop. 4.5 bound)")
-        bits = flood_phase(iteration)
-        if bits & LOST:
-            log.repeated_detections += 1
-            continue
-        if not bits & CONFLICT:
-            break
-        log.iterations += 1
-        begin = transport.round
-        roots = start_resolution_reliable(robot, st, transport.round)
-        t, out = run_wave_phase(
-            transport, wave, lambda inbox, now, t: resolution_round(robot, st, inbox, now, t),
-            lambda: resolution_done(robot, st, bool(wave.bits & LOST)),
-            lambda: LOST if st.lost_in_phase else 0, cap, "resolution", robot.id,
-            lambda: robot.peak_memory_bytes)
-        finish_resolution(robot)
-        log.resolution_rounds += t
-        log.phases.append(dict(phase="resolution", iteration=iteration, start_round=begin,
-                               rounds=t, roots=int(roots), lost_somewhere=bool(out & LOST)))
-    log.seconds = time.perf_counter() - t_start
-    log.retransmissions = chan.retransmissions
-    log.acks = chan.acks_sent
-    log.heartbeats = chan.heartbeats_sent
-    log.lost_neighbours = sorted(int(k) for k in st.lost_neighbours)
-    return log
+def labels_done(robot: Robot, st) -> bool:
+    """Everything this robot sent is acknowledged: when every robot is so, nothing is in
+    flight and no value can change again (the phase end of the simulator)."""
+    return st.chan.idle()

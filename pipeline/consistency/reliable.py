@@ -179,6 +179,82 @@ class ReliableState:
         return held + self.chan.memory_bytes()
 
 
+class AlonePhases:
+    """A robot alone running a rule's flooding phases over the reliable channel, each ended by
+    the termination wave (:mod:`.wave`): what the rules without the paper's detection loop
+    (:mod:`.sync_alone`, :mod:`.labels`) share.
+
+    A phase: round 0 ``start(robot, send)``; then, per network round, the messages the channel
+    delivers go to ``step(robot, msgs, send, now, t)`` (``t`` the phase round), a neighbour
+    silent past the loss timeout is cut (``robot-lost``, :func:`cut_lost`), and the wave ends
+    the phase when every robot is *done* (everything it sent acknowledged: nothing in flight)
+    with the OR of every robot's ``bits()``. ``cap``: rounds after which a phase that did not
+    end raises ``RuntimeError`` (a bug, never a correct run): ``(m + n + 4)`` rounds of loss
+    timeout plus four, four times over.
+
+    Attributes: ``n``, ``st`` (:class:`ReliableState`), ``chan``, ``wave``, ``cap``, ``log``
+    (:class:`~.wave.RobotRun`).
+    """
+
+    def __init__(self, robot: Robot, transport, protocol, n_robots: int | None = None):
+        import time
+
+        from pipeline.consistency.wave import RobotRun, TerminationWave
+
+        self.robot, self.transport = robot, transport
+        self.n = int(n_robots or robot.n)
+        self.st = ReliableState(Channel(transport, protocol))
+        self.chan = self.st.chan
+        self.wave = TerminationWave(self.n)
+        self.cap = (robot.m_total + self.n + 4) * (protocol.loss_timeout + 4) * 4
+        self.log = RobotRun()
+        self._t0 = time.perf_counter()
+
+    def phase(self, name: str, start, step, bits, memory=None) -> tuple[int, int, int]:
+        """Run one phase; returns ``(rounds, OR of the bits over the team, start round)``.
+        ``memory()``: bytes to count in the robot's peak after each round (optional)."""
+        from pipeline.consistency.wave import run_wave_phase
+
+        robot, chan, st, transport = self.robot, self.chan, self.st, self.transport
+        now = transport.round
+        nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist())
+        start(robot, lambda dst, kind, p: chan.send(dst, kind, p, now))
+        chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+        st.lost_in_phase = False
+        begin = transport.round
+
+        def round_(inbox, now, t):
+            msgs = chan.receive(inbox, now)
+            lost = chan.check_lost(now, nbrs - chan.lost)
+            if lost:
+                cut_lost(robot, st, lost, now)
+            step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), now, t)
+            chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
+            if memory is not None:
+                robot.peak_memory_bytes = max(robot.peak_memory_bytes, memory())
+
+        t, out = run_wave_phase(transport, self.wave, round_, chan.idle, bits, self.cap, name,
+                                robot.id, lambda: robot.peak_memory_bytes)
+        return t, out, begin
+
+    def close(self):
+        """The run log with its time and the channel's counts; returns it."""
+        return close_log(self.log, self.st, self._t0)
+
+
+def close_log(log, st: ReliableState, t0: float):
+    """Fill a robot's run log at its end: seconds since ``t0`` (``time.perf_counter``), the
+    channel's retransmissions, acknowledgements and heartbeats, the neighbours it lost."""
+    import time
+
+    log.seconds = time.perf_counter() - t0
+    log.retransmissions = st.chan.retransmissions
+    log.acks = st.chan.acks_sent
+    log.heartbeats = st.chan.heartbeats_sent
+    log.lost_neighbours = sorted(int(k) for k in st.lost_neighbours)
+    return log
+
+
 # ------------------------------------------------------------------------------------------
 # helpers on the robot
 

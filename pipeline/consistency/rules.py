@@ -269,7 +269,7 @@ register(ResolutionRule(
     summary="by the multi-way matching",
     cases={6: "sync"},
     detection=False,
-    stage="pipeline.consistency.sync:run_sync",
+    stage="pipeline.consistency.engines.sync_batched:run_sync",
     stage_batched="pipeline.consistency.engines.sync_batched:run_sync_batched",
     alone="pipeline.consistency.sync_alone:run_sync_locally",
     equip="pipeline.consistency.sync:equip_robot",
@@ -286,7 +286,7 @@ register(ResolutionRule(
     cases={},
     detection=False,
     stage="pipeline.consistency.engines.paper_labels:run_paper_labels",
-    alone="pipeline.consistency.labels:run_paper_labels_locally",
+    alone="pipeline.consistency.alone:run_paper_labels_locally",
     cuts_as="paper"))
 for _module in filter(None, (m.strip() for m in os.environ.get(PLUGINS_ENV, "").split(","))):
     importlib.import_module(_module)

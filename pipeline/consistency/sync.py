@@ -91,7 +91,7 @@ Bounds and cost
     only grows (camera sets are dropped at phase A's start only), so its peak is at the
     end of a phase B (or of the support round).
 
-Drivers: :func:`run_sync` steps the robots one by one (the reference, and the code a robot
+Drivers: :func:`.engines.sync_batched.run_sync` steps the robots one by one (the reference, and the code a robot
 runs alone); :func:`.sync_batched.run_sync_batched` evaluates the same rounds for all robots
 at once in the simulator, with the same per-robot state, rounds, messages, bytes and memory.
 
@@ -118,11 +118,11 @@ import numpy as np
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
-from pipeline.transport import Message, Transport
+from pipeline.transport import Message
 
 __all__ = ["SyncState", "equip_sync", "equip_robot", "start_support", "support_step", "start_exchange",
            "exchange_step", "start_merge", "merge_step", "finish_sync", "has_best",
-           "run_sync", "id_dtype", "CASE_SYNC", "SUPPORT", "BEST", "MERGE",
+           "id_dtype", "CASE_SYNC", "SUPPORT", "BEST", "MERGE",
            "RELABEL", "EXCHANGE", "FLOODS"]
 
 Send = Callable[[int, str, dict], None]
@@ -643,52 +643,3 @@ def finish_sync(robot: Robot, round_: int) -> None:
 
 
 # --------------------------------------------------------------------------- simulator driver
-
-
-def _phase(robots: list[Robot], network: Transport, start, step, on_round, t0: int,
-           cap: int) -> int:
-    """One phase on every robot until nothing is in flight; returns the rounds taken."""
-    sends = [lambda dst, kind, p, i=rb.id: network.send(i, dst, kind, p) for rb in robots]
-    for rb in robots:
-        start(rb, sends[rb.id])
-    t = 0
-    while network.pending:
-        network.end_round()
-        t += 1
-        if on_round is not None:
-            on_round(t0 + t)
-        receivers = network.receivers() if hasattr(network, "receivers") else range(len(robots))
-        for i in receivers:
-            step(robots[i], network.inbox(i), sends[i], t0 + t)
-        if t > cap:
-            raise RuntimeError(f"sync phase did not end within {cap} rounds")
-    return t
-
-
-def run_sync(robots: list[Robot], network: Transport, on_round=None) -> dict:
-    """The ``sync`` rule on every robot (each equipped by :func:`equip_sync`): support round,
-    Borůvka rounds until no eligible link is left, then each robot cuts its side.
-
-    The driver only plays the clock and the phase barrier (nothing in flight) and reads one
-    bit per robot (:func:`has_best`), as the termination wave of a robot alone would.
-
-    Returns ``rounds``, ``boruvka_rounds`` and ``support_rounds``.
-    """
-    n = len(robots)
-    cap = 2 * n + 4
-    t = _phase(robots, network, start_support, support_step, on_round, 0, cap)
-    support_rounds = t
-    boruvka = 0
-    m_total = robots[0].m_total if robots else 0
-    while True:
-        t += _phase(robots, network, start_exchange, exchange_step, on_round, t, cap)
-        if not any(has_best(rb) for rb in robots):
-            break
-        boruvka += 1
-        if boruvka > m_total:
-            raise RuntimeError(f"sync did not end within {m_total} Borůvka rounds")
-        t += _phase(robots, network, start_merge, merge_step, on_round, t, cap)
-    for rb in robots:
-        rb.sync.rounds = boruvka
-        finish_sync(rb, t)
-    return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)

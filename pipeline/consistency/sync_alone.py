@@ -24,12 +24,7 @@ restarts at most once per lost robot, so at most ``n`` restarts.
 
 from __future__ import annotations
 
-import time
-
-import numpy as np
-
-from pipeline.consistency.channel import Channel
-from pipeline.consistency.reliable import ReliableState, cut_lost
+from pipeline.consistency.reliable import AlonePhases
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.sync import (
     equip_sync,
@@ -42,7 +37,7 @@ from pipeline.consistency.sync import (
     start_support,
     support_step,
 )
-from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun
 
 __all__ = ["run_sync_locally"]
 
@@ -66,40 +61,16 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
     does not end within a cap derived from ``n``, ``m`` and the timeout raises
     ``RuntimeError`` naming the robot and the phase (a bug, never a correct run).
     """
-    n = int(n_robots or robot.n)
-    st = ReliableState(Channel(transport, protocol))
-    chan = st.chan
-    wave = TerminationWave(n)
-    cap = (robot.m_total + n + 4) * (protocol.loss_timeout + 4) * 4
-    log = RobotRun()
-    t_start = time.perf_counter()
+    run = AlonePhases(robot, transport, protocol, n_robots)
+    st, log, n = run.st, run.log, run.n
     weight = robot.sync.weight.copy()
 
     def run_phase(name: str, start, step) -> int:
-        now = transport.round
-        nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist())
-        start(robot, lambda dst, kind, p: chan.send(dst, kind, p, now))
-        chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
-        st.lost_in_phase = False
-        begin = transport.round
-
-        def round_(inbox, now, t):
-            msgs = chan.receive(inbox, now)
-            lost = chan.check_lost(now, nbrs - chan.lost)
-            if lost:
-                cut_lost(robot, st, lost, now)
-            step(robot, msgs, lambda dst, kind, p: chan.send(dst, kind, p, now), now)
-            chan.flush(now, heartbeat_to=sorted(nbrs - chan.lost))
-            robot.peak_memory_bytes = max(robot.peak_memory_bytes,
-                                          robot.fixed_bytes() + robot.sync.nbytes()
-                                          + chan.memory_bytes())
-
-        def bits():
-            return (CONFLICT if name == "sync-exchange" and has_best(robot) else 0) | \
-                   (LOST if st.lost_in_phase else 0)
-
-        t, out = run_wave_phase(transport, wave, round_, chan.idle, bits, cap, name, robot.id,
-                                lambda: robot.peak_memory_bytes)
+        t, out, begin = run.phase(
+            name, start, lambda rb, msgs, send, now, t: step(rb, msgs, send, now),
+            lambda: (CONFLICT if name == "sync-exchange" and has_best(robot) else 0)
+            | (LOST if st.lost_in_phase else 0),
+            memory=lambda: robot.fixed_bytes() + robot.sync.nbytes() + run.chan.memory_bytes())
         log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
         log.resolution_rounds += t
         return out
@@ -127,5 +98,4 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
     finish_sync(robot, transport.round)
     log.iterations = boruvka
     log.repeated_detections = restarts
-    log.seconds = time.perf_counter() - t_start
-    return log
+    return run.close()

@@ -52,40 +52,22 @@ Local termination rule (the termination wave)
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from pipeline.consistency.channel import Channel
+from pipeline.consistency.alone import run_loop_locally
 from pipeline.consistency.protocols import ProtocolOptions
-from pipeline.consistency.reliable import (
-    ReliableState,
-    closing_round,
-    detection_done,
-    detection_round,
-    start_closing,
-    start_detection_reliable,
-)
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
+from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave
 
-__all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "CONFLICT", "LOST"]
-
-def _own_bits(robot: Robot, st: ReliableState) -> int:
-    return (CONFLICT if robot.conflictive.any() else 0) | (LOST if st.lost_in_phase else 0)
-
-
-def _run_phase(robot: Robot, st: ReliableState, transport, wave: TerminationWave, step, done,
-               max_rounds: int, phase: str) -> tuple[int, int]:
-    """Rounds of one phase until the wave ends it; returns (rounds, OR of the bits)."""
-    return run_wave_phase(transport, wave, step, done, lambda: _own_bits(robot, st), max_rounds,
-                          phase, robot.id, lambda: robot.peak_memory_bytes)
+__all__ = ["TerminationWave", "RobotRun", "run_consistency_locally", "robot_link_log",
+           "CONFLICT", "LOST"]
 
 
 def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
                             n_robots: int | None = None,
-                            resolution: str = DEFAULT_RESOLUTION) -> RobotRun:
+                            resolution: str = DEFAULT_RESOLUTION,
+                            detection: str = "rows") -> RobotRun:
     """Detection and resolution until conflict-free, ended by the local rule (module docstring).
 
     Parameters
@@ -100,85 +82,23 @@ def run_consistency_locally(robot: Robot, transport, protocol: ProtocolOptions |
         channel; ``evidence``, the flood-and-solve rule of :mod:`.evidence` (the robot must
         hold its evidence, :func:`.evidence.equip`), whose one pass leaves the sets it solved
         conflict-free for the next detection, as in the simulator.
+    detection : str
+        ``rows``: the paper's detection (Sec. III, eq. 5) in lockstep; ``labels``: the
+        label flooding of :mod:`.labels` (the same outcome, memory that follows the links),
+        ended by the wave like every other phase.
 
     Returns
     -------
     RobotRun
     """
-    protocol = protocol or ProtocolOptions(reliable=True)
     rule = get_rule(resolution)
     if not rule.detection:
         # a rule that is the whole stage (no detection) ends its own phases by the same wave
-        return rule.hook("alone")(robot, transport, protocol, n_robots)
-    rule_start, rule_step, rule_done, rule_finish = (
-        rule.hook(h) for h in ("start", "step", "done", "finish"))
-    n = int(n_robots or robot.n)
-    # the reliable protocol's own state, exactly as the simulator's ReliableProtocol holds it
-    st = ReliableState(Channel(transport, protocol))
-    chan = st.chan
-    wave = TerminationWave(n)
-    m_total = robot.m_total
-    # generous caps, as in the simulator's driver: they only turn a bug into an error
-    det_cap = (m_total + n + 4) * (protocol.loss_timeout + 4) * 4 + n
-    res_cap = (n + 2) * (protocol.loss_timeout + 4) * 4 + m_total + n
-    max_iterations = m_total // 4 + 2 + n * n
-    log = RobotRun()
-    t_start = time.perf_counter()
-    iteration = 0
-    while True:
-        iteration += 1
-        if iteration > max_iterations:
-            raise RuntimeError(f"robot {robot.id}: conflicts remain after {max_iterations} "
-                               "iterations (Prop. 4.5 bound)")
-        start = transport.round
-        start_detection_reliable(robot, st, iteration, transport.round)
-        rounds, bits = _run_phase(
-            robot, st, transport, wave,
-            lambda inbox, now, t: detection_round(robot, st, inbox, now, t),
-            lambda: detection_done(robot, st), det_cap, "detection")
-        log.detection_rounds += rounds
-        log.phases.append(dict(phase="detection", iteration=iteration, start_round=start,
-                               rounds=rounds, t_stop=int(robot.t_stop),
-                               conflictive_features=int(robot.conflictive.sum()),
-                               conflict_somewhere=bool(bits & CONFLICT),
-                               lost_somewhere=bool(bits & LOST)))
-        if bits & LOST:
-            log.repeated_detections += 1
-            continue
-        if not bits & CONFLICT:
-            # every linked neighbour confirms it is alive (reliable.py, "Closing round")
-            start = transport.round
-            start_closing(robot, st, transport.round)
-            rounds, bits = _run_phase(
-                robot, st, transport, wave,
-                lambda inbox, now, t: closing_round(robot, st, inbox, now, t),
-                chan.idle, res_cap, "closing")
-            log.closing_rounds += rounds
-            log.phases.append(dict(phase="closing", iteration=iteration, start_round=start,
-                                   rounds=rounds, lost_somewhere=bool(bits & LOST)))
-            if bits & LOST:
-                log.repeated_detections += 1
-                continue
-            break
-        log.iterations += 1
-        start = transport.round
-        roots = rule_start(robot, st, transport.round)
-        rounds, bits = _run_phase(
-            robot, st, transport, wave,
-            lambda inbox, now, t: rule_step(robot, st, inbox, now, t),
-            lambda: rule_done(robot, st, bool(wave.bits & LOST)), res_cap, "resolution")
-        # what the next detection examines again (Alg. 1: the unassigned conflictive
-        # features, Sec. IV after Cor. 4.4; the evidence rule: its sets, now conflict-free)
-        rule_finish(robot)
-        log.resolution_rounds += rounds
-        log.phases.append(dict(phase="resolution", iteration=iteration, start_round=start,
-                               rounds=rounds, roots=int(roots), lost_somewhere=bool(bits & LOST)))
-    log.seconds = time.perf_counter() - t_start
-    log.retransmissions = chan.retransmissions
-    log.acks = chan.acks_sent
-    log.heartbeats = chan.heartbeats_sent
-    log.lost_neighbours = sorted(int(k) for k in st.lost_neighbours)
-    return log
+        return rule.hook("alone")(robot, transport, protocol or ProtocolOptions(reliable=True),
+                                  n_robots)
+    return run_loop_locally(robot, transport, protocol, n_robots,
+                            tuple(rule.hook(h) for h in ("start", "step", "done", "finish")),
+                            detection)
 
 
 def robot_link_log(robot: Robot) -> dict:

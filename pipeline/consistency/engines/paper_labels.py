@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.engines.phases import run_resolution_phase
+from pipeline.consistency.engines.phases import run_quiet_phase, run_resolution_phase
 from pipeline.consistency.labels import finish_labels, labels_step, start_labels
 from pipeline.consistency.protocols import PaperProtocol
 from pipeline.consistency.robot import Robot
@@ -24,20 +24,11 @@ def run_labels(robots: list[Robot], network: Transport, iteration: int, on_round
     nothing is in flight; returns what :func:`.engines.phases.run_phase` returns for a
     detection."""
     start_round = int(network.round)
-    sends = [lambda dst, kind, p, i=rb.id: network.send(i, dst, kind, p) for rb in robots]
-    for rb in robots:
-        start_labels(rb, iteration, sends[rb.id])
     cap = int(sum(rb.m for rb in robots)) + 2
-    t = 0
-    while network.pending:
-        network.end_round()
-        t += 1
-        if on_round is not None:
-            on_round(t0 + t)
-        for i in network.receivers():
-            labels_step(robots[i], network.inbox(i), sends[i], t)
-        if t > cap:
-            raise RuntimeError(f"label flooding did not end within {cap} rounds")
+    # the robots count the phase's own rounds (t_stop); the progress report, the stage's
+    tell = None if on_round is None else (lambda t: on_round(t0 + t))
+    t = run_quiet_phase(robots, network, lambda rb, send: start_labels(rb, iteration, send),
+                        labels_step, tell, 0, cap, "label flooding")
     for rb in robots:
         finish_labels(rb)
     return dict(rounds=t, start_round=start_round, lost=False,

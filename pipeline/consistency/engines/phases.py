@@ -12,7 +12,7 @@ from pipeline.consistency.protocols import DETECTION, RESOLUTION, end_phase
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Transport
 
-__all__ = ["run_phase", "run_resolution_phase"]
+__all__ = ["run_phase", "run_resolution_phase", "run_quiet_phase"]
 
 
 def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, iteration: int = 0,
@@ -64,3 +64,30 @@ def run_resolution_phase(robots: list[Robot], network: Transport, protocol, iter
     """Alg. 1 (the ``paper`` rule's pass, :mod:`pipeline.consistency.rules`): the resolution
     phase of :func:`run_phase` with the protocol's robot steps."""
     return run_phase(robots, network, protocol, RESOLUTION, iteration, on_round=on_round)
+
+
+def run_quiet_phase(robots: list[Robot], network: Transport, start, step, on_round=None,
+                    t0: int = 0, cap: int | None = None, what: str = "phase") -> int:
+    """A phase of a rule that floods (``sync``, label flooding) on every robot until nothing
+    is in flight — the phase end a robot alone learns from the termination wave; returns the
+    rounds taken.
+
+    Round 0 ``start(robot, send)`` on every robot; then, round after round, every robot with
+    mail takes ``step(robot, inbox, send, t0 + t)``. ``cap``: rounds after which it raises
+    ``RuntimeError`` (a bug, never a correct run; default ``2 n + 4``)."""
+    cap = 2 * len(robots) + 4 if cap is None else cap
+    sends = [lambda dst, kind, p, i=rb.id: network.send(i, dst, kind, p) for rb in robots]
+    for rb in robots:
+        start(rb, sends[rb.id])
+    t = 0
+    while network.pending:
+        network.end_round()
+        t += 1
+        if on_round is not None:
+            on_round(t0 + t)
+        receivers = network.receivers() if hasattr(network, "receivers") else range(len(robots))
+        for i in receivers:
+            step(robots[i], network.inbox(i), sends[i], t0 + t)
+        if t > cap:
+            raise RuntimeError(f"{what} did not end within {cap} rounds")
+    return t

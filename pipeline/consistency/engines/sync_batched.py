@@ -1,6 +1,6 @@
 """Batched evaluation of the ``sync`` rule (:mod:`..sync`) in the in-process simulator.
 
-The per-robot driver (:func:`.sync.run_sync`) steps every robot with a message in every
+The per-robot driver (:func:`run_sync`) steps every robot with a message in every
 round, robot by robot. That is the code the robots run one at a time over a reliable
 channel or as their own programs. On the simulator's lossless static network this module
 computes the *same* rounds for all robots at once, with numpy over the robots' link tables
@@ -60,12 +60,12 @@ Memory
 Equivalence (tested: ``tests/pipeline/consistency/test_sync_batched.py``, Hypothesis): the
 same per-robot final state (``label``, ``other``, ``open``, ``tree``, ``w``, camera sets,
 ``link_alive``, the deletion log, ``component``, peak memory), the same rounds, and the same
-messages and bytes per kind as :func:`.sync.run_sync`.
+messages and bytes per kind as :func:`run_sync`.
 
 Where it applies (:func:`sync_batched_applies`): the in-process :class:`Network` with no
 fault switch, robots freshly equipped by :func:`.sync.equip_sync` with one flood graph,
 every link held by both ends (alive at both or at neither) with the same weight at both.
-Elsewhere :func:`run_sync_batched` runs the robots one by one (:func:`.sync.run_sync`).
+Elsewhere :func:`run_sync_batched` runs the robots one by one (:func:`run_sync`).
 
 Cost: ``O((H + M) log H)`` per Borůvka round (``H`` half-links, ``M`` features) plus, per
 network round, work in proportion to that round's sends; camera-set tests ``O(K ⌈n/64⌉)`` for the ``K`` open links
@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.keys import EMPTY, isin_sorted, ranges
 from pipeline.consistency.robot import Robot
@@ -86,13 +87,19 @@ from pipeline.consistency.sync import (
     MERGE,
     RELABEL,
     SUPPORT,
+    exchange_step,
     finish_sync,
-    run_sync,
+    has_best,
+    merge_step,
+    start_exchange,
+    start_merge,
+    start_support,
+    support_step,
 )
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.transport.simulated import Network
 
-__all__ = ["run_sync_batched", "sync_batched_applies"]
+__all__ = ["run_sync", "run_sync_batched", "sync_batched_applies"]
 
 #: entries (or 64-bit words) of one vectorized piece: triangle counts, camera-set tests
 CHUNK = 1 << 22
@@ -349,7 +356,7 @@ def _flood_best(team: _Team, best: np.ndarray, fl: np.ndarray, fptr: np.ndarray,
 
 def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> dict:
     """The ``sync`` rule on every robot, evaluated in batch; returns what
-    :func:`.sync.run_sync` returns (``rounds``, ``boruvka_rounds``, ``support_rounds``) and
+    :func:`run_sync` returns (``rounds``, ``boruvka_rounds``, ``support_rounds``) and
     leaves every robot and the network as it does. Runs the robots one by one where the
     batched evaluation does not apply (:func:`sync_batched_applies`)."""
     if not sync_batched_applies(robots, network):
@@ -475,5 +482,35 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         rb.peak_memory_bytes = max(rb.peak_memory_bytes,
                                    st.robot_fixed + st.fixed + int(held_max[i]) * per_set,
                                    st.robot_fixed + st.fixed + int(team.lists_bytes[i]))
+        finish_sync(rb, t)
+    return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)
+
+
+def run_sync(robots: list[Robot], network: Transport, on_round=None) -> dict:
+    """The ``sync`` rule on every robot (each equipped by :func:`equip_sync`): support round,
+    Borůvka rounds until no eligible link is left, then each robot cuts its side.
+
+    The driver only plays the clock and the phase barrier (nothing in flight) and reads one
+    bit per robot (:func:`has_best`), as the termination wave of a robot alone would.
+
+    Returns ``rounds``, ``boruvka_rounds`` and ``support_rounds``.
+    """
+    n = len(robots)
+    cap = 2 * n + 4
+    t = run_quiet_phase(robots, network, start_support, support_step, on_round, 0, cap, "sync")
+    support_rounds = t
+    boruvka = 0
+    m_total = robots[0].m_total if robots else 0
+    while True:
+        t += run_quiet_phase(robots, network, start_exchange, exchange_step, on_round, t, cap,
+                             "sync")
+        if not any(has_best(rb) for rb in robots):
+            break
+        boruvka += 1
+        if boruvka > m_total:
+            raise RuntimeError(f"sync did not end within {m_total} Borůvka rounds")
+        t += run_quiet_phase(robots, network, start_merge, merge_step, on_round, t, cap, "sync")
+    for rb in robots:
+        rb.sync.rounds = boruvka
         finish_sync(rb, t)
     return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)

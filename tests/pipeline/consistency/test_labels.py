@@ -68,7 +68,7 @@ def test_memory_and_bytes_follow_the_links():
 
 def _alone(fpc, links, options=None):
     """Every robot in its own thread runs the rule alone (reliable channel, termination wave)."""
-    from pipeline.consistency.labels import run_paper_labels_locally
+    from pipeline.consistency.alone import run_paper_labels_locally
     from pipeline.consistency.protocols import ProtocolOptions
     from pipeline.transport.local import LocalTeam
 

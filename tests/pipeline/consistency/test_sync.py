@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 from sync_instances import comm_edges, planted_instance
 
 from pipeline.consistency.engines.driver import build_robots
+from pipeline.consistency.engines.sync_batched import run_sync
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
-from pipeline.consistency.sync import CASE_SYNC, FLOODS, equip_sync, run_sync
+from pipeline.consistency.sync import CASE_SYNC, FLOODS, equip_sync
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
 

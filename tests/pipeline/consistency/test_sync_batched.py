@@ -12,8 +12,12 @@ from sync_instances import comm_edges, planted_instance
 
 from pipeline.consistency.engines import sync_batched
 from pipeline.consistency.engines.driver import build_robots
-from pipeline.consistency.engines.sync_batched import run_sync_batched, sync_batched_applies
-from pipeline.consistency.sync import FLOODS, equip_sync, run_sync
+from pipeline.consistency.engines.sync_batched import (
+    run_sync,
+    run_sync_batched,
+    sync_batched_applies,
+)
+from pipeline.consistency.sync import FLOODS, equip_sync
 from pipeline.transport.simulated import Network, NetworkOptions
 
 SETTINGS = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
