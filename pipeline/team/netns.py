@@ -150,8 +150,16 @@ class NetnsRig:
 
     # --- programs -------------------------------------------------------------------------
     def start(self, i: int, argv: list[str], **popen) -> subprocess.Popen:
-        """Run ``argv`` on robot ``i``'s host (``ip netns exec``); kept for :meth:`close`."""
-        p = subprocess.Popen(["ip", "netns", "exec", self.ns(i), *argv], **popen)
+        """Run ``argv`` on robot ``i``'s host (``ip netns exec``); kept for :meth:`close`.
+
+        The program gets its own ``/dev/shm`` (a private tmpfs in its own mount namespace),
+        as on a machine of its own: otherwise Zenoh, finding its peer's shared-memory
+        segments, would hand large payloads over shared memory and only a reference would
+        cross the cable. The program's pid is that of ``argv`` (each step ``exec`` s)."""
+        shell = 'mount -t tmpfs -o size=512m fm-shm /dev/shm && exec "$@"'
+        p = subprocess.Popen(["ip", "netns", "exec", self.ns(i), "unshare", "--mount",
+                              "--propagation", "private", "sh", "-c", shell, "sh", *argv],
+                             **popen)
         self.procs[int(i)] = p
         return p
 

@@ -208,6 +208,10 @@ class ZenohTransport(RoundEndpoint):
         self._stop = threading.Event()
         self.messages = self.bytes = self.dropped = 0
         self.wire_bytes = self.wire_packets = 0
+        # per neighbour: message bytes counted (as the simulator counts) and packet bytes
+        # handed to Zenoh (what the namespace rig compares with the cable's counters)
+        self.bytes_to = {k: 0 for k in self.neighbours}
+        self.wire_bytes_to = {k: 0 for k in self.neighbours}
         self.messages_by_kind: dict[str, int] = {}
         self.bytes_by_kind: dict[str, int] = {}
         self.wait_s = 0.0
@@ -394,6 +398,7 @@ class ZenohTransport(RoundEndpoint):
         size = msg.nbytes
         self.messages += 1
         self.bytes += size
+        self.bytes_to[dst] += size
         self.messages_by_kind[kind] = self.messages_by_kind.get(kind, 0) + 1
         self.bytes_by_kind[kind] = self.bytes_by_kind.get(kind, 0) + size
         if self.lossy and self.drop_prob > 0.0 and self._rng.random() < self.drop_prob:
@@ -410,6 +415,7 @@ class ZenohTransport(RoundEndpoint):
             data = encode_packet({"src": self.robot_id, "dst": k, "round": r,
                                   "state": state or {}}, msgs)
             self.wire_bytes += len(data)
+            self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
             self._pubs[k].put(data)
         t0 = time.monotonic()
@@ -450,6 +456,8 @@ class ZenohTransport(RoundEndpoint):
                     round=self.round, messages_by_kind=dict(self.messages_by_kind),
                     bytes_by_kind=dict(self.bytes_by_kind), wire_bytes=self.wire_bytes,
                     wire_packets=self.wire_packets, wait_s=round(self.wait_s, 4),
+                    bytes_to={str(k): v for k, v in sorted(self.bytes_to.items())},
+                    wire_bytes_to={str(k): v for k, v in sorted(self.wire_bytes_to.items())},
                     silent=sorted(self.silent), outcome=self.outcome(),
                     written_off={str(k): v for k, v in sorted(self.written_off.items())})
 

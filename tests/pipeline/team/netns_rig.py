@@ -18,11 +18,12 @@ from pipeline.types import Links
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def rig_team(rig, name: str, data: dict, options: dict | None = None) -> Team:
+def rig_team(rig, name: str, data: dict, options: dict | None = None,
+             robot_options: dict | None = None) -> Team:
     """A team whose robot ``i`` listens on the rig's address of host ``i`` (no observer)."""
     robots = [RobotEntry(i, rig.endpoint(i)) for i in range(rig.n)]
     t = Team(name, robots, np.asarray(rig.edges, np.int64), data,
-             {**DEFAULT_OPTIONS, **(options or {})})
+             {**DEFAULT_OPTIONS, **(options or {})}, dict(robot_options or {}))
     return parse_team(t.to_json())
 
 
