@@ -40,11 +40,14 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["NetnsRig", "unavailable", "NETEM_MISSING"]
+__all__ = ["NetnsRig", "unavailable", "NETEM_MISSING", "read_results", "team_links",
+           "kept_links", "conflictive_sets_after"]
 
 #: what this kernel cannot do (stated in reports beside the faults the rig made)
 NETEM_MISSING = "netem (packet loss, delay, reordering) is absent from this kernel"
@@ -200,6 +203,40 @@ class NetnsRig:
         return {(a, b): self.interface_bytes(a, b)[0] + self.interface_bytes(b, a)[0]
                 for a, b in self.edges}
 
+    # --- a team on the rig ----------------------------------------------------------------
+    def team(self, name: str, data: dict, options: dict | None = None,
+             robot_options: dict | None = None):
+        """A team whose robot ``i`` listens on host ``i``'s address (no observer)."""
+        from pipeline.team.teamfile import DEFAULT_OPTIONS, RobotEntry, Team, parse_team
+
+        robots = [RobotEntry(i, self.endpoint(i)) for i in range(self.n)]
+        t = Team(name, robots, np.asarray(self.edges, np.int64), data,
+                 {**DEFAULT_OPTIONS, **(options or {})}, dict(robot_options or {}))
+        return parse_team(t.to_json())
+
+    def start_robots(self, team, workdir, ids=None, root=None) -> dict:
+        """Start ``python -m pipeline robot`` on the hosts of ``ids`` (default all), each
+        writing ``workdir/robotI.json`` and its log ``robotI.log``; returns ``{id: json}``."""
+        from pipeline.team.teamfile import write_team
+
+        workdir = Path(workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        team_path = workdir / "TEAM.json"
+        if not team_path.exists():
+            write_team(team_path, team)
+        root = Path(root) if root else Path(__file__).resolve().parents[2]
+        env = {**os.environ, "PYTHONPATH": str(root), "OMP_NUM_THREADS": "1",
+               "OPENBLAS_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+        out = {}
+        for i in (range(team.n) if ids is None else ids):
+            res = workdir / f"robot{i}.json"
+            with open(workdir / f"robot{i}.log", "wb") as log:
+                self.start(i, [sys.executable, "-m", "pipeline", "robot", "--team",
+                               str(team_path), "--id", str(i), "--result", str(res)],
+                           stdout=log, stderr=log, env=env, cwd=str(root))
+            out[i] = res
+        return out
+
     def wait_all(self, timeout_s: float) -> dict[int, int | None]:
         """Wait for every program (at most ``timeout_s`` in all); their exit codes (None: still
         running at the limit)."""
@@ -208,3 +245,50 @@ class NetnsRig:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 p.wait(timeout=max(0.0, end - time.monotonic()))
         return {i: p.poll() for i, p in self.procs.items()}
+
+
+def wait_for_line(path, text: str, timeout_s: float) -> bool:
+    """True once ``text`` appears in the file (polled), False after ``timeout_s``."""
+    path = Path(path)
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if path.exists() and text in path.read_text(errors="replace"):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def read_results(paths: dict) -> dict:
+    """The robots' ``--result`` documents that were written, by robot id."""
+    return {i: json.loads(Path(p).read_text()) for i, p in paths.items() if Path(p).exists()}
+
+
+def team_links(res: dict) -> dict:
+    """Every link as each end reports it: ``{(i, r, j, s): {robot: (alive, case, round)}}``,
+    links stored once with ``i < j``."""
+    out: dict = {}
+    for i, doc in res.items():
+        L = doc["links"]
+        for k, r, s, a, c, t in zip(L["link_nbr"], L["link_r"], L["link_s"], L["link_alive"],
+                                    L["deleted_case"], L["deleted_round"], strict=True):
+            key = (i, r, k, s) if i < k else (k, s, i, r)
+            out.setdefault(key, {})[i] = (bool(a), int(c), int(t))
+    return out
+
+
+def kept_links(res: dict):
+    """The links kept by every end that wrote a result, as :class:`~pipeline.types.Links`."""
+    from pipeline.types import Links
+
+    kept = [k for k, v in team_links(res).items() if all(a for a, _, _ in v.values())]
+    return Links([k[0] for k in kept], [k[1] for k in kept], [k[2] for k in kept],
+                 [k[3] for k in kept])
+
+
+def conflictive_sets_after(res: dict) -> int:
+    """Association sets of the kept links that hold two features of one camera (Def. 2.4)."""
+    from pipeline.consistency.centralized import union_find_conflicts
+
+    m = next(iter(res.values()))["features_per_camera"]
+    labels, conflict = union_find_conflicts(m, kept_links(res))
+    return int(np.unique(labels[conflict]).size)

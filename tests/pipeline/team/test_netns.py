@@ -11,16 +11,15 @@ import signal
 import time
 
 import pytest
-from netns_rig import (
-    kept_conflict_free,
-    results,
-    rig_team,
-    start_team,
+
+from pipeline.team.netns import (
+    NetnsRig,
+    conflictive_sets_after,
+    read_results,
     team_links,
+    unavailable,
     wait_for_line,
 )
-
-from pipeline.team.netns import NetnsRig, unavailable
 
 WHY = unavailable()
 pytestmark = pytest.mark.skipif(WHY is not None, reason=f"no network namespaces: {WHY}")
@@ -43,18 +42,18 @@ def _run(tmp_path, options, fault=None, late=None, robot_options=None):
     handshakes are done (``late``: a robot started that many seconds after the others).
     Returns (exit codes, results, the cable counters)."""
     with NetnsRig(4, RING) as rig:
-        team = rig_team(rig, "ring", DATA, options, robot_options)
+        team = rig.team("ring", DATA, options, robot_options)
         ids = [i for i in range(4) if late is None or i != late[0]]
-        paths = start_team(rig, team, tmp_path, ids)
+        paths = rig.start_robots(team, tmp_path, ids)
         if late is not None:
             time.sleep(late[1])
-            paths.update(start_team(rig, team, tmp_path, [late[0]]))
+            paths.update(rig.start_robots(team, tmp_path, [late[0]]))
         if fault is not None:
             assert wait_for_line(tmp_path / "robot2.log", "neighbours heard", 60)
             fault(rig)
         codes = rig.wait_all(HANG_S)
         wire = rig.link_bytes()
-    return codes, results(paths), wire
+    return codes, read_results(paths), wire
 
 
 @pytest.fixture(scope="module")
@@ -69,19 +68,16 @@ def _outcomes(res):
 
 def _decisions(res):
     """Every link's (status, case, round) at each end."""
-    out = {}
-    for i, doc in res.items():
-        L = doc["links"]
-        for k, r, s, a, c, t in zip(L["link_nbr"], L["link_r"], L["link_s"], L["link_alive"],
-                                    L["deleted_case"], L["deleted_round"], strict=True):
-            out[(i, r, k, s)] = (a, c, t)
-    return out
+    return team_links(res)
 
 
 def _ends_agree(res):
-    alive, case = team_links(res)
-    return all(len(set(v.values())) == 1 for v in alive.values()) and all(
-        len(set(v.values())) == 1 for v in case.values())
+    """Both ends of every link made the same decision (status and case)."""
+    return all(len({v[:2] for v in ends.values()}) == 1 for ends in team_links(res).values())
+
+
+def kept_conflict_free(res):
+    return conflictive_sets_after(res) == 0
 
 
 def test_reference_run_and_bytes_measured_twice(reference):
@@ -89,7 +85,8 @@ def test_reference_run_and_bytes_measured_twice(reference):
     assert codes == {0: 0, 1: 0, 2: 0, 3: 0}
     assert _outcomes(res) == {0: "done", 1: "done", 2: "done", 3: "done"}
     assert kept_conflict_free(res) and _ends_agree(res)
-    assert any(not a for a, _, _ in _decisions(res).values())  # there were conflicts to cut
+    # there were conflicts to cut
+    assert any(not a for ends in _decisions(res).values() for a, _, _ in ends.values())
     for a, b in RING:
         counted = res[a]["counters"]["bytes_to"][str(b)] + res[b]["counters"]["bytes_to"][str(a)]
         packets = (res[a]["counters"]["wire_bytes_to"][str(b)]
