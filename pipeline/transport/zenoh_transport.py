@@ -38,7 +38,7 @@ Faults at this transport
       that is merely slow (rendering, matching) keeps beating and is waited for.
 
 Writing a neighbour off (no hang, ever)
-    A robot stops waiting for neighbour ``k`` — *writes it off* — for one of four reasons,
+    A robot stops waiting for neighbour ``k`` — *writes it off* — for one of five reasons,
     kept in :attr:`ZenohTransport.written_off`:
 
     ``closed``   its Zenoh session closed (liveliness token gone): its process ended;
@@ -46,7 +46,9 @@ Writing a neighbour off (no hang, ever)
                  frozen, or the link between them down (the robot cannot tell which);
     ``told``     ``k`` wrote *this* robot off and said so (``fm/T/gone/K/ID``);
     ``limit``    one round waited ``round_limit_s`` seconds for ``k``, which kept beating
-                 without sending the round's packet.
+                 without sending the round's packet;
+    ``start``    ``k`` did not answer the start handshake within ``start_timeout_s`` (while
+                 another neighbour did; with none heard the robot stops, naming one).
 
     Writing off is final and made symmetric: the robot stops sending ``k`` round packets *and
     beats*, publishes ``gone`` to it at once and again whenever it hears from it later (at most
@@ -65,8 +67,8 @@ Writing a neighbour off (no hang, ever)
     a robot that writes off every neighbour runs its remaining rounds alone, without waiting.
     :meth:`ZenohTransport.outcome` names how the robot ended: ``done`` (no neighbour written
     off), ``cut`` (only neighbours whose process ended), ``partitioned`` (a neighbour went
-    silent or wrote it off: frozen, or a link down), ``gave-up`` (a round hit
-    ``round_limit_s``).
+    silent, wrote it off or never answered: frozen, a link down, not started), ``gave-up`` (a
+    round hit ``round_limit_s``).
 
 Rejoin (the rule, and why nothing is lost)
     Rule: a neighbour is waited for until it is written off (above), never merely because it
@@ -94,8 +96,10 @@ Rejoin (the rule, and why nothing is lost)
 Start handshake
     Each robot repeats ``hello`` to every neighbour (carrying whether it has heard that
     neighbour) until it has heard every neighbour and every neighbour has heard it, then sends
-    one last ``hello``. A neighbour not heard within ``start_timeout_s`` is reported by id and
-    endpoint (:class:`~pipeline.transport.RobotMissingError`).
+    one last ``hello``. A neighbour that starts late within ``start_timeout_s`` joins; one not
+    heard by then is written off (``start``) and named in the log, and the robot runs on with
+    the others; if no neighbour at all was heard, the robot stops and names one
+    (:class:`~pipeline.transport.RobotMissingError`).
 """
 
 from __future__ import annotations
@@ -298,7 +302,8 @@ class ZenohTransport(RoundEndpoint):
 
     _WHY = {"closed": "its Zenoh session closed",
             "told": "it wrote this robot off",
-            "limit": "the round waited round_limit_s for it"}
+            "limit": "the round waited round_limit_s for it",
+            "start": "no answer to the start handshake"}
 
     def _write_off(self, k: int, why: str) -> None:
         """Stop counting on neighbour ``k`` (caller holds ``_cv``); tell it, once now and
@@ -320,7 +325,7 @@ class ZenohTransport(RoundEndpoint):
             return "done"
         if "limit" in why:
             return "gave-up"
-        if why & {"silent", "told"}:
+        if why & {"silent", "told", "start"}:
             return "partitioned"
         return "cut"
 
@@ -354,10 +359,15 @@ class ZenohTransport(RoundEndpoint):
     def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05) -> float:
         """Wait until every neighbour is heard and has heard this robot; return seconds taken.
 
+        A neighbour that starts late within ``timeout_s`` joins. One that has not answered by
+        then is written off (``start``: named in the log, outcome ``partitioned``) and the robot
+        runs on with the others; if it starts later it is told (``gone``) and ends alone.
+
         Raises
         ------
         RobotMissingError
-            Some neighbour was not heard within ``timeout_s``; the message names it.
+            No neighbour at all was heard within ``timeout_s`` (a wrong address is likelier
+            than every neighbour being down); the message names the first.
         """
         t0 = time.monotonic()
         name = self.team.name
@@ -381,12 +391,21 @@ class ZenohTransport(RoundEndpoint):
                 say()  # the last one tells late neighbours that they were heard
                 return time.monotonic() - t0
             if time.monotonic() - t0 > timeout_s:
-                if not missing:
-                    missing = sorted(k for k in self.neighbours if not self._hello.get(k))
+                missing = sorted(set(missing) | {k for k in self.neighbours
+                                                 if not self._hello.get(k)})
                 k = missing[0]
-                raise RobotMissingError(
-                    f"robot {self.robot_id}: neighbour robot {k} ({self.team.endpoint(k)}) did "
-                    f"not answer within {timeout_s:g} s; it never started or cannot be reached")
+                text = (f"neighbour robot {k} ({self.team.endpoint(k)}) did not answer within "
+                        f"{timeout_s:g} s; it never started or cannot be reached")
+                if len(missing) == len(self.neighbours):
+                    raise RobotMissingError(f"robot {self.robot_id}: {text}")
+                # some neighbours answered: run on with them, the others written off
+                for k in missing:
+                    self._log(f"robot {self.robot_id}: neighbour robot {k} "
+                              f"({self.team.endpoint(k)}) did not answer within {timeout_s:g} s; "
+                              "it never started or cannot be reached")
+                    with self._cv:
+                        self._write_off(k, "start")
+                return time.monotonic() - t0
 
     # --- rounds ---------------------------------------------------------------------------
     def send(self, dst: int, kind: str, payload: dict) -> None:

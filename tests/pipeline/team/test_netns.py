@@ -38,14 +38,14 @@ def _scene_cache(tmp_path_factory, monkeypatch):
 
 
 def _run(tmp_path, options, fault=None, late=None, robot_options=None):
-    """One team run on a fresh rig; ``fault(rig, workdir)`` runs once robot ``0``-``3``'s
-    handshakes are done (``late``: a robot started that many seconds after the others).
-    Returns (exit codes, results, the cable counters)."""
+    """One team run on a fresh rig; ``fault(rig)`` runs once robot 2's start handshake is
+    done (``late``: ``(robot, seconds)`` started that much after the others, never with
+    ``None``). Returns (exit codes, results, the cable counters)."""
     with NetnsRig(4, RING) as rig:
         team = rig.team("ring", DATA, options, robot_options)
         ids = [i for i in range(4) if late is None or i != late[0]]
         paths = rig.start_robots(team, tmp_path, ids)
-        if late is not None:
+        if late is not None and late[1] is not None:  # (robot, None): it never starts
             time.sleep(late[1])
             paths.update(rig.start_robots(team, tmp_path, [late[0]]))
         if fault is not None:
@@ -155,4 +155,15 @@ def test_killed_host_is_cut_by_its_neighbours(tmp_path):
     assert {i: codes[i] for i in (0, 1, 3)} == {0: 0, 1: 0, 3: 0}
     assert _outcomes(res) == {0: "done", 1: "cut", 3: "cut"}
     assert res[1]["counters"]["written_off"] == {"2": "closed"}
+    assert kept_conflict_free(res) and _ends_agree(res)
+
+
+def test_robot_that_never_starts_is_written_off_and_the_rest_finish(tmp_path):
+    """Robot 3 never starts: its neighbours 0 and 2 write it off when their start timeout
+    ends and finish with robot 1 as a partial team (before: they stopped with exit 3)."""
+    codes, res, _ = _run(tmp_path, {"round_timeout_s": 10.0, "start_timeout_s": 3.0},
+                         late=(3, None))
+    assert codes == {0: 0, 1: 0, 2: 0}
+    assert _outcomes(res) == {0: "partitioned", 1: "done", 2: "partitioned"}
+    assert res[0]["counters"]["written_off"] == {"3": "start"}
     assert kept_conflict_free(res) and _ends_agree(res)
