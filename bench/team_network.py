@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import tempfile
@@ -143,7 +144,7 @@ def summarize(raw: dict, edges, reference: dict | None) -> dict:
         "bytes_packets": sum(v["packets"] for v in links.values()),
         "bytes_socket": sum(v["socket"] for v in links.values()),
         "bytes_alone_need_s": round(need, 2) if rate else None,
-        "robot_compute_s_max": round(max(timings), 2) if timings else None,
+        "robot_total_s_max": round(max(timings), 2) if timings else None,  # waits included
         "per_link": links,
     }
 
@@ -174,13 +175,14 @@ def main(argv=None) -> int:
              "ring2": {"kind": "formation", "formation": "d", "seed": 0, "size": [w, h],
                        "robots": int(args.robots), "graph": "ring2"}}
     out = {"netem": NETEM_MISSING, "size": [w, h], "fault_s": args.fault_s,
-           "fault_after_s": args.fault_after, "teams": {}}
+           "fault_after_s": args.fault_after, "load_average_start": os.getloadavg()[0],
+           "teams": {}}
+    print(f"load average at the start: {out['load_average_start']:.1f}", flush=True)
     t_all = time.monotonic()
     for name in [t for t in args.teams.split(",") if t]:
         data = teams[name]
         edges = data_synth.formation_edges(data["formation"], 0, data["robots"], data["graph"])
         n = int(data["robots"] or 6)
-        data = {**data, "robots": data["robots"]}
         rows, reference = [], None
         for case in [c for c in args.cases.split(",") if c]:
             with tempfile.TemporaryDirectory(prefix="fm-net-") as tmp:
@@ -198,6 +200,8 @@ def main(argv=None) -> int:
                   f"{row['bytes_alone_need_s']} s", flush=True)
         out["teams"][name] = {"robots": n, "edges": len(edges), "rows": rows}
     out["bench_s"] = round(time.monotonic() - t_all, 1)
+    out["load_average_end"] = os.getloadavg()[0]
+    print(f"load average at the end: {out['load_average_end']:.1f}")
     Path(args.out).mkdir(parents=True, exist_ok=True)
     write_json_atomic(Path(args.out) / "results.json", json.loads(json.dumps(out)))
     print(f"saved {args.out}/results.json ({out['bench_s']} s)")
