@@ -426,6 +426,15 @@ class ZenohTransport(RoundEndpoint):
         self._out[dst].append((kind, payload))
 
     def end_round(self, state: dict | None = None) -> tuple[list[Message], dict[int, dict]]:
+        """Send this round's packets, wait for the neighbours' (see
+        :meth:`RoundEndpoint.end_round`).
+
+        Bound: returns within ``deg × block_s`` (the sends; :func:`link_timeouts`) plus
+        ``round_limit_s`` plus one beat period, whatever the neighbours do: a neighbour whose
+        packet has not come is written off when its session closes, after ``round_timeout_s``
+        of silence, when it says it wrote this robot off, or when the round has waited
+        ``round_limit_s`` (module docstring, "Writing a neighbour off").
+        """
         r = self.round
         for k in sorted(self.neighbours):
             msgs, self._out[k] = self._out[k], []
