@@ -219,6 +219,7 @@ class ZenohTransport(RoundEndpoint):
         self.messages_by_kind: dict[str, int] = {}
         self.bytes_by_kind: dict[str, int] = {}
         self.wait_s = 0.0
+        self.send_s = 0.0  # seconds the round packets' puts blocked (a full queue: slow link)
         connect = [team.endpoint(k) for k in sorted(self.neighbours)]
         if team.observer:
             connect.append(team.observer)
@@ -445,7 +446,9 @@ class ZenohTransport(RoundEndpoint):
             self.wire_bytes += len(data)
             self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
+            t_put = time.monotonic()
             self._pubs[k].put(data)
+            self.send_s += time.monotonic() - t_put
         t0 = time.monotonic()
         with self._cv:
             for k in self.neighbours:
@@ -484,6 +487,7 @@ class ZenohTransport(RoundEndpoint):
                     round=self.round, messages_by_kind=dict(self.messages_by_kind),
                     bytes_by_kind=dict(self.bytes_by_kind), wire_bytes=self.wire_bytes,
                     wire_packets=self.wire_packets, wait_s=round(self.wait_s, 4),
+                    send_s=round(self.send_s, 4),
                     bytes_to={str(k): v for k, v in sorted(self.bytes_to.items())},
                     wire_bytes_to={str(k): v for k, v in sorted(self.wire_bytes_to.items())},
                     silent=sorted(self.silent), outcome=self.outcome(),
