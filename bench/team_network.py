@@ -145,6 +145,9 @@ def summarize(raw: dict, edges, reference: dict | None) -> dict:
         "bytes_socket": sum(v["socket"] for v in links.values()),
         "bytes_alone_need_s": round(need, 2) if rate else None,
         "robot_total_s_max": round(max(timings), 2) if timings else None,  # waits included
+        # seconds the robot's round packets waited to be handed to Zenoh (a full queue)
+        "robot_send_s_max": max((doc["counters"].get("send_s", 0.0) for doc in res.values()),
+                                default=None),
         "per_link": links,
     }
 

@@ -60,10 +60,11 @@ Writing a neighbour off (no hang, ever)
     so it waited for that neighbour's packets for ever, and its other neighbours for it: a
     cycle of waits around a ring.)
 
-    Bounds, stated for :meth:`ZenohTransport.end_round`: the packets go out within
-    ``deg × block_s`` (a put into a full queue blocks at most ``block_s`` seconds before Zenoh
-    closes that link, which reads as ``closed``), then the wait ends within ``round_limit_s``
-    plus one beat period whatever the neighbours do. A round therefore never waits for ever;
+    Bounds, stated for :meth:`ZenohTransport.end_round`: the packets are queued to one
+    sender thread per neighbour (a put into a slow link's full queue blocks that link's
+    sender only, at most ``block_s`` seconds per packet before Zenoh closes that link, which
+    reads as ``closed``), and the wait ends within ``round_limit_s`` plus one beat period
+    whatever the neighbours do. A round therefore never waits for ever;
     a robot that writes off every neighbour runs its remaining rounds alone, without waiting.
     :meth:`ZenohTransport.outcome` names how the robot ended: ``done`` (no neighbour written
     off), ``cut`` (only neighbours whose process ended), ``partitioned`` (a neighbour went
@@ -105,6 +106,7 @@ Start handshake
 from __future__ import annotations
 
 import json
+import queue
 import sys
 import threading
 import time
@@ -244,6 +246,12 @@ class ZenohTransport(RoundEndpoint):
             key(name, "round", self.robot_id, k),
             congestion_control=zenoh.CongestionControl.BLOCK)
             for k in sorted(self.neighbours)}
+        # one sender per neighbour: a put into a slow link's full queue blocks that link only
+        self._sendq = {k: queue.SimpleQueue() for k in sorted(self.neighbours)}
+        self._senders = {k: threading.Thread(target=self._sender, args=(k,), daemon=True)
+                         for k in sorted(self.neighbours)}
+        for t in self._senders.values():
+            t.start()
         self._beat_pubs = {k: self.session.declare_publisher(
             key(name, "alive", self.robot_id, k)) for k in sorted(self.neighbours)}
         self._beater = threading.Thread(target=self._beat, daemon=True)
@@ -284,6 +292,23 @@ class ZenohTransport(RoundEndpoint):
                     self._say_gone(k)
             except Exception:  # noqa: BLE001 - the session is closing
                 return
+
+    def _sender(self, k: int) -> None:
+        """Hand neighbour ``k``'s round packets to Zenoh in order; ``None`` ends it."""
+        q = self._sendq[k]
+        while True:
+            data = q.get()
+            if data is None:
+                return
+            if k in self.written_off:
+                continue
+            t_put = time.monotonic()
+            try:
+                self._pubs[k].put(data)
+            except Exception:  # noqa: BLE001 - the session is closing
+                return
+            with self._cv:
+                self.send_s += time.monotonic() - t_put
 
     def _say_gone(self, k: int) -> None:
         self.session.put(key(self.team.name, "gone", self.robot_id, k), b"1")
@@ -430,8 +455,9 @@ class ZenohTransport(RoundEndpoint):
         """Send this round's packets, wait for the neighbours' (see
         :meth:`RoundEndpoint.end_round`).
 
-        Bound: returns within ``deg × block_s`` (the sends; :func:`link_timeouts`) plus
-        ``round_limit_s`` plus one beat period, whatever the neighbours do: a neighbour whose
+        Bound: returns within ``round_limit_s`` plus one beat period, whatever the neighbours
+        do (the packets are queued to each neighbour's sender thread, which never holds the
+        round up): a neighbour whose
         packet has not come is written off when its session closes, after ``round_timeout_s``
         of silence, when it says it wrote this robot off, or when the round has waited
         ``round_limit_s`` (module docstring, "Writing a neighbour off").
@@ -446,9 +472,7 @@ class ZenohTransport(RoundEndpoint):
             self.wire_bytes += len(data)
             self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
-            t_put = time.monotonic()
-            self._pubs[k].put(data)
-            self.send_s += time.monotonic() - t_put
+            self._sendq[k].put(data)  # never blocks: the neighbour's sender puts it
         t0 = time.monotonic()
         with self._cv:
             for k in self.neighbours:
@@ -522,6 +546,14 @@ class ZenohTransport(RoundEndpoint):
             sub.undeclare()
 
     def close(self) -> None:
+        """Let the senders hand over what they still hold (each at most ``block_s`` per
+        packet, :func:`link_timeouts`, in parallel), then close the session."""
+        for q in self._sendq.values():
+            q.put(None)
+        block_s = link_timeouts(self.round_timeout_s)[1]
+        end = time.monotonic() + 2 * block_s
+        for t in self._senders.values():
+            t.join(timeout=max(0.0, end - time.monotonic()))
         self._stop.set()
         try:
             self.session.close()
