@@ -5,7 +5,8 @@ Each robot runs as ``python -m pipeline robot`` in its own Linux network namespa
 robots) and a 20-robot ring2 formation (``--robots``), both at ``--size`` with fusion on (the
 default ``run-formation``). Cases, side by side in one run:
 
-* ``unlimited``, ``10mbit``, ``1mbit``: a ``tbf`` cap on both ends of every cable;
+* ``unlimited``, ``10mbit``, ``1mbit``: a ``tbf`` cap on both ends of every cable
+  (``256kbit`` too when named in ``--cases``);
 * ``partition``: cable ``(1, 2)`` down for ``--fault-s`` seconds, then up again;
 * ``freeze``: robot 2's program stopped (SIGSTOP) for ``--fault-s`` seconds, then resumed;
 * ``kill``: robot 2's program killed (SIGKILL).
@@ -49,8 +50,8 @@ from pipeline.team.netns import (  # noqa: E402
     wait_for_line,
 )
 
-RATES = {"unlimited": None, "10mbit": 10e6, "1mbit": 1e6}
-CASES = ("unlimited", "10mbit", "1mbit", "partition", "freeze", "kill")
+RATES = {"unlimited": None, "10mbit": 10e6, "1mbit": 1e6, "256kbit": 256e3}
+CASES = ("unlimited", "10mbit", "1mbit", "partition", "freeze", "kill")  # and 256kbit
 
 
 def _rate_bits(name: str) -> float | None:
@@ -61,7 +62,7 @@ def run_case(team_name: str, data: dict, edges, case: str, args, workdir: Path) 
     """One team run of ``case`` on a fresh rig; the raw figures."""
     n = int(data["robots"] or 6)
     with NetnsRig(n, edges) as rig:
-        if case in ("10mbit", "1mbit"):
+        if RATES.get(case):
             rig.cap(case)
         team = rig.team(team_name, data, {"fusion": True, "start_timeout_s": 120.0})
         t0 = time.monotonic()
@@ -156,7 +157,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--teams", default="d,ring2", help="comma list of d, ring2")
-    ap.add_argument("--cases", default=",".join(CASES), help=f"comma list of {', '.join(CASES)}")
+    ap.add_argument("--cases", default=",".join(CASES),
+                    help=f"comma list of {', '.join(CASES)}, 256kbit (the first is the "
+                         "reference of links lost: name unlimited first)")
     ap.add_argument("--robots", type=int, default=20, help="robots of the ring2 team")
     ap.add_argument("--size", default="640x480", help="image size WxH of every robot")
     ap.add_argument("--fault-s", type=float, default=10.0, help="partition / freeze length")

@@ -191,6 +191,11 @@ class NetnsRig:
                                 "latency", latency], check=True, capture_output=True, text=True)
             self._caps[(a, b)] = rate
 
+    def qdisc(self, a: int, b: int) -> str:
+        """The queueing discipline on robot ``a``'s end of cable ``(a, b)`` (``tc qdisc show``)."""
+        return subprocess.run(["ip", "netns", "exec", self.ns(a), "tc", "qdisc", "show", "dev",
+                               self.dev(b)], check=True, capture_output=True, text=True).stdout
+
     # --- what crossed the sockets ---------------------------------------------------------
     def interface_bytes(self, i: int, j: int) -> tuple[int, int]:
         """``(tx, rx)`` bytes of robot ``i``'s end of cable ``(i, j)`` (kernel counters)."""

@@ -142,6 +142,21 @@ def test_link_partitioned_then_healed_is_taken_back(tmp_path, reference):
     _same_as_reference(res, reference)
 
 
+def test_capped_links_give_the_same_decisions(tmp_path, reference):
+    """Every cable capped at 1 Mbit/s (tc tbf at both ends) from robot 2's handshake on:
+    slower, the same decisions."""
+    caps = []
+
+    def cap(rig):
+        rig.cap("1mbit")
+        caps.append(rig.qdisc(1, 2))
+
+    codes, res, _ = _run(tmp_path, {"round_timeout_s": 10.0}, cap)
+    assert "tbf" in caps[0] and "1Mbit" in caps[0]
+    assert codes == {0: 0, 1: 0, 2: 0, 3: 0}
+    _same_as_reference(res, reference)
+
+
 def test_robot_started_late_joins(tmp_path, reference):
     codes, res, _ = _run(tmp_path, {"round_timeout_s": 10.0}, late=(3, 3.0))
     assert codes == {0: 0, 1: 0, 2: 0, 3: 0}
