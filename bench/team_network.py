@@ -20,7 +20,8 @@ kept, links lost (links of the unlimited run that are missing or cut ``robot-los
 decided differently from the unlimited run, and per cable: bytes counted by the protocol
 (messages, as the simulator counts), bytes of the packets handed to Zenoh, and bytes that
 crossed the cable (kernel interface counters, both directions, headers included), with the
-time the busiest direction's bytes alone need at the cap (the physical limit). Saves
+time the busiest direction's bytes alone need at the cap (the physical limit); and the TCP
+segments the hosts sent and retransmitted (``nstat``). Saves
 ``runs/bench-team-network/results.json``.
 """
 
@@ -94,10 +95,13 @@ def run_case(team_name: str, data: dict, edges, case: str, args, workdir: Path) 
         codes = {i: p.poll() for i, p in rig.procs.items()}
         ifaces = {f"{a}-{b}": {"tx_a": rig.interface_bytes(a, b)[0],
                                "tx_b": rig.interface_bytes(b, a)[0]} for a, b in rig.edges}
+        tcp = [rig.tcp_counters(i) for i in range(n)]
     res = read_results(paths)
     return {"case": case, "wall_s": None if wall is None else round(wall, 2),
             "hung": wall is None, "exit_codes": codes, "fault": fault, "results": res,
-            "interfaces": ifaces}
+            "interfaces": ifaces,
+            "tcp_segments": sum(c.get("TcpOutSegs", 0) for c in tcp),
+            "tcp_retransmitted": sum(c.get("TcpRetransSegs", 0) for c in tcp)}
 
 
 def summarize(raw: dict, edges, reference: dict | None) -> dict:
@@ -149,6 +153,8 @@ def summarize(raw: dict, edges, reference: dict | None) -> dict:
         # seconds the robot's round packets waited to be handed to Zenoh (a full queue)
         "robot_send_s_max": max((doc["counters"].get("send_s", 0.0) for doc in res.values()),
                                 default=None),
+        # TCP segments all hosts sent, and retransmitted (a capped cable's bucket drops)
+        "tcp_segments": raw["tcp_segments"], "tcp_retransmitted": raw["tcp_retransmitted"],
         "per_link": links,
     }
 
@@ -203,7 +209,8 @@ def main(argv=None) -> int:
                   f"{row['links_lost']}, differ {row['links_decided_differently']}, bytes "
                   f"counted {row['bytes_counted']:,} / packets {row['bytes_packets']:,} / "
                   f"socket {row['bytes_socket']:,}, bytes alone need "
-                  f"{row['bytes_alone_need_s']} s", flush=True)
+                  f"{row['bytes_alone_need_s']} s, TCP segments retransmitted "
+                  f"{row['tcp_retransmitted']:,} of {row['tcp_segments']:,}", flush=True)
         out["teams"][name] = {"robots": n, "edges": len(edges), "rows": rows}
     out["bench_s"] = round(time.monotonic() - t_all, 1)
     out["load_average_end"] = os.getloadavg()[0]

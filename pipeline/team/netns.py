@@ -203,6 +203,16 @@ class NetnsRig:
         st = json.loads(r.stdout)[0]["stats64"]
         return int(st["tx"]["bytes"]), int(st["rx"]["bytes"])
 
+    def tcp_counters(self, i: int) -> dict[str, int]:
+        """Host ``i``'s TCP segments sent and retransmitted since its namespace was made
+        (``nstat``; ``{}`` where nstat is missing)."""
+        if shutil.which("nstat") is None:
+            return {}
+        r = subprocess.run(["ip", "netns", "exec", self.ns(i), "nstat", "-a", "-z", "-s",
+                            "TcpOutSegs", "TcpRetransSegs"], capture_output=True, text=True)
+        return {f[0]: int(f[1]) for f in (line.split() for line in r.stdout.splitlines())
+                if len(f) >= 2 and f[0].startswith("Tcp")}
+
     def link_bytes(self) -> dict[tuple[int, int], int]:
         """Bytes that crossed each cable, both directions (sum of its two ends' tx)."""
         return {(a, b): self.interface_bytes(a, b)[0] + self.interface_bytes(b, a)[0]
