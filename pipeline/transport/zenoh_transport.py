@@ -525,6 +525,8 @@ class ZenohTransport(RoundEndpoint):
     def publish_result(self, data: bytes, wait_s: float = 10.0, period_s: float = 0.25) -> bool:
         """Publish the final result until the observer acknowledges it (or ``wait_s``).
 
+        Bound: about ``wait_s`` plus one ``period_s``, plus at most ``block_s`` per put
+        (:func:`link_timeouts`) when the link to the observer is full or down.
         Returns True when acknowledged (always False without an observer in the team).
         """
         import zenoh
