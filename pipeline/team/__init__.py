@@ -2,7 +2,7 @@
 
 ``TEAM.json`` (:mod:`.teamfile`), the robot program (:mod:`.robot`, ``formation-match
 robot``), starting and observing a team (:mod:`.launcher`), the zygote that forks the robots
-(:mod:`.zygote`) and what the observer makes of the robots' published results
+(:mod:`.zygote`), robots on hosts of their own in network namespaces (:mod:`.netns`) and what the observer makes of the robots' published results
 (:mod:`.assemble`).
 
 May import: everything below the stage chain (the root's shared words, :mod:`pipeline.inputs`,

@@ -23,6 +23,7 @@ import numpy as np
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
+from pipeline.team.teamfile import DEFAULT_OPTIONS
 from pipeline.types import Links, PairMatches
 
 __all__ = ["team_options", "links_of_team", "consistency_of_team", "fusion_of_team",
@@ -35,7 +36,8 @@ FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zeno
 
 
 def team_options(features: str = "sift", max_features: int | None = 2000, faults=None,
-                 round_timeout_s: float = 5.0, merge_radius: float | None = None,
+                 round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"],
+                 merge_radius: float | None = None,
                  resolution: str = DEFAULT_RESOLUTION, fusion: bool = False,
                  **feature_options) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.

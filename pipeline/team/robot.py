@@ -368,6 +368,7 @@ def run_robot_process(team, i: int, result_path=None) -> int:
     transport = ZenohTransport(team, i, drop_prob=float(opts["drop_prob"]),
                                seed=int(opts["fault_seed"]),
                                round_timeout_s=float(opts["round_timeout_s"]),
+                               round_limit_s=float(opts["round_limit_s"]),
                                log=lambda s: _log(i, s))
     startup["session_open"] = _since_launch()
     try:
@@ -395,6 +396,8 @@ def run_robot_process(team, i: int, result_path=None) -> int:
                 k: arrays[k].tolist() for k in ("link_nbr", "link_r", "link_s", "link_alive",
                                                 "deleted_case", "deleted_round")}})
         acked = transport.publish_result(encode_packet(header, [("result", arrays)]))
+        _log(i, f"outcome: {header['counters']['outcome']}"
+                f"{'' if not transport.written_off else f' {transport.written_off}'}")
         _log(i, f"done in {header['timings_s']['total']:.2f} s, {transport.round} rounds"
                 f"{'' if acked or not team.observer else ' (observer did not acknowledge)'}")
         # the last round's packets were handed to Zenoh before the result, and closing the

@@ -18,7 +18,8 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # K of the image as the robot uses it (after downscaling to max_size)
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
-                  "round_timeout_s": 5.0, "start_timeout_s": 60.0, "loss_timeout": 40,
+                  "round_timeout_s": 30.0, "round_limit_s": 600.0,
+                  "start_timeout_s": 60.0, "loss_timeout": 40,
                   "resolution": "evidence",       # a rule of pipeline.consistency.rules,
                                                   # default its DEFAULT_RESOLUTION; e.g.
                                                   # "paper" (paper with drop_prob > 0)
@@ -56,7 +57,10 @@ DEFAULT_OPTIONS = {
     "merge_radius": None,
     "drop_prob": 0.0,
     "fault_seed": 0,
-    "round_timeout_s": 5.0,
+    # silence after which a neighbour is written off, and the longest one round waits for a
+    # neighbour that beats but sends nothing (pipeline.transport.zenoh_transport)
+    "round_timeout_s": 30.0,
+    "round_limit_s": 600.0,
     "start_timeout_s": 60.0,
     "loss_timeout": 40,
     "fusion": False,
@@ -341,7 +345,7 @@ def _check_options(opts: dict, where: str) -> None:
     p = opts.get("drop_prob", 0.0)
     if not isinstance(p, (int, float)) or not 0.0 <= p < 1.0:
         raise InputError(f"{where}: option drop_prob {p!r} must be in [0, 1)")
-    for k in ("round_timeout_s", "start_timeout_s"):
+    for k in ("round_timeout_s", "round_limit_s", "start_timeout_s"):
         v = opts.get(k, 1.0)
         if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
             raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "

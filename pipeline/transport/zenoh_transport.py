@@ -9,6 +9,7 @@ Key expressions (``T`` = team name)
     ``fm/T/round/SRC/DST``  one packet per logical round from robot SRC to neighbour DST
     ``fm/T/hello/SRC/DST``  start handshake
     ``fm/T/alive/SRC/DST``  liveness beat
+    ``fm/T/gone/SRC/DST``   SRC wrote DST off (see "Writing a neighbour off")
     ``fm/T/live/ID``        liveliness token of a robot
     ``fm/T/result/ID``      a robot's final result (for the observer)
     ``fm/T/ack/ID``         the observer's receipt of it
@@ -31,24 +32,81 @@ Faults at this transport
       (:mod:`pipeline.consistency.reliable`) retransmits what is lost, as in the simulator.
     * Liveness: every robot holds a Zenoh liveliness token (``fm/T/live/ID``); when its
       process dies its session closes and the neighbours hear the token vanish within
-      milliseconds: that neighbour is *silent* at once. For a machine that vanishes without
-      closing anything, a background thread sends every neighbour a tiny ``alive`` beat every
-      ``beat_s`` seconds, whatever the robot is computing. A neighbour from which neither a
-      packet nor a beat arrived for ``round_timeout_s`` seconds is *silent* from then on: the robot stops waiting for it and its later packets are
-      ignored. A neighbour that is merely slow (rendering, matching) keeps beating and is
-      waited for. The robot is not told that it crashed: its protocol
-      infers it from silence and cuts its links as ``robot-lost`` after ``T`` rounds.
+      milliseconds. For a machine that vanishes without closing anything, a background thread
+      sends every neighbour still counted on a tiny ``alive`` beat every ``beat_s`` seconds,
+      whatever the robot is computing. A neighbour
+      that is merely slow (rendering, matching) keeps beating and is waited for.
+
+Writing a neighbour off (no hang, ever)
+    A robot stops waiting for neighbour ``k`` — *writes it off* — for one of five reasons,
+    kept in :attr:`ZenohTransport.written_off`:
+
+    ``closed``   its Zenoh session closed (liveliness token gone): its process ended;
+    ``silent``   nothing from it (no packet, no beat) for ``round_timeout_s`` seconds: a host
+                 frozen, or the link between them down (the robot cannot tell which);
+    ``told``     ``k`` wrote *this* robot off and said so (``fm/T/gone/K/ID``);
+    ``limit``    one round waited ``round_limit_s`` seconds for ``k``, which kept beating
+                 without sending the round's packet;
+    ``start``    ``k`` did not answer the start handshake within ``start_timeout_s`` (while
+                 another neighbour did; with none heard the robot stops, naming one).
+
+    Writing off is final and made symmetric: the robot stops sending ``k`` round packets *and
+    beats*, publishes ``gone`` to it at once and again whenever it hears from it later (at most
+    once per beat period), so ``k`` writes this robot off too (``told``) — or, if the notice
+    cannot reach it, by silence after its own ``round_timeout_s``. The neighbour's late
+    packets are ignored. The robot's protocol then sees nothing more from ``k`` and cuts its
+    links as ``robot-lost`` after ``T`` rounds (:mod:`pipeline.consistency.reliable`), on both
+    ends. (Before, a robot written off by one neighbour kept receiving that neighbour's beats,
+    so it waited for that neighbour's packets for ever, and its other neighbours for it: a
+    cycle of waits around a ring.)
+
+    Bounds, stated for :meth:`ZenohTransport.end_round`: the packets are queued to one
+    sender thread per neighbour (a put into a slow link's full queue blocks that link's
+    sender only, at most ``block_s`` seconds per packet before Zenoh closes that link, which
+    reads as ``closed``), and the wait ends within ``round_limit_s`` plus one beat period
+    whatever the neighbours do. A round therefore never waits for ever;
+    a robot that writes off every neighbour runs its remaining rounds alone, without waiting.
+    :meth:`ZenohTransport.outcome` names how the robot ended: ``done`` (no neighbour written
+    off), ``cut`` (only neighbours whose process ended), ``partitioned`` (a neighbour went
+    silent, wrote it off or never answered: frozen, a link down, not started), ``gave-up`` (a
+    round hit ``round_limit_s``).
+
+Rejoin (the rule, and why nothing is lost)
+    Rule: a neighbour is waited for until it is written off (above), never merely because it
+    is late. Claim: if no neighbour of any robot is written off — every host that froze
+    resumed, every link that went down came back, and every robot that started late started,
+    within ``round_timeout_s`` of its last word (``start_timeout_s`` at the start) — then every
+    robot receives exactly the inboxes of an undisturbed run, so the team's decisions (every
+    link's status, reason and round) are those of the run without the fault: the frozen or cut
+    off robot is taken back with its links decided with the rest, nothing is lost.
+    Proof: (1) nothing in flight is lost. The session keeps a link through a silence of up
+    to ``lease_s`` = ``2·round_timeout_s + 10`` s (Zenoh's lease) and a blocked put up to
+    ``block_s`` = ``round_timeout_s + 5`` s, both longer than any silence that is not written
+    off, so the Zenoh session and its TCP connection stay open and TCP delivers every byte,
+    in order, once the link or the host is back. (2) The α-synchronizer's round ``r`` ends
+    only when the round-``r`` packet of every neighbour not written off has arrived, and by
+    (1) it does arrive; so the inbox of round ``r + 1`` is the same set of messages, in the
+    same order (by sender then sending order), whatever the delays. (3) The robot code is
+    deterministic given its inboxes (the injected drops are seeded per robot and per
+    message, not per time), so by induction on rounds every robot makes the same decisions
+    as without the fault. Only time is spent: the rounds of the whole team stall while one
+    robot is silent. When a robot *is* written off, its links are cut as ``robot-lost`` by
+    both ends, so the team still ends conflict-free (the survivors repeat detection after a
+    loss, :mod:`pipeline.consistency.termination`), and the run reports the links it lost.
 
 Start handshake
     Each robot repeats ``hello`` to every neighbour (carrying whether it has heard that
     neighbour) until it has heard every neighbour and every neighbour has heard it, then sends
-    one last ``hello``. A neighbour not heard within ``start_timeout_s`` is reported by id and
-    endpoint (:class:`~pipeline.transport.RobotMissingError`).
+    one last ``hello``. A neighbour that starts late within ``start_timeout_s`` joins; one not
+    heard by then is written off (``start``) and named in the log, and the robot runs on with
+    the others; if no neighbour at all was heard, the robot stops and names one
+    (:class:`~pipeline.transport.RobotMissingError`).
 """
 
 from __future__ import annotations
 
 import json
+import queue
 import sys
 import threading
 import time
@@ -67,24 +125,40 @@ def key(team: str, what: str, *ids) -> str:
     return "/".join(["fm", team, what, *(str(i) for i in ids)])
 
 
-def zenoh_config(listen: list[str], connect: list[str]):
-    """A peer-mode Zenoh config: no multicast scouting, no gossip, explicit endpoints."""
+def link_timeouts(round_timeout_s: float) -> tuple[float, float]:
+    """``(lease_s, block_s)`` of a robot's Zenoh session: longer than any silence the robot
+    does not write off, so a session outlives every fault it is meant to survive (module
+    docstring, "Rejoin", step 1)."""
+    return 2.0 * float(round_timeout_s) + 10.0, float(round_timeout_s) + 5.0
+
+
+def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None):
+    """A peer-mode Zenoh config: no multicast scouting, no gossip, explicit endpoints; with
+    ``round_timeout_s``, the lease and the longest blocked put of :func:`link_timeouts`."""
     import zenoh
 
-    return zenoh.Config.from_json5(json.dumps({
+    doc = {
         "mode": "peer",
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "listen": {"endpoints": list(listen)},
         "connect": {"endpoints": list(connect)},
-    }))
+    }
+    if round_timeout_s is not None:
+        lease_s, block_s = link_timeouts(round_timeout_s)
+        doc["transport"] = {"link": {"tx": {
+            "lease": int(lease_s * 1000),
+            "queue": {"congestion_control": {"block": {"wait_before_close":
+                                                           int(block_s * 1e6)}}}}}}
+    return zenoh.Config.from_json5(json.dumps(doc))
 
 
-def open_session(listen: list[str], connect: list[str], who: str):
+def open_session(listen: list[str], connect: list[str], who: str,
+                 round_timeout_s: float | None = None):
     """Open a Zenoh session; a listen endpoint that cannot be bound is one InputError line."""
     import zenoh
 
     try:
-        return zenoh.open(zenoh_config(listen, connect))
+        return zenoh.open(zenoh_config(listen, connect, round_timeout_s))
     except zenoh.ZError as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else "zenoh error"
         ep = listen[0] if listen else "?"
@@ -102,13 +176,22 @@ class ZenohTransport(RoundEndpoint):
     robot_id : int
     drop_prob : float in [0, 1) — loss injected on outgoing algorithm messages
     seed : int — seed of the drops (combined with the robot id)
-    round_timeout_s : float — silence (no packet, no beat) after which a neighbour is lost
+    round_timeout_s : float — silence (no packet, no beat) after which a neighbour is
+        written off (``silent``)
+    round_limit_s : float — longest one round waits for a neighbour that beats but sends
+        nothing (then ``limit``)
     beat_s : float — period of the liveness beats
     log : callable(str) or None — progress lines (default: stderr)
+
+    Attributes
+    ----------
+    written_off : dict[int, str] — neighbours written off and why (module docstring)
+    silent : set[int] — the same neighbours (what the robot code asks)
     """
 
     def __init__(self, team, robot_id: int, *, drop_prob: float = 0.0, seed: int = 0,
-                 round_timeout_s: float = 5.0, beat_s: float = 0.2, log=None) -> None:
+                 round_timeout_s: float = 30.0, round_limit_s: float = 600.0,
+                 beat_s: float = 0.2, log=None) -> None:
         self.team = team
         self.robot_id = int(robot_id)
         self.neighbours = frozenset(team.neighbours(self.robot_id))
@@ -117,6 +200,9 @@ class ZenohTransport(RoundEndpoint):
         self.lossy = False  # set by the robot when its consistency stage starts
         self._rng = np.random.default_rng([int(seed), 7, self.robot_id])
         self.round_timeout_s = float(round_timeout_s)
+        self.round_limit_s = float(round_limit_s)
+        self.written_off: dict[int, str] = {}
+        self._tell: dict[int, float] = {}  # written-off neighbour -> last gone notice sent
         self._log = log or (lambda s: print(s, file=sys.stderr, flush=True))
         self.silent: set[int] = set()
         self._out: dict[int, list[tuple[str, dict]]] = {k: [] for k in self.neighbours}
@@ -128,14 +214,19 @@ class ZenohTransport(RoundEndpoint):
         self._stop = threading.Event()
         self.messages = self.bytes = self.dropped = 0
         self.wire_bytes = self.wire_packets = 0
+        # per neighbour: message bytes counted (as the simulator counts) and packet bytes
+        # handed to Zenoh (what the namespace rig compares with the cable's counters)
+        self.bytes_to = {k: 0 for k in self.neighbours}
+        self.wire_bytes_to = {k: 0 for k in self.neighbours}
         self.messages_by_kind: dict[str, int] = {}
         self.bytes_by_kind: dict[str, int] = {}
         self.wait_s = 0.0
+        self.send_s = 0.0  # seconds the round packets' puts blocked (a full queue: slow link)
         connect = [team.endpoint(k) for k in sorted(self.neighbours)]
         if team.observer:
             connect.append(team.observer)
         self.session = open_session([team.endpoint(self.robot_id)], connect,
-                                    f"robot {self.robot_id}")
+                                    f"robot {self.robot_id}", self.round_timeout_s)
         name = team.name
         self._subs = []
         for k in sorted(self.neighbours):
@@ -145,6 +236,8 @@ class ZenohTransport(RoundEndpoint):
                 key(name, "hello", k, self.robot_id), self._on_hello))
             self._subs.append(self.session.declare_subscriber(
                 key(name, "alive", k, self.robot_id), self._on_beat))
+            self._subs.append(self.session.declare_subscriber(
+                key(name, "gone", k, self.robot_id), self._on_gone))
         import zenoh
 
         # round packets must never be dropped by Zenoh itself (its default under congestion
@@ -153,6 +246,12 @@ class ZenohTransport(RoundEndpoint):
             key(name, "round", self.robot_id, k),
             congestion_control=zenoh.CongestionControl.BLOCK)
             for k in sorted(self.neighbours)}
+        # one sender per neighbour: a put into a slow link's full queue blocks that link only
+        self._sendq = {k: queue.SimpleQueue() for k in sorted(self.neighbours)}
+        self._senders = {k: threading.Thread(target=self._sender, args=(k,), daemon=True)
+                         for k in sorted(self.neighbours)}
+        for t in self._senders.values():
+            t.start()
         self._beat_pubs = {k: self.session.declare_publisher(
             key(name, "alive", self.robot_id, k)) for k in sorted(self.neighbours)}
         self._beater = threading.Thread(target=self._beat, daemon=True)
@@ -176,17 +275,85 @@ class ZenohTransport(RoundEndpoint):
             self._cv.notify_all()
 
     def _beat(self) -> None:
+        """Beats to the neighbours still counted on; ``gone`` notices to those written off
+        that were heard since the last notice (at most one per beat period each)."""
         while not self._stop.wait(self.beat_s):
-            for pub in self._beat_pubs.values():
-                try:
-                    pub.put(b"1")
-                except Exception:  # noqa: BLE001 - the session is closing
-                    return
+            with self._cv:
+                beat = [k for k in self._beat_pubs if k not in self.written_off]
+                now = time.monotonic()
+                tell = [k for k, t in self._tell.items()
+                        if self._heard.get(k, -1.0) >= t and now - t >= self.beat_s]
+                for k in tell:
+                    self._tell[k] = now
+            try:
+                for k in beat:
+                    self._beat_pubs[k].put(b"1")
+                for k in tell:
+                    self._say_gone(k)
+            except Exception:  # noqa: BLE001 - the session is closing
+                return
+
+    def _sender(self, k: int) -> None:
+        """Hand neighbour ``k``'s round packets to Zenoh in order; ``None`` ends it."""
+        q = self._sendq[k]
+        while True:
+            data = q.get()
+            if data is None:
+                return
+            if k in self.written_off:
+                continue
+            t_put = time.monotonic()
+            try:
+                self._pubs[k].put(data)
+            except Exception:  # noqa: BLE001 - the session is closing
+                return
+            with self._cv:
+                self.send_s += time.monotonic() - t_put
+
+    def _say_gone(self, k: int) -> None:
+        self.session.put(key(self.team.name, "gone", self.robot_id, k), b"1")
 
     def _on_beat(self, sample) -> None:
         k = int(str(sample.key_expr).split("/")[-2])
         with self._cv:
             self._heard[k] = time.monotonic()
+
+    def _on_gone(self, sample) -> None:
+        k = int(str(sample.key_expr).split("/")[-2])
+        with self._cv:
+            if k not in self.written_off:
+                self._write_off(k, "told")
+                self._tell[k] = time.monotonic()  # it knows: no notice back
+            self._cv.notify_all()
+
+    _WHY = {"closed": "its Zenoh session closed",
+            "told": "it wrote this robot off",
+            "limit": "the round waited round_limit_s for it",
+            "start": "no answer to the start handshake"}
+
+    def _write_off(self, k: int, why: str) -> None:
+        """Stop counting on neighbour ``k`` (caller holds ``_cv``); tell it, once now and
+        again whenever it is heard later (by the beat thread)."""
+        if k in self.written_off:
+            return
+        self.written_off[k] = why
+        self.silent.add(k)
+        self._tell[k] = float("-inf")  # the beat thread's next pass sends the first notice
+        text = self._WHY.get(why, f"nothing from it for {self.round_timeout_s:g} s")
+        self._log(f"robot {self.robot_id}: robot {k} written off in round {self.round} "
+                  f"({why}: {text})")
+
+    def outcome(self) -> str:
+        """How this robot ended (module docstring): ``done``, ``cut``, ``partitioned`` or
+        ``gave-up``."""
+        why = set(self.written_off.values())
+        if not why:
+            return "done"
+        if "limit" in why:
+            return "gave-up"
+        if why & {"silent", "told", "start"}:
+            return "partitioned"
+        return "cut"
 
     # --- callbacks (Zenoh threads) --------------------------------------------------------
     def _on_packet(self, sample) -> None:
@@ -196,9 +363,11 @@ class ZenohTransport(RoundEndpoint):
             self._log(f"robot {self.robot_id}: dropped a malformed packet on "
                       f"{sample.key_expr}: {exc}")
             return
+        src = int(header["src"])
         with self._cv:
-            self._packets[(int(header["src"]), int(header["round"]))] = (header, msgs)
-            self._heard[int(header["src"])] = time.monotonic()
+            self._heard[src] = time.monotonic()
+            if src not in self.written_off:  # a written-off robot's packets are ignored
+                self._packets[(src, int(header["round"]))] = (header, msgs)
             self._cv.notify_all()
 
     def _on_hello(self, sample) -> None:
@@ -208,6 +377,7 @@ class ZenohTransport(RoundEndpoint):
         except (ValueError, KeyError, TypeError):
             return
         with self._cv:
+            self._heard[src] = time.monotonic()
             self._hello[src] = self._hello.get(src, False) or heard_me
             self._cv.notify_all()
 
@@ -215,10 +385,15 @@ class ZenohTransport(RoundEndpoint):
     def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05) -> float:
         """Wait until every neighbour is heard and has heard this robot; return seconds taken.
 
+        A neighbour that starts late within ``timeout_s`` joins. One that has not answered by
+        then is written off (``start``: named in the log, outcome ``partitioned``) and the robot
+        runs on with the others; if it starts later it is told (``gone``) and ends alone.
+
         Raises
         ------
         RobotMissingError
-            Some neighbour was not heard within ``timeout_s``; the message names it.
+            No neighbour at all was heard within ``timeout_s`` (a wrong address is likelier
+            than every neighbour being down); the message names the first.
         """
         t0 = time.monotonic()
         name = self.team.name
@@ -242,12 +417,21 @@ class ZenohTransport(RoundEndpoint):
                 say()  # the last one tells late neighbours that they were heard
                 return time.monotonic() - t0
             if time.monotonic() - t0 > timeout_s:
-                if not missing:
-                    missing = sorted(k for k in self.neighbours if not self._hello.get(k))
+                missing = sorted(set(missing) | {k for k in self.neighbours
+                                                 if not self._hello.get(k)})
                 k = missing[0]
-                raise RobotMissingError(
-                    f"robot {self.robot_id}: neighbour robot {k} ({self.team.endpoint(k)}) did "
-                    f"not answer within {timeout_s:g} s; it never started or cannot be reached")
+                text = (f"neighbour robot {k} ({self.team.endpoint(k)}) did not answer within "
+                        f"{timeout_s:g} s; it never started or cannot be reached")
+                if len(missing) == len(self.neighbours):
+                    raise RobotMissingError(f"robot {self.robot_id}: {text}")
+                # some neighbours answered: run on with them, the others written off
+                for k in missing:
+                    self._log(f"robot {self.robot_id}: neighbour robot {k} "
+                              f"({self.team.endpoint(k)}) did not answer within {timeout_s:g} s; "
+                              "it never started or cannot be reached")
+                    with self._cv:
+                        self._write_off(k, "start")
+                return time.monotonic() - t0
 
     # --- rounds ---------------------------------------------------------------------------
     def send(self, dst: int, kind: str, payload: dict) -> None:
@@ -259,6 +443,7 @@ class ZenohTransport(RoundEndpoint):
         size = msg.nbytes
         self.messages += 1
         self.bytes += size
+        self.bytes_to[dst] += size
         self.messages_by_kind[kind] = self.messages_by_kind.get(kind, 0) + 1
         self.bytes_by_kind[kind] = self.bytes_by_kind.get(kind, 0) + size
         if self.lossy and self.drop_prob > 0.0 and self._rng.random() < self.drop_prob:
@@ -267,6 +452,16 @@ class ZenohTransport(RoundEndpoint):
         self._out[dst].append((kind, payload))
 
     def end_round(self, state: dict | None = None) -> tuple[list[Message], dict[int, dict]]:
+        """Send this round's packets, wait for the neighbours' (see
+        :meth:`RoundEndpoint.end_round`).
+
+        Bound: returns within ``round_limit_s`` plus one beat period, whatever the neighbours
+        do (the packets are queued to each neighbour's sender thread, which never holds the
+        round up): a neighbour whose
+        packet has not come is written off when its session closes, after ``round_timeout_s``
+        of silence, when it says it wrote this robot off, or when the round has waited
+        ``round_limit_s`` (module docstring, "Writing a neighbour off").
+        """
         r = self.round
         for k in sorted(self.neighbours):
             msgs, self._out[k] = self._out[k], []
@@ -275,8 +470,9 @@ class ZenohTransport(RoundEndpoint):
             data = encode_packet({"src": self.robot_id, "dst": k, "round": r,
                                   "state": state or {}}, msgs)
             self.wire_bytes += len(data)
+            self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
-            self._pubs[k].put(data)
+            self._sendq[k].put(data)  # never blocks: the neighbour's sender puts it
         t0 = time.monotonic()
         with self._cv:
             for k in self.neighbours:
@@ -287,21 +483,22 @@ class ZenohTransport(RoundEndpoint):
                 if not waiting:
                     break
                 now = time.monotonic()
-                gone = [k for k in waiting
-                        if k in self._left or now - self._heard[k] > self.round_timeout_s]
-                for k in gone:
-                    self.silent.add(k)
-                    why = ("its Zenoh session closed" if k in self._left else
-                           f"nothing from it for {self.round_timeout_s:g} s")
-                    self._log(f"robot {self.robot_id}: robot {k} is silent from round {r} on "
-                              f"({why})")
-                if len(gone) == len(waiting):
+                for k in waiting:
+                    if k in self._left:
+                        self._write_off(k, "closed")
+                    elif now - self._heard[k] > self.round_timeout_s:
+                        self._write_off(k, "silent")
+                    elif now - t0 > self.round_limit_s:
+                        self._write_off(k, "limit")
+                if all(k in self.silent for k in waiting):
                     break
+                # bounded: every pass writes off or waits at most a beat period, and after
+                # round_limit_s every neighbour still waited for is written off
                 self._cv.wait(min(self.beat_s, self.round_timeout_s))
             got = {k: self._packets.pop((k, r)) for k in sorted(self.neighbours)
                    if k not in self.silent and (k, r) in self._packets}
             for kk in [kk for kk in self._packets if kk[1] <= r]:
-                del self._packets[kk]  # late packets of silent robots
+                del self._packets[kk]  # late packets
         self.wait_s += time.monotonic() - t0
         self.round = r + 1
         inbox = [Message(k, self.robot_id, kind, payload, r)
@@ -314,7 +511,11 @@ class ZenohTransport(RoundEndpoint):
                     round=self.round, messages_by_kind=dict(self.messages_by_kind),
                     bytes_by_kind=dict(self.bytes_by_kind), wire_bytes=self.wire_bytes,
                     wire_packets=self.wire_packets, wait_s=round(self.wait_s, 4),
-                    silent=sorted(self.silent))
+                    send_s=round(self.send_s, 4),
+                    bytes_to={str(k): v for k, v in sorted(self.bytes_to.items())},
+                    wire_bytes_to={str(k): v for k, v in sorted(self.wire_bytes_to.items())},
+                    silent=sorted(self.silent), outcome=self.outcome(),
+                    written_off={str(k): v for k, v in sorted(self.written_off.items())})
 
     # --- results --------------------------------------------------------------------------
     def status(self, text: str) -> None:
@@ -324,6 +525,8 @@ class ZenohTransport(RoundEndpoint):
     def publish_result(self, data: bytes, wait_s: float = 10.0, period_s: float = 0.25) -> bool:
         """Publish the final result until the observer acknowledges it (or ``wait_s``).
 
+        Bound: about ``wait_s`` plus one ``period_s``, plus at most ``block_s`` per put
+        (:func:`link_timeouts`) when the link to the observer is full or down.
         Returns True when acknowledged (always False without an observer in the team).
         """
         import zenoh
@@ -345,6 +548,14 @@ class ZenohTransport(RoundEndpoint):
             sub.undeclare()
 
     def close(self) -> None:
+        """Let the senders hand over what they still hold (each at most ``block_s`` per
+        packet, :func:`link_timeouts`, in parallel), then close the session."""
+        for q in self._sendq.values():
+            q.put(None)
+        block_s = link_timeouts(self.round_timeout_s)[1]
+        end = time.monotonic() + 2 * block_s
+        for t in self._senders.values():
+            t.join(timeout=max(0.0, end - time.monotonic()))
         self._stop.set()
         try:
             self.session.close()

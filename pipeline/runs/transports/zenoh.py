@@ -27,12 +27,13 @@ from pipeline.team.assemble import (
     team_options,
 )
 from pipeline.team.launcher import launch_team, make_team, team_summary
+from pipeline.team.teamfile import DEFAULT_OPTIONS
 
 __all__ = ["formation", "images", "resolve", "resolve_links_file"]
 
 
 def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
-              round_timeout_s: float = 5.0) -> FormationRobots:
+              round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"]) -> FormationRobots:
     """``run-formation --transport zenoh``: one robot process per camera.
 
     The robots render their own cameras, extract, match, resolve and fuse; this process (the
@@ -42,7 +43,7 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
     ----------
     config : FormationConfig
     kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
-    round_timeout_s : float — wait for a neighbour's packet before it counts as silent
+    round_timeout_s : float — silence after which a neighbour is written off
     workdir : folder for TEAM.json and the robots' logs (default: temporary)
     keep_run : list or None — the :class:`~pipeline.team.launcher.TeamRun` is appended to it
     """
