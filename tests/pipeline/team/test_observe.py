@@ -1,0 +1,183 @@
+"""A team started by hand (one ``robot`` process each) and a standalone observer: the same
+run folder as the simulator's; each robot reads only its own data."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.runs.formation import FormationConfig, run_formation
+
+
+@pytest.fixture(autouse=True)
+def _scene_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+def _rows(path):
+    return [tuple(line.split(",")[:6]) for line in Path(path).read_text().splitlines()]
+
+
+def _start_robots(team_paths, tmp_path):
+    """One ``python -m pipeline robot`` process per robot, as a user starts them by hand."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    procs = []
+    for i, team in enumerate(team_paths):
+        log = open(tmp_path / f"robot{i}.log", "wb")  # noqa: SIM115
+        procs.append((subprocess.Popen(
+            [sys.executable, "-m", "pipeline", "robot", "--team", str(team), "--id", str(i),
+             "--result", str(tmp_path / f"robot{i}.json")], stdout=log,
+            stderr=subprocess.STDOUT, env=env), log))
+    return procs
+
+
+def _stop(procs, timeout=60):
+    codes = []
+    for p, log in procs:
+        try:
+            codes.append(p.wait(timeout=timeout))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            codes.append(p.wait())
+        log.close()
+    return codes
+
+
+def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.stages import merge_radius_for
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+
+    cfg = dict(formation="a", seed=0, size=(160, 120), fusion=True, rerun=False)
+    sim = run_formation(FormationConfig(out=str(tmp_path / "sim"), **cfg))
+    c = FormationConfig(**cfg)
+    import data_synth
+
+    opts = team_options(c.features, c.max_features, None,
+                        merge_radius=merge_radius_for(c.resolution, None),
+                        resolution=c.resolution, fusion=True)
+    opts["start_timeout_s"] = 120.0
+    team = make_team("by-hand", data_synth.formation_edges("a", 0, None, None),
+                     {"kind": "formation", "formation": "a", "seed": 0, "size": [160, 120],
+                      "robots": None, "graph": None}, opts, n=6)
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300", "--no-rerun"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+    rows = _rows(tmp_path / "obs" / "links.csv")
+    assert rows == _rows(sim / "links.csv")
+    assert any(r[5] == "fusion-outlier" for r in rows[1:])
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["team"]["observed"] is True and report["team"]["lost"] == []
+    assert report["after"]["conflictive_sets"] == 0
+    # each robot's --result holds every decision it made, fusion cuts included
+    status = {(int(r[0]), int(r[1]), int(r[2]), int(r[3])): (r[4], r[5]) for r in rows[1:]}
+    fusion_cuts = 0
+    for i in range(team.n):
+        res = json.loads((tmp_path / f"robot{i}.json").read_text())["links"]
+        for k, r, s, why in zip(res["link_nbr"], res["link_r"], res["link_s"],
+                                zip(res["status"], res["reason"], strict=True), strict=True):
+            key = (i, r, k, s) if i < k else (k, s, i, r)
+            if why[1] == "fusion-outlier":
+                fusion_cuts += 1
+                assert status[key] == ("deleted", "fusion-outlier")
+            if why[0] == "kept":
+                assert status[key] == ("kept", "")
+        assert len(res["fusion_cut"]) == len(res["link_nbr"])
+    assert fusion_cuts > 0
+
+
+def test_each_robot_given_only_its_own_links_file_runs(tmp_path):
+    """Every robot on its own "machine" (folder): its TEAM.json copy names every robot's
+    links file, but only its own exists there. The observer's links.csv equals the
+    simulator's ``resolve`` of the whole file."""
+    from pipeline.runs.transports.zenoh import write_robot_links
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+    from pipeline.types import Links
+
+    rng = np.random.default_rng(4)
+    rows, seen = [], set()
+    for _ in range(90):
+        i, j = sorted(rng.choice(4, 2, replace=False).tolist())
+        r, s = int(rng.integers(10)), int(rng.integers(10))
+        if (i, r, j) not in seen and (j, s, i) not in seen:
+            seen |= {(i, r, j), (j, s, i)}
+            rows.append((i, r, j, s))
+    rows.sort()
+    q = rng.uniform(0.05, 0.95, len(rows)).round(3)
+    links = Links(*np.array(rows).T, q)
+    whole = tmp_path / "in.csv"
+    whole.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+        f"{a},{b},{c},{d},{x}\n" for (a, b, c, d), x in zip(rows, q, strict=True)))
+    graph = tmp_path / "graph.csv"
+    graph.write_text("".join(f"{i},{j}\n" for i in range(4) for j in range(i + 1, 4)))
+    assert main(["resolve", "--links", str(whole), "--comm-graph", str(graph), "--resolution",
+                 "evidence", "--out", str(tmp_path / "sim.csv")]) == 0
+    names = [f"links-robot{i}.csv" for i in range(4)]
+    team = make_team("own-files", [[i, j] for i in range(4) for j in range(i + 1, 4)],
+                     {"kind": "links", "links": names, "features_per_camera": [10] * 4},
+                     {"resolution": "evidence", "start_timeout_s": 120.0}, n=4)
+    paths = []
+    for i in range(4):
+        home = tmp_path / f"machine{i}"
+        home.mkdir()
+        written = write_robot_links(home, links, 4)
+        for k, p in enumerate(written):
+            if k != i:
+                p.unlink()  # only its own rows live on its machine
+        team.path = None
+        paths.append(write_team(home / "TEAM.json", team))
+    (tmp_path / "observer").mkdir()
+    obs_team = write_team(tmp_path / "observer" / "TEAM.json", team)
+    procs = _start_robots(paths, tmp_path)
+    try:
+        assert main(["observe", "--team", str(obs_team), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * 4
+    sim = _rows(tmp_path / "sim.csv")
+    got = _rows(tmp_path / "obs" / "links.csv")
+    assert got[0] == sim[0] and sorted(got[1:]) == sorted(sim[1:])
+    assert any(r[4] == "deleted" for r in sim[1:])
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["after"]["conflictive_sets"] == 0 and report["links"] == len(rows)
+
+
+def test_a_robot_reads_only_its_own_rows_and_refuses_a_foreign_file(tmp_path):
+    from pipeline.errors import InputError
+    from pipeline.team.robot import own_links_from_file
+
+    f = tmp_path / "r1.csv"
+    f.write_text("cam_i,feat_i,cam_j,feat_j\n0,1,1,2\n1,0,2,3\n")
+    nbr, r, s, _ = own_links_from_file(f, 1, own_file=True)
+    assert nbr.tolist() == [2, 0] and r.tolist() == [0, 2] and s.tolist() == [3, 1]
+    with pytest.raises(InputError, match=r"r1.csv:3: link \(1,0\)-\(2,3\) does not touch robot 0"):
+        own_links_from_file(f, 0, own_file=True)
+
+
+def test_observe_refuses_a_team_without_observer_or_of_photographs(tmp_path):
+    doc = {"version": 1, "name": "two", "comm_edges": [[0, 1]],
+           "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
+                      {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
+           "data": {"kind": "formation", "formation": "line", "robots": 2, "seed": 0}}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    doc["observer"] = {"endpoint": "tcp/127.0.0.1:7449"}
+    doc["data"] = {"kind": "images", "images": ["a.jpg", "b.jpg"]}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()
