@@ -70,8 +70,11 @@ def pack_features(keypoints: np.ndarray, raw_descriptors: np.ndarray, rootsift: 
 
 def unpack_features(payload: dict) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`pack_features`: ``(keypoints, descriptors to match with)``, equal to
-    the sender's own (``matching_descriptors(raw, rootsift)``)."""
+    the sender's own (``matching_descriptors(raw, rootsift)``). A payload without
+    ``descriptor_form`` holds the descriptors to match with as they are."""
     d = payload["descriptors"]
+    if "descriptor_form" not in payload:
+        return payload["keypoints"].reshape(-1, 2), d
     as_byte, root = (bool(v) for v in payload["descriptor_form"][:2])
     if as_byte:
         d = d.astype(np.float32)

@@ -26,10 +26,15 @@ from pipeline.errors import InputError
 from pipeline.types import Links, PairMatches
 
 __all__ = ["team_options", "links_of_team", "consistency_of_team", "fusion_of_team",
-           "FUSION_SKIPPED"]
+           "FUSION_SKIPPED", "CONSISTENCY_KINDS", "FUSION_KINDS"]
 
-CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "closing", "ack", "heartbeat")
-FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut")
+#: message kinds of each stage (the evidence rule's flood is ``bundle``, the sync rule's are
+#: ``sync-*``; the reliable fusion's empty rounds ``fusion-tick``); the robots' other kinds
+#: (``features``, ``matches``, ``counts``, ``lossy``) are the feature exchange before them
+CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "closing", "ack", "heartbeat",
+                     "bundle", "sync-support", "sync-best", "sync-merge", "sync-relabel",
+                     "sync-x")
+FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut", "fusion-tick")
 FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport "
                   "for photographs (their poses come from a reconstruction of all of them)"}
 

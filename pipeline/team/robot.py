@@ -49,7 +49,7 @@ from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_ne
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
 from pipeline.team.teamfile import LAUNCHED_AT_ENV, links_file_of
-from pipeline.transport.wire import encode_packet
+from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
            "flood_flag", "result_links"]
@@ -164,7 +164,9 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     known[i] = len(feats)
     lossy = np.array([_own_lossy(opts)], np.uint8)
     pose = _pose(view)
-    payload = {**pack_features(raw.keypoints, raw.descriptors, rootsift),
+    compact = opts.get("wire", "compact") == "compact"
+    payload = {**(pack_features(raw.keypoints, raw.descriptors, rootsift) if compact else
+                  {"keypoints": feats.keypoints, "descriptors": feats.descriptors}),
                "K": np.asarray(view.K, np.float64),
                "intrinsics_known": np.array([view.intrinsics_known], np.uint8),
                "size": np.array([w, h], np.int32)}
@@ -172,7 +174,8 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
         payload["R"], payload["t"] = pose[1], pose[2]
     del raw
     for k in sorted(transport.neighbours):
-        if k < i:  # edge (k, i) is matched by k, the lower id: only k uses these features
+        if k < i or not compact:  # edge (k, i) is matched by k, the lower id: only k uses
+            # these features (the plain encoding sends them to every neighbour)
             transport.send(k, "features", payload)
         transport.send(k, "counts", {"m": known.copy(), "lossy": lossy.copy()})
     sent, sent_lossy = known.copy(), lossy.copy()
@@ -283,6 +286,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     keypoints and matches (see :func:`pipeline.consistency.termination.robot_link_log`).
     """
     opts = team.options_for(i)
+    set_compression(opts.get("wire", "compact") == "compact")
     timings: dict = {}
     t0 = time.perf_counter()
     arrays: dict = {}

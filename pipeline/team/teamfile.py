@@ -25,7 +25,8 @@ one; a user may write one by hand. Schema (``version`` 1)::
                                                   # default its DEFAULT_RESOLUTION; e.g.
                                                   # "paper" (paper with drop_prob > 0)
                   "merge_radius": null, "contrast_threshold": null, "rootsift": false,
-                  "budget_after_merge": false, "threshold_px": 1.0},
+                  "budget_after_merge": false, "threshold_px": 1.0,
+                  "wire": "compact"},             # or "plain" (teamfile.WIRE_FORMS)
               # max_features / threshold_px null: scaled with the image size (photos);
               # merge_radius null: that of the resolution, as on the command line (2 px
               # with evidence, 0.5 px with paper)
@@ -73,7 +74,13 @@ DEFAULT_OPTIONS = {
     "rootsift": False,
     "budget_after_merge": False,
     "threshold_px": 1.0,
+    "wire": "compact",
 }
+#: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
+#: (pipeline.matching.compact), features only to the neighbour that matches them, packets
+#: zlib-compressed (pipeline.transport.wire); ``plain`` — descriptors as extracted, to every
+#: neighbour, packets uncompressed (the earlier encoding, kept to compare the two)
+WIRE_FORMS = ("compact", "plain")
 #: options that are the team's, not one robot's (every robot must run the same rule)
 TEAM_ONLY_OPTIONS = ("resolution",)
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
@@ -385,6 +392,9 @@ def _check_options(opts: dict, where: str) -> None:
     for k in ("fusion", "rootsift", "budget_after_merge"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
+    if opts.get("wire", "compact") not in WIRE_FORMS:
+        raise InputError(f"{where}: option wire {opts['wire']!r} must be one of "
+                         f"{', '.join(WIRE_FORMS)}")
     method = opts.get("features", "sift")
     if method not in FEATURE_METHODS:
         raise InputError(f"{where}: option features {method!r} must be one of "

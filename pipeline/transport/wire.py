@@ -28,7 +28,8 @@ import zlib
 
 import numpy as np
 
-__all__ = ["encode_packet", "decode_packet", "WireError", "ZLIB_LEVEL", "MAX_PACKET_BYTES"]
+__all__ = ["encode_packet", "decode_packet", "WireError", "ZLIB_LEVEL", "MAX_PACKET_BYTES",
+           "set_compression"]
 
 _MAGIC = b"FMP1"
 _MAGIC_Z = b"FMZ1"
@@ -39,6 +40,13 @@ ZLIB_LEVEL = 1
 #: largest decompressed packet accepted (a packet claiming more is malformed, not a reason to
 #: exhaust memory): 1 GiB
 MAX_PACKET_BYTES = 1 << 30
+_compress = {"on": True}
+
+
+def set_compression(on: bool) -> None:
+    """Whether :func:`encode_packet` compresses by default in this process (a robot process
+    sets it from its ``wire`` option; on unless told otherwise)."""
+    _compress["on"] = bool(on)
 
 
 class WireError(ValueError):
@@ -46,14 +54,15 @@ class WireError(ValueError):
 
 
 def encode_packet(header: dict, messages: list[tuple[str, dict]],
-                  compress: bool = True) -> bytes:
+                  compress: bool | None = None) -> bytes:
     """Encode one packet.
 
     Parameters
     ----------
     header : dict — JSON-serialisable fields (ints, floats, bools, strings, lists)
     messages : list of ``(kind, payload)`` — payload maps names to numpy arrays
-    compress : bool — send it zlib-compressed when that is smaller (module docstring)
+    compress : bool or None — send it zlib-compressed when that is smaller (module
+        docstring); None: as :func:`set_compression` set (default on)
 
     Returns
     -------
@@ -71,7 +80,7 @@ def encode_packet(header: dict, messages: list[tuple[str, dict]],
         descr.append([kind, arrays])
     head = json.dumps({**header, "msgs": descr}, separators=(",", ":")).encode()
     plain = b"".join([_MAGIC, _LEN.pack(len(head)), head, *blobs])
-    if compress and len(plain) > 64:
+    if (_compress["on"] if compress is None else compress) and len(plain) > 64:
         packed = zlib.compress(plain, ZLIB_LEVEL)
         if len(packed) + len(_MAGIC_Z) < len(plain):
             return _MAGIC_Z + packed

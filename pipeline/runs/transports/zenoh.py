@@ -61,7 +61,7 @@ def _union_links(parts):
 
 
 def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
-              round_timeout_s: float = 5.0) -> FormationRobots:
+              round_timeout_s: float = 5.0, wire: str = "compact") -> FormationRobots:
     """``run-formation --transport zenoh``: one robot process per camera.
 
     The robots render their own cameras, extract, match, resolve and fuse; this process (the
@@ -72,6 +72,7 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
     config : FormationConfig
     kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
     round_timeout_s : float — wait for a neighbour's packet before it counts as silent
+    wire : the robots' encoding, ``compact`` or ``plain`` (:data:`pipeline.team.teamfile.WIRE_FORMS`)
     workdir : folder for TEAM.json and the robots' logs (default: temporary)
     keep_run : list or None — the :class:`~pipeline.team.launcher.TeamRun` is appended to it
     """
@@ -79,7 +80,7 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
 
     opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
                         merge_radius_for(config.resolution, config.merge_radius),
-                        config.resolution, fusion=bool(config.fusion))
+                        config.resolution, fusion=bool(config.fusion), wire=wire)
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6

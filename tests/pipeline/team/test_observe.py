@@ -181,3 +181,26 @@ def test_observe_refuses_a_team_without_observer_or_of_photographs(tmp_path):
     assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
                  str(tmp_path / "o")]) == 2
     assert not (tmp_path / "o").exists()
+
+
+def test_loss_at_one_robot_is_learnt_by_all_and_the_fault_tolerant_rule_runs(tmp_path):
+    """Robot 2 alone injects message loss (its own option): every robot learns it from its
+    neighbours and all run the fault-tolerant Alg. 1, as the simulator does on a lossy
+    network."""
+    from pipeline.runs.transports.zenoh import write_robot_links
+    from pipeline.team.launcher import launch_team, make_team
+    from pipeline.types import Links
+
+    links = Links([0, 0, 1, 2], [0, 1, 0, 0], [1, 3, 2, 3], [0, 0, 1, 1], [0.9, 0.2, 0.8, 0.7])
+    paths = [str(p) for p in write_robot_links(tmp_path, links, 4)]
+    team = make_team("lossy-one", [[0, 1], [1, 2], [2, 3], [0, 3]],
+                     {"kind": "links", "links": paths, "features_per_camera": [2, 2, 2, 2]},
+                     {"resolution": "evidence"}, n=4)
+    team.robot_options = {2: {"drop_prob": 0.3}}
+    run = launch_team(team, tmp_path / "work")
+    assert sorted(run.results) == [0, 1, 2, 3]
+    assert {h["resolution"] for h, _ in run.results.values()} == {"paper"}
+    assert all(h["counters"]["dropped"] == 0 for i, (h, _) in run.results.items() if i != 2)
+    team.robot_options = {}
+    run = launch_team(team, tmp_path / "work2")
+    assert {h["resolution"] for h, _ in run.results.values()} == {"evidence"}
