@@ -204,3 +204,38 @@ def test_loss_at_one_robot_is_learnt_by_all_and_the_fault_tolerant_rule_runs(tmp
     team.robot_options = {}
     run = launch_team(team, tmp_path / "work2")
     assert {h["resolution"] for h, _ in run.results.values()} == {"evidence"}
+
+
+def test_the_observer_names_a_robot_that_never_started_or_failed():
+    import threading
+
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import observe_team
+    from pipeline.transport.zenoh_transport import key, open_session
+
+    data = {"kind": "links", "links": "x.csv", "features_per_camera": [1, 1]}
+    team = make_team("quiet", [[0, 1]], data, n=2)
+    with pytest.raises(TeamError, match=r"no robot published a result within 0.5 s; robot 0 "
+                                        r"\(tcp/127.0.0.1:\d+\) never started"):
+        observe_team(team, timeout_s=0.5)
+    # a robot that reports a failure ends the observation with its message
+    team = make_team("failing", [[0, 1]], data, n=2)
+    stop = threading.Event()
+
+    def robot_one():
+        s = open_session([team.endpoint(1)], [team.observer], "robot 1")
+        try:
+            while not stop.wait(0.05):
+                s.put(key(team.name, "status", 1), "failed: no such image")
+        finally:
+            s.close()
+
+    t = threading.Thread(target=robot_one)
+    t.start()
+    try:
+        with pytest.raises(TeamError, match=r"robot 1 \(tcp/127.0.0.1:\d+\) failed: no such image"):
+            observe_team(team, timeout_s=60)
+    finally:
+        stop.set()
+        t.join()
