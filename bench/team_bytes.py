@@ -5,7 +5,7 @@ with ``--twenty`` also a 20-robot ``ring2`` team, each run over ``--transport ze
 in one run, alternating: ``plain`` (descriptors as extracted, float32, sent to every
 neighbour; packets uncompressed: the encoding before) and ``compact`` (SIFT descriptors as
 bytes, features only to the neighbour that matches with them, packets zlib-compressed:
-:mod:`pipeline.matching.compact`, :mod:`pipeline.transport.wire`). Per stage (the feature
+:mod:`pipeline.matching.packed`, :mod:`pipeline.transport.wire`). Per stage (the feature
 exchange, consistency, fusion): bytes counted (the algorithm messages as the simulator
 counts them) and bytes handed to Zenoh (the encoded packets); totals, the ratio
 compact / plain, wall time of the team, and whether ``links.csv`` is the same (statuses and

@@ -132,9 +132,9 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     computed by the matching end and sent with the matches) per neighbour; ``lossy``: some
     robot of the team injects message loss (flooded with the counts, :func:`flood_flag`).
     """
-    from pipeline.matching.compact import matching_descriptors, pack_features, unpack_features
     from pipeline.matching.features import extract, photo_max_features
     from pipeline.matching.link_evidence import edge_evidence
+    from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
     from pipeline.matching.pairs import match_pair, photo_threshold_px
     from pipeline.stages import merge_radius_for
     from pipeline.types import Features, PairMatches
@@ -150,7 +150,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     budget = opts.get("max_features")
     rootsift = bool(opts.get("rootsift", False))
     # extracted without RootSIFT: the SIFT bytes travel, each end takes the root itself
-    # (pipeline.matching.compact)
+    # (pipeline.matching.packed)
     raw = extract(view, opts["features"],
                   photo_max_features(w, h) if budget is None else int(budget),
                   merge_radius_for(resolution, opts.get("merge_radius")),

@@ -77,7 +77,7 @@ DEFAULT_OPTIONS = {
     "wire": "compact",
 }
 #: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
-#: (pipeline.matching.compact), features only to the neighbour that matches them, packets
+#: (pipeline.matching.packed), features only to the neighbour that matches them, packets
 #: zlib-compressed (pipeline.transport.wire); ``plain`` — descriptors as extracted, to every
 #: neighbour, packets uncompressed (the earlier encoding, kept to compare the two)
 WIRE_FORMS = ("compact", "plain")

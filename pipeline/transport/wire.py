@@ -16,7 +16,7 @@ Compression: a packet whose bytes zlib (level :data:`ZLIB_LEVEL`) makes smaller 
 compressed (``FMZ1`` then the zlib stream of the whole ``FMP1`` packet); others travel as
 they are. Decoding accepts both. Lossless, so the receiver's arrays are the sender's; the
 wire bytes are the compressed lengths. Measured on formation d (``bench/team_bytes.py``, one
-run): the feature exchange (SIFT descriptors as bytes, :mod:`pipeline.matching.compact`)
+run): the feature exchange (SIFT descriptors as bytes, :mod:`pipeline.matching.packed`)
 2.61 MB counted, 2.08 MB compressed; the consistency stage's packets 2.94 MB plain, 1.46 MB
 compressed; fusion's 1.55 MB, 1.26 MB.
 """

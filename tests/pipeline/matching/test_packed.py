@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pipeline.matching.compact import matching_descriptors, pack_features, unpack_features
 from pipeline.matching.features import extract
+from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
 from pipeline.matching.pairs import match_pair
 from pipeline.transport import Message
 
