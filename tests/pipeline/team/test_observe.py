@@ -239,3 +239,55 @@ def test_the_observer_names_a_robot_that_never_started_or_failed():
     finally:
         stop.set()
         t.join()
+
+
+def test_a_robot_killed_mid_run_is_reported_lost_by_the_observer(tmp_path):
+    """kill -9 of one hand-started robot: its Zenoh session vanishes, the survivors finish
+    without it, the observer reports it lost and writes a conflict-free run folder."""
+    import signal
+    import time
+
+    from pipeline.consistency.centralized import is_conflict_free
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+    from pipeline.types import Links
+
+    opts = team_options(max_features=2000, round_timeout_s=1.0, merge_radius=2.0)
+    opts["start_timeout_s"] = 120.0
+    edges = [[i, j] for i in range(4) for j in range(i + 1, 4)]
+    team = make_team("kill-one", edges, {"kind": "formation", "formation": "complete",
+                                         "seed": 0, "size": [160, 120], "robots": 4,
+                                         "graph": "complete"}, opts, n=4)
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * 4, tmp_path)
+    out = {}
+
+    def observe():
+        out["code"] = main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                            "--timeout", "300", "--no-rerun"])
+
+    import threading
+
+    t = threading.Thread(target=observe)
+    t.start()
+    try:
+        log = tmp_path / "robot2.log"
+        for _ in range(1200):  # until robot 2 has met its neighbours (at most 120 s)
+            if log.exists() and "neighbours heard" in log.read_text():
+                break
+            time.sleep(0.1)
+        procs[2][0].send_signal(signal.SIGKILL)
+        t.join(timeout=300)
+    finally:
+        codes = _stop(procs)
+    assert not t.is_alive() and out["code"] == 0
+    assert codes[2] == -signal.SIGKILL and [codes[i] for i in (0, 1, 3)] == [0, 0, 0]
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["team"]["lost"] == [2] and report["team"]["robots"]["2"]["result"] is None
+    rows = [r.split(",") for r in (tmp_path / "obs" / "links.csv").read_text().splitlines()[1:]]
+    kept = [r for r in rows if r[4] == "kept"]
+    assert not any("2" in (r[0], r[2]) for r in kept)
+    links = Links(*([int(r[k]) for r in kept] for k in (0, 1, 2, 3)))
+    assert is_conflict_free(report["features_per_camera"], links)
+    assert report["after"]["conflictive_sets"] == 0
