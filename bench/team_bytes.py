@@ -30,10 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.runfolder import write_json_atomic  # noqa: E402
-from pipeline.team.assemble import CONSISTENCY_KINDS, FUSION_KINDS  # noqa: E402
+from pipeline.team.assemble import stage_of_kind  # noqa: E402
 
-STAGES = {"exchange": ("features", "matches", "counts", "lossy"),
-          "consistency": CONSISTENCY_KINDS, "fusion": FUSION_KINDS}
+STAGES = ("exchange", "consistency", "fusion")
 
 
 def _run(cfg_kw: dict, out: Path, transport: str, wire: str | None = None) -> dict:
@@ -53,10 +52,10 @@ def _run(cfg_kw: dict, out: Path, transport: str, wire: str | None = None) -> di
         res["team_s"] = runs[0].published_s
         report = json.loads((out / "report.json").read_text())
         robots = report["team"]["robots"].values()
-        counted = {s: sum(r["bytes_by_kind"].get(k, 0) for r in robots for k in kinds)
-                   for s, kinds in STAGES.items()}
-        other = sum(r["bytes"] for r in robots) - sum(counted.values())
-        counted["other"] = other
+        counted = dict.fromkeys(STAGES, 0)
+        for r in robots:
+            for k, v in r["bytes_by_kind"].items():
+                counted[stage_of_kind(k)] += v
         on_wire = {s: sum(r["wire_bytes_by_stage"].get(s, 0) for r in robots)
                    for s in STAGES}
         res.update(counted=counted, wire=on_wire,
@@ -109,8 +108,8 @@ def main(argv=None) -> int:
             print(f"| total | {p['counted_total'] / mb:.2f} / {p['wire_total'] / mb:.2f} | "
                   f"{c['counted_total'] / mb:.2f} / {c['wire_total'] / mb:.2f} | "
                   f"{c['wire_total'] / p['wire_total']:.1%} |")
-            print(f"team wall (launch to last result): plain {p['team_s']:.2f} s, compact "
-                  f"{c['team_s']:.2f} s; links.csv same as sim: plain "
+            print(f"team wall (launch to last result, median): plain {p['team_s']:.2f} s "
+                  f"{p['team_walls_s']}, compact {c['team_s']:.2f} s {c['team_walls_s']}; links.csv same as sim: plain "
                   f"{p['links_same_as_sim']}, compact {c['links_same_as_sim']}; conflictive "
                   f"sets after: {p['conflictive_sets_after']}, {c['conflictive_sets_after']}")
             print(f"compact on the wire / plain counted: "
