@@ -13,8 +13,11 @@ the run folder the one-machine launcher (``--transport zenoh``) writes for the s
   by ``(cam_i, feat_i, cam_j, feat_j)``; ``status`` and ``reason`` from the robots' logs) and
   ``report.json`` (``before`` and ``after`` conflict counts, the resolution's figures, the
   ``team`` section), as ``resolve`` writes them.
-* Photographs (``images``) are refused: their run folder is built on a reconstruction of all
-  the photographs, which the observer does not hold; run ``run-images --transport zenoh``.
+* ``data.kind == "images"``: the run folder of ``run-images --transport zenoh`` (the pycolmap
+  reconstructions before and after cleaning, ``report.json``, ``links.csv``, ``sparse/``,
+  ``recording.rrd``): the observer loads the team's photographs itself, as each robot loads
+  its own (:func:`pipeline.team.robot.load_view`), so it needs them on its machine, in one
+  folder (that of ``data.images``). As over the launcher, photographs get no fusion.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.progress import StageTimer
 
-__all__ = ["observe_run", "formation_config_of"]
+__all__ = ["observe_run", "formation_config_of", "images_config_of"]
 
 
 def formation_config_of(team, out, rerun: bool = True):
@@ -53,7 +56,8 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     Raises
     ------
     InputError
-        A bad team file, one without an observer endpoint, or a team of photographs.
+        A bad team file, one without an observer endpoint, or a team of photographs in more
+        than one folder.
     TeamError
         A robot failed, or none published within ``timeout_s``
         (:func:`pipeline.team.observe.observe_team`).
@@ -67,10 +71,10 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     team = load_team(team_path)
     kind = team.data["kind"]
     if kind == "images":
-        raise InputError(f"team {team.name!r} matches photographs: their run folder needs a "
-                         "reconstruction of all of them, which the observer does not hold; "
-                         "observe works for formation and links teams (or run run-images "
-                         "--transport zenoh)")
+        folders = {team.resolve_path(p).resolve().parent for p in team.data["images"]}
+        if len(folders) != 1:
+            raise InputError(f"team {team.name!r}: the observer reads the photographs from one "
+                             f"folder, data.images names {len(folders)}; put them in one")
     zenoh = get_transport("zenoh").load()
     with timer.stage("observe", f"{team.n} robots of {team.name!r} on {team.observer}"):
         run = observe_team(team, timeout_s=timeout_s, log=log)
@@ -86,7 +90,44 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
         robots.extra = {"team": summary}
         return write_formation_run(config, robots.formation, robots.features, robots.matches,
                                    robots.cleaning, timer, extra=robots.extra)
+    if kind == "images":
+        return _write_images_run(out, team, run, summary, rerun, timer, zenoh)
     return _write_links_run(Path(out), team, zenoh.links_of_run(team, run), summary, timer)
+
+
+def images_config_of(team, out, rerun: bool = True):
+    """The :class:`~pipeline.runs.images.ImagesConfig` of an ``images`` team: its options
+    as ``run-images --transport zenoh`` hands them to the robots."""
+    from pipeline.runs.images import ImagesConfig
+
+    o, d = team.options, team.data
+    folder = team.resolve_path(d["images"][0]).resolve().parent
+    return ImagesConfig(
+        directory=str(folder), graph=f"team {team.name}", max_size=d.get("max_size"),
+        features=o["features"], max_features=o["max_features"],
+        contrast_threshold=o.get("contrast_threshold"), rootsift=bool(o.get("rootsift")),
+        threshold_px=o.get("threshold_px"), budget_after_merge=bool(o.get("budget_after_merge")),
+        fusion=False, rerun=bool(rerun), out=str(out), resolution=str(o["resolution"]),
+        merge_radius=o.get("merge_radius"), transport="zenoh")
+
+
+def _write_images_run(out, team, run, summary: dict, rerun: bool, timer: StageTimer,
+                      zenoh) -> Path:
+    """The ``run-images`` run folder of an observed photo team (module docstring)."""
+    from pipeline.runs.images import run_images
+    from pipeline.team.robot import load_view
+
+    config = images_config_of(team, out, rerun)
+    with timer.stage("load", f"the team's {team.n} photographs"):
+        views = [load_view(team, i) for i in range(team.n)]
+    edges = np.asarray(team.comm_edges, dtype=np.int64).reshape(-1, 2)
+
+    def robots_job(config, views, comm_edges, timer, graph_from_features):
+        robots = zenoh.images_of_run(config, views, team, run)
+        robots.team = summary
+        return robots
+
+    return run_images(config, timer, loaded=(views, edges), robots_job=robots_job)
 
 
 def _write_links_run(out: Path, team, res, summary: dict, timer: StageTimer) -> Path:

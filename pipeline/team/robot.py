@@ -52,7 +52,7 @@ from pipeline.team.teamfile import LAUNCHED_AT_ENV, links_file_of
 from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
-           "flood_flag", "result_links"]
+           "flood_flag", "result_links", "load_view"]
 
 
 def _log(i: int, text: str) -> None:
@@ -89,7 +89,11 @@ def own_links_from_file(path, i: int, own_file: bool = False):
     return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
 
 
-def _load_view(team, i: int):
+def load_view(team, i: int):
+    """Robot ``i``'s own view: its rendered camera, or its photograph (downscaled to
+    ``data.max_size``, with the intrinsics the team file gives it, ``intrinsics_source`` its
+    ``data.intrinsics_source`` entry or ``team file``). An observer loads the photographs the
+    same way (:mod:`pipeline.runs.observe`)."""
     data = team.data
     if data["kind"] == "formation":
         import data_synth
@@ -111,8 +115,9 @@ def _load_view(team, i: int):
         pixels, _ = downscale(pixels, np.eye(3), data.get("max_size"))
         h, w = pixels.shape[:2]
         K = guess_K(w, h) if K is None else np.asarray(K, np.float64)
+        source = (data.get("intrinsics_source") or ["team file"] * team.n)[i]
         return View(name=path.name, image=pixels, K=np.asarray(K, np.float64),
-                    intrinsics_known=bool(known))
+                    intrinsics_known=bool(known), intrinsics_source=str(source))
     raise InputError(f"data kind {data['kind']!r} has no images")
 
 
@@ -143,7 +148,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     resolution = str(opts.get("resolution", DEFAULT_RESOLUTION))
 
     t = time.perf_counter()
-    view = _load_view(team, i)
+    view = load_view(team, i)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
     h, w = view.image.shape[:2]

@@ -14,7 +14,10 @@ one; a user may write one by hand. Schema (``version`` 1)::
       "data": {"kind": "formation", "formation": "d", "seed": 0, "size": [640, 480],
                "robots": null, "graph": null}
           or {"kind": "images", "images": ["a.jpg", ...], "intrinsics": [[[fx,0,cx],...], ...],
-              "intrinsics_known": [true, ...], "max_size": 1600}
+              "intrinsics_known": [true, ...], "max_size": 1600,
+              "intrinsics_source": ["K.txt", ...]}     # optional: where each K came from
+              # (K.txt, exif-..., guess: an observer's reconstruction refines EXIF and
+              # guessed focal lengths, keeps calibrations)
               # K of the image as the robot uses it (after downscaling to max_size)
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
               # "links": ["r0.csv", "r1.csv", ...]: one file per robot, each holding only
@@ -101,7 +104,8 @@ MAX_ROBOT_FEATURES = 5_000_000
 #: keys a robot entry and each kind of ``data`` may hold
 _ROBOT_KEYS = {"id", "endpoint"}
 _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
-              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size"},
+              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
+                         "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -340,6 +344,11 @@ def _check_data(data: dict, n: int, where: str) -> None:
                                       and all(isinstance(v, bool) for v in known)):
             raise InputError(f"{where}: data.intrinsics_known must list {n} true/false values "
                              "or be null")
+        src = data.get("intrinsics_source")
+        if src is not None and not (isinstance(src, list) and len(src) == n
+                                    and all(isinstance(v, str) for v in src)):
+            raise InputError(f"{where}: data.intrinsics_source must list {n} names (K.txt, "
+                             "exif-35mm, guess, ...) or be null")
         ms = data.get("max_size")
         if ms is not None and (not _is_int(ms) or ms < 0):
             raise InputError(f"{where}: data.max_size {ms!r} must be a number of pixels >= 0 "

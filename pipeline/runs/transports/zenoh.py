@@ -28,7 +28,8 @@ from pipeline.team.assemble import (
 )
 from pipeline.team.launcher import launch_team, make_team, team_summary
 
-__all__ = ["formation", "formation_of_run", "images", "resolve", "resolve_links_file",
+__all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
+           "resolve_links_file",
            "write_robot_links", "links_of_run"]
 
 
@@ -163,16 +164,30 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
         A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
         a graph kind or file).
     """
-    from pipeline.types import Features
-
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
                          "features at once; with --transport zenoh give ring, ring2, complete, "
                          "seq:K or a graph file")
+    team = images_team(config, views, comm_edges)
+    n = team.n
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    return images_of_run(config, views, team, run)
+
+
+def images_team(config, views, comm_edges):
+    """The loopback team of ``run-images --transport zenoh``: one robot per photograph, its
+    path, intrinsics (as loaded, at the downscaled size) and their source, the run's
+    feature and resolution options."""
     directory = Path(config.directory).resolve()
     data = {"kind": "images", "images": [str(directory / v.name) for v in views],
             "intrinsics": [np.asarray(v.K, np.float64).tolist() for v in views],
             "intrinsics_known": [bool(v.intrinsics_known) for v in views],
+            "intrinsics_source": [str(v.intrinsics_source) for v in views],
             "max_size": config.max_size}
     opts = team_options(config.features, config.max_features, None,
                         merge_radius=merge_radius_for(config.resolution, config.merge_radius),
@@ -182,13 +197,21 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
                         budget_after_merge=bool(config.budget_after_merge),
                         threshold_px=config.threshold_px)
     n = len(views)
-    team = make_team(f"images-{n}", comm_edges, data, opts, n=n)
-    with timer.stage("team", f"{n} robot processes over zenoh"):
-        run = launch_team(team, workdir)
-        timer.note(f"{len(run.results)} of {n} robots published; "
-                   f"process start {run.start_s:.2f} s")
-    if keep_run is not None:
-        keep_run.append(run)
+    return make_team(f"images-{n}", comm_edges, data, opts, n=n)
+
+
+def images_of_run(config, views, team, run) -> ImagesRobots:
+    """What the robots of a photo ``team`` published in ``run`` (launched here, or observed by
+    :mod:`pipeline.team.observe`), as the ``images`` job's result.
+
+    Raises
+    ------
+    TeamError
+        A robot did not publish (the run of photographs needs every camera's keypoints).
+    """
+    from pipeline.types import Features
+
+    n = team.n
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
         raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result")

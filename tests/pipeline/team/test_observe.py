@@ -167,7 +167,8 @@ def test_a_robot_reads_only_its_own_rows_and_refuses_a_foreign_file(tmp_path):
         own_links_from_file(f, 0, own_file=True)
 
 
-def test_observe_refuses_a_team_without_observer_or_of_photographs(tmp_path):
+def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(tmp_path,
+                                                                               capsys):
     doc = {"version": 1, "name": "two", "comm_edges": [[0, 1]],
            "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
                       {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
@@ -175,12 +176,50 @@ def test_observe_refuses_a_team_without_observer_or_of_photographs(tmp_path):
     (tmp_path / "T.json").write_text(json.dumps(doc))
     assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
                  str(tmp_path / "o")]) == 2
+    assert "has no observer endpoint" in capsys.readouterr().err
     doc["observer"] = {"endpoint": "tcp/127.0.0.1:7449"}
-    doc["data"] = {"kind": "images", "images": ["a.jpg", "b.jpg"]}
+    doc["data"] = {"kind": "images", "images": ["a/x.jpg", "b/y.jpg"]}
     (tmp_path / "T.json").write_text(json.dumps(doc))
     assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
                  str(tmp_path / "o")]) == 2
+    assert "from one folder, data.images names 2" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_small,
+                                                                       tmp_path):
+    """Four photographs, photo defaults, robots started by hand: the observer's run folder
+    has the links of ``run-images --transport zenoh`` (equal to the simulator's without
+    fusion)."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.inputs.photos import load_folder
+    from pipeline.runs.images import ImagesConfig
+    from pipeline.runs.transports.zenoh import images_team
+    from pipeline.team.teamfile import write_team
+
+    args = ["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
+            "--no-fusion", "--no-rerun"]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    config = ImagesConfig(str(sceaux_small), "complete", max_size=320)
+    views = load_folder(sceaux_small, max_size=320)
+    team = images_team(config, views, comm_graph("complete", [v.name for v in views]))
+    team.options["start_timeout_s"] = 120.0
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300", "--no-rerun"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+    sim = (tmp_path / "sim" / "links.csv").read_text().splitlines()
+    assert (tmp_path / "obs" / "links.csv").read_text().splitlines() == sim
+    assert len(sim) > 500
+    rep = json.loads((tmp_path / "obs" / "report.json").read_text())
+    sim_rep = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert rep["features_per_camera"] == sim_rep["features_per_camera"]
+    assert rep["team"]["observed"] is True and rep["fusion"]["enabled"] is False
+    assert (tmp_path / "obs" / "sparse").is_dir()
 
 
 def test_loss_at_one_robot_is_learnt_by_all_and_the_fault_tolerant_rule_runs(tmp_path):
