@@ -183,6 +183,13 @@ def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(t
     assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
                  str(tmp_path / "o")]) == 2
     assert "from one folder, data.images names 2" in capsys.readouterr().err
+    assert main(["observe", "--team", str(tmp_path / "none.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    for bad in ("0", "-1", "nan", "1e9"):
+        assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                     str(tmp_path / "o"), "--timeout", bad]) == 2
+        assert "--timeout" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
