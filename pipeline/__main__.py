@@ -69,6 +69,8 @@ COMMANDS = {
                       "resolve, score pairwise against the labels"),
     "clean-h5": ("clean_h5", "remove inconsistent matches from hloc's features.h5/matches.h5"),
     "robot": ("robot", "run one robot of a team over Zenoh (TEAM.json)"),
+    "observe": ("observe", "collect the results of a team's robots started elsewhere and "
+                "write its run folder (TEAM.json)"),
 }
 
 

@@ -150,8 +150,14 @@ def _points_and_tracks(mapping, views: list[View], features, kept: Links):
     return xyz, tracks, colors
 
 
-def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
+def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=None,
+               robots_job=None) -> Path:
     """Run every stage on a folder of photographs and write the run folder; return its path.
+
+    ``loaded``: ``(views, comm_edges)`` already loaded (an observer of a team loads the
+    team's photographs itself, :mod:`pipeline.runs.observe`) instead of ``config.directory``
+    and ``config.graph``; ``robots_job``: a callable with the transport's ``images``
+    signature that replaces it (the observer hands in what the robots published).
 
     Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
     consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
@@ -173,7 +179,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 
     timer = timer or StageTimer()
     out = config.out_dir()
-    views, comm_edges = _load(config, timer)
+    views, comm_edges = _load(config, timer) if loaded is None else loaded
     names = [v.name for v in views]
     by_similarity = comm_edges is None
     chosen = {}
@@ -187,8 +193,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 
     # features and matching, by the robots of the transport (over zenoh they also detect
     # and resolve; this process then only observes)
-    robots = get_transport(config.transport).load().images(config, views, comm_edges, timer,
-                                                            graph_from_features)
+    job = robots_job or get_transport(config.transport).load().images
+    robots = job(config, views, comm_edges, timer, graph_from_features)
     feats, matches, links, cleaning, team = (robots.features, robots.matches, robots.links,
                                              robots.cleaning, robots.team)
     if by_similarity:

@@ -27,10 +27,20 @@ from pipeline.team.teamfile import DEFAULT_OPTIONS
 from pipeline.types import Links, PairMatches
 
 __all__ = ["team_options", "links_of_team", "consistency_of_team", "fusion_of_team",
-           "FUSION_SKIPPED"]
+           "FUSION_SKIPPED", "EXCHANGE_KINDS", "FUSION_KINDS", "stage_of_kind"]
 
-CONSISTENCY_KINDS = ("blocks", "final", "request", "reject", "closing", "ack", "heartbeat")
-FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut")
+#: message kinds of the feature exchange before consistency (pipeline.team.robot) and of
+#: fusion (pipeline.fusion.robot, with the reliable fusion's empty rounds ``fusion-tick``);
+#: every other kind is the consistency stage's (detection, each resolution rule's own —
+#: the evidence rule's ``bundle``, the sync rule's ``sync-*`` —, the reliable channel's)
+EXCHANGE_KINDS = ("features", "matches", "counts", "lossy")
+FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut", "fusion-tick")
+
+
+def stage_of_kind(kind: str) -> str:
+    """``exchange``, ``consistency`` or ``fusion``: the stage a message kind belongs to."""
+    return ("exchange" if kind in EXCHANGE_KINDS else "fusion" if kind in FUSION_KINDS
+            else "consistency")
 FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zenoh transport "
                   "for photographs (their poses come from a reconstruction of all of them)"}
 
@@ -103,8 +113,12 @@ def _link_keys(cam_i, feat_i, cam_j, feat_j, n: int, M: int) -> np.ndarray:
     return ((cam_i * n + cam_j) * M + feat_i) * M + feat_j
 
 
-def _counted(heads: dict, kinds) -> tuple[dict, dict]:
-    """Messages and bytes of each kind, summed over the robots' published counters."""
+def _counted(heads: dict, stage: str) -> tuple[dict, dict]:
+    """Messages and bytes of each kind of ``stage`` (:func:`stage_of_kind`), summed over the
+    robots' published counters."""
+    kinds = FUSION_KINDS if stage == "fusion" else sorted(
+        {k for h in heads.values() for k in h["counters"]["bytes_by_kind"]
+         if stage_of_kind(k) == stage})
     msgs = {k: 0 for k in kinds}
     byts = {k: 0 for k in kinds}
     for h in heads.values():
@@ -153,7 +167,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     heads = {i: h for i, (h, _) in results.items()}
     any_run_head = heads[min(heads)] if heads else {}
     any_run = any_run_head.get("run", {})
-    msgs, byts = _counted(heads, CONSISTENCY_KINDS)
+    msgs, byts = _counted(heads, "consistency")
     lost_by = {}
     for i, h in heads.items():
         for k in h["run"].get("lost_neighbours", []):
@@ -220,7 +234,7 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
             cut[index.rows(i, a)[a["fusion_cut"].astype(bool)]] = True
     cut &= before
     ledger.cut(cut, "fusion-outlier", rounds)
-    msgs, byts = _counted(heads, FUSION_KINDS)
+    msgs, byts = _counted(heads, "fusion")
     # fused landmarks: every robot's final estimate of every track it observes
     rows = [(i, a) for i, (_, a) in sorted(results.items()) if "fusion_names" in a]
     names = np.unique(np.concatenate([a["fusion_names"] for _, a in rows])) if rows \

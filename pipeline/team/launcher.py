@@ -38,7 +38,8 @@ from pipeline.errors import TeamError
 from pipeline.team.teamfile import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry, Team, write_team
 from pipeline.transport.wire import WireError, decode_packet
 
-__all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent"]
+__all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
+           "Observer"]
 
 
 def free_ports(k: int, host: str = "127.0.0.1") -> list[int]:
@@ -150,7 +151,7 @@ class TeamRun:
         return sorted(self.results)
 
 
-class _Observer:
+class Observer:
     """Subscribes to results and statuses; acknowledges every result."""
 
     def __init__(self, team: Team) -> None:
@@ -224,7 +225,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     workdir.mkdir(parents=True, exist_ok=True)
     team_path = write_team(workdir / "TEAM.json", team)
     run = TeamRun(team)
-    observer = _Observer(team)
+    observer = Observer(team)
     procs: dict[int, subprocess.Popen] = {}
     errfiles = {}
     pgid = None
@@ -368,6 +369,8 @@ def team_summary(run: TeamRun) -> dict:
             c = h["counters"]
             rob[str(i)] = {"rounds": c["round"], "messages": c["messages"], "bytes": c["bytes"],
                            "wire_bytes": c["wire_bytes"], "wire_packets": c["wire_packets"],
+                           "bytes_by_kind": c.get("bytes_by_kind", {}),
+                           "wire_bytes_by_stage": h.get("wire_bytes_by_stage", {}),
                            "dropped": c["dropped"], "silent": c["silent"],
                            "peak_rss_bytes": h["peak_rss_bytes"],
                            "peak_memory_bytes": h["peak_memory_bytes"],

@@ -48,10 +48,11 @@ from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_network
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
-from pipeline.team.teamfile import LAUNCHED_AT_ENV
-from pipeline.transport.wire import encode_packet
+from pipeline.team.teamfile import LAUNCHED_AT_ENV, links_file_of
+from pipeline.transport.wire import encode_packet, set_compression
 
-__all__ = ["robot_main", "run_robot_process", "own_links_from_file", "team_resolution"]
+__all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
+           "flood_flag", "result_links", "load_view"]
 
 
 def _log(i: int, text: str) -> None:
@@ -63,22 +64,36 @@ def peak_rss_bytes() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
-def own_links_from_file(path, i: int):
-    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays (the
-    robot reads the shared file and keeps its own rows)."""
+def own_links_from_file(path, i: int, own_file: bool = False):
+    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays.
+
+    ``own_file``: the file is robot ``i``'s own (``data.links`` lists one file per robot), so
+    every row must touch it (InputError naming the first that does not: a file given to the
+    wrong robot); otherwise the file is shared and the robot keeps its own rows.
+    """
     from pipeline.inputs.linkscsv import read_links_csv
 
     lf = read_links_csv(path)
     L = lf.links
     a = np.flatnonzero(L.cam_i == i)
     b = np.flatnonzero(L.cam_j == i)
+    if own_file and len(a) + len(b) < len(L):
+        k = int(np.flatnonzero((L.cam_i != i) & (L.cam_j != i))[0])
+        raise InputError(f"{path}:{lf.line[k]}: link ({L.cam_i[k]},{L.feat_i[k]})-"
+                         f"({L.cam_j[k]},{L.feat_j[k]}) does not touch robot {i}, whose own "
+                         "links file this is (data.links); give each robot the rows of its "
+                         "own links")
     nbr = np.concatenate([L.cam_j[a], L.cam_i[b]])
     r = np.concatenate([L.feat_i[a], L.feat_j[b]])
     s = np.concatenate([L.feat_j[a], L.feat_i[b]])
     return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
 
 
-def _load_view(team, i: int):
+def load_view(team, i: int):
+    """Robot ``i``'s own view: its rendered camera, or its photograph (downscaled to
+    ``data.max_size``, with the intrinsics the team file gives it, ``intrinsics_source`` its
+    ``data.intrinsics_source`` entry or ``team file``). An observer loads the photographs the
+    same way (:mod:`pipeline.runs.observe`)."""
     data = team.data
     if data["kind"] == "formation":
         import data_synth
@@ -100,8 +115,9 @@ def _load_view(team, i: int):
         pixels, _ = downscale(pixels, np.eye(3), data.get("max_size"))
         h, w = pixels.shape[:2]
         K = guess_K(w, h) if K is None else np.asarray(K, np.float64)
+        source = (data.get("intrinsics_source") or ["team file"] * team.n)[i]
         return View(name=path.name, image=pixels, K=np.asarray(K, np.float64),
-                    intrinsics_known=bool(known))
+                    intrinsics_known=bool(known), intrinsics_source=str(source))
     raise InputError(f"data kind {data['kind']!r} has no images")
 
 
@@ -116,43 +132,58 @@ def _pose(view):
 def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     """Steps 1–4 of the module docstring.
 
-    Returns ``(features, view, matches, weights, fpc)``: ``matches`` and ``weights`` (the
-    local evidence of each link, :func:`pipeline.matching.link_evidence.edge_evidence`, computed by the
-    matching end and sent with the matches) per neighbour.
+    Returns ``(features, view, matches, weights, fpc, lossy)``: ``matches`` and ``weights``
+    (the local evidence of each link, :func:`pipeline.matching.link_evidence.edge_evidence`,
+    computed by the matching end and sent with the matches) per neighbour; ``lossy``: some
+    robot of the team injects message loss (flooded with the counts, :func:`flood_flag`).
     """
     from pipeline.matching.features import extract, photo_max_features
     from pipeline.matching.link_evidence import edge_evidence
+    from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
     from pipeline.matching.pairs import match_pair, photo_threshold_px
     from pipeline.stages import merge_radius_for
     from pipeline.types import Features, PairMatches
 
+    # the merge radius of the rule asked for, as the simulator's matching takes it
+    resolution = str(opts.get("resolution", DEFAULT_RESOLUTION))
+
     t = time.perf_counter()
-    view = _load_view(team, i)
+    view = load_view(team, i)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
     h, w = view.image.shape[:2]
     budget = opts.get("max_features")
-    feats = extract(view, opts["features"],
-                    photo_max_features(w, h) if budget is None else int(budget),
-                    merge_radius_for(team_resolution(team), opts.get("merge_radius")),
-                    contrast_threshold=opts.get("contrast_threshold"),
-                    rootsift=bool(opts.get("rootsift", False)),
-                    budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    rootsift = bool(opts.get("rootsift", False))
+    # extracted without RootSIFT: the SIFT bytes travel, each end takes the root itself
+    # (pipeline.matching.packed)
+    raw = extract(view, opts["features"],
+                  photo_max_features(w, h) if budget is None else int(budget),
+                  merge_radius_for(resolution, opts.get("merge_radius")),
+                  contrast_threshold=opts.get("contrast_threshold"), rootsift=False,
+                  budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    feats = Features(raw.keypoints, matching_descriptors(raw.descriptors, rootsift),
+                     raw.scales, raw.method)
     timings["features"] = time.perf_counter() - t
     n = team.n
     known = np.full(n, -1, dtype=np.int32)
     known[i] = len(feats)
+    lossy = np.array([_own_lossy(opts)], np.uint8)
     pose = _pose(view)
-    payload = {"keypoints": feats.keypoints, "descriptors": feats.descriptors,
+    compact = opts.get("wire", "compact") == "compact"
+    payload = {**(pack_features(raw.keypoints, raw.descriptors, rootsift) if compact else
+                  {"keypoints": feats.keypoints, "descriptors": feats.descriptors}),
                "K": np.asarray(view.K, np.float64),
                "intrinsics_known": np.array([view.intrinsics_known], np.uint8),
                "size": np.array([w, h], np.int32)}
     if pose is not None:  # a robot that knows its pose tells it (known-pose evidence)
         payload["R"], payload["t"] = pose[1], pose[2]
+    del raw
     for k in sorted(transport.neighbours):
-        transport.send(k, "features", payload)
-        transport.send(k, "counts", {"m": known.copy()})
-    sent = known.copy()
+        if k < i or not compact:  # edge (k, i) is matched by k, the lower id: only k uses
+            # these features (the plain encoding sends them to every neighbour)
+            transport.send(k, "features", payload)
+        transport.send(k, "counts", {"m": known.copy(), "lossy": lossy.copy()})
+    sent, sent_lossy = known.copy(), lossy.copy()
     t = time.perf_counter()
     matches: dict[int, PairMatches] = {}
     weights: dict[int, np.ndarray] = {}
@@ -164,9 +195,11 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
             if msg.kind == "counts":
                 upd = (known < 0) & (p["m"] >= 0)
                 known[upd] = p["m"][upd]
+                lossy |= p["lossy"]
             elif msg.kind == "features" and msg.src > i:
-                other = Features(p["keypoints"], p["descriptors"],
-                                 np.zeros(len(p["keypoints"]), np.float32), feats.method)
+                kp_other, desc_other = unpack_features(p)
+                other = Features(kp_other, desc_other, np.zeros(len(kp_other), np.float32),
+                                 feats.method)
                 both_known = bool(view.intrinsics_known and p["intrinsics_known"][0])
                 thr = opts.get("threshold_px", 1.0)
                 if thr is None:  # scaled with the larger image, as matching does
@@ -190,10 +223,10 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
                     msg.src, i, p["pairs"].reshape(-1, 2), p["ratio"], p["epipolar_error"],
                     int(p["n_putative"][0]), bytes(p["reason"]).decode())
                 weights[msg.src] = p["weight"]
-        if rnd < rounds and (known != sent).any():
+        if rnd < rounds and ((known != sent).any() or (lossy != sent_lossy).any()):
             for k in sorted(transport.neighbours):
-                transport.send(k, "counts", {"m": known.copy()})
-            sent = known.copy()
+                transport.send(k, "counts", {"m": known.copy(), "lossy": lossy.copy()})
+            sent, sent_lossy = known.copy(), lossy.copy()
     timings["matching_exchange"] = time.perf_counter() - t
     missing = sorted(k for k in transport.neighbours if k not in matches and k not in
                      getattr(transport, "silent", ()))
@@ -201,7 +234,28 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
         raise RuntimeError(f"robot {i}: no matching with neighbour {missing[0]} after "
                            f"{rounds} rounds")
     fpc = np.where(known < 0, 0, known).astype(np.int64)
-    return feats, view, matches, weights, fpc
+    return feats, view, matches, weights, fpc, bool(lossy[0])
+
+
+def _own_lossy(opts: dict) -> bool:
+    return float(opts.get("drop_prob", 0.0)) > 0
+
+
+def flood_flag(transport, flag: bool, n: int) -> bool:
+    """Whether any robot of a connected team of ``n`` holds ``flag``: each robot tells its
+    neighbours its flag, then the OR it learnt whenever it grows, for ``n - 1`` rounds (every
+    robot is within ``n - 1`` hops of every other on a connected graph). Used by robots that
+    exchange no counts (a links file) to learn whether some robot injects message loss."""
+    have = bool(flag)
+    told = False
+    for _ in range(max(n - 1, 1)):
+        if have and not told:
+            for k in sorted(transport.neighbours):
+                transport.send(k, "lossy", {"lossy": np.array([1], np.uint8)})
+            told = True
+        inbox, _ = transport.end_round()
+        have = have or any(m.kind == "lossy" for m in inbox)
+    return have
 
 
 def _own_rows(i: int, matches: dict, weights: dict):
@@ -220,13 +274,14 @@ def _own_rows(i: int, matches: dict, weights: dict):
     return cat(nbr), cat(r), cat(s), cat(w, np.float64)
 
 
-def team_resolution(team) -> str:
-    """The rule the robots resolve by: the team's ``resolution`` option, except that with
-    message loss injected at any robot the fault-tolerant Alg. 1 runs (as the simulator
-    does on a faulty network) instead of a rule that is not fault-tolerant. Public
-    knowledge: every robot reads the same team file."""
-    lossy = any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n))
-    return rule_for_network(str(team.options.get("resolution", DEFAULT_RESOLUTION)), lossy).name
+def robot_resolution(opts: dict, lossy: bool) -> str:
+    """The rule the robots resolve by: the ``resolution`` option (the team's: a robot may not
+    override it, :mod:`pipeline.team.teamfile`), except that with message loss injected at
+    any robot (``lossy``, which every robot learns from its neighbours: :func:`flood_flag`,
+    or with the feature counts) the fault-tolerant Alg. 1 runs, as the simulator does on a
+    faulty network, instead of a rule that is not fault-tolerant. A robot reads only its own
+    options."""
+    return rule_for_network(str(opts.get("resolution", DEFAULT_RESOLUTION)), bool(lossy)).name
 
 
 def robot_main(team, i: int, transport) -> tuple[dict, dict]:
@@ -236,6 +291,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     keypoints and matches (see :func:`pipeline.consistency.termination.robot_link_log`).
     """
     opts = team.options_for(i)
+    set_compression(opts.get("wire", "compact") == "compact")
     timings: dict = {}
     t0 = time.perf_counter()
     arrays: dict = {}
@@ -245,7 +301,9 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         from pipeline.matching.link_evidence import ratio_llr
 
         fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
-        nbr, r, s, quality = own_links_from_file(team.resolve_path(team.data["links"]), i)
+        path, own_file = links_file_of(team, i)
+        nbr, r, s, quality = own_links_from_file(path, i, own_file)
+        lossy = flood_flag(transport, _own_lossy(opts), team.n)
         weight = ratio_llr(1.0 - quality)  # the evidence a links file carries
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
@@ -255,12 +313,12 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         if bad.size:
             k = int(bad[0])
             raise InputError(f"robot {i}: link ({i},{int(r[k])})-({int(nbr[k])},{int(s[k])}) of "
-                             f"{team.data['links']} names a feature beyond data."
+                             f"{path} names a feature beyond data."
                              f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
                              "give counts that cover every feature id of the links file")
     else:
-        feats, view, matches, weights, fpc = _features_and_matches(team, i, transport, opts,
-                                                                   timings)
+        feats, view, matches, weights, fpc, lossy = _features_and_matches(
+            team, i, transport, opts, timings)
         nbr, r, s, weight = _own_rows(i, matches, weights)
         keypoints = feats.keypoints
         pose = _pose(view)
@@ -275,7 +333,8 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             arrays[f"eperr_{k}"] = pm.epipolar_error.astype(np.float32)
     order = np.lexsort((s, nbr))  # the order of the Robot's link table
     robot = Robot(i, fpc, nbr[order], r[order], s[order])
-    resolution = team_resolution(team)
+    wire = {"exchange": int(getattr(transport, "wire_bytes", 0))}
+    resolution = robot_resolution(opts, lossy)
     rule = get_rule(resolution)
     if rule.needs_evidence:
         rule.hook("equip")(robot, weight[order],
@@ -288,22 +347,25 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     t = time.perf_counter()
     run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
     timings["consistency"] = time.perf_counter() - t
+    wire["consistency"] = int(getattr(transport, "wire_bytes", 0)) - sum(wire.values())
     fusion = None
     if bool(opts.get("fusion")) and team.data["kind"] == "formation" and pose is not None:
         t = time.perf_counter()
-        fusion = _robot_fusion(team, i, robot, run, transport, keypoints, pose, arrays)
+        fusion = _robot_fusion(team, i, robot, run, transport, keypoints, pose, arrays, lossy)
         timings["fusion"] = time.perf_counter() - t
+        wire["fusion"] = int(getattr(transport, "wire_bytes", 0)) - sum(wire.values())
     timings["total"] = time.perf_counter() - t0
     arrays.update(robot_link_log(robot))
     header = {"id": i, "features_per_camera": fpc.tolist(), "matches": matches_hdr,
               "resolution": resolution,
-              "counters": transport.counters(), "run": {k: v for k, v in vars(run).items()},
+              "counters": transport.counters(), "wire_bytes_by_stage": wire, "run": {k: v for k, v in vars(run).items()},
               "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
               "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid(), "fusion": fusion}
     return header, arrays
 
 
-def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict) -> dict:
+def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict,
+                  lossy: bool) -> dict:
     """Step 6 of the module docstring; fills ``arrays`` and returns the header's ``fusion``."""
     from pipeline.consistency.protocols import ProtocolOptions
     from pipeline.consistency.robot import ROBOT_LOST
@@ -313,9 +375,12 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     if hasattr(transport, "status"):
         transport.status("fusion")
     K, R, t = pose
-    fusion = FusionRobot(i, team.n, team.comm_edges, robot.final_tracks(), keypoints, K, R, t)
-    if any(float(team.options_for(k).get("drop_prob", 0.0)) > 0 for k in range(team.n)):
-        # loss injected (public: the team file): every logical round over the reliable
+    # its own neighbourhood: the comm edges that touch it, in the team's order
+    e = np.asarray(team.comm_edges, dtype=np.int64).reshape(-1, 2)
+    own_edges = e[(e[:, 0] == i) | (e[:, 1] == i)]
+    fusion = FusionRobot(i, team.n, own_edges, robot.final_tracks(), keypoints, K, R, t)
+    if lossy:
+        # loss injected (learnt with the counts): every logical round over the reliable
         # channel in lockstep, as the simulator's fusion runs on a lossy network
         out = run_fusion_reliably(fusion, transport, ProtocolOptions(
             reliable=True, loss_timeout=int(team.options_for(i)["loss_timeout"])), team.n)
@@ -340,6 +405,33 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
             "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus,
             "noise": fusion.opt.noise, "sigma_px": fusion.sigma,
             "forced": _forced(fusion)}
+
+
+def result_links(arrays: dict) -> dict:
+    """Every decision the robot made on each row of its link table, for ``--result``: the
+    link (``link_nbr``, ``link_r``, ``link_s``), its deletion log (``link_alive`` after the
+    consistency stage, ``deleted_case``, ``deleted_round``, ``deleted_iteration``), the
+    fusion stage's cut (``fusion_cut``, 0 without fusion) and the outcome as the run's
+    ``links.csv`` words it: ``status`` ``kept``/``deleted`` and ``reason`` (the case of
+    :func:`pipeline.consistency.rules.case_names` — ``b``, ``c``, ``reject``, ``robot-lost``,
+    a rule's own — or ``fusion-outlier``; empty when kept)."""
+    from pipeline.consistency.robot import CASE_NAMES
+    from pipeline.consistency.rules import case_names
+
+    names = {**CASE_NAMES, **case_names()}
+    alive = arrays["link_alive"].astype(bool)
+    cut = arrays.get("fusion_cut", np.zeros(len(alive), np.uint8)).astype(bool) & alive
+    reason = [("fusion-outlier" if c else "") if a else names.get(int(k), str(int(k)))
+              for a, c, k in zip(alive.tolist(), cut.tolist(), arrays["deleted_case"].tolist(),
+                                 strict=True)]
+    out = {k: arrays[k].tolist() for k in ("link_nbr", "link_r", "link_s", "link_alive",
+                                           "deleted_case", "deleted_round",
+                                           "deleted_iteration")}
+    out["fusion_cut"] = cut.astype(np.uint8).tolist()
+    out["status"] = ["kept" if a and not c else "deleted"
+                     for a, c in zip(alive.tolist(), cut.tolist(), strict=True)]
+    out["reason"] = reason
+    return out
 
 
 def _forced(fusion) -> bool:
@@ -392,10 +484,11 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         if result_path:
             from pipeline.runfolder import write_json_atomic
 
-            write_json_atomic(result_path, {**header, "links": {
-                k: arrays[k].tolist() for k in ("link_nbr", "link_r", "link_s", "link_alive",
-                                                "deleted_case", "deleted_round")}})
-        acked = transport.publish_result(encode_packet(header, [("result", arrays)]))
+            write_json_atomic(result_path, {**header, "links": result_links(arrays)})
+        # repeated until the observer acknowledges it: an observer started by hand may come
+        # up while the robots run, so wait as long as for a neighbour at the start
+        acked = transport.publish_result(encode_packet(header, [("result", arrays)]),
+                                         wait_s=max(10.0, float(opts["start_timeout_s"])))
         _log(i, f"outcome: {header['counters']['outcome']}"
                 f"{'' if not transport.written_off else f' {transport.written_off}'}")
         _log(i, f"done in {header['timings_s']['total']:.2f} s, {transport.round} rounds"

@@ -14,9 +14,14 @@ one; a user may write one by hand. Schema (``version`` 1)::
       "data": {"kind": "formation", "formation": "d", "seed": 0, "size": [640, 480],
                "robots": null, "graph": null}
           or {"kind": "images", "images": ["a.jpg", ...], "intrinsics": [[[fx,0,cx],...], ...],
-              "intrinsics_known": [true, ...], "max_size": 1600}
+              "intrinsics_known": [true, ...], "max_size": 1600,
+              "intrinsics_source": ["K.txt", ...]}     # optional: where each K came from
+              # (K.txt, exif-..., guess: an observer's reconstruction refines EXIF and
+              # guessed focal lengths, keeps calibrations)
               # K of the image as the robot uses it (after downscaling to max_size)
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
+              # "links": ["r0.csv", "r1.csv", ...]: one file per robot, each holding only
+              # the rows that touch that robot (a robot reads only its own)
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -24,12 +29,18 @@ one; a user may write one by hand. Schema (``version`` 1)::
                                                   # default its DEFAULT_RESOLUTION; e.g.
                                                   # "paper" (paper with drop_prob > 0)
                   "merge_radius": null, "contrast_threshold": null, "rootsift": false,
-                  "budget_after_merge": false, "threshold_px": 1.0},
+                  "budget_after_merge": false, "threshold_px": 1.0,
+                  "wire": "compact"},             # or "plain" (teamfile.WIRE_FORMS)
               # max_features / threshold_px null: scaled with the image size (photos);
               # merge_radius null: that of the resolution, as on the command line (2 px
               # with evidence, 0.5 px with paper)
       "robot_options": {"3": {"drop_prob": 0.2}}  # optional per-robot overrides of "options"
-    }
+    }                                             # (not "resolution": the team's rule)
+
+A robot reads only its own part of the file: its endpoint and its neighbours' (to connect),
+its own ``options`` (``options`` with its ``robot_options``), its own data entry (its image,
+its links file), and the public facts of Sec. II: the team size and the comm graph, of which
+it uses only the edges that touch it.
 
 Relative paths in ``data`` are relative to the team file. Every problem is one
 :class:`~pipeline.errors.InputError` line naming the bad value.
@@ -48,7 +59,8 @@ import numpy as np
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
-__all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS", "DATA_KINDS"]
+__all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
+           "DATA_KINDS", "links_file_of", "TEAM_ONLY_OPTIONS"]
 
 DATA_KINDS = ("formation", "images", "links")
 DEFAULT_OPTIONS = {
@@ -69,7 +81,15 @@ DEFAULT_OPTIONS = {
     "rootsift": False,
     "budget_after_merge": False,
     "threshold_px": 1.0,
+    "wire": "compact",
 }
+#: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
+#: (pipeline.matching.packed), features only to the neighbour that matches them, packets
+#: zlib-compressed (pipeline.transport.wire); ``plain`` — descriptors as extracted, to every
+#: neighbour, packets uncompressed (the earlier encoding, kept to compare the two)
+WIRE_FORMS = ("compact", "plain")
+#: options that are the team's, not one robot's (every robot must run the same rule)
+TEAM_ONLY_OPTIONS = ("resolution",)
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
 #: OpenCV offers one is checked when the robot extracts)
 FEATURE_METHODS = ("sift", "orb", "akaze", "surf")
@@ -88,7 +108,8 @@ MAX_ROBOT_FEATURES = 5_000_000
 #: keys a robot entry and each kind of ``data`` may hold
 _ROBOT_KEYS = {"id", "endpoint"}
 _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
-              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size"},
+              "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
+                         "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -254,6 +275,10 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: robot_options key {key!r} must be a robot id 0..{n - 1} "
                              "with an object of options")
         _check_options(val, where)
+        fixed = sorted(set(val) & set(TEAM_ONLY_OPTIONS))
+        if fixed:
+            raise InputError(f"{where}: robot_options[{key!r}] sets {fixed[0]!r}, which is the "
+                             "team's (every robot runs the same rule); set it under 'options'")
         per[rid] = val
     obs = doc.get("observer")
     observer = None
@@ -323,13 +348,21 @@ def _check_data(data: dict, n: int, where: str) -> None:
                                       and all(isinstance(v, bool) for v in known)):
             raise InputError(f"{where}: data.intrinsics_known must list {n} true/false values "
                              "or be null")
+        src = data.get("intrinsics_source")
+        if src is not None and not (isinstance(src, list) and len(src) == n
+                                    and all(isinstance(v, str) for v in src)):
+            raise InputError(f"{where}: data.intrinsics_source must list {n} names (K.txt, "
+                             "exif-35mm, guess, ...) or be null")
         ms = data.get("max_size")
         if ms is not None and (not _is_int(ms) or ms < 0):
             raise InputError(f"{where}: data.max_size {ms!r} must be a number of pixels >= 0 "
                              "(0: full size) or null")
     elif kind == "links":
-        if not isinstance(data.get("links"), str):
-            raise InputError(f"{where}: data.links must be the path of a links CSV file")
+        lk = data.get("links")
+        if not (isinstance(lk, str) or (isinstance(lk, list) and len(lk) == n
+                                        and all(isinstance(p, str) for p in lk))):
+            raise InputError(f"{where}: data.links must be the path of a links CSV file, or "
+                             f"a list of {n} paths, one per robot (each its own rows)")
         fpc = data.get("features_per_camera")
         if not isinstance(fpc, list) or len(fpc) != n or not all(
                 _is_int(v) and 0 <= v <= MAX_ROBOT_FEATURES for v in fpc):
@@ -372,6 +405,9 @@ def _check_options(opts: dict, where: str) -> None:
     for k in ("fusion", "rootsift", "budget_after_merge"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
+    if opts.get("wire", "compact") not in WIRE_FORMS:
+        raise InputError(f"{where}: option wire {opts['wire']!r} must be one of "
+                         f"{', '.join(WIRE_FORMS)}")
     method = opts.get("features", "sift")
     if method not in FEATURE_METHODS:
         raise InputError(f"{where}: option features {method!r} must be one of "
@@ -435,8 +471,18 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
         path = team.resolve_path(data["images"][i])
         return [(f"data.images[{i}] of the team file",
                  require_input_file(path, f"{where}: data.images[{i}]"))]
-    return [("data.links of the team file",
-             require_input_file(team.resolve_path(data["links"]), f"{where}: data.links"))]
+    path, own = links_file_of(team, i)
+    what = f"data.links[{i}]" if own else "data.links"
+    return [(f"{what} of the team file", require_input_file(path, f"{where}: {what}"))]
+
+
+def links_file_of(team: Team, i: int) -> tuple[Path, bool]:
+    """Robot ``i``'s links file and whether it is its own (``data.links`` a list of one file
+    per robot) rather than the team's shared one."""
+    lk = team.data["links"]
+    if isinstance(lk, list):
+        return team.resolve_path(lk[int(i)]), True
+    return team.resolve_path(lk), False
 
 
 def write_team(path, team: Team) -> Path:

@@ -29,11 +29,42 @@ from pipeline.team.assemble import (
 from pipeline.team.launcher import launch_team, make_team, team_summary
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 
-__all__ = ["formation", "images", "resolve", "resolve_links_file"]
+__all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
+           "resolve_links_file",
+           "write_robot_links", "links_of_run"]
+
+
+def write_robot_links(folder: Path, links, n: int) -> list[Path]:
+    """One links file per robot in ``folder`` (``links-robotI.csv``): the rows of ``links``
+    that touch robot ``I``, in their order, with their quality. Returns the paths."""
+    paths = []
+    for i in range(n):
+        sel = np.flatnonzero((links.cam_i == i) | (links.cam_j == i))
+        p = folder / f"links-robot{i}.csv"
+        p.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+            f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
+                links.cam_i[sel].tolist(), links.feat_i[sel].tolist(),
+                links.cam_j[sel].tolist(), links.feat_j[sel].tolist(),
+                links.quality[sel].tolist(), strict=True)))
+        paths.append(p)
+    return paths
+
+
+def _union_links(parts):
+    """The links of per-robot files, each link once, sorted by ``(cam_i, feat_i, cam_j,
+    feat_j)``."""
+    from pipeline.types import Links
+
+    cat = [np.concatenate([getattr(p, a) for p in parts]) if parts else np.zeros(0, np.int64)
+           for a in ("cam_i", "feat_i", "cam_j", "feat_j")]
+    q = np.concatenate([p.quality for p in parts]) if parts else np.zeros(0)
+    _, first = np.unique(np.stack(cat, 1), axis=0, return_index=True)
+    return Links(*(c[first] for c in cat), q[first])
 
 
 def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
-              round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"]) -> FormationRobots:
+              round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"],
+              wire: str = "compact") -> FormationRobots:
     """``run-formation --transport zenoh``: one robot process per camera.
 
     The robots render their own cameras, extract, match, resolve and fuse; this process (the
@@ -44,16 +75,16 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
     config : FormationConfig
     kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
     round_timeout_s : float — silence after which a neighbour is written off
+    wire : the robots' encoding, ``compact`` or ``plain``
+        (:data:`pipeline.team.teamfile.WIRE_FORMS`)
     workdir : folder for TEAM.json and the robots' logs (default: temporary)
     keep_run : list or None — the :class:`~pipeline.team.launcher.TeamRun` is appended to it
     """
     import data_synth
-    from pipeline.matching.features import extract
-    from pipeline.types import Features
 
     opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
                         merge_radius_for(config.resolution, config.merge_radius),
-                        config.resolution, fusion=bool(config.fusion))
+                        config.resolution, fusion=bool(config.fusion), wire=wire)
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6
@@ -69,6 +100,18 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
                    f"process start {run.start_s:.2f} s")
     if keep_run is not None:
         keep_run.append(run)
+    return formation_of_run(config, team, run, timer)
+
+
+def formation_of_run(config, team, run, timer: StageTimer) -> FormationRobots:
+    """What the robots of ``team`` published in ``run`` (launched here, or observed by
+    :mod:`pipeline.team.observe`), as the ``formation`` job's result: the observer renders
+    the formation once more for the evaluation only."""
+    import data_synth
+    from pipeline.matching.features import extract
+    from pipeline.types import Features
+
+    opts = team.options
     with timer.stage("render", "observer: ground truth for the evaluation"):
         formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
                                       n_robots=config.robots, graph=config.graph)
@@ -79,8 +122,8 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
             feats.append(Features(kp, np.zeros((len(kp), 0), np.float32),
                                   np.zeros(len(kp), np.float32), config.features))
         else:  # a robot lost before publishing: the evaluation extracts its features itself
-            feats.append(extract(v, config.features, config.max_features,
-                                 opts["merge_radius"]))
+            feats.append(extract(v, config.features, config.max_features or 2000,
+                                 merge_radius_for(config.resolution, opts["merge_radius"])))
     matches, links = links_of_team(team, run.results)
     m = np.array([len(f) for f in feats], dtype=np.int64)
     res = consistency_of_team(team, run.results, links, m, run.killed)
@@ -124,16 +167,30 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
         A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
         a graph kind or file).
     """
-    from pipeline.types import Features
-
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
                          "features at once; with --transport zenoh give ring, ring2, complete, "
                          "seq:K or a graph file")
+    team = images_team(config, views, comm_edges)
+    n = team.n
+    with timer.stage("team", f"{n} robot processes over zenoh"):
+        run = launch_team(team, workdir)
+        timer.note(f"{len(run.results)} of {n} robots published; "
+                   f"process start {run.start_s:.2f} s")
+    if keep_run is not None:
+        keep_run.append(run)
+    return images_of_run(config, views, team, run)
+
+
+def images_team(config, views, comm_edges):
+    """The loopback team of ``run-images --transport zenoh``: one robot per photograph, its
+    path, intrinsics (as loaded, at the downscaled size) and their source, the run's
+    feature and resolution options."""
     directory = Path(config.directory).resolve()
     data = {"kind": "images", "images": [str(directory / v.name) for v in views],
             "intrinsics": [np.asarray(v.K, np.float64).tolist() for v in views],
             "intrinsics_known": [bool(v.intrinsics_known) for v in views],
+            "intrinsics_source": [str(v.intrinsics_source) for v in views],
             "max_size": config.max_size}
     opts = team_options(config.features, config.max_features, None,
                         merge_radius=merge_radius_for(config.resolution, config.merge_radius),
@@ -143,13 +200,21 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
                         budget_after_merge=bool(config.budget_after_merge),
                         threshold_px=config.threshold_px)
     n = len(views)
-    team = make_team(f"images-{n}", comm_edges, data, opts, n=n)
-    with timer.stage("team", f"{n} robot processes over zenoh"):
-        run = launch_team(team, workdir)
-        timer.note(f"{len(run.results)} of {n} robots published; "
-                   f"process start {run.start_s:.2f} s")
-    if keep_run is not None:
-        keep_run.append(run)
+    return make_team(f"images-{n}", comm_edges, data, opts, n=n)
+
+
+def images_of_run(config, views, team, run) -> ImagesRobots:
+    """What the robots of a photo ``team`` published in ``run`` (launched here, or observed by
+    :mod:`pipeline.team.observe`), as the ``images`` job's result.
+
+    Raises
+    ------
+    TeamError
+        A robot did not publish (the run of photographs needs every camera's keypoints).
+    """
+    from pipeline.types import Features
+
+    n = team.n
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
         raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result")
@@ -167,20 +232,32 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
 
 
 def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, *,
-                           kill=None, workdir=None, keep_run: list | None = None
-                           ) -> ConsistencyResult:
-    """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``."""
+                       kill=None, workdir=None, keep_run: list | None = None, links=None
+                       ) -> ConsistencyResult:
+    """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``.
+
+    ``links_csv``: one file the robots share, or a list of one file per robot holding only
+    the rows that touch it (then each robot reads only its own file); the links of the
+    result are ``links`` when given, else the shared file's rows in order, or the per-robot
+    files' links each once, sorted."""
     from pipeline.inputs.linkscsv import read_links_csv
 
     fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
     edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
-    data = {"kind": "links", "links": str(Path(links_csv).resolve()),
-            "features_per_camera": fpc}
+    per_robot = isinstance(links_csv, (list, tuple))
+    paths = [str(Path(p).resolve()) for p in links_csv] if per_robot \
+        else str(Path(links_csv).resolve())
+    data = {"kind": "links", "links": paths, "features_per_camera": fpc}
     team = make_team("resolve", edges, data, options, n=len(fpc))
     run = launch_team(team, workdir, kill=kill)
     if keep_run is not None:
         keep_run.append(run)
-    links = read_links_csv(links_csv).links
+    if links is not None:
+        pass
+    elif per_robot:
+        links = _union_links([read_links_csv(p).links for p in links_csv])
+    else:
+        links = read_links_csv(links_csv).links
     res = consistency_of_team(team, run.results, links, fpc, run.killed)
     res.stats["team"] = team_summary(run)
     return res
@@ -190,9 +267,10 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
     """``resolve --transport zenoh``: the consistency stage as one robot process per camera.
 
     The links to make consistent (kept rows, compact ids, with their quality: the evidence
-    of the evidence rule) go to a file in a temporary team folder; each robot reads its own
-    rows of it (:func:`resolve_links_file`). ``ids`` is not needed: the robots are the
-    cameras of the compact layout. Returns ``(ConsistencyResult, faults section or None)``.
+    of the evidence rule) go to one file per robot in a temporary team folder, each with the
+    rows that touch that robot: a robot reads only its own (:func:`resolve_links_file`).
+    ``ids`` is not needed: the robots are the cameras of the compact layout. Returns
+    ``(ConsistencyResult, faults section or None)``; the result's links are ``links``.
     """
     import tempfile
 
@@ -201,15 +279,33 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
 
     m = features_per_camera
     with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
-        path = Path(work) / "links.csv"
-        path.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
-            f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
-                links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                links.feat_j.tolist(), links.quality.tolist(), strict=True)))
-        res = resolve_links_file(path, m, comm_edges_for(m, links, comm_edges),
+        paths = write_robot_links(Path(work), links, len(m))
+        res = resolve_links_file(paths, m, comm_edges_for(m, links, comm_edges),
                                  team_options(faults=faults, resolution=resolution),
-                                 workdir=work)
+                                 workdir=work, links=links)
+
     fault_section = None
     if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
         fault_section = fault_report(faults or FaultConfig(), res)
     return res, fault_section
+
+
+def links_of_run(team, run) -> ConsistencyResult:
+    """The consistency stage of a ``links`` team observed by :mod:`pipeline.team.observe`:
+    the links are those the robots published in their link tables (each link once, sorted
+    by ``(cam_i, feat_i, cam_j, feat_j)``: the observer reads no links file), the decisions
+    those of their logs."""
+    from pipeline.types import Links
+
+    parts = []
+    for i, (_, a) in sorted(run.results.items()):
+        nbr = a["link_nbr"].astype(np.int64)
+        r, s = a["link_r"].astype(np.int64), a["link_s"].astype(np.int64)
+        lo = i < nbr
+        parts.append(Links(np.where(lo, i, nbr), np.where(lo, r, s), np.where(lo, nbr, i),
+                           np.where(lo, s, r)))
+    links = _union_links(parts)
+    res = consistency_of_team(team, run.results, links, team.data["features_per_camera"],
+                              run.killed)
+    res.stats["team"] = team_summary(run)
+    return res

@@ -74,7 +74,7 @@ def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
     from pipeline.runs.resolve import resolve_file
     from pipeline.stages import clean_association, consistency_stage
     from pipeline.team.assemble import team_options
-    from pipeline.team.robot import team_resolution
+    from pipeline.team.robot import robot_resolution
     from pipeline.team.teamfile import DEFAULT_OPTIONS, load_team
     from pipeline.types import Links
 
@@ -105,7 +105,7 @@ def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
         "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
                    {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
         "data": {"kind": "formation", "formation": "line", "robots": 2, "seed": 0}}))
-    assert team_resolution(load_team(team_file)) == DEFAULT_RESOLUTION
+    assert robot_resolution(load_team(team_file).options_for(0), lossy=False) == DEFAULT_RESOLUTION
     # and the default is what runs: the paper's Fig. 1, its weakest link cut by the evidence
     links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0], [0.8, 0.8, 0.2, 0.8])
     res = resolve_conflicts([1, 1, 1, 2], None, links)

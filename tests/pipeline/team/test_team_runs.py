@@ -82,7 +82,14 @@ def test_zenoh_links_equal_the_simulators_formation(formation, resolution, fusio
             assert report["fusion"]["bytes_by_kind"][kind] == nbytes
     assert report["resolution"]["method"] == resolution
     assert report["team"]["transport"] == "zenoh"
-    assert all(r["wire_bytes"] >= r["bytes"] for r in report["team"]["robots"].values())
+    # every stage's wire bytes add up to the robot's
+    has_lower = {max(e) for e in report["comm_edges"]}
+    for i, r in report["team"]["robots"].items():
+        stages = r["wire_bytes_by_stage"]
+        assert list(stages) == ["exchange", "consistency"] + (["fusion"] if fusion else [])
+        assert all(v > 0 for v in stages.values()) and sum(stages.values()) == r["wire_bytes"]
+        # features go only to the neighbour that matches with them (the lower id)
+        assert (r["bytes_by_kind"].get("features", 0) > 0) == (int(i) in has_lower)
 
 
 @pytest.mark.parametrize("resolution", ["evidence", "paper"])

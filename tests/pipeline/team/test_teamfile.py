@@ -38,6 +38,10 @@ def test_a_valid_team_parses():
     ({"options": {"drop_prob": 1.5}}, "drop_prob"),
     ({"options": {"speed": 1}}, "unknown option 'speed'"),
     ({"colour": 1}, "unknown key 'colour'"),
+    ({"robot_options": {"1": {"resolution": "paper"}}}, "'resolution', which is the team's"),
+    ({"options": {"wire": "gzip"}}, "wire 'gzip' must be one of compact, plain"),
+    ({"data": {"kind": "links", "links": ["a.csv", "b.csv"], "features_per_camera": [1, 1, 1]}},
+     "a list of 3 paths, one per robot"),
 ])
 def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
@@ -83,3 +87,18 @@ def test_writing_a_team_file_never_writes_through_a_name_beside_it(tmp_path):
     write_team(tmp_path / "TEAM.json", parse_team(_doc()))
     assert precious.read_text() == "precious"
     assert load_team(tmp_path / "TEAM.json").n == 3
+
+
+def test_each_robot_names_its_own_links_file(tmp_path):
+    from pipeline.team.teamfile import check_data_files, links_file_of
+
+    p = tmp_path / "TEAM.json"
+    p.write_text(json.dumps(_doc(data={"kind": "links", "links": ["r0.csv", "r1.csv", "r2.csv"],
+                                       "features_per_camera": [2, 2, 2]})))
+    team = load_team(p)
+    assert links_file_of(team, 1) == (tmp_path / "r1.csv", True)
+    (tmp_path / "r1.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,1,1,0\n")
+    # robot 1 needs only its own file: the others' may live on other machines
+    assert [q for _, q in check_data_files(team, 1)] == [tmp_path / "r1.csv"]
+    with pytest.raises(InputError, match=r"data.links\[0\]"):
+        check_data_files(team, 0)

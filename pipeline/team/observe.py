@@ -1,0 +1,122 @@
+"""A standalone observer of a team whose robots were started elsewhere (by hand, on several
+machines): ``formation-match observe --team TEAM.json --out DIR``.
+
+It opens a Zenoh session listening on the team file's ``observer`` endpoint (every robot
+connects to it besides its neighbours, :mod:`pipeline.transport.zenoh_transport`), and
+collects what the one-machine launcher's observer collects
+(:class:`pipeline.team.launcher.Observer`): each robot's published result (acknowledged, so
+the robot stops repeating it) and its statuses. It takes no part in the algorithm and never
+relays between robots. The run folder is then made from the results exactly as the launcher's
+run makes it (:mod:`pipeline.team.assemble`, the ``zenoh`` transport's job functions), so a
+team started by hand ends in the same ``links.csv`` as ``--transport zenoh``.
+
+When it stops (every wait is bounded)
+    It waits until every robot of the team has ended: published its result, published a
+    ``failed: ...`` status (a :class:`~pipeline.errors.TeamError` naming it), or vanished
+    without a result (its Zenoh liveliness token deleted — its process ended — and no
+    result within :data:`GRACE_S` after that: a lost robot, reported as killed). A robot
+    not ended within ``timeout_s`` of the observer's start is lost too; if no robot at all
+    published by then, a TeamError names one that never started.
+"""
+
+from __future__ import annotations
+
+import time
+
+from pipeline.errors import TeamError
+from pipeline.team.launcher import Observer, TeamRun
+
+__all__ = ["observe_team", "TeamObserver", "GRACE_S"]
+
+#: seconds a robot whose liveliness token vanished has to deliver its result (it publishes
+#: before closing its session; this covers the packet still in flight)
+GRACE_S = 2.0
+
+
+class TeamObserver(Observer):
+    """:class:`~pipeline.team.launcher.Observer` that also hears robots' liveliness tokens
+    vanish (a robot process that ended)."""
+
+    def __init__(self, team) -> None:
+        super().__init__(team)
+        self.vanished: dict[int, float] = {}
+        self.alive: set[int] = set()
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            self._key(team.name, "live", "*"), self._on_live, history=True))
+
+    def _on_live(self, sample) -> None:
+        import zenoh
+
+        try:
+            i = int(str(sample.key_expr).rsplit("/", 1)[-1])
+        except ValueError:
+            return
+        with self.cv:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self.vanished.setdefault(i, time.monotonic())
+            else:
+                self.alive.add(i)
+            self.cv.notify_all()
+
+
+def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
+    """Collect the results of ``team``'s robots started elsewhere; return a :class:`TeamRun`.
+
+    Bound: returns or raises within ``timeout_s`` (plus at most one wait period of 0.05 s);
+    see the module docstring for when it stops.
+
+    Raises
+    ------
+    TeamError
+        A robot published ``failed: ...`` (named, with its message), or no robot published a
+        result within ``timeout_s`` (names the first that never started, or never published).
+    InputError
+        The team file has no ``observer`` endpoint, or it cannot be listened on.
+    """
+    from pipeline.errors import InputError
+
+    if not team.observer:
+        raise InputError(f"team {team.name!r} has no observer endpoint; add "
+                         "\"observer\": {\"endpoint\": \"tcp/HOST:PORT\"} to TEAM.json (the "
+                         "robots connect to it) and start the robots again")
+    log = log or (lambda s: None)
+    obs = TeamObserver(team)
+    run = TeamRun(team)
+    t0 = time.monotonic()
+    deadline = t0 + float(timeout_s)
+    log(f"observer listening on {team.observer} for the {team.n} robots of {team.name!r}")
+    try:
+        with obs.cv:
+            while True:
+                now = time.monotonic()
+                failed = sorted(i for i, s in obs.status.items()
+                                if s.startswith("failed") and i not in obs.results)
+                if failed:
+                    i = failed[0]
+                    raise TeamError(f"robot {i} ({team.endpoint(i)}) {obs.status[i]}")
+                lost = {i for i, t in obs.vanished.items()
+                        if i not in obs.results and now - t > GRACE_S}
+                if all(i in obs.results or i in lost for i in range(team.n)):
+                    break
+                if now > deadline:
+                    missing = [i for i in range(team.n) if i not in obs.results]
+                    if not obs.results:
+                        never = [i for i in missing if i not in obs.status
+                                 and i not in obs.alive]
+                        who = (never or missing)[0]
+                        raise TeamError(
+                            f"no robot published a result within {timeout_s:g} s; robot {who} "
+                            f"({team.endpoint(who)}) "
+                            f"{'never started' if who in never else 'did not publish'}")
+                    lost |= set(missing)
+                    log(f"robots {missing} did not publish within {timeout_s:g} s: lost")
+                    break
+                obs.cv.wait(0.05)
+            run.results = dict(obs.results)
+            run.status = dict(obs.status)
+            run.finished_at = dict(obs.finished_at)
+            run.killed = {i: obs.vanished.get(i, time.monotonic()) for i in sorted(lost)}
+        run.wall_s = run.published_s = time.monotonic() - t0
+        return run
+    finally:
+        obs.close()

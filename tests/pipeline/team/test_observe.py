@@ -1,0 +1,339 @@
+"""A team started by hand (one ``robot`` process each) and a standalone observer: the same
+run folder as the simulator's; each robot reads only its own data."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import main
+from pipeline.runs.formation import FormationConfig, run_formation
+
+
+@pytest.fixture(autouse=True)
+def _scene_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+def _rows(path):
+    return [tuple(line.split(",")[:6]) for line in Path(path).read_text().splitlines()]
+
+
+def _start_robots(team_paths, tmp_path):
+    """One ``python -m pipeline robot`` process per robot, as a user starts them by hand."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    procs = []
+    for i, team in enumerate(team_paths):
+        log = open(tmp_path / f"robot{i}.log", "wb")  # noqa: SIM115
+        procs.append((subprocess.Popen(
+            [sys.executable, "-m", "pipeline", "robot", "--team", str(team), "--id", str(i),
+             "--result", str(tmp_path / f"robot{i}.json")], stdout=log,
+            stderr=subprocess.STDOUT, env=env), log))
+    return procs
+
+
+def _stop(procs, timeout=60):
+    codes = []
+    for p, log in procs:
+        try:
+            codes.append(p.wait(timeout=timeout))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            codes.append(p.wait())
+        log.close()
+    return codes
+
+
+def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.stages import merge_radius_for
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+
+    cfg = dict(formation="a", seed=0, size=(160, 120), fusion=True, rerun=False)
+    sim = run_formation(FormationConfig(out=str(tmp_path / "sim"), **cfg))
+    c = FormationConfig(**cfg)
+    import data_synth
+
+    opts = team_options(c.features, c.max_features, None,
+                        merge_radius=merge_radius_for(c.resolution, None),
+                        resolution=c.resolution, fusion=True)
+    opts["start_timeout_s"] = 120.0
+    team = make_team("by-hand", data_synth.formation_edges("a", 0, None, None),
+                     {"kind": "formation", "formation": "a", "seed": 0, "size": [160, 120],
+                      "robots": None, "graph": None}, opts, n=6)
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300", "--no-rerun"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+    rows = _rows(tmp_path / "obs" / "links.csv")
+    assert rows == _rows(sim / "links.csv")
+    assert any(r[5] == "fusion-outlier" for r in rows[1:])
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["team"]["observed"] is True and report["team"]["lost"] == []
+    assert report["after"]["conflictive_sets"] == 0
+    # each robot's --result holds every decision it made, fusion cuts included
+    status = {(int(r[0]), int(r[1]), int(r[2]), int(r[3])): (r[4], r[5]) for r in rows[1:]}
+    fusion_cuts = 0
+    for i in range(team.n):
+        res = json.loads((tmp_path / f"robot{i}.json").read_text())["links"]
+        for k, r, s, why in zip(res["link_nbr"], res["link_r"], res["link_s"],
+                                zip(res["status"], res["reason"], strict=True), strict=True):
+            key = (i, r, k, s) if i < k else (k, s, i, r)
+            if why[1] == "fusion-outlier":
+                fusion_cuts += 1
+                assert status[key] == ("deleted", "fusion-outlier")
+            if why[0] == "kept":
+                assert status[key] == ("kept", "")
+        assert len(res["fusion_cut"]) == len(res["link_nbr"])
+    assert fusion_cuts > 0
+
+
+def test_each_robot_given_only_its_own_links_file_runs(tmp_path):
+    """Every robot on its own "machine" (folder): its TEAM.json copy names every robot's
+    links file, but only its own exists there. The observer's links.csv equals the
+    simulator's ``resolve`` of the whole file."""
+    from pipeline.runs.transports.zenoh import write_robot_links
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+    from pipeline.types import Links
+
+    rng = np.random.default_rng(4)
+    rows, seen = [], set()
+    for _ in range(90):
+        i, j = sorted(rng.choice(4, 2, replace=False).tolist())
+        r, s = int(rng.integers(10)), int(rng.integers(10))
+        if (i, r, j) not in seen and (j, s, i) not in seen:
+            seen |= {(i, r, j), (j, s, i)}
+            rows.append((i, r, j, s))
+    rows.sort()
+    q = rng.uniform(0.05, 0.95, len(rows)).round(3)
+    links = Links(*np.array(rows).T, q)
+    whole = tmp_path / "in.csv"
+    whole.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
+        f"{a},{b},{c},{d},{x}\n" for (a, b, c, d), x in zip(rows, q, strict=True)))
+    graph = tmp_path / "graph.csv"
+    graph.write_text("".join(f"{i},{j}\n" for i in range(4) for j in range(i + 1, 4)))
+    assert main(["resolve", "--links", str(whole), "--comm-graph", str(graph), "--resolution",
+                 "evidence", "--out", str(tmp_path / "sim.csv")]) == 0
+    names = [f"links-robot{i}.csv" for i in range(4)]
+    team = make_team("own-files", [[i, j] for i in range(4) for j in range(i + 1, 4)],
+                     {"kind": "links", "links": names, "features_per_camera": [10] * 4},
+                     {"resolution": "evidence", "start_timeout_s": 120.0}, n=4)
+    paths = []
+    for i in range(4):
+        home = tmp_path / f"machine{i}"
+        home.mkdir()
+        written = write_robot_links(home, links, 4)
+        for k, p in enumerate(written):
+            if k != i:
+                p.unlink()  # only its own rows live on its machine
+        team.path = None
+        paths.append(write_team(home / "TEAM.json", team))
+    (tmp_path / "observer").mkdir()
+    obs_team = write_team(tmp_path / "observer" / "TEAM.json", team)
+    procs = _start_robots(paths, tmp_path)
+    try:
+        assert main(["observe", "--team", str(obs_team), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * 4
+    sim = _rows(tmp_path / "sim.csv")
+    got = _rows(tmp_path / "obs" / "links.csv")
+    assert got[0] == sim[0] and sorted(got[1:]) == sorted(sim[1:])
+    assert any(r[4] == "deleted" for r in sim[1:])
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["after"]["conflictive_sets"] == 0 and report["links"] == len(rows)
+
+
+def test_a_robot_reads_only_its_own_rows_and_refuses_a_foreign_file(tmp_path):
+    from pipeline.errors import InputError
+    from pipeline.team.robot import own_links_from_file
+
+    f = tmp_path / "r1.csv"
+    f.write_text("cam_i,feat_i,cam_j,feat_j\n0,1,1,2\n1,0,2,3\n")
+    nbr, r, s, _ = own_links_from_file(f, 1, own_file=True)
+    assert nbr.tolist() == [2, 0] and r.tolist() == [0, 2] and s.tolist() == [3, 1]
+    with pytest.raises(InputError, match=r"r1.csv:3: link \(1,0\)-\(2,3\) does not touch robot 0"):
+        own_links_from_file(f, 0, own_file=True)
+
+
+def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(tmp_path,
+                                                                               capsys):
+    doc = {"version": 1, "name": "two", "comm_edges": [[0, 1]],
+           "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
+                      {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
+           "data": {"kind": "formation", "formation": "line", "robots": 2, "seed": 0}}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "has no observer endpoint" in capsys.readouterr().err
+    doc["observer"] = {"endpoint": "tcp/127.0.0.1:7449"}
+    doc["data"] = {"kind": "images", "images": ["a/x.jpg", "b/y.jpg"]}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "from one folder, data.images names 2" in capsys.readouterr().err
+    assert main(["observe", "--team", str(tmp_path / "none.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    for bad in ("0", "-1", "nan", "1e9"):
+        assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                     str(tmp_path / "o"), "--timeout", bad]) == 2
+        assert "--timeout" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_small,
+                                                                       tmp_path):
+    """Four photographs, photo defaults, robots started by hand: the observer's run folder
+    has the links of ``run-images --transport zenoh`` (equal to the simulator's without
+    fusion)."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.inputs.photos import load_folder
+    from pipeline.runs.images import ImagesConfig
+    from pipeline.runs.transports.zenoh import images_team
+    from pipeline.team.teamfile import write_team
+
+    args = ["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
+            "--no-fusion", "--no-rerun"]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    config = ImagesConfig(str(sceaux_small), "complete", max_size=320)
+    views = load_folder(sceaux_small, max_size=320)
+    team = images_team(config, views, comm_graph("complete", [v.name for v in views]))
+    team.options["start_timeout_s"] = 120.0
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300", "--no-rerun"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+    sim = (tmp_path / "sim" / "links.csv").read_text().splitlines()
+    assert (tmp_path / "obs" / "links.csv").read_text().splitlines() == sim
+    assert len(sim) > 500
+    rep = json.loads((tmp_path / "obs" / "report.json").read_text())
+    sim_rep = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert rep["features_per_camera"] == sim_rep["features_per_camera"]
+    assert rep["team"]["observed"] is True and rep["fusion"]["enabled"] is False
+    assert (tmp_path / "obs" / "sparse").is_dir()
+
+
+def test_loss_at_one_robot_is_learnt_by_all_and_the_fault_tolerant_rule_runs(tmp_path):
+    """Robot 2 alone injects message loss (its own option): every robot learns it from its
+    neighbours and all run the fault-tolerant Alg. 1, as the simulator does on a lossy
+    network."""
+    from pipeline.runs.transports.zenoh import write_robot_links
+    from pipeline.team.launcher import launch_team, make_team
+    from pipeline.types import Links
+
+    links = Links([0, 0, 1, 2], [0, 1, 0, 0], [1, 3, 2, 3], [0, 0, 1, 1], [0.9, 0.2, 0.8, 0.7])
+    paths = [str(p) for p in write_robot_links(tmp_path, links, 4)]
+    team = make_team("lossy-one", [[0, 1], [1, 2], [2, 3], [0, 3]],
+                     {"kind": "links", "links": paths, "features_per_camera": [2, 2, 2, 2]},
+                     {"resolution": "evidence"}, n=4)
+    team.robot_options = {2: {"drop_prob": 0.3}}
+    run = launch_team(team, tmp_path / "work")
+    assert sorted(run.results) == [0, 1, 2, 3]
+    assert {h["resolution"] for h, _ in run.results.values()} == {"paper"}
+    assert all(h["counters"]["dropped"] == 0 for i, (h, _) in run.results.items() if i != 2)
+    team.robot_options = {}
+    run = launch_team(team, tmp_path / "work2")
+    assert {h["resolution"] for h, _ in run.results.values()} == {"evidence"}
+
+
+def test_the_observer_names_a_robot_that_never_started_or_failed():
+    import threading
+
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import observe_team
+    from pipeline.transport.zenoh_transport import key, open_session
+
+    data = {"kind": "links", "links": "x.csv", "features_per_camera": [1, 1]}
+    team = make_team("quiet", [[0, 1]], data, n=2)
+    with pytest.raises(TeamError, match=r"no robot published a result within 0.5 s; robot 0 "
+                                        r"\(tcp/127.0.0.1:\d+\) never started"):
+        observe_team(team, timeout_s=0.5)
+    # a robot that reports a failure ends the observation with its message
+    team = make_team("failing", [[0, 1]], data, n=2)
+    stop = threading.Event()
+
+    def robot_one():
+        s = open_session([team.endpoint(1)], [team.observer], "robot 1")
+        try:
+            while not stop.wait(0.05):
+                s.put(key(team.name, "status", 1), "failed: no such image")
+        finally:
+            s.close()
+
+    t = threading.Thread(target=robot_one)
+    t.start()
+    try:
+        with pytest.raises(TeamError, match=r"robot 1 \(tcp/127.0.0.1:\d+\) failed: no such image"):
+            observe_team(team, timeout_s=60)
+    finally:
+        stop.set()
+        t.join()
+
+
+def test_a_robot_killed_mid_run_is_reported_lost_by_the_observer(tmp_path):
+    """kill -9 of one hand-started robot: its Zenoh session vanishes, the survivors finish
+    without it, the observer reports it lost and writes a conflict-free run folder."""
+    import signal
+    import time
+
+    from pipeline.consistency.centralized import is_conflict_free
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.team.launcher import make_team
+    from pipeline.team.teamfile import write_team
+    from pipeline.types import Links
+
+    opts = team_options(max_features=2000, round_timeout_s=1.0, merge_radius=2.0)
+    opts["start_timeout_s"] = 120.0
+    edges = [[i, j] for i in range(4) for j in range(i + 1, 4)]
+    team = make_team("kill-one", edges, {"kind": "formation", "formation": "complete",
+                                         "seed": 0, "size": [160, 120], "robots": 4,
+                                         "graph": "complete"}, opts, n=4)
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * 4, tmp_path)
+    out = {}
+
+    def observe():
+        out["code"] = main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                            "--timeout", "300", "--no-rerun"])
+
+    import threading
+
+    t = threading.Thread(target=observe)
+    t.start()
+    try:
+        log = tmp_path / "robot2.log"
+        for _ in range(1200):  # until robot 2 has met its neighbours (at most 120 s)
+            if log.exists() and "neighbours heard" in log.read_text():
+                break
+            time.sleep(0.1)
+        procs[2][0].send_signal(signal.SIGKILL)
+        t.join(timeout=300)
+    finally:
+        codes = _stop(procs)
+    assert not t.is_alive() and out["code"] == 0
+    assert codes[2] == -signal.SIGKILL and [codes[i] for i in (0, 1, 3)] == [0, 0, 0]
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["team"]["lost"] == [2] and report["team"]["robots"]["2"]["result"] is None
+    rows = [r.split(",") for r in (tmp_path / "obs" / "links.csv").read_text().splitlines()[1:]]
+    kept = [r for r in rows if r[4] == "kept"]
+    assert not any("2" in (r[0], r[2]) for r in kept)
+    links = Links(*([int(r[k]) for r in kept] for k in (0, 1, 2, 3)))
+    assert is_conflict_free(report["features_per_camera"], links)
+    assert report["after"]["conflictive_sets"] == 0
