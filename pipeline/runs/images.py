@@ -43,7 +43,10 @@ class ImagesConfig:
     graph: str
     intrinsics: str = "auto"
     max_size: int | None = 1600
-    features: str = "sift"
+    #: COLMAP's SIFT and matcher by default (pipeline.matching.features.COLMAP_SIFT,
+    #: pipeline.matching.pairs.MATCHERS): the features and matches a COLMAP user starts from
+    features: str = "colmap-sift"
+    matcher: str = "colmap"
     #: per image; None = scaled with the image size (pipeline.matching.features.photo_max_features)
     max_features: int | None = None
     #: SIFT contrast threshold (None = OpenCV's 0.04; 0.02 = COLMAP's DoG peak threshold,

@@ -140,7 +140,7 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
                         contrast_threshold=config.contrast_threshold,
                         rootsift=bool(config.rootsift),
                         budget_after_merge=bool(config.budget_after_merge),
-                        threshold_px=config.threshold_px)
+                        threshold_px=config.threshold_px, matcher=config.matcher)
     n = len(views)
     team = make_team(f"images-{n}", comm_edges, data, opts, n=n)
     with timer.stage("team", f"{n} robot processes over zenoh"):
