@@ -10,6 +10,12 @@ cleaning (:mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run 
 ``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.evaluation.truth`)
 the ``truth`` column and every ground-truth figure of a formation run are filled in.
 
+Camera ``k`` is the ``k``-th image in the order of its pixels' digests
+(:func:`pipeline.inputs.photos.in_content_order`), not of its file name: with ``complete``,
+``knn:K`` or a graph file of image names, renaming the files changes no decision, only the
+names in the outputs (``line``, ``ring``, ``seq:K`` and index files follow the name order on
+purpose: there the names are the user's sequence).
+
 Poses for fusion: real images come without poses, so the reconstruction *before* cleaning
 supplies them (and refines guessed focal lengths). Fusion runs among the images it registered
 (at least two); the others take no part, like crashed robots, and the report names them.
@@ -240,15 +246,24 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None) -> Path:
 def _load(config: ImagesConfig, timer: StageTimer):
     """The photographs and the comm graph (``None`` for ``knn:K``, chosen after the features)."""
     from pipeline.commgraph import comm_graph
-    from pipeline.inputs.photos import load_folder
+    from pipeline.inputs.photos import in_content_order, load_folder
 
     with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
         intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
             else Path(config.intrinsics)
-        views = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
-        names = [v.name for v in views]
+        loaded = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
+        # cameras in the order of their pixels' digests: file names change nothing
+        views = in_content_order(loaded)
         by_similarity = str(config.graph).startswith("knn:")
-        comm_edges = None if by_similarity else comm_graph(config.graph, names)
+        comm_edges = None
+        if not by_similarity:
+            # kinds that follow an order (line, ring, seq:K) and index files follow the file
+            # names, as the user named them; the edges are then put on the camera indices
+            in_name_order = comm_graph(config.graph, [v.name for v in loaded])
+            camera = {v.name: k for k, v in enumerate(views)}
+            to_camera = np.array([camera[v.name] for v in loaded], dtype=np.int64)
+            comm_edges = np.sort(to_camera[in_name_order], axis=1).reshape(-1, 2)
+            comm_edges = comm_edges[np.lexsort((comm_edges[:, 1], comm_edges[:, 0]))]
         sources = sorted({v.intrinsics_source for v in views})
         timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
                    f"{config.graph}: " + ("chosen by image similarity after the features"

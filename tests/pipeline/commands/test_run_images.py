@@ -312,3 +312,32 @@ def test_internet_style_photos_register_at_the_defaults(tmp_path, sceaux_small):
     assert report["flags"] == []
     # the feature budget scaled with the 640x481 images: 2000, not the old cap's ~1600 left
     assert min(report["features_per_camera"]) > 1800
+
+
+@pytest.mark.parametrize("graph", ["knn:2", "complete"])
+def test_renaming_the_files_changes_no_decision(tmp_path, sceaux_small, graph):
+    """The same photographs under random names, in another name order: camera k is the k-th
+    image by content (pipeline.inputs.photos.in_content_order), so links.csv is byte for byte
+    the same and the report differs only in the names."""
+    renamed = tmp_path / "renamed"
+    renamed.mkdir()
+    shutil.copy(sceaux_small / "K.txt", renamed / "K.txt")
+    names = sorted(p.name for p in sceaux_small.glob("*.JPG"))
+    rng = np.random.default_rng(11)
+    new_names = {n: f"{k:03d}.JPG" for n, k in zip(names, rng.permutation(900)[:len(names)],
+                                                    strict=True)}
+    for old, new in new_names.items():
+        shutil.copy(sceaux_small / old, renamed / new)
+    outs = []
+    for folder, tag in ((sceaux_small, "named"), (renamed, "renamed")):
+        out = tmp_path / f"run-{tag}"
+        assert main(["run-images", str(folder), "--graph", graph, "--max-size", "320",
+                     "--no-rerun", "--out", str(out)]) == 0
+        outs.append(out)
+    a, b = (json.loads((o / "report.json").read_text()) for o in outs)
+    assert (outs[0] / "links.csv").read_bytes() == (outs[1] / "links.csv").read_bytes()
+    assert [new_names[im["name"]] for im in a["images"]] == [im["name"] for im in b["images"]]
+    assert a["comm_edges"] == b["comm_edges"]
+    for when in ("before", "after"):
+        ta, tb = a["triangulation"][when], b["triangulation"][when]
+        assert (ta["registered_images"], ta["points"]) == (tb["registered_images"], tb["points"])
