@@ -300,18 +300,18 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
 
 
 def _colmap_sift(gray: np.ndarray, max_features: int, merge_radius: float) -> Features:
-    """COLMAP's SIFT (its budget: the ``max_features`` largest-scale locations), co-located
-    orientations merged as for OpenCV's (the largest scale kept, then the first)."""
+    """COLMAP's SIFT (its budget: the ``max_features`` largest-scale locations, each with up
+    to two orientations), co-located orientations merged as for OpenCV's (the largest scale
+    kept, then the first)."""
     from pipeline.colmap.sift import sift
 
     if min(gray.shape) < MIN_IMAGE_PX:
         return Features(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32),
                         np.zeros(0, np.float32), COLMAP_SIFT)
     got = sift(gray, max_features)
+    # COLMAP's budget already counts locations: a second orientation is not cut here
     keep = (merge_colocated(got.keypoints, got.scales, merge_radius) if merge_radius > 0
             else np.arange(len(got.keypoints)))
-    if len(keep) > max_features:
-        keep = np.sort(keep[np.argsort(-got.scales[keep], kind="stable")[:max_features]])
     return Features(np.ascontiguousarray(got.keypoints[keep]),
                     np.ascontiguousarray(got.descriptors[keep]),
                     np.ascontiguousarray(got.scales[keep]), COLMAP_SIFT)
