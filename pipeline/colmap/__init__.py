@@ -39,6 +39,7 @@ from pipeline.colmap.mapping import (
     registered_poses,
     rescale_to_files,
     similarity_between,
+    undistorted_keypoints,
     write_model,
     write_model_for_files,
 )
@@ -65,6 +66,7 @@ __all__ = [
     "registered_poses",
     "rescale_to_files",
     "similarity_between",
+    "undistorted_keypoints",
     "write_model",
     "write_model_for_files",
 ]

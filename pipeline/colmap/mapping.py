@@ -21,6 +21,7 @@ from pipeline.errors import InputError
 
 __all__ = ["MappingSummary", "incremental_mapping", "write_model", "read_model",
            "model_images", "model_points", "model_tracks", "registered_poses",
+           "undistorted_keypoints",
            "similarity_between"]
 
 
@@ -256,6 +257,25 @@ def model_tracks(rec) -> list[list[tuple[str, float, float]]]:
             track.append((names[el.image_id], float(xy[0]), float(xy[1])))
         out.append(track)
     return out
+
+
+def undistorted_keypoints(rec, name: str, xy: np.ndarray) -> np.ndarray:
+    """Keypoints ``(m, 2)`` (OpenCV convention) of image ``name`` with its camera's lens
+    distortion removed: where a pinhole with the camera's own ``K``
+    (:func:`registered_poses`) would have seen them. Unchanged for a camera without distortion
+    or an image not in ``rec``."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    image = next((im for im in rec.images.values() if im.name == name), None) \
+        if rec is not None else None
+    if image is None or len(xy) == 0:
+        return xy.copy()
+    cam = rec.cameras[image.camera_id]
+    rays = np.asarray(cam.cam_from_img(xy + COLMAP_PIXEL_OFFSET), dtype=np.float64)
+    K = np.asarray(cam.calibration_matrix(), dtype=np.float64)
+    out = rays @ K[:2, :2].T + K[:2, 2]
+    bad = ~np.isfinite(out).all(axis=1)
+    out[bad] = xy[bad] + COLMAP_PIXEL_OFFSET
+    return out - COLMAP_PIXEL_OFFSET
 
 
 def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:

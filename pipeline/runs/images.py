@@ -104,7 +104,8 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
     """Fusion (Montijano et al., dynamic voting) among the robots whose pose is known.
 
     Real images have no poses; the reconstruction before cleaning gives them (and refines
-    guessed focal lengths). A robot whose image it did not register cannot form a local
+    guessed focal lengths and the radial distortion, which is taken out of the keypoints
+    fusion sees). A robot whose image it did not register cannot form a local
     landmark estimate, so it takes no part: fusion runs on the registered cameras, their kept
     links and the comm edges between them (like a crashed robot). Links to an unregistered
     camera are left as the consistency stage left them. Cut links get reason
@@ -120,6 +121,11 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
             f"camera poses unknown: the reconstruction before cleaning registered "
             f"{len(reg)} of {len(views)} images")}
         return
+    # the poses come with a lens model (SIMPLE_RADIAL): fusion's pinhole projections see each
+    # keypoint where the pinhole K of its camera would have seen it
+    rec = mapping.reconstruction
+    features = [dataclasses.replace(f, keypoints=colmap.undistorted_keypoints(
+        rec, v.name, f.keypoints).astype(np.float32)) for v, f in zip(views, features, strict=True)]
     fr, n_cut = fusion_stage(cleaning.ledger, _posed(views, poses), features, comm_edges,
                              cameras=reg, timer=timer, track_labels=cleaning.track_labels,
                              detail=f", {len(reg)} of {len(views)} cameras posed")
