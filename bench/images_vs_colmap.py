@@ -1,33 +1,40 @@
-"""run-images against pycolmap's own pipeline on the same photographs, side by side.
+"""run-images against pycolmap's own pipeline on the same photographs, side by side, and
+where cleaning a COLMAP database helps, against exact truth.
 
-For every photo folder given, two inputs are built:
+Inputs (each folder given, plus the rendered ring scenes):
 
 - ``named``: the folder as it is (its ``K.txt``, if any, is used by run-images; COLMAP reads
   EXIF focal lengths, as it always does),
-- ``shuffled``: the same images copied under random names in a shuffled order, without
+- ``renamed``: the same images copied under random names in a shuffled order, without
   ``K.txt`` and with the EXIF stripped (pixels re-encoded losslessly as PNG): names carry no
-  order and the intrinsics are unknown, as with photos gathered from the internet.
+  order and the intrinsics are unknown, as with photos gathered from the internet,
+- ``ring-ABCD`` / ``ring-AABB``: :mod:`data_synth.symmetric` — a tower of repeated modules
+  seen by a ring of 18 cameras, written as a photo folder with its truth (poses and depth);
+  ``AABB``: two adjacent sides exact copies of each other.
 
-On each input it runs
+Methods on each input:
 
 - ``colmap``: ``pycolmap.extract_features`` + ``match_exhaustive`` + ``incremental_mapping``
-  with their defaults (the reference a COLMAP user knows),
-- ``ours-before``: run-images ``--graph complete`` with the settings it had before the photo
-  defaults (2000 features from OpenCV's SIFT at its own contrast threshold, plain SIFT, the
-  detector's budget counted before merging, 1 px epipolar threshold),
-- ``ours``: run-images ``--graph complete`` at its defaults,
-- ``ours-knn4``: run-images ``--graph knn:4`` at its defaults (neighbours by image similarity).
+  at their defaults (the reference a COLMAP user knows),
+- ``colmap+clean-db``: the same database through ``clean-db`` (the distributed consistency
+  stage, :mod:`pipeline.runs.clean_db`) between matching and mapping; its time is colmap's
+  extraction and matching plus the cleaning and the mapping,
+- ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
+  cleaning, ``sparse/``; the one before cleaning beside it),
+- ``ours-knn4``: run-images ``--graph knn:4`` (neighbours by image similarity).
 
-and reports registered images, 3D points, mean track length, mean reprojection error and
-wall time; for run-images the reconstruction after cleaning (``sparse/``), with the one before
-cleaning beside it. Prints a markdown table and writes ``runs/bench-images/results.json``.
+Columns: registered images, 3D points, mean track length, mean reprojection error, wall time,
+and where the truth is known the camera rotation / position errors after a similarity
+alignment and the wrong tracks (tracks joining true points more than 0.1 m apart,
+:mod:`pipeline.evaluation.scene_truth`). Prints a markdown table and writes
+``runs/bench-images/results.json``.
 
-    python bench/images_vs_colmap.py                       # quick: the 640 px Sceaux copy
-    python bench/images_vs_colmap.py DIR [DIR ...]         # e.g. the full-size photos
+    python bench/images_vs_colmap.py                       # Sceaux (full size), Graffiti, rings
+    python bench/images_vs_colmap.py --quick               # the 640 px Sceaux copy and one ring
+    python bench/images_vs_colmap.py DIR [DIR ...]         # other photo folders (plus the rings)
 
-Measured on 2 cores: the quick default about 65 s; the 2832x2128 Sceaux photos (both inputs,
-every method) about 25 min while the cores were shared, of which COLMAP's feature extraction
-is the largest part.
+Times are wall-clock seconds on this machine with its 2 cores shared with other work: compare
+rows of one run only.
 """
 
 from __future__ import annotations
@@ -48,7 +55,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-DEFAULT_DATA = ROOT / "tests" / "data" / "sceaux_castle_640"
+QUICK_DATA = ROOT / "tests" / "data" / "sceaux_castle_640"
+SHARED = Path("/work/shared/data")
+DEFAULT_DATA = [SHARED / "sceaux_castle", SHARED / "graffiti"]
+#: folders only measured as named (renaming is measured on the first)
+NAMED_ONLY = {"graffiti"}
+RING_CAMERAS = 18
 SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff"}
 
 
@@ -74,8 +86,35 @@ def shuffled_copy(src: Path, dst: Path, seed: int = 0) -> dict[str, str]:
     return mapping
 
 
-def run_colmap(images: Path, work: Path) -> dict:
+def _judge(rec, truth) -> dict:
+    """Pose errors and wrong tracks of a reconstruction against the truth (or nothing)."""
+    if truth is None or rec is None:
+        return {}
+    from pipeline import colmap
+    from pipeline.evaluation.scene_truth import pose_errors, wrong_tracks
+
+    poses = {n: (R, t) for n, (R, t, _) in colmap.registered_poses(rec).items()}
+    pe = pose_errors(poses, truth)
+    wt = wrong_tracks(colmap.model_tracks(rec), truth)
+    return {"rotation_deg": pe["rotation_deg"], "position_m": pe["position_m"],
+            "wrong_tracks": wt["wrong"], "judged_tracks": wt["judged"]}
+
+
+def _model_row(models, truth) -> dict:
+    if not models:
+        return {"registered": 0, "points": 0, "track_length": 0.0, "reproj_px": 0.0}
+    rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
+    rec.update_point_3d_errors()
+    return {"registered": rec.num_reg_images(), "points": rec.num_points3D(),
+            "track_length": round(rec.compute_mean_track_length(), 3),
+            "reproj_px": round(rec.compute_mean_reprojection_error(), 3), **_judge(rec, truth)}
+
+
+def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
+    """``colmap`` and ``colmap+clean-db`` rows: one extraction and matching, two mappings."""
     import pycolmap
+
+    from pipeline.runs.clean_db import clean_database
 
     work.mkdir(parents=True, exist_ok=True)
     db = work / "database.db"
@@ -90,28 +129,32 @@ def run_colmap(images: Path, work: Path) -> dict:
     with pycolmap.Database.open(db) as d:
         n_images = d.num_images()
         n_kp = [d.read_keypoints(im.image_id).shape[0] for im in d.read_all_images()]
-    row = {"images": n_images, "features_mean": round(sum(n_kp) / max(len(n_kp), 1)),
-           "time_s": round(t3 - t0, 1),
-           "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
-                            "mapping": round(t3 - t2, 1)}}
-    if not models:
-        return {**row, "registered": 0, "points": 0, "track_length": 0.0, "reproj_px": 0.0}
-    rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
-    rec.update_point_3d_errors()
-    return {**row, "registered": rec.num_reg_images(), "points": rec.num_points3D(),
-            "track_length": round(rec.compute_mean_track_length(), 3),
-            "reproj_px": round(rec.compute_mean_reprojection_error(), 3)}
+    base = {"images": n_images, "features_mean": round(sum(n_kp) / max(len(n_kp), 1))}
+    colmap_row = {**base, "time_s": round(t3 - t0, 1),
+                  "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
+                                   "mapping": round(t3 - t2, 1)},
+                  **_model_row(models, truth)}
+    t4 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        cleaned = clean_database(db, work / "cleaned.db", rerun=False)
+    t5 = time.perf_counter()
+    models2 = pycolmap.incremental_mapping(work / "cleaned.db", images, work / "sparse-cleaned")
+    t6 = time.perf_counter()
+    clean_row = {**base, "time_s": round((t2 - t0) + (t6 - t4), 1),
+                 "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
+                                  "clean-db": round(t5 - t4, 1), "mapping": round(t6 - t5, 1)},
+                 "links": cleaned.links, "links_cut": cleaned.cut,
+                 **_model_row(models2, truth)}
+    return [colmap_row, clean_row]
 
 
-def run_ours(images: Path, work: Path, graph: str, legacy: bool) -> dict:
+def run_ours(images: Path, work: Path, graph: str, truth=None) -> dict:
+    from pipeline import colmap
     from pipeline.progress import StageTimer
     from pipeline.runs.images import ImagesConfig, run_images
 
     cfg = ImagesConfig(directory=str(images), graph=graph, out=str(work / "run"), rerun=False,
                        threads=-1)
-    if legacy:
-        cfg.max_features, cfg.contrast_threshold, cfg.rootsift = 2000, None, False
-        cfg.threshold_px, cfg.budget_after_merge = 1.0, False
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):  # the run's own report table
         out = run_images(cfg, StageTimer(verbose=False))
@@ -128,64 +171,108 @@ def run_ours(images: Path, work: Path, graph: str, legacy: bool) -> dict:
                                 "points": before["points"],
                                 "track_length": before["mean_track_length"]},
             "links": report["before"]["links"], "links_kept": report["after"]["links"],
-            "comm_edges": len(report["comm_edges"]), "flags": report.get("flags", [])}
+            "comm_edges": len(report["comm_edges"]), "flags": report.get("flags", []),
+            **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = {
-    "colmap": lambda images, work: run_colmap(images, work),
-    "ours-before": lambda images, work: run_ours(images, work, "complete", legacy=True),
-    "ours": lambda images, work: run_ours(images, work, "complete", legacy=False),
-    "ours-knn4": lambda images, work: run_ours(images, work, "knn:4", legacy=False),
-}
+METHODS = ("colmap", "colmap+clean-db", "ours", "ours-knn4")
+
+
+def _fmt_err(r: dict) -> tuple[str, str, str]:
+    if r.get("rotation_deg") is None:
+        return ("", "", "") if "wrong_tracks" not in r else ("n/a", "n/a", "")
+    return (f"{r['rotation_deg']['median']:.2f}", f"{r['position_m']['median']:.3f}",
+            f"{r['wrong_tracks']}/{r['judged_tracks']}")
+
+
+def _inputs(folders, kinds, tmp: Path, rings: list[str]):
+    """``(data name, input kind, image folder, truth or None)`` for every measured input."""
+    from data_synth.symmetric import write_ring_folder
+    from pipeline.evaluation.scene_truth import read_truth
+
+    for folder in folders:
+        for kind in kinds:
+            if kind == "renamed" and folder.name in NAMED_ONLY:
+                continue
+            images = folder if kind == "named" else tmp / f"{folder.name}-renamed"
+            if kind == "renamed" and not images.exists():
+                shuffled_copy(folder, images)
+            yield folder.name, kind, images, None
+    for sides in rings:
+        images = tmp / f"ring-{sides}"
+        write_ring_folder(images, n=RING_CAMERAS, sides=sides)
+        yield f"ring-{sides}", "named", images, read_truth(images)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("folders", nargs="*", type=Path, default=[DEFAULT_DATA],
-                    help=f"photo folders (default: {DEFAULT_DATA.relative_to(ROOT)})")
+    ap.add_argument("folders", nargs="*", type=Path, default=None,
+                    help="photo folders (default: Sceaux at full size and Graffiti from "
+                         f"{SHARED})")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"{QUICK_DATA.relative_to(ROOT)} and the ABCD ring only")
     ap.add_argument("--methods", default=",".join(METHODS),
                     help=f"comma-separated subset of {','.join(METHODS)}")
-    ap.add_argument("--inputs", default="named,shuffled", help="named, shuffled or both")
+    ap.add_argument("--inputs", default="named,renamed", help="named, renamed or both")
+    ap.add_argument("--rings", default="ABCD,AABB",
+                    help="rendered ring scenes by their sides (comma-separated; empty: none)")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-images" / "results.json")
     args = ap.parse_args(argv)
+    folders = args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA)
+    rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
-    inputs = [i for i in args.inputs.split(",") if i]
+    kinds = [i for i in args.inputs.split(",") if i]
     rows = []
+    t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench-images-") as tmp:
         tmp = Path(tmp)
-        for folder in args.folders:
-            for kind in inputs:
-                images = folder if kind == "named" else tmp / f"{folder.name}-shuffled"
-                if kind == "shuffled" and not images.exists():
-                    shuffled_copy(folder, images)
-                for method in methods:
-                    work = tmp / f"{folder.name}-{kind}-{method}"
-                    print(f"== {folder.name} {kind} {method} ...", file=sys.stderr, flush=True)
-                    try:
-                        row = METHODS[method](images, work)
-                    except Exception as exc:  # noqa: BLE001 - a failed run is a result too
-                        row = {"error": f"{type(exc).__name__}: {exc}"}
-                    rows.append({"data": folder.name, "input": kind, "method": method, **row})
-                    print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
-                    shutil.rmtree(work, ignore_errors=True)
+        for data, kind, images, truth in _inputs(folders, kinds, tmp, rings):
+            work = tmp / f"{data}-{kind}"
+            todo = []
+            if "colmap" in methods or "colmap+clean-db" in methods:
+                todo.append(("colmap", None))
+            todo += [(m, g) for m, g in (("ours", "complete"), ("ours-knn4", "knn:4"))
+                     if m in methods]
+            for name, graph in todo:
+                print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
+                try:
+                    got = (run_colmap(images, work / "colmap", truth) if graph is None
+                           else [run_ours(images, work / name, graph, truth)])
+                except Exception as exc:  # noqa: BLE001 - a failed run is a result too
+                    got = [{"error": f"{type(exc).__name__}: {exc}"}] * (2 if name == "colmap"
+                                                                          else 1)
+                names = ["colmap", "colmap+clean-db"] if name == "colmap" else [name]
+                for method, row in zip(names, got, strict=True):
+                    if method in methods:
+                        rows.append({"data": data, "input": kind, "method": method, **row})
+                        print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+            shutil.rmtree(work, ignore_errors=True)
     header = ("| data | input | method | registered | points | track length | reproj. px "
-              "| time s | features/img |")
-    lines = [header, "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+              "| rot. err. ° (median) | pos. err. m (median) | wrong tracks | time s "
+              "| features/img |")
+    lines = [header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['data']} | {r['input']} | {r['method']} | error: {r['error']} "
-                         f"| | | | | |")
+                         f"| | | | | | | | |")
             continue
+        rot, pos, wrong = _fmt_err(r)
         lines.append(f"| {r['data']} | {r['input']} | {r['method']} | {r['registered']}/"
                      f"{r['images']} | {r['points']} | {r['track_length']:.2f} | "
-                     f"{r['reproj_px']:.2f} | {r['time_s']} | {r['features_mean']} |")
+                     f"{r['reproj_px']:.2f} | {rot} | {pos} | {wrong} | {r['time_s']} | "
+                     f"{r['features_mean']} |")
     table = "\n".join(lines)
     print(table)
+    targets = _targets(rows)
+    for line in targets["lines"]:
+        print(line)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     import cv2
     import pycolmap
 
-    payload = {"rows": rows, "table": table, "cores": os.cpu_count(),
+    payload = {"rows": rows, "table": table, "targets": targets, "cores": os.cpu_count(),
+               "load_average_at_end": os.getloadavg(),
+               "bench_wall_s": round(time.perf_counter() - t_start, 1),
                "python": platform.python_version(), "opencv": cv2.__version__,
                "pycolmap": pycolmap.__version__}
     tmp_out = args.out.with_suffix(".json.tmp")
@@ -193,6 +280,34 @@ def main(argv=None) -> int:
     os.replace(tmp_out, args.out)
     print(f"saved {args.out}")
     return 0
+
+
+def _targets(rows: list[dict]) -> dict:
+    """Ours against colmap per input: points and time ratios; clean-db against colmap alone
+    on the inputs with truth: pose errors."""
+    by = {(r["data"], r["input"], r["method"]): r for r in rows if "error" not in r}
+    out, lines = [], []
+    for (data, kind, method), r in sorted(by.items()):
+        ref = by.get((data, kind, "colmap"))
+        if method == "colmap" or ref is None or not ref["points"]:
+            continue
+        item = {"data": data, "input": kind, "method": method,
+                "points_ratio": round(r["points"] / ref["points"], 3),
+                "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None}
+        if r.get("rotation_deg") and ref.get("rotation_deg"):
+            item["rotation_median_deg"] = [ref["rotation_deg"]["median"],
+                                           r["rotation_deg"]["median"]]
+            item["position_median_m"] = [ref["position_m"]["median"], r["position_m"]["median"]]
+            item["wrong_tracks"] = [ref["wrong_tracks"], r["wrong_tracks"]]
+        out.append(item)
+        lines.append(f"{data} {kind} {method}: points {item['points_ratio']:.3f} x colmap's, "
+                     f"time {item['time_ratio']} x colmap's"
+                     + (f"; rotation median {item['rotation_median_deg'][1]} ° vs colmap "
+                        f"{item['rotation_median_deg'][0]} °, position median "
+                        f"{item['position_median_m'][1]} m vs {item['position_median_m'][0]} m, "
+                        f"wrong tracks {item['wrong_tracks'][1]} vs {item['wrong_tracks'][0]}"
+                        if "rotation_median_deg" in item else ""))
+    return {"items": out, "lines": lines}
 
 
 if __name__ == "__main__":

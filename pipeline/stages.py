@@ -104,7 +104,8 @@ def extract_and_match(views: list[View], comm_edges, method: str,
                       max_features: int | None, timer: StageTimer, *, ratio: float = 0.8,
                       threshold_px: float | None = 1.0, merge_radius: float | None = None,
                       contrast_threshold: float | None = None, rootsift: bool = False,
-                      budget_after_merge: bool = False) -> tuple[list, list, Links]:
+                      budget_after_merge: bool = False,
+                      matcher: str = "opencv") -> tuple[list, list, Links]:
     """Features of every camera, then matching on the communication edges only.
 
     ``ratio`` (Lowe ratio test) and ``threshold_px`` (epipolar RANSAC inlier threshold) go to
@@ -115,7 +116,8 @@ def extract_and_match(views: list[View], comm_edges, method: str,
     with each image's size (:func:`pipeline.matching.features.photo_max_features`,
     :func:`pipeline.matching.pairs.photo_threshold_px`). ``comm_edges`` may be a callable
     ``features -> edges`` (a graph chosen from the features, e.g. ``knn:K`` by image
-    similarity).
+    similarity). ``matcher`` picks OpenCV's or COLMAP's pair matching
+    (:data:`pipeline.matching.pairs.MATCHERS`).
 
     Returns ``(features, matches, links)``: per-camera Features, per-edge PairMatches and all
     links (``Links.from_matches``).
@@ -132,7 +134,8 @@ def extract_and_match(views: list[View], comm_edges, method: str,
     if callable(comm_edges):
         comm_edges = comm_edges(feats)
     with timer.stage("matching", f"{len(comm_edges)} communication edges"):
-        matches = match_edges(feats, views, comm_edges, ratio=ratio, threshold_px=threshold_px)
+        matches = match_edges(feats, views, comm_edges, ratio=ratio, threshold_px=threshold_px,
+                              matcher=matcher)
         links = Links.from_matches(matches)
         timer.note(f"{len(links)} links")
     return feats, matches, links

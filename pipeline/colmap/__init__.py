@@ -7,6 +7,8 @@ pycolmap API change touches it alone (checked by write-and-reload tests).
   write a cleaned copy (``clean-db``).
 - :mod:`.mapping` — incremental mapping and what is read from a reconstruction (poses,
   similarity between two gauges), model folders.
+- :mod:`.sift` — COLMAP's SIFT on an image in memory, COLMAP's matcher and two-view
+  verification on a list of pairs (the comm edges).
 - :mod:`.known_poses` — robust triangulation with known poses, models of triangulated tracks
   (:mod:`pipeline.evaluation.triangulation`).
 
@@ -32,10 +34,12 @@ from pipeline.colmap.mapping import (
     incremental_mapping,
     model_images,
     model_points,
+    model_tracks,
     read_model,
     registered_poses,
     rescale_to_files,
     similarity_between,
+    undistorted_keypoints,
     write_model,
     write_model_for_files,
 )
@@ -57,10 +61,12 @@ __all__ = [
     "incremental_mapping",
     "model_images",
     "model_points",
+    "model_tracks",
     "read_model",
     "registered_poses",
     "rescale_to_files",
     "similarity_between",
+    "undistorted_keypoints",
     "write_model",
     "write_model_for_files",
 ]

@@ -20,7 +20,9 @@ from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
 
 __all__ = ["MappingSummary", "incremental_mapping", "write_model", "read_model",
-           "model_images", "model_points", "registered_poses", "similarity_between"]
+           "model_images", "model_points", "model_tracks", "registered_poses",
+           "undistorted_keypoints",
+           "similarity_between"]
 
 
 @dataclass
@@ -73,9 +75,11 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
     output_dir : where COLMAP writes its models; a temporary folder when None
     num_threads : COLMAP threads (-1: all cores)
     seed : COLMAP's random seed, for repeatable figures
-    fixed_intrinsics : iterable of image names whose camera the bundle adjustments keep
-        constant (calibrated cameras: with few views COLMAP otherwise lets the focal length
-        drift far from a known calibration at no cost in reprojection error)
+    fixed_intrinsics : iterable of image names whose calibration the bundle adjustments keep
+        (with few views COLMAP otherwise lets the focal length drift far from a known
+        calibration at no cost in reprojection error): when it names every image, no focal
+        length is refined and the distortion terms still are; otherwise those cameras are
+        held constant
 
     Returns
     -------
@@ -94,8 +98,14 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
             with pycolmap.Database.open(database_path) as db:
                 n_images = db.num_images()
                 fixed = set(fixed_intrinsics)
-                options.constant_cameras = {im.camera_id for im in db.read_all_images()
-                                            if im.name in fixed}
+                images = db.read_all_images()
+                if images and all(im.name in fixed for im in images):
+                    # every camera calibrated: focal lengths kept, a radial term refined
+                    # (a pinhole camera has none to refine)
+                    options.ba_refine_focal_length = False
+                else:
+                    options.constant_cameras = {im.camera_id for im in images
+                                                if im.name in fixed}
             # COLMAP insists on an existing image folder even when it reads no pixels;
             # a progress bar counts the images as the mapper registers them
             from pipeline.progress import progress
@@ -231,6 +241,41 @@ def model_points(rec) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
         kp.append(el.point2D_idx)
     return (np.asarray(xyz, dtype=np.float64).reshape(-1, 3), np.asarray(ids, dtype=np.int64),
             names, np.asarray(kp, dtype=np.int64))
+
+
+def model_tracks(rec) -> list[list[tuple[str, float, float]]]:
+    """Every 3D point's track: its observations ``(image name, x, y)`` in COLMAP's pixel
+    convention, in the reconstruction's point order."""
+    if rec is None:
+        return []
+    names = {i: im.name for i, im in rec.images.items()}
+    out = []
+    for p in rec.points3D.values():
+        track = []
+        for el in p.track.elements:
+            xy = rec.images[el.image_id].points2D[el.point2D_idx].xy
+            track.append((names[el.image_id], float(xy[0]), float(xy[1])))
+        out.append(track)
+    return out
+
+
+def undistorted_keypoints(rec, name: str, xy: np.ndarray) -> np.ndarray:
+    """Keypoints ``(m, 2)`` (OpenCV convention) of image ``name`` with its camera's lens
+    distortion removed: where a pinhole with the camera's own ``K``
+    (:func:`registered_poses`) would have seen them. Unchanged for a camera without distortion
+    or an image not in ``rec``."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    image = next((im for im in rec.images.values() if im.name == name), None) \
+        if rec is not None else None
+    if image is None or len(xy) == 0:
+        return xy.copy()
+    cam = rec.cameras[image.camera_id]
+    rays = np.asarray(cam.cam_from_img(xy + COLMAP_PIXEL_OFFSET), dtype=np.float64)
+    K = np.asarray(cam.calibration_matrix(), dtype=np.float64)
+    out = rays @ K[:2, :2].T + K[:2, 2]
+    bad = ~np.isfinite(out).all(axis=1)
+    out[bad] = xy[bad] + COLMAP_PIXEL_OFFSET
+    return out - COLMAP_PIXEL_OFFSET
 
 
 def registered_poses(rec) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:

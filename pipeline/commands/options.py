@@ -27,9 +27,10 @@ def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> Non
     """
     from pipeline.matching.features import available_methods
 
-    p.add_argument("--features", default="sift",
-                   help=f"feature method: {'|'.join(available_methods())} (the ones this OpenCV "
-                        "build offers; default sift)")
+    default = "colmap-sift" if photos else "sift"
+    p.add_argument("--features", default=default,
+                   help=f"feature method: {'|'.join(available_methods())} (the ones this build "
+                        f"offers; colmap-sift is COLMAP's SIFT; default {default})")
     if photos:
         p.add_argument("--max-features", default="auto", metavar="N|auto",
                        help="features per image; auto (default) scales with the image: 2000 "

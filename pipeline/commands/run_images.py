@@ -60,6 +60,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="tolerance of --truth in pixels of the processed images (default 2)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
+    p.add_argument("--matcher", default="colmap", choices=("colmap", "opencv"),
+                   help="pair matching on the comm edges: colmap (default: COLMAP's matcher and "
+                        "two-view verification, its 4 px threshold and 15 inliers) or opencv "
+                        "(mutual ratio test and USAC MAGSAC)")
     add_resolution_option(p)
     add_merge_radius_option(p)
     add_transport_option(p)
@@ -80,7 +84,7 @@ def config_from_args(args) -> ImagesConfig:
                         truth_tol_px=args.truth_tol,
                         resolution=args.resolution, merge_radius=args.merge_radius,
                         live="spawn" if args.spawn else args.connect,
-                        transport=args.transport)
+                        transport=args.transport, matcher=args.matcher)
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:

@@ -210,6 +210,10 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
 
     directory = Path(directory)
     H1 = read_homographies(directory, len(views))
+    # image k of the files is the k-th name; the cameras may be in another order (content
+    # order, pipeline.inputs.photos.in_content_order)
+    rank = {name: k for k, name in enumerate(sorted(v.name for v in views))}
+    H1 = H1[[rank[v.name] for v in views]]
     scales = _image_scales(directory, views)
     kps = [np.asarray(f.keypoints, dtype=np.float64) for f in features]
     m = np.array([len(k) for k in kps], dtype=np.int64)

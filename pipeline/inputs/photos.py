@@ -40,6 +40,7 @@ __all__ = [
     "load_image",
     "read_k_txt",
     "exif_focal_px",
+    "in_content_order",
 ]
 
 log = logging.getLogger(__name__)
@@ -363,6 +364,23 @@ def downscale(pixels: np.ndarray, K: np.ndarray, max_size: int | None):
     nw, nh = max(1, round(w * s)), max(1, round(h * s))
     pixels = cv2.resize(pixels, (nw, nh), interpolation=cv2.INTER_AREA)
     return pixels, _scaled_K(K, nw / w, nh / h)
+
+
+def in_content_order(views: list[View]) -> list[View]:
+    """``views`` sorted by the SHA-256 digest of their pixels (shape and bytes), names last.
+
+    The camera index of a photograph is then a property of what it shows, not of its file
+    name: renaming the files of a folder permutes nothing downstream (matching directions,
+    the robots' ids of the consistency stage, COLMAP's image ids and its tie-breaks all
+    follow the camera index). Two files with identical pixels keep their name order.
+    """
+    import hashlib
+
+    def key(v: View):
+        img = np.ascontiguousarray(v.image)
+        return hashlib.sha256(repr(img.shape).encode() + img.tobytes()).digest(), v.name
+
+    return sorted(views, key=key)
 
 
 def load_folder(directory: str | Path, max_size: int | None = 1600,

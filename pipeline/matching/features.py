@@ -2,7 +2,10 @@
 
 The paper extracts SURF features on each robot's image. SURF is patented and missing from the
 pip builds of OpenCV, so SIFT is the default here; ORB and AKAZE are offered as fast binary
-alternatives and SURF where the OpenCV build has the non-free algorithms.
+alternatives and SURF where the OpenCV build has the non-free algorithms. ``colmap-sift`` is
+COLMAP's own SIFT (:func:`pipeline.colmap.sift.sift`: its DoG peak threshold, two orientations
+per location, ``L1_ROOT`` descriptors), the default of the photographs (``run-images``), so that
+a photo run starts from the features a COLMAP user gets.
 
 One detail matters for the paper's counts: SIFT emits several keypoints at one location (one
 per dominant orientation). With the strict one-feature-per-camera rule of Def. 2.4, such twins
@@ -28,7 +31,10 @@ __all__ = ["METHODS", "available_methods", "check_method", "extract", "extract_a
            "PHOTO_CONTRAST_THRESHOLD", "MIN_FEATURES", "MAX_FEATURES"]
 
 #: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
-METHODS = ("sift", "orb", "akaze", "surf")
+METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
+
+#: COLMAP's SIFT (pycolmap, :mod:`pipeline.colmap.sift`) rather than OpenCV's
+COLMAP_SIFT = "colmap-sift"
 
 #: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
 MERGE_RADIUS_PX = 0.5
@@ -113,7 +119,10 @@ def check_method(method: str) -> None:
 
 
 def _detector(method: str, max_features: int, contrast_threshold: float | None = None):
-    """The OpenCV detector for ``method``; raises :class:`InputError` for unknown/unavailable ones."""
+    """The OpenCV detector for ``method`` (``None`` for :data:`COLMAP_SIFT`, which is not
+    OpenCV's); raises :class:`InputError` for unknown/unavailable ones."""
+    if method == COLMAP_SIFT:
+        return None
     if method == "sift":
         if contrast_threshold is not None:
             return cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
@@ -214,8 +223,10 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
         uint8 preferred; float images in ``[0, 1]`` are scaled to ``[0, 255]``, uint16 divided
         by 257, bool mapped to 0/255, other numbers clipped to ``[0, 255]``. Images with a side
         shorter than :data:`MIN_IMAGE_PX` give zero features.
-    method : {"sift", "orb", "akaze", "surf"}
-        ``surf`` only where OpenCV has non-free algorithms.
+    method : {"sift", "orb", "akaze", "surf", "colmap-sift"}
+        ``surf`` only where OpenCV has non-free algorithms; ``colmap-sift`` is COLMAP's SIFT
+        (``contrast_threshold``, ``rootsift`` and ``budget_after_merge`` do not apply: its
+        descriptors are RootSIFT already and its budget counts locations).
     max_features : int
         Upper bound on the features returned (strongest kept). Co-located duplicates are merged
         after detection, so fewer may be returned.
@@ -255,6 +266,8 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     if isinstance(max_features, bool) or not isinstance(max_features, (int, np.integer)) or max_features < 1:
         raise InputError(f"max_features must be a positive integer, got {max_features!r}")
     max_features = int(max_features)
+    if method == COLMAP_SIFT:
+        return _colmap_sift(_gray(image_or_view), max_features, merge_radius)
     detector = _detector(method, 0 if budget_after_merge and method == "sift" else max_features,
                          contrast_threshold if method == "sift" else None)
     gray = _gray(image_or_view)
@@ -284,6 +297,24 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     if rootsift and dtype == np.float32:
         desc = root_sift(desc)
     return Features(np.ascontiguousarray(xy[keep]), np.ascontiguousarray(desc), scales[keep], method)
+
+
+def _colmap_sift(gray: np.ndarray, max_features: int, merge_radius: float) -> Features:
+    """COLMAP's SIFT (its budget: the ``max_features`` largest-scale locations, each with up
+    to two orientations), co-located orientations merged as for OpenCV's (the largest scale
+    kept, then the first)."""
+    from pipeline.colmap.sift import sift
+
+    if min(gray.shape) < MIN_IMAGE_PX:
+        return Features(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32),
+                        np.zeros(0, np.float32), COLMAP_SIFT)
+    got = sift(gray, max_features)
+    # COLMAP's budget already counts locations: a second orientation is not cut here
+    keep = (merge_colocated(got.keypoints, got.scales, merge_radius) if merge_radius > 0
+            else np.arange(len(got.keypoints)))
+    return Features(np.ascontiguousarray(got.keypoints[keep]),
+                    np.ascontiguousarray(got.descriptors[keep]),
+                    np.ascontiguousarray(got.scales[keep]), COLMAP_SIFT)
 
 
 def extract_all(views, method: str = "sift", max_features: int | None = 2000,

@@ -10,6 +10,12 @@ For every communication edge ``(i, j)``, ``i < j``:
 2. the epipolar constraint with RANSAC (Sec. V-B, ref. [13]) — here ``cv2.USAC_MAGSAC`` on the
    essential matrix when both cameras are calibrated, on the fundamental matrix otherwise.
 
+With ``matcher="colmap"`` (the photographs' default) both steps are COLMAP's own
+(:func:`pipeline.colmap.sift.match_pairs`: mutual nearest neighbours with its ratio test, then
+its two-view geometry with its 4 px threshold and 15 inliers at least), on the same
+communication edges only; each link's Lowe ratio and Sampson error are then computed here as
+for the OpenCV matcher, for the evidence of :mod:`pipeline.matching.link_evidence`.
+
 The result is one one-to-one association ``A_ij`` per undirected edge (Assumption 2.2), stored
 once with ``i < j``; ``A_ji = A_ijᵀ`` is implied (Assumption 2.3), ``A_ii = I`` (Assumption 2.1)
 is added by :mod:`pipeline.association`.
@@ -27,8 +33,16 @@ from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
 from pipeline.types import Features, PairMatches, View
 
-__all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px",
-           "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES"]
+__all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px", "lowe_ratios",
+           "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES", "MATCHERS",
+           "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX"]
+
+#: pair matchers: OpenCV + numpy (:func:`mutual_ratio_matches`, :func:`epipolar_filter`) or
+#: COLMAP's (:func:`pipeline.colmap.sift.match_pairs`)
+MATCHERS = ("opencv", "colmap")
+#: COLMAP's defaults for its verification: ``TwoViewGeometryOptions.min_num_inliers`` and
+#: ``ransac.max_error`` (pixels)
+COLMAP_MIN_INLIERS, COLMAP_MAX_ERROR_PX = 15, 4.0
 
 #: fewest matches an association may have; below this it is left empty (USAC needs >= 7 points)
 MIN_MATCHES = 8
@@ -233,6 +247,82 @@ def epipolar_filter(x_i: np.ndarray, x_j: np.ndarray, K_i: np.ndarray | None, K_
 # --------------------------------------------------------------------------- one edge, all edges
 
 
+def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
+                rows_per_block: int = 1024) -> np.ndarray:
+    """Lowe ratio of given matches: the distance of ``d_i[r]`` to ``d_j[s]`` over its distance
+    to the nearest other descriptor of ``d_j``, ``(M,)`` float32 in ``[0, 1]``.
+
+    For COLMAP's matches (mutual nearest neighbours, so ``s`` is the nearest), which come
+    without their ratio. Float descriptors; the products run by blocks of rows.
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    out = np.ones(len(pairs), np.float32)
+    if len(pairs) == 0 or len(d_j) < 2:
+        return out
+    dj = np.asarray(d_j, dtype=np.float32)
+    sq_j = (dj * dj).sum(1)
+    for a in range(0, len(pairs), rows_per_block):
+        r, s_ = pairs[a:a + rows_per_block, 0], pairs[a:a + rows_per_block, 1]
+        q = np.asarray(d_i, dtype=np.float32)[r]
+        d2 = (q * q).sum(1)[:, None] + sq_j[None, :] - 2.0 * (q @ dj.T)
+        rows = np.arange(len(r))
+        best = d2[rows, s_].copy()
+        d2[rows, s_] = np.inf
+        second = d2.min(axis=1)
+        ratio = np.sqrt(np.maximum(best, 0.0)) / np.sqrt(np.maximum(second, 1e-12))
+        out[a:a + len(r)] = np.clip(ratio, 0.0, 1.0)
+    return out
+
+
+def _colmap_matches(edges: np.ndarray, features: list[Features], Ks, sizes, known,
+                    ratio: float, threshold_px: float | None, min_matches: int,
+                    threads: int = -1) -> list[PairMatches]:
+    """COLMAP's matching and verification on ``edges`` (:mod:`pipeline.colmap.sift`), as
+    PairMatches with the Lowe ratio and Sampson error of each kept match."""
+    from pipeline.colmap.sift import match_pairs
+
+    for f in features:
+        if f.descriptors.dtype != np.float32 or f.descriptors.shape[1] != 128:
+            raise InputError(f"the colmap matcher needs SIFT descriptors (128 floats), got "
+                             f"{f.method} {f.descriptors.dtype}x{f.descriptors.shape[1]}; use "
+                             f"--features colmap-sift or sift, or --matcher opencv")
+    names = [f"image{k}" for k in range(len(features))]
+    cams = [(np.asarray(K, np.float64), tuple(int(v) for v in size), bool(kn), bool(kn))
+            for K, size, kn in zip(Ks, sizes, known, strict=True)]
+    verified = match_pairs(names, [f.keypoints for f in features],
+                           [f.descriptors for f in features], cams, edges, threads=threads,
+                           ratio=ratio,
+                           max_error_px=COLMAP_MAX_ERROR_PX if threshold_px is None
+                           else float(threshold_px),
+                           min_inliers=max(int(min_matches), COLMAP_MIN_INLIERS))
+    out = []
+    for v in verified:
+        if len(v.pairs) == 0:
+            out.append(_empty(v.i, v.j, v.n_putative,
+                              f"COLMAP's verification kept no matches ({v.config}, "
+                              f"{v.n_putative} putative)"))
+            continue
+        fi, fj = features[v.i], features[v.j]
+        x_i = fi.keypoints[v.pairs[:, 0]].astype(np.float64)
+        x_j = fj.keypoints[v.pairs[:, 1]].astype(np.float64)
+        F = v.F
+        if F is None:  # a planar or panoramic pair: the least-squares F of its inliers
+            F, _ = cv2.findFundamentalMat(x_i, x_j, cv2.FM_8POINT) if len(x_i) >= 8 \
+                else (None, None)
+        err = sampson_error_px(F, x_i, x_j) if F is not None and F.shape == (3, 3) \
+            else np.zeros(len(x_i))
+        out.append(PairMatches(v.i, v.j, v.pairs.astype(np.int32),
+                               lowe_ratios(fi.descriptors, fj.descriptors, v.pairs),
+                               err.astype(np.float32), n_putative=v.n_putative, reason=""))
+    return out
+
+
+def _size_of(K: np.ndarray) -> tuple[int, int]:
+    """An image size for ``K`` when none is given: twice the principal point."""
+    K = np.asarray(K, dtype=np.float64)
+    return int(np.ceil(2 * K[0, 2] + 1)), int(np.ceil(2 * K[1, 2] + 1))
+
+
 def _empty(i: int, j: int, n_putative: int, reason: str) -> PairMatches:
     return PairMatches(i, j, np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
                        np.zeros(0, np.float32), n_putative=n_putative, reason=reason)
@@ -242,7 +332,8 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
                K_i: np.ndarray | None = None, K_j: np.ndarray | None = None,
                intrinsics_known: bool = True, ratio: float = 0.8, threshold_px: float = 1.0,
                min_matches: int = MIN_MATCHES, confidence: float = 0.999,
-               max_iters: int = 1000) -> PairMatches:
+               max_iters: int = 1000, matcher: str = "opencv",
+               sizes: tuple | None = None) -> PairMatches:
     """The one-to-one association ``A_ij`` of one communication edge (Sec. V-B).
 
     Parameters
@@ -263,6 +354,12 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
         Fewer putative matches or fewer epipolar inliers than this give an empty association
         with ``reason`` set (a 7-point model fits any 7 points, so ``min_matches >= 8``).
     confidence, max_iters : RANSAC settings (see :func:`epipolar_filter`)
+    matcher : {"opencv", "colmap"}
+        ``colmap``: COLMAP's matching and verification (module notes; ``threshold_px`` is its
+        RANSAC ``max_error``, at least :data:`COLMAP_MIN_INLIERS` inliers are asked). The same function for one edge as
+        :func:`match_edges` for many, so a robot in its own process matches as the simulator does.
+    sizes : ((w_i, h_i), (w_j, h_j)) or None — image sizes for COLMAP's cameras (``None``:
+        twice the principal points)
 
     Returns
     -------
@@ -279,12 +376,18 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
     i, j = int(i), int(j)
     if i == j:
         raise InputError(f"cannot match camera {i} with itself")
+    if matcher not in MATCHERS:
+        raise InputError(f"matcher {matcher!r}: choose one of {', '.join(MATCHERS)}")
     if i > j:
         i, j, feats_i, feats_j, K_i, K_j = j, i, feats_j, feats_i, K_j, K_i
+        sizes = None if sizes is None else (sizes[1], sizes[0])
     if not 0.0 < ratio <= 1.0:
         raise InputError(f"ratio must be in (0, 1], got {ratio}")
-    if not threshold_px > 0:
-        raise InputError(f"epipolar threshold must be > 0 pixels, got {threshold_px}")
+    if (threshold_px is None and matcher != "colmap") or \
+            (threshold_px is not None and not threshold_px > 0):
+        raise InputError(f"epipolar threshold must be > 0 pixels, got {threshold_px}"
+                         + (" (None: COLMAP's own, with the colmap matcher only)"
+                            if threshold_px is None else ""))
     if min_matches < 8:
         raise InputError(f"min_matches must be >= 8 (a 7-point model fits any 7 matches), got {min_matches}")
     d_i, d_j = feats_i.descriptors, feats_j.descriptors
@@ -299,6 +402,14 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
                                  f"(got {None if K is None else np.shape(K)}); "
                                  "or pass intrinsics_known=False")
         K_i, K_j = np.asarray(K_i, np.float64), np.asarray(K_j, np.float64)
+    if matcher == "colmap":
+        if K_i is None or K_j is None:
+            raise InputError(f"cameras {i}, {j}: the colmap matcher needs both intrinsics K")
+        sizes = sizes or (_size_of(K_i), _size_of(K_j))
+        pm = _colmap_matches(np.array([[0, 1]]), [feats_i, feats_j], [K_i, K_j], sizes,
+                             [intrinsics_known] * 2, ratio, threshold_px, min_matches, threads=1)[0]
+        pm.i, pm.j = i, j
+        return pm
 
     pairs, link_ratio = mutual_ratio_matches(d_i, d_j, ratio)
     n_put = len(pairs)
@@ -326,7 +437,7 @@ PARALLEL_MAX_MATRIX_BYTES = 64 * 2**20
 def match_edges(features: list[Features], views: list[View], comm_edges, ratio: float = 0.8,
                 threshold_px: float | None = 1.0, min_matches: int = MIN_MATCHES,
                 confidence: float = 0.999, max_iters: int = 1000,
-                workers: int | None = None) -> list[PairMatches]:
+                workers: int | None = None, matcher: str = "opencv") -> list[PairMatches]:
     """Local associations for every communication edge, and only for those (Sec. II, V-B).
 
     Parameters
@@ -347,6 +458,9 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
         beat BLAS threads inside each product on the default formation (0.095 s against
         0.137 s for its 15 edges, one machine); binary descriptors' popcount is
         single-threaded and releases the GIL — measured in ``bench/foundation.py``.
+    matcher : {"opencv", "colmap"}
+        ``colmap``: every edge in one call of COLMAP's matcher (its threads; ``threshold_px``
+        ``None`` is its own 4 px), the same pairs as :func:`match_pair` edge by edge.
 
     Returns
     -------
@@ -367,6 +481,12 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     methods = {f.method for f in features}
     if len(methods) > 1:
         raise InputError(f"cameras use different feature methods {sorted(methods)}; use one")
+    if matcher not in MATCHERS:
+        raise InputError(f"matcher {matcher!r}: choose one of {', '.join(MATCHERS)}")
+    if matcher == "colmap":
+        return _colmap_matches(edges, features, [v.K for v in views], [v.size for v in views],
+                               [v.intrinsics_known for v in views], ratio, threshold_px,
+                               min_matches, threads=workers if workers is not None else -1)
 
     def one(e):
         i, j = int(e[0]), int(e[1])

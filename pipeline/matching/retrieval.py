@@ -8,6 +8,8 @@ computed:
 
 1. a vocabulary of ``k`` visual words: k-means (``scipy.cluster.vq.kmeans2``, started from
    sampled descriptors, fixed seed) on a deterministic sample of the descriptors of all images,
+   the images taken in the order of their descriptors' content digests (:func:`content_order`),
+   so that neither file names nor the order of the cameras moves the vocabulary,
 2. per image, the sum of the residuals ``d - c_w`` of its descriptors to their nearest word
    ``c_w``: a ``(k, D)`` array,
 3. intra-normalisation (each word's residual sum to unit length; Arandjelović & Zisserman,
@@ -15,7 +17,8 @@ computed:
 4. similarity of two images = dot product of their vectors (cosine, in ``[-1, 1]``).
 
 ``knn_edges`` then lets every image pick its ``K`` most similar images; an edge is kept
-where either image picked the other. Interpretation for the papers' model: the comm graph is
+where either image picked the other; equal similarities go to the image first in content order.
+Renaming or reordering the images therefore permutes the graph and changes nothing else. Interpretation for the papers' model: the comm graph is
 an input of Aragüés et al. (Sec. II); here it is chosen once, before matching, from what each
 robot could share cheaply (one global vector per robot), and never changes afterwards.
 Binary descriptors (ORB, AKAZE) are unpacked to 0/1 bits and treated as real vectors.
@@ -23,6 +26,7 @@ Binary descriptors (ORB, AKAZE) are unpacked to 0/1 bits and treated as real vec
 
 from __future__ import annotations
 
+import hashlib
 import warnings
 
 import numpy as np
@@ -30,7 +34,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Features
 
-__all__ = ["vocabulary", "vlad", "similarity", "knn_edges", "DEFAULT_WORDS"]
+__all__ = ["content_order", "vocabulary", "vlad", "similarity", "knn_edges", "DEFAULT_WORDS"]
 
 #: visual words of the vocabulary (fewer when the images hold fewer descriptors)
 DEFAULT_WORDS = 64
@@ -46,6 +50,21 @@ def _as_real(descriptors: np.ndarray) -> np.ndarray:
     return d.astype(np.float32, copy=False)
 
 
+def content_order(features: list[Features]) -> np.ndarray:
+    """Indices of ``features`` sorted by the SHA-256 digest of each image's descriptors.
+
+    The order depends on what the images hold, never on their names or their camera index
+    (two images with identical descriptors keep their relative order).
+
+    Returns
+    -------
+    order : ndarray, (n,) int64 — a permutation of ``range(n)``
+    """
+    digests = [hashlib.sha256(np.ascontiguousarray(f.descriptors).tobytes()).digest()
+               for f in features]
+    return np.array(sorted(range(len(features)), key=lambda k: digests[k]), dtype=np.int64)
+
+
 def vocabulary(features: list[Features], words: int = DEFAULT_WORDS, seed: int = 0,
                sample_per_image: int = SAMPLE_PER_IMAGE) -> np.ndarray:
     """k-means visual words from a sample of every image's descriptors.
@@ -57,6 +76,9 @@ def vocabulary(features: list[Features], words: int = DEFAULT_WORDS, seed: int =
     seed : int — k-means seed: the vocabulary is repeatable
     sample_per_image : int — at most this many descriptors of each image (evenly spaced)
 
+    The sample is stacked in :func:`content_order`, so the k-means start (sampled points,
+    ``seed``) and hence the words do not depend on the order of ``features``.
+
     Returns
     -------
     centres : ndarray, (k, D') float32 — ``k = 0`` when no image has descriptors
@@ -64,8 +86,8 @@ def vocabulary(features: list[Features], words: int = DEFAULT_WORDS, seed: int =
     from scipy.cluster.vq import kmeans2
 
     parts = []
-    for f in features:
-        d = _as_real(f.descriptors)
+    for k in content_order(features):
+        d = _as_real(features[k].descriptors)
         if len(d) > sample_per_image:
             d = d[np.linspace(0, len(d) - 1, sample_per_image).astype(np.int64)]
         parts.append(d)
@@ -143,8 +165,8 @@ def knn_edges(features: list[Features], k: int, words: int = DEFAULT_WORDS,
 
     Notes
     -----
-    Ties (e.g. images without features, similarity 0) go to the lower camera index, so the
-    graph is repeatable. Each image picks ``min(k, n - 1)`` neighbours: ``n * min(k, n-1) / 2``
+    Ties (e.g. images without features, similarity 0) go to the image first in
+    :func:`content_order`, so the graph is repeatable and the same for any order of the images. Each image picks ``min(k, n - 1)`` neighbours: ``n * min(k, n-1) / 2``
     to ``n * min(k, n-1)`` edges.
     """
     n = len(features)
@@ -154,10 +176,15 @@ def knn_edges(features: list[Features], k: int, words: int = DEFAULT_WORDS,
         raise InputError(f"knn graph: K must be a positive integer, got {k!r}")
     k = int(min(k, n - 1))
     S = similarity(features, words, seed)
-    key = -S.copy()
+    # rounded: a product of the same two vectors may differ in its last bit with their rows'
+    # places in the matrix, which must not decide a near tie
+    key = -np.round(S, 9)
     np.fill_diagonal(key, np.inf)
-    # stable sort on (-similarity): equal similarities keep index order
-    nearest = np.argsort(key, axis=1, kind="stable")[:, :k]
+    # sort on (-similarity, content rank): equal similarities go to the image first in
+    # content order, whatever the camera indices
+    rank = np.empty(n, dtype=np.int64)
+    rank[content_order(features)] = np.arange(n)
+    nearest = np.lexsort((np.broadcast_to(rank, (n, n)), key), axis=1)[:, :k]
     e = np.stack([np.repeat(np.arange(n), k), nearest.reshape(-1)], axis=1)
     e = np.unique(np.sort(e, axis=1), axis=0).astype(np.int64)
     return e, S

@@ -205,8 +205,12 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
                 if thr is None:  # scaled with the larger image, as matching does
                     wj, hj = (int(v) for v in p["size"])
                     thr = photo_threshold_px(max(w, wj), max(h, hj))
+                matcher = opts.get("matcher", "opencv")
+                if matcher == "colmap" and opts.get("threshold_px") is None:
+                    thr = None  # COLMAP's own threshold, as pipeline.matching.pairs.match_edges
                 pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known,
-                                threshold_px=float(thr))
+                                threshold_px=None if thr is None else float(thr),
+                                matcher=matcher, sizes=((w, h), tuple(int(v) for v in p["size"])))
                 other_pose = (p["K"], p["R"], p["t"]) if "R" in p else None
                 ev = edge_evidence(pm, feats.keypoints, other.keypoints,
                                    pose if other_pose is not None else None, other_pose)

@@ -82,6 +82,7 @@ DEFAULT_OPTIONS = {
     "budget_after_merge": False,
     "threshold_px": 1.0,
     "wire": "compact",
+    "matcher": "opencv",
 }
 #: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
 #: (pipeline.matching.packed), features only to the neighbour that matches them, packets
@@ -92,7 +93,9 @@ WIRE_FORMS = ("compact", "plain")
 TEAM_ONLY_OPTIONS = ("resolution",)
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
 #: OpenCV offers one is checked when the robot extracts)
-FEATURE_METHODS = ("sift", "orb", "akaze", "surf")
+FEATURE_METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
+#: pair matchers a team file may name (``pipeline.matching.pairs.MATCHERS``)
+MATCHERS = ("opencv", "colmap")
 #: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
 #: which it started a robot process, so the robot can report how long its start took
 LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
@@ -412,6 +415,9 @@ def _check_options(opts: dict, where: str) -> None:
     if method not in FEATURE_METHODS:
         raise InputError(f"{where}: option features {method!r} must be one of "
                          f"{', '.join(FEATURE_METHODS)}")
+    if opts.get("matcher", "opencv") not in MATCHERS:
+        raise InputError(f"{where}: option matcher {opts['matcher']!r} must be one of "
+                         f"{', '.join(MATCHERS)}")
     from pipeline.consistency.rules import rule_names
 
     if opts.get("resolution", DEFAULT_RESOLUTION) not in rule_names():

@@ -63,10 +63,11 @@ def test_write_and_reload_round_trip(tmp_path):
         cam = db.read_camera(1)
         assert cam.model == pycolmap.CameraModelId.PINHOLE
         assert np.allclose(cam.params, [300.0, 301.0, 160.0, 120.0])
-        # a guessed K: one focal length sqrt(fx fy), no prior, refined by the mapper
+        # a guessed K: COLMAP's model for photographs, one focal length sqrt(fx fy), no
+        # radial term yet, no prior, refined by the mapper
         guess = db.read_camera(2)
-        assert guess.model == pycolmap.CameraModelId.SIMPLE_PINHOLE
-        assert np.allclose(guess.params, [np.sqrt(301.0 * 301.0), 160.0, 120.0])
+        assert guess.model == pycolmap.CameraModelId.SIMPLE_RADIAL
+        assert np.allclose(guess.params, [np.sqrt(301.0 * 301.0), 160.0, 120.0, 0.0])
         assert cam.has_prior_focal_length and not guess.has_prior_focal_length
         assert db.num_rigs() == db.num_frames() == db.num_images() == 3
         # the raw matches table holds every link, kept or not
@@ -226,7 +227,10 @@ def test_registered_poses_and_similarity_between_two_gauges(sceaux_matches, tmp_
     for name, (R, t, K) in poses.items():
         assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and t.shape == (3,)
         view = next(v for v in views if v.name == name)
-        assert np.allclose(K, view.K)  # kept fixed, back in the OpenCV pixel convention
+        # the focal length kept (SIMPLE_RADIAL: one focal length sqrt(fx fy)), the principal
+        # point too, back in the OpenCV pixel convention
+        f = np.sqrt(view.K[0, 0] * view.K[1, 1])
+        assert np.allclose(K[[0, 1], [0, 1]], f) and np.allclose(K[:2, 2], view.K[:2, 2])
     # the same model in another gauge: scale 3, a rotation about z, a shift
     c, s = np.cos(0.7), np.sin(0.7)
     R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])

@@ -40,7 +40,7 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
         config.max_features, timer, contrast_threshold=config.contrast_threshold,
         merge_radius=stages.merge_radius_for(config.resolution, config.merge_radius),
         rootsift=config.rootsift, threshold_px=config.threshold_px,
-        budget_after_merge=config.budget_after_merge)
+        budget_after_merge=config.budget_after_merge, matcher=config.matcher)
     return ImagesRobots(feats, matches, links)
 
 

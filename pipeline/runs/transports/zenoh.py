@@ -198,7 +198,7 @@ def images_team(config, views, comm_edges):
                         contrast_threshold=config.contrast_threshold,
                         rootsift=bool(config.rootsift),
                         budget_after_merge=bool(config.budget_after_merge),
-                        threshold_px=config.threshold_px)
+                        threshold_px=config.threshold_px, matcher=config.matcher)
     n = len(views)
     return make_team(f"images-{n}", comm_edges, data, opts, n=n)
 

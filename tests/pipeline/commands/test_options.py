@@ -43,11 +43,15 @@ def test_bad_size(text, match):
         parse_size(text)
 
 
-def test_photo_options_default_to_a_budget_scaled_with_the_image():
+def test_photo_options_default_to_colmaps_sift_and_a_budget_scaled_with_the_image():
     p = argparse.ArgumentParser()
     add_feature_options(p, photos=True)
-    assert feature_options(p.parse_args([])) == ("sift", None)
-    assert feature_options(p.parse_args(["--max-features", "4096"])) == ("sift", 4096)
+    assert feature_options(p.parse_args([])) == ("colmap-sift", None)
+    assert feature_options(p.parse_args(["--max-features", "4096"])) == ("colmap-sift", 4096)
+    assert feature_options(p.parse_args(["--features", "sift"])) == ("sift", None)
+    q = argparse.ArgumentParser()
+    add_feature_options(q)
+    assert feature_options(q.parse_args([])) == ("sift", 2000)
     with pytest.raises(InputError, match="expected a number of features or 'auto'"):
         feature_options(p.parse_args(["--max-features", "many"]))
 

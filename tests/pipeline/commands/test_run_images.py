@@ -93,8 +93,15 @@ def test_fusion_with_poses_of_the_first_reconstruction(sceaux_run):
 def test_exported_database_holds_exactly_the_kept_links(sceaux_run):
     out, report, rows = sceaux_run
     contents = colmap.read_database(out / "database.db")
-    assert contents.names == [im["name"] for im in report["images"]]
-    assert _link_set(contents.links) == _link_set(_links(rows, "kept"))
+    # the database reader numbers images by sorted name, the run by content
+    # (pipeline.inputs.photos.in_content_order): compare links by image name
+    names = [im["name"] for im in report["images"]]
+    assert sorted(contents.names) == sorted(names)
+
+    def named(links, order):
+        return {tuple(sorted(((order[a], b), (order[c], d)))) for a, b, c, d in _link_set(links)}
+
+    assert named(contents.links, contents.names) == named(_links(rows, "kept"), names)
     with pycolmap.Database.open(out / "database.db") as db:
         assert db.num_matches() == len(rows)  # the raw matches table keeps every link
         assert db.num_images() == 4
@@ -125,10 +132,14 @@ def test_mixed_sizes_and_guessed_intrinsics(tmp_path, sceaux_small):
     out = tmp_path / "run"
     assert main(["run-images", str(d), "--graph", "complete", "--no-rerun", "--out", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert [im["size"] for im in report["images"]] == [[640, 481], [512, 385], [560, 481]]
+    # cameras in content order (pipeline.inputs.photos.in_content_order): compare by name
+    images = {im["name"]: im for im in report["images"]}
+    assert [images[n]["size"] for n in ("a.png", "b.jpg", "c.tif")] == \
+        [[640, 481], [512, 385], [560, 481]]
     assert {im["intrinsics_source"] for im in report["images"]} == {"guess"}
     # each image its own guess: f = 1.2 * longest side
-    assert [round(im["K"][0][0], 3) for im in report["images"]] == [768.0, 614.4, 672.0]
+    assert [round(images[n]["K"][0][0], 3) for n in ("a.png", "b.jpg", "c.tif")] == \
+        [768.0, 614.4, 672.0]
     assert report["after"]["conflictive_sets"] == 0
     assert report["before"]["links"] > 0
 
@@ -312,3 +323,59 @@ def test_internet_style_photos_register_at_the_defaults(tmp_path, sceaux_small):
     assert report["flags"] == []
     # the feature budget scaled with the 640x481 images: 2000, not the old cap's ~1600 left
     assert min(report["features_per_camera"]) > 1800
+
+
+@pytest.mark.parametrize("graph", ["knn:2", "complete"])
+def test_renaming_the_files_changes_no_decision(tmp_path, sceaux_small, graph):
+    """The same photographs under random names, in another name order: camera k is the k-th
+    image by content (pipeline.inputs.photos.in_content_order), so links.csv is byte for byte
+    the same and the report differs only in the names."""
+    renamed = tmp_path / "renamed"
+    renamed.mkdir()
+    shutil.copy(sceaux_small / "K.txt", renamed / "K.txt")
+    names = sorted(p.name for p in sceaux_small.glob("*.JPG"))
+    rng = np.random.default_rng(11)
+    new_names = {n: f"{k:03d}.JPG" for n, k in zip(names, rng.permutation(900)[:len(names)],
+                                                    strict=True)}
+    for old, new in new_names.items():
+        shutil.copy(sceaux_small / old, renamed / new)
+    outs = []
+    for folder, tag in ((sceaux_small, "named"), (renamed, "renamed")):
+        out = tmp_path / f"run-{tag}"
+        assert main(["run-images", str(folder), "--graph", graph, "--max-size", "320",
+                     "--no-rerun", "--out", str(out)]) == 0
+        outs.append(out)
+    a, b = (json.loads((o / "report.json").read_text()) for o in outs)
+    assert (outs[0] / "links.csv").read_bytes() == (outs[1] / "links.csv").read_bytes()
+    assert [new_names[im["name"]] for im in a["images"]] == [im["name"] for im in b["images"]]
+    assert a["comm_edges"] == b["comm_edges"]
+    for when in ("before", "after"):
+        ta, tb = a["triangulation"][when], b["triangulation"][when]
+        assert (ta["registered_images"], ta["points"]) == (tb["registered_images"], tb["points"])
+
+
+def test_cleaning_effect_names_the_stage_and_the_links(sceaux_run):
+    """report.json's cleaning_effect: the points of the reconstruction before cleaning whose
+    track held a cut link, by the stage that cut it, with those links' rows of links.csv."""
+    _, report, rows = sceaux_run
+    effect = report["cleaning_effect"]
+    tri = report["triangulation"]
+    assert effect["points_before"] == tri["before"]["points"]
+    assert effect["points_after"] == tri["after"]["points"]
+    cut_by = {}
+    for r in rows:
+        if r["reason"]:
+            cut_by[r["reason"]] = cut_by.get(r["reason"], 0) + 1
+    total_points = 0
+    for stage, entry in effect["by_stage"].items():
+        assert stage in cut_by and 0 < entry["count"] <= cut_by[stage]
+        assert 0 < entry["points"] <= entry["count"]
+        total_points += entry["points"]
+        listed = entry["links_csv_rows"]
+        assert len(listed) == min(entry["count"], 200)
+        assert all(rows[k]["reason"] == stage and rows[k]["status"] == "deleted" for k in listed)
+    assert effect["points_with_cut_links"] <= total_points
+    lost = set(tri["before"]["registered_names"]) - set(tri["after"]["registered_names"])
+    assert [e["image"] for e in effect["images_lost"]] == sorted(lost)
+    gained = [e["image"] for e in effect["images_gained"]]
+    assert (("images-gained" in {f["flag"] for f in report["flags"]}) == bool(gained))

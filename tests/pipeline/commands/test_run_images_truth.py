@@ -50,6 +50,8 @@ def truth_by_hand(out: Path, report: dict, tol_px: float = 2.0):
     kp = [np.array([p.xy for p in by_name[n].points2D]) - 0.5 for n in names]
     assert [len(k) for k in kp] == report["features_per_camera"]
     H1 = [np.eye(3)] + [np.loadtxt(GRAF_SMALL / f"H1to{k}p.txt") for k in range(2, len(names) + 1)]
+    # H1to{k}p belongs to the k-th file name; camera order is by content
+    H1 = [H1[k] for k in np.argsort(np.argsort(names))]
     off = np.concatenate([[0], np.cumsum([len(k) for k in kp])])
     true = set()
     for i in range(len(kp)):

@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pipeline.errors import InputError
-from pipeline.matching.retrieval import knn_edges, similarity, vlad, vocabulary
+from pipeline.matching.retrieval import content_order, knn_edges, similarity, vlad, vocabulary
 from pipeline.types import Features
 
 
@@ -69,3 +71,27 @@ def test_bad_k(k):
 def test_one_image_is_an_error():
     with pytest.raises(InputError, match="at least two images"):
         knn_edges([_feats(np.ones((3, 32), np.float32))], k=1)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**16), k=st.integers(1, 4))
+def test_reordering_the_images_permutes_the_graph_and_changes_nothing_else(seed, k):
+    # the k-means start and the ties come from the images' content, never from their order
+    rng = np.random.default_rng(seed)
+    feats = _scenes(rng, [0, 1, 0, 1, 2, 2, 0], per_image=80, dim=16)
+    feats.append(_feats(np.zeros((0, 16), np.float32)))  # ties: an image without features
+    perm = rng.permutation(len(feats))
+    edges, S = knn_edges(feats, k, words=8)
+    edges_p, S_p = knn_edges([feats[p] for p in perm], k, words=8)
+    back = np.sort(perm[edges_p], axis=1)
+    assert sorted(map(tuple, back.tolist())) == sorted(map(tuple, edges.tolist()))
+    assert np.allclose(S_p, S[np.ix_(perm, perm)], atol=1e-6)
+
+
+def test_content_order_ignores_the_order_of_the_images():
+    rng = np.random.default_rng(3)
+    feats = _scenes(rng, [0, 1, 2, 0])
+    order = content_order(feats)
+    assert sorted(order.tolist()) == [0, 1, 2, 3]
+    rev = content_order(feats[::-1])
+    assert [3 - k for k in rev.tolist()] == order.tolist()
