@@ -13,14 +13,15 @@ features of one image in one association set. *Window*: a robot holds the frames
 window, older frames are *retired*: their features and links are final (a retired link is
 never cut again). New links must join a frame of step ``t`` to a frame in the window
 (the runner matches a new frame against its robot's ``W - 1`` previous frames and its current
-neighbours' last ``W`` frames). *Label*: every feature carries the name of its track (the
-smallest global feature id the track had when it was named; a new feature starts as its own
-label). A label names a set of features that contains the feature's true association set
-(equal, unless a cut of an old link split a track whose parts stay joined only through
-retired frames: the label keeps the parts together, which only makes the checks below
-stricter). Every robot holds, for each label it carries, the retired images of its own
-retired frames in that label (``retired`` entries): 8 bytes per (label, image), dropped once
-the label has no feature left in any window.
+neighbours' last ``W`` frames). *Label*: every feature carries the name of its track (a new
+feature starts as its own global id; a set keeps the name of the track whose retired frames
+it holds, otherwise it gets a fresh name, :data:`FRESH_LABELS`). A label names a set of
+features that contains the feature's true association set: a window feature with a kept
+link into a retired frame is *anchored*, and the anchored window pieces of one label are
+treated as one set (they may be joined through retired frames; if they are not, treating
+them as joined only makes the checks below stricter). Every robot holds, for each label it
+carries, the retired images of its own retired frames in that label (``retired`` entries):
+8 bytes per (label, image), dropped once the label has no feature left in any window.
 
 One step (:meth:`OnlineAssociation.add_step`)
 ---------------------------------------------
@@ -29,9 +30,10 @@ One step (:meth:`OnlineAssociation.add_step`)
    robot knows them: the two robots of a new link exchange their ends' labels, 16 bytes per
    link). The stage runs on the *sub-problem*: the window features of the touched labels and
    the step's new features, the kept window links among them, the new links, and one
-   *history link* between consecutive window pieces of a label that the window links do not
-   join (the pieces are joined through retired frames; the history link carries that
-   connection, so a set that closes through history is one set for the detection). On it
+   *history link* between consecutive anchored window pieces of a label that the window
+   links do not join (the pieces may be joined through retired frames; the history link
+   carries that connection, so a set that closes through history is one set for the
+   detection). On it
    the simulator runs Aragüés et al.'s detection (Sec. III, Prop. 3.5) and the rule of
    :mod:`pipeline.consistency.rules` (default :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`)
    until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
@@ -46,7 +48,8 @@ One step (:meth:`OnlineAssociation.add_step`)
    conflict-free), add the kept new links by decreasing quality, skip one that would put two
    features of one image (window or retired) in one set. A skipped link is cut with reason
    ``history``. So new evidence never overturns a retired frame's decision.
-4. Labels are renamed: each final set takes the smallest label it holds.
+4. Labels are renamed: a final set holding anchored features takes the smallest of their
+   labels (their retired entries follow it); any other set gets a fresh name.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
 links make its set conflictive, and only by the rule (reason of the rule) or by the history
@@ -104,6 +107,9 @@ from pipeline.types import Links
 
 __all__ = ["Frame", "OnlineAssociation", "batch_resolve", "HISTORY", "LABEL_BYTES",
            "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
+
+FRESH_LABELS = 1 << 40
+"""First fresh label name: a set no retired frame anchors is named from here on."""
 
 HISTORY = "history"
 """Reason of a link cut by the history repair (step 3 of the module docstring)."""
@@ -183,6 +189,8 @@ class OnlineAssociation:
         self.projection: list = []
         self.label = np.zeros(0, np.int64)      # per feature
         self.degree = np.zeros(0, np.int64)     # kept links per feature
+        self.border = np.zeros(0, np.int64)     # kept links into retired frames per feature
+        self._fresh = FRESH_LABELS              # next fresh label name
         self.links = _LinkTable()
         self.window_images = np.zeros(0, np.int64)
         self.window_links = np.zeros(0, np.int64)  # ids of links with both ends in the window
@@ -280,6 +288,7 @@ class OnlineAssociation:
             base = self.offset[g]
             self.label = np.concatenate([self.label, base + np.arange(m, dtype=np.int64)])
             self.degree = np.concatenate([self.degree, np.zeros(m, np.int64)])
+            self.border = np.concatenate([self.border, np.zeros(m, np.int64)])
             self.window_images = np.append(self.window_images, g)
 
     def _retire(self, t: int) -> None:
@@ -288,14 +297,18 @@ class OnlineAssociation:
             return
         feats = np.concatenate([self.offset[g] + np.arange(self.m[g]) for g in old])
         imgs = np.repeat(old, self.m[old])
-        tracked = (self.degree[feats] > 0) | (self.label[feats] != feats)
+        tracked = self.degree[feats] > 0
         self.ret_label = np.concatenate([self.ret_label, self.label[feats[tracked]]])
         self.ret_image = np.concatenate([self.ret_image, imgs[tracked]])
         self.window_images = np.setdiff1d(self.window_images, old)
         L = self.links
         wl = self.window_links
-        keep = ~(np.isin(L.ci[wl], old) | np.isin(L.cj[wl], old))
-        self.window_links = wl[keep]
+        gone_i, gone_j = np.isin(L.ci[wl], old), np.isin(L.cj[wl], old)
+        # a kept link from a window feature into a retired frame anchors that feature
+        a, b = self._ends(wl)
+        border = L.kept[wl] & (gone_i != gone_j)
+        np.add.at(self.border, np.where(gone_i, b, a)[border], 1)
+        self.window_links = wl[~(gone_i | gone_j)]
 
     def _add_links(self, links: Links, first: int, t: int) -> np.ndarray:
         from pipeline.association import check_links
@@ -346,7 +359,9 @@ class OnlineAssociation:
         old_ids = wl[L.kept[wl] & (L.step_added[wl] < t) & np.isin(self.label[a_w], touched)]
         a_o, b_o = self._ends(old_ids)
         # history links: consecutive window pieces of a label (joined through retired frames)
-        hist_a, hist_b = _history_links(sub, self.label[sub], self._components(sub, a_o, b_o))
+        piece = self._components(sub, a_o, b_o)
+        anch = _anchored(self.label[sub], piece, self.border[sub] > 0)
+        hist_a, hist_b = _history_links(sub[anch], self.label[sub][anch], piece[anch])
         real = np.concatenate([old_ids, new_ids])
         a_r, b_r = self._ends(real)
         a_all = np.concatenate([a_r, hist_a])
@@ -417,21 +432,25 @@ class OnlineAssociation:
     def _history_check(self, sub, real, t: int) -> tuple[int, int]:
         """Step 3 of the module docstring: returns (links cut, flood bytes).
 
-        The check joins all window features of every label (``hist_a``, ``hist_b``: each to
-        the label's smallest feature), whatever the rule cut: a piece cut off by the rule may
-        still be joined to its label through retired frames, and treating it as joined only
-        makes the check stricter."""
+        After the rule's cuts a label's window features fall into *pieces* (components of
+        the kept window links). A piece holding a feature with a kept link into a retired
+        frame is *anchored*: the check joins the anchored pieces of a label (``hist_a``,
+        ``hist_b``: each anchored feature to the label's smallest anchored feature), since
+        they may be joined through retired frames, which only makes the check stricter. A
+        piece with no such link is joined to the rest of its label by no link at all: it
+        is a set of its own (exact)."""
         L = self.links
         old_label = self.label[sub]
         kept_real = real[L.kept[real]]
         a_k, b_k = self._ends(kept_real)
-        hist_a, hist_b = _label_links(sub, old_label)
+        anch = _anchored(old_label, self._components(sub, a_k, b_k), self.border[sub] > 0)
+        hist_a, hist_b = _label_links(sub[anch], old_label[anch])
         comp = self._components(sub, np.concatenate([a_k, hist_a]),
                                 np.concatenate([b_k, hist_b]))
         img_of = np.searchsorted(self.offset, sub, side="right") - 1
-        # each touched label lies in one component (its pieces are joined by history links)
-        lab_u, lab_first = np.unique(old_label, return_index=True)
-        comp_of_label = comp[lab_first]
+        # the retired entries of a label go with its anchored features (one component)
+        lab_u, lab_first = np.unique(old_label[anch], return_index=True)
+        comp_of_label = comp[anch][lab_first]
         on = np.isin(self.ret_label, lab_u)
         r_comp = comp_of_label[np.searchsorted(lab_u, self.ret_label[on])]
         r_img = self.ret_image[on]
@@ -442,11 +461,12 @@ class OnlineAssociation:
             robots = np.unique(self.robot[img_of[members]])
             in_c = np.isin(self.offset[L.ci[kept_real]] + L.fi[kept_real], sub[members])
             links_c = kept_real[in_c]
-            labels_c = np.unique(old_label[members])
+            labels_c = np.unique(old_label[members][anch[members]])
             entries = int(np.isin(self.ret_label, labels_c).sum())
             flood += len(robots) * (RETIRED_ENTRY_BYTES * entries +
                                     FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum()))
-            skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, old_label, t)
+            skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, old_label,
+                                   anch, t)
             self._cut(skipped, HISTORY, t)
             cut_n += len(skipped)
         if bad:
@@ -454,27 +474,38 @@ class OnlineAssociation:
             a_k, b_k = self._ends(kept_real)
             comp = self._components(sub, np.concatenate([a_k, hist_a]),
                                     np.concatenate([b_k, hist_b]))
-        # step 4: each final set takes the smallest label it holds
-        order = np.lexsort((old_label, comp))
-        first = np.r_[True, comp[order][1:] != comp[order][:-1]]
-        name = np.empty(comp.max() + 1 if len(comp) else 0, np.int64)
-        name[comp[order][first]] = old_label[order][first]
-        new_label = name[comp]
-        mapping = dict(zip(old_label.tolist(), new_label.tolist(), strict=True))
-        self.label[sub] = new_label
+            comp_of_label = comp[anch][lab_first]
+        # step 4: a set holding anchored features keeps the smallest of their labels (its
+        # retired entries follow); any other set gets a fresh name
+        has = np.zeros(comp.max() + 1 if len(comp) else 0, bool)
+        has[comp[anch]] = True
+        name = np.full(len(has), -1, np.int64)
+        order = np.lexsort((old_label[anch], comp[anch]))
+        ca, la = comp[anch][order], old_label[anch][order]
+        first = np.r_[True, ca[1:] != ca[:-1]] if len(ca) else np.zeros(0, bool)
+        name[ca[first]] = la[first]
+        fresh = np.flatnonzero(~has)
+        name[fresh] = self._fresh + np.arange(len(fresh))
+        self._fresh += len(fresh)
+        self.label[sub] = name[comp]
+        keep = ~np.isin(self.ret_label, old_label) | np.isin(self.ret_label, lab_u)
+        mapping = dict(zip(lab_u.tolist(), name[comp_of_label].tolist(), strict=True))
+        self.ret_label, self.ret_image = self.ret_label[keep], self.ret_image[keep]
         on = np.isin(self.ret_label, lab_u)
         self.ret_label[on] = [mapping[x] for x in self.ret_label[on].tolist()]
         return cut_n, flood
 
-    def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, old_label, t) -> np.ndarray:
+    def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, old_label, anch,
+                t) -> np.ndarray:
         """The deterministic repair of one set (step 3): the new links it skips."""
         L = self.links
         parent = {int(f): int(f) for f in sub[members]}
         images: dict[int, set] = {int(f): {int(img_of[k])} for k, f in zip(members, sub[members],
                                                                             strict=True)}
-        for lab in np.unique(old_label[members]).tolist():
+        am = members[anch[members]]
+        for lab in np.unique(old_label[am]).tolist():
             rets = self.ret_image[self.ret_label == lab].tolist()
-            f0 = int(sub[members][old_label[members] == lab][0])
+            f0 = int(sub[am][old_label[am] == lab][0])
             images[f0] |= set(rets)
 
         def find(x):
@@ -533,6 +564,17 @@ def _history_links(sub: np.ndarray, label: np.ndarray, piece: np.ndarray):
     lab, f = lab[first], f[first]            # smallest feature of each (label, piece)
     same = lab[1:] == lab[:-1]
     return f[:-1][same], f[1:][same]
+
+
+def _anchored(label: np.ndarray, piece: np.ndarray, border: np.ndarray) -> np.ndarray:
+    """Features whose piece holds a feature of their label with a link into a retired frame."""
+    if not len(label):
+        return np.zeros(0, bool)
+    key = np.stack([label, piece], axis=1)
+    u, inv = np.unique(key, axis=0, return_inverse=True)
+    hit = np.zeros(len(u), bool)
+    hit[inv.reshape(-1)[border]] = True
+    return hit[inv.reshape(-1)]
 
 
 def _label_links(sub: np.ndarray, label: np.ndarray):
