@@ -1,0 +1,120 @@
+"""Benchmark: a team in motion, the online stage next to a batch rerun from scratch.
+
+For each formation size (``--robots``, default 6 and 20; graph ``--graph``, default
+``ring2``) the formation drives ``--steps`` steps along the facade
+(:func:`data_synth.motion.render_motion`, ``--size``, ``--max-features`` SIFT features per
+frame) and :func:`pipeline.runs.online.run_online_steps` associates it online with window
+``--window``. Per step it records the online stage's wall time, rounds, messages, bytes and
+the largest robot memory (descriptors and keypoints of its window frames plus the stage's
+state, :meth:`OnlineAssociation.robot_state_bytes`; ``stage_peak_bytes``: the stage's own
+peak per frame as the simulator measures it). Every ``--batch-every`` steps and at the last
+step the same rule runs from scratch on all links so far (the batch run, in the same
+process right after the step: same machine, same minutes) with the same figures (a robot of
+the batch run holds all its frames). At the end: pairwise precision / recall / F1 of both
+on the scope of :mod:`pipeline.evaluation.online` and their conflictive sets.
+
+Targets: conflict-free after every step; at the last step the online step costs <= 10 % of
+the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per robot follows
+the window, not the history (its last-step value over its value at step ``window``).
+
+Prints a table and saves ``runs/bench-online/results.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+
+OUT = ROOT / "runs" / "bench-online"
+TARGET_COST = 0.10
+
+
+def one(robots: int, args) -> dict:
+    from pipeline.progress import StageTimer
+    from pipeline.runs.online import OnlineConfig, online_report, run_online_steps
+
+    config = OnlineConfig(formation=args.graph, seed=args.seed, size=args.size,
+                          max_features=args.max_features, robots=robots, graph=args.graph,
+                          steps=args.steps, window=args.window, speed=args.speed,
+                          resolution=args.resolution, batch_every=args.batch_every,
+                          rerun=False)
+    t0 = time.perf_counter()
+
+    def show(r):
+        b = r.get("batch")
+        print(f"  n={robots} step {r['step']:3d}: {r['links_new']:6d} new, online "
+              f"{r['wall_s']:7.3f} s {r['rounds']:3d} rounds {r['bytes'] / 1e6:8.2f} MB "
+              f"mem {r['robot_memory_bytes_max'] / 1e6:6.2f} MB"
+              + (f" | batch {b['wall_s']:7.3f} s {b['rounds']:3d} rounds "
+                 f"{b['bytes'] / 1e6:9.2f} MB mem {b['robot_memory_bytes_max'] / 1e6:6.2f} MB"
+                 if b else ""), flush=True)
+
+    run = run_online_steps(config, StageTimer(verbose=False), on_step=show)
+    report = online_report(config, run, StageTimer(verbose=False))
+    steps = report["steps"]
+    last = steps[-1]
+    b = last.get("batch", {})
+    ref = steps[min(args.window, len(steps)) - 1]
+    f = report["final"]
+    summary = {
+        "robots": robots, "graph": args.graph, "steps": len(steps), "window": args.window,
+        "images": report["n_images"], "links": f["links"],
+        "conflict_free_every_step": report["conflict_free_every_step"],
+        "last_step": {"online_wall_s": last["wall_s"], "batch_wall_s": b.get("wall_s"),
+                      "wall_ratio": last["wall_s"] / b["wall_s"] if b else None,
+                      "online_bytes": last["bytes"], "batch_bytes": b.get("bytes"),
+                      "bytes_ratio": last["bytes"] / b["bytes"] if b else None,
+                      "online_rounds": last["rounds"], "batch_rounds": b.get("rounds"),
+                      "online_messages": last["messages"], "batch_messages": b.get("messages"),
+                      "online_robot_memory_bytes": last["robot_memory_bytes_max"],
+                      "batch_robot_memory_bytes": b.get("robot_memory_bytes_max")},
+        "memory_growth": last["robot_memory_bytes_max"] / ref["robot_memory_bytes_max"]
+        if ref["robot_memory_bytes_max"] else None,
+        "final": {k: f[k] for k in ("before", "online", "batch") if k in f},
+        "seconds": time.perf_counter() - t0,
+    }
+    return {"summary": summary, "steps": steps}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--robots", type=int, nargs="+", default=[6, 20])
+    ap.add_argument("--graph", default="ring2")
+    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--window", type=int, default=3)
+    ap.add_argument("--speed", type=float, default=0.15)
+    ap.add_argument("--size", type=lambda s: tuple(int(v) for v in s.split("x")),
+                    default=(320, 240))
+    ap.add_argument("--max-features", type=int, default=300)
+    ap.add_argument("--resolution", default="evidence")
+    ap.add_argument("--batch-every", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(OUT))
+    args = ap.parse_args(argv)
+    results = {"config": {k: (list(v) if isinstance(v, tuple) else v)
+                          for k, v in vars(args).items()}, "runs": []}
+    out = Path(args.out)
+    for n in args.robots:
+        r = one(n, args)
+        results["runs"].append(r)
+        s = r["summary"]
+        ls = s["last_step"]
+        print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; last step "
+              f"online/batch wall {ls['wall_ratio']}, bytes {ls['bytes_ratio']}; memory "
+              f"growth {s['memory_growth']}; F1 online {s['final']['online']['f1']:.4f} "
+              f"batch {s['final'].get('batch', {}).get('f1', float('nan')):.4f}", flush=True)
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out / "results.json", results)  # saved after each size
+    print(f"saved {out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
