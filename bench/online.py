@@ -17,12 +17,17 @@ Targets: conflict-free after every step; at the last step the online step costs 
 the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per robot follows
 the window, not the history (its last-step value over its value at step ``window``).
 
-Prints a table and saves ``runs/bench-online/results.json``.
+Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
+online one it is compared with.
+
+Prints a table and saves ``runs/bench-online/results.json`` (one entry per formation size;
+running one size again replaces its entry).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -44,7 +49,7 @@ def one(robots: int, args) -> dict:
                           max_features=args.max_features, robots=robots, graph=args.graph,
                           steps=args.steps, window=args.window, speed=args.speed,
                           resolution=args.resolution, batch_every=args.batch_every,
-                          rerun=False)
+                          fusion=args.fusion, rerun=False)
     t0 = time.perf_counter()
 
     def show(r):
@@ -96,14 +101,24 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", default="evidence")
     ap.add_argument("--batch-every", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fusion", action="store_true",
+                    help="fuse the changed tracks after each step (off: the consistency stage "
+                         "alone, as the batch run)")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
-    results = {"config": {k: (list(v) if isinstance(v, tuple) else v)
-                          for k, v in vars(args).items()}, "runs": []}
+    config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
     out = Path(args.out)
     for n in args.robots:
         r = one(n, args)
-        results["runs"].append(r)
+        r["config"] = config
+        # each formation size replaces its own entry of the results.json found at the time of
+        # writing, so sizes can be run by separate invocations (each keeps its options)
+        results = {"runs": []}
+        if (out / "results.json").exists():
+            results = json.loads((out / "results.json").read_text())
+        results["runs"] = sorted([x for x in results.get("runs", [])
+                                  if x["summary"]["robots"] != n] + [r],
+                                 key=lambda x: x["summary"]["robots"])
         s = r["summary"]
         ls = s["last_step"]
         print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; last step "

@@ -108,7 +108,8 @@ def online_config_from_args(args):
                         switching=bool(faults is not None and faults.switching_topology),
                         resolution=args.resolution,
                         tol_px=validate.tolerance_px(args.tol_px),
-                        batch_every=args.batch_every, out=args.out, rerun=not args.no_rerun)
+                        batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,
+                        rerun=not args.no_rerun)
 
 
 def run(args) -> int:

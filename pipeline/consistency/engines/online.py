@@ -197,6 +197,7 @@ class OnlineAssociation:
         self.ret_label = np.zeros(0, np.int64)
         self.ret_image = np.zeros(0, np.int64)
         self.steps: list[dict] = []
+        self.last_sub = np.zeros(0, np.int64)  # features of the last step's sub-problem
 
     # ---------------------------------------------------------------- views of the record
     @property
@@ -253,6 +254,7 @@ class OnlineAssociation:
             outside the window.
         """
         t0 = time.perf_counter()
+        self.last_sub = np.zeros(0, np.int64)
         self.t += 1
         t = self.t
         first = self.n_images
@@ -354,6 +356,7 @@ class OnlineAssociation:
         wfeat = np.concatenate([self.offset[g] + np.arange(self.m[g]) for g in w]) if len(w) \
             else np.zeros(0, np.int64)
         sub = wfeat[np.isin(self.label[wfeat], touched)]
+        self.last_sub = sub
         wl = self.window_links
         a_w, b_w = self._ends(wl)
         old_ids = wl[L.kept[wl] & (L.step_added[wl] < t) & np.isin(self.label[a_w], touched)]
@@ -413,6 +416,18 @@ class OnlineAssociation:
         swap = ca > cb
         return Links(np.where(swap, cb, ca), np.where(swap, fb, fa), np.where(swap, ca, cb),
                      np.where(swap, fa, fb), q), swap
+
+    def changed_window_links(self) -> np.ndarray:
+        """Ids of the kept window links of the sets the last step's stage ran on (both ends
+        in its sub-problem): the tracks the step changed, e.g. for fusion."""
+        wl = self.window_links[self.links.kept[self.window_links]]
+        a, b = self._ends(wl)
+        return wl[np.isin(a, self.last_sub) & np.isin(b, self.last_sub)]
+
+    def cut(self, ids, reason: str) -> None:
+        """Cut kept links ``ids`` at the current step for a later stage's ``reason`` (e.g.
+        ``fusion-outlier``). Cutting only splits sets: the association stays conflict-free."""
+        self._cut(np.asarray(ids, np.int64).reshape(-1), reason, self.t)
 
     def _cut(self, ids: np.ndarray, reason: str, t: int) -> None:
         L = self.links

@@ -44,12 +44,14 @@ def test_links_and_their_steps_agree_with_the_report(run_dir):
         steps = list(csv.DictReader(f))
     assert len(links) == len(steps) == report["final"]["links"]
     cut = [int(s["step_cut"]) for s in steps if s["step_cut"]]
-    assert len(cut) == sum(r["cut"] for r in report["steps"])
+    fusion = [r["fusion"]["cut"] for r in report["steps"]]
+    assert len(cut) == sum(r["cut"] for r in report["steps"]) + sum(fusion)
+    assert report["fusion"]["links_cut"] == sum(fusion)
     assert all(lk["status"] == "deleted" for lk, s in zip(links, steps, strict=True)
                if s["step_cut"])
     for r in report["steps"]:
         assert sum(int(s["step_added"]) == r["step"] for s in steps) == r["links_new"]
-        assert cut.count(r["step"]) == r["cut"]
+        assert cut.count(r["step"]) == r["cut"] + r["fusion"]["cut"]
     with open(run_dir / "images.csv") as f:
         images = list(csv.DictReader(f))
     assert [(int(i["robot"]), int(i["step"])) for i in images][:7] == \
@@ -78,3 +80,13 @@ def test_bad_options_are_refused(tmp_path, capsys, flags, match):
     assert main(["run-formation", "--out", str(tmp_path / "r"), *FAST, *flags]) == 2
     assert match in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+def test_without_fusion_no_link_is_cut_as_an_outlier(tmp_path):
+    out = tmp_path / "r"
+    assert main(["run-formation", "--steps", "2", "--window", "2", "--no-fusion", "--no-rerun",
+                 "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["fusion"]["enabled"] is False and report["fusion"]["links_cut"] == 0
+    assert all("fusion" not in s for s in report["steps"])
+    assert not (out / "recording.rrd").exists()
