@@ -35,6 +35,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
+
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-online"
@@ -61,10 +63,27 @@ def one(robots: int, args) -> dict:
                  f"{b['bytes'] / 1e6:9.2f} MB mem {b['robot_memory_bytes_max'] / 1e6:6.2f} MB"
                  if b else ""), flush=True)
 
-    run = run_online_steps(config, StageTimer(verbose=False), on_step=show)
+    batch_steps = None if args.batch_steps is None else {k - 1 for k in args.batch_steps}
+    run = run_online_steps(config, StageTimer(verbose=False), batch_steps=batch_steps,
+                           on_step=show)
     report = online_report(config, run, StageTimer(verbose=False))
     steps = report["steps"]
+    from pipeline.evaluation.online import ScopedTruth, scope_pairs
+
+    oa, seq = run.online, run.sequence
+    scope = ScopedTruth(seq.flat, run.features,
+                        scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window))
+    links = oa.all_links()
+    at_batch = {}
+    for t, kept_b in sorted(run.batch_kept.items()):
+        upto = links.subset(np.arange(len(kept_b)))
+        at_batch[t + 1] = {"online": scope.scores(upto.subset(run.online_kept_at(t))),
+                           "batch": scope.scores(upto.subset(kept_b))}
+    final_step = steps[-1]
     last = steps[-1]
+    # the comparison step: the last step, or the last one the batch ran at
+    with_batch = [r for r in steps if "batch" in r]
+    last = with_batch[-1] if with_batch else last
     b = last.get("batch", {})
     ref = steps[min(args.window, len(steps)) - 1]
     f = report["final"]
@@ -72,6 +91,7 @@ def one(robots: int, args) -> dict:
         "robots": robots, "graph": args.graph, "steps": len(steps), "window": args.window,
         "images": report["n_images"], "links": f["links"],
         "conflict_free_every_step": report["conflict_free_every_step"],
+        "compared_step": last["step"] + 1,
         "last_step": {"online_wall_s": last["wall_s"], "batch_wall_s": b.get("wall_s"),
                       "wall_ratio": last["wall_s"] / b["wall_s"] if b else None,
                       "online_bytes": last["bytes"], "batch_bytes": b.get("bytes"),
@@ -80,8 +100,10 @@ def one(robots: int, args) -> dict:
                       "online_messages": last["messages"], "batch_messages": b.get("messages"),
                       "online_robot_memory_bytes": last["robot_memory_bytes_max"],
                       "batch_robot_memory_bytes": b.get("robot_memory_bytes_max")},
-        "memory_growth": last["robot_memory_bytes_max"] / ref["robot_memory_bytes_max"]
+        "memory_growth": final_step["robot_memory_bytes_max"] / ref["robot_memory_bytes_max"]
         if ref["robot_memory_bytes_max"] else None,
+        "online_robot_memory_bytes_last": final_step["robot_memory_bytes_max"],
+        "scores_at_batch_steps": at_batch,
         "final": {k: f[k] for k in ("before", "online", "batch") if k in f},
         "seconds": time.perf_counter() - t0,
     }
@@ -100,6 +122,10 @@ def main(argv=None) -> int:
     ap.add_argument("--max-features", type=int, default=300)
     ap.add_argument("--resolution", default="evidence")
     ap.add_argument("--batch-every", type=int, default=10)
+    ap.add_argument("--batch-steps", type=int, nargs="+", default=None,
+                    help="steps (1-based) at which the batch run goes, instead of every "
+                         "--batch-every and the last (the batch rerun's cost grows with the "
+                         "history: on a busy machine a large team's last steps take long)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
@@ -121,10 +147,15 @@ def main(argv=None) -> int:
                                  key=lambda x: x["summary"]["robots"])
         s = r["summary"]
         ls = s["last_step"]
-        print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; last step "
-              f"online/batch wall {ls['wall_ratio']}, bytes {ls['bytes_ratio']}; memory "
-              f"growth {s['memory_growth']}; F1 online {s['final']['online']['f1']:.4f} "
-              f"batch {s['final'].get('batch', {}).get('f1', float('nan')):.4f}", flush=True)
+        print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; step "
+              f"{s['compared_step']}: online/batch wall {ls['wall_ratio']}, bytes "
+              f"{ls['bytes_ratio']}; robot memory at step {s['steps']} / at step "
+              f"{args.window}: {s['memory_growth']}", flush=True)
+        for k, sc in s["scores_at_batch_steps"].items():
+            print(f"  after step {k}: pairwise F1 online {sc['online']['f1']:.4f} "
+                  f"(P {sc['online']['precision']:.4f} R {sc['online']['recall']:.4f}), batch "
+                  f"{sc['batch']['f1']:.4f} (P {sc['batch']['precision']:.4f} "
+                  f"R {sc['batch']['recall']:.4f})", flush=True)
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomic(out / "results.json", results)  # saved after each size
     print(f"saved {out / 'results.json'}")

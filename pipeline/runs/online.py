@@ -75,7 +75,9 @@ class OnlineConfig:
 @dataclass
 class OnlineRun:
     """What :func:`run_online_steps` produced: the sequence, every frame's features, the
-    online association, per-step records (online and batch) and the last batch result."""
+    online association, per-step records (online and batch), the last batch result and,
+    once evaluated, each link's truth (``1`` good, ``0`` spurious); ``batch_kept``: step ->
+    the batch run's kept mask over the links made up to that step."""
 
     sequence: object
     features: list
@@ -83,6 +85,14 @@ class OnlineRun:
     steps: list
     batch: object | None
     truth: np.ndarray | None = None
+    batch_kept: dict | None = None
+
+    def online_kept_at(self, step: int) -> np.ndarray:
+        """The online association's kept mask over the links made up to ``step``, as it
+        stood after that step."""
+        L = self.online.links
+        upto = L.step_added <= step
+        return (L.kept | (L.step_cut > step))[upto]
 
 
 def step_pairs(robot_of: np.ndarray, step_of: np.ndarray, t: int, window: int,
@@ -172,7 +182,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
     features: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)
-    records, batch = [], None
+    records, batch, batch_kept = [], None, {}
     with timer.stage("online", f"{config.steps} steps, window {config.window}"):
         for t in range(config.steps):
             ids = [seq.image(i, t) for i in range(n)]
@@ -212,6 +222,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                 np.add.at(b_state, robot_of[oa.links.ci], 40)
                 np.add.at(b_state, robot_of[oa.links.cj], 40)
                 kept_b = batch.links.subset(~batch.deleted)
+                batch_kept[t] = ~batch.deleted
                 rec["batch"] = dict(
                     wall_s=time.perf_counter() - t1,
                     rounds=int(bs["detection_rounds"] + bs["resolution_rounds"]),
@@ -228,7 +239,8 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "
                        f"{rec['wall_s']:.3f} s")
-    return OnlineRun(sequence=seq, features=features, online=oa, steps=records, batch=batch)
+    return OnlineRun(sequence=seq, features=features, online=oa, steps=records, batch=batch,
+                     batch_kept=batch_kept)
 
 
 def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
