@@ -27,8 +27,8 @@ One step (:meth:`OnlineAssociation.add_step`)
 ---------------------------------------------
 1. The step's frames join the window, frames older than ``W`` steps retire.
 2. *Incremental detection.* The touched labels are the labels of the new links' ends (each
-   robot knows them: the two robots of a new link exchange their ends' labels, 16 bytes per
-   link). The stage runs on the *sub-problem*: the window features of the touched labels and
+   robot knows them: the two robots of a new link exchange their ends' labels, one message
+   of 8 bytes each way). The stage runs on the *sub-problem*: the window features of the touched labels and
    the step's new features, the kept window links among them, the new links, and one
    *history link* between consecutive anchored window pieces of a label that the window
    links do not join (the pieces may be joined through retired frames; the history link
@@ -377,7 +377,7 @@ class OnlineAssociation:
         rec.update(touched_labels=int(len(touched)), sub_images=int(len(images)),
                    sub_features=int(len(sub)), sub_links=int(n_real),
                    history_links=int(len(hist_a)))
-        local_links, swap = self._local_links(images, a_all, b_all, q_all)
+        local_links = self._local_links(images, a_all, b_all, q_all)
         kw = {}
         if self.rule.needs_evidence:
             kw = dict(keypoints=[self.keypoints[g] for g in images],
@@ -385,7 +385,6 @@ class OnlineAssociation:
                       if all(self.projection[g] is not None for g in images) else None)
         res = resolve_conflicts(self.m[images], None, local_links,
                                 resolution=self.resolution, **kw)
-        del swap
         st = res.stats
         first = st["per_iteration"][0] if st["per_iteration"] else {}
         rec.update(conflictive_features=int(first.get("conflictive_features", 0)),
@@ -396,7 +395,7 @@ class OnlineAssociation:
                    messages=int(st["messages"]), bytes=int(st["bytes"]),
                    stage_peak_bytes=int(st["max_robot_memory_bytes"]))
         rec["bytes"] += 2 * LABEL_BYTES * len(new_ids)
-        rec["messages"] += len(new_ids)
+        rec["messages"] += 2 * len(new_ids)  # one label each way
         cut = np.flatnonzero(res.deleted[:n_real])
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
@@ -408,14 +407,14 @@ class OnlineAssociation:
         rec["cut"] = rec["cut_rule"] + rec["cut_history"]
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
 
-    def _local_links(self, images, a, b, q) -> tuple[Links, np.ndarray]:
+    def _local_links(self, images, a, b, q) -> Links:
         img_a = np.searchsorted(self.offset, a, side="right") - 1
         img_b = np.searchsorted(self.offset, b, side="right") - 1
         ca, cb = np.searchsorted(images, img_a), np.searchsorted(images, img_b)
         fa, fb = a - self.offset[img_a], b - self.offset[img_b]
         swap = ca > cb
         return Links(np.where(swap, cb, ca), np.where(swap, fb, fa), np.where(swap, ca, cb),
-                     np.where(swap, fa, fb), q), swap
+                     np.where(swap, fa, fb), q)
 
     def changed_window_links(self) -> np.ndarray:
         """Ids of the kept window links of the sets the last step's stage ran on (both ends
