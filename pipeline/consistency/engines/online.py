@@ -27,8 +27,8 @@ One step (:meth:`OnlineAssociation.add_step`)
 ---------------------------------------------
 1. The step's frames join the window, frames older than ``W`` steps retire.
 2. *Incremental detection.* The touched labels are the labels of the new links' ends (each
-   robot knows them: the two robots of a new link exchange their ends' labels, one message
-   of 8 bytes each way). The stage runs on the *sub-problem*: the window features of the touched labels and
+   robot knows them: the two robots of a new link exchange their ends' labels, counted as
+   one message of 16 bytes per link). The stage runs on the *sub-problem*: the window features of the touched labels and
    the step's new features, the kept window links among them, the new links, and one
    *history link* between consecutive anchored window pieces of a label that the window
    links do not join (the pieces may be joined through retired frames; the history link
@@ -395,7 +395,7 @@ class OnlineAssociation:
                    messages=int(st["messages"]), bytes=int(st["bytes"]),
                    stage_peak_bytes=int(st["max_robot_memory_bytes"]))
         rec["bytes"] += 2 * LABEL_BYTES * len(new_ids)
-        rec["messages"] += 2 * len(new_ids)  # one label each way
+        rec["messages"] += len(new_ids)  # counted as one message per link (both labels)
         cut = np.flatnonzero(res.deleted[:n_real])
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
