@@ -41,6 +41,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_fault_arguments(p)
     add_transport_option(p)
     add_memory_option(p)
+    g = p.add_argument_group("a formation in motion (online association)")
+    g.add_argument("--steps", type=int, default=None,
+                   help="drive the formation along the facade for N steps, one frame per robot "
+                        "per step, and associate online (pipeline.runs.online); default: one "
+                        "snapshot")
+    g.add_argument("--window", type=int, default=3,
+                   help="with --steps: steps of frames a robot holds and matches against "
+                        "(default 3)")
+    g.add_argument("--speed", type=float, default=0.15,
+                   help="with --steps: metres the formation drives per step (default 0.15)")
+    g.add_argument("--batch-every", type=int, default=0,
+                   help="with --steps: also run the batch stage from scratch on all links every "
+                        "K steps (default 0: at the last step only)")
 
 
 def config_from_args(args) -> FormationConfig:
@@ -64,14 +77,68 @@ def config_from_args(args) -> FormationConfig:
                            merge_radius=args.merge_radius)
 
 
+def online_config_from_args(args):
+    """The :class:`pipeline.runs.online.OnlineConfig` of ``run-formation --steps N``."""
+    from pipeline.runs.online import OnlineConfig
+
+    if args.steps < 1:
+        raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
+    if args.window < 1:
+        raise InputError(f"--window {args.window}: expected a number of steps >= 1")
+    if not args.speed >= 0:
+        raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
+    if args.batch_every < 0:
+        raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
+    if args.transport != "sim":
+        raise InputError("--steps runs on the simulator only; drop --transport")
+    if (args.robots is None) != (args.graph is None):
+        raise InputError("--robots and --graph go together (a parametric formation needs both)")
+    method, max_features = feature_options(args)
+    robots = None if args.robots is None else validate.robots(args.robots)
+    faults = faults_from_args(args)
+    if faults is not None and faults.any and not (faults.switching_topology and not
+                                                   faults.drop_prob and not
+                                                   faults.crash and not faults.delay_rounds):
+        raise InputError("--steps models only --switching-topology (the graph of each step); "
+                         "drop the other fault options")
+    return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
+                        size=parse_size(args.size), features=method,
+                        max_features=max_features or 2000, robots=robots, graph=args.graph,
+                        steps=args.steps, window=args.window, speed=args.speed,
+                        switching=bool(faults is not None and faults.switching_topology),
+                        resolution=args.resolution,
+                        tol_px=validate.tolerance_px(args.tol_px),
+                        batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,
+                        rerun=not args.no_rerun)
+
+
 def run(args) -> int:
     from pipeline.outcome import exit_status
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.formation import run_formation
 
+    if args.steps is not None:
+        return _run_online(args)
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):
         out = run_formation(config, transport=args.transport)
     written = "report.json, links.csv, sparse/" + ("" if args.no_rerun else ", recording.rrd")
     print(f"run written to {out}/ ({written})")
     return exit_status(json.loads((out / "report.json").read_text()))
+
+
+def _run_online(args) -> int:
+    from pipeline.runfolder import claim_run_folder
+    from pipeline.runs.online import run_online
+
+    config = online_config_from_args(args)
+    with claim_run_folder(config.out_dir()):
+        out = run_online(config)
+    report = json.loads((out / "report.json").read_text())
+    f = report["final"]
+    print(f"{len(report['steps'])} steps, {f['links']} links, conflict-free after every step: "
+          f"{report['conflict_free_every_step']}; pairwise F1 online "
+          f"{f['online']['f1']:.3f}" + (f", batch {f['batch']['f1']:.3f}" if "batch" in f else ""))
+    print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
+          + ("" if args.no_rerun else ", recording.rrd") + ")")
+    return 0 if report["conflict_free_every_step"] else 3

@@ -1,0 +1,166 @@
+"""Benchmark: a team in motion, the online stage next to a batch rerun from scratch.
+
+For each formation size (``--robots``, default 6 and 20; graph ``--graph``, default
+``ring2``) the formation drives ``--steps`` steps along the facade
+(:func:`data_synth.motion.render_motion`, ``--size``, ``--max-features`` SIFT features per
+frame) and :func:`pipeline.runs.online.run_online_steps` associates it online with window
+``--window``. Per step it records the online stage's wall time, rounds, messages, bytes and
+the largest robot memory (descriptors and keypoints of its window frames plus the stage's
+state, :meth:`OnlineAssociation.robot_state_bytes`; ``stage_peak_bytes``: the stage's own
+peak per frame as the simulator measures it). Every ``--batch-every`` steps and at the last
+step the same rule runs from scratch on all links so far (the batch run, in the same
+process right after the step: same machine, same minutes) with the same figures (a robot of
+the batch run holds all its frames). At the end: pairwise precision / recall / F1 of both
+on the scope of :mod:`pipeline.evaluation.online` and their conflictive sets.
+
+Targets: conflict-free after every step; at the last step the online step costs <= 10 % of
+the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per robot follows
+the window, not the history (its last-step value over its value at step ``window``).
+
+Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
+online one it is compared with.
+
+Prints a table and saves ``runs/bench-online/results.json`` (one entry per formation size;
+running one size again replaces its entry).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+
+OUT = ROOT / "runs" / "bench-online"
+TARGET_COST = 0.10
+
+
+def one(robots: int, args) -> dict:
+    from pipeline.progress import StageTimer
+    from pipeline.runs.online import OnlineConfig, online_report, run_online_steps
+
+    config = OnlineConfig(formation=args.graph, seed=args.seed, size=args.size,
+                          max_features=args.max_features, robots=robots, graph=args.graph,
+                          steps=args.steps, window=args.window, speed=args.speed,
+                          resolution=args.resolution, batch_every=args.batch_every,
+                          fusion=args.fusion, rerun=False)
+    t0 = time.perf_counter()
+
+    def show(r):
+        b = r.get("batch")
+        print(f"  n={robots} step {r['step']:3d}: {r['links_new']:6d} new, online "
+              f"{r['wall_s']:7.3f} s {r['rounds']:3d} rounds {r['bytes'] / 1e6:8.2f} MB "
+              f"mem {r['robot_memory_bytes_max'] / 1e6:6.2f} MB"
+              + (f" | batch {b['wall_s']:7.3f} s {b['rounds']:3d} rounds "
+                 f"{b['bytes'] / 1e6:9.2f} MB mem {b['robot_memory_bytes_max'] / 1e6:6.2f} MB"
+                 if b else ""), flush=True)
+
+    batch_steps = None if args.batch_steps is None else {k - 1 for k in args.batch_steps}
+    run = run_online_steps(config, StageTimer(verbose=False), batch_steps=batch_steps,
+                           on_step=show)
+    report = online_report(config, run, StageTimer(verbose=False))
+    steps = report["steps"]
+    from pipeline.evaluation.online import ScopedTruth, scope_pairs
+
+    oa, seq = run.online, run.sequence
+    scope = ScopedTruth(seq.flat, run.features,
+                        scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window))
+    links = oa.all_links()
+    at_batch = {}
+    for t, kept_b in sorted(run.batch_kept.items()):
+        upto = links.subset(np.arange(len(kept_b)))
+        at_batch[t + 1] = {"online": scope.scores(upto.subset(run.online_kept_at(t))),
+                           "batch": scope.scores(upto.subset(kept_b))}
+    final_step = steps[-1]
+    last = steps[-1]
+    # the comparison step: the last step, or the last one the batch ran at
+    with_batch = [r for r in steps if "batch" in r]
+    last = with_batch[-1] if with_batch else last
+    b = last.get("batch", {})
+    ref = steps[min(args.window, len(steps)) - 1]
+    f = report["final"]
+    summary = {
+        "robots": robots, "graph": args.graph, "steps": len(steps), "window": args.window,
+        "images": report["n_images"], "links": f["links"],
+        "conflict_free_every_step": report["conflict_free_every_step"],
+        "compared_step": last["step"] + 1,
+        "last_step": {"online_wall_s": last["wall_s"], "batch_wall_s": b.get("wall_s"),
+                      "wall_ratio": last["wall_s"] / b["wall_s"] if b else None,
+                      "online_bytes": last["bytes"], "batch_bytes": b.get("bytes"),
+                      "bytes_ratio": last["bytes"] / b["bytes"] if b else None,
+                      "online_rounds": last["rounds"], "batch_rounds": b.get("rounds"),
+                      "online_messages": last["messages"], "batch_messages": b.get("messages"),
+                      "online_robot_memory_bytes": last["robot_memory_bytes_max"],
+                      "batch_robot_memory_bytes": b.get("robot_memory_bytes_max")},
+        "memory_growth": final_step["robot_memory_bytes_max"] / ref["robot_memory_bytes_max"]
+        if ref["robot_memory_bytes_max"] else None,
+        "online_robot_memory_bytes_last": final_step["robot_memory_bytes_max"],
+        "scores_at_batch_steps": at_batch,
+        "final": {k: f[k] for k in ("before", "online", "batch") if k in f},
+        "seconds": time.perf_counter() - t0,
+    }
+    return {"summary": summary, "steps": steps}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--robots", type=int, nargs="+", default=[6, 20])
+    ap.add_argument("--graph", default="ring2")
+    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--window", type=int, default=3)
+    ap.add_argument("--speed", type=float, default=0.15)
+    ap.add_argument("--size", type=lambda s: tuple(int(v) for v in s.split("x")),
+                    default=(320, 240))
+    ap.add_argument("--max-features", type=int, default=300)
+    ap.add_argument("--resolution", default="evidence")
+    ap.add_argument("--batch-every", type=int, default=10)
+    ap.add_argument("--batch-steps", type=int, nargs="+", default=None,
+                    help="steps (1-based) at which the batch run goes, instead of every "
+                         "--batch-every and the last (the batch rerun's cost grows with the "
+                         "history: on a busy machine a large team's last steps take long)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fusion", action="store_true",
+                    help="fuse the changed tracks after each step (off: the consistency stage "
+                         "alone, as the batch run)")
+    ap.add_argument("--out", default=str(OUT))
+    args = ap.parse_args(argv)
+    config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
+    out = Path(args.out)
+    for n in args.robots:
+        r = one(n, args)
+        r["config"] = config
+        # each formation size replaces its own entry of the results.json found at the time of
+        # writing, so sizes can be run by separate invocations (each keeps its options)
+        results = {"runs": []}
+        if (out / "results.json").exists():
+            results = json.loads((out / "results.json").read_text())
+        results["runs"] = sorted([x for x in results.get("runs", [])
+                                  if x["summary"]["robots"] != n] + [r],
+                                 key=lambda x: x["summary"]["robots"])
+        s = r["summary"]
+        ls = s["last_step"]
+        print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; step "
+              f"{s['compared_step']}: online/batch wall {ls['wall_ratio']}, bytes "
+              f"{ls['bytes_ratio']}; robot memory at step {s['steps']} / at step "
+              f"{args.window}: {s['memory_growth']}", flush=True)
+        for k, sc in s["scores_at_batch_steps"].items():
+            print(f"  after step {k}: pairwise F1 online {sc['online']['f1']:.4f} "
+                  f"(P {sc['online']['precision']:.4f} R {sc['online']['recall']:.4f}), batch "
+                  f"{sc['batch']['f1']:.4f} (P {sc['batch']['precision']:.4f} "
+                  f"R {sc['batch']['recall']:.4f})", flush=True)
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out / "results.json", results)  # saved after each size
+    print(f"saved {out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

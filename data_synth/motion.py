@@ -1,0 +1,136 @@
+"""A formation moving along a path: one frame per robot per step, with exact ground truth.
+
+The robots keep their formation (:func:`data_synth.formations.robot_poses`: line abreast,
+each gazing at its own point of the facade) and the whole formation drives along the facade
+(``+x``) by ``speed`` metres per step, without turning: at step ``k`` robot ``i`` stands at
+``centre_i + (speed * (k - (steps - 1) / 2), 0, 0)`` with its first orientation, so the path
+is centred on the scene and a landmark leaves a camera's view after about ``view width /
+speed`` steps. Every frame is rendered from the same scene as :func:`data_synth.render`
+(same seed, same sensor-noise law: frame ``(i, k)`` draws its noise from
+``[seed, 3, i, k]``).
+
+The communication graph is the formation's (``formation``/``graph`` as in
+:func:`data_synth.render`). With ``switching=True`` the graph of each step is drawn as the
+simulated network's switching topology draws it per round
+(:func:`pipeline.transport.simulated.recurrent_topology`: every edge up with probability
+``p_up``, each edge up at least once every ``window`` steps): at step ``k`` only the robots of
+an up edge exchange their frames.
+
+Ground truth: :attr:`Sequence.flat` is a :class:`~data_synth.formations.Formation` whose
+views are all the frames in arrival order (frame of robot ``i`` at step ``k`` is view
+``k * n + i``); :func:`data_synth.ground_truth.true_pairs` and the evaluation work on it
+unchanged, camera ``g`` being that frame.
+
+Example
+-------
+>>> from data_synth.motion import render_motion
+>>> s = render_motion("ring", seed=0, steps=2, size=(64, 48), n_robots=3, cache=False)
+>>> len(s.flat.views), s.step_edges[0].tolist()
+(6, [[0, 1], [0, 2], [1, 2]])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from data_synth import _check_int, _setup
+from data_synth.formations import Formation
+from data_synth.renderer import render_view
+from data_synth.scene import build_scene
+from pipeline.errors import InputError
+from pipeline.types import View
+
+__all__ = ["Sequence", "render_motion", "DEFAULT_SPEED"]
+
+DEFAULT_SPEED = 0.15
+"""Metres the formation drives along the facade per step (default of :func:`render_motion`)."""
+
+
+@dataclass
+class Sequence:
+    """A moving formation: every robot's frame at every step and who talks at each step.
+
+    Attributes
+    ----------
+    name : str — the formation's name (as :attr:`Formation.name`)
+    n_robots, steps : int
+    comm_edges : ndarray, (E, 2) int64 — the formation's communication graph
+    step_edges : list of (E_k, 2) int64 — the edges up at step ``k`` (all of ``comm_edges``
+        without ``switching``)
+    flat : Formation — all frames as one formation, view ``k * n_robots + i`` = robot ``i``
+        at step ``k`` (the frame's name is ``r{i:02d}k{k:03d}``)
+    speed : float — metres per step
+    """
+
+    name: str
+    n_robots: int
+    steps: int
+    comm_edges: np.ndarray
+    step_edges: list
+    flat: Formation
+    speed: float
+
+    def frame(self, robot: int, step: int) -> View:
+        """The view of ``robot`` at ``step``."""
+        return self.flat.views[self.image(robot, step)]
+
+    def image(self, robot: int, step: int) -> int:
+        """Index of the frame of ``robot`` at ``step`` in :attr:`flat`."""
+        return int(step) * self.n_robots + int(robot)
+
+
+def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
+                  size: tuple[int, int] = (320, 240), n_robots: int | None = None,
+                  graph: str | None = None, speed: float = DEFAULT_SPEED,
+                  switching: bool = False, p_up: float = 0.5, window: int = 3,
+                  cache: bool = True) -> Sequence:
+    """Render a formation driving along the facade for ``steps`` steps.
+
+    Parameters
+    ----------
+    formation, seed, size, n_robots, graph : as :func:`data_synth.render`
+    steps : int >= 1
+    speed : float — metres per step along ``+x`` (``0`` keeps the formation still: every step
+        renders the same poses with fresh sensor noise)
+    switching, p_up, window : the per-step graph (module docstring)
+    cache : bool — unused for now (frames are rendered, not cached); kept for the signature
+        of :func:`data_synth.render`
+
+    Raises
+    ------
+    InputError
+        As :func:`data_synth.render`; ``steps < 1``; a negative or non-finite speed; ``p_up``
+        outside ``(0, 1]``.
+    """
+    del cache
+    steps = _check_int(steps, "steps", 1)
+    if not np.isfinite(speed) or speed < 0:
+        raise InputError(f"speed {speed!r}: expected metres per step >= 0")
+    if not 0 < p_up <= 1:
+        raise InputError(f"p_up {p_up!r}: expected a probability in (0, 1]")
+    name, kind, n, (W, H), centres, poses, edges, K = _setup(formation, seed, size, n_robots,
+                                                             graph)
+    scene = build_scene(seed)
+    views, all_centres = [], []
+    for k in range(steps):
+        shift = np.array([speed * (k - (steps - 1) / 2), 0.0, 0.0])
+        for i, (R, t) in enumerate(poses):
+            t_k = t - R @ shift  # same orientation, centre moved by `shift`
+            image, depth = render_view(scene, K, R, t_k, (W, H),
+                                       rng=np.random.default_rng([seed, 3, i, k]))
+            views.append(View(name=f"r{i:02d}k{k:03d}", image=image, K=K.copy(), R=R.copy(),
+                              t=t_k, depth=depth, intrinsics_known=True))
+            all_centres.append(centres[i] + shift)
+    if switching:
+        from pipeline.transport.simulated import recurrent_topology
+
+        topo = recurrent_topology(edges, p_up=p_up, window=window, seed=seed)
+        step_edges = [topo(k) for k in range(steps)]
+    else:
+        step_edges = [edges.copy() for _ in range(steps)]
+    flat = Formation(name=f"{name}-moving", views=views, comm_edges=edges, graph=kind,
+                     seed=seed, centres=np.asarray(all_centres))
+    return Sequence(name=name, n_robots=n, steps=steps, comm_edges=edges,
+                    step_edges=step_edges, flat=flat, speed=float(speed))

@@ -1,0 +1,354 @@
+"""The ``run-formation --steps N`` job: a formation in motion, associated online, step by step.
+
+Each step every robot renders one frame (:func:`data_synth.motion.render_motion`), extracts
+its features and matches the new frame against its own ``W - 1`` previous frames and the
+last ``W`` frames (this step's included) of every robot it can talk to at this step (an edge
+of the step's communication graph), ``W`` = ``window``. The new links go to the online stage
+(:class:`pipeline.consistency.engines.online.OnlineAssociation`: detection and the rule on
+what they touch, the history check); the kept association is checked conflict-free after
+every step (a centralized count, evaluation only). Optionally (``batch_every``) the same
+rule is run from scratch on all links so far (the batch run) for comparison.
+
+Fusion (``fusion``, default on): after each step the tracks the step changed (the sets its
+stage ran on, window frames only) are fused again by robust distributed fusion
+(Montijano et al., dynamic voting, :func:`pipeline.fusion.landmarks.fuse_tracks`, frames as
+its robots, frames sharing a link as neighbours); observations voted out cut their links as
+``fusion-outlier`` (a cut only splits a set: the association stays conflict-free). Tracks no
+link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,
+bytes, links cut, tracks fused, wall time), apart from the consistency stage's figures.
+
+Outputs (run folder, written atomically): ``report.json`` (``steps``: one entry per step
+with ``links_new``, ``conflictive_sets_after``, ``wall_s``, ``rounds``, ``bytes`` and the
+rest of the online record, and the batch run's figures where it ran; ``final``: pairwise
+scores of the online and batch associations on the scope of
+:mod:`pipeline.evaluation.online`), ``links.csv`` (cameras are frames; ``round`` is the step
+that cut the link), ``images.csv`` (frame -> robot, step, name), ``link_steps.csv`` (step
+that made and step that cut each link) and ``recording.rrd`` (a ``step`` timeline:
+:mod:`viz.online_log`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.progress import StageTimer
+from pipeline.types import Links
+
+__all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs"]
+
+
+@dataclass
+class OnlineConfig:
+    """Options of ``run-formation --steps N``."""
+
+    formation: str = "d"
+    seed: int = 0
+    size: tuple[int, int] = (320, 240)
+    features: str = "sift"
+    max_features: int = 500
+    robots: int | None = None
+    graph: str | None = None
+    steps: int = 10
+    window: int = 3
+    speed: float = 0.15
+    switching: bool = False
+    resolution: str = DEFAULT_RESOLUTION
+    tol_px: float = 2.0
+    batch_every: int = 0
+    fusion: bool = True
+    out: str | None = None
+    rerun: bool = True
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        name = f"online-{self.formation}" if self.robots is None else \
+            f"online-n{self.robots}-{self.graph}"
+        return Path("runs") / name
+
+
+@dataclass
+class OnlineRun:
+    """What :func:`run_online_steps` produced: the sequence, every frame's features, the
+    online association, per-step records (online and batch), the last batch result and,
+    once evaluated, each link's truth (``1`` good, ``0`` spurious); ``batch_kept``: step ->
+    the batch run's kept mask over the links made up to that step."""
+
+    sequence: object
+    features: list
+    online: object
+    steps: list
+    batch: object | None
+    truth: np.ndarray | None = None
+    batch_kept: dict | None = None
+
+    def online_kept_at(self, step: int) -> np.ndarray:
+        """The online association's kept mask over the links made up to ``step``, as it
+        stood after that step."""
+        L = self.online.links
+        upto = L.step_added <= step
+        return (L.kept | (L.step_cut > step))[upto]
+
+
+def step_pairs(robot_of: np.ndarray, step_of: np.ndarray, t: int, window: int,
+               edges_up: np.ndarray) -> np.ndarray:
+    """Frame pairs ``(a, b)``, ``a < b``, matched at step ``t``: every frame of step ``t``
+    against its robot's previous ``window - 1`` frames and the frames of the last ``window``
+    steps of the robots it talks to at step ``t`` (``edges_up``).
+
+    Examples
+    --------
+    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.array([[0, 1]])).tolist()
+    [[0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.zeros((0, 2))).tolist()
+    [[0, 2], [1, 3]]
+    """
+    n = int(robot_of.max()) + 1
+    talk = np.eye(n, dtype=bool)
+    for i, j in np.asarray(edges_up, np.int64).reshape(-1, 2):
+        talk[i, j] = talk[j, i] = True
+    new = np.flatnonzero(step_of == t)
+    win = np.flatnonzero(step_of > t - window)
+    out = set()
+    for g in new.tolist():
+        for h in win.tolist():
+            if h != g and talk[robot_of[g], robot_of[h]]:
+                out.add((min(g, h), max(g, h)))
+    return np.array(sorted(out), np.int64).reshape(-1, 2)
+
+
+def _fuse_changed(oa, views: list, features: list) -> dict:
+    """Fusion of the tracks the last step changed (module docstring); returns its figures."""
+    from pipeline.fusion.landmarks import fuse_tracks
+
+    t0 = time.perf_counter()
+    ids = oa.changed_window_links()
+    L = oa.links
+    if not len(ids):
+        return dict(rounds=0, messages=0, bytes=0, cut=0, tracks=0, wall_s=0.0)
+    images = np.unique(np.concatenate([L.ci[ids], L.cj[ids]]))
+    ci, cj = np.searchsorted(images, L.ci[ids]), np.searchsorted(images, L.cj[ids])
+    local = Links(ci, L.fi[ids], cj, L.fj[ids], L.quality[ids])
+    edges = np.unique(np.stack([ci, cj], axis=1), axis=0)
+    fr = fuse_tracks([views[g] for g in images], [features[g] for g in images], local, edges)
+    cut = ids[np.asarray(fr.cut_links, bool)]
+    oa.cut(cut, "fusion-outlier")
+    st = fr.stats
+    return dict(rounds=int(st.get("rounds", 0)), messages=int(st.get("messages", 0)),
+                bytes=int(st.get("bytes", 0)), cut=int(len(cut)),
+                tracks=int(len(fr.track_ids)), wall_s=time.perf_counter() - t0)
+
+
+def _memory(features: list, images: np.ndarray, robot_of: np.ndarray, n: int) -> np.ndarray:
+    """Bytes of keypoints and descriptors each robot holds for ``images``."""
+    out = np.zeros(n, np.int64)
+    for g in images.tolist():
+        f = features[g]
+        out[robot_of[g]] += f.keypoints.nbytes + f.descriptors.nbytes
+    return out
+
+
+def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
+                     batch_steps=None, on_step=None) -> OnlineRun:
+    """Render, match and associate online step by step (module docstring).
+
+    ``batch_steps``: the steps at which the batch run goes (default every
+    ``config.batch_every`` steps and the last, none with ``batch_every == 0``). ``on_step``:
+    called with each step's record. Returns an :class:`OnlineRun`.
+    """
+    from data_synth.motion import render_motion
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
+    from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
+    from pipeline.matching.pairs import match_edges
+
+    timer = timer or StageTimer(verbose=False)
+    with timer.stage("render", f"{config.steps} steps"):
+        seq = render_motion(config.formation, config.seed, config.steps, config.size,
+                            config.robots, config.graph, speed=config.speed,
+                            switching=config.switching, window=config.window)
+    n = seq.n_robots
+    views = seq.flat.views
+    if batch_steps is None:
+        every = int(config.batch_every)
+        batch_steps = set() if every <= 0 else \
+            {t for t in range(config.steps) if (t + 1) % every == 0} | {config.steps - 1}
+    oa = OnlineAssociation(config.window, resolution=config.resolution)
+    features: list = []
+    robot_of = np.zeros(0, np.int64)
+    step_of = np.zeros(0, np.int64)
+    records, batch, batch_kept = [], None, {}
+    with timer.stage("online", f"{config.steps} steps, window {config.window}"):
+        for t in range(config.steps):
+            ids = [seq.image(i, t) for i in range(n)]
+            t0 = time.perf_counter()
+            feats = extract_all([views[g] for g in ids], config.features, config.max_features,
+                                MERGE_RADIUS_PX)
+            features += feats
+            robot_of = np.concatenate([robot_of, np.arange(n)])
+            step_of = np.concatenate([step_of, np.full(n, t)])
+            pairs = step_pairs(robot_of, step_of, t, config.window, seq.step_edges[t])
+            local = np.unique(pairs)
+            lp = np.searchsorted(local, pairs)
+            matches = match_edges([features[g] for g in local], [views[g] for g in local], lp)
+            lk = Links.from_matches(matches)
+            links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
+            match_s = time.perf_counter() - t0
+            frames = [Frame(i, len(f), f.keypoints, views[g].K @ np.c_[views[g].R, views[g].t])
+                      for i, (g, f) in enumerate(zip(ids, feats, strict=True))]
+            rec = dict(oa.add_step(frames, links))
+            if config.fusion:
+                rec["fusion"] = _fuse_changed(oa, views, features)
+            kept = oa.kept_links()
+            counts = count_conflicts(AssociationGraph(oa.m, kept))
+            rec.update(match_s=match_s, pairs_matched=int(len(pairs)),
+                       conflictive_sets_after=int(counts.conflictive_sets),
+                       links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
+            desc = _memory(features, oa.window_images, robot_of, n)
+            rec["robot_memory_bytes_max"] = int((desc + oa.robot_state_bytes()).max())
+            if t in batch_steps:
+                t1 = time.perf_counter()
+                batch = batch_resolve(oa.m, oa.all_links(), config.resolution,
+                                      keypoints=oa.keypoints, projections=oa.projection)
+                bs = batch.stats
+                all_img = np.arange(len(features))
+                b_state = _memory(features, all_img, robot_of, n)
+                np.add.at(b_state, robot_of, 16 * oa.m)
+                np.add.at(b_state, robot_of[oa.links.ci], 40)
+                np.add.at(b_state, robot_of[oa.links.cj], 40)
+                kept_b = batch.links.subset(~batch.deleted)
+                batch_kept[t] = ~batch.deleted
+                rec["batch"] = dict(
+                    wall_s=time.perf_counter() - t1,
+                    rounds=int(bs["detection_rounds"] + bs["resolution_rounds"]),
+                    messages=int(bs["messages"]), bytes=int(bs["bytes"]),
+                    stage_peak_bytes=int(bs["max_robot_memory_bytes"]),
+                    robot_memory_bytes_max=int(b_state.max()),
+                    cut=int(batch.deleted.sum()),
+                    conflictive_sets_after=int(count_conflicts(
+                        AssociationGraph(oa.m, kept_b)).conflictive_sets))
+            records.append(rec)
+            if on_step is not None:
+                on_step(rec)
+            timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut, "
+                       f"{rec['conflictive_sets_after']} conflictive sets after, "
+                       f"{rec['rounds']} rounds, {rec['bytes']} bytes, "
+                       f"{rec['wall_s']:.3f} s")
+    return OnlineRun(sequence=seq, features=features, online=oa, steps=records, batch=batch,
+                     batch_kept=batch_kept)
+
+
+def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
+    """Run :func:`run_online_steps` (with the batch run at the last step), evaluate against
+    the ground truth and write the run folder (module docstring); return its path."""
+    timer = timer or StageTimer()
+    run = run_online_steps(config, timer, batch_steps={config.steps - 1}
+                           if config.batch_every == 0 else None)
+    report = online_report(config, run, timer)
+    _write(config.out_dir(), config, run, report, timer)
+    return config.out_dir()
+
+
+def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> dict:
+    """``report.json`` of an online run: config, steps, and the final scores."""
+    from pipeline.evaluation.links import link_truth
+    from pipeline.evaluation.online import ScopedTruth, scope_pairs
+    from pipeline.evaluation.report import versions
+
+    oa, seq = run.online, run.sequence
+    links = oa.all_links()
+    with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
+        truth = np.asarray(link_truth(seq.flat, run.features, links, tol_px=config.tol_px),
+                           bool)
+        scope = scope_pairs(oa.robot, oa.step, seq.comm_edges, config.window)
+        st = ScopedTruth(seq.flat, run.features, scope, tol_px=config.tol_px)
+        final = {"links": int(len(links)), "good_links": int(truth.sum()),
+                 "scope_image_pairs": int(len(scope)),
+                 "before": st.scores(links)}
+        kept = oa.links.kept
+        if config.fusion:  # the consistency stage's own result: fusion's cuts put back
+            resolved = kept | (oa.links.reason == "fusion-outlier")
+            final["online_before_fusion"] = dict(st.scores(links.subset(resolved)),
+                                                 kept=int(resolved.sum()))
+        final["online"] = dict(st.scores(links.subset(kept)), kept=int(kept.sum()),
+                               good_kept=int((truth & kept).sum()),
+                               conflictive_sets=int(run.steps[-1]["conflictive_sets_after"]),
+                               cut_by_reason={str(r): int((oa.links.reason == r).sum())
+                                              for r in sorted(set(oa.links.reason[~kept]))})
+        if run.batch is not None:
+            kb = ~run.batch.deleted
+            final["batch"] = dict(st.scores(links.subset(kb)), kept=int(kb.sum()),
+                                  good_kept=int((truth & kb).sum()),
+                                  conflictive_sets=int(run.steps[-1]["batch"]
+                                                       ["conflictive_sets_after"]))
+    run.truth = truth.astype(np.int8)
+    return {
+        "title": f"formation {config.formation} in motion ({config.steps} steps, seed "
+                 f"{config.seed})",
+        "n_robots": int(seq.n_robots),
+        "n_images": int(oa.n_images),
+        "comm_edges": np.asarray(seq.comm_edges).tolist(),
+        "window": int(config.window),
+        "resolution": oa.resolution,
+        "steps": [_jsonable(r) for r in run.steps],
+        "final": final,
+        "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
+                                             for r in run.steps)),
+        "fusion": {"enabled": bool(config.fusion),
+                   "scope": "the tracks each step changed, window frames only",
+                   "links_cut": int((oa.links.reason == "fusion-outlier").sum())},
+        "ground_truth": {"tolerance_px": config.tol_px},
+        "versions": versions(),
+        "config": {**asdict(config), "out": str(config.out_dir())},
+    }
+
+
+def _jsonable(rec: dict) -> dict:
+    out = {}
+    for k, v in rec.items():
+        if isinstance(v, dict):
+            out[k] = _jsonable(v)
+        elif isinstance(v, (np.integer,)):
+            out[k] = int(v)
+        elif isinstance(v, (float, np.floating)):
+            out[k] = round(float(v), 6)
+        else:
+            out[k] = v
+    return out
+
+
+def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
+           timer: StageTimer) -> None:
+    from pipeline.inputs.linkscsv import write_links_csv
+    from pipeline.runfolder import atomic_run_folder, write_json_atomic
+    from pipeline.types import LinkLedger
+
+    oa = run.online
+    L = oa.links
+    ledger = LinkLedger(oa.all_links(), np.where(L.kept, "kept", "deleted").astype(object),
+                        L.reason.astype(object), np.where(L.kept, -1, L.step_cut),
+                        np.full(len(L.ci), -1, np.int64),
+                        np.full(len(L.ci), "", dtype=object),
+                        truth=run.truth)
+    with timer.stage("write", str(out)):
+        with atomic_run_folder(out) as tmp:
+            write_links_csv(tmp / "links.csv", ledger)
+            names = [v.name for v in run.sequence.flat.views]
+            rows = ["image,robot,step,name"] + [
+                f"{g},{int(oa.robot[g])},{int(oa.step[g])},{names[g]}" for g in range(oa.n_images)]
+            (tmp / "images.csv").write_text("\n".join(rows) + "\n")
+            rows = ["link,step_added,step_cut"] + [
+                f"{k},{int(a)},{'' if c < 0 else int(c)}"
+                for k, (a, c) in enumerate(zip(L.step_added, L.step_cut, strict=True))]
+            (tmp / "link_steps.csv").write_text("\n".join(rows) + "\n")
+            if config.rerun:
+                from viz.online_log import log_online
+
+                log_online(tmp / "recording.rrd", run.sequence, oa, report["steps"])
+            report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
+            write_json_atomic(tmp / "report.json", report)

@@ -1,0 +1,136 @@
+"""Online association (pipeline.consistency.engines.online): conflict-free after every step,
+earlier decisions kept outside what new links touch, the history repair, and the batch run."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pipeline.consistency.centralized import is_conflict_free
+from pipeline.consistency.engines.online import (
+    HISTORY,
+    Frame,
+    OnlineAssociation,
+    batch_resolve,
+)
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+
+@st.composite
+def streams(draw, max_robots=4, max_steps=6, max_m=4):
+    """A team's stream: per step one frame per robot and random one-to-one links from each
+    new frame to frames of the window (own earlier frames, others' frames, this step's)."""
+    n = draw(st.integers(2, max_robots))
+    steps = draw(st.integers(1, max_steps))
+    window = draw(st.integers(1, 3))
+    seed = draw(st.integers(0, 2**31 - 1))
+    density = draw(st.sampled_from([0.3, 0.6, 0.9]))
+    rng = np.random.default_rng(seed)
+    m_all, step_of, robot_of, out = [], [], [], []
+    for t in range(steps):
+        frames = [Frame(i, int(rng.integers(1, max_m + 1))) for i in range(n)]
+        first = len(m_all)
+        for f in frames:
+            m_all.append(f.m)
+            step_of.append(t)
+            robot_of.append(f.robot)
+        ci, fi, cj, fj = [], [], [], []
+        for g in range(first, len(m_all)):
+            for h in range(len(m_all)):
+                if h == g or step_of[h] <= t - window or (h >= first and h > g):
+                    continue
+                if rng.random() > density:
+                    continue
+                k = min(m_all[g], m_all[h])
+                r = rng.permutation(m_all[g])[:k]
+                s = rng.permutation(m_all[h])[:k]
+                use = rng.random(k) < 0.7
+                for a, b in zip(r[use], s[use], strict=True):
+                    lo, hi = (h, g) if h < g else (g, h)
+                    fa, fb = (b, a) if h < g else (a, b)
+                    ci.append(lo), fi.append(int(fa)), cj.append(hi), fj.append(int(fb))
+        q = rng.uniform(0.05, 0.95, len(ci))
+        out.append((frames, Links(ci, fi, cj, fj, q)))
+    return window, out
+
+
+def _run(window, stream, resolution):
+    oa = OnlineAssociation(window, resolution=resolution)
+    for frames, links in stream:
+        before = oa.label.copy()
+        rec = oa.add_step(frames, links)
+        yield oa, rec, before, links
+
+
+@pytest.mark.parametrize("resolution", ["paper", "evidence"])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams())
+def test_conflict_free_after_every_step(resolution, data):
+    window, stream = data
+    for oa, rec, _, links in _run(window, stream, resolution):
+        assert is_conflict_free(oa.m, oa.kept_links()), rec
+        assert rec["links_new"] == len(links)
+        assert rec["cut"] == rec["cut_rule"] + rec["cut_history"]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams())
+def test_earlier_decisions_are_kept_outside_the_touched_tracks(data):
+    window, stream = data
+    prev_kept = np.zeros(0, bool)
+    for oa, rec, before, _links in _run(window, stream, "paper"):
+        L = oa.links
+        n_old = len(prev_kept)
+        # a cut link is never restored
+        assert not (L.kept[:n_old] & ~prev_kept).any()
+        # a link cut at this step lies in a track the step's new links touched
+        a = oa.offset[L.ci] + L.fi
+        new = np.arange(n_old, len(L.ci))
+        ends = np.concatenate([a[new], (oa.offset[L.cj] + L.fj)[new]])
+        grown = np.concatenate([before, np.arange(len(before), len(oa.label))])
+        touched = np.unique(grown[ends])
+        cut_now = np.flatnonzero(L.step_cut == rec["step"])
+        assert np.isin(grown[a[cut_now]], touched).all()
+        prev_kept = L.kept.copy()
+
+
+@pytest.mark.parametrize("resolution", ["paper", "evidence"])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams(max_steps=1))
+def test_one_step_equals_the_batch_run(resolution, data):
+    """All links in one step, nothing retired: the online stage runs the rule on the same
+    links (images without links left out, order kept) and decides exactly as the batch."""
+    window, stream = data
+    (frames, links), = stream
+    oa = OnlineAssociation(window, resolution=resolution)
+    oa.add_step(frames, links)
+    batch = batch_resolve(oa.m, oa.all_links(), resolution=resolution,
+                          keypoints=[np.zeros((m, 2)) for m in oa.m])
+    assert oa.links.kept.tolist() == (~batch.deleted).tolist()
+
+
+def test_a_conflict_in_a_retired_frame_is_cut_by_the_history_repair():
+    # window 2: the frames of step 0 (images 0, 1) retire at step 2
+    oa = OnlineAssociation(window=2, resolution="paper")
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    # track A = {0:0, 1:0, 2:0}, track B = {0:1, 1:1, 3:1}
+    oa.add_step([Frame(0, 1), Frame(1, 2)], Links([0, 1], [0, 1], [2, 3], [0, 1]))
+    # a new frame of robot 0 links to 2:0 (A) and 3:1 (B): the merged set holds images 0 and 1
+    # twice, both retired; its window images (2, 3, 4) are all distinct
+    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3], [0, 1], [4, 4], [0, 0],
+                                                        [0.9, 0.4]))
+    assert rec["conflictive_features"] == 0
+    assert rec["cut_history"] == 1
+    # the weaker link goes
+    assert oa.links.reason.tolist()[-2:] == ["", HISTORY]
+    assert oa.is_conflict_free()
+
+
+def test_a_new_link_must_touch_the_step_and_the_window():
+    oa = OnlineAssociation(window=1, resolution="paper")
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [1], [0]))
+    with pytest.raises(InputError, match="window of 1 steps"):
+        oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [2], [0]))
+    with pytest.raises(InputError, match="window"):
+        OnlineAssociation(window=0)

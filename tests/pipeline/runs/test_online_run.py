@@ -1,0 +1,92 @@
+"""run-formation --steps N (pipeline.runs.online): the run folder, its step timeline, the
+checks of the options."""
+
+import csv
+import json
+
+import pytest
+
+from pipeline.__main__ import main
+from viz.recording_reader import entity_paths
+
+FAST = ["--size", "192x144", "--max-features", "150", "--formation", "a"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("online") / "run"
+    assert main(["run-formation", "--steps", "3", "--window", "2", "--out", str(out),
+                 *FAST]) == 0
+    return out
+
+
+def test_report_has_one_entry_per_step(run_dir):
+    report = json.loads((run_dir / "report.json").read_text())
+    assert [s["step"] for s in report["steps"]] == [0, 1, 2]
+    for s in report["steps"]:
+        for key in ("links_new", "conflictive_sets_after", "wall_s", "rounds", "bytes",
+                    "messages", "robot_memory_bytes_max"):
+            assert key in s
+        assert s["conflictive_sets_after"] == 0
+    assert report["conflict_free_every_step"] is True
+    assert report["n_images"] == 18 and report["window"] == 2
+    assert sum(s["links_new"] for s in report["steps"]) == report["final"]["links"]
+    # the batch run at the last step, scored on the same scope
+    assert report["final"]["batch"]["true_pairs"] == report["final"]["online"]["true_pairs"]
+    assert report["steps"][-1]["batch"]["conflictive_sets_after"] == 0
+
+
+def test_links_and_their_steps_agree_with_the_report(run_dir):
+    report = json.loads((run_dir / "report.json").read_text())
+    with open(run_dir / "links.csv") as f:
+        links = list(csv.DictReader(f))
+    with open(run_dir / "link_steps.csv") as f:
+        steps = list(csv.DictReader(f))
+    assert len(links) == len(steps) == report["final"]["links"]
+    cut = [int(s["step_cut"]) for s in steps if s["step_cut"]]
+    fusion = [r["fusion"]["cut"] for r in report["steps"]]
+    assert len(cut) == sum(r["cut"] for r in report["steps"]) + sum(fusion)
+    assert report["fusion"]["links_cut"] == sum(fusion)
+    assert all(lk["status"] == "deleted" for lk, s in zip(links, steps, strict=True)
+               if s["step_cut"])
+    for r in report["steps"]:
+        assert sum(int(s["step_added"]) == r["step"] for s in steps) == r["links_new"]
+        assert cut.count(r["step"]) == r["cut"] + r["fusion"]["cut"]
+    with open(run_dir / "images.csv") as f:
+        images = list(csv.DictReader(f))
+    assert [(int(i["robot"]), int(i["step"])) for i in images][:7] == \
+        [(0, 0), (1, 0), (2, 0), (3, 0), (4, 0), (5, 0), (0, 1)]
+
+
+def test_recording_carries_the_step_timeline(run_dir):
+    from rerun.chunk import RrdReader
+
+    paths = entity_paths(run_dir / "recording.rrd")
+    for p in ("/world/robots", "/world/links/new", "/steps/links_new",
+              "/steps/conflictive_sets_after", "/steps/log"):
+        assert p in paths
+    store = RrdReader(run_dir / "recording.rrd").store()
+    timelines = {str(c) for c in store.schema().index_columns()}
+    assert any("step" in t for t in timelines)
+
+
+@pytest.mark.parametrize("flags, match", [
+    (["--steps", "0"], "--steps 0"),
+    (["--steps", "2", "--window", "0"], "--window 0"),
+    (["--steps", "2", "--speed", "-1"], "--speed"),
+    (["--steps", "2", "--drop-prob", "0.1"], "switching-topology"),
+])
+def test_bad_options_are_refused(tmp_path, capsys, flags, match):
+    assert main(["run-formation", "--out", str(tmp_path / "r"), *FAST, *flags]) == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+def test_without_fusion_no_link_is_cut_as_an_outlier(tmp_path):
+    out = tmp_path / "r"
+    assert main(["run-formation", "--steps", "2", "--window", "2", "--no-fusion", "--no-rerun",
+                 "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["fusion"]["enabled"] is False and report["fusion"]["links_cut"] == 0
+    assert all("fusion" not in s for s in report["steps"])
+    assert not (out / "recording.rrd").exists()
