@@ -91,8 +91,11 @@ def test_reference_run_and_bytes_measured_twice(reference):
         counted = res[a]["counters"]["bytes_to"][str(b)] + res[b]["counters"]["bytes_to"][str(a)]
         packets = (res[a]["counters"]["wire_bytes_to"][str(b)]
                    + res[b]["counters"]["wire_bytes_to"][str(a)])
-        # the cable carried the packets (and Zenoh's framing, beats, TCP/IP headers)
-        assert 0 < counted <= packets <= wire[(a, b)]
+        # the cable carried the packets (and Zenoh's framing, beats, TCP/IP headers); the
+        # packets are the counted payloads with their headers, compressed where that is
+        # smaller (pipeline.transport.wire), so they may weigh less than the count
+        assert counted > 0
+        assert 0 < packets <= wire[(a, b)]
 
 
 def test_host_frozen_while_one_neighbour_waits_no_hang(tmp_path):
