@@ -26,9 +26,9 @@ packet between neighbours crosses exactly their cable and the cable's interface 
 (``ip -s link``) count what crossed the socket, headers included (:meth:`link_bytes`). Robots
 that are not neighbours have no route to each other, as the comm graph says.
 
-Needs root and ``ip`` / ``tc`` (iproute2): :func:`unavailable` says why a rig cannot be made,
-so tests skip with that reason. Every namespace is named ``<prefix>-<i>`` with a prefix unique
-to this process; :meth:`NetnsRig.close` (also on ``with`` exit, on error or interrupt) kills the
+Needs root, ``ip`` / ``tc`` (iproute2) and ``unshare`` (util-linux): :func:`unavailable` says
+why a rig cannot be made, so tests skip with that reason. Every namespace is named
+``<prefix>-<i>`` with a prefix unique to this process; :meth:`NetnsRig.close` (also on ``with`` exit, on error or interrupt) kills the
 programs it started and deletes the namespaces, which removes their cables.
 """
 
@@ -61,6 +61,8 @@ def unavailable() -> str | None:
     """Why network namespaces cannot be made here (None when they can)."""
     if shutil.which("ip") is None or shutil.which("tc") is None:
         return "iproute2 (ip, tc) is not installed"
+    if shutil.which("unshare") is None:
+        return "unshare (util-linux) is not installed"
     if os.geteuid() != 0:
         return "making network namespaces needs root"
     name = f"fmprobe-{os.getpid()}"
