@@ -35,6 +35,7 @@ programs it started and deletes the namespaces, which removes their cables.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
 import shutil
@@ -51,6 +52,9 @@ __all__ = ["NetnsRig", "unavailable", "NETEM_MISSING", "read_results", "team_lin
 
 #: what this kernel cannot do (stated in reports beside the faults the rig made)
 NETEM_MISSING = "netem (packet loss, delay, reordering) is absent from this kernel"
+
+
+_RIGS = itertools.count()  # rigs made by this process: each its own namespace prefix
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -87,7 +91,7 @@ class NetnsRig:
         self.n = int(n)
         self.edges = [tuple(sorted((int(a), int(b))))
                       for a, b in np.asarray(comm_edges, np.int64).reshape(-1, 2)]
-        self.prefix = prefix or f"fm{os.getpid()}"
+        self.prefix = prefix or f"fm{os.getpid()}x{next(_RIGS)}"
         self.procs: dict[int, subprocess.Popen] = {}
         self._made: list[str] = []
         self._caps: dict[tuple[int, int], str] = {}
