@@ -26,15 +26,16 @@ packet between neighbours crosses exactly their cable and the cable's interface 
 (``ip -s link``) count what crossed the socket, headers included (:meth:`link_bytes`). Robots
 that are not neighbours have no route to each other, as the comm graph says.
 
-Needs root and ``ip`` / ``tc`` (iproute2): :func:`unavailable` says why a rig cannot be made,
-so tests skip with that reason. Every namespace is named ``<prefix>-<i>`` with a prefix unique
-to this process; :meth:`NetnsRig.close` (also on ``with`` exit, on error or interrupt) kills the
+Needs root, ``ip`` / ``tc`` (iproute2) and ``unshare`` (util-linux): :func:`unavailable` says
+why a rig cannot be made, so tests skip with that reason. Every namespace is named
+``<prefix>-<i>`` with a prefix unique to this process; :meth:`NetnsRig.close` (also on ``with`` exit, on error or interrupt) kills the
 programs it started and deletes the namespaces, which removes their cables.
 """
 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
 import shutil
@@ -53,6 +54,9 @@ __all__ = ["NetnsRig", "unavailable", "NETEM_MISSING", "read_results", "team_lin
 NETEM_MISSING = "netem (packet loss, delay, reordering) is absent from this kernel"
 
 
+_RIGS = itertools.count()  # rigs made by this process: each its own namespace prefix
+
+
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     return subprocess.run(["ip", *args], capture_output=True, text=True, check=check)
 
@@ -61,6 +65,8 @@ def unavailable() -> str | None:
     """Why network namespaces cannot be made here (None when they can)."""
     if shutil.which("ip") is None or shutil.which("tc") is None:
         return "iproute2 (ip, tc) is not installed"
+    if shutil.which("unshare") is None:
+        return "unshare (util-linux) is not installed"
     if os.geteuid() != 0:
         return "making network namespaces needs root"
     name = f"fmprobe-{os.getpid()}"
@@ -85,7 +91,7 @@ class NetnsRig:
         self.n = int(n)
         self.edges = [tuple(sorted((int(a), int(b))))
                       for a, b in np.asarray(comm_edges, np.int64).reshape(-1, 2)]
-        self.prefix = prefix or f"fm{os.getpid()}"
+        self.prefix = prefix or f"fm{os.getpid()}x{next(_RIGS)}"
         self.procs: dict[int, subprocess.Popen] = {}
         self._made: list[str] = []
         self._caps: dict[tuple[int, int], str] = {}

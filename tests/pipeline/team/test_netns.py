@@ -105,10 +105,10 @@ def test_host_frozen_while_one_neighbour_waits_no_hang(tmp_path):
 
     def freeze(rig):
         rig.signal(2, signal.SIGSTOP)
-        time.sleep(3.0)
+        time.sleep(5.0)
         rig.signal(2, signal.SIGCONT)
 
-    codes, res, _ = _run(tmp_path, {"round_timeout_s": 1.0}, freeze,
+    codes, res, _ = _run(tmp_path, {"round_timeout_s": 2.0}, freeze,
                          robot_options={3: {"round_timeout_s": 30.0}})
     # robot 3 is the busy neighbour: it waits long enough for robot 2 to come back
     assert codes == {0: 0, 1: 0, 2: 0, 3: 0}, "a robot hung"
