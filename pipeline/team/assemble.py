@@ -9,7 +9,7 @@ logs), and the report. Evaluation against ground truth is centralized checking c
 renders the formation itself, as ``run-formation`` does, and never feeds anything back.
 
 The robots resolve by Alg. 1 or by the evidence rule, as the simulator does
-(:func:`pipeline.team.robot.team_resolution`). On a rendered formation they then run fusion
+(:func:`pipeline.team.robot.robot_resolution`). On a rendered formation they then run fusion
 themselves (:mod:`pipeline.fusion.robot`); the observer cuts the links any robot cut as
 ``fusion-outlier`` (:func:`fusion_of_team`) and reports the stage from their counters.
 ``run-images`` over zenoh runs no fusion (its poses come from a reconstruction of every

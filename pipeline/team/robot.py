@@ -5,24 +5,29 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
 1. **Its own data.** A rendered formation: it renders only its own camera
    (:func:`data_synth.render_robot`; the scene model is the world it looks at, the other
    cameras are not rendered). A photograph (``run-images``): it loads only its own file, with
-   the intrinsics the team file gives it. A links file (``resolve``): it keeps only the rows
-   that touch it. Public knowledge, as in the simulator: the team size ``n`` and the comm
-   graph.
+   the intrinsics the team file gives it. A links file (``resolve``): its own file (``data.links``
+   a list, one per robot), or the rows of a shared one that touch it. Its own options
+   (``options`` with its ``robot_options``). Public knowledge, as in the simulator: the team
+   size ``n`` and the comm graph, of which it uses the edges that touch it.
 2. **Its own features** (:func:`pipeline.matching.features.extract`, with the team's feature options:
    the photo defaults of ``run-images`` or the formations').
-3. **Exchange for matching.** Round 0: it sends every neighbour its keypoints, descriptors,
-   intrinsics, image size and, when known, its pose (``features`` message, counted in
-   bytes). Matching of edge ``(i, j)`` is done by exactly one side, the lower id ``i``, with
-   the very function the simulator uses (:func:`pipeline.matching.pairs.match_pair`), which then
+3. **Exchange for matching.** Matching of edge ``(i, j)`` is done by exactly one side, the
+   lower id ``i``, so in round 0 a robot sends each *lower-id* neighbour its keypoints,
+   descriptors (in compact form, :mod:`pipeline.matching.packed`; team option ``wire``
+   ``plain``: as extracted, to every neighbour), intrinsics, image size and, when known, its
+   pose (``features`` message, counted in bytes). The matching end uses
+   the very function the simulator uses (:func:`pipeline.matching.pairs.match_pair`), then
    sends ``j`` the result (``matches``: pairs, ratios, epipolar errors and each link's local
    evidence, :func:`pipeline.matching.link_evidence.edge_evidence`). So both ends hold the same
    ``A_ij`` and the same evidence, equal to the simulator's for that edge.
 4. **Feature counts** (public knowledge of Sec. II: every robot's ``m_j`` gives the column
    offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
-   learnt something new), enough on any connected graph of ``n`` robots.
+   learnt something new), enough on any connected graph of ``n`` robots; with them a flag,
+   whether some robot injects message loss (its own ``drop_prob``; a links team floods the
+   flag alone, :func:`flood_flag`), which picks the rule (:func:`robot_resolution`).
 5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
    run_consistency_locally`): detection, then Alg. 1 or the evidence rule
-   (:func:`team_resolution`), repeated until conflict-free.
+   (:func:`robot_resolution`), repeated until conflict-free.
 6. **Fusion** (a rendered formation, whose robots know their poses; team option ``fusion``):
    the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
    tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
@@ -30,7 +35,7 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    over the reliable channel in lockstep (:func:`pipeline.fusion.robot_loops.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
    outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
 7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
-   cuts, the matches it holds, its keypoints and its fused landmarks (for the observer's
+   cuts (also in ``--result``, :func:`result_links`), the matches it holds, its keypoints and its fused landmarks (for the observer's
    evaluation only) and its counters.
 """
 
