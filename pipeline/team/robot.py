@@ -158,7 +158,9 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     t = time.perf_counter()
     h, w = view.image.shape[:2]
     budget = opts.get("max_features")
-    rootsift = bool(opts.get("rootsift", False))
+    # COLMAP's SIFT is L1-rooted already: RootSIFT applies to OpenCV's SIFT only, as in
+    # pipeline.matching.features.extract
+    rootsift = bool(opts.get("rootsift", False)) and opts["features"] != "colmap-sift"
     # extracted without RootSIFT: the SIFT bytes travel, each end takes the root itself
     # (pipeline.matching.packed)
     raw = extract(view, opts["features"],

@@ -199,7 +199,7 @@ def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_sm
     has the links of ``run-images --transport zenoh`` (equal to the simulator's without
     fusion)."""
     from pipeline.commgraph import comm_graph
-    from pipeline.inputs.photos import load_folder
+    from pipeline.inputs.photos import in_content_order, load_folder
     from pipeline.runs.images import ImagesConfig
     from pipeline.runs.transports.zenoh import images_team
     from pipeline.team.teamfile import write_team
@@ -208,7 +208,8 @@ def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_sm
             "--no-fusion", "--no-rerun"]
     assert main([*args, "--out", str(tmp_path / "sim")]) == 0
     config = ImagesConfig(str(sceaux_small), "complete", max_size=320)
-    views = load_folder(sceaux_small, max_size=320)
+    # cameras in the order run-images gives them (by content, pipeline.inputs.photos)
+    views = in_content_order(load_folder(sceaux_small, max_size=320))
     team = images_team(config, views, comm_graph("complete", [v.name for v in views]))
     team.options["start_timeout_s"] = 120.0
     path = write_team(tmp_path / "TEAM.json", team)
