@@ -133,7 +133,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     h, w = view.image.shape[:2]
     budget = opts.get("max_features")
     feats = extract(view, opts["features"],
-                    photo_max_features(w, h) if budget is None else int(budget),
+                    photo_max_features(w, h, opts["features"]) if budget is None else int(budget),
                     merge_radius_for(team_resolution(team), opts.get("merge_radius")),
                     contrast_threshold=opts.get("contrast_threshold"),
                     rootsift=bool(opts.get("rootsift", False)),
