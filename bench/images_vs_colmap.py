@@ -55,6 +55,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -105,6 +107,40 @@ def _judge(rec, truth) -> dict:
             "wrong_tracks": wt["wrong"], "judged_tracks": wt["judged"]}
 
 
+def wrong_link_anatomy(db: Path, cleaned: Path, truth) -> dict:
+    """Where the wrong verified matches of a COLMAP database sit, and what clean-db cut.
+
+    ``wrong`` links join different true points. The consistency stage can only see a wrong
+    link inside a *conflictive* set (one holding two features of one image, Aragüés et al.
+    Def. 2.4); in a set of two features (a match no third image confirms) or in a larger
+    conflict-free set it is invisible to it.
+    """
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph
+    from pipeline.evaluation.scene_truth import wrong_links
+
+    before, after = colmap.read_database(db), colmap.read_database(cleaned)
+    L = before.links
+    wrong, judged = wrong_links(before.names, before.keypoints, L, truth)
+    m = before.features_per_camera
+    graph = AssociationGraph(m, L)
+    labels = graph.components()
+    cam = np.repeat(np.arange(len(m)), m)
+    key = np.unique(labels * len(m) + cam, return_counts=True)
+    conflictive = np.unique(key[0][key[1] > 1] // len(m))
+    g = graph.offsets[L.cam_i] + L.feat_i
+    in_conflict = np.isin(labels[g], conflictive)
+    size = np.bincount(labels)[labels[g]]
+    wrong_after, _ = wrong_links(after.names, after.keypoints, after.links, truth)
+    return {"links": int(len(L)), "judged": int(judged.sum()), "wrong": int(wrong.sum()),
+            "wrong_in_conflictive_sets": int((wrong & in_conflict).sum()),
+            "wrong_in_two_feature_sets": int((wrong & (size == 2)).sum()),
+            "wrong_in_larger_consistent_sets": int((wrong & (size > 2) & ~in_conflict).sum()),
+            "links_in_conflictive_sets": int(in_conflict.sum()),
+            "links_after_clean_db": int(len(after.links)),
+            "wrong_after_clean_db": int(wrong_after.sum())}
+
+
 def _model_row(models, truth) -> dict:
     if not models:
         return {"registered": 0, "points": 0, "track_length": 0.0, "reproj_px": 0.0}
@@ -151,6 +187,7 @@ def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
                  "links": cleaned.links, "links_cut": cleaned.cut,
                  **_model_row(models2, truth)}
     if truth is not None:
+        clean_row["wrong_links"] = wrong_link_anatomy(db, work / "cleaned.db", truth)
         # COLMAP's mapping is not repeatable across runs (its default seed is random): the
         # same two databases mapped again with fixed seeds separate cleaning from chance
         for row, path in ((colmap_row, db), (clean_row, work / "cleaned.db")):
@@ -235,9 +272,11 @@ def main(argv=None) -> int:
     ap.add_argument("--inputs", default="named,renamed", help="named, renamed or both")
     ap.add_argument("--rings", default="ABCD,AABB",
                     help="rendered ring scenes by their sides (comma-separated; empty: none)")
+    ap.add_argument("--rings-only", action="store_true", help="no photo folders")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-images" / "results.json")
     args = ap.parse_args(argv)
-    folders = args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA)
+    folders = [] if args.rings_only else \
+        (args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA))
     rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
     kinds = [i for i in args.inputs.split(",") if i]
@@ -285,6 +324,15 @@ def main(argv=None) -> int:
     targets = _targets(rows)
     for line in targets["lines"]:
         print(line)
+    for r in rows:
+        if "wrong_links" in r:
+            w = r["wrong_links"]
+            print(f"{r['data']}: {w['wrong']} of {w['judged']} judged verified matches join "
+                  f"different true points; in conflictive sets {w['wrong_in_conflictive_sets']}"
+                  f", in two-feature sets {w['wrong_in_two_feature_sets']}, in larger "
+                  f"conflict-free sets {w['wrong_in_larger_consistent_sets']}; clean-db cut "
+                  f"{w['links'] - w['links_after_clean_db']} links, "
+                  f"{w['wrong'] - w['wrong_after_clean_db']} of them wrong")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     import cv2
     import pycolmap
