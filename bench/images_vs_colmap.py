@@ -21,12 +21,15 @@ Methods on each input:
   extraction and matching plus the cleaning and the mapping,
 - ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
   cleaning, ``sparse/``; the one before cleaning beside it),
+- ``ours-no-fusion``: the same with ``--no-fusion`` (the consistency stage's cuts only),
 - ``ours-knn4``: run-images ``--graph knn:4`` (neighbours by image similarity).
 
 Columns: registered images, 3D points, mean track length, mean reprojection error, wall time,
 and where the truth is known the camera rotation / position errors after a similarity
 alignment and the wrong tracks (tracks joining true points more than 0.1 m apart,
-:mod:`pipeline.evaluation.scene_truth`). Prints a markdown table and writes
+:mod:`pipeline.evaluation.scene_truth`); there ``colmap`` and ``colmap+clean-db`` also map
+their two databases again with fixed seeds 0, 1, 2 (COLMAP's default seed is random, and one
+mapping of a scene of repeated structure may fold where the next does not). Prints a markdown table and writes
 ``runs/bench-images/results.json``.
 
     python bench/images_vs_colmap.py                       # Sceaux (full size), Graffiti, rings
@@ -52,6 +55,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -61,6 +66,8 @@ DEFAULT_DATA = [SHARED / "sceaux_castle", SHARED / "graffiti"]
 #: folders only measured as named (renaming is measured on the first)
 NAMED_ONLY = {"graffiti"}
 RING_CAMERAS = 18
+#: fixed mapping seeds of the inputs with truth (``colmap`` and ``colmap+clean-db``)
+SEEDS = (0, 1, 2)
 SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff"}
 
 
@@ -98,6 +105,40 @@ def _judge(rec, truth) -> dict:
     wt = wrong_tracks(colmap.model_tracks(rec), truth)
     return {"rotation_deg": pe["rotation_deg"], "position_m": pe["position_m"],
             "wrong_tracks": wt["wrong"], "judged_tracks": wt["judged"]}
+
+
+def wrong_link_anatomy(db: Path, cleaned: Path, truth) -> dict:
+    """Where the wrong verified matches of a COLMAP database sit, and what clean-db cut.
+
+    ``wrong`` links join different true points. The consistency stage can only see a wrong
+    link inside a *conflictive* set (one holding two features of one image, Aragüés et al.
+    Def. 2.4); in a set of two features (a match no third image confirms) or in a larger
+    conflict-free set it is invisible to it.
+    """
+    from pipeline import colmap
+    from pipeline.association import AssociationGraph
+    from pipeline.evaluation.scene_truth import wrong_links
+
+    before, after = colmap.read_database(db), colmap.read_database(cleaned)
+    L = before.links
+    wrong, judged = wrong_links(before.names, before.keypoints, L, truth)
+    m = before.features_per_camera
+    graph = AssociationGraph(m, L)
+    labels = graph.components()
+    cam = np.repeat(np.arange(len(m)), m)
+    key = np.unique(labels * len(m) + cam, return_counts=True)
+    conflictive = np.unique(key[0][key[1] > 1] // len(m))
+    g = graph.offsets[L.cam_i] + L.feat_i
+    in_conflict = np.isin(labels[g], conflictive)
+    size = np.bincount(labels)[labels[g]]
+    wrong_after, _ = wrong_links(after.names, after.keypoints, after.links, truth)
+    return {"links": int(len(L)), "judged": int(judged.sum()), "wrong": int(wrong.sum()),
+            "wrong_in_conflictive_sets": int((wrong & in_conflict).sum()),
+            "wrong_in_two_feature_sets": int((wrong & (size == 2)).sum()),
+            "wrong_in_larger_consistent_sets": int((wrong & (size > 2) & ~in_conflict).sum()),
+            "links_in_conflictive_sets": int(in_conflict.sum()),
+            "links_after_clean_db": int(len(after.links)),
+            "wrong_after_clean_db": int(wrong_after.sum())}
 
 
 def _model_row(models, truth) -> dict:
@@ -145,16 +186,28 @@ def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
                                   "clean-db": round(t5 - t4, 1), "mapping": round(t6 - t5, 1)},
                  "links": cleaned.links, "links_cut": cleaned.cut,
                  **_model_row(models2, truth)}
+    if truth is not None:
+        clean_row["wrong_links"] = wrong_link_anatomy(db, work / "cleaned.db", truth)
+        # COLMAP's mapping is not repeatable across runs (its default seed is random): the
+        # same two databases mapped again with fixed seeds separate cleaning from chance
+        for row, path in ((colmap_row, db), (clean_row, work / "cleaned.db")):
+            row["seeds"] = []
+            for seed in SEEDS:
+                options = pycolmap.IncrementalPipelineOptions()
+                options.random_seed = seed
+                out = work / f"seed{seed}-{path.stem}"
+                got = _model_row(pycolmap.incremental_mapping(path, images, out, options), truth)
+                row["seeds"].append({"seed": seed, **got})
     return [colmap_row, clean_row]
 
 
-def run_ours(images: Path, work: Path, graph: str, truth=None) -> dict:
+def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = True) -> dict:
     from pipeline import colmap
     from pipeline.progress import StageTimer
     from pipeline.runs.images import ImagesConfig, run_images
 
     cfg = ImagesConfig(directory=str(images), graph=graph, out=str(work / "run"), rerun=False,
-                       threads=-1)
+                       threads=-1, fusion=fusion)
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):  # the run's own report table
         out = run_images(cfg, StageTimer(verbose=False))
@@ -175,7 +228,10 @@ def run_ours(images: Path, work: Path, graph: str, truth=None) -> dict:
             **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = ("colmap", "colmap+clean-db", "ours", "ours-knn4")
+METHODS = ("colmap", "colmap+clean-db", "ours", "ours-no-fusion", "ours-knn4")
+#: run-images variants: method -> (graph, fusion)
+OURS = {"ours": ("complete", True), "ours-no-fusion": ("complete", False),
+        "ours-knn4": ("knn:4", True)}
 
 
 def _fmt_err(r: dict) -> tuple[str, str, str]:
@@ -216,9 +272,11 @@ def main(argv=None) -> int:
     ap.add_argument("--inputs", default="named,renamed", help="named, renamed or both")
     ap.add_argument("--rings", default="ABCD,AABB",
                     help="rendered ring scenes by their sides (comma-separated; empty: none)")
+    ap.add_argument("--rings-only", action="store_true", help="no photo folders")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-images" / "results.json")
     args = ap.parse_args(argv)
-    folders = args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA)
+    folders = [] if args.rings_only else \
+        (args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA))
     rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
     kinds = [i for i in args.inputs.split(",") if i]
@@ -231,13 +289,13 @@ def main(argv=None) -> int:
             todo = []
             if "colmap" in methods or "colmap+clean-db" in methods:
                 todo.append(("colmap", None))
-            todo += [(m, g) for m, g in (("ours", "complete"), ("ours-knn4", "knn:4"))
-                     if m in methods]
-            for name, graph in todo:
+            todo += [(m, OURS[m]) for m in OURS if m in methods]
+            for name, variant in todo:
                 print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
                 try:
-                    got = (run_colmap(images, work / "colmap", truth) if graph is None
-                           else [run_ours(images, work / name, graph, truth)])
+                    got = (run_colmap(images, work / "colmap", truth) if variant is None
+                           else [run_ours(images, work / name, *variant[:1], truth,
+                                          fusion=variant[1])])
                 except Exception as exc:  # noqa: BLE001 - a failed run is a result too
                     got = [{"error": f"{type(exc).__name__}: {exc}"}] * (2 if name == "colmap"
                                                                           else 1)
@@ -266,6 +324,15 @@ def main(argv=None) -> int:
     targets = _targets(rows)
     for line in targets["lines"]:
         print(line)
+    for r in rows:
+        if "wrong_links" in r:
+            w = r["wrong_links"]
+            print(f"{r['data']}: {w['wrong']} of {w['judged']} judged verified matches join "
+                  f"different true points; in conflictive sets {w['wrong_in_conflictive_sets']}"
+                  f", in two-feature sets {w['wrong_in_two_feature_sets']}, in larger "
+                  f"conflict-free sets {w['wrong_in_larger_consistent_sets']}; clean-db cut "
+                  f"{w['links'] - w['links_after_clean_db']} links, "
+                  f"{w['wrong'] - w['wrong_after_clean_db']} of them wrong")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     import cv2
     import pycolmap
@@ -294,6 +361,16 @@ def _targets(rows: list[dict]) -> dict:
         item = {"data": data, "input": kind, "method": method,
                 "points_ratio": round(r["points"] / ref["points"], 3),
                 "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None}
+        if ref.get("seeds") and r.get("seeds"):
+            item["seeds_rotation_median_deg"] = [
+                [x["rotation_deg"]["median"] if x.get("rotation_deg") else None
+                 for x in row["seeds"]] for row in (ref, r)]
+            item["seeds_wrong_tracks"] = [[x.get("wrong_tracks") for x in row["seeds"]]
+                                          for row in (ref, r)]
+            lines.append(f"{data} {kind} {method} vs colmap, mapping seeds {list(SEEDS)}: "
+                         f"rotation median {item['seeds_rotation_median_deg'][1]} ° vs "
+                         f"{item['seeds_rotation_median_deg'][0]} °, wrong tracks "
+                         f"{item['seeds_wrong_tracks'][1]} vs {item['seeds_wrong_tracks'][0]}")
         if r.get("rotation_deg") and ref.get("rotation_deg"):
             item["rotation_median_deg"] = [ref["rotation_deg"]["median"],
                                            r["rotation_deg"]["median"]]

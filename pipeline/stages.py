@@ -77,7 +77,7 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     return float(merge_radius)
 
 
-def budget_line(views: list[View], max_features: int | None) -> str:
+def budget_line(views: list[View], max_features: int | None, method: str = "sift") -> str:
     """The feature budget as the stage line says it: ``2000 per image``, or with budgets
     scaled with each image (``max_features=None``) the numbers, e.g. ``3300 per image (2000
     per 640x480 pixels, at most 8192)`` or ``2000-8192 per image (…)`` for mixed sizes.
@@ -90,10 +90,17 @@ def budget_line(views: list[View], max_features: int | None) -> str:
     >>> budget_line([], 2000)
     '2000 per image'
     """
-    from pipeline.matching.features import BASE_FEATURES, MAX_PHOTO_FEATURES, photo_max_features
+    from pipeline.matching.features import (
+        BASE_FEATURES,
+        COLMAP_SIFT,
+        MAX_PHOTO_FEATURES,
+        photo_max_features,
+    )
 
     if max_features is not None:
         return f"{max_features} per image"
+    if method == COLMAP_SIFT:
+        return f"{MAX_PHOTO_FEATURES} per image (COLMAP's budget, in locations)"
     budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})
     span = "-".join(str(b) for b in {budgets[0]: 0, budgets[-1]: 0}) if budgets else "?"
     return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, at most "
@@ -126,7 +133,7 @@ def extract_and_match(views: list[View], comm_edges, method: str,
     from pipeline.matching.pairs import match_edges
 
     radius = MERGE_RADIUS_PX if merge_radius is None else merge_radius
-    with timer.stage("features", f"{method}, at most {budget_line(views, max_features)}"):
+    with timer.stage("features", f"{method}, at most {budget_line(views, max_features, method)}"):
         feats = extract_all(views, method, max_features, radius,
                             contrast_threshold=contrast_threshold, rootsift=rootsift,
                             budget_after_merge=budget_after_merge)

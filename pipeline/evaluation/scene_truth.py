@@ -30,7 +30,7 @@ import numpy as np
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET
 from pipeline.errors import InputError
 
-__all__ = ["SceneTruth", "read_truth", "umeyama", "pose_errors", "wrong_tracks",
+__all__ = ["SceneTruth", "read_truth", "umeyama", "pose_errors", "wrong_tracks", "wrong_links",
            "TRUTH_FILE", "WRONG_TRACK_TOL_M"]
 
 #: the truth file of a rendered photo folder
@@ -196,3 +196,32 @@ def wrong_tracks(tracks: list[list[tuple[str, float, float]]], truth: SceneTruth
         wrong += int(spread > tol_m)
     return {"points": len(tracks), "judged": judged, "wrong": wrong,
             "wrong_fraction": round(wrong / judged, 4) if judged else 0.0, "tol_m": tol_m}
+
+
+def wrong_links(names: list[str], keypoints: list[np.ndarray], links, truth: SceneTruth,
+                tol_m: float = WRONG_TRACK_TOL_M) -> tuple[np.ndarray, np.ndarray]:
+    """Which links join different true points.
+
+    Parameters
+    ----------
+    names : image name of each camera; keypoints : per camera ``(m, 2)`` OpenCV pixels
+    links : :class:`pipeline.types.Links`
+
+    Returns
+    -------
+    wrong, judged : ndarray, (L,) bool — ``wrong``: both ends judged and their true points
+    farther apart than ``tol_m``; ``judged``: neither end on a depth edge
+    """
+    idx = truth.index()
+    L = len(links)
+    X = np.zeros((2, L, 3))
+    ok = np.zeros((2, L), dtype=bool)
+    for side, (cams, feats) in enumerate(((links.cam_i, links.feat_i),
+                                          (links.cam_j, links.feat_j))):
+        for k in np.unique(cams):
+            sel = cams == k
+            xy = np.asarray(keypoints[int(k)], dtype=np.float64)[feats[sel]]
+            X[side, sel], ok[side, sel] = _true_points(truth, idx[names[int(k)]], xy)
+    judged = ok.all(axis=0)
+    wrong = judged & (np.linalg.norm(X[0] - X[1], axis=1) > tol_m)
+    return wrong, judged

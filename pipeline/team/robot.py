@@ -164,7 +164,7 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     # extracted without RootSIFT: the SIFT bytes travel, each end takes the root itself
     # (pipeline.matching.packed)
     raw = extract(view, opts["features"],
-                  photo_max_features(w, h) if budget is None else int(budget),
+                  photo_max_features(w, h, opts["features"]) if budget is None else int(budget),
                   merge_radius_for(resolution, opts.get("merge_radius")),
                   contrast_threshold=opts.get("contrast_threshold"), rootsift=False,
                   budget_after_merge=bool(opts.get("budget_after_merge", False)))

@@ -97,3 +97,16 @@ def test_truth_file_round_trip_and_bad_files(tmp_path):
              t=truth.t, depth=truth.depth)
     with pytest.raises(InputError, match="do not describe 3 images"):
         read_truth(tmp_path)
+
+
+def test_wrong_links_from_the_depth():
+    from pipeline.evaluation.scene_truth import wrong_links
+    from pipeline.types import Links
+
+    truth = _plane_truth(3)
+    X, Y = np.array([0.2, 0.1, 10.0]), np.array([0.9, -0.4, 10.0])
+    kp = [np.array([_project(truth, k, X), _project(truth, k, Y)]) - 0.5 for k in range(3)]
+    # (0, X)-(1, X) right, (0, X)-(2, Y) wrong, (1, Y)-(2, Y) right
+    links = Links([0, 0, 1], [0, 0, 1], [1, 2, 2], [0, 1, 1])
+    wrong, judged = wrong_links(truth.names, kp, links, truth)
+    assert judged.all() and wrong.tolist() == [False, True, False]

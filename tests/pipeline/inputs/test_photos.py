@@ -219,3 +219,18 @@ def test_k_txt_for_another_resolution(tmp_path):
 def test_bad_max_size(tmp_path, size):
     with pytest.raises(InputError, match="max_size"):
         load_folder(tmp_path, max_size=size)
+
+
+def test_content_order_follows_the_pixels_not_the_names():
+    from pipeline.inputs.photos import in_content_order
+    from pipeline.types import View
+
+    rng = np.random.default_rng(5)
+    images = [rng.integers(0, 255, (8, 8, 3), dtype=np.uint8) for _ in range(5)]
+    views = [View(f"n{k}.png", im, np.eye(3)) for k, im in enumerate(images)]
+    order = [v.image.tobytes() for v in in_content_order(views)]
+    renamed = [View(f"z{9 - k}.png", im, np.eye(3)) for k, im in enumerate(images)]
+    assert [v.image.tobytes() for v in in_content_order(renamed[::-1])] == order
+    # identical pixels keep their name order
+    twins = [View("b.png", images[0], np.eye(3)), View("a.png", images[0].copy(), np.eye(3))]
+    assert [v.name for v in in_content_order(twins)] == ["a.png", "b.png"]
