@@ -77,6 +77,18 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     return float(merge_radius)
 
 
+
+def photo_merge_radius(method: str, resolution: str, merge_radius: float | None) -> float:
+    """The merge radius of a photo run: as given, else COLMAP's SIFT merges only co-located
+    orientations (:data:`pipeline.matching.features.MERGE_RADIUS_PX`, as COLMAP keeps distinct
+    DoG extrema apart; ``pipeline.runs.images`` measured why), else the rule's own
+    (:func:`merge_radius_for`)."""
+    from pipeline.matching.features import COLMAP_SIFT, MERGE_RADIUS_PX
+
+    if merge_radius is None and method == COLMAP_SIFT:
+        return MERGE_RADIUS_PX
+    return merge_radius_for(resolution, merge_radius)
+
 def budget_line(views: list[View], max_features: int | None, method: str = "sift") -> str:
     """The feature budget as the stage line says it: ``2000 per image``, or with budgets
     scaled with each image (``max_features=None``) the numbers, e.g. ``3300 per image (2000

@@ -264,10 +264,12 @@ def _photo_defaults(config: ImagesConfig) -> ImagesConfig:
     Sceaux photographs at 1600 px that cost 1.5 % of the points before cleaning and 1.8 %
     after (7721 / 7435 against 7837 / 7569, one run each).
     """
-    from pipeline.matching.features import COLMAP_SIFT, MERGE_RADIUS_PX
+    from pipeline.matching.features import COLMAP_SIFT
+    from pipeline.stages import photo_merge_radius
 
     if config.features == COLMAP_SIFT and config.merge_radius is None:
-        return dataclasses.replace(config, merge_radius=MERGE_RADIUS_PX)
+        return dataclasses.replace(config, merge_radius=photo_merge_radius(
+            config.features, config.resolution, None))
     return config
 
 

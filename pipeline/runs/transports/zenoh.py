@@ -18,7 +18,12 @@ from pipeline.errors import InputError, TeamError
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
-from pipeline.stages import CleaningResult, ledger_from_consistency, merge_radius_for
+from pipeline.stages import (
+    CleaningResult,
+    ledger_from_consistency,
+    merge_radius_for,
+    photo_merge_radius,
+)
 from pipeline.team.assemble import (
     FUSION_SKIPPED,
     consistency_of_team,
@@ -193,7 +198,8 @@ def images_team(config, views, comm_edges):
             "intrinsics_source": [str(v.intrinsics_source) for v in views],
             "max_size": config.max_size}
     opts = team_options(config.features, config.max_features, None,
-                        merge_radius=merge_radius_for(config.resolution, config.merge_radius),
+                        merge_radius=photo_merge_radius(config.features, config.resolution,
+                                                        config.merge_radius),
                         resolution=config.resolution,
                         contrast_threshold=config.contrast_threshold,
                         rootsift=bool(config.rootsift),
