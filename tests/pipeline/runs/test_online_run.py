@@ -107,3 +107,17 @@ def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     L = oa.links
     assert first.tolist() == (L.step_cut[:seen[0]] != 0).tolist()
     assert run.online_kept_at(1).tolist() == L.kept.tolist()
+
+
+def test_switching_topology_draws_the_graph_of_each_step(tmp_path, run_dir):
+    out = tmp_path / "r"
+    assert main(["run-formation", "--steps", "3", "--window", "2", "--switching-topology",
+                 "--no-fusion", "--no-rerun", "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    full = json.loads((run_dir / "report.json").read_text())
+    assert report["config"]["switching"] is True and report["conflict_free_every_step"]
+    # the same frames, matched only along the edges up at each step
+    pairs = [s["pairs_matched"] for s in report["steps"]]
+    assert all(p <= q for p, q in zip(pairs, [s["pairs_matched"] for s in full["steps"]],
+                                      strict=True))
+    assert pairs != [s["pairs_matched"] for s in full["steps"]]
