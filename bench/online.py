@@ -10,8 +10,9 @@ state, :meth:`OnlineAssociation.robot_state_bytes`; ``stage_peak_bytes``: the st
 peak per frame as the simulator measures it). Every ``--batch-every`` steps and at the last
 step the same rule runs from scratch on all links so far (the batch run, in the same
 process right after the step: same machine, same minutes) with the same figures (a robot of
-the batch run holds all its frames). At the end: pairwise precision / recall / F1 of both
-on the scope of :mod:`pipeline.evaluation.online` and their conflictive sets.
+the batch run holds all its frames). After every step the batch ran: pairwise precision / recall / F1 of both
+on the scope of :mod:`pipeline.evaluation.online` restricted to the frames taken so far, and
+their conflictive sets.
 
 Targets: conflict-free after every step; at the last step the online step costs <= 10 % of
 the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per robot follows
@@ -71,11 +72,13 @@ def one(robots: int, args) -> dict:
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
 
     oa, seq = run.online, run.sequence
-    scope = ScopedTruth(seq.flat, run.features,
-                        scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window))
+    pairs = scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window)
     links = oa.all_links()
     at_batch = {}
     for t, kept_b in sorted(run.batch_kept.items()):
+        # the scope of the frames taken up to step t (true pairs of later frames left out)
+        scope = ScopedTruth(seq.flat, run.features,
+                            pairs[(oa.step[pairs[:, 0]] <= t) & (oa.step[pairs[:, 1]] <= t)])
         upto = links.subset(np.arange(len(kept_b)))
         at_batch[t + 1] = {"online": scope.scores(upto.subset(run.online_kept_at(t))),
                            "batch": scope.scores(upto.subset(kept_b))}

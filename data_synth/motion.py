@@ -24,7 +24,7 @@ unchanged, camera ``g`` being that frame.
 Example
 -------
 >>> from data_synth.motion import render_motion
->>> s = render_motion("ring", seed=0, steps=2, size=(64, 48), n_robots=3, cache=False)
+>>> s = render_motion("ring", seed=0, steps=2, size=(64, 48), n_robots=3)
 >>> len(s.flat.views), s.step_edges[0].tolist()
 (6, [[0, 1], [0, 2], [1, 2]])
 """
@@ -84,8 +84,7 @@ class Sequence:
 def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
                   size: tuple[int, int] = (320, 240), n_robots: int | None = None,
                   graph: str | None = None, speed: float = DEFAULT_SPEED,
-                  switching: bool = False, p_up: float = 0.5, window: int = 3,
-                  cache: bool = True) -> Sequence:
+                  switching: bool = False, p_up: float = 0.5, window: int = 3) -> Sequence:
     """Render a formation driving along the facade for ``steps`` steps.
 
     Parameters
@@ -95,8 +94,9 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
     speed : float — metres per step along ``+x`` (``0`` keeps the formation still: every step
         renders the same poses with fresh sensor noise)
     switching, p_up, window : the per-step graph (module docstring)
-    cache : bool — unused for now (frames are rendered, not cached); kept for the signature
-        of :func:`data_synth.render`
+
+    Frames are rendered, not read from the render cache (:mod:`data_synth.cache` holds
+    snapshots).
 
     Raises
     ------
@@ -104,7 +104,6 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
         As :func:`data_synth.render`; ``steps < 1``; a negative or non-finite speed; ``p_up``
         outside ``(0, 1]``.
     """
-    del cache
     steps = _check_int(steps, "steps", 1)
     if not np.isfinite(speed) or speed < 0:
         raise InputError(f"speed {speed!r}: expected metres per step >= 0")

@@ -280,7 +280,9 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                                conflictive_sets=int(run.steps[-1]["conflictive_sets_after"]),
                                cut_by_reason={str(r): int((oa.links.reason == r).sum())
                                               for r in sorted(set(oa.links.reason[~kept]))})
-        if run.batch is not None:
+        if run.batch is not None and len(run.batch.deleted) == len(links):
+            # the batch run of the last step (an earlier one is scored by the caller, on the
+            # links of its own step: OnlineRun.batch_kept and online_kept_at)
             kb = ~run.batch.deleted
             final["batch"] = dict(st.scores(links.subset(kb)), kept=int(kb.sum()),
                                   good_kept=int((truth & kb).sum()),

@@ -90,3 +90,34 @@ def test_without_fusion_no_link_is_cut_as_an_outlier(tmp_path):
     assert report["fusion"]["enabled"] is False and report["fusion"]["links_cut"] == 0
     assert all("fusion" not in s for s in report["steps"])
     assert not (out / "recording.rrd").exists()
+
+
+def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
+    from pipeline.runs.online import OnlineConfig, run_online_steps
+
+    seen = []
+    config = OnlineConfig(formation="ring", robots=3, graph="ring", size=(192, 144),
+                          max_features=150, steps=2, window=2, fusion=False, rerun=False)
+    run = run_online_steps(config, batch_steps={0},
+                           on_step=lambda r: seen.append(r["links_total"]))
+    oa = run.online
+    first = run.online_kept_at(0)
+    assert len(first) == seen[0] == len(run.batch_kept[0])
+    # what step 0 kept: cut at step 0 is out, cut later is still in
+    L = oa.links
+    assert first.tolist() == (L.step_cut[:seen[0]] != 0).tolist()
+    assert run.online_kept_at(1).tolist() == L.kept.tolist()
+
+
+def test_switching_topology_draws_the_graph_of_each_step(tmp_path, run_dir):
+    out = tmp_path / "r"
+    assert main(["run-formation", "--steps", "3", "--window", "2", "--switching-topology",
+                 "--no-fusion", "--no-rerun", "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    full = json.loads((run_dir / "report.json").read_text())
+    assert report["config"]["switching"] is True and report["conflict_free_every_step"]
+    # the same frames, matched only along the edges up at each step
+    pairs = [s["pairs_matched"] for s in report["steps"]]
+    assert all(p <= q for p, q in zip(pairs, [s["pairs_matched"] for s in full["steps"]],
+                                      strict=True))
+    assert pairs != [s["pairs_matched"] for s in full["steps"]]
