@@ -36,6 +36,21 @@ def _start_robots(team_paths, tmp_path):
     return procs
 
 
+def _observe_by_hand(team, tmp_path) -> None:
+    """``team`` written to TEAM.json, its robots started by hand, ``observe`` writing
+    ``tmp_path/obs``; every robot ends with exit 0."""
+    from pipeline.team.teamfile import write_team
+
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "300", "--no-rerun"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+
+
 def _stop(procs, timeout=60):
     codes = []
     for p, log in procs:
@@ -52,7 +67,6 @@ def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
     from pipeline.runs.transports.zenoh import team_options
     from pipeline.stages import merge_radius_for
     from pipeline.team.launcher import make_team
-    from pipeline.team.teamfile import write_team
 
     cfg = dict(formation="a", seed=0, size=(160, 120), fusion=True, rerun=False)
     sim = run_formation(FormationConfig(out=str(tmp_path / "sim"), **cfg))
@@ -66,14 +80,7 @@ def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
     team = make_team("by-hand", data_synth.formation_edges("a", 0, None, None),
                      {"kind": "formation", "formation": "a", "seed": 0, "size": [160, 120],
                       "robots": None, "graph": None}, opts, n=6)
-    path = write_team(tmp_path / "TEAM.json", team)
-    procs = _start_robots([path] * team.n, tmp_path)
-    try:
-        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
-                     "--timeout", "300", "--no-rerun"]) == 0
-    finally:
-        codes = _stop(procs)
-    assert codes == [0] * team.n
+    _observe_by_hand(team, tmp_path)
     rows = _rows(tmp_path / "obs" / "links.csv")
     assert rows == _rows(sim / "links.csv")
     assert any(r[5] == "fusion-outlier" for r in rows[1:])
@@ -202,7 +209,6 @@ def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_sm
     from pipeline.inputs.photos import in_content_order, load_folder
     from pipeline.runs.images import ImagesConfig
     from pipeline.runs.transports.zenoh import images_team
-    from pipeline.team.teamfile import write_team
 
     args = ["run-images", str(sceaux_small), "--graph", "complete", "--max-size", "320",
             "--no-fusion", "--no-rerun"]
@@ -212,14 +218,7 @@ def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_sm
     views = in_content_order(load_folder(sceaux_small, max_size=320))
     team = images_team(config, views, comm_graph("complete", [v.name for v in views]))
     team.options["start_timeout_s"] = 120.0
-    path = write_team(tmp_path / "TEAM.json", team)
-    procs = _start_robots([path] * team.n, tmp_path)
-    try:
-        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
-                     "--timeout", "300", "--no-rerun"]) == 0
-    finally:
-        codes = _stop(procs)
-    assert codes == [0] * team.n
+    _observe_by_hand(team, tmp_path)
     sim = (tmp_path / "sim" / "links.csv").read_text().splitlines()
     assert (tmp_path / "obs" / "links.csv").read_text().splitlines() == sim
     assert len(sim) > 500
