@@ -131,8 +131,9 @@ def formation_case(formation: str, seed: int) -> Case:
 
 
 def graffiti_case(directory: str, graph: str) -> Case:
-    """Graffiti matched as ``run-images`` matches it at its defaults; truth from the data
-    set's homographies at 2 px (mutual)."""
+    """Graffiti matched as ``run-images`` matches it at its defaults (features, matcher, merge
+    radius; cameras in file-name order, the homographies' order); truth from the data set's
+    homographies at 2 px (mutual)."""
     from pipeline.commgraph import comm_graph
     from pipeline.evaluation.truth import (
         _image_scales,
@@ -144,15 +145,16 @@ def graffiti_case(directory: str, graph: str) -> Case:
     from pipeline.matching.link_evidence import link_evidence
     from pipeline.progress import StageTimer
     from pipeline.runs.images import ImagesConfig
-    from pipeline.stages import extract_and_match, merge_radius_for
+    from pipeline.stages import extract_and_match, photo_merge_radius
 
     c = ImagesConfig(directory=directory, graph=graph)
     views = load_folder(directory, max_size=c.max_size, intrinsics="auto")
     edges = comm_graph(graph, [v.name for v in views])
     feats, matches, links = extract_and_match(
         views, edges, c.features, c.max_features, StageTimer(verbose=False),
-        contrast_threshold=c.contrast_threshold, merge_radius=merge_radius_for(c.resolution, None),
-        rootsift=c.rootsift, threshold_px=c.threshold_px, budget_after_merge=c.budget_after_merge)
+        contrast_threshold=c.contrast_threshold,
+        merge_radius=photo_merge_radius(c.features, c.resolution, None), rootsift=c.rootsift,
+        threshold_px=c.threshold_px, budget_after_merge=c.budget_after_merge, matcher=c.matcher)
     kps = [np.asarray(f.keypoints, dtype=np.float64) for f in feats]
     H1 = read_homographies(directory, len(views))
     scales = _image_scales(Path(directory), views)
