@@ -15,7 +15,8 @@ keypoints are merged here (the strongest response is kept).
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -335,7 +336,8 @@ def extract_all(views, method: str = "sift", max_features: int | None = 2000,
     max_features : int or None
         Per image; ``None``: :func:`photo_max_features` of each image's size and ``method``.
     workers : int
-        Threads; OpenCV releases the GIL inside ``detectAndCompute``. ``1`` runs serially.
+        Threads (OpenCV releases the GIL inside ``detectAndCompute``), or forked processes for
+        COLMAP's SIFT (pycolmap holds it). ``1`` runs serially.
     """
     from pipeline.progress import progress
 
@@ -352,5 +354,29 @@ def extract_all(views, method: str = "sift", max_features: int | None = 2000,
 
     if workers <= 1 or len(views) <= 1:
         return [one(v) for v in progress(views, desc="features")]
+    if str(method).lower() == COLMAP_SIFT and _FORK is not None:
+        # pycolmap's SIFT holds the GIL (threads run it one at a time): forked workers, each
+        # reading the views from the parent's memory as it was at the fork (copy-on-write)
+        # and sending back its Features; the same calls in the same order per image, so the
+        # same results as serially
+        global _FORKED_JOB
+        _FORKED_JOB = (views, one)
+        try:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=_FORK) as pool:
+                return list(progress(pool.map(_forked_one, range(len(views))),
+                                     total=len(views), desc="features"))
+        finally:
+            _FORKED_JOB = None
     with ThreadPoolExecutor(max_workers=workers) as pool:
         return list(progress(pool.map(one, views), total=len(views), desc="features"))
+
+
+#: the job forked workers of :func:`extract_all` read (set just before the pool forks)
+_FORKED_JOB = None
+_FORK = multiprocessing.get_context("fork") if "fork" in multiprocessing.get_all_start_methods() \
+    else None
+
+
+def _forked_one(k: int) -> Features:
+    views, one = _FORKED_JOB
+    return one(views[k])
