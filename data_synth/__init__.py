@@ -53,7 +53,8 @@ MIN_SIZE = (64, 48)
 """Smallest image size ``(W, H)`` accepted by :func:`render`."""
 
 
-def _check_int(value, name: str, minimum: int) -> int:
+def check_int(value, name: str, minimum: int) -> int:
+    """``value`` as an int, or InputError naming ``name`` if it is not an integer >= minimum."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
         raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
@@ -94,7 +95,7 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
     InputError
         Unknown formation or graph kind, ``n_robots < 2``, image smaller than ``MIN_SIZE``.
     """
-    name, kind, n, (W, H), centres, poses, edges, K = _setup(formation, seed, size, n_robots,
+    name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
     # the views depend on seed, size and robots only (not on the graph): one cache entry each
     pixels = render_cache.load_views(seed, (W, H), n) if cache else None
@@ -115,7 +116,7 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
 def formation_edges(formation: str = "d", seed: int = 0, n_robots: int | None = None,
                     graph: str | None = None) -> np.ndarray:
     """The communication graph ``(E, 2)`` of a formation, without rendering anything."""
-    return _setup(formation, seed, MIN_SIZE, n_robots, graph)[6]
+    return formation_setup(formation, seed, MIN_SIZE, n_robots, graph)[6]
 
 
 def render_robot(robot: int, formation: str = "d", seed: int = 0,
@@ -138,7 +139,7 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
     InputError
         As :func:`render`, or ``robot`` outside ``0..n-1``.
     """
-    _, _, n, (W, H), _, poses, edges, K = _setup(formation, seed, size, n_robots, graph)
+    _, _, n, (W, H), _, poses, edges, K = formation_setup(formation, seed, size, n_robots, graph)
     if isinstance(robot, bool) or not isinstance(robot, numbers.Integral) or not 0 <= robot < n:
         raise InputError(f"robot {robot!r} is not in the formation; robots are 0..{n - 1}")
     i = int(robot)
@@ -153,7 +154,7 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
                 intrinsics_known=True), edges
 
 
-def _setup(formation, seed, size, n_robots, graph):
+def formation_setup(formation, seed, size, n_robots, graph):
     """Checked parameters, poses, comm edges and intrinsics shared by all robots."""
     if not isinstance(formation, str) or (formation not in FORMATIONS and formation not in GRAPH_KINDS):
         raise InputError(f"unknown formation {formation!r}; choose one of "
@@ -161,8 +162,8 @@ def _setup(formation, seed, size, n_robots, graph):
                          f"({', '.join(GRAPH_KINDS)})")
     if graph is not None and graph not in GRAPH_KINDS:
         raise InputError(f"unknown graph kind {graph!r}; choose one of {', '.join(GRAPH_KINDS)}")
-    seed = _check_int(seed, "seed", 0)
-    n = 6 if n_robots is None else _check_int(n_robots, "n_robots", 2)
+    seed = check_int(seed, "seed", 0)
+    n = 6 if n_robots is None else check_int(n_robots, "n_robots", 2)
     try:
         W, H = (int(v) for v in size)
     except (TypeError, ValueError):

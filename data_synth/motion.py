@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from data_synth import _check_int, _setup
+from data_synth import check_int, formation_setup
 from data_synth.formations import Formation
 from data_synth.renderer import render_view
 from data_synth.scene import build_scene
@@ -104,12 +104,12 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
         As :func:`data_synth.render`; ``steps < 1``; a negative or non-finite speed; ``p_up``
         outside ``(0, 1]``.
     """
-    steps = _check_int(steps, "steps", 1)
+    steps = check_int(steps, "steps", 1)
     if not np.isfinite(speed) or speed < 0:
         raise InputError(f"speed {speed!r}: expected metres per step >= 0")
     if not 0 < p_up <= 1:
         raise InputError(f"p_up {p_up!r}: expected a probability in (0, 1]")
-    name, kind, n, (W, H), centres, poses, edges, K = _setup(formation, seed, size, n_robots,
+    name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
     scene = build_scene(seed)
     views, all_centres = [], []

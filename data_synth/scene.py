@@ -23,7 +23,7 @@ import numpy as np
 
 from data_synth import textures
 
-__all__ = ["Face", "Scene", "build_scene", "FACADE_Y", "SUN_DIRECTION"]
+__all__ = ["Face", "Scene", "build_scene", "tiled_faces", "FACADE_Y", "SUN_DIRECTION"]
 
 FACADE_Y = 10.0
 """``y`` of the facade plane (m)."""
@@ -106,7 +106,7 @@ def _shade(texture: np.ndarray, normal: np.ndarray, ambient: float = 0.55) -> np
     return np.clip(texture.astype(np.float32) * f, 0, 255).astype(np.uint8)
 
 
-def _tiled_faces(name: str, origin, u, v, texture: np.ndarray, tile: int = TILE_TEXELS) -> list:
+def tiled_faces(name: str, origin, u, v, texture: np.ndarray, tile: int = TILE_TEXELS) -> list:
     """Cut a large face into texture tiles of at most ``tile`` texels (exact texel boundaries)."""
     origin, u, v = (np.asarray(x, np.float64) for x in (origin, u, v))
     H, W = texture.shape[:2]
@@ -194,18 +194,18 @@ def build_scene(seed: int = 0, window_variants: int = 4, window_variation: float
     tex = textures.facade_texture(rng, facade_w, facade_h, ppm, rows=3, cols=10,
                                   window_variation=window_variation, stains_per_m2=1.5 * detail,
                                   roughness=roughness, window_variants=window_variants)
-    faces += _tiled_faces("facade", [-facade_w / 2, FACADE_Y, facade_h], [facade_w, 0, 0],
+    faces += tiled_faces("facade", [-facade_w / 2, FACADE_Y, facade_h], [facade_w, 0, 0],
                           [0, 0, -facade_h], tex)
     floor_w, floor_d = 20.0, 14.0
     tex = textures.floor_texture(rng, floor_w, floor_d, ppm, stains_per_m2=0.8 * detail)
-    faces += _tiled_faces("floor", [-floor_w / 2, FACADE_Y, 0.0], [floor_w, 0, 0],
+    faces += tiled_faces("floor", [-floor_w / 2, FACADE_Y, 0.0], [floor_w, 0, 0],
                           [0, -floor_d, 0], tex)
     wall_d, wall_h = 8.0, 4.0
     tex = textures.side_wall_texture(rng, wall_d, wall_h, ppm)
-    faces += _tiled_faces("side_wall", [-7.0, 2.0, wall_h], [0, wall_d, 0], [0, 0, -wall_h], tex)
+    faces += tiled_faces("side_wall", [-7.0, 2.0, wall_h], [0, wall_d, 0], [0, 0, -wall_h], tex)
     # its back (seen by robots far to the left of a wide formation): faces are one-sided
     tex = textures.side_wall_texture(rng, wall_d, wall_h, ppm)
-    faces += _tiled_faces("side_wall_back", [-7.0, 2.0 + wall_d, wall_h], [0, -wall_d, 0],
+    faces += tiled_faces("side_wall_back", [-7.0, 2.0 + wall_d, wall_h], [0, -wall_d, 0],
                           [0, 0, -wall_h], tex)
 
     landmarks: dict = {}

@@ -33,7 +33,7 @@ import numpy as np
 from data_synth import textures
 from data_synth.formations import look_at
 from data_synth.renderer import intrinsics, render_view
-from data_synth.scene import Scene, _tiled_faces
+from data_synth.scene import Scene, tiled_faces
 
 __all__ = ["build_tower_scene", "ring_poses", "write_ring_folder", "TOWER_SIDE_M",
            "TOWER_HEIGHT_M"]
@@ -74,12 +74,12 @@ def build_tower_scene(seed: int = 0, sides: str = "ABCD", floor_motifs: int = 8,
             ([half, half, h], [-s, 0, 0]),      # side facing +y
             ([-half, half, h], [0, -s, 0])),   # side facing -x
             [facades[c] for c in sides], strict=True)):
-        faces += _tiled_faces(f"tower{k}", origin, u, [0, 0, -h], side)
+        faces += tiled_faces(f"tower{k}", origin, u, [0, 0, -h], side)
     roof = textures.side_wall_texture(rng, s, s, ppm)
-    faces += _tiled_faces("roof", [-half, half, h], [s, 0, 0], [0, -s, 0], roof)
+    faces += tiled_faces("roof", [-half, half, h], [s, 0, 0], [0, -s, 0], roof)
     floor = textures.floor_texture(rng, 28.0, 28.0, 40.0, tile_m=0.5, n_motifs=floor_motifs,
                                    dirt=floor_dirt, stains_per_m2=floor_stains)
-    faces += _tiled_faces("floor", [-14.0, 14.0, 0.0], [28.0, 0, 0], [0, -28.0, 0], floor)
+    faces += tiled_faces("floor", [-14.0, 14.0, 0.0], [28.0, 0, 0], [0, -28.0, 0], floor)
     corners = {}
     for q, (x, y) in enumerate(((-half, -half), (half, -half), (half, half), (-half, half))):
         corners[f"tower.top{q}"] = np.array([x, y, h], np.float64)
