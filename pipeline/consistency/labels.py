@@ -62,6 +62,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.consistency.detection import reset_detection
+from pipeline.consistency.reliable import ReliableState, cut_lost
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
@@ -206,7 +207,7 @@ def _measure(robot: Robot) -> None:
 # ------------------------------------------------------------------------------------------
 # over the reliable channel (a robot alone: pipeline.consistency.termination)
 
-def start_labels_reliable(robot: Robot, st, iteration: int, now: int) -> None:
+def start_labels_reliable(robot: Robot, st: ReliableState, iteration: int, now: int) -> None:
     """Round 0 of the flooding with its messages sent reliably (``st`` a
     :class:`~.reliable.ReliableState`); every linked neighbour is waited on (heartbeats)."""
     st.lost_in_phase = False
@@ -216,12 +217,11 @@ def start_labels_reliable(robot: Robot, st, iteration: int, now: int) -> None:
     st.chan.flush(now, heartbeat_to=sorted(st.all_nbrs))
 
 
-def labels_round(robot: Robot, st, inbox: list[Message], now: int, phase_round: int) -> None:
+def labels_round(robot: Robot, st: ReliableState, inbox: list[Message], now: int,
+                 phase_round: int) -> None:
     """One network round: the channel's messages folded in (:func:`labels_step`), a silent
     neighbour cut (``robot-lost``), the outcome so far published on the robot (its flags only
     turn true, so the termination wave's ``CONFLICT`` bit may read it every round)."""
-    from pipeline.consistency.reliable import cut_lost
-
     msgs = st.chan.receive(inbox, now)
     lost = st.chan.check_lost(now, st.all_nbrs)
     if lost:
@@ -232,7 +232,7 @@ def labels_round(robot: Robot, st, inbox: list[Message], now: int, phase_round: 
     st.chan.flush(now, heartbeat_to=sorted(st.all_nbrs))
 
 
-def labels_done(robot: Robot, st) -> bool:
+def labels_done(robot: Robot, st: ReliableState) -> bool:
     """Everything this robot sent is acknowledged: when every robot is so, nothing is in
     flight and no value can change again (the phase end of the simulator)."""
     return st.chan.idle()

@@ -124,6 +124,7 @@ round) besides the paper's ``rows``/``indptr``/``indices``; ``final`` carries ``
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,6 +140,7 @@ from pipeline.consistency.detection import (
 )
 from pipeline.consistency.resolution import resolution_step, start_resolution
 from pipeline.consistency.robot import ROBOT_LOST, Robot, blocks_bytes
+from pipeline.consistency.wave import RobotRun, TerminationWave, run_wave_phase
 from pipeline.transport import Message
 
 __all__ = ["ReliableState", "start_detection_reliable", "detection_round",
@@ -197,10 +199,6 @@ class AlonePhases:
     """
 
     def __init__(self, robot: Robot, transport, protocol, n_robots: int | None = None):
-        import time
-
-        from pipeline.consistency.wave import RobotRun, TerminationWave
-
         self.robot, self.transport = robot, transport
         self.n = int(n_robots or robot.n)
         self.st = ReliableState(Channel(transport, protocol))
@@ -213,8 +211,6 @@ class AlonePhases:
     def phase(self, name: str, start, step, bits, memory=None) -> tuple[int, int, int]:
         """Run one phase; returns ``(rounds, OR of the bits over the team, start round)``.
         ``memory()``: bytes to count in the robot's peak after each round (optional)."""
-        from pipeline.consistency.wave import run_wave_phase
-
         robot, chan, st, transport = self.robot, self.chan, self.st, self.transport
         now = transport.round
         nbrs = set(np.unique(robot.link_nbr[robot.link_alive]).tolist())
@@ -245,8 +241,6 @@ class AlonePhases:
 def close_log(log, st: ReliableState, t0: float):
     """Fill a robot's run log at its end: seconds since ``t0`` (``time.perf_counter``), the
     channel's retransmissions, acknowledgements and heartbeats, the neighbours it lost."""
-    import time
-
     log.seconds = time.perf_counter() - t0
     log.retransmissions = st.chan.retransmissions
     log.acks = st.chan.acks_sent
