@@ -11,15 +11,19 @@ at a time; here the robots reach the *same* clusters with Borůvka phases of *lo
 dominant* links (the idea of Hoepman's distributed greedy matching, 2004):
 
 Weights (Sec. "evidence" of the rule; both ends of a link compute the same value)
-    ``w = λ + TRIANGLE_WEIGHT · (τ + q)``: ``λ`` the link's local log-likelihood ratio
-    (:mod:`pipeline.matching.link_evidence`, held by both robots of the link since matching),
-    ``τ`` the number of third cameras in which both ends match one common feature, and
+    ``w = λ + TRIANGLE_WEIGHT · (τ · min(1, K / shared) + q)``: ``λ`` the link's local
+    log-likelihood ratio (:mod:`pipeline.matching.link_evidence`, held by both robots of the
+    link since matching), ``τ`` the number of third cameras in which both ends match one
+    common feature, ``shared`` the third cameras both ends are linked into, ``K`` =
+    :data:`.cycles.SUPPORT_VIEWS` (beyond ``K`` such cameras the triangles count as the
+    agreement rate ``τ / shared`` over ``K`` views: on dense graphs one confusion repeats
+    across views and closes many triangles, :func:`.cycles.support_term`), and
     ``q = 1`` for a link without triangle over which a quadrangle through four cameras closes
     (:mod:`.cycles`: a good link beside a pair that swapped two matches loses its triangles,
     not its quadrangle). Phase 0 (*support*, one round): every robot sends each linked
     neighbour the other ends of its features linked to it; both ends of a link then count
-    ``τ`` and decide ``q`` from the same lists (the far end's, and those of the features
-    linked to its own end), once every linked neighbour's list is in.
+    ``τ`` and ``shared`` and decide ``q`` from the same lists (the far end's, and those of
+    the features linked to its own end), once every linked neighbour's list is in.
     Order: ``(w, -lo, -hi)`` decreasing (``lo < hi`` the link's global feature ids), a strict
     total order every robot evaluates alike.
 
@@ -115,6 +119,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.consistency.cycles import cycle_support, support_term
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
@@ -151,7 +156,8 @@ class SyncState:
     Attributes
     ----------
     weight : (L,) float64 — local evidence ``λ`` of its links (link table order)
-    w : (L,) float64 — ``λ + TRIANGLE_WEIGHT · τ`` once the support round is over
+    w : (L,) float64 — ``λ + TRIANGLE_WEIGHT · support_term(τ, shared, quad)`` once the
+        support round is over
     lo, hi : (L,) int64 — the link's global feature ids, ``lo < hi``
     other : (L,) int64 — cluster of each link's far end, as last heard
     open : (L,) bool — ends in different clusters and not found ineligible
@@ -171,6 +177,7 @@ class SyncState:
     robot_fixed : int — :meth:`~.robot.Robot.fixed_bytes` of its robot (fixed sizes too)
     tau : (L,) int64 — triangle support counted so far (on a reliable channel the lists of
         the support round may arrive in several rounds)
+    shared : (L,) int64 — third cameras both ends are linked into, counted so far
     quad : (L,) bool — a quadrangle closes over a link without triangle (:mod:`.cycles`),
         decided once every linked neighbour's list is in
     support_lists, support_heard — the lists received in the support round (freed once the
@@ -198,6 +205,7 @@ class SyncState:
     fixed: int = 0
     robot_fixed: int = 0
     tau: np.ndarray | None = None
+    shared: np.ndarray | None = None
     quad: np.ndarray | None = None
     support_lists: list | None = None
     support_heard: set | None = None
@@ -211,10 +219,12 @@ class SyncState:
             self.support_heard = set()
         if self.tau is None:
             self.tau = np.zeros(self.weight.shape[0], dtype=np.int64)
+        if self.shared is None:
+            self.shared = np.zeros(self.weight.shape[0], dtype=np.int64)
         self.fixed = int(sum(a.nbytes for a in (
             self.weight, self.w, self.lo, self.hi, self.other, self.open, self.tree,
             self.label, self.has_best, self.best_w, self.best_lo, self.best_hi,
-            self.relabeled, self.tau, self.quad)))
+            self.relabeled, self.tau, self.shared, self.quad)))
 
     def nbytes(self) -> int:
         """Bytes held: the fixed-size arrays (``fixed``), ``8 + 8 · words`` per camera set, and
@@ -378,13 +388,16 @@ def start_support(robot: Robot, send: Send) -> None:
 
 
 def support_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -> None:
-    """Count each link's triangle support ``τ`` from the far end's list; set ``w``."""
+    """Count each link's triangle support ``τ`` and the third cameras both ends are linked
+    into (``shared``) from the far end's list; set ``w`` (:func:`.cycles.support_term`)."""
     st = robot.sync
     alive = robot.link_alive
     far = robot.offsets[robot.link_nbr] + robot.link_s.astype(np.int64)
     m_total = np.int64(robot.m_total)
     own_keys = np.sort(robot.link_r[alive].astype(np.int64) * m_total + far[alive])
     tau = st.tau
+    n = np.int64(robot.n)
+    own_cams = np.sort(robot.link_r[alive].astype(np.int64) * n + robot.link_nbr[alive])
     bounds = np.searchsorted(robot.link_nbr, [[m.src for m in inbox], [m.src + 1 for m in inbox]])
     for msg, a, b in zip(inbox, bounds[0].tolist(), bounds[1].tolist(), strict=True):
         if msg.kind != SUPPORT:
@@ -405,19 +418,21 @@ def support_step(robot: Robot, inbox: list[Message], send: Send, round_: int) ->
         idx = ranges(starts[pos], starts[pos + 1])
         keys = robot.link_r[rep].astype(np.int64) * m_total + p["gid"][idx].astype(np.int64)
         tau += np.bincount(rep[isin_sorted(keys, own_keys)], minlength=tau.size)
+        cams = _camera(robot, p["gid"][idx].astype(np.int64))
+        st.shared += np.bincount(rep[isin_sorted(robot.link_r[rep].astype(np.int64) * n + cams,
+                                                 own_cams)], minlength=tau.size)
     expected = set(np.unique(robot.link_nbr[alive]).tolist())
     if st.support_lists and expected <= st.support_heard:
         _measure(robot)  # the peak, with every list held
         st.quad = _quadrangles(robot, st)
         st.support_lists = []
-    st.w = st.weight + TRIANGLE_WEIGHT * (tau + (st.quad & (tau == 0)))
+    st.w = st.weight + TRIANGLE_WEIGHT * support_term(tau, st.shared, st.quad)
     _measure(robot)
 
 
 def _quadrangles(robot: Robot, st: SyncState) -> np.ndarray:
     """Quadrangle flag of the own links without triangle (:func:`.cycles.cycle_support`),
     from the own links and the lists every linked neighbour sent in the support round."""
-    from pipeline.consistency.cycles import cycle_support
 
     alive = robot.link_alive
     quad = np.zeros(robot.link_r.shape[0], dtype=bool)

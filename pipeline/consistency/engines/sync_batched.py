@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.consistency.cycles import cycle_support, support_term
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.keys import EMPTY, isin_sorted, ranges
@@ -264,7 +265,9 @@ def _support(team: _Team, counts: _Counts) -> tuple[int, np.ndarray]:
     # τ: the far feature's list entries linked to the own feature
     adj, ptr = team.csr(team.alive)
     akeys = np.sort(team.f[A] * M + team.g[A])
+    ckeys = np.sort(team.f[A] * team.n + team.nbr[A])  # (own feature, camera it links into)
     tau = np.zeros(H, dtype=np.int64)
+    shared = np.zeros(H, dtype=np.int64)
     cnt = deg[team.g[A]]
     done = np.cumsum(cnt)
     start = 0
@@ -275,11 +278,14 @@ def _support(team: _Team, counts: _Counts) -> tuple[int, np.ndarray]:
         x = team.g[adj[ranges(ptr[team.g[h]], ptr[team.g[h] + 1])]]
         hit = isin_sorted(np.repeat(team.f[h], c) * M + x, akeys)
         tau[h] = np.bincount(np.repeat(np.arange(h.size), c)[hit], minlength=h.size)
+        hit = isin_sorted(np.repeat(team.f[h], c) * team.n + team.cam[x], ckeys)
+        shared[h] = np.bincount(np.repeat(np.arange(h.size), c)[hit], minlength=h.size)
         start = stop
     quad = _quadrangles(team, tau, adj, ptr)
     stepped = np.zeros(team.n, dtype=bool)  # robots that receive a support message
     stepped[team.nbr[A]] = True
-    w = np.where(stepped[team.rob], team.weight + TRIANGLE_WEIGHT * (tau + quad), team.weight)
+    w = np.where(stepped[team.rob],
+                 team.weight + TRIANGLE_WEIGHT * support_term(tau, shared, quad), team.weight)
     # each robot holds every list it received until its quadrangles are decided (int64
     # feature, degree and far ends, as :func:`..sync.support_step` keeps them)
     ukeys, first = np.unique(team.pair[A] * M + team.f[A], return_index=True)
@@ -295,8 +301,6 @@ def _quadrangles(team: _Team, tau: np.ndarray, adj: np.ndarray, ptr: np.ndarray)
     decides it from its own links and the lists of the support round: the lists a robot
     receives are its neighbours' features' alive links, i.e. the alive graph's rows, so one
     evaluation per link on those rows gives both halves' flags."""
-    from pipeline.consistency.cycles import cycle_support
-
     quad = np.zeros(team.H, dtype=bool)
     A = np.flatnonzero(team.alive & (tau == 0))
     rep = A[A < team.twin[A]]

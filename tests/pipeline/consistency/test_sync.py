@@ -10,6 +10,7 @@ from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from sync_instances import comm_edges, planted_instance
 
+from pipeline.consistency.cycles import SUPPORT_VIEWS
 from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.engines.sync_batched import run_sync
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
@@ -40,7 +41,8 @@ def _reference(fpc, links: Links, weight) -> list[set]:
 
 def _reference_weights(fpc, links: Links, weight):
     """Link ends, camera of every feature and each link's weight: local evidence plus one
-    per triangle, plus one where no triangle but a quadrangle closes (brute force)."""
+    per triangle (the agreement rate over ``K`` views beyond ``K`` shared third cameras),
+    plus one where no triangle but a quadrangle closes (brute force)."""
     off = np.concatenate([[0], np.cumsum(fpc)])
     a = (off[links.cam_i] + links.feat_i).tolist()
     b = (off[links.cam_j] + links.feat_j).tolist()
@@ -54,8 +56,11 @@ def _reference_weights(fpc, links: Links, weight):
     quad = [tau[k] == 0 and any(u in nbrs[y] and len({cam[x], cam[t], cam[u], cam[y]}) == 4
                                 for t in nbrs[x] - {y} for u in nbrs[t])
             for k, (x, y) in enumerate(zip(a, b, strict=True))]
-    return a, b, cam, [float(weight[k]) + TRIANGLE_WEIGHT * (tau[k] + quad[k])
-                       for k in range(len(a))]
+    # third cameras both ends are linked into; beyond K of them triangles count as a rate
+    shared = [len({cam[t] for t in nbrs[x]} & {cam[t] for t in nbrs[y]})
+              for x, y in zip(a, b, strict=True)]
+    return a, b, cam, [float(weight[k]) + TRIANGLE_WEIGHT * (
+        tau[k] * min(1.0, SUPPORT_VIEWS / max(shared[k], 1)) + quad[k]) for k in range(len(a))]
 
 
 def _run(fpc, links, weight, flood="links"):
