@@ -26,8 +26,9 @@ How much the triangles count (:func:`support_term`)
     Triangles are not independent evidence where many views see one landmark: a confusion
     between two similar landmarks repeats across the views, and a wrong link then closes
     tens of triangles with other wrong links of the same confusion (CMU hotel, complete graph
-    of 101 frames, descriptors only: the wrong links between two look-alike corners close
-    23–77 triangles of 99 third cameras, the good ones 52–95). So the triangle term counts at
+    of 101 frames, descriptors only: 5th–95th percentiles of the triangles closed, of 99 third
+    cameras, 23–77 for the wrong links between two look-alike corners, 52–95 for their good
+    links; counted from the links of ``bench/multiway.py``'s case). So the triangle term counts at
     most :data:`SUPPORT_VIEWS` third cameras at face value and, beyond, the link's agreement
     rate over that many: ``τ · min(1, K / shared)``. On sparse graphs (``shared ≤ K``) it is
     the triangle count itself; on dense ones the agreement rate decides, next to the link's
