@@ -401,7 +401,7 @@ def run_case(title: str, case: Case, methods, base: dict, a, records: list) -> N
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "cmu_hotel"))
-    p.add_argument("--frames", type=int, nargs="*", default=[20, 101],
+    p.add_argument("--frames", type=int, nargs="*", default=[20, 50, 101],
                    help="labelled cases with these frame counts (none: only the team rows)")
     p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
     p.add_argument("--inputs", nargs="+", default=["descriptors", "defaults"],

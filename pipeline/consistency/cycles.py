@@ -32,7 +32,12 @@ How much the triangles count (:func:`support_term`)
     most :data:`SUPPORT_VIEWS` third cameras at face value and, beyond, the link's agreement
     rate over that many: ``τ · min(1, K / shared)``. On sparse graphs (``shared ≤ K``) it is
     the triangle count itself; on dense ones the agreement rate decides, next to the link's
-    own evidence ``λ``.
+    own evidence ``λ``. ``K = 3`` keeps the triangle term's range (``3 · TRIANGLE_WEIGHT``,
+    6.9) within that of the ratio evidence (``±4.6``), so neither alone overrules the other;
+    measured on CMU hotel subsets of 30–101 frames (complete graphs, descriptors only, several
+    orders): ``K = 3`` gave the best association on every one, ``K = 4`` or ``5`` lost on the
+    50-frame subset (F1 0.992), counting every triangle lost on the 101-frame one (0.994). On
+    the ring2 teams and the formations no link has more than ``K`` shared third cameras.
 
 Cost: triangles ``O(deg(r) + deg(s))`` per link; the quadrangle test runs only on links with
 no triangle, ``O(Σ_{t ∈ N(r)} deg(t))`` each.
@@ -45,7 +50,7 @@ import numpy as np
 __all__ = ["cycle_support", "support_term", "SUPPORT_VIEWS"]
 
 #: third cameras whose triangles count at face value (:func:`support_term`)
-SUPPORT_VIEWS = 5
+SUPPORT_VIEWS = 3
 
 
 def support_term(tau: np.ndarray, shared: np.ndarray, quad: np.ndarray) -> np.ndarray:
