@@ -47,10 +47,42 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cycle_support", "support_term", "SUPPORT_VIEWS"]
+from pipeline.consistency.keys import isin_sorted, ranges
+
+__all__ = ["cycle_support", "shared_cameras", "support_term", "SUPPORT_VIEWS"]
 
 #: third cameras whose triangles count at face value (:func:`support_term`)
 SUPPORT_VIEWS = 3
+
+
+def shared_cameras(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray,
+                   cam_b: np.ndarray) -> np.ndarray:
+    """Third cameras both ends of each link are linked into, among the links given.
+
+    Parameters
+    ----------
+    a, b : (E,) int — link ends (feature ids), each link once
+    cam_a, cam_b : (E,) int — their cameras
+
+    Returns
+    -------
+    (E,) int64 — ``|cams(N(a)) ∩ cams(N(b))|`` (neither end's own camera is in the other's
+    set: no feature links to its own camera)
+    """
+    E = a.shape[0]
+    if E == 0:
+        return np.zeros(0, dtype=np.int64)
+    nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
+    ia, ib = inv[:E], inv[E:]
+    cam = np.empty(nodes.size, dtype=np.int64)
+    cam[ia], cam[ib] = cam_a, cam_b
+    C = np.int64(cam.max()) + 1
+    into = np.unique(np.r_[ia, ib] * C + cam[np.r_[ib, ia]])  # (node, camera it links into)
+    ptr = np.searchsorted(into // C, np.arange(nodes.size + 1))
+    pos = ranges(ptr[ia], ptr[ia + 1])
+    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
+    hit = isin_sorted(ib[e] * C + into[pos] % C, into)
+    return np.bincount(e[hit], minlength=E).astype(np.int64)
 
 
 def support_term(tau: np.ndarray, shared: np.ndarray, quad: np.ndarray) -> np.ndarray:

@@ -24,7 +24,10 @@ likely wrong. Here the robots of ``C`` instead agree on the cut by *flooding and
 of decreasing evidence: a link's weight is its local log-likelihood ratio plus
 :data:`TRIANGLE_WEIGHT` per *third camera* in which both its ends match one common feature
 (triangle support, computed from the set's links; with known poses a third camera counts
-only if the triangle's three observations are one point, see :func:`triangle_support`). Two
+only if the triangle's three observations are one point, see :func:`triangle_support`),
+counted at face value up to :data:`.cycles.SUPPORT_VIEWS` third cameras both ends are linked
+into and beyond as the agreement rate over that many (:func:`.cycles.support_term`, the
+``sync`` rule's weight: a confusion repeated across the views of a dense set). Two
 clusters merge only if they share no camera (Def. 2.4) and, when every camera of the set has
 a known pose, if the point triangulated (linear DLT) from all their observations lies in
 front of every camera and reprojects within :data:`REPROJECTION_TOL_PX` of each (the inlier
@@ -59,6 +62,7 @@ from functools import partial
 
 import numpy as np
 
+from pipeline.consistency.cycles import shared_cameras, support_term
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message, Transport
 
@@ -451,7 +455,8 @@ def set_problem(bundles: dict) -> tuple:
         return np.array([cam[int(g)] for g in ids], dtype=np.int64)
 
     kp, P = set_geometry(bundles)
-    w = w + TRIANGLE_WEIGHT * triangle_support(a, b, cam_of, kp, P)
+    tau = triangle_support(a, b, cam_of, kp, P)
+    w = w + TRIANGLE_WEIGHT * support_term(tau, shared_cameras(a, b, cam_a, cam_b), False)
     return a, b, cam_a, cam_b, w, kp, P
 
 

@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.consistency.cycles import shared_cameras, support_term
 from pipeline.consistency.evidence import (
     TRIANGLE_WEIGHT,
     EvidenceState,
@@ -304,7 +305,9 @@ class _SetProblems:
         self.cam_a = np.searchsorted(offsets, self.a, side="right") - 1
         self.cam_b = np.searchsorted(offsets, self.b, side="right") - 1
         self.local = w
-        self.w = w + TRIANGLE_WEIGHT * _triangles(self.a, self.b, self.cam_a, self.cam_b)
+        self.shared = shared_cameras(self.a, self.b, self.cam_a, self.cam_b)
+        self.w = w + TRIANGLE_WEIGHT * support_term(
+            _triangles(self.a, self.b, self.cam_a, self.cam_b), self.shared, False)
 
     def of(self, label: int) -> slice:
         k = int(np.searchsorted(self.label, label))
@@ -322,8 +325,8 @@ class _SetProblems:
         def cam_of(ids):
             return np.array([cam[int(g)] for g in ids], dtype=np.int64)
 
-        return self.local[e] + TRIANGLE_WEIGHT * triangle_support(a, b, cam_of, keypoints,
-                                                                  projections)
+        tau = triangle_support(a, b, cam_of, keypoints, projections)
+        return self.local[e] + TRIANGLE_WEIGHT * support_term(tau, self.shared[e], False)
 
 
 def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
