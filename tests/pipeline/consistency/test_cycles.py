@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.consistency.cycles import cycle_support
+from pipeline.consistency.cycles import SUPPORT_VIEWS, cycle_support, shared_cameras, support_term
 
 
 def _graph(seed: int, n: int, m: int, p: float):
@@ -80,3 +80,30 @@ def test_a_good_link_next_to_a_swap_keeps_a_quadrangle():
         assert _brute(edges, m, a, b) == (0, True)
     # the swapped A1-B2 closes neither
     assert _brute(edges, m, 2, 5) == (0, False)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 7), m=st.integers(1, 5),
+       p=st.floats(0.2, 1.0))
+def test_shared_cameras_equal_a_brute_force_count(seed, n, m, p):
+    edges = sorted(_graph(seed, n, m, p))
+    if not edges:
+        return
+    a = np.array([x for x, _ in edges], dtype=np.int64)
+    b = np.array([y for _, y in edges], dtype=np.int64)
+    nbr = {}
+    for x, y in edges:
+        nbr.setdefault(x, set()).add(y // m)
+        nbr.setdefault(y, set()).add(x // m)
+    want = [len(nbr[x] & nbr[y]) for x, y in edges]
+    assert shared_cameras(a, b, a // m, b // m).tolist() == want
+
+
+def test_support_term_counts_triangles_up_to_k_then_the_agreement_rate():
+    k = SUPPORT_VIEWS
+    tau = np.array([0, 0, 2, k, k, 2 * k, 0])
+    shared = np.array([0, 3, 2, k, 2 * k, 4 * k, 4 * k])
+    quad = np.array([True, False, True, False, False, False, True])
+    got = support_term(tau, shared, quad)
+    # a quadrangle counts one only without triangle; beyond K shared cameras: K · τ / shared
+    np.testing.assert_allclose(got, [1.0, 0.0, 2.0, k, k / 2, k / 2, 1.0], rtol=0, atol=1e-12)
