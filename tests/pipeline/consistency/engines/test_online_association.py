@@ -213,8 +213,8 @@ def test_a_long_track_costs_its_robots_one_run_not_one_entry_per_frame():
         state.append(oa.robot_state_bytes().tolist())
     assert oa.is_conflict_free() and oa.links.kept.all()
     assert len(np.unique(oa.ret_piece)) == 1
-    assert sorted(zip(oa.ret_robot.tolist(), oa.ret_lo.tolist(), oa.ret_hi.tolist())) == \
-        [(0, 0, 27), (1, 0, 27)]
+    runs = zip(oa.ret_robot.tolist(), oa.ret_lo.tolist(), oa.ret_hi.tolist(), strict=True)
+    assert sorted(runs) == [(0, 0, 27), (1, 0, 27)]
     assert state[-1] == state[3]
 
 
