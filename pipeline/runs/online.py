@@ -40,7 +40,7 @@ from pipeline.progress import StageTimer
 from pipeline.types import Links
 
 __all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs",
-           "associate_online", "batch_steps_of"]
+           "associate_online", "batch_steps_of", "online_tables", "jsonable_step"]
 
 
 @dataclass
@@ -284,7 +284,8 @@ def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
     run = run_online_steps(config, timer, batch_steps={config.steps - 1}
                            if config.batch_every == 0 else None)
     report = online_report(config, run, timer)
-    _write(config.out_dir(), config, run, report, timer)
+    online_tables(config.out_dir(), run, report, timer,
+                  [v.name for v in run.sequence.flat.views], rerun=config.rerun)
     return config.out_dir()
 
 
@@ -331,7 +332,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "comm_edges": np.asarray(seq.comm_edges).tolist(),
         "window": int(config.window),
         "resolution": oa.resolution,
-        "steps": [_jsonable(r) for r in run.steps],
+        "steps": [jsonable_step(r) for r in run.steps],
         "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
                                              for r in run.steps)),
@@ -344,11 +345,12 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     }
 
 
-def _jsonable(rec: dict) -> dict:
+def jsonable_step(rec: dict) -> dict:
+    """A step record as ``report.json`` holds it (plain numbers, floats rounded)."""
     out = {}
     for k, v in rec.items():
         if isinstance(v, dict):
-            out[k] = _jsonable(v)
+            out[k] = jsonable_step(v)
         elif isinstance(v, (np.integer,)):
             out[k] = int(v)
         elif isinstance(v, (float, np.floating)):
@@ -358,8 +360,11 @@ def _jsonable(rec: dict) -> dict:
     return out
 
 
-def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
-           timer: StageTimer) -> None:
+def online_tables(out: Path, run: OnlineRun, report: dict, timer: StageTimer, names: list,
+                  rerun: bool = True, centres: np.ndarray | None = None) -> None:
+    """Write the run folder of an online run atomically: ``links.csv``, ``images.csv``
+    (``names``: each frame's name), ``link_steps.csv``, ``report.json`` and, with ``rerun``,
+    ``recording.rrd`` (robots at their frames' centres, or at ``centres``)."""
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.runfolder import atomic_run_folder, write_json_atomic
     from pipeline.types import LinkLedger
@@ -374,7 +379,6 @@ def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             write_links_csv(tmp / "links.csv", ledger)
-            names = [v.name for v in run.sequence.flat.views]
             rows = ["image,robot,step,name"] + [
                 f"{g},{int(oa.robot[g])},{int(oa.step[g])},{names[g]}" for g in range(oa.n_images)]
             (tmp / "images.csv").write_text("\n".join(rows) + "\n")
@@ -382,9 +386,10 @@ def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
                 f"{k},{int(a)},{'' if c < 0 else int(c)}"
                 for k, (a, c) in enumerate(zip(L.step_added, L.step_cut, strict=True))]
             (tmp / "link_steps.csv").write_text("\n".join(rows) + "\n")
-            if config.rerun:
+            if rerun:
                 from viz.online_log import log_online
 
-                log_online(tmp / "recording.rrd", run.sequence, oa, report["steps"])
+                log_online(tmp / "recording.rrd", run.sequence, oa, report["steps"],
+                           centres=centres)
             report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
             write_json_atomic(tmp / "report.json", report)
