@@ -194,10 +194,12 @@ class OnlineAssociation:
     True
     """
 
-    def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION):
+    def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
+                 overturn: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
+        self.overturn = bool(overturn)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -552,6 +554,7 @@ class OnlineAssociation:
         comp = self._components(sub, np.concatenate([a_k, hist_a]),
                                 np.concatenate([b_k, hist_b]))
         img_of = np.searchsorted(self.offset, sub, side="right") - 1
+        w_all = self._border_ends()[0]
         # the pieces of each set and their retired entries
         pc = np.unique(np.stack([comp[np.searchsorted(sub, att_f)], att_p], axis=1), axis=0) \
             if len(att_f) else np.zeros((0, 2), np.int64)
@@ -579,14 +582,24 @@ class OnlineAssociation:
             robots = np.unique(self.robot[img_of[members]])
             in_c = np.isin(self.offset[L.ci[kept_real]] + L.fi[kept_real], sub[members])
             links_c = kept_real[in_c]
-            flood += len(robots) * FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum())
             here = r_comp == c
-            skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, att_f,
-                                   att_p, (r_piece[here], r_robot[here], r_lo[here],
-                                           r_hi[here]), t)
+            entries = (r_piece[here], r_robot[here], r_lo[here], r_hi[here])
+            if self.overturn:
+                border_c = self.border_links[np.isin(w_all, sub[members])]
+                flood += len(robots) * FLOOD_LINK_BYTES * int(len(links_c) + len(border_c))
+                skipped = self._rebuild(sub, members, links_c, border_c, img_of, entries)
+            else:
+                flood += len(robots) * FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum())
+                skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, att_f,
+                                       att_p, entries, t)
             self._cut(skipped, HISTORY, t)
             cut_n += len(skipped)
         if bad:
+            self.border_links = self.border_links[L.kept[self.border_links]]
+            self._drop_dead_pieces()
+            w_b, p_b, _ = self._border_ends()
+            on = np.isin(w_b, sub)
+            hist_a, hist_b = _chain(w_b[on], p_b[on])
             kept_real = real[L.kept[real]]
             a_k, b_k = self._ends(kept_real)
             comp = self._components(sub, np.concatenate([a_k, hist_a]),
@@ -596,6 +609,61 @@ class OnlineAssociation:
         self.label[sub] = self._fresh + comp.astype(np.int64)
         self._fresh += n_c
         return cut_n, flood
+
+    def _rebuild(self, sub, members, links_c, border_c, img_of, entries) -> np.ndarray:
+        """The history repair of one conflictive set when open links may be overturned
+        (step 3): the links it cuts. The set's retired pieces stay whole (their links are
+        final); its open links, every kept window link and border link of the set, are added
+        by decreasing quality (ties by link id), the order of the evidence rule's Kruskal
+        merge, and a link is skipped when the two groups it would join have overlapping runs
+        of one robot. Deterministic: every robot of the set computes the same cut."""
+        L = self.links
+        r_piece, r_robot, r_lo, r_hi = entries
+        images: dict[int, dict] = {
+            int(f): {int(self.robot[img_of[k]]): [(int(self.step[img_of[k]]),) * 2]}
+            for k, f in zip(members, sub[members], strict=True)}
+        for p in np.unique(r_piece).tolist():  # a piece is node -1 - p
+            on = r_piece == p
+            runs: dict = {}
+            for r, lo, hi in zip(r_robot[on].tolist(), r_lo[on].tolist(), r_hi[on].tolist(),
+                                 strict=True):
+                runs.setdefault(r, []).append((lo, hi))
+            images[-1 - p] = runs
+        parent = {x: x for x in images}
+        a_w, b_w = self._ends(links_c)
+        a_b, b_b = self._ends(border_c)
+        win_a = self.piece[a_b] < 0
+        node_b = -1 - self.piece[np.where(win_a, b_b, a_b)]
+        ids = np.concatenate([links_c, border_c])
+        na = np.concatenate([a_w, np.where(win_a, a_b, b_b)])
+        nb = np.concatenate([b_w, node_b])
+        for x in np.concatenate([na, nb]).tolist():  # a piece with no entries left
+            images.setdefault(x, {})
+            parent.setdefault(x, x)
+        order = np.lexsort((ids, -L.quality[ids]))
+
+        def find(x):
+            while parent[x] != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        skipped = []
+        for k in order.tolist():
+            rx, ry = find(int(na[k])), find(int(nb[k]))
+            if rx == ry:
+                continue
+            x, y = images[rx], images[ry]
+            if any(lo <= h and l2 <= hi for r in x.keys() & y.keys()
+                   for lo, hi in x[r] for l2, h in y[r]):
+                skipped.append(int(ids[k]))
+                continue
+            if len(x) < len(y):
+                rx, ry, x, y = ry, rx, y, x
+            parent[ry] = rx
+            for r, runs in y.items():
+                x.setdefault(r, []).extend(runs)
+        return np.asarray(skipped, np.int64)
 
     def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, att_f, att_p,
                 entries, t) -> np.ndarray:

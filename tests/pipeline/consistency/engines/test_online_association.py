@@ -234,3 +234,23 @@ def test_two_pieces_sharing_a_retired_frame_are_not_joined():
     assert rec["conflictive_features"] == 0 and rec["cut_history"] == 1
     assert oa.links.reason.tolist()[-3:] == ["", HISTORY, ""]
     assert oa.is_conflict_free()
+
+
+@pytest.mark.parametrize("overturn", [True, False])
+def test_the_history_repair_may_overturn_a_weak_link_into_a_retired_frame(overturn):
+    """Track B reaches the window through a weak link (quality 0.2) from a retired frame; a
+    new frame joins A and B. With ``overturn`` the repair adds every open link of the set by
+    decreasing quality and the weak link goes (B's piece then has no border link left, its
+    entries go); without, it keeps the earlier links and cuts a new one."""
+    oa = OnlineAssociation(window=2, resolution="paper", overturn=overturn)
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0], [0.9, 0.2]))
+    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
+                                                        [0, 0, 0], [0.8, 0.9, 0.7]))
+    assert rec["cut_history"] == 1 and oa.is_conflict_free()
+    reasons = oa.links.reason.tolist()
+    if overturn:
+        assert reasons == ["", "", "", HISTORY, "", "", ""]
+        assert np.unique(oa.ret_piece).tolist() == [oa.piece[0]]
+    else:
+        assert reasons == ["", "", "", "", HISTORY, "", ""]
