@@ -58,18 +58,25 @@ One step (:meth:`OnlineAssociation.add_step`)
    set); in a set that reaches two pieces or more, the set's robots flood the pieces' names
    and entries (8 bytes per piece and :data:`RETIRED_ENTRY_BYTES` per entry, per robot of the
    set, in the detection's rounds) and check whether one robot has overlapping runs in two
-   pieces. A conflictive set floods its new links too (24 bytes each per robot) and each of
-   its robots solves the same deterministic repair: start from the set's kept old links and
-   history links (joined before the step), add the kept new links by decreasing quality,
-   skip one that would join two groups in which one robot has overlapping runs (window
-   frames count as runs of one step). A skipped link is cut with reason ``history``. So new
-   evidence never overturns a retired frame's decision.
+   pieces. A conflictive set floods its open links too (24 bytes each per robot) and each
+   of its robots solves the same deterministic repair, the rule of *when new evidence
+   overturns an earlier decision*: a link between two retired frames is final (its piece is
+   only summarized, it can no longer be split); every other kept link of the set, new, or
+   older with an end in the window (window links and border links: *open* links), is
+   weighed again with the new ones. The repair starts from the set's retired pieces, adds
+   its open links by decreasing quality (ties by link id; the order of the evidence rule's
+   Kruskal merge) and skips a link that would join two groups in which one robot has
+   overlapping runs (window frames count as runs of one step). A skipped link is cut with
+   reason ``history``: when a weak link into a retired frame closes the clash, it is that
+   link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
+   starts from the set's old links and history links and skips only new links, so new
+   evidence never overturns an earlier decision.)
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
 links make its set conflictive, and only by the rule (reason of the rule) or by the history
-repair; every other kept link keeps its decision, and the labels of untouched tracks do not
-change.
+repair (an open link of a set holding a retired frame twice); every other kept link keeps
+its decision, and the labels of untouched tracks do not change.
 
 Guarantee (after every step the kept association is conflict-free), by induction on the
 steps. Before the first step there is no link. Suppose the association is conflict-free
@@ -82,9 +89,11 @@ piece's border links, which the history links chain). The rule leaves every comp
 sub-problem conflict-free over window images (Prop. 4.5 for Alg. 1; one pass of the
 evidence rule). If the rule cut a history link (which stays), or two pieces of a component
 share a retired image (then one robot has overlapping runs in both: runs cover every frame
-of their piece), the repair rebuilds the component from groups joined before the step and
-adds a link only when no robot has overlapping runs in the two groups it joins, a superset
-of "the two groups share an image": the result is conflict-free. Hence a conflict created
+of their piece), the repair rebuilds the component from conflict-free groups (its retired
+pieces, each conflict-free by the induction; with ``overturn=False`` the groups its old
+links joined before the step) and adds a link only when no robot has overlapping runs in the
+two groups it joins, a superset of "the two groups share an image": the result is
+conflict-free (a cut only splits sets, so the other components stay conflict-free). Hence a conflict created
 by new links is always found: it lies in a set that contains a new link, whose labels are
 touched, so it is inside the sub-problem (window images, caught by detection, Prop. 3.5) or
 in two retired pieces of the set (caught by the history check).
@@ -176,6 +185,8 @@ class OnlineAssociation:
     ----------
     window : int >= 1 — steps of frames a robot holds
     resolution : a rule of :mod:`pipeline.consistency.rules`
+    overturn : bool — the history repair may cut open links older than the step (default;
+        module docstring, step 3), or only new links
 
     Examples
     --------
