@@ -64,6 +64,8 @@ class OnlineConfig:
     fusion: bool = True
     out: str | None = None
     rerun: bool = True
+    #: the history repair may overturn open links (OnlineAssociation, step 3)
+    overturn: bool = True
 
     def out_dir(self) -> Path:
         if self.out:
@@ -174,7 +176,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
     run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, config.window,
                            config.resolution, timer, features=config.features,
                            max_features=config.max_features, fusion=config.fusion,
-                           batch_steps=batch_steps, on_step=on_step)
+                           batch_steps=batch_steps, on_step=on_step, overturn=config.overturn)
     run.sequence = seq
     return run
 
@@ -191,13 +193,13 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      timer: StageTimer, *, features: str = "sift",
                      max_features: int | None = 500, fusion: bool = True,
                      batch_steps=frozenset(), on_step=None, feature_options=None,
-                     match_options=None) -> OnlineRun:
+                     match_options=None, overturn: bool = True) -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
     of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
-    :func:`pipeline.matching.pairs.match_edges`. Returns an :class:`OnlineRun` without
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn`` to the online stage. Returns an :class:`OnlineRun` without
     ``sequence``."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
@@ -209,7 +211,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     radius = feature_options.pop("merge_radius", None)
     radius = MERGE_RADIUS_PX if radius is None else radius
     steps = len(step_edges)
-    oa = OnlineAssociation(window, resolution=resolution)
+    oa = OnlineAssociation(window, resolution=resolution, overturn=overturn)
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)
