@@ -16,7 +16,10 @@ their conflictive sets.
 
 Targets: conflict-free after every step; at the last step the online step costs <= 10 % of
 the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per robot follows
-the window, not the history (its last-step value over its value at step ``window``).
+the window, not the history (its last-step value over its value at step ``window``; the
+stage's own state every 5 steps, ``memory_curve``, and its last-step value over its value
+half-way, ``state_growth_second_half``). ``--no-overturn``: the history repair's earlier
+rule (only new links are cut), for comparison.
 
 Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
 online one it is compared with.
@@ -52,7 +55,7 @@ def one(robots: int, args) -> dict:
                           max_features=args.max_features, robots=robots, graph=args.graph,
                           steps=args.steps, window=args.window, speed=args.speed,
                           resolution=args.resolution, batch_every=args.batch_every,
-                          fusion=args.fusion, rerun=False)
+                          fusion=args.fusion, rerun=False, overturn=not args.no_overturn)
     t0 = time.perf_counter()
 
     def show(r):
@@ -106,6 +109,16 @@ def one(robots: int, args) -> dict:
         "memory_growth": final_step["robot_memory_bytes_max"] / ref["robot_memory_bytes_max"]
         if ref["robot_memory_bytes_max"] else None,
         "online_robot_memory_bytes_last": final_step["robot_memory_bytes_max"],
+        # the stage's own state per robot (labels, window links, border links, retired
+        # entries), every 5 steps and at the last: it levels off once the window is full
+        "memory_curve": [{"step": r["step"] + 1,
+                          "robot_memory_bytes_max": r["robot_memory_bytes_max"],
+                          "robot_state_bytes_max": r["robot_state_bytes_max"],
+                          "retired_entries_max": r.get("retired_entries_max")}
+                         for r in steps if (r["step"] + 1) % 5 == 0 or r is final_step],
+        "state_growth_second_half": final_step["robot_state_bytes_max"]
+        / steps[len(steps) // 2 - 1]["robot_state_bytes_max"]
+        if len(steps) >= 2 and steps[len(steps) // 2 - 1]["robot_state_bytes_max"] else None,
         "scores_at_batch_steps": at_batch,
         "final": {k: f[k] for k in ("before", "online", "batch") if k in f},
         "seconds": time.perf_counter() - t0,
@@ -130,6 +143,9 @@ def main(argv=None) -> int:
                          "--batch-every and the last (the batch rerun's cost grows with the "
                          "history: on a busy machine a large team's last steps take long)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-overturn", action="store_true",
+                    help="the history repair cuts only new links (the earlier rule), instead of "
+                         "weighing the conflictive set's open links again")
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
                          "alone, as the batch run)")
@@ -154,6 +170,11 @@ def main(argv=None) -> int:
               f"{s['compared_step']}: online/batch wall {ls['wall_ratio']}, bytes "
               f"{ls['bytes_ratio']}; robot memory at step {s['steps']} / at step "
               f"{args.window}: {s['memory_growth']}", flush=True)
+        print("  robot memory (MB) / stage state (kB) / retired entries, by step: " + ", ".join(
+            f"{c['step']}: {c['robot_memory_bytes_max'] / 1e6:.3f} / "
+            f"{c['robot_state_bytes_max'] / 1e3:.1f} / {c['retired_entries_max']}"
+            for c in s["memory_curve"]) + f"; state last / at step {s['steps'] // 2}: "
+            f"{s['state_growth_second_half']}", flush=True)
         for k, sc in s["scores_at_batch_steps"].items():
             print(f"  after step {k}: pairwise F1 online {sc['online']['f1']:.4f} "
                   f"(P {sc['online']['precision']:.4f} R {sc['online']['recall']:.4f}), batch "

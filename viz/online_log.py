@@ -40,16 +40,17 @@ def _pair_strips(centres, ci, cj) -> tuple[list, list]:
 
 
 def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
-               application_id: str = "formation-match") -> Path:
+               application_id: str = "formation-match", centres=None) -> Path:
     """Write the recording of an online run to ``path`` (temp file, then renamed).
 
     ``sequence``: :class:`data_synth.motion.Sequence`; ``online``: the run's
-    :class:`pipeline.consistency.engines.online.OnlineAssociation`; ``steps``: its records.
+    :class:`pipeline.consistency.engines.online.OnlineAssociation`; ``steps``: its records;
+    ``centres``: ``(frames, 3)`` where to draw each frame instead of its camera centre (frames
+    without poses, e.g. photographs; ``sequence`` may then be ``None``).
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    views = sequence.flat.views
-    centres = _centres(views)
+    centres = _centres(sequence.flat.views) if centres is None else np.asarray(centres, float)
     L = online.links
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:

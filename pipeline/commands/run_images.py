@@ -1,6 +1,8 @@
 """``python -m pipeline run-images DIR --graph KIND``: the whole pipeline on real photographs.
 
-The options of the run; the run itself is :func:`pipeline.runs.images.run_images`.
+The options of the run; the run itself is :func:`pipeline.runs.images.run_images`, or with
+``--sequence`` (a folder of per-robot frame sequences, associated online step by step)
+:func:`pipeline.runs.online_images.run_images_sequence`.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ __all__ = ["add_arguments", "config_from_args", "run"]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
-                   help="folder of photographs (JPEG/PNG/TIFF; taken in name order)")
+                   help="folder of photographs (JPEG/PNG/TIFF; taken in name order); with "
+                        "--sequence a folder of one sub-folder per robot")
     p.add_argument("--graph", required=True, metavar="ring|ring2|complete|knn:K|seq:K|FILE",
                    help="communication graph: ring, ring2 (ring + 2-hop chords), complete, "
                         "knn:K (each image with the K images most similar to it, by a global "
@@ -67,6 +70,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_resolution_option(p)
     add_merge_radius_option(p)
     add_transport_option(p)
+    g = p.add_argument_group("a team in motion: per-robot frame sequences (online association)")
+    g.add_argument("--sequence", action="store_true",
+                   help="DIR holds one sub-folder per robot (robots in the sub-folders' name "
+                        "order), each with that robot's frames in name order, every robot the "
+                        "same number; step k = each robot's k-th frame, associated online as "
+                        "run-formation --steps N; --graph is then the robots' graph (a kind, or "
+                        "a file of sub-folder names or indices); no fusion (no poses)")
+    g.add_argument("--window", type=int, default=3,
+                   help="with --sequence: steps of frames a robot holds and matches against "
+                        "(default 3)")
+    g.add_argument("--batch-every", type=int, default=0,
+                   help="with --sequence: also run the batch stage from scratch on all links "
+                        "every K steps (default 0: at the last step only)")
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -94,10 +110,61 @@ def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
         if Path(v).exists()]
 
 
+def sequence_config_from_args(args):
+    """The :class:`pipeline.runs.online_images.SequenceConfig` of ``run-images DIR --sequence``.
+
+    Raises
+    ------
+    InputError
+        A bad ``--window`` or ``--batch-every``, or an option the online job does not run
+        (``--transport`` other than sim, ``--export-db``, ``--truth``, a live viewer).
+    """
+    from pipeline.runs.online_images import SequenceConfig
+
+    if args.window < 1:
+        raise InputError(f"--window {args.window}: expected a number of steps >= 1")
+    if args.batch_every < 0:
+        raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
+    for flag, on in (("--transport", args.transport != "sim"), ("--export-db", args.export_db),
+                     ("--truth", args.truth != "none"),
+                     ("--spawn/--connect", bool(args.spawn or args.connect))):
+        if on:
+            raise InputError(f"{flag} is not available with --sequence (the online job runs "
+                             "on the simulator and writes no database); drop it")
+    if args.max_size < 0:
+        raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
+                         f"or 0 for full resolution")
+    method, max_features = feature_options(args)
+    return SequenceConfig(directory=args.directory, graph=args.graph, window=args.window,
+                          intrinsics=args.intrinsics, max_size=args.max_size or None,
+                          features=method, max_features=max_features, matcher=args.matcher,
+                          resolution=args.resolution, batch_every=args.batch_every,
+                          out=args.out, rerun=not args.no_rerun)
+
+
+def _run_sequence(args) -> int:
+    from pipeline.runfolder import claim_run_folder
+    from pipeline.runs.online_images import run_images_sequence
+
+    config = sequence_config_from_args(args)
+    with claim_run_folder(config.out_dir(), inputs=[("DIR", config.directory)]):
+        out = run_images_sequence(config)
+    report = json.loads((out / "report.json").read_text())
+    f = report["final"]
+    print(f"{len(report['steps'])} steps of {report['n_robots']} robots, {f['links']} links, "
+          f"conflict-free after every step: {report['conflict_free_every_step']}; kept online "
+          f"{f['online']['kept']}" + (f", batch {f['batch']['kept']}" if "batch" in f else ""))
+    print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
+          + ("" if args.no_rerun else ", recording.rrd") + ")")
+    return 0 if report["conflict_free_every_step"] else 3
+
+
 def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.images import run_images
 
+    if args.sequence:
+        return _run_sequence(args)
     config = config_from_args(args)
     with claim_run_folder(config.out_dir(), inputs=_inputs(config)):
         out = run_images(config)

@@ -39,7 +39,8 @@ from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.progress import StageTimer
 from pipeline.types import Links
 
-__all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs"]
+__all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs",
+           "associate_online", "batch_steps_of", "online_tables", "jsonable_step"]
 
 
 @dataclass
@@ -63,6 +64,8 @@ class OnlineConfig:
     fusion: bool = True
     out: str | None = None
     rerun: bool = True
+    #: the history repair may overturn open links (OnlineAssociation, step 3)
+    overturn: bool = True
 
     def out_dir(self) -> Path:
         if self.out:
@@ -162,62 +165,95 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
     called with each step's record. Returns an :class:`OnlineRun`.
     """
     from data_synth.motion import render_motion
-    from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
-    from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
-    from pipeline.matching.pairs import match_edges
 
     timer = timer or StageTimer(verbose=False)
     with timer.stage("render", f"{config.steps} steps"):
         seq = render_motion(config.formation, config.seed, config.steps, config.size,
                             config.robots, config.graph, speed=config.speed,
                             switching=config.switching, window=config.window)
-    n = seq.n_robots
-    views = seq.flat.views
     if batch_steps is None:
-        every = int(config.batch_every)
-        batch_steps = set() if every <= 0 else \
-            {t for t in range(config.steps) if (t + 1) % every == 0} | {config.steps - 1}
-    oa = OnlineAssociation(config.window, resolution=config.resolution)
-    features: list = []
+        batch_steps = batch_steps_of(config.steps, config.batch_every)
+    run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, config.window,
+                           config.resolution, timer, features=config.features,
+                           max_features=config.max_features, fusion=config.fusion,
+                           batch_steps=batch_steps, on_step=on_step, overturn=config.overturn)
+    run.sequence = seq
+    return run
+
+
+def batch_steps_of(steps: int, every: int) -> set:
+    """The steps of the batch run: every ``every`` steps and the last (none if ``every`` is
+    0)."""
+    every = int(every)
+    return set() if every <= 0 else \
+        {t for t in range(steps) if (t + 1) % every == 0} | {steps - 1}
+
+
+def associate_online(views: list, n: int, step_edges: list, window: int, resolution: str,
+                     timer: StageTimer, *, features: str = "sift",
+                     max_features: int | None = 500, fusion: bool = True,
+                     batch_steps=frozenset(), on_step=None, feature_options=None,
+                     match_options=None, overturn: bool = True) -> OnlineRun:
+    """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
+    of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
+    of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
+    changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
+    ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn`` to the online stage. Returns an :class:`OnlineRun` without
+    ``sequence``."""
+    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
+    from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
+    from pipeline.matching.pairs import match_edges
+
+    feature_options = dict(feature_options or {})
+    match_options = dict(match_options or {})
+    radius = feature_options.pop("merge_radius", None)
+    radius = MERGE_RADIUS_PX if radius is None else radius
+    steps = len(step_edges)
+    oa = OnlineAssociation(window, resolution=resolution, overturn=overturn)
+    feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)
     records, batch, batch_kept = [], None, {}
-    with timer.stage("online", f"{config.steps} steps, window {config.window}"):
-        for t in range(config.steps):
-            ids = [seq.image(i, t) for i in range(n)]
+    with timer.stage("online", f"{steps} steps, window {window}"):
+        for t in range(steps):
+            ids = [t * n + i for i in range(n)]
             t0 = time.perf_counter()
-            feats = extract_all([views[g] for g in ids], config.features, config.max_features,
-                                MERGE_RADIUS_PX)
-            features += feats
+            feats = extract_all([views[g] for g in ids], features, max_features, radius,
+                                **feature_options)
+            feats_all += feats
             robot_of = np.concatenate([robot_of, np.arange(n)])
             step_of = np.concatenate([step_of, np.full(n, t)])
-            pairs = step_pairs(robot_of, step_of, t, config.window, seq.step_edges[t])
+            pairs = step_pairs(robot_of, step_of, t, window, step_edges[t])
             local = np.unique(pairs)
             lp = np.searchsorted(local, pairs)
-            matches = match_edges([features[g] for g in local], [views[g] for g in local], lp)
+            matches = match_edges([feats_all[g] for g in local], [views[g] for g in local], lp,
+                                  **match_options)
             lk = Links.from_matches(matches)
             links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
             match_s = time.perf_counter() - t0
-            frames = [Frame(i, len(f), f.keypoints, views[g].K @ np.c_[views[g].R, views[g].t])
+            frames = [Frame(i, len(f), f.keypoints, None if views[g].R is None else
+                            views[g].K @ np.c_[views[g].R, views[g].t])
                       for i, (g, f) in enumerate(zip(ids, feats, strict=True))]
             rec = dict(oa.add_step(frames, links))
-            if config.fusion:
-                rec["fusion"] = _fuse_changed(oa, views, features)
+            if fusion:
+                rec["fusion"] = _fuse_changed(oa, views, feats_all)
             kept = oa.kept_links()
             counts = count_conflicts(AssociationGraph(oa.m, kept))
             rec.update(match_s=match_s, pairs_matched=int(len(pairs)),
                        conflictive_sets_after=int(counts.conflictive_sets),
                        links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
-            desc = _memory(features, oa.window_images, robot_of, n)
+            desc = _memory(feats_all, oa.window_images, robot_of, n)
             rec["robot_memory_bytes_max"] = int((desc + oa.robot_state_bytes()).max())
             if t in batch_steps:
                 t1 = time.perf_counter()
-                batch = batch_resolve(oa.m, oa.all_links(), config.resolution,
-                                      keypoints=oa.keypoints, projections=oa.projection)
+                batch = batch_resolve(oa.m, oa.all_links(), resolution,
+                                      keypoints=oa.keypoints, projections=oa.projection
+                                      if all(p is not None for p in oa.projection) else None)
                 bs = batch.stats
-                all_img = np.arange(len(features))
-                b_state = _memory(features, all_img, robot_of, n)
+                all_img = np.arange(len(feats_all))
+                b_state = _memory(feats_all, all_img, robot_of, n)
                 np.add.at(b_state, robot_of, 16 * oa.m)
                 np.add.at(b_state, robot_of[oa.links.ci], 40)
                 np.add.at(b_state, robot_of[oa.links.cj], 40)
@@ -239,7 +275,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "
                        f"{rec['wall_s']:.3f} s")
-    return OnlineRun(sequence=seq, features=features, online=oa, steps=records, batch=batch,
+    return OnlineRun(sequence=None, features=feats_all, online=oa, steps=records, batch=batch,
                      batch_kept=batch_kept)
 
 
@@ -250,7 +286,8 @@ def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
     run = run_online_steps(config, timer, batch_steps={config.steps - 1}
                            if config.batch_every == 0 else None)
     report = online_report(config, run, timer)
-    _write(config.out_dir(), config, run, report, timer)
+    online_tables(config.out_dir(), run, report, timer,
+                  [v.name for v in run.sequence.flat.views], rerun=config.rerun)
     return config.out_dir()
 
 
@@ -297,7 +334,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "comm_edges": np.asarray(seq.comm_edges).tolist(),
         "window": int(config.window),
         "resolution": oa.resolution,
-        "steps": [_jsonable(r) for r in run.steps],
+        "steps": [jsonable_step(r) for r in run.steps],
         "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
                                              for r in run.steps)),
@@ -310,11 +347,12 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     }
 
 
-def _jsonable(rec: dict) -> dict:
+def jsonable_step(rec: dict) -> dict:
+    """A step record as ``report.json`` holds it (plain numbers, floats rounded)."""
     out = {}
     for k, v in rec.items():
         if isinstance(v, dict):
-            out[k] = _jsonable(v)
+            out[k] = jsonable_step(v)
         elif isinstance(v, (np.integer,)):
             out[k] = int(v)
         elif isinstance(v, (float, np.floating)):
@@ -324,8 +362,11 @@ def _jsonable(rec: dict) -> dict:
     return out
 
 
-def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
-           timer: StageTimer) -> None:
+def online_tables(out: Path, run: OnlineRun, report: dict, timer: StageTimer, names: list,
+                  rerun: bool = True, centres: np.ndarray | None = None) -> None:
+    """Write the run folder of an online run atomically: ``links.csv``, ``images.csv``
+    (``names``: each frame's name), ``link_steps.csv``, ``report.json`` and, with ``rerun``,
+    ``recording.rrd`` (robots at their frames' centres, or at ``centres``)."""
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.runfolder import atomic_run_folder, write_json_atomic
     from pipeline.types import LinkLedger
@@ -340,7 +381,6 @@ def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             write_links_csv(tmp / "links.csv", ledger)
-            names = [v.name for v in run.sequence.flat.views]
             rows = ["image,robot,step,name"] + [
                 f"{g},{int(oa.robot[g])},{int(oa.step[g])},{names[g]}" for g in range(oa.n_images)]
             (tmp / "images.csv").write_text("\n".join(rows) + "\n")
@@ -348,9 +388,10 @@ def _write(out: Path, config: OnlineConfig, run: OnlineRun, report: dict,
                 f"{k},{int(a)},{'' if c < 0 else int(c)}"
                 for k, (a, c) in enumerate(zip(L.step_added, L.step_cut, strict=True))]
             (tmp / "link_steps.csv").write_text("\n".join(rows) + "\n")
-            if config.rerun:
+            if rerun:
                 from viz.online_log import log_online
 
-                log_online(tmp / "recording.rrd", run.sequence, oa, report["steps"])
+                log_online(tmp / "recording.rrd", run.sequence, oa, report["steps"],
+                           centres=centres)
             report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
             write_json_atomic(tmp / "report.json", report)

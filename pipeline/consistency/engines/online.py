@@ -10,77 +10,103 @@ Words
 *Image* (a camera of the papers, Def. 2.4): one frame of one robot; a conflict is two
 features of one image in one association set. *Window*: a robot holds the frames of its last
 ``W`` steps (``window``); at step ``t`` the frames of steps ``t - W + 1 .. t`` are in the
-window, older frames are *retired*: their features and links are final (a retired link is
-never cut again). New links must join a frame of step ``t`` to a frame in the window
-(the runner matches a new frame against its robot's ``W - 1`` previous frames and its current
-neighbours' last ``W`` frames). *Label*: every feature carries the name of its track (a new
-feature starts as its own global id; a set keeps the name of the track whose retired frames
-it holds, otherwise it gets a fresh name, :data:`FRESH_LABELS`). A label names a set of
-features that contains the feature's true association set: a window feature with a kept
-link into a retired frame is *anchored*, and the anchored window pieces of one label are
-treated as one set (they may be joined through retired frames; if they are not, treating
-them as joined only makes the checks below stricter). Every robot holds, for each label it
-carries, the retired images of its own retired frames in that label (``retired`` entries):
-8 bytes per (label, image), dropped once the label has no feature left in any window.
+window, older frames are *retired*: their features and links are final (a link with a
+retired end is never cut again). New links must join a frame of step ``t`` to a frame in the
+window (the runner matches a new frame against its robot's ``W - 1`` previous frames and its
+current neighbours' last ``W`` frames). A *retired piece* is a connected component of the
+kept links between retired features; a *border link* is a kept link from a window feature
+into a retired piece. A set of the association is exactly a component of the window's kept
+links, the border links and the retired pieces (a piece is connected, so are the window
+features its border links reach). *Label*: every window feature carries a name of its set
+(a new feature starts as its own global id, every set a step's stage ran on gets a fresh
+name, :data:`FRESH_LABELS`); a label always contains the whole set of its features (a later
+cut, e.g. by fusion, may leave it naming several sets, which only widens the next check).
+
+*Retired entries* summarize a piece for the history check: for each robot with retired
+frames in the piece, the runs of consecutive steps of those frames, ``(piece, lo, hi)``, held
+by that robot (one frame per robot per step, so a run names the frames exactly); beyond
+:data:`RUNS_PER_ROBOT` runs the oldest runs of one robot merge into one run over their span
+(a superset of its frames). A piece keeps its entries while a border link reaches it; a
+piece no window feature reaches can never meet a new link, and its entries are dropped. So a
+robot's entries are at most ``RUNS_PER_ROBOT`` per live piece it has frames in, and the live
+pieces are reached by border links of window features: memory follows the window, not the
+history (a track seen for a long time costs ``RUNS_PER_ROBOT`` entries per robot, not one per
+frame).
 
 One step (:meth:`OnlineAssociation.add_step`)
 ---------------------------------------------
-1. The step's frames join the window, frames older than ``W`` steps retire.
+1. The step's frames join the window, frames older than ``W`` steps retire: their tracked
+   features join the retired pieces their kept links reach (pieces that meet merge and keep
+   the smallest name; the robot of a retiring feature sends the piece's name over each link
+   that becomes a border link, 8 bytes, and a renamed piece's entries learn the new name, 8
+   bytes each: ``retire_bytes``).
 2. *Incremental detection.* The touched labels are the labels of the new links' ends (each
    robot knows them: the two robots of a new link exchange their ends' labels, counted as
-   one message of 16 bytes per link). The stage runs on the *sub-problem*: the window features of the touched labels and
-   the step's new features, the kept window links among them, the new links, and one
-   *history link* between consecutive anchored window pieces of a label that the window
-   links do not join (the pieces may be joined through retired frames; the history link
-   carries that connection, so a set that closes through history is one set for the
-   detection). On it
+   one message of 16 bytes per link). The stage runs on the *sub-problem*: the window
+   features of the touched labels (the step's new features included), the kept window links
+   among them, the new links, and the *history links*: for every retired piece, a chain
+   through the window features its border links reach (the set closes through the piece;
+   the history link carries that connection, so the detection sees the set whole). On it
    the simulator runs Aragüés et al.'s detection (Sec. III, Prop. 3.5) and the rule of
    :mod:`pipeline.consistency.rules` (default :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`)
    until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
-   ignored (it is no link of the association).
-3. *History check.* A set the new links formed may merge two labels that share a retired
-   image (two features of one retired frame), which the window alone cannot show. Every
-   member of a set knows the set after the detection (Prop. 3.5: its row is the whole set);
-   the set's robots flood their retired entries of the set's labels and its new links (the
-   same flood as the evidence rule, counted as 8 bytes per entry and 24 per link, per robot
-   of the set, in the detection's rounds), and each solves the same deterministic repair:
-   start from the set's kept old links and history links (each label alone is
-   conflict-free), add the kept new links by decreasing quality, skip one that would put two
-   features of one image (window or retired) in one set. A skipped link is cut with reason
-   ``history``. So new evidence never overturns a retired frame's decision.
-4. Labels are renamed: a final set holding anchored features takes the smallest of their
-   labels (their retired entries follow it); any other set gets a fresh name.
+   ignored (it is no link of the association; a history link that doubles a real link is
+   left to the real link in the detection and kept in the check below).
+3. *History check.* A set the new links formed may join two retired pieces that hold one
+   retired image (two features of one retired frame), which the window alone cannot show.
+   Every member of a set knows the set after the detection (Prop. 3.5: its row is the whole
+   set); in a set that reaches two pieces or more, the set's robots flood the pieces' names
+   and entries (8 bytes per piece and :data:`RETIRED_ENTRY_BYTES` per entry, per robot of the
+   set, in the detection's rounds) and check whether one robot has overlapping runs in two
+   pieces. A conflictive set floods its open links too (24 bytes each per robot) and each
+   of its robots solves the same deterministic repair, the rule of *when new evidence
+   overturns an earlier decision*: a link between two retired frames is final (its piece is
+   only summarized, it can no longer be split); every other kept link of the set, new, or
+   older with an end in the window (window links and border links: *open* links), is
+   weighed again with the new ones. The repair starts from the set's retired pieces, adds
+   its open links by decreasing quality (ties by link id; the order of the evidence rule's
+   Kruskal merge) and skips a link that would join two groups in which one robot has
+   overlapping runs (window frames count as runs of one step). A skipped link is cut with
+   reason ``history``: when a weak link into a retired frame closes the clash, it is that
+   link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
+   starts from the set's old links and history links and skips only new links, so new
+   evidence never overturns an earlier decision.)
+4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
 links make its set conflictive, and only by the rule (reason of the rule) or by the history
-repair; every other kept link keeps its decision, and the labels of untouched tracks do not
-change.
+repair (an open link of a set holding a retired frame twice); every other kept link keeps
+its decision, and the labels of untouched tracks do not change.
 
 Guarantee (after every step the kept association is conflict-free), by induction on the
-steps. Before the first step there is no link. Suppose every label holds at most one
-feature of every image after step ``t - 1``. At step ``t`` only sets reached by a new link
-can change: a set no new link reaches keeps its links (the stage runs on touched labels
-only; cuts happen only in the sub-problem), so it stays conflict-free. A set the new links
-reach is, after the step, contained in one component of the sub-problem's kept links plus
-history links, together with the retired parts of its labels (a retired feature is joined to
-the window only through its label's window features, whose pieces the history links join).
-The rule leaves every component of the sub-problem conflict-free over window images
-(Prop. 4.5 for Alg. 1; one pass of the evidence rule). If the rule cut a history link (which
-stays), or the labels merged in a component share a retired image, the repair rebuilds the
-component from conflict-free pieces and adds a link only when the two pieces have no image
-in common (window or retired): the result is conflict-free. Hence a conflict created by new
-links is always found: it lies in a set that contains a new link, whose labels are touched,
-so it is inside the sub-problem (window images, caught by detection, Prop. 3.5) or in the
-retired entries of its labels (caught by the history check).
+steps. Before the first step there is no link. Suppose the association is conflict-free
+after step ``t - 1``. At step ``t`` only sets reached by a new link can change: a set no new
+link reaches keeps its links (the stage runs on touched labels only; cuts happen only in the
+sub-problem), so it stays conflict-free. A set the new links reach is, after the step, a
+component of the sub-problem's kept links plus history links, together with the retired
+pieces its border links reach (a retired feature is joined to the window only through a
+piece's border links, which the history links chain). The rule leaves every component of the
+sub-problem conflict-free over window images (Prop. 4.5 for Alg. 1; one pass of the
+evidence rule). If the rule cut a history link (which stays), or two pieces of a component
+share a retired image (then one robot has overlapping runs in both: runs cover every frame
+of their piece), the repair rebuilds the component from conflict-free groups (its retired
+pieces, each conflict-free by the induction; with ``overturn=False`` the groups its old
+links joined before the step) and adds a link only when no robot has overlapping runs in the
+two groups it joins, a superset of "the two groups share an image": the result is
+conflict-free (a cut only splits sets, so the other components stay conflict-free). Hence a conflict created
+by new links is always found: it lies in a set that contains a new link, whose labels are
+touched, so it is inside the sub-problem (window images, caught by detection, Prop. 3.5) or
+in two retired pieces of the set (caught by the history check).
 
-What each robot knows after a step: for each of its window features, its label (its set's
-name) and, from the detection, the members of its set within the window; for each label it
-carries, its own retired images in it; every link it holds, kept or cut, with the step.
+What each robot knows after a step: for each of its window features, its label and, from
+the detection, the members of its set within the window; for each of its border links, the
+retired piece's name; for each live piece it has retired frames in, its runs of steps;
+every link it holds, kept or cut, with the step.
 
 Costs: rounds, messages and bytes are the simulator's counts of the sub-problem's stage
 (images are its cameras, so messages between two frames of one robot are counted as if
-sent: an upper bound on what goes over the air), plus the label exchange of the new links
-and the history flood. The bookkeeping of this class (arrays of all links and features) is
+sent: an upper bound on what goes over the air), plus the label exchange of the new links,
+the names of retired pieces (step 1) and the history flood. The bookkeeping of this class (arrays of all links and features) is
 the simulator's record, not a robot's memory: :meth:`OnlineAssociation.robot_state_bytes`
 counts what a robot holds.
 
@@ -116,10 +142,13 @@ HISTORY = "history"
 
 LABEL_BYTES = 8
 """Bytes of one label on the wire (int64)."""
-RETIRED_ENTRY_BYTES = 8
-"""Bytes of one retired entry in the history flood (an image id; the label is the set's)."""
+RETIRED_ENTRY_BYTES = 16
+"""Bytes of one retired entry, held or flooded: a piece name (int64) and a run of steps
+(two int32; the robot is the holder)."""
 FLOOD_LINK_BYTES = 24
 """Bytes of one link in the history flood (two global feature ids and a float32 quality)."""
+RUNS_PER_ROBOT = 4
+"""Step runs a retired piece keeps per robot (:meth:`OnlineAssociation._add_entries`)."""
 
 
 @dataclass
@@ -156,6 +185,8 @@ class OnlineAssociation:
     ----------
     window : int >= 1 — steps of frames a robot holds
     resolution : a rule of :mod:`pipeline.consistency.rules`
+    overturn : bool — the history repair may cut open links older than the step (default;
+        module docstring, step 3), or only new links
 
     Examples
     --------
@@ -174,10 +205,12 @@ class OnlineAssociation:
     True
     """
 
-    def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION):
+    def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
+                 overturn: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
+        self.overturn = bool(overturn)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -189,13 +222,19 @@ class OnlineAssociation:
         self.projection: list = []
         self.label = np.zeros(0, np.int64)      # per feature
         self.degree = np.zeros(0, np.int64)     # kept links per feature
-        self.border = np.zeros(0, np.int64)     # kept links into retired frames per feature
+        self.piece = np.zeros(0, np.int64)      # per retired feature: its retired piece, or -1
         self._fresh = FRESH_LABELS              # next fresh label name
+        self._fresh_piece = 0                   # next retired piece name
         self.links = _LinkTable()
         self.window_images = np.zeros(0, np.int64)
         self.window_links = np.zeros(0, np.int64)  # ids of links with both ends in the window
-        self.ret_label = np.zeros(0, np.int64)
-        self.ret_image = np.zeros(0, np.int64)
+        self.border_links = np.zeros(0, np.int64)  # ids of kept links window -> retired
+        # retired entries of live pieces: (piece, robot, lo, hi), the robot's frames of steps
+        # lo..hi in the piece (at most RUNS_PER_ROBOT per piece and robot)
+        self.ret_piece = np.zeros(0, np.int64)
+        self.ret_robot = np.zeros(0, np.int64)
+        self.ret_lo = np.zeros(0, np.int64)
+        self.ret_hi = np.zeros(0, np.int64)
         self.steps: list[dict] = []
         self.last_sub = np.zeros(0, np.int64)  # features of the last step's sub-problem
 
@@ -221,8 +260,9 @@ class OnlineAssociation:
     def robot_state_bytes(self) -> np.ndarray:
         """Bytes each robot holds for the stage, ``(n_robots,)``: for its window frames'
         features a label and a link count (16 bytes each), the window links it holds (40
-        bytes each: two ids, two features, quality) and its retired entries (16 bytes each:
-        label and image). Descriptors are the matcher's, counted by the caller."""
+        bytes each: two ids, two features, quality), its border links (16 bytes each: its
+        feature and the retired piece's name) and its retired entries (16 bytes each: piece
+        and image). Descriptors are the matcher's, counted by the caller."""
         n = int(self.robot.max()) + 1 if len(self.robot) else 0
         out = np.zeros(n, np.int64)
         w = self.window_images
@@ -230,7 +270,8 @@ class OnlineAssociation:
         wl = self.window_links
         np.add.at(out, self.robot[self.links.ci[wl]], 40)
         np.add.at(out, self.robot[self.links.cj[wl]], 40)
-        np.add.at(out, self.robot[self.ret_image], 16)
+        np.add.at(out, self.robot[self._border_ends()[2]], 16)
+        np.add.at(out, self.ret_robot, RETIRED_ENTRY_BYTES)
         return out
 
     # ---------------------------------------------------------------- one step
@@ -243,9 +284,10 @@ class OnlineAssociation:
         ``sub_features``, ``sub_links``, ``history_links``, ``conflictive_features``
         (found by the step's first detection), ``conflictive_sets`` (resolved by the rule),
         ``cut`` (``cut_rule``, ``cut_history``, ``cut_old``: of them, links made at an
-        earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``,
-        ``wall_s``, ``robot_state_bytes_max``, ``stage_peak_bytes`` (the stage's peak over
-        its images).
+        earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
+        (of them ``retire_bytes``: the names of retired pieces, step 1), ``wall_s``,
+        ``robot_state_bytes_max``, ``retired_entries_max`` (a robot's retired entries),
+        ``stage_peak_bytes`` (the stage's peak over its images).
 
         Raises
         ------
@@ -259,7 +301,7 @@ class OnlineAssociation:
         t = self.t
         first = self.n_images
         self._add_frames(frames, t)
-        self._retire(t)
+        retire_msgs, retire_bytes = self._retire(t)
         new_ids = self._add_links(links, first, t)
         rec = dict(step=t, frames=len(frames), links_new=int(len(new_ids)), touched_labels=0,
                    sub_images=0, sub_features=0, sub_links=0, history_links=0,
@@ -268,8 +310,13 @@ class OnlineAssociation:
                    resolution_rounds=0, messages=0, bytes=0, stage_peak_bytes=0)
         if len(new_ids):
             self._stage(new_ids, t, rec)
-        self._drop_dead_labels()
-        rec["robot_state_bytes_max"] = int(self.robot_state_bytes().max(initial=0))
+        rec["messages"] += retire_msgs
+        rec["bytes"] += retire_bytes
+        rec["retire_bytes"] = retire_bytes
+        state = self.robot_state_bytes()
+        rec["robot_state_bytes_max"] = int(state.max(initial=0))
+        per = np.bincount(self.ret_robot, minlength=len(state))
+        rec["retired_entries_max"] = int(per.max(initial=0))
         rec["wall_s"] = time.perf_counter() - t0
         self.steps.append(rec)
         return rec
@@ -290,27 +337,74 @@ class OnlineAssociation:
             base = self.offset[g]
             self.label = np.concatenate([self.label, base + np.arange(m, dtype=np.int64)])
             self.degree = np.concatenate([self.degree, np.zeros(m, np.int64)])
-            self.border = np.concatenate([self.border, np.zeros(m, np.int64)])
+            self.piece = np.concatenate([self.piece, np.full(m, -1, np.int64)])
             self.window_images = np.append(self.window_images, g)
 
-    def _retire(self, t: int) -> None:
+    def _border_ends(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Of each border link: its window feature, its retired feature's piece, and the
+        window feature's image."""
+        a, b = self._ends(self.border_links)
+        win_a = self.piece[a] < 0
+        w, r = np.where(win_a, a, b), np.where(win_a, b, a)
+        return w, self.piece[r], np.searchsorted(self.offset, w, side="right") - 1
+
+    def _retire(self, t: int) -> tuple[int, int]:
+        """Step 1: frames older than the window retire; their kept links become final.
+
+        Returns the messages and bytes that name the retired pieces (module docstring)."""
         old = self.window_images[self.step[self.window_images] <= t - self.window]
         if not len(old):
-            return
+            return 0, 0
+        L = self.links
         feats = np.concatenate([self.offset[g] + np.arange(self.m[g]) for g in old])
         imgs = np.repeat(old, self.m[old])
         tracked = self.degree[feats] > 0
-        self.ret_label = np.concatenate([self.ret_label, self.label[feats[tracked]]])
-        self.ret_image = np.concatenate([self.ret_image, imgs[tracked]])
-        self.window_images = np.setdiff1d(self.window_images, old)
-        L = self.links
-        wl = self.window_links
+        f_new, img_new = feats[tracked], imgs[tracked]
+        wl, bl = self.window_links, self.border_links
         gone_i, gone_j = np.isin(L.ci[wl], old), np.isin(L.cj[wl], old)
-        # a kept link from a window feature into a retired frame anchors that feature
-        a, b = self._ends(wl)
-        border = L.kept[wl] & (gone_i != gone_j)
-        np.add.at(self.border, np.where(gone_i, b, a)[border], 1)
+        a_w, b_w = self._ends(wl)
+        inside = L.kept[wl] & gone_i & gone_j          # both ends retire now
+        border_new = L.kept[wl] & (gone_i != gone_j)   # one end retires now
+        # the border links whose window end retires now join an older piece
+        w_b, p_b, _ = self._border_ends()
+        closing = np.isin(w_b, f_new)
+        # pieces: components of the newly retired features and the older pieces they touch
+        old_p = np.unique(p_b[closing])
+        k = len(f_new)
+        node_a = np.concatenate([np.searchsorted(f_new, a_w[inside]),
+                                 np.searchsorted(f_new, w_b[closing])])
+        node_b = np.concatenate([np.searchsorted(f_new, b_w[inside]),
+                                 k + np.searchsorted(old_p, p_b[closing])])
+        n_nodes = k + len(old_p)
+        adj = sp.coo_matrix((np.ones(len(node_a)), (node_a, node_b)), shape=(n_nodes, n_nodes))
+        comp = connected_components(adj, directed=False)[1].astype(np.int64)
+        # a component keeps the smallest name of the older pieces it holds, else a fresh name
+        none = np.iinfo(np.int64).max
+        name = np.full(comp.max() + 1 if n_nodes else 0, none, np.int64)
+        np.minimum.at(name, comp[k:], old_p)
+        fresh = np.flatnonzero(name == none)
+        name[fresh] = self._fresh_piece + np.arange(len(fresh))
+        self._fresh_piece += int(len(fresh))
+        self.piece[f_new] = name[comp[:k]]
+        renamed = 0
+        if len(old_p):
+            rename = name[comp[k:]]
+            moved = rename != old_p
+            if moved.any():
+                on = np.isin(self.ret_piece, old_p[moved])
+                renamed = int(on.sum())
+                self.ret_piece[on] = rename[np.searchsorted(old_p, self.ret_piece[on])]
+                on = np.isin(self.piece, old_p[moved])
+                self.piece[on] = rename[np.searchsorted(old_p, self.piece[on])]
+        self._add_entries(self.piece[f_new], self.robot[img_new], self.step[img_new])
+        self.window_images = np.setdiff1d(self.window_images, old)
         self.window_links = wl[~(gone_i | gone_j)]
+        self.border_links = np.concatenate([bl[~closing], wl[border_new]])
+        self._drop_dead_pieces()
+        # the robot of a retiring feature names its piece over each new border link; a
+        # renamed piece's entries learn the new name (8 bytes each)
+        n_msgs = int(border_new.sum()) + renamed
+        return n_msgs, LABEL_BYTES * n_msgs
 
     def _add_links(self, links: Links, first: int, t: int) -> np.ndarray:
         from pipeline.association import check_links
@@ -358,18 +452,25 @@ class OnlineAssociation:
         sub = wfeat[np.isin(self.label[wfeat], touched)]
         self.last_sub = sub
         wl = self.window_links
-        a_w, b_w = self._ends(wl)
+        a_w, _ = self._ends(wl)
         old_ids = wl[L.kept[wl] & (L.step_added[wl] < t) & np.isin(self.label[a_w], touched)]
-        a_o, b_o = self._ends(old_ids)
-        # history links: consecutive window pieces of a label (joined through retired frames)
-        piece = self._components(sub, a_o, b_o)
-        anch = _anchored(self.label[sub], piece, self.border[sub] > 0)
-        hist_a, hist_b = _history_links(sub[anch], self.label[sub][anch], piece[anch])
+        # history links: the window features each retired piece holds, chained (exact: a
+        # piece is connected, so are the window features its border links reach)
+        w_b, p_b, _ = self._border_ends()
+        on = np.isin(w_b, sub)
+        att_f, att_p = w_b[on], p_b[on]
+        hist_a, hist_b = _chain(att_f, att_p)
         real = np.concatenate([old_ids, new_ids])
         a_r, b_r = self._ends(real)
-        a_all = np.concatenate([a_r, hist_a])
-        b_all = np.concatenate([b_r, hist_b])
-        q_all = np.concatenate([L.quality[real], np.ones(len(hist_a))])
+        # a history link that doubles a real link is left out of the detection (the real
+        # link stands for it there; cutting it would not split the set: the check below
+        # still counts the history link)
+        n_f = len(self.label)
+        det = ~np.isin(np.minimum(hist_a, hist_b) * n_f + np.maximum(hist_a, hist_b),
+                       np.minimum(a_r, b_r) * n_f + np.maximum(a_r, b_r))
+        a_all = np.concatenate([a_r, hist_a[det]])
+        b_all = np.concatenate([b_r, hist_b[det]])
+        q_all = np.concatenate([L.quality[real], np.ones(int(det.sum()))])
         n_real = len(real)
         # images of the sub-problem are its cameras
         img_of = np.searchsorted(self.offset, sub, side="right") - 1
@@ -400,7 +501,7 @@ class OnlineAssociation:
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
         # history check and repair (step 3), then the new labels (step 4)
-        hist_cut, flood = self._history_check(sub, real, t)
+        hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
         rec["bytes"] += int(flood)
         rec["rounds"] = rec["detection_rounds"] + rec["resolution_rounds"]
@@ -424,9 +525,16 @@ class OnlineAssociation:
         return wl[np.isin(a, self.last_sub) & np.isin(b, self.last_sub)]
 
     def cut(self, ids, reason: str) -> None:
-        """Cut kept links ``ids`` at the current step for a later stage's ``reason`` (e.g.
-        ``fusion-outlier``). Cutting only splits sets: the association stays conflict-free."""
-        self._cut(np.asarray(ids, np.int64).reshape(-1), reason, self.t)
+        """Cut kept window links ``ids`` at the current step for a later stage's ``reason``
+        (e.g. ``fusion-outlier``). Cutting only splits sets: the association stays
+        conflict-free (labels may then name more than one set, which only makes the next
+        checks look at more features)."""
+        ids = np.asarray(ids, np.int64).reshape(-1)
+        bad = ids[~np.isin(ids, self.window_links)]
+        if bad.size:
+            raise InputError(f"link {int(bad[0])}: only links between window frames can be "
+                             "cut (a retired frame's links are final)")
+        self._cut(ids, reason, self.t)
 
     def _cut(self, ids: np.ndarray, reason: str, t: int) -> None:
         L = self.links
@@ -441,86 +549,109 @@ class OnlineAssociation:
     def _components(self, sub, a, b) -> np.ndarray:
         ia, ib = np.searchsorted(sub, a), np.searchsorted(sub, b)
         adj = sp.coo_matrix((np.ones(len(ia)), (ia, ib)), shape=(len(sub), len(sub)))
-        return connected_components(adj, directed=False)[1]
+        return connected_components(adj, directed=False)[1].astype(np.int64)
 
-    def _history_check(self, sub, real, t: int) -> tuple[int, int]:
+    def _history_check(self, sub, real, hist_a, hist_b, att_f, att_p, t: int
+                       ) -> tuple[int, int]:
         """Step 3 of the module docstring: returns (links cut, flood bytes).
 
-        After the rule's cuts a label's window features fall into *pieces* (components of
-        the kept window links). A piece holding a feature with a kept link into a retired
-        frame is *anchored*: the check joins the anchored pieces of a label (``hist_a``,
-        ``hist_b``: each anchored feature to the label's smallest anchored feature), since
-        they may be joined through retired frames, which only makes the check stricter. A
-        piece with no such link is joined to the rest of its label by no link at all: it
-        is a set of its own (exact)."""
+        The sets after the rule's cuts are the components of the kept links and the history
+        links (a history link stands for a retired piece: it cannot be cut). A set is
+        conflictive if it holds one window image twice (the rule cut a history link) or if
+        two of its retired pieces share an image."""
         L = self.links
-        old_label = self.label[sub]
         kept_real = real[L.kept[real]]
         a_k, b_k = self._ends(kept_real)
-        anch = _anchored(old_label, self._components(sub, a_k, b_k), self.border[sub] > 0)
-        hist_a, hist_b = _label_links(sub[anch], old_label[anch])
         comp = self._components(sub, np.concatenate([a_k, hist_a]),
                                 np.concatenate([b_k, hist_b]))
         img_of = np.searchsorted(self.offset, sub, side="right") - 1
-        # the retired entries of a label go with its anchored features (one component)
-        lab_u, lab_first = np.unique(old_label[anch], return_index=True)
-        comp_of_label = comp[anch][lab_first]
-        on = np.isin(self.ret_label, lab_u)
-        r_comp = comp_of_label[np.searchsorted(lab_u, self.ret_label[on])]
-        r_img = self.ret_image[on]
-        bad = set(_duplicated_keys(comp, img_of)) | set(_duplicated_keys(r_comp, r_img))
-        cut_n, flood = 0, 0
+        w_all = self._border_ends()[0]
+        # the pieces of each set and their retired entries
+        pc = np.unique(np.stack([comp[np.searchsorted(sub, att_f)], att_p], axis=1), axis=0) \
+            if len(att_f) else np.zeros((0, 2), np.int64)
+        n_pieces = np.bincount(pc[:, 0], minlength=comp.max() + 1 if len(comp) else 0)
+        pc = pc[np.argsort(pc[:, 1], kind="stable")]  # one set per piece (its chain)
+        on = np.isin(self.ret_piece, pc[:, 1])
+        r_comp = pc[np.searchsorted(pc[:, 1], self.ret_piece[on]), 0]
+        r_piece, r_robot = self.ret_piece[on], self.ret_robot[on]
+        r_lo, r_hi = self.ret_lo[on], self.ret_hi[on]
+        # the flood: sets with two pieces or more compare their pieces' entries
+        flood = 0
+        many = np.flatnonzero(n_pieces >= 2)
+        if len(many):
+            robots_c = np.zeros(len(n_pieces), np.int64)
+            key = np.unique(np.stack([comp, self.robot[img_of]], axis=1), axis=0)
+            np.add.at(robots_c, key[:, 0], 1)
+            entries_c = np.bincount(r_comp, minlength=len(n_pieces))
+            flood += int((robots_c[many] * (RETIRED_ENTRY_BYTES * entries_c[many]
+                                            + LABEL_BYTES * n_pieces[many])).sum())
+        bad = set(_duplicated_keys(comp, img_of)) | \
+            set(_overlapping_runs(r_comp, r_robot, r_lo, r_hi))
+        cut_n = 0
         for c in sorted(bad):
             members = np.flatnonzero(comp == c)
             robots = np.unique(self.robot[img_of[members]])
             in_c = np.isin(self.offset[L.ci[kept_real]] + L.fi[kept_real], sub[members])
             links_c = kept_real[in_c]
-            labels_c = np.unique(old_label[members][anch[members]])
-            entries = int(np.isin(self.ret_label, labels_c).sum())
-            flood += len(robots) * (RETIRED_ENTRY_BYTES * entries +
-                                    FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum()))
-            skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, old_label,
-                                   anch, t)
+            here = r_comp == c
+            entries = (r_piece[here], r_robot[here], r_lo[here], r_hi[here])
+            if self.overturn:
+                border_c = self.border_links[np.isin(w_all, sub[members])]
+                flood += len(robots) * FLOOD_LINK_BYTES * int(len(links_c) + len(border_c))
+                skipped = self._rebuild(sub, members, links_c, border_c, img_of, entries)
+            else:
+                flood += len(robots) * FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum())
+                skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, att_f,
+                                       att_p, entries, t)
             self._cut(skipped, HISTORY, t)
             cut_n += len(skipped)
         if bad:
+            self.border_links = self.border_links[L.kept[self.border_links]]
+            self._drop_dead_pieces()
+            w_b, p_b, _ = self._border_ends()
+            on = np.isin(w_b, sub)
+            hist_a, hist_b = _chain(w_b[on], p_b[on])
             kept_real = real[L.kept[real]]
             a_k, b_k = self._ends(kept_real)
             comp = self._components(sub, np.concatenate([a_k, hist_a]),
                                     np.concatenate([b_k, hist_b]))
-            comp_of_label = comp[anch][lab_first]
-        # step 4: a set holding anchored features keeps the smallest of their labels (its
-        # retired entries follow); any other set gets a fresh name
-        has = np.zeros(comp.max() + 1 if len(comp) else 0, bool)
-        has[comp[anch]] = True
-        name = np.full(len(has), -1, np.int64)
-        order = np.lexsort((old_label[anch], comp[anch]))
-        ca, la = comp[anch][order], old_label[anch][order]
-        first = np.r_[True, ca[1:] != ca[:-1]] if len(ca) else np.zeros(0, bool)
-        name[ca[first]] = la[first]
-        fresh = np.flatnonzero(~has)
-        name[fresh] = self._fresh + np.arange(len(fresh))
-        self._fresh += len(fresh)
-        self.label[sub] = name[comp]
-        keep = ~np.isin(self.ret_label, old_label) | np.isin(self.ret_label, lab_u)
-        mapping = dict(zip(lab_u.tolist(), name[comp_of_label].tolist(), strict=True))
-        self.ret_label, self.ret_image = self.ret_label[keep], self.ret_image[keep]
-        on = np.isin(self.ret_label, lab_u)
-        self.ret_label[on] = [mapping[x] for x in self.ret_label[on].tolist()]
+        # step 4: every set of the sub-problem gets a fresh name
+        n_c = int(comp.max()) + 1 if len(comp) else 0
+        self.label[sub] = self._fresh + comp.astype(np.int64)
+        self._fresh += n_c
         return cut_n, flood
 
-    def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, old_label, anch,
-                t) -> np.ndarray:
-        """The deterministic repair of one set (step 3): the new links it skips."""
+    def _rebuild(self, sub, members, links_c, border_c, img_of, entries) -> np.ndarray:
+        """The history repair of one conflictive set when open links may be overturned
+        (step 3): the links it cuts. The set's retired pieces stay whole (their links are
+        final); its open links, every kept window link and border link of the set, are added
+        by decreasing quality (ties by link id), the order of the evidence rule's Kruskal
+        merge, and a link is skipped when the two groups it would join have overlapping runs
+        of one robot. Deterministic: every robot of the set computes the same cut."""
         L = self.links
-        parent = {int(f): int(f) for f in sub[members]}
-        images: dict[int, set] = {int(f): {int(img_of[k])} for k, f in zip(members, sub[members],
-                                                                            strict=True)}
-        am = members[anch[members]]
-        for lab in np.unique(old_label[am]).tolist():
-            rets = self.ret_image[self.ret_label == lab].tolist()
-            f0 = int(sub[am][old_label[am] == lab][0])
-            images[f0] |= set(rets)
+        r_piece, r_robot, r_lo, r_hi = entries
+        images: dict[int, dict] = {
+            int(f): {int(self.robot[img_of[k]]): [(int(self.step[img_of[k]]),) * 2]}
+            for k, f in zip(members, sub[members], strict=True)}
+        for p in np.unique(r_piece).tolist():  # a piece is node -1 - p
+            on = r_piece == p
+            runs: dict = {}
+            for r, lo, hi in zip(r_robot[on].tolist(), r_lo[on].tolist(), r_hi[on].tolist(),
+                                 strict=True):
+                runs.setdefault(r, []).append((lo, hi))
+            images[-1 - p] = runs
+        parent = {x: x for x in images}
+        a_w, b_w = self._ends(links_c)
+        a_b, b_b = self._ends(border_c)
+        win_a = self.piece[a_b] < 0
+        node_b = -1 - self.piece[np.where(win_a, b_b, a_b)]
+        ids = np.concatenate([links_c, border_c])
+        na = np.concatenate([a_w, np.where(win_a, a_b, b_b)])
+        nb = np.concatenate([b_w, node_b])
+        for x in np.concatenate([na, nb]).tolist():  # a piece with no entries left
+            images.setdefault(x, {})
+            parent.setdefault(x, x)
+        order = np.lexsort((ids, -L.quality[ids]))
 
         def find(x):
             while parent[x] != x:
@@ -528,79 +659,158 @@ class OnlineAssociation:
                 x = parent[x]
             return x
 
-        def union(x, y) -> bool:
+        skipped = []
+        for k in order.tolist():
+            rx, ry = find(int(na[k])), find(int(nb[k]))
+            if rx == ry:
+                continue
+            x, y = images[rx], images[ry]
+            if any(lo <= h and l2 <= hi for r in x.keys() & y.keys()
+                   for lo, hi in x[r] for l2, h in y[r]):
+                skipped.append(int(ids[k]))
+                continue
+            if len(x) < len(y):
+                rx, ry, x, y = ry, rx, y, x
+            parent[ry] = rx
+            for r, runs in y.items():
+                x.setdefault(r, []).extend(runs)
+        return np.asarray(skipped, np.int64)
+
+    def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, att_f, att_p,
+                entries, t) -> np.ndarray:
+        """The deterministic repair of one set (step 3): the new links it skips. A group of
+        features holds, per robot, the step runs of its frames (window frames as runs of
+        one step); two groups may join when no robot has overlapping runs in both."""
+        L = self.links
+        r_piece, r_robot, r_lo, r_hi = entries
+        parent = {int(f): int(f) for f in sub[members]}
+        images: dict[int, dict] = {
+            int(f): {int(self.robot[img_of[k]]): [(int(self.step[img_of[k]]),) * 2]}
+            for k, f in zip(members, sub[members], strict=True)}
+        mem = set(parent)
+        seen: set[int] = set()
+        for f, p in zip(att_f.tolist(), att_p.tolist(), strict=True):
+            if f in mem and p not in seen:   # a piece's runs go with one of its features
+                seen.add(p)
+                for r, lo, hi in zip(r_robot[r_piece == p].tolist(), r_lo[r_piece == p].tolist(),
+                                     r_hi[r_piece == p].tolist(), strict=True):
+                    images[f].setdefault(r, []).append((lo, hi))
+
+        def clash(x: dict, y: dict) -> bool:
+            return any(lo <= h and l2 <= hi for r in x.keys() & y.keys()
+                       for lo, hi in x[r] for l2, h in y[r])
+
+        def find(x):
+            while parent[x] != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        def union(x, y, force: bool = False) -> bool:
             rx, ry = find(x), find(y)
             if rx == ry:
                 return True
-            if images[rx] & images[ry]:
+            if not force and clash(images[rx], images[ry]):
                 return False
             if len(images[rx]) < len(images[ry]):
                 rx, ry = ry, rx
             parent[ry] = rx
-            images[rx] |= images[ry]
+            for r, runs in images[ry].items():
+                images[rx].setdefault(r, []).extend(runs)
             return True
 
         is_new = L.step_added[links_c] == t
         old, new = links_c[~is_new], links_c[is_new]
         a_o, b_o = self._ends(old)
-        mem = set(parent)
         base = [(int(x), int(y)) for x, y in zip(a_o, b_o, strict=True)]
         base += [(int(x), int(y)) for x, y in zip(hist_a, hist_b, strict=True)
                  if int(x) in mem]
-        for x, y in base:  # pieces of one label: conflict-free by the induction
-            union(x, y)
+        for x, y in base:  # joined before this step (a clash here is the runs' summary's)
+            union(x, y, force=True)
         new = new[np.lexsort((new, -L.quality[new]))]
         a_n, b_n = self._ends(new)
         skipped = [int(k) for k, x, y in zip(new, a_n, b_n, strict=True)
                    if not union(int(x), int(y))]
         return np.asarray(skipped, np.int64)
 
-    def _drop_dead_labels(self) -> None:
-        w = self.window_images
-        if not len(self.ret_label):
+    def _drop_dead_pieces(self) -> None:
+        """A retired piece no border link reaches belongs to a set with no window feature
+        left: no new link can reach it, its entries go."""
+        if not len(self.ret_piece):
             return
-        wfeat = np.concatenate([self.offset[g] + np.arange(self.m[g]) for g in w]) if len(w) \
-            else np.zeros(0, np.int64)
-        live = np.isin(self.ret_label, self.label[wfeat])
-        self.ret_label, self.ret_image = self.ret_label[live], self.ret_image[live]
+        live = np.isin(self.ret_piece, self._border_ends()[1])
+        self.ret_piece, self.ret_robot = self.ret_piece[live], self.ret_robot[live]
+        self.ret_lo, self.ret_hi = self.ret_lo[live], self.ret_hi[live]
+
+    def _add_entries(self, piece, robot, step) -> None:
+        """Add retired frames (one entry each) to the entries, then rewrite every (piece,
+        robot) as its runs of consecutive steps; beyond :data:`RUNS_PER_ROBOT` runs its oldest
+        runs become one run over their span (a superset of its frames: the history check
+        may then see a clash that is not there, never miss one)."""
+        p = np.concatenate([self.ret_piece, piece])
+        r = np.concatenate([self.ret_robot, robot])
+        lo = np.concatenate([self.ret_lo, step])
+        hi = np.concatenate([self.ret_hi, step])
+        if not len(p):
+            return
+        order = np.lexsort((lo, r, p))
+        p, r, lo, hi = p[order], r[order], lo[order], hi[order]
+        head = np.r_[True, (p[1:] != p[:-1]) | (r[1:] != r[:-1])]
+        gid = np.cumsum(head) - 1
+        big = int(hi.max()) + 2
+        run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+        start = head | np.r_[True, lo[1:] > run_max[:-1] + 1]
+        p, r, lo, hi, gid = _reduce_runs(start, p, r, lo, hi, gid)
+        # at most RUNS_PER_ROBOT runs per (piece, robot): its oldest runs merge into one
+        g_head = np.r_[True, gid[1:] != gid[:-1]]
+        k = np.cumsum(g_head) - 1
+        rank = np.arange(len(k)) - np.flatnonzero(g_head)[k]
+        extra = np.bincount(k)[k] - RUNS_PER_ROBOT  # runs 0..extra become one
+        start = g_head | (rank > extra)
+        p, r, lo, hi, _ = _reduce_runs(start, p, r, lo, hi, gid)
+        self.ret_piece, self.ret_robot, self.ret_lo, self.ret_hi = p, r, lo, hi
 
 
-def _history_links(sub: np.ndarray, label: np.ndarray, piece: np.ndarray):
-    """Links joining, for every label, the pieces that hold it: one link between the smallest
-    features of that label in consecutive pieces (a piece may hold several labels once new
-    links join them)."""
-    if not len(sub):
+def _chain(f: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Links chaining the items ``f`` of each group in order (``len(group) - 1`` per group).
+
+    >>> [x.tolist() for x in _chain(np.array([5, 3, 9, 4]), np.array([1, 1, 1, 2]))]
+    [[3, 5], [5, 9]]
+    """
+    if not len(f):
         z = np.zeros(0, np.int64)
         return z, z
-    order = np.lexsort((sub, piece, label))
-    lab, pc, f = label[order], piece[order], sub[order]
-    first = np.r_[True, (lab[1:] != lab[:-1]) | (pc[1:] != pc[:-1])]
-    lab, f = lab[first], f[first]            # smallest feature of each (label, piece)
-    same = lab[1:] == lab[:-1]
-    return f[:-1][same], f[1:][same]
+    u = np.unique(np.stack([group, f], axis=1), axis=0)
+    same = u[1:, 0] == u[:-1, 0]
+    ab = np.unique(np.stack([u[:-1, 1][same], u[1:, 1][same]], axis=1), axis=0)
+    return ab[:, 0], ab[:, 1]
 
 
-def _anchored(label: np.ndarray, piece: np.ndarray, border: np.ndarray) -> np.ndarray:
-    """Features whose piece holds a feature of their label with a link into a retired frame."""
-    if not len(label):
-        return np.zeros(0, bool)
-    key = np.stack([label, piece], axis=1)
-    u, inv = np.unique(key, axis=0, return_inverse=True)
-    hit = np.zeros(len(u), bool)
-    hit[inv.reshape(-1)[border]] = True
-    return hit[inv.reshape(-1)]
+def _reduce_runs(start, p, r, lo, hi, gid):
+    """Runs beginning at ``start`` (rows sorted by piece, robot, lo) merged into one row."""
+    at = np.flatnonzero(start)
+    return p[at], r[at], lo[at], np.maximum.reduceat(hi, at), gid[at]
 
 
-def _label_links(sub: np.ndarray, label: np.ndarray):
-    """Links joining every feature to the smallest feature of its label, ``(a, b)``."""
-    if not len(sub):
-        z = np.zeros(0, np.int64)
-        return z, z
-    order = np.lexsort((sub, label))
-    lab, f = label[order], sub[order]
-    first = np.r_[True, lab[1:] != lab[:-1]]
-    root = f[first][np.cumsum(first) - 1]
-    return root[~first], f[~first]
+def _overlapping_runs(group, robot, lo, hi) -> list[int]:
+    """Groups in which one robot has two overlapping step runs (one frame twice).
+
+    >>> _overlapping_runs(np.array([0, 0, 1, 1]), np.array([2, 2, 2, 3]),
+    ...                   np.array([0, 4, 0, 0]), np.array([3, 5, 9, 9]))
+    []
+    >>> _overlapping_runs(np.array([0, 0]), np.array([2, 2]), np.array([0, 3]), np.array([3, 5]))
+    [0]
+    """
+    if not len(group):
+        return []
+    order = np.lexsort((lo, robot, group))
+    g, r, lo, hi = group[order], robot[order], lo[order], hi[order]
+    head = np.r_[True, (g[1:] != g[:-1]) | (r[1:] != r[:-1])]
+    gid = np.cumsum(head) - 1
+    big = int(hi.max()) + 2
+    run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+    hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
+    return np.unique(g[hit]).tolist()
 
 
 def _duplicated_keys(group: np.ndarray, item: np.ndarray) -> list[int]:

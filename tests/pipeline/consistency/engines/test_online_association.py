@@ -134,3 +134,123 @@ def test_a_new_link_must_touch_the_step_and_the_window():
         oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [2], [0]))
     with pytest.raises(InputError, match="window"):
         OnlineAssociation(window=0)
+
+
+def _retired_truth(oa):
+    """Centralized: every retired piece's (robot, step) frames, by the piece's name."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    L = oa.links
+    a, b = oa.offset[L.ci] + L.fi, oa.offset[L.cj] + L.fj
+    retired = ~np.isin(np.arange(oa.n_images), oa.window_images)
+    both = L.kept & retired[L.ci] & retired[L.cj]
+    n = len(oa.label)
+    comp = connected_components(coo_matrix((np.ones(both.sum()), (a[both], b[both])),
+                                           shape=(n, n)), directed=False)[1]
+    img = np.repeat(np.arange(oa.n_images), oa.m)
+    out = {}
+    for f in np.flatnonzero(oa.piece >= 0):
+        out.setdefault(int(oa.piece[f]), set()).add((int(oa.robot[img[f]]),
+                                                     int(oa.step[img[f]])))
+        # one name per retired component
+        assert (oa.piece[comp == comp[f]] == oa.piece[f]).all() or \
+            (oa.piece[comp == comp[f]] < 0).any()
+    return out
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams(max_steps=10))
+def test_retired_runs_cover_their_pieces_frames(data):
+    """The entries of a live piece: at most RUNS_PER_ROBOT runs per robot, their steps a
+    superset of the piece's frames, exact while a robot has no more runs than that."""
+    from pipeline.consistency.engines import online
+
+    window, stream = data
+    for oa, _rec, _, _ in _run(window, stream, "paper"):
+        truth = _retired_truth(oa)
+        for p in np.unique(oa.ret_piece).tolist():
+            on = oa.ret_piece == p
+            robots, counts = np.unique(oa.ret_robot[on], return_counts=True)
+            assert counts.max() <= online.RUNS_PER_ROBOT
+            covered = {(int(r), s) for r, lo, hi in zip(oa.ret_robot[on], oa.ret_lo[on],
+                                                         oa.ret_hi[on], strict=True)
+                       for s in range(int(lo), int(hi) + 1)}
+            assert truth[p] <= covered
+            if counts.max() < online.RUNS_PER_ROBOT:
+                assert truth[p] == covered
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams(max_steps=10))
+def test_conflict_free_when_runs_are_summarized_to_one(data):
+    """RUNS_PER_ROBOT = 1 (each robot's frames of a piece as one span): the history check
+    sees more clashes than there are, and the association stays conflict-free."""
+    from unittest import mock
+
+    window, stream = data
+    with mock.patch("pipeline.consistency.engines.online.RUNS_PER_ROBOT", 1):
+        for oa, rec, _, _ in _run(window, stream, "paper"):
+            assert is_conflict_free(oa.m, oa.kept_links()), rec
+            assert np.unique(np.stack([oa.ret_piece, oa.ret_robot]), axis=1).shape[1] == \
+                len(oa.ret_piece)
+
+
+def test_a_long_track_costs_its_robots_one_run_not_one_entry_per_frame():
+    """A track both robots see at every step for 30 steps: its retired frames are one run per
+    robot, and a robot's state at the last step is what it was once the window filled."""
+    oa = OnlineAssociation(window=2, resolution="paper")
+    state = []
+    for t in range(30):
+        g = 2 * t   # images of step t: 2t (robot 0) and 2t + 1 (robot 1)
+        ci, fi, cj, fj = [g], [0], [g + 1], [0]
+        if t:
+            ci += [g - 2, g - 1]
+            fi += [0, 0]
+            cj += [g, g + 1]
+            fj += [0, 0]
+        oa.add_step([Frame(0, 2), Frame(1, 2)], Links(ci, fi, cj, fj))
+        state.append(oa.robot_state_bytes().tolist())
+    assert oa.is_conflict_free() and oa.links.kept.all()
+    assert len(np.unique(oa.ret_piece)) == 1
+    runs = zip(oa.ret_robot.tolist(), oa.ret_lo.tolist(), oa.ret_hi.tolist(), strict=True)
+    assert sorted(runs) == [(0, 0, 27), (1, 0, 27)]
+    assert state[-1] == state[3]
+
+
+def test_two_pieces_sharing_a_retired_frame_are_not_joined():
+    """Two tracks meet in a retired frame through different features: a new link that joins
+    them is cut by the history repair, though every window image of the set is distinct."""
+    oa = OnlineAssociation(window=2, resolution="paper")
+    # step 0: tracks A = {0:0, 1:0} and B = {0:1, 1:1}
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    # step 1: 2:0 joins A, 3:0 joins B
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0]))
+    # step 2 (step 0 retired: A and B are two pieces, both in images 0 and 1): 4:0 links to
+    # both tracks
+    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
+                                                        [0, 0, 0], [0.9, 0.5, 0.7]))
+    assert oa.piece[:4].tolist() == [0, 1, 0, 1]
+    assert rec["conflictive_features"] == 0 and rec["cut_history"] == 1
+    assert oa.links.reason.tolist()[-3:] == ["", HISTORY, ""]
+    assert oa.is_conflict_free()
+
+
+@pytest.mark.parametrize("overturn", [True, False])
+def test_the_history_repair_may_overturn_a_weak_link_into_a_retired_frame(overturn):
+    """Track B reaches the window through a weak link (quality 0.2) from a retired frame; a
+    new frame joins A and B. With ``overturn`` the repair adds every open link of the set by
+    decreasing quality and the weak link goes (B's piece then has no border link left, its
+    entries go); without, it keeps the earlier links and cuts a new one."""
+    oa = OnlineAssociation(window=2, resolution="paper", overturn=overturn)
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0], [0.9, 0.2]))
+    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
+                                                        [0, 0, 0], [0.8, 0.9, 0.7]))
+    assert rec["cut_history"] == 1 and oa.is_conflict_free()
+    reasons = oa.links.reason.tolist()
+    if overturn:
+        assert reasons == ["", "", "", HISTORY, "", "", ""]
+        assert np.unique(oa.ret_piece).tolist() == [oa.piece[0]]
+    else:
+        assert reasons == ["", "", "", "", HISTORY, "", ""]

@@ -1,0 +1,75 @@
+"""A folder of per-robot frame sequences (``run-images DIR --sequence``).
+
+``DIR`` holds one sub-folder per robot (robots in the sub-folders' name order; hidden
+folders skipped); each sub-folder holds that robot's frames, taken in name order. Step ``k``
+is every robot's ``k``-th frame, so every robot must hold the same number of frames (at
+least two: a single frame is no sequence). Intrinsics as :func:`pipeline.inputs.photos.load_folder`:
+with ``"auto"`` a ``DIR/K.txt`` serves every robot, otherwise each sub-folder's own
+``K.txt``, EXIF or the stated guess.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from pipeline.errors import InputError
+from pipeline.inputs.photos import load_folder
+from pipeline.types import View
+
+__all__ = ["PhotoSequence", "load_sequence"]
+
+
+@dataclass
+class PhotoSequence:
+    """Frames of a team in motion read from folders.
+
+    robots : list[str] — the sub-folders' names, robot ``i`` = ``robots[i]``
+    steps : int
+    views : list[View] — ``views[k * n_robots + i]`` = robot ``i``'s frame of step ``k``,
+        named ``<sub-folder>/<file>``
+    """
+
+    robots: list
+    steps: int
+    views: list
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.robots)
+
+
+def load_sequence(directory: str | Path, max_size: int | None = 1600,
+                  intrinsics: str | Path = "auto") -> PhotoSequence:
+    """Read ``DIR`` (module docstring) into a :class:`PhotoSequence`.
+
+    Raises
+    ------
+    InputError
+        ``DIR`` missing or not a folder, fewer than two robot sub-folders, sub-folders with
+        different numbers of frames, or any error of :func:`~pipeline.inputs.photos.load_folder`.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError(f"--sequence {str(directory)!r}: expected a folder holding one "
+                         "sub-folder of frames per robot")
+    subs = sorted((p for p in directory.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                  key=lambda p: p.name)
+    if len(subs) < 2:
+        raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s); a "
+                         "team needs at least two (one sub-folder of frames per robot)")
+    if intrinsics == "auto" and (directory / "K.txt").is_file():
+        intrinsics = directory / "K.txt"
+    per_robot = [load_folder(p, max_size=max_size, intrinsics=intrinsics) for p in subs]
+    counts = {p.name: len(v) for p, v in zip(subs, per_robot, strict=True)}
+    if len(set(counts.values())) > 1:
+        raise InputError(f"--sequence {str(directory)!r}: robots hold different numbers of "
+                         f"frames ({', '.join(f'{k}: {v}' for k, v in counts.items())}); step "
+                         "k is every robot's k-th frame, give every robot the same number")
+    steps = len(per_robot[0])
+    views: list[View] = []
+    for k in range(steps):
+        for p, vs in zip(subs, per_robot, strict=True):
+            views.append(dataclasses.replace(vs[k], name=f"{p.name}/{vs[k].name}"))
+    return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views)

@@ -1,0 +1,111 @@
+"""The ``run-images DIR --sequence`` job: a folder of per-robot frame sequences, associated
+online step by step.
+
+``DIR`` holds one sub-folder per robot with its frames in name order
+(:mod:`pipeline.inputs.sequence`); step ``k`` is every robot's ``k``-th frame. The robots'
+communication graph is ``--graph`` over the robots (a kind, or a file of sub-folder names or
+indices), the same at every step. Each step runs what ``run-formation --steps N`` runs
+(:func:`pipeline.runs.online.associate_online`): the new frames' features, matching against
+the robot's ``W - 1`` previous frames and its neighbours' last ``W`` frames, the online stage
+(:class:`pipeline.consistency.engines.online.OnlineAssociation`), the conflict check after
+the step; the batch run from scratch at the last step (and every ``batch_every`` steps).
+Photographs come without poses, so there is no fusion and the evidence rule judges links on
+their keypoints without its geometric test; there is no ground truth, so the report gives no
+scores, only the step list and how the online and batch associations compare (links kept,
+links on which they agree).
+
+Outputs (run folder, written atomically): ``report.json`` (``steps``: one entry per step
+with ``links_new``, ``conflictive_sets_after``, ``wall_s``, ``rounds``, ``bytes`` and the rest
+of the online record), ``links.csv`` (cameras are frames; ``round`` is the step that cut the
+link; ``truth`` empty), ``images.csv`` (frame -> robot, step, ``<sub-folder>/<file>``),
+``link_steps.csv`` and ``recording.rrd`` on a ``step`` timeline (robots on a step x robot grid:
+photographs have no positions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.progress import StageTimer
+
+__all__ = ["SequenceConfig", "run_images_sequence"]
+
+
+@dataclass
+class SequenceConfig:
+    """Options of ``run-images DIR --sequence``."""
+
+    directory: str
+    graph: str = "complete"
+    window: int = 3
+    intrinsics: str = "auto"
+    max_size: int | None = 1600
+    features: str = "sift"
+    max_features: int | None = None
+    matcher: str = "opencv"
+    resolution: str = DEFAULT_RESOLUTION
+    batch_every: int = 0
+    out: str | None = None
+    rerun: bool = True
+
+    def out_dir(self) -> Path:
+        if self.out:
+            return Path(self.out)
+        graph = Path(self.graph).stem if Path(self.graph).is_file() else \
+            self.graph.replace(":", "")
+        return Path("runs") / f"sequence-{Path(self.directory).resolve().name}-{graph}"
+
+
+def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None) -> Path:
+    """Run the job (module docstring), write its run folder and return its path."""
+    from pipeline.commgraph import comm_graph
+    from pipeline.inputs.sequence import load_sequence
+    from pipeline.runs.online import associate_online, batch_steps_of, online_tables
+
+    timer = timer or StageTimer()
+    with timer.stage("load", config.directory):
+        seq = load_sequence(config.directory, config.max_size, config.intrinsics)
+    edges = comm_graph(config.graph, seq.robots)
+    timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
+    run = associate_online(seq.views, seq.n_robots, [edges] * seq.steps, config.window,
+                           config.resolution, timer, features=config.features,
+                           max_features=config.max_features, fusion=False,
+                           batch_steps=batch_steps_of(seq.steps, config.batch_every)
+                           | {seq.steps - 1},
+                           match_options=dict(threshold_px=None, matcher=config.matcher))
+    oa = run.online
+    kept = oa.links.kept
+    final = {"links": int(len(kept)), "online": {"kept": int(kept.sum()),
+                                                 "conflictive_sets":
+                                                 int(run.steps[-1]["conflictive_sets_after"])}}
+    if run.batch is not None:
+        kb = ~run.batch.deleted
+        final["batch"] = {"kept": int(kb.sum()),
+                          "conflictive_sets": int(run.steps[-1]["batch"]
+                                                  ["conflictive_sets_after"]),
+                          "links_decided_alike": int((kb == kept).sum())}
+    from pipeline.evaluation.report import versions
+    from pipeline.runs.online import jsonable_step
+
+    report = {
+        "title": f"{seq.n_robots} robots' frame sequences from {config.directory} "
+                 f"({seq.steps} steps)",
+        "n_robots": int(seq.n_robots), "robots": seq.robots,
+        "n_images": int(oa.n_images), "comm_edges": edges.tolist(),
+        "window": int(config.window), "resolution": oa.resolution,
+        "steps": [jsonable_step(r) for r in run.steps], "final": final,
+        "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
+                                             for r in run.steps)),
+        "fusion": {"enabled": False, "scope": "photographs have no poses"},
+        "versions": versions(),
+        "config": {**asdict(config), "out": str(config.out_dir())},
+    }
+    n = seq.n_robots
+    grid = np.array([[float(k), float(i), 0.0] for k in range(seq.steps) for i in range(n)])
+    online_tables(config.out_dir(), run, report, timer, [v.name for v in seq.views],
+                  rerun=config.rerun, centres=grid)
+    return config.out_dir()

@@ -1,0 +1,46 @@
+"""Per-robot frame sequences (pipeline.inputs.sequence): robots and steps in name order,
+one intrinsics file for all, clear errors on a bad folder."""
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.inputs.sequence import load_sequence
+
+SCEAUX = Path(__file__).parents[2] / "data" / "sceaux_castle_640"
+
+
+def _folder(root: Path, frames: dict) -> Path:
+    files = sorted(SCEAUX.glob("*.JPG"))
+    for robot, idx in frames.items():
+        (root / robot).mkdir(parents=True)
+        for k, i in enumerate(idx):
+            shutil.copy(files[i], root / robot / f"f{k:02d}.jpg")
+    shutil.copy(SCEAUX / "K.txt", root / "K.txt")
+    return root
+
+
+def test_step_k_is_every_robots_kth_frame(tmp_path):
+    root = _folder(tmp_path / "seq", {"r1": [1, 3], "r0": [0, 2], ".hidden": [5, 6]})
+    seq = load_sequence(root, max_size=64)
+    assert seq.robots == ["r0", "r1"] and seq.steps == 2 and seq.n_robots == 2
+    assert [v.name for v in seq.views] == ["r0/f00.jpg", "r1/f00.jpg", "r0/f01.jpg",
+                                           "r1/f01.jpg"]
+    assert {v.intrinsics_source for v in seq.views} == {"K.txt"}
+    assert max(seq.views[0].size) == 64
+
+
+def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
+    root = _folder(tmp_path / "seq", {"a": [0, 1, 2], "b": [3, 4]})
+    with pytest.raises(InputError, match=r"different numbers of frames \(a: 3, b: 2\)"):
+        load_sequence(root, max_size=64)
+
+
+def test_a_team_needs_two_robot_folders(tmp_path):
+    root = _folder(tmp_path / "seq", {"a": [0, 1]})
+    with pytest.raises(InputError, match="1 robot sub-folder"):
+        load_sequence(root, max_size=64)
+    with pytest.raises(InputError, match="one sub-folder of frames per robot"):
+        load_sequence(tmp_path / "missing")

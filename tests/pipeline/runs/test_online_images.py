@@ -1,0 +1,85 @@
+"""run-images DIR --sequence (pipeline.runs.online_images): a tiny folder of two robots'
+frame sequences, associated online; the run folder's step list and tables."""
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pipeline.__main__ import main
+
+SCEAUX = Path(__file__).parents[2] / "data" / "sceaux_castle_640"
+FAST = ["--max-size", "200", "--features", "sift", "--max-features", "200",
+        "--matcher", "opencv", "--graph", "complete"]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    root = tmp_path_factory.mktemp("seq") / "team"
+    files = sorted(SCEAUX.glob("*.JPG"))
+    for robot, idx in (("a", [0, 2, 4]), ("b", [1, 3, 5])):
+        (root / robot).mkdir(parents=True)
+        for k, i in enumerate(idx):
+            shutil.copy(files[i], root / robot / f"{k}.jpg")
+    shutil.copy(SCEAUX / "K.txt", root / "K.txt")
+    return root
+
+
+@pytest.fixture(scope="module")
+def run_dir(folder, tmp_path_factory):
+    out = tmp_path_factory.mktemp("seqrun") / "run"
+    assert main(["run-images", str(folder), "--sequence", "--window", "2", "--out", str(out),
+                 *FAST]) == 0
+    return out
+
+
+def test_one_step_per_frame_index_and_conflict_free_after_each(run_dir):
+    report = json.loads((run_dir / "report.json").read_text())
+    assert [s["step"] for s in report["steps"]] == [0, 1, 2]
+    assert report["n_robots"] == 2 and report["robots"] == ["a", "b"]
+    assert report["n_images"] == 6 and report["window"] == 2
+    for s in report["steps"]:
+        for key in ("links_new", "conflictive_sets_after", "wall_s", "rounds", "bytes"):
+            assert key in s
+        assert s["conflictive_sets_after"] == 0
+    assert report["conflict_free_every_step"] is True
+    f = report["final"]
+    assert sum(s["links_new"] for s in report["steps"]) == f["links"] > 0
+    assert f["batch"]["conflictive_sets"] == 0
+    assert report["steps"][-1]["batch"]["conflictive_sets_after"] == 0
+    assert (run_dir / "recording.rrd").stat().st_size > 0
+
+
+def test_images_and_links_tables(run_dir):
+    with open(run_dir / "images.csv") as fh:
+        images = list(csv.DictReader(fh))
+    assert [(int(r["robot"]), int(r["step"]), r["name"]) for r in images] == [
+        (0, 0, "a/0.jpg"), (1, 0, "b/0.jpg"), (0, 1, "a/1.jpg"), (1, 1, "b/1.jpg"),
+        (0, 2, "a/2.jpg"), (1, 2, "b/2.jpg")]
+    report = json.loads((run_dir / "report.json").read_text())
+    with open(run_dir / "link_steps.csv") as fh:
+        steps = list(csv.DictReader(fh))
+    with open(run_dir / "links.csv") as fh:
+        links = list(csv.DictReader(fh))
+    assert len(steps) == len(links) == report["final"]["links"]
+    for r in report["steps"]:
+        assert sum(int(s["step_added"]) == r["step"] for s in steps) == r["links_new"]
+    # a new link joins a frame of its step to a frame of the window (2 steps)
+    step_of = {int(r["image"]): int(r["step"]) for r in images}
+    for lk, s in zip(links, steps, strict=True):
+        a, b = step_of[int(lk["cam_i"])], step_of[int(lk["cam_j"])]
+        assert max(a, b) == int(s["step_added"]) and abs(a - b) < 2
+
+
+@pytest.mark.parametrize("flags, match", [
+    (["--export-db"], "--export-db is not available with --sequence"),
+    (["--window", "0"], "--window 0: expected a number of steps >= 1"),
+])
+def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsys, flags,
+                                                         match):
+    assert main(["run-images", str(folder), "--sequence", "--out", str(tmp_path / "x"), *FAST,
+                 *flags]) == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
