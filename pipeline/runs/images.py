@@ -4,8 +4,9 @@ The stages of a formation run (docs/DESIGN.md "Data flow") without ground truth:
 downscale the images with their own intrinsics (:mod:`pipeline.inputs.photos`), features, matching on the
 user's comm-graph edges only, the distributed consistency stage (Aragüés et al., Sec. III
 detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
-cleaned tracks a pycolmap incremental reconstruction from the matches before and after
-cleaning (:mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run outputs" with
+cleaned tracks a pycolmap incremental reconstruction from the matches before cleaning and,
+after cleaning, the kept links triangulated on its poses and bundle adjusted (or mapped from
+scratch with ``remap``; :func:`_map_after`, :mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run outputs" with
 ``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``. With
 ``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.evaluation.truth`)
 the ``truth`` column and every ground-truth figure of a formation run are filled in.
@@ -76,6 +77,9 @@ class ImagesConfig:
     live: str | None = None
     #: "sim" (robots in this process) or "zenoh" (one robot process per photograph; no fusion)
     transport: str = "sim"
+    #: map the kept links from scratch instead of on the poses of the reconstruction before
+    #: cleaning (:func:`_map_after`)
+    remap: bool = False
 
     def out_dir(self) -> Path:
         if self.out:
@@ -176,7 +180,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
 
     Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
     consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
-    reconstruction after cleaning → outputs (report.json with ``flags``, links.csv with
+    reconstruction after cleaning (on the first one's poses, :func:`_map_after`) → outputs (report.json with ``flags``, links.csv with
     ``truth`` empty, sparse/ = the reconstruction after cleaning at the resolution of the image
     files, with colours, recording.rrd, database.db with ``export_db``).
 
@@ -241,10 +245,9 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
         else:
             _fuse_registered(cleaning, views, feats, comm_edges, map_before, timer)
         kept = cleaning.ledger.kept
-        with timer.stage("reconstruction-after", "pycolmap incremental mapping, kept links"):
+        with timer.stage("reconstruction-after", _AFTER[_after_mode(config, kept, map_before)]):
             db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
-            map_after = colmap.incremental_mapping(db_after, num_threads=config.threads,
-                                                   fixed_intrinsics=fixed)
+            map_after = _map_after(config, kept, db_after, map_before, fixed)
             timer.note(_mapping_note(map_after))
 
         report, md = _report(config, out, views, feats, matches, comm_edges, cleaning, team,
@@ -254,6 +257,54 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
                timer)
     print(md)
     return out
+
+
+#: how the reconstruction after cleaning is made (:func:`_after_mode`), as the stage line and
+#: report.json say it
+_AFTER = {
+    "same": "nothing cut: the reconstruction before cleaning",
+    "poses": "kept links triangulated on the poses of the reconstruction before cleaning, "
+             "bundle adjusted (pipeline.colmap.mapping_from_poses)",
+    "scratch": "pycolmap incremental mapping of the kept links from scratch",
+}
+
+
+def _after_mode(config: ImagesConfig, kept: np.ndarray, map_before) -> str:
+    """``same`` (no link cut), ``scratch`` (``remap``, or no reconstruction before cleaning
+    to start from) or ``poses`` (the default: :func:`_map_after`)."""
+    if bool(np.all(kept)):
+        return "same"
+    if config.remap or map_before.reconstruction is None or map_before.registered_images < 2:
+        return "scratch"
+    return "poses"
+
+
+def _map_after(config: ImagesConfig, kept: np.ndarray, db_after: Path, map_before, fixed):
+    """The reconstruction after cleaning (the check of the cleaned tracks).
+
+    By default the kept links are triangulated on the poses of the reconstruction before
+    cleaning and bundle adjusted, and the images it did not register are offered to the
+    mapper (:func:`pipeline.colmap.mapping_from_poses`): those poses are the ones fusion
+    judged the links with, and the kept links are a subset of the links they were found
+    from. Mapping the kept links from scratch (``remap``) makes COLMAP find every pose
+    again from that subset; on a weak view graph the correct matches alone may fall below
+    its registration thresholds: the rendered ring of :mod:`data_synth.symmetric` (ABCD)
+    registered 18 of 18 images before cleaning and 5 of 18 after, as it did with exactly
+    the links the truth calls wrong removed, while on the poses the kept links register
+    18 of 18 with lower pose errors than before cleaning (mapping_from_poses' docstring).
+    With no link cut the reconstruction before cleaning is the one after (the same
+    database), so it is not mapped twice.
+    """
+    from pipeline import colmap
+
+    mode = _after_mode(config, kept, map_before)
+    if mode == "same":
+        return map_before
+    if mode == "scratch":
+        return colmap.incremental_mapping(db_after, num_threads=config.threads,
+                                          fixed_intrinsics=fixed)
+    return colmap.mapping_from_poses(db_after, map_before.reconstruction,
+                                     num_threads=config.threads, fixed_intrinsics=fixed)
 
 
 def _photo_defaults(config: ImagesConfig) -> ImagesConfig:
@@ -322,6 +373,7 @@ def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, 
         "fusion": sections.fusion_section(ledger, cleaning.fusion_stats),
         "triangulation": {"method": "pycolmap incremental mapping from the matches "
                                     "(two-view geometries = links before / kept links after)",
+                          "after_from": _AFTER[_after_mode(config, ledger.kept, map_before)],
                           "before": map_before.summary(), "after": map_after.summary()},
         "baselines": sections.baselines_section(m, links),
         "matching": sections.matching_section(matches),
