@@ -28,6 +28,8 @@ import dataclasses
 import importlib.util
 import shutil
 import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -220,20 +222,29 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     if by_similarity:
         comm_edges = chosen["edges"]
 
-    with tempfile.TemporaryDirectory(prefix="run-images-") as work:
+    with tempfile.TemporaryDirectory(prefix="run-images-") as work, \
+            ThreadPoolExecutor(max_workers=1) as mapper:
         work = Path(work)
         # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed
         # focal lengths are refined
         fixed = [v.name for v in views if colmap.calibrated(v)]
-        with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links"):
-            db_before = colmap.write_database(work / "before.db", views, feats, links)
-            map_before = colmap.incremental_mapping(db_before, num_threads=config.threads,
-                                                    fixed_intrinsics=fixed)
-            timer.note(_mapping_note(map_before))
+        db_before = colmap.write_database(work / "before.db", views, feats, links)
+        # COLMAP's mapper releases the GIL: the reconstruction before cleaning runs in a
+        # thread while this one runs what needs only the links (the consistency stage, the
+        # report's centralized baselines); fusion waits for its poses
+        before_job = mapper.submit(_timed, colmap.incremental_mapping, db_before,
+                                   num_threads=config.threads, fixed_intrinsics=fixed)
         if cleaning is None:
             cleaning = clean_association(views, feats, comm_edges, links, fusion=False,
                                          timer=timer, resolution=config.resolution,
                                          matches=matches)
+        baselines = _baselines(feats, links)
+        with timer.stage("reconstruction-before", "pycolmap incremental mapping, all links "
+                         "(begun alongside the consistency stage)"):
+            map_before, mapping_s = before_job.result()
+            timer.note(_mapping_note(map_before))
+        # the stage's time is the mapping's own (it overlapped the stages above)
+        timer.timings["reconstruction-before"] = mapping_s
         if team is not None:
             pass  # fusion does not run over the zenoh transport (cleaning.fusion_stats says so)
         elif not config.fusion:
@@ -251,7 +262,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
             timer.note(_mapping_note(map_after))
 
         report, md = _report(config, out, views, feats, matches, comm_edges, cleaning, team,
-                             map_before, map_after, timer)
+                             map_before, map_after, timer, baselines=baselines)
 
         _write(out, config, report, md, views, feats, cleaning, map_before, map_after, db_after,
                timer)
@@ -352,9 +363,26 @@ def _load(config: ImagesConfig, timer: StageTimer):
     return views, comm_edges
 
 
+def _timed(fn, *args, **kwargs):
+    """``(fn(*args, **kwargs), its wall time in seconds)``."""
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0
+
+
+def _baselines(feats, links: Links) -> dict:
+    """The report's centralized baselines on the links before cleaning
+    (:func:`pipeline.evaluation.report.baselines_section`)."""
+    from pipeline.evaluation import report as sections
+
+    return sections.baselines_section(np.array([len(f) for f in feats], dtype=np.int64), links)
+
+
 def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, cleaning, team,
-            map_before, map_after, timer: StageTimer) -> tuple[dict, str]:
-    """``report.json`` of a photo run (with its ``flags``, warned on stderr) and its markdown."""
+            map_before, map_after, timer: StageTimer, *,
+            baselines: dict | None = None) -> tuple[dict, str]:
+    """``report.json`` of a photo run (with its ``flags``, warned on stderr) and its markdown
+    (``baselines``: the section when already computed, :func:`_baselines`)."""
     from pipeline.evaluation import report as sections
 
     m = np.array([len(f) for f in feats], dtype=np.int64)
@@ -375,7 +403,7 @@ def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, 
                                     "(two-view geometries = links before / kept links after)",
                           "after_from": _AFTER[_after_mode(config, ledger.kept, map_before)],
                           "before": map_before.summary(), "after": map_after.summary()},
-        "baselines": sections.baselines_section(m, links),
+        "baselines": _baselines(feats, links) if baselines is None else baselines,
         "matching": sections.matching_section(matches),
         "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist(),
                     "intrinsics_source": v.intrinsics_source,
