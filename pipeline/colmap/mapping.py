@@ -21,7 +21,8 @@ from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
 
-__all__ = ["MappingSummary", "incremental_mapping", "mapping_from_poses", "write_model",
+__all__ = ["MappingSummary", "incremental_mapping", "mapping_from_poses", "poses_usable",
+           "write_model",
            "read_model", "model_images", "model_points", "model_tracks", "registered_poses",
            "undistorted_keypoints",
            "similarity_between"]
@@ -198,8 +199,8 @@ def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads
     database_path : a database whose image ids, names and keypoints are those
         ``reconstruction`` was mapped from (e.g. two :func:`write_database` files of the same
         views and features, with different kept links)
-    reconstruction : pycolmap.Reconstruction — not modified (a copy is refined); ``None`` or
-        fewer than two registered images: :func:`incremental_mapping` from scratch
+    reconstruction : pycolmap.Reconstruction — not modified (a copy is refined); ``None``, or
+        not :func:`poses_usable`: :func:`incremental_mapping` from scratch
     num_threads, seed, fixed_intrinsics : as :func:`incremental_mapping`
 
     Returns
@@ -213,7 +214,7 @@ def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads
     """
     database_path = Path(database_path)
     check_database_file(database_path)
-    if reconstruction is None or reconstruction.num_reg_images() < 2:
+    if not poses_usable(reconstruction):
         return incremental_mapping(database_path, num_threads=num_threads, seed=seed,
                                    fixed_intrinsics=fixed_intrinsics)
     options, images, constant = _pipeline_options(database_path, num_threads, seed,
@@ -240,6 +241,22 @@ def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads
                               len(images), input_path=start)
             rec = _largest(models) or rec
     return _summary(rec, len(images), 1)
+
+
+def poses_usable(reconstruction) -> bool:
+    """Whether :func:`mapping_from_poses` can start from ``reconstruction``: two registered
+    images or more, and no camera of a registered image with parameters COLMAP's mapper
+    deems bogus (focal length ratio outside ``[0.1, 10]`` or a distortion term above 1, its
+    ``min_focal_length_ratio``, ``max_focal_length_ratio``, ``max_extra_param``): its
+    triangulator skips such images, so a start with one would give no points (seen on the
+    AABB ring with ``knn:4``: a shared camera left at ``k = -1.07``)."""
+    if reconstruction is None or reconstruction.num_reg_images() < 2:
+        return False
+    mapper = pycolmap.IncrementalMapperOptions()
+    cameras = {reconstruction.images[i].camera_id for i in reconstruction.reg_image_ids()}
+    return not any(reconstruction.cameras[c].has_bogus_params(
+        mapper.min_focal_length_ratio, mapper.max_focal_length_ratio, mapper.max_extra_param)
+        for c in cameras)
 
 
 def _refine(rec, options, constant_cameras) -> None:

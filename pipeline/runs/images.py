@@ -282,10 +282,13 @@ _AFTER = {
 
 def _after_mode(config: ImagesConfig, kept: np.ndarray, map_before) -> str:
     """``same`` (no link cut), ``scratch`` (``remap``, or no reconstruction before cleaning
-    to start from) or ``poses`` (the default: :func:`_map_after`)."""
+    to start from: fewer than two images, or a camera COLMAP deems bogus,
+    :func:`pipeline.colmap.poses_usable`) or ``poses`` (the default: :func:`_map_after`)."""
     if bool(np.all(kept)):
         return "same"
-    if config.remap or map_before.reconstruction is None or map_before.registered_images < 2:
+    from pipeline import colmap
+
+    if config.remap or not colmap.poses_usable(map_before.reconstruction):
         return "scratch"
     return "poses"
 

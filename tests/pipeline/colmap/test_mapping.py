@@ -93,3 +93,19 @@ def test_without_a_start_it_maps_from_scratch(sceaux_before):
     db = _kept_database(sceaux_before, "scratch.db", np.ones(len(links), dtype=bool))
     got = colmap.mapping_from_poses(db, None, num_threads=1)
     assert got.registered_images == 4 and got.points > 0
+
+
+def test_a_start_with_a_bogus_camera_is_mapped_from_scratch(sceaux_before):
+    """A camera COLMAP deems bogus (a distortion term above 1) would make its triangulator skip
+    every image of it: no points. Such a start is refused and the database mapped afresh."""
+    _, _, links, before, _ = sceaux_before
+    start = pycolmap.Reconstruction(before.reconstruction)
+    assert colmap.poses_usable(start)
+    for camera in start.cameras.values():
+        params = np.array(camera.params)
+        params[-1] = -1.07  # SIMPLE_RADIAL's k, as left by one mapping of the AABB ring
+        camera.params = params
+    assert not colmap.poses_usable(start) and not colmap.poses_usable(None)
+    db = _kept_database(sceaux_before, "bogus.db", np.ones(len(links), dtype=bool))
+    got = colmap.mapping_from_poses(db, start, num_threads=1)
+    assert got.registered_images == 4 and got.points > 0
