@@ -184,9 +184,12 @@ def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads
     registration thresholds (``abs_pose_min_num_inliers`` = 30 2D-3D matches seen before
     an image is even tried, twice that many 2D-2D for the structure-less fallback). On the
     rendered ring of :mod:`data_synth.symmetric` (ABCD, 18 cameras 20° apart) the frontier
-    image saw 38 triangulated points with all links, 24 after fusion cut 34 wrong links to
-    it, and the mapper stopped at 5 of 18 images; removing exactly the links that the truth
-    calls wrong stopped it at 5 too, for seeds 0, 1 and 2. On the same poses the kept links
+    image saw 38 triangulated points in the mapping of all links (too few inliers: the
+    structure-less fallback registered it); against the 5-image model of the cleaned links
+    it saw 24 (30 with all links), fusion having cut 39 of its links to those images, 34 of
+    them wrong by the truth, so it was never tried and the mapper stopped at 5 of 18;
+    removing exactly the links the truth calls wrong stopped it at 5 too (mapping seeds 0,
+    1 and 2). On the same poses the kept links
     give 18 of 18 images and, refined, lower pose errors than the reconstruction before
     cleaning (``bench/images_vs_colmap.py``).
 
