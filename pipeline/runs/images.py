@@ -6,9 +6,9 @@ user's comm-graph edges only, the distributed consistency stage (Aragüés et al
 detection and Sec. IV Alg. 1 resolution), fusion where poses exist, and as the check of the
 cleaned tracks a pycolmap incremental reconstruction from the matches before cleaning and,
 after cleaning, the kept links triangulated on its poses and bundle adjusted (or mapped from
-scratch with ``remap``; :func:`_map_after`, :mod:`pipeline.colmap`). Writes the run folder of docs/DESIGN.md "Run outputs" with
-``truth`` empty in ``links.csv``, optionally the cleaned matches as ``database.db``. With
-``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.evaluation.truth`)
+scratch with ``remap``; :func:`_map_after`, :mod:`pipeline.colmap`). Writes the run folder
+of docs/DESIGN.md "Run outputs" with ``truth`` empty in ``links.csv``, optionally the
+cleaned matches as ``database.db``. With ``truth="homographies"`` (a planar scene with ``H1to{k}p.txt`` files, :mod:`pipeline.evaluation.truth`)
 the ``truth`` column and every ground-truth figure of a formation run are filled in.
 
 Camera ``k`` is the ``k``-th image in the order of its pixels' digests
@@ -182,8 +182,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
 
     Stages: load → features → matching (comm edges only) → reconstruction before cleaning →
     consistency (Sec. III + Alg. 1) → fusion (poses from the first reconstruction) →
-    reconstruction after cleaning (on the first one's poses, :func:`_map_after`) → outputs (report.json with ``flags``, links.csv with
-    ``truth`` empty, sparse/ = the reconstruction after cleaning at the resolution of the image
+    reconstruction after cleaning (on the first one's poses, :func:`_map_after`) → outputs
+    (report.json with ``flags``, links.csv with ``truth`` empty, sparse/ = the reconstruction after cleaning at the resolution of the image
     files, with colours, recording.rrd, database.db with ``export_db``).
 
     Raises
