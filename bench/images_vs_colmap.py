@@ -22,6 +22,8 @@ Methods on each input:
 - ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
   cleaning, ``sparse/``; the one before cleaning beside it),
 - ``ours-no-fusion``: the same with ``--no-fusion`` (the consistency stage's cuts only),
+- ``ours-remap``: the same with ``--remap`` (the kept links mapped from scratch instead of on
+  the poses of the reconstruction before cleaning),
 - ``ours-knn4``: run-images ``--graph knn:4`` (neighbours by image similarity).
 
 Columns: registered images, 3D points, mean track length, mean reprojection error, wall time,
@@ -37,7 +39,9 @@ mapping of a scene of repeated structure may fold where the next does not). Prin
     python bench/images_vs_colmap.py DIR [DIR ...]         # other photo folders (plus the rings)
 
 Times are wall-clock seconds on this machine with its 2 cores shared with other work: compare
-rows of one run only.
+rows of one run only (modules are imported before any clock starts, :data:`WARM_IMPORTS`);
+``cpu_s`` beside them is the CPU time of the run (this process and its
+forked feature workers), which other work on the cores changes less.
 """
 
 from __future__ import annotations
@@ -91,6 +95,17 @@ def shuffled_copy(src: Path, dst: Path, seed: int = 0) -> dict[str, str]:
             Image.frombytes(im.mode, im.size, im.tobytes()).save(dst / name)
         mapping[name] = f.name
     return mapping
+
+
+def cpu_s() -> float:
+    """CPU seconds (user + system) of this process and its finished children so far: with
+    other work on the cores, wall time measures the share the run got, CPU time the work it
+    did (forked feature workers are children, COLMAP's threads are this process)."""
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
+        resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _judge(rec, truth) -> dict:
@@ -160,18 +175,18 @@ def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
     work.mkdir(parents=True, exist_ok=True)
     db = work / "database.db"
     pycolmap.logging.minloglevel = 2
-    t0 = time.perf_counter()
+    c0, t0 = cpu_s(), time.perf_counter()
     pycolmap.extract_features(db, images)
     t1 = time.perf_counter()
     pycolmap.match_exhaustive(db)
     t2 = time.perf_counter()
     models = pycolmap.incremental_mapping(db, images, work / "sparse")
-    t3 = time.perf_counter()
+    t3, c3 = time.perf_counter(), cpu_s()
     with pycolmap.Database.open(db) as d:
         n_images = d.num_images()
         n_kp = [d.read_keypoints(im.image_id).shape[0] for im in d.read_all_images()]
     base = {"images": n_images, "features_mean": round(sum(n_kp) / max(len(n_kp), 1))}
-    colmap_row = {**base, "time_s": round(t3 - t0, 1),
+    colmap_row = {**base, "time_s": round(t3 - t0, 1), "cpu_s": round(c3 - c0, 1),
                   "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
                                    "mapping": round(t3 - t2, 1)},
                   **_model_row(models, truth)}
@@ -201,17 +216,18 @@ def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
     return [colmap_row, clean_row]
 
 
-def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = True) -> dict:
+def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = True,
+             remap: bool = False) -> dict:
     from pipeline import colmap
     from pipeline.progress import StageTimer
     from pipeline.runs.images import ImagesConfig, run_images
 
     cfg = ImagesConfig(directory=str(images), graph=graph, out=str(work / "run"), rerun=False,
-                       threads=-1, fusion=fusion)
-    t0 = time.perf_counter()
+                       threads=-1, fusion=fusion, remap=remap)
+    c0, t0 = cpu_s(), time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):  # the run's own report table
         out = run_images(cfg, StageTimer(verbose=False))
-    dt = time.perf_counter() - t0
+    dt, dc = time.perf_counter() - t0, cpu_s() - c0
     report = json.loads((out / "report.json").read_text())
     after, before = report["triangulation"]["after"], report["triangulation"]["before"]
     return {"images": report["n_cameras"],
@@ -219,6 +235,7 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
             "registered": after["registered_images"], "points": after["points"],
             "track_length": after["mean_track_length"],
             "reproj_px": after["mean_reprojection_error"], "time_s": round(dt, 1),
+            "cpu_s": round(dc, 1),
             "time_split_s": {k: round(v, 1) for k, v in report["timings_s"].items()},
             "before_cleaning": {"registered": before["registered_images"],
                                 "points": before["points"],
@@ -228,10 +245,10 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
             **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = ("colmap", "colmap+clean-db", "ours", "ours-no-fusion", "ours-knn4")
-#: run-images variants: method -> (graph, fusion)
-OURS = {"ours": ("complete", True), "ours-no-fusion": ("complete", False),
-        "ours-knn4": ("knn:4", True)}
+METHODS = ("colmap", "colmap+clean-db", "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
+#: run-images variants: method -> (graph, fusion, remap)
+OURS = {"ours": ("complete", True, False), "ours-no-fusion": ("complete", False, False),
+        "ours-remap": ("complete", True, True), "ours-knn4": ("knn:4", True, False)}
 
 
 def _fmt_err(r: dict) -> tuple[str, str, str]:
@@ -241,7 +258,7 @@ def _fmt_err(r: dict) -> tuple[str, str, str]:
             f"{r['wrong_tracks']}/{r['judged_tracks']}")
 
 
-def _inputs(folders, kinds, tmp: Path, rings: list[str]):
+def _inputs(folders, kinds, tmp: Path, rings: list[str], ring_seeds=(0,)):
     """``(data name, input kind, image folder, truth or None)`` for every measured input."""
     from data_synth.symmetric import write_ring_folder
     from pipeline.evaluation.scene_truth import read_truth
@@ -255,9 +272,25 @@ def _inputs(folders, kinds, tmp: Path, rings: list[str]):
                 shuffled_copy(folder, images)
             yield folder.name, kind, images, None
     for sides in rings:
-        images = tmp / f"ring-{sides}"
-        write_ring_folder(images, n=RING_CAMERAS, sides=sides)
-        yield f"ring-{sides}", "named", images, read_truth(images)
+        for seed in ring_seeds:
+            name = f"ring-{sides}" + (f"-seed{seed}" if seed else "")
+            images = tmp / name
+            write_ring_folder(images, n=RING_CAMERAS, sides=sides, seed=seed)
+            yield name, "named", images, read_truth(images)
+
+
+#: modules run-images imports on first use (its command line loads lazily); imported before any
+#: clock starts, as pycolmap is for the colmap rows
+WARM_IMPORTS = ("cv2", "PIL.Image", "scipy.sparse.csgraph", "pycolmap", "pipeline.stages",
+                "pipeline.runs.images", "pipeline.runs.transports.sim",
+                "pipeline.runs.clean_db", "pipeline.consistency", "pipeline.consistency.engines",
+                "pipeline.fusion.landmarks", "pipeline.evaluation.report",
+                "pipeline.evaluation.flags", "pipeline.evaluation.truth",
+                "pipeline.inputs.photos", "pipeline.inputs.linkscsv",
+                "pipeline.matching.retrieval", "pipeline.matching.features",
+                "pipeline.colmap", "pipeline.colmap.sift", "pipeline.consistency.centralized",
+                "pipeline.consistency.spectral", "scipy.optimize", "multiprocessing",
+                "concurrent.futures.process", "PIL.PngImagePlugin")
 
 
 def main(argv=None) -> int:
@@ -272,6 +305,8 @@ def main(argv=None) -> int:
     ap.add_argument("--inputs", default="named,renamed", help="named, renamed or both")
     ap.add_argument("--rings", default="ABCD,AABB",
                     help="rendered ring scenes by their sides (comma-separated; empty: none)")
+    ap.add_argument("--ring-seeds", default="0",
+                    help="render seeds of the ring scenes (comma-separated; default 0)")
     ap.add_argument("--rings-only", action="store_true", help="no photo folders")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-images" / "results.json")
     args = ap.parse_args(argv)
@@ -280,11 +315,16 @@ def main(argv=None) -> int:
     rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
     kinds = [i for i in args.inputs.split(",") if i]
+    import importlib
+
+    for name in WARM_IMPORTS:
+        importlib.import_module(name)
     rows = []
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench-images-") as tmp:
         tmp = Path(tmp)
-        for data, kind, images, truth in _inputs(folders, kinds, tmp, rings):
+        ring_seeds = [int(x) for x in args.ring_seeds.split(",") if x]
+        for data, kind, images, truth in _inputs(folders, kinds, tmp, rings, ring_seeds):
             work = tmp / f"{data}-{kind}"
             todo = []
             if "colmap" in methods or "colmap+clean-db" in methods:
@@ -294,8 +334,8 @@ def main(argv=None) -> int:
                 print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
                 try:
                     got = (run_colmap(images, work / "colmap", truth) if variant is None
-                           else [run_ours(images, work / name, *variant[:1], truth,
-                                          fusion=variant[1])])
+                           else [run_ours(images, work / name, variant[0], truth,
+                                          fusion=variant[1], remap=variant[2])])
                 except Exception as exc:  # noqa: BLE001 - a failed run is a result too
                     got = [{"error": f"{type(exc).__name__}: {exc}"}] * (2 if name == "colmap"
                                                                           else 1)
@@ -306,19 +346,19 @@ def main(argv=None) -> int:
                         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
             shutil.rmtree(work, ignore_errors=True)
     header = ("| data | input | method | registered | points | track length | reproj. px "
-              "| rot. err. ° (median) | pos. err. m (median) | wrong tracks | time s "
+              "| rot. err. ° (median) | pos. err. m (median) | wrong tracks | time s | CPU s "
               "| features/img |")
-    lines = [header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['data']} | {r['input']} | {r['method']} | error: {r['error']} "
-                         f"| | | | | | | | |")
+                         f"| | | | | | | | | |")
             continue
         rot, pos, wrong = _fmt_err(r)
         lines.append(f"| {r['data']} | {r['input']} | {r['method']} | {r['registered']}/"
                      f"{r['images']} | {r['points']} | {r['track_length']:.2f} | "
                      f"{r['reproj_px']:.2f} | {rot} | {pos} | {wrong} | {r['time_s']} | "
-                     f"{r['features_mean']} |")
+                     f"{r.get('cpu_s', '')} | {r['features_mean']} |")
     table = "\n".join(lines)
     print(table)
     targets = _targets(rows)
@@ -360,7 +400,9 @@ def _targets(rows: list[dict]) -> dict:
             continue
         item = {"data": data, "input": kind, "method": method,
                 "points_ratio": round(r["points"] / ref["points"], 3),
-                "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None}
+                "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None,
+                "cpu_ratio": round(r["cpu_s"] / ref["cpu_s"], 3)
+                if ref.get("cpu_s") and "cpu_s" in r else None}
         if ref.get("seeds") and r.get("seeds"):
             item["seeds_rotation_median_deg"] = [
                 [x["rotation_deg"]["median"] if x.get("rotation_deg") else None
@@ -378,7 +420,7 @@ def _targets(rows: list[dict]) -> dict:
             item["wrong_tracks"] = [ref["wrong_tracks"], r["wrong_tracks"]]
         out.append(item)
         lines.append(f"{data} {kind} {method}: points {item['points_ratio']:.3f} x colmap's, "
-                     f"time {item['time_ratio']} x colmap's"
+                     f"time {item['time_ratio']} x colmap's (CPU {item['cpu_ratio']} x)"
                      + (f"; rotation median {item['rotation_median_deg'][1]} ° vs colmap "
                         f"{item['rotation_median_deg'][0]} °, position median "
                         f"{item['position_median_m'][1]} m vs {item['position_median_m'][0]} m, "

@@ -5,7 +5,8 @@ pycolmap API change touches it alone (checked by write-and-reload tests).
   (quieted inside the adapter's calls only), the version.
 - :mod:`.database` — COLMAP databases: write the pipeline's matches, read COLMAP's or hloc's,
   write a cleaned copy (``clean-db``).
-- :mod:`.mapping` — incremental mapping and what is read from a reconstruction (poses,
+- :mod:`.mapping` — incremental mapping (from scratch, or on the poses of an earlier
+  reconstruction) and what is read from a reconstruction (poses,
   similarity between two gauges), model folders.
 - :mod:`.sift` — COLMAP's SIFT on an image in memory, COLMAP's matcher and two-view
   verification on a list of pairs (the comm edges).
@@ -32,9 +33,11 @@ from pipeline.colmap.known_poses import (
 from pipeline.colmap.mapping import (
     MappingSummary,
     incremental_mapping,
+    mapping_from_poses,
     model_images,
     model_points,
     model_tracks,
+    poses_usable,
     read_model,
     registered_poses,
     rescale_to_files,
@@ -59,6 +62,8 @@ __all__ = [
     "write_points_model",
     "MappingSummary",
     "incremental_mapping",
+    "mapping_from_poses",
+    "poses_usable",
     "model_images",
     "model_points",
     "model_tracks",

@@ -2,6 +2,8 @@
 
 - :func:`incremental_mapping` — ``pycolmap.incremental_mapping`` and its figures (registered
   images, points, mean track length, mean reprojection error).
+- :func:`mapping_from_poses` — the tracks of a database triangulated on the poses of an
+  earlier reconstruction of the same images, bundle adjusted, the images it lacks registered.
 - :func:`registered_poses`, :func:`similarity_between` — poses and gauge of a reconstruction.
 - :func:`write_model`, :func:`read_model` — a reconstruction as a COLMAP model folder.
 """
@@ -19,8 +21,9 @@ from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
 
-__all__ = ["MappingSummary", "incremental_mapping", "write_model", "read_model",
-           "model_images", "model_points", "model_tracks", "registered_poses",
+__all__ = ["MappingSummary", "incremental_mapping", "mapping_from_poses", "poses_usable",
+           "write_model",
+           "read_model", "model_images", "model_points", "model_tracks", "registered_poses",
            "undistorted_keypoints",
            "similarity_between"]
 
@@ -62,6 +65,47 @@ class MappingSummary:
                 "mean_reprojection_error": round(float(self.mean_reprojection_error), 4)}
 
 
+def _pipeline_options(database_path: Path, num_threads: int, seed: int, fixed_intrinsics,
+                      image_dir) -> tuple:
+    """COLMAP's mapping options for a database: ``(options, images in the database, ids of
+    the cameras held constant)``; every camera calibrated: no focal length refined (the
+    radial term still is); some: those cameras held constant."""
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = num_threads
+    options.random_seed = seed
+    options.extract_colors = bool(image_dir)
+    with quiet_colmap(), pycolmap.Database.open(database_path) as db:
+        images = db.read_all_images()
+    fixed = set(fixed_intrinsics)
+    constant = set()
+    if images and all(im.name in fixed for im in images):
+        options.ba_refine_focal_length = False
+    else:
+        constant = {im.camera_id for im in images if im.name in fixed}
+        options.constant_cameras = constant
+    return options, images, constant
+
+
+def _summary(rec, n_images: int, n_models: int) -> MappingSummary:
+    """The figures of ``rec`` (the largest model; zeros when it is None)."""
+    if rec is None:
+        return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
+    rec.update_point_3d_errors()
+    names = sorted(rec.images[i].name for i in rec.reg_image_ids())
+    return MappingSummary(
+        images=n_images, models=n_models, registered_images=rec.num_reg_images(),
+        registered_names=names, points=rec.num_points3D(),
+        observations=int(rec.compute_num_observations()),
+        mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+        mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
+        reconstruction=rec)
+
+
+def _largest(models: dict):
+    return max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D())) \
+        if models else None
+
+
 def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
                         output_dir: str | Path | None = None, num_threads: int = -1,
                         seed: int = 0, fixed_intrinsics=()) -> MappingSummary:
@@ -87,46 +131,156 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
     """
     database_path = Path(database_path)
     check_database_file(database_path)
-    options = pycolmap.IncrementalPipelineOptions()
-    options.num_threads = num_threads
-    options.random_seed = seed
-    options.extract_colors = bool(image_dir)
+    options, images, _ = _pipeline_options(database_path, num_threads, seed, fixed_intrinsics,
+                                           image_dir)
     with tempfile.TemporaryDirectory(prefix="colmap-map-") as tmp:
         out = Path(output_dir) if output_dir is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
-        with quiet_colmap():
-            with pycolmap.Database.open(database_path) as db:
-                n_images = db.num_images()
-                fixed = set(fixed_intrinsics)
-                images = db.read_all_images()
-                if images and all(im.name in fixed for im in images):
-                    # every camera calibrated: focal lengths kept, a radial term refined
-                    # (a pinhole camera has none to refine)
-                    options.ba_refine_focal_length = False
-                else:
-                    options.constant_cameras = {im.camera_id for im in images
-                                                if im.name in fixed}
-            # COLMAP insists on an existing image folder even when it reads no pixels;
-            # a progress bar counts the images as the mapper registers them
-            from pipeline.progress import progress
+        models = _mapping(database_path, str(image_dir or tmp), out, options, len(images))
+    return _summary(_largest(models), len(images), len(models))
 
-            with progress(None, total=n_images, desc="mapping (images registered)") as bar:
-                models = pycolmap.incremental_mapping(
-                    database_path, str(image_dir or tmp), out, options,
-                    initial_image_pair_callback=lambda: bar.update(2),
-                    next_image_callback=lambda: bar.update(1))
-    if not models:
-        return MappingSummary(n_images, 0, 0, [], 0, 0, 0.0, 0.0, None)
-    rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
-    rec.update_point_3d_errors()
-    names = sorted(rec.images[i].name for i in rec.reg_image_ids())
-    return MappingSummary(
-        images=n_images, models=len(models), registered_images=rec.num_reg_images(),
-        registered_names=names, points=rec.num_points3D(),
-        observations=int(rec.compute_num_observations()),
-        mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
-        mean_reprojection_error=float(rec.compute_mean_reprojection_error()),
-        reconstruction=rec)
+
+def _mapping(database_path: Path, image_dir: str, out: Path, options, n_images: int,
+             input_path: str | Path = "") -> dict:
+    """``pycolmap.incremental_mapping``, quiet, with a progress bar of the images registered."""
+    # COLMAP insists on an existing image folder even when it reads no pixels
+    from pipeline.progress import progress
+
+    with quiet_colmap(), progress(None, total=n_images,
+                                  desc="mapping (images registered)") as bar:
+        return pycolmap.incremental_mapping(
+            database_path, image_dir, out, options, input_path=str(input_path),
+            initial_image_pair_callback=lambda: bar.update(2),
+            next_image_callback=lambda: bar.update(1))
+
+
+#: bundle adjustment rounds of :func:`mapping_from_poses` (each followed by the mapper's
+#: filter); COLMAP's own global refinement stops at the same change of observations
+MAX_REFINEMENTS = 5
+MIN_REFINEMENT_CHANGE = 0.0005
+
+
+def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads: int = -1,
+                       seed: int = 0, fixed_intrinsics=()) -> MappingSummary:
+    """The verified matches of ``database_path`` mapped on the poses of ``reconstruction``.
+
+    Steps: the tracks of the database's two-view geometries triangulated on the registered
+    poses and cameras of ``reconstruction`` (its points are dropped:
+    ``pycolmap.triangulate_points``, COLMAP's point triangulator, which completes, merges and
+    filters the tracks with the poses held); then global bundle adjustments with poses,
+    points and the cameras not named in ``fixed_intrinsics`` refined, each followed by
+    COLMAP's mapper filter (reprojection error above ``filter_max_reproj_error``, 4 px, or
+    triangulation angle below ``filter_min_tri_angle``, 1.5°), until fewer than
+    :data:`MIN_REFINEMENT_CHANGE` of the observations change (at most
+    :data:`MAX_REFINEMENTS`, COLMAP's ``ba_global_max_refinements``); last, images of the
+    database that ``reconstruction`` did not register are offered to COLMAP's incremental
+    mapper, continuing this model (its 2D-3D registration, then its structure-less
+    fallback).
+
+    Why (``pipeline.runs.images``, the reconstruction after cleaning): the cleaned links
+    are a subset of links whose reconstruction is known, and fusion judged them with its
+    poses. Mapping them from scratch makes COLMAP find every pose again from that subset,
+    and where the view graph is weak the correct matches alone may not reach its
+    registration thresholds (``abs_pose_min_num_inliers`` = 30 2D-3D matches seen before
+    an image is even tried, twice that many 2D-2D for the structure-less fallback). On the
+    rendered ring of :mod:`data_synth.symmetric` (ABCD, 18 cameras 20° apart) the frontier
+    image saw 38 triangulated points in the mapping of all links (too few inliers: the
+    structure-less fallback registered it); against the 5-image model of the cleaned links
+    it saw 24 (30 with all links), fusion having cut 39 of its links to those images, 34 of
+    them wrong by the truth, so it was never tried and the mapper stopped at 5 of 18;
+    removing exactly the links the truth calls wrong stopped it at 5 too (mapping seeds 0,
+    1 and 2). On the same poses the kept links
+    give 18 of 18 images and, refined, lower pose errors than the reconstruction before
+    cleaning (``bench/images_vs_colmap.py``).
+
+    What it cannot do: re-decide a pose. A reconstruction folded by wrong matches stays
+    folded (its bundle adjustment only refines); :func:`incremental_mapping` on the same
+    database is the from-scratch alternative (``run-images --remap``).
+
+    Parameters
+    ----------
+    database_path : a database whose image ids, names and keypoints are those
+        ``reconstruction`` was mapped from (e.g. two :func:`write_database` files of the same
+        views and features, with different kept links)
+    reconstruction : pycolmap.Reconstruction — not modified (a copy is refined); ``None``, or
+        not :func:`poses_usable`: :func:`incremental_mapping` from scratch
+    num_threads, seed, fixed_intrinsics : as :func:`incremental_mapping`
+
+    Returns
+    -------
+    MappingSummary — ``models`` is 1 (the continued model)
+
+    Raises
+    ------
+    InputError
+        The database does not hold ``reconstruction``'s images under the same ids and names.
+    """
+    database_path = Path(database_path)
+    check_database_file(database_path)
+    if not poses_usable(reconstruction):
+        return incremental_mapping(database_path, num_threads=num_threads, seed=seed,
+                                   fixed_intrinsics=fixed_intrinsics)
+    options, images, constant = _pipeline_options(database_path, num_threads, seed,
+                                                  fixed_intrinsics, "")
+    names = {int(im.image_id): im.name for im in images}
+    for image_id, image in reconstruction.images.items():
+        if names.get(int(image_id)) != image.name:
+            raise InputError(
+                f"database {str(database_path)!r} does not hold the reconstruction's image "
+                f"{image.name!r} under id {image_id} (it has "
+                f"{names.get(int(image_id))!r}): map the database it was made from")
+    with tempfile.TemporaryDirectory(prefix="colmap-poses-") as tmp, quiet_colmap():
+        tmp = Path(tmp)
+        rec = pycolmap.triangulate_points(pycolmap.Reconstruction(reconstruction),
+                                          database_path, tmp, tmp / "triangulated",
+                                          clear_points=True, options=options)
+        _refine(rec, options, constant)
+        if rec.num_reg_images() < len(images):
+            start = tmp / "start"
+            start.mkdir()
+            rec.write(start)
+            options.multiple_models = False
+            models = _mapping(database_path, str(tmp), tmp / "continued", options,
+                              len(images), input_path=start)
+            rec = _largest(models) or rec
+    return _summary(rec, len(images), 1)
+
+
+def poses_usable(reconstruction) -> bool:
+    """Whether :func:`mapping_from_poses` can start from ``reconstruction``: two registered
+    images or more, and no camera of a registered image with parameters COLMAP's mapper
+    deems bogus (focal length ratio outside ``[0.1, 10]`` or a distortion term above 1, its
+    ``min_focal_length_ratio``, ``max_focal_length_ratio``, ``max_extra_param``): its
+    triangulator skips such images, so a start with one would give no points (seen on the
+    AABB ring with ``knn:4``: a shared camera left at ``k = -1.07``)."""
+    if reconstruction is None or reconstruction.num_reg_images() < 2:
+        return False
+    mapper = pycolmap.IncrementalMapperOptions()
+    cameras = {reconstruction.images[i].camera_id for i in reconstruction.reg_image_ids()}
+    return not any(reconstruction.cameras[c].has_bogus_params(
+        mapper.min_focal_length_ratio, mapper.max_focal_length_ratio, mapper.max_extra_param)
+        for c in cameras)
+
+
+def _refine(rec, options, constant_cameras) -> None:
+    """Global bundle adjustment (poses, points, the cameras not held constant) and COLMAP's
+    mapper filter, repeated until the observations settle (:func:`mapping_from_poses`)."""
+    ba = options.get_global_bundle_adjustment()
+    mapper = options.get_mapper()
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in rec.reg_image_ids():
+        config.add_image(image_id)
+    for camera_id in constant_cameras:
+        if camera_id in rec.cameras:
+            config.set_constant_cam_intrinsics(camera_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    for _ in range(MAX_REFINEMENTS):
+        observations = max(int(rec.compute_num_observations()), 1)
+        pycolmap.create_default_bundle_adjuster(ba, config, rec).solve()
+        filtered = pycolmap.ObservationManager(rec).filter_all_points3D(
+            mapper.filter_max_reproj_error, mapper.filter_min_tri_angle)
+        if filtered / observations < MIN_REFINEMENT_CHANGE:
+            break
 
 
 def write_model(path: str | Path, reconstruction=None) -> Path:

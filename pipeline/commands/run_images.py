@@ -46,6 +46,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write the matches as a COLMAP database (run folder/database.db): "
                         "matches table = every link, two-view geometries = kept links")
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
+    p.add_argument("--remap", action="store_true",
+                   help="map the kept links from scratch (COLMAP's incremental mapping) instead "
+                        "of triangulating them on the poses of the reconstruction before "
+                        "cleaning and bundle adjusting (the default: cleaning then refines the "
+                        "poses but cannot lose an image the first mapping registered)")
     p.add_argument("--no-rerun", action="store_true", help="do not write recording.rrd")
     live = p.add_mutually_exclusive_group()
     live.add_argument("--spawn", action="store_true",
@@ -100,7 +105,7 @@ def config_from_args(args) -> ImagesConfig:
                         truth_tol_px=args.truth_tol,
                         resolution=args.resolution, merge_radius=args.merge_radius,
                         live="spawn" if args.spawn else args.connect,
-                        transport=args.transport, matcher=args.matcher)
+                        transport=args.transport, matcher=args.matcher, remap=args.remap)
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:

@@ -186,7 +186,7 @@ def wrong_tracks(tracks: list[list[tuple[str, float, float]]], truth: SceneTruth
     order = np.argsort(obs_track[ok], kind="stable")
     Xo, to = X[ok][order], obs_track[ok][order]
     starts = np.flatnonzero(np.r_[True, to[1:] != to[:-1]]) if len(to) else np.zeros(0, int)
-    ends = np.r_[starts[1:], len(to)]
+    ends = np.r_[starts[1:], len(to)] if len(starts) else np.zeros(0, int)
     for a, b in zip(starts, ends, strict=True):
         if b - a < 2:
             continue

@@ -359,6 +359,12 @@ def extract_all(views, method: str = "sift", max_features: int | None = 2000,
         # reading the views from the parent's memory as it was at the fork (copy-on-write)
         # and sending back its Features; the same calls in the same order per image, so the
         # same results as serially
+        from pipeline.colmap.sift import sift_extractor
+
+        # the extractors made once here, before the fork, are every worker's
+        for v in views:
+            h, w = (v.image if isinstance(v, View) else np.asarray(v)).shape[:2]
+            sift_extractor(max_features or photo_max_features(w, h, method))
         global _FORKED_JOB
         _FORKED_JOB = (views, one)
         try:

@@ -108,13 +108,28 @@ def test_exported_database_holds_exactly_the_kept_links(sceaux_run):
 
 
 def test_sparse_is_the_reconstruction_after_cleaning(sceaux_run):
-    out, report, _ = sceaux_run
+    out, report, rows = sceaux_run
     rec = pycolmap.Reconstruction(out / "sparse")
     after = report["triangulation"]["after"]
     assert rec.num_reg_images() == after["registered_images"] >= 3
     assert rec.num_points3D() == after["points"] > 0
     assert 0 < after["mean_reprojection_error"] < 2.0
     assert report["triangulation"]["before"]["registered_images"] >= 3
+    # made on the poses of the reconstruction before cleaning: no image it registered is lost
+    assert any(r["status"] == "deleted" for r in rows)
+    assert report["triangulation"]["after_from"].startswith("kept links triangulated on the poses")
+    assert set(report["triangulation"]["before"]["registered_names"]) <= \
+        set(after["registered_names"])
+
+
+def test_remap_option_reaches_the_config():
+    from pipeline.__main__ import build_parser
+    from pipeline.commands.run_images import config_from_args
+
+    parser = build_parser()
+    argv = ["run-images", "DIR", "--graph", "ring"]
+    assert config_from_args(parser.parse_args(argv)).remap is False
+    assert config_from_args(parser.parse_args([*argv, "--remap"])).remap is True
 
 
 def test_mixed_sizes_and_guessed_intrinsics(tmp_path, sceaux_small):

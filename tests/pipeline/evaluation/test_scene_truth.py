@@ -85,6 +85,15 @@ def test_tracks_of_one_point_are_right_and_a_swapped_observation_is_wrong():
     assert wrong_tracks([on_edge], truth)["judged"] in (0, 1)
 
 
+def test_a_reconstruction_without_points_has_no_wrong_track():
+    """Regression: a model with no points (or tracks of no judged observation) failed on the
+    bookkeeping of empty tracks."""
+    truth = _plane_truth()
+    got = wrong_tracks([], truth)
+    assert (got["points"], got["judged"], got["wrong"], got["wrong_fraction"]) == (0, 0, 0, 0.0)
+    assert wrong_tracks([[("other.png", 1.0, 1.0)]], truth)["judged"] == 0
+
+
 def test_truth_file_round_trip_and_bad_files(tmp_path):
     truth = _plane_truth(3)
     np.savez(tmp_path / "truth.npz", names=np.array(truth.names), K=truth.K, R=truth.R,
