@@ -15,6 +15,7 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 from pipeline.association import AssociationGraph
 from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
+from pipeline.consistency.cycles import SUPPORT_VIEWS
 from pipeline.consistency.evidence import evidence_cut, triangle_support
 from pipeline.errors import InputError
 from pipeline.types import Links
@@ -100,6 +101,16 @@ def triangles_by_hand(a, b, cam, obs=None) -> np.ndarray:
                      for x, y in zip(a.tolist(), b.tolist(), strict=True)])
 
 
+def shared_by_hand(a, b, cam) -> np.ndarray:
+    """Third cameras both ends of each link are linked into (the set's links): beyond
+    :data:`SUPPORT_VIEWS` of them the triangles count as the agreement rate over that many."""
+    into = {}
+    for x, y in zip(a.tolist(), b.tolist(), strict=True):
+        into.setdefault(x, set()).add(cam[y])
+        into.setdefault(y, set()).add(cam[x])
+    return np.array([len(into[x] & into[y]) for x, y in zip(a.tolist(), b.tolist(), strict=True)])
+
+
 def greedy_kept(a, b, cam, weight, obs=None) -> np.ndarray:
     """The links the rule keeps in one conflictive set, by the merge it documents, written
     here: links by decreasing weight (ties: smaller ``(min gid, max gid)`` first); two
@@ -156,6 +167,8 @@ def expected_cut(fpc, links, link_weight, keypoints=None, projections=None):
 
     A set whose cameras all have a known pose: triangles counted only where their three
     observations are one point, the merge with the geometric test (:func:`greedy_kept`).
+    Triangles count at face value up to :data:`SUPPORT_VIEWS` shared third cameras
+    (:func:`shared_by_hand`), beyond as the agreement rate over that many.
     Any other set: every triangle counted; of at most :data:`EXHAUSTIVE_LINKS` links, the
     exhaustive reference (with which :func:`greedy_kept` must agree), else
     :func:`greedy_kept`.
@@ -175,7 +188,9 @@ def expected_cut(fpc, links, link_weight, keypoints=None, projections=None):
         if np.unique(cam[feats]).size == feats.size:
             continue  # not conflictive: nothing to cut
         obs = set_observations(feats, fpc, keypoints, projections)
-        w = link_weight[sel] + LOG_TEN * triangles_by_hand(a[sel], b[sel], cam, obs)
+        tau = triangles_by_hand(a[sel], b[sel], cam, obs)
+        w = link_weight[sel] + LOG_TEN * tau * np.minimum(
+            1.0, SUPPORT_VIEWS / np.maximum(shared_by_hand(a[sel], b[sel], cam), 1))
         kept = greedy_kept(a[sel], b[sel], cam, w, obs)
         if obs is not None:
             n_posed += 1
