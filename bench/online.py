@@ -19,7 +19,8 @@ the batch rerun in wall time and in bytes; final F1 >= the batch's; memory per r
 the window, not the history (its last-step value over its value at step ``window``; the
 stage's own state every 5 steps, ``memory_curve``, and its last-step value over its value
 half-way, ``state_growth_second_half``). ``--no-overturn``: the history repair's earlier
-rule (only new links are cut), for comparison.
+rule (only new links are cut), for comparison. ``--hold H``: a frame's links stay open H steps
+after it leaves the matching window (default ``window - 1``; ``--hold 0``: the earlier rule).
 
 Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
 online one it is compared with.
@@ -55,7 +56,8 @@ def one(robots: int, args) -> dict:
                           max_features=args.max_features, robots=robots, graph=args.graph,
                           steps=args.steps, window=args.window, speed=args.speed,
                           resolution=args.resolution, batch_every=args.batch_every,
-                          fusion=args.fusion, rerun=False, overturn=not args.no_overturn)
+                          fusion=args.fusion, rerun=False, overturn=not args.no_overturn,
+                          hold=args.hold)
     t0 = time.perf_counter()
 
     def show(r):
@@ -146,6 +148,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-overturn", action="store_true",
                     help="the history repair cuts only new links (the earlier rule), instead of "
                          "weighing the conflictive set's open links again")
+    ap.add_argument("--hold", type=int, default=None,
+                    help="steps a frame's links stay open after it leaves the matching window "
+                         "(default window - 1; 0: final at once, the earlier rule)")
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
                          "alone, as the batch run)")

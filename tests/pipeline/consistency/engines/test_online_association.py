@@ -24,6 +24,7 @@ def streams(draw, max_robots=4, max_steps=6, max_m=4):
     n = draw(st.integers(2, max_robots))
     steps = draw(st.integers(1, max_steps))
     window = draw(st.integers(1, 3))
+    hold = draw(st.integers(0, 2))
     seed = draw(st.integers(0, 2**31 - 1))
     density = draw(st.sampled_from([0.3, 0.6, 0.9]))
     rng = np.random.default_rng(seed)
@@ -52,11 +53,11 @@ def streams(draw, max_robots=4, max_steps=6, max_m=4):
                     ci.append(lo), fi.append(int(fa)), cj.append(hi), fj.append(int(fb))
         q = rng.uniform(0.05, 0.95, len(ci))
         out.append((frames, Links(ci, fi, cj, fj, q)))
-    return window, out
+    return window, hold, out
 
 
-def _run(window, stream, resolution):
-    oa = OnlineAssociation(window, resolution=resolution)
+def _run(window, hold, stream, resolution):
+    oa = OnlineAssociation(window, resolution=resolution, hold=hold)
     for frames, links in stream:
         before = oa.label.copy()
         rec = oa.add_step(frames, links)
@@ -67,8 +68,8 @@ def _run(window, stream, resolution):
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=streams())
 def test_conflict_free_after_every_step(resolution, data):
-    window, stream = data
-    for oa, rec, _, links in _run(window, stream, resolution):
+    window, hold, stream = data
+    for oa, rec, _, links in _run(window, hold, stream, resolution):
         assert is_conflict_free(oa.m, oa.kept_links()), rec
         assert rec["links_new"] == len(links)
         assert rec["cut"] == rec["cut_rule"] + rec["cut_history"]
@@ -77,9 +78,9 @@ def test_conflict_free_after_every_step(resolution, data):
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=streams())
 def test_earlier_decisions_are_kept_outside_the_touched_tracks(data):
-    window, stream = data
+    window, hold, stream = data
     prev_kept = np.zeros(0, bool)
-    for oa, rec, before, _links in _run(window, stream, "paper"):
+    for oa, rec, before, _links in _run(window, hold, stream, "paper"):
         L = oa.links
         n_old = len(prev_kept)
         # a cut link is never restored
@@ -101,9 +102,9 @@ def test_earlier_decisions_are_kept_outside_the_touched_tracks(data):
 def test_one_step_equals_the_batch_run(resolution, data):
     """All links in one step, nothing retired: the online stage runs the rule on the same
     links (images without links left out, order kept) and decides exactly as the batch."""
-    window, stream = data
+    window, hold, stream = data
     (frames, links), = stream
-    oa = OnlineAssociation(window, resolution=resolution)
+    oa = OnlineAssociation(window, resolution=resolution, hold=hold)
     oa.add_step(frames, links)
     batch = batch_resolve(oa.m, oa.all_links(), resolution=resolution,
                           keypoints=[np.zeros((m, 2)) for m in oa.m])
@@ -112,7 +113,7 @@ def test_one_step_equals_the_batch_run(resolution, data):
 
 def test_a_conflict_in_a_retired_frame_is_cut_by_the_history_repair():
     # window 2: the frames of step 0 (images 0, 1) retire at step 2
-    oa = OnlineAssociation(window=2, resolution="paper")
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
     oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
     # track A = {0:0, 1:0, 2:0}, track B = {0:1, 1:1, 3:1}
     oa.add_step([Frame(0, 1), Frame(1, 2)], Links([0, 1], [0, 1], [2, 3], [0, 1]))
@@ -166,8 +167,8 @@ def test_retired_runs_cover_their_pieces_frames(data):
     superset of the piece's frames, exact while a robot has no more runs than that."""
     from pipeline.consistency.engines import online
 
-    window, stream = data
-    for oa, _rec, _, _ in _run(window, stream, "paper"):
+    window, hold, stream = data
+    for oa, _rec, _, _ in _run(window, hold, stream, "paper"):
         truth = _retired_truth(oa)
         for p in np.unique(oa.ret_piece).tolist():
             on = oa.ret_piece == p
@@ -188,9 +189,9 @@ def test_conflict_free_when_runs_are_summarized_to_one(data):
     sees more clashes than there are, and the association stays conflict-free."""
     from unittest import mock
 
-    window, stream = data
+    window, hold, stream = data
     with mock.patch("pipeline.consistency.engines.online.RUNS_PER_ROBOT", 1):
-        for oa, rec, _, _ in _run(window, stream, "paper"):
+        for oa, rec, _, _ in _run(window, hold, stream, "paper"):
             assert is_conflict_free(oa.m, oa.kept_links()), rec
             assert np.unique(np.stack([oa.ret_piece, oa.ret_robot]), axis=1).shape[1] == \
                 len(oa.ret_piece)
@@ -199,7 +200,7 @@ def test_conflict_free_when_runs_are_summarized_to_one(data):
 def test_a_long_track_costs_its_robots_one_run_not_one_entry_per_frame():
     """A track both robots see at every step for 30 steps: its retired frames are one run per
     robot, and a robot's state at the last step is what it was once the window filled."""
-    oa = OnlineAssociation(window=2, resolution="paper")
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
     state = []
     for t in range(30):
         g = 2 * t   # images of step t: 2t (robot 0) and 2t + 1 (robot 1)
@@ -221,7 +222,7 @@ def test_a_long_track_costs_its_robots_one_run_not_one_entry_per_frame():
 def test_two_pieces_sharing_a_retired_frame_are_not_joined():
     """Two tracks meet in a retired frame through different features: a new link that joins
     them is cut by the history repair, though every window image of the set is distinct."""
-    oa = OnlineAssociation(window=2, resolution="paper")
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
     # step 0: tracks A = {0:0, 1:0} and B = {0:1, 1:1}
     oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
     # step 1: 2:0 joins A, 3:0 joins B
@@ -242,7 +243,7 @@ def test_the_history_repair_may_overturn_a_weak_link_into_a_retired_frame(overtu
     new frame joins A and B. With ``overturn`` the repair adds every open link of the set by
     decreasing quality and the weak link goes (B's piece then has no border link left, its
     entries go); without, it keeps the earlier links and cuts a new one."""
-    oa = OnlineAssociation(window=2, resolution="paper", overturn=overturn)
+    oa = OnlineAssociation(window=2, resolution="paper", overturn=overturn, hold=0)
     oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
     oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0], [0.9, 0.2]))
     rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
@@ -254,3 +255,36 @@ def test_the_history_repair_may_overturn_a_weak_link_into_a_retired_frame(overtu
         assert np.unique(oa.ret_piece).tolist() == [oa.piece[0]]
     else:
         assert reasons == ["", "", "", "", HISTORY, "", ""]
+
+
+@pytest.mark.parametrize("hold", [0, 1])
+def test_a_held_link_between_two_old_frames_can_still_be_cut(hold):
+    """Window 2: a weak link (quality 0.1) joins tracks B (0:1) and C (1:1) at step 0; the
+    clash shows at step 2, when image 4 sees B and C in two features. Without a hold the
+    frames of step 0 are retired by then and the weak link is final: the repair cuts a strong
+    new link instead. Held one step, the weak link is still open and it is the one the rule
+    cuts."""
+    oa = OnlineAssociation(window=2, resolution="paper", hold=hold)
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1], [0.9, 0.1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [1, 1], [2, 3], [0, 0], [0.9, 0.9]))
+    assert oa.window_images.tolist() == [0, 1, 2, 3]
+    rec = oa.add_step([Frame(0, 2), Frame(1, 1)],
+                      Links([2, 3], [0, 0], [4, 4], [0, 1], [0.9, 0.9]))
+    assert oa.is_conflict_free()
+    if hold:
+        assert oa.window_images.tolist() == [0, 1, 2, 3, 4, 5]
+        assert oa.links.reason.tolist() == ["", "paper", "", "", "", ""]
+        assert rec["cut_history"] == 0
+    else:
+        assert oa.window_images.tolist() == [2, 3, 4, 5]
+        assert oa.links.reason.tolist() == ["", "", "", "", "", HISTORY]
+
+
+def test_a_held_frame_takes_no_new_link():
+    oa = OnlineAssociation(window=1, resolution="paper", hold=2)
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [1], [0]))
+    with pytest.raises(InputError, match="window of 1 steps"):
+        oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [2], [0]))
+    with pytest.raises(InputError, match="hold -1"):
+        OnlineAssociation(window=1, hold=-1)
+    assert OnlineAssociation(window=3).hold == 2
