@@ -49,6 +49,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--window", type=int, default=3,
                    help="with --steps: steps of frames a robot holds and matches against "
                         "(default 3)")
+    g.add_argument("--hold", type=int, default=None,
+                   help="with --steps: steps a frame's links stay open after it leaves the "
+                        "matching window (default window - 1; 0: final at once)")
     g.add_argument("--speed", type=float, default=0.15,
                    help="with --steps: metres the formation drives per step (default 0.15)")
     g.add_argument("--batch-every", type=int, default=0,
@@ -85,6 +88,9 @@ def online_config_from_args(args):
         raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
     if args.window < 1:
         raise InputError(f"--window {args.window}: expected a number of steps >= 1")
+    if args.hold is not None and args.hold < 0:
+        raise InputError(f"--hold {args.hold}: expected a number of steps >= 0 (0: a frame's "
+                         "links are final once it leaves the window)")
     if not args.speed >= 0:
         raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
     if args.batch_every < 0:
@@ -104,8 +110,8 @@ def online_config_from_args(args):
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                         size=parse_size(args.size), features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,
-                        steps=args.steps, window=args.window, speed=args.speed,
-                        switching=bool(faults is not None and faults.switching_topology),
+                        steps=args.steps, window=args.window, hold=args.hold,
+                        speed=args.speed, switching=bool(faults is not None and faults.switching_topology),
                         resolution=args.resolution,
                         tol_px=validate.tolerance_px(args.tol_px),
                         batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,

@@ -338,6 +338,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "n_images": int(oa.n_images),
         "comm_edges": np.asarray(seq.comm_edges).tolist(),
         "window": int(config.window),
+        "hold": int(oa.hold),
         "resolution": oa.resolution,
         "steps": [jsonable_step(r) for r in run.steps],
         "final": final,

@@ -30,6 +30,7 @@ def test_report_has_one_entry_per_step(run_dir):
         assert s["conflictive_sets_after"] == 0
     assert report["conflict_free_every_step"] is True
     assert report["n_images"] == 18 and report["window"] == 2
+    assert report["hold"] == 1  # the default hold, window - 1
     assert sum(s["links_new"] for s in report["steps"]) == report["final"]["links"]
     # the batch run at the last step, scored on the same scope
     assert report["final"]["batch"]["true_pairs"] == report["final"]["online"]["true_pairs"]
@@ -74,6 +75,7 @@ def test_recording_carries_the_step_timeline(run_dir):
     (["--steps", "0"], "--steps 0"),
     (["--steps", "2", "--window", "0"], "--window 0"),
     (["--steps", "2", "--speed", "-1"], "--speed"),
+    (["--steps", "2", "--hold", "-1"], "--hold -1"),
     (["--steps", "2", "--drop-prob", "0.1"], "switching-topology"),
 ])
 def test_bad_options_are_refused(tmp_path, capsys, flags, match):
