@@ -150,12 +150,16 @@ def _fuse_changed(oa, views: list, features: list) -> dict:
                 tracks=int(len(fr.track_ids)), wall_s=time.perf_counter() - t0)
 
 
-def _memory(features: list, images: np.ndarray, robot_of: np.ndarray, n: int) -> np.ndarray:
-    """Bytes of keypoints and descriptors each robot holds for ``images``."""
+def _memory(features: list, images: np.ndarray, robot_of: np.ndarray, n: int,
+            keypoints_only: np.ndarray | None = None) -> np.ndarray:
+    """Bytes of keypoints and descriptors each robot holds for ``images``, and of keypoints
+    only for ``keypoints_only`` (held frames: no new match, so no descriptors)."""
     out = np.zeros(n, np.int64)
     for g in images.tolist():
         f = features[g]
         out[robot_of[g]] += f.keypoints.nbytes + f.descriptors.nbytes
+    for g in (() if keypoints_only is None else keypoints_only.tolist()):
+        out[robot_of[g]] += features[g].keypoints.nbytes
     return out
 
 
@@ -249,7 +253,9 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             rec.update(match_s=match_s, pairs_matched=int(len(pairs)),
                        conflictive_sets_after=int(counts.conflictive_sets),
                        links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
-            desc = _memory(feats_all, oa.window_images, robot_of, n)
+            w = oa.window_images
+            matching = step_of[w] > t - window  # held frames keep their keypoints only
+            desc = _memory(feats_all, w[matching], robot_of, n, keypoints_only=w[~matching])
             rec["robot_memory_bytes_max"] = int((desc + oa.robot_state_bytes()).max())
             if t in batch_steps:
                 t1 = time.perf_counter()

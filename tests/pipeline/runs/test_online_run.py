@@ -4,6 +4,7 @@ checks of the options."""
 import csv
 import json
 
+import numpy as np
 import pytest
 
 from pipeline.__main__ import main
@@ -123,3 +124,14 @@ def test_switching_topology_draws_the_graph_of_each_step(tmp_path, run_dir):
     assert all(p <= q for p, q in zip(pairs, [s["pairs_matched"] for s in full["steps"]],
                                       strict=True))
     assert pairs != [s["pairs_matched"] for s in full["steps"]]
+
+
+def test_a_held_frame_costs_its_robot_its_keypoints_not_its_descriptors():
+    from types import SimpleNamespace
+
+    from pipeline.runs import online
+
+    f = SimpleNamespace(keypoints=np.zeros((10, 2)), descriptors=np.zeros((10, 128), np.float32))
+    out = online._memory([f, f, f], np.array([0]), np.array([0, 0, 1]), 2,
+                         keypoints_only=np.array([1, 2]))
+    assert out.tolist() == [2 * 160 + 5120, 160]
