@@ -96,7 +96,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                  f"({seq.steps} steps)",
         "n_robots": int(seq.n_robots), "robots": seq.robots,
         "n_images": int(oa.n_images), "comm_edges": edges.tolist(),
-        "window": int(config.window), "resolution": oa.resolution,
+        "window": int(config.window), "hold": int(oa.hold), "resolution": oa.resolution,
         "steps": [jsonable_step(r) for r in run.steps], "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
                                              for r in run.steps)),
