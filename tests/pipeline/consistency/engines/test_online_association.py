@@ -288,3 +288,24 @@ def test_a_held_frame_takes_no_new_link():
     with pytest.raises(InputError, match="hold -1"):
         OnlineAssociation(window=1, hold=-1)
     assert OnlineAssociation(window=3).hold == 2
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams(max_steps=8))
+def test_the_window_holds_window_plus_hold_steps_and_retired_links_stay(data):
+    """With any hold: after step t the stage's window is the frames of the last W + H steps,
+    the association is conflict-free, and no link between two frames retired before the
+    step is cut at it (final), while links of held frames may be."""
+    window, hold, stream = data
+    prev_retired = np.zeros(0, bool)
+    for oa, rec, _, _ in _run(window, hold, stream, "evidence"):
+        t = rec["step"]
+        assert oa.window_images.tolist() == \
+            np.flatnonzero(oa.step > t - window - hold).tolist()
+        assert is_conflict_free(oa.m, oa.kept_links()), rec
+        L = oa.links
+        old = np.zeros(oa.n_images, bool)
+        old[:len(prev_retired)] = prev_retired
+        cut_now = L.step_cut == t
+        assert not (cut_now & old[L.ci] & old[L.cj]).any()
+        prev_retired = ~np.isin(np.arange(oa.n_images), oa.window_images)
