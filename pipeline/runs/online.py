@@ -5,7 +5,8 @@ its features and matches the new frame against its own ``W - 1`` previous frames
 last ``W`` frames (this step's included) of every robot it can talk to at this step (an edge
 of the step's communication graph), ``W`` = ``window``. The new links go to the online stage
 (:class:`pipeline.consistency.engines.online.OnlineAssociation`: detection and the rule on
-what they touch, the history check); the kept association is checked conflict-free after
+what they touch, the history check; a frame's links stay open ``hold`` steps after it leaves
+the matching window, default ``W - 1``); the kept association is checked conflict-free after
 every step (a centralized count, evaluation only). Optionally (``batch_every``) the same
 rule is run from scratch on all links so far (the batch run) for comparison.
 
