@@ -4,7 +4,16 @@ import os
 import shutil
 import tempfile
 
+from hypothesis import settings
+
 from data_synth.cache import ENV
+
+# Property tests draw the same examples on every run and machine by default ("repeatable"), so
+# a run's verdict does not depend on luck; `pytest --hypothesis-profile explore` draws new
+# random examples (and replays failures kept in .hypothesis/) to look for counterexamples.
+settings.register_profile("repeatable", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile("repeatable")
 
 _saved: dict = {}
 
