@@ -85,6 +85,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--window", type=int, default=3,
                    help="with --sequence: steps of frames a robot holds and matches against "
                         "(default 3)")
+    g.add_argument("--hold", type=int, default=None,
+                   help="with --sequence: steps a frame's links stay open after it leaves the "
+                        "matching window (default window - 1; 0: final at once)")
     g.add_argument("--batch-every", type=int, default=0,
                    help="with --sequence: also run the batch stage from scratch on all links "
                         "every K steps (default 0: at the last step only)")
@@ -121,13 +124,16 @@ def sequence_config_from_args(args):
     Raises
     ------
     InputError
-        A bad ``--window`` or ``--batch-every``, or an option the online job does not run
+        A bad ``--window``, ``--hold`` or ``--batch-every``, or an option the online job does not run
         (``--transport`` other than sim, ``--export-db``, ``--truth``, a live viewer).
     """
     from pipeline.runs.online_images import SequenceConfig
 
     if args.window < 1:
         raise InputError(f"--window {args.window}: expected a number of steps >= 1")
+    if args.hold is not None and args.hold < 0:
+        raise InputError(f"--hold {args.hold}: expected a number of steps >= 0 (0: a frame's "
+                         "links are final once it leaves the window)")
     if args.batch_every < 0:
         raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
     for flag, on in (("--transport", args.transport != "sim"), ("--export-db", args.export_db),
@@ -141,7 +147,7 @@ def sequence_config_from_args(args):
                          f"or 0 for full resolution")
     method, max_features = feature_options(args)
     return SequenceConfig(directory=args.directory, graph=args.graph, window=args.window,
-                          intrinsics=args.intrinsics, max_size=args.max_size or None,
+                          hold=args.hold, intrinsics=args.intrinsics, max_size=args.max_size or None,
                           features=method, max_features=max_features, matcher=args.matcher,
                           resolution=args.resolution, batch_every=args.batch_every,
                           out=args.out, rerun=not args.no_rerun)

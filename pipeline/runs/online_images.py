@@ -42,6 +42,7 @@ class SequenceConfig:
     directory: str
     graph: str = "complete"
     window: int = 3
+    hold: int | None = None  # None: the stage's default (window - 1)
     intrinsics: str = "auto"
     max_size: int | None = 1600
     features: str = "sift"
@@ -76,7 +77,8 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                            max_features=config.max_features, fusion=False,
                            batch_steps=batch_steps_of(seq.steps, config.batch_every)
                            | {seq.steps - 1},
-                           match_options=dict(threshold_px=None, matcher=config.matcher))
+                           match_options=dict(threshold_px=None, matcher=config.matcher),
+                           hold=config.hold)
     oa = run.online
     kept = oa.links.kept
     final = {"links": int(len(kept)), "online": {"kept": int(kept.sum()),

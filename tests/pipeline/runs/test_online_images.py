@@ -76,6 +76,7 @@ def test_images_and_links_tables(run_dir):
 @pytest.mark.parametrize("flags, match", [
     (["--export-db"], "--export-db is not available with --sequence"),
     (["--window", "0"], "--window 0: expected a number of steps >= 1"),
+    (["--hold", "-1"], "--hold -1: expected a number of steps >= 0"),
 ])
 def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsys, flags,
                                                          match):
@@ -83,3 +84,11 @@ def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsy
                  *flags]) == 2
     assert match in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_the_hold_defaults_to_window_minus_one_and_is_a_choice(run_dir, folder, tmp_path):
+    assert json.loads((run_dir / "report.json").read_text())["hold"] == 1  # --window 2
+    out = tmp_path / "hold0"
+    assert main(["run-images", str(folder), "--sequence", "--window", "2", "--hold", "0",
+                 "--no-rerun", "--out", str(out), *FAST]) == 0
+    assert json.loads((out / "report.json").read_text())["hold"] == 0
