@@ -12,7 +12,7 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["add_feature_options", "add_scene_options",
+__all__ = ["add_feature_options", "add_online_options", "check_online_options", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
@@ -63,6 +63,33 @@ def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None
                         + "; ".join(rule.help for rule in RULES.values())
                         + f" (default {default}; on a lossy network, --drop-prob, the "
                           "fault-tolerant Alg. 1 runs instead)")
+
+
+def add_online_options(g, flag: str) -> None:
+    """``--window``, ``--hold`` and ``--batch-every`` of an online job (``flag`` the option that
+    turns it on, named in the help): :class:`pipeline.consistency.engines.online.
+    OnlineAssociation`'s window and hold, and the batch reruns beside it."""
+    g.add_argument("--window", type=int, default=3,
+                   help=f"with {flag}: steps of frames a robot holds and matches against "
+                        "(default 3)")
+    g.add_argument("--hold", type=int, default=None,
+                   help=f"with {flag}: steps a frame's links stay open after it leaves the "
+                        "matching window (default window - 1; 0: final at once)")
+    g.add_argument("--batch-every", type=int, default=0,
+                   help=f"with {flag}: also run the batch stage from scratch on all links "
+                        "every K steps (default 0: at the last step only)")
+
+
+def check_online_options(args) -> None:
+    """InputError naming a bad ``--window``, ``--hold`` or ``--batch-every``
+    (:func:`add_online_options`)."""
+    if args.window < 1:
+        raise InputError(f"--window {args.window}: expected a number of steps >= 1")
+    if args.hold is not None and args.hold < 0:
+        raise InputError(f"--hold {args.hold}: expected a number of steps >= 0 (0: a frame's "
+                         "links are final once it leaves the window)")
+    if args.batch_every < 0:
+        raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
 
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:

@@ -10,9 +10,11 @@ from pipeline.commands.options import (
     add_feature_options,
     add_memory_option,
     add_merge_radius_option,
+    add_online_options,
     add_resolution_option,
     add_scene_options,
     add_transport_option,
+    check_online_options,
     feature_options,
     parse_size,
 )
@@ -46,17 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="drive the formation along the facade for N steps, one frame per robot "
                         "per step, and associate online (pipeline.runs.online); default: one "
                         "snapshot")
-    g.add_argument("--window", type=int, default=3,
-                   help="with --steps: steps of frames a robot holds and matches against "
-                        "(default 3)")
-    g.add_argument("--hold", type=int, default=None,
-                   help="with --steps: steps a frame's links stay open after it leaves the "
-                        "matching window (default window - 1; 0: final at once)")
+    add_online_options(g, "--steps")
     g.add_argument("--speed", type=float, default=0.15,
                    help="with --steps: metres the formation drives per step (default 0.15)")
-    g.add_argument("--batch-every", type=int, default=0,
-                   help="with --steps: also run the batch stage from scratch on all links every "
-                        "K steps (default 0: at the last step only)")
 
 
 def config_from_args(args) -> FormationConfig:
@@ -86,15 +80,9 @@ def online_config_from_args(args):
 
     if args.steps < 1:
         raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
-    if args.window < 1:
-        raise InputError(f"--window {args.window}: expected a number of steps >= 1")
-    if args.hold is not None and args.hold < 0:
-        raise InputError(f"--hold {args.hold}: expected a number of steps >= 0 (0: a frame's "
-                         "links are final once it leaves the window)")
+    check_online_options(args)
     if not args.speed >= 0:
         raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
-    if args.batch_every < 0:
-        raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
     if args.transport != "sim":
         raise InputError("--steps runs on the simulator only; drop --transport")
     if (args.robots is None) != (args.graph is None):

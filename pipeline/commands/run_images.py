@@ -15,8 +15,10 @@ from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
     add_merge_radius_option,
+    add_online_options,
     add_resolution_option,
     add_transport_option,
+    check_online_options,
     feature_options,
 )
 from pipeline.errors import InputError
@@ -82,15 +84,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "same number; step k = each robot's k-th frame, associated online as "
                         "run-formation --steps N; --graph is then the robots' graph (a kind, or "
                         "a file of sub-folder names or indices); no fusion (no poses)")
-    g.add_argument("--window", type=int, default=3,
-                   help="with --sequence: steps of frames a robot holds and matches against "
-                        "(default 3)")
-    g.add_argument("--hold", type=int, default=None,
-                   help="with --sequence: steps a frame's links stay open after it leaves the "
-                        "matching window (default window - 1; 0: final at once)")
-    g.add_argument("--batch-every", type=int, default=0,
-                   help="with --sequence: also run the batch stage from scratch on all links "
-                        "every K steps (default 0: at the last step only)")
+    add_online_options(g, "--sequence")
 
 
 def config_from_args(args) -> ImagesConfig:
@@ -129,13 +123,7 @@ def sequence_config_from_args(args):
     """
     from pipeline.runs.online_images import SequenceConfig
 
-    if args.window < 1:
-        raise InputError(f"--window {args.window}: expected a number of steps >= 1")
-    if args.hold is not None and args.hold < 0:
-        raise InputError(f"--hold {args.hold}: expected a number of steps >= 0 (0: a frame's "
-                         "links are final once it leaves the window)")
-    if args.batch_every < 0:
-        raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
+    check_online_options(args)
     for flag, on in (("--transport", args.transport != "sim"), ("--export-db", args.export_db),
                      ("--truth", args.truth != "none"),
                      ("--spawn/--connect", bool(args.spawn or args.connect))):
