@@ -11,6 +11,12 @@ from __future__ import annotations
 import time
 
 from pipeline.consistency.channel import Channel
+from pipeline.consistency.evidence import (
+    evidence_done,
+    evidence_round,
+    reexamine_sets,
+    start_evidence_reliable,
+)
 from pipeline.consistency.labels import labels_done, labels_round, start_labels_reliable
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.reliable import (
@@ -29,7 +35,8 @@ from pipeline.consistency.resolution import finish_resolution
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
-__all__ = ["DETECTIONS", "ALG1", "run_loop_locally", "run_paper_labels_locally"]
+__all__ = ["DETECTIONS", "ALG1", "EVIDENCE", "run_loop_locally", "run_paper_labels_locally",
+           "run_evidence_locally"]
 
 #: the detections a robot alone can run: ``(start, round, done)`` over the reliable channel
 DETECTIONS = {
@@ -128,3 +135,19 @@ def run_paper_labels_locally(robot: Robot, transport, protocol: ProtocolOptions 
     """The ``paper-labels`` rule for a robot alone: the loop with the label flooding of
     :mod:`.labels` as its detection and Alg. 1 as its resolution."""
     return run_loop_locally(robot, transport, protocol, n_robots, ALG1, detection="labels")
+
+
+#: the evidence rule over the reliable channel (:mod:`.evidence`): ``(start, step, done, finish)``
+EVIDENCE = (start_evidence_reliable, evidence_round, evidence_done, reexamine_sets)
+
+
+def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
+                         n_robots: int | None = None) -> RobotRun:
+    """The ``evidence`` rule for a robot alone: the loop with the rows of Sec. III as its
+    detection and the evidence rule's flood and solve as its resolution.
+
+    On every set of at most ``B`` features (the bundle budget of :mod:`.setlists`) its cuts
+    are those of the simulator's stage (:mod:`.engines.evidence_stage`: the same bundles and
+    solution); a larger set is solved here by its bundles too (memory ``Σ |C|²``), where the
+    simulator's stage runs the ``sync`` merge on its links."""
+    return run_loop_locally(robot, transport, protocol, n_robots, EVIDENCE, detection="rows")

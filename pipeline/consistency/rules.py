@@ -248,16 +248,16 @@ register(ResolutionRule(
     name="evidence",
     help="evidence = the robots of each set agree on the cut that keeps the best-supported "
          "links",
-    title="detection (Sec. III) + the evidence-aware resolution (robots of a set agree on the "
-          "cut that keeps the best-supported links)",
+    title="detection by bounded label flooding + the evidence-aware resolution (robots of a "
+          "set agree on the cut that keeps the best-supported links; sets beyond the bundle "
+          "budget by the distributed greedy merge)",
     summary="by the evidence rule",
+    # the cuts of the small sets and of the large sets' merge alike
     cases={5: "evidence"},
-    simulate="pipeline.consistency.evidence:evidence_pass",
-    batched="pipeline.consistency.engines.batched_evidence:evidence_pass",
-    start="pipeline.consistency.evidence:start_evidence_reliable",
-    step="pipeline.consistency.evidence:evidence_round",
-    done="pipeline.consistency.evidence:evidence_done",
-    finish="pipeline.consistency.evidence:reexamine_sets",
+    detection=False,
+    stage="pipeline.consistency.engines.evidence_stage:run_evidence_stage",
+    stage_batched="pipeline.consistency.engines.evidence_stage:run_evidence_stage_batched",
+    alone="pipeline.consistency.alone:run_evidence_locally",
     needs_evidence=True,
     merge_radius_px=2.0))
 register(ResolutionRule(
