@@ -120,6 +120,8 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
         for rb, a, h in zip(robots, alive, hidden, strict=True):
             rb.deleted_case[a & ~rb.link_alive] = evidence.CASE_EVIDENCE
             rb.link_alive = rb.link_alive | h
+    for rb in robots:  # each robot's peak over the three phases (each measured as it ran)
+        network.note_memory(rb.id, rb.peak_memory_bytes)
     return dict(rounds=t, detection_rounds=det, conflictive_sets=res_sets,
                 large_sets=n_large, bundle_budget=B, merge_rounds=merge_rounds)
 
