@@ -63,7 +63,7 @@ from pipeline.consistency.setlists import (
     setlists_step,
     start_setlists,
 )
-from pipeline.consistency.sync import equip_sync
+from pipeline.consistency.sync import CASE_SYNC, equip_sync
 from pipeline.transport import Transport
 
 __all__ = ["run_evidence_stage", "run_evidence_stage_batched", "run_setlists"]
@@ -118,7 +118,8 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
         merge_rounds = int(res["rounds"])
         t += merge_rounds
         for rb, a, h in zip(robots, alive, hidden, strict=True):
-            rb.deleted_case[a & ~rb.link_alive] = evidence.CASE_EVIDENCE
+            rb.deleted_case[a & ~rb.link_alive & (rb.deleted_case == CASE_SYNC)] = \
+                evidence.CASE_EVIDENCE
             rb.link_alive = rb.link_alive | h
     for rb in robots:  # each robot's peak over the three phases (each measured as it ran)
         network.note_memory(rb.id, rb.peak_memory_bytes)
