@@ -42,6 +42,13 @@ cluster. Hence:
 * the one rule: a robot reads its own state and its inbox only; :func:`evidence_cut` sees
   only the bundles the robot received.
 
+Where the member lists come from: the rule's stage (:mod:`.engines.evidence_stage`, and
+:func:`.alone.run_evidence_locally` for a robot alone) runs the bounded label flooding of
+:mod:`.setlists` instead of the rows of Sec. III: a set of at most ``B`` features (the bundle
+budget) reaches this flood and solve with its whole member list, as the rows gave it; a larger
+set is merged by the ``sync`` rule on its links instead, so no robot holds more than ``B``
+bundles of one set.
+
 Stated choices: ties in weight are broken by the smaller link ``(min gid, max gid)``; the
 weight of a link is the one its bundles carry (both ends hold the same value); a robot whose
 pose is unknown sends no ``P`` and the geometric test is then skipped for the whole set.

@@ -7,7 +7,8 @@ finds fewer conflicts, talking only to their neighbours; the loop of Prop. 4.5 r
 detection and resolution until a detection finds none. ``paper`` is the paper's Alg. 1
 (:mod:`.resolution`; over the reliable channel :mod:`.reliable`); ``evidence`` floods each
 set's costed links and cuts the same deterministic solution at every robot
-(:mod:`.evidence`).
+(:mod:`.evidence`), after a detection of its own (bounded label flooding, :mod:`.setlists`;
+sets beyond its bundle budget merged as ``sync`` merges: :mod:`.engines.evidence_stage`).
 
 ``DEFAULT_RESOLUTION`` (``evidence``) is the rule every entry point runs unless told otherwise:
 ``resolve_conflicts``, the stage functions of :mod:`pipeline.stages`, the runners' configs,
@@ -105,10 +106,11 @@ __all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rul
 DEFAULT_RESOLUTION = "evidence"
 #: the rule of the jobs that receive links only (``resolve``, ``clean-db``, ``clean-h5``,
 #: ``run-landmarks``): no camera poses, so the evidence rule's geometric tests cannot run and
-#: its decisions are the greedy merge ``sync`` computes too, while its detection needs memory
-#: in ``Σ |C|²`` (refused on a 101-frame CMU hotel input at 8 GB; ``sync`` 0.4 GB); ``sync``
-#: also counts quadrangles (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras).
-#: Measured by ``bench/multiway.py``.
+#: its decisions are the greedy merge ``sync`` computes too, at a higher cost (its detection
+#: floods up to ``B + 1`` ids per feature: a 101-frame CMU hotel input, 561 MB peak against
+#: sync's 347 MB, 732 MB on the wire against 308 MB); ``sync`` also counts quadrangles on
+#: every set (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras). Measured by
+#: ``bench/multiway.py``.
 DEFAULT_LINKS_RESOLUTION = "sync"
 
 #: the cases of Alg. 1 every report lists (line 10: (b) the feature is already in another
