@@ -220,8 +220,7 @@ def finish_setlists(robot: Robot) -> None:
     first[has] = st.ids[ptr[:-1][has]]
     # rules (8)-(9) on a small set's list: two ids of one camera
     cam = np.searchsorted(robot.offsets, st.ids, side="right") - 1
-    key = st.r * np.int64(robot.n) + cam  # sorted within each feature? not by camera: sort
-    key = np.sort(key)
+    key = np.sort(st.r * np.int64(robot.n) + cam)  # (feature, camera) of every id
     twice = key[1:][key[1:] == key[:-1]] // np.int64(robot.n)
     dup = np.zeros(m, dtype=bool)
     dup[twice] = True
