@@ -60,7 +60,7 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
 __all__ = ["SetListState", "start_setlists", "setlists_step", "finish_setlists", "KIND",
-           "SET_BUNDLE_BYTES", "bundle_bytes_bound", "bundle_budget"]
+           "SET_BUNDLE_BYTES", "bundle_bytes_bound", "bundle_budget", "merge_smallest"]
 
 KIND = "setlist"
 #: the bytes a robot may hold for the bundles of one conflictive set (the default bundle
@@ -150,6 +150,23 @@ def _send_new(robot: Robot, send) -> None:
               "ids": new_ids[ranges(ptr[r], ptr[r + 1])].astype(idt)})
 
 
+def merge_smallest(old: np.ndarray, incoming: np.ndarray, base, keep: int):
+    """The ``keep`` smallest keys of each group (``key // base``) of ``old ∪ incoming``, and
+    those of them not in ``old``: ``(merged, fresh)``, both sorted; ``old`` sorted, unique.
+
+    >>> merge_smallest(np.array([10, 12]), np.array([11, 12, 21]), 10, 2)
+    (array([10, 11, 21]), array([11, 21]))
+    """
+    merged = np.sort(np.r_[old, incoming])
+    if merged.size:  # sorting then dropping repeats beats hashing at these sizes
+        merged = merged[np.r_[True, merged[1:] != merged[:-1]]]
+    group = merged // base
+    head = np.r_[0, np.flatnonzero(group[1:] != group[:-1]) + 1] if merged.size else _EMPTY
+    rank = np.arange(merged.size) - np.repeat(head, np.diff(np.r_[head, merged.size]))
+    merged = merged[rank < keep]
+    return merged, merged[~isin_sorted(merged, old)]
+
+
 def start_setlists(robot: Robot, iteration: int, send, budget: int) -> None:
     """Round 0: every active feature (Sec. IV after Cor. 4.4, as the rows of Sec. III choose
     them) starts with its own id and sends it along its alive links."""
@@ -192,13 +209,8 @@ def setlists_step(robot: Robot, inbox: list[Message], send, round_: int = 0) -> 
         heard_r = np.concatenate(got_r)
         st.heard[heard_r] = True
         M = np.int64(robot.m_total)
-        old = st.r * M + st.ids  # sorted
-        key = np.unique(np.r_[old, heard_r * M + np.concatenate(got_id)])
-        r = key // M
-        head = np.r_[0, np.flatnonzero(r[1:] != r[:-1]) + 1]
-        rank = np.arange(key.size) - np.repeat(head, np.diff(np.r_[head, key.size]))
-        key = key[rank <= st.budget]  # the B + 1 smallest of each feature's union
-        new = key[~isin_sorted(key, old)]
+        key, new = merge_smallest(st.r * M + st.ids, heard_r * M + np.concatenate(got_id), M,
+                                  st.budget + 1)
         st.r, st.ids = key // M, key % M
         st.new_r, st.new_ids = new // M, new % M
     _send_new(robot, send)

@@ -1,6 +1,9 @@
 """Bounded label flooding: every feature ends with its set's member list or knows the set is
 larger than the budget, as a centralized union-find says (Hypothesis)."""
 
+from functools import partial
+from unittest.mock import patch
+
 import numpy as np
 from consistency_graphs import instances
 from hypothesis import HealthCheck, given, settings
@@ -9,8 +12,9 @@ from scipy.sparse.csgraph import shortest_path
 
 from pipeline.association import AssociationGraph, conflictive_labels
 from pipeline.commgraph import comm_edges_for
+from pipeline.consistency.engines import evidence_stage
 from pipeline.consistency.engines.driver import build_robots
-from pipeline.consistency.engines.evidence_stage import run_setlists
+from pipeline.consistency.engines.evidence_stage import run_setlists, run_setlists_batched
 from pipeline.transport.simulated import Network
 
 SETTINGS = settings(max_examples=100, deadline=None,
@@ -58,3 +62,39 @@ def test_each_feature_learns_its_set_or_that_it_is_large(inst, budget):
     # memory follows the links: at most B + 1 ids per feature held
     assert all(np.bincount(rb.setlists.r, minlength=rb.m).max(initial=0) <= budget + 1
                for rb in robots)
+
+
+@SETTINGS
+@given(inst=instances(max_n=7, max_feat=5), budget=st.integers(1, 8),
+       p_cut=st.sampled_from([0.0, 0.3]), seed=st.integers(0, 2**32 - 1),
+       chunk=st.sampled_from([1, 5, 1 << 21]))
+def test_the_batched_flood_leaves_every_robot_in_the_per_robot_state(inst, budget, p_cut, seed,
+                                                                     chunk):
+    fpc, edges, links = inst
+    edges = comm_edges_for(fpc, links, edges)
+    runs = []
+    batched = partial(_patched, chunk)
+    for flood in (run_setlists, batched):
+        robots, _ = build_robots(fpc, links)
+        rng = np.random.default_rng(seed)
+        for rb in robots:  # links cut at one end only: the receiver's own rows decide
+            rb.link_alive &= rng.random(rb.link_alive.size) >= p_cut
+        network = Network(len(fpc), edges)
+        rounds = flood(robots, network, budget, None, 3)
+        runs.append((robots, network.counters(), rounds))
+    (ra, ca, ta), (rb_, cb, tb) = runs
+    assert ta == tb and ca == cb
+    for a, b in zip(ra, rb_, strict=True):
+        for k in ("r", "ids", "new_r", "new_ids", "heard", "large"):
+            np.testing.assert_array_equal(getattr(a.setlists, k), getattr(b.setlists, k), k)
+        for k in ("conflictive", "set_label", "track_label", "active"):
+            np.testing.assert_array_equal(getattr(a, k), getattr(b, k), k)
+        assert (a.X != b.X).nnz == 0
+        assert a.t_stop == b.t_stop and a.stopped == b.stopped
+        assert a.peak_memory_bytes == b.peak_memory_bytes
+
+
+def _patched(chunk, *args):
+    """The batched flood with its merge cut in pieces of ``chunk`` entries."""
+    with patch.object(evidence_stage, "CHUNK_ENTRIES", chunk):
+        return run_setlists_batched(*args)
