@@ -107,8 +107,8 @@ DEFAULT_RESOLUTION = "evidence"
 #: the rule of the jobs that receive links only (``resolve``, ``clean-db``, ``clean-h5``,
 #: ``run-landmarks``): no camera poses, so the evidence rule's geometric tests cannot run and
 #: its decisions are the greedy merge ``sync`` computes too, at a higher cost (its detection
-#: floods up to ``B + 1`` ids per feature: a 101-frame CMU hotel input, 561 MB peak against
-#: sync's 347 MB, 732 MB on the wire against 308 MB); ``sync`` also counts quadrangles on
+#: floods up to ``B + 1`` ids per feature: a 101-frame CMU hotel input, 326 MB peak against
+#: sync's 317 MB, 732 MB on the wire against 308 MB); ``sync`` also counts quadrangles on
 #: every set (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras). Measured by
 #: ``bench/multiway.py``.
 DEFAULT_LINKS_RESOLUTION = "sync"

@@ -40,12 +40,19 @@ Result: conflict-free (the small sets by the evidence merge, the large ones by t
 merge, the non-conflictive small sets untouched). Rounds, messages, bytes and memory per
 robot are those of the three phases, counted as each phase counts them.
 
-Engines: :func:`run_evidence_stage` (every robot on its own inbox: the evidence pass and
-the merge robot by robot) and :func:`run_evidence_stage_batched` (the same label flooding,
-then the batched evidence pass of :mod:`.batched_evidence` and the batched merge of
-:mod:`.sync_batched`, each falling back to robot by robot where it does not apply); same
-results, rounds, messages, bytes and memory (``tests/pipeline/consistency/engines/
-test_batched.py``).
+Engines: :func:`run_evidence_stage` (every robot on its own inbox, phase after phase) and
+:func:`run_evidence_stage_batched` (the flood of phase 1 on the stacked link tables,
+:func:`run_setlists_batched`, then the batched evidence pass of :mod:`.batched_evidence` and
+the batched merge of :mod:`.sync_batched`, each falling back to robot by robot where it does
+not apply); same results, rounds, messages, bytes and memory per robot
+(``tests/pipeline/consistency/engines/test_batched.py``, ``tests/pipeline/consistency/
+test_setlists.py``).
+
+Measured (``bench/multiway.py --frames 50 101 --graphs complete --inputs descriptors
+--methods evidence sync --team``): CMU hotel, 101 frames, complete graph, descriptor-only
+links (one set of 2626 features, ``B = 152``): F1 1.000 as ``sync``, peak RSS well under
+1 GB where the rule after the rows ran out of 6 GB; the README's multi-way table has the
+figures of one run.
 """
 
 from __future__ import annotations
