@@ -71,6 +71,10 @@ the sets it found.
     once where the batched engines apply), and ``alone(robot, transport, protocol, n_robots)
     -> RobotRun`` (one robot in its own process, ending its phases by the termination wave of
     :mod:`.termination`) instead of ``simulate``/``start``/``step``/``done``/``finish``.
+``set_lists``
+    The rule's own detection floods up to ``B + 1`` ids of each set (:mod:`.setlists`, ``B``
+    the bundle budget): the memory guard counts those (:func:`pipeline.budget.
+    check_detection_memory`).
 ``cuts_as``
     The rule whose cuts this one makes on a fault-free network by construction (another
     protocol for the same decisions, property-tested): reports that compare every rule on
@@ -150,6 +154,7 @@ class ResolutionRule:
     needs_evidence: bool = False
     merge_radius_px: float | None = None
     cuts_as: str | None = None
+    set_lists: bool = False
     _loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
     def hook(self, name: str):
@@ -260,6 +265,7 @@ register(ResolutionRule(
     stage="pipeline.consistency.engines.evidence_stage:run_evidence_stage",
     stage_batched="pipeline.consistency.engines.evidence_stage:run_evidence_stage_batched",
     alone="pipeline.consistency.alone:run_evidence_locally",
+    set_lists=True,
     needs_evidence=True,
     merge_radius_px=2.0))
 register(ResolutionRule(

@@ -236,6 +236,11 @@ def _budget(robots: list[Robot]) -> int:
     return bundle_budget(robots[0].n if robots else 0, given.pop() if given else None)
 
 
+def _after(on_round, t0: int):
+    """The progress report of a phase that starts after ``t0`` rounds of the stage."""
+    return None if on_round is None else (lambda t: on_round(t0 + t))
+
+
 def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> dict:
     B = _budget(robots)
     flood = run_setlists_batched if batched and type(network) is Network \
@@ -244,7 +249,7 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
     t = det
     res_sets = 0
     if any(rb.conflictive.any() for rb in robots):
-        shift = (lambda s: (lambda r: on_round(s + r)))(t) if on_round is not None else None
+        shift = _after(on_round, t)
         run = batched_evidence.run_evidence_resolution if batched else \
             evidence.run_evidence_resolution
         res = run(robots, network, on_round=shift)
@@ -261,7 +266,7 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
         for rb, a, h in zip(robots, alive, hidden, strict=True):
             rb.link_alive = a & ~h
             equip_sync(rb, rb.evidence.link_weight)
-        shift = (lambda s: (lambda r: on_round(s + r)))(t) if on_round is not None else None
+        shift = _after(on_round, t)
         res = (run_sync_batched if batched else run_sync)(robots, network, on_round=shift)
         merge_rounds = int(res["rounds"])
         t += merge_rounds
@@ -285,5 +290,6 @@ def run_evidence_stage(robots: list[Robot], network: Transport, on_round=None) -
 
 
 def run_evidence_stage_batched(robots: list[Robot], network: Transport, on_round=None) -> dict:
-    """:func:`run_evidence_stage` with phases 2 and 3 evaluated in batch (same results)."""
+    """:func:`run_evidence_stage` with its three phases evaluated in batch where the batched
+    engines apply (same results, rounds, messages, bytes and memory)."""
     return _stage(robots, network, on_round, True)
