@@ -34,6 +34,9 @@ the interpreter and libraries, rounded up):
   (the lists, the entries that entered in a round, the merge's pieces).
 - data read from a database or an HDF5 file: its declared bytes times the copies made of
   them (:data:`COPIES_OF_READ_DATA`), counted from the declared sizes before any is read.
+- :func:`baselines_bytes`: the centralized baselines of ``--baselines`` (a copy of the links
+  per baseline, and the dense eigenproblem of a spectral baseline's largest component,
+  at most :data:`BASELINE_DENSE_FEATURES` features, with LAPACK's workspace).
 - :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
   (rendering, features, matching, cleaning and the report; ring formations of 10 and 30
   robots: 87 bytes at 640x480, 78 at 320x240).
@@ -49,7 +52,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_LIST_ENTRY",
+__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_LIST_ENTRY",
            "BYTES_PER_ROBOT_PIXEL",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
@@ -70,6 +73,12 @@ BYTES_PER_CAMERA = 12_000
 BYTES_PER_EDGE = 600
 #: bytes per robot and pixel of a rendered formation (measured 78-87)
 BYTES_PER_ROBOT_PIXEL = 90
+#: the largest component a spectral baseline solves densely
+#: (:data:`pipeline.consistency.spectral.DENSE_VALUES_MAX`)
+BASELINE_DENSE_FEATURES = 4000
+#: float64 matrices of that size held at once by the dense eigensolver (matrix, eigenvectors,
+#: workspace)
+BASELINE_DENSE_COPIES = 3
 #: copies made of data read from a file (the library's array, ours, a converted one)
 COPIES_OF_READ_DATA = 3
 #: default limit of the estimate, in GB (10^9 bytes)
@@ -201,6 +210,13 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
                "such sets come from wrong links: clean them first, or use --resolution sync "
                "(no detection) or paper-labels (Alg. 1 after a label-flooding detection): "
                "their memory follows the links")
+
+
+def baselines_bytes(features: int, links: int) -> int:
+    """Estimated peak of the centralized baselines on ``links`` links among ``features``
+    features (module notes)."""
+    dense = min(int(features), BASELINE_DENSE_FEATURES)
+    return int(links) * BYTES_PER_ROW + BASELINE_DENSE_COPIES * dense * dense * 8
 
 
 def check_formation_memory(n_robots: int, size: tuple[int, int], limit,

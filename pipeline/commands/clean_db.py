@@ -27,6 +27,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON",
                    help="also save the summary as JSON")
+    p.add_argument("--baselines", action="store_true",
+                   help="also run the centralized baselines on the same verified links "
+                        "(spectral synchronization, a CLEAR-style method, union-find dropping "
+                        "conflictive sets, ...), for comparison: a line each and the summary's "
+                        "baselines")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p, links_only=True)
 
@@ -52,7 +57,8 @@ def run(args) -> int:
     with OutputFiles(replace=args.overwrite) as outputs:
         res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
                              args.resolution, rerun=not args.no_rerun,
-                             image_dir=args.image_dir, outputs=outputs)
+                             image_dir=args.image_dir, outputs=outputs,
+                             baselines=args.baselines)
         summary = flag_result(res.summary())
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
@@ -64,6 +70,10 @@ def run(args) -> int:
           f"({r['detection_rounds']} detection + {r['resolution_rounds']} resolution rounds, "
           f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
           f"{cut['not-comm-edge']} outside the comm graph")
+    if res.baselines:
+        from pipeline.evaluation.report import baselines_lines
+
+        print("\n".join(baselines_lines(res.baselines, r["method"])))
     links_csv, rrd = side_paths(res.output)
     print(f"cleaned database written to {res.output}; what was cut: {links_csv}"
           + ("" if args.no_rerun else f", recording: {rrd}"))

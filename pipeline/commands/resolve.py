@@ -30,6 +30,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    p.add_argument("--baselines", action="store_true",
+                   help="also run the centralized baselines on the same links (spectral "
+                        "synchronization, a CLEAR-style method, union-find dropping conflictive "
+                        "sets, ...), for comparison: a line each and the summary's baselines")
     add_overwrite_and_memory_options(p, "--out / --report")
     add_resolution_option(p, links_only=True)
     add_transport_option(p)
@@ -53,7 +57,7 @@ def run(args) -> int:
         s = flag_result(resolve_file(args.links, args.out, args.comm_graph,
                                      faults_from_args(args), args.max_memory_gb,
                                      resolution=args.resolution, transport=args.transport,
-                                     outputs=outputs))
+                                     outputs=outputs, baselines=args.baselines))
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, r = s["before"], s["after"], s["resolution"]
@@ -74,5 +78,9 @@ def run(args) -> int:
               f"retransmissions; +{f.get('extra_rounds', '?')} rounds, "
               f"+{f.get('extra_messages', '?')} messages "
               "vs fault-free")
+    if "baselines" in s:
+        from pipeline.evaluation.report import baselines_lines
+
+        print("\n".join(baselines_lines(s["baselines"], s["resolution_method"])))
     print(f"written: {s['output']}" + (f", {args.report}" if args.report else ""))
     return exit_status(s)

@@ -18,7 +18,7 @@ from pipeline.consistency.rules import deleted_cases
 from pipeline.types import LinkLedger, Links
 
 __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
-           "fusion_section", "baselines_section", "resolution_quality_section",
+           "fusion_section", "baselines_section", "baselines_beside", "baselines_lines", "resolution_quality_section",
            "matching_section", "report_markdown",
            "mapping_markdown", "track_gt_points", "fused_point_errors"]
 
@@ -142,6 +142,46 @@ def baselines_section(m, links: Links, good: np.ndarray | None = None, missing=N
             row["pairwise"] = pairwise(kept)
         out[name] = row
     return out
+
+
+def baselines_beside(m, links: Links, kept: np.ndarray) -> dict:
+    """The centralized baselines on the links a job resolved, beside the rule's decisions,
+    for a job without ground truth (``resolve --baselines``, ``clean-db --baselines``).
+
+    Per baseline (:data:`pipeline.consistency.centralized.BASELINES`): the counts of its
+    association (conflictive sets and features), ``deleted_links``, ``decided_otherwise``
+    (links it keeps where the rule cut them, or cuts where the rule kept them) and its CPU
+    time; for comparison only, never used by the robots.
+
+    Parameters
+    ----------
+    m : (n,) int — features per camera
+    links : Links, (L,) — the links the rule ran on
+    kept : (L,) bool — the rule's decisions
+    """
+    import time
+
+    from pipeline.consistency import centralized
+
+    kept = np.asarray(kept, dtype=bool)
+    uf = centralized.union_find_conflicts(m, links)  # the same sets for all
+    out = {}
+    for name, fn in centralized.BASELINES.items():
+        t0 = time.process_time()
+        mask = np.asarray(fn(m, links, _uf=uf), dtype=bool)
+        cpu = time.process_time() - t0
+        out[name] = {**association_counts(m, links.subset(mask), None, None),
+                     "deleted_links": int((~mask).sum()),
+                     "decided_otherwise": int((mask != kept).sum()),
+                     "cpu_s": round(cpu, 3)}
+    return out
+
+
+def baselines_lines(section: dict, rule: str) -> list[str]:
+    """One printed line per baseline of :func:`baselines_beside`'s ``section``."""
+    return [f"baseline {name}: {bl['deleted_links']} links deleted, {bl['conflictive_sets']} "
+            f"conflictive sets left, {bl['decided_otherwise']} links decided otherwise than "
+            f"{rule} ({bl['cpu_s']:.2f} s CPU)" for name, bl in section.items()]
 
 
 def resolution_quality_section(m, links: Links, good: np.ndarray, pairwise,

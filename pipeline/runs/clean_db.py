@@ -43,18 +43,23 @@ class CleanDbResult:
     after: dict
     cut: dict
     resolution: dict = field(default_factory=dict)
+    baselines: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        return {"input": str(self.input), "output": str(self.output), "images": self.images,
-                "comm_edges": self.comm_edges, "links": self.links, "before": self.before,
-                "after": self.after, "cut": self.cut, "resolution": self.resolution}
+        out = {"input": str(self.input), "output": str(self.output), "images": self.images,
+               "comm_edges": self.comm_edges, "links": self.links, "before": self.before,
+               "after": self.after, "cut": self.cut, "resolution": self.resolution}
+        if self.baselines:
+            out["baselines"] = self.baselines
+        return out
 
 
 def clean_database(database: str | Path, out: str | Path,
                    comm_graph_file: str | Path | None = None,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
                    resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
-                   image_dir: str | Path | None = None, outputs=None) -> CleanDbResult:
+                   image_dir: str | Path | None = None, outputs=None,
+                   baselines: bool = False) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -72,6 +77,8 @@ def clean_database(database: str | Path, out: str | Path,
     image_dir : the images, drawn in the recording
     outputs : a :class:`pipeline.runfolder.OutputFiles` that puts every output in place
         together (default: each written at once)
+    baselines : also run the centralized baselines on the links the rule ran on
+        (``CleanDbResult.baselines``: :func:`pipeline.evaluation.report.baselines_beside`)
 
     Returns
     -------
@@ -103,17 +110,17 @@ def clean_database(database: str | Path, out: str | Path,
     contents = colmap.read_database(database, check_sizes=count_tables)
     try:
         return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
-                      image_dir, outputs)
+                      image_dir, outputs, baselines)
     finally:
         contents.close()
 
 
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
-           rerun: bool, image_dir, outputs) -> CleanDbResult:
+           rerun: bool, image_dir, outputs, baselines: bool = False) -> CleanDbResult:
     """:func:`clean_database` on the database read as ``contents``."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import BYTES_PER_EDGE, check_detection_memory, count_lines
+    from pipeline.budget import BYTES_PER_EDGE, baselines_bytes, check_detection_memory, count_lines
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.consistency.rules import get_rule
     from pipeline.consistency.setlists import bundle_budget
@@ -141,6 +148,9 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     rule = get_rule(resolution)
     check_detection_memory(m, model_links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+    if baselines:
+        budget.add("the centralized baselines (--baselines)",
+                   baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None
@@ -156,13 +166,18 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     n_edges = len(edges) if edges is not None else \
         len(np.unique(model_links.cam_i * n + model_links.cam_j))
     stats = result.stats
+    section = {}
+    if baselines:
+        from pipeline.evaluation.report import baselines_beside
+
+        section = baselines_beside(m, model_links, ~result.deleted)
     return CleanDbResult(
         input=database, output=out, images=n, comm_edges=n_edges, links=len(links),
         before=before, after=after,
         cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge", "resolution")},
         resolution={"method": stats.get("resolution"), **{k: stats.get(k) for k in (
             "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
-            "max_robot_memory_bytes")}})
+            "max_robot_memory_bytes")}}, baselines=section)
 
 
 def _link_weight(contents, links) -> np.ndarray:

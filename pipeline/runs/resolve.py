@@ -29,8 +29,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                  comm_graph_csv: str | Path | None = None,
                  faults: FaultConfig | None = None,
                  max_memory_gb: float = DEFAULT_LIMIT_GB, resolution: str = DEFAULT_LINKS_RESOLUTION,
-                 transport: str = "sim", outputs=None) -> dict:
+                 transport: str = "sim", outputs=None, baselines: bool = False) -> dict:
     """Read, resolve, write; return the summary dict (with a ``faults`` section if any).
+
+    ``baselines``: also run the centralized baselines on the same links, for comparison
+    (the summary's ``baselines``: :func:`pipeline.evaluation.report.baselines_beside`).
 
     ``outputs``: a :class:`pipeline.runfolder.OutputFiles` that puts ``out_csv`` in place
     with the command's other outputs (default: ``out_csv`` is written at once).
@@ -50,6 +53,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import (
         BYTES_PER_CAMERA,
+        baselines_bytes,
         BYTES_PER_EDGE,
         BYTES_PER_ROW,
         MemoryBudget,
@@ -115,6 +119,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     rule = rule_for_network(resolution, faulty)
     check_detection_memory(m, run_links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+    if baselines:
+        budget.add("the centralized baselines (--baselines)",
+                   baselines_bytes(int(m.sum()), len(run_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
                                                                  resolution, ids)
@@ -143,6 +150,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                                           "closing_rounds", "messages", "bytes",
                                           "max_robot_memory_bytes") if k in st},
     }
+    if baselines:
+        from pipeline.evaluation.report import baselines_beside
+
+        summary["baselines"] = baselines_beside(m, run_links, ~res.deleted)
     if fault_section is not None:
         summary["faults"] = fault_section_in_ids(fault_section, ids)
     if "team" in res.stats:

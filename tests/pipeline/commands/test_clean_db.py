@@ -66,6 +66,27 @@ def test_round_trip_cuts_the_conflicts_and_nothing_else(tmp_path, capsys):
     assert summary["after"]["conflictive_sets"] == 0 and summary["before"]["conflictive_sets"] == 2
 
 
+def test_baselines_beside_the_rule(tmp_path, capsys):
+    """--baselines: every centralized baseline on the same verified links, in the summary and
+    printed; what each deleted is its own mask's count."""
+    from pipeline.consistency.centralized import BASELINES
+
+    src, out, report = tmp_path / "in.db", tmp_path / "out.db", tmp_path / "s.json"
+    _, feats, links = _db_with_planted_conflicts(src)
+    assert main(["clean-db", str(src), "--out", str(out), "--report", str(report),
+                 "--baselines", "--no-rerun"]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads(report.read_text())
+    m = np.array([len(f.keypoints) for f in feats], dtype=np.int64)
+    assert sorted(summary["baselines"]) == sorted(BASELINES)
+    for name, fn in BASELINES.items():
+        mask = np.asarray(fn(m, links), dtype=bool)
+        assert summary["baselines"][name]["deleted_links"] == int((~mask).sum()), name
+        assert f"baseline {name}: " in printed
+    # the two planted conflictive sets are left by none of the baselines that drop or merge
+    assert summary["baselines"]["drop_conflictive_sets"]["conflictive_sets"] == 0
+
+
 def test_comm_graph_file_cuts_links_between_non_neighbours(tmp_path):
     src = tmp_path / "in.db"
     _, feats, links = _db_with_planted_conflicts(src)

@@ -48,6 +48,40 @@ def test_evidence_cuts_the_weakest_link_of_the_cycle(tmp_path, capsys):
     assert back.reason.tolist() == ["", "", "resolution", ""]
 
 
+def test_baselines_beside_the_rule(tmp_path, capsys):
+    """--baselines: every centralized baseline on the same links, each with what it deleted
+    and how many links it decided otherwise than the rule (counted here from its own mask)."""
+    import json
+
+    from pipeline.consistency.centralized import BASELINES
+    from pipeline.inputs.linkscsv import read_links_csv
+
+    src = tmp_path / "in.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j,quality\n0,0,3,1,0.8\n0,0,1,0,0.8\n"
+                   "1,0,2,0,0.1\n3,0,2,0,0.8\n")
+    out, rep = tmp_path / "out.csv", tmp_path / "r.json"
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "evidence",
+                 "--baselines", "--report", str(rep)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads(rep.read_text())
+    assert sorted(summary["baselines"]) == sorted(BASELINES)
+    kept = read_run_links_csv(out).status == "kept"
+    links = read_links_csv(src).links
+    m = features_per_camera_for(links)
+    for name, fn in BASELINES.items():
+        mask = np.asarray(fn(m, links), dtype=bool)
+        row = summary["baselines"][name]
+        assert row["deleted_links"] == int((~mask).sum()), name
+        assert row["decided_otherwise"] == int((mask != kept).sum()), name
+        assert row["conflictive_sets"] == count_conflicts(
+            AssociationGraph(m, links.subset(mask))).conflictive_sets, name
+        assert f"baseline {name}: {row['deleted_links']} links deleted" in printed
+    # without the option: no baselines
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o2.csv"),
+                 "--report", str(tmp_path / "r2.json")]) == 0
+    assert "baselines" not in json.loads((tmp_path / "r2.json").read_text())
+
+
 def test_comm_graph_file(tmp_path):
     src = tmp_path / "in.csv"
     src.write_text(FIG1)
