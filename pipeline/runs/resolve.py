@@ -53,10 +53,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import (
         BYTES_PER_CAMERA,
-        baselines_bytes,
         BYTES_PER_EDGE,
         BYTES_PER_ROW,
         MemoryBudget,
+        baselines_bytes,
         check_detection_memory,
         count_lines,
     )
