@@ -29,6 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the images, to draw them in OUT.rrd (default: gray canvases)")
     p.add_argument("--no-rerun", action="store_true", help="do not write OUT.rrd")
     p.add_argument("--report", default=None, metavar="JSON", help="also save the summary as JSON")
+    p.add_argument("--baselines", action="store_true",
+                   help="also run the centralized baselines on the same matches (spectral "
+                        "synchronization, a CLEAR-style method, union-find dropping conflictive "
+                        "sets, ...), for comparison: a line each and the summary's baselines")
     add_overwrite_and_memory_options(p, "OUT.h5, its side files and --report")
 
 
@@ -57,7 +61,8 @@ def run(args) -> int:
     with OutputFiles(replace=args.overwrite) as outputs:
         s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
                                  rerun=not args.no_rerun, image_dir=args.image_dir,
-                                 outputs=outputs, max_memory_gb=args.max_memory_gb))
+                                 outputs=outputs, max_memory_gb=args.max_memory_gb,
+                                 baselines=args.baselines))
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]
@@ -66,5 +71,9 @@ def run(args) -> int:
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
     print(f"matches cut: {cut['resolution']} by resolution in {r['iterations']} iteration(s), "
           f"{cut['not-one-to-one']} not one-to-one")
+    if "baselines" in s:
+        from pipeline.evaluation.report import baselines_lines
+
+        print("\n".join(baselines_lines(s["baselines"], r["resolution"])))
     print("written: " + ", ".join(s["written"] + ([args.report] if args.report else [])))
     return exit_status(s)

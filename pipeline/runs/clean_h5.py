@@ -29,8 +29,11 @@ __all__ = ["clean_h5"]
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
              pairs: str | Path | None = None, *, rerun: bool = True,
              image_dir: str | Path | None = None, outputs=None,
-             max_memory_gb: float = DEFAULT_LIMIT_GB) -> dict:
+             max_memory_gb: float = DEFAULT_LIMIT_GB, baselines: bool = False) -> dict:
     """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    ``baselines``: also run the centralized baselines on the matches the rule ran on (the
+    summary's ``baselines``: :func:`pipeline.evaluation.report.baselines_beside`).
 
     Memory: what the files declare and what the detection needs are counted against
     ``max_memory_gb`` before they are allocated (:mod:`pipeline.budget`).
@@ -51,7 +54,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         :func:`pipeline.outputs.check_output_files`).
     """
     from pipeline.association import AssociationGraph, count_conflicts
-    from pipeline.budget import MemoryBudget, check_detection_memory
+    from pipeline.budget import MemoryBudget, baselines_bytes, check_detection_memory
     from pipeline.commgraph import comm_edges_for
     from pipeline.inputs import hloc
     from pipeline.runfolder import output_path
@@ -81,6 +84,9 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     model_links = links.subset(ok)
     check_detection_memory(m, model_links, budget,
                            detection=get_rule(DEFAULT_LINKS_RESOLUTION).detection)
+    if baselines:
+        budget.add("the centralized baselines (--baselines)",
+                   baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result, _ = consistency_stage(m, edges, model_links, resolution=DEFAULT_LINKS_RESOLUTION)
     idx = np.flatnonzero(ok)
@@ -101,12 +107,18 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
                                  report_markdown=md, outputs=outputs)
     st = result.stats
-    return {"features": str(features), "matches": str(matches), "output": str(out),
-            "written": [str(out)] + [str(p) for p in written], "images": n,
-            "comm_edges": int(len(edges)), "links": int(len(links)), "before": before,
-            "after": after, "cut": cut,
-            "resolution": {k: st.get(k) for k in ("iterations", "detection_rounds",
-                                                  "resolution_rounds", "messages", "bytes")}}
+    summary = {"features": str(features), "matches": str(matches), "output": str(out),
+               "written": [str(out)] + [str(p) for p in written], "images": n,
+               "comm_edges": int(len(edges)), "links": int(len(links)), "before": before,
+               "after": after, "cut": cut,
+               "resolution": {k: st.get(k) for k in ("resolution", "iterations",
+                                                     "detection_rounds", "resolution_rounds",
+                                                     "messages", "bytes")}}
+    if baselines:
+        from pipeline.evaluation.report import baselines_beside
+
+        summary["baselines"] = baselines_beside(m, model_links, ~result.deleted)
+    return summary
 
 
 #: largest side of a gray canvas drawn for an image (keypoints beyond it are off the canvas)

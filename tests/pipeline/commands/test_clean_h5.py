@@ -80,6 +80,28 @@ def test_round_trip_cuts_the_conflict_and_the_duplicate(tmp_path, capsys, swappe
     assert (tmp_path / "clean" / "matches-clean.rrd").is_file()
 
 
+def test_baselines_beside_the_rule(tmp_path, capsys):
+    """--baselines: every centralized baseline on the same matches, in the summary and printed;
+    what each deleted is its own mask's count."""
+    import json
+
+    from pipeline.consistency.centralized import BASELINES
+
+    feats, matches = _write(tmp_path)
+    contents = read_h5(feats, matches)
+    out, rep = tmp_path / "clean.h5", tmp_path / "s.json"
+    assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                 str(out), "--no-rerun", "--baselines", "--report", str(rep)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads(rep.read_text())
+    links = contents.links.subset(~contents.not_one_to_one)
+    assert sorted(summary["baselines"]) == sorted(BASELINES)
+    for name, fn in BASELINES.items():
+        mask = np.asarray(fn(contents.features_per_camera, links), dtype=bool)
+        assert summary["baselines"][name]["deleted_links"] == int((~mask).sum()), name
+        assert f"baseline {name}: " in printed
+
+
 def test_pairs_file_limits_the_pairs_and_old_keys_are_read(tmp_path, capsys):
     feats, matches = _write(tmp_path, old_keys=True)
     pairs = tmp_path / "pairs.txt"
