@@ -22,8 +22,10 @@ of the kept links (every two features in one association set), against the label
 Cases
     * Labelled landmarks (default ``../shared/data/cmu_hotel``, ``--frames 20 101``), graphs
       ``complete``, ``seq:4``, ``ring2``; inputs ``descriptors`` (Hungarian matches of the
-      given descriptors only: the input CLEAR is benchmarked on) and ``defaults`` (what
-      ``run-landmarks`` does by default: epipolar guidance and two-hop votes). Every image's
+      given descriptors only: the input CLEAR is benchmarked on), ``guided`` (epipolar
+      guidance on the labelled positions: what ``run-landmarks`` does by default for ``sync``
+      and ``evidence``) and ``guided+votes`` (then two-hop votes: its default for ``paper`` and
+      ``paper-labels``, :func:`pipeline.runs.landmarks.default_refinement`). Every image's
       landmarks are presented in a seeded random order (``--shuffle-seed``): the files list
       them in label order, and any tie broken by index would otherwise read the truth.
     * A synthetic team (``--team 300``): ``n`` cameras on a ring2 graph, each seeing the same
@@ -46,7 +48,7 @@ Where each link is known good or spurious (every case but none), ``good_cut`` an
 Prints one table per case and saves ``runs/bench-multiway/results.json``.
 
 Usage: ``.venv/bin/python bench/multiway.py [--data DIR] [--frames 20 101] [--graphs ...]
-[--inputs descriptors defaults] [--methods ...] [--team 300 3000] [--quick]``
+[--inputs descriptors guided guided+votes] [--methods ...] [--team 300 3000] [--quick]``
 (``--quick``: 20 frames, complete graph, descriptors only, formation a seed 5, team of 100).
 """
 
@@ -185,7 +187,7 @@ def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, s
                                     edges, fr[0].descriptor_kind, None,
                                     [f.keypoints[p] for f, p in zip(fr, perms, strict=True)],
                                     geometry, 3.0)
-    if inputs == "defaults":
+    if inputs == "guided+votes":
         links, _ = refine_by_votes(m, edges, links, 10)
     return Case(m, edges, links, truth_id=np.concatenate(perms))
 
@@ -428,8 +430,8 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, nargs="*", default=[20, 50, 101],
                    help="labelled cases with these frame counts (none: only the team rows)")
     p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
-    p.add_argument("--inputs", nargs="+", default=["descriptors", "defaults"],
-                   choices=("descriptors", "defaults"))
+    p.add_argument("--inputs", nargs="+", default=["descriptors", "guided", "guided+votes"],
+                   choices=("descriptors", "guided", "guided+votes"))
     p.add_argument("--methods", nargs="+", default=[*DISTRIBUTED, *CENTRALIZED])
     p.add_argument("--graffiti", default=str(ROOT.parent / "shared" / "data" / "graffiti"),
                    help="the Graffiti folder (H1to{k}p); '' skips it")

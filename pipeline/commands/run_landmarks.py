@@ -53,9 +53,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epipolar-px", type=float, default=3.0, metavar="PX",
                    help="Sampson error bound of --geometry epipolar (default 3 px: hand-labelled "
                         "positions)")
-    p.add_argument("--refine", default="votes", choices=REFINEMENTS,
-                   help="votes (default): robots refine their matches by two-hop votes through "
-                        "common neighbours until a fixed point; none: use the matches as they are")
+    p.add_argument("--refine", default=None, choices=REFINEMENTS,
+                   help="votes: robots refine their matches by two-hop votes through common "
+                        "neighbours until a fixed point; none: use the matches as they are "
+                        "(default: none for a rule that weighs the links' cycles itself, sync "
+                        "and evidence; votes for paper and paper-labels)")
     p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
                    help="cap on the vote iterations (two rounds each; default 10)")
     from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, RULES

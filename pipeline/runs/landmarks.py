@@ -15,9 +15,12 @@ neighbours (:mod:`pipeline.matching.votes`) → the distributed consistency stag
 
 Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
 :mod:`pipeline.matching.landmarks`), the
-whole assignment kept (``--ratio none``), refined by votes. The
-votes are the ambiguity filter: a pair the ratio gate would drop still carries paths that
-vote for the right match, and gating before voting removes them.
+whole assignment kept (``--ratio none``), refined by votes only when the rule does not weigh
+the cycles itself (:func:`default_refinement`: ``paper``, ``paper-labels``; ``sync`` and
+``evidence`` take the matches as they are, see ``weighs_cycles`` in
+:mod:`pipeline.consistency.rules`). The
+votes are the ambiguity filter of Alg. 1: a pair the ratio gate would drop still carries paths
+that vote for the right match, and gating before voting removes them.
 
 Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
 matches it implies, i.e. every two landmarks in one association set of the kept links (the
@@ -35,7 +38,7 @@ no ``sparse/`` and no recording.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +49,20 @@ from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links
 
-__all__ = ["LandmarksConfig", "REFINEMENTS", "run_landmarks",
+__all__ = ["LandmarksConfig", "REFINEMENTS", "default_refinement", "run_landmarks",
            "true_landmark_pairs", "landmarks_markdown"]
 
 
 #: refinements of the landmark matches before the consistency stage
 REFINEMENTS = ("votes", "none")
+
+
+def default_refinement(resolution: str) -> str:
+    """``--refine`` when not given: ``none`` for a rule that weighs the cycles of the links
+    itself (``weighs_cycles``), ``votes`` for the others (module notes)."""
+    from pipeline.consistency.rules import get_rule
+
+    return "none" if get_rule(resolution).weighs_cycles else "votes"
 
 
 @dataclass
@@ -65,7 +76,7 @@ class LandmarksConfig:
     ratio: float | None = None
     geometry: str = "epipolar"
     epipolar_px: float = 3.0
-    refine: str = "votes"
+    refine: str | None = None  # None: the rule's (default_refinement)
     vote_iterations: int = 10
     resolution: str = DEFAULT_LINKS_RESOLUTION
     baselines: bool = True
@@ -129,7 +140,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.matching.landmarks import match_landmark_edges
     from pipeline.stages import ledger_from_consistency
 
-    if config.refine not in REFINEMENTS:
+    if config.refine is not None and config.refine not in REFINEMENTS:
         raise InputError(f"--refine {config.refine!r}: expected one of {', '.join(REFINEMENTS)}")
     if config.vote_iterations < 1:
         raise InputError(f"--vote-iterations {config.vote_iterations}: expected at least 1")
@@ -139,6 +150,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     if config.resolution not in rule_names():
         raise InputError(f"--resolution {config.resolution!r}: expected one of "
                          f"{', '.join(rule_names())}")
+    if config.refine is None:
+        config = replace(config, refine=default_refinement(config.resolution))
     timer = timer or StageTimer()
     out = config.out_dir()
     with timer.stage("load", f"{config.directory}, descriptors {config.descriptors}"):

@@ -64,6 +64,22 @@ def test_scores_recomputed_from_links_csv(hotel_run):
     assert report["after"]["good_links"] == sum(r["truth"] == "1" for r in kept)
 
 
+@pytest.mark.parametrize("rule, refine", [("sync", "none"), ("evidence", "none"),
+                                          ("paper-labels", "votes")])
+def test_refinement_follows_the_rule(tmp_path, rule, refine):
+    """Without --refine: the votes only for a rule that does not weigh the links' cycles."""
+    from pipeline.consistency.rules import get_rule
+    from pipeline.runs.landmarks import default_refinement
+
+    assert default_refinement(rule) == refine
+    assert get_rule(rule).weighs_cycles == (refine == "none")
+    out = tmp_path / rule
+    assert main(["run-landmarks", str(HOTEL), "--graph", "ring", "--resolution", rule,
+                 "--no-baselines", "--out", str(out), "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["refinement"]["method"] == refine and report["config"]["refine"] == refine
+
+
 def test_true_pairs_count():
     assert len(true_landmark_pairs([3, 3, 3])) == 9
 
