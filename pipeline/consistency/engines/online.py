@@ -144,10 +144,11 @@ from scipy.sparse.csgraph import connected_components
 from pipeline.consistency.engines.driver import resolve_conflicts
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
+from pipeline.transport import HEADER_BYTES
 from pipeline.types import Links
 
-__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "HISTORY", "LABEL_BYTES",
-           "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
+__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_weights", "HISTORY",
+           "LABEL_BYTES", "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
 
 FRESH_LABELS = 1 << 40
 """First fresh label name: a set no retired frame anchors is named from here on."""
@@ -223,7 +224,7 @@ class OnlineAssociation:
     """
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
-                 overturn: bool = True, hold: int | None = None):
+                 overturn: bool = True, hold: int | None = None, weigh: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -234,6 +235,7 @@ class OnlineAssociation:
                              "links are final as soon as it leaves the matching window)")
         self.hold = int(hold)
         self.overturn = bool(overturn)
+        self.weigh = bool(weigh)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -329,7 +331,8 @@ class OnlineAssociation:
         rec = dict(step=t, frames=len(frames), links_new=int(len(new_ids)), touched_labels=0,
                    sub_images=0, sub_features=0, sub_links=0, history_links=0,
                    conflictive_features=0, conflictive_sets=0, cut=0, cut_rule=0,
-                   cut_history=0, cut_old=0, rounds=0, detection_rounds=0,
+                   cut_weigh=0, cut_history=0, cut_old=0, weighed_sets=0, weigh_rounds=0,
+                   weigh_messages=0, weigh_bytes=0, rounds=0, detection_rounds=0,
                    resolution_rounds=0, messages=0, bytes=0, stage_peak_bytes=0)
         if len(new_ids):
             self._stage(new_ids, t, rec)
@@ -524,13 +527,104 @@ class OnlineAssociation:
         cut = np.flatnonzero(res.deleted[:n_real])
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
+        # the sets the detection found conflict-free are weighed by the rule's merge too
+        if self.weigh and self.rule.detection and self.rule.needs_evidence:
+            self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec)
         # history check and repair (step 3), then the new labels (step 4)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
         rec["bytes"] += int(flood)
         rec["rounds"] = rec["detection_rounds"] + rec["resolution_rounds"]
-        rec["cut"] = rec["cut_rule"] + rec["cut_history"]
+        rec["cut"] = rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
+
+    def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
+               rec: dict) -> None:
+        """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
+        the detection found conflict-free.
+
+        The sets are the components of the sub-problem's links before the rule's cuts (real
+        and history links, as the detection saw them); one without two features of one image
+        is conflict-free, the rule left it alone. A set with an image of unknown pose is not
+        weighed: without the geometric test the merge of a conflict-free set joins all of it
+        (no two features of one image to keep apart), it would cut nothing. Its robots flood its bundles as the rule's
+        robots do (:mod:`pipeline.consistency.evidence`, step 1: each feature's keypoint,
+        links with their evidence weights, projection) and each solves what
+        :func:`~pipeline.consistency.evidence.solve_set` solves on them (the weights of
+        :func:`~pipeline.consistency.evidence.set_problem`, here :func:`set_weights` for all
+        sets at once, then :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal
+        merge by decreasing evidence with the geometric test), then cuts its side of the
+        links the solution cuts. A cut history link is ignored, as in the rule's pass (it
+        stands for a retired piece). Counts (bounds): a robot sends each bundle of its set
+        once to each neighbour of the set, ``128 + 16 deg`` bytes (the rule's bundle
+        fields), at most one message per neighbour per round; the flood runs beside the
+        rule's, in the rounds of the resolution phase, for the largest diameter of a
+        weighed set's image graph + 1 rounds (the rule's bound)."""
+        from pipeline.consistency.evidence import evidence_cut
+        from pipeline.matching.link_evidence import ratio_llr
+
+        comp = self._components(sub, a_all, b_all)
+        posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
+        # conflictive sets (the rule's) and sets with an image of unknown pose (no test: the
+        # merge of a conflict-free set then joins all of it) are not weighed
+        bad = np.union1d(_duplicated_keys(comp, img_of),
+                         comp[~posed[np.searchsorted(images, img_of)]]).astype(np.int64)
+        ia = np.searchsorted(sub, a_all)
+        on = ~np.isin(comp[ia], bad)
+        if not on.any():
+            return
+        ks = np.flatnonzero(on)
+        ks = ks[np.argsort(comp[ia[ks]], kind="stable")]   # grouped by set
+        lc = comp[ia[ks]]
+        cam = np.searchsorted(images, img_of)            # an image's camera in the stage
+        a, b = np.minimum(a_all[ks], b_all[ks]), np.maximum(a_all[ks], b_all[ks])
+        sa, sb = np.searchsorted(sub, a), np.searchsorted(sub, b)
+        ca, cb = cam[sa], cam[sb]
+        local = ratio_llr(1.0 - np.asarray(q_all, np.float64)[ks])
+        P_img = np.stack([np.eye(3, 4) if p is None else np.asarray(p, np.float64)
+                          for p in (self.projection[g] for g in images.tolist())]) \
+            if len(images) else np.zeros((0, 3, 4))
+        kp = np.concatenate([np.asarray(self.keypoints[g][sub[img_of == g] - self.offset[g]],
+                                        np.float32) for g in images.tolist()]).astype(np.float64) \
+            if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
+        c_w, c_head = np.unique(lc, return_index=True)
+        c_end = np.r_[c_head[1:], len(lc)]
+        w = set_weights(a, b, ca, cb, local,
+                        lambda ids: kp[np.searchsorted(sub, ids)],
+                        lambda ids: P_img[cam[np.searchsorted(sub, ids)]])
+        cut = np.zeros(len(ks), bool)
+        for u, v in zip(c_head.tolist(), c_end.tolist(), strict=True):
+            f = np.unique(np.r_[sa[u:v], sb[u:v]])
+            kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
+            Pd = dict(zip(sub[f].tolist(), P_img[cam[f]], strict=True))
+            cut[u:v] = evidence_cut(a[u:v], b[u:v], ca[u:v], cb[u:v], w[u:v], kpd, Pd)
+        is_real = ks < n_real                            # a cut history link is ignored
+        cut_ids = real[ks[cut & is_real]]
+        self._cut(cut_ids, str(self.rule.name), t)
+        # the flood's counts: per set, its image graph (an image is a robot of the stage)
+        pair = np.unique(np.stack([lc, np.minimum(ca, cb), np.maximum(ca, cb)], axis=1),
+                         axis=0)
+        edges_c = np.bincount(np.searchsorted(c_w, pair[:, 0]), minlength=len(c_w))
+        diam_c = _set_diameters(pair, c_w, len(images))
+        deg = np.bincount(np.r_[sa, sb], minlength=len(sub))
+        f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
+        bundle_c = np.bincount(np.searchsorted(c_w, f_set[:, 0]),
+                               weights=128 + 16 * deg[f_set[:, 1]],
+                               minlength=len(c_w)).astype(np.int64)
+        rounds = int(diam_c.max()) + 1
+        msgs = int((2 * edges_c * (diam_c + 1)).sum())
+        nbytes = int((2 * edges_c * bundle_c).sum()) + HEADER_BYTES * msgs
+        # a robot holds the bundles of each of its sets
+        node = np.unique(np.stack([np.r_[pair[:, 0], pair[:, 0]],
+                                   np.r_[pair[:, 1], pair[:, 2]]], axis=1), axis=0)
+        held = np.bincount(node[:, 1], weights=bundle_c[np.searchsorted(c_w, node[:, 0])],
+                           minlength=len(images))
+        rec.update(weighed_sets=int(len(c_w)), cut_weigh=int(len(cut_ids)),
+                   weigh_rounds=rounds, weigh_messages=msgs, weigh_bytes=nbytes)
+        rec["resolution_rounds"] = max(rec["resolution_rounds"], rounds)
+        rec["messages"] += msgs
+        rec["bytes"] += nbytes
+        rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(held.max(initial=0)))
 
     def _local_links(self, images, a, b, q) -> Links:
         img_a = np.searchsorted(self.offset, a, side="right") - 1
@@ -793,6 +887,116 @@ class OnlineAssociation:
         start = g_head | (rank > extra)
         p, r, lo, hi, _ = _reduce_runs(start, p, r, lo, hi, gid)
         self.ret_piece, self.ret_robot, self.ret_lo, self.ret_hi = p, r, lo, hi
+
+
+def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
+                geometric=None, tol_px: float | None = None) -> np.ndarray:
+    """The evidence rule's link weights (:func:`pipeline.consistency.evidence.set_problem`)
+    of the links of several sets at once.
+
+    Parameters
+    ----------
+    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
+    cam_a, cam_b : (E,) int — their cameras
+    local : (E,) float — each link's local evidence (what its bundles carry)
+    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
+    geometric : (E,) bool or None — the link's set has every projection (the rule's test
+        on it); None: all do when ``projections`` is given
+    tol_px : float or None — the test's tolerance (default the rule's
+        :data:`~pipeline.consistency.evidence.REPROJECTION_TOL_PX`)
+
+    Returns
+    -------
+    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
+    cameras in which both ends match one common feature whose three observations are one
+    point (:func:`~pipeline.consistency.evidence.triangle_support`; all common features
+    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
+    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
+    ``set_problem`` on its bundles; the sets' triangles are listed at once and their
+    three-view points solved as one stack of SVDs (the rule solves one at a time).
+    """
+    from pipeline.consistency.cycles import shared_cameras, support_term
+    from pipeline.consistency.evidence import REPROJECTION_TOL_PX, TRIANGLE_WEIGHT
+    from pipeline.consistency.keys import isin_sorted, ranges
+
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
+    local = np.asarray(local, np.float64)
+    E = a.size
+    if E == 0:
+        return np.zeros(0)
+    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
+    nodes, inv = np.unique(np.r_[lo, hi], return_inverse=True)
+    N = nodes.size
+    ia, ib = inv[:E], inv[E:]
+    cam = np.empty(N, np.int64)
+    cam[ia] = np.where(lo == a, cam_a, cam_b)
+    cam[ib] = np.where(lo == a, cam_b, cam_a)
+    adj = np.sort(np.r_[ia, ib] * N + np.r_[ib, ia])
+    ptr = np.searchsorted(adj // N, np.arange(N + 1))
+    pos = ranges(ptr[ia], ptr[ia + 1])
+    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
+    z = adj[pos] % N
+    common = isin_sorted(z * N + ib[e], adj)
+    e, z = e[common], z[common]
+    ok = np.ones(e.size, bool)
+    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
+    if keypoints is not None and projections is not None and e.size:
+        test = np.flatnonzero(geo[e])
+        if test.size:
+            ids = np.stack([nodes[ia[e[test]]], nodes[ib[e[test]]], nodes[z[test]]], axis=1)
+            ok[test] = _one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
+                                  np.asarray(projections(ids.ravel()), np.float64)
+                                  .reshape(-1, 3, 3, 4), tol)
+    e, z = e[ok], z[ok]
+    C = int(cam.max()) + 1
+    pairs = np.unique(e * C + cam[z])
+    tau = np.bincount(pairs // C, minlength=E)
+    shared = shared_cameras(a, b, cam_a, cam_b)
+    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
+
+
+def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
+    """The evidence rule's test (``evidence._consistent``) on a stack of observation triples:
+    ``kp (T, 3, 2)``, ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three
+    cameras and within ``tol`` px of each observation."""
+    A = np.empty((len(kp), 6, 4))
+    A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
+    A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
+    X = np.linalg.svd(A)[2][:, -1]
+    fin = np.abs(X[:, 3]) >= 1e-12
+    X = X / np.where(fin, X[:, 3], 1.0)[:, None]
+    p = np.einsum("tkij,tj->tki", P, X)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
+    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
+
+
+def _set_diameters(pair: np.ndarray, sets: np.ndarray, n_images: int) -> np.ndarray:
+    """Diameter of each set's image graph: ``pair`` (K, 3) rows (set, image, image), an edge
+    each; ``sets`` the sets, ascending. Breadth-first from every node at once (sparse
+    boolean powers of the graph of (set, image) nodes, block-diagonal by set)."""
+    key = np.r_[pair[:, 0] * (n_images + 1) + pair[:, 1], pair[:, 0] * (n_images + 1) + pair[:, 2]]
+    node, inv = np.unique(key, return_inverse=True)
+    k = len(pair)
+    n = len(node)
+    adj = sp.coo_matrix((np.ones(2 * k, bool), (inv, np.r_[inv[k:], inv[:k]])),
+                        shape=(n, n)).tocsr()
+    reach = sp.identity(n, dtype=bool, format="csr")
+    ecc = np.zeros(n, np.int64)
+    d = 0
+    while True:
+        nxt = (reach + reach @ adj).astype(bool)
+        grew = np.diff(nxt.indptr) > np.diff(reach.indptr)
+        if not grew.any():
+            break
+        d += 1
+        ecc[grew] = d
+        reach = nxt
+    out = np.zeros(len(sets), np.int64)
+    np.maximum.at(out, np.searchsorted(sets, node // (n_images + 1)), ecc)
+    return out
 
 
 def default_hold(window: int) -> int:
