@@ -67,6 +67,28 @@ One step (:meth:`OnlineAssociation.add_step`)
    until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
    ignored (it is no link of the association; a history link that doubles a real link is
    left to the real link in the detection and kept in the check below).
+2b. *Weighing the conflict-free sets* (``weigh``, default; a rule with detection and
+   evidence: ``evidence``). The rule cuts only in the sets the detection finds conflictive
+   (Prop. 4.5); every other set of the sub-problem, one the step's new links touched and
+   the detection found conflict-free, is weighed by the rule's merge too: its robots flood
+   its bundles as the rule's robots do (each window feature's keypoint, its links of the
+   set with their evidence weights, its frame's projection; history links as in the
+   detection) and each solves the rule's solution on them
+   (:func:`~pipeline.consistency.evidence.solve_set`: triangle support with the three-view
+   test, the Kruskal merge by decreasing evidence with the geometric test of the merged
+   track), then cuts its side of the window links the solution cuts (reason of the rule;
+   a cut history link is ignored, as in the rule's pass). In a conflict-free set the merge
+   never meets two features of one image: what it cuts is what the geometric test refutes,
+   so a set with a frame of unknown pose is not weighed (it would cut nothing). Why: a
+   clash splits a set as soon as it appears, and the pieces are conflict-free from then on;
+   a spurious link whose set never becomes conflictive again was never weighed, while the
+   batch run sees the uncut history, where the set is conflictive and the merge's
+   geometric test cuts it (``bench/online_cuts.py``, seed 0, ``H = 2``, before the
+   weighing: of the 290 spurious links the batch cut and the online run kept, 5 were ever
+   in a conflictive set while open, all 290 in a set a step's new links touched). Each
+   step re-weighs a touched set with what the window holds then (more frames, more
+   triangles, a longer track for the geometric test): a link stays open to it for ``W + H``
+   steps.
 3. *History check.* A set the new links formed may join two retired pieces that hold one
    retired image (two features of one retired frame), which the window alone cannot show.
    Every member of a set knows the set after the detection (Prop. 3.5: its row is the whole
@@ -89,9 +111,11 @@ One step (:meth:`OnlineAssociation.add_step`)
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
-links make its set conflictive, and only by the rule (reason of the rule) or by the history
-repair (an open link of a set holding a retired frame twice); every other kept link keeps
-its decision, and the labels of untouched tracks do not change.
+links touch its set: by the rule (reason of the rule) when they make it conflictive, by the
+rule's merge (step 2b, reason of the rule) when its geometric test refutes it, or by the
+history repair (an open link of a set holding a retired frame twice); a link between two
+retired frames is final; every other kept link keeps its decision, and the labels of
+untouched tracks do not change.
 
 Guarantee (after every step the kept association is conflict-free), by induction on the
 steps. Before the first step there is no link. Suppose the association is conflict-free
@@ -102,7 +126,8 @@ component of the sub-problem's kept links plus history links, together with the 
 pieces its border links reach (a retired feature is joined to the window only through a
 piece's border links, which the history links chain). The rule leaves every component of the
 sub-problem conflict-free over window images (Prop. 4.5 for Alg. 1; one pass of the
-evidence rule). If the rule cut a history link (which stays), or two pieces of a component
+evidence rule); the weighing of step 2b only cuts links, which splits sets. If the rule cut
+a history link (which stays), or two pieces of a component
 share a retired image (then one robot has overlapping runs in both: runs cover every frame
 of their piece), the repair rebuilds the component from conflict-free groups (its retired
 pieces, each conflict-free by the induction; with ``overturn=False`` the groups its old
@@ -116,12 +141,18 @@ in two retired pieces of the set (caught by the history check).
 What each robot knows after a step: for each of its window features, its label and, from
 the detection, the members of its set within the window; for each of its border links, the
 retired piece's name; for each live piece it has retired frames in, its runs of steps;
-every link it holds, kept or cut, with the step.
+every link it holds, kept or cut, with the step. During a step, a robot of a set the stage
+weighs (step 2 or 2b) holds that set's bundles: the keypoints, links, weights and
+projections of the set's window features; it drops them once it has cut its side, so its
+memory still follows window + hold.
 
 Costs: rounds, messages and bytes are the simulator's counts of the sub-problem's stage
 (images are its cameras, so messages between two frames of one robot are counted as if
 sent: an upper bound on what goes over the air), plus the label exchange of the new links,
-the names of retired pieces (step 1) and the history flood. The bookkeeping of this class (arrays of all links and features) is
+the names of retired pieces (step 1), the weighing's flood (step 2b: bounds, each bundle
+sent once to each neighbour of its set, ``128 + 16 deg`` bytes, in the resolution phase
+beside the rule's flood, ``diam + 1`` rounds; ``weigh_bytes``, ``weigh_messages``,
+``weigh_rounds``) and the history flood. The bookkeeping of this class (arrays of all links and features) is
 the simulator's record, not a robot's memory: :meth:`OnlineAssociation.robot_state_bytes`
 counts what a robot holds.
 
@@ -205,6 +236,8 @@ class OnlineAssociation:
         module docstring, step 3), or only new links
     hold : int >= 0 or None — steps a frame stays in the stage (its links open) after it
         leaves the matching window; None: ``window - 1`` (module docstring, *Hold*)
+    weigh : bool — every set the step's new links touch is weighed by the rule's merge
+        (default; module docstring, step 2b), or only the conflictive ones (the earlier rule)
 
     Examples
     --------
@@ -308,8 +341,10 @@ class OnlineAssociation:
         :attr:`steps`): ``step``, ``links_new``, ``touched_labels``, ``sub_images``,
         ``sub_features``, ``sub_links``, ``history_links``, ``conflictive_features``
         (found by the step's first detection), ``conflictive_sets`` (resolved by the rule),
-        ``cut`` (``cut_rule``, ``cut_history``, ``cut_old``: of them, links made at an
-        earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
+        ``weighed_sets`` (the conflict-free sets weighed, step 2b, with ``weigh_rounds``,
+        ``weigh_messages``, ``weigh_bytes``, counted in ``rounds``, ``messages``, ``bytes``),
+        ``cut`` (``cut_rule``, ``cut_weigh``, ``cut_history``, ``cut_old``: of them, links
+        made at an earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
         (of them ``retire_bytes``: the names of retired pieces, step 1), ``wall_s``,
         ``robot_state_bytes_max``, ``retired_entries_max`` (a robot's retired entries),
         ``stage_peak_bytes`` (the stage's peak over its images).
