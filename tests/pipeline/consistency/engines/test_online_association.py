@@ -79,9 +79,12 @@ def test_conflict_free_after_every_step(resolution, data):
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=streams())
 def test_earlier_decisions_are_kept_outside_the_touched_tracks(data):
-    window, hold, stream = data
+    _check_earlier_decisions(*data, "paper")
+
+
+def _check_earlier_decisions(window, hold, stream, resolution):
     prev_kept = np.zeros(0, bool)
-    for oa, rec, before, _links in _run(window, hold, stream, "paper"):
+    for oa, rec, before, _links in _run(window, hold, stream, resolution):
         L = oa.links
         n_old = len(prev_kept)
         # a cut link is never restored
@@ -489,3 +492,11 @@ def test_a_spurious_link_of_a_conflict_free_set_is_cut_by_the_weighing(weigh):
         assert set(oa.links.reason.tolist()[1:]) == {"evidence"}
     else:
         assert oa.links.kept.all() and rec["weighed_sets"] == 0
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=posed_streams(max_steps=5))
+def test_the_weighing_cuts_only_in_the_touched_tracks(data):
+    """With poses the evidence rule's merge weighs every touched set: a link it cuts still
+    lies in a track the step's new links touched, and a cut link is never restored."""
+    _check_earlier_decisions(*data, "evidence")
