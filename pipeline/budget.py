@@ -26,6 +26,12 @@ the interpreter and libraries, rounded up):
   such inputs (11,250 and 22,500 random links among 10 cameras, sets of 8,844 and 9,975
   features): about 36 bytes of peak memory per entry (the robots' sparse blocks, the copies
   in flight and the per-round work arrays).
+- :data:`BYTES_PER_LIST_ENTRY`: the evidence rule's detection (bounded label flooding,
+  :mod:`pipeline.consistency.setlists`): every feature of a set ``s`` holds up to ``B + 1``
+  ids of it (``B`` the bundle budget), ``sum_s |s| · min(|s|, B + 1)`` entries. Measured on
+  random links among 10 cameras (``B = 978``; 45,000 and 90,000 links, sets of 19,956 and
+  39,919 features, 1.95e7 and 3.91e7 entries: peak 1.27 and 2.33 GB): 54 bytes per entry
+  (the lists, the entries that entered in a round, the merge's pieces).
 - data read from a database or an HDF5 file: its declared bytes times the copies made of
   them (:data:`COPIES_OF_READ_DATA`), counted from the declared sizes before any is read.
 - :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
@@ -43,13 +49,16 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROBOT_PIXEL",
+__all__ = ["BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_LIST_ENTRY",
+           "BYTES_PER_ROBOT_PIXEL",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
            "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
 BYTES_PER_ENTRY = 36
+#: measured peak bytes per entry of the evidence rule's set lists (54, module notes)
+BYTES_PER_LIST_ENTRY = 64
 #: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
 BYTES_PER_ROW = 1500
 #: peak bytes per link of the ``sync`` rule in the simulator (measured: CMU hotel, 101 frames,
@@ -148,29 +157,42 @@ def count_lines(path: str | os.PathLike) -> int:
     return n + (last != b"\n")
 
 
-def detection_entries(features_per_camera, links: Links) -> tuple[int, int]:
-    """``(sum_s |s|^2, largest |s|)`` over the association sets of ``links``."""
+def detection_entries(features_per_camera, links: Links,
+                      keep: int | None = None) -> tuple[int, int]:
+    """``(sum_s |s|^2, largest |s|)`` over the association sets of ``links``; with ``keep``,
+    ``sum_s |s| · min(|s|, keep)`` (every feature holds at most ``keep`` ids of its set)."""
     from pipeline.association import AssociationGraph, conflictive_labels
 
     _, sizes, _ = conflictive_labels(AssociationGraph(features_per_camera, links))
     s = sizes[sizes >= 2].astype(np.int64)
-    return int((s * s).sum()), int(s.max(initial=0))
+    held = s if keep is None else np.minimum(s, int(keep))
+    return int((s * held).sum()), int(s.max(initial=0))
 
 
 def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
-                           flag: str = "--max-memory-gb", *, detection: bool = True) -> None:
+                           flag: str = "--max-memory-gb", *, detection: bool = True,
+                           set_lists: int | None = None) -> None:
     """Count the consistency stage's memory in ``budget`` (or a limit in GB): InputError if it
     takes the total above the limit (module notes).
 
     ``detection``: the rule runs the paper's detection (Sec. III), whose rows hold every
     feature of a set (``Σ |C|²``); ``False`` for a rule without it (``sync``, whose robots
     hold their links and the far ends' clusters; ``paper-labels``, four numbers per feature
-    besides its links): :data:`BYTES_PER_SYNC_LINK` per link, the larger of the two."""
+    besides its links): :data:`BYTES_PER_SYNC_LINK` per link, the larger of the two.
+    ``set_lists``: the bundle budget ``B`` of a rule whose own detection floods up to
+    ``B + 1`` ids of each set (``evidence``): :data:`BYTES_PER_LIST_ENTRY` per entry too."""
     if not isinstance(budget, MemoryBudget):
         budget = MemoryBudget(budget, flag)
     if not detection:
         budget.add(f"the robots' links and the clusters at their far ends ({len(links)} links)",
                    len(links) * BYTES_PER_SYNC_LINK, "split the input or raise the limit")
+        if set_lists is not None:
+            entries, largest = detection_entries(features_per_camera, links, int(set_lists) + 1)
+            budget.add(f"the evidence rule's detection (the links chain up to {largest} features "
+                       f"into one association set; each feature holds up to {int(set_lists) + 1}"
+                       " of its ids)", entries * BYTES_PER_LIST_ENTRY,
+                       "such sets come from wrong links: clean them first, or use --resolution "
+                       "sync (its memory follows the links)")
         return
     entries, largest = detection_entries(features_per_camera, links)
     budget.add(f"the distributed detection (the links chain up to {largest} features into "

@@ -33,6 +33,7 @@ from pipeline.colmap.known_poses import (
 from pipeline.colmap.mapping import (
     MappingSummary,
     incremental_mapping,
+    incremental_mapping_with_retry,
     mapping_from_poses,
     model_images,
     model_points,
@@ -62,6 +63,7 @@ __all__ = [
     "write_points_model",
     "MappingSummary",
     "incremental_mapping",
+    "incremental_mapping_with_retry",
     "mapping_from_poses",
     "poses_usable",
     "model_images",

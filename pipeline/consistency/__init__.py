@@ -7,7 +7,8 @@ Robot side (what a robot runs, in the simulator or in its own process):
 
 * :mod:`.robot` — a robot's own state and operations; :mod:`.detection` (Sec. III) and
   :mod:`.resolution` (Alg. 1) — the paper's algorithms; :mod:`.evidence` — the
-  evidence-aware resolution rule; :mod:`.keys` — sorted-key helpers;
+  evidence-aware resolution rule, after the bounded label flooding of :mod:`.setlists` (sets
+  beyond its bundle budget merged by :mod:`.sync`); :mod:`.keys` — sorted-key helpers;
 * :mod:`.channel` and :mod:`.reliable` — the fault-tolerant protocol for a faulty network
   (message loss, crashed robots, a topology that changes per round);
 * :mod:`.protocols` — the two protocols (paper, reliable) behind one interface;

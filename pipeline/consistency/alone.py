@@ -11,9 +11,11 @@ from __future__ import annotations
 import time
 
 from pipeline.consistency.channel import Channel
+from pipeline.consistency.evidence import CASE_EVIDENCE, evidence_step, start_evidence
 from pipeline.consistency.labels import labels_done, labels_round, start_labels_reliable
 from pipeline.consistency.protocols import ProtocolOptions
 from pipeline.consistency.reliable import (
+    AlonePhases,
     ReliableState,
     close_log,
     closing_round,
@@ -27,9 +29,18 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.resolution import finish_resolution
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.setlists import (
+    bundle_budget,
+    finish_setlists,
+    setlists_step,
+    start_setlists,
+)
+from pipeline.consistency.sync import CASE_SYNC, equip_sync
+from pipeline.consistency.sync_alone import run_sync_locally
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
-__all__ = ["DETECTIONS", "ALG1", "run_loop_locally", "run_paper_labels_locally"]
+__all__ = ["DETECTIONS", "ALG1", "LARGE", "run_loop_locally", "run_paper_labels_locally",
+           "run_evidence_locally"]
 
 #: the detections a robot alone can run: ``(start, round, done)`` over the reliable channel
 DETECTIONS = {
@@ -128,3 +139,94 @@ def run_paper_labels_locally(robot: Robot, transport, protocol: ProtocolOptions 
     """The ``paper-labels`` rule for a robot alone: the loop with the label flooding of
     :mod:`.labels` as its detection and Alg. 1 as its resolution."""
     return run_loop_locally(robot, transport, protocol, n_robots, ALG1, detection="labels")
+
+
+
+#: the third bit of the evidence rule's wave (beside ``CONFLICT`` and ``LOST``): some robot
+#: holds a feature of a set of more than ``B`` features
+LARGE = 4
+
+
+def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
+                         n_robots: int | None = None) -> RobotRun:
+    """The ``evidence`` rule for a robot alone: the phases of the simulator's stage
+    (:mod:`.engines.evidence_stage`) over the reliable channel, each ended by the wave.
+
+    1. Bounded label flooding (:mod:`.setlists`, ``B`` from the robot's
+       :class:`~.evidence.EvidenceState` or the team's default); the wave ORs ``CONFLICT``
+       (a small conflictive set), ``LARGE`` and ``LOST``. A robot's flags are read every
+       round and the OR keeps a flag raised before more ids arrived (a set first seen small
+       and conflictive, then large): it only makes the next phase run, where nothing waits.
+    2. With ``CONFLICT``: the evidence rule's flood and solve (:func:`.evidence.start_evidence`,
+       :func:`.evidence.evidence_step`) on the small conflictive sets; the wave ends it when
+       nothing is in flight, when every set is solved unless a robot was lost.
+    3. With ``LARGE``: the robot hides its links outside large sets and runs the ``sync``
+       merge alone (:func:`.sync_alone.run_sync_locally`, its own channel and wave, both
+       started at the same round by every robot), then shows them again.
+
+    A loss (``LOST``) in phase 1 or 2 starts again from phase 1 on the links left (the sets
+    solved keep their cuts and are found conflict-free), as the detection loop repeats a
+    detection after a loss.
+    """
+    protocol = protocol or ProtocolOptions(reliable=True)
+    run = AlonePhases(robot, transport, protocol, n_robots)
+    st, log, chan = run.st, run.log, run.chan
+    B = bundle_budget(robot.n, robot.evidence.bundle_budget)
+
+    def lists_bits() -> int:
+        return ((CONFLICT if robot.conflictive.any() else 0)
+                | (LARGE if robot.setlists.large.any() else 0)
+                | (LOST if st.lost_in_phase else 0))
+
+    def lists_start(rb, send) -> None:
+        start_setlists(rb, 1, send, B)
+        finish_setlists(rb)
+
+    def lists_step(rb, msgs, send, now, t) -> None:
+        setlists_step(rb, msgs, send, t)
+        finish_setlists(rb)
+
+    restarts = 0
+    while True:
+        t, bits, begin = run.phase(
+            "setlists", lists_start, lists_step, lists_bits,
+            memory=lambda: robot.memory_bytes() + robot.setlists.nbytes() + chan.memory_bytes())
+        log.detection_rounds += t
+        log.phases.append(dict(phase="setlists", start_round=begin, rounds=t, bits=int(bits)))
+        if not bits & LOST and bits & CONFLICT:
+            t, ebits, begin = run.phase(
+                "evidence", lambda rb, send: start_evidence(rb, send),
+                lambda rb, msgs, send, now, t: evidence_step(rb, msgs, send, t),
+                lambda: LOST if st.lost_in_phase else 0,
+                memory=lambda: (robot.memory_bytes() + robot.evidence.nbytes()
+                                + chan.memory_bytes()))
+            log.resolution_rounds += t
+            log.phases.append(dict(phase="evidence", start_round=begin, rounds=t,
+                                   bits=int(ebits)))
+            bits |= ebits & LOST
+        if not bits & LOST:
+            break
+        restarts += 1
+        if restarts > run.n:
+            raise RuntimeError(f"robot {robot.id}: more than {run.n} restarts after losses")
+    log.repeated_detections = restarts
+    merge = None
+    if bits & LARGE:
+        alive = robot.link_alive.copy()
+        hidden = alive & ~robot.setlists.large[robot.link_r]
+        robot.link_alive = alive & ~hidden
+        equip_sync(robot, robot.evidence.link_weight)
+        merge = run_sync_locally(robot, transport, protocol, n_robots)
+        robot.deleted_case[alive & ~robot.link_alive & (robot.deleted_case == CASE_SYNC)] = \
+            CASE_EVIDENCE
+        robot.link_alive = robot.link_alive | hidden
+    log.iterations = int((robot.deleted_case == CASE_EVIDENCE).any())
+    out = run.close()
+    if merge is not None:
+        out.resolution_rounds += merge.resolution_rounds
+        out.phases.extend(merge.phases)
+        out.repeated_detections += merge.repeated_detections
+        for k in ("retransmissions", "acks", "heartbeats"):
+            setattr(out, k, getattr(out, k) + getattr(merge, k))
+        out.lost_neighbours = sorted(set(out.lost_neighbours) | set(merge.lost_neighbours))
+    return out

@@ -42,6 +42,13 @@ cluster. Hence:
 * the one rule: a robot reads its own state and its inbox only; :func:`evidence_cut` sees
   only the bundles the robot received.
 
+Where the member lists come from: the rule's stage (:mod:`.engines.evidence_stage`, and
+:func:`.alone.run_evidence_locally` for a robot alone) runs the bounded label flooding of
+:mod:`.setlists` instead of the rows of Sec. III: a set of at most ``B`` features (the bundle
+budget) reaches this flood and solve with its whole member list, as the rows gave it; a larger
+set is merged by the ``sync`` rule on its links instead, so no robot holds more than ``B``
+bundles of one set.
+
 Stated choices: ties in weight are broken by the smaller link ``(min gid, max gid)``; the
 weight of a link is the one its bundles carry (both ends hold the same value); a robot whose
 pose is unknown sends no ``P`` and the geometric test is then skipped for the whole set.
@@ -61,6 +68,8 @@ from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.cycles import shared_cameras, support_term
 from pipeline.consistency.robot import Robot
@@ -111,6 +120,8 @@ class EvidenceState:
     set_members: dict = field(default_factory=dict)
     set_nbrs: dict = field(default_factory=dict)
     held_bytes: int = 0  # bytes of the bundles and set members held, kept as they arrive
+    #: the bundle budget ``B`` of :mod:`.setlists` (``None``: the team's default)
+    bundle_budget: int | None = None
 
     def keep(self, lab: int, g: int, bundle: tuple) -> None:
         """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""
@@ -486,6 +497,7 @@ def cut_own_side(robot: Robot, solution: tuple, round_) -> None:
     solutions of several sets concatenated, each with its own round).
     """
     a, b, cam_a, cam_b, cut = solution
+    _name_pieces(robot, a, b, cut)
     mine = (cam_a == robot.id) | (cam_b == robot.id)
     sel = cut & mine
     if not sel.any():
@@ -505,6 +517,23 @@ def cut_own_side(robot: Robot, solution: tuple, round_) -> None:
     robot.deleted_round[link] = rounds
     robot.deleted_case[link] = CASE_EVIDENCE
     robot.deleted_iteration[link] = robot.iteration
+
+
+def _name_pieces(robot: Robot, a: np.ndarray, b: np.ndarray, cut: np.ndarray) -> None:
+    """Name the track of each own feature of the solved sets: the smallest id of its piece
+    (the component of the kept links, the name the next detection of Sec. III would give)."""
+    nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
+    own = (nodes >= robot.gid0) & (nodes < robot.gid0 + robot.m)
+    if not own.any():
+        return
+    E = a.size
+    keep = ~np.asarray(cut, dtype=bool)
+    g = sp.csr_matrix((np.ones(int(keep.sum()), dtype=bool), (inv[:E][keep], inv[E:][keep])),
+                      shape=(nodes.size, nodes.size))
+    _, comp = connected_components(g, directed=False)
+    smallest = np.full(int(comp.max(initial=-1)) + 1, np.iinfo(np.int64).max, dtype=np.int64)
+    np.minimum.at(smallest, comp, nodes)
+    robot.track_label[nodes[own] - robot.gid0] = smallest[comp[own]]
 
 
 def _solve_and_cut(robot: Robot, lab: int, round_: int) -> None:

@@ -7,7 +7,8 @@ finds fewer conflicts, talking only to their neighbours; the loop of Prop. 4.5 r
 detection and resolution until a detection finds none. ``paper`` is the paper's Alg. 1
 (:mod:`.resolution`; over the reliable channel :mod:`.reliable`); ``evidence`` floods each
 set's costed links and cuts the same deterministic solution at every robot
-(:mod:`.evidence`).
+(:mod:`.evidence`), after a detection of its own (bounded label flooding, :mod:`.setlists`;
+sets beyond its bundle budget merged as ``sync`` merges: :mod:`.engines.evidence_stage`).
 
 ``DEFAULT_RESOLUTION`` (``evidence``) is the rule every entry point runs unless told otherwise:
 ``resolve_conflicts``, the stage functions of :mod:`pipeline.stages`, the runners' configs,
@@ -70,6 +71,10 @@ the sets it found.
     once where the batched engines apply), and ``alone(robot, transport, protocol, n_robots)
     -> RobotRun`` (one robot in its own process, ending its phases by the termination wave of
     :mod:`.termination`) instead of ``simulate``/``start``/``step``/``done``/``finish``.
+``set_lists``
+    The rule's own detection floods up to ``B + 1`` ids of each set (:mod:`.setlists`, ``B``
+    the bundle budget): the memory guard counts those (:func:`pipeline.budget.
+    check_detection_memory`).
 ``cuts_as``
     The rule whose cuts this one makes on a fault-free network by construction (another
     protocol for the same decisions, property-tested): reports that compare every rule on
@@ -105,10 +110,11 @@ __all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rul
 DEFAULT_RESOLUTION = "evidence"
 #: the rule of the jobs that receive links only (``resolve``, ``clean-db``, ``clean-h5``,
 #: ``run-landmarks``): no camera poses, so the evidence rule's geometric tests cannot run and
-#: its decisions are the greedy merge ``sync`` computes too, while its detection needs memory
-#: in ``Σ |C|²`` (refused on a 101-frame CMU hotel input at 8 GB; ``sync`` 0.4 GB); ``sync``
-#: also counts quadrangles (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras).
-#: Measured by ``bench/multiway.py``.
+#: its decisions are the greedy merge ``sync`` computes too, at a higher cost (its detection
+#: floods up to ``B + 1`` ids per feature: a 101-frame CMU hotel input, 326 MB peak against
+#: sync's 317 MB, 732 MB on the wire against 308 MB); ``sync`` also counts quadrangles on
+#: every set (a ring2 team with swapped matches: F1 0.92 -> 1.00 at 100 cameras). Measured by
+#: ``bench/multiway.py``.
 DEFAULT_LINKS_RESOLUTION = "sync"
 
 #: the cases of Alg. 1 every report lists (line 10: (b) the feature is already in another
@@ -148,6 +154,7 @@ class ResolutionRule:
     needs_evidence: bool = False
     merge_radius_px: float | None = None
     cuts_as: str | None = None
+    set_lists: bool = False
     _loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
     def hook(self, name: str):
@@ -248,16 +255,17 @@ register(ResolutionRule(
     name="evidence",
     help="evidence = the robots of each set agree on the cut that keeps the best-supported "
          "links",
-    title="detection (Sec. III) + the evidence-aware resolution (robots of a set agree on the "
-          "cut that keeps the best-supported links)",
+    title="detection by bounded label flooding + the evidence-aware resolution (robots of a "
+          "set agree on the cut that keeps the best-supported links; sets beyond the bundle "
+          "budget by the distributed greedy merge)",
     summary="by the evidence rule",
+    # the cuts of the small sets and of the large sets' merge alike
     cases={5: "evidence"},
-    simulate="pipeline.consistency.evidence:evidence_pass",
-    batched="pipeline.consistency.engines.batched_evidence:evidence_pass",
-    start="pipeline.consistency.evidence:start_evidence_reliable",
-    step="pipeline.consistency.evidence:evidence_round",
-    done="pipeline.consistency.evidence:evidence_done",
-    finish="pipeline.consistency.evidence:reexamine_sets",
+    detection=False,
+    stage="pipeline.consistency.engines.evidence_stage:run_evidence_stage",
+    stage_batched="pipeline.consistency.engines.evidence_stage:run_evidence_stage_batched",
+    alone="pipeline.consistency.alone:run_evidence_locally",
+    set_lists=True,
     needs_evidence=True,
     merge_radius_px=2.0))
 register(ResolutionRule(

@@ -9,6 +9,10 @@ Flags
 -----
 ``few-registered``
     The reconstruction before cleaning registered fewer than half the images.
+``relaxed-registration``
+    COLMAP's registration threshold left images out and the reconstruction before cleaning
+    is the one mapped again at the relaxed threshold
+    (:func:`pipeline.colmap.incremental_mapping_with_retry`).
 ``images-lost``
     Cleaning lost images: registered after < registered before.
 ``cleaning-worse``
@@ -93,6 +97,15 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                       "message": f"the reconstruction registered only {reg_b} of {n_images} "
                                  f"images (fewer than half)",
                       "likely_cause": "; ".join(causes)})
+    if before.get("registered_at_colmap_default") is not None:
+        flags.append({"flag": "relaxed-registration",
+                      "message": f"COLMAP's registration threshold (30 triangulated points "
+                                 f"seen) registered {before['registered_at_colmap_default']} of "
+                                 f"{n_images} images; at {before['min_pose_inliers']} points "
+                                 f"{reg_b} were registered",
+                      "likely_cause": "a weak view graph: few matches reach the images the "
+                                      "first model lacked; their poses rest on fewer points "
+                                      "(check them, or add photos that overlap them)"})
     cut = {k: int(v) for k, v in (cut_by_reason or {}).items() if v}
     cut_text = ", ".join(f"{v} by {k}" for k, v in sorted(cut.items())) or "none"
     if reg_a < reg_b:

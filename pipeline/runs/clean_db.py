@@ -116,6 +116,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     from pipeline.budget import BYTES_PER_EDGE, check_detection_memory, count_lines
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.consistency.rules import get_rule
+    from pipeline.consistency.setlists import bundle_budget
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
     from pipeline.runs.cleaned import check_image_dir
@@ -137,7 +138,9 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
-    check_detection_memory(m, model_links, budget, detection=get_rule(resolution).detection)
+    rule = get_rule(resolution)
+    check_detection_memory(m, model_links, budget, detection=rule.detection,
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None

@@ -232,7 +232,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
         # COLMAP's mapper releases the GIL: the reconstruction before cleaning runs in a
         # thread while this one runs what needs only the links (the consistency stage, the
         # report's centralized baselines); fusion waits for its poses
-        before_job = mapper.submit(_timed, colmap.incremental_mapping, db_before,
+        before_job = mapper.submit(_timed, colmap.incremental_mapping_with_retry, db_before,
                                    num_threads=config.threads, fixed_intrinsics=fixed)
         if cleaning is None:
             cleaning = clean_association(views, feats, comm_edges, links, fusion=False,
@@ -316,9 +316,11 @@ def _map_after(config: ImagesConfig, kept: np.ndarray, db_after: Path, map_befor
         return map_before
     if mode == "scratch":
         return colmap.incremental_mapping(db_after, num_threads=config.threads,
-                                          fixed_intrinsics=fixed)
+                                          fixed_intrinsics=fixed,
+                                          min_pose_inliers=map_before.min_pose_inliers)
     return colmap.mapping_from_poses(db_after, map_before.reconstruction,
-                                     num_threads=config.threads, fixed_intrinsics=fixed)
+                                     num_threads=config.threads, fixed_intrinsics=fixed,
+                                     min_pose_inliers=map_before.min_pose_inliers)
 
 
 def _photo_defaults(config: ImagesConfig) -> ImagesConfig:
@@ -609,6 +611,9 @@ def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
 
 
 def _mapping_note(mapping) -> str:
-    return (f"{mapping.registered_images} of {mapping.images} images registered, "
+    relaxed = "" if mapping.registered_at_colmap_default is None else (
+        f" (at {mapping.min_pose_inliers} points seen; COLMAP's 30 registered "
+        f"{mapping.registered_at_colmap_default})")
+    return (f"{mapping.registered_images} of {mapping.images} images registered{relaxed}, "
             f"{mapping.points} points, track length {mapping.mean_track_length:.2f}, "
             f"reprojection error {mapping.mean_reprojection_error:.3f} px")

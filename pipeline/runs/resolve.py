@@ -58,6 +58,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     )
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.consistency.rules import deleted_cases, rule_for_network
+    from pipeline.consistency.setlists import bundle_budget
     from pipeline.inputs.compact import compact_ids, fault_section_in_ids
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
     from pipeline.outputs import require_input_file
@@ -111,8 +112,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     # the rule that will run: on a faulty network a rule that is not fault-tolerant gives way
     # to the fault-tolerant Alg. 1, whose detection is what must fit
     faulty = faults is not None and faults.any
-    check_detection_memory(m, run_links, budget,
-                           detection=rule_for_network(resolution, faulty).detection)
+    rule = rule_for_network(resolution, faulty)
+    check_detection_memory(m, run_links, budget, detection=rule.detection,
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
                                                                  resolution, ids)

@@ -170,7 +170,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       protocol: ProtocolOptions | None = None,
                       resolution: str = DEFAULT_RESOLUTION,
                       link_weight=None, keypoints=None, projections=None,
-                      engine: str = "auto") -> ConsistencyResult:
+                      engine: str = "auto", bundle_budget: int | None = None
+                      ) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -210,6 +211,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         (:mod:`.batched_evidence`); same results, rounds, messages, bytes and memory; it
         needs the paper's protocol with delta messages on a fault-free network. ``auto``:
         batched exactly there.
+    bundle_budget : int or None
+        ``evidence`` only: the largest set (in features) solved by its bundles; larger sets
+        are solved by the distributed greedy merge on their links
+        (:mod:`.evidence_stage`). ``None``: :func:`~pipeline.consistency.setlists.
+        bundle_budget` of the team's size. ``stats['large_sets']`` counts the larger sets.
 
     Returns
     -------
@@ -261,6 +267,14 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     if rule.needs_evidence:
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections,
                         rule.hook("equip"))
+    if bundle_budget is not None:
+        if isinstance(bundle_budget, bool) or int(bundle_budget) != bundle_budget \
+                or bundle_budget < 1:
+            raise InputError(f"bundle_budget {bundle_budget!r}: give a set size of at least "
+                             "1 feature, or None for the default")
+        for rb in robots:
+            if getattr(rb, "evidence", None) is not None:
+                rb.evidence.bundle_budget = int(bundle_budget)
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:
@@ -274,6 +288,10 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     result = _collect(fpc, links, robots, link_index, per_iteration, network, proto, repeated,
                       close_round)
     result.stats["resolution"] = rule.name
+    stage = per_iteration[0].get("stage", {}) if len(per_iteration) == 1 else {}
+    for key in ("large_sets", "bundle_budget"):  # the evidence rule's (evidence_stage)
+        if key in stage:
+            result.stats[key] = int(stage[key])
     return result
 
 

@@ -487,6 +487,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
                                    st.robot_fixed + st.fixed + int(held_max[i]) * per_set,
                                    st.robot_fixed + st.fixed + int(team.lists_bytes[i]))
         finish_sync(rb, t)
+        network.note_memory(rb.id, rb.peak_memory_bytes)
     return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)
 
 
@@ -517,4 +518,5 @@ def run_sync(robots: list[Robot], network: Transport, on_round=None) -> dict:
     for rb in robots:
         rb.sync.rounds = boruvka
         finish_sync(rb, t)
+        network.note_memory(rb.id, rb.peak_memory_bytes)  # the peak its steps measured
     return dict(rounds=t, boruvka_rounds=boruvka, support_rounds=support_rounds)

@@ -109,3 +109,55 @@ def test_a_start_with_a_bogus_camera_is_mapped_from_scratch(sceaux_before):
     db = _kept_database(sceaux_before, "bogus.db", np.ones(len(links), dtype=bool))
     got = colmap.mapping_from_poses(db, start, num_threads=1)
     assert got.registered_images == 4 and got.points > 0
+
+
+def _fake(registered_by_threshold, n=6):
+    """A mapping function registering ``registered_by_threshold[t]`` of ``n`` images at
+    threshold ``t``; the thresholds it was called with, in order."""
+    calls = []
+
+    def mapping(database_path, *, min_pose_inliers, **options):
+        calls.append((min_pose_inliers, options))
+        k = registered_by_threshold[min_pose_inliers]
+        return colmap.MappingSummary(n, 1, k, [f"{i}.png" for i in range(k)], 10 * k, 30 * k,
+                                     3.0, 0.5, None, min_pose_inliers)
+    return mapping, calls
+
+
+def test_retry_only_when_images_are_missing():
+    """COLMAP's threshold first; every image registered: no second mapping."""
+    from pipeline.colmap.mapping import COLMAP_MIN_POSE_INLIERS, RETRY_MIN_POSE_INLIERS
+
+    mapping, calls = _fake({COLMAP_MIN_POSE_INLIERS: 6, RETRY_MIN_POSE_INLIERS: 6})
+    out = colmap.incremental_mapping_with_retry("db", mapping=mapping, num_threads=1)
+    assert [c[0] for c in calls] == [COLMAP_MIN_POSE_INLIERS]
+    assert calls[0][1] == {"num_threads": 1}
+    assert out.min_pose_inliers == COLMAP_MIN_POSE_INLIERS
+    assert out.registered_at_colmap_default is None
+    assert "registered_at_colmap_default" not in out.summary()
+
+
+def test_retry_kept_only_when_it_registers_more():
+    from pipeline.colmap.mapping import COLMAP_MIN_POSE_INLIERS, RETRY_MIN_POSE_INLIERS
+
+    mapping, calls = _fake({COLMAP_MIN_POSE_INLIERS: 2, RETRY_MIN_POSE_INLIERS: 6})
+    out = colmap.incremental_mapping_with_retry("db", mapping=mapping)
+    assert [c[0] for c in calls] == [COLMAP_MIN_POSE_INLIERS, RETRY_MIN_POSE_INLIERS]
+    assert out.registered_images == 6 and out.min_pose_inliers == RETRY_MIN_POSE_INLIERS
+    assert out.summary()["registered_at_colmap_default"] == 2
+    # a retry that registers no more: the first model stays
+    mapping, _ = _fake({COLMAP_MIN_POSE_INLIERS: 3, RETRY_MIN_POSE_INLIERS: 3})
+    out = colmap.incremental_mapping_with_retry("db", mapping=mapping)
+    assert out.min_pose_inliers == COLMAP_MIN_POSE_INLIERS and out.registered_images == 3
+
+
+def test_the_threshold_reaches_colmaps_mapper(sceaux_before):
+    """The threshold is the mapper's ``abs_pose_min_num_inliers``, and the summary names it."""
+    from pipeline.colmap.mapping import _pipeline_options
+
+    *_, work = sceaux_before
+    db = _kept_database(sceaux_before, "threshold.db", None)
+    options, _, _ = _pipeline_options(db, 1, 0, (), "", 15)
+    assert options.mapper.abs_pose_min_num_inliers == 15
+    out = colmap.incremental_mapping(db, num_threads=1, min_pose_inliers=15)
+    assert out.summary()["min_pose_inliers"] == 15 and out.registered_images == 4

@@ -251,7 +251,8 @@ def test_one_line_with_huge_ids_runs_in_small_memory(tmp_path, links, graph, fir
 
 def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_path):
     """90,000 random links among 10 cameras: one association set of ~40,000 features, whose
-    detection would need ~57 GB; refused at once under a 1.5 GB cap."""
+    detection would need ~57 GB (the evidence rule's, ~2.5 GB); refused at once under a
+    1.5 GB cap."""
     rng = np.random.default_rng(0)
     rows = []
     for i in range(10):
@@ -260,18 +261,22 @@ def test_noisy_links_chaining_one_giant_set_are_refused_before_allocating(tmp_pa
             rows += [f"{i},{a},{j},{b}\n" for a, b in zip(r, s, strict=True)]
     src = tmp_path / "noisy.csv"
     src.write_text("".join(rows))
-    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv",
-                       "--resolution", "evidence"])  # a rule with the detection (Sec. III)
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert "into one association set" in proc.stderr and "--max-memory-gb" in proc.stderr
-    assert "--resolution sync" in proc.stderr  # the rule whose memory follows the links
-    assert not (tmp_path / "o.csv").exists()
+    for rule, part in (("paper", "distributed detection"),  # the rows of Sec. III
+                       ("evidence", "evidence rule's detection")):  # up to B + 1 ids a feature
+        proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv",
+                           "--resolution", rule])
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr
+        assert part in proc.stderr and "into one association set" in proc.stderr
+        assert "--max-memory-gb" in proc.stderr
+        assert "--resolution sync" in proc.stderr  # the rule whose memory follows the links
+        assert not (tmp_path / "o.csv").exists()
 
 
 def test_the_sync_rule_counts_its_links_not_the_detections_sets(tmp_path):
     """300 cameras in a ring, 10 features each, every pair of neighbours swapping two matches:
     sets of up to 900 features, 2.5e6 detection entries (~90 MB): refused with the detection
-    at 0.05 GB, counted per link by the sync rule (3,000 links: ~7 MB)."""
+    at 0.05 GB, counted per link by the sync rule (3,000 links: ~7 MB) and by the evidence
+    rule (its lists: at most B + 1 = 54 ids a feature at 300 cameras, ~10 MB)."""
     rows = []
     for i in range(300):
         lo, hi = sorted((i, (i + 1) % 300))
@@ -280,11 +285,12 @@ def test_the_sync_rule_counts_its_links_not_the_detections_sets(tmp_path):
     src = tmp_path / "ring.csv"
     src.write_text("".join(rows))
     refused = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv",
-                          "--resolution", "evidence", "--max-memory-gb", "0.05"])
+                          "--resolution", "paper", "--max-memory-gb", "0.05"])
     assert refused.returncode == 2 and "into one association set" in refused.stderr
-    proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q",
-                       "--resolution", "sync", "--max-memory-gb", "0.05"])
-    assert proc.returncode == 0, proc.stderr
+    for rule in ("sync", "evidence"):
+        proc = run_capped(["resolve", "--links", src, "--out", tmp_path / "o.csv", "-q",
+                           "--overwrite", "--resolution", rule, "--max-memory-gb", "0.05"])
+        assert proc.returncode == 0, proc.stderr
     # with message loss the fault-tolerant Alg. 1 runs instead, and its detection is counted
     lossy = run_capped(["resolve", "--links", src, "--out", tmp_path / "o2.csv",
                         "--resolution", "sync", "--drop-prob", "0.1", "--max-memory-gb", "0.05"])

@@ -57,10 +57,13 @@ def test_the_sync_rule_runs_through_resolve_on_both_transports(transport, tmp_pa
     assert statuses == ["kept", "kept", "kept", "deleted", "kept"]
 
 
-@pytest.mark.parametrize("name", ["paper", "evidence"])
-def test_every_hook_of_a_registered_rule_loads(name):
+@pytest.mark.parametrize("name, hooks", [
+    ("paper", ("simulate", "batched", "start", "step", "done", "finish")),
+    ("evidence", ("stage", "stage_batched", "alone", "equip")),
+    ("sync", ("stage", "stage_batched", "alone", "equip"))])
+def test_every_hook_of_a_registered_rule_loads(name, hooks):
     rule = get_rule(name)
-    for hook in ("simulate", "batched", "start", "step", "done", "finish"):
+    for hook in hooks:
         assert callable(rule.hook(hook)), hook
 
 

@@ -69,6 +69,9 @@ def _assert_same(a, b) -> None:
             np.testing.assert_array_equal(getattr(ra, k), getattr(rb, k),
                                           err_msg=f"robot {ra.id} {k}")
         assert ra.peak_memory_bytes == rb.peak_memory_bytes, f"robot {ra.id} memory"
+        # the network holds each robot's peak (the stage's max_robot_memory_bytes)
+        assert net_a.peak_memory(ra.id) == ra.peak_memory_bytes > 0, f"robot {ra.id} noted"
+        assert net_b.peak_memory(rb.id) == rb.peak_memory_bytes, f"robot {rb.id} noted"
 
 
 @SETTINGS

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from consistency_graphs import instances, random_instance
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency import resolve_conflicts
@@ -127,12 +128,13 @@ def test_local_termination_with_a_crash_ends_conflict_free():
                if lg is not None and i in {int(k) for e in edges for k in e if 2 in e})
 
 
-def _run_team_evidence(fpc, edges, links, weight, options=None):
+def _run_team_evidence(fpc, edges, links, weight, options=None, budget=None):
     from pipeline.consistency.evidence import equip
 
     robots, link_index = build_robots(fpc, links)
     for rb, li in zip(robots, link_index, strict=True):
         equip(rb, weight[li], np.zeros((rb.m, 2)), None)
+        rb.evidence.bundle_budget = budget
     team = LocalTeam(len(fpc), edges, options)
     logs = team.run(lambda tr: run_consistency_locally(robots[tr.robot_id], tr,
                                                        resolution="evidence"))
@@ -144,15 +146,18 @@ def _run_team_evidence(fpc, edges, links, weight, options=None):
 
 
 @settings(max_examples=25, deadline=None)
-@given(instances())
-def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst):
+@given(instances(), st.sampled_from([None, 1, 3]))
+def test_local_termination_gives_the_drivers_links_with_the_evidence_rule(inst, budget):
     from pipeline.matching.link_evidence import ratio_llr
 
     fpc, edges, links = inst
     edges = comm_edges_for(fpc, links, edges)
     weight = ratio_llr(1.0 - links.quality)
-    ref = resolve_conflicts(fpc, edges, links, resolution="evidence", link_weight=weight)
-    deleted, logs, robots, link_index = _run_team_evidence(fpc, edges, links, weight)
+    # small budgets: the sets beyond them merged by sync alone, as in the simulator's stage
+    ref = resolve_conflicts(fpc, edges, links, resolution="evidence", link_weight=weight,
+                            bundle_budget=budget)
+    deleted, logs, robots, link_index = _run_team_evidence(fpc, edges, links, weight,
+                                                           budget=budget)
     assert np.array_equal(deleted, ref.deleted)
     # both ends cut alike, with the evidence rule's case
     ends = np.zeros(len(links), dtype=int)

@@ -32,6 +32,18 @@ def test_few_registered_names_the_likely_causes():
     assert "registered only 2 of 6" in flags_markdown(flags)
 
 
+def test_a_reconstruction_at_the_relaxed_threshold_is_flagged():
+    """The model before cleaning was mapped again at the relaxed registration threshold: the
+    run says what COLMAP's threshold registered and at how many points the rest were."""
+    before = dict(_summary(6, NAMES, 1000), min_pose_inliers=15, registered_at_colmap_default=2)
+    flags = reconstruction_flags(6, before, before, RING, [100] * 6, [5000] * 6)
+    assert [f["flag"] for f in flags] == ["relaxed-registration"]
+    assert "registered 2 of 6" in flags[0]["message"] and "at 15 points 6" in flags[0]["message"]
+    # at COLMAP's own threshold: no flag
+    plain = dict(_summary(6, NAMES, 1000), min_pose_inliers=30)
+    assert reconstruction_flags(6, plain, plain, RING, [100] * 6, [5000] * 6) == []
+
+
 def test_images_lost_after_cleaning_name_the_images_and_the_cuts():
     before, after = _summary(6, NAMES, 1000), _summary(5, NAMES[:5], 990)
     flags = reconstruction_flags(6, before, after, RING, [100] * 6, [5000] * 6,
