@@ -186,6 +186,11 @@ __all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_w
 FRESH_LABELS = 1 << 40
 """First fresh label name: a set no retired frame anchors is named from here on."""
 
+WEIGHED_RULE = "evidence"
+"""The rule whose merge weighs the conflict-free sets of a step (step 2b of the module
+docstring): its stage cuts only in conflictive sets of at most ``B`` features (and merges the
+larger ones); ``sync`` merges every set already, ``paper``'s Alg. 1 has no weights."""
+
 HISTORY = "history"
 """Reason of a link cut by the history repair (step 3 of the module docstring)."""
 
@@ -565,8 +570,9 @@ class OnlineAssociation:
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
         # the sets the detection found conflict-free are weighed by the rule's merge too
-        if self.weigh and self.rule.detection and self.rule.needs_evidence:
-            self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec)
+        if self.weigh and self.rule.name == WEIGHED_RULE:
+            self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec,
+                        st.get("bundle_budget"))
         # history check and repair (step 3), then the new labels (step 4)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
@@ -576,13 +582,15 @@ class OnlineAssociation:
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
 
     def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
-               rec: dict) -> None:
+               rec: dict, budget: int | None = None) -> None:
         """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
         the detection found conflict-free.
 
         The sets are the components of the sub-problem's links before the rule's cuts (real
         and history links, as the detection saw them); one without two features of one image
-        is conflict-free, the rule left it alone. A set with an image of unknown pose is not
+        is conflict-free and holds at most ``budget`` features (the rule's bundle budget
+        ``B``, :func:`pipeline.consistency.setlists.bundle_budget`: a larger set got the
+        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A set with an image of unknown pose is not
         weighed: without the geometric test the merge of a conflict-free set joins all of it
         (no two features of one image to keep apart), it would cut nothing. Its robots flood its bundles as the rule's
         robots do (:mod:`pipeline.consistency.evidence`, step 1: each feature's keypoint,
@@ -606,6 +614,9 @@ class OnlineAssociation:
         # merge of a conflict-free set then joins all of it) are not weighed
         bad = np.union1d(_duplicated_keys(comp, img_of),
                          comp[~posed[np.searchsorted(images, img_of)]]).astype(np.int64)
+        if budget is not None:  # the rule's large sets (more than B features)
+            size = np.bincount(comp)
+            bad = np.union1d(bad, np.flatnonzero(size > int(budget))).astype(np.int64)
         ia = np.searchsorted(sub, a_all)
         on = ~np.isin(comp[ia], bad)
         if not on.any():
