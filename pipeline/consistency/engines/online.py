@@ -67,10 +67,11 @@ One step (:meth:`OnlineAssociation.add_step`)
    until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
    ignored (it is no link of the association; a history link that doubles a real link is
    left to the real link in the detection and kept in the check below).
-2b. *Weighing the conflict-free sets* (``weigh``, default; a rule with detection and
-   evidence: ``evidence``). The rule cuts only in the sets the detection finds conflictive
-   (Prop. 4.5); every other set of the sub-problem, one the step's new links touched and
-   the detection found conflict-free, is weighed by the rule's merge too: its robots flood
+2b. *Weighing the conflict-free sets* (``weigh``, default; the evidence rule,
+   :data:`WEIGHED_RULE`). The rule cuts only in the sets it finds conflictive (its sets of
+   at most ``B`` features, the bundle budget; a larger set gets its ``sync`` merge, and is
+   left to it here); every other set of the sub-problem, one the step's new links touched
+   and found conflict-free, is weighed by the rule's merge too: its robots flood
    its bundles as the rule's robots do (each window feature's keypoint, its links of the
    set with their evidence weights, its frame's projection; history links as in the
    detection) and each solves the rule's solution on them
