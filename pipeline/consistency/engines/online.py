@@ -71,14 +71,20 @@ One step (:meth:`OnlineAssociation.add_step`)
    :data:`WEIGHED_RULE`). The rule cuts only in the sets it finds conflictive (its sets of
    at most ``B`` features, the bundle budget; a larger set gets its ``sync`` merge, and is
    left to it here); every other set of the sub-problem, one the step's new links touched
-   and found conflict-free, is weighed by the rule's merge too: its robots flood
-   its bundles as the rule's robots do (each window feature's keypoint, its links of the
-   set with their evidence weights, its frame's projection; history links as in the
-   detection) and each solves the rule's solution on them
-   (:func:`~pipeline.consistency.evidence.solve_set`: triangle support with the three-view
-   test, the Kruskal merge by decreasing evidence with the geometric test of the merged
-   track), then cuts its side of the window links the solution cuts (reason of the rule;
-   a cut history link is ignored, as in the rule's pass). In a conflict-free set the merge
+   and found conflict-free, is weighed by the rule's merge too. Its robots send their
+   bundles as the rule's robots make them (each window feature's keypoint, its links of
+   the set with their evidence weights, its frame's projection; history links as in the
+   rule's pass) up a tree to the set's *root*, the robot of its smallest feature: the
+   rule's set lists name that feature first to every robot of a set of at most ``B``
+   features, and the label flooding brought it one hop per round, so the neighbour it
+   came from first is a parent on a shortest path. The root solves the rule's solution on
+   the set's bundles (:func:`~pipeline.consistency.evidence.solve_set`: triangle support
+   with the three-view test, the Kruskal merge by decreasing evidence with the geometric
+   test of the merged track) and sends the links it cuts down the tree; each robot cuts
+   its side of them (reason of the rule; a cut history link is ignored, as in the rule's
+   pass). Unlike a conflictive set, whose robots all solve alike (no reject messages), a
+   conflict-free set needs no symmetric solving: one solution sent down costs far fewer
+   bytes than every bundle flooded to every robot. In a conflict-free set the merge
    never meets two features of one image: what it cuts is what the geometric test refutes,
    so a set with a frame of unknown pose is not weighed (it would cut nothing). Why: a
    clash splits a set as soon as it appears, and the pieces are conflict-free from then on;
@@ -152,10 +158,11 @@ memory still follows window + hold.
 Costs: rounds, messages and bytes are the simulator's counts of the sub-problem's stage
 (images are its cameras, so messages between two frames of one robot are counted as if
 sent: an upper bound on what goes over the air), plus the label exchange of the new links,
-the names of retired pieces (step 1), the weighing's flood (step 2b: bounds, each bundle
-sent once to each neighbour of its set, ``128 + 16 deg`` bytes, in the resolution phase
-beside the rule's flood, ``diam + 1`` rounds; ``weigh_bytes``, ``weigh_messages``,
-``weigh_rounds``) and the history flood. The bookkeeping of this class (arrays of all links and features) is
+the names of retired pieces (step 1), the weighing (step 2b: each bundle, ``128 + 16 deg``
+bytes, one message per hop from its robot to the root, the cut links, 16 bytes each, one
+message down each tree edge; ``2 ecc(root) + 1`` rounds, counted in the resolution phase
+beside the rule's; ``weigh_bytes``, ``weigh_messages``, ``weigh_rounds``) and the history
+flood. The bookkeeping of this class (arrays of all links and features) is
 the simulator's record, not a robot's memory: :meth:`OnlineAssociation.robot_state_bytes`
 counts what a robot holds.
 
@@ -591,21 +598,22 @@ class OnlineAssociation:
         and history links, as the detection saw them); one without two features of one image
         is conflict-free and holds at most ``budget`` features (the rule's bundle budget
         ``B``, :func:`pipeline.consistency.setlists.bundle_budget`: a larger set got the
-        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A set with an image of unknown pose is not
-        weighed: without the geometric test the merge of a conflict-free set joins all of it
-        (no two features of one image to keep apart), it would cut nothing. Its robots flood its bundles as the rule's
-        robots do (:mod:`pipeline.consistency.evidence`, step 1: each feature's keypoint,
-        links with their evidence weights, projection) and each solves what
-        :func:`~pipeline.consistency.evidence.solve_set` solves on them (the weights of
-        :func:`~pipeline.consistency.evidence.set_problem`, here :func:`set_weights` for all
-        sets at once, then :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal
-        merge by decreasing evidence with the geometric test), then cuts its side of the
-        links the solution cuts. A cut history link is ignored, as in the rule's pass (it
-        stands for a retired piece). Counts (bounds): a robot sends each bundle of its set
-        once to each neighbour of the set, ``128 + 16 deg`` bytes (the rule's bundle
-        fields), at most one message per neighbour per round; the flood runs beside the
-        rule's, in the rounds of the resolution phase, for the largest diameter of a
-        weighed set's image graph + 1 rounds (the rule's bound)."""
+        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A set with an
+        image of unknown pose is not weighed: without the geometric test the merge of a
+        conflict-free set joins all of it (no two features of one image to keep apart), it
+        would cut nothing. Its robots send their bundles (:mod:`pipeline.consistency.evidence`,
+        step 1: each feature's keypoint, links with their evidence weights, projection) to
+        the set's root, which solves what :func:`~pipeline.consistency.evidence.solve_set`
+        solves on them (the weights of :func:`~pipeline.consistency.evidence.set_problem`,
+        here :func:`set_weights` for all sets at once, then
+        :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal merge by decreasing
+        evidence with the geometric test) and sends the cut links back; each robot cuts its
+        side. A cut history link is ignored, as in the rule's pass (it stands for a retired
+        piece). Counts (module docstring, *Costs*): a bundle, ``128 + 16 deg`` bytes (the
+        rule's bundle fields), one message per hop up the shortest-path tree to the root
+        (no two bundles share a message: a bound); the cut links, 16 bytes each, one message
+        down each tree edge; ``2 ecc(root) + 1`` rounds. A robot holds at most its set's
+        bundles (the root all of them)."""
         from pipeline.consistency.evidence import evidence_cut
         from pipeline.matching.link_evidence import ratio_llr
 
@@ -650,24 +658,37 @@ class OnlineAssociation:
         is_real = ks < n_real                            # a cut history link is ignored
         cut_ids = real[ks[cut & is_real]]
         self._cut(cut_ids, str(self.rule.name), t)
-        # the flood's counts: per set, its image graph (an image is a robot of the stage)
-        pair = np.unique(np.stack([lc, np.minimum(ca, cb), np.maximum(ca, cb)], axis=1),
-                         axis=0)
-        edges_c = np.bincount(np.searchsorted(c_w, pair[:, 0]), minlength=len(c_w))
-        diam_c = _set_diameters(pair, c_w, len(images))
-        deg = np.bincount(np.r_[sa, sb], minlength=len(sub))
+        # the counts of the gathering: each set's bundles go up the tree to its root, the
+        # root's answer comes down (a conflict-free set: one feature per image, so its
+        # feature graph is its image graph; an image is a robot of the stage)
+        n_s = len(sub)
+        adj = sp.coo_matrix((np.ones(2 * len(sa), bool), (np.r_[sa, sb], np.r_[sb, sa])),
+                            shape=(n_s, n_s)).tocsr()
         f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
-        bundle_c = np.bincount(np.searchsorted(c_w, f_set[:, 0]),
-                               weights=128 + 16 * deg[f_set[:, 1]],
-                               minlength=len(c_w)).astype(np.int64)
-        rounds = int(diam_c.max()) + 1
-        msgs = int((2 * edges_c * (diam_c + 1)).sum())
-        nbytes = int((2 * edges_c * bundle_c).sum()) + HEADER_BYTES * msgs
-        # a robot holds the bundles of each of its sets
-        node = np.unique(np.stack([np.r_[pair[:, 0], pair[:, 0]],
-                                   np.r_[pair[:, 1], pair[:, 2]]], axis=1), axis=0)
-        held = np.bincount(node[:, 1], weights=bundle_c[np.searchsorted(c_w, node[:, 0])],
-                           minlength=len(images))
+        f_c = np.searchsorted(c_w, f_set[:, 0])            # each member's set
+        members = np.bincount(f_c, minlength=len(c_w))
+        root = f_set[np.r_[0, np.cumsum(members)[:-1]], 1]  # smallest feature of each set
+        dist = np.full(n_s, -1, np.int64)
+        dist[root] = 0
+        front, d = root, 0
+        while len(front):
+            d += 1
+            nxt = np.unique(adj[front].indices)
+            front = nxt[dist[nxt] < 0]
+            dist[front] = d
+        f_dist = dist[f_set[:, 1]]
+        ecc = np.zeros(len(c_w), np.int64)
+        np.maximum.at(ecc, f_c, f_dist)
+        deg = np.bincount(np.r_[sa, sb], minlength=n_s)
+        f_bytes = 128 + 16 * deg[f_set[:, 1]]
+        bundle_c = np.bincount(f_c, weights=f_bytes, minlength=len(c_w)).astype(np.int64)
+        cuts_c = np.bincount(np.searchsorted(c_w, lc[cut & is_real]), minlength=len(c_w))
+        rounds = int((2 * ecc + 1).max())
+        msgs = int(f_dist.sum() + (members - 1).sum())
+        nbytes = int((f_bytes * f_dist).sum() + (16 * cuts_c * (members - 1)).sum()) \
+            + HEADER_BYTES * msgs
+        # a robot holds at most its set's bundles (the root all of them) while it weighs
+        held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=len(images))
         rec.update(weighed_sets=int(len(c_w)), cut_weigh=int(len(cut_ids)),
                    weigh_rounds=rounds, weigh_messages=msgs, weigh_bytes=nbytes)
         rec["resolution_rounds"] = max(rec["resolution_rounds"], rounds)
@@ -1020,32 +1041,6 @@ def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
     return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
-
-
-def _set_diameters(pair: np.ndarray, sets: np.ndarray, n_images: int) -> np.ndarray:
-    """Diameter of each set's image graph: ``pair`` (K, 3) rows (set, image, image), an edge
-    each; ``sets`` the sets, ascending. Breadth-first from every node at once (sparse
-    boolean powers of the graph of (set, image) nodes, block-diagonal by set)."""
-    key = np.r_[pair[:, 0] * (n_images + 1) + pair[:, 1], pair[:, 0] * (n_images + 1) + pair[:, 2]]
-    node, inv = np.unique(key, return_inverse=True)
-    k = len(pair)
-    n = len(node)
-    adj = sp.coo_matrix((np.ones(2 * k, bool), (inv, np.r_[inv[k:], inv[:k]])),
-                        shape=(n, n)).tocsr()
-    reach = sp.identity(n, dtype=bool, format="csr")
-    ecc = np.zeros(n, np.int64)
-    d = 0
-    while True:
-        nxt = (reach + reach @ adj).astype(bool)
-        grew = np.diff(nxt.indptr) > np.diff(reach.indptr)
-        if not grew.any():
-            break
-        d += 1
-        ecc[grew] = d
-        reach = nxt
-    out = np.zeros(len(sets), np.int64)
-    np.maximum.at(out, np.searchsorted(sets, node // (n_images + 1)), ecc)
-    return out
 
 
 def default_hold(window: int) -> int:

@@ -487,7 +487,13 @@ def test_a_spurious_link_of_a_conflict_free_set_is_cut_by_the_weighing(weigh):
                                     [0.9, 0.3, 0.2]))
     assert rec["conflictive_features"] == 0 and rec["cut_rule"] == 0
     if weigh:
-        assert rec["cut_weigh"] >= 1 and rec["weighed_sets"] == 1 and rec["weigh_bytes"] > 0
+        assert rec["cut_weigh"] >= 1 and rec["weighed_sets"] == 1
+        # the gathering at the root (image 0's feature): two bundles of 128 + 16 * 2 bytes
+        # one hop each, then the cut links (16 bytes each) down the two tree edges, and a
+        # 12-byte header per message; 2 ecc(root) + 1 rounds
+        assert rec["weigh_messages"] == 2 + 2
+        assert rec["weigh_bytes"] == 2 * 160 + 2 * 16 * rec["cut_weigh"] + 12 * 4
+        assert rec["weigh_rounds"] == 3
         assert oa.links.kept.tolist()[0] and not oa.links.kept[1:].any()
         assert set(oa.links.reason.tolist()[1:]) == {"evidence"}
     else:
