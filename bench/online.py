@@ -21,7 +21,9 @@ when the stage's window fills; the
 stage's own state every 5 steps, ``memory_curve``, and its last-step value over its value
 half-way, ``state_growth_second_half``). ``--no-overturn``: the history repair's earlier
 rule (only new links are cut), for comparison. ``--hold H``: a frame's links stay open H steps
-after it leaves the matching window (default ``window - 1``; ``--hold 0``: the earlier rule).
+after it leaves the matching window (default ``window - 1``; ``--hold 0``: the earlier rule). ``--no-weigh``: only the sets the
+detection finds conflictive are weighed by the rule (the earlier rule; default: every set the
+step's new links touch, step 2b of :mod:`pipeline.consistency.engines.online`).
 
 Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
 online one it is compared with.
@@ -58,7 +60,7 @@ def one(robots: int, args) -> dict:
                           steps=args.steps, window=args.window, speed=args.speed,
                           resolution=args.resolution, batch_every=args.batch_every,
                           fusion=args.fusion, rerun=False, overturn=not args.no_overturn,
-                          hold=args.hold)
+                          hold=args.hold, weigh=not args.no_weigh)
     t0 = time.perf_counter()
 
     def show(r):
@@ -154,6 +156,9 @@ def main(argv=None) -> int:
     ap.add_argument("--hold", type=int, default=None,
                     help="steps a frame's links stay open after it leaves the matching window "
                          "(default window - 1; 0: final at once, the earlier rule)")
+    ap.add_argument("--no-weigh", action="store_true",
+                    help="weigh only the conflictive sets of a step (the earlier rule), instead "
+                         "of every set the step's new links touch")
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
                          "alone, as the batch run)")

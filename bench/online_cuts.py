@@ -39,7 +39,7 @@ def one(args, hold: int) -> dict:
     from pipeline.progress import StageTimer
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
-    repairs, in_conflict = [], set()
+    repairs, in_conflict, in_touched = [], set(), set()
     rebuild, check = eng.OnlineAssociation._rebuild, eng.OnlineAssociation._history_check
 
     def rebuild_counted(self, sub, members, links_c, border_c, img_of, entries):
@@ -56,6 +56,7 @@ def one(args, hold: int) -> dict:
     def check_counted(self, sub, real, hist_a, hist_b, att_f, att_p, t):
         L = self.links
         was = real[L.kept[real] | (L.step_cut[real] == t)]  # before the rule's cuts
+        in_touched.update(was.tolist())
         a, b = self._ends(was)
         comp = self._components(sub, np.concatenate([a, hist_a]), np.concatenate([b, hist_b]))
         img = np.searchsorted(self.offset, sub, side="right") - 1
@@ -87,6 +88,8 @@ def one(args, hold: int) -> dict:
         s[2] += int(truth[skipped].sum())
     ever = np.zeros(len(truth), bool)
     ever[sorted(in_conflict)] = True
+    touched = np.zeros(len(truth), bool)
+    touched[sorted(in_touched)] = True
     extra = L.kept & ~truth & ~kb
     lost = ~L.kept & truth & kb
     return {
@@ -99,6 +102,7 @@ def one(args, hold: int) -> dict:
             "without": dict(zip(("sets", "cuts", "good_cuts"), split[False], strict=True))},
         "spurious_kept_online_cut_by_batch": int(extra.sum()),
         "of_them_in_a_conflictive_set_while_open": int((extra & ever).sum()),
+        "of_them_in_a_touched_set_while_open": int((extra & touched).sum()),
         "good_cut_online_kept_by_batch": {str(r): int((lost & (L.reason == r)).sum())
                                           for r in sorted(set(L.reason[lost]))},
     }
@@ -133,7 +137,8 @@ def main(argv=None) -> int:
               f"{wo['sets']} sets, {wo['cuts']} cuts, {wo['good_cuts']} good; spurious kept "
               f"online but cut by batch {r['spurious_kept_online_cut_by_batch']}, of them "
               f"{r['of_them_in_a_conflictive_set_while_open']} ever in a conflictive set "
-              f"while open; good cut online but kept by batch "
+              f"while open, {r['of_them_in_a_touched_set_while_open']} in a set a step's new "
+              f"links touched while open; good cut online but kept by batch "
               f"{r['good_cut_online_kept_by_batch']}", flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -67,6 +67,37 @@ One step (:meth:`OnlineAssociation.add_step`)
    until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
    ignored (it is no link of the association; a history link that doubles a real link is
    left to the real link in the detection and kept in the check below).
+2b. *Weighing the conflict-free sets* (``weigh``, default; the evidence rule,
+   :data:`WEIGHED_RULE`). The rule cuts only in the sets it finds conflictive (its sets of
+   at most ``B`` features, the bundle budget; a larger set gets its ``sync`` merge, and is
+   left to it here); every other set of the sub-problem, one the step's new links touched
+   and found conflict-free, is weighed by the rule's merge too. Its robots send their
+   bundles as the rule's robots make them (each window feature's keypoint, its links of
+   the set with their evidence weights, its frame's projection; history links as in the
+   rule's pass) up a tree to the set's *root*, the robot of its smallest feature: the
+   rule's set lists name that feature first to every robot of a set of at most ``B``
+   features, and the label flooding brought it one hop per round, so the neighbour it
+   came from first is a parent on a shortest path. The root solves the rule's solution on
+   the set's bundles (:func:`~pipeline.consistency.evidence.solve_set`: triangle support
+   with the three-view test, the Kruskal merge by decreasing evidence with the geometric
+   test of the merged track) and sends the links it cuts down the tree; each robot cuts
+   its side of them (reason of the rule; a cut history link is ignored, as in the rule's
+   pass). Unlike a conflictive set, whose robots all solve alike (no reject messages), a
+   conflict-free set needs no symmetric solving: one solution sent down costs far fewer
+   bytes than every bundle flooded to every robot. In a conflict-free set the merge
+   never meets two features of one image: what it cuts is what the geometric test refutes,
+   so a set with a frame of unknown pose is not weighed (it would cut nothing). Why: a
+   clash splits a set as soon as it appears, and the pieces are conflict-free from then on;
+   a spurious link whose set never becomes conflictive again was never weighed, while the
+   batch run sees the uncut history, where the set is conflictive and the merge's
+   geometric test cuts it (``bench/online_cuts.py``, seed 0, ``H = 2``, before the
+   weighing: of the 290 spurious links the batch cut and the online run kept, 5 were ever
+   in a conflictive set while open, all 290 in a set a step's new links touched; with the
+   weighing the run keeps 154 spurious links, the batch 552, and the online pairwise F1 of
+   ``bench/online.py`` reaches the batch's). Each
+   step re-weighs a touched set with what the window holds then (more frames, more
+   triangles, a longer track for the geometric test): a link stays open to it for ``W + H``
+   steps.
 3. *History check.* A set the new links formed may join two retired pieces that hold one
    retired image (two features of one retired frame), which the window alone cannot show.
    Every member of a set knows the set after the detection (Prop. 3.5: its row is the whole
@@ -89,9 +120,11 @@ One step (:meth:`OnlineAssociation.add_step`)
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
-links make its set conflictive, and only by the rule (reason of the rule) or by the history
-repair (an open link of a set holding a retired frame twice); every other kept link keeps
-its decision, and the labels of untouched tracks do not change.
+links touch its set: by the rule (reason of the rule) when they make it conflictive, by the
+rule's merge (step 2b, reason of the rule) when its geometric test refutes it, or by the
+history repair (an open link of a set holding a retired frame twice); a link between two
+retired frames is final; every other kept link keeps its decision, and the labels of
+untouched tracks do not change.
 
 Guarantee (after every step the kept association is conflict-free), by induction on the
 steps. Before the first step there is no link. Suppose the association is conflict-free
@@ -102,7 +135,8 @@ component of the sub-problem's kept links plus history links, together with the 
 pieces its border links reach (a retired feature is joined to the window only through a
 piece's border links, which the history links chain). The rule leaves every component of the
 sub-problem conflict-free over window images (Prop. 4.5 for Alg. 1; one pass of the
-evidence rule). If the rule cut a history link (which stays), or two pieces of a component
+evidence rule); the weighing of step 2b only cuts links, which splits sets. If the rule cut
+a history link (which stays), or two pieces of a component
 share a retired image (then one robot has overlapping runs in both: runs cover every frame
 of their piece), the repair rebuilds the component from conflict-free groups (its retired
 pieces, each conflict-free by the induction; with ``overturn=False`` the groups its old
@@ -116,12 +150,19 @@ in two retired pieces of the set (caught by the history check).
 What each robot knows after a step: for each of its window features, its label and, from
 the detection, the members of its set within the window; for each of its border links, the
 retired piece's name; for each live piece it has retired frames in, its runs of steps;
-every link it holds, kept or cut, with the step.
+every link it holds, kept or cut, with the step. During a step, a robot of a set the stage
+weighs (step 2 or 2b) holds that set's bundles: the keypoints, links, weights and
+projections of the set's window features; it drops them once it has cut its side, so its
+memory still follows window + hold.
 
 Costs: rounds, messages and bytes are the simulator's counts of the sub-problem's stage
 (images are its cameras, so messages between two frames of one robot are counted as if
 sent: an upper bound on what goes over the air), plus the label exchange of the new links,
-the names of retired pieces (step 1) and the history flood. The bookkeeping of this class (arrays of all links and features) is
+the names of retired pieces (step 1), the weighing (step 2b: each bundle, ``128 + 16 deg``
+bytes, one message per hop from its robot to the root, the cut links, 16 bytes each, one
+message down each tree edge; ``2 ecc(root) + 1`` rounds, counted in the resolution phase
+beside the rule's; ``weigh_bytes``, ``weigh_messages``, ``weigh_rounds``) and the history
+flood. The bookkeeping of this class (arrays of all links and features) is
 the simulator's record, not a robot's memory: :meth:`OnlineAssociation.robot_state_bytes`
 counts what a robot holds.
 
@@ -144,13 +185,19 @@ from scipy.sparse.csgraph import connected_components
 from pipeline.consistency.engines.driver import resolve_conflicts
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
+from pipeline.transport import HEADER_BYTES
 from pipeline.types import Links
 
-__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "HISTORY", "LABEL_BYTES",
-           "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
+__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_weights", "HISTORY",
+           "LABEL_BYTES", "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
 
 FRESH_LABELS = 1 << 40
 """First fresh label name: a set no retired frame anchors is named from here on."""
+
+WEIGHED_RULE = "evidence"
+"""The rule whose merge weighs the conflict-free sets of a step (step 2b of the module
+docstring): its stage cuts only in conflictive sets of at most ``B`` features (and merges the
+larger ones); ``sync`` merges every set already, ``paper``'s Alg. 1 has no weights."""
 
 HISTORY = "history"
 """Reason of a link cut by the history repair (step 3 of the module docstring)."""
@@ -204,6 +251,8 @@ class OnlineAssociation:
         module docstring, step 3), or only new links
     hold : int >= 0 or None — steps a frame stays in the stage (its links open) after it
         leaves the matching window; None: ``window - 1`` (module docstring, *Hold*)
+    weigh : bool — every set the step's new links touch is weighed by the rule's merge
+        (default; module docstring, step 2b), or only the conflictive ones (the earlier rule)
 
     Examples
     --------
@@ -223,7 +272,7 @@ class OnlineAssociation:
     """
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
-                 overturn: bool = True, hold: int | None = None):
+                 overturn: bool = True, hold: int | None = None, weigh: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -234,6 +283,7 @@ class OnlineAssociation:
                              "links are final as soon as it leaves the matching window)")
         self.hold = int(hold)
         self.overturn = bool(overturn)
+        self.weigh = bool(weigh)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -306,8 +356,10 @@ class OnlineAssociation:
         :attr:`steps`): ``step``, ``links_new``, ``touched_labels``, ``sub_images``,
         ``sub_features``, ``sub_links``, ``history_links``, ``conflictive_features``
         (found by the step's first detection), ``conflictive_sets`` (resolved by the rule),
-        ``cut`` (``cut_rule``, ``cut_history``, ``cut_old``: of them, links made at an
-        earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
+        ``weighed_sets`` (the conflict-free sets weighed, step 2b, with ``weigh_rounds``,
+        ``weigh_messages``, ``weigh_bytes``, counted in ``rounds``, ``messages``, ``bytes``),
+        ``cut`` (``cut_rule``, ``cut_weigh``, ``cut_history``, ``cut_old``: of them, links
+        made at an earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
         (of them ``retire_bytes``: the names of retired pieces, step 1), ``wall_s``,
         ``robot_state_bytes_max``, ``retired_entries_max`` (a robot's retired entries),
         ``stage_peak_bytes`` (the stage's peak over its images).
@@ -329,7 +381,8 @@ class OnlineAssociation:
         rec = dict(step=t, frames=len(frames), links_new=int(len(new_ids)), touched_labels=0,
                    sub_images=0, sub_features=0, sub_links=0, history_links=0,
                    conflictive_features=0, conflictive_sets=0, cut=0, cut_rule=0,
-                   cut_history=0, cut_old=0, rounds=0, detection_rounds=0,
+                   cut_weigh=0, cut_history=0, cut_old=0, weighed_sets=0, weigh_rounds=0,
+                   weigh_messages=0, weigh_bytes=0, rounds=0, detection_rounds=0,
                    resolution_rounds=0, messages=0, bytes=0, stage_peak_bytes=0)
         if len(new_ids):
             self._stage(new_ids, t, rec)
@@ -524,13 +577,124 @@ class OnlineAssociation:
         cut = np.flatnonzero(res.deleted[:n_real])
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
+        # the sets the detection found conflict-free are weighed by the rule's merge too
+        if self.weigh and self.rule.name == WEIGHED_RULE:
+            self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec,
+                        st.get("bundle_budget"))
         # history check and repair (step 3), then the new labels (step 4)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
         rec["bytes"] += int(flood)
         rec["rounds"] = rec["detection_rounds"] + rec["resolution_rounds"]
-        rec["cut"] = rec["cut_rule"] + rec["cut_history"]
+        rec["cut"] = rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
+
+    def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
+               rec: dict, budget: int | None = None) -> None:
+        """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
+        the detection found conflict-free.
+
+        The sets are the components of the sub-problem's links before the rule's cuts (real
+        and history links, as the detection saw them); one without two features of one image
+        is conflict-free and holds at most ``budget`` features (the rule's bundle budget
+        ``B``, :func:`pipeline.consistency.setlists.bundle_budget`: a larger set got the
+        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A set with an
+        image of unknown pose is not weighed: without the geometric test the merge of a
+        conflict-free set joins all of it (no two features of one image to keep apart), it
+        would cut nothing. Its robots send their bundles (:mod:`pipeline.consistency.evidence`,
+        step 1: each feature's keypoint, links with their evidence weights, projection) to
+        the set's root, which solves what :func:`~pipeline.consistency.evidence.solve_set`
+        solves on them (the weights of :func:`~pipeline.consistency.evidence.set_problem`,
+        here :func:`set_weights` for all sets at once, then
+        :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal merge by decreasing
+        evidence with the geometric test) and sends the cut links back; each robot cuts its
+        side. A cut history link is ignored, as in the rule's pass (it stands for a retired
+        piece). Counts (module docstring, *Costs*): a bundle, ``128 + 16 deg`` bytes (the
+        rule's bundle fields), one message per hop up the shortest-path tree to the root
+        (no two bundles share a message: a bound); the cut links, 16 bytes each, one message
+        down each tree edge; ``2 ecc(root) + 1`` rounds. A robot holds at most its set's
+        bundles (the root all of them)."""
+        from pipeline.consistency.evidence import evidence_cut
+        from pipeline.matching.link_evidence import ratio_llr
+
+        comp = self._components(sub, a_all, b_all)
+        posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
+        # conflictive sets (the rule's) and sets with an image of unknown pose (no test: the
+        # merge of a conflict-free set then joins all of it) are not weighed
+        bad = np.union1d(_duplicated_keys(comp, img_of),
+                         comp[~posed[np.searchsorted(images, img_of)]]).astype(np.int64)
+        if budget is not None:  # the rule's large sets (more than B features)
+            size = np.bincount(comp)
+            bad = np.union1d(bad, np.flatnonzero(size > int(budget))).astype(np.int64)
+        ia = np.searchsorted(sub, a_all)
+        on = ~np.isin(comp[ia], bad)
+        if not on.any():
+            return
+        ks = np.flatnonzero(on)
+        ks = ks[np.argsort(comp[ia[ks]], kind="stable")]   # grouped by set
+        lc = comp[ia[ks]]
+        cam = np.searchsorted(images, img_of)            # an image's camera in the stage
+        a, b = np.minimum(a_all[ks], b_all[ks]), np.maximum(a_all[ks], b_all[ks])
+        sa, sb = np.searchsorted(sub, a), np.searchsorted(sub, b)
+        ca, cb = cam[sa], cam[sb]
+        local = ratio_llr(1.0 - np.asarray(q_all, np.float64)[ks])
+        P_img = np.stack([np.eye(3, 4) if p is None else np.asarray(p, np.float64)
+                          for p in (self.projection[g] for g in images.tolist())]) \
+            if len(images) else np.zeros((0, 3, 4))
+        kp = np.concatenate([np.asarray(self.keypoints[g][sub[img_of == g] - self.offset[g]],
+                                        np.float32) for g in images.tolist()]).astype(np.float64) \
+            if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
+        c_w, c_head = np.unique(lc, return_index=True)
+        c_end = np.r_[c_head[1:], len(lc)]
+        w = set_weights(a, b, ca, cb, local,
+                        lambda ids: kp[np.searchsorted(sub, ids)],
+                        lambda ids: P_img[cam[np.searchsorted(sub, ids)]])
+        cut = np.zeros(len(ks), bool)
+        for u, v in zip(c_head.tolist(), c_end.tolist(), strict=True):
+            f = np.unique(np.r_[sa[u:v], sb[u:v]])
+            kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
+            Pd = dict(zip(sub[f].tolist(), P_img[cam[f]], strict=True))
+            cut[u:v] = evidence_cut(a[u:v], b[u:v], ca[u:v], cb[u:v], w[u:v], kpd, Pd)
+        is_real = ks < n_real                            # a cut history link is ignored
+        cut_ids = real[ks[cut & is_real]]
+        self._cut(cut_ids, str(self.rule.name), t)
+        # the counts of the gathering: each set's bundles go up the tree to its root, the
+        # root's answer comes down (a conflict-free set: one feature per image, so its
+        # feature graph is its image graph; an image is a robot of the stage)
+        n_s = len(sub)
+        adj = sp.coo_matrix((np.ones(2 * len(sa), bool), (np.r_[sa, sb], np.r_[sb, sa])),
+                            shape=(n_s, n_s)).tocsr()
+        f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
+        f_c = np.searchsorted(c_w, f_set[:, 0])            # each member's set
+        members = np.bincount(f_c, minlength=len(c_w))
+        root = f_set[np.r_[0, np.cumsum(members)[:-1]], 1]  # smallest feature of each set
+        dist = np.full(n_s, -1, np.int64)
+        dist[root] = 0
+        front, d = root, 0
+        while len(front):
+            d += 1
+            nxt = np.unique(adj[front].indices)
+            front = nxt[dist[nxt] < 0]
+            dist[front] = d
+        f_dist = dist[f_set[:, 1]]
+        ecc = np.zeros(len(c_w), np.int64)
+        np.maximum.at(ecc, f_c, f_dist)
+        deg = np.bincount(np.r_[sa, sb], minlength=n_s)
+        f_bytes = 128 + 16 * deg[f_set[:, 1]]
+        bundle_c = np.bincount(f_c, weights=f_bytes, minlength=len(c_w)).astype(np.int64)
+        cuts_c = np.bincount(np.searchsorted(c_w, lc[cut & is_real]), minlength=len(c_w))
+        rounds = int((2 * ecc + 1).max())
+        msgs = int(f_dist.sum() + (members - 1).sum())
+        nbytes = int((f_bytes * f_dist).sum() + (16 * cuts_c * (members - 1)).sum()) \
+            + HEADER_BYTES * msgs
+        # a robot holds at most its set's bundles (the root all of them) while it weighs
+        held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=len(images))
+        rec.update(weighed_sets=int(len(c_w)), cut_weigh=int(len(cut_ids)),
+                   weigh_rounds=rounds, weigh_messages=msgs, weigh_bytes=nbytes)
+        rec["resolution_rounds"] = max(rec["resolution_rounds"], rounds)
+        rec["messages"] += msgs
+        rec["bytes"] += nbytes
+        rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(held.max(initial=0)))
 
     def _local_links(self, images, a, b, q) -> Links:
         img_a = np.searchsorted(self.offset, a, side="right") - 1
@@ -793,6 +957,90 @@ class OnlineAssociation:
         start = g_head | (rank > extra)
         p, r, lo, hi, _ = _reduce_runs(start, p, r, lo, hi, gid)
         self.ret_piece, self.ret_robot, self.ret_lo, self.ret_hi = p, r, lo, hi
+
+
+def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
+                geometric=None, tol_px: float | None = None) -> np.ndarray:
+    """The evidence rule's link weights (:func:`pipeline.consistency.evidence.set_problem`)
+    of the links of several sets at once.
+
+    Parameters
+    ----------
+    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
+    cam_a, cam_b : (E,) int — their cameras
+    local : (E,) float — each link's local evidence (what its bundles carry)
+    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
+    geometric : (E,) bool or None — the link's set has every projection (the rule's test
+        on it); None: all do when ``projections`` is given
+    tol_px : float or None — the test's tolerance (default the rule's
+        :data:`~pipeline.consistency.evidence.REPROJECTION_TOL_PX`)
+
+    Returns
+    -------
+    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
+    cameras in which both ends match one common feature whose three observations are one
+    point (:func:`~pipeline.consistency.evidence.triangle_support`; all common features
+    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
+    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
+    ``set_problem`` on its bundles; the sets' triangles are listed at once and their
+    three-view points solved as one stack of SVDs (the rule solves one at a time).
+    """
+    from pipeline.consistency.cycles import shared_cameras, support_term
+    from pipeline.consistency.evidence import REPROJECTION_TOL_PX, TRIANGLE_WEIGHT
+    from pipeline.consistency.keys import isin_sorted, ranges
+
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
+    local = np.asarray(local, np.float64)
+    E = a.size
+    if E == 0:
+        return np.zeros(0)
+    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
+    nodes, inv = np.unique(np.r_[lo, hi], return_inverse=True)
+    N = nodes.size
+    ia, ib = inv[:E], inv[E:]
+    cam = np.empty(N, np.int64)
+    cam[ia] = np.where(lo == a, cam_a, cam_b)
+    cam[ib] = np.where(lo == a, cam_b, cam_a)
+    adj = np.sort(np.r_[ia, ib] * N + np.r_[ib, ia])
+    ptr = np.searchsorted(adj // N, np.arange(N + 1))
+    pos = ranges(ptr[ia], ptr[ia + 1])
+    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
+    z = adj[pos] % N
+    common = isin_sorted(z * N + ib[e], adj)
+    e, z = e[common], z[common]
+    ok = np.ones(e.size, bool)
+    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
+    if keypoints is not None and projections is not None and e.size:
+        test = np.flatnonzero(geo[e])
+        if test.size:
+            ids = np.stack([nodes[ia[e[test]]], nodes[ib[e[test]]], nodes[z[test]]], axis=1)
+            ok[test] = _one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
+                                  np.asarray(projections(ids.ravel()), np.float64)
+                                  .reshape(-1, 3, 3, 4), tol)
+    e, z = e[ok], z[ok]
+    C = int(cam.max()) + 1
+    pairs = np.unique(e * C + cam[z])
+    tau = np.bincount(pairs // C, minlength=E)
+    shared = shared_cameras(a, b, cam_a, cam_b)
+    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
+
+
+def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
+    """The evidence rule's test (``evidence._consistent``) on a stack of observation triples:
+    ``kp (T, 3, 2)``, ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three
+    cameras and within ``tol`` px of each observation."""
+    A = np.empty((len(kp), 6, 4))
+    A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
+    A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
+    X = np.linalg.svd(A)[2][:, -1]
+    fin = np.abs(X[:, 3]) >= 1e-12
+    X = X / np.where(fin, X[:, 3], 1.0)[:, None]
+    p = np.einsum("tkij,tj->tki", P, X)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
+    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
 
 
 def default_hold(window: int) -> int:

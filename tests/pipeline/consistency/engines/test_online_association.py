@@ -12,6 +12,7 @@ from pipeline.consistency.engines.online import (
     Frame,
     OnlineAssociation,
     batch_resolve,
+    set_weights,
 )
 from pipeline.errors import InputError
 from pipeline.types import Links
@@ -72,15 +73,18 @@ def test_conflict_free_after_every_step(resolution, data):
     for oa, rec, _, links in _run(window, hold, stream, resolution):
         assert is_conflict_free(oa.m, oa.kept_links()), rec
         assert rec["links_new"] == len(links)
-        assert rec["cut"] == rec["cut_rule"] + rec["cut_history"]
+        assert rec["cut"] == rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=streams())
 def test_earlier_decisions_are_kept_outside_the_touched_tracks(data):
-    window, hold, stream = data
+    _check_earlier_decisions(*data, "paper")
+
+
+def _check_earlier_decisions(window, hold, stream, resolution):
     prev_kept = np.zeros(0, bool)
-    for oa, rec, before, _links in _run(window, hold, stream, "paper"):
+    for oa, rec, before, _links in _run(window, hold, stream, resolution):
         L = oa.links
         n_old = len(prev_kept)
         # a cut link is never restored
@@ -312,3 +316,193 @@ def test_the_window_holds_window_plus_hold_steps_and_retired_links_stay(data):
         cut_now = L.step_cut == t
         assert not (cut_now & old[L.ci] & old[L.cj]).any()
         prev_retired = ~np.isin(np.arange(oa.n_images), oa.window_images)
+
+
+# ------------------------------------------------------------ weighing the conflict-free sets
+
+K = np.array([[200.0, 0, 100], [0, 200.0, 100], [0, 0, 1]])
+
+
+def _camera(x: float) -> np.ndarray:
+    """``K [I | -c]``: a camera at ``(x, 0, -6)`` looking along +z."""
+    return K @ np.c_[np.eye(3), -np.array([x, 0.0, -6.0])]
+
+
+def _project(P, X):
+    p = P @ np.r_[X, 1.0]
+    return p[:2] / p[2]
+
+
+@st.composite
+def posed_streams(draw, max_robots=4, max_steps=4, max_m=4):
+    """A team's stream with poses: robot ``i`` at step ``t`` is a camera at ``x = i + t / 4``;
+    each feature sees one of a few 3D points (its keypoint that point's projection); a link
+    joins two features of the same point (a good link) with probability ``p_good``, else any
+    two features (mostly spurious: the geometric test refutes them)."""
+    n = draw(st.integers(2, max_robots))
+    steps = draw(st.integers(1, max_steps))
+    window = draw(st.integers(1, 3))
+    hold = draw(st.integers(0, 2))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    p_good = draw(st.sampled_from([0.5, 0.8, 1.0]))
+    points = rng.uniform([-1, -1, 0], [4, 1, 2], (draw(st.integers(2, 6)), 3))
+    pts, step_of, out = [], [], []
+    for t in range(steps):
+        frames, first = [], len(pts)
+        for i in range(n):
+            P = _camera(i + t / 4)
+            see = rng.integers(0, len(points), int(rng.integers(1, max_m + 1)))
+            kp = np.array([_project(P, points[k]) for k in see])
+            frames.append(Frame(i, len(see), kp, P))
+            pts.append(see)
+            step_of.append(t)
+        ci, fi, cj, fj = [], [], [], []
+        for g in range(first, len(pts)):
+            for h in range(g):
+                if step_of[h] <= t - window or rng.random() < 0.3:
+                    continue
+                used_g, used_h = set(), set()
+                for r in rng.permutation(len(pts[g])).tolist():
+                    same = [s for s in range(len(pts[h])) if pts[h][s] == pts[g][r]]
+                    pool = same if same and rng.random() < p_good else range(len(pts[h]))
+                    free = [s for s in pool if s not in used_h]
+                    if not free:
+                        continue
+                    s_ = int(rng.choice(free))
+                    used_g.add(r)
+                    used_h.add(s_)
+                    ci.append(h), fi.append(s_), cj.append(g), fj.append(r)
+        out.append((frames, Links(ci, fi, cj, fj, rng.uniform(0.05, 0.95, len(ci)))))
+    return window, hold, out
+
+
+def _bundles(oa, a, b, w):
+    """The evidence rule's bundles of one set (gid -> kp, neighbours, weights, camera, P)."""
+    img = np.searchsorted(oa.offset, np.r_[a, b], side="right") - 1
+    ends = np.r_[a, b]
+    bundles = {}
+    for g in np.unique(ends).tolist():
+        im = int(img[ends == g][0])
+        mine = np.flatnonzero((a == g) | (b == g))
+        other = np.where(a[mine] == g, b[mine], a[mine])
+        bundles[g] = (np.asarray(oa.keypoints[im][g - oa.offset[im]], np.float32), other,
+                      w[mine], im, oa.projection[im])
+    return bundles
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=posed_streams(max_steps=1))
+def test_the_weights_of_several_sets_at_once_are_the_rules(data):
+    """set_weights on all the sets of a step equals the rule's set_problem on each set."""
+    from pipeline.consistency.evidence import set_problem
+    from pipeline.matching.link_evidence import ratio_llr
+
+    window, hold, stream = data
+    (frames, links), = stream
+    oa = OnlineAssociation(window, hold=hold, weigh=False)
+    oa.add_step(frames, links)
+    a, b = oa._ends(np.arange(len(links)))
+    local = ratio_llr(1.0 - links.quality)
+    img = lambda ids: np.searchsorted(oa.offset, ids, side="right") - 1  # noqa: E731
+    kp = lambda ids: np.array([np.float32(oa.keypoints[i][g - oa.offset[i]])  # noqa: E731
+                               for g, i in zip(ids, img(ids), strict=True)], np.float64)
+    P = lambda ids: np.stack([oa.projection[i] for i in img(ids)])  # noqa: E731
+    got = set_weights(a, b, img(a), img(b), local, kp, P)
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(oa.label)
+    comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)),
+                                directed=False)[1][a]
+    for c in np.unique(comp).tolist():
+        on = np.flatnonzero(comp == c)
+        ra, rb, _, _, w, _, _ = set_problem(_bundles(oa, a[on], b[on], local[on]))
+        order = np.lexsort((np.maximum(a[on], b[on]), np.minimum(a[on], b[on])))
+        assert (ra == np.minimum(a[on], b[on])[order]).all()
+        np.testing.assert_allclose(got[on][order], w, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("weigh", [True, False])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=posed_streams(max_steps=1))
+def test_one_posed_step_weighs_every_set_by_the_rule(weigh, data):
+    """All links in one step, with poses: every set, conflictive or not, ends as the rule's
+    solution on it (solve_set, what its robots solve); without weighing, the conflict-free
+    sets keep every link (the detection found nothing there)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from pipeline.consistency.evidence import solve_set
+    from pipeline.matching.link_evidence import ratio_llr
+
+    window, hold, stream = data
+    (frames, links), = stream
+    oa = OnlineAssociation(window, hold=hold, weigh=weigh)
+    oa.add_step(frames, links)
+    a, b = oa._ends(np.arange(len(links)))
+    n = len(oa.label)
+    comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)),
+                                directed=False)[1][a]
+    img = np.searchsorted(oa.offset, np.r_[a, b], side="right") - 1
+    local = ratio_llr(1.0 - links.quality)
+    expected = np.ones(len(a), bool)
+    for c in np.unique(comp).tolist():
+        on = np.flatnonzero(comp == c)
+        ends = np.r_[a[on], b[on]]
+        imgs = np.r_[img[:len(a)][on], img[len(a):][on]]
+        clash = len(np.unique(imgs)) < len(np.unique(ends))
+        if not weigh and not clash:
+            continue
+        ra, rb, _, _, cut = solve_set(_bundles(oa, a[on], b[on], local[on]))
+        key = {(x, y): k for k, x, y in zip(on.tolist(), np.minimum(a[on], b[on]).tolist(),
+                                            np.maximum(a[on], b[on]).tolist(), strict=True)}
+        for x, y, c_ in zip(ra.tolist(), rb.tolist(), cut.tolist(), strict=True):
+            expected[key[(x, y)]] = not c_
+    assert oa.links.kept.tolist() == expected.tolist()
+    assert oa.is_conflict_free()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=posed_streams(max_steps=5))
+def test_conflict_free_after_every_posed_step(data):
+    window, hold, stream = data
+    oa = OnlineAssociation(window, hold=hold)
+    for frames, links in stream:
+        rec = oa.add_step(frames, links)
+        assert is_conflict_free(oa.m, oa.kept_links()), rec
+        assert rec["cut"] == rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
+
+
+@pytest.mark.parametrize("weigh", [True, False])
+def test_a_spurious_link_of_a_conflict_free_set_is_cut_by_the_weighing(weigh):
+    """Three cameras see a point X; a third frame's feature sees another point Y and is
+    linked to X's track (a spurious link, the weakest). The set holds one feature per image:
+    the detection finds no conflict. Weighed by the rule's merge, the three-view point of the
+    merged track misses Y's keypoint by far and the link is cut; without, it stays."""
+    X, Y = np.array([0.5, 0.2, 1.0]), np.array([1.5, -0.4, 0.5])
+    P = [_camera(x) for x in (0.0, 1.0, 2.0)]
+    frames = [Frame(i, 1, _project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
+    oa = OnlineAssociation(window=2, weigh=weigh)
+    rec = oa.add_step(frames, Links([0, 0, 1], [0, 0, 0], [1, 2, 2], [0, 0, 0],
+                                    [0.9, 0.3, 0.2]))
+    assert rec["conflictive_features"] == 0 and rec["cut_rule"] == 0
+    if weigh:
+        assert rec["cut_weigh"] >= 1 and rec["weighed_sets"] == 1
+        # the gathering at the root (image 0's feature): two bundles of 128 + 16 * 2 bytes
+        # one hop each, then the cut links (16 bytes each) down the two tree edges, and a
+        # 12-byte header per message; 2 ecc(root) + 1 rounds
+        assert rec["weigh_messages"] == 2 + 2
+        assert rec["weigh_bytes"] == 2 * 160 + 2 * 16 * rec["cut_weigh"] + 12 * 4
+        assert rec["weigh_rounds"] == 3
+        assert oa.links.kept.tolist()[0] and not oa.links.kept[1:].any()
+        assert set(oa.links.reason.tolist()[1:]) == {"evidence"}
+    else:
+        assert oa.links.kept.all() and rec["weighed_sets"] == 0
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=posed_streams(max_steps=5))
+def test_the_weighing_cuts_only_in_the_touched_tracks(data):
+    """With poses the evidence rule's merge weighs every touched set: a link it cuts still
+    lies in a track the step's new links touched, and a cut link is never restored."""
+    _check_earlier_decisions(*data, "evidence")
