@@ -62,9 +62,12 @@ One step (:meth:`OnlineAssociation.add_step`)
    among them, the new links, and the *history links*: for every retired piece, a chain
    through the window features its border links reach (the set closes through the piece;
    the history link carries that connection, so the detection sees the set whole). On it
-   the simulator runs Aragüés et al.'s detection (Sec. III, Prop. 3.5) and the rule of
-   :mod:`pipeline.consistency.rules` (default :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`)
-   until conflict-free (Prop. 4.5), images as its cameras; a cut of a history link is
+   the simulator runs the rule of :mod:`pipeline.consistency.rules` (default
+   :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`), images as its cameras, until
+   conflict-free: a rule with Aragüés et al.'s detection (Sec. III, Prop. 3.5) loops
+   detection and resolution (Prop. 4.5); the evidence rule is a whole stage (its bounded
+   label flooding, the bundles of its sets of at most ``B`` features, the ``sync`` merge of
+   the larger ones: :mod:`pipeline.consistency.engines.evidence_stage`); a cut of a history link is
    ignored (it is no link of the association; a history link that doubles a real link is
    left to the real link in the detection and kept in the check below).
 2b. *Weighing the conflict-free sets* (``weigh``, default; the evidence rule,
