@@ -68,6 +68,8 @@ def one(robots: int, args) -> dict:
         print(f"  n={robots} step {r['step']:3d}: {r['links_new']:6d} new, online "
               f"{r['wall_s']:7.3f} s {r['rounds']:3d} rounds {r['bytes'] / 1e6:8.2f} MB "
               f"mem {r['robot_memory_bytes_max'] / 1e6:6.2f} MB"
+              + (f" ({r['merge_rounds']} rounds merging {r['large_sets']} sets beyond the "
+                 "bundle budget)" if r.get("large_sets") else "")
               + (f" | batch {b['wall_s']:7.3f} s {b['rounds']:3d} rounds "
                  f"{b['bytes'] / 1e6:9.2f} MB mem {b['robot_memory_bytes_max'] / 1e6:6.2f} MB"
                  if b else ""), flush=True)

@@ -289,7 +289,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       close_round)
     result.stats["resolution"] = rule.name
     stage = per_iteration[0].get("stage", {}) if len(per_iteration) == 1 else {}
-    for key in ("large_sets", "bundle_budget"):  # the evidence rule's (evidence_stage)
+    # the evidence rule's (evidence_stage): sets beyond the bundle budget and the rounds of
+    # their sync merge
+    for key in ("large_sets", "bundle_budget", "merge_rounds"):
         if key in stage:
             result.stats[key] = int(stage[key])
     return result

@@ -386,7 +386,8 @@ class OnlineAssociation:
                    conflictive_features=0, conflictive_sets=0, cut=0, cut_rule=0,
                    cut_weigh=0, cut_history=0, cut_old=0, weighed_sets=0, weigh_rounds=0,
                    weigh_messages=0, weigh_bytes=0, rounds=0, detection_rounds=0,
-                   resolution_rounds=0, messages=0, bytes=0, stage_peak_bytes=0)
+                   resolution_rounds=0, large_sets=0, merge_rounds=0, messages=0, bytes=0,
+                   stage_peak_bytes=0)
         if len(new_ids):
             self._stage(new_ids, t, rec)
         rec["messages"] += retire_msgs
@@ -573,6 +574,8 @@ class OnlineAssociation:
                                             for p in st["per_iteration"])),
                    detection_rounds=int(st["detection_rounds"]),
                    resolution_rounds=int(st["resolution_rounds"]),
+                   large_sets=int(st.get("large_sets", 0)),
+                   merge_rounds=int(st.get("merge_rounds", 0)),
                    messages=int(st["messages"]), bytes=int(st["bytes"]),
                    stage_peak_bytes=int(st["max_robot_memory_bytes"]))
         rec["bytes"] += 2 * LABEL_BYTES * len(new_ids)

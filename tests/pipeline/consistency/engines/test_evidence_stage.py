@@ -77,7 +77,7 @@ def test_with_a_budget_above_every_set_the_stage_cuts_as_the_rule_after_the_rows
     for f in ("deleted", "round", "iteration", "track_label"):
         np.testing.assert_array_equal(getattr(new, f), getattr(old, f), err_msg=f)
     np.testing.assert_array_equal(new.case == "", old.case == "")
-    assert new.stats["large_sets"] == 0
+    assert new.stats["large_sets"] == 0 and new.stats["merge_rounds"] == 0
     event(f"cut {int(new.deleted.sum())}")
 
 
@@ -94,6 +94,8 @@ def test_with_a_small_budget_large_sets_get_the_merge_on_their_links(inst, budge
     large = sizes[lab] > budget
     assert res.stats["large_sets"] == np.unique(lab[large]).size
     assert res.stats["bundle_budget"] == budget
+    # the merge runs (and takes rounds) only when there is a large set
+    assert (res.stats["merge_rounds"] > 0) == bool(large.any())
     event(f"large sets {res.stats['large_sets']}")
     # the large sets: sync's result on their links alone
     if large.any():
