@@ -947,12 +947,7 @@ class OnlineAssociation:
         hi = np.concatenate([self.ret_hi, step])
         if not len(p):
             return
-        order = np.lexsort((lo, r, p))
-        p, r, lo, hi = p[order], r[order], lo[order], hi[order]
-        head = np.r_[True, (p[1:] != p[:-1]) | (r[1:] != r[:-1])]
-        gid = np.cumsum(head) - 1
-        big = int(hi.max()) + 2
-        run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+        p, r, lo, hi, head, gid, run_max = _runs_by_robot(p, r, lo, hi)
         start = head | np.r_[True, lo[1:] > run_max[:-1] + 1]
         p, r, lo, hi, gid = _reduce_runs(start, p, r, lo, hi, gid)
         # at most RUNS_PER_ROBOT runs per (piece, robot): its oldest runs merge into one
@@ -1073,6 +1068,19 @@ def _chain(f: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ab[:, 0], ab[:, 1]
 
 
+def _runs_by_robot(group, robot, lo, hi):
+    """Step runs sorted by (group, robot, lo): the sorted arrays, ``head`` (the first run of
+    each (group, robot)), ``gid`` (its index) and ``run_max`` (the largest ``hi`` so far
+    within it)."""
+    order = np.lexsort((lo, robot, group))
+    g, r, lo, hi = group[order], robot[order], lo[order], hi[order]
+    head = np.r_[True, (g[1:] != g[:-1]) | (r[1:] != r[:-1])]
+    gid = np.cumsum(head) - 1
+    big = int(hi.max()) + 2
+    run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+    return g, r, lo, hi, head, gid, run_max
+
+
 def _reduce_runs(start, p, r, lo, hi, gid):
     """Runs beginning at ``start`` (rows sorted by piece, robot, lo) merged into one row."""
     at = np.flatnonzero(start)
@@ -1090,12 +1098,7 @@ def _overlapping_runs(group, robot, lo, hi) -> list[int]:
     """
     if not len(group):
         return []
-    order = np.lexsort((lo, robot, group))
-    g, r, lo, hi = group[order], robot[order], lo[order], hi[order]
-    head = np.r_[True, (g[1:] != g[:-1]) | (r[1:] != r[:-1])]
-    gid = np.cumsum(head) - 1
-    big = int(hi.max()) + 2
-    run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+    g, _, lo, _, head, _, run_max = _runs_by_robot(group, robot, lo, hi)
     hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
     return np.unique(g[hit]).tolist()
 
