@@ -12,7 +12,7 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["add_feature_options", "add_online_options", "check_online_options", "add_scene_options",
+__all__ = ["add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size"]
@@ -90,6 +90,15 @@ def check_online_options(args) -> None:
                          "links are final once it leaves the window)")
     if args.batch_every < 0:
         raise InputError(f"--batch-every {args.batch_every}: expected steps >= 0")
+
+
+def online_run_summary(report: dict, out, first_line: str, no_rerun: bool) -> int:
+    """Print an online job's summary (``first_line``, then the files written to ``out``) and
+    return its exit status: 0, or 3 when a step ended with a conflict."""
+    print(first_line)
+    print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
+          + ("" if no_rerun else ", recording.rrd") + ")")
+    return 0 if report["conflict_free_every_step"] else 3
 
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:

@@ -16,6 +16,7 @@ from pipeline.commands.options import (
     add_transport_option,
     check_online_options,
     feature_options,
+    online_run_summary,
     parse_size,
 )
 from pipeline.errors import InputError
@@ -130,9 +131,8 @@ def _run_online(args) -> int:
         out = run_online(config)
     report = json.loads((out / "report.json").read_text())
     f = report["final"]
-    print(f"{len(report['steps'])} steps, {f['links']} links, conflict-free after every step: "
-          f"{report['conflict_free_every_step']}; pairwise F1 online "
-          f"{f['online']['f1']:.3f}" + (f", batch {f['batch']['f1']:.3f}" if "batch" in f else ""))
-    print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
-          + ("" if args.no_rerun else ", recording.rrd") + ")")
-    return 0 if report["conflict_free_every_step"] else 3
+    return online_run_summary(
+        report, out, f"{len(report['steps'])} steps, {f['links']} links, conflict-free after "
+        f"every step: {report['conflict_free_every_step']}; pairwise F1 online "
+        f"{f['online']['f1']:.3f}" + (f", batch {f['batch']['f1']:.3f}" if "batch" in f else ""),
+        args.no_rerun)

@@ -20,6 +20,7 @@ from pipeline.commands.options import (
     add_transport_option,
     check_online_options,
     feature_options,
+    online_run_summary,
 )
 from pipeline.errors import InputError
 from pipeline.outcome import exit_status
@@ -150,12 +151,11 @@ def _run_sequence(args) -> int:
         out = run_images_sequence(config)
     report = json.loads((out / "report.json").read_text())
     f = report["final"]
-    print(f"{len(report['steps'])} steps of {report['n_robots']} robots, {f['links']} links, "
-          f"conflict-free after every step: {report['conflict_free_every_step']}; kept online "
-          f"{f['online']['kept']}" + (f", batch {f['batch']['kept']}" if "batch" in f else ""))
-    print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
-          + ("" if args.no_rerun else ", recording.rrd") + ")")
-    return 0 if report["conflict_free_every_step"] else 3
+    return online_run_summary(
+        report, out, f"{len(report['steps'])} steps of {report['n_robots']} robots, "
+        f"{f['links']} links, conflict-free after every step: "
+        f"{report['conflict_free_every_step']}; kept online {f['online']['kept']}"
+        + (f", batch {f['batch']['kept']}" if "batch" in f else ""), args.no_rerun)
 
 
 def run(args) -> int:
