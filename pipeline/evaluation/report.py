@@ -165,15 +165,14 @@ def baselines_beside(m, links: Links, kept: np.ndarray) -> dict:
 
     kept = np.asarray(kept, dtype=bool)
     uf = centralized.union_find_conflicts(m, links)  # the same sets for all
-    out = {}
+    masks, cpu = {}, {}
     for name, fn in centralized.BASELINES.items():
         t0 = time.process_time()
-        mask = np.asarray(fn(m, links, _uf=uf), dtype=bool)
-        cpu = time.process_time() - t0
-        out[name] = {**association_counts(m, links.subset(mask), None, None),
-                     "deleted_links": int((~mask).sum()),
-                     "decided_otherwise": int((mask != kept).sum()),
-                     "cpu_s": round(cpu, 3)}
+        masks[name] = np.asarray(fn(m, links, _uf=uf), dtype=bool)
+        cpu[name] = round(time.process_time() - t0, 3)
+    out = baselines_section(m, links, masks=masks)
+    for name, row in out.items():
+        row.update(decided_otherwise=int((masks[name] != kept).sum()), cpu_s=cpu[name])
     return out
 
 
