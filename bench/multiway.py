@@ -257,14 +257,12 @@ def links_split(m, links: Links, kept: np.ndarray) -> int:
     separates exactly the spurious links, so an association that separates more input links
     than the truth explains the input less well than the truth under any model in which each
     link is wrong independently with one probability below 1/2."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from pipeline.association import AssociationGraph, camera_offsets
 
-    off = np.concatenate([[0], np.cumsum(m)])
+    comp = AssociationGraph(m, links.subset(kept)).components()
+    off = camera_offsets(m)
     a = off[links.cam_i] + links.feat_i
     b = off[links.cam_j] + links.feat_j
-    g = coo_matrix((np.ones(int(kept.sum())), (a[kept], b[kept])), shape=(off[-1],) * 2)
-    _, comp = connected_components(g, directed=False)
     return int((comp[a] != comp[b]).sum())
 
 
