@@ -60,7 +60,8 @@ def one(robots: int, args) -> dict:
                           steps=args.steps, window=args.window, speed=args.speed,
                           resolution=args.resolution, batch_every=args.batch_every,
                           fusion=args.fusion, rerun=False, overturn=not args.no_overturn,
-                          hold=args.hold, weigh=not args.no_weigh)
+                          hold=args.hold, weigh=not args.no_weigh,
+                          gather=not args.no_gather)
     t0 = time.perf_counter()
 
     def show(r):
@@ -161,6 +162,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-weigh", action="store_true",
                     help="weigh only the conflictive sets of a step (the earlier rule), instead "
                          "of every set the step's new links touch")
+    ap.add_argument("--no-gather", action="store_true",
+                    help="solve the rule's small conflictive sets by its own flood of their "
+                         "bundles to every robot of the set (the earlier stage), instead of "
+                         "gathering them at the set's root as the weighing does")
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
                          "alone, as the batch run)")

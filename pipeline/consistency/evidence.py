@@ -122,6 +122,9 @@ class EvidenceState:
     held_bytes: int = 0  # bytes of the bundles and set members held, kept as they arrive
     #: the bundle budget ``B`` of :mod:`.setlists` (``None``: the team's default)
     bundle_budget: int | None = None
+    #: the stage solves the conflictive sets of at most ``B`` features (its phase 2);
+    #: ``False``: it leaves them to its caller (the online stage gathers them at a root)
+    solve_small: bool = True
 
     def keep(self, lab: int, g: int, bundle: tuple) -> None:
         """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""

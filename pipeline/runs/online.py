@@ -73,6 +73,9 @@ class OnlineConfig:
     #: the sets the detection finds conflict-free are weighed by the rule's merge too
     #: (OnlineAssociation, step 2b; the evidence rule)
     weigh: bool = True
+    #: the rule's small conflictive sets are solved at their roots (bundles gathered), not by
+    #: the rule's flood to every robot of the set: the same cuts, fewer bytes
+    gather: bool = True
 
     def out_dir(self) -> Path:
         if self.out:
@@ -188,7 +191,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                            config.resolution, timer, features=config.features,
                            max_features=config.max_features, fusion=config.fusion,
                            batch_steps=batch_steps, on_step=on_step, overturn=config.overturn,
-                           hold=config.hold, weigh=config.weigh)
+                           hold=config.hold, weigh=config.weigh, gather=config.gather)
     run.sequence = seq
     return run
 
@@ -206,13 +209,14 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      max_features: int | None = 500, fusion: bool = True,
                      batch_steps=frozenset(), on_step=None, feature_options=None,
                      match_options=None, overturn: bool = True,
-                     hold: int | None = None, weigh: bool = True) -> OnlineRun:
+                     hold: int | None = None, weigh: bool = True,
+                     gather: bool = True) -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
     of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
-    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold`` and ``weigh`` to the online stage. Returns an :class:`OnlineRun` without
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh`` and ``gather`` to the online stage. Returns an :class:`OnlineRun` without
     ``sequence``."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
@@ -225,7 +229,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     radius = MERGE_RADIUS_PX if radius is None else radius
     steps = len(step_edges)
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
-                           weigh=weigh)
+                           weigh=weigh, gather=gather)
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)

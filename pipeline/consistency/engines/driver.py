@@ -170,8 +170,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       protocol: ProtocolOptions | None = None,
                       resolution: str = DEFAULT_RESOLUTION,
                       link_weight=None, keypoints=None, projections=None,
-                      engine: str = "auto", bundle_budget: int | None = None
-                      ) -> ConsistencyResult:
+                      engine: str = "auto", bundle_budget: int | None = None,
+                      solve_small_sets: bool = True) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -216,6 +216,11 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         are solved by the distributed greedy merge on their links
         (:mod:`.evidence_stage`). ``None``: :func:`~pipeline.consistency.setlists.
         bundle_budget` of the team's size. ``stats['large_sets']`` counts the larger sets.
+    solve_small_sets : bool
+        ``evidence`` only: ``False`` runs the detection and the merge of the larger sets but
+        leaves the conflictive sets of at most ``B`` features as they are, for a caller that
+        solves them itself (the online stage, :mod:`.online`); the result is then not
+        conflict-free.
 
     Returns
     -------
@@ -275,6 +280,12 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         for rb in robots:
             if getattr(rb, "evidence", None) is not None:
                 rb.evidence.bundle_budget = int(bundle_budget)
+    if not solve_small_sets:
+        if rule.name != "evidence":
+            raise InputError(f"solve_small_sets=False: only the evidence rule leaves its small "
+                             f"sets to the caller, not {rule.name!r}")
+        for rb in robots:
+            rb.evidence.solve_small = False
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:

@@ -18,7 +18,10 @@ both ran out of memory. The stage is now three phases, each ended when nothing i
    every robot solves the set alike, the Kruskal merge with the geometric test): per set the
    same bundles, the same solution, the same cuts in the same rounds as the rule after the
    rows of Sec. III, since a set's flood and solution depend on that set only. Run only if
-   some robot found a conflictive feature (the wave's ``CONFLICT`` bit).
+   some robot found a conflictive feature (the wave's ``CONFLICT`` bit), and unless the
+   caller solves those sets itself (``solve_small_sets=False`` of
+   :func:`..driver.resolve_conflicts`: the online stage gathers each set's bundles at one
+   robot, :mod:`.online`).
 3. **The ``sync`` merge on the large sets** (:mod:`..sync`): every robot hides its links that
    are not in a large set (both ends of a link know: the two features share their set) and
    runs the distributed greedy merge on the rest; the greedy merge decomposes over connected
@@ -236,6 +239,14 @@ def _budget(robots: list[Robot]) -> int:
     return bundle_budget(robots[0].n if robots else 0, given.pop() if given else None)
 
 
+def _solve_small(robots: list[Robot]) -> bool:
+    """Phase 2 runs unless the robots were handed ``solve_small = False`` (all alike)."""
+    given = {bool(getattr(rb.evidence, "solve_small", True)) for rb in robots}
+    if len(given) > 1:
+        raise ValueError("the robots disagree on solving the sets of at most B features")
+    return given.pop() if given else True
+
+
 def _after(on_round, t0: int):
     """The progress report of a phase that starts after ``t0`` rounds of the stage."""
     return None if on_round is None else (lambda t: on_round(t0 + t))
@@ -248,7 +259,7 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
     det = flood(robots, network, B, on_round)
     t = det
     res_sets = 0
-    if any(rb.conflictive.any() for rb in robots):
+    if _solve_small(robots) and any(rb.conflictive.any() for rb in robots):
         shift = _after(on_round, t)
         run = batched_evidence.run_evidence_resolution if batched else \
             evidence.run_evidence_resolution

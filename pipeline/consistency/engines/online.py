@@ -67,7 +67,13 @@ One step (:meth:`OnlineAssociation.add_step`)
    conflict-free: a rule with Aragüés et al.'s detection (Sec. III, Prop. 3.5) loops
    detection and resolution (Prop. 4.5); the evidence rule is a whole stage (its bounded
    label flooding, the bundles of its sets of at most ``B`` features, the ``sync`` merge of
-   the larger ones: :mod:`pipeline.consistency.engines.evidence_stage`); a cut of a history link is
+   the larger ones: :mod:`pipeline.consistency.engines.evidence_stage`), except that by
+   default (``gather``) its conflictive sets of at most ``B`` features are solved as in
+   step 2b, their bundles gathered at the set's root rather than flooded to every robot of
+   the set (the same bundles and :func:`~pipeline.consistency.evidence.solve_set`, so the
+   same cuts; the flood crosses every link of the set, the gathering one path per bundle:
+   on a 20-robot formation the flood was about 95 % of a step's bytes,
+   ``bench/online.py --no-gather``); a cut of a history link is
    ignored (it is no link of the association; a history link that doubles a real link is
    left to the real link in the detection and kept in the check below).
 2b. *Weighing the conflict-free sets* (``weigh``, default; the evidence rule,
@@ -256,6 +262,9 @@ class OnlineAssociation:
         leaves the matching window; None: ``window - 1`` (module docstring, *Hold*)
     weigh : bool — every set the step's new links touch is weighed by the rule's merge
         (default; module docstring, step 2b), or only the conflictive ones (the earlier rule)
+    gather : bool — the evidence rule's conflictive sets of at most ``B`` features are solved
+        at their roots too, their bundles gathered as in step 2b (default; the same cuts), or
+        by the rule's own flood to every robot of the set (module docstring, step 2)
 
     Examples
     --------
@@ -275,7 +284,8 @@ class OnlineAssociation:
     """
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
-                 overturn: bool = True, hold: int | None = None, weigh: bool = True):
+                 overturn: bool = True, hold: int | None = None, weigh: bool = True,
+                 gather: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -287,6 +297,7 @@ class OnlineAssociation:
         self.hold = int(hold)
         self.overturn = bool(overturn)
         self.weigh = bool(weigh)
+        self.gather = bool(gather)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -565,8 +576,9 @@ class OnlineAssociation:
             kw = dict(keypoints=[self.keypoints[g] for g in images],
                       projections=[self.projection[g] for g in images]
                       if all(self.projection[g] is not None for g in images) else None)
+        gather = self.gather and self.rule.name == WEIGHED_RULE
         res = resolve_conflicts(self.m[images], None, local_links,
-                                resolution=self.resolution, **kw)
+                                resolution=self.resolution, solve_small_sets=not gather, **kw)
         st = res.stats
         first = st["per_iteration"][0] if st["per_iteration"] else {}
         rec.update(conflictive_features=int(first.get("conflictive_features", 0)),
@@ -583,10 +595,11 @@ class OnlineAssociation:
         cut = np.flatnonzero(res.deleted[:n_real])
         self._cut(real[cut], str(self.rule.name), t)
         rec["cut_rule"] = int(len(cut))
-        # the sets the detection found conflict-free are weighed by the rule's merge too
-        if self.weigh and self.rule.name == WEIGHED_RULE:
+        # the sets the detection found conflict-free are weighed by the rule's merge too; the
+        # small conflictive ones are solved there when gathered
+        if (self.weigh or gather) and self.rule.name == WEIGHED_RULE:
             self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec,
-                        st.get("bundle_budget"))
+                        st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather)
         # history check and repair (step 3), then the new labels (step 4)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
@@ -596,9 +609,15 @@ class OnlineAssociation:
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
 
     def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
-               rec: dict, budget: int | None = None) -> None:
+               rec: dict, budget: int | None = None, *, conflict_free: bool = True,
+               conflictive: bool = False) -> None:
         """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
-        the detection found conflict-free.
+        the detection found conflict-free (``conflict_free``) and, with ``conflictive``, on
+        its conflictive sets of at most ``budget`` features (the rule's solution of step 2,
+        gathered at the root instead of flooded to every robot of the set: the same bundles,
+        so the same cuts, :func:`~pipeline.consistency.evidence.solve_set`; counted as the
+        rule's: ``cut_rule``, ``conflictive_sets``; such a set is solved with the geometric
+        test where every image of it is posed, without where not, as the rule does).
 
         The sets are the components of the sub-problem's links before the rule's cuts (real
         and history links, as the detection saw them); one without two features of one image
@@ -625,10 +644,14 @@ class OnlineAssociation:
 
         comp = self._components(sub, a_all, b_all)
         posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
-        # conflictive sets (the rule's) and sets with an image of unknown pose (no test: the
-        # merge of a conflict-free set then joins all of it) are not weighed
-        bad = np.union1d(_duplicated_keys(comp, img_of),
-                         comp[~posed[np.searchsorted(images, img_of)]]).astype(np.int64)
+        dup = np.asarray(_duplicated_keys(comp, img_of), np.int64)
+        unposed = np.unique(comp[~posed[np.searchsorted(images, img_of)]])
+        # conflictive sets unless gathered here (else the rule's), and conflict-free sets
+        # with an image of unknown pose (no test: the merge of a conflict-free set then joins
+        # all of it) or not weighed at all, are left alone
+        bad = dup if not conflictive else np.zeros(0, np.int64)
+        free_bad = unposed if conflict_free else np.unique(comp)
+        bad = np.union1d(bad, np.setdiff1d(free_bad, dup)).astype(np.int64)
         if budget is not None:  # the rule's large sets (more than B features)
             size = np.bincount(comp)
             bad = np.union1d(bad, np.flatnonzero(size > int(budget))).astype(np.int64)
@@ -652,21 +675,32 @@ class OnlineAssociation:
             if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
         c_w, c_head = np.unique(lc, return_index=True)
         c_end = np.r_[c_head[1:], len(lc)]
+        geometric = ~np.isin(lc, unposed)                 # the set's images all posed
         w = set_weights(a, b, ca, cb, local,
                         lambda ids: kp[np.searchsorted(sub, ids)],
-                        lambda ids: P_img[cam[np.searchsorted(sub, ids)]])
+                        lambda ids: P_img[cam[np.searchsorted(sub, ids)]], geometric=geometric)
         cut = np.zeros(len(ks), bool)
         for u, v in zip(c_head.tolist(), c_end.tolist(), strict=True):
-            f = np.unique(np.r_[sa[u:v], sb[u:v]])
-            kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
-            Pd = dict(zip(sub[f].tolist(), P_img[cam[f]], strict=True))
+            kpd = Pd = None
+            if geometric[u]:
+                f = np.unique(np.r_[sa[u:v], sb[u:v]])
+                kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
+                Pd = dict(zip(sub[f].tolist(), P_img[cam[f]], strict=True))
             cut[u:v] = evidence_cut(a[u:v], b[u:v], ca[u:v], cb[u:v], w[u:v], kpd, Pd)
         is_real = ks < n_real                            # a cut history link is ignored
+        in_dup = np.isin(lc, dup)                          # a link of a conflictive set
         cut_ids = real[ks[cut & is_real]]
         self._cut(cut_ids, str(self.rule.name), t)
+        n_rule = int((cut & is_real & in_dup).sum())
+        rec["cut_rule"] += n_rule
+        rec["conflictive_sets"] += int(np.isin(c_w, dup).sum())
+        rec["conflictive_features"] += int(len(np.unique(np.r_[a[cut & in_dup],
+                                                                b[cut & in_dup]])))
         # the counts of the gathering: each set's bundles go up the tree to its root, the
         # root's answer comes down (a conflict-free set: one feature per image, so its
-        # feature graph is its image graph; an image is a robot of the stage)
+        # feature graph is its image graph, an image being a robot of the stage; in a
+        # conflictive set a robot may hold two features of a path, so counting the hops
+        # between features bounds the hops between robots)
         n_s = len(sub)
         adj = sp.coo_matrix((np.ones(2 * len(sa), bool), (np.r_[sa, sb], np.r_[sb, sa])),
                             shape=(n_s, n_s)).tocsr()
@@ -695,7 +729,7 @@ class OnlineAssociation:
             + HEADER_BYTES * msgs
         # a robot holds at most its set's bundles (the root all of them) while it weighs
         held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=len(images))
-        rec.update(weighed_sets=int(len(c_w)), cut_weigh=int(len(cut_ids)),
+        rec.update(weighed_sets=int(len(c_w)) - int(np.isin(c_w, dup).sum()), cut_weigh=int(len(cut_ids)) - n_rule,
                    weigh_rounds=rounds, weigh_messages=msgs, weigh_bytes=nbytes)
         rec["resolution_rounds"] = max(rec["resolution_rounds"], rounds)
         rec["messages"] += msgs

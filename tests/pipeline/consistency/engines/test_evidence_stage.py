@@ -135,3 +135,29 @@ def test_a_bad_bundle_budget_is_an_input_error(bad):
     links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])
     with pytest.raises(InputError, match="bundle_budget"):
         resolve_conflicts([1, 1, 1, 2], None, links, bundle_budget=bad)
+
+
+@SETTINGS
+@given(inst=instances(max_n=7, max_feat=5), budget=st.integers(1, 6), posed=st.booleans(),
+       seed=st.integers(0, 2**32 - 1))
+def test_left_to_the_caller_the_small_sets_stay_and_the_large_ones_are_merged(
+        inst, budget, posed, seed):
+    """``solve_small_sets=False``: no link of a set of at most ``B`` features is cut (the
+    caller solves them, e.g. the online stage at each set's root); the large sets get the
+    same merge as when the stage solves everything."""
+    fpc, edges, links = inst
+    kp, P = _poses(fpc, seed) if posed else (None, None)
+    kw = dict(resolution="evidence", bundle_budget=budget, keypoints=kp, projections=P)
+    left = resolve_conflicts(fpc, edges, links, solve_small_sets=False, **kw)
+    full = resolve_conflicts(fpc, edges, links, **kw)
+    lab, sizes = _set_sizes(fpc, links)
+    large = sizes[lab] > budget
+    assert not left.deleted[~large].any()
+    np.testing.assert_array_equal(left.deleted[large], full.deleted[large])
+    assert all(it["conflictive_sets"] == 0 for it in left.stats["per_iteration"])
+
+
+def test_only_the_evidence_rule_leaves_its_small_sets_to_the_caller():
+    links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])
+    with pytest.raises(InputError, match="solve_small_sets=False.*'paper'"):
+        resolve_conflicts([1, 1, 1, 2], None, links, resolution="paper", solve_small_sets=False)

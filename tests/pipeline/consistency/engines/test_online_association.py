@@ -506,3 +506,24 @@ def test_the_weighing_cuts_only_in_the_touched_tracks(data):
     """With poses the evidence rule's merge weighs every touched set: a link it cuts still
     lies in a track the step's new links touched, and a cut link is never restored."""
     _check_earlier_decisions(*data, "evidence")
+
+
+@pytest.mark.parametrize("posed", [False, True])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_gathering_the_small_conflictive_sets_decides_as_the_rules_flood(posed, data):
+    """The evidence rule's small conflictive sets solved at their roots (``gather``, the
+    default) or by the rule's flood to every robot of the set: the same cuts at the same
+    steps with the same reasons, the same sets counted (the bytes differ: the flood crosses
+    every link of a set, the gathering one path per bundle and back; on a set of two or three
+    features the gathering's replies may cost more, ``bench/online.py`` measures a team)."""
+    window, hold, stream = data.draw(posed_streams() if posed else streams())
+    runs = []
+    for gather in (True, False):
+        oa = OnlineAssociation(window, hold=hold, gather=gather)
+        runs.append((oa, [oa.add_step(frames, links) for frames, links in stream]))
+    (g, rg), (f, rf) = runs
+    for name in ("kept", "reason", "step_cut"):
+        assert getattr(g.links, name).tolist() == getattr(f.links, name).tolist(), name
+    for key in ("cut_rule", "cut_weigh", "cut_history", "conflictive_sets", "weighed_sets"):
+        assert [r[key] for r in rg] == [r[key] for r in rf], key
