@@ -218,7 +218,7 @@ def _consistent(members: list[int], kp: dict, P: dict, tol: float) -> bool:
         Pg = P[g]
         A[2 * k] = x * Pg[2] - Pg[0]
         A[2 * k + 1] = y * Pg[2] - Pg[1]
-    X = np.linalg.svd(A)[2][-1]
+    X = np.linalg.svd(A, full_matrices=False)[2][-1]  # V only: U of a long track is (2k, 2k)
     if abs(X[3]) < 1e-12:
         return False
     X = X / X[3]

@@ -90,7 +90,7 @@ def triangulate_views(uv, views_mask, R, t, K, sigma_px: float = 1.0, iterations
                      xn[..., 1:2] * P[..., 2, :] - P[..., 1, :]], -2)  # (M, V, 2, 4)
     rows = rows / np.maximum(np.linalg.norm(rows, axis=-1, keepdims=True), 1e-300)
     A = (rows * w[..., None, None]).reshape(M, -1, 4)
-    _, _, Vt = np.linalg.svd(A)
+    _, _, Vt = np.linalg.svd(A, full_matrices=False)
     Xh = Vt[:, -1]
     with np.errstate(divide="ignore", invalid="ignore"):
         X = Xh[:, :3] / Xh[:, 3:4]

@@ -1069,7 +1069,7 @@ def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     A = np.empty((len(kp), 6, 4))
     A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
     A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
-    X = np.linalg.svd(A)[2][:, -1]
+    X = np.linalg.svd(A, full_matrices=False)[2][:, -1]
     fin = np.abs(X[:, 3]) >= 1e-12
     X = X / np.where(fin, X[:, 3], 1.0)[:, None]
     p = np.einsum("tkij,tj->tki", P, X)
