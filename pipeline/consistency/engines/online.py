@@ -167,10 +167,11 @@ memory still follows window + hold.
 Costs: rounds, messages and bytes are the simulator's counts of the sub-problem's stage
 (images are its cameras, so messages between two frames of one robot are counted as if
 sent: an upper bound on what goes over the air), plus the label exchange of the new links,
-the names of retired pieces (step 1), the weighing (step 2b: each bundle, ``128 + 16 deg``
-bytes, one message per hop from its robot to the root, the cut links, 16 bytes each, one
-message down each tree edge; ``2 ecc(root) + 1`` rounds, counted in the resolution phase
-beside the rule's; ``weigh_bytes``, ``weigh_messages``, ``weigh_rounds``) and the history
+the names of retired pieces (step 1), the weighing and the gathering of the small
+conflictive sets (step 2b: each bundle, ``128 + 16 deg`` bytes, one message per hop from its
+robot to the root, the cut links, 16 bytes each, one message down each tree edge;
+``2 ecc(root) + 1`` rounds, counted in the resolution phase beside the rule's;
+``weigh_bytes``, ``weigh_messages``, ``weigh_rounds``) and the history
 flood. The bookkeeping of this class (arrays of all links and features) is
 the simulator's record, not a robot's memory: :meth:`OnlineAssociation.robot_state_bytes`
 counts what a robot holds.
