@@ -84,8 +84,10 @@ def online_config_from_args(args):
     check_online_options(args)
     if not args.speed >= 0:
         raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
-    if args.transport != "sim":
-        raise InputError("--steps runs on the simulator only; drop --transport")
+    if args.transport != "sim" and not args.no_fusion:
+        raise InputError(f"--steps over --transport {args.transport}: the robots run each "
+                         "step's consistency stage, the fusion of the changed tracks runs on "
+                         "the simulator only; add --no-fusion")
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
     method, max_features = feature_options(args)
@@ -104,7 +106,7 @@ def online_config_from_args(args):
                         resolution=args.resolution,
                         tol_px=validate.tolerance_px(args.tol_px),
                         batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,
-                        rerun=not args.no_rerun)
+                        rerun=not args.no_rerun, transport=args.transport)
 
 
 def run(args) -> int:

@@ -120,17 +120,16 @@ def sequence_config_from_args(args):
     ------
     InputError
         A bad ``--window``, ``--hold`` or ``--batch-every``, or an option the online job does not run
-        (``--transport`` other than sim, ``--export-db``, ``--truth``, a live viewer).
+        (``--export-db``, ``--truth``, a live viewer).
     """
     from pipeline.runs.online_images import SequenceConfig
 
     check_online_options(args)
-    for flag, on in (("--transport", args.transport != "sim"), ("--export-db", args.export_db),
-                     ("--truth", args.truth != "none"),
+    for flag, on in (("--export-db", args.export_db), ("--truth", args.truth != "none"),
                      ("--spawn/--connect", bool(args.spawn or args.connect))):
         if on:
-            raise InputError(f"{flag} is not available with --sequence (the online job runs "
-                             "on the simulator and writes no database); drop it")
+            raise InputError(f"{flag} is not available with --sequence (the online job "
+                             "writes no database and takes no truth); drop it")
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
                          f"or 0 for full resolution")
@@ -139,7 +138,7 @@ def sequence_config_from_args(args):
                           hold=args.hold, intrinsics=args.intrinsics, max_size=args.max_size or None,
                           features=method, max_features=max_features, matcher=args.matcher,
                           resolution=args.resolution, batch_every=args.batch_every,
-                          out=args.out, rerun=not args.no_rerun)
+                          out=args.out, rerun=not args.no_rerun, transport=args.transport)
 
 
 def _run_sequence(args) -> int:

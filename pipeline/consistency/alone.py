@@ -159,7 +159,9 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
        and conflictive, then large): it only makes the next phase run, where nothing waits.
     2. With ``CONFLICT``: the evidence rule's flood and solve (:func:`.evidence.start_evidence`,
        :func:`.evidence.evidence_step`) on the small conflictive sets; the wave ends it when
-       nothing is in flight, when every set is solved unless a robot was lost.
+       nothing is in flight, when every set is solved unless a robot was lost. Skipped when
+       the robot's :class:`~.evidence.EvidenceState` says ``solve_small = False`` (every
+       robot alike: the caller solves those sets, e.g. the online stage at their roots).
     3. With ``LARGE``: the robot hides its links outside large sets and runs the ``sync``
        merge alone (:func:`.sync_alone.run_sync_locally`, its own channel and wave, both
        started at the same round by every robot), then shows them again.
@@ -193,7 +195,7 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
             memory=lambda: robot.memory_bytes() + robot.setlists.nbytes() + chan.memory_bytes())
         log.detection_rounds += t
         log.phases.append(dict(phase="setlists", start_round=begin, rounds=t, bits=int(bits)))
-        if not bits & LOST and bits & CONFLICT:
+        if not bits & LOST and bits & CONFLICT and robot.evidence.solve_small:
             t, ebits, begin = run.phase(
                 "evidence", lambda rb, send: start_evidence(rb, send),
                 lambda rb, msgs, send, now, t: evidence_step(rb, msgs, send, t),

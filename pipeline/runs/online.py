@@ -76,6 +76,8 @@ class OnlineConfig:
     #: the rule's small conflictive sets are solved at their roots (bundles gathered), not by
     #: the rule's flood to every robot of the set: the same cuts, fewer bytes
     gather: bool = True
+    #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
+    transport: str = "sim"
 
     def out_dir(self) -> Path:
         if self.out:
@@ -191,7 +193,8 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                            config.resolution, timer, features=config.features,
                            max_features=config.max_features, fusion=config.fusion,
                            batch_steps=batch_steps, on_step=on_step, overturn=config.overturn,
-                           hold=config.hold, weigh=config.weigh, gather=config.gather)
+                           hold=config.hold, weigh=config.weigh, gather=config.gather,
+                           transport=config.transport)
     run.sequence = seq
     return run
 
@@ -210,13 +213,15 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      batch_steps=frozenset(), on_step=None, feature_options=None,
                      match_options=None, overturn: bool = True,
                      hold: int | None = None, weigh: bool = True,
-                     gather: bool = True) -> OnlineRun:
+                     gather: bool = True, transport: str = "sim") -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
     of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
-    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh`` and ``gather`` to the online stage. Returns an :class:`OnlineRun` without
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh`` and ``gather`` to the online stage; ``transport``
+    names where the robots run the rule's stage of each step (its ``online_stage`` job; the
+    batch run stays on the simulator). Returns an :class:`OnlineRun` without
     ``sequence``."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
@@ -228,8 +233,11 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     radius = feature_options.pop("merge_radius", None)
     radius = MERGE_RADIUS_PX if radius is None else radius
     steps = len(step_edges)
+    from pipeline.runs.transports import get_transport
+
+    stage = get_transport(transport).load().online_stage
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
-                           weigh=weigh, gather=gather)
+                           weigh=weigh, gather=gather, stage=stage)
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)

@@ -52,6 +52,8 @@ class SequenceConfig:
     batch_every: int = 0
     out: str | None = None
     rerun: bool = True
+    #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
+    transport: str = "sim"
 
     def out_dir(self) -> Path:
         if self.out:
@@ -78,6 +80,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                            batch_steps=batch_steps_of(seq.steps, config.batch_every)
                            | {seq.steps - 1},
                            match_options=dict(threshold_px=None, matcher=config.matcher),
+                           transport=config.transport,
                            hold=config.hold)
     oa = run.online
     kept = oa.links.kept

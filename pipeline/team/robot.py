@@ -351,6 +351,10 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         rule.hook("equip")(robot, weight[order],
                            np.zeros((robot.m, 2)) if keypoints is None else keypoints,
                            projection)
+        if not bool(opts.get("solve_small_sets", True)):
+            robot.evidence.solve_small = False  # the caller solves them (the online stage)
+        if opts.get("bundle_budget") is not None:
+            robot.evidence.bundle_budget = int(opts["bundle_budget"])
     if hasattr(transport, "status"):
         transport.status("consistency")
         transport.lossy = True  # faults are injected into the consistency stage, as simulated

@@ -83,6 +83,11 @@ DEFAULT_OPTIONS = {
     "threshold_px": 1.0,
     "wire": "compact",
     "matcher": "opencv",
+    # the evidence rule solves its conflictive sets of at most B features (False: leaves
+    # them to the caller, the online stage, which gathers them at their roots)
+    "solve_small_sets": True,
+    # the evidence rule's bundle budget B (None: the team's default, setlists.bundle_budget)
+    "bundle_budget": None,
 }
 #: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
 #: (pipeline.matching.packed), features only to the neighbour that matches them, packets

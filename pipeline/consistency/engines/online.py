@@ -198,7 +198,8 @@ from pipeline.errors import InputError
 from pipeline.transport import HEADER_BYTES
 from pipeline.types import Links
 
-__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_weights", "HISTORY",
+__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_weights",
+           "simulated_stage", "HISTORY",
            "LABEL_BYTES", "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
 
 FRESH_LABELS = 1 << 40
@@ -266,6 +267,12 @@ class OnlineAssociation:
     gather : bool — the evidence rule's conflictive sets of at most ``B`` features are solved
         at their roots too, their bundles gathered as in step 2b (default; the same cuts), or
         by the rule's own flood to every robot of the set (module docstring, step 2)
+    stage : callable or None — runs the rule's stage of a step on its sub-problem:
+        ``stage(features_per_image, links, resolution, *, solve_small_sets, keypoints,
+        projections) -> ConsistencyResult`` with the images as cameras and images sharing a
+        link as neighbours; None: the simulator (:func:`resolve_conflicts`). The job
+        ``online_stage`` of a transport (:mod:`pipeline.runs.transports`), e.g. robot
+        processes over Zenoh; every decision is the rule's, so the same on any transport
 
     Examples
     --------
@@ -286,7 +293,7 @@ class OnlineAssociation:
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
                  overturn: bool = True, hold: int | None = None, weigh: bool = True,
-                 gather: bool = True):
+                 gather: bool = True, stage=None):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -299,6 +306,7 @@ class OnlineAssociation:
         self.overturn = bool(overturn)
         self.weigh = bool(weigh)
         self.gather = bool(gather)
+        self.stage = stage or simulated_stage
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -578,8 +586,8 @@ class OnlineAssociation:
                       projections=[self.projection[g] for g in images]
                       if all(self.projection[g] is not None for g in images) else None)
         gather = self.gather and self.rule.name == WEIGHED_RULE
-        res = resolve_conflicts(self.m[images], None, local_links,
-                                resolution=self.resolution, solve_small_sets=not gather, **kw)
+        res = self.stage(self.m[images], local_links, self.resolution,
+                         solve_small_sets=not gather, **kw)
         st = res.stats
         first = st["per_iteration"][0] if st["per_iteration"] else {}
         rec.update(conflictive_features=int(first.get("conflictive_features", 0)),
@@ -1136,6 +1144,14 @@ def _overlapping_runs(group, robot, lo, hi) -> list[int]:
     g, _, lo, _, head, _, run_max = _runs_by_robot(group, robot, lo, hi)
     hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
     return np.unique(g[hit]).tolist()
+
+
+def simulated_stage(features_per_image, links: Links, resolution: str, *,
+                     solve_small_sets: bool = True, keypoints=None, projections=None):
+    """The rule's stage of a step on the simulated network (the default ``stage``)."""
+    return resolve_conflicts(features_per_image, None, links, resolution=resolution,
+                             solve_small_sets=solve_small_sets, keypoints=keypoints,
+                             projections=projections)
 
 
 def _duplicated_keys(group: np.ndarray, item: np.ndarray) -> list[int]:

@@ -18,12 +18,16 @@ loads nothing heavy) with one function per job:
     ``run-images``: features and matching of the photographs (``comm_edges`` None: the
     ``knn:K`` graph, chosen by ``graph_from_features(features)``); the consistency stage when
     the robots run it themselves (else ``cleaning`` is None and the runner runs it).
+``online_stage(features_per_camera, links, resolution, *, solve_small_sets, keypoints, projections) -> ConsistencyResult``
+    ``run-formation --steps N``: the rule's stage of one step on its sub-problem (the
+    step's frames are the cameras, frames sharing a link are neighbours; the online stage
+    of :mod:`pipeline.consistency.engines.online` does the rest).
 ``resolve(features_per_camera, comm_edges, links, faults, resolution, ids) -> (ConsistencyResult, dict or None)``
     ``resolve``: the consistency stage on a user's links (``ids``: the compact renumbering
     of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
     faults were injected or a robot was lost.
 
-A new transport (e.g. ROS 2) is one module with these three functions and one
+A new transport (e.g. ROS 2) is one module with these four functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
 What the jobs hand back is in :mod:`.results`.
 

@@ -12,7 +12,7 @@ import numpy as np
 from pipeline import stages
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
-__all__ = ["formation", "images", "resolve"]
+__all__ = ["formation", "images", "online_stage", "resolve"]
 
 
 def formation(config, timer) -> FormationRobots:
@@ -42,6 +42,17 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
         rootsift=config.rootsift, threshold_px=config.threshold_px,
         budget_after_merge=config.budget_after_merge, matcher=config.matcher)
     return ImagesRobots(feats, matches, links)
+
+
+def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
+                 keypoints=None, projections=None):
+    """The rule's stage of one online step on its sub-problem (frames as cameras, cameras
+    sharing a link as neighbours) on the simulated network: the online stage's own default."""
+    from pipeline.consistency.engines.online import simulated_stage
+
+    return simulated_stage(features_per_camera, links, resolution,
+                           solve_small_sets=solve_small_sets, keypoints=keypoints,
+                           projections=projections)
 
 
 def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):

@@ -35,6 +35,7 @@ from pipeline.team.launcher import launch_team, make_team, team_summary
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
+           "online_stage",
            "resolve_links_file",
            "write_robot_links", "links_of_run"]
 
@@ -294,6 +295,50 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
     if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:
         fault_section = fault_report(faults or FaultConfig(), res)
     return res, fault_section
+
+
+def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
+                  keypoints=None, projections=None) -> ConsistencyResult:
+    """The rule's stage of one online step (``run-formation --steps N --transport zenoh``): one
+    robot process per frame of the step's sub-problem that has a link there, over Zenoh, each
+    reading its own rows of the sub-problem's links (:func:`resolve_links_file`); neighbours
+    are the frames sharing a link, as in the simulator.
+
+    The frames are the stage's cameras, as in the simulator (:mod:`pipeline.consistency.
+    engines.online`); a frame without a link in the sub-problem takes no part (it has
+    nothing to send) and the evidence rule's bundle budget is the one of all the
+    sub-problem's frames, as the simulator computes it, so both decide alike. The robots
+    read links and their quality only (no keypoints): the evidence rule's small conflictive
+    sets must be left to the caller (``solve_small_sets=False``, the online stage's
+    gathering), which solves them with the geometric test.
+    """
+    import tempfile
+
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.consistency.rules import get_rule
+    from pipeline.consistency.setlists import bundle_budget
+    from pipeline.types import Links
+
+    rule = get_rule(resolution)
+    if rule.needs_evidence and solve_small_sets:
+        raise InputError(f"the {rule.name} rule over zenoh in an online run: its small "
+                         "conflictive sets are gathered at their roots (the robots hold links, "
+                         "not keypoints); drop --no-gather")
+    m = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    used = np.unique(np.concatenate([links.cam_i, links.cam_j]))
+    where = np.searchsorted(used, np.arange(len(m)))
+    sub = Links(where[links.cam_i], links.feat_i, where[links.cam_j], links.feat_j,
+                links.quality)
+    opts = team_options(resolution=rule.name)
+    if rule.needs_evidence:
+        opts.update(solve_small_sets=False, bundle_budget=bundle_budget(len(m)))
+    with tempfile.TemporaryDirectory(prefix="online-step-") as work:
+        paths = write_robot_links(Path(work), sub, len(used))
+        res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
+                                 workdir=work, links=sub)
+    if rule.needs_evidence:
+        res.stats["bundle_budget"] = int(opts["bundle_budget"])
+    return res
 
 
 def links_of_run(team, run) -> ConsistencyResult:

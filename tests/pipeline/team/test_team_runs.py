@@ -325,3 +325,32 @@ def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceau
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("error: --graph knn:2: knn:K chooses neighbours from every image")
     assert not (tmp_path / "z").exists()
+
+
+@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+def test_zenoh_online_steps_equal_the_simulators(resolution, tmp_path):
+    """``run-formation --steps N --transport zenoh``: each step's stage runs as robot processes
+    (one per frame of the step's sub-problem); every link is made, kept and cut at the same
+    step, for the same reason, as on the simulator."""
+    args = ["run-formation", "--steps", "3", "--window", "2", "--size", "160x120",
+            "--max-features", "120", "--formation", "a", "--no-fusion", "--no-rerun",
+            "--resolution", resolution]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*args, "--transport", "zenoh", "--out", str(tmp_path / "zen")]) == 0
+    for name in ("links.csv", "link_steps.csv"):
+        sim = Path(tmp_path / "sim" / name).read_text().splitlines()
+        assert Path(tmp_path / "zen" / name).read_text().splitlines() == sim, name
+    steps = json.loads((tmp_path / "sim" / "report.json").read_text())["steps"]
+    assert sum(s["cut"] for s in steps) > 0  # the steps had conflicts to cut
+    zen = json.loads((tmp_path / "zen" / "report.json").read_text())
+    assert zen["config"]["transport"] == "zenoh"
+    assert all(s["conflictive_sets_after"] == 0 for s in zen["steps"])
+    # the robots' own counts (the reliable protocol's acks and termination wave), not the
+    # simulator's: the stage ran in the robot processes
+    assert [s["messages"] for s in zen["steps"]] != [s["messages"] for s in steps]
+
+
+def test_zenoh_online_steps_need_no_fusion(tmp_path, capsys):
+    assert main(["run-formation", "--steps", "2", "--transport", "zenoh", "--out",
+                 str(tmp_path / "x")]) == 2
+    assert "add --no-fusion" in capsys.readouterr().err
