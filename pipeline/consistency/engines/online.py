@@ -193,12 +193,12 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.engines.driver import resolve_conflicts
+from pipeline.consistency.engines.gather import solve_at_roots
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
-from pipeline.transport import HEADER_BYTES
 from pipeline.types import Links
 
-__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold", "set_weights",
+__all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold",
            "simulated_stage", "HISTORY",
            "LABEL_BYTES", "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
 
@@ -632,25 +632,13 @@ class OnlineAssociation:
         and history links, as the detection saw them); one without two features of one image
         is conflict-free and holds at most ``budget`` features (the rule's bundle budget
         ``B``, :func:`pipeline.consistency.setlists.bundle_budget`: a larger set got the
-        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A set with an
-        image of unknown pose is not weighed: without the geometric test the merge of a
-        conflict-free set joins all of it (no two features of one image to keep apart), it
-        would cut nothing. Its robots send their bundles (:mod:`pipeline.consistency.evidence`,
-        step 1: each feature's keypoint, links with their evidence weights, projection) to
-        the set's root, which solves what :func:`~pipeline.consistency.evidence.solve_set`
-        solves on them (the weights of :func:`~pipeline.consistency.evidence.set_problem`,
-        here :func:`set_weights` for all sets at once, then
-        :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal merge by decreasing
-        evidence with the geometric test) and sends the cut links back; each robot cuts its
-        side. A cut history link is ignored, as in the rule's pass (it stands for a retired
-        piece). Counts (module docstring, *Costs*): a bundle, ``128 + 16 deg`` bytes (the
-        rule's bundle fields), one message per hop up the shortest-path tree to the root
-        (no two bundles share a message: a bound); the cut links, 16 bytes each, one message
-        down each tree edge; ``2 ecc(root) + 1`` rounds. A robot holds at most its set's
-        bundles (the root all of them)."""
-        from pipeline.consistency.evidence import evidence_cut
-        from pipeline.matching.link_evidence import ratio_llr
-
+        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A conflict-free
+        set with an image of unknown pose is not weighed: without the geometric test the
+        merge of a conflict-free set joins all of it (no two features of one image to keep
+        apart), it would cut nothing. The sets are solved at their roots
+        (:func:`.gather.solve_at_roots`: bundles up a shortest-path tree, the cut links back
+        down; its module docstring gives the counts); each robot cuts its side. A cut
+        history link is ignored, as in the rule's pass (it stands for a retired piece)."""
         comp = self._components(sub, a_all, b_all)
         posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
         dup = np.asarray(_duplicated_keys(comp, img_of), np.int64)
@@ -668,82 +656,32 @@ class OnlineAssociation:
         on = ~np.isin(comp[ia], bad)
         if not on.any():
             return
-        ks = np.flatnonzero(on)
-        ks = ks[np.argsort(comp[ia[ks]], kind="stable")]   # grouped by set
-        lc = comp[ia[ks]]
         cam = np.searchsorted(images, img_of)            # an image's camera in the stage
-        a, b = np.minimum(a_all[ks], b_all[ks]), np.maximum(a_all[ks], b_all[ks])
-        sa, sb = np.searchsorted(sub, a), np.searchsorted(sub, b)
-        ca, cb = cam[sa], cam[sb]
-        local = ratio_llr(1.0 - np.asarray(q_all, np.float64)[ks])
         P_img = np.stack([np.eye(3, 4) if p is None else np.asarray(p, np.float64)
                           for p in (self.projection[g] for g in images.tolist())]) \
             if len(images) else np.zeros((0, 3, 4))
         kp = np.concatenate([np.asarray(self.keypoints[g][sub[img_of == g] - self.offset[g]],
                                         np.float32) for g in images.tolist()]).astype(np.float64) \
             if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
-        c_w, c_head = np.unique(lc, return_index=True)
-        c_end = np.r_[c_head[1:], len(lc)]
-        geometric = ~np.isin(lc, unposed)                 # the set's images all posed
-        w = set_weights(a, b, ca, cb, local,
-                        lambda ids: kp[np.searchsorted(sub, ids)],
-                        lambda ids: P_img[cam[np.searchsorted(sub, ids)]], geometric=geometric)
-        cut = np.zeros(len(ks), bool)
-        for u, v in zip(c_head.tolist(), c_end.tolist(), strict=True):
-            kpd = Pd = None
-            if geometric[u]:
-                f = np.unique(np.r_[sa[u:v], sb[u:v]])
-                kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
-                Pd = dict(zip(sub[f].tolist(), P_img[cam[f]], strict=True))
-            cut[u:v] = evidence_cut(a[u:v], b[u:v], ca[u:v], cb[u:v], w[u:v], kpd, Pd)
-        is_real = ks < n_real                            # a cut history link is ignored
-        in_dup = np.isin(lc, dup)                          # a link of a conflictive set
-        cut_ids = real[ks[cut & is_real]]
+        is_real = np.arange(len(a_all)) < n_real          # a cut history link is ignored
+        sol = solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_img, unposed,
+                             is_real, len(images))
+        ks, cut = sol.links, sol.cut
+        in_dup = np.isin(sol.set_of, dup)                  # a link of a conflictive set
+        cut_ids = real[ks[cut & is_real[ks]]]
         self._cut(cut_ids, str(self.rule.name), t)
-        n_rule = int((cut & is_real & in_dup).sum())
+        n_rule = int((cut & is_real[ks] & in_dup).sum())
+        n_dup = int(np.isin(sol.sets, dup).sum())
         rec["cut_rule"] += n_rule
-        rec["conflictive_sets"] += int(np.isin(c_w, dup).sum())
-        rec["conflictive_features"] += int(len(np.unique(np.r_[a[cut & in_dup],
-                                                                b[cut & in_dup]])))
-        # the counts of the gathering: each set's bundles go up the tree to its root, the
-        # root's answer comes down (a conflict-free set: one feature per image, so its
-        # feature graph is its image graph, an image being a robot of the stage; in a
-        # conflictive set a robot may hold two features of a path, so counting the hops
-        # between features bounds the hops between robots)
-        n_s = len(sub)
-        adj = sp.coo_matrix((np.ones(2 * len(sa), bool), (np.r_[sa, sb], np.r_[sb, sa])),
-                            shape=(n_s, n_s)).tocsr()
-        f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
-        f_c = np.searchsorted(c_w, f_set[:, 0])            # each member's set
-        members = np.bincount(f_c, minlength=len(c_w))
-        root = f_set[np.r_[0, np.cumsum(members)[:-1]], 1]  # smallest feature of each set
-        dist = np.full(n_s, -1, np.int64)
-        dist[root] = 0
-        front, d = root, 0
-        while len(front):
-            d += 1
-            nxt = np.unique(adj[front].indices)
-            front = nxt[dist[nxt] < 0]
-            dist[front] = d
-        f_dist = dist[f_set[:, 1]]
-        ecc = np.zeros(len(c_w), np.int64)
-        np.maximum.at(ecc, f_c, f_dist)
-        deg = np.bincount(np.r_[sa, sb], minlength=n_s)
-        f_bytes = 128 + 16 * deg[f_set[:, 1]]
-        bundle_c = np.bincount(f_c, weights=f_bytes, minlength=len(c_w)).astype(np.int64)
-        cuts_c = np.bincount(np.searchsorted(c_w, lc[cut & is_real]), minlength=len(c_w))
-        rounds = int((2 * ecc + 1).max())
-        msgs = int(f_dist.sum() + (members - 1).sum())
-        nbytes = int((f_bytes * f_dist).sum() + (16 * cuts_c * (members - 1)).sum()) \
-            + HEADER_BYTES * msgs
-        # a robot holds at most its set's bundles (the root all of them) while it weighs
-        held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=len(images))
-        rec.update(weighed_sets=int(len(c_w)) - int(np.isin(c_w, dup).sum()), cut_weigh=int(len(cut_ids)) - n_rule,
-                   weigh_rounds=rounds, weigh_messages=msgs, weigh_bytes=nbytes)
-        rec["resolution_rounds"] = max(rec["resolution_rounds"], rounds)
-        rec["messages"] += msgs
-        rec["bytes"] += nbytes
-        rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(held.max(initial=0)))
+        rec["conflictive_sets"] += n_dup
+        rec["conflictive_features"] += int(len(np.unique(np.r_[sol.a[cut & in_dup],
+                                                                sol.b[cut & in_dup]])))
+        rec.update(weighed_sets=int(len(sol.sets)) - n_dup, cut_weigh=int(len(cut_ids)) - n_rule,
+                   weigh_rounds=sol.rounds, weigh_messages=sol.messages, weigh_bytes=sol.nbytes)
+        rec["resolution_rounds"] = max(rec["resolution_rounds"], sol.rounds)
+        rec["messages"] += sol.messages
+        rec["bytes"] += sol.nbytes
+        rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(sol.held.max(initial=0)))
 
     def _local_links(self, images, a, b, q) -> Links:
         img_a = np.searchsorted(self.offset, a, side="right") - 1
@@ -1001,90 +939,6 @@ class OnlineAssociation:
         start = g_head | (rank > extra)
         p, r, lo, hi, _ = _reduce_runs(start, p, r, lo, hi, gid)
         self.ret_piece, self.ret_robot, self.ret_lo, self.ret_hi = p, r, lo, hi
-
-
-def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
-                geometric=None, tol_px: float | None = None) -> np.ndarray:
-    """The evidence rule's link weights (:func:`pipeline.consistency.evidence.set_problem`)
-    of the links of several sets at once.
-
-    Parameters
-    ----------
-    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
-    cam_a, cam_b : (E,) int — their cameras
-    local : (E,) float — each link's local evidence (what its bundles carry)
-    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
-    geometric : (E,) bool or None — the link's set has every projection (the rule's test
-        on it); None: all do when ``projections`` is given
-    tol_px : float or None — the test's tolerance (default the rule's
-        :data:`~pipeline.consistency.evidence.REPROJECTION_TOL_PX`)
-
-    Returns
-    -------
-    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
-    cameras in which both ends match one common feature whose three observations are one
-    point (:func:`~pipeline.consistency.evidence.triangle_support`; all common features
-    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
-    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
-    ``set_problem`` on its bundles; the sets' triangles are listed at once and their
-    three-view points solved as one stack of SVDs (the rule solves one at a time).
-    """
-    from pipeline.consistency.cycles import shared_cameras, support_term
-    from pipeline.consistency.evidence import REPROJECTION_TOL_PX, TRIANGLE_WEIGHT
-    from pipeline.consistency.keys import isin_sorted, ranges
-
-    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
-    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
-    local = np.asarray(local, np.float64)
-    E = a.size
-    if E == 0:
-        return np.zeros(0)
-    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
-    nodes, inv = np.unique(np.r_[lo, hi], return_inverse=True)
-    N = nodes.size
-    ia, ib = inv[:E], inv[E:]
-    cam = np.empty(N, np.int64)
-    cam[ia] = np.where(lo == a, cam_a, cam_b)
-    cam[ib] = np.where(lo == a, cam_b, cam_a)
-    adj = np.sort(np.r_[ia, ib] * N + np.r_[ib, ia])
-    ptr = np.searchsorted(adj // N, np.arange(N + 1))
-    pos = ranges(ptr[ia], ptr[ia + 1])
-    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
-    z = adj[pos] % N
-    common = isin_sorted(z * N + ib[e], adj)
-    e, z = e[common], z[common]
-    ok = np.ones(e.size, bool)
-    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
-    if keypoints is not None and projections is not None and e.size:
-        test = np.flatnonzero(geo[e])
-        if test.size:
-            ids = np.stack([nodes[ia[e[test]]], nodes[ib[e[test]]], nodes[z[test]]], axis=1)
-            ok[test] = _one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
-                                  np.asarray(projections(ids.ravel()), np.float64)
-                                  .reshape(-1, 3, 3, 4), tol)
-    e, z = e[ok], z[ok]
-    C = int(cam.max()) + 1
-    pairs = np.unique(e * C + cam[z])
-    tau = np.bincount(pairs // C, minlength=E)
-    shared = shared_cameras(a, b, cam_a, cam_b)
-    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
-
-
-def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
-    """The evidence rule's test (``evidence._consistent``) on a stack of observation triples:
-    ``kp (T, 3, 2)``, ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three
-    cameras and within ``tol`` px of each observation."""
-    A = np.empty((len(kp), 6, 4))
-    A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
-    A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
-    X = np.linalg.svd(A, full_matrices=False)[2][:, -1]
-    fin = np.abs(X[:, 3]) >= 1e-12
-    X = X / np.where(fin, X[:, 3], 1.0)[:, None]
-    p = np.einsum("tkij,tj->tki", P, X)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
-    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
 
 
 def default_hold(window: int) -> int:

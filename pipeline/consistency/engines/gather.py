@@ -1,0 +1,214 @@
+"""The sets of an online step solved at their roots (step 2b of :mod:`.online`).
+
+A set of at most ``B`` features that a step's new links touch is solved by the evidence
+rule's merge at one robot, its *root* (the robot of its smallest feature: the rule's set
+lists name that feature first to every robot of the set, and the label flooding brought it
+one hop per round, so the neighbour it came from first is a parent on a shortest path). Its
+robots send their bundles (:mod:`pipeline.consistency.evidence`, step 1: each feature's
+keypoint, its links with their evidence weights, its frame's projection) up that tree; the
+root solves what :func:`~pipeline.consistency.evidence.solve_set` solves on them (the weights
+of :func:`~pipeline.consistency.evidence.set_problem`, here :func:`set_weights` for all sets
+at once, then :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal merge by
+decreasing evidence with the geometric test) and sends the cut links back down; each robot
+cuts its side. The same bundles give the same cuts as the rule's own flood of them to every
+robot of the set; one path per bundle and back costs far fewer bytes than every bundle over
+every link of the set.
+
+Counts: a bundle, ``128 + 16 deg`` bytes (the rule's bundle fields), one message per hop up
+the shortest-path tree to the root (no two bundles share a message: a bound); the cut links,
+16 bytes each, one message down each tree edge; ``2 ecc(root) + 1`` rounds. Hops are counted
+between features: in a conflict-free set (one feature per image) that is the image graph, an
+image being a robot of the stage; in a conflictive set a robot may hold two features of a
+path, so the count bounds the hops between robots. A robot holds at most its set's bundles
+(the root all of them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from pipeline.transport import HEADER_BYTES
+
+__all__ = ["RootSolution", "set_weights", "solve_at_roots"]
+
+
+@dataclass
+class RootSolution:
+    """What :func:`solve_at_roots` decided and what it cost.
+
+    ``links`` (E,) the indices of the solved links in the caller's link arrays, grouped by
+    set; ``set_of`` (E,) each link's set; ``a``, ``b`` (E,) its ends (smaller first);
+    ``cut`` (E,) bool; ``sets`` the solved sets, ascending; ``rounds``, ``messages``,
+    ``nbytes`` of the gathering; ``held`` (cameras,) the bundle bytes each camera holds."""
+
+    links: np.ndarray
+    set_of: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    cut: np.ndarray
+    sets: np.ndarray
+    rounds: int
+    messages: int
+    nbytes: int
+    held: np.ndarray
+
+
+def solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_cam, unposed, sent,
+                   n_cams: int) -> RootSolution:
+    """Solve the sets of the links ``on`` at their roots (module docstring).
+
+    Parameters
+    ----------
+    sub : (F,) int — the stage's features (global ids), ascending
+    cam : (F,) int — each feature's camera in the stage
+    a_all, b_all, q_all : (L,) — the stage's links (global ids) and their quality
+    on : (L,) bool — the links of the sets to solve
+    comp : (F,) int — each feature's set
+    kp : (F, 2) float — each feature's keypoint; ``P_cam`` (cameras, 3, 4) each camera's
+        projection (any value for a camera of unknown pose)
+    unposed : sets with a camera of unknown pose: solved without the geometric test
+    sent : (L,) bool — links whose cut is sent back (a cut history link is not)
+    n_cams : int — cameras of the stage
+    """
+    from pipeline.consistency.evidence import evidence_cut
+    from pipeline.matching.link_evidence import ratio_llr
+
+    ia = np.searchsorted(sub, a_all)
+    ks = np.flatnonzero(on)
+    ks = ks[np.argsort(comp[ia[ks]], kind="stable")]   # grouped by set
+    lc = comp[ia[ks]]
+    a, b = np.minimum(a_all[ks], b_all[ks]), np.maximum(a_all[ks], b_all[ks])
+    sa, sb = np.searchsorted(sub, a), np.searchsorted(sub, b)
+    ca, cb = cam[sa], cam[sb]
+    local = ratio_llr(1.0 - np.asarray(q_all, np.float64)[ks])
+    c_w, c_head = np.unique(lc, return_index=True)
+    c_end = np.r_[c_head[1:], len(lc)]
+    geometric = ~np.isin(lc, unposed)                 # the set's images all posed
+    w = set_weights(a, b, ca, cb, local,
+                    lambda ids: kp[np.searchsorted(sub, ids)],
+                    lambda ids: P_cam[cam[np.searchsorted(sub, ids)]], geometric=geometric)
+    cut = np.zeros(len(ks), bool)
+    for u, v in zip(c_head.tolist(), c_end.tolist(), strict=True):
+        kpd = Pd = None
+        if geometric[u]:
+            f = np.unique(np.r_[sa[u:v], sb[u:v]])
+            kpd = dict(zip(sub[f].tolist(), kp[f], strict=True))
+            Pd = dict(zip(sub[f].tolist(), P_cam[cam[f]], strict=True))
+        cut[u:v] = evidence_cut(a[u:v], b[u:v], ca[u:v], cb[u:v], w[u:v], kpd, Pd)
+    # the counts of the gathering (module docstring)
+    n_s = len(sub)
+    adj = sp.coo_matrix((np.ones(2 * len(sa), bool), (np.r_[sa, sb], np.r_[sb, sa])),
+                        shape=(n_s, n_s)).tocsr()
+    f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
+    f_c = np.searchsorted(c_w, f_set[:, 0])            # each member's set
+    members = np.bincount(f_c, minlength=len(c_w))
+    root = f_set[np.r_[0, np.cumsum(members)[:-1]], 1]  # smallest feature of each set
+    dist = np.full(n_s, -1, np.int64)
+    dist[root] = 0
+    front, d = root, 0
+    while len(front):
+        d += 1
+        nxt = np.unique(adj[front].indices)
+        front = nxt[dist[nxt] < 0]
+        dist[front] = d
+    f_dist = dist[f_set[:, 1]]
+    ecc = np.zeros(len(c_w), np.int64)
+    np.maximum.at(ecc, f_c, f_dist)
+    deg = np.bincount(np.r_[sa, sb], minlength=n_s)
+    f_bytes = 128 + 16 * deg[f_set[:, 1]]
+    bundle_c = np.bincount(f_c, weights=f_bytes, minlength=len(c_w)).astype(np.int64)
+    cuts_c = np.bincount(np.searchsorted(c_w, lc[cut & sent[ks]]), minlength=len(c_w))
+    rounds = int((2 * ecc + 1).max(initial=0))
+    msgs = int(f_dist.sum() + (members - 1).sum())
+    nbytes = int((f_bytes * f_dist).sum() + (16 * cuts_c * (members - 1)).sum()) \
+        + HEADER_BYTES * msgs
+    held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=n_cams)
+    return RootSolution(links=ks, set_of=lc, a=a, b=b, cut=cut, sets=c_w, rounds=rounds,
+                        messages=msgs, nbytes=nbytes, held=held)
+
+
+def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
+                geometric=None, tol_px: float | None = None) -> np.ndarray:
+    """The evidence rule's link weights (:func:`pipeline.consistency.evidence.set_problem`)
+    of the links of several sets at once.
+
+    Parameters
+    ----------
+    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
+    cam_a, cam_b : (E,) int — their cameras
+    local : (E,) float — each link's local evidence (what its bundles carry)
+    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
+    geometric : (E,) bool or None — the link's set has every projection (the rule's test
+        on it); None: all do when ``projections`` is given
+    tol_px : float or None — the test's tolerance (default the rule's
+        :data:`~pipeline.consistency.evidence.REPROJECTION_TOL_PX`)
+
+    Returns
+    -------
+    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
+    cameras in which both ends match one common feature whose three observations are one
+    point (:func:`~pipeline.consistency.evidence.triangle_support`; all common features
+    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
+    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
+    ``set_problem`` on its bundles; the sets' triangles are listed at once and their
+    three-view points solved as one stack of SVDs (the rule solves one at a time).
+    """
+    from pipeline.consistency.cycles import shared_cameras, support_term
+    from pipeline.consistency.evidence import REPROJECTION_TOL_PX, TRIANGLE_WEIGHT
+    from pipeline.consistency.keys import isin_sorted, ranges
+
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
+    local = np.asarray(local, np.float64)
+    E = a.size
+    if E == 0:
+        return np.zeros(0)
+    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
+    nodes, inv = np.unique(np.r_[lo, hi], return_inverse=True)
+    N = nodes.size
+    ia, ib = inv[:E], inv[E:]
+    cam = np.empty(N, np.int64)
+    cam[ia] = np.where(lo == a, cam_a, cam_b)
+    cam[ib] = np.where(lo == a, cam_b, cam_a)
+    adj = np.sort(np.r_[ia, ib] * N + np.r_[ib, ia])
+    ptr = np.searchsorted(adj // N, np.arange(N + 1))
+    pos = ranges(ptr[ia], ptr[ia + 1])
+    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
+    z = adj[pos] % N
+    common = isin_sorted(z * N + ib[e], adj)
+    e, z = e[common], z[common]
+    ok = np.ones(e.size, bool)
+    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
+    if keypoints is not None and projections is not None and e.size:
+        test = np.flatnonzero(geo[e])
+        if test.size:
+            ids = np.stack([nodes[ia[e[test]]], nodes[ib[e[test]]], nodes[z[test]]], axis=1)
+            ok[test] = _one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
+                                  np.asarray(projections(ids.ravel()), np.float64)
+                                  .reshape(-1, 3, 3, 4), tol)
+    e, z = e[ok], z[ok]
+    C = int(cam.max()) + 1
+    pairs = np.unique(e * C + cam[z])
+    tau = np.bincount(pairs // C, minlength=E)
+    shared = shared_cameras(a, b, cam_a, cam_b)
+    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
+
+
+def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
+    """The evidence rule's test (``evidence._consistent``) on a stack of observation triples:
+    ``kp (T, 3, 2)``, ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three
+    cameras and within ``tol`` px of each observation."""
+    A = np.empty((len(kp), 6, 4))
+    A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
+    A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
+    X = np.linalg.svd(A, full_matrices=False)[2][:, -1]
+    fin = np.abs(X[:, 3]) >= 1e-12
+    X = X / np.where(fin, X[:, 3], 1.0)[:, None]
+    p = np.einsum("tkij,tj->tki", P, X)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
+    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
