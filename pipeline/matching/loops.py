@@ -31,6 +31,11 @@ biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``) and t
 along a long path, while round a triangle of a ring about one axis it cancels. Zach et al.'s
 inference over cycles is replaced by the two passes above.
 
+Limit: the weights decide whom a failed triangle blames — the pair met later. A wrong pair
+heavier than the right pairs of its images is accepted first and the right ones are then
+dropped in its place. On the rendered ring the wrong pairs hold 15–30 inliers and the right
+ones 100–500; with equal weights the order of the pairs decides.
+
 Centralized: :func:`loop_check` is a pre-pass of ``clean-db`` over all pairs at once (the
 greedy pass needs the global order of pairs). A distributed version of step 2 alone needs only
 two-hop information: each image sends each neighbour its list of pairs (the other image, the
