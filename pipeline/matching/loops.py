@@ -23,12 +23,19 @@ cycle-consistent view graph greedily, pairs in decreasing number of inliers:
    pair that closes no triangle yet is accepted).
 2. *Vote.* Every accepted pair is judged again on the triangles of the final accepted graph:
    it is kept when it closes at least one consistent triangle and no more inconsistent than
-   consistent ones; a pair that closes no triangle at all is kept (no loop, no verdict).
+   consistent ones.
+3. *Squares.* A kept pair ``(i, j)`` that closes no triangle (two images far apart on the
+   ring: no third image is accepted with both) is judged the same way on the cycles
+   ``i → k → l → j → i`` of four kept pairs, where an inconsistent square counts against the
+   pair only when it is the square's lightest (as in step 1, the weakest pair is blamed; a
+   lone inconsistent square drops one pair, not four); a pair on no such cycle either is kept
+   (no loop, no verdict).
 
 What this interprets: Enqvist et al. check every cycle a new pair closes, by the spanning tree;
-here only triangles count (cycles of length 3), because the rotations a database gives are
-biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``) and the bias grows
-along a long path, while round a triangle of a ring about one axis it cancels. Zach et al.'s
+here only cycles of three and four pairs count, because the rotations a database gives are
+biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``; on the rendered ring
+a right pair's rotation is off by about a third of its angle) and the bias grows along a long
+path, while round a short cycle of a ring about one axis it cancels. Zach et al.'s
 inference over cycles is replaced by the two passes above.
 
 Limit: the weights decide whom a failed triangle blames — the pair met later. A wrong pair
@@ -66,9 +73,10 @@ class LoopCheck:
     Attributes
     ----------
     inconsistent : ndarray, (P,) bool — pairs to drop (they fail their loops)
-    consistent_triangles, inconsistent_triangles : ndarray, (P,) int64 — the triangles of the
-        final accepted graph each pair closes, by verdict (the greedy pass's rejects: those it
-        met when rejected)
+    consistent_triangles, inconsistent_triangles : ndarray, (P,) int64 — the cycles that
+        judged each pair, by verdict: the triangles of the final accepted graph, or the
+        squares for a pair on no triangle (step 3); the greedy pass's rejects: the triangles
+        it met when rejected
     judged : ndarray, (P,) bool — pairs with a rotation (the others are kept, unjudged)
     two_hop_entries : int — what a one-exchange distributed vote would send (module notes)
     """
@@ -80,7 +88,7 @@ class LoopCheck:
     two_hop_entries: int
 
     def summary(self) -> dict:
-        """Counts for a report."""
+        """Counts for a report (``pairs_without_triangle``: kept pairs on no cycle at all)."""
         return {"pairs": int(len(self.inconsistent)), "judged": int(self.judged.sum()),
                 "pairs_dropped": int(self.inconsistent.sum()),
                 "pairs_without_triangle": int((self.judged & ~self.inconsistent
@@ -152,6 +160,22 @@ def loop_check(n: int, pairs, rotations, weights, tol_deg: float = DEFAULT_LOOP_
         """``R_ab`` from the stored ``R_min,max``."""
         return rotations[index[(a, b)]] if a < b else rotations[index[(b, a)]].T
 
+    def square_votes(p: int, nbrs: list[set]) -> tuple[int, int]:
+        """Cycles ``i → k → l → j → i`` of kept pairs: ``R_ij`` against ``R_lj R_kl R_ik``;
+        an inconsistent one counts only where ``p`` is the lightest of its four pairs."""
+        i, j = (int(x) for x in pairs[p])
+        paths = [(k, ll) for k in sorted(nbrs[i] - {j}) for ll in sorted(nbrs[j] - {i, k})
+                 if ll in nbrs[k]]
+        if not paths:
+            return 0, 0
+        R_ik = np.stack([rot(i, k) for k, _ in paths])
+        R_kj = np.stack([rot(ll, j) @ rot(k, ll) for k, ll in paths])
+        ok = cycle_error_deg(R_ik, R_kj, rotations[p][None]) < tol_deg
+        lightest = np.array([rank[p] > max(rank[index[tuple(sorted(e))]]
+                                           for e in ((i, k), (k, ll), (ll, j)))
+                             for k, ll in paths])
+        return int(ok.sum()), int((~ok & lightest).sum())
+
     def votes(p: int, nbrs: list[set]) -> tuple[int, int]:
         i, j = (int(x) for x in pairs[p])
         ks = sorted(nbrs[i] & nbrs[j])
@@ -168,7 +192,10 @@ def loop_check(n: int, pairs, rotations, weights, tol_deg: float = DEFAULT_LOOP_
     accepted = np.zeros(P, dtype=bool)
     nbrs: list[set] = [set() for _ in range(n)]
     # 1. greedy pass, pairs in decreasing weight (Enqvist et al.: a cycle-consistent graph)
-    for p in np.lexsort((pairs[:, 1], pairs[:, 0], -weights)).tolist():
+    order = np.lexsort((pairs[:, 1], pairs[:, 0], -weights))
+    rank = np.empty(P, dtype=np.int64)
+    rank[order] = np.arange(P)
+    for p in order.tolist():
         if not judged[p]:
             continue
         cons[p], inc[p] = votes(p, nbrs)
@@ -181,6 +208,17 @@ def loop_check(n: int, pairs, rotations, weights, tol_deg: float = DEFAULT_LOOP_
     inconsistent = judged & ~accepted
     for p in np.flatnonzero(accepted).tolist():
         cons[p], inc[p] = votes(p, nbrs)
+        if cons[p] + inc[p] and (cons[p] == 0 or inc[p] > cons[p]):
+            inconsistent[p] = True
+    # 3. kept pairs on no triangle: judged on the squares of the kept graph
+    kept_nbrs: list[set] = [set() for _ in range(n)]
+    for a, b in pairs[accepted & ~inconsistent].tolist():
+        kept_nbrs[a].add(b)
+        kept_nbrs[b].add(a)
+    lonely = np.flatnonzero(accepted & ~inconsistent & (cons + inc == 0)).tolist()
+    for p in lonely:
+        cons[p], inc[p] = square_votes(p, kept_nbrs)
+    for p in lonely:
         if cons[p] + inc[p] and (cons[p] == 0 or inc[p] > cons[p]):
             inconsistent[p] = True
     deg = np.bincount(pairs.ravel(), minlength=n)

@@ -63,9 +63,24 @@ def test_consistent_graph_keeps_every_pair():
     assert (res.consistent_triangles > 0).all()
 
 
-def test_pairs_on_no_triangle_are_not_judged_by_it():
-    """A ring of four: no triangle, so even a corrupted pair stays (no loop, no verdict);
-    a pair without a rotation is kept unjudged."""
+@pytest.mark.parametrize("bad", [0, 1, 2, 3])
+def test_a_square_blames_its_lightest_pair(bad):
+    """A ring of four: no triangle, one square; when it does not close, only its lightest
+    pair is dropped (the corrupted one, lightest here)."""
+    pairs = np.array([(0, 1), (1, 2), (2, 3), (0, 3)])
+    R = _view_graph(4, pairs, 5)
+    R[bad] = _corrupt(R[bad], 90.0, 5)
+    w = np.full(4, 100.0)
+    w[bad] = 20.0
+    res = loop_check(4, pairs, R, w)
+    assert np.flatnonzero(res.inconsistent).tolist() == [bad]
+    # each image sends each neighbour its 2 pairs: 4 edges x (2 + 2)
+    assert res.two_hop_entries == 16
+
+
+def test_pairs_on_no_cycle_are_not_judged():
+    """The same ring with one pair without a rotation: no cycle left, nothing dropped, the
+    pair without a rotation kept unjudged."""
     pairs = np.array([(0, 1), (1, 2), (2, 3), (0, 3)])
     R = _view_graph(4, pairs, 5)
     R[1] = _corrupt(R[1], 90.0, 5)
@@ -74,8 +89,6 @@ def test_pairs_on_no_triangle_are_not_judged_by_it():
     assert not res.inconsistent.any()
     assert res.judged.tolist() == [True, True, False, True]
     assert res.summary()["pairs_without_triangle"] == 3
-    # each image sends each neighbour its 2 pairs: 4 edges x (2 + 2)
-    assert res.two_hop_entries == 16
 
 
 @pytest.mark.parametrize("tol", [0.0, -5.0, 180.0, float("nan"), float("inf")])
