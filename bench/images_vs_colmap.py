@@ -22,7 +22,9 @@ Methods on each input:
 - ``colmap+clean-db+loops``: the same with ``clean-db --loop-check`` (image pairs whose
   relative rotation breaks the triangles of the view graph dropped first,
   :mod:`pipeline.matching.loops`); on the inputs with truth, which pairs it dropped,
-  judged against it,
+  judged against it, and every database of these rows also mapped with the fixed seeds at
+  15 pose inliers (``seeds_min15``: run-images' relaxed registration threshold,
+  :data:`pipeline.colmap.mapping.RETRY_MIN_POSE_INLIERS`),
 - ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
   cleaning, ``sparse/``; the one before cleaning beside it),
 - ``ours-no-fusion``: the same with ``--no-fusion`` (the consistency stage's cuts only),
@@ -220,15 +222,24 @@ def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> lis
         paths.append(work / f"{name}.db")
     if truth is not None:
         # COLMAP's mapping is not repeatable across runs (its default seed is random): the
-        # same databases mapped again with fixed seeds separate cleaning from chance
+        # same databases mapped again with fixed seeds separate cleaning from chance; with
+        # the loop check, also at run-images' relaxed registration threshold (a pair-level
+        # cut leaves the frontier images of the ring below COLMAP's 30 points)
+        from pipeline.colmap.mapping import RETRY_MIN_POSE_INLIERS
+
         for row, path in zip(rows, paths, strict=True):
-            row["seeds"] = []
-            for seed in SEEDS:
-                options = pycolmap.IncrementalPipelineOptions()
-                options.random_seed = seed
-                out = work / f"seed{seed}-{path.stem}"
-                got = _model_row(pycolmap.incremental_mapping(path, images, out, options), truth)
-                row["seeds"].append({"seed": seed, **got})
+            for key, min_inliers in (("seeds", None),) + (
+                    (("seeds_min15", RETRY_MIN_POSE_INLIERS),) if loops else ()):
+                row[key] = []
+                for seed in SEEDS:
+                    options = pycolmap.IncrementalPipelineOptions()
+                    options.random_seed = seed
+                    if min_inliers is not None:
+                        options.mapper.abs_pose_min_num_inliers = min_inliers
+                    out = work / f"{key}{seed}-{path.stem}"
+                    got = _model_row(pycolmap.incremental_mapping(path, images, out, options),
+                                     truth)
+                    row[key].append({"seed": seed, **got})
     return rows
 
 
@@ -458,16 +469,23 @@ def _targets(rows: list[dict]) -> dict:
                 "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None,
                 "cpu_ratio": round(r["cpu_s"] / ref["cpu_s"], 3)
                 if ref.get("cpu_s") and "cpu_s" in r else None}
-        if ref.get("seeds") and r.get("seeds"):
-            item["seeds_rotation_median_deg"] = [
-                [x["rotation_deg"]["median"] if x.get("rotation_deg") else None
-                 for x in row["seeds"]] for row in (ref, r)]
-            item["seeds_wrong_tracks"] = [[x.get("wrong_tracks") for x in row["seeds"]]
-                                          for row in (ref, r)]
-            lines.append(f"{data} {kind} {method} vs colmap, mapping seeds {list(SEEDS)}: "
-                         f"rotation median {item['seeds_rotation_median_deg'][1]} ° vs "
-                         f"{item['seeds_rotation_median_deg'][0]} °, wrong tracks "
-                         f"{item['seeds_wrong_tracks'][1]} vs {item['seeds_wrong_tracks'][0]}")
+        for key, what in (("seeds", ""), ("seeds_min15", " at 15 pose inliers")):
+            if not (ref.get(key) and r.get(key)):
+                continue
+            got = {f: [[x[f]["median"] if x.get(f) else None for x in row[key]]
+                       for row in (ref, r)] for f in ("rotation_deg", "position_m")}
+            got["registered"] = [[x.get("registered") for x in row[key]] for row in (ref, r)]
+            got["wrong_tracks"] = [[x.get("wrong_tracks") for x in row[key]] for row in (ref, r)]
+            item[f"{key}_rotation_median_deg"] = got["rotation_deg"]
+            item[f"{key}_wrong_tracks"] = got["wrong_tracks"]
+            item[f"{key}_position_median_m"] = got["position_m"]
+            item[f"{key}_registered"] = got["registered"]
+            lines.append(f"{data} {kind} {method} vs colmap, mapping seeds {list(SEEDS)}{what}: "
+                         f"registered {got['registered'][1]} vs {got['registered'][0]}, "
+                         f"rotation median {got['rotation_deg'][1]} ° vs "
+                         f"{got['rotation_deg'][0]} °, position median {got['position_m'][1]} m "
+                         f"vs {got['position_m'][0]} m, wrong tracks {got['wrong_tracks'][1]} "
+                         f"vs {got['wrong_tracks'][0]}")
         if r.get("rotation_deg") and ref.get("rotation_deg"):
             item["rotation_median_deg"] = [ref["rotation_deg"]["median"],
                                            r["rotation_deg"]["median"]]
