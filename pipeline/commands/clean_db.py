@@ -97,7 +97,10 @@ def run(args) -> int:
         lc = res.loop_check
         print(f"loop check: {lc['pairs_dropped']} of {lc['judged']} image pairs break their "
               f"rotation loops (tolerance {lc['tol_deg']:g}°), {lc['links_cut']} links cut; "
-              f"{lc['pairs_without_triangle']} kept pairs close no triangle")
+              f"{lc['pairs_without_triangle']} kept pairs on no loop")
+        if lc["pairs_dropped"]:
+            print("  fewer pairs can leave images below COLMAP's registration threshold: if "
+                  "the mapper registers few, map with --Mapper.abs_pose_min_num_inliers 15")
     if res.baselines:
         from pipeline.evaluation.report import baselines_lines
 
