@@ -511,8 +511,9 @@ def relative_rotations(contents: DatabaseContents) -> tuple[np.ndarray, np.ndarr
     two-view-geometry inliers with the database's cameras (their focal length, or COLMAP's
     guess of it), at COLMAP's verification threshold (4 px), seeded for repeatable output.
     Not the pose of the stored geometry: decomposing a stored homography (planar pairs) or
-    ``F`` picked the wrong one of its solutions on right pairs of the Sceaux photos (5 of 55
-    pairs more than 90° from COLMAP's own reconstruction, none with the essential matrix).
+    ``F`` picked the wrong one of its solutions on right pairs of the Sceaux photos (on the
+    640 px copy, 5 of 55 pairs more than 90° from COLMAP's own reconstruction of them; none
+    with the essential matrix).
 
     Parameters
     ----------
