@@ -33,9 +33,9 @@ cycle-consistent view graph greedily, pairs in decreasing number of inliers:
 
 What this interprets: Enqvist et al. check every cycle a new pair closes, by the spanning tree;
 here only cycles of three and four pairs count, because the rotations a database gives are
-biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``; on the rendered ring
-a right pair's rotation is off by about a third of its angle) and the bias grows along a long
-path, while round a short cycle of a ring about one axis it cancels. Zach et al.'s
+biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``: 960 px on the
+rendered ring, whose truth is 722 px) and the bias grows along a long path, while round a
+short cycle of a ring about one axis it largely cancels. Zach et al.'s
 inference over cycles is replaced by the two passes above.
 
 Limit: the weights decide whom a failed triangle blames — the pair met later. A wrong pair
