@@ -36,7 +36,7 @@ here only cycles of three and four pairs count, because the rotations a database
 biased by its focal-length guesses (COLMAP's default is ``1.2 max(w, h)``: 960 px on the
 rendered ring, whose truth is 722 px) and the bias grows along a long path, while round a
 short cycle of a ring about one axis it largely cancels. Zach et al.'s
-inference over cycles is replaced by the two passes above.
+inference over cycles is replaced by the three passes above.
 
 Limit: the weights decide whom a failed triangle blames — the pair met later. A wrong pair
 heavier than the right pairs of its images is accepted first and the right ones are then
