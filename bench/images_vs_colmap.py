@@ -19,6 +19,12 @@ Methods on each input:
 - ``colmap+clean-db``: the same database through ``clean-db`` (the distributed consistency
   stage, :mod:`pipeline.runs.clean_db`) between matching and mapping; its time is colmap's
   extraction and matching plus the cleaning and the mapping,
+- ``colmap+clean-db+loops``: the same with ``clean-db --loop-check`` (image pairs whose
+  relative rotation breaks the triangles of the view graph dropped first,
+  :mod:`pipeline.matching.loops`); on the inputs with truth, which pairs it dropped,
+  judged against it, and every database of these rows also mapped with the fixed seeds at
+  15 pose inliers (``seeds_min15``: run-images' relaxed registration threshold,
+  :data:`pipeline.colmap.mapping.RETRY_MIN_POSE_INLIERS`),
 - ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
   cleaning, ``sparse/``; the one before cleaning beside it),
 - ``ours-no-fusion``: the same with ``--no-fusion`` (the consistency stage's cuts only),
@@ -166,10 +172,12 @@ def _model_row(models, truth) -> dict:
             "reproj_px": round(rec.compute_mean_reprojection_error(), 3), **_judge(rec, truth)}
 
 
-def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
-    """``colmap`` and ``colmap+clean-db`` rows: one extraction and matching, two mappings."""
+def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> list[dict]:
+    """``colmap`` and ``colmap+clean-db`` rows (and ``colmap+clean-db+loops`` with ``loops``):
+    one extraction and matching, one mapping per database."""
     import pycolmap
 
+    from pipeline.matching.loops import DEFAULT_LOOP_TOL_DEG
     from pipeline.runs.clean_db import clean_database
 
     work.mkdir(parents=True, exist_ok=True)
@@ -190,30 +198,77 @@ def run_colmap(images: Path, work: Path, truth=None) -> list[dict]:
                   "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
                                    "mapping": round(t3 - t2, 1)},
                   **_model_row(models, truth)}
-    t4 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        cleaned = clean_database(db, work / "cleaned.db", rerun=False)
-    t5 = time.perf_counter()
-    models2 = pycolmap.incremental_mapping(work / "cleaned.db", images, work / "sparse-cleaned")
-    t6 = time.perf_counter()
-    clean_row = {**base, "time_s": round((t2 - t0) + (t6 - t4), 1),
-                 "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
-                                  "clean-db": round(t5 - t4, 1), "mapping": round(t6 - t5, 1)},
-                 "links": cleaned.links, "links_cut": cleaned.cut,
-                 **_model_row(models2, truth)}
+    rows, paths = [colmap_row], [db]
+    for name, tol in (("cleaned", None),) + ((("cleaned-loops", DEFAULT_LOOP_TOL_DEG),)
+                                             if loops else ()):
+        t4 = time.perf_counter()
+        with contextlib.redirect_stdout(io.StringIO()):
+            cleaned = clean_database(db, work / f"{name}.db", rerun=False, loop_tol_deg=tol)
+        t5 = time.perf_counter()
+        models2 = pycolmap.incremental_mapping(work / f"{name}.db", images,
+                                               work / f"sparse-{name}")
+        t6 = time.perf_counter()
+        row = {**base, "time_s": round((t2 - t0) + (t6 - t4), 1),
+               "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
+                                "clean-db": round(t5 - t4, 1), "mapping": round(t6 - t5, 1)},
+               "links": cleaned.links, "links_cut": cleaned.cut,
+               **({"loop_check": cleaned.loop_check} if cleaned.loop_check else {}),
+               **_model_row(models2, truth)}
+        if truth is not None:
+            row["wrong_links"] = wrong_link_anatomy(db, work / f"{name}.db", truth)
+            if tol is not None:
+                row["loop_pairs"] = loop_pair_anatomy(db, tol, truth)
+        rows.append(row)
+        paths.append(work / f"{name}.db")
     if truth is not None:
-        clean_row["wrong_links"] = wrong_link_anatomy(db, work / "cleaned.db", truth)
         # COLMAP's mapping is not repeatable across runs (its default seed is random): the
-        # same two databases mapped again with fixed seeds separate cleaning from chance
-        for row, path in ((colmap_row, db), (clean_row, work / "cleaned.db")):
-            row["seeds"] = []
-            for seed in SEEDS:
-                options = pycolmap.IncrementalPipelineOptions()
-                options.random_seed = seed
-                out = work / f"seed{seed}-{path.stem}"
-                got = _model_row(pycolmap.incremental_mapping(path, images, out, options), truth)
-                row["seeds"].append({"seed": seed, **got})
-    return [colmap_row, clean_row]
+        # same databases mapped again with fixed seeds separate cleaning from chance; with
+        # the loop check, also at run-images' relaxed registration threshold (a pair-level
+        # cut leaves the frontier images of the ring below COLMAP's 30 points)
+        from pipeline.colmap.mapping import RETRY_MIN_POSE_INLIERS
+
+        for row, path in zip(rows, paths, strict=True):
+            for key, min_inliers in (("seeds", None),) + (
+                    (("seeds_min15", RETRY_MIN_POSE_INLIERS),) if loops else ()):
+                row[key] = []
+                for seed in SEEDS:
+                    options = pycolmap.IncrementalPipelineOptions()
+                    options.random_seed = seed
+                    if min_inliers is not None:
+                        options.mapper.abs_pose_min_num_inliers = min_inliers
+                    out = work / f"{key}{seed}-{path.stem}"
+                    got = _model_row(pycolmap.incremental_mapping(path, images, out, options),
+                                     truth)
+                    row[key].append({"seed": seed, **got})
+    return rows
+
+
+def loop_pair_anatomy(db: Path, tol_deg: float, truth) -> dict:
+    """What the loop check (``clean-db --loop-check``) drops, judged against the truth: a
+    pair is *wrong* when most of its judged verified matches join different true points."""
+    from pipeline import colmap
+    from pipeline.evaluation.scene_truth import wrong_links
+    from pipeline.matching.loops import loop_check
+
+    c = colmap.read_database(db)
+    try:
+        n = len(c.names)
+        pairs, rotations, inliers = colmap.relative_rotations(c)
+        check = loop_check(n, pairs, rotations, inliers, tol_deg)
+        wrong, judged = wrong_links(c.names, c.keypoints, c.links, truth)
+        key = c.links.cam_i * n + c.links.cam_j
+        pk = pairs[:, 0] * n + pairs[:, 1]
+        n_wrong = np.array([wrong[key == k].sum() for k in pk])
+        n_judged = np.array([judged[key == k].sum() for k in pk])
+        bad = n_wrong * 2 > np.maximum(n_judged, 1)
+        drop = check.inconsistent
+    finally:
+        c.close()
+    return {"pairs": int(len(pairs)), "wrong_pairs": int(bad.sum()),
+            "wrong_pairs_dropped": int((bad & drop).sum()),
+            "right_pairs_dropped": int((~bad & drop).sum()),
+            "wrong_matches_in_kept_pairs": int(n_wrong[~drop].sum()),
+            "wrong_matches": int(n_wrong.sum())}
 
 
 def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = True,
@@ -245,7 +300,7 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
             **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = ("colmap", "colmap+clean-db", "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
+METHODS = ("colmap", "colmap+clean-db", "colmap+clean-db+loops", "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
 #: run-images variants: method -> (graph, fusion, remap)
 OURS = {"ours": ("complete", True, False), "ours-no-fusion": ("complete", False, False),
         "ours-remap": ("complete", True, True), "ours-knn4": ("knn:4", True, False)}
@@ -327,19 +382,22 @@ def main(argv=None) -> int:
         for data, kind, images, truth in _inputs(folders, kinds, tmp, rings, ring_seeds):
             work = tmp / f"{data}-{kind}"
             todo = []
-            if "colmap" in methods or "colmap+clean-db" in methods:
+            if {"colmap", "colmap+clean-db", "colmap+clean-db+loops"} & set(methods):
                 todo.append(("colmap", None))
             todo += [(m, OURS[m]) for m in OURS if m in methods]
             for name, variant in todo:
                 print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
+                names = ((["colmap", "colmap+clean-db"]
+                          + (["colmap+clean-db+loops"] if "colmap+clean-db+loops" in methods
+                             else [])) if name == "colmap" else [name])
                 try:
-                    got = (run_colmap(images, work / "colmap", truth) if variant is None
+                    got = (run_colmap(images, work / "colmap", truth,
+                                      loops="colmap+clean-db+loops" in methods)
+                           if variant is None
                            else [run_ours(images, work / name, variant[0], truth,
                                           fusion=variant[1], remap=variant[2])])
                 except Exception as exc:  # noqa: BLE001 - a failed run is a result too
-                    got = [{"error": f"{type(exc).__name__}: {exc}"}] * (2 if name == "colmap"
-                                                                          else 1)
-                names = ["colmap", "colmap+clean-db"] if name == "colmap" else [name]
+                    got = [{"error": f"{type(exc).__name__}: {exc}"}] * len(names)
                 for method, row in zip(names, got, strict=True):
                     if method in methods:
                         rows.append({"data": data, "input": kind, "method": method, **row})
@@ -373,6 +431,14 @@ def main(argv=None) -> int:
                   f"conflict-free sets {w['wrong_in_larger_consistent_sets']}; clean-db cut "
                   f"{w['links'] - w['links_after_clean_db']} links, "
                   f"{w['wrong'] - w['wrong_after_clean_db']} of them wrong")
+        if "loop_pairs" in r:
+            lp = r["loop_pairs"]
+            print(f"{r['data']}: the loop check dropped {lp['wrong_pairs_dropped']} of the "
+                  f"{lp['wrong_pairs']} wrong image pairs (most matches joining different true "
+                  f"points) and {lp['right_pairs_dropped']} of the "
+                  f"{lp['pairs'] - lp['wrong_pairs']} others; "
+                  f"{lp['wrong_matches_in_kept_pairs']} of {lp['wrong_matches']} wrong matches "
+                  f"are in the pairs it kept")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     import cv2
     import pycolmap
@@ -403,16 +469,23 @@ def _targets(rows: list[dict]) -> dict:
                 "time_ratio": round(r["time_s"] / ref["time_s"], 3) if ref["time_s"] else None,
                 "cpu_ratio": round(r["cpu_s"] / ref["cpu_s"], 3)
                 if ref.get("cpu_s") and "cpu_s" in r else None}
-        if ref.get("seeds") and r.get("seeds"):
-            item["seeds_rotation_median_deg"] = [
-                [x["rotation_deg"]["median"] if x.get("rotation_deg") else None
-                 for x in row["seeds"]] for row in (ref, r)]
-            item["seeds_wrong_tracks"] = [[x.get("wrong_tracks") for x in row["seeds"]]
-                                          for row in (ref, r)]
-            lines.append(f"{data} {kind} {method} vs colmap, mapping seeds {list(SEEDS)}: "
-                         f"rotation median {item['seeds_rotation_median_deg'][1]} ° vs "
-                         f"{item['seeds_rotation_median_deg'][0]} °, wrong tracks "
-                         f"{item['seeds_wrong_tracks'][1]} vs {item['seeds_wrong_tracks'][0]}")
+        for key, what in (("seeds", ""), ("seeds_min15", " at 15 pose inliers")):
+            if not (ref.get(key) and r.get(key)):
+                continue
+            got = {f: [[x[f]["median"] if x.get(f) else None for x in row[key]]
+                       for row in (ref, r)] for f in ("rotation_deg", "position_m")}
+            got["registered"] = [[x.get("registered") for x in row[key]] for row in (ref, r)]
+            got["wrong_tracks"] = [[x.get("wrong_tracks") for x in row[key]] for row in (ref, r)]
+            item[f"{key}_rotation_median_deg"] = got["rotation_deg"]
+            item[f"{key}_wrong_tracks"] = got["wrong_tracks"]
+            item[f"{key}_position_median_m"] = got["position_m"]
+            item[f"{key}_registered"] = got["registered"]
+            lines.append(f"{data} {kind} {method} vs colmap, mapping seeds {list(SEEDS)}{what}: "
+                         f"registered {got['registered'][1]} vs {got['registered'][0]}, "
+                         f"rotation median {got['rotation_deg'][1]} ° vs "
+                         f"{got['rotation_deg'][0]} °, position median {got['position_m'][1]} m "
+                         f"vs {got['position_m'][0]} m, wrong tracks {got['wrong_tracks'][1]} "
+                         f"vs {got['wrong_tracks'][0]}")
         if r.get("rotation_deg") and ref.get("rotation_deg"):
             item["rotation_median_deg"] = [ref["rotation_deg"]["median"],
                                            r["rotation_deg"]["median"]]

@@ -101,6 +101,8 @@ CUT_WHY = {
     "robot-lost": "one of its robots fell silent and its neighbours declared it lost",
     "not-one-to-one": "the input matched one keypoint to several of the other image",
     "not-comm-edge": "its two images are not neighbours in the communication graph",
+    "loop-inconsistent": "its image pair's relative rotation breaks the rotation loops of the "
+                         "view graph (clean-db --loop-check)",
 }
 #: How a resolution cut was decided (``case`` of the ledger).
 CASE_WHY = {"evidence": "evidence rule: the least-supported links of the set",

@@ -22,6 +22,7 @@ from pipeline.colmap.database import (
     DatabaseContents,
     calibrated,
     read_database,
+    relative_rotations,
     write_cleaned_database,
     write_database,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "DatabaseContents",
     "calibrated",
     "read_database",
+    "relative_rotations",
     "write_cleaned_database",
     "write_database",
     "build_reconstruction",

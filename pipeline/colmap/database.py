@@ -8,6 +8,8 @@
   hloc, as the pipeline's :class:`~pipeline.types.Links`.
 - :func:`write_cleaned_database` — a copy of a database with some two-view-geometry inliers
   removed; the input file is never opened for writing.
+- :func:`relative_rotations` — each verified pair's relative rotation from its two-view
+  geometry (the loop check of ``clean-db --loop-check``, :mod:`pipeline.matching.loops`).
 
 A user's database is read through SQLite, never by copying its bytes: its tables are checked
 first (:mod:`pipeline.inputs.dbcheck`), then ``VACUUM INTO`` takes a consistent private snapshot of
@@ -34,7 +36,7 @@ from pipeline.inputs.dbcheck import MAX_PAIR_ID_IMAGE, check_database_tables, op
 from pipeline.types import Features, Links, View
 
 __all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",
-           "read_database", "write_cleaned_database"]
+           "read_database", "write_cleaned_database", "relative_rotations"]
 
 _TVG = pycolmap.TwoViewGeometryConfiguration
 
@@ -500,3 +502,63 @@ def write_cleaned_database(contents: DatabaseContents, out_path: str | Path,
         finally:
             con.close()
     return out_path
+
+
+def relative_rotations(contents: DatabaseContents) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each verified pair's relative rotation, estimated on its stored inliers.
+
+    ``pycolmap.estimate_relative_pose``: LO-RANSAC of the essential matrix on the pair's
+    two-view-geometry inliers with the database's cameras (their focal length, or COLMAP's
+    guess of it), at COLMAP's verification threshold (4 px), seeded for repeatable output.
+    Not the pose of the stored geometry: decomposing a stored homography (planar pairs) or
+    ``F`` picked the wrong one of its solutions on right pairs of the Sceaux photos (on the
+    640 px copy, 5 of 55 pairs more than 90° from COLMAP's own reconstruction of them; none
+    with the essential matrix).
+
+    Parameters
+    ----------
+    contents : DatabaseContents — from :func:`read_database` (its snapshot is read again)
+
+    Returns
+    -------
+    pairs : (P, 2) int64 — camera pairs ``(i, j)``, ``i < j`` (the order of ``contents.names``)
+    rotations : (P, 3, 3) — ``R_ij``, camera ``j``'s rotation from camera ``i``'s; NaN where no
+        pose was found (no camera, too few inliers)
+    inliers : (P,) int64 — the pair's stored inlier count
+    """
+    if contents.snapshot is None:
+        raise InputError("relative_rotations needs the contents returned by read_database")
+    cam_of_id = {int(iid): k for k, iid in enumerate(contents.image_ids)}
+    with quiet_colmap(), pycolmap.Database.open(contents.snapshot) as db:
+        pair_ids, geometries = db.read_two_view_geometries()
+    options = pycolmap.RANSACOptions()
+    options.max_error = 4.0
+    options.random_seed = 0
+    rows = []
+    for pid, g in zip(pair_ids, geometries, strict=True):
+        m = np.asarray(g.inlier_matches, dtype=np.int64).reshape(-1, 2)
+        if not len(m):
+            continue
+        id1, id2 = divmod(int(pid), MAX_PAIR_ID_IMAGE)
+        a, b = cam_of_id[int(id1)], cam_of_id[int(id2)]
+        R = np.full((3, 3), np.nan)
+        cam_a, cam_b = contents.cameras[a], contents.cameras[b]
+        if cam_a is not None and cam_b is not None and len(m) >= 5:
+            xa = contents.keypoints[a][m[:, 0]].astype(np.float64) + COLMAP_PIXEL_OFFSET
+            xb = contents.keypoints[b][m[:, 1]].astype(np.float64) + COLMAP_PIXEL_OFFSET
+            try:
+                with quiet_colmap():
+                    got = pycolmap.estimate_relative_pose(cam_a, xa, cam_b, xb, options)
+            except (RuntimeError, ValueError):
+                got = None
+            if got is not None:
+                R = np.asarray(got["cam2_from_cam1"].rotation.matrix(), dtype=np.float64)
+        if a > b:
+            a, b, R = b, a, R.T
+        rows.append((a, b, R, len(m)))
+    if not rows:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
+    rows.sort(key=lambda r: (r[0], r[1]))
+    return (np.array([(a, b) for a, b, _, _ in rows], dtype=np.int64),
+            np.stack([R for _, _, R, _ in rows]),
+            np.array([k for _, _, _, k in rows], dtype=np.int64))

@@ -1,4 +1,4 @@
-"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE]``.
+"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE] [--loop-check]``.
 
 A COLMAP database's verified matches made consistent; the job and what it writes are
 described in :mod:`pipeline.runs.clean_db`. This module parses the options and prints the
@@ -32,8 +32,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(spectral synchronization, a CLEAR-style method, union-find dropping "
                         "conflictive sets, ...), for comparison: a line each and the summary's "
                         "baselines")
+    p.add_argument("--loop-check", action="store_true",
+                   help="first drop the image pairs whose relative rotation breaks the rotation "
+                        "loops (triangles) of the view graph: wrong two-view geometries between "
+                        "images of repeated structure, which the consistency stage cannot see "
+                        "(reason loop-inconsistent; off by default)")
+    p.add_argument("--loop-tol", default=None, metavar="DEG",
+                   help="with --loop-check: the cycle error (degrees) below which a triangle "
+                        "is consistent (default 15)")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p, links_only=True)
+
+
+def _loop_tol(args) -> float | None:
+    """The loop check's tolerance, or None when it is off (InputError on a bad value)."""
+    from pipeline.errors import InputError
+    from pipeline.matching.loops import DEFAULT_LOOP_TOL_DEG
+    from pipeline.runs.clean_db import check_loop_tol
+
+    if not args.loop_check:
+        if args.loop_tol is not None:
+            raise InputError(f"--loop-tol {args.loop_tol} without --loop-check: add "
+                             f"--loop-check, or leave --loop-tol out")
+        return None
+    return check_loop_tol(DEFAULT_LOOP_TOL_DEG if args.loop_tol is None else args.loop_tol)
 
 
 def run(args) -> int:
@@ -45,6 +67,7 @@ def run(args) -> int:
     from pipeline.runs.cleaned import check_image_dir, side_paths
 
     limit_gb(args.max_memory_gb)
+    loop_tol = _loop_tol(args)
     links_out, rrd_out = side_paths(args.out)
     check_output_files([("--out", args.out), ("--report", args.report),
                         ("OUT.links.csv", links_out)]
@@ -58,7 +81,7 @@ def run(args) -> int:
         res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
                              args.resolution, rerun=not args.no_rerun,
                              image_dir=args.image_dir, outputs=outputs,
-                             baselines=args.baselines)
+                             baselines=args.baselines, loop_tol_deg=loop_tol)
         summary = flag_result(res.summary())
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
@@ -70,6 +93,14 @@ def run(args) -> int:
           f"({r['detection_rounds']} detection + {r['resolution_rounds']} resolution rounds, "
           f"{r['messages']} messages), {cut['not-one-to-one']} not one-to-one, "
           f"{cut['not-comm-edge']} outside the comm graph")
+    if res.loop_check:
+        lc = res.loop_check
+        print(f"loop check: {lc['pairs_dropped']} of {lc['judged']} image pairs break their "
+              f"rotation loops (tolerance {lc['tol_deg']:g}°), {lc['links_cut']} links cut; "
+              f"{lc['pairs_without_triangle']} kept pairs on no loop")
+        if lc["pairs_dropped"]:
+            print("  fewer pairs can leave images below COLMAP's registration threshold: if "
+                  "the mapper registers few, map with --Mapper.abs_pose_min_num_inliers 15")
     if res.baselines:
         from pipeline.evaluation.report import baselines_lines
 

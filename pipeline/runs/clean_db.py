@@ -11,6 +11,13 @@ and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`). Before the distributed stage, li
 model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
 the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
 between images that are not neighbours: those robots could not have matched).
+
+With ``loop_tol_deg`` (``--loop-check``) a pair-level pass runs first: the image pairs whose
+relative rotation breaks the rotation loops of the view graph
+(:func:`pipeline.matching.loops.loop_check`, a centralized pre-pass) lose all their links,
+reason ``loop-inconsistent``. It finds what the consistency stage cannot see: a wrong
+two-view geometry between two images of repeated structure, consistent at the level of
+features.
 """
 
 from __future__ import annotations
@@ -24,7 +31,7 @@ from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 
-__all__ = ["CleanDbResult", "clean_database", "COLMAP_MAX_ERROR_PX"]
+__all__ = ["CleanDbResult", "clean_database", "check_loop_tol", "COLMAP_MAX_ERROR_PX"]
 
 #: COLMAP's default two-view verification threshold (``max_error``, pixels)
 COLMAP_MAX_ERROR_PX = 4.0
@@ -44,6 +51,7 @@ class CleanDbResult:
     cut: dict
     resolution: dict = field(default_factory=dict)
     baselines: dict = field(default_factory=dict)
+    loop_check: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         out = {"input": str(self.input), "output": str(self.output), "images": self.images,
@@ -51,6 +59,8 @@ class CleanDbResult:
                "after": self.after, "cut": self.cut, "resolution": self.resolution}
         if self.baselines:
             out["baselines"] = self.baselines
+        if self.loop_check:
+            out["loop_check"] = self.loop_check
         return out
 
 
@@ -59,7 +69,7 @@ def clean_database(database: str | Path, out: str | Path,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
                    resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None, outputs=None,
-                   baselines: bool = False) -> CleanDbResult:
+                   baselines: bool = False, loop_tol_deg: float | None = None) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -79,6 +89,10 @@ def clean_database(database: str | Path, out: str | Path,
         together (default: each written at once)
     baselines : also run the centralized baselines on the links the rule ran on
         (``CleanDbResult.baselines``: :func:`pipeline.evaluation.report.baselines_beside`)
+    loop_tol_deg : run the pair-level loop check first with this cycle tolerance (degrees;
+        ``None``: not run): :func:`pipeline.matching.loops.loop_check` on the pairs with links
+        left after the checks above, weighted by their inlier counts; its summary is
+        ``CleanDbResult.loop_check``
 
     Returns
     -------
@@ -88,12 +102,14 @@ def clean_database(database: str | Path, out: str | Path,
     ------
     InputError
         Missing/unreadable database, a database without two-view geometries, ``out`` equal to
-        the input, a bad comm-graph file.
+        the input, a bad comm-graph file, a loop tolerance outside (0, 180) degrees.
     """
     from pipeline import colmap
     from pipeline.budget import BYTES_PER_CAMERA, BYTES_PER_ROW, COPIES_OF_READ_DATA, MemoryBudget
 
     database, out = Path(database), Path(out)
+    if loop_tol_deg is not None:
+        check_loop_tol(loop_tol_deg)
     if out.resolve() == database.resolve():
         raise InputError(f"--out {str(out)!r} is the input database; the input is never "
                          f"modified, choose a new file")
@@ -110,13 +126,14 @@ def clean_database(database: str | Path, out: str | Path,
     contents = colmap.read_database(database, check_sizes=count_tables)
     try:
         return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
-                      image_dir, outputs, baselines)
+                      image_dir, outputs, baselines, loop_tol_deg)
     finally:
         contents.close()
 
 
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
-           rerun: bool, image_dir, outputs, baselines: bool = False) -> CleanDbResult:
+           rerun: bool, image_dir, outputs, baselines: bool = False,
+           loop_tol_deg: float | None = None) -> CleanDbResult:
     """:func:`clean_database` on the database read as ``contents``."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
@@ -142,6 +159,9 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
         reason[off_graph & (reason == "")] = "not-comm-edge"
     else:
         edges = None
+    loop_section = {}
+    if loop_tol_deg is not None:
+        loop_section = _loop_pass(contents, reason, loop_tol_deg)
     model_ok = reason == ""
     model_links = links.subset(model_ok)
     # the association graph the robots start from: one-to-one links on comm edges
@@ -174,10 +194,42 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     return CleanDbResult(
         input=database, output=out, images=n, comm_edges=n_edges, links=len(links),
         before=before, after=after,
-        cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge", "resolution")},
+        cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge")
+             + (("loop-inconsistent",) if loop_tol_deg is not None else ()) + ("resolution",)},
         resolution={"method": stats.get("resolution"), **{k: stats.get(k) for k in (
             "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
-            "max_robot_memory_bytes")}}, baselines=section)
+            "max_robot_memory_bytes")}}, baselines=section, loop_check=loop_section)
+
+
+def check_loop_tol(tol_deg) -> float:
+    """``--loop-tol`` as a float, or InputError naming it (an angle in (0, 180) degrees)."""
+    from pipeline.matching.loops import DEFAULT_LOOP_TOL_DEG
+
+    try:
+        tol = float(tol_deg)
+    except (TypeError, ValueError):
+        tol = float("nan")
+    if not (np.isfinite(tol) and 0.0 < tol < 180.0):
+        raise InputError(f"--loop-tol {tol_deg!r}: the cycle tolerance is an angle in degrees "
+                         f"between 0 and 180 (default {DEFAULT_LOOP_TOL_DEG:g})")
+    return tol
+
+
+def _loop_pass(contents, reason: np.ndarray, tol_deg: float) -> dict:
+    """The pair-level loop check (:mod:`pipeline.matching.loops`) on the pairs that still have
+    links; the links of the pairs it drops get ``reason`` ``loop-inconsistent`` (in place)."""
+    from pipeline import colmap
+    from pipeline.matching.loops import loop_check
+
+    links, n = contents.links, len(contents.names)
+    pairs, rotations, inliers = colmap.relative_rotations(contents)
+    key = links.cam_i * n + links.cam_j
+    live = np.isin(pairs[:, 0] * n + pairs[:, 1], key[reason == ""])
+    check = loop_check(n, pairs[live], rotations[live], inliers[live], tol_deg)
+    bad = pairs[live][check.inconsistent]
+    reason[np.isin(key, bad[:, 0] * n + bad[:, 1]) & (reason == "")] = "loop-inconsistent"
+    return {"tol_deg": float(tol_deg), **check.summary(),
+            "links_cut": int((reason == "loop-inconsistent").sum())}
 
 
 def _link_weight(contents, links) -> np.ndarray:

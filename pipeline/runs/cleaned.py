@@ -6,7 +6,7 @@ format. Beside them they write, with the same stem:
 
 - ``STEM.links.csv`` — the run-output ``links.csv`` (docs/DESIGN.md "Run outputs"): every link read,
   ``kept`` or ``deleted`` with its reason (``not-one-to-one``, ``not-comm-edge``,
-  ``resolution``) and the resolution round that cut it; camera ``i`` is the ``i``-th image name
+  ``loop-inconsistent``, ``resolution``) and the resolution round that cut it; camera ``i`` is the ``i``-th image name
   in sorted order. ``resolve --links STEM.links.csv`` reads it back.
 - ``STEM.rrd`` — a Rerun recording: each image (from ``--image-dir``, else a gray canvas of the
   camera's size) with its keypoints coloured by status, the conflict graph, the report. The

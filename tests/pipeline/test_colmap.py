@@ -165,6 +165,38 @@ def test_image_without_keypoints_and_six_column_keypoints(tmp_path):
     assert _link_set(contents.links) == {(0, 0, 1, 1), (0, 2, 1, 3)}
 
 
+def test_relative_rotations_of_a_rendered_pose_graph(tmp_path):
+    """Three calibrated cameras round a point cloud: each pair's rotation from its stored
+    geometry is the true ``R_j R_iᵀ`` (to 0.5°), in name order whatever the stored order."""
+    from scipy.spatial.transform import Rotation
+
+    from data_synth.formations import look_at
+
+    rng = np.random.default_rng(2)
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    poses = [look_at([8 * np.sin(a), -8 * np.cos(a), 1.0], [0, 0, 0])
+             for a in np.deg2rad([-25.0, 0.0, 30.0])]
+    X = rng.uniform(-1.5, 1.5, size=(50, 3))
+    kps = []
+    for R, t in poses:
+        x = (K @ (R @ X.T + t[:, None])).T
+        kps.append((x[:, :2] / x[:, 2:]).astype(np.float32))
+    # names sort as 2, 0, 1: the stored image order is not the name order
+    views = [View(name, np.zeros((240, 320, 3), np.uint8), K) for name in ("b", "c", "a")]
+    feats = [Features(k, np.zeros((50, 128), np.float32), np.ones(50, np.float32), "sift")
+             for k in kps]
+    rows = [(i, p, j, p) for i, j in ((0, 1), (0, 2), (1, 2)) for p in range(50)]
+    colmap.write_database(tmp_path / "r.db", views, feats, Links(*np.array(rows).T))
+    contents = colmap.read_database(tmp_path / "r.db")
+    pairs, rotations, inliers = colmap.relative_rotations(contents)
+    assert pairs.tolist() == [[0, 1], [0, 2], [1, 2]] and inliers.tolist() == [50, 50, 50]
+    camera_of = [2, 0, 1]  # camera i (name order) is view camera_of[i]
+    for (i, j), R in zip(pairs.tolist(), rotations, strict=True):
+        true = poses[camera_of[j]][0] @ poses[camera_of[i]][0].T
+        err = Rotation.from_matrix(R @ true.T).magnitude()
+        assert np.degrees(err) < 0.5, (i, j)
+
+
 def test_database_without_two_view_geometries(tmp_path):
     views, feats = _views_and_features(n=2)
     path = colmap.write_database(tmp_path / "raw.db", views, feats,

@@ -230,3 +230,84 @@ def test_writes_links_csv_and_recording_beside_the_database(tmp_path, capsys):
     assert main(["resolve", "--links", str(tmp_path / "clean.links.csv"),
                  "--out", str(tmp_path / "again.csv")]) == 0
     assert "deleted: 0 links" in capsys.readouterr().out
+
+
+def _db_with_a_twin_pair(path, n=5, points=60, twin_points=25):
+    """Five calibrated cameras on an arc round a point cloud, every pair matched on the true
+    projections, except pair (0, 3): its matches are what a twin of the scene would give (image
+    3's side seen from a pose turned 45° about the vertical axis), a valid but wrong two-view
+    geometry, with fewer inliers than the right pairs (as the wrong pairs of the rendered ring
+    have: 15-30 against 100-500). Each pair's points are its own, so no set holds two
+    features of one image."""
+    from data_synth.formations import look_at
+
+    rng = np.random.default_rng(1)
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    poses = [look_at([8 * np.sin(a), -8 * np.cos(a), 1.0], [0, 0, 0])
+             for a in np.deg2rad(np.linspace(-40, 40, n))]
+    a = np.deg2rad(45)
+    twin = (poses[3][0] @ np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0],
+                                    [0, 0, 1]]), poses[3][1])
+
+    def project(pose, X):
+        x = (K @ (pose[0] @ X.T + pose[1][:, None])).T
+        return (x[:, :2] / x[:, 2:]).astype(np.float32)
+
+    kps = [[] for _ in range(n)]
+    rows, twin_rows = [], []
+    for i in range(n):
+        for j in range(i + 1, n):
+            X = rng.uniform(-1.5, 1.5, size=(twin_points if (i, j) == (0, 3) else points, 3))
+            pj = twin if (i, j) == (0, 3) else poses[j]
+            fi, fj = sum(len(k) for k in kps[i]), sum(len(k) for k in kps[j])
+            kps[i].append(project(poses[i], X))
+            kps[j].append(project(pj, X))
+            got = [(i, fi + p, j, fj + p) for p in range(len(X))]
+            (twin_rows if (i, j) == (0, 3) else rows).extend(got)
+    views = [View(f"view_{k}.jpg", np.zeros((240, 320, 3), np.uint8), K) for k in range(n)]
+    feats = [Features(np.concatenate(k), np.zeros((sum(map(len, k)), 128), np.float32),
+                      np.ones(sum(map(len, k)), np.float32), "sift") for k in kps]
+    ci, fi, cj, fj = np.array(rows + twin_rows).T
+    colmap.write_database(path, views, feats, Links(ci, fi, cj, fj))
+    return len(twin_rows)
+
+
+def test_loop_check_drops_the_twin_pair(tmp_path, capsys):
+    """--loop-check: the pair whose rotation breaks its triangles loses all its links (reason
+    loop-inconsistent), every other pair keeps all of its; without it nothing is cut."""
+    src = tmp_path / "twin.db"
+    n_twin = _db_with_a_twin_pair(src)
+    out, report = tmp_path / "loop.db", tmp_path / "loop.json"
+    assert main(["clean-db", str(src), "--out", str(out), "--report", str(report),
+                 "--loop-check", "--no-rerun"]) == 0
+    assert "loop check: 1 of 10 image pairs break their rotation loops" in capsys.readouterr().out
+    summary = json.loads(report.read_text())
+    assert summary["cut"]["loop-inconsistent"] == n_twin
+    assert summary["loop_check"]["pairs_dropped"] == 1
+    cleaned = colmap.read_database(out)
+    pairs = set(zip(cleaned.links.cam_i.tolist(), cleaned.links.cam_j.tolist(), strict=True))
+    assert pairs == {(i, j) for i in range(5) for j in range(i + 1, 5)} - {(0, 3)}
+    assert len(cleaned.links) == len(colmap.read_database(src).links) - n_twin
+
+    plain = tmp_path / "plain.json"
+    assert main(["clean-db", str(src), "--out", str(tmp_path / "plain.db"), "--report",
+                 str(plain), "--no-rerun"]) == 0
+    summary = json.loads(plain.read_text())
+    assert "loop-inconsistent" not in summary["cut"] and "loop_check" not in summary
+    assert sum(summary["cut"].values()) == 0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--loop-tol", "10"], "without --loop-check"),
+    (["--loop-check", "--loop-tol", "0"], "between 0 and 180"),
+    (["--loop-check", "--loop-tol", "180"], "between 0 and 180"),
+    (["--loop-check", "--loop-tol", "nan"], "between 0 and 180"),
+    (["--loop-check", "--loop-tol", "ten"], "--loop-tol 'ten'"),
+])
+def test_bad_loop_options_are_named(tmp_path, capsys, argv, message):
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    out = tmp_path / "o.db"
+    assert main(["clean-db", str(src), "--out", str(out), "--no-rerun", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
