@@ -354,3 +354,27 @@ def test_zenoh_online_steps_need_no_fusion(tmp_path, capsys):
     assert main(["run-formation", "--steps", "2", "--transport", "zenoh", "--out",
                  str(tmp_path / "x")]) == 2
     assert "add --no-fusion" in capsys.readouterr().err
+
+
+def test_zenoh_sequence_steps_equal_the_simulators(tmp_path):
+    """``run-images DIR --sequence --transport zenoh``: photographs (no poses) of two robots,
+    each step's stage as robot processes; the same links, steps and reasons as the simulator."""
+    import shutil
+
+    sceaux = Path(__file__).parents[2] / "data" / "sceaux_castle_640"
+    files = sorted(sceaux.glob("*.JPG"))
+    root = tmp_path / "team"
+    for robot, idx in (("a", [0, 2, 4]), ("b", [1, 3, 5])):
+        (root / robot).mkdir(parents=True)
+        for k, i in enumerate(idx):
+            shutil.copy(files[i], root / robot / f"{k}.jpg")
+    shutil.copy(sceaux / "K.txt", root / "K.txt")
+    args = ["run-images", str(root), "--sequence", "--window", "2", "--max-size", "200",
+            "--features", "sift", "--max-features", "200", "--matcher", "opencv", "--graph",
+            "complete", "--no-rerun"]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*args, "--transport", "zenoh", "--out", str(tmp_path / "zen")]) == 0
+    for name in ("links.csv", "link_steps.csv"):
+        sim = Path(tmp_path / "sim" / name).read_text().splitlines()
+        assert Path(tmp_path / "zen" / name).read_text().splitlines() == sim, name
+    assert len(sim) > 100
