@@ -320,7 +320,8 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     from pipeline.types import Links
 
     rule = get_rule(resolution)
-    if rule.needs_evidence and solve_small_sets:
+    leaves = rule.name == "evidence"   # the rule whose small sets the caller may solve
+    if leaves and solve_small_sets:
         raise InputError(f"the {rule.name} rule over zenoh in an online run: its small "
                          "conflictive sets are gathered at their roots (the robots hold links, "
                          "not keypoints); drop --no-gather")
@@ -330,13 +331,13 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     sub = Links(where[links.cam_i], links.feat_i, where[links.cam_j], links.feat_j,
                 links.quality)
     opts = team_options(resolution=rule.name)
-    if rule.needs_evidence:
+    if leaves:
         opts.update(solve_small_sets=False, bundle_budget=bundle_budget(len(m)))
     with tempfile.TemporaryDirectory(prefix="online-step-") as work:
         paths = write_robot_links(Path(work), sub, len(used))
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
                                  workdir=work, links=sub)
-    if rule.needs_evidence:
+    if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])
     return res
 

@@ -327,7 +327,7 @@ def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceau
     assert not (tmp_path / "z").exists()
 
 
-@pytest.mark.parametrize("resolution", ["evidence", "paper"])
+@pytest.mark.parametrize("resolution", ["evidence", "paper", "sync"])
 def test_zenoh_online_steps_equal_the_simulators(resolution, tmp_path):
     """``run-formation --steps N --transport zenoh``: each step's stage runs as robot processes
     (one per frame of the step's sub-problem); every link is made, kept and cut at the same
