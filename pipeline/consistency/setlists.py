@@ -57,6 +57,7 @@ import scipy.sparse as sp
 from pipeline.consistency.detection import reset_detection
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.sync import id_dtype
 from pipeline.transport import Message
 
 __all__ = ["SetListState", "start_setlists", "setlists_step", "finish_setlists", "KIND",
@@ -119,10 +120,6 @@ class SetListState:
                                            self.heard, self.large))
 
 
-def _id_dtype(robot: Robot):
-    return np.int32 if robot.m_total < 2**31 else np.int64
-
-
 def _measure(robot: Robot) -> None:
     robot.peak_memory_bytes = max(robot.peak_memory_bytes,
                                   robot.memory_bytes() + robot.setlists.nbytes())
@@ -142,7 +139,7 @@ def _send_new(robot: Robot, send) -> None:
     if sel.size == 0:
         return
     nbr = robot.link_nbr[sel]  # the link table is sorted by neighbour
-    idt = _id_dtype(robot)
+    idt = id_dtype(robot.m_total)
     for part in np.split(sel, np.flatnonzero(np.diff(nbr)) + 1):
         r = np.unique(robot.link_r[part]).astype(np.int64)
         send(int(robot.link_nbr[part[0]]), KIND,

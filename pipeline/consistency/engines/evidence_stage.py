@@ -79,7 +79,7 @@ from pipeline.consistency.setlists import (
     setlists_step,
     start_setlists,
 )
-from pipeline.consistency.sync import CASE_SYNC, equip_sync
+from pipeline.consistency.sync import CASE_SYNC, equip_sync, id_dtype
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.transport.simulated import Network
 
@@ -122,7 +122,7 @@ def run_setlists_batched(robots: list[Robot], network: Transport, budget: int, o
     if n == 0:
         return 0
     M = np.int64(robots[0].m_total)
-    idb = 4 if int(M) < 2**31 else 8
+    idb = id_dtype(int(M)).itemsize
     for rb in robots:
         reset_detection(rb, 1)
         rb.stopped = not rb.active.any()
