@@ -24,6 +24,8 @@ rule (only new links are cut), for comparison. ``--hold H``: a frame's links sta
 after it leaves the matching window (default ``window - 1``; ``--hold 0``: the earlier rule). ``--no-weigh``: only the sets the
 detection finds conflictive are weighed by the rule (the earlier rule; default: every set the
 step's new links touch, step 2b of :mod:`pipeline.consistency.engines.online`).
+``--no-gather``: the rule's small conflictive sets solved by its own flood of their bundles
+to every robot of the set (default: gathered at each set's root, the same cuts).
 
 Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
 online one it is compared with.

@@ -173,7 +173,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
                    baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
-                    keypoints=contents.keypoints) if get_rule(resolution).needs_evidence else None
+                    keypoints=contents.keypoints) if rule.needs_evidence else None
     # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
     result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
     idx = np.flatnonzero(model_ok)

@@ -227,14 +227,13 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
     from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
     from pipeline.matching.pairs import match_edges
+    from pipeline.runs.transports import get_transport
 
     feature_options = dict(feature_options or {})
     match_options = dict(match_options or {})
     radius = feature_options.pop("merge_radius", None)
     radius = MERGE_RADIUS_PX if radius is None else radius
     steps = len(step_edges)
-    from pipeline.runs.transports import get_transport
-
     stage = get_transport(transport).load().online_stage
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
                            weigh=weigh, gather=gather, stage=stage)

@@ -281,9 +281,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
             if getattr(rb, "evidence", None) is not None:
                 rb.evidence.bundle_budget = int(bundle_budget)
     if not solve_small_sets:
-        if rule.name != "evidence":
-            raise InputError(f"solve_small_sets=False: only the evidence rule leaves its small "
-                             f"sets to the caller, not {rule.name!r}")
+        if not rule.set_lists:
+            raise InputError(f"solve_small_sets=False: only a rule with sets of at most B "
+                             f"features (evidence) leaves them to the caller, not {rule.name!r}")
         for rb in robots:
             rb.evidence.solve_small = False
     m_total = int(fpc.sum())

@@ -270,7 +270,7 @@ class OnlineAssociation:
     stage : callable or None — runs the rule's stage of a step on its sub-problem:
         ``stage(features_per_image, links, resolution, *, solve_small_sets, keypoints,
         projections) -> ConsistencyResult`` with the images as cameras and images sharing a
-        link as neighbours; None: the simulator (:func:`resolve_conflicts`). The job
+        link as neighbours; None: the simulator (:func:`simulated_stage`). The job
         ``online_stage`` of a transport (:mod:`pipeline.runs.transports`), e.g. robot
         processes over Zenoh; every decision is the rule's, so the same on any transport
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline import stages
+from pipeline.consistency.engines.online import simulated_stage
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
 __all__ = ["formation", "images", "online_stage", "resolve"]
@@ -44,15 +45,9 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
     return ImagesRobots(feats, matches, links)
 
 
-def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
-                 keypoints=None, projections=None):
-    """The rule's stage of one online step on its sub-problem (frames as cameras, cameras
-    sharing a link as neighbours) on the simulated network: the online stage's own default."""
-    from pipeline.consistency.engines.online import simulated_stage
-
-    return simulated_stage(features_per_camera, links, resolution,
-                           solve_small_sets=solve_small_sets, keypoints=keypoints,
-                           projections=projections)
+#: the rule's stage of one online step on its sub-problem (frames as cameras, cameras
+#: sharing a link as neighbours) on the simulated network: the online stage's own default
+online_stage = simulated_stage
 
 
 def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):

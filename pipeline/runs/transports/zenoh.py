@@ -320,7 +320,7 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     from pipeline.types import Links
 
     rule = get_rule(resolution)
-    leaves = rule.name == "evidence"   # the rule whose small sets the caller may solve
+    leaves = rule.set_lists   # a rule whose small sets the caller may solve (evidence)
     if leaves and solve_small_sets:
         raise InputError(f"the {rule.name} rule over zenoh in an online run: its small "
                          "conflictive sets are gathered at their roots (the robots hold links, "
