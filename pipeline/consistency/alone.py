@@ -29,6 +29,7 @@ from pipeline.consistency.reliable import (
 )
 from pipeline.consistency.resolution import finish_resolution
 from pipeline.consistency.robot import Robot
+from pipeline.consistency.roots import roots_step, start_roots
 from pipeline.consistency.setlists import (
     bundle_budget,
     finish_setlists,
@@ -162,6 +163,9 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
        nothing is in flight, when every set is solved unless a robot was lost. Skipped when
        the robot's :class:`~.evidence.EvidenceState` says ``solve_small = False`` (every
        robot alike: the caller solves those sets, e.g. the online stage at their roots).
+    2b. With ``gather_free``, or ``gather_conflictive`` and ``CONFLICT`` (every robot
+       alike): the small sets solved at their roots (:mod:`.roots`), the wave ending it when
+       nothing is in flight. A loss there is an error (a set may be left unsolved).
     3. With ``LARGE``: the robot hides its links outside large sets and runs the ``sync``
        merge alone (:func:`.sync_alone.run_sync_locally`, its own channel and wave, both
        started at the same round by every robot), then shows them again.
@@ -212,6 +216,18 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
         if restarts > run.n:
             raise RuntimeError(f"robot {robot.id}: more than {run.n} restarts after losses")
     log.repeated_detections = restarts
+    ev = robot.evidence
+    if ev.gather_free or (ev.gather_conflictive and bits & CONFLICT):
+        t, rbits, begin = run.phase(
+            "roots", lambda rb, send: start_roots(rb, send),
+            lambda rb, msgs, send, now, t: roots_step(rb, msgs, send, t),
+            lambda: LOST if st.lost_in_phase else 0,
+            memory=lambda: robot.memory_bytes() + robot.roots.nbytes() + chan.memory_bytes())
+        log.resolution_rounds += t
+        log.phases.append(dict(phase="roots", start_round=begin, rounds=t, bits=int(rbits)))
+        if rbits & LOST:  # a set that lost a robot may stay unsolved: said, never hidden
+            raise RuntimeError(f"robot {robot.id}: a robot was lost while the sets were "
+                               "solved at their roots")
     merge = None
     if bits & LARGE:
         alive = robot.link_alive.copy()

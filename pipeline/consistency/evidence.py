@@ -79,7 +79,7 @@ __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "start_
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
            "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "set_geometry",
-           "solve_set", "cut_own_side", "finish_evidence", "evidence_pass", "reexamine_sets"]
+           "solve_set", "cut_own_side", "send_bundle_items", "read_bundle_items", "finish_evidence", "evidence_pass", "reexamine_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -125,6 +125,10 @@ class EvidenceState:
     #: the stage solves the conflictive sets of at most ``B`` features (its phase 2);
     #: ``False``: it leaves them to its caller (the online stage gathers them at a root)
     solve_small: bool = True
+    #: the small sets solved at their roots (:mod:`.roots`): the conflictive ones (with
+    #: ``solve_small`` off) and the conflict-free ones
+    gather_conflictive: bool = False
+    gather_free: bool = False
 
     def keep(self, lab: int, g: int, bundle: tuple) -> None:
         """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""
@@ -388,21 +392,37 @@ def _send_bundles(robot: Robot, out: dict, send: Send) -> None:
         items = out[j]
         if not items:
             continue
-        lab = np.array([x for x, _ in items], dtype=np.int64)
-        feat = np.array([g for _, g in items], dtype=np.int64)
-        bund = [st.bundles[x][g] for x, g in items]
-        payload = {"set": lab, "feat": feat,
-                   "kp": np.stack([bb[0] for bb in bund]).astype(np.float32),
-                   "deg": np.array([bb[1].size for bb in bund], dtype=np.int32),
-                   "nbr": np.concatenate([bb[1] for bb in bund]).astype(np.int64),
-                   "w": np.concatenate([bb[2] for bb in bund]).astype(np.float64),
-                   "cam": np.array([bb[3] for bb in bund], dtype=np.int32)}
-        has_P = np.array([bb[4] is not None for bb in bund], dtype=bool)
-        if has_P.any():
-            payload["P"] = np.stack([bb[4] for bb in bund if bb[4] is not None]).astype(np.float64)
-            if not has_P.all():
-                payload["has_P"] = has_P
-        send(j, "bundle", payload)
+        send(j, "bundle", send_bundle_items([(x, g, st.bundles[x][g]) for x, g in items]))
+
+
+def send_bundle_items(items: list) -> dict:
+    """The payload of a ``bundle`` message (module docstring) holding ``items``, a list of
+    ``(set label, feature gid, bundle)``."""
+    bund = [bb for _, _, bb in items]
+    payload = {"set": np.array([x for x, _, _ in items], dtype=np.int64),
+               "feat": np.array([g for _, g, _ in items], dtype=np.int64),
+               "kp": np.stack([bb[0] for bb in bund]).astype(np.float32),
+               "deg": np.array([bb[1].size for bb in bund], dtype=np.int32),
+               "nbr": np.concatenate([bb[1] for bb in bund]).astype(np.int64),
+               "w": np.concatenate([bb[2] for bb in bund]).astype(np.float64),
+               "cam": np.array([bb[3] for bb in bund], dtype=np.int32)}
+    has_P = np.array([bb[4] is not None for bb in bund], dtype=bool)
+    if has_P.any():
+        payload["P"] = np.stack([bb[4] for bb in bund if bb[4] is not None]).astype(np.float64)
+        if not has_P.all():
+            payload["has_P"] = has_P
+    return payload
+
+
+def read_bundle_items(p: dict) -> list:
+    """The ``(set label, feature gid, bundle)`` items of a ``bundle`` payload, each bundle
+    ``(kp, nbr, w, cam, P)`` exactly as its robot made it."""
+    ends = np.r_[0, np.cumsum(p["deg"])]
+    proj = _projections(p)
+    return [(lab, g, (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]], p["w"][ends[k]:ends[k + 1]],
+                      int(p["cam"][k]), proj[k]))
+            for k, (lab, g) in enumerate(zip(p["set"].tolist(), p["feat"].tolist(),
+                                             strict=True))]
 
 
 def _projections(p: dict) -> list:
@@ -425,15 +445,11 @@ def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -
     for msg in inbox:
         if msg.kind != "bundle":
             continue
-        p = msg.payload
-        ends = np.r_[0, np.cumsum(p["deg"])]
-        proj = _projections(p)
-        for k, (lab, g) in enumerate(zip(p["set"].tolist(), p["feat"].tolist(), strict=True)):
+        for lab, g, bundle in read_bundle_items(msg.payload):
             have = st.bundles.get(lab)
             if have is None or g in have:
                 continue
-            st.keep(lab, g, (p["kp"][k], p["nbr"][ends[k]:ends[k + 1]],
-                             p["w"][ends[k]:ends[k + 1]], int(p["cam"][k]), proj[k]))
+            st.keep(lab, g, bundle)
             for j in st.set_nbrs[lab]:
                 if j != msg.src:
                     out.setdefault(j, []).append((lab, g))

@@ -171,7 +171,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                       resolution: str = DEFAULT_RESOLUTION,
                       link_weight=None, keypoints=None, projections=None,
                       engine: str = "auto", bundle_budget: int | None = None,
-                      solve_small_sets: bool = True) -> ConsistencyResult:
+                      solve_small_sets: bool = True, gather_conflictive: bool = False,
+                      gather_free: bool = False) -> ConsistencyResult:
     """Make the association graph conflict-free with robots that only talk to neighbours.
 
     Parameters
@@ -221,6 +222,13 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         leaves the conflictive sets of at most ``B`` features as they are, for a caller that
         solves them itself (the online stage, :mod:`.online`); the result is then not
         conflict-free.
+    gather_conflictive, gather_free : bool
+        ``evidence`` only: the robots solve the conflictive sets of at most ``B`` features
+        (``gather_conflictive``, instead of the rule's flood: ``solve_small_sets`` is then
+        off) and the conflict-free ones (``gather_free``) at their roots, the robot of each
+        set's smallest feature (:mod:`pipeline.consistency.roots`: bundles up a tree, the cut
+        links down; the online stage's step 2b run by the robots). ``stats['roots']``: its
+        rounds and sets.
 
     Returns
     -------
@@ -286,6 +294,15 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
                              f"features (evidence) leaves them to the caller, not {rule.name!r}")
         for rb in robots:
             rb.evidence.solve_small = False
+    if gather_conflictive or gather_free:
+        if not rule.set_lists:
+            raise InputError(f"gather_conflictive / gather_free: only a rule with sets of at "
+                             f"most B features (evidence) solves them at roots, not "
+                             f"{rule.name!r}")
+        for rb in robots:
+            rb.evidence.gather_conflictive = bool(gather_conflictive)
+            rb.evidence.gather_free = bool(gather_free)
+            rb.evidence.solve_small = rb.evidence.solve_small and not gather_conflictive
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:
@@ -305,6 +322,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     for key in ("large_sets", "bundle_budget", "merge_rounds"):
         if key in stage:
             result.stats[key] = int(stage[key])
+    if "roots" in stage:
+        result.stats["roots"] = dict(stage["roots"])
     return result
 
 

@@ -66,6 +66,7 @@ import scipy.sparse as sp
 from pipeline.consistency import evidence
 from pipeline.consistency.detection import reset_detection
 from pipeline.consistency.engines import batched_evidence
+from pipeline.consistency.engines.gather import run_roots
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.engines.sync_batched import run_sync, run_sync_batched
 from pipeline.consistency.keys import ranges
@@ -266,6 +267,14 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
         res = run(robots, network, on_round=shift)
         t += res["rounds"]
         res_sets = res["conflictive_sets"]
+    roots = None
+    if any(rb.evidence.gather_conflictive or rb.evidence.gather_free for rb in robots):
+        c0 = network.counters()
+        roots = run_roots(robots, network, _after(on_round, t))
+        c1 = network.counters()
+        roots.update(start_round=t, messages=c1["messages"] - c0["messages"],
+                     bytes=c1["bytes"] - c0["bytes"])
+        t += roots["rounds"]
     large = [rb.setlists.large for rb in robots]
     n_large = len({int(lab) for rb, lg in zip(robots, large, strict=True)
                    for lab in rb.setlists.ids[np.searchsorted(rb.setlists.r,
@@ -287,8 +296,11 @@ def _stage(robots: list[Robot], network: Transport, on_round, batched: bool) -> 
             rb.link_alive = rb.link_alive | h
     for rb in robots:  # each robot's peak over the three phases (each measured as it ran)
         network.note_memory(rb.id, rb.peak_memory_bytes)
-    return dict(rounds=t, detection_rounds=det, conflictive_sets=res_sets,
-                large_sets=n_large, bundle_budget=B, merge_rounds=merge_rounds)
+    out = dict(rounds=t, detection_rounds=det, conflictive_sets=res_sets,
+               large_sets=n_large, bundle_budget=B, merge_rounds=merge_rounds)
+    if roots is not None:
+        out["roots"] = roots
+    return out
 
 
 def run_evidence_stage(robots: list[Robot], network: Transport, on_round=None) -> dict:

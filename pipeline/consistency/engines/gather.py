@@ -30,9 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from pipeline.consistency.engines.phases import run_quiet_phase
+from pipeline.consistency.robot import Robot
+from pipeline.consistency.roots import roots_step, start_roots
 from pipeline.transport import HEADER_BYTES
 
-__all__ = ["RootSolution", "set_weights", "solve_at_roots"]
+__all__ = ["RootSolution", "run_roots", "set_weights", "solve_at_roots"]
 
 
 @dataclass
@@ -212,3 +215,16 @@ def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
     return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
+
+
+def run_roots(robots: list[Robot], network, on_round=None, t0: int = 0) -> dict:
+    """The protocol on every robot of the simulator, each on its own inbox, until nothing is
+    in flight (the end a robot alone learns from the termination wave). Returns ``rounds``,
+    ``sets`` (solved, counted at their roots); RuntimeError if a set stayed unsolved."""
+    rooted = []
+    t = run_quiet_phase(robots, network, lambda rb, send: rooted.append(start_roots(rb, send)),
+                        roots_step, on_round, t0, cap=3 * len(robots) + 6, what="roots")
+    left = [rb.id for rb in robots if set(rb.roots.own) - rb.roots.answered]
+    if left:
+        raise RuntimeError(f"robots {left} did not learn the solution of all their sets")
+    return dict(rounds=t, sets=int(sum(rooted)))

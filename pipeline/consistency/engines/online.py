@@ -273,6 +273,11 @@ class OnlineAssociation:
         link as neighbours; None: the simulator (:func:`simulated_stage`). The job
         ``online_stage`` of a transport (:mod:`pipeline.runs.transports`), e.g. robot
         processes over Zenoh; every decision is the rule's, so the same on any transport
+    robots_solve : bool — the sets of steps 2 (with ``gather``) and 2b are solved by the
+        stage's robots at their roots (:mod:`pipeline.consistency.roots`; the stage is then
+        called with ``gather_conflictive``, ``gather_free``), as a transport whose robots are
+        processes must; False (default): by the simulator's batched solution of the same
+        protocol (:func:`.gather.solve_at_roots`: the same cuts, property-tested)
 
     Examples
     --------
@@ -293,7 +298,7 @@ class OnlineAssociation:
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
                  overturn: bool = True, hold: int | None = None, weigh: bool = True,
-                 gather: bool = True, stage=None):
+                 gather: bool = True, stage=None, robots_solve: bool = False):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -307,6 +312,7 @@ class OnlineAssociation:
         self.weigh = bool(weigh)
         self.gather = bool(gather)
         self.stage = stage or simulated_stage
+        self.robots_solve = bool(robots_solve)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -586,6 +592,10 @@ class OnlineAssociation:
                       projections=[self.projection[g] for g in images]
                       if all(self.projection[g] is not None for g in images) else None)
         gather = self.gather and self.rule.name == WEIGHED_RULE
+        by_robots = self.robots_solve and self.rule.name == WEIGHED_RULE \
+            and (gather or self.weigh)
+        if by_robots:
+            kw.update(gather_conflictive=gather, gather_free=self.weigh)
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats
@@ -608,7 +618,8 @@ class OnlineAssociation:
         # small conflictive ones are solved there when gathered
         if (self.weigh or gather) and self.rule.name == WEIGHED_RULE:
             self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec,
-                        st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather)
+                        st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather,
+                        solved=res if by_robots else None)
         # history check and repair (step 3), then the new labels (step 4)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
         rec["cut_history"] = int(hist_cut)
@@ -619,7 +630,7 @@ class OnlineAssociation:
 
     def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
                rec: dict, budget: int | None = None, *, conflict_free: bool = True,
-               conflictive: bool = False) -> None:
+               conflictive: bool = False, solved=None) -> None:
         """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
         the detection found conflict-free (``conflict_free``) and, with ``conflictive``, on
         its conflictive sets of at most ``budget`` features (the rule's solution of step 2,
@@ -638,7 +649,12 @@ class OnlineAssociation:
         apart), it would cut nothing. The sets are solved at their roots
         (:func:`.gather.solve_at_roots`: bundles up a shortest-path tree, the cut links back
         down; its module docstring gives the counts); each robot cuts its side. A cut
-        history link is ignored, as in the rule's pass (it stands for a retired piece)."""
+        history link is ignored, as in the rule's pass (it stands for a retired piece).
+
+        ``solved``: the stage's result when its robots solved these sets themselves
+        (``robots_solve``): their cuts are already made and counted as the rule's; here they
+        are counted as this step's (``cut_weigh``, ``weighed_sets``; the bytes are in the
+        stage's)."""
         comp = self._components(sub, a_all, b_all)
         posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
         dup = np.asarray(_duplicated_keys(comp, img_of), np.int64)
@@ -664,20 +680,37 @@ class OnlineAssociation:
                                         np.float32) for g in images.tolist()]).astype(np.float64) \
             if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
         is_real = np.arange(len(a_all)) < n_real          # a cut history link is ignored
-        sol = solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_img, unposed,
-                             is_real, len(images))
-        ks, cut = sol.links, sol.cut
-        in_dup = np.isin(sol.set_of, dup)                  # a link of a conflictive set
+        if solved is None:
+            sol = solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_img, unposed,
+                                 is_real, len(images))
+            ks, cut, set_of, sets = sol.links, sol.cut, sol.set_of, sol.sets
+        else:  # cut by the stage's robots (and counted in its rounds, messages and bytes)
+            ks = np.flatnonzero(on)
+            ks = ks[np.argsort(comp[ia[ks]], kind="stable")]
+            cut = np.asarray(solved.deleted, bool)[ks]
+            set_of = comp[ia[ks]]
+            sets = np.unique(set_of)
+        in_dup = np.isin(set_of, dup)                      # a link of a conflictive set
         cut_ids = real[ks[cut & is_real[ks]]]
         self._cut(cut_ids, str(self.rule.name), t)
         n_rule = int((cut & is_real[ks] & in_dup).sum())
-        n_dup = int(np.isin(sol.sets, dup).sum())
+        n_dup = int(np.isin(sets, dup).sum())
+        a_s, b_s = a_all[ks], b_all[ks]
+        if solved is not None:  # the stage counted all its cuts, and their ends, as the rule's
+            rec["cut_rule"] -= int(len(cut_ids))
+            rec["conflictive_features"] -= int(len(np.unique(np.r_[a_s[cut], b_s[cut]])))
         rec["cut_rule"] += n_rule
         rec["conflictive_sets"] += n_dup
-        rec["conflictive_features"] += int(len(np.unique(np.r_[sol.a[cut & in_dup],
-                                                                sol.b[cut & in_dup]])))
-        rec.update(weighed_sets=int(len(sol.sets)) - n_dup, cut_weigh=int(len(cut_ids)) - n_rule,
-                   weigh_rounds=sol.rounds, weigh_messages=sol.messages, weigh_bytes=sol.nbytes)
+        rec["conflictive_features"] += int(len(np.unique(np.r_[a_s[cut & in_dup],
+                                                                b_s[cut & in_dup]])))
+        rec.update(weighed_sets=int(len(sets)) - n_dup, cut_weigh=int(len(cut_ids)) - n_rule)
+        if solved is not None:
+            roots = solved.stats.get("roots", {})
+            rec.update(weigh_rounds=int(roots.get("rounds", 0)),
+                       weigh_messages=int(roots.get("messages", 0)),
+                       weigh_bytes=int(roots.get("bytes", 0)))
+            return
+        rec.update(weigh_rounds=sol.rounds, weigh_messages=sol.messages, weigh_bytes=sol.nbytes)
         rec["resolution_rounds"] = max(rec["resolution_rounds"], sol.rounds)
         rec["messages"] += sol.messages
         rec["bytes"] += sol.nbytes
@@ -1001,11 +1034,13 @@ def _overlapping_runs(group, robot, lo, hi) -> list[int]:
 
 
 def simulated_stage(features_per_image, links: Links, resolution: str, *,
-                     solve_small_sets: bool = True, keypoints=None, projections=None):
+                     solve_small_sets: bool = True, keypoints=None, projections=None,
+                     gather_conflictive: bool = False, gather_free: bool = False):
     """The rule's stage of a step on the simulated network (the default ``stage``)."""
     return resolve_conflicts(features_per_image, None, links, resolution=resolution,
                              solve_small_sets=solve_small_sets, keypoints=keypoints,
-                             projections=projections)
+                             projections=projections, gather_conflictive=gather_conflictive,
+                             gather_free=gather_free)
 
 
 def _duplicated_keys(group: np.ndarray, item: np.ndarray) -> list[int]:

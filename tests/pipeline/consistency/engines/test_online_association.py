@@ -494,3 +494,25 @@ def test_gathering_the_small_conflictive_sets_decides_as_the_rules_flood(posed, 
         assert getattr(g.links, name).tolist() == getattr(f.links, name).tolist(), name
     for key in ("cut_rule", "cut_weigh", "cut_history", "conflictive_sets", "weighed_sets"):
         assert [r[key] for r in rg] == [r[key] for r in rf], key
+
+
+@pytest.mark.parametrize("posed", [False, True])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_the_sets_solved_by_the_robots_at_their_roots_are_the_batched_solution(posed, data):
+    """``robots_solve``: the stage's robots solve the sets of steps 2 and 2b at their roots
+    (pipeline.consistency.roots, every robot on its own inbox in the simulator), as robot
+    processes do over a middleware; the default is the batched solution of the same
+    protocol (engines.gather.solve_at_roots). Same cuts, steps, reasons and counts of sets."""
+    window, hold, stream = data.draw(posed_streams() if posed else streams())
+    runs = []
+    for robots_solve in (True, False):
+        oa = OnlineAssociation(window, hold=hold, robots_solve=robots_solve)
+        runs.append((oa, [oa.add_step(frames, links) for frames, links in stream]))
+    (r, rr), (b, rb) = runs
+    for name in ("kept", "reason", "step_cut"):
+        assert getattr(r.links, name).tolist() == getattr(b.links, name).tolist(), name
+    for key in ("cut", "cut_rule", "cut_weigh", "cut_history", "conflictive_sets",
+                "conflictive_features", "weighed_sets"):
+        assert [x[key] for x in rr] == [x[key] for x in rb], key
+    assert r.is_conflict_free()
