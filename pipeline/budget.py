@@ -64,9 +64,16 @@ BYTES_PER_ENTRY = 36
 BYTES_PER_LIST_ENTRY = 64
 #: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
 BYTES_PER_ROW = 1500
-#: peak bytes per link of the ``sync`` rule in the simulator (measured: CMU hotel, 101 frames,
-#: 151,500 links, peak RSS 410 MB of which ~90 MB before the rule, bench/multiway.py)
-BYTES_PER_SYNC_LINK = 2_200
+#: peak bytes per link of the ``sync`` rule's robots beyond the rows of the links file
+#: (:data:`BYTES_PER_ROW`, counted apart). Measured through ``resolve`` (peak RSS beyond the
+#: interpreter's ~75 MB, per link): CMU hotel, 101 frames, descriptor links (151,500 links)
+#: 1.80 KB with ``sync``, 1.85 KB with ``evidence``, 0.75 KB with ``paper-labels`` (its robots
+#: hold four numbers per feature: about what reading and holding the rows costs); the ring2
+#: team of 3,000 cameras (180,000 links) 1.46 / 1.55 / 0.88 KB, of 10,000 cameras 1.45 KB with
+#: ``sync``. So at most about 1.1 KB beyond the rows; 1.2 KB with the rows' own 1.5 KB leaves
+#: the sum 50 % above the largest measured (it was 2.2 KB, measured in a process that held the
+#: links without their file, and so counted the rows twice)
+BYTES_PER_SYNC_LINK = 1_200
 #: bytes per camera (robot) of the simulated team (measured 9.3 KB)
 BYTES_PER_CAMERA = 12_000
 #: bytes per communication edge (measured 0.4 KB)
