@@ -11,9 +11,10 @@ import numpy as np
 
 from pipeline import stages
 from pipeline.consistency.engines.online import simulated_stage
+from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
-__all__ = ["formation", "images", "online_stage", "resolve"]
+__all__ = ["formation", "images", "online_stage", "online_fusion", "resolve"]
 
 
 def formation(config, timer) -> FormationRobots:
@@ -48,6 +49,10 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
 #: the rule's stage of one online step on its sub-problem (frames as cameras, cameras
 #: sharing a link as neighbours) on the simulated network: the online stage's own default
 online_stage = simulated_stage
+
+#: the fusion of one online step's changed tracks (frames as robots) in this process: robust
+#: distributed fusion itself (Montijano et al., dynamic voting)
+online_fusion = fuse_tracks
 
 
 def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
