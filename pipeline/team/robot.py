@@ -125,12 +125,13 @@ def links_camera(team, i: int):
     kp = np.zeros((len(lines) - 1, 2), np.float64)
     for k, line in enumerate(lines[1:]):
         try:
-            kp[k] = [float(v) for v in line.split(",")]
+            xy = [float(v) for v in line.split(",")]
         except ValueError:
-            kp[k] = np.nan
-        if not np.isfinite(kp[k]).all():
+            xy = []
+        if len(xy) != 2 or not np.isfinite(xy).all():
             raise InputError(f"{path}:{k + 2}: {line!r} is not a keypoint x,y of two finite "
                              "numbers")
+        kp[k] = xy
     m = int(team.data["features_per_camera"][i])
     if len(kp) != m:
         raise InputError(f"{path}: {len(kp)} keypoints, but data.features_per_camera gives "

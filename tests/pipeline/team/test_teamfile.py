@@ -5,6 +5,10 @@ import pytest
 from pipeline.errors import InputError
 from pipeline.team.teamfile import load_team, parse_team
 
+_LINKS = {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}
+_CAM = {"K": [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]], "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+        "t": [0.0, 0.0, 1.5]}
+
 
 def _doc(**over):
     doc = {"version": 1, "name": "t", "comm_edges": [[0, 1], [1, 2]],
@@ -42,6 +46,25 @@ def test_a_valid_team_parses():
     ({"options": {"wire": "gzip"}}, "wire 'gzip' must be one of compact, plain"),
     ({"data": {"kind": "links", "links": ["a.csv", "b.csv"], "features_per_camera": [1, 1, 1]}},
      "a list of 3 paths, one per robot"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"]}},
+     "data.keypoints is given without data.cameras"),
+    ({"data": {**_LINKS, "cameras": [_CAM] * 3}}, "data.cameras is given without data.keypoints"),
+    ({"data": {**_LINKS, "keypoints": ["k0"], "cameras": [_CAM] * 3}},
+     "data.keypoints must list 3 paths"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"], "cameras": [_CAM] * 2}},
+     "data.cameras must list 3 cameras"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, {**_CAM, "dist": [0]}, _CAM]}},
+     "data.cameras[1] must be an object with exactly \"K\", \"R\" and \"t\"; unknown key 'dist'"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, _CAM, {**_CAM, "R": [[1, 0], [0, 1]]}]}},
+     "data.cameras[2].R must be a 3x3 matrix"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [{**_CAM, "t": [0, 0, "1"]}, _CAM, _CAM]}},
+     "data.cameras[0].t [0, 0, '1'] must be 3 finite numbers"),
+    ({"options": {"fusion": True}}, "options sets fusion on a links team without data.keypoints"),
+    ({"robot_options": {"1": {"fusion": True}}},
+     "robot_options['1'] sets fusion on a links team without data.keypoints"),
 ])
 def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
@@ -102,3 +125,22 @@ def test_each_robot_names_its_own_links_file(tmp_path):
     assert [q for _, q in check_data_files(team, 1)] == [tmp_path / "r1.csv"]
     with pytest.raises(InputError, match=r"data.links\[0\]"):
         check_data_files(team, 0)
+
+
+def test_a_links_team_with_keypoints_and_cameras(tmp_path):
+    """Each robot of a links team may be given its own keypoints file and camera (the fusion
+    of an online step): the team round-trips, each robot names its own keypoints file."""
+    from pipeline.team.teamfile import check_data_files, keypoints_file_of
+
+    data = {**_LINKS, "keypoints": ["k0.csv", "k1.csv", "k2.csv"], "cameras": [_CAM] * 3}
+    p = tmp_path / "TEAM.json"
+    p.write_text(json.dumps(_doc(data=data, options={"fusion": True})))
+    team = load_team(p)
+    assert parse_team(team.to_json()).to_json() == team.to_json()
+    assert keypoints_file_of(team, 2) == tmp_path / "k2.csv"
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n")
+    with pytest.raises(InputError, match=r"data.keypoints\[1\]"):
+        check_data_files(team, 1)
+    (tmp_path / "k1.csv").write_text("x,y\n")
+    assert [w for w, _ in check_data_files(team, 1)] == [
+        "data.links of the team file", "data.keypoints[1] of the team file"]
