@@ -158,7 +158,9 @@ def track_names(features_per_camera, links: Links) -> np.ndarray:
     inside = np.flatnonzero(track_of >= 0)
     smallest = np.full(T, np.iinfo(np.int64).max, np.int64)
     np.minimum.at(smallest, track_of[inside], inside)
-    return np.where(track_of >= 0, smallest[np.maximum(track_of, 0)], -1)
+    names = np.full(len(track_of), -1, np.int64)
+    names[inside] = smallest[track_of[inside]]
+    return names
 
 
 def _fuse_changed(oa, views: list, features: list, fuse) -> dict:
