@@ -11,10 +11,9 @@ import numpy as np
 
 from pipeline import stages
 from pipeline.consistency.engines.online import simulated_stage
-from pipeline.fusion.landmarks import fuse_tracks
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
-__all__ = ["formation", "images", "online_stage", "online_fusion", "resolve"]
+__all__ = ["formation", "images", "online_stage", "resolve"]  # and online_fusion (__getattr__)
 
 
 def formation(config, timer) -> FormationRobots:
@@ -50,9 +49,17 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
 #: sharing a link as neighbours) on the simulated network: the online stage's own default
 online_stage = simulated_stage
 
-#: the fusion of one online step's changed tracks (frames as robots) in this process: robust
-#: distributed fusion itself (Montijano et al., dynamic voting)
-online_fusion = fuse_tracks
+
+def __getattr__(name: str):
+    """``online_fusion``: the fusion of one online step's changed tracks (frames as robots) in
+    this process, robust distributed fusion itself (Montijano et al., dynamic voting:
+    :func:`pipeline.fusion.landmarks.fuse_tracks`), imported when first asked for, so that a
+    run without fusion loads none of it."""
+    if name == "online_fusion":
+        from pipeline.fusion.landmarks import fuse_tracks
+
+        return fuse_tracks
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
