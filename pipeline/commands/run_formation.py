@@ -84,10 +84,11 @@ def online_config_from_args(args):
     check_online_options(args)
     if not args.speed >= 0:
         raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
-    if args.transport != "sim" and not args.no_fusion:
-        raise InputError(f"--steps over --transport {args.transport}: the robots run each "
-                         "step's consistency stage, the fusion of the changed tracks runs on "
-                         "the simulator only; add --no-fusion")
+    from pipeline.runs.transports import get_transport
+
+    if not args.no_fusion and not hasattr(get_transport(args.transport).load(), "online_fusion"):
+        raise InputError(f"--steps over --transport {args.transport}: this transport runs no "
+                         "fusion of the changed tracks; add --no-fusion")
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
     method, max_features = feature_options(args)

@@ -75,6 +75,11 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
         if len(folders) != 1:
             raise InputError(f"team {team.name!r}: the observer reads the photographs from one "
                              f"folder, data.images names {len(folders)}; put them in one")
+    if kind == "links" and any(team.options_for(i)["fusion"] for i in range(team.n)):
+        raise InputError(f"team {team.name!r}: the observer of a links team writes the "
+                         "consistency stage only, not the fusion cuts its robots make; set "
+                         "option fusion false (the fusion of a links team runs in "
+                         "run-formation --steps N --transport zenoh)")
     zenoh = get_transport("zenoh").load()
     with timer.stage("observe", f"{team.n} robots of {team.name!r} on {team.observer}"):
         run = observe_team(team, timeout_s=timeout_s, log=log)

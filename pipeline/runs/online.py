@@ -13,7 +13,10 @@ rule is run from scratch on all links so far (the batch run) for comparison.
 Fusion (``fusion``, default on): after each step the tracks the step changed (the sets its
 stage ran on, window frames only) are fused again by robust distributed fusion
 (Montijano et al., dynamic voting, :func:`pipeline.fusion.landmarks.fuse_tracks`, frames as
-its robots, frames sharing a link as neighbours); observations voted out cut their links as
+its robots, frames sharing a link as neighbours), as the ``online_fusion`` job of the run's
+transport (in this process, or one robot process per frame over Zenoh); each track named by
+the smallest global feature id of its set, as the robots name it when they detect their sets
+(the name seeds their max-c draws); observations voted out cut their links as
 ``fusion-outlier`` (a cut only splits a set: the association stays conflict-free). Tracks no
 link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,
 bytes, links cut, tracks fused, wall time), apart from the consistency stage's figures.
@@ -41,6 +44,7 @@ from pipeline.progress import StageTimer
 from pipeline.types import Links
 
 __all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs",
+           "track_names",
            "associate_online", "batch_steps_of", "online_tables", "jsonable_step"]
 
 
@@ -137,10 +141,33 @@ def step_pairs(robot_of: np.ndarray, step_of: np.ndarray, t: int, window: int,
     return np.array(sorted(out), np.int64).reshape(-1, 2)
 
 
-def _fuse_changed(oa, views: list, features: list) -> dict:
-    """Fusion of the tracks the last step changed (module docstring); returns its figures."""
-    from pipeline.fusion.landmarks import fuse_tracks
+def track_names(features_per_camera, links: Links) -> np.ndarray:
+    """Each feature's track named as robots that detect their association sets name it: the
+    smallest global feature id of its set (Prop. 3.5; :meth:`pipeline.consistency.robot.Robot.
+    final_tracks`), ``-1`` outside tracks.
 
+    Examples
+    --------
+    >>> L = Links(np.array([0, 1]), np.array([1, 0]), np.array([1, 2]), np.array([0, 1]))
+    >>> track_names([2, 1, 2], L).tolist()
+    [-1, 1, 1, -1, 1]
+    """
+    from pipeline.fusion.landmarks import tracks_of
+
+    track_of, T = tracks_of(np.asarray(features_per_camera, np.int64), links)
+    inside = np.flatnonzero(track_of >= 0)
+    smallest = np.full(T, np.iinfo(np.int64).max, np.int64)
+    np.minimum.at(smallest, track_of[inside], inside)
+    names = np.full(len(track_of), -1, np.int64)
+    names[inside] = smallest[track_of[inside]]
+    return names
+
+
+def _fuse_changed(oa, views: list, features: list, fuse) -> dict:
+    """Fusion of the tracks the last step changed (module docstring) by ``fuse``, the run's
+    transport's ``online_fusion`` job (:mod:`pipeline.runs.transports`), with the tracks named
+    by :func:`track_names`; returns its figures (over zenoh also the rounds and bytes the
+    robots spent naming their tracks, ``naming_rounds`` and ``naming_bytes``)."""
     t0 = time.perf_counter()
     ids = oa.changed_window_links()
     L = oa.links
@@ -150,13 +177,18 @@ def _fuse_changed(oa, views: list, features: list) -> dict:
     ci, cj = np.searchsorted(images, L.ci[ids]), np.searchsorted(images, L.cj[ids])
     local = Links(ci, L.fi[ids], cj, L.fj[ids], L.quality[ids])
     edges = np.unique(np.stack([ci, cj], axis=1), axis=0)
-    fr = fuse_tracks([views[g] for g in images], [features[g] for g in images], local, edges)
+    feats = [features[g] for g in images]
+    fr = fuse([views[g] for g in images], feats, local, edges,
+              track_labels=track_names([len(f) for f in feats], local))
     cut = ids[np.asarray(fr.cut_links, bool)]
     oa.cut(cut, "fusion-outlier")
     st = fr.stats
-    return dict(rounds=int(st.get("rounds", 0)), messages=int(st.get("messages", 0)),
-                bytes=int(st.get("bytes", 0)), cut=int(len(cut)),
-                tracks=int(len(fr.track_ids)), wall_s=time.perf_counter() - t0)
+    out = dict(rounds=int(st.get("rounds", 0)), messages=int(st.get("messages", 0)),
+               bytes=int(st.get("bytes", 0)), cut=int(len(cut)),
+               tracks=int(len(fr.track_ids)))
+    out.update({k: int(st[k]) for k in ("naming_rounds", "naming_bytes") if k in st})
+    out["wall_s"] = time.perf_counter() - t0
+    return out
 
 
 def _memory(features: list, images: np.ndarray, robot_of: np.ndarray, n: int,
@@ -220,8 +252,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
     :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh`` and ``gather`` to the online stage; ``transport``
-    names where the robots run the rule's stage of each step (its ``online_stage`` job; the
-    batch run stays on the simulator). Returns an :class:`OnlineRun` without
+    names where the robots run the rule's stage and the fusion of each step (its
+    ``online_stage`` and ``online_fusion`` jobs; the batch run stays on the simulator). Returns an :class:`OnlineRun` without
     ``sequence``."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
@@ -234,7 +266,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     radius = feature_options.pop("merge_radius", None)
     radius = MERGE_RADIUS_PX if radius is None else radius
     steps = len(step_edges)
-    stage = get_transport(transport).load().online_stage
+    jobs = get_transport(transport).load()
+    stage = jobs.online_stage
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
                            weigh=weigh, gather=gather, stage=stage)
     feats_all: list = []
@@ -263,7 +296,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                       for i, (g, f) in enumerate(zip(ids, feats, strict=True))]
             rec = dict(oa.add_step(frames, links))
             if fusion:
-                rec["fusion"] = _fuse_changed(oa, views, feats_all)
+                rec["fusion"] = _fuse_changed(oa, views, feats_all, jobs.online_fusion)
             kept = oa.kept_links()
             counts = count_conflicts(AssociationGraph(oa.m, kept))
             rec.update(match_s=match_s, pairs_matched=int(len(pairs)),

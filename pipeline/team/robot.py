@@ -6,7 +6,9 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    (:func:`data_synth.render_robot`; the scene model is the world it looks at, the other
    cameras are not rendered). A photograph (``run-images``): it loads only its own file, with
    the intrinsics the team file gives it. A links file (``resolve``): its own file (``data.links``
-   a list, one per robot), or the rows of a shared one that touch it. Its own options
+   a list, one per robot), or the rows of a shared one that touch it; with ``data.keypoints``
+   and ``data.cameras`` (the fusion of an online step) also its own keypoints file and its
+   own camera, :func:`links_camera`. Its own options
    (``options`` with its ``robot_options``). Public knowledge, as in the simulator: the team
    size ``n`` and the comm graph, of which it uses the edges that touch it.
 2. **Its own features** (:func:`pipeline.matching.features.extract`, with the team's feature options:
@@ -28,7 +30,8 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
 5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
    run_consistency_locally`): detection, then Alg. 1 or the evidence rule
    (:func:`robot_resolution`), repeated until conflict-free.
-6. **Fusion** (a rendered formation, whose robots know their poses; team option ``fusion``):
+6. **Fusion** (a rendered formation, or a links team given keypoints and cameras: robots that
+   know their poses; team option ``fusion``):
    the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
    tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
    by the termination wave; with message loss injected (``drop_prob``), every logical round
@@ -53,11 +56,11 @@ from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_network
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
-from pipeline.team.teamfile import LAUNCHED_AT_ENV, links_file_of
+from pipeline.team.teamfile import LAUNCHED_AT_ENV, keypoints_file_of, links_file_of
 from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
-           "flood_flag", "result_links", "load_view"]
+           "flood_flag", "result_links", "load_view", "links_camera", "write_keypoints"]
 
 
 def _log(i: int, text: str) -> None:
@@ -92,6 +95,51 @@ def own_links_from_file(path, i: int, own_file: bool = False):
     r = np.concatenate([L.feat_i[a], L.feat_j[b]])
     s = np.concatenate([L.feat_j[a], L.feat_i[b]])
     return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
+
+
+def write_keypoints(path, keypoints) -> None:
+    """A keypoints file of a links team (``data.keypoints``): header ``x,y``, one row per
+    feature, each coordinate as the shortest text that reads back to the same float32."""
+    kp = np.asarray(keypoints, np.float32).reshape(-1, 2)
+    with open(path, "w") as f:
+        f.write("x,y\n" + "".join(f"{x!r},{y!r}\n" for x, y in kp.tolist()))
+
+
+def links_camera(team, i: int):
+    """Robot ``i``'s keypoints ``(m_i, 2)`` float32 and ``(K, R, t)`` on a links team that
+    gives them (``data.keypoints``, ``data.cameras``), else ``(None, None)``. It reads its own
+    keypoints file and its own camera entry only.
+
+    Raises
+    ------
+    InputError
+        The keypoints file is not ``x,y`` rows of finite numbers (naming the line), or holds
+        another count of rows than ``data.features_per_camera`` gives robot ``i``.
+    """
+    path = keypoints_file_of(team, i)
+    if path is None:
+        return None, None
+    lines = path.read_text().splitlines()
+    if not lines or lines[0].replace(" ", "") != "x,y":
+        raise InputError(f"{path}:1: a keypoints file starts with the header x,y")
+    kp = np.zeros((len(lines) - 1, 2), np.float64)
+    for k, line in enumerate(lines[1:]):
+        try:
+            xy = [float(v) for v in line.split(",")]
+        except ValueError:
+            xy = []
+        if len(xy) != 2 or not np.isfinite(xy).all():
+            raise InputError(f"{path}:{k + 2}: {line!r} is not a keypoint x,y of two finite "
+                             "numbers")
+        kp[k] = xy
+    m = int(team.data["features_per_camera"][i])
+    if len(kp) != m:
+        raise InputError(f"{path}: {len(kp)} keypoints, but data.features_per_camera gives "
+                         f"robot {i} {m} features; one row per feature")
+    cam = team.data["cameras"][i]
+    return kp.astype(np.float32), (np.asarray(cam["K"], np.float64),
+                                   np.asarray(cam["R"], np.float64),
+                                   np.asarray(cam["t"], np.float64).reshape(3))
 
 
 def load_view(team, i: int):
@@ -327,6 +375,9 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
                              f"{path} names a feature beyond data."
                              f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
                              "give counts that cover every feature id of the links file")
+        keypoints, pose = links_camera(team, i)
+        if pose is not None:
+            projection = pose[0] @ np.c_[pose[1], pose[2]]
     else:
         feats, view, matches, weights, fpc, lossy = _features_and_matches(
             team, i, transport, opts, timings)
@@ -364,7 +415,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     timings["consistency"] = time.perf_counter() - t
     wire["consistency"] = int(getattr(transport, "wire_bytes", 0)) - sum(wire.values())
     fusion = None
-    if bool(opts.get("fusion")) and team.data["kind"] == "formation" and pose is not None:
+    if bool(opts.get("fusion")) and pose is not None:
         t = time.perf_counter()
         fusion = _robot_fusion(team, i, robot, run, transport, keypoints, pose, arrays, lossy)
         timings["fusion"] = time.perf_counter() - t

@@ -22,6 +22,11 @@ one; a user may write one by hand. Schema (``version`` 1)::
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
               # "links": ["r0.csv", "r1.csv", ...]: one file per robot, each holding only
               # the rows that touch that robot (a robot reads only its own)
+              # optional, both or neither: "keypoints": ["k0.csv", ...], one file per
+              # robot, a header "x,y" then one row per feature (m_i rows, pixels), and
+              # "cameras": [{"K": [[...]], "R": [[...]], "t": [tx, ty, tz]}, ...], each
+              # robot's intrinsics and pose (cam_from_world): with them the robots of a
+              # links team know where they look, and option "fusion" fuses their tracks
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -60,7 +65,7 @@ from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
-           "DATA_KINDS", "links_file_of", "TEAM_ONLY_OPTIONS"]
+           "DATA_KINDS", "links_file_of", "keypoints_file_of", "TEAM_ONLY_OPTIONS"]
 
 DATA_KINDS = ("formation", "images", "links")
 DEFAULT_OPTIONS = {
@@ -118,7 +123,7 @@ _ROBOT_KEYS = {"id", "endpoint"}
 _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
               "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
                          "intrinsics_source"},
-              "links": {"kind", "links", "features_per_camera"}}
+              "links": {"kind", "links", "features_per_camera", "keypoints", "cameras"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -288,6 +293,13 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: robot_options[{key!r}] sets {fixed[0]!r}, which is the "
                              "team's (every robot runs the same rule); set it under 'options'")
         per[rid] = val
+    if data["kind"] == "links" and data.get("cameras") is None:
+        asks = [k for k, v in [("options", opts), *((f"robot_options[{k!r}]", {**opts, **v})
+                                                      for k, v in ro.items())] if v["fusion"]]
+        if asks:
+            raise InputError(f"{where}: {asks[0]} sets fusion on a links team without "
+                             "data.keypoints and data.cameras; fusion needs every robot's "
+                             "keypoints and pose")
     obs = doc.get("observer")
     observer = None
     if obs is not None:
@@ -376,6 +388,42 @@ def _check_data(data: dict, n: int, where: str) -> None:
                 _is_int(v) and 0 <= v <= MAX_ROBOT_FEATURES for v in fpc):
             raise InputError(f"{where}: data.features_per_camera must list {n} counts in "
                              f"0..{MAX_ROBOT_FEATURES} (a robot's memory follows its count)")
+        _check_links_cameras(data, n, where)
+
+
+def _is_matrix(v, rows: int, cols: int) -> bool:
+    return isinstance(v, list) and len(v) == rows and all(
+        isinstance(r, list) and len(r) == cols and all(map(_is_number, r)) for r in v)
+
+
+def _check_links_cameras(data: dict, n: int, where: str) -> None:
+    """``data.keypoints`` and ``data.cameras`` of a links team: both or neither, one entry per
+    robot (module docstring)."""
+    kp, cams = data.get("keypoints"), data.get("cameras")
+    if (kp is None) != (cams is None):
+        raise InputError(f"{where}: data.{'keypoints' if cams is None else 'cameras'} is "
+                         f"given without data.{'cameras' if cams is None else 'keypoints'}; "
+                         "a links team's robots need both (their keypoints and their poses) "
+                         "or neither")
+    if kp is None:
+        return
+    if not (isinstance(kp, list) and len(kp) == n and all(isinstance(p, str) for p in kp)):
+        raise InputError(f"{where}: data.keypoints must list {n} paths, one keypoints file "
+                         "per robot (header x,y, one row per feature)")
+    if not isinstance(cams, list) or len(cams) != n:
+        raise InputError(f"{where}: data.cameras must list {n} cameras, one per robot "
+                         '({"K": 3x3, "R": 3x3, "t": [tx, ty, tz]})')
+    for i, c in enumerate(cams):
+        if not isinstance(c, dict) or set(c) != {"K", "R", "t"}:
+            keys = sorted(set(c) - {"K", "R", "t"}) if isinstance(c, dict) else []
+            raise InputError(f"{where}: data.cameras[{i}] must be an object with exactly "
+                             '"K", "R" and "t"' + (f"; unknown key {keys[0]!r}" if keys else ""))
+        for key, shape in (("K", (3, 3)), ("R", (3, 3))):
+            if not _is_matrix(c[key], *shape):
+                raise InputError(f"{where}: data.cameras[{i}].{key} must be a 3x3 matrix of "
+                                 "finite numbers")
+        if not (isinstance(c["t"], list) and len(c["t"]) == 3 and all(map(_is_number, c["t"]))):
+            raise InputError(f"{where}: data.cameras[{i}].t {c['t']!r} must be 3 finite numbers")
 
 
 def _check_options(opts: dict, where: str) -> None:
@@ -484,7 +532,12 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
                  require_input_file(path, f"{where}: data.images[{i}]"))]
     path, own = links_file_of(team, i)
     what = f"data.links[{i}]" if own else "data.links"
-    return [(f"{what} of the team file", require_input_file(path, f"{where}: {what}"))]
+    files = [(f"{what} of the team file", require_input_file(path, f"{where}: {what}"))]
+    kp = keypoints_file_of(team, i)
+    if kp is not None:
+        files.append((f"data.keypoints[{i}] of the team file",
+                      require_input_file(kp, f"{where}: data.keypoints[{i}]")))
+    return files
 
 
 def links_file_of(team: Team, i: int) -> tuple[Path, bool]:
@@ -494,6 +547,12 @@ def links_file_of(team: Team, i: int) -> tuple[Path, bool]:
     if isinstance(lk, list):
         return team.resolve_path(lk[int(i)]), True
     return team.resolve_path(lk), False
+
+
+def keypoints_file_of(team: Team, i: int) -> Path | None:
+    """Robot ``i``'s keypoints file of a links team (``data.keypoints``), or None."""
+    kp = team.data.get("keypoints")
+    return None if kp is None else team.resolve_path(kp[int(i)])
 
 
 def write_team(path, team: Team) -> Path:

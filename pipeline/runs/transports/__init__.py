@@ -22,12 +22,18 @@ loads nothing heavy) with one function per job:
     ``run-formation --steps N``: the rule's stage of one step on its sub-problem (the
     step's frames are the cameras, frames sharing a link are neighbours; the online stage
     of :mod:`pipeline.consistency.engines.online` does the rest).
+``online_fusion(views, features, links, comm_edges, *, track_labels) -> FusionResult``
+    ``run-formation --steps N`` (fusion on): robust distributed fusion
+    (:func:`pipeline.fusion.landmarks.fuse_tracks`, its arguments and result) of the tracks
+    one step changed (the frames of those tracks are the robots, frames sharing a link are
+    neighbours); ``track_labels``: each feature's track named by the smallest global feature
+    id of its set, as robots that detect their sets name them (the max-c draws hang on them).
 ``resolve(features_per_camera, comm_edges, links, faults, resolution, ids) -> (ConsistencyResult, dict or None)``
     ``resolve``: the consistency stage on a user's links (``ids``: the compact renumbering
     of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
     faults were injected or a robot was lost.
 
-A new transport (e.g. ROS 2) is one module with these four functions and one
+A new transport (e.g. ROS 2) is one module with these five functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
 What the jobs hand back is in :mod:`.results`.
 
@@ -112,4 +118,4 @@ register(TransportEntry(
     "sim", "robots are objects of this process (default, fastest)", _sim))
 register(TransportEntry(
     "zenoh", "one process per robot on this machine, talking over Zenoh (fusion on rendered "
-             "formations; none on photographs)", _zenoh))
+             "formations, also online; none on photographs)", _zenoh))

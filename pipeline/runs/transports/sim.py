@@ -13,7 +13,7 @@ from pipeline import stages
 from pipeline.consistency.engines.online import simulated_stage
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
-__all__ = ["formation", "images", "online_stage", "resolve"]
+__all__ = ["formation", "images", "online_stage", "resolve"]  # and online_fusion (__getattr__)
 
 
 def formation(config, timer) -> FormationRobots:
@@ -48,6 +48,18 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
 #: the rule's stage of one online step on its sub-problem (frames as cameras, cameras
 #: sharing a link as neighbours) on the simulated network: the online stage's own default
 online_stage = simulated_stage
+
+
+def __getattr__(name: str):
+    """``online_fusion``: the fusion of one online step's changed tracks (frames as robots) in
+    this process, robust distributed fusion itself (Montijano et al., dynamic voting:
+    :func:`pipeline.fusion.landmarks.fuse_tracks`), imported when first asked for, so that a
+    run without fusion loads none of it."""
+    if name == "online_fusion":
+        from pipeline.fusion.landmarks import fuse_tracks
+
+        return fuse_tracks
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):

@@ -35,7 +35,7 @@ from pipeline.team.launcher import launch_team, make_team, team_summary
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
-           "online_stage",
+           "online_stage", "online_fusion",
            "resolve_links_file",
            "write_robot_links", "links_of_run"]
 
@@ -340,6 +340,109 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])
     return res
+
+
+def online_fusion(views, features, links, comm_edges, *, track_labels=None):
+    """The fusion of one online step's changed tracks (``run-formation --steps N --transport
+    zenoh``): one robot process per frame, over Zenoh, each running the fusion code of a batch
+    formation run (:func:`pipeline.team.robot.robot_main`, step 6: :class:`pipeline.fusion.robot.
+    FusionRobot`) on what it alone holds: its own rows of ``links`` (its links file), its own
+    keypoints (its keypoints file) and its own camera ``K, R, t`` (its ``data.cameras`` entry,
+    :mod:`pipeline.team.teamfile`), and the comm edges that touch it.
+
+    The robots first name their tracks themselves: the consistency stage (Alg. 1, ``paper``)
+    on the links, which are conflict-free (the kept links of the online association), so it
+    only detects: each feature's track is named by the smallest global feature id of its
+    association set (Prop. 3.5, :meth:`pipeline.consistency.robot.Robot.final_tracks`). The
+    simulator's job (:func:`pipeline.fusion.landmarks.fuse_tracks`) takes the same names as
+    ``track_labels`` (the caller computes them: the robots' max-c draws hang on them), so both
+    decide alike; here ``track_labels``, when given, is checked against the names the robots
+    learnt.
+
+    Returns
+    -------
+    FusionResult
+        ``cut_links`` over ``links``, the fused landmarks and their tracks (numbered as
+        :func:`pipeline.fusion.landmarks.tracks_of`), each robot's observations; ``stats`` those
+        of :func:`pipeline.team.assemble.fusion_of_team`, with the naming detection's
+        ``naming_rounds``, ``naming_messages`` and ``naming_bytes`` and the ``team`` summary.
+
+    Raises
+    ------
+    InputError
+        A view without a pose.
+    TeamError
+        A robot did not publish, the detection cut a link (the links were not conflict-free),
+        or a robot named a track otherwise than ``track_labels``.
+    """
+    import tempfile
+
+    from pipeline.fusion.landmarks import FusionResult
+    from pipeline.team.robot import write_keypoints
+
+    n = len(views)
+    if len(features) != n:
+        raise InputError(f"got {n} views but {len(features)} feature sets; one each")
+    for i, v in enumerate(views):
+        if v.R is None or v.t is None:
+            raise InputError(f"view {i} ({v.name}) has no pose; fusion needs every camera's "
+                             "cam_from_world (R, t)")
+    m = np.array([len(f) for f in features], dtype=np.int64)
+    cameras = [{"K": np.asarray(v.K, np.float64).tolist(),
+                "R": np.asarray(v.R, np.float64).tolist(),
+                "t": np.asarray(v.t, np.float64).reshape(3).tolist()} for v in views]
+    opts = team_options(resolution="paper", fusion=True)
+    with tempfile.TemporaryDirectory(prefix="online-fusion-") as work:
+        folder = Path(work)
+        paths = write_robot_links(folder, links, n)
+        kps = []
+        for i, f in enumerate(features):
+            kps.append(folder / f"keypoints-robot{i}.csv")
+            write_keypoints(kps[-1], f.keypoints)
+        data = {"kind": "links", "links": [str(p) for p in paths],
+                "features_per_camera": m.tolist(), "keypoints": [str(p) for p in kps],
+                "cameras": cameras}
+        team = make_team("online-fusion", comm_edges, data, opts, n=n)
+        run = launch_team(team, work)
+    lost = sorted(set(range(n)) - set(run.results))
+    if lost:
+        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
+                        "publish a result")
+    res = consistency_of_team(team, run.results, links, m, run.killed)
+    if res.deleted.any():
+        k = int(np.flatnonzero(res.deleted)[0])
+        raise TeamError(f"the fusion team's detection cut link ({links.cam_i[k]},"
+                        f"{links.feat_i[k]})-({links.cam_j[k]},{links.feat_j[k]}): the links "
+                        "handed to fusion must be conflict-free (kept links)")
+    off = np.concatenate([[0], np.cumsum(m)])
+    obs = [(i, a) for i, (_, a) in sorted(run.results.items())]
+    if track_labels is not None:
+        want = np.asarray(track_labels, np.int64).reshape(-1)
+        for i, a in obs:
+            feat = off[i] + a["fusion_feat"].astype(np.int64)
+            if not np.array_equal(want[feat], a["fusion_names"].astype(np.int64)):
+                raise TeamError(f"robot {i} named its tracks otherwise than track_labels")
+    ledger = ledger_from_consistency(res)
+    stats, points, track_ids = fusion_of_team(team, run.results, ledger, m)
+    stats.update(naming_rounds=int(res.stats["detection_rounds"]),
+                 naming_messages=int(res.stats["messages"]),
+                 naming_bytes=int(res.stats["bytes"]), team=team_summary(run))
+    cut = np.asarray(ledger.reason == "fusion-outlier", bool)
+    # each robot's observations (its features in a fused track), tracks as tracks_of numbers them
+    from pipeline.fusion.landmarks import tracks_of
+
+    uf, _ = tracks_of(m, links)
+    cam = np.concatenate([np.full(len(a["fusion_feat"]), i, np.int64) for i, a in obs]) \
+        if obs else np.zeros(0, np.int64)
+    feat = np.concatenate([a["fusion_feat"].astype(np.int64) for _, a in obs]) \
+        if obs else np.zeros(0, np.int64)
+    estimated = np.concatenate([a["fusion_estimated"].astype(bool) for _, a in obs]) \
+        if obs else np.zeros(0, bool)
+    outlier = np.concatenate([a["fusion_outlier"].astype(bool) for _, a in obs]) \
+        if obs else np.zeros(0, bool)
+    return FusionResult(points=points, track_ids=track_ids, obs_track=uf[off[cam] + feat],
+                        obs_cam=cam, obs_feat=feat, obs_estimated=estimated,
+                        obs_inlier=~outlier, cut_links=cut, stats=stats)
 
 
 def links_of_run(team, run) -> ConsistencyResult:

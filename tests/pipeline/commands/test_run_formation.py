@@ -119,3 +119,23 @@ def test_failed_run_keeps_previous_run(small_run, monkeypatch):
         run_formation(FormationConfig(**SMALL, out=str(out), rerun=False))
     assert (out / "report.json").read_bytes() == before
     assert sorted(p.name for p in out.parent.iterdir()) == [out.name]
+
+
+def test_steps_over_a_transport_without_online_fusion_need_no_fusion(tmp_path, capsys):
+    """``--steps`` over a transport whose module has no ``online_fusion`` job: one line
+    naming the transport and ``--no-fusion``, exit 2, nothing written."""
+    import types
+
+    from pipeline.__main__ import main
+    from pipeline.runs.transports import TransportEntry, register, unregister
+
+    register(TransportEntry("nofusion", "a transport without online fusion",
+                            lambda: types.SimpleNamespace(online_stage=None)))
+    try:
+        assert main(["run-formation", "--steps", "2", "--transport", "nofusion", "--out",
+                     str(tmp_path / "x")]) == 2
+    finally:
+        unregister("nofusion")
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--transport nofusion" in err and "add --no-fusion" in err
+    assert not (tmp_path / "x").exists()

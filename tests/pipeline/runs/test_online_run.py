@@ -6,6 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pipeline.__main__ import main
 from viz.recording_reader import entity_paths
@@ -135,3 +137,37 @@ def test_a_held_frame_costs_its_robot_its_keypoints_not_its_descriptors():
     out = online._memory([f, f, f], np.array([0]), np.array([0, 0, 1]), 2,
                          keypoints_only=np.array([1, 2]))
     assert out.tolist() == [2 * 160 + 5120, 160]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(1, 4), min_size=2, max_size=5), st.data())
+def test_track_names_are_the_smallest_feature_id_of_each_set(counts, data):
+    """Each feature's name is the smallest global id of its connected set of links (the
+    name a robot's detection gives it), ``-1`` for a feature without a link: checked
+    against scipy's connected components."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from pipeline.runs.online import track_names
+    from pipeline.types import Links
+
+    n, off = len(counts), np.concatenate([[0], np.cumsum(counts)])
+    rows = data.draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, 3),
+                                        st.integers(0, n - 1), st.integers(0, 3)), max_size=12))
+    seen, keep = set(), []  # one-to-one per camera pair (Assumption 2.2)
+    for a, r, b, s in sorted({(a, r % counts[a], b, s % counts[b]) for a, r, b, s in rows
+                              if a < b}):
+        if (a, r, b) not in seen and (b, s, a) not in seen:
+            seen |= {(a, r, b), (b, s, a)}
+            keep.append((a, r, b, s))
+    rows = keep
+    ci, fi, cj, fj = (np.array([x[k] for x in rows], np.int64) for k in range(4))
+    names = track_names(counts, Links(ci, fi, cj, fj))
+    ga, gb = off[ci] + fi, off[cj] + fj
+    _, comp = connected_components(sp.coo_matrix((np.ones(len(ga)), (ga, gb)),
+                                                 shape=(off[-1], off[-1])), directed=False)
+    linked = np.zeros(off[-1], bool)
+    linked[ga] = linked[gb] = True
+    for g in range(off[-1]):
+        want = min(np.flatnonzero(comp == comp[g])) if linked[g] else -1
+        assert names[g] == want

@@ -190,6 +190,15 @@ def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(t
     assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
                  str(tmp_path / "o")]) == 2
     assert "from one folder, data.images names 2" in capsys.readouterr().err
+    cam = {"K": np.eye(3).tolist(), "R": np.eye(3).tolist(), "t": [0, 0, 1]}
+    doc["data"] = {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1],
+                   "keypoints": ["k0.csv", "k1.csv"], "cameras": [cam, cam]}
+    doc["options"] = {"fusion": True}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "not the fusion cuts its robots make; set option fusion false" in \
+        capsys.readouterr().err
     assert main(["observe", "--team", str(tmp_path / "none.json"), "--out",
                  str(tmp_path / "o")]) == 2
     assert "not found" in capsys.readouterr().err

@@ -327,14 +327,16 @@ def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceau
     assert not (tmp_path / "z").exists()
 
 
-@pytest.mark.parametrize("resolution", ["evidence", "paper", "sync"])
-def test_zenoh_online_steps_equal_the_simulators(resolution, tmp_path):
+@pytest.mark.parametrize("resolution,fusion", [("evidence", True), ("paper", True),
+                                               ("sync", False)])
+def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, tmp_path):
     """``run-formation --steps N --transport zenoh``: each step's stage runs as robot processes
-    (one per frame of the step's sub-problem); every link is made, kept and cut at the same
-    step, for the same reason, as on the simulator."""
+    (one per frame of the step's sub-problem), and so does each step's fusion of the changed
+    tracks (one per frame of those tracks); every link is made, kept and cut at the same step,
+    for the same reason, as on the simulator, and each step fuses and cuts as much."""
     args = ["run-formation", "--steps", "3", "--window", "2", "--size", "160x120",
-            "--max-features", "120", "--formation", "a", "--no-fusion", "--no-rerun",
-            "--resolution", resolution]
+            "--max-features", "120", "--formation", "a", "--no-rerun",
+            "--resolution", resolution] + ([] if fusion else ["--no-fusion"])
     assert main([*args, "--out", str(tmp_path / "sim")]) == 0
     assert main([*args, "--transport", "zenoh", "--out", str(tmp_path / "zen")]) == 0
     for name in ("links.csv", "link_steps.csv"):
@@ -348,12 +350,17 @@ def test_zenoh_online_steps_equal_the_simulators(resolution, tmp_path):
     # the robots' own counts (the reliable protocol's acks and termination wave), not the
     # simulator's: the stage ran in the robot processes
     assert [s["messages"] for s in zen["steps"]] != [s["messages"] for s in steps]
-
-
-def test_zenoh_online_steps_need_no_fusion(tmp_path, capsys):
-    assert main(["run-formation", "--steps", "2", "--transport", "zenoh", "--out",
-                 str(tmp_path / "x")]) == 2
-    assert "add --no-fusion" in capsys.readouterr().err
+    if fusion:
+        figures = [{k: s["fusion"][k] for k in ("cut", "tracks", "rounds")} for s in steps]
+        assert [{k: s["fusion"][k] for k in ("cut", "tracks", "rounds")}
+                for s in zen["steps"]] == figures
+        assert all(f["tracks"] > 0 for f in figures)
+        # the robots named their tracks themselves (a detection before the fusion)
+        assert all(s["fusion"]["naming_rounds"] > 0 for s in zen["steps"])
+        if resolution == "paper":  # Alg. 1 leaves spurious links that fusion votes out
+            assert sum(f["cut"] for f in figures) > 0
+            with open(tmp_path / "zen" / "links.csv") as f:
+                assert any(",fusion-outlier," in line for line in f)
 
 
 def test_zenoh_sequence_steps_equal_the_simulators(tmp_path):

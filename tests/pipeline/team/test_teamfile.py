@@ -1,9 +1,15 @@
 import json
 
+import numpy as np
 import pytest
 
 from pipeline.errors import InputError
+from pipeline.team.robot import links_camera, write_keypoints
 from pipeline.team.teamfile import load_team, parse_team
+
+_LINKS = {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}
+_CAM = {"K": [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]], "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+        "t": [0.0, 0.0, 1.5]}
 
 
 def _doc(**over):
@@ -42,6 +48,25 @@ def test_a_valid_team_parses():
     ({"options": {"wire": "gzip"}}, "wire 'gzip' must be one of compact, plain"),
     ({"data": {"kind": "links", "links": ["a.csv", "b.csv"], "features_per_camera": [1, 1, 1]}},
      "a list of 3 paths, one per robot"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"]}},
+     "data.keypoints is given without data.cameras"),
+    ({"data": {**_LINKS, "cameras": [_CAM] * 3}}, "data.cameras is given without data.keypoints"),
+    ({"data": {**_LINKS, "keypoints": ["k0"], "cameras": [_CAM] * 3}},
+     "data.keypoints must list 3 paths"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"], "cameras": [_CAM] * 2}},
+     "data.cameras must list 3 cameras"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, {**_CAM, "dist": [0]}, _CAM]}},
+     "data.cameras[1] must be an object with exactly \"K\", \"R\" and \"t\"; unknown key 'dist'"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, _CAM, {**_CAM, "R": [[1, 0], [0, 1]]}]}},
+     "data.cameras[2].R must be a 3x3 matrix"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [{**_CAM, "t": [0, 0, "1"]}, _CAM, _CAM]}},
+     "data.cameras[0].t [0, 0, '1'] must be 3 finite numbers"),
+    ({"options": {"fusion": True}}, "options sets fusion on a links team without data.keypoints"),
+    ({"robot_options": {"1": {"fusion": True}}},
+     "robot_options['1'] sets fusion on a links team without data.keypoints"),
 ])
 def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
@@ -102,3 +127,69 @@ def test_each_robot_names_its_own_links_file(tmp_path):
     assert [q for _, q in check_data_files(team, 1)] == [tmp_path / "r1.csv"]
     with pytest.raises(InputError, match=r"data.links\[0\]"):
         check_data_files(team, 0)
+
+
+def test_a_links_team_with_keypoints_and_cameras(tmp_path):
+    """Each robot of a links team may be given its own keypoints file and camera (the fusion
+    of an online step): the team round-trips, each robot names its own keypoints file."""
+    from pipeline.team.teamfile import check_data_files, keypoints_file_of
+
+    data = {**_LINKS, "keypoints": ["k0.csv", "k1.csv", "k2.csv"], "cameras": [_CAM] * 3}
+    p = tmp_path / "TEAM.json"
+    p.write_text(json.dumps(_doc(data=data, options={"fusion": True})))
+    team = load_team(p)
+    assert parse_team(team.to_json()).to_json() == team.to_json()
+    assert keypoints_file_of(team, 2) == tmp_path / "k2.csv"
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n")
+    with pytest.raises(InputError, match=r"data.keypoints\[1\]"):
+        check_data_files(team, 1)
+    (tmp_path / "k1.csv").write_text("x,y\n")
+    assert [w for w, _ in check_data_files(team, 1)] == [
+        "data.links of the team file", "data.keypoints[1] of the team file"]
+
+
+# a robot of a links team reads its own keypoints file and camera
+# (pipeline.team.robot.links_camera)
+
+_ROBOT_CAM = {"K": [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]], "R": np.eye(3).tolist(),
+              "t": [0.1, -0.2, 1.5]}
+
+
+def _robot_team(tmp_path, counts=(3, 2)):
+    data = {"kind": "links", "links": "in.csv", "features_per_camera": list(counts),
+            "keypoints": ["k0.csv", "k1.csv"], "cameras": [_ROBOT_CAM, {**_ROBOT_CAM, "t": [1.0, 0, 2]}]}
+    doc = {"version": 1, "name": "t", "comm_edges": [[0, 1]], "data": data,
+           "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{7000 + i}"} for i in range(2)]}
+    (tmp_path / "TEAM.json").write_text(json.dumps(doc))
+    return load_team(tmp_path / "TEAM.json")
+
+
+def test_a_robot_reads_back_its_own_keypoints_and_camera_exactly(tmp_path):
+    kp = np.random.default_rng(0).uniform(0, 640, (3, 2)).astype(np.float32)
+    write_keypoints(tmp_path / "k0.csv", kp)
+    team = _robot_team(tmp_path)
+    got, (K, R, t) = links_camera(team, 0)
+    assert got.dtype == np.float32 and np.array_equal(got, kp)
+    assert np.array_equal(K, np.array(_ROBOT_CAM["K"])) and np.array_equal(R, np.eye(3))
+    assert t.tolist() == [0.1, -0.2, 1.5]
+
+
+def test_a_links_team_without_cameras_gives_none(tmp_path):
+    doc = json.loads(_robot_team(tmp_path).path.read_text())
+    del doc["data"]["keypoints"], doc["data"]["cameras"]
+    (tmp_path / "TEAM.json").write_text(json.dumps(doc))
+    assert links_camera(load_team(tmp_path / "TEAM.json"), 1) == (None, None)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("u,v\n1,2\n1,2\n", "k1.csv:1: a keypoints file starts with the header x,y"),
+    ("x,y\n1,2\n1,nan\n", "k1.csv:3: '1,nan' is not a keypoint x,y"),
+    ("x,y\n1,2\n1\n", "k1.csv:3: '1' is not a keypoint"),
+    ("x,y\n1,2\n", "1 keypoints, but data.features_per_camera gives robot 1 2 features"),
+])
+def test_bad_keypoints_file_is_one_line_error(tmp_path, text, words):
+    team = _robot_team(tmp_path)
+    (tmp_path / "k1.csv").write_text(text)
+    with pytest.raises(InputError) as e:
+        links_camera(team, 1)
+    assert words in str(e.value) and "\n" not in str(e.value)
