@@ -268,8 +268,11 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     steps = len(step_edges)
     jobs = get_transport(transport).load()
     stage = jobs.online_stage
+    # robot processes solve the sets at their roots themselves; the simulator solves them in
+    # batch (the same protocol's decisions, property-tested)
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
-                           weigh=weigh, gather=gather, stage=stage)
+                           weigh=weigh, gather=gather, stage=stage,
+                           robots_solve=bool(getattr(jobs, "ONLINE_ROBOTS_SOLVE", False)))
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)

@@ -60,7 +60,8 @@ from pipeline.team.teamfile import LAUNCHED_AT_ENV, keypoints_file_of, links_fil
 from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
-           "flood_flag", "result_links", "load_view", "links_camera", "write_keypoints"]
+           "flood_flag", "result_links", "load_view", "links_camera", "links_projection",
+           "write_keypoints"]
 
 
 def _log(i: int, text: str) -> None:
@@ -137,9 +138,24 @@ def links_camera(team, i: int):
         raise InputError(f"{path}: {len(kp)} keypoints, but data.features_per_camera gives "
                          f"robot {i} {m} features; one row per feature")
     cam = team.data["cameras"][i]
+    if not (isinstance(cam, dict) and "K" in cam):  # a projection only, or no pose
+        return kp.astype(np.float32), None
     return kp.astype(np.float32), (np.asarray(cam["K"], np.float64),
                                    np.asarray(cam["R"], np.float64),
                                    np.asarray(cam["t"], np.float64).reshape(3))
+
+
+def links_projection(team, i: int):
+    """Robot ``i``'s projection ``K [R | t]`` (3, 4) on a links team whose ``data.cameras``
+    gives its pose or its projection ``P``, else None (its own entry only)."""
+    cams = team.data.get("cameras")
+    cam = None if cams is None else cams[i]
+    if cam is None:
+        return None
+    if "P" in cam:
+        return np.asarray(cam["P"], np.float64).reshape(3, 4)
+    return np.asarray(cam["K"], np.float64) @ np.c_[np.asarray(cam["R"], np.float64),
+                                                    np.asarray(cam["t"], np.float64).reshape(3)]
 
 
 def load_view(team, i: int):
@@ -376,8 +392,7 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
                              f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
                              "give counts that cover every feature id of the links file")
         keypoints, pose = links_camera(team, i)
-        if pose is not None:
-            projection = pose[0] @ np.c_[pose[1], pose[2]]
+        projection = links_projection(team, i)
     else:
         feats, view, matches, weights, fpc, lossy = _features_and_matches(
             team, i, transport, opts, timings)
@@ -406,6 +421,12 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             robot.evidence.solve_small = False  # the caller solves them (the online stage)
         if opts.get("bundle_budget") is not None:
             robot.evidence.bundle_budget = int(opts["bundle_budget"])
+        if rule.set_lists:  # the small sets solved at their roots (pipeline.consistency.
+            # roots), every robot alike
+            robot.evidence.gather_conflictive = bool(opts.get("gather_conflictive", False))
+            robot.evidence.gather_free = bool(opts.get("gather_free", False))
+            if robot.evidence.gather_conflictive:
+                robot.evidence.solve_small = False
     if hasattr(transport, "status"):
         transport.status("consistency")
         transport.lossy = True  # faults are injected into the consistency stage, as simulated

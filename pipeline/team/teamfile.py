@@ -26,7 +26,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # robot, a header "x,y" then one row per feature (m_i rows, pixels), and
               # "cameras": [{"K": [[...]], "R": [[...]], "t": [tx, ty, tz]}, ...], each
               # robot's intrinsics and pose (cam_from_world): with them the robots of a
-              # links team know where they look, and option "fusion" fuses their tracks
+              # links team know where they look, and option "fusion" fuses their tracks;
+              # an entry may instead be {"P": 3x4} (a projection K [R | t] only: the
+              # evidence rule's geometric test, no fusion) or null (pose unknown)
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -93,6 +95,11 @@ DEFAULT_OPTIONS = {
     "solve_small_sets": True,
     # the evidence rule's bundle budget B (None: the team's default, setlists.bundle_budget)
     "bundle_budget": None,
+    # the evidence rule's small sets solved at their roots by the robots
+    # (pipeline.consistency.roots: the online stage's steps 2 and 2b): the conflictive ones
+    # (the rule's own flood then leaves them) and the conflict-free ones
+    "gather_conflictive": False,
+    "gather_free": False,
 }
 #: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
 #: (pipeline.matching.packed), features only to the neighbour that matches them, packets
@@ -100,7 +107,8 @@ DEFAULT_OPTIONS = {
 #: neighbour, packets uncompressed (the earlier encoding, kept to compare the two)
 WIRE_FORMS = ("compact", "plain")
 #: options that are the team's, not one robot's (every robot must run the same rule)
-TEAM_ONLY_OPTIONS = ("resolution",)
+TEAM_ONLY_OPTIONS = ("resolution", "solve_small_sets", "bundle_budget", "gather_conflictive",
+                     "gather_free")
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
 #: OpenCV offers one is checked when the robot extracts)
 FEATURE_METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
@@ -293,13 +301,14 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: robot_options[{key!r}] sets {fixed[0]!r}, which is the "
                              "team's (every robot runs the same rule); set it under 'options'")
         per[rid] = val
-    if data["kind"] == "links" and data.get("cameras") is None:
+    if data["kind"] == "links" and not all(
+            isinstance(c, dict) and "K" in c for c in data.get("cameras") or [None]):
         asks = [k for k, v in [("options", opts), *((f"robot_options[{k!r}]", {**opts, **v})
                                                       for k, v in ro.items())] if v["fusion"]]
         if asks:
             raise InputError(f"{where}: {asks[0]} sets fusion on a links team without "
-                             "data.keypoints and data.cameras; fusion needs every robot's "
-                             "keypoints and pose")
+                             "data.keypoints and every robot's pose in data.cameras (K, R, t); "
+                             "fusion needs every robot's keypoints and pose")
     obs = doc.get("observer")
     observer = None
     if obs is not None:
@@ -414,10 +423,18 @@ def _check_links_cameras(data: dict, n: int, where: str) -> None:
         raise InputError(f"{where}: data.cameras must list {n} cameras, one per robot "
                          '({"K": 3x3, "R": 3x3, "t": [tx, ty, tz]})')
     for i, c in enumerate(cams):
+        if c is None:  # a robot of unknown pose
+            continue
+        if isinstance(c, dict) and set(c) == {"P"}:
+            if not _is_matrix(c["P"], 3, 4):
+                raise InputError(f"{where}: data.cameras[{i}].P must be a 3x4 matrix of finite "
+                                 "numbers (K [R | t])")
+            continue
         if not isinstance(c, dict) or set(c) != {"K", "R", "t"}:
             keys = sorted(set(c) - {"K", "R", "t"}) if isinstance(c, dict) else []
             raise InputError(f"{where}: data.cameras[{i}] must be an object with exactly "
-                             '"K", "R" and "t"' + (f"; unknown key {keys[0]!r}" if keys else ""))
+                             '"K", "R" and "t" (a pose), exactly "P" (a projection) or null '
+                             "(unknown)" + (f"; unknown key {keys[0]!r}" if keys else ""))
         for key, shape in (("K", (3, 3)), ("R", (3, 3))):
             if not _is_matrix(c[key], *shape):
                 raise InputError(f"{where}: data.cameras[{i}].{key} must be a 3x3 matrix of "
@@ -458,7 +475,8 @@ def _check_options(opts: dict, where: str) -> None:
     if r is not None and (not _is_number(r) or r < 0):
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
                          "pixels >= 0")
-    for k in ("fusion", "rootsift", "budget_after_merge"):
+    for k in ("fusion", "rootsift", "budget_after_merge", "solve_small_sets", "gather_conflictive",
+              "gather_free"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
     if opts.get("wire", "compact") not in WIRE_FORMS:

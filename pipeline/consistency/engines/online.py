@@ -594,8 +594,10 @@ class OnlineAssociation:
         gather = self.gather and self.rule.name == WEIGHED_RULE
         by_robots = self.robots_solve and self.rule.name == WEIGHED_RULE \
             and (gather or self.weigh)
-        if by_robots:
-            kw.update(gather_conflictive=gather, gather_free=self.weigh)
+        if by_robots:  # each image's own projection, None where unknown (a set with one
+            # is solved without the geometric test, as in the batched solution)
+            kw.update(gather_conflictive=gather, gather_free=self.weigh,
+                      projections=[self.projection[g] for g in images])
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats

@@ -18,10 +18,13 @@ loads nothing heavy) with one function per job:
     ``run-images``: features and matching of the photographs (``comm_edges`` None: the
     ``knn:K`` graph, chosen by ``graph_from_features(features)``); the consistency stage when
     the robots run it themselves (else ``cleaning`` is None and the runner runs it).
-``online_stage(features_per_camera, links, resolution, *, solve_small_sets, keypoints, projections) -> ConsistencyResult``
+``online_stage(features_per_camera, links, resolution, *, solve_small_sets, keypoints, projections, gather_conflictive, gather_free) -> ConsistencyResult``
     ``run-formation --steps N``: the rule's stage of one step on its sub-problem (the
     step's frames are the cameras, frames sharing a link are neighbours; the online stage
-    of :mod:`pipeline.consistency.engines.online` does the rest).
+    of :mod:`pipeline.consistency.engines.online` does the rest). The module's
+    ``ONLINE_ROBOTS_SOLVE`` (default False) says whether the stage's robots solve the small
+    sets at their roots themselves (``gather_*``, :mod:`pipeline.consistency.roots`: robot
+    processes must), or the online stage solves them in batch (the simulator).
 ``online_fusion(views, features, links, comm_edges, *, track_labels) -> FusionResult``
     ``run-formation --steps N`` (fusion on): robust distributed fusion
     (:func:`pipeline.fusion.landmarks.fuse_tracks`, its arguments and result) of the tracks

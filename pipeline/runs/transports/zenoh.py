@@ -40,6 +40,10 @@ __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_t
            "write_robot_links", "links_of_run"]
 
 
+#: the robots of an online step solve the small sets at their roots themselves (processes:
+#: no one else holds their bundles)
+ONLINE_ROBOTS_SOLVE = True
+
 def write_robot_links(folder: Path, links, n: int) -> list[Path]:
     """One links file per robot in ``folder`` (``links-robotI.csv``): the rows of ``links``
     that touch robot ``I``, in their order, with their quality. Returns the paths."""
@@ -239,14 +243,15 @@ def images_of_run(config, views, team, run) -> ImagesRobots:
 
 
 def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, *,
-                       kill=None, workdir=None, keep_run: list | None = None, links=None
-                       ) -> ConsistencyResult:
+                       kill=None, workdir=None, keep_run: list | None = None, links=None,
+                       data_extra: dict | None = None) -> ConsistencyResult:
     """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``.
 
     ``links_csv``: one file the robots share, or a list of one file per robot holding only
     the rows that touch it (then each robot reads only its own file); the links of the
     result are ``links`` when given, else the shared file's rows in order, or the per-robot
-    files' links each once, sorted."""
+    files' links each once, sorted. ``data_extra``: more keys of the team's ``data`` (e.g. the
+    robots' ``keypoints`` and ``cameras``, :mod:`pipeline.team.teamfile`)."""
     from pipeline.inputs.linkscsv import read_links_csv
 
     fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
@@ -254,7 +259,7 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
     per_robot = isinstance(links_csv, (list, tuple))
     paths = [str(Path(p).resolve()) for p in links_csv] if per_robot \
         else str(Path(links_csv).resolve())
-    data = {"kind": "links", "links": paths, "features_per_camera": fpc}
+    data = {"kind": "links", "links": paths, "features_per_camera": fpc, **(data_extra or {})}
     team = make_team("resolve", edges, data, options, n=len(fpc))
     run = launch_team(team, workdir, kill=kill)
     if keep_run is not None:
@@ -298,7 +303,8 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
 
 
 def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
-                  keypoints=None, projections=None) -> ConsistencyResult:
+                 keypoints=None, projections=None, gather_conflictive=False,
+                 gather_free=False) -> ConsistencyResult:
     """The rule's stage of one online step (``run-formation --steps N --transport zenoh``): one
     robot process per frame of the step's sub-problem that has a link there, over Zenoh, each
     reading its own rows of the sub-problem's links (:func:`resolve_links_file`); neighbours
@@ -307,24 +313,29 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     The frames are the stage's cameras, as in the simulator (:mod:`pipeline.consistency.
     engines.online`); a frame without a link in the sub-problem takes no part (it has
     nothing to send) and the evidence rule's bundle budget is the one of all the
-    sub-problem's frames, as the simulator computes it, so both decide alike. The robots
-    read links and their quality only (no keypoints): the evidence rule's small conflictive
-    sets must be left to the caller (``solve_small_sets=False``, the online stage's
-    gathering), which solves them with the geometric test.
+    sub-problem's frames, as the simulator computes it, so both decide alike. With
+    ``gather_conflictive`` / ``gather_free`` (the online stage's ``robots_solve``) the robots
+    also solve the small sets at their roots (:mod:`pipeline.consistency.roots`): each then
+    holds its own keypoints (its keypoints file) and its own projection (its
+    ``data.cameras`` entry ``P``, null where unknown), as the simulator's robots do. Without
+    them the robots hold links and their quality only: the evidence rule's small
+    conflictive sets must then be left to the caller (``solve_small_sets=False``).
     """
     import tempfile
 
     from pipeline.commgraph import comm_edges_for
     from pipeline.consistency.rules import get_rule
     from pipeline.consistency.setlists import bundle_budget
+    from pipeline.team.robot import write_keypoints
     from pipeline.types import Links
 
     rule = get_rule(resolution)
     leaves = rule.set_lists   # a rule whose small sets the caller may solve (evidence)
-    if leaves and solve_small_sets:
+    gather = leaves and (gather_conflictive or gather_free)
+    if leaves and solve_small_sets and not gather_conflictive:
         raise InputError(f"the {rule.name} rule over zenoh in an online run: its small "
-                         "conflictive sets are gathered at their roots (the robots hold links, "
-                         "not keypoints); drop --no-gather")
+                         "conflictive sets are solved at their roots (the online stage's "
+                         "gathering, by its robots with robots_solve); drop --no-gather")
     m = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
     used = np.unique(np.concatenate([links.cam_i, links.cam_j]))
     where = np.searchsorted(used, np.arange(len(m)))
@@ -333,12 +344,32 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     opts = team_options(resolution=rule.name)
     if leaves:
         opts.update(solve_small_sets=False, bundle_budget=bundle_budget(len(m)))
+    if gather:
+        opts.update(gather_conflictive=bool(gather_conflictive), gather_free=bool(gather_free))
     with tempfile.TemporaryDirectory(prefix="online-step-") as work:
         paths = write_robot_links(Path(work), sub, len(used))
+        extra = {}
+        if gather and keypoints is not None:
+            kps = []
+            for k, g in enumerate(used.tolist()):
+                kps.append(Path(work) / f"keypoints-robot{k}.csv")
+                write_keypoints(kps[-1], keypoints[g])
+            P = [None if projections is None or projections[g] is None else
+                 {"P": np.asarray(projections[g], np.float64).tolist()} for g in used.tolist()]
+            extra = {"keypoints": [str(p) for p in kps], "cameras": P}
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
-                                 workdir=work, links=sub)
+                                 workdir=work, links=sub, data_extra=extra)
     if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])
+    if gather:  # the phase of the sets solved at their roots, as the simulator reports it
+        from pipeline.consistency.roots import CUTS, GBUNDLE, TOKEN
+
+        kinds = (TOKEN, GBUNDLE, CUTS)
+        res.stats["roots"] = dict(
+            rounds=int(max((ph.get("rounds", 0) for ph in res.stats["per_iteration"]
+                            if ph.get("phase") == "roots"), default=0)),
+            messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
+            bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)))
     return res
 
 

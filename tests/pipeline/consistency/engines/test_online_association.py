@@ -496,15 +496,20 @@ def test_gathering_the_small_conflictive_sets_decides_as_the_rules_flood(posed, 
         assert [r[key] for r in rg] == [r[key] for r in rf], key
 
 
-@pytest.mark.parametrize("posed", [False, True])
+@pytest.mark.parametrize("posed", ["no", "yes", "mixed"])
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_the_sets_solved_by_the_robots_at_their_roots_are_the_batched_solution(posed, data):
     """``robots_solve``: the stage's robots solve the sets of steps 2 and 2b at their roots
     (pipeline.consistency.roots, every robot on its own inbox in the simulator), as robot
     processes do over a middleware; the default is the batched solution of the same
-    protocol (engines.gather.solve_at_roots). Same cuts, steps, reasons and counts of sets."""
-    window, hold, stream = data.draw(posed_streams() if posed else streams())
+    protocol (engines.gather.solve_at_roots). Same cuts, steps, reasons and counts of sets,
+    whether every frame, none or only some have a pose (robot 0's frames none: a set with
+    one of them is solved without the geometric test)."""
+    window, hold, stream = data.draw(streams() if posed == "no" else posed_streams())
+    if posed == "mixed":
+        stream = [([Frame(f.robot, f.m, f.keypoints, None if f.robot == 0 else f.projection)
+                    for f in frames], links) for frames, links in stream]
     runs = []
     for robots_solve in (True, False):
         oa = OnlineAssociation(window, hold=hold, robots_solve=robots_solve)
