@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.team.robot import links_camera, write_keypoints
+from pipeline.team.robot import links_camera, links_projection, write_keypoints
 from pipeline.team.teamfile import load_team, parse_team
 
 _LINKS = {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}
@@ -57,7 +57,14 @@ def test_a_valid_team_parses():
      "data.cameras must list 3 cameras"),
     ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
                "cameras": [_CAM, {**_CAM, "dist": [0]}, _CAM]}},
-     "data.cameras[1] must be an object with exactly \"K\", \"R\" and \"t\"; unknown key 'dist'"),
+     "data.cameras[1] must be an object with exactly \"K\", \"R\" and \"t\" (a pose), "
+     "exactly \"P\" (a projection) or null (unknown); unknown key 'dist'"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, {"P": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}, None]}},
+     "data.cameras[1].P must be a 3x4 matrix of finite numbers"),
+    ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
+               "cameras": [_CAM, {"P": [[1, 0, 0, 0]] * 3}, None]}, "options": {"fusion": True}},
+     "options sets fusion on a links team without data.keypoints and every robot's pose"),
     ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
                "cameras": [_CAM, _CAM, {**_CAM, "R": [[1, 0], [0, 1]]}]}},
      "data.cameras[2].R must be a 3x3 matrix"),
@@ -172,6 +179,25 @@ def test_a_robot_reads_back_its_own_keypoints_and_camera_exactly(tmp_path):
     assert got.dtype == np.float32 and np.array_equal(got, kp)
     assert np.array_equal(K, np.array(_ROBOT_CAM["K"])) and np.array_equal(R, np.eye(3))
     assert t.tolist() == [0.1, -0.2, 1.5]
+
+
+def test_a_robot_knows_its_projection_from_its_pose_or_its_p_entry(tmp_path):
+    """links_projection: K [R | t] of a pose, the P of a projection-only entry (no pose for
+    fusion then), None where unknown; each robot its own entry."""
+    P = np.arange(12, dtype=float).reshape(3, 4)
+    doc = json.loads(_robot_team(tmp_path).path.read_text())
+    doc["robots"].append({"id": 2, "endpoint": "tcp/127.0.0.1:7002"})
+    doc["comm_edges"] = [[0, 1], [1, 2]]
+    doc["data"].update(features_per_camera=[1, 1, 1], keypoints=["k0.csv", "k1.csv", "k2.csv"],
+                       cameras=[_ROBOT_CAM, {"P": P.tolist()}, None])
+    (tmp_path / "TEAM.json").write_text(json.dumps(doc))
+    for k in range(3):
+        write_keypoints(tmp_path / f"k{k}.csv", [[1.0, 2.0]])
+    team = load_team(tmp_path / "TEAM.json")
+    K, R, t = (np.array(_ROBOT_CAM[k], float) for k in "KRt")
+    assert np.array_equal(links_projection(team, 0), K @ np.c_[R, t])
+    assert np.array_equal(links_projection(team, 1), P) and links_camera(team, 1)[1] is None
+    assert links_projection(team, 2) is None and links_camera(team, 2)[1] is None
 
 
 def test_a_links_team_without_cameras_gives_none(tmp_path):
