@@ -85,8 +85,11 @@ One step (:meth:`OnlineAssociation.add_step`)
    the set with their evidence weights, its frame's projection; history links as in the
    rule's pass) up a tree to the set's *root*, the robot of its smallest feature: the
    rule's set lists name that feature first to every robot of a set of at most ``B``
-   features, and the label flooding brought it one hop per round, so the neighbour it
-   came from first is a parent on a shortest path. The root solves the rule's solution on
+   features; the root sends a token down the set's links and each robot takes the robot
+   its first token came from as its parent (:mod:`pipeline.consistency.roots`, the robots'
+   protocol, which robot processes run: ``robots_solve``; the simulator evaluates it in
+   batch, :func:`.gather.solve_at_roots`, counted as a shortest-path tree, and the two are
+   property-tested to cut alike). The root solves the rule's solution on
    the set's bundles (:func:`~pipeline.consistency.evidence.solve_set`: triangle support
    with the three-view test, the Kruskal merge by decreasing evidence with the geometric
    test of the merged track) and sends the links it cuts down the tree; each robot cuts
