@@ -10,6 +10,8 @@ Key expressions (``T`` = team name)
     ``fm/T/hello/SRC/DST``  start handshake
     ``fm/T/alive/SRC/DST``  liveness beat
     ``fm/T/gone/SRC/DST``   SRC wrote DST off (see "Writing a neighbour off")
+    ``fm/T/again/SRC/DST``  SRC asks DST to send its packet of a round again (payload: the
+                            round; see "A round packet lost")
     ``fm/T/live/ID``        liveliness token of a robot
     ``fm/T/result/ID``      a robot's final result (for the observer)
     ``fm/T/ack/ID``         the observer's receipt of it
@@ -36,6 +38,19 @@ Faults at this transport
       sends every neighbour still counted on a tiny ``alive`` beat every ``beat_s`` seconds,
       whatever the robot is computing. A neighbour
       that is merely slow (rendering, matching) keeps beating and is waited for.
+
+A round packet lost
+    Round packets go with Zenoh's blocking congestion control, so Zenoh never drops one on a
+    full queue; yet a packet can still be lost with the link it was queued on (a link closed
+    and reopened under load: observed with two 18-robot teams started at once on two cores,
+    where a team stalled with every robot waiting in one round for a neighbour that kept
+    beating). A robot that has waited :data:`ASK_AFTER_S` for a neighbour's packet of the
+    current round while hearing its beats asks it for that packet (``again``, at most once
+    per :data:`ASK_AFTER_S`); a robot keeps its packets of its last two rounds and sends the
+    asked one again (a neighbour may still wait for the round before this robot's: it moved
+    on when it got the neighbour's packet). A packet that arrives twice is kept once (it is
+    stored by sender and round). A neighbour that has not sent the round yet ignores the
+    request. Counted in ``resent`` and ``asked``.
 
 Writing a neighbour off (no hang, ever)
     A robot stops waiting for neighbour ``k`` — *writes it off* — for one of five reasons,
@@ -117,7 +132,7 @@ from pipeline.errors import InputError
 from pipeline.transport import Message, NotANeighbourError, RobotMissingError, RoundEndpoint
 from pipeline.transport.wire import WireError, decode_packet, encode_packet
 
-__all__ = ["ZenohTransport", "zenoh_config", "open_session", "key"]
+__all__ = ["ZenohTransport", "zenoh_config", "open_session", "key", "ASK_AFTER_S"]
 
 
 def key(team: str, what: str, *ids) -> str:
@@ -131,6 +146,11 @@ def link_timeouts(round_timeout_s: float) -> tuple[float, float]:
     docstring, "Rejoin", step 1)."""
     return 2.0 * float(round_timeout_s) + 10.0, float(round_timeout_s) + 5.0
 
+
+
+#: seconds a robot waits for a neighbour's round packet, while hearing its beats, before it
+#: asks for it again (and again every so many seconds): a packet lost with its link
+ASK_AFTER_S = 2.0
 
 def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None):
     """A peer-mode Zenoh config: no multicast scouting, no gossip, explicit endpoints; with
@@ -221,6 +241,9 @@ class ZenohTransport(RoundEndpoint):
         self.messages_by_kind: dict[str, int] = {}
         self.bytes_by_kind: dict[str, int] = {}
         self.wait_s = 0.0
+        self.resent = self.asked = 0
+        self._kept: dict[int, dict[int, bytes]] = {k: {} for k in self.neighbours}
+        self._asked_at: dict[int, float] = {}
         self.send_s = 0.0  # seconds the round packets' puts blocked (a full queue: slow link)
         connect = [team.endpoint(k) for k in sorted(self.neighbours)]
         if team.observer:
@@ -238,6 +261,8 @@ class ZenohTransport(RoundEndpoint):
                 key(name, "alive", k, self.robot_id), self._on_beat))
             self._subs.append(self.session.declare_subscriber(
                 key(name, "gone", k, self.robot_id), self._on_gone))
+            self._subs.append(self.session.declare_subscriber(
+                key(name, "again", k, self.robot_id), self._on_again))
         import zenoh
 
         # round packets must never be dropped by Zenoh itself (its default under congestion
@@ -370,6 +395,22 @@ class ZenohTransport(RoundEndpoint):
                 self._packets[(src, int(header["round"]))] = (header, msgs)
             self._cv.notify_all()
 
+    def _on_again(self, sample) -> None:
+        """A neighbour asks for this robot's packet of a round again (module docstring)."""
+        try:
+            k = int(str(sample.key_expr).split("/")[-2])
+            r = int(sample.payload.to_bytes())
+        except ValueError:
+            return
+        with self._cv:
+            data = self._kept.get(k, {}).get(r)
+            if data is None or k in self.written_off:
+                return
+            self.resent += 1
+        self._log(f"robot {self.robot_id}: sent its round {r} packet to robot {k} again "
+                  "(asked: it did not arrive)")
+        self._sendq[k].put(data)
+
     def _on_hello(self, sample) -> None:
         try:
             doc = json.loads(sample.payload.to_bytes())
@@ -472,6 +513,9 @@ class ZenohTransport(RoundEndpoint):
             self.wire_bytes += len(data)
             self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
+            with self._cv:  # kept for a neighbour that asks again (its last two rounds)
+                self._kept[k] = {q: d for q, d in self._kept[k].items() if q >= r - 1}
+                self._kept[k][r] = data
             self._sendq[k].put(data)  # never blocks: the neighbour's sender puts it
         t0 = time.monotonic()
         with self._cv:
@@ -492,6 +536,16 @@ class ZenohTransport(RoundEndpoint):
                         self._write_off(k, "limit")
                 if all(k in self.silent for k in waiting):
                     break
+                for k in waiting:  # heard, but its packet of the round is late: ask again
+                    if k not in self.silent and now - t0 > ASK_AFTER_S \
+                            and now - self._asked_at.get(k, t0) > ASK_AFTER_S:
+                        self._asked_at[k] = now
+                        self.asked += 1
+                        try:
+                            self.session.put(key(self.team.name, "again", self.robot_id, k),
+                                             str(r).encode())
+                        except Exception:  # noqa: BLE001 - the session is closing
+                            pass
                 # bounded: every pass writes off or waits at most a beat period, and after
                 # round_limit_s every neighbour still waited for is written off
                 self._cv.wait(min(self.beat_s, self.round_timeout_s))
@@ -511,7 +565,7 @@ class ZenohTransport(RoundEndpoint):
                     round=self.round, messages_by_kind=dict(self.messages_by_kind),
                     bytes_by_kind=dict(self.bytes_by_kind), wire_bytes=self.wire_bytes,
                     wire_packets=self.wire_packets, wait_s=round(self.wait_s, 4),
-                    send_s=round(self.send_s, 4),
+                    send_s=round(self.send_s, 4), resent=self.resent, asked=self.asked,
                     bytes_to={str(k): v for k, v in sorted(self.bytes_to.items())},
                     wire_bytes_to={str(k): v for k, v in sorted(self.wire_bytes_to.items())},
                     silent=sorted(self.silent), outcome=self.outcome(),
