@@ -133,7 +133,7 @@ from pipeline.fusion.voting import (
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.types import Features, Links, View
 
-__all__ = ["FusionResult", "fuse_tracks", "tracks_of"]
+__all__ = ["FusionResult", "fuse_tracks", "require_posed_views", "tracks_of"]
 
 LOCAL_MODES = ("robust", "pair", "neighbours")
 CONSENSUS_MODES = ("exact", "metropolis")
@@ -209,7 +209,8 @@ def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int, np
 # the stage
 
 
-def _check_inputs(views, features, links, comm_edges, sigma_px, local, noise):
+def require_posed_views(views, features) -> None:
+    """InputError unless there is one feature set per view and every view has a pose."""
     n = len(views)
     if len(features) != n:
         raise InputError(f"got {len(views)} views but {len(features)} feature sets; one each")
@@ -217,6 +218,11 @@ def _check_inputs(views, features, links, comm_edges, sigma_px, local, noise):
         if v.R is None or v.t is None:
             raise InputError(f"view {i} ({v.name}) has no pose; fusion needs every camera's "
                              "cam_from_world (R, t)")
+
+
+def _check_inputs(views, features, links, comm_edges, sigma_px, local, noise):
+    require_posed_views(views, features)
+    n = len(views)
     if not sigma_px > 0:
         raise InputError(f"sigma_px must be > 0, got {sigma_px}")
     if local not in LOCAL_MODES:

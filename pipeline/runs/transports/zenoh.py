@@ -408,16 +408,11 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
     """
     import tempfile
 
-    from pipeline.fusion.landmarks import FusionResult
+    from pipeline.fusion.landmarks import FusionResult, require_posed_views
     from pipeline.team.robot import write_keypoints
 
+    require_posed_views(views, features)
     n = len(views)
-    if len(features) != n:
-        raise InputError(f"got {n} views but {len(features)} feature sets; one each")
-    for i, v in enumerate(views):
-        if v.R is None or v.t is None:
-            raise InputError(f"view {i} ({v.name}) has no pose; fusion needs every camera's "
-                             "cam_from_world (R, t)")
     m = np.array([len(f) for f in features], dtype=np.int64)
     cameras = [{"K": np.asarray(v.K, np.float64).tolist(),
                 "R": np.asarray(v.R, np.float64).tolist(),
