@@ -22,6 +22,10 @@ both ran out of memory. The stage is now three phases, each ended when nothing i
    caller solves those sets itself (``solve_small_sets=False`` of
    :func:`..driver.resolve_conflicts`: the online stage gathers each set's bundles at one
    robot, :mod:`.online`).
+2b. **The small sets solved at their roots** (:mod:`..roots`), when the robots were handed
+   ``gather_conflictive`` / ``gather_free`` (:func:`..driver.resolve_conflicts`; the online
+   stage's robots): every robot on its own inbox (:func:`.gather.run_roots`), the same cuts
+   as phase 2 on the conflictive ones.
 3. **The ``sync`` merge on the large sets** (:mod:`..sync`): every robot hides its links that
    are not in a large set (both ends of a link know: the two features share their set) and
    runs the distributed greedy merge on the rest; the greedy merge decomposes over connected
