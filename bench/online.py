@@ -26,6 +26,9 @@ detection finds conflictive are weighed by the rule (the earlier rule; default: 
 step's new links touch, step 2b of :mod:`pipeline.consistency.engines.online`).
 ``--no-gather``: the rule's small conflictive sets solved by its own flood of their bundles
 to every robot of the set (default: gathered at each set's root, the same cuts).
+``--robots-solve``: the sets solved at their roots by the simulator's robots themselves,
+each on its own inbox (:mod:`pipeline.consistency.roots`, what robot processes run), instead
+of the batched solution counted as a shortest-path tree (the same cuts).
 
 Fusion is off unless ``--fusion``: the batch run is the consistency stage alone, so is the
 online one it is compared with.
@@ -63,7 +66,7 @@ def one(robots: int, args) -> dict:
                           resolution=args.resolution, batch_every=args.batch_every,
                           fusion=args.fusion, rerun=False, overturn=not args.no_overturn,
                           hold=args.hold, weigh=not args.no_weigh,
-                          gather=not args.no_gather)
+                          gather=not args.no_gather, robots_solve=args.robots_solve)
     t0 = time.perf_counter()
 
     def show(r):
@@ -168,6 +171,10 @@ def main(argv=None) -> int:
                     help="solve the rule's small conflictive sets by its own flood of their "
                          "bundles to every robot of the set (the earlier stage), instead of "
                          "gathering them at the set's root as the weighing does")
+    ap.add_argument("--robots-solve", action="store_true",
+                    help="the simulator's robots run the roots' protocol themselves "
+                         "(pipeline.consistency.roots) instead of its batched solution: the "
+                         "same cuts, the protocol's own rounds, messages and bytes")
     ap.add_argument("--fusion", action="store_true",
                     help="fuse the changed tracks after each step (off: the consistency stage "
                          "alone, as the batch run)")

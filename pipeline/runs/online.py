@@ -80,6 +80,10 @@ class OnlineConfig:
     #: the rule's small conflictive sets are solved at their roots (bundles gathered), not by
     #: the rule's flood to every robot of the set: the same cuts, fewer bytes
     gather: bool = True
+    #: the simulator's robots run the roots' protocol themselves, each on its own inbox
+    #: (OnlineAssociation ``robots_solve``; a transport of processes always does), instead
+    #: of its batched solution: the same cuts, the protocol's own rounds and bytes
+    robots_solve: bool = False
     #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
     transport: str = "sim"
 
@@ -226,7 +230,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                            max_features=config.max_features, fusion=config.fusion,
                            batch_steps=batch_steps, on_step=on_step, overturn=config.overturn,
                            hold=config.hold, weigh=config.weigh, gather=config.gather,
-                           transport=config.transport)
+                           transport=config.transport, robots_solve=config.robots_solve)
     run.sequence = seq
     return run
 
@@ -245,13 +249,14 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      batch_steps=frozenset(), on_step=None, feature_options=None,
                      match_options=None, overturn: bool = True,
                      hold: int | None = None, weigh: bool = True,
-                     gather: bool = True, transport: str = "sim") -> OnlineRun:
+                     gather: bool = True, transport: str = "sim",
+                     robots_solve: bool = False) -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
     of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
-    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh`` and ``gather`` to the online stage; ``transport``
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh``, ``gather`` and ``robots_solve`` to the online stage; ``transport``
     names where the robots run the rule's stage and the fusion of each step (its
     ``online_stage`` and ``online_fusion`` jobs; the batch run stays on the simulator). Returns an :class:`OnlineRun` without
     ``sequence``."""
@@ -272,7 +277,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     # batch (the same protocol's decisions, property-tested)
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
                            weigh=weigh, gather=gather, stage=stage,
-                           robots_solve=bool(getattr(jobs, "ONLINE_ROBOTS_SOLVE", False)))
+                           robots_solve=robots_solve
+                           or bool(getattr(jobs, "ONLINE_ROBOTS_SOLVE", False)))
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)
