@@ -598,9 +598,12 @@ class OnlineAssociation:
         by_robots = self.robots_solve and self.rule.name == WEIGHED_RULE \
             and (gather or self.weigh)
         if by_robots:  # each image's own projection, None where unknown (a set with one
-            # is solved without the geometric test, as in the batched solution)
-            kw.update(gather_conflictive=gather, gather_free=self.weigh,
-                      projections=[self.projection[g] for g in images])
+            # is solved without the geometric test, as in the batched solution; with no pose
+            # at all no conflict-free set is weighed: it would cut nothing)
+            posed = [self.projection[g] for g in images]
+            kw.update(gather_conflictive=gather,
+                      gather_free=self.weigh and any(P is not None for P in posed),
+                      projections=posed)
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats
