@@ -199,7 +199,7 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
             memory=lambda: robot.memory_bytes() + robot.setlists.nbytes() + chan.memory_bytes())
         log.detection_rounds += t
         log.phases.append(dict(phase="setlists", start_round=begin, rounds=t, bits=int(bits)))
-        if not bits & LOST and bits & CONFLICT and robot.evidence.solve_small:
+        if not bits & LOST and bits & CONFLICT and robot.evidence.floods_small():
             t, ebits, begin = run.phase(
                 "evidence", lambda rb, send: start_evidence(rb, send),
                 lambda rb, msgs, send, now, t: evidence_step(rb, msgs, send, t),

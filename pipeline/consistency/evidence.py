@@ -125,10 +125,15 @@ class EvidenceState:
     #: the stage solves the conflictive sets of at most ``B`` features (its phase 2);
     #: ``False``: it leaves them to its caller (the online stage gathers them at a root)
     solve_small: bool = True
-    #: the small sets solved at their roots (:mod:`.roots`): the conflictive ones (with
-    #: ``solve_small`` off) and the conflict-free ones
+    #: the small sets solved at their roots (:mod:`.roots`): the conflictive ones (the rule's
+    #: flood then leaves them, :meth:`floods_small`) and the conflict-free ones
     gather_conflictive: bool = False
     gather_free: bool = False
+
+    def floods_small(self) -> bool:
+        """The stage's phase 2 (the rule's flood) solves the small conflictive sets: neither
+        left to the caller nor solved at their roots."""
+        return self.solve_small and not self.gather_conflictive
 
     def keep(self, lab: int, g: int, bundle: tuple) -> None:
         """Hold ``bundle = (kp, nbr, w, cam, P)`` of feature ``g`` of set ``lab``."""

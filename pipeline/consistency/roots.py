@@ -28,7 +28,7 @@ every member's list), and the others learn only the links it cuts:
 
 Which sets (a robot's :class:`~.evidence.EvidenceState`, every robot alike): the small
 conflictive sets with ``gather_conflictive`` (the rule's phase 2 then leaves them:
-``solve_small`` off), the small conflict-free ones with ``gather_free`` (in a conflict-free
+:meth:`~.evidence.EvidenceState.floods_small`), the small conflict-free ones with ``gather_free`` (in a conflict-free
 set the merge meets no two features of one image: it cuts only what the geometric test
 refutes, and nothing where a bundle carries no projection). A set's robots all know whether
 it is conflictive and small (their lists are equal), so all take part or none does.
@@ -105,10 +105,12 @@ class RootsState:
                    + 16 * len(self.members))
 
 
-def selected_sets(robot: Robot, conflictive: bool, free: bool) -> np.ndarray:
-    """``(m,)`` int64: the set (its smallest id) of each own feature that takes part, -1
-    elsewhere: small sets (:func:`.setlists.finish_setlists` ran) of two features or more,
-    conflictive ones with ``conflictive``, conflict-free ones with ``free``."""
+def selected_sets(robot: Robot, conflictive: bool, free: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``(label, size)``, each ``(m,)`` int64: the set (its smallest id) of each own feature
+    that takes part, -1 elsewhere, and the length of each own feature's list (its set's size
+    where the set is small): small sets (:func:`.setlists.finish_setlists` ran) of two
+    features or more, conflictive ones with ``conflictive``, conflict-free ones with
+    ``free``."""
     st = robot.setlists
     count = np.bincount(st.r, minlength=robot.m)
     ptr = np.r_[0, np.cumsum(count)]
@@ -117,7 +119,7 @@ def selected_sets(robot: Robot, conflictive: bool, free: bool) -> np.ndarray:
     first[has] = st.ids[ptr[:-1][has]]
     small = robot.active & ~st.large & (count >= 2)
     take = small & ((robot.conflictive & conflictive) | (~robot.conflictive & free))
-    return np.where(take, first, -1)
+    return np.where(take, first, -1), count
 
 
 def start_roots(robot: Robot, send) -> int:
@@ -125,8 +127,7 @@ def start_roots(robot: Robot, send) -> int:
     sets this robot is the root of."""
     ev: EvidenceState = robot.evidence
     st = robot.roots = RootsState()
-    label = selected_sets(robot, ev.gather_conflictive, ev.gather_free)
-    count = np.bincount(robot.setlists.r, minlength=robot.m)
+    label, count = selected_sets(robot, ev.gather_conflictive, ev.gather_free)
     link = np.flatnonzero(robot.link_alive & (label[robot.link_r] >= 0))
     r = robot.link_r[link]
     other = robot.offsets[robot.link_nbr[link]] + robot.link_s[link]
@@ -220,8 +221,7 @@ def _solve_if_complete(robot: Robot, s: int, send, round_: int) -> None:
     _send_cuts({j: [(s, a, b)] for j in sorted(st.children.get(s, ()))}, send)
     robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
     st.held_bytes -= sum(bundle_nbytes(x) for x in st.held[s].values())
-    st.held[s] = {}
-    st.members[s] = 0  # solved: nothing more to hold
+    st.held[s] = {}  # solved: nothing more to hold
 
 
 def _send_cuts(down: dict, send) -> None:

@@ -425,8 +425,6 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             # roots), every robot alike
             robot.evidence.gather_conflictive = bool(opts.get("gather_conflictive", False))
             robot.evidence.gather_free = bool(opts.get("gather_free", False))
-            if robot.evidence.gather_conflictive:
-                robot.evidence.solve_small = False
     if hasattr(transport, "status"):
         transport.status("consistency")
         transport.lossy = True  # faults are injected into the consistency stage, as simulated

@@ -147,10 +147,10 @@ def link_timeouts(round_timeout_s: float) -> tuple[float, float]:
     return 2.0 * float(round_timeout_s) + 10.0, float(round_timeout_s) + 5.0
 
 
-
 #: seconds a robot waits for a neighbour's round packet, while hearing its beats, before it
 #: asks for it again (and again every so many seconds): a packet lost with its link
 ASK_AFTER_S = 2.0
+
 
 def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None):
     """A peer-mode Zenoh config: no multicast scouting, no gossip, explicit endpoints; with
@@ -504,6 +504,7 @@ class ZenohTransport(RoundEndpoint):
         ``round_limit_s`` (module docstring, "Writing a neighbour off").
         """
         r = self.round
+        sent = {}
         for k in sorted(self.neighbours):
             msgs, self._out[k] = self._out[k], []
             if k in self.silent:
@@ -513,12 +514,13 @@ class ZenohTransport(RoundEndpoint):
             self.wire_bytes += len(data)
             self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
-            with self._cv:  # kept for a neighbour that asks again (its last two rounds)
-                self._kept[k] = {q: d for q, d in self._kept[k].items() if q >= r - 1}
-                self._kept[k][r] = data
+            sent[k] = data
             self._sendq[k].put(data)  # never blocks: the neighbour's sender puts it
         t0 = time.monotonic()
         with self._cv:
+            for k, data in sent.items():  # kept for a neighbour that asks again (two rounds)
+                self._kept[k] = {r - 1: self._kept[k][r - 1]} if r - 1 in self._kept[k] else {}
+                self._kept[k][r] = data
             for k in self.neighbours:
                 self._heard.setdefault(k, t0)
             while True:

@@ -302,7 +302,6 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         for rb in robots:
             rb.evidence.gather_conflictive = bool(gather_conflictive)
             rb.evidence.gather_free = bool(gather_free)
-            rb.evidence.solve_small = rb.evidence.solve_small and not gather_conflictive
     m_total = int(fpc.sum())
 
     with rounds_bar(f"consistency: {n} robots") as bar:

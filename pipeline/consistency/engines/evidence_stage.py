@@ -245,8 +245,9 @@ def _budget(robots: list[Robot]) -> int:
 
 
 def _solve_small(robots: list[Robot]) -> bool:
-    """Phase 2 runs unless the robots were handed ``solve_small = False`` (all alike)."""
-    given = {bool(getattr(rb.evidence, "solve_small", True)) for rb in robots}
+    """Phase 2 runs unless the robots leave the small sets to the caller or solve them at
+    their roots (all alike, :meth:`..evidence.EvidenceState.floods_small`)."""
+    given = {rb.evidence.floods_small() for rb in robots}
     if len(given) > 1:
         raise ValueError("the robots disagree on solving the sets of at most B features")
     return given.pop() if given else True

@@ -44,6 +44,7 @@ __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_t
 #: no one else holds their bundles)
 ONLINE_ROBOTS_SOLVE = True
 
+
 def write_robot_links(folder: Path, links, n: int) -> list[Path]:
     """One links file per robot in ``folder`` (``links-robotI.csv``): the rows of ``links``
     that touch robot ``I``, in their order, with their quality. Returns the paths."""
@@ -57,6 +58,18 @@ def write_robot_links(folder: Path, links, n: int) -> list[Path]:
                 links.cam_j[sel].tolist(), links.feat_j[sel].tolist(),
                 links.quality[sel].tolist(), strict=True)))
         paths.append(p)
+    return paths
+
+
+def _write_robot_keypoints(folder: Path, keypoints) -> list[str]:
+    """One keypoints file per robot in ``folder`` (``keypoints-robotI.csv``, the team file's
+    ``data.keypoints``, :func:`pipeline.team.robot.write_keypoints`). Returns the paths."""
+    from pipeline.team.robot import write_keypoints
+
+    paths = []
+    for i, kp in enumerate(keypoints):
+        paths.append(str(folder / f"keypoints-robot{i}.csv"))
+        write_keypoints(paths[-1], kp)
     return paths
 
 
@@ -326,7 +339,6 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     from pipeline.commgraph import comm_edges_for
     from pipeline.consistency.rules import get_rule
     from pipeline.consistency.setlists import bundle_budget
-    from pipeline.team.robot import write_keypoints
     from pipeline.types import Links
 
     rule = get_rule(resolution)
@@ -350,13 +362,11 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
         paths = write_robot_links(Path(work), sub, len(used))
         extra = {}
         if gather and keypoints is not None:
-            kps = []
-            for k, g in enumerate(used.tolist()):
-                kps.append(Path(work) / f"keypoints-robot{k}.csv")
-                write_keypoints(kps[-1], keypoints[g])
             P = [None if projections is None or projections[g] is None else
                  {"P": np.asarray(projections[g], np.float64).tolist()} for g in used.tolist()]
-            extra = {"keypoints": [str(p) for p in kps], "cameras": P}
+            extra = {"keypoints": _write_robot_keypoints(Path(work),
+                                                         [keypoints[g] for g in used.tolist()]),
+                     "cameras": P}
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
                                  workdir=work, links=sub, data_extra=extra)
     if leaves:
@@ -412,7 +422,6 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
     import tempfile
 
     from pipeline.fusion.landmarks import FusionResult, require_posed_views
-    from pipeline.team.robot import write_keypoints
 
     require_posed_views(views, features)
     n = len(views)
@@ -424,12 +433,9 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
     with tempfile.TemporaryDirectory(prefix="online-fusion-") as work:
         folder = Path(work)
         paths = write_robot_links(folder, links, n)
-        kps = []
-        for i, f in enumerate(features):
-            kps.append(folder / f"keypoints-robot{i}.csv")
-            write_keypoints(kps[-1], f.keypoints)
         data = {"kind": "links", "links": [str(p) for p in paths],
-                "features_per_camera": m.tolist(), "keypoints": [str(p) for p in kps],
+                "features_per_camera": m.tolist(),
+                "keypoints": _write_robot_keypoints(folder, [f.keypoints for f in features]),
                 "cameras": cameras}
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
         run = launch_team(team, work)

@@ -485,15 +485,23 @@ def test_gathering_the_small_conflictive_sets_decides_as_the_rules_flood(posed, 
     every link of a set, the gathering one path per bundle and back; on a set of two or three
     features the gathering's replies may cost more, ``bench/online.py`` measures a team)."""
     window, hold, stream = data.draw(posed_streams() if posed else streams())
+    _assert_alike(window, hold, stream, "gather",
+                  ("cut_rule", "cut_weigh", "cut_history", "conflictive_sets", "weighed_sets"))
+
+
+def _assert_alike(window, hold, stream, option: str, keys) -> OnlineAssociation:
+    """Run ``stream`` with ``option`` on and off: the same kept links, reasons and steps of
+    the cuts, and the same per-step ``keys``; returns the run with it on."""
     runs = []
-    for gather in (True, False):
-        oa = OnlineAssociation(window, hold=hold, gather=gather)
+    for on in (True, False):
+        oa = OnlineAssociation(window, hold=hold, **{option: on})
         runs.append((oa, [oa.add_step(frames, links) for frames, links in stream]))
-    (g, rg), (f, rf) = runs
+    (a, ra), (b, rb) = runs
     for name in ("kept", "reason", "step_cut"):
-        assert getattr(g.links, name).tolist() == getattr(f.links, name).tolist(), name
-    for key in ("cut_rule", "cut_weigh", "cut_history", "conflictive_sets", "weighed_sets"):
-        assert [r[key] for r in rg] == [r[key] for r in rf], key
+        assert getattr(a.links, name).tolist() == getattr(b.links, name).tolist(), name
+    for key in keys:
+        assert [r[key] for r in ra] == [r[key] for r in rb], key
+    return a
 
 
 @pytest.mark.parametrize("posed", ["no", "yes", "mixed"])
@@ -510,14 +518,7 @@ def test_the_sets_solved_by_the_robots_at_their_roots_are_the_batched_solution(p
     if posed == "mixed":
         stream = [([Frame(f.robot, f.m, f.keypoints, None if f.robot == 0 else f.projection)
                     for f in frames], links) for frames, links in stream]
-    runs = []
-    for robots_solve in (True, False):
-        oa = OnlineAssociation(window, hold=hold, robots_solve=robots_solve)
-        runs.append((oa, [oa.add_step(frames, links) for frames, links in stream]))
-    (r, rr), (b, rb) = runs
-    for name in ("kept", "reason", "step_cut"):
-        assert getattr(r.links, name).tolist() == getattr(b.links, name).tolist(), name
-    for key in ("cut", "cut_rule", "cut_weigh", "cut_history", "conflictive_sets",
-                "conflictive_features", "weighed_sets"):
-        assert [x[key] for x in rr] == [x[key] for x in rb], key
+    r = _assert_alike(window, hold, stream, "robots_solve",
+                      ("cut", "cut_rule", "cut_weigh", "cut_history", "conflictive_sets",
+                       "conflictive_features", "weighed_sets"))
     assert r.is_conflict_free()
