@@ -115,7 +115,12 @@ Start handshake
     one last ``hello``. A neighbour that starts late within ``start_timeout_s`` joins; one not
     heard by then is written off (``start``) and named in the log, and the robot runs on with
     the others; if no neighbour at all was heard, the robot stops and names one
-    (:class:`~pipeline.transport.RobotMissingError`).
+    (:class:`~pipeline.transport.RobotMissingError`). That last ``hello`` may be lost (the
+    robot killed before Zenoh sent it; a test caught a neighbour then waiting the whole
+    timeout for a robot that had long started): a robot that has finished its handshake
+    answers every ``hello`` it still gets with one of its own, so a neighbour still waiting
+    is told it was heard; and a neighbour heard once whose session then closes (liveliness
+    token gone) is written off at once (``closed``), not after the timeout.
 """
 
 from __future__ import annotations
@@ -228,6 +233,7 @@ class ZenohTransport(RoundEndpoint):
         self._out: dict[int, list[tuple[str, dict]]] = {k: [] for k in self.neighbours}
         self._packets: dict[tuple[int, int], tuple[dict, list]] = {}
         self._hello: dict[int, bool] = {}
+        self._started = False  # the start handshake is over (hellos are answered)
         self._cv = threading.Condition()
         self._heard: dict[int, float] = {}
         self.beat_s = float(beat_s)
@@ -415,12 +421,21 @@ class ZenohTransport(RoundEndpoint):
         try:
             doc = json.loads(sample.payload.to_bytes())
             src, heard_me = int(doc["src"]), bool(doc["heard"])
+            waiting = not bool(doc.get("done", False))
         except (ValueError, KeyError, TypeError):
             return
         with self._cv:
             self._heard[src] = time.monotonic()
             self._hello[src] = self._hello.get(src, False) or heard_me
             self._cv.notify_all()
+            answer = waiting and self._started and src in self.neighbours \
+                and src not in self.written_off
+        if answer:  # it is still in its handshake: it may have missed our last hello
+            try:
+                self.session.put(key(self.team.name, "hello", self.robot_id, src),
+                                 json.dumps({"src": self.robot_id, "heard": True, "done": True}))
+            except Exception:  # noqa: BLE001 - the session is closing
+                pass
 
     # --- start ----------------------------------------------------------------------------
     def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05) -> float:
@@ -439,27 +454,33 @@ class ZenohTransport(RoundEndpoint):
         t0 = time.monotonic()
         name = self.team.name
 
-        def say():
+        def say(done: bool = False):
             for k in sorted(self.neighbours):
                 with self._cv:
                     heard = k in self._hello
                 self.session.put(key(name, "hello", self.robot_id, k),
-                                 json.dumps({"src": self.robot_id, "heard": heard}))
+                                 json.dumps({"src": self.robot_id, "heard": heard, "done": done}))
 
         while True:
             say()
             with self._cv:
-                ok = all(self._hello.get(k, False) for k in self.neighbours)
+                ok = all(self._hello.get(k, False) for k in self.neighbours
+                         if k not in self.written_off)
                 if not ok:
                     self._cv.wait(period_s)
-                    ok = all(self._hello.get(k, False) for k in self.neighbours)
+                    for k in sorted(self._left & self._hello.keys()):  # heard, then ended
+                        self._write_off(k, "closed")
+                    ok = all(self._hello.get(k, False) for k in self.neighbours
+                             if k not in self.written_off)
                 missing = sorted(k for k in self.neighbours if k not in self._hello)
+                if ok:
+                    self._started = True
             if ok:
-                say()  # the last one tells late neighbours that they were heard
+                say(done=True)  # the last one tells late neighbours that they were heard
                 return time.monotonic() - t0
             if time.monotonic() - t0 > timeout_s:
-                missing = sorted(set(missing) | {k for k in self.neighbours
-                                                 if not self._hello.get(k)})
+                missing = sorted((set(missing) | {k for k in self.neighbours
+                                                  if not self._hello.get(k)}) - self.written_off.keys())
                 k = missing[0]
                 text = (f"neighbour robot {k} ({self.team.endpoint(k)}) did not answer within "
                         f"{timeout_s:g} s; it never started or cannot be reached")
@@ -472,6 +493,8 @@ class ZenohTransport(RoundEndpoint):
                               "it never started or cannot be reached")
                     with self._cv:
                         self._write_off(k, "start")
+                with self._cv:
+                    self._started = True
                 return time.monotonic() - t0
 
     # --- rounds ---------------------------------------------------------------------------

@@ -2,7 +2,9 @@
 sent again, so the round completes (pipeline.transport.zenoh_transport, "A round packet
 lost")."""
 
+import json
 import threading
+import time
 
 import numpy as np
 
@@ -64,3 +66,85 @@ def test_a_lost_round_packet_is_asked_for_and_sent_again():
     finally:
         for rb in robots:
             rb.close()
+
+
+class _LossyHello:
+    """A robot's Zenoh session whose ``hello`` puts pass only when ``keep(doc)`` says so."""
+
+    def __init__(self, session, keep):
+        self._session, self._keep, self.dropped = session, keep, []
+
+    def put(self, key_expr, payload):
+        if "/hello/" in str(key_expr):
+            doc = json.loads(payload)
+            if not self._keep(doc):
+                self.dropped.append(doc)
+                return None
+        return self._session.put(key_expr, payload)
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+
+def _pair(name):
+    team = make_team(name, [[0, 1]], {"kind": "links", "links": "in.csv",
+                                      "features_per_camera": [1, 1]}, n=2)
+    return [ZenohTransport(team, i, round_timeout_s=30.0, log=lambda s: None) for i in range(2)]
+
+
+def test_a_lost_last_hello_is_answered_again():
+    """Robot 0's hellos that say it heard robot 1 are lost, its last one included (as when a
+    robot is killed before Zenoh sends it): robot 1 still finishes its handshake, at once and
+    without writing robot 0 off, because robot 0 answers its hellos once it has started."""
+    robots = _pair("lasthello")
+    first = []
+
+    def keep(doc):  # lose every "heard you" of the handshake loop and the last hello
+        if not doc["heard"]:
+            return True
+        if doc["done"] and not first:
+            first.append(doc)
+            return False
+        return bool(doc["done"])
+
+    robots[0].session = _LossyHello(robots[0].session, keep)
+    took = [None, None]
+
+    def run(i):
+        took[i] = robots[i].handshake(timeout_s=20.0)
+
+    try:
+        threads = [threading.Thread(target=run, args=(i,)) for i in (1, 0)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert first, "the test did not lose the last hello"
+        assert not robots[1].written_off and not robots[0].written_off
+        assert took[1] is not None and took[1] < 10.0
+    finally:
+        for rb in robots:
+            rb.close()
+
+
+def test_a_neighbour_heard_then_gone_is_written_off_in_the_handshake():
+    """Robot 1 never learns that robot 0 heard it (every such hello lost); robot 0 then ends:
+    robot 1 writes it off as ``closed`` when its session closes, not at the start timeout."""
+    robots = _pair("heardgone")
+    robots[0].session = _LossyHello(robots[0].session, lambda doc: not doc["heard"])
+    took = [None, None]
+
+    def run(i):
+        took[i] = robots[i].handshake(timeout_s=30.0)
+
+    t1 = threading.Thread(target=run, args=(1,))
+    t1.start()
+    try:
+        run(0)
+        time.sleep(0.5)
+        robots[0].close()
+        t1.join(60)
+        assert robots[1].written_off == {0: "closed"}
+        assert took[1] is not None and took[1] < 20.0
+    finally:
+        robots[1].close()
