@@ -40,6 +40,9 @@ __all__ = ["LinkEvidence", "link_evidence", "edge_evidence", "geometric_llr", "r
 MIN_SCALE_PX = 0.05
 #: Lowe ratios are clipped to ``[RATIO_EPS, 1 - RATIO_EPS]`` before the log-odds
 RATIO_EPS = 0.01
+#: beyond the clip the log-odds still fall by this much per unit of ratio (:func:`ratio_llr`):
+#: only the order of the clipped links, far below every other evidence term
+RATIO_TIE_SLOPE = 1e-3
 
 
 @dataclass
@@ -68,15 +71,24 @@ class LinkEvidence:
     @staticmethod
     def from_quality(links: Links) -> LinkEvidence:
         """Evidence from ``Links.quality`` alone (``1 − ratio``, e.g. a user's links file)."""
-        ratio = np.clip(1.0 - links.quality, 0.0, 1.0)
+        ratio = np.maximum(1.0 - links.quality, 0.0)
         nan = np.full(len(links), np.nan)
         return LinkEvidence(ratio, nan, nan.copy(), ratio_llr(ratio))
 
 
 def ratio_llr(ratio: np.ndarray) -> np.ndarray:
-    """``log((1 − ρ) / ρ)``, ``(L,)`` — the Lowe-ratio log-likelihood ratio."""
-    r = np.clip(np.asarray(ratio, dtype=np.float64), RATIO_EPS, 1.0 - RATIO_EPS)
-    return np.log1p(-r) - np.log(r)
+    """``log((1 − ρ) / ρ)``, ``(L,)`` — the Lowe-ratio log-likelihood ratio.
+
+    ``ρ`` is clipped to ``[RATIO_EPS, 1 − RATIO_EPS]``; beyond the clip the value keeps falling
+    by :data:`RATIO_TIE_SLOPE` per unit of ``ρ``, so the log-odds stay strictly decreasing in
+    ``ρ``. A ratio of 1 or more is real input: an assignment (the Hungarian matching of the
+    labelled benchmarks, ``run-landmarks --ratio none``) may pair a feature with another than
+    its nearest neighbour, ``ρ = d / d_alt > 1``; on the hard labelled sets measured half the
+    links were there, and a flat value left their order in the greedy merge to the feature
+    ids instead of the descriptor distances (README, "Multi-way matching")."""
+    r = np.asarray(ratio, dtype=np.float64)
+    c = np.clip(r, RATIO_EPS, 1.0 - RATIO_EPS)
+    return np.log1p(-c) - np.log(c) - RATIO_TIE_SLOPE * (r - c)
 
 
 def geometric_llr(error: np.ndarray, edge: np.ndarray, threshold_px: float) -> np.ndarray:

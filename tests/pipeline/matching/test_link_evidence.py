@@ -2,10 +2,14 @@
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from pipeline.errors import InputError
 from pipeline.matching.link_evidence import (
     MIN_SCALE_PX,
+    RATIO_EPS,
+    RATIO_TIE_SLOPE,
     LinkEvidence,
     edge_evidence,
     geometric_llr,
@@ -19,6 +23,22 @@ from pipeline.types import Features, Links, PairMatches, View
 def test_ratio_llr_by_hand():
     np.testing.assert_allclose(ratio_llr([0.5, 0.2, 0.8]), [0.0, np.log(4), -np.log(4)])
     assert np.isfinite(ratio_llr([0.0, 1.0])).all()  # clipped
+
+
+@given(st.lists(st.integers(0, 5_000_000), min_size=2, max_size=30, unique=True))
+def test_ratio_llr_keeps_the_order_of_the_ratios_beyond_the_clip(micro):
+    """An assignment may pair a feature with another than its nearest neighbour (ratio > 1):
+    the log-odds still order those links by their ratio (the greedy merge reads the order).
+    Ratios on a grid of 1e-6 (closer ones may round to one float of log-odds)."""
+    r = np.sort(np.asarray(micro)) / 1e6
+    llr = ratio_llr(r)
+    assert np.isfinite(llr).all() and (np.diff(llr) < 0).all()
+    inside = (r >= RATIO_EPS) & (r <= 1 - RATIO_EPS)
+    np.testing.assert_allclose(llr[inside], np.log((1 - r[inside]) / r[inside]))
+    outside = ~inside  # within RATIO_TIE_SLOPE per unit of ratio of the clipped value
+    clipped = np.clip(r[outside], RATIO_EPS, 1 - RATIO_EPS)
+    np.testing.assert_allclose(llr[outside], np.log((1 - clipped) / clipped)
+                               - RATIO_TIE_SLOPE * (r[outside] - clipped))
 
 
 def test_geometric_llr_by_hand():
