@@ -39,9 +39,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph over the images in name order (default complete)")
     p.add_argument("--frames", type=int, default=None, metavar="N",
                    help="use N images at a fixed stride floor(n/N) from the first (default all)")
-    p.add_argument("--descriptors", default="given", choices=("given", "sift"),
+    p.add_argument("--descriptors", default="auto", choices=("auto", "given", "sift"),
                    help="given: one NAME.scf per image (rows = landmarks; histograms compared "
-                        "by chi-square); sift: SIFT at the keypoints (L2). Default given")
+                        "by chi-square); sift: SIFT at the keypoints (L2); auto (default): "
+                        "given when the folder holds .scf files, else sift")
     p.add_argument("--ratio", type=_ratio, default=None, metavar="R|none",
                    help="gate of the Hungarian matches: keep a pair if its distance is at most "
                         "R times the nearest alternative in its row or column (Lowe's ratio, "

@@ -33,7 +33,7 @@ __all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frame
            "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
-DESCRIPTOR_SOURCES = ("given", "sift")
+DESCRIPTOR_SOURCES = ("auto", "given", "sift")
 #: most labelled landmarks per image: matching builds a K x K cost matrix per image pair
 #: (5000: 200 MB in float64; labelled benchmarks carry tens to hundreds)
 MAX_LANDMARKS = 5000
@@ -168,15 +168,18 @@ def select_frames(n_total: int, frames: int | None) -> np.ndarray:
     return np.arange(frames) * step
 
 
-def load_landmark_folder(directory: str | Path, descriptors: str = "given",
+def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                          frames: int | None = None) -> list[LandmarkFrame]:
     """Read a labelled-landmark folder (module notes) in natural name order.
 
     Parameters
     ----------
     directory : folder
-    descriptors : ``given`` (one ``.scf`` file per image) or ``sift`` (computed at the
-        keypoints, :func:`sift_at_keypoints`)
+    descriptors : ``given`` (one ``.scf`` file per image), ``sift`` (computed at the
+        keypoints, :func:`sift_at_keypoints`) or ``auto`` (``given`` when the folder holds
+        ``.scf`` files, else ``sift``: a labelled set that ships only images and keypoints,
+        such as the ``.mat`` files of Willow-style sets, needs no option); each frame's
+        ``descriptor_file`` says which was used (``"sift"`` or the file name)
     frames : int or None — take this many images at a fixed stride (:func:`select_frames`)
 
     Returns
@@ -199,6 +202,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "given",
     files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
                    key=lambda p: natural_key(p.name))
     images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    if descriptors == "auto":
+        descriptors = "given" if any(p.suffix.lower() == ".scf" for p in files) else "sift"
     if len(images) < 2:
         raise InputError(f"{directory}: found {len(images)} image(s); a labelled-landmark "
                          "folder needs at least two (image + NAME.txt or NAME.mat each)")

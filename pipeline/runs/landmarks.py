@@ -72,7 +72,7 @@ class LandmarksConfig:
     directory: str
     graph: str = "complete"
     frames: int | None = None
-    descriptors: str = "given"
+    descriptors: str = "auto"
     ratio: float | None = None
     geometry: str = "epipolar"
     epipolar_px: float = 3.0
@@ -160,8 +160,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         comm_edges = comm_graph(config.graph, names)
         m = np.array([len(f.keypoints) for f in frames], dtype=np.int64)
         kind = frames[0].descriptor_kind
-        timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors; graph "
-                   f"{config.graph}: {len(comm_edges)} edges")
+        source = "sift" if frames[0].descriptor_file == "sift" else "given"
+        timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors ({source}); "
+                   f"graph {config.graph}: {len(comm_edges)} edges")
     with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
                                  f"geometry {config.geometry}, ratio gate {config.ratio}"):
         links, matching = match_landmark_edges(
@@ -235,7 +236,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "pairwise": pairwise,
         "cycle_consistent": bool(after["conflictive_sets"] == 0),
         "cycle_consistent_before": bool(before["conflictive_sets"] == 0),
-        "matching": matching,
+        "matching": {**matching, "descriptors": source},
         "refinement": refinement,
         "resolution": {
             "method": config.resolution,

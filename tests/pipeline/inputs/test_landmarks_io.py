@@ -88,3 +88,20 @@ def test_missing_folder_and_bad_descriptor_source(tmp_path):
         load_landmark_folder(tmp_path / "nope")
     with pytest.raises(InputError, match="--descriptors 'orb'"):
         load_landmark_folder(HOTEL, descriptors="orb")
+
+
+def test_auto_descriptors_read_given_files_and_compute_sift_without_them(tmp_path):
+    """The default (``auto``): the ``.scf`` files where the folder has them, SIFT at the
+    keypoints where it ships only images and keypoints (e.g. ``.mat`` files alone)."""
+    assert [f.descriptor_file for f in load_landmark_folder(HOTEL)][0] == "hotel001.scf"
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0]])
+    for k in range(3):
+        _image(tmp_path / f"view{k}.png")
+        savemat(tmp_path / f"view{k}.mat", {"pts_coord": pts.T + k})
+    frames = load_landmark_folder(tmp_path)
+    assert [f.descriptor_file for f in frames] == ["sift"] * 3
+    assert frames[0].descriptors.shape == (3, 128)
+    for k in range(3):  # descriptor files that do not fit are still an error under auto
+        np.savetxt(tmp_path / f"view{k}.scf", np.ones((2, 5)))
+    with pytest.raises(InputError, match="2 descriptor rows for 3 landmarks"):
+        load_landmark_folder(tmp_path)
