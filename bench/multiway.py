@@ -170,12 +170,15 @@ def graffiti_case(directory: str, graph: str) -> Case:
 
 
 
-def warped_landmarks(directory: str, out: Path, seed: int, frames: int = 30) -> Path:
+def warped_landmarks(directory: str, out: Path, seed: int, frames: int = 30,
+                     hide: float = 0.0) -> Path:
     """A harder labelled set from ``directory`` (CMU hotel's layout): ``frames`` images at a
     fixed stride, each warped by its own random homography (rotation up to 25°, scale 0.6–1.2,
     a perspective term), blurred (σ up to 1.5 px), with gain and noise, and its labelled
     positions moved alike (plus 1 px of noise); a warp that would move a landmark out of the
-    image is drawn again. The same landmarks through other "cameras": matched by SIFT at the
+    image is drawn again; with ``hide``, each image also loses that fraction of its
+    landmarks, drawn at random (written ``nan nan``: landmarks not seen by every image, the
+    universe larger than any image). The same landmarks through other "cameras": matched by SIFT at the
     keypoints (``descriptors sift``), for a labelled set whose matches are far noisier than
     the hotel's own. Seeded: the same ``seed`` gives the same set."""
     import cv2
@@ -183,6 +186,7 @@ def warped_landmarks(directory: str, out: Path, seed: int, frames: int = 30) -> 
     from pipeline.inputs.landmarks import load_landmark_folder
 
     fr = load_landmark_folder(directory, "given", frames)
+    n_rows = max(int(f.landmarks.max()) + 1 for f in fr)
     rng = np.random.default_rng(seed)
     out.mkdir(parents=True, exist_ok=True)
     for k, f in enumerate(fr):
@@ -208,7 +212,11 @@ def warped_landmarks(directory: str, out: Path, seed: int, frames: int = 30) -> 
             im = cv2.GaussianBlur(im, (0, 0), sigma)
         im = np.clip(im * rng.uniform(0.6, 1.3) + rng.normal(0, 6, im.shape), 0, 255)
         cv2.imwrite(str(out / f"warped{k:03d}.png"), im.astype(np.uint8))
-        np.savetxt(out / f"warped{k:03d}.txt", pts, fmt="%.2f")
+        rows = np.full((n_rows, 2), np.nan)
+        rows[f.landmarks] = pts  # a landmark the source image does not see stays 'nan nan'
+        if hide > 0:
+            rows[rng.choice(n_rows, int(round(hide * n_rows)), replace=False)] = np.nan
+        np.savetxt(out / f"warped{k:03d}.txt", rows, fmt="%.2f")
     return out
 
 
@@ -232,7 +240,8 @@ def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, s
                                     geometry, 3.0)
     if inputs == "guided+votes":
         links, _ = refine_by_votes(m, edges, links, 10)
-    return Case(m, edges, links, truth_id=np.concatenate(perms))
+    return Case(m, edges, links, truth_id=np.concatenate([f.landmarks[p] for f, p in
+                                                          zip(fr, perms, strict=True)]))
 
 
 def team_case(n: int, k: int = 30, p_swap: float = 0.3, seed: int = 0):
@@ -481,6 +490,8 @@ def main(argv=None) -> int:
     p.add_argument("--warped-seeds", type=int, nargs="*", default=[1, 2, 3],
                    help="warped copies of --data (warped_landmarks), 30 frames each, SIFT at "
                         "the keypoints; none: skip")
+    p.add_argument("--warped-hide", type=float, nargs="*", default=[0.0, 0.25],
+                   help="fractions of each warped image's landmarks hidden (nan rows)")
     p.add_argument("--team", type=int, nargs="*", default=[300])
     p.add_argument("--team-methods", nargs="+",
                    default=["resolve:sync", "sync", "evidence", "drop_conflictive_sets",
@@ -494,7 +505,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.quick:
         a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
-        a.warped_seeds = [1]
+        a.warped_seeds, a.warped_hide = [1], [0.25]
         a.graffiti, a.formations, a.formation_seeds = "", "a", [5]
     records = []
     load = os.getloadavg()[0]
@@ -505,18 +516,24 @@ def main(argv=None) -> int:
                 run_case(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}", case,
                          a.methods, dict(case="landmarks", data=Path(a.data).name, frames=frames,
                                          graph=graph, inputs=inputs), a, records)
-    for wseed in a.warped_seeds:
-        import tempfile
+    for hide in a.warped_hide:
+        for wseed in a.warped_seeds:
+            import tempfile
 
-        with tempfile.TemporaryDirectory() as tmp:
-            wdir = warped_landmarks(a.data, Path(tmp) / f"warped-{wseed}", wseed)
-            for graph in a.graphs:
-                case = landmark_case(str(wdir), None, graph, "descriptors", a.shuffle_seed,
-                                     descriptors="sift")
-                run_case(f"{Path(a.data).name} warped (seed {wseed}), 30 frames, {graph}, "
-                         "SIFT at the keypoints, descriptors only", case, a.methods,
-                         dict(case="warped", data=Path(a.data).name, warp_seed=wseed, frames=30,
-                              graph=graph, inputs="sift descriptors"), a, records)
+            with tempfile.TemporaryDirectory() as tmp:
+                wdir = warped_landmarks(a.data, Path(tmp) / f"warped-{wseed}", wseed, hide=hide)
+                for graph in a.graphs:
+                    case = landmark_case(str(wdir), None, graph, "descriptors", a.shuffle_seed,
+                                         descriptors="sift")
+                    beyond = 1.0 - case.links.quality >= 0.99  # the Lowe-ratio clip
+                    print(f"links with ratio >= 0.99 (an assignment beyond the nearest "
+                          f"neighbour): {beyond.mean():.2f}, right among them "
+                          f"{case.link_good[beyond].mean():.2f}")
+                    run_case(f"{Path(a.data).name} warped (seed {wseed}{f', {hide:g} hidden' if hide else ''}), "
+                             f"30 frames, {graph}, SIFT at the keypoints, descriptors only", case,
+                             a.methods, dict(case="warped", data=Path(a.data).name,
+                                             warp_seed=wseed, hidden=hide, frames=30,
+                                             graph=graph, inputs="sift descriptors"), a, records)
     if a.graffiti:
         for graph in a.graphs:
             case = graffiti_case(a.graffiti, graph)

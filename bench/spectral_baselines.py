@@ -60,7 +60,7 @@ def permuted_input(frames, seed: int):
     for fr in frames:
         perm = rng.permutation(fr.descriptors.shape[0])
         desc.append(fr.descriptors[perm])
-        truth.append(perm)
+        truth.append(fr.landmarks[perm])
     return desc, np.concatenate(truth)
 
 

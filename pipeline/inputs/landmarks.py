@@ -6,7 +6,10 @@ images is the identity on rows. Layout:
 
 * images: ``.png``, ``.jpg``, ``.jpeg``, ``.tif``, ``.tiff``, ``.bmp``, ``.ppm``, ``.pgm``;
 * keypoints, one file per image: ``NAME.txt`` (``K`` rows ``x y``, whitespace or comma
-  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``); OpenCV pixel convention;
+  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``); OpenCV pixel convention; a
+  row ``nan nan`` marks a landmark the image does not see (occluded, out of view): the image
+  then has a feature for each of its other rows only, and a landmark need not be seen by
+  every image;
 * optional descriptors, one file per image: ``NAME.scf`` (``K`` rows of numbers, e.g. the
   60-bin shape contexts of the CMU hotel benchmark), or SIFT computed at the keypoints.
 
@@ -50,8 +53,10 @@ class LandmarkFrame:
     ----------
     name : str — image file name
     image_path : Path
-    keypoints : ndarray, (K, 2) float64 — landmark ``k`` at row ``k``
-    descriptors : ndarray, (K, D) float64 or None — row ``k`` describes landmark ``k``
+    keypoints : ndarray, (K_i, 2) float64 — the landmarks the image sees, in label order
+    landmarks : ndarray, (K_i,) int64 — the label (row of the keypoint file) of each: feature
+        ``f`` of the image is landmark ``landmarks[f]`` (``0..K-1`` when it sees them all)
+    descriptors : ndarray, (K_i, D) float64 or None — row ``f`` describes feature ``f``
     descriptor_kind : str — ``histogram`` (χ² distance) or ``vector`` (L2 distance)
     keypoint_file, descriptor_file : str
     """
@@ -59,6 +64,7 @@ class LandmarkFrame:
     name: str
     image_path: Path
     keypoints: np.ndarray
+    landmarks: np.ndarray | None = None
     descriptors: np.ndarray | None = None
     descriptor_kind: str = ""
     keypoint_file: str = ""
@@ -114,8 +120,10 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
     return pts.T.copy()
 
 
-def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
-    """InputError if a labelled keypoint of ``path`` is not finite or lies outside ``image``.
+def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
+    """The rows of ``path`` the image sees, ``(K_i,)`` int64 (a row ``nan nan`` is a landmark
+    it does not see); InputError if another row is not finite or lies outside ``image``, or
+    if the image sees none.
 
     A keypoint may lie anywhere on the image's pixels in the 0-based (OpenCV, centres
     ``0..W-1``) or the 1-based (MATLAB, centres ``1..W``) convention: ``-0.5 <= x <= W + 0.5``
@@ -123,11 +131,18 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
     """
     from PIL import Image, UnidentifiedImageError
 
-    bad = ~np.isfinite(pts).all(axis=1)
+    unseen = np.isnan(pts).all(axis=1)
+    bad = ~np.isfinite(pts).all(axis=1) & ~unseen
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise InputError(f"{path}: landmark row {row + 1} is {pts[row].tolist()}; every "
-                         "landmark needs finite pixel coordinates")
+                         "landmark needs finite pixel coordinates (or 'nan nan' for a landmark "
+                         "this image does not see)")
+    if unseen.all():
+        raise InputError(f"{path}: every landmark row is 'nan nan': the image sees none of "
+                         "them; remove it from the folder")
+    seen = np.flatnonzero(~unseen)
+    pts = pts[seen]
     try:
         with Image.open(image) as im:
             w, h = im.size
@@ -138,9 +153,10 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> None:
     out = (pts[:, 0] < -0.5) | (pts[:, 0] > w + 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h + 0.5)
     if out.any():
         row = int(np.flatnonzero(out)[0])
-        raise InputError(f"{path}: landmark row {row + 1} at {pts[row].tolist()} lies outside "
-                         f"the {w}x{h} image {image.name}; fix the label (pixel coordinates, "
-                         "x to the right, y down)")
+        raise InputError(f"{path}: landmark row {int(seen[row]) + 1} at {pts[row].tolist()} "
+                         f"lies outside the {w}x{h} image {image.name}; fix the label (pixel "
+                         "coordinates, x to the right, y down)")
+    return seen
 
 
 def _read_descriptors(path: Path) -> np.ndarray:
@@ -250,10 +266,10 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         raise InputError(f"{kps[0][0]}: {k} landmarks per image; at most {MAX_LANDMARKS} "
                          "(matching compares every landmark of one image with every landmark "
                          "of another)")
-    for im, (p, pts) in zip(images, kps, strict=True):
-        _check_keypoints(p, pts, im)
-    out = [LandmarkFrame(name=im.name, image_path=im, keypoints=pts, keypoint_file=p.name)
-           for im, (p, pts) in zip(images, kps, strict=True)]
+    seen = [_check_keypoints(p, pts, im) for im, (p, pts) in zip(images, kps, strict=True)]
+    out = [LandmarkFrame(name=im.name, image_path=im, keypoints=pts[sn], landmarks=sn,
+                         keypoint_file=p.name)
+           for im, (p, pts), sn in zip(images, kps, seen, strict=True)]
     if descriptors == "given":
         desc_files = [p for p in files if p.suffix.lower() == ".scf"]
         by_stem_d = {p.stem: p for p in desc_files}
@@ -268,12 +284,12 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         first = None
         for fr, dp in zip(out, dfiles, strict=True):
             d = _read_descriptors(dp)
-            if d.shape[0] != fr.keypoints.shape[0]:
-                raise InputError(f"{dp}: {d.shape[0]} descriptor rows for "
-                                 f"{fr.keypoints.shape[0]} landmarks of {fr.name}; expected one "
-                                 "row per landmark")
+            if d.shape[0] != k:
+                raise InputError(f"{dp}: {d.shape[0]} descriptor rows for {k} landmarks of "
+                                 f"{fr.name}; expected one row per landmark")
+            d = d[fr.landmarks]  # the rows of the landmarks it does not see are not read
             if not np.isfinite(d).all():
-                row = int(np.flatnonzero(~np.isfinite(d).all(axis=1))[0])
+                row = int(fr.landmarks[np.flatnonzero(~np.isfinite(d).all(axis=1))[0]])
                 raise InputError(f"{dp}: descriptor row {row + 1} holds a non-finite value "
                                  "(nan or inf); every descriptor must be finite numbers")
             first = first or (dp, d.shape[1])

@@ -84,7 +84,7 @@ def ratio_llr(ratio: np.ndarray) -> np.ndarray:
     ``ρ``. A ratio of 1 or more is real input: an assignment (the Hungarian matching of the
     labelled benchmarks, ``run-landmarks --ratio none``) may pair a feature with another than
     its nearest neighbour, ``ρ = d / d_alt > 1``. On the warped copies of CMU hotel of
-    ``bench/multiway.py`` 40–53 % of the links had ``ρ ≥ 1 − RATIO_EPS``, 54–71 % of them
+    ``bench/multiway.py`` 40–53 % of the links had ``ρ ≥ 1 − RATIO_EPS``, 54–74 % of them
     good; a flat value left their order in the greedy merge to the feature ids instead of
     the descriptor distances (README, "Multi-way matching")."""
     r = np.asarray(ratio, dtype=np.float64)

@@ -31,7 +31,8 @@ refinement), over their closure and as they are. ``cycle_consistent`` is true wh
 (then the implied pairwise matching is cycle-consistent).
 
 Writes ``report.json`` and ``links.csv`` (docs/DESIGN.md "Run outputs"; ``truth`` is 1 when the
-two ends carry the same label) atomically. There are no camera poses and no 3D points, so
+two ends carry the same label; a feature index of ``links.csv`` counts the landmarks its image
+sees, ``feature_landmarks`` in ``report.json`` maps it to its label row) atomically. There are no camera poses and no 3D points, so
 no ``sparse/`` and no recording.
 """
 
@@ -90,18 +91,23 @@ class LandmarksConfig:
         return Path("runs") / f"landmarks-{folder}{frames}-{self.graph.replace(':', '')}"
 
 
-def true_landmark_pairs(features_per_camera) -> np.ndarray:
-    """True pairs ``(Q, 2)`` (global ids) of every image pair: equal label rows.
+def true_landmark_pairs(features_per_camera, landmarks=None) -> np.ndarray:
+    """True pairs ``(Q, 2)`` (global ids) of every image pair: features of one landmark.
 
-    Images with fewer landmarks than others contribute their rows ``0..K_i-1``.
+    ``landmarks``: per image, the landmark of each feature (``LandmarkFrame.landmarks``);
+    ``None``: feature ``k`` is landmark ``k`` in every image (an image with fewer features
+    contributes its rows ``0..K_i-1``).
     """
     m = np.asarray(features_per_camera, dtype=np.int64)
+    if landmarks is None:
+        landmarks = [np.arange(k) for k in m]
     off = np.concatenate([[0], np.cumsum(m)])
     parts = []
     for i in range(m.size):
         for j in range(i + 1, m.size):
-            k = np.arange(min(m[i], m[j]))
-            parts.append(np.stack([off[i] + k, off[j] + k], axis=1))
+            _, fi, fj = np.intersect1d(landmarks[i], landmarks[j], assume_unique=True,
+                                       return_indices=True)
+            parts.append(np.stack([off[i] + fi, off[j] + fj], axis=1))
     return np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
 
 
@@ -192,10 +198,14 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")
     kept_links = links.subset(kept)
-    truth = links.feat_i == links.feat_j
+    lid = [f.landmarks for f in frames]
+    off_l = np.concatenate([[0], np.cumsum(m)])
+    lid_all = np.concatenate(lid)
+    truth = lid_all[off_l[links.cam_i] + links.feat_i] == lid_all[off_l[links.cam_j] + links.feat_j]
     with timer.stage("evaluate", "pairwise scores over the closure of the links"):
-        tp = true_landmark_pairs(m)
-        n_true_on_edges = int(sum(min(m[i], m[j]) for i, j in comm_edges.tolist()))
+        tp = true_landmark_pairs(m, lid)
+        n_true_on_edges = int(sum(np.intersect1d(lid[i], lid[j]).size
+                                  for i, j in comm_edges.tolist()))
 
         def counts(lk: Links, t: np.ndarray) -> dict:
             c = count_conflicts(AssociationGraph(m, lk)).as_dict()
@@ -256,7 +266,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "fusion": {"enabled": False, "reason": "labelled landmarks come without camera poses"},
         "triangulation": {"enabled": False, "reason": "no camera poses"},
         "baselines": baselines,
-        "ground_truth": {"kind": "labelled landmarks: row k of every image is landmark k"},
+        "ground_truth": {"kind": "labelled landmarks: row k of every keypoint file is landmark "
+                                 "k; a row 'nan nan' is a landmark the image does not see"},
+        "feature_landmarks": [f.landmarks.tolist() for f in frames],
         "versions": versions(),
         "config": {**asdict(config), "out": str(out)},
     }

@@ -108,3 +108,39 @@ def test_out_holding_the_input_folder_is_refused(tmp_path, capsys):
     assert main(["run-landmarks", str(data), "--out", str(tmp_path)]) == 2
     assert "holds the input DIR" in capsys.readouterr().err
     assert sorted(p.name for p in data.iterdir()) == before
+
+
+def test_true_pairs_of_partly_seen_landmarks():
+    # image 0 sees landmarks 0, 2; image 1 sees 0, 1, 2; image 2 sees 1
+    pairs = true_landmark_pairs([2, 3, 1], [np.array([0, 2]), np.array([0, 1, 2]), np.array([1])])
+    assert sorted(map(tuple, pairs.tolist())) == [(0, 2), (1, 4), (3, 5)]
+
+
+def test_landmarks_not_seen_by_every_image(tmp_path):
+    """Hotel frames where each image hides a few landmarks (``nan nan`` rows): the features
+    follow what each image sees, and the truth column and the scores agree with the label
+    rows of ``feature_landmarks``."""
+    data = tmp_path / "hotel"
+    shutil.copytree(HOTEL, data)
+    rng = np.random.default_rng(3)
+    for k, p in enumerate(sorted(data.glob("hotel*.txt"))):
+        rows = np.loadtxt(p)
+        rows[rng.choice(30, 3 + k % 3, replace=False)] = np.nan
+        np.savetxt(p, rows)
+    out = tmp_path / "run"
+    assert main(["run-landmarks", str(data), "--graph", "complete", "--out", str(out), "-q",
+                 "--no-baselines"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    lm = [np.asarray(x) for x in report["feature_landmarks"]]
+    m = report["features_per_camera"]
+    assert m == [len(x) for x in lm] and m != [30] * 6 and all(len(x) < 30 for x in lm)
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    same = [lm[int(r["cam_i"])][int(r["feat_i"])] == lm[int(r["cam_j"])][int(r["feat_j"])]
+            for r in rows]
+    assert [r["truth"] == "1" for r in rows] == same
+    kept = [r for r in rows if r["status"] == "kept"]
+    links = Links(*[np.array([int(r[k]) for r in kept]) for k in ("cam_i", "feat_i", "cam_j", "feat_j")])
+    s = pairwise_scores(association_pairs(m, links), true_landmark_pairs(m, lm), sum(m))
+    assert s["f1"] == pytest.approx(report["pairwise"]["after"]["f1"])
+    assert report["cycle_consistent"] is True

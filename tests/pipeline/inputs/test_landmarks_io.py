@@ -105,3 +105,31 @@ def test_auto_descriptors_read_given_files_and_compute_sift_without_them(tmp_pat
         np.savetxt(tmp_path / f"view{k}.scf", np.ones((2, 5)))
     with pytest.raises(InputError, match="2 descriptor rows for 3 landmarks"):
         load_landmark_folder(tmp_path)
+
+
+def test_a_landmark_an_image_does_not_see_is_a_nan_row(tmp_path):
+    """``nan nan`` rows: the image has a feature per landmark it sees, in label order, and
+    ``landmarks`` names each feature's label row; descriptor rows of unseen landmarks are not
+    read (they may be nan); a half-nan row, or an image that sees nothing, is an error."""
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0], [20.0, 30.0]])
+    for k in range(3):
+        _image(tmp_path / f"view{k}.png")
+        rows = pts.copy()
+        rows[k] = np.nan  # image k does not see landmark k
+        np.savetxt(tmp_path / f"view{k}.txt", rows)
+        d = np.arange(20.0).reshape(4, 5) + k
+        d[k] = np.nan
+        np.savetxt(tmp_path / f"view{k}.scf", d)
+    frames = load_landmark_folder(tmp_path)
+    assert [f.landmarks.tolist() for f in frames] == [[1, 2, 3], [0, 2, 3], [0, 1, 3]]
+    np.testing.assert_allclose(frames[1].keypoints, pts[[0, 2, 3]])
+    np.testing.assert_allclose(frames[2].descriptors, np.arange(20.0).reshape(4, 5)[[0, 1, 3]] + 2)
+    assert [f.landmarks.tolist() for f in load_landmark_folder(tmp_path, "sift")][0] == [1, 2, 3]
+    bad = pts.copy()
+    bad[1, 0] = np.nan
+    np.savetxt(tmp_path / "view0.txt", bad)
+    with pytest.raises(InputError, match="row 2 is \\[nan, 20.0\\].*'nan nan'"):
+        load_landmark_folder(tmp_path)
+    np.savetxt(tmp_path / "view0.txt", np.full((4, 2), np.nan))
+    with pytest.raises(InputError, match="sees none of them"):
+        load_landmark_folder(tmp_path)
