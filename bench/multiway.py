@@ -490,6 +490,9 @@ def main(argv=None) -> int:
     p.add_argument("--warped-seeds", type=int, nargs="*", default=[1, 2, 3],
                    help="warped copies of --data (warped_landmarks), 30 frames each, SIFT at "
                         "the keypoints; none: skip")
+    p.add_argument("--warped-inputs", nargs="+", default=["descriptors", "guided"],
+                   help="inputs of the warped cases (as --inputs; guided = run-landmarks' "
+                        "default matching)")
     p.add_argument("--warped-hide", type=float, nargs="*", default=[0.0, 0.25],
                    help="fractions of each warped image's landmarks hidden (nan rows)")
     p.add_argument("--team", type=int, nargs="*", default=[300])
@@ -505,7 +508,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.quick:
         a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
-        a.warped_seeds, a.warped_hide = [1], [0.25]
+        a.warped_seeds, a.warped_hide, a.warped_inputs = [1], [0.25], ["descriptors"]
         a.graffiti, a.formations, a.formation_seeds = "", "a", [5]
     records = []
     load = os.getloadavg()[0]
@@ -523,17 +526,19 @@ def main(argv=None) -> int:
             with tempfile.TemporaryDirectory() as tmp:
                 wdir = warped_landmarks(a.data, Path(tmp) / f"warped-{wseed}", wseed, hide=hide)
                 for graph in a.graphs:
-                    case = landmark_case(str(wdir), None, graph, "descriptors", a.shuffle_seed,
-                                         descriptors="sift")
-                    beyond = 1.0 - case.links.quality >= 0.99  # the Lowe-ratio clip
-                    print(f"links with ratio >= 0.99 (an assignment beyond the nearest "
-                          f"neighbour): {beyond.mean():.2f}, right among them "
-                          f"{case.link_good[beyond].mean():.2f}")
-                    run_case(f"{Path(a.data).name} warped (seed {wseed}{f', {hide:g} hidden' if hide else ''}), "
-                             f"30 frames, {graph}, SIFT at the keypoints, descriptors only", case,
-                             a.methods, dict(case="warped", data=Path(a.data).name,
-                                             warp_seed=wseed, hidden=hide, frames=30,
-                                             graph=graph, inputs="sift descriptors"), a, records)
+                    for inputs in a.warped_inputs:
+                        case = landmark_case(str(wdir), None, graph, inputs, a.shuffle_seed,
+                                             descriptors="sift")
+                        beyond = 1.0 - case.links.quality >= 0.99  # the Lowe-ratio clip
+                        print(f"links with ratio >= 0.99 (an assignment beyond the nearest "
+                              f"neighbour): {beyond.mean():.2f}, right among them "
+                              f"{case.link_good[beyond].mean():.2f}")
+                        hidden = f", {hide:g} hidden" if hide else ""
+                        run_case(f"{Path(a.data).name} warped (seed {wseed}{hidden}), 30 frames, "
+                                 f"{graph}, SIFT at the keypoints, {inputs}", case, a.methods,
+                                 dict(case="warped", data=Path(a.data).name, warp_seed=wseed,
+                                      hidden=hide, frames=30, graph=graph,
+                                      inputs=f"sift {inputs}"), a, records)
     if a.graffiti:
         for graph in a.graphs:
             case = graffiti_case(a.graffiti, graph)
