@@ -111,7 +111,9 @@ def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
 
 
 @pytest.mark.parametrize("name, content, needle", [
-    ("v1.txt", "nan nan\n" + "1 2\n" * (K - 1), "landmark row 1 is [nan, nan]"),
+    # a whole 'nan nan' row is a landmark the image does not see; half of one is an error
+    ("v1.txt", "nan 3\n" + "1 2\n" * (K - 1), "landmark row 1 is [nan, 3.0]"),
+    ("v1.txt", "nan nan\n" * K, "v1.txt: every landmark row is 'nan nan'"),
     ("v1.txt", "inf 3\n" + "1 2\n" * (K - 1), "landmark row 1 is [inf, 3.0]"),
     ("v1.txt", "1 2\n" * (K - 1) + "1e300 3\n", "landmark row 8 at [1e+300, 3.0] lies outside "
                                                 "the 64x48 image v1.png"),
@@ -128,7 +130,7 @@ def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
     ("v1.scf", "", "v1.scf: 0 descriptor rows for 8 landmarks"),  # no loadtxt warning
     ("v1.scf", "1 2 3 4 5 6\n" * (K - 1), "v1.scf: 7 descriptor rows for 8 landmarks"),
     ("v1.scf", "1 2 3\n" * K, "v1.scf: descriptors of 3 values but v0.scf has 6"),
-], ids=["kp-nan", "kp-inf", "kp-huge", "kp-outside", "kp-3-columns", "kp-text", "kp-binary",
+], ids=["kp-nan", "kp-all-nan", "kp-inf", "kp-huge", "kp-outside", "kp-3-columns", "kp-text", "kp-binary",
         "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-binary",
         "scf-empty", "scf-fewer-rows", "scf-other-width"])
 def test_bad_label_or_descriptor_file(folder, capsys, name, content, needle):
