@@ -132,6 +132,17 @@ def test_remap_option_reaches_the_config():
     assert config_from_args(parser.parse_args([*argv, "--remap"])).remap is True
 
 
+def test_graph_defaults_to_complete():
+    """Without --graph every pair is matched, as COLMAP's exhaustive matcher does."""
+    from pipeline.__main__ import build_parser
+    from pipeline.commands.run_images import config_from_args, sequence_config_from_args
+
+    parser = build_parser()
+    assert config_from_args(parser.parse_args(["run-images", "DIR"])).graph == "complete"
+    args = parser.parse_args(["run-images", "DIR", "--sequence"])
+    assert sequence_config_from_args(args).graph == "complete"
+
+
 def test_mixed_sizes_and_guessed_intrinsics(tmp_path, sceaux_small):
     """An internet-style set: different sizes and aspect ratios, no K.txt, no EXIF."""
     from PIL import Image
