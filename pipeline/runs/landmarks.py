@@ -32,8 +32,8 @@ refinement), over their closure and as they are. ``cycle_consistent`` is true wh
 
 Writes ``report.json`` and ``links.csv`` (docs/DESIGN.md "Run outputs"; ``truth`` is 1 when the
 two ends carry the same label; a feature index of ``links.csv`` counts the landmarks its image
-sees, ``feature_landmarks`` in ``report.json`` maps it to its label row) atomically. There are no camera poses and no 3D points, so
-no ``sparse/`` and no recording.
+sees, ``feature_landmarks`` in ``report.json`` maps it to its label row) atomically. There are
+no camera poses and no 3D points, so no ``sparse/`` and no recording.
 """
 
 from __future__ import annotations
