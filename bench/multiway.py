@@ -61,6 +61,7 @@ import platform
 import resource
 import signal
 import sys
+import tempfile
 import time
 import traceback
 from pathlib import Path
@@ -339,7 +340,6 @@ def run_resolve_cli(rule: str, m, edges, links: Links, cap_gb: float) -> dict:
     and the row reports what the job takes."""
     import csv
     import subprocess
-    import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
         src, graph, out = Path(tmp, "links.csv"), Path(tmp, "graph.csv"), Path(tmp, "out.csv")
@@ -519,17 +519,17 @@ def main(argv=None) -> int:
                 run_case(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}", case,
                          a.methods, dict(case="landmarks", data=Path(a.data).name, frames=frames,
                                          graph=graph, inputs=inputs), a, records)
+    from pipeline.matching.link_evidence import RATIO_EPS
+
     for hide in a.warped_hide:
         for wseed in a.warped_seeds:
-            import tempfile
-
             with tempfile.TemporaryDirectory() as tmp:
                 wdir = warped_landmarks(a.data, Path(tmp) / f"warped-{wseed}", wseed, hide=hide)
                 for graph in a.graphs:
                     for inputs in a.warped_inputs:
                         case = landmark_case(str(wdir), None, graph, inputs, a.shuffle_seed,
                                              descriptors="sift")
-                        beyond = 1.0 - case.links.quality >= 0.99  # the Lowe-ratio clip
+                        beyond = 1.0 - case.links.quality >= 1.0 - RATIO_EPS  # the clip
                         print(f"links with ratio >= 0.99 (an assignment beyond the nearest "
                               f"neighbour): {beyond.mean():.2f}, right among them "
                               f"{case.link_good[beyond].mean():.2f}")

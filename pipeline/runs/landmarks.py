@@ -136,7 +136,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         Bad folder or files (:func:`pipeline.inputs.landmarks.load_landmark_folder`), graph
         (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
     """
-    from pipeline.association import AssociationGraph, count_conflicts
+    from pipeline.association import AssociationGraph, camera_offsets, count_conflicts
     from pipeline.commgraph import comm_graph
     from pipeline.consistency import centralized, resolve_conflicts
     from pipeline.consistency.rules import get_rule, rule_names
@@ -199,9 +199,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         timer.note(f"{int(res.deleted.sum())} links cut")
     kept_links = links.subset(kept)
     lid = [f.landmarks for f in frames]
-    off_l = np.concatenate([[0], np.cumsum(m)])
-    lid_all = np.concatenate(lid)
-    truth = lid_all[off_l[links.cam_i] + links.feat_i] == lid_all[off_l[links.cam_j] + links.feat_j]
+    lid_all, off = np.concatenate(lid), camera_offsets(m)
+    truth = lid_all[off[links.cam_i] + links.feat_i] == lid_all[off[links.cam_j] + links.feat_j]
     with timer.stage("evaluate", "pairwise scores over the closure of the links"):
         tp = true_landmark_pairs(m, lid)
         n_true_on_edges = int(sum(np.intersect1d(lid[i], lid[j]).size
