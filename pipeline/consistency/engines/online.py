@@ -128,7 +128,14 @@ One step (:meth:`OnlineAssociation.add_step`)
    reason ``history``: when a weak link into a retired frame closes the clash, it is that
    link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
    starts from the set's old links and history links and skips only new links, so new
-   evidence never overturns an earlier decision.)
+   evidence never overturns an earlier decision.) With ``robots_solve`` (and ``overturn``)
+   the stage's robots run this check themselves after the rule, one robot per window frame
+   of the sub-problem, messages only over the sub-problem's links
+   (:mod:`pipeline.consistency.history`: label flooding of the sets, a flood of their
+   pieces, of the pieces' entries where a set has two or more, of the open links of a bad
+   set, then every robot of it computes the same repair and cuts its side); the record
+   applies their cuts and counts their messages (``history_rounds``, ``history_bytes``)
+   in place of the flood estimate above. Property-tested to cut as the record's check.
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
@@ -280,7 +287,10 @@ class OnlineAssociation:
         stage's robots at their roots (:mod:`pipeline.consistency.roots`; the stage is then
         called with ``gather_conflictive``, ``gather_free``), as a transport whose robots are
         processes must; False (default): by the simulator's batched solution of the same
-        protocol (:func:`.gather.solve_at_roots`: the same cuts, property-tested)
+        protocol (:func:`.gather.solve_at_roots`: the same cuts, property-tested); with
+        ``overturn`` the stage's robots also run the history check (step 3,
+        :mod:`pipeline.consistency.history`; the stage is called with ``history``, one
+        :class:`~pipeline.consistency.history.HistoryInputs` per image)
 
     Examples
     --------
@@ -604,6 +614,10 @@ class OnlineAssociation:
             kw.update(gather_conflictive=gather,
                       gather_free=self.weigh and any(P is not None for P in posed),
                       projections=posed)
+        robots_check = self.robots_solve and self.overturn
+        if robots_check:  # step 3 by the stage's robots (pipeline.consistency.history)
+            kw["history"] = self._history_inputs(images, local_links, real, det, hist_a,
+                                                 hist_b, sub)
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats
@@ -629,9 +643,19 @@ class OnlineAssociation:
                         st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather,
                         solved=res if by_robots else None)
         # history check and repair (step 3), then the new labels (step 4)
-        hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t)
+        hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t,
+                                              res.stats.get("history") if robots_check
+                                              else None)
         rec["cut_history"] = int(hist_cut)
         rec["bytes"] += int(flood)
+        if robots_check:  # the robots' own phases: their rounds follow the rule's
+            h = res.stats["history"]
+            rec["history_rounds"] = int(h["rounds"])
+            rec["history_bytes"] = int(h["bytes"])
+            rec["resolution_rounds"] += int(h["rounds"])
+            if not h.get("counted"):
+                rec["messages"] += int(h["messages"])
+            rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(h.get("peak_bytes", 0)))
         rec["rounds"] = rec["detection_rounds"] + rec["resolution_rounds"]
         rec["cut"] = rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
         rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
@@ -767,15 +791,65 @@ class OnlineAssociation:
         adj = sp.coo_matrix((np.ones(len(ia)), (ia, ib)), shape=(len(sub), len(sub)))
         return connected_components(adj, directed=False)[1].astype(np.int64)
 
-    def _history_check(self, sub, real, hist_a, hist_b, att_f, att_p, t: int
-                       ) -> tuple[int, int]:
+    def _history_inputs(self, images, local_links: Links, real, det, hist_a, hist_b, sub
+                        ) -> list:
+        """What each stage camera's robot holds for step 3 run by the robots
+        (:class:`~pipeline.consistency.history.HistoryInputs`): its frame's first global id,
+        team robot and step; for each of its rows the link id (-1: a history link), quality
+        and whether a history link joins its two features; its border links into retired
+        pieces and those pieces' retired entries."""
+        from pipeline.consistency.history import HistoryInputs
+
+        L = self.links
+        n_real = len(real)
+        n_f = len(self.label)
+        a_r, b_r = self._ends(real)
+        hist_keys = np.minimum(hist_a, hist_b) * n_f + np.maximum(hist_a, hist_b)
+        doubled = np.isin(np.minimum(a_r, b_r) * n_f + np.maximum(a_r, b_r), hist_keys)
+        k_all = len(local_links)
+        row_id = np.r_[real, np.full(k_all - n_real, -1, np.int64)]
+        row_q = np.r_[L.quality[real], np.ones(k_all - n_real)]
+        row_h = np.r_[doubled, np.ones(k_all - n_real, bool)]
+        ll = local_links
+        owner = np.r_[ll.cam_i, ll.cam_j]
+        nbr, s_ = np.r_[ll.cam_j, ll.cam_i], np.r_[ll.feat_j, ll.feat_i]
+        both = np.r_[np.arange(k_all), np.arange(k_all)]
+        w_b, p_b, img_b = self._border_ends()
+        on = np.isin(w_b, sub)
+        b_ids = self.border_links[on]
+        w_b, p_b, cam_b = w_b[on], p_b[on], np.searchsorted(images, img_b[on])
+        out = []
+        for c, g in enumerate(images.tolist()):
+            rows = owner == c
+            mine = cam_b == c
+            ent = np.isin(self.ret_piece, p_b[mine])
+            out.append(HistoryInputs(
+                int(self.offset[g]), int(self.robot[g]), int(self.step[g]),
+                nbr[rows], s_[rows], row_id[both[rows]], row_q[both[rows]],
+                row_h[both[rows]], w_b[mine] - self.offset[g], p_b[mine], b_ids[mine],
+                L.quality[b_ids[mine]], self.ret_piece[ent], self.ret_robot[ent],
+                self.ret_lo[ent], self.ret_hi[ent]))
+        return out
+
+    def _history_check(self, sub, real, hist_a, hist_b, att_f, att_p, t: int,
+                       robots: dict | None = None) -> tuple[int, int]:
         """Step 3 of the module docstring: returns (links cut, flood bytes).
 
         The sets after the rule's cuts are the components of the kept links and the history
         links (a history link stands for a retired piece: it cannot be cut). A set is
         conflictive if it holds one window image twice (the rule cut a history link) or if
-        two of its retired pieces share an image."""
+        two of its retired pieces share an image.
+
+        ``robots``: the check as the stage's robots ran it (:mod:`pipeline.consistency.history`:
+        ``cut`` the link ids they cut, ``bytes`` what they sent, counted here unless the stage
+        counted it, ``counted``); the record then only applies their cuts and renames."""
         L = self.links
+        if robots is not None:
+            cut_ids = np.asarray(robots["cut"], np.int64)
+            self._cut(cut_ids, HISTORY, t)
+            bad = bool(len(cut_ids))
+            flood = 0 if robots.get("counted") else int(robots["bytes"])
+            return self._rename(sub, real, bad, len(cut_ids), flood)
         kept_real = real[L.kept[real]]
         a_k, b_k = self._ends(kept_real)
         comp = self._components(sub, np.concatenate([a_k, hist_a]),
@@ -821,9 +895,17 @@ class OnlineAssociation:
                                        att_p, entries, t)
             self._cut(skipped, HISTORY, t)
             cut_n += len(skipped)
-        if bad:
+        return self._rename(sub, real, bool(bad), cut_n, flood, comp)
+
+    def _rename(self, sub, real, changed: bool, cut_n: int, flood: int, comp=None
+                ) -> tuple[int, int]:
+        """Step 4: every set of the sub-problem (after the history cuts) gets a fresh name;
+        returns (links cut, flood bytes) for the caller."""
+        L = self.links
+        if changed:
             self.border_links = self.border_links[L.kept[self.border_links]]
             self._drop_dead_pieces()
+        if changed or comp is None:
             w_b, p_b, _ = self._border_ends()
             on = np.isin(w_b, sub)
             hist_a, hist_b = _chain(w_b[on], p_b[on])
@@ -1043,12 +1125,23 @@ def _overlapping_runs(group, robot, lo, hi) -> list[int]:
 
 def simulated_stage(features_per_image, links: Links, resolution: str, *,
                      solve_small_sets: bool = True, keypoints=None, projections=None,
-                     gather_conflictive: bool = False, gather_free: bool = False):
-    """The rule's stage of a step on the simulated network (the default ``stage``)."""
-    return resolve_conflicts(features_per_image, None, links, resolution=resolution,
-                             solve_small_sets=solve_small_sets, keypoints=keypoints,
-                             projections=projections, gather_conflictive=gather_conflictive,
-                             gather_free=gather_free)
+                     gather_conflictive: bool = False, gather_free: bool = False,
+                     history=None):
+    """The rule's stage of a step on the simulated network (the default ``stage``).
+
+    ``history``: one :class:`~pipeline.consistency.history.HistoryInputs` per camera: the
+    stage's robots then run the history check after the rule, on the links it kept
+    (:func:`.history.run_history`), reported in ``stats['history']`` (its messages and bytes
+    counted there, not in the stage's)."""
+    res = resolve_conflicts(features_per_image, None, links, resolution=resolution,
+                            solve_small_sets=solve_small_sets, keypoints=keypoints,
+                            projections=projections, gather_conflictive=gather_conflictive,
+                            gather_free=gather_free)
+    if history is not None:
+        from pipeline.consistency.engines.history import run_history
+
+        res.stats["history"] = run_history(features_per_image, links, ~res.deleted, history)
+    return res
 
 
 def _duplicated_keys(group: np.ndarray, item: np.ndarray) -> list[int]:

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from online_streams import camera, posed_streams, project, streams
 
 from pipeline.consistency.centralized import is_conflict_free
 from pipeline.consistency.engines.online import (
@@ -15,45 +16,6 @@ from pipeline.consistency.engines.online import (
 )
 from pipeline.errors import InputError
 from pipeline.types import Links
-
-
-@st.composite
-def streams(draw, max_robots=4, max_steps=6, max_m=4):
-    """A team's stream: per step one frame per robot and random one-to-one links from each
-    new frame to frames of the window (own earlier frames, others' frames, this step's)."""
-    n = draw(st.integers(2, max_robots))
-    steps = draw(st.integers(1, max_steps))
-    window = draw(st.integers(1, 3))
-    hold = draw(st.integers(0, 2))
-    seed = draw(st.integers(0, 2**31 - 1))
-    density = draw(st.sampled_from([0.3, 0.6, 0.9]))
-    rng = np.random.default_rng(seed)
-    m_all, step_of, robot_of, out = [], [], [], []
-    for t in range(steps):
-        frames = [Frame(i, int(rng.integers(1, max_m + 1))) for i in range(n)]
-        first = len(m_all)
-        for f in frames:
-            m_all.append(f.m)
-            step_of.append(t)
-            robot_of.append(f.robot)
-        ci, fi, cj, fj = [], [], [], []
-        for g in range(first, len(m_all)):
-            for h in range(len(m_all)):
-                if h == g or step_of[h] <= t - window or (h >= first and h > g):
-                    continue
-                if rng.random() > density:
-                    continue
-                k = min(m_all[g], m_all[h])
-                r = rng.permutation(m_all[g])[:k]
-                s = rng.permutation(m_all[h])[:k]
-                use = rng.random(k) < 0.7
-                for a, b in zip(r[use], s[use], strict=True):
-                    lo, hi = (h, g) if h < g else (g, h)
-                    fa, fb = (b, a) if h < g else (a, b)
-                    ci.append(lo), fi.append(int(fa)), cj.append(hi), fj.append(int(fb))
-        q = rng.uniform(0.05, 0.95, len(ci))
-        out.append((frames, Links(ci, fi, cj, fj, q)))
-    return window, hold, out
 
 
 def _run(window, hold, stream, resolution):
@@ -319,62 +281,6 @@ def test_the_window_holds_window_plus_hold_steps_and_retired_links_stay(data):
 
 # ------------------------------------------------------------ weighing the conflict-free sets
 
-K = np.array([[200.0, 0, 100], [0, 200.0, 100], [0, 0, 1]])
-
-
-def _camera(x: float) -> np.ndarray:
-    """``K [I | -c]``: a camera at ``(x, 0, -6)`` looking along +z."""
-    return K @ np.c_[np.eye(3), -np.array([x, 0.0, -6.0])]
-
-
-def _project(P, X):
-    p = P @ np.r_[X, 1.0]
-    return p[:2] / p[2]
-
-
-@st.composite
-def posed_streams(draw, max_robots=4, max_steps=4, max_m=4):
-    """A team's stream with poses: robot ``i`` at step ``t`` is a camera at ``x = i + t / 4``;
-    each feature sees one of a few 3D points (its keypoint that point's projection); a link
-    joins two features of the same point (a good link) with probability ``p_good``, else any
-    two features (mostly spurious: the geometric test refutes them)."""
-    n = draw(st.integers(2, max_robots))
-    steps = draw(st.integers(1, max_steps))
-    window = draw(st.integers(1, 3))
-    hold = draw(st.integers(0, 2))
-    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
-    p_good = draw(st.sampled_from([0.5, 0.8, 1.0]))
-    points = rng.uniform([-1, -1, 0], [4, 1, 2], (draw(st.integers(2, 6)), 3))
-    pts, step_of, out = [], [], []
-    for t in range(steps):
-        frames, first = [], len(pts)
-        for i in range(n):
-            P = _camera(i + t / 4)
-            see = rng.integers(0, len(points), int(rng.integers(1, max_m + 1)))
-            kp = np.array([_project(P, points[k]) for k in see])
-            frames.append(Frame(i, len(see), kp, P))
-            pts.append(see)
-            step_of.append(t)
-        ci, fi, cj, fj = [], [], [], []
-        for g in range(first, len(pts)):
-            for h in range(g):
-                if step_of[h] <= t - window or rng.random() < 0.3:
-                    continue
-                used_g, used_h = set(), set()
-                for r in rng.permutation(len(pts[g])).tolist():
-                    same = [s for s in range(len(pts[h])) if pts[h][s] == pts[g][r]]
-                    pool = same if same and rng.random() < p_good else range(len(pts[h]))
-                    free = [s for s in pool if s not in used_h]
-                    if not free:
-                        continue
-                    s_ = int(rng.choice(free))
-                    used_g.add(r)
-                    used_h.add(s_)
-                    ci.append(h), fi.append(s_), cj.append(g), fj.append(r)
-        out.append((frames, Links(ci, fi, cj, fj, rng.uniform(0.05, 0.95, len(ci)))))
-    return window, hold, out
-
-
 def _bundles(oa, a, b, w):
     """The evidence rule's bundles of one set (gid -> kp, neighbours, weights, camera, P)."""
     img = np.searchsorted(oa.offset, np.r_[a, b], side="right") - 1
@@ -447,8 +353,8 @@ def test_a_spurious_link_of_a_conflict_free_set_is_cut_by_the_weighing(weigh):
     the detection finds no conflict. Weighed by the rule's merge, the three-view point of the
     merged track misses Y's keypoint by far and the link is cut; without, it stays."""
     X, Y = np.array([0.5, 0.2, 1.0]), np.array([1.5, -0.4, 0.5])
-    P = [_camera(x) for x in (0.0, 1.0, 2.0)]
-    frames = [Frame(i, 1, _project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
+    P = [camera(x) for x in (0.0, 1.0, 2.0)]
+    frames = [Frame(i, 1, project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
     oa = OnlineAssociation(window=2, weigh=weigh)
     rec = oa.add_step(frames, Links([0, 0, 1], [0, 0, 0], [1, 2, 2], [0, 0, 0],
                                     [0.9, 0.3, 0.2]))

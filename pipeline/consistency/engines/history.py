@@ -1,0 +1,75 @@
+"""The robots' history check (:mod:`pipeline.consistency.history`) on the simulator.
+
+Every robot of a step's sub-problem steps on its own inbox, phase after phase, each phase
+until nothing is in flight (the end a robot alone learns from the termination wave). Where a
+robot alone skips a phase because the wave's bits say no robot needs it, here the phase
+runs and ends at once: no robot has anything to send, so the decisions are the same.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.commgraph import comm_edges_for
+from pipeline.consistency.engines.driver import build_robots
+from pipeline.consistency.engines.phases import run_quiet_phase
+from pipeline.consistency.history import (
+    HistoryInputs,
+    equip_history,
+    finish_entries,
+    finish_pieces,
+    finish_repair,
+    flood_step,
+    labels_step,
+    own_entries,
+    own_links,
+    own_pieces,
+    start_flood,
+    start_labels,
+)
+from pipeline.transport.simulated import Network
+from pipeline.types import Links
+
+__all__ = ["run_history"]
+
+
+def run_history(features_per_camera, links: Links, alive: np.ndarray,
+                inputs: list[HistoryInputs]) -> dict:
+    """The check on the stage's cameras: ``links`` the stage's links (real and history), each
+    robot's rows alive where ``alive`` (the links the stage kept), ``inputs`` one per camera.
+
+    Returns ``cut`` (sorted link ids the robots cut), ``rounds``, ``messages``, ``bytes``,
+    ``phases`` (rounds of each phase), ``peak_bytes`` (a robot's largest state)."""
+    fpc = np.asarray(features_per_camera, np.int64)
+    robots, link_index = build_robots(fpc, links)
+    alive = np.asarray(alive, bool)
+    for rb, idx in zip(robots, link_index, strict=True):
+        rb.link_alive = alive[idx].copy()
+        equip_history(rb, inputs[rb.id])
+    network = Network(len(fpc), comm_edges_for(fpc, links, None))
+    phases = {}
+
+    def flood(name, own):
+        phases[name] = run_quiet_phase(robots, network,
+                                       lambda rb, send: start_flood(rb, send, own(rb)),
+                                       lambda rb, inbox, send, t: flood_step(rb, inbox, send, t),
+                                       what=f"history {name}")
+
+    phases["sets"] = run_quiet_phase(robots, network, start_labels,
+                                     lambda rb, inbox, send, t: labels_step(rb, inbox, send, t),
+                                     what="history sets")
+    flood("pieces", own_pieces)
+    for rb in robots:
+        finish_pieces(rb)
+    flood("entries", own_entries)
+    for rb in robots:
+        finish_entries(rb)
+    flood("repair", own_links)
+    for rb in robots:
+        finish_repair(rb)
+    c = network.counters()
+    cut = np.unique(np.concatenate([np.asarray(rb.history.cut, np.int64) for rb in robots])
+                    if robots else np.zeros(0, np.int64))
+    return dict(cut=cut, rounds=int(sum(phases.values())), messages=int(c["messages"]),
+                bytes=int(c["bytes"]), phases=phases,
+                peak_bytes=int(max((rb.history.nbytes() for rb in robots), default=0)))
