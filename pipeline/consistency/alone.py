@@ -41,7 +41,7 @@ from pipeline.consistency.sync_alone import run_sync_locally
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
 __all__ = ["DETECTIONS", "ALG1", "LARGE", "run_loop_locally", "run_paper_labels_locally",
-           "run_evidence_locally"]
+           "run_evidence_locally", "run_history_locally"]
 
 #: the detections a robot alone can run: ``(start, round, done)`` over the reliable channel
 DETECTIONS = {
@@ -248,3 +248,69 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
             setattr(out, k, getattr(out, k) + getattr(merge, k))
         out.lost_neighbours = sorted(set(out.lost_neighbours) | set(merge.lost_neighbours))
     return out
+
+
+def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
+                        n_robots: int | None = None) -> RobotRun:
+    """The history check of an online step (:mod:`.history`) for a robot alone, after its
+    rule: the robot must hold its inputs (:func:`.history.equip_history`). Its phases over
+    the reliable channel, each ended by the termination wave, whose bits say every robot
+    alike whether the next is needed: the entries only where some set has two pieces or
+    more (``MANY``), the repair only where some set is bad (``BAD``). A robot lost in the
+    check is an error (a bad set could stay unrepaired): said, never hidden. The links it
+    cuts are in ``robot.history.cut``."""
+    from pipeline.consistency.history import (
+        BAD,
+        MANY,
+        finish_entries,
+        finish_pieces,
+        finish_repair,
+        flood_step,
+        labels_step,
+        own_entries,
+        own_links,
+        own_pieces,
+        start_flood,
+        start_labels,
+    )
+
+    protocol = protocol or ProtocolOptions(reliable=True)
+    run = AlonePhases(robot, transport, protocol, n_robots)
+    st, log = run.st, run.log
+
+    def lost() -> int:
+        return LOST if st.lost_in_phase else 0
+
+    def memory() -> int:
+        return robot.memory_bytes() + robot.history.nbytes() + run.chan.memory_bytes()
+
+    def flood(name: str, own, bits):
+        t, out, begin = run.phase(
+            name, lambda rb, send: start_flood(rb, send, own(rb)),
+            lambda rb, msgs, send, now, t: flood_step(rb, msgs, send, t),
+            lambda: bits() | lost(), memory=memory)
+        log.resolution_rounds += t
+        log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
+        if out & LOST:
+            raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
+        return out
+
+    t, out, begin = run.phase(
+        "history-sets", lambda rb, send: start_labels(rb, send),
+        lambda rb, msgs, send, now, t: labels_step(rb, msgs, send, t), lost, memory=memory)
+    log.detection_rounds += t
+    log.phases.append(dict(phase="history-sets", start_round=begin, rounds=t, bits=int(out)))
+    if out & LOST:
+        raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
+    bits = flood("history-pieces", own_pieces, lambda: finish_pieces(robot))
+    finish_pieces(robot)
+    bad = bits & BAD
+    if bits & MANY:  # the wave ORs every robot's bad sets as their entries arrive
+        bad |= flood("history-entries", own_entries, lambda: finish_entries(robot)) & BAD
+        finish_entries(robot)
+    else:
+        finish_entries(robot, ran=False)
+    if bad:
+        flood("history-repair", own_links, lambda: 0)
+        finish_repair(robot)
+    return run.close()

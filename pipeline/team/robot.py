@@ -431,6 +431,9 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     protocol = ProtocolOptions(reliable=True, loss_timeout=int(opts["loss_timeout"]))
     t = time.perf_counter()
     run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
+    history = None
+    if team.data.get("history") is not None:  # an online step's history check
+        history = _robot_history(team, i, robot, transport, protocol, arrays)
     timings["consistency"] = time.perf_counter() - t
     wire["consistency"] = int(getattr(transport, "wire_bytes", 0)) - sum(wire.values())
     fusion = None
@@ -445,8 +448,24 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
               "resolution": resolution,
               "counters": transport.counters(), "wire_bytes_by_stage": wire, "run": {k: v for k, v in vars(run).items()},
               "peak_memory_bytes": int(robot.peak_memory_bytes), "timings_s": timings,
-              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid(), "fusion": fusion}
+              "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid(), "fusion": fusion,
+              "history": history}
     return header, arrays
+
+
+def _robot_history(team, i: int, robot, transport, protocol, arrays: dict) -> dict:
+    """The history check of an online step after the rule (:mod:`pipeline.consistency.
+    history`), on the robot's own inputs (its file of ``data.history``); the links it cuts go
+    to ``arrays['history_cut']``. Returns its rounds and phases."""
+    from pipeline.consistency.alone import run_history_locally
+    from pipeline.consistency.history import HistoryInputs, equip_history
+
+    with np.load(team.resolve_path(team.data["history"][i])) as f:
+        equip_history(robot, HistoryInputs.from_arrays(f))
+    hrun = run_history_locally(robot, transport, protocol, team.n)
+    arrays["history_cut"] = np.asarray(sorted(robot.history.cut), np.int64)
+    return {"rounds": int(hrun.detection_rounds + hrun.resolution_rounds),
+            "phases": hrun.phases}
 
 
 def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict,

@@ -28,7 +28,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # robot's intrinsics and pose (cam_from_world): with them the robots of a
               # links team know where they look, and option "fusion" fuses their tracks;
               # an entry may instead be {"P": 3x4} (a projection K [R | t] only: the
-              # evidence rule's geometric test, no fusion) or null (pose unknown)
+              # evidence rule's geometric test, no fusion) or null (pose unknown);
+              # optional "history": ["h0.npz", ...], one file per robot: an online step's
+              # history check after the rule (pipeline.consistency.history.HistoryInputs)
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -131,7 +133,8 @@ _ROBOT_KEYS = {"id", "endpoint"}
 _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "graph"},
               "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
                          "intrinsics_source"},
-              "links": {"kind", "links", "features_per_camera", "keypoints", "cameras"}}
+              "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
+                        "history"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -398,6 +401,11 @@ def _check_data(data: dict, n: int, where: str) -> None:
             raise InputError(f"{where}: data.features_per_camera must list {n} counts in "
                              f"0..{MAX_ROBOT_FEATURES} (a robot's memory follows its count)")
         _check_links_cameras(data, n, where)
+        hist = data.get("history")
+        if hist is not None and not (isinstance(hist, list) and len(hist) == n
+                                     and all(isinstance(p, str) for p in hist)):
+            raise InputError(f"{where}: data.history must list {n} paths, one history file "
+                             "per robot (an online step's check), or be absent")
 
 
 def _is_matrix(v, rows: int, cols: int) -> bool:
@@ -555,6 +563,10 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
     if kp is not None:
         files.append((f"data.keypoints[{i}] of the team file",
                       require_input_file(kp, f"{where}: data.keypoints[{i}]")))
+    if team.data.get("history") is not None:
+        hp = team.resolve_path(team.data["history"][int(i)])
+        files.append((f"data.history[{i}] of the team file",
+                      require_input_file(hp, f"{where}: data.history[{i}]")))
     return files
 
 

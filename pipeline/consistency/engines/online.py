@@ -1131,14 +1131,14 @@ def simulated_stage(features_per_image, links: Links, resolution: str, *,
 
     ``history``: one :class:`~pipeline.consistency.history.HistoryInputs` per camera: the
     stage's robots then run the history check after the rule, on the links it kept
-    (:func:`.history.run_history`), reported in ``stats['history']`` (its messages and bytes
+    (:func:`.history_run.run_history`), reported in ``stats['history']`` (its messages and bytes
     counted there, not in the stage's)."""
     res = resolve_conflicts(features_per_image, None, links, resolution=resolution,
                             solve_small_sets=solve_small_sets, keypoints=keypoints,
                             projections=projections, gather_conflictive=gather_conflictive,
                             gather_free=gather_free)
     if history is not None:
-        from pipeline.consistency.engines.history import run_history
+        from pipeline.consistency.engines.history_run import run_history
 
         res.stats["history"] = run_history(features_per_image, links, ~res.deleted, history)
     return res

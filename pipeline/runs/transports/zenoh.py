@@ -73,6 +73,23 @@ def _write_robot_keypoints(folder: Path, keypoints) -> list[str]:
     return paths
 
 
+def _write_robot_history(folder: Path, history, used: np.ndarray, where: np.ndarray
+                         ) -> list[str]:
+    """One history file per robot process (``history-robotI.npz``, the team file's
+    ``data.history``): the inputs of frame ``used[i]``, its rows' neighbours renumbered as
+    the processes are (``where``). Returns the paths."""
+    from dataclasses import replace
+
+    paths = []
+    for i, g in enumerate(np.asarray(used).tolist()):
+        inp = history[g]
+        inp = replace(inp, row_nbr=np.asarray(where, np.int64)[np.asarray(inp.row_nbr,
+                                                                        np.int64)])
+        paths.append(str(folder / f"history-robot{i}.npz"))
+        np.savez(paths[-1], **inp.to_arrays())
+    return paths
+
+
 def _union_links(parts):
     """The links of per-robot files, each link once, sorted by ``(cam_i, feat_i, cam_j,
     feat_j)``."""
@@ -317,7 +334,7 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
 
 def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
                  keypoints=None, projections=None, gather_conflictive=False,
-                 gather_free=False) -> ConsistencyResult:
+                 gather_free=False, history=None) -> ConsistencyResult:
     """The rule's stage of one online step (``run-formation --steps N --transport zenoh``): one
     robot process per frame of the step's sub-problem that has a link there, over Zenoh, each
     reading its own rows of the sub-problem's links (:func:`resolve_links_file`); neighbours
@@ -333,6 +350,12 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     ``data.cameras`` entry ``P``, null where unknown), as the simulator's robots do. Without
     them the robots hold links and their quality only: the evidence rule's small
     conflictive sets must then be left to the caller (``solve_small_sets=False``).
+
+    ``history``: one :class:`~pipeline.consistency.history.HistoryInputs` per frame; each
+    robot process then runs the step's history check after the rule on its own inputs (its
+    file of ``data.history``, :func:`pipeline.team.robot._robot_history`), and
+    ``stats['history']`` holds the links they cut (``cut``), the check's rounds and its
+    messages and bytes (``counted``: already in the stage's counts).
     """
     import tempfile
 
@@ -367,8 +390,24 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             extra = {"keypoints": _write_robot_keypoints(Path(work),
                                                          [keypoints[g] for g in used.tolist()]),
                      "cameras": P}
+        if history is not None:
+            extra["history"] = _write_robot_history(Path(work), history, used, where)
+        kept: list = []
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
-                                 workdir=work, links=sub, data_extra=extra)
+                                 workdir=work, links=sub, data_extra=extra, keep_run=kept)
+    if history is not None:
+        from pipeline.consistency.history import HLAB, HSET
+
+        heads = [h for h, _ in kept[0].results.values()]
+        res.stats["history"] = dict(
+            cut=np.unique(np.concatenate(
+                [np.zeros(0, np.int64)] + [np.asarray(a.get("history_cut", []), np.int64)
+                                           for _, a in kept[0].results.values()])),
+            rounds=int(max((h["history"]["rounds"] for h in heads if h.get("history")),
+                           default=0)),
+            messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in (HLAB, HSET))),
+            bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in (HLAB, HSET))),
+            counted=True)
     if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])
     if gather:  # the phase of the sets solved at their roots, as the simulator reports it

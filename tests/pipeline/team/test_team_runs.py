@@ -385,3 +385,36 @@ def test_zenoh_sequence_steps_equal_the_simulators(tmp_path):
         sim = Path(tmp_path / "sim" / name).read_text().splitlines()
         assert Path(tmp_path / "zen" / name).read_text().splitlines() == sim, name
     assert len(sim) > 100
+
+
+def _two_tracks_joined_through_the_window(oa, weak: float):
+    """Tracks A = {0:0, 1:0} and B = {0:1, 1:1} of step 0 retire as two pieces; B reaches
+    the window through a link of quality ``weak``; at step 2 frame 4 joins both."""
+    from pipeline.consistency.engines.online import Frame
+
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0], [0.9, weak]))
+    return oa.add_step([Frame(0, 1), Frame(1, 1)],
+                       Links([2, 3, 4], [0, 0, 0], [4, 4, 5], [0, 0, 0], [0.8, 0.9, 0.7]))
+
+
+@pytest.mark.parametrize("resolution,weak", [("paper", 0.2), ("evidence", 0.95)])
+def test_zenoh_robots_run_the_history_check_as_the_record(resolution, weak):
+    """An online step's history check (two retired pieces sharing a retired frame, joined
+    through the window) run by the robot processes themselves after the rule: the same link
+    cut, for the same reason, as the simulator's record computes; the robots' rounds and
+    bytes of the check are reported."""
+    from pipeline.consistency.engines.online import HISTORY, OnlineAssociation
+    from pipeline.runs.transports.zenoh import online_stage
+
+    runs = []
+    for stage in (online_stage, None):
+        oa = OnlineAssociation(window=2, resolution=resolution, hold=0, stage=stage,
+                               robots_solve=stage is not None)
+        runs.append((oa, _two_tracks_joined_through_the_window(oa, weak)))
+    (zen, rz), (sim, rs) = runs
+    assert rz["cut_history"] == rs["cut_history"] == 1
+    assert zen.links.reason.tolist() == sim.links.reason.tolist()
+    assert HISTORY in zen.links.reason.tolist()
+    assert rz["history_rounds"] > 0 and rz["history_bytes"] > 0
+    assert zen.is_conflict_free()

@@ -1,7 +1,6 @@
-"""The history check run by the stage's robots (pipeline.consistency.engines.history): the
-same cuts, reasons and names as the online record's own check, for every rule."""
+"""The history check run by the stage's robots (pipeline.consistency.engines.history_run):
+the same cuts, reasons and names as the online record's own check, for every rule."""
 
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from online_streams import posed_streams, streams
