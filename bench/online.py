@@ -66,7 +66,8 @@ def one(robots: int, args) -> dict:
                           resolution=args.resolution, batch_every=args.batch_every,
                           fusion=args.fusion, rerun=False, overturn=not args.no_overturn,
                           hold=args.hold, weigh=not args.no_weigh,
-                          gather=not args.no_gather, robots_solve=args.robots_solve)
+                          gather=not args.no_gather, robots_solve=args.robots_solve,
+                          robots_check=not args.record_check)
     t0 = time.perf_counter()
 
     def show(r):
@@ -134,6 +135,11 @@ def one(robots: int, args) -> dict:
         "state_growth_second_half": final_step["robot_state_bytes_max"]
         / steps[len(steps) // 2 - 1]["robot_state_bytes_max"]
         if len(steps) >= 2 and steps[len(steps) // 2 - 1]["robot_state_bytes_max"] else None,
+        # the history check (step 3): links it cut, its bytes (the robots' own messages with
+        # --robots-solve, else the record's estimate of its flood) and the robots' rounds
+        "history": {"cut": int(sum(r.get("cut_history", 0) for r in steps)),
+                    "bytes": int(sum(r.get("history_bytes", 0) for r in steps)),
+                    "rounds": int(sum(r.get("history_rounds", 0) for r in steps))},
         "scores_at_batch_steps": at_batch,
         "final": {k: f[k] for k in ("before", "online", "batch") if k in f},
         "seconds": time.perf_counter() - t0,
@@ -171,6 +177,10 @@ def main(argv=None) -> int:
                     help="solve the rule's small conflictive sets by its own flood of their "
                          "bundles to every robot of the set (the earlier stage), instead of "
                          "gathering them at the set's root as the weighing does")
+    ap.add_argument("--record-check", action="store_true",
+                    help="the record's own history check (step 3), counted by its estimate, "
+                         "instead of the robots' protocol (pipeline.consistency.history): the "
+                         "same cuts")
     ap.add_argument("--robots-solve", action="store_true",
                     help="the simulator's robots run the roots' protocol themselves "
                          "(pipeline.consistency.roots) instead of its batched solution: the "
@@ -204,6 +214,10 @@ def main(argv=None) -> int:
             f"{c['robot_state_bytes_max'] / 1e3:.1f} / {c['retired_entries_max']}"
             for c in s["memory_curve"]) + f"; state last / at step {s['steps'] // 2}: "
             f"{s['state_growth_second_half']}", flush=True)
+        h = s["history"]
+        print(f"  history check: {h['cut']} links cut, {h['bytes'] / 1e6:.3f} MB"
+              + (f", {h['rounds']} rounds of the robots' protocol" if h["rounds"] else
+                 " (the record's estimate)"), flush=True)
         for k, sc in s["scores_at_batch_steps"].items():
             print(f"  after step {k}: pairwise F1 online {sc['online']['f1']:.4f} "
                   f"(P {sc['online']['precision']:.4f} R {sc['online']['recall']:.4f}), batch "

@@ -256,22 +256,21 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
     rule: the robot must hold its inputs (:func:`.history.equip_history`). Its phases over
     the reliable channel, each ended by the termination wave, whose bits say every robot
     alike whether the next is needed: the entries only where some set has two pieces or
-    more (``MANY``), the repair only where some set is bad (``BAD``). A robot lost in the
+    more (``MANY``) or is flagged (``BAD``), the repair only where some set is bad. A robot lost in the
     check is an error (a bad set could stay unrepaired): said, never hidden. The links it
     cuts are in ``robot.history.cut``."""
     from pipeline.consistency.history import (
         BAD,
         MANY,
         finish_entries,
-        finish_pieces,
+        finish_names,
         finish_repair,
         flood_step,
-        labels_step,
+        names_step,
         own_entries,
         own_links,
-        own_pieces,
         start_flood,
-        start_labels,
+        start_names,
     )
 
     protocol = protocol or ProtocolOptions(reliable=True)
@@ -284,29 +283,26 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
     def memory() -> int:
         return robot.memory_bytes() + robot.history.nbytes() + run.chan.memory_bytes()
 
-    def flood(name: str, own, bits):
-        t, out, begin = run.phase(
-            name, lambda rb, send: start_flood(rb, send, own(rb)),
-            lambda rb, msgs, send, now, t: flood_step(rb, msgs, send, t),
-            lambda: bits() | lost(), memory=memory)
+    def phase(name: str, start, step, bits) -> int:
+        t, out, begin = run.phase(name, start, step, lambda: bits() | lost(), memory=memory)
         log.resolution_rounds += t
         log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
         if out & LOST:
             raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
         return out
 
-    t, out, begin = run.phase(
-        "history-sets", lambda rb, send: start_labels(rb, send),
-        lambda rb, msgs, send, now, t: labels_step(rb, msgs, send, t), lost, memory=memory)
-    log.detection_rounds += t
-    log.phases.append(dict(phase="history-sets", start_round=begin, rounds=t, bits=int(out)))
-    if out & LOST:
-        raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
-    bits = flood("history-pieces", own_pieces, lambda: finish_pieces(robot))
-    finish_pieces(robot)
-    bad = bits & BAD
-    if bits & MANY:  # the wave ORs every robot's bad sets as their entries arrive
-        bad |= flood("history-entries", own_entries, lambda: finish_entries(robot)) & BAD
+    def flood(name: str, own, bits) -> int:
+        return phase(name, lambda rb, send: start_flood(rb, send, own(rb)),
+                     lambda rb, msgs, send, now, t: flood_step(rb, msgs, send, t), bits)
+
+    # the wave ORs every robot's bits as its pieces and entries arrive (they only grow)
+    bits = phase("history-names", lambda rb, send: start_names(rb, send),
+                 lambda rb, msgs, send, now, t: names_step(rb, msgs, send, t),
+                 lambda: finish_names(robot))
+    finish_names(robot)
+    bad = 0
+    if bits & (MANY | BAD):
+        bad = flood("history-entries", own_entries, lambda: finish_entries(robot)) & BAD
         finish_entries(robot)
     else:
         finish_entries(robot, ran=False)

@@ -16,19 +16,24 @@ each team robot's frames in the piece, :mod:`.engines.online`).
 Phases, each run until nothing is in flight (the termination wave ends it for a robot alone;
 its bits say, every robot alike, whether the next phase is needed):
 
-1. **Sets** (``hlab``). The sets after the rule's cuts are the components of the kept real
-   links and every history link (a cut history link stays: it stands for a piece). Each
-   feature starts as its own global id and floods the smallest id it has seen over those
-   links (label flooding, as :mod:`.labels`); at the end every feature holds its set's
-   smallest id, which names the set at every robot alike.
-2. **Pieces** (``hset``, items ``(piece,)``). Per set, the robots flood the names of the
-   pieces their features' border links reach, and ``-1`` where the robot holds two features
-   of the set (its frame twice: a conflict a robot sees alone). Every robot of the set ends
-   with the set's pieces and that flag; bits: a set with two pieces or more, a flagged set.
-3. **Entries** (``hset``, items ``(piece, robot, lo, hi)``; sets with two pieces or more).
-   The robots flood the retired entries of their set's pieces; a set in which one team robot
-   has overlapping runs (one retired frame in two pieces) is *bad*, as is a flagged set.
-4. **Repair** (``hset``, items ``(link, feature, robot, step, quality, piece)``; bad sets).
+1. **Names** (``hlab``). The sets after the rule's cuts are the components of the kept real
+   links and every history link (a cut history link stays: it stands for a piece). Only a
+   set that reaches a retired piece can be bad: two pieces need one, and a frame twice needs
+   a *rejoining* row, one the rule cut that a history link doubles (the rule leaves the
+   components of the links it kept conflict-free), whose ends a history link ties to a
+   piece. A piece belongs to one set (the history links chain the window features it
+   reaches), so a set's smallest piece names it. Each feature with a border link starts
+   with the two smallest pieces its border links reach, every other feature with none, and
+   the two smallest pieces heard flood over those links (label flooding, as :mod:`.labels`,
+   from those features only: a set without a piece sends nothing). At the end every feature
+   of such a set holds its two smallest pieces: the first names the set at every robot
+   alike, the second says whether it has two or more. A robot holding two features of one
+   set flags it (its frame twice: a conflict a robot sees alone). Bits: ``MANY``, ``BAD``.
+2. **Entries** (``hset``, items ``(piece, robot, lo, hi)``; sets with two pieces or more,
+   and flagged sets). The robots flood the retired entries of their set's pieces, and the
+   item ``(-1, -1, -1, -1)`` for a set they flagged; a set in which one team robot has
+   overlapping runs (one retired frame in two pieces) is *bad*, as is a flagged set.
+3. **Repair** (``hset``, items ``(link, feature, robot, step, quality, piece)``; bad sets).
    The robots flood the set's open links: each robot one *half* per kept real link of its
    features (its end: the feature's global id, team robot and step) and one per border link
    (with its piece; quality as the bits of its float64). Every robot of the set then holds
@@ -46,11 +51,12 @@ links in the same order. Property-tested against the record's check
 (``tests/pipeline/consistency/test_history.py``).
 
 Costs: counted by the transport as every message (a flood item crosses each robot pair of
-its set that shares a link, once per direction at most): 12 bytes per label in phase 1, 8
-bytes per set name plus 8 per item column in phases 2–4.
+its set that shares a link, once per direction at most): 20 bytes per feature and change in
+phase 1, 8 bytes per set name plus 8 per item column in phases 2–3.
 
-Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``lab`` (K,) int64; ``hset``
-``lab`` (K,) int64, ``item`` (K, c) int64.
+Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``p`` (K, 2) int64 (its two
+smallest pieces heard, :data:`NONE` where fewer); ``hset`` ``lab`` (K,) int64, ``item``
+(K, c) int64.
 """
 
 from __future__ import annotations
@@ -63,15 +69,18 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
 __all__ = ["HistoryInputs", "HistoryState", "equip_history", "rebuild", "rebuild_halves",
-           "start_labels", "labels_step", "start_flood", "flood_step", "own_pieces",
-           "finish_pieces", "own_entries", "finish_entries", "own_links", "finish_repair",
-           "HLAB", "HSET", "MANY", "BAD"]
+           "start_names", "names_step", "finish_names", "start_flood", "flood_step",
+           "own_entries", "finish_entries", "own_links", "finish_repair", "HLAB", "HSET",
+           "MANY", "BAD", "NONE"]
 
 HLAB, HSET = "hlab", "hset"
-#: wave bits of phase 2 (beside the reliable channel's ``LOST``): a set with two pieces or
-#: more (phase 3 runs), a set flagged bad (phase 4 runs)
+#: wave bits of phase 1 (beside the reliable channel's ``LOST``): a set with two pieces or
+#: more, a set flagged (phase 2 runs); of phase 2: a bad set (phase 3 runs)
 MANY, BAD = 8, 16
-_DUP = -1  # the item of phase 2 that flags a set holding one window frame twice
+#: phase 2's item that flags a set holding one window frame twice
+_FLAG = (-1, -1, -1, -1)
+#: no piece (phase 1): a feature no piece reached; its set cannot be bad, it takes no part
+NONE = np.iinfo(np.int64).max
 
 
 @dataclass
@@ -124,9 +133,10 @@ class HistoryInputs:
 class HistoryState:
     """A robot's state of the check: ``label`` (m,) its features' set names (phase 1),
     ``conn`` the rows that join sets (kept real rows, history rows), ``row_id``,
-    ``row_quality``, ``row_hist`` per row of its link table, ``items`` set -> the flooded
-    items of the current phase, ``pieces`` / ``bad`` / ``entries`` what phases 2–3 learnt,
-    ``cut`` the link ids this robot cut (its rows and border links)."""
+    ``row_quality``, ``row_hist`` per row of its link table, ``label`` / ``second`` (m,)
+    its features' two smallest pieces heard (phase 1; ``label`` names the set), ``items``
+    set -> the flooded items of the current phase, ``flagged`` / ``bad`` / ``entries`` what
+    phases 1–2 learnt, ``cut`` the link ids this robot cut (its rows and border links)."""
 
     inp: HistoryInputs
     row_id: np.ndarray
@@ -134,9 +144,9 @@ class HistoryState:
     row_hist: np.ndarray
     conn: np.ndarray = None
     label: np.ndarray = None
+    second: np.ndarray = None
     items: dict = field(default_factory=dict)
     fresh: dict = field(default_factory=dict)
-    pieces: dict = field(default_factory=dict)
     flagged: set = field(default_factory=set)
     bad: set = field(default_factory=set)
     entries: dict = field(default_factory=dict)
@@ -145,7 +155,7 @@ class HistoryState:
     def nbytes(self) -> int:
         held = sum(len(it) for v in self.items.values() for it in v)
         return int(sum(a.nbytes for a in (self.row_id, self.row_quality, self.row_hist))
-                   + 8 * held + (0 if self.label is None else self.label.nbytes))
+                   + 8 * held + (0 if self.label is None else 2 * self.label.nbytes))
 
 
 def equip_history(robot: Robot, inp: HistoryInputs) -> None:
@@ -166,46 +176,77 @@ def equip_history(robot: Robot, inp: HistoryInputs) -> None:
     robot.history = HistoryState(inp, row_id, row_q, row_h)
 
 
-# ----------------------------------------------------------------------- phase 1: sets
-def start_labels(robot: Robot, send) -> None:
-    """Round 0 of phase 1: every feature its own id; each robot sends its features' ids over
-    its set-joining rows."""
+# ---------------------------------------------------------------------- phase 1: names
+def start_names(robot: Robot, send) -> None:
+    """Round 0 of phase 1: each feature with a border link takes the two smallest pieces they
+    reach and sends them over its set-joining rows; every other feature holds none."""
     st: HistoryState = robot.history
     st.conn = (robot.link_alive & (st.row_id >= 0)) | st.row_hist
-    st.label = st.inp.gid0 + np.arange(robot.m, dtype=np.int64)
-    _send_labels(robot, np.ones(robot.m, bool), send)
+    st.label = np.full(robot.m, NONE, np.int64)
+    st.second = np.full(robot.m, NONE, np.int64)
+    br = np.asarray(st.inp.border_r, np.int64)
+    bp = np.asarray(st.inp.border_piece, np.int64)
+    changed = _offer(st, br, bp)
+    _send_names(robot, changed, send)
 
 
-def labels_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
-    """A round of phase 1: take the smallest id heard; send on the features it lowered."""
+def names_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
+    """A round of phase 1: keep the two smallest pieces heard; send on the features they
+    changed."""
     st: HistoryState = robot.history
-    lowered = np.zeros(robot.m, bool)
+    changed = np.zeros(robot.m, bool)
     for msg in inbox:
         if msg.kind != HLAB:
             continue
-        s, lab = msg.payload["s"].astype(np.int64), msg.payload["lab"]
-        better = lab < st.label[s]
-        if better.any():
-            np.minimum.at(st.label, s[better], lab[better])
-            lowered[s[better]] = True
-    if lowered.any():
-        _send_labels(robot, lowered, send)
+        s, p = msg.payload["s"].astype(np.int64), msg.payload["p"]
+        changed |= _offer(st, np.r_[s, s], np.r_[p[:, 0], p[:, 1]])
+    if changed.any():
+        _send_names(robot, changed, send)
 
 
-def _send_labels(robot: Robot, which: np.ndarray, send) -> None:
+def _offer(st: HistoryState, r: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Offer pieces ``p`` to own features ``r``: each keeps its two smallest distinct ones.
+    Returns (m,) bool, the features whose pair changed."""
+    changed = np.zeros(len(st.label), bool)
+    keep = (p != NONE) & (p < st.second[r]) & (p != st.label[r])
+    for f, q in zip(r[keep].tolist(), p[keep].tolist(), strict=True):
+        lab, sec = int(st.label[f]), int(st.second[f])
+        if q == lab or q >= sec:
+            continue
+        if q < lab:
+            st.label[f], st.second[f] = q, lab
+        else:
+            st.second[f] = q
+        changed[f] = True
+    return changed
+
+
+def _send_names(robot: Robot, which: np.ndarray, send) -> None:
     st: HistoryState = robot.history
     rows = np.flatnonzero(st.conn & which[robot.link_r])
     for j in np.unique(robot.link_nbr[rows]).tolist():
         k = rows[robot.link_nbr[rows] == j]
+        r = robot.link_r[k]
         send(j, HLAB, {"s": robot.link_s[k].astype(np.int32),
-                       "lab": st.label[robot.link_r[k]].astype(np.int64)})
+                       "p": np.stack([st.label[r], st.second[r]], axis=1).astype(np.int64)})
 
 
-# ------------------------------------------------------------ phases 2-4: floods per set
+def finish_names(robot: Robot) -> int:
+    """After phase 1: the sets this robot holds two features of are flagged; returns the
+    wave bits ``MANY`` (a set of its features has two pieces or more) and ``BAD`` (it
+    flagged a set)."""
+    st: HistoryState = robot.history
+    named = st.label != NONE
+    labs, counts = np.unique(st.label[named], return_counts=True)
+    st.flagged = set(labs[counts >= 2].tolist())
+    return (MANY if (st.second[named] != NONE).any() else 0) | (BAD if st.flagged else 0)
+
+
+# ------------------------------------------------------------ phases 2-3: floods per set
 def _set_nbrs(robot: Robot) -> dict:
     """Set -> the robots this one shares a set-joining row of it with."""
     st: HistoryState = robot.history
-    rows = np.flatnonzero(st.conn)
+    rows = np.flatnonzero(st.conn & (st.label[robot.link_r] != NONE))
     out: dict = {}
     for lab, j in zip(st.label[robot.link_r[rows]].tolist(), robot.link_nbr[rows].tolist(),
                       strict=True):
@@ -253,50 +294,17 @@ def _send_fresh(robot: Robot, send) -> None:
                        "item": np.array([p[1] for p in pairs], np.int64)})
 
 
-def own_pieces(robot: Robot) -> dict:
-    """Phase 2's own items: per set of the robot's features, the pieces their border links
-    reach, and ``(-1,)`` where the robot holds two features of the set. Sets of one feature
-    with no border link take no part (nothing to flood)."""
-    st: HistoryState = robot.history
-    inp = st.inp
-    own: dict = {}
-    labs, counts = np.unique(st.label, return_counts=True)
-    for lab in labs[counts >= 2].tolist():
-        own.setdefault(lab, set()).add((_DUP,))
-    for r, p in zip(np.asarray(inp.border_r, np.int64).tolist(),
-                    np.asarray(inp.border_piece, np.int64).tolist(), strict=True):
-        own.setdefault(int(st.label[r]), set()).add((p,))
-    return own
-
-
-def finish_pieces(robot: Robot) -> int:
-    """After phase 2: the pieces and flags of each set; returns the wave bits ``MANY`` (a set
-    of this robot has two pieces or more) and ``BAD`` (a set is flagged)."""
-    st: HistoryState = robot.history
-    bits = 0
-    st.pieces = {}
-    for lab, its in st.items.items():
-        ps = sorted(p for (p,) in its if p != _DUP)
-        st.pieces[lab] = ps
-        if (_DUP,) in its:
-            st.flagged.add(lab)
-            bits |= BAD
-        if len(ps) >= 2:
-            bits |= MANY
-    return bits
-
-
 def own_entries(robot: Robot) -> dict:
-    """Phase 3's own items: the entries of the pieces of each set with two pieces or more."""
+    """Phase 2's own items: the entries of the pieces of each set with two pieces or more
+    that this robot's border links reach, and :data:`_FLAG` for each set it flagged."""
     st: HistoryState = robot.history
     inp = st.inp
-    own: dict = {}
+    own: dict = {lab: {_FLAG} for lab in st.flagged}
     piece_set = {}
     for r, p in zip(np.asarray(inp.border_r, np.int64).tolist(),
                     np.asarray(inp.border_piece, np.int64).tolist(), strict=True):
-        lab = int(st.label[r])
-        if len(st.pieces.get(lab, ())) >= 2:
-            piece_set[p] = lab
+        if st.second[r] != NONE:
+            piece_set[p] = int(st.label[r])
     for p, rb, lo, hi in zip(*(np.asarray(getattr(inp, k), np.int64).tolist() for k in
                                ("entry_piece", "entry_robot", "entry_lo", "entry_hi")),
                              strict=True):
@@ -306,12 +314,13 @@ def own_entries(robot: Robot) -> dict:
 
 
 def finish_entries(robot: Robot, ran: bool = True) -> int:
-    """After phase 3 (``ran``: it ran; a robot alone skips it when no set has two pieces):
-    the sets in which one team robot has overlapping runs, or flagged, are bad; returns
-    ``BAD`` if this robot holds a feature of one."""
+    """After phase 2 (``ran``: it ran; a robot alone skips it when no set has two pieces and
+    none is flagged): the flagged sets and those in which one team robot has overlapping
+    runs are bad; returns ``BAD`` if this robot holds a feature of one."""
     st: HistoryState = robot.history
-    st.entries = {lab: sorted(its) for lab, its in st.items.items()} if ran else {}
-    st.bad = set(st.flagged)
+    items = st.items if ran else {}
+    st.entries = {lab: sorted(it for it in its if it != _FLAG) for lab, its in items.items()}
+    st.bad = set(st.flagged) | {lab for lab, its in items.items() if _FLAG in its}
     for lab, ent in st.entries.items():
         runs = sorted((rb, lo, hi) for _, rb, lo, hi in ent)
         last_rb, reach = None, None

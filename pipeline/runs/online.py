@@ -84,6 +84,9 @@ class OnlineConfig:
     #: (OnlineAssociation ``robots_solve``; a transport of processes always does), instead
     #: of its batched solution: the same cuts, the protocol's own rounds and bytes
     robots_solve: bool = False
+    #: the stage's robots run the history check (OnlineAssociation ``robots_check``, step 3;
+    #: default): False, the record's own check, the same cuts, its cost an estimate
+    robots_check: bool = True
     #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
     transport: str = "sim"
 
@@ -230,7 +233,8 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                            max_features=config.max_features, fusion=config.fusion,
                            batch_steps=batch_steps, on_step=on_step, overturn=config.overturn,
                            hold=config.hold, weigh=config.weigh, gather=config.gather,
-                           transport=config.transport, robots_solve=config.robots_solve)
+                           transport=config.transport, robots_solve=config.robots_solve,
+                           robots_check=config.robots_check)
     run.sequence = seq
     return run
 
@@ -250,13 +254,13 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      match_options=None, overturn: bool = True,
                      hold: int | None = None, weigh: bool = True,
                      gather: bool = True, transport: str = "sim",
-                     robots_solve: bool = False) -> OnlineRun:
+                     robots_solve: bool = False, robots_check: bool = True) -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
     of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
-    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh``, ``gather`` and ``robots_solve`` to the online stage; ``transport``
+    :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh``, ``gather``, ``robots_solve`` and ``robots_check`` to the online stage; ``transport``
     names where the robots run the rule's stage and the fusion of each step (its
     ``online_stage`` and ``online_fusion`` jobs; the batch run stays on the simulator). Returns an :class:`OnlineRun` without
     ``sequence``."""
@@ -278,6 +282,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     oa = OnlineAssociation(window, resolution=resolution, overturn=overturn, hold=hold,
                            weigh=weigh, gather=gather, stage=stage,
                            robots_solve=robots_solve
+                           or bool(getattr(jobs, "ONLINE_ROBOTS_SOLVE", False)),
+                           robots_check=robots_check
                            or bool(getattr(jobs, "ONLINE_ROBOTS_SOLVE", False)))
     feats_all: list = []
     robot_of = np.zeros(0, np.int64)

@@ -17,15 +17,14 @@ from pipeline.consistency.history import (
     HistoryInputs,
     equip_history,
     finish_entries,
-    finish_pieces,
+    finish_names,
     finish_repair,
     flood_step,
-    labels_step,
+    names_step,
     own_entries,
     own_links,
-    own_pieces,
     start_flood,
-    start_labels,
+    start_names,
 )
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
@@ -55,12 +54,11 @@ def run_history(features_per_camera, links: Links, alive: np.ndarray,
                                        lambda rb, inbox, send, t: flood_step(rb, inbox, send, t),
                                        what=f"history {name}")
 
-    phases["sets"] = run_quiet_phase(robots, network, start_labels,
-                                     lambda rb, inbox, send, t: labels_step(rb, inbox, send, t),
-                                     what="history sets")
-    flood("pieces", own_pieces)
+    phases["names"] = run_quiet_phase(robots, network, start_names,
+                                      lambda rb, inbox, send, t: names_step(rb, inbox, send, t),
+                                      what="history names")
     for rb in robots:
-        finish_pieces(rb)
+        finish_names(rb)
     flood("entries", own_entries)
     for rb in robots:
         finish_entries(rb)

@@ -128,14 +128,16 @@ One step (:meth:`OnlineAssociation.add_step`)
    reason ``history``: when a weak link into a retired frame closes the clash, it is that
    link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
    starts from the set's old links and history links and skips only new links, so new
-   evidence never overturns an earlier decision.) With ``robots_solve`` (and ``overturn``)
-   the stage's robots run this check themselves after the rule, one robot per window frame
+   evidence never overturns an earlier decision.) By default (``robots_check``, with
+   ``overturn``) the stage's robots run this check themselves after the rule, one robot per window frame
    of the sub-problem, messages only over the sub-problem's links
    (:mod:`pipeline.consistency.history`: label flooding of the sets, a flood of their
    pieces, of the pieces' entries where a set has two or more, of the open links of a bad
    set, then every robot of it computes the same repair and cuts its side); the record
-   applies their cuts and counts their messages (``history_rounds``, ``history_bytes``)
-   in place of the flood estimate above. Property-tested to cut as the record's check.
+   applies their cuts and counts their messages (``history_rounds``, ``history_bytes``:
+   above all the flood that names the sets after the rule's cuts, which the estimate above
+   takes as known) in place of the estimate. Property-tested to cut as the record's check
+   (``robots_check=False``, which keeps the estimate: ``bench/online.py --record-check``).
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
@@ -287,10 +289,12 @@ class OnlineAssociation:
         stage's robots at their roots (:mod:`pipeline.consistency.roots`; the stage is then
         called with ``gather_conflictive``, ``gather_free``), as a transport whose robots are
         processes must; False (default): by the simulator's batched solution of the same
-        protocol (:func:`.gather.solve_at_roots`: the same cuts, property-tested); with
-        ``overturn`` the stage's robots also run the history check (step 3,
-        :mod:`pipeline.consistency.history`; the stage is called with ``history``, one
-        :class:`~pipeline.consistency.history.HistoryInputs` per image)
+        protocol (:func:`.gather.solve_at_roots`: the same cuts, property-tested)
+    robots_check : bool — with ``overturn``, the stage's robots run the history check
+        (step 3, :mod:`pipeline.consistency.history`; the stage is called with ``history``,
+        one :class:`~pipeline.consistency.history.HistoryInputs` per image), and its costs
+        are their messages (default); False: the record's own check, the same cuts
+        (property-tested), its cost the estimate of step 3
 
     Examples
     --------
@@ -311,7 +315,8 @@ class OnlineAssociation:
 
     def __init__(self, window: int, resolution: str = DEFAULT_RESOLUTION,
                  overturn: bool = True, hold: int | None = None, weigh: bool = True,
-                 gather: bool = True, stage=None, robots_solve: bool = False):
+                 gather: bool = True, stage=None, robots_solve: bool = False,
+                 robots_check: bool = True):
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise InputError(f"window {window!r}: expected a number of steps >= 1")
         self.window = int(window)
@@ -326,6 +331,7 @@ class OnlineAssociation:
         self.gather = bool(gather)
         self.stage = stage or simulated_stage
         self.robots_solve = bool(robots_solve)
+        self.robots_check = bool(robots_check)
         self.rule = get_rule(resolution)
         self.resolution = self.rule.name
         self.t = -1
@@ -614,10 +620,17 @@ class OnlineAssociation:
             kw.update(gather_conflictive=gather,
                       gather_free=self.weigh and any(P is not None for P in posed),
                       projections=posed)
-        robots_check = self.robots_solve and self.overturn
+        robots_check = self.robots_check and self.overturn
+        # the weighing solved in batch by the simulator cuts after the stage: the robots'
+        # check then runs after it, on the simulator's robots (else within the stage)
+        weigh_after = (self.weigh or gather) and self.rule.name == WEIGHED_RULE \
+            and not by_robots
+        hist_in = None
         if robots_check:  # step 3 by the stage's robots (pipeline.consistency.history)
-            kw["history"] = self._history_inputs(images, local_links, real, det, hist_a,
-                                                 hist_b, sub)
+            hist_in = self._history_inputs(images, local_links, real, det, hist_a, hist_b,
+                                           sub)
+            if not weigh_after:
+                kw["history"] = hist_in
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats
@@ -643,11 +656,17 @@ class OnlineAssociation:
                         st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather,
                         solved=res if by_robots else None)
         # history check and repair (step 3), then the new labels (step 4)
+        if robots_check and weigh_after:
+            from pipeline.consistency.engines.history_run import run_history
+
+            alive = np.r_[L.kept[real], ~np.asarray(res.deleted, bool)[n_real:]]
+            res.stats["history"] = run_history(self.m[images], local_links, alive, hist_in)
         hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t,
                                               res.stats.get("history") if robots_check
                                               else None)
         rec["cut_history"] = int(hist_cut)
         rec["bytes"] += int(flood)
+        rec["history_bytes"] = int(flood)  # the record's estimate of the check's flood
         if robots_check:  # the robots' own phases: their rounds follow the rule's
             h = res.stats["history"]
             rec["history_rounds"] = int(h["rounds"])

@@ -410,7 +410,8 @@ def test_zenoh_robots_run_the_history_check_as_the_record(resolution, weak):
     runs = []
     for stage in (online_stage, None):
         oa = OnlineAssociation(window=2, resolution=resolution, hold=0, stage=stage,
-                               robots_solve=stage is not None)
+                               robots_solve=stage is not None,
+                               robots_check=stage is not None)
         runs.append((oa, _two_tracks_joined_through_the_window(oa, weak)))
     (zen, rz), (sim, rs) = runs
     assert rz["cut_history"] == rs["cut_history"] == 1

@@ -12,7 +12,7 @@ from pipeline.types import Links
 def _both(window, hold, stream, resolution):
     runs = []
     for robots in (True, False):
-        oa = OnlineAssociation(window, resolution=resolution, hold=hold, robots_solve=robots)
+        oa = OnlineAssociation(window, resolution=resolution, hold=hold, robots_check=robots)
         runs.append((oa, [oa.add_step(frames, links) for frames, links in stream]))
     return runs
 
@@ -50,7 +50,7 @@ def test_two_pieces_sharing_a_retired_frame_are_kept_apart_by_the_robots():
     twice in the set, only the pieces' retired entries show the clash. The robots flood the
     set's pieces, then their entries, then its open links, and cut the weakest link of the
     join (reason ``history``); their messages are the check's cost."""
-    oa = OnlineAssociation(window=2, resolution="paper", hold=0, robots_solve=True)
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
     oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
     oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0]))
     rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
