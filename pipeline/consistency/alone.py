@@ -255,22 +255,21 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
     """The history check of an online step (:mod:`.history`) for a robot alone, after its
     rule: the robot must hold its inputs (:func:`.history.equip_history`). Its phases over
     the reliable channel, each ended by the termination wave, whose bits say every robot
-    alike whether the next is needed: the entries only where some set has two pieces or
-    more (``MANY``) or is flagged (``BAD``), the repair only where some set is bad. A robot lost in the
+    alike whether the next is needed: the echo only where some set has two pieces or more
+    (``MANY``) or is flagged (``BAD``), the repair only where some set is bad. A robot lost in the
     check is an error (a bad set could stay unrepaired): said, never hidden. The links it
     cuts are in ``robot.history.cut``."""
     from pipeline.consistency.history import (
         BAD,
         MANY,
-        finish_entries,
+        echo_step,
+        finish_echo,
         finish_names,
-        finish_repair,
-        flood_step,
         names_step,
-        own_entries,
-        own_links,
-        start_flood,
+        repair_step,
+        start_echo,
         start_names,
+        start_repair,
     )
 
     protocol = protocol or ProtocolOptions(reliable=True)
@@ -284,29 +283,19 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
         return robot.memory_bytes() + robot.history.nbytes() + run.chan.memory_bytes()
 
     def phase(name: str, start, step, bits) -> int:
-        t, out, begin = run.phase(name, start, step, lambda: bits() | lost(), memory=memory)
+        t, out, begin = run.phase(name, lambda rb, send: start(rb, send),
+                                  lambda rb, msgs, send, now, t: step(rb, msgs, send, t),
+                                  lambda: bits() | lost(), memory=memory)
         log.resolution_rounds += t
         log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
         if out & LOST:
             raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
         return out
 
-    def flood(name: str, own, bits) -> int:
-        return phase(name, lambda rb, send: start_flood(rb, send, own(rb)),
-                     lambda rb, msgs, send, now, t: flood_step(rb, msgs, send, t), bits)
-
-    # the wave ORs every robot's bits as its pieces and entries arrive (they only grow)
-    bits = phase("history-names", lambda rb, send: start_names(rb, send),
-                 lambda rb, msgs, send, now, t: names_step(rb, msgs, send, t),
-                 lambda: finish_names(robot))
+    # the wave ORs every robot's bits (they only grow within a phase)
+    bits = phase("history-names", start_names, names_step, lambda: finish_names(robot))
     finish_names(robot)
-    bad = 0
-    if bits & (MANY | BAD):
-        bad = flood("history-entries", own_entries, lambda: finish_entries(robot)) & BAD
-        finish_entries(robot)
-    else:
-        finish_entries(robot, ran=False)
-    if bad:
-        flood("history-repair", own_links, lambda: 0)
-        finish_repair(robot)
+    if bits & (MANY | BAD) and \
+            phase("history-echo", start_echo, echo_step, lambda: finish_echo(robot)) & BAD:
+        phase("history-repair", start_repair, repair_step, lambda: 0)
     return run.close()

@@ -23,24 +23,30 @@ its bits say, every robot alike, whether the next phase is needed):
    components of the links it kept conflict-free), whose ends a history link ties to a
    piece. A piece belongs to one set (the history links chain the window features it
    reaches), so a set's smallest piece names it. Each feature with a border link starts
-   with the two smallest pieces its border links reach, every other feature with none, and
-   the two smallest pieces heard flood over those links (label flooding, as :mod:`.labels`,
-   from those features only: a set without a piece sends nothing). At the end every feature
-   of such a set holds its two smallest pieces: the first names the set at every robot
-   alike, the second says whether it has two or more. A robot holding two features of one
-   set flags it (its frame twice: a conflict a robot sees alone). Bits: ``MANY``, ``BAD``.
-2. **Entries** (``hset``, items ``(piece, robot, lo, hi)``; sets with two pieces or more,
-   and flagged sets). The robots flood the retired entries of their set's pieces, and the
-   item ``(-1, -1, -1, -1)`` for a set they flagged; a set in which one team robot has
-   overlapping runs (one retired frame in two pieces) is *bad*, as is a flagged set.
-3. **Repair** (``hset``, items ``(link, feature, robot, step, quality, piece)``; bad sets).
-   The robots flood the set's open links: each robot one *half* per kept real link of its
-   features (its end: the feature's global id, team robot and step) and one per border link
-   (with its piece; quality as the bits of its float64). Every robot of the set then holds
-   the same links and entries and computes :func:`rebuild` on them — the same deterministic
-   function the record computes — and cuts its side of the links it skips: its rows and its
-   border links (:attr:`HistoryState.cut`; the step's record applies them, reason
-   ``history``).
+   with the two smallest pieces its border links reach, every other feature with none; the
+   two smallest pieces heard flood over those links (label flooding, as :mod:`.labels`, from
+   those features only: a set without a piece sends nothing) with a flag, raised where a
+   robot holds two features naming one piece (its frame twice: a conflict a robot sees
+   alone) and ORed along. At the end every feature of such a set holds the set's name,
+   whether it has two pieces or more, and its flag: a set with two pieces or more, or
+   flagged, is *examined*; its *root* is the robot holding the head of its first piece's
+   chain (the smallest window feature the piece's border links reach, which its robot
+   knows: ``border_head``). Bits: ``MANY``, ``BAD``.
+2. **Echo** (``htok``, ``hecho``; examined sets). Segall's echo algorithm from each examined
+   set's root over the set's links: a robot takes the sender of its first token as its
+   parent and sends tokens on; it answers its parent once every other neighbour answered
+   (by an echo, as its child, or by a token of its own), with the retired entries (step runs
+   ``(piece, robot, lo, hi)``) of its own and its subtree's pieces. The root then holds the
+   set's entries: the set is *bad* if it is flagged or one team robot has overlapping runs
+   (one retired frame in two pieces). Bits: ``BAD``.
+3. **Repair** (``hgo``, ``hup``, ``hcut``; bad sets). The root asks down its tree; each robot
+   sends up, once its children did, its and its subtree's *halves* of the set's open links:
+   one per kept real link of its features (its end: the feature's global id, team robot and
+   step) and one per border link (with its piece; quality as the bits of its float64). The
+   root computes :func:`rebuild` — the same deterministic function the record computes — on
+   the set's links and entries, and the links it skips go down the tree; each robot cuts its
+   side of them: its rows and its border links (:attr:`HistoryState.cut`; the step's record
+   applies them, reason ``history``).
 
 Same decisions as the record's check (:meth:`.engines.online.OnlineAssociation.
 _history_check` with ``overturn``, the default): the sets are the same components, a set is
@@ -50,13 +56,16 @@ one piece needs no entries to be repaired), and :func:`rebuild` gets the same gr
 links in the same order. Property-tested against the record's check
 (``tests/pipeline/consistency/test_history.py``).
 
-Costs: counted by the transport as every message (a flood item crosses each robot pair of
-its set that shares a link, once per direction at most): 20 bytes per feature and change in
-phase 1, 8 bytes per set name plus 8 per item column in phases 2–3.
+Costs: counted by the transport as every message. Phase 1 is a label flooding over the
+links of the sets that reach a piece (28 bytes per feature and change); phases 2 and 3 cross
+each link of an examined set once or twice with a token, and carry each entry and each half
+one hop per tree edge up to the root (32 and 48 bytes, plus 8 for the set's name), the cut
+links down (16 bytes each per tree edge).
 
-Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``p`` (K, 2) int64 (its two
-smallest pieces heard, :data:`NONE` where fewer); ``hset`` ``lab`` (K,) int64, ``item``
-(K, c) int64.
+Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``p`` (K, 3) int64 (its two
+smallest pieces heard, :data:`NONE` where fewer; the flag); ``htok``,
+``hgo`` ``set`` (S,) int64; ``hecho``, ``hup`` ``set`` (S,) the sets answered, ``lab`` (K,),
+``item`` (K, 4) entries / (K, 6) halves; ``hcut`` ``lab``, ``id`` (K,) int64.
 """
 
 from __future__ import annotations
@@ -69,16 +78,14 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
 __all__ = ["HistoryInputs", "HistoryState", "equip_history", "rebuild", "rebuild_halves",
-           "start_names", "names_step", "finish_names", "start_flood", "flood_step",
-           "own_entries", "finish_entries", "own_links", "finish_repair", "HLAB", "HSET",
-           "MANY", "BAD", "NONE"]
+           "start_names", "names_step", "finish_names", "start_echo", "echo_step",
+           "finish_echo", "start_repair", "repair_step", "own_entries", "own_links",
+           "HLAB", "HTOK", "HECHO", "HGO", "HUP", "HCUT", "MANY", "BAD", "NONE"]
 
-HLAB, HSET = "hlab", "hset"
+HLAB, HTOK, HECHO, HGO, HUP, HCUT = "hlab", "htok", "hecho", "hgo", "hup", "hcut"
 #: wave bits of phase 1 (beside the reliable channel's ``LOST``): a set with two pieces or
 #: more, a set flagged (phase 2 runs); of phase 2: a bad set (phase 3 runs)
 MANY, BAD = 8, 16
-#: phase 2's item that flags a set holding one window frame twice
-_FLAG = (-1, -1, -1, -1)
 #: no piece (phase 1): a feature no piece reached; its set cannot be bad, it takes no part
 NONE = np.iinfo(np.int64).max
 
@@ -91,7 +98,9 @@ class HistoryInputs:
     robot that took the frame and its step. Rows (any order; matched to the robot's link
     table by ``(row_nbr, row_s)``): ``row_id`` the link's id (-1: a history link),
     ``row_quality``, ``row_hist`` (a history link joins the row's two features). Border links:
-    ``border_r`` (own feature), ``border_piece``, ``border_id``, ``border_quality``. Entries
+    ``border_r`` (own feature), ``border_piece``, ``border_id``, ``border_quality``,
+    ``border_head`` (its feature is the smallest window feature the piece's border links
+    reach: the head of the piece's chain of history links). Entries
     of those pieces: ``entry_piece``, ``entry_robot``, ``entry_lo``, ``entry_hi``.
     """
 
@@ -107,13 +116,15 @@ class HistoryInputs:
     border_piece: np.ndarray
     border_id: np.ndarray
     border_quality: np.ndarray
+    border_head: np.ndarray
     entry_piece: np.ndarray
     entry_robot: np.ndarray
     entry_lo: np.ndarray
     entry_hi: np.ndarray
 
     ARRAYS = ("row_nbr", "row_s", "row_id", "row_quality", "row_hist", "border_r",
-              "border_piece", "border_id", "border_quality", "entry_piece", "entry_robot",
+              "border_piece", "border_id", "border_quality", "border_head", "entry_piece",
+              "entry_robot",
               "entry_lo", "entry_hi")
 
     def to_arrays(self) -> dict:
@@ -131,12 +142,14 @@ class HistoryInputs:
 
 @dataclass
 class HistoryState:
-    """A robot's state of the check: ``label`` (m,) its features' set names (phase 1),
-    ``conn`` the rows that join sets (kept real rows, history rows), ``row_id``,
-    ``row_quality``, ``row_hist`` per row of its link table, ``label`` / ``second`` (m,)
-    its features' two smallest pieces heard (phase 1; ``label`` names the set), ``items``
-    set -> the flooded items of the current phase, ``flagged`` / ``bad`` / ``entries`` what
-    phases 1–2 learnt, ``cut`` the link ids this robot cut (its rows and border links)."""
+    """A robot's state of the check. Rows of its link table: ``row_id``, ``row_quality``,
+    ``row_hist``; ``conn`` the rows that join sets (kept real rows, history rows). Phase 1,
+    per own feature: ``label`` / ``second`` its two smallest pieces heard (``label`` names the
+    set), ``flag``; then per set
+    ``checked`` (two pieces or more, or flagged), ``flagged``, ``roots`` (this robot holds the
+    root's feature). Phase 2, per set: ``nbrs``, ``parent``, ``children``, ``waiting``,
+    ``collected``, ``done``; at a root ``entries`` and ``bad``. Phase 3: ``pending``,
+    ``halves``; ``cut`` the link ids this robot cut (its rows and border links)."""
 
     inp: HistoryInputs
     row_id: np.ndarray
@@ -145,17 +158,28 @@ class HistoryState:
     conn: np.ndarray = None
     label: np.ndarray = None
     second: np.ndarray = None
-    items: dict = field(default_factory=dict)
-    fresh: dict = field(default_factory=dict)
+    flag: np.ndarray = None
+    checked: set = field(default_factory=set)
     flagged: set = field(default_factory=set)
-    bad: set = field(default_factory=set)
+    roots: set = field(default_factory=set)
+    nbrs: dict = field(default_factory=dict)
+    parent: dict = field(default_factory=dict)
+    children: dict = field(default_factory=dict)
+    waiting: dict = field(default_factory=dict)
+    collected: dict = field(default_factory=dict)
+    done: set = field(default_factory=set)
     entries: dict = field(default_factory=dict)
+    bad: set = field(default_factory=set)
+    pending: dict = field(default_factory=dict)
+    halves: dict = field(default_factory=dict)
     cut: list = field(default_factory=list)
 
     def nbytes(self) -> int:
-        held = sum(len(it) for v in self.items.values() for it in v)
+        held = sum(len(it) for d in (self.collected, self.halves) for v in d.values()
+                   for it in v) + sum(4 * len(v) for v in self.entries.values())
+        per_feature = 0 if self.label is None else 2 * self.label.nbytes + self.flag.nbytes
         return int(sum(a.nbytes for a in (self.row_id, self.row_quality, self.row_hist))
-                   + 8 * held + (0 if self.label is None else 2 * self.label.nbytes))
+                   + 8 * held + per_feature + 8 * sum(len(v) for v in self.nbrs.values()))
 
 
 def equip_history(robot: Robot, inp: HistoryInputs) -> None:
@@ -184,41 +208,59 @@ def start_names(robot: Robot, send) -> None:
     st.conn = (robot.link_alive & (st.row_id >= 0)) | st.row_hist
     st.label = np.full(robot.m, NONE, np.int64)
     st.second = np.full(robot.m, NONE, np.int64)
+    st.flag = np.zeros(robot.m, bool)
+    changed = np.zeros(robot.m, bool)
     br = np.asarray(st.inp.border_r, np.int64)
-    bp = np.asarray(st.inp.border_piece, np.int64)
-    changed = _offer(st, br, bp)
+    for r, p in zip(br.tolist(), np.asarray(st.inp.border_piece, np.int64).tolist(),
+                    strict=True):
+        changed[r] |= _offer(st, r, p)
+    changed |= _flag_twice(st)
     _send_names(robot, changed, send)
 
 
 def names_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
-    """A round of phase 1: keep the two smallest pieces heard; send on the features they
-    changed."""
+    """A round of phase 1: keep the two smallest pieces heard and the flag; send on the
+    features that changed."""
     st: HistoryState = robot.history
     changed = np.zeros(robot.m, bool)
     for msg in inbox:
         if msg.kind != HLAB:
             continue
-        s, p = msg.payload["s"].astype(np.int64), msg.payload["p"]
-        changed |= _offer(st, np.r_[s, s], np.r_[p[:, 0], p[:, 1]])
+        s = msg.payload["s"].astype(np.int64).tolist()
+        for f, (p1, p2, fl) in zip(s, msg.payload["p"].tolist(), strict=True):
+            c = _offer(st, f, p1)
+            c |= _offer(st, f, p2)
+            if fl and not st.flag[f]:
+                st.flag[f] = c = True
+            changed[f] |= c
+    changed |= _flag_twice(st)
     if changed.any():
         _send_names(robot, changed, send)
 
 
-def _offer(st: HistoryState, r: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Offer pieces ``p`` to own features ``r``: each keeps its two smallest distinct ones.
-    Returns (m,) bool, the features whose pair changed."""
-    changed = np.zeros(len(st.label), bool)
-    keep = (p != NONE) & (p < st.second[r]) & (p != st.label[r])
-    for f, q in zip(r[keep].tolist(), p[keep].tolist(), strict=True):
-        lab, sec = int(st.label[f]), int(st.second[f])
-        if q == lab or q >= sec:
-            continue
-        if q < lab:
-            st.label[f], st.second[f] = q, lab
-        else:
-            st.second[f] = q
-        changed[f] = True
-    return changed
+def _offer(st: HistoryState, f: int, q: int) -> bool:
+    """Offer piece ``q`` (or :data:`NONE`) to own feature ``f``: it keeps its two smallest
+    distinct pieces. Returns whether they changed."""
+    lab = int(st.label[f])
+    if q == NONE or q == lab:
+        return False
+    if q < lab:
+        st.second[f], st.label[f] = lab, q
+        return True
+    if q < st.second[f]:
+        st.second[f] = q
+        return True
+    return False
+
+
+def _flag_twice(st: HistoryState) -> np.ndarray:
+    """Flag the features of a set this robot holds two of (a piece belongs to one set, so two
+    features naming one piece are in one set for good). Returns (m,) the newly flagged."""
+    named = st.label != NONE
+    labs, counts = np.unique(st.label[named], return_counts=True)
+    twice = named & np.isin(st.label, labs[counts >= 2]) & ~st.flag
+    st.flag |= twice
+    return twice
 
 
 def _send_names(robot: Robot, which: np.ndarray, send) -> None:
@@ -228,21 +270,28 @@ def _send_names(robot: Robot, which: np.ndarray, send) -> None:
         k = rows[robot.link_nbr[rows] == j]
         r = robot.link_r[k]
         send(j, HLAB, {"s": robot.link_s[k].astype(np.int32),
-                       "p": np.stack([st.label[r], st.second[r]], axis=1).astype(np.int64)})
+                       "p": np.stack([st.label[r], st.second[r],
+                                      st.flag[r].astype(np.int64)], axis=1)})
 
 
 def finish_names(robot: Robot) -> int:
-    """After phase 1: the sets this robot holds two features of are flagged; returns the
-    wave bits ``MANY`` (a set of its features has two pieces or more) and ``BAD`` (it
-    flagged a set)."""
+    """After phase 1: the sets to examine (two pieces or more, or flagged: ``checked``), the
+    flagged ones, and the sets this robot is the root of (it holds the head of the chain of
+    the set's first piece). Returns the wave bits ``MANY`` and ``BAD``."""
     st: HistoryState = robot.history
-    named = st.label != NONE
-    labs, counts = np.unique(st.label[named], return_counts=True)
-    st.flagged = set(labs[counts >= 2].tolist())
-    return (MANY if (st.second[named] != NONE).any() else 0) | (BAD if st.flagged else 0)
+    named = np.flatnonzero(st.label != NONE)
+    st.flagged = {int(st.label[f]) for f in named.tolist() if st.flag[f]}
+    st.checked = {int(st.label[f]) for f in named.tolist()
+                  if st.flag[f] or st.second[f] != NONE}
+    br = np.asarray(st.inp.border_r, np.int64)
+    bp = np.asarray(st.inp.border_piece, np.int64)
+    head = np.asarray(st.inp.border_head, bool) & (bp == st.label[br])
+    st.roots = {int(p) for p in bp[head].tolist() if int(p) in st.checked}
+    many = bool((st.second[named] != NONE).any())
+    return (MANY if many else 0) | (BAD if st.flagged else 0)
 
 
-# ------------------------------------------------------------ phases 2-3: floods per set
+# ----------------------------------------------------- phases 2-3: a tree per examined set
 def _set_nbrs(robot: Robot) -> dict:
     """Set -> the robots this one shares a set-joining row of it with."""
     st: HistoryState = robot.history
@@ -254,52 +303,98 @@ def _set_nbrs(robot: Robot) -> dict:
     return out
 
 
-def start_flood(robot: Robot, send, own: dict) -> None:
-    """Round 0 of a flood: ``own`` set -> the robot's own items (tuples of ints) of it; the
-    robot sends them to its neighbours of each set."""
+def start_echo(robot: Robot, send) -> None:
+    """Round 0 of phase 2: the root of each examined set sends a token to its neighbours of
+    the set (Segall's echo: a robot takes the sender of its first token as its parent, sends
+    tokens on, and answers its parent once every other neighbour answered — by its echo as a
+    child, or by a token of its own)."""
     st: HistoryState = robot.history
-    st.items = {lab: set(v) for lab, v in own.items()}
-    st.fresh = {lab: set(v) for lab, v in own.items() if v}
-    _send_fresh(robot, send)
+    st.nbrs = _set_nbrs(robot)
+    st.parent, st.children, st.waiting, st.collected, st.done = {}, {}, {}, {}, set()
+    st.bad = set()
+    tokens: dict = {}
+    for lab in sorted(st.roots):
+        st.waiting[lab] = set(st.nbrs.get(lab, ()))
+        for j in st.waiting[lab]:
+            tokens.setdefault(j, []).append(lab)
+    _send_sets(send, HTOK, tokens)
+    _complete(robot, send)
 
 
-def flood_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
-    """A round of a flood: keep the items not held yet; send them on."""
+def echo_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
+    """A round of phase 2: tokens and echoes (module docstring)."""
     st: HistoryState = robot.history
+    first: dict = {}
     for msg in inbox:
-        if msg.kind != HSET:
+        if msg.kind == HTOK:
+            for lab in msg.payload["set"].tolist():
+                first.setdefault(lab, []).append(msg.src)
+        elif msg.kind == HECHO:
+            for lab in msg.payload["set"].tolist():
+                st.children.setdefault(lab, set()).add(msg.src)
+                st.waiting.get(lab, set()).discard(msg.src)
+            for lab, it in zip(msg.payload["lab"].tolist(), msg.payload["item"].tolist(),
+                               strict=True):
+                st.collected.setdefault(lab, set()).add(tuple(it))
+    tokens: dict = {}
+    for lab, senders in sorted(first.items()):
+        if lab in st.waiting or lab in st.done:   # a token answers this robot's own
+            for j in senders:
+                st.waiting.get(lab, set()).discard(j)
             continue
-        labs, items = msg.payload["lab"].tolist(), msg.payload["item"].tolist()
-        for lab, it in zip(labs, items, strict=True):
-            it = tuple(it)
-            have = st.items.setdefault(lab, set())
-            if it not in have:
-                have.add(it)
-                st.fresh.setdefault(lab, set()).add(it)
-    _send_fresh(robot, send)
+        st.parent[lab] = min(senders)
+        rest = set(st.nbrs.get(lab, ())) - {st.parent[lab]}
+        st.waiting[lab] = rest - set(senders)
+        for j in rest:
+            tokens.setdefault(j, []).append(lab)
+    _send_sets(send, HTOK, tokens)
+    _complete(robot, send)
 
 
-def _send_fresh(robot: Robot, send) -> None:
+def _complete(robot: Robot, send) -> None:
+    """Sets whose neighbours all answered: a robot echoes its own entries and those of its
+    subtree to its parent; the root decides."""
     st: HistoryState = robot.history
-    if not st.fresh:
-        return
-    nbrs = _set_nbrs(robot)
-    out: dict = {}
-    for lab, its in st.fresh.items():
-        for j in nbrs.get(lab, ()):
-            out.setdefault(j, []).extend((lab, it) for it in sorted(its))
-    st.fresh = {}
-    for j, pairs in sorted(out.items()):
-        send(j, HSET, {"lab": np.array([p[0] for p in pairs], np.int64),
-                       "item": np.array([p[1] for p in pairs], np.int64)})
+    echoes: dict = {}
+    for lab in sorted(k for k, w in st.waiting.items() if not w and k not in st.done):
+        st.done.add(lab)
+        items = st.collected.pop(lab, set()) | own_entries(robot).get(lab, set())
+        if lab in st.roots:
+            st.entries[lab] = sorted(items)
+            if lab in st.flagged or _overlap(st.entries[lab]):
+                st.bad.add(lab)
+        else:
+            echoes.setdefault(st.parent[lab], []).append((lab, sorted(items)))
+    for j, sets in sorted(echoes.items()):
+        pairs = [(lab, it) for lab, its in sets for it in its]
+        send(j, HECHO, {"set": np.array([lab for lab, _ in sets], np.int64),
+                        "lab": np.array([p[0] for p in pairs], np.int64),
+                        "item": np.array([p[1] for p in pairs], np.int64).reshape(-1, 4)})
+
+
+def _send_sets(send, kind: str, by_robot: dict) -> None:
+    for j, labs in sorted(by_robot.items()):
+        send(j, kind, {"set": np.array(sorted(labs), np.int64)})
+
+
+def _overlap(entries) -> bool:
+    """Whether one team robot has overlapping step runs among ``entries`` ``(piece, robot,
+    lo, hi)`` (one retired frame in two pieces: runs of one piece never overlap)."""
+    last_rb, reach = None, None
+    for rb, lo, hi in sorted((rb, lo, hi) for _, rb, lo, hi in entries):
+        if rb == last_rb and lo <= reach:
+            return True
+        reach = hi if rb != last_rb else max(reach, hi)
+        last_rb = rb
+    return False
 
 
 def own_entries(robot: Robot) -> dict:
-    """Phase 2's own items: the entries of the pieces of each set with two pieces or more
-    that this robot's border links reach, and :data:`_FLAG` for each set it flagged."""
+    """The retired entries of the pieces this robot's border links reach, per set with two
+    pieces or more: ``(piece, robot, lo, hi)``."""
     st: HistoryState = robot.history
     inp = st.inp
-    own: dict = {lab: {_FLAG} for lab in st.flagged}
+    own: dict = {}
     piece_set = {}
     for r, p in zip(np.asarray(inp.border_r, np.int64).tolist(),
                     np.asarray(inp.border_piece, np.int64).tolist(), strict=True):
@@ -313,29 +408,92 @@ def own_entries(robot: Robot) -> dict:
     return own
 
 
-def finish_entries(robot: Robot, ran: bool = True) -> int:
-    """After phase 2 (``ran``: it ran; a robot alone skips it when no set has two pieces and
-    none is flagged): the flagged sets and those in which one team robot has overlapping
-    runs are bad; returns ``BAD`` if this robot holds a feature of one."""
+def finish_echo(robot: Robot) -> int:
+    """After phase 2: ``BAD`` if this robot is the root of a bad set."""
+    return BAD if robot.history.bad else 0
+
+
+def start_repair(robot: Robot, send) -> None:
+    """Round 0 of phase 3: the root of each bad set asks its children down the tree for the
+    set's open links."""
     st: HistoryState = robot.history
-    items = st.items if ran else {}
-    st.entries = {lab: sorted(it for it in its if it != _FLAG) for lab, its in items.items()}
-    st.bad = set(st.flagged) | {lab for lab, its in items.items() if _FLAG in its}
-    for lab, ent in st.entries.items():
-        runs = sorted((rb, lo, hi) for _, rb, lo, hi in ent)
-        last_rb, reach = None, None
-        for rb, lo, hi in runs:   # by robot, then start: a start within the reach overlaps
-            if rb == last_rb and lo <= reach:
-                st.bad.add(lab)
-                break
-            reach = hi if rb != last_rb else max(reach, hi)
-            last_rb = rb
-    return BAD if st.bad else 0
+    st.pending, st.halves = {}, {}
+    go: dict = {}
+    for lab in sorted(st.bad):
+        st.pending[lab] = set(st.children.get(lab, ()))
+        for j in st.pending[lab]:
+            go.setdefault(j, []).append(lab)
+    _send_sets(send, HGO, go)
+    _up(robot, send)
 
 
-def own_links(robot: Robot) -> dict:
-    """Phase 4's own items: per bad set, one half per kept real row and one per border link
-    of the robot's features: ``(link, feature, robot, step, quality bits, piece or -1)``."""
+def repair_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
+    """A round of phase 3: the request goes down the tree, the halves come up (a robot sends
+    its own and its subtree's once every child sent), the root solves :func:`rebuild` and
+    the links it skips go down; each robot cuts its side."""
+    st: HistoryState = robot.history
+    go: dict = {}
+    cuts: dict = {}
+    for msg in inbox:
+        if msg.kind == HGO:
+            for lab in msg.payload["set"].tolist():
+                st.pending[lab] = set(st.children.get(lab, ()))
+                for j in st.pending[lab]:
+                    go.setdefault(j, []).append(lab)
+        elif msg.kind == HUP:
+            for lab in msg.payload["set"].tolist():
+                st.pending.get(lab, set()).discard(msg.src)
+            for lab, it in zip(msg.payload["lab"].tolist(), msg.payload["item"].tolist(),
+                               strict=True):
+                st.halves.setdefault(lab, set()).add(tuple(it))
+        elif msg.kind == HCUT:
+            for lab, i in zip(msg.payload["lab"].tolist(), msg.payload["id"].tolist(),
+                              strict=True):
+                cuts.setdefault(lab, []).append(i)
+    _send_sets(send, HGO, go)
+    for lab, ids in sorted(cuts.items()):
+        _cut_down(robot, send, lab, ids)
+    _up(robot, send)
+
+
+def _up(robot: Robot, send) -> None:
+    st: HistoryState = robot.history
+    ups: dict = {}
+    ready = sorted(k for k, w in st.pending.items() if not w)
+    own = own_links(robot, set(ready)) if ready else {}
+    for lab in ready:
+        del st.pending[lab]
+        items = st.halves.pop(lab, set()) | own.get(lab, set())
+        if lab in st.roots:
+            skipped = rebuild_halves(sorted(items), st.entries.get(lab, []))
+            _cut_down(robot, send, lab, skipped.tolist())
+        else:
+            ups.setdefault(st.parent[lab], []).append((lab, sorted(items)))
+    for j, sets in sorted(ups.items()):
+        pairs = [(lab, it) for lab, its in sets for it in its]
+        send(j, HUP, {"set": np.array([lab for lab, _ in sets], np.int64),
+                      "lab": np.array([p[0] for p in pairs], np.int64),
+                      "item": np.array([p[1] for p in pairs], np.int64).reshape(-1, 6)})
+
+
+def _cut_down(robot: Robot, send, lab: int, ids: list) -> None:
+    """Cut this robot's side of ``ids`` (its rows and border links) and send them on to its
+    children of the set."""
+    st: HistoryState = robot.history
+    if not ids:
+        return
+    mine = set(st.row_id[robot.link_alive & (st.row_id >= 0)].tolist()) \
+        | set(np.asarray(st.inp.border_id, np.int64).tolist())
+    st.cut.extend(i for i in ids if i in mine)
+    for j in sorted(st.children.get(lab, ())):
+        send(j, HCUT, {"lab": np.full(len(ids), lab, np.int64),
+                       "id": np.asarray(ids, np.int64)})
+
+
+def own_links(robot: Robot, want: set) -> dict:
+    """The halves this robot sends up for each set of ``want``: one per kept real row and one
+    per border link of its features, ``(link, feature, robot, step, quality bits, piece or
+    -1)``."""
     st: HistoryState = robot.history
     inp = st.inp
     own: dict = {}
@@ -343,7 +501,7 @@ def own_links(robot: Robot) -> dict:
     qbits = st.row_quality.astype(np.float64).view(np.int64)
     for k in np.flatnonzero(robot.link_alive & (st.row_id >= 0)).tolist():
         lab = int(st.label[robot.link_r[k]])
-        if lab in st.bad:
+        if lab in want:
             own.setdefault(lab, set()).add((int(st.row_id[k]), int(gid[robot.link_r[k]]),
                                             inp.robot, inp.step, int(qbits[k]), -1))
     bq = np.asarray(inp.border_quality, np.float64).view(np.int64)
@@ -352,22 +510,9 @@ def own_links(robot: Robot) -> dict:
                           np.asarray(inp.border_id, np.int64).tolist(), bq.tolist(),
                           strict=True):
         lab = int(st.label[r])
-        if lab in st.bad:
+        if lab in want:
             own.setdefault(lab, set()).add((i, int(gid[r]), inp.robot, inp.step, q, p))
     return own
-
-
-def finish_repair(robot: Robot) -> None:
-    """After phase 4: every robot of a bad set solves :func:`rebuild` on the set's flooded
-    links and entries and cuts its side of the links it skips (:attr:`HistoryState.cut`)."""
-    st: HistoryState = robot.history
-    mine_rows = {int(i) for i in st.row_id[robot.link_alive & (st.row_id >= 0)].tolist()}
-    mine = mine_rows | {int(i) for i in np.asarray(st.inp.border_id, np.int64).tolist()}
-    for lab in sorted(st.bad):
-        halves = sorted(st.items.get(lab, ()))
-        ent = st.entries.get(lab, [])
-        skipped = rebuild_halves(halves, ent)
-        st.cut.extend(i for i in skipped.tolist() if i in mine)
 
 
 def rebuild_halves(halves, entries) -> np.ndarray:

@@ -15,16 +15,15 @@ from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.history import (
     HistoryInputs,
+    echo_step,
     equip_history,
-    finish_entries,
+    finish_echo,
     finish_names,
-    finish_repair,
-    flood_step,
     names_step,
-    own_entries,
-    own_links,
-    start_flood,
+    repair_step,
+    start_echo,
     start_names,
+    start_repair,
 )
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
@@ -37,8 +36,9 @@ def run_history(features_per_camera, links: Links, alive: np.ndarray,
     """The check on the stage's cameras: ``links`` the stage's links (real and history), each
     robot's rows alive where ``alive`` (the links the stage kept), ``inputs`` one per camera.
 
-    Returns ``cut`` (sorted link ids the robots cut), ``rounds``, ``messages``, ``bytes``,
-    ``phases`` (rounds of each phase), ``peak_bytes`` (a robot's largest state)."""
+    Returns ``cut`` (sorted link ids the robots cut), ``rounds``, ``messages``, ``bytes``
+    (``bytes_by_kind``), ``phases`` (rounds of each phase), ``peak_bytes`` (a robot's
+    largest state at the end)."""
     fpc = np.asarray(features_per_camera, np.int64)
     robots, link_index = build_robots(fpc, links)
     alive = np.asarray(alive, bool)
@@ -47,27 +47,19 @@ def run_history(features_per_camera, links: Links, alive: np.ndarray,
         equip_history(rb, inputs[rb.id])
     network = Network(len(fpc), comm_edges_for(fpc, links, None))
     phases = {}
-
-    def flood(name, own):
-        phases[name] = run_quiet_phase(robots, network,
-                                       lambda rb, send: start_flood(rb, send, own(rb)),
-                                       lambda rb, inbox, send, t: flood_step(rb, inbox, send, t),
-                                       what=f"history {name}")
-
-    phases["names"] = run_quiet_phase(robots, network, start_names,
-                                      lambda rb, inbox, send, t: names_step(rb, inbox, send, t),
-                                      what="history names")
-    for rb in robots:
-        finish_names(rb)
-    flood("entries", own_entries)
-    for rb in robots:
-        finish_entries(rb)
-    flood("repair", own_links)
-    for rb in robots:
-        finish_repair(rb)
+    for name, start, step, finish in (("names", start_names, names_step, finish_names),
+                                      ("echo", start_echo, echo_step, finish_echo),
+                                      ("repair", start_repair, repair_step, None)):
+        phases[name] = run_quiet_phase(
+            robots, network, start,
+            lambda rb, inbox, send, t, step=step: step(rb, inbox, send, t),
+            what=f"history {name}", cap=3 * len(robots) + 6)
+        if finish is not None:
+            for rb in robots:
+                finish(rb)
     c = network.counters()
     cut = np.unique(np.concatenate([np.asarray(rb.history.cut, np.int64) for rb in robots])
                     if robots else np.zeros(0, np.int64))
     return dict(cut=cut, rounds=int(sum(phases.values())), messages=int(c["messages"]),
-                bytes=int(c["bytes"]), phases=phases,
+                bytes=int(c["bytes"]), phases=phases, bytes_by_kind=c["bytes_by_kind"],
                 peak_bytes=int(max((rb.history.nbytes() for rb in robots), default=0)))

@@ -837,6 +837,10 @@ class OnlineAssociation:
         on = np.isin(w_b, sub)
         b_ids = self.border_links[on]
         w_b, p_b, cam_b = w_b[on], p_b[on], np.searchsorted(images, img_b[on])
+        # the head of each piece's chain: its smallest window feature (_chain's order)
+        first = np.full(int(p_b.max()) + 1 if len(p_b) else 0, np.iinfo(np.int64).max)
+        np.minimum.at(first, p_b, w_b)
+        head = w_b == first[p_b]
         out = []
         for c, g in enumerate(images.tolist()):
             rows = owner == c
@@ -846,7 +850,7 @@ class OnlineAssociation:
                 int(self.offset[g]), int(self.robot[g]), int(self.step[g]),
                 nbr[rows], s_[rows], row_id[both[rows]], row_q[both[rows]],
                 row_h[both[rows]], w_b[mine] - self.offset[g], p_b[mine], b_ids[mine],
-                L.quality[b_ids[mine]], self.ret_piece[ent], self.ret_robot[ent],
+                L.quality[b_ids[mine]], head[mine], self.ret_piece[ent], self.ret_robot[ent],
                 self.ret_lo[ent], self.ret_hi[ent]))
         return out
 

@@ -396,7 +396,9 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
                                  workdir=work, links=sub, data_extra=extra, keep_run=kept)
     if history is not None:
-        from pipeline.consistency.history import HLAB, HSET
+        from pipeline.consistency.history import HCUT, HECHO, HGO, HLAB, HTOK, HUP
+
+        kinds = (HLAB, HTOK, HECHO, HGO, HUP, HCUT)
 
         heads = [h for h, _ in kept[0].results.values()]
         res.stats["history"] = dict(
@@ -405,8 +407,8 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
                                            for _, a in kept[0].results.values()])),
             rounds=int(max((h["history"]["rounds"] for h in heads if h.get("history")),
                            default=0)),
-            messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in (HLAB, HSET))),
-            bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in (HLAB, HSET))),
+            messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
+            bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)),
             counted=True)
     if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])

@@ -45,7 +45,8 @@ def test_rebuild_halves_decides_as_rebuild_on_the_same_links():
 def test_inputs_go_through_named_arrays_unchanged():
     inp = HistoryInputs(40, 3, 7, np.array([1, 2]), np.array([0, 1]), np.array([5, -1]),
                         np.array([0.5, 1.0]), np.array([False, True]), np.array([1]),
-                        np.array([9]), np.array([12]), np.array([0.25]), np.array([9, 9]),
+                        np.array([9]), np.array([12]), np.array([0.25]), np.array([True]),
+                        np.array([9, 9]),
                         np.array([0, 3]), np.array([1, 2]), np.array([1, 4]))
     back = HistoryInputs.from_arrays(inp.to_arrays())
     assert (back.gid0, back.robot, back.step) == (40, 3, 7)
