@@ -129,15 +129,17 @@ One step (:meth:`OnlineAssociation.add_step`)
    link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
    starts from the set's old links and history links and skips only new links, so new
    evidence never overturns an earlier decision.) By default (``robots_check``, with
-   ``overturn``) the stage's robots run this check themselves after the rule, one robot per window frame
-   of the sub-problem, messages only over the sub-problem's links
-   (:mod:`pipeline.consistency.history`: label flooding of the sets, a flood of their
-   pieces, of the pieces' entries where a set has two or more, of the open links of a bad
-   set, then every robot of it computes the same repair and cuts its side); the record
-   applies their cuts and counts their messages (``history_rounds``, ``history_bytes``:
-   above all the flood that names the sets after the rule's cuts, which the estimate above
-   takes as known) in place of the estimate. Property-tested to cut as the record's check
-   (``robots_check=False``, which keeps the estimate: ``bench/online.py --record-check``).
+   ``overturn``) the stage's robots run this check themselves after the rule, one robot per
+   window frame of the sub-problem, messages only over the sub-problem's links
+   (:mod:`pipeline.consistency.history`: a label flooding of the two smallest pieces each
+   set reaches, which names the sets after the rule's cuts; an echo from each set with two
+   pieces or a frame twice gathers the pieces' entries at a root; a bad set's open links go
+   up that tree, the root computes the repair, the cut links go down, each robot cuts its
+   side); the record applies their cuts and counts their messages (``history_rounds``,
+   ``history_bytes``: above all the label flooding, which the estimate above takes as known
+   from the detection) in place of the estimate. Property-tested to cut as the record's
+   check (``robots_check=False``, which keeps the estimate: ``bench/online.py
+   --record-check``).
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
