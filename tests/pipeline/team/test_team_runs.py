@@ -327,14 +327,16 @@ def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceau
     assert not (tmp_path / "z").exists()
 
 
-@pytest.mark.parametrize("resolution,fusion", [("evidence", True), ("paper", True),
-                                               ("sync", False)])
-def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, tmp_path):
+@pytest.mark.parametrize("resolution,fusion,n_steps", [
+    ("evidence", True, 3), ("paper", True, 3), ("sync", False, 3), ("paper", False, 5)])
+def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, n_steps, tmp_path):
     """``run-formation --steps N --transport zenoh``: each step's stage runs as robot processes
     (one per frame of the step's sub-problem), and so does each step's fusion of the changed
     tracks (one per frame of those tracks); every link is made, kept and cut at the same step,
-    for the same reason, as on the simulator, and each step fuses and cuts as much."""
-    args = ["run-formation", "--steps", "3", "--window", "2", "--size", "160x120",
+    for the same reason, as on the simulator, and each step fuses and cuts as much. Five steps
+    of window 2 (hold 1): frames retire from step 4 on, and the robot processes run the
+    history check on retired pieces."""
+    args = ["run-formation", "--steps", str(n_steps), "--window", "2", "--size", "160x120",
             "--max-features", "120", "--formation", "a", "--no-rerun",
             "--resolution", resolution] + ([] if fusion else ["--no-fusion"])
     assert main([*args, "--out", str(tmp_path / "sim")]) == 0
@@ -350,6 +352,8 @@ def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, tmp_path):
     # the robots' own counts (the reliable protocol's acks and termination wave), not the
     # simulator's: the stage ran in the robot processes
     assert [s["messages"] for s in zen["steps"]] != [s["messages"] for s in steps]
+    if len(steps) > 3:  # pieces retired: the robots' check examined sets that reach them
+        assert sum(s["history_bytes"] for s in zen["steps"][3:]) > 0
     if fusion:
         figures = [{k: s["fusion"][k] for k in ("cut", "tracks", "rounds")} for s in steps]
         assert [{k: s["fusion"][k] for k in ("cut", "tracks", "rounds")}
