@@ -365,11 +365,16 @@ def _complete(robot: Robot, send) -> None:
                 st.bad.add(lab)
         else:
             echoes.setdefault(st.parent[lab], []).append((lab, sorted(items)))
-    for j, sets in sorted(echoes.items()):
+    _send_items(send, HECHO, echoes, 4)
+
+
+def _send_items(send, kind: str, by_robot: dict, width: int) -> None:
+    """Per robot, one message answering its sets: ``by_robot`` robot -> [(set, items)]."""
+    for j, sets in sorted(by_robot.items()):
         pairs = [(lab, it) for lab, its in sets for it in its]
-        send(j, HECHO, {"set": np.array([lab for lab, _ in sets], np.int64),
-                        "lab": np.array([p[0] for p in pairs], np.int64),
-                        "item": np.array([p[1] for p in pairs], np.int64).reshape(-1, 4)})
+        send(j, kind, {"set": np.array([lab for lab, _ in sets], np.int64),
+                       "lab": np.array([p[0] for p in pairs], np.int64),
+                       "item": np.array([p[1] for p in pairs], np.int64).reshape(-1, width)})
 
 
 def _send_sets(send, kind: str, by_robot: dict) -> None:
@@ -469,11 +474,7 @@ def _up(robot: Robot, send) -> None:
             _cut_down(robot, send, lab, skipped.tolist())
         else:
             ups.setdefault(st.parent[lab], []).append((lab, sorted(items)))
-    for j, sets in sorted(ups.items()):
-        pairs = [(lab, it) for lab, its in sets for it in its]
-        send(j, HUP, {"set": np.array([lab for lab, _ in sets], np.int64),
-                      "lab": np.array([p[0] for p in pairs], np.int64),
-                      "item": np.array([p[1] for p in pairs], np.int64).reshape(-1, 6)})
+    _send_items(send, HUP, ups, 6)
 
 
 def _cut_down(robot: Robot, send, lab: int, ids: list) -> None:

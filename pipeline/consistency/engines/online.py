@@ -208,6 +208,7 @@ from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.engines.driver import resolve_conflicts
 from pipeline.consistency.engines.gather import solve_at_roots
+from pipeline.consistency.history import rebuild
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
 from pipeline.types import Links
@@ -950,7 +951,8 @@ class OnlineAssociation:
         final); its open links, every kept window link and border link of the set, are added
         by decreasing quality (ties by link id), the order of the evidence rule's Kruskal
         merge, and a link is skipped when the two groups it would join have overlapping runs
-        of one robot. Deterministic: every robot of the set computes the same cut."""
+        of one robot (:func:`pipeline.consistency.history.rebuild`, what the robots' check
+        computes at the set's root). Deterministic."""
         L = self.links
         r_piece, r_robot, r_lo, r_hi = entries
         images: dict[int, dict] = {
@@ -963,7 +965,6 @@ class OnlineAssociation:
                                  strict=True):
                 runs.setdefault(r, []).append((lo, hi))
             images[-1 - p] = runs
-        parent = {x: x for x in images}
         a_w, b_w = self._ends(links_c)
         a_b, b_b = self._ends(border_c)
         win_a = self.piece[a_b] < 0
@@ -971,33 +972,7 @@ class OnlineAssociation:
         ids = np.concatenate([links_c, border_c])
         na = np.concatenate([a_w, np.where(win_a, a_b, b_b)])
         nb = np.concatenate([b_w, node_b])
-        for x in np.concatenate([na, nb]).tolist():  # a piece with no entries left
-            images.setdefault(x, {})
-            parent.setdefault(x, x)
-        order = np.lexsort((ids, -L.quality[ids]))
-
-        def find(x):
-            while parent[x] != x:
-                parent[x] = parent[parent[x]]
-                x = parent[x]
-            return x
-
-        skipped = []
-        for k in order.tolist():
-            rx, ry = find(int(na[k])), find(int(nb[k]))
-            if rx == ry:
-                continue
-            x, y = images[rx], images[ry]
-            if any(lo <= h and l2 <= hi for r in x.keys() & y.keys()
-                   for lo, hi in x[r] for l2, h in y[r]):
-                skipped.append(int(ids[k]))
-                continue
-            if len(x) < len(y):
-                rx, ry, x, y = ry, rx, y, x
-            parent[ry] = rx
-            for r, runs in y.items():
-                x.setdefault(r, []).extend(runs)
-        return np.asarray(skipped, np.int64)
+        return rebuild(images, ids, na, nb, L.quality[ids])
 
     def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, att_f, att_p,
                 entries, t) -> np.ndarray:

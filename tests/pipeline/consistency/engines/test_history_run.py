@@ -5,8 +5,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from online_streams import posed_streams, streams
 
-from pipeline.consistency.engines.online import HISTORY, Frame, OnlineAssociation
-from pipeline.types import Links
+from pipeline.consistency.engines.online import OnlineAssociation
 
 
 def _both(window, hold, stream, resolution):
@@ -42,21 +41,3 @@ def test_the_robots_check_after_the_weighing_cuts_as_the_record(data):
     (a, _), (b, _) = _both(window, hold, stream, "evidence")
     for name in ("kept", "reason", "step_cut"):
         assert getattr(a.links, name).tolist() == getattr(b.links, name).tolist(), name
-
-
-def test_two_pieces_sharing_a_retired_frame_are_kept_apart_by_the_robots():
-    """Tracks A = {0:0, 1:0} and B = {0:1, 1:1} of step 0 retire as two pieces, both in
-    images 0 and 1; at step 2 frame 4 links to both through the window: no window image is
-    twice in the set, only the pieces' retired entries show the clash. The robots flood the
-    set's pieces, then their entries, then its open links, and cut the weakest link of the
-    join (reason ``history``); their messages are the check's cost."""
-    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
-    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
-    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0]))
-    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
-                                                        [0, 0, 0], [0.9, 0.5, 0.7]))
-    assert oa.piece[:4].tolist() == [0, 1, 0, 1]
-    assert rec["conflictive_features"] == 0 and rec["cut_history"] == 1
-    assert oa.links.reason.tolist()[-3:] == ["", HISTORY, ""]
-    assert rec["history_rounds"] > 0 and rec["history_bytes"] > 0
-    assert oa.is_conflict_free()

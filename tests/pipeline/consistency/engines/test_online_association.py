@@ -187,10 +187,13 @@ def test_a_long_track_costs_its_robots_one_run_not_one_entry_per_frame():
     assert state[-1] == state[3]
 
 
-def test_two_pieces_sharing_a_retired_frame_are_not_joined():
+@pytest.mark.parametrize("robots_check", [True, False])
+def test_two_pieces_sharing_a_retired_frame_are_not_joined(robots_check):
     """Two tracks meet in a retired frame through different features: a new link that joins
-    them is cut by the history repair, though every window image of the set is distinct."""
-    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
+    them is cut by the history repair, though every window image of the set is distinct; by
+    the robots' check (the default: their pieces named, the entries echoed to a root, the
+    repair there, their messages counted) or by the record's own."""
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0, robots_check=robots_check)
     # step 0: tracks A = {0:0, 1:0} and B = {0:1, 1:1}
     oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
     # step 1: 2:0 joins A, 3:0 joins B
@@ -203,6 +206,7 @@ def test_two_pieces_sharing_a_retired_frame_are_not_joined():
     assert rec["conflictive_features"] == 0 and rec["cut_history"] == 1
     assert oa.links.reason.tolist()[-3:] == ["", HISTORY, ""]
     assert oa.is_conflict_free()
+    assert (rec.get("history_rounds", 0) > 0) == robots_check and rec["history_bytes"] > 0
 
 
 @pytest.mark.parametrize("overturn", [True, False])
