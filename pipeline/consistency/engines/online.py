@@ -841,9 +841,10 @@ class OnlineAssociation:
         b_ids = self.border_links[on]
         w_b, p_b, cam_b = w_b[on], p_b[on], np.searchsorted(images, img_b[on])
         # the head of each piece's chain: its smallest window feature (_chain's order)
-        first = np.full(int(p_b.max()) + 1 if len(p_b) else 0, np.iinfo(np.int64).max)
-        np.minimum.at(first, p_b, w_b)
-        head = w_b == first[p_b]
+        pieces, at = np.unique(p_b, return_inverse=True)
+        first = np.full(len(pieces), np.iinfo(np.int64).max)
+        np.minimum.at(first, at, w_b)
+        head = w_b == first[at]
         out = []
         for c, g in enumerate(images.tolist()):
             rows = owner == c
