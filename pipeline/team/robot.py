@@ -458,14 +458,28 @@ def _robot_history(team, i: int, robot, transport, protocol, arrays: dict) -> di
     history`), on the robot's own inputs (its file of ``data.history``); the links it cuts go
     to ``arrays['history_cut']``. Returns its rounds and phases."""
     from pipeline.consistency.alone import run_history_locally
-    from pipeline.consistency.history import HistoryInputs, equip_history
+    from pipeline.consistency.history import equip_history
 
-    with np.load(team.resolve_path(team.data["history"][i])) as f:
-        equip_history(robot, HistoryInputs.from_arrays(f))
+    equip_history(robot, load_history_inputs(team.resolve_path(team.data["history"][i]), i))
     hrun = run_history_locally(robot, transport, protocol, team.n)
     arrays["history_cut"] = np.asarray(sorted(robot.history.cut), np.int64)
     return {"rounds": int(hrun.detection_rounds + hrun.resolution_rounds),
             "phases": hrun.phases}
+
+
+def load_history_inputs(path, i: int):
+    """Robot ``i``'s inputs of an online step's history check from its file (``data.history``
+    of the team file, :class:`pipeline.consistency.history.HistoryInputs` as named arrays).
+    Raises InputError naming the file when it is not one."""
+    from pipeline.consistency.history import HistoryInputs
+
+    try:
+        with np.load(path) as f:
+            return HistoryInputs.from_arrays(f)
+    except (OSError, KeyError, ValueError, IndexError) as e:
+        raise InputError(f"robot {i}: data.history[{i}] {path} is not a history file of an "
+                         f"online step ({type(e).__name__}: {e}); the online stage writes "
+                         "one per robot (pipeline.runs.transports.zenoh.online_stage)") from e
 
 
 def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict,

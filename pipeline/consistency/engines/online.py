@@ -630,8 +630,7 @@ class OnlineAssociation:
             and not by_robots
         hist_in = None
         if robots_check:  # step 3 by the stage's robots (pipeline.consistency.history)
-            hist_in = self._history_inputs(images, local_links, real, det, hist_a, hist_b,
-                                           sub)
+            hist_in = self._history_inputs(images, local_links, real, hist_a, hist_b, sub)
             if not weigh_after:
                 kw["history"] = hist_in
         res = self.stage(self.m[images], local_links, self.resolution,
@@ -813,7 +812,7 @@ class OnlineAssociation:
         adj = sp.coo_matrix((np.ones(len(ia)), (ia, ib)), shape=(len(sub), len(sub)))
         return connected_components(adj, directed=False)[1].astype(np.int64)
 
-    def _history_inputs(self, images, local_links: Links, real, det, hist_a, hist_b, sub
+    def _history_inputs(self, images, local_links: Links, real, hist_a, hist_b, sub
                         ) -> list:
         """What each stage camera's robot holds for step 3 run by the robots
         (:class:`~pipeline.consistency.history.HistoryInputs`): its frame's first global id,

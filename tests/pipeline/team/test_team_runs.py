@@ -423,3 +423,20 @@ def test_zenoh_robots_run_the_history_check_as_the_record(resolution, weak):
     assert HISTORY in zen.links.reason.tolist()
     assert rz["history_rounds"] > 0 and rz["history_bytes"] > 0
     assert zen.is_conflict_free()
+
+
+def test_a_history_file_that_is_not_one_is_a_one_line_error(tmp_path):
+    """A team file's ``data.history`` entry that names a file of something else: the robot
+    names the file and what writes it, in one line."""
+    from pipeline.errors import InputError
+    from pipeline.team.robot import load_history_inputs
+
+    bad = tmp_path / "h.npz"
+    bad.write_bytes(b"not an npz")
+    with pytest.raises(InputError, match=r"^robot 3: data.history\[3\] .*h.npz is not a history "
+                                         r"file of an online step") as e:
+        load_history_inputs(bad, 3)
+    assert "\n" not in str(e.value)
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    with pytest.raises(InputError, match="KeyError"):
+        load_history_inputs(tmp_path / "other.npz", 0)
