@@ -93,6 +93,14 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
     if reg_b < n_images / 2:
         causes = _weak_matching_causes(n_images, np.asarray(comm_edges), pair_links,
                                        features_per_camera, intrinsics_guessed)
+        if before.get("models") == 0 and max(pair_links, default=0) > 0:
+            # COLMAP's mapper starts from one image pair: IncrementalMapperOptions'
+            # init_min_num_inliers (100) and init_min_tri_angle (16 degrees)
+            causes.insert(0, f"COLMAP found no image pair to start its model from, though "
+                             f"matching linked up to {max(pair_links)} features of a pair: "
+                             f"a first pair needs 100 inliers seen with 16 degrees of "
+                             f"triangulation angle (photos taken from nearly one place, or "
+                             f"too few photos, give it none)")
         flags.append({"flag": "few-registered",
                       "message": f"the reconstruction registered only {reg_b} of {n_images} "
                                  f"images (fewer than half)",

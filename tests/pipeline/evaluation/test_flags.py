@@ -32,6 +32,22 @@ def test_few_registered_names_the_likely_causes():
     assert "registered only 2 of 6" in flags_markdown(flags)
 
 
+def test_no_model_at_all_names_colmaps_first_pair():
+    """Two photos matched well (574 links) but COLMAP started no model: the first cause named
+    is its first pair's thresholds, not only the guessed focal length."""
+    none = dict(_summary(0, [], 0), models=0)
+    flags = reconstruction_flags(2, none, none, np.array([[0, 1]]), [574], [5000] * 2,
+                                 intrinsics_guessed=2)
+    cause = flags[0]["likely_cause"]
+    assert cause.startswith("COLMAP found no image pair to start its model from, though "
+                            "matching linked up to 574 features of a pair")
+    assert "guessed" in cause
+    # a model that started but stayed small: no such cause
+    small = dict(_summary(1, NAMES[:1], 10), models=1)
+    flags = reconstruction_flags(6, small, small, RING, [100] * 6, [5000] * 6)
+    assert "no image pair to start" not in flags[0]["likely_cause"]
+
+
 def test_a_reconstruction_at_the_relaxed_threshold_is_flagged():
     """The model before cleaning was mapped again at the relaxed registration threshold: the
     run says what COLMAP's threshold registered and at how many points the rest were."""
