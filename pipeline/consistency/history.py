@@ -57,13 +57,15 @@ links in the same order. Property-tested against the record's check
 (``tests/pipeline/consistency/test_history.py``).
 
 Costs: counted by the transport as every message. Phase 1 is a label flooding over the
-links of the sets that reach a piece (28 bytes per feature and change); phases 2 and 3 cross
+links of the sets that reach a piece (13 bytes per feature and change while piece names fit
+in an int32, 21 beyond); phases 2 and 3 cross
 each link of an examined set once or twice with a token, and carry each entry and each half
 one hop per tree edge up to the root (32 and 48 bytes, plus 8 for the set's name), the cut
 links down (16 bytes each per tree edge).
 
-Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``p`` (K, 3) int64 (its two
-smallest pieces heard, :data:`NONE` where fewer; the flag); ``htok``,
+Payloads: ``hlab`` ``s`` (K,) int32 (the receiver's feature), ``p`` (K, 2) int32, or int64
+once a piece name does not fit (its two smallest pieces heard, -1 where fewer), ``flag`` (K,)
+uint8; ``htok``,
 ``hgo`` ``set`` (S,) int64; ``hecho``, ``hup`` ``set`` (S,) the sets answered, ``lab`` (K,),
 ``item`` (K, 4) entries / (K, 6) halves; ``hcut`` ``lab``, ``id`` (K,) int64.
 """
@@ -227,7 +229,10 @@ def names_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
         if msg.kind != HLAB:
             continue
         s = msg.payload["s"].astype(np.int64).tolist()
-        for f, (p1, p2, fl) in zip(s, msg.payload["p"].tolist(), strict=True):
+        p = msg.payload["p"].astype(np.int64)
+        p[p < 0] = NONE
+        pairs = np.c_[p, msg.payload["flag"].astype(np.int64)].tolist()
+        for f, (p1, p2, fl) in zip(s, pairs, strict=True):
             c = _offer(st, f, p1)
             c |= _offer(st, f, p2)
             if fl and not st.flag[f]:
@@ -269,9 +274,13 @@ def _send_names(robot: Robot, which: np.ndarray, send) -> None:
     for j in np.unique(robot.link_nbr[rows]).tolist():
         k = rows[robot.link_nbr[rows] == j]
         r = robot.link_r[k]
+        p = np.stack([st.label[r], st.second[r]], axis=1)
+        named = p != NONE
+        # piece names as int32 while they fit (-1: none), else int64
+        wide = bool(named.any()) and int(p[named].max()) >= np.iinfo(np.int32).max
         send(j, HLAB, {"s": robot.link_s[k].astype(np.int32),
-                       "p": np.stack([st.label[r], st.second[r],
-                                      st.flag[r].astype(np.int64)], axis=1)})
+                       "p": np.where(named, p, -1).astype(np.int64 if wide else np.int32),
+                       "flag": st.flag[r].astype(np.uint8)})
 
 
 def finish_names(robot: Robot) -> int:

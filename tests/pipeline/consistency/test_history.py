@@ -1,6 +1,7 @@
 """The history check's pieces a robot computes alone (pipeline.consistency.history)."""
 
 import numpy as np
+import pytest
 
 from pipeline.consistency.history import HistoryInputs, rebuild, rebuild_halves
 
@@ -52,3 +53,28 @@ def test_inputs_go_through_named_arrays_unchanged():
     assert (back.gid0, back.robot, back.step) == (40, 3, 7)
     for k in HistoryInputs.ARRAYS:
         np.testing.assert_array_equal(getattr(back, k), getattr(inp, k))
+
+
+@pytest.mark.parametrize("base", [5, 2**40])
+def test_two_frames_joining_two_overlapping_pieces_cut_the_weaker_border_link(base):
+    """Two frames linked (link 7, quality 0.9), each bordering its own retired piece (links 20
+    and 21); robot 2's frames of step 2 are in both pieces: the robots name the set, echo the
+    entries to its root, and the weakest link that closes the clash (21) is cut by the robot
+    holding it. Piece names beyond an int32 travel as int64, with the same decision."""
+    from pipeline.consistency.engines.history_run import run_history
+    from pipeline.types import Links
+
+    P, Q = base, base + 1
+
+    def frame(gid0, robot, piece, bid, q):
+        return HistoryInputs(gid0, robot, 5, np.array([1 - robot]), np.array([0]),
+                             np.array([7]), np.array([0.9]), np.array([False]), np.array([0]),
+                             np.array([piece]), np.array([bid]), np.array([q]),
+                             np.array([True]), np.array([piece]), np.array([2]),
+                             np.array([0 if piece == P else 2]),
+                             np.array([2 if piece == P else 3]))
+
+    out = run_history([1, 1], Links([0], [0], [1], [0], [0.9]), np.array([True]),
+                      [frame(0, 0, P, 20, 0.8), frame(10, 1, Q, 21, 0.3)])
+    assert out["cut"].tolist() == [21]
+    assert out["phases"]["names"] > 0 and out["phases"]["repair"] > 0
