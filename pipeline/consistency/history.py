@@ -54,7 +54,7 @@ bad under the same two conditions (runs of one robot in one piece never overlap,
 needs two pieces; a window frame's single step never overlaps a retired run, so a set with
 one piece needs no entries to be repaired), and :func:`rebuild` gets the same groups and
 links in the same order. Property-tested against the record's check
-(``tests/pipeline/consistency/test_history.py``).
+(``tests/pipeline/consistency/engines/test_history_run.py``).
 
 Costs: counted by the transport as every message. Phase 1 is a label flooding over the
 links of the sets that reach a piece (13 bytes per feature and change while piece names fit
@@ -82,6 +82,7 @@ from pipeline.transport import Message
 __all__ = ["HistoryInputs", "HistoryState", "equip_history", "rebuild", "rebuild_halves",
            "start_names", "names_step", "finish_names", "start_echo", "echo_step",
            "finish_echo", "start_repair", "repair_step", "own_entries", "own_links",
+           "runs_by_robot", "overlapping_runs",
            "HLAB", "HTOK", "HECHO", "HGO", "HUP", "HCUT", "MANY", "BAD", "NONE"]
 
 HLAB, HTOK, HECHO, HGO, HUP, HCUT = "hlab", "htok", "hecho", "hgo", "hup", "hcut"
@@ -365,9 +366,11 @@ def _complete(robot: Robot, send) -> None:
     subtree to its parent; the root decides."""
     st: HistoryState = robot.history
     echoes: dict = {}
-    for lab in sorted(k for k, w in st.waiting.items() if not w and k not in st.done):
+    ready = sorted(k for k, w in st.waiting.items() if not w and k not in st.done)
+    own = own_entries(robot) if ready else {}
+    for lab in ready:
         st.done.add(lab)
-        items = st.collected.pop(lab, set()) | own_entries(robot).get(lab, set())
+        items = st.collected.pop(lab, set()) | own.get(lab, set())
         if lab in st.roots:
             st.entries[lab] = sorted(items)
             if lab in st.flagged or _overlap(st.entries[lab]):
@@ -393,14 +396,12 @@ def _send_sets(send, kind: str, by_robot: dict) -> None:
 
 def _overlap(entries) -> bool:
     """Whether one team robot has overlapping step runs among ``entries`` ``(piece, robot,
-    lo, hi)`` (one retired frame in two pieces: runs of one piece never overlap)."""
-    last_rb, reach = None, None
-    for rb, lo, hi in sorted((rb, lo, hi) for _, rb, lo, hi in entries):
-        if rb == last_rb and lo <= reach:
-            return True
-        reach = hi if rb != last_rb else max(reach, hi)
-        last_rb = rb
-    return False
+    lo, hi)`` (one retired frame in two pieces: runs of one piece never overlap), by the
+    record's own test (:func:`overlapping_runs`)."""
+    if not entries:
+        return False
+    _, rb, lo, hi = np.asarray(entries, np.int64).T
+    return bool(overlapping_runs(np.zeros(len(rb), np.int64), rb, lo, hi))
 
 
 def own_entries(robot: Robot) -> dict:
@@ -599,3 +600,32 @@ def rebuild(groups: dict, ids: np.ndarray, a: np.ndarray, b: np.ndarray,
         for r, runs in y.items():
             x.setdefault(r, []).extend(runs)
     return np.asarray(skipped, np.int64)
+
+
+def runs_by_robot(group, robot, lo, hi):
+    """Step runs sorted by (group, robot, lo): the sorted arrays, ``head`` (the first run of
+    each (group, robot)), ``gid`` (its index) and ``run_max`` (the largest ``hi`` so far
+    within it)."""
+    order = np.lexsort((lo, robot, group))
+    g, r, lo, hi = group[order], robot[order], lo[order], hi[order]
+    head = np.r_[True, (g[1:] != g[:-1]) | (r[1:] != r[:-1])]
+    gid = np.cumsum(head) - 1
+    big = int(hi.max()) + 2
+    run_max = np.maximum.accumulate(gid * big + hi) - gid * big
+    return g, r, lo, hi, head, gid, run_max
+
+
+def overlapping_runs(group, robot, lo, hi) -> list[int]:
+    """Groups in which one robot has two overlapping step runs (one frame twice).
+
+    >>> overlapping_runs(np.array([0, 0, 1, 1]), np.array([2, 2, 2, 3]),
+    ...                  np.array([0, 4, 0, 0]), np.array([3, 5, 9, 9]))
+    []
+    >>> overlapping_runs(np.array([0, 0]), np.array([2, 2]), np.array([0, 3]), np.array([3, 5]))
+    [0]
+    """
+    if not len(group):
+        return []
+    g, _, lo, _, head, _, run_max = runs_by_robot(group, robot, lo, hi)
+    hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
+    return np.unique(g[hit]).tolist()

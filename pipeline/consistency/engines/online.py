@@ -208,7 +208,7 @@ from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.engines.driver import resolve_conflicts
 from pipeline.consistency.engines.gather import solve_at_roots
-from pipeline.consistency.history import rebuild
+from pipeline.consistency.history import overlapping_runs, rebuild, runs_by_robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
 from pipeline.types import Links
@@ -844,10 +844,15 @@ class OnlineAssociation:
         first = np.full(len(pieces), np.iinfo(np.int64).max)
         np.minimum.at(first, at, w_b)
         head = w_b == first[at]
+        # each camera's rows and border links, grouped once
+        o_row = np.argsort(owner, kind="stable")
+        at_row = np.searchsorted(owner[o_row], np.arange(len(images) + 1))
+        o_b = np.argsort(cam_b, kind="stable")
+        at_b = np.searchsorted(cam_b[o_b], np.arange(len(images) + 1))
         out = []
         for c, g in enumerate(images.tolist()):
-            rows = owner == c
-            mine = cam_b == c
+            rows = o_row[at_row[c]:at_row[c + 1]]
+            mine = o_b[at_b[c]:at_b[c + 1]]
             ent = np.isin(self.ret_piece, p_b[mine])
             out.append(HistoryInputs(
                 int(self.offset[g]), int(self.robot[g]), int(self.step[g]),
@@ -902,7 +907,7 @@ class OnlineAssociation:
             flood += int((robots_c[many] * (RETIRED_ENTRY_BYTES * entries_c[many]
                                             + LABEL_BYTES * n_pieces[many])).sum())
         bad = set(_duplicated_keys(comp, img_of)) | \
-            set(_overlapping_runs(r_comp, r_robot, r_lo, r_hi))
+            set(overlapping_runs(r_comp, r_robot, r_lo, r_hi))
         cut_n = 0
         for c in sorted(bad):
             members = np.flatnonzero(comp == c)
@@ -1051,7 +1056,7 @@ class OnlineAssociation:
         hi = np.concatenate([self.ret_hi, step])
         if not len(p):
             return
-        p, r, lo, hi, head, gid, run_max = _runs_by_robot(p, r, lo, hi)
+        p, r, lo, hi, head, gid, run_max = runs_by_robot(p, r, lo, hi)
         start = head | np.r_[True, lo[1:] > run_max[:-1] + 1]
         p, r, lo, hi, gid = _reduce_runs(start, p, r, lo, hi, gid)
         # at most RUNS_PER_ROBOT runs per (piece, robot): its oldest runs merge into one
@@ -1088,39 +1093,10 @@ def _chain(f: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ab[:, 0], ab[:, 1]
 
 
-def _runs_by_robot(group, robot, lo, hi):
-    """Step runs sorted by (group, robot, lo): the sorted arrays, ``head`` (the first run of
-    each (group, robot)), ``gid`` (its index) and ``run_max`` (the largest ``hi`` so far
-    within it)."""
-    order = np.lexsort((lo, robot, group))
-    g, r, lo, hi = group[order], robot[order], lo[order], hi[order]
-    head = np.r_[True, (g[1:] != g[:-1]) | (r[1:] != r[:-1])]
-    gid = np.cumsum(head) - 1
-    big = int(hi.max()) + 2
-    run_max = np.maximum.accumulate(gid * big + hi) - gid * big
-    return g, r, lo, hi, head, gid, run_max
-
-
 def _reduce_runs(start, p, r, lo, hi, gid):
     """Runs beginning at ``start`` (rows sorted by piece, robot, lo) merged into one row."""
     at = np.flatnonzero(start)
     return p[at], r[at], lo[at], np.maximum.reduceat(hi, at), gid[at]
-
-
-def _overlapping_runs(group, robot, lo, hi) -> list[int]:
-    """Groups in which one robot has two overlapping step runs (one frame twice).
-
-    >>> _overlapping_runs(np.array([0, 0, 1, 1]), np.array([2, 2, 2, 3]),
-    ...                   np.array([0, 4, 0, 0]), np.array([3, 5, 9, 9]))
-    []
-    >>> _overlapping_runs(np.array([0, 0]), np.array([2, 2]), np.array([0, 3]), np.array([3, 5]))
-    [0]
-    """
-    if not len(group):
-        return []
-    g, _, lo, _, head, _, run_max = _runs_by_robot(group, robot, lo, hi)
-    hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
-    return np.unique(g[hit]).tolist()
 
 
 def simulated_stage(features_per_image, links: Links, resolution: str, *,
