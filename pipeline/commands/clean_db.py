@@ -1,4 +1,4 @@
-"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE] [--loop-check]``.
+"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE] [--loop-check] [--fusion]``.
 
 A COLMAP database's verified matches made consistent; the job and what it writes are
 described in :mod:`pipeline.runs.clean_db`. This module parses the options and prints the
@@ -40,6 +40,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loop-tol", default=None, metavar="DEG",
                    help="with --loop-check: the cycle error (degrees) below which a triangle "
                         "is consistent (default 15)")
+    p.add_argument("--fusion", action="store_true",
+                   help="after the consistency stage, map the input with COLMAP (seed 0) and "
+                        "run the robust distributed fusion on its poses: the observations "
+                        "voted out of their tracks cut their links (reason fusion-outlier): "
+                        "wrong matches the consistency stage cannot see, e.g. a window matched "
+                        "to its twin in several views (off by default: it costs one mapping)")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p, links_only=True)
 
@@ -81,7 +87,8 @@ def run(args) -> int:
         res = clean_database(args.database, args.out, args.comm_graph, args.max_memory_gb,
                              args.resolution, rerun=not args.no_rerun,
                              image_dir=args.image_dir, outputs=outputs,
-                             baselines=args.baselines, loop_tol_deg=loop_tol)
+                             baselines=args.baselines, loop_tol_deg=loop_tol,
+                             fusion=args.fusion)
         summary = flag_result(res.summary())
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
@@ -101,6 +108,16 @@ def run(args) -> int:
         if lc["pairs_dropped"]:
             print("  fewer pairs can leave images below COLMAP's registration threshold: if "
                   "the mapper registers few, map with --Mapper.abs_pose_min_num_inliers 15")
+    if res.fusion:
+        fu = res.fusion
+        mp = fu["mapping"]
+        if fu["enabled"]:
+            print(f"fusion: {cut['fusion-outlier']} links cut as outliers of their tracks, on "
+                  f"the poses of a COLMAP mapping of the input ({fu['cameras']} of "
+                  f"{res.images} images registered, {mp['points']} points, "
+                  f"{mp['mean_reprojection_error']:.2f} px)")
+        else:
+            print(f"fusion: not run, {fu['reason']}")
     if res.baselines:
         from pipeline.evaluation.report import baselines_lines
 

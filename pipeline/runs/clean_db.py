@@ -18,6 +18,18 @@ relative rotation breaks the rotation loops of the view graph
 reason ``loop-inconsistent``. It finds what the consistency stage cannot see: a wrong
 two-view geometry between two images of repeated structure, consistent at the level of
 features.
+
+With ``fusion`` (``--fusion``) the robust distributed fusion of Montijano et al. (dynamic
+voting, :func:`pipeline.stages.fusion_stage`, the second stage of ``run-images``) runs after
+the consistency stage, on the poses of a COLMAP mapping of the input database
+(:func:`pipeline.colmap.incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its
+links before cleaning): the observations it votes out of their tracks cut their links, reason
+``fusion-outlier``. It sees what the consistency stage cannot: a wrong match in a
+conflict-free set (a window matched to its twin in several views), which only geometry with
+poses refutes. The images the mapping did not register take no part (their links stay as the
+consistency stage left them), as in ``run-images``. A mapping folded by the repeated structure
+gives wrong poses, and fusion then cuts right links: the summary's ``fusion`` section gives
+the mapping's figures, so a user can judge it.
 """
 
 from __future__ import annotations
@@ -52,6 +64,7 @@ class CleanDbResult:
     resolution: dict = field(default_factory=dict)
     baselines: dict = field(default_factory=dict)
     loop_check: dict = field(default_factory=dict)
+    fusion: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         out = {"input": str(self.input), "output": str(self.output), "images": self.images,
@@ -61,6 +74,8 @@ class CleanDbResult:
             out["baselines"] = self.baselines
         if self.loop_check:
             out["loop_check"] = self.loop_check
+        if self.fusion:
+            out["fusion"] = self.fusion
         return out
 
 
@@ -69,7 +84,8 @@ def clean_database(database: str | Path, out: str | Path,
                    max_memory_gb: float = DEFAULT_LIMIT_GB,
                    resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None, outputs=None,
-                   baselines: bool = False, loop_tol_deg: float | None = None) -> CleanDbResult:
+                   baselines: bool = False, loop_tol_deg: float | None = None,
+                   fusion: bool = False) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -93,6 +109,9 @@ def clean_database(database: str | Path, out: str | Path,
         ``None``: not run): :func:`pipeline.matching.loops.loop_check` on the pairs with links
         left after the checks above, weighted by their inlier counts; its summary is
         ``CleanDbResult.loop_check``
+    fusion : after the consistency stage, fuse the kept links' tracks on the poses of a COLMAP
+        mapping of the input and cut the links of the observations voted out (module
+        docstring); its summary is ``CleanDbResult.fusion``
 
     Returns
     -------
@@ -126,14 +145,14 @@ def clean_database(database: str | Path, out: str | Path,
     contents = colmap.read_database(database, check_sizes=count_tables)
     try:
         return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
-                      image_dir, outputs, baselines, loop_tol_deg)
+                      image_dir, outputs, baselines, loop_tol_deg, fusion)
     finally:
         contents.close()
 
 
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
            rerun: bool, image_dir, outputs, baselines: bool = False,
-           loop_tol_deg: float | None = None) -> CleanDbResult:
+           loop_tol_deg: float | None = None, fusion: bool = False) -> CleanDbResult:
     """:func:`clean_database` on the database read as ``contents``."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
@@ -178,6 +197,8 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
+    fusion_section = _fusion_pass(contents, model_links, idx, result, reason, edges) \
+        if fusion else {}
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     colmap.write_cleaned_database(contents, output_path(outputs, out, "--out"), keep)
@@ -195,10 +216,12 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
         input=database, output=out, images=n, comm_edges=n_edges, links=len(links),
         before=before, after=after,
         cut={k: int((reason == k).sum()) for k in ("not-one-to-one", "not-comm-edge")
-             + (("loop-inconsistent",) if loop_tol_deg is not None else ()) + ("resolution",)},
+             + (("loop-inconsistent",) if loop_tol_deg is not None else ()) + ("resolution",)
+             + (("fusion-outlier",) if fusion else ())},
         resolution={"method": stats.get("resolution"), **{k: stats.get(k) for k in (
             "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
-            "max_robot_memory_bytes")}}, baselines=section, loop_check=loop_section)
+            "max_robot_memory_bytes")}}, baselines=section, loop_check=loop_section,
+        fusion=fusion_section)
 
 
 def check_loop_tol(tol_deg) -> float:
@@ -230,6 +253,53 @@ def _loop_pass(contents, reason: np.ndarray, tol_deg: float) -> dict:
     reason[np.isin(key, bad[:, 0] * n + bad[:, 1]) & (reason == "")] = "loop-inconsistent"
     return {"tol_deg": float(tol_deg), **check.summary(),
             "links_cut": int((reason == "loop-inconsistent").sum())}
+
+
+def _fusion_pass(contents, model_links, idx: np.ndarray, result, reason: np.ndarray,
+                 edges) -> dict:
+    """Fusion on the poses of a COLMAP mapping of the input (module docstring): the links it
+    cuts among the consistency stage's kept ``model_links`` (rows ``idx`` of the database's
+    links) get ``reason`` ``fusion-outlier`` (in place). Returns the summary's ``fusion``
+    section."""
+    from pipeline import colmap
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.stages import fusion_stage, ledger_from_consistency
+    from pipeline.types import Features, View
+
+    # the snapshot is what was read: the mapping sees the same matches, the input stays untouched
+    mapping = colmap.incremental_mapping_with_retry(contents.snapshot or contents.path, seed=0)
+    rec = mapping.reconstruction
+    poses = colmap.registered_poses(rec)
+    names = contents.names
+    reg = np.array([k for k, name in enumerate(names) if name in poses], dtype=np.int64)
+    section = {"enabled": len(reg) >= 2, "poses_from": "COLMAP mapping of the input "
+               "database (seed 0)", "mapping": {k: v for k, v in mapping.summary().items()
+                                                if k != "registered_names"},
+               "cameras": int(len(reg)),
+               "cameras_without_pose": [n for n in names if n not in poses]}
+    if len(reg) < 2:
+        section["reason"] = (f"camera poses unknown: the mapping registered {len(reg)} of "
+                             f"{len(names)} images")
+        return section
+    views, feats = [], []
+    for name, kp in zip(names, contents.keypoints, strict=True):
+        R, t, K = poses.get(name, (None, None, np.eye(3)))
+        # fusion's pinhole projections see each keypoint where the pinhole K would have
+        xy = colmap.undistorted_keypoints(rec, name, kp).astype(np.float32)
+        views.append(View(name, np.zeros((1, 1), np.uint8), K, R, t))
+        feats.append(Features(xy, np.zeros((len(xy), 0), np.float32),
+                              np.ones(len(xy), np.float32), "sift"))
+    m = contents.features_per_camera
+    ledger = ledger_from_consistency(result)
+    comm = comm_edges_for(m, model_links, edges)
+    fr, n_cut = fusion_stage(ledger, views, feats, comm, cameras=reg,
+                             detail=f", {len(reg)} of {len(names)} cameras posed")
+    cut = np.flatnonzero(ledger.status == "deleted")
+    cut = cut[np.asarray(ledger.reason, dtype=object)[cut] == "fusion-outlier"]
+    reason[idx[cut]] = "fusion-outlier"
+    section.update({k: v for k, v in dict(fr.stats).items() if np.isscalar(v)},
+                   links_cut=int(n_cut))
+    return section
 
 
 def _link_weight(contents, links) -> np.ndarray:

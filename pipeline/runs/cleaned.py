@@ -49,15 +49,19 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
                     model_links: Links, features_per_camera) -> LinkLedger:
     """The ledger of a cleaning command: the links an earlier check cut (``reason`` not
     empty, e.g. ``not-one-to-one``), then the consistency stage's decisions (``result`` on
-    ``model_links``, the links ``rows``) with each link's place in a conflictive set before."""
+    ``model_links``, the links ``rows``) with each link's place in a conflictive set before,
+    then the links a later stage cut among those it kept (``fusion-outlier``)."""
     from pipeline.association import conflictive_links
     from pipeline.stages import ledger_from_consistency
 
+    reason = np.asarray(reason, dtype=str)
     ledger = LinkLedger.all_kept(links)
-    for why in sorted(set(np.asarray(reason, dtype=str)) - {"", "resolution"}):
-        ledger.cut(np.asarray(reason, dtype=str) == why, why, -1)
+    for why in sorted(set(reason) - {"", "resolution", "fusion-outlier"}):
+        ledger.cut(reason == why, why, -1)
     ledger.place(rows, ledger_from_consistency(
         result, conflictive_links(features_per_camera, model_links)))
+    if (reason == "fusion-outlier").any():
+        ledger.cut(reason == "fusion-outlier", "fusion-outlier", -1)
     return ledger
 
 

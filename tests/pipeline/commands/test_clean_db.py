@@ -311,3 +311,89 @@ def test_bad_loop_options_are_named(tmp_path, capsys, argv, message):
     assert main(["clean-db", str(src), "--out", str(out), "--no-rerun", *argv]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def _db_with_a_wrong_consistent_track(path, n=8, points=250, planted=20, noise_px=0.3):
+    """Eight calibrated cameras round a point cloud, every pair matched on the true
+    projections (with ``noise_px`` of noise), plus ``planted`` wrong links that no consistency
+    stage can see: point ``A_k``, seen by cameras 0-3 only, is linked in camera 3 to point
+    ``B_k`` of camera 5, ``B_k`` seen by cameras 5 and 6 only. The set ``A_k ∪ B_k`` holds each
+    camera once (conflict-free), but its observations are not one point. Returns the planted
+    links as ``(cam_i, feat_i, cam_j, feat_j)`` tuples and the links of the full tracks."""
+    from data_synth.formations import look_at
+
+    rng = np.random.default_rng(3)
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    poses = [look_at([8 * np.cos(a), 8 * np.sin(a), 1.5], [0, 0, 0])
+             for a in np.linspace(0, 2 * np.pi, n, endpoint=False)]
+    X = rng.uniform(-1.5, 1.5, size=(points + 2 * planted, 3))
+    seen = [list(range(points)) for _ in range(n)]
+    A, B = np.arange(points, points + planted), np.arange(points + planted, points + 2 * planted)
+    for c in range(4):
+        seen[c] += A.tolist()
+    for c in (5, 6):
+        seen[c] += B.tolist()
+    kps, feat_of = [], []
+    for c, (R, t) in enumerate(poses):
+        x = (K @ (R @ X[seen[c]].T + t[:, None])).T
+        kps.append((x[:, :2] / x[:, 2:] + rng.normal(0, noise_px, (len(seen[c]), 2)))
+                   .astype(np.float32))
+        feat_of.append({p: f for f, p in enumerate(seen[c])})
+    rows = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            rows += [(i, feat_of[i][p], j, feat_of[j][p]) for p in sorted(set(seen[i]) &
+                                                                          set(seen[j]))]
+    wrong = [(3, feat_of[3][a], 5, feat_of[5][b]) for a, b in zip(A, B, strict=True)]
+    views = [View(f"view_{k}.jpg", np.zeros((240, 320, 3), np.uint8), K) for k in range(n)]
+    feats = [Features(k, np.zeros((len(k), 128), np.float32), np.ones(len(k), np.float32),
+                      "sift") for k in kps]
+    ci, fi, cj, fj = np.array(rows + wrong).T
+    colmap.write_database(path, views, feats, Links(ci, fi, cj, fj))
+    full = {r for r in rows if r[1] < points and r[3] < points}
+    return set(wrong), full
+
+
+def _links_by_reason(csv_path) -> dict:
+    import csv
+
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    out: dict = {}
+    for r in rows:
+        key = (int(r["cam_i"]), int(r["feat_i"]), int(r["cam_j"]), int(r["feat_j"]))
+        out.setdefault(r["reason"], set()).add(key)
+    return out
+
+
+def test_fusion_cuts_wrong_matches_the_consistency_stage_cannot_see(tmp_path, capsys):
+    """--fusion: on the poses of a COLMAP mapping of the input, fusion votes the planted
+    observations out of their conflict-free tracks and cuts every planted link (reason
+    fusion-outlier, in the summary and in OUT.links.csv), and almost no link of the true
+    tracks; without it the same database comes out uncut."""
+    src = tmp_path / "wrong.db"
+    wrong, full = _db_with_a_wrong_consistent_track(src)
+    out, report = tmp_path / "fused.db", tmp_path / "fused.json"
+    assert main(["clean-db", str(src), "--out", str(out), "--report", str(report), "--fusion",
+                 "--no-rerun"]) == 0
+    printed = capsys.readouterr().out
+    assert "conflictive sets: 0 before, 0 after" in printed
+    assert "of the input (8 of 8 images registered" in printed
+    summary = json.loads(report.read_text())
+    assert summary["fusion"]["enabled"] and summary["fusion"]["cameras"] == 8
+    by_reason = _links_by_reason(tmp_path / "fused.links.csv")
+    fused_out = by_reason.get("fusion-outlier", set())
+    assert summary["cut"]["fusion-outlier"] == len(fused_out)
+    assert wrong <= fused_out
+    assert len(fused_out & full) <= 0.01 * len(full)
+    cleaned = colmap.read_database(out)
+    kept = set(zip(cleaned.links.cam_i.tolist(), cleaned.links.feat_i.tolist(),
+                   cleaned.links.cam_j.tolist(), cleaned.links.feat_j.tolist(), strict=True))
+    assert not kept & fused_out and len(kept) == len(colmap.read_database(src).links) - len(
+        fused_out)
+
+    plain = tmp_path / "plain.json"
+    assert main(["clean-db", str(src), "--out", str(tmp_path / "plain.db"), "--report",
+                 str(plain), "--no-rerun"]) == 0
+    summary = json.loads(plain.read_text())
+    assert "fusion" not in summary and sum(summary["cut"].values()) == 0
