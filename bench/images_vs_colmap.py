@@ -9,8 +9,9 @@ Inputs (each folder given, plus the rendered ring scenes):
   ``K.txt`` and with the EXIF stripped (pixels re-encoded losslessly as PNG): names carry no
   order and the intrinsics are unknown, as with photos gathered from the internet,
 - ``ring-ABCD`` / ``ring-AABB``: :mod:`data_synth.symmetric` — a tower of repeated modules
-  seen by a ring of 18 cameras, written as a photo folder with its truth (poses and depth);
-  ``AABB``: two adjacent sides exact copies of each other.
+  seen by a ring of 18 cameras (``--ring-cameras``: other counts, named ``ring-ABCD-30cams``),
+  written as a photo folder with its truth (poses and depth); ``AABB``: two adjacent sides
+  exact copies of each other.
 
 Methods on each input:
 
@@ -25,6 +26,10 @@ Methods on each input:
   judged against it, and every database of these rows also mapped with the fixed seeds at
   15 pose inliers (``seeds_min15``: run-images' relaxed registration threshold,
   :data:`pipeline.colmap.mapping.RETRY_MIN_POSE_INLIERS`),
+- ``colmap+clean-db+fusion``: the same with ``clean-db --fusion`` (the robust distributed
+  fusion on the poses of a COLMAP mapping of the input cuts the observations voted out of
+  their tracks); its time includes that mapping; its databases are also mapped at 15 pose
+  inliers (``seeds_min15``),
 - ``ours``: run-images ``--graph complete`` at its defaults (the reconstruction after
   cleaning, ``sparse/``; the one before cleaning beside it),
 - ``ours-no-fusion``: the same with ``--no-fusion`` (the consistency stage's cuts only),
@@ -172,9 +177,17 @@ def _model_row(models, truth) -> dict:
             "reproj_px": round(rec.compute_mean_reprojection_error(), 3), **_judge(rec, truth)}
 
 
-def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> list[dict]:
-    """``colmap`` and ``colmap+clean-db`` rows (and ``colmap+clean-db+loops`` with ``loops``):
-    one extraction and matching, one mapping per database."""
+#: the clean-db variants of the colmap rows: method -> (database name, clean_database options)
+CLEANINGS = {"colmap+clean-db": ("cleaned", {}),
+             "colmap+clean-db+loops": ("cleaned-loops", {"loop_tol_deg": "default"}),
+             "colmap+clean-db+fusion": ("cleaned-fusion", {"fusion": True})}
+
+
+def run_colmap(images: Path, work: Path, truth=None,
+               cleanings=("colmap+clean-db",)) -> list[dict]:
+    """The ``colmap`` row and one row per clean-db variant of ``cleanings`` (keys of
+    :data:`CLEANINGS`, in that order): one extraction and matching, one mapping per
+    database."""
     import pycolmap
 
     from pipeline.matching.loops import DEFAULT_LOOP_TOL_DEG
@@ -198,12 +211,14 @@ def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> lis
                   "time_split_s": {"features": round(t1 - t0, 1), "matching": round(t2 - t1, 1),
                                    "mapping": round(t3 - t2, 1)},
                   **_model_row(models, truth)}
-    rows, paths = [colmap_row], [db]
-    for name, tol in (("cleaned", None),) + ((("cleaned-loops", DEFAULT_LOOP_TOL_DEG),)
-                                             if loops else ()):
+    rows, paths, relaxed = [colmap_row], [db], [False]
+    for method in cleanings:
+        name, opts = CLEANINGS[method]
+        opts = {k: DEFAULT_LOOP_TOL_DEG if v == "default" else v for k, v in opts.items()}
+        tol = opts.get("loop_tol_deg")
         t4 = time.perf_counter()
         with contextlib.redirect_stdout(io.StringIO()):
-            cleaned = clean_database(db, work / f"{name}.db", rerun=False, loop_tol_deg=tol)
+            cleaned = clean_database(db, work / f"{name}.db", rerun=False, **opts)
         t5 = time.perf_counter()
         models2 = pycolmap.incremental_mapping(work / f"{name}.db", images,
                                                work / f"sparse-{name}")
@@ -213,6 +228,9 @@ def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> lis
                                 "clean-db": round(t5 - t4, 1), "mapping": round(t6 - t5, 1)},
                "links": cleaned.links, "links_cut": cleaned.cut,
                **({"loop_check": cleaned.loop_check} if cleaned.loop_check else {}),
+               **({"fusion": {k: v for k, v in cleaned.fusion.items() if k in (
+                   "enabled", "cameras", "links_cut", "mapping", "sigma_px")}}
+                  if cleaned.fusion else {}),
                **_model_row(models2, truth)}
         if truth is not None:
             row["wrong_links"] = wrong_link_anatomy(db, work / f"{name}.db", truth)
@@ -220,6 +238,7 @@ def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> lis
                 row["loop_pairs"] = loop_pair_anatomy(db, tol, truth)
         rows.append(row)
         paths.append(work / f"{name}.db")
+        relaxed.append(method != "colmap+clean-db")
     if truth is not None:
         # COLMAP's mapping is not repeatable across runs (its default seed is random): the
         # same databases mapped again with fixed seeds separate cleaning from chance; with
@@ -227,9 +246,10 @@ def run_colmap(images: Path, work: Path, truth=None, loops: bool = False) -> lis
         # cut leaves the frontier images of the ring below COLMAP's 30 points)
         from pipeline.colmap.mapping import RETRY_MIN_POSE_INLIERS
 
+        any_relaxed = any(relaxed)
         for row, path in zip(rows, paths, strict=True):
             for key, min_inliers in (("seeds", None),) + (
-                    (("seeds_min15", RETRY_MIN_POSE_INLIERS),) if loops else ()):
+                    (("seeds_min15", RETRY_MIN_POSE_INLIERS),) if any_relaxed else ()):
                 row[key] = []
                 for seed in SEEDS:
                     options = pycolmap.IncrementalPipelineOptions()
@@ -300,7 +320,8 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
             **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = ("colmap", "colmap+clean-db", "colmap+clean-db+loops", "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
+METHODS = ("colmap", "colmap+clean-db", "colmap+clean-db+loops", "colmap+clean-db+fusion",
+           "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
 #: run-images variants: method -> (graph, fusion, remap)
 OURS = {"ours": ("complete", True, False), "ours-no-fusion": ("complete", False, False),
         "ours-remap": ("complete", True, True), "ours-knn4": ("knn:4", True, False)}
@@ -313,7 +334,8 @@ def _fmt_err(r: dict) -> tuple[str, str, str]:
             f"{r['wrong_tracks']}/{r['judged_tracks']}")
 
 
-def _inputs(folders, kinds, tmp: Path, rings: list[str], ring_seeds=(0,)):
+def _inputs(folders, kinds, tmp: Path, rings: list[str], ring_seeds=(0,),
+            ring_cameras=(RING_CAMERAS,)):
     """``(data name, input kind, image folder, truth or None)`` for every measured input."""
     from data_synth.symmetric import write_ring_folder
     from pipeline.evaluation.scene_truth import read_truth
@@ -326,12 +348,14 @@ def _inputs(folders, kinds, tmp: Path, rings: list[str], ring_seeds=(0,)):
             if kind == "renamed" and not images.exists():
                 shuffled_copy(folder, images)
             yield folder.name, kind, images, None
-    for sides in rings:
-        for seed in ring_seeds:
-            name = f"ring-{sides}" + (f"-seed{seed}" if seed else "")
-            images = tmp / name
-            write_ring_folder(images, n=RING_CAMERAS, sides=sides, seed=seed)
-            yield name, "named", images, read_truth(images)
+    for cams in ring_cameras:
+        for sides in rings:
+            for seed in ring_seeds:
+                name = f"ring-{sides}" + (f"-{cams}cams" if cams != RING_CAMERAS else "") + (
+                    f"-seed{seed}" if seed else "")
+                images = tmp / name
+                write_ring_folder(images, n=cams, sides=sides, seed=seed)
+                yield name, "named", images, read_truth(images)
 
 
 #: modules run-images imports on first use (its command line loads lazily); imported before any
@@ -362,6 +386,9 @@ def main(argv=None) -> int:
                     help="rendered ring scenes by their sides (comma-separated; empty: none)")
     ap.add_argument("--ring-seeds", default="0",
                     help="render seeds of the ring scenes (comma-separated; default 0)")
+    ap.add_argument("--ring-cameras", default=str(RING_CAMERAS),
+                    help=f"cameras of each ring, evenly spaced (comma-separated; default "
+                         f"{RING_CAMERAS}: 20° apart)")
     ap.add_argument("--rings-only", action="store_true", help="no photo folders")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-images" / "results.json")
     args = ap.parse_args(argv)
@@ -379,20 +406,20 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench-images-") as tmp:
         tmp = Path(tmp)
         ring_seeds = [int(x) for x in args.ring_seeds.split(",") if x]
-        for data, kind, images, truth in _inputs(folders, kinds, tmp, rings, ring_seeds):
+        ring_cameras = [int(x) for x in args.ring_cameras.split(",") if x]
+        cleanings = [m for m in CLEANINGS if m in methods]
+        for data, kind, images, truth in _inputs(folders, kinds, tmp, rings, ring_seeds,
+                                                 ring_cameras):
             work = tmp / f"{data}-{kind}"
             todo = []
-            if {"colmap", "colmap+clean-db", "colmap+clean-db+loops"} & set(methods):
+            if {"colmap", *CLEANINGS} & set(methods):
                 todo.append(("colmap", None))
             todo += [(m, OURS[m]) for m in OURS if m in methods]
             for name, variant in todo:
                 print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
-                names = ((["colmap", "colmap+clean-db"]
-                          + (["colmap+clean-db+loops"] if "colmap+clean-db+loops" in methods
-                             else [])) if name == "colmap" else [name])
+                names = ["colmap", *cleanings] if name == "colmap" else [name]
                 try:
-                    got = (run_colmap(images, work / "colmap", truth,
-                                      loops="colmap+clean-db+loops" in methods)
+                    got = (run_colmap(images, work / "colmap", truth, cleanings)
                            if variant is None
                            else [run_ours(images, work / name, variant[0], truth,
                                           fusion=variant[1], remap=variant[2])])

@@ -397,3 +397,19 @@ def test_fusion_cuts_wrong_matches_the_consistency_stage_cannot_see(tmp_path, ca
                  str(plain), "--no-rerun"]) == 0
     summary = json.loads(plain.read_text())
     assert "fusion" not in summary and sum(summary["cut"].values()) == 0
+
+
+def test_fusion_without_poses_says_so_and_cuts_what_the_stage_cut(tmp_path, capsys):
+    """--fusion on a database COLMAP cannot map (random keypoints): fusion does not run, the
+    summary and the printout say why, and the cuts are the consistency stage's alone."""
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    report = tmp_path / "o.json"
+    assert main(["clean-db", str(src), "--out", str(tmp_path / "o.db"), "--report",
+                 str(report), "--fusion", "--no-rerun"]) == 0
+    printed = capsys.readouterr().out
+    assert "fusion: not run, camera poses unknown: the mapping registered 0 of 4 images" \
+        in printed
+    summary = json.loads(report.read_text())
+    assert summary["fusion"]["enabled"] is False and summary["cut"]["fusion-outlier"] == 0
+    assert summary["cut"]["resolution"] > 0 and summary["after"]["conflictive_sets"] == 0
