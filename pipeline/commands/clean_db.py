@@ -116,6 +116,10 @@ def run(args) -> int:
                   f"the poses of a COLMAP mapping of the input ({fu['cameras']} of "
                   f"{res.images} images registered, {mp['points']} points, "
                   f"{mp['mean_reprojection_error']:.2f} px)")
+            if cut["fusion-outlier"]:
+                print("  fewer matches can leave images below COLMAP's registration threshold "
+                      "where the views overlap little: if the mapper registers few, map with "
+                      "--Mapper.abs_pose_min_num_inliers 15")
         else:
             print(f"fusion: not run, {fu['reason']}")
     if res.baselines:
