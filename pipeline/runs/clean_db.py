@@ -21,9 +21,9 @@ features.
 
 With ``fusion`` (``--fusion``) the robust distributed fusion of Montijano et al. (dynamic
 voting, :func:`pipeline.stages.fusion_stage`, the second stage of ``run-images``) runs after
-the consistency stage, on the poses of a COLMAP mapping of the input database
-(:func:`pipeline.colmap.incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its
-links before cleaning): the observations it votes out of their tracks cut their links, reason
+the consistency stage, on the poses of a COLMAP mapping of the links the robots start from
+(the input's, less those the checks above cut; :func:`pipeline.colmap.
+incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its links before cleaning): the observations it votes out of their tracks cut their links, reason
 ``fusion-outlier``. It sees what the consistency stage cannot: a wrong match in a
 conflict-free set (a window matched to its twin in several views), which only geometry with
 poses refutes. The images the mapping did not register take no part (their links stay as the
@@ -197,8 +197,8 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
-    fusion_section = _fusion_pass(contents, model_links, idx, result, reason, edges) \
-        if fusion else {}
+    fusion_section = _fusion_pass(contents, model_ok, model_links, idx, result, reason,
+                                  edges) if fusion else {}
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     colmap.write_cleaned_database(contents, output_path(outputs, out, "--out"), keep)
@@ -255,19 +255,27 @@ def _loop_pass(contents, reason: np.ndarray, tol_deg: float) -> dict:
             "links_cut": int((reason == "loop-inconsistent").sum())}
 
 
-def _fusion_pass(contents, model_links, idx: np.ndarray, result, reason: np.ndarray,
-                 edges) -> dict:
+def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, result,
+                 reason: np.ndarray, edges) -> dict:
     """Fusion on the poses of a COLMAP mapping of the input (module docstring): the links it
     cuts among the consistency stage's kept ``model_links`` (rows ``idx`` of the database's
-    links) get ``reason`` ``fusion-outlier`` (in place). Returns the summary's ``fusion``
-    section."""
+    links) get ``reason`` ``fusion-outlier`` (in place). The mapping sees the links the robots
+    started from (``model_ok``: without those the checks before the stage cut, e.g. outside
+    the comm graph). Returns the summary's ``fusion`` section."""
+    import tempfile
+
     from pipeline import colmap
     from pipeline.commgraph import comm_edges_for
     from pipeline.stages import fusion_stage, ledger_from_consistency
     from pipeline.types import Features, View
 
-    # the snapshot is what was read: the mapping sees the same matches, the input stays untouched
-    mapping = colmap.incremental_mapping_with_retry(contents.snapshot or contents.path, seed=0)
+    with tempfile.TemporaryDirectory(prefix="clean-db-mapping-") as tmp:
+        # the snapshot is what was read: the mapping sees the same matches, the input stays
+        # untouched; a copy without the links cut before the stage when there are any
+        db = contents.snapshot or contents.path
+        if not model_ok.all():
+            db = colmap.write_cleaned_database(contents, Path(tmp) / "model.db", model_ok)
+        mapping = colmap.incremental_mapping_with_retry(db, seed=0)
     rec = mapping.reconstruction
     poses = colmap.registered_poses(rec)
     names = contents.names

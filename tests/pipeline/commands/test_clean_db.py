@@ -413,3 +413,23 @@ def test_fusion_without_poses_says_so_and_cuts_what_the_stage_cut(tmp_path, caps
     summary = json.loads(report.read_text())
     assert summary["fusion"]["enabled"] is False and summary["cut"]["fusion-outlier"] == 0
     assert summary["cut"]["resolution"] > 0 and summary["after"]["conflictive_sets"] == 0
+
+
+def test_fusion_maps_only_the_links_on_the_comm_graph(tmp_path):
+    """--fusion with --comm-graph: the links between non-neighbours are cut before the stage
+    and left out of the mapping; fusion still cuts every planted link (pair (3, 5) is an
+    edge) and the links it cuts are all on the graph."""
+    src = tmp_path / "wrong.db"
+    wrong, _ = _db_with_a_wrong_consistent_track(src)
+    graph = tmp_path / "graph.txt"
+    edges = [(k, (k + 1) % 8) for k in range(8)] + [(k, (k + 2) % 8) for k in range(8)]
+    graph.write_text("".join(f"{i},{j}\n" for i, j in edges))
+    report = tmp_path / "o.json"
+    assert main(["clean-db", str(src), "--out", str(tmp_path / "o.db"), "--comm-graph",
+                 str(graph), "--report", str(report), "--fusion", "--no-rerun"]) == 0
+    summary = json.loads(report.read_text())
+    assert summary["cut"]["not-comm-edge"] > 0 and summary["fusion"]["cameras"] == 8
+    by_reason = _links_by_reason(tmp_path / "o.links.csv")
+    assert wrong <= by_reason["fusion-outlier"]
+    on_graph = {tuple(sorted(e)) for e in edges}
+    assert all((r[0], r[2]) in on_graph for r in by_reason["fusion-outlier"])
