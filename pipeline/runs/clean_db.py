@@ -22,8 +22,9 @@ features.
 With ``fusion`` (``--fusion``) the robust distributed fusion of Montijano et al. (dynamic
 voting, :func:`pipeline.stages.fusion_stage`, the second stage of ``run-images``) runs after
 the consistency stage, on the poses of a COLMAP mapping of the links the robots start from
-(the input's, less those the checks above cut; :func:`pipeline.colmap.
-incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its links before cleaning): the observations it votes out of their tracks cut their links, reason
+(the input's, less those the checks above cut;
+:func:`pipeline.colmap.incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its
+links before cleaning): the observations it votes out of their tracks cut their links, reason
 ``fusion-outlier``. It sees what the consistency stage cannot: a wrong match in a
 conflict-free set (a window matched to its twin in several views), which only geometry with
 poses refutes. The images the mapping did not register take no part (their links stay as the
