@@ -94,6 +94,9 @@ ZERO_EIG = 1e-9
 MAJORITY = 1.0 / np.sqrt(2.0)
 #: a row of the embedding shorter than this times the longest row carries no direction
 _ZERO_ROW = 1e-8
+#: relative difference below which two pivot scores are a tie (broken by the lowest id): far
+#: above the rounding of eigenvectors (~1e-12 here), far below the gaps that decide
+_TIE = 1e-7
 _SEED = 0
 
 
@@ -444,14 +447,43 @@ def _by_component(prob: _Problem, spectrum: _Spectrum, counts: np.ndarray,
 # ------------------------------------------------------------------------- baselines
 
 
+def _first_within(values: np.ndarray, best: float) -> int:
+    """The lowest index whose value is within :data:`_TIE` (relative) of ``best``: a choice
+    that rounding noise in the last bits of the values cannot change."""
+    tol = _TIE * max(1.0, abs(best))
+    return int(np.flatnonzero(np.abs(values - best) <= tol)[0])
+
+
+def _sync_pivots(Un: np.ndarray, cand: np.ndarray, k: int) -> np.ndarray:
+    """Rows of ``Un`` (among ``cand``) spanning its row space, as QR with column pivoting
+    chooses them: each the row farthest from the span of those chosen before it.
+
+    Ties (every unit row is equally far from an empty span; symmetric inputs) go to the
+    lowest id within :data:`_TIE`, not to rounding noise: LAPACK's pivoting breaks them by the
+    last bits of the eigenvectors, which differ between BLAS builds and between the dense
+    and the ARPACK solver, and a different pivot renames the points (and may move a
+    decision). The residual norms are those of Businger–Golub pivoting (``O(m k^2)``)."""
+    R = Un[cand].copy()
+    piv: list[int] = []
+    for _ in range(min(k, cand.size)):
+        norm2 = np.einsum("ij,ij->i", R, R)
+        norm2[piv] = -1.0
+        best = float(norm2.max())
+        if best <= _ZERO_ROW ** 2:
+            break
+        p = _first_within(norm2, best)
+        piv.append(p)
+        q = R[p] / np.sqrt(norm2[p])
+        R -= np.outer(R @ q, q)
+    return cand[np.asarray(piv, dtype=np.int64)]
+
+
 def _round_sync(U: np.ndarray, camera: np.ndarray, min_cosine: float
                 ) -> tuple[np.ndarray, np.ndarray]:
     """spectral_sync steps 4-6 on one component's embedding ``U`` (``m_c x k``)."""
     k = U.shape[1]
     Un, ok = _unit_rows(U)
-    cand = np.flatnonzero(ok)
-    _, _, piv = scipy.linalg.qr(Un[cand].T, mode="economic", pivoting=True)
-    C = Un[cand[piv[:k]]]                                     # (k', k), k' = min(k, #cand)
+    C = Un[_sync_pivots(Un, np.flatnonzero(ok), k)]           # (k', k), k' = min(k, #cand)
     Z, _, Yt = np.linalg.svd(C, full_matrices=False)
     S = Un @ (Z @ Yt).T                                       # cosines to orthonormal directions
     col = _assign(S, camera, maximize=True)
@@ -516,7 +548,7 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
     >>> links = Links([0, 0, 1, 0, 0, 1, 0], [0, 0, 1, 1, 1, 0, 0],
     ...               [1, 2, 2, 1, 2, 2, 1], [1, 0, 0, 0, 1, 1, 0])
     >>> spectral_sync([2, 2, 2], links).tolist()     # A = global ids 0, 3, 4; B = 1, 2, 5
-    [1, 0, 0, 1, 1, 0]
+    [0, 1, 1, 0, 0, 1]
     """
     _check_universe(universe_size)
     prob = _problem(features_per_camera, links, weight)
@@ -540,16 +572,17 @@ def _clear_pivots(U: np.ndarray, Un: np.ndarray, ok: np.ndarray, k: int) -> np.n
     CLEAR's code starts from the first row; here from the row of ``U`` with the largest norm
     (lowest id on ties), so the choice does not depend on the order of the features. Each
     further pivot minimizes the sum of ``|<u_r, u_p>|`` over the pivots ``p`` already chosen
-    (``O(m k)`` per pivot, no ``m x m`` matrix).
+    (``O(m k)`` per pivot, no ``m x m`` matrix). Ties are ties within :data:`_TIE`
+    (:func:`_first_within`), so rounding noise of the eigenvectors does not choose.
     """
     norm = np.linalg.norm(U, axis=1)
     norm[~ok] = -1.0
-    piv = [int(np.argmax(norm))]
+    piv = [_first_within(norm, float(norm.max()))]
     total = np.abs(Un @ Un[piv[0]])
     total[~ok] = np.inf
     total[piv[0]] = np.inf
     for _ in range(1, min(k, int(ok.sum()))):
-        p = int(np.argmin(total))
+        p = _first_within(total, float(total.min()))
         piv.append(p)
         total += np.abs(Un @ Un[p])
         total[p] = np.inf
@@ -605,7 +638,7 @@ def clear_sync(features_per_camera, links: Links, weight: np.ndarray | None = No
     >>> links = Links([0, 0, 1, 0, 0, 1, 0], [0, 0, 1, 1, 1, 0, 0],
     ...               [1, 2, 2, 1, 2, 2, 1], [1, 0, 0, 0, 1, 1, 0])
     >>> clear_sync([2, 2, 2], links).tolist()     # A = global ids 0, 3, 4; B = 1, 2, 5
-    [0, 1, 1, 0, 0, 1]
+    [1, 0, 0, 1, 1, 0]
     """
     _check_universe(universe_size)
     prob = _problem(features_per_camera, links, weight)
