@@ -26,7 +26,7 @@ from pipeline.types import LinkLedger, Links, View
 
 __all__ = ["CleaningResult", "merge_radius_for", "budget_line", "extract_and_match",
            "evidence_inputs", "consistency_stage", "ledger_from_consistency", "fusion_stage",
-           "clean_association"]
+           "posed_views", "fusion_on_reconstruction", "clean_association"]
 
 
 @dataclass
@@ -278,6 +278,56 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
         ledger.cut(cut, "fusion-outlier", int(fr.stats.get("rounds", -1)))
         timer.note(f"{len(cut)} links cut as fusion outliers")
     return fr, int(len(cut))
+
+
+def posed_views(views: list[View], poses: dict) -> list[View]:
+    """Copies of ``views`` with ``R, t`` (and the refined ``K``) of those named in ``poses``
+    (:func:`pipeline.colmap.registered_poses`); the others unchanged."""
+    import dataclasses
+
+    out = []
+    for v in views:
+        if v.name in poses:
+            R, t, K = poses[v.name]
+            out.append(dataclasses.replace(v, R=R, t=t, K=K))
+        else:
+            out.append(v)
+    return out
+
+
+def fusion_on_reconstruction(ledger: LinkLedger, views: list[View], features: list, comm_edges,
+                             reconstruction, *, timer: StageTimer | None = None,
+                             track_labels=None):
+    """:func:`fusion_stage` among the cameras ``reconstruction`` (pycolmap) registered, on its
+    poses and refined cameras.
+
+    The poses come with a lens model (e.g. SIMPLE_RADIAL): fusion's pinhole projections see
+    each keypoint where the pinhole ``K`` of its camera would have seen it
+    (:func:`pipeline.colmap.undistorted_keypoints`). A camera the reconstruction did not
+    register cannot form a local landmark estimate, so it takes no part (as a crashed robot);
+    its links stay as the consistency stage left them.
+
+    Returns
+    -------
+    (FusionResult or None, int, ndarray) — the fusion result (None when fewer than two
+    cameras are registered: nothing runs), the number of links it cut, the registered
+    cameras' indices.
+    """
+    import dataclasses
+
+    from pipeline import colmap
+
+    poses = colmap.registered_poses(reconstruction)
+    reg = np.array([k for k, v in enumerate(views) if v.name in poses], dtype=np.int64)
+    if len(reg) < 2:
+        return None, 0, reg
+    features = [dataclasses.replace(f, keypoints=colmap.undistorted_keypoints(
+        reconstruction, v.name, f.keypoints).astype(np.float32))
+        for v, f in zip(views, features, strict=True)]
+    fr, n_cut = fusion_stage(ledger, posed_views(views, poses), features, comm_edges,
+                             cameras=reg, timer=timer, track_labels=track_labels,
+                             detail=f", {len(reg)} of {len(views)} cameras posed")
+    return fr, n_cut, reg
 
 
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,

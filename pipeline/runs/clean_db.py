@@ -267,7 +267,7 @@ def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, r
 
     from pipeline import colmap
     from pipeline.commgraph import comm_edges_for
-    from pipeline.stages import fusion_stage, ledger_from_consistency
+    from pipeline.stages import fusion_on_reconstruction, ledger_from_consistency
     from pipeline.types import Features, View
 
     with tempfile.TemporaryDirectory(prefix="clean-db-mapping-") as tmp:
@@ -277,35 +277,26 @@ def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, r
         if not model_ok.all():
             db = colmap.write_cleaned_database(contents, Path(tmp) / "model.db", model_ok)
         mapping = colmap.incremental_mapping_with_retry(db, seed=0)
-    rec = mapping.reconstruction
-    poses = colmap.registered_poses(rec)
     names = contents.names
-    reg = np.array([k for k, name in enumerate(names) if name in poses], dtype=np.int64)
-    section = {"enabled": len(reg) >= 2, "poses_from": "COLMAP mapping of the input "
+    # a database holds no pixels and no poses: fusion reads names, keypoints and the mapping
+    views = [View(name, np.zeros((1, 1), np.uint8), np.eye(3)) for name in names]
+    feats = [Features(kp, np.zeros((len(kp), 0), np.float32), np.ones(len(kp), np.float32),
+                      "sift") for kp in contents.keypoints]
+    ledger = ledger_from_consistency(result)
+    fr, n_cut, reg = fusion_on_reconstruction(
+        ledger, views, feats, comm_edges_for(contents.features_per_camera, model_links, edges),
+        mapping.reconstruction)
+    registered = {names[k] for k in reg.tolist()}
+    section = {"enabled": fr is not None, "poses_from": "COLMAP mapping of the input "
                "database (seed 0)", "mapping": {k: v for k, v in mapping.summary().items()
                                                 if k != "registered_names"},
                "cameras": int(len(reg)),
-               "cameras_without_pose": [n for n in names if n not in poses]}
-    if len(reg) < 2:
+               "cameras_without_pose": [n for n in names if n not in registered]}
+    if fr is None:
         section["reason"] = (f"camera poses unknown: the mapping registered {len(reg)} of "
                              f"{len(names)} images")
         return section
-    views, feats = [], []
-    for name, kp in zip(names, contents.keypoints, strict=True):
-        R, t, K = poses.get(name, (None, None, np.eye(3)))
-        # fusion's pinhole projections see each keypoint where the pinhole K would have
-        xy = colmap.undistorted_keypoints(rec, name, kp).astype(np.float32)
-        views.append(View(name, np.zeros((1, 1), np.uint8), K, R, t))
-        feats.append(Features(xy, np.zeros((len(xy), 0), np.float32),
-                              np.ones(len(xy), np.float32), "sift"))
-    m = contents.features_per_camera
-    ledger = ledger_from_consistency(result)
-    comm = comm_edges_for(m, model_links, edges)
-    fr, n_cut = fusion_stage(ledger, views, feats, comm, cameras=reg,
-                             detail=f", {len(reg)} of {len(names)} cameras posed")
-    cut = np.flatnonzero(ledger.status == "deleted")
-    cut = cut[np.asarray(ledger.reason, dtype=object)[cut] == "fusion-outlier"]
-    reason[idx[cut]] = "fusion-outlier"
+    reason[idx[ledger.reason == "fusion-outlier"]] = "fusion-outlier"
     section.update({k: v for k, v in dict(fr.stats).items() if np.isscalar(v)},
                    links_cut=int(n_cut))
     return section

@@ -93,18 +93,6 @@ class ImagesConfig:
 
 # ------------------------------------------------------------------------------------ the run
 
-def _posed(views: list[View], poses: dict) -> list[View]:
-    """Copies of ``views`` with ``R, t`` (and the refined ``K``) of the registered ones."""
-    out = []
-    for v in views:
-        if v.name in poses:
-            R, t, K = poses[v.name]
-            out.append(dataclasses.replace(v, R=R, t=t, K=K))
-        else:
-            out.append(v)
-    return out
-
-
 def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
                      timer: StageTimer) -> None:
     """Fusion (Montijano et al., dynamic voting) among the robots whose pose is known.
@@ -117,29 +105,22 @@ def _fuse_registered(cleaning, views: list[View], features, comm_edges, mapping,
     camera are left as the consistency stage left them. Cut links get reason
     ``fusion-outlier`` in ``cleaning.ledger``; ``cleaning`` is updated in place.
     """
-    from pipeline import colmap
-    from pipeline.stages import fusion_stage
+    from pipeline.stages import fusion_on_reconstruction
 
-    poses = colmap.registered_poses(mapping.reconstruction)
-    reg = np.array([k for k, v in enumerate(views) if v.name in poses], dtype=np.int64)
-    if len(reg) < 2:
+    fr, n_cut, reg = fusion_on_reconstruction(cleaning.ledger, views, features, comm_edges,
+                                              mapping.reconstruction, timer=timer,
+                                              track_labels=cleaning.track_labels)
+    if fr is None:
         cleaning.fusion_stats = {"enabled": False, "reason": (
             f"camera poses unknown: the reconstruction before cleaning registered "
             f"{len(reg)} of {len(views)} images")}
         return
-    # the poses come with a lens model (SIMPLE_RADIAL): fusion's pinhole projections see each
-    # keypoint where the pinhole K of its camera would have seen it
-    rec = mapping.reconstruction
-    features = [dataclasses.replace(f, keypoints=colmap.undistorted_keypoints(
-        rec, v.name, f.keypoints).astype(np.float32)) for v, f in zip(views, features, strict=True)]
-    fr, n_cut = fusion_stage(cleaning.ledger, _posed(views, poses), features, comm_edges,
-                             cameras=reg, timer=timer, track_labels=cleaning.track_labels,
-                             detail=f", {len(reg)} of {len(views)} cameras posed")
+    registered = {views[k].name for k in reg.tolist()}
     cleaning.fused_points = np.asarray(fr.points)
     cleaning.fusion_stats = {
         "enabled": True, "poses_from": "reconstruction before cleaning",
         "cameras": int(len(reg)),
-        "cameras_without_pose": [v.name for v in views if v.name not in poses],
+        "cameras_without_pose": [v.name for v in views if v.name not in registered],
         **dict(fr.stats), "observations_cut_links": n_cut}
 
 
@@ -590,13 +571,14 @@ def _flags(views, feats, ledger, comm_edges, matches, map_before, map_after) -> 
 def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
                      kept_links, md: str, live: str | None = None) -> None:
     from pipeline import colmap
+    from pipeline.stages import posed_views
     from pipeline.types import RunRecord
     from viz.rerun_log import log_run
 
     # cameras registered after cleaning are drawn with their pose and camera in that
     # reconstruction; fused points, estimated in the frame of the reconstruction before
     # cleaning, are moved into it by the similarity between the two
-    drawn = _posed(views, colmap.registered_poses(mapping.reconstruction))
+    drawn = posed_views(views, colmap.registered_poses(mapping.reconstruction))
     fused = None
     if cleaning.fused_points is not None and len(cleaning.fused_points):
         M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
