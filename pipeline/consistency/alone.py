@@ -259,18 +259,7 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
     (``MANY``) or is flagged (``BAD``), the repair only where some set is bad. A robot lost in the
     check is an error (a bad set could stay unrepaired): said, never hidden. The links it
     cuts are in ``robot.history.cut``."""
-    from pipeline.consistency.history import (
-        BAD,
-        MANY,
-        echo_step,
-        finish_echo,
-        finish_names,
-        names_step,
-        repair_step,
-        start_echo,
-        start_names,
-        start_repair,
-    )
+    from pipeline.consistency.history import BAD, MANY, PHASES
 
     protocol = protocol or ProtocolOptions(reliable=True)
     run = AlonePhases(robot, transport, protocol, n_robots)
@@ -282,20 +271,21 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
     def memory() -> int:
         return robot.memory_bytes() + robot.history.nbytes() + run.chan.memory_bytes()
 
-    def phase(name: str, start, step, bits) -> int:
-        t, out, begin = run.phase(name, lambda rb, send: start(rb, send),
+    def phase(name: str, start, step, finish) -> int:
+        bits = (lambda: finish(robot)) if finish is not None else (lambda: 0)
+        t, out, begin = run.phase(f"history-{name}", lambda rb, send: start(rb, send),
                                   lambda rb, msgs, send, now, t: step(rb, msgs, send, t),
                                   lambda: bits() | lost(), memory=memory)
         log.resolution_rounds += t
-        log.phases.append(dict(phase=name, start_round=begin, rounds=t, bits=int(out)))
+        log.phases.append(dict(phase=f"history-{name}", start_round=begin, rounds=t,
+                               bits=int(out)))
         if out & LOST:
             raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
+        bits()  # the state after the phase (the wave may have asked before its last round)
         return out
 
     # the wave ORs every robot's bits (they only grow within a phase)
-    bits = phase("history-names", start_names, names_step, lambda: finish_names(robot))
-    finish_names(robot)
-    if bits & (MANY | BAD) and \
-            phase("history-echo", start_echo, echo_step, lambda: finish_echo(robot)) & BAD:
-        phase("history-repair", start_repair, repair_step, lambda: 0)
+    names, echo, repair = PHASES
+    if phase(*names) & (MANY | BAD) and phase(*echo) & BAD:
+        phase(*repair)
     return run.close()

@@ -82,7 +82,7 @@ from pipeline.transport import Message
 __all__ = ["HistoryInputs", "HistoryState", "equip_history", "rebuild", "rebuild_halves",
            "start_names", "names_step", "finish_names", "start_echo", "echo_step",
            "finish_echo", "start_repair", "repair_step", "own_entries", "own_links",
-           "runs_by_robot", "overlapping_runs",
+           "runs_by_robot", "overlapping_runs", "PHASES",
            "HLAB", "HTOK", "HECHO", "HGO", "HUP", "HCUT", "MANY", "BAD", "NONE"]
 
 HLAB, HTOK, HECHO, HGO, HUP, HCUT = "hlab", "htok", "hecho", "hgo", "hup", "hcut"
@@ -322,12 +322,7 @@ def start_echo(robot: Robot, send) -> None:
     st.nbrs = _set_nbrs(robot)
     st.parent, st.children, st.waiting, st.collected, st.done = {}, {}, {}, {}, set()
     st.bad = set()
-    tokens: dict = {}
-    for lab in sorted(st.roots):
-        st.waiting[lab] = set(st.nbrs.get(lab, ()))
-        for j in st.waiting[lab]:
-            tokens.setdefault(j, []).append(lab)
-    _send_sets(send, HTOK, tokens)
+    _ask_each(send, HTOK, st.roots, st.nbrs, st.waiting)
     _complete(robot, send)
 
 
@@ -394,6 +389,17 @@ def _send_sets(send, kind: str, by_robot: dict) -> None:
         send(j, kind, {"set": np.array(sorted(labs), np.int64)})
 
 
+def _ask_each(send, kind: str, labels, robots_of: dict, waiting: dict) -> None:
+    """For each set of ``labels``, send ``kind`` to its robots in ``robots_of`` (one message
+    per robot, all its sets) and wait for each of them (``waiting[set]``, in place)."""
+    by_robot: dict = {}
+    for lab in sorted(labels):
+        waiting[lab] = set(robots_of.get(lab, ()))
+        for j in waiting[lab]:
+            by_robot.setdefault(j, []).append(lab)
+    _send_sets(send, kind, by_robot)
+
+
 def _overlap(entries) -> bool:
     """Whether one team robot has overlapping step runs among ``entries`` ``(piece, robot,
     lo, hi)`` (one retired frame in two pieces: runs of one piece never overlap), by the
@@ -433,12 +439,7 @@ def start_repair(robot: Robot, send) -> None:
     set's open links."""
     st: HistoryState = robot.history
     st.pending, st.halves = {}, {}
-    go: dict = {}
-    for lab in sorted(st.bad):
-        st.pending[lab] = set(st.children.get(lab, ()))
-        for j in st.pending[lab]:
-            go.setdefault(j, []).append(lab)
-    _send_sets(send, HGO, go)
+    _ask_each(send, HGO, st.bad, st.children, st.pending)
     _up(robot, send)
 
 
@@ -629,3 +630,12 @@ def overlapping_runs(group, robot, lo, hi) -> list[int]:
     g, _, lo, _, head, _, run_max = runs_by_robot(group, robot, lo, hi)
     hit = ~head & (lo <= np.r_[-1, run_max[:-1]])
     return np.unique(g[hit]).tolist()
+
+
+#: the check's phases in order, as both drivers run them (the simulator's
+#: :func:`.engines.history_run.run_history`, a robot alone's :func:`.alone.run_history_locally`):
+#: ``(name, start, step, finish)``; ``finish(robot)`` (idempotent) settles the robot's state
+#: after the phase and returns the wave bits that decide the next (None: the last phase)
+PHASES = (("names", start_names, names_step, finish_names),
+          ("echo", start_echo, echo_step, finish_echo),
+          ("repair", start_repair, repair_step, None))

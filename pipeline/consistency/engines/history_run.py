@@ -13,18 +13,7 @@ import numpy as np
 from pipeline.commgraph import comm_edges_for
 from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.engines.phases import run_quiet_phase
-from pipeline.consistency.history import (
-    HistoryInputs,
-    echo_step,
-    equip_history,
-    finish_echo,
-    finish_names,
-    names_step,
-    repair_step,
-    start_echo,
-    start_names,
-    start_repair,
-)
+from pipeline.consistency.history import PHASES, HistoryInputs, equip_history
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
 
@@ -47,9 +36,7 @@ def run_history(features_per_camera, links: Links, alive: np.ndarray,
         equip_history(rb, inputs[rb.id])
     network = Network(len(fpc), comm_edges_for(fpc, links, None))
     phases = {}
-    for name, start, step, finish in (("names", start_names, names_step, finish_names),
-                                      ("echo", start_echo, echo_step, finish_echo),
-                                      ("repair", start_repair, repair_step, None)):
+    for name, start, step, finish in PHASES:
         phases[name] = run_quiet_phase(
             robots, network, start,
             lambda rb, inbox, send, t, step=step: step(rb, inbox, send, t),
