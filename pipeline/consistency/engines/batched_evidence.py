@@ -73,7 +73,9 @@ from pipeline.consistency.evidence import (
     TRIANGLE_WEIGHT,
     EvidenceState,
     bundle_nbytes,
+    common_features,
     cut_own_side,
+    distinct_cameras,
     evidence_cut,
     finish_evidence,
     own_set_links,
@@ -331,26 +333,14 @@ class _SetProblems:
 
 def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
     """Triangle support of every link ``(a, b)`` (each once): distinct cameras of the features
-    linked to both ends, ``(E,)`` int64."""
-    E = a.size
-    if E == 0:
+    linked to both ends, ``(E,)`` int64 (:func:`.evidence.triangle_support` without poses)."""
+    if a.size == 0:
         return _EMPTY
-    nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
-    N = nodes.size
-    ia, ib = inv[:E], inv[E:]
-    cam = np.empty(N, dtype=np.int64)
-    cam[ia], cam[ib] = cam_a, cam_b
-    src, dst = np.r_[ia, ib], np.r_[ib, ia]
-    adj = np.sort(src * N + dst)  # each link in both directions
-    ptr = np.searchsorted(adj // N, np.arange(N + 1))
-    start, stop = ptr[ia], ptr[ia + 1]
-    pos = ranges(start, stop)
-    z = adj[pos] % N  # the neighbours of each link's first end
-    e = np.repeat(np.arange(E), stop - start)
-    common = isin_sorted(z * N + ib[e], adj)  # ... that are neighbours of its second end
-    n_cam = int(cam.max()) + 1
-    pairs = np.unique(e[common] * n_cam + cam[z[common]])
-    return np.bincount(pairs // n_cam, minlength=E).astype(np.int64)
+    e, z = common_features(a, b)
+    nodes = np.unique(np.r_[a, b])
+    cam = np.empty(nodes.size, dtype=np.int64)
+    cam[np.searchsorted(nodes, a)], cam[np.searchsorted(nodes, b)] = cam_a, cam_b
+    return distinct_cameras(e, cam[np.searchsorted(nodes, z)], a.size)
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,

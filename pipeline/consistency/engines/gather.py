@@ -160,8 +160,13 @@ def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
     three-view points solved as one stack of SVDs (the rule solves one at a time).
     """
     from pipeline.consistency.cycles import shared_cameras, support_term
-    from pipeline.consistency.evidence import REPROJECTION_TOL_PX, TRIANGLE_WEIGHT
-    from pipeline.consistency.keys import isin_sorted, ranges
+    from pipeline.consistency.evidence import (
+        REPROJECTION_TOL_PX,
+        TRIANGLE_WEIGHT,
+        common_features,
+        distinct_cameras,
+        one_point,
+    )
 
     a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
     cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
@@ -171,50 +176,24 @@ def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
         return np.zeros(0)
     tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
     lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
-    nodes, inv = np.unique(np.r_[lo, hi], return_inverse=True)
-    N = nodes.size
-    ia, ib = inv[:E], inv[E:]
-    cam = np.empty(N, np.int64)
-    cam[ia] = np.where(lo == a, cam_a, cam_b)
-    cam[ib] = np.where(lo == a, cam_b, cam_a)
-    adj = np.sort(np.r_[ia, ib] * N + np.r_[ib, ia])
-    ptr = np.searchsorted(adj // N, np.arange(N + 1))
-    pos = ranges(ptr[ia], ptr[ia + 1])
-    e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
-    z = adj[pos] % N
-    common = isin_sorted(z * N + ib[e], adj)
-    e, z = e[common], z[common]
+    e, z = common_features(lo, hi)
     ok = np.ones(e.size, bool)
     geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
     if keypoints is not None and projections is not None and e.size:
         test = np.flatnonzero(geo[e])
         if test.size:
-            ids = np.stack([nodes[ia[e[test]]], nodes[ib[e[test]]], nodes[z[test]]], axis=1)
-            ok[test] = _one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
-                                  np.asarray(projections(ids.ravel()), np.float64)
-                                  .reshape(-1, 3, 3, 4), tol)
+            ids = np.stack([lo[e[test]], hi[e[test]], z[test]], axis=1)
+            ok[test] = one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
+                                 np.asarray(projections(ids.ravel()), np.float64)
+                                 .reshape(-1, 3, 3, 4), tol)
     e, z = e[ok], z[ok]
-    C = int(cam.max()) + 1
-    pairs = np.unique(e * C + cam[z])
-    tau = np.bincount(pairs // C, minlength=E)
+    nodes = np.unique(np.r_[lo, hi])
+    cam = np.empty(nodes.size, np.int64)
+    cam[np.searchsorted(nodes, lo)] = np.where(lo == a, cam_a, cam_b)
+    cam[np.searchsorted(nodes, hi)] = np.where(lo == a, cam_b, cam_a)
+    tau = distinct_cameras(e, cam[np.searchsorted(nodes, z)], E)
     shared = shared_cameras(a, b, cam_a, cam_b)
     return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
-
-
-def _one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
-    """The evidence rule's test (``evidence._consistent``) on a stack of observation triples:
-    ``kp (T, 3, 2)``, ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three
-    cameras and within ``tol`` px of each observation."""
-    A = np.empty((len(kp), 6, 4))
-    A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
-    A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
-    X = np.linalg.svd(A, full_matrices=False)[2][:, -1]
-    fin = np.abs(X[:, 3]) >= 1e-12
-    X = X / np.where(fin, X[:, 3], 1.0)[:, None]
-    p = np.einsum("tkij,tj->tki", P, X)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
-    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
 
 
 def run_roots(robots: list[Robot], network, on_round=None, t0: int = 0) -> dict:
