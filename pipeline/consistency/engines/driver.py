@@ -226,7 +226,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         ``evidence`` only: the robots solve the conflictive sets of at most ``B`` features
         (``gather_conflictive``, instead of the rule's flood: ``solve_small_sets`` is then
         off) and the conflict-free ones (``gather_free``) at their roots, the robot of each
-        set's smallest feature (:mod:`pipeline.consistency.roots`: bundles up a tree, the cut
+        set's :func:`~pipeline.consistency.roots.root_of` member (:mod:`pipeline.consistency.
+        roots`: bundles up a tree, the cut
         links down; the online stage's step 2b run by the robots). ``stats['roots']``: its
         rounds and sets.
 

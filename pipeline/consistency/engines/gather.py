@@ -1,9 +1,9 @@
 """The sets of an online step solved at their roots (step 2b of :mod:`.online`).
 
 A set of at most ``B`` features that a step's new links touch is solved by the evidence
-rule's merge at one robot, its *root* (the robot of its smallest feature: the rule's set
-lists name that feature first to every robot of the set, and the label flooding brought it
-one hop per round, so the neighbour it came from first is a parent on a shortest path). Its
+rule's merge at one robot, its *root* (the robot of the member :func:`.roots.root_of` picks
+from the set list every member holds; the root's tokens flood the set one hop per round, so
+the neighbour a robot's first token came from is a parent on a shortest path). Its
 robots send their bundles (:mod:`pipeline.consistency.evidence`, step 1: each feature's
 keypoint, its links with their evidence weights, its frame's projection) up that tree; the
 root solves what :func:`~pipeline.consistency.evidence.solve_set` solves on them (the weights
@@ -32,7 +32,7 @@ import scipy.sparse as sp
 
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.robot import Robot
-from pipeline.consistency.roots import roots_step, start_roots
+from pipeline.consistency.roots import roots_step, spread, start_roots
 from pipeline.transport import HEADER_BYTES
 
 __all__ = ["RootSolution", "run_roots", "set_weights", "solve_at_roots"]
@@ -108,7 +108,9 @@ def solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_cam, unposed, 
     f_set = np.unique(np.stack([np.r_[lc, lc], np.r_[sa, sb]], axis=1), axis=0)
     f_c = np.searchsorted(c_w, f_set[:, 0])            # each member's set
     members = np.bincount(f_c, minlength=len(c_w))
-    root = f_set[np.r_[0, np.cumsum(members)[:-1]], 1]  # smallest feature of each set
+    # each set's root: its member of smallest spread (roots.root_of), first of its rows
+    by_key = np.lexsort((spread(sub[f_set[:, 1]]), f_c))
+    root = f_set[by_key[np.r_[0, np.cumsum(members)[:-1]]], 1]
     dist = np.full(n_s, -1, np.int64)
     dist[root] = 0
     front, d = root, 0

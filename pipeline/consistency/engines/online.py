@@ -83,9 +83,10 @@ One step (:meth:`OnlineAssociation.add_step`)
    and found conflict-free, is weighed by the rule's merge too. Its robots send their
    bundles as the rule's robots make them (each window feature's keypoint, its links of
    the set with their evidence weights, its frame's projection; history links as in the
-   rule's pass) up a tree to the set's *root*, the robot of its smallest feature: the
-   rule's set lists name that feature first to every robot of a set of at most ``B``
-   features; the root sends a token down the set's links and each robot takes the robot
+   rule's pass) up a tree to the set's *root*, the robot of the member that
+   :func:`.roots.root_of` picks from the set list every robot of a set of at most ``B``
+   features holds (a fixed scrambling of the ids, so a step's roots spread over its
+   robots); the root sends a token down the set's links and each robot takes the robot
    its first token came from as its parent (:mod:`pipeline.consistency.roots`, the robots'
    protocol, which robot processes run: ``robots_solve``; the simulator evaluates it in
    batch, :func:`.gather.solve_at_roots`, counted as a shortest-path tree, and the two are
