@@ -24,6 +24,7 @@ import hashlib
 import json
 import os
 import stat
+import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -245,9 +246,15 @@ def _check_writable_folder(path: Path, flag: str) -> None:
     if not parent.is_dir():
         raise InputError(f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder; "
                          "choose another place")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    # a real probe, not os.access: for root every folder passes os.access, yet /proc, /sys
+    # and read-only mounts refuse new files
+    try:
+        with tempfile.TemporaryFile(dir=parent, prefix=".fm-probe-"):
+            pass
+    except OSError as exc:
         raise InputError(f"{flag} {str(path)!r}: cannot write in {str(parent)!r} (read-only or "
-                         "no permission); choose a folder you can write in")
+                         f"no permission: {exc.strerror or exc}); choose a folder you can "
+                         "write in") from None
 
 
 def refuse_unsafe_target(path, flag: str = "output") -> None:

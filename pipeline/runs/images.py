@@ -184,6 +184,10 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     out = config.out_dir()
     views, comm_edges = _load(config, timer) if loaded is None else loaded
     names = [v.name for v in views]
+    if config.truth == "homographies":  # its files checked before any work, read at the end
+        from pipeline.evaluation.truth import read_homographies
+
+        read_homographies(config.directory, len(views))
     by_similarity = comm_edges is None
     chosen = {}
 
@@ -407,6 +411,8 @@ def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, 
         with timer.stage("evaluate", "ground truth from the homographies"):
             fill_report(report, config.directory, views, feats, comm_edges, ledger,
                         config.truth_tol_px)
+        if report["ground_truth"]["doubt"]:
+            timer.warn(report["ground_truth"]["doubt"])
     flag_result(report, names)
     report["cleaning_effect"] = _cleaning_effect(views, feats, ledger, map_before, map_after)
     report["flags"] = _flags(views, feats, ledger, comm_edges, matches, map_before,

@@ -62,9 +62,25 @@ def test_symlink_fifo_folder_and_device_are_refused(tmp_path):
 
 
 def test_read_only_location_is_refused(tmp_path, monkeypatch):
-    monkeypatch.setattr(outputs.os, "access", lambda path, mode: False)
-    with pytest.raises(InputError, match="cannot write in"):
+    real = outputs.tempfile.TemporaryFile
+
+    def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
+        if str(dir) == str(tmp_path):
+            raise PermissionError(13, "Permission denied")
+        return real(*args, dir=dir, **kw)
+
+    monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
+    with pytest.raises(InputError, match="cannot write in .*Permission denied"):
         check_output_files([("--out", tmp_path / "o.csv")])
+
+
+def test_a_folder_that_takes_no_file_is_refused_even_for_root():
+    # /proc takes no new file, whoever asks (os.access says yes to root): named, not a
+    # temporary file's error
+    with pytest.raises(InputError, match="--out '/proc/o.csv': cannot write in '/proc'"):
+        check_output_files([("--out", "/proc/o.csv")])
+    with pytest.raises(InputError, match="cannot write in '/proc'"):
+        check_run_folder("/proc/run")
 
 
 @pytest.mark.parametrize("name", [".", "/", ".."])

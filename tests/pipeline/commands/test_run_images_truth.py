@@ -122,6 +122,7 @@ def test_pairwise_and_baselines_present(graffiti_run):
     for bl in report["baselines"].values():
         assert {"good_links", "spurious_links", "missing_links", "pairwise"} <= set(bl)
     assert report["ground_truth"]["tolerance_px"] == 2.0
+    assert report["ground_truth"]["doubt"] is None  # the right homographies raise no doubt
     assert report["resolution"]["good_deleted"] + report["resolution"]["spurious_deleted"] == \
         report["resolution"]["deleted_links"]
 
@@ -132,7 +133,39 @@ def test_missing_homographies_is_an_input_error(tmp_path, capsys):
     code = main(["run-images", str(tmp_path), "--graph", "ring", "--truth", "homographies",
                  "--no-rerun", "--no-fusion", "--out", str(tmp_path / "o")])
     assert code == 2
-    assert "H1to2p.txt" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "H1to2p.txt" in err
+    assert "[features]" not in err  # refused at load, before any work
+
+
+def test_homographies_of_another_size_are_doubted(tmp_path, capsys):
+    """Homographies of the images at twice their size (those of the originals given with
+    resized copies): no link agrees, and the run says so rather than reporting 0 good links
+    silently."""
+    import numpy as np
+
+    S = np.diag([2.0, 2.0, 1.0])
+    for k in (1, 2, 3):
+        (tmp_path / f"img{k}.png").write_bytes((GRAF_SMALL / f"img{k}.png").read_bytes())
+        if k > 1:
+            H = S @ np.loadtxt(GRAF_SMALL / f"H1to{k}p.txt") @ np.linalg.inv(S)
+            np.savetxt(tmp_path / f"H1to{k}p.txt", H / H[2, 2])
+    out = tmp_path / "o"
+    assert main(["run-images", str(tmp_path), "--graph", "complete", "--truth",
+                 "homographies", "--no-rerun", "--no-fusion", "--out", str(out)]) == 0
+    truth = json.loads((out / "report.json").read_text())["ground_truth"]
+    assert truth["doubt"] and "for these images at this size" in truth["doubt"]
+    assert "agree with the homographies" in capsys.readouterr().err
+
+
+def test_truth_doubt_needs_links_and_a_tiny_agreement():
+    import numpy as np
+
+    from pipeline.evaluation.truth import truth_doubt
+
+    assert truth_doubt(np.zeros(19, bool), 2.0) is None          # too few links to judge
+    assert truth_doubt(np.r_[np.ones(1, bool), np.zeros(19, bool)], 2.0) is None  # 5 %
+    assert "0 of 20 links" in truth_doubt(np.zeros(20, bool), 2.0)
 
 
 def _graffiti_at_full_scale(folder: Path) -> Path:
