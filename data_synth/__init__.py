@@ -154,12 +154,17 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
                 intrinsics_known=True), edges
 
 
-def formation_setup(formation, seed, size, n_robots, graph):
-    """Checked parameters, poses, comm edges and intrinsics shared by all robots."""
+def check_formation(formation) -> None:
+    """InputError unless ``formation`` names one: a–d (the paper's Fig. 4) or a graph kind."""
     if not isinstance(formation, str) or (formation not in FORMATIONS and formation not in GRAPH_KINDS):
         raise InputError(f"unknown formation {formation!r}; choose one of "
                          f"{', '.join(FORMATIONS)} (the paper's Fig. 4) or a graph kind "
                          f"({', '.join(GRAPH_KINDS)})")
+
+
+def formation_setup(formation, seed, size, n_robots, graph):
+    """Checked parameters, poses, comm edges and intrinsics shared by all robots."""
+    check_formation(formation)
     if graph is not None and graph not in GRAPH_KINDS:
         raise InputError(f"unknown graph kind {graph!r}; choose one of {', '.join(GRAPH_KINDS)}")
     seed = check_int(seed, "seed", 0)

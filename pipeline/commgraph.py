@@ -56,7 +56,7 @@ from pipeline.inputs.linkscsv import MAX_ID
 
 __all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "diameter_lower_bound", "links_off_graph",
-           "edge_set"]
+           "edge_set", "positive_k"]
 
 #: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``seq:K``).
 GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
@@ -135,13 +135,18 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
         r = r_conn * np.random.default_rng([seed, 4]).uniform(1.0, 2.5)
         e = np.stack(np.nonzero(np.triu(D <= r + 1e-9, k=1)), axis=1)
     elif kind.startswith("seq:"):
-        return _seq_edges(n, min(_positive_k(kind), max(n - 1, 0)))
+        return _seq_edges(n, min(positive_k(kind), max(n - 1, 0)))
     else:
         raise InputError(f"unknown graph kind {kind!r}; choose one of {', '.join(_ALL_KINDS)}")
     return edge_set(e)
 
 
-def _positive_k(spec: str) -> int:
+def positive_k(spec: str) -> int:
+    """The ``K`` of a ``seq:K`` or ``knn:K`` graph kind; InputError unless a positive integer.
+
+    >>> positive_k("knn:4")
+    4
+    """
     k_text = spec.split(":", 1)[1]
     if not k_text.isdigit() or int(k_text) < 1:
         raise InputError(f"graph {spec!r}: K must be a positive integer, e.g. "
@@ -185,7 +190,7 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarr
     if spec in _ALL_KINDS and spec not in ("geometric", "seq:K") or spec.startswith("seq:"):
         return graph_edges(spec, n)
     if spec.startswith("knn:"):
-        k = _positive_k(spec)
+        k = positive_k(spec)
         if knn is None:
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")

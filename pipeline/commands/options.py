@@ -69,20 +69,36 @@ def add_online_options(g, flag: str) -> None:
     """``--window``, ``--hold`` and ``--batch-every`` of an online job (``flag`` the option that
     turns it on, named in the help): :class:`pipeline.consistency.engines.online.
     OnlineAssociation`'s window and hold, and the batch reruns beside it."""
-    g.add_argument("--window", type=int, default=3,
+    g.add_argument("--window", type=int, default=None,
                    help=f"with {flag}: steps of frames a robot holds and matches against "
                         "(default 3)")
     g.add_argument("--hold", type=int, default=None,
                    help=f"with {flag}: steps a frame's links stay open after it leaves the "
                         "matching window (default window - 1; 0: final at once)")
-    g.add_argument("--batch-every", type=int, default=0,
+    g.add_argument("--batch-every", type=int, default=None,
                    help=f"with {flag}: also run the batch stage from scratch on all links "
                         "every K steps (default 0: at the last step only)")
 
 
+#: the defaults of :func:`add_online_options` (``--hold``'s: ``window - 1``, by the job)
+ONLINE_DEFAULTS = {"window": 3, "batch_every": 0}
+
+
+def refuse_online_options(args, flag: str) -> None:
+    """InputError when ``--window``, ``--hold`` or ``--batch-every`` is given to a job that is
+    not online (they would be ignored without a word); ``flag`` turns the online job on."""
+    for name in ("window", "hold", "batch_every"):
+        if getattr(args, name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} applies to an online job only; add "
+                             f"{flag} or drop it")
+
+
 def check_online_options(args) -> None:
     """InputError naming a bad ``--window``, ``--hold`` or ``--batch-every``
-    (:func:`add_online_options`)."""
+    (:func:`add_online_options`); fills in the defaults of those not given."""
+    for name, value in ONLINE_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     if args.window < 1:
         raise InputError(f"--window {args.window}: expected a number of steps >= 1")
     if args.hold is not None and args.hold < 0:

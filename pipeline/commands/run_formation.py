@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from data_synth import check_formation
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
@@ -18,6 +19,7 @@ from pipeline.commands.options import (
     feature_options,
     online_run_summary,
     parse_size,
+    refuse_online_options,
 )
 from pipeline.errors import InputError
 from pipeline.faults import add_fault_arguments, faults_from_args
@@ -64,6 +66,7 @@ def config_from_args(args) -> FormationConfig:
     size = parse_size(args.size)
     # formations a-d: the paper's 6 robots
     check_formation_memory(robots if robots is not None else 6, size, args.max_memory_gb)
+    check_formation(args.formation)  # before the render stage opens
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                            size=size,
                            features=method, max_features=max_features,
@@ -99,6 +102,7 @@ def online_config_from_args(args):
                                                    faults.crash and not faults.delay_rounds):
         raise InputError("--steps models only --switching-topology (the graph of each step); "
                          "drop the other fault options")
+    check_formation(args.formation)
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                         size=parse_size(args.size), features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,
@@ -117,6 +121,7 @@ def run(args) -> int:
 
     if args.steps is not None:
         return _run_online(args)
+    refuse_online_options(args, "--steps N")
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):
         out = run_formation(config, transport=args.transport)

@@ -21,6 +21,7 @@ from pipeline.commands.options import (
     check_online_options,
     feature_options,
     online_run_summary,
+    refuse_online_options,
 )
 from pipeline.errors import InputError
 from pipeline.outcome import exit_status
@@ -164,6 +165,7 @@ def run(args) -> int:
 
     if args.sequence:
         return _run_sequence(args)
+    refuse_online_options(args, "--sequence")
     config = config_from_args(args)
     with claim_run_folder(config.out_dir(), inputs=_inputs(config)):
         out = run_images(config)

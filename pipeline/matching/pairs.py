@@ -35,7 +35,7 @@ from pipeline.types import Features, PairMatches, View
 
 __all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px", "lowe_ratios",
            "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES", "MATCHERS",
-           "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX"]
+           "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX", "check_matcher", "COLMAP_MATCHER_FEATURES"]
 
 #: pair matchers: OpenCV + numpy (:func:`mutual_ratio_matches`, :func:`epipolar_filter`) or
 #: COLMAP's (:func:`pipeline.colmap.sift.match_pairs`)
@@ -285,6 +285,20 @@ def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
         ratio = np.sqrt(np.maximum(best, 0.0)) / np.sqrt(np.maximum(second, 1e-12))
         out[a:a + len(r)] = np.clip(ratio, 0.0, 1.0)
     return out
+
+
+#: feature methods whose descriptors COLMAP's matcher takes (SIFT, 128 floats)
+COLMAP_MATCHER_FEATURES = ("sift", "colmap-sift")
+
+
+def check_matcher(matcher: str, features: str) -> None:
+    """InputError, before any work, when ``matcher`` cannot take ``features``' descriptors
+    (the ``colmap`` matcher takes SIFT only; the check in :func:`_colmap_matches` is the
+    same on the descriptors themselves)."""
+    if matcher == "colmap" and features not in COLMAP_MATCHER_FEATURES:
+        raise InputError(f"--matcher colmap needs SIFT descriptors; --features {features} "
+                         f"gives others: use --features colmap-sift or sift, or "
+                         f"--matcher opencv")
 
 
 def _colmap_matches(edges: np.ndarray, features: list[Features], Ks, sizes, known,

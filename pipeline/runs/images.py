@@ -182,6 +182,12 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     timer = timer or StageTimer()
     config = _photo_defaults(config)
     out = config.out_dir()
+    from pipeline.commgraph import positive_k
+    from pipeline.matching.pairs import check_matcher
+
+    check_matcher(config.matcher, config.features)  # before any work, as the graph's K
+    if str(config.graph).startswith("knn:"):
+        positive_k(str(config.graph))
     views, comm_edges = _load(config, timer) if loaded is None else loaded
     names = [v.name for v in views]
     if config.truth == "homographies":  # its files checked before any work, read at the end

@@ -67,9 +67,11 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     """Run the job (module docstring), write its run folder and return its path."""
     from pipeline.commgraph import comm_graph
     from pipeline.inputs.sequence import load_sequence
+    from pipeline.matching.pairs import check_matcher
     from pipeline.runs.online import associate_online, batch_steps_of, online_tables
 
     timer = timer or StageTimer()
+    check_matcher(config.matcher, config.features)  # before any work
     with timer.stage("load", config.directory):
         seq = load_sequence(config.directory, config.max_size, config.intrinsics)
     edges = comm_graph(config.graph, seq.robots)

@@ -68,11 +68,18 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     ("--delay-rounds", "-2", "--delay-rounds -2"),
     ("--delay-rounds", "1e3", "not a whole number"),
     ("--max-features", "99999999999999999999", "at most 1000000"),
+    ("--formation", "e", "unknown formation 'e'"),
+    ("--window", "2", "--window applies to an online job only; add --steps N"),
+    ("--hold", "0", "--hold applies to an online job only"),
+    ("--batch-every", "1", "--batch-every applies to an online job only"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"
     assert main(["run-formation", "--out", str(out), *FAST, flag, value]) == 2
-    one_line_error(capsys, message)
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in err, err
+    assert "[render]" not in err  # not even the first stage opened
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 

@@ -55,6 +55,20 @@ def test_bad_thread_count_is_refused_before_any_work(photos, tmp_path, capsys, t
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("args,message", [
+    (["--graph", "knn:0"], "graph 'knn:0': K must be a positive integer"),
+    (["--features", "orb"], "--matcher colmap needs SIFT descriptors; --features orb"),
+    (["--window", "2"], "--window applies to an online job only; add --sequence"),
+])
+def test_options_that_cannot_run_are_refused_before_any_work(photos, tmp_path, capsys, args,
+                                                            message):
+    assert main(["run-images", str(photos), *args, "--out", str(tmp_path / "run")]) == 2
+    captured = capsys.readouterr()
+    assert "[features]" not in captured.err and "[load]" not in captured.err
+    assert message in captured.err and "Traceback" not in captured.err
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("fx", ["1e300", "1e-9", "0.5"])
 def test_k_with_an_absurd_focal_length_is_refused(photos, tmp_path, capsys, fx):
     (photos / "K.txt").write_text(f"{fx} 0 320\n0 {fx} 240\n0 0 1\n")
