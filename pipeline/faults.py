@@ -97,8 +97,9 @@ class FaultConfig:
         """InputError if a crash names a robot outside ``0..n_robots-1``."""
         for r, t in self.crash:
             if not 0 <= int(r) < n_robots:
-                raise InputError(f"--crash {r}@{t}: robot {r} does not exist; robots are "
-                                 f"0..{n_robots - 1}")
+                raise InputError(f"--crash {r}@{t}: robot {r} does not exist; " + (
+                    f"robots are 0..{n_robots - 1}" if n_robots else
+                    "the input has no robot (no link names a camera)"))
 
     def topology(self, comm_edges):
         """The per-round edge function of the switching topology, or ``None``."""

@@ -32,6 +32,7 @@ from pipeline.types import View
 from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
+    "image_paths",
     "IMAGE_SUFFIXES",
     "GUESS_FOCAL_FACTOR",
     "guess_K",
@@ -83,22 +84,35 @@ class ImageIntrinsics:
 
 # --------------------------------------------------------------------------------------- images
 
+def image_paths(directory: Path) -> list[Path]:
+    """The image files of ``directory`` by suffix, in name order (hidden files left out);
+    nothing is checked: :func:`load_folder` says what is wrong with a folder."""
+    return [p for p in _visible_files(directory) if p.suffix.lower() in IMAGE_SUFFIXES]
+
+
+def _visible_files(directory: Path) -> list[Path]:
+    return sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
+                  key=lambda p: p.name)
+
+
 def _image_files(directory: Path) -> list[Path]:
     if not directory.exists():
         raise InputError(f"image folder {str(directory)!r} does not exist")
     if not directory.is_dir():
         raise InputError(f"{str(directory)!r} is not a folder: give the folder that holds the images")
-    files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
-                   key=lambda p: p.name)
-    images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    files = _visible_files(directory)
+    images = image_paths(directory)
     skipped = [p.name for p in files if p.suffix.lower() not in IMAGE_SUFFIXES]
     if skipped:
         log.info("skipping %d file(s) that are not images by suffix: %s", len(skipped),
                  ", ".join(skipped))
     if not images:
+        subs = [p for p in directory.iterdir() if p.is_dir() and not p.name.startswith(".")]
+        hint = (f"; it holds {len(subs)} sub-folder(s): for one sub-folder of frames per "
+                "robot, add --sequence" if subs else "")
         raise InputError(
             f"no images in {str(directory)!r}: expected files ending in "
-            f"{', '.join(IMAGE_SUFFIXES)} (found {len(files)} other file(s))")
+            f"{', '.join(IMAGE_SUFFIXES)} (found {len(files)} other file(s)){hint}")
     if len(images) == 1:
         raise InputError(
             f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import InputError
-from pipeline.inputs.photos import load_folder
+from pipeline.inputs.photos import image_paths, load_folder
 from pipeline.types import View
 
 __all__ = ["PhotoSequence", "load_sequence"]
@@ -61,12 +61,16 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
                          "team needs at least two (one sub-folder of frames per robot)")
     if intrinsics == "auto" and (directory / "K.txt").is_file():
         intrinsics = directory / "K.txt"
-    per_robot = [load_folder(p, max_size=max_size, intrinsics=intrinsics) for p in subs]
-    counts = {p.name: len(v) for p, v in zip(subs, per_robot, strict=True)}
+    counts = {p.name: len(image_paths(p)) for p in subs}
     if len(set(counts.values())) > 1:
         raise InputError(f"--sequence {str(directory)!r}: robots hold different numbers of "
                          f"frames ({', '.join(f'{k}: {v}' for k, v in counts.items())}); step "
                          "k is every robot's k-th frame, give every robot the same number")
+    if max(counts.values()) == 1:
+        raise InputError(f"--sequence {str(directory)!r}: every robot holds one frame (one "
+                         "step); a sequence needs two steps or more. For one snapshot of the "
+                         "team, put the frames in one folder and drop --sequence")
+    per_robot = [load_folder(p, max_size=max_size, intrinsics=intrinsics) for p in subs]
     steps = len(per_robot[0])
     views: list[View] = []
     for k in range(steps):

@@ -64,6 +64,8 @@ def test_crash_of_an_unknown_robot_names_it():
     cfg = parse(["--crash", "9@3"])
     with pytest.raises(InputError, match=r"robot 9 does not exist; robots are 0\.\.3"):
         cfg.network_options([[0, 1]], 4)
+    with pytest.raises(InputError, match="robot 9 does not exist; the input has no robot"):
+        cfg.network_options(np.zeros((0, 2), int), 0)  # not "robots are 0..-1"
 
 
 def test_report_section_records_injection_and_effect():

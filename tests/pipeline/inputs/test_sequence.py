@@ -44,3 +44,21 @@ def test_a_team_needs_two_robot_folders(tmp_path):
         load_sequence(root, max_size=64)
     with pytest.raises(InputError, match="one sub-folder of frames per robot"):
         load_sequence(tmp_path / "missing")
+
+
+def test_one_frame_per_robot_is_one_step_not_a_sequence(tmp_path):
+    root = _folder(tmp_path / "seq", {"a": [0], "b": [1]})
+    with pytest.raises(InputError, match="every robot holds one frame .* drop --sequence"):
+        load_sequence(root, max_size=64)
+    # a robot with one frame among robots with more: the counts are named, not its folder
+    root = _folder(tmp_path / "seq2", {"a": [0], "b": [1, 2]})
+    with pytest.raises(InputError, match=r"different numbers of frames \(a: 1, b: 2\)"):
+        load_sequence(root, max_size=64)
+
+
+def test_a_sequence_folder_without_sequence_says_to_add_it(tmp_path):
+    from pipeline.inputs.photos import load_folder
+
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    with pytest.raises(InputError, match="holds 2 sub-folder.*add --sequence"):
+        load_folder(root, max_size=64)
