@@ -56,7 +56,7 @@ from pipeline.inputs.linkscsv import MAX_ID
 
 __all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "diameter_lower_bound", "links_off_graph",
-           "edge_set", "positive_k"]
+           "edge_set", "positive_k", "graph_parts"]
 
 #: Kinds built by :func:`graph_edges` (plus ``ring+triangles`` and ``seq:K``).
 GRAPH_KINDS = ("line", "ring", "ring2", "complete", "geometric")
@@ -347,6 +347,20 @@ def check_comm_edges(comm_edges, n_cameras: int, *, what: str = "communication e
         raise InputError(f"{what} ({a}, {b}) is listed more than once; list each undirected "
                          "edge once")
     return edges
+
+
+def graph_parts(n: int, edges: np.ndarray) -> int:
+    """Connected components of the graph on ``n`` nodes (an isolated node is one).
+
+    >>> graph_parts(4, np.array([[0, 1], [2, 3]]))
+    2
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return int(connected_components(adj, directed=False)[0])
 
 
 def diameter_lower_bound(n: int, edges: np.ndarray) -> int:

@@ -63,6 +63,11 @@ def flag_result(report: dict, names: list[str] | None = None) -> dict:
     if not isinstance(total, int):
         total = (report.get("before") or {}).get("links")
     kept = after.get("links")
+    if total == 0:
+        warnings.append(_warning(
+            "no-links", "the input holds no link between two images: there is nothing to "
+                        "associate (images too small, too few features, or no overlap between "
+                        "neighbours)"))
     if total and kept == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
                                                   "cut; the result holds no association"))

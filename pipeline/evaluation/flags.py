@@ -23,8 +23,8 @@ Flags
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+from pipeline.commgraph import graph_parts
 
 __all__ = ["reconstruction_flags", "flags_markdown"]
 
@@ -32,16 +32,10 @@ __all__ = ["reconstruction_flags", "flags_markdown"]
 TOLERANCE = 0.05
 
 
-def _graph_parts(n: int, edges: np.ndarray) -> int:
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return int(connected_components(adj, directed=False)[0])
-
-
 def _weak_matching_causes(n: int, edges: np.ndarray, pair_links: list[int],
                           features_per_camera: list[int], intrinsics_guessed: int) -> list[str]:
     causes = []
-    parts = _graph_parts(n, edges)
+    parts = graph_parts(n, edges)
     if parts > 1:
         causes.append(f"the comm graph splits the {n} images into {parts} groups that never "
                       f"match each other (choose a denser --graph, e.g. complete or knn:K "

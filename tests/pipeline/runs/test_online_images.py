@@ -92,3 +92,21 @@ def test_the_hold_defaults_to_window_minus_one_and_is_a_choice(run_dir, folder, 
     assert main(["run-images", str(folder), "--sequence", "--window", "2", "--hold", "0",
                  "--no-rerun", "--out", str(out), *FAST]) == 0
     assert json.loads((out / "report.json").read_text())["hold"] == 0
+
+
+def test_a_graph_that_leaves_a_robot_alone_is_warned(tmp_path, capsys):
+    """A graph file that never joins robot c: its frames match no one's; said, as run-images
+    says it of a graph that splits the images."""
+    files = sorted(SCEAUX.glob("*.JPG"))
+    root = tmp_path / "team"
+    for robot, idx in (("a", [0, 3]), ("b", [1, 4]), ("c", [2, 5])):
+        (root / robot).mkdir(parents=True)
+        for k, i in enumerate(idx):
+            shutil.copy(files[i], root / robot / f"{k}.jpg")
+    shutil.copy(SCEAUX / "K.txt", root / "K.txt")
+    graph = tmp_path / "g.csv"
+    graph.write_text("a,b\n")
+    fast = [a for a in FAST if a not in ("--graph", "complete")]
+    assert main(["run-images", str(root), "--sequence", "--graph", str(graph), "--no-rerun",
+                 "--out", str(tmp_path / "run"), *fast]) == 0
+    assert "splits the 3 robots into 2 groups" in capsys.readouterr().err
