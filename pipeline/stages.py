@@ -101,6 +101,8 @@ def budget_line(views: list[View], max_features: int | None, method: str = "sift
     '3333 per image (2000 per 640x480 pixels, at most 8192)'
     >>> budget_line([], 2000)
     '2000 per image'
+    >>> budget_line([], 300, "colmap-sift")
+    "300 per image (COLMAP's budget, in locations)"
     """
     from pipeline.matching.features import (
         BASE_FEATURES,
@@ -109,10 +111,10 @@ def budget_line(views: list[View], max_features: int | None, method: str = "sift
         photo_max_features,
     )
 
+    if method == COLMAP_SIFT:  # a location with two orientations gives two features
+        return f"{max_features or MAX_PHOTO_FEATURES} per image (COLMAP's budget, in locations)"
     if max_features is not None:
         return f"{max_features} per image"
-    if method == COLMAP_SIFT:
-        return f"{MAX_PHOTO_FEATURES} per image (COLMAP's budget, in locations)"
     budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})
     span = "-".join(str(b) for b in {budgets[0]: 0, budgets[-1]: 0}) if budgets else "?"
     return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, at most "
