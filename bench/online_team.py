@@ -8,7 +8,7 @@ same formation, alternated ``--repeat`` times (the median wall kept). Printed an
 configuration: wall time, the online stage's time, the fusion's time summed over the steps
 (``fusion.wall_s`` of each step, team start included over Zenoh), links cut by fusion, tracks
 fused, fusion bytes counted, the bytes the robots spent naming their tracks (over Zenoh, a
-detection before the fusion) and whether ``links.csv`` and ``link_steps.csv`` equal the
+detection before the fusion), each step's stage time (matching and fusion not included) and whether ``links.csv`` and ``link_steps.csv`` equal the
 simulator's with the same fusion setting. Saves ``runs/bench-online-team/results.json``.
 """
 
@@ -49,6 +49,9 @@ def _run(args: list[str], out: Path) -> dict:
     return {"wall_s": round(wall, 2),
             "online_s": round(rep["timings_s"].get("online", 0.0), 2),
             "fusion_s": round(sum(f.get("wall_s", 0.0) for f in fus), 2),
+            # each step's stage (the step record's wall_s: matching and fusion not included):
+            # over Zenoh, the step's team of robot processes
+            "stage_s": [round(s["wall_s"], 2) for s in steps],
             "fusion_cut": [f.get("cut") for f in fus],
             "fusion_tracks": [f.get("tracks") for f in fus],
             "fusion_bytes": sum(f.get("bytes", 0) for f in fus),
@@ -91,8 +94,12 @@ def main() -> int:
               f"{str(r['fusion_cut']):>12s} {str(r['fusion_tracks']):>14s} "
               f"{r['fusion_bytes'] / 1e6:9.2f} {r['naming_bytes'] / 1e6:9.2f} "
               f"{r['tables_equal_sim']}")
+    for name, r in rows.items():
+        print(f"{name:20s} each step's stage, s: {r['stage_s']}")
     z, zn, s = rows["zenoh"]["wall_s"], rows["zenoh --no-fusion"]["wall_s"], rows["sim"]["wall_s"]
-    print(f"zenoh with fusion / zenoh --no-fusion: {z / zn:.2f}; zenoh / sim: {z / s:.2f}")
+    sn = rows["sim --no-fusion"]["wall_s"]
+    print(f"zenoh with fusion / zenoh --no-fusion: {z / zn:.2f}; zenoh / sim: {z / s:.2f}; "
+          f"without fusion: {zn / sn:.2f}")
     results = {"command": ["run-formation", *common, "--no-rerun"], "repeat": args.repeat,
                "cpus": os.cpu_count(), "load_average_at_start": load, "runs": rows}
     write_json_atomic(Path(args.out) / "results.json", results)
