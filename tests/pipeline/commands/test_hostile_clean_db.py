@@ -71,7 +71,14 @@ def test_out_through_a_hard_link_to_the_input_is_refused(db, tmp_path, capsys):
 def test_read_only_location_is_aone_line_error(db, tmp_path, capsys, monkeypatch):
     from pipeline import outputs
 
-    monkeypatch.setattr(outputs.os, "access", lambda p, mode: False)
+    real = outputs.tempfile.TemporaryFile
+
+    def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
+        if str(dir) == str(tmp_path):  # the folder takes no file (read-only mount, /proc)
+            raise PermissionError(13, "Permission denied")
+        return real(*args, dir=dir, **kw)
+
+    monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db")]) == 2
     one_line_error(capsys, "cannot write in")
 

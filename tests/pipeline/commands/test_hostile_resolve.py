@@ -84,7 +84,14 @@ def test_out_naming_a_folder_is_refused(fig1, tmp_path, capsys):
 def test_read_only_location_is_aone_line_error(fig1, tmp_path, capsys, monkeypatch):
     from pipeline import outputs
 
-    monkeypatch.setattr(outputs.os, "access", lambda p, mode: False)
+    real = outputs.tempfile.TemporaryFile
+
+    def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
+        if str(dir) == str(tmp_path):  # the folder takes no file (read-only mount, /proc)
+            raise PermissionError(13, "Permission denied")
+        return real(*args, dir=dir, **kw)
+
+    monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "ro" / "o.csv")]) == 2
     one_line_error(capsys, "cannot write in")
 
