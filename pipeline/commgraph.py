@@ -154,7 +154,8 @@ def positive_k(spec: str) -> int:
     return int(k_text)
 
 
-def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarray:
+def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
+               what: str = "image") -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
 
     Parameters
@@ -167,6 +168,8 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarr
     names : list[str], (n,) — image names in camera order
     knn : callable ``K -> (E, 2) edges``, optional — needed by ``knn:K`` only: the ``K``
         most similar images of each (e.g. ``knn_edges`` of the images' features)
+    what : str — what the named nodes are, in the messages of a bad file (``robot`` for the
+        robots of a team's frame sequences)
 
     Returns
     -------
@@ -204,12 +207,12 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None) -> np.ndarr
         raise InputError(
             f"graph {spec!r}: not one of {kinds} and no such file; give a kind "
             f"or a file of 'cam_i,cam_j' lines (indices or image names)")
-    return read_comm_graph(path, names)
+    return read_comm_graph(path, names, what)
 
 
 # ----------------------------------------------------------------------------------- file
 
-def _camera(path, line_no, column, tok, names, by_name) -> int:
+def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> int:
     """One end of an edge line: an image name (when names are known) or a 0-based index."""
     if by_name is not None and tok in by_name:
         return by_name[tok]
@@ -217,8 +220,8 @@ def _camera(path, line_no, column, tok, names, by_name) -> int:
         if by_name is not None:
             n = len(names)
             shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")
-            raise InputError(f"{path}, line {line_no}: image {tok!r} is not one of the {n} "
-                             f"images ({shown})")
+            raise InputError(f"{path}, line {line_no}: {what} {tok!r} is not one of the {n} "
+                             f"{what}s ({shown})")
         raise InputError(f"{path}, line {line_no}: {column} {tok!r} is not an integer camera id; "
                          "ids are 0-based integers")
     k = int(tok)
@@ -230,11 +233,12 @@ def _camera(path, line_no, column, tok, names, by_name) -> int:
     if names is not None and k >= len(names):
         n = len(names)
         raise InputError(f"{path}, line {line_no}: camera index {k} out of range 0..{n - 1} "
-                         f"({n} images)")
+                         f"({n} {what}s)")
     return k
 
 
-def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> np.ndarray:
+def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
+                    what: str = "image") -> np.ndarray:
     """Read a communication-graph file: one edge ``cam_i,cam_j`` per line.
 
     Format: two cameras per line separated by a comma, tab or spaces (CSV double quotes for
@@ -247,6 +251,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
     ----------
     path : path of a UTF-8 text file
     names : list[str] or None — image names in camera order (also bounds the indices)
+    what : str — what a node is in messages (``image``; ``robot`` for a team's sequences)
 
     Returns
     -------
@@ -278,7 +283,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None) -> 
         if len(tokens) != 2:
             raise InputError(f"{path}, line {line_no}: {raw.strip()!r} has {len(tokens)} columns; "
                              "it must hold two cameras 'cam_i,cam_j' (indices or image names)")
-        i, j = (_camera(path, line_no, col, tok, names, by_name)
+        i, j = (_camera(path, line_no, col, tok, names, by_name, what)
                 for col, tok in zip(("cam_i", "cam_j"), tokens, strict=True))
         if i == j:
             raise InputError(f"{path}, line {line_no}: self-edge {raw.strip()!r} ({path}:{line_no}: "

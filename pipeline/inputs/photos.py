@@ -33,6 +33,7 @@ from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
     "image_paths",
+    "identical_pixels",
     "IMAGE_SUFFIXES",
     "GUESS_FOCAL_FACTOR",
     "guess_K",
@@ -380,6 +381,13 @@ def downscale(pixels: np.ndarray, K: np.ndarray, max_size: int | None):
     return pixels, _scaled_K(K, nw / w, nh / h)
 
 
+def _pixel_digest(v: View) -> bytes:
+    import hashlib
+
+    img = np.ascontiguousarray(v.image)
+    return hashlib.sha256(repr(img.shape).encode() + img.tobytes()).digest()
+
+
 def in_content_order(views: list[View]) -> list[View]:
     """``views`` sorted by the SHA-256 digest of their pixels (shape and bytes), names last.
 
@@ -388,13 +396,16 @@ def in_content_order(views: list[View]) -> list[View]:
     the robots' ids of the consistency stage, COLMAP's image ids and its tie-breaks all
     follow the camera index). Two files with identical pixels keep their name order.
     """
-    import hashlib
+    return sorted(views, key=lambda v: (_pixel_digest(v), v.name))
 
-    def key(v: View):
-        img = np.ascontiguousarray(v.image)
-        return hashlib.sha256(repr(img.shape).encode() + img.tobytes()).digest(), v.name
 
-    return sorted(views, key=key)
+def identical_pixels(views: list[View]) -> list[list[str]]:
+    """Groups of two or more names of ``views`` whose pixels are identical (as loaded), each
+    in name order: the same photograph twice matches itself perfectly and adds nothing."""
+    groups: dict[bytes, list[str]] = {}
+    for v in views:
+        groups.setdefault(_pixel_digest(v), []).append(v.name)
+    return [sorted(g) for g in groups.values() if len(g) > 1]
 
 
 def load_folder(directory: str | Path, max_size: int | None = 1600,

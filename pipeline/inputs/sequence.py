@@ -29,11 +29,13 @@ class PhotoSequence:
     steps : int
     views : list[View] — ``views[k * n_robots + i]`` = robot ``i``'s frame of step ``k``,
         named ``<sub-folder>/<file>``
+    ignored : list[str] — images directly in ``DIR`` (no robot's: not used)
     """
 
     robots: list
     steps: int
     views: list
+    ignored: list = dataclasses.field(default_factory=list)
 
     @property
     def n_robots(self) -> int:
@@ -76,4 +78,5 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     for k in range(steps):
         for p, vs in zip(subs, per_robot, strict=True):
             views.append(dataclasses.replace(vs[k], name=f"{p.name}/{vs[k].name}"))
-    return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views)
+    return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views,
+                         ignored=[p.name for p in image_paths(directory)])

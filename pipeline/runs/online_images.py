@@ -74,7 +74,12 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     check_matcher(config.matcher, config.features)  # before any work
     with timer.stage("load", config.directory):
         seq = load_sequence(config.directory, config.max_size, config.intrinsics)
-    edges = comm_graph(config.graph, seq.robots)
+    if seq.ignored:
+        timer.warn(f"{len(seq.ignored)} image(s) directly in {config.directory} belong to no "
+                   f"robot and are not used ({', '.join(seq.ignored[:3])}"
+                   f"{', ...' if len(seq.ignored) > 3 else ''}): a robot's frames go in its "
+                   "sub-folder")
+    edges = comm_graph(config.graph, seq.robots, what="robot")
     timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
     parts = graph_parts(seq.n_robots, edges)
     if parts > 1:

@@ -168,3 +168,14 @@ def test_the_diameter_bound_of_the_time_guard():
     two = np.r_[path, [[51, 52]]]  # two components: the larger diameter
     assert diameter_lower_bound(53, two) == 50
     assert diameter_lower_bound(3, np.zeros((0, 2), int)) == 0
+
+
+def test_a_graph_file_of_robots_names_robots_in_its_errors(tmp_path):
+    from pipeline.commgraph import comm_graph
+
+    f = tmp_path / "g.csv"
+    f.write_text("r0,r5\n")
+    with pytest.raises(InputError, match=r"robot 'r5' is not one of the 3 robots \(r0, r1, r2\)"):
+        comm_graph(f, ["r0", "r1", "r2"], what="robot")
+    with pytest.raises(InputError, match="image 'r5' is not one of the 3 images"):
+        comm_graph(f, ["r0", "r1", "r2"])

@@ -234,3 +234,15 @@ def test_content_order_follows_the_pixels_not_the_names():
     # identical pixels keep their name order
     twins = [View("b.png", images[0], np.eye(3)), View("a.png", images[0].copy(), np.eye(3))]
     assert [v.name for v in in_content_order(twins)] == ["a.png", "b.png"]
+
+
+def test_identical_photographs_are_found_by_their_pixels(sceaux_small, tmp_path):
+    from pipeline.inputs.photos import identical_pixels, load_folder
+
+    files = sorted(p for p in sceaux_small.iterdir() if p.suffix.lower() == ".jpg")[:3]
+    for p in files:
+        shutil.copy(p, tmp_path / p.name)
+    assert identical_pixels(load_folder(tmp_path, max_size=64)) == []
+    shutil.copy(files[1], tmp_path / "copy.jpg")   # the same photograph under another name
+    assert identical_pixels(load_folder(tmp_path, max_size=64)) == [
+        sorted(["copy.jpg", files[1].name])]

@@ -62,3 +62,11 @@ def test_a_sequence_folder_without_sequence_says_to_add_it(tmp_path):
     root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
     with pytest.raises(InputError, match="holds 2 sub-folder.*add --sequence"):
         load_folder(root, max_size=64)
+
+
+def test_images_beside_the_robot_folders_are_named_as_unused(tmp_path):
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    assert load_sequence(root, max_size=64).ignored == []
+    shutil.copy(sorted(SCEAUX.glob("*.JPG"))[4], root / "stray.jpg")
+    seq = load_sequence(root, max_size=64)
+    assert seq.ignored == ["stray.jpg"] and len(seq.views) == 4
