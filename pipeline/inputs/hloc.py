@@ -261,6 +261,14 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
                     found = (by_flat[key[:k]][0], by_flat[key[k + 1:]][0])
                     break
         if found is None:
+            missing = [p for p in parts if p not in by_flat] if len(parts) == 2 else \
+                ([] if any(key.startswith(f + "_") or key.endswith("_" + f) for f in by_flat)
+                 else [key])
+            if missing:  # --pairs cannot help: an image the features file does not hold
+                raise InputError(f"matches file: pair group {key!r} names "
+                                 f"{', '.join(repr(m) for m in missing)}, not an image of the "
+                                 "features file: are features.h5 and matches.h5 of the same "
+                                 "images?")
             raise InputError(f"matches file: pair group {key!r} does not name two images of the "
                              f"features file; give --pairs")
         if found[0] == found[1]:

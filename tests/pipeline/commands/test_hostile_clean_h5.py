@@ -188,12 +188,16 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
      "matching_scores0 of pair 'a.jpg/sub-b.jpg' have dtype |S2"),
     (lambda fd: fd.create_group("zz.jpg/yy.jpg").create_dataset("matches0",
                                                                 data=np.full(M, -1)),
-     "'zz.jpg/yy.jpg' does not name two images"),
+     "'zz.jpg/yy.jpg' names 'zz.jpg', 'yy.jpg', not an image of the features file: are "
+     "features.h5 and matches.h5 of the same images?"),
+    (lambda fd: fd.create_group("a.jpg/yy.jpg").create_dataset("matches0",
+                                                               data=np.full(M, -1)),
+     "'a.jpg/yy.jpg' names 'yy.jpg', not an image of the features file"),
     (lambda fd: fd.create_group("a.jpg/a.jpg").create_dataset("matches0", data=np.arange(M)),
      "pairs image 'a.jpg' with itself"),
 ], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
-        "scores-strings", "unknown-pair", "self-pair"])
+        "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(matches, "a") as fd:
