@@ -22,3 +22,23 @@ def sceaux_small(tmp_path_factory) -> Path:
     for name in (*SCEAUX_IMAGES, "K.txt"):
         shutil.copy(SCEAUX / name, out / name)
     return out
+
+
+@pytest.fixture
+def refuse_writes_in(monkeypatch):
+    """``refuse_writes_in(folder)``: ``folder`` then takes no new file, as a read-only mount
+    or ``/proc`` (for root too): the output check's write probe
+    (:func:`pipeline.outputs._check_writable_folder`) is refused there."""
+    from pipeline import outputs
+
+    real = outputs.tempfile.TemporaryFile
+
+    def apply(folder) -> None:
+        def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
+            if str(dir) == str(folder):
+                raise PermissionError(13, "Permission denied")
+            return real(*args, dir=dir, **kw)
+
+        monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
+
+    return apply

@@ -5,7 +5,6 @@ import os
 
 import pytest
 
-from pipeline import outputs
 from pipeline.errors import InputError
 from pipeline.outputs import check_output_files, check_run_folder, require_input_file
 
@@ -61,15 +60,8 @@ def test_symlink_fifo_folder_and_device_are_refused(tmp_path):
     assert (tmp_path / "real").read_text() == "x"
 
 
-def test_read_only_location_is_refused(tmp_path, monkeypatch):
-    real = outputs.tempfile.TemporaryFile
-
-    def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
-        if str(dir) == str(tmp_path):
-            raise PermissionError(13, "Permission denied")
-        return real(*args, dir=dir, **kw)
-
-    monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
+def test_read_only_location_is_refused(tmp_path, refuse_writes_in):
+    refuse_writes_in(tmp_path)
     with pytest.raises(InputError, match="cannot write in .*Permission denied"):
         check_output_files([("--out", tmp_path / "o.csv")])
 

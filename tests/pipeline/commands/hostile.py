@@ -46,19 +46,3 @@ def refused(capsys, argv, folder, *needles) -> str:
     line = one_line_error(capsys, *needles)
     assert tree(folder) == before
     return line
-
-
-def refuse_writes_in(monkeypatch, folder) -> None:
-    """Make ``folder`` take no new file, as a read-only mount or ``/proc`` (for root too): the
-    output check's write probe (:func:`pipeline.outputs._check_writable_folder`) is refused
-    there."""
-    from pipeline import outputs
-
-    real = outputs.tempfile.TemporaryFile
-
-    def refuse(*args, dir=None, **kw):  # noqa: A002 - TemporaryFile's own keyword
-        if str(dir) == str(folder):
-            raise PermissionError(13, "Permission denied")
-        return real(*args, dir=dir, **kw)
-
-    monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)

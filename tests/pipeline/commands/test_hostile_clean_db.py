@@ -12,7 +12,7 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import one_line_error, refuse_writes_in, refused  # noqa: E402
+from hostile import one_line_error, refused  # noqa: E402
 from test_clean_db import _db_with_planted_conflicts  # noqa: E402
 
 
@@ -68,8 +68,8 @@ def test_out_through_a_hard_link_to_the_input_is_refused(db, tmp_path, capsys):
     one_line_error(capsys, "input file")
 
 
-def test_read_only_location_is_aone_line_error(db, tmp_path, capsys, monkeypatch):
-    refuse_writes_in(monkeypatch, tmp_path)
+def test_read_only_location_is_aone_line_error(db, tmp_path, capsys, refuse_writes_in):
+    refuse_writes_in(tmp_path)
     assert main(["clean-db", str(db), "--out", str(tmp_path / "o.db")]) == 2
     one_line_error(capsys, "cannot write in")
 

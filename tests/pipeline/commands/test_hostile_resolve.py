@@ -16,7 +16,7 @@ from pipeline.__main__ import main
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1] / "consistency"))
 from consistency_graphs import random_instance  # noqa: E402
-from hostile import one_line_error, refuse_writes_in, refused, run_capped  # noqa: E402
+from hostile import one_line_error, refused, run_capped  # noqa: E402
 
 FIG1 = "cam_i,feat_i,cam_j,feat_j\n0,0,3,1\n0,0,1,0\n1,0,2,0\n3,0,2,0\n"
 
@@ -81,8 +81,8 @@ def test_out_naming_a_folder_is_refused(fig1, tmp_path, capsys):
     one_line_error(capsys, "is a folder")
 
 
-def test_read_only_location_is_aone_line_error(fig1, tmp_path, capsys, monkeypatch):
-    refuse_writes_in(monkeypatch, tmp_path)
+def test_read_only_location_is_aone_line_error(fig1, tmp_path, capsys, refuse_writes_in):
+    refuse_writes_in(tmp_path)
     assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "ro" / "o.csv")]) == 2
     one_line_error(capsys, "cannot write in")
 
