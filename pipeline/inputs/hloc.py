@@ -179,7 +179,9 @@ def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:
             continue
         parts = line.split()
         if len(parts) != 2:
-            raise InputError(f"{path}:{lineno}: {line!r} must hold two image names")
+            raise InputError(f"{path}:{lineno}: {line!r} must hold two image names separated "
+                             f"by white space ({len(parts)} found; hloc's pairs format: a name "
+                             "holding a space cannot be written there)")
         for p in parts:
             if p not in names:
                 raise InputError(f"{path}:{lineno}: image {p!r} has no keypoints in the "
