@@ -210,20 +210,6 @@ class FloodRobot:
                 if got is None or not got[k]:
                     s.resend.setdefault(j, set()).add(k)
 
-    def _fresh_for(self, s: _TrackState, j: int, fresh: np.ndarray, got) -> list:
-        """The fresh entries ``k`` (ascending) to send neighbour ``j``: not ``j``'s own, not
-        sent by ``j``, and not of a neighbour of ``j`` other than this robot whose link to
-        ``j`` is up (``j`` heard that entry from it in round 1)."""
-        f = fresh[fresh != j]
-        if got is not None:
-            f = f[~got[f]]
-        if not f.size:
-            return []
-        heard = (f != self.robot) & s.nb[j, f]
-        if s.down and heard.any():
-            heard[heard] = [(min(j, k), max(j, k)) not in s.down for k in f[heard].tolist()]
-        return f[~heard].tolist()
-
     def _decide(self, names: list, masks: list) -> None:
         rows = [self.tracks[k] for k in names]
         dec = decide(np.stack(masks), np.stack([s.est for s in rows]),
@@ -313,11 +299,12 @@ class FloodRobot:
                     out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
                 if j in s.closed:
                     continue
-                got = s.sent_by.get(j)
-                # j heard its neighbours' entries in round 1, unless the link went down:
-                # send the fresh entries j has not had, on arrays (one track, one neighbour)
-                send = [] if s.stopped else self._fresh_for(s, j, fresh, got)
-                got = np.zeros(self.n, dtype=bool) if got is None else got
+                got = s.sent_by.get(j, np.zeros(self.n, dtype=bool))
+                # j heard its neighbours' entries in round 1, unless the link went down
+                send = [] if s.stopped else [
+                    k for k in fresh if k != j and not got[k]
+                    and not (k != self.robot and s.nb[j, k]
+                             and (min(j, k), max(j, k)) not in s.down)]
                 send += sorted(k for k in s.resend.pop(j, ()) if k not in send and not got[k])
                 if s.stopped and not send:
                     continue
