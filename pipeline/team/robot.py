@@ -48,6 +48,7 @@ import os
 import resource
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -56,7 +57,12 @@ from pipeline.consistency.robot import Robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule, rule_for_network
 from pipeline.consistency.termination import robot_link_log, run_consistency_locally
 from pipeline.errors import InputError
-from pipeline.team.teamfile import LAUNCHED_AT_ENV, keypoints_file_of, links_file_of
+from pipeline.team.teamfile import (
+    LAUNCHED_AT_ENV,
+    PROFILE_DIR_ENV,
+    keypoints_file_of,
+    links_file_of,
+)
 from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
@@ -569,6 +575,22 @@ def _since_launch() -> float | None:
         return None
 
 
+def _profiled(main, team, i: int, transport):
+    """``main(team, i, transport)``, under cProfile when :data:`PROFILE_DIR_ENV` names a
+    folder (its statistics written there as ``<team>-<i>-<pid>.pstats``, also on failure)."""
+    folder = os.environ.get(PROFILE_DIR_ENV)
+    if not folder:
+        return main(team, i, transport)
+    import cProfile
+
+    prof = cProfile.Profile()
+    try:
+        return prof.runcall(main, team, i, transport)
+    finally:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        prof.dump_stats(str(Path(folder) / f"{team.name}-{i}-{os.getpid()}.pstats"))
+
+
 def run_robot_process(team, i: int, result_path=None) -> int:
     """The ``robot`` command: connect, handshake, run, publish; returns an exit code."""
     startup = {"entered": _since_launch()}
@@ -587,7 +609,7 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         startup["handshake_done"] = _since_launch()
         _log(i, f"all {len(transport.neighbours)} neighbours heard after {waited:.2f} s")
         try:
-            header, arrays = robot_main(team, i, transport)
+            header, arrays = _profiled(robot_main, team, i, transport)
         except Exception as exc:
             transport.status(f"failed: {exc}")
             raise

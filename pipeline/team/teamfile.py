@@ -119,6 +119,9 @@ MATCHERS = ("opencv", "colmap")
 #: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
 #: which it started a robot process, so the robot can report how long its start took
 LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
+#: environment variable naming a folder: a robot process then runs its robot under cProfile
+#: and writes ``<team>-<id>-<pid>.pstats`` there (``bench/team_profile.py`` reads them)
+PROFILE_DIR_ENV = "FORMATION_MATCH_PROFILE_DIR"
 #: longest round / start timeout a team file may ask for (one day): beyond it a robot would
 #: wait for a neighbour that never answers for ever, in practice
 MAX_TIMEOUT_S = 86400.0
