@@ -77,7 +77,7 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message, Transport
 
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common_features",
-           "distinct_cameras", "one_point", "start_evidence",
+           "node_cameras", "distinct_cameras", "one_point", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
            "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "set_geometry",
@@ -236,6 +236,17 @@ def common_features(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarra
     z = adj[pos] % N                                   # the neighbours of each link's first end
     common = isin_sorted(z * N + ib[e], adj)           # ... that are neighbours of its second
     return e[common], nodes[z[common]]
+
+
+def node_cameras(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray):
+    """``cam_of``: ``(k,) ids -> (k,) cameras`` for the features that end the links ``(a, b)``
+    (their cameras ``cam_a``, ``cam_b``), on arrays."""
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    nodes = np.unique(np.r_[a, b])
+    cam = np.empty(nodes.size, dtype=np.int64)
+    cam[np.searchsorted(nodes, a)] = cam_a
+    cam[np.searchsorted(nodes, b)] = cam_b
+    return lambda ids: cam[np.searchsorted(nodes, np.asarray(ids, np.int64))]
 
 
 def distinct_cameras(e: np.ndarray, cam: np.ndarray, E: int) -> np.ndarray:
@@ -529,12 +540,8 @@ def set_problem(bundles: dict) -> tuple:
     a, b, w = key // span, key % span, w[first]
     cam_a = np.array([cam[g] for g in a.tolist()], dtype=np.int64)
     cam_b = np.array([cam[g] for g in b.tolist()], dtype=np.int64)
-
-    def cam_of(ids):
-        return np.array([cam[int(g)] for g in ids], dtype=np.int64)
-
     kp, P = set_geometry(bundles)
-    tau = triangle_support(a, b, cam_of, kp, P)
+    tau = triangle_support(a, b, node_cameras(a, b, cam_a, cam_b), kp, P)
     w = w + TRIANGLE_WEIGHT * support_term(tau, shared_cameras(a, b, cam_a, cam_b), False)
     return a, b, cam_a, cam_b, w, kp, P
 

@@ -73,11 +73,10 @@ from pipeline.consistency.evidence import (
     TRIANGLE_WEIGHT,
     EvidenceState,
     bundle_nbytes,
-    common_features,
     cut_own_side,
-    distinct_cameras,
     evidence_cut,
     finish_evidence,
+    node_cameras,
     own_set_links,
     own_sets,
     set_geometry,
@@ -309,7 +308,9 @@ class _SetProblems:
         self.local = w
         self.shared = shared_cameras(self.a, self.b, self.cam_a, self.cam_b)
         self.w = w + TRIANGLE_WEIGHT * support_term(
-            _triangles(self.a, self.b, self.cam_a, self.cam_b), self.shared, False)
+            triangle_support(self.a, self.b,
+                             node_cameras(self.a, self.b, self.cam_a, self.cam_b)),
+            self.shared, False)
 
     def of(self, label: int) -> slice:
         k = int(np.searchsorted(self.label, label))
@@ -321,26 +322,9 @@ class _SetProblems:
         if keypoints is None or projections is None:
             return self.w[e]
         a, b = self.a[e], self.b[e]
-        cam = dict(zip(np.r_[a, b].tolist(), np.r_[self.cam_a[e], self.cam_b[e]].tolist(),
-                       strict=True))
-
-        def cam_of(ids):
-            return np.array([cam[int(g)] for g in ids], dtype=np.int64)
-
-        tau = triangle_support(a, b, cam_of, keypoints, projections)
+        tau = triangle_support(a, b, node_cameras(a, b, self.cam_a[e], self.cam_b[e]),
+                               keypoints, projections)
         return self.local[e] + TRIANGLE_WEIGHT * support_term(tau, self.shared[e], False)
-
-
-def _triangles(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
-    """Triangle support of every link ``(a, b)`` (each once): distinct cameras of the features
-    linked to both ends, ``(E,)`` int64 (:func:`.evidence.triangle_support` without poses)."""
-    if a.size == 0:
-        return _EMPTY
-    e, z = common_features(a, b)
-    nodes = np.unique(np.r_[a, b])
-    cam = np.empty(nodes.size, dtype=np.int64)
-    cam[np.searchsorted(nodes, a)], cam[np.searchsorted(nodes, b)] = cam_a, cam_b
-    return distinct_cameras(e, cam[np.searchsorted(nodes, z)], a.size)
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,

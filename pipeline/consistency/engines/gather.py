@@ -167,6 +167,7 @@ def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
         TRIANGLE_WEIGHT,
         common_features,
         distinct_cameras,
+        node_cameras,
         one_point,
     )
 
@@ -189,11 +190,7 @@ def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
                                  np.asarray(projections(ids.ravel()), np.float64)
                                  .reshape(-1, 3, 3, 4), tol)
     e, z = e[ok], z[ok]
-    nodes = np.unique(np.r_[lo, hi])
-    cam = np.empty(nodes.size, np.int64)
-    cam[np.searchsorted(nodes, lo)] = np.where(lo == a, cam_a, cam_b)
-    cam[np.searchsorted(nodes, hi)] = np.where(lo == a, cam_b, cam_a)
-    tau = distinct_cameras(e, cam[np.searchsorted(nodes, z)], E)
+    tau = distinct_cameras(e, node_cameras(a, b, cam_a, cam_b)(z), E)
     shared = shared_cameras(a, b, cam_a, cam_b)
     return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
 
