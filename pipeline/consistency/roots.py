@@ -174,11 +174,10 @@ def start_roots(robot: Robot, send) -> int:
         st.own.setdefault(s, {})[robot.gid0 + f] = bundle
         st.nbrs.setdefault(s, set()).update(robot.link_nbr[link[on]].tolist())
     st.nbrs = {s: sorted(v) for s, v in st.nbrs.items()}
-    lists = robot.setlists
-    ptr = np.r_[0, np.cumsum(np.bincount(lists.r, minlength=robot.m))]
+    ptr = np.r_[0, np.cumsum(count)]  # each own feature's member list in setlists.ids
     root = {}  # each set's root feature, from the member list every member holds alike
     for f in np.flatnonzero(label >= 0).tolist():
-        root.setdefault(int(label[f]), root_of(lists.ids[ptr[f]:ptr[f + 1]]))
+        root.setdefault(int(label[f]), root_of(robot.setlists.ids[ptr[f]:ptr[f + 1]]))
     rooted = [s for s in st.own if root[s] in st.own[s]]  # the robot of the root feature
     out: dict[int, list] = {}
     for s in rooted:
