@@ -34,6 +34,7 @@ from pipeline.validate import check_focal, focal_px_ok
 __all__ = [
     "image_paths",
     "identical_pixels",
+    "pixel_digests",
     "IMAGE_SUFFIXES",
     "GUESS_FOCAL_FACTOR",
     "guess_K",
@@ -381,30 +382,38 @@ def downscale(pixels: np.ndarray, K: np.ndarray, max_size: int | None):
     return pixels, _scaled_K(K, nw / w, nh / h)
 
 
-def _pixel_digest(v: View) -> bytes:
+def pixel_digests(views: list[View]) -> list[bytes]:
+    """The SHA-256 digest of each view's pixels (shape and bytes)."""
     import hashlib
 
-    img = np.ascontiguousarray(v.image)
-    return hashlib.sha256(repr(img.shape).encode() + img.tobytes()).digest()
+    out = []
+    for v in views:
+        img = np.ascontiguousarray(v.image)
+        out.append(hashlib.sha256(repr(img.shape).encode() + img.tobytes()).digest())
+    return out
 
 
-def in_content_order(views: list[View]) -> list[View]:
+def in_content_order(views: list[View], digests: list[bytes] | None = None) -> list[View]:
     """``views`` sorted by the SHA-256 digest of their pixels (shape and bytes), names last.
 
     The camera index of a photograph is then a property of what it shows, not of its file
     name: renaming the files of a folder permutes nothing downstream (matching directions,
     the robots' ids of the consistency stage, COLMAP's image ids and its tie-breaks all
     follow the camera index). Two files with identical pixels keep their name order.
+    ``digests``: :func:`pixel_digests` of ``views``, when the caller has them.
     """
-    return sorted(views, key=lambda v: (_pixel_digest(v), v.name))
+    digests = pixel_digests(views) if digests is None else digests
+    order = sorted(range(len(views)), key=lambda k: (digests[k], views[k].name))
+    return [views[k] for k in order]
 
 
-def identical_pixels(views: list[View]) -> list[list[str]]:
+def identical_pixels(views: list[View], digests: list[bytes] | None = None) -> list[list[str]]:
     """Groups of two or more names of ``views`` whose pixels are identical (as loaded), each
-    in name order: the same photograph twice matches itself perfectly and adds nothing."""
+    in name order: the same photograph twice matches itself perfectly and adds nothing.
+    ``digests``: :func:`pixel_digests` of ``views``, when the caller has them."""
     groups: dict[bytes, list[str]] = {}
-    for v in views:
-        groups.setdefault(_pixel_digest(v), []).append(v.name)
+    for v, d in zip(views, pixel_digests(views) if digests is None else digests, strict=True):
+        groups.setdefault(d, []).append(v.name)
     return [sorted(g) for g in groups.values() if len(g) > 1]
 
 

@@ -334,15 +334,21 @@ def _photo_defaults(config: ImagesConfig) -> ImagesConfig:
 def _load(config: ImagesConfig, timer: StageTimer):
     """The photographs and the comm graph (``None`` for ``knn:K``, chosen after the features)."""
     from pipeline.commgraph import comm_graph
-    from pipeline.inputs.photos import identical_pixels, in_content_order, load_folder
+    from pipeline.inputs.photos import (
+        identical_pixels,
+        in_content_order,
+        load_folder,
+        pixel_digests,
+    )
 
     with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
         intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
             else Path(config.intrinsics)
         loaded = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
         # cameras in the order of their pixels' digests: file names change nothing
-        views = in_content_order(loaded)
-        for same in identical_pixels(views):
+        digests = pixel_digests(loaded)
+        views = in_content_order(loaded, digests)
+        for same in identical_pixels(loaded, digests):
             timer.warn(f"images {', '.join(same)} have identical pixels: the same photograph "
                        "twice matches itself and adds nothing; keep one")
         by_similarity = str(config.graph).startswith("knn:")
