@@ -65,23 +65,24 @@ def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None
                           "fault-tolerant Alg. 1 runs instead)")
 
 
+#: the defaults of :func:`add_online_options` (``--hold``'s: ``window - 1``, by the job)
+ONLINE_DEFAULTS = {"window": 3, "batch_every": 0}
+
+
 def add_online_options(g, flag: str) -> None:
     """``--window``, ``--hold`` and ``--batch-every`` of an online job (``flag`` the option that
     turns it on, named in the help): :class:`pipeline.consistency.engines.online.
     OnlineAssociation`'s window and hold, and the batch reruns beside it."""
     g.add_argument("--window", type=int, default=None,
                    help=f"with {flag}: steps of frames a robot holds and matches against "
-                        "(default 3)")
+                        f"(default {ONLINE_DEFAULTS['window']})")
     g.add_argument("--hold", type=int, default=None,
                    help=f"with {flag}: steps a frame's links stay open after it leaves the "
                         "matching window (default window - 1; 0: final at once)")
     g.add_argument("--batch-every", type=int, default=None,
                    help=f"with {flag}: also run the batch stage from scratch on all links "
-                        "every K steps (default 0: at the last step only)")
-
-
-#: the defaults of :func:`add_online_options` (``--hold``'s: ``window - 1``, by the job)
-ONLINE_DEFAULTS = {"window": 3, "batch_every": 0}
+                        f"every K steps (default {ONLINE_DEFAULTS['batch_every']}: at the last "
+                        "step only)")
 
 
 def refuse_online_options(args, flag: str) -> None:
