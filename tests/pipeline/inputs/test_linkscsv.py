@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from pipeline.errors import InputError
 from pipeline.inputs.linkscsv import (
@@ -96,3 +98,50 @@ def test_huge_ids_are_named_not_overflowing(tmp_path):
     """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
     with pytest.raises(InputError, match="feat_j .* is too large"):
         read_links_csv(write(tmp_path, "0,0,1,99999999999999999999\n"))
+
+
+_FIELDS = ["0", "1", "2", "3", "7", "+4", "12", "-1", "1.5", "", "1e3", " 2", "2147483647",
+           "2147483646", "99999999999999999999", "0.25", "1e999", "x", '"3"']
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.lists(st.lists(st.sampled_from(_FIELDS), min_size=3, max_size=6), max_size=8),
+       header=st.sampled_from(["", "cam_i,feat_i,cam_j,feat_j\n",
+                               "cam_i,feat_i,cam_j,feat_j,quality\n", "CAM_I, feat_i,cam_j,feat_j\n",
+                               "\ufeffcam_i,feat_i,cam_j,feat_j\n", "cam_i,cam_j,feat_i,feat_j\n"]),
+       end=st.sampled_from(["\n", "\r\n"]), last=st.booleans())
+def test_plain_files_read_at_once_as_row_by_row(tmp_path, monkeypatch, rows, header, end, last):
+    """The NumPy reading of a plain file (``_read_plain``) gives what the row reader gives:
+    the same links, lines and quality, or the row reader's error when a row is bad."""
+    import pipeline.inputs.linkscsv as lc
+
+    text = header.replace("\n", end) + end.join(",".join(r) for r in rows) + (end if last else "")
+    p = tmp_path / "in.csv"
+    p.write_bytes(text.encode())
+
+    def read(fast):
+        with monkeypatch.context() as m:
+            if not fast:
+                m.setattr(lc, "_read_plain", lambda path: None)
+            try:
+                lf = lc.read_links_csv(p)
+            except InputError as exc:
+                return str(exc)
+        q = None if lf.links.quality is None else lf.links.quality.tolist()
+        return ([c.tolist() for c in (lf.links.cam_i, lf.links.feat_i, lf.links.cam_j,
+                                      lf.links.feat_j)], q, lf.line.tolist(), lf.has_quality)
+
+    assert read(True) == read(False)
+
+
+def test_a_large_plain_file_is_read_at_once(tmp_path, monkeypatch):
+    """A plain file of many rows takes the NumPy path (the row reader is not called)."""
+    import pipeline.inputs.linkscsv as lc
+
+    n = 2000
+    rows = "\n".join(f"{c},{f},{c + 1},{(f * 7) % n},{f / n}" for c in range(3) for f in range(n))
+    p = write(tmp_path, "cam_i,feat_i,cam_j,feat_j,quality\n" + rows + "\n")
+    monkeypatch.setattr(lc, "_rows", lambda path: pytest.fail("row reader used"))
+    lf = lc.read_links_csv(p)
+    assert len(lf.links) == 3 * n and lf.line[[0, -1]].tolist() == [2, 3 * n + 1]
+    assert lf.links.quality[5] == 5 / n
