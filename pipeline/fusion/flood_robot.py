@@ -18,7 +18,7 @@ from pipeline.fusion.decision import Decision, decide
 from pipeline.fusion.protocol import WIRE_DTYPES, index_bytes, to_wire
 from pipeline.transport import HEADER_BYTES
 
-__all__ = ["entry_bytes", "message_bytes", "tombstone_bytes", "FloodEntry", "FloodMessage",
+__all__ = ["entry_bytes", "message_bytes", "tombstone_bytes", "FloodEntries", "FloodMessage",
            "FloodRobot", "robot_step"]
 
 
@@ -40,25 +40,28 @@ def message_bytes(n_open, n_est, n_relay, n, K, d, wire):
 
 
 @dataclass
-class FloodEntry:
-    """One robot's entry of one track (what is flooded).
+class FloodEntries:
+    """Robots' entries of one track (what is flooded), one row per entry.
 
     Attributes
     ----------
-    robot : int
-    neighbours : ndarray, (n,) bool — its neighbours in the track's observer graph
-    estimated : bool
-    draws : ndarray, (K,) — ``-inf`` when not estimated
-    x : ndarray, (d,) — wire image (zeros when not estimated)
-    info : ndarray, (d, d) — wire image of ``Λ⁻¹`` (zeros when not estimated)
+    robot : ndarray, (E,) int64 — distinct robots
+    neighbours : ndarray, (E, n) bool — each one's neighbours in the track's observer graph
+    estimated : ndarray, (E,) bool
+    draws : ndarray, (E, K) — ``-inf`` when not estimated
+    x : ndarray, (E, d) — wire image (zeros when not estimated)
+    info : ndarray, (E, d, d) — wire image of ``Λ⁻¹`` (zeros when not estimated)
     """
 
-    robot: int
+    robot: np.ndarray
     neighbours: np.ndarray
-    estimated: bool
+    estimated: np.ndarray
     draws: np.ndarray
     x: np.ndarray
     info: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.robot.shape[0])
 
 
 def tombstone_bytes(n: int, n_tombstones: int) -> int:
@@ -78,12 +81,12 @@ class FloodMessage:
     src: int
     dst: int
     round: int
-    tracks: dict = field(default_factory=dict)   # name -> (last: bool, [FloodEntry])
+    tracks: dict = field(default_factory=dict)   # name -> (last: bool, FloodEntries)
     down: dict = field(default_factory=dict)     # name -> [(a, b)] lost links, a < b
 
     def nbytes(self, n: int, K: int, d: int, wire: str) -> int:
         """Size on the wire (module docstring)."""
-        n_est = sum(e.estimated for _, ents in self.tracks.values() for e in ents)
+        n_est = sum(int(ents.estimated.sum()) for _, ents in self.tracks.values())
         n_all = sum(len(ents) for _, ents in self.tracks.values())
         size = int(message_bytes(len(self.tracks), n_est, n_all - n_est, n, K, d, wire))
         n_tomb = sum(len(v) for v in self.down.values())
@@ -147,26 +150,28 @@ class FloodRobot:
                 draws=np.full((n, K), -np.inf), x=np.zeros((n, d)), info=np.zeros((n, d, d)),
                 sent_by={}, closed=set(), gone=np.zeros(n, dtype=bool))
             est = bool(tr["estimated"])
-            self._learn(s, FloodEntry(self.robot, s.neighbours, est,
-                                      np.asarray(tr["draws"], np.float64) if est
-                                      else np.full(K, -np.inf),
-                                      to_wire(np.asarray(tr["x"]), wire) if est else np.zeros(d),
-                                      to_wire(np.asarray(tr["info"]), wire) if est
-                                      else np.zeros((d, d))), 0)
+            self._learn(s, FloodEntries(
+                np.array([self.robot], dtype=np.int64), s.neighbours[None].copy(),
+                np.array([est]),
+                (np.asarray(tr["draws"], np.float64) if est else np.full(K, -np.inf))[None],
+                (to_wire(np.asarray(tr["x"]), wire) if est else np.zeros(d))[None],
+                (to_wire(np.asarray(tr["info"]), wire) if est else np.zeros((d, d)))[None]), 0)
             self.tracks[name] = s
 
     @staticmethod
-    def _learn(s: _TrackState, e: FloodEntry, t: int) -> bool:
-        if s.known[e.robot]:
-            return False
-        k = e.robot
-        s.known[k], s.learned[k], s.nb[k], s.est[k] = True, t, e.neighbours, e.estimated
-        s.draws[k], s.x[k], s.info[k] = e.draws, e.x, e.info
-        return True
+    def _learn(s: _TrackState, e: FloodEntries, t: int) -> None:
+        """Keep the entries of robots not known yet (rows of ``e`` are distinct robots)."""
+        new = ~s.known[e.robot]
+        if not new.any():
+            return
+        k = e.robot[new]
+        s.known[k], s.learned[k], s.nb[k], s.est[k] = True, t, e.neighbours[new], e.estimated[new]
+        s.draws[k], s.x[k], s.info[k] = e.draws[new], e.x[new], e.info[new]
 
-    def _entry(self, s: _TrackState, k: int) -> FloodEntry:
-        return FloodEntry(int(k), s.nb[k].copy(), bool(s.est[k]), s.draws[k].copy(),
-                          s.x[k].copy(), s.info[k].copy())
+    @staticmethod
+    def _entries(s: _TrackState, k: np.ndarray) -> FloodEntries:
+        """The held entries of robots ``k`` (copies)."""
+        return FloodEntries(k, s.nb[k], s.est[k], s.draws[k], s.x[k], s.info[k])
 
     @property
     def finished(self) -> bool:
@@ -242,10 +247,9 @@ class FloodRobot:
             for name, (last, entries) in msg.tracks.items():
                 s = self.tracks[name]
                 got = s.sent_by.setdefault(msg.src, np.zeros(self.n, dtype=bool))
-                for e in entries:
-                    got[e.robot] = True
-                    if not s.done:
-                        self._learn(s, e, t_prev)
+                got[entries.robot] = True
+                if not s.done:
+                    self._learn(s, entries, t_prev)
                 if last:
                     s.closed.add(msg.src)
             for name, links in getattr(msg, "down", {}).items():
@@ -291,25 +295,37 @@ class FloodRobot:
             if s.stopped and not news and not s.resend:
                 continue
             fresh = np.flatnonzero(s.learned == t - 1)
-            for j in np.flatnonzero(s.neighbours & ~s.gone):
-                j = int(j)
-                tomb = [e for e in news if j not in e
-                        and e not in s.down_sent_by.get(j, ())]
-                if tomb:
-                    out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
+            other = fresh != self.robot
+            for j in np.flatnonzero(s.neighbours & ~s.gone).tolist():
+                if news:
+                    tomb = [e for e in news if j not in e
+                            and e not in s.down_sent_by.get(j, ())]
+                    if tomb:
+                        out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
                 if j in s.closed:
                     continue
-                got = s.sent_by.get(j, np.zeros(self.n, dtype=bool))
-                # j heard its neighbours' entries in round 1, unless the link went down
-                send = [] if s.stopped else [
-                    k for k in fresh if k != j and not got[k]
-                    and not (k != self.robot and s.nb[j, k]
-                             and (min(j, k), max(j, k)) not in s.down)]
-                send += sorted(k for k in s.resend.pop(j, ()) if k not in send and not got[k])
-                if s.stopped and not send:
+                got = s.sent_by.get(j)
+                if s.stopped:
+                    send = fresh[:0]
+                else:
+                    # j heard its neighbours' entries in round 1, unless the link went down
+                    heard = other & s.nb[j, fresh]
+                    if s.down and heard.any():
+                        heard[heard] = [(min(j, k), max(j, k)) not in s.down
+                                        for k in fresh[heard].tolist()]
+                    keep = (fresh != j) & ~heard
+                    if got is not None:
+                        keep &= ~got[fresh]
+                    send = fresh[keep]
+                again = s.resend.pop(j, None)
+                if again:
+                    more = sorted(k for k in again
+                                  if k not in send and (got is None or not got[k]))
+                    send = np.concatenate([send, np.asarray(more, dtype=np.int64)])
+                if s.stopped and not send.size:
                     continue
                 msg = out.setdefault(j, FloodMessage(self.robot, j, t))
-                msg.tracks[name] = (bool(s.done), [self._entry(s, k) for k in send])
+                msg.tracks[name] = (bool(s.done), self._entries(s, send))
             s.resend.clear()
             if s.done:
                 s.stopped = True

@@ -29,20 +29,27 @@ def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
     has seen a lost link, when tombstones may reopen a track the other end considers closed."""
     names = sorted(msg.tracks)
     last = np.array([bool(msg.tracks[b][0]) for b in names], dtype=bool)
-    ents = [e for b in names for e in msg.tracks[b][1]]
-    count = np.array([len(msg.tracks[b][1]) for b in names], dtype=np.int64)
-    E = [e for e in ents if e.estimated]
+    blocks = [msg.tracks[b][1] for b in names]
+    count = np.array([len(e) for e in blocks], dtype=np.int64)
     dt = WIRE_DTYPES[wire]
-    K = len(E[0].draws) if E else 0
     ib = np.dtype(f"u{index_bytes(n)}")
+    if blocks:
+        robot = np.concatenate([e.robot for e in blocks])
+        nbrs = np.concatenate([e.neighbours for e in blocks]).reshape(-1, n)
+        est = np.concatenate([e.estimated for e in blocks]).astype(bool)
+        K = blocks[0].draws.shape[1]
+        draws = np.concatenate([e.draws for e in blocks]).reshape(-1, K)[est]
+        x = np.concatenate([e.x for e in blocks]).reshape(-1, 3)[est]
+        info = np.concatenate([e.info for e in blocks]).reshape(-1, 3, 3)[est][:, TRIU[0], TRIU[1]]
+    else:
+        robot, nbrs, est = np.zeros(0, np.int64), np.zeros((0, n), bool), np.zeros(0, bool)
+        draws, x, info = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((0, 6))
+    if not est.any():
+        draws = np.zeros((0, 0))
     out = {"count": count.astype(np.dtype(f"u{index_bytes(n + 1)}")), "last": np.packbits(last),
-           "robot": np.array([e.robot for e in ents], dtype=ib),
-           "nbrs": np.packbits(np.array([e.neighbours for e in ents], dtype=bool).reshape(
-               len(ents), n), axis=1),
-           "flags": np.array([bool(e.estimated) for e in ents], dtype=np.uint8),
-           "draws": np.array([e.draws for e in E], dtype=np.float64).reshape(len(E), K),
-           "x": np.array([e.x for e in E], dtype=dt).reshape(len(E), 3),
-           "info": np.array([np.asarray(e.info)[TRIU] for e in E], dtype=dt).reshape(len(E), 6)}
+           "robot": robot.astype(ib), "nbrs": np.packbits(nbrs, axis=1),
+           "flags": est.astype(np.uint8), "draws": draws.astype(np.float64),
+           "x": x.astype(dt), "info": info.astype(dt)}
     if named:
         out["names"] = np.asarray(names, dtype=np.int64)
     tomb = [(b, a_, b_) for b in sorted(msg.down) for a_, b_ in msg.down[b]]
@@ -57,7 +64,7 @@ def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
 def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int, shared=()):
     """Inverse of :func:`encode_flood`, given the names of the open tracks (in order) unless
     the message names them, and the link's shared tracks (sorted names, for tombstones)."""
-    from pipeline.fusion.flood_robot import FloodEntry, FloodMessage
+    from pipeline.fusion.flood_robot import FloodEntries, FloodMessage
 
     if "names" in p:
         names = [int(b) for b in p["names"]]
@@ -70,25 +77,23 @@ def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int
     est = p["flags"].astype(bool)
     nbrs = np.unpackbits(p["nbrs"], axis=1, count=n).astype(bool) if E else \
         np.zeros((0, n), bool)
-    pos = np.cumsum(est) - 1
+    robot = p["robot"].astype(np.int64)
+    draws = np.full((E, K), -np.inf)
+    x, info = np.zeros((E, 3)), np.zeros((E, 3, 3))
+    if est.any():
+        draws[est] = p["draws"].astype(np.float64)
+        x[est] = p["x"].astype(np.float64)
+        tri = p["info"].astype(np.float64)
+        full = np.zeros((tri.shape[0], 3, 3))
+        full[:, TRIU[0], TRIU[1]] = tri
+        full[:, TRIU[1], TRIU[0]] = tri
+        info[est] = full
     msg = FloodMessage(src, dst, round_)
-    k = 0
-    for b, lb, c in zip(names, last, count, strict=True):
-        entries = []
-        for _ in range(int(c)):
-            if est[k]:
-                e = int(pos[k])
-                info = np.zeros((3, 3))
-                info[TRIU] = p["info"][e].astype(np.float64)
-                info[TRIU[1], TRIU[0]] = p["info"][e].astype(np.float64)
-                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], True,
-                                          p["draws"][e].astype(np.float64),
-                                          p["x"][e].astype(np.float64), info))
-            else:
-                entries.append(FloodEntry(int(p["robot"][k]), nbrs[k], False,
-                                          np.full(K, -np.inf), np.zeros(3), np.zeros((3, 3))))
-            k += 1
-        msg.tracks[int(b)] = (bool(lb), entries)
+    ends = np.cumsum(count)
+    for b, lb, a, z in zip(names, last.tolist(), (ends - count).tolist(), ends.tolist(),
+                           strict=True):
+        msg.tracks[int(b)] = (bool(lb), FloodEntries(robot[a:z], nbrs[a:z], est[a:z],
+                                                     draws[a:z], x[a:z], info[a:z]))
     shared = list(shared)
     for t, (a_, b_) in zip(p.get("tomb_track", []), p.get("tomb_ends", np.zeros((0, 2))),
                            strict=True):

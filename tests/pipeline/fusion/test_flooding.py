@@ -193,7 +193,7 @@ def test_robot_step_returns_a_new_state_and_leaves_the_old_one():
     assert r.round == 0 and new.round == 1
     assert [(m.src, m.dst, list(m.tracks)) for m in out] == [(0, 1, [7])]
     last, entries = out[0].tracks[7]
-    assert not last and [e.robot for e in entries] == [0]
+    assert not last and entries.robot.tolist() == [0]
 
 
 def _robots(n, observes, est, ne, x, info, draws, K, wire="float32", c=1):
