@@ -75,53 +75,60 @@ def tombstone_bytes(n: int, n_tombstones: int) -> int:
 
 @dataclass
 class FloodMessage:
-    """One message of a logical round from ``src`` to ``dst``: per open track (by name) its
-    *last* flag and its entries; per track with news of lost links, its tombstones."""
+    """One message of a logical round from ``src`` to ``dst``: its open tracks (names, each
+    with its *last* flag and its entry count) and their entries, track after track; per track
+    with news of lost links, its tombstones."""
 
     src: int
     dst: int
     round: int
-    tracks: dict = field(default_factory=dict)   # name -> (last: bool, FloodEntries)
-    down: dict = field(default_factory=dict)     # name -> [(a, b)] lost links, a < b
+    names: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))   # (T,) open tracks
+    last: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))        # (T,)
+    count: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))   # (T,) entries each
+    entries: FloodEntries | None = None                  # (Σ count,) rows, track after track
+    down: dict = field(default_factory=dict)             # name -> [(a, b)] lost links, a < b
+
+    @property
+    def tracks(self) -> dict:
+        """``name -> (last, FloodEntries)`` of the open tracks (a reader's view)."""
+        ends = np.cumsum(self.count)
+        e = self.entries
+        return {int(b): (bool(lb), FloodEntries(e.robot[a:z], e.neighbours[a:z], e.estimated[a:z],
+                                                 e.draws[a:z], e.x[a:z], e.info[a:z]))
+                for b, lb, a, z in zip(self.names.tolist(), self.last.tolist(),
+                                       (ends - self.count).tolist(), ends.tolist(), strict=True)}
 
     def nbytes(self, n: int, K: int, d: int, wire: str) -> int:
         """Size on the wire (module docstring)."""
-        n_est = sum(int(ents.estimated.sum()) for _, ents in self.tracks.values())
-        n_all = sum(len(ents) for _, ents in self.tracks.values())
-        size = int(message_bytes(len(self.tracks), n_est, n_all - n_est, n, K, d, wire))
+        n_all = 0 if self.entries is None else len(self.entries)
+        n_est = 0 if self.entries is None else int(self.entries.estimated.sum())
+        size = int(message_bytes(len(self.names), n_est, n_all - n_est, n, K, d, wire))
         n_tomb = sum(len(v) for v in self.down.values())
         if n_tomb:
             size = (size or HEADER_BYTES) + tombstone_bytes(n, n_tomb)
         return size
 
 
-@dataclass
-class _TrackState:
-    neighbours: np.ndarray          # (n,) bool, own neighbours in the track
-    known: np.ndarray               # (n,) bool
-    learned: np.ndarray             # (n,) int, round first heard (-1: not yet)
-    nb: np.ndarray                  # (n, n) bool, neighbour lists held
-    est: np.ndarray                 # (n,) bool
-    draws: np.ndarray               # (n, K)
-    x: np.ndarray                   # (n, d)
-    info: np.ndarray                # (n, d, d)
-    sent_by: dict                   # neighbour -> (n,) bool entries it sent me
-    closed: set                     # neighbours that sent their last message
-    gone: np.ndarray                # (n,) bool, neighbours declared lost
-    down: dict = field(default_factory=dict)          # lost link (a, b), a < b -> round learned
-    down_sent_by: dict = field(default_factory=dict)  # neighbour -> set of links it sent me
-    resend: dict = field(default_factory=dict)        # neighbour -> entries to send it again
-    last_down: int = 0              # round the latest lost link was learned
-    done: bool = False
-    stopped: bool = False
-    decided_round: int = -1
-    known_at_decision: np.ndarray | None = None
-    revisions: int = 0              # decisions taken again after a lost link shrank the set
-    forced: bool = False            # decided by the round cap, ball not closed
+class _TrackView:
+    """What a robot holds about one of its tracks (read-only view of its rows)."""
+
+    def __init__(self, robot: FloodRobot, b: int):
+        self._r, self._b = robot, b
+
+    def __getattr__(self, key):
+        value = getattr(self._r, "_" + key)[self._b]
+        if key == "known_at_decision" and not self._r._done[self._b]:
+            return None
+        return value.copy() if isinstance(value, np.ndarray) else value.item() \
+            if isinstance(value, np.generic) else value
 
 
 class FloodRobot:
     """One robot's exact fusion: its own state and, per logical round, :meth:`step`.
+
+    The state of all its tracks is held in arrays with one row per track (in name order), so
+    a round takes in, decides and relays every track at once; the tracks touched by lost
+    links (tombstones, entries sent again) are handled track by track.
 
     Parameters
     ----------
@@ -140,43 +147,66 @@ class FloodRobot:
         self.robot, self.n, self.K, self.d, self.wire = int(robot), int(n), int(K), int(d), wire
         self.c, self.thr = int(c), float(thr)
         self.round = 0
-        self.tracks: dict = {}
         self.decisions: dict = {}
-        for name, tr in tracks.items():
-            s = _TrackState(
-                neighbours=np.asarray(tr["neighbours"], dtype=bool).copy(),
-                known=np.zeros(n, dtype=bool), learned=np.full(n, -1, dtype=np.int64),
-                nb=np.zeros((n, n), dtype=bool), est=np.zeros(n, dtype=bool),
-                draws=np.full((n, K), -np.inf), x=np.zeros((n, d)), info=np.zeros((n, d, d)),
-                sent_by={}, closed=set(), gone=np.zeros(n, dtype=bool))
+        names = sorted(int(b) for b in tracks)
+        B = len(names)
+        self.names = np.asarray(names, dtype=np.int64)
+        self._neighbours = np.zeros((B, n), dtype=bool)
+        self._known = np.zeros((B, n), dtype=bool)
+        self._learned = np.full((B, n), -1, dtype=np.int64)
+        self._nb = np.zeros((B, n, n), dtype=bool)
+        self._est = np.zeros((B, n), dtype=bool)
+        self._draws = np.full((B, n, K), -np.inf)
+        self._x = np.zeros((B, n, d))
+        self._info = np.zeros((B, n, d, d))
+        self._got = np.zeros((B, n, n), dtype=bool)     # [b, j, k]: neighbour j sent k's entry
+        self._closed = np.zeros((B, n), dtype=bool)     # neighbours that sent their last
+        self._gone = np.zeros((B, n), dtype=bool)       # neighbours declared lost
+        self._down = [{} for _ in range(B)]             # lost link (a, b), a < b -> round learned
+        self._down_sent_by = [{} for _ in range(B)]     # neighbour -> set of links it sent me
+        self._resend: dict = {}                         # row -> {neighbour: entries to send again}
+        self._last_down = np.zeros(B, dtype=np.int64)   # round the latest lost link was learned
+        self._done = np.zeros(B, dtype=bool)
+        self._stopped = np.zeros(B, dtype=bool)
+        self._decided_round = np.full(B, -1, dtype=np.int64)
+        self._known_at_decision = np.zeros((B, n), dtype=bool)
+        self._revisions = np.zeros(B, dtype=np.int64)  # decisions taken again (a lost link)
+        self._forced = np.zeros(B, dtype=bool)         # decided by the round cap, ball not closed
+        i = self.robot
+        for b, name in enumerate(names):
+            tr = tracks[name]
             est = bool(tr["estimated"])
-            self._learn(s, FloodEntries(
-                np.array([self.robot], dtype=np.int64), s.neighbours[None].copy(),
-                np.array([est]),
-                (np.asarray(tr["draws"], np.float64) if est else np.full(K, -np.inf))[None],
-                (to_wire(np.asarray(tr["x"]), wire) if est else np.zeros(d))[None],
-                (to_wire(np.asarray(tr["info"]), wire) if est else np.zeros((d, d)))[None]), 0)
-            self.tracks[name] = s
+            self._neighbours[b] = np.asarray(tr["neighbours"], dtype=bool)
+            self._est[b, i] = est
+            if est:
+                self._draws[b, i] = np.asarray(tr["draws"], np.float64)
+                self._x[b, i] = to_wire(np.asarray(tr["x"]), wire)
+                self._info[b, i] = to_wire(np.asarray(tr["info"]), wire)
+        self._known[:, i] = True
+        self._learned[:, i] = 0
+        self._nb[:, i] = self._neighbours
 
-    @staticmethod
-    def _learn(s: _TrackState, e: FloodEntries, t: int) -> None:
-        """Keep the entries of robots not known yet (rows of ``e`` are distinct robots)."""
-        new = ~s.known[e.robot]
-        if not new.any():
-            return
-        k = e.robot[new]
-        s.known[k], s.learned[k], s.nb[k], s.est[k] = True, t, e.neighbours[new], e.estimated[new]
-        s.draws[k], s.x[k], s.info[k] = e.draws[new], e.x[new], e.info[new]
+    @property
+    def tracks(self) -> dict:
+        """``name -> view`` of what the robot holds about each track (``known``, ``learned``,
+        ``decided_round``, ``known_at_decision``, ``forced``, ``revisions``, ...)."""
+        return {int(name): _TrackView(self, b) for b, name in enumerate(self.names.tolist())}
 
-    @staticmethod
-    def _entries(s: _TrackState, k: np.ndarray) -> FloodEntries:
-        """The held entries of robots ``k`` (copies)."""
-        return FloodEntries(k, s.nb[k], s.est[k], s.draws[k], s.x[k], s.info[k])
+    def _rows(self, names) -> np.ndarray:
+        """Rows of the tracks ``names`` (KeyError for a track the robot does not observe)."""
+        names = np.asarray(names, dtype=np.int64).reshape(-1)
+        if names.size and not self.names.size:
+            raise KeyError(int(names[0]))
+        b = np.minimum(np.searchsorted(self.names, names), max(self.names.size - 1, 0))
+        bad = np.flatnonzero(self.names[b] != names) if names.size else ()
+        if len(bad):
+            raise KeyError(int(names[bad[0]]))
+        return b
 
     @property
     def finished(self) -> bool:
         """Every track stopped: the robot sends nothing more."""
-        return all(s.stopped for s in self.tracks.values())
+        return bool(self._stopped.all())
 
     def component(self, name) -> np.ndarray:
         """The robots this robot reaches in track ``name`` over the links it holds (from the
@@ -185,42 +215,51 @@ class FloodRobot:
         The ball is *closed* when every robot of it is known; the decision is taken on it
         (module docstring, "Crashes during the flood").
         """
-        s = self.tracks[name]
-        if not s.down and not (s.nb[s.known].any(0) & ~s.known).any():
-            return s.known.copy()       # no lost link and the ball closed: it is what it holds
-        adj = s.nb | s.nb.T
-        for a, b in s.down:
-            adj[a, b] = adj[b, a] = False
-        reach = np.zeros(self.n, dtype=bool)
-        reach[self.robot] = True
+        return self._components(self._rows([name]))[0]
+
+    def _components(self, rows: np.ndarray) -> np.ndarray:
+        """:meth:`component` of the tracks ``rows``, (R, n) bool."""
+        known, nb = self._known[rows], self._nb[rows]
+        out = known.copy()
+        heard_of = (nb & known[:, :, None]).any(1)
+        down = np.array([bool(self._down[b]) for b in rows.tolist()], dtype=bool)
+        # no lost link and the ball closed: it is what it holds
+        slow = np.flatnonzero(down | (heard_of & ~known).any(1))
+        if slow.size == 0:
+            return out
+        adj = nb[slow] | np.swapaxes(nb[slow], 1, 2)
+        for r, b in enumerate(rows[slow].tolist()):
+            for a, z in self._down[b]:
+                adj[r, a, z] = adj[r, z, a] = False
+        reach = np.zeros((slow.size, self.n), dtype=bool)
+        reach[:, self.robot] = True
         front = reach.copy()
+        kn = known[slow]
         while front.any():
-            nxt = adj[front].any(0) & ~reach
+            nxt = (front[:, :, None] & adj).any(1) & ~reach
             reach |= nxt
-            front = nxt & s.known        # an unknown robot's own links are not known yet
-        return reach
+            front = nxt & kn     # an unknown robot's own links are not known yet
+        out[slow] = reach
+        return out
 
-    def _lose(self, s: _TrackState, a: int, b: int, t: int) -> None:
-        """Take in the lost link ``(a, b)`` at round ``t``: a tombstone to pass on, and the
-        entries this robot kept from a neighbour at one end because that neighbour heard the
-        other end in round 1 (no longer sure) are sent to it again."""
-        e = (min(a, b), max(a, b))
-        if e in s.down:
+    def _lose(self, b: int, a: int, z: int, t: int) -> None:
+        """Take in the lost link ``(a, z)`` of track row ``b`` at round ``t``: a tombstone to
+        pass on, and the entries this robot kept from a neighbour at one end because that
+        neighbour heard the other end in round 1 (no longer sure) are sent to it again."""
+        e = (min(a, z), max(a, z))
+        if e in self._down[b]:
             return
-        s.down[e] = t
-        s.last_down = t
+        self._down[b][e] = t
+        self._last_down[b] = t
         for j, k in ((e[0], e[1]), (e[1], e[0])):
-            if j != self.robot and s.neighbours[j] and s.known[k] and k != self.robot:
-                got = s.sent_by.get(j)
-                if got is None or not got[k]:
-                    s.resend.setdefault(j, set()).add(k)
+            if j != self.robot and self._neighbours[b, j] and self._known[b, k] \
+                    and k != self.robot and not self._got[b, j, k]:
+                self._resend.setdefault(b, {}).setdefault(j, set()).add(k)
 
-    def _decide(self, names: list, masks: list) -> None:
-        rows = [self.tracks[k] for k in names]
-        dec = decide(np.stack(masks), np.stack([s.est for s in rows]),
-                     np.stack([s.draws for s in rows]), np.stack([s.x for s in rows]),
-                     np.stack([s.info for s in rows]), c=self.c, thr=self.thr)
-        for r, name in enumerate(names):
+    def _decide(self, rows: np.ndarray, masks: np.ndarray) -> None:
+        dec = decide(masks, self._est[rows], self._draws[rows], self._x[rows], self._info[rows],
+                     c=self.c, thr=self.thr)
+        for r, name in enumerate(self.names[rows].tolist()):
             self.decisions[name] = Decision(
                 members=dec.members[r], yes=dec.yes[r], counts=dec.counts[r],
                 size=dec.size[r], winner=dec.winner[r], theta=dec.theta[r],
@@ -242,93 +281,115 @@ class FloodRobot:
         ``self.round`` is that round)
         """
         t_prev = self.round
+        n = self.n
         lost = set(int(j) for j in lost)
         for msg in inbox:
-            for name, (last, entries) in msg.tracks.items():
-                s = self.tracks[name]
-                got = s.sent_by.setdefault(msg.src, np.zeros(self.n, dtype=bool))
-                got[entries.robot] = True
-                if not s.done:
-                    self._learn(s, entries, t_prev)
-                if last:
-                    s.closed.add(msg.src)
+            if len(msg.names):
+                rows = self._rows(msg.names)
+                e = msg.entries
+                er = np.repeat(rows, msg.count)
+                self._got[er, msg.src, e.robot] = True
+                new = ~self._done[er] & ~self._known[er, e.robot]
+                if new.any():
+                    b, k = er[new], e.robot[new]
+                    self._known[b, k], self._learned[b, k] = True, t_prev
+                    self._nb[b, k], self._est[b, k] = e.neighbours[new], e.estimated[new]
+                    self._draws[b, k], self._x[b, k] = e.draws[new], e.x[new]
+                    self._info[b, k] = e.info[new]
+                self._closed[rows[msg.last], msg.src] = True
             for name, links in getattr(msg, "down", {}).items():
-                s = self.tracks[name]
-                s.down_sent_by.setdefault(msg.src, set()).update(links)
-                for a, b in links:
-                    self._lose(s, int(a), int(b), t_prev)
-        decide_now, masks, again, again_masks = [], [], [], []
-        for name, s in self.tracks.items():
-            for j in lost:
-                if s.neighbours[j]:
-                    s.gone[j] = True
-                    s.closed.add(j)
-                    self._lose(s, self.robot, j, t_prev)
-            fresh_down = s.last_down == t_prev and bool(s.down)
-            if s.done and not fresh_down:
-                continue
-            comp = self.component(name)
-            closed = not (comp & ~s.known).any()
-            if s.done:
-                # a lost link learned after the decision: decide again on what is left
-                keep = comp & s.known
-                s.forced = s.forced and not closed
-                if not np.array_equal(keep, s.known_at_decision):
-                    s.known_at_decision, s.decided_round = keep, t_prev
-                    s.revisions += 1
-                    again.append(name)
-                    again_masks.append(keep)
-                continue
-            if closed or t_prev >= self.n - 1 + s.last_down:
-                s.done, s.decided_round, s.forced = True, t_prev, not closed
-                s.known_at_decision = comp & s.known
-                decide_now.append(name)
-                masks.append(s.known_at_decision)
-        if decide_now:
-            self._decide(decide_now, masks)
+                b = int(self._rows([name])[0])
+                self._down_sent_by[b].setdefault(msg.src, set()).update(links)
+                for a, z in links:
+                    self._lose(b, int(a), int(z), t_prev)
+        for j in lost:
+            for b in np.flatnonzero(self._neighbours[:, j]).tolist():
+                self._gone[b, j] = self._closed[b, j] = True
+                self._lose(b, self.robot, j, t_prev)
+        has_down = np.array([bool(d) for d in self._down], dtype=bool)
+        fresh_down = has_down & (self._last_down == t_prev)
+        rows = np.flatnonzero(~self._done | fresh_down)
+        comp = self._components(rows)
+        known = self._known[rows]
+        closed = ~(comp & ~known).any(1)
+        # a lost link learned after the decision: decide again on what is left
+        again = []
+        for r in np.flatnonzero(self._done[rows]).tolist():
+            b = int(rows[r])
+            keep = comp[r] & known[r]
+            self._forced[b] = self._forced[b] and not closed[r]
+            if not np.array_equal(keep, self._known_at_decision[b]):
+                self._known_at_decision[b], self._decided_round[b] = keep, t_prev
+                self._revisions[b] += 1
+                again.append(b)
+        now = ~self._done[rows] & (closed | (t_prev >= n - 1 + self._last_down[rows]))
+        go = rows[now]
+        self._done[go], self._decided_round[go], self._forced[go] = True, t_prev, ~closed[now]
+        self._known_at_decision[go] = comp[now] & known[now]
+        if go.size:
+            self._decide(go, self._known_at_decision[go])
         if again:
-            self._decide(again, again_masks)
-        t = t_prev + 1
+            again = np.asarray(again, dtype=np.int64)
+            self._decide(again, self._known_at_decision[again])
+        return self._send(t_prev + 1, has_down)
+
+    def _send(self, t: int, has_down: np.ndarray) -> list:
+        """This round's messages (round ``t``), then every decided track stops."""
+        n = self.n
+        news = {}
+        for b in np.flatnonzero(has_down).tolist():
+            fresh_links = [e for e, r in self._down[b].items() if r == t - 1]
+            if fresh_links:
+                news[b] = fresh_links
+        busy = ~self._stopped
+        for b in (*news, *self._resend):
+            busy[b] = True
+        fresh = self._learned == t - 1
+        others = np.arange(n) != self.robot
         out: dict[int, FloodMessage] = {}
-        for name, s in self.tracks.items():
-            news = [e for e, r in s.down.items() if r == t - 1]
-            if s.stopped and not news and not s.resend:
+        for j in np.flatnonzero((self._neighbours & busy[:, None]).any(0)).tolist():
+            rows = np.flatnonzero(busy & self._neighbours[:, j] & ~self._gone[:, j])
+            for b in rows.tolist():
+                tomb = [e for e in news.get(b, ()) if j not in e
+                        and e not in self._down_sent_by[b].get(j, ())]
+                if tomb:
+                    out.setdefault(j, FloodMessage(self.robot, j, t)).down[int(self.names[b])] = tomb
+            rows = rows[~self._closed[rows, j]]
+            if rows.size == 0:
                 continue
-            fresh = np.flatnonzero(s.learned == t - 1)
-            other = fresh != self.robot
-            for j in np.flatnonzero(s.neighbours & ~s.gone).tolist():
-                if news:
-                    tomb = [e for e in news if j not in e
-                            and e not in s.down_sent_by.get(j, ())]
-                    if tomb:
-                        out.setdefault(j, FloodMessage(self.robot, j, t)).down[name] = tomb
-                if j in s.closed:
-                    continue
-                got = s.sent_by.get(j)
-                if s.stopped:
-                    send = fresh[:0]
-                else:
-                    # j heard its neighbours' entries in round 1, unless the link went down
-                    heard = other & s.nb[j, fresh]
-                    if s.down and heard.any():
-                        heard[heard] = [(min(j, k), max(j, k)) not in s.down
-                                        for k in fresh[heard].tolist()]
-                    keep = (fresh != j) & ~heard
-                    if got is not None:
-                        keep &= ~got[fresh]
-                    send = fresh[keep]
-                again = s.resend.pop(j, None)
-                if again:
-                    more = sorted(k for k in again
-                                  if k not in send and (got is None or not got[k]))
-                    send = np.concatenate([send, np.asarray(more, dtype=np.int64)])
-                if s.stopped and not send.size:
-                    continue
-                msg = out.setdefault(j, FloodMessage(self.robot, j, t))
-                msg.tracks[name] = (bool(s.done), self._entries(s, send))
-            s.resend.clear()
-            if s.done:
-                s.stopped = True
+            stopped = self._stopped[rows]
+            # j heard its neighbours' entries in round 1, unless the link went down
+            heard = others & self._nb[rows, j, :]
+            for r in np.flatnonzero(has_down[rows] & heard.any(1)).tolist():
+                down = self._down[rows[r]]
+                for k in np.flatnonzero(heard[r]).tolist():
+                    heard[r, k] = (min(j, k), max(j, k)) not in down
+            send = fresh[rows] & ~heard & ~self._got[rows, j, :] & ~stopped[:, None]
+            send[:, j] = False
+            r_e, k_e = np.nonzero(send)
+            extra_r, extra_k = [], []
+            for r in (range(rows.size) if self._resend else ()):
+                more = self._resend.get(int(rows[r]), {}).pop(j, ())
+                more = sorted(k for k in more if not send[r, k] and not self._got[rows[r], j, k])
+                extra_r += [r] * len(more)
+                extra_k += more
+            if extra_r:
+                order = np.argsort(np.concatenate([r_e, extra_r]), kind="stable")
+                r_e = np.concatenate([r_e, extra_r]).astype(np.int64)[order]
+                k_e = np.concatenate([k_e, extra_k]).astype(np.int64)[order]
+            count = np.bincount(r_e, minlength=rows.size)
+            keep = ~stopped | (count > 0)
+            if not keep.any():
+                continue
+            msg = out.setdefault(j, FloodMessage(self.robot, j, t))
+            b_e = rows[r_e]
+            msg.names, msg.last = self.names[rows[keep]], self._done[rows[keep]].copy()
+            msg.count = count[keep].astype(np.int64)
+            msg.entries = FloodEntries(k_e.astype(np.int64), self._nb[b_e, k_e], self._est[b_e, k_e],
+                                       self._draws[b_e, k_e], self._x[b_e, k_e],
+                                       self._info[b_e, k_e])
+        self._resend.clear()
+        self._stopped |= self._done
         self.round = t
         return list(out.values())
 

@@ -27,20 +27,18 @@ def encode_flood(msg, n: int, wire: str, shared, named: bool = False) -> dict:
     among the link's ``shared`` tracks (sorted names) and the two ends of the lost link.
     ``named``: the open tracks' names are sent too (8 bytes each), which a robot does once it
     has seen a lost link, when tombstones may reopen a track the other end considers closed."""
-    names = sorted(msg.tracks)
-    last = np.array([bool(msg.tracks[b][0]) for b in names], dtype=bool)
-    blocks = [msg.tracks[b][1] for b in names]
-    count = np.array([len(e) for e in blocks], dtype=np.int64)
+    if np.any(np.diff(msg.names) <= 0):
+        raise ValueError("a flood message lists its tracks in increasing name order")
+    names = msg.names.tolist()
+    last, count = np.asarray(msg.last, bool), np.asarray(msg.count, np.int64)
     dt = WIRE_DTYPES[wire]
     ib = np.dtype(f"u{index_bytes(n)}")
-    if blocks:
-        robot = np.concatenate([e.robot for e in blocks])
-        nbrs = np.concatenate([e.neighbours for e in blocks]).reshape(-1, n)
-        est = np.concatenate([e.estimated for e in blocks]).astype(bool)
-        K = blocks[0].draws.shape[1]
-        draws = np.concatenate([e.draws for e in blocks]).reshape(-1, K)[est]
-        x = np.concatenate([e.x for e in blocks]).reshape(-1, 3)[est]
-        info = np.concatenate([e.info for e in blocks]).reshape(-1, 3, 3)[est][:, TRIU[0], TRIU[1]]
+    e = msg.entries
+    if e is not None and len(e):
+        robot, nbrs, est = e.robot, e.neighbours.reshape(-1, n), e.estimated.astype(bool)
+        draws = e.draws.reshape(len(e), -1)[est]
+        x = e.x.reshape(-1, 3)[est]
+        info = e.info.reshape(-1, 3, 3)[est][:, TRIU[0], TRIU[1]]
     else:
         robot, nbrs, est = np.zeros(0, np.int64), np.zeros((0, n), bool), np.zeros(0, bool)
         draws, x, info = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((0, 6))
@@ -88,12 +86,9 @@ def decode_flood(src: int, dst: int, round_: int, names, p: dict, n: int, K: int
         full[:, TRIU[0], TRIU[1]] = tri
         full[:, TRIU[1], TRIU[0]] = tri
         info[est] = full
-    msg = FloodMessage(src, dst, round_)
-    ends = np.cumsum(count)
-    for b, lb, a, z in zip(names, last.tolist(), (ends - count).tolist(), ends.tolist(),
-                           strict=True):
-        msg.tracks[int(b)] = (bool(lb), FloodEntries(robot[a:z], nbrs[a:z], est[a:z],
-                                                     draws[a:z], x[a:z], info[a:z]))
+    msg = FloodMessage(src, dst, round_, names=np.asarray(names, dtype=np.int64).reshape(-1),
+                       last=last, count=count,
+                       entries=FloodEntries(robot, nbrs, est, draws, x, info))
     shared = list(shared)
     for t, (a_, b_) in zip(p.get("tomb_track", []), p.get("tomb_ends", np.zeros((0, 2))),
                            strict=True):

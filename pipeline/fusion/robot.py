@@ -571,9 +571,8 @@ class FusionRobot:
         for m in self.flood_out:
             if m.dst not in self.alive:
                 continue
-            for b, (last, _) in m.tracks.items():
-                if last:
-                    self.last_sent.setdefault((int(b), m.dst), self.flood.round)
+            for b in m.names[m.last].tolist():
+                self.last_sent.setdefault((b, m.dst), self.flood.round)
             out.append((m.dst, FLOOD, encode_flood(m, self.n, self.opt.wire,
                                                    self._shared_names(m.dst), named)))
         return out
@@ -591,9 +590,8 @@ class FusionRobot:
                 for m in inbox if m.kind == FLOOD and m.src in self.alive]
         self.saw_tombstone |= any(m.down for m in msgs)
         for m in msgs:
-            for b, (last, _) in m.tracks.items():
-                if last:
-                    self.closed_from.add((int(b), m.src))
+            for b in m.names[m.last].tolist():
+                self.closed_from.add((b, m.src))
         self.flood_out = self.flood.step(msgs, sorted(set(self.lost)))
         if self.flood_out:
             self.flood_last_send = self.flood.round
