@@ -198,14 +198,14 @@ def _fuse_changed(oa, views: list, features: list, fuse) -> dict:
     return out
 
 
-def _memory(features: list, images: np.ndarray, robot_of: np.ndarray, n: int,
+def _memory(features: list, desc_bytes: list, images: np.ndarray, robot_of: np.ndarray, n: int,
             keypoints_only: np.ndarray | None = None) -> np.ndarray:
-    """Bytes of keypoints and descriptors each robot holds for ``images``, and of keypoints
-    only for ``keypoints_only`` (held frames: no new match, so no descriptors)."""
+    """Bytes of keypoints and descriptors (``desc_bytes`` per frame) each robot holds for
+    ``images``, and of keypoints only for ``keypoints_only`` (held frames: no new match, so no
+    descriptors)."""
     out = np.zeros(n, np.int64)
     for g in images.tolist():
-        f = features[g]
-        out[robot_of[g]] += f.keypoints.nbytes + f.descriptors.nbytes
+        out[robot_of[g]] += features[g].keypoints.nbytes + desc_bytes[g]
     for g in (() if keypoints_only is None else keypoints_only.tolist()):
         out[robot_of[g]] += features[g].keypoints.nbytes
     return out
@@ -261,13 +261,12 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
     :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh``, ``gather``, ``robots_solve`` and ``robots_check`` to the online stage; ``transport``
-    names where the robots run the rule's stage and the fusion of each step (its
-    ``online_stage`` and ``online_fusion`` jobs; the batch run stays on the simulator). Returns an :class:`OnlineRun` without
-    ``sequence``."""
+    names where the robots match, run the rule's stage and fuse at each step (its
+    ``online_robots``, ``online_match``, ``online_stage`` and ``online_fusion`` jobs; the
+    batch run stays on the simulator). Returns an :class:`OnlineRun` without ``sequence``."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.engines.online import Frame, OnlineAssociation, batch_resolve
-    from pipeline.matching.features import MERGE_RADIUS_PX, extract_all
-    from pipeline.matching.pairs import match_edges
+    from pipeline.matching.features import MERGE_RADIUS_PX
     from pipeline.runs.transports import get_transport
 
     feature_options = dict(feature_options or {})
@@ -289,22 +288,23 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     robot_of = np.zeros(0, np.int64)
     step_of = np.zeros(0, np.int64)
     records, batch, batch_kept = [], None, {}
-    with timer.stage("online", f"{steps} steps, window {window}"):
+    desc_bytes: list = []  # bytes of each frame's descriptors (held by its robot)
+    with jobs.online_robots() as store, timer.stage("online", f"{steps} steps, window {window}"):
         for t in range(steps):
             ids = [t * n + i for i in range(n)]
             t0 = time.perf_counter()
-            feats = extract_all([views[g] for g in ids], features, max_features, radius,
-                                **feature_options)
-            feats_all += feats
             robot_of = np.concatenate([robot_of, np.arange(n)])
             step_of = np.concatenate([step_of, np.full(n, t)])
-            pairs = step_pairs(robot_of, step_of, t, window, step_edges[t])
-            local = np.unique(pairs)
-            lp = np.searchsorted(local, pairs)
-            matches = match_edges([feats_all[g] for g in local], [views[g] for g in local], lp,
-                                  **match_options)
-            lk = Links.from_matches(matches)
-            links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
+            # the robots' own matching (over Zenoh each robot process matches its pairs,
+            # keeping its window's features in its own folder: pipeline.team.online_match)
+            feats, links, stats = jobs.online_match(
+                views, t, n, window, step_edges[t], store, features=features,
+                max_features=max_features, merge_radius=radius,
+                feature_options=feature_options, match_options=match_options)
+            feats_all += feats
+            desc_bytes += stats["descriptor_bytes"]
+            n_pairs = int(len(step_pairs(robot_of, step_of, t, window, step_edges[t])))
+            match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes") if k in stats}
             match_s = time.perf_counter() - t0
             frames = [Frame(i, len(f), f.keypoints, None if views[g].R is None else
                             views[g].K @ np.c_[views[g].R, views[g].t])
@@ -314,12 +314,13 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 rec["fusion"] = _fuse_changed(oa, views, feats_all, jobs.online_fusion)
             kept = oa.kept_links()
             counts = count_conflicts(AssociationGraph(oa.m, kept))
-            rec.update(match_s=match_s, pairs_matched=int(len(pairs)),
+            rec.update(match_s=match_s, pairs_matched=n_pairs, **match_rec,
                        conflictive_sets_after=int(counts.conflictive_sets),
                        links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
             w = oa.window_images
             matching = step_of[w] > t - window  # held frames keep their keypoints only
-            desc = _memory(feats_all, w[matching], robot_of, n, keypoints_only=w[~matching])
+            desc = _memory(feats_all, desc_bytes, w[matching], robot_of, n,
+                           keypoints_only=w[~matching])
             rec["robot_memory_bytes_max"] = int((desc + oa.robot_state_bytes()).max())
             if t in batch_steps:
                 t1 = time.perf_counter()
@@ -328,7 +329,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                                       if all(p is not None for p in oa.projection) else None)
                 bs = batch.stats
                 all_img = np.arange(len(feats_all))
-                b_state = _memory(feats_all, all_img, robot_of, n)
+                b_state = _memory(feats_all, desc_bytes, all_img, robot_of, n)
                 np.add.at(b_state, robot_of, 16 * oa.m)
                 np.add.at(b_state, robot_of[oa.links.ci], 40)
                 np.add.at(b_state, robot_of[oa.links.cj], 40)

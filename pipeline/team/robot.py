@@ -371,6 +371,10 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     The header is JSON-able (counters, phases, timings); the arrays are the link log,
     keypoints and matches (see :func:`pipeline.consistency.termination.robot_link_log`).
     """
+    if team.data["kind"] == "online-match":  # an online step's matching, nothing decided
+        from pipeline.team.online_match import online_match_main
+
+        return online_match_main(team, i, transport)
     opts = team.options_for(i)
     set_compression(opts.get("wire", "compact") == "compact")
     timings: dict = {}
@@ -618,10 +622,11 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         # seconds from the launcher's start of this process to each step (profile of the
         # process start; None when the robot was started by hand)
         header["since_launch_s"] = startup
-        kept = int(arrays["link_alive"].sum())
-        _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
-                f"{len(arrays['link_alive'])}")
-        if result_path:
+        if "link_alive" in arrays:
+            kept = int(arrays["link_alive"].sum())
+            _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
+                    f"{len(arrays['link_alive'])}")
+        if result_path and "link_alive" in arrays:
             from pipeline.runfolder import write_json_atomic
 
             write_json_atomic(result_path, {**header, "links": result_links(arrays)})

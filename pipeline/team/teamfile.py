@@ -31,6 +31,11 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # evidence rule's geometric test, no fusion) or null (pose unknown);
               # optional "history": ["h0.npz", ...], one file per robot: an online step's
               # history check after the rule (pipeline.consistency.history.HistoryInputs)
+          or {"kind": "online-match", "step": 3, "window": 3, "frames": ["f0.npz", ...],
+              "store": ["robot-0", ...]}
+              # an online step's matching (pipeline.team.online_match): robot I's new frame
+              # (frame id step * n + I) and its own folder, where it keeps its window's
+              # features between steps
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -71,7 +76,7 @@ from pipeline.errors import InputError
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
            "DATA_KINDS", "links_file_of", "keypoints_file_of", "TEAM_ONLY_OPTIONS"]
 
-DATA_KINDS = ("formation", "images", "links")
+DATA_KINDS = ("formation", "images", "links", "online-match")
 DEFAULT_OPTIONS = {
     "features": "sift",
     "max_features": 2000,
@@ -137,7 +142,8 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
               "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
                          "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
-                        "history"}}
+                        "history"},
+              "online-match": {"kind", "step", "window", "frames", "store"}}
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -392,6 +398,18 @@ def _check_data(data: dict, n: int, where: str) -> None:
         if ms is not None and (not _is_int(ms) or ms < 0):
             raise InputError(f"{where}: data.max_size {ms!r} must be a number of pixels >= 0 "
                              "(0: full size) or null")
+    elif kind == "online-match":
+        for key in ("step", "window"):
+            v = data.get(key)
+            if not _is_int(v) or v < (0 if key == "step" else 1):
+                raise InputError(f"{where}: data.{key} {v!r} must be an integer >= "
+                                 f"{0 if key == 'step' else 1}")
+        for key, what in (("frames", "frame file (its camera's new frame)"),
+                          ("store", "folder (its features between steps)")):
+            v = data.get(key)
+            if not (isinstance(v, list) and len(v) == n and all(isinstance(x, str) for x in v)):
+                raise InputError(f"{where}: data.{key} must list {n} paths, one {what} per "
+                                 "robot")
     elif kind == "links":
         lk = data.get("links")
         if not (isinstance(lk, str) or (isinstance(lk, list) and len(lk) == n
@@ -559,6 +577,10 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
         path = team.resolve_path(data["images"][i])
         return [(f"data.images[{i}] of the team file",
                  require_input_file(path, f"{where}: data.images[{i}]"))]
+    if data["kind"] == "online-match":
+        path = team.resolve_path(data["frames"][i])
+        return [(f"data.frames[{i}] of the team file",
+                 require_input_file(path, f"{where}: data.frames[{i}]"))]
     path, own = links_file_of(team, i)
     what = f"data.links[{i}]" if own else "data.links"
     files = [(f"{what} of the team file", require_input_file(path, f"{where}: {what}"))]

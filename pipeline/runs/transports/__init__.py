@@ -18,6 +18,15 @@ loads nothing heavy) with one function per job:
     ``run-images``: features and matching of the photographs (``comm_edges`` None: the
     ``knn:K`` graph, chosen by ``graph_from_features(features)``); the consistency stage when
     the robots run it themselves (else ``cleaning`` is None and the runner runs it).
+``online_robots()`` and ``online_match(views, t, n, window, edges_up, store, *, features, max_features, merge_radius, feature_options, match_options) -> (features, links, stats)``
+    ``run-formation --steps N`` and ``run-images --sequence``: the matching of step ``t``
+    (robot ``i``'s new frame is ``views[t * n + i]``; the pairs of
+    :func:`pipeline.runs.online.step_pairs`, robots talking along ``edges_up``), each robot
+    keeping its window's features in ``store`` from step to step (``online_robots()``: a
+    context manager giving the store for a whole run). Returns the new frames' features in
+    robot order (the keypoints at least), the step's links in global frame ids in the order
+    :func:`pipeline.matching.pairs.match_edges` gives them, and ``stats``
+    (``descriptor_bytes`` per new frame; ``messages`` and ``bytes`` where counted).
 ``online_stage(features_per_camera, links, resolution, *, solve_small_sets, keypoints, projections, gather_conflictive, gather_free) -> ConsistencyResult``
     ``run-formation --steps N``: the rule's stage of one step on its sub-problem (the
     step's frames are the cameras, frames sharing a link are neighbours; the online stage
@@ -36,7 +45,7 @@ loads nothing heavy) with one function per job:
     of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
     faults were injected or a robot was lost.
 
-A new transport (e.g. ROS 2) is one module with these five functions and one
+A new transport (e.g. ROS 2) is one module with these functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
 What the jobs hand back is in :mod:`.results`.
 

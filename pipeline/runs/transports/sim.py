@@ -7,13 +7,16 @@ registry (:mod:`pipeline.runs.transports`).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from pipeline import stages
 from pipeline.consistency.engines.online import simulated_stage
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
 
-__all__ = ["formation", "images", "online_stage", "resolve"]  # and online_fusion (__getattr__)
+__all__ = ["formation", "images", "online_robots", "online_match", "online_stage",
+           "resolve"]  # and online_fusion (__getattr__)
 
 
 def formation(config, timer) -> FormationRobots:
@@ -43,6 +46,40 @@ def images(config, views, comm_edges, timer, graph_from_features) -> ImagesRobot
         rootsift=config.rootsift, threshold_px=config.threshold_px,
         budget_after_merge=config.budget_after_merge, matcher=config.matcher)
     return ImagesRobots(feats, matches, links)
+
+
+@contextlib.contextmanager
+def online_robots():
+    """What the robots of an online run keep from step to step (:func:`online_match`): each
+    frame's features while the frame is in a matching window, in this process."""
+    yield {}
+
+
+def online_match(views, t: int, n: int, window: int, edges_up, store: dict, *, features: str,
+                 max_features, merge_radius: float, feature_options: dict,
+                 match_options: dict):
+    """An online step's matching in this process: the new frames' features (robot ``i``'s
+    frame ``t · n + i``), kept in ``store`` while in the window, and the pairs of
+    :func:`pipeline.runs.online.step_pairs` matched as :func:`pipeline.matching.pairs.
+    match_edges` matches them. Returns ``(features, links, stats)`` as the registry says."""
+    from pipeline.matching.features import extract_all
+    from pipeline.matching.pairs import match_edges
+    from pipeline.runs.online import step_pairs
+    from pipeline.types import Links
+
+    ids = [t * n + i for i in range(n)]
+    feats = extract_all([views[g] for g in ids], features, max_features, merge_radius,
+                        **feature_options)
+    store.update(zip(ids, feats, strict=True))
+    for g in [g for g in store if g // n <= t - window]:  # left every matching window
+        del store[g]
+    frames = np.arange((t + 1) * n)
+    pairs = step_pairs(frames % n, frames // n, t, window, edges_up)
+    local = np.unique(pairs)
+    lk = Links.from_matches(match_edges([store[g] for g in local], [views[g] for g in local],
+                                        np.searchsorted(local, pairs), **match_options))
+    links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
+    return feats, links, {"descriptor_bytes": [int(f.descriptors.nbytes) for f in feats]}
 
 
 #: the rule's stage of one online step on its sub-problem (frames as cameras, cameras

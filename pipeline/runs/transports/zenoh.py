@@ -540,3 +540,84 @@ def links_of_run(team, run) -> ConsistencyResult:
                               run.killed)
     res.stats["team"] = team_summary(run)
     return res
+
+
+def online_robots():
+    """What the robots of an online run keep from step to step (:func:`online_match`): a
+    folder per robot, under a temporary folder removed at the end of the run."""
+    import tempfile
+
+    return tempfile.TemporaryDirectory(prefix="online-robots-")
+
+
+def online_match(views, t: int, n: int, window: int, edges_up, store, *, features: str,
+                 max_features, merge_radius: float, feature_options: dict,
+                 match_options: dict):
+    """An online step's matching as robot processes (:mod:`pipeline.team.online_match`): each
+    robot extracts its new frame's features, keeps its window's in its own folder under
+    ``store`` (kept by the caller from step to step), exchanges with the robots it talks to
+    at step ``t`` (``edges_up``) the features they match with, and matches its own pairs.
+
+    Returns ``(features, links, stats)``: the new frames' :class:`~pipeline.types.Features`
+    in robot order (keypoints and scales; the descriptors stay with their robot: ``(N, 0)``),
+    the step's links in global frame ids in the simulator's order (pairs in increasing
+    order, as :func:`pipeline.matching.pairs.match_edges` returns them), and the team's
+    messages, bytes and wall time with the bytes of each new frame's descriptors
+    (``descriptor_bytes``, robot order).
+
+    Raises
+    ------
+    TeamError
+        A robot did not publish, or the robots matched other pairs than
+        :func:`pipeline.runs.online.step_pairs` lists.
+    """
+    import tempfile
+
+    from pipeline.runs.online import step_pairs
+    from pipeline.team.online_match import write_frame
+    from pipeline.types import Features, Links, PairMatches
+
+    store = Path(store)
+    frames = []
+    for i in range(n):
+        path = store / "cameras" / f"frame-{t * n + i}.npz"  # what robot i's camera delivered
+        write_frame(path, views[t * n + i])
+        frames.append(str(path))
+    data = {"kind": "online-match", "step": int(t), "window": int(window), "frames": frames,
+            "store": [str(store / f"robot-{i}") for i in range(n)]}
+    opts = team_options(features, max_features, None, merge_radius=merge_radius,
+                        **{k: v for k, v in feature_options.items()
+                           if k in ("contrast_threshold", "rootsift", "budget_after_merge")},
+                        threshold_px=match_options.get("threshold_px", 1.0),
+                        matcher=match_options.get("matcher", "opencv"))
+    team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2), data,
+                     opts, n=n)
+    with tempfile.TemporaryDirectory(prefix="online-match-") as work:
+        run = launch_team(team, work)
+    lost = sorted(set(range(n)) - set(run.results))
+    if lost:
+        raise TeamError(f"robot {lost[0]} of step {t}'s matching team did not publish")
+    feats, desc_bytes, matches = [], [], {}
+    for i in range(n):
+        header, arrays = run.results[i]
+        kp = arrays["keypoints"].reshape(-1, 2)
+        feats.append(Features(kp, np.zeros((len(kp), 0), np.float32), arrays["scales"],
+                              features))
+        desc_bytes.append(int(header["descriptor_bytes"]))
+        for pr in header["pairs"]:
+            a, b = int(pr["a"]), int(pr["b"])
+            matches[(a, b)] = PairMatches(
+                a, b, arrays[f"pairs_{a}_{b}"].reshape(-1, 2), arrays[f"ratio_{a}_{b}"],
+                arrays[f"eperr_{a}_{b}"], int(pr["n_putative"]), str(pr["reason"]))
+    robot_of = np.arange((t + 1) * n) % n
+    step_of = np.arange((t + 1) * n) // n
+    want = [tuple(p) for p in step_pairs(robot_of, step_of, t, window, edges_up).tolist()]
+    if sorted(matches) != want:
+        raise TeamError(f"step {t}: the robots matched {len(matches)} frame pairs, the step "
+                        f"has {len(want)}")
+    links = Links.from_matches([matches[p] for p in want])
+    summary = team_summary(run)
+    stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values())),
+             "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values())),
+             "wall_s": float(summary["wall_s"]), "descriptor_bytes": desc_bytes}
+    return feats, links, stats

@@ -133,8 +133,8 @@ def test_a_held_frame_costs_its_robot_its_keypoints_not_its_descriptors():
 
     from pipeline.runs import online
 
-    f = SimpleNamespace(keypoints=np.zeros((10, 2)), descriptors=np.zeros((10, 128), np.float32))
-    out = online._memory([f, f, f], np.array([0]), np.array([0, 0, 1]), 2,
+    f = SimpleNamespace(keypoints=np.zeros((10, 2)))
+    out = online._memory([f, f, f], [5120] * 3, np.array([0]), np.array([0, 0, 1]), 2,
                          keypoints_only=np.array([1, 2]))
     assert out.tolist() == [2 * 160 + 5120, 160]
 

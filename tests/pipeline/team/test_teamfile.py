@@ -8,6 +8,8 @@ from pipeline.team.robot import links_camera, links_projection, write_keypoints
 from pipeline.team.teamfile import load_team, parse_team
 
 _LINKS = {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}
+_MATCH = {"kind": "online-match", "step": 2, "window": 3, "frames": ["f0.npz", "f1.npz", "f2.npz"],
+          "store": ["r0", "r1", "r2"]}
 _CAM = {"K": [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]], "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
         "t": [0.0, 0.0, 1.5]}
 
@@ -18,6 +20,17 @@ def _doc(**over):
            "data": {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2, 2]}}
     doc.update(over)
     return doc
+
+
+def test_an_online_match_team_parses_and_names_a_missing_frame(tmp_path):
+    from pipeline.team.teamfile import check_data_files
+
+    path = tmp_path / "TEAM.json"
+    path.write_text(json.dumps(_doc(data=_MATCH)))
+    team = load_team(path)
+    assert team.data["step"] == 2 and team.resolve_path(team.data["store"][1]) == tmp_path / "r1"
+    with pytest.raises(InputError, match=r"data.frames\[1\]"):
+        check_data_files(team, 1)
 
 
 def test_a_valid_team_parses():
@@ -75,6 +88,11 @@ def test_a_valid_team_parses():
      "data.history must list 3 paths, one history file per robot"),
     ({"data": {**_LINKS, "history": "h.npz"}}, "data.history must list 3 paths"),
     ({"options": {"fusion": True}}, "options sets fusion on a links team without data.keypoints"),
+    ({"data": {**_MATCH, "step": -1}}, "data.step -1 must be an integer >= 0"),
+    ({"data": {**_MATCH, "window": 0}}, "data.window 0 must be an integer >= 1"),
+    ({"data": {**_MATCH, "frames": ["f0.npz"]}}, "data.frames must list 3 paths, one frame file"),
+    ({"data": {**_MATCH, "store": "robots"}}, "data.store must list 3 paths, one folder"),
+    ({"data": {**_MATCH, "links": "in.csv"}}, "data of kind online-match has unknown key 'links'"),
     ({"robot_options": {"1": {"fusion": True}}},
      "robot_options['1'] sets fusion on a links team without data.keypoints"),
 ])

@@ -1,0 +1,178 @@
+"""One robot's matching of an online step, in its own process (``run-formation --steps N``
+and ``run-images DIR --sequence`` over Zenoh).
+
+Robot ``i`` of a team of ``n`` robots takes frame ``t · n + i`` at step ``t`` (the frame ids of
+:func:`pipeline.runs.online.associate_online`). It keeps, in its own folder (``data.store``,
+read and written by it alone), the features of its frames of the last ``W`` steps
+(``data.window``): its memory between steps, which follows its window. At step ``t``
+(``data.step``), with the robots it talks to at that step (the team's comm graph):
+
+1. it loads its new frame (``data.frames[i]``: the pixels its camera delivered, ``K``, whether
+   ``K`` is known, the pose where the robot knows it), extracts its features with the run's
+   options (as :func:`pipeline.matching.features.extract_all` does for the simulator), stores
+   them and drops its frames that left the window;
+2. it sends each neighbour ``j`` the features ``j`` matches with: its frames of steps
+   ``t - W + 1 .. t - 1`` (``j``'s new frame against them), and its new frame when ``i > j``
+   (two new frames are matched by the robot of the lower id); SIFT as bytes, as the batch
+   robots send them (:mod:`pipeline.matching.packed`);
+3. after one round it matches the pairs of :func:`pipeline.runs.online.step_pairs` that are its
+   own: its new frame against its own older window frames and against every frame it
+   received, each pair ``(a, b)``, ``a < b``, by :func:`pipeline.matching.pairs.match_pair` as
+   :func:`pipeline.matching.pairs.match_edges` matches it (same orientation, same options);
+4. it publishes the new frame's keypoints and its pairs' matches (the launching process
+   orders them as the simulator's matching and goes on with the step).
+
+Every pair of the step is matched by exactly one robot: a pair joins a new frame and a window
+frame of two robots that talk (or of one robot); the new frame's robot matches it, and of two
+new frames the lower robot's.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["online_match_main", "frame_file", "write_frame", "load_frame", "own_pairs"]
+
+
+def frame_file(folder, g: int) -> Path:
+    """A robot's stored features of frame ``g`` in its folder."""
+    return Path(folder) / f"frame-{int(g)}.npz"
+
+
+def write_frame(path, view) -> None:
+    """What a robot's camera delivers for one frame, as ``load_frame`` reads it."""
+    from pipeline.runfolder import atomic_file
+
+    arrays = {"image": np.asarray(view.image), "K": np.asarray(view.K, np.float64),
+              "intrinsics_known": np.array([bool(view.intrinsics_known)])}
+    if view.R is not None and view.t is not None:
+        arrays["R"] = np.asarray(view.R, np.float64)
+        arrays["t"] = np.asarray(view.t, np.float64).reshape(3)
+    with atomic_file(path, mode="wb") as f:
+        np.savez(f, **arrays)
+
+
+def load_frame(path, name: str):
+    """The :class:`~pipeline.types.View` of a frame file written by :func:`write_frame`."""
+    from pipeline.types import View
+
+    with np.load(path) as z:
+        posed = "R" in z.files
+        return View(name=name, image=z["image"], K=z["K"], R=z["R"] if posed else None,
+                    t=z["t"] if posed else None, intrinsics_known=bool(z["intrinsics_known"][0]))
+
+
+def own_pairs(i: int, n: int, t: int, window: int, neighbours) -> list[tuple[int, int]]:
+    """The pairs ``(a, b)``, ``a < b``, robot ``i`` matches at step ``t``: its new frame
+    against its frames of the window's earlier steps and every window frame of the robots it
+    talks to, except their new frames of a lower robot id (those match it)."""
+    g = t * n + i
+    out = [(t2 * n + i, g) for t2 in range(max(0, t - window + 1), t)]
+    for j in sorted(int(k) for k in neighbours):
+        out += [(t2 * n + j, g) for t2 in range(max(0, t - window + 1), t)]
+        if j > i:
+            out.append((g, t * n + j))
+    return sorted(out)
+
+
+def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
+    """Steps 1–4 of the module docstring for robot ``i``; returns (header, arrays) as
+    :func:`pipeline.team.robot.robot_main` does (no link log: nothing is decided here)."""
+    from pipeline.matching.features import extract, photo_max_features
+    from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
+    from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.transport.wire import set_compression
+    from pipeline.types import Features
+
+    opts = team.options_for(i)
+    set_compression(opts.get("wire", "compact") == "compact")
+    data = team.data
+    n, t, window = team.n, int(data["step"]), int(data["window"])
+    store = team.resolve_path(data["store"][i])
+    store.mkdir(parents=True, exist_ok=True)
+    timings: dict = {}
+    t0 = time.perf_counter()
+    g = t * n + i
+    view = load_frame(team.resolve_path(data["frames"][i]), f"frame-{g}")
+    h, w = view.image.shape[:2]
+    budget = opts.get("max_features")
+    rootsift = bool(opts.get("rootsift", False)) and opts["features"] != "colmap-sift"
+    raw = extract(view, opts["features"],
+                  photo_max_features(w, h, opts["features"]) if budget is None else int(budget),
+                  float(opts["merge_radius"]), contrast_threshold=opts.get("contrast_threshold"),
+                  rootsift=False, budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    own = {"keypoints": raw.keypoints, "raw": raw.descriptors, "scales": raw.scales,
+           "K": np.asarray(view.K, np.float64), "known": np.array([view.intrinsics_known]),
+           "size": np.array([w, h], np.int64)}
+    from pipeline.runfolder import atomic_file
+
+    with atomic_file(frame_file(store, g), mode="wb") as f:
+        np.savez(f, **own)
+    for old in store.glob("frame-*.npz"):  # the robot's memory follows its window
+        if int(old.stem.split("-")[1]) // n <= t - window:
+            old.unlink()
+    timings["features"] = time.perf_counter() - t0
+
+    def stored(f: int) -> dict:
+        with np.load(frame_file(store, f)) as z:
+            return {k: z[k] for k in z.files}
+
+    earlier = [s * n + i for s in range(max(0, t - window + 1), t)]
+    for j in sorted(transport.neighbours):
+        for f in earlier + ([g] if i > j else []):  # one message per frame
+            s = stored(f)
+            transport.send(j, "frame", {**pack_features(s["keypoints"], s["raw"], rootsift),
+                                        "id": np.array([f], np.int64), "K": s["K"],
+                                        "known": s["known"], "size": s["size"]})
+    t1 = time.perf_counter()
+    inbox, _ = transport.end_round()
+    feats, meta = {}, {}
+    for f in earlier + [g]:
+        s = stored(f)
+        feats[f] = Features(s["keypoints"], matching_descriptors(s["raw"], rootsift), s["scales"],
+                            raw.method)
+        meta[f] = (s["K"], bool(s["known"][0]), tuple(int(v) for v in s["size"]))
+    for msg in inbox:
+        if msg.kind != "frame":
+            continue
+        p = msg.payload
+        kp, desc = unpack_features(p)
+        f = int(p["id"][0])
+        feats[f] = Features(kp, desc, np.zeros(len(kp), np.float32), raw.method)
+        meta[f] = (p["K"].reshape(3, 3), bool(p["known"][0]), tuple(int(v) for v in p["size"]))
+    timings["exchange"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    arrays = {"keypoints": raw.keypoints, "scales": raw.scales}
+    header_pairs = []
+    thr = opts.get("threshold_px", 1.0)
+    matcher = opts.get("matcher", "opencv")
+    for a, b in own_pairs(i, n, t, window, transport.neighbours):
+        (Ka, ka, sa), (Kb, kb, sb) = meta[a], meta[b]
+        th = thr
+        if th is None and matcher != "colmap":  # scaled with the larger image, as match_edges
+            th = photo_threshold_px(max(sa[0], sb[0]), max(sa[1], sb[1]))
+        pm = match_pair(a, b, feats[a], feats[b], Ka, Kb, bool(ka and kb),
+                        threshold_px=None if th is None else float(th), matcher=matcher,
+                        sizes=(sa, sb))
+        header_pairs.append({"a": a, "b": b, "n_putative": int(pm.n_putative),
+                             "reason": pm.reason})
+        arrays[f"pairs_{a}_{b}"] = pm.pairs.astype(np.int32)
+        arrays[f"ratio_{a}_{b}"] = pm.ratio.astype(np.float32)
+        arrays[f"eperr_{a}_{b}"] = pm.epipolar_error.astype(np.float32)
+    timings["matching"] = time.perf_counter() - t2
+    timings["total"] = time.perf_counter() - t0
+    held = 0  # bytes of the features the robot holds: its window's keypoints and descriptors
+    for f in store.glob("frame-*.npz"):
+        with np.load(f) as z:
+            held += int(z["keypoints"].nbytes + z["raw"].nbytes)
+    from pipeline.team.robot import peak_rss_bytes
+
+    header = {"id": i, "frame": g, "pairs": header_pairs, "held_bytes": held,
+              "descriptor_bytes": int(raw.descriptors.nbytes),
+              "counters": transport.counters(), "timings_s": timings,
+              "peak_memory_bytes": held, "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid()}
+    return header, arrays

@@ -1,0 +1,63 @@
+"""An online step's matching in robot processes (pipeline.team.online_match): every pair of
+the step matched once, by one robot, as the simulator matches it; each robot's folder holds
+its window's frames only."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.runs.online import step_pairs
+from pipeline.team.online_match import own_pairs
+
+
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 6), t=st.integers(0, 6), window=st.integers(1, 4),
+       edges=st.sets(st.tuples(st.integers(0, 5), st.integers(0, 5)), max_size=12))
+def test_every_pair_of_the_step_is_one_robots(n, t, window, edges):
+    edges = np.array(sorted({(min(a, b), max(a, b)) for a, b in edges
+                             if a != b and a < n and b < n}), np.int64).reshape(-1, 2)
+    robot_of = np.arange((t + 1) * n) % n
+    step_of = np.arange((t + 1) * n) // n
+    want = [tuple(p) for p in step_pairs(robot_of, step_of, t, window, edges).tolist()]
+    mine = []
+    for i in range(n):
+        nbrs = set(edges[edges[:, 0] == i, 1].tolist()) | set(edges[edges[:, 1] == i, 0].tolist())
+        mine += own_pairs(i, n, t, window, nbrs)
+    assert sorted(mine) == want  # the same pairs, none matched twice
+
+
+@pytest.fixture(scope="module")
+def sequence():
+    from data_synth.motion import render_motion
+
+    return render_motion("d", 0, 3, (160, 120), 3, window=2)
+
+
+def test_robots_match_as_the_simulator_and_keep_their_window(sequence, tmp_path):
+    """Three steps of a 3-robot formation, window 2: the links of each step that the robot
+    processes give equal the simulator's, and after each step robot i's folder holds exactly
+    its frames of the last two steps (the simulator's store the same frames)."""
+    from pipeline.matching.features import MERGE_RADIUS_PX
+    from pipeline.runs.transports import sim, zenoh
+
+    views, n, window = sequence.flat.views, sequence.n_robots, 2
+    kw = dict(features="sift", max_features=300, merge_radius=MERGE_RADIUS_PX,
+              feature_options={}, match_options={})
+    with sim.online_robots() as memory:
+        for t in range(3):
+            edges = sequence.step_edges[t]
+            f_z, l_z, s_z = zenoh.online_match(views, t, n, window, edges, tmp_path, **kw)
+            f_s, l_s, s_s = sim.online_match(views, t, n, window, edges, memory, **kw)
+            assert len(l_s) > 0
+            for a, b in ((l_z.cam_i, l_s.cam_i), (l_z.feat_i, l_s.feat_i), (l_z.cam_j, l_s.cam_j),
+                         (l_z.feat_j, l_s.feat_j), (l_z.quality, l_s.quality)):
+                np.testing.assert_array_equal(a, b)
+            for i in range(n):
+                np.testing.assert_array_equal(f_z[i].keypoints, f_s[i].keypoints)
+                held = sorted(int(p.stem.split("-")[1])
+                              for p in (tmp_path / f"robot-{i}").glob("*.npz"))
+                window_frames = [s * n + i for s in range(max(0, t - window + 1), t + 1)]
+                assert held == window_frames
+                assert sorted(g for g in memory if g % n == i) == window_frames
+            assert s_z["bytes"] > 0 and s_z["descriptor_bytes"] == s_s["descriptor_bytes"]
