@@ -8,8 +8,10 @@ same formation, alternated ``--repeat`` times (the median wall kept). Printed an
 configuration: wall time, the online stage's time, the fusion's time summed over the steps
 (``fusion.wall_s`` of each step, team start included over Zenoh), links cut by fusion, tracks
 fused, fusion bytes counted, the bytes the robots spent naming their tracks (over Zenoh, a
-detection before the fusion), each step's stage time (matching and fusion not included) and whether ``links.csv`` and ``link_steps.csv`` equal the
-simulator's with the same fusion setting. Saves ``runs/bench-online-team/results.json``.
+detection before the fusion), each step's stage time (matching and fusion not included),
+each step's matching time (over Zenoh the robots' own, :mod:`pipeline.team.online_match`)
+and the bytes its robots exchanged, and whether ``links.csv`` and ``link_steps.csv`` equal
+the simulator's with the same fusion setting. Saves ``runs/bench-online-team/results.json``.
 """
 
 from __future__ import annotations
@@ -52,6 +54,9 @@ def _run(args: list[str], out: Path) -> dict:
             # each step's stage (the step record's wall_s: matching and fusion not included):
             # over Zenoh, the step's team of robot processes
             "stage_s": [round(s["wall_s"], 2) for s in steps],
+            # each step's matching (over Zenoh the robots' own, a team per step)
+            "match_s": [round(s["match_s"], 2) for s in steps],
+            "match_bytes": sum(s.get("match_bytes", 0) for s in steps),
             "fusion_cut": [f.get("cut") for f in fus],
             "fusion_tracks": [f.get("tracks") for f in fus],
             "fusion_bytes": sum(f.get("bytes", 0) for f in fus),
@@ -95,7 +100,8 @@ def main() -> int:
               f"{r['fusion_bytes'] / 1e6:9.2f} {r['naming_bytes'] / 1e6:9.2f} "
               f"{r['tables_equal_sim']}")
     for name, r in rows.items():
-        print(f"{name:20s} each step's stage, s: {r['stage_s']}")
+        print(f"{name:20s} each step's stage, s: {r['stage_s']}; matching, s: {r['match_s']}"
+              + (f" ({r['match_bytes'] / 1e6:.2f} MB exchanged)" if r["match_bytes"] else ""))
     z, zn, s = rows["zenoh"]["wall_s"], rows["zenoh --no-fusion"]["wall_s"], rows["sim"]["wall_s"]
     sn = rows["sim --no-fusion"]["wall_s"]
     print(f"zenoh with fusion / zenoh --no-fusion: {z / zn:.2f}; zenoh / sim: {z / s:.2f}; "
