@@ -304,7 +304,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             feats_all += feats
             desc_bytes += stats["descriptor_bytes"]
             n_pairs = int(len(step_pairs(robot_of, step_of, t, window, step_edges[t])))
-            match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes") if k in stats}
+            match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes", "held_bytes_max")
+                         if k in stats}
             match_s = time.perf_counter() - t0
             frames = [Frame(i, len(f), f.keypoints, None if views[g].R is None else
                             views[g].K @ np.c_[views[g].R, views[g].t])

@@ -11,10 +11,12 @@ read and written by it alone), the features of its frames of the last ``W`` step
    ``K`` is known, the pose where the robot knows it), extracts its features with the run's
    options (as :func:`pipeline.matching.features.extract_all` does for the simulator), stores
    them and drops its frames that left the window;
-2. it sends each neighbour ``j`` the features ``j`` matches with: its frames of steps
-   ``t - W + 1 .. t - 1`` (``j``'s new frame against them), and its new frame when ``i > j``
-   (two new frames are matched by the robot of the lower id); SIFT as bytes, as the batch
-   robots send them (:mod:`pipeline.matching.packed`);
+2. it sends each neighbour ``j`` the features ``j`` matches with and does not hold yet: its
+   frames of steps ``t - W + 1 .. t - 1`` (``j``'s new frame against them), and its new frame
+   when ``i > j`` (two new frames are matched by the robot of the lower id); SIFT as bytes, as
+   the batch robots send them (:mod:`pipeline.matching.packed`). A robot keeps the frames it
+   receives in its folder while they are in the window, and records what it sent to whom
+   (``sent.json``), pruned by the same rule: each frame crosses each link once;
 3. after one round it matches the pairs of :func:`pipeline.runs.online.step_pairs` that are its
    own: its new frame against its own older window frames and against every frame it
    received, each pair ``(a, b)``, ``a < b``, by :func:`pipeline.matching.pairs.match_pair` as
@@ -29,6 +31,7 @@ new frames the lower robot's.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -108,42 +111,59 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     own = {"keypoints": raw.keypoints, "raw": raw.descriptors, "scales": raw.scales,
            "K": np.asarray(view.K, np.float64), "known": np.array([view.intrinsics_known]),
            "size": np.array([w, h], np.int64)}
-    from pipeline.runfolder import atomic_file
+    from pipeline.runfolder import atomic_file, write_json_atomic
 
-    with atomic_file(frame_file(store, g), mode="wb") as f:
-        np.savez(f, **own)
-    for old in store.glob("frame-*.npz"):  # the robot's memory follows its window
-        if int(old.stem.split("-")[1]) // n <= t - window:
-            old.unlink()
-    timings["features"] = time.perf_counter() - t0
+    def save(f: int, arrays: dict) -> None:
+        with atomic_file(frame_file(store, f), mode="wb") as out:
+            np.savez(out, **arrays)
 
     def stored(f: int) -> dict:
         with np.load(frame_file(store, f)) as z:
             return {k: z[k] for k in z.files}
 
+    save(g, own)
+    for old in store.glob("frame-*.npz"):  # the robot's memory follows its window
+        if int(old.stem.split("-")[1]) // n <= t - window:
+            old.unlink()
+    timings["features"] = time.perf_counter() - t0
+    # what it sent each neighbour at earlier steps and the neighbour still keeps (the same
+    # window rule on both sides): each frame crosses a link once
+    sent_path = store / "sent.json"
+    sent = json.loads(sent_path.read_text()) if sent_path.exists() else {}
     earlier = [s * n + i for s in range(max(0, t - window + 1), t)]
     for j in sorted(transport.neighbours):
+        had = {f for f in sent.get(str(j), []) if f // n > t - window}
         for f in earlier + ([g] if i > j else []):  # one message per frame
+            if f in had:
+                continue
             s = stored(f)
             transport.send(j, "frame", {**pack_features(s["keypoints"], s["raw"], rootsift),
                                         "id": np.array([f], np.int64), "K": s["K"],
                                         "known": s["known"], "size": s["size"]})
+            had.add(f)
+        sent[str(j)] = sorted(had)
+    sent = {j: [f for f in fs if f // n > t - window] for j, fs in sent.items()}
+    write_json_atomic(sent_path, {j: fs for j, fs in sent.items() if fs})
     t1 = time.perf_counter()
     inbox, _ = transport.end_round()
+    for msg in inbox:  # kept while in the window: the sender sends a frame once
+        if msg.kind == "frame":
+            save(int(msg.payload["id"][0]), msg.payload)
     feats, meta = {}, {}
-    for f in earlier + [g]:
-        s = stored(f)
-        feats[f] = Features(s["keypoints"], matching_descriptors(s["raw"], rootsift), s["scales"],
-                            raw.method)
-        meta[f] = (s["K"], bool(s["known"][0]), tuple(int(v) for v in s["size"]))
-    for msg in inbox:
-        if msg.kind != "frame":
-            continue
-        p = msg.payload
-        kp, desc = unpack_features(p)
-        f = int(p["id"][0])
-        feats[f] = Features(kp, desc, np.zeros(len(kp), np.float32), raw.method)
-        meta[f] = (p["K"].reshape(3, 3), bool(p["known"][0]), tuple(int(v) for v in p["size"]))
+    for pair in own_pairs(i, n, t, window, transport.neighbours):
+        for f in pair:
+            if f in feats:
+                continue
+            s = stored(f)
+            if "raw" in s:  # its own frame
+                kp, desc, scales = s["keypoints"], matching_descriptors(s["raw"], rootsift), \
+                    s["scales"]
+            else:  # a neighbour's, as sent
+                kp, desc = unpack_features(s)
+                scales = np.zeros(len(kp), np.float32)
+            feats[f] = Features(kp, desc, scales, raw.method)
+            meta[f] = (s["K"].reshape(3, 3), bool(s["known"][0]),
+                       tuple(int(v) for v in s["size"]))
     timings["exchange"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     arrays = {"keypoints": raw.keypoints, "scales": raw.scales}
@@ -165,10 +185,11 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
         arrays[f"eperr_{a}_{b}"] = pm.epipolar_error.astype(np.float32)
     timings["matching"] = time.perf_counter() - t2
     timings["total"] = time.perf_counter() - t0
-    held = 0  # bytes of the features the robot holds: its window's keypoints and descriptors
+    held = 0  # bytes of the features it holds: its window's and those its neighbours sent
     for f in store.glob("frame-*.npz"):
         with np.load(f) as z:
-            held += int(z["keypoints"].nbytes + z["raw"].nbytes)
+            held += int(z["keypoints"].nbytes + z["raw" if "raw" in z.files else
+                                                "descriptors"].nbytes)
     from pipeline.team.robot import peak_rss_bytes
 
     header = {"id": i, "frame": g, "pairs": header_pairs, "held_bytes": held,

@@ -563,7 +563,8 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     the step's links in global frame ids in the simulator's order (pairs in increasing
     order, as :func:`pipeline.matching.pairs.match_edges` returns them), and the team's
     messages, bytes and wall time with the bytes of each new frame's descriptors
-    (``descriptor_bytes``, robot order).
+    (``descriptor_bytes``, robot order) and the most bytes of features a robot holds
+    (``held_bytes_max``: its window's frames and those its neighbours sent it).
 
     Raises
     ------
@@ -597,13 +598,14 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
         raise TeamError(f"robot {lost[0]} of step {t}'s matching team did not publish")
-    feats, desc_bytes, matches = [], [], {}
+    feats, desc_bytes, held, matches = [], [], [], {}
     for i in range(n):
         header, arrays = run.results[i]
         kp = arrays["keypoints"].reshape(-1, 2)
         feats.append(Features(kp, np.zeros((len(kp), 0), np.float32), arrays["scales"],
                               features))
         desc_bytes.append(int(header["descriptor_bytes"]))
+        held.append(int(header["held_bytes"]))
         for pr in header["pairs"]:
             a, b = int(pr["a"]), int(pr["b"])
             matches[(a, b)] = PairMatches(
@@ -619,5 +621,6 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     summary = team_summary(run)
     stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values())),
              "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values())),
-             "wall_s": float(summary["wall_s"]), "descriptor_bytes": desc_bytes}
+             "wall_s": float(summary["wall_s"]), "descriptor_bytes": desc_bytes,
+             "held_bytes_max": max(held)}
     return feats, links, stats

@@ -37,13 +37,15 @@ def sequence():
 def test_robots_match_as_the_simulator_and_keep_their_window(sequence, tmp_path):
     """Three steps of a 3-robot formation, window 2: the links of each step that the robot
     processes give equal the simulator's, and after each step robot i's folder holds exactly
-    its frames of the last two steps (the simulator's store the same frames)."""
+    its frames of the last two steps (the simulator's store the same frames) and the frames
+    its neighbours sent it in that window, each sent once."""
     from pipeline.matching.features import MERGE_RADIUS_PX
     from pipeline.runs.transports import sim, zenoh
 
     views, n, window = sequence.flat.views, sequence.n_robots, 2
     kw = dict(features="sift", max_features=300, merge_radius=MERGE_RADIUS_PX,
               feature_options={}, match_options={})
+    needed, messages = set(), 0
     with sim.online_robots() as memory:
         for t in range(3):
             edges = sequence.step_edges[t]
@@ -58,6 +60,14 @@ def test_robots_match_as_the_simulator_and_keep_their_window(sequence, tmp_path)
                 held = sorted(int(p.stem.split("-")[1])
                               for p in (tmp_path / f"robot-{i}").glob("*.npz"))
                 window_frames = [s * n + i for s in range(max(0, t - window + 1), t + 1)]
-                assert held == window_frames
+                assert [g for g in held if g % n == i] == window_frames
+                assert all(g // n > t - window for g in held)  # and its neighbours' in it
                 assert sorted(g for g in memory if g % n == i) == window_frames
+                nbrs = {int(b) for a, b in edges if a == i} | {int(a) for a, b in edges if b == i}
+                for j in nbrs:  # j matches with i's earlier window frames, and with its
+                    # new one when i > j
+                    needed |= {(g, i, j) for g in window_frames[:-1]}
+                    needed |= {(t * n + i, i, j)} if i > j else set()
+            messages += s_z["messages"]
             assert s_z["bytes"] > 0 and s_z["descriptor_bytes"] == s_s["descriptor_bytes"]
+    assert messages == len(needed)  # each frame crossed each link once
