@@ -70,6 +70,11 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     timer = timer or StageTimer()
     team = load_team(team_path)
     kind = team.data["kind"]
+    if kind == "online-match":
+        raise InputError(f"team {team.name!r} is one step's matching of an online run "
+                         "(run-formation --steps N or run-images DIR --sequence with "
+                         "--transport zenoh), whose launching process takes its matches; "
+                         "there is no run folder to observe")
     if kind == "images":
         folders = {team.resolve_path(p).resolve().parent for p in team.data["images"]}
         if len(folders) != 1:

@@ -199,6 +199,13 @@ def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(t
                  str(tmp_path / "o")]) == 2
     assert "not the fusion cuts its robots make; set option fusion false" in \
         capsys.readouterr().err
+    doc["data"] = {"kind": "online-match", "step": 0, "window": 2, "frames": ["f0", "f1"],
+                   "store": ["r0", "r1"]}
+    doc["options"] = {}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "one step's matching of an online run" in capsys.readouterr().err
     assert main(["observe", "--team", str(tmp_path / "none.json"), "--out",
                  str(tmp_path / "o")]) == 2
     assert "not found" in capsys.readouterr().err
