@@ -35,7 +35,7 @@ from pipeline.types import Features, PairMatches, View
 
 __all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px", "lowe_ratios",
            "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES", "MATCHERS",
-           "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX", "check_matcher", "COLMAP_MATCHER_FEATURES"]
+           "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX", "check_matcher", "COLMAP_MATCHER_FEATURES", "step_pairs"]
 
 #: pair matchers: OpenCV + numpy (:func:`mutual_ratio_matches`, :func:`epipolar_filter`) or
 #: COLMAP's (:func:`pipeline.colmap.sift.match_pairs`)
@@ -544,3 +544,30 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     with (nullcontext() if binary else threadpool_limits(1, user_api="blas")), \
             ThreadPoolExecutor(max_workers=workers) as pool:
         return list(progress(pool.map(one, edges), total=len(edges), desc="matching pairs"))
+
+
+def step_pairs(robot_of: np.ndarray, step_of: np.ndarray, t: int, window: int,
+               edges_up: np.ndarray) -> np.ndarray:
+    """Frame pairs ``(a, b)``, ``a < b``, matched at step ``t``: every frame of step ``t``
+    against its robot's previous ``window - 1`` frames and the frames of the last ``window``
+    steps of the robots it talks to at step ``t`` (``edges_up``).
+
+    Examples
+    --------
+    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.array([[0, 1]])).tolist()
+    [[0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.zeros((0, 2))).tolist()
+    [[0, 2], [1, 3]]
+    """
+    n = int(robot_of.max()) + 1
+    talk = np.eye(n, dtype=bool)
+    for i, j in np.asarray(edges_up, np.int64).reshape(-1, 2):
+        talk[i, j] = talk[j, i] = True
+    new = np.flatnonzero(step_of == t)
+    win = np.flatnonzero(step_of > t - window)
+    out = set()
+    for g in new.tolist():
+        for h in win.tolist():
+            if h != g and talk[robot_of[g], robot_of[h]]:
+                out.add((min(g, h), max(g, h)))
+    return np.array(sorted(out), np.int64).reshape(-1, 2)

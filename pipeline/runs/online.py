@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.matching.pairs import step_pairs
 from pipeline.progress import StageTimer
 from pipeline.types import Links
 
@@ -119,33 +120,6 @@ class OnlineRun:
         L = self.online.links
         upto = L.step_added <= step
         return (L.kept | (L.step_cut > step))[upto]
-
-
-def step_pairs(robot_of: np.ndarray, step_of: np.ndarray, t: int, window: int,
-               edges_up: np.ndarray) -> np.ndarray:
-    """Frame pairs ``(a, b)``, ``a < b``, matched at step ``t``: every frame of step ``t``
-    against its robot's previous ``window - 1`` frames and the frames of the last ``window``
-    steps of the robots it talks to at step ``t`` (``edges_up``).
-
-    Examples
-    --------
-    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.array([[0, 1]])).tolist()
-    [[0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
-    >>> step_pairs(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 1]), 1, 2, np.zeros((0, 2))).tolist()
-    [[0, 2], [1, 3]]
-    """
-    n = int(robot_of.max()) + 1
-    talk = np.eye(n, dtype=bool)
-    for i, j in np.asarray(edges_up, np.int64).reshape(-1, 2):
-        talk[i, j] = talk[j, i] = True
-    new = np.flatnonzero(step_of == t)
-    win = np.flatnonzero(step_of > t - window)
-    out = set()
-    for g in new.tolist():
-        for h in win.tolist():
-            if h != g and talk[robot_of[g], robot_of[h]]:
-                out.add((min(g, h), max(g, h)))
-    return np.array(sorted(out), np.int64).reshape(-1, 2)
 
 
 def track_names(features_per_camera, links: Links) -> np.ndarray:

@@ -17,7 +17,7 @@ read and written by it alone), the features of its frames of the last ``W`` step
    the batch robots send them (:mod:`pipeline.matching.packed`). A robot keeps the frames it
    receives in its folder while they are in the window, and records what it sent to whom
    (``sent.json``), pruned by the same rule: each frame crosses each link once;
-3. after one round it matches the pairs of :func:`pipeline.runs.online.step_pairs` that are its
+3. after one round it matches the pairs of :func:`pipeline.matching.pairs.step_pairs` that are its
    own: its new frame against its own older window frames and against every frame it
    received, each pair ``(a, b)``, ``a < b``, by :func:`pipeline.matching.pairs.match_pair` as
    :func:`pipeline.matching.pairs.match_edges` matches it (same orientation, same options);
@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import time
 from pathlib import Path
 
@@ -190,10 +191,8 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
         with np.load(f) as z:
             held += int(z["keypoints"].nbytes + z["raw" if "raw" in z.files else
                                                 "descriptors"].nbytes)
-    from pipeline.team.robot import peak_rss_bytes
-
     header = {"id": i, "frame": g, "pairs": header_pairs, "held_bytes": held,
               "descriptor_bytes": int(raw.descriptors.nbytes),
               "counters": transport.counters(), "timings_s": timings,
-              "peak_memory_bytes": held, "peak_rss_bytes": peak_rss_bytes(), "pid": os.getpid()}
+              "peak_memory_bytes": held, "peak_rss_bytes": 1024 * resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "pid": os.getpid()}
     return header, arrays

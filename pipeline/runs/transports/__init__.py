@@ -21,7 +21,7 @@ loads nothing heavy) with one function per job:
 ``online_robots()`` and ``online_match(views, t, n, window, edges_up, store, *, features, max_features, merge_radius, feature_options, match_options) -> (features, links, stats)``
     ``run-formation --steps N`` and ``run-images --sequence``: the matching of step ``t``
     (robot ``i``'s new frame is ``views[t * n + i]``; the pairs of
-    :func:`pipeline.runs.online.step_pairs`, robots talking along ``edges_up``), each robot
+    :func:`pipeline.matching.pairs.step_pairs`, robots talking along ``edges_up``), each robot
     keeping its window's features in ``store`` from step to step (``online_robots()``: a
     context manager giving the store for a whole run). Returns the new frames' features in
     robot order (the keypoints at least), the step's links in global frame ids in the order

@@ -60,11 +60,10 @@ def online_match(views, t: int, n: int, window: int, edges_up, store: dict, *, f
                  match_options: dict):
     """An online step's matching in this process: the new frames' features (robot ``i``'s
     frame ``t · n + i``), kept in ``store`` while in the window, and the pairs of
-    :func:`pipeline.runs.online.step_pairs` matched as :func:`pipeline.matching.pairs.
+    :func:`pipeline.matching.pairs.step_pairs` matched as :func:`pipeline.matching.pairs.
     match_edges` matches them. Returns ``(features, links, stats)`` as the registry says."""
     from pipeline.matching.features import extract_all
-    from pipeline.matching.pairs import match_edges
-    from pipeline.runs.online import step_pairs
+    from pipeline.matching.pairs import match_edges, step_pairs
     from pipeline.types import Links
 
     ids = [t * n + i for i in range(n)]

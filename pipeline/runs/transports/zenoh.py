@@ -570,11 +570,11 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     ------
     TeamError
         A robot did not publish, or the robots matched other pairs than
-        :func:`pipeline.runs.online.step_pairs` lists.
+        :func:`pipeline.matching.pairs.step_pairs` lists.
     """
     import tempfile
 
-    from pipeline.runs.online import step_pairs
+    from pipeline.matching.pairs import step_pairs
     from pipeline.team.online_match import write_frame
     from pipeline.types import Features, Links, PairMatches
 

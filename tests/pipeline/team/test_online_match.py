@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.runs.online import step_pairs
+from pipeline.matching.pairs import step_pairs
 from pipeline.team.online_match import own_pairs
 
 
