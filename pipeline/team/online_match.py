@@ -89,6 +89,7 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     from pipeline.matching.features import extract, photo_max_features
     from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
     from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.runfolder import atomic_file, write_json_atomic
     from pipeline.transport.wire import set_compression
     from pipeline.types import Features
 
@@ -112,7 +113,6 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     own = {"keypoints": raw.keypoints, "raw": raw.descriptors, "scales": raw.scales,
            "K": np.asarray(view.K, np.float64), "known": np.array([view.intrinsics_known]),
            "size": np.array([w, h], np.int64)}
-    from pipeline.runfolder import atomic_file, write_json_atomic
 
     def save(f: int, arrays: dict) -> None:
         with atomic_file(frame_file(store, f), mode="wb") as out:
@@ -194,5 +194,6 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     header = {"id": i, "frame": g, "pairs": header_pairs, "held_bytes": held,
               "descriptor_bytes": int(raw.descriptors.nbytes),
               "counters": transport.counters(), "timings_s": timings,
-              "peak_memory_bytes": held, "peak_rss_bytes": 1024 * resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "pid": os.getpid()}
+              "peak_memory_bytes": held, "pid": os.getpid(),
+              "peak_rss_bytes": 1024 * resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}
     return header, arrays
