@@ -3,8 +3,8 @@
 Runs ``run-formation --steps N --transport zenoh`` (formation d by default, ``--no-rerun``)
 with every robot process under cProfile (the ``FORMATION_MATCH_PROFILE_DIR`` hook of
 :mod:`pipeline.team.robot`), then adds up the statistics of all robot processes of each kind
-of team (``resolve``: the rule's stage of a step; ``online-fusion``: the fusion of the
-tracks a step changed) and prints, per kind, the robot runs, their summed time and the
+of team (``online-match``: the robots' matching of a step; ``resolve``: the rule's stage of
+a step; ``online-fusion``: the fusion of the tracks a step changed) and prints, per kind, the robot runs, their summed time and the
 functions with the largest cumulative and own time summed over them. cProfile slows Python
 calls (a line made of many small calls looks heavier than it is): read it for where to look,
 and measure a change with ``bench/online_team.py``. Saves ``runs/bench-team-profile/results.json``.
@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import pstats
+import re
 import subprocess
 import sys
 import tempfile
@@ -62,7 +63,8 @@ def main() -> int:
             raise SystemExit(f"run-formation failed: {proc.stderr.decode(errors='replace')[-500:]}")
         kinds: dict[str, list[Path]] = {}
         for f in sorted(prof.glob("*.pstats")):
-            kinds.setdefault(f.name.rsplit("-", 2)[0], []).append(f)
+            # the team's name without a step number (online-match-3: online-match)
+            kinds.setdefault(re.sub(r"-\d+$", "", f.name.rsplit("-", 2)[0]), []).append(f)
         results = {"command": cmd, "wall_s": round(wall, 2), "load_average_at_start": load,
                    "teams": {}}
         print(f"{' '.join(cmd)}: {wall:.2f} s with every robot process profiled")

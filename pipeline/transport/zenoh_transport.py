@@ -2,8 +2,13 @@
 
 Session (checked set-up, see the notes on Zenoh): ``mode: peer``, multicast scouting off and
 gossip off, so a robot is connected exactly to the endpoints it is told: it listens on its own
-endpoint and connects to its comm-graph neighbours' endpoints (and to the observer's, if the
-team has one). No message can reach a robot that is not a neighbour.
+endpoint and connects to the endpoints of its comm-graph neighbours of *lower* id (and to the
+observer's, if the team has one); its neighbours of higher id connect to it. No message can
+reach a robot that is not a neighbour. Each link is opened from one end: two peers that open
+a session to each other at the same moment can both lose it (eclipse-zenoh/zenoh#169), which
+left two robots of a test unconnected for 20 s now and then. A robot whose lower neighbour
+is not listening yet tries again after 0.1 s, doubling up to 1 s (``connect.retry``; Zenoh's
+default, 1 s up to 4 s, made a late neighbour wait about 2 s).
 
 Key expressions (``T`` = team name)
     ``fm/T/round/SRC/DST``  one packet per logical round from robot SRC to neighbour DST
@@ -166,7 +171,9 @@ def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float |
         "mode": "peer",
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "listen": {"endpoints": list(listen)},
-        "connect": {"endpoints": list(connect)},
+        "connect": {"endpoints": list(connect),
+                    "retry": {"period_init_ms": 100, "period_max_ms": 1000,
+                              "period_increase_factor": 2}},
     }
     if round_timeout_s is not None:
         lease_s, block_s = link_timeouts(round_timeout_s)
@@ -251,7 +258,8 @@ class ZenohTransport(RoundEndpoint):
         self._kept: dict[int, dict[int, bytes]] = {k: {} for k in self.neighbours}
         self._asked_at: dict[int, float] = {}
         self.send_s = 0.0  # seconds the round packets' puts blocked (a full queue: slow link)
-        connect = [team.endpoint(k) for k in sorted(self.neighbours)]
+        # each link opened from one end, the higher id (module docstring)
+        connect = [team.endpoint(k) for k in sorted(self.neighbours) if k < self.robot_id]
         if team.observer:
             connect.append(team.observer)
         self.session = open_session([team.endpoint(self.robot_id)], connect,
