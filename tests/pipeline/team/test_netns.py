@@ -3,7 +3,7 @@ hosts, partitioned and healed links, late starts, kills — never a hang, nothin
 fault ends in time, and the bytes that crossed each cable beside the protocol's count.
 
 A 4-robot ring on a small rendered formation (320x240, two links to cut): each team run is a few seconds. The faults
-start when a robot has finished its start handshake (its log says so), i.e. while the
+start when every robot has finished its start handshake (its log says so), i.e. while the
 robots render, extract and exchange features.
 """
 
@@ -38,9 +38,11 @@ def _scene_cache(tmp_path_factory, monkeypatch):
 
 
 def _run(tmp_path, options, fault=None, late=None, robot_options=None):
-    """One team run on a fresh rig; ``fault(rig)`` runs once robot 2's start handshake is
-    done (``late``: ``(robot, seconds)`` started that much after the others, never with
-    ``None``). Returns (exit codes, results, the cable counters)."""
+    """One team run on a fresh rig; ``fault(rig)`` runs once every started robot's start
+    handshake is done (robot 2 ending its own first could be frozen before its last hello
+    left, keeping a neighbour in the handshake instead of the run) (``late``: ``(robot,
+    seconds)`` started that much after the others, never with ``None``). Returns (exit codes,
+    results, the cable counters)."""
     with NetnsRig(4, RING) as rig:
         team = rig.team("ring", DATA, options, robot_options)
         ids = [i for i in range(4) if late is None or i != late[0]]
@@ -49,7 +51,8 @@ def _run(tmp_path, options, fault=None, late=None, robot_options=None):
             time.sleep(late[1])
             paths.update(rig.start_robots(team, tmp_path, [late[0]]))
         if fault is not None:
-            assert wait_for_line(tmp_path / "robot2.log", "neighbours heard", 60)
+            for i in sorted(paths):
+                assert wait_for_line(tmp_path / f"robot{i}.log", "neighbours heard", 60)
             fault(rig)
         codes = rig.wait_all(HANG_S)
         wire = rig.link_bytes()
