@@ -2,7 +2,7 @@
 machines): ``formation-match observe --team TEAM.json --out DIR``.
 
 It opens a Zenoh session listening on the team file's ``observer`` endpoint (every robot
-connects to it besides its neighbours, :mod:`pipeline.transport.zenoh_transport`), and
+connects to it besides its neighbours of lower id, :mod:`pipeline.transport.zenoh_transport`), and
 collects what the one-machine launcher's observer collects
 (:class:`pipeline.team.launcher.Observer`): each robot's published result (acknowledged, so
 the robot stops repeating it) and its statuses. It takes no part in the algorithm and never
