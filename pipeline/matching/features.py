@@ -218,7 +218,7 @@ def merge_colocated(keypoints: np.ndarray, response: np.ndarray,
     return np.sort(order[first]).astype(np.int64)
 
 
-def extract(image_or_view, method: str = "sift", max_features: int = 2000,
+def extract(image_or_view, method: str = "sift", max_features: int | None = 2000,
             merge_radius: float = MERGE_RADIUS_PX, *, contrast_threshold: float | None = None,
             rootsift: bool = False, budget_after_merge: bool = False) -> Features:
     """Detect and describe local features in one image.
@@ -233,9 +233,10 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
         ``surf`` only where OpenCV has non-free algorithms; ``colmap-sift`` is COLMAP's SIFT
         (``contrast_threshold``, ``rootsift`` and ``budget_after_merge`` do not apply: its
         descriptors are RootSIFT already and its budget counts locations).
-    max_features : int
+    max_features : int or None
         Upper bound on the features returned (strongest kept). Co-located duplicates are merged
-        after detection, so fewer may be returned.
+        after detection, so fewer may be returned. ``None``: :func:`photo_max_features` of the
+        image's size.
     merge_radius : float
         Keypoints closer than this many pixels are one feature (strongest kept); ``0`` disables.
     contrast_threshold : float, optional
@@ -269,6 +270,10 @@ def extract(image_or_view, method: str = "sift", max_features: int = 2000,
     0
     """
     method = str(method).lower()
+    if max_features is None:
+        h, w = (image_or_view.image if isinstance(image_or_view, View)
+                else np.asarray(image_or_view)).shape[:2]
+        max_features = photo_max_features(w, h, method)
     if isinstance(max_features, bool) or not isinstance(max_features, (int, np.integer)) or max_features < 1:
         raise InputError(f"max_features must be a positive integer, got {max_features!r}")
     max_features = int(max_features)
@@ -345,12 +350,9 @@ def extract_all(views, method: str = "sift", max_features: int | None = 2000,
     _detector(str(method).lower(), 1)  # fail on a bad method before starting any thread
 
     def one(v):
-        budget = max_features
-        if budget is None:
-            h, w = (v.image if isinstance(v, View) else np.asarray(v)).shape[:2]
-            budget = photo_max_features(w, h, method)
-        return extract(v, method, budget, merge_radius, contrast_threshold=contrast_threshold,
-                       rootsift=rootsift, budget_after_merge=budget_after_merge)
+        return extract(v, method, max_features, merge_radius,
+                       contrast_threshold=contrast_threshold, rootsift=rootsift,
+                       budget_after_merge=budget_after_merge)
 
     if workers <= 1 or len(views) <= 1:
         return [one(v) for v in progress(views, desc="features")]

@@ -29,7 +29,24 @@ import numpy as np
 
 from pipeline.matching.features import root_sift
 
-__all__ = ["pack_features", "unpack_features", "matching_descriptors"]
+__all__ = ["pack_features", "unpack_features", "matching_descriptors", "extract_raw"]
+
+
+def extract_raw(view, opts: dict, merge_radius: float):
+    """A robot's own features as it sends them: extracted without RootSIFT, and whether it
+    matches with RootSIFT of them (:func:`matching_descriptors`; COLMAP's SIFT is L1-rooted
+    already, so RootSIFT applies to OpenCV's SIFT only, as in
+    :func:`pipeline.matching.features.extract`). ``opts``: a robot's options
+    (:data:`pipeline.team.teamfile.DEFAULT_OPTIONS`: ``features``, ``max_features`` — ``None``
+    scales with the image —, ``contrast_threshold``, ``rootsift``, ``budget_after_merge``).
+    Returns ``(raw Features, rootsift)``."""
+    from pipeline.matching.features import extract
+
+    budget = opts.get("max_features")
+    raw = extract(view, opts["features"], None if budget is None else int(budget),
+                  float(merge_radius), contrast_threshold=opts.get("contrast_threshold"),
+                  rootsift=False, budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    return raw, bool(opts.get("rootsift", False)) and opts["features"] != "colmap-sift"
 
 
 def matching_descriptors(raw: np.ndarray, rootsift: bool) -> np.ndarray:

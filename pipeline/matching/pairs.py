@@ -375,8 +375,9 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
         Essential matrix (``True``) or fundamental matrix (``False``).
     ratio : float
         Lowe ratio threshold in ``(0, 1]`` (see :func:`mutual_ratio_matches`).
-    threshold_px : float
-        Epipolar inlier threshold in pixels.
+    threshold_px : float or None
+        Epipolar inlier threshold in pixels; ``None``: :func:`photo_threshold_px` of the larger
+        of the two images (``sizes``), or with the colmap matcher COLMAP's own.
     min_matches : int
         Fewer putative matches or fewer epipolar inliers than this give an empty association
         with ``reason`` set (a 7-point model fits any 7 points, so ``min_matches >= 8``).
@@ -385,8 +386,8 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
         ``colmap``: COLMAP's matching and verification (module notes; ``threshold_px`` is its
         RANSAC ``max_error``, at least :data:`COLMAP_MIN_INLIERS` inliers are asked). The same function for one edge as
         :func:`match_edges` for many, so a robot in its own process matches as the simulator does.
-    sizes : ((w_i, h_i), (w_j, h_j)) or None — image sizes for COLMAP's cameras (``None``:
-        twice the principal points)
+    sizes : ((w_i, h_i), (w_j, h_j)) or None — image sizes, for COLMAP's cameras and a
+        ``threshold_px`` of ``None`` (``None``: twice the principal points)
 
     Returns
     -------
@@ -410,11 +411,8 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
         sizes = None if sizes is None else (sizes[1], sizes[0])
     if not 0.0 < ratio <= 1.0:
         raise InputError(f"ratio must be in (0, 1], got {ratio}")
-    if (threshold_px is None and matcher != "colmap") or \
-            (threshold_px is not None and not threshold_px > 0):
-        raise InputError(f"epipolar threshold must be > 0 pixels, got {threshold_px}"
-                         + (" (None: COLMAP's own, with the colmap matcher only)"
-                            if threshold_px is None else ""))
+    if threshold_px is not None and not threshold_px > 0:
+        raise InputError(f"epipolar threshold must be > 0 pixels, got {threshold_px}")
     if min_matches < 8:
         raise InputError(f"min_matches must be >= 8 (a 7-point model fits any 7 matches), got {min_matches}")
     d_i, d_j = feats_i.descriptors, feats_j.descriptors
@@ -438,6 +436,12 @@ def match_pair(i: int, j: int, feats_i: Features, feats_j: Features,
         pm.i, pm.j = i, j
         return pm
 
+    if threshold_px is None:  # scaled with the larger image
+        if sizes is None and (K_i is None or K_j is None):
+            raise InputError(f"cameras {i}, {j}: an epipolar threshold of None scales with the "
+                             "images: give their sizes (or intrinsics K), or a threshold")
+        (wi, hi), (wj, hj) = sizes or (_size_of(K_i), _size_of(K_j))
+        threshold_px = photo_threshold_px(max(wi, wj), max(hi, hj))
     pairs, link_ratio = mutual_ratio_matches(d_i, d_j, ratio)
     n_put = len(pairs)
     if n_put < min_matches:
@@ -519,13 +523,10 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
         i, j = int(e[0]), int(e[1])
         # a fundamental matrix unless both cameras are calibrated
         known = bool(views[i].intrinsics_known and views[j].intrinsics_known)
-        thr = threshold_px
-        if thr is None:
-            (wi, hi), (wj, hj) = views[i].size, views[j].size
-            thr = photo_threshold_px(max(wi, wj), max(hi, hj))
         return match_pair(i, j, features[i], features[j], views[i].K, views[j].K, known,
-                          ratio=ratio, threshold_px=thr, min_matches=min_matches,
-                          confidence=confidence, max_iters=max_iters)
+                          ratio=ratio, threshold_px=threshold_px, min_matches=min_matches,
+                          confidence=confidence, max_iters=max_iters,
+                          sizes=(views[i].size, views[j].size))
 
     from pipeline.progress import progress
 

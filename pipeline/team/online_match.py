@@ -86,9 +86,13 @@ def own_pairs(i: int, n: int, t: int, window: int, neighbours) -> list[tuple[int
 def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     """Steps 1–4 of the module docstring for robot ``i``; returns (header, arrays) as
     :func:`pipeline.team.robot.robot_main` does (no link log: nothing is decided here)."""
-    from pipeline.matching.features import extract, photo_max_features
-    from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
-    from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.matching.packed import (
+        extract_raw,
+        matching_descriptors,
+        pack_features,
+        unpack_features,
+    )
+    from pipeline.matching.pairs import match_pair
     from pipeline.runfolder import atomic_file, write_json_atomic
     from pipeline.transport.wire import set_compression
     from pipeline.types import Features
@@ -104,12 +108,7 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     g = t * n + i
     view = load_frame(team.resolve_path(data["frames"][i]), f"frame-{g}")
     h, w = view.image.shape[:2]
-    budget = opts.get("max_features")
-    rootsift = bool(opts.get("rootsift", False)) and opts["features"] != "colmap-sift"
-    raw = extract(view, opts["features"],
-                  photo_max_features(w, h, opts["features"]) if budget is None else int(budget),
-                  float(opts["merge_radius"]), contrast_threshold=opts.get("contrast_threshold"),
-                  rootsift=False, budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    raw, rootsift = extract_raw(view, opts, opts["merge_radius"])
     own = {"keypoints": raw.keypoints, "raw": raw.descriptors, "scales": raw.scales,
            "K": np.asarray(view.K, np.float64), "known": np.array([view.intrinsics_known]),
            "size": np.array([w, h], np.int64)}
@@ -169,16 +168,12 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     t2 = time.perf_counter()
     arrays = {"keypoints": raw.keypoints, "scales": raw.scales}
     header_pairs = []
-    thr = opts.get("threshold_px", 1.0)
-    matcher = opts.get("matcher", "opencv")
+    thr = opts.get("threshold_px", 1.0)  # None: scaled with the larger image
     for a, b in own_pairs(i, n, t, window, transport.neighbours):
         (Ka, ka, sa), (Kb, kb, sb) = meta[a], meta[b]
-        th = thr
-        if th is None and matcher != "colmap":  # scaled with the larger image, as match_edges
-            th = photo_threshold_px(max(sa[0], sb[0]), max(sa[1], sb[1]))
         pm = match_pair(a, b, feats[a], feats[b], Ka, Kb, bool(ka and kb),
-                        threshold_px=None if th is None else float(th), matcher=matcher,
-                        sizes=(sa, sb))
+                        threshold_px=None if thr is None else float(thr),
+                        matcher=opts.get("matcher", "opencv"), sizes=(sa, sb))
         header_pairs.append({"a": a, "b": b, "n_putative": int(pm.n_putative),
                              "reason": pm.reason})
         arrays[f"pairs_{a}_{b}"] = pm.pairs.astype(np.int32)

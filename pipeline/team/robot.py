@@ -212,10 +212,14 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     computed by the matching end and sent with the matches) per neighbour; ``lossy``: some
     robot of the team injects message loss (flooded with the counts, :func:`flood_flag`).
     """
-    from pipeline.matching.features import extract, photo_max_features
     from pipeline.matching.link_evidence import edge_evidence
-    from pipeline.matching.packed import matching_descriptors, pack_features, unpack_features
-    from pipeline.matching.pairs import match_pair, photo_threshold_px
+    from pipeline.matching.packed import (
+        extract_raw,
+        matching_descriptors,
+        pack_features,
+        unpack_features,
+    )
+    from pipeline.matching.pairs import match_pair
     from pipeline.stages import merge_radius_for
     from pipeline.types import Features, PairMatches
 
@@ -227,17 +231,9 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
     h, w = view.image.shape[:2]
-    budget = opts.get("max_features")
-    # COLMAP's SIFT is L1-rooted already: RootSIFT applies to OpenCV's SIFT only, as in
-    # pipeline.matching.features.extract
-    rootsift = bool(opts.get("rootsift", False)) and opts["features"] != "colmap-sift"
     # extracted without RootSIFT: the SIFT bytes travel, each end takes the root itself
-    # (pipeline.matching.packed)
-    raw = extract(view, opts["features"],
-                  photo_max_features(w, h, opts["features"]) if budget is None else int(budget),
-                  merge_radius_for(resolution, opts.get("merge_radius")),
-                  contrast_threshold=opts.get("contrast_threshold"), rootsift=False,
-                  budget_after_merge=bool(opts.get("budget_after_merge", False)))
+    raw, rootsift = extract_raw(view, opts,
+                                merge_radius_for(resolution, opts.get("merge_radius")))
     feats = Features(raw.keypoints, matching_descriptors(raw.descriptors, rootsift),
                      raw.scales, raw.method)
     timings["features"] = time.perf_counter() - t
@@ -278,16 +274,11 @@ def _features_and_matches(team, i: int, transport, opts: dict, timings: dict):
                 other = Features(kp_other, desc_other, np.zeros(len(kp_other), np.float32),
                                  feats.method)
                 both_known = bool(view.intrinsics_known and p["intrinsics_known"][0])
-                thr = opts.get("threshold_px", 1.0)
-                if thr is None:  # scaled with the larger image, as matching does
-                    wj, hj = (int(v) for v in p["size"])
-                    thr = photo_threshold_px(max(w, wj), max(h, hj))
-                matcher = opts.get("matcher", "opencv")
-                if matcher == "colmap" and opts.get("threshold_px") is None:
-                    thr = None  # COLMAP's own threshold, as pipeline.matching.pairs.match_edges
+                thr = opts.get("threshold_px", 1.0)  # None: scaled with the larger image
                 pm = match_pair(i, msg.src, feats, other, view.K, p["K"], both_known,
                                 threshold_px=None if thr is None else float(thr),
-                                matcher=matcher, sizes=((w, h), tuple(int(v) for v in p["size"])))
+                                matcher=opts.get("matcher", "opencv"),
+                                sizes=((w, h), tuple(int(v) for v in p["size"])))
                 other_pose = (p["K"], p["R"], p["t"]) if "R" in p else None
                 ev = edge_evidence(pm, feats.keypoints, other.keypoints,
                                    pose if other_pose is not None else None, other_pose)
