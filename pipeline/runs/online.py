@@ -40,11 +40,10 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
-from pipeline.matching.pairs import step_pairs
 from pipeline.progress import StageTimer
 from pipeline.types import Links
 
-__all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online", "step_pairs",
+__all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online",
            "track_names",
            "associate_online", "batch_steps_of", "online_tables", "jsonable_step"]
 
@@ -231,8 +230,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                      robots_solve: bool = False, robots_check: bool = True) -> OnlineRun:
     """The online loop on frames already at hand: ``views[k * n + i]`` is robot ``i``'s frame
     of step ``k``, ``step_edges[k]`` the robots that talk at step ``k``. Each step: features
-    of the new frames, matching on :func:`step_pairs`, the online stage, fusion of the
-    changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
+    of the new frames, matching on :func:`pipeline.matching.pairs.step_pairs`, the online
+    stage, fusion of the changed tracks (needs poses), the batch run at ``batch_steps``. ``feature_options`` and
     ``match_options`` go to :func:`pipeline.matching.features.extract_all` and
     :func:`pipeline.matching.pairs.match_edges`; ``overturn``, ``hold``, ``weigh``, ``gather``, ``robots_solve`` and ``robots_check`` to the online stage; ``transport``
     names where the robots match, run the rule's stage and fuse at each step (its
@@ -277,7 +276,6 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 feature_options=feature_options, match_options=match_options)
             feats_all += feats
             desc_bytes += stats["descriptor_bytes"]
-            n_pairs = int(len(step_pairs(robot_of, step_of, t, window, step_edges[t])))
             match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes", "held_bytes_max")
                          if k in stats}
             match_s = time.perf_counter() - t0
@@ -289,7 +287,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 rec["fusion"] = _fuse_changed(oa, views, feats_all, jobs.online_fusion)
             kept = oa.kept_links()
             counts = count_conflicts(AssociationGraph(oa.m, kept))
-            rec.update(match_s=match_s, pairs_matched=n_pairs, **match_rec,
+            rec.update(match_s=match_s, pairs_matched=int(stats["pairs"]), **match_rec,
                        conflictive_sets_after=int(counts.conflictive_sets),
                        links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
             w = oa.window_images

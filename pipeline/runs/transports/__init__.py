@@ -26,8 +26,8 @@ loads nothing heavy) with one function per job:
     context manager giving the store for a whole run). Returns the new frames' features in
     robot order (the keypoints at least), the step's links in global frame ids in the order
     :func:`pipeline.matching.pairs.match_edges` gives them, and ``stats``
-    (``descriptor_bytes`` per new frame; ``messages``, ``bytes`` and ``held_bytes_max``, the
-    most bytes of features a robot holds, where counted).
+    (``pairs`` matched, ``descriptor_bytes`` per new frame; ``messages``, ``bytes`` and
+    ``held_bytes_max``, the most bytes of features a robot holds, where counted).
 ``online_stage(features_per_camera, links, resolution, *, solve_small_sets, keypoints, projections, gather_conflictive, gather_free) -> ConsistencyResult``
     ``run-formation --steps N``: the rule's stage of one step on its sub-problem (the
     step's frames are the cameras, frames sharing a link are neighbours; the online stage

@@ -78,7 +78,8 @@ def online_match(views, t: int, n: int, window: int, edges_up, store: dict, *, f
     lk = Links.from_matches(match_edges([store[g] for g in local], [views[g] for g in local],
                                         np.searchsorted(local, pairs), **match_options))
     links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
-    return feats, links, {"descriptor_bytes": [int(f.descriptors.nbytes) for f in feats]}
+    return feats, links, {"pairs": int(len(pairs)),
+                          "descriptor_bytes": [int(f.descriptors.nbytes) for f in feats]}
 
 
 #: the rule's stage of one online step on its sub-problem (frames as cameras, cameras

@@ -611,9 +611,8 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
             matches[(a, b)] = PairMatches(
                 a, b, arrays[f"pairs_{a}_{b}"].reshape(-1, 2), arrays[f"ratio_{a}_{b}"],
                 arrays[f"eperr_{a}_{b}"], int(pr["n_putative"]), str(pr["reason"]))
-    robot_of = np.arange((t + 1) * n) % n
-    step_of = np.arange((t + 1) * n) // n
-    want = [tuple(p) for p in step_pairs(robot_of, step_of, t, window, edges_up).tolist()]
+    frames = np.arange((t + 1) * n)
+    want = [tuple(p) for p in step_pairs(frames % n, frames // n, t, window, edges_up).tolist()]
     if sorted(matches) != want:
         raise TeamError(f"step {t}: the robots matched {len(matches)} frame pairs, the step "
                         f"has {len(want)}")
@@ -621,6 +620,7 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     summary = team_summary(run)
     stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values())),
              "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values())),
-             "wall_s": float(summary["wall_s"]), "descriptor_bytes": desc_bytes,
+             "wall_s": float(summary["wall_s"]), "pairs": len(want),
+             "descriptor_bytes": desc_bytes,
              "held_bytes_max": max(held)}
     return feats, links, stats
