@@ -131,8 +131,9 @@ def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
     """``--merge-radius PX``: keypoints of one image closer than this are one feature."""
     p.add_argument("--merge-radius", type=float, default=None, metavar="PX",
                    help="keypoints of one image closer than this are one feature (default: "
-                        "2 px, the truth tolerance, with --resolution evidence; 0.5 px with "
-                        "paper)")
+                        "the rule's, 2 px (the truth tolerance) with --resolution evidence or "
+                        "sync, 0.5 px with paper and paper-labels; 0.5 px with colmap-sift, as "
+                        "COLMAP keeps nearby DoG extrema apart, and with run-formation --steps)")
 
 
 def feature_options(args) -> tuple[str, int | None]:

@@ -81,6 +81,7 @@ def config_from_args(args) -> FormationConfig:
 def online_config_from_args(args):
     """The :class:`pipeline.runs.online.OnlineConfig` of ``run-formation --steps N``."""
     from pipeline.runs.online import OnlineConfig
+    from pipeline.stages import merge_radius_for
 
     if args.steps < 1:
         raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
@@ -111,7 +112,9 @@ def online_config_from_args(args):
                         resolution=args.resolution,
                         tol_px=validate.tolerance_px(args.tol_px),
                         batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,
-                        rerun=not args.no_rerun, transport=args.transport)
+                        rerun=not args.no_rerun, transport=args.transport,
+                        merge_radius=None if args.merge_radius is None else
+                        merge_radius_for(args.resolution, args.merge_radius))
 
 
 def run(args) -> int:

@@ -63,13 +63,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--connect", nargs="?", const="connect", default=None, metavar="URL",
                       help="also stream the recording to a running Rerun viewer (default URL: "
                            "Rerun's, rerun+http://127.0.0.1:9876/proxy)")
-    p.add_argument("--threads", type=int, default=1,
+    p.add_argument("--threads", type=int, default=None,
                    help="threads of COLMAP's mapper (default 1: repeatable figures; -1: all cores)")
     p.add_argument("--truth", default="none", choices=("none", "homographies"),
                    help="ground truth: homographies = DIR/H1to{k}p.txt (planar scene, image 1 "
                         "to image k at full resolution); a link is good when each keypoint maps "
                         "within --truth-tol of the other (pipeline.evaluation.truth). Default none")
-    p.add_argument("--truth-tol", type=float, default=2.0, metavar="PX",
+    p.add_argument("--truth-tol", type=float, default=None, metavar="PX",
                    help="tolerance of --truth in pixels of the processed images (default 2)")
     p.add_argument("--out", default=None,
                    help="run folder (default runs/images-<DIR name>-<graph>)")
@@ -94,15 +94,19 @@ def config_from_args(args) -> ImagesConfig:
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
                          f"or 0 for full resolution")
-    if not args.truth_tol > 0:
-        raise InputError(f"--truth-tol {args.truth_tol}: expected a positive number of pixels")
+    if args.truth_tol is not None and args.truth == "none":
+        raise InputError(f"--truth-tol {args.truth_tol} without --truth: the tolerance is "
+                         "that of --truth homographies; add it or drop --truth-tol")
+    truth_tol = 2.0 if args.truth_tol is None else args.truth_tol
+    if not truth_tol > 0:
+        raise InputError(f"--truth-tol {truth_tol}: expected a positive number of pixels")
     method, max_features = feature_options(args)
     return ImagesConfig(directory=args.directory, graph=args.graph, intrinsics=args.intrinsics,
                         max_size=args.max_size or None, features=method,
                         max_features=max_features, fusion=not args.no_fusion,
                         rerun=not args.no_rerun, export_db=args.export_db, out=args.out,
-                        threads=validate.threads(args.threads), truth=args.truth,
-                        truth_tol_px=args.truth_tol,
+                        threads=validate.threads(1 if args.threads is None else args.threads),
+                        truth=args.truth, truth_tol_px=truth_tol,
                         resolution=args.resolution, merge_radius=args.merge_radius,
                         live="spawn" if args.spawn else args.connect,
                         transport=args.transport, matcher=args.matcher, remap=args.remap)
@@ -127,11 +131,16 @@ def sequence_config_from_args(args):
     from pipeline.runs.online_images import SequenceConfig
 
     check_online_options(args)
-    for flag, on in (("--export-db", args.export_db), ("--truth", args.truth != "none"),
-                     ("--spawn/--connect", bool(args.spawn or args.connect))):
+    for flag, on, why in (
+            ("--export-db", args.export_db, "writes no database"),
+            ("--truth", args.truth != "none", "takes no truth"),
+            ("--truth-tol", args.truth_tol is not None, "takes no truth"),
+            ("--remap", args.remap, "maps nothing"),
+            ("--threads", args.threads is not None, "runs no COLMAP mapper"),
+            ("--spawn/--connect", bool(args.spawn or args.connect), "streams to no viewer")):
         if on:
             raise InputError(f"{flag} is not available with --sequence (the online job "
-                             "writes no database and takes no truth); drop it")
+                             f"{why}); drop it")
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
                          f"or 0 for full resolution")
@@ -140,7 +149,8 @@ def sequence_config_from_args(args):
                           hold=args.hold, intrinsics=args.intrinsics, max_size=args.max_size or None,
                           features=method, max_features=max_features, matcher=args.matcher,
                           resolution=args.resolution, batch_every=args.batch_every,
-                          out=args.out, rerun=not args.no_rerun, transport=args.transport)
+                          out=args.out, rerun=not args.no_rerun, transport=args.transport,
+                          merge_radius=args.merge_radius)
 
 
 def _run_sequence(args) -> int:
@@ -148,6 +158,11 @@ def _run_sequence(args) -> int:
     from pipeline.runs.online_images import run_images_sequence
 
     config = sequence_config_from_args(args)
+    out, folder = config.out_dir().resolve(), Path(config.directory).resolve()
+    if folder in out.parents:
+        raise InputError(f"--out {str(config.out_dir())!r} is inside DIR {config.directory!r}: "
+                         "with --sequence every sub-folder of DIR is a robot, so the next run "
+                         "on DIR would read the run folder as one; choose an --out outside DIR")
     with claim_run_folder(config.out_dir(), inputs=[("DIR", config.directory)]):
         out = run_images_sequence(config)
     report = json.loads((out / "report.json").read_text())

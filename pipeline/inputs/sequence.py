@@ -30,12 +30,14 @@ class PhotoSequence:
     views : list[View] — ``views[k * n_robots + i]`` = robot ``i``'s frame of step ``k``,
         named ``<sub-folder>/<file>``
     ignored : list[str] — images directly in ``DIR`` (no robot's: not used)
+    empty : list[str] — sub-folders holding no image (no robot: not used)
     """
 
     robots: list
     steps: int
     views: list
     ignored: list = dataclasses.field(default_factory=list)
+    empty: list = dataclasses.field(default_factory=list)
 
     @property
     def n_robots(self) -> int:
@@ -49,7 +51,8 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     Raises
     ------
     InputError
-        ``DIR`` missing or not a folder, fewer than two robot sub-folders, sub-folders with
+        ``DIR`` missing or not a folder, fewer than two robot sub-folders holding images
+        (sub-folders without any are no robots: :attr:`PhotoSequence.empty`), sub-folders with
         different numbers of frames, or any error of :func:`~pipeline.inputs.photos.load_folder`.
     """
     directory = Path(directory)
@@ -58,9 +61,12 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
                          "sub-folder of frames per robot")
     subs = sorted((p for p in directory.iterdir() if p.is_dir() and not p.name.startswith(".")),
                   key=lambda p: p.name)
+    empty = [p.name for p in subs if not image_paths(p)]  # e.g. a run folder: no robot
+    subs = [p for p in subs if p.name not in empty]
     if len(subs) < 2:
-        raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s); a "
-                         "team needs at least two (one sub-folder of frames per robot)")
+        raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "
+                         "holding images; a team needs at least two (one sub-folder of frames "
+                         "per robot)")
     if intrinsics == "auto" and (directory / "K.txt").is_file():
         intrinsics = directory / "K.txt"
     counts = {p.name: len(image_paths(p)) for p in subs}
@@ -79,4 +85,4 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         for p, vs in zip(subs, per_robot, strict=True):
             views.append(dataclasses.replace(vs[k], name=f"{p.name}/{vs[k].name}"))
     return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views,
-                         ignored=[p.name for p in image_paths(directory)])
+                         ignored=[p.name for p in image_paths(directory)], empty=empty)

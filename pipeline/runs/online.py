@@ -89,6 +89,9 @@ class OnlineConfig:
     robots_check: bool = True
     #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
     transport: str = "sim"
+    #: keypoints of one frame closer than this are one feature (None: the co-location radius,
+    #: :data:`pipeline.matching.features.MERGE_RADIUS_PX`, whatever the rule)
+    merge_radius: float | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -207,7 +210,8 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
                            batch_steps=batch_steps, on_step=on_step, overturn=config.overturn,
                            hold=config.hold, weigh=config.weigh, gather=config.gather,
                            transport=config.transport, robots_solve=config.robots_solve,
-                           robots_check=config.robots_check)
+                           robots_check=config.robots_check,
+                           feature_options={"merge_radius": config.merge_radius})
     run.sequence = seq
     return run
 

@@ -54,6 +54,9 @@ class SequenceConfig:
     rerun: bool = True
     #: where the robots run the rule's stage of each step (:mod:`pipeline.runs.transports`)
     transport: str = "sim"
+    #: keypoints of one frame closer than this are one feature (None: as ``run-images``,
+    #: :func:`pipeline.stages.photo_merge_radius`)
+    merge_radius: float | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -69,6 +72,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     from pipeline.inputs.sequence import load_sequence
     from pipeline.matching.pairs import check_matcher
     from pipeline.runs.online import associate_online, batch_steps_of, online_tables
+    from pipeline.stages import photo_merge_radius
 
     timer = timer or StageTimer()
     check_matcher(config.matcher, config.features)  # before any work
@@ -79,15 +83,20 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                    f"robot and are not used ({', '.join(seq.ignored[:3])}"
                    f"{', ...' if len(seq.ignored) > 3 else ''}): a robot's frames go in its "
                    "sub-folder")
+    if seq.empty:
+        timer.warn(f"{len(seq.empty)} sub-folder(s) of {config.directory} hold no image and are "
+                   f"no robot ({', '.join(seq.empty[:3])}{', ...' if len(seq.empty) > 3 else ''})")
     edges = comm_graph(config.graph, seq.robots, what="robot")
     timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
     parts = graph_parts(seq.n_robots, edges)
     if parts > 1:
         timer.warn(f"the comm graph splits the {seq.n_robots} robots into {parts} groups that "
                    "never match each other's frames (choose a denser --graph)")
+    radius = photo_merge_radius(config.features, config.resolution, config.merge_radius)
     run = associate_online(seq.views, seq.n_robots, [edges] * seq.steps, config.window,
                            config.resolution, timer, features=config.features,
                            max_features=config.max_features, fusion=False,
+                           feature_options={"merge_radius": radius},
                            batch_steps=batch_steps_of(seq.steps, config.batch_every)
                            | {seq.steps - 1},
                            match_options=dict(threshold_px=None, matcher=config.matcher),

@@ -59,6 +59,7 @@ def test_bad_thread_count_is_refused_before_any_work(photos, tmp_path, capsys, t
     (["--graph", "knn:0"], "graph 'knn:0': K must be a positive integer"),
     (["--features", "orb"], "--matcher colmap needs SIFT descriptors; --features orb"),
     (["--window", "2"], "--window applies to an online job only; add --sequence"),
+    (["--truth-tol", "3"], "--truth-tol 3.0 without --truth"),
 ])
 def test_options_that_cannot_run_are_refused_before_any_work(photos, tmp_path, capsys, args,
                                                             message):

@@ -38,6 +38,15 @@ def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
         load_sequence(root, max_size=64)
 
 
+def test_a_sub_folder_without_images_is_no_robot(tmp_path):
+    """E.g. a run folder written into DIR: skipped and listed, not a robot of 0 frames."""
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    (root / "run" / "sparse").mkdir(parents=True)
+    (root / "run" / "report.json").write_text("{}")
+    seq = load_sequence(root, max_size=64)
+    assert seq.robots == ["a", "b"] and seq.empty == ["run"] and seq.steps == 2
+
+
 def test_a_team_needs_two_robot_folders(tmp_path):
     root = _folder(tmp_path / "seq", {"a": [0, 1]})
     with pytest.raises(InputError, match="1 robot sub-folder"):

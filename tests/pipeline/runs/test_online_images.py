@@ -77,6 +77,9 @@ def test_images_and_links_tables(run_dir):
     (["--export-db"], "--export-db is not available with --sequence"),
     (["--window", "0"], "--window 0: expected a number of steps >= 1"),
     (["--hold", "-1"], "--hold -1: expected a number of steps >= 0"),
+    (["--remap"], "--remap is not available with --sequence"),
+    (["--threads", "2"], "--threads is not available with --sequence"),
+    (["--truth-tol", "3"], "--truth-tol is not available with --sequence"),
 ])
 def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsys, flags,
                                                          match):
@@ -84,6 +87,26 @@ def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsy
                  *flags]) == 2
     assert match in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_run_folder_inside_the_sequence_folder_is_refused(folder, capsys):
+    """Every sub-folder of DIR is a robot: a run folder there would be one on the next run."""
+    assert main(["run-images", str(folder), "--sequence", "--out", str(folder / "run"),
+                 *FAST]) == 2
+    assert "is inside DIR" in capsys.readouterr().err
+    assert not (folder / "run").exists()
+
+
+def test_the_merge_radius_reaches_the_robots_features(run_dir, folder, tmp_path):
+    """--merge-radius is applied (it was once dropped): a wide radius merges keypoints, so
+    fewer features and fewer links than the default's run."""
+    out = tmp_path / "wide"
+    assert main(["run-images", str(folder), "--sequence", "--window", "2", "--merge-radius",
+                 "12", "--no-rerun", "--out", str(out), *FAST]) == 0
+    wide, default = (json.loads((d / "report.json").read_text()) for d in (out, run_dir))
+    assert wide["config"]["merge_radius"] == 12.0
+    assert default["config"]["merge_radius"] is None
+    assert wide["final"]["links"] < default["final"]["links"]
 
 
 def test_the_hold_defaults_to_window_minus_one_and_is_a_choice(run_dir, folder, tmp_path):

@@ -97,6 +97,21 @@ def test_without_fusion_no_link_is_cut_as_an_outlier(tmp_path):
     assert not (out / "recording.rrd").exists()
 
 
+def test_the_merge_radius_reaches_the_robots_features(tmp_path):
+    """--merge-radius with --steps is applied (it was once dropped): a wide radius merges
+    keypoints, so the first step's frames have fewer features, and links, than with the
+    default."""
+    counts = []
+    for extra in ([], ["--merge-radius", "12"]):
+        out = tmp_path / f"r{len(extra)}"
+        assert main(["run-formation", "--steps", "1", "--no-fusion", "--no-rerun", "--out",
+                     str(out), *FAST, *extra]) == 0
+        report = json.loads((out / "report.json").read_text())
+        counts.append(report["steps"][0]["links_new"])
+    assert report["config"]["merge_radius"] == 12.0
+    assert 0 < counts[1] < counts[0]
+
+
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
