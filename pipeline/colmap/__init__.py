@@ -23,6 +23,7 @@ from pipeline.colmap.database import (
     calibrated,
     read_database,
     relative_rotations,
+    rescale_database,
     write_cleaned_database,
     write_database,
 )
@@ -58,6 +59,7 @@ __all__ = [
     "calibrated",
     "read_database",
     "relative_rotations",
+    "rescale_database",
     "write_cleaned_database",
     "write_database",
     "build_reconstruction",

@@ -36,7 +36,7 @@ from pipeline.inputs.dbcheck import MAX_PAIR_ID_IMAGE, check_database_tables, op
 from pipeline.types import Features, Links, View
 
 __all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",
-           "read_database", "write_cleaned_database", "relative_rotations"]
+           "read_database", "write_cleaned_database", "relative_rotations", "rescale_database"]
 
 _TVG = pycolmap.TwoViewGeometryConfiguration
 
@@ -233,6 +233,55 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
             tvg = _two_view_geometry(kept_pairs.get((i, j), empty), views[i], views[j],
                                      features[i].keypoints, features[j].keypoints)
             db.write_two_view_geometry(image_ids[i], image_ids[j], tvg)
+    return path
+
+
+def rescale_database(path: str | Path, sizes: dict[str, tuple[int, int]]) -> Path:
+    """Scale a database written at the downscaled size of the images to their files, in place.
+
+    ``sizes``: ``{image name: (width, height)}`` of the files. As
+    :func:`pipeline.colmap.mapping.rescale_to_files` scales a model: in COLMAP's pixel
+    convention (origin at the top-left corner) resizing by ``(sx, sy)`` multiplies every pixel
+    coordinate, so each camera is rescaled (``Camera.rescale``, once for a shared camera) and
+    each image's keypoints are multiplied; a pair's fundamental matrix becomes
+    ``S_j⁻ᵀ F S_i⁻¹`` and its homography ``S_j H S_i⁻¹`` (``S = diag(sx, sy, 1)``), so that
+    ``x_jᵀ F x_i = 0`` holds for the scaled points; the essential matrix, the relative pose and
+    the inlier matches do not change. Images not named in ``sizes`` keep their size.
+    """
+    path = Path(path)
+    with quiet_colmap(), pycolmap.Database.open(str(path)) as db:
+        images = {im.image_id: im for im in db.read_all_images()}
+        cameras = {c.camera_id: c for c in db.read_all_cameras()}
+        factor: dict[int, tuple[float, float]] = {}
+        for im in images.values():
+            if im.name not in sizes or im.camera_id in factor:
+                continue
+            cam = cameras[im.camera_id]
+            W, H = (int(v) for v in sizes[im.name])
+            factor[im.camera_id] = (W / cam.width, H / cam.height)
+            if (W, H) != (cam.width, cam.height):
+                cam.rescale(W, H)
+                db.update_camera(cam)
+        S = {i: np.diag([*factor.get(im.camera_id, (1.0, 1.0)), 1.0])
+             for i, im in images.items()}
+        for i in images:
+            if S[i][0, 0] == 1.0 and S[i][1, 1] == 1.0 or not db.exists_keypoints(i):
+                continue
+            kp = np.array(db.read_keypoints(i), dtype=np.float32)
+            kp[:, 0] *= np.float32(S[i][0, 0])
+            kp[:, 1] *= np.float32(S[i][1, 1])
+            db.update_keypoints(i, kp)
+        pair_ids, geometries = db.read_two_view_geometries()
+        for pid, g in zip(pair_ids, geometries, strict=True):
+            i, j = pycolmap.pair_id_to_image_pair(pid)
+            Si, Sj = S[i], S[j]
+            if np.array_equal(Si, Sj) and Si[0, 0] == 1.0 and Si[1, 1] == 1.0:
+                continue
+            if g.F is not None:  # None: the geometry has none
+                g.F = np.linalg.inv(Sj).T @ np.asarray(g.F) @ np.linalg.inv(Si)
+            if g.H is not None:
+                g.H = Sj @ np.asarray(g.H) @ np.linalg.inv(Si)
+            db.update_two_view_geometry(i, j, g)
     return path
 
 

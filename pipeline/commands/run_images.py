@@ -48,8 +48,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="longest image side after downscaling (default 1600; 0 = full size)")
     add_feature_options(p, photos=True)
     p.add_argument("--export-db", action="store_true",
-                   help="also write the matches as a COLMAP database (run folder/database.db): "
-                        "matches table = every link, two-view geometries = kept links")
+                   help="also write the matches as a COLMAP database (run folder/database.db, "
+                        "at the resolution of the image files, as sparse/): matches table = every "
+                        "link, two-view geometries = kept links; keypoints without descriptors "
+                        "(for mapping, not for matching again)")
     p.add_argument("--no-fusion", action="store_true", help="skip the fusion stage")
     p.add_argument("--remap", action="store_true",
                    help="map the kept links from scratch (COLMAP's incremental mapping) instead "

@@ -454,13 +454,14 @@ def _write(out: Path, config: ImagesConfig, report: dict, md: str, views, feats,
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             write_links_csv(tmp / "links.csv", ledger)
-            # sparse/ at the resolution of the image files it names (the mapping ran on
-            # downscaled copies), with colours from those files
-            colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction,
-                                         _file_sizes(views, Path(config.directory)),
+            # sparse/ and database.db at the resolution of the image files they name (the
+            # mapping ran on downscaled copies), sparse/ with colours from those files
+            sizes = _file_sizes(views, Path(config.directory))
+            colmap.write_model_for_files(tmp / "sparse", map_after.reconstruction, sizes,
                                          config.directory)
             if config.export_db:
                 shutil.copyfile(db_after, tmp / "database.db")
+                colmap.rescale_database(tmp / "database.db", sizes)
             if config.rerun:
                 _write_recording(tmp / "recording.rrd", views, feats, cleaning,
                                  map_before, map_after, kept_links, md, live=config.live)

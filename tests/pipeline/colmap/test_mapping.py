@@ -161,3 +161,54 @@ def test_the_threshold_reaches_colmaps_mapper(sceaux_before):
     assert options.mapper.abs_pose_min_num_inliers == 15
     out = colmap.incremental_mapping(db, num_threads=1, min_pose_inliers=15)
     assert out.summary()["min_pose_inliers"] == 15 and out.registered_images == 4
+
+
+def test_a_database_rescaled_to_the_files(sceaux_before, tmp_path):
+    """rescale_database (run-images --export-db): cameras at the files' size, keypoints and
+    two-view geometries scaled alike, so every kept match satisfies the scaled F as it did the
+    original (x_jᵀ F x_i is invariant), matches and inliers unchanged."""
+    import shutil
+
+    views, feats, links, _, _ = sceaux_before
+    db = _kept_database(sceaux_before, "scaled-src.db", None)
+    out = tmp_path / "scaled.db"
+    shutil.copyfile(db, out)
+    sizes = {v.name: (3 * v.size[0], 2 * v.size[1]) for v in views}  # sx = 3, sy = 2
+    colmap.rescale_database(out, sizes)
+
+    def read(path):
+        with pycolmap.Database.open(str(path)) as d:
+            ims = {im.image_id: im for im in d.read_all_images()}
+            cams = {c.camera_id: c for c in d.read_all_cameras()}
+            kps = {i: np.array(d.read_keypoints(i)) for i in ims}
+            pids, geoms = d.read_two_view_geometries()
+            return ims, cams, kps, dict(zip(pids, geoms, strict=True)), d.num_matches()
+
+    ims0, cams0, kp0, g0, n0 = read(db)
+    ims1, cams1, kp1, g1, n1 = read(out)
+    assert n1 == n0 and g0.keys() == g1.keys()
+    for i, im in ims1.items():
+        cam = cams1[im.camera_id]
+        assert (cam.width, cam.height) == sizes[im.name]
+        np.testing.assert_allclose(kp1[i][:, 0], 3 * kp0[i][:, 0], rtol=1e-6)
+        np.testing.assert_allclose(kp1[i][:, 1], 2 * kp0[i][:, 1], rtol=1e-6)
+        f0, f1 = cams0[ims0[i].camera_id].focal_length, cam.focal_length
+        assert 2 * f0 < f1 < 3 * f0  # one focal length, scaled between sy and sx
+    checked = 0
+    for pid, g in g1.items():
+        i, j = pycolmap.pair_id_to_image_pair(pid)
+        inl = np.asarray(g.inlier_matches)
+        assert np.array_equal(inl, np.asarray(g0[pid].inlier_matches))
+        if not len(inl) or g0[pid].F is None:
+            continue
+
+        def residual(kp, F, i=i, j=j, inl=inl):
+            a = np.c_[kp[i][inl[:, 0], :2], np.ones(len(inl))]
+            b = np.c_[kp[j][inl[:, 1], :2], np.ones(len(inl))]
+            return np.einsum("ni,ij,nj->n", b, F, a)
+
+        r0, r1 = residual(kp0, np.asarray(g0[pid].F)), residual(kp1, np.asarray(g1[pid].F))
+        # keypoints are stored as float32: the residuals agree to its precision
+        np.testing.assert_allclose(r1, r0, atol=1e-4 * np.abs(r0).max() + 1e-9)
+        checked += 1
+    assert checked > 0
