@@ -81,6 +81,9 @@ class MappingSummary:
                "min_pose_inliers": int(self.min_pose_inliers)}
         if self.registered_at_colmap_default is not None:
             out["registered_at_colmap_default"] = int(self.registered_at_colmap_default)
+        bogus = bogus_camera_images(self.reconstruction)
+        if bogus:  # said only when there are some
+            out["bogus_camera_images"] = bogus
         return out
 
 
@@ -319,11 +322,24 @@ def poses_usable(reconstruction) -> bool:
     AABB ring with ``knn:4``: a shared camera left at ``k = -1.07``)."""
     if reconstruction is None or reconstruction.num_reg_images() < 2:
         return False
+    return not bogus_camera_images(reconstruction)
+
+
+def bogus_camera_images(reconstruction) -> list[str]:
+    """Names of the registered images whose camera has parameters COLMAP's mapper deems bogus
+    (:func:`poses_usable`: focal length ratio outside ``[0.1, 10]`` or a distortion term
+    above 1), sorted; empty without a reconstruction."""
+    if reconstruction is None:
+        return []
     mapper = pycolmap.IncrementalMapperOptions()
-    cameras = {reconstruction.images[i].camera_id for i in reconstruction.reg_image_ids()}
-    return not any(reconstruction.cameras[c].has_bogus_params(
-        mapper.min_focal_length_ratio, mapper.max_focal_length_ratio, mapper.max_extra_param)
-        for c in cameras)
+    out = []
+    for i in reconstruction.reg_image_ids():
+        image = reconstruction.images[i]
+        if reconstruction.cameras[image.camera_id].has_bogus_params(
+                mapper.min_focal_length_ratio, mapper.max_focal_length_ratio,
+                mapper.max_extra_param):
+            out.append(image.name)
+    return sorted(out)
 
 
 def _refine(rec, options, constant_cameras) -> None:

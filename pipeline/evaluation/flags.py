@@ -15,6 +15,10 @@ Flags
     (:func:`pipeline.colmap.incremental_mapping_with_retry`).
 ``images-lost``
     Cleaning lost images: registered after < registered before.
+``bogus-cameras``
+    Registered images of the reconstruction after cleaning (``sparse/``) have camera
+    parameters COLMAP's own mapper deems bogus (focal length ratio outside ``[0.1, 10]``, a
+    distortion term above 1): their poses and points are not to be trusted.
 ``cleaning-worse``
     Cleaning made another figure worse by more than 5 %: fewer points, a shorter mean track,
     or a larger mean reprojection error.
@@ -108,6 +112,17 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                       "likely_cause": "a weak view graph: few matches reach the images the "
                                       "first model lacked; their poses rest on fewer points "
                                       "(check them, or add photos that overlap them)"})
+    bogus = list(after.get("bogus_camera_images", []))
+    if bogus:
+        flags.append({"flag": "bogus-cameras",
+                      "message": f"COLMAP deems the camera parameters of {len(bogus)} "
+                                 f"registered image(s) of sparse/ bogus (focal length ratio "
+                                 f"outside [0.1, 10] or a distortion term above 1): "
+                                 f"{', '.join(bogus[:5])}{', ...' if len(bogus) > 5 else ''}",
+                      "likely_cause": "intrinsics that the photos cannot pin down (few or small "
+                                      "images, a guessed focal length refined on weak "
+                                      "geometry): give a K.txt, use photos with EXIF, or a "
+                                      "larger --max-size"})
     cut = {k: int(v) for k, v in (cut_by_reason or {}).items() if v}
     cut_text = ", ".join(f"{v} by {k}" for k, v in sorted(cut.items())) or "none"
     if reg_a < reg_b:

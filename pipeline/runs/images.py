@@ -268,20 +268,24 @@ _AFTER = {
     "poses": "kept links triangulated on the poses of the reconstruction before cleaning, "
              "bundle adjusted (pipeline.colmap.mapping_from_poses)",
     "scratch": "pycolmap incremental mapping of the kept links from scratch",
+    "unusable": "pycolmap incremental mapping of the kept links from scratch (the "
+                "reconstruction before cleaning is no start: fewer than two registered images, "
+                "or cameras COLMAP deems bogus)",
 }
 
 
 def _after_mode(config: ImagesConfig, kept: np.ndarray, map_before) -> str:
-    """``same`` (no link cut), ``scratch`` (``remap``, or no reconstruction before cleaning
-    to start from: fewer than two images, or a camera COLMAP deems bogus,
-    :func:`pipeline.colmap.poses_usable`) or ``poses`` (the default: :func:`_map_after`)."""
+    """``same`` (no link cut), ``scratch`` (``remap``), ``unusable`` (from scratch too: no
+    reconstruction before cleaning to start from, fewer than two images or a camera COLMAP
+    deems bogus, :func:`pipeline.colmap.poses_usable`) or ``poses`` (the default:
+    :func:`_map_after`)."""
     if bool(np.all(kept)):
         return "same"
     from pipeline import colmap
 
-    if config.remap or not colmap.poses_usable(map_before.reconstruction):
+    if config.remap:
         return "scratch"
-    return "poses"
+    return "poses" if colmap.poses_usable(map_before.reconstruction) else "unusable"
 
 
 def _map_after(config: ImagesConfig, kept: np.ndarray, db_after: Path, map_before, fixed):
@@ -305,7 +309,7 @@ def _map_after(config: ImagesConfig, kept: np.ndarray, db_after: Path, map_befor
     mode = _after_mode(config, kept, map_before)
     if mode == "same":
         return map_before
-    if mode == "scratch":
+    if mode in ("scratch", "unusable"):
         return colmap.incremental_mapping(db_after, num_threads=config.threads,
                                           fixed_intrinsics=fixed,
                                           min_pose_inliers=map_before.min_pose_inliers)

@@ -80,3 +80,34 @@ def test_cleaning_that_costs_points_or_accuracy_is_flagged_not_small_noise():
     msg = flags[0]["message"]
     assert "points 1000 -> 700" in msg and "track length" in msg and "reprojection" in msg
     assert "9 by resolution" in flags[0]["likely_cause"]
+
+
+def test_cameras_colmap_deems_bogus_are_flagged_by_name():
+    """sparse/ with a camera COLMAP's mapper would reject (e.g. k = 24.7 on 80x60 images) is
+    not written silently."""
+    before = _summary(6, NAMES, 1000)
+    after = {**before, "bogus_camera_images": ["1.jpg", "4.jpg"]}
+    flags = reconstruction_flags(6, before, after, RING, [100] * 6, [5000] * 6)
+    assert [f["flag"] for f in flags] == ["bogus-cameras"]
+    assert "2 registered image(s)" in flags[0]["message"]
+    assert "1.jpg, 4.jpg" in flags[0]["message"] and "K.txt" in flags[0]["likely_cause"]
+
+
+def test_bogus_camera_images_reads_colmaps_own_test():
+    """The registered images whose camera fails Camera.has_bogus_params with the mapper's
+    thresholds (here a radial term of 24.7), by name; none without a reconstruction."""
+    import pycolmap
+
+    from pipeline.colmap.mapping import bogus_camera_images, poses_usable
+
+    assert bogus_camera_images(None) == []
+    rec = pycolmap.Reconstruction()
+    for cid, k in ((1, 0.1), (2, 24.7), (3, 0.0)):
+        cam = pycolmap.Camera(model="SIMPLE_RADIAL", width=80, height=60,
+                              params=[70, 40, 30, k], camera_id=cid)
+        rec.add_camera_with_trivial_rig(cam)
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=f"{cid}.png", camera_id=cid,
+                                                        image_id=cid), pycolmap.Rigid3d())
+    assert rec.num_reg_images() == 3
+    assert bogus_camera_images(rec) == ["2.png"]
+    assert not poses_usable(rec)
