@@ -209,8 +209,10 @@ def _mapping(database_path: Path, image_dir: str, out: Path, options, n_images: 
     # COLMAP insists on an existing image folder even when it reads no pixels
     from pipeline.progress import progress
 
-    with quiet_colmap(), progress(None, total=n_images,
-                                  desc="mapping (images registered)") as bar:
+    # its errors too ("Failed to create any sparse model"): what the mapping failed to do is
+    # the caller's to say (a run's flags name it and its likely cause), not a raw log line
+    with quiet_colmap(3), progress(None, total=n_images,
+                                   desc="mapping (images registered)") as bar:
         return pycolmap.incremental_mapping(
             database_path, image_dir, out, options, input_path=str(input_path),
             initial_image_pair_callback=lambda: bar.update(2),

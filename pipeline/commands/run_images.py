@@ -27,7 +27,7 @@ from pipeline.errors import InputError
 from pipeline.outcome import exit_status
 from pipeline.runs.images import ImagesConfig
 
-__all__ = ["add_arguments", "config_from_args", "run"]
+__all__ = ["add_arguments", "config_from_args", "run", "check_live", "RERUN_DEFAULT_URL"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -92,6 +92,45 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_online_options(g, "--sequence")
 
 
+#: where ``--connect`` streams without a URL (Rerun's own default)
+RERUN_DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
+
+
+def check_live(spawn: bool, connect: str | None, timeout_s: float = 1.0) -> None:
+    """Refuse before any work a live viewer that cannot be reached: ``--spawn`` without a
+    display (Rerun would ignore it), ``--connect`` to a URL that is not Rerun's
+    ``rerun+http://HOST:PORT/proxy`` form or where nothing answers (Rerun would retry in the
+    background and drop the stream)."""
+    import os
+    import socket
+    import sys
+    from urllib.parse import urlsplit
+
+    if spawn and sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise InputError("--spawn needs a display (DISPLAY is not set): drop it and open "
+                         "recording.rrd later (make view serves it to a browser), or stream to "
+                         "a viewer elsewhere with --connect URL")
+    if connect is None:
+        return
+    url = RERUN_DEFAULT_URL if connect == "connect" else connect
+    parts = urlsplit(url.removeprefix("rerun+"))
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+    if not url.startswith(("rerun+http://", "rerun+https://")) or not host or not port:
+        raise InputError(f"--connect {url!r}: expected Rerun's form "
+                         f"rerun+http://HOST:PORT/proxy, e.g. {RERUN_DEFAULT_URL}")
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise InputError(f"--connect {url}: no Rerun viewer answers there "
+                         f"({exc.strerror or exc}); start one (rerun) or drop --connect "
+                         "(recording.rrd is written either way)") from None
+
+
 def config_from_args(args) -> ImagesConfig:
     if args.max_size < 0:
         raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
@@ -103,6 +142,10 @@ def config_from_args(args) -> ImagesConfig:
     if not truth_tol > 0:
         raise InputError(f"--truth-tol {truth_tol}: expected a positive number of pixels")
     method, max_features = feature_options(args)
+    if args.no_rerun and (args.spawn or args.connect):
+        raise InputError(f"{'--spawn' if args.spawn else '--connect'} with --no-rerun: the live "
+                         "viewer shows the recording; drop one of them")
+    check_live(args.spawn, args.connect)
     return ImagesConfig(directory=args.directory, graph=args.graph, intrinsics=args.intrinsics,
                         max_size=args.max_size or None, features=method,
                         max_features=max_features, fusion=not args.no_fusion,

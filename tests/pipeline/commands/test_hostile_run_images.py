@@ -192,3 +192,34 @@ def test_an_image_file_is_judged_on_its_header_before_decoding(photos, tmp_path,
                  str(tmp_path / "run")]) == 2
     one_line_error(capsys, "000_big.jpg", needle)
     assert big.stat().st_mtime_ns == stat.st_mtime_ns and not (tmp_path / "run").exists()
+
+
+def test_a_live_viewer_that_cannot_be_reached_is_refused_before_any_work(photos, tmp_path,
+                                                                         capsys, monkeypatch):
+    """--spawn without a display, --connect where no viewer answers or to a malformed URL:
+    one line, exit 2, nothing written (Rerun itself would ignore the spawn or retry in the
+    background and drop the stream, with its own log lines)."""
+    import socket
+
+    from pipeline.commands.run_images import check_live
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there now
+    for flags, message in ((["--spawn"], "--spawn needs a display"),
+                           (["--connect", f"rerun+http://127.0.0.1:{port}/proxy"],
+                            "no Rerun viewer answers there"),
+                           (["--connect", "http://127.0.0.1:9876"], "expected Rerun's form"),
+                           (["--connect", "--no-rerun"], "--connect with --no-rerun")):
+        assert main(["run-images", str(photos), *flags, "--out", str(tmp_path / "run")]) == 2
+        one_line_error(capsys, message)
+        assert not (tmp_path / "run").exists()
+    with socket.socket() as listening:  # a viewer's port that answers passes
+        listening.bind(("127.0.0.1", 0))
+        listening.listen()
+        check_live(False, f"rerun+http://127.0.0.1:{listening.getsockname()[1]}/proxy")
+    monkeypatch.setenv("DISPLAY", ":0")
+    check_live(True, None)
