@@ -92,6 +92,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_online_options(g, "--sequence")
 
 
+def check_max_size(max_size: int) -> None:
+    """``--max-size``: 0 (full resolution) or at least 16 pixels of the longest side."""
+    from pipeline.inputs.photos import MIN_MAX_SIZE
+
+    if max_size < 0 or 0 < max_size < MIN_MAX_SIZE:
+        raise InputError(f"--max-size {max_size}: expected at least {MIN_MAX_SIZE} pixels of "
+                         f"the longest side, or 0 for full resolution")
+
+
 #: where ``--connect`` streams without a URL (Rerun's own default)
 RERUN_DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
 
@@ -132,9 +141,7 @@ def check_live(spawn: bool, connect: str | None, timeout_s: float = 1.0) -> None
 
 
 def config_from_args(args) -> ImagesConfig:
-    if args.max_size < 0:
-        raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
-                         f"or 0 for full resolution")
+    check_max_size(args.max_size)
     if args.truth_tol is not None and args.truth == "none":
         raise InputError(f"--truth-tol {args.truth_tol} without --truth: the tolerance is "
                          "that of --truth homographies; add it or drop --truth-tol")
@@ -186,9 +193,7 @@ def sequence_config_from_args(args):
         if on:
             raise InputError(f"{flag} is not available with --sequence (the online job "
                              f"{why}); drop it")
-    if args.max_size < 0:
-        raise InputError(f"--max-size {args.max_size}: expected a positive number of pixels, "
-                         f"or 0 for full resolution")
+    check_max_size(args.max_size)
     method, max_features = feature_options(args)
     return SequenceConfig(directory=args.directory, graph=args.graph, window=args.window,
                           hold=args.hold, intrinsics=args.intrinsics, max_size=args.max_size or None,

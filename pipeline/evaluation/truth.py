@@ -61,9 +61,15 @@ def read_homographies(directory: str | Path, n: int) -> np.ndarray:
             h = np.loadtxt(path, dtype=np.float64)
         except ValueError as exc:
             raise InputError(f"{path}: not a numeric 3 x 3 matrix ({exc})") from None
-        if h.shape != (3, 3) or not np.isfinite(h).all() or abs(np.linalg.det(h)) < 1e-12:
+        if h.shape != (3, 3):
             raise InputError(f"{path}: expected an invertible 3 x 3 homography, got shape "
                              f"{h.shape}")
+        if not np.isfinite(h).all():
+            raise InputError(f"{path}: the homography holds a non-finite value (nan or inf); "
+                             "expected an invertible 3 x 3 matrix of numbers")
+        if abs(np.linalg.det(h)) < 1e-12:
+            raise InputError(f"{path}: the homography is singular (determinant "
+                             f"{np.linalg.det(h):.3g}); expected an invertible 3 x 3 matrix")
         H[k - 1] = h
     return H
 

@@ -36,6 +36,7 @@ __all__ = [
     "identical_pixels",
     "pixel_digests",
     "IMAGE_SUFFIXES",
+    "MIN_MAX_SIZE",
     "GUESS_FOCAL_FACTOR",
     "guess_K",
     "ImageIntrinsics",
@@ -50,6 +51,8 @@ log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+#: the smallest longest side images may be downscaled to (``max_size``)
+MIN_MAX_SIZE = 16
 #: Focal length of the stated guess, in units of the longest image side.
 GUESS_FOCAL_FACTOR = 1.2
 #: Diagonal of the 35 mm film frame (36 x 24 mm), the reference of ``FocalLengthIn35mmFilm``.
@@ -462,8 +465,9 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
     """
     directory = Path(directory)
     if max_size is not None:
-        if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) or max_size < 16:
-            raise InputError(f"max_size {max_size!r}: expected an integer >= 16 (pixels of the "
+        if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) or \
+                max_size < MIN_MAX_SIZE:
+            raise InputError(f"max_size {max_size!r}: expected an integer >= {MIN_MAX_SIZE} (pixels of the "
                              f"longest side), or None for full resolution")
     files = _image_files(directory)
     mode, K_file, k_path = _resolve_intrinsics(intrinsics, directory)
@@ -485,7 +489,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                 (K, source), known = found, True
             elif mode == "exif":
                 raise InputError(
-                    f"{path.name}: no EXIF focal length (FocalLengthIn35mmFilm, or FocalLength "
+                    f"{path}: no EXIF focal length (FocalLengthIn35mmFilm, or FocalLength "
                     f"with FocalPlaneXResolution); use --intrinsics auto (guess) or a K.txt")
             else:
                 K, source, known = guess_K(w, h), "guess", False

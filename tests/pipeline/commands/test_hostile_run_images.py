@@ -60,6 +60,9 @@ def test_bad_thread_count_is_refused_before_any_work(photos, tmp_path, capsys, t
     (["--features", "orb"], "--matcher colmap needs SIFT descriptors; --features orb"),
     (["--window", "2"], "--window applies to an online job only; add --sequence"),
     (["--truth-tol", "3"], "--truth-tol 3.0 without --truth"),
+    (["--max-size", "10"], "--max-size 10: expected at least 16 pixels of the longest side, "
+                           "or 0 for full resolution"),
+    (["--max-size", "-1"], "--max-size -1: expected at least 16"),
 ])
 def test_options_that_cannot_run_are_refused_before_any_work(photos, tmp_path, capsys, args,
                                                             message):

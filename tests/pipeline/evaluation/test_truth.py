@@ -64,3 +64,9 @@ def test_missing_or_bad_homography_file(tmp_path):
     (tmp_path / "H1to2p.txt").write_text("1 0 0\n0 1 0\n")
     with pytest.raises(InputError, match="invertible 3 x 3"):
         read_homographies(tmp_path, 2)
+    (tmp_path / "H1to2p.txt").write_text("nan 0 0\n0 1 0\n0 0 1\n")
+    with pytest.raises(InputError, match="non-finite value"):
+        read_homographies(tmp_path, 2)
+    (tmp_path / "H1to2p.txt").write_text("1 2 3\n2 4 6\n0 0 0\n")
+    with pytest.raises(InputError, match="singular"):
+        read_homographies(tmp_path, 2)
