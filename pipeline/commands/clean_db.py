@@ -11,7 +11,7 @@ import argparse
 
 from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "run", "fusion_lines"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -109,19 +109,7 @@ def run(args) -> int:
             print("  fewer pairs can leave images below COLMAP's registration threshold: if "
                   "the mapper registers few, map with --Mapper.abs_pose_min_num_inliers 15")
     if res.fusion:
-        fu = res.fusion
-        mp = fu["mapping"]
-        if fu["enabled"]:
-            print(f"fusion: {cut['fusion-outlier']} links cut as outliers of their tracks, on "
-                  f"the poses of a COLMAP mapping of the input ({fu['cameras']} of "
-                  f"{res.images} images registered, {mp['points']} points, "
-                  f"{mp['mean_reprojection_error']:.2f} px)")
-            if cut["fusion-outlier"]:
-                print("  fewer matches can leave images below COLMAP's registration threshold "
-                      "where the views overlap little: if the mapper registers few, map with "
-                      "--Mapper.abs_pose_min_num_inliers 15")
-        else:
-            print(f"fusion: not run, {fu['reason']}")
+        print("\n".join(fusion_lines(res.fusion, cut["fusion-outlier"], res.images)))
     if res.baselines:
         from pipeline.evaluation.report import baselines_lines
 
@@ -130,3 +118,26 @@ def run(args) -> int:
     print(f"cleaned database written to {res.output}; what was cut: {links_csv}"
           + ("" if args.no_rerun else f", recording: {rrd}"))
     return exit_status(summary)
+
+
+def fusion_lines(fu: dict, cut: int, images: int) -> list[str]:
+    """What ``clean-db --fusion`` prints of its fusion section ``fu`` (``cut`` links cut as
+    outliers, of a database of ``images`` images): the mapping it judged the tracks on, the
+    largest of its models named as such (the images of the others are not fused)."""
+    if not fu["enabled"]:
+        return [f"fusion: not run, {fu['reason']}"]
+    mp = fu["mapping"]
+    models = int(mp.get("models", 1))
+    out = [f"fusion: {cut} links cut as outliers of their tracks, on the poses of a COLMAP "
+           f"mapping of the input ({fu['cameras']} of {images} images registered"
+           + (f" in the largest of its {models} models" if models > 1 else "")
+           + f", {mp['points']} points, {mp['mean_reprojection_error']:.2f} px)"]
+    if models > 1:
+        out.append(f"  the images of the other models are not fused "
+                   f"({len(fu['cameras_without_pose'])} without a pose here; see the report's "
+                   "fusion.cameras_without_pose)")
+    if cut:
+        out.append("  fewer matches can leave images below COLMAP's registration threshold "
+                   "where the views overlap little: if the mapper registers few, map with "
+                   "--Mapper.abs_pose_min_num_inliers 15")
+    return out

@@ -433,3 +433,20 @@ def test_fusion_maps_only_the_links_on_the_comm_graph(tmp_path):
     assert wrong <= by_reason["fusion-outlier"]
     on_graph = {tuple(sorted(e)) for e in edges}
     assert all((r[0], r[2]) in on_graph for r in by_reason["fusion-outlier"])
+
+
+def test_fusion_on_the_largest_of_several_models_says_so():
+    """clean-db --fusion judges tracks on one COLMAP model: with several, the line says it is
+    the largest and that the other models' images are not fused."""
+    from pipeline.commands.clean_db import fusion_lines
+
+    fu = {"enabled": True, "cameras": 4, "cameras_without_pose": ["g1", "g2", "g3"],
+          "mapping": {"models": 2, "points": 1259, "mean_reprojection_error": 0.2}}
+    lines = fusion_lines(fu, 0, 7)
+    assert "4 of 7 images registered in the largest of its 2 models" in lines[0]
+    assert "not fused (3 without a pose here" in lines[1] and len(lines) == 2
+    one = fusion_lines({**fu, "mapping": {**fu["mapping"], "models": 1},
+                        "cameras_without_pose": []}, 5, 4)
+    assert "largest" not in one[0] and "5 links cut" in one[0] and len(one) == 2
+    assert fusion_lines({"enabled": False, "reason": "camera poses unknown"}, 0, 4) == \
+        ["fusion: not run, camera poses unknown"]
