@@ -102,7 +102,7 @@ def budget_line(views: list[View], max_features: int | None, method: str = "sift
     >>> budget_line([], 2000)
     '2000 per image'
     >>> budget_line([], 300, "colmap-sift")
-    "300 per image (COLMAP's budget, in locations)"
+    "300 per image (COLMAP's budget, by whole scale levels: a few more locations may stay)"
     """
     from pipeline.matching.features import (
         BASE_FEATURES,
@@ -112,7 +112,8 @@ def budget_line(views: list[View], max_features: int | None, method: str = "sift
     )
 
     if method == COLMAP_SIFT:  # a location with two orientations gives two features
-        return f"{max_features or MAX_PHOTO_FEATURES} per image (COLMAP's budget, in locations)"
+        return (f"{max_features or MAX_PHOTO_FEATURES} per image (COLMAP's budget, by whole "
+                f"scale levels: a few more locations may stay)")
     if max_features is not None:
         return f"{max_features} per image"
     budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})

@@ -33,8 +33,11 @@ def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> Non
                         f"offers; colmap-sift is COLMAP's SIFT; default {default})")
     if photos:
         p.add_argument("--max-features", default="auto", metavar="N|auto",
-                       help="features per image; auto (default) scales with the image: 2000 "
-                            "per 640x480 pixels, at most 8192 (COLMAP's default)")
+                       help="features per image; auto (default): with colmap-sift COLMAP's "
+                            "own 8192 at every size, with the other methods 2000 per 640x480 "
+                            "pixels, at most 8192. COLMAP's SIFT applies its budget to whole "
+                            "scale levels, each location with up to two orientations: an image "
+                            "may keep somewhat more locations than N")
     else:
         p.add_argument("--max-features", type=int, default=2000,
                        help="features per image (default 2000)")

@@ -234,7 +234,9 @@ def report_markdown(report: dict) -> str:
         if key in r:
             lines.append(f"| {key.replace('_', ' ')} | {r[key]} |")
     fusion, faults = report.get("fusion") or {}, report.get("faults") or {}
-    if "cut_links" in fusion:
+    if fusion.get("enabled") is False:  # not run: no count of its cuts to show
+        lines.append(f"| fusion | not run ({fusion.get('reason', 'disabled')}) |")
+    elif "cut_links" in fusion:
         lines.append(f"| links cut by fusion (fusion-outlier) | {fusion['cut_links']} |")
     if fusion.get("robot_sigma_px"):
         sig = " ".join("–" if x is None else f"{x:.2f}" for x in fusion["robot_sigma_px"])

@@ -41,6 +41,9 @@ def test_sections_with_ground_truth():
         "fusion": f})
     assert "| Conflictive sets (c) | 1 | 0 |" in md and "| spurious deleted | 1 |" in md
     assert "| links cut by fusion (fusion-outlier) | 1 |" in md
+    off = fusion_section(ledger, {"enabled": False, "reason": "disabled by option"})
+    md = report_markdown({"before": before, "after": before, "resolution": r, "fusion": off})
+    assert "| fusion | not run (disabled by option) |" in md and "links cut by fusion" not in md
 
 
 def test_sections_without_ground_truth_leave_good_and_spurious_out():
