@@ -216,7 +216,7 @@ def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> 
     """One end of an edge line: an image name (when names are known) or a 0-based index."""
     if by_name is not None and tok in by_name:
         return by_name[tok]
-    if not re.fullmatch(r"[+-]?\d+", tok):
+    if not re.fullmatch(r"-?[0-9]+", tok):  # ASCII digits (\d takes other scripts too)
         if by_name is not None:
             n = len(names)
             shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")

@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,16 +78,18 @@ def _rows(path: Path):
         yield lineno, fields, stripped
 
 
+_ID = re.compile(r"-?[0-9]+")
+
 #: largest camera or feature id accepted (ids index int32 arrays inside the robots)
 MAX_ID = 2**31 - 2
 
 
 def _int_field(path, lineno, raw, name, value) -> int:
-    try:
-        v = int(value)
-    except ValueError:
+    # ASCII digits only: Python's int() also takes "1_0" (10), "+1" and other scripts' digits
+    if not _ID.fullmatch(value):
         raise InputError(f"{path}:{lineno}: {raw!r}: {name} {value!r} is not an integer id; "
-                         "ids are 0-based integers") from None
+                         "ids are 0-based integers written in digits 0-9")
+    v = int(value)
     if v < 0:
         raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is negative; ids are 0-based")
     if v > MAX_ID:
@@ -160,6 +163,8 @@ def _read_plain(path: Path) -> LinksFile | None:
     if ncols not in (4, 5) or (commas != ncols - 1).any():
         return None
     fields = np.array(body.replace(b"\n", b",").split(b",")).reshape(-1, ncols)
+    if not np.char.isdigit(fields[:, :4]).all():  # "+1", "1e3", "-1": the row reader's
+        return None
     try:
         a = fields[:, :4].astype(np.int64)
         quality = fields[:, 4].astype(np.float64) if ncols == 5 else None

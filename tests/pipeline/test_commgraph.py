@@ -79,6 +79,7 @@ def test_graph_file_naming_unknown_image(tmp_path):
     ("0,1\n2,2\n", "line 2: self-edge"),
     ("0,1,2\n", "line 1: .* must hold two cameras"),
     ("# nothing\n", "holds no edge"),
+    ("\uff10,1\n", "line 1: .* is not one of the 6 images"),  # a full-width digit
 ])
 def test_graph_file_errors(tmp_path, text, match):
     f = tmp_path / "g.txt"

@@ -44,6 +44,11 @@ def test_reads_without_header_and_quality(tmp_path):
 @pytest.mark.parametrize("text, line, message", [
     ("0,0,1,0\n0,x,1,1\n", 2, "'x' is not an integer"),
     ("0,0,1,0\n0,1.5,1,1\n", 2, "not an integer"),
+    # what Python's int() would take: an underscore, a sign, another script's digits
+    ("1_0,0,2,0\n", 1, "cam_i '1_0' is not an integer id"),
+    ("+1,0,2,0\n", 1, r"cam_i '\+1' is not an integer id"),
+    ("0,0,2,1e3\n", 1, "feat_j '1e3' is not an integer id"),
+    ("\uff11,0,2,0\n", 1, "is not an integer id; ids are 0-based integers written in digits"),
     ("0,0,1,-1\n", 1, "negative"),
     ("0,0,1\n", 1, "has 3 columns"),
     ("0,0,1,0,0.5,7\n", 1, "has 6 columns"),
