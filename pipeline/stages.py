@@ -380,6 +380,11 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                         + res.stats.get("closing_rounds", 0))
             transport = faults.fusion_transport(edges, cameras, start)
             comm_edges = edges
+        if cameras is not None and len(cameras) == 0:
+            cleaning.fusion_stats = {"enabled": False, "reason": "every robot crashed before "
+                                                                 "fusion",
+                                     "crashed_before_fusion": crashed}
+            return cleaning
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
                                  track_labels=cleaning.track_labels, cameras=cameras,
                                  transport=transport)

@@ -176,6 +176,24 @@ def test_run_formation_report_has_a_faults_section(tmp_path):
     assert all("1" in (r.split(",")[0], r.split(",")[2]) for r in cut)
 
 
+def test_every_robot_crashed_before_fusion_is_said_not_a_traceback(tmp_path):
+    """No robot is left to fuse: the run still writes its folder and says fusion did not run
+    (exit 3 if conflicts remain, as any run that does not end conflict-free)."""
+    import json
+
+    from pipeline.__main__ import main
+
+    out = tmp_path / "run"
+    crash = [a for i in range(6) for a in ("--crash", f"{i}@0")]
+    rc = main(["run-formation", "--formation", "c", "--size", "192x144", "--max-features",
+               "150", "--no-rerun", *crash, "--out", str(out)])
+    report = json.loads((out / "report.json").read_text())
+    assert rc == (3 if report["after"]["conflictive_sets"] else 0)
+    fusion = report["fusion"]
+    assert fusion["enabled"] is False and fusion["reason"] == "every robot crashed before fusion"
+    assert fusion["crashed_before_fusion"] == [0, 1, 2, 3, 4, 5]
+
+
 def _formation_run(tmp_path, name, *crash):
     import csv
     import json
