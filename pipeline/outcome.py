@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "exit_status"]
+__all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "NO_LINKS_WHY", "exit_status"]
 
 #: Exit code of a run whose written result still holds conflictive sets.
 EXIT_NOT_CONFLICT_FREE = 3
@@ -32,7 +32,12 @@ def _warning(code: str, message: str) -> dict:
     return {"code": code, "message": message}
 
 
-def flag_result(report: dict, names: list[str] | None = None) -> dict:
+#: why an input may hold no link, by default (runs that match images)
+NO_LINKS_WHY = "images too small, too few features, or no overlap between neighbours"
+
+
+def flag_result(report: dict, names: list[str] | None = None,
+                no_links_why: str = NO_LINKS_WHY) -> dict:
     """Add ``conflict_free: false`` and ``warnings`` to ``report`` (in place) where due.
 
     Parameters
@@ -41,6 +46,7 @@ def flag_result(report: dict, names: list[str] | None = None) -> dict:
         final links) and, where present, ``links`` or ``before.links`` (input links),
         ``faults`` (:func:`pipeline.faults.fault_report`), ``features_per_camera``
     names : image names in camera order (for ``no-features``); default ``camera K``
+    no_links_why : the likely causes the ``no-links`` warning names (what the input was)
 
     Returns
     -------
@@ -66,8 +72,7 @@ def flag_result(report: dict, names: list[str] | None = None) -> dict:
     if total == 0:
         warnings.append(_warning(
             "no-links", "the input holds no link between two images: there is nothing to "
-                        "associate (images too small, too few features, or no overlap between "
-                        "neighbours)"))
+                        f"associate ({no_links_why})"))
     if total and kept == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
                                                   "cut; the result holds no association"))

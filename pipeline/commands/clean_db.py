@@ -89,7 +89,8 @@ def run(args) -> int:
                              image_dir=args.image_dir, outputs=outputs,
                              baselines=args.baselines, loop_tol_deg=loop_tol,
                              fusion=args.fusion)
-        summary = flag_result(res.summary())
+        summary = flag_result(res.summary(), no_links_why="the database holds no verified "
+                                                          "match between two images")
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution

@@ -62,7 +62,9 @@ def run(args) -> int:
         s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
                                  rerun=not args.no_rerun, image_dir=args.image_dir,
                                  outputs=outputs, max_memory_gb=args.max_memory_gb,
-                                 baselines=args.baselines))
+                                 baselines=args.baselines),
+                        no_links_why="matches.h5 holds no match between two images of the "
+                                     "pairs read")
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]

@@ -57,7 +57,9 @@ def run(args) -> int:
         s = flag_result(resolve_file(args.links, args.out, args.comm_graph,
                                      faults_from_args(args), args.max_memory_gb,
                                      resolution=args.resolution, transport=args.transport,
-                                     outputs=outputs, baselines=args.baselines))
+                                     outputs=outputs, baselines=args.baselines),
+                        no_links_why="the links file holds no link row, or only rows "
+                                     "already deleted")
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
     b, a, r = s["before"], s["after"], s["resolution"]

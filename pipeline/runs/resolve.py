@@ -123,8 +123,12 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(m.sum()), len(run_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
-    res, fault_section = get_transport(transport).load().resolve(m, run_edges, run_links, faults,
-                                                                 resolution, ids)
+    # without a link the robots have nothing to exchange: no team of processes is started
+    # for it (a team over Zenoh needs two robots with something to say); the result is the
+    # same empty association on every transport
+    where = transport if len(run_links) else "sim"
+    res, fault_section = get_transport(where).load().resolve(m, run_edges, run_links, faults,
+                                                             resolution, ids)
     after = count_conflicts(AssociationGraph(m, res.kept())).as_dict()
     ledger = ledger_from_consistency(res)
     ledger.links = links  # the ids as given (the stage may have run on compact ones)

@@ -17,6 +17,24 @@ def test_an_input_without_links_is_said_not_silently_empty():
     assert "nothing to associate" in out.getvalue()
 
 
+def test_a_links_file_without_links_is_not_blamed_on_images(tmp_path, capsys):
+    """resolve on a header-only file, over either transport: the warning names the file, not
+    images (it has none), and no team of processes is started for nothing (over Zenoh it
+    used to fail with a team of 0 robots)."""
+    from pipeline.__main__ import main
+
+    src = tmp_path / "in.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j\n")
+    for transport in ("sim", "zenoh"):
+        out = tmp_path / f"{transport}.csv"
+        assert main(["resolve", "--links", str(src), "--out", str(out), "--transport",
+                     transport]) == 0
+        err = capsys.readouterr().err
+        assert "the links file holds no link row" in err and "images too small" not in err
+        assert out.read_text().splitlines() == ["cam_i,feat_i,cam_j,feat_j,status,reason,"
+                                                "round,truth"]
+
+
 def test_links_all_cut_and_links_kept():
     assert _codes({"links": 5, "after": {"links": 0, "conflictive_sets": 0}}) == \
         ["all-links-cut"]

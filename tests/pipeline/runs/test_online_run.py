@@ -112,6 +112,17 @@ def test_the_merge_radius_reaches_the_robots_features(tmp_path):
     assert 0 < counts[1] < counts[0]
 
 
+def test_a_run_without_any_link_is_warned(tmp_path, capsys):
+    """A formation driven off its scene (--speed 100) matches nothing: said, with the speed,
+    not an F1 of 0 on 0 pairs in silence."""
+    out = tmp_path / "gone"
+    assert main(["run-formation", "--steps", "2", "--speed", "100", "--no-fusion", "--no-rerun",
+                 "--out", str(out), *FAST]) == 0
+    assert json.loads((out / "report.json").read_text())["final"]["links"] == 0
+    err = capsys.readouterr().err
+    assert "warning: no link in 2 steps" in err and "--speed 100 m per step" in err
+
+
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
