@@ -26,9 +26,19 @@ from pipeline.faults import add_fault_arguments, faults_from_args
 from pipeline.runs.formation import FormationConfig
 
 
+def formation_choice(args) -> str:
+    """``--formation`` (default d); refused beside ``--robots/--graph``, which render a
+    parametric formation instead of one of a–d."""
+    if args.robots is not None and args.formation is not None:
+        raise InputError(f"--formation {args.formation} with --robots/--graph: those render a "
+                         "parametric formation, not one of a-d; drop one of them")
+    return "d" if args.formation is None else args.formation
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--formation", default="d",
-                   help="formation a|b|c|d (comm graphs of increasing cycles; default d)")
+    p.add_argument("--formation", default=None,
+                   help="formation a|b|c|d (comm graphs of increasing cycles; default d); not "
+                        "with --robots/--graph (a parametric formation)")
     add_feature_options(p)
     add_scene_options(p)
     p.add_argument("--robots", default=None,
@@ -61,6 +71,7 @@ def config_from_args(args) -> FormationConfig:
 
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
+    args.formation = formation_choice(args)
     method, max_features = feature_options(args)
     robots = None if args.robots is None else validate.robots(args.robots)
     size = parse_size(args.size)
@@ -95,6 +106,7 @@ def online_config_from_args(args):
                          "fusion of the changed tracks; add --no-fusion")
     if (args.robots is None) != (args.graph is None):
         raise InputError("--robots and --graph go together (a parametric formation needs both)")
+    args.formation = formation_choice(args)
     method, max_features = feature_options(args)
     robots = None if args.robots is None else validate.robots(args.robots)
     faults = faults_from_args(args)

@@ -94,7 +94,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     triangulation, tri_after, gt_points, fused_errors = _triangulate(
         views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
     report = {
-        "title": f"formation {config.formation} (seed {config.seed})",
+        "title": (f"formation {config.formation}" if config.robots is None else
+                  f"{config.robots} robots on a {config.graph} graph") + f" (seed {config.seed})",
         "n_cameras": len(views),
         "comm_edges": comm_edges.tolist(),
         "features_per_camera": m.tolist(),

@@ -380,7 +380,9 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                                                        ["conflictive_sets_after"]))
     run.truth = truth.astype(np.int8)
     return {
-        "title": f"formation {config.formation} in motion ({config.steps} steps, seed "
+        "title": (f"formation {config.formation}" if config.robots is None else
+                  f"{config.robots} robots on a {config.graph} graph")
+                 + f" in motion ({config.steps} steps, seed "
                  f"{config.seed})",
         "n_robots": int(seq.n_robots),
         "n_images": int(oa.n_images),

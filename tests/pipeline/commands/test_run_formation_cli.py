@@ -14,6 +14,10 @@ from pipeline.__main__ import main
         (["--features", "bogus"], "unknown feature method 'bogus'"),
         (["--robots", "5"], "--robots and --graph go together"),
         (["--max-features", "3"], "at least 8"),
+        (["--formation", "a", "--robots", "4", "--graph", "ring"],
+         "--formation a with --robots/--graph: those render a parametric formation"),
+        (["--steps", "2", "--formation", "b", "--robots", "3", "--graph", "ring"],
+         "--formation b with --robots/--graph"),
     ],
 )
 def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
@@ -23,3 +27,14 @@ def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
     assert message in err
     assert "Traceback" not in err
     assert not out.exists()
+
+
+def test_a_parametric_formation_is_titled_by_its_robots_and_graph(tmp_path):
+    """--robots/--graph render no formation a-d: the report does not call it 'formation d'."""
+    import json
+
+    out = tmp_path / "p"
+    assert main(["run-formation", "--robots", "3", "--graph", "line", "--size", "160x120",
+                 "--max-features", "100", "--no-fusion", "--no-rerun", "--out", str(out)]) == 0
+    title = json.loads((out / "report.json").read_text())["title"]
+    assert title == "3 robots on a line graph (seed 0)"
