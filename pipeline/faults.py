@@ -287,7 +287,8 @@ def fault_report(config: FaultConfig, result, fault_free=None) -> dict:
     neighbours that declared it lost), ``links_cut_robot_lost``, ``messages_dropped``,
     ``retransmissions``, ``acks``, ``heartbeats``, ``repeated_detections``, ``rounds``
     (detection, resolution and closing),
-    ``messages``; with ``fault_free``: ``extra_rounds``, ``extra_messages``,
+    ``messages``; with ``fault_free`` (a run of the same rule: the caller names it in
+    ``fault_free_resolution``): ``extra_rounds``, ``extra_messages``,
     ``extra_links_deleted``.
     """
     st = result.stats

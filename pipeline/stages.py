@@ -223,7 +223,15 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     check_simulated_work(len(m), edges, faults)
     result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)),
                                protocol=faults.protocol_options(), **kw)
-    return result, fault_report(faults, result, resolve_conflicts(m, comm_edges, links, **kw))
+    # the fault-free reference runs the rule the faulty run ran (on a faulty network a rule
+    # that is not fault-tolerant gives way to Alg. 1): the difference is the faults' alone
+    from pipeline.consistency.rules import DEFAULT_RESOLUTION, rule_for_network
+
+    ran = rule_for_network(resolution or DEFAULT_RESOLUTION, True).name
+    section = fault_report(faults, result, resolve_conflicts(m, comm_edges, links,
+                                                             **dict(kw, resolution=ran)))
+    section["fault_free_resolution"] = ran
+    return result, section
 
 
 def ledger_from_consistency(result, conflictive_before: np.ndarray | None = None) -> LinkLedger:

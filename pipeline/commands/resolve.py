@@ -75,11 +75,13 @@ def run(args) -> int:
           "bytes per robot")
     if "faults" in s:
         f = s["faults"]
-        print(f"faults: {f['messages_dropped']} messages dropped, crashed {f['crashed'] or 'none'}, "
+        crashed = ", ".join(f"robot {k} at round {v}" for k, v in
+                            sorted(f["crashed"].items(), key=lambda kv: int(kv[0]))) or "none"
+        extra = (f"; {f['extra_rounds']:+d} rounds, {f['extra_messages']:+d} messages vs the "
+                 "same rule fault-free" if "extra_rounds" in f else "")
+        print(f"faults: {f['messages_dropped']} messages dropped, crashed: {crashed}, "
               f"{f['links_cut_robot_lost']} links cut robot-lost; {f['retransmissions']} "
-              f"retransmissions; +{f.get('extra_rounds', '?')} rounds, "
-              f"+{f.get('extra_messages', '?')} messages "
-              "vs fault-free")
+              f"retransmissions{extra}")
     if "baselines" in s:
         from pipeline.evaluation.report import baselines_lines
 

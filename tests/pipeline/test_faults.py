@@ -143,7 +143,9 @@ def test_resolve_command_records_faults(tmp_path, capsys):
     rc = main(["resolve", "--links", str(src), "--out", str(out), "--report", str(rep),
                "--drop-prob", "0.3", "--crash", "3@2", "--switching-topology"])
     assert rc == 0
-    assert "links cut robot-lost" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "links cut robot-lost" in printed and "crashed: robot 3 at round 2" in printed
+    assert "rounds" in printed and "vs the same rule fault-free" in printed and "+-" not in printed
     rows = out.read_text().splitlines()[1:]
     assert [r.split(",")[5] for r in rows] == ["robot-lost", "", "", "robot-lost"]
     f = json.loads(rep.read_text())["faults"]
@@ -152,6 +154,16 @@ def test_resolve_command_records_faults(tmp_path, capsys):
                              "switch_p_up": 0.5, "switch_window": 4, "seed": 0}
     assert f["crashed"] == {"3": 2} and f["links_cut_robot_lost"] == 2
     assert f["extra_rounds"] > 0 and f["messages_dropped"] > 0
+    # compared with the rule that ran (the default is not fault-tolerant: Alg. 1 ran), run
+    # fault-free on the same input
+    assert f["fault_free_resolution"] == "paper"
+    ref = tmp_path / "ref.csv"
+    assert main(["resolve", "--links", str(src), "--out", str(ref), "--resolution", "paper"]) == 0
+    printed = capsys.readouterr().out
+    cut_ref = sum(r.split(",")[4] == "deleted" for r in ref.read_text().splitlines()[1:])
+    cut = sum(r.split(",")[4] == "deleted" for r in rows)
+    assert f["extra_links_deleted"] == cut - cut_ref
+    assert "crashed: robot 3 at round 2" not in printed  # the reference run has no faults
 
 
 def test_run_formation_report_has_a_faults_section(tmp_path):
