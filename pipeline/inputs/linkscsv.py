@@ -62,6 +62,8 @@ class LinksFile:
     status: np.ndarray | None = None
     reason: np.ndarray | None = None
     round: np.ndarray | None = None
+    #: its ``truth`` column (int8: 1 good, 0 spurious, -1 empty), None when every row is empty
+    truth: np.ndarray | None = None
 
 
 def _rows(path: Path):
@@ -254,7 +256,11 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                 raise InputError(f"{path}:{lineno}: {raw!r}: status {fields[4]!r} is not "
                                  "'kept' or 'deleted'")
             rnd = -1 if fields[6] == "" else _int_field(path, lineno, raw, "round", fields[6])
-            run_cols.append((fields[4], fields[5], rnd))
+            if fields[7] not in ("", "0", "1"):
+                raise InputError(f"{path}:{lineno}: {raw!r}: truth {fields[7]!r} is not 1 "
+                                 "(good), 0 (spurious) or empty")
+            run_cols.append((fields[4], fields[5], rnd, -1 if fields[7] == "" else
+                             int(fields[7])))
             fields = fields[:4]
         elif len(fields) not in (4, 5):
             raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected 4 "
@@ -295,9 +301,11 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     quality = np.asarray(quals, dtype=np.float64) if ncols == 5 else None
     out = LinksFile(Links(ci, fi, cj, fj, quality), np.asarray(lines, dtype=np.int64), ncols == 5)
     if ncols == len(RUN_LINK_COLUMNS):
-        st, rs, rd = zip(*run_cols, strict=True) if run_cols else ((), (), ())
+        st, rs, rd, tr = zip(*run_cols, strict=True) if run_cols else ((), (), (), ())
         out.status = np.asarray(st, dtype=object).astype(str)
         out.reason = np.asarray(rs, dtype=object).astype(str)
+        truth = np.asarray(tr, dtype=np.int8)
+        out.truth = truth if (truth >= 0).any() else None
         out.round = np.asarray(rd, dtype=np.int64)
     return out
 

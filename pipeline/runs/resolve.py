@@ -139,6 +139,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         old = np.flatnonzero(~active)
         full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
         ledger = full
+    ledger.truth = lf.truth  # a run output's truth column goes through (file order)
     write_links_csv(output_path(outputs, out_csv, "--out"), ledger)
     st = res.stats
     summary = {

@@ -148,6 +148,20 @@ def test_own_output_is_accepted_as_input(tmp_path, capsys):
     assert second.links.feat_j.tolist() == first.links.feat_j.tolist()
 
 
+def test_a_run_outputs_truth_column_goes_through(tmp_path, capsys):
+    """A run-formation links.csv (with its ground truth) resolved again keeps each row's
+    truth; a bad truth value is named."""
+    src, out = tmp_path / "run.csv", tmp_path / "o.csv"
+    src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n"
+                   "0,0,1,0,kept,,,1\n1,0,2,0,kept,,,0\n0,1,2,1,deleted,resolution,3,1\n"
+                   "2,2,0,2,kept,,,\n")
+    assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
+    assert [r.rsplit(",", 1)[1] for r in out.read_text().splitlines()[1:]] == ["1", "0", "1", ""]
+    src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n0,0,1,0,kept,,,yes\n")
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "x.csv")]) == 2
+    assert "truth 'yes' is not 1 (good), 0 (spurious) or empty" in capsys.readouterr().err
+
+
 def test_run_links_csv_with_a_bad_status_names_the_row(tmp_path, capsys):
     src = tmp_path / "in.csv"
     src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n0,0,1,0,maybe,,,\n")
