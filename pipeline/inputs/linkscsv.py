@@ -263,8 +263,12 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                              int(fields[7])))
             fields = fields[:4]
         elif len(fields) not in (4, 5):
-            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; expected 4 "
-                             "(cam_i,feat_i,cam_j,feat_j) or 5 (with quality)")
+            sep = next((f" (columns are separated by commas, not {name})"
+                        for c, name in (("\t", "tabs"), (";", "semicolons"), (" ", "spaces"))
+                        if len(fields) == 1 and c in raw.strip()), "")
+            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} "
+                             f"column{'s' if len(fields) != 1 else ''}; expected 4 "
+                             f"(cam_i,feat_i,cam_j,feat_j) or 5 (with quality){sep}")
         if ncols is None:
             ncols = len(fields)
         elif len(fields) != ncols and not run_cols:

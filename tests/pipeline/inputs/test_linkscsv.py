@@ -51,6 +51,8 @@ def test_reads_without_header_and_quality(tmp_path):
     ("\uff11,0,2,0\n", 1, "is not an integer id; ids are 0-based integers written in digits"),
     ("0,0,1,-1\n", 1, "negative"),
     ("0,0,1\n", 1, "has 3 columns"),
+    ("0\t0\t1\t0\n", 1, "has 1 column; .* separated by commas, not tabs"),
+    ("0;0;1;0\n", 1, "has 1 column; .* separated by commas, not semicolons"),
     ("0,0,1,0,0.5,7\n", 1, "has 6 columns"),
     ("0,0,1,0,0.5\n0,1,1,1\n", 2, "started with 5"),
     ("0,0,1,0,abc\n", 1, "quality 'abc'"),
