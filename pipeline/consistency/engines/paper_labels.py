@@ -31,6 +31,7 @@ def run_labels(robots: list[Robot], network: Transport, iteration: int, on_round
                         labels_step, tell, 0, cap, "label flooding")
     for rb in robots:
         finish_labels(rb)
+        network.note_memory(rb.id, rb.peak_memory_bytes)  # also when no resolution follows
     return dict(rounds=t, start_round=start_round, lost=False,
                 t_stop=np.array([rb.t_stop for rb in robots], dtype=np.int64),
                 conflictive_features=int(sum(int(rb.conflictive.sum()) for rb in robots)))

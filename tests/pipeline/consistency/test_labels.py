@@ -12,6 +12,7 @@ from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.engines.driver import build_robots, detect_once
 from pipeline.consistency.engines.paper_labels import run_labels
 from pipeline.transport.simulated import Network
+from pipeline.types import Links
 
 instances = st.tuples(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(2, 6),
                       st.sampled_from([0.5, 0.9, 1.0]), st.sampled_from([0.3, 0.9]),
@@ -64,6 +65,14 @@ def test_memory_and_bytes_follow_the_links():
     assert paper.deleted.any()
     assert flood.stats["max_robot_memory_bytes"] * 3 < paper.stats["max_robot_memory_bytes"]
     assert flood.stats["bytes"] * 3 < paper.stats["bytes"]
+
+
+def test_memory_is_reported_without_any_conflict():
+    """A conflict-free input runs the detection only: the robots' memory is still reported
+    (it read 0 bytes per robot when no resolution phase followed)."""
+    links = Links(np.array([0, 1]), np.array([0, 0]), np.array([1, 2]), np.array([0, 0]))
+    res = resolve_conflicts([1, 1, 1], comm_edges(links), links, resolution="paper-labels")
+    assert not res.deleted.any() and res.stats["max_robot_memory_bytes"] > 0
 
 
 def _alone(fpc, links, options=None):
