@@ -385,7 +385,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                  sigma_px=float(sigma_px), noise=noise,
                  robot_sigma_px=[float(x) for x in sigma],
                  noise_residuals=[int(x) for x in residuals], rounds=0,
-                 consensus_rounds=int(rounds),
+                 consensus_rounds=0,  # until the stage runs (no track: it does not)
                  maxc_rounds=0, messages=0, bytes=0, logical_messages=0)
     obs_track_out = obs_track
     if track_labels is not None:
@@ -536,6 +536,7 @@ def _stage_stats(stats: dict, res, protocol, consensus: str, wire: str, node_edg
             robots_lost={str(k): v for k, v in ex.get("robots_lost", {}).items()})
     else:
         stats.update(rounds=int(total_rounds), maxc_rounds=int(res.maxc_stats.rounds),
+                     consensus_rounds=int(res.stats.rounds),
                      messages=int(2 * active_comm * total_rounds),
                      logical_messages=int(res.stats.messages + res.maxc_stats.messages),
                      bytes=int(res.stats.bytes + res.maxc_stats.bytes),

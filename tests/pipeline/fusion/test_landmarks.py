@@ -195,3 +195,15 @@ def test_local_estimates_of_all_robots_equal_each_robot_alone(local):
         np.testing.assert_array_equal(all_est[:, i], est_i[:, i])
         np.testing.assert_array_equal(all_X[:, i], X_i[:, i])
         np.testing.assert_array_equal(all_cov[:, i], cov_i[:, i])
+
+
+def test_without_a_track_no_round_is_counted():
+    """No link, no track: the stage runs no round, and says so alike in its total and its
+    consensus part (the report once showed 0 rounds of which 100 of consensus)."""
+    views, feats, links, edges, _ = planted_rig()
+    none = links.subset(np.zeros(len(links), dtype=bool))
+    res = fuse_tracks(views, feats, none, edges, sigma_px=0.5)
+    assert res.stats["tracks"] == 0
+    assert res.stats["rounds"] == res.stats["consensus_rounds"] == res.stats["maxc_rounds"] == 0
+    ran = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
+    assert ran.stats["rounds"] == ran.stats["maxc_rounds"] + ran.stats["consensus_rounds"] > 0
