@@ -144,3 +144,12 @@ def test_landmarks_not_seen_by_every_image(tmp_path):
     s = pairwise_scores(association_pairs(m, links), true_landmark_pairs(m, lm), sum(m))
     assert s["f1"] == pytest.approx(report["pairwise"]["after"]["f1"])
     assert report["cycle_consistent"] is True
+
+
+def test_a_graph_that_splits_the_images_is_warned(tmp_path, capsys):
+    """A graph file of two separate groups: said, as run-images says it."""
+    graph = tmp_path / "g.csv"
+    graph.write_text("0,1\n1,2\n3,4\n4,5\n")
+    assert main(["run-landmarks", str(HOTEL), "--graph", str(graph), "--out",
+                 str(tmp_path / "r")]) == 0
+    assert "splits the 6 images into 2 groups" in capsys.readouterr().err
