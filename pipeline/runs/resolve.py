@@ -157,8 +157,14 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     }
     if baselines:
         from pipeline.evaluation.report import baselines_beside
+        from pipeline.progress import StageTimer
 
-        summary["baselines"] = baselines_beside(m, run_links, ~res.deleted)
+        # centralized, and the spectral ones grow fast with the largest set (minutes on tens
+        # of thousands of features in one set): said before they start, timed when done
+        with StageTimer().stage("baselines", f"the centralized baselines beside the rule, "
+                                             f"on {int(m.sum())} features and {len(run_links)} "
+                                             "links (minutes on large sets)"):
+            summary["baselines"] = baselines_beside(m, run_links, ~res.deleted)
     if fault_section is not None:
         summary["faults"] = fault_section_in_ids(fault_section, ids)
     if "team" in res.stats:

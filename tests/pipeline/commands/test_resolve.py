@@ -62,7 +62,9 @@ def test_baselines_beside_the_rule(tmp_path, capsys):
     out, rep = tmp_path / "out.csv", tmp_path / "r.json"
     assert main(["resolve", "--links", str(src), "--out", str(out), "--resolution", "evidence",
                  "--baselines", "--report", str(rep)]) == 0
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
+    assert "[baselines] the centralized baselines beside the rule, on 5 features" in captured.err
     summary = json.loads(rep.read_text())
     assert sorted(summary["baselines"]) == sorted(BASELINES)
     kept = read_run_links_csv(out).status == "kept"
