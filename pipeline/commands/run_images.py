@@ -34,9 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
                    help="folder of photographs (JPEG/PNG/TIFF; taken in name order); with "
                         "--sequence a folder of one sub-folder per robot")
-    p.add_argument("--graph", default="complete", metavar="ring|ring2|complete|knn:K|seq:K|FILE",
+    p.add_argument("--graph", default="complete",
+                   metavar="line|ring|ring2|complete|knn:K|seq:K|FILE",
                    help="communication graph (default complete: every pair, as COLMAP's "
-                        "exhaustive matcher): ring, ring2 (ring + 2-hop chords), complete, "
+                        "exhaustive matcher): line, ring, ring2 (ring + 2-hop chords), complete, "
                         "knn:K (each image with the K images most similar to it, by a global "
                         "descriptor of its features: for unordered photos), seq:K (each image "
                         "with the K nearest in name order: for ordered sequences), or a file of "
