@@ -78,6 +78,9 @@ def config_from_args(args) -> FormationConfig:
     # formations a-d: the paper's 6 robots
     check_formation_memory(robots if robots is not None else 6, size, args.max_memory_gb)
     check_formation(args.formation)  # before the render stage opens
+    from pipeline.runs.transports import check_team_size
+
+    check_team_size(args.transport, robots if robots is not None else 6, "robots")
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                            size=size,
                            features=method, max_features=max_features,
@@ -116,6 +119,12 @@ def online_config_from_args(args):
         raise InputError("--steps models only --switching-topology (the graph of each step); "
                          "drop the other fault options")
     check_formation(args.formation)
+    from pipeline.runs.transports import check_team_size
+
+    hold = args.window - 1 if args.hold is None else args.hold
+    check_team_size(args.transport, (robots if robots is not None else 6) * (args.window + hold),
+                    "frames in a step's window (robots x (window + hold): a step's stage runs "
+                    "one robot per frame)")
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                         size=parse_size(args.size), features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,

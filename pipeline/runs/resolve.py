@@ -67,7 +67,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
-    from pipeline.runs.transports import get_transport
+    from pipeline.runs.transports import check_team_size, get_transport
     from pipeline.stages import ledger_from_consistency
     from pipeline.types import LinkLedger
 
@@ -90,8 +90,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if comm_graph_csv is not None:
         edges = read_comm_graph(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
-    # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the links
-    ids = compact_ids(links, edges, n_cameras=n_cams)
+    # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the
+    # links; always compact where each robot is a process (no process for an id without links)
+    force = True if getattr(get_transport(transport).load(), "COMPACT_IDS", False) else None
+    ids = compact_ids(links, edges, n_cameras=n_cams, force=force)
     n = int(ids.cameras.max(initial=-1)) + 1
     robots = len(ids.features_per_camera)  # the cameras of the run (compact ids)
     budget.add(f"the robots of the {robots} cameras", robots * BYTES_PER_CAMERA,
@@ -111,8 +113,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     active = lf.status == "kept" if lf.status is not None else np.ones(len(links), dtype=bool)
     if not active.all():
         links = all_links.subset(active)
-        ids = compact_ids(links, edges, n_cameras=n_cams)
+        ids = compact_ids(links, edges, n_cameras=n_cams, force=force)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
+    if len(run_links):
+        check_team_size(transport, len(m), "cameras in the links file")
     # the rule that will run: on a faulty network a rule that is not fault-tolerant gives way
     # to the fault-tolerant Alg. 1, whose detection is what must fit
     faulty = faults is not None and faults.any
@@ -143,7 +147,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     write_links_csv(output_path(outputs, out_csv, "--out"), ledger)
     st = res.stats
     summary = {
-        "input": str(links_csv), "output": str(out_csv), "cameras": int(m.size),
+        # the cameras that appear (in a link or a comm edge), whatever the layout the robots
+        # ran on (ids as given hold the ids between them too; a process team does not)
+        "input": str(links_csv), "output": str(out_csv), "cameras": int(np.unique(np.concatenate(
+            [all_links.cam_i, all_links.cam_j] + ([edges.ravel()] if edges is not None
+                                                  else []))).size),
         "comm_edges": int(len(edges)) if edges is not None else
         int(np.unique(links.cam_i * n + links.cam_j).size),
         "links": len(all_links), "deleted": int(res.deleted.sum()),

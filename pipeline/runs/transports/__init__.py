@@ -46,6 +46,10 @@ loads nothing heavy) with one function per job:
     of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
     faults were injected or a robot was lost.
 
+Optional module attributes: ``MAX_ROBOT_PROCESSES`` (the most robots a job may start on this
+machine, checked before any work by :func:`check_team_size`), ``COMPACT_IDS`` (``resolve``
+runs on the cameras that appear in a link or a comm edge only, :mod:`pipeline.inputs.compact`).
+
 A new transport (e.g. ROS 2) is one module with these functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
 What the jobs hand back is in :mod:`.results`.
@@ -60,7 +64,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
-           "unregister", "get_transport", "transport_names", "transport_help"]
+           "unregister", "get_transport", "transport_names", "transport_help",
+           "check_team_size"]
 
 
 @dataclass(frozen=True)
@@ -107,6 +112,26 @@ def get_transport(name: str) -> TransportEntry:
     if name not in TRANSPORTS:
         raise InputError(f"transport {name!r}: choose one of {', '.join(TRANSPORTS)}")
     return TRANSPORTS[name]
+
+
+def check_team_size(name: str, robots: int, what: str) -> None:
+    """Refuse a job that would start more robots than transport ``name`` allows on this
+    machine (its module's ``MAX_ROBOT_PROCESSES``; none: no limit).
+
+    Raises
+    ------
+    InputError
+        ``robots`` above the limit; ``what`` says what they are (e.g. "cameras in the links
+        file").
+    """
+    from pipeline.errors import InputError
+
+    cap = getattr(get_transport(name).load(), "MAX_ROBOT_PROCESSES", None)
+    if cap is not None and robots > cap:
+        raise InputError(f"--transport {name} starts one process per robot on this machine: "
+                         f"{robots} {what} would be {robots} processes, at most {cap}; use "
+                         "--transport sim, or start the robots on their own hosts "
+                         "(formation-match robot --team TEAM.json)")
 
 
 def transport_help() -> str:

@@ -44,6 +44,15 @@ __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_t
 #: no one else holds their bundles)
 ONLINE_ROBOTS_SOLVE = True
 
+#: the most robot processes a job starts on this machine (each holds an interpreter and a
+#: Zenoh session: a links file naming thousands of cameras would otherwise fork thousands of
+#: processes); beyond it the job is refused before any work (``check_team_size``)
+MAX_ROBOT_PROCESSES = 256
+
+#: robots are the cameras that appear in a link or a comm edge (ids made compact,
+#: :mod:`pipeline.inputs.compact`): a camera id with nothing to say starts no process
+COMPACT_IDS = True
+
 
 def write_robot_links(folder: Path, links, n: int) -> list[Path]:
     """One links file per robot in ``folder`` (``links-robotI.csv``): the rows of ``links``
@@ -207,6 +216,9 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
         A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
         a graph kind or file).
     """
+    from pipeline.runs.transports import check_team_size
+
+    check_team_size("zenoh", len(views), "photographs")
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
                          "features at once; with --transport zenoh give ring, ring2, complete, "

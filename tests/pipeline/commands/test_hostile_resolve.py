@@ -431,3 +431,28 @@ def test_a_report_that_cannot_be_written_names_it_and_leaves_no_output(fig1, tmp
     assert "Traceback" not in r.stderr and f"error: {report}: File too large" in r.stderr
     assert "written" not in r.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv"]
+
+
+def test_a_team_too_large_for_one_machine_is_refused_before_it_starts(tmp_path, capsys):
+    """Over zenoh each camera is a process: a links file naming 301 cameras is refused at
+    once (it would fork 301 processes), and a camera id with no link starts none (ids made
+    compact): the same cameras counted and the same links.csv as the simulator's."""
+    from pipeline.runs.transports.zenoh import MAX_ROBOT_PROCESSES
+
+    chain = tmp_path / "chain.csv"
+    n = MAX_ROBOT_PROCESSES + 45
+    chain.write_text("".join(f"{i},0,{i + 1},0\n" for i in range(n - 1)))
+    assert main(["resolve", "--links", str(chain), "--out", str(tmp_path / "o.csv"),
+                 "--transport", "zenoh"]) == 2
+    one_line_error(capsys, f"{n} cameras in the links file would be {n} processes")
+    assert not (tmp_path / "o.csv").exists()
+    gap = tmp_path / "gap.csv"
+    gap.write_text("0,0,100,0\n")
+    outs = []
+    for transport in ("sim", "zenoh"):
+        out = tmp_path / f"{transport}.csv"
+        assert main(["resolve", "--links", str(gap), "--out", str(out), "--transport",
+                     transport]) == 0
+        assert "2 cameras, 1 comm edges, 1 links" in capsys.readouterr().out
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]

@@ -18,6 +18,11 @@ from pipeline.__main__ import main
          "--formation a with --robots/--graph: those render a parametric formation"),
         (["--steps", "2", "--formation", "b", "--robots", "3", "--graph", "ring"],
          "--formation b with --robots/--graph"),
+        (["--robots", "300", "--graph", "ring", "--transport", "zenoh", "--size", "64x48"],
+         "300 robots would be 300 processes, at most 256"),
+        (["--steps", "2", "--robots", "60", "--graph", "ring", "--transport", "zenoh",
+          "--size", "64x48", "--window", "3"],
+         "300 frames in a step's window"),
     ],
 )
 def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
