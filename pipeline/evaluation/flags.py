@@ -20,8 +20,9 @@ Flags
     parameters COLMAP's own mapper deems bogus (focal length ratio outside ``[0.1, 10]``, a
     distortion term above 1): their poses and points are not to be trusted.
 ``cleaning-worse``
-    Cleaning made another figure worse by more than 5 %: fewer points, a shorter mean track,
-    or a larger mean reprojection error.
+    Cleaning made another figure worse by more than 5 %: fewer points (unless the mean
+    reprojection error fell and the tracks stayed as long: then the points that went were the
+    inconsistent ones), a shorter mean track, or a larger mean reprojection error.
 """
 
 from __future__ import annotations
@@ -143,12 +144,15 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                                          "out)")})
     worse = []
     p_b, p_a = int(before["points"]), int(after["points"])
-    if p_b and p_a < (1 - TOLERANCE) * p_b:
-        worse.append(f"points {p_b} -> {p_a}")
+    e_b, e_a = float(before["mean_reprojection_error"]), float(after["mean_reprojection_error"])
     t_b, t_a = float(before["mean_track_length"]), float(after["mean_track_length"])
+    # fewer points with a smaller error and tracks as long: the points that went were the
+    # inconsistent ones, which is what cleaning is for (a few points of a small model)
+    sharper = 0 < e_a < e_b and t_a >= (1 - TOLERANCE) * t_b
+    if p_b and p_a < (1 - TOLERANCE) * p_b and not sharper:
+        worse.append(f"points {p_b} -> {p_a}")
     if p_a and t_a < (1 - TOLERANCE) * t_b:
         worse.append(f"mean track length {t_b:.2f} -> {t_a:.2f}")
-    e_b, e_a = float(before["mean_reprojection_error"]), float(after["mean_reprojection_error"])
     if e_b and e_a > (1 + TOLERANCE) * e_b:
         worse.append(f"mean reprojection error {e_b:.3f} -> {e_a:.3f} px")
     if worse and reg_b:

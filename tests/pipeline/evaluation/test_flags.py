@@ -80,6 +80,13 @@ def test_cleaning_that_costs_points_or_accuracy_is_flagged_not_small_noise():
     msg = flags[0]["message"]
     assert "points 1000 -> 700" in msg and "track length" in msg and "reprojection" in msg
     assert "9 by resolution" in flags[0]["likely_cause"]
+    # fewer points but each more accurate, tracks as long: what cleaning is for, not flagged
+    assert reconstruction_flags(6, _summary(6, NAMES, 200, 3.0, 0.50),
+                                _summary(6, NAMES, 187, 3.0, 0.45), RING, [100] * 6,
+                                [5000] * 6) == []
+    flags = reconstruction_flags(6, _summary(6, NAMES, 200, 3.0, 0.50),
+                                 _summary(6, NAMES, 187, 3.0, 0.50), RING, [100] * 6, [5000] * 6)
+    assert [f["flag"] for f in flags] == ["cleaning-worse"]
 
 
 def test_cameras_colmap_deems_bogus_are_flagged_by_name():
