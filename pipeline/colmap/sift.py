@@ -79,9 +79,10 @@ def sift(gray: np.ndarray, max_features: int = 8192, threads: int = 1) -> SiftRe
     """COLMAP's CPU SIFT on one ``(H, W)`` uint8 image, at COLMAP's default options but
     ``max_num_features`` (:func:`sift_extractor`).
 
-    COLMAP keeps the ``max_features`` largest-scale locations; each may carry up to two
-    orientations, so ``N`` may exceed ``max_features`` (merge co-located keypoints to count
-    locations, :func:`pipeline.matching.features.merge_colocated`).
+    COLMAP keeps about the ``max_features`` largest-scale locations (it drops whole scale
+    levels, so a few more may stay); each may carry up to two orientations, so ``N`` may
+    exceed ``max_features`` (merge co-located keypoints to count locations,
+    :func:`pipeline.matching.features.merge_colocated`).
     """
     gray = np.ascontiguousarray(gray, dtype=np.uint8)
     if gray.ndim != 2:
