@@ -239,9 +239,21 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             with contextlib.suppress(ProcessLookupError):
                 p.kill()
 
+    # a signal while the team is being stopped (a second Ctrl-C, or the one `timeout`
+    # forwards) must not break the cleanup: the observer's Zenoh session left open keeps the
+    # interpreter alive. It is held until the cleanup is done, then raised.
+    stopping = {"now": False, "pending": None}
+
+    def interrupt(signum):
+        return KeyboardInterrupt() if signum == signal.SIGINT else SystemExit(128 + signum)
+
     def on_signal(signum, frame):
         kill_all()
-        raise KeyboardInterrupt if signum == signal.SIGINT else SystemExit(128 + signum)
+        if stopping["now"]:
+            stopping["pending"] = signum
+            return
+        stopping["now"] = True
+        raise interrupt(signum)
 
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -328,6 +340,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         run.stderr = {i: _tail(workdir / f"robot{i}.log", 20) for i in procs}
         return run
     finally:
+        stopping["now"] = True
         kill_all()
         if zygote is not None:
             # the zygote reaps its robots; killed with them, it reports no more exits, and
@@ -347,6 +360,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             signal.signal(sig, h)
         if tmp is not None:
             tmp.cleanup()
+        if stopping["pending"] is not None:
+            raise interrupt(stopping["pending"])
 
 
 def _tail(path: Path, lines: int = 1) -> str:

@@ -242,8 +242,11 @@ def _descendants(pid):
     return kids + [g for k in kids for g in _children(k)]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL, "SIGINT twice"])
 def test_interrupted_launcher_leaves_no_robot_behind(links_input, tmp_path, sig):
+    """Ctrl-C, kill -9, and Ctrl-C twice (or the SIGINT `timeout` forwards after the one the
+    process group got): every robot gone, and the launcher ends (a second SIGINT during its
+    cleanup once left the observer's Zenoh session open and the process alive)."""
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
     # a full-size formation keeps the six robots busy for seconds
     proc = subprocess.Popen(
@@ -257,8 +260,14 @@ def test_interrupted_launcher_leaves_no_robot_behind(links_input, tmp_path, sig)
         kids = _descendants(proc.pid)
         time.sleep(0.05)
     assert len(kids) == 7
-    proc.send_signal(sig)
-    proc.wait(timeout=20)
+    if sig == "SIGINT twice":
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.002)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 130
+    else:
+        proc.send_signal(sig)
+        proc.wait(timeout=20)
     t0 = time.monotonic()
     while time.monotonic() - t0 < 10 and any(os.path.exists(f"/proc/{k}") and
                                              "Z" not in _state(k) for k in kids):
