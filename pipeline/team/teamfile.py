@@ -144,7 +144,9 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
               "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
                         "history"},
               "online-match": {"kind", "step", "window", "frames", "store"}}
-_ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:\s]+:(\d{1,5})$")
+#: a reliable, ordered Zenoh link (the rounds' "nothing lost" rests on it: not udp), host a
+#: name, an IPv4 address or a bracketed IPv6 address
+_ENDPOINT = re.compile(r"^(tcp|quic|tls)/(\[[0-9A-Fa-f:.]+\]|[^:\s\[\]]+):(\d{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
@@ -252,9 +254,11 @@ def parse_team(doc, path: Path | None = None) -> Team:
         if rid in robots:
             raise InputError(f"{where}: robot id {rid} is listed twice")
         m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
-        if not m or not 0 < int(m.group(2)) < 65536:
+        if not m or not 0 < int(m.group(3)) < 65536:
+            why = " (udp may lose a round's packet; the rounds need a reliable link)" \
+                if isinstance(ep, str) and ep.startswith("udp/") else ""
             raise InputError(f"{where}: robot {rid} endpoint {ep!r} must look like "
-                             "tcp/HOST:PORT with a port in 1..65535")
+                             f"tcp/HOST:PORT with a port in 1..65535{why}")
         if ep in endpoints:
             raise InputError(f"{where}: robots {endpoints[ep]} and {rid} share endpoint {ep!r}; "
                              "each robot listens on its own")
@@ -361,6 +365,19 @@ def _check_data(data: dict, n: int, where: str) -> None:
             if data.get(key) is not None and not isinstance(data[key], str):
                 raise InputError(f"{where}: data.{key} {data[key]!r} must be a name, e.g. "
                                  f"{'d' if key == 'formation' else 'ring'}")
+        # the names the robots render (checked here too, so that observe refuses what every
+        # robot would refuse, instead of waiting for robots that never start)
+        from data_synth import check_formation
+        from pipeline.commgraph import GRAPH_KINDS
+
+        if data.get("formation") is not None:
+            try:
+                check_formation(data["formation"])
+            except InputError as exc:
+                raise InputError(f"{where}: data.formation: {exc}") from None
+        if data.get("graph") is not None and data["graph"] not in GRAPH_KINDS:
+            raise InputError(f"{where}: data.graph {data['graph']!r}: choose one of "
+                             f"{', '.join(GRAPH_KINDS)}")
         seed = data.get("seed", 0)
         if not _is_int(seed) or seed < 0:
             raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")

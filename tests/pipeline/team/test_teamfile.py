@@ -50,6 +50,8 @@ def test_a_valid_team_parses():
      "tcp/HOST:PORT"),
     ({"robots": [{"id": 0, "endpoint": "tcp/h:99999"}, {"id": 1, "endpoint": "tcp/h:2"}]},
      "1..65535"),
+    ({"robots": [{"id": 0, "endpoint": "udp/h:1"}, {"id": 1, "endpoint": "tcp/h:2"}]},
+     "udp may lose a round's packet"),
     ({"comm_edges": [[0, 3]]}, "[0, 3]"),
     ({"comm_edges": "0-1"}, "comm_edges"),
     ({"data": {"kind": "video"}}, "kind"),
@@ -95,6 +97,11 @@ def test_a_valid_team_parses():
     ({"data": {**_MATCH, "links": "in.csv"}}, "data of kind online-match has unknown key 'links'"),
     ({"robot_options": {"1": {"fusion": True}}},
      "robot_options['1'] sets fusion on a links team without data.keypoints"),
+    # names every robot would refuse: observe refuses them too, not waiting for robots
+    ({"data": {"kind": "formation", "formation": "zz", "robots": 3, "graph": "ring"}},
+     "data.formation: unknown formation 'zz'"),
+    ({"data": {"kind": "formation", "formation": "ring", "robots": 3, "graph": "star"}},
+     "data.graph 'star': choose one of line, ring"),
 ])
 def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
@@ -240,3 +247,10 @@ def test_bad_keypoints_file_is_one_line_error(tmp_path, text, words):
     with pytest.raises(InputError) as e:
         links_camera(team, 1)
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_an_ipv6_endpoint_parses():
+    team = parse_team(_doc(robots=[{"id": 0, "endpoint": "tcp/[::1]:7447"},
+                                   {"id": 1, "endpoint": "tcp/127.0.0.1:7448"},
+                                   {"id": 2, "endpoint": "tcp/localhost:7449"}]))
+    assert team.endpoint(0) == "tcp/[::1]:7447"
