@@ -376,8 +376,8 @@ def _check_data(data: dict, n: int, where: str) -> None:
             except InputError as exc:
                 raise InputError(f"{where}: data.formation: {exc}") from None
         if data.get("graph") is not None and data["graph"] not in GRAPH_KINDS:
-            raise InputError(f"{where}: data.graph {data['graph']!r}: choose one of "
-                             f"{', '.join(GRAPH_KINDS)}")
+            raise InputError(f"{where}: data.graph: unknown graph kind {data['graph']!r}; "
+                             f"choose one of {', '.join(GRAPH_KINDS)}")
         seed = data.get("seed", 0)
         if not _is_int(seed) or seed < 0:
             raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")

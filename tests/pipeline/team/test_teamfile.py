@@ -101,7 +101,7 @@ def test_a_valid_team_parses():
     ({"data": {"kind": "formation", "formation": "zz", "robots": 3, "graph": "ring"}},
      "data.formation: unknown formation 'zz'"),
     ({"data": {"kind": "formation", "formation": "ring", "robots": 3, "graph": "star"}},
-     "data.graph 'star': choose one of line, ring"),
+     "data.graph: unknown graph kind 'star'; choose one of line, ring"),
 ])
 def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
