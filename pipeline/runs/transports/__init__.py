@@ -124,14 +124,10 @@ def check_team_size(name: str, robots: int, what: str) -> None:
         ``robots`` above the limit; ``what`` says what they are (e.g. "cameras in the links
         file").
     """
-    from pipeline.errors import InputError
+    from pipeline.runs.transports.limits import refuse_over
 
-    cap = getattr(get_transport(name).load(), "MAX_ROBOT_PROCESSES", None)
-    if cap is not None and robots > cap:
-        raise InputError(f"--transport {name} starts one process per robot on this machine: "
-                         f"{robots} {what} would be {robots} processes, at most {cap}; use "
-                         "--transport sim, or start the robots on their own hosts "
-                         "(formation-match robot --team TEAM.json)")
+    refuse_over(name, getattr(get_transport(name).load(), "MAX_ROBOT_PROCESSES", None), robots,
+                what)
 
 
 def transport_help() -> str:

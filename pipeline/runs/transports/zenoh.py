@@ -216,9 +216,9 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
         A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
         a graph kind or file).
     """
-    from pipeline.runs.transports import check_team_size
+    from pipeline.runs.transports.limits import refuse_over
 
-    check_team_size("zenoh", len(views), "photographs")
+    refuse_over("zenoh", MAX_ROBOT_PROCESSES, len(views), "photographs")
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
                          "features at once; with --transport zenoh give ring, ring2, complete, "
