@@ -132,6 +132,7 @@ from __future__ import annotations
 
 import json
 import queue
+import re
 import sys
 import threading
 import time
@@ -193,9 +194,19 @@ def open_session(listen: list[str], connect: list[str], who: str,
         return zenoh.open(zenoh_config(listen, connect, round_timeout_s))
     except zenoh.ZError as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else "zenoh error"
+        # Zenoh's messages carry the paths of its Rust sources: not the user's concern
+        msg = re.sub(r"(\s+at)?\s+[^\s\]]*(\.cargo/|\.rs:)[^\s\]]*", "", msg)
+        msg = re.sub(r"(\s+at)+\s*$", "", msg).strip(" .") or "zenoh error"
         ep = listen[0] if listen else "?"
-        if "in use" in msg.lower() or "bind" in msg.lower() or "listen" in msg.lower():
-            raise InputError(f"{who}: cannot listen on {ep} (port in use?): {msg}") from None
+        low = msg.lower()
+        if "in use" in low:
+            raise InputError(f"{who}: cannot listen on {ep}: the port is in use (another "
+                             f"robot or program holds it): {msg}") from None
+        if "assign requested address" in low or "not available" in low:
+            raise InputError(f"{who}: cannot listen on {ep}: that address is not one of this "
+                             f"host's (give one of its own, e.g. 127.0.0.1): {msg}") from None
+        if "bind" in low or "listen" in low:
+            raise InputError(f"{who}: cannot listen on {ep}: {msg}") from None
         raise InputError(f"{who}: cannot open a Zenoh session on {ep}: {msg}") from None
 
 

@@ -267,6 +267,19 @@ def test_port_in_use_is_one_line(team_dir):
     assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
     assert len(lines) == 1 and f"cannot listen on tcp/127.0.0.1:{port}" in lines[0]
+    assert "the port is in use" in lines[0] and ".cargo" not in lines[0]
+
+
+def test_an_address_not_of_this_host_is_named_as_such(team_dir):
+    """An endpoint on an address this host does not have is not called a port in use."""
+    doc = _doc(robots=[{"id": 0, "endpoint": "tcp/192.0.2.1:17300"},
+                       {"id": 1, "endpoint": "tcp/127.0.0.1:17301"},
+                       {"id": 2, "endpoint": "tcp/127.0.0.1:17302"}])
+    p = run_capped(["robot", "--team", _write(team_dir, doc), "--id", "0"], timeout=60)
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and "cannot listen on tcp/192.0.2.1:17300" in lines[0]
+    assert "port is in use" not in lines[0] and ".cargo" not in lines[0]
 
 
 def test_team_feature_methods_are_the_pipelines():
