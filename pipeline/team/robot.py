@@ -602,7 +602,11 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         transport.status("started")
         waited = transport.handshake(float(opts["start_timeout_s"]))
         startup["handshake_done"] = _since_launch()
-        _log(i, f"all {len(transport.neighbours)} neighbours heard after {waited:.2f} s")
+        gone = sorted(k for k in transport.neighbours if k in transport.written_off)
+        heard = len(transport.neighbours) - len(gone)
+        _log(i, (f"all {heard} neighbours heard" if not gone else
+                 f"{heard} of {len(transport.neighbours)} neighbours heard, "
+                 f"{', '.join(map(str, gone))} written off") + f" after {waited:.2f} s")
         try:
             header, arrays = _profiled(robot_main, team, i, transport)
         except Exception as exc:
