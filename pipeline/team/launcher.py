@@ -392,8 +392,10 @@ def team_summary(run: TeamRun) -> dict:
                            "timings_s": h["timings_s"], "handshake_s": h.get("handshake_s"),
                            "since_launch_s": h.get("since_launch_s")}
         else:
+            # lost: "killed" (its process ended or went silent), "started" whether it ever
+            # said so (a robot never started is lost too)
             rob[str(i)] = {"result": None, "exit_code": run.exit_codes.get(i),
-                           "killed": i in run.killed}
+                           "killed": i in run.killed, "started": i in run.status}
     return {"transport": "zenoh", "robots": rob, "wall_s": round(run.wall_s, 4),
             "process_start_s": round(run.start_s, 4),
             "last_result_s": round(run.published_s, 4),

@@ -347,6 +347,7 @@ def test_a_robot_killed_mid_run_is_reported_lost_by_the_observer(tmp_path):
     assert codes[2] == -signal.SIGKILL and [codes[i] for i in (0, 1, 3)] == [0, 0, 0]
     report = json.loads((tmp_path / "obs" / "report.json").read_text())
     assert report["team"]["lost"] == [2] and report["team"]["robots"]["2"]["result"] is None
+    assert report["team"]["robots"]["2"]["started"] is True  # killed, not never started
     rows = [r.split(",") for r in (tmp_path / "obs" / "links.csv").read_text().splitlines()[1:]]
     kept = [r for r in rows if r[4] == "kept"]
     assert not any("2" in (r[0], r[2]) for r in kept)
