@@ -50,6 +50,11 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     from pipeline.inputs.linkscsv import read_run_links_csv
 
     folder = Path(folder)
+    if (folder / "link_steps.csv").exists() and (folder / "images.csv").exists():
+        raise InputError(f"{folder}: an online run folder (run-formation --steps, run-images "
+                         "--sequence): its recording, on the step timeline, is written by the "
+                         "run itself from what it holds in memory; run it again without "
+                         "--no-rerun")
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
             raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
@@ -110,6 +115,12 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
         out = folder / "recording.rrd"
         if out.exists():
             raise InputError(f"{out} exists; name another file with --out")
+    out = Path(out)
+    if out.suffix != ".rrd":
+        raise InputError(f"--out {str(out)!r}: a recording is written to a .rrd file; name one "
+                         "(e.g. recording.rrd)")
+    if out.is_symlink() or (out.exists() and not out.is_file()):
+        raise InputError(f"--out {str(out)!r} is not a regular file; name a .rrd file")
     inside = Path(out).resolve().parent == folder.resolve()
     pure_run = inside and run_folder_problem(folder) is None
     record = read_run_folder(folder)

@@ -38,6 +38,9 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
     if target:
         p = Path(target)
         if p.is_file():
+            if p.suffix != ".rrd":
+                raise FileNotFoundError(f"{p}: not a Rerun recording (.rrd); give a run folder "
+                                        "or its recording.rrd")
             return p
         if p.is_dir():
             if (p / "recording.rrd").is_file():

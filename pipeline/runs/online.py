@@ -292,6 +292,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             kept = oa.kept_links()
             counts = count_conflicts(AssociationGraph(oa.m, kept))
             rec.update(match_s=match_s, pairs_matched=int(stats["pairs"]), **match_rec,
+                       comm_edges=np.asarray(step_edges[t], np.int64).reshape(-1, 2).tolist(),
                        conflictive_sets_after=int(counts.conflictive_sets),
                        links_total=int(len(oa.links.ci)), links_kept=int(len(kept)))
             w = oa.window_images

@@ -70,3 +70,22 @@ def test_a_recording_added_to_a_run_folder_keeps_it_replaceable(tmp_path):
     (run / "notes.txt").write_text("mine")
     log_run_folder(run)
     assert "notes.txt" in run_folder_problem(run)
+
+
+def test_out_must_be_a_recording_and_online_folders_are_said(tmp_path, capsys):
+    """--out naming the run's own links.csv (or any file not .rrd) is refused and the folder
+    stays readable (it once overwrote links.csv with the recording); an online run folder is
+    named as such, not 'not a run folder'."""
+    folder = _save(make_record(), tmp_path / "run")
+    before = (folder / "links.csv").read_bytes()
+    for out in (folder / "links.csv", folder / "report.json", tmp_path / "rec.txt"):
+        assert main([str(folder), "--out", str(out)]) == 2
+        assert "a recording is written to a .rrd file" in capsys.readouterr().err
+    assert (folder / "links.csv").read_bytes() == before
+    read_run_folder(folder)
+    online = tmp_path / "online"
+    online.mkdir()
+    for name in ("report.json", "links.csv", "images.csv", "link_steps.csv"):
+        (online / name).write_text("")
+    assert main([str(online)]) == 2
+    assert "an online run folder" in capsys.readouterr().err

@@ -56,6 +56,9 @@ def test_newest_recording_and_missing_ones(tmp_path, capsys):
     (runs / "c").mkdir()
     assert main([str(runs / "c"), "--dry-run"]) == 2
     assert "no recording.rrd" in capsys.readouterr().err
+    (runs / "c" / "report.json").write_text("{}")  # a file, but no recording
+    assert main([str(runs / "c" / "report.json"), "--dry-run"]) == 2
+    assert "not a Rerun recording (.rrd)" in capsys.readouterr().err
 
 
 def test_the_printed_url_shows_the_recording_in_a_headless_browser(tmp_path):

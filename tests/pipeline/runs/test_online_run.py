@@ -152,6 +152,10 @@ def test_switching_topology_draws_the_graph_of_each_step(tmp_path, run_dir):
     assert all(p <= q for p, q in zip(pairs, [s["pairs_matched"] for s in full["steps"]],
                                       strict=True))
     assert pairs != [s["pairs_matched"] for s in full["steps"]]
+    # each step records the graph it used: a subset of the full one, not always all of it
+    edges = {tuple(e) for e in full["comm_edges"]}
+    per_step = [{tuple(e) for e in s["comm_edges"]} for s in report["steps"]]
+    assert all(e <= edges for e in per_step) and any(e != edges for e in per_step)
 
 
 def test_a_held_frame_costs_its_robot_its_keypoints_not_its_descriptors():
