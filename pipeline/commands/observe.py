@@ -36,6 +36,13 @@ def run(args) -> int:
     if not 0 < args.timeout <= MAX_TIMEOUT_S:
         raise InputError(f"--timeout {args.timeout:g} must be a number of seconds in "
                          f"(0, {MAX_TIMEOUT_S:g}]")
+    from pipeline.team.teamfile import load_team
+
+    start = float(load_team(args.team).options.get("start_timeout_s", 0))
+    if args.timeout < start:
+        print(f"warning: --timeout {args.timeout:g} s is shorter than the team's start_timeout_s "
+              f"({start:g} s): robots still waiting for a neighbour when the observer gives up "
+              "publish to no one", file=sys.stderr)
     with claim_run_folder(args.out, [("--team", args.team)]):
         out = observe_run(args.team, args.out, timeout_s=args.timeout,
                           rerun=not args.no_rerun,

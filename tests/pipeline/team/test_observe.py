@@ -354,3 +354,23 @@ def test_a_robot_killed_mid_run_is_reported_lost_by_the_observer(tmp_path):
     links = Links(*([int(r[k]) for r in kept] for k in (0, 1, 2, 3)))
     assert is_conflict_free(report["features_per_camera"], links)
     assert report["after"]["conflictive_sets"] == 0
+
+
+def test_a_timeout_shorter_than_the_teams_start_is_warned(tmp_path, capsys):
+    """observe --timeout below the team's start_timeout_s: robots still starting when it gives
+    up would publish to no one; said before it waits."""
+    from pipeline.team.launcher import free_ports
+
+    p = free_ports(3)
+    doc = {"version": 1, "name": "early", "comm_edges": [[0, 1]],
+           "robots": [{"id": 0, "endpoint": f"tcp/127.0.0.1:{p[0]}"},
+                      {"id": 1, "endpoint": f"tcp/127.0.0.1:{p[1]}"}],
+           "observer": {"endpoint": f"tcp/127.0.0.1:{p[2]}"},
+           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]},
+           "options": {"start_timeout_s": 30}}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    (tmp_path / "in.csv").write_text("0,0,1,0\n")
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", str(tmp_path / "o"),
+                 "--timeout", "0.5"]) == 2  # no robot was started
+    err = capsys.readouterr().err
+    assert "--timeout 0.5 s is shorter than the team's start_timeout_s (30 s)" in err
