@@ -119,12 +119,10 @@ def online_config_from_args(args):
         raise InputError("--steps models only --switching-topology (the graph of each step); "
                          "drop the other fault options")
     check_formation(args.formation)
-    from pipeline.runs.transports import check_team_size
+    from pipeline.runs.transports import check_online_team_size
 
-    hold = args.window - 1 if args.hold is None else args.hold
-    check_team_size(args.transport, (robots if robots is not None else 6) * (args.window + hold),
-                    "frames in a step's window (robots x (window + hold): a step's stage runs "
-                    "one robot per frame)")
+    check_online_team_size(args.transport, robots if robots is not None else 6, args.window,
+                           args.hold)
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                         size=parse_size(args.size), features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,

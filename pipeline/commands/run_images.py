@@ -111,13 +111,13 @@ def check_live(spawn: bool, connect: str | None, timeout_s: float = 1.0) -> None
     display (Rerun would ignore it), ``--connect`` to a URL that is not Rerun's
     ``rerun+http://HOST:PORT/proxy`` form or where nothing answers (Rerun would retry in the
     background and drop the stream)."""
-    import os
     import socket
     import sys
     from urllib.parse import urlsplit
 
-    if spawn and sys.platform.startswith("linux") and not (
-            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+    from viz.view import has_display
+
+    if spawn and sys.platform.startswith("linux") and not has_display():
         raise InputError("--spawn needs a display (DISPLAY is not set): drop it and open "
                          "recording.rrd later (make view serves it to a browser), or stream to "
                          "a viewer elsewhere with --connect URL")

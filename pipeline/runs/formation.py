@@ -25,7 +25,14 @@ from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.stages import CleaningResult, consistency_stage, evidence_inputs
 from pipeline.types import Links, RunRecord
 
-__all__ = ["FormationConfig", "run_formation", "write_formation_run"]
+__all__ = ["FormationConfig", "run_formation", "write_formation_run", "formation_name"]
+
+
+def formation_name(formation: str, robots: int | None, graph: str | None) -> str:
+    """What a report calls the formation: ``formation d``, or a parametric one by its robots
+    and graph (``3 robots on a line graph``; its ``formation`` value is not one of a–d)."""
+    return f"formation {formation}" if robots is None else f"{robots} robots on a {graph} graph"
+
 
 
 @dataclass
@@ -94,8 +101,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     triangulation, tri_after, gt_points, fused_errors = _triangulate(
         views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
     report = {
-        "title": (f"formation {config.formation}" if config.robots is None else
-                  f"{config.robots} robots on a {config.graph} graph") + f" (seed {config.seed})",
+        "title": formation_name(config.formation, config.robots, config.graph)
+                 + f" (seed {config.seed})",
         "n_cameras": len(views),
         "comm_edges": comm_edges.tolist(),
         "features_per_camera": m.tolist(),

@@ -176,7 +176,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     from pipeline import colmap
     from pipeline.commgraph import comm_graph
     from pipeline.matching.retrieval import knn_edges
-    from pipeline.runs.transports import get_transport
+    from pipeline.runs.transports import check_team_size, get_transport
     from pipeline.stages import clean_association
 
     timer = timer or StageTimer()
@@ -206,6 +206,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
 
     # features and matching, by the robots of the transport (over zenoh they also detect
     # and resolve; this process then only observes)
+    check_team_size(config.transport, len(views), "photographs")
     job = robots_job or get_transport(config.transport).load().images
     robots = job(config, views, comm_edges, timer, graph_from_features)
     feats, matches, links, cleaning, team = (robots.features, robots.matches, robots.links,

@@ -350,6 +350,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     from pipeline.evaluation.links import link_truth
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
     from pipeline.evaluation.report import versions
+    from pipeline.runs.formation import formation_name
 
     oa, seq = run.online, run.sequence
     links = oa.all_links()
@@ -381,8 +382,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                                                        ["conflictive_sets_after"]))
     run.truth = truth.astype(np.int8)
     return {
-        "title": (f"formation {config.formation}" if config.robots is None else
-                  f"{config.robots} robots on a {config.graph} graph")
+        "title": formation_name(config.formation, config.robots, config.graph)
                  + f" in motion ({config.steps} steps, seed "
                  f"{config.seed})",
         "n_robots": int(seq.n_robots),

@@ -86,12 +86,9 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     if seq.empty:
         timer.warn(f"{len(seq.empty)} sub-folder(s) of {config.directory} hold no image and are "
                    f"no robot ({', '.join(seq.empty[:3])}{', ...' if len(seq.empty) > 3 else ''})")
-    from pipeline.runs.transports import check_team_size
+    from pipeline.runs.transports import check_online_team_size
 
-    hold = config.window - 1 if config.hold is None else config.hold
-    check_team_size(config.transport, seq.n_robots * (config.window + hold),
-                    "frames in a step's window (robots x (window + hold): a step's stage runs "
-                    "one robot per frame)")
+    check_online_team_size(config.transport, seq.n_robots, config.window, config.hold)
     edges = comm_graph(config.graph, seq.robots, what="robot")
     timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
     parts = graph_parts(seq.n_robots, edges)

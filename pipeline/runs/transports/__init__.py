@@ -65,7 +65,7 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size"]
+           "check_team_size", "check_online_team_size"]
 
 
 @dataclass(frozen=True)
@@ -124,10 +124,26 @@ def check_team_size(name: str, robots: int, what: str) -> None:
         ``robots`` above the limit; ``what`` says what they are (e.g. "cameras in the links
         file").
     """
-    from pipeline.runs.transports.limits import refuse_over
+    from pipeline.errors import InputError
 
-    refuse_over(name, getattr(get_transport(name).load(), "MAX_ROBOT_PROCESSES", None), robots,
-                what)
+    cap = getattr(get_transport(name).load(), "MAX_ROBOT_PROCESSES", None)
+    if cap is not None and robots > cap:
+        raise InputError(f"--transport {name} starts one process per robot on this machine: "
+                         f"{robots} {what} would be {robots} processes, at most {cap}; use "
+                         "--transport sim, or start the robots on their own hosts "
+                         "(formation-match robot --team TEAM.json)")
+
+
+def check_online_team_size(name: str, robots: int, window: int, hold: int | None) -> None:
+    """:func:`check_team_size` of an online run: a step's stage runs one robot per frame of
+    the window, ``robots × (window + hold)`` (``hold`` None: the stage's default,
+    :func:`pipeline.consistency.engines.online.default_hold`)."""
+    from pipeline.consistency.engines.online import default_hold
+
+    hold = default_hold(window) if hold is None else int(hold)
+    check_team_size(name, robots * (int(window) + hold),
+                    "frames in a step's window (robots x (window + hold): a step's stage runs "
+                    "one robot per frame)")
 
 
 def transport_help() -> str:

@@ -46,7 +46,8 @@ ONLINE_ROBOTS_SOLVE = True
 
 #: the most robot processes a job starts on this machine (each holds an interpreter and a
 #: Zenoh session: a links file naming thousands of cameras would otherwise fork thousands of
-#: processes); beyond it the job is refused before any work (``check_team_size``)
+#: processes); beyond it the job is refused before any work
+#: (:func:`pipeline.runs.transports.check_team_size`)
 MAX_ROBOT_PROCESSES = 256
 
 #: robots are the cameras that appear in a link or a comm edge (ids made compact,
@@ -216,9 +217,6 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
         A ``knn:K`` graph (it is chosen from every image's features at once: over zenoh give
         a graph kind or file).
     """
-    from pipeline.runs.transports.limits import refuse_over
-
-    refuse_over("zenoh", MAX_ROBOT_PROCESSES, len(views), "photographs")
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
                          "features at once; with --transport zenoh give ring, ring2, complete, "
