@@ -33,6 +33,11 @@ written is it put in place. Guarantees:
   (one holding anything a user added is left alone). The lock file is removed by its holder
   while still locked; a run that locked a file already removed retries on the new one.
 
+Several run folders of one command (``run-formations``: one per formation, and its summary
+files) are put in place together (:func:`publish_together`): each is staged as above, none
+replaces its ``NAME`` until all are written, and the swaps then run with SIGINT and SIGTERM
+held, so an interrupt or an error before that leaves every previous run as it was.
+
 Output files (:func:`atomic_file`, :class:`OutputFiles`) are written to a temporary name and
 renamed into place; a command's outputs are all written before any is put in place, and one
 that may not replace an existing file is put in place without replacing (an output created
@@ -48,10 +53,12 @@ import json
 import os
 import secrets
 import shutil
+import signal
 import stat
 import sys
 import tempfile
-from contextlib import contextmanager
+import threading
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +74,7 @@ from pipeline.outputs import (
 )
 
 __all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
-           "publish", "publish_mode", "write_json_atomic"]
+           "publish", "publish_mode", "publish_together", "write_json_atomic"]
 
 
 def _umask() -> int:
@@ -548,7 +555,8 @@ def atomic_run_folder(out: str | os.PathLike, inputs=()):
     ['.formation-match-run', 'report.json']
     """
     out = Path(out)
-    with claim_run_folder(out, inputs):
+    with ExitStack() as claim:
+        claim.enter_context(claim_run_folder(out, inputs))
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
         try:
             write_run_marker(tmp, finished=False)
@@ -556,7 +564,101 @@ def atomic_run_folder(out: str | os.PathLike, inputs=()):
             write_run_marker(tmp, finished=True)
             publish_mode(tmp, directory=True)
             check_run_folder(out, inputs)  # nothing foreign was put there meanwhile
+            if _together:  # put in place with the others (publish_together), lock kept
+                _together[-1].stage(tmp, out, inputs, claim.pop_all())
+                return
             _put_in_place(tmp, out)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
+
+
+class _Together:
+    """The run folders staged inside one :func:`publish_together`, their locks, and what
+    to write once they are in place."""
+
+    def __init__(self) -> None:
+        self.staged: list[tuple[Path, Path, tuple]] = []
+        self.locks = ExitStack()
+        self.after: list = []
+
+    def stage(self, tmp: Path, out: Path, inputs, claim: ExitStack) -> None:
+        self.locks.enter_context(claim)  # the folder's lock, held until all are in place
+        self.staged.append((tmp, out, tuple(inputs)))
+
+    def staged_folder(self, out: str | os.PathLike) -> Path:
+        """Where the run folder for ``out`` is staged until the block ends."""
+        key = _key(Path(out))
+        return next(tmp for tmp, o, _ in self.staged if _key(o) == key)
+
+    def then(self, write) -> None:
+        """Call ``write()`` right after the folders are in place, within the held signals
+        (e.g. summary files naming them)."""
+        self.after.append(write)
+
+
+_together: list[_Together] = []
+
+
+@contextmanager
+def publish_together():
+    """Run folders written inside (:func:`atomic_run_folder`) are put in place together when
+    the block ends without error, each replacing its previous run; on an error or an interrupt
+    inside, every staged folder is removed and no previous run is touched.
+
+    The swaps and the writers given to ``then`` run with SIGINT and SIGTERM held (in the main
+    thread): a signal that arrives then is acted on once all are in place — an interrupt, then
+    too late to stop anything, is reported and the command ends normally; a SIGTERM ends the
+    process as it would have.
+
+    Example
+    -------
+    >>> import pathlib, tempfile
+    >>> parent = pathlib.Path(tempfile.mkdtemp())
+    >>> with publish_together():
+    ...     for name in ("a", "b"):
+    ...         with atomic_run_folder(parent / name) as tmp:
+    ...             _ = (tmp / "report.json").write_text(name)
+    ...         assert not (parent / name).exists()  # not yet
+    >>> sorted(p.name for p in parent.iterdir())
+    ['a', 'b']
+    """
+    together = _Together()
+    _together.append(together)
+    try:
+        with together.locks:
+            yield together
+            with _held_signals() as got:
+                for tmp, out, inputs in together.staged:
+                    check_run_folder(out, inputs)
+                    _put_in_place(tmp, out)
+                together.staged.clear()
+                for write in together.after:
+                    write()
+            if signal.SIGINT in got:
+                print("interrupt received while the runs were put in place: they are complete",
+                      file=sys.stderr)
+            if signal.SIGTERM in got:
+                signal.raise_signal(signal.SIGTERM)
+    finally:
+        _together.remove(together)
+        for tmp, _, _ in together.staged:  # not put in place: an error or an interrupt
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextmanager
+def _held_signals():
+    """Hold SIGINT and SIGTERM for the block (main thread only); yields the set of those
+    that arrived, for the caller to act on after it."""
+    got: set = set()
+    if threading.current_thread() is not threading.main_thread():
+        yield got
+        return
+    old = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old[sig] = signal.signal(sig, lambda signum, frame: got.add(signum))
+        yield got
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)

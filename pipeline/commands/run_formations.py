@@ -194,6 +194,7 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 def run(args) -> int:
     from pipeline import validate
     from pipeline.budget import check_formation_memory
+    from pipeline.runfolder import publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
 
     method, max_features = feature_options(args)
@@ -204,17 +205,23 @@ def run(args) -> int:
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)
     reports = {}
-    for name in FORMATIONS:
-        cfg = FormationConfig(formation=name, seed=args.seed, size=size,
-                              features=method, max_features=max_features,
-                              out=str(parent / f"formation-{name}"),
-                              resolution=resolution, merge_radius=args.merge_radius)
-        out = run_formation(cfg, transport=args.transport)
-        reports[name] = json.loads((out / "report.json").read_text())
-    table = formations_table(reports)
-    check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
-    md, js = write_summaries(parent, f"# Formations (a)–(d), seed {args.seed}, {method}, "
-                             f"{args.size}, resolution {args.resolution}\n\n" + table, reports)
+    # the four run folders and the summaries are put in place together at the end: an error
+    # or an interrupt before leaves the previous runs of --out as they were
+    with publish_together() as together:
+        for name in FORMATIONS:
+            cfg = FormationConfig(formation=name, seed=args.seed, size=size,
+                                  features=method, max_features=max_features,
+                                  out=str(parent / f"formation-{name}"),
+                                  resolution=resolution, merge_radius=args.merge_radius)
+            out = together.staged_folder(run_formation(cfg, transport=args.transport))
+            reports[name] = json.loads((out / "report.json").read_text())
+        table = formations_table(reports)
+        check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
+        written = []
+        together.then(lambda: written.extend(write_summaries(
+            parent, f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}, "
+            f"resolution {args.resolution}\n\n" + table, reports)))
+    md, js = written
     print(table)
     print(f"saved {md} and {js}")
     return 0

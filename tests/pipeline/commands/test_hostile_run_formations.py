@@ -101,3 +101,49 @@ def test_out_naming_a_file_or_a_foreign_run_folder_is_refused_before_any_work(
     assert main(["run-formations", "--out", str(out)]) == 2
     one_line_error(capsys, "formation-c")
     assert (out / "formation-c" / "thesis.tex").read_text() == "mine"
+
+
+def _fake_formation_runs(monkeypatch, seed_of_run, stop_at=None):
+    """run_formation replaced by one that writes a small run folder (through the real
+    atomic_run_folder) holding the seed, and raises KeyboardInterrupt at ``stop_at``."""
+    import json
+
+    import pipeline.runs.formation as run
+    from pipeline.runfolder import atomic_run_folder
+
+    def fake(cfg, *a, **k):
+        if cfg.formation == stop_at:
+            raise KeyboardInterrupt
+        with atomic_run_folder(cfg.out_dir()) as tmp:
+            (tmp / "report.json").write_text(json.dumps({"seed": seed_of_run}))
+        return cfg.out_dir()
+
+    monkeypatch.setattr(run, "run_formation", fake)
+    import pipeline.commands.run_formations as rf
+    monkeypatch.setattr(rf, "formations_table", lambda reports: "table\n")
+
+
+def test_an_interrupt_replaces_no_formation_of_the_previous_run(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during formation c: the four formation folders and the summaries of the
+    previous run stay as they were (before, a and b were already replaced while the message
+    said nothing was)."""
+    import json
+
+    out = tmp_path / "runs"
+    _fake_formation_runs(monkeypatch, 11)
+    assert main(["run-formations", "--out", str(out), "--seed", "11"]) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    _fake_formation_runs(monkeypatch, 12, stop_at="c")
+    assert main(["run-formations", "--out", str(out), "--seed", "12"]) == 130
+    assert "nothing was written or replaced" in capsys.readouterr().err
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert {json.loads((out / f"formation-{x}" / "report.json").read_text())["seed"]
+            for x in "abcd"} == {11}
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["formation-a", "formation-b", "formation-c", "formation-d", "formations.md",
+         "formations.json"])  # no staging folder or lock left
+    _fake_formation_runs(monkeypatch, 12)
+    assert main(["run-formations", "--out", str(out), "--seed", "12"]) == 0
+    assert {json.loads((out / f"formation-{x}" / "report.json").read_text())["seed"]
+            for x in "abcd"} == {12}
