@@ -103,6 +103,34 @@ def _read_txt_keypoints(path: Path) -> np.ndarray | None:
     return np.asarray(rows, dtype=np.float64)
 
 
+def _txt_problem(path: Path) -> str | None:
+    """Why a text file that is mostly a keypoint table is not one: its first line that is not
+    two numbers, when an earlier line is (``None`` for any other file, e.g. a README)."""
+    from pipeline.inputs.csvfields import text_lines
+
+    good = 0
+    try:
+        lines = list(text_lines(path, "label file"))
+    except (InputError, OSError):
+        return None
+    for number, line in lines:
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        toks = line.replace(",", " ").split()
+        try:
+            ok = len([float(t) for t in toks]) == 2
+        except ValueError:
+            ok = False
+        if ok:
+            good += 1
+        elif good:
+            return f"line {number} is {line[:60]!r}"
+        else:
+            return None
+    return None
+
+
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:
     """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable."""
     from scipy.io import loadmat
@@ -113,7 +141,13 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
         return None
     if "pts_coord" not in data:
         return None
-    pts = np.asarray(data["pts_coord"], dtype=np.float64)
+    raw = np.asarray(data["pts_coord"])
+    if raw.dtype.kind not in "iuf":  # text, a struct, complex numbers
+        what = {"U": "text", "S": "text", "c": "complex numbers", "V": "a struct",
+                "O": "a cell array", "b": "logical values"}.get(raw.dtype.kind, raw.dtype.name)
+        raise InputError(f"{path}: pts_coord holds {what}, expected a numeric 2 x K array "
+                         "(row 0 = x, row 1 = y)")
+    pts = raw.astype(np.float64)
     if pts.ndim != 2 or pts.shape[0] != 2:
         raise InputError(f"{path}: pts_coord has shape {pts.shape}, expected 2 x K "
                          "(row 0 = x, row 1 = y)")
@@ -164,9 +198,31 @@ def _read_descriptors(path: Path) -> np.ndarray:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # an empty file: its row count says it
             d = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except ValueError as exc:
-        raise InputError(f"{path}: not a numeric table of descriptors ({exc})") from None
+    except ValueError:
+        raise InputError(f"{path}: not a numeric table of descriptors "
+                         f"({_first_bad_line(path)})") from None
     return d
+
+
+def _first_bad_line(path: Path) -> str:
+    """The first line of a descriptor table that is not all numbers, or whose count of
+    numbers differs from the first line's, for an error message (lines counted from 1)."""
+    width = None
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for number, line in enumerate(f, 1):
+            toks = line.split("#", 1)[0].split()
+            if not toks:
+                continue
+            try:
+                [float(t) for t in toks]
+            except ValueError as exc:
+                return f"line {number}: {exc}"
+            if width is None:
+                width = len(toks)
+            elif len(toks) != width:
+                return f"line {number} holds {len(toks)} values, line 1 {width}"
+    return "every line must hold the same count of numbers"
+
 
 
 def select_frames(n_total: int, frames: int | None) -> np.ndarray:
@@ -249,6 +305,12 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         if named:
             raise InputError(f"{named[0]}: not a keypoint table (every line must be two numbers "
                              "'x y'; a .mat file needs pts_coord 2 x K); fix or remove the file")
+        # paired by order (the hotel's layout): a label file broken part-way names itself
+        broken = [(p, why) for p in sorted(rejected.values(), key=lambda q: natural_key(q.name))
+                  if p.suffix.lower() == ".txt" and (why := _txt_problem(p))]
+        if broken:
+            raise InputError(f"{broken[0][0]}: not a keypoint table ({broken[0][1]}; every line "
+                             "must be two numbers 'x y', or 'nan nan'); fix or remove the file")
         raise InputError(
             f"{directory}: {len(images)} images but {len(kp_files)} keypoint files (NAME.txt "
             "with K rows 'x y', or NAME.mat with pts_coord 2 x K); give each image a keypoint "

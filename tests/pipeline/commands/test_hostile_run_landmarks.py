@@ -125,13 +125,18 @@ def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
     ("v1.txt", "1 2\n" * (K - 1), "different numbers of landmarks (v0.txt: 8, v1.txt: 7)"),
     ("v1.scf", ("nan " * 6 + "\n") * K, "v1.scf: descriptor row 1 holds a non-finite value"),
     ("v1.scf", ("1 " * 5 + "inf\n") * K, "v1.scf: descriptor row 1 holds a non-finite value"),
-    ("v1.scf", "1 2 3\n1 2\n" * (K // 2), "v1.scf: not a numeric table"),
+    ("v1.scf", "1 2 3\n1 2\n" * (K // 2), "v1.scf: not a numeric table of descriptors (line 2 "
+                                          "holds 2 values, line 1 3)"),
+    ("v1.scf", "1 2 3 4 5 6\n" * 2 + "a b c 4 5 6\n" * (K - 2),
+     "v1.scf: not a numeric table of descriptors (line 3: could not convert string to float: "
+     "'a')"),
     ("v1.scf", b"\xff\x00" * 100, "v1.scf: not a numeric table"),
     ("v1.scf", "", "v1.scf: 0 descriptor rows for 8 landmarks"),  # no loadtxt warning
     ("v1.scf", "1 2 3 4 5 6\n" * (K - 1), "v1.scf: 7 descriptor rows for 8 landmarks"),
     ("v1.scf", "1 2 3\n" * K, "v1.scf: descriptors of 3 values but v0.scf has 6"),
 ], ids=["kp-nan", "kp-all-nan", "kp-inf", "kp-huge", "kp-outside", "kp-3-columns", "kp-text", "kp-binary",
-        "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-binary",
+        "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-text-line-3",
+        "scf-binary",
         "scf-empty", "scf-fewer-rows", "scf-other-width"])
 def test_bad_label_or_descriptor_file(folder, capsys, name, content, needle):
     (folder / name).write_bytes(content if isinstance(content, bytes) else content.encode())
@@ -168,6 +173,36 @@ def test_an_image_that_is_not_an_image(folder, capsys, damage, extra):
 def test_missing_descriptor_file(folder, capsys):
     (folder / "v2.scf").unlink()
     _fails(capsys, _argv(folder), folder, "needs one NAME.scf per image (found 3 for 4 images)")
+
+
+@pytest.mark.parametrize("value, kind", [(np.array([["a", "b"]]), "text"),
+                                         (np.ones((2, 8)) * (1 + 2j), "complex numbers"),
+                                         ({"x": 1.0}, "a struct"),
+                                         (np.array([[1.0, "a"]], dtype=object), "a cell array")])
+def test_mat_labels_that_are_not_numbers_are_named(folder, capsys, value, kind):
+    """A pts_coord of text, complex numbers or a struct: named, not a traceback (complex
+    values lost their imaginary part with a numpy warning)."""
+    from scipy.io import savemat
+
+    (folder / "v1.txt").unlink()
+    savemat(folder / "v1.mat", {"pts_coord": value})
+    _fails(capsys, _argv(folder), folder, "v1.mat: pts_coord holds", kind,
+           "expected a numeric 2 x K array")
+
+
+def test_a_broken_label_file_paired_by_order_is_named(folder, capsys):
+    """Images and label files paired by name order (the CMU hotel layout: hotel.seq0.png,
+    hotel1.txt): a label file broken part-way is named with its line, not counted as missing
+    (the message said '4 images but 3 keypoint files')."""
+    for k in range(4):
+        (folder / f"v{k}.txt").rename(folder / f"labels{k}.txt")
+        (folder / f"v{k}.scf").rename(folder / f"labels{k}.scf")
+    (folder / "README.txt").write_text("labelled frames, see the paper\n")
+    rows = (folder / "labels2.txt").read_text().splitlines()
+    rows[4] = "12 34 56"
+    (folder / "labels2.txt").write_text("\n".join(rows) + "\n")
+    _fails(capsys, _argv(folder), folder, "labels2.txt: not a keypoint table (line 5 is "
+                                          "'12 34 56'")
 
 
 def test_corrupt_mat_labels_are_named(folder, capsys):
