@@ -36,6 +36,7 @@ from pipeline.errors import InputError
 from pipeline.types import View
 
 __all__ = [
+    "formation_name",
     "render",
     "render_robot",
     "formation_edges",
@@ -152,6 +153,12 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
                                    rng=np.random.default_rng([seed, 3, i]))
     return View(name=f"cam{i:02d}", image=image, K=K.copy(), R=R, t=t, depth=depth,
                 intrinsics_known=True), edges
+
+
+def formation_name(formation: str, robots: int | None, graph: str | None) -> str:
+    """What a report calls the formation: ``formation d``, or a parametric one by its robots
+    and graph (``3 robots on a line graph``; its ``formation`` value is not one of a–d)."""
+    return f"formation {formation}" if robots is None else f"{robots} robots on a {graph} graph"
 
 
 def check_formation(formation) -> None:

@@ -255,6 +255,29 @@ def add_fault_arguments(parser: argparse.ArgumentParser) -> None:
                    help="seed of the message drops and the switching topology (default 0)")
 
 
+def warn_rule_under_faults(faults: FaultConfig | None, resolution: str | None) -> str | None:
+    """Warn (shown even with ``--quiet``) when a fault flag makes the chosen rule give way to
+    the fault-tolerant Alg. 1 (:func:`pipeline.consistency.rules.rule_for_network`: a rule that
+    is not fault-tolerant runs on a fault-free network only); returns the warning, or None."""
+    from pipeline.consistency.rules import DEFAULT_RESOLUTION, rule_for_network
+    from pipeline.progress import log
+
+    if faults is None or not faults.any:
+        return None
+    asked = resolution or DEFAULT_RESOLUTION
+    ran = rule_for_network(asked, True).name
+    if ran == asked:
+        return None
+    flags = [flag for flag, on in (("--drop-prob", faults.drop_prob > 0),
+                                   ("--delay-rounds", bool(faults.delay_rounds)),
+                                   ("--crash", bool(faults.crash)),
+                                   ("--switching-topology", faults.switching_topology)) if on]
+    text = (f"--resolution {asked} is not fault-tolerant: with {', '.join(flags)} the robots run "
+            f"the fault-tolerant Alg. 1 ({ran}) instead (report.json: resolution_method)")
+    log.warning("warning: %s", text)
+    return text
+
+
 def faults_from_args(args) -> FaultConfig:
     """The :class:`FaultConfig` of parsed arguments; InputError on a bad value."""
     from pipeline.validate import seed as checked_seed

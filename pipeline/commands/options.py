@@ -64,8 +64,10 @@ def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None
     p.add_argument("--resolution", choices=tuple(RULES), default=default,
                    help="how the robots cut conflictive sets: "
                         + "; ".join(rule.help for rule in RULES.values())
-                        + f" (default {default}; on a lossy network, --drop-prob, the "
-                          "fault-tolerant Alg. 1 runs instead)")
+                        + f" (default {default}; with a fault flag, --drop-prob, "
+                          "--delay-rounds, --crash or --switching-topology, a rule that is not "
+                          "fault-tolerant gives way to the fault-tolerant Alg. 1, with a "
+                          "warning)")
 
 
 #: the defaults of :func:`add_online_options` (``--hold``'s: ``window - 1``, by the job)

@@ -14,7 +14,7 @@ from pipeline.commands.options import (
     add_resolution_option,
     add_transport_option,
 )
-from pipeline.faults import add_fault_arguments, faults_from_args
+from pipeline.faults import add_fault_arguments, faults_from_args, warn_rule_under_faults
 
 __all__ = ["add_arguments", "run"]
 
@@ -52,10 +52,12 @@ def run(args) -> int:
     check_output_files([("--out", args.out), ("--report", args.report)],
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
+    faults = faults_from_args(args)
+    warn_rule_under_faults(faults, args.resolution)
     # every output is written before any is put in place: an error leaves none of them
     with OutputFiles(replace=args.overwrite) as outputs:
         s = flag_result(resolve_file(args.links, args.out, args.comm_graph,
-                                     faults_from_args(args), args.max_memory_gb,
+                                     faults, args.max_memory_gb,
                                      resolution=args.resolution, transport=args.transport,
                                      outputs=outputs, baselines=args.baselines),
                         no_links_why="the links file holds no link row, or only rows "

@@ -22,7 +22,7 @@ from pipeline.commands.options import (
     refuse_online_options,
 )
 from pipeline.errors import InputError
-from pipeline.faults import add_fault_arguments, faults_from_args
+from pipeline.faults import add_fault_arguments, faults_from_args, warn_rule_under_faults
 from pipeline.runs.formation import FormationConfig
 
 
@@ -62,8 +62,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "per step, and associate online (pipeline.runs.online); default: one "
                         "snapshot")
     add_online_options(g, "--steps")
-    g.add_argument("--speed", type=float, default=0.15,
-                   help="with --steps: metres the formation drives per step (default 0.15)")
+    g.add_argument("--speed", type=float, default=None,
+                   help=f"with --steps: metres the formation drives per step (default "
+                        f"{DEFAULT_SPEED})")
+
+
+#: ``--speed`` of an online run when not given (metres per step; OnlineConfig.speed's default)
+DEFAULT_SPEED = 0.15
 
 
 def config_from_args(args) -> FormationConfig:
@@ -81,13 +86,15 @@ def config_from_args(args) -> FormationConfig:
     from pipeline.runs.transports import check_team_size
 
     check_team_size(args.transport, robots if robots is not None else 6, "robots")
+    faults = faults_from_args(args)
+    warn_rule_under_faults(faults, args.resolution)
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                            size=size,
                            features=method, max_features=max_features,
                            robots=robots, graph=args.graph,
                            tol_px=validate.tolerance_px(args.tol_px),
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
-                           faults=faults_from_args(args),
+                           faults=faults,
                            resolution=args.resolution,
                            merge_radius=args.merge_radius)
 
@@ -100,6 +107,8 @@ def online_config_from_args(args):
     if args.steps < 1:
         raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
     check_online_options(args)
+    if args.speed is None:
+        args.speed = DEFAULT_SPEED
     if not args.speed >= 0:
         raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
     from pipeline.runs.transports import get_transport
@@ -144,6 +153,8 @@ def run(args) -> int:
     if args.steps is not None:
         return _run_online(args)
     refuse_online_options(args, "--steps N")
+    if args.speed is not None:
+        raise InputError("--speed applies to an online job only; add --steps N or drop it")
     config = config_from_args(args)
     with claim_run_folder(config.out_dir()):
         out = run_formation(config, transport=args.transport)

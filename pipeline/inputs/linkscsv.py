@@ -242,7 +242,7 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
             if tuple(f.lower() for f in fields) == RUN_LINK_COLUMNS:
                 ncols = len(RUN_LINK_COLUMNS)  # a run-output links.csv, e.g. resolve's own
                 continue
-            if fields and fields[0].lower() == "cam_i":
+            if any(f.lower() in LINK_COLUMNS for f in fields):  # a header, in some order
                 if tuple(f.lower() for f in fields) not in (LINK_COLUMNS[:4], LINK_COLUMNS):
                     raise InputError(f"{path}:{lineno}: header {raw!r} must be "
                                      f"'cam_i,feat_i,cam_j,feat_j' or with ',quality'")

@@ -25,13 +25,8 @@ from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.stages import CleaningResult, consistency_stage, evidence_inputs
 from pipeline.types import Links, RunRecord
 
-__all__ = ["FormationConfig", "run_formation", "write_formation_run", "formation_name"]
+__all__ = ["FormationConfig", "run_formation", "write_formation_run"]
 
-
-def formation_name(formation: str, robots: int | None, graph: str | None) -> str:
-    """What a report calls the formation: ``formation d``, or a parametric one by its robots
-    and graph (``3 robots on a line graph``; its ``formation`` value is not one of a–d)."""
-    return f"formation {formation}" if robots is None else f"{robots} robots on a {graph} graph"
 
 
 
@@ -91,6 +86,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     :func:`_triangulate` (pycolmap with known poses, before and after; the fused landmarks'
     errors), then the report and the outputs (:func:`_write`).
     """
+    from data_synth import formation_name
     from pipeline.evaluation import report as sections
 
     out = config.out_dir()

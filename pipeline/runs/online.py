@@ -347,10 +347,10 @@ def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
 
 def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> dict:
     """``report.json`` of an online run: config, steps, and the final scores."""
+    from data_synth import formation_name
     from pipeline.evaluation.links import link_truth
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
     from pipeline.evaluation.report import versions
-    from pipeline.runs.formation import formation_name
 
     oa, seq = run.online, run.sequence
     links = oa.all_links()

@@ -22,9 +22,10 @@ __all__ = ["formation", "images", "online_robots", "online_match", "online_stage
 def formation(config, timer) -> FormationRobots:
     """Render the formation, then features, matching, consistency and fusion in this process."""
     import data_synth
+    from data_synth import formation_name
 
-    with timer.stage("render", f"formation {config.formation}, seed {config.seed}, "
-                     f"{config.size[0]}x{config.size[1]}"):
+    with timer.stage("render", f"{formation_name(config.formation, config.robots, config.graph)}"
+                     f", seed {config.seed}, {config.size[0]}x{config.size[1]}"):
         rendered = data_synth.render(config.formation, seed=config.seed, size=config.size,
                                      n_robots=config.robots, graph=config.graph)
         views, comm_edges = rendered.views, np.asarray(rendered.comm_edges)

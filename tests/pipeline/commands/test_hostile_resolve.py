@@ -127,6 +127,27 @@ def test_crash_of_a_robot_that_does_not_exist(tmp_path, capsys):
     one_line_error(capsys, "robot 5 does not exist")
 
 
+@pytest.mark.parametrize("rule, flags, warned", [
+    ("evidence", ["--crash", "1@999999"], "--resolution evidence is not fault-tolerant: with "
+                                          "--crash the robots run the fault-tolerant Alg. 1"),
+    ("sync", ["--switching-topology"], "--resolution sync is not fault-tolerant: with "
+                                       "--switching-topology"),
+    ("paper", ["--crash", "1@999999"], None),
+    ("evidence", [], None),
+])
+def test_a_rule_that_gives_way_to_alg1_under_faults_is_warned(fig1, tmp_path, capsys, rule,
+                                                               flags, warned):
+    """A fault flag (even a crash that never fires) made the chosen rule run as Alg. 1
+    without a word; the report said so only in resolution_method."""
+    rep = tmp_path / "r.json"
+    assert main(["resolve", "--links", str(fig1), "--out", str(tmp_path / "o.csv"),
+                 "--resolution", rule, "--report", str(rep), *flags]) == 0
+    err = capsys.readouterr().err
+    assert (warned in err) if warned else ("not fault-tolerant" not in err), err
+    method = json.loads(rep.read_text())["resolution_method"]
+    assert method == ("paper" if warned else rule)
+
+
 # ------------------------------------------------------------- wrong results as success
 
 def _write_links(path, links):

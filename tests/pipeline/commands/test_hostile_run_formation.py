@@ -72,6 +72,7 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     ("--window", "2", "--window applies to an online job only; add --steps N"),
     ("--hold", "0", "--hold applies to an online job only"),
     ("--batch-every", "1", "--batch-every applies to an online job only"),
+    ("--speed", "0.3", "--speed applies to an online job only; add --steps N"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"

@@ -62,6 +62,9 @@ def test_reads_without_header_and_quality(tmp_path):
     ("0,0,1,0\n0,0,1,1\n", 2, "feature 0,0 is linked twice to camera 1"),
     ("0,0,1,5\n0,1,1,5\n", 2, "feature 1,5 is linked twice to camera 0"),
     ("cam_i,cam_j,feat_i,feat_j\n0,0,1,0\n", 1, "header"),
+    # a header in another order named the first column name as a bad id ('cam_i 'cam_j'...')
+    ("cam_j,feat_j,cam_i,feat_i\n0,0,1,0\n", 1, "header 'cam_j,feat_j,cam_i,feat_i' must be"),
+    ("feat_i,cam_i,feat_j,cam_j,quality\n0,0,1,0,1\n", 1, "header"),
 ])
 def test_bad_rows_are_named(tmp_path, text, line, message):
     p = write(tmp_path, text)
