@@ -299,6 +299,14 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     elif len(kp_files) == len(images):
         pairing = "order"
         kps = kp_files
+        clash = next(((im, p) for im, (p, _) in zip(images, kps, strict=True)
+                      if im.stem in by_stem and p.stem != im.stem), None)
+        if clash is not None:
+            im, p = clash
+            raise InputError(f"{directory}: {im.name} has the keypoint file "
+                             f"{by_stem[im.stem][0].name} by name, but not every image has one "
+                             f"of its name, so they pair by name order, which gives it {p.name}; "
+                             "name every keypoint file after its image (NAME.txt), or none")
     else:
         named = [rejected[im.stem] for im in images
                  if im.stem not in by_stem and im.stem in rejected]

@@ -205,6 +205,15 @@ def test_a_broken_label_file_paired_by_order_is_named(folder, capsys):
                                           "'12 34 56'")
 
 
+def test_a_label_file_named_after_another_image_than_its_order_gives_is_refused(folder,
+                                                                              capsys):
+    """Labels paired by name order because one is not named after its image: an image that
+    has a label file of its name was silently given the next one (F1 fell to 0.32)."""
+    (folder / "v0.txt").rename(folder / "z_v0.txt")  # sorts after v1..v3: order mispairs
+    _fails(capsys, _argv(folder), folder, "v1.png has the keypoint file v1.txt by name",
+           "gives it v2.txt")
+
+
 def test_corrupt_mat_labels_are_named(folder, capsys):
     (folder / "v1.txt").unlink()
     (folder / "v1.mat").write_bytes(b"MATLAB 5.0" + bytes(range(256)))
