@@ -42,6 +42,12 @@ Cases
       rules were not developed on), each on its own comm graph, matched as ``run-formation``
       matches it (SIFT, 640x480), truth at 2 px; the oracle too.
 
+``--renumber S ...``: every labelled case (hotel and warped) also runs with its cameras
+numbered in a seeded random order (the same images, links and graph; each image keeps its
+features): a rule's decisions should not hang on how the cameras are numbered, and a table
+prints, per method, how far its F1 moved from the case's own numbering (``renumber`` in the
+rows; the recall ratios below use the own numbering only).
+
 Where each link is known good or spurious (every case but none), ``good_cut`` and
 ``spurious_cut`` count what each method cut. Method ``good_links`` (on request) keeps exactly
 the good links: the association of the input's right links, no link invented, the bound of
@@ -246,6 +252,47 @@ def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, s
         links, _ = refine_by_votes(m, edges, links, 10)
     return Case(m, edges, links, truth_id=np.concatenate([f.landmarks[p] for f, p in
                                                           zip(fr, perms, strict=True)]))
+
+
+def renumbered(case: Case, seed: int) -> Case:
+    """``case`` with its cameras numbered in a seeded random order: camera ``i`` becomes
+    ``perm[i]``, keeping its features, links, quality and truth (each link written with its
+    lower camera first)."""
+    perm = np.random.default_rng(seed).permutation(len(case.m))
+    m = case.m[np.argsort(perm)]
+    a, b = perm[case.links.cam_i], perm[case.links.cam_j]
+    swap = a > b
+    L = case.links
+    links = Links(np.where(swap, b, a), np.where(swap, L.feat_j, L.feat_i), np.where(swap, a, b),
+                  np.where(swap, L.feat_i, L.feat_j), L.quality)
+    edges = np.sort(perm[np.asarray(case.edges, np.int64).reshape(-1, 2)], axis=1)
+    off, off2 = np.concatenate([[0], np.cumsum(case.m)]), np.concatenate([[0], np.cumsum(m)])
+    truth = np.empty_like(case.truth_id)
+    for i in range(len(case.m)):
+        truth[off2[perm[i]]:off2[perm[i]] + case.m[i]] = case.truth_id[off[i]:off[i + 1]]
+    return Case(m, edges, links, truth_id=truth)
+
+
+def renumber_table(records: list) -> list[str]:
+    """Per method, the largest change of F1 between a labelled case's own camera numbering
+    and its renumberings (``--renumber``)."""
+    key_of = lambda r: tuple(r.get(k) for k in ("case", "data", "frames", "graph", "inputs",  # noqa: E731
+                                                 "warp_seed", "hidden", "method"))
+    own = {key_of(r): r["f1"] for r in records
+           if r.get("status") == "ok" and r.get("renumber") is None}
+    moved: dict = {}
+    for r in records:
+        if r.get("status") == "ok" and r.get("renumber") is not None and key_of(r) in own:
+            d = abs(r["f1"] - own[key_of(r)])
+            best = moved.get(r["method"])
+            if best is None or d > best[0]:
+                moved[r["method"]] = (d, r)
+    lines = []
+    for method, (d, r) in moved.items():
+        lines.append(f"  {method}: F1 moved by at most {d:.3f} ({r['case']} {r['frames']} "
+                     f"frames, {r['graph']}, {r['inputs']}, renumbering seed {r['renumber']}: "
+                     f"{own[key_of(r)]:.3f} -> {r['f1']:.3f})")
+    return lines
 
 
 def team_case(n: int, k: int = 30, p_swap: float = 0.3, seed: int = 0):
@@ -467,6 +514,7 @@ def sparse_recall(records: list) -> list[dict]:
     method's recall on the sparse graph over its recall on the complete one."""
     key_of = lambda r: tuple((k, r.get(k)) for k in ("case", "data", "frames", "inputs",  # noqa: E731
                                                        "warp_seed", "hidden", "method"))
+    records = [r for r in records if r.get("renumber") is None]
     complete = {key_of(r): r["recall"] for r in records
                 if r.get("status") == "ok" and r.get("graph") == "complete"}
     out = []
@@ -524,6 +572,9 @@ def main(argv=None) -> int:
                             "quality_merge"],
                    help="methods of the team rows; resolve:RULE runs the resolve command")
     p.add_argument("--shuffle-seed", type=int, default=0)
+    p.add_argument("--renumber", type=int, nargs="*", default=[],
+                   help="also run every labelled case with its cameras renumbered by these "
+                        "seeds (decisions should not depend on the numbering)")
     p.add_argument("--cap-gb", type=float, default=6.0)
     p.add_argument("--cap-s", type=float, default=600.0)
     p.add_argument("--quick", action="store_true")
@@ -539,9 +590,13 @@ def main(argv=None) -> int:
         for graph in a.graphs:
             for inputs in a.inputs:
                 case = landmark_case(a.data, frames, graph, inputs, a.shuffle_seed)
-                run_case(f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}", case,
-                         a.methods, dict(case="landmarks", data=Path(a.data).name, frames=frames,
-                                         graph=graph, inputs=inputs), a, records)
+                title = f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}"
+                base = dict(case="landmarks", data=Path(a.data).name, frames=frames,
+                            graph=graph, inputs=inputs)
+                run_case(title, case, a.methods, base, a, records)
+                for seed in a.renumber:
+                    run_case(f"{title}, cameras renumbered (seed {seed})", renumbered(case, seed),
+                             a.methods, dict(base, renumber=seed), a, records)
     from pipeline.matching.link_evidence import RATIO_EPS
 
     for hide in a.warped_hide:
@@ -557,11 +612,15 @@ def main(argv=None) -> int:
                               f"neighbour): {beyond.mean():.2f}, right among them "
                               f"{case.link_good[beyond].mean():.2f}")
                         hidden = f", {hide:g} hidden" if hide else ""
-                        run_case(f"{Path(a.data).name} warped (seed {wseed}{hidden}), 30 frames, "
-                                 f"{graph}, SIFT at the keypoints, {inputs}", case, a.methods,
-                                 dict(case="warped", data=Path(a.data).name, warp_seed=wseed,
-                                      hidden=hide, frames=30, graph=graph,
-                                      inputs=f"sift {inputs}"), a, records)
+                        title = (f"{Path(a.data).name} warped (seed {wseed}{hidden}), 30 frames, "
+                                 f"{graph}, SIFT at the keypoints, {inputs}")
+                        base = dict(case="warped", data=Path(a.data).name, warp_seed=wseed,
+                                    hidden=hide, frames=30, graph=graph, inputs=f"sift {inputs}")
+                        run_case(title, case, a.methods, base, a, records)
+                        for seed in a.renumber:
+                            run_case(f"{title}, cameras renumbered (seed {seed})",
+                                     renumbered(case, seed), a.methods,
+                                     dict(base, renumber=seed), a, records)
     if a.graffiti:
         for graph in a.graphs:
             case = graffiti_case(a.graffiti, graph)
@@ -579,6 +638,9 @@ def main(argv=None) -> int:
         run_case(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap",
                  team_case(n), a.team_methods, dict(case="team", cameras=n, graph="ring2"),
                  a, records)
+    if a.renumber:
+        print("F1 under camera renumbering (--renumber " + " ".join(map(str, a.renumber)) + ")")
+        print("\n".join(renumber_table(records)))
     ratios = sparse_recall(records)
     if ratios:
         print("recall on a sparse graph over the complete graph's (target: at least 0.5)")
@@ -596,7 +658,8 @@ def main(argv=None) -> int:
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                     "load_average_at_start": round(load, 2),
                     "load_average_at_end": round(os.getloadavg()[0], 2)},
-        "args": vars(a), "records": records, "sparse_recall": ratios})
+        "args": vars(a), "records": records, "sparse_recall": ratios,
+        "renumbering": renumber_table(records)})
     print(f"saved {out / 'results.json'} (load average {load:.1f} at start, "
           f"{os.getloadavg()[0]:.1f} at end)")
     return 0

@@ -75,3 +75,48 @@ def test_output_is_one_to_one_on_comm_edges(n, K, seed):
     refined, _ = refine_by_votes([K] * n, np.array(edges), Links(ci, fi, cj, fj), iterations=3)
     check_links(refined, [K] * n)
     assert {(a, b) for a, _, b, _ in _as_set(refined)} <= set(edges)
+
+
+def test_refined_links_keep_the_input_quality():
+    """The votes decide which pairs are matched; the refined links carry the descriptor
+    evidence of their pair (not the vote share, which is 1 for nearly every kept pair and
+    left a weighing rule with ties only), and a pair the votes introduced gets quality 0."""
+    edges = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    links = _identity_links(edges, 3, wrong=(0, 2))
+    quality = np.linspace(0.3, 0.9, len(links))
+    links = Links(links.cam_i, links.feat_i, links.cam_j, links.feat_j, quality)
+    given_q = dict(zip(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+                           links.feat_j.tolist(), strict=True), quality.tolist(), strict=True))
+    refined, _ = refine_by_votes([3] * 4, np.array(edges), links)
+    got = dict(zip(zip(refined.cam_i.tolist(), refined.feat_i.tolist(),
+                       refined.cam_j.tolist(), refined.feat_j.tolist(), strict=True),
+                   refined.quality.tolist(), strict=True))
+    introduced = {(0, 0, 2, 0), (0, 1, 2, 1)}  # the votes undid the swap on edge (0, 2)
+    assert set(got) - set(given_q) == introduced
+    assert all(got[k] == 0.0 for k in introduced)
+    assert all(got[k] == given_q[k] for k in set(got) - introduced)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(3, 6), st.integers(1, 5), st.integers(0, 10_000))
+def test_a_refined_link_has_its_input_quality_or_zero(n, K, seed):
+    rng = np.random.default_rng(seed)
+    edges = [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.8]
+    if not edges:
+        edges = [(0, 1)]
+    ci, fi, cj, fj = [], [], [], []
+    for i, j in edges:
+        k = int(rng.integers(0, K + 1))
+        r, s = rng.permutation(K)[:k], rng.permutation(K)[:k]
+        ci += [i] * k
+        fi += r.tolist()
+        cj += [j] * k
+        fj += s.tolist()
+    q = rng.uniform(0.1, 0.9, len(ci))
+    links = Links(ci, fi, cj, fj, q)
+    refined, _ = refine_by_votes([K] * n, np.array(edges), links, iterations=3)
+    given_q = dict(zip(zip(ci, fi, cj, fj, strict=True), q.tolist(), strict=True))
+    for key, quality in zip(zip(refined.cam_i.tolist(), refined.feat_i.tolist(),
+                                refined.cam_j.tolist(), refined.feat_j.tolist(), strict=True),
+                            refined.quality.tolist(), strict=True):
+        assert quality == given_q.get(key, 0.0)
