@@ -12,7 +12,10 @@
 
 from __future__ import annotations
 
+import signal
 import tempfile
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -212,11 +215,45 @@ def _mapping(database_path: Path, image_dir: str, out: Path, options, n_images: 
     # its errors too ("Failed to create any sparse model"): what the mapping failed to do is
     # the caller's to say (a run's flags name it and its likely cause), not a raw log line
     with quiet_colmap(3), progress(None, total=n_images,
-                                   desc="mapping (images registered)") as bar:
+                                   desc="mapping (images registered)") as bar, \
+            interrupts_kept():
         return pycolmap.incremental_mapping(
             database_path, image_dir, out, options, input_path=str(input_path),
             initial_image_pair_callback=lambda: bar.update(2),
             next_image_callback=lambda: bar.update(1))
+
+
+@contextmanager
+def interrupts_kept():
+    """Re-raise a Ctrl-C that a call into COLMAP swallowed.
+
+    ``pycolmap.incremental_mapping`` checks for interrupts and runs Python callbacks (the
+    progress bar); a KeyboardInterrupt raised there can end the mapping early with the
+    reconstruction kept and the call returning normally, so the command went on and wrote a
+    result from a cut-short mapping (seen under load: ``clean-db --fusion`` exited 0 after a
+    Ctrl-C, 787 points where the full run has 786). In the main thread the SIGINT handler is
+    wrapped for the call: it records the signal (and acts as before); if one arrived, a
+    KeyboardInterrupt is raised once the call has returned."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signals reach the main thread only
+        return
+    got = []
+    previous = signal.getsignal(signal.SIGINT)
+
+    def handler(signum, frame):
+        got.append(signum)
+        if callable(previous):
+            previous(signum, frame)
+        elif previous != signal.SIG_IGN:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if got:
+        raise KeyboardInterrupt
 
 
 #: bundle adjustment rounds of :func:`mapping_from_poses` (each followed by the mapper's

@@ -74,17 +74,24 @@ def read_homographies(directory: str | Path, n: int) -> np.ndarray:
     return H
 
 
-def truth_doubt(good: np.ndarray, tol_px: float) -> str | None:
+def truth_doubt(good: np.ndarray, tol_px: float, names: list[str] | None = None) -> str | None:
     """A warning when the homographies likely do not describe these images, else None: at
     least 20 links and under 5 % of them within ``tol_px`` (matching finds right links on a
     planar scene far more often than that; homographies of the originals given with resized
-    copies find almost none: measured 0 of 515 on Graffiti downscaled to 640 px)."""
+    copies find almost none: measured 0 of 515 on Graffiti downscaled to 640 px). ``names``:
+    the images' names, to say which one is image 1 of the files (the first in name order; a
+    folder without the reference image pairs every file with the wrong image)."""
     n = int(np.size(good))
     if n < 20 or float(np.mean(good)) >= 0.05:
         return None
+    order = ""
+    if names:
+        first = sorted(names)
+        order = (f"; image k of H1to{{k}}p is the k-th image in name order: image 1 is "
+                 f"{first[0]}, image 2 {first[1]}" if len(first) > 1 else "")
     return (f"only {int(np.sum(good))} of {n} links agree with the homographies within "
             f"{tol_px:g} px: are the H1to{{k}}p.txt files for these images at this size "
-            "(resized copies need their homographies rescaled)?")
+            f"(resized copies need their homographies rescaled){order}?")
 
 
 def pair_homography(H1: np.ndarray, i: int, j: int) -> np.ndarray:
@@ -265,4 +272,4 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
         links.subset(resolved)), "after": pairwise(links.subset(kept))}
     report["ground_truth"] = {"kind": "homographies H_ij = H_1j H_1i^-1, mutual reprojection",
                               "tolerance_px": tol_px, "true_pairs": int(len(tp)),
-                              "doubt": truth_doubt(good, tol_px)}
+                              "doubt": truth_doubt(good, tol_px, [v.name for v in views])}

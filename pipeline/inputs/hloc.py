@@ -87,7 +87,7 @@ def _read_dataset(ds, path: Path, what: str, kinds: str) -> np.ndarray:
         declared data than the file stores (checked before anything is allocated).
     """
     if ds.dtype.kind not in kinds or ds.dtype.fields is not None:
-        expected = "integers" if kinds == "iu" else "numbers"
+        expected = "integers" if kinds == "iu" else "real numbers (integers or floats)"
         raise InputError(f"{path}: {what} have dtype {ds.dtype}; expected {expected}")
     stored = ds.id.get_storage_size()
     if ds.nbytes > LAZY_LIMIT_BYTES and stored * MAX_EXPANSION < ds.nbytes:
@@ -147,7 +147,7 @@ def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
                 what = f"keypoints of {image!r}"
                 if len(obj.shape) != 2 or obj.shape[1] != 2 and obj.shape[0] != 0:
                     raise InputError(f"{path}: {what} have shape {obj.shape}; expected (N, 2)")
-                kp = _read_dataset(obj, path, what, "fc")
+                kp = _read_dataset(obj, path, what, "fiu")
                 if not np.isfinite(kp).all():
                     row = int(np.flatnonzero(~np.isfinite(kp).all(axis=1))[0])
                     raise InputError(f"{path}: {what}: keypoint {row} is {kp[row].tolist()}; "

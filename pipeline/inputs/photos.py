@@ -50,7 +50,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
 #: the smallest longest side images may be downscaled to (``max_size``)
 MIN_MAX_SIZE = 16
 #: Focal length of the stated guess, in units of the longest image side.
@@ -111,6 +111,9 @@ def _image_files(directory: Path) -> list[Path]:
     if skipped:
         log.info("skipping %d file(s) that are not images by suffix: %s", len(skipped),
                  ", ".join(skipped))
+    left_out = _left_out_images(directory, files)
+    if left_out:
+        log.warning("warning: %s", f"{str(directory)!r}: {'; '.join(left_out)}")
     if not images:
         subs = [p for p in directory.iterdir() if p.is_dir() and not p.name.startswith(".")]
         hint = (f"; it holds {len(subs)} sub-folder(s): for one sub-folder of frames per "
@@ -121,8 +124,43 @@ def _image_files(directory: Path) -> list[Path]:
     if len(images) == 1:
         raise InputError(
             f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "
-            f"two cameras; add more images")
+            f"two cameras; add more images" + (f" ({'; '.join(left_out)})" if left_out else ""))
     return images
+
+
+def _holds_images(path: Path) -> bool:
+    try:
+        return path.is_dir() and bool(image_paths(path))
+    except OSError:  # an unreadable sub-folder: nothing read from it either
+        return False
+
+
+def _left_out_images(directory: Path, files: list[Path]) -> list[str]:
+    """What in ``directory`` looks like a photograph but is not read, for a warning: files of
+    another image format Pillow knows (GIF, PPM, ...: not a photo format COLMAP's tools take
+    here), symbolic links that lead nowhere, and sub-folders holding images (one folder per
+    robot is ``--sequence``)."""
+    from PIL import Image
+
+    known = set(Image.registered_extensions()) - set(IMAGE_SUFFIXES)
+    out = []
+    other = [p.name for p in files if p.suffix.lower() in known]
+    if other:
+        out.append(f"{len(other)} image file(s) of a format not read here left out "
+                   f"({', '.join(other[:5])}{', ...' if len(other) > 5 else ''}; convert them "
+                   f"to one of {', '.join(IMAGE_SUFFIXES)})")
+    entries = sorted((p for p in directory.iterdir() if not p.name.startswith(".")),
+                     key=lambda p: p.name)
+    broken = [p.name for p in entries if p.is_symlink() and not p.exists()]
+    if broken:
+        out.append(f"{len(broken)} symbolic link(s) leading nowhere left out "
+                   f"({', '.join(broken[:5])}{', ...' if len(broken) > 5 else ''})")
+    subs = [p.name for p in entries if _holds_images(p)]
+    if subs:
+        out.append(f"{len(subs)} sub-folder(s) holding images left out ({', '.join(subs[:5])}"
+                   f"{', ...' if len(subs) > 5 else ''}; one sub-folder of frames per robot is "
+                   "--sequence)")
+    return out
 
 
 def _to_uint8(arr: np.ndarray) -> np.ndarray:

@@ -84,12 +84,28 @@ def test_a_device_as_features_file(files, tmp_path, capsys):
     (lambda fd: fd["a.jpg/keypoints"].__setitem__(3, [np.nan, 1]), "keypoint 3 is [nan, 1.0]"),
     (lambda fd: fd["a.jpg/keypoints"].__setitem__(0, [np.inf, 1]), "keypoint 0 is [inf, 1.0]"),
     (lambda fd: [fd.__delitem__(n) for n in ("c.jpg", "sub")], "1 image(s)"),
-], ids=["no-keypoints", "3-columns", "1-d", "scalar", "strings", "nan", "inf", "one-image"])
+    # complex keypoints were read, their imaginary part dropped without a word
+    (lambda fd: _replace(fd, "a.jpg/keypoints", np.ones((M, 2), np.complex64) * (1 + 5j)),
+     "have dtype complex64; expected real numbers"),
+], ids=["no-keypoints", "3-columns", "1-d", "scalar", "strings", "nan", "inf", "one-image",
+        "complex"])
 def test_malformed_keypoints(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(feats, "a") as fd:
         edit(fd)
     refused(capsys, _argv(feats, matches, tmp_path / "o.h5"), d, needle, str(feats))
+
+
+def test_integer_keypoints_are_read(files, tmp_path, capsys):
+    """Keypoints stored as integers (pixel centres) are numbers: they were refused with
+    'have dtype int32; expected numbers'."""
+    d, feats, matches = files
+    with h5py.File(feats, "a") as fd:
+        for name in ("a.jpg", "sub/b.jpg", "c.jpg"):
+            kp = fd[name + "/keypoints"][()]
+            _replace(fd, name + "/keypoints", np.rint(kp).astype(np.int32))
+    assert main(_argv(feats, matches, tmp_path / "o.h5")) == 0
+    assert (tmp_path / "o.h5").is_file()
 
 
 def test_keypoints_declared_but_not_stored_fail_before_any_allocation(files, tmp_path):

@@ -166,6 +166,9 @@ def test_truth_doubt_needs_links_and_a_tiny_agreement():
     assert truth_doubt(np.zeros(19, bool), 2.0) is None          # too few links to judge
     assert truth_doubt(np.r_[np.ones(1, bool), np.zeros(19, bool)], 2.0) is None  # 5 %
     assert "0 of 20 links" in truth_doubt(np.zeros(20, bool), 2.0)
+    # a folder without the reference image: the message says which image is image 1
+    said = truth_doubt(np.zeros(20, bool), 2.0, ["img3.png", "img2.png", "img4.png"])
+    assert "image 1 is img2.png, image 2 img3.png" in said
 
 
 def _graffiti_at_full_scale(folder: Path) -> Path:

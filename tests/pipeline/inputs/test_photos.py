@@ -162,6 +162,36 @@ def test_one_image_only(tmp_path):
         load_folder(d)
 
 
+def test_bmp_and_webp_photographs_are_read(tmp_path):
+    """BMP and WebP were dropped by their suffix (an info line only, none with -q)."""
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1)),
+                           "b.bmp": Image.fromarray(_texture(40, 50, 2)),
+                           "c.webp": Image.fromarray(_texture(40, 50, 3))})
+    assert [v.name for v in load_folder(d)] == ["a.png", "b.bmp", "c.webp"]
+
+
+def test_what_looks_like_a_photograph_but_is_left_out_is_warned(tmp_path, caplog):
+    """A GIF, a symbolic link leading nowhere and a sub-folder of images were dropped without
+    a word (the link and the sub-folder even without --quiet); the one-image error names them."""
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1)),
+                           "b.png": Image.fromarray(_texture(40, 50, 2)),
+                           "c.gif": Image.fromarray(_texture(40, 50, 3)).convert("P")})
+    (d / "dead.png").symlink_to(tmp_path / "nowhere.png")
+    (d / "robot1").mkdir()
+    Image.fromarray(_texture(40, 50, 4)).save(d / "robot1" / "f0.png")
+    with caplog.at_level("WARNING", logger="pipeline"):
+        assert [v.name for v in load_folder(d)] == ["a.png", "b.png"]
+    warned = " ".join(r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+    for needle in ("1 image file(s) of a format not read here left out (c.gif",
+                   "1 symbolic link(s) leading nowhere left out (dead.png)",
+                   "1 sub-folder(s) holding images left out (robot1; one sub-folder of frames "
+                   "per robot is --sequence)"):
+        assert needle in warned, warned
+    (d / "b.png").unlink()
+    with pytest.raises(InputError, match=r"only one image .*a\.png.*c\.gif.*dead\.png"):
+        load_folder(d)
+
+
 def test_non_image_file_with_image_suffix(tmp_path):
     d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50)),
                            "b.jpg": b"this is a text file, not a JPEG\n"})
