@@ -6,9 +6,9 @@ worst case of the detection's ``d + 1`` rounds (Cor. 3.6) and of Alg. 1's ``n`` 
 (Thm. 4.3). Each run is a whole process (start-up included); its wall time and peak resident
 memory (``ru_maxrss`` of that child alone, by ``os.wait4``) are measured, with both
 resolutions (Alg. 1: ``--resolution paper``; the default ``evidence`` rule, whose robots merge
-a set beyond their bundle budget, as this one is, by the ``sync`` merge: with every link tied,
-one pair per Borůvka round, about ``n²`` rounds, evaluated in batch by the simulator), the two
-side by side for each ``n``, ``--repeat`` times in turn (medians).
+a set beyond their bundle budget, as this one is, by the ``sync`` merge, every link tied:
+in the pseudo-random order of ``pipeline.consistency.keys.tie_key``, evaluated in batch by
+the simulator), the two side by side for each ``n``, ``--repeat`` times in turn (medians).
 Target (1000 cameras): under 5 s and 500 MB.
 
 Prints a table and saves ``runs/bench-consistency-cycle/results.json``.

@@ -72,7 +72,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.cycles import shared_cameras, support_term
-from pipeline.consistency.keys import isin_sorted, ranges
+from pipeline.consistency.keys import isin_sorted, ranges, tie_key
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message, Transport
 
@@ -314,13 +314,14 @@ def evidence_cut(a, b, cam_a, cam_b, weight, keypoints: dict | None = None,
     Notes
     -----
     ``O(E log E)`` plus one ``(2k × 4)`` SVD per attempted merge of ``k`` observations.
-    Deterministic: order by ``(-weight, a, b)``.
+    Deterministic: order by ``(-weight, t, lo, hi)`` (``t`` = :func:`.keys.tie_key`: ties of
+    weight in a fixed pseudo-random order, as the ``sync`` merge orders them).
     """
     a = np.asarray(a, dtype=np.int64)
     b = np.asarray(b, dtype=np.int64)
     weight = np.asarray(weight, dtype=np.float64)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    order = np.lexsort((hi, lo, -weight))
+    order = np.lexsort((hi, lo, tie_key(lo, hi), -weight))
     parent: dict[int, int] = {}
     cams: dict[int, int] = {}
     members: dict[int, list[int]] = {}

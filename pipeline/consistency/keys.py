@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EMPTY", "isin_sorted", "ranges"]
+__all__ = ["EMPTY", "isin_sorted", "ranges", "tie_key"]
 
 #: an empty int64 index array
 EMPTY = np.zeros(0, dtype=np.int64)
@@ -39,3 +39,34 @@ def ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
         return EMPTY
     first = np.cumsum(length) - length
     return np.repeat(start - first, length) + np.arange(total)
+
+
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser on uint64 (wrapping arithmetic)."""
+    x = (x ^ (x >> np.uint64(30))) * _M1
+    x = (x ^ (x >> np.uint64(27))) * _M2
+    return x ^ (x >> np.uint64(31))
+
+
+def tie_key(lo, hi) -> np.ndarray:
+    """A fixed pseudo-random uint64 per link ``(lo, hi)`` (its two global feature ids): the
+    merge rules order links of equal evidence by it (smaller first), then by ``lo``, ``hi``.
+
+    Both ends of a link compute it alike from public ids. Ordering ties by the ids instead
+    makes a chain of equal links sequential for the distributed merge: on a path every
+    cluster prefers the link towards smaller ids, so each Borůvka round of :mod:`.sync`
+    merges one pair and a cycle of ``n`` cameras took about ``n²`` rounds (996,006 at
+    ``n = 1000``); in a pseudo-random order a constant share of the links is locally dominant
+    in every round.
+
+    >>> k = tie_key(np.array([0, 0, 5]), np.array([1, 2, 9]))
+    >>> k.dtype, bool(k[0] != k[1]), int(tie_key(np.array([0]), np.array([1]))[0]) == int(k[0])
+    (dtype('uint64'), True, True)
+    """
+    lo = np.asarray(lo).astype(np.int64).astype(np.uint64)
+    hi = np.asarray(hi).astype(np.int64).astype(np.uint64)
+    with np.errstate(over="ignore"):
+        return _mix(_mix(lo) ^ hi)

@@ -24,7 +24,9 @@ Weights (Sec. "evidence" of the rule; both ends of a link compute the same value
     neighbour the other ends of its features linked to it; both ends of a link then count
     ``τ`` and ``shared`` and decide ``q`` from the same lists (the far end's, and those of
     the features linked to its own end), once every linked neighbour's list is in.
-    Order: ``(w, -lo, -hi)`` decreasing (``lo < hi`` the link's global feature ids), a strict
+    Order: ``(w, -t, -lo, -hi)`` decreasing (``lo < hi`` the link's global feature ids,
+    ``t`` = :func:`.keys.tie_key` of them: ties of ``w`` go in a fixed pseudo-random order,
+    so that a chain of equal links is not merged one pair per Borůvka round), a strict
     total order every robot evaluates alike.
 
 A Borůvka round (two phases, each ended when nothing is in flight)
@@ -121,7 +123,7 @@ import numpy as np
 
 from pipeline.consistency.cycles import cycle_support, support_term
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
-from pipeline.consistency.keys import isin_sorted, ranges
+from pipeline.consistency.keys import isin_sorted, ranges, tie_key
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
 
@@ -351,8 +353,9 @@ def _from_wire(st: SyncState, rows: np.ndarray) -> np.ndarray:
 
 
 def _best_per(group: np.ndarray, w, lo, hi) -> np.ndarray:
-    """Index of the largest key ``(w, -lo, -hi)`` of each group, groups ascending."""
-    order = np.lexsort((-hi, -lo, w, group))
+    """Index of the largest key ``(w, -t, -lo, -hi)`` of each group (``t`` =
+    :func:`.keys.tie_key`), groups ascending."""
+    order = np.lexsort((-hi, -lo, ~tie_key(lo, hi), w, group))
     g = group[order]
     last = np.ones(g.size, dtype=bool)
     last[:-1] = g[1:] != g[:-1]

@@ -25,7 +25,8 @@ Steps (one vectorized step per network round; the phases of :mod:`..sync`)
     features linked to ``j``, its ``deg`` far ends: ``12 + 8 F + id · Σ deg`` bytes. ``τ`` of a
     link is what the robot counts from the list: the far ends of the far feature that are
     linked to its own feature (chunks of :data:`CHUNK` entries). Both ends hold the same
-    ``w``; its order ``(w, -lo, -hi)`` becomes one integer ``rank`` per link.
+    ``w``; its order ``(w, -t, -lo, -hi)`` (``t`` = :func:`..keys.tie_key`) becomes one
+    integer ``rank`` per link.
 
     Phase A (best). Closing: open links inside a cluster; open links whose clusters merged in
     the last phase B and now share a camera (the others' camera sets did not change). Each
@@ -79,7 +80,7 @@ import numpy as np
 from pipeline.consistency.cycles import cycle_support, support_term
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
-from pipeline.consistency.keys import EMPTY, isin_sorted, ranges
+from pipeline.consistency.keys import EMPTY, isin_sorted, ranges, tie_key
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.sync import (
     _BITS,
@@ -321,12 +322,13 @@ def _quadrangles(team: _Team, tau: np.ndarray, adj: np.ndarray, ptr: np.ndarray)
 
 
 def _ranks(team: _Team, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rank of every alive link by its key ``(w, -lo, -hi)`` (larger is better), on both
-    halves; and the representative half-link of each rank."""
+    """Rank of every alive link by its key ``(w, -t, -lo, -hi)`` (larger is better; ``t`` =
+    :func:`pipeline.consistency.keys.tie_key`), on both halves; and the representative
+    half-link of each rank."""
     A = np.flatnonzero(team.alive)
     rep = A[A < team.twin[A]]
     lo, hi = np.minimum(team.f[rep], team.g[rep]), np.maximum(team.f[rep], team.g[rep])
-    rep = rep[np.lexsort((-hi, -lo, w[rep]))]
+    rep = rep[np.lexsort((-hi, -lo, ~tie_key(lo, hi), w[rep]))]
     rank = np.full(team.H, -1, dtype=np.int64)
     rank[rep] = np.arange(rep.size)
     rank[team.twin[rep]] = np.arange(rep.size)

@@ -17,6 +17,7 @@ from pipeline.consistency import resolve_conflicts
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts
 from pipeline.consistency.cycles import SUPPORT_VIEWS
 from pipeline.consistency.evidence import evidence_cut, triangle_support
+from pipeline.consistency.keys import tie_key
 from pipeline.errors import InputError
 from pipeline.types import Links
 
@@ -113,13 +114,15 @@ def shared_by_hand(a, b, cam) -> np.ndarray:
 
 def greedy_kept(a, b, cam, weight, obs=None) -> np.ndarray:
     """The links the rule keeps in one conflictive set, by the merge it documents, written
-    here: links by decreasing weight (ties: smaller ``(min gid, max gid)`` first); two
+    here: links by decreasing weight (ties: smaller ``tie_key``, then smaller ``(min gid,
+    max gid)`` first); two
     clusters merge unless they share a camera or, with ``obs`` (every pose of the set known),
     their observations together are not one point (:func:`one_point`); a link is kept iff its
     ends end in one cluster. Without ``obs`` it must agree with :func:`exhaustive_kept`
     (checked in :func:`expected_cut` on every set small enough for that search)."""
     cluster = {g: [g] for g in np.r_[a, b].tolist()}  # feature -> the list of its cluster
-    for k in np.lexsort((np.maximum(a, b), np.minimum(a, b), -np.asarray(weight))).tolist():
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    for k in np.lexsort((hi, lo, tie_key(lo, hi), -np.asarray(weight))).tolist():
         ca, cb = cluster[int(a[k])], cluster[int(b[k])]
         if ca is cb or {cam[g] for g in ca} & {cam[g] for g in cb}:
             continue
@@ -135,7 +138,8 @@ def greedy_kept(a, b, cam, weight, obs=None) -> np.ndarray:
 def exhaustive_kept(a, b, cam, weight) -> np.ndarray:
     """The links the rule keeps in one conflictive set, found among all ``2**E`` subsets.
 
-    The rule merges by decreasing weight (ties: smaller ``(min gid, max gid)`` first) and
+    The rule merges by decreasing weight (ties: smaller ``tie_key``, then smaller ``(min gid,
+    max gid)`` first) and
     never merges two clusters that share a camera. The subsets whose clusters hold each
     camera at most once are closed under removal, so that greedy merge keeps, of all of
     them, the subset that comes first in lexicographic order of the links sorted that way:
@@ -143,7 +147,8 @@ def exhaustive_kept(a, b, cam, weight) -> np.ndarray:
     ``test_the_rule_is_greedy_not_the_minimum_weight_cut``.)
     """
     E = a.size
-    rank = np.lexsort((np.maximum(a, b), np.minimum(a, b), -weight))
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    rank = np.lexsort((hi, lo, tie_key(lo, hi), -weight))
     nodes, inv = np.unique(np.r_[a, b], return_inverse=True)
     ia, ib = inv[:E][rank], inv[E:][rank]
     subsets = np.arange(2 ** E)
@@ -401,11 +406,12 @@ def test_a_triangle_outweighs_a_stronger_link():
 
 
 def test_the_rule_is_greedy_not_the_minimum_weight_cut():
-    # 2:0 - 3:0 (5.0) is merged first; then 2:0 - 0:0 and 2:0 - 1:0 join, and 3:0 - 0:1 and
-    # 3:0 - 1:1 (3.0 each) would put cameras 0 and 1 twice in that cluster: both cut (6.0 of
-    # evidence), where cutting 2:0 - 3:0 alone (5.0) would leave two conflict-free tracks.
+    # 2:0 - 3:0 (5.0) is merged first; then 2:0 - 0:0 and 2:0 - 1:0 (3.2, 3.1) join, and
+    # 3:0 - 0:1 and 3:0 - 1:1 (3.0, 2.9) would put cameras 0 and 1 twice in that cluster: both
+    # cut (5.9 of evidence), where cutting 2:0 - 3:0 alone (5.0) would leave two
+    # conflict-free tracks.
     links = Links([0, 1, 2, 0, 1], [0, 0, 0, 1, 1], [2, 2, 3, 3, 3], [0, 0, 0, 0, 0])
-    weight = np.array([3.0, 3.0, 5.0, 3.0, 3.0])
+    weight = np.array([3.2, 3.1, 5.0, 3.0, 2.9])
     res, solved, _ = check_evidence([2, 2, 1, 1], None, links, link_weight=weight)
     assert solved == 1
     assert res.deleted.tolist() == [False, False, False, True, True]

@@ -5,6 +5,7 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pipeline.__main__ import build_parser, main
@@ -47,14 +48,18 @@ def test_every_hook_of_a_rule_without_detection_loads():
 @pytest.mark.parametrize("transport", ["sim", "zenoh"])
 def test_the_sync_rule_runs_through_resolve_on_both_transports(transport, tmp_path, capsys):
     # Fig. 1 (global ids 0,1 | 2,3 | 4 | 5,6): equal weights and no triangle, so the greedy
-    # merge takes the links by their smaller ends: (0,2), (0,6), (1,3), (2,4); then (4,5)
-    # would join feature 5 to a cluster holding 6, both of camera 3: (3,0)-(2,0) is cut
+    # merge takes the links in the order of their tie keys (keys.tie_key): (4,5), (2,4),
+    # (0,6), (1,3); then (0,2) would join a cluster holding 6 to one holding 5, both of
+    # camera 3: (0,0)-(1,0) is cut
+    from pipeline.consistency.keys import tie_key
+
+    assert np.argsort(tie_key([0, 0, 2, 4, 1], [6, 2, 4, 5, 3])).tolist() == [3, 2, 0, 4, 1]
     printed, s, statuses = _resolve_fig1("sync", transport, tmp_path, capsys)
     assert "deleted: 1 links by the multi-way matching" in printed
     assert s["resolution_method"] == "sync"
     assert s["deleted_by_case"] == {"b": 0, "c": 0, "sync": 1}
     assert s["after"]["conflictive_sets"] == 0
-    assert statuses == ["kept", "kept", "kept", "deleted", "kept"]
+    assert statuses == ["kept", "deleted", "kept", "kept", "kept"]
 
 
 @pytest.mark.parametrize("name, hooks", [

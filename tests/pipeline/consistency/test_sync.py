@@ -14,6 +14,7 @@ from pipeline.consistency.cycles import SUPPORT_VIEWS
 from pipeline.consistency.engines.driver import build_robots
 from pipeline.consistency.engines.sync_batched import run_sync
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
+from pipeline.consistency.keys import tie_key
 from pipeline.consistency.sync import CASE_SYNC, FLOODS, equip_sync
 from pipeline.transport.simulated import Network
 from pipeline.types import Links
@@ -25,9 +26,11 @@ def _instance(seed: int, n: int, m: int, p_link: float, p_swap: float, ties: boo
 
 def _reference(fpc, links: Links, weight) -> list[set]:
     """Clusters of the sequential greedy merge, written plainly: triangle support by brute
-    force, links sorted by (weight desc, smaller end, larger end), lists of sets."""
+    force, links sorted by (weight desc, tie key, smaller end, larger end), lists of sets."""
     a, b, cam, w = _reference_weights(fpc, links, weight)
-    order = sorted(range(len(a)), key=lambda k: (-w[k], min(a[k], b[k]), max(a[k], b[k])))
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    tie = tie_key(lo, hi).tolist()
+    order = sorted(range(len(a)), key=lambda k: (-w[k], tie[k], lo[k], hi[k]))
     cluster = {g: {g} for g in range(int(np.sum(fpc)))}
     for k in order:
         x, y = cluster[a[k]], cluster[b[k]]
