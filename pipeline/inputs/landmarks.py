@@ -77,28 +77,35 @@ def natural_key(name: str) -> list:
             for t in re.split(r"(\d+)", name) if t]
 
 
-def _read_txt_keypoints(path: Path) -> np.ndarray | None:
-    """``(K, 2)`` from a text table, ``None`` if the file is not a 2-column numeric table."""
+def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:
+    """The rows ``[x, y]`` of a text table read up to its first line that is not two numbers,
+    and that line (``"line N is '...'"``), or None when every line is two numbers; an
+    unreadable file (not UTF-8, a line too long) gives no rows and no line."""
     from pipeline.inputs.csvfields import text_lines
 
-    rows = []
+    rows: list = []
     try:
         lines = list(text_lines(path, "label file"))
     except (InputError, OSError):
-        return None
-    for _, line in lines:
+        return rows, None
+    for number, line in lines:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
-        toks = line.replace(",", " ").split()
         try:
-            vals = [float(t) for t in toks]
+            vals = [float(t) for t in line.replace(",", " ").split()]
         except ValueError:
-            return None
+            vals = []
         if len(vals) != 2:
-            return None
+            return rows, f"line {number} is {line[:60]!r}"
         rows.append(vals)
-    if not rows:
+    return rows, None
+
+
+def _read_txt_keypoints(path: Path) -> np.ndarray | None:
+    """``(K, 2)`` from a text table, ``None`` if the file is not a 2-column numeric table."""
+    rows, bad = _parse_txt_keypoints(path)
+    if bad is not None or not rows:
         return None
     return np.asarray(rows, dtype=np.float64)
 
@@ -106,29 +113,8 @@ def _read_txt_keypoints(path: Path) -> np.ndarray | None:
 def _txt_problem(path: Path) -> str | None:
     """Why a text file that is mostly a keypoint table is not one: its first line that is not
     two numbers, when an earlier line is (``None`` for any other file, e.g. a README)."""
-    from pipeline.inputs.csvfields import text_lines
-
-    good = 0
-    try:
-        lines = list(text_lines(path, "label file"))
-    except (InputError, OSError):
-        return None
-    for number, line in lines:
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        toks = line.replace(",", " ").split()
-        try:
-            ok = len([float(t) for t in toks]) == 2
-        except ValueError:
-            ok = False
-        if ok:
-            good += 1
-        elif good:
-            return f"line {number} is {line[:60]!r}"
-        else:
-            return None
-    return None
+    rows, bad = _parse_txt_keypoints(path)
+    return bad if rows else None
 
 
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:

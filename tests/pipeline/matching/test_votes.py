@@ -57,11 +57,10 @@ def test_tie_between_direct_link_and_one_path_drops_both():
     assert on_02 == {(2, 2)}  # landmarks 0 and 1: no majority either way
 
 
-@settings(max_examples=25, deadline=None)
-@given(st.integers(3, 6), st.integers(1, 5), st.integers(0, 10_000))
-def test_output_is_one_to_one_on_comm_edges(n, K, seed):
-    rng = np.random.default_rng(seed)
-    edges = [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.7]
+def _random_matches(rng, n, K, p_edge):
+    """Random one-to-one matches of up to ``K`` landmarks on each edge of a random graph of
+    ``n`` robots (each pair an edge with probability ``p_edge``): ``(edges, ci, fi, cj, fj)``."""
+    edges = [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < p_edge]
     if not edges:
         edges = [(0, 1)]
     ci, fi, cj, fj = [], [], [], []
@@ -72,6 +71,13 @@ def test_output_is_one_to_one_on_comm_edges(n, K, seed):
         fi += r.tolist()
         cj += [j] * k
         fj += s.tolist()
+    return edges, ci, fi, cj, fj
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(3, 6), st.integers(1, 5), st.integers(0, 10_000))
+def test_output_is_one_to_one_on_comm_edges(n, K, seed):
+    edges, ci, fi, cj, fj = _random_matches(np.random.default_rng(seed), n, K, 0.7)
     refined, _ = refine_by_votes([K] * n, np.array(edges), Links(ci, fi, cj, fj), iterations=3)
     check_links(refined, [K] * n)
     assert {(a, b) for a, _, b, _ in _as_set(refined)} <= set(edges)
@@ -101,17 +107,7 @@ def test_refined_links_keep_the_input_quality():
 @given(st.integers(3, 6), st.integers(1, 5), st.integers(0, 10_000))
 def test_a_refined_link_has_its_input_quality_or_zero(n, K, seed):
     rng = np.random.default_rng(seed)
-    edges = [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.8]
-    if not edges:
-        edges = [(0, 1)]
-    ci, fi, cj, fj = [], [], [], []
-    for i, j in edges:
-        k = int(rng.integers(0, K + 1))
-        r, s = rng.permutation(K)[:k], rng.permutation(K)[:k]
-        ci += [i] * k
-        fi += r.tolist()
-        cj += [j] * k
-        fj += s.tolist()
+    edges, ci, fi, cj, fj = _random_matches(rng, n, K, 0.8)
     q = rng.uniform(0.1, 0.9, len(ci))
     links = Links(ci, fi, cj, fj, q)
     refined, _ = refine_by_votes([K] * n, np.array(edges), links, iterations=3)
