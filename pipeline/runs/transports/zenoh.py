@@ -8,6 +8,8 @@ job's results (:mod:`pipeline.team.assemble`). The job functions are those of th
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
@@ -165,6 +167,10 @@ def formation_of_run(config, team, run, timer: StageTimer) -> FormationRobots:
     with timer.stage("render", "observer: ground truth for the evaluation"):
         formation = data_synth.render(config.formation, seed=config.seed, size=config.size,
                                       n_robots=config.robots, graph=config.graph)
+    # the graph the robots talked over is the team's (a team file may give other comm_edges
+    # than its formation's graph): the evaluation, its missing links, follows it
+    formation = dataclasses.replace(
+        formation, comm_edges=np.asarray(team.comm_edges, np.int64).reshape(-1, 2))
     feats = []
     for i, v in enumerate(formation.views):
         if i in run.results:

@@ -374,3 +374,26 @@ def test_a_timeout_shorter_than_the_teams_start_is_warned(tmp_path, capsys):
                  "--timeout", "0.5"]) == 2  # no robot was started
     err = capsys.readouterr().err
     assert "--timeout 0.5 s is shorter than the team's start_timeout_s (30 s)" in err
+
+
+def test_the_observer_evaluates_on_the_teams_comm_edges(tmp_path):
+    """A team file whose comm_edges differ from its formation's default graph (a line of three
+    robots that all talk to each other): the robots match over comm_edges; the observer took
+    the formation's graph and refused their links ('cameras 0 and 2 are not neighbours')."""
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.stages import merge_radius_for
+    from pipeline.team.launcher import make_team
+
+    c = FormationConfig(formation="line", robots=3, graph=None, seed=5, size=(160, 120))
+    opts = team_options(c.features, 300, None, merge_radius=merge_radius_for(c.resolution, None),
+                        resolution=c.resolution, fusion=False)
+    opts["start_timeout_s"] = 120.0
+    edges = np.array([[0, 1], [0, 2], [1, 2]])
+    team = make_team("by-hand-triangle", edges,
+                     {"kind": "formation", "formation": "line", "seed": 5, "size": [160, 120],
+                      "robots": 3, "graph": None}, opts, n=3)
+    _observe_by_hand(team, tmp_path)
+    report = json.loads((tmp_path / "obs" / "report.json").read_text())
+    assert report["comm_edges"] == edges.tolist()
+    rows = _rows(tmp_path / "obs" / "links.csv")[1:]
+    assert any({int(r[0]), int(r[2])} == {0, 2} for r in rows)  # links over the added edge
