@@ -426,6 +426,7 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
             bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)),
             counted=True)
+    _count_acted(res, rule, sub, used, m, kept[0], history is not None)
     if leaves:
         res.stats["bundle_budget"] = int(opts["bundle_budget"])
     if gather:  # the phase of the sets solved at their roots, as the simulator reports it
@@ -438,6 +439,31 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
             bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)))
     return res
+
+
+def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
+    """``conflictive_features`` of the stage's first record, as the simulator counts it
+    (:mod:`pipeline.consistency.engines.driver`): for a rule with a detection, the team's
+    conflictive features after its first detection (the sum of each robot's own); for a whole
+    stage without one, the features with a link the rule cut (history cuts apart). The robots'
+    logs give one robot's phases only (the online step read 0 or one robot's count, and went
+    negative once the cuts of the sets solved at their roots were taken off it)."""
+    if rule.detection:
+        acted = 0
+        for head, _ in run.results.values():
+            det = [p for p in head.get("run", {}).get("phases", [])
+                   if p.get("phase") == "detection"]
+            acted += int(det[0].get("conflictive_features", 0)) if det else 0
+    else:
+        cut = np.flatnonzero(res.deleted)
+        if history:
+            cut = np.setdiff1d(cut, np.asarray(res.stats["history"]["cut"], np.int64))
+        off = np.concatenate([[0], np.cumsum(m[used])])
+        acted = int(np.unique(np.r_[off[sub.cam_i[cut]] + sub.feat_i[cut],
+                                    off[sub.cam_j[cut]] + sub.feat_j[cut]]).size)
+    if not res.stats["per_iteration"]:
+        res.stats["per_iteration"].append({})
+    res.stats["per_iteration"][0]["conflictive_features"] = acted
 
 
 def online_fusion(views, features, links, comm_edges, *, track_labels=None):

@@ -358,6 +358,11 @@ def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, n_steps, tm
     zen = json.loads((tmp_path / "zen" / "report.json").read_text())
     assert zen["config"]["transport"] == "zenoh"
     assert all(s["conflictive_sets_after"] == 0 for s in zen["steps"])
+    # what each step acted on, counted alike (over zenoh it read one robot's phases, or none,
+    # and went negative once the sets solved at their roots were taken off)
+    counts = ("conflictive_features", "cut", "cut_rule", "links_kept")
+    assert [{k: s[k] for k in counts} for s in zen["steps"]] == \
+        [{k: s[k] for k in counts} for s in steps]
     # the robots' own counts (the reliable protocol's acks and termination wave), not the
     # simulator's: the stage ran in the robot processes
     assert [s["messages"] for s in zen["steps"]] != [s["messages"] for s in steps]
