@@ -9,7 +9,6 @@ job's results (:mod:`pipeline.team.assemble`). The job functions are those of th
 from __future__ import annotations
 
 import dataclasses
-
 from pathlib import Path
 
 import numpy as np
