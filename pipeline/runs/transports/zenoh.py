@@ -410,6 +410,13 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
         kept: list = []
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
                                  workdir=work, links=sub, data_extra=extra, keep_run=kept)
+    lost = sorted(set(range(len(used))) - set(kept[0].results)
+                  | {int(k) for k in kept[0].killed}
+                  | {int(k) for k in res.stats.get("faults", {}).get("robots_lost", {})})
+    if lost:  # its links would read as the rule's cuts: an online step models no lost robot
+        raise TeamError(f"the robot process of image {int(used[lost[0]])} was lost during an "
+                        "online step's consistency stage (an online run over zenoh models no "
+                        "lost robot, only --switching-topology); run it again")
     if history is not None:
         from pipeline.consistency.history import HCUT, HECHO, HGO, HLAB, HTOK, HUP
 
