@@ -2,12 +2,13 @@
 
 Reads what a run wrote (docs/DESIGN.md "Run outputs": ``links.csv``, ``report.json``, ``sparse/``)
 back into a :class:`~pipeline.types.RunRecord` and logs it with :func:`viz.rerun_log.log_run`,
-e.g. for a run made with ``--no-rerun``. It computes nothing; what the folder does not hold is
-left out of the recording:
+e.g. for a run made with ``--no-rerun``. The conflictive sets before the resolution are those
+of every link ``links.csv`` lists (every link matching produced, kept or cut:
+:func:`pipeline.association.conflictive_links`, as the run computed them); nothing else is
+computed, and what the folder does not hold is left out of the recording:
 
 - the images (not in a run folder): each camera shows a blank image of its size;
-- the conflictive sets before resolution, and the iteration of each cut (not in
-  ``links.csv``): no conflict graph, and the replay orders cuts by round only;
+- the iteration of each cut (not in ``links.csv``): the replay orders cuts by round only;
 - cameras absent from ``sparse/`` (an image the mapper did not register): drawn without a
   pose, their keypoints unknown;
 - ground-truth and fused points.
@@ -58,12 +59,15 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
             raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
+    from pipeline.association import conflictive_links
+
     report = json.loads((folder / "report.json").read_text())
     ledger = read_run_links_csv(folder / "links.csv")
     rec = colmap.read_model(folder / "sparse")
     images = colmap.model_images(rec)
     m = [int(x) for x in report["features_per_camera"]]
     names = _camera_names(report, images)
+    ledger.conflictive_before = conflictive_links(m, ledger.links)
     if len(names) != len(m):
         raise InputError(f"{folder}: report.json lists {len(m)} cameras but {len(names)} images "
                          "are known; the folder's files do not belong together")

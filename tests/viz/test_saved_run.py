@@ -40,6 +40,22 @@ def test_read_back_what_the_run_wrote(tmp_path):
         np.testing.assert_allclose(f.keypoints, g.keypoints, atol=1e-4)
 
 
+def test_the_conflictive_sets_before_are_those_of_every_link(tmp_path):
+    """links.csv lists every link matching produced: the links in conflictive sets before the
+    resolution are recomputed from it, as the run computed them (the recording said '0 links
+    lay in conflictive sets' beside a cut 'in a conflictive set')."""
+    from pipeline.association import conflictive_links
+    from viz.rerun_log import cut_summary
+
+    record = make_record()
+    back = read_run_folder(_save(record, tmp_path / "run"))
+    m = [len(f) for f in record.features]
+    want = conflictive_links(m, record.ledger.links)
+    assert want.any()  # the case this test is about
+    assert back.ledger.conflictive_before.tolist() == want.tolist()
+    assert f"{int(want.sum())} links lay in conflictive sets" in cut_summary(back)
+
+
 def test_log_a_folder_without_recording(tmp_path, capsys):
     folder = _save(make_record(), tmp_path / "run")
     assert main([str(folder)]) == 0
