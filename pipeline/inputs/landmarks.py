@@ -149,7 +149,7 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
     ``0..W-1``) or the 1-based (MATLAB, centres ``1..W``) convention: ``-0.5 <= x <= W + 0.5``
     and likewise for ``y``. Only the image's header is read.
     """
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
     unseen = np.isnan(pts).all(axis=1)
     bad = ~np.isfinite(pts).all(axis=1) & ~unseen
@@ -163,11 +163,12 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
                          "them; remove it from the folder")
     seen = np.flatnonzero(~unseen)
     pts = pts[seen]
+    from pipeline.inputs.photos import open_header
+
     try:
-        with Image.open(image) as im:
+        with open_header(image) as im:  # the declared size checked, nothing decoded
             w, h = im.size
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError,
-            Image.DecompressionBombError) as exc:
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         raise InputError(f"{image.name}: cannot read it as an image ({exc}); remove or replace "
                          "the file (a truncated or non-image file)") from None
     out = (pts[:, 0] < -0.5) | (pts[:, 0] > w + 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h + 0.5)

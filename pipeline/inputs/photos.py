@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import re
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -199,6 +200,30 @@ def _pixels(im: Image.Image) -> np.ndarray:
     return _to_uint8(arr)
 
 
+_PILLOW_LIMIT = threading.Lock()
+
+
+def open_header(path: str | Path) -> Image.Image:
+    """``Image.open`` (the header only) and the size check of :func:`_check_declared_size`.
+
+    Pillow's own decompression-bomb check is off for the open: above about 179 M pixels it
+    raised its own error before this check could name the size and the limit (README, "Errors
+    you can meet"); the check here refuses from :data:`MAX_IMAGE_PIXELS` on, before anything
+    is decoded. UnidentifiedImageError / OSError as ``Image.open`` raises them."""
+    import warnings
+
+    path = Path(path)
+    with _PILLOW_LIMIT, warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            im = Image.open(path)
+        finally:
+            Image.MAX_IMAGE_PIXELS = limit
+    _check_declared_size(path, im)
+    return im
+
+
 def _check_declared_size(path: Path, im: Image.Image) -> None:
     """InputError, before anything is decoded, for an image declaring more than
     :data:`MAX_IMAGE_PIXELS` pixels or a file far larger than the pixels it declares."""
@@ -236,14 +261,9 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
         more than :data:`MAX_IMAGE_PIXELS`, or the file is far larger than its pixels
         (checked on the header, before decoding).
     """
-    import warnings
-
     path = Path(path)
     try:
-        with warnings.catch_warnings():  # the size is judged here (MAX_IMAGE_PIXELS)
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            im = Image.open(path)  # reads the header only
-        _check_declared_size(path, im)
+        im = open_header(path)
         im.load()  # forces the full decode: a truncated JPEG raises here, not later
         pixels = _pixels(im)
     except InputError:

@@ -177,7 +177,9 @@ def _jpeg_header(width: int, height: int) -> bytes:
 @pytest.mark.parametrize("width,height,size,needle", [
     (640, 480, 2**30, "1,073,741,824 bytes for a 640x480 image"),   # a 1 GB sparse file
     (12000, 12000, 2**30, "declares 12000x12000 = 144,000,000 pixels"),
-], ids=["sparse-1GB", "144-megapixels"])
+    # above Pillow's own bomb limit (about 179 M pixels) Pillow's message came instead
+    (20000, 20000, 2**30, "declares 20000x20000 = 400,000,000 pixels"),
+], ids=["sparse-1GB", "144-megapixels", "400-megapixels"])
 def test_an_image_file_is_judged_on_its_header_before_decoding(photos, tmp_path, capsys,
                                                                monkeypatch, width, height,
                                                                size, needle):
