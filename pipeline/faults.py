@@ -273,7 +273,7 @@ def warn_rule_under_faults(faults: FaultConfig | None, resolution: str | None) -
                                    ("--crash", bool(faults.crash)),
                                    ("--switching-topology", faults.switching_topology)) if on]
     text = (f"--resolution {asked} is not fault-tolerant: with {', '.join(flags)} the robots run "
-            f"the fault-tolerant Alg. 1 ({ran}) instead (report.json: resolution_method)")
+            f"the fault-tolerant Alg. 1 ({ran}) instead (the report names the rule that ran)")
     log.warning("warning: %s", text)
     return text
 

@@ -87,6 +87,7 @@ def config_from_args(args) -> FormationConfig:
 
     check_team_size(args.transport, robots if robots is not None else 6, "robots")
     faults = faults_from_args(args)
+    faults.check_robots(robots if robots is not None else 6)  # before the render, not after
     warn_rule_under_faults(faults, args.resolution)
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                            size=size,

@@ -73,6 +73,8 @@ def test_out_naming_a_file_or_a_symlink_is_refused(checkout, capsys):
     ("--hold", "0", "--hold applies to an online job only"),
     ("--batch-every", "1", "--batch-every applies to an online job only"),
     ("--speed", "0.3", "--speed applies to an online job only; add --steps N"),
+    # a robot that does not exist: refused before the render (it was after the matching)
+    ("--crash", "9@1", "--crash 9@1: robot 9 does not exist"),
 ])
 def test_meaningless_values_are_refused_before_any_work(tmp_path, capsys, flag, value, message):
     out = tmp_path / "run"
