@@ -37,7 +37,9 @@ def formation_choice(args) -> str:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formation", default=None,
-                   help="formation a|b|c|d (comm graphs of increasing cycles; default d); not "
+                   help="formation a|b|c|d (comm graphs of increasing cycles; default d), or a "
+                        "graph kind (line, ring, ring2, complete, geometric: the paper's 6 "
+                        "robots on it); not "
                         "with --robots/--graph (a parametric formation)")
     add_feature_options(p)
     add_scene_options(p)

@@ -32,12 +32,13 @@ __all__ = ["add_arguments", "config_from_args", "run", "check_live", "RERUN_DEFA
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
-                   help="folder of photographs (JPEG/PNG/TIFF; taken in name order); with "
+                   help="folder of photographs (JPEG/PNG/TIFF/BMP/WebP; taken in name order); with "
                         "--sequence a folder of one sub-folder per robot")
     p.add_argument("--graph", default="complete",
                    metavar="line|ring|ring2|complete|knn:K|seq:K|FILE",
                    help="communication graph (default complete: every pair, as COLMAP's "
-                        "exhaustive matcher): line, ring, ring2 (ring + 2-hop chords), complete, "
+                        "exhaustive matcher): line, ring, ring2 (ring + 2-hop chords), "
+                        "ring+triangles (formation b's), complete, "
                         "knn:K (each image with the K images most similar to it, by a global "
                         "descriptor of its features: for unordered photos), seq:K (each image "
                         "with the K nearest in name order: for ordered sequences), or a file of "

@@ -35,8 +35,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("directory", metavar="DIR",
                    help="folder of images, each with NAME.txt (K rows 'x y') or NAME.mat "
                         "(pts_coord 2 x K): the same K labelled landmarks in the same order")
-    p.add_argument("--graph", default="complete", metavar="complete|ring|ring2|seq:K|FILE",
-                   help="communication graph over the images in name order (default complete)")
+    p.add_argument("--graph", default="complete",
+                   metavar="line|ring|ring2|complete|seq:K|FILE",
+                   help="communication graph over the images in name order (default complete): "
+                        "line, ring, ring2 (ring + 2-hop chords), ring+triangles, complete, "
+                        "seq:K (each image with the K nearest in name order) or a file of "
+                        "'cam_i,cam_j' lines")
     p.add_argument("--frames", type=int, default=None, metavar="N",
                    help="use N images at a fixed stride floor(n/N) from the first (default all)")
     p.add_argument("--descriptors", default="auto", choices=("auto", "given", "sift"),

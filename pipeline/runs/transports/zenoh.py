@@ -224,7 +224,7 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
     """
     if comm_edges is None:
         raise InputError(f"--graph {config.graph}: knn:K chooses neighbours from every image's "
-                         "features at once; with --transport zenoh give ring, ring2, complete, "
+                         "features at once; with --transport zenoh give line, ring, ring2, complete, "
                          "seq:K or a graph file")
     team = images_team(config, views, comm_edges)
     n = team.n
