@@ -629,8 +629,9 @@ def publish_together():
         with together.locks:
             yield together
             with _held_signals() as got:
-                for tmp, out, inputs in together.staged:
+                for _, out, inputs in together.staged:  # every one checked before any swap
                     check_run_folder(out, inputs)
+                for tmp, out, _ in together.staged:
                     _put_in_place(tmp, out)
                 together.staged.clear()
                 for write in together.after:
