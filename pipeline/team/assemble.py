@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
-from pipeline.consistency.rules import DEFAULT_RESOLUTION
+from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 from pipeline.types import Links, PairMatches
@@ -196,7 +196,12 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
                                        default=0)),
         protocol="reliable", resolution=str(any_run_head.get("resolution", "paper")),
         termination="local (termination wave)")
-    return result_from_logs(links, logs, survivors, comp, stats=stats, faults=faults)
+    res = result_from_logs(links, logs, survivors, comp, stats=stats, faults=faults)
+    if not get_rule(stats["resolution"]).detection:
+        # a rule without detection is one pass, an iteration when it cut anything, as the
+        # simulator counts it (engines.driver); a robot's own log counts its Borůvka rounds
+        res.stats["iterations"] = int(bool(res.deleted.any()))
+    return res
 
 
 def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, np.ndarray]:
