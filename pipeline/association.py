@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.errors import InputError
-from pipeline.types import Links
+from pipeline.types import Links, id_array
 
 __all__ = [
     "AssociationGraph",
@@ -31,7 +31,10 @@ __all__ = [
 
 def camera_offsets(features_per_camera) -> np.ndarray:
     """Global index of each camera's first feature, ``(n + 1,)``; last entry is ``m_sum``."""
-    m = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    try:
+        m = id_array(features_per_camera, "features_per_camera")
+    except ValueError as exc:
+        raise InputError(f"{exc} (a count of features)") from None
     if (m < 0).any():
         raise InputError(f"features_per_camera must be >= 0, got {m.tolist()}")
     return np.concatenate([[0], np.cumsum(m)])

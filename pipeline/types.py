@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["View", "Features", "PairMatches", "Links", "LinkLedger", "RunRecord"]
+__all__ = ["View", "Features", "PairMatches", "Links", "LinkLedger", "RunRecord", "id_array"]
 
 
 @dataclass
@@ -95,6 +95,23 @@ class PairMatches:
     reason: str = ""
 
 
+def id_array(values, what: str) -> np.ndarray:
+    """``values`` as a 1-D int64 array of ids; ValueError naming the first value that is not
+    a whole number an int64 holds (``1.0`` is one, ``1.5``, ``nan``, ``1e30`` and ``2**63`` are
+    not: a cast truncated, wrapped or overflowed them silently)."""
+    v = np.asarray(values)
+    if v.dtype.kind == "f":
+        bad = ~np.isfinite(v) | (v != np.round(v)) | (np.abs(v) >= 2.0**63)
+    elif v.dtype.kind == "u":
+        bad = v > np.iinfo(np.int64).max
+    else:
+        return np.asarray(v, dtype=np.int64).reshape(-1)
+    if bad.any():
+        k = int(np.flatnonzero(bad.reshape(-1))[0])
+        raise ValueError(f"{what}[{k}] = {v.reshape(-1)[k].item()!r} is not a whole-number id")
+    return v.astype(np.int64).reshape(-1)
+
+
 @dataclass
 class Links:
     """All links of the association graph, each undirected link stored once with ``cam_i < cam_j``.
@@ -113,7 +130,7 @@ class Links:
 
     def __post_init__(self) -> None:
         for name in ("cam_i", "feat_i", "cam_j", "feat_j"):
-            setattr(self, name, np.asarray(getattr(self, name), dtype=np.int64).reshape(-1))
+            setattr(self, name, id_array(getattr(self, name), f"Links: {name}"))
         n = self.cam_i.shape[0]
         if not all(getattr(self, k).shape[0] == n for k in ("feat_i", "cam_j", "feat_j")):
             raise ValueError("Links: cam_i, feat_i, cam_j, feat_j must have the same length")

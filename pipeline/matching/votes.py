@@ -220,11 +220,19 @@ def refine_by_votes(features_per_camera, comm_edges, links: Links,
     stats : dict — ``iterations`` (run), ``fixed_point`` (bool), ``rounds``, ``messages``, ``bytes``,
         ``changed_per_iteration`` (matches changed, counted at the deciding end)
     """
-    if iterations < 1:
-        raise InputError(f"vote iterations {iterations}: expected at least 1")
-    m = np.asarray(features_per_camera, dtype=np.int64)
+    from pipeline.association import camera_offsets, check_links
+    from pipeline.commgraph import comm_edges_for
+
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
+            or iterations < 1:
+        raise InputError(f"vote iterations {iterations!r}: expected a whole number >= 1")
+    m = np.diff(camera_offsets(features_per_camera))
     n = m.size
-    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    # the links as resolve_conflicts takes them (ids in range, one-to-one, cam_i < cam_j) and
+    # on the comm graph (None: cameras sharing a link): a link off it was placed at another
+    # neighbour's row and came back as a link the input never had
+    check_links(links, m)
+    edges = comm_edges_for(m, links, comm_edges)
     nbrs = [[] for _ in range(n)]
     for i, j in edges.tolist():
         nbrs[i].append(j)

@@ -61,6 +61,10 @@ __all__ = [
 ]
 
 
+
+#: most features a team may declare (each robot holds arrays of the team's feature count)
+MAX_FEATURES = 2**31 - 1
+
 def build_robots(features_per_camera, links: Links) -> tuple[list[Robot], list[np.ndarray]]:
     """Hand every robot its own associations (what its matching produced).
 
@@ -265,8 +269,12 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     1
     """
     get_rule(resolution)
-    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
-    camera_offsets(fpc)
+    fpc = np.diff(camera_offsets(features_per_camera))  # whole numbers >= 0, named if not
+    if int(fpc.sum()) > MAX_FEATURES:
+        raise InputError(f"features_per_camera sums to {int(fpc.sum()):,} features, above "
+                         f"{MAX_FEATURES:,}: every robot holds arrays of the team's feature "
+                         "count; give the counts of the features that exist (resolve renumbers "
+                         "sparse ids to those present)")
     check_links(links, fpc)
     edges = comm_edges_for(fpc, links, comm_edges)
     n = fpc.shape[0]
@@ -422,6 +430,12 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
         np.asarray(link_weight, dtype=np.float64).reshape(-1)
     if w.shape[0] != L:
         raise InputError(f"link_weight has {w.shape[0]} entries for {L} links")
+    if np.isnan(w).any():  # the merge rules order links strictly by it: NaN has no place
+        k = int(np.flatnonzero(np.isnan(w))[0])
+        what = f"quality {links.quality[k]}" if link_weight is None else "link_weight nan"
+        raise InputError(f"link {k} ({links.cam_i[k]},{links.feat_i[k]})-({links.cam_j[k]},"
+                         f"{links.feat_j[k]}) has {what}: a link's evidence must be a number "
+                         "(drop the link, or give it a value)")
     for rb, li in zip(robots, link_index, strict=True):
         kp = np.zeros((rb.m, 2)) if keypoints is None else keypoints[rb.id]
         P = None if projections is None else projections[rb.id]

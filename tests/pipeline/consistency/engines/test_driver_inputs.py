@@ -1,0 +1,67 @@
+"""resolve_conflicts called from a user's code with inputs it must refuse, naming them."""
+
+import numpy as np
+import pytest
+
+from pipeline.consistency import resolve_conflicts
+from pipeline.errors import InputError
+from pipeline.types import Links
+
+FIG1 = dict(cam_i=[0, 1, 2, 0], feat_i=[0, 0, 0, 1], cam_j=[1, 2, 3, 3], feat_j=[0, 0, 0, 0])
+
+
+@pytest.mark.parametrize("resolution", ["sync", "evidence"])
+def test_a_nan_quality_or_weight_is_named(resolution):
+    """sync ran out of Borůvka rounds on a NaN ('did not end within 5 Borůvka rounds'): its
+    order of the links needs numbers."""
+    links = Links(**FIG1, quality=[1.0, np.nan, 0.5, 0.2])
+    with pytest.raises(InputError, match=r"link 1 \(1,0\)-\(2,0\) has quality nan"):
+        resolve_conflicts([2, 1, 1, 1], None, links, resolution=resolution)
+    with pytest.raises(InputError, match="has link_weight nan"):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), resolution=resolution,
+                          link_weight=[np.nan, 1, 1, 1])
+
+
+@pytest.mark.parametrize("ids, needle", [
+    ([0.4, 1.6], r"Links: feat_i\[0\] = .*0\.4 is not a whole-number id"),
+    ([0, np.nan], r"feat_i\[1\] = .*nan"),
+    ([0, 1e30], r"feat_i\[1\] = .*1e\+30"),
+    (np.array([0, 2**63], dtype=np.uint64), r"feat_i\[1\] = .*9223372036854775808"),
+])
+def test_ids_that_are_not_whole_numbers_are_refused(ids, needle):
+    """A cast to int64 truncated 1.6 to 1, wrapped 2**63 to a negative id."""
+    with pytest.raises(ValueError, match=needle):
+        Links([0, 0], ids, [1, 1], [0, 1])
+
+
+def test_whole_number_floats_are_ids():
+    links = Links([0.0, 1.0], [1.0, 0], [1, 2], [0, 0])
+    assert links.cam_i.dtype == np.int64 and links.cam_i.tolist() == [0, 1]
+
+
+def test_feature_counts_that_are_not_whole_numbers_are_named():
+    with pytest.raises(InputError, match=r"features_per_camera\[0\] = .*2\.7"):
+        resolve_conflicts([2.7, 1], None, Links([0], [1], [1], [0]))
+
+
+def test_a_feature_count_too_large_to_hold_is_refused_before_any_allocation():
+    """2**40 features on one camera allocated 8 TiB (MemoryError)."""
+    with pytest.raises(InputError, match="sums to 1,099,511,627,780 features"):
+        resolve_conflicts([2, 1, 1, 2**40], None, Links(**FIG1))
+
+
+def test_votes_refuse_what_resolve_conflicts_refuses():
+    """refine_by_votes took a link off the comm graph, a self-link or a negative id and
+    returned links the input never had."""
+    from pipeline.matching.votes import refine_by_votes
+
+    with pytest.raises(InputError, match="not neighbours in the communication graph"):
+        refine_by_votes([1, 1, 1, 1], [[0, 1], [0, 3], [1, 2], [2, 3]], Links([0], [0], [2], [0]))
+    with pytest.raises(InputError):
+        refine_by_votes([1, 1, 1], [[0, 1], [1, 2]], Links([1], [0], [1], [0]))
+    with pytest.raises(InputError):
+        refine_by_votes([3, 1], [[0, 1]], Links([0], [-1], [1], [0]))
+    with pytest.raises(InputError, match="vote iterations 1.5"):
+        refine_by_votes([1, 1], [[0, 1]], Links([0], [0], [1], [0]), iterations=1.5)
+    refined, _ = refine_by_votes([1, 1], None, Links([0], [0], [1], [0]))  # None: as resolve
+    assert len(refined) == 1
