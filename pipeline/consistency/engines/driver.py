@@ -142,7 +142,8 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     -------
     Detection
     """
-    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    fpc = np.diff(camera_offsets(features_per_camera))
+    check_links(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
     robots, _ = build_robots(fpc, links)
     if network is None:
         network = Network(fpc.shape[0], comm_edges_for(fpc, links, comm_edges), network_options)
@@ -436,9 +437,21 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
         raise InputError(f"link {k} ({links.cam_i[k]},{links.feat_i[k]})-({links.cam_j[k]},"
                          f"{links.feat_j[k]}) has {what}: a link's evidence must be a number "
                          "(drop the link, or give it a value)")
+    for given, what in ((keypoints, "keypoints"), (projections, "projections")):
+        if given is not None and len(given) != len(robots):
+            raise InputError(f"{what} has {len(given)} entries for {len(robots)} cameras; give "
+                             "one per camera (None for a camera without)" if what ==
+                             "projections" else f"{what} has {len(given)} entries for "
+                             f"{len(robots)} cameras; give one (m_i, 2) array per camera")
     for rb, li in zip(robots, link_index, strict=True):
         kp = np.zeros((rb.m, 2)) if keypoints is None else keypoints[rb.id]
         P = None if projections is None else projections[rb.id]
+        if np.shape(kp) != (rb.m, 2):
+            raise InputError(f"keypoints of camera {rb.id} have shape {np.shape(kp)}; expected "
+                             f"({rb.m}, 2), one row per feature")
+        if P is not None and np.shape(P) != (3, 4):
+            raise InputError(f"projection of camera {rb.id} has shape {np.shape(P)}; expected "
+                             "(3, 4), or None where unknown")
         equip_robot(rb, w[li], kp, P)
 
 

@@ -65,3 +65,25 @@ def test_votes_refuse_what_resolve_conflicts_refuses():
         refine_by_votes([1, 1], [[0, 1]], Links([0], [0], [1], [0]), iterations=1.5)
     refined, _ = refine_by_votes([1, 1], None, Links([0], [0], [1], [0]))  # None: as resolve
     assert len(refined) == 1
+
+
+def test_evidence_inputs_of_the_wrong_size_are_named():
+    """A keypoints list too short was an IndexError, a (3, 3) projection a reshape error."""
+    kp = [np.zeros((2, 2)), np.zeros((1, 2)), np.zeros((1, 2))]
+    with pytest.raises(InputError, match="keypoints has 3 entries for 4 cameras"):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), resolution="evidence", keypoints=kp)
+    kp.append(np.zeros((3, 2)))
+    with pytest.raises(InputError, match=r"keypoints of camera 3 have shape \(3, 2\)"):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), resolution="evidence", keypoints=kp)
+    kp[3] = np.zeros((1, 2))
+    P = [np.eye(3, 4)] * 3 + [np.eye(3)]
+    with pytest.raises(InputError, match=r"projection of camera 3 has shape \(3, 3\)"):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), resolution="evidence", keypoints=kp,
+                          projections=P)
+
+
+def test_detect_once_checks_the_links():
+    from pipeline.consistency.engines.driver import detect_once
+
+    with pytest.raises(InputError):
+        detect_once([2, 1, 1, 1], Links([0], [0], [0], [1]))  # a self-link, read as a conflict
