@@ -89,7 +89,8 @@ def one(robots: int, args) -> dict:
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
 
     oa, seq = run.online, run.sequence
-    pairs = scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window)
+    pairs = scope_pairs(oa.robot, oa.step, seq.comm_edges, args.window,
+                        step_edges=seq.step_edges)
     links = oa.all_links()
     at_batch = {}
     for t, kept_b in sorted(run.batch_kept.items()):

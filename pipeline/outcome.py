@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "NO_LINKS_WHY", "exit_status"]
+__all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
+           "exit_status"]
 
 #: Exit code of a run whose written result still holds conflictive sets.
 EXIT_NOT_CONFLICT_FREE = 3
@@ -92,6 +93,33 @@ def flag_result(report: dict, names: list[str] | None = None,
             warnings.append(_warning(
                 "no-features", f"no features found in {len(empty)} image(s): "
                 f"{', '.join(shown)} (blank, too small or too narrow); they take no part"))
+    if warnings:
+        report["warnings"] = warnings
+    return report
+
+
+def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY) -> dict:
+    """:func:`flag_result` for an online run's report (``steps``, ``final``,
+    ``conflict_free_every_step``): ``no-links`` (no link in any step), ``all-links-cut``,
+    ``not-conflict-free`` (a step ended with conflictive sets: ``conflict_free: false``)."""
+    warnings = []
+    steps = report.get("steps", [])
+    left = [k for k, s in enumerate(steps) if s.get("conflictive_sets_after")]
+    if left:
+        report["conflict_free"] = False
+        warnings.append(_warning(
+            "not-conflict-free", f"the association was not conflict-free after step(s) "
+            f"{', '.join(map(str, left[:5]))}{', ...' if len(left) > 5 else ''}; do not use it "
+            "as a clean association"))
+    final = report.get("final", {})
+    total = int(final.get("links", 0))
+    if total == 0:
+        warnings.append(_warning(
+            "no-links", f"no link in {len(steps)} steps: there is nothing to associate "
+                        f"({no_links_why})"))
+    elif int((final.get("online") or {}).get("kept", -1)) == 0:
+        warnings.append(_warning("all-links-cut", f"every one of the {total} links was cut; "
+                                                  "the result holds no association"))
     if warnings:
         report["warnings"] = warnings
     return report

@@ -116,19 +116,15 @@ def check_online_options(args) -> None:
 
 def online_run_summary(report: dict, out, first_line: str, no_rerun: bool) -> int:
     """Print an online job's summary (``first_line``, then the files written to ``out``) and
-    return its exit status: 0, or 3 when a step ended with a conflict."""
-    import sys
+    its report's warnings (:func:`pipeline.outcome.flag_online`), and return its exit status:
+    0, or 3 when a step ended with a conflict."""
+    from pipeline.outcome import exit_status
 
     print(first_line)
     print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
           + ("" if no_rerun else ", recording.rrd") + ")")
-    if not report["final"]["links"]:
-        speed = report.get("config", {}).get("speed")
-        print(f"warning: no link in {len(report['steps'])} steps: there is nothing to associate "
-              "(frames too small, too few features, or no overlap between the robots' views"
-              + (f"; at --speed {speed:g} m per step the formation may have left the scene"
-                 if speed else "") + ")", file=sys.stderr)
-    return 0 if report["conflict_free_every_step"] else 3
+    code = exit_status(report)
+    return code if code else (0 if report["conflict_free_every_step"] else 3)
 
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:

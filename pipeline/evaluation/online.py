@@ -5,7 +5,8 @@ A moving team's history holds many frames; the true pairs between every two fram
 pairwise score of :mod:`pipeline.evaluation.metrics` restricted to a *scope* of image pairs:
 two frames of one robot, or of two robots joined in the formation's communication graph, at
 most ``horizon - 1`` steps apart (the pairs the online matcher with window ``horizon`` could
-link directly). Implied pairs (two features in one association set) and true pairs are both
+link directly); with a switching topology, joined at the step of the later frame (the step
+that matched the pair, :func:`pipeline.matching.pairs.step_pairs`). Implied pairs (two features in one association set) and true pairs are both
 counted on the scope only, for every association scored, so online and batch runs are judged
 on one scale.
 """
@@ -21,8 +22,11 @@ from pipeline.types import Links
 __all__ = ["scope_pairs", "ScopedTruth"]
 
 
-def scope_pairs(robot, step, comm_edges, horizon: int) -> np.ndarray:
+def scope_pairs(robot, step, comm_edges, horizon: int, step_edges=None) -> np.ndarray:
     """Image pairs ``(a, b)``, ``a < b``, of the scope (module docstring), ``(P, 2)`` int64.
+
+    ``step_edges``: the edges up at each step (a switching topology), or None: ``comm_edges``
+    at every step. A pair is in the scope when its robots talk at the later frame's step.
 
     Examples
     --------
@@ -30,14 +34,21 @@ def scope_pairs(robot, step, comm_edges, horizon: int) -> np.ndarray:
     [[0, 1], [2, 3]]
     >>> len(scope_pairs([0, 1, 0, 1], [0, 0, 1, 1], [[0, 1]], 2))
     6
+    >>> scope_pairs([0, 1, 0, 1], [0, 0, 1, 1], [[0, 1]], 2, step_edges=[[[0, 1]], []]).tolist()
+    [[0, 1], [0, 2], [1, 3]]
     """
     robot, step = np.asarray(robot, np.int64), np.asarray(step, np.int64)
     n = int(robot.max()) + 1 if len(robot) else 0
-    near = np.eye(n, dtype=bool)
-    for i, j in np.asarray(comm_edges, np.int64).reshape(-1, 2):
-        near[i, j] = near[j, i] = True
+    per_step = [comm_edges] * (int(step.max()) + 1 if len(step) else 0) if step_edges is None \
+        else list(step_edges)
+    near = np.zeros((max(len(per_step), 1), n, n), dtype=bool)
+    near[:, np.arange(n), np.arange(n)] = True
+    for t, edges in enumerate(per_step):
+        for i, j in np.asarray(edges, np.int64).reshape(-1, 2):
+            near[t, i, j] = near[t, j, i] = True
     a, b = np.triu_indices(len(robot), k=1)
-    ok = near[robot[a], robot[b]] & (np.abs(step[a] - step[b]) < horizon)
+    later = np.maximum(step[a], step[b])
+    ok = near[later, robot[a], robot[b]] & (np.abs(step[a] - step[b]) < horizon)
     return np.stack([a[ok], b[ok]], axis=1).astype(np.int64)
 
 

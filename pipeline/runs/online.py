@@ -357,7 +357,8 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     with timer.stage("evaluate", f"ground truth at {config.tol_px} px"):
         truth = np.asarray(link_truth(seq.flat, run.features, links, tol_px=config.tol_px),
                            bool)
-        scope = scope_pairs(oa.robot, oa.step, seq.comm_edges, config.window)
+        scope = scope_pairs(oa.robot, oa.step, seq.comm_edges, config.window,
+                            step_edges=seq.step_edges)
         st = ScopedTruth(seq.flat, run.features, scope, tol_px=config.tol_px)
         final = {"links": int(len(links)), "good_links": int(truth.sum()),
                  "scope_image_pairs": int(len(scope)),
@@ -395,6 +396,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
                                              for r in run.steps)),
+        **_flags(run, config.speed),
         "fusion": {"enabled": bool(config.fusion),
                    "scope": "the tracks each step changed, window frames only",
                    "links_cut": int((oa.links.reason == "fusion-outlier").sum())},
@@ -402,6 +404,20 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "versions": versions(),
         "config": {**asdict(config), "out": str(config.out_dir())},
     }
+
+
+def _flags(run: OnlineRun, speed: float) -> dict:
+    """``conflict_free`` / ``warnings`` of an online formation run
+    (:func:`pipeline.outcome.flag_online`), as a report section to merge."""
+    from pipeline.outcome import flag_online
+
+    why = ("frames too small, too few features, or no overlap between the robots' views"
+           + (f"; at --speed {speed:g} m per step the formation may have left the scene"
+              if speed else ""))
+    L = run.online.links
+    rep = flag_online({"steps": run.steps, "final": {"links": int(len(L.ci)), "online": {
+        "kept": int(L.kept.sum())}}}, why)
+    return {k: rep[k] for k in ("conflict_free", "warnings") if k in rep}
 
 
 def jsonable_step(rec: dict) -> dict:

@@ -132,6 +132,10 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
         "versions": versions(),
         "config": {**asdict(config), "out": str(config.out_dir())},
     }
+    from pipeline.outcome import flag_online
+
+    flag_online(report, "frames too small, too few features, or no overlap between the "
+                        "robots' frames")
     n = seq.n_robots
     grid = np.array([[float(k), float(i), 0.0] for k in range(seq.steps) for i in range(n)])
     online_tables(config.out_dir(), run, report, timer, [v.name for v in seq.views],

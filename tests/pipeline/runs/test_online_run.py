@@ -118,9 +118,13 @@ def test_a_run_without_any_link_is_warned(tmp_path, capsys):
     out = tmp_path / "gone"
     assert main(["run-formation", "--steps", "2", "--speed", "100", "--no-fusion", "--no-rerun",
                  "--out", str(out), *FAST]) == 0
-    assert json.loads((out / "report.json").read_text())["final"]["links"] == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["final"]["links"] == 0
     err = capsys.readouterr().err
     assert "warning: no link in 2 steps" in err and "--speed 100 m per step" in err
+    # in the report too, as a batch run's result warnings are (it was on stderr only)
+    assert [w["code"] for w in report["warnings"]] == ["no-links"]
+    assert "--speed 100 m per step" in report["warnings"][0]["message"]
 
 
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
