@@ -417,8 +417,13 @@ def _assign(score: np.ndarray, camera: np.ndarray, maximize: bool) -> np.ndarray
 
 
 def _check_universe(universe_size) -> None:
-    if universe_size is not None and int(universe_size) < 1:
-        raise ValueError(f"universe_size {universe_size}: expected a positive integer or None")
+    """ValueError unless ``universe_size`` is None or a whole number >= 1 (``"2"``, ``True``
+    and ``2.5`` were taken as 2, 1 and 2)."""
+    if universe_size is None:
+        return
+    if isinstance(universe_size, (bool, np.bool_)) or not isinstance(
+            universe_size, (int, np.integer)) or universe_size < 1:
+        raise ValueError(f"universe_size {universe_size!r}: expected a positive integer or None")
 
 
 def _by_component(prob: _Problem, spectrum: _Spectrum, counts: np.ndarray,
@@ -551,6 +556,8 @@ def spectral_sync(features_per_camera, links: Links, weight: np.ndarray | None =
     [0, 1, 1, 0, 0, 1]
     """
     _check_universe(universe_size)
+    if not -1.0 <= float(min_cosine) <= 1.0:  # nan too: it left every feature unassigned
+        raise ValueError(f"min_cosine {min_cosine!r}: expected a cosine in [-1, 1]")
     prob = _problem(features_per_camera, links, weight)
     if prob.active.size == 0:
         return np.full(prob.m_total, -1, dtype=np.int64)
@@ -665,4 +672,8 @@ def labels_to_kept(features_per_camera, links: Links, labels: np.ndarray) -> np.
     """
     a, b = _link_ends(features_per_camera, links)
     labels = np.asarray(labels, dtype=np.int64)
+    m_total = int(np.sum(features_per_camera))
+    if labels.shape != (m_total,):
+        raise ValueError(f"labels of shape {labels.shape}: expected ({m_total},), one per "
+                         "feature")
     return (labels[a] == labels[b]) & (labels[a] >= 0)

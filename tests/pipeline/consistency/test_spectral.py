@@ -295,3 +295,19 @@ def test_rounding_does_not_depend_on_the_eigenbasis_or_its_last_bits(rounding, s
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     # each point's rows share a label, and the first row names point 0
     assert a[0][0] == 0 and all(np.unique(a[0][U[:, p] > 0]).size == 1 for p in range(k))
+
+
+@pytest.mark.parametrize("kw", [dict(universe_size="2"), dict(universe_size=True),
+                                dict(universe_size=2.5), dict(min_cosine=float("nan"))])
+def test_loose_arguments_are_refused(kw):
+    """'2', True and 2.5 were taken as 2, 1 and 2 landmarks; a nan cosine left every feature
+    unassigned without a word."""
+    links = Links([0, 0, 1], [0, 1, 0], [1, 1, 2], [0, 1, 0])
+    with pytest.raises(ValueError, match="universe_size|min_cosine"):
+        spectral_sync([2, 2, 1], links, **kw)
+
+
+def test_labels_of_another_shape_are_refused():
+    links = Links([0, 0], [0, 0], [1, 2], [0, 0])
+    with pytest.raises(ValueError, match=r"labels of shape \(3, 1\): expected \(3,\)"):
+        labels_to_kept([1, 1, 1], links, np.array([[4], [4], [-1]]))
