@@ -123,8 +123,7 @@ def online_run_summary(report: dict, out, first_line: str, no_rerun: bool) -> in
     print(first_line)
     print(f"run written to {out}/ (report.json, links.csv, images.csv, link_steps.csv"
           + ("" if no_rerun else ", recording.rrd") + ")")
-    code = exit_status(report)
-    return code if code else (0 if report["conflict_free_every_step"] else 3)
+    return exit_status(report)  # 3 when a step ended with a conflict (flag_online)
 
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:

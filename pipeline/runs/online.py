@@ -382,7 +382,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                                   conflictive_sets=int(run.steps[-1]["batch"]
                                                        ["conflictive_sets_after"]))
     run.truth = truth.astype(np.int8)
-    return {
+    report = {
         "title": formation_name(config.formation, config.robots, config.graph)
                  + f" in motion ({config.steps} steps, seed "
                  f"{config.seed})",
@@ -396,7 +396,6 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
                                              for r in run.steps)),
-        **_flags(run, config.speed),
         "fusion": {"enabled": bool(config.fusion),
                    "scope": "the tracks each step changed, window frames only",
                    "links_cut": int((oa.links.reason == "fusion-outlier").sum())},
@@ -404,20 +403,12 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "versions": versions(),
         "config": {**asdict(config), "out": str(config.out_dir())},
     }
-
-
-def _flags(run: OnlineRun, speed: float) -> dict:
-    """``conflict_free`` / ``warnings`` of an online formation run
-    (:func:`pipeline.outcome.flag_online`), as a report section to merge."""
     from pipeline.outcome import flag_online
 
-    why = ("frames too small, too few features, or no overlap between the robots' views"
-           + (f"; at --speed {speed:g} m per step the formation may have left the scene"
-              if speed else ""))
-    L = run.online.links
-    rep = flag_online({"steps": run.steps, "final": {"links": int(len(L.ci)), "online": {
-        "kept": int(L.kept.sum())}}}, why)
-    return {k: rep[k] for k in ("conflict_free", "warnings") if k in rep}
+    return flag_online(report, "frames too small, too few features, or no overlap between the "
+                       "robots' views" + (f"; at --speed {config.speed:g} m per step the "
+                                          "formation may have left the scene"
+                                          if config.speed else ""))
 
 
 def jsonable_step(rec: dict) -> dict:
