@@ -22,6 +22,7 @@ import contextlib
 import ctypes
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -42,11 +43,48 @@ __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "di
            "Observer"]
 
 
+#: where :func:`free_ports` draws when the kernel's ephemeral range cannot be read
+_EPHEMERAL_DEFAULT = (32768, 60999)
+
+
+def ephemeral_range() -> tuple[int, int]:
+    """The kernel's ephemeral port range (``net.ipv4.ip_local_port_range``): the ports it hands
+    out for ``bind(port 0)`` and as the local end of every outgoing connection."""
+    try:
+        lo, hi = (int(x) for x in Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+    except (OSError, ValueError):
+        return _EPHEMERAL_DEFAULT
+    return lo, hi
+
+
 def free_ports(k: int, host: str = "127.0.0.1") -> list[int]:
-    """``k`` distinct TCP ports that were free on ``host`` a moment ago."""
+    """``k`` distinct TCP ports that were free on ``host`` a moment ago, drawn at random below
+    the kernel's ephemeral range.
+
+    A robot binds its port only once its process runs. A port the kernel hands out itself
+    (``bind(port 0)``) lies in the ephemeral range, which every outgoing connection on the
+    machine draws its local port from too, so a robot's or another program's connection
+    could take it in between ("the port is in use"); below the range the kernel assigns no
+    port on its own. Each drawn port is checked free by binding it; the draw falls back to
+    the kernel's choice if fewer than ``k`` are found."""
+    lo, _ = ephemeral_range()
+    first = 10000 if lo > 12000 else 1024
+    rng = random.SystemRandom()
     socks, ports = [], []
     try:
-        for _ in range(k):
+        if lo - first >= 4 * k:
+            for port in rng.sample(range(first, lo), min(lo - first, 8 * k + 64)):
+                if len(ports) == k:
+                    break
+                s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                try:
+                    s.bind((host, port))
+                except OSError:
+                    s.close()
+                    continue
+                socks.append(s)
+                ports.append(port)
+        while len(ports) < k:
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             s.bind((host, 0))
             socks.append(s)

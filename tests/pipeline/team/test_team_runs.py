@@ -198,11 +198,9 @@ def _team_file(tmp_path, ports, links_input, **opts):
 
 
 def _free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+    from pipeline.team.launcher import free_ports
+
+    return free_ports(1)[0]
 
 
 def test_robot_bad_inputs_are_one_line_errors(links_input, tmp_path, capsys):
