@@ -6,6 +6,7 @@ import argparse
 import json
 
 from data_synth import check_formation
+from data_synth.motion import DEFAULT_SPEED
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
@@ -68,9 +69,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"with --steps: metres the formation drives per step (default "
                         f"{DEFAULT_SPEED})")
 
-
-#: ``--speed`` of an online run when not given (metres per step; OnlineConfig.speed's default)
-DEFAULT_SPEED = 0.15
 
 
 def config_from_args(args) -> FormationConfig:

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_synth.motion import DEFAULT_SPEED
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.progress import StageTimer
 from pipeline.types import Links
@@ -61,7 +62,7 @@ class OnlineConfig:
     graph: str | None = None
     steps: int = 10
     window: int = 3
-    speed: float = 0.15
+    speed: float = DEFAULT_SPEED
     switching: bool = False
     resolution: str = DEFAULT_RESOLUTION
     tol_px: float = 2.0
