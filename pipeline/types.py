@@ -98,8 +98,26 @@ class PairMatches:
 def id_array(values, what: str) -> np.ndarray:
     """``values`` as a 1-D int64 array of ids; ValueError naming the first value that is not
     a whole number an int64 holds (``1.0`` is one, ``1.5``, ``nan``, ``1e30`` and ``2**63`` are
-    not: a cast truncated, wrapped or overflowed them silently)."""
-    v = np.asarray(values)
+    not: a cast truncated, wrapped or overflowed them silently; nor are booleans, strings or
+    ``None``: a mask or text given for ids would be read as ids 0 and 1 or parsed)."""
+    try:
+        v = np.asarray(values)
+    except ValueError:  # a ragged nesting
+        raise ValueError(f"{what} must be a flat sequence of whole-number ids") from None
+    if v.dtype.kind == "O":  # Python ints past int64, None, mixed objects
+        flat = v.reshape(-1)
+        for k, x in enumerate(flat.tolist()):
+            if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) \
+                    or not float(x).is_integer() or not -2**63 <= x < 2**63:
+                raise ValueError(f"{what}[{k}] = {flat[k]!r} is not a whole-number id")
+        v = np.asarray(flat.tolist(), dtype=np.float64 if any(
+            isinstance(x, (float, np.floating)) for x in flat.tolist()) else np.int64)
+    if v.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if v.dtype.kind not in "iuf":  # bool masks, strings, complex: no id is meant
+        flat = v.reshape(-1)
+        raise ValueError(f"{what}[0] = {flat[0].item()!r} is not a whole-number id: give integers, got dtype "
+                         f"{v.dtype}")
     if v.dtype.kind == "f":
         bad = ~np.isfinite(v) | (v != np.round(v)) | (np.abs(v) >= 2.0**63)
     elif v.dtype.kind == "u":

@@ -1,5 +1,7 @@
 """LinkLedger: the one per-link record of a run."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -40,3 +42,24 @@ def test_a_malformed_ledger_is_refused(field, value, match):
     args[field] = value
     with pytest.raises(ValueError, match=match):
         LinkLedger(**args)
+
+
+@pytest.mark.parametrize("ids, shown", [
+    ([True, False], "True"),            # a boolean mask given for ids
+    (["0", "1"], "'0'"),                # text
+    ([0, None], "None"),
+    ([0, 2**70], str(2**70)),           # a Python int past int64
+    ([1 + 2j, 0], "(1+2j)"),
+])
+def test_ids_that_are_not_whole_numbers_are_refused_and_named(ids, shown):
+    with pytest.raises(ValueError, match=rf"Links: cam_i\[\d\] = {re.escape(shown)} is not a "
+                                         "whole-number id"):
+        Links(ids, [0, 0], [1, 1], [0, 1])
+
+
+def test_ragged_ids_are_refused_and_object_ids_taken():
+    with pytest.raises(ValueError, match="Links: cam_i must be a flat sequence"):
+        Links([[0], [0, 1]], [0, 0], [1, 1], [0, 1])
+    links = Links(np.array([0, 0], dtype=object), [0, 1.0], [1, 1], [0, 1])
+    assert links.cam_i.dtype == np.int64 and links.feat_i.tolist() == [0, 1]
+    assert Links(np.array([], dtype=bool), [], [], []).cam_i.dtype == np.int64
