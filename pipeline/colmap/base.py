@@ -9,12 +9,27 @@ the whole process.
 
 from __future__ import annotations
 
+import signal
+import threading
 from contextlib import contextmanager
 
 import numpy as np
 import pycolmap
 
 __all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid"]
+
+
+def _default_sigterm() -> None:
+    """Give SIGTERM back its default action after pycolmap's import, which installs glog's
+    failure handler on it: a ``kill`` or ``timeout`` then printed a C stack trace of 18 lines
+    as if the program had crashed. A handler set in Python (the team launcher's) is kept, and
+    so is glog's on the signals of a real crash (SIGSEGV, SIGABRT, ...)."""
+    if threading.current_thread() is threading.main_thread() \
+            and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+_default_sigterm()
 
 #: Added to OpenCV pixel coordinates to get COLMAP's (docs/DESIGN.md "Conventions").
 COLMAP_PIXEL_OFFSET = 0.5
