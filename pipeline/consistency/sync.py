@@ -653,7 +653,9 @@ def finish_sync(robot: Robot, round_: int) -> None:
     robot.link_alive[k] = False
     robot.deleted_round[k] = round_
     robot.deleted_case[k] = CASE_SYNC
-    robot.deleted_iteration[k] = robot.iteration
+    # the merge is the rule's one pass: iteration 1 (1-based, as every rule logs its cuts),
+    # or the detection's own when the merge follows one
+    robot.deleted_iteration[k] = max(robot.iteration, 1)
     has_link = np.zeros(robot.m, dtype=bool)
     has_link[robot.link_r[robot.link_alive]] = True
     robot.component = np.where(has_link, st.label, -1)

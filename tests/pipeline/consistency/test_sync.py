@@ -181,3 +181,17 @@ def test_both_flood_graphs_reach_the_same_clusters_with_their_own_costs():
     assert stats_a["rounds"] < stats_b["rounds"]  # here: all links inside are shallower
     with pytest.raises(ValueError, match="flood"):
         equip_sync(build_robots(fpc, links)[0][0], weight[:0], "star")
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-robot"])
+def test_a_cut_link_is_logged_in_iteration_one(engine):
+    # ConsistencyResult.iteration is 1-based for a cut link, -1 for a kept one (the merge
+    # logged its cuts in iteration 0)
+    from pipeline.consistency import resolve_conflicts
+
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])  # paper Fig. 1
+    res = resolve_conflicts([2, 1, 1, 1], [[0, 1], [1, 2], [2, 3], [0, 3]], links,
+                            resolution="sync", engine=engine)
+    assert res.deleted.sum() == 1
+    assert res.iteration[res.deleted].tolist() == [1]
+    assert (res.iteration[~res.deleted] == -1).all()
