@@ -104,6 +104,9 @@ def id_array(values, what: str) -> np.ndarray:
         v = np.asarray(values)
     except ValueError:  # a ragged nesting
         raise ValueError(f"{what} must be a flat sequence of whole-number ids") from None
+    if v.ndim > 1:  # (n, 1) or (2, n) given for a list: flattening would invent entries' order
+        raise ValueError(f"{what} must be a flat sequence of whole-number ids, not an array of "
+                         f"shape {v.shape}")
     if v.dtype.kind == "O":  # Python ints past int64, None, mixed objects
         flat = v.reshape(-1)
         for k, x in enumerate(flat.tolist()):

@@ -30,8 +30,10 @@ class ConsistencyResult:
     iteration : ndarray, (L,) int — detection/resolution iteration that cut it (1-based), -1 if kept
     round : ndarray, (L,) int — resolution round of that iteration in which the receiver of the
         request cut it (1-based), -1 if kept
-    case : ndarray, (L,) str — ``'b'`` or ``'c'`` (Alg. 1) or ``'evidence'`` for a link cut by resolution, ``''``
-        otherwise
+    case : ndarray, (L,) str — for a link cut by resolution, the case that cut it: ``'b'`` or
+        ``'c'`` (Alg. 1, line 10), ``'evidence'`` (the evidence rule), ``'sync'`` (the ``sync``
+        merge; also a large set of the evidence rule); ``'robot-lost'`` for a link cut because
+        its far robot was declared lost; ``''`` if kept
     component : ndarray, (m_total,) int64 — component ``C_q`` built by Alg. 1 for every feature
         (``q`` = global id of its root feature), -1 for features never assigned
     track_label : ndarray, (m_total,) int64 — each robot's own name for the track of each of
@@ -47,7 +49,7 @@ class ConsistencyResult:
         ``max_robot_memory_bytes`` (peak over robots and rounds of :meth:`Robot.memory_bytes`),
         ``asymmetric_links`` (links between two surviving robots deleted at one end only),
         ``deleted_links``, ``protocol`` (``paper`` or ``reliable``), ``resolution`` (the rule
-        that cut: ``paper`` or ``evidence``), ``survivors`` (n,) bool
+        that cut: its name in :data:`~pipeline.consistency.rules.RULES`), ``survivors`` (n,) bool
         (robots alive at the end), and ``faults``: what the network injected and its effect
         (``dropped`` messages, ``crashed`` robots with their crash round,
         ``crashed_after_close`` (those of them that crashed after the last closing phase

@@ -63,3 +63,14 @@ def test_ragged_ids_are_refused_and_object_ids_taken():
     links = Links(np.array([0, 0], dtype=object), [0, 1.0], [1, 1], [0, 1])
     assert links.cam_i.dtype == np.int64 and links.feat_i.tolist() == [0, 1]
     assert Links(np.array([], dtype=bool), [], [], []).cam_i.dtype == np.int64
+
+
+def test_ids_given_as_a_table_are_refused_with_their_shape():
+    from pipeline.association import AssociationGraph
+
+    with pytest.raises(ValueError, match=r"Links: cam_i must be a flat .* shape \(2, 1\)"):
+        Links([[0], [0]], [0, 1], [1, 1], [0, 1])
+    # [[2, 1], [1, 1]] was taken as four cameras
+    with pytest.raises(ValueError, match=r"features_per_camera must be a flat .* shape \(2, 2\)"):
+        AssociationGraph([[2, 1], [1, 1]], Links([0], [0], [1], [0]))
+    assert Links(np.int64(0), 0, 1, 0).cam_i.tolist() == [0]  # a scalar is one id
