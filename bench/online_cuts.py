@@ -53,7 +53,7 @@ def one(args, hold: int) -> dict:
         repairs.append((skipped, final))
         return skipped
 
-    def check_counted(self, sub, real, hist_a, hist_b, att_f, att_p, t):
+    def check_counted(self, sub, real, hist_a, hist_b, att_f, att_p, t, robots=None):
         L = self.links
         was = real[L.kept[real] | (L.step_cut[real] == t)]  # before the rule's cuts
         in_touched.update(was.tolist())
@@ -62,7 +62,7 @@ def one(args, hold: int) -> dict:
         img = np.searchsorted(self.offset, sub, side="right") - 1
         bad = eng._duplicated_keys(comp, img)
         in_conflict.update(was[np.isin(comp[np.searchsorted(sub, a)], bad)].tolist())
-        return check(self, sub, real, hist_a, hist_b, att_f, att_p, t)
+        return check(self, sub, real, hist_a, hist_b, att_f, att_p, t, robots)
 
     config = OnlineConfig(formation=args.graph, seed=args.seed, size=args.size,
                           max_features=args.max_features, robots=args.robots,
