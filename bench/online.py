@@ -149,6 +149,18 @@ def one(robots: int, args) -> dict:
 
 
 def main(argv=None) -> int:
+    """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
+    one-line error naming it, exit status 2, as the command line's."""
+    from pipeline.errors import InputError
+
+    try:
+        return _main(argv)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--robots", type=int, nargs="+", default=[6, 20])
     ap.add_argument("--graph", default="ring2")

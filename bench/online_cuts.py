@@ -109,6 +109,18 @@ def one(args, hold: int) -> dict:
 
 
 def main(argv=None) -> int:
+    """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
+    one-line error naming it, exit status 2, as the command line's."""
+    from pipeline.errors import InputError
+
+    try:
+        return _main(argv)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _main(argv=None) -> int:
     from pipeline.consistency.engines.online import default_hold
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

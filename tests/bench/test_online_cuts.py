@@ -24,3 +24,12 @@ def test_a_small_run_saves_one_record_per_hold(tmp_path, capsys):
     assert [r["hold"] for r in runs] == [0, 1]
     assert all(r["online"]["kept"] > 0 for r in runs)
     assert "saved" in capsys.readouterr().out
+
+
+def test_a_value_the_stage_refuses_is_a_one_line_error(tmp_path, capsys):
+    out = tmp_path / "cuts"
+    assert _bench().main(["--robots", "3", "--steps", "2", "--hold", "-1", "--size", "160x120",
+                          "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: hold -1") and "Traceback" not in err
+    assert not out.exists()
