@@ -22,6 +22,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
 def run_graph(directory: Path, graph: str, out: Path) -> dict:
@@ -95,10 +98,11 @@ def main() -> int:
     edges = {g: len(r["comm_edges"]) for g, r in reports.items()}
     print(table(reports, edges))
     print(f"load average at the end: {load_end}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(json.dumps(
-        {"directory": str(args.directory), "load_average_at_start": load,
-         "load_average_at_end": load_end, "reports": reports}, indent=1))
+    # written beside and renamed into place: an interrupted or failed write leaves the
+    # previous results.json as it was
+    write_json_atomic(args.out / "results.json",
+                      {"directory": str(args.directory), "load_average_at_start": load,
+                       "load_average_at_end": load_end, "reports": reports})
     print(f"saved {args.out / 'results.json'}")
     return 0
 
