@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 from data_synth import check_formation
 from data_synth.motion import DEFAULT_SPEED
@@ -110,8 +111,9 @@ def online_config_from_args(args):
     check_online_options(args)
     if args.speed is None:
         args.speed = DEFAULT_SPEED
-    if not args.speed >= 0:
-        raise InputError(f"--speed {args.speed}: expected metres per step >= 0")
+    if not (math.isfinite(args.speed) and args.speed >= 0):
+        raise InputError(f"--speed {args.speed}: expected a finite number of metres per step "
+                         ">= 0")
     from pipeline.runs.transports import get_transport
 
     if not args.no_fusion and not hasattr(get_transport(args.transport).load(), "online_fusion"):

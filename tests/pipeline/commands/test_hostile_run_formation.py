@@ -137,3 +137,15 @@ def test_a_formation_too_large_for_memory_is_refused_before_rendering(tmp_path, 
     assert main(["run-formation", "--out", str(tmp_path / "run"), *argv]) == 2
     one_line_error(capsys, needle)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("speed", ["inf", "-inf", "nan", "-0.5"])
+def test_online_speed_that_is_no_distance_is_named_as_the_option(tmp_path, capsys, speed):
+    out = tmp_path / "run"
+    assert main(["run-formation", "--out", str(out), *FAST, "--steps", "2",
+                 f"--speed={speed}"]) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and f"--speed {float(speed)}" in lines[0], err
+    assert "[render]" not in err
+    assert not out.exists()
