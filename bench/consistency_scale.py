@@ -33,6 +33,7 @@ Usage: ``.venv/bin/python bench/consistency_scale.py [--quick] [--n 6 10 …] [-
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import platform
 import sys
@@ -239,7 +240,7 @@ def plot(records: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[6, 10, 20, 50, 100, 200, 500, 1000])
     ap.add_argument("--repeat", type=int, default=3,
@@ -255,8 +256,16 @@ def main() -> int:
     ap.add_argument("--detect", type=float, default=0.85, help="probability a true link is found")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=OUT)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     ns = [6, 10, 20] if args.quick else args.n
+    if min(ns) < 2:
+        ap.error(f"--n {min(ns)}: a team has at least 2 robots")
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
+    if importlib.util.find_spec("matplotlib") is None:
+        # checked before the runs: the figure is drawn at the end, after minutes of work
+        ap.error("matplotlib is missing, for the figure time_bytes.png: install the bench "
+                 "extra (make bench, or pip install -e '.[bench]')")
 
     header = (f"{'n':>5} {'resolution':>10} {'m_sum':>8} {'links':>7} {'confl':>5} {'dist_s':>7} {'robot_s':>7} "
               f"{'uf_s':>6} {'ratio':>5} {'r_ratio':>7} {'it':>2} {'det1':>4} {'d+1':>4} "
