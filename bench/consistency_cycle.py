@@ -66,7 +66,7 @@ def run_resolve(links: Path, out: Path, resolution: str) -> dict:
                 exit_code=proc.returncode, deleted=cut, stderr=err[-300:])
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[100, 1000])
     ap.add_argument("--evidence-max-n", type=int, default=None,
@@ -74,7 +74,11 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3,
                     help="runs of each process, the resolutions in turn (medians reported)")
     ap.add_argument("--out", type=Path, default=OUT)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
+    if min(args.n) < 2:
+        ap.error(f"--n {min(args.n)}: a cycle joins at least 2 cameras")
 
     records = []
     print(f"{'n':>6} {'resolution':>10} {'wall s':>8} {'peak MB':>8} {'exit':>4} {'cut':>4} "

@@ -72,7 +72,7 @@ def bench_method(method: str, args, size) -> dict:
     return {"method": method, "runs": runs, "median": med, "min": best}
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")
     ap.add_argument("--seed", type=int, default=0)
@@ -81,7 +81,9 @@ def main() -> int:
     ap.add_argument("--methods", default="sift,orb,akaze")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-foundation"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
     w, h = (int(v) for v in args.size.lower().split("x"))
 
     load_before = os.getloadavg()

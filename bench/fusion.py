@@ -188,6 +188,8 @@ def main(argv=None) -> int:
                     help="rounds of the fixed scheme that tell 'not converged at 100'")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-fusion"))
     args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
     size = tuple(int(v) for v in args.size.lower().split("x"))
     import pipeline.fusion.landmarks  # noqa: F401  (imports outside the timings)
 

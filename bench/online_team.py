@@ -65,7 +65,7 @@ def _run(args: list[str], out: Path) -> dict:
             "tables": [(out / n).read_text() for n in ("links.csv", "link_steps.csv")]}
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")
     ap.add_argument("--steps", type=int, default=3)
@@ -73,7 +73,11 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1,
                     help="runs of each configuration, alternated; the median wall kept")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-online-team"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
+    if args.steps < 1:
+        ap.error(f"--steps {args.steps}: at least 1")
     common = ["--steps", str(args.steps), "--formation", args.formation] + \
         ([] if args.size is None else ["--size", args.size])
     load = [round(x, 2) for x in os.getloadavg()]

@@ -119,7 +119,7 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
             "conflictive_sets_after": rep["after"]["conflictive_sets"]}
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team"))
@@ -127,7 +127,9 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3,
                     help="runs of each sim/zenoh configuration, the median wall kept "
                          "(default 3; the machine may be shared)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
     load = [round(x, 2) for x in os.getloadavg()]
     results = {"size": args.size, "formations": {}, "cpus": os.cpu_count(),
                "load_average_at_start": load}

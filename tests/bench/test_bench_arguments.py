@@ -1,0 +1,39 @@
+"""Benches given a count they cannot run (no repeat, no step, a cycle of one camera) refuse it
+before any work with a one-line message and exit status 2, instead of a traceback or a
+results.json of nothing written over the previous one."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _bench(name):
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "bench" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("name, args, message", [
+    ("foundation", ["--repeat", "0"], "--repeat 0: at least 1"),
+    ("fusion", ["--repeat", "-1"], "--repeat -1: at least 1"),
+    ("team", ["--repeat", "0"], "--repeat 0: at least 1"),
+    ("consistency_cycle", ["--repeat", "0"], "--repeat 0: at least 1"),
+    ("consistency_cycle", ["--n", "5", "1"], "--n 1: a cycle joins at least 2 cameras"),
+    ("online_team", ["--steps", "0"], "--steps 0: at least 1"),
+    ("online_team", ["--repeat", "0"], "--repeat 0: at least 1"),
+])
+def test_a_count_the_bench_cannot_run_is_refused(tmp_path, capsys, name, args, message):
+    out = tmp_path / "bench"
+    out.mkdir()
+    (out / "results.json").write_text('{"previous": true}')
+    with pytest.raises(SystemExit) as exc:
+        _bench(name).main(args + ["--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert (out / "results.json").read_text() == '{"previous": true}'
+    assert [p.name for p in out.iterdir()] == ["results.json"]
