@@ -20,7 +20,6 @@ Usage: ``.venv/bin/python bench/spectral_baselines.py [--data DIR] [--frames 20 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import sys
@@ -38,6 +37,7 @@ from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E40
 from pipeline.evaluation.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
 from pipeline.inputs.landmarks import load_landmark_folder  # noqa: E402
 from pipeline.matching.landmarks import match_landmark_edges  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
 def label_pairs(labels: np.ndarray) -> np.ndarray:
@@ -81,7 +81,7 @@ def measure(fn, *args, **kw):
     return out, wall, cpu, peak / 1e6
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/cmu_hotel"))
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
@@ -90,7 +90,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--universe", type=int, default=30, help="the given universe size")
     ap.add_argument("--json", type=Path, default=None, help="also save the records here")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     k = args.universe
     methods = [("spectral", spectral_sync, {}),
                ("spectral, k given", spectral_sync, {"universe_size": k}),
@@ -132,7 +132,8 @@ def main() -> int:
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"process peak RSS: {rss:.0f} MB")
     if args.json:
-        args.json.write_text(json.dumps({"seed": args.seed, "records": records}, indent=1))
+        # written beside and renamed into place: a failed write keeps the previous file whole
+        write_json_atomic(args.json, {"seed": args.seed, "records": records})
     return 0
 
 

@@ -1,0 +1,57 @@
+"""bench/spectral_baselines.py --json: a failed write leaves the previous file whole."""
+
+import importlib.util
+import json
+import resource
+import signal
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data" / "cmu_hotel_small"
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_spectral_baselines",
+                                                  ROOT / "bench" / "spectral_baselines.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _args(path):
+    return ["--data", str(DATA), "--frames", "6", "--graphs", "ring2", "--descriptors", "given",
+            "--json", str(path)]
+
+
+def test_json_is_saved(tmp_path, capsys):
+    path = tmp_path / "records.json"
+    assert _bench().main(_args(path)) == 0
+    assert json.loads(path.read_text())["records"]
+
+
+def test_a_write_that_fails_keeps_the_previous_file(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "records.json"
+    previous = json.dumps({"seed": 0, "records": list(range(1000))})
+    path.write_text(previous)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    getrusage = resource.getrusage
+
+    def getrusage_then_disk_full(who):
+        # read just before the file is saved: from here on no file of this process may grow
+        # past 200 bytes (EFBIG), the write fails part-way, as on a full disk
+        usage = getrusage(who)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200, hard))
+        return usage
+
+    monkeypatch.setattr(resource, "getrusage", getrusage_then_disk_full)
+    try:
+        with pytest.raises(OSError):
+            _bench().main(_args(path))
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+    assert path.read_text() == previous
+    assert [p.name for p in tmp_path.iterdir()] == ["records.json"]
