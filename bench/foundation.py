@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
+from pipeline.errors import InputError  # noqa: E402
 from pipeline.matching.features import extract_all  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -84,10 +85,17 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
-    w, h = (int(v) for v in args.size.lower().split("x"))
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        ap.error(f"--size {args.size!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480")
 
     load_before = os.getloadavg()
-    results = [bench_method(m, args, (w, h)) for m in args.methods.split(",")]
+    try:
+        results = [bench_method(m, args, (w, h)) for m in args.methods.split(",")]
+    except InputError as exc:  # a formation, size or feature method the pipeline refuses
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     load_after = os.getloadavg()
     print(f"\nformation {args.formation}, seed {args.seed}, {w}x{h}, at most {args.max_features} "
           f"features, median of {args.repeat} runs (min in brackets), {os.cpu_count()} cores, "

@@ -1,0 +1,41 @@
+"""bench/foundation.py: a size, formation or feature method it cannot run is a one-line error
+with exit status 2, not a traceback, and no results file is written."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_foundation",
+                                                  ROOT / "bench" / "foundation.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("args", [["--size", "160"], ["--size", "axb"]])
+def test_a_size_that_is_not_width_x_height_is_refused(tmp_path, capsys, args):
+    out = tmp_path / "found"
+    with pytest.raises(SystemExit) as exc:
+        _bench().main(args + ["--repeat", "1", "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "expected WIDTHxHEIGHT" in err and "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--methods", "bogus"], "unknown feature method 'bogus'"),
+    (["--formation", "zz"], "unknown formation 'zz'"),
+])
+def test_a_method_or_formation_the_pipeline_refuses_is_named(tmp_path, capsys, args, message):
+    out = tmp_path / "found"
+    assert _bench().main(args + ["--size", "160x120", "--max-features", "50", "--repeat", "1",
+                                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {message}") and "Traceback" not in err
+    assert not out.exists()
