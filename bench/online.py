@@ -148,6 +148,27 @@ def one(robots: int, args) -> dict:
     return {"summary": summary, "steps": steps}
 
 
+def _previous(out: Path) -> dict:
+    """The results.json already in ``out`` (``{"runs": []}`` if none); InputError if it is not
+    one this bench wrote, so it is neither extended wrongly nor replaced."""
+    from pipeline.errors import InputError
+
+    path = out / "results.json"
+    if not path.exists():
+        return {"runs": []}
+    try:
+        results = json.loads(path.read_text())
+    except (ValueError, OSError) as exc:
+        raise InputError(f"{path}: not readable as this bench's results ({exc}); move it away "
+                         "or give another --out") from None
+    if not (isinstance(results, dict) and isinstance(results.get("runs", []), list)
+            and all(isinstance(r, dict) and isinstance(r.get("summary"), dict)
+                    and "robots" in r["summary"] for r in results.get("runs", []))):
+        raise InputError(f"{path}: not this bench's results (a 'runs' list of entries with a "
+                         "'summary'); move it away or give another --out")
+    return results
+
+
 def main(argv=None) -> int:
     """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
     one-line error naming it, exit status 2, as the command line's."""
@@ -205,14 +226,13 @@ def _main(argv=None) -> int:
     args = ap.parse_args(argv)
     config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
     out = Path(args.out)
+    _previous(out)  # a results.json this bench cannot extend is refused before the runs
     for n in args.robots:
         r = one(n, args)
         r["config"] = config
         # each formation size replaces its own entry of the results.json found at the time of
         # writing, so sizes can be run by separate invocations (each keeps its options)
-        results = {"runs": []}
-        if (out / "results.json").exists():
-            results = json.loads((out / "results.json").read_text())
+        results = _previous(out)
         results["runs"] = sorted([x for x in results.get("runs", [])
                                   if x["summary"]["robots"] != n] + [r],
                                  key=lambda x: x["summary"]["robots"])
