@@ -12,8 +12,10 @@ cameras and :data:`DENSE_FEATURES` features in all, or at most
 ``DENSE_PER_LINK_END`` features per link end. Beyond that, cameras are renumbered to the ones
 that appear in a link or a comm edge and features, per camera, to the ones that appear in a
 link, both in increasing order. Every order the algorithms use (camera ids, global feature
-ids) is kept, so the links cut, their reasons, rounds and cases are the same either way; only
-the robots' memory figures follow the compact layout. Results are per link, so nothing needs
+ids) is kept, so Alg. 1's cuts, reasons, rounds and cases are the same either way; the merge
+rules (sync, evidence) order links of equal evidence by a hash of their global ids
+(:func:`pipeline.consistency.keys.tie_key`), which renumbering changes, so ``resolve`` always
+runs on the compact layout (one layout however the ids are spelled, on every transport). Results are per link, so nothing needs
 mapping back except robot ids in the fault report (:meth:`CompactIds.robot_ids`).
 """
 

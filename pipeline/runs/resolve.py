@@ -90,9 +90,12 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if comm_graph_csv is not None:
         edges = read_comm_graph(comm_graph_csv)
         n_cams = int(edges.max(initial=-1)) + 1
-    # ids as given, or made compact when sparse (pipeline.inputs.compact): memory follows the
-    # links; always compact where each robot is a process (no process for an id without links)
-    force = True if getattr(get_transport(transport).load(), "COMPACT_IDS", False) else None
+    # always the compact layout (pipeline.inputs.compact): memory follows the links, and the
+    # merge rules (sync, evidence) order links of equal evidence by a hash of their global
+    # feature ids, so one layout whatever the ids as given keeps the cuts the same however the
+    # ids are spelled and on every transport (a process team runs on compact ids: no process
+    # for an id without links)
+    force = True
     ids = compact_ids(links, edges, n_cameras=n_cams, force=force)
     n = int(ids.cameras.max(initial=-1)) + 1
     robots = len(ids.features_per_camera)  # the cameras of the run (compact ids)
