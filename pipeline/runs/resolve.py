@@ -119,7 +119,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         ids = compact_ids(links, edges, n_cameras=n_cams, force=force)
     m, run_links, run_edges = ids.features_per_camera, ids.links, ids.edges
     if len(run_links):
-        check_team_size(transport, len(m), "cameras in the links file")
+        check_team_size(transport, len(m), "cameras in the links file" if edges is None
+                        else "cameras in the links file and the comm graph")
     # the rule that will run: on a faulty network a rule that is not fault-tolerant gives way
     # to the fault-tolerant Alg. 1, whose detection is what must fit
     faulty = faults is not None and faults.any
