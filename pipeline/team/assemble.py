@@ -173,7 +173,9 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         for k in h["run"].get("lost_neighbours", []):
             lost_by.setdefault(int(k), []).append(int(i))
     faults = dict(
-        drop_probability=float(team.options.get("drop_prob", 0.0)), switching_topology=False,
+        # the highest loss any robot injects (a robot's own option may set it alone)
+        drop_probability=max(float(team.options_for(i).get("drop_prob", 0.0) or 0.0)
+                             for i in range(n)), switching_topology=False,
         dropped=int(sum(h["counters"]["dropped"] for h in heads.values())),
         crashed={int(k): None for k in killed},
         crashes_not_reached={},
