@@ -11,7 +11,8 @@ promise, or keep it only by cutting everything; a run must then not look like a 
 - ``warnings`` — a list of ``{"code", "message"}``: ``not-conflict-free``,
   ``all-links-cut`` (every input link was cut), ``robots-lost-without-crash`` (robots were
   declared lost from silence although they never crashed: the message loss defeated the
-  timeouts), ``no-features`` (images where no feature was found, named).
+  timeouts; over zenoh, robot processes that ran to their end but were written off by a
+  neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named).
 
 :func:`exit_status` prints them on stderr and gives the exit code. The rule: ``3`` when the
 result is not conflict-free (it is still written, and flagged), else ``0``; warnings alone do
@@ -55,7 +56,9 @@ def flag_result(report: dict, names: list[str] | None = None,
     """
     warnings = []
     after = report.get("after") or {}
-    faults = report.get("faults") or {}
+    # a team run of processes (zenoh) keeps its faults beside the stage's other details
+    faults = (report.get("faults")
+              or ((report.get("resolution") or {}).get("details") or {}).get("faults") or {})
     left = int(after.get("conflictive_sets") or 0)
     if left:
         report["conflict_free"] = False
@@ -77,13 +80,22 @@ def flag_result(report: dict, names: list[str] | None = None,
     if total and kept == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
                                                   "cut; the result holds no association"))
-    false_lost = sorted(set(faults.get("robots_lost", {})) - set(faults.get("crashed", {})),
-                        key=int)
+    gone = {str(k) for k in faults.get("crashed", {})}
+    team = report.get("team") or {}
+    if isinstance(team.get("robots"), dict):  # a team of processes: those without a result
+        gone |= {str(k) for k in team.get("lost") or []}
+        ran = {str(k) for k, v in team["robots"].items() if isinstance(v, dict) and "rounds" in v}
+        gone |= {str(k) for k in faults.get("robots_lost", {})} - ran
+    false_lost = sorted({str(k) for k in faults.get("robots_lost", {})} - gone, key=int)
     if false_lost:
+        dropped = faults.get("messages_dropped", faults.get("dropped"))
+        why = (f"{dropped} messages dropped" if "robots" not in team else
+               f"{dropped} messages dropped; they ran to their end, written off by a silent or "
+               "cut-off neighbour or a round limit: each robot's counters name why")
         warnings.append(_warning(
             "robots-lost-without-crash",
             f"robot(s) {', '.join(false_lost)} were declared lost by their neighbours although "
-            f"they never crashed ({faults.get('messages_dropped')} messages dropped); "
+            f"they never crashed ({why}); "
             f"{faults.get('links_cut_robot_lost')} link(s) were cut as robot-lost"))
     m = report.get("features_per_camera")
     if m is not None:

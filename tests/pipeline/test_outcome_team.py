@@ -1,0 +1,29 @@
+"""flag_result on the report of a team of robot processes (zenoh): a robot written off
+while it ran to its end is warned of; a robot that died is not (pipeline.outcome)."""
+
+from pipeline.outcome import flag_result
+
+RAN = {"rounds": 18, "messages": 10}
+
+
+def _team_report(robots, lost=None):
+    faults = {"dropped": 0, "crashed": {}, "robots_lost": {"1": [0, 2]},
+              "links_cut_robot_lost": 0}
+    team = {"transport": "zenoh", "robots": robots}
+    if lost is not None:
+        team["lost"] = lost
+    return {"before": {"links": 40}, "after": {"links": 30, "conflictive_sets": 0},
+            "resolution": {"details": {"faults": faults}}, "team": team}
+
+
+def test_a_robot_written_off_although_it_ran_to_its_end_is_warned_of():
+    report = flag_result(_team_report({"0": RAN, "1": RAN, "2": RAN}))
+    assert [w["code"] for w in report["warnings"]] == ["robots-lost-without-crash"]
+    assert "robot(s) 1 " in report["warnings"][0]["message"]
+    assert "conflict_free" not in report
+
+
+def test_a_robot_that_died_or_never_published_is_no_false_loss():
+    killed = {"result": None, "exit_code": -9, "killed": False, "started": True}
+    assert "warnings" not in flag_result(_team_report({"0": RAN, "1": killed, "2": RAN}))
+    assert "warnings" not in flag_result(_team_report({"0": RAN, "2": RAN}, lost=[1]))
