@@ -34,7 +34,13 @@ Cases
       ``resolve`` command on the links written as a file, as a user runs it: its wall time and
       peak RSS in ``resolve_wall_s``, ``resolve_peak_rss_mb``), the rules and the cheap
       baselines (``--team-methods`` adds ``spectral_sync`` or ``clear``: minutes from a few hundred
-      cameras on, their sparse eigenproblems converge slowly on a ring).
+      cameras on, their sparse eigenproblems converge slowly on a ring). ``--team-seeds``
+      (default 0) draws other swaps and qualities. The qualities are drawn independently of
+      whether a match is right, so they carry no evidence here; each team row prints the sum
+      of the ``sync`` rule's link weights over the input links the truth and each method's
+      association join (the objective its greedy merge climbs) and how well the quality
+      separates the links the triangles confirm from those they refute (``--evidence-check``
+      prints both for the labelled and warped cases too).
     * Graffiti (``--graffiti DIR``, default ``../shared/data/graffiti``; ``''`` skips it) on
       the same graphs, matched as ``run-images`` matches it at its defaults, truth from the
       data set's homographies at 2 px; the oracle too.
@@ -100,8 +106,10 @@ class Case:
     projections); without it every rule reads the links' quality."""
 
     def __init__(self, m, edges, links, *, truth_id=None, true_pairs=None, link_good=None,
-                 evidence=None):
+                 evidence=None, weights=None):
         self.m, self.edges, self.links = m, edges, links
+        self.weights = weights  # each link's weight as the sync robots compute it, or None
+        self.quality_check: dict = {}  # sync_evidence's test of the quality's information
         if link_good is None and truth_id is not None:
             off = np.concatenate([[0], np.cumsum(m)])
             link_good = truth_id[off[links.cam_i] + links.feat_i] == \
@@ -117,6 +125,8 @@ class Case:
             out.update(good_cut=int((~kept & good).sum()), spurious_cut=int((~kept & ~good).sum()))
         if self.truth_id is not None:
             out["links_split"] = links_split(self.m, self.links, kept)
+        if self.weights is not None:
+            out["evidence_kept"] = evidence_kept(self.m, self.links, kept, self.weights)
         return out
 
 
@@ -369,6 +379,61 @@ def links_split(m, links: Links, kept: np.ndarray) -> int:
     return int((comp[a] != comp[b]).sum())
 
 
+def evidence_kept(m, links: Links, kept: np.ndarray, w: np.ndarray) -> float:
+    """Sum of the weights ``w`` of the input links whose ends the association (the closure of
+    the kept links) joins: the objective the greedy merge of ``sync`` climbs (each link's
+    ``w`` read as its log-odds of being right, an association keeping the links it joins)."""
+    from pipeline.association import AssociationGraph, camera_offsets
+
+    comp = AssociationGraph(m, links.subset(kept)).components()
+    off = camera_offsets(m)
+    joined = comp[off[links.cam_i] + links.feat_i] == comp[off[links.cam_j] + links.feat_j]
+    return float(np.sum(w[joined]))
+
+
+def sync_evidence(m, links: Links) -> tuple[np.ndarray, dict]:
+    """Each input link's weight ``w`` as the ``sync`` robots compute it (their support round
+    on the simulator: local evidence plus the cycles' support), in the input's order, and how
+    well the local evidence ``λ`` (the quality's log-odds) tells the links the cycles confirm
+    (a triangle closes over them) from those they refute (third cameras shared, no triangle):
+    the area under the ROC curve of ``λ`` between the two groups (0.5: no information) and the
+    one-sided Mann-Whitney p-value."""
+    from pipeline.commgraph import comm_edges_for
+    from pipeline.consistency.engines.driver import build_robots
+    from pipeline.consistency.engines.sync_batched import run_sync_batched
+    from pipeline.consistency.sync import equip_sync
+    from pipeline.matching.link_evidence import ratio_llr
+    from pipeline.transport.simulated import Network
+
+    robots, index = build_robots(m, links)
+    lam = ratio_llr(1.0 - links.quality)
+    for rb, li in zip(robots, index, strict=True):
+        equip_sync(rb, lam[li])
+    run_sync_batched(robots, Network(len(m), comm_edges_for(m, links)))
+    w = np.empty(len(links))
+    for rb, li in zip(robots, index, strict=True):
+        w[li] = rb.sync.w
+    from scipy.stats import mannwhitneyu
+
+    from pipeline.association import camera_offsets
+    from pipeline.consistency.cycles import shared_cameras
+    from pipeline.consistency.evidence import triangle_support
+
+    off = camera_offsets(m)
+    a, b = off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
+    cam_of = lambda ids: np.searchsorted(off, ids, side="right") - 1  # noqa: E731
+    tau = triangle_support(a, b, cam_of)
+    shared = shared_cameras(a, b, links.cam_i, links.cam_j)
+
+    confirmed, refuted = lam[tau >= 1], lam[(tau == 0) & (shared >= 1)]
+    check = dict(confirmed=int(confirmed.size), refuted=int(refuted.size))
+    if confirmed.size and refuted.size:
+        u = mannwhitneyu(confirmed, refuted, alternative="greater")
+        check.update(auc=float(u.statistic) / (confirmed.size * refuted.size),
+                     p=float(u.pvalue))
+    return w, check
+
+
 def pair_scores(m, kept: Links, true_pairs) -> dict:
     """Pairwise P/R/F1 of the closure of ``kept`` against listed true pairs; consistency."""
     from pipeline.consistency.centralized import is_conflict_free
@@ -542,7 +607,19 @@ def run_case(title: str, case: Case, methods, base: dict, a, records: list) -> N
     if case.truth_id is not None:
         split = ", ".join(f"{r['method']} {r['links_split']}" for r in rows if "links_split" in r)
         print(f"input links separated: the truth {int((~case.link_good).sum())} (the spurious "
-              f"ones); {split}\n", flush=True)
+              f"ones); {split}", flush=True)
+    if case.weights is not None:
+        truth = float(np.sum(case.weights[case.link_good]))
+        ev = ", ".join(f"{r['method']} {r['evidence_kept']:.2f}" for r in rows
+                       if "evidence_kept" in r)
+        print(f"evidence of the input links each association joins (sum of the sync rule's "
+              f"weights): the truth {truth:.2f}; {ev}", flush=True)
+    qc = case.quality_check
+    if "auc" in qc:
+        print(f"quality as evidence: AUC {qc['auc']:.3f} (one-sided p {qc['p']:.1e}) of the "
+              f"quality's log-odds between the {qc['confirmed']} links a triangle confirms "
+              f"and the {qc['refuted']} the shared third cameras refute", flush=True)
+    print(flush=True)
 
 
 def main(argv=None) -> int:
@@ -567,6 +644,13 @@ def main(argv=None) -> int:
     p.add_argument("--warped-hide", type=float, nargs="*", default=[0.0, 0.25],
                    help="fractions of each warped image's landmarks hidden (nan rows)")
     p.add_argument("--team", type=int, nargs="*", default=[300])
+    p.add_argument("--evidence-check", action="store_true",
+                   help="on the labelled and warped cases too (always on the team rows): the "
+                        "sum of the sync rule's weights over the input links each association "
+                        "joins, and how well the quality tells the links the triangles "
+                        "confirm from those they refute")
+    p.add_argument("--team-seeds", type=int, nargs="+", default=[0],
+                   help="seeds of the team rows (which pairs swap, the qualities drawn)")
     p.add_argument("--team-methods", nargs="+",
                    default=["resolve:sync", "sync", "evidence", "drop_conflictive_sets",
                             "quality_merge"],
@@ -590,6 +674,8 @@ def main(argv=None) -> int:
         for graph in a.graphs:
             for inputs in a.inputs:
                 case = landmark_case(a.data, frames, graph, inputs, a.shuffle_seed)
+                if a.evidence_check:
+                    case.weights, case.quality_check = sync_evidence(case.m, case.links)
                 title = f"{Path(a.data).name}, {frames} frames, {graph}, {inputs}"
                 base = dict(case="landmarks", data=Path(a.data).name, frames=frames,
                             graph=graph, inputs=inputs)
@@ -607,6 +693,8 @@ def main(argv=None) -> int:
                     for inputs in a.warped_inputs:
                         case = landmark_case(str(wdir), None, graph, inputs, a.shuffle_seed,
                                              descriptors="sift")
+                        if a.evidence_check:
+                            case.weights, case.quality_check = sync_evidence(case.m, case.links)
                         beyond = 1.0 - case.links.quality >= 1.0 - RATIO_EPS  # the clip
                         print(f"links with ratio >= 0.99 (an assignment beyond the nearest "
                               f"neighbour): {beyond.mean():.2f}, right among them "
@@ -635,9 +723,12 @@ def main(argv=None) -> int:
                      dict(case="formation", formation=formation, seed=seed, graph="formation",
                           inputs="defaults"), a, records)
     for n in a.team:
-        run_case(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap",
-                 team_case(n), a.team_methods, dict(case="team", cameras=n, graph="ring2"),
-                 a, records)
+        for seed in a.team_seeds:
+            case = team_case(n, seed=seed)
+            case.weights, case.quality_check = sync_evidence(case.m, case.links)
+            run_case(f"team of {n} cameras, ring2, 30 landmarks, 30 % of pairs with a swap, "
+                     f"seed {seed}", case, a.team_methods,
+                     dict(case="team", cameras=n, graph="ring2", team_seed=seed), a, records)
     if a.renumber:
         print("F1 under camera renumbering (--renumber " + " ".join(map(str, a.renumber)) + ")")
         print("\n".join(renumber_table(records)))
