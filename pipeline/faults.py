@@ -255,6 +255,19 @@ def add_fault_arguments(parser: argparse.ArgumentParser) -> None:
                    help="seed of the message drops and the switching topology (default 0)")
 
 
+def check_faults_for_transport(faults: FaultConfig | None, transport: str) -> None:
+    """InputError when a fault of the simulated network is asked of another transport:
+    ``--crash``, ``--delay-rounds`` and ``--switching-topology`` act in the simulator's
+    network only (a process team is disturbed by killing, freezing or cutting off its robots);
+    ``--drop-prob`` works on every transport. Checked before anything else about the faults
+    is said or done."""
+    if faults is not None and transport != "sim" and (
+            faults.crash or faults.switching_topology or faults.delay_rounds):
+        raise InputError("--crash, --delay-rounds and --switching-topology are faults of the "
+                         f"simulated network (--transport sim); over {transport}, kill a robot "
+                         "process instead; --drop-prob works on both")
+
+
 def warn_rule_under_faults(faults: FaultConfig | None, resolution: str | None) -> str | None:
     """Warn (shown even with ``--quiet``) when a fault flag makes the chosen rule give way to
     the fault-tolerant Alg. 1 (:func:`pipeline.consistency.rules.rule_for_network`: a rule that

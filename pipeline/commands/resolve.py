@@ -14,7 +14,12 @@ from pipeline.commands.options import (
     add_resolution_option,
     add_transport_option,
 )
-from pipeline.faults import add_fault_arguments, faults_from_args, warn_rule_under_faults
+from pipeline.faults import (
+    add_fault_arguments,
+    check_faults_for_transport,
+    faults_from_args,
+    warn_rule_under_faults,
+)
 
 __all__ = ["add_arguments", "run"]
 
@@ -53,6 +58,7 @@ def run(args) -> int:
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     faults = faults_from_args(args)
+    check_faults_for_transport(faults, args.transport)
     warn_rule_under_faults(faults, args.resolution)
     # every output is written before any is put in place: an error leaves none of them
     with OutputFiles(replace=args.overwrite) as outputs:

@@ -24,7 +24,12 @@ from pipeline.commands.options import (
     refuse_online_options,
 )
 from pipeline.errors import InputError
-from pipeline.faults import add_fault_arguments, faults_from_args, warn_rule_under_faults
+from pipeline.faults import (
+    add_fault_arguments,
+    check_faults_for_transport,
+    faults_from_args,
+    warn_rule_under_faults,
+)
 from pipeline.runs.formation import FormationConfig
 
 
@@ -89,6 +94,7 @@ def config_from_args(args) -> FormationConfig:
     check_team_size(args.transport, robots if robots is not None else 6, "robots")
     faults = faults_from_args(args)
     faults.check_robots(robots if robots is not None else 6)  # before the render, not after
+    check_faults_for_transport(faults, args.transport)
     warn_rule_under_faults(faults, args.resolution)
     return FormationConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                            size=size,

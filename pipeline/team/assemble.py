@@ -22,7 +22,6 @@ import numpy as np
 
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.errors import InputError
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 from pipeline.types import Links, PairMatches
 
@@ -61,6 +60,7 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
         ``--crash``, ``--delay-rounds`` or ``--switching-topology`` (faults of the simulated
         network; over Zenoh kill a robot process instead).
     """
+    from pipeline.faults import check_faults_for_transport
     from pipeline.matching.features import MERGE_RADIUS_PX
 
     opts = {"features": features,
@@ -69,10 +69,7 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
             "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius),
             "resolution": resolution, "fusion": bool(fusion), **feature_options}
     if faults is not None:
-        if faults.crash or faults.switching_topology or faults.delay_rounds:
-            raise InputError("--crash, --delay-rounds and --switching-topology are faults of "
-                             "the simulated network (--transport sim); over zenoh, kill a "
-                             "robot process instead; --drop-prob works on both")
+        check_faults_for_transport(faults, "zenoh")
         opts["drop_prob"] = float(faults.drop_prob)
         opts["fault_seed"] = int(faults.seed)
     return opts

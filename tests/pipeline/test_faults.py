@@ -258,3 +258,29 @@ def test_run_formation_crashes_before_and_during_fusion(tmp_path, capsys):
     # no warning but the one that the default rule gives way to Alg. 1 under --crash
     warned = [ln for ln in capsys.readouterr().err.lower().splitlines() if "warning" in ln]
     assert all("is not fault-tolerant: with --crash" in ln for ln in warned), warned
+
+
+@pytest.mark.parametrize("flags", [["--crash", "1@2"], ["--delay-rounds", "2"],
+                                   ["--switching-topology"]])
+def test_a_simulated_fault_over_zenoh_is_refused_before_any_warning(tmp_path, capsys, flags):
+    """It was warned that the rule gives way to Alg. 1 under the fault, then refused."""
+    from pipeline.__main__ import main
+
+    links = tmp_path / "l.csv"
+    links.write_text("0,0,1,0\n1,0,2,0\n2,0,0,1\n")
+    rc = main(["resolve", "--links", str(links), "--out", str(tmp_path / "o.csv"),
+               "--transport", "zenoh", *flags])
+    err = capsys.readouterr().err
+    assert rc == 2 and "faults of the simulated network" in err
+    assert "not fault-tolerant" not in err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_run_formation_refuses_a_simulated_fault_over_zenoh_before_any_warning(tmp_path, capsys):
+    from pipeline.__main__ import main
+
+    rc = main(["run-formation", "--transport", "zenoh", "--crash", "1@2", "--no-rerun",
+               "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "faults of the simulated network" in err
+    assert "not fault-tolerant" not in err and not (tmp_path / "run").exists()
