@@ -90,9 +90,17 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error(f"--size {args.size!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480")
 
+    from pipeline.matching.features import METHODS
+
+    methods = args.methods.split(",")
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:  # before any method runs (a bad one last ran the others first)
+        print(f"error: unknown feature method {unknown[0]!r} (--methods); choose from "
+              f"{', '.join(METHODS)}", file=sys.stderr)
+        return 2
     load_before = os.getloadavg()
     try:
-        results = [bench_method(m, args, (w, h)) for m in args.methods.split(",")]
+        results = [bench_method(m, args, (w, h)) for m in methods]
     except InputError as exc:  # a formation, size or feature method the pipeline refuses
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -225,6 +225,9 @@ def _main(argv=None) -> int:
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
     config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
+    late = [k for k in args.batch_steps or () if not 1 <= k <= args.steps]
+    if late:  # a batch step beyond the run was left out without a word
+        ap.error(f"--batch-steps {late[0]}: the run has steps 1 to {args.steps}")
     out = Path(args.out)
     _previous(out)  # a results.json this bench cannot extend is refused before the runs
     for n in args.robots:

@@ -39,3 +39,13 @@ def test_a_method_or_formation_the_pipeline_refuses_is_named(tmp_path, capsys, a
     err = capsys.readouterr().err
     assert err.startswith(f"error: {message}") and "Traceback" not in err
     assert not out.exists()
+
+
+def test_an_unknown_method_is_refused_before_the_known_ones_run(tmp_path, capsys, monkeypatch):
+    bench = _bench()
+    ran = []
+    monkeypatch.setattr(bench, "bench_method", lambda m, *a: ran.append(m))
+    out = tmp_path / "found"
+    assert bench.main(["--methods", "orb,bogus", "--size", "160x120", "--repeat", "1",
+                       "--out", str(out)]) == 2
+    assert ran == [] and "unknown feature method 'bogus'" in capsys.readouterr().err

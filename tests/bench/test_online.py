@@ -51,3 +51,13 @@ def test_sizes_run_apart_share_one_results_file(tmp_path, capsys):
                               "160x120", "--max-features", "60", "--out", str(out)]) == 0
     runs = json.loads((out / "results.json").read_text())["runs"]
     assert [r["summary"]["robots"] for r in runs] == [2, 3]
+
+
+def test_a_batch_step_beyond_the_run_is_refused(tmp_path, capsys):
+    out = tmp_path / "online"
+    with pytest.raises(SystemExit) as exc:
+        _bench().main(["--robots", "3", "--steps", "2", "--batch-steps", "7", "--size",
+                       "160x120", "--max-features", "60", "--out", str(out)])
+    assert exc.value.code == 2
+    assert "--batch-steps 7: the run has steps 1 to 2" in capsys.readouterr().err
+    assert not out.exists()
