@@ -237,6 +237,26 @@ def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> 
     return k
 
 
+def _refuse_ambiguous(path, rows, names, by_name, what: str) -> None:
+    """A file that gives some camera by its index (a token no name equals) must not hold a token
+    that is both a name and the index of another camera: names of digits (sub-folders ``10``,
+    ``2``, ``9``) would make ``0,2`` mean robot ``10`` and robot ``2`` (index 1), not indices
+    0 and 2. A file of names only, or of indices only, is read as before."""
+    tokens = [(line_no, tok) for line_no, _, toks in rows for tok in toks]
+    by_index = [(line_no, tok) for line_no, tok in tokens
+                if tok not in by_name and re.fullmatch(r"[0-9]+", tok)]
+    if not by_index:
+        return
+    for line_no, tok in tokens:
+        if tok in by_name and re.fullmatch(r"[0-9]+", tok) and int(tok) < len(names) \
+                and int(tok) != by_name[tok]:
+            raise InputError(
+                f"{path}, line {line_no}: {what} {tok!r} is ambiguous: it is the name of {what} "
+                f"{by_name[tok]} and the index of {what} {int(tok)} ({names[int(tok)]!r}), and the "
+                f"file gives {what}s by index too (line {by_index[0][0]}: {by_index[0][1]!r}); "
+                f"write every {what} by its name, or every one by its index")
+
+
 def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
                     what: str = "image") -> np.ndarray:
     """Read a communication-graph file: one edge ``cam_i,cam_j`` per line.
@@ -244,7 +264,8 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
     Format: two cameras per line separated by a comma, tab or spaces (CSV double quotes for
     names holding spaces, commas or ``#``, see :mod:`pipeline.inputs.csvfields`); each a 0-based index,
     or, when ``names`` is given, an image name (a token equal to an image name is that image,
-    otherwise it must be an index). ``#`` starts a comment; blank lines and a first line
+    otherwise it must be an index; a file that gives some image by index may not hold a token
+    that is also the name of another image: names of digits make it ambiguous). ``#`` starts a comment; blank lines and a first line
     ``cam_i,cam_j`` are skipped. A line repeating an edge (either orientation) is merged.
 
     Parameters
@@ -270,7 +291,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
     path = Path(path)
     require_input_file(path, "comm graph file")
     by_name = None if names is None else {name: k for k, name in enumerate(names)}
-    edges = []
+    rows = []
     header_allowed = True
     for line_no, raw in text_lines(path, "graph file"):
         tokens = line_fields(raw, f"{path}, line {line_no}")
@@ -283,6 +304,11 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
         if len(tokens) != 2:
             raise InputError(f"{path}, line {line_no}: {raw.strip()!r} has {len(tokens)} columns; "
                              "it must hold two cameras 'cam_i,cam_j' (indices or image names)")
+        rows.append((line_no, raw, tokens))
+    if by_name is not None:
+        _refuse_ambiguous(path, rows, names, by_name, what)
+    edges = []
+    for line_no, raw, tokens in rows:
         i, j = (_camera(path, line_no, col, tok, names, by_name, what)
                 for col, tok in zip(("cam_i", "cam_j"), tokens, strict=True))
         if i == j:

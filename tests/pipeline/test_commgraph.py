@@ -180,3 +180,18 @@ def test_a_graph_file_of_robots_names_robots_in_its_errors(tmp_path):
         comm_graph(f, ["r0", "r1", "r2"], what="robot")
     with pytest.raises(InputError, match="image 'r5' is not one of the 3 images"):
         comm_graph(f, ["r0", "r1", "r2"])
+
+
+def test_names_of_digits_mixed_with_indices_are_refused_as_ambiguous(tmp_path):
+    names = ["10", "2", "9"]  # sub-folders of robots in name order
+    g = tmp_path / "g.txt"
+    g.write_text("0,2\n")  # '0' an index; '2' the name of robot 1 and the index of robot 2
+    with pytest.raises(InputError, match=r"robot '2' is ambiguous: it is the name of robot 1 "
+                                         r"and the index of robot 2 \('9'\)"):
+        read_comm_graph(g, names, what="robot")
+    g.write_text("10,2\n2,9\n")  # names only
+    assert read_comm_graph(g, names, what="robot").tolist() == [[0, 1], [1, 2]]
+    g.write_text("0,1\n")  # indices only, none of them a name
+    assert read_comm_graph(g, names, what="robot").tolist() == [[0, 1]]
+    # names equal to their own index are no ambiguity
+    assert read_comm_graph(g, ["0", "1", "x"], what="robot").tolist() == [[0, 1]]
