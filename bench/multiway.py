@@ -622,6 +622,14 @@ def run_case(title: str, case: Case, methods, base: dict, a, records: list) -> N
     print(flush=True)
 
 
+def machine(load_at_start: float) -> dict:
+    """What a results file says of the machine: cores, Python, the load average at the start
+    of the bench and now (its end)."""
+    return {"cpus": os.cpu_count(), "python": platform.python_version(),
+            "load_average_at_start": round(load_at_start, 2),
+            "load_average_at_end": round(os.getloadavg()[0], 2)}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "cmu_hotel"))
@@ -746,10 +754,7 @@ def main(argv=None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "results.json", {
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "load_average_at_start": round(load, 2),
-                    "load_average_at_end": round(os.getloadavg()[0], 2)},
-        "args": vars(a), "records": records, "sparse_recall": ratios,
+        "machine": machine(load), "args": vars(a), "records": records, "sparse_recall": ratios,
         "renumbering": renumber_table(records)})
     print(f"saved {out / 'results.json'} (load average {load:.1f} at start, "
           f"{os.getloadavg()[0]:.1f} at end)")

@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-online-cuts"
@@ -108,19 +109,10 @@ def one(args, hold: int) -> dict:
     }
 
 
+@one_line_errors
 def main(argv=None) -> int:
     """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
     one-line error naming it, exit status 2, as the command line's."""
-    from pipeline.errors import InputError
-
-    try:
-        return _main(argv)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-def _main(argv=None) -> int:
     from pipeline.consistency.engines.online import default_hold
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from collections import defaultdict
@@ -153,11 +152,8 @@ def main(argv=None) -> int:
                   f"{check.get('auc', float('nan')):.3f}", flush=True)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "results.json", {
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "load_average_at_start": round(load, 2),
-                    "load_average_at_end": round(os.getloadavg()[0], 2)},
-        "args": vars(a), "records": records})
+    write_json_atomic(out / "results.json", {"machine": multiway.machine(load), "args": vars(a),
+                                             "records": records})
     print(f"saved {out / 'results.json'} (load average {load:.1f} at start, "
           f"{os.getloadavg()[0]:.1f} at end)")
     return 0

@@ -2,19 +2,16 @@
 before any work with a one-line message and exit status 2, instead of a traceback or a
 results.json of nothing written over the previous one."""
 
-import importlib.util
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench(name):
-    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "bench" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench(name)
 
 
 @pytest.mark.parametrize("name, args, message", [

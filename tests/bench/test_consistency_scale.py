@@ -5,16 +5,13 @@ import importlib.util
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_consistency_scale",
-                                                  ROOT / "bench" / "consistency_scale.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("consistency_scale")
 
 
 @pytest.mark.parametrize("args, message", [

@@ -1,20 +1,16 @@
 """bench/foundation.py: a size, formation or feature method it cannot run is a one-line error
 with exit status 2, not a traceback, and no results file is written."""
 
-import importlib.util
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_foundation",
-                                                  ROOT / "bench" / "foundation.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("foundation")
 
 
 @pytest.mark.parametrize("args", [["--size", "160"], ["--size", "axb"]])

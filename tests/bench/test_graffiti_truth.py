@@ -1,6 +1,5 @@
 """bench/graffiti_truth.py: a failed write of results.json leaves the previous one whole."""
 
-import importlib.util
 import json
 import resource
 import shutil
@@ -9,17 +8,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "graffiti_small"
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_graffiti_truth",
-                                                  ROOT / "bench" / "graffiti_truth.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("graffiti_truth")
 
 
 def test_a_write_that_fails_keeps_the_previous_results(tmp_path, monkeypatch):

@@ -1,19 +1,16 @@
 """bench/online.py: a value the online stage refuses is a one-line error, not a traceback."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_online", ROOT / "bench" / "online.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("online")
 
 
 @pytest.mark.parametrize("args, named", [

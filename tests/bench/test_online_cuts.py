@@ -1,18 +1,15 @@
 """bench/online_cuts.py: its counting wrapper of the history check keeps the engine's signature."""
 
-import importlib.util
 import json
 from pathlib import Path
+
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_online_cuts",
-                                                  ROOT / "bench" / "online_cuts.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("online_cuts")
 
 
 def test_a_small_run_saves_one_record_per_hold(tmp_path, capsys):

@@ -1,23 +1,19 @@
 """bench/spectral_baselines.py --json: a failed write leaves the previous file whole."""
 
-import importlib.util
 import json
 import resource
 import signal
 from pathlib import Path
 
 import pytest
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "cmu_hotel_small"
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_spectral_baselines",
-                                                  ROOT / "bench" / "spectral_baselines.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("spectral_baselines")
 
 
 def _args(path):

@@ -1,22 +1,16 @@
 """bench/team_moves.py: the central split-and-re-merge move after ``sync`` on the team."""
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
+from benchload import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():
-    sys.path.insert(0, str(ROOT / "bench"))
-    spec = importlib.util.spec_from_file_location("bench_team_moves",
-                                                  ROOT / "bench" / "team_moves.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("team_moves")
 
 
 def test_the_move_undoes_a_crossing_and_stays_consistent():

@@ -1,0 +1,18 @@
+"""Load a bench script, ``bench/NAME.py``, as a module (the benches are scripts, not a package)."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def load_bench(name: str):
+    """``bench/NAME.py`` imported afresh as ``bench_NAME``; ``bench/`` goes on ``sys.path``
+    (a bench may import another, as ``team_moves`` imports ``multiway``)."""
+    if str(ROOT / "bench") not in sys.path:
+        sys.path.insert(0, str(ROOT / "bench"))
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "bench" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
