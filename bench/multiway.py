@@ -394,10 +394,10 @@ def evidence_kept(m, links: Links, kept: np.ndarray, w: np.ndarray) -> float:
 def sync_evidence(m, links: Links) -> tuple[np.ndarray, dict]:
     """Each input link's weight ``w`` as the ``sync`` robots compute it (their support round
     on the simulator: local evidence plus the cycles' support), in the input's order, and how
-    well the local evidence ``λ`` (the quality's log-odds) tells the links the cycles confirm
-    (a triangle closes over them) from those they refute (third cameras shared, no triangle):
-    the area under the ROC curve of ``λ`` between the two groups (0.5: no information) and the
-    one-sided Mann-Whitney p-value."""
+    well the quality tells the links the cycles confirm from those they refute
+    (:func:`pipeline.evaluation.quality.quality_evidence`: the area under the ROC curve, 0.5
+    when it tells nothing, and the one-sided Mann-Whitney p-value; the same for the quality's
+    log-odds ``λ``, a strictly increasing function of it)."""
     from pipeline.commgraph import comm_edges_for
     from pipeline.consistency.engines.driver import build_robots
     from pipeline.consistency.engines.sync_batched import run_sync_batched
@@ -413,24 +413,12 @@ def sync_evidence(m, links: Links) -> tuple[np.ndarray, dict]:
     w = np.empty(len(links))
     for rb, li in zip(robots, index, strict=True):
         w[li] = rb.sync.w
-    from scipy.stats import mannwhitneyu
+    from pipeline.evaluation.quality import quality_evidence
 
-    from pipeline.association import camera_offsets
-    from pipeline.consistency.cycles import shared_cameras
-    from pipeline.consistency.evidence import triangle_support
-
-    off = camera_offsets(m)
-    a, b = off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
-    cam_of = lambda ids: np.searchsorted(off, ids, side="right") - 1  # noqa: E731
-    tau = triangle_support(a, b, cam_of)
-    shared = shared_cameras(a, b, links.cam_i, links.cam_j)
-
-    confirmed, refuted = lam[tau >= 1], lam[(tau == 0) & (shared >= 1)]
-    check = dict(confirmed=int(confirmed.size), refuted=int(refuted.size))
-    if confirmed.size and refuted.size:
-        u = mannwhitneyu(confirmed, refuted, alternative="greater")
-        check.update(auc=float(u.statistic) / (confirmed.size * refuted.size),
-                     p=float(u.pvalue))
+    qe = quality_evidence(m, links)
+    check = dict(confirmed=qe["confirmed"], refuted=qe["refuted"])
+    if "auc" in qe:
+        check.update(auc=qe["auc"], p=qe["p_higher"])
     return w, check
 
 

@@ -12,7 +12,9 @@ promise, or keep it only by cutting everything; a run must then not look like a 
   ``all-links-cut`` (every input link was cut), ``robots-lost-without-crash`` (robots were
   declared lost from silence although they never crashed: the message loss defeated the
   timeouts; over zenoh, robot processes that ran to their end but were written off by a
-  neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named).
+  neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named),
+  ``quality-reversed`` (``resolve``: the links the triangles refute carry the higher quality,
+  :mod:`pipeline.evaluation.quality`).
 
 :func:`exit_status` prints them on stderr and gives the exit code. The rule: ``3`` when the
 result is not conflict-free (it is still written, and flagged), else ``0``; warnings alone do
@@ -33,6 +35,10 @@ EXIT_NOT_CONFLICT_FREE = 3
 def _warning(code: str, message: str) -> dict:
     return {"code": code, "message": message}
 
+
+#: one-sided p-value under which a report's ``quality_evidence`` (the links' quality against
+#: their cycles, :mod:`pipeline.evaluation.quality`) is warned of as reversed
+REVERSED_P = 1e-3
 
 #: why an input may hold no link, by default (runs that match images)
 NO_LINKS_WHY = "images too small, too few features, or no overlap between neighbours"
@@ -97,6 +103,15 @@ def flag_result(report: dict, names: list[str] | None = None,
             f"robot(s) {', '.join(false_lost)} were declared lost by their neighbours although "
             f"they never crashed ({why}); "
             f"{faults.get('links_cut_robot_lost')} link(s) were cut as robot-lost"))
+    qe = report.get("quality_evidence") or {}
+    if qe.get("p_reversed") is not None and qe["p_reversed"] < REVERSED_P:
+        warnings.append(_warning(
+            "quality-reversed",
+            f"the links' quality looks reversed: the {qe['refuted']} links the triangles refute "
+            f"have higher quality than the {qe['confirmed']} they confirm (AUC "
+            f"{qe['auc']:.2f}, one-sided p {qe['p_reversed']:.1e}); the merge rules read quality "
+            "as growing with confidence (e.g. 1 - Lowe ratio): give a similarity, not a "
+            "distance"))
     m = report.get("features_per_camera")
     if m is not None:
         empty = [k for k, v in enumerate(m) if int(v) == 0]

@@ -167,6 +167,10 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                                           "closing_rounds", "messages", "bytes",
                                           "max_robot_memory_bytes") if k in st},
     }
+    from pipeline.evaluation.quality import quality_evidence
+
+    # does the quality carry evidence? (the merge rules weigh it; a reversed one is warned of)
+    summary["quality_evidence"] = quality_evidence(m, run_links)
     if baselines:
         from pipeline.evaluation.report import baselines_beside
         from pipeline.progress import StageTimer

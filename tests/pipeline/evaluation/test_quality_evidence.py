@@ -1,0 +1,72 @@
+"""The links' quality against their own cycles: informative, reversed, constant."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.evaluation.quality import quality_evidence
+from pipeline.types import Links
+
+
+def _ring2(seed: int, n: int = 40, k: int = 10, p_swap: float = 0.4):
+    """``n`` cameras on a ring2 graph, ``k`` landmarks each; a share of the pairs swap two
+    matches. Returns features per camera, links and which links are right."""
+    rng = np.random.default_rng(seed)
+    perm = [rng.permutation(k) for _ in range(n)]
+    inv = [np.argsort(p) for p in perm]
+    rows, good = [], []
+    for i in range(n):
+        for d in (1, 2):
+            j = (i + d) % n
+            tgt = np.arange(k)
+            if rng.random() < p_swap:
+                a, b = rng.choice(k, 2, replace=False)
+                tgt[a], tgt[b] = tgt[b], tgt[a]
+            for lm in range(k):
+                rows.append((i, int(inv[i][lm]), j, int(inv[j][tgt[lm]])))
+                good.append(tgt[lm] == lm)
+    ci, fi, cj, fj = (np.array(c) for c in zip(*rows, strict=True))
+    return np.full(n, k), ci, fi, cj, fj, np.array(good)
+
+
+def test_a_quality_that_tracks_the_truth_is_higher_on_confirmed_links_and_its_reverse_lower():
+    m, ci, fi, cj, fj, good = _ring2(0)
+    rng = np.random.default_rng(1)
+    q = np.where(good, rng.uniform(0.4, 0.9, good.size), rng.uniform(0.1, 0.6, good.size))
+    ok = quality_evidence(m, Links(ci, fi, cj, fj, q))
+    rev = quality_evidence(m, Links(ci, fi, cj, fj, 1.0 - q))
+    assert ok["confirmed"] > 0 and ok["refuted"] > 0 and not ok["constant"]
+    assert ok["auc"] > 0.6 and ok["p_higher"] < 1e-3 and ok["p_reversed"] > 0.5
+    assert rev["auc"] == pytest.approx(1.0 - ok["auc"], abs=1e-12)
+    assert rev["p_reversed"] == pytest.approx(ok["p_higher"], rel=1e-9)
+    assert (rev["confirmed"], rev["refuted"]) == (ok["confirmed"], ok["refuted"])
+
+
+def test_a_constant_quality_or_no_link_is_not_tested():
+    m, ci, fi, cj, fj, _ = _ring2(2)
+    c = quality_evidence(m, Links(ci, fi, cj, fj, np.full(ci.size, 0.5)))
+    assert c["constant"] and "auc" not in c and c["confirmed"] > 0
+    empty = quality_evidence([3, 3], Links([], [], [], []))
+    assert empty == {"confirmed": 0, "refuted": 0, "constant": True}
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_resolve_warns_of_a_reversed_quality_only(tmp_path, capsys, reverse):
+    from pipeline.__main__ import main
+
+    m, ci, fi, cj, fj, good = _ring2(3)
+    rng = np.random.default_rng(4)
+    q = np.where(good, rng.uniform(0.4, 0.9, good.size), rng.uniform(0.1, 0.6, good.size))
+    q = 1.0 - q if reverse else q
+    src = tmp_path / "links.csv"
+    src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
+                           for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
+    rep = tmp_path / "rep.json"
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(rep), "-q"]) == 0
+    report = json.loads(rep.read_text())
+    codes = [w["code"] for w in report.get("warnings", [])]
+    assert ("quality-reversed" in codes) == reverse
+    assert (report["quality_evidence"]["auc"] < 0.5) == reverse
+    assert ("looks reversed" in capsys.readouterr().err) == reverse
