@@ -48,7 +48,7 @@ def test_a_constant_quality_or_no_link_is_not_tested():
     c = quality_evidence(m, Links(ci, fi, cj, fj, np.full(ci.size, 0.5)))
     assert c["constant"] and "auc" not in c and c["confirmed"] > 0
     empty = quality_evidence([3, 3], Links([], [], [], []))
-    assert empty == {"confirmed": 0, "refuted": 0, "constant": True}
+    assert empty == {"checked": 0, "confirmed": 0, "refuted": 0, "constant": True}
 
 
 @pytest.mark.parametrize("reverse", [False, True])
@@ -70,3 +70,16 @@ def test_resolve_warns_of_a_reversed_quality_only(tmp_path, capsys, reverse):
     assert ("quality-reversed" in codes) == reverse
     assert (report["quality_evidence"]["auc"] < 0.5) == reverse
     assert ("looks reversed" in capsys.readouterr().err) == reverse
+
+
+def test_a_large_input_is_checked_on_a_fixed_draw_of_its_links():
+    m, ci, fi, cj, fj, good = _ring2(5)
+    q = np.where(good, 0.8, 0.3)
+    links = Links(ci, fi, cj, fj, q)
+    whole = quality_evidence(m, links)
+    assert whole["checked"] == len(links)
+    few = quality_evidence(m, links, max_checked=200)
+    assert few["checked"] == 200 and few == quality_evidence(m, links, max_checked=200)
+    # the entries' budget (each link costs its ends' degrees, 4 + 4 on a ring2) bounds it too
+    assert quality_evidence(m, links, max_entries=8 * 50)["checked"] == 50
+    assert few["confirmed"] + few["refuted"] <= 200 and few["p_higher"] < 1e-3
