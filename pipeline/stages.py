@@ -26,7 +26,7 @@ from pipeline.types import LinkLedger, Links, View
 
 __all__ = ["CleaningResult", "merge_radius_for", "budget_line", "extract_and_match",
            "evidence_inputs", "consistency_stage", "ledger_from_consistency", "fusion_stage",
-           "posed_views", "fusion_on_reconstruction", "clean_association"]
+           "fused_tracks", "posed_views", "fusion_on_reconstruction", "clean_association"]
 
 
 @dataclass
@@ -39,7 +39,12 @@ class CleaningResult:
     resolution_stats : dict — :attr:`ConsistencyResult.stats` of the consistency stage
     fusion_stats : dict — what fusion did, or ``enabled: False`` with the reason it did not run
     fused_points : ndarray, (F, 3) or None — fused landmark of each fused track
-    fused_track_ids : ndarray, (F,) or None — track (association set) of each fused landmark
+    fused_track_ids : ndarray, (F,) or None — track of the links the consistency stage kept
+        (association set, numbered as :func:`pipeline.fusion.landmarks.tracks_of` numbers
+        them on every camera's features) that holds each fused landmark
+    fused_track_features : list of (k,) int arrays or None — global feature ids (camera
+        offsets of every camera's features) of the observations each fused landmark was fused
+        from: its track as the robots that took part in fusion held it
     faults : dict or None — the report's ``faults`` section when faults were injected
     track_labels : ndarray, (m_total,) or None — each robot's own name for the track of each
         of its features (``ConsistencyResult.track_label``), what fusion's tracks come from
@@ -50,6 +55,7 @@ class CleaningResult:
     fusion_stats: dict = field(default_factory=dict)
     fused_points: np.ndarray | None = None
     fused_track_ids: np.ndarray | None = None
+    fused_track_features: list | None = None
     faults: dict | None = None
     track_labels: np.ndarray | None = None
 
@@ -291,6 +297,37 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
     return fr, int(len(cut))
 
 
+def fused_tracks(fr, features_per_camera, links: Links,
+                 cameras: np.ndarray | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Each fused landmark of :func:`fusion_stage`'s result ``fr`` (on ``cameras`` renumbered
+    ``0..k-1``) in the numbering of every camera: the track of ``links`` (the kept links
+    fusion started from, all cameras) that holds it and the global feature ids it was fused
+    from.
+
+    Returns
+    -------
+    (track_ids (F,), features: list of F sorted int arrays) — ``track_ids`` numbered as
+    :func:`pipeline.fusion.landmarks.tracks_of` numbers them on ``links``; a crashed robot
+    can leave two fused landmarks in one track of ``links`` (it joined them).
+    """
+    from pipeline.fusion.landmarks import tracks_of
+
+    m = np.asarray(features_per_camera, dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(m)])
+    reg = np.arange(len(m), dtype=np.int64) if cameras is None else np.asarray(cameras, np.int64)
+    n_points = len(fr.points)
+    gid = off[reg[np.asarray(fr.obs_cam, np.int64)]] + np.asarray(fr.obs_feat, np.int64)
+    point = np.asarray(fr.obs_point, np.int64)
+    order = np.lexsort((gid, point))
+    gid, point = gid[order], point[order]
+    keep = point >= 0
+    groups = np.split(gid[keep], np.searchsorted(point[keep], np.arange(1, n_points)))
+    track_of, _ = tracks_of(m, links)
+    ids = np.array([track_of[g[0]] for g in groups], dtype=np.int64) if n_points \
+        else np.zeros(0, np.int64)
+    return ids, groups
+
+
 def posed_views(views: list[View], poses: dict) -> list[View]:
     """Copies of ``views`` with ``R, t`` (and the refined ``K``) of those named in ``poses``
     (:func:`pipeline.colmap.registered_poses`); the others unchanged."""
@@ -393,6 +430,7 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                                                                  "fusion",
                                      "crashed_before_fusion": crashed}
             return cleaning
+        kept_links = ledger.links.subset(ledger.kept)  # what fusion starts from
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
                                  track_labels=cleaning.track_labels, cameras=cameras,
                                  transport=transport)
@@ -413,7 +451,9 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                     if k not in fault_section["crashed_during_fusion"]}
         cleaning.fusion_stats = {"enabled": True, **stats, "observations_cut_links": n_cut}
         cleaning.fused_points = np.asarray(fr.points)
-        cleaning.fused_track_ids = np.asarray(fr.track_ids)
+        # fusion numbered its tracks on the robots that took part: number them on all
+        cleaning.fused_track_ids, cleaning.fused_track_features = fused_tracks(
+            fr, m, kept_links, cameras)
     return cleaning
 
 

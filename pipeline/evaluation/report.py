@@ -277,12 +277,18 @@ def track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:
 
 def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.ndarray,
                        fused_track_ids: np.ndarray, gt_points: list,
-                       solved_tracks: dict | None = None) -> dict:
+                       solved_tracks: dict | None = None,
+                       fused_track_features: list | None = None) -> dict:
     """Fused landmarks against ground truth and against pycolmap on the same tracks.
 
-    Fusion runs on the links kept by resolution; its tracks are numbered like
-    :func:`pipeline.association.association_sets` on those links (smallest feature id), so
-    the pycolmap triangulation of the same links gives the point to compare with.
+    Fusion runs on the links kept by resolution; ``fused_track_ids`` number the track of
+    those links that holds each fused landmark like
+    :func:`pipeline.association.association_sets` on them (smallest feature id), so the
+    pycolmap triangulation of the same links gives the point to compare with.
+    ``fused_track_features``: the global feature ids each landmark was fused from
+    (:attr:`pipeline.stages.CleaningResult.fused_track_features`), whose ground truth it is
+    compared with (default: the features of its track of ``resolved_links``; they differ
+    when a robot took no part in fusion).
     ``solved_tracks``: the tracks the run has triangulated already
     (:func:`pipeline.evaluation.triangulation.triangulate_tracks`).
     """
@@ -293,12 +299,16 @@ def fused_point_errors(views, feats, resolved_links: Links, fused_points: np.nda
     all_gt = np.concatenate(gt_points) if gt_points else np.zeros((0, 3))
     ids = np.asarray(fused_track_ids, dtype=np.int64)
     pts = np.asarray(fused_points, dtype=np.float64).reshape(-1, 3)
-    gt = medoids(all_gt, [tracks[k] for k in ids])
+    if fused_track_features is not None and len(fused_track_features) != len(ids):
+        raise ValueError("fused_point_errors: one feature set per fused landmark")
+    gt_track = medoids(all_gt, [tracks[k] for k in ids])  # what pycolmap triangulated
+    gt = gt_track if fused_track_features is None else \
+        medoids(all_gt, [np.asarray(g, dtype=np.int64) for g in fused_track_features])
     err_gt = np.linalg.norm(pts - gt, axis=1)
     err_gt = err_gt[np.isfinite(err_gt)]
     ok = tri.ok[ids]
     err_colmap = np.linalg.norm(pts[ok] - tri.xyz[ids[ok]], axis=1)
-    err_colmap_gt = np.linalg.norm(tri.xyz[ids[ok]] - gt[ok], axis=1)
+    err_colmap_gt = np.linalg.norm(tri.xyz[ids[ok]] - gt_track[ok], axis=1)
     err_colmap_gt = err_colmap_gt[np.isfinite(err_colmap_gt)]
 
     def med(a):

@@ -161,6 +161,11 @@ class FusionResult:
     obs_votes : ndarray, (O, K)
         The observing robot's final vote vector ``v_i`` for its track (NaN where the track
         was not fused): what decided its winner.
+    obs_point : ndarray, (O,) int or None
+        Row of ``points`` fused from the observation's track, ``-1`` when its track has no
+        fused point: the features of point ``p`` are the observations with ``obs_point == p``
+        (with ``track_labels`` a track is the robots' own, which ``obs_track`` does not name:
+        tracks of the same ``track_ids`` may be several)
     stats : dict
         ``rounds`` (max-c + consensus), ``messages`` (robot-to-robot, one per neighbour pair
         and direction per round, bundling all shared tracks), ``bytes``, and counts.
@@ -176,6 +181,7 @@ class FusionResult:
     cut_links: np.ndarray
     stats: dict = field(default_factory=dict)
     obs_votes: np.ndarray | None = None
+    obs_point: np.ndarray | None = None
 
 
 def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
@@ -394,7 +400,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         uf, _ = tracks_of(m, links)
         obs_track_out = uf[obs_g]
     empty = FusionResult(np.zeros((0, 3)), np.zeros(0, np.int64), obs_track_out, obs_cam, obs_feat,
-                         np.zeros(n_obs, bool), np.ones(n_obs, bool), np.zeros(L, bool), stats)
+                         np.zeros(n_obs, bool), np.ones(n_obs, bool), np.zeros(L, bool), stats,
+                         obs_point=np.full(n_obs, -1, dtype=np.int64))
     if B == 0 or not estimated.any():
         return empty
 
@@ -462,13 +469,17 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         # (a lockstep exchange sent its packets through the transport itself)
         for kind, v in kinds.items():
             transport.count(kind, v["messages"], v["bytes"])
+    point_of_track = np.full(T, -1, dtype=np.int64)
+    point_of_track[tr[has_pt]] = np.arange(int(has_pt.sum()))
+    obs_point = point_of_track[obs_track]
     if track_labels is not None:
         first_obs = np.full(T, -1, dtype=np.int64)
         first_obs[obs_track[::-1]] = obs_g[::-1]
         tr = uf[first_obs[tr]]
     return FusionResult(points=pts[has_pt], track_ids=tr[has_pt], obs_track=obs_track_out,
                         obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
-                        obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes)
+                        obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes,
+                        obs_point=obs_point)
 
 
 def _observer_graph(comm: np.ndarray, observes: np.ndarray):

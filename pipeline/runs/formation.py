@@ -220,7 +220,8 @@ def _triangulate(views, feats: list, ledger, cleaning: CleaningResult, resolved_
         if cleaning.fused_points is not None:  # fused landmarks against pycolmap and the truth
             fused_errors = sections.fused_point_errors(
                 views, feats, resolved_links, cleaning.fused_points, cleaning.fused_track_ids,
-                gt_points, solved_tracks=solved_tracks)
+                gt_points, solved_tracks=solved_tracks,
+                fused_track_features=cleaning.fused_track_features)
     return triangulation, tri_after, gt_points, fused_errors
 
 

@@ -214,11 +214,12 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
     (:func:`pipeline.fusion.points.fused_points`, from every robot's final estimate); its id
     is the union-find
     track (:func:`pipeline.fusion.landmarks.tracks_of` over the kept links) of its smallest
-    feature.
+    feature, and its features those the robots that published fused it from
+    (:attr:`pipeline.stages.CleaningResult.fused_track_features`).
 
     Returns
     -------
-    (stats, points (F, 3), track_ids (F,))
+    (stats, points (F, 3), track_ids (F,), features: list of F sorted global feature id arrays)
     """
     from pipeline.fusion.landmarks import tracks_of
     from pipeline.fusion.points import fused_points
@@ -289,4 +290,5 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
         phase_rounds=max((int(h["rounds"]) for h in fusion_heads), default=0),
         robots_lost={str(i): h["lost"] for i, h in sorted(
             (i, (hh.get("fusion") or {})) for i, hh in heads.items()) if h.get("lost")})
-    return stats, pts[has_pt], ids[has_pt]
+    groups = [np.sort(gid[b, obs[b]]) for b in np.flatnonzero(has_pt)]
+    return stats, pts[has_pt], ids[has_pt], groups

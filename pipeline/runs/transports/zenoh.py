@@ -186,9 +186,10 @@ def formation_of_run(config, team, run, timer: StageTimer) -> FormationRobots:
                               dict(res.stats))
     if config.fusion:
         with timer.stage("fusion", "observer: the links the robots cut in their fusion stage"):
-            stats, pts, ids = fusion_of_team(team, run.results, cleaning.ledger, m)
+            stats, pts, ids, groups = fusion_of_team(team, run.results, cleaning.ledger, m)
             cleaning.fusion_stats = stats
             cleaning.fused_points, cleaning.fused_track_ids = pts, ids
+            cleaning.fused_track_features = groups
             timer.note(f"{stats['links_cut']} links cut as fusion outliers")
     else:
         cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
@@ -547,7 +548,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
             if not np.array_equal(want[feat], a["fusion_names"].astype(np.int64)):
                 raise TeamError(f"robot {i} named its tracks otherwise than track_labels")
     ledger = ledger_from_consistency(res)
-    stats, points, track_ids = fusion_of_team(team, run.results, ledger, m)
+    stats, points, track_ids, groups = fusion_of_team(team, run.results, ledger, m)
     stats.update(naming_rounds=int(res.stats["detection_rounds"]),
                  naming_messages=int(res.stats["messages"]),
                  naming_bytes=int(res.stats["bytes"]), team=team_summary(run))
@@ -564,9 +565,13 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
         if obs else np.zeros(0, bool)
     outlier = np.concatenate([a["fusion_outlier"].astype(bool) for _, a in obs]) \
         if obs else np.zeros(0, bool)
+    point_of = np.full(int(off[-1]), -1, dtype=np.int64)  # the fused point of each feature
+    for k, g in enumerate(groups):
+        point_of[g] = k
     return FusionResult(points=points, track_ids=track_ids, obs_track=uf[off[cam] + feat],
                         obs_cam=cam, obs_feat=feat, obs_estimated=estimated,
-                        obs_inlier=~outlier, cut_links=cut, stats=stats)
+                        obs_inlier=~outlier, cut_links=cut, stats=stats,
+                        obs_point=point_of[off[cam] + feat])
 
 
 def links_of_run(team, run) -> ConsistencyResult:

@@ -80,6 +80,11 @@ def test_zenoh_links_equal_the_simulators_formation(formation, resolution, fusio
         assert report["fusion"]["fused_points"] == sim_fusion["fused_points"]
         for kind, nbytes in sim_fusion["bytes_by_kind"].items():
             assert report["fusion"]["bytes_by_kind"][kind] == nbytes
+        # the fused landmarks are judged alike (same tracks, same features' truth), to
+        # within the rounding of the robots' float32 wire
+        for key in ("median_error_vs_ground_truth", "p90_error_vs_ground_truth",
+                    "median_pycolmap_error_vs_ground_truth", "median_distance_to_pycolmap"):
+            assert report["fusion"][key] == pytest.approx(sim_fusion[key], rel=1e-4, abs=1e-6)
     assert report["resolution"]["method"] == resolution
     assert report["team"]["transport"] == "zenoh"
     # every stage's wire bytes add up to the robot's
