@@ -301,6 +301,9 @@ class LockstepExchange(CountingExchange):
         self.options = options or ProtocolOptions.for_delay(delay)
         self.channels = [Channel(network.endpoint(i), self.options) for i in range(network.n)]
         self._start = (int(network.messages), int(network.bytes), int(network.dropped))
+        counters = network.counters()
+        self._start_by_kind = (dict(counters["messages_by_kind"]),
+                               dict(counters["bytes_by_kind"]))
         self._start_round = int(network.round)
         self._link_up = np.ones(self.n_links, dtype=bool)
 
@@ -379,8 +382,23 @@ class LockstepExchange(CountingExchange):
         self.retransmissions = sum(ch.retransmissions for ch in self.channels)
 
     def summary(self) -> dict:
+        """As :meth:`CountingExchange.summary`; ``by_kind`` holds what the network carried
+        since this exchange began, by message kind: the logical rounds' kinds (with their
+        retransmissions) and the channel's own ``ack`` and ``heartbeat`` packets, so that
+        they add up to ``messages`` and ``bytes``."""
         out = super().summary()
-        out["by_kind"] = {k: dict(rounds=v[0]) for k, v in self.by_kind.items()}
+        counters = self.network.counters()
+        msgs0, bytes0 = self._start_by_kind
+        kinds = list(self.by_kind) + [k for k in counters["messages_by_kind"]
+                                      if k not in self.by_kind]
+        by_kind = {}
+        for k in kinds:
+            msgs = int(counters["messages_by_kind"].get(k, 0)) - int(msgs0.get(k, 0))
+            nbytes = int(counters["bytes_by_kind"].get(k, 0)) - int(bytes0.get(k, 0))
+            if k in self.by_kind or msgs or nbytes:
+                by_kind[k] = dict(rounds=self.by_kind.get(k, [0])[0], messages=msgs,
+                                  bytes=nbytes)
+        out["by_kind"] = by_kind
         out["robots_lost"] = {int(i): sorted(int(j) for j in ch.lost)
                               for i, ch in enumerate(self.channels) if ch.lost}
         out["crashed"] = sorted(int(i) for i in self.crashed)

@@ -90,6 +90,23 @@ def test_fusion_under_message_loss_ends_with_the_fault_free_result():
     assert net.counters()["bytes_by_kind"]["fusion"] > 0
 
 
+@pytest.mark.parametrize("consensus", ["exact", "metropolis"])
+@pytest.mark.parametrize("options", [dict(drop_probability=0.3, seed=4), dict(delay_rounds=2)])
+def test_fusion_traffic_by_kind_adds_up_on_a_faulty_network(consensus, options):
+    """The stage's figures by message kind are what the network carried: they add up to its
+    messages and bytes, setup included (every robot tells each neighbour its pose first)."""
+    views, feats, links, edges = _planted_rig()
+    clean = fuse_tracks(views, feats, links, edges, sigma_px=0.5, consensus=consensus).stats
+    net = Network(len(views), edges, NetworkOptions(**options))
+    st_ = fuse_tracks(views, feats, links, edges, sigma_px=0.5, transport=net,
+                      consensus=consensus).stats
+    by_kind = st_["bytes_by_kind"]
+    assert sum(by_kind.values()) == st_["bytes"] == net.counters()["bytes"] > 0
+    assert by_kind["fusion-setup"] == st_["setup_bytes"] >= clean["setup_bytes"] > 0
+    assert st_["setup_messages"] >= clean["setup_messages"] == 2 * len(edges)
+    assert by_kind["fusion"] > 0
+
+
 @pytest.mark.parametrize("mode,crash_round", [("exact", 1), ("exact", 2), ("metropolis", 4)])
 def test_robot_crashed_during_fusion_leaves_the_graph_and_is_not_judged(mode, crash_round):
     views, feats, links, edges = _planted_rig()
