@@ -441,6 +441,14 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
             stats["crashed_before_fusion"] = crashed
             stats["robots_lost"] = {str(int(cameras[int(k)])): [int(cameras[j]) for j in v]
                                     for k, v in stats.get("robots_lost", {}).items()}
+            # per-robot figures: one entry per robot of the team, None for one that took
+            # no part
+            for key in ("robot_sigma_px", "noise_residuals"):
+                if key in stats:
+                    per_robot = [None] * len(m)
+                    for k, v in zip(cameras.tolist(), stats[key], strict=True):
+                        per_robot[k] = v
+                    stats[key] = per_robot
             if fault_section is not None:
                 # a crash the consistency stage did not reach may have hit fusion
                 later = fault_section.get("crashes_not_reached", {})

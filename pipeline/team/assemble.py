@@ -284,8 +284,8 @@ def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, 
         links_cut=int(cut.sum()),
         hypotheses=int(fusion_heads[0]["hypotheses"]) if fusion_heads else 0,
         noise=fusion_heads[0].get("noise") if fusion_heads else None,
-        robot_sigma_px=[(hh.get("fusion") or {}).get("sigma_px")
-                        for _, hh in sorted(heads.items())],
+        robot_sigma_px=[((heads.get(i) or {}).get("fusion") or {}).get("sigma_px")
+                        for i in range(n)],  # None: a robot that published no fusion
         retransmissions=int(sum(h.get("retransmissions", 0) for h in fusion_heads)),
         phase_rounds=max((int(h["rounds"]) for h in fusion_heads), default=0),
         robots_lost={str(i): h["lost"] for i, h in sorted(

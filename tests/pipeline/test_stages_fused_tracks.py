@@ -77,3 +77,25 @@ def test_fused_landmarks_of_a_crash_before_fusion_lie_on_their_tracks(formation_
         np.percentile(direct, 90), abs=FIGURE_TOL)
     assert figures["median_error_vs_ground_truth"] == pytest.approx(
         np.median(direct), abs=FIGURE_TOL)
+
+
+def test_per_robot_fusion_figures_of_a_crash_before_fusion_are_by_robot_id(formation_a):
+    """Fusion runs on the survivors renumbered 0..k-1; the report's per-robot figures name
+    every robot of the team, None for the one that took no part."""
+    from pipeline.stages import consistency_stage, fusion_stage, ledger_from_consistency
+
+    formation, feats, links = formation_a
+    views, edges = formation.views, formation.comm_edges
+    faults = FaultConfig(crash=((2, 21),))
+    cleaning = clean_association(views, feats, edges, links, faults=faults, resolution="paper")
+    fs = cleaning.fusion_stats
+    assert fs["crashed_before_fusion"] == [2]
+    survivors = [0, 1, 3, 4, 5]
+    # direct: the survivors' fusion on the consistency stage's decisions, in its own numbering
+    m = [len(f) for f in feats]
+    res, _ = consistency_stage(m, edges, links, faults, resolution="paper")
+    fr, _ = fusion_stage(ledger_from_consistency(res), views, feats, edges,
+                         cameras=np.array(survivors), track_labels=res.track_label)
+    for key in ("robot_sigma_px", "noise_residuals"):
+        assert len(fs[key]) == len(views) and fs[key][2] is None
+        assert [fs[key][k] for k in survivors] == fr.stats[key]

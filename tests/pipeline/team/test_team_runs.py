@@ -153,6 +153,9 @@ def test_kill_9_of_one_robot_during_fusion(tmp_path):
     assert all(t - run.killed[2] < 30 for t in run.finished_at.values())
     report = json.loads((out / "report.json").read_text())
     assert report["fusion"]["enabled"] and report["fusion"]["robots_lost"]
+    # per-robot figures by robot id: the killed robot published none
+    sigma = report["fusion"]["robot_sigma_px"]
+    assert len(sigma) == 6 and sigma[2] is None and None not in sigma[:2] + sigma[3:]
     kept, rows = _kept_links(out / "links.csv")
     touching = [r for r in rows if "2" in (r[0], r[2])]
     assert touching and all(r[4] == "deleted" for r in touching)
