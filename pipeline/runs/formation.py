@@ -93,7 +93,10 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     views, comm_edges = formation.views, np.asarray(formation.comm_edges)
     m = np.array([len(f) for f in feats], dtype=np.int64)
     ledger = cleaning.ledger
-    evaluated = _evaluate(config, formation, feats, matches, ledger, timer)
+    # the rule the consistency stage ran: on a faulty network a rule that is not
+    # fault-tolerant gives way to Alg. 1 (pipeline.consistency.rules.rule_for_network)
+    ran = cleaning.resolution_stats.get("resolution") or config.resolution
+    evaluated = _evaluate(config, formation, feats, matches, ledger, timer, ran)
     triangulation, tri_after, gt_points, fused_errors = _triangulate(
         views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
     report = {
@@ -134,10 +137,12 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
 
 
 def _evaluate(config: FormationConfig, formation, feats: list, matches: list, ledger,
-              timer: StageTimer) -> dict:
+              timer: StageTimer, method: str | None = None) -> dict:
     """The ground-truth sections of the report (``before``, ``after``, ``pairwise``,
     ``baselines``, ``resolution_quality``); sets ``ledger.truth``. Also returns
-    ``resolved_links``, what the consistency stage kept (fusion ran on exactly these)."""
+    ``resolved_links``, what the consistency stage kept (fusion ran on exactly these).
+    ``method``: the resolution rule the consistency stage ran (default
+    ``config.resolution``), whose row of ``resolution_quality`` is what the run cut."""
     from pipeline.consistency import centralized
     from pipeline.evaluation import report as sections
     from pipeline.evaluation.links import MissingLinks, link_truth
@@ -187,7 +192,8 @@ def _evaluate(config: FormationConfig, formation, feats: list, matches: list, le
         quality = sections.resolution_quality_section(
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
-                              config.resolution, resolved, baseline_masks, graph_of(links)),
+                              method or config.resolution, resolved, baseline_masks,
+                              graph_of(links)),
             graph=graph_of(links))
     return {"before": before, "after": after, "pairwise": pairwise, "baselines": baselines,
             "resolution_quality": quality, "resolved_links": resolved_links}

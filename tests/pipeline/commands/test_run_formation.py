@@ -139,3 +139,25 @@ def test_steps_over_a_transport_without_online_fusion_need_no_fusion(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--transport nofusion" in err and "add --no-fusion" in err
     assert not (tmp_path / "x").exists()
+
+
+def test_resolution_quality_of_a_faulty_run_names_the_rule_that_ran(small_run, tmp_path):
+    """On a faulty network the evidence rule gives way to Alg. 1: the run's cuts are the row
+    of ``paper``; the ``evidence`` row is the evidence rule on the same links, fault-free."""
+    from pipeline.faults import FaultConfig
+
+    _, fault_free, _ = small_run
+    out = tmp_path / "faulty"
+    # a crash the run never reaches: the network is faulty, the links the same
+    run_formation(FormationConfig(**SMALL, out=str(out), fusion=False, rerun=False,
+                                  faults=FaultConfig(crash=((5, 100_000),))))
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "links.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert report["resolution"]["method"] == "paper" and report["before"] == fault_free["before"]
+    q, q0 = report["resolution_quality"], fault_free["resolution_quality"]
+    cut = [r for r in rows if r["reason"] == "resolution"]
+    assert q["paper"]["good_cut"] == sum(r["truth"] == "1" for r in cut)
+    assert q["paper"]["spurious_cut"] == sum(r["truth"] == "0" for r in cut)
+    assert q["paper"]["pairwise_f1"] == report["pairwise"]["after_resolution"]["f1"]
+    assert q["evidence"] == q0["evidence"]
