@@ -321,11 +321,11 @@ def fused_tracks(fr, features_per_camera, links: Links,
     order = np.lexsort((gid, point))
     gid, point = gid[order], point[order]
     keep = point >= 0
+    if n_points == 0:
+        return np.zeros(0, np.int64), []
     groups = np.split(gid[keep], np.searchsorted(point[keep], np.arange(1, n_points)))
     track_of, _ = tracks_of(m, links)
-    ids = np.array([track_of[g[0]] for g in groups], dtype=np.int64) if n_points \
-        else np.zeros(0, np.int64)
-    return ids, groups
+    return np.array([track_of[g[0]] for g in groups], dtype=np.int64), groups
 
 
 def posed_views(views: list[View], poses: dict) -> list[View]:

@@ -99,3 +99,20 @@ def test_per_robot_fusion_figures_of_a_crash_before_fusion_are_by_robot_id(forma
     for key in ("robot_sigma_px", "noise_residuals"):
         assert len(fs[key]) == len(views) and fs[key][2] is None
         assert [fs[key][k] for k in survivors] == fr.stats[key]
+
+
+def test_a_crash_that_leaves_no_fused_landmark_reports_none(formation_a):
+    """Robots 1 and 3 survive, no neighbours of each other: fusion runs and fuses nothing."""
+    formation, feats, links = formation_a
+    views = formation.views
+    faults = FaultConfig(crash=tuple((r, 21) for r in (0, 2, 4, 5)))
+    cleaning = clean_association(views, feats, formation.comm_edges, links, faults=faults,
+                                 resolution="paper")
+    assert cleaning.fusion_stats["enabled"] and cleaning.fusion_stats["tracks_fused"] == 0
+    assert len(cleaning.fused_track_ids) == len(cleaning.fused_track_features) == 0
+    gt_points = [points_from_keypoints(v, f.keypoints)[0] for v, f in zip(views, feats, strict=True)]
+    ledger = cleaning.ledger
+    figures = fused_point_errors(views, feats, links.subset(ledger.kept), cleaning.fused_points,
+                                 cleaning.fused_track_ids, gt_points,
+                                 fused_track_features=cleaning.fused_track_features)
+    assert figures["fused_points"] == 0 and figures["p90_error_vs_ground_truth"] is None
