@@ -316,13 +316,13 @@ def fused_tracks(fr, features_per_camera, links: Links,
     off = np.concatenate([[0], np.cumsum(m)])
     reg = np.arange(len(m), dtype=np.int64) if cameras is None else np.asarray(cameras, np.int64)
     n_points = len(fr.points)
+    if n_points == 0:
+        return np.zeros(0, np.int64), []
     gid = off[reg[np.asarray(fr.obs_cam, np.int64)]] + np.asarray(fr.obs_feat, np.int64)
     point = np.asarray(fr.obs_point, np.int64)
     order = np.lexsort((gid, point))
     gid, point = gid[order], point[order]
     keep = point >= 0
-    if n_points == 0:
-        return np.zeros(0, np.int64), []
     groups = np.split(gid[keep], np.searchsorted(point[keep], np.arange(1, n_points)))
     track_of, _ = tracks_of(m, links)
     return np.array([track_of[g[0]] for g in groups], dtype=np.int64), groups

@@ -203,7 +203,8 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     return res
 
 
-def fusion_of_team(team, results: dict, ledger, fpc) -> tuple[dict, np.ndarray, np.ndarray]:
+def fusion_of_team(team, results: dict, ledger,
+                   fpc) -> tuple[dict, np.ndarray, np.ndarray, list]:
     """Cut in ``ledger`` the links a robot cut in its fusion stage; the stage's figures and
     fused landmarks, read from what the robots published (reporting only).
 
