@@ -39,8 +39,10 @@ the graph need no pose and are always logged.
 The replay (Aragüés et al., Sec. IV, Alg. 1) runs on the ``round`` timeline. Its value is a
 *step*, not the paper's round number, because rounds restart at every detection/resolution
 iteration: step 0 shows every link as a candidate; step ``k`` is the ``k``-th distinct
-``(stage, iteration, round)`` in which links were cut, ordered with the resolution stage first
-and then by ``(iteration, round)``; the last step shows the kept links as kept.
+``(stage, iteration, round)`` in which links were cut, in the order the run cut them
+(:func:`replay_steps`: checks before the consistency stage, then the consistency stage by
+``(iteration, round)`` with the links of robots declared lost among the resolution's cuts,
+then the fusion); the last step shows the kept links as kept.
 ``resolution/log`` names the iteration and round of every step.
 """
 
@@ -72,6 +74,7 @@ __all__ = [
     "link_endpoints_3d",
     "log_run",
     "replay_steps",
+    "STAGE_ORDER",
     "world_axes_from_cameras",
 ]
 
@@ -289,6 +292,22 @@ def link_endpoints_3d(record: RunRecord, depth: float) -> np.ndarray:
     return np.stack(ends, axis=1).astype(np.float32)
 
 
+#: When each ``reason`` cuts its links in a run: ``(phase, rank)``. Phase 0 are the checks
+#: before the consistency stage (``clean-db``, ``clean-h5``), phase 1 the consistency stage
+#: (the resolution and the robots declared lost, whose cuts share one ``(iteration, round)``
+#: clock), phase 2 the fusion after it; any other reason comes last.
+STAGE_ORDER = {"not-one-to-one": (0, 0), "not-comm-edge": (0, 1), "loop-inconsistent": (0, 2),
+               "resolution": (1, 0), "robot-lost": (1, 1), "fusion-outlier": (2, 0)}
+
+
+def _replay_order(key: tuple[str, int, int]) -> tuple:
+    stage, iteration, rnd = key
+    phase, rank = STAGE_ORDER.get(stage, (3, 0))
+    if phase == 1:  # one stage: its cuts in the order they were made
+        return (phase, iteration, rnd, rank, stage)
+    return (phase, rank, stage, iteration, rnd)
+
+
 def replay_steps(record: RunRecord) -> tuple[np.ndarray, list[tuple[str, int, int]]]:
     """Step of the ``round`` timeline at which each link is cut.
 
@@ -297,23 +316,26 @@ def replay_steps(record: RunRecord) -> tuple[np.ndarray, list[tuple[str, int, in
     step : ndarray, (L,) int64
         ``1..S`` for deleted links, ``S + 1`` for kept links (shown as kept at the last step).
     keys : list of (stage, iteration, round), length S
-        What step ``k`` replays (``keys[k - 1]``): resolution first, then any later stage
-        (e.g. ``fusion-outlier``) in name order; within a stage by ``(iteration, round)``.
+        What step ``k`` replays (``keys[k - 1]``), in the order the run cut the links
+        (:data:`STAGE_ORDER`): the checks before the consistency stage, then the consistency
+        stage by ``(iteration, round)`` (a robot declared lost cuts its links in the round
+        it was declared, among the resolution's cuts), then the fusion, then any other
+        stage in name order; within a stage by ``(iteration, round)``.
     """
     deleted = np.flatnonzero(np.asarray(record.ledger.status) == "deleted")
     reason = np.asarray(record.ledger.reason, dtype=str).reshape(-1)
     it = np.asarray(record.ledger.iteration, dtype=np.int64).reshape(-1)
     rd = np.asarray(record.ledger.round, dtype=np.int64).reshape(-1)
     names, stage_of = np.unique(reason[deleted], return_inverse=True)
-    stages = sorted(names.tolist(), key=lambda s: (s != "resolution", s))
-    rank_of_name = np.array([stages.index(s) for s in names.tolist()], dtype=np.int64)
-    stage_rank = rank_of_name[stage_of.reshape(-1)]
-    triples = np.stack([stage_rank, it[deleted], rd[deleted]], axis=1).reshape(-1, 3)
+    triples = np.stack([stage_of.reshape(-1), it[deleted], rd[deleted]], axis=1).reshape(-1, 3)
     uniq, inv = np.unique(triples, axis=0, return_inverse=True)
-    step = np.full(len(record.ledger.links), len(uniq) + 1, dtype=np.int64)
-    step[deleted] = inv.reshape(-1) + 1
-    keys = [(stages[s], int(i), int(r)) for s, i, r in uniq]
-    return step, keys
+    keys = [(str(names[s]), int(i), int(r)) for s, i, r in uniq]
+    order = sorted(range(len(keys)), key=lambda k: _replay_order(keys[k]))
+    rank = np.empty(len(keys), dtype=np.int64)
+    rank[order] = np.arange(len(keys))
+    step = np.full(len(record.ledger.links), len(keys) + 1, dtype=np.int64)
+    step[deleted] = rank[inv.reshape(-1)] + 1
+    return step, [keys[k] for k in order]
 
 
 def _node_ids(cam: np.ndarray, feat: np.ndarray) -> np.ndarray:

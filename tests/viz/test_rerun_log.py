@@ -260,6 +260,36 @@ def test_stored_strips_match_geometry(recording):
     np.testing.assert_allclose(strips, link_endpoints_3d(record, 0.5)[deleted], atol=1e-5)
 
 
+def test_replay_follows_the_order_the_run_cut_links():
+    """A robot declared lost in iteration 1 cuts its links before the resolution of
+    iteration 2, and both before the fusion; the checks before the consistency stage
+    (clean-db) come first, whatever the names of the stages."""
+    record = make_record()
+    ledger = record.ledger
+    status = np.array(ledger.status, dtype=object)
+    reason = np.array(ledger.reason, dtype=object)
+    iteration = np.array(ledger.iteration, dtype=np.int64)
+    rnd = np.array(ledger.round, dtype=np.int64)
+    res = np.flatnonzero(reason == "resolution")
+    iteration[res], rnd[res] = 2, [1, 2]
+    kept = np.flatnonzero(status == "kept")
+    status[kept[:3]] = "deleted"
+    reason[kept[:3]] = ["robot-lost", "not-comm-edge", "robot-lost"]
+    iteration[kept[:3]], rnd[kept[:3]] = [1, -1, 2], [40, -1, 1]
+    record.ledger = LinkLedger(ledger.links, status=status.astype(str),
+                               reason=reason.astype(str), iteration=iteration, round=rnd,
+                               case=ledger.case, truth=ledger.truth,
+                               conflictive_before=ledger.conflictive_before)
+    step, keys = replay_steps(record)
+    assert keys == [("not-comm-edge", -1, -1), ("robot-lost", 1, 40), ("resolution", 2, 1),
+                    ("robot-lost", 2, 1), ("resolution", 2, 2), ("fusion-outlier", -1, 0)]
+    for k, (stage, i, r) in enumerate(keys, start=1):
+        at = (record.ledger.reason == stage) & (record.ledger.iteration == i) \
+            & (record.ledger.round == r) & (record.ledger.status == "deleted")
+        assert at.any() and (step[at] == k).all()
+    assert (step[record.ledger.status == "kept"] == len(keys) + 1).all()
+
+
 def test_replay_order_and_final_colours(recording):
     path, record = recording
     step, keys = replay_steps(record)
