@@ -44,8 +44,9 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     Raises
     ------
     InputError
-        A missing ``report.json``, ``links.csv`` or ``sparse/``, or files that disagree (a
-        camera count different from the report's).
+        A missing ``report.json``, ``links.csv`` or ``sparse/``, one that does not read
+        (``report.json`` not JSON or without ``features_per_camera``, ``sparse/`` without a
+        COLMAP model), or files that disagree (a camera count different from the report's).
     """
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv
@@ -61,9 +62,19 @@ def read_run_folder(folder: str | Path) -> RunRecord:
             raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
     from pipeline.association import conflictive_links
 
-    report = json.loads((folder / "report.json").read_text())
+    try:
+        report = json.loads((folder / "report.json").read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{folder}: report.json is not a run's report (not JSON: {exc})") \
+            from exc
+    if not isinstance(report, dict) or "features_per_camera" not in report:
+        raise InputError(f"{folder}: report.json lists no features_per_camera; not a run's "
+                         "report (docs/DESIGN.md 'Run outputs')")
     ledger = read_run_links_csv(folder / "links.csv")
-    rec = colmap.read_model(folder / "sparse")
+    try:
+        rec = colmap.read_model(folder / "sparse")
+    except ValueError as exc:  # pycolmap: missing or unreadable model files
+        raise InputError(f"{folder}: sparse/ holds no readable COLMAP model ({exc})") from exc
     images = colmap.model_images(rec)
     m = [int(x) for x in report["features_per_camera"]]
     names = _camera_names(report, images)

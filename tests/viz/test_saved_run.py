@@ -105,3 +105,22 @@ def test_out_must_be_a_recording_and_online_folders_are_said(tmp_path, capsys):
         (online / name).write_text("")
     assert main([str(online)]) == 2
     assert "an online run folder" in capsys.readouterr().err
+
+
+def test_a_folder_whose_files_do_not_read_is_said_not_a_traceback(tmp_path, capsys):
+    """A report.json that is not JSON or not a run's report, and a sparse/ without its model
+    files, are input errors (exit 2 and a message), not a traceback."""
+    cases = {
+        "not-json": lambda f: (f / "report.json").write_text("{"),
+        "no-features": lambda f: (f / "report.json").write_text('{"n_cameras": 3}'),
+        "a-list": lambda f: (f / "report.json").write_text("[]"),
+        "no-model": lambda f: (f / "sparse" / "points3D.bin").unlink(),
+    }
+    for name, spoil in cases.items():
+        folder = _save(make_record(), tmp_path / name)
+        spoil(folder)
+        with pytest.raises(InputError):
+            read_run_folder(folder)
+        assert main([str(folder)]) == 2, name
+        assert "error:" in capsys.readouterr().err
+        assert not (folder / "recording.rrd").exists()
