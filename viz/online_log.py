@@ -8,7 +8,8 @@ Reads the results only. On the ``step`` timeline, at every step:
 - ``world/links/cut``: one strip per frame pair that lost links at that step;
 - ``steps/links_new``, ``steps/cut``, ``steps/conflictive_sets_after``, ``steps/rounds``,
   ``steps/bytes``: the step's figures as scalars (plots);
-- ``steps/log``: a text line per step (links arriving, conflicts found, cuts).
+- ``steps/log``: a text line per step (links arriving, conflicts found, cuts: the consistency
+  stage's, and the fusion's where it ran, which ``world/links/cut`` draws too).
 """
 
 from __future__ import annotations
@@ -70,10 +71,13 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
                                                                 colors=colour))
             for k in STEP_SCALARS:
                 rec.log(f"steps/{k}", rr.Scalars(float(r.get(k, 0))))
+            fused = r.get("fusion") or {}
+            by_fusion = f", {int(fused.get('cut', 0))} cut by fusion" if fused else ""
             rec.log("steps/log", rr.TextLog(
                 f"step {t}: {r['links_new']} links arrive, {r['conflictive_features']} "
                 f"conflictive features found, {r['cut']} cut ({r.get('cut_history', 0)} by the "
-                f"history check), {r['conflictive_sets_after']} conflictive sets after"))
+                f"history check){by_fusion}, {r['conflictive_sets_after']} conflictive sets "
+                "after"))
     finally:
         rec.disconnect()
     os.replace(tmp, path)
