@@ -42,7 +42,8 @@ def _pair_strips(centres, ci, cj) -> tuple[list, list]:
 
 def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
                application_id: str = "formation-match", centres=None) -> Path:
-    """Write the recording of an online run to ``path`` (temp file, then renamed).
+    """Write the recording of an online run to ``path`` (temp file, then renamed: a failure
+    leaves ``path`` as it was and no temp file).
 
     ``sequence``: :class:`data_synth.motion.Sequence`; ``online``: the run's
     :class:`pipeline.consistency.engines.online.OnlineAssociation`; ``steps``: its records;
@@ -78,7 +79,10 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
                 f"conflictive features found, {r['cut']} cut ({r.get('cut_history', 0)} by the "
                 f"history check){by_fusion}, {r['conflictive_sets_after']} conflictive sets "
                 "after"))
-    finally:
+        rec.disconnect()  # writes the footer; the file does not read back without it
+        os.replace(tmp, path)
+    except BaseException:
         rec.disconnect()
-    os.replace(tmp, path)
+        tmp.unlink(missing_ok=True)
+        raise
     return path

@@ -5,6 +5,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from rerun.chunk import RrdReader
 
 from viz.online_log import log_online
@@ -54,3 +55,15 @@ def test_the_step_log_counts_every_link_the_step_draws_cut(tmp_path):
         del r["fusion"]
     path = log_online(tmp_path / "nofusion.rrd", None, online, steps, centres=centres)
     assert "fusion" not in _texts(path, "/steps/log")[1]
+
+
+def test_a_failed_recording_leaves_the_previous_one_and_no_temp_file(tmp_path):
+    online = SimpleNamespace(step=np.array([0, 0]), robot=np.array([0, 1]))
+    online.links = SimpleNamespace(ci=np.array([0]), cj=np.array([1]),
+                                   step_added=np.array([0]), step_cut=np.array([-1]))
+    path = tmp_path / "recording.rrd"
+    path.write_bytes(b"previous")
+    with pytest.raises(KeyError):  # a step record without its figures
+        log_online(path, None, online, [dict(step=0)], centres=np.zeros((2, 3)))
+    assert path.read_bytes() == b"previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recording.rrd"]
