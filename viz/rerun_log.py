@@ -43,7 +43,7 @@ iteration: step 0 shows every link as a candidate; step ``k`` is the ``k``-th di
 (:func:`replay_steps`: checks before the consistency stage, then the consistency stage by
 ``(iteration, round)`` with the links of robots declared lost among the resolution's cuts,
 then the fusion); the last step shows the kept links as kept.
-``resolution/log`` names the iteration and round of every step.
+``resolution/log`` names the iteration and round of every step, where the ledger knows them.
 """
 
 from __future__ import annotations
@@ -565,9 +565,10 @@ def _log_replay_text(rec: rr.RecordingStream, step: np.ndarray, keys: list, n_ke
     counts = np.bincount(step, minlength=len(keys) + 2)
     for k, (stage, iteration, rnd) in enumerate(keys, start=1):
         rec.set_time("round", sequence=k)
+        when = "".join(f", {name} {v}" for name, v in (("iteration", iteration), ("round", rnd))
+                       if v >= 0)  # -1: not known (a saved run) or not one of the stage's
         rec.log("resolution/log",
-                rr.TextLog(f"step {k}: {stage}, iteration {iteration}, round {rnd}: "
-                           f"{_links(counts[k])} cut"))
+                rr.TextLog(f"step {k}: {stage}{when}: {_links(counts[k])} cut"))
     rec.set_time("round", sequence=len(keys) + 1)
     rec.log("resolution/log", rr.TextLog(f"step {len(keys) + 1}: {_links(n_kept)} kept"))
 

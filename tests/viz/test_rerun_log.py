@@ -516,3 +516,14 @@ def test_jpeg_bytes_keep_colour_order_and_size(shape):
 def test_jpeg_bytes_refuse_what_they_cannot_encode():
     assert jpeg_bytes(np.zeros((4, 4, 4), np.uint8), 85) is None  # RGBA
     assert jpeg_bytes(np.zeros((4, 4), np.float32), 85) is None
+
+
+def test_replay_log_names_no_unknown_iteration_or_round(recording):
+    """The fusion's cuts and a saved run's (whose links.csv holds no iteration) carry -1 for
+    what is not known: the step's line leaves it out instead of saying 'iteration -1'."""
+    path, _ = recording
+    lines = [t for c in _chunks(path, "/resolution/log", static=False)
+             for row in c.to_record_batch().to_pydict()["TextLog:text"] for t in row]
+    assert "step 1: resolution, iteration 0, round 1: 1 link cut" in lines
+    assert "step 3: fusion-outlier, round 0: 1 link cut" in lines
+    assert not any("-1" in t for t in lines)
