@@ -28,7 +28,8 @@ GRPC_PORT = 9876
 
 def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) -> Path:
     """The ``.rrd`` to open: ``target`` itself, ``target/recording.rrd`` (or the only ``.rrd``
-    in a folder), or the newest ``recording.rrd`` under ``runs``.
+    in a folder), or the newest ``recording.rrd`` under ``runs`` outside hidden folders (a
+    run's staging folder holds a recording before the run is in place, or after it failed).
 
     Raises
     ------
@@ -51,7 +52,11 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
             raise FileNotFoundError(f"{p}: no recording.rrd in this folder (was it written with "
                                     f"--no-rerun?)")
         raise FileNotFoundError(f"{p}: no such run folder or .rrd file")
-    found = sorted(runs.glob("**/recording.rrd"), key=lambda q: q.stat().st_mtime)
+    # a hidden folder is no run: e.g. the staging folder of a run still writing, or of one
+    # killed before its folder was put in place (pipeline.runfolder.atomic_run_folder)
+    found = sorted((q for q in runs.glob("**/recording.rrd")
+                    if not any(part.startswith(".") for part in q.relative_to(runs).parts)),
+                   key=lambda q: q.stat().st_mtime)
     if not found:
         raise FileNotFoundError(f"no recording under {runs}/ yet: run 'make run-formation' first")
     return found[-1]

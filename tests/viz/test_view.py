@@ -76,3 +76,18 @@ def test_the_printed_url_shows_the_recording_in_a_headless_browser(tmp_path):
         stop(server)
     assert shows_recording(shown), f"{coloured_share(shown):.2%} of the views area coloured"
     assert not shows_recording(bare), f"{coloured_share(bare):.2%} of the views area coloured"
+
+
+def test_the_newest_recording_is_a_finished_runs_not_a_staging_folders(tmp_path):
+    """A run writes its folder in a hidden staging folder beside it
+    (pipeline.runfolder.atomic_run_folder), which a killed run leaves behind: make view
+    opened that newer, unfinished recording instead of the last run's."""
+    import os
+
+    runs = tmp_path / "runs"
+    for name, mtime in (("formation-d", 1_000), (".formation-d.tmp-x1y2", 2_000),
+                        ("sub/.hidden", 3_000)):
+        (runs / name).mkdir(parents=True)
+        (runs / name / "recording.rrd").write_bytes(b"x")
+        os.utime(runs / name / "recording.rrd", (mtime, mtime))
+    assert find_recording(None, runs) == runs / "formation-d" / "recording.rrd"
