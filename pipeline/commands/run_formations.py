@@ -4,7 +4,9 @@ Tables III and IV, plus what the paper could not count without ground truth."""
 from __future__ import annotations
 
 import argparse
+import io
 import json
+import sys
 from pathlib import Path
 
 from pipeline.commands.options import (
@@ -194,6 +196,7 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 def run(args) -> int:
     from pipeline import validate
     from pipeline.budget import check_formation_memory
+    from pipeline.outcome import exit_status
     from pipeline.runfolder import publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
 
@@ -224,4 +227,13 @@ def run(args) -> int:
     md, js = written
     print(table)
     print(f"saved {md} and {js}")
-    return 0
+    # each formation's warnings about its result (no links, not conflict-free, ...), as
+    # run-formation prints them; exit 3 when any result is not conflict-free
+    status = 0
+    for name, report in reports.items():
+        flagged = io.StringIO()
+        status = max(status, exit_status(report, flagged))
+        for line in flagged.getvalue().splitlines():
+            kind, _, message = line.partition(": ")
+            print(f"{kind}: formation {name}: {message}", file=sys.stderr)
+    return status
