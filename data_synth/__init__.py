@@ -177,9 +177,12 @@ def formation_setup(formation, seed, size, n_robots, graph):
     seed = check_int(seed, "seed", 0)
     n = 6 if n_robots is None else check_int(n_robots, "n_robots", 2)
     try:
-        W, H = (int(v) for v in size)
+        W, H = size
     except (TypeError, ValueError):
         raise InputError(f"size must be (width, height) in pixels, got {size!r}") from None
+    if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in (W, H)):
+        raise InputError(f"size must be (width, height) in whole pixels, got {size!r}")
+    W, H = int(W), int(H)
     if W < MIN_SIZE[0] or H < MIN_SIZE[1]:
         raise InputError(f"image size {W}x{H} is too small; use at least {MIN_SIZE[0]}x{MIN_SIZE[1]}")
 

@@ -25,6 +25,7 @@ pixel.
 from __future__ import annotations
 
 import hashlib
+import numbers
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -44,6 +45,14 @@ __all__ = [
 
 DEPTH_EPS = 0.02
 """Relative depth tolerance of the visibility test."""
+
+
+def _check_tol(tol_px) -> float:
+    """``tol_px`` as a float, or InputError naming it unless it is a finite number > 0."""
+    if (isinstance(tol_px, bool) or not isinstance(tol_px, numbers.Real)
+            or not np.isfinite(tol_px) or tol_px <= 0):
+        raise InputError(f"tol_px must be a finite number of pixels > 0, got {tol_px!r}")
+    return float(tol_px)
 
 
 def _check_xy(xy, what: str) -> np.ndarray:
@@ -171,13 +180,14 @@ def good_links(formation, cam_i: int, xy_i, cam_j: int, xy_j, tol_px: float = 2.
     depth test in the other camera (relative tolerance ``DEPTH_EPS = 2 %``) and reprojects
     within ``tol_px`` of the other keypoint.
     """
+    tol_px = _check_tol(tol_px)
     return reprojection_errors(formation, cam_i, xy_i, cam_j, xy_j) <= tol_px
 
 
 def _view(formation, i) -> View:
     n = len(formation.views)
-    if not (0 <= int(i) < n):
-        raise InputError(f"camera {i} out of range 0..{n - 1}")
+    if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
+        raise InputError(f"camera {i!r} is not a camera of the formation; cameras are 0..{n - 1}")
     return formation.views[int(i)]
 
 
@@ -220,6 +230,7 @@ def true_pairs(formation, i: int, xy_i, j: int, xy_j, tol_px: float = 2.0) -> np
     """
     vi, vj = _view(formation, i), _view(formation, j)
     xy_i, xy_j = _check_xy(xy_i, "xy_i"), _check_xy(xy_j, "xy_j")
+    tol_px = _check_tol(tol_px)
     # evaluation asks for the pairs of one camera pair several times (the links before and
     # after each stage, each baseline): computed once per formation, cameras, keypoints, tol
     cache = getattr(formation, "_truth_cache", None)

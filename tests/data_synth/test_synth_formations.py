@@ -75,6 +75,8 @@ def test_parametric_render():
     (dict(n_robots=2.5), "n_robots"),
     (dict(size=(32, 24)), "32x24 is too small.*64x48"),
     (dict(size="big"), "size must be"),
+    (dict(size=(161.7, 97.2)), r"whole pixels, got \(161.7, 97.2\)"),
+    (dict(size=(True, 97)), r"whole pixels, got \(True, 97\)"),
     (dict(seed=-1), "seed must be an integer >= 0"),
 ])
 def test_bad_input(kwargs, message):

@@ -107,6 +107,21 @@ def test_ground_truth_bad_input(formation):
         good_links(formation, 0, np.zeros((1, 2)), 9, np.zeros((1, 2)))
 
 
+@pytest.mark.parametrize("tol", [float("nan"), -1.0, 0, float("inf"), "2", True])
+def test_a_tolerance_that_is_not_a_positive_number_of_pixels_is_named(formation, tol):
+    xy = np.array([[10.0, 10.0], [50.0, 40.0]])
+    for judge in (good_links, true_pairs):
+        with pytest.raises(InputError, match=f"tol_px must be .* got {tol!r}"):
+            judge(formation, 0, xy, 1, xy, tol_px=tol)
+
+
+@pytest.mark.parametrize("cam", [1.5, "1", True, -1, 6])
+def test_a_camera_that_is_not_an_index_of_the_formation_is_named(formation, cam):
+    xy = np.array([[10.0, 10.0]])
+    with pytest.raises(InputError, match=f"camera {cam!r} is not a camera"):
+        good_links(formation, 0, xy, cam, xy)
+
+
 def _sample_depth_whole_map(depth, xy):
     """The reference: ``1/z`` of the whole map first, then the same sampling rule."""
     H, W = depth.shape
