@@ -10,6 +10,7 @@ import math
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
+    add_memory_option,
     add_scene_options,
     feature_options,
     parse_size,
@@ -49,6 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="epipolar RANSAC inlier threshold in pixels (default 1)")
     p.add_argument("--tol-px", type=float, default=2.0,
                    help="ground-truth tolerance of a good link in pixels (default 2)")
+    add_memory_option(p)
 
 
 def match_formation(formation: str, seed: int = 0, size: tuple[int, int] = (640, 480),
@@ -117,6 +119,7 @@ def table(results: list[dict]) -> str:
 
 
 def run(args) -> int:
+    from pipeline.budget import check_formation_memory
     from pipeline.progress import StageTimer
 
     name = str(args.formation).lower()
@@ -128,6 +131,8 @@ def run(args) -> int:
     args.ratio = validate.lowe_ratio(args.ratio)
     args.threshold_px = validate.tolerance_px(args.threshold_px, "--threshold-px")
     args.seed = validate.seed(args.seed, "--seed")
+    # the formations are rendered one at a time, six robots each
+    check_formation_memory(6, size, args.max_memory_gb)
     timer = StageTimer()
     results = [match_formation(n, seed=args.seed, size=size, features=method,
                                max_features=max_features, ratio=args.ratio,

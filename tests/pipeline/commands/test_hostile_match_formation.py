@@ -39,6 +39,10 @@ def no_render(monkeypatch):
     ("--max-features", "99999999999999999999", "at most 1000000"),
     ("--formation", "z", "--formation 'z'"),
     ("--features", "surf-or-whatever", "--features"),
+    # six 4096x4096 views take about 9 GB to render and match (measured 93 bytes per robot
+    # and pixel at 2048x1536): refused like run-formation refuses them
+    ("--size", "4096x4096", "6 robots at 4096x4096 would need about 9.1 GB"),
+    ("--max-memory-gb", "nan", "--max-memory-gb 'nan'"),
 ])
 def test_meaningless_values_are_refused_before_any_work(no_render, capsys, flag, value,
                                                         message):
