@@ -34,6 +34,7 @@ from data_synth.renderer import intrinsics, render_view
 from data_synth.scene import build_scene
 from pipeline.errors import InputError
 from pipeline.types import View
+from pipeline.validate import MAX_RENDER_PIXELS, MAX_RENDER_SIDE
 
 __all__ = [
     "formation_name",
@@ -76,7 +77,7 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
         Drives the scene textures, the formation jitter and the sensor noise. The camera poses
         and images do not depend on the graph: formations ``a``–``d`` with one seed share images.
     size : (W, H)
-        Image size in pixels, at least :data:`MIN_SIZE`.
+        Image size in whole pixels, at least :data:`MIN_SIZE`.
     n_robots : int, optional
         Number of robots (default 6); for ``n != 6`` formations ``a``–``d`` follow their rules
         (ring, ring + triangles, ring2, complete).
@@ -94,7 +95,9 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
     Raises
     ------
     InputError
-        Unknown formation or graph kind, ``n_robots < 2``, image smaller than ``MIN_SIZE``.
+        Unknown formation or graph kind, ``n_robots < 2``, image smaller than ``MIN_SIZE``
+        or larger than the command line allows (``pipeline.validate.MAX_RENDER_SIDE`` a side,
+        ``MAX_RENDER_PIXELS`` in all).
     """
     name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
@@ -185,6 +188,9 @@ def formation_setup(formation, seed, size, n_robots, graph):
     W, H = int(W), int(H)
     if W < MIN_SIZE[0] or H < MIN_SIZE[1]:
         raise InputError(f"image size {W}x{H} is too small; use at least {MIN_SIZE[0]}x{MIN_SIZE[1]}")
+    if W > MAX_RENDER_SIDE or H > MAX_RENDER_SIDE or W * H > MAX_RENDER_PIXELS:
+        raise InputError(f"image size {W}x{H} is too large; each side at most {MAX_RENDER_SIDE} "
+                         f"and at most {MAX_RENDER_PIXELS} pixels in all (e.g. 4096x4096)")
 
     if graph is None:
         kind = FORMATIONS.get(formation, formation)

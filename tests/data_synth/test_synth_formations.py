@@ -77,6 +77,10 @@ def test_parametric_render():
     (dict(size="big"), "size must be"),
     (dict(size=(161.7, 97.2)), r"whole pixels, got \(161.7, 97.2\)"),
     (dict(size=(True, 97)), r"whole pixels, got \(True, 97\)"),
+    # refused before any allocation (the renderer would ask for 112 GiB here)
+    (dict(size=(100000, 100000)), "100000x100000 is too large"),
+    (dict(size=(8193, 64)), "8193x64 is too large"),
+    (dict(size=(4097, 4097)), "4097x4097 is too large"),
     (dict(seed=-1), "seed must be an integer >= 0"),
 ])
 def test_bad_input(kwargs, message):
