@@ -56,7 +56,7 @@ bench-voting: $(BENCH_STAMP)
 # make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (its URL,
 # with the recording's address, printed; python -m viz.browser checks it in headless Chromium)
 view: $(STAMP)
-	$(PY) -m viz.view $(RUN)
+	$(PY) -m viz.view $(if $(RUN),"$(RUN)")
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

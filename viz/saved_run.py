@@ -9,6 +9,8 @@ computed, and what the folder does not hold is left out of the recording:
 
 - the images (not in a run folder): each camera shows a blank image of its size;
 - the iteration of each cut (not in ``links.csv``): the replay orders cuts by round only;
+- how the rule decided each cut (Alg. 1's case, the evidence rule, the ``sync`` merge; not in
+  ``links.csv``): the cuts panel and the labels name the stage (``resolution``) only;
 - cameras absent from ``sparse/`` (an image the mapper did not register): drawn without a
   pose, their keypoints unknown;
 - ground-truth and fused points.
