@@ -80,7 +80,8 @@ def sift(gray: np.ndarray, max_features: int = 8192, threads: int = 1) -> SiftRe
     ``max_num_features`` (:func:`sift_extractor`).
 
     COLMAP keeps about the ``max_features`` largest-scale locations (it drops whole scale
-    levels, so a few more may stay); each may carry up to two orientations, so ``N`` may
+    levels, so more may stay, up to about twice a small budget); each may carry up to two
+    orientations, so ``N`` may
     exceed ``max_features`` (merge co-located keypoints to count locations,
     :func:`pipeline.matching.features.merge_colocated`).
     """
