@@ -203,6 +203,26 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
     return res
 
 
+def _fusion_tracks(results: dict, fpc: np.ndarray) -> dict:
+    """The stage's tracks and observations from the track names the robots started fusion
+    from (``fusion_labels``; a robot that published none holds no observation), counted as
+    :func:`pipeline.fusion.landmarks.fuse_tracks` counts them from the same names: a name
+    held by two features or more is a track, conflictive when one robot holds it twice."""
+    from pipeline.fusion.landmarks import _tracks_from_labels
+
+    labels = np.concatenate([results[i][1]["fusion_labels"].astype(np.int64)
+                             if i in results and "fusion_labels" in results[i][1]
+                             else np.full(int(fpc[i]), -1, np.int64) for i in range(len(fpc))]) \
+        if len(fpc) else np.zeros(0, np.int64)
+    track_of, T, _ = _tracks_from_labels(labels, int(fpc.sum()))
+    cam = np.repeat(np.arange(len(fpc)), fpc)
+    per = np.zeros((T, len(fpc)), dtype=np.int64)
+    sel = track_of >= 0
+    np.add.at(per, (track_of[sel], cam[sel]), 1)
+    return dict(tracks=int(T), tracks_conflictive=int((per > 1).any(1).sum()),
+                observations=int(sel.sum()))
+
+
 def fusion_of_team(team, results: dict, ledger,
                    fpc) -> tuple[dict, np.ndarray, np.ndarray, list]:
     """Cut in ``ledger`` the links a robot cut in its fusion stage; the stage's figures and
@@ -262,31 +282,45 @@ def fusion_of_team(team, results: dict, ledger,
     ne = [np.stack([np.flatnonzero(obs[:, u] & obs[:, v]) * n + u,
                     np.flatnonzero(obs[:, u] & obs[:, v]) * n + v], 1) for u, v in edges]
     ne = np.concatenate(ne) if ne else np.zeros((0, 2), np.int64)
-    fused = fused_points(ne, good, theta, winner)
-    pts, has_pt = fused.points, fused.has_point
+    fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]
+    K = int(fusion_heads[0]["hypotheses"]) if fusion_heads else None
+    fused = fused_points(ne, good, theta, winner, K)
+    pts, has_pt, grp = fused.points, fused.has_point, fused.group
     uf, _ = tracks_of(fpc, links.subset(before))
     ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
-    fusion_heads = [h["fusion"] for h in heads.values() if h.get("fusion")]
     mode = fusion_heads[0].get("consensus", "metropolis") if fusion_heads else None
     # the exact mode floods (no separate max-c rounds); Metropolis: n - 1 max-c rounds first
     maxc = max(n - 1, 0) if mode == "metropolis" else 0
+    tracks = _fusion_tracks(results, fpc)
+    voted_out = sum(int((a["fusion_estimated"].astype(bool)
+                         & ~a["fusion_inlier"].astype(bool)).sum()) for _, a in rows)
     stats = dict(
-        enabled=True, transport="zenoh", consensus=mode, rounds=int(rounds), maxc_rounds=maxc,
+        enabled=True, transport="zenoh", **tracks, consensus=mode, rounds=int(rounds), maxc_rounds=maxc,
         consensus_rounds=max(int(rounds) - maxc, 0),
         settled=(bool(rounds - maxc < 100) if mode == "metropolis"
                  else not any(h.get("forced", False) for h in fusion_heads)),
         messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
         messages_by_kind={k: v for k, v in msgs.items() if v},
         bytes_by_kind={k: v for k, v in byts.items() if v},
+        # both ends of every observer-graph edge, every round (the simulator's logical count)
+        logical_messages=int(2 * len(ne) * rounds),
         setup_messages=int(msgs["fusion-setup"]), setup_bytes=int(byts["fusion-setup"]),
         tracks_fused=int(has_pt.sum()),
         observations_estimated=int(sum(h["estimated"] for h in fusion_heads)),
+        observations_voted_out=int(voted_out),
         observations_cut=int(sum(h["outliers"] for h in fusion_heads)),
-        links_cut=int(cut.sum()),
-        hypotheses=int(fusion_heads[0]["hypotheses"]) if fusion_heads else 0,
+        links_cut=int(cut.sum()), observations_cut_links=int(cut.sum()),
+        tracks_split_winner=int((fused.split & has_pt).sum()),
+        max_disagreement=float(np.max(np.where(grp, np.linalg.norm(
+            theta - pts[:, None], axis=-1), 0.0))) if has_pt.any() else 0.0,
+        hypotheses=int(K or 0),
+        **(fusion_heads[0].get("options", {}) if fusion_heads else {}),
         noise=fusion_heads[0].get("noise") if fusion_heads else None,
+        # per robot; None: a robot that published no fusion
         robot_sigma_px=[((heads.get(i) or {}).get("fusion") or {}).get("sigma_px")
-                        for i in range(n)],  # None: a robot that published no fusion
+                        for i in range(n)],
+        noise_residuals=[((heads.get(i) or {}).get("fusion") or {}).get("noise_residuals")
+                         for i in range(n)],
         retransmissions=int(sum(h.get("retransmissions", 0) for h in fusion_heads)),
         phase_rounds=max((int(h["rounds"]) for h in fusion_heads), default=0),
         robots_lost={str(i): h["lost"] for i, h in sorted(

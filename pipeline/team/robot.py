@@ -497,7 +497,8 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     # its own neighbourhood: the comm edges that touch it, in the team's order
     e = np.asarray(team.comm_edges, dtype=np.int64).reshape(-1, 2)
     own_edges = e[(e[:, 0] == i) | (e[:, 1] == i)]
-    fusion = FusionRobot(i, team.n, own_edges, robot.final_tracks(), keypoints, K, R, t)
+    labels = robot.final_tracks()
+    fusion = FusionRobot(i, team.n, own_edges, labels, keypoints, K, R, t)
     if lossy:
         # loss injected (learnt with the counts): every logical round over the reliable
         # channel in lockstep, as the simulator's fusion runs on a lossy network
@@ -519,10 +520,19 @@ def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: 
     arrays["fusion_inlier"] = np.asarray(fusion.yes_w, np.uint8)
     arrays["fusion_outlier"] = np.asarray(fusion.outlier, np.uint8)
     arrays["fusion_winner"] = np.asarray(fusion.winner, np.int32)
+    # the track names fusion started from (conflictive ones too): the observer counts the
+    # stage's tracks and observations from them, as the simulator does from the same names
+    arrays["fusion_labels"] = np.asarray(labels, np.int64)
+    opt = fusion.opt
     return {**out, "tracks": int(len(fusion.names)), "estimated": int(fusion.est.sum()),
             "outliers": int(len(fusion.outlier_feats)), "links_cut": int(cut.sum()),
             "hypotheses": int(fusion.Kh), "consensus": fusion.opt.consensus,
             "noise": fusion.opt.noise, "sigma_px": fusion.sigma,
+            "noise_residuals": int(fusion.noise_residuals),
+            "options": {"c": int(opt.c), "local": opt.local, "gate": opt.gate,
+                        "p": float(opt.p), "sigma_px": float(opt.sigma_px), "wire": opt.wire,
+                        # W of the Metropolis stop rule (the exact mode has none)
+                        "stop_window": int(fusion.W) if opt.consensus == "metropolis" else None},
             "forced": _forced(fusion)}
 
 
