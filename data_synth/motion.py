@@ -31,6 +31,7 @@ Example
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,11 @@ class Sequence:
         return int(step) * self.n_robots + int(robot)
 
 
+def _is_real(value) -> bool:
+    """``value`` is a real number (a bool is not)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
 def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
                   size: tuple[int, int] = (320, 240), n_robots: int | None = None,
                   graph: str | None = None, speed: float = DEFAULT_SPEED,
@@ -101,14 +107,15 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
     Raises
     ------
     InputError
-        As :func:`data_synth.render`; ``steps < 1``; a negative or non-finite speed; ``p_up``
-        outside ``(0, 1]``.
+        As :func:`data_synth.render`; ``steps < 1``; a speed that is not a finite number
+        >= 0; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1.
     """
     steps = check_int(steps, "steps", 1)
-    if not np.isfinite(speed) or speed < 0:
-        raise InputError(f"speed {speed!r}: expected metres per step >= 0")
-    if not 0 < p_up <= 1:
+    if not _is_real(speed) or not np.isfinite(speed) or speed < 0:
+        raise InputError(f"speed {speed!r}: expected metres per step, a finite number >= 0")
+    if not _is_real(p_up) or not 0 < p_up <= 1:
         raise InputError(f"p_up {p_up!r}: expected a probability in (0, 1]")
+    window = check_int(window, "window", 1)
     name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
     scene = build_scene(seed)

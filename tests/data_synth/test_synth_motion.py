@@ -44,8 +44,24 @@ def test_switching_graph_is_a_subset_that_recurs():
     assert any(len(e) < len(full) for e in s.step_edges)
 
 
-@pytest.mark.parametrize("kw, match", [({"steps": 0}, "steps"), ({"speed": -1.0}, "speed"),
-                                       ({"p_up": 0.0}, "p_up")])
+@pytest.mark.parametrize("kw, match", [
+    ({"steps": 0}, "steps"), ({"speed": -1.0}, "speed"), ({"p_up": 0.0}, "p_up"),
+    # not numbers: named, not a TypeError
+    ({"speed": "1"}, r"speed '1'.*>= 0"), ({"speed": None}, "speed None"),
+    ({"speed": True}, "speed True"), ({"p_up": "x"}, r"p_up 'x'.*\(0, 1\]"),
+    ({"p_up": float("nan")}, "p_up nan"),
+    # the window of the switching graph: an integer >= 1, with or without switching
+    ({"window": 0}, r"window must be an integer >= 1, got 0"),
+    ({"window": 1.5}, r"window must be an integer >= 1, got 1.5"),
+    ({"window": "3"}, r"window must be an integer >= 1, got '3'"),
+    ({"window": 0, "switching": True}, r"window .* got 0")])
 def test_bad_parameters_are_named(kw, match):
     with pytest.raises(InputError, match=match):
         render_motion("ring", size=(64, 48), n_robots=2, **{"steps": 1, **kw})
+
+
+def test_window_one_and_numpy_numbers_are_accepted():
+    s = render_motion("ring", size=(64, 48), n_robots=3, steps=2, switching=True,
+                      window=np.int64(1), p_up=np.float64(0.5), speed=np.float32(0.2))
+    # a window of one step: every edge up at every step
+    assert all(len(e) == len(s.comm_edges) for e in s.step_edges)
