@@ -60,7 +60,8 @@ def _quadratic(r, M):
     return out
 
 
-def decide(known, estimated, draws, x, info, *, c: int, thr: float) -> Decision:
+def decide(known, estimated, draws, x, info, *, c: int, thr: float,
+           team: int | None = None) -> Decision:
     """The limit of max-c consensus and dynamic voting on the entries a robot holds.
 
     Parameters
@@ -72,6 +73,8 @@ def decide(known, estimated, draws, x, info, *, c: int, thr: float) -> Decision:
     info : ndarray, (R, n, d, d) — ``Λ⁻¹`` (wire images)
     c : int — robots per hypothesis
     thr : float — gate on the squared Mahalanobis distance (eq. 12)
+    team : int or None — robots of the team (default ``n``), for columns that hold only
+        some of them in id order (a track's observers): it bounds the iterations of ``F``
 
     Returns
     -------
@@ -124,7 +127,7 @@ def decide(known, estimated, draws, x, info, *, c: int, thr: float) -> Decision:
     finished = np.zeros((R, K), dtype=bool)
     cycles = np.zeros((R, K), dtype=bool)
     history = [S]
-    for _ in range(4 * n + 4):
+    for _ in range(4 * (n if team is None else int(team)) + 4):
         theta, ok = ml(S)
         nxt = gate(theta, ok)
         fixed = ~finished & (nxt == S).all(-1)

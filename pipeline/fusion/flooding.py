@@ -263,9 +263,59 @@ class FloodRun:
     sizes: list
 
 
+@dataclass
+class _Slots:
+    """The observers of each track in robot order: slot ``s`` of track ``b`` is robot
+    ``robot[b k + s]`` (``-1`` past its observers), ``k`` the most observers of a track;
+    the node ``b n + i`` of an observer is the slot node ``node[b n + i]`` (``-1``: robot
+    ``i`` does not observe track ``b``). The flood and the decisions run on slot nodes:
+    their state follows the observers of each track, not the whole team."""
+
+    n: int
+    k: int
+    robot: np.ndarray
+    node: np.ndarray
+
+    def node_of(self, slot_nodes) -> np.ndarray:
+        """The node ``b n + i`` of slot nodes ``b k + s`` (observers only)."""
+        slot_nodes = np.asarray(slot_nodes, dtype=np.int64)
+        return (slot_nodes // self.k) * self.n + self.robot[slot_nodes]
+
+    def take(self, a, fill=0):
+        """``(B, n, ...)`` per robot to ``(B, k, ...)`` per slot (``fill`` past the observers)."""
+        a = np.asarray(a)
+        B = len(self.robot) // self.k
+        flat = a.reshape((B * self.n,) + a.shape[2:])
+        idx = np.arange(B * self.k) // self.k * self.n + np.maximum(self.robot, 0)
+        out = flat[idx]
+        out[self.robot < 0] = fill
+        return out.reshape((B, self.k) + a.shape[2:])
+
+    def edges(self, node_edges) -> np.ndarray:
+        """Node edges ``(b n + i, b n + j)`` (between observers) as slot-node edges."""
+        ne = np.asarray(node_edges, dtype=np.int64).reshape(-1, 2)
+        return self.node[ne]
+
+
+def _slots(observes) -> _Slots:
+    """The :class:`_Slots` of ``observes`` ``(B, n)``."""
+    observes = np.asarray(observes, dtype=bool)
+    B, n = observes.shape
+    count = observes.sum(1)
+    k = max(int(count.max(initial=0)), 1)
+    ob_b, ob_i = np.nonzero(observes)                 # by track, then robot: slots in order
+    slot = np.arange(len(ob_b)) - np.repeat(np.cumsum(count) - count, count)
+    robot = np.full(B * k, -1, dtype=np.int64)
+    robot[ob_b * k + slot] = ob_i
+    node = np.full(B * n, -1, dtype=np.int64)
+    node[ob_b * n + ob_i] = ob_b * k + slot
+    return _Slots(n, k, robot, node)
+
+
 def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d: int,
           wire: str, exchange=None) -> FloodRun:
-    """The flood of every track at once; row ``b n + i`` is robot ``i``'s state in track ``b``.
+    """The flood of every track at once; row ``b n + i`` is robot ``i``'s state in track ``b``
+    (computed on the tracks' observers alone, :func:`_flood_slots`).
 
     Parameters
     ----------
@@ -292,26 +342,50 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
     """
     observes = np.asarray(observes, dtype=bool)
     B, n = observes.shape
-    M = B * n
+    sl = _slots(observes)
+    run = _flood_slots(sl.take(observes, False), sl.edges(node_edges), edge_link, n_links, n,
+                       estimated=sl.take(np.asarray(estimated, dtype=bool).reshape(B, n), False),
+                       K=K, d=d, wire=wire, exchange=exchange)
+    known = np.zeros((B * n, n), dtype=bool)
+    r, c = np.nonzero(run.known)
+    known[sl.node_of(r), sl.robot[(r // sl.k) * sl.k + c]] = True
+    decided = np.full(B * n, -1, dtype=np.int64)
+    mine = sl.robot >= 0
+    decided[sl.node_of(np.flatnonzero(mine))] = run.decided_round[mine]
+    return FloodRun(known=known, decided_round=decided, rounds=run.rounds, settled=run.settled,
+                    sizes=run.sizes)
+
+
+def _flood_slots(observes, node_edges, edge_link, n_links: int, n: int, *, estimated, K: int,
+                 d: int, wire: str, exchange=None) -> FloodRun:
+    """:func:`flood` on the tracks' observers alone (:class:`_Slots`): ``observes``,
+    ``estimated`` ``(B, k)`` and ``node_edges`` over slot nodes ``b k + s``, ``n`` the team
+    size (message sizes, round cap). The state of a node holds one column per observer of
+    its track, ``O(B k²)`` for tracks of at most ``k`` observers, not ``O(B n²)``; the
+    update is :func:`flood`'s, column for column (a robot that does not observe a track
+    never enters its state)."""
+    observes = np.asarray(observes, dtype=bool)
+    B, k = observes.shape
+    M = B * k
     obs = observes.reshape(-1)
-    est = np.asarray(estimated, dtype=bool).reshape(B, n)
-    robot = np.tile(np.arange(n), B)
+    est = np.asarray(estimated, dtype=bool).reshape(B, k)
+    robot = np.tile(np.arange(k), B)                  # the slot of each node
     ne = np.asarray(node_edges, dtype=np.int64).reshape(-1, 2)
     E = len(ne)
     src = np.concatenate([ne[:, 0], ne[:, 1]])
     dst = np.concatenate([ne[:, 1], ne[:, 0]])
     link2 = np.concatenate([2 * edge_link, 2 * edge_link + 1]).astype(np.int64)
     rev = np.concatenate([np.arange(E) + E, np.arange(E)])
-    nbr = np.zeros((M, n), dtype=bool)
+    nbr = np.zeros((M, k), dtype=bool)
     nbr[src, robot[dst]] = True
-    nbr_t = nbr.reshape(B, n, n)
+    nbr_t = nbr.reshape(B, k, k)
     has_edge = np.zeros(M, dtype=bool)
     has_edge[src] = True
-    known = np.zeros((M, n), dtype=bool)
+    known = np.zeros((M, k), dtype=bool)
     known[obs, robot[obs]] = True
     learned = np.where(known, 0, -1).astype(np.int64)
-    gone = np.zeros((M, n), dtype=bool)
-    sent = np.zeros((2 * E, n), dtype=bool)
+    gone = np.zeros((M, k), dtype=bool)
+    sent = np.zeros((2 * E, k), dtype=bool)
     closed_in = np.zeros(2 * E, dtype=bool)       # the sender of this edge sent its last
     link_up = np.ones(max(int(n_links), 0), dtype=bool)
     done = obs & ~has_edge                        # an observer without neighbours knows all
@@ -319,8 +393,8 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
     stopped = ~obs.copy()
     dec_known = known.copy()
     forced = np.zeros(M, dtype=bool)              # decided by the cap, ball not closed
-    # column k of a row: is entry k estimated? (per track)
-    est_k = np.repeat(est, n, axis=0)             # (M, n): est[b, k] for row b n + i
+    # column s of a row: is the entry of slot s estimated? (per track)
+    est_k = np.repeat(est, k, axis=0)             # (M, k): est[b, s] for row b k + i
     incidence = sp.csr_matrix((np.ones(2 * E), (dst, np.arange(2 * E))), shape=(M, 2 * E))
     rows = np.arange(2 * E)
     sizes, t_last, t = [], 0, 0
@@ -357,8 +431,8 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
         closed_in |= down
         gone[dst[down], robot[src[down]]] = True
         stopped |= done                            # a done robot sent its last this round
-        kt = known.reshape(B, n, n).astype(np.float64)
-        reach = (kt @ nbr_t.astype(np.float64)).reshape(M, n) > 0
+        kt = known.reshape(B, k, k).astype(np.float64)
+        reach = (kt @ nbr_t.astype(np.float64)).reshape(M, k) > 0
         closes = ~(reach & ~known & ~gone).any(1)
         now = obs & ~done & (closes | (t >= cap))
         forced |= now & ~closes
@@ -369,28 +443,38 @@ def flood(observes, node_edges, edge_link, n_links: int, *, estimated, K: int, d
                     settled=not bool(forced.any()), sizes=sizes)
 
 
-def _flood_by_robots(observes, node_edges, edge_link, exchange, *, estimated, draws, x, info,
-                     K: int, c: int, thr: float, wire: str) -> FloodRun:
+def _flood_by_robots(sl: _Slots, observes, node_edges, edge_link, exchange, *, estimated,
+                     draws, x, info, K: int, c: int, thr: float, wire: str) -> FloodRun:
     """The flood of every track by :class:`~pipeline.fusion.flood_robot.FloodRobot` s over ``exchange``
-    (:func:`run_robots_on`), as a :class:`FloodRun` (``known``: each robot's last decision
-    set; rows of robots that crashed before deciding: what they held)."""
+    (:func:`run_robots_on`), as a :class:`FloodRun` on the slot nodes of ``sl`` (``known``:
+    each robot's last decision set; rows of robots that crashed before deciding: what they
+    held)."""
     observes = np.asarray(observes, dtype=bool)
     B, n = observes.shape
-    ne = np.asarray(node_edges, dtype=np.int64).reshape(-1, 2)
-    nbr = np.zeros((B * n, n), dtype=bool)
-    nbr[ne[:, 0], ne[:, 1] % n] = nbr[ne[:, 1], ne[:, 0] % n] = True
-    robots = [FloodRobot(i, n, {int(b): dict(neighbours=nbr[b * n + i], estimated=estimated[b, i],
+    k = sl.k
+    ne = sl.edges(node_edges)
+    nbr = np.zeros((B * k, k), dtype=bool)
+    nbr[ne[:, 0], ne[:, 1] % k] = nbr[ne[:, 1], ne[:, 0] % k] = True
+
+    def neighbours(b: int, i: int) -> np.ndarray:
+        row = np.zeros(n, dtype=bool)
+        row[sl.robot[b * k + np.flatnonzero(nbr[sl.node[b * n + i]])]] = True
+        return row
+
+    robots = [FloodRobot(i, n, {int(b): dict(neighbours=neighbours(b, i), estimated=estimated[b, i],
                                              draws=draws[b, i], x=x[b, i], info=info[b, i])
                                 for b in np.flatnonzero(observes[:, i])},
                          K=K, d=x.shape[-1], wire=wire, c=c, thr=thr) for i in range(n)]
     rounds, sizes = run_robots_on(robots, exchange.link_ends, exchange)
-    known = np.zeros((B * n, n), dtype=bool)
-    decided = np.full(B * n, -1, dtype=np.int64)
+    known = np.zeros((B * k, k), dtype=bool)
+    decided = np.full(B * k, -1, dtype=np.int64)
     forced = False
     for r in robots:
         for b, st in r.tracks.items():
-            row = b * n + r.robot
-            known[row] = st.known_at_decision if st.known_at_decision is not None else st.known
+            row = sl.node[b * n + r.robot]
+            held = st.known_at_decision if st.known_at_decision is not None else st.known
+            slots = sl.robot[b * k:(b + 1) * k]
+            known[row] = held[np.maximum(slots, 0)] & (slots >= 0)
             decided[row] = st.decided_round
             forced |= st.forced and r.robot not in exchange.crashed
     return FloodRun(known=known, decided_round=decided, rounds=int(rounds),
@@ -446,23 +530,32 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
     infow = to_wire(np.where(est[..., None, None], info, 0.0), wire)
     from pipeline.fusion.protocol import LockstepExchange
 
+    # the flood and the decisions on each track's observers alone (_Slots): per track
+    # O(k²) state for its k observers, not O(n²) for the team
+    observes = np.asarray(observes, dtype=bool)
+    sl = _slots(observes)
+    k = sl.k
     if isinstance(exchange, LockstepExchange):
         # a faulty network: links can go down, so the robots run one by one with tombstones
-        run = _flood_by_robots(observes, node_edges, edge_link, exchange, estimated=est,
+        run = _flood_by_robots(sl, observes, node_edges, edge_link, exchange, estimated=est,
                                draws=draws, x=x, info=info, K=K, c=c, thr=thr, wire=wire)
     else:
-        run = flood(observes, node_edges, edge_link, n_links, estimated=est, K=K, d=d,
-                    wire=wire, exchange=exchange)
-    rows = np.flatnonzero(np.asarray(observes, dtype=bool).reshape(-1))
+        run = _flood_slots(sl.take(observes, False), sl.edges(node_edges), edge_link, n_links,
+                           n, estimated=sl.take(est, False), K=K, d=d, wire=wire,
+                           exchange=exchange)
+    rows = np.flatnonzero(observes.reshape(-1))
+    srows = sl.node[rows]
     tb = rows // n
     # a row's decision is a function of its track's entries and the set it holds alone
     # (decide's rows are independent): robots of one track holding the same set decide the
     # same, so each distinct (track, set) is decided once
-    key = np.concatenate([tb[:, None], np.packbits(run.known[rows], axis=1)], 1)
+    key = np.concatenate([tb[:, None], np.packbits(run.known[srows], axis=1)], 1)
     _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inv = inv.reshape(-1)
     tf = tb[first]
-    dec = decide(run.known[rows[first]], est[tf], draws[tf], xw[tf], infow[tf], c=c, thr=thr)
+    # (slots in robot order: the sums over robots add the same terms in the same order)
+    dec = decide(run.known[srows[first]], sl.take(est, False)[tf], sl.take(draws, -np.inf)[tf],
+                 sl.take(xw)[tf], sl.take(infow)[tf], c=c, thr=thr, team=n)
     dec = Decision(**{f: getattr(dec, f)[inv] for f in Decision.__dataclass_fields__})
     theta = np.zeros((B * n, d))
     valid = np.zeros(B * n, dtype=bool)
@@ -470,7 +563,7 @@ def exact_dynamic_voting(x, cov, estimated, observes, node_edges, edge_link, n_l
     winner = np.zeros(B * n, dtype=np.int64)
     votes = np.zeros((B * n, K))
     members = np.zeros((B * n, K), dtype=bool)
-    own = rows % n
+    own = srows % k
     theta[rows], valid[rows], winner[rows] = dec.theta, dec.valid, dec.winner
     inlier[rows] = dec.yes[np.arange(len(rows)), dec.winner, own] & dec.valid
     votes[rows] = dec.counts / np.maximum(dec.size, 1)[:, None]

@@ -110,6 +110,7 @@ from pipeline.fusion.consensus import (
 )
 from pipeline.fusion.flooding import exact_dynamic_voting
 from pipeline.fusion.local import (
+    TwoViewPoints,
     local_estimates,
     observing_neighbours,
     project,
@@ -373,17 +374,25 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     # sigma_px): the scale of its Λ_i = σ_i² (Σ J_vᵀ J_v)⁻¹, so of its chi-square vote
     # d(x_i, θ_i(t), Λ_i) <= χ²_{3,p} (eqs. 12–13), and of its pixel check below
     # (the two-view points of every observer pair, shared with the robust local estimate)
-    pairs = two_view_points(kp, observing_neighbours(observes, adj), Rs, ts, Ks) \
-        if noise == "measured" and local == "robust" else None
+    # (the robot × robot work of both runs on a few tracks at a time, _track_chunks: a
+    # track's rows depend on that track alone, so the chunks give the values of one call)
+    node_edges, edge_link, active_comm = _observer_graph(comm, observes)
+    chunks = _track_chunks(observes, node_edges)
+    pairs = [two_view_points(kp[s], observing_neighbours(observes[s], adj), Rs, ts, Ks)
+             if noise == "measured" else None for s in chunks]
     sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px, p, noise,
-                                   pairs=pairs)
-    X, cov, estimated = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma, px_thr, local,
-                                        pairs=pairs)
+                                   pairs=_joined_pairs(pairs, chunks) if noise == "measured"
+                                   else None)
+    X = np.zeros((B, n, 3))
+    cov = np.empty((B, n, 3, 3))
+    estimated = np.zeros((B, n), dtype=bool)
+    for s, pr in zip(chunks, pairs, strict=True):
+        X[s], cov[s], estimated[s] = local_estimates(kp[s], observes[s], adj, Rs, ts, Ks, sigma,
+                                                     px_thr, local, pairs=pr)
     # each robot's own max-c draws, from its id and the track's name (public once exchanged)
     draws = hypothesis_draws(seed, np.repeat(track_names[tr], n), np.tile(np.arange(n), B),
                              K).reshape(B, n, K)
 
-    node_edges, edge_link, active_comm = _observer_graph(comm, observes)
     stats = dict(tracks=int(T), tracks_fused=0, tracks_conflictive=int(conflictive.sum()),
                  observations=int(n_obs), observations_estimated=int(estimated.sum()),
                  observations_voted_out=0, observations_cut=0, links_cut=0,
@@ -480,6 +489,48 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                         obs_cam=obs_cam, obs_feat=obs_feat, obs_estimated=obs_est,
                         obs_inlier=obs_in, cut_links=cut, stats=stats, obs_votes=obs_votes,
                         obs_point=obs_point)
+
+
+
+#: robot × robot entries the local estimates work on at once (:func:`_track_chunks`)
+CHUNK_ENTRIES = 1 << 22
+
+
+def _track_chunks(observes, node_edges, cap: int = CHUNK_ENTRIES) -> list[slice]:
+    """Consecutive runs of tracks whose local estimates work on at most about ``cap``
+    robot × robot entries at once (a track alone if it needs more).
+
+    The local estimates (:func:`pipeline.fusion.local.local_estimates`, the two-view points
+    of :func:`pipeline.fusion.local.two_view_points`) hold per track dense ``(n, n)`` tables
+    of the observing neighbours, their pairs and chosen views (``n²``), every keypoint of
+    the track against the two-view point of each observing pair (``2 E_b n``, ``E_b`` the
+    comm edges between its observers) and each estimate's triangulation over all ``n``
+    cameras (``k_b n`` rows of some 64 entries' bytes, ``k_b`` its observers). Over all
+    tracks at once that is ``O(B n²)``; chunk by chunk the peak is that of one chunk.
+    """
+    B, n = observes.shape
+    edges = np.bincount(np.asarray(node_edges, dtype=np.int64).reshape(-1, 2)[:, 0] // max(n, 1),
+                        minlength=B)
+    cost = n * n + 2 * edges * n + 64 * observes.sum(1) * n
+    chunks, start, acc = [], 0, 0
+    for b, c in enumerate(cost.tolist()):
+        if acc and acc + c > cap:
+            chunks.append(slice(start, b))
+            start, acc = b, 0
+        acc += c
+    if B:
+        chunks.append(slice(start, B))
+    return chunks
+
+
+def _joined_pairs(pairs: list[TwoViewPoints], chunks: list[slice]) -> TwoViewPoints:
+    """The two-view points of consecutive chunks of tracks as those of all the tracks."""
+    if not pairs:
+        return TwoViewPoints(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                             np.zeros((0, 3)), np.zeros(0, dtype=bool))
+    return TwoViewPoints(np.concatenate([pr.b + s.start for pr, s in zip(pairs, chunks, strict=True)]),
+                         *(np.concatenate([getattr(pr, f) for pr in pairs])
+                           for f in ("lo", "hi", "X", "ok")))
 
 
 def _observer_graph(comm: np.ndarray, observes: np.ndarray):

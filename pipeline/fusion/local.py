@@ -181,9 +181,10 @@ def _robust_views(kp, nb, Rs, ts, Ks, sigma_px, px_thr, pairs: TwoViewPoints | N
     if pairs is None:
         pairs = two_view_points(kp, nb, Rs, ts, Ks)
     ub, ui, uj, Xu, oku = pairs
-    pair_id = np.full((B, n, n), -1, dtype=np.int64)
-    pair_id[ub, ui, uj] = pair_id[ub, uj, ui] = np.arange(len(ub))
-    pid = pair_id[bb, ii, jj]
+    # the pair of each (b, i, j): the pairs come sorted by (b, lo, hi), so by bisection
+    # (not a (B, n, n) table of pair ids)
+    pid = np.searchsorted((ub * n + ui) * n + uj,
+                          (bb * n + np.minimum(ii, jj)) * n + np.maximum(ii, jj))
     pair = np.zeros((P, n), dtype=bool)
     pair[np.arange(P), ii] = True
     pair[np.arange(P), jj] = True

@@ -146,7 +146,8 @@ def robot_noise(kp, observes, adj, Rs, ts, Ks, sigma_px: float = 1.0, p: float =
     if noise == "fixed" or not B:
         return sigma, count
     mine = np.ones(n, dtype=bool) if robots is None else np.asarray(robots, dtype=bool)
-    nb = observing_neighbours(observes, adj, mine)
+    # (given the pairs, the (B, n, n) table of observing neighbours is not needed)
+    nb = observing_neighbours(observes, adj, mine) if pairs is None else None
     _, lo, hi, d, ok = two_view_residuals(kp, nb, Rs, ts, Ks, pairs)
     # each residual counts for both its robots; the median of each robot's, sorted by value
     who = np.concatenate([lo[ok], hi[ok]])
