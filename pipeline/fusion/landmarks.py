@@ -195,7 +195,7 @@ def tracks_of(features_per_camera, links: Links) -> tuple[np.ndarray, int]:
     return track_of, len(tracks)
 
 
-def _tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int, np.ndarray]:
+def tracks_from_labels(track_labels, m_total: int) -> tuple[np.ndarray, int, np.ndarray]:
     """Track index of every feature from the robots' own track names (in name order), the
     track count and each track's name."""
     lab = np.asarray(track_labels, dtype=np.int64).reshape(-1)
@@ -335,7 +335,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         track_of, T = tracks_of(m, links)
         track_names = np.arange(T, dtype=np.int64)
     else:
-        track_of, T, track_names = _tracks_from_labels(track_labels, int(off[-1]))
+        track_of, T, track_names = tracks_from_labels(track_labels, int(off[-1]))
     cam_of = np.repeat(np.arange(n), m)
     feat_of = np.arange(off[-1]) - off[cam_of]
     obs_g = np.flatnonzero(track_of >= 0)

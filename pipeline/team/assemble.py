@@ -208,13 +208,13 @@ def _fusion_tracks(results: dict, fpc: np.ndarray) -> dict:
     from (``fusion_labels``; a robot that published none holds no observation), counted as
     :func:`pipeline.fusion.landmarks.fuse_tracks` counts them from the same names: a name
     held by two features or more is a track, conflictive when one robot holds it twice."""
-    from pipeline.fusion.landmarks import _tracks_from_labels
+    from pipeline.fusion.landmarks import tracks_from_labels
 
     labels = np.concatenate([results[i][1]["fusion_labels"].astype(np.int64)
                              if i in results and "fusion_labels" in results[i][1]
                              else np.full(int(fpc[i]), -1, np.int64) for i in range(len(fpc))]) \
         if len(fpc) else np.zeros(0, np.int64)
-    track_of, T, _ = _tracks_from_labels(labels, int(fpc.sum()))
+    track_of, T, _ = tracks_from_labels(labels, int(fpc.sum()))
     cam = np.repeat(np.arange(len(fpc)), fpc)
     per = np.zeros((T, len(fpc)), dtype=np.int64)
     sel = track_of >= 0

@@ -15,7 +15,7 @@ def _bench():
 
 @pytest.mark.parametrize("args, named", [
     (["--robots", "1"], "n_robots must be an integer >= 2, got 1"),
-    (["--robots", "3", "--window", "0"], "window 0"),
+    (["--robots", "3", "--window", "0"], "window must be an integer >= 1, got 0"),
     (["--robots", "3", "--steps", "0"], "steps must be an integer >= 1, got 0"),
 ])
 def test_refused_values_are_named_with_exit_status_2(tmp_path, capsys, args, named):
