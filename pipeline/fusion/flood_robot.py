@@ -154,12 +154,12 @@ class FloodRobot:
         self._neighbours = np.zeros((B, n), dtype=bool)
         self._known = np.zeros((B, n), dtype=bool)
         self._learned = np.full((B, n), -1, dtype=np.int64)
-        self._nb = np.zeros((B, n, n), dtype=bool)
+        self._nb = np.zeros((B, n, (n + 7) // 8), dtype=np.uint8)  # [b, k]: k's neighbours, packed
         self._est = np.zeros((B, n), dtype=bool)
         self._draws = np.full((B, n, K), -np.inf)
         self._x = np.zeros((B, n, d))
         self._info = np.zeros((B, n, d, d))
-        self._got = np.zeros((B, n, n), dtype=bool)     # [b, j, k]: neighbour j sent k's entry
+        self._got = None                                # [b, col(j), k]: neighbour j sent k's entry
         self._closed = np.zeros((B, n), dtype=bool)     # neighbours that sent their last
         self._gone = np.zeros((B, n), dtype=bool)       # neighbours declared lost
         self._down = [{} for _ in range(B)]             # lost link (a, b), a < b -> round learned
@@ -184,7 +184,19 @@ class FloodRobot:
                 self._info[b, i] = to_wire(np.asarray(tr["info"]), wire)
         self._known[:, i] = True
         self._learned[:, i] = 0
-        self._nb[:, i] = self._neighbours
+        self._nb[:, i] = np.packbits(self._neighbours, axis=-1)
+        # one column of _got per robot that is a neighbour in some track (robot order)
+        self._cols = np.flatnonzero(self._neighbours.any(0))
+        self._got = np.zeros((B, len(self._cols), n), dtype=bool)
+
+    def _col(self, j: int) -> int:
+        """Column of neighbour ``j`` in ``_got`` (a column is added for a sender that is a
+        neighbour in none of the robot's tracks)."""
+        c = int(np.searchsorted(self._cols, j))
+        if c == len(self._cols) or self._cols[c] != j:
+            self._cols = np.insert(self._cols, c, j)
+            self._got = np.insert(self._got, c, False, axis=1)
+        return c
 
     @property
     def tracks(self) -> dict:
@@ -218,28 +230,39 @@ class FloodRobot:
         return self._components(self._rows([name]))[0]
 
     def _components(self, rows: np.ndarray) -> np.ndarray:
-        """:meth:`component` of the tracks ``rows``, (R, n) bool."""
-        known, nb = self._known[rows], self._nb[rows]
+        """:meth:`component` of the tracks ``rows``, (R, n) bool.
+
+        Only the robots it knows and those they name as neighbours have links it holds, so
+        the search of each track runs on those robots (at most the track's observers)."""
+        n = self.n
+        known, nbp = self._known[rows], self._nb[rows]
         out = known.copy()
-        heard_of = (nb & known[:, :, None]).any(1)
+        rr, kk = np.nonzero(known)
+        heard = np.zeros(nbp.shape[::2], dtype=np.uint8)
+        np.bitwise_or.at(heard, rr, nbp[rr, kk])
+        heard_of = np.unpackbits(heard, axis=-1, count=n).astype(bool)
         down = np.array([bool(self._down[b]) for b in rows.tolist()], dtype=bool)
         # no lost link and the ball closed: it is what it holds
         slow = np.flatnonzero(down | (heard_of & ~known).any(1))
-        if slow.size == 0:
-            return out
-        adj = nb[slow] | np.swapaxes(nb[slow], 1, 2)
-        for r, b in enumerate(rows[slow].tolist()):
-            for a, z in self._down[b]:
-                adj[r, a, z] = adj[r, z, a] = False
-        reach = np.zeros((slow.size, self.n), dtype=bool)
-        reach[:, self.robot] = True
-        front = reach.copy()
-        kn = known[slow]
-        while front.any():
-            nxt = (front[:, :, None] & adj).any(1) & ~reach
-            reach |= nxt
-            front = nxt & kn     # an unknown robot's own links are not known yet
-        out[slow] = reach
+        for r in slow.tolist():
+            kn = known[r]
+            U = np.flatnonzero(kn | heard_of[r])             # robots with links it holds
+            kU = kn[U]
+            nb = np.zeros((U.size, U.size), dtype=bool)
+            nb[kU] = np.unpackbits(nbp[r, U[kU]], axis=-1, count=n).astype(bool)[:, U]
+            adj = nb | nb.T
+            for a, z in self._down[int(rows[r])]:
+                pa, pz = np.searchsorted(U, a), np.searchsorted(U, z)
+                if pa < U.size and pz < U.size and U[pa] == a and U[pz] == z:
+                    adj[pa, pz] = adj[pz, pa] = False
+            reach = U == self.robot
+            front = reach.copy()
+            while front.any():
+                nxt = adj[front].any(0) & ~reach
+                reach |= nxt
+                front = nxt & kU     # an unknown robot's own links are not known yet
+            out[r] = False
+            out[r, U] = reach
         return out
 
     def _lose(self, b: int, a: int, z: int, t: int) -> None:
@@ -253,7 +276,7 @@ class FloodRobot:
         self._last_down[b] = t
         for j, k in ((e[0], e[1]), (e[1], e[0])):
             if j != self.robot and self._neighbours[b, j] and self._known[b, k] \
-                    and k != self.robot and not self._got[b, j, k]:
+                    and k != self.robot and not self._got[b, self._col(j), k]:
                 self._resend.setdefault(b, {}).setdefault(j, set()).add(k)
 
     def _decide(self, rows: np.ndarray, masks: np.ndarray) -> None:
@@ -288,12 +311,13 @@ class FloodRobot:
                 rows = self._rows(msg.names)
                 e = msg.entries
                 er = np.repeat(rows, msg.count)
-                self._got[er, msg.src, e.robot] = True
+                self._got[er, self._col(msg.src), e.robot] = True
                 new = ~self._done[er] & ~self._known[er, e.robot]
                 if new.any():
                     b, k = er[new], e.robot[new]
                     self._known[b, k], self._learned[b, k] = True, t_prev
-                    self._nb[b, k], self._est[b, k] = e.neighbours[new], e.estimated[new]
+                    self._nb[b, k] = np.packbits(e.neighbours[new], axis=-1)
+                    self._est[b, k] = e.estimated[new]
                     self._draws[b, k], self._x[b, k] = e.draws[new], e.x[new]
                     self._info[b, k] = e.info[new]
                 self._closed[rows[msg.last], msg.src] = True
@@ -359,18 +383,19 @@ class FloodRobot:
                 continue
             stopped = self._stopped[rows]
             # j heard its neighbours' entries in round 1, unless the link went down
-            heard = others & self._nb[rows, j, :]
+            heard = others & np.unpackbits(self._nb[rows, j], axis=-1, count=n).astype(bool)
             for r in np.flatnonzero(has_down[rows] & heard.any(1)).tolist():
                 down = self._down[rows[r]]
                 for k in np.flatnonzero(heard[r]).tolist():
                     heard[r, k] = (min(j, k), max(j, k)) not in down
-            send = fresh[rows] & ~heard & ~self._got[rows, j, :] & ~stopped[:, None]
+            got = self._got[rows, self._col(j), :]
+            send = fresh[rows] & ~heard & ~got & ~stopped[:, None]
             send[:, j] = False
             r_e, k_e = np.nonzero(send)
             extra_r, extra_k = [], []
             for r in (range(rows.size) if self._resend else ()):
                 more = self._resend.get(int(rows[r]), {}).pop(j, ())
-                more = sorted(k for k in more if not send[r, k] and not self._got[rows[r], j, k])
+                more = sorted(k for k in more if not send[r, k] and not got[r, k])
                 extra_r += [r] * len(more)
                 extra_k += more
             if extra_r:
@@ -385,7 +410,9 @@ class FloodRobot:
             b_e = rows[r_e]
             msg.names, msg.last = self.names[rows[keep]], self._done[rows[keep]].copy()
             msg.count = count[keep].astype(np.int64)
-            msg.entries = FloodEntries(k_e.astype(np.int64), self._nb[b_e, k_e], self._est[b_e, k_e],
+            msg.entries = FloodEntries(k_e.astype(np.int64),
+                                       np.unpackbits(self._nb[b_e, k_e], axis=-1,
+                                                     count=n).astype(bool), self._est[b_e, k_e],
                                        self._draws[b_e, k_e], self._x[b_e, k_e],
                                        self._info[b_e, k_e])
         self._resend.clear()

@@ -221,41 +221,48 @@ class FusionRobot:
         keep = ~np.isin(self.names, sorted(drop))
         self.names, self.feat = self.names[keep], self.feat[keep]
         B = len(self.names)
-        observes = np.zeros((B, n), dtype=bool)
-        observes[:, i] = True
-        kp = np.zeros((B, n, 2))
-        kp[:, i] = self.keypoints[self.feat].astype(np.float64)
-        Rs = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-        ts = np.zeros((n, 3))
+        # the robot's view of the team: itself and the neighbours whose setups came, in robot
+        # order (column v is robot view[v]); its estimates use no other robot, and the order
+        # keeps every sum and tie-break of the team-wide tables
+        view = np.array(sorted({i} | set(self.setups)), dtype=np.int64)
+        L, li = len(view), int(np.searchsorted(view, i))
+        observes = np.zeros((B, L), dtype=bool)
+        observes[:, li] = True
+        kp = np.zeros((B, L, 2))
+        kp[:, li] = self.keypoints[self.feat].astype(np.float64)
+        Rs = np.broadcast_to(np.eye(3), (L, 3, 3)).copy()
+        ts = np.zeros((L, 3))
         Ks = Rs.copy()
-        Ks[i], Rs[i], ts[i] = self.K, self.R, self.t
-        adj = np.zeros((n, n), dtype=bool)
+        Ks[li], Rs[li], ts[li] = self.K, self.R, self.t
+        adj = np.zeros((L, L), dtype=bool)
         for j, s in self.setups.items():
-            Ks[j], Rs[j], ts[j] = _camera_from(s["camera"])
-            adj[i, j] = adj[j, i] = True
+            v = int(np.searchsorted(view, j))
+            Ks[v], Rs[v], ts[v] = _camera_from(s["camera"])
+            adj[li, v] = adj[v, li] = True
             pos = np.searchsorted(self.names, s["names"])
             ok = (pos < B) & (self.names[np.minimum(pos, max(B - 1, 0))] == s["names"]) \
                 if B else np.zeros(len(s["names"]), bool)
-            observes[pos[ok], j] = True
-            kp[pos[ok], j] = s["keypoints"][ok].astype(np.float64)
-        own = np.zeros(n, dtype=bool)
-        own[i] = True
+            observes[pos[ok], v] = True
+            kp[pos[ok], v] = s["keypoints"][ok].astype(np.float64)
+        own = np.zeros(L, dtype=bool)
+        own[li] = True
         # its own keypoint noise (the scale of its Λ_i, its vote and its pixel check), from
         # the two-view points its robust local estimate is built from
         pairs = two_view_points(kp, observing_neighbours(observes, adj, own), Rs, ts, Ks) \
             if self.opt.noise == "measured" and self.opt.local == "robust" else None
         sigma, residuals = robot_noise(kp, observes, adj, Rs, ts, Ks, self.opt.sigma_px,
                                        self.opt.p, self.opt.noise, robots=own, pairs=pairs)
-        self.sigma, self.noise_residuals = float(sigma[i]), int(residuals[i])
+        self.sigma, self.noise_residuals = float(sigma[li]), int(residuals[li])
         X, cov, est = local_estimates(kp, observes, adj, Rs, ts, Ks, sigma,
                                       self.px_thr, self.opt.local, robots=own, pairs=pairs)
-        self.kp_own = kp[:, i]
-        self.est = est[:, i]
+        self.kp_own = kp[:, li]
+        self.est = est[:, li]
         # the voting inputs as dynamic_voting prepares them (pipeline.fusion.voting._prepare)
-        self.x = np.where(self.est[:, None], X[:, i], 0.0)
-        cov_i = np.where(self.est[:, None, None], cov[:, i], np.eye(3))
+        self.x = np.where(self.est[:, None], X[:, li], 0.0)
+        cov_i = np.where(self.est[:, None, None], cov[:, li], np.eye(3))
         self._cov_i = cov_i
-        self.nb_obs = observes & adj[i][None]          # (B, n): observing neighbours per track
+        self.nb_obs = np.zeros((B, n), dtype=bool)     # (B, n): observing neighbours per track
+        self.nb_obs[:, view] = observes & adj[li][None]
         self.nb_obs[:, i] = False
         self.shared = {j: np.flatnonzero(self.nb_obs[:, j]) for j in self.neighbours}
         Kh, c = self.Kh, self.opt.c

@@ -62,3 +62,64 @@ def test_track_chunks_cover_the_tracks_in_order_within_the_cap():
     per_track = n * n + 2 * 2 * n + 64 * 3 * n
     assert all(s.stop - s.start <= max(1, CHUNK_ENTRIES // per_track) for s in chunks)
     assert len(chunks) >= B * per_track // CHUNK_ENTRIES
+
+
+def _ring_of_six(P=40, seed=5):
+    """6 cameras on a ring observing ``P`` points (70 % each), some keypoints planted off:
+    per camera its views, keypoints and track names (point id + 1000)."""
+    from data_synth.formations import look_at
+
+    rng = np.random.default_rng(seed)
+    K = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    pts = rng.uniform([-1, -1, 4], [1, 1, 7], (P, 3))
+    cams = []
+    for v in range(6):
+        R, t = look_at([0.6 * v - 1.5, 0.1 * v, 0.0], [0.0, 0.0, 5.5], up=(0.0, 1.0, 0.0))
+        seen = np.flatnonzero(rng.random(P) < 0.7)
+        p = (K @ (pts[seen] @ R.T + t).T).T
+        uv = p[:, :2] / p[:, 2:] + rng.normal(0, 0.3, (len(seen), 2))
+        bad = rng.random(len(seen)) < 0.1
+        uv[bad] += rng.uniform(15, 40, (int(bad.sum()), 2))
+        cams.append((K, R, t, uv.astype(np.float32), seen + 1000))
+    return cams
+
+
+def _run_robots(cams, n):
+    """The 6 robots' fusion, round by round, in a team of ``n`` (robots 6.. are idle)."""
+    from types import SimpleNamespace
+
+    from pipeline.fusion.robot import FusionRobot
+
+    edges = np.array([(i, i + 1) for i in range(5)] + [(0, 5)])
+    robots = [FusionRobot(i, n, edges, names, kp, K, R, t)
+              for i, (K, R, t, kp, names) in enumerate(cams)]
+    for _ in range(100):
+        if all(r.done for r in robots):
+            break
+        sent = [(r.i, dst, kind, payload) for r in robots for dst, kind, payload in r.messages()]
+        for r in robots:
+            r.receive([SimpleNamespace(src=s, kind=k, payload=p)
+                       for s, d, k, p in sent if d == r.i])
+    assert all(r.done for r in robots)
+    return robots
+
+
+def test_a_robot_s_fusion_follows_its_neighbours_and_tracks_not_the_team_squared():
+    # 6 robots on a ring in a team of 1000: each robot's setup tables, flood and components
+    # are on itself and its neighbours (and the robots of its tracks), so the 6 robots' fusion
+    # peaks well below one byte per (own track, robot, robot) of the team (before: several)
+    cams = _ring_of_six()
+    small = _run_robots(cams, 6)
+    n = 1000
+    tracemalloc.start()
+    try:
+        big = _run_robots(cams, n)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # the team size changes no decision
+    assert any(len(r.outlier_feats) for r in small)
+    for a, b in zip(small, big, strict=True):
+        np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
+    tracks = sum(r.B for r in big)
+    assert peak < tracks * n * n / 2
