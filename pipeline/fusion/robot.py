@@ -175,6 +175,8 @@ class FusionRobot:
         self._first = [int(b) for a, b in comm if a == self.i]
         self._second = [int(a) for a, b in comm if b == self.i]
         self.alive = set(self.neighbours)
+        # the Metropolis mode keeps what it hears from neighbour j in column col[j]
+        self.col = {j: c for c, j in enumerate(self.neighbours)}
         lab = np.asarray(track_names, dtype=np.int64).reshape(-1)
         have = np.flatnonzero(lab >= 0)
         names, inv, counts = np.unique(lab[have], return_inverse=True, return_counts=True)
@@ -271,7 +273,7 @@ class FusionRobot:
         self.draws = draws
         self.sets = np.full((B, Kh, c), -np.inf)
         self.sets[:, :, 0] = draws
-        self.nb_sets = np.full((B, n, Kh, c), -np.inf)
+        self.nb_sets = np.full((B, len(self.neighbours), Kh, c), -np.inf)
         self.maxc_changed = np.ones(B, dtype=bool)
         # consensus state (pipeline.fusion.voting._dynamic_voting_protocol, this robot's rows)
         self.info = information_matrix(cov_i).reshape(B, 1, 3, 3)
@@ -355,10 +357,10 @@ class FusionRobot:
                 continue
             S = self.shared[msg.src]
             ch = np.unpackbits(msg.payload["changed"], count=len(S)).astype(bool)
-            self.nb_sets[S[ch], msg.src] = msg.payload["sets"]
+            self.nb_sets[S[ch], self.col[msg.src]] = msg.payload["sets"]
         B, Kh, c = self.sets.shape
-        nb = np.where(self.nb_obs[:, :, None, None], self.nb_sets, -np.inf)   # (B, n, K, c)
-        cand = np.concatenate([self.sets[:, None], nb], axis=1)                # (B, 1+n, K, c)
+        nb = np.where(self.nb_obs[:, self.neighbours, None, None], self.nb_sets, -np.inf)
+        cand = np.concatenate([self.sets[:, None], nb], axis=1)            # (B, 1+deg, K, c)
         new_sets = top_c_distinct(cand.transpose(0, 2, 1, 3).reshape(B, Kh, -1), c)
         self.maxc_changed = (new_sets != self.sets).any(axis=(1, 2))
         self.sets = new_sets
@@ -384,13 +386,13 @@ class FusionRobot:
         self.theta = np.zeros((B, Kh, 3))
         self.ok = np.zeros((B, Kh), dtype=bool)
         self.yes = self.prev_yes.copy()
-        n = self.n
-        self.nb_P = np.zeros((B, n, Kh, 3, 3))
-        self.nb_q = np.zeros((B, n, Kh, 3))
-        self.nb_v = np.zeros((B, n, Kh))
-        self.nb_deg = np.zeros((B, n), dtype=np.int64)
-        self.nb_counter = np.zeros((B, n), dtype=np.int64)
-        self.nb_stopped = np.zeros((B, n), dtype=bool)
+        m = len(self.neighbours)   # column col[j]: neighbour j
+        self.nb_P = np.zeros((B, m, Kh, 3, 3))
+        self.nb_q = np.zeros((B, m, Kh, 3))
+        self.nb_v = np.zeros((B, m, Kh))
+        self.nb_deg = np.zeros((B, m), dtype=np.int64)
+        self.nb_counter = np.zeros((B, m), dtype=np.int64)
+        self.nb_stopped = np.zeros((B, m), dtype=bool)
         self.counter_dtype = np.dtype(f"u{index_bytes(self.W + 1)}")
         self.deg_dtype = np.dtype(f"u{index_bytes(self.n)}")
         self.wire_dtype = np.float32 if wire == "float32" else np.float64
@@ -425,7 +427,8 @@ class FusionRobot:
         # the stop rule's counters (pipeline.fusion.protocol.stop_counters, this robot's rows)
         flag = ~changed & (u == 0).all(1)
         prev = np.where(self.stopped, _BIG, self.counter)
-        nbc = np.where(self.nb_obs & ~self.nb_stopped, self.nb_counter, _BIG).min(1)
+        nbc = np.where(self.nb_obs[:, self.neighbours] & ~self.nb_stopped, self.nb_counter,
+                       _BIG).min(1, initial=_BIG)
         self.counter = np.where(flag, 1 + np.minimum(prev, nbc), 0)
         self.stopping = run & (self.counter >= self.W + 1)
         self.deg_sent = self.deg.copy()
@@ -454,8 +457,8 @@ class FusionRobot:
         for msg in inbox:
             if msg.kind != FUSION or msg.src not in self.alive:
                 continue
-            j, p = msg.src, msg.payload
-            S = self.shared[j]
+            j, p = self.col[msg.src], msg.payload
+            S = self.shared[msg.src]
             R = S[~self.nb_stopped[S, j]]
             ch = np.unpackbits(p["changed"], count=len(R)).astype(bool)
             C = R[ch]
@@ -490,31 +493,30 @@ class FusionRobot:
         """``Σ_j a_ij X_j(t)`` over the images of the round: Metropolis weights from the degrees
         this round's messages carried, terms in neighbour-id order (the simulator's sparse row
         order), ``a_ii`` with the weights subtracted in comm-edge order (its ``bincount``)."""
-        n, i = self.n, self.i
-        contrib = self.nb_obs                                               # alive neighbours
+        i, col = self.i, self.col
+        contrib = self.nb_obs[:, self.neighbours]                           # alive neighbours
         w = np.where(contrib, 1.0 / (1.0 + np.maximum(self.deg_sent[:, None], self.nb_deg)), 0.0)
         s1 = np.zeros(self.B)
         for j in self._first:
-            s1 = s1 + np.where(contrib[:, j], w[:, j], 0.0)
+            s1 = s1 + np.where(contrib[:, col[j]], w[:, col[j]], 0.0)
         s2 = np.zeros(self.B)
         for j in self._second:
-            s2 = s2 + np.where(contrib[:, j], w[:, j], 0.0)
+            s2 = s2 + np.where(contrib[:, col[j]], w[:, col[j]], 0.0)
         diag = 1.0 - s1 - s2
         P = np.zeros_like(self.P)
         q = np.zeros_like(self.q)
         v = np.zeros_like(self.v)
         img = self.image
-        for j in range(n):
+        for j in sorted({i} | self.alive):                                   # robot order
             if j == i:
                 a = diag
                 Pj, qj, vj = img
                 sel = np.ones(self.B, dtype=bool)
             else:
-                if j not in self.alive:
-                    continue
-                a = w[:, j]
-                Pj, qj, vj = self.nb_P[:, j], self.nb_q[:, j], self.nb_v[:, j]
-                sel = contrib[:, j]
+                c = col[j]
+                a = w[:, c]
+                Pj, qj, vj = self.nb_P[:, c], self.nb_q[:, c], self.nb_v[:, c]
+                sel = contrib[:, c]
             P = P + np.where(sel[:, None, None, None], a[:, None, None, None] * Pj, 0.0)
             q = q + np.where(sel[:, None, None], a[:, None, None] * qj, 0.0)
             v = v + np.where(sel[:, None], a[:, None] * vj, 0.0)

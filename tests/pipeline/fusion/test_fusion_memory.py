@@ -84,16 +84,16 @@ def _ring_of_six(P=40, seed=5):
     return cams
 
 
-def _run_robots(cams, n):
+def _run_robots(cams, n, consensus="exact"):
     """The 6 robots' fusion, round by round, in a team of ``n`` (robots 6.. are idle)."""
     from types import SimpleNamespace
 
-    from pipeline.fusion.robot import FusionRobot
+    from pipeline.fusion.robot import FusionOptions, FusionRobot
 
     edges = np.array([(i, i + 1) for i in range(5)] + [(0, 5)])
-    robots = [FusionRobot(i, n, edges, names, kp, K, R, t)
+    robots = [FusionRobot(i, n, edges, names, kp, K, R, t, FusionOptions(consensus=consensus))
               for i, (K, R, t, kp, names) in enumerate(cams)]
-    for _ in range(100):
+    for _ in range(3 * n + 200):
         if all(r.done for r in robots):
             break
         sent = [(r.i, dst, kind, payload) for r in robots for dst, kind, payload in r.messages()]
@@ -123,3 +123,22 @@ def test_a_robot_s_fusion_follows_its_neighbours_and_tracks_not_the_team_squared
         np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
     tracks = sum(r.B for r in big)
     assert peak < tracks * n * n / 2
+
+
+def test_a_robot_s_metropolis_consensus_holds_its_neighbours_rows_only():
+    # the Metropolis mode keeps what each neighbour sent (max-c sets, P, q, v, degrees, stop
+    # counters) per own track and neighbour: in a team of 300 the 6 robots peak below one
+    # 3 x 3 float64 matrix per (own track, team robot) (before: about 7 of them)
+    cams = _ring_of_six()
+    small = _run_robots(cams, 6, "metropolis")
+    n = 300
+    tracemalloc.start()
+    try:
+        big = _run_robots(cams, n, "metropolis")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert any(len(r.outlier_feats) for r in small)
+    for a, b in zip(small, big, strict=True):
+        np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
+    assert peak < sum(r.B for r in big) * n * 72
