@@ -40,6 +40,15 @@ the interpreter and libraries, rounded up):
 - :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
   (rendering, features, matching, cleaning and the report; ring formations of 10 and 30
   robots: 87 bytes at 640x480, 78 at 320x240).
+- :func:`fusion_bytes`: the simulator's fusion stage, counted once the consistency stage has
+  named the tracks (:func:`check_fusion_memory`). It holds per-(track, robot) tables over the
+  whole team (keypoints, local estimates, covariances, draws, votes) and per track its
+  observers' flood and decisions: :data:`BYTES_PER_FUSION_TRACK_ROBOT` per track and team
+  robot plus :data:`BYTES_PER_FUSION_OBSERVER_PAIR` per (track, observer, observer). Measured
+  (tracemalloc peak of the stage, run-formation): 200 robots on ring2 at 320x240 (2,912
+  tracks, sum k^2 = 124,173) 481 MB; 60 on complete at 160x120 (689, 31,620) 58 MB; 400 on
+  ring at 160x120, --max-features 100 (834, 16,392) 161 MB. The two constants give 597, 88
+  and 233 MB there.
 """
 
 from __future__ import annotations
@@ -53,7 +62,8 @@ from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_LIST_ENTRY",
-           "BYTES_PER_ROBOT_PIXEL",
+           "BYTES_PER_ROBOT_PIXEL", "BYTES_PER_FUSION_OBSERVER_PAIR", "BYTES_PER_FUSION_TRACK_ROBOT",
+           "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
            "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb"]
@@ -80,6 +90,10 @@ BYTES_PER_CAMERA = 12_000
 BYTES_PER_EDGE = 600
 #: bytes per robot and pixel of a rendered formation (measured 78-87)
 BYTES_PER_ROBOT_PIXEL = 90
+#: the fusion stage's bytes per (track, team robot) (module notes)
+BYTES_PER_FUSION_TRACK_ROBOT = 600
+#: the fusion stage's bytes per (track, observer, observer) (module notes)
+BYTES_PER_FUSION_OBSERVER_PAIR = 2000
 #: the largest component a spectral baseline solves densely
 #: (:data:`pipeline.consistency.spectral.DENSE_VALUES_MAX`)
 BASELINE_DENSE_FEATURES = 4000
@@ -234,3 +248,24 @@ def check_formation_memory(n_robots: int, size: tuple[int, int], limit,
     MemoryBudget(limit, flag).add(
         f"rendering and cleaning the views of {n_robots} robots at {w}x{h}",
         n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")
+
+
+def fusion_bytes(n_robots: int, observers) -> int:
+    """Estimated peak of the simulator's fusion stage on tracks with ``observers[b]``
+    observers each among ``n_robots`` robots (module notes)."""
+    k = np.asarray(observers, dtype=np.int64).reshape(-1)
+    return int(len(k) * int(n_robots) * BYTES_PER_FUSION_TRACK_ROBOT
+               + int((k * k).sum()) * BYTES_PER_FUSION_OBSERVER_PAIR)
+
+
+def check_fusion_memory(n_robots: int, track_labels, limit,
+                        flag: str = "--max-memory-gb") -> None:
+    """InputError, before the fusion stage allocates, when the tracks of ``track_labels``
+    (each feature's track name, ``-1`` outside tracks) among ``n_robots`` robots would need
+    more than ``limit`` GB (:func:`fusion_bytes`)."""
+    lab = np.asarray(track_labels, dtype=np.int64).reshape(-1)
+    _, k = np.unique(lab[lab >= 0], return_counts=True)
+    MemoryBudget(limit, flag).add(
+        f"the fusion stage ({len(k)} tracks among {int(n_robots)} robots, up to "
+        f"{int(k.max(initial=0))} observers a track)", fusion_bytes(n_robots, k),
+        "fewer --robots or --max-features, or --no-fusion")

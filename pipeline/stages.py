@@ -381,7 +381,8 @@ def fusion_on_reconstruction(ledger: LinkLedger, views: list[View], features: li
 def clean_association(views: list[View], features: list, comm_edges: np.ndarray, links: Links,
                       *, fusion: bool = True, timer: StageTimer | None = None,
                       faults: FaultConfig | None = None, resolution: str = DEFAULT_RESOLUTION,
-                      matches: list | None = None) -> CleaningResult:
+                      matches: list | None = None,
+                      max_memory_gb: float | None = None) -> CleaningResult:
     """Consistency (Aragüés et al., Sec. III–IV) then fusion (Montijano et al.) on ``links``.
 
     ``resolution``: a rule of :mod:`pipeline.consistency.rules`, e.g. ``paper`` (Alg. 1) or
@@ -389,6 +390,8 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
     when given, see :func:`evidence_inputs`).
 
     Fusion needs camera poses; it is skipped (and says so in ``fusion_stats``) without them.
+    ``max_memory_gb``: the fusion stage is refused (InputError) when its estimate on the tracks
+    the consistency stage named exceeds it (:func:`pipeline.budget.check_fusion_memory`).
     With ``faults`` on, the consistency stage runs on the faulty network (and once more
     fault-free, for the ``faults`` section's extra rounds and messages); a switching topology
     is used by the fusion consensus too.
@@ -430,6 +433,11 @@ def clean_association(views: list[View], features: list, comm_edges: np.ndarray,
                                                                  "fusion",
                                      "crashed_before_fusion": crashed}
             return cleaning
+        if max_memory_gb is not None:
+            from pipeline.budget import check_fusion_memory
+
+            check_fusion_memory(len(m) if cameras is None else len(cameras),
+                                cleaning.track_labels, max_memory_gb)
         kept_links = ledger.links.subset(ledger.kept)  # what fusion starts from
         fr, n_cut = fusion_stage(ledger, views, features, comm_edges, timer=timer,
                                  track_labels=cleaning.track_labels, cameras=cameras,

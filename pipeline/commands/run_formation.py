@@ -104,7 +104,8 @@ def config_from_args(args) -> FormationConfig:
                            fusion=not args.no_fusion, out=args.out, rerun=not args.no_rerun,
                            faults=faults,
                            resolution=args.resolution,
-                           merge_radius=args.merge_radius)
+                           merge_radius=args.merge_radius,
+                           max_memory_gb=args.max_memory_gb)
 
 
 def online_config_from_args(args):

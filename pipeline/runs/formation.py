@@ -48,6 +48,9 @@ class FormationConfig:
     faults: FaultConfig | None = None
     resolution: str = DEFAULT_RESOLUTION
     merge_radius: float | None = None
+    #: the memory guard's limit for the stages counted once their inputs are known (the
+    #: fusion stage: :func:`pipeline.budget.check_fusion_memory`); None: not checked
+    max_memory_gb: float | None = None
 
     def out_dir(self) -> Path:
         if self.out:
@@ -116,7 +119,9 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         "matching": sections.matching_section(matches),
         "ground_truth": {"tolerance_px": config.tol_px},
         "versions": sections.versions(),
-        "config": {**asdict(config), "out": str(out)},
+        # the memory limit is a guard on the run, not an option of its outputs
+        "config": {**{k: v for k, v in asdict(config).items() if k != "max_memory_gb"},
+                   "out": str(out)},
     }
     if cleaning.faults is not None:
         report["faults"] = cleaning.faults

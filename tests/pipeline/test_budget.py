@@ -31,3 +31,40 @@ def test_the_lists_are_counted_beside_the_links_and_refused_past_the_limit():
     assert budget.total == need
     with pytest.raises(InputError, match="evidence rule's detection.*5 features"):
         check_detection_memory(FPC, LINKS, (need - 1) / 1e9, detection=False, set_lists=2)
+
+
+def test_the_fusion_stage_is_counted_per_track_robot_and_observer_pair():
+    from pipeline.budget import (
+        BYTES_PER_FUSION_OBSERVER_PAIR,
+        BYTES_PER_FUSION_TRACK_ROBOT,
+        check_fusion_memory,
+        fusion_bytes,
+    )
+
+    # tracks 7 (3 observers), 9 (2) and 4 (1); -1 outside tracks
+    labels = [7, 7, -1, 9, 7, 9, 4]
+    need = 3 * 10 * BYTES_PER_FUSION_TRACK_ROBOT + (9 + 4 + 1) * BYTES_PER_FUSION_OBSERVER_PAIR
+    assert fusion_bytes(10, [3, 2, 1]) == need
+    check_fusion_memory(10, labels, need / 1e9)
+    with pytest.raises(InputError, match=r"the fusion stage \(3 tracks among 10 robots, up to "
+                                         r"3 observers a track\).*--no-fusion.*--max-memory-gb"):
+        check_fusion_memory(10, labels, 0.999 * need / 1e9)
+
+
+def test_a_formation_whose_fusion_exceeds_the_limit_is_refused_before_it_runs(tmp_path,
+                                                                              monkeypatch):
+    # the guard counts the fusion stage once the consistency stage has named the tracks: a
+    # limit above everything before it but below the fusion's estimate stops the run there
+    import pipeline.fusion.landmarks as landmarks
+    from pipeline.runs.formation import FormationConfig, run_formation
+
+    def never(*a, **k):
+        raise AssertionError("the fusion stage ran")
+
+    monkeypatch.setattr(landmarks, "fuse_tracks", never)
+    config = FormationConfig(formation="d", size=(160, 120), max_features=300, rerun=False,
+                             out=str(tmp_path / "run"), max_memory_gb=1e-4)
+    with pytest.raises(InputError, match=r"the fusion stage \(\d+ tracks among 6 robots.*"
+                                         r"--no-fusion"):
+        run_formation(config)
+    assert not (tmp_path / "run" / "links.csv").exists()

@@ -34,7 +34,8 @@ def formation(config, timer) -> FormationRobots:
         merge_radius=stages.merge_radius_for(config.resolution, config.merge_radius))
     cleaning = stages.clean_association(views, feats, comm_edges, links, fusion=config.fusion,
                                  faults=config.faults, timer=timer,
-                                 resolution=config.resolution, matches=matches)
+                                 resolution=config.resolution, matches=matches,
+                                 max_memory_gb=config.max_memory_gb)
     return FormationRobots(rendered, feats, matches, cleaning)
 
 
