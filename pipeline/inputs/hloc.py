@@ -250,7 +250,8 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
         if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "matches0":
             keys.append(obj.parent.name.strip("/"))
     fd.visititems(visit)
-    out = []
+    out: list[tuple[str, str, str]] = []
+    seen: dict[frozenset, str] = {}
     for key in keys:
         parts = key.split("/")
         found = None
@@ -276,6 +277,15 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
         if found[0] == found[1]:
             raise InputError(f"matches file: pair group {key!r} pairs image {found[0]!r} with "
                              "itself; remove it or give --pairs")
+        # one image pair in two groups (both orders, or the new key beside the old): both
+        # would be read as links, and the cleaned copy of the second would lose every match;
+        # hloc reads one of them, the one pairs.txt's order finds first
+        pair = frozenset(found)
+        if pair in seen:
+            raise InputError(f"matches file: pair groups {seen[pair]!r} and {key!r} both hold "
+                             f"the image pair {min(found)!r}, {max(found)!r}; give --pairs (the "
+                             "group its order names is read, as hloc reads it)")
+        seen[pair] = key
         out.append((key, *found))
     return out
 

@@ -211,9 +211,15 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
      "'a.jpg/yy.jpg' names 'yy.jpg', not an image of the features file"),
     (lambda fd: fd.create_group("a.jpg/a.jpg").create_dataset("matches0", data=np.arange(M)),
      "pairs image 'a.jpg' with itself"),
+    # one image pair stored twice: reading both made the cleaned copy of one lose every match
+    (lambda fd: fd.copy(P01, "sub-b.jpg/a.jpg"),
+     "pair groups 'a.jpg/sub-b.jpg' and 'sub-b.jpg/a.jpg' both hold the image pair"),
+    (lambda fd: fd.copy(P01, "a.jpg_sub-b.jpg"),
+     "pair groups 'a.jpg/sub-b.jpg' and 'a.jpg_sub-b.jpg' both hold the image pair"),
 ], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
-        "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair"])
+        "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair", "pair-both-orders",
+        "pair-old-and-new-key"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(matches, "a") as fd:
