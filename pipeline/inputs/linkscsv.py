@@ -5,7 +5,9 @@ integer ids, an optional header row naming those columns, blank lines and ``#`` 
 allowed. Validation is strict and never drops input silently: a non-integer or negative id, a
 bad quality, a wrong number of columns, a self-link, a duplicate link or a link that breaks
 one-to-one-ness (Assumption 2.2 of Aragüés et al.) is an :class:`~pipeline.errors.InputError`
-naming the file, the row number and its content. A row with ``cam_i > cam_j`` is normalised by
+naming the file, the row number and its content (in a run-output ``links.csv`` read back,
+one-to-one-ness and duplicates are checked on its kept rows: its deleted rows stay deleted, and
+``clean-db`` / ``clean-h5`` delete the rows that break one-to-one-ness). A row with ``cam_i > cam_j`` is normalised by
 swapping its two ends (docs/DESIGN.md: each undirected link is stored once with ``cam_i < cam_j``).
 
 Output (``write_links_csv``): the ``links.csv`` of docs/DESIGN.md "Run outputs", header
@@ -217,7 +219,8 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     InputError
         Missing file; a row with the wrong number of columns (4 or 5, the same in every row), a
         non-integer or negative id, a non-finite quality, a self-link, a duplicate link or one
-        that breaks one-to-one-ness — naming the row number and its content.
+        that breaks one-to-one-ness (among the kept rows of a run-output links.csv) — naming
+        the row number and its content.
 
     Examples
     --------
@@ -294,10 +297,14 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
 
     a = _normalised(np.asarray(vals, dtype=np.int64).reshape(-1, 4))
     ci, fi, cj, fj = a.T
-    for cols, what in _one_to_one(ci, fi, cj, fj):
+    # the rows to make consistent: in a run-output links.csv only the kept ones (its deleted
+    # rows stay deleted; clean-db and clean-h5 delete rows that break one-to-one-ness there)
+    rows = np.flatnonzero([st == "kept" for st, *_ in run_cols]) if run_cols \
+        else np.arange(len(a))
+    for cols, what in _one_to_one(*a[rows].T):
         dup = _first_duplicate(*cols)
         if dup is not None:
-            k0, k1 = dup
+            k0, k1 = rows[dup[0]], rows[dup[1]]
             msg = what.format(*a[k1].tolist())
             raise InputError(f"{path}:{lines[k1]}: {raws[k1]!r}: {msg} (also row {lines[k0]}: "
                              f"{raws[k0]!r}); matching must give a one-to-one association per "

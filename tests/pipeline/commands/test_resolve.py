@@ -169,3 +169,22 @@ def test_run_links_csv_with_a_bad_status_names_the_row(tmp_path, capsys):
     src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n0,0,1,0,maybe,,,\n")
     assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")]) == 2
     assert re.search(r"in.csv:2: .*status 'maybe'", capsys.readouterr().err)
+
+
+def test_a_clean_h5_links_csv_with_deleted_not_one_to_one_rows_is_read(tmp_path, capsys):
+    """clean-db and clean-h5 write the rows that break one-to-one-ness as deleted: resolve
+    reads such a links.csv (its deleted rows stay deleted) and still refuses kept rows that
+    break it."""
+    head = "cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n"
+    src, out = tmp_path / "in.links.csv", tmp_path / "o.csv"
+    src.write_text(head + "0,0,1,0,kept,,,\n0,1,1,0,deleted,not-one-to-one,,\n"
+                          "1,0,2,0,kept,,,\n2,0,0,1,kept,,,\n")
+    assert main(["resolve", "--links", str(src), "--out", str(out)]) == 0
+    back = read_run_links_csv(out)
+    assert back.status.tolist()[1] == "deleted" and back.reason.tolist()[1] == "not-one-to-one"
+    kept = back.links.subset(back.status == "kept")
+    m = features_per_camera_for(back.links)
+    assert count_conflicts(AssociationGraph(m, kept)).conflictive_sets == 0
+    src.write_text(head + "0,0,1,0,kept,,,\n0,1,1,0,kept,,,\n")
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "x.csv")]) == 2
+    assert "in.links.csv:3: '0,1,1,0,kept,,,': not one-to-one" in capsys.readouterr().err
