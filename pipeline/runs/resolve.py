@@ -101,8 +101,12 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     robots = len(ids.features_per_camera)  # the cameras of the run (compact ids)
     budget.add(f"the robots of the {robots} cameras", robots * BYTES_PER_CAMERA,
                "fewer cameras (a comm graph naming only those with links)")
+    # a run-output links.csv (e.g. our own output): its deleted rows stay deleted with their
+    # reason and round; its kept rows are the links to make consistent
+    active = lf.status == "kept" if lf.status is not None else np.ones(len(links), dtype=bool)
     if edges is not None and len(links):
-        off = links_off_graph(links, edges, n)
+        # a deleted row may join non-neighbours: clean-db cuts those links (not-comm-edge)
+        off = links_off_graph(links, edges, n) & active
         if off.any():
             k = int(np.flatnonzero(off)[0])
             raise InputError(
@@ -111,9 +115,6 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                 f"{links.cam_j[k]}, which are not neighbours in {comm_graph_csv}; add the edge "
                 "or remove the link")
     all_links = links
-    # a run-output links.csv (e.g. our own output): its deleted rows stay deleted with their
-    # reason and round; its kept rows are the links to make consistent
-    active = lf.status == "kept" if lf.status is not None else np.ones(len(links), dtype=bool)
     if not active.all():
         links = all_links.subset(active)
         ids = compact_ids(links, edges, n_cameras=n_cams, force=force)

@@ -188,3 +188,23 @@ def test_a_clean_h5_links_csv_with_deleted_not_one_to_one_rows_is_read(tmp_path,
     src.write_text(head + "0,0,1,0,kept,,,\n0,1,1,0,kept,,,\n")
     assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "x.csv")]) == 2
     assert "in.links.csv:3: '0,1,1,0,kept,,,': not one-to-one" in capsys.readouterr().err
+
+
+def test_deleted_rows_between_non_neighbours_are_read_with_the_comm_graph(tmp_path, capsys):
+    """clean-db deletes the links between images that are not neighbours (not-comm-edge):
+    its links.csv resolved again with the same comm graph keeps them deleted; a kept link
+    between non-neighbours is still refused."""
+    head = "cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n"
+    src, graph, out = tmp_path / "in.links.csv", tmp_path / "g.csv", tmp_path / "o.csv"
+    graph.write_text("0,1\n1,2\n")
+    src.write_text(head + "0,0,1,0,kept,,,\n1,0,2,0,kept,,,\n0,1,2,0,deleted,not-comm-edge,,\n")
+    assert main(["resolve", "--links", str(src), "--comm-graph", str(graph),
+                 "--out", str(out)]) == 0
+    back = read_run_links_csv(out)
+    assert back.status.tolist() == ["kept", "kept", "deleted"]
+    assert back.reason.tolist()[2] == "not-comm-edge"
+    src.write_text(head + "0,0,1,0,kept,,,\n0,1,2,0,kept,,,\n")
+    assert main(["resolve", "--links", str(src), "--comm-graph", str(graph),
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert "in.links.csv:3: link (0,1)-(2,0) joins cameras 0 and 2, which are not neighbours" \
+        in capsys.readouterr().err
