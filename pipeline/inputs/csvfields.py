@@ -51,6 +51,11 @@ def text_lines(path: str | os.PathLike, what: str) -> Iterator[tuple[int, str]]:
                                  "of text: is it the right file?")
             if lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
                 raw = raw[3:]
+            if lineno == 1 and raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+                # UTF-16 (or UTF-32) text, e.g. a spreadsheet's "Unicode text" export
+                raise InputError(f"{what} {os.fspath(path)!r} is not a UTF-8 text file "
+                                 "(UTF-16 or UTF-32 by its byte-order mark at line 1); save "
+                                 "it as UTF-8")
             try:
                 line = raw.decode("utf-8")
             except UnicodeDecodeError as exc:
