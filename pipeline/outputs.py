@@ -269,8 +269,8 @@ def refuse_unsafe_target(path, flag: str = "output") -> None:
                          "outputs never replace or write through a link: give a plain file name")
     try:
         mode = p.lstat().st_mode
-    except FileNotFoundError:
-        return
+    except (FileNotFoundError, NotADirectoryError):  # nothing there (a file on the way: the
+        return                                       # writable-folder check names it)
     if stat.S_ISDIR(mode):
         raise InputError(f"{flag} {str(p)!r} is a folder; give the name of a file to write, "
                          f"e.g. {str(p / 'out')!r}")

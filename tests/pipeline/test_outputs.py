@@ -16,6 +16,17 @@ def test_new_file_is_accepted(tmp_path):
     assert sorted(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("below", ["x.csv", "sub/x.csv"])
+def test_an_output_below_a_file_names_that_file(tmp_path, below):
+    """``--out in.csv/x.csv``: one line naming the file that stands where a folder must,
+    not the bare OSError 'Not a directory'."""
+    (tmp_path / "in.csv").write_text("0,0,1,0\n")
+    out = tmp_path / "in.csv" / below
+    with pytest.raises(InputError, match=r"--out '.*in.csv/.*x.csv': '.*in.csv' is a file, "
+                                         r"not a folder; choose another place"):
+        check_output_files([("--out", out)], overwrite=True)
+
+
 def test_existing_file_needs_overwrite(tmp_path):
     (tmp_path / "o.csv").write_text("old")
     with pytest.raises(InputError, match="already exists; pass --overwrite"):
