@@ -57,6 +57,10 @@ def test_reads_without_header_and_quality(tmp_path):
     ("0,0,1,0,0.5\n0,1,1,1\n", 2, "started with 5"),
     ("0,0,1,0,abc\n", 1, "quality 'abc'"),
     ("0,0,1,0,nan\n", 1, "quality 'nan'"),
+    # Python's float() reads these as 10 and 3: a quality is written in ASCII digits
+    ("0,0,1,0,1_0\n", 1, "quality '1_0' is not a number written in digits 0-9"),
+    ("0,0,1,0,\u0663\n", 1, "quality '\u0663' is not a number written in digits 0-9"),
+    ("0,0,1,0,0.5\n1,0,2,0, infinity\n", 2, "quality 'infinity' is not a finite number"),
     ("0,0,1,0\n2,3,2,4\n", 2, "self-link within camera 2"),
     ("0,0,1,0\n0,1,1,1\n1,0,0,0\n", 3, "duplicate link"),
     ("0,0,1,0\n0,0,1,1\n", 2, "feature 0,0 is linked twice to camera 1"),
