@@ -294,6 +294,9 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
     InputError
         The first broken rule, naming the flag and the path.
     """
+    for flag, p in outputs:
+        if p is not None and not os.fspath(p):  # Path("") would read as "."
+            raise InputError(f"{flag} '' is empty: give the name of a file to write")
     outs = [(f, Path(p)) for f, p in outputs if p is not None]
     ins = [(f, Path(p)) for f, p in inputs if p is not None]
     for flag, p in outs:

@@ -27,6 +27,12 @@ def test_an_output_below_a_file_names_that_file(tmp_path, below):
         check_output_files([("--out", out)], overwrite=True)
 
 
+def test_an_empty_output_name_is_named_as_empty():
+    """``--out ''``: the message names the empty string, not '.' (what Path('') reads as)."""
+    with pytest.raises(InputError, match=r"^--report '' is empty: give the name of a file"):
+        check_output_files([("--out", "o.csv"), ("--report", "")])
+
+
 def test_existing_file_needs_overwrite(tmp_path):
     (tmp_path / "o.csv").write_text("old")
     with pytest.raises(InputError, match="already exists; pass --overwrite"):
