@@ -297,6 +297,9 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
     for flag, p in outputs:
         if p is not None and not os.fspath(p):  # Path("") would read as "."
             raise InputError(f"{flag} '' is empty: give the name of a file to write")
+    for flag, p in inputs:
+        if p is not None and not os.fspath(p):
+            raise InputError(f"{flag} '' is empty: give the file to read")
     outs = [(f, Path(p)) for f, p in outputs if p is not None]
     ins = [(f, Path(p)) for f, p in inputs if p is not None]
     for flag, p in outs:

@@ -31,6 +31,8 @@ def test_an_empty_output_name_is_named_as_empty():
     """``--out ''``: the message names the empty string, not '.' (what Path('') reads as)."""
     with pytest.raises(InputError, match=r"^--report '' is empty: give the name of a file"):
         check_output_files([("--out", "o.csv"), ("--report", "")])
+    with pytest.raises(InputError, match=r"^--links '' is empty: give the file to read"):
+        check_output_files([("--out", "o.csv")], [("--links", "")])
 
 
 def test_existing_file_needs_overwrite(tmp_path):
