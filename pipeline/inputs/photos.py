@@ -263,6 +263,9 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     """
     path = Path(path)
     try:
+        if path.stat().st_size == 0:
+            raise InputError(f"{path.name}: the file is empty (0 bytes), not an image; remove or "
+                             "replace it (an interrupted copy or download?)")
         im = open_header(path)
         im.load()  # forces the full decode: a truncated JPEG raises here, not later
         pixels = _pixels(im)
@@ -530,8 +533,14 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
     files = _image_files(directory)
     mode, K_file, k_path = _resolve_intrinsics(intrinsics, directory)
     views: list[View] = []
+    multi: list[str] = []
     for path in files:
         pixels, header = load_image(path)
+        # a multi-page TIFF, an animated PNG or WebP: the frames after the first are not
+        # read; a camera's MPO JPEG (a preview or depth map after the photo) is not warned
+        frames = getattr(header, "n_frames", 1)
+        if isinstance(frames, int) and frames > 1 and header.format != "MPO":
+            multi.append(f"{path.name} ({frames})")
         h, w = pixels.shape[:2]
         if mode == "file":
             K, source, known = K_file, "K.txt", True
@@ -555,6 +564,10 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
         pixels, K = downscale(pixels, K, max_size)
         views.append(View(name=path.name, image=pixels, K=np.array(K, dtype=np.float64),
                           intrinsics_known=known, intrinsics_source=source))
+    if multi:
+        log.warning("warning: %s", f"{len(multi)} file(s) in {str(directory)!r} hold several "
+                    f"frames or pages and only the first of each is read: {', '.join(multi)}; "
+                    "save each frame as its own image file to use it")
     log.info("loaded %d images from %s (intrinsics: %s)", len(views), directory,
              ", ".join(sorted({v.intrinsics_source for v in views})))
     return views

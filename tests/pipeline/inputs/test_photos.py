@@ -209,6 +209,38 @@ def test_truncated_jpeg(tmp_path, sceaux_small):
         load_folder(d)
 
 
+def test_empty_file_is_named_as_empty(tmp_path):
+    """A zero-byte file with an image suffix was refused as an unidentified image; it says
+    the file is empty."""
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1)),
+                           "b.png": Image.fromarray(_texture(40, 50, 2)),
+                           "c.jpg": b""})
+    with pytest.raises(InputError, match=r"^c\.jpg: the file is empty \(0 bytes\), not an image"):
+        load_folder(d)
+
+
+@pytest.mark.parametrize("name", ["pages.tif", "anim.webp"])
+def test_frames_after_the_first_are_not_dropped_silently(tmp_path, caplog, name):
+    """A multi-page TIFF or an animated WebP was read as its first frame without a word."""
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1))})
+    frames = [Image.fromarray(_texture(40, 50, k)) for k in (2, 3, 4)]
+    frames[0].save(d / name, save_all=True, append_images=frames[1:])
+    with caplog.at_level("WARNING", logger="pipeline"):
+        assert [v.name for v in load_folder(d)] == ["a.png", name]
+    warned = " ".join(r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+    assert f"hold several frames or pages and only the first of each is read: {name} (3)" \
+        in warned, warned
+
+
+def test_single_frame_images_are_not_warned_as_multi_frame(tmp_path, caplog):
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1)),
+                           "b.tif": Image.fromarray(_texture(40, 50, 2)),
+                           "c.webp": Image.fromarray(_texture(40, 50, 3))})
+    with caplog.at_level("WARNING", logger="pipeline"):
+        load_folder(d)
+    assert not [r for r in caplog.records if "several frames" in r.getMessage()]
+
+
 @pytest.mark.parametrize("text, match", [
     ("fx 0 cx\n0 fy cy\n0 0 1\n", "'fx' is not a number"),
     ("1000 0 320\n0 1000 240\n", "holds 6 numbers"),
