@@ -4,8 +4,8 @@
 folders skipped); each sub-folder holds that robot's frames, taken in name order. Step ``k``
 is every robot's ``k``-th frame, so every robot must hold the same number of frames (at
 least two: a single frame is no sequence). Intrinsics as :func:`pipeline.inputs.photos.load_folder`:
-with ``"auto"`` a ``DIR/K.txt`` serves every robot, otherwise each sub-folder's own
-``K.txt``, EXIF or the stated guess.
+with ``"auto"`` a sub-folder's own ``K.txt`` serves its robot, a ``DIR/K.txt`` every
+robot without one, otherwise EXIF or the stated guess.
 """
 
 from __future__ import annotations
@@ -67,8 +67,9 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "
                          "holding images; a team needs at least two (one sub-folder of frames "
                          "per robot)")
+    shared = intrinsics
     if intrinsics == "auto" and (directory / "K.txt").is_file():
-        intrinsics = directory / "K.txt"
+        shared = directory / "K.txt"
     counts = {p.name: len(image_paths(p)) for p in subs}
     if len(set(counts.values())) > 1:
         raise InputError(f"--sequence {str(directory)!r}: robots hold different numbers of "
@@ -78,7 +79,10 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         raise InputError(f"--sequence {str(directory)!r}: every robot holds one frame (one "
                          "step); a sequence needs two steps or more. For one snapshot of the "
                          "team, put the frames in one folder and drop --sequence")
-    per_robot = [load_folder(p, max_size=max_size, intrinsics=intrinsics) for p in subs]
+    # the most specific K.txt wins: a robot's own camera is not overridden by the team's
+    per_robot = [load_folder(p, max_size=max_size,
+                             intrinsics="auto" if intrinsics == "auto" and (p / "K.txt").is_file()
+                             else shared) for p in subs]
     steps = len(per_robot[0])
     views: list[View] = []
     for k in range(steps):

@@ -4,6 +4,7 @@ one intrinsics file for all, clear errors on a bad folder."""
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pipeline.errors import InputError
@@ -30,6 +31,19 @@ def test_step_k_is_every_robots_kth_frame(tmp_path):
                                            "r1/f01.jpg"]
     assert {v.intrinsics_source for v in seq.views} == {"K.txt"}
     assert max(seq.views[0].size) == 64
+
+
+def test_a_robots_own_k_txt_is_not_overridden_by_the_teams(tmp_path):
+    """With a DIR/K.txt, a sub-folder's own K.txt (another camera) was ignored without a
+    word: that robot's frames got the team's focal length."""
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    (root / "b" / "K.txt").write_text("500 0 300\n0 500 200\n0 0 1\n")
+    seq = load_sequence(root, max_size=None)
+    team = np.loadtxt(SCEAUX / "K.txt")
+    for v in seq.views:
+        want = np.array([[500.0, 0, 300], [0, 500, 200], [0, 0, 1]]) \
+            if v.name.startswith("b/") else team
+        np.testing.assert_allclose(v.K, want, err_msg=v.name)
 
 
 def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
