@@ -202,6 +202,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
         chosen["edges"] = comm_graph(config.graph, names,
                                      knn=lambda k: knn_edges(features, k)[0])
         timer.note(f"graph {config.graph} by image similarity: {len(chosen['edges'])} edges")
+        _warn_split(timer, len(names), chosen["edges"])
         return chosen["edges"]
 
     # features and matching, by the robots of the transport (over zenoh they also detect
@@ -366,11 +367,24 @@ def _load(config: ImagesConfig, timer: StageTimer):
             to_camera = np.array([camera[v.name] for v in loaded], dtype=np.int64)
             comm_edges = np.sort(to_camera[in_name_order], axis=1).reshape(-1, 2)
             comm_edges = comm_edges[np.lexsort((comm_edges[:, 1], comm_edges[:, 0]))]
+            _warn_split(timer, len(views), comm_edges)
         sources = sorted({v.intrinsics_source for v in views})
         timer.note(f"{len(views)} images, intrinsics from {', '.join(sources)}; graph "
                    f"{config.graph}: " + ("chosen by image similarity after the features"
                                           if by_similarity else f"{len(comm_edges)} edges"))
     return views, comm_edges
+
+
+def _warn_split(timer: StageTimer, n: int, comm_edges: np.ndarray) -> None:
+    """Warn when the comm graph leaves images in groups that never match each other: their
+    features cannot be associated across the groups, and the reconstruction holds one group."""
+    from pipeline.commgraph import graph_parts
+
+    parts = graph_parts(n, comm_edges)
+    if parts > 1:
+        timer.warn(f"the comm graph splits the {n} images into {parts} groups that never "
+                   "match each other: their features cannot be associated across the groups "
+                   "(choose a denser --graph)")
 
 
 def _timed(fn, *args, **kwargs):
