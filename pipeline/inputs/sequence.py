@@ -80,8 +80,8 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
                          "step); a sequence needs two steps or more. For one snapshot of the "
                          "team, put the frames in one folder and drop --sequence")
     # the most specific K.txt wins: a robot's own camera is not overridden by the team's
-    per_robot = [load_folder(p, max_size=max_size,
-                             intrinsics="auto" if intrinsics == "auto" and (p / "K.txt").is_file()
+    per_robot = [_load_robot(p, max_size,
+                             "auto" if intrinsics == "auto" and (p / "K.txt").is_file()
                              else shared) for p in subs]
     steps = len(per_robot[0])
     views: list[View] = []
@@ -90,3 +90,15 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
             views.append(dataclasses.replace(vs[k], name=f"{p.name}/{vs[k].name}"))
     return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views,
                          ignored=[p.name for p in image_paths(directory)], empty=empty)
+
+
+def _load_robot(folder: Path, max_size: int | None, intrinsics) -> list[View]:
+    """:func:`load_folder` of one robot's sub-folder; an error that names a file of it by
+    its name alone (robots' frames often share names) names the sub-folder too."""
+    try:
+        return load_folder(folder, max_size=max_size, intrinsics=intrinsics)
+    except InputError as exc:
+        message = str(exc)
+        if str(folder) in message:
+            raise
+        raise InputError(f"robot {folder.name!r} ({str(folder)!r}): {message}") from None

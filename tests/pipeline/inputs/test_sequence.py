@@ -46,6 +46,15 @@ def test_a_robots_own_k_txt_is_not_overridden_by_the_teams(tmp_path):
         np.testing.assert_allclose(v.K, want, err_msg=v.name)
 
 
+def test_a_bad_frame_names_its_robot(tmp_path):
+    """Robots' frames often share names (f00.jpg in every sub-folder): an error naming the
+    file alone did not say which robot's it was."""
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    (root / "b" / "f01.jpg").write_bytes(b"")
+    with pytest.raises(InputError, match=r"^robot 'b' \(.*seq/b'\): f01\.jpg: the file is empty"):
+        load_sequence(root, max_size=64)
+
+
 def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
     root = _folder(tmp_path / "seq", {"a": [0, 1, 2], "b": [3, 4]})
     with pytest.raises(InputError, match=r"different numbers of frames \(a: 3, b: 2\)"):
