@@ -198,12 +198,15 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")
         return knn(k)
+    kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"] + ["knn:K"])
+    if not spec.strip() and not Path(spec).is_file():  # Path('') is the current folder
+        raise InputError(f"graph {spec!r} is empty; give a kind ({kinds}) or a file of "
+                         "'cam_i,cam_j' lines")
     path = Path(kind_or_file)
     if path.is_dir():
         raise InputError(f"graph {spec!r} is a folder, not a file; give a kind or a file of "
                          "'cam_i,cam_j' lines")
     if not path.is_file():
-        kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"] + ["knn:K"])
         raise InputError(
             f"graph {spec!r}: not one of {kinds} and no such file; give a kind "
             f"or a file of 'cam_i,cam_j' lines (indices or image names)")

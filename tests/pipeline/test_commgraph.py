@@ -94,6 +94,15 @@ def test_unknown_graph_kind(spec):
         comm_graph(spec, NAMES6)
 
 
+@pytest.mark.parametrize("spec", ["", " "])
+def test_an_empty_graph_is_named_empty_not_a_folder(spec, tmp_path, monkeypatch):
+    """--graph '' (an unset shell variable) was refused as 'a folder': Path('') is the
+    current folder."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match=rf"^graph '{spec}' is empty; give a kind \(line, ring"):
+        comm_graph(spec, NAMES6)
+
+
 def test_graph_needs_two_cameras():
     with pytest.raises(InputError, match="at least two"):
         comm_graph("ring", ["a"])
