@@ -166,6 +166,18 @@ def config_from_args(args) -> ImagesConfig:
                         transport=args.transport, matcher=args.matcher, remap=args.remap)
 
 
+def _refuse_empty_paths(args) -> None:
+    """InputError for an empty DIR, ``--out`` or ``--intrinsics`` (an unset shell variable):
+    ``Path('')`` is the current folder, and an empty ``--out`` fell back to the default run
+    folder, replacing the run there."""
+    for flag, value in (("DIR", args.directory), ("--out", args.out),
+                        ("--intrinsics", args.intrinsics)):
+        if value == "":
+            raise InputError(f"{flag} '' is empty (an unset variable?); give "
+                             + ("a folder name" if flag != "--intrinsics"
+                                else "auto, exif or the path of a K.txt"))
+
+
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
     """``(flag, path)`` of what the run reads (a run folder may not hold them)."""
     return [("DIR", config.directory)] + [
@@ -230,6 +242,7 @@ def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.images import run_images
 
+    _refuse_empty_paths(args)
     if args.sequence:
         return _run_sequence(args)
     refuse_online_options(args, "--sequence")

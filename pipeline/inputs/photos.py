@@ -300,6 +300,8 @@ def read_k_txt(path: str | Path) -> np.ndarray:
         ``K[1, 0]`` is not 0, or a focal length is not positive.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"intrinsics file {str(path)!r} is a folder; give the K.txt file")
     if not path.is_file():
         raise InputError(f"intrinsics file {str(path)!r} does not exist")
     try:

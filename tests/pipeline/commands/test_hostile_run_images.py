@@ -228,3 +228,30 @@ def test_a_live_viewer_that_cannot_be_reached_is_refused_before_any_work(photos,
         check_live(False, f"rerun+http://127.0.0.1:{listening.getsockname()[1]}/proxy")
     monkeypatch.setenv("DISPLAY", ":0")
     check_live(True, None)
+
+
+@pytest.mark.parametrize("args,flag", [
+    (["--out", ""], "--out"), (["--intrinsics", ""], "--intrinsics"),
+    (["--sequence", "--out", ""], "--out")])
+def test_an_empty_out_or_intrinsics_is_refused(photos, tmp_path, monkeypatch, capsys, args,
+                                               flag):
+    """An empty --out (an unset variable) fell back to the default runs/images-...,
+    replacing the run there; an empty --intrinsics was read as the file '.'."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run-images", str(photos), *args]) == 2
+    one_line_error(capsys, f"{flag} '' is empty (an unset variable?)")
+    assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("extra", [[], ["--sequence"]])
+def test_an_empty_dir_is_refused_not_read_as_the_current_folder(tmp_path, monkeypatch, capsys,
+                                                                 extra):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run-images", "", *extra]) == 2
+    one_line_error(capsys, "DIR '' is empty (an unset variable?); give a folder name")
+
+
+def test_intrinsics_naming_a_folder_says_so(photos, tmp_path, capsys):
+    assert main(["run-images", str(photos), "--intrinsics", str(tmp_path),
+                 "--out", str(tmp_path / "run")]) == 2
+    one_line_error(capsys, f"intrinsics file {str(tmp_path)!r} is a folder; give the K.txt file")
