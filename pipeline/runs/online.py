@@ -427,6 +427,17 @@ def jsonable_step(rec: dict) -> dict:
     return out
 
 
+def _write_images_csv(path: Path, oa, names: list) -> None:
+    """``images.csv``: frame, robot, step, name; a name holding a comma, a quote or a line
+    break (file and folder names may) is quoted as CSV does, so each frame stays one row."""
+    import csv
+
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["image", "robot", "step", "name"])
+        w.writerows([g, int(oa.robot[g]), int(oa.step[g]), names[g]] for g in range(oa.n_images))
+
+
 def online_tables(out: Path, run: OnlineRun, report: dict, timer: StageTimer, names: list,
                   rerun: bool = True, centres: np.ndarray | None = None) -> None:
     """Write the run folder of an online run atomically: ``links.csv``, ``images.csv``
@@ -446,9 +457,7 @@ def online_tables(out: Path, run: OnlineRun, report: dict, timer: StageTimer, na
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             write_links_csv(tmp / "links.csv", ledger)
-            rows = ["image,robot,step,name"] + [
-                f"{g},{int(oa.robot[g])},{int(oa.step[g])},{names[g]}" for g in range(oa.n_images)]
-            (tmp / "images.csv").write_text("\n".join(rows) + "\n")
+            _write_images_csv(tmp / "images.csv", oa, names)
             rows = ["link,step_added,step_cut"] + [
                 f"{k},{int(a)},{'' if c < 0 else int(c)}"
                 for k, (a, c) in enumerate(zip(L.step_added, L.step_cut, strict=True))]

@@ -133,3 +133,23 @@ def test_a_graph_that_leaves_a_robot_alone_is_warned(tmp_path, capsys):
     assert main(["run-images", str(root), "--sequence", "--graph", str(graph), "--no-rerun",
                  "--out", str(tmp_path / "run"), *fast]) == 0
     assert "splits the 3 robots into 2 groups" in capsys.readouterr().err
+
+
+def test_names_with_commas_quotes_and_line_breaks_stay_one_row(tmp_path):
+    """images.csv joined its fields with bare commas: a sub-folder 'rob,1' or a file
+    'a\\nb.jpg' broke the row, so a CSV reader saw other frames and names."""
+    files = sorted(SCEAUX.glob("*.JPG"))
+    root = tmp_path / "team"
+    names = {"rob,1": ['f 0,"x".jpg', 'f 1,"x".jpg'], 'r"2': ["a\nb0.jpg", "a\nb1.jpg"]}
+    for (robot, frames), idx in zip(names.items(), ([0, 2], [1, 3]), strict=True):
+        (root / robot).mkdir(parents=True)
+        for name, i in zip(frames, idx, strict=True):
+            shutil.copy(files[i], root / robot / name)
+    out = tmp_path / "run"
+    assert main(["run-images", str(root), "--sequence", "--no-rerun", "--out", str(out),
+                 *FAST]) == 0
+    with open(out / "images.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert rows == [["image", "robot", "step", "name"],
+                    ["0", "0", "0", 'r"2/a\nb0.jpg'], ["1", "1", "0", 'rob,1/f 0,"x".jpg'],
+                    ["2", "0", "1", 'r"2/a\nb1.jpg'], ["3", "1", "1", 'rob,1/f 1,"x".jpg']]
