@@ -70,6 +70,10 @@ MAX_IMAGE_PIXELS = 100_000_000
 #: 640x480 JPEG header), and is refused without reading it.
 MAX_FILE_TO_PIXELS = 4
 FILE_HEADROOM_BYTES = 16 * 2**20
+#: A K.txt whose principal point lies further than this fraction of an image's side from its
+#: centre is warned (a calibrated lens has it within a few percent): the usual cause is a
+#: K.txt of the full-resolution photos beside resized copies.
+OFF_CENTRE = 0.2
 
 
 @dataclass
@@ -536,6 +540,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
     mode, K_file, k_path = _resolve_intrinsics(intrinsics, directory)
     views: list[View] = []
     multi: list[str] = []
+    off_centre: list[str] = []
     for path in files:
         pixels, header = load_image(path)
         # a multi-page TIFF, an animated PNG or WebP: the frames after the first are not
@@ -552,6 +557,8 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                 raise InputError(
                     f"{k_path}: principal point ({cx:g}, {cy:g}) lies outside image {path.name} "
                     f"({w}x{h}); K.txt must be given at the images' full resolution")
+            if abs(cx - (w - 1) / 2) > OFF_CENTRE * w or abs(cy - (h - 1) / 2) > OFF_CENTRE * h:
+                off_centre.append(f"{path.name} ({w}x{h})")
         else:
             found = _exif_K(header, w, h)
             if found is not None:
@@ -566,6 +573,13 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
         pixels, K = downscale(pixels, K, max_size)
         views.append(View(name=path.name, image=pixels, K=np.array(K, dtype=np.float64),
                           intrinsics_known=known, intrinsics_source=source))
+    if off_centre:
+        cx, cy = K_file[0, 2], K_file[1, 2]
+        log.warning("warning: %s", f"{k_path}: principal point ({cx:g}, {cy:g}) lies far from "
+                    f"the centre of {len(off_centre)} image(s): {', '.join(off_centre[:5])}"
+                    f"{', ...' if len(off_centre) > 5 else ''}; is K.txt for another "
+                    "resolution? It must be at the files' resolution (for resized copies, scale "
+                    "fx, fy, cx and cy by the resize factor)")
     if multi:
         log.warning("warning: %s", f"{len(multi)} file(s) in {str(directory)!r} hold several "
                     f"frames or pages and only the first of each is read: {', '.join(multi)}; "

@@ -209,6 +209,34 @@ def test_truncated_jpeg(tmp_path, sceaux_small):
         load_folder(d)
 
 
+def _off_centre_warnings(caplog):
+    return [r.getMessage() for r in caplog.records if "lies far from the centre" in r.getMessage()]
+
+
+def test_k_txt_of_the_full_resolution_beside_resized_copies_is_warned(tmp_path, caplog):
+    """A K.txt for 640 px photos beside 320 px copies: its principal point fell inside the
+    copies, so it was taken without a word (the reconstruction then registered nothing)."""
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(241, 320, 1)),
+                           "b.png": Image.fromarray(_texture(241, 320, 2))})
+    (d / "K.txt").write_text("656 0 319.6\n0 656 240.1\n0 0 1\n")
+    with caplog.at_level("WARNING", logger="pipeline"):
+        load_folder(d, max_size=None)
+    assert _off_centre_warnings(caplog) == [
+        f"warning: {d / 'K.txt'}: principal point (319.6, 240.1) lies far from the centre of 2 "
+        "image(s): a.png (320x241), b.png (320x241); is K.txt for another resolution? It must "
+        "be at the files' resolution (for resized copies, scale fx, fy, cx and cy by the "
+        "resize factor)"]
+
+
+def test_k_txt_at_the_files_resolution_is_not_warned(tmp_path, caplog):
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(240, 320, 1)),
+                           "b.png": Image.fromarray(_texture(240, 320, 2))})
+    (d / "K.txt").write_text("328 0 166\n0 328 114\n0 0 1\n")  # a few px off the centre
+    with caplog.at_level("WARNING", logger="pipeline"):
+        load_folder(d, max_size=None)
+    assert _off_centre_warnings(caplog) == []
+
+
 def test_empty_file_is_named_as_empty(tmp_path):
     """A zero-byte file with an image suffix was refused as an unidentified image; it says
     the file is empty."""
