@@ -34,6 +34,7 @@ from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
     "image_paths",
+    "is_utf8_name",
     "identical_pixels",
     "pixel_digests",
     "IMAGE_SUFFIXES",
@@ -126,11 +127,28 @@ def _image_files(directory: Path) -> list[Path]:
         raise InputError(
             f"no images in {str(directory)!r}: expected files ending in "
             f"{', '.join(IMAGE_SUFFIXES)} (found {len(files)} other file(s)){hint}")
+    not_utf8 = [p.name for p in images if not is_utf8_name(p.name)]
+    if not_utf8:
+        raise InputError(
+            f"{len(not_utf8)} image file name(s) in {str(directory)!r} are not UTF-8 text "
+            f"({', '.join(repr(n) for n in not_utf8[:5])}{', ...' if len(not_utf8) > 5 else ''}"
+            "): the outputs name every image in UTF-8 (report.json, COLMAP's model); rename "
+            "them, e.g. with convmv -f latin1 -t utf8")
     if len(images) == 1:
         raise InputError(
             f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "
             f"two cameras; add more images" + (f" ({'; '.join(left_out)})" if left_out else ""))
     return images
+
+
+def is_utf8_name(name: str) -> bool:
+    """Whether a file name decoded from the file system is UTF-8 text (bytes that are not
+    become lone surrogates, which no UTF-8 output can hold)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _holds_images(path: Path) -> bool:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import InputError
-from pipeline.inputs.photos import image_paths, load_folder
+from pipeline.inputs.photos import image_paths, is_utf8_name, load_folder
 from pipeline.types import View
 
 __all__ = ["PhotoSequence", "load_sequence"]
@@ -67,6 +67,12 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "
                          "holding images; a team needs at least two (one sub-folder of frames "
                          "per robot)")
+    not_utf8 = [p.name for p in subs if not is_utf8_name(p.name)]
+    if not_utf8:
+        raise InputError(f"--sequence {str(directory)!r}: {len(not_utf8)} robot sub-folder "
+                         f"name(s) are not UTF-8 text ({', '.join(repr(n) for n in not_utf8[:5])}"
+                         "): the outputs name every frame in UTF-8 (images.csv, report.json); "
+                         "rename them, e.g. with convmv -f latin1 -t utf8")
     shared = intrinsics
     if intrinsics == "auto" and (directory / "K.txt").is_file():
         shared = directory / "K.txt"

@@ -237,6 +237,18 @@ def test_k_txt_at_the_files_resolution_is_not_warned(tmp_path, caplog):
     assert _off_centre_warnings(caplog) == []
 
 
+def test_file_names_that_are_not_utf8_are_refused(tmp_path):
+    """A Latin-1 file name ('ch\\xe2teau.jpg') was loaded, then crashed the run with a
+    traceback where COLMAP's database was written."""
+    import os
+
+    d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50, 1))})
+    Image.fromarray(_texture(40, 50, 2)).save(d / os.fsdecode(b"ch\xe2teau.png"))
+    with pytest.raises(InputError, match=r"^1 image file name\(s\) in .* are not UTF-8 text "
+                                         r"\('ch\\udce2teau\.png'\).*rename them"):
+        load_folder(d)
+
+
 def test_empty_file_is_named_as_empty(tmp_path):
     """A zero-byte file with an image suffix was refused as an unidentified image; it says
     the file is empty."""

@@ -55,6 +55,18 @@ def test_a_bad_frame_names_its_robot(tmp_path):
         load_sequence(root, max_size=64)
 
 
+def test_robot_folder_names_that_are_not_utf8_are_refused(tmp_path):
+    """A Latin-1 sub-folder name crashed the run with a traceback where images.csv was
+    written."""
+    import os
+
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    (root / "b").rename(root / os.fsdecode(b"rob\xe9"))
+    with pytest.raises(InputError, match=r"1 robot sub-folder name\(s\) are not UTF-8 text "
+                                         r"\('rob\\udce9'\)"):
+        load_sequence(root, max_size=64)
+
+
 def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
     root = _folder(tmp_path / "seq", {"a": [0, 1, 2], "b": [3, 4]})
     with pytest.raises(InputError, match=r"different numbers of frames \(a: 3, b: 2\)"):
