@@ -255,3 +255,14 @@ def test_intrinsics_naming_a_folder_says_so(photos, tmp_path, capsys):
     assert main(["run-images", str(photos), "--intrinsics", str(tmp_path),
                  "--out", str(tmp_path / "run")]) == 2
     one_line_error(capsys, f"intrinsics file {str(tmp_path)!r} is a folder; give the K.txt file")
+
+
+def test_an_out_name_that_is_not_utf8_is_refused_before_any_work(photos, tmp_path, capsys):
+    """A Latin-1 --out ('run\\xe9') ran the whole job, then crashed with a traceback where
+    the recording was written."""
+    import os
+
+    out = tmp_path / os.fsdecode(b"run\xe9")
+    assert main(["run-images", str(photos), "--out", str(out)]) == 2
+    err = one_line_error(capsys, "is not UTF-8 text", "give a UTF-8 folder name")
+    assert err and not out.exists()
