@@ -37,6 +37,15 @@ def test_out_naming_the_cwd_a_parent_or_root_is_refused(checkout, capsys, out):
     assert tree(checkout) == before
 
 
+@pytest.mark.parametrize("extra", [[], ["--steps", "2"]])
+def test_an_empty_out_is_refused_not_the_default_run_folder(checkout, capsys, extra):
+    """--out '' (an unset variable) ran into the default runs/formation-d, replacing the
+    run there."""
+    assert main(["run-formation", *FAST, *extra, "--out", ""]) == 2
+    one_line_error(capsys, "--out '' is empty (an unset variable?)")
+    assert not (checkout / "runs").exists()
+
+
 def test_out_naming_a_foreign_folder_is_refused(checkout, capsys):
     before = tree(checkout)
     assert main(["run-formation", "--out", str(checkout), *FAST]) == 2
