@@ -87,6 +87,7 @@ def config_from_args(args) -> LandmarksConfig:
 
 
 def run(args) -> int:
+    from pipeline.outcome import exit_status
     from pipeline.runfolder import claim_run_folder
 
     config = config_from_args(args)
@@ -99,4 +100,4 @@ def run(args) -> int:
         out, report = run_landmarks(config)
     print(landmarks_markdown(report))
     print(f"run written to {out}/ (report.json, links.csv)")
-    return 0
+    return exit_status(report)

@@ -46,6 +46,7 @@ import numpy as np
 
 from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
+from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links
@@ -56,6 +57,9 @@ __all__ = ["LandmarksConfig", "REFINEMENTS", "default_refinement", "run_landmark
 
 #: refinements of the landmark matches before the consistency stage
 REFINEMENTS = ("votes", "none")
+#: why a labelled folder may give no link (the ``no-links`` warning of :mod:`pipeline.outcome`)
+NO_LANDMARK_LINKS_WHY = ("a --ratio gate so strict that it keeps no match, or a --graph "
+                         "without an edge")
 
 
 def default_refinement(resolution: str) -> str:
@@ -276,6 +280,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "versions": versions(),
         "config": {**asdict(config), "out": str(out)},
     }
+    flag_result(report, names, no_links_why=NO_LANDMARK_LINKS_WHY)
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             ledger = ledger_from_consistency(res)

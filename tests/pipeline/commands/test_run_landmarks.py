@@ -153,3 +153,21 @@ def test_a_graph_that_splits_the_images_is_warned(tmp_path, capsys):
     assert main(["run-landmarks", str(HOTEL), "--graph", str(graph), "--out",
                  str(tmp_path / "r")]) == 0
     assert "splits the 6 images into 2 groups" in capsys.readouterr().err
+
+
+def test_a_run_without_links_is_warned_in_report_and_on_stderr(tmp_path, capsys):
+    """A --ratio gate that keeps no match leaves nothing to associate: the run says so, as
+    every other command does, instead of a table of zero scores."""
+    out = tmp_path / "r"
+    assert main(["run-landmarks", str(HOTEL), "--graph", "line", "--descriptors", "sift",
+                 "--ratio", "0.0001", "--no-baselines", "--out", str(out), "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["before"]["links"] == 0
+    assert [w["code"] for w in report["warnings"]] == ["no-links"]
+    err = capsys.readouterr().err
+    assert "warning: the input holds no link between two images" in err and "--ratio" in err
+
+
+def test_a_clean_run_carries_no_warnings(hotel_run):
+    report, _ = hotel_run
+    assert "warnings" not in report and "conflict_free" not in report
