@@ -97,7 +97,8 @@ def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:
         except ValueError:
             vals = []
         if len(vals) != 2:
-            return rows, f"line {number} is {line[:60]!r}"
+            count = f" ({len(vals)} numbers)" if vals else ""
+            return rows, f"line {number} is {line[:60]!r}{count}"
         rows.append(vals)
     return rows, None
 
@@ -115,6 +116,16 @@ def _txt_problem(path: Path) -> str | None:
     two numbers, when an earlier line is (``None`` for any other file, e.g. a README)."""
     rows, bad = _parse_txt_keypoints(path)
     return bad if rows else None
+
+
+def _why_not_table(path: Path) -> str:
+    """What makes a label file of an image no keypoint table, for an error message: its first
+    line that is not two numbers, or that it holds no row (empty, not UTF-8 text, a MAT file
+    without ``pts_coord``)."""
+    if path.suffix.lower() == ".mat":
+        return "no readable variable pts_coord"
+    rows, bad = _parse_txt_keypoints(path)
+    return bad if bad is not None else "no row of two numbers in it"
 
 
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:
@@ -298,8 +309,9 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         named = [rejected[im.stem] for im in images
                  if im.stem not in by_stem and im.stem in rejected]
         if named:
-            raise InputError(f"{named[0]}: not a keypoint table (every line must be two numbers "
-                             "'x y'; a .mat file needs pts_coord 2 x K); fix or remove the file")
+            raise InputError(f"{named[0]}: not a keypoint table ({_why_not_table(named[0])}; "
+                             "every line must be two numbers 'x y', or 'nan nan'; a .mat file "
+                             "needs pts_coord 2 x K); fix or remove the file")
         # paired by order (the hotel's layout): a label file broken part-way names itself
         broken = [(p, why) for p in sorted(rejected.values(), key=lambda q: natural_key(q.name))
                   if p.suffix.lower() == ".txt" and (why := _txt_problem(p))]

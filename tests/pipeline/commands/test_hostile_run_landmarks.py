@@ -272,3 +272,16 @@ def test_ctrl_c_is_one_line_exit_130_and_nothing_written(folder, capsys, monkeyp
     assert "Traceback" not in err and err.count("interrupted:") == 1
     assert err.splitlines()[-1].startswith("interrupted: run-landmarks")
     assert tree(folder.parent) == before
+
+
+@pytest.mark.parametrize("content, needle", [
+    ("1,2,3\n" + "1,2\n" * (K - 1), "(line 1 is '1,2,3' (3 numbers);"),
+    ("x y\n" + "1 2\n" * (K - 1), "(line 1 is 'x y';"),
+    ("", "(no row of two numbers in it;"),
+    ("1 2\n" * 3 + "1 2 0.5\n" + "1 2\n" * (K - 4), "(line 4 is '1 2 0.5' (3 numbers);"),
+], ids=["comma-3-columns", "header", "empty", "3-columns-line-4"])
+def test_a_label_file_paired_by_name_names_its_bad_line(folder, capsys, content, needle):
+    """Every image has a label file of its name, one of them is no table: the message names
+    the line that is not 'x y' (it said only 'not a keypoint table')."""
+    (folder / "v1.txt").write_text(content)
+    _fails(capsys, _argv(folder), folder, "v1.txt: not a keypoint table", needle)
