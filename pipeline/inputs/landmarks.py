@@ -16,7 +16,9 @@ images is the identity on rows. Layout:
 Pairing of the files: when every image has a keypoint file of the same stem, by name.
 Otherwise (the CMU hotel files are ``hotel.seq0.png`` / ``hotel1.txt`` / ``hotel001.scf``)
 by *natural* name order (``seq2`` before ``seq10``) — the ``i``-th image with the ``i``-th
-keypoint file and the ``i``-th descriptor file — which needs equal counts. Text and MAT files
+keypoint file and the ``i``-th descriptor file — which needs equal counts. An image with
+two keypoint files of its name (``NAME.txt`` and ``NAME.mat``) is refused unless they hold the
+same labels. Text and MAT files
 that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
 keypoint files and are ignored.
 """
@@ -290,7 +292,14 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             kp_files.append((p, pts))
         else:
             rejected.setdefault(p.stem, p)
-    by_stem = {p.stem: (p, pts) for p, pts in kp_files}
+    by_stem: dict[str, tuple[Path, np.ndarray]] = {}
+    image_stems = {im.stem for im in images}
+    for p, pts in kp_files:
+        other = by_stem.setdefault(p.stem, (p, pts))
+        if other[0] is not p and p.stem in image_stems and not (
+                other[1].shape == pts.shape and np.array_equal(other[1], pts, equal_nan=True)):
+            raise InputError(f"{directory}: {other[0].name} and {p.name} are both keypoint files "
+                             f"of {p.stem} and their labels differ; keep one of them")
     if all(im.stem in by_stem for im in images):
         pairing = "name"
         kps = [by_stem[im.stem] for im in images]

@@ -285,3 +285,16 @@ def test_a_label_file_paired_by_name_names_its_bad_line(folder, capsys, content,
     the line that is not 'x y' (it said only 'not a keypoint table')."""
     (folder / "v1.txt").write_text(content)
     _fails(capsys, _argv(folder), folder, "v1.txt: not a keypoint table", needle)
+
+
+def test_an_image_with_two_differing_label_files_is_refused(folder, capsys):
+    """v1.txt and a v1.mat of other labels: one of them was used without a word (the .txt);
+    two files of the same labels are one."""
+    from scipy.io import savemat
+
+    pts = np.loadtxt(folder / "v1.txt")
+    savemat(folder / "v1.mat", {"pts_coord": pts.T})
+    assert main(_argv(folder)) == 0
+    savemat(folder / "v1.mat", {"pts_coord": pts[::-1].T})
+    _fails(capsys, _argv(folder), folder, "v1.mat and v1.txt are both keypoint files of v1",
+           "keep one of them")
