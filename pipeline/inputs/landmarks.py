@@ -25,6 +25,7 @@ keypoint files and are ignored.
 
 from __future__ import annotations
 
+import logging
 import re
 import warnings
 from dataclasses import dataclass
@@ -36,6 +37,8 @@ from pipeline.errors import InputError
 
 __all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frames",
            "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
+
+log = logging.getLogger(__name__)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
 DESCRIPTOR_SOURCES = ("auto", "given", "sift")
@@ -225,6 +228,22 @@ def _first_bad_line(path: Path) -> str:
 
 
 
+def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path]) -> None:
+    """Warn of keypoint files paired with no image (their image is missing, or of a format
+    not read here, e.g. ``.webp``, ``.gif``): their landmarks are left out of the run."""
+    if not orphans:
+        return
+    unread = [p.name for p in files
+              if p.stem in {q.stem for q in orphans}
+              and p.suffix.lower() not in (*IMAGE_SUFFIXES, ".txt", ".mat", ".scf")]
+    why = (f"; {', '.join(unread[:3])} is not one of the image formats read "
+           f"({', '.join(IMAGE_SUFFIXES)}): convert it" if unread else
+           "; no image of their name")
+    log.warning("warning: %s", f"{directory}: {len(orphans)} keypoint file(s) left out, "
+                f"paired with no image ({', '.join(p.name for p in orphans[:5])}"
+                f"{', ...' if len(orphans) > 5 else ''}){why}")
+
+
 def select_frames(n_total: int, frames: int | None) -> np.ndarray:
     """Indices of ``frames`` images taken at a fixed stride from the first.
 
@@ -303,6 +322,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     if all(im.stem in by_stem for im in images):
         pairing = "name"
         kps = [by_stem[im.stem] for im in images]
+        _warn_orphans(directory, files, [p for p, _ in by_stem.values()
+                                         if p.stem not in image_stems])
     elif len(kp_files) == len(images):
         pairing = "order"
         kps = kp_files

@@ -298,3 +298,21 @@ def test_an_image_with_two_differing_label_files_is_refused(folder, capsys):
     savemat(folder / "v1.mat", {"pts_coord": pts[::-1].T})
     _fails(capsys, _argv(folder), folder, "v1.mat and v1.txt are both keypoint files of v1",
            "keep one of them")
+
+
+@pytest.mark.parametrize("image, needle", [
+    ("v3.webp", "v3.webp is not one of the image formats read"),
+    (None, "no image of their name"),
+], ids=["unread-format", "no-image"])
+def test_a_label_file_without_its_image_is_warned(folder, capsys, image, needle):
+    """An image in a format not read (or missing) beside its labels: the run went on with the
+    other images and said nothing of the labels it left out."""
+    png = folder / "v3.png"
+    if image:
+        from PIL import Image
+
+        Image.open(png).save(folder / image, lossless=True)
+    png.unlink()
+    assert main(_argv(folder, "-q")) == 0
+    err = capsys.readouterr().err
+    assert "1 keypoint file(s) left out, paired with no image (v3.txt)" in err and needle in err
