@@ -406,10 +406,15 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     }
     from pipeline.outcome import flag_online
 
-    return flag_online(report, "frames too small, too few features, or no overlap between the "
-                       "robots' views" + (f"; at --speed {config.speed:g} m per step the "
-                                          "formation may have left the scene"
-                                          if config.speed else ""))
+    if config.switching and not any(len(s.get("comm_edges", ())) for s in report["steps"]):
+        # no frame had a neighbour to match: the drawn graphs, not the images, are the cause
+        why = (f"--switching-topology left no communication link up in any of the "
+               f"{len(run.steps)} step(s) (drawn from --seed); more --steps, or another --seed")
+    else:
+        why = ("frames too small, too few features, or no overlap between the robots' views"
+               + (f"; at --speed {config.speed:g} m per step the formation may have left the "
+                  "scene" if config.speed else ""))
+    return flag_online(report, why)
 
 
 def jsonable_step(rec: dict) -> dict:

@@ -127,6 +127,20 @@ def test_a_run_without_any_link_is_warned(tmp_path, capsys):
     assert "--speed 100 m per step" in report["warnings"][0]["message"]
 
 
+def test_no_link_because_the_switching_graph_had_no_edge_names_the_graph(tmp_path, capsys):
+    """Two robots, one step, and the drawn graph of that step has no edge up: nothing could
+    be matched, and the warning blamed the images and the speed instead of the graph."""
+    out = tmp_path / "apart"
+    assert main(["run-formation", "--steps", "1", "--robots", "2", "--graph", "line",
+                 "--switching-topology", "--window", "10", "--no-fusion", "--no-rerun",
+                 "--out", str(out), "--size", "192x144", "--max-features", "150"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["steps"][0]["comm_edges"] == [] and report["final"]["links"] == 0
+    message = report["warnings"][0]["message"]
+    assert "--switching-topology left no communication link up in any of the 1 step(s)" in message
+    assert "--speed" not in message and message in capsys.readouterr().err
+
+
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
