@@ -361,6 +361,9 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                          f"({first}: {sizes[first]}, {other}: {sizes[other]}); every image must "
                          "carry the same labelled landmarks in the same order")
     k = next(iter(K))
+    if k == 0:  # a .mat of pts_coord 2 x 0 (an empty .txt is no keypoint table)
+        raise InputError(f"{kps[0][0]}: holds no landmark (pts_coord is 2 x 0); every image "
+                         "needs the same K >= 1 labelled landmarks")
     if k > MAX_LANDMARKS:
         raise InputError(f"{kps[0][0]}: {k} landmarks per image; at most {MAX_LANDMARKS} "
                          "(matching compares every landmark of one image with every landmark "

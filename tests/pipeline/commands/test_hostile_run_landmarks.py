@@ -316,3 +316,14 @@ def test_a_label_file_without_its_image_is_warned(folder, capsys, image, needle)
     assert main(_argv(folder, "-q")) == 0
     err = capsys.readouterr().err
     assert "1 keypoint file(s) left out, paired with no image (v3.txt)" in err and needle in err
+
+
+def test_mat_labels_of_no_landmark_are_named_as_such(folder, capsys):
+    """pts_coord 2 x 0 in every file: refused as holding no landmark (the message said every
+    row was 'nan nan', of a file that has no row)."""
+    from scipy.io import savemat
+
+    for k in range(4):
+        (folder / f"v{k}.txt").unlink()
+        savemat(folder / f"v{k}.mat", {"pts_coord": np.zeros((2, 0))})
+    _fails(capsys, _argv(folder), folder, "v0.mat: holds no landmark (pts_coord is 2 x 0)")
