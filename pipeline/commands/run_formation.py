@@ -137,6 +137,10 @@ def online_config_from_args(args):
                                                    faults.crash and not faults.delay_rounds):
         raise InputError("--steps models only --switching-topology (the graph of each step); "
                          "drop the other fault options")
+    if faults is not None and faults.seed != 0:
+        raise InputError(f"--fault-seed {faults.seed}: an online run (--steps) draws the graph "
+                         "of each step from --seed, the scene's seed; drop --fault-seed, or "
+                         "change --seed")
     check_formation(args.formation)
     from pipeline.runs.transports import check_online_team_size
 

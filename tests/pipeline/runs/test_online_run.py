@@ -80,6 +80,8 @@ def test_recording_carries_the_step_timeline(run_dir):
     (["--steps", "2", "--speed", "-1"], "--speed"),
     (["--steps", "2", "--hold", "-1"], "--hold -1"),
     (["--steps", "2", "--drop-prob", "0.1"], "switching-topology"),
+    # the graph of each step is drawn from --seed: a --fault-seed changed nothing, silently
+    (["--steps", "2", "--switching-topology", "--fault-seed", "7"], "--fault-seed 7: an online"),
 ])
 def test_bad_options_are_refused(tmp_path, capsys, flags, match):
     assert main(["run-formation", "--out", str(tmp_path / "r"), *FAST, *flags]) == 2
