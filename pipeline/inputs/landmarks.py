@@ -16,7 +16,8 @@ images is the identity on rows. Layout:
 Pairing of the files: when every image has a keypoint file of the same stem, by name.
 Otherwise (the CMU hotel files are ``hotel.seq0.png`` / ``hotel1.txt`` / ``hotel001.scf``)
 by *natural* name order (``seq2`` before ``seq10``) — the ``i``-th image with the ``i``-th
-keypoint file and the ``i``-th descriptor file — which needs equal counts. An image with
+keypoint file and the ``i``-th descriptor file — which needs equal counts, and is refused
+when it would give an image another file than the one of its name. An image with
 two keypoint files of its name (``NAME.txt`` and ``NAME.mat``) is refused unless they hold the
 same labels. Text and MAT files
 that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
@@ -379,6 +380,15 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             dfiles = [by_stem_d[im.stem] for im in images]
         elif len(desc_files) == len(images):
             dfiles = desc_files
+            clash = next(((im, dp) for im, dp in zip(images, dfiles, strict=True)
+                          if im.stem in by_stem_d and dp.stem != im.stem), None)
+            if clash is not None:
+                im, dp = clash
+                raise InputError(f"{directory}: {im.name} has the descriptor file "
+                                 f"{by_stem_d[im.stem].name} by name, but not every image has "
+                                 f"one of its name, so they pair by name order, which gives it "
+                                 f"{dp.name}; name every descriptor file after its image "
+                                 "(NAME.scf), or none")
         else:
             raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
                              f"(found {len(desc_files)} for {len(images)} images); or use "

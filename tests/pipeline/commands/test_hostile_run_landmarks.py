@@ -327,3 +327,12 @@ def test_mat_labels_of_no_landmark_are_named_as_such(folder, capsys):
         (folder / f"v{k}.txt").unlink()
         savemat(folder / f"v{k}.mat", {"pts_coord": np.zeros((2, 0))})
     _fails(capsys, _argv(folder), folder, "v0.mat: holds no landmark (pts_coord is 2 x 0)")
+
+
+def test_a_descriptor_file_named_after_another_image_than_its_order_gives_is_refused(folder,
+                                                                                   capsys):
+    """Labels paired by name, descriptors by name order because one .scf is not named after
+    its image: every image was given the next image's descriptors, without a word."""
+    (folder / "v0.scf").rename(folder / "z_v0.scf")  # sorts after v1..v3: order mispairs
+    _fails(capsys, _argv(folder), folder, "v1.png has the descriptor file v1.scf by name",
+           "gives it v2.scf")
