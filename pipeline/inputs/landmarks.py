@@ -10,7 +10,8 @@ images is the identity on rows. Layout:
   row ``nan nan`` marks a landmark the image does not see (occluded, out of view): the image
   then has a feature for each of its other rows only, and a landmark need not be seen by
   every image;
-* optional descriptors, one file per image: ``NAME.scf`` (``K`` rows of numbers, e.g. the
+* optional descriptors, one file per image: ``NAME.scf`` (``K`` rows of numbers, separated
+  like the keypoints', e.g. the
   60-bin shape contexts of the CMU hotel benchmark), or SIFT computed at the keypoints.
 
 Pairing of the files: when every image has a keypoint file of the same stem, by name.
@@ -198,10 +199,19 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
 
 
 def _read_descriptors(path: Path) -> np.ndarray:
+    """``(rows, D)`` of a descriptor table: numbers separated by whitespace or commas, as a
+    keypoint table's, in UTF-8 text (a leading byte-order mark is skipped)."""
+    import io
+
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not a numeric table of descriptors (not UTF-8 text: "
+                         f"{exc.reason} at byte {exc.start})") from None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # an empty file: its row count says it
-            d = np.loadtxt(path, dtype=np.float64, ndmin=2)
+            d = np.loadtxt(io.StringIO(text.replace(",", " ")), dtype=np.float64, ndmin=2)
     except ValueError:
         raise InputError(f"{path}: not a numeric table of descriptors "
                          f"({_first_bad_line(path)})") from None
@@ -212,9 +222,9 @@ def _first_bad_line(path: Path) -> str:
     """The first line of a descriptor table that is not all numbers, or whose count of
     numbers differs from the first line's, for an error message (lines counted from 1)."""
     width = None
-    with open(path, encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for number, line in enumerate(f, 1):
-            toks = line.split("#", 1)[0].split()
+            toks = line.split("#", 1)[0].replace(",", " ").split()
             if not toks:
                 continue
             try:

@@ -1,6 +1,7 @@
 """run-landmarks, as a hostile user would run it: one line on stderr naming the bad value,
 exit 2, no traceback, the labelled folder untouched and no run folder written."""
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -336,3 +337,20 @@ def test_a_descriptor_file_named_after_another_image_than_its_order_gives_is_ref
     (folder / "v0.scf").rename(folder / "z_v0.scf")  # sorts after v1..v3: order mispairs
     _fails(capsys, _argv(folder), folder, "v1.png has the descriptor file v1.scf by name",
            "gives it v2.scf")
+
+
+@pytest.mark.parametrize("encode", [
+    lambda rows: "\n".join(",".join(r.split()) for r in rows) + "\n",
+    lambda rows: "\ufeff" + "\n".join(rows) + "\n",
+], ids=["commas", "byte-order-mark"])
+def test_descriptor_files_are_read_as_the_label_files_are(folder, capsys, encode):
+    """A .scf separated by commas, or saved with a byte-order mark, as a label file may be:
+    it was refused ('could not convert string to float: '\\ufeff0'') and now gives the run
+    the same descriptors."""
+    assert main(_argv(folder)) == 0
+    before = json.loads((folder.parent / "run" / "report.json").read_text())["pairwise"]
+    rows = (folder / "v1.scf").read_text().splitlines()
+    (folder / "v1.scf").write_text(encode(rows), encoding="utf-8")
+    assert main(_argv(folder)) == 0
+    after = json.loads((folder.parent / "run" / "report.json").read_text())["pairwise"]
+    assert after == before
