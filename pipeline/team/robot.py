@@ -610,7 +610,11 @@ def run_robot_process(team, i: int, result_path=None) -> int:
     startup["session_open"] = _since_launch()
     try:
         transport.status("started")
-        waited = transport.handshake(float(opts["start_timeout_s"]))
+        try:
+            waited = transport.handshake(float(opts["start_timeout_s"]))
+        except InputError as exc:  # another team file than a neighbour's
+            transport.status(f"failed: {exc}")
+            raise
         startup["handshake_done"] = _since_launch()
         gone = sorted(k for k in transport.neighbours if k in transport.written_off)
         heard = len(transport.neighbours) - len(gone)

@@ -188,6 +188,16 @@ class Team:
         """``options`` with robot ``i``'s overrides applied."""
         return {**self.options, **self.robot_options.get(int(i), {})}
 
+    def shared_terms(self) -> dict:
+        """What every robot of the team must read alike from its team file: the team size,
+        the comm graph, the kind of data and the team-wide options
+        (:data:`TEAM_ONLY_OPTIONS`). Robots started with team files that differ in these would
+        run different protocols and never end a phase together; the start handshake compares
+        them (:meth:`pipeline.transport.zenoh_transport.ZenohTransport.handshake`)."""
+        edges = sorted(sorted(map(int, e)) for e in np.asarray(self.comm_edges).tolist())
+        return {"robots": self.n, "comm_edges": edges, "data.kind": self.data.get("kind"),
+                **{k: self.options.get(k) for k in TEAM_ONLY_OPTIONS}}
+
     def check_id(self, i) -> int:
         """The robot id as int; InputError if it is not a robot of this team."""
         try:

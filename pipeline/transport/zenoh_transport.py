@@ -251,6 +251,10 @@ class ZenohTransport(RoundEndpoint):
         self._out: dict[int, list[tuple[str, dict]]] = {k: [] for k in self.neighbours}
         self._packets: dict[tuple[int, int], tuple[dict, list]] = {}
         self._hello: dict[int, bool] = {}
+        # the team-wide settings of this robot's team file, sent with every hello; a
+        # neighbour's that differ are kept here and stop the handshake (see handshake)
+        self._terms = team.shared_terms()
+        self._other_terms: dict[int, dict] = {}
         self._started = False  # the start handshake is over (hellos are answered)
         self._cv = threading.Condition()
         self._heard: dict[int, float] = {}
@@ -441,7 +445,21 @@ class ZenohTransport(RoundEndpoint):
             doc = json.loads(sample.payload.to_bytes())
             src, heard_me = int(doc["src"]), bool(doc["heard"])
             waiting = not bool(doc.get("done", False))
-        except (ValueError, KeyError, TypeError):
+            terms = doc.get("terms")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            return
+        if isinstance(terms, dict) and terms != self._terms:
+            with self._cv:
+                first = src not in self._other_terms
+                self._other_terms.setdefault(src, terms)
+                self._cv.notify_all()
+            if first:  # tell it ours at once: it may not have heard this robot yet
+                try:
+                    self.session.put(key(self.team.name, "hello", self.robot_id, src),
+                                     json.dumps({"src": self.robot_id, "heard": False,
+                                                 "done": False, "terms": self._terms}))
+                except Exception:  # noqa: BLE001 - the session is closing
+                    pass
             return
         with self._cv:
             self._heard[src] = time.monotonic()
@@ -452,11 +470,29 @@ class ZenohTransport(RoundEndpoint):
         if answer:  # it is still in its handshake: it may have missed our last hello
             try:
                 self.session.put(key(self.team.name, "hello", self.robot_id, src),
-                                 json.dumps({"src": self.robot_id, "heard": True, "done": True}))
+                                 json.dumps({"src": self.robot_id, "heard": True, "done": True,
+                                             "terms": self._terms}))
             except Exception:  # noqa: BLE001 - the session is closing
                 pass
 
     # --- start ----------------------------------------------------------------------------
+    def _check_terms(self) -> None:
+        """InputError naming the first neighbour whose team file differs from this robot's in
+        a team-wide setting (:meth:`pipeline.team.teamfile.Team.shared_terms`)."""
+        if not self._other_terms:
+            return
+        k = min(self._other_terms)
+        theirs = self._other_terms[k]
+        keys = [x for x in sorted(set(theirs) | set(self._terms))
+                if theirs.get(x) != self._terms.get(x)]
+        what = "; ".join(x if x == "comm_edges" else
+                         f"{x} {theirs.get(x)!r} there, {self._terms.get(x)!r} here"
+                         for x in keys)
+        raise InputError(f"robot {self.robot_id}: neighbour robot {k} ({self.team.endpoint(k)}) "
+                         f"was started with another team file ({what}); start every robot of "
+                         f"team {self.team.name!r} with the same robots, comm_edges, data.kind "
+                         "and options it shares (resolution, ...)")
+
     def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05) -> float:
         """Wait until every neighbour is heard and has heard this robot; return seconds taken.
 
@@ -469,6 +505,10 @@ class ZenohTransport(RoundEndpoint):
         RobotMissingError
             No neighbour at all was heard within ``timeout_s`` (a wrong address is likelier
             than every neighbour being down); the message names the first.
+        InputError
+            A neighbour's hello carries other team-wide settings (its team file differs in the
+            robots, the comm graph, the data kind or a team-only option): the two would run
+            different protocols, so neither starts.
         """
         t0 = time.monotonic()
         name = self.team.name
@@ -478,15 +518,18 @@ class ZenohTransport(RoundEndpoint):
                 with self._cv:
                     heard = k in self._hello
                 self.session.put(key(name, "hello", self.robot_id, k),
-                                 json.dumps({"src": self.robot_id, "heard": heard, "done": done}))
+                                 json.dumps({"src": self.robot_id, "heard": heard, "done": done,
+                                             "terms": self._terms}))
 
         while True:
             say()
             with self._cv:
+                self._check_terms()
                 ok = all(self._hello.get(k, False) for k in self.neighbours
                          if k not in self.written_off)
                 if not ok:
                     self._cv.wait(period_s)
+                    self._check_terms()
                     for k in sorted(self._left & self._hello.keys()):  # heard, then ended
                         self._write_off(k, "closed")
                     ok = all(self._hello.get(k, False) for k in self.neighbours

@@ -148,3 +148,41 @@ def test_a_neighbour_heard_then_gone_is_written_off_in_the_handshake():
         assert took[1] is not None and took[1] < 20.0
     finally:
         robots[1].close()
+
+
+def test_robots_started_with_team_files_of_other_rules_both_stop_in_the_handshake():
+    """Robot 1's team file names another rule than robot 0's (a TEAM.json edited between
+    robots): both stop at the start with an InputError naming the setting, where they used
+    to run their different protocols without ever ending a phase."""
+    import dataclasses
+
+    import pytest
+
+    from pipeline.errors import InputError
+
+    team = make_team("otherterms", [[0, 1]], {"kind": "links", "links": "in.csv",
+                                              "features_per_camera": [1, 1]}, n=2)
+    other = dataclasses.replace(team, options={**team.options, "resolution": "paper"})
+    robots = [ZenohTransport(t, i, round_timeout_s=30.0, log=lambda s: None)
+              for i, t in ((0, team), (1, other))]
+    errors = [None, None]
+
+    def run(i):
+        try:
+            robots[i].handshake(timeout_s=20.0)
+        except InputError as exc:
+            errors[i] = str(exc)
+
+    try:
+        threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert "resolution 'paper' there, 'evidence' here" in errors[0]
+        assert "resolution 'evidence' there, 'paper' here" in errors[1]
+        with pytest.raises(InputError, match="another team file"):
+            robots[1].handshake(timeout_s=1.0)
+    finally:
+        for rb in robots:
+            rb.close()
