@@ -14,7 +14,9 @@ When it stops (every wait is bounded)
     It waits until every robot of the team has ended: published its result, published a
     ``failed: ...`` status (a :class:`~pipeline.errors.TeamError` naming it), or vanished
     without a result (its Zenoh liveliness token deleted — its process ended — and no
-    result within :data:`GRACE_S` after that: a lost robot, reported as killed). A robot
+    result within :data:`GRACE_S` after that: a lost robot, reported as killed), or never
+    started and was written off by every neighbour in their published results (it can no
+    longer take part: lost too, without waiting for ``timeout_s``). A robot
     not ended within ``timeout_s`` of the observer's start is lost too; if no robot at all
     published by then, a TeamError names one that never started.
 """
@@ -59,6 +61,22 @@ class TeamObserver(Observer):
             self.cv.notify_all()
 
 
+def _written_off_unstarted(team, obs) -> set[int]:
+    """Robots that never started (no liveliness token, no status) and that every neighbour
+    wrote off in a published result: a robot written off is never taken back, so nothing of
+    theirs can reach the run any more (one started now is told so and ends alone)."""
+    out = set()
+    for k in range(team.n):
+        if k in obs.results or k in obs.alive or k in obs.status:
+            continue
+        nbrs = team.neighbours(k)
+        if nbrs and all(j in obs.results and {str(x) for x in (
+                obs.results[j][0].get("counters", {}).get("written_off") or {})} >= {str(k)}
+                for j in nbrs):
+            out.add(k)
+    return out
+
+
 def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
     """Collect the results of ``team``'s robots started elsewhere; return a :class:`TeamRun`.
 
@@ -96,7 +114,12 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                     raise TeamError(f"robot {i} ({team.endpoint(i)}) {obs.status[i]}")
                 lost = {i for i, t in obs.vanished.items()
                         if i not in obs.results and now - t > GRACE_S}
+                lost |= _written_off_unstarted(team, obs)
                 if all(i in obs.results or i in lost for i in range(team.n)):
+                    off = sorted(_written_off_unstarted(team, obs))
+                    if off:
+                        log(f"robots {off} never started and every neighbour wrote them off: "
+                            "lost")
                     break
                 if now > deadline:
                     missing = [i for i in range(team.n) if i not in obs.results]

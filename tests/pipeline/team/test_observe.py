@@ -397,3 +397,42 @@ def test_the_observer_evaluates_on_the_teams_comm_edges(tmp_path):
     assert report["comm_edges"] == edges.tolist()
     rows = _rows(tmp_path / "obs" / "links.csv")[1:]
     assert any({int(r[0]), int(r[2])} == {0, 2} for r in rows)  # links over the added edge
+
+
+def test_a_robot_never_started_and_written_off_by_its_neighbours_ends_the_observation():
+    """Robot 0 never starts; robot 1 wrote it off at its start timeout and published: the
+    observer reports robot 0 lost as soon as robot 1's result is in (a written-off robot is
+    never taken back), instead of waiting out its --timeout."""
+    import threading
+    import time
+
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import observe_team
+    from pipeline.transport.wire import encode_packet
+    from pipeline.transport.zenoh_transport import key, open_session
+
+    team = make_team("written-off", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                               "features_per_camera": [1, 1]}, n=2)
+    stop = threading.Event()
+    result = encode_packet({"id": 1, "counters": {"outcome": "partitioned",
+                                                  "written_off": {"0": "start"}}},
+                           [("result", {})])
+
+    def robot_one():
+        s = open_session([team.endpoint(1)], [team.observer], "robot 1")
+        try:
+            while not stop.wait(0.05):
+                s.put(key(team.name, "result", 1), result)
+        finally:
+            s.close()
+
+    t = threading.Thread(target=robot_one)
+    t.start()
+    try:
+        t0 = time.monotonic()
+        run = observe_team(team, timeout_s=60)
+        assert time.monotonic() - t0 < 30
+        assert sorted(run.results) == [1] and sorted(run.killed) == [0]
+    finally:
+        stop.set()
+        t.join()
