@@ -37,7 +37,7 @@ def run(args) -> int:
     check_output_files([("--result", args.result)], [("--team", args.team), *inputs],
                        overwrite=args.overwrite)
     try:
-        code = run_robot_process(team, i, args.result)
+        code = run_robot_process(team, i, args.result, overwrite=args.overwrite)
     except RobotMissingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3

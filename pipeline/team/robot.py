@@ -596,8 +596,13 @@ def _profiled(main, team, i: int, transport):
         prof.dump_stats(str(Path(folder) / f"{team.name}-{i}-{os.getpid()}.pstats"))
 
 
-def run_robot_process(team, i: int, result_path=None) -> int:
-    """The ``robot`` command: connect, handshake, run, publish; returns an exit code."""
+def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -> int:
+    """The ``robot`` command: connect, handshake, run, publish; returns an exit code.
+
+    ``result_path`` (``--result``) is replaced only with ``overwrite``, also when it appeared
+    while the robot ran (another process given the same file). A result that cannot be
+    written is one ``error:`` line and exit 2, after the result was published to the team's
+    observer all the same."""
     startup = {"entered": _since_launch()}
     from pipeline.transport.zenoh_transport import ZenohTransport
 
@@ -635,10 +640,15 @@ def run_robot_process(team, i: int, result_path=None) -> int:
             kept = int(arrays["link_alive"].sum())
             _log(i, f"links: {kept} kept, {len(arrays['link_alive']) - kept} deleted of "
                     f"{len(arrays['link_alive'])}")
+        unwritten = None
         if result_path and "link_alive" in arrays:
             from pipeline.runfolder import write_json_atomic
 
-            write_json_atomic(result_path, {**header, "links": result_links(arrays)})
+            try:
+                write_json_atomic(result_path, {**header, "links": result_links(arrays)},
+                                  replace=overwrite, flag="--result")
+            except (InputError, OSError) as exc:  # published all the same, below
+                unwritten = exc
         # repeated until the observer acknowledges it: an observer started by hand may come
         # up while the robots run, so wait as long as for a neighbour at the start
         acked = transport.publish_result(encode_packet(header, [("result", arrays)]),
@@ -652,4 +662,7 @@ def run_robot_process(team, i: int, result_path=None) -> int:
         time.sleep(0.05)
     finally:
         transport.close()
+    if unwritten is not None:
+        print(f"error: robot {i}: {unwritten}", file=sys.stderr, flush=True)
+        return 2
     return 0

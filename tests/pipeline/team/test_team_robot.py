@@ -1,5 +1,7 @@
-"""The robot program's own helpers (pipeline.team.robot) that need no team running."""
+"""The robot program (pipeline.team.robot): its helpers that need no team running, and its
+--result file."""
 
+import json
 import pstats
 from types import SimpleNamespace
 
@@ -25,3 +27,32 @@ def test_the_profile_hook_writes_the_robots_statistics_only_when_asked(tmp_path,
     with pytest.raises(RuntimeError, match="robot stopped"):  # written on failure too
         _profiled(fails, SimpleNamespace(name="fusion"), 1, None)
     assert len(list((tmp_path / "prof").glob("fusion-1-*.pstats"))) == 1
+
+
+def test_two_robots_given_one_result_file_do_not_replace_each_others(tmp_path):
+    """Robots 0 and 1 both given ``--result same.json`` (no --overwrite): the first to end
+    writes it, the second keeps it as it is and exits 2 naming it, where it used to replace
+    it silently and both exited 0."""
+    import threading
+
+    from pipeline.team.launcher import make_team
+    from pipeline.team.robot import run_robot_process
+
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n")
+    team = make_team("same-result", [[0, 1]], {"kind": "links", "links": "in.csv",
+                                               "features_per_camera": [1, 1]}, n=2)
+    team.path = tmp_path / "TEAM.json"
+    team.observer = None
+    same = tmp_path / "same.json"
+    codes = [None, None]
+
+    def run(i):
+        codes[i] = run_robot_process(team, i, str(same))
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert sorted(codes) == [0, 2]
+    assert json.loads(same.read_text())["id"] == codes.index(0)
