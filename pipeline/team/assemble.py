@@ -235,7 +235,9 @@ def fusion_of_team(team, results: dict, ledger,
     (:func:`pipeline.fusion.points.fused_points`, from every robot's final estimate); its id
     is the union-find
     track (:func:`pipeline.fusion.landmarks.tracks_of` over the kept links) of its smallest
-    feature, and its features those the robots that published fused it from
+    feature still in one (a landmark with none, whose links a robot lost during fusion took
+    away, is left out of the points returned, not of ``stats``), and its features those the
+    robots that published fused it from
     (:attr:`pipeline.stages.CleaningResult.fused_track_features`).
 
     Returns
@@ -287,7 +289,13 @@ def fusion_of_team(team, results: dict, ledger,
     fused = fused_points(ne, good, theta, winner, K)
     pts, has_pt, grp = fused.points, fused.has_point, fused.group
     uf, _ = tracks_of(fpc, links.subset(before))
-    ids = uf[np.minimum(gid.min(1), max(int(off[-1]) - 1, 0))] if T else np.zeros(0, np.int64)
+    # the track of each robot's observation in the kept links (-1: none, e.g. its links to a
+    # robot lost during fusion were cut after it fused them)
+    big = np.iinfo(np.int64).max
+    tr = np.where(gid < off[-1], uf[np.minimum(gid, max(int(off[-1]) - 1, 0))], -1)
+    first = np.where(tr >= 0, gid, big).argmin(1) if T else np.zeros(0, np.int64)
+    ids = tr[np.arange(T), first] if T else np.zeros(0, np.int64)
+    in_track = ids >= 0
     mode = fusion_heads[0].get("consensus", "metropolis") if fusion_heads else None
     # the exact mode floods (no separate max-c rounds); Metropolis: n - 1 max-c rounds first
     maxc = max(n - 1, 0) if mode == "metropolis" else 0
@@ -325,5 +333,8 @@ def fusion_of_team(team, results: dict, ledger,
         phase_rounds=max((int(h["rounds"]) for h in fusion_heads), default=0),
         robots_lost={str(i): h["lost"] for i, h in sorted(
             (i, (hh.get("fusion") or {})) for i, hh in heads.items()) if h.get("lost")})
-    groups = [np.sort(gid[b, obs[b]]) for b in np.flatnonzero(has_pt)]
-    return stats, pts[has_pt], ids[has_pt], groups
+    # the landmarks of tracks still in the kept links, each named by the track of its smallest
+    # observation still in one
+    keep = has_pt & in_track
+    groups = [np.sort(gid[b, obs[b]]) for b in np.flatnonzero(keep)]
+    return stats, pts[keep], ids[keep], groups
