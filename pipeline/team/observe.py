@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import time
 
-from pipeline.errors import TeamError
+from pipeline.errors import InputError, TeamError
 from pipeline.team.launcher import Observer, TeamRun
 
 __all__ = ["observe_team", "TeamObserver", "GRACE_S"]
@@ -61,6 +61,22 @@ class TeamObserver(Observer):
             self.cv.notify_all()
 
 
+def _check_terms(team, results: dict) -> None:
+    """InputError naming the first robot whose result was computed under other team-wide
+    settings than the observer's team file holds (a TEAM.json edited in between): the run
+    folder would describe a run that did not happen."""
+    mine = team.shared_terms()
+    for i in sorted(results):
+        theirs = results[i][0].get("team_terms")
+        if theirs is None or theirs == mine:
+            continue
+        keys = [x for x in sorted(set(theirs) | set(mine)) if theirs.get(x) != mine.get(x)]
+        what = "; ".join(x if x == "comm_edges" else
+                         f"{x} {theirs.get(x)!r} there, {mine.get(x)!r} here" for x in keys)
+        raise InputError(f"robot {i} ({team.endpoint(i)}) ran with another team file than the "
+                         f"observer's ({what}); give the observer the robots' TEAM.json")
+
+
 def _written_off_unstarted(team, obs) -> set[int]:
     """Robots that never started (no liveliness token, no status) and that every neighbour
     wrote off in a published result: a robot written off is never taken back, so nothing of
@@ -89,9 +105,9 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
         A robot published ``failed: ...`` (named, with its message), or no robot published a
         result within ``timeout_s`` (names the first that never started, or never published).
     InputError
-        The team file has no ``observer`` endpoint, or it cannot be listened on.
+        The team file has no ``observer`` endpoint, or it cannot be listened on, or a robot
+        published a result computed under other team-wide settings than the file's.
     """
-    from pipeline.errors import InputError
 
     if not team.observer:
         raise InputError(f"team {team.name!r} has no observer endpoint; add "
@@ -112,6 +128,7 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                 if failed:
                     i = failed[0]
                     raise TeamError(f"robot {i} ({team.endpoint(i)}) {obs.status[i]}")
+                _check_terms(team, obs.results)
                 lost = {i for i, t in obs.vanished.items()
                         if i not in obs.results and now - t > GRACE_S}
                 lost |= _written_off_unstarted(team, obs)

@@ -632,6 +632,7 @@ def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -
             transport.status(f"failed: {exc}")
             raise
         header["handshake_s"] = round(waited, 4)
+        header["team_terms"] = team.shared_terms()  # the observer checks its own file's
         startup["main_done"] = _since_launch()
         # seconds from the launcher's start of this process to each step (profile of the
         # process start; None when the robot was started by hand)

@@ -399,24 +399,16 @@ def test_the_observer_evaluates_on_the_teams_comm_edges(tmp_path):
     assert any({int(r[0]), int(r[2])} == {0, 2} for r in rows)  # links over the added edge
 
 
-def test_a_robot_never_started_and_written_off_by_its_neighbours_ends_the_observation():
-    """Robot 0 never starts; robot 1 wrote it off at its start timeout and published: the
-    observer reports robot 0 lost as soon as robot 1's result is in (a written-off robot is
-    never taken back), instead of waiting out its --timeout."""
+def _observe_with_robot_one(team, header, timeout_s=60):
+    """observe_team(team) while a stand-in robot 1 publishes a result of ``header``."""
     import threading
-    import time
 
-    from pipeline.team.launcher import make_team
     from pipeline.team.observe import observe_team
     from pipeline.transport.wire import encode_packet
     from pipeline.transport.zenoh_transport import key, open_session
 
-    team = make_team("written-off", [[0, 1]], {"kind": "links", "links": "x.csv",
-                                               "features_per_camera": [1, 1]}, n=2)
     stop = threading.Event()
-    result = encode_packet({"id": 1, "counters": {"outcome": "partitioned",
-                                                  "written_off": {"0": "start"}}},
-                           [("result", {})])
+    result = encode_packet({"id": 1, **header}, [("result", {})])
 
     def robot_one():
         s = open_session([team.endpoint(1)], [team.observer], "robot 1")
@@ -429,10 +421,39 @@ def test_a_robot_never_started_and_written_off_by_its_neighbours_ends_the_observ
     t = threading.Thread(target=robot_one)
     t.start()
     try:
-        t0 = time.monotonic()
-        run = observe_team(team, timeout_s=60)
-        assert time.monotonic() - t0 < 30
-        assert sorted(run.results) == [1] and sorted(run.killed) == [0]
+        return observe_team(team, timeout_s=timeout_s)
     finally:
         stop.set()
         t.join()
+
+
+def test_a_robot_never_started_and_written_off_by_its_neighbours_ends_the_observation():
+    """Robot 0 never starts; robot 1 wrote it off at its start timeout and published: the
+    observer reports robot 0 lost as soon as robot 1's result is in (a written-off robot is
+    never taken back), instead of waiting out its --timeout."""
+    import time
+
+    from pipeline.team.launcher import make_team
+
+    team = make_team("written-off", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                               "features_per_camera": [1, 1]}, n=2)
+    t0 = time.monotonic()
+    run = _observe_with_robot_one(team, {"counters": {"outcome": "partitioned",
+                                                      "written_off": {"0": "start"}}})
+    assert time.monotonic() - t0 < 30
+    assert sorted(run.results) == [1] and sorted(run.killed) == [0]
+
+
+def test_the_observer_refuses_a_result_of_another_team_file():
+    """Robot 1 ran with a TEAM.json naming another rule than the observer's: the observer
+    stops with an InputError naming it, where it used to write a run folder whose report
+    claimed the rule the robots did not run."""
+    from pipeline.errors import InputError
+    from pipeline.team.launcher import make_team
+
+    team = make_team("other-file", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                              "features_per_camera": [1, 1]}, n=2)
+    terms = {**team.shared_terms(), "resolution": "paper"}
+    with pytest.raises(InputError, match=r"robot 1 \(tcp/127.0.0.1:\d+\) ran with another team "
+                                         r"file than the observer's \(resolution 'paper' there"):
+        _observe_with_robot_one(team, {"counters": {}, "team_terms": terms}, timeout_s=20)
