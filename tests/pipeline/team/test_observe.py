@@ -457,3 +457,20 @@ def test_the_observer_refuses_a_result_of_another_team_file():
     with pytest.raises(InputError, match=r"robot 1 \(tcp/127.0.0.1:\d+\) ran with another team "
                                          r"file than the observer's \(resolution 'paper' there"):
         _observe_with_robot_one(team, {"counters": {}, "team_terms": terms}, timeout_s=20)
+
+
+def test_a_result_arriving_after_the_observer_closed_raises_nothing():
+    """A robot's result delivered while the observer closes (it stopped on another robot's
+    error) used to raise ZError in Zenoh's callback thread, printed as a traceback."""
+    from types import SimpleNamespace
+
+    from pipeline.team.launcher import Observer, make_team
+    from pipeline.transport.wire import encode_packet
+
+    team = make_team("closing", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                           "features_per_camera": [1, 1]}, n=2)
+    obs = Observer(team)
+    obs.close()
+    packet = encode_packet({"id": 1}, [("result", {})])
+    obs._on_result(SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: packet)))
+    assert 1 in obs.results
