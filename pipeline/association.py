@@ -37,7 +37,14 @@ def camera_offsets(features_per_camera) -> np.ndarray:
         raise InputError(f"{exc} (a count of features)") from None
     if (m < 0).any():
         raise InputError(f"features_per_camera must be >= 0, got {m.tolist()}")
-    return np.concatenate([[0], np.cumsum(m)])
+    offsets = np.cumsum(m)
+    # each count is below 2**63 and every partial sum before it is >= 0, so the first sum an
+    # int64 cannot hold wraps to a negative one
+    if offsets.size and (offsets < 0).any():
+        raise InputError(f"features_per_camera sums to {sum(m.tolist()):,} features, more "
+                         f"than an int64 holds ({2**63 - 1:,}); give the counts of the "
+                         "features that exist")
+    return np.concatenate([[0], offsets])
 
 
 def check_links(links: Links, features_per_camera) -> None:

@@ -52,3 +52,15 @@ def test_check_links_rejects_one_to_many():
     links = Links(cam_i=[0, 0], feat_i=[0, 0], cam_j=[1, 1], feat_j=[0, 1])
     with pytest.raises(InputError, match="one-to-one"):
         check_links(links, [2, 2])
+
+
+def test_feature_counts_whose_sum_overflows_int64_are_refused():
+    from pipeline.association import camera_offsets
+    from pipeline.consistency import resolve_conflicts
+
+    with pytest.raises(InputError, match=r"sums to 9,223,372,036,854,775,810 features, more "
+                                         r"than an int64 holds"):
+        camera_offsets([2**63 - 1, 1, 1, 1])
+    links = Links(cam_i=[0, 1, 2, 0], feat_i=[0, 0, 0, 1], cam_j=[1, 2, 3, 3], feat_j=[0, 0, 0, 0])
+    with pytest.raises(InputError, match="more than an int64 holds"):
+        resolve_conflicts([2**63 - 1, 1, 1, 1], [[0, 1], [1, 2], [2, 3], [0, 3]], links)
