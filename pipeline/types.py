@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.errors import InputError
+
 __all__ = ["View", "Features", "PairMatches", "Links", "LinkLedger", "RunRecord", "id_array"]
 
 
@@ -151,15 +153,29 @@ class Links:
 
     def __post_init__(self) -> None:
         for name in ("cam_i", "feat_i", "cam_j", "feat_j"):
-            setattr(self, name, id_array(getattr(self, name), f"Links: {name}"))
+            try:
+                setattr(self, name, id_array(getattr(self, name), f"Links: {name}"))
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
         n = self.cam_i.shape[0]
-        if not all(getattr(self, k).shape[0] == n for k in ("feat_i", "cam_j", "feat_j")):
-            raise ValueError("Links: cam_i, feat_i, cam_j, feat_j must have the same length")
+        lengths = {k: getattr(self, k).shape[0] for k in ("cam_i", "feat_i", "cam_j", "feat_j")}
+        if len(set(lengths.values())) > 1:
+            raise InputError("Links: cam_i, feat_i, cam_j, feat_j must have the same length, got "
+                             + ", ".join(f"{k} {v}" for k, v in lengths.items())
+                             + ": give one entry per link in each")
         if self.quality is None:
             self.quality = np.ones(n, dtype=np.float64)
-        self.quality = np.asarray(self.quality, dtype=np.float64).reshape(-1)
+        try:
+            q = np.asarray(self.quality, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"Links: quality must be numbers, one per link ({exc})") from None
+        if q.ndim > 1:  # a (2, n) or (n, 2) table flattened would pair values with other links
+            raise InputError(f"Links: quality must be a flat sequence of one number per link, "
+                             f"not an array of shape {q.shape}")
+        self.quality = q.reshape(-1)
         if self.quality.shape[0] != n:
-            raise ValueError(f"Links: quality has length {self.quality.shape[0]}, expected {n}")
+            raise InputError(f"Links: quality has length {self.quality.shape[0]}, expected {n} "
+                             "(one per link)")
 
     def __len__(self) -> int:
         return int(self.cam_i.shape[0])

@@ -74,3 +74,30 @@ def test_ids_given_as_a_table_are_refused_with_their_shape():
     with pytest.raises(ValueError, match=r"features_per_camera must be a flat .* shape \(2, 2\)"):
         AssociationGraph([[2, 1], [1, 1]], Links([0], [0], [1], [0]))
     assert Links(np.int64(0), 0, 1, 0).cam_i.tolist() == [0]  # a scalar is one id
+
+
+def test_links_of_mismatched_lengths_are_refused_as_input_errors_naming_the_lengths():
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match="cam_i 3, feat_i 4, cam_j 4, feat_j 4"):
+        Links([0, 1, 2], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    with pytest.raises(InputError, match=r"Links: cam_i\[0\] = 'a' is not a whole-number id"):
+        Links(["a"], [0], [1], [0])
+
+
+@pytest.mark.parametrize("quality, match", [
+    ([1.0, 1.0], r"quality has length 2, expected 3"),
+    (["a", "b", "c"], r"quality must be numbers.*'a'"),
+    ([[1.0, 1.0, 1.0], [1.0, 1.0, 1.0]], r"quality must be a flat .* shape \(2, 3\)"),
+    (np.ones((3, 1)), r"quality must be a flat .* shape \(3, 1\)"),
+])
+def test_a_quality_that_is_not_one_number_per_link_is_refused(quality, match):
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=match):
+        Links(*_links_columns(), quality)
+
+
+def _links_columns():
+    links = _links()
+    return links.cam_i, links.feat_i, links.cam_j, links.feat_j
