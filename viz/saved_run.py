@@ -39,6 +39,19 @@ def _camera_names(report: dict, images: dict) -> list[str]:
     return [name for name, _ in sorted(images.items(), key=lambda kv: kv[1]["image_id"])]
 
 
+def _refuse_online(folder: Path) -> None:
+    """InputError for an online run folder: its recording comes from the run only."""
+    if not ((folder / "link_steps.csv").exists() and (folder / "images.csv").exists()):
+        return
+    what = (f"its recording, on the step timeline, is {folder / 'recording.rrd'}, written by "
+            "the run itself: open it with make view RUN=" + str(folder)
+            if (folder / "recording.rrd").is_file() else
+            "its recording, on the step timeline, is written by the run itself from what it "
+            "holds in memory; run it again without --no-rerun")
+    raise InputError(f"{folder}: an online run folder (run-formation --steps, run-images "
+                     f"--sequence): {what}")
+
+
 def read_run_folder(folder: str | Path) -> RunRecord:
     """The :class:`RunRecord` of a saved run folder (see the module docstring for what a
     folder does not hold).
@@ -54,11 +67,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     from pipeline.inputs.linkscsv import read_run_links_csv
 
     folder = Path(folder)
-    if (folder / "link_steps.csv").exists() and (folder / "images.csv").exists():
-        raise InputError(f"{folder}: an online run folder (run-formation --steps, run-images "
-                         "--sequence): its recording, on the step timeline, is written by the "
-                         "run itself from what it holds in memory; run it again without "
-                         "--no-rerun")
+    _refuse_online(folder)
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
             raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
@@ -128,6 +137,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     from viz.rerun_log import log_run
 
     folder = Path(folder)
+    _refuse_online(folder)  # before the output: its recording.rrd is the one to open
     if out is None:
         out = folder / "recording.rrd"
         if out.exists():

@@ -107,6 +107,23 @@ def test_out_must_be_a_recording_and_online_folders_are_said(tmp_path, capsys):
     assert "an online run folder" in capsys.readouterr().err
 
 
+def test_an_online_folder_with_its_recording_is_said_online_before_the_output(tmp_path, capsys):
+    """An online run writes recording.rrd: the folder is named online and its recording
+    pointed at, not 'recording.rrd exists; name another file with --out' (which, followed,
+    led to the online refusal)."""
+    online = tmp_path / "online"
+    online.mkdir()
+    for name in ("report.json", "links.csv", "images.csv", "link_steps.csv", "recording.rrd"):
+        (online / name).write_text("")
+    assert main([str(online)]) == 2
+    err = capsys.readouterr().err
+    assert "an online run folder" in err and "exists" not in err
+    assert f"make view RUN={online}" in err
+    assert main([str(online), "--out", str(tmp_path / "other.rrd")]) == 2
+    assert "an online run folder" in capsys.readouterr().err
+    assert not (tmp_path / "other.rrd").exists()
+
+
 def test_a_folder_whose_files_do_not_read_is_said_not_a_traceback(tmp_path, capsys):
     """A report.json that is not JSON or not a run's report, and a sparse/ without its model
     files, are input errors (exit 2 and a message), not a traceback."""
