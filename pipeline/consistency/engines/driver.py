@@ -124,6 +124,27 @@ class Detection:
     protocol: object
 
 
+def _feature_counts(features_per_camera) -> np.ndarray:
+    """``m_i`` of every camera as int64, refused (InputError) unless whole numbers >= 0 that
+    sum to at most :data:`MAX_FEATURES`."""
+    fpc = np.diff(camera_offsets(features_per_camera))  # whole numbers >= 0, named if not
+    if int(fpc.sum()) > MAX_FEATURES:
+        raise InputError(f"features_per_camera sums to {int(fpc.sum()):,} features, above "
+                         f"{MAX_FEATURES:,}: every robot holds arrays of the team's feature "
+                         "count; give the counts of the features that exist (resolve renumbers "
+                         "sparse ids to those present)")
+    return fpc
+
+
+def _check_links_given(links, fpc: np.ndarray) -> None:
+    """:func:`check_links`, after refusing what is not a :class:`Links` (a tuple of columns,
+    None) with an InputError instead of an AttributeError inside the check."""
+    if not isinstance(links, Links):
+        raise InputError(f"links must be a pipeline.types.Links (Links(cam_i, feat_i, cam_j, "
+                         f"feat_j[, quality])), not {type(links).__name__}")
+    check_links(links, fpc)
+
+
 def detect_once(features_per_camera, links: Links, comm_edges=None,
                 network_options: NetworkOptions | None = None,
                 protocol: ProtocolOptions | None = None, *, network: Transport | None = None,
@@ -142,8 +163,8 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     -------
     Detection
     """
-    fpc = np.diff(camera_offsets(features_per_camera))
-    check_links(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
+    fpc = _feature_counts(features_per_camera)
+    _check_links_given(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
     robots, _ = build_robots(fpc, links)
     if network is None:
         network = Network(fpc.shape[0], comm_edges_for(fpc, links, comm_edges), network_options)
@@ -270,13 +291,8 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     1
     """
     get_rule(resolution)
-    fpc = np.diff(camera_offsets(features_per_camera))  # whole numbers >= 0, named if not
-    if int(fpc.sum()) > MAX_FEATURES:
-        raise InputError(f"features_per_camera sums to {int(fpc.sum()):,} features, above "
-                         f"{MAX_FEATURES:,}: every robot holds arrays of the team's feature "
-                         "count; give the counts of the features that exist (resolve renumbers "
-                         "sparse ids to those present)")
-    check_links(links, fpc)
+    fpc = _feature_counts(features_per_camera)
+    _check_links_given(links, fpc)
     edges = comm_edges_for(fpc, links, comm_edges)
     n = fpc.shape[0]
     robots, link_index = build_robots(fpc, links)

@@ -87,3 +87,25 @@ def test_detect_once_checks_the_links():
 
     with pytest.raises(InputError):
         detect_once([2, 1, 1, 1], Links([0], [0], [0], [1]))  # a self-link, read as a conflict
+
+
+def test_detect_once_refuses_feature_counts_as_resolve_conflicts_does():
+    """detect_once had no cap: 2**40 features on one camera tried to allocate 8 TiB."""
+    from pipeline.consistency.engines.driver import detect_once
+
+    with pytest.raises(InputError, match="sums to 1,099,511,627,780 features"):
+        detect_once([2, 1, 1, 2**40], Links(**FIG1))
+
+
+@pytest.mark.parametrize("links", [None, ([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0]),
+                                   FIG1])
+def test_links_that_are_not_a_links_are_named(links):
+    """A tuple of columns raised AttributeError ('tuple' object has no attribute 'cam_i'),
+    None a TypeError, inside the check."""
+    from pipeline.consistency.engines.driver import detect_once
+
+    for call in (lambda: resolve_conflicts([2, 1, 1, 1], None, links),
+                 lambda: detect_once([2, 1, 1, 1], links)):
+        with pytest.raises(InputError, match=rf"links must be a pipeline.types.Links .*not "
+                                             rf"{type(links).__name__}"):
+            call()
