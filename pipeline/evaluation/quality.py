@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = ["quality_evidence", "MAX_CHECKED"]
@@ -36,6 +37,23 @@ MAX_ENTRIES = 2_000_000
 """Neighbour-list entries the check reads at most (a link costs the degrees of its two ends):
 its cost follows these, not the input's triangles (a dense 101-image input, 151,500 links of
 about 100 neighbours per feature, took over a minute and 1 GB counted whole)."""
+
+
+def _check_ids(links: Links, m: np.ndarray) -> None:
+    """InputError naming the first link with a camera or feature id out of range: it would be
+    read as another camera's feature (a wrong verdict, no error). Either end may come first."""
+    ci, fi, cj, fj = links.cam_i, links.feat_i, links.cam_j, links.feat_j
+    n = m.shape[0]
+    bad = (ci < 0) | (cj < 0) | (ci >= n) | (cj >= n)
+    what = f"camera id out of range 0..{n - 1}"
+    if not bad.any():
+        bad = (fi < 0) | (fj < 0) | (fi >= m[ci]) | (fj >= m[cj])
+        what = "feature id out of range"
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        detail = "" if what.startswith("camera") else \
+            f" (camera {ci[k]} has {m[ci[k]]} features, camera {cj[k]} has {m[cj[k]]})"
+        raise InputError(f"link {k} ({ci[k]},{fi[k]})-({cj[k]},{fj[k]}): {what}{detail}")
 
 
 def quality_evidence(features_per_camera, links: Links, max_checked: int = MAX_CHECKED,
@@ -55,13 +73,17 @@ def quality_evidence(features_per_camera, links: Links, max_checked: int = MAX_C
     from pipeline.association import camera_offsets
     from pipeline.consistency.keys import isin_sorted, ranges
 
+    for name, v in (("max_checked", max_checked), ("max_entries", max_entries)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise InputError(f"{name} {v!r}: give a whole number of links (entries) >= 0")
+    off = camera_offsets(features_per_camera)
+    _check_ids(links, np.diff(off))
     q = np.asarray(links.quality, dtype=np.float64)
     L = len(links)
     out = {"checked": 0, "confirmed": 0, "refuted": 0,
            "constant": bool(L == 0 or np.all(q == q[0]))}
     if L == 0:
         return out
-    off = camera_offsets(features_per_camera)
     a = (off[links.cam_i] + links.feat_i).astype(np.int64)
     b = (off[links.cam_j] + links.feat_j).astype(np.int64)
     M = np.int64(off[-1])

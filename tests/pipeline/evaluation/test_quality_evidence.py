@@ -83,3 +83,20 @@ def test_a_large_input_is_checked_on_a_fixed_draw_of_its_links():
     # the entries' budget (each link costs its ends' degrees, 4 + 4 on a ring2) bounds it too
     assert quality_evidence(m, links, max_entries=8 * 50)["checked"] == 50
     assert few["confirmed"] + few["refuted"] <= 200 and few["p_higher"] < 1e-3
+
+
+def test_links_out_of_range_and_negative_caps_are_refused():
+    """Feature ids past their camera's count were read as the next camera's features and
+    judged ('confirmed': 3 on the paper's Fig. 1 with camera 0 given 1 feature); a negative
+    max_checked checked L - 1 links."""
+    from pipeline.errors import InputError
+
+    fig1 = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    with pytest.raises(InputError, match=r"link 3 \(0,1\)-\(3,0\): feature id out of range"):
+        quality_evidence([1, 1, 1, 1], fig1)
+    assert quality_evidence([2, 1, 1, 1], fig1)["checked"] == 4
+    for kw in (dict(max_checked=-1), dict(max_entries=-5), dict(max_checked=2.5)):
+        with pytest.raises(InputError, match=f"{next(iter(kw))} .*>= 0"):
+            quality_evidence([2, 1, 1, 1], fig1, **kw)
+    with pytest.raises(InputError, match=r"link 0 \(0,0\)-\(4,0\): camera id out of range 0..3"):
+        quality_evidence([2, 1, 1, 1], Links([0], [0], [4], [0]))
