@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.association import AssociationGraph, association_sets, camera_offsets
+from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = ["association_pairs", "pairwise_scores", "PairwiseTruth", "true_pairs_all"]
@@ -47,10 +48,27 @@ def _keys(pairs: np.ndarray, m: int) -> np.ndarray:
     return pairs[:, 0].astype(np.int64) * (m + 1) + pairs[:, 1]
 
 
+def _pairs(pairs, m_total: int, name: str) -> np.ndarray:
+    p = np.asarray(pairs)
+    if p.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if p.ndim != 2 or p.shape[1] != 2 or p.dtype.kind not in "iu":
+        raise InputError(f"{name} pairs: give a (P, 2) array of integer feature ids, got shape "
+                         f"{p.shape} of dtype {p.dtype}")
+    bad = (p < 0) | (p >= m_total)
+    if bad.any():
+        k = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise InputError(f"{name} pairs: row {k} {p[k].tolist()} names a feature outside "
+                         f"0..{m_total - 1} (m_total {m_total})")
+    return p
+
+
 def pairwise_scores(predicted: np.ndarray, truth: np.ndarray, m_total: int) -> dict:
-    """Precision, recall and F1 of predicted pairs ``(P, 2)`` against true pairs ``(Q, 2)``."""
-    pk = np.unique(_keys(np.sort(predicted, axis=1), m_total))
-    tk = np.unique(_keys(np.sort(truth, axis=1), m_total))
+    """Precision, recall and F1 of predicted pairs ``(P, 2)`` against true pairs ``(Q, 2)``
+    (global feature ids in ``0..m_total - 1``; InputError otherwise: a pair past ``m_total``
+    would be counted as another pair)."""
+    pk = np.unique(_keys(np.sort(_pairs(predicted, m_total, "predicted"), axis=1), m_total))
+    tk = np.unique(_keys(np.sort(_pairs(truth, m_total, "truth"), axis=1), m_total))
     correct = int(np.isin(pk, tk, assume_unique=True).sum())
     precision = correct / len(pk) if len(pk) else 0.0
     recall = correct / len(tk) if len(tk) else 0.0

@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from pipeline.association import camera_offsets
 from pipeline.consistency.centralized import union_find_conflicts
+from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = ["oracle_cut", "min_conflict_cut", "resolution_scores",
@@ -122,6 +123,15 @@ def min_conflict_cut(cam: np.ndarray, a: np.ndarray, b: np.ndarray,
     raise RuntimeError(f"oracle cut did not converge in {max_rounds} rounds")
 
 
+def _per_link(mask, n_links: int, name: str) -> np.ndarray:
+    """``mask`` as an ``(L,)`` bool array; InputError when it has another shape (numpy would
+    broadcast a single entry over every link, or fail with a broadcasting message)."""
+    v = np.asarray(mask)
+    if v.shape != (n_links,):
+        raise InputError(f"{name} has shape {v.shape}; give one entry per link ({n_links},)")
+    return v.astype(bool)
+
+
 def oracle_cut(features_per_camera, links: Links, truth: np.ndarray, *, graph=None) -> np.ndarray:
     """Kept mask ``(L,)`` of the oracle: spurious links of conflictive sets cut, then the
     fewest good links there that leave the graph conflict-free.
@@ -138,7 +148,7 @@ def oracle_cut(features_per_camera, links: Links, truth: np.ndarray, *, graph=No
     kept : ndarray, (L,) bool
     """
     fpc = np.asarray(features_per_camera, dtype=np.int64)
-    truth = np.asarray(truth, dtype=bool)
+    truth = _per_link(truth, len(links), "truth")
     kept = np.ones(len(links), dtype=bool)
     if not len(links):
         return kept
@@ -174,8 +184,8 @@ def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
     dict with ``good_cut``, ``spurious_cut``, ``spurious_in_sets``, ``spurious_left``,
     ``links_in_sets`` (int)
     """
-    truth = np.asarray(truth, dtype=bool)
-    kept = np.asarray(kept, dtype=bool)
+    truth = _per_link(truth, len(links), "truth")
+    kept = _per_link(kept, len(links), "kept")
     if in_sets is None:
         in_sets = links_in_conflictive_sets(features_per_camera, links)
     return {"good_cut": int((~kept & truth).sum()), "spurious_cut": int((~kept & ~truth).sum()),

@@ -91,3 +91,17 @@ def test_pairwise_truth_refuses_another_feature_count():
     links = Links([0], [0], [1], [0])
     with pytest.raises(ValueError, match="3 features scored on 2"):
         PairwiseTruth(np.array([[0, 1]]), 3).scores([1, 1], links)
+
+
+def test_pairs_outside_m_total_or_not_pairs_are_refused():
+    """A pair naming a feature past m_total shares its key with another pair: (0, 9) was
+    scored as the true pair (1, 3) with m_total 5 (precision 1.0)."""
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=r"predicted pairs: row 0 \[0, 9\] names a feature "
+                                         r"outside 0..4"):
+        pairwise_scores(np.array([[0, 9]]), np.array([[1, 3]]), 5)
+    with pytest.raises(InputError, match=r"truth pairs: give a \(P, 2\) array .* shape \(2,\)"):
+        pairwise_scores(np.array([[0, 1]]), np.array([0, 1]), 5)
+    assert pairwise_scores([[1, 0]], [[0, 1]], 5)["f1"] == 1.0
+    assert pairwise_scores(np.zeros((0, 2), int), [], 5)["predicted_pairs"] == 0

@@ -83,3 +83,21 @@ def test_resolution_scores_by_hand():
     sc = resolution_scores([1, 1, 1, 2], FIG1, truth, kept)
     assert sc == {"good_cut": 1, "spurious_cut": 0, "spurious_in_sets": 1, "spurious_left": 1,
                   "links_in_sets": 4}
+
+
+def test_truth_or_kept_of_another_length_is_refused():
+    """A one-entry kept mask was broadcast over every link (scores of a mask never given);
+    a truth of another length failed with numpy's broadcasting message."""
+    import pytest
+
+    from pipeline.errors import InputError
+
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    truth = np.array([True, True, True, False])
+    with pytest.raises(InputError, match=r"kept has shape \(1,\); give one entry per link \(4,\)"):
+        resolution_scores([2, 1, 1, 1], links, truth, np.array([True]))
+    with pytest.raises(InputError, match=r"truth has shape \(2,\)"):
+        oracle_cut([2, 1, 1, 1], links, truth[:2])
+    kept = oracle_cut([2, 1, 1, 1], links, truth)
+    assert kept.tolist() == [True, True, True, False]
+    assert resolution_scores([2, 1, 1, 1], links, truth, kept)["spurious_cut"] == 1
