@@ -99,6 +99,7 @@ def render(formation: str = "d", seed: int = 0, size: tuple[int, int] = (640, 48
         or larger than the command line allows (``pipeline.validate.MAX_RENDER_SIDE`` a side,
         ``MAX_RENDER_PIXELS`` in all).
     """
+    seed = check_int(seed, "seed", 0)  # a Python int: numpy's int64 wraps in seed * 1000
     name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
     # the views depend on seed, size and robots only (not on the graph): one cache entry each
@@ -143,6 +144,7 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
     InputError
         As :func:`render`, or ``robot`` outside ``0..n-1``.
     """
+    seed = check_int(seed, "seed", 0)  # a Python int: numpy's int64 wraps in seed * 1000
     _, _, n, (W, H), _, poses, edges, K = formation_setup(formation, seed, size, n_robots, graph)
     if isinstance(robot, bool) or not isinstance(robot, numbers.Integral) or not 0 <= robot < n:
         raise InputError(f"robot {robot!r} is not in the formation; robots are 0..{n - 1}")

@@ -111,6 +111,7 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
         >= 0; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1.
     """
     steps = check_int(steps, "steps", 1)
+    seed = check_int(seed, "seed", 0)  # a Python int: numpy's int64 wraps in seed * 1000
     if not _is_real(speed) or not np.isfinite(speed) or speed < 0:
         raise InputError(f"speed {speed!r}: expected metres per step, a finite number >= 0")
     if not _is_real(p_up) or not 0 < p_up <= 1:

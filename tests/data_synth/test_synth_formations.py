@@ -86,3 +86,15 @@ def test_parametric_render():
 def test_bad_input(kwargs, message):
     with pytest.raises(InputError, match=message):
         data_synth.render(**kwargs)
+
+
+def test_a_numpy_seed_renders_what_the_same_python_int_renders():
+    """A numpy int64 seed wrapped in the scene's seed * 1000 + 7 (a RuntimeWarning and another
+    scene than the same seed given as a Python int)."""
+    seed = 2**62
+    a = data_synth.render("ring", seed=seed, size=SMALL, n_robots=2, cache=False)
+    b = data_synth.render("ring", seed=np.int64(seed), size=SMALL, n_robots=2, cache=False)
+    assert type(b.seed) is int
+    assert all(np.array_equal(x.image, y.image) for x, y in zip(a.views, b.views, strict=True))
+    r, _ = data_synth.render_robot(1, "ring", seed=np.uint64(seed), size=SMALL, n_robots=2)
+    assert np.array_equal(r.image, a.views[1].image)

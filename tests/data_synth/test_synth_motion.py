@@ -65,3 +65,11 @@ def test_window_one_and_numpy_numbers_are_accepted():
                       window=np.int64(1), p_up=np.float64(0.5), speed=np.float32(0.2))
     # a window of one step: every edge up at every step
     assert all(len(e) == len(s.comm_edges) for e in s.step_edges)
+
+
+def test_a_numpy_seed_moves_as_the_same_python_int():
+    """The scene of a numpy int64 seed was another one (seed * 1000 + 7 wrapped)."""
+    a = render_motion("ring", seed=2**62, steps=1, size=(64, 48), n_robots=2)
+    b = render_motion("ring", seed=np.int64(2**62), steps=1, size=(64, 48), n_robots=2)
+    assert all(np.array_equal(x.image, y.image)
+               for x, y in zip(a.flat.views, b.flat.views, strict=True))
