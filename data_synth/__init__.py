@@ -34,7 +34,7 @@ from data_synth.renderer import intrinsics, render_view
 from data_synth.scene import build_scene
 from pipeline.errors import InputError
 from pipeline.types import View
-from pipeline.validate import MAX_RENDER_PIXELS, MAX_RENDER_SIDE
+from pipeline.validate import MAX_RENDER_PIXELS, MAX_RENDER_SIDE, MAX_ROBOTS
 
 __all__ = [
     "formation_name",
@@ -181,6 +181,9 @@ def formation_setup(formation, seed, size, n_robots, graph):
         raise InputError(f"unknown graph kind {graph!r}; choose one of {', '.join(GRAPH_KINDS)}")
     seed = check_int(seed, "seed", 0)
     n = 6 if n_robots is None else check_int(n_robots, "n_robots", 2)
+    if n > MAX_ROBOTS:  # the poses and graph alone grow with n (10**9 exhausted the memory)
+        raise InputError(f"n_robots {n}: at most {MAX_ROBOTS} robots (line abreast 0.8 m apart, "
+                         "beyond a few hundred most see nothing of the facade)")
     try:
         W, H = size
     except (TypeError, ValueError):

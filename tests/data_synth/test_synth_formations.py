@@ -82,10 +82,24 @@ def test_parametric_render():
     (dict(size=(8193, 64)), "8193x64 is too large"),
     (dict(size=(4097, 4097)), "4097x4097 is too large"),
     (dict(seed=-1), "seed must be an integer >= 0"),
+    # refused before any allocation (10**9 robots exhausted the memory in the poses)
+    (dict(n_robots=10**9, size=SMALL), "n_robots 1000000000: at most 1000 robots"),
 ])
 def test_bad_input(kwargs, message):
     with pytest.raises(InputError, match=message):
         data_synth.render(**kwargs)
+
+
+def test_the_largest_team_is_accepted_and_one_more_refused_in_every_entry_point():
+    from data_synth.motion import render_motion
+    from pipeline.validate import MAX_ROBOTS
+
+    assert len(data_synth.formation_edges("ring", n_robots=MAX_ROBOTS)) == MAX_ROBOTS
+    for call in (lambda: data_synth.formation_edges("ring", n_robots=MAX_ROBOTS + 1),
+                 lambda: data_synth.render_robot(0, "ring", n_robots=MAX_ROBOTS + 1, size=SMALL),
+                 lambda: render_motion("ring", n_robots=MAX_ROBOTS + 1, steps=1, size=SMALL)):
+        with pytest.raises(InputError, match=f"at most {MAX_ROBOTS} robots"):
+            call()
 
 
 def test_a_numpy_seed_renders_what_the_same_python_int_renders():
