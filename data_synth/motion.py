@@ -87,6 +87,17 @@ def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
+#: bytes every rendered frame holds per pixel (its uint8 RGB image and float32 depth)
+FRAME_BYTES_PER_PIXEL = 7
+
+
+def _physical_memory() -> int:
+    """This machine's memory in bytes (a frame count beyond it can never be rendered)."""
+    import os
+
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
 def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
                   size: tuple[int, int] = (320, 240), n_robots: int | None = None,
                   graph: str | None = None, speed: float = DEFAULT_SPEED,
@@ -108,7 +119,8 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
     ------
     InputError
         As :func:`data_synth.render`; ``steps < 1``; a speed that is not a finite number
-        >= 0; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1.
+        >= 0; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1;
+        ``switching`` not a bool; frames that would hold more than the machine's memory.
     """
     steps = check_int(steps, "steps", 1)
     seed = check_int(seed, "seed", 0)  # a Python int: numpy's int64 wraps in seed * 1000
@@ -117,8 +129,15 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
     if not _is_real(p_up) or not 0 < p_up <= 1:
         raise InputError(f"p_up {p_up!r}: expected a probability in (0, 1]")
     window = check_int(window, "window", 1)
+    if not isinstance(switching, (bool, np.bool_)):
+        raise InputError(f"switching {switching!r}: expected True or False")
     name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
+    held = steps * n * W * H * FRAME_BYTES_PER_PIXEL
+    if held > _physical_memory():
+        raise InputError(f"steps {steps}: {steps * n} frames of {W}x{H} would hold about "
+                         f"{held / 1e9:.3g} GB, more than this machine's memory; fewer steps, "
+                         "fewer robots or a smaller size")
     scene = build_scene(seed)
     views, all_centres = [], []
     for k in range(steps):

@@ -40,6 +40,9 @@ the interpreter and libraries, rounded up):
 - :data:`BYTES_PER_ROBOT_PIXEL`: a rendered formation, per robot and pixel of its image
   (rendering, features, matching, cleaning and the report; ring formations of 10 and 30
   robots: 87 bytes at 640x480, 78 at 320x240).
+- :func:`check_motion_memory`: an online run (``run-formation --steps N``) renders every
+  frame first and holds them to its end, :data:`BYTES_PER_FRAME_PIXEL` per frame pixel, plus
+  one step's matching and cleaning at :data:`BYTES_PER_ROBOT_PIXEL`.
 - :func:`fusion_bytes`: the simulator's fusion stage, counted once the consistency stage has
   named the tracks (:func:`check_fusion_memory`). It holds per-(track, robot) tables over the
   whole team (keypoints, local estimates, covariances, draws, votes) and per track its
@@ -61,7 +64,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_LIST_ENTRY",
+__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
            "BYTES_PER_ROBOT_PIXEL", "BYTES_PER_FUSION_OBSERVER_PAIR", "BYTES_PER_FUSION_TRACK_ROBOT",
            "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
@@ -90,6 +93,10 @@ BYTES_PER_CAMERA = 12_000
 BYTES_PER_EDGE = 600
 #: bytes per robot and pixel of a rendered formation (measured 78-87)
 BYTES_PER_ROBOT_PIXEL = 90
+#: bytes per pixel of every frame an online run renders, held for the whole run (its uint8
+#: image and float32 depth, 7; the process grew by 14.1 per frame pixel rendering formation d
+#: at 320x240 for 20 steps, :func:`data_synth.motion.render_motion`, ``ru_maxrss``)
+BYTES_PER_FRAME_PIXEL = 16
 #: the fusion stage's bytes per (track, team robot) (module notes)
 BYTES_PER_FUSION_TRACK_ROBOT = 600
 #: the fusion stage's bytes per (track, observer, observer) (module notes)
@@ -248,6 +255,22 @@ def check_formation_memory(n_robots: int, size: tuple[int, int], limit,
     MemoryBudget(limit, flag).add(
         f"rendering and cleaning the views of {n_robots} robots at {w}x{h}",
         n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")
+
+
+def check_motion_memory(n_robots: int, steps: int, size: tuple[int, int], limit,
+                        flag: str = "--max-memory-gb") -> None:
+    """InputError, before anything is rendered, when an online run of ``steps`` steps would
+    need more than ``limit`` GB: its frames are rendered first and held for the whole run
+    (:data:`BYTES_PER_FRAME_PIXEL`), and each step's matching and cleaning works on one
+    frame per robot (:data:`BYTES_PER_ROBOT_PIXEL`)."""
+    w, h = size
+    b = MemoryBudget(limit, flag)
+    b.add(f"rendering {steps} steps of {n_robots} robots at {w}x{h} "
+          f"({steps * n_robots} frames)",
+          steps * n_robots * w * h * BYTES_PER_FRAME_PIXEL,
+          "fewer --steps, fewer --robots or a smaller --size")
+    b.add(f"matching and cleaning one step of {n_robots} robots at {w}x{h}",
+          n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")
 
 
 def fusion_bytes(n_robots: int, observers) -> int:

@@ -110,6 +110,7 @@ def config_from_args(args) -> FormationConfig:
 
 def online_config_from_args(args):
     """The :class:`pipeline.runs.online.OnlineConfig` of ``run-formation --steps N``."""
+    from pipeline.budget import check_motion_memory
     from pipeline.runs.online import OnlineConfig
     from pipeline.stages import merge_radius_for
 
@@ -142,12 +143,15 @@ def online_config_from_args(args):
                          "of each step from --seed, the scene's seed; drop --fault-seed, or "
                          "change --seed")
     check_formation(args.formation)
+    size = parse_size(args.size)
+    check_motion_memory(robots if robots is not None else 6, args.steps, size,
+                        args.max_memory_gb)  # every frame is rendered before the first step
     from pipeline.runs.transports import check_online_team_size
 
     check_online_team_size(args.transport, robots if robots is not None else 6, args.window,
                            args.hold)
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
-                        size=parse_size(args.size), features=method,
+                        size=size, features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,
                         steps=args.steps, window=args.window, hold=args.hold,
                         speed=args.speed, switching=bool(faults is not None and faults.switching_topology),

@@ -54,7 +54,11 @@ def test_switching_graph_is_a_subset_that_recurs():
     ({"window": 0}, r"window must be an integer >= 1, got 0"),
     ({"window": 1.5}, r"window must be an integer >= 1, got 1.5"),
     ({"window": "3"}, r"window must be an integer >= 1, got '3'"),
-    ({"window": 0, "switching": True}, r"window .* got 0")])
+    ({"window": 0, "switching": True}, r"window .* got 0"),
+    # a string is truthy: "no" drew a switching graph
+    ({"switching": "no"}, r"switching 'no': expected True or False"),
+    # frames beyond the machine's memory: refused before the first render, not killed
+    ({"steps": 10**12}, r"steps 1000000000000: 2000000000000 frames of 64x48 .* machine's memory")])
 def test_bad_parameters_are_named(kw, match):
     with pytest.raises(InputError, match=match):
         render_motion("ring", size=(64, 48), n_robots=2, **{"steps": 1, **kw})

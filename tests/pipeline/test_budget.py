@@ -68,3 +68,15 @@ def test_a_formation_whose_fusion_exceeds_the_limit_is_refused_before_it_runs(tm
                                          r"--no-fusion"):
         run_formation(config)
     assert not (tmp_path / "run" / "links.csv").exists()
+
+
+def test_an_online_run_counts_every_frame_it_renders_and_one_step_of_work():
+    from pipeline.budget import BYTES_PER_FRAME_PIXEL, BYTES_PER_ROBOT_PIXEL, check_motion_memory
+
+    need = 6 * 10 * 40 * 30 * BYTES_PER_FRAME_PIXEL + 6 * 40 * 30 * BYTES_PER_ROBOT_PIXEL
+    check_motion_memory(6, 10, (40, 30), need / 1e9)  # exactly at the limit: accepted
+    with pytest.raises(InputError, match=r"one step of 6 robots .* counted before it"):
+        check_motion_memory(6, 11, (40, 30), need / 1e9)  # one more step's frames
+    with pytest.raises(InputError, match=r"rendering 100 steps of 6 robots at 40x30 \(600 frames\)"
+                       r".*fewer --steps"):
+        check_motion_memory(6, 100, (40, 30), need / 1e9)

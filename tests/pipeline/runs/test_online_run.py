@@ -82,6 +82,8 @@ def test_recording_carries_the_step_timeline(run_dir):
     (["--steps", "2", "--drop-prob", "0.1"], "switching-topology"),
     # the graph of each step is drawn from --seed: a --fault-seed changed nothing, silently
     (["--steps", "2", "--switching-topology", "--fault-seed", "7"], "--fault-seed 7: an online"),
+    # every frame is rendered before the first step: refused before rendering, not killed
+    (["--steps", "1000000"], "rendering 1000000 steps of 6 robots"),
 ])
 def test_bad_options_are_refused(tmp_path, capsys, flags, match):
     assert main(["run-formation", "--out", str(tmp_path / "r"), *FAST, *flags]) == 2
