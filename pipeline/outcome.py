@@ -9,7 +9,8 @@ promise, or keep it only by cutting everything; a run must then not look like a 
 
 - ``conflict_free: false`` — conflictive sets remain in the written result;
 - ``warnings`` — a list of ``{"code", "message"}``: ``not-conflict-free``,
-  ``all-links-cut`` (every input link was cut), ``robots-lost-without-crash`` (robots were
+  ``all-links-cut`` (every input link was cut), ``robots-lost`` (robots crashed, were killed
+  or never started: their links are cut or left unchecked), ``robots-lost-without-crash`` (robots were
   declared lost from silence although they never crashed: the message loss defeated the
   timeouts; over zenoh, robot processes that ran to their end but were written off by a
   neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named),
@@ -92,6 +93,16 @@ def flag_result(report: dict, names: list[str] | None = None,
         gone |= {str(k) for k in team.get("lost") or []}
         ran = {str(k) for k, v in team["robots"].items() if isinstance(v, dict) and "rounds" in v}
         gone |= {str(k) for k in faults.get("robots_lost", {})} - ran
+    if gone:
+        ids = sorted(gone, key=int)
+        cut = faults.get("links_cut_robot_lost")
+        warnings.append(_warning(
+            "robots-lost",
+            f"robot(s) {', '.join(ids)} crashed, were killed or never took part before the "
+            f"consistency stage ended; {cut if cut is not None else 'their'} link(s) to them "
+            "were cut as robot-lost by the survivors, and a link between two of them keeps the "
+            "status it had when they stopped (checked by no robot after that): rerun without "
+            "the fault for a whole association"))
     false_lost = sorted({str(k) for k in faults.get("robots_lost", {})} - gone, key=int)
     if false_lost:
         dropped = faults.get("messages_dropped", faults.get("dropped"))

@@ -23,7 +23,25 @@ def test_a_robot_written_off_although_it_ran_to_its_end_is_warned_of():
     assert "conflict_free" not in report
 
 
-def test_a_robot_that_died_or_never_published_is_no_false_loss():
+def test_a_robot_that_died_or_never_published_is_no_false_loss_but_a_loss():
     killed = {"result": None, "exit_code": -9, "killed": False, "started": True}
-    assert "warnings" not in flag_result(_team_report({"0": RAN, "1": killed, "2": RAN}))
-    assert "warnings" not in flag_result(_team_report({"0": RAN, "2": RAN}, lost=[1]))
+    for report in (flag_result(_team_report({"0": RAN, "1": killed, "2": RAN})),
+                   flag_result(_team_report({"0": RAN, "2": RAN}, lost=[1]))):
+        assert [w["code"] for w in report["warnings"]] == ["robots-lost"]
+        assert report["warnings"][0]["message"].startswith("robot(s) 1 crashed, were killed")
+        assert "conflict_free" not in report  # a warning, not a failed result
+
+
+def test_a_clean_team_has_no_warning():
+    report = _team_report({"0": RAN, "1": RAN, "2": RAN})
+    report["resolution"]["details"]["faults"]["robots_lost"] = {}
+    assert "warnings" not in flag_result(report)
+
+
+def test_a_simulated_crash_is_warned_with_the_links_it_cost():
+    report = {"before": {"links": 40}, "after": {"links": 30, "conflictive_sets": 0},
+              "faults": {"crashed": {"0": 0, "1": 0}, "robots_lost": {"0": [1], "1": [0]},
+                         "links_cut_robot_lost": 7}}
+    w = flag_result(report)["warnings"]
+    assert [x["code"] for x in w] == ["robots-lost"]
+    assert "robot(s) 0, 1 crashed" in w[0]["message"] and "7 link(s)" in w[0]["message"]
