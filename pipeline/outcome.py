@@ -122,7 +122,9 @@ def flag_result(report: dict, names: list[str] | None = None,
             f"have higher quality than the {qe['confirmed']} they confirm (AUC "
             f"{qe['auc']:.2f}, one-sided p {qe['p_reversed']:.1e}); the merge rules read quality "
             "as growing with confidence (e.g. 1 - Lowe ratio): give a similarity, not a "
-            "distance"))
+            "distance" + ("" if qe.get("read_by_rule", True) else
+                          f" (the rule that ran, {report.get('resolution_method')}, does not "
+                          "read the quality: this run's cuts do not depend on it)")))
     m = report.get("features_per_camera")
     if m is not None:
         empty = [k for k, v in enumerate(m) if int(v) == 0]

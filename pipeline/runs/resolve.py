@@ -172,6 +172,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
 
     # does the quality carry evidence? (the merge rules weigh it; a reversed one is warned of)
     summary["quality_evidence"] = quality_evidence(m, run_links)
+    from pipeline.consistency.rules import get_rule
+
+    # whether the rule that ran reads the quality at all (Alg. 1 does not): the warning says so
+    summary["quality_evidence"]["read_by_rule"] = bool(
+        get_rule(res.stats["resolution"]).needs_evidence)
     if baselines:
         from pipeline.evaluation.report import baselines_beside
         from pipeline.progress import StageTimer

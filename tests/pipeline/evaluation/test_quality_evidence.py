@@ -100,3 +100,23 @@ def test_links_out_of_range_and_negative_caps_are_refused():
             quality_evidence([2, 1, 1, 1], fig1, **kw)
     with pytest.raises(InputError, match=r"link 0 \(0,0\)-\(4,0\): camera id out of range 0..3"):
         quality_evidence([2, 1, 1, 1], Links([0], [0], [4], [0]))
+
+
+@pytest.mark.parametrize("rule, reads", [("sync", True), ("paper", False)])
+def test_the_reversed_warning_says_when_the_rule_that_ran_ignores_the_quality(tmp_path, capsys,
+                                                                              rule, reads):
+    from pipeline.__main__ import main
+
+    m, ci, fi, cj, fj, good = _ring2(3)
+    q = np.where(good, 0.2, 0.8)  # a distance given for a similarity
+    src = tmp_path / "links.csv"
+    src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
+                           for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
+    rep = tmp_path / "rep.json"
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(rep), "--resolution", rule, "-q"]) == 0
+    report = json.loads(rep.read_text())
+    assert report["quality_evidence"]["read_by_rule"] is reads
+    (w,) = [w for w in report["warnings"] if w["code"] == "quality-reversed"]
+    assert ("does not read the quality" in w["message"]) is not reads
+    assert f"the rule that ran, {rule}," in w["message"] or reads
