@@ -15,7 +15,8 @@ promise, or keep it only by cutting everything; a run must then not look like a 
   timeouts; over zenoh, robot processes that ran to their end but were written off by a
   neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named),
   ``quality-reversed`` (``resolve``: the links the triangles refute carry the higher quality,
-  :mod:`pipeline.evaluation.quality`).
+  :mod:`pipeline.evaluation.quality`), ``quality-scale`` (``resolve``: qualities above 1,
+  another scale than ``1 - Lowe ratio``).
 
 :func:`exit_status` prints them on stderr and gives the exit code. The rule: ``3`` when the
 result is not conflict-free (it is still written, and flagged), else ``0``; warnings alone do
@@ -125,6 +126,13 @@ def flag_result(report: dict, names: list[str] | None = None,
             "distance" + ("" if qe.get("read_by_rule", True) else
                           f" (the rule that ran, {report.get('resolution_method')}, does not "
                           "read the quality: this run's cuts do not depend on it)")))
+    if qe.get("above_one") and qe.get("read_by_rule", True):
+        warnings.append(_warning(
+            "quality-scale",
+            f"{qe['above_one']} of the links' qualities are above 1: the merge rules read "
+            "quality as 1 - Lowe ratio (at most 1) and count every quality above 0.99 as "
+            "near-certain, so the order of these barely weighs; rescale the quality to [0, 1] "
+            "(e.g. score / max score)"))
     m = report.get("features_per_camera")
     if m is not None:
         empty = [k for k, v in enumerate(m) if int(v) == 0]

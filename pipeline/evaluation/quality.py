@@ -82,6 +82,10 @@ def quality_evidence(features_per_camera, links: Links, max_checked: int = MAX_C
     L = len(links)
     out = {"checked": 0, "confirmed": 0, "refuted": 0,
            "constant": bool(L == 0 or np.all(q == q[0]))}
+    # qualities above 1 cannot be 1 - Lowe ratio: the merge rules clip the ratio at
+    # RATIO_EPS, so a score on another scale (0-100, inlier counts) is read as near-certain
+    # everywhere and its order barely weighs (warned as quality-scale)
+    out["above_one"] = 0 if out["constant"] else int(np.count_nonzero(q > 1.0))
     if L == 0:
         return out
     a = (off[links.cam_i] + links.feat_i).astype(np.int64)

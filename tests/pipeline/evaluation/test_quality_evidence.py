@@ -48,7 +48,8 @@ def test_a_constant_quality_or_no_link_is_not_tested():
     c = quality_evidence(m, Links(ci, fi, cj, fj, np.full(ci.size, 0.5)))
     assert c["constant"] and "auc" not in c and c["confirmed"] > 0
     empty = quality_evidence([3, 3], Links([], [], [], []))
-    assert empty == {"checked": 0, "confirmed": 0, "refuted": 0, "constant": True}
+    assert empty == {"checked": 0, "confirmed": 0, "refuted": 0, "constant": True,
+                     "above_one": 0}
 
 
 @pytest.mark.parametrize("reverse", [False, True])
@@ -120,3 +121,24 @@ def test_the_reversed_warning_says_when_the_rule_that_ran_ignores_the_quality(tm
     (w,) = [w for w in report["warnings"] if w["code"] == "quality-reversed"]
     assert ("does not read the quality" in w["message"]) is not reads
     assert f"the rule that ran, {rule}," in w["message"] or reads
+
+
+@pytest.mark.parametrize("scale, warned", [(1.0, False), (100.0, True)])
+def test_a_quality_on_another_scale_than_one_minus_the_ratio_is_warned(tmp_path, capsys, scale,
+                                                                      warned):
+    from pipeline.__main__ import main
+
+    m, ci, fi, cj, fj, good = _ring2(3)
+    rng = np.random.default_rng(4)
+    q = scale * np.where(good, rng.uniform(0.4, 0.9, good.size), rng.uniform(0.1, 0.6, good.size))
+    src = tmp_path / "links.csv"
+    src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
+                           for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
+    rep = tmp_path / "rep.json"
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--report", str(rep), "-q"]) == 0
+    report = json.loads(rep.read_text())
+    assert report["quality_evidence"]["above_one"] == (int((q > 1).sum()) if warned else 0)
+    codes = [w["code"] for w in report.get("warnings", [])]
+    assert ("quality-scale" in codes) is warned
+    assert ("rescale the quality to [0, 1]" in capsys.readouterr().err) is warned
