@@ -52,21 +52,32 @@ def test_a_constant_quality_or_no_link_is_not_tested():
                      "above_one": 0}
 
 
-@pytest.mark.parametrize("reverse", [False, True])
-def test_resolve_warns_of_a_reversed_quality_only(tmp_path, capsys, reverse):
+def _resolve_report(tmp_path, quality_of, *flags) -> tuple[dict, np.ndarray]:
+    """``resolve --report`` on the ring2 links of ``_ring2(3)`` with ``quality_of(good)`` as
+    their quality: the report and the qualities written."""
     from pipeline.__main__ import main
 
     m, ci, fi, cj, fj, good = _ring2(3)
-    rng = np.random.default_rng(4)
-    q = np.where(good, rng.uniform(0.4, 0.9, good.size), rng.uniform(0.1, 0.6, good.size))
-    q = 1.0 - q if reverse else q
+    q = quality_of(good)
     src = tmp_path / "links.csv"
     src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
                            for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
     rep = tmp_path / "rep.json"
     assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
-                 "--report", str(rep), "-q"]) == 0
-    report = json.loads(rep.read_text())
+                 "--report", str(rep), "-q", *flags]) == 0
+    return json.loads(rep.read_text()), q
+
+
+def _informative(good, scale=1.0):
+    rng = np.random.default_rng(4)
+    return scale * np.where(good, rng.uniform(0.4, 0.9, good.size),
+                            rng.uniform(0.1, 0.6, good.size))
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_resolve_warns_of_a_reversed_quality_only(tmp_path, capsys, reverse):
+    report, _ = _resolve_report(
+        tmp_path, lambda g: 1.0 - _informative(g) if reverse else _informative(g))
     codes = [w["code"] for w in report.get("warnings", [])]
     assert ("quality-reversed" in codes) == reverse
     assert (report["quality_evidence"]["auc"] < 0.5) == reverse
@@ -104,19 +115,10 @@ def test_links_out_of_range_and_negative_caps_are_refused():
 
 
 @pytest.mark.parametrize("rule, reads", [("sync", True), ("paper", False)])
-def test_the_reversed_warning_says_when_the_rule_that_ran_ignores_the_quality(tmp_path, capsys,
-                                                                              rule, reads):
-    from pipeline.__main__ import main
-
-    m, ci, fi, cj, fj, good = _ring2(3)
-    q = np.where(good, 0.2, 0.8)  # a distance given for a similarity
-    src = tmp_path / "links.csv"
-    src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
-                           for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
-    rep = tmp_path / "rep.json"
-    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
-                 "--report", str(rep), "--resolution", rule, "-q"]) == 0
-    report = json.loads(rep.read_text())
+def test_the_reversed_warning_says_when_the_rule_that_ran_ignores_the_quality(tmp_path, rule,
+                                                                              reads):
+    # a distance given for a similarity
+    report, _ = _resolve_report(tmp_path, lambda g: np.where(g, 0.2, 0.8), "--resolution", rule)
     assert report["quality_evidence"]["read_by_rule"] is reads
     (w,) = [w for w in report["warnings"] if w["code"] == "quality-reversed"]
     assert ("does not read the quality" in w["message"]) is not reads
@@ -126,18 +128,7 @@ def test_the_reversed_warning_says_when_the_rule_that_ran_ignores_the_quality(tm
 @pytest.mark.parametrize("scale, warned", [(1.0, False), (100.0, True)])
 def test_a_quality_on_another_scale_than_one_minus_the_ratio_is_warned(tmp_path, capsys, scale,
                                                                       warned):
-    from pipeline.__main__ import main
-
-    m, ci, fi, cj, fj, good = _ring2(3)
-    rng = np.random.default_rng(4)
-    q = scale * np.where(good, rng.uniform(0.4, 0.9, good.size), rng.uniform(0.1, 0.6, good.size))
-    src = tmp_path / "links.csv"
-    src.write_text("".join(f"{a},{b},{c},{d},{e:.6f}\n"
-                           for a, b, c, d, e in zip(ci, fi, cj, fj, q, strict=True)))
-    rep = tmp_path / "rep.json"
-    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
-                 "--report", str(rep), "-q"]) == 0
-    report = json.loads(rep.read_text())
+    report, q = _resolve_report(tmp_path, lambda g: _informative(g, scale))
     assert report["quality_evidence"]["above_one"] == (int((q > 1).sum()) if warned else 0)
     codes = [w["code"] for w in report.get("warnings", [])]
     assert ("quality-scale" in codes) is warned
