@@ -114,9 +114,16 @@ def test_a_lost_last_hello_is_answered_again():
         took[i] = robots[i].handshake(timeout_s=20.0)
 
     try:
-        threads = [threading.Thread(target=run, args=(i,)) for i in (1, 0)]
-        for t in threads:
-            t.start()
+        threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+        # robot 1 starts once it has heard robot 0 (a hello saying "not heard you yet", the
+        # only kind that is not lost): started together, robot 0 could hear robot 1 before its
+        # first hello, and then every hello it sends says "heard you" and is lost, so neither
+        # ever hears the other (a race of the test's loss pattern, not of the protocol)
+        threads[0].start()
+        deadline = time.monotonic() + 20.0
+        while 0 not in robots[1]._hello and time.monotonic() < deadline:
+            time.sleep(0.01)
+        threads[1].start()
         for t in threads:
             t.join(60)
         assert first, "the test did not lose the last hello"
