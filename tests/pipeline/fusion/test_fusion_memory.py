@@ -104,24 +104,29 @@ def _run_robots(cams, n, consensus="exact"):
     return robots
 
 
+def _same_decisions_and_peak(n, *mode):
+    """The 6 ring robots' fusion alone and in a team of ``n``: the same outliers (the team
+    size changes no decision), and the traced peak of the team run with its own-track count."""
+    cams = _ring_of_six()
+    small = _run_robots(cams, 6, *mode)
+    tracemalloc.start()
+    try:
+        big = _run_robots(cams, n, *mode)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert any(len(r.outlier_feats) for r in small)
+    for a, b in zip(small, big, strict=True):
+        np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
+    return peak, sum(r.B for r in big)
+
+
 def test_a_robot_s_fusion_follows_its_neighbours_and_tracks_not_the_team_squared():
     # 6 robots on a ring in a team of 1000: each robot's setup tables, flood and components
     # are on itself and its neighbours (and the robots of its tracks), so the 6 robots' fusion
     # peaks well below one byte per (own track, robot, robot) of the team (before: several)
-    cams = _ring_of_six()
-    small = _run_robots(cams, 6)
     n = 1000
-    tracemalloc.start()
-    try:
-        big = _run_robots(cams, n)
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    # the team size changes no decision
-    assert any(len(r.outlier_feats) for r in small)
-    for a, b in zip(small, big, strict=True):
-        np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
-    tracks = sum(r.B for r in big)
+    peak, tracks = _same_decisions_and_peak(n)
     assert peak < tracks * n * n / 2
 
 
@@ -129,16 +134,6 @@ def test_a_robot_s_metropolis_consensus_holds_its_neighbours_rows_only():
     # the Metropolis mode keeps what each neighbour sent (max-c sets, P, q, v, degrees, stop
     # counters) per own track and neighbour: in a team of 300 the 6 robots peak below one
     # 3 x 3 float64 matrix per (own track, team robot) (before: about 7 of them)
-    cams = _ring_of_six()
-    small = _run_robots(cams, 6, "metropolis")
     n = 300
-    tracemalloc.start()
-    try:
-        big = _run_robots(cams, n, "metropolis")
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert any(len(r.outlier_feats) for r in small)
-    for a, b in zip(small, big, strict=True):
-        np.testing.assert_array_equal(a.outlier_feats, b.outlier_feats)
-    assert peak < sum(r.B for r in big) * n * 72
+    peak, tracks = _same_decisions_and_peak(n, "metropolis")
+    assert peak < tracks * n * 72
