@@ -62,9 +62,12 @@ Relative paths in ``data`` are relative to the team file. Every problem is one
 
 from __future__ import annotations
 
+import functools
+import ipaddress
 import json
 import math
 import re
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -251,6 +254,9 @@ def parse_team(doc, path: Path | None = None) -> Team:
                          "({\"id\": I, \"endpoint\": \"tcp/HOST:PORT\"})")
     robots: dict[int, RobotEntry] = {}
     endpoints: dict[str, int] = {}
+    # the same listening address written another way (localhost and 127.0.0.1, a host name
+    # and its address): robot id by (transport, address, port)
+    addresses: dict[tuple[str, str, int], int] = {}
     for k, r in enumerate(robots_doc):
         if not isinstance(r, dict) or "id" not in r or "endpoint" not in r:
             raise InputError(f"{where}: robots[{k}] must be an object with 'id' and 'endpoint'")
@@ -272,6 +278,14 @@ def parse_team(doc, path: Path | None = None) -> Team:
         if ep in endpoints:
             raise InputError(f"{where}: robots {endpoints[ep]} and {rid} share endpoint {ep!r}; "
                              "each robot listens on its own")
+        keys = _endpoint_addresses(m)
+        for key in keys:
+            if key in addresses:
+                other = addresses[key]
+                raise InputError(f"{where}: robots {other} and {rid} share endpoint {ep!r} "
+                                 f"(the address of robot {other}'s {robots[other].endpoint!r}); "
+                                 "each robot listens on its own")
+        addresses.update(dict.fromkeys(keys, rid))
         endpoints[ep] = rid
         robots[rid] = RobotEntry(rid, ep)
     n = len(robots)
@@ -342,12 +356,61 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: 'observer' {obs!r} must be an object "
                              "{\"endpoint\": \"tcp/HOST:PORT\"}")
         ep = obs.get("endpoint")
-        if not isinstance(ep, str) or not _ENDPOINT.match(ep):
+        m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
+        if not m:
             raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT")
         if ep in endpoints:
             raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
+        for key in _endpoint_addresses(m):
+            if key in addresses:
+                other = addresses[key]
+                raise InputError(f"{where}: observer endpoint {ep!r} is robot {other}'s "
+                                 f"({robots[other].endpoint!r}, the same address)")
         observer = ep
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+#: what a loopback address is compared as: 127.0.0.1, ::1 and localhost are one machine's own
+_LOOPBACK = "loopback"
+
+
+def _endpoint_addresses(m: re.Match) -> tuple[tuple[str, str, int], ...]:
+    """The (transport, address, port) keys an endpoint matched by ``_ENDPOINT`` listens on.
+
+    The host is resolved with ``socket.getaddrinfo`` (a name that does not resolve stands for
+    itself, lower-cased); every loopback address is one key, so ``tcp/localhost:P`` and
+    ``tcp/127.0.0.1:P`` collide. quic runs over UDP, tcp and tls over TCP.
+    """
+    transport = "udp" if m.group(1) == "quic" else "tcp"
+    port = int(m.group(3))
+    return tuple((transport, a, port) for a in _host_addresses(m.group(2).strip("[]").lower()))
+
+
+@functools.lru_cache(maxsize=1024)
+def _host_addresses(host: str) -> tuple[str, ...]:
+    try:
+        found = [host] if _ip(host) else [a[4][0] for a in socket.getaddrinfo(
+            host, None, type=socket.SOCK_STREAM)]
+    except (OSError, UnicodeError, ValueError):
+        found = []
+    if not found:
+        return (_LOOPBACK,) if host == "localhost" or host.endswith(".localhost") else (host,)
+    out = []
+    for a in found:
+        ip = _ip(a.split("%")[0])
+        if ip is not None and getattr(ip, "ipv4_mapped", None):
+            ip = ip.ipv4_mapped
+        key = _LOOPBACK if ip is not None and ip.is_loopback else str(ip) if ip else a
+        if key not in out:
+            out.append(key)
+    return tuple(out)
+
+
+def _ip(text: str):
+    try:
+        return ipaddress.ip_address(text)
+    except ValueError:
+        return None
 
 
 def _is_int(v) -> bool:

@@ -1,4 +1,5 @@
 import json
+import re
 
 import numpy as np
 import pytest
@@ -107,6 +108,41 @@ def test_malformed_team_is_one_line_error(over, words):
     with pytest.raises(InputError) as e:
         parse_team(_doc(**over))
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def _endpoints(*eps):
+    return [{"id": i, "endpoint": ep} for i, ep in enumerate(eps)]
+
+
+@pytest.mark.parametrize("first, second", [
+    ("tcp/127.0.0.1:7001", "tcp/localhost:7001"),
+    ("tcp/localhost:7001", "tcp/[::1]:7001"),
+    ("tcp/LOCALHOST:7001", "tcp/localhost:7001"),
+    ("tls/127.0.0.1:7001", "tcp/localhost:7001"),
+])
+def test_one_address_written_two_ways_is_a_shared_endpoint(first, second):
+    """localhost and 127.0.0.1 are one listening address: the second robot could not bind."""
+    with pytest.raises(InputError, match=(
+            rf"robots 0 and 1 share endpoint '{re.escape(second)}' \(the address of robot 0's "
+            rf"'{re.escape(first)}'\); each robot listens on its own")):
+        parse_team(_doc(robots=_endpoints(first, second, "tcp/127.0.0.1:7002")))
+
+
+def test_the_observer_on_a_robots_address_written_another_way_is_refused():
+    with pytest.raises(InputError, match=r"observer endpoint 'tcp/localhost:7000' is robot 0's "
+                                         r"\('tcp/127.0.0.1:7000', the same address\)"):
+        parse_team(_doc(observer={"endpoint": "tcp/localhost:7000"}))
+
+
+@pytest.mark.parametrize("first, second", [
+    ("tcp/127.0.0.1:7001", "tcp/localhost:7002"),      # other port
+    ("tcp/127.0.0.1:7001", "quic/localhost:7001"),     # quic is UDP: another port space
+    ("tcp/10.0.0.1:7001", "tcp/10.0.0.2:7001"),        # two machines
+    ("tcp/robot-a.invalid:7001", "tcp/robot-b.invalid:7001"),  # names that do not resolve
+])
+def test_distinct_addresses_are_not_shared(first, second):
+    t = parse_team(_doc(robots=_endpoints(first, second, "tcp/127.0.0.1:7003")))
+    assert [r.endpoint for r in t.robots[:2]] == [first, second]
 
 
 def test_robot_id_outside_the_team(tmp_path):
