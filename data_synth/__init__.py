@@ -160,10 +160,22 @@ def render_robot(robot: int, formation: str = "d", seed: int = 0,
                 intrinsics_known=True), edges
 
 
-def formation_name(formation: str, robots: int | None, graph: str | None) -> str:
+def formation_name(formation: str, robots: int | None, graph: str | None,
+                   n_edges: int | None = None) -> str:
     """What a report calls the formation: ``formation d``, or a parametric one by its robots
-    and graph (``3 robots on a line graph``; its ``formation`` value is not one of a–d)."""
-    return f"formation {formation}" if robots is None else f"{robots} robots on a {graph} graph"
+    and graph (``3 robots on a line graph``; its ``formation`` value is not one of a–d).
+
+    Robots without a graph kind (a team file without ``data.graph``, whose robots talk over
+    its own ``comm_edges``) are named by those: ``3 robots on 2 comm edges`` (``n_edges``),
+    else by the formation whose rule drew their graph (``3 robots, formation d``).
+    """
+    if robots is None:
+        return f"formation {formation}"
+    if graph is not None:
+        return f"{robots} robots on a {graph} graph"
+    if n_edges is not None:
+        return f"{robots} robots on {n_edges} comm edge{'' if n_edges == 1 else 's'}"
+    return f"{robots} robots, formation {formation}"
 
 
 def check_formation(formation) -> None:

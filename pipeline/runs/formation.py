@@ -103,8 +103,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     triangulation, tri_after, gt_points, fused_errors = _triangulate(
         views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
     report = {
-        "title": formation_name(config.formation, config.robots, config.graph)
-                 + f" (seed {config.seed})",
+        "title": formation_name(config.formation, config.robots, config.graph,
+                                len(comm_edges)) + f" (seed {config.seed})",
         "n_cameras": len(views),
         "comm_edges": comm_edges.tolist(),
         "features_per_camera": m.tolist(),

@@ -37,3 +37,24 @@ def test_resolution_quality_files_the_rule_that_ran_under_its_own_name(tmp_path,
     assert q["paper"]["pairwise_f1"] == faulty["pairwise"]["after_resolution"]["f1"]
     # ... and the evidence rule's row is the evidence rule's own cut of the same links
     assert q["evidence"] == q_clean["evidence"]
+
+
+def test_a_team_of_robots_without_a_graph_kind_is_titled_by_its_comm_edges(tmp_path, monkeypatch):
+    """A hand-written formation team gives robots but no data.graph: the observer's report (the
+    config of formation_config_of) names the robots' comm edges, not a 'None graph'."""
+    from pipeline.runs.observe import formation_config_of
+    from pipeline.team.teamfile import parse_team
+
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path / "cache"))
+    team = parse_team({
+        "version": 1, "name": "hand", "comm_edges": [[0, 1], [1, 2]],
+        "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{7100 + i}"} for i in range(3)],
+        "data": {"kind": "formation", "formation": "a", "robots": 3, "size": [161, 97]},
+        "options": {"max_features": 200}})
+    out = tmp_path / "observed"
+    config = formation_config_of(team, out, rerun=False)
+    assert config.robots == 3 and config.graph is None
+    run_formation(config)
+    report = json.loads((out / "report.json").read_text())
+    n_edges = len(report["comm_edges"])
+    assert report["title"] == f"3 robots on {n_edges} comm edges (seed 0)"
