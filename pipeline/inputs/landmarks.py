@@ -239,9 +239,11 @@ def _first_bad_line(path: Path) -> str:
 
 
 
-def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path]) -> None:
-    """Warn of keypoint files paired with no image (their image is missing, or of a format
-    not read here, e.g. ``.webp``, ``.gif``): their landmarks are left out of the run."""
+def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path],
+                  kind: str = "keypoint") -> None:
+    """Warn of ``kind`` (keypoint or descriptor) files paired with no image (their image is
+    missing, or of a format not read here, e.g. ``.webp``, ``.gif``): they are left out of
+    the run."""
     if not orphans:
         return
     unread = [p.name for p in files
@@ -250,7 +252,7 @@ def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path]) -> No
     why = (f"; {', '.join(unread[:3])} is not one of the image formats read "
            f"({', '.join(IMAGE_SUFFIXES)}): convert it" if unread else
            "; no image of their name")
-    log.warning("warning: %s", f"{directory}: {len(orphans)} keypoint file(s) left out, "
+    log.warning("warning: %s", f"{directory}: {len(orphans)} {kind} file(s) left out, "
                 f"paired with no image ({', '.join(p.name for p in orphans[:5])}"
                 f"{', ...' if len(orphans) > 5 else ''}){why}")
 
@@ -388,6 +390,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         by_stem_d = {p.stem: p for p in desc_files}
         if pairing == "name" and all(im.stem in by_stem_d for im in images):
             dfiles = [by_stem_d[im.stem] for im in images]
+            _warn_orphans(directory, files, [p for p in desc_files if p.stem not in image_stems],
+                          "descriptor")
         elif len(desc_files) == len(images):
             dfiles = desc_files
             clash = next(((im, dp) for im, dp in zip(images, dfiles, strict=True)

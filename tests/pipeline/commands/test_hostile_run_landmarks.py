@@ -354,3 +354,14 @@ def test_descriptor_files_are_read_as_the_label_files_are(folder, capsys, encode
     assert main(_argv(folder)) == 0
     after = json.loads((folder.parent / "run" / "report.json").read_text())["pairwise"]
     assert after == before
+
+
+def test_a_descriptor_file_without_its_image_is_warned(folder, capsys):
+    """A NAME.scf with no image NAME (its labels gone with it, or never given): the run used
+    the other images' descriptors and said nothing of the file it left out."""
+    (folder / "v3.png").unlink()
+    (folder / "v3.txt").unlink()
+    assert main(_argv(folder, "-q")) == 0
+    err = capsys.readouterr().err
+    assert "1 descriptor file(s) left out, paired with no image (v3.scf)" in err
+    assert "no image of their name" in err
