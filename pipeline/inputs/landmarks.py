@@ -18,7 +18,9 @@ Pairing of the files: when every image has a keypoint file of the same stem, by 
 Otherwise (the CMU hotel files are ``hotel.seq0.png`` / ``hotel1.txt`` / ``hotel001.scf``)
 by *natural* name order (``seq2`` before ``seq10``) — the ``i``-th image with the ``i``-th
 keypoint file and the ``i``-th descriptor file — which needs equal counts, and is refused
-when it would give an image another file than the one of its name. An image with
+when it would give an image another file than the one of its name, or when some files are
+named after their images and an image has none of its name (order would give it another
+image's file: order is for folders whose files are named after no image). An image with
 two keypoint files of its name (``NAME.txt`` and ``NAME.mat``) is refused unless they hold the
 same labels. Text and MAT files
 that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
@@ -239,6 +241,22 @@ def _first_bad_line(path: Path) -> str:
 
 
 
+def _refuse_partly_named(directory: Path, images: list[Path], paired: list[Path],
+                         stems: set[str], kind: str, pattern: str) -> None:
+    """InputError when files paired by name order (``paired[i]`` with ``images[i]``) are named
+    after some images but an image without a file of its name is given another one: it would
+    take another image's file (e.g. ``v3.txt`` renamed ``labels.txt``); order is for folders
+    whose files are named after no image."""
+    named = [im for im in images if im.stem in stems]
+    if not named:
+        return
+    im, p = next((im, p) for im, p in zip(images, paired, strict=True) if im.stem not in stems)
+    raise InputError(f"{directory}: {im.name} has no {kind} file of its name, but "
+                     f"{len(named)} other image(s) have one (e.g. {named[0].name}), so they "
+                     f"pair by name order, which gives it {p.name}; name every {kind} file "
+                     f"after its image ({pattern}), or none")
+
+
 def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path],
                   kind: str = "keypoint") -> None:
     """Warn of ``kind`` (keypoint or descriptor) files paired with no image (their image is
@@ -348,6 +366,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                              f"{by_stem[im.stem][0].name} by name, but not every image has one "
                              f"of its name, so they pair by name order, which gives it {p.name}; "
                              "name every keypoint file after its image (NAME.txt), or none")
+        _refuse_partly_named(directory, images, [p for p, _ in kps], set(by_stem), "keypoint",
+                             "NAME.txt")
     else:
         named = [rejected[im.stem] for im in images
                  if im.stem not in by_stem and im.stem in rejected]
@@ -403,6 +423,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                                  f"one of its name, so they pair by name order, which gives it "
                                  f"{dp.name}; name every descriptor file after its image "
                                  "(NAME.scf), or none")
+            _refuse_partly_named(directory, images, dfiles, set(by_stem_d), "descriptor",
+                                 "NAME.scf")
         else:
             raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
                              f"(found {len(desc_files)} for {len(images)} images); or use "

@@ -365,3 +365,23 @@ def test_a_descriptor_file_without_its_image_is_warned(folder, capsys):
     err = capsys.readouterr().err
     assert "1 descriptor file(s) left out, paired with no image (v3.scf)" in err
     assert "no image of their name" in err
+
+
+@pytest.mark.parametrize("suffix, kind", [(".txt", "keypoint"), (".scf", "descriptor")])
+def test_an_image_without_its_own_file_among_named_files_is_refused(folder, capsys, suffix,
+                                                                    kind):
+    """v2's file renamed (v2b sorts in its place): the other images' files are named after
+    them, and name order silently gave v2 the renamed file as if it were its own."""
+    (folder / f"v2{suffix}").rename(folder / f"v2b{suffix}")
+    _fails(capsys, _argv(folder), folder,
+           f"v2.png has no {kind} file of its name, but 3 other image(s) have one (e.g. v0.png)",
+           f"gives it v2b{suffix}")
+
+
+def test_files_named_after_no_image_still_pair_by_name_order(folder, capsys):
+    """The documented order pairing (the CMU hotel layout) is kept: no file is named after an
+    image."""
+    for k in range(4):
+        (folder / f"v{k}.txt").rename(folder / f"labels{k}.txt")
+        (folder / f"v{k}.scf").rename(folder / f"desc{k}.scf")
+    assert main(_argv(folder, "-q")) == 0
