@@ -194,6 +194,13 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
         return graph_edges(spec, n)
     if spec.startswith("knn:"):
         k = positive_k(spec)
+        if knn is None and what == "robot":
+            kinds = ", ".join(k for k in _ALL_KINDS if k != "geometric")
+            raise InputError(f"graph {spec!r}: with --sequence the graph is the robots' "
+                             f"communication graph, a kind ({kinds}) or a file of "
+                             "'robot_i,robot_j' lines (sub-folder names or indices); knn:K "
+                             "picks neighbours by image similarity, for unordered photos "
+                             "(run-images without --sequence)")
         if knn is None:
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")

@@ -94,6 +94,16 @@ def test_unknown_graph_kind(spec):
         comm_graph(spec, NAMES6)
 
 
+def test_knn_for_robots_names_the_robots_graph_and_where_knn_belongs():
+    """The robots of frame sequences take a communication graph; knn:K is for photos."""
+    with pytest.raises(InputError, match=r"with --sequence the graph is the robots' "
+                                         r"communication graph, a kind \(line, .*seq:K\)") as e:
+        comm_graph("knn:1", ["r0", "r1", "r2"], what="robot")
+    assert "for unordered photos" in str(e.value) and "features" not in str(e.value)
+    with pytest.raises(InputError, match="needs the images' features"):
+        comm_graph("knn:1", ["a.jpg", "b.jpg", "c.jpg"])
+
+
 @pytest.mark.parametrize("spec", ["", " "])
 def test_an_empty_graph_is_named_empty_not_a_folder(spec, tmp_path, monkeypatch):
     """--graph '' (an unset shell variable) was refused as 'a folder': Path('') is the

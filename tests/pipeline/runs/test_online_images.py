@@ -153,3 +153,15 @@ def test_names_with_commas_quotes_and_line_breaks_stay_one_row(tmp_path):
     assert rows == [["image", "robot", "step", "name"],
                     ["0", "0", "0", 'r"2/a\nb0.jpg'], ["1", "1", "0", 'rob,1/f 0,"x".jpg'],
                     ["2", "0", "1", 'r"2/a\nb1.jpg'], ["3", "1", "1", 'rob,1/f 1,"x".jpg']]
+
+
+def test_a_knn_graph_with_sequence_is_refused_as_no_robot_graph(folder, tmp_path, capsys):
+    """--sequence takes the robots' communication graph: knn:K (of unordered photos) was
+    refused as needing 'the images' features', which the run had."""
+    assert main(["run-images", str(folder), "--sequence", "--out", str(tmp_path / "x"), *FAST,
+                 "--graph", "knn:1"]) == 2
+    err = capsys.readouterr().err
+    assert "graph 'knn:1': with --sequence the graph is the robots' communication graph" in err
+    assert "seq:K" in err and "'robot_i,robot_j' lines" in err and "for unordered photos" in err
+    assert "needs the images' features" not in err
+    assert not (tmp_path / "x").exists()
