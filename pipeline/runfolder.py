@@ -364,20 +364,46 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
             _held[key][1] -= 1
         return
     check_run_folder(out, inputs, flag)
+    made = _missing_parents(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    lock = out.parent / f".{out.name}.lock"
-    fd = _lock(lock, out, flag)
     try:
-        _held[key] = [fd, 1]
+        lock = out.parent / f".{out.name}.lock"
+        fd = _lock(lock, out, flag)
         try:
-            _recover(out)
-            check_run_folder(out, inputs, flag)  # the restored folder, if any, is checked too
-            yield out
+            _held[key] = [fd, 1]
+            try:
+                _recover(out)
+                check_run_folder(out, inputs, flag)  # the restored folder, if any, too
+                yield out
+            finally:
+                del _held[key]
+                _unlink_if_same(lock, fd)  # while still locked: see _lock; only our own file
         finally:
-            del _held[key]
-            _unlink_if_same(lock, fd)  # while still locked: see _lock; only our own file
+            os.close(fd)  # releases the flock
     finally:
-        os.close(fd)  # releases the flock
+        if not out.exists():
+            _remove_empty(made)
+
+
+def _missing_parents(out: Path) -> list[Path]:
+    """The folders above ``out`` that do not exist yet, deepest first (``runs/`` of a default
+    ``--out``): made for the run, removed again when it writes no folder."""
+    missing = []
+    for parent in out.absolute().parents:
+        if parent.exists() or parent.is_symlink():
+            break
+        missing.append(parent)
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove each of ``folders`` (deepest first) while it is empty: a run refused on its
+    input leaves no empty ``runs/`` behind; a folder another run wrote into stays."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 _LOCK_HEAD = "formation-match lock"

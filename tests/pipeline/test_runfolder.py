@@ -240,3 +240,21 @@ def test_a_second_run_into_the_same_folder_is_refused_at_once(tmp_path):
         holder.communicate("\n", timeout=30)
     _run(out, 2)  # free again once the holder is done
     assert json.loads((out / "report.json").read_text()) == {"run": 2}
+
+
+def test_a_refused_run_leaves_no_folder_it_made_above_its_own(tmp_path):
+    """The default --out (runs/NAME) made runs/ before the input was read; a run refused then
+    left it behind, empty. A folder that holds something else stays."""
+    out = tmp_path / "runs" / "sub" / "demo"
+    with pytest.raises(InputError, match="bad input"):
+        with runfolder.claim_run_folder(out):
+            raise InputError("bad input")
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "keep.txt").write_text("mine")
+    with pytest.raises(InputError):
+        with runfolder.claim_run_folder(out):
+            raise InputError("bad input")
+    assert [p.name for p in (tmp_path / "runs").iterdir()] == ["keep.txt"]
+    _run(out, 1)  # a run that writes its folder keeps the folders above it
+    assert json.loads((out / "report.json").read_text()) == {"run": 1}

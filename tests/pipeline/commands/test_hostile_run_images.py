@@ -266,3 +266,17 @@ def test_an_out_name_that_is_not_utf8_is_refused_before_any_work(photos, tmp_pat
     assert main(["run-images", str(photos), "--out", str(out)]) == 2
     err = one_line_error(capsys, "is not UTF-8 text", "give a UTF-8 folder name")
     assert err and not out.exists()
+
+
+def test_a_refused_run_with_the_default_out_creates_nothing(tmp_path, monkeypatch, capsys):
+    """In a folder holding only a sub-folder of images, `run-images . -q` is refused (no image
+    directly in DIR); the default --out's runs/ was made first and left behind, empty."""
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        Image.fromarray(rng.integers(0, 255, (48, 64), dtype=np.uint8)).save(sub / f"f{k}.png")
+    monkeypatch.chdir(tmp_path)
+    assert main(["run-images", ".", "-q"]) == 2
+    assert "no images in '.'" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
