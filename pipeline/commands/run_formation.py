@@ -149,7 +149,7 @@ def online_config_from_args(args):
     from pipeline.runs.transports import check_online_team_size
 
     check_online_team_size(args.transport, robots if robots is not None else 6, args.window,
-                           args.hold)
+                           args.hold, args.steps)
     return OnlineConfig(formation=args.formation, seed=validate.seed(args.seed, "--seed"),
                         size=size, features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,

@@ -88,7 +88,8 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                    f"no robot ({', '.join(seq.empty[:3])}{', ...' if len(seq.empty) > 3 else ''})")
     from pipeline.runs.transports import check_online_team_size
 
-    check_online_team_size(config.transport, seq.n_robots, config.window, config.hold)
+    check_online_team_size(config.transport, seq.n_robots, config.window, config.hold,
+                           seq.steps)
     edges = comm_graph(config.graph, seq.robots, what="robot")
     timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
     parts = graph_parts(seq.n_robots, edges)

@@ -134,16 +134,18 @@ def check_team_size(name: str, robots: int, what: str) -> None:
                          "(formation-match robot --team TEAM.json)")
 
 
-def check_online_team_size(name: str, robots: int, window: int, hold: int | None) -> None:
-    """:func:`check_team_size` of an online run: a step's stage runs one robot per frame of
-    the window, ``robots × (window + hold)`` (``hold`` None: the stage's default,
-    :func:`pipeline.consistency.engines.online.default_hold`)."""
+def check_online_team_size(name: str, robots: int, window: int, hold: int | None,
+                           steps: int) -> None:
+    """:func:`check_team_size` of an online run of ``steps`` steps: a step's stage runs one
+    robot per frame of the window, ``robots × min(window + hold, steps)`` (``hold`` None: the
+    stage's default, :func:`pipeline.consistency.engines.online.default_hold`); a window
+    longer than the run holds only the frames the run has."""
     from pipeline.consistency.engines.online import default_hold
 
     hold = default_hold(window) if hold is None else int(hold)
-    check_team_size(name, robots * (int(window) + hold),
-                    "frames in a step's window (robots x (window + hold): a step's stage runs "
-                    "one robot per frame)")
+    check_team_size(name, robots * min(int(window) + hold, int(steps)),
+                    "frames in a step's window (robots x min(window + hold, steps): a step's "
+                    "stage runs one robot per frame)")
 
 
 def transport_help() -> str:

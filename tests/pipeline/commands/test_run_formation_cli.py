@@ -20,7 +20,7 @@ from pipeline.__main__ import main
          "--formation b with --robots/--graph"),
         (["--robots", "300", "--graph", "ring", "--transport", "zenoh", "--size", "64x48"],
          "300 robots would be 300 processes, at most 256"),
-        (["--steps", "2", "--robots", "60", "--graph", "ring", "--transport", "zenoh",
+        (["--steps", "5", "--robots", "60", "--graph", "ring", "--transport", "zenoh",
           "--size", "64x48", "--window", "3"],
          "300 frames in a step's window"),
     ],
