@@ -449,7 +449,8 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
 
 
 def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
-    """``conflictive_features`` of the stage's first record, as the simulator counts it
+    """``conflictive_features`` and ``conflictive_sets`` of the stage's first record, as the
+    simulator counts them
     (:mod:`pipeline.consistency.engines.driver`): for a rule with a detection, the team's
     conflictive features after its first detection (the sum of each robot's own); for a whole
     stage without one, the features with a link the rule cut (history cuts apart). The robots'
@@ -468,9 +469,15 @@ def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
         off = np.concatenate([[0], np.cumsum(m[used])])
         acted = int(np.unique(np.r_[off[sub.cam_i[cut]] + sub.feat_i[cut],
                                     off[sub.cam_j[cut]] + sub.feat_j[cut]]).size)
+    # the sets Alg. 1 resolved, as the simulator counts them (each set once, at its root):
+    # the sum of the sets each robot rooted in its resolution passes (one robot's phases
+    # carry no such count, and the step read 0)
+    rooted = sum(int(p.get("roots", 0)) for head, _ in run.results.values()
+                 for p in head.get("run", {}).get("phases", []) if p.get("phase") == "resolution")
     if not res.stats["per_iteration"]:
         res.stats["per_iteration"].append({})
     res.stats["per_iteration"][0]["conflictive_features"] = acted
+    res.stats["per_iteration"][0]["conflictive_sets"] = rooted
 
 
 def online_fusion(views, features, links, comm_edges, *, track_labels=None):

@@ -386,7 +386,7 @@ def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, n_steps, tm
     assert all(s["conflictive_sets_after"] == 0 for s in zen["steps"])
     # what each step acted on, counted alike (over zenoh it read one robot's phases, or none,
     # and went negative once the sets solved at their roots were taken off)
-    counts = ("conflictive_features", "cut", "cut_rule", "links_kept")
+    counts = ("conflictive_features", "conflictive_sets", "cut", "cut_rule", "links_kept")
     assert [{k: s[k] for k in counts} for s in zen["steps"]] == \
         [{k: s[k] for k in counts} for s in steps]
     # the robots' own counts (the reliable protocol's acks and termination wave), not the
@@ -463,6 +463,29 @@ def test_zenoh_robots_run_the_history_check_as_the_record(resolution, weak):
     assert HISTORY in zen.links.reason.tolist()
     assert rz["history_rounds"] > 0 and rz["history_bytes"] > 0
     assert zen.is_conflict_free()
+
+
+@pytest.mark.parametrize("resolution", ["paper", "paper-labels"])
+def test_zenoh_online_step_counts_the_sets_alg1_resolved(resolution):
+    """An online step's ``conflictive_sets`` over zenoh: the sets the robots rooted in their
+    resolution passes, summed over the team, as the simulator counts them (one conflictive
+    set, 0:0 and 0:1 joined through 1:0 and 2:0, beside a conflict-free one)."""
+    from pipeline.consistency.engines.online import Frame, OnlineAssociation
+    from pipeline.runs.transports.zenoh import online_stage
+
+    links = Links([0, 1, 0, 1, 2], [0, 0, 1, 1, 1], [1, 2, 2, 2, 3], [0, 0, 0, 1, 0],
+                  [0.9, 0.8, 0.3, 0.9, 0.4])
+    recs = []
+    for stage in (online_stage, None):
+        oa = OnlineAssociation(window=2, resolution=resolution, stage=stage,
+                               robots_solve=stage is not None, robots_check=stage is not None)
+        frames = [Frame(0, 2), Frame(1, 3), Frame(2, 2), Frame(3, 1)]
+        recs.append((oa, oa.add_step(frames, links)))
+    (zen, rz), (sim, rs) = recs
+    assert zen.links.reason.tolist() == sim.links.reason.tolist()
+    assert rs["conflictive_sets"] >= 1
+    assert rz["conflictive_sets"] == rs["conflictive_sets"]
+    assert rz["conflictive_features"] == rs["conflictive_features"]
 
 
 def test_a_history_file_that_is_not_one_is_a_one_line_error(tmp_path):
