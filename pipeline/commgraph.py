@@ -216,11 +216,18 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
     if not path.is_file():
         raise InputError(
             f"graph {spec!r}: not one of {kinds} and no such file; give a kind "
-            f"or a file of 'cam_i,cam_j' lines (indices or image names)")
+            f"or a file of 'cam_i,cam_j' lines (indices or {_node(what)[1]})")
     return read_comm_graph(path, names, what)
 
 
 # ----------------------------------------------------------------------------------- file
+
+def _node(what: str) -> tuple[str, str]:
+    """What an edge joins and what names it, in messages: an image is a camera, named by its
+    file; a team's robot is named by its sub-folder."""
+    return {"image": ("camera", "image names"),
+            "robot": ("robot", "sub-folder names")}.get(what, (what, f"{what} names"))
+
 
 def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> int:
     """One end of an edge line: an image name (when names are known) or a 0-based index."""
@@ -232,8 +239,8 @@ def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> 
             shown = ", ".join(names[:5]) + (", ..." if n > 5 else "")
             raise InputError(f"{path}, line {line_no}: {what} {tok!r} is not one of the {n} "
                              f"{what}s ({shown})")
-        raise InputError(f"{path}, line {line_no}: {column} {tok!r} is not an integer camera id; "
-                         "ids are 0-based integers")
+        raise InputError(f"{path}, line {line_no}: {column} {tok!r} is not an integer "
+                         f"{_node(what)[0]} id; ids are 0-based integers")
     k = int(tok)
     if k < 0:
         raise InputError(f"{path}, line {line_no}: {column} {k} is negative; ids are 0-based")
@@ -242,8 +249,8 @@ def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> 
                          f"most {MAX_ID}")
     if names is not None and k >= len(names):
         n = len(names)
-        raise InputError(f"{path}, line {line_no}: camera index {k} out of range 0..{n - 1} "
-                         f"({n} {what}s)")
+        raise InputError(f"{path}, line {line_no}: {_node(what)[0]} index {k} out of range "
+                         f"0..{n - 1} ({n} {what}s)")
     return k
 
 
@@ -312,8 +319,9 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
             continue
         header_allowed = False
         if len(tokens) != 2:
+            node, named = _node(what)
             raise InputError(f"{path}, line {line_no}: {raw.strip()!r} has {len(tokens)} columns; "
-                             "it must hold two cameras 'cam_i,cam_j' (indices or image names)")
+                             f"it must hold two {node}s 'cam_i,cam_j' (indices or {named})")
         rows.append((line_no, raw, tokens))
     if by_name is not None:
         _refuse_ambiguous(path, rows, names, by_name, what)
@@ -322,9 +330,10 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
         i, j = (_camera(path, line_no, col, tok, names, by_name, what)
                 for col, tok in zip(("cam_i", "cam_j"), tokens, strict=True))
         if i == j:
+            node = _node(what)[0]
             raise InputError(f"{path}, line {line_no}: self-edge {raw.strip()!r} ({path}:{line_no}: "
-                             f"camera {i} twice); a camera cannot be its own neighbour, an edge "
-                             "joins two different cameras")
+                             f"{node} {i} twice); a {node} cannot be its own neighbour, an edge "
+                             f"joins two different {node}s")
         edges.append((i, j))
     if not edges:
         raise InputError(f"graph file {str(path)!r} holds no edge; list one 'cam_i,cam_j' "

@@ -88,6 +88,20 @@ def test_graph_file_errors(tmp_path, text, match):
         comm_graph(f, NAMES6)
 
 
+@pytest.mark.parametrize("text, match", [
+    ("r0,r1,r2\n", "line 1: .* must hold two robots 'cam_i,cam_j' \\(indices or sub-folder names\\)"),
+    ("r0,r1\nr1,r1\n", "line 2: self-edge .* robot 1 twice\\); a robot cannot be its own"),
+    ("0,5\n", "line 1: robot index 5 out of range 0..2 \\(3 robots\\)"),
+])
+def test_graph_file_errors_of_a_team_name_its_robots(tmp_path, text, match):
+    """run-images --sequence: the graph joins robots named by their sub-folders, not images."""
+    f = tmp_path / "g.txt"
+    f.write_text(text)
+    with pytest.raises(InputError, match=match) as err:
+        comm_graph(f, ["r0", "r1", "r2"], what="robot")
+    assert "camera" not in str(err.value) and "image" not in str(err.value)
+
+
 @pytest.mark.parametrize("spec", ["star", "seq:0", "seq:x", "seq:", "knn:0", "knn:2"])
 def test_unknown_graph_kind(spec):
     with pytest.raises(InputError, match="graph"):
