@@ -142,6 +142,14 @@ def online_config_from_args(args):
         raise InputError(f"--fault-seed {faults.seed}: an online run (--steps) draws the graph "
                          "of each step from --seed, the scene's seed; drop --fault-seed, or "
                          "change --seed")
+    switching = bool(faults is not None and faults.switching_topology)
+    if switching and args.window == 1:
+        from pipeline.progress import log
+
+        # data_synth.motion forces every edge up once every --window steps
+        log.warning("warning: --switching-topology with --window 1: every communication link "
+                    "is forced up at every step (each comes up at least once every --window "
+                    "steps), so the graph does not switch; use --window 2 or more")
     check_formation(args.formation)
     size = parse_size(args.size)
     check_motion_memory(robots if robots is not None else 6, args.steps, size,
@@ -154,7 +162,7 @@ def online_config_from_args(args):
                         size=size, features=method,
                         max_features=max_features or 2000, robots=robots, graph=args.graph,
                         steps=args.steps, window=args.window, hold=args.hold,
-                        speed=args.speed, switching=bool(faults is not None and faults.switching_topology),
+                        speed=args.speed, switching=switching,
                         resolution=args.resolution,
                         tol_px=validate.tolerance_px(args.tol_px),
                         batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,

@@ -43,3 +43,21 @@ def test_a_parametric_formation_is_titled_by_its_robots_and_graph(tmp_path):
                  "--max-features", "100", "--no-fusion", "--no-rerun", "--out", str(out)]) == 0
     title = json.loads((out / "report.json").read_text())["title"]
     assert title == "3 robots on a line graph (seed 0)"
+
+
+@pytest.mark.parametrize("window, warned", [(1, True), (2, False)])
+def test_switching_with_a_window_of_one_step_is_warned(window, warned, capsys, tmp_path):
+    """--switching-topology forces every link up once every --window steps: with --window 1
+    the graph never switches, which the user is told."""
+    import json
+
+    out = tmp_path / "run"
+    assert main(["run-formation", "--steps", "1", "--robots", "2", "--graph", "line",
+                 "--switching-topology", "--window", str(window), "--size", "160x120",
+                 "--max-features", "80", "--no-fusion", "--no-rerun", "--quiet",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert ("--switching-topology with --window 1" in err) == warned
+    if warned:  # the warning says what the run did: every link up
+        assert json.loads((out / "report.json").read_text())["steps"][0]["comm_edges"] == \
+            [[0, 1]]
