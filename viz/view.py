@@ -40,8 +40,10 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
         p = Path(target)
         if p.is_file():
             if p.suffix != ".rrd":
-                raise FileNotFoundError(f"{p}: not a Rerun recording (.rrd); give a run folder "
-                                        "or its recording.rrd")
+                beside = p.with_suffix(".rrd")  # clean-db / clean-h5 write OUT.rrd by OUT
+                hint = (f"; its recording is {beside}" if beside.is_file() else
+                        "; give a run folder or its recording.rrd")
+                raise FileNotFoundError(f"{p}: not a Rerun recording (.rrd){hint}")
             return p
         if p.is_dir():
             if (p / "recording.rrd").is_file():
@@ -49,6 +51,13 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
             found = sorted(p.glob("*.rrd"))
             if len(found) == 1:
                 return found[0]
+            if found:  # several outputs of clean-db / clean-h5 in one folder
+                raise FileNotFoundError(f"{p}: {len(found)} recordings in this folder "
+                                        f"({_names(found)}): give the one to open")
+            runs_in = sorted(q.parent for q in p.glob("*/recording.rrd"))
+            if runs_in:  # the parent of run folders, e.g. run-formations' --out
+                raise FileNotFoundError(f"{p}: a folder of {len(runs_in)} runs "
+                                        f"({_names(runs_in)}): give the run to open")
             raise FileNotFoundError(f"{p}: no recording.rrd in this folder (was it written with "
                                     f"--no-rerun?)")
         raise FileNotFoundError(f"{p}: no such run folder or .rrd file")
@@ -60,6 +69,12 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
     if not found:
         raise FileNotFoundError(f"no recording under {runs}/ yet: run 'make run-formation' first")
     return found[-1]
+
+
+def _names(paths: list[Path], shown: int = 4) -> str:
+    """The first ``shown`` of ``paths`` by name, and how many more."""
+    names = ", ".join(repr(q.name) for q in paths[:shown])
+    return names + (f", … {len(paths) - shown} more" if len(paths) > shown else "")
 
 
 def has_display(env=None) -> bool:

@@ -91,3 +91,28 @@ def test_the_newest_recording_is_a_finished_runs_not_a_staging_folders(tmp_path)
         (runs / name / "recording.rrd").write_bytes(b"x")
         os.utime(runs / name / "recording.rrd", (mtime, mtime))
     assert find_recording(None, runs) == runs / "formation-d" / "recording.rrd"
+
+
+def test_a_folder_of_several_recordings_or_runs_names_them(tmp_path):
+    """clean-db writes OUT.rrd beside OUT.db, so a folder of cleaned databases holds several
+    recordings, and run-formations' --out holds four run folders: neither was written with
+    --no-rerun, which is what the message said; it names what the folder holds instead."""
+    cleaned = tmp_path / "cleaned"
+    cleaned.mkdir()
+    for name in ("castle.db", "castle.rrd", "graffiti.db", "graffiti.rrd"):
+        (cleaned / name).write_bytes(b"x")
+    with pytest.raises(FileNotFoundError) as exc:
+        find_recording(cleaned)
+    assert "2 recordings in this folder ('castle.rrd', 'graffiti.rrd')" in str(exc.value)
+    assert "--no-rerun" not in str(exc.value)
+    with pytest.raises(FileNotFoundError, match=r"its recording is .*castle\.rrd"):
+        find_recording(cleaned / "castle.db")
+
+    runs = tmp_path / "runs"
+    for name in "abcde":
+        (runs / f"formation-{name}").mkdir(parents=True)
+        (runs / f"formation-{name}" / "recording.rrd").write_bytes(b"x")
+    with pytest.raises(FileNotFoundError) as exc:
+        find_recording(runs)
+    assert ("a folder of 5 runs ('formation-a', 'formation-b', 'formation-c', 'formation-d', "
+            "… 1 more)") in str(exc.value)
