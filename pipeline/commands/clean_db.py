@@ -8,6 +8,7 @@ summary.
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
 
@@ -70,7 +71,7 @@ def run(args) -> int:
     from pipeline.outputs import check_output_files
     from pipeline.runfolder import OutputFiles, write_json_atomic
     from pipeline.runs.clean_db import clean_database
-    from pipeline.runs.cleaned import check_image_dir, side_paths
+    from pipeline.runs.cleaned import check_image_dir, side_paths, stale_recording
 
     limit_gb(args.max_memory_gb)
     loop_tol = _loop_tol(args)
@@ -93,6 +94,8 @@ def run(args) -> int:
                                                           "match between two images")
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
+    if args.no_rerun and (stale := stale_recording(args.out)):
+        print(stale, file=sys.stderr)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "

@@ -7,6 +7,7 @@ hloc's matches made consistent; the job and what it writes are described in
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pipeline.commands.options import add_overwrite_and_memory_options
 from pipeline.errors import InputError
@@ -42,7 +43,7 @@ def run(args) -> int:
     from pipeline.outputs import check_output_files
     from pipeline.runfolder import OutputFiles, write_json_atomic
     from pipeline.runs.clean_h5 import clean_h5
-    from pipeline.runs.cleaned import check_image_dir, side_paths
+    from pipeline.runs.cleaned import check_image_dir, side_paths, stale_recording
 
     limit_gb(args.max_memory_gb)
     if not args.out:
@@ -67,6 +68,8 @@ def run(args) -> int:
                                      "pairs read")
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), s)
+    if args.no_rerun and (stale := stale_recording(args.out)):
+        print(stale, file=sys.stderr)
     b, a, cut, r = s["before"], s["after"], s["cut"], s["resolution"]
     print(f"{s['images']} images, {s['comm_edges']} image pairs, {s['links']} matches")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "

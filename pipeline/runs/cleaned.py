@@ -15,6 +15,7 @@ format. Beside them they write, with the same stem:
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from pipeline.errors import InputError
 from pipeline.types import Features, LinkLedger, Links, View
 
 __all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "check_image_dir",
-           "write_side_outputs"]
+           "write_side_outputs", "stale_recording"]
 
 
 def side_paths(out: str | Path) -> tuple[Path, Path]:
@@ -32,6 +33,18 @@ def side_paths(out: str | Path) -> tuple[Path, Path]:
     out = Path(out)
     stem = out.with_suffix("") if out.suffix else out
     return stem.with_name(stem.name + ".links.csv"), stem.with_name(stem.name + ".rrd")
+
+
+def stale_recording(out: str | Path) -> str | None:
+    """The warning for an ``OUT.rrd`` beside ``out`` after a run with ``--no-rerun``, which
+    writes none: that recording is of an earlier run (or not ours) and does not show this
+    result, though it is named like its recording; ``None`` when there is no such file."""
+    rrd = side_paths(out)[1]
+    if not os.path.lexists(rrd):
+        return None
+    return (f"warning: {str(rrd)!r} beside {str(out)!r} is not this run's recording "
+            f"(--no-rerun writes none): it does not show this result; remove it, or run "
+            f"without --no-rerun")
 
 
 @dataclass

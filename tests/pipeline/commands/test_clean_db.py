@@ -450,3 +450,24 @@ def test_fusion_on_the_largest_of_several_models_says_so():
     assert "largest" not in one[0] and "5 links cut" in one[0] and len(one) == 2
     assert fusion_lines({"enabled": False, "reason": "camera poses unknown"}, 0, 4) == \
         ["fusion: not run, camera poses unknown"]
+
+
+def test_no_rerun_beside_an_earlier_recording_warns_that_it_is_stale(tmp_path, capsys):
+    """--overwrite --no-rerun replaced OUT.db and OUT.links.csv and left the OUT.rrd of the
+    run before (with other cuts) beside them, named as this result's recording, without a
+    word."""
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    out, rrd = tmp_path / "clean.db", tmp_path / "clean.rrd"
+    assert main(["clean-db", str(src), "--out", str(out), "--quiet"]) == 0
+    recording = rrd.read_bytes()
+    capsys.readouterr()
+    assert main(["clean-db", str(src), "--out", str(out), "--overwrite", "--no-rerun",
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {str(rrd)!r} beside {str(out)!r} is not this run's recording" in err
+    assert rrd.read_bytes() == recording  # warned, not removed
+    rrd.unlink()
+    assert main(["clean-db", str(src), "--out", str(out), "--overwrite", "--no-rerun",
+                 "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().err

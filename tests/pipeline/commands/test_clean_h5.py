@@ -152,3 +152,21 @@ def test_existing_output_needs_overwrite(tmp_path, capsys):
     assert out.read_bytes() == b"keep me"
     assert main(argv + ["--overwrite"]) == 0
     assert out.read_bytes() != b"keep me"
+
+
+def test_no_rerun_beside_an_earlier_recording_warns_that_it_is_stale(tmp_path, capsys):
+    """--overwrite --no-rerun replaced OUT.h5 and OUT.links.csv and left the OUT.rrd of the
+    run before beside them, named as this result's recording, without a word."""
+    feats, matches = _write(tmp_path)
+    out = tmp_path / "o.h5"
+    argv = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out", str(out)]
+    assert main(argv + ["--no-rerun"]) == 0
+    assert "not this run's recording" not in capsys.readouterr().err  # no OUT.rrd: no word
+    assert main(argv + ["--overwrite"]) == 0
+    rrd = tmp_path / "o.rrd"
+    recording = rrd.read_bytes()
+    capsys.readouterr()
+    assert main(argv + ["--overwrite", "--no-rerun"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {str(rrd)!r} beside {str(out)!r} is not this run's recording" in err
+    assert rrd.read_bytes() == recording  # warned, not removed
