@@ -29,7 +29,16 @@ def _caused_by_interrupt(exc: BaseException | None) -> bool:
 
 
 def _interrupted(command: str) -> int:
-    print(f"interrupted: {command} stopped, nothing was written or replaced", file=sys.stderr)
+    done = []
+    if "pipeline.runfolder" in sys.modules:  # else nothing can have been put in place
+        done = sys.modules["pipeline.runfolder"].outputs_in_place()
+    if done:  # too late to keep them: say which are there, written in full
+        names = ", ".join(repr(str(p)) for p in done[:4]) + (", …" if len(done) > 4 else "")
+        print(f"interrupted: {command} stopped; already in place, complete: {names}",
+              file=sys.stderr)
+    else:
+        print(f"interrupted: {command} stopped, nothing was written or replaced",
+              file=sys.stderr)
     return 130
 
 
@@ -158,6 +167,8 @@ def _requested_command(argv: list[str]) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = _requested_command(argv)
+    if "pipeline.runfolder" in sys.modules:  # a new command: nothing of it in place yet
+        sys.modules["pipeline.runfolder"].forget_outputs_in_place()
     try:
         return _run(argv, command)
     except KeyboardInterrupt:

@@ -73,7 +73,7 @@ from pipeline.outputs import (
     write_run_marker,
 )
 
-__all__ = ["OutputFiles", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
+__all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
            "publish", "publish_mode", "publish_together", "write_json_atomic"]
 
 
@@ -282,11 +282,13 @@ class OutputFiles:
                                      "was removed while the command worked; nothing was written")
                 publish_mode(tmp, directory=False)
                 refuse_unsafe_target(target, flag)
+                _put_in_place_so_far.append(target)  # before: an interrupt may end it there
                 try:
                     publish(tmp, target, self.replace)
-                except FileExistsError:
-                    raise _appeared(target, flag) from None
                 except OSError as exc:
+                    _put_in_place_so_far.remove(target)
+                    if isinstance(exc, FileExistsError):
+                        raise _appeared(target, flag) from None
                     raise _named(exc, target) from None
                 done.append(target)
         except BaseException:
@@ -294,6 +296,7 @@ class OutputFiles:
                 for target in done:
                     if os.path.lexists(target):
                         os.unlink(target)
+                    _put_in_place_so_far.remove(target)
             raise
 
 
@@ -547,8 +550,24 @@ def _discard_previous(old: Path, out: Path) -> None:
           f"{old}", file=sys.stderr)
 
 
+#: the outputs this process has put in place (files of :class:`OutputFiles`, run folders),
+#: so that an interrupt after them is not reported as one that wrote nothing
+_put_in_place_so_far: list[Path] = []
+
+
+def outputs_in_place() -> list[Path]:
+    """The outputs put in place since :func:`forget_outputs_in_place`, in order."""
+    return list(_put_in_place_so_far)
+
+
+def forget_outputs_in_place() -> None:
+    """Start a new command's record of :func:`outputs_in_place`."""
+    _put_in_place_so_far.clear()
+
+
 def _put_in_place(staged: Path, out: Path) -> None:
     """Replace ``out`` by ``staged`` so that one of the two complete runs is always at ``out``."""
+    _put_in_place_so_far.append(out)  # before: an interrupt may end it halfway
     if not os.path.lexists(out):
         _rename_noreplace(staged, out)
         return

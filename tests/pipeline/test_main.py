@@ -235,6 +235,35 @@ def test_ctrl_c_while_the_command_module_loads_is_one_line_exit_130(monkeypatch,
     assert err == "interrupted: resolve stopped, nothing was written or replaced\n"
 
 
+def test_ctrl_c_after_the_outputs_are_in_place_does_not_say_nothing_was_written(
+        tmp_path, monkeypatch, capsys):
+    """A Ctrl-C while the summary is printed, after OUT.csv and --report were put in place,
+    said 'nothing was written or replaced' although both had been (re)written: it now names
+    them as complete; a later command's interrupt does not inherit them."""
+    import pipeline.outcome
+
+    links, out, report = tmp_path / "in.csv", tmp_path / "out.csv", tmp_path / "r.json"
+    links.write_text("0,0,1,0\n1,0,2,0\n0,1,2,0\n")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline.outcome, "exit_status", interrupted)  # after the outputs
+    assert main(["resolve", "--links", str(links), "--out", str(out), "--report",
+                 str(report)]) == 130
+    assert out.is_file() and report.is_file()
+    err = capsys.readouterr().err
+    assert "nothing was written" not in err
+    assert err == (f"interrupted: resolve stopped; already in place, complete: {str(out)!r}, "
+                   f"{str(report)!r}\n")
+    import pipeline.__main__ as entry
+
+    monkeypatch.setattr(entry, "build_parser", interrupted)
+    assert main(["resolve", "--links", "x", "--out", "y"]) == 130
+    assert capsys.readouterr().err == ("interrupted: resolve stopped, nothing was written or "
+                                       "replaced\n")
+
+
 def test_ctrl_c_while_a_cxx_extension_loads_is_not_an_import_error(monkeypatch, capsys):
     """pybind11 turns a KeyboardInterrupt during a module's initialisation into an
     ImportError, which pycolmap turns into 'Cannot import the C++ backend'."""
