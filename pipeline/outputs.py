@@ -329,7 +329,7 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     ------
     InputError
         ``out`` is a symbolic link, a file, ``/``, the current folder or one of its parents,
-        an input or a folder holding an input, or an existing non-empty folder without the
+        inside another run folder, an input or a folder holding an input, or an existing non-empty folder without the
         :data:`RUN_MARKER` of a previous run.
     """
     p = Path(out)
@@ -342,6 +342,12 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
         raise InputError(f"{flag} {str(out)!r} is {'/' if real == Path(real.anchor) else 'the current folder or one of its parents'}; "
                          "a run folder is replaced as a whole: give a new folder name, e.g. "
                          "runs/NAME")
+    for anc in real.parents:  # a run folder holds only what its run wrote
+        if os.path.lexists(anc / RUN_MARKER):
+            raise InputError(f"{flag} {str(out)!r} is inside the run folder {str(anc)!r}: a "
+                             "run folder holds only what its run wrote (a run put in it would "
+                             "block, or be deleted by, the next run there): choose an --out "
+                             "outside it")
     for in_flag, q in inputs:
         if q is None:
             continue

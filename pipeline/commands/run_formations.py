@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -176,11 +177,15 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
     file that is a link, a special file, or a file run-formations did not write (unless
     ``overwrite``)."""
     from pipeline.errors import InputError
-    from pipeline.outputs import check_run_folder, refuse_unsafe_target
+    from pipeline.outputs import RUN_MARKER, check_run_folder, refuse_unsafe_target
 
     if parent.exists() and not parent.is_dir():
         raise InputError(f"--out {str(parent)!r} is a file; run-formations writes a folder of "
                          "runs: give a folder name, e.g. runs")
+    if os.path.lexists(parent / RUN_MARKER):
+        raise InputError(f"--out {str(parent)!r} is a run folder; run-formations writes a "
+                         "folder of four runs and its summaries, which would mix with that "
+                         "run: choose another --out, e.g. runs")
     for name in FORMATIONS:
         check_run_folder(parent / f"formation-{name}", flag="--out")
     ours = _written_by_us(parent)

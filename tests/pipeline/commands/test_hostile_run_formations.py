@@ -147,3 +147,28 @@ def test_an_interrupt_replaces_no_formation_of_the_previous_run(tmp_path, monkey
     assert main(["run-formations", "--out", str(out), "--seed", "12"]) == 0
     assert {json.loads((out / f"formation-{x}" / "report.json").read_text())["seed"]
             for x in "abcd"} == {12}
+
+
+def test_out_naming_a_run_folder_is_refused_and_the_run_stays_replaceable(tmp_path, monkeypatch,
+                                                                          capsys):
+    """run-formations --out RUN, RUN a run-formation folder: the four runs and the summaries
+    were written inside it, and the next run-formation --out RUN refused RUN as a folder
+    holding 46 entries added after its run."""
+    from pipeline.outputs import run_folder_problem
+    from pipeline.runfolder import atomic_run_folder
+
+    _fake_formation_runs(monkeypatch, seed_of_run=1)
+    run = tmp_path / "formation-d"
+    with atomic_run_folder(run) as tmp:
+        (tmp / "report.json").write_text("{}")
+    assert main(["run-formations", "--out", str(run)]) == 2
+    one_line_error(capsys, "is a run folder")
+    assert sorted(p.name for p in run.iterdir()) == [".formation-match-run", "report.json"]
+    assert run_folder_problem(run) is None
+    # a run folder inside a run folder (run-formation --out RUN/sub), through the same check
+    from pipeline.errors import InputError
+    from pipeline.outputs import check_run_folder
+
+    with pytest.raises(InputError, match="is inside the run folder"):
+        check_run_folder(run / "sub")
+    assert main(["run-formations", "--out", str(tmp_path / "runs")]) == 0  # elsewhere: fine
