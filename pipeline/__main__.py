@@ -62,7 +62,7 @@ import atexit  # noqa: E402
 import importlib  # noqa: E402
 import logging  # noqa: E402
 import threading  # noqa: E402
-from collections.abc import Iterable  # noqa: E402
+from collections.abc import Callable, Iterable  # noqa: E402
 
 from pipeline.errors import InputError, TeamError  # noqa: E402
 
@@ -167,15 +167,22 @@ def _requested_command(argv: list[str]) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = _requested_command(argv)
+    return interruptible(command or "formation-match", lambda: _run(argv, command))
+
+
+def interruptible(command: str, run: Callable[[], int]) -> int:
+    """``run()``'s exit code; a Ctrl-C while it runs ends it with one line on stderr naming
+    ``command`` (and the outputs already in place, if any) and exit code 130, never a
+    traceback. Also used by the other programs of the project (``python -m viz.saved_run``)."""
     if "pipeline.runfolder" in sys.modules:  # a new command: nothing of it in place yet
         sys.modules["pipeline.runfolder"].forget_outputs_in_place()
     try:
-        return _run(argv, command)
+        return run()
     except KeyboardInterrupt:
-        return _interrupted(command or "formation-match")
+        return _interrupted(command)
     except Exception as exc:
         if _caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
-            return _interrupted(command or "formation-match")
+            return _interrupted(command)
         raise
 
 

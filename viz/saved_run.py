@@ -158,6 +158,15 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The program: exit code 0 written, 2 bad input, 130 interrupted (Ctrl-C: one line on
+    stderr, as the pipeline's commands say it; the recording is written to a temporary
+    sibling and renamed, so none is half-written)."""
+    from pipeline.__main__ import interruptible
+
+    return interruptible("viz.saved_run", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="python -m viz.saved_run",
                                  description="Log a saved run folder to a Rerun recording.")
     ap.add_argument("folder", metavar="RUN_DIR", help="run folder (report.json, links.csv, sparse/)")

@@ -141,3 +141,25 @@ def test_a_folder_whose_files_do_not_read_is_said_not_a_traceback(tmp_path, caps
         assert main([str(folder)]) == 2, name
         assert "error:" in capsys.readouterr().err
         assert not (folder / "recording.rrd").exists()
+
+
+def test_a_ctrl_c_is_one_line_and_exit_130_not_a_traceback(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the recording is written ends as the pipeline's commands end: one
+    'interrupted: …' line on stderr and exit code 130."""
+    import viz.saved_run
+
+    folder = _save(make_record(), tmp_path / "run")
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(viz.saved_run, "log_run_folder", interrupted)
+    try:
+        code = main([str(folder)])
+    except KeyboardInterrupt:
+        pytest.fail("the Ctrl-C escaped viz.saved_run.main (a traceback, death by SIGINT)")
+    assert code == 130
+    err = capsys.readouterr().err
+    assert err.startswith("interrupted: viz.saved_run stopped")
+    assert len(err.strip().splitlines()) == 1
+    assert not (folder / "recording.rrd").exists()
