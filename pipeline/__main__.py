@@ -6,7 +6,8 @@ defined on demand), so ``python -m pipeline --help`` loads no OpenCV, SciPy, pyc
 
 Exit codes: 0 done; 2 bad input, a file that cannot be read or written, or a team of robot
 processes that did not finish (one line on stderr naming the robot, nothing written); 3 the run finished but its result is not conflict-free (written, flagged in
-the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written).
+the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written). A closed stdout
+pipe (``| head -3``) ends the command quietly with 0.
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ import argparse  # noqa: E402
 import atexit  # noqa: E402
 import importlib  # noqa: E402
 import logging  # noqa: E402
+import select  # noqa: E402
 import threading  # noqa: E402
 from collections.abc import Callable, Iterable  # noqa: E402
 
@@ -201,12 +203,38 @@ def _run(argv: list[str], command: str | None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
+        if isinstance(exc, BrokenPipeError) and _stdout_closed():
+            return _stdout_gone()
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except MemoryError:
         print(f"error: {args.command} ran out of memory; try a smaller input", file=sys.stderr)
         return 2
+
+
+def _stdout_closed() -> bool:
+    """stdout is a pipe whose reader has gone (``| head``): writing to it fails."""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll(), no file descriptor
+        return False
+
+
+def _stdout_gone() -> int:
+    """The end of a command whose stdout reader stopped reading (``| head -3``): quietly, as
+    Unix tools end, with exit code 0 (what the reader took is what it asked for; the same code
+    as when the pipe is found closed only at the final flush). What is still buffered for
+    stdout is discarded."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (AttributeError, OSError, ValueError):
+        pass
+    return 0
 
 
 def entry() -> None:

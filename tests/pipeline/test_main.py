@@ -311,3 +311,21 @@ def test_ctrl_c_in_the_first_second_ends_with_130_and_no_traceback(tmp_path, del
         assert err.strip().splitlines()[-1].startswith("interrupted:")
         assert not (tmp_path / "o.csv").exists()
 
+
+
+def test_a_closed_stdout_pipe_ends_the_command_quietly(tmp_path):
+    """``formation-match match-formation … | head -3``: the reader stops reading while the
+    command still prints; the command ends quietly with exit code 0, no 'error: Broken pipe'.
+    (Unbuffered stdout makes every print meet the closed pipe, whatever the output's size.)"""
+    env = {**os.environ, "FORMATION_MATCH_CACHE": str(tmp_path / "cache"),
+           "PYTHONUNBUFFERED": "1"}
+    read, write = os.pipe()
+    os.close(read)  # the reader has gone before the first line
+    try:
+        out = subprocess.run([sys.executable, "-m", "pipeline", "match-formation", "--formation",
+                              "a", "--size", "160x120", "--max-features", "200", "-q"],
+                             cwd=ROOT, stdout=write, stderr=subprocess.PIPE, text=True, env=env)
+    finally:
+        os.close(write)
+    assert out.stderr == ""
+    assert out.returncode == 0
