@@ -178,7 +178,7 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
     Raises
     ------
     InputError
-        Fewer than two cameras, an unknown kind that is no file either, a bad ``K``, or any
+        Fewer than two cameras (robots), an unknown kind that is no file either, a bad ``K``, or any
         error of :func:`read_comm_graph`.
 
     Examples
@@ -188,7 +188,7 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
     """
     n = len(names)
     if n < 2:
-        raise InputError(f"a comm graph needs at least two cameras, got {n}")
+        raise InputError(f"a comm graph needs at least two {_node(what)[0]}s, got {n}")
     spec = str(kind_or_file)
     if spec in _ALL_KINDS and spec not in ("geometric", "seq:K") or spec.startswith("seq:"):
         return graph_edges(spec, n)

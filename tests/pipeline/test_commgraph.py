@@ -128,8 +128,15 @@ def test_an_empty_graph_is_named_empty_not_a_folder(spec, tmp_path, monkeypatch)
 
 
 def test_graph_needs_two_cameras():
-    with pytest.raises(InputError, match="at least two"):
+    with pytest.raises(InputError, match="at least two cameras, got 1"):
         comm_graph("ring", ["a"])
+
+
+def test_graph_of_robots_needs_two_robots_not_cameras(tmp_path):
+    """The nodes of a team's graph (run-images --sequence) are robots: the message says so."""
+    for graph in ("ring", write(tmp_path, "r0,r0\n", "g.csv")):
+        with pytest.raises(InputError, match="^a comm graph needs at least two robots, got 1$"):
+            comm_graph(graph, ["r0"], what="robot")
 
 
 def test_comm_graph_csv(tmp_path):
