@@ -73,7 +73,8 @@ from pipeline.outputs import (
     write_run_marker,
 )
 
-__all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
+__all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "note_output_in_place",
+           "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
            "publish", "publish_mode", "publish_together", "write_json_atomic"]
 
 
@@ -563,6 +564,12 @@ def outputs_in_place() -> list[Path]:
 def forget_outputs_in_place() -> None:
     """Start a new command's record of :func:`outputs_in_place`."""
     _put_in_place_so_far.clear()
+
+
+def note_output_in_place(path: str | os.PathLike) -> None:
+    """Add ``path``, an output put in place by other means than this module's (a recording
+    :func:`viz.rerun_log.log_run` renamed into place), to :func:`outputs_in_place`."""
+    _put_in_place_so_far.append(Path(path))
 
 
 def _put_in_place(staged: Path, out: Path) -> None:

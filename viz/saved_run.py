@@ -134,6 +134,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     (:func:`pipeline.outputs.run_folder_problem`).
     """
     from pipeline.outputs import run_folder_problem, write_run_marker
+    from pipeline.runfolder import note_output_in_place
     from viz.rerun_log import log_run
 
     folder = Path(folder)
@@ -152,6 +153,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     pure_run = inside and run_folder_problem(folder) is None
     record = read_run_folder(folder)
     path = log_run(out, record, recording_name=folder.name)
+    note_output_in_place(path)  # a Ctrl-C from here on names it as written
     if pure_run:
         write_run_marker(folder, finished=True)
     return path

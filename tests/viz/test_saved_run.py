@@ -163,3 +163,21 @@ def test_a_ctrl_c_is_one_line_and_exit_130_not_a_traceback(tmp_path, capsys, mon
     assert err.startswith("interrupted: viz.saved_run stopped")
     assert len(err.strip().splitlines()) == 1
     assert not (folder / "recording.rrd").exists()
+
+
+def test_a_ctrl_c_after_the_recording_is_written_names_it(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while 'wrote …' is printed: the recording is in place, whole, and the
+    interrupt line says so instead of 'nothing was written or replaced'."""
+    import viz.saved_run
+
+    folder = _save(make_record(), tmp_path / "run")
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(viz.saved_run, "print", interrupted, raising=False)
+    assert main([str(folder)]) == 130
+    err = capsys.readouterr().err
+    assert err == (f"interrupted: viz.saved_run stopped; already in place, complete: "
+                   f"{str(folder / 'recording.rrd')!r}\n")
+    assert count_strips(folder / "recording.rrd", "world/links/deleted") == N_DELETED
