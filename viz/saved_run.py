@@ -18,15 +18,20 @@ computed, and what the folder does not hold is left out of the recording:
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-from pathlib import Path
+if __name__ == "__main__":  # run as a program: a Ctrl-C while the libraries load is one line
+    from pipeline.__main__ import exit_quietly_on_interrupt
 
-import numpy as np
+    exit_quietly_on_interrupt("viz.saved_run")
 
-from pipeline.errors import InputError
-from pipeline.types import Features, RunRecord, View
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from pipeline.errors import InputError  # noqa: E402
+from pipeline.types import Features, RunRecord, View  # noqa: E402
 
 __all__ = ["read_run_folder", "log_run_folder", "main"]
 

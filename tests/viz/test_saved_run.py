@@ -181,3 +181,20 @@ def test_a_ctrl_c_after_the_recording_is_written_names_it(tmp_path, capsys, monk
     assert err == (f"interrupted: viz.saved_run stopped; already in place, complete: "
                    f"{str(folder / 'recording.rrd')!r}\n")
     assert count_strips(folder / "recording.rrd", "world/links/deleted") == N_DELETED
+
+
+def test_a_ctrl_c_while_the_libraries_load_is_one_line_and_exit_130(tmp_path):
+    """Run as a program, a Ctrl-C before main (here: raised by the import of NumPy, a
+    stand-in module first on the path) ends with the one line, no traceback."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    (tmp_path / "numpy.py").write_text("raise KeyboardInterrupt\n")
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(root)])}
+    out = subprocess.run([sys.executable, "-m", "viz.saved_run", str(tmp_path / "run")],
+                         cwd=root, capture_output=True, text=True, env=env)
+    assert out.stderr == "interrupted: viz.saved_run stopped, nothing was written or replaced\n"
+    assert out.returncode == 130
