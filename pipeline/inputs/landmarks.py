@@ -241,16 +241,25 @@ def _first_bad_line(path: Path) -> str:
 
 
 
-def _refuse_partly_named(directory: Path, images: list[Path], paired: list[Path],
-                         stems: set[str], kind: str, pattern: str) -> None:
-    """InputError when files paired by name order (``paired[i]`` with ``images[i]``) are named
-    after some images but an image without a file of its name is given another one: it would
-    take another image's file (e.g. ``v3.txt`` renamed ``labels.txt``); order is for folders
-    whose files are named after no image."""
-    named = [im for im in images if im.stem in stems]
+def _refuse_order_mismatch(directory: Path, images: list[Path], paired: list[Path],
+                           own: dict[str, Path], kind: str, pattern: str) -> None:
+    """InputError when files paired by name order (``paired[i]`` with ``images[i]``) would give
+    an image another file than its own: an image whose file of its name (``own``, by stem) is
+    passed over, or, where some files are named after images, an image without one that takes
+    another image's file (e.g. ``v3.txt`` renamed ``labels.txt``). Order is for folders whose
+    files are named after no image."""
+    clash = next(((im, p) for im, p in zip(images, paired, strict=True)
+                  if im.stem in own and p.stem != im.stem), None)
+    if clash is not None:
+        im, p = clash
+        raise InputError(f"{directory}: {im.name} has the {kind} file {own[im.stem].name} by "
+                         f"name, but not every image has one of its name, so they pair by name "
+                         f"order, which gives it {p.name}; name every {kind} file after its "
+                         f"image ({pattern}), or none")
+    named = [im for im in images if im.stem in own]
     if not named:
         return
-    im, p = next((im, p) for im, p in zip(images, paired, strict=True) if im.stem not in stems)
+    im, p = next((im, p) for im, p in zip(images, paired, strict=True) if im.stem not in own)
     raise InputError(f"{directory}: {im.name} has no {kind} file of its name, but "
                      f"{len(named)} other image(s) have one (e.g. {named[0].name}), so they "
                      f"pair by name order, which gives it {p.name}; name every {kind} file "
@@ -358,16 +367,9 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     elif len(kp_files) == len(images):
         pairing = "order"
         kps = kp_files
-        clash = next(((im, p) for im, (p, _) in zip(images, kps, strict=True)
-                      if im.stem in by_stem and p.stem != im.stem), None)
-        if clash is not None:
-            im, p = clash
-            raise InputError(f"{directory}: {im.name} has the keypoint file "
-                             f"{by_stem[im.stem][0].name} by name, but not every image has one "
-                             f"of its name, so they pair by name order, which gives it {p.name}; "
-                             "name every keypoint file after its image (NAME.txt), or none")
-        _refuse_partly_named(directory, images, [p for p, _ in kps], set(by_stem), "keypoint",
-                             "NAME.txt")
+        _refuse_order_mismatch(directory, images, [p for p, _ in kps],
+                               {stem: p for stem, (p, _) in by_stem.items()}, "keypoint",
+                               "NAME.txt")
     else:
         named = [rejected[im.stem] for im in images
                  if im.stem not in by_stem and im.stem in rejected]
@@ -414,17 +416,8 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                           "descriptor")
         elif len(desc_files) == len(images):
             dfiles = desc_files
-            clash = next(((im, dp) for im, dp in zip(images, dfiles, strict=True)
-                          if im.stem in by_stem_d and dp.stem != im.stem), None)
-            if clash is not None:
-                im, dp = clash
-                raise InputError(f"{directory}: {im.name} has the descriptor file "
-                                 f"{by_stem_d[im.stem].name} by name, but not every image has "
-                                 f"one of its name, so they pair by name order, which gives it "
-                                 f"{dp.name}; name every descriptor file after its image "
-                                 "(NAME.scf), or none")
-            _refuse_partly_named(directory, images, dfiles, set(by_stem_d), "descriptor",
-                                 "NAME.scf")
+            _refuse_order_mismatch(directory, images, dfiles, by_stem_d, "descriptor",
+                                   "NAME.scf")
         else:
             raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
                              f"(found {len(desc_files)} for {len(images)} images); or use "
