@@ -55,10 +55,6 @@ def _last_word(program: str, exc_type, exc, tb) -> None:
     sys.__excepthook__(exc_type, exc, tb)
 
 
-def _uncaught(exc_type, exc, tb) -> None:
-    _last_word("formation-match", exc_type, exc, tb)
-
-
 def exit_quietly_on_interrupt(program: str) -> None:
     """Make a Ctrl-C that escapes ``program``'s main, however early (while its libraries
     load), end it as this program's does: one line naming ``program``, exit 130. For the
@@ -67,7 +63,7 @@ def exit_quietly_on_interrupt(program: str) -> None:
 
 
 if __name__ == "__main__":  # run as a program: from here on, before the imports below
-    sys.excepthook = _uncaught
+    exit_quietly_on_interrupt("formation-match")
 
 import argparse  # noqa: E402
 import atexit  # noqa: E402
@@ -265,7 +261,7 @@ def entry() -> None:
     cProfile``, coverage), which writes its data afterwards, and any thread of the program
     that is not a daemon, which the normal exit waits for.
     """
-    sys.excepthook = _uncaught  # a Ctrl-C that escapes main (module notes)
+    exit_quietly_on_interrupt("formation-match")  # a Ctrl-C that escapes main (module notes)
     code = main()
     others = [t for t in threading.enumerate()
               if t is not threading.main_thread() and not t.daemon]
