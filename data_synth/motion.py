@@ -40,6 +40,7 @@ from data_synth import check_int, formation_setup
 from data_synth.formations import Formation
 from data_synth.renderer import render_view
 from data_synth.scene import build_scene
+from pipeline.budget import BYTES_PER_FRAME_PIXEL
 from pipeline.errors import InputError
 from pipeline.types import View
 
@@ -87,10 +88,6 @@ def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
-#: bytes every rendered frame holds per pixel (its uint8 RGB image and float32 depth)
-FRAME_BYTES_PER_PIXEL = 7
-
-
 def _physical_memory() -> int:
     """This machine's memory in bytes (a frame count beyond it can never be rendered)."""
     import os
@@ -133,7 +130,7 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
         raise InputError(f"switching {switching!r}: expected True or False")
     name, kind, n, (W, H), centres, poses, edges, K = formation_setup(formation, seed, size, n_robots,
                                                              graph)
-    held = steps * n * W * H * FRAME_BYTES_PER_PIXEL
+    held = steps * n * W * H * BYTES_PER_FRAME_PIXEL
     if held > _physical_memory():
         raise InputError(f"steps {steps}: {steps * n} frames of {W}x{H} would hold about "
                          f"{held / 1e9:.3g} GB, more than this machine's memory; fewer steps, "
