@@ -28,7 +28,7 @@ from __future__ import annotations
 import sys
 
 __all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
-           "exit_status"]
+           "merge_radius_why", "exit_status"]
 
 #: Exit code of a run whose written result still holds conflictive sets.
 EXIT_NOT_CONFLICT_FREE = 3
@@ -44,6 +44,15 @@ REVERSED_P = 1e-3
 
 #: why an input may hold no link, by default (runs that match images)
 NO_LINKS_WHY = "images too small, too few features, or no overlap between neighbours"
+
+
+def merge_radius_why(radius: float | None, size: tuple[int, int]) -> str:
+    """The clause a ``no-links`` warning adds when ``--merge-radius`` is wide enough (a tenth
+    of the image's shorter side or more, e.g. ``--merge-radius 1000``) to have merged each
+    image's keypoints into a few features; ``""`` otherwise."""
+    if radius is None or radius < 0.1 * min(size):
+        return ""
+    return f", or a --merge-radius of {radius:g} px merging each image's keypoints"
 
 
 def flag_result(report: dict, names: list[str] | None = None,

@@ -19,7 +19,7 @@ import numpy as np
 from pipeline.association import AssociationGraph
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.faults import FaultConfig
-from pipeline.outcome import NO_LINKS_WHY, flag_result
+from pipeline.outcome import NO_LINKS_WHY, flag_result, merge_radius_why
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.stages import CleaningResult, consistency_stage, evidence_inputs
@@ -129,11 +129,8 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     if fused_errors is not None:
         report["fusion"].update(fused_errors)
 
-    why = NO_LINKS_WHY
-    radius = config.merge_radius
-    if radius is not None and radius >= 0.1 * min(config.size):  # e.g. --merge-radius 1000
-        why += f", or a --merge-radius of {radius:g} px merging each image's keypoints"
-    flag_result(report, [v.name for v in views], no_links_why=why)
+    flag_result(report, [v.name for v in views],
+                no_links_why=NO_LINKS_WHY + merge_radius_why(config.merge_radius, config.size))
     md = sections.report_markdown(report)
     _write(out, config, report, md, views, feats, ledger, tri_after, gt_points,
            cleaning.fused_points, timer)

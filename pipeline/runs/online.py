@@ -404,7 +404,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "versions": versions(),
         "config": {**asdict(config), "out": str(config.out_dir())},
     }
-    from pipeline.outcome import flag_online
+    from pipeline.outcome import flag_online, merge_radius_why
 
     if config.switching and not any(len(s.get("comm_edges", ())) for s in report["steps"]):
         # no frame had a neighbour to match: the drawn graphs, not the images, are the cause
@@ -412,6 +412,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                f"{len(run.steps)} step(s) (drawn from --seed); more --steps, or another --seed")
     else:
         why = ("frames too small, too few features, or no overlap between the robots' views"
+               + merge_radius_why(config.merge_radius, config.size)
                + (f"; at --speed {config.speed:g} m per step the formation may have left the "
                   "scene" if config.speed else ""))
     return flag_online(report, why)

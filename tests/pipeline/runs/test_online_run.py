@@ -131,6 +131,19 @@ def test_a_run_without_any_link_is_warned(tmp_path, capsys):
     assert "--speed 100 m per step" in report["warnings"][0]["message"]
 
 
+def test_no_link_because_of_a_wide_merge_radius_names_the_radius(tmp_path, capsys):
+    """--merge-radius 1000 merges each frame's keypoints into one feature, so nothing links:
+    the warning named the images and the speed only, where a batch run names the radius."""
+    out = tmp_path / "merged"
+    assert main(["run-formation", "--steps", "2", "--merge-radius", "1000", "--no-fusion",
+                 "--no-rerun", "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["final"]["links"] == 0
+    message = report["warnings"][0]["message"]
+    assert "a --merge-radius of 1000 px merging each image's keypoints" in message
+    assert message in capsys.readouterr().err
+
+
 def test_no_link_because_the_switching_graph_had_no_edge_names_the_graph(tmp_path, capsys):
     """Two robots, one step, and the drawn graph of that step has no edge up: nothing could
     be matched, and the warning blamed the images and the speed instead of the graph."""
