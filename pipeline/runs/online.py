@@ -326,7 +326,9 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             records.append(rec)
             if on_step is not None:
                 on_step(rec)
-            timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut, "
+            # the fusion's cuts are links cut at this step too (links.csv, link_steps.csv)
+            by_fusion = f", {rec['fusion']['cut']} cut by fusion" if fusion else ""
+            timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut{by_fusion}, "
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "
                        f"{rec['wall_s']:.3f} s")

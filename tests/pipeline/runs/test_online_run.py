@@ -158,6 +158,23 @@ def test_no_link_because_the_switching_graph_had_no_edge_names_the_graph(tmp_pat
     assert "--speed" not in message and message in capsys.readouterr().err
 
 
+def test_each_step_line_counts_the_links_fusion_cut(tmp_path, capsys):
+    """A step's line said "0 cut" where fusion had cut 12 links at that step (links.csv and
+    link_steps.csv count them): it now names the fusion's cuts beside the stage's."""
+    out = tmp_path / "fused"
+    assert main(["run-formation", "--steps", "2", "--resolution", "paper", "--no-rerun",
+                 "--out", str(out), *FAST]) == 0
+    report = json.loads((out / "report.json").read_text())
+    with open(out / "link_steps.csv", newline="") as f:
+        cut_at = [r["step_cut"] for r in csv.DictReader(f)]
+    err = capsys.readouterr().err
+    assert sum(s["fusion"]["cut"] for s in report["steps"]) > 0
+    for s in report["steps"]:
+        t, stage, fused = s["step"], s["cut"], s["fusion"]["cut"]
+        assert stage + fused == cut_at.count(str(t))
+        assert f"step {t}: {s['links_new']} new links, {stage} cut, {fused} cut by fusion, " in err
+
+
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
