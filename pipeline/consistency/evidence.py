@@ -77,7 +77,7 @@ from pipeline.consistency.robot import Robot
 from pipeline.transport import Message, Transport
 
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common_features",
-           "node_cameras", "distinct_cameras", "one_point", "start_evidence",
+           "node_cameras", "distinct_cameras", "one_point", "far_point", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round", "evidence_done",
            "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "set_geometry",
@@ -258,10 +258,30 @@ def distinct_cameras(e: np.ndarray, cam: np.ndarray, E: int) -> np.ndarray:
     return np.bincount(pairs // C, minlength=E).astype(np.int64)
 
 
+def far_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
+    """Whether a point far along the observations' rays fits them: ``kp (T, k, 2)``,
+    ``P (T, k, 3, 4)`` -> ``(T,)`` bool, the point at infinity in the mean direction of the
+    ``k`` rays (each in front of its camera) in front of every camera and within ``tol`` px of
+    each observation.
+
+    The DLT point alone misses it where the rays barely diverge: cameras with one centre (a
+    robot standing still, ``run-formation --steps --speed 0``) put that centre in the
+    system's null space, and noise on a baseline of millimetres puts the least-squares point
+    behind the cameras; the observations are one point all the same, a distant one."""
+    M = P[..., :3]
+    h = np.concatenate([kp, np.ones(kp.shape[:-1] + (1,))], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ray = np.einsum("tkij,tkj->tki", np.linalg.pinv(M), h)  # M @ ray = h: depth 1, in front
+        ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+        p = np.einsum("tkij,tj->tki", M, ray.mean(axis=1))
+        err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
+    return (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
+
+
 def one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     """:func:`_consistent` on a stack of observation triples: ``kp (T, 3, 2)``,
     ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three cameras and
-    within ``tol`` px of each observation."""
+    within ``tol`` px of each observation, or else the :func:`far_point`."""
     A = np.empty((len(kp), 6, 4))
     A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
     A[:, 1::2] = kp[:, :, 1:] * P[:, :, 2] - P[:, :, 1]
@@ -271,11 +291,15 @@ def one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     p = np.einsum("tkij,tj->tki", P, X)
     with np.errstate(divide="ignore", invalid="ignore"):
         err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
-    return fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
+    ok = fin & (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
+    if not ok.all():
+        ok[~ok] = far_point(kp[~ok], P[~ok], tol)
+    return ok
 
 
 def _consistent(members: list[int], kp: dict, P: dict, tol: float) -> bool:
-    """DLT point of the observations ``members`` in front of all and within ``tol`` px."""
+    """DLT point of the observations ``members`` in front of all and within ``tol`` px, or
+    else the :func:`far_point` of their rays."""
     A = np.empty((2 * len(members), 4))
     for k, g in enumerate(members):
         x, y = kp[g]
@@ -283,14 +307,16 @@ def _consistent(members: list[int], kp: dict, P: dict, tol: float) -> bool:
         A[2 * k] = x * Pg[2] - Pg[0]
         A[2 * k + 1] = y * Pg[2] - Pg[1]
     X = np.linalg.svd(A, full_matrices=False)[2][-1]  # V only: U of a long track is (2k, 2k)
-    if abs(X[3]) < 1e-12:
-        return False
-    X = X / X[3]
-    for g in members:
-        p = P[g] @ X
-        if p[2] <= 0 or np.hypot(p[0] / p[2] - kp[g][0], p[1] / p[2] - kp[g][1]) > tol:
-            return False
-    return True
+    if abs(X[3]) >= 1e-12:
+        X = X / X[3]
+        if all(_reprojects(P[g] @ X, kp[g], tol) for g in members):
+            return True
+    return bool(far_point(np.array([[kp[g] for g in members]], dtype=np.float64),
+                          np.array([[P[g] for g in members]], dtype=np.float64), tol)[0])
+
+
+def _reprojects(p: np.ndarray, xy, tol: float) -> bool:
+    return bool(p[2] > 0 and np.hypot(p[0] / p[2] - xy[0], p[1] / p[2] - xy[1]) <= tol)
 
 
 def evidence_cut(a, b, cam_a, cam_b, weight, keypoints: dict | None = None,

@@ -59,14 +59,22 @@ def components(gid_a, gid_b, n_features) -> np.ndarray:
 def one_point(xy, P, tol_px: float = TOL_PX) -> bool:
     """Observations ``xy`` (k, 2) through cameras ``P`` (k, 3, 4) are one point: the
     least-squares solution of their rays (``x × P X = 0``, all rows at once) is finite, lies
-    in front of each camera and reprojects within ``tol_px`` of each observation."""
+    in front of each camera and reprojects within ``tol_px`` of each observation; or else the
+    point at infinity in the mean direction of their unit rays does (a distant point: rays
+    from one camera centre, or from centres millimetres apart)."""
     xy, P = np.asarray(xy, dtype=np.float64), np.asarray(P, dtype=np.float64)
+
+    def fits(p) -> bool:  # p (k, 3): the point's image in each camera
+        return bool((p[:, 2] > 0).all()
+                    and (np.hypot(*(p[:, :2] / p[:, 2:] - xy).T) <= tol_px).all())
+
     rows = np.concatenate([xy[:, :1] * P[:, 2] - P[:, 0], xy[:, 1:] * P[:, 2] - P[:, 1]])
     X = np.linalg.svd(rows)[2][-1]
-    if abs(X[3]) < 1e-12:
-        return False
-    p = P @ (X / X[3])                                                        # (k, 3)
-    return bool((p[:, 2] > 0).all() and (np.hypot(*(p[:, :2] / p[:, 2:] - xy).T) <= tol_px).all())
+    if abs(X[3]) >= 1e-12 and fits(P @ (X / X[3])):
+        return True
+    rays = [np.linalg.solve(Pk[:, :3], [x, y, 1.0]) for Pk, (x, y) in zip(P, xy, strict=True)]
+    d = np.mean([r / np.linalg.norm(r) for r in rays], axis=0)
+    return fits(P[:, :, :3] @ d)
 
 
 def set_observations(gids, fpc, keypoints, projections):
@@ -610,3 +618,35 @@ def test_components_of_result_hold_each_camera_once():
     _, lab = connected_components(AssociationGraph(fpc, res.kept()).adjacency(), directed=False)
     cam = np.repeat(np.arange(len(fpc)), fpc)
     assert np.unique(np.stack([lab, cam], 1), axis=0).shape[0] == lab.size
+
+
+# a camera K [R | t]; the same one twice is a robot that stood still between two frames
+_K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+_R = np.array([[math.cos(0.3), 0, math.sin(0.3)], [0, 1, 0], [-math.sin(0.3), 0, math.cos(0.3)]])
+_STILL = _K @ np.c_[_R, [-1.0, 0.0, 2.0]]
+
+
+@pytest.mark.parametrize("dx", [0.3, 0.5, -0.7, 1.0])
+def test_two_frames_of_one_pose_keep_their_link(dx):
+    """Two observations within 1 px through one camera pose (run-formation --steps --speed 0)
+    are one point: the DLT point of a shared centre is that centre, and the merge's test
+    refused such links by the sign of rounding noise (44 good links of one robot's two frames
+    cut in a 3-robot run); a point far along the ray fits them."""
+    kp = {0: np.array([300.0, 200.0]), 1: np.array([300.0 + dx, 200.2])}
+    P = {0: _STILL, 1: _STILL}
+    assert not evidence_cut([0], [1], [0], [1], [1.0], kp, P).any()
+
+
+def test_three_frames_of_one_pose_support_each_other():
+    """A triangle of three frames of one pose (feature k in frame k) counts for each of its
+    links: its three observations are one point, a distant one."""
+    kp = {0: np.array([300.0, 200.0]), 1: np.array([300.5, 200.2]), 2: np.array([299.6, 199.8])}
+    P = dict.fromkeys(kp, _STILL)
+    a, b = np.array([0, 0, 1]), np.array([1, 2, 2])
+    assert triangle_support(a, b, lambda z: z, kp, P).tolist() == [1, 1, 1]
+
+
+def test_two_frames_of_one_pose_still_refute_a_wrong_match():
+    """The far point fits rays that agree: 20 px apart through one pose is no point."""
+    kp = {0: np.array([300.0, 200.0]), 1: np.array([320.0, 200.0])}
+    assert evidence_cut([0], [1], [0], [1], [1.0], kp, {0: _STILL, 1: _STILL}).tolist() == [True]

@@ -175,6 +175,22 @@ def test_each_step_line_counts_the_links_fusion_cut(tmp_path, capsys):
         assert f"step {t}: {s['links_new']} new links, {stage} cut, {fused} cut by fusion, " in err
 
 
+def test_a_still_formation_keeps_the_good_links_between_a_robots_frames(tmp_path):
+    """--speed 0: each robot sees its scene from one pose at every step. The evidence rule's
+    geometric test refused two observations through one pose by rounding noise, and cut 44
+    good links between a robot's two frames (3 robots, 2 steps); none is cut now."""
+    out = tmp_path / "still"
+    assert main(["run-formation", "--steps", "2", "--speed", "0", "--robots", "3", "--graph",
+                 "line", "--size", "160x120", "--max-features", "100", "--no-rerun",
+                 "--out", str(out)]) == 0
+    with open(out / "images.csv", newline="") as f:
+        robot = {int(r["image"]): r["robot"] for r in csv.DictReader(f)}
+    with open(out / "links.csv", newline="") as f:
+        own = [r for r in csv.DictReader(f) if robot[int(r["cam_i"])] == robot[int(r["cam_j"])]]
+    assert own and all(r["truth"] == "1" for r in own)
+    assert [r for r in own if r["status"] == "deleted"] == []
+
+
 def test_online_kept_at_an_earlier_step_is_what_that_step_kept():
     from pipeline.runs.online import OnlineConfig, run_online_steps
 
