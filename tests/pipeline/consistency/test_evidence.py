@@ -59,9 +59,9 @@ def components(gid_a, gid_b, n_features) -> np.ndarray:
 def one_point(xy, P, tol_px: float = TOL_PX) -> bool:
     """Observations ``xy`` (k, 2) through cameras ``P`` (k, 3, 4) are one point: the
     least-squares solution of their rays (``x × P X = 0``, all rows at once) is finite, lies
-    in front of each camera and reprojects within ``tol_px`` of each observation; or else the
-    point at infinity in the mean direction of their unit rays does (a distant point: rays
-    from one camera centre, or from centres millimetres apart)."""
+    in front of each camera and reprojects within ``tol_px`` of each observation; or else, for
+    cameras of one centre, the point at infinity in the mean direction of their unit rays
+    does (rays from one centre carry no depth)."""
     xy, P = np.asarray(xy, dtype=np.float64), np.asarray(P, dtype=np.float64)
 
     def fits(p) -> bool:  # p (k, 3): the point's image in each camera
@@ -72,6 +72,10 @@ def one_point(xy, P, tol_px: float = TOL_PX) -> bool:
     X = np.linalg.svd(rows)[2][-1]
     if abs(X[3]) >= 1e-12 and fits(P @ (X / X[3])):
         return True
+    centres = [-np.linalg.solve(Pk[:, :3], Pk[:, 3]) for Pk in P]
+    spread = max(np.linalg.norm(c - centres[0]) for c in centres)
+    if spread > 1e-9 * (1 + np.linalg.norm(centres[0])):
+        return False
     rays = [np.linalg.solve(Pk[:, :3], [x, y, 1.0]) for Pk, (x, y) in zip(P, xy, strict=True)]
     d = np.mean([r / np.linalg.norm(r) for r in rays], axis=0)
     return fits(P[:, :, :3] @ d)
@@ -650,3 +654,15 @@ def test_two_frames_of_one_pose_still_refute_a_wrong_match():
     """The far point fits rays that agree: 20 px apart through one pose is no point."""
     kp = {0: np.array([300.0, 200.0]), 1: np.array([320.0, 200.0])}
     assert evidence_cut([0], [1], [0], [1], [1.0], kp, {0: _STILL, 1: _STILL}).tolist() == [True]
+
+
+def test_far_point_is_for_cameras_of_one_centre():
+    """Cameras with distinct centres keep the DLT test alone: the same two observations that
+    one pose's frames accept through the far point are judged by the DLT point once the
+    second frame moved 1 m (parallel rays: its point is at infinity, refused as before)."""
+    from pipeline.consistency.evidence import far_point
+
+    kp = np.array([[[300.0, 200.0], [300.0, 200.0]]])
+    moved = _K @ np.c_[_R, [-2.0, 0.0, 2.0]]
+    assert far_point(kp, np.array([[_STILL, _STILL]]), TOL_PX).tolist() == [True]
+    assert far_point(kp, np.array([[_STILL, moved]]), TOL_PX).tolist() == [False]
