@@ -107,15 +107,18 @@ def _camera_key(cam: pycolmap.Camera) -> tuple:
             tuple(float(p) for p in cam.params), bool(cam.has_prior_focal_length))
 
 
-def _write_image_with_trivial_rig(db, view: View, shared: dict | None = None) -> int:
+def _write_image_with_trivial_rig(db, view: View, shared: dict | None = None,
+                                  file_size: tuple[int, int] | None = None) -> int:
     """Camera, one-sensor rig, image and frame, as COLMAP's feature extractor writes them.
 
-    ``shared`` maps a camera (model, size, parameters) to its ``(camera_id, rig_id)``: images
-    with identical intrinsics share one camera and its rig (COLMAP's ``single_camera``), so
-    one K (e.g. a K.txt) is one camera in the database and in ``sparse/``.
+    ``shared`` maps a camera (model, size, parameters) and ``file_size`` to its
+    ``(camera_id, rig_id)``: images with identical intrinsics share one camera and its rig
+    (COLMAP's ``single_camera``), so one K (e.g. a K.txt) is one camera in the database and in
+    ``sparse/``; images downscaled from files of different sizes do not (a camera is scaled
+    back to its files by one factor, :func:`rescale_database`).
     """
     cam = _camera(view)
-    key = _camera_key(cam)
+    key = (_camera_key(cam), file_size)
     if shared is not None and key in shared:
         camera_id, rig_id = shared[key]
         sensor = pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=camera_id)
@@ -187,7 +190,8 @@ def _pairs_by_edge(links: Links) -> dict[tuple[int, int], np.ndarray]:
 
 
 def write_database(path: str | Path, views: list[View], features: list[Features], links: Links,
-                   keep: np.ndarray | None = None) -> Path:
+                   keep: np.ndarray | None = None,
+                   file_sizes: list[tuple[int, int]] | None = None) -> Path:
     """Write views, keypoints and links as a new COLMAP database.
 
     Parameters
@@ -199,6 +203,9 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
     links : Links, (L,) — written to the ``matches`` table
     keep : ndarray, (L,) bool or None — links written as two-view-geometry inliers (``None``:
         all). ``keep = ~deleted`` gives the database of the cleaned association.
+    file_sizes : list of (width, height), (n,), or None — the size of each view's image file
+        when the views are downscaled copies: views of files of different sizes never share a
+        camera
 
     Returns
     -------
@@ -220,7 +227,9 @@ def write_database(path: str | Path, views: list[View], features: list[Features]
         raise InputError(f"write_database: keep has shape {keep.shape}, expected ({len(links)},)")
     with _atomic_database(path) as tmp, quiet_colmap(), pycolmap.Database.open(tmp) as db:
         shared: dict = {}
-        image_ids = [_write_image_with_trivial_rig(db, v, shared) for v in views]
+        sizes = [None] * len(views) if file_sizes is None else [tuple(s) for s in file_sizes]
+        image_ids = [_write_image_with_trivial_rig(db, v, shared, size)
+                     for v, size in zip(views, sizes, strict=True)]
         for image_id, f in zip(image_ids, features, strict=True):
             kp = np.asarray(f.keypoints, dtype=np.float32).reshape(-1, 2)
             db.write_keypoints(image_id, kp + np.float32(COLMAP_PIXEL_OFFSET))

@@ -221,7 +221,11 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
         # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed
         # focal lengths are refined
         fixed = [v.name for v in views if colmap.calibrated(v)]
-        db_before = colmap.write_database(work / "before.db", views, feats, links)
+        # views downscaled from files of different sizes are not one camera: sparse/ and
+        # database.db scale each camera back to its files by one factor
+        file_sizes = list(_file_sizes(views, Path(config.directory)).values())
+        db_before = colmap.write_database(work / "before.db", views, feats, links,
+                                          file_sizes=file_sizes)
         # COLMAP's mapper releases the GIL: the reconstruction before cleaning runs in a
         # thread while this one runs what needs only the links (the consistency stage, the
         # report's centralized baselines); fusion waits for its poses
@@ -250,7 +254,8 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
             _fuse_registered(cleaning, views, feats, comm_edges, map_before, timer)
         kept = cleaning.ledger.kept
         with timer.stage("reconstruction-after", _AFTER[_after_mode(config, kept, map_before)]):
-            db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept)
+            db_after = colmap.write_database(work / "database.db", views, feats, links, keep=kept,
+                                             file_sizes=file_sizes)
             map_after = _map_after(config, kept, db_after, map_before, fixed)
             timer.note(_mapping_note(map_after))
 
