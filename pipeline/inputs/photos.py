@@ -327,7 +327,7 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(f"intrinsics file {str(path)!r} does not exist")
     try:
-        text = path.read_text(encoding="utf-8", errors="strict")
+        text = path.read_text(encoding="utf-8-sig", errors="strict")  # a BOM (Notepad) too
     except (UnicodeDecodeError, OSError) as exc:
         raise InputError(f"intrinsics file {str(path)!r} is not a text file ({exc})") from None
     tokens = [t for line in text.splitlines() for t in re.split(r"[\s,;]+", line.split("#")[0]) if t]

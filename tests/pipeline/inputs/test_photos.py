@@ -308,6 +308,14 @@ def test_k_txt_four_numbers_and_comments(tmp_path):
     assert np.allclose(read_k_txt(k), [[500, 0, 320], [0, 510, 240], [0, 0, 1]])
 
 
+def test_k_txt_saved_with_a_byte_order_mark(tmp_path):
+    """Windows Notepad's "UTF-8 with BOM": the mark was read as part of fx, and the file
+    refused as "'\\ufeff2905' is not a number"."""
+    k = tmp_path / "K.txt"
+    k.write_bytes(b"\xef\xbb\xbf2905 0 1416\r\n0 2905 1064\r\n0 0 1\r\n")
+    assert np.allclose(read_k_txt(k), [[2905, 0, 1416], [0, 2905, 1064], [0, 0, 1]])
+
+
 def test_k_txt_for_another_resolution(tmp_path):
     d = _folder(tmp_path, {"a.png": Image.fromarray(_texture(40, 50)),
                            "b.png": Image.fromarray(_texture(40, 50))})
