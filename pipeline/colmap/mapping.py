@@ -456,10 +456,57 @@ def write_model_for_files(path: str | Path, reconstruction, sizes: dict[str, tup
         return path
     full = pycolmap.Reconstruction(str(path))
     rescale_to_files(full, sizes)
-    with quiet_colmap():
-        full.extract_colors_for_all_images(str(image_dir))
+    _extract_colors(full, image_dir)
     full.write(path)
     return path
+
+
+def _extract_colors(rec, image_dir: str | Path) -> None:
+    """Colour each point of ``rec`` in place with the mean of the file's pixel (bilinear, at
+    ``xy - 0.5``: COLMAP's pixel centres) over its observations in the registered images, as
+    ``Reconstruction.extract_colors_for_all_images`` does, but with the files decoded as
+    run-images decodes them (:func:`pipeline.inputs.photos.load_image`): COLMAP's own reader
+    cannot read WebP and left every point of a WebP folder black. A point seen by no readable
+    pixel is black."""
+    from pipeline.inputs.photos import load_image
+
+    sums: dict[int, np.ndarray] = {}
+    counts: dict[int, int] = {}
+    for image_id in rec.reg_image_ids():
+        image = rec.images[image_id]
+        observed = [(p.point3D_id, p.xy) for p in image.points2D if p.has_point3D()]
+        if not observed:
+            continue
+        pixels, _ = load_image(Path(image_dir) / image.name)
+        h, w = pixels.shape[:2]
+        xy = np.array([q for _, q in observed], dtype=np.float64) - COLMAP_PIXEL_OFFSET
+        inside = (xy[:, 0] >= 0) & (xy[:, 1] >= 0) & (xy[:, 0] <= w - 1) & (xy[:, 1] <= h - 1)
+        colours = _bilinear(pixels, np.clip(xy, 0, [w - 1, h - 1]))
+        for (pid, _), colour, ok in zip(observed, colours, inside, strict=True):
+            if ok:
+                sums[pid] = sums.get(pid, 0.0) + colour
+                counts[pid] = counts.get(pid, 0) + 1
+    for pid, point in rec.points3D.items():
+        colour = sums[pid] / counts[pid] if pid in counts else np.zeros(3)
+        point.color = np.clip(np.rint(colour), 0, 255).astype(np.uint8)
+
+
+def _bilinear(pixels: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(N, 3) float64: ``pixels`` (H, W, 3) RGB or (H, W) gray interpolated at the N points
+    ``xy`` (inside the image); only the pixels sampled are converted, not the image."""
+    h, w = pixels.shape[:2]
+    x0 = np.floor(xy[:, 0]).astype(np.int64)
+    y0 = np.floor(xy[:, 1]).astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    dx, dy = (xy[:, 0] - x0)[:, None], (xy[:, 1] - y0)[:, None]
+
+    def px(y, x):
+        v = pixels[y, x].astype(np.float64)
+        return v if v.ndim == 2 else v[:, None]
+
+    out = ((1 - dx) * (1 - dy) * px(y0, x0) + dx * (1 - dy) * px(y0, x1)
+           + (1 - dx) * dy * px(y1, x0) + dx * dy * px(y1, x1))
+    return np.broadcast_to(out, (len(xy), 3))
 
 
 def read_model(path: str | Path):
