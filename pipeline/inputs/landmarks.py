@@ -122,9 +122,24 @@ def _read_txt_keypoints(path: Path) -> np.ndarray | None:
 
 def _txt_problem(path: Path) -> str | None:
     """Why a text file that is mostly a keypoint table is not one: its first line that is not
-    two numbers, when an earlier line is (``None`` for any other file, e.g. a README)."""
+    two numbers, when an earlier line is, or when two or more lines are rows of numbers (a
+    header line, a third column) (``None`` for any other file, e.g. a README)."""
+    from pipeline.inputs.csvfields import text_lines
+
     rows, bad = _parse_txt_keypoints(path)
-    return bad if rows else None
+    if rows or bad is None:
+        return bad
+    numeric = 0
+    for _, line in text_lines(path, "label file"):
+        toks = line.split("#", 1)[0].replace(",", " ").split()
+        try:
+            vals = [float(t) for t in toks]
+        except ValueError:
+            continue
+        numeric += len(vals) >= 2
+        if numeric >= 2:
+            return bad
+    return None
 
 
 def _why_not_table(path: Path) -> str:
