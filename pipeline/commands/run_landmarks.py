@@ -12,6 +12,7 @@ from pipeline.errors import InputError
 from pipeline.runs.landmarks import (
     REFINEMENTS,
     LandmarksConfig,
+    default_refinement,
     landmarks_markdown,
     run_landmarks,
 )
@@ -55,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="epipolar (default): after the assignment, fit a fundamental matrix by "
                         "RANSAC and assign again within the epipolar band (guided matching); "
                         "none: descriptors only (the input CLEAR is benchmarked on)")
-    p.add_argument("--epipolar-px", type=float, default=3.0, metavar="PX",
+    p.add_argument("--epipolar-px", type=float, default=None, metavar="PX",
                    help="Sampson error bound of --geometry epipolar (default 3 px: hand-labelled "
                         "positions)")
     p.add_argument("--refine", default=None, choices=REFINEMENTS,
@@ -63,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "neighbours until a fixed point; none: use the matches as they are "
                         "(default: none for a rule that weighs the links' cycles itself, sync "
                         "and evidence; votes for paper and paper-labels)")
-    p.add_argument("--vote-iterations", type=int, default=10, metavar="N",
+    p.add_argument("--vote-iterations", type=int, default=None, metavar="N",
                    help="cap on the vote iterations (two rounds each; default 10)")
     from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, RULES
 
@@ -77,13 +78,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run folder (default runs/landmarks-<DIR name>[-fN]-<graph>)")
 
 
+def _refuse_unused_options(args) -> None:
+    """InputError when ``--epipolar-px`` or ``--vote-iterations`` is given to a run whose
+    matching or refinement does not read it (it would be ignored without a word); a bad
+    value is named first (:func:`pipeline.runs.landmarks.run_landmarks`)."""
+    px, votes = args.epipolar_px, args.vote_iterations
+    if (px is not None and not 0 < px < float("inf")) or (votes is not None and votes < 1):
+        return
+    if args.epipolar_px is not None and args.geometry != "epipolar":
+        raise InputError(f"--epipolar-px applies to --geometry epipolar only (this run has "
+                         f"--geometry {args.geometry}); drop it")
+    refine = args.refine or default_refinement(args.resolution)
+    if args.vote_iterations is not None and refine != "votes":
+        why = "" if args.refine else f", the default of --resolution {args.resolution}"
+        raise InputError(f"--vote-iterations applies to --refine votes only (this run refines "
+                         f"by {refine}{why}); add --refine votes or drop it")
+
+
 def config_from_args(args) -> LandmarksConfig:
+    _refuse_unused_options(args)
+    given = {k: v for k, v in (("epipolar_px", args.epipolar_px),
+                               ("vote_iterations", args.vote_iterations)) if v is not None}
     return LandmarksConfig(directory=args.directory, graph=args.graph, frames=args.frames,
                            descriptors=args.descriptors, ratio=args.ratio,
-                           geometry=args.geometry, epipolar_px=args.epipolar_px,
-                           refine=args.refine, vote_iterations=args.vote_iterations,
+                           geometry=args.geometry, refine=args.refine,
                            resolution=args.resolution, baselines=not args.no_baselines,
-                           out=args.out)
+                           out=args.out, **given)
 
 
 def run(args) -> int:

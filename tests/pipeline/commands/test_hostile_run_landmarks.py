@@ -206,6 +206,28 @@ def test_a_broken_label_file_paired_by_order_is_named(folder, capsys):
                                           "'12 34 56'")
 
 
+@pytest.mark.parametrize("extra, needle", [
+    (("--geometry", "none", "--epipolar-px", "5"),
+     "--epipolar-px applies to --geometry epipolar only (this run has --geometry none)"),
+    (("--vote-iterations", "3"),
+     "--vote-iterations applies to --refine votes only (this run refines by none, the default "
+     "of --resolution sync)"),
+    (("--resolution", "paper", "--refine", "none", "--vote-iterations", "3"),
+     "--vote-iterations applies to --refine votes only (this run refines by none)"),
+])
+def test_an_option_the_run_would_not_read_is_refused(folder, capsys, extra, needle):
+    """--epipolar-px without epipolar matching and --vote-iterations without the votes were
+    accepted, ignored and recorded in the report's config as if they had acted."""
+    _fails(capsys, _argv(folder, *extra), folder, needle)
+
+
+def test_vote_iterations_with_the_votes_is_used(folder, capsys):
+    assert main(_argv(folder, "--resolution", "paper", "--vote-iterations", "1")) == 0
+    report = json.loads((folder.parent / "run" / "report.json").read_text())
+    assert report["config"]["vote_iterations"] == 1
+    assert report["refinement"]["iterations"] == 1
+
+
 @pytest.mark.parametrize("first_line, needle", [
     ("x y", "line 1 is 'x y'"),
     ("x,y", "line 1 is 'x,y'"),
