@@ -75,7 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-baselines", action="store_true",
                    help="skip the centralized baselines")
     p.add_argument("--out", default=None,
-                   help="run folder (default runs/landmarks-<DIR name>[-fN]-<graph>)")
+                   help="run folder (default runs/landmarks-<DIR name>[-fN]-<graph>; a graph "
+                        "file by its name without suffix)")
 
 
 def _refuse_unused_options(args) -> None:

@@ -92,7 +92,9 @@ class LandmarksConfig:
             return Path(self.out)
         folder = Path(self.directory).resolve().name or "landmarks"
         frames = f"-f{self.frames}" if self.frames else ""
-        return Path("runs") / f"landmarks-{folder}{frames}-{self.graph.replace(':', '')}"
+        # a graph file by its stem, as run-images names it: its path would nest folders
+        graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
+        return Path("runs") / f"landmarks-{folder}{frames}-{graph}"
 
 
 def true_landmark_pairs(features_per_camera, landmarks=None) -> np.ndarray:
