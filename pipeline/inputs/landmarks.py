@@ -123,7 +123,8 @@ def _read_txt_keypoints(path: Path) -> np.ndarray | None:
 def _txt_problem(path: Path) -> str | None:
     """Why a text file that is mostly a keypoint table is not one: its first line that is not
     two numbers, when an earlier line is, or when two or more lines are rows of numbers (a
-    header line, a third column) (``None`` for any other file, e.g. a README)."""
+    header line, a third column, numbers separated by semicolons) (``None`` for any other
+    file, e.g. a README)."""
     from pipeline.inputs.csvfields import text_lines
 
     rows, bad = _parse_txt_keypoints(path)
@@ -131,7 +132,7 @@ def _txt_problem(path: Path) -> str | None:
         return bad
     numeric = 0
     for _, line in text_lines(path, "label file"):
-        toks = line.split("#", 1)[0].replace(",", " ").split()
+        toks = line.split("#", 1)[0].replace(",", " ").replace(";", " ").split()
         try:
             vals = [float(t) for t in toks]
         except ValueError:

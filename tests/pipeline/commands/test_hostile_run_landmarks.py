@@ -232,18 +232,20 @@ def test_vote_iterations_with_the_votes_is_used(folder, capsys):
     ("x y", "line 1 is 'x y'"),
     ("x,y", "line 1 is 'x,y'"),
     (None, "(3 numbers)"),
+    (";", "line 1 is '"),
 ])
 def test_a_label_file_paired_by_order_with_a_header_or_a_third_column_is_named(
         folder, capsys, first_line, needle):
-    """Label files paired by name order whose first line is a header ('x y') or whose rows
-    hold a third column: the file is named with its line (the message said '4 images but 3
-    keypoint files', or '0 keypoint files' when every file had the header)."""
+    """Label files paired by name order whose first line is a header ('x y'), whose rows
+    hold a third column or are 'x;y': the file is named with its line (the message said '4
+    images but 3 keypoint files', or '0 keypoint files' when every file had the header)."""
     for k in range(4):
         (folder / f"v{k}.txt").rename(folder / f"labels{k}.txt")
         (folder / f"v{k}.scf").rename(folder / f"labels{k}.scf")
     (folder / "README.txt").write_text("labelled frames, see the paper\n")
     rows = (folder / "labels1.txt").read_text().splitlines()
-    rows = [first_line, *rows] if first_line else [r + " 1" for r in rows]
+    rows = ([r.replace(" ", ";") for r in rows] if first_line == ";" else
+            [first_line, *rows] if first_line else [r + " 1" for r in rows])
     (folder / "labels1.txt").write_text("\n".join(rows) + "\n")
     _fails(capsys, _argv(folder), folder, "labels1.txt: not a keypoint table", needle)
 
