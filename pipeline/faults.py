@@ -296,10 +296,15 @@ def faults_from_args(args) -> FaultConfig:
     from pipeline.validate import seed as checked_seed
 
     seed = checked_seed(args.fault_seed, "--fault-seed")
-    return FaultConfig(drop_prob=_probability(args.drop_prob),
-                       delay_rounds=_delay(args.delay_rounds),
-                       crash=tuple(parse_crash(c) for c in args.crash),
-                       switching_topology=bool(args.switching_topology), seed=seed)
+    config = FaultConfig(drop_prob=_probability(args.drop_prob),
+                         delay_rounds=_delay(args.delay_rounds),
+                         crash=tuple(parse_crash(c) for c in args.crash),
+                         switching_topology=bool(args.switching_topology), seed=seed)
+    if seed != 0 and not (config.drop_prob > 0 or config.switching_topology):
+        raise InputError(f"--fault-seed {seed}: it seeds the message drops and the switching "
+                         "topology, and this run has neither (it would change nothing); add "
+                         "--drop-prob or --switching-topology, or drop --fault-seed")
+    return config
 
 
 def fault_report(config: FaultConfig, result, fault_free=None) -> dict:

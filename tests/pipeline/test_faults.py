@@ -42,6 +42,20 @@ def test_flags_parse():
     assert cfg.as_dict()["crash"] == ["2@15", "0@4"]
 
 
+@pytest.mark.parametrize("argv", [["--fault-seed", "7"], ["--fault-seed", "7", "--crash", "1@3"],
+                                  ["--fault-seed", "7", "--delay-rounds", "2"]])
+def test_a_fault_seed_with_nothing_random_to_seed_is_refused(argv):
+    """--fault-seed seeds only the drops and the switching topology: without them it was
+    accepted and changed nothing (resolve --crash 3@5 gave one output for every seed)."""
+    with pytest.raises(InputError, match="--fault-seed 7: it seeds the message drops"):
+        parse(argv)
+
+
+def test_a_fault_seed_with_drops_or_switching_is_taken():
+    assert parse(["--fault-seed", "7", "--drop-prob", "0.1"]).seed == 7
+    assert parse(["--fault-seed", "7", "--switching-topology"]).seed == 7
+
+
 @pytest.mark.parametrize("text", ["2", "2@", "@3", "a@3", "2@x", "-1@3", "2@-3", "2@3@4",
                                   "2.5@3", "", "2 3"])
 def test_bad_crash_syntax_is_an_input_error(text):
