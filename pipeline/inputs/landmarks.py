@@ -145,12 +145,22 @@ def _txt_problem(path: Path) -> str | None:
 
 def _why_not_table(path: Path) -> str:
     """What makes a label file of an image no keypoint table, for an error message: its first
-    line that is not two numbers, or that it holds no row (empty, not UTF-8 text, a MAT file
-    without ``pts_coord``)."""
+    line that is not two numbers, that it is not UTF-8 text (UTF-16, binary: the reader's own
+    message, naming the line), or that it holds no row (empty, a MAT file without
+    ``pts_coord``)."""
+    from pipeline.inputs.csvfields import text_lines
+
     if path.suffix.lower() == ".mat":
         return "no readable variable pts_coord"
     rows, bad = _parse_txt_keypoints(path)
-    return bad if bad is not None else "no row of two numbers in it"
+    if bad is not None:
+        return bad
+    try:
+        for _ in text_lines(path, "label file"):
+            pass
+    except InputError as exc:
+        return str(exc)
+    return "no row of two numbers in it"
 
 
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:

@@ -122,6 +122,9 @@ def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
     ("v1.txt", "1 2 3\n" + "1 2\n" * (K - 1), "v1.txt: not a keypoint table"),
     ("v1.txt", "x y\n" + "1 2\n" * (K - 1), "v1.txt: not a keypoint table"),
     ("v1.txt", b"\x00\xff\xfe" * 50, "v1.txt: not a keypoint table"),
+    # a UTF-16 label file was said to hold 'no row of two numbers'
+    ("v1.txt", ("1 2\n" * K).encode("utf-16"), "is not a UTF-8 text file (UTF-16"),
+    ("v1.txt", b"1 2\n\xe9 3\n", "is not a UTF-8 text file ("),
     ("v1.txt", "", "v1.txt: not a keypoint table"),
     ("v1.txt", "1 2\n" * (K - 1), "different numbers of landmarks (v0.txt: 8, v1.txt: 7)"),
     ("v1.scf", ("nan " * 6 + "\n") * K, "v1.scf: descriptor row 1 holds a non-finite value"),
@@ -136,7 +139,7 @@ def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
     ("v1.scf", "1 2 3 4 5 6\n" * (K - 1), "v1.scf: 7 descriptor rows for 8 landmarks"),
     ("v1.scf", "1 2 3\n" * K, "v1.scf: descriptors of 3 values but v0.scf has 6"),
 ], ids=["kp-nan", "kp-all-nan", "kp-inf", "kp-huge", "kp-outside", "kp-3-columns", "kp-text", "kp-binary",
-        "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-text-line-3",
+        "kp-utf16", "kp-latin1", "kp-empty", "kp-fewer-rows", "scf-nan", "scf-inf", "scf-ragged", "scf-text-line-3",
         "scf-binary",
         "scf-empty", "scf-fewer-rows", "scf-other-width"])
 def test_bad_label_or_descriptor_file(folder, capsys, name, content, needle):
