@@ -120,11 +120,12 @@ def _read_txt_keypoints(path: Path) -> np.ndarray | None:
     return np.asarray(rows, dtype=np.float64)
 
 
-def _txt_problem(path: Path) -> str | None:
+def _txt_problem(path: Path, k: int | None = None) -> str | None:
     """Why a text file that is mostly a keypoint table is not one: its first line that is not
-    two numbers, when an earlier line is, or when two or more lines are rows of numbers (a
-    header line, a third column, numbers separated by semicolons) (``None`` for any other
-    file, e.g. a README)."""
+    two numbers, when an earlier line is, or when its rows of numbers (a header line above
+    them, a third column, numbers separated by semicolons) are as many as the other label
+    files' ``k`` (two or more when no label file was read) (``None`` for any other file, e.g.
+    a README or a 3 x 3 homography)."""
     from pipeline.inputs.csvfields import text_lines
 
     rows, bad = _parse_txt_keypoints(path)
@@ -134,13 +135,10 @@ def _txt_problem(path: Path) -> str | None:
     for _, line in text_lines(path, "label file"):
         toks = line.split("#", 1)[0].replace(",", " ").replace(";", " ").split()
         try:
-            vals = [float(t) for t in toks]
+            numeric += len([float(t) for t in toks]) >= 2
         except ValueError:
             continue
-        numeric += len(vals) >= 2
-        if numeric >= 2:
-            return bad
-    return None
+    return bad if (numeric >= 2 if k is None else numeric == k) else None
 
 
 def _why_not_table(path: Path) -> str:
@@ -403,9 +401,12 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             raise InputError(f"{named[0]}: not a keypoint table ({_why_not_table(named[0])}; "
                              "every line must be two numbers 'x y', or 'nan nan'; a .mat file "
                              "needs pts_coord 2 x K); fix or remove the file")
-        # paired by order (the hotel's layout): a label file broken part-way names itself
+        # paired by order (the hotel's layout): a label file broken part-way names itself, and
+        # so does one of as many rows of numbers as the label files read (most of them) hold
+        sizes = [pts.shape[0] for _, pts in kp_files]
+        k_read = max(set(sizes), key=sizes.count) if sizes else None
         broken = [(p, why) for p in sorted(rejected.values(), key=lambda q: natural_key(q.name))
-                  if p.suffix.lower() == ".txt" and (why := _txt_problem(p))]
+                  if p.suffix.lower() == ".txt" and (why := _txt_problem(p, k_read))]
         if broken:
             raise InputError(f"{broken[0][0]}: not a keypoint table ({broken[0][1]}; every line "
                              "must be two numbers 'x y', or 'nan nan'); fix or remove the file")

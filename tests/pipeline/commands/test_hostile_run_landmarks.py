@@ -253,6 +253,18 @@ def test_a_label_file_paired_by_order_with_a_header_or_a_third_column_is_named(
     _fails(capsys, _argv(folder), folder, "labels1.txt: not a keypoint table", needle)
 
 
+def test_a_homography_beside_labels_paired_by_order_is_not_blamed(folder, capsys):
+    """A 3 x 3 homography file (three rows of three numbers) is not a label file: with a label
+    file missing, the error counts images and label files instead of naming it."""
+    for k in range(4):
+        (folder / f"v{k}.txt").rename(folder / f"labels{k}.txt")
+        (folder / f"v{k}.scf").rename(folder / f"labels{k}.scf")
+    (folder / "labels3.txt").unlink()
+    (folder / "H1to2p.txt").write_text("1 0 0\n0 1 0\n0 0 1\n")
+    err = _fails(capsys, _argv(folder), folder, "4 images but 3 keypoint files")
+    assert "H1to2p" not in err
+
+
 def test_a_label_file_named_after_another_image_than_its_order_gives_is_refused(folder,
                                                                               capsys):
     """Labels paired by name order because one is not named after its image: an image that
