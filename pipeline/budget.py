@@ -17,15 +17,24 @@ the interpreter and libraries, rounded up):
   queues (30,000 cameras in 10,000 separate triangles: 9.3 KB a camera).
 - :data:`BYTES_PER_EDGE`: a communication edge (20,000 cameras, 200,000 edges: 0.4 KB an
   edge).
-- :data:`BYTES_PER_ENTRY`: the distributed detection. In the detection of Aragüés et al.
-  (Sec. III, eq. 5) every robot ``i`` propagates the rows ``X_ij(t)`` of the powers of the
-  association matrix: after ``d`` rounds robot ``i`` holds, for each of its features, every
-  feature of that feature's association set. Summed over the robots this is ``sum_s |s|^2``
-  entries over the association sets ``s`` (Def. 2.4), whatever the ids — a few noisy links
-  among 10 cameras that chain 10,000 features into one set need 10^8 entries. Measured on
-  such inputs (11,250 and 22,500 random links among 10 cameras, sets of 8,844 and 9,975
-  features): about 36 bytes of peak memory per entry (the robots' sparse blocks, the copies
-  in flight and the per-round work arrays).
+- :data:`BYTES_PER_ENTRY` and :data:`BYTES_PER_ROW_CROSSING`: the distributed detection. In
+  the detection of Aragüés et al. (Sec. III, eq. 5) every robot ``i`` propagates the rows
+  ``X_ij(t)`` of the powers of the association matrix: after ``d`` rounds robot ``i`` holds,
+  for each of its features, every feature of that feature's association set. Summed over the
+  robots this is ``sum_s |s|^2`` entries over the association sets ``s`` (Def. 2.4), whatever
+  the ids — a few noisy links among 10 cameras that chain 10,000 features into one set need
+  10^8 entries. Measured on such inputs (11,250 and 22,500 random links among 10 cameras,
+  sets of 8,844 and 9,975 features): about 36 bytes of peak memory per entry (the robots'
+  sparse blocks, the copies in flight and the per-round work arrays). A row also travels to
+  every robot its feature is linked to (a robot sends the rows its neighbour reads), so on a
+  dense graph, where a set is joined in a round or two, every row crosses each of its
+  feature's links at once: ``sum_s |s| · 2 L_s`` entries in flight (``L_s`` the links of set
+  ``s``), :data:`BYTES_PER_ROW_CROSSING` each; the estimate is the larger of the two terms.
+  Measured through ``resolve --resolution paper`` on the CMU hotel's descriptor matches
+  (complete graphs; peak RSS beyond the interpreter and the rows): 60 frames (518,400
+  entries, about 59 links a feature) 0.2 GB, 80 frames (4.03 M, 79) 2.5 GB, 101 frames
+  (6.94 M, 100) 7.5 GB, where 36 bytes an entry alone gave 0.25 GB; the crossings at 12
+  bytes give 0.37, 3.8 and 8.3 GB.
 - :data:`BYTES_PER_LIST_ENTRY`: the evidence rule's detection (bounded label flooding,
   :mod:`pipeline.consistency.setlists`): every feature of a set ``s`` holds up to ``B + 1``
   ids of it (``B`` the bundle budget), ``sum_s |s| · min(|s|, B + 1)`` entries. Measured on
@@ -64,15 +73,18 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
+__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
            "BYTES_PER_ROBOT_PIXEL", "BYTES_PER_FUSION_OBSERVER_PAIR", "BYTES_PER_FUSION_TRACK_ROBOT",
            "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
-           "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb"]
+           "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb",
+           "row_crossings"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
 BYTES_PER_ENTRY = 36
+#: bytes per entry of a row crossing one link of its feature in the detection (module notes)
+BYTES_PER_ROW_CROSSING = 12
 #: measured peak bytes per entry of the evidence rule's set lists (54, module notes)
 BYTES_PER_LIST_ENTRY = 64
 #: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
@@ -198,12 +210,31 @@ def detection_entries(features_per_camera, links: Links,
                       keep: int | None = None) -> tuple[int, int]:
     """``(sum_s |s|^2, largest |s|)`` over the association sets of ``links``; with ``keep``,
     ``sum_s |s| · min(|s|, keep)`` (every feature holds at most ``keep`` ids of its set)."""
-    from pipeline.association import AssociationGraph, conflictive_labels
-
-    _, sizes, _ = conflictive_labels(AssociationGraph(features_per_camera, links))
-    s = sizes[sizes >= 2].astype(np.int64)
+    s, _ = _set_sizes(features_per_camera, links)
     held = s if keep is None else np.minimum(s, int(keep))
     return int((s * held).sum()), int(s.max(initial=0))
+
+
+def row_crossings(features_per_camera, links: Links) -> int:
+    """``sum_s |s| · 2 L_s`` over the association sets of ``links`` (``L_s`` its links): the
+    entries of the detection's rows when each row crosses every link of its feature once
+    (module notes)."""
+    _, per_link = _set_sizes(features_per_camera, links, of_links=True)
+    return int(2 * per_link.sum())
+
+
+def _set_sizes(features_per_camera, links: Links, of_links: bool = False):
+    """Sizes of the association sets of two features or more; with ``of_links``, also the
+    size of each link's set (one entry per link)."""
+    from pipeline.association import AssociationGraph, conflictive_labels
+
+    graph = AssociationGraph(features_per_camera, links)
+    labels, sizes, _ = conflictive_labels(graph)
+    s = sizes[sizes >= 2].astype(np.int64)
+    if not of_links:
+        return s, None
+    a, _ = graph.global_ids()
+    return s, sizes[labels[a]] if len(links) else np.zeros(0, np.int64)
 
 
 def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
@@ -232,9 +263,11 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
                        "sync (its memory follows the links)")
         return
     entries, largest = detection_entries(features_per_camera, links)
+    crossings = row_crossings(features_per_camera, links)
     budget.add(f"the distributed detection (the links chain up to {largest} features into "
-               "one association set; every robot holds every feature of its sets, eq. 5)",
-               entries * BYTES_PER_ENTRY,
+               "one association set; every robot holds every feature of its sets, eq. 5, and "
+               "sends each row over every link of its feature)",
+               max(entries * BYTES_PER_ENTRY, crossings * BYTES_PER_ROW_CROSSING),
                "such sets come from wrong links: clean them first, or use --resolution sync "
                "(no detection) or paper-labels (Alg. 1 after a label-flooding detection): "
                "their memory follows the links")

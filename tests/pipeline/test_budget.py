@@ -80,3 +80,28 @@ def test_an_online_run_counts_every_frame_it_renders_and_one_step_of_work():
     with pytest.raises(InputError, match=r"rendering 100 steps of 6 robots at 40x30 \(600 frames\)"
                        r".*fewer --steps"):
         check_motion_memory(6, 100, (40, 30), need / 1e9)
+
+
+def test_rows_crossing_every_link_of_their_feature_are_counted_on_a_dense_set():
+    """Alg. 1's detection sends each row (``|s|`` ids) over every link of its feature: on a
+    set whose features all link to each other (a complete graph of 10 cameras), those
+    crossings (10 · 2 · 45 = 900 entries), not the 100 entries held, bound the memory; the
+    guard counted the held entries only, and ``resolve --resolution paper`` on the CMU
+    hotel's 101 frames needed 7.5 GB where it estimated 0.25."""
+    from itertools import combinations
+
+    from pipeline.budget import BYTES_PER_ENTRY, BYTES_PER_ROW_CROSSING, row_crossings
+
+    assert row_crossings(FPC, LINKS) == 2 * 4 * 5 + 2 * 1 * 2
+    pairs = list(combinations(range(10), 2))
+    dense = Links([i for i, _ in pairs], [0] * 45, [j for _, j in pairs], [0] * 45)
+    fpc = [1] * 10
+    assert detection_entries(fpc, dense) == (100, 10)
+    assert row_crossings(fpc, dense) == 900
+    need = 900 * BYTES_PER_ROW_CROSSING
+    assert need > 100 * BYTES_PER_ENTRY
+    budget = MemoryBudget(need / 1e9)
+    check_detection_memory(fpc, dense, budget)
+    assert budget.total == need
+    with pytest.raises(InputError, match="sends each row over every link of its feature"):
+        check_detection_memory(fpc, dense, (need - 1) / 1e9)
