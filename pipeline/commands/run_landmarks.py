@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.options import add_memory_option
 from pipeline.errors import InputError
 from pipeline.runs.landmarks import (
     REFINEMENTS,
@@ -77,6 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None,
                    help="run folder (default runs/landmarks-<DIR name>[-fN]-<graph>; a graph "
                         "file by its name without suffix)")
+    add_memory_option(p)
 
 
 def _refuse_unused_options(args) -> None:
@@ -97,14 +99,17 @@ def _refuse_unused_options(args) -> None:
 
 
 def config_from_args(args) -> LandmarksConfig:
+    from pipeline.budget import limit_gb
+
     _refuse_unused_options(args)
+    limit_gb(args.max_memory_gb)  # a bad limit is refused before the matching
     given = {k: v for k, v in (("epipolar_px", args.epipolar_px),
                                ("vote_iterations", args.vote_iterations)) if v is not None}
     return LandmarksConfig(directory=args.directory, graph=args.graph, frames=args.frames,
                            descriptors=args.descriptors, ratio=args.ratio,
                            geometry=args.geometry, refine=args.refine,
                            resolution=args.resolution, baselines=not args.no_baselines,
-                           out=args.out, **given)
+                           out=args.out, max_memory_gb=args.max_memory_gb, **given)
 
 
 def run(args) -> int:

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 from pipeline.outcome import flag_result
@@ -86,6 +87,7 @@ class LandmarksConfig:
     resolution: str = DEFAULT_LINKS_RESOLUTION
     baselines: bool = True
     out: str | None = None
+    max_memory_gb: float = DEFAULT_LIMIT_GB
 
     def out_dir(self) -> Path:
         if self.out:
@@ -95,6 +97,30 @@ class LandmarksConfig:
         # a graph file by its stem, as run-images names it: its path would nest folders
         graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
         return Path("runs") / f"landmarks-{folder}{frames}-{graph}"
+
+
+def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
+    """The memory guard of :mod:`pipeline.budget` on the matched links, before the rule and
+    the baselines allocate what grows with them: InputError naming the part above
+    ``config.max_memory_gb`` (Alg. 1's detection on a dense graph of a hundred frames needs
+    GBs)."""
+    from pipeline.budget import (
+        MemoryBudget,
+        baselines_bytes,
+        check_detection_memory,
+        limit_gb,
+    )
+    from pipeline.consistency.rules import get_rule
+    from pipeline.consistency.setlists import bundle_budget
+
+    budget = MemoryBudget(limit_gb(config.max_memory_gb))
+    budget.add_rows("the matched links", len(links))
+    rule = get_rule(config.resolution)
+    check_detection_memory(m, links, budget, detection=rule.detection,
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+    if config.baselines:
+        budget.add("the centralized baselines", baselines_bytes(int(np.sum(m)), len(links)),
+                   "add --no-baselines")
 
 
 def true_landmark_pairs(features_per_camera, landmarks=None) -> np.ndarray:
@@ -202,6 +228,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                        f"changed per iteration {vstats['changed_per_iteration']}")
     else:
         input_links = links
+    _check_memory(m, links, config)
     with timer.stage("resolution", get_rule(config.resolution).title):
         c0 = time.process_time()
         res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
