@@ -643,13 +643,15 @@ def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -
                     f"{len(arrays['link_alive'])}")
         unwritten = None
         if result_path and "link_alive" in arrays:
-            from pipeline.runfolder import write_json_atomic
+            from pipeline.runfolder import note_output_in_place, write_json_atomic
 
             try:
                 write_json_atomic(result_path, {**header, "links": result_links(arrays)},
                                   replace=overwrite, flag="--result")
             except (InputError, OSError) as exc:  # published all the same, below
                 unwritten = exc
+            else:  # a Ctrl-C while the observer is awaited names it as written
+                note_output_in_place(result_path)
         # repeated until the observer acknowledges it: an observer started by hand may come
         # up while the robots run, so wait as long as for a neighbour at the start
         acked = transport.publish_result(encode_packet(header, [("result", arrays)]),

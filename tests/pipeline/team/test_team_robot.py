@@ -56,3 +56,48 @@ def test_two_robots_given_one_result_file_do_not_replace_each_others(tmp_path):
         t.join(120)
     assert sorted(codes) == [0, 2]
     assert json.loads(same.read_text())["id"] == codes.index(0)
+
+
+def test_ctrl_c_while_the_observer_is_awaited_names_the_result_written(tmp_path, monkeypatch,
+                                                                       capsys):
+    """A robot whose ``--result`` is written and which is interrupted while it repeats its
+    result to an observer (not started yet): the one line names the result as in place,
+    where it said that nothing was written."""
+    import threading
+
+    from pipeline.__main__ import interruptible
+    from pipeline.team.launcher import make_team
+    from pipeline.team.robot import run_robot_process
+    from pipeline.transport.zenoh_transport import ZenohTransport
+
+    publish = ZenohTransport.publish_result
+
+    def interrupted(self, *a, **k):
+        if self.robot_id == 0:
+            raise KeyboardInterrupt
+        return publish(self, *a, **k)
+
+    monkeypatch.setattr(ZenohTransport, "publish_result", interrupted)
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n")
+    team = make_team("ctrl-c-result", [[0, 1]], {"kind": "links", "links": "in.csv",
+                                                 "features_per_camera": [1, 1]}, n=2)
+    team.path = tmp_path / "TEAM.json"
+    team.observer = None
+    result = tmp_path / "r0.json"
+    codes = [None, None]
+
+    def run(i):
+        if i == 0:
+            codes[0] = interruptible("robot", lambda: run_robot_process(team, 0, str(result)))
+        else:
+            codes[1] = run_robot_process(team, 1)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert codes == [130, 0]
+    assert json.loads(result.read_text())["id"] == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("interrupted:")]
+    assert lines == [f"interrupted: robot stopped; already in place, complete: {str(result)!r}"]
