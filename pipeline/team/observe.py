@@ -144,10 +144,15 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                         never = [i for i in missing if i not in obs.status
                                  and i not in obs.alive]
                         who = (never or missing)[0]
+                        # the observer cannot tell a robot that never ran from one that
+                        # gave up repeating its result before the observer listened
+                        late = (", or it ended before this observer listened (a robot repeats "
+                                "its result for start_timeout_s, at least 10 s): start the "
+                                "observer before the robots end")
                         raise TeamError(
                             f"no robot published a result within {timeout_s:g} s; robot {who} "
                             f"({team.endpoint(who)}) "
-                            f"{'never started' if who in never else 'did not publish'}")
+                            f"{'never started' + late if who in never else 'did not publish'}")
                     lost |= set(missing)
                     log(f"robots {missing} did not publish within {timeout_s:g} s: lost")
                     break

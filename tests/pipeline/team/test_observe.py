@@ -474,3 +474,35 @@ def test_a_result_arriving_after_the_observer_closed_raises_nothing():
     packet = encode_packet({"id": 1}, [("result", {})])
     obs._on_result(SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: packet)))
     assert 1 in obs.results
+
+
+def test_an_observer_started_after_the_robots_ended_says_they_may_have_ended(tmp_path):
+    """Two robots that ran and gave up repeating their results (no observer yet), then the
+    observer: it cannot tell them from robots that never ran, and said only 'never started'
+    of robots that had run; it now says that they may have ended before it listened."""
+    import threading
+
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import observe_team
+    from pipeline.team.robot import run_robot_process
+
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n")
+    data = {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]}
+    team = make_team("ended-early", [[0, 1]], data, n=2)
+    team.options["start_timeout_s"] = 1.0
+    team.path = tmp_path / "TEAM.json"
+    codes = [None, None]
+
+    def run(i):
+        codes[i] = run_robot_process(team, i)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert codes == [0, 0]
+    with pytest.raises(TeamError, match=r"robot 0 \(tcp/127.0.0.1:\d+\) never started, or it "
+                                        r"ended before this observer listened"):
+        observe_team(team, timeout_s=0.5)
