@@ -587,6 +587,11 @@ def _check_options(opts: dict, where: str) -> None:
         v = opts.get(k)
         if v is not None and (not _is_number(v) or not v > 0):
             raise InputError(f"{where}: option {k} {v!r} must be a finite number > 0 or null")
+    budget = opts.get("bundle_budget")
+    if budget is not None and (not _is_int(budget) or budget < 1):
+        raise InputError(f"{where}: option bundle_budget {budget!r} must be an integer >= 1 "
+                         "(the largest set the evidence rule bundles) or null (the team's "
+                         "default)")
     seed = opts.get("fault_seed", 0)
     if not _is_int(seed) or seed < 0:
         raise InputError(f"{where}: option fault_seed {seed!r} must be an integer >= 0")

@@ -110,6 +110,17 @@ def test_malformed_team_is_one_line_error(over, words):
     assert words in str(e.value) and "\n" not in str(e.value)
 
 
+@pytest.mark.parametrize("budget", ["x", -3, 0, 2.5, True, [4]])
+def test_a_bundle_budget_that_is_not_a_set_size_is_refused(budget):
+    """``bundle_budget`` was not checked: every robot of the team then stopped with a
+    traceback (``int('x')``, a negative size) or cut a 2.5 to 2."""
+    with pytest.raises(InputError) as e:
+        parse_team(_doc(options={"bundle_budget": budget}))
+    assert f"option bundle_budget {budget!r} must be an integer >= 1" in str(e.value)
+    assert parse_team(_doc(options={"bundle_budget": 4})).options["bundle_budget"] == 4
+    assert parse_team(_doc(options={"bundle_budget": None})).options["bundle_budget"] is None
+
+
 def _endpoints(*eps):
     return [{"id": i, "endpoint": ep} for i, ep in enumerate(eps)]
 
