@@ -370,16 +370,19 @@ def parse_team(doc, path: Path | None = None) -> Team:
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
 
 
-#: what a loopback address is compared as: 127.0.0.1, ::1 and localhost are one machine's own
+#: what localhost's addresses are compared as: 127.0.0.1, ::1 and localhost are one (a name
+#: may resolve to either); other loopback addresses (127.0.0.2, ...) listen apart
 _LOOPBACK = "loopback"
+_LOCALHOST_IPS = (ipaddress.ip_address("127.0.0.1"), ipaddress.ip_address("::1"))
 
 
 def _endpoint_addresses(m: re.Match) -> tuple[tuple[str, str, int], ...]:
     """The (transport, address, port) keys an endpoint matched by ``_ENDPOINT`` listens on.
 
     The host is resolved with ``socket.getaddrinfo`` (a name that does not resolve stands for
-    itself, lower-cased); every loopback address is one key, so ``tcp/localhost:P`` and
-    ``tcp/127.0.0.1:P`` collide. quic runs over UDP, tcp and tls over TCP.
+    itself, lower-cased); localhost's addresses (127.0.0.1, ::1) are one key, so
+    ``tcp/localhost:P`` and ``tcp/127.0.0.1:P`` collide, while ``tcp/127.0.0.2:P`` (another
+    loopback address, which binds apart) does not. quic runs over UDP, tcp and tls over TCP.
     """
     transport = "udp" if m.group(1) == "quic" else "tcp"
     port = int(m.group(3))
@@ -400,7 +403,7 @@ def _host_addresses(host: str) -> tuple[str, ...]:
         ip = _ip(a.split("%")[0])
         if ip is not None and getattr(ip, "ipv4_mapped", None):
             ip = ip.ipv4_mapped
-        key = _LOOPBACK if ip is not None and ip.is_loopback else str(ip) if ip else a
+        key = _LOOPBACK if ip in _LOCALHOST_IPS else str(ip) if ip else a
         if key not in out:
             out.append(key)
     return tuple(out)

@@ -156,6 +156,19 @@ def test_distinct_addresses_are_not_shared(first, second):
     assert [r.endpoint for r in t.robots[:2]] == [first, second]
 
 
+def test_robots_on_other_loopback_addresses_with_one_port_are_not_shared():
+    """127.0.0.1:P, 127.0.0.2:P, 127.0.0.3:P bind apart (hosts simulated on one machine); every
+    loopback address was one, so the team was refused as sharing an endpoint."""
+    t = parse_team(_doc(robots=_endpoints("tcp/127.0.0.1:7001", "tcp/127.0.0.2:7001",
+                                          "tcp/127.0.0.3:7001"),
+                        observer={"endpoint": "tcp/127.0.0.9:7001"}))
+    assert [r.endpoint for r in t.robots] == ["tcp/127.0.0.1:7001", "tcp/127.0.0.2:7001",
+                                              "tcp/127.0.0.3:7001"]
+    with pytest.raises(InputError, match="robots 0 and 1 share endpoint 'tcp/\\[::1\\]:7001'"):
+        parse_team(_doc(robots=_endpoints("tcp/127.0.0.1:7001", "tcp/[::1]:7001",
+                                          "tcp/127.0.0.3:7001")))
+
+
 def test_robot_id_outside_the_team(tmp_path):
     p = tmp_path / "TEAM.json"
     p.write_text(json.dumps(_doc()))
