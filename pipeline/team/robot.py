@@ -383,8 +383,11 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         weight = ratio_llr(1.0 - quality)  # the evidence a links file carries
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
-            raise InputError(f"robot {i}: link to camera {int(nbr[bad[0]])}, which is not its "
-                             "neighbour in the team's comm graph")
+            k = int(bad[0])
+            raise InputError(f"robot {i}: link ({i},{int(r[k])})-({int(nbr[k])},{int(s[k])}) of "
+                             f"{path} joins camera {int(nbr[k])}, which is not its neighbour in "
+                             f"the team's comm_edges; add [{min(i, int(nbr[k]))}, "
+                             f"{max(i, int(nbr[k]))}] to comm_edges or remove the link")
         bad = np.flatnonzero((r >= fpc[i]) | (s >= fpc[nbr]))
         if bad.size:
             k = int(bad[0])

@@ -3,6 +3,7 @@
 
 import json
 import pstats
+import re
 from types import SimpleNamespace
 
 import pytest
@@ -101,3 +102,22 @@ def test_ctrl_c_while_the_observer_is_awaited_names_the_result_written(tmp_path,
     assert json.loads(result.read_text())["id"] == 0
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("interrupted:")]
     assert lines == [f"interrupted: robot stopped; already in place, complete: {str(result)!r}"]
+
+
+def test_a_link_between_robots_that_do_not_talk_names_the_link_and_the_edge(tmp_path):
+    """A links team whose comm_edges leave out a pair that a link joins: each robot said only
+    'link to camera J'; it now names the link, its file and the edge to add."""
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import launch_team, make_team
+
+    links = tmp_path / "in.csv"
+    links.write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n1,1,2,1\n0,1,2,0\n")
+    team = make_team("t", [[0, 1], [1, 2]], {"kind": "links", "links": str(links),
+                                              "features_per_camera": [2, 2, 2]}, n=3)
+    f = re.escape(str(links))
+    with pytest.raises(TeamError, match=(
+            rf"robot 0: link \(0,1\)-\(2,0\) of {f} joins camera 2, which is not its neighbour "
+            rf"in the team's comm_edges; add \[0, 2\] to comm_edges or remove the link|"
+            rf"robot 2: link \(2,0\)-\(0,1\) of {f} joins camera 0, which is not its neighbour "
+            rf"in the team's comm_edges; add \[0, 2\] to comm_edges or remove the link")):
+        launch_team(team, tmp_path / "team", timeout_s=60)
