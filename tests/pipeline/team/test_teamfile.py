@@ -96,8 +96,8 @@ def test_a_valid_team_parses():
     ({"data": {**_MATCH, "frames": ["f0.npz"]}}, "data.frames must list 3 paths, one frame file"),
     ({"data": {**_MATCH, "store": "robots"}}, "data.store must list 3 paths, one folder"),
     ({"data": {**_MATCH, "links": "in.csv"}}, "data of kind online-match has unknown key 'links'"),
-    ({"robot_options": {"1": {"fusion": True}}},
-     "robot_options['1'] sets fusion on a links team without data.keypoints"),
+    ({"options": {"fusion": True}},
+     "options sets fusion on a links team without data.keypoints"),
     # names every robot would refuse: observe refuses them too, not waiting for robots
     ({"data": {"kind": "formation", "formation": "zz", "robots": 3, "graph": "ring"}},
      "data.formation: unknown formation 'zz'"),
@@ -119,6 +119,20 @@ def test_a_bundle_budget_that_is_not_a_set_size_is_refused(budget):
     assert f"option bundle_budget {budget!r} must be an integer >= 1" in str(e.value)
     assert parse_team(_doc(options={"bundle_budget": 4})).options["bundle_budget"] == 4
     assert parse_team(_doc(options={"bundle_budget": None})).options["bundle_budget"] is None
+
+
+@pytest.mark.parametrize("fusion", [False, True])
+def test_fusion_is_the_teams_option_not_one_robots(fusion):
+    """``robot_options: {"1": {"fusion": false}}`` was accepted: robot 1 skipped the fusion stage
+    and ended while its neighbours ran it, so they wrote it off and cut all its links
+    robot-lost. Fusion is now the team's, like the rule, and compared in the start hello."""
+    formation = {"kind": "formation", "formation": "ring", "robots": 3, "size": [160, 120]}
+    with pytest.raises(InputError, match=r"robot_options\['1'\] sets 'fusion', which is the "
+                                         r"team's"):
+        parse_team(_doc(data=formation, options={"fusion": not fusion},
+                        robot_options={"1": {"fusion": fusion}}))
+    t = parse_team(_doc(data=formation, options={"fusion": fusion}))
+    assert t.shared_terms()["fusion"] is fusion
 
 
 def _endpoints(*eps):
