@@ -319,13 +319,13 @@ def parse_team(doc, path: Path | None = None) -> Team:
     _check_data(data, n, where)
 
     opts = dict(DEFAULT_OPTIONS)
-    given = doc.get("options", {}) or {}
+    given = doc.get("options") if doc.get("options") is not None else {}
     if not isinstance(given, dict):
         raise InputError(f"{where}: 'options' must be an object")
     _check_options(given, where)
     opts.update(given)
     per = {}
-    ro = doc.get("robot_options", {}) or {}
+    ro = doc.get("robot_options") if doc.get("robot_options") is not None else {}
     if not isinstance(ro, dict):
         raise InputError(f"{where}: 'robot_options' must be an object {{\"ID\": {{options}}}}")
     for key, val in ro.items():

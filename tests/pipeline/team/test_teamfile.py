@@ -135,6 +135,15 @@ def test_fusion_is_the_teams_option_not_one_robots(fusion):
     assert t.shared_terms()["fusion"] is fusion
 
 
+@pytest.mark.parametrize("key", ["options", "robot_options"])
+@pytest.mark.parametrize("value", [[], "", 0, False])
+def test_options_that_are_not_an_object_are_refused_even_when_empty(key, value):
+    """``"options": []`` (or "", 0, false) passed as no options, where ``[1]`` was refused."""
+    with pytest.raises(InputError, match=rf"'{key}' must be an object"):
+        parse_team(_doc(**{key: value}))
+    assert parse_team(_doc(**{key: None})).options["fusion"] is False
+
+
 def _endpoints(*eps):
     return [{"id": i, "endpoint": ep} for i, ep in enumerate(eps)]
 
