@@ -117,9 +117,10 @@ DEFAULT_OPTIONS = {
 #: neighbour, packets uncompressed (the earlier encoding, kept to compare the two)
 WIRE_FORMS = ("compact", "plain")
 #: options that are the team's, not one robot's (every robot must run the same rule, and the
-#: fusion stage or none: a robot that skips it ends early and its neighbours cut its links)
+#: fusion stage or none: a robot that skips it ends early and its neighbours cut its links;
+#: and extract one kind of descriptor: a neighbour's features are matched as its own kind)
 TEAM_ONLY_OPTIONS = ("resolution", "solve_small_sets", "bundle_budget", "gather_conflictive",
-                     "gather_free", "fusion")
+                     "gather_free", "fusion", "features", "rootsift")
 #: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
 #: OpenCV offers one is checked when the robot extracts)
 FEATURE_METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
@@ -340,7 +341,8 @@ def parse_team(doc, path: Path | None = None) -> Team:
         fixed = sorted(set(val) & set(TEAM_ONLY_OPTIONS))
         if fixed:
             raise InputError(f"{where}: robot_options[{key!r}] sets {fixed[0]!r}, which is the "
-                             "team's (every robot runs the same rule and stages); set it under 'options'")
+                             "team's (every robot runs the same rule and stages and extracts one kind of "
+                             "descriptor); set it under 'options'")
         per[rid] = val
     if data["kind"] == "links" and not all(
             isinstance(c, dict) and "K" in c for c in data.get("cameras") or [None]):

@@ -135,6 +135,19 @@ def test_fusion_is_the_teams_option_not_one_robots(fusion):
     assert t.shared_terms()["fusion"] is fusion
 
 
+@pytest.mark.parametrize("key, value", [("features", "orb"), ("rootsift", True)])
+def test_the_descriptor_kind_is_the_teams_option_not_one_robots(key, value):
+    """``robot_options: {"1": {"features": "orb"}}`` was accepted: robot 1 extracted ORB, its
+    neighbours matched its descriptors as their own SIFT and stopped on "cameras 0 and 1 have
+    different descriptors (sift float32x128 vs sift uint8x32)", naming the wrong method. One
+    kind of descriptor is now the team's, refused per robot and compared in the start hello."""
+    formation = {"kind": "formation", "formation": "ring", "robots": 3, "size": [160, 120]}
+    with pytest.raises(InputError, match=rf"robot_options\['1'\] sets '{key}', which is the "
+                                         r"team's"):
+        parse_team(_doc(data=formation, robot_options={"1": {key: value}}))
+    assert parse_team(_doc(data=formation, options={key: value})).shared_terms()[key] == value
+
+
 @pytest.mark.parametrize("key", ["options", "robot_options"])
 @pytest.mark.parametrize("value", [[], "", 0, False])
 def test_options_that_are_not_an_object_are_refused_even_when_empty(key, value):
