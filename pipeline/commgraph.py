@@ -413,6 +413,24 @@ def graph_parts(n: int, edges: np.ndarray) -> int:
     return int(connected_components(adj, directed=False)[0])
 
 
+def split_warning(n: int, edges: np.ndarray, items: str = "images",
+                  lost: str = "their features cannot be associated across the groups",
+                  advice: str = "choose a denser --graph") -> str | None:
+    """The warning of a comm graph on ``n`` ``items`` that splits them into groups that never
+    match each other (:func:`graph_parts`), or None when it is connected.
+
+    >>> split_warning(4, np.array([[0, 1], [2, 3]]))
+    'the comm graph splits the 4 images into 2 groups that never match each other: their features cannot be associated across the groups (choose a denser --graph)'
+    >>> split_warning(2, np.array([[0, 1]])) is None
+    True
+    """
+    parts = graph_parts(n, edges)
+    if parts <= 1:
+        return None
+    return (f"the comm graph splits the {n} {items} into {parts} groups that never match each "
+            f"other: {lost} ({advice})")
+
+
 def diameter_lower_bound(n: int, edges: np.ndarray) -> int:
     """The largest hop distance found by two breadth-first sweeps in every connected
     component of the graph on ``n`` nodes: a lower bound of the largest component's

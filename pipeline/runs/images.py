@@ -383,13 +383,11 @@ def _load(config: ImagesConfig, timer: StageTimer):
 def _warn_split(timer: StageTimer, n: int, comm_edges: np.ndarray) -> None:
     """Warn when the comm graph leaves images in groups that never match each other: their
     features cannot be associated across the groups, and the reconstruction holds one group."""
-    from pipeline.commgraph import graph_parts
+    from pipeline.commgraph import split_warning
 
-    parts = graph_parts(n, comm_edges)
-    if parts > 1:
-        timer.warn(f"the comm graph splits the {n} images into {parts} groups that never "
-                   "match each other: their features cannot be associated across the groups "
-                   "(choose a denser --graph)")
+    message = split_warning(n, comm_edges)
+    if message:
+        timer.warn(message)
 
 
 def _timed(fn, *args, **kwargs):

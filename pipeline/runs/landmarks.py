@@ -169,7 +169,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
     """
     from pipeline.association import AssociationGraph, camera_offsets, count_conflicts
-    from pipeline.commgraph import comm_graph, graph_parts
+    from pipeline.commgraph import comm_graph, split_warning
     from pipeline.consistency import centralized, resolve_conflicts
     from pipeline.consistency.rules import get_rule, rule_names
     from pipeline.evaluation.report import versions
@@ -201,11 +201,10 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         source = "sift" if frames[0].descriptor_file == "sift" else "given"
         timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors ({source}); "
                    f"graph {config.graph}: {len(comm_edges)} edges")
-        parts = graph_parts(len(frames), comm_edges)
-        if parts > 1:
-            timer.warn(f"the comm graph splits the {len(frames)} images into {parts} groups "
-                       "that never match each other: their landmarks cannot be associated "
-                       "across the groups (choose a denser --graph)")
+        message = split_warning(len(frames), comm_edges, lost="their landmarks cannot be "
+                                "associated across the groups")
+        if message:
+            timer.warn(message)
     with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
                                  f"geometry {config.geometry}, ratio gate {config.ratio}"):
         links, matching = match_landmark_edges(

@@ -85,6 +85,12 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
                          "consistency stage only, not the fusion cuts its robots make; set "
                          "option fusion false (the fusion of a links team runs in "
                          "run-formation --steps N --transport zenoh)")
+    from pipeline.commgraph import split_warning
+
+    message = split_warning(team.n, team.comm_edges, "robots", "their features cannot be "
+                            "associated across the groups", "add comm_edges to the team file")
+    if message:
+        timer.warn(message)
     zenoh = get_transport("zenoh").load()
     with timer.stage("observe", f"{team.n} robots of {team.name!r} on {team.observer}"):
         run = observe_team(team, timeout_s=timeout_s, log=log)

@@ -68,7 +68,7 @@ class SequenceConfig:
 
 def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None) -> Path:
     """Run the job (module docstring), write its run folder and return its path."""
-    from pipeline.commgraph import comm_graph, graph_parts
+    from pipeline.commgraph import comm_graph, split_warning
     from pipeline.inputs.sequence import load_sequence
     from pipeline.matching.pairs import check_matcher
     from pipeline.runs.online import associate_online, batch_steps_of, online_tables
@@ -92,10 +92,10 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                            seq.steps)
     edges = comm_graph(config.graph, seq.robots, what="robot")
     timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
-    parts = graph_parts(seq.n_robots, edges)
-    if parts > 1:
-        timer.warn(f"the comm graph splits the {seq.n_robots} robots into {parts} groups that "
-                   "never match each other's frames (choose a denser --graph)")
+    message = split_warning(seq.n_robots, edges, "robots", "their frames cannot be associated "
+                            "across the groups")
+    if message:
+        timer.warn(message)
     radius = photo_merge_radius(config.features, config.resolution, config.merge_radius)
     run = associate_online(seq.views, seq.n_robots, [edges] * seq.steps, config.window,
                            config.resolution, timer, features=config.features,

@@ -506,3 +506,25 @@ def test_an_observer_started_after_the_robots_ended_says_they_may_have_ended(tmp
     with pytest.raises(TeamError, match=r"robot 0 \(tcp/127.0.0.1:\d+\) never started, or it "
                                         r"ended before this observer listened"):
         observe_team(team, timeout_s=0.5)
+
+
+def test_a_team_whose_comm_graph_splits_is_warned_by_the_observer(tmp_path, capsys):
+    """A hand-written team whose comm_edges leave robot 2 with no neighbour: no robot, no
+    observer said a word (run-images warns of a split graph); the observer now says so
+    before it waits, naming the fix."""
+    from pipeline.team.launcher import free_ports
+
+    p = free_ports(4)
+    doc = {"version": 1, "name": "split", "comm_edges": [[0, 1]],
+           "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p[i]}"} for i in range(3)],
+           "observer": {"endpoint": f"tcp/127.0.0.1:{p[3]}"},
+           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1, 1]},
+           "options": {"start_timeout_s": 0.5}}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    (tmp_path / "in.csv").write_text("0,0,1,0\n")
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", str(tmp_path / "o"),
+                 "--timeout", "0.5"]) == 2  # no robot was started
+    err = capsys.readouterr().err
+    assert ("the comm graph splits the 3 robots into 2 groups that never match each other: "
+            "their features cannot be associated across the groups (add comm_edges to the "
+            "team file)") in err
