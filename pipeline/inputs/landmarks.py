@@ -469,6 +469,12 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             fr.descriptor_kind = "histogram" if (d >= 0).all() else "vector"
         kinds = {fr.descriptor_kind for fr in out}
         if len(kinds) > 1:
+            neg = [fr.descriptor_file for fr in out if fr.descriptor_kind == "vector"]
+            log.warning("warning: %s", f"{len(neg)} of {len(out)} descriptor files hold "
+                        f"negative values ({', '.join(neg[:3])}{', ...' if len(neg) > 3 else ''}"
+                        "), the others none: every image's descriptors are compared by L2 "
+                        "distance, not chi-square (non-negative rows are read as histograms, "
+                        "e.g. shape contexts); check those files")
             for fr in out:
                 fr.descriptor_kind = "vector"
     sel = select_frames(len(out), frames)

@@ -133,3 +133,22 @@ def test_a_landmark_an_image_does_not_see_is_a_nan_row(tmp_path):
     np.savetxt(tmp_path / "view0.txt", np.full((4, 2), np.nan))
     with pytest.raises(InputError, match="sees none of them"):
         load_landmark_folder(tmp_path)
+
+
+def test_one_file_of_negative_descriptors_among_histograms_is_warned(tmp_path, caplog):
+    """One negative value in one of the descriptor files switched every image from chi-square
+    to L2 distance with no word but the stage line's "vector descriptors"; it is now warned,
+    naming the file."""
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0]])
+    for k in range(3):
+        _image(tmp_path / f"view{k}.png")
+        np.savetxt(tmp_path / f"view{k}.txt", pts + k)
+        d = np.arange(15.0).reshape(3, 5) + k
+        if k == 1:
+            d[2, 4] = -0.5
+        np.savetxt(tmp_path / f"view{k}.scf", d)
+    with caplog.at_level("WARNING"):
+        frames = load_landmark_folder(tmp_path)
+    assert {f.descriptor_kind for f in frames} == {"vector"}
+    assert "1 of 3 descriptor files hold negative values (view1.scf)" in caplog.text
+    assert "compared by L2 distance, not chi-square" in caplog.text
