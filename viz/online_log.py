@@ -7,7 +7,9 @@ Reads the results only. On the ``step`` timeline, at every step:
   frames' camera centres (``links`` count in the label);
 - ``world/links/cut``: one strip per frame pair that lost links at that step;
 - ``steps/links_new``, ``steps/cut``, ``steps/conflictive_sets_after``, ``steps/rounds``,
-  ``steps/bytes``: the step's figures as scalars (plots);
+  ``steps/bytes``: the step's figures as scalars (plots); ``steps/cut`` is the consistency
+  stage's cuts, ``steps/cut_fusion`` the fusion's (0 where it did not run): together, the links
+  ``world/links/cut`` draws;
 - ``steps/log``: a text line per step (links arriving, conflicts found, cuts: the consistency
   stage's, and the fusion's where it ran, which ``world/links/cut`` draws too).
 """
@@ -73,6 +75,7 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
             for k in STEP_SCALARS:
                 rec.log(f"steps/{k}", rr.Scalars(float(r.get(k, 0))))
             fused = r.get("fusion") or {}
+            rec.log("steps/cut_fusion", rr.Scalars(float(fused.get("cut", 0))))
             by_fusion = f", {int(fused.get('cut', 0))} cut by fusion" if fused else ""
             rec.log("steps/log", rr.TextLog(
                 f"step {t}: {r['links_new']} links arrive, {r['conflictive_features']} "

@@ -20,6 +20,17 @@ def _texts(path, entity):
     return out
 
 
+def _scalars(path, entity):
+    """``{step: value}`` of a ``steps/<name>`` scalar."""
+    out = {}
+    for chunk in RrdReader(path).store().stream().filter(content=entity).to_chunks():
+        if chunk.entity_path == entity:
+            d = chunk.to_record_batch().to_pydict()
+            for s, row in zip(d["step"], d["Scalars:scalars"], strict=True):
+                out[int(s)] = float(row[0])
+    return out
+
+
 def _cut_labels(path):
     """Links drawn cut at each step: the sum of the strips' ``N links`` labels."""
     per_step = {}
@@ -50,6 +61,9 @@ def test_the_step_log_counts_every_link_the_step_draws_cut(tmp_path):
     assert _cut_labels(path)[1] == 3
     line = _texts(path, "/steps/log")[1]
     assert "1 cut (0 by the history check), 2 cut by fusion" in line
+    # the plots name both stages' cuts, which add up to the links drawn cut
+    assert _scalars(path, "/steps/cut") == {0: 0.0, 1: 1.0}
+    assert _scalars(path, "/steps/cut_fusion") == {0: 0.0, 1: 2.0}
     # without fusion (--no-fusion, photographs) the line names none
     for r in steps:
         del r["fusion"]
