@@ -38,6 +38,7 @@ from pipeline.validate import MAX_RENDER_PIXELS, MAX_RENDER_SIDE, MAX_ROBOTS
 
 __all__ = [
     "formation_name",
+    "formation_used",
     "render",
     "render_robot",
     "formation_edges",
@@ -176,6 +177,12 @@ def formation_name(formation: str, robots: int | None, graph: str | None,
     if n_edges is not None:
         return f"{robots} robots on {n_edges} comm edge{'' if n_edges == 1 else 's'}"
     return f"{robots} robots, formation {formation}"
+
+
+def formation_used(formation: str, graph: str | None) -> str | None:
+    """The formation a render used: ``None`` beside a graph kind, which draws the graph in its
+    place (``run-formation --robots N --graph G``, a parametric formation)."""
+    return formation if graph is None else None
 
 
 def check_formation(formation) -> None:

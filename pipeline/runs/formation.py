@@ -89,7 +89,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     :func:`_triangulate` (pycolmap with known poses, before and after; the fused landmarks'
     errors), then the report and the outputs (:func:`_write`).
     """
-    from data_synth import formation_name
+    from data_synth import formation_name, formation_used
     from pipeline.evaluation import report as sections
 
     out = config.out_dir()
@@ -121,6 +121,7 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         "versions": sections.versions(),
         # the memory limit is a guard on the run, not an option of its outputs
         "config": {**{k: v for k, v in asdict(config).items() if k != "max_memory_gb"},
+                   "formation": formation_used(config.formation, config.graph),
                    "out": str(out)},
     }
     if cleaning.faults is not None:

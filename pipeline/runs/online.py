@@ -350,7 +350,7 @@ def run_online(config: OnlineConfig, timer: StageTimer | None = None) -> Path:
 
 def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> dict:
     """``report.json`` of an online run: config, steps, and the final scores."""
-    from data_synth import formation_name
+    from data_synth import formation_name, formation_used
     from pipeline.evaluation.links import link_truth
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
     from pipeline.evaluation.report import versions
@@ -404,7 +404,8 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                    "links_cut": int((oa.links.reason == "fusion-outlier").sum())},
         "ground_truth": {"tolerance_px": config.tol_px},
         "versions": versions(),
-        "config": {**asdict(config), "out": str(config.out_dir())},
+        "config": {**asdict(config), "formation": formation_used(config.formation, config.graph),
+                   "out": str(config.out_dir())},
     }
     from pipeline.outcome import flag_online, merge_radius_why
 

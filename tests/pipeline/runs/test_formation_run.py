@@ -58,3 +58,18 @@ def test_a_team_of_robots_without_a_graph_kind_is_titled_by_its_comm_edges(tmp_p
     report = json.loads((out / "report.json").read_text())
     n_edges = len(report["comm_edges"])
     assert report["title"] == f"3 robots on {n_edges} comm edges (seed 0)"
+
+
+def test_a_parametric_run_records_no_formation_letter(tmp_path, monkeypatch):
+    """--robots/--graph draw the graph; config.formation said 'd', which no parametric run
+    uses (--formation d beside --robots is refused): it is null, a lettered run's stays."""
+    from pipeline.__main__ import main
+
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "line"
+    assert main(["run-formation", "--robots", "3", "--graph", "line", "--size", "161x97",
+                 "--max-features", "100", "--no-fusion", "--no-rerun", "--out", str(out)]) == 0
+    config = json.loads((out / "report.json").read_text())["config"]
+    assert config["formation"] is None and config["robots"] == 3 and config["graph"] == "line"
+    clean, _ = _run(tmp_path, "lettered")
+    assert clean["config"]["formation"] == "d"

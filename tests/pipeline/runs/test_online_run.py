@@ -91,6 +91,16 @@ def test_bad_options_are_refused(tmp_path, capsys, flags, match):
     assert not (tmp_path / "r").exists()
 
 
+def test_a_parametric_online_run_records_no_formation_letter(tmp_path, run_dir):
+    """--robots/--graph draw the graph: config.formation is null, not the unused 'd'."""
+    out = tmp_path / "line"
+    assert main(["run-formation", "--steps", "1", "--robots", "3", "--graph", "line",
+                 "--size", "192x144", "--max-features", "150", "--no-fusion", "--no-rerun",
+                 "--out", str(out)]) == 0
+    assert json.loads((out / "report.json").read_text())["config"]["formation"] is None
+    assert json.loads((run_dir / "report.json").read_text())["config"]["formation"] == "a"
+
+
 def test_without_fusion_no_link_is_cut_as_an_outlier(tmp_path):
     out = tmp_path / "r"
     assert main(["run-formation", "--steps", "2", "--window", "2", "--no-fusion", "--no-rerun",
