@@ -51,11 +51,12 @@ def add_scene_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None, *,
-                          links_only: bool = False) -> None:
+                          links_only: bool = False, faults: bool = False) -> None:
     """``--resolution RULE``: a rule of :mod:`pipeline.consistency.rules` (Alg. 1 of the
     paper, the evidence-aware rule, ...); ``default`` None: the registry's
     ``DEFAULT_RESOLUTION``, or ``DEFAULT_LINKS_RESOLUTION`` for a job that receives links
-    only (``links_only``)."""
+    only (``links_only``); ``faults``: the command has the fault flags of
+    :func:`pipeline.faults.add_fault_arguments`, which the help then names."""
     from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, DEFAULT_RESOLUTION, RULES
 
     if default is None:
@@ -64,10 +65,11 @@ def add_resolution_option(p: argparse.ArgumentParser, default: str | None = None
     p.add_argument("--resolution", choices=tuple(RULES), default=default,
                    help="how the robots cut conflictive sets: "
                         + "; ".join(rule.help for rule in RULES.values())
-                        + f" (default {default}; with a fault flag, --drop-prob, "
-                          "--delay-rounds, --crash or --switching-topology, a rule that is not "
-                          "fault-tolerant gives way to the fault-tolerant Alg. 1, with a "
-                          "warning)")
+                        + f" (default {default}"
+                        + ("; with a fault flag, --drop-prob, --delay-rounds, --crash or "
+                           "--switching-topology, a rule that is not fault-tolerant gives way to "
+                           "the fault-tolerant Alg. 1, with a warning" if faults else "")
+                        + ")")
 
 
 #: the defaults of :func:`add_online_options` (``--hold``'s: ``window - 1``, by the job)
@@ -135,13 +137,16 @@ def add_transport_option(p: argparse.ArgumentParser) -> None:
                    help=transport_help())
 
 
-def add_merge_radius_option(p: argparse.ArgumentParser) -> None:
-    """``--merge-radius PX``: keypoints of one image closer than this are one feature."""
+def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None) -> None:
+    """``--merge-radius PX``: keypoints of one image closer than this are one feature;
+    ``online``: the command's option of an online run, which keeps 0.5 px (named in the
+    help)."""
     p.add_argument("--merge-radius", type=float, default=None, metavar="PX",
                    help="keypoints of one image closer than this are one feature (default: "
                         "the rule's, 2 px (the truth tolerance) with --resolution evidence or "
                         "sync, 0.5 px with paper and paper-labels; 0.5 px with colmap-sift, as "
-                        "COLMAP keeps nearby DoG extrema apart, and with run-formation --steps)")
+                        "COLMAP keeps nearby DoG extrema apart"
+                        + (f", and with {online}" if online else "") + ")")
 
 
 def feature_options(args) -> tuple[str, int | None]:

@@ -40,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "synchronization, a CLEAR-style method, union-find dropping conflictive "
                         "sets, ...), for comparison: a line each and the summary's baselines")
     add_overwrite_and_memory_options(p, "--out / --report")
-    add_resolution_option(p, links_only=True)
+    add_resolution_option(p, links_only=True, faults=True)
     add_transport_option(p)
     add_fault_arguments(p)
 

@@ -114,3 +114,24 @@ def test_one_default_resolution_everywhere_but_run_formations(tmp_path):
     links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0], [0.8, 0.8, 0.2, 0.8])
     res = resolve_conflicts([1, 1, 1, 2], None, links)
     assert res.stats["resolution"] == "evidence" and res.deleted.tolist() == [0, 0, 1, 0]
+
+
+def test_each_commands_help_names_only_its_own_options():
+    """run-formations --help told of --drop-prob, --crash, ... (beside --resolution) and
+    run-formation's --steps (beside --merge-radius), options it does not have; a flag after
+    another command's name ('as run-formation --steps N') is that command's."""
+    import re
+
+    from pipeline.__main__ import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.choices and isinstance(a.choices, dict))
+    commands = set(sub.choices)
+    foreign = []
+    for name, parser in sub.choices.items():
+        own = {s for a in parser._actions for s in a.option_strings}
+        for action in parser._actions:
+            for m in re.finditer(r"(\S+) (--[a-z][a-z0-9-]*)|(--[a-z][a-z0-9-]*)", action.help or ""):
+                flag = m.group(2) or m.group(3)
+                if flag not in own and m.group(1) not in commands:
+                    foreign.append(f"{name} {action.option_strings}: {flag}")
+    assert foreign == []
