@@ -198,7 +198,7 @@ def sequence_config_from_args(args):
     ------
     InputError
         A bad ``--window``, ``--hold`` or ``--batch-every``, or an option the online job does not run
-        (``--export-db``, ``--truth``, a live viewer).
+        (``--export-db``, ``--truth``, ``--no-fusion``, a live viewer).
     """
     from pipeline.runs.online_images import SequenceConfig
 
@@ -208,6 +208,7 @@ def sequence_config_from_args(args):
             ("--truth", args.truth != "none", "takes no truth"),
             ("--truth-tol", args.truth_tol is not None, "takes no truth"),
             ("--remap", args.remap, "maps nothing"),
+            ("--no-fusion", args.no_fusion, "fuses nothing: photographs have no poses"),
             ("--threads", args.threads is not None, "runs no COLMAP mapper"),
             ("--spawn/--connect", bool(args.spawn or args.connect), "streams to no viewer")):
         if on:

@@ -80,6 +80,9 @@ def test_images_and_links_tables(run_dir):
     (["--remap"], "--remap is not available with --sequence"),
     (["--threads", "2"], "--threads is not available with --sequence"),
     (["--truth-tol", "3"], "--truth-tol is not available with --sequence"),
+    # photo sequences never fuse: --no-fusion was accepted and changed nothing
+    (["--no-fusion"], "--no-fusion is not available with --sequence (the online job fuses "
+                      "nothing"),
 ])
 def test_options_the_online_job_does_not_run_are_refused(folder, tmp_path, capsys, flags,
                                                          match):
