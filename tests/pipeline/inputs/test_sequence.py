@@ -71,6 +71,14 @@ def test_robots_with_different_numbers_of_frames_are_refused(tmp_path):
     root = _folder(tmp_path / "seq", {"a": [0, 1, 2], "b": [3, 4]})
     with pytest.raises(InputError, match=r"different numbers of frames \(a: 3, b: 2\)"):
         load_sequence(root, max_size=64)
+    # the README's errors table has its row (it had none), with what to do
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[3] / "README.md").read_text()
+    errors = readme[readme.index("## Errors you can meet"):readme.index("## Layout")]
+    row = next((r for r in errors.splitlines()
+                if "robots hold different numbers of frames" in r), None)
+    assert row is not None and "the same number of frames" in row and row.endswith("| 2 |")
 
 
 def test_a_sub_folder_without_images_is_no_robot(tmp_path):
