@@ -39,6 +39,13 @@ TOLERANCE = 0.05
 
 def _weak_matching_causes(n: int, edges: np.ndarray, pair_links: list[int],
                           features_per_camera: list[int], intrinsics_guessed: int) -> list[str]:
+    m = np.asarray(features_per_camera, dtype=np.int64)
+    if len(m) and not m.any():
+        # nothing reached matching: the ratio and epipolar tests had no match to reject
+        return [f"no image has any feature (the detector found none in the {len(m)} images): "
+                f"they are too small or too plain for it; use larger or more textured images "
+                f"(a larger --max-size if they were downscaled), or another --features, e.g. "
+                f"sift"]
     causes = []
     parts = graph_parts(n, edges)
     if parts > 1:
@@ -53,7 +60,6 @@ def _weak_matching_causes(n: int, edges: np.ndarray, pair_links: list[int],
                           f"matches survived the ratio and epipolar tests): the images overlap "
                           f"little or have too few features (try --max-features 8192 or a "
                           f"larger --max-size)")
-    m = np.asarray(features_per_camera, dtype=np.int64)
     if len(m) and int(np.median(m)) < 1000:
         causes.append(f"few features per image (median {int(np.median(m))}): textureless or "
                       f"small images (try a larger --max-size or --max-features)")

@@ -32,6 +32,18 @@ def test_few_registered_names_the_likely_causes():
     assert "registered only 2 of 6" in flags_markdown(flags)
 
 
+def test_no_feature_in_any_image_is_the_cause_named():
+    """Tiny or plain images where the detector found nothing: the cause is the missing
+    features, not matches the ratio and epipolar tests rejected (there were none)."""
+    none = dict(_summary(0, [], 0), models=0)
+    flags = reconstruction_flags(3, none, none, np.array([[0, 1], [0, 2], [1, 2]]), [0] * 3,
+                                 [0] * 3, intrinsics_guessed=3)
+    cause = flags[0]["likely_cause"]
+    assert cause.startswith("no image has any feature (the detector found none in the 3 "
+                            "images)")
+    assert "--features" in cause and "ratio and epipolar" not in cause
+
+
 def test_no_model_at_all_names_colmaps_first_pair():
     """Two photos matched well (574 links) but COLMAP started no model: the first cause named
     is its first pair's thresholds, not only the guessed focal length."""
