@@ -18,7 +18,6 @@ from pipeline.faults import (
     add_fault_arguments,
     check_faults_for_transport,
     faults_from_args,
-    warn_rule_under_faults,
 )
 
 __all__ = ["add_arguments", "run"]
@@ -58,8 +57,7 @@ def run(args) -> int:
                        [("--links", args.links), ("--comm-graph", args.comm_graph)],
                        overwrite=args.overwrite)
     faults = faults_from_args(args)
-    check_faults_for_transport(faults, args.transport)
-    warn_rule_under_faults(faults, args.resolution)
+    check_faults_for_transport(faults, args.transport)  # the rule's warning: resolve_file's
     # every output is written before any is put in place: an error leaves none of them
     with OutputFiles(replace=args.overwrite) as outputs:
         s = flag_result(resolve_file(args.links, args.out, args.comm_graph,

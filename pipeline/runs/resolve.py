@@ -63,7 +63,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     from pipeline.commgraph import links_off_graph, read_comm_graph
     from pipeline.consistency.rules import deleted_cases, rule_for_network
     from pipeline.consistency.setlists import bundle_budget
-    from pipeline.inputs.compact import compact_ids, fault_section_in_ids
+    from pipeline.faults import warn_rule_under_faults
+    from pipeline.inputs.compact import compact_ids, fault_section_in_ids, faults_in_layout
     from pipeline.inputs.linkscsv import read_links_csv, write_links_csv
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
@@ -131,6 +132,11 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(m.sum()), len(run_links)), "drop --baselines")
+    if faults is not None:
+        faults_in_layout(faults, ids)  # a crash of a robot not in the input is refused here
+    # the input checked: a rule that gives way to Alg. 1 under the faults is warned of now, so
+    # that a refused command prints its error line only
+    warn_rule_under_faults(faults, resolution)
     before = count_conflicts(AssociationGraph(m, run_links)).as_dict()
     # without a link the robots have nothing to exchange: no team of processes is started
     # for it (a team over Zenoh needs two robots with something to say); the result is the

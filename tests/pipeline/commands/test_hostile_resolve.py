@@ -127,6 +127,18 @@ def test_crash_of_a_robot_that_does_not_exist(tmp_path, capsys):
     one_line_error(capsys, "robot 5 does not exist")
 
 
+def test_a_crash_of_a_robot_that_does_not_exist_is_refused_before_any_warning(tmp_path, capsys):
+    """With the default rule (sync, not fault-tolerant) the warning that Alg. 1 runs instead
+    came first, then the refusal: a refused command prints its error line only."""
+    src = tmp_path / "in.csv"
+    src.write_text("0,0,1,0\n1,0,2,0\n2,0,0,1\n")
+    assert main(["resolve", "--links", str(src), "--out", str(tmp_path / "o.csv"),
+                 "--crash", "9@1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --crash 9@1: robot 9 does not exist") and "warning" not in err
+    assert not (tmp_path / "o.csv").exists()
+
+
 @pytest.mark.parametrize("rule, flags, warned", [
     ("evidence", ["--crash", "1@999999"], "--resolution evidence is not fault-tolerant: with "
                                           "--crash the robots run the fault-tolerant Alg. 1"),
