@@ -264,6 +264,37 @@ def _check_declared_size(path: Path, im: Image.Image) -> None:
                          "or replace it")
 
 
+def _tiff_layout(path: Path) -> str | None:
+    """What the first image of a TIFF file holds, read from its header (``32-bit
+    floating-point TIFF, 3 samples per pixel``), or ``None``: not a TIFF, or no readable
+    header. Names a layout Pillow cannot open (32-bit float RGB) without decoding it."""
+    import struct
+
+    tags = {}
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+            if head[:4] not in (b"II*\0", b"MM\0*"):
+                return None
+            e = "<" if head[:2] == b"II" else ">"
+            f.seek(struct.unpack(e + "I", head[4:])[0])
+            for _ in range(min(struct.unpack(e + "H", f.read(2))[0], 4096)):
+                tag, typ, count, value = struct.unpack(e + "HHI4s", f.read(12))
+                if tag not in (258, 277, 339) or typ != 3:  # BitsPerSample, SamplesPerPixel,
+                    continue                                  # SampleFormat: SHORTs
+                if count > 2:  # one value per sample, stored apart: the first one
+                    here = f.tell()
+                    f.seek(struct.unpack(e + "I", value)[0])
+                    value = f.read(2)
+                    f.seek(here)
+                tags[tag] = struct.unpack(e + "H", value[:2])[0]
+    except (OSError, struct.error):
+        return None
+    kind = {1: "unsigned integer", 2: "signed integer", 3: "floating-point"}.get(
+        tags.get(339, 1), "other-sample-format")
+    return f"{tags.get(258, 1)}-bit {kind} TIFF, {tags.get(277, 1)} sample(s) per pixel"
+
+
 def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     """Decode one image file completely.
 
@@ -279,7 +310,8 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     Raises
     ------
     InputError
-        The file is not an image Pillow can decode, or it is truncated / corrupt; it declares
+        The file is not an image Pillow can decode (a TIFF whose header Pillow cannot read is
+        named by its layout, e.g. 32-bit float RGB), or it is truncated / corrupt; it declares
         more than :data:`MAX_IMAGE_PIXELS`, or the file is far larger than its pixels
         (checked on the header, before decoding).
     """
@@ -294,6 +326,12 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     except InputError:
         raise
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
+        tiff = _tiff_layout(path) if isinstance(exc, UnidentifiedImageError) else None
+        if tiff is not None:
+            raise InputError(
+                f"{path.name}: {tiff}: not a layout this reader decodes; convert it to an 8- "
+                f"or 16-bit PNG or TIFF (e.g. magick {path.name} -depth 16 {path.stem}.png)"
+            ) from None
         raise InputError(
             f"{path.name}: cannot read it as an image ({exc}); remove or replace the file "
             f"(a truncated or non-image file)") from None

@@ -2,6 +2,7 @@
 
 import shutil
 
+import cv2
 import numpy as np
 import pytest
 from PIL import ExifTags, Image
@@ -197,6 +198,25 @@ def test_non_image_file_with_image_suffix(tmp_path):
                            "b.jpg": b"this is a text file, not a JPEG\n"})
     with pytest.raises(InputError, match=r"b\.jpg: cannot read it as an image"):
         load_folder(d)
+
+
+def test_a_float_rgb_tiff_is_named_as_a_layout_not_read(tmp_path):
+    """A valid 32-bit float RGB TIFF (Pillow cannot open it, OpenCV can) was called 'a
+    truncated or non-image file'; its layout is named, with what to convert it to. A TIFF
+    cut inside its header is still a truncated file."""
+    from pipeline.inputs.photos import load_image
+
+    rgb = _texture(40, 50).astype(np.float32) / 255
+    assert cv2.imwrite(str(tmp_path / "f.tif"), rgb)
+    assert cv2.imread(str(tmp_path / "f.tif"), cv2.IMREAD_UNCHANGED).dtype == np.float32
+    with pytest.raises(InputError) as e:
+        load_image(tmp_path / "f.tif")
+    assert str(e.value) == ("f.tif: 32-bit floating-point TIFF, 3 sample(s) per pixel: not a "
+                            "layout this reader decodes; convert it to an 8- or 16-bit PNG or "
+                            "TIFF (e.g. magick f.tif -depth 16 f.png)")
+    (tmp_path / "cut.tif").write_bytes((tmp_path / "f.tif").read_bytes()[:100])
+    with pytest.raises(InputError, match=r"cut\.tif: cannot read it as an image"):
+        load_image(tmp_path / "cut.tif")
 
 
 def test_truncated_jpeg(tmp_path, sceaux_small):
