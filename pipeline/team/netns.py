@@ -38,6 +38,7 @@ import contextlib
 import itertools
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -47,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["NetnsRig", "unavailable", "NETEM_MISSING", "read_results", "team_links",
+__all__ = ["NetnsRig", "unavailable", "remove_stale", "NETEM_MISSING", "read_results", "team_links",
            "kept_links", "conflictive_sets_after"]
 
 #: what this kernel cannot do (stated in reports beside the faults the rig made)
@@ -75,6 +76,34 @@ def unavailable() -> str | None:
         return f"ip netns add failed: {r.stderr.strip() or r.returncode}"
     _ip("netns", "del", name, check=False)
     return None
+
+
+_PREFIX = re.compile(r"^fm(\d+)x\d+-\d+$")
+
+
+def remove_stale() -> list[str]:
+    """Delete the namespaces of rigs whose process is gone, and return their names.
+
+    A rig deletes its namespaces when it closes, also on error or Ctrl-C; a process killed
+    outright (``SIGKILL``, e.g. a test run stopped by a timeout) cannot, and its namespaces
+    stayed until the machine restarted. A rig's names carry its process id
+    (``fm<pid>x<k>-<i>``): those of a process that no longer exists are removed. Namespaces
+    of live processes, and every other name, are left alone."""
+    listed = _ip("netns", "list", check=False).stdout.split("\n")
+    gone = []
+    for line in listed:
+        name = line.split(" ")[0]
+        m = _PREFIX.match(name)
+        if m is None or int(m.group(1)) == os.getpid():
+            continue
+        try:
+            os.kill(int(m.group(1)), 0)
+        except ProcessLookupError:
+            _ip("netns", "del", name, check=False)
+            gone.append(name)
+        except PermissionError:
+            pass  # a live process of another user
+    return gone
 
 
 class NetnsRig:
@@ -126,7 +155,9 @@ class NetnsRig:
         self.close()
 
     def make(self) -> None:
-        """Create the namespaces, addresses and cables."""
+        """Create the namespaces, addresses and cables (first removing those a killed
+        process left: :func:`remove_stale`)."""
+        remove_stale()
         for i in range(self.n):
             _ip("netns", "add", self.ns(i))
             self._made.append(self.ns(i))

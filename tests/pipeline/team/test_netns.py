@@ -7,9 +7,11 @@ start when every robot has finished its start handshake (its log says so), i.e. 
 robots render, extract and exchange features.
 """
 
+import os
 import signal
 import time
 
+import numpy as np
 import pytest
 
 from pipeline.team.netns import (
@@ -188,3 +190,29 @@ def test_robot_that_never_starts_is_written_off_and_the_rest_finish(tmp_path):
     assert _outcomes(res) == {0: "partitioned", 1: "done", 2: "partitioned"}
     assert res[0]["counters"]["written_off"] == {"3": "start"}
     assert kept_conflict_free(res) and _ends_agree(res)
+
+
+def test_namespaces_left_by_a_killed_process_are_removed_by_the_next_rig():
+    """A rig's process killed outright (SIGKILL: a test run stopped by its timeout) left its
+    namespaces for good (four fm947x7-* were found on this machine); the next rig removes
+    those of a process that is gone, and leaves a live process's alone."""
+    import subprocess
+
+    from pipeline.team.netns import remove_stale
+
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    stale, live = f"fm{dead.pid}x0-0", f"fm{os.getppid()}x0-0"
+    for name in (stale, live):
+        subprocess.run(["ip", "netns", "add", name], check=True)
+    try:
+        with NetnsRig(1, np.zeros((0, 2), np.int64)):
+            pass
+        names = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True,
+                               check=True).stdout
+        assert stale not in names
+        assert live in names
+        assert remove_stale() == []
+    finally:
+        for name in (stale, live):
+            subprocess.run(["ip", "netns", "del", name], capture_output=True)
