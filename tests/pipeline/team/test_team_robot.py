@@ -30,31 +30,44 @@ def test_the_profile_hook_writes_the_robots_statistics_only_when_asked(tmp_path,
     assert len(list((tmp_path / "prof").glob("fusion-1-*.pstats"))) == 1
 
 
-def test_two_robots_given_one_result_file_do_not_replace_each_others(tmp_path):
-    """Robots 0 and 1 both given ``--result same.json`` (no --overwrite): the first to end
-    writes it, the second keeps it as it is and exits 2 naming it, where it used to replace
-    it silently and both exited 0."""
-    import threading
-
+def _two_robots(tmp_path, name: str):
+    """A links team of two robots and one link, without observer, its file in tmp_path."""
     from pipeline.team.launcher import make_team
-    from pipeline.team.robot import run_robot_process
 
     (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n")
-    team = make_team("same-result", [[0, 1]], {"kind": "links", "links": "in.csv",
-                                               "features_per_camera": [1, 1]}, n=2)
+    team = make_team(name, [[0, 1]], {"kind": "links", "links": "in.csv",
+                                      "features_per_camera": [1, 1]}, n=2)
     team.path = tmp_path / "TEAM.json"
     team.observer = None
-    same = tmp_path / "same.json"
+    return team
+
+
+def _run_both(run) -> list:
+    """``run(i)`` for robots 0 and 1 in two threads; their exit codes."""
+    import threading
+
     codes = [None, None]
 
-    def run(i):
-        codes[i] = run_robot_process(team, i, str(same))
+    def one(i):
+        codes[i] = run(i)
 
-    threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
+    threads = [threading.Thread(target=one, args=(i,)) for i in (0, 1)]
     for t in threads:
         t.start()
     for t in threads:
         t.join(120)
+    return codes
+
+
+def test_two_robots_given_one_result_file_do_not_replace_each_others(tmp_path):
+    """Robots 0 and 1 both given ``--result same.json`` (no --overwrite): the first to end
+    writes it, the second keeps it as it is and exits 2 naming it, where it used to replace
+    it silently and both exited 0."""
+    from pipeline.team.robot import run_robot_process
+
+    team = _two_robots(tmp_path, "same-result")
+    same = tmp_path / "same.json"
+    codes = _run_both(lambda i: run_robot_process(team, i, str(same)))
     assert sorted(codes) == [0, 2]
     assert json.loads(same.read_text())["id"] == codes.index(0)
 
@@ -64,10 +77,7 @@ def test_ctrl_c_while_the_observer_is_awaited_names_the_result_written(tmp_path,
     """A robot whose ``--result`` is written and which is interrupted while it repeats its
     result to an observer (not started yet): the one line names the result as in place,
     where it said that nothing was written."""
-    import threading
-
     from pipeline.__main__ import interruptible
-    from pipeline.team.launcher import make_team
     from pipeline.team.robot import run_robot_process
     from pipeline.transport.zenoh_transport import ZenohTransport
 
@@ -79,25 +89,10 @@ def test_ctrl_c_while_the_observer_is_awaited_names_the_result_written(tmp_path,
         return publish(self, *a, **k)
 
     monkeypatch.setattr(ZenohTransport, "publish_result", interrupted)
-    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n")
-    team = make_team("ctrl-c-result", [[0, 1]], {"kind": "links", "links": "in.csv",
-                                                 "features_per_camera": [1, 1]}, n=2)
-    team.path = tmp_path / "TEAM.json"
-    team.observer = None
+    team = _two_robots(tmp_path, "ctrl-c-result")
     result = tmp_path / "r0.json"
-    codes = [None, None]
-
-    def run(i):
-        if i == 0:
-            codes[0] = interruptible("robot", lambda: run_robot_process(team, 0, str(result)))
-        else:
-            codes[1] = run_robot_process(team, 1)
-
-    threads = [threading.Thread(target=run, args=(i,)) for i in (0, 1)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(120)
+    codes = _run_both(lambda i: interruptible("robot", lambda: run_robot_process(
+        team, 0, str(result))) if i == 0 else run_robot_process(team, 1))
     assert codes == [130, 0]
     assert json.loads(result.read_text())["id"] == 0
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("interrupted:")]
