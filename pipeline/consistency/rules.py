@@ -13,8 +13,9 @@ sets beyond its bundle budget merged as ``sync`` merges: :mod:`.engines.evidence
 ``DEFAULT_RESOLUTION`` (``evidence``) is the rule every entry point runs unless told otherwise:
 ``resolve_conflicts``, the stage functions of :mod:`pipeline.stages`, the runners' configs,
 the commands' ``--resolution`` (``run-formations`` keeps ``paper`` to reproduce the paper's
-tables) and a ``TEAM.json`` without ``resolution``. The jobs that receive links only
-(``resolve``, ``clean-db``, ``clean-h5``, ``run-landmarks``) run
+tables) and a ``TEAM.json`` of formations or photographs without ``resolution``. The jobs that
+receive links only (``resolve``, ``clean-db``, ``clean-h5``, ``run-landmarks``, a ``TEAM.json``
+of links) run
 ``DEFAULT_LINKS_RESOLUTION`` (``sync``): without poses its decisions are the evidence rule's
 greedy merge (plus quadrangle support) and its memory follows the links.
 
@@ -114,11 +115,12 @@ __all__ = ["ResolutionRule", "RULES", "register", "unregister", "get_rule", "rul
            "DEFAULT_RESOLUTION", "DEFAULT_LINKS_RESOLUTION"]
 
 #: the rule every entry point runs unless told otherwise (the Python API, the stage functions,
-#: the runners' configs, the commands, a TEAM.json without ``resolution``); ``run-formations``
+#: the runners' configs, the commands, a TEAM.json of formations or photographs without
+#: ``resolution``); ``run-formations``
 #: reproduces the paper's tables with ``paper``. Registered below.
 DEFAULT_RESOLUTION = "evidence"
 #: the rule of the jobs that receive links only (``resolve``, ``clean-db``, ``clean-h5``,
-#: ``run-landmarks``): no camera poses, so the evidence rule's geometric tests cannot run and
+#: ``run-landmarks``, a TEAM.json of links): no camera poses, so the evidence rule's geometric tests cannot run and
 #: its decisions are the greedy merge ``sync`` computes too, at a higher cost (its detection
 #: floods up to ``B + 1`` ids per feature: a 101-frame CMU hotel input, 326 MB peak against
 #: sync's 317 MB, 732 MB on the wire against 308 MB); ``sync`` also counts quadrangles on

@@ -40,8 +40,10 @@ one; a user may write one by hand. Schema (``version`` 1)::
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
                   "resolution": "evidence",       # a rule of pipeline.consistency.rules,
-                                                  # default its DEFAULT_RESOLUTION; e.g.
-                                                  # "paper" (paper with drop_prob > 0)
+                                                  # default its DEFAULT_RESOLUTION (a links
+                                                  # team: DEFAULT_LINKS_RESOLUTION, as
+                                                  # resolve); e.g. "paper" (paper with
+                                                  # drop_prob > 0)
                   "merge_radius": null, "contrast_threshold": null, "rootsift": false,
                   "budget_after_merge": false, "threshold_px": 1.0,
                   "wire": "compact"},             # or "plain" (teamfile.WIRE_FORMS)
@@ -320,6 +322,10 @@ def parse_team(doc, path: Path | None = None) -> Team:
     _check_data(data, n, where)
 
     opts = dict(DEFAULT_OPTIONS)
+    if data["kind"] == "links":  # links only, as resolve receives them: its default rule
+        from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
+
+        opts["resolution"] = DEFAULT_LINKS_RESOLUTION
     given = doc.get("options") if doc.get("options") is not None else {}
     if not isinstance(given, dict):
         raise InputError(f"{where}: 'options' must be an object")

@@ -350,3 +350,18 @@ def test_an_ipv6_endpoint_parses():
                                    {"id": 1, "endpoint": "tcp/127.0.0.1:7448"},
                                    {"id": 2, "endpoint": "tcp/localhost:7449"}]))
     assert team.endpoint(0) == "tcp/[::1]:7447"
+
+
+def test_a_links_team_without_a_rule_runs_resolves_default():
+    """A hand-written links team without ``resolution`` ran the evidence rule while ``resolve``
+    on the same links runs ``sync`` (DEFAULT_LINKS_RESOLUTION): the same links got other
+    decisions by hand than through the command. A links team now takes resolve's default;
+    a formation team keeps DEFAULT_RESOLUTION, and a rule given is kept."""
+    from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION, DEFAULT_RESOLUTION
+
+    links = {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1, 1]}
+    formation = {"kind": "formation", "formation": "ring", "robots": 3, "size": [160, 120]}
+    assert parse_team(_doc(data=links)).options["resolution"] == DEFAULT_LINKS_RESOLUTION
+    assert parse_team(_doc(data=formation)).options["resolution"] == DEFAULT_RESOLUTION
+    given = parse_team(_doc(data=links, options={"resolution": "paper"}))
+    assert given.options["resolution"] == "paper"
