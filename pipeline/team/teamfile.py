@@ -246,7 +246,8 @@ def parse_team(doc, path: Path | None = None) -> Team:
     if unknown:
         raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r}; see the TEAM.json "
                          "schema in the README")
-    if doc.get("version", 1) != 1:
+    version = doc.get("version", 1)
+    if isinstance(version, bool) or version != 1:  # true == 1 in Python, not in JSON
         raise InputError(f"{where}: version {doc.get('version')!r} is not supported (use 1)")
     name = doc.get("name", "team")
     if not isinstance(name, str) or not _NAME.match(name):

@@ -365,3 +365,11 @@ def test_a_links_team_without_a_rule_runs_resolves_default():
     assert parse_team(_doc(data=formation)).options["resolution"] == DEFAULT_RESOLUTION
     given = parse_team(_doc(data=links, options={"resolution": "paper"}))
     assert given.options["resolution"] == "paper"
+
+
+@pytest.mark.parametrize("version", [True, 1.5, "1", 2])
+def test_a_version_other_than_1_is_refused(version):
+    """``"version": true`` passed as version 1 (Python's ``True == 1``)."""
+    with pytest.raises(InputError, match=r"version .* is not supported \(use 1\)"):
+        parse_team(_doc(version=version))
+    assert parse_team(_doc(version=1.0)).n == 3
