@@ -7,13 +7,17 @@ STAMP  := $(VENV)/.installed
 .PHONY: setup run-formation run-formations test lint bench bench-voting view clean
 
 # a .venv whose python is gone (a half-made or moved one) is made again; one of a Python older
-# than 3.11, or without pip, is named with what to do (make clean, then PYTHON=...)
+# than 3.11, or without pip, is named with what to do (make clean, then PYTHON=...). A PYTHON
+# that is not a command, or older than 3.11, is named before any .venv is made from it.
 ifeq ($(shell test -x $(PY) && echo ok),)
   $(shell rm -f $(STAMP))
 endif
 
 $(STAMP): pyproject.toml
-	@test -x $(PY) || { rm -rf $(VENV); $(PYTHON) -m venv $(VENV); }
+	@test -x $(PY) || { rm -rf $(VENV); \
+	  command -v "$(PYTHON)" >/dev/null 2>&1 || { echo "error: PYTHON='$(PYTHON)' is not a command; formation-match needs Python 3.11 or newer: make PYTHON=python3.11 (or newer, or its path)" >&2; exit 1; }; \
+	  $(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null || { echo "error: PYTHON='$(PYTHON)' is $$($(PYTHON) --version 2>&1 | head -1); formation-match needs 3.11 or newer: make PYTHON=python3.11 (or newer)" >&2; exit 1; }; \
+	  $(PYTHON) -m venv $(VENV); }
 	@$(PY) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(VENV) holds Python $$($(PY) -c 'import sys; print(sys.version.split()[0])'); formation-match needs 3.11 or newer: make clean, then make PYTHON=python3.11 (or newer)" >&2; exit 1; }
 	@$(PY) -m pip --version >/dev/null 2>&1 || $(PY) -m ensurepip --upgrade >/dev/null 2>&1 || { echo "error: $(VENV) has no pip (on Debian: apt install python3-venv); make clean, then again" >&2; exit 1; }
 	$(PY) -m pip install --quiet --upgrade pip

@@ -29,3 +29,33 @@ def test_make_bench_runs_every_bench_but_the_floor_that_needs_a_folder():
     expected = sorted(f"bench/{p.name}" for p in (ROOT / "bench").glob("*.py")
                       if p.name != "opencv_floor.py")
     assert scripts == expected
+
+
+OLD_PYTHON = """#!/bin/sh
+case "$1" in
+  --version) echo "Python 3.10.12" ;;
+  -c) exit 1 ;;
+  -m) mkdir -p "$3/bin" && cp "$0" "$3/bin/python" ;;
+esac
+"""
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
+@pytest.mark.parametrize("python, said", [("no-such-python-3", "is not a command"),
+                                          ("", "is not a command"),
+                                          ("OLD", "is Python 3.10.12")])
+def test_make_setup_names_a_python_it_cannot_use_before_making_the_venv(tmp_path, python, said):
+    # a PYTHON that is not a command, or older than 3.11, made a .venv (or a shell error,
+    # '-m: not found'), then asked for make clean before the right PYTHON was taken
+    for name in ("Makefile", "pyproject.toml"):
+        shutil.copy(ROOT / name, tmp_path / name)
+    if python == "OLD":
+        python = str(tmp_path / "python3.10")
+        (tmp_path / "python3.10").write_text(OLD_PYTHON)
+        (tmp_path / "python3.10").chmod(0o755)
+    run = subprocess.run(["make", "setup", f"PYTHON={python}"], cwd=tmp_path,
+                         capture_output=True, text=True)
+    assert run.returncode != 0
+    assert f"error: PYTHON='{python}' {said}" in run.stderr
+    assert "3.11 or newer" in run.stderr
+    assert not (tmp_path / ".venv").exists()
