@@ -8,8 +8,9 @@ rule. The key also holds a digest of the ``data_synth`` source files and the Num
 versions, so that changed rendering code never reads old pixels.
 
 Where: ``$FORMATION_MATCH_CACHE`` if set, else ``$XDG_CACHE_HOME/formation-match``, else
-``~/.cache/formation-match``. ``FORMATION_MATCH_CACHE=off`` (or ``0``, ``no``, ``false``)
-turns the cache off. One uncompressed ``.npz`` per entry (~13 MB at 640x480 with 6 robots),
+``~/.cache/formation-match``; off when there is no home folder (``HOME`` empty, not an existing
+folder, or unset with no password entry). ``FORMATION_MATCH_CACHE=off`` (or ``0``, ``no``,
+``false``) turns the cache off. One uncompressed ``.npz`` per entry (~13 MB at 640x480 with 6 robots),
 written to a temporary file and renamed (concurrent runs never see half a file). An entry that
 cannot be read or does not hold what its name says is ignored and written again.
 
@@ -65,8 +66,17 @@ def cache_dir() -> Path | None:
         return Path(value).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or ""
     # XDG: a relative XDG_CACHE_HOME is invalid and is ignored
-    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".cache"
-    return root / "formation-match"
+    if base and Path(base).is_absolute():
+        return Path(base) / "formation-match"
+    home = os.environ.get("HOME")
+    if home is None:
+        try:
+            home = str(Path.home())  # the password database's
+        except RuntimeError:  # no entry for this user either
+            return None
+    if not home or not Path(home).is_absolute() or not Path(home).is_dir():
+        return None  # no home to keep it in: never a /.cache, nor a home made for the cache
+    return Path(home) / ".cache" / "formation-match"
 
 
 @functools.cache

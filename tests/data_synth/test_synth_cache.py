@@ -126,10 +126,32 @@ def test_cache_folder_follows_xdg_then_home(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache.cache_dir() == tmp_path / "xdg" / "formation-match"
     monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")
+    (tmp_path / "home").mkdir()
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     assert cache.cache_dir() == tmp_path / "home" / ".cache" / "formation-match"
     monkeypatch.delenv("XDG_CACHE_HOME")
     assert cache.cache_dir() == tmp_path / "home" / ".cache" / "formation-match"
+
+
+def _no_home(cls):
+    raise RuntimeError("Could not determine home directory.")  # as pathlib says it
+
+
+@pytest.mark.parametrize("home", ["", "missing", None])
+def test_no_home_folder_turns_the_cache_off(tmp_path, monkeypatch, home):
+    # HOME='' put the cache in /.cache, HOME=/nonexistent made that folder, and HOME unset for
+    # a user without a password entry (a container's --user 12345) ended run-formation with
+    # "RuntimeError: Could not determine home directory"
+    monkeypatch.delenv(cache.ENV)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    if home is None:
+        monkeypatch.delenv("HOME")
+        monkeypatch.setattr(Path, "home", classmethod(_no_home))
+    else:
+        monkeypatch.setenv("HOME", str(tmp_path / home) if home else "")
+    assert cache.cache_dir() is None
+    assert cache.save_views(1, SIZE, {"image": np.zeros((2, 4, 4, 3), np.uint8)}) is None
+    assert not (tmp_path / "missing").exists()
 
 
 def test_unwritable_cache_is_not_fatal(tmp_path, monkeypatch):
