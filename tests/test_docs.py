@@ -41,3 +41,17 @@ def test_readme_run_images_line_names_every_option():
     assert not missing
     assert "`run-formation`, `run-formations`, `run-images` and `resolve` take `--transport" \
         in readme
+
+
+def test_readme_says_where_make_setup_puts_the_command():
+    # the README showed the bare `formation-match` after `make setup`, which installs it in
+    # .venv/bin only: typed as shown, a new user's shell said 'command not found'
+    import tomllib
+
+    readme = (ROOT / "README.md").read_text()
+    commands = readme.split("## Commands", 1)[1].split("```", 1)[0]
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert "formation-match" in project["scripts"]
+    assert "`.venv/bin/formation-match`" in commands
+    assert "source .venv/bin/activate" in commands
+    assert "VENV   := .venv" in (ROOT / "Makefile").read_text()
