@@ -6,15 +6,18 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: setup run-formation run-formations test lint bench bench-voting view clean
 
-# a .venv whose python is gone (a half-made or moved one) is made again; one of a Python older
-# than 3.11, or without pip, is named with what to do (make clean, then PYTHON=...). A PYTHON
-# that is not a command, or older than 3.11, is named before any .venv is made from it.
-ifeq ($(shell test -x $(PY) && echo ok),)
+# a .venv whose python is gone (a half-made one) or that is not this folder's (made before the
+# clone was moved or copied: it imports the old folder's code, and its formation-match runs the
+# old folder's python) is made again; one of a Python older than 3.11, or without pip, is named
+# with what to do (make clean, then PYTHON=...). A PYTHON that is not a command, or older than
+# 3.11, is named before any .venv is made from it.
+VENV_HERE = test -x $(PY) && (cd / && "$(CURDIR)/$(PY)" -c 'import os, sys, pipeline; sys.exit(os.path.realpath(pipeline.__file__) != os.path.realpath(sys.argv[1]))' "$(CURDIR)/pipeline/__init__.py") >/dev/null 2>&1
+ifeq ($(shell $(VENV_HERE) && echo ok),)
   $(shell rm -f $(STAMP))
 endif
 
 $(STAMP): pyproject.toml
-	@test -x $(PY) || { rm -rf $(VENV); \
+	@$(VENV_HERE) || { rm -rf $(VENV); \
 	  command -v "$(PYTHON)" >/dev/null 2>&1 || { echo "error: PYTHON='$(PYTHON)' is not a command; formation-match needs Python 3.11 or newer: make PYTHON=python3.11 (or newer, or its path)" >&2; exit 1; }; \
 	  $(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null || { echo "error: PYTHON='$(PYTHON)' is $$($(PYTHON) --version 2>&1 | head -1); formation-match needs 3.11 or newer: make PYTHON=python3.11 (or newer)" >&2; exit 1; }; \
 	  $(PYTHON) -m venv $(VENV); }

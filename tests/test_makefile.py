@@ -59,3 +59,28 @@ def test_make_setup_names_a_python_it_cannot_use_before_making_the_venv(tmp_path
     assert f"error: PYTHON='{python}' {said}" in run.stderr
     assert "3.11 or newer" in run.stderr
     assert not (tmp_path / ".venv").exists()
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
+@pytest.mark.parametrize("imports_from, remade", [("other", True), ("clone", False)])
+def test_a_venv_made_for_another_folder_is_made_again(tmp_path, imports_from, remade):
+    # a clone moved (or copied) after make setup kept its .venv, whose editable install and
+    # .venv/bin/formation-match name the old folder ('exec: …/old/.venv/bin/python: not found')
+    import sys
+
+    clone = tmp_path / "clone"
+    for folder in (clone, tmp_path / "other"):
+        (folder / "pipeline").mkdir(parents=True)
+        (folder / "pipeline" / "__init__.py").write_text("")
+    for name in ("Makefile", "pyproject.toml"):
+        shutil.copy(ROOT / name, clone / name)
+    python = clone / ".venv" / "bin" / "python"  # a venv importing pipeline from imports_from
+    python.parent.mkdir(parents=True)
+    python.write_text(f'#!/bin/sh\nPYTHONPATH="{tmp_path / imports_from}" '
+                      f'exec "{sys.executable}" "$@"\n')
+    python.chmod(0o755)
+    (clone / ".venv" / ".installed").touch()
+    out = subprocess.run(["make", "-n", "-s", "setup"], cwd=clone, capture_output=True,
+                         text=True, check=True).stdout
+    assert ("pip install" in out) == remade
+    assert (clone / ".venv" / ".installed").exists() != remade
