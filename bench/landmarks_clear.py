@@ -46,7 +46,7 @@ CLEAR_MEASURED = {  # measured on this machine with CLEAR's public code (not our
 }
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
@@ -58,7 +58,13 @@ def main() -> int:
     ap.add_argument("--results", default="results.json", help="file name under --out")
     ap.add_argument("--quick", action="store_true", help="20 frames only")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-landmarks")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if not args.data.is_dir():
+        print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
+              "and their label files)", file=sys.stderr)
+        return 2
+    print(HEADER)
+    print("|" + "---|" * (HEADER.count("|") - 1))
     frames = [20] if args.quick else args.frames
     records = []
     for n in frames:
@@ -128,6 +134,4 @@ def _row(r: dict) -> str:
 
 
 if __name__ == "__main__":
-    print(HEADER)
-    print("|" + "---|" * (HEADER.count("|") - 1))
     sys.exit(main())

@@ -34,3 +34,13 @@ def test_a_count_the_bench_cannot_run_is_refused(tmp_path, capsys, name, args, m
     assert message in err and "Traceback" not in err
     assert (out / "results.json").read_text() == '{"previous": true}'
     assert [p.name for p in out.iterdir()] == ["results.json"]
+
+
+def test_landmarks_clear_names_a_missing_data_folder_before_any_output(tmp_path, capsys):
+    # it printed its table's header, then ended with an InputError traceback (its default
+    # --data, ../shared/data/cmu_hotel, is not beside every clone)
+    assert _bench("landmarks_clear").main(["--data", str(tmp_path / "nope"), "--quick"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == (f"error: --data {tmp_path / 'nope'}: no such folder; give the CMU hotel "
+                   "folder (its frames and their label files)\n")
