@@ -9,9 +9,10 @@ STAMP  := $(VENV)/.installed
 # a .venv whose python is gone (a half-made one) or that is not this folder's (made before the
 # clone was moved or copied: it imports the old folder's code, and its formation-match runs the
 # old folder's python) is made again; one of a Python older than 3.11, or without pip, is named
-# with what to do (make clean, then PYTHON=...). A PYTHON that is not a command, or older than
+# with what to do (make clean, then PYTHON=...). The check finds where the .venv's python would
+# import pipeline from without running it (an error in the code does not remake the .venv). A PYTHON that is not a command, or older than
 # 3.11, is named before any .venv is made from it.
-VENV_HERE = test -x $(PY) && (cd / && "$(CURDIR)/$(PY)" -c 'import os, sys, pipeline; sys.exit(os.path.realpath(pipeline.__file__) != os.path.realpath(sys.argv[1]))' "$(CURDIR)/pipeline/__init__.py") >/dev/null 2>&1
+VENV_HERE = test -x $(PY) && (cd / && "$(CURDIR)/$(PY)" -c 'import importlib.util as u, os, sys; s = u.find_spec("pipeline"); sys.exit(s is None or os.path.realpath(s.origin) != os.path.realpath(sys.argv[1]))' "$(CURDIR)/pipeline/__init__.py") >/dev/null 2>&1
 ifeq ($(shell $(VENV_HERE) && echo ok),)
   $(shell rm -f $(STAMP))
 endif
