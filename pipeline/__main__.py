@@ -145,6 +145,7 @@ def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentPars
     quiet.add_argument("-q", "--quiet", action="store_true",
                        help="print only warnings, errors and the final result (no stage lines, "
                             "no progress bars)")
+    quiet.add_argument("--version", action="version", version=f"formation-match {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text, parents=[quiet])

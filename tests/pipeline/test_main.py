@@ -161,9 +161,12 @@ def test_help_names_the_program(capsys):
     assert capsys.readouterr().out.startswith("usage: formation-match")
 
 
-def test_version(capsys):
+@pytest.mark.parametrize("argv", [["--version"], ["run-formation", "--version"],
+                                  ["resolve", "--version"]])
+def test_version(capsys, argv):
+    """``--version`` before or after the command (after it, it was an unrecognized argument)."""
     with pytest.raises(SystemExit) as exc:
-        main(["--version"])
+        main(argv)
     assert exc.value.code == 0
     assert capsys.readouterr().out.strip() == f"formation-match {__version__}"
 
