@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.commgraph import neighbour_table
+from pipeline.errors import InputError
 from pipeline.transport import Message, NotANeighbourError, Transport
 
 __all__ = ["NetworkOptions", "Network", "recurrent_topology"]
@@ -128,6 +129,17 @@ def recurrent_topology(comm_edges, p_up: float = 0.5, window: int = 4, seed: int
 
 
 
+def _check_crashed_robots(options: NetworkOptions, n: int) -> None:
+    """InputError naming a robot of ``crashed`` / ``crash_at`` outside ``0..n-1``."""
+    for name, robots in (("crashed", options.crashed), ("crash_at", options.crash_at)):
+        for r in robots:
+            if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 0 <= r < n:
+                raise InputError(f"NetworkOptions {name}: robot {r!r} does not exist; the team's "
+                                 f"robots are 0..{n - 1}" if n else
+                                 f"NetworkOptions {name}: robot {r!r} does not exist; the team "
+                                 "has no robot")
+
+
 class Network(Transport):
     """Synchronous message passing between neighbouring robots, simulated in process.
 
@@ -155,6 +167,7 @@ class Network(Transport):
     def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None) -> None:
         self.n = int(n)
         self.options = options or NetworkOptions()
+        _check_crashed_robots(self.options, self.n)
         self._initial_edges = [tuple(map(int, e)) for e in np.asarray(comm_edges).reshape(-1, 2)]
         self._nbrs = neighbour_table(self._initial_edges, self.n)
         self._round = 0

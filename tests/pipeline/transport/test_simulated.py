@@ -148,3 +148,15 @@ def test_delayed_message_over_a_link_that_went_down_in_flight_arrives():
     for _ in range(3):
         net.end_round()
     assert not net.is_neighbour(0, 1) and len(net.inbox(1)) == 1
+
+
+@pytest.mark.parametrize("options", [NetworkOptions(crashed=frozenset({99})),
+                                     NetworkOptions(crash_at={3: 5}),
+                                     NetworkOptions(crash_at={-1: 5})])
+def test_a_crash_of_a_robot_outside_the_team_is_refused_naming_it(options):
+    # it ran the whole stage, then failed with an IndexError while reporting the crashes
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=r"robot (99|3|-1) does not exist; the team's robots "
+                                         r"are 0\.\.2"):
+        Network(3, EDGES, options)
