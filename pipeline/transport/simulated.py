@@ -82,6 +82,21 @@ class NetworkOptions:
     topology: Callable[[int], Iterable[tuple[int, int]]] | None = None
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        p = self.drop_probability
+        if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)) \
+                or not 0.0 <= p <= 1.0:  # also refuses nan
+            raise InputError(f"NetworkOptions drop_probability {p!r}: give a probability in "
+                             "[0, 1]")
+        for name in ("delay_rounds", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise InputError(f"NetworkOptions {name} {v!r}: give a whole number >= 0")
+        for r, t in dict(self.crash_at).items():
+            if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or t < 0:
+                raise InputError(f"NetworkOptions crash_at: robot {r!r} crashes at round {t!r}; "
+                                 "give a round number >= 0")
+
     @property
     def any_fault(self) -> bool:
         """True when some switch is on (the network is not the paper's lossless static one)."""

@@ -160,3 +160,19 @@ def test_a_crash_of_a_robot_outside_the_team_is_refused_naming_it(options):
     with pytest.raises(InputError, match=r"robot (99|3|-1) does not exist; the team's robots "
                                          r"are 0\.\.2"):
         Network(3, EDGES, options)
+
+
+@pytest.mark.parametrize("options, bad", [
+    (dict(delay_rounds=-1), "delay_rounds -1"),  # every message was lost: every link cut
+    (dict(delay_rounds=1.5), "delay_rounds 1.5"),
+    (dict(drop_probability=-0.5), "drop_probability -0.5"),  # read as no fault at all
+    (dict(drop_probability=float("nan")), "drop_probability nan"),
+    (dict(drop_probability=2), "drop_probability 2"),
+    (dict(seed=-1), "seed -1"),  # numpy's ValueError from inside the generator
+    (dict(crash_at={1: -3}), "round -3"),
+])
+def test_network_options_out_of_range_are_refused_naming_the_value(options, bad):
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=f"NetworkOptions .*{bad}"):
+        NetworkOptions(**options)
