@@ -53,7 +53,7 @@ def check_links(links: Links, features_per_camera) -> None:
     Checks: camera and feature ids in range, ``cam_i < cam_j`` (no self-links, each undirected
     link stored once), no duplicate link, and one-to-one per camera pair (Assumption 2.2).
     """
-    m = np.asarray(features_per_camera, dtype=np.int64)
+    m = np.diff(camera_offsets(features_per_camera))  # whole counts >= 0, named if not
     n = len(m)
     L = len(links)
     if L == 0:
@@ -106,7 +106,8 @@ class AssociationGraph:
     links: Links
 
     def __post_init__(self) -> None:
-        self.features_per_camera = np.asarray(self.features_per_camera, dtype=np.int64)
+        # whole counts >= 0, named if not (an int64 cast truncated 2.5 to 2 silently)
+        self.features_per_camera = np.diff(camera_offsets(self.features_per_camera))
         check_links(self.links, self.features_per_camera)
         self.offsets = camera_offsets(self.features_per_camera)
         self._labels = None  # components(), once computed

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.association import AssociationGraph, conflictive_labels
+from pipeline.association import AssociationGraph, camera_offsets, conflictive_labels
 
 __all__ = [
     "union_find_conflicts",
@@ -65,7 +65,7 @@ def is_conflict_free(features_per_camera, links) -> bool:
 
 
 def _link_ends(features_per_camera, links) -> tuple[np.ndarray, np.ndarray]:
-    off = np.concatenate([[0], np.cumsum(np.asarray(features_per_camera, dtype=np.int64))])
+    off = camera_offsets(features_per_camera)
     return off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
 
 
@@ -84,7 +84,7 @@ def keep_first_per_image(features_per_camera, links, *, _uf=None) -> np.ndarray:
     A link is kept when both its features are kept; the surviving links of a set then join
     features of distinct images, so the result is conflict-free.
     """
-    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    fpc = np.diff(camera_offsets(features_per_camera))  # whole counts >= 0, named if not
     labels, _ = union_find_conflicts(fpc, links) if _uf is None else _uf
     if not len(links):
         return np.zeros(0, dtype=bool)
@@ -114,7 +114,7 @@ def quality_merge(features_per_camera, links, *, _uf=None) -> np.ndarray:
     ``O(L_c α(L_c))`` union-find operations in Python for the ``L_c`` links of conflictive
     sets; camera sets are Python integers used as bit sets.
     """
-    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    fpc = np.diff(camera_offsets(features_per_camera))  # whole counts >= 0, named if not
     L = len(links)
     kept = np.ones(L, dtype=bool)
     if L == 0:

@@ -57,6 +57,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from pipeline.association import camera_offsets
 from pipeline.types import Links
 
 __all__ = [
@@ -104,10 +105,7 @@ _SEED = 0
 
 
 def _offsets(features_per_camera) -> np.ndarray:
-    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
-    if (fpc < 0).any():
-        raise ValueError("features_per_camera must be non-negative")
-    return np.concatenate([[0], np.cumsum(fpc)])
+    return camera_offsets(features_per_camera)  # whole counts >= 0, named if not
 
 
 def _link_ends(features_per_camera, links: Links) -> tuple[np.ndarray, np.ndarray]:

@@ -64,3 +64,14 @@ def test_feature_counts_whose_sum_overflows_int64_are_refused():
     links = Links(cam_i=[0, 1, 2, 0], feat_i=[0, 0, 0, 1], cam_j=[1, 2, 3, 3], feat_j=[0, 0, 0, 0])
     with pytest.raises(InputError, match="more than an int64 holds"):
         resolve_conflicts([2**63 - 1, 1, 1, 1], [[0, 1], [1, 2], [2, 3], [0, 3]], links)
+
+
+@pytest.mark.parametrize("fpc, bad", [([1, 1, 1, 2.5], r"features_per_camera\[3\] = 2.5"),
+                                      ([1, 1, 1, -2], r"must be >= 0, got \[1, 1, 1, -2\]")])
+def test_counts_that_are_not_whole_numbers_are_refused_naming_them(fpc, bad):
+    # an int64 cast truncated 2.5 to 2 and judged the graph of other counts silently
+    links = Links(cam_i=[0, 0, 1, 2], feat_i=[0, 0, 0, 0], cam_j=[3, 1, 2, 3], feat_j=[1, 0, 0, 0])
+    with pytest.raises(InputError, match=bad):
+        AssociationGraph(fpc, links)
+    with pytest.raises(InputError, match=bad):
+        check_links(links, fpc)

@@ -42,3 +42,15 @@ def test_every_baseline_is_conflict_free(inst):
     # the quality merge and the distributed stage only cut inside conflictive sets
     assert (quality_merge(fpc, links) >= drop).all()
     assert (~resolve_conflicts(fpc, edges, links, resolution="paper").deleted >= drop).all()
+
+
+def test_baselines_refuse_counts_that_are_not_whole_numbers():
+    # 2.5 features was read as 2: the baselines judged other counts than those given
+    import pytest
+
+    from pipeline.consistency.centralized import BASELINES
+    from pipeline.errors import InputError
+
+    for fn in [is_conflict_free, *BASELINES.values()]:
+        with pytest.raises(InputError, match=r"features_per_camera\[3\] = 2.5"):
+            fn([1, 1, 1, 2.5], FIG1)
