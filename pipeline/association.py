@@ -53,6 +53,9 @@ def check_links(links: Links, features_per_camera) -> None:
     Checks: camera and feature ids in range, ``cam_i < cam_j`` (no self-links, each undirected
     link stored once), no duplicate link, and one-to-one per camera pair (Assumption 2.2).
     """
+    if not isinstance(links, Links):  # a tuple of columns, None: not an AttributeError below
+        raise InputError(f"links must be a pipeline.types.Links (Links(cam_i, feat_i, cam_j, "
+                         f"feat_j[, quality])), not {type(links).__name__}")
     m = np.diff(camera_offsets(features_per_camera))  # whole counts >= 0, named if not
     n = len(m)
     L = len(links)

@@ -75,3 +75,15 @@ def test_counts_that_are_not_whole_numbers_are_refused_naming_them(fpc, bad):
         AssociationGraph(fpc, links)
     with pytest.raises(InputError, match=bad):
         check_links(links, fpc)
+
+
+@pytest.mark.parametrize("links", [([0], [0], [1], [0]), None])
+def test_links_that_are_not_a_links_record_are_refused_naming_the_type(links):
+    # is_conflict_free / AssociationGraph failed with an AttributeError on 'cam_i'
+    from pipeline.consistency.centralized import is_conflict_free
+
+    for check in (lambda: check_links(links, [1, 1]), lambda: AssociationGraph([1, 1], links),
+                  lambda: is_conflict_free([1, 1], links)):
+        with pytest.raises(InputError, match=f"links must be a pipeline.types.Links .*not "
+                                             f"{type(links).__name__}"):
+            check()

@@ -136,15 +136,6 @@ def _feature_counts(features_per_camera) -> np.ndarray:
     return fpc
 
 
-def _check_links_given(links, fpc: np.ndarray) -> None:
-    """:func:`check_links`, after refusing what is not a :class:`Links` (a tuple of columns,
-    None) with an InputError instead of an AttributeError inside the check."""
-    if not isinstance(links, Links):
-        raise InputError(f"links must be a pipeline.types.Links (Links(cam_i, feat_i, cam_j, "
-                         f"feat_j[, quality])), not {type(links).__name__}")
-    check_links(links, fpc)
-
-
 def detect_once(features_per_camera, links: Links, comm_edges=None,
                 network_options: NetworkOptions | None = None,
                 protocol: ProtocolOptions | None = None, *, network: Transport | None = None,
@@ -164,7 +155,7 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     Detection
     """
     fpc = _feature_counts(features_per_camera)
-    _check_links_given(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
+    check_links(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
     robots, _ = build_robots(fpc, links)
     if network is None:
         network = Network(fpc.shape[0], comm_edges_for(fpc, links, comm_edges), network_options)
@@ -292,7 +283,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     """
     get_rule(resolution)
     fpc = _feature_counts(features_per_camera)
-    _check_links_given(links, fpc)
+    check_links(links, fpc)
     edges = comm_edges_for(fpc, links, comm_edges)
     n = fpc.shape[0]
     robots, link_index = build_robots(fpc, links)
