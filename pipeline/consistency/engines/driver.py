@@ -434,8 +434,17 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
     from pipeline.matching.link_evidence import ratio_llr
 
     L = len(links)
-    w = ratio_llr(1.0 - links.quality) if link_weight is None else \
-        np.asarray(link_weight, dtype=np.float64).reshape(-1)
+    if link_weight is None:
+        w = ratio_llr(1.0 - links.quality)
+    else:
+        try:
+            w = np.asarray(link_weight, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"link_weight must be numbers, one per link ({exc})") from None
+        if w.ndim > 1:  # a table flattened would pair its values with other links
+            raise InputError(f"link_weight must be a flat sequence of one number per link, not "
+                             f"an array of shape {w.shape}")
+        w = w.reshape(-1)
     if w.shape[0] != L:
         raise InputError(f"link_weight has {w.shape[0]} entries for {L} links")
     if np.isnan(w).any():  # the merge rules order links strictly by it: NaN has no place

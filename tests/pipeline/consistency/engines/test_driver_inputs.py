@@ -109,3 +109,13 @@ def test_links_that_are_not_a_links_are_named(links):
         with pytest.raises(InputError, match=rf"links must be a pipeline.types.Links .*not "
                                              rf"{type(links).__name__}"):
             call()
+
+
+@pytest.mark.parametrize("weight, needle", [
+    (["a", "b", "c", "d"], r"link_weight must be numbers, one per link \(could not convert "
+                           r"string to float: 'a'\)"),  # a bare ValueError of numpy's
+    ([[1, 2], [3, 4]], r"link_weight must be a flat sequence .*shape \(2, 2\)"),  # flattened
+])
+def test_link_weight_that_is_not_one_number_per_link_is_named(weight, needle):
+    with pytest.raises(InputError, match=needle):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), link_weight=weight)
