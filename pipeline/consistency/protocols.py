@@ -80,6 +80,14 @@ class ProtocolOptions:
     loss_timeout: int = 40
     delta_messages: bool | None = None
 
+    def __post_init__(self) -> None:
+        # loss_timeout 0 declared every neighbour lost at once: every link cut
+        for name in ("retransmit_after", "heartbeat_every", "loss_timeout"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise InputError(f"ProtocolOptions {name} {v!r}: give a whole number of rounds "
+                                 ">= 1")
+
     @classmethod
     def for_delay(cls, delay_rounds: int) -> ProtocolOptions:
         """The defaults with the timers set for a link latency of ``delay_rounds`` extra
