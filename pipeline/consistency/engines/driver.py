@@ -136,6 +136,16 @@ def _feature_counts(features_per_camera) -> np.ndarray:
     return fpc
 
 
+def _check_options(network_options, protocol) -> None:
+    """InputError naming options that are not :class:`NetworkOptions` / :class:`ProtocolOptions`
+    (a dict of them failed with an AttributeError inside the network)."""
+    for given, cls, name in ((network_options, NetworkOptions, "network_options"),
+                             (protocol, ProtocolOptions, "protocol")):
+        if given is not None and not isinstance(given, cls):
+            raise InputError(f"{name} must be a {cls.__module__}.{cls.__name__} or None, not "
+                             f"{type(given).__name__}: give {cls.__name__}(...) of its fields")
+
+
 def detect_once(features_per_camera, links: Links, comm_edges=None,
                 network_options: NetworkOptions | None = None,
                 protocol: ProtocolOptions | None = None, *, network: Transport | None = None,
@@ -154,6 +164,7 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     -------
     Detection
     """
+    _check_options(network_options, protocol)
     fpc = _feature_counts(features_per_camera)
     check_links(links, fpc)  # as resolve_conflicts: a self-link read as a conflict
     robots, _ = build_robots(fpc, links)
@@ -282,6 +293,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     1
     """
     get_rule(resolution)
+    _check_options(network_options, protocol)
     fpc = _feature_counts(features_per_camera)
     check_links(links, fpc)
     edges = comm_edges_for(fpc, links, comm_edges)

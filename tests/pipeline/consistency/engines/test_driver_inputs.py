@@ -119,3 +119,19 @@ def test_links_that_are_not_a_links_are_named(links):
 def test_link_weight_that_is_not_one_number_per_link_is_named(weight, needle):
     with pytest.raises(InputError, match=needle):
         resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), link_weight=weight)
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(network_options={"drop_probability": 0.1}), "network_options must be a "
+     "pipeline.transport.simulated.NetworkOptions or None, not dict"),
+    (dict(protocol={"reliable": True}), "protocol must be a "
+     "pipeline.consistency.protocols.ProtocolOptions or None, not dict"),
+])
+def test_options_given_as_a_dict_are_named(kw, needle):
+    # an AttributeError ('dict' object has no attribute 'seed') from inside the network
+    from pipeline.consistency import detect_once
+
+    with pytest.raises(InputError, match=needle):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), **kw)
+    with pytest.raises(InputError, match=needle):
+        detect_once([2, 1, 1, 1], Links(**FIG1), **kw)
