@@ -31,6 +31,10 @@ __all__ = [
 
 def camera_offsets(features_per_camera) -> np.ndarray:
     """Global index of each camera's first feature, ``(n + 1,)``; last entry is ``m_sum``."""
+    if np.ndim(features_per_camera) == 0 and not isinstance(features_per_camera, str):
+        # a number of cameras (or of features) given for the list: read as one camera
+        raise InputError(f"features_per_camera {features_per_camera!r}: give one count per "
+                         "camera (a list or array), not a single number")
     try:
         m = id_array(features_per_camera, "features_per_camera")
     except ValueError as exc:

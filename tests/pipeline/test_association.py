@@ -87,3 +87,17 @@ def test_links_that_are_not_a_links_record_are_refused_naming_the_type(links):
         with pytest.raises(InputError, match=f"links must be a pipeline.types.Links .*not "
                                              f"{type(links).__name__}"):
             check()
+
+
+def test_a_single_number_for_the_counts_is_refused_naming_it():
+    # 4 (the number of cameras) was read as one camera of 4 features: resolve_conflicts then
+    # said 'camera id out of range 0..0' of the first link
+    from pipeline.association import camera_offsets
+    from pipeline.consistency import resolve_conflicts
+
+    links = Links(cam_i=[0, 0, 1, 2], feat_i=[0, 0, 0, 0], cam_j=[3, 1, 2, 3], feat_j=[1, 0, 0, 0])
+    needle = "features_per_camera 4: give one count per camera"
+    for call in (lambda: camera_offsets(4), lambda: check_links(links, 4),
+                 lambda: resolve_conflicts(4, None, links)):
+        with pytest.raises(InputError, match=needle):
+            call()
