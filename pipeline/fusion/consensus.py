@@ -142,7 +142,7 @@ class Topology(ABC):
 
     def weights(self, t: int) -> sp.csr_matrix:
         """Metropolis matrix ``A(t)``, ``(n_nodes, n_nodes)``."""
-        return metropolis_weights(self.edges(t), self.n_nodes)
+        return _metropolis(self.edges(t), self.n_nodes)
 
 
 def _check_edges(edges, n_nodes: int) -> np.ndarray:
@@ -162,7 +162,7 @@ class FixedTopology(Topology):
     def __init__(self, edges, n_nodes: int):
         self.n_nodes = int(n_nodes)
         self._edges = _check_edges(edges, self.n_nodes)
-        self._A = metropolis_weights(self._edges, self.n_nodes)
+        self._A = _metropolis(self._edges, self.n_nodes)
 
     def edges(self, t: int) -> np.ndarray:
         return self._edges
@@ -333,7 +333,11 @@ def metropolis_weights(edges, n_nodes: int) -> sp.csr_matrix:
            [0.333, 0.333, 0.333],
            [0.   , 0.333, 0.667]])
     """
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    return _metropolis(_check_edges(edges, int(n_nodes)), int(n_nodes))
+
+
+def _metropolis(e: np.ndarray, n_nodes: int) -> sp.csr_matrix:
+    """:func:`metropolis_weights` of edges already checked (each once, ids in range)."""
     i, j = e[:, 0], e[:, 1]
     deg = np.bincount(np.concatenate([i, j]), minlength=n_nodes)
     w = 1.0 / (1.0 + np.maximum(deg[i], deg[j]))
@@ -348,7 +352,9 @@ def metropolis_weights(edges, n_nodes: int) -> sp.csr_matrix:
 
 def graph_diameter(edges, n_nodes: int) -> int:
     """Diameter (longest shortest path, in hops) of a connected graph; ``InputError`` if not."""
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if int(n_nodes) < 1:
+        raise InputError(f"graph of {n_nodes} nodes: a diameter needs at least one node")
+    e = _check_edges(edges, int(n_nodes))
     adj = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_nodes, n_nodes))
     dist = shortest_path(adj, directed=False, unweighted=True)
     if np.isinf(dist).any():

@@ -521,13 +521,13 @@ class _LiveGraph(Topology):
     comm links the exchange reported lost (a crashed robot leaves the graph)."""
 
     def __init__(self, protocol: RoundProtocol, n_nodes: int):
-        from pipeline.fusion.consensus import metropolis_weights
+        from pipeline.fusion.consensus import _metropolis
 
         self.protocol = protocol
         self.n_nodes = int(n_nodes)
         self.edges_all = protocol.traffic.node_edges
         self.alive = np.ones(len(self.edges_all), dtype=bool)
-        self._weights = metropolis_weights
+        self._weights = _metropolis  # the protocol's own edges: each once, in range
         self._A = None
 
     def edges(self, t: int) -> np.ndarray:

@@ -198,3 +198,21 @@ def test_consensus_runs_on_a_transport_graph():
     switching, stats = average_consensus(x0, Network(n, edges, NetworkOptions(topology=topo)), 200)
     assert stats.messages == sum(2 * len(topo(t)) for t in range(200))
     np.testing.assert_allclose(switching, x0.mean(), atol=1e-6)
+
+
+
+@pytest.mark.parametrize("edges, needle", [
+    ([[0, 1], [1, 5]], r"edge \(1, 5\) names an unknown node; node ids are 0\.\.2"),
+    ([[0, 1], [-1, 2]], r"edge \(-1, 2\) names an unknown node"),
+    ([[0, 1], [1, 0]], r"edge \(0, 1\) is listed more than once"),  # was weighed as degree 2
+    ([[0, 0], [1, 2]], r"edge \(0, 0\) is a self-edge"),
+])
+def test_metropolis_weights_and_the_diameter_name_a_bad_edge(edges, needle):
+    # numpy's broadcast / bincount ValueErrors, scipy's 'index 5 exceeds matrix dimension',
+    # or the weights of a doubled degree
+    with pytest.raises(InputError, match=needle):
+        metropolis_weights(edges, 3)
+    with pytest.raises(InputError, match=needle):
+        graph_diameter(edges, 3)
+    with pytest.raises(InputError, match="graph of 0 nodes"):
+        graph_diameter([], 0)
