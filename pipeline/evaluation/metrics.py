@@ -104,7 +104,8 @@ class PairwiseTruth:
 
     def __init__(self, truth: np.ndarray, m_total: int):
         self.m_total = int(m_total)
-        keys = np.unique(_keys(np.sort(np.asarray(truth, dtype=np.int64).reshape(-1, 2),
+        # checked as pairwise_scores checks it: a pair past m_total wrapped into another pair
+        keys = np.unique(_keys(np.sort(_pairs(truth, self.m_total, "truth").astype(np.int64),
                                        axis=1), self.m_total))
         a, b = keys // (self.m_total + 1), keys % (self.m_total + 1)
         # only pairs of two distinct existing features can ever be implied by links

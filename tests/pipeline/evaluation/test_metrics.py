@@ -105,3 +105,19 @@ def test_pairs_outside_m_total_or_not_pairs_are_refused():
         pairwise_scores(np.array([[0, 1]]), np.array([0, 1]), 5)
     assert pairwise_scores([[1, 0]], [[0, 1]], 5)["f1"] == 1.0
     assert pairwise_scores(np.zeros((0, 2), int), [], 5)["predicted_pairs"] == 0
+
+
+def test_pairwise_truth_refuses_a_true_pair_past_the_features_as_pairwise_scores_does():
+    # (0, 6) of 3 features wrapped to the key of (1, 2): counted as found, recall 1.0
+    import pytest
+
+    from pipeline.errors import InputError
+    from pipeline.types import Links
+
+    chain = Links([0, 1], [0, 0], [1, 2], [0, 0])
+    truth = np.array([[0, 1], [0, 6]])
+    needle = r"truth pairs: row 1 \[0, 6\] names a feature outside 0\.\.2"
+    with pytest.raises(InputError, match=needle):
+        pairwise_scores(association_pairs([1, 1, 1], chain), truth, 3)
+    with pytest.raises(InputError, match=needle):
+        PairwiseTruth(truth, 3).scores([1, 1, 1], chain)
