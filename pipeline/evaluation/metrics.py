@@ -63,10 +63,19 @@ def _pairs(pairs, m_total: int, name: str) -> np.ndarray:
     return p
 
 
+def _m_total(m_total) -> int:
+    """``m_total`` as an int; InputError unless a whole number >= 0 (``None``, ``5.5``)."""
+    if isinstance(m_total, bool) or not isinstance(m_total, (int, np.integer)) or m_total < 0:
+        raise InputError(f"m_total {m_total!r}: give the number of features, a whole number "
+                         ">= 0 (features_per_camera summed)")
+    return int(m_total)
+
+
 def pairwise_scores(predicted: np.ndarray, truth: np.ndarray, m_total: int) -> dict:
     """Precision, recall and F1 of predicted pairs ``(P, 2)`` against true pairs ``(Q, 2)``
     (global feature ids in ``0..m_total - 1``; InputError otherwise: a pair past ``m_total``
     would be counted as another pair)."""
+    m_total = _m_total(m_total)
     pk = np.unique(_keys(np.sort(_pairs(predicted, m_total, "predicted"), axis=1), m_total))
     tk = np.unique(_keys(np.sort(_pairs(truth, m_total, "truth"), axis=1), m_total))
     correct = int(np.isin(pk, tk, assume_unique=True).sum())
@@ -103,7 +112,7 @@ class PairwiseTruth:
     """
 
     def __init__(self, truth: np.ndarray, m_total: int):
-        self.m_total = int(m_total)
+        self.m_total = _m_total(m_total)
         # checked as pairwise_scores checks it: a pair past m_total wrapped into another pair
         keys = np.unique(_keys(np.sort(_pairs(truth, self.m_total, "truth").astype(np.int64),
                                        axis=1), self.m_total))

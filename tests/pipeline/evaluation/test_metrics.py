@@ -121,3 +121,16 @@ def test_pairwise_truth_refuses_a_true_pair_past_the_features_as_pairwise_scores
         pairwise_scores(association_pairs([1, 1, 1], chain), truth, 3)
     with pytest.raises(InputError, match=needle):
         PairwiseTruth(truth, 3).scores([1, 1, 1], chain)
+
+
+def test_a_feature_count_that_is_not_a_whole_number_is_named():
+    # None failed with a TypeError inside the range check; 5.5 let feature 5 count as existing
+    import pytest
+
+    from pipeline.errors import InputError
+
+    for m_total in (None, 5.5, -1):
+        with pytest.raises(InputError, match=f"m_total {m_total!r}: give the number of features"):
+            pairwise_scores(np.array([[0, 1]]), np.array([[0, 1]]), m_total)
+        with pytest.raises(InputError, match=f"m_total {m_total!r}: give the number of features"):
+            PairwiseTruth(np.array([[0, 1]]), m_total)
