@@ -58,6 +58,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
 from pipeline.association import camera_offsets
+from pipeline.errors import InputError
 from pipeline.types import Links
 
 __all__ = [
@@ -109,15 +110,23 @@ def _offsets(features_per_camera) -> np.ndarray:
 
 
 def _link_ends(features_per_camera, links: Links) -> tuple[np.ndarray, np.ndarray]:
-    """Global ids ``(a, b)`` of both ends of every link; ``ValueError`` when out of range."""
+    """Global ids ``(a, b)`` of both ends of every link; InputError naming the first link
+    with an end out of range (matches as given: many-to-many links are this input)."""
     off = _offsets(features_per_camera)
     n = off.size - 1
     fpc = np.diff(off)
-    for cam, feat in ((links.cam_i, links.feat_i), (links.cam_j, links.feat_j)):
-        if len(cam) and ((cam < 0).any() or (cam >= n).any()):
-            raise ValueError(f"a link names a camera outside 0..{n - 1}")
-        if len(cam) and ((feat < 0).any() or (feat >= fpc[cam]).any()):
-            raise ValueError("a link names a feature outside its camera's features")
+    ci, fi, cj, fj = links.cam_i, links.feat_i, links.cam_j, links.feat_j
+    bad = np.flatnonzero((ci < 0) | (cj < 0) | (ci >= n) | (cj >= n))
+    if bad.size:
+        k = bad[0]
+        raise InputError(f"link {k} ({ci[k]},{fi[k]})-({cj[k]},{fj[k]}): camera id out of "
+                         f"range 0..{n - 1}")
+    bad = np.flatnonzero((fi < 0) | (fj < 0) | (fi >= fpc[ci]) | (fj >= fpc[cj]))
+    if bad.size:
+        k = bad[0]
+        raise InputError(f"link {k} ({ci[k]},{fi[k]})-({cj[k]},{fj[k]}): feature id out of "
+                         f"range (camera {ci[k]} has {fpc[ci[k]]} features, camera {cj[k]} "
+                         f"has {fpc[cj[k]]})")
     return off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
 
 

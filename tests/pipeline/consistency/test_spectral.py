@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 
 from pipeline.commgraph import comm_graph
 from pipeline.consistency import spectral
-from pipeline.consistency.centralized import is_conflict_free
+from pipeline.consistency.centralized import clear_kept, is_conflict_free, spectral_sync_kept
 from pipeline.consistency.spectral import (
     clear_sync,
     labels_to_kept,
@@ -311,3 +311,17 @@ def test_labels_of_another_shape_are_refused():
     links = Links([0, 0], [0, 0], [1, 2], [0, 0])
     with pytest.raises(ValueError, match=r"labels of shape \(3, 1\): expected \(3,\)"):
         labels_to_kept([1, 1, 1], links, np.array([[4], [4], [-1]]))
+
+
+@pytest.mark.parametrize("method", [*METHODS, spectral_sync_kept, clear_kept])
+@pytest.mark.parametrize("links, needle", [
+    (Links([0], [5], [1], [0]), r"link 0 \(0,5\)-\(1,0\): feature id out of range \(camera 0 "
+                                r"has 2 features"),
+    (Links([0], [0], [3], [1]), r"link 0 \(0,0\)-\(3,1\): camera id out of range 0\.\.1"),
+])
+def test_a_link_out_of_range_is_named_as_the_other_stages_name_it(method, links, needle):
+    # a ValueError ('a link names a feature outside its camera's features') naming no link
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=needle):
+        method([2, 2], links)
