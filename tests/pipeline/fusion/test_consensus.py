@@ -216,3 +216,16 @@ def test_metropolis_weights_and_the_diameter_name_a_bad_edge(edges, needle):
         graph_diameter(edges, 3)
     with pytest.raises(InputError, match="graph of 0 nodes"):
         graph_diameter([], 0)
+
+
+def test_ransac_counts_refuse_what_is_not_a_count():
+    # ransac_success(0.6, 1, -3) returned -14.6 as a probability; c = 1.5 drew 8 hypotheses
+    from pipeline.fusion.consensus import ransac_success
+
+    with pytest.raises(InputError, match="K must be a whole number of hypotheses >= 0, got -3"):
+        ransac_success(0.6, 1, -3)
+    with pytest.raises(InputError, match="p_in must be in"):
+        ransac_success(float("nan"), 1, 3)
+    with pytest.raises(InputError, match="c must be a whole number of points >= 1, got 1.5"):
+        ransac_hypotheses(0.6, 1.5)
+    assert ransac_success(0.6, 1, 6) == pytest.approx(1 - 0.4 ** 6, abs=1e-12)
