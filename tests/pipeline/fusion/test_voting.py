@@ -144,3 +144,20 @@ def test_bad_covariance_is_named():
         dynamic_voting(x, cov, RING10, K=1, rounds=1, rng=0)
     with pytest.raises(InputError, match="cov must have shape"):
         distributed_ml(x, cov[:5], RING10)
+
+
+@pytest.mark.parametrize("call, needle", [
+    (lambda x, cov, E: dynamic_voting(x, cov, E, K=0, rng=0), r"K \(hypotheses\) must be a "
+     r"whole number >= 1, got 0"),  # numpy's 'cannot reshape array of size 0' in max-c
+    (lambda x, cov, E: static_voting(x, cov, E, K=1.5, rng=0), r"got 1\.5"),
+    (lambda x, cov, E: dynamic_voting(x, cov, E, K=3, rounds=-1, rng=0),
+     "rounds must be a whole number >= 0, got -1"),  # no round run: x came back as given
+    (lambda x, cov, E: distributed_ml(x, cov, E, rounds=-1), "rounds must be a whole number"),
+    (lambda x, cov, E: static_voting(x, cov, E, K=3, rounds=5, rng=0),
+     r"rounds must be three counts \(hypotheses, vote averaging, final ML\), got 5"),
+])
+def test_counts_that_are_not_counts_are_named(call, needle):
+    x = np.array([[0.0, 0], [0.1, 0], [0, 0.1], [5, 5]])
+    cov = np.tile(np.eye(2) * 0.01, (4, 1, 1))
+    with pytest.raises(InputError, match=needle):
+        call(x, cov, [[0, 1], [1, 2], [2, 3]])
