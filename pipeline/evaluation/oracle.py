@@ -129,6 +129,15 @@ def _per_link(mask, n_links: int, name: str) -> np.ndarray:
     v = np.asarray(mask)
     if v.shape != (n_links,):
         raise InputError(f"{name} has shape {v.shape}; give one entry per link ({n_links},)")
+    if v.dtype != bool:
+        # a cast would read -1 (the ledger's 'unknown' truth), 0.4 or 'no' as True
+        bad = np.flatnonzero(~np.isin(v, [0, 1])) if v.dtype.kind in "iuf" else \
+            np.arange(min(1, v.size))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"{name}[{k}] = {v[k].item()!r}: give booleans (or 0 / 1), one per "
+                             "link" + (" (LinkLedger.truth holds -1 for an unknown link: "
+                                       "pass ledger.good)" if name == "truth" else ""))
     return v.astype(bool)
 
 

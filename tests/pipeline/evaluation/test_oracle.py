@@ -3,6 +3,7 @@
 import itertools
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -101,3 +102,19 @@ def test_truth_or_kept_of_another_length_is_refused():
     kept = oracle_cut([2, 1, 1, 1], links, truth)
     assert kept.tolist() == [True, True, True, False]
     assert resolution_scores([2, 1, 1, 1], links, truth, kept)["spurious_cut"] == 1
+
+
+@pytest.mark.parametrize("truth, needle", [
+    (np.array([1, 1, -1, 1], dtype=np.int8), r"truth\[2\] = -1: give booleans \(or 0 / 1\)"),
+    ([1.0, 1.0, 0.4, 1.0], r"truth\[2\] = 0\.4"),
+    (["y", "y", "n", "y"], r"truth\[0\] = 'y'"),
+])
+def test_truth_that_is_not_boolean_is_named_not_cast(truth, needle):
+    # a cast to bool read -1 (a ledger's unknown link), 0.4 or 'n' as a good link
+    from pipeline.errors import InputError
+
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    with pytest.raises(InputError, match=needle):
+        oracle_cut([2, 1, 1, 1], links, truth)
+    with pytest.raises(InputError, match=needle):
+        resolution_scores([2, 1, 1, 1], links, truth, [True] * 4)
