@@ -397,7 +397,7 @@ def average_consensus(x0, topology, rounds: int, *, history: bool = False):
     stats = CommStats()
     msg = bundle_bytes(x[0].size)
     trace = [x.copy()] if history else None
-    for t in range(int(rounds)):
+    for t in range(whole_count(rounds, "rounds", 0)):
         A = topo.weights(t)
         stats.add_round(len(topo.edges(t)), msg)
         x = _mix(A, x)
@@ -524,7 +524,7 @@ def ml_consensus(P0, q0, topology, rounds: int, *, history: bool = False):
     trace = []
     if history:
         trace.append(solve_information(P, q)[0])
-    for t in range(int(rounds)):
+    for t in range(whole_count(rounds, "rounds", 0)):
         A = topo.weights(t)
         stats.add_round(len(topo.edges(t)), msg)
         P = _mix(A, P)
@@ -583,7 +583,7 @@ def max_c_consensus(draws, topology, c: int, rounds: int, *, before_round=None):
     stats = CommStats()
     msg = bundle_bytes(K * c, with_degree=False)
     changed = np.ones(n, dtype=bool)
-    for t in range(int(rounds)):
+    for t in range(whole_count(rounds, "rounds", 0)):
         if before_round is not None:
             before_round(t, changed)
         e = topo.edges(t)
@@ -639,6 +639,14 @@ def hypothesis_members(draws, sets) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------------
 # RANSAC
+
+
+def whole_count(value, name: str, least: int) -> int:
+    """``value`` as an int; InputError naming it unless a whole number >= ``least`` (a
+    negative count of rounds ran none, a fractional one was truncated)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise InputError(f"{name} must be a whole number >= {least}, got {value!r}")
+    return int(value)
 
 
 def _check_c(c) -> None:

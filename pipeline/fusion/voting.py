@@ -67,6 +67,7 @@ from pipeline.fusion.consensus import (
     max_c_consensus,
     ml_consensus,
     solve_information,
+    whole_count,
 )
 
 __all__ = [
@@ -266,7 +267,7 @@ def distributed_ml(x, cov, topology, rounds: int = 100, *, observed=None,
     -------
     VotingResult with ``K = 1``; every observing robot is an "inlier".
     """
-    rounds = _count(rounds, "rounds", 0)  # -1 ran no round: the estimates came back as given
+    rounds = whole_count(rounds, "rounds", 0)  # -1 ran no round: the estimates came back as given
     x, cov, obs = _prepare(x, cov, observed)
     B, N, d = x.shape
     topo = as_topology(topology, N, B)
@@ -305,19 +306,12 @@ def sq_mahalanobis(r, info):
     return np.einsum("...i,...ij,...j->...", r, info, r)
 
 
-def _count(value, name: str, least: int) -> int:
-    """``value`` as an int; InputError naming it unless a whole number >= ``least``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise InputError(f"{name} must be a whole number >= {least}, got {value!r}")
-    return int(value)
-
-
 def _voting_setup(x, cov, observed, topology, p, gate, K, c, rng, members, maxc_rounds,
                   before_round=None, draws=None):
     """Shared start of both voting schemes: checked inputs, topology, χ² gate, and the
     hypothesis members (max-c consensus, eqs. 6–7, unless given)."""
     if members is None:  # numpy's reshape / negative-dimension errors deep in max-c
-        K = _count(K, "K (hypotheses)", 1)
+        K = whole_count(K, "K (hypotheses)", 1)
     x, cov, obs = _prepare(x, cov, observed)
     B, N, d = x.shape
     topo = as_topology(topology, N, B)
@@ -360,7 +354,7 @@ def static_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     if np.ndim(rounds) != 1 or len(rounds) != 3:
         raise InputError(f"rounds must be three counts (hypotheses, vote averaging, final ML), "
                          f"got {rounds!r}")
-    r_hyp, r_vote, r_final = (_count(r, "rounds", 0) for r in rounds)
+    r_hyp, r_vote, r_final = (whole_count(r, "rounds", 0) for r in rounds)
     K = members.shape[-1]
     info = np.linalg.inv(cov)                                      # (B, N, d, d)
     # step 1: the K partial MLs (eq. 4) by consensus with initial conditions (5)
@@ -461,7 +455,7 @@ def dynamic_voting(x, cov, topology, *, K: int, c: int = 1, p: float = 0.95,
     VotingResult
         ``theta`` is ``θ_i^{h*}(T)``; ``inlier`` is robot ``i``'s gate for ``h*`` at ``T``.
     """
-    rounds = _count(rounds, "rounds", 0)  # -1 ran no round: the estimates came back as given
+    rounds = whole_count(rounds, "rounds", 0)  # -1 ran no round: the estimates came back as given
     before_round = None
     if protocol is not None:
         if history:

@@ -229,3 +229,17 @@ def test_ransac_counts_refuse_what_is_not_a_count():
     with pytest.raises(InputError, match="c must be a whole number of points >= 1, got 1.5"):
         ransac_hypotheses(0.6, 1.5)
     assert ransac_success(0.6, 1, 6) == pytest.approx(1 - 0.4 ** 6, abs=1e-12)
+
+
+def test_consensus_rounds_that_are_not_a_count_are_named():
+    # rounds=-1 ran no round and returned the initial values as the consensus; 2.7 ran 2
+    from pipeline.fusion.consensus import max_c_consensus, ml_consensus
+
+    topo = FixedTopology([[0, 1], [1, 2]], 3)
+    for rounds in (-1, 2.7):
+        with pytest.raises(InputError, match=f"rounds must be a whole number >= 0, got {rounds}"):
+            average_consensus(np.array([1.0, 2.0, 3.0]), topo, rounds)
+        with pytest.raises(InputError, match="rounds must be a whole number"):
+            ml_consensus(np.tile(np.eye(2), (3, 1, 1)), np.ones((3, 2)), topo, rounds)
+        with pytest.raises(InputError, match="rounds must be a whole number"):
+            max_c_consensus(np.ones((3, 2)), topo, 1, rounds)
