@@ -480,6 +480,19 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
         if P is not None and np.shape(P) != (3, 4):
             raise InputError(f"projection of camera {rb.id} has shape {np.shape(P)}; expected "
                              "(3, 4), or None where unknown")
+        # the geometric test's SVD failed on a NaN and never returned on an inf
+        for given, what in ((kp, f"keypoints of camera {rb.id}"),
+                            (P, f"projection of camera {rb.id}")):
+            try:
+                finite = given is None or np.isfinite(np.asarray(given, dtype=np.float64))
+            except (TypeError, ValueError):
+                raise InputError(f"{what} must be numbers") from None
+            if not np.all(finite):
+                k = tuple(int(x) for x in np.argwhere(~finite)[0])
+                raise InputError(f"{what}: a non-finite value at {k} "
+                                 f"({np.asarray(given, dtype=np.float64)[k]}); give finite "
+                                 "numbers" + (" (None where the pose is unknown)"
+                                              if what.startswith("projection") else ""))
         equip_robot(rb, w[li], kp, P)
 
 

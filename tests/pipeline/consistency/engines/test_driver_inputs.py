@@ -135,3 +135,23 @@ def test_options_given_as_a_dict_are_named(kw, needle):
         resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), **kw)
     with pytest.raises(InputError, match=needle):
         detect_once([2, 1, 1, 1], Links(**FIG1), **kw)
+
+
+@pytest.mark.parametrize("camera, value, what", [(0, np.nan, "keypoints"),
+                                                 (1, np.inf, "projection")])
+def test_a_non_finite_keypoint_or_projection_is_named(camera, value, what, monkeypatch):
+    # the evidence rule's geometric test: numpy's 'SVD did not converge' on a NaN keypoint,
+    # and an SVD that never returned on an inf in a projection (refused before it runs)
+    from pipeline.consistency import evidence
+
+    def never(*args, **kwargs):
+        raise AssertionError("the geometric test ran on a non-finite input")
+
+    monkeypatch.setattr(evidence, "_consistent", never)
+    m = [2, 1, 1, 1]
+    kp = [np.zeros((k, 2)) for k in m]
+    P = [np.hstack([np.eye(3), [[i], [0], [0]]]) for i in range(4)]
+    (kp if what == "keypoints" else P)[camera][0, 0] = value
+    with pytest.raises(InputError, match=rf"{what} of camera {camera}: a non-finite value at "
+                                         rf"\(0, 0\) \({value}\)"):
+        resolve_conflicts(m, None, Links(**FIG1), keypoints=kp, projections=P)
