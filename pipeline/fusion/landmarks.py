@@ -236,7 +236,7 @@ def _check_inputs(views, features, links, comm_edges, sigma_px, local, noise):
         raise InputError(f"local must be one of {LOCAL_MODES}, got {local!r}")
     if noise not in NOISE_MODES:
         raise InputError(f"noise must be one of {NOISE_MODES}, got {noise!r}")
-    return check_comm_edges(np.asarray(comm_edges).reshape(-1, 2), n)
+    return check_comm_edges(comm_edges, n)  # (E, 2) as given: a flat list is refused, not paired
 
 
 def _track_topology(edges_up, observes: np.ndarray, comm: np.ndarray, n: int):

@@ -207,3 +207,13 @@ def test_without_a_track_no_round_is_counted():
     assert res.stats["rounds"] == res.stats["consensus_rounds"] == res.stats["maxc_rounds"] == 0
     ran = fuse_tracks(views, feats, links, edges, sigma_px=0.5)
     assert ran.stats["rounds"] == ran.stats["maxc_rounds"] + ran.stats["consensus_rounds"] > 0
+
+
+def test_comm_edges_not_of_shape_e_by_2_are_refused_not_paired_anew():
+    # a flat list or a (2, E) array was reshaped to (E, 2): other pairs than those meant
+    views, feats, links, edges, pts = planted_rig()
+    e = np.asarray(edges)
+    for wrong in (e.reshape(-1), e.T):
+        with pytest.raises(InputError, match=rf"communication edges must have shape \(E, 2\), "
+                                             rf"got \({wrong.shape[0]},"):
+            fuse_tracks(views, feats, links, wrong)
