@@ -13,7 +13,9 @@ promise, or keep it only by cutting everything; a run must then not look like a 
   or never started: their links are cut or left unchecked), ``robots-lost-without-crash`` (robots were
   declared lost from silence although they never crashed: the message loss defeated the
   timeouts; over zenoh, robot processes that ran to their end but were written off by a
-  neighbour, a partition or a round limit), ``no-features`` (images where no feature was found, named),
+  neighbour, a partition or a round limit), ``robots-unreported`` (over zenoh, robots that
+  ran to their end with their neighbours but whose results never reached the observer),
+  ``no-features`` (images where no feature was found, named),
   ``quality-reversed`` (``resolve``: the links the triangles refute carry the higher quality,
   :mod:`pipeline.evaluation.quality`), ``quality-scale`` (``resolve``: qualities above 1,
   another scale than ``1 - Lowe ratio``).
@@ -103,6 +105,16 @@ def flag_result(report: dict, names: list[str] | None = None,
         gone |= {str(k) for k in team.get("lost") or []}
         ran = {str(k) for k, v in team["robots"].items() if isinstance(v, dict) and "rounds" in v}
         gone |= {str(k) for k in faults.get("robots_lost", {})} - ran
+    unheard = {str(k) for k in team.get("unreported") or []}
+    gone -= unheard
+    if unheard:
+        warnings.append(_warning(
+            "robots-unreported",
+            f"robot(s) {', '.join(sorted(unheard, key=int))} ran to their end with their "
+            "neighbours (none wrote them off), but their results never reached the observer "
+            "(check the observer's network path to them): their links were decided by both "
+            "ends as in a whole run; their own counters and fusion estimates are missing from "
+            "the report"))
     if gone:
         ids = sorted(gone, key=int)
         cut = faults.get("links_cut_robot_lost")

@@ -64,7 +64,7 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     """
     from pipeline.runs.transports import get_transport
     from pipeline.team.launcher import team_summary
-    from pipeline.team.observe import observe_team
+    from pipeline.team.observe import observe_team, unreported
     from pipeline.team.teamfile import load_team
 
     timer = timer or StageTimer()
@@ -94,10 +94,13 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     zenoh = get_transport("zenoh").load()
     with timer.stage("observe", f"{team.n} robots of {team.name!r} on {team.observer}"):
         run = observe_team(team, timeout_s=timeout_s, log=log)
+        unheard = unreported(team, run.results, run.killed)
         timer.note(f"{len(run.results)} of {team.n} robots published"
-                   + (f"; lost: {sorted(run.killed)}" if run.killed else ""))
+                   + (f"; lost: {sorted(run.killed)}" if run.killed else "")
+                   + (f" ({unheard} ran to their end: their results did not reach this "
+                      "observer)" if unheard else ""))
     summary = {**team_summary(run), "observed": True,
-               "lost": sorted(int(k) for k in run.killed)}
+               "lost": sorted(int(k) for k in run.killed), "unreported": unheard}
     if kind == "formation":
         from pipeline.runs.formation import write_formation_run
 

@@ -28,7 +28,7 @@ import time
 from pipeline.errors import InputError, TeamError
 from pipeline.team.launcher import Observer, TeamRun
 
-__all__ = ["observe_team", "TeamObserver", "GRACE_S"]
+__all__ = ["observe_team", "TeamObserver", "GRACE_S", "unreported"]
 
 #: seconds a robot whose liveliness token vanished has to deliver its result (it publishes
 #: before closing its session; this covers the packet still in flight)
@@ -90,6 +90,22 @@ def _written_off_unstarted(team, obs) -> set[int]:
                 obs.results[j][0].get("counters", {}).get("written_off") or {})} >= {str(k)}
                 for j in nbrs):
             out.add(k)
+    return out
+
+
+def unreported(team, results: dict, lost) -> list[int]:
+    """The robots of ``lost`` that ran to their end with their neighbours: every neighbour
+    published a result and none wrote them off (``counters.written_off``), so each of their
+    links was decided by both ends to the end, as in a whole run; only their own result never
+    reached the observer (the observer's network path to them was cut)."""
+    out = []
+    for k in sorted(int(x) for x in lost):
+        nbrs = team.neighbours(k)
+        if k not in results and nbrs and all(
+                j in results and str(k) not in {str(x) for x in (
+                    results[j][0].get("counters", {}).get("written_off") or {})}
+                for j in nbrs):
+            out.append(k)
     return out
 
 

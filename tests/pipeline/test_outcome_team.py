@@ -45,3 +45,15 @@ def test_a_simulated_crash_is_warned_with_the_links_it_cost():
     w = flag_result(report)["warnings"]
     assert [x["code"] for x in w] == ["robots-lost"]
     assert "robot(s) 0, 1 crashed" in w[0]["message"] and "7 link(s)" in w[0]["message"]
+
+
+def test_a_robot_that_ran_to_its_end_unheard_by_the_observer_is_not_called_killed():
+    """Robot 1 finished with its neighbours (none wrote it off) but its result never reached
+    the observer (the observer's cable to it was down): it used to be warned of as crashed,
+    killed or never started, with 'rerun without the fault'."""
+    report = _team_report({"0": RAN, "2": RAN}, lost=[1])
+    report["team"]["unreported"] = [1]
+    report["resolution"]["details"]["faults"].update(robots_lost={}, crashed={"1": None})
+    w = flag_result(report)["warnings"]
+    assert [x["code"] for x in w] == ["robots-unreported"]
+    assert w[0]["message"].startswith("robot(s) 1 ran to their end with their neighbours")

@@ -528,3 +528,18 @@ def test_a_team_whose_comm_graph_splits_is_warned_by_the_observer(tmp_path, caps
     assert ("the comm graph splits the 3 robots into 2 groups that never match each other: "
             "their features cannot be associated across the groups (add comm_edges to the "
             "team file)") in err
+
+
+def test_a_lost_robot_whose_neighbours_all_heard_it_to_the_end_is_unreported_not_lost():
+    """Robot 1 of a line 0-1-2 published nothing (the observer's path to it was cut) while
+    robots 0 and 2 finished with it: it is named unreported; robot 3, written off by its
+    neighbour 2, and robot 4, whose neighbour published nothing, are not."""
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import unreported
+
+    team = make_team("unheard", [[0, 1], [1, 2], [2, 3], [3, 4]],
+                     {"kind": "links", "links": "x.csv", "features_per_camera": [1] * 5}, n=5)
+    done = ({"counters": {"outcome": "done", "written_off": {}}}, {})
+    results = {0: done, 2: ({"counters": {"outcome": "partitioned",
+                                          "written_off": {"3": "silent"}}}, {})}
+    assert unreported(team, results, [1, 3, 4]) == [1]
