@@ -15,6 +15,8 @@ promise, or keep it only by cutting everything; a run must then not look like a 
   timeouts; over zenoh, robot processes that ran to their end but were written off by a
   neighbour, a partition or a round limit), ``robots-unreported`` (over zenoh, robots that
   ran to their end with their neighbours but whose results never reached the observer),
+  ``pairs-unmatched`` (over zenoh, comm-graph pairs never matched: a neighbour written off
+  before the features crossed),
   ``no-features`` (images where no feature was found, named),
   ``quality-reversed`` (``resolve``: the links the triangles refute carry the higher quality,
   :mod:`pipeline.evaluation.quality`), ``quality-scale`` (``resolve``: qualities above 1,
@@ -105,6 +107,15 @@ def flag_result(report: dict, names: list[str] | None = None,
         gone |= {str(k) for k in team.get("lost") or []}
         ran = {str(k) for k, v in team["robots"].items() if isinstance(v, dict) and "rounds" in v}
         gone |= {str(k) for k in faults.get("robots_lost", {})} - ran
+    unmatched = team.get("unmatched_pairs") or []
+    if unmatched:
+        pairs = ", ".join(f"{a}-{b}" for a, b in unmatched)
+        warnings.append(_warning(
+            "pairs-unmatched",
+            f"{len(unmatched)} image pair(s) of the comm graph were never matched ({pairs}): "
+            "a robot wrote its neighbour off before their features crossed (each robot's "
+            "counters name why); their links are missing from the result, not cut, so no "
+            "count of cut links includes them"))
     unheard = {str(k) for k in team.get("unreported") or []}
     gone -= unheard
     if unheard:

@@ -437,7 +437,18 @@ def team_summary(run: TeamRun) -> dict:
             # said so (a robot never started is lost too)
             rob[str(i)] = {"result": None, "exit_code": run.exit_codes.get(i),
                            "killed": i in run.killed, "started": i in run.status}
+    # comm edges a robot that published never matched: it wrote the neighbour off before
+    # their features crossed, so the pair's links are missing (not cut); a links team
+    # reads its links and matches nothing
+    unmatched = []
+    if run.team.data.get("kind") in ("formation", "images"):
+        for a, b in sorted(sorted(map(int, e)) for e in np.asarray(run.team.comm_edges).tolist()):
+            pairs = [{(int(m["i"]), int(m["j"])) for m in run.results[x][0].get("matches", [])}
+                     for x in (a, b) if x in run.results]
+            if any((a, b) not in p and (b, a) not in p for p in pairs):
+                unmatched.append([a, b])
     return {"transport": "zenoh", "robots": rob, "wall_s": round(run.wall_s, 4),
+            **({"unmatched_pairs": unmatched} if unmatched else {}),
             "process_start_s": round(run.start_s, 4),
             "last_result_s": round(run.published_s, 4),
             "killed": {str(k): True for k in run.killed},

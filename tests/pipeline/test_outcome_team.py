@@ -57,3 +57,15 @@ def test_a_robot_that_ran_to_its_end_unheard_by_the_observer_is_not_called_kille
     w = flag_result(report)["warnings"]
     assert [x["code"] for x in w] == ["robots-unreported"]
     assert w[0]["message"].startswith("robot(s) 1 ran to their end with their neighbours")
+
+
+def test_a_pair_never_matched_is_warned_of_although_no_link_was_cut():
+    """Robot 1 wrote robot 2 off (silent: a cable capped at 16 kbit/s) before their features
+    crossed: pair 1-2 was never matched and its links are missing, while the loss warning said
+    '0 link(s) were cut as robot-lost'."""
+    report = _team_report({"0": RAN, "1": RAN, "2": RAN})
+    report["team"]["unmatched_pairs"] = [[1, 2]]
+    w = flag_result(report)["warnings"]
+    assert [x["code"] for x in w] == ["pairs-unmatched", "robots-lost-without-crash"]
+    assert w[0]["message"].startswith("1 image pair(s) of the comm graph were never matched "
+                                      "(1-2)")
