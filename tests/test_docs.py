@@ -36,7 +36,7 @@ def test_readme_run_images_line_names_every_option():
                       flags=re.M | re.S).group(0)
     sub = build_parser(["run-images"])._subparsers._group_actions[0].choices["run-images"]
     options = {o for a in sub._actions for o in a.option_strings if o.startswith("--")}
-    missing = sorted(o for o in options - {"--help", "--quiet", "--transport"}
+    missing = sorted(o for o in options - {"--help", "--quiet", "--version", "--transport"}
                      if not re.search(re.escape(o) + r"(?![\w-])", block))
     assert not missing
     assert "`run-formation`, `run-formations`, `run-images` and `resolve` take `--transport" \
