@@ -57,8 +57,31 @@ def main(folder: Path) -> dict:
             "inliers": inliers, "wall_s": time.perf_counter() - T0}
 
 
+USAGE = "usage: python bench/opencv_floor.py IMAGE_DIR  (cam*.png and K.txt; -h: what it measures)"
+
+
+def cli(argv: list[str]) -> int:
+    """The command line by hand, not argparse: its import would count in the floor's time."""
+    if argv and argv[0] in ("-h", "--help"):
+        print(f"{USAGE}\n\n{__doc__}")
+        return 0
+    if len(argv) != 1:
+        print(f"{USAGE}\nerror: expected one IMAGE_DIR, got {len(argv)} arguments "
+              "(bench/run_formation.py renders the images and runs this floor on them)",
+              file=sys.stderr)
+        return 2
+    folder = Path(argv[0])
+    if not (folder / "K.txt").is_file() or not any(folder.glob("cam*.png")):
+        print(f"error: {argv[0]}: no cam*.png images with their K.txt; give the folder of a "
+              "rendered formation (bench/run_formation.py writes one)", file=sys.stderr)
+        return 2
+    print(json.dumps(main(folder)), flush=True)
+    return 0
+
+
 if __name__ == "__main__":
-    print(json.dumps(main(Path(sys.argv[1]))), flush=True)
+    if cli(sys.argv[1:]):
+        sys.exit(2)
     # the run it is compared with ends without the interpreter's teardown
     # (pipeline.__main__.entry); so does the floor, to compare the same work
     os._exit(0)
