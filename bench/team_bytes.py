@@ -71,6 +71,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="runs of each encoding (median wall)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-bytes"))
     args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
     teams = {"d (6 robots)": dict(formation="d")}
     if args.twenty:
         teams["ring2 (20 robots)"] = dict(robots=20, graph="ring2")

@@ -22,6 +22,7 @@ def _bench(name):
     ("consistency_cycle", ["--n", "5", "1"], "--n 1: a cycle joins at least 2 cameras"),
     ("online_team", ["--steps", "0"], "--steps 0: at least 1"),
     ("online_team", ["--repeat", "0"], "--repeat 0: at least 1"),
+    ("team_bytes", ["--repeat", "0"], "--repeat 0: at least 1"),
 ])
 def test_a_count_the_bench_cannot_run_is_refused(tmp_path, capsys, name, args, message):
     out = tmp_path / "bench"
