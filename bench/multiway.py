@@ -660,6 +660,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-multiway"))
     a = p.parse_args(argv)
+    if a.team and min(a.team) < 2:
+        p.error(f"--team {min(a.team)}: a team has at least 2 cameras")
     if a.quick:
         a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
         a.warped_seeds, a.warped_hide, a.warped_inputs = [1], [0.25], ["descriptors"]

@@ -128,6 +128,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-team-moves"))
     a = p.parse_args(argv)
+    if min(a.n) < 2:
+        p.error(f"--n {min(a.n)}: a team has at least 2 cameras")
     load = os.getloadavg()[0]
     records = []
     for n in a.n:

@@ -23,6 +23,9 @@ def _bench(name):
     ("online_team", ["--steps", "0"], "--steps 0: at least 1"),
     ("online_team", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("team_bytes", ["--repeat", "0"], "--repeat 0: at least 1"),
+    ("team_moves", ["--n", "10", "1"], "--n 1: a team has at least 2 cameras"),
+    ("multiway", ["--frames", "--graffiti", "", "--formations", "", "--warped-seeds",
+                  "--team", "0"], "--team 0: a team has at least 2 cameras"),
 ])
 def test_a_count_the_bench_cannot_run_is_refused(tmp_path, capsys, name, args, message):
     out = tmp_path / "bench"
