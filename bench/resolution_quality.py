@@ -35,6 +35,7 @@ from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
 from pipeline.consistency.rules import get_rule  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.evaluation.links import link_truth  # noqa: E402
 from pipeline.evaluation.metrics import association_pairs, pairwise_scores, true_pairs_all  # noqa: E402
 from pipeline.evaluation.oracle import oracle_cut, resolution_scores  # noqa: E402
@@ -119,7 +120,8 @@ def one_run(formation: str, seed: int, merge_radius: float) -> list[dict]:
     return out
 
 
-def main() -> int:
+@one_line_errors
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formations", default="abcd")
     ap.add_argument("--seeds", type=int, default=5, help="how many seeds")
@@ -128,10 +130,21 @@ def main() -> int:
     ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{get_rule('evidence').merge_radius_px}",
                     help="comma-separated radii in pixels")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-resolution"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.seeds < 1:
+        ap.error(f"--seeds {args.seeds}: at least 1")
+    if not args.formations:
+        ap.error("--formations '': give at least one formation, e.g. abcd")
+    for f in args.formations:
+        data_synth.check_formation(f)
+    try:
+        radii = [float(x) for x in args.merge_radius.split(",")]
+    except ValueError:
+        ap.error(f"--merge-radius {args.merge_radius!r}: expected comma-separated radii in "
+                 "pixels, e.g. 2,3")
 
     passes = {}
-    for radius in (float(x) for x in args.merge_radius.split(",")):
+    for radius in radii:
         passes[str(radius)] = one_pass(args, radius)
     out = Path(args.out)
     write_json_atomic(out / "results.json", {"by_merge_radius": passes, "config": vars(args)})
