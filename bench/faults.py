@@ -186,6 +186,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="20 formations")
     args = ap.parse_args(argv)
+    if args.formations < 1:
+        ap.error(f"--formations {args.formations}: at least 1")
     count = 20 if args.quick else args.formations
     t0 = time.perf_counter()
     rows = []
