@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.consistency.rules import RULES as RESOLUTIONS  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.progress import StageTimer  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.runs.landmarks import LandmarksConfig, run_landmarks  # noqa: E402
@@ -46,6 +47,7 @@ CLEAR_MEASURED = {  # measured on this machine with CLEAR's public code (not our
 }
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))

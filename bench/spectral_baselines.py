@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.commgraph import comm_graph  # noqa: E402
 from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.evaluation.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
 from pipeline.inputs.landmarks import load_landmark_folder  # noqa: E402
 from pipeline.matching.landmarks import match_landmark_edges  # noqa: E402
@@ -81,6 +82,7 @@ def measure(fn, *args, **kw):
     return out, wall, cpu, peak / 1e6
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/cmu_hotel"))

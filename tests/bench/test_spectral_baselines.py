@@ -51,3 +51,17 @@ def test_a_write_that_fails_keeps_the_previous_file(tmp_path, monkeypatch, capsy
         signal.signal(signal.SIGXFSZ, handler)
     assert path.read_text() == previous
     assert [p.name for p in tmp_path.iterdir()] == ["records.json"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--data", "NOPE"], "error: NOPE: no such folder of labelled images"),
+    (["--frames", "1"], "error: --frames 1: expected 2.."),
+])
+def test_input_it_cannot_read_is_one_error_line(tmp_path, capsys, args, message):
+    argv = _args(tmp_path / "records.json")
+    for flag, value in zip(args[::2], args[1::2], strict=True):
+        argv[argv.index(flag) + 1] = value
+    assert _bench().main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message) and "Traceback" not in err
+    assert not (tmp_path / "records.json").exists()
