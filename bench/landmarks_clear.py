@@ -65,15 +65,18 @@ def main(argv=None) -> int:
         print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
               "and their label files)", file=sys.stderr)
         return 2
+    for conf in args.configs:
+        if _config(conf) is None:
+            ap.error(f"--configs {conf!r}: expected REFINE:RATIO:GEOMETRY[:PX], e.g. "
+                     "votes:none:epipolar or none:0.8:epipolar:2")
+    frames = [20] if args.quick else args.frames
     print(HEADER)
     print("|" + "---|" * (HEADER.count("|") - 1))
-    frames = [20] if args.quick else args.frames
     records = []
     for n in frames:
         for graph in args.graphs:
             for conf in args.configs:
-                refine, ratio_text, geometry, *px = conf.split(":")
-                ratio = None if ratio_text == "none" else float(ratio_text)
+                refine, ratio_text, ratio, geometry, px = _config(conf)
                 for method in RESOLUTIONS:
                     name = (f"f{n}-{graph.replace(':', '')}-{geometry}{''.join(px)}-{refine}"
                             f"-r{ratio_text}"
@@ -122,6 +125,22 @@ def main(argv=None) -> int:
 HEADER = ("| frames | graph | geometry | refine | gate | resolution | Hungarian F1 | P / R / F1 after "
           "| cycle-consistent | rounds | messages | MB | wall s | CPU s | quality_merge F1 | "
           "keep_first F1 | drop_sets F1 |")
+
+
+def _config(conf: str):
+    """``REFINE:RATIO:GEOMETRY[:PX]`` as ``(refine, ratio text, ratio, geometry, [px])``;
+    None if it does not read so."""
+    parts = conf.split(":")
+    if len(parts) not in (3, 4):
+        return None
+    refine, ratio_text, geometry, *px = parts
+    try:
+        ratio = None if ratio_text == "none" else float(ratio_text)
+        if px:
+            float(px[0])
+    except ValueError:
+        return None
+    return refine, ratio_text, ratio, geometry, px
 
 
 def _row(r: dict) -> str:

@@ -1,7 +1,14 @@
 """bench/landmarks_clear.py: input it cannot read is one ``error:`` line, exit status 2, and
 the previous results.json stays as it was."""
 
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
 from benchload import load_bench
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_missing_data_folder_is_one_error_line(tmp_path, capsys):
@@ -14,3 +21,19 @@ def test_a_missing_data_folder_is_one_error_line(tmp_path, capsys):
     assert err.startswith(f"error: {tmp_path / 'NOPE'}: no such folder of labelled images")
     assert "Traceback" not in err
     assert (tmp_path / "results.json").read_text() == '{"previous": true}'
+
+
+@pytest.mark.parametrize("conf", ["votes", "votes:x:none", "votes:none:epipolar:abc"])
+def test_a_config_that_does_not_read_is_refused_before_the_table(tmp_path, capsys, conf):
+    with pytest.raises(SystemExit) as exc:
+        load_bench("landmarks_clear").main(["--configs", conf, "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    out, err = capsys.readouterr()
+    assert f"error: --configs {conf!r}: expected REFINE:RATIO:GEOMETRY[:PX]" in err
+    assert "Traceback" not in err and out == ""
+
+
+def test_help_is_not_preceded_by_the_table_header():
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "landmarks_clear.py"), "--help"],
+                          capture_output=True, text=True, check=True)
+    assert proc.stdout.startswith("usage: ")
