@@ -11,6 +11,7 @@ Reproduced: ``θ_i → ML`` of the inliers and ``v_i → 0.7`` with the last opi
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 from pathlib import Path
 
@@ -165,6 +166,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
     args = ap.parse_args(argv)
+    if importlib.util.find_spec("matplotlib") is None:
+        ap.error("matplotlib is missing, for the figure fig2_3.png: install the bench extra "
+                 "(make bench-voting, or pip install -e '.[bench]')")
     fig = plot_fig23(args.out / "fig2_3.png")
     print(f"\nFigs. 2-3 example: ML of all {np.round(fig['ml_all'], 2).tolist()}, ML of inliers "
           f"{np.round(fig['ml_in'], 2).tolist()}; winner h={fig['winner']} (members "
