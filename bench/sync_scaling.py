@@ -140,7 +140,20 @@ def run_child(engine: str, flood: str, case: str, data: Path, timeout: float) ->
     return r
 
 
-def main() -> int:
+def case_problem(case: str) -> str | None:
+    """What is wrong with a ``--cases`` entry, or None: ``hotel:F:GRAPH`` (``F`` a count of
+    at least 2 or ``all``) or ``ring2:N`` (``N`` at least 2)."""
+    kind, _, rest = case.partition(":")
+    count = rest.split(":", 1)[0] if kind == "hotel" and ":" in rest else rest
+    if kind not in ("hotel", "ring2") or (kind == "hotel" and ":" not in rest):
+        return "expected hotel:F:GRAPH or ring2:N, e.g. hotel:20:complete ring2:3000"
+    if not (count == "all" and kind == "hotel") and not (count.isdigit() and int(count) >= 2):
+        return f"{count!r} is not a count of at least 2 cameras" + (
+            " (or all)" if kind == "hotel" else "")
+    return None
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", nargs="+", default=DEFAULT_CASES)
     ap.add_argument("--engines", nargs="+", default=["batched"], choices=["robot", "batched"])
@@ -150,10 +163,16 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--child", nargs=3, metavar=("ENGINE", "FLOOD", "CASE"),
                     help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.child:
         print(json.dumps(child(*args.child, args.data)))
         return 0
+    for case in args.cases:
+        if problem := case_problem(case):
+            ap.error(f"--cases {case}: {problem}")
+    if any(c.startswith("hotel:") for c in args.cases) and not args.data.is_dir():
+        ap.error(f"--data {args.data}: no such folder of labelled images (the hotel cases "
+                 "read it); give the CMU hotel folder, or only ring2:N cases")
     head = (f"{'case':>20} {'engine':>7} {'flood':>5} {'wall s':>8} {'cpu s':>8} {'rounds':>7} "
             f"{'messages':>10} {'bytes':>12} {'robot KB':>8} {'RSS MB':>7} digest")
     print(head)
