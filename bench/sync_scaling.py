@@ -170,6 +170,8 @@ def main(argv=None) -> int:
     for case in args.cases:
         if problem := case_problem(case):
             ap.error(f"--cases {case}: {problem}")
+    # the children run in the repository: a relative --data is the caller's
+    args.data = args.data.absolute()
     if any(c.startswith("hotel:") for c in args.cases) and not args.data.is_dir():
         ap.error(f"--data {args.data}: no such folder of labelled images (the hotel cases "
                  "read it); give the CMU hotel folder, or only ring2:N cases")

@@ -1,6 +1,7 @@
 """bench/sync_scaling.py: a case it cannot run is refused before any child starts, and a
 relative --data is read from the caller's directory (the children run in the repository)."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -24,3 +25,10 @@ def test_a_case_it_cannot_run_is_refused(tmp_path, capsys, args, message):
     assert message in err and "Traceback" not in err
     assert (tmp_path / "results.json").read_text() == '{"previous": true}'
 
+
+def test_a_relative_data_folder_is_the_callers(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(ROOT / "tests")
+    assert load_bench("sync_scaling").main(
+        ["--cases", "hotel:6:ring", "--data", "data/cmu_hotel_small", "--out", str(tmp_path)]) == 0
+    (rec,) = json.loads((tmp_path / "results.json").read_text())
+    assert "error" not in rec and rec["cameras"] == 6
