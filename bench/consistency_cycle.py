@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-consistency-cycle"
@@ -75,6 +76,8 @@ def main(argv=None) -> int:
                     help="runs of each process, the resolutions in turn (medians reported)")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     if min(args.n) < 2:

@@ -49,6 +49,7 @@ from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E4
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
@@ -257,6 +258,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     ns = [6, 10, 20] if args.quick else args.n
     if min(ns) < 2:
         ap.error(f"--n {min(ns)}: a team has at least 2 robots")

@@ -34,6 +34,7 @@ from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
 from pipeline.errors import InputError  # noqa: E402
 from pipeline.matching.features import extract_all  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
@@ -83,6 +84,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-foundation"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     try:

@@ -48,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 MODES = {"fixed": dict(stop=False, consensus="metropolis"),
@@ -188,6 +189,8 @@ def main(argv=None) -> int:
                     help="rounds of the fixed scheme that tell 'not converged at 100'")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-fusion"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     size = tuple(int(v) for v in args.size.lower().split("x"))

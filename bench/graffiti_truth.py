@@ -24,6 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
@@ -87,6 +88,8 @@ def main() -> int:
     ap.add_argument("--graphs", nargs="+", default=["ring", "ring2", "complete"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-graffiti")
     args = ap.parse_args()
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if not (args.directory / "H1to2p.txt").is_file():
         print(f"error: {args.directory}: no Graffiti homographies (H1to2p.txt); give the folder",
               file=sys.stderr)

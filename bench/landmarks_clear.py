@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.consistency.rules import RULES as RESOLUTIONS  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.progress import StageTimer  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.runs.landmarks import LandmarksConfig, run_landmarks  # noqa: E402
@@ -61,6 +62,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="20 frames only")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-landmarks")
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if not args.data.is_dir():
         print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
               "and their label files)", file=sys.stderr)

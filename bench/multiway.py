@@ -86,6 +86,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
@@ -660,6 +661,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-multiway"))
     a = p.parse_args(argv)
+    if problem := results_folder_problem(a.out):
+        p.error(problem)
     if a.team and min(a.team) < 2:
         p.error(f"--team {min(a.team)}: a team has at least 2 cameras")
     if a.quick:

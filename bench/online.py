@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-online"
@@ -216,6 +217,8 @@ def main(argv=None) -> int:
                          "alone, as the batch run)")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
     late = [k for k in args.batch_steps or () if not 1 <= k <= args.steps]
     if late:  # a batch step beyond the run was left out without a word

@@ -29,6 +29,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-online-cuts"
@@ -129,6 +130,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     holds = args.hold if args.hold is not None else [0, default_hold(args.window)]
     runs = []
     for h in holds:

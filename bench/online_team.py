@@ -28,6 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 CONFIGS = {"sim": [], "sim --no-fusion": ["--no-fusion"],
@@ -74,6 +75,8 @@ def main(argv=None) -> int:
                     help="runs of each configuration, alternated; the median wall kept")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-online-team"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     if args.steps < 1:

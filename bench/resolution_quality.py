@@ -42,6 +42,7 @@ from pipeline.evaluation.oracle import oracle_cut, resolution_scores  # noqa: E4
 from pipeline.matching.features import MERGE_RADIUS_PX, extract_all  # noqa: E402
 from pipeline.matching.link_evidence import link_evidence  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
@@ -131,6 +132,8 @@ def main(argv=None) -> int:
                     help="comma-separated radii in pixels")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-resolution"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.seeds < 1:
         ap.error(f"--seeds {args.seeds}: at least 1")
     if not args.formations:

@@ -52,6 +52,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 TARGET_RATIO = 2.0
@@ -119,6 +120,8 @@ def main() -> int:
     ap.add_argument("--formation", default="d")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-run-formation"))
     args = ap.parse_args()
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
 

@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-sync-scaling"
@@ -164,6 +165,8 @@ def main(argv=None) -> int:
     ap.add_argument("--child", nargs=3, metavar=("ENGINE", "FLOOD", "CASE"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.child:
         print(json.dumps(child(*args.child, args.data)))
         return 0

@@ -26,6 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 FORMATIONS = {"d (6 robots)": ["--formation", "d"],
@@ -128,6 +129,8 @@ def main(argv=None) -> int:
                     help="runs of each sim/zenoh configuration, the median wall kept "
                          "(default 3; the machine may be shared)")
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     load = [round(x, 2) for x in os.getloadavg()]

@@ -29,6 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.assemble import stage_of_kind  # noqa: E402
 
@@ -71,6 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="runs of each encoding (median wall)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-bytes"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     teams = {"d (6 robots)": dict(formation="d")}

@@ -44,6 +44,7 @@ import multiway  # noqa: E402
 
 from pipeline.association import AssociationGraph, camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
@@ -128,6 +129,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-team-moves"))
     a = p.parse_args(argv)
+    if problem := results_folder_problem(a.out):
+        p.error(problem)
     if min(a.n) < 2:
         p.error(f"--n {min(a.n)}: a team has at least 2 cameras")
     load = os.getloadavg()[0]

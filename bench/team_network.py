@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.consistency.robot import ROBOT_LOST  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.netns import (  # noqa: E402
     NETEM_MISSING,
@@ -175,6 +176,8 @@ def main(argv=None) -> int:
                     help="a robot still running this long after the start counts as hung")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-network"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     why = unavailable()
     if why:
         print(f"cannot run: {why}", file=sys.stderr)

@@ -25,6 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.teamfile import PROFILE_DIR_ENV  # noqa: E402
 
@@ -48,6 +49,8 @@ def main() -> int:
     ap.add_argument("--top", type=int, default=12)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-profile"))
     args = ap.parse_args()
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     cmd = ["run-formation", "--steps", str(args.steps), "--formation", args.formation,

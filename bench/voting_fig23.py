@@ -28,6 +28,7 @@ from pipeline.fusion.consensus import (  # noqa: E402
     ransac_hypotheses,
 )
 from pipeline.fusion.voting import dynamic_voting, gate_threshold  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
@@ -166,6 +167,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if importlib.util.find_spec("matplotlib") is None:
         ap.error("matplotlib is missing, for the figure fig2_3.png: install the bench extra "
                  "(make bench-voting, or pip install -e '.[bench]')")

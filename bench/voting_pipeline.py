@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.outputs import results_folder_problem
 from pipeline.runfolder import write_json_atomic
 
 
@@ -93,6 +94,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     prow = pipeline_fusion()
     print_pipeline(prow)
     write_json_atomic(args.out / "pipeline.json", dict(rows=prow))

@@ -109,6 +109,7 @@ from pipeline.fusion.voting import (
     gate_threshold,
     static_voting,
 )
+from pipeline.outputs import results_folder_problem
 from pipeline.runfolder import write_json_atomic
 
 PAPER = {
@@ -322,6 +323,8 @@ def main(argv=None) -> int:
                     help="communication radius of the per-round random geometric graph")
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
     args = ap.parse_args(argv)
+    if problem := results_folder_problem(args.out):
+        ap.error(problem)
     if args.trials < 1:
         ap.error(f"--trials must be >= 1, got {args.trials}")
 

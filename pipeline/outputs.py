@@ -322,6 +322,23 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
                                  "output its own name")
 
 
+def results_folder_problem(out, flag: str = "--out") -> str | None:
+    """Why ``out`` cannot be the folder a benchmark writes its results in (``results.json``
+    and the like, replaced one by one), or None: empty, a file or a path through one, or in a
+    folder that may not be written. Checked before the benchmark's work, which takes minutes."""
+    if not os.fspath(out):
+        return f"{flag} '' is empty: give a folder name"
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        return (f"{flag} {str(p)!r} is a file; the results are written in a folder: give a "
+                "folder name")
+    try:
+        _check_writable_folder(p / "results.json", flag)
+    except InputError as exc:
+        return str(exc).replace(repr(str(p / "results.json")), repr(str(p)), 1)
+    return None
+
+
 def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     """Check that the run folder ``out`` may be (re)placed by a new run; return it as a Path.
 

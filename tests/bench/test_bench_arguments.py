@@ -2,6 +2,7 @@
 before any work with a one-line message and exit status 2, instead of a traceback or a
 results.json of nothing written over the previous one."""
 
+import inspect
 from pathlib import Path
 
 import pytest
@@ -53,3 +54,27 @@ def test_landmarks_clear_names_a_missing_data_folder_before_any_output(tmp_path,
     assert out == ""
     assert err == (f"error: --data {tmp_path / 'nope'}: no such folder; give the CMU hotel "
                    "folder (its frames and their label files)\n")
+
+
+# images_vs_colmap's --out is a file, formations' goes to run-formations (which checks it)
+FOLDER_BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py")
+                        if 'add_argument("--out"' in p.read_text()
+                        and p.stem not in ("formations", "images_vs_colmap"))
+
+
+@pytest.mark.parametrize("name", FOLDER_BENCHES)
+@pytest.mark.parametrize("where", ["file", "under a file"])
+def test_an_out_that_cannot_be_a_folder_is_refused_before_any_work(tmp_path, capsys,
+                                                                   monkeypatch, name, where):
+    (tmp_path / "f").write_text("mine")
+    out = tmp_path / "f" if where == "file" else tmp_path / "f" / "sub"
+    monkeypatch.setattr("sys.argv", [f"{name}.py", "--out", str(out)])
+    main = _bench(name).main
+    with pytest.raises(SystemExit) as exc:
+        main(["--out", str(out)]) if "argv" in inspect.signature(main).parameters else main()
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    message = "is a file; the results are written in a folder" if where == "file" else (
+        f"{str(tmp_path / 'f')!r} is a file, not a folder")
+    assert f"error: --out {str(out)!r}" in err and message in err and "Traceback" not in err
+    assert (tmp_path / "f").read_text() == "mine"
