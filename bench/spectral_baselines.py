@@ -38,6 +38,7 @@ from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.evaluation.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
 from pipeline.inputs.landmarks import load_landmark_folder  # noqa: E402
 from pipeline.matching.landmarks import match_landmark_edges  # noqa: E402
+from pipeline.outputs import check_output_files  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
@@ -93,6 +94,8 @@ def main(argv=None) -> int:
     ap.add_argument("--universe", type=int, default=30, help="the given universe size")
     ap.add_argument("--json", type=Path, default=None, help="also save the records here")
     args = ap.parse_args(argv)
+    if args.json:
+        check_output_files([("--json", args.json)], overwrite=True)
     k = args.universe
     methods = [("spectral", spectral_sync, {}),
                ("spectral, k given", spectral_sync, {"universe_size": k}),

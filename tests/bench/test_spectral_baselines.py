@@ -65,3 +65,13 @@ def test_input_it_cannot_read_is_one_error_line(tmp_path, capsys, args, message)
     err = capsys.readouterr().err
     assert err.startswith(message) and "Traceback" not in err
     assert not (tmp_path / "records.json").exists()
+
+
+@pytest.mark.parametrize("where", ["under a file", "a folder"])
+def test_a_json_path_it_cannot_write_is_refused_first(tmp_path, capsys, where):
+    (tmp_path / "f").write_text("mine")
+    path = tmp_path / "f" / "records.json" if where == "under a file" else tmp_path
+    assert _bench().main(_args(path)) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith(f"error: --json {str(path)!r}") and "Traceback" not in err
+    assert out == "" and (tmp_path / "f").read_text() == "mine"
