@@ -83,6 +83,7 @@ def main(argv=None) -> int:
     if min(args.n) < 2:
         ap.error(f"--n {min(args.n)}: a cycle joins at least 2 cameras")
 
+    load_start = os.getloadavg()
     records = []
     print(f"{'n':>6} {'resolution':>10} {'wall s':>8} {'peak MB':>8} {'exit':>4} {'cut':>4} "
           f"{'wall s of each run':>20}")
@@ -119,12 +120,16 @@ def main(argv=None) -> int:
             print(f"target: {TARGET_N}-camera cycle, {r['resolution']}: {r['wall_s']:.2f} s, "
                   f"{r['peak_rss_mb']:.0f} MB ({'within' if ok else 'OVER'} {TARGET_S:.0f} s "
                   f"and {TARGET_MB:.0f} MB)")
+    load_end = os.getloadavg()
+    print(f"load average {load_start[0]:.1f} at the start, {load_end[0]:.1f} at the end "
+          f"({os.cpu_count()} cores)")
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / "results.json", records)
     write_json_atomic(args.out / "meta.json", dict(python=platform.python_version(),
                                                     machine=platform.machine(),
                                                     repeat=args.repeat,
-                                                    load_average=os.getloadavg(),
+                                                    load_average_at_start=load_start,
+                                                    load_average=load_end,
                                                     command=" ".join(sys.argv)))
     print(f"saved {args.out / 'results.json'}")
     return 0
