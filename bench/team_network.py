@@ -178,6 +178,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    for flag, given, known in (("--teams", args.teams, ("d", "ring2")),
+                               ("--cases", args.cases, (*CASES, *RATES))):
+        names = [t for t in given.split(",") if t]
+        if not names or set(names) - set(known):
+            bad = sorted(set(names) - set(known)) or [repr(given)]
+            ap.error(f"{flag} {','.join(bad)}: expected a comma list of "
+                     f"{', '.join(dict.fromkeys(known))}")
+    if args.robots < 2:
+        ap.error(f"--robots {args.robots}: a team has at least 2 robots")
     why = unavailable()
     if why:
         print(f"cannot run: {why}", file=sys.stderr)
