@@ -191,6 +191,8 @@ def main(argv=None) -> int:
     if why:
         print(f"cannot run: {why}", file=sys.stderr)
         return 2
+    # a SIGTERM (timeout, kill) unwinds as Ctrl-C does: each rig removes its namespaces
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     import data_synth
 
     w, h = (int(v) for v in args.size.lower().split("x"))

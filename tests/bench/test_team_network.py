@@ -1,6 +1,12 @@
 """bench/team_network.py: a team, case or robot count it cannot run is refused before any
 namespace is made (an unknown team was a KeyError traceback after the first team's runs)."""
 
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
 import pytest
 from benchload import load_bench
 
@@ -21,3 +27,45 @@ def test_what_it_cannot_run_is_refused_first(tmp_path, capsys, monkeypatch, args
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+CHILD = """
+import sys, time
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from benchload import load_bench
+bench = load_bench("team_network")
+marks = Path({marks!r})
+
+class Rig:  # stands for NetnsRig: no namespace is made
+    def __init__(self, n, edges):
+        pass
+    def __enter__(self):
+        (marks / "made").write_text("")
+        return self
+    def __exit__(self, *exc):
+        (marks / "removed").write_text("")
+    def team(self, *a, **k):
+        time.sleep(60)
+
+bench.unavailable = lambda: None
+bench.NetnsRig = Rig
+bench.main(["--teams", "d", "--cases", "unlimited", "--out", str(marks / "out")])
+"""
+
+
+def test_a_sigterm_removes_the_namespaces_as_ctrl_c_does(tmp_path):
+    """timeout and kill send SIGTERM: the rig's namespaces were left behind (fmPIDxK-*)."""
+    tests = str(Path(__file__).resolve().parent)
+    proc = subprocess.Popen([sys.executable, "-c", CHILD.format(tests=tests, marks=str(tmp_path))])
+    try:
+        for _ in range(600):
+            if (tmp_path / "made").exists() or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert (tmp_path / "made").exists()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    finally:
+        proc.kill()
+    assert (tmp_path / "removed").exists()
