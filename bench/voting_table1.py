@@ -99,6 +99,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import one_line_errors
 from pipeline.fusion.consensus import (
     RandomGeometricTopology,
     ransac_hypotheses,
@@ -314,6 +315,7 @@ def shape_claims(table: dict) -> list[bool]:
     return [bool(f(table["ml"], table["static"], table["dynamic"])) for _, f in CLAIMS]
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
