@@ -665,6 +665,13 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if problem := results_folder_problem(a.out):
         p.error(problem)
+    from pipeline.consistency.centralized import BASELINES
+    from pipeline.consistency.rules import RULES
+
+    known = [*DISTRIBUTED, *BASELINES, "oracle", "good_links", *(f"resolve:{r}" for r in RULES)]
+    for flag, methods in (("--methods", a.methods), ("--team-methods", a.team_methods)):
+        if unknown := [x for x in methods if x not in known]:
+            p.error(f"{flag} {' '.join(unknown)}: unknown; choose from {', '.join(known)}")
     if a.team and min(a.team) < 2:
         p.error(f"--team {min(a.team)}: a team has at least 2 cameras")
     if a.quick:
