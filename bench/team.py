@@ -26,6 +26,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import parse_size  # noqa: E402
+from pipeline.errors import InputError  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -131,6 +133,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    try:
+        parse_size(args.size)
+    except InputError as exc:
+        ap.error(str(exc))
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     load = [round(x, 2) for x in os.getloadavg()]

@@ -39,7 +39,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import parse_size  # noqa: E402
 from pipeline.consistency.robot import ROBOT_LOST  # noqa: E402
+from pipeline.errors import InputError  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.netns import (  # noqa: E402
@@ -178,6 +180,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    try:
+        parse_size(args.size)
+    except InputError as exc:
+        ap.error(str(exc))
     for flag, given, known in (("--teams", args.teams, ("d", "ring2")),
                                ("--cases", args.cases, (*CASES, *RATES))):
         names = [t for t in given.split(",") if t]

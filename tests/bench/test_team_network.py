@@ -16,6 +16,7 @@ from benchload import load_bench
     (["--cases", "kill,1gbit"], "--cases 1gbit: expected a comma list of unlimited, "),
     (["--cases", ","], "--cases ',': expected a comma list of"),
     (["--robots", "1"], "--robots 1: a team has at least 2 robots"),
+    (["--size", "big"], "--size 'big': expected WIDTHxHEIGHT, e.g. 640x480"),
 ])
 def test_what_it_cannot_run_is_refused_first(tmp_path, capsys, monkeypatch, args, message):
     bench = load_bench("team_network")
