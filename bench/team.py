@@ -139,6 +139,9 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
+    if args.only is not None and not any(args.only in name for name in FORMATIONS):
+        ap.error(f"--only {args.only!r}: no formation key holds it; the keys are "
+                 + ", ".join(repr(name) for name in FORMATIONS))
     load = [round(x, 2) for x in os.getloadavg()]
     results = {"size": args.size, "formations": {}, "cpus": os.cpu_count(),
                "load_average_at_start": load}

@@ -26,6 +26,7 @@ def _bench(name):
     ("team_bytes", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("fusion", ["--formations", "z"], "error: unknown formation 'z'"),
     ("team", ["--size", "0x0"], "--size '0x0': at least 64x48 pixels are needed"),
+    ("team", ["--only", "e (6"], "--only 'e (6': no formation key holds it; the keys are 'd (6"),
     ("online_team", ["--size", "640"], "--size '640': expected WIDTHxHEIGHT, e.g. 640x480"),
     ("multiway", ["--frames", "--graffiti", "", "--formations", "", "--warped-seeds", "--team", "10",
                   "--team-methods", "sync", "foo"], "--team-methods foo: unknown; choose from"),
