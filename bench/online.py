@@ -220,6 +220,9 @@ def main(argv=None) -> int:
     if problem := results_folder_problem(args.out):
         ap.error(problem)
     config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}
+    if args.batch_every < 0:  # it was taken as 0
+        ap.error(f"--batch-every {args.batch_every}: expected steps >= 0 (0: no batch rerun, "
+                 "or only at --batch-steps)")
     late = [k for k in args.batch_steps or () if not 1 <= k <= args.steps]
     if late:  # a batch step beyond the run was left out without a word
         ap.error(f"--batch-steps {late[0]}: the run has steps 1 to {args.steps}")

@@ -25,6 +25,8 @@ def _bench(name):
     ("online_team", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("team_bytes", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("fusion", ["--formations", "z"], "error: unknown formation 'z'"),
+    ("online", ["--batch-every", "-1", "--robots", "2", "--steps", "1", "--size", "64x48"],
+     "--batch-every -1: expected steps >= 0"),
     ("team", ["--size", "0x0"], "--size '0x0': at least 64x48 pixels are needed"),
     ("team", ["--only", "e (6"], "--only 'e (6': no formation key holds it; the keys are 'd (6"),
     ("online_team", ["--size", "640"], "--size '640': expected WIDTHxHEIGHT, e.g. 640x480"),
