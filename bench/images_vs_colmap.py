@@ -397,6 +397,24 @@ def main(argv=None) -> int:
     rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
     kinds = [i for i in args.inputs.split(",") if i]
+    for flag, given, known in (("--methods", methods, METHODS),
+                               ("--inputs", kinds, ("named", "renamed"))):
+        if not given or set(given) - set(known):
+            bad = ",".join(x for x in given if x not in known) or "''"
+            ap.error(f"{flag} {bad}: expected a comma-separated subset of {','.join(known)}")
+    for flag, text in (("--ring-seeds", args.ring_seeds), ("--ring-cameras", args.ring_cameras)):
+        if not all(x.isdigit() for x in text.split(",") if x):
+            ap.error(f"{flag} {text!r}: expected comma-separated whole numbers, e.g. 0,1,2")
+    for folder in folders:
+        if not Path(folder).is_dir():
+            ap.error(f"{folder}: no such photo folder")
+    from pipeline.errors import InputError
+    from pipeline.outputs import check_output_files
+
+    try:
+        check_output_files([("--out", args.out)], overwrite=True)
+    except InputError as exc:
+        ap.error(str(exc))
     import importlib
 
     for name in WARM_IMPORTS:
