@@ -81,13 +81,15 @@ def _baseline(report: dict, name: str) -> str:
     return f"{b['spurious_links']}, {_f(b['pairwise']['f1'])}"
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("directory", nargs="?", type=Path,
                     default=ROOT.parent / "shared" / "data" / "graffiti")
     ap.add_argument("--graphs", nargs="+", default=["ring", "ring2", "complete"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-graffiti")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    # run-images runs in the repository: relative paths are the caller's
+    args.directory, args.out = args.directory.absolute(), args.out.absolute()
     if problem := results_folder_problem(args.out):
         ap.error(problem)
     if not (args.directory / "H1to2p.txt").is_file():

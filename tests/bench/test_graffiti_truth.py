@@ -50,3 +50,20 @@ def test_a_write_that_fails_keeps_the_previous_results(tmp_path, monkeypatch):
         signal.signal(signal.SIGXFSZ, handler)
     assert (out / "results.json").read_text() == previous
     assert sorted(p.name for p in out.iterdir()) == ["results.json", "ring"]
+
+
+def test_relative_paths_are_the_callers(tmp_path, monkeypatch, capsys):
+    """run-images runs in the repository: a relative folder or --out was read there (the
+    run was written inside the repository, and its report not found)."""
+    photos = tmp_path / "graffiti"
+    photos.mkdir()
+    for name in ("img1.png", "img2.png", "img3.png", "H1to2p.txt", "H1to3p.txt"):
+        shutil.copy(DATA / name, photos / name)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["graffiti_truth.py", "graffiti", "--graphs", "ring",
+                                      "--out", "bench"])
+    assert _bench().main() == 0
+    report = json.loads((tmp_path / "bench" / "results.json").read_text())["reports"]["ring"]
+    assert (tmp_path / "bench" / "ring" / "report.json").is_file() and report["comm_edges"]
+    assert report["comm_edges"] == json.loads(
+        (tmp_path / "bench" / "ring" / "report.json").read_text())["comm_edges"]
