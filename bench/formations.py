@@ -51,10 +51,12 @@ def table(reports: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-formations")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    args.out = args.out.absolute()  # run-formations runs in the repository: a relative --out
+    # is the caller's
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     done = subprocess.run([sys.executable, "-m", "pipeline", "run-formations", "--out",
