@@ -64,14 +64,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if not args.data.is_dir():
-        print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
-              "and their label files)", file=sys.stderr)
-        return 2
     for conf in args.configs:
         if _config(conf) is None:
             ap.error(f"--configs {conf!r}: expected REFINE:RATIO:GEOMETRY[:PX], e.g. "
                      "votes:none:epipolar or none:0.8:epipolar:2")
+    if not args.data.is_dir():
+        print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
+              "and their label files)", file=sys.stderr)
+        return 2
     frames = [20] if args.quick else args.frames
     print(HEADER)
     print("|" + "---|" * (HEADER.count("|") - 1))

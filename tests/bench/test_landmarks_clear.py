@@ -18,7 +18,7 @@ def test_a_missing_data_folder_is_one_error_line(tmp_path, capsys):
          "--configs", "none:none:none", "--out", str(tmp_path)])
     assert code == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"error: {tmp_path / 'NOPE'}: no such folder of labelled images")
+    assert err.startswith(f"error: --data {tmp_path / 'NOPE'}: no such folder")
     assert "Traceback" not in err
     assert (tmp_path / "results.json").read_text() == '{"previous": true}'
 

@@ -2,7 +2,6 @@
 folder without the rendered images is refused with an ``error:`` line and exit status 2
 instead of a traceback (``make bench`` leaves it to ``bench/run_formation.py``)."""
 
-import re
 from pathlib import Path
 
 from benchload import load_bench
@@ -27,8 +26,3 @@ def test_a_folder_without_the_images_is_refused(tmp_path, capsys):
     assert load_bench("opencv_floor").cli([str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"error: {tmp_path}: no cam*.png images with their K.txt")
-
-
-def test_make_bench_does_not_run_the_floor_without_its_folder():
-    make = (ROOT / "Makefile").read_text()
-    assert re.search(r"filter-out bench/opencv_floor\.py,\$\(wildcard bench/\*\.py\)", make)
