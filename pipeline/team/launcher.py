@@ -200,6 +200,7 @@ class Observer:
         self.status: dict = {}
         self.seen: dict = {}
         self.finished_at: dict = {}
+        self.heard: dict = {}  # robot -> when its result (first or a repeat) last came
         self.cv = threading.Condition()
         self.session = open_session([team.observer], [], "observer")
         self._key = key
@@ -213,15 +214,20 @@ class Observer:
         except WireError:
             return
         i = int(header["id"])
-        # a result still arriving while the observer closes (it stopped on another robot's
-        # error): no receipt then, and no traceback from Zenoh's callback thread
-        with contextlib.suppress(Exception):
-            self.session.put(self._key(self.team.name, "ack", i), b"ok")
+        self.ack(i)  # every repeat: an earlier receipt may have been lost with its link
         with self.cv:
+            self.heard[i] = time.monotonic()
             if i not in self.results:
                 self.results[i] = (header, msgs[0][1] if msgs else {})
-                self.finished_at[i] = time.monotonic()
+                self.finished_at[i] = self.heard[i]
             self.cv.notify_all()
+
+    def ack(self, i: int) -> None:
+        """Acknowledge robot ``i``'s result. A result still arriving while the observer
+        closes (it stopped on another robot's error): no receipt then, and no traceback from
+        Zenoh's callback thread."""
+        with contextlib.suppress(Exception):
+            self.session.put(self._key(self.team.name, "ack", i), b"ok")
 
     def _on_status(self, sample) -> None:
         i = int(str(sample.key_expr).rsplit("/", 1)[-1])

@@ -19,6 +19,14 @@ When it stops (every wait is bounded)
     longer take part: lost too, without waiting for ``timeout_s``). A robot
     not ended within ``timeout_s`` of the observer's start is lost too; if no robot at all
     published by then, a TeamError names one that never started.
+
+    It then stays up to :data:`SETTLE_S` more (never past ``timeout_s``), acknowledging the
+    repeats of every robot that still repeats its result: a receipt can be lost with the link
+    it went on (a robot's link to an observer paused longer than the observer's lease, e.g.
+    by SIGSTOP, is closed by the robot and opened again; the results queued on the old link
+    still arrive, their receipts do not), and a robot that never hears one repeats its result
+    for ``start_timeout_s``. A robot has stopped repeating when its liveliness token is gone
+    and no result came from it for :data:`QUIET_S`.
 """
 
 from __future__ import annotations
@@ -34,6 +42,13 @@ __all__ = ["observe_team", "TeamObserver", "GRACE_S", "unreported"]
 #: before closing its session; this covers the packet still in flight)
 GRACE_S = 2.0
 
+#: longest the observer stays, once it has every result, for robots still repeating theirs
+SETTLE_S = 5.0
+
+#: seconds without a result from a robot whose token is gone after which it has stopped
+#: repeating (a robot repeats every 0.25 s; a link opened again after a lapse takes longer)
+QUIET_S = 1.0
+
 
 class TeamObserver(Observer):
     """:class:`~pipeline.team.launcher.Observer` that also hears robots' liveliness tokens
@@ -43,6 +58,7 @@ class TeamObserver(Observer):
         super().__init__(team)
         self.vanished: dict[int, float] = {}
         self.alive: set[int] = set()
+        self.holding: set[int] = set()  # robots whose liveliness token is there now
         self._subs.append(self.session.liveliness().declare_subscriber(
             self._key(team.name, "live", "*"), self._on_live, history=True))
 
@@ -56,8 +72,10 @@ class TeamObserver(Observer):
         with self.cv:
             if sample.kind == zenoh.SampleKind.DELETE:
                 self.vanished.setdefault(i, time.monotonic())
+                self.holding.discard(i)
             else:
                 self.alive.add(i)
+                self.holding.add(i)
             self.cv.notify_all()
 
 
@@ -109,11 +127,23 @@ def unreported(team, results: dict, lost) -> list[int]:
     return out
 
 
+def _settle(obs, until: float) -> None:
+    """With ``obs.cv`` held: wait until every robot whose result ``obs`` holds has stopped
+    repeating it (module docstring), or ``until``; each repeat is acknowledged meanwhile."""
+    while True:
+        now = time.monotonic()
+        if now >= until or all(i not in obs.holding and now - obs.heard.get(i, 0.0) >= QUIET_S
+                               for i in obs.results):
+            return
+        obs.cv.wait(min(0.05, until - now))
+
+
 def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
     """Collect the results of ``team``'s robots started elsewhere; return a :class:`TeamRun`.
 
-    Bound: returns or raises within ``timeout_s`` (plus at most one wait period of 0.05 s);
-    see the module docstring for when it stops.
+    Bound: returns or raises within ``timeout_s`` (plus at most one wait period of 0.05 s),
+    and at most :data:`SETTLE_S` after it has every result; see the module docstring for when
+    it stops.
 
     Raises
     ------
@@ -177,7 +207,8 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
             run.status = dict(obs.status)
             run.finished_at = dict(obs.finished_at)
             run.killed = {i: obs.vanished.get(i, time.monotonic()) for i in sorted(lost)}
-        run.wall_s = run.published_s = time.monotonic() - t0
+            run.wall_s = run.published_s = time.monotonic() - t0
+            _settle(obs, min(deadline, time.monotonic() + SETTLE_S))
         return run
     finally:
         obs.close()

@@ -543,3 +543,38 @@ def test_a_lost_robot_whose_neighbours_all_heard_it_to_the_end_is_unreported_not
     results = {0: done, 2: ({"counters": {"outcome": "partitioned",
                                           "written_off": {"3": "silent"}}}, {})}
     assert unreported(team, results, [1, 3, 4]) == [1]
+
+
+def test_a_robot_whose_receipts_were_lost_is_acknowledged_before_the_observer_ends(
+        tmp_path, monkeypatch):
+    """Every receipt sent before the observer holds all the results is lost (as with a link
+    the robot closed while the observer was paused, ``kill -STOP``): the observer stays to
+    acknowledge the repeats, so no robot repeats its result until ``start_timeout_s``."""
+    from pipeline.team.launcher import Observer, make_team
+    from pipeline.team.teamfile import write_team
+
+    (tmp_path / "in.csv").write_text("cam_i,feat_i,cam_j,feat_j,quality\n0,0,1,0,0.9\n"
+                                     "0,1,2,1,0.8\n1,2,2,0,0.7\n0,2,1,1,0.6\n")
+    team = make_team("lost-acks", [[0, 1], [0, 2], [1, 2]],
+                     {"kind": "links", "links": "in.csv", "features_per_camera": [5] * 3},
+                     {"resolution": "evidence", "start_timeout_s": 10.0}, n=3)
+    real_ack = Observer.ack
+
+    def ack_once_all_in(self, i):
+        with self.cv:
+            all_in = all(k in self.results for k in range(self.team.n))
+        if all_in:
+            real_ack(self, i)
+
+    monkeypatch.setattr(Observer, "ack", ack_once_all_in)
+    path = write_team(tmp_path / "TEAM.json", team)
+    procs = _start_robots([path] * team.n, tmp_path)
+    try:
+        assert main(["observe", "--team", str(path), "--out", str(tmp_path / "obs"),
+                     "--timeout", "120"]) == 0
+    finally:
+        codes = _stop(procs)
+    assert codes == [0] * team.n
+    for i in range(team.n):
+        log = (tmp_path / f"robot{i}.log").read_text()
+        assert f"[robot {i}] done in" in log and "observer did not acknowledge" not in log
