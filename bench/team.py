@@ -26,8 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.commands.options import parse_size  # noqa: E402
-from pipeline.errors import InputError  # noqa: E402
+from pipeline.commands.options import size_argument  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -124,7 +123,7 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--size", default="640x480", type=size_argument)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team"))
     ap.add_argument("--only", default=None, help="run one formation key only")
     ap.add_argument("--repeat", type=int, default=3,
@@ -133,10 +132,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    try:
-        parse_size(args.size)
-    except InputError as exc:
-        ap.error(str(exc))
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
     if args.only is not None and not any(args.only in name for name in FORMATIONS):

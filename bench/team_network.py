@@ -39,9 +39,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.commands.options import parse_size  # noqa: E402
+from pipeline.commands.options import size_argument  # noqa: E402
 from pipeline.consistency.robot import ROBOT_LOST  # noqa: E402
-from pipeline.errors import InputError  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.netns import (  # noqa: E402
@@ -170,7 +169,8 @@ def main(argv=None) -> int:
                     help=f"comma list of {', '.join(CASES)}, 256kbit (the first is the "
                          "reference of links lost: name unlimited first)")
     ap.add_argument("--robots", type=int, default=20, help="robots of the ring2 team")
-    ap.add_argument("--size", default="640x480", help="image size WxH of every robot")
+    ap.add_argument("--size", default="640x480", type=size_argument,
+                    help="image size WxH of every robot")
     ap.add_argument("--fault-s", type=float, default=10.0, help="partition / freeze length")
     ap.add_argument("--fault-after", type=float, default=1.0,
                     help="seconds after robot 2's start handshake at which the fault starts")
@@ -180,10 +180,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    try:
-        parse_size(args.size)
-    except InputError as exc:
-        ap.error(str(exc))
     for flag, given, known in (("--teams", args.teams, ("d", "ring2")),
                                ("--cases", args.cases, (*CASES, *RATES))):
         names = [t for t in given.split(",") if t]

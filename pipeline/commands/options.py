@@ -15,7 +15,7 @@ from pipeline.validate import render_size
 __all__ = ["add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "add_memory_option", "add_overwrite_and_memory_options",
-           "feature_options", "parse_size"]
+           "feature_options", "parse_size", "size_argument"]
 
 
 def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> None:
@@ -187,6 +187,21 @@ def feature_options(args) -> tuple[str, int | None]:
         raise InputError(f"--max-features {args.max_features}: at most {MAX_FEATURES} per image; "
                          "give a smaller count (e.g. 2000) or 'auto' for photos")
     return method, int(args.max_features)
+
+
+def size_argument(text: str) -> str:
+    """An argparse ``type`` for ``--size``: ``text`` unchanged when :func:`parse_size` reads
+    it, else argparse's one-line error with :func:`parse_size`'s message (the bench scripts,
+    which hand ``--size`` on to the commands).
+
+    >>> size_argument("320x240")
+    '320x240'
+    """
+    try:
+        parse_size(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def parse_size(text: str) -> tuple[int, int]:
