@@ -621,12 +621,24 @@ def similarity_between(src, tgt) -> np.ndarray | None:
     """``tgt_from_src`` similarity ``(3, 4)`` (``x_tgt = M[:, :3] @ x_src + M[:, 3]``) from the
     projection centres of the images registered in both reconstructions (by name), or None
     with fewer than three such images. Two reconstructions of one scene have different gauges;
-    this puts points of one into the frame of the other."""
+    this puts points of one into the frame of the other; None too when the centres are
+    collinear (the rotation about their line is unknown).
+
+    Umeyama's closed form, here rather than ``pycolmap.estimate_sim3d``, which returns None
+    for centres on a plane through the origin: three images always are, once a mapper has
+    centred the reconstruction on them.
+    """
     a, b = registered_poses(src), registered_poses(tgt)
     common = sorted(set(a) & set(b))
     if len(common) < 3:
         return None
     src_c = np.stack([-a[k][0].T @ a[k][1] for k in common])  # projection centres
     tgt_c = np.stack([-b[k][0].T @ b[k][1] for k in common])
-    sim = pycolmap.estimate_sim3d(src_c, tgt_c)
-    return None if sim is None else np.asarray(sim.matrix(), dtype=np.float64)
+    xs, xt = src_c - src_c.mean(axis=0), tgt_c - tgt_c.mean(axis=0)
+    U, d, Vt = np.linalg.svd(xt.T @ xs)
+    if d[1] <= 1e-9 * d[0]:
+        return None
+    s = np.array([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt)) or 1.0])
+    R = (U * s) @ Vt
+    scale = float(d @ s) / float((xs ** 2).sum())
+    return np.hstack([scale * R, (tgt_c.mean(axis=0) - scale * R @ src_c.mean(axis=0))[:, None]])

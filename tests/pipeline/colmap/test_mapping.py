@@ -212,3 +212,37 @@ def test_a_database_rescaled_to_the_files(sceaux_before, tmp_path):
         np.testing.assert_allclose(r1, r0, atol=1e-4 * np.abs(r0).max() + 1e-9)
         checked += 1
     assert checked > 0
+
+
+def _poses(centres):
+    """registered_poses-like ``{name: (R, t, K)}`` of cameras at ``centres``."""
+    return {f"im{k}": (np.eye(3), -np.asarray(c, float), np.eye(3))
+            for k, c in enumerate(centres)}
+
+
+@pytest.mark.parametrize("centres", [
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0]],                 # three centres, centred by the mapper
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]],     # a plane through the origin
+    [[1, 2, 3], [4, 5, 6], [7, 8, 10], [0, 1, -2]],
+])
+def test_similarity_between_centres_on_a_plane_through_the_origin(monkeypatch, centres):
+    """Three registered images (run-images on three photos, the reconstruction centred on
+    them) gave None (pycolmap.estimate_sim3d refuses such centres), and the fused points
+    were left out of recording.rrd while report.json counted them."""
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    src = np.asarray(centres, float)
+    tgt = 3.0 * src @ R.T + [1.0, -2.0, 0.5]
+    poses = {"src": _poses(src), "tgt": _poses(tgt)}
+    monkeypatch.setattr("pipeline.colmap.mapping.registered_poses", lambda rec: poses[rec])
+    M = colmap.similarity_between("src", "tgt")
+    assert M is not None
+    assert np.allclose(M[:, :3], 3.0 * R, atol=1e-9) and np.allclose(M[:, 3], [1, -2, 0.5],
+                                                                       atol=1e-9)
+    assert np.allclose(colmap.similarity_between("src", "src"), np.eye(3, 4), atol=1e-9)
+
+
+def test_similarity_between_collinear_centres_is_unknown(monkeypatch):
+    poses = _poses([[0, 0, 0], [1, 1, 1], [2, 2, 2]])
+    monkeypatch.setattr("pipeline.colmap.mapping.registered_poses", lambda rec: poses)
+    assert colmap.similarity_between("a", "b") is None
