@@ -109,6 +109,17 @@ def web_url(port: int = WEB_PORT, grpc_port: int = GRPC_PORT, host: str = "local
                                                  safe="")
 
 
+def _bad_ports(port: int, grpc_port: int) -> str | None:
+    """Why the web viewer cannot serve on these ports (the URL would name them), or None."""
+    for flag, p in (("--port", port), ("--grpc-port", grpc_port)):
+        if not 1 <= p <= 65535:
+            return f"{flag} {p}: give a TCP port from 1 to 65535"
+    if port == grpc_port:
+        return (f"--port and --grpc-port are both {port}: the page and the recording need a "
+                f"port each, e.g. --port {port} --grpc-port {port + 1 if port < 65535 else 1}")
+    return None
+
+
 def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Namespace,
                                                                       Path | None]:
     """``ap``'s arguments (its ``target`` a run folder or ``.rrd``) and the recording to open,
@@ -135,6 +146,10 @@ def main(argv=None) -> int:
     if path is None:
         return 2
     web = args.web or (not args.native and not has_display())
+    bad = _bad_ports(args.port, args.grpc_port) if web else None
+    if bad:
+        print(f"error: {bad}", file=sys.stderr)
+        return 2
     cmd = viewer_command(path, web, args.port, args.grpc_port)
     print(f"opening {path}")
     if web:

@@ -116,3 +116,24 @@ def test_a_folder_of_several_recordings_or_runs_names_them(tmp_path):
         find_recording(runs)
     assert ("a folder of 5 runs ('formation-a', 'formation-b', 'formation-c', 'formation-d', "
             "… 1 more)") in str(exc.value)
+
+
+@pytest.mark.parametrize("ports, message", [
+    (["--port", "70000"], "error: --port 70000: give a TCP port from 1 to 65535\n"),
+    (["--grpc-port", "0"], "error: --grpc-port 0: give a TCP port from 1 to 65535\n"),
+    (["--port", "9876"], "error: --port and --grpc-port are both 9876: the page and the "
+                         "recording need a port each, e.g. --port 9876 --grpc-port 9877\n"),
+])
+def test_web_viewer_ports_it_cannot_serve_on_are_refused(tmp_path, capsys, monkeypatch, ports,
+                                                         message):
+    """--port 70000 printed a URL on port 70000, then rerun refused the port; one port for
+    both printed a URL whose recording never loaded (rerun: 'port is already used')."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "recording.rrd").write_bytes(b"x")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main([str(run), "--dry-run", *ports]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == message and "web viewer:" not in captured.out
+    assert main([str(run), "--dry-run", "--native", *ports]) == 0  # no port is served
