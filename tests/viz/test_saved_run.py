@@ -198,3 +198,13 @@ def test_a_ctrl_c_while_the_libraries_load_is_one_line_and_exit_130(tmp_path):
                          cwd=root, capture_output=True, text=True, env=env)
     assert out.stderr == "interrupted: viz.saved_run stopped, nothing was written or replaced\n"
     assert out.returncode == 130
+
+
+def test_an_empty_out_is_named_as_empty(tmp_path, capsys):
+    """--out "$UNSET" was refused as "--out '.': a recording is written to a .rrd file", a
+    value the user never gave."""
+    folder = _save(make_record(), tmp_path / "run")
+    assert main([str(folder), "--out", ""]) == 2
+    assert capsys.readouterr().err == ("error: --out '' is empty (an unset variable?); name a "
+                                       ".rrd file, or drop --out to write RUN_DIR/recording.rrd\n")
+    assert not (folder / "recording.rrd").exists()
