@@ -624,21 +624,20 @@ def similarity_between(src, tgt) -> np.ndarray | None:
     this puts points of one into the frame of the other; None too when the centres are
     collinear (the rotation about their line is unknown).
 
-    Umeyama's closed form, here rather than ``pycolmap.estimate_sim3d``, which returns None
-    for centres on a plane through the origin: three images always are, once a mapper has
-    centred the reconstruction on them.
+    Umeyama's closed form by OpenCV (``cv2.estimateAffine3D`` with ``force_rotation``),
+    rather than ``pycolmap.estimate_sim3d``, which returns None for centres on a plane through
+    the origin: three images always are, once a mapper has centred the reconstruction on them.
     """
+    import cv2
+
     a, b = registered_poses(src), registered_poses(tgt)
     common = sorted(set(a) & set(b))
     if len(common) < 3:
         return None
     src_c = np.stack([-a[k][0].T @ a[k][1] for k in common])  # projection centres
     tgt_c = np.stack([-b[k][0].T @ b[k][1] for k in common])
-    xs, xt = src_c - src_c.mean(axis=0), tgt_c - tgt_c.mean(axis=0)
-    U, d, Vt = np.linalg.svd(xt.T @ xs)
-    if d[1] <= 1e-9 * d[0]:
+    spread = np.linalg.svd(src_c - src_c.mean(axis=0), compute_uv=False)
+    if spread[1] <= 1e-9 * spread[0]:  # collinear (or one point): a rotation is unknown
         return None
-    s = np.array([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt)) or 1.0])
-    R = (U * s) @ Vt
-    scale = float(d @ s) / float((xs ** 2).sum())
-    return np.hstack([scale * R, (tgt_c.mean(axis=0) - scale * R @ src_c.mean(axis=0))[:, None]])
+    Rt, scale = cv2.estimateAffine3D(src_c, tgt_c, force_rotation=True)
+    return np.hstack([float(scale) * Rt[:, :3], Rt[:, 3:]]).astype(np.float64)
