@@ -24,7 +24,7 @@ import math
 
 from pipeline.errors import InputError
 
-__all__ = ["MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
+__all__ = ["not_empty", "MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
            "tolerance_px", "lowe_ratio", "threads", "seed", "render_size", "robots",
            "focal_px_ok", "check_focal"]
 
@@ -34,6 +34,20 @@ MAX_RENDER_PIXELS = 4096 * 4096
 MAX_ROBOTS = 1000
 #: focal length / longest image side must lie in this range
 FOCAL_RANGE = (0.05, 1000.0)
+
+
+def not_empty(value, flag: str, advice: str = "give a folder name") -> None:
+    """InputError when a path option was given as ``''`` (an unset shell variable): ``Path('')``
+    is the current folder, where a command would write or read something else than meant.
+
+    >>> not_empty("runs/x", "--out")
+    >>> not_empty("", "--out")
+    Traceback (most recent call last):
+    ...
+    pipeline.errors.InputError: --out '' is empty (an unset variable?); give a folder name
+    """
+    if value is not None and str(value) == "":
+        raise InputError(f"{flag} '' is empty (an unset variable?); {advice}")
 
 
 def tolerance_px(value, flag: str = "--tol-px") -> float:

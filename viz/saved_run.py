@@ -140,11 +140,10 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     """
     from pipeline.outputs import run_folder_problem, write_run_marker
     from pipeline.runfolder import note_output_in_place
+    from pipeline.validate import not_empty
     from viz.rerun_log import log_run
 
-    if str(out) == "":  # an unset variable: not the default recording, nor the folder '.'
-        raise InputError("--out '' is empty (an unset variable?); name a .rrd file, or drop "
-                         "--out to write RUN_DIR/recording.rrd")
+    not_empty(out, "--out", "name a .rrd file, or drop --out to write RUN_DIR/recording.rrd")
     folder = Path(folder)
     _refuse_online(folder)  # before the output: its recording.rrd is the one to open
     if out is None:

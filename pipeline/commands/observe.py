@@ -32,6 +32,7 @@ def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.observe import observe_run
     from pipeline.team.teamfile import MAX_TIMEOUT_S
+    from pipeline.validate import not_empty
 
     if not 0 < args.timeout <= MAX_TIMEOUT_S:
         raise InputError(f"--timeout {args.timeout:g} must be a number of seconds in "
@@ -43,6 +44,7 @@ def run(args) -> int:
         print(f"warning: --timeout {args.timeout:g} s is shorter than the team's start_timeout_s "
               f"({start:g} s): robots still waiting for a neighbour when the observer gives up "
               "publish to no one", file=sys.stderr)
+    not_empty(args.out, "--out")  # not the current folder
     with claim_run_folder(args.out, [("--team", args.team)]):
         out = observe_run(args.team, args.out, timeout_s=args.timeout,
                           rerun=not args.no_rerun,

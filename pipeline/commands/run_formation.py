@@ -176,8 +176,7 @@ def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.formation import run_formation
 
-    if args.out == "":  # an unset variable: not the default run folder, which it replaced
-        raise InputError("--out '' is empty (an unset variable?); give a folder name")
+    validate.not_empty(args.out, "--out")  # not the default run folder, which it replaced
     if args.steps is not None:
         return _run_online(args)
     refuse_online_options(args, "--steps N")

@@ -201,13 +201,11 @@ def check_outputs(parent: Path, overwrite: bool) -> None:
 def run(args) -> int:
     from pipeline import validate
     from pipeline.budget import check_formation_memory
-    from pipeline.errors import InputError
     from pipeline.outcome import exit_status
     from pipeline.runfolder import publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
 
-    if args.out == "":  # an unset variable: not the current folder, which it would fill
-        raise InputError("--out '' is empty (an unset variable?); give a folder name, e.g. runs")
+    validate.not_empty(args.out, "--out", "give a folder name, e.g. runs")  # not the cwd
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")
     resolution = args.resolution

@@ -172,10 +172,8 @@ def _refuse_empty_paths(args) -> None:
     folder, replacing the run there."""
     for flag, value in (("DIR", args.directory), ("--out", args.out),
                         ("--intrinsics", args.intrinsics)):
-        if value == "":
-            raise InputError(f"{flag} '' is empty (an unset variable?); give "
-                             + ("a folder name" if flag != "--intrinsics"
-                                else "auto, exif or the path of a K.txt"))
+        validate.not_empty(value, flag, "give a folder name" if flag != "--intrinsics"
+                           else "give auto, exif or the path of a K.txt")
     from pipeline.inputs.photos import is_utf8_name
 
     if args.out is not None and not is_utf8_name(str(Path(args.out).absolute())):

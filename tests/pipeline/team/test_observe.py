@@ -578,3 +578,19 @@ def test_a_robot_whose_receipts_were_lost_is_acknowledged_before_the_observer_en
     for i in range(team.n):
         log = (tmp_path / f"robot{i}.log").read_text()
         assert f"[robot {i}] done in" in log and "observer did not acknowledge" not in log
+
+
+def test_an_empty_out_is_named_as_empty(tmp_path, capsys):
+    """``observe --out ''`` (an unset variable) was refused as ``--out '.'``, a value the user
+    never gave."""
+    (tmp_path / "T.json").write_text(json.dumps({
+        "version": 1, "name": "empty-out", "comm_edges": [[0, 1]],
+        "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7991"},
+                   {"id": 1, "endpoint": "tcp/127.0.0.1:7992"}],
+        "observer": {"endpoint": "tcp/127.0.0.1:7993"},
+        "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]}}))
+    (tmp_path / "in.csv").write_text("0,0,1,0\n")
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", "",
+                 "--timeout", "60"]) == 2
+    err = capsys.readouterr().err
+    assert "error: --out '' is empty (an unset variable?); give a folder name" in err
