@@ -356,21 +356,27 @@ def test_a_robot_killed_mid_run_is_reported_lost_by_the_observer(tmp_path):
     assert report["after"]["conflictive_sets"] == 0
 
 
+def _links_team_file(tmp_path, name: str, n: int, edges, **options) -> str:
+    """A TEAM.json of ``n`` robots holding one feature each and the link (0,0)-(1,0), on free
+    loopback ports, with an observer; its path."""
+    from pipeline.team.launcher import free_ports
+
+    p = free_ports(n + 1)
+    doc = {"version": 1, "name": name, "comm_edges": edges,
+           "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p[i]}"} for i in range(n)],
+           "observer": {"endpoint": f"tcp/127.0.0.1:{p[n]}"},
+           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1] * n},
+           "options": options}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    (tmp_path / "in.csv").write_text("0,0,1,0\n")
+    return str(tmp_path / "T.json")
+
+
 def test_a_timeout_shorter_than_the_teams_start_is_warned(tmp_path, capsys):
     """observe --timeout below the team's start_timeout_s: robots still starting when it gives
     up would publish to no one; said before it waits."""
-    from pipeline.team.launcher import free_ports
-
-    p = free_ports(3)
-    doc = {"version": 1, "name": "early", "comm_edges": [[0, 1]],
-           "robots": [{"id": 0, "endpoint": f"tcp/127.0.0.1:{p[0]}"},
-                      {"id": 1, "endpoint": f"tcp/127.0.0.1:{p[1]}"}],
-           "observer": {"endpoint": f"tcp/127.0.0.1:{p[2]}"},
-           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]},
-           "options": {"start_timeout_s": 30}}
-    (tmp_path / "T.json").write_text(json.dumps(doc))
-    (tmp_path / "in.csv").write_text("0,0,1,0\n")
-    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", str(tmp_path / "o"),
+    team = _links_team_file(tmp_path, "early", 2, [[0, 1]], start_timeout_s=30)
+    assert main(["observe", "--team", team, "--out", str(tmp_path / "o"),
                  "--timeout", "0.5"]) == 2  # no robot was started
     err = capsys.readouterr().err
     assert "--timeout 0.5 s is shorter than the team's start_timeout_s (30 s)" in err
@@ -512,17 +518,8 @@ def test_a_team_whose_comm_graph_splits_is_warned_by_the_observer(tmp_path, caps
     """A hand-written team whose comm_edges leave robot 2 with no neighbour: no robot, no
     observer said a word (run-images warns of a split graph); the observer now says so
     before it waits, naming the fix."""
-    from pipeline.team.launcher import free_ports
-
-    p = free_ports(4)
-    doc = {"version": 1, "name": "split", "comm_edges": [[0, 1]],
-           "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p[i]}"} for i in range(3)],
-           "observer": {"endpoint": f"tcp/127.0.0.1:{p[3]}"},
-           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1, 1]},
-           "options": {"start_timeout_s": 0.5}}
-    (tmp_path / "T.json").write_text(json.dumps(doc))
-    (tmp_path / "in.csv").write_text("0,0,1,0\n")
-    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", str(tmp_path / "o"),
+    team = _links_team_file(tmp_path, "split", 3, [[0, 1]], start_timeout_s=0.5)
+    assert main(["observe", "--team", team, "--out", str(tmp_path / "o"),
                  "--timeout", "0.5"]) == 2  # no robot was started
     err = capsys.readouterr().err
     assert ("the comm graph splits the 3 robots into 2 groups that never match each other: "
@@ -583,14 +580,7 @@ def test_a_robot_whose_receipts_were_lost_is_acknowledged_before_the_observer_en
 def test_an_empty_out_is_named_as_empty(tmp_path, capsys):
     """``observe --out ''`` (an unset variable) was refused as ``--out '.'``, a value the user
     never gave."""
-    (tmp_path / "T.json").write_text(json.dumps({
-        "version": 1, "name": "empty-out", "comm_edges": [[0, 1]],
-        "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7991"},
-                   {"id": 1, "endpoint": "tcp/127.0.0.1:7992"}],
-        "observer": {"endpoint": "tcp/127.0.0.1:7993"},
-        "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]}}))
-    (tmp_path / "in.csv").write_text("0,0,1,0\n")
-    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out", "",
-                 "--timeout", "60"]) == 2
+    team = _links_team_file(tmp_path, "empty-out", 2, [[0, 1]])
+    assert main(["observe", "--team", team, "--out", "", "--timeout", "60"]) == 2
     err = capsys.readouterr().err
     assert "error: --out '' is empty (an unset variable?); give a folder name" in err
