@@ -49,6 +49,7 @@ from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E4
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
@@ -241,6 +242,7 @@ def plot(records: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[6, 10, 20, 50, 100, 200, 500, 1000])

@@ -51,6 +51,7 @@ from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
 from pipeline.consistency.engines.driver import detect_once  # noqa: E402
 from pipeline.consistency.protocols import ProtocolOptions  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.transport.simulated import NetworkOptions, recurrent_topology  # noqa: E402
 
@@ -180,6 +181,7 @@ def summarize(rows: list[dict]) -> list[dict]:
     return out
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--formations", type=int, default=200)

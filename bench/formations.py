@@ -21,6 +21,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.errors import one_line_errors  # noqa: E402
+
 #: the paper's Tables III–IV (SURF on real images, good / spurious counted by hand)
 PAPER = {"Conflictive sets": "2, 22, 31, 72", "Conflictive features": "14, 144, 204, 521",
          "Links deleted by resolution (good / spurious)":
@@ -51,6 +55,7 @@ def table(reports: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-formations")

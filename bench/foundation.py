@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
-from pipeline.errors import InputError  # noqa: E402
+from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.matching.features import extract_all  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
@@ -74,6 +74,7 @@ def bench_method(method: str, args, size) -> dict:
     return {"method": method, "runs": runs, "median": med, "min": best}
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")

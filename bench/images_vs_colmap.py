@@ -75,6 +75,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_errors  # noqa: E402
+
 QUICK_DATA = ROOT / "tests" / "data" / "sceaux_castle_640"
 SHARED = Path("/work/shared/data")
 DEFAULT_DATA = [SHARED / "sceaux_castle", SHARED / "graffiti"]
@@ -372,6 +374,7 @@ WARM_IMPORTS = ("cv2", "PIL.Image", "scipy.sparse.csgraph", "pycolmap", "pipelin
                 "concurrent.futures.process", "PIL.PngImagePlugin")
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folders", nargs="*", type=Path, default=None,

@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.commands.options import size_argument  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -67,6 +68,7 @@ def _run(args: list[str], out: Path) -> dict:
             "tables": [(out / n).read_text() for n in ("links.csv", "link_steps.csv")]}
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")

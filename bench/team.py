@@ -27,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.commands.options import size_argument  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -121,6 +122,7 @@ def _kill_run(args: list[str], size, out: Path) -> dict:
             "conflictive_sets_after": rep["after"]["conflictive_sets"]}
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--size", default="640x480", type=size_argument)

@@ -29,6 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.assemble import stage_of_kind  # noqa: E402
@@ -66,6 +67,7 @@ def _run(cfg_kw: dict, out: Path, transport: str, wire: str | None = None) -> di
     return res
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--twenty", action="store_true", help="also the 20-robot ring2 team")

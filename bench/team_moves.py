@@ -44,6 +44,7 @@ import multiway  # noqa: E402
 
 from pipeline.association import AssociationGraph, camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -123,6 +124,7 @@ def _root(parent: list, x: int) -> int:
     return x
 
 
+@one_line_errors
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, nargs="+", default=[300, 3000])

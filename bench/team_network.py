@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.commands.options import size_argument  # noqa: E402
 from pipeline.consistency.robot import ROBOT_LOST  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.netns import (  # noqa: E402
@@ -161,6 +162,7 @@ def summarize(raw: dict, edges, reference: dict | None) -> dict:
     }
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -25,6 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.team.teamfile import PROFILE_DIR_ENV  # noqa: E402
@@ -41,6 +42,7 @@ def _rows(stats: pstats.Stats, key: str, top: int) -> list[dict]:
     return out
 
 
+@one_line_errors
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")

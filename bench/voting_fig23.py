@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from voting_table1 import SUCCESS, ml_of  # noqa: E402
 
-from pipeline.errors import InputError  # noqa: E402
+from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.fusion.consensus import (  # noqa: E402
     FixedTopology,
     graph_diameter,
@@ -163,6 +163,7 @@ def plot_fig23(path: Path, rounds: int = 100, seed: int = 3) -> dict:
                 last_opinion_change=last_change, condition1=cond1, condition3=cond3)
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))

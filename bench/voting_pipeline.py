@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import one_line_errors
 from pipeline.outputs import results_folder_problem
 from pipeline.runfolder import write_json_atomic
 
@@ -90,6 +91,7 @@ def print_pipeline(rows) -> None:
               f"{r['bytes'] / 1e6:7.1f}")
 
 
+@one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))

@@ -15,32 +15,8 @@ from __future__ import annotations
 import os
 import sys
 
-
-def _caused_by_interrupt(exc: BaseException | None) -> bool:
-    """``exc`` is a KeyboardInterrupt, or an error raised because of one (a C++ extension
-    interrupted while it loads reports an ImportError, which its package may turn into
-    another error: pycolmap's "Cannot import the C++ backend")."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
-
-
-def _interrupted(command: str) -> int:
-    done = []
-    if "pipeline.runfolder" in sys.modules:  # else nothing can have been put in place
-        done = sys.modules["pipeline.runfolder"].outputs_in_place()
-    if done:  # too late to keep them: say which are there, written in full
-        names = ", ".join(repr(str(p)) for p in done[:4]) + (", …" if len(done) > 4 else "")
-        print(f"interrupted: {command} stopped; already in place, complete: {names}",
-              file=sys.stderr)
-    else:
-        print(f"interrupted: {command} stopped, nothing was written or replaced",
-              file=sys.stderr)
-    return 130
+from pipeline.errors import caused_by_interrupt as _caused_by_interrupt
+from pipeline.errors import report_interrupt as _interrupted
 
 
 def _last_word(program: str, exc_type, exc, tb) -> None:
