@@ -24,6 +24,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from multiway import SHARED_DATA  # noqa: E402
+
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -86,7 +88,7 @@ def _baseline(report: dict, name: str) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("directory", nargs="?", type=Path,
-                    default=ROOT.parent / "shared" / "data" / "graffiti")
+                    default=SHARED_DATA / "graffiti")
     ap.add_argument("--graphs", nargs="+", default=["ring", "ring2", "complete"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-graffiti")
     args = ap.parse_args(argv)

@@ -75,11 +75,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from multiway import SHARED_DATA  # noqa: E402
+
 from pipeline.errors import one_line_errors  # noqa: E402
 
 QUICK_DATA = ROOT / "tests" / "data" / "sceaux_castle_640"
-SHARED = Path("/work/shared/data")
-DEFAULT_DATA = [SHARED / "sceaux_castle", SHARED / "graffiti"]
+DEFAULT_DATA = [SHARED_DATA / "sceaux_castle", SHARED_DATA / "graffiti"]
 #: folders only measured as named (renaming is measured on the first)
 NAMED_ONLY = {"graffiti"}
 RING_CAMERAS = 18
@@ -379,7 +380,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folders", nargs="*", type=Path, default=None,
                     help="photo folders (default: Sceaux at full size and Graffiti from "
-                         f"{SHARED})")
+                         f"{SHARED_DATA})")
     ap.add_argument("--quick", action="store_true",
                     help=f"{QUICK_DATA.relative_to(ROOT)} and the ABCD ring only")
     ap.add_argument("--methods", default=",".join(METHODS),

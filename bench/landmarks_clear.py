@@ -35,6 +35,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from multiway import SHARED_DATA  # noqa: E402
+
 from pipeline.consistency.rules import RULES as RESOLUTIONS  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
@@ -51,7 +53,7 @@ CLEAR_MEASURED = {  # measured on this machine with CLEAR's public code (not our
 @one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))
+    ap.add_argument("--data", type=Path, default=SHARED_DATA / "cmu_hotel")
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
     ap.add_argument("--graphs", nargs="+", default=["complete", "ring", "seq:4"])
     ap.add_argument("--configs", nargs="+",

@@ -91,6 +91,10 @@ from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
+#: where every bench looks for the shared data sets by default (CMU hotel, Graffiti, Sceaux):
+#: ``../shared/data`` beside the clone, whatever the current folder
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
 DISTRIBUTED = ("paper", "paper-labels", "evidence", "sync")
 CENTRALIZED = ("spectral_sync", "clear", "drop_conflictive_sets", "quality_merge")
 
@@ -623,14 +627,14 @@ def machine(load_at_start: float) -> dict:
 @one_line_errors
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "cmu_hotel"))
+    p.add_argument("--data", default=str(SHARED_DATA / "cmu_hotel"))
     p.add_argument("--frames", type=int, nargs="*", default=[20, 50, 101],
                    help="labelled cases with these frame counts (none: only the team rows)")
     p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
     p.add_argument("--inputs", nargs="+", default=["descriptors", "guided", "guided+votes"],
                    choices=("descriptors", "guided", "guided+votes"))
     p.add_argument("--methods", nargs="+", default=[*DISTRIBUTED, *CENTRALIZED])
-    p.add_argument("--graffiti", default=str(ROOT.parent / "shared" / "data" / "graffiti"),
+    p.add_argument("--graffiti", default=str(SHARED_DATA / "graffiti"),
                    help="the Graffiti folder (H1to{k}p); '' skips it")
     p.add_argument("--formations", default="abcd", help="formations to render ('' none)")
     p.add_argument("--formation-seeds", type=int, nargs="*", default=[5, 6, 7, 8, 9])

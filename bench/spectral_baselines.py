@@ -32,6 +32,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from multiway import SHARED_DATA  # noqa: E402
+
 from pipeline.commgraph import comm_graph  # noqa: E402
 from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -86,7 +88,7 @@ def measure(fn, *args, **kw):
 @one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=Path("/work/shared/data/cmu_hotel"))
+    ap.add_argument("--data", type=Path, default=SHARED_DATA / "cmu_hotel")
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
     ap.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
     ap.add_argument("--descriptors", nargs="+", default=["given", "sift"])

@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
+from multiway import SHARED_DATA  # noqa: E402
 
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
@@ -161,7 +162,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", nargs="+", default=DEFAULT_CASES)
     ap.add_argument("--engines", nargs="+", default=["batched"], choices=["robot", "batched"])
     ap.add_argument("--floods", nargs="+", default=["links"], choices=["links", "tree"])
-    ap.add_argument("--data", type=Path, default=Path("../shared/data/cmu_hotel"))
+    ap.add_argument("--data", type=Path, default=SHARED_DATA / "cmu_hotel")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per child")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--child", nargs=3, metavar=("ENGINE", "FLOOD", "CASE"),
