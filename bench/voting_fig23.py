@@ -31,6 +31,10 @@ from pipeline.fusion.voting import dynamic_voting, gate_threshold  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
+ROOT = Path(__file__).resolve().parents[1]
+#: the repository's runs/, as every bench, whatever the current folder
+OUT = ROOT / "runs" / "bench-voting"
+
 
 def fig23_example(seed: int = 3):
     """10 robots, 7 inliers, fixed graph, ``c = 1``, 6 hypotheses, Conditions 1–4 hold.
@@ -166,7 +170,7 @@ def plot_fig23(path: Path, rounds: int = 100, seed: int = 3) -> dict:
 @one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
+    ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)

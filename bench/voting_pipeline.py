@@ -19,6 +19,10 @@ from pipeline.errors import one_line_errors
 from pipeline.outputs import results_folder_problem
 from pipeline.runfolder import write_json_atomic
 
+ROOT = Path(__file__).resolve().parents[1]
+#: the repository's runs/, as every bench, whatever the current folder
+OUT = ROOT / "runs" / "bench-voting"
+
 
 def pipeline_fusion(formations=("a", "b", "c", "d"), seed: int = 0, size=(640, 480)) -> list:
     """Fusion after resolution on rendered formations, against ground truth and pycolmap.
@@ -94,7 +98,7 @@ def print_pipeline(rows) -> None:
 @one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
+    ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)

@@ -113,6 +113,11 @@ from pipeline.fusion.voting import (
 from pipeline.outputs import results_folder_problem
 from pipeline.runfolder import write_json_atomic
 
+ROOT = Path(__file__).resolve().parents[1]
+#: the repository's runs/, as every bench, whatever the current folder
+OUT = ROOT / "runs" / "bench-voting"
+
+
 PAPER = {
     "ml": dict(false_positive_votes=4015, false_negative_votes=0, error_mean=2.063,
                error_std=2.502, iterations=100, trials=1000),
@@ -323,7 +328,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--radius", type=float, default=0.4,
                     help="communication radius of the per-round random geometric graph")
-    ap.add_argument("--out", type=Path, default=Path("runs/bench-voting"))
+    ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
