@@ -39,6 +39,8 @@ def _bench(name):
     ("multiway", ["--frames", "--graffiti", "", "--warped-seeds", "--team", "--formations", "z"],
      "error: unknown formation 'z'"),
     ("team_moves", ["--n", "10", "1"], "--n 1: a team has at least 2 cameras"),
+    ("team_profile", ["--steps", "0"], "--steps 0: at least 1"),
+    ("team_profile", ["--top", "-1"], "--top -1: at least 1 function per table"),
     ("resolution_quality", ["--seeds", "0"], "--seeds 0: at least 1"),
     ("resolution_quality", ["--formations", "xa"], "error: unknown formation 'x'; choose one of"),
     ("resolution_quality", ["--merge-radius", "x,2"], "--merge-radius 'x,2': expected comma"),
