@@ -195,6 +195,9 @@ def main(argv=None) -> int:
         ap.error(problem)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: at least 1")
+    if args.long_rounds <= 100:
+        ap.error(f"--long-rounds {args.long_rounds}: more than the fixed scheme's 100 rounds "
+                 "(it tells whether a link was cut before its votes settled)")
     size = tuple(int(v) for v in args.size.lower().split("x"))
     import pipeline.fusion.landmarks  # noqa: F401  (imports outside the timings)
 

@@ -25,6 +25,7 @@ def _bench(name):
     ("online_team", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("team_bytes", ["--repeat", "0"], "--repeat 0: at least 1"),
     ("fusion", ["--formations", "z"], "error: unknown formation 'z'"),
+    ("fusion", ["--long-rounds", "-1"], "--long-rounds -1: more than the fixed scheme's 100"),
     ("online", ["--batch-every", "-1", "--robots", "2", "--steps", "1", "--size", "64x48"],
      "--batch-every -1: expected steps >= 0"),
     ("team", ["--size", "0x0"], "--size '0x0': at least 64x48 pixels are needed"),
