@@ -682,6 +682,10 @@ def main(argv=None) -> int:
         a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
         a.warped_seeds, a.warped_hide, a.warped_inputs = [1], [0.25], ["descriptors"]
         a.graffiti, a.formations, a.formation_seeds = "", "a", [5]
+    import data_synth
+
+    for formation in a.formations:  # before the labelled, warped and Graffiti cases run
+        data_synth.check_formation(formation)
     records = []
     load = os.getloadavg()[0]
     for frames in a.frames:
