@@ -24,9 +24,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
 from multiway import SHARED_DATA  # noqa: E402
 
-from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.commgraph import comm_graph  # noqa: E402
+from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
@@ -37,6 +39,9 @@ def run_graph(directory: Path, graph: str, out: Path) -> dict:
     done = subprocess.run([sys.executable, "-m", "pipeline", "run-images", str(directory),
                            "--graph", graph, "--truth", "homographies", "--no-rerun", "--out",
                            str(folder), "--quiet"], cwd=ROOT, capture_output=True, text=True)
+    if done.returncode == 2:  # the user's input refused (a bad graph file): its one line
+        errors = [line for line in done.stderr.splitlines() if line.startswith("error: ")]
+        raise InputError(errors[-1].removeprefix("error: ") if errors else done.stderr.strip())
     if done.returncode != 0:
         raise SystemExit(f"run-images --graph {graph} exited {done.returncode}:\n{done.stderr}")
     return json.loads((folder / "report.json").read_text())
@@ -100,6 +105,9 @@ def main(argv=None) -> int:
         print(f"error: {args.directory}: no Graffiti homographies (H1to2p.txt); give the folder",
               file=sys.stderr)
         return 2
+    for graph in args.graphs:  # an unknown kind, before any run (run-images checks a file)
+        if not Path(graph).is_file():
+            comm_graph(graph, ["img1", "img2"], knn=lambda k: np.zeros((0, 2), dtype=int))
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     reports = {g: run_graph(args.directory, g, args.out) for g in args.graphs}

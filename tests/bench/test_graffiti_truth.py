@@ -67,3 +67,28 @@ def test_relative_paths_are_the_callers(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "bench" / "ring" / "report.json").is_file() and report["comm_edges"]
     assert report["comm_edges"] == json.loads(
         (tmp_path / "bench" / "ring" / "report.json").read_text())["comm_edges"]
+
+
+def test_an_unknown_graph_kind_is_refused_before_any_run(tmp_path, monkeypatch, capsys):
+    """It ran the graphs before it, then passed run-images' refusal through with exit 1."""
+    mod = _bench()
+
+    def no_run(*args):
+        raise AssertionError("run-images ran before --graphs was checked")
+    monkeypatch.setattr(mod, "run_graph", no_run)
+    assert mod.main([str(DATA), "--graphs", "ring", "foo", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: graph 'foo': not one of line, ring") and err.count("\n") == 1
+    assert not (tmp_path / "b").exists()
+
+
+def test_a_refusal_of_run_images_is_exit_2_in_one_line(tmp_path, capsys):
+    """run-images' own refusals (here: one photo, no pair) passed through with exit 1."""
+    photos = tmp_path / "graffiti"
+    photos.mkdir()
+    for name in ("img1.png", "H1to2p.txt"):
+        shutil.copy(DATA / name, photos / name)
+    code = _bench().main([str(photos), "--graphs", "ring", "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith("error: ") and err.count("\n") == 1 and "exited" not in err
