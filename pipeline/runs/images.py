@@ -486,7 +486,8 @@ def _write(out: Path, config: ImagesConfig, report: dict, md: str, views, feats,
                 colmap.rescale_database(tmp / "database.db", sizes)
             if config.rerun:
                 _write_recording(tmp / "recording.rrd", views, feats, cleaning,
-                                 map_before, map_after, kept_links, md, live=config.live)
+                                 map_before, map_after, kept_links, md, live=config.live,
+                                 warn=timer.warn)
             report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
             write_json_atomic(tmp / "report.json", report)
 
@@ -613,7 +614,7 @@ def _flags(views, feats, ledger, comm_edges, matches, map_before, map_after) -> 
 
 
 def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
-                     kept_links, md: str, live: str | None = None) -> None:
+                     kept_links, md: str, live: str | None = None, warn=None) -> None:
     from pipeline import colmap
     from pipeline.stages import posed_views
     from pipeline.types import RunRecord
@@ -628,6 +629,17 @@ def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,
         M = colmap.similarity_between(map_before.reconstruction, mapping.reconstruction)
         if M is not None:
             fused = np.asarray(cleaning.fused_points, dtype=np.float64) @ M[:, :3].T + M[:, 3]
+        elif warn is not None:
+            common = len(set(colmap.registered_poses(map_before.reconstruction))
+                         & set(colmap.registered_poses(mapping.reconstruction)))
+            why = (f"only {common} images are registered both before and after cleaning "
+                   "(three are needed)" if common < 3 else
+                   f"the centres of the {common} images registered both before and after "
+                   "cleaning are collinear")
+            warn(f"the {len(cleaning.fused_points)} fused points (report.json "
+                 "fusion.fused_points) are not in the recording: they were estimated in the "
+                 "frame of the reconstruction before cleaning, and " + why + ", so they "
+                 "cannot be put into the frame of the one drawn")
     points, tracks, colors = _points_and_tracks(mapping, views, feats, kept_links)
     record = RunRecord(
         views=drawn, features=feats, ledger=cleaning.ledger,
