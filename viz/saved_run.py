@@ -70,8 +70,15 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     """
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv
+    from viz.view import LANDMARKS_RUN_NOTE, landmarks_run
 
     folder = Path(folder)
+    if not folder.is_dir():
+        what = "no such folder" if not folder.exists() else "a file, not a folder"
+        raise InputError(f"{folder}: {what}; give the run folder (--out) of a run-formation "
+                         "or run-images run")
+    if landmarks_run(folder):
+        raise InputError(f"{folder}: {LANDMARKS_RUN_NOTE}")
     _refuse_online(folder)
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():

@@ -26,6 +26,24 @@ WEB_PORT = 9090
 GRPC_PORT = 9876
 
 
+#: what a run-landmarks folder is, for a reader asking it for a recording
+LANDMARKS_RUN_NOTE = ("a run-landmarks run folder (report.json, links.csv): run-landmarks "
+                      "writes no recording (labelled landmarks come without camera poses); "
+                      "read its report.json and links.csv")
+
+
+def landmarks_run(folder: Path) -> bool:
+    """Whether ``folder`` holds the report of a ``run-landmarks`` run (its
+    ``feature_landmarks``)."""
+    import json
+
+    try:
+        report = json.loads((folder / "report.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(report, dict) and "feature_landmarks" in report
+
+
 def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) -> Path:
     """The ``.rrd`` to open: ``target`` itself, ``target/recording.rrd`` (or the only ``.rrd``
     in a folder), or the newest ``recording.rrd`` under ``runs`` outside hidden folders (a
@@ -58,6 +76,8 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
             if runs_in:  # the parent of run folders, e.g. run-formations' --out
                 raise FileNotFoundError(f"{p}: a folder of {len(runs_in)} runs "
                                         f"({_names(runs_in)}): give the run to open")
+            if landmarks_run(p):
+                raise FileNotFoundError(f"{p}: {LANDMARKS_RUN_NOTE}")
             raise FileNotFoundError(f"{p}: no recording.rrd in this folder (was it written with "
                                     f"--no-rerun?)")
         raise FileNotFoundError(f"{p}: no such run folder or .rrd file")

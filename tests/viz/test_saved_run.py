@@ -208,3 +208,20 @@ def test_an_empty_out_is_named_as_empty(tmp_path, capsys):
     assert capsys.readouterr().err == ("error: --out '' is empty (an unset variable?); name a "
                                        ".rrd file, or drop --out to write RUN_DIR/recording.rrd\n")
     assert not (folder / "recording.rrd").exists()
+
+
+def test_a_landmarks_run_and_a_missing_folder_are_named(tmp_path, capsys):
+    """A run-landmarks folder (report.json, links.csv, no sparse/) is named as such, not 'no
+    sparse; not a run folder'; a folder that does not exist is named missing, not 'no
+    report.json'."""
+    run = tmp_path / "lm"
+    run.mkdir()
+    (run / "report.json").write_text('{"feature_landmarks": [[0, 1]]}')
+    (run / "links.csv").write_text("")
+    assert main([str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "a run-landmarks run folder" in err and "writes no recording" in err
+    assert not (run / "recording.rrd").exists()
+    assert main([str(tmp_path / "no-such")]) == 2
+    assert f"{tmp_path / 'no-such'}: no such folder; give the run folder" in \
+        capsys.readouterr().err

@@ -137,3 +137,14 @@ def test_web_viewer_ports_it_cannot_serve_on_are_refused(tmp_path, capsys, monke
     captured = capsys.readouterr()
     assert captured.err == message and "web viewer:" not in captured.out
     assert main([str(run), "--dry-run", "--native", *ports]) == 0  # no port is served
+
+
+def test_a_landmarks_run_folder_is_named_not_asked_about_no_rerun(tmp_path):
+    """run-landmarks writes no recording and has no --no-rerun option."""
+    run = tmp_path / "lm"
+    run.mkdir()
+    (run / "report.json").write_text('{"feature_landmarks": []}')
+    with pytest.raises(FileNotFoundError) as exc:
+        find_recording(run)
+    assert "a run-landmarks run folder" in str(exc.value)
+    assert "--no-rerun" not in str(exc.value)
