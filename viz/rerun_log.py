@@ -552,8 +552,12 @@ def cut_summary(record: RunRecord) -> str:
               "the kept links (green) are hidden there: show them with the eye of "
               "`world/links/kept`, or open the tab *All links*. A cut link's label (hover) "
               "names its two features, its stage and, with ground truth, whether it was good "
-              "or spurious. The graph shows each conflictive set as it was before the "
-              "resolution, a `×` on every link the run cut; the pair view draws every cut "
+              "or spurious. " + (
+                  "The graph shows each conflictive set as it was before the resolution, a "
+                  "`×` on every link the run cut; " if n_conf else
+                  "There was no conflictive set before the resolution, so the graph is "
+                  "empty; ") +
+              "the pair view draws every cut "
               f"link of one image pair and at most {PAIR_KEPT_SAMPLE} of its kept links."]
     return "\n".join(lines)
 

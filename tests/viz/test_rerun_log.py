@@ -192,6 +192,17 @@ def test_the_first_views_show_what_was_cut_and_why(recording):
     assert chunk.to_record_batch().to_pydict()["TextDocument:text"][0][0] == cut_summary(record)
 
 
+def test_cut_summary_says_when_there_was_no_conflictive_set():
+    """With no conflictive set no graph is logged: the panel says so instead of describing
+    a graph of sets."""
+    record = make_record()
+    assert "The graph shows each conflictive set" in cut_summary(record)
+    record.ledger.conflictive_before[:] = False
+    text = cut_summary(record)
+    assert "The graph shows each conflictive set" not in text
+    assert "There was no conflictive set before the resolution, so the graph is empty" in text
+
+
 def test_cut_summary_counts_each_stage_and_says_why():
     record = make_record()
     text = cut_summary(record)
