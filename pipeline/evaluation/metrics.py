@@ -60,6 +60,11 @@ def _pairs(pairs, m_total: int, name: str) -> np.ndarray:
         k = int(np.flatnonzero(bad.any(axis=1))[0])
         raise InputError(f"{name} pairs: row {k} {p[k].tolist()} names a feature outside "
                          f"0..{m_total - 1} (m_total {m_total})")
+    same = np.flatnonzero(p[:, 0] == p[:, 1])
+    if same.size:  # a feature is no pair with itself: it would count as a pair found or true
+        k = int(same[0])
+        raise InputError(f"{name} pairs: row {k} {p[k].tolist()} pairs feature {int(p[k, 0])} "
+                         "with itself; give pairs of two different features")
     return p
 
 
@@ -73,8 +78,9 @@ def _m_total(m_total) -> int:
 
 def pairwise_scores(predicted: np.ndarray, truth: np.ndarray, m_total: int) -> dict:
     """Precision, recall and F1 of predicted pairs ``(P, 2)`` against true pairs ``(Q, 2)``
-    (global feature ids in ``0..m_total - 1``; InputError otherwise: a pair past ``m_total``
-    would be counted as another pair)."""
+    (global feature ids in ``0..m_total - 1``, two different ones; InputError otherwise: a
+    pair past ``m_total`` would be counted as another pair, a feature paired with itself as a
+    pair)."""
     m_total = _m_total(m_total)
     pk = np.unique(_keys(np.sort(_pairs(predicted, m_total, "predicted"), axis=1), m_total))
     tk = np.unique(_keys(np.sort(_pairs(truth, m_total, "truth"), axis=1), m_total))

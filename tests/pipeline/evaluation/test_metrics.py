@@ -76,6 +76,7 @@ def _links_and_truth(draw):
     truth = draw(st.lists(st.tuples(st.integers(0, max(total - 1, 0)),
                                     st.integers(0, max(total - 1, 0))), max_size=40)) \
         if total else []
+    truth = [p for p in truth if p[0] != p[1]]  # a feature paired with itself is refused
     return m, links, np.array(truth, dtype=np.int64).reshape(-1, 2), total
 
 
@@ -134,3 +135,19 @@ def test_a_feature_count_that_is_not_a_whole_number_is_named():
             pairwise_scores(np.array([[0, 1]]), np.array([[0, 1]]), m_total)
         with pytest.raises(InputError, match=f"m_total {m_total!r}: give the number of features"):
             PairwiseTruth(np.array([[0, 1]]), m_total)
+
+
+def test_a_feature_paired_with_itself_is_refused():
+    # (1, 1) counted as a predicted pair (precision 0 of 1), and as a true pair in truth
+    import pytest
+
+    from pipeline.errors import InputError
+    from pipeline.types import Links
+
+    with pytest.raises(InputError, match=r"predicted pairs: row 0 \[1, 1\] pairs feature 1 "
+                                         "with itself"):
+        pairwise_scores(np.array([[1, 1]]), np.array([[1, 0]]), 5)
+    with pytest.raises(InputError, match=r"truth pairs: row 1 \[2, 2\] pairs feature 2 with"):
+        pairwise_scores(np.array([[1, 0]]), np.array([[1, 0], [2, 2]]), 5)
+    with pytest.raises(InputError, match=r"truth pairs: row 0 \[0, 0\] pairs feature 0 with"):
+        PairwiseTruth(np.array([[0, 0]]), 3).scores([1, 1, 1], Links([0], [0], [1], [0]))
