@@ -369,6 +369,10 @@ def check_comm_edges(comm_edges, n_cameras: int, *, what: str = "communication e
         raw = np.asarray(comm_edges)
     except (TypeError, ValueError) as exc:
         raise InputError(f"{what}s are not an (E, 2) array of {noun} ids: {exc}") from None
+    if raw.ndim == 0 and raw.dtype == object:  # a set, a generator, a dict: numpy wraps it whole
+        raise InputError(f"{what}s given as a {type(comm_edges).__name__}: give a list of "
+                         f"({noun} i, {noun} j) pairs or an (E, 2) integer array, e.g. "
+                         "[(0, 1), (1, 2)]")
     if raw.size == 0:
         return np.zeros((0, 2), dtype=np.int64)
     if raw.ndim != 2 or raw.shape[1] != 2:

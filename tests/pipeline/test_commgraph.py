@@ -235,3 +235,15 @@ def test_names_of_digits_mixed_with_indices_are_refused_as_ambiguous(tmp_path):
     assert read_comm_graph(g, names, what="robot").tolist() == [[0, 1]]
     # names equal to their own index are no ambiguity
     assert read_comm_graph(g, ["0", "1", "x"], what="robot").tolist() == [[0, 1]]
+
+
+@pytest.mark.parametrize("edges,kind", [({(0, 1)}, "set"), (((0, 1) for _ in "x"), "generator"),
+                                        ({0: 1}, "dict")])
+def test_edges_of_a_python_set_or_generator_are_named_by_type(edges, kind):
+    # numpy wrapped them whole: 'must have shape (E, 2), got ()'
+    from pipeline.consistency.engines.driver import resolve_conflicts
+    from pipeline.types import Links
+
+    with pytest.raises(InputError, match=rf"communication edges given as a {kind}: give a list "
+                                         r"of \(camera i, camera j\) pairs or an \(E, 2\)"):
+        resolve_conflicts([1, 1], edges, Links([0], [0], [1], [0]))
