@@ -260,18 +260,18 @@ class LinkLedger:
         self.check()
 
     def check(self) -> None:
-        """ValueError unless every per-link array has one entry per link and every status is
-        ``kept`` or ``deleted``."""
+        """InputError (a ValueError) unless every per-link array has one entry per link and
+        every status is ``kept`` or ``deleted``, naming the field."""
         L = len(self.links)
         for name in ("status", "reason", "round", "iteration", "case", "truth",
                      "conflictive_before"):
             arr = getattr(self, name)
             if arr is not None and np.asarray(arr).reshape(-1).shape[0] != L:
-                raise ValueError(f"LinkLedger.{name} has length {np.asarray(arr).shape[0]}, "
-                                 f"expected one per link ({L})")
+                raise InputError(f"LinkLedger.{name} has length {np.asarray(arr).shape[0]}, "
+                                 f"expected one per link ({L}): give one entry per link")
         bad = ~np.isin(np.asarray(self.status).astype(str), LINK_STATUSES)
         if bad.any():
-            raise ValueError(f"LinkLedger.status must be 'kept' or 'deleted', got "
+            raise InputError(f"LinkLedger.status must be 'kept' or 'deleted', got "
                              f"{np.asarray(self.status)[bad][0]!r}")
 
     @staticmethod

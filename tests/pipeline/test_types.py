@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 
+from pipeline.errors import InputError
 from pipeline.types import LinkLedger, Links
 
 
@@ -40,7 +41,7 @@ def test_a_malformed_ledger_is_refused(field, value, match):
     args = dict(links=_links(), status=["kept"] * L, reason=[""] * L, round=[-1] * L,
                 iteration=[-1] * L, case=[""] * L)
     args[field] = value
-    with pytest.raises(ValueError, match=match):
+    with pytest.raises(InputError, match=match):  # not a bare ValueError
         LinkLedger(**args)
 
 
