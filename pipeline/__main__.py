@@ -17,6 +17,7 @@ import sys
 
 from pipeline.errors import caused_by_interrupt as _caused_by_interrupt
 from pipeline.errors import report_interrupt as _interrupted
+from pipeline.errors import run_interruptibly
 
 
 def _last_word(program: str, exc_type, exc, tb) -> None:
@@ -162,14 +163,7 @@ def interruptible(command: str, run: Callable[[], int]) -> int:
     traceback. Also used by the other programs of the project (``python -m viz.saved_run``)."""
     if "pipeline.runfolder" in sys.modules:  # a new command: nothing of it in place yet
         sys.modules["pipeline.runfolder"].forget_outputs_in_place()
-    try:
-        return run()
-    except KeyboardInterrupt:
-        return _interrupted(command)
-    except Exception as exc:
-        if _caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
-            return _interrupted(command)
-        raise
+    return run_interruptibly(command, run)
 
 
 def _run(argv: list[str], command: str | None) -> int:

@@ -54,14 +54,21 @@ def one_line_errors(main):
     @functools.wraps(main)
     def wrapped(*args, **kwargs) -> int:
         try:
-            return main(*args, **kwargs)
+            return run_interruptibly(name, lambda: main(*args, **kwargs))
         except InputError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        except KeyboardInterrupt:
-            return report_interrupt(name)
-        except Exception as exc:
-            if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
-                return report_interrupt(name)
-            raise
     return wrapped
+
+
+def run_interruptibly(command: str, run) -> int:
+    """``run()``'s exit code; a Ctrl-C while it runs (also one a library turned into another
+    exception) ends it with :func:`report_interrupt`'s line and exit code 130."""
+    try:
+        return run()
+    except KeyboardInterrupt:
+        return report_interrupt(command)
+    except Exception as exc:
+        if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
+            return report_interrupt(command)
+        raise
