@@ -16,3 +16,25 @@ def load_bench(name: str):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+class _Parsed(Exception):
+    pass
+
+
+def default_options(monkeypatch, name: str):
+    """The options ``bench/NAME.py`` parses with no argument, stopped right after parsing
+    (no work done): its argparse Namespace."""
+    import argparse
+
+    parse = argparse.ArgumentParser.parse_args
+
+    def parsed(self, args=None, namespace=None):
+        raise _Parsed(parse(self, args, namespace))
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", parsed)
+    main = load_bench(name).main
+    try:
+        getattr(main, "__wrapped__", main)([])
+    except _Parsed as exc:
+        return exc.args[0]
+    raise AssertionError(f"bench/{name}.py did not parse its arguments")

@@ -2,18 +2,13 @@
 ``../shared/data`` beside the clone, whatever the current folder (some looked in
 ``../shared/data`` of the current folder, some in ``/work/shared/data``)."""
 
-import argparse
 from pathlib import Path
 
 import pytest
-from benchload import load_bench
+from benchload import default_options, load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ROOT.parent / "shared" / "data"
-
-
-class _Parsed(Exception):
-    pass
 
 
 @pytest.mark.parametrize("name, option, data_set", [
@@ -26,14 +21,7 @@ class _Parsed(Exception):
 ])
 def test_the_default_data_is_beside_the_clone(monkeypatch, tmp_path, name, option, data_set):
     monkeypatch.chdir(tmp_path)  # not the clone's parent's folder: nothing of it counts
-    parse = argparse.ArgumentParser.parse_args
-
-    def parsed(self, args=None, namespace=None):  # the options as given, then no work
-        raise _Parsed(parse(self, args, namespace))
-    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", parsed)
-    with pytest.raises(_Parsed) as exc:
-        load_bench(name).main.__wrapped__([])
-    assert Path(getattr(exc.value.args[0], option)) == SHARED / data_set
+    assert Path(getattr(default_options(monkeypatch, name), option)) == SHARED / data_set
 
 
 def test_images_vs_colmap_reads_the_photos_beside_the_clone():
