@@ -34,8 +34,9 @@ from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
 def run_graph(directory: Path, graph: str, out: Path) -> dict:
-    """The report of one run-images run on ``graph`` (its run folder under ``out``)."""
-    folder = out / graph
+    """The report of one run-images run on ``graph`` (its run folder under ``out``, named by
+    the graph kind, or a graph file's name without suffix, as run-images names it)."""
+    folder = out / (Path(graph).stem if Path(graph).is_file() else graph.replace(":", ""))
     done = subprocess.run([sys.executable, "-m", "pipeline", "run-images", str(directory),
                            "--graph", graph, "--truth", "homographies", "--no-rerun", "--out",
                            str(folder), "--quiet"], cwd=ROOT, capture_output=True, text=True)
@@ -108,6 +109,8 @@ def main(argv=None) -> int:
     for graph in args.graphs:  # an unknown kind, before any run (run-images checks a file)
         if not Path(graph).is_file():
             comm_graph(graph, ["img1", "img2"], knn=lambda k: np.zeros((0, 2), dtype=int))
+    # a graph file as the caller names it (run-images runs in the repository)
+    args.graphs = [str(Path(g).absolute()) if Path(g).is_file() else g for g in args.graphs]
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     reports = {g: run_graph(args.directory, g, args.out) for g in args.graphs}

@@ -92,3 +92,20 @@ def test_a_refusal_of_run_images_is_exit_2_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2
     assert err.startswith("error: ") and err.count("\n") == 1 and "exited" not in err
+
+
+def test_a_graph_file_runs_in_a_folder_named_by_its_stem(tmp_path, monkeypatch, capsys):
+    """``--graphs FILE``: the run folder was ``out / FILE`` (the graph file's own path when
+    absolute, refused as holding the input; nested folders when relative, read in the
+    repository); it is now named by the file's stem, as run-images names it, and a relative
+    file is the caller's."""
+    photos = tmp_path / "graffiti"
+    photos.mkdir()
+    for name in ("img1.png", "img2.png", "img3.png", "H1to2p.txt", "H1to3p.txt"):
+        shutil.copy(DATA / name, photos / name)
+    (tmp_path / "chain.txt").write_text("img1.png,img2.png\nimg2.png,img3.png\n")
+    monkeypatch.chdir(tmp_path)
+    assert _bench().main([str(photos), "--graphs", "chain.txt", "--out", "bench"]) == 0
+    report = json.loads((tmp_path / "bench" / "results.json").read_text())["reports"]
+    assert len(report[str(tmp_path / "chain.txt")]["comm_edges"]) == 2
+    assert (tmp_path / "bench" / "chain" / "report.json").is_file()
