@@ -73,7 +73,8 @@ class TeamObserver(Observer):
             if sample.kind == zenoh.SampleKind.DELETE:
                 self.vanished.setdefault(i, time.monotonic())
                 self.holding.discard(i)
-            else:
+            else:  # (again:) a token back after a lapse of its link is a robot still running
+                self.vanished.pop(i, None)
                 self.alive.add(i)
                 self.holding.add(i)
             self.cv.notify_all()

@@ -584,3 +584,25 @@ def test_an_empty_out_is_named_as_empty(tmp_path, capsys):
     assert main(["observe", "--team", team, "--out", "", "--timeout", "60"]) == 2
     err = capsys.readouterr().err
     assert "error: --out '' is empty (an unset variable?); give a folder name" in err
+
+
+def test_a_token_back_after_a_lapse_is_a_robot_still_running():
+    """A robot's liveliness token that vanished (its link to the observer lapsed) and came
+    back: the observer kept the first vanish time, so the robot would be counted lost
+    GRACE_S after it, running or not; the time is now forgotten when the token is back."""
+    import threading
+    from types import SimpleNamespace
+
+    import zenoh
+
+    from pipeline.team.observe import TeamObserver
+
+    obs = object.__new__(TeamObserver)  # its bookkeeping only: no session
+    obs.cv = threading.Condition()
+    obs.vanished, obs.alive, obs.holding = {}, set(), set()
+    key = "formation-match/team/live/3"
+    obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
+    obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.DELETE))
+    assert 3 in obs.vanished and 3 not in obs.holding
+    obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
+    assert obs.vanished == {} and obs.holding == {3} and obs.alive == {3}
