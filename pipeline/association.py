@@ -114,9 +114,9 @@ class AssociationGraph:
 
     def __post_init__(self) -> None:
         # whole counts >= 0, named if not (an int64 cast truncated 2.5 to 2 silently)
-        self.features_per_camera = np.diff(camera_offsets(self.features_per_camera))
-        check_links(self.links, self.features_per_camera)
         self.offsets = camera_offsets(self.features_per_camera)
+        self.features_per_camera = np.diff(self.offsets)
+        check_links(self.links, self.features_per_camera)
         self._labels = None  # components(), once computed
 
     @property

@@ -649,12 +649,6 @@ def whole_count(value, name: str, least: int) -> int:
     return int(value)
 
 
-def _check_c(c) -> None:
-    """InputError unless ``c`` (points per hypothesis) is a whole number >= 1."""
-    if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or c < 1:
-        raise InputError(f"c must be a whole number of points >= 1, got {c!r}")
-
-
 def ransac_hypotheses(p_in: float, c: int, success: float = 0.99) -> int:
     """Number of hypotheses ``K = ⌈log(1 − p_s) / log(1 − p_in^c)⌉`` (Fischler–Bolles, ref. [5]).
 
@@ -671,7 +665,7 @@ def ransac_hypotheses(p_in: float, c: int, success: float = 0.99) -> int:
         raise InputError(f"p_in must be in (0, 1], got {p_in}")
     if not 0 < success < 1:
         raise InputError(f"success probability must be in (0, 1), got {success}")
-    _check_c(c)
+    whole_count(c, "c (points)", 1)
     good = p_in ** c
     if good >= 1:
         return 1
@@ -682,7 +676,6 @@ def ransac_success(p_in: float, c: int, K: int) -> float:
     """Probability ``1 − (1 − p_in^c)^K`` that some hypothesis holds inliers only."""
     if not 0 <= p_in <= 1:  # also refuses nan
         raise InputError(f"p_in must be in [0, 1], got {p_in}")
-    _check_c(c)
-    if isinstance(K, bool) or not isinstance(K, (int, np.integer)) or K < 0:
-        raise InputError(f"K must be a whole number of hypotheses >= 0, got {K!r}")
+    whole_count(c, "c (points)", 1)
+    whole_count(K, "K (hypotheses)", 0)
     return 1.0 - (1.0 - p_in ** c) ** int(K)

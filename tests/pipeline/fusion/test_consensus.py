@@ -222,11 +222,11 @@ def test_ransac_counts_refuse_what_is_not_a_count():
     # ransac_success(0.6, 1, -3) returned -14.6 as a probability; c = 1.5 drew 8 hypotheses
     from pipeline.fusion.consensus import ransac_success
 
-    with pytest.raises(InputError, match="K must be a whole number of hypotheses >= 0, got -3"):
+    with pytest.raises(InputError, match=r"K \(hypotheses\) must be a whole number >= 0, got -3"):
         ransac_success(0.6, 1, -3)
     with pytest.raises(InputError, match="p_in must be in"):
         ransac_success(float("nan"), 1, 3)
-    with pytest.raises(InputError, match="c must be a whole number of points >= 1, got 1.5"):
+    with pytest.raises(InputError, match=r"c \(points\) must be a whole number >= 1, got 1.5"):
         ransac_hypotheses(0.6, 1.5)
     assert ransac_success(0.6, 1, 6) == pytest.approx(1 - 0.4 ** 6, abs=1e-12)
 
