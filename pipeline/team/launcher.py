@@ -202,7 +202,10 @@ class Observer:
         self.finished_at: dict = {}
         self.heard: dict = {}  # robot -> when its result (first or a repeat) last came
         self.cv = threading.Condition()
-        self.session = open_session([team.observer], [], "observer")
+        # the robots' lease (link_timeouts of their round timeout): with Zenoh's default of
+        # 10 s a pause of the observer's process longer than that closed its links
+        longest = max(float(team.options_for(i)["round_timeout_s"]) for i in range(team.n))
+        self.session = open_session([team.observer], [], "observer", round_timeout_s=longest)
         self._key = key
         self._subs = [
             self.session.declare_subscriber(key(team.name, "result", "*"), self._on_result),

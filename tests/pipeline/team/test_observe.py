@@ -606,3 +606,26 @@ def test_a_token_back_after_a_lapse_is_a_robot_still_running():
     assert 3 in obs.vanished and 3 not in obs.holding
     obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
     assert obs.vanished == {} and obs.holding == {3} and obs.alive == {3}
+
+
+def test_the_observer_session_has_the_robots_lease(monkeypatch):
+    """The observer opened its Zenoh session with Zenoh's default lease (10 s) while the
+    robots' sessions outlast ``round_timeout_s`` (70 s by default): a pause of the observer
+    longer than 10 s closed its links. It now takes the lease of the team's longest round
+    timeout (per-robot overrides included)."""
+    from pipeline.team import launcher
+    from pipeline.transport import zenoh_transport
+
+    seen = {}
+
+    def fake_open(listen, connect, who, round_timeout_s=None):
+        seen["round_timeout_s"] = round_timeout_s
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(zenoh_transport, "open_session", fake_open)
+    team = launcher.make_team("lease", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                                  "features_per_camera": [1, 1]}, n=2)
+    team.robot_options = {1: {"round_timeout_s": 45.0}}
+    with pytest.raises(RuntimeError, match="stop here"):
+        launcher.Observer(team)
+    assert seen["round_timeout_s"] == 45.0
