@@ -152,3 +152,18 @@ def test_comm_graph_none_uses_linked_cameras():
     a = resolve_conflicts(fpc, None, links, resolution="paper")
     b = resolve_conflicts(fpc, edges, links, resolution="paper")
     np.testing.assert_array_equal(a.deleted, b.deleted)
+
+
+def test_detection_rounds_follow_the_association_graph_not_the_comm_graph():
+    """Cor. 3.6's ``d`` is the diameter of the association graph ``G``: three cameras that all
+    talk to each other (comm diameter 1) need 18 rounds on a chain of 17 links (README)."""
+    from pipeline.types import Links
+    rows = []
+    for k in range(6):
+        rows += [(0, k, 1, k), (1, k, 2, k)] + ([(0, k + 1, 2, k)] if k < 5 else [])
+    ci, fi, cj, fj = (np.array(c) for c in zip(*rows, strict=True))
+    links = Links(ci, fi, cj, fj)
+    fpc = np.array([6, 6, 6])
+    det = detect_once(fpc, links, np.array([[0, 1], [0, 2], [1, 2]]))
+    assert diameter(fpc, links) == 17
+    assert det.stats["t_stop"].max() == 18
