@@ -78,6 +78,10 @@ Interpretations and limits
   information-weighted mean of the local estimates.
 * Tracks that hold two features of one camera (conflictive sets, which resolution removes)
   are not fused: their observations are neither fused nor cut (``tracks_conflictive``).
+* A track seen by two robots only is never cut: whatever ``local`` says, both robots
+  triangulate the same two keypoints, so their estimates agree and both vote yes for every
+  hypothesis (the paper's Condition 2 is "hard to be true" for 2–3 inliers, Sec. IV-C). A
+  wrong link between the only two observers of a point is left as it is.
 * A robot without an observing neighbour cannot triangulate; its observation is kept
   unverified (``estimated`` false). An estimate whose normal matrix is singular (parallel
   rays) is dropped the same way; the robot then only relays.

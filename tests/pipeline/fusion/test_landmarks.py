@@ -217,3 +217,17 @@ def test_comm_edges_not_of_shape_e_by_2_are_refused_not_paired_anew():
         with pytest.raises(InputError, match=rf"communication edges must have shape \(E, 2\), "
                                              rf"got \({wrong.shape[0]},"):
             fuse_tracks(views, feats, links, wrong)
+
+
+@pytest.mark.parametrize("local", ["robust", "pair", "neighbours"])
+def test_a_track_of_two_observers_is_never_cut(local):
+    """Module docstring: the two robots of a two-observer track triangulate the same two
+    keypoints, so a wrong link between them (camera 2's keypoint 40 px off) stays."""
+    views, feats, links, edges, _ = planted_rig()
+    two = (links.cam_i == 0) & (links.feat_i == 7) & (links.cam_j == 2)
+    other = (links.feat_i == 7) | (links.feat_j == 7) | (links.feat_i == 30) | (links.feat_j == 30)
+    keep = two | ~other
+    kept = Links(links.cam_i[keep], links.feat_i[keep], links.cam_j[keep], links.feat_j[keep])
+    res = fuse_tracks(views, feats, kept, edges, sigma_px=0.5, local=local)
+    assert not res.cut_links[two[keep]].any()
+    assert res.stats["observations_voted_out"] == 0
