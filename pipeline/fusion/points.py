@@ -4,8 +4,9 @@ After dynamic voting (Montijano et al., Sec. IV-B) every robot that observes a t
 its own estimate of the track's landmark and the hypothesis it voted for. The fused point of
 a track is formed from the largest connected group of its observers (in the track's
 observer graph) that hold a valid estimate, among them those that picked the group's most
-common winner, averaged. Both the simulator's stage (:func:`pipeline.fusion.landmarks.
-fuse_tracks`) and the observer of a team of robot processes
+common winner, averaged. Ties are broken by index: of two equally large groups the one
+holding the lowest robot id, of two equally common winners the lowest hypothesis. Both the
+simulator's stage (:func:`pipeline.fusion.landmarks.fuse_tracks`) and the observer of a team of robot processes
 (:func:`pipeline.team.assemble.fusion_of_team`) form it here, from the same arrays.
 """
 
