@@ -84,6 +84,8 @@ def decide(known, estimated, draws, x, info, *, c: int, thr: float,
     -----
     Rows are independent: entries outside ``known`` are masked to zero before use, sums over
     robots run in id order. Cost ``O(R K n d² I)`` with ``I`` the iterations of ``F`` (a few).
+    The iteration of ``F`` is capped at ``4 team + 4`` steps: a hypothesis that has reached
+    neither a fixed point nor a cycle by then keeps its last set (``cycles`` false).
     """
     known = np.asarray(known, dtype=bool)
     R, n = known.shape
