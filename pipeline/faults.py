@@ -20,8 +20,10 @@ makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The 
 stage's network (:meth:`fusion_transport`) has the same delay and its robots the same timers.
 
 Time (stated): on a faulty network the simulator steps every robot in every round, and one
-detection takes ``(D + 1)(d + 3)`` rounds on a communication graph of diameter ``d``
-(measured: 23, 46, 253 and 2,323 rounds on a 21-camera path for ``D`` = 0, 1, 10, 100).
+detection takes ``(D + 1)(d + 3)`` rounds with ``d`` the larger of the communication
+graph's and the association graph's diameters (detection ends ``d + 1`` logical rounds in,
+Cor. 3.6; measured: 23, 46, 253 and 2,323 rounds on a 21-camera path for ``D`` = 0, 1, 10,
+100, and 66 for ``D`` = 2 on three fully connected cameras with a chain of 17 links).
 :func:`check_simulated_work` refuses, before it starts, a run whose robots × rounds exceed
 :data:`MAX_ROBOT_ROUNDS` (a robot-round took 17 µs of one core: 1.07 million for a
 101-camera path with ``--delay-rounds 100`` in 18 s), e.g. ``--delay-rounds 100`` on a
@@ -187,20 +189,31 @@ def parse_crash(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
-def check_simulated_work(n_robots: int, edges, faults: FaultConfig) -> None:
+def check_simulated_work(n_robots: int, edges, faults: FaultConfig,
+                         features_per_camera=None, links=None) -> None:
     """InputError, before the run starts, when one detection on the faulty network would
     step more than :data:`MAX_ROBOT_ROUNDS` robot-rounds (module notes); ``edges`` is the
-    communication graph."""
+    communication graph. With ``features_per_camera`` and ``links``, ``d`` is also at least
+    the association graph's diameter (lower bound): detection stops within that diameter
+    plus one logical rounds (Cor. 3.6), which a chain of links can make far longer than the
+    comm graph's."""
     from pipeline.commgraph import diameter_lower_bound
 
     D = int(faults.delay_rounds)
     d = diameter_lower_bound(int(n_robots), edges)
+    what = "a communication graph"
+    if links is not None and len(links):
+        off = np.concatenate([[0], np.cumsum(np.asarray(features_per_camera, dtype=np.int64))])
+        feats = np.stack([off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j], 1)
+        d_links = diameter_lower_bound(int(off[-1]), feats)
+        if d_links > d:
+            d, what = d_links, "an association graph (links)"
     rounds = (D + 1) * (d + 3)
     if n_robots * rounds > MAX_ROBOT_ROUNDS:
         raise InputError(
             f"on a faulty network the simulator steps each of the {n_robots} robots in every "
             f"round, and one detection takes (D + 1)(d + 3) = {rounds} rounds here "
-            f"(--delay-rounds {D}, a communication graph of diameter {d} or more): "
+            f"(--delay-rounds {D}, {what} of diameter {d} or more): "
             f"{n_robots * rounds:,} robot-rounds, above the {MAX_ROBOT_ROUNDS:,} a run may "
             "take (half a minute); lower --delay-rounds, or run the cameras in smaller "
             "groups")

@@ -226,7 +226,7 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     from pipeline.faults import check_simulated_work, fault_report
 
     edges = comm_edges if comm_edges is not None else comm_edges_for(m, links, None)
-    check_simulated_work(len(m), edges, faults)
+    check_simulated_work(len(m), edges, faults, m, links)
     result = resolve_conflicts(m, comm_edges, links, faults.network_options(edges, len(m)),
                                protocol=faults.protocol_options(), **kw)
     # the fault-free reference runs the rule the faulty run ran (on a faulty network a rule

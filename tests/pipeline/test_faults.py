@@ -302,3 +302,24 @@ def test_run_formation_refuses_a_simulated_fault_over_zenoh_before_any_warning(t
     err = capsys.readouterr().err
     assert rc == 2 and "faults of the simulated network" in err
     assert "not fault-tolerant" not in err and not (tmp_path / "run").exists()
+
+
+def test_the_work_check_counts_the_association_graphs_diameter():
+    """Detection stops d + 1 logical rounds in with d the association graph's diameter
+    (Cor. 3.6), not the comm graph's: three fully connected cameras and a chain of 7,000
+    links at --delay-rounds 100 are some 2.1 million robot-rounds, refused before the run."""
+    from pipeline.faults import check_simulated_work
+    L = 7000
+    k = np.arange(L + 1)
+    cam = k % 3
+    feat = k // 3
+    a, b = np.stack([cam[:-1], feat[:-1]], 1), np.stack([cam[1:], feat[1:]], 1)
+    swap = a[:, 0] > b[:, 0]
+    a[swap], b[swap] = b[swap], a[swap].copy()
+    links = Links(a[:, 0], a[:, 1], b[:, 0], b[:, 1])
+    fpc = np.bincount(cam, minlength=3)
+    tri = np.array([[0, 1], [0, 2], [1, 2]])
+    faults = FaultConfig(delay_rounds=100)
+    check_simulated_work(3, tri, faults)  # the comm graph alone: 1,212 robot-rounds
+    with pytest.raises(InputError, match=r"association graph \(links\) of diameter 7000"):
+        check_simulated_work(3, tri, faults, fpc, links)
