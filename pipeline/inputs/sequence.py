@@ -31,6 +31,8 @@ class PhotoSequence:
         named ``<sub-folder>/<file>``
     ignored : list[str] — images directly in ``DIR`` (no robot's: not used)
     empty : list[str] — sub-folders holding no image (no robot: not used)
+    broken : list[str] — symbolic links in ``DIR`` leading nowhere (a robot's folder on a
+        drive not mounted: no robot, not used)
     """
 
     robots: list
@@ -38,6 +40,7 @@ class PhotoSequence:
     views: list
     ignored: list = dataclasses.field(default_factory=list)
     empty: list = dataclasses.field(default_factory=list)
+    broken: list = dataclasses.field(default_factory=list)
 
     @property
     def n_robots(self) -> int:
@@ -94,8 +97,11 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     for k in range(steps):
         for p, vs in zip(subs, per_robot, strict=True):
             views.append(dataclasses.replace(vs[k], name=f"{p.name}/{vs[k].name}"))
+    broken = sorted(p.name for p in directory.iterdir()
+                    if p.is_symlink() and not p.exists() and not p.name.startswith("."))
     return PhotoSequence(robots=[p.name for p in subs], steps=steps, views=views,
-                         ignored=[p.name for p in image_paths(directory)], empty=empty)
+                         ignored=[p.name for p in image_paths(directory)], empty=empty,
+                         broken=broken)
 
 
 def _load_robot(folder: Path, max_size: int | None, intrinsics) -> list[View]:

@@ -86,6 +86,11 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     if seq.empty:
         timer.warn(f"{len(seq.empty)} sub-folder(s) of {config.directory} hold no image and are "
                    f"no robot ({', '.join(seq.empty[:3])}{', ...' if len(seq.empty) > 3 else ''})")
+    if seq.broken:
+        timer.warn(f"{len(seq.broken)} symbolic link(s) in {config.directory} lead nowhere and "
+                   f"are no robot ({', '.join(seq.broken[:3])}"
+                   f"{', ...' if len(seq.broken) > 3 else ''}): a robot's frames on a drive not "
+                   "mounted? fix or remove the links")
     from pipeline.runs.transports import check_online_team_size
 
     check_online_team_size(config.transport, seq.n_robots, config.window, config.hold,

@@ -168,3 +168,15 @@ def test_a_knn_graph_with_sequence_is_refused_as_no_robot_graph(folder, tmp_path
     assert "seq:K" in err and "'robot_i,robot_j' lines" in err and "for unordered photos" in err
     assert "needs the images' features" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_robot_folder_link_leading_nowhere_is_warned(folder, tmp_path, capsys):
+    """A sub-folder that is a symbolic link to a drive not mounted was dropped from the team
+    without a word: the run went on with one robot fewer."""
+    root = tmp_path / "team"
+    shutil.copytree(folder, root)
+    (root / "c").symlink_to(tmp_path / "not-mounted")
+    assert main(["run-images", str(root), "--sequence", "--no-rerun", "--quiet",
+                 "--out", str(tmp_path / "run"), *FAST]) == 0
+    err = capsys.readouterr().err
+    assert "1 symbolic link(s) in " in err and "lead nowhere and are no robot (c)" in err
