@@ -86,6 +86,14 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     if seq.empty:
         timer.warn(f"{len(seq.empty)} sub-folder(s) of {config.directory} hold no image and are "
                    f"no robot ({', '.join(seq.empty[:3])}{', ...' if len(seq.empty) > 3 else ''})")
+    from pipeline.inputs.photos import identical_pixels
+
+    same = identical_pixels(seq.views)
+    if same:
+        timer.warn(f"{len(same)} group(s) of frames have identical pixels "
+                   f"({'; '.join(' = '.join(g) for g in same[:3])}{'; ...' if len(same) > 3 else ''}"
+                   "): the same photograph twice matches itself and adds nothing (a robot's "
+                   "folder copied or linked as another's?)")
     if seq.broken:
         timer.warn(f"{len(seq.broken)} symbolic link(s) in {config.directory} lead nowhere and "
                    f"are no robot ({', '.join(seq.broken[:3])}"

@@ -180,3 +180,16 @@ def test_a_robot_folder_link_leading_nowhere_is_warned(folder, tmp_path, capsys)
                  "--out", str(tmp_path / "run"), *FAST]) == 0
     err = capsys.readouterr().err
     assert "1 symbolic link(s) in " in err and "lead nowhere and are no robot (c)" in err
+
+
+def test_frames_with_identical_pixels_are_warned(folder, tmp_path, capsys):
+    """run-images warns the same photograph twice; with --sequence (a robot's folder copied
+    as another's) it said nothing."""
+    root = tmp_path / "team"
+    shutil.copytree(folder, root)
+    shutil.copytree(folder / "a", root / "c")
+    assert main(["run-images", str(root), "--sequence", "--no-rerun", "--quiet",
+                 "--out", str(tmp_path / "run"), *FAST]) == 0
+    err = capsys.readouterr().err
+    assert ("3 group(s) of frames have identical pixels (a/0.jpg = c/0.jpg; a/1.jpg = c/1.jpg; "
+            "a/2.jpg = c/2.jpg)") in err
