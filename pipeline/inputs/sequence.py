@@ -11,6 +11,8 @@ robot without one, otherwise EXIF or the stated guess.
 from __future__ import annotations
 
 import dataclasses
+import logging
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +21,8 @@ from pipeline.inputs.photos import image_paths, is_utf8_name, load_folder
 from pipeline.types import View
 
 __all__ = ["PhotoSequence", "load_sequence"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -88,6 +92,21 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         raise InputError(f"--sequence {str(directory)!r}: every robot holds one frame (one "
                          "step); a sequence needs two steps or more. For one snapshot of the "
                          "team, put the frames in one folder and drop --sequence")
+    pair = _number_order_breach([p.name for p in subs])
+    if pair:
+        log.warning("warning: %s", f"--sequence {str(directory)!r}: the robot sub-folders sort "
+                    f"by name otherwise than by number ({pair[0]} before {pair[1]}): robot i "
+                    "is the i-th by name, and line, ring and seq:K follow that order; "
+                    f"zero-pad the numbers (e.g. {_zero_padded(pair[1])}) for number order")
+    breaches = {p.name: _number_order_breach([f.name for f in image_paths(p)]) for p in subs}
+    breaches = {robot: pair for robot, pair in breaches.items() if pair}
+    if breaches:
+        robot, pair = next(iter(breaches.items()))
+        log.warning("warning: %s", f"{len(breaches)} robot(s) ({', '.join(list(breaches)[:3])}"
+                    f"{', ...' if len(breaches) > 3 else ''}) hold frames that sort by name "
+                    f"otherwise than by number ({robot}/{pair[0]} before {robot}/{pair[1]}): "
+                    "step k is every robot's k-th frame by name; zero-pad the numbers (e.g. "
+                    f"{_zero_padded(pair[1])}) for number order")
     # the most specific K.txt wins: a robot's own camera is not overridden by the team's
     per_robot = [_load_robot(p, max_size,
                              "auto" if intrinsics == "auto" and (p / "K.txt").is_file()
@@ -114,3 +133,22 @@ def _load_robot(folder: Path, max_size: int | None, intrinsics) -> list[View]:
         if str(folder) in message:
             raise
         raise InputError(f"robot {folder.name!r} ({str(folder)!r}): {message}") from None
+
+
+def _number_order_breach(names: list[str]) -> tuple[str, str] | None:
+    """The first two of ``names`` (in name order) that number order puts the other way
+    round (``frame10.png`` before ``frame2.png``), or None when both orders agree."""
+    def key(name):
+        return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", name)
+                if t]
+
+    by_number = sorted(names, key=key)
+    for a, b in zip(names, by_number, strict=True):
+        if a != b:
+            return a, b
+    return None
+
+
+def _zero_padded(name: str) -> str:
+    """``name`` with its numbers written with three digits or more (``frame002.png``)."""
+    return re.sub(r"\d+", lambda m: m.group().zfill(3), name)

@@ -122,3 +122,28 @@ def test_images_beside_the_robot_folders_are_named_as_unused(tmp_path):
     shutil.copy(sorted(SCEAUX.glob("*.JPG"))[4], root / "stray.jpg")
     seq = load_sequence(root, max_size=64)
     assert seq.ignored == ["stray.jpg"] and len(seq.views) == 4
+
+
+def test_names_that_sort_otherwise_by_number_are_warned(tmp_path, caplog):
+    """frame10 sorts before frame2 by name: step 1 was every robot's tenth frame, without a
+    word; robots robot10 / robot2 put line and ring out of number order alike."""
+    files = sorted(SCEAUX.glob("*.JPG"))
+    root = tmp_path / "seq"
+    for robot, idx in (("robot2", [0, 2, 4]), ("robot10", [1, 3, 5])):
+        (root / robot).mkdir(parents=True)
+        for name, i in zip(("frame1.jpg", "frame2.jpg", "frame10.jpg"), idx, strict=True):
+            shutil.copy(files[i], root / robot / name)
+    with caplog.at_level("WARNING"):
+        seq = load_sequence(root, max_size=64)
+    assert seq.robots == ["robot10", "robot2"]  # name order, as documented
+    assert [v.name for v in seq.views[:4]] == ["robot10/frame1.jpg", "robot2/frame1.jpg",
+                                               "robot10/frame10.jpg", "robot2/frame10.jpg"]
+    text = caplog.text
+    assert "robot sub-folders sort by name otherwise than by number (robot10 before robot2)" \
+        in text and "robot002" in text
+    assert ("2 robot(s) (robot10, robot2) hold frames that sort by name otherwise than by "
+            "number (robot10/frame10.jpg before robot10/frame2.jpg)") in text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        load_sequence(_folder(tmp_path / "padded", {"r1": [0, 1], "r2": [2, 3]}), max_size=64)
+    assert "by number" not in caplog.text
