@@ -248,6 +248,9 @@ def run(args) -> int:
     from pipeline.runs.images import run_images
 
     _refuse_empty_paths(args)
+    from pipeline.stages import merge_radius_for
+
+    merge_radius_for(args.resolution, args.merge_radius)  # a bad one refused before any work
     if args.sequence:
         return _run_sequence(args)
     refuse_online_options(args, "--sequence")

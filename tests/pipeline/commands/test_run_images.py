@@ -405,3 +405,15 @@ def test_cleaning_effect_names_the_stage_and_the_links(sceaux_run):
     assert [e["image"] for e in effect["images_lost"]] == sorted(lost)
     gained = [e["image"] for e in effect["images_gained"]]
     assert (("images-gained" in {f["flag"] for f in report["flags"]}) == bool(gained))
+
+
+@pytest.mark.parametrize("mode", [[], ["--sequence"]])
+def test_a_bad_merge_radius_is_refused_before_the_photos_are_read(tmp_path, capsys, mode):
+    """--merge-radius -1 was refused only after every photograph was loaded (and with a
+    bad folder, the folder's error came first)."""
+    missing = tmp_path / "not-yet-copied"
+    assert main(["run-images", str(missing), *mode, "--merge-radius", "-1",
+                 "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert "error: --merge-radius -1.0: expected pixels >= 0" in err
+    assert "not-yet-copied" not in err and not (tmp_path / "run").exists()
