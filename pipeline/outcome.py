@@ -165,23 +165,30 @@ def flag_result(report: dict, names: list[str] | None = None,
             "quality as 1 - Lowe ratio (at most 1) and count every quality above 0.99 as "
             "near-certain, so the order of these barely weighs; rescale the quality to [0, 1] "
             "(e.g. score / max score)"))
-    m = report.get("features_per_camera")
-    if m is not None:
-        empty = [k for k, v in enumerate(m) if int(v) == 0]
-        if empty:
-            shown = [names[k] if names else f"camera {k}" for k in empty]
-            warnings.append(_warning(
-                "no-features", f"no features found in {len(empty)} image(s): "
-                f"{', '.join(shown)} (blank, too small or too narrow); they take no part"))
+    warnings += _no_features(report, names)
     if warnings:
         report["warnings"] = warnings
     return report
 
 
-def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY) -> dict:
+def _no_features(report: dict, names: list[str] | None) -> list[dict]:
+    """The ``no-features`` warning of the images of ``report["features_per_camera"]`` that
+    hold none, or nothing."""
+    m = report.get("features_per_camera")
+    empty = [] if m is None else [k for k, v in enumerate(m) if int(v) == 0]
+    if not empty:
+        return []
+    shown = [names[k] if names else f"camera {k}" for k in empty]
+    return [_warning("no-features", f"no features found in {len(empty)} image(s): "
+                     f"{', '.join(shown)} (blank, too small or too narrow); they take no part")]
+
+
+def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
+                names: list[str] | None = None) -> dict:
     """:func:`flag_result` for an online run's report (``steps``, ``final``,
     ``conflict_free_every_step``): ``no-links`` (no link in any step), ``all-links-cut``,
-    ``not-conflict-free`` (a step ended with conflictive sets: ``conflict_free: false``)."""
+    ``not-conflict-free`` (a step ended with conflictive sets: ``conflict_free: false``),
+    ``no-features`` (frames of ``features_per_camera`` holding none, named by ``names``)."""
     warnings = []
     steps = report.get("steps", [])
     left = [k for k, s in enumerate(steps) if s.get("conflictive_sets_after")]
@@ -200,6 +207,7 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY) -> dict:
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} links was cut; "
                                                   "the result holds no association"))
+    warnings += _no_features(report, names)
     if warnings:
         report["warnings"] = warnings
     return report

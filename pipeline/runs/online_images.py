@@ -138,6 +138,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
                  f"({seq.steps} steps)",
         "n_robots": int(seq.n_robots), "robots": seq.robots,
         "n_images": int(oa.n_images), "comm_edges": edges.tolist(),
+        "features_per_camera": [int(len(f)) for f in run.features],
         "window": int(config.window), "hold": int(oa.hold), "resolution": oa.resolution,
         "steps": [jsonable_step(r) for r in run.steps], "final": final,
         "conflict_free_every_step": bool(all(r["conflictive_sets_after"] == 0
@@ -149,7 +150,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     from pipeline.outcome import flag_online
 
     flag_online(report, "frames too small, too few features, or no overlap between the "
-                        "robots' frames")
+                        "robots' frames", [v.name for v in seq.views])
     n = seq.n_robots
     grid = np.array([[float(k), float(i), 0.0] for k in range(seq.steps) for i in range(n)])
     online_tables(config.out_dir(), run, report, timer, [v.name for v in seq.views],

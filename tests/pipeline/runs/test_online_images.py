@@ -193,3 +193,22 @@ def test_frames_with_identical_pixels_are_warned(folder, tmp_path, capsys):
     err = capsys.readouterr().err
     assert ("3 group(s) of frames have identical pixels (a/0.jpg = c/0.jpg; a/1.jpg = c/1.jpg; "
             "a/2.jpg = c/2.jpg)") in err
+
+
+def test_a_frame_without_features_is_warned_and_in_the_report(folder, tmp_path, capsys):
+    """A blank frame took no part without a word, where a batch run warns no-features."""
+    import numpy as np
+    from PIL import Image
+
+    root = tmp_path / "team"
+    shutil.copytree(folder, root)
+    Image.fromarray(np.full((480, 640), 128, np.uint8)).save(root / "b" / "1.jpg")
+    out = tmp_path / "run"
+    assert main(["run-images", str(root), "--sequence", "--no-rerun", "--quiet",
+                 "--out", str(out), *FAST]) == 0
+    message = "no features found in 1 image(s): b/1.jpg (blank, too small or too narrow)"
+    assert f"warning: {message}" in capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    assert report["features_per_camera"][3] == 0 and min(report["features_per_camera"][:3]) > 0
+    assert [w["code"] for w in report["warnings"]] == ["no-features"]
+    assert report["warnings"][0]["message"].startswith(message)
