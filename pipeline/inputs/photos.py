@@ -34,6 +34,7 @@ from pipeline.validate import check_focal, focal_px_ok
 
 __all__ = [
     "image_paths",
+    "left_out_images",
     "is_utf8_name",
     "identical_pixels",
     "pixel_digests",
@@ -99,6 +100,12 @@ def image_paths(directory: Path) -> list[Path]:
     """The image files of ``directory`` by suffix, in name order (hidden files left out);
     nothing is checked: :func:`load_folder` says what is wrong with a folder."""
     return [p for p in _visible_files(directory) if p.suffix.lower() in IMAGE_SUFFIXES]
+
+
+def left_out_images(directory: Path) -> list[str]:
+    """What in ``directory`` looks like a photograph but is not read (another image format, a
+    link leading nowhere, a sub-folder holding images), one phrase each, for a warning."""
+    return _left_out_images(directory, _visible_files(directory))
 
 
 def _visible_files(directory: Path) -> list[Path]:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import InputError
-from pipeline.inputs.photos import image_paths, is_utf8_name, load_folder
+from pipeline.inputs.photos import image_paths, is_utf8_name, left_out_images, load_folder
 from pipeline.types import View
 
 __all__ = ["PhotoSequence", "load_sequence"]
@@ -69,6 +69,9 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     subs = sorted((p for p in directory.iterdir() if p.is_dir() and not p.name.startswith(".")),
                   key=lambda p: p.name)
     empty = [p.name for p in subs if not image_paths(p)]  # e.g. a run folder: no robot
+    for p in subs:  # frames of a format not read, a nested robot folder: said why
+        if p.name in empty and left_out_images(p):
+            log.warning("warning: %s", f"{str(p)!r}: {'; '.join(left_out_images(p))}")
     subs = [p for p in subs if p.name not in empty]
     if len(subs) < 2:
         raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "

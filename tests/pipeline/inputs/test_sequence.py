@@ -147,3 +147,20 @@ def test_names_that_sort_otherwise_by_number_are_warned(tmp_path, caplog):
     with caplog.at_level("WARNING"):
         load_sequence(_folder(tmp_path / "padded", {"r1": [0, 1], "r2": [2, 3]}), max_size=64)
     assert "by number" not in caplog.text
+
+
+def test_a_robot_folder_of_frames_in_a_format_not_read_says_why_it_is_no_robot(tmp_path,
+                                                                                caplog):
+    """A sub-folder of GIF frames was only said to 'hold no image': the robot was dropped
+    without naming the files left out, as run-images names them in a flat folder."""
+    from PIL import Image
+
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    (root / "c").mkdir()
+    for k in range(2):
+        Image.new("L", (64, 48), 90).save(root / "c" / f"f{k}.gif")
+    with caplog.at_level("WARNING"):
+        seq = load_sequence(root, max_size=64)
+    assert seq.robots == ["a", "b"] and seq.empty == ["c"]
+    assert "c': 2 image file(s) of a format not read here left out (f0.gif, f1.gif" \
+        in caplog.text
