@@ -102,10 +102,11 @@ def image_paths(directory: Path) -> list[Path]:
     return [p for p in _visible_files(directory) if p.suffix.lower() in IMAGE_SUFFIXES]
 
 
-def left_out_images(directory: Path) -> list[str]:
+def left_out_images(directory: Path, robot_folder: bool = False) -> list[str]:
     """What in ``directory`` looks like a photograph but is not read (another image format, a
-    link leading nowhere, a sub-folder holding images), one phrase each, for a warning."""
-    return _left_out_images(directory, _visible_files(directory))
+    link leading nowhere, a sub-folder holding images), one phrase each, for a warning;
+    ``robot_folder``: ``directory`` is a robot's folder of ``--sequence``."""
+    return _left_out_images(directory, _visible_files(directory), robot_folder)
 
 
 def _visible_files(directory: Path) -> list[Path]:
@@ -165,7 +166,7 @@ def _holds_images(path: Path) -> bool:
         return False
 
 
-def _left_out_images(directory: Path, files: list[Path]) -> list[str]:
+def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = False) -> list[str]:
     """What in ``directory`` looks like a photograph but is not read, for a warning: files of
     another image format Pillow knows (GIF, PPM, ...: not a photo format COLMAP's tools take
     here), symbolic links that lead nowhere, and sub-folders holding images (one folder per
@@ -187,9 +188,10 @@ def _left_out_images(directory: Path, files: list[Path]) -> list[str]:
                    f"({', '.join(broken[:5])}{', ...' if len(broken) > 5 else ''})")
     subs = [p.name for p in entries if _holds_images(p)]
     if subs:
+        hint = ("a robot's frames lie directly in its own sub-folder of the --sequence folder"
+                if robot_folder else "one sub-folder of frames per robot is --sequence")
         out.append(f"{len(subs)} sub-folder(s) holding images left out ({', '.join(subs[:5])}"
-                   f"{', ...' if len(subs) > 5 else ''}; one sub-folder of frames per robot is "
-                   "--sequence)")
+                   f"{', ...' if len(subs) > 5 else ''}; {hint})")
     return out
 
 

@@ -70,8 +70,9 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
                   key=lambda p: p.name)
     empty = [p.name for p in subs if not image_paths(p)]  # e.g. a run folder: no robot
     for p in subs:  # frames of a format not read, a nested robot folder: said why
-        if p.name in empty and left_out_images(p):
-            log.warning("warning: %s", f"{str(p)!r}: {'; '.join(left_out_images(p))}")
+        why = left_out_images(p, robot_folder=True) if p.name in empty else []
+        if why:
+            log.warning("warning: %s", f"{str(p)!r}: {'; '.join(why)}")
     subs = [p for p in subs if p.name not in empty]
     if len(subs) < 2:
         raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "

@@ -164,3 +164,17 @@ def test_a_robot_folder_of_frames_in_a_format_not_read_says_why_it_is_no_robot(t
     assert seq.robots == ["a", "b"] and seq.empty == ["c"]
     assert "c': 2 image file(s) of a format not read here left out (f0.gif, f1.gif" \
         in caplog.text
+
+
+def test_a_robot_folder_holding_robot_folders_does_not_suggest_sequence(tmp_path, caplog):
+    """A sub-folder holding a folder of frames was warned '... one sub-folder of frames per
+    robot is --sequence' while --sequence was given: the hint now says where a robot's frames
+    must lie."""
+    root = _folder(tmp_path / "seq", {"a": [0, 1], "b": [2, 3]})
+    _folder(root / "group", {"r5": [4, 5]})
+    with caplog.at_level("WARNING"):
+        seq = load_sequence(root, max_size=64)
+    assert seq.empty == ["group"]
+    assert "1 sub-folder(s) holding images left out (r5; a robot's frames lie directly in " \
+           "its own sub-folder of the --sequence folder)" in caplog.text
+    assert "is --sequence" not in caplog.text
