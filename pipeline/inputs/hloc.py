@@ -239,6 +239,26 @@ def _find_pair(fd, a: str, b: str) -> tuple[str, bool] | None:
     return None
 
 
+def _check_pair_groups(fd, h5py, path: Path) -> None:
+    """InputError naming the first group that holds data but no ``matches0``: another tool's
+    layout (e.g. ``matches`` as ``(K, 2)`` index pairs), whose pairs would otherwise be left
+    out of the cleaning unread, and copied to the output as they are."""
+    foreign: dict[str, list[str]] = {}
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and "matches0" not in obj.parent:
+            foreign.setdefault(obj.parent.name.strip("/"), []).append(name.rsplit("/", 1)[-1])
+    fd.visititems(visit)
+    if foreign:
+        key, held = next(iter(foreign.items()))
+        raise InputError(
+            f"{path}: group {key!r} holds {', '.join(repr(h) for h in held)} but no 'matches0'"
+            + (f" (nor {len(foreign) - 1} other group(s))" if len(foreign) > 1 else "")
+            + ": not hloc's layout, where each pair's 'matches0' gives, for every keypoint of "
+            "the first image, its match in the second (-1 for none); write the matches so, or "
+            "remove the group")
+
+
 def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
     """Every pair group of the file as ``(key, name0, name1)``."""
     by_flat = {}
@@ -328,6 +348,7 @@ def read_h5(features: str | Path, matches: str | Path,
     with _open(matches, "matches file") as fd:
         found = _declared(fd, h5py, "matches0") + _declared(fd, h5py, "matching_scores0")
         _check_declared_total(found, matches, "matches")
+        _check_pair_groups(fd, h5py, matches)
         if budget is not None:  # one pair is read at a time
             budget.add_read("reading the largest pair of the matches file",
                             max((ds.nbytes for ds in found), default=0))

@@ -216,10 +216,13 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
      "pair groups 'a.jpg/sub-b.jpg' and 'sub-b.jpg/a.jpg' both hold the image pair"),
     (lambda fd: fd.copy(P01, "a.jpg_sub-b.jpg"),
      "pair groups 'a.jpg/sub-b.jpg' and 'a.jpg_sub-b.jpg' both hold the image pair"),
+    # another tool's layout, (K, 2) index pairs: that pair was left out and copied uncleaned
+    (lambda fd: fd[P01].move("matches0", "matches"),
+     "group 'a.jpg/sub-b.jpg' holds 'matches', 'matching_scores0' but no 'matches0'"),
 ], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
         "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair", "pair-both-orders",
-        "pair-old-and-new-key"])
+        "pair-old-and-new-key", "matches-not-matches0"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
     d, feats, matches = files
     with h5py.File(matches, "a") as fd:
