@@ -5,8 +5,9 @@ hloc (Hierarchical-Localization) keeps local features and matches in two HDF5 fi
 - ``features.h5``: one group per image, named by the image's path relative to the image folder
   (a name with ``/`` is a nested group), holding ``keypoints`` ``(N, 2)`` float in pixels with
   the origin at the centre of the top-left pixel (the OpenCV convention used here; hloc adds
-  0.5 itself when it writes a COLMAP database), plus ``descriptors``, ``scores``,
-  ``image_size``, which are not needed here.
+  0.5 itself when it writes a COLMAP database) of the image read, whose ``(width, height)``
+  is ``image_size`` (:func:`read_image_sizes`, for the recording), plus ``descriptors`` and
+  ``scores``, which are not needed here.
 - ``matches.h5``: one group per image pair, named ``names_to_pair(name0, name1)`` =
   ``name0/name1`` with every ``/`` inside a name replaced by ``-`` (so a pair is two nested
   groups), holding ``matches0`` ``(N0,)`` int (for each keypoint of ``name0`` the index of its
@@ -34,8 +35,8 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["names_to_pair", "H5Matches", "read_features", "read_pairs", "read_h5",
-           "write_cleaned_matches"]
+__all__ = ["names_to_pair", "H5Matches", "read_features", "read_image_sizes", "read_pairs",
+           "read_h5", "write_cleaned_matches"]
 
 
 def names_to_pair(name0: str, name1: str, separator: str = "/") -> str:
@@ -158,6 +159,28 @@ def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
         raise InputError(f"{path}: no image group with a 'keypoints' dataset; is this hloc's "
                          f"features.h5?")
     return out
+
+
+def read_image_sizes(path: str | Path) -> dict[str, tuple[int, int]]:
+    """``{image name: (width, height)}`` from the ``image_size`` datasets of an hloc
+    ``features.h5`` (the size of the image its keypoints are in the pixels of), for the images
+    that store a usable one (two whole numbers from 1 to :data:`MAX_IMAGE_SIDE`)."""
+    path = Path(path)
+    h5py = _h5py()
+    out: dict[str, tuple[int, int]] = {}
+    with _open(path, "features file") as fd:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "image_size" \
+                    and obj.shape == (2,) and obj.dtype.kind in "fiu":
+                size = np.asarray(obj[()], dtype=np.float64)
+                if np.all((size >= 1) & (size <= MAX_IMAGE_SIDE) & (size == np.round(size))):
+                    out[obj.parent.name.strip("/")] = (int(size[0]), int(size[1]))
+        fd.visititems(visit)
+    return out
+
+
+#: largest image side an ``image_size`` dataset is believed for
+MAX_IMAGE_SIDE = 100_000
 
 
 def read_pairs(path: str | Path, names: set[str]) -> list[tuple[str, str]]:

@@ -101,7 +101,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
           f"| Cut not one-to-one | | {cut['not-one-to-one']} |\n"
           f"| Cut by resolution | | {cut['resolution']} |\n")
     outcome = CleaningOutcome(
-        names=contents.names, sizes=[_size_of(k) for k in contents.keypoints],
+        names=contents.names, sizes=_sizes(features, contents, image_dir),
         keypoints=contents.keypoints,
         ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
@@ -119,6 +119,19 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
 
         summary["baselines"] = baselines_beside(m, model_links, ~result.deleted)
     return summary
+
+
+def _sizes(features, contents, image_dir) -> list[tuple[int, int]]:
+    """The size of each image whose pixels its keypoints are in: hloc's ``image_size`` where
+    features.h5 stores it (the recording scales the keypoints to the images of ``image_dir``
+    when these are of another size), else, with ``image_dir``, ``(0, 0)``: unknown, the
+    keypoints are drawn as they are on that folder's image (hloc's keypoints are in the
+    pixels of the image it read), and without it a canvas that holds every keypoint."""
+    from pipeline.inputs import hloc
+
+    stored = hloc.read_image_sizes(features)
+    return [stored.get(name) or ((0, 0) if image_dir is not None else _size_of(kp))
+            for name, kp in zip(contents.names, contents.keypoints, strict=True)]
 
 
 #: largest side of a gray canvas drawn for an image (keypoints beyond it are off the canvas)
