@@ -424,10 +424,12 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
                 pair_ids, geometries = db.read_two_view_geometries()
                 # rows without inliers may be left out of the read above; count them all
                 n_rows = db.num_verified_image_pairs()
+                raw = (db.num_matches(), db.num_matched_image_pairs())
                 cameras = {c.camera_id: c for c in db.read_all_cameras()}
         except (RuntimeError, ValueError, IndexError) as exc:
             raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
-        contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras)
+        contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras,
+                             raw)
     except BaseException:
         shutil.rmtree(snapshot_dir, ignore_errors=True)
         raise
@@ -437,7 +439,9 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
 
 
 def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
-              cameras) -> DatabaseContents:
+              cameras, raw: tuple[int, int] = (0, 0)) -> DatabaseContents:
+    """The contents read; ``raw``: the matches table's ``(matches, image pairs)``, named
+    when no pair is verified (matched with geometric verification skipped)."""
     if len(images) < 2:
         raise InputError(f"database {str(path)!r} holds {len(images)} image(s); at least two are needed")
     images = sorted(images, key=lambda im: im.name)
@@ -450,6 +454,12 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     if not usable:
         what = "no two-view geometries" if not n_rows else \
             f"{n_rows} two-view geometries, all without inliers"
+        if not n_rows and raw[0]:
+            raise InputError(
+                f"database {str(path)!r} has {what}: its {raw[0]} matches of {raw[1]} image "
+                f"pairs were never geometrically verified (matched with the verification "
+                f"skipped). Verify them first, e.g. pycolmap.verify_matches(DB, PAIRS_TXT), or "
+                f"match again with COLMAP's matcher")
         raise InputError(
             f"database {str(path)!r} has {what}: it holds no verified matches. Run COLMAP's "
             f"matcher (e.g. 'colmap exhaustive_matcher') or hloc's geometric verification first")

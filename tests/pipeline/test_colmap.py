@@ -205,6 +205,21 @@ def test_database_without_two_view_geometries(tmp_path):
         colmap.read_database(path)
 
 
+def test_database_of_matches_never_verified_names_them(tmp_path):
+    """matched with geometric verification skipped: the matches table holds the matches, no
+    pair has a two-view geometry; the message said to run the matcher that had run"""
+    import sqlite3
+
+    views, feats = _views_and_features(n=3)
+    path = colmap.write_database(tmp_path / "unverified.db", views, feats,
+                                 Links([0, 0, 1], [1, 2, 3], [1, 2, 2], [2, 3, 4]))
+    with sqlite3.connect(path) as con:
+        con.execute("DELETE FROM two_view_geometries")
+    with pytest.raises(InputError, match=r"its 3 matches of 3 image pairs were never "
+                                         r"geometrically verified .*pycolmap.verify_matches"):
+        colmap.read_database(path)
+
+
 def test_database_whose_geometries_have_no_inliers(tmp_path):
     views, feats = _views_and_features(n=2)
     links = Links([0], [1], [1], [2])
