@@ -35,6 +35,7 @@ the mapping's figures, so a user can judge it.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,7 +45,8 @@ from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
 from pipeline.errors import InputError
 
-__all__ = ["CleanDbResult", "clean_database", "check_loop_tol", "COLMAP_MAX_ERROR_PX"]
+__all__ = ["CleanDbResult", "clean_database", "check_loop_tol", "check_no_log_beside",
+           "COLMAP_MAX_ERROR_PX"]
 
 #: COLMAP's default two-view verification threshold (``max_error``, pixels)
 COLMAP_MAX_ERROR_PX = 4.0
@@ -133,6 +135,7 @@ def clean_database(database: str | Path, out: str | Path,
     if out.resolve() == database.resolve():
         raise InputError(f"--out {str(out)!r} is the input database; the input is never "
                          f"modified, choose a new file")
+    check_no_log_beside(out)
     # every allocation that grows with the input is counted before it is made
     budget = MemoryBudget(max_memory_gb)
 
@@ -223,6 +226,21 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
             "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
             "max_robot_memory_bytes")}}, baselines=section, loop_check=loop_section,
         fusion=fusion_section)
+
+
+def check_no_log_beside(out: Path) -> None:
+    """InputError when SQLite's write-ahead log or rollback journal of a database named
+    ``out`` lies beside it (the database is open in another program, e.g. COLMAP, or was not
+    closed): SQLite would replay it into the new database written there, e.g. a COLMAP
+    session's edits into the cleaned copy, or every two-view geometry deleted."""
+    for side in ("-wal", "-journal"):
+        log = Path(f"{out}{side}")
+        if os.path.lexists(log):
+            raise InputError(
+                f"--out {str(out)!r}: {str(log)!r} beside it holds changes of a database of that "
+                f"name not yet written into it (a program, e.g. COLMAP, has it open or did not "
+                f"close it); SQLite would apply them to the new database. Close that program, "
+                f"or choose another --out")
 
 
 def check_loop_tol(tol_deg) -> float:

@@ -245,6 +245,24 @@ def test_changes_still_in_the_write_ahead_log_are_read(db, tmp_path, capsys):
         writer.close()
 
 
+def test_an_output_whose_write_ahead_log_lies_beside_it_is_refused(db, tmp_path, capsys):
+    """OUT.db open in another program (a COLMAP session) with changes in OUT.db-wal: a new
+    OUT.db put there took that log for its own, here every two-view geometry deleted."""
+    out = tmp_path / "o.db"
+    assert main(["clean-db", str(db), "--out", str(out), "--no-rerun"]) == 0
+    writer = sqlite3.connect(out)
+    writer.execute("PRAGMA wal_autocheckpoint = 0")
+    writer.execute("DELETE FROM two_view_geometries")
+    writer.commit()
+    try:
+        before = {p.name: _sha(p) for p in tmp_path.iterdir() if p.is_file()}
+        assert main(["clean-db", str(db), "--out", str(out), "--no-rerun", "--overwrite"]) == 2
+        one_line_error(capsys, "o.db-wal' beside it holds changes")
+        assert {p.name: _sha(p) for p in tmp_path.iterdir() if p.is_file()} == before
+    finally:
+        writer.close()
+
+
 # ---------------------------------------------------------------- not a database at all
 
 @pytest.mark.parametrize("case,message", [
