@@ -60,6 +60,10 @@ def _open(path: Path, what: str):
     try:
         return h5py.File(path, "r")
     except OSError as exc:
+        if "unable to lock file" in str(exc):  # HDF5's lock: another program writes it
+            raise InputError(f"{what} {str(path)!r} is open for writing in another program "
+                             "(HDF5's file lock: e.g. hloc still writing it, or a notebook "
+                             "that opened it in mode 'a'); close it there and run again") from None
         raise InputError(f"{what} {str(path)!r} is not an HDF5 file ({exc})") from None
 
 

@@ -173,6 +173,28 @@ def test_keypoints_far_outside_any_image_draw_a_bounded_canvas():
     assert _size_of(np.array([[-5.0, 3.0]], np.float32)) == (16, 16)
 
 
+@pytest.mark.parametrize("which", ["features", "matches"])
+def test_a_file_another_program_writes_is_named_as_such(files, tmp_path, capsys, which):
+    """HDF5 locks a file another program opened for writing (hloc still at work, a notebook
+    that opened it in mode 'a'); it was called 'not an HDF5 file'."""
+    import subprocess
+
+    d, feats, matches = files
+    held = feats if which == "features" else matches
+    writer = subprocess.Popen(
+        [sys.executable, "-c", "import sys, h5py; f = h5py.File(sys.argv[1], 'a'); "
+         "print('open', flush=True); sys.stdin.read()", str(held)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        env={k: v for k, v in os.environ.items() if k != "HDF5_USE_FILE_LOCKING"})
+    try:
+        assert writer.stdout.readline().strip() == "open"
+        refused(capsys, _argv(feats, matches, tmp_path / "o.h5"), d,
+                "is open for writing in another program", f"{which} file")
+    finally:
+        writer.communicate("")
+    assert not (tmp_path / "o.h5").exists()
+
+
 # --- the matches file ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("edit, needle", [
