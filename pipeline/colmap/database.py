@@ -307,9 +307,10 @@ class DatabaseContents:
     image_ids : ndarray, (n,) int64 — COLMAP image id of each camera
     keypoints : list[ndarray], (n,) each (m_i, 2) float32 — OpenCV pixel convention
     links : Links, (L,) — two-view-geometry inliers, each undirected link once, ``cam_i < cam_j``
-    not_one_to_one : ndarray, (L,) bool — a link whose feature is already linked to another
-        feature of the same other image by an earlier inlier of that pair (COLMAP allows this
-        when cross-check is off; the paper's Assumption 2.2 does not)
+    not_one_to_one : ndarray, (L,) bool — a link whose feature is linked to two features or
+        more of the same other image by the inliers of that pair (COLMAP allows this when
+        cross-check is off; the paper's Assumption 2.2 does not): every such link, since the
+        database holds no score to tell which one is right
     link_pair_id : ndarray, (L,) int64 — the ``pair_id`` of the two-view-geometry row holding
         each link, as stored (its links are in the row's inlier order)
     snapshot : Path or None — the private snapshot of the database that was read (kept while
@@ -344,12 +345,10 @@ class DatabaseContents:
             self._snapshot_dir, self.snapshot = None, None
 
 
-def _first_occurrence(key: np.ndarray) -> np.ndarray:
-    """``(L,)`` bool: True where ``key`` appears for the first time (in input order)."""
-    _, first = np.unique(key, return_index=True)
-    out = np.zeros(key.shape[0], dtype=bool)
-    out[first] = True
-    return out
+def _repeated(key: np.ndarray) -> np.ndarray:
+    """``(L,)`` bool: True where ``key`` appears more than once."""
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return counts[inverse.reshape(-1)] > 1
 
 
 def _xy(keypoints) -> np.ndarray:
@@ -487,13 +486,14 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
             f"names keypoint {max(fi[k], fj[k])} beyond the stored keypoints; the database is "
             f"inconsistent")
     links = Links(ci, fi, cj, fj)
-    # Assumption 2.2 (one-to-one per pair): later duplicates of a feature within a pair
+    # Assumption 2.2 (one-to-one per pair): every inlier of a feature linked twice or more
+    # into one other image (a database stores no score to tell which of them is right)
     n = len(names)
     offs = np.concatenate([[0], np.cumsum(m)])
     ga, gb = offs[ci] + fi, offs[cj] + fj
-    one_to_one = _first_occurrence(ga * n + cj) & _first_occurrence(gb * n + ci)
+    not_one_to_one = _repeated(ga * n + cj) | _repeated(gb * n + ci)
     return DatabaseContents(path=path, names=names, image_ids=image_ids, keypoints=kps,
-                            links=links, not_one_to_one=~one_to_one,
+                            links=links, not_one_to_one=not_one_to_one,
                             pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
                             cameras=[cameras.get(im.camera_id) for im in images],
                             fundamental=fundamental, link_pair_id=source)

@@ -8,8 +8,13 @@ links removed from the two-view geometries. Run COLMAP's mapper on OUT.db as usu
 
 Beside OUT.db it writes ``OUT.links.csv`` (every verified link, kept or deleted with its reason)
 and ``OUT.rrd`` (:mod:`pipeline.runs.cleaned`). Before the distributed stage, links the paper's
-model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice into the same other image, Assumption 2.2;
-the later inlier of the pair is cut) and, with ``--comm-graph``, ``not-comm-edge`` (a link
+model cannot hold are cut too, each with its reason: ``not-one-to-one`` (a feature linked twice or more into the same other image, Assumption 2.2;
+every inlier of that feature into that image is cut: the database stores no score to tell
+which is right. Measured on six Sceaux photos at 480 px, SIFT matched with cross-check off,
+``OUT.db`` mapped by ``pycolmap.incremental_mapping`` with seeds 0-2: the input 6/6 images
+registered, about 1,800 points at 0.38 px; keeping the first inlier of each feature, the
+earlier rule, 5/6 and about 796 points at 0.90-0.94 px; cutting them all, 6/6 and about
+1,550 points at 0.31 px) and, with ``--comm-graph``, ``not-comm-edge`` (a link
 between images that are not neighbours: those robots could not have matched).
 
 With ``loop_tol_deg`` (``--loop-check``) a pair-level pass runs first: the image pairs whose
