@@ -402,8 +402,12 @@ def read_h5(features: str | Path, matches: str | Path,
                                  f"{n0} has {m[cam[n0]]} keypoints; expected ({m[cam[n0]]},)")
             raw = _read_dataset(ds, matches, f"matches0 of pair {key!r}", "iu").reshape(-1)
             if raw.size and raw.max() >= m[cam[n1]]:
+                unsigned = raw.dtype.kind == "u" and raw.max() == np.iinfo(raw.dtype).max
                 raise InputError(f"{matches}: pair {key!r} matches keypoint {raw.max()} of "
-                                 f"{n1}, which has {m[cam[n1]]} keypoints")
+                                 f"{n1}, which has {m[cam[n1]]} keypoints" + (
+                                     f" ({raw.dtype} is unsigned: hloc's -1, no match, reads "
+                                     f"as {raw.max()}; store matches0 as a signed integer, "
+                                     "e.g. int32)" if unsigned else ""))
             m0 = raw.astype(np.int64)
             if raw.size and raw.min() < -1:
                 raise InputError(f"{matches}: matches0 of pair {key!r} holds {raw.min()}; "

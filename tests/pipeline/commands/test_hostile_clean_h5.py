@@ -218,6 +218,10 @@ def test_a_file_another_program_writes_is_named_as_such(files, tmp_path, capsys,
     # 2**64 - 1 would read -1 (no match) once cast to int64
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, 2**64 - 1, np.uint64)),
      "matches keypoint 18446744073709551615"),
+    # hloc's -1 (no match) written unsigned: the message said only 'matches keypoint 65535'
+    (lambda fd: _replace(fd, P01 + "/matches0", np.full(M, -1, np.int16).astype(np.uint16)),
+     "(uint16 is unsigned: hloc's -1, no match, reads as 65535; store matches0 as a signed "
+     "integer, e.g. int32)"),
     (lambda fd: _replace(fd, P01 + "/matching_scores0", np.ones(3, np.float16)),
      "matching_scores0 of pair 'a.jpg/sub-b.jpg' has shape (3,)"),
     (lambda fd: _replace(fd, P01 + "/matching_scores0", np.full(M, np.nan, np.float32)),
@@ -242,7 +246,7 @@ def test_a_file_another_program_writes_is_named_as_such(files, tmp_path, capsys,
     (lambda fd: fd[P01].move("matches0", "matches"),
      "group 'a.jpg/sub-b.jpg' holds 'matches', 'matching_scores0' but no 'matches0'"),
 ], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
-        "below-minus-one", "int64-huge", "uint64-max", "scores-short", "scores-nan",
+        "below-minus-one", "int64-huge", "uint64-max", "uint16-minus-one", "scores-short", "scores-nan",
         "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair", "pair-both-orders",
         "pair-old-and-new-key", "matches-not-matches0"])
 def test_malformed_matches(files, tmp_path, capsys, edit, needle):
