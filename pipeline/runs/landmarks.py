@@ -308,7 +308,11 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "versions": versions(),
         "config": {**asdict(config), "out": str(out)},
     }
-    flag_result(report, names, no_links_why=NO_LANDMARK_LINKS_WHY)
+    why = NO_LANDMARK_LINKS_WHY
+    if len(input_links) and not len(links):  # the matches were there: the votes took them all
+        why = (f"the --refine votes step removed all {len(input_links)} matches, none won a "
+               "strict majority of its two-hop votes; --refine none keeps them")
+    flag_result(report, names, no_links_why=why)
     with timer.stage("write", str(out)):
         with atomic_run_folder(out) as tmp:
             ledger = ledger_from_consistency(res)
