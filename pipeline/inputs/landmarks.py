@@ -453,6 +453,13 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         for fr, dp in zip(out, dfiles, strict=True):
             d = _read_descriptors(dp)
             if d.shape[0] != k:
+                hidden = k - len(fr.landmarks)
+                if hidden and d.shape[0] == len(fr.landmarks):  # rows of the seen ones only
+                    raise InputError(f"{dp}: {d.shape[0]} descriptor rows for the {k} label "
+                                     f"rows of {fr.keypoint_file}; {fr.name} sees "
+                                     f"{d.shape[0]} landmarks, but each of its {hidden} 'nan "
+                                     "nan' label rows needs a descriptor row too (any numbers: "
+                                     "it is not read)")
                 raise InputError(f"{dp}: {d.shape[0]} descriptor rows for {k} landmarks of "
                                  f"{fr.name}; expected one row per landmark")
             d = d[fr.landmarks]  # the rows of the landmarks it does not see are not read

@@ -135,6 +135,26 @@ def test_a_landmark_an_image_does_not_see_is_a_nan_row(tmp_path):
         load_landmark_folder(tmp_path)
 
 
+def test_descriptors_of_the_seen_landmarks_only_are_refused_naming_the_nan_rows(tmp_path):
+    """An image that does not see a landmark, with a descriptor file of a row per landmark it
+    sees: refused as "3 descriptor rows for 4 landmarks of view1.png", though view1.png sees
+    3; the message now says its 'nan nan' row needs a descriptor row too."""
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0], [20.0, 30.0]])
+    for k in range(2):
+        _image(tmp_path / f"view{k}.png")
+        rows = pts.copy()
+        if k:
+            rows[2] = np.nan
+        np.savetxt(tmp_path / f"view{k}.txt", rows)
+        np.savetxt(tmp_path / f"view{k}.scf", np.ones((4 - k, 5)))
+    with pytest.raises(InputError) as err:
+        load_landmark_folder(tmp_path)
+    assert str(err.value) == (
+        f"{tmp_path / 'view1.scf'}: 3 descriptor rows for the 4 label rows of view1.txt; "
+        "view1.png sees 3 landmarks, but each of its 1 'nan nan' label rows needs a "
+        "descriptor row too (any numbers: it is not read)")
+
+
 def test_one_file_of_negative_descriptors_among_histograms_is_warned(tmp_path, caplog):
     """One negative value in one of the descriptor files switched every image from chi-square
     to L2 distance with no word but the stage line's "vector descriptors"; it is now warned,
