@@ -218,9 +218,12 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
     out = (pts[:, 0] < -0.5) | (pts[:, 0] > w + 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h + 0.5)
     if out.any():
         row = int(np.flatnonzero(out)[0])
+        # -1 -1: another tool's mark of a landmark not seen, which here is 'nan nan'
+        unseen_mark = ("; if the image does not see this landmark, write the row 'nan nan' "
+                       "(not -1 -1)" if (pts[row] == -1).all() else "")
         raise InputError(f"{path}: landmark row {int(seen[row]) + 1} at {pts[row].tolist()} "
                          f"lies outside the {w}x{h} image {image.name}; fix the label (pixel "
-                         "coordinates, x to the right, y down)")
+                         f"coordinates, x to the right, y down){unseen_mark}")
     return seen
 
 

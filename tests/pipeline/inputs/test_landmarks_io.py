@@ -155,6 +155,26 @@ def test_descriptors_of_the_seen_landmarks_only_are_refused_naming_the_nan_rows(
         "descriptor row too (any numbers: it is not read)")
 
 
+def test_a_minus_one_row_is_refused_naming_the_nan_row(tmp_path):
+    """'-1 -1', how other tools mark a landmark an image does not see, was refused only as a
+    label outside the image to fix; the error now names 'nan nan', this format's mark. A
+    label that is merely off the image gets no such hint."""
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0]])
+    for k in range(2):
+        _image(tmp_path / f"view{k}.png")
+        np.savetxt(tmp_path / f"view{k}.txt", pts)
+    rows = pts.copy()
+    rows[1] = -1
+    np.savetxt(tmp_path / "view1.txt", rows)
+    with pytest.raises(InputError, match=r"row 2 at \[-1.0, -1.0\] lies outside the 64x48 "
+                       r"image view1.png; .*write the row 'nan nan' \(not -1 -1\)$"):
+        load_landmark_folder(tmp_path, descriptors="sift")
+    rows[1] = [-3, 20]
+    np.savetxt(tmp_path / "view1.txt", rows)
+    with pytest.raises(InputError, match=r"y down\)$"):
+        load_landmark_folder(tmp_path, descriptors="sift")
+
+
 def test_one_file_of_negative_descriptors_among_histograms_is_warned(tmp_path, caplog):
     """One negative value in one of the descriptor files switched every image from chi-square
     to L2 distance with no word but the stage line's "vector descriptors"; it is now warned,
