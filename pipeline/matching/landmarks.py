@@ -48,6 +48,8 @@ EPIPOLAR_PX = 3.0
 _FORBIDDEN = 1e12
 #: elements of one block of :func:`chi2_distance`'s temporaries (8 MB each, five alive at once)
 _CHI2_BLOCK = 2 ** 20
+#: landmark pairs of one block of :func:`guided_match`'s epipolar band (about 40 MB)
+_PAIRS_BLOCK = 2 ** 18
 #: COLMAP's ``TwoViewGeometryOptions.max_H_inlier_ratio``: above it F is degenerate
 MAX_H_INLIER_RATIO = 0.8
 
@@ -169,7 +171,13 @@ def guided_match(cost: np.ndarray, x_i: np.ndarray, x_j: np.ndarray,
             int(h_mask.sum()) > MAX_H_INLIER_RATIO * int(inl.sum()):
         return np.stack([r, s], axis=1).astype(np.int64), False
     ki, kj = cost.shape
-    err = sampson_error_px(F, np.repeat(x_i, kj, axis=0), np.tile(x_j, (ki, 1))).reshape(ki, kj)
+    err = np.empty((ki, kj))
+    # a block of rows at a time: the pairs of all rows at once took 4.3 GB for 5000 landmarks
+    step = max(1, _PAIRS_BLOCK // max(1, kj))
+    for r in range(0, ki, step):
+        rows = x_i[r:r + step]
+        err[r:r + step] = sampson_error_px(F, np.repeat(rows, kj, axis=0),
+                                           np.tile(x_j, (len(rows), 1))).reshape(-1, kj)
     band = np.where(err <= threshold_px, cost, _FORBIDDEN)
     r, s = linear_sum_assignment(band)
     ok = band[r, s] < _FORBIDDEN
