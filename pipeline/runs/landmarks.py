@@ -199,7 +199,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         m = np.array([len(f.keypoints) for f in frames], dtype=np.int64)
         kind = frames[0].descriptor_kind
         source = "sift" if frames[0].descriptor_file == "sift" else "given"
-        timer.note(f"{len(frames)} images x {m[0]} landmarks, {kind} descriptors ({source}); "
+        # images with 'nan nan' rows see fewer landmarks: the first image's count is not all's
+        seen = f"x {m[0]}" if (m == m[0]).all() else f"seeing {m.min()}-{m.max()}"
+        timer.note(f"{len(frames)} images {seen} landmarks, {kind} descriptors ({source}); "
                    f"graph {config.graph}: {len(comm_edges)} edges")
         message = split_warning(len(frames), comm_edges, lost="their landmarks cannot be "
                                 "associated across the groups")

@@ -46,3 +46,26 @@ def test_votes_that_remove_every_match_are_named_in_the_warning(tmp_path):
     assert warning["code"] == "no-links"
     assert "--refine votes step removed all 6 matches" in warning["message"]
     assert "--ratio" not in warning["message"]
+
+
+def test_the_load_line_counts_the_landmarks_of_every_image(tmp_path, capsys):
+    """Two of three images hide a landmark ('nan nan' rows): the load line said "3 images x 3
+    landmarks" from the first image's count alone; it now gives the range the images see."""
+    import numpy as np
+    from PIL import Image
+
+    from pipeline.__main__ import main
+
+    data = tmp_path / "data"
+    data.mkdir()
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0], [20.0, 30.0]])
+    for k in range(3):
+        Image.new("L", (64, 48), 128).save(data / f"v{k}.png")
+        rows = pts.copy()
+        if k < 2:  # v0 and v1 hide one landmark each, v2 sees all four
+            rows[k + 1] = np.nan
+        np.savetxt(data / f"v{k}.txt", rows)
+    assert main(["run-landmarks", str(data), "--geometry", "none", "--no-baselines",
+                 "--out", str(tmp_path / "run")]) == 0
+    err = capsys.readouterr().err
+    assert "3 images seeing 3-4 landmarks, vector descriptors (sift)" in err
