@@ -41,6 +41,11 @@ the interpreter and libraries, rounded up):
   random links among 10 cameras (``B = 978``; 45,000 and 90,000 links, sets of 19,956 and
   39,919 features, 1.95e7 and 3.91e7 entries: peak 1.27 and 2.33 GB): 54 bytes per entry
   (the lists, the entries that entered in a round, the merge's pieces).
+- :data:`BYTES_PER_LANDMARK_PAIR`: ``run-landmarks``' matching of one image pair (the
+  descriptor costs of every landmark pair, the epipolar band, the Hungarian method's copy),
+  for the comm graph's largest pair ``K_i · K_j``. Measured (peak RSS beyond a 4-frame run's
+  165 MB, ``--no-baselines``): two images of 5,000 landmarks 580 MB (23 bytes per pair), of
+  2,000 landmarks 53 MB (13).
 - data read from a database or an HDF5 file: its declared bytes times the copies made of
   them (:data:`COPIES_OF_READ_DATA`), counted from the declared sizes before any is read.
 - :func:`baselines_bytes`: the centralized baselines of ``--baselines`` (a copy of the links
@@ -73,7 +78,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
+__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_LANDMARK_PAIR", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
            "BYTES_PER_ROBOT_PIXEL", "BYTES_PER_FUSION_OBSERVER_PAIR", "BYTES_PER_FUSION_TRACK_ROBOT",
            "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
@@ -87,6 +92,8 @@ BYTES_PER_ENTRY = 36
 BYTES_PER_ROW_CROSSING = 12
 #: measured peak bytes per entry of the evidence rule's set lists (54, module notes)
 BYTES_PER_LIST_ENTRY = 64
+#: peak bytes per landmark pair of ``run-landmarks``' matching of one image pair (module notes)
+BYTES_PER_LANDMARK_PAIR = 24
 #: bytes per row of a links or comm-graph file (measured 1.3 KB per link)
 BYTES_PER_ROW = 1500
 #: peak bytes per link of the ``sync`` rule's robots beyond the rows of the links file

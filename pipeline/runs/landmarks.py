@@ -99,6 +99,22 @@ class LandmarksConfig:
         return Path("runs") / f"landmarks-{folder}{frames}-{graph}"
 
 
+def _check_matching_memory(m, comm_edges, config: LandmarksConfig) -> None:
+    """InputError before the matching when its largest image pair of the comm graph would
+    need more than ``config.max_memory_gb`` (:data:`pipeline.budget.BYTES_PER_LANDMARK_PAIR`
+    per landmark pair)."""
+    from pipeline.budget import BYTES_PER_LANDMARK_PAIR, MemoryBudget, limit_gb
+
+    edges = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
+    if not len(edges):
+        return
+    k = np.argmax(m[edges[:, 0]] * m[edges[:, 1]])
+    i, j = int(edges[k, 0]), int(edges[k, 1])
+    MemoryBudget(limit_gb(config.max_memory_gb)).add(
+        f"matching images {i} and {j} ({m[i]} x {m[j]} landmark pairs)",
+        int(m[i]) * int(m[j]) * BYTES_PER_LANDMARK_PAIR, "match fewer landmarks per image")
+
+
 def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
     """The memory guard of :mod:`pipeline.budget` on the matched links, before the rule and
     the baselines allocate what grows with them: InputError naming the part above
@@ -207,6 +223,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                                 "associated across the groups")
         if message:
             timer.warn(message)
+    _check_matching_memory(m, comm_edges, config)
     with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
                                  f"geometry {config.geometry}, ratio gate {config.ratio}"):
         links, matching = match_landmark_edges(

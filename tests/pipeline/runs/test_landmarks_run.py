@@ -2,6 +2,9 @@
 
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 from pipeline.runs.landmarks import LandmarksConfig
 
 
@@ -69,3 +72,23 @@ def test_the_load_line_counts_the_landmarks_of_every_image(tmp_path, capsys):
                  "--out", str(tmp_path / "run")]) == 0
     err = capsys.readouterr().err
     assert "3 images seeing 3-4 landmarks, vector descriptors (sift)" in err
+
+
+def test_the_matching_of_the_largest_image_pair_is_counted_against_the_memory_limit():
+    """--max-memory-gb counted the links, the detection and the baselines, not the matching:
+    two images of 5,000 landmarks ran to a 0.74 GB peak under a 0.3 GB limit. The largest
+    image pair of the comm graph is now counted before the matching."""
+    from pipeline.budget import BYTES_PER_LANDMARK_PAIR
+    from pipeline.errors import InputError
+    from pipeline.runs.landmarks import LandmarksConfig, _check_matching_memory
+
+    config = LandmarksConfig(directory="unused", max_memory_gb=0.1)
+    m = np.array([3000, 100, 3000])
+    with pytest.raises(InputError, match=r"matching images 0 and 2 \(3000 x 3000 landmark pairs\) "
+                                         r"would need about 0\.2 GB of memory, above the limit "
+                                         r"of 0\.1 GB; match fewer landmarks per image"):
+        _check_matching_memory(m, np.array([[0, 1], [0, 2], [1, 2]]), config)
+    # a graph without the large pair, and no graph at all, pass
+    _check_matching_memory(m, np.array([[0, 1], [1, 2]]), config)
+    _check_matching_memory(m, np.zeros((0, 2), np.int64), config)
+    assert 3000 * 3000 * BYTES_PER_LANDMARK_PAIR > 0.1e9 > 3000 * 100 * BYTES_PER_LANDMARK_PAIR
