@@ -451,7 +451,7 @@ def test_a_run_above_the_memory_limit_is_refused_before_the_rule(folder, capsys)
     graph, descriptors only) took 7.9 GB. The matched links are now counted before the rule
     runs, as resolve counts them, and a run above --max-memory-gb is refused, naming the
     part and the flag; a bad limit is refused before the matching."""
-    _fails(capsys, _argv(folder, "--resolution", "paper", "--max-memory-gb", "1e-6"), folder,
+    _fails(capsys, _argv(folder, "--resolution", "paper", "--max-memory-gb", "2e-6"), folder,
            "matched links would need about", "--max-memory-gb")
     _fails(capsys, _argv(folder, "--max-memory-gb", "0"), folder, "--max-memory-gb '0'")
     assert main(_argv(folder, "--resolution", "paper", "--max-memory-gb", "1")) == 0
