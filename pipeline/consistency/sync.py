@@ -517,9 +517,11 @@ def exchange_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -
     msgs = [m for m in inbox if m.kind == BEST]
     if msgs:
         src, f, w, lo, hi = _gather(msgs, ("feat", "w", "lo", "hi"))
-        # per feature the largest of the keys heard and the one held (held wins a tie)
-        top = _best_per(np.concatenate([f, f]), np.concatenate([w, st.best_w[f]]),
-                        np.concatenate([lo, st.best_lo[f]]), np.concatenate([hi, st.best_hi[f]]))
+        # per feature the largest of the keys heard and the one held (held wins a tie); a
+        # feature that holds none takes the largest heard (a link of evidence -inf included)
+        h = f[st.has_best[f]]
+        top = _best_per(np.concatenate([f, h]), np.concatenate([w, st.best_w[h]]),
+                        np.concatenate([lo, st.best_lo[h]]), np.concatenate([hi, st.best_hi[h]]))
         top = top[top < f.size]
         if top.size:
             g = f[top]

@@ -195,3 +195,25 @@ def test_a_cut_link_is_logged_in_iteration_one(engine):
     assert res.deleted.sum() == 1
     assert res.iteration[res.deleted].tolist() == [1]
     assert (res.iteration[~res.deleted] == -1).all()
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-robot"])
+def test_links_of_evidence_minus_infinity_never_merge_twice_in_a_round(engine):
+    # cameras 0-1-2 merge first; then the cluster's two -inf links lead to features 25 and
+    # 26 of camera 3. Their tie keys are above the one of "no best held" (ids -1, -1): a
+    # member without an open link (camera 1) once kept "none" against both, each end took
+    # its own link as the cluster's best, and both merged, joining two features of camera 3
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.consistency.centralized import is_conflict_free
+
+    fpc = np.array([1, 1, 1, 27])
+    links = Links([0, 1, 0, 2], [0, 0, 0, 0], [1, 2, 3, 3], [0, 0, 25, 26])
+    weight = np.array([1.0, 1.0, -np.inf, -np.inf])
+    res = resolve_conflicts(fpc, None, links, resolution="sync", link_weight=weight,
+                            engine=engine)
+    assert is_conflict_free(fpc, links.subset(~res.deleted))
+    clusters = _reference(fpc, links, weight)
+    off = np.concatenate([[0], np.cumsum(fpc)])
+    a, b = off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
+    together = [any(int(x) in c and int(y) in c for c in clusters) for x, y in zip(a, b, strict=True)]
+    assert (~res.deleted).tolist() == together == [True, True, True, False]

@@ -116,3 +116,17 @@ def test_where_it_does_not_apply_the_robots_run_one_by_one():
     robots, net = _team(fpc, links, weight, "tree")
     equip_sync(robots[0], robots[0].sync.weight, "links")  # one robot floods otherwise
     assert not sync_batched_applies(robots, net)
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 8), m=st.integers(2, 5),
+       share=st.sampled_from([0.3, 1.0]), flood=st.sampled_from(FLOODS),
+       graph=st.sampled_from(["complete", "ring2"]))
+def test_batched_equals_robot_by_robot_with_links_of_evidence_minus_infinity(
+        seed, n, m, share, flood, graph):
+    # -inf evidence (Links.quality -inf, or a link_weight of -inf) ties with the "no best
+    # held" entry of a feature in phase A
+    fpc, links, weight = planted_instance(seed, n, m, 0.9, 0.8, True, graph)
+    rng = np.random.default_rng(seed)
+    weight[rng.random(weight.size) < share] = -np.inf
+    _assert_same(*_both(fpc, links, weight, flood))
