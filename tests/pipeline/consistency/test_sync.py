@@ -217,3 +217,20 @@ def test_links_of_evidence_minus_infinity_never_merge_twice_in_a_round(engine):
     a, b = off[links.cam_i] + links.feat_i, off[links.cam_j] + links.feat_j
     together = [any(int(x) in c and int(y) in c for c in clusters) for x, y in zip(a, b, strict=True)]
     assert (~res.deleted).tolist() == together == [True, True, True, False]
+
+
+def test_a_quadrangle_makes_sync_decide_otherwise_than_the_evidence_rule():
+    # README, "sync": without poses it is the evidence rule's greedy merge except for the
+    # quadrangles. a = 0:0 links to b = 1:0 (evidence 0, no triangle, but the 4-cycle
+    # a - 2:0 - 3:0 - b closes over it) and to p = 4:0 (evidence 1), which holds b2 = 1:1
+    # (evidence 5). sync weighs a - b 0 + TRIANGLE_WEIGHT > 1 and cuts a - p; the evidence
+    # rule weighs it 0 and cuts a - b (and one link of the cycle)
+    from pipeline.consistency import resolve_conflicts
+
+    links = Links([0, 0, 2, 1, 0, 1], [0, 0, 0, 0, 0, 1], [1, 2, 3, 3, 4, 4], [0, 0, 0, 0, 0, 0])
+    weight = np.array([0.0, -5.0, -5.0, -5.0, 1.0, 5.0])
+    fpc = [1, 2, 1, 1, 1]
+    cut = {rule: resolve_conflicts(fpc, None, links, resolution=rule,
+                                   link_weight=weight).deleted for rule in ("sync", "evidence")}
+    assert np.flatnonzero(cut["sync"]).tolist() == [4]
+    assert cut["evidence"][0] and not cut["evidence"][4]
