@@ -63,7 +63,7 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
     """
     run = AlonePhases(robot, transport, protocol, n_robots)
     st, log, n = run.st, run.log, run.n
-    weight = robot.sync.weight.copy()
+    weight, flood = robot.sync.weight.copy(), robot.sync.flood
 
     def run_phase(name: str, start, step) -> int:
         t, out, begin = run.phase(
@@ -93,8 +93,9 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
         restarts += 1
         if restarts > n:
             raise RuntimeError(f"robot {robot.id}: more than {n} restarts after losses")
-        # a neighbour was lost somewhere: start again from the links that are left
-        equip_sync(robot, weight)
+        # a neighbour was lost somewhere: start again from the links that are left, with the
+        # same flood graph
+        equip_sync(robot, weight, flood)
     finish_sync(robot, transport.round)
     log.iterations = boruvka
     log.repeated_detections = restarts
