@@ -40,3 +40,28 @@ def comm_edges(links: Links) -> np.ndarray:
     return np.array(sorted({(int(i), int(j)) for i, j in zip(links.cam_i, links.cam_j,
                                                               strict=True)}),
                     dtype=np.int64).reshape(-1, 2)
+
+
+def irregular_instance(seed: int, n: int, max_m: int, p_pair: float, p_link: float,
+                       weights: str):
+    """``n`` cameras of 0..``max_m`` features each; each camera pair (with probability
+    ``p_pair``) matches a random one-to-one subset of their features, each match kept with
+    probability ``p_link`` (cameras without links, several components, conflicts by chance).
+    Evidence ``weights``: ``ties`` (0 or 1), ``equal`` (all 0), ``normal``, ``inf`` (+-inf).
+    Returns ``fpc, links, weight``."""
+    rng = np.random.default_rng(seed)
+    fpc = rng.integers(0, max_m + 1, n)
+    ci, fi, cj, fj = [], [], [], []
+    for i, j in combinations(range(n), 2):
+        if rng.random() >= p_pair:
+            continue
+        k = int(min(fpc[i], fpc[j]))
+        for x, y in zip(rng.permutation(fpc[i])[:k].tolist(), rng.permutation(fpc[j])[:k].tolist(),
+                        strict=True):
+            if rng.random() < p_link:
+                ci.append(i), fi.append(x), cj.append(j), fj.append(y)
+    L = len(ci)
+    weight = {"ties": lambda: rng.integers(0, 2, L).astype(float), "equal": lambda: np.zeros(L),
+              "normal": lambda: rng.normal(size=L),
+              "inf": lambda: np.where(rng.random(L) < 0.5, np.inf, -np.inf)}[weights]()
+    return fpc, Links(ci, fi, cj, fj), weight

@@ -8,7 +8,8 @@ from unittest.mock import patch
 import numpy as np
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from sync_instances import comm_edges, planted_instance
+from sync_instances import comm_edges, irregular_instance, planted_instance
+from test_sync import _reference
 
 from pipeline.consistency.engines import sync_batched
 from pipeline.consistency.engines.driver import build_robots
@@ -28,19 +29,20 @@ ROBOT_ARRAYS = ("link_alive", "deleted_round", "deleted_case", "deleted_iteratio
                 "component")
 
 
-def _team(fpc, links, weight, flood, options=None):
+def _team(fpc, links, weight, flood, options=None, edges=None):
     robots, index = build_robots(fpc, links)
     for rb, li in zip(robots, index, strict=True):
         equip_sync(rb, weight[li], flood)
-    return robots, Network(len(fpc), comm_edges(links), options)
+    edges = comm_edges(links) if edges is None else edges
+    return robots, Network(len(fpc), edges, options)
 
 
-def _both(fpc, links, weight, flood, options=None, batched_only=True):
+def _both(fpc, links, weight, flood, options=None, batched_only=True, edges=None):
     """Robot by robot and batched on two copies of one team: (result, rounds seen, network,
     robots) of each."""
     out = []
     for run in (run_sync, run_sync_batched):
-        robots, net = _team(fpc, links, weight, flood, options)
+        robots, net = _team(fpc, links, weight, flood, options, edges)
         seen: list[int] = []
         if run is run_sync_batched and batched_only:
             assert sync_batched_applies(robots, net)
@@ -70,7 +72,8 @@ def _assert_same(a, b) -> None:
                                           err_msg=f"robot {ra.id} {k}")
         assert ra.peak_memory_bytes == rb.peak_memory_bytes, f"robot {ra.id} memory"
         # the network holds each robot's peak (the stage's max_robot_memory_bytes)
-        assert net_a.peak_memory(ra.id) == ra.peak_memory_bytes > 0, f"robot {ra.id} noted"
+        assert net_a.peak_memory(ra.id) == ra.peak_memory_bytes, f"robot {ra.id} noted"
+        assert ra.peak_memory_bytes > 0 or ra.m == 0, f"robot {ra.id} measured"
         assert net_b.peak_memory(rb.id) == rb.peak_memory_bytes, f"robot {rb.id} noted"
 
 
@@ -130,3 +133,24 @@ def test_batched_equals_robot_by_robot_with_links_of_evidence_minus_infinity(
     rng = np.random.default_rng(seed)
     weight[rng.random(weight.size) < share] = -np.inf
     _assert_same(*_both(fpc, links, weight, flood))
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7), max_m=st.integers(0, 4),
+       p_pair=st.sampled_from([0.3, 0.7, 1.0]), p_link=st.sampled_from([0.5, 1.0]),
+       weights=st.sampled_from(["ties", "equal", "normal", "inf"]),
+       flood=st.sampled_from(FLOODS), complete=st.booleans())
+def test_batched_equals_robot_by_robot_on_irregular_teams(seed, n, max_m, p_pair, p_link,
+                                                          weights, flood, complete):
+    # one camera, cameras without features or links, several components, comm edges that
+    # hold no link, every link of equal evidence, +-inf evidence; and the greedy merge's
+    # clusters (test_sync's reference)
+    fpc, links, weight = irregular_instance(seed, n, max_m, p_pair, p_link, weights)
+    edges = np.array([(i, j) for i in range(n) for j in range(i + 1, n)],
+                     dtype=np.int64).reshape(-1, 2) if complete else None
+    a, b = _both(fpc, links, weight, flood, edges=edges)
+    _assert_same(a, b)
+    labels = np.concatenate([rb.sync.label for rb in a[3]])
+    clusters = sorted({frozenset(np.flatnonzero(labels == g).tolist())
+                       for g in np.unique(labels)}, key=min)
+    assert clusters == _reference(fpc, links, weight)
