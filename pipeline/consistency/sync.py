@@ -23,7 +23,10 @@ Weights (Sec. "evidence" of the rule; both ends of a link compute the same value
     not its quadrangle). Phase 0 (*support*, one round): every robot sends each linked
     neighbour the other ends of its features linked to it; both ends of a link then count
     ``τ`` and ``shared`` and decide ``q`` from the same lists (the far end's, and those of
-    the features linked to its own end), once every linked neighbour's list is in.
+    the features linked to its own end), once every linked neighbour's list is in. Both
+    count features of the far end's list, not cameras: the links are one-to-one per camera
+    pair (Assumption 2.2, checked on input), so a feature is linked into a camera through
+    one feature at most and the two counts are the same.
     Order: ``(w, -t, -lo, -hi)`` decreasing (``lo < hi`` the link's global feature ids,
     ``t`` = :func:`.keys.tie_key` of them: ties of ``w`` go in a fixed pseudo-random order,
     so that a chain of equal links is not merged one pair per Borůvka round), a strict
