@@ -187,10 +187,11 @@ CLEANINGS = {"colmap+clean-db": ("cleaned", {}),
 
 
 def run_colmap(images: Path, work: Path, truth=None,
-               cleanings=("colmap+clean-db",)) -> list[dict]:
+               cleanings=("colmap+clean-db",), one_camera: bool = False) -> list[dict]:
     """The ``colmap`` row and one row per clean-db variant of ``cleanings`` (keys of
     :data:`CLEANINGS`, in that order): one extraction and matching, one mapping per
-    database."""
+    database. ``one_camera``: every image shares one camera (``CameraMode.SINGLE``; pycolmap's
+    default gives each image its own), as ``run-images`` gives images of one file size."""
     import pycolmap
 
     from pipeline.matching.loops import DEFAULT_LOOP_TOL_DEG
@@ -200,7 +201,8 @@ def run_colmap(images: Path, work: Path, truth=None,
     db = work / "database.db"
     pycolmap.logging.minloglevel = 2
     c0, t0 = cpu_s(), time.perf_counter()
-    pycolmap.extract_features(db, images)
+    pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE
+                              if one_camera else pycolmap.CameraMode.AUTO)
     t1 = time.perf_counter()
     pycolmap.match_exhaustive(db)
     t2 = time.perf_counter()
@@ -323,8 +325,8 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
             **_judge(colmap.read_model(out / "sparse"), truth)}
 
 
-METHODS = ("colmap", "colmap+clean-db", "colmap+clean-db+loops", "colmap+clean-db+fusion",
-           "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
+METHODS = ("colmap", "colmap-one-camera", "colmap+clean-db", "colmap+clean-db+loops",
+           "colmap+clean-db+fusion", "ours", "ours-no-fusion", "ours-remap", "ours-knn4")
 #: run-images variants: method -> (graph, fusion, remap)
 OURS = {"ours": ("complete", True, False), "ours-no-fusion": ("complete", False, False),
         "ours-remap": ("complete", True, True), "ours-knn4": ("knn:4", True, False)}
@@ -436,6 +438,8 @@ def main(argv=None) -> int:
             todo = []
             if {"colmap", *CLEANINGS} & set(methods):
                 todo.append(("colmap", None))
+            if "colmap-one-camera" in methods:
+                todo.append(("colmap-one-camera", "one-camera"))
             todo += [(m, OURS[m]) for m in OURS if m in methods]
             for name, variant in todo:
                 print(f"== {data} {kind} {name} ...", file=sys.stderr, flush=True)
@@ -443,6 +447,8 @@ def main(argv=None) -> int:
                 try:
                     got = (run_colmap(images, work / "colmap", truth, cleanings)
                            if variant is None
+                           else run_colmap(images, work / name, truth, (), one_camera=True)
+                           if variant == "one-camera"
                            else [run_ours(images, work / name, variant[0], truth,
                                           fusion=variant[1], remap=variant[2])])
                 except Exception as exc:  # noqa: BLE001 - a failed run is a result too
