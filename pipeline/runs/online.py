@@ -392,6 +392,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "n_robots": int(seq.n_robots),
         "n_images": int(oa.n_images),
         "comm_edges": np.asarray(seq.comm_edges).tolist(),
+        "features_per_camera": [int(len(f)) for f in run.features],
         "window": int(config.window),
         "hold": int(oa.hold),
         "resolution": oa.resolution,
@@ -418,7 +419,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
                + merge_radius_why(config.merge_radius, config.size)
                + (f"; at --speed {config.speed:g} m per step the formation may have left the "
                   "scene" if config.speed else ""))
-    return flag_online(report, why)
+    return flag_online(report, why, [v.name for v in seq.flat.views])
 
 
 def jsonable_step(rec: dict) -> dict:

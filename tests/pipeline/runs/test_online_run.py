@@ -137,8 +137,25 @@ def test_a_run_without_any_link_is_warned(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "warning: no link in 2 steps" in err and "--speed 100 m per step" in err
     # in the report too, as a batch run's result warnings are (it was on stderr only)
-    assert [w["code"] for w in report["warnings"]] == ["no-links"]
+    assert [w["code"] for w in report["warnings"]] == ["no-links", "no-features"]
     assert "--speed 100 m per step" in report["warnings"][0]["message"]
+
+
+def test_frames_without_features_are_warned_and_named(tmp_path, capsys):
+    """At --speed 12 the formation starts and ends beside the scene: the frames of steps 0
+    and 3 see only sky. They are named in a no-features warning and counted in
+    features_per_camera, as run-images --sequence does, not left out in silence."""
+    out = tmp_path / "beside"
+    assert main(["run-formation", "--steps", "4", "--speed", "12", "--robots", "3", "--graph",
+                 "ring", "--size", "96x72", "--max-features", "80", "--no-rerun",
+                 "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    m = report["features_per_camera"]
+    assert len(m) == 12 and [k for k, v in enumerate(m) if v == 0] == [0, 1, 2, 9, 10, 11]
+    assert [w["code"] for w in report["warnings"]] == ["no-features"]
+    names = "r00k000, r01k000, r02k000, r00k003, r01k003, r02k003"
+    assert names in report["warnings"][0]["message"]
+    assert f"no features found in 6 image(s): {names}" in capsys.readouterr().err
 
 
 def test_no_link_because_of_a_wide_merge_radius_names_the_radius(tmp_path, capsys):
