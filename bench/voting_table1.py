@@ -254,9 +254,13 @@ def run_reading_family(trials, noise, eig, seed, radius, log):
     ml = summarize(distributed_ml(x, cov, topo(), rounds=100), x, cov, outlier, 100)
     rows = []
     for gate, p in GATES:
+        # the fixed-round scheme picks each robot's winner by the plain argmax (tie_tol=0),
+        # as the pipeline's fixed-round fusion does: its votes need not have converged, so
+        # two close votes are not a tie of counts (pipeline.fusion.voting, "Winner")
         st = static_voting(x, cov, topo(), K=K, c=C, p=p, gate=gate, rounds=(100, 100, 100),
-                           rng=seed + 2)
-        dy = dynamic_voting(x, cov, topo(), K=K, c=C, p=p, gate=gate, rounds=100, rng=seed + 2)
+                           rng=seed + 2, tie_tol=0.0)
+        dy = dynamic_voting(x, cov, topo(), K=K, c=C, p=p, gate=gate, rounds=100, rng=seed + 2,
+                            tie_tol=0.0)
         exact_c = float((dy.members.sum(1) == C).mean())
         base = dict(noise=noise, eig=eig, gate=gate, p=p, threshold_sq=gate_threshold(D, p, gate),
                     hypotheses=K, c=C, maxc_rounds=dy.maxc_stats.rounds,
