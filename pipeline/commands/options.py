@@ -137,16 +137,20 @@ def add_transport_option(p: argparse.ArgumentParser) -> None:
                    help=transport_help())
 
 
-def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None) -> None:
+def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None,
+                            photos: bool = False) -> None:
     """``--merge-radius PX``: keypoints of one image closer than this are one feature;
     ``online``: the command's option of an online run, which keeps 0.5 px (named in the
-    help)."""
+    help); ``photos``: a command on photographs, where colmap-sift keeps 0.5 px
+    (:func:`pipeline.stages.photo_merge_radius`; a rendered formation takes the rule's
+    radius with every feature method, :func:`pipeline.stages.merge_radius_for`)."""
     p.add_argument("--merge-radius", type=float, default=None, metavar="PX",
                    help="keypoints of one image closer than this are one feature (default: "
                         "the rule's, 2 px (the truth tolerance) with --resolution evidence or "
-                        "sync, 0.5 px with paper and paper-labels; 0.5 px with colmap-sift, as "
-                        "COLMAP keeps nearby DoG extrema apart"
-                        + (f", and with {online}" if online else "") + ")")
+                        "sync, 0.5 px with paper and paper-labels"
+                        + ("; 0.5 px with colmap-sift, as COLMAP keeps nearby DoG extrema apart"
+                           if photos else ", whatever --features")
+                        + (f"; 0.5 px with {online}" if online else "") + ")")
 
 
 def feature_options(args) -> tuple[str, int | None]:

@@ -82,7 +82,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "two-view verification, its 4 px threshold and 15 inliers) or opencv "
                         "(mutual ratio test and USAC MAGSAC)")
     add_resolution_option(p)
-    add_merge_radius_option(p)
+    add_merge_radius_option(p, photos=True)
     add_transport_option(p)
     g = p.add_argument_group("a team in motion: per-robot frame sequences (online association)")
     g.add_argument("--sequence", action="store_true",

@@ -135,3 +135,21 @@ def test_each_commands_help_names_only_its_own_options():
                 if flag not in own and m.group(1) not in commands:
                     foreign.append(f"{name} {action.option_strings}: {flag}")
     assert foreign == []
+
+
+@pytest.mark.parametrize("command,colmap_sift_radius", [
+    ("run-formation", 2.0), ("run-formations", 2.0), ("run-images", 0.5)])
+def test_merge_radius_help_states_what_colmap_sift_gets(command, colmap_sift_radius):
+    """run-formation's and run-formations' --help said "0.5 px with colmap-sift", as
+    run-images' does, but a rendered formation takes the rule's radius with every feature
+    method (2 px with the evidence rule): the formation commands no longer claim it."""
+    from pipeline.__main__ import build_parser
+    from pipeline.stages import merge_radius_for, photo_merge_radius
+
+    sub = build_parser([command])._subparsers._group_actions[0].choices[command]
+    text = next(a.help for a in sub._actions if "--merge-radius" in a.option_strings)
+    used = (photo_merge_radius if command == "run-images"
+            else lambda f, r, m: merge_radius_for(r, m))("colmap-sift", "evidence", None)
+    assert used == colmap_sift_radius
+    assert ("0.5 px with colmap-sift" in text) == (colmap_sift_radius == 0.5)
+    assert "2 px (the truth tolerance) with --resolution evidence" in text
