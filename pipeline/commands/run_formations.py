@@ -204,6 +204,7 @@ def run(args) -> int:
     from pipeline.outcome import exit_status
     from pipeline.runfolder import publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
+    from pipeline.stages import merge_radius_for
 
     validate.not_empty(args.out, "--out", "give a folder name, e.g. runs")  # not the cwd
     method, max_features = feature_options(args)
@@ -227,9 +228,13 @@ def run(args) -> int:
         table = formations_table(reports)
         check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
         written = []
+        # every option that changes the counts, the merge radius as the runs used it
+        budget = "auto" if max_features is None else max_features
+        radius = merge_radius_for(resolution, args.merge_radius)
         together.then(lambda: written.extend(write_summaries(
-            parent, f"# Formations (a)–(d), seed {args.seed}, {method}, {args.size}, "
-            f"resolution {args.resolution}\n\n" + table, reports)))
+            parent, f"# Formations (a)–(d), seed {args.seed}, {method} ({budget} features per "
+            f"image), {args.size}, resolution {args.resolution}, keypoint merge radius "
+            f"{radius:g} px\n\n" + table, reports)))
     md, js = written
     print(table)
     print(f"saved {md} and {js}")

@@ -27,3 +27,19 @@ def test_an_empty_out_is_refused_not_the_current_folder(tmp_path, monkeypatch, c
     assert capsys.readouterr().err == ("error: --out '' is empty (an unset variable?); give a "
                                        "folder name, e.g. runs\n")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_summary_title_names_every_option_that_changes_the_counts(tmp_path, monkeypatch):
+    """formations.md's title named the seed, features, size and rule, not the keypoint merge
+    radius nor the feature budget: a run at --merge-radius 2 (other counts than the README's
+    0.5 px) carried the title of a default run."""
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "runs"
+    for extra, title in (
+            ([], "# Formations (a)–(d), seed 0, sift (2000 features per image), 64x48, "
+                 "resolution paper, keypoint merge radius 0.5 px"),
+            (["--merge-radius", "2", "--max-features", "300", "--resolution", "evidence"],
+             "# Formations (a)–(d), seed 0, sift (300 features per image), 64x48, "
+             "resolution evidence, keypoint merge radius 2 px")):
+        assert main(["run-formations", "-q", "--size", "64x48", "--out", str(out), *extra]) == 0
+        assert (out / "formations.md").read_text().splitlines()[0] == title
