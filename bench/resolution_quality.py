@@ -145,6 +145,10 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error(f"--merge-radius {args.merge_radius!r}: expected comma-separated radii in "
                  "pixels, e.g. 2,3")
+    for radius in radii:  # as run-formation refuses one (a negative one merged nothing)
+        if not np.isfinite(radius) or radius < 0:
+            ap.error(f"--merge-radius {args.merge_radius!r}: {radius:g} is not a radius in "
+                     "pixels >= 0 (0 merges nothing)")
 
     passes = {}
     for radius in radii:

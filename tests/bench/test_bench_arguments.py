@@ -45,6 +45,10 @@ def _bench(name):
     ("resolution_quality", ["--seeds", "0"], "--seeds 0: at least 1"),
     ("resolution_quality", ["--formations", "xa"], "error: unknown formation 'x'; choose one of"),
     ("resolution_quality", ["--merge-radius", "x,2"], "--merge-radius 'x,2': expected comma"),
+    ("resolution_quality", ["--merge-radius=-1,2"],
+     "--merge-radius '-1,2': -1 is not a radius in pixels >= 0 (0 merges nothing)"),
+    ("resolution_quality", ["--merge-radius", "0.5,nan"],
+     "--merge-radius '0.5,nan': nan is not a radius in pixels >= 0"),
     ("multiway", ["--frames", "--graffiti", "", "--formations", "", "--warped-seeds",
                   "--team", "0"], "--team 0: a team has at least 2 cameras"),
 ])
