@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import data_synth  # noqa: E402
+from pipeline import validate  # noqa: E402
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
@@ -136,6 +137,7 @@ def main(argv=None) -> int:
         ap.error(problem)
     if args.seeds < 1:
         ap.error(f"--seeds {args.seeds}: at least 1")
+    validate.seed(args.first_seed, "--first-seed")  # named, not as the renderer's "seed"
     if not args.formations:
         ap.error("--formations '': give at least one formation, e.g. abcd")
     for f in args.formations:

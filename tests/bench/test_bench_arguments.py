@@ -43,6 +43,8 @@ def _bench(name):
     ("team_profile", ["--steps", "0"], "--steps 0: at least 1"),
     ("team_profile", ["--top", "-1"], "--top -1: at least 1 function per table"),
     ("resolution_quality", ["--seeds", "0"], "--seeds 0: at least 1"),
+    ("resolution_quality", ["--first-seed", "-3"],
+     "error: --first-seed -3: a seed must be an integer from 0 to 2**63 - 1"),
     ("resolution_quality", ["--formations", "xa"], "error: unknown formation 'x'; choose one of"),
     ("resolution_quality", ["--merge-radius", "x,2"], "--merge-radius 'x,2': expected comma"),
     ("resolution_quality", ["--merge-radius=-1,2"],
