@@ -99,6 +99,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline import validate
 from pipeline.errors import one_line_errors
 from pipeline.fusion.consensus import (
     RandomGeometricTopology,
@@ -336,6 +337,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    args.seed = validate.seed(args.seed, "--seed")  # numpy's traceback otherwise
     if args.trials < 2:  # the error's std over one trial is 0: no ratio to the paper's
         ap.error(f"--trials must be >= 2 (Table I's standard deviation of the error is taken "
                  f"over trials), got {args.trials}")

@@ -38,6 +38,8 @@ def _bench(name):
     ("fusion", ["--resolutions", "foo"], "error: resolution 'foo': choose one of"),
     ("voting_table1", ["--radius", "-1", "--trials", "2"], "error: radius must be > 0, got -1"),
     ("voting_table1", ["--trials", "1"], "--trials must be >= 2 (Table I's standard deviation"),
+    ("voting_table1", ["--seed", "-1", "--trials", "2"],
+     "error: --seed -1: a seed must be an integer from 0 to 2**63 - 1"),
     ("multiway", ["--frames", "--graffiti", "", "--warped-seeds", "--team", "--formations", "z"],
      "error: unknown formation 'z'"),
     ("team_moves", ["--n", "10", "1"], "--n 1: a team has at least 2 cameras"),
