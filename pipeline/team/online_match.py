@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import TeamError
+
 __all__ = ["online_match_main", "frame_file", "write_frame", "load_frame", "own_pairs"]
 
 
@@ -149,6 +151,12 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     for msg in inbox:  # kept while in the window: the sender sends a frame once
         if msg.kind == "frame":
             save(int(msg.payload["id"][0]), msg.payload)
+    for f in sorted({f for pair in own_pairs(i, n, t, window, transport.neighbours)
+                     for f in pair}):
+        if not frame_file(store, f).exists():  # its robot was written off before sending it
+            raise TeamError(f"robot {i}: the features of frame {f} never came from robot "
+                            f"{f % n}, lost (stopped, killed or cut off) during step {t}'s "
+                            "matching; run it again")
     feats, meta = {}, {}
     for pair in own_pairs(i, n, t, window, transport.neighbours):
         for f in pair:

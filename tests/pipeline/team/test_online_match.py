@@ -71,3 +71,44 @@ def test_robots_match_as_the_simulator_and_keep_their_window(sequence, tmp_path)
             messages += s_z["messages"]
             assert s_z["bytes"] > 0 and s_z["descriptor_bytes"] == s_s["descriptor_bytes"]
     assert messages == len(needed)  # each frame crossed each link once
+
+
+class _CutOff:
+    """A transport on which neighbour 1 was written off before it sent anything."""
+
+    neighbours = frozenset({1})
+    silent = frozenset({1})
+
+    def send(self, dst, kind, payload):
+        pass
+
+    def end_round(self, state=None):
+        return [], {}
+
+    def counters(self):
+        return {"messages": 0, "bytes": 0}
+
+
+def test_a_neighbour_lost_before_its_frame_came_is_named(sequence, tmp_path):
+    """Robot 0 of a 3-robot team matches the two new frames of step 0 (its own and robot 1's);
+    robot 1 lost before sending its frame stops robot 0 with an error naming robot 1 and the
+    missing frame (it read a file of its own folder that was never written, and said only
+    that the file did not exist)."""
+    from pipeline.errors import TeamError
+    from pipeline.matching.features import MERGE_RADIUS_PX
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.team.launcher import make_team
+    from pipeline.team.online_match import online_match_main, write_frame
+
+    views, n = sequence.flat.views, sequence.n_robots
+    frames = []
+    for i in range(n):
+        frames.append(str(tmp_path / f"camera-{i}.npz"))
+        write_frame(frames[-1], views[i])
+    data = {"kind": "online-match", "step": 0, "window": 2, "frames": frames,
+            "store": [str(tmp_path / f"robot-{i}") for i in range(n)]}
+    team = make_team("online-match-0", [[0, 1], [1, 2]], data,
+                     team_options("sift", 300, None, merge_radius=MERGE_RADIUS_PX), n=n)
+    with pytest.raises(TeamError, match=r"^robot 0: the features of frame 1 never came from "
+                                        r"robot 1, lost .* during step 0's matching"):
+        online_match_main(team, 0, _CutOff())
