@@ -44,9 +44,12 @@ from pipeline.budget import BYTES_PER_FRAME_PIXEL
 from pipeline.errors import InputError
 from pipeline.types import View
 
-__all__ = ["Sequence", "render_motion", "DEFAULT_SPEED"]
+__all__ = ["Sequence", "render_motion", "DEFAULT_SPEED", "MAX_SPEED"]
 
 DEFAULT_SPEED = 0.15
+#: the fastest formation rendered (metres per step): the scene is tens of metres long, and the
+#: projections of cameras near 1e308 m overflow
+MAX_SPEED = 1e6
 """Metres the formation drives along the facade per step (default of :func:`render_motion`)."""
 
 
@@ -116,13 +119,14 @@ def render_motion(formation: str = "d", seed: int = 0, steps: int = 10,
     ------
     InputError
         As :func:`data_synth.render`; ``steps < 1``; a speed that is not a finite number
-        >= 0; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1;
+        from 0 to ``MAX_SPEED``; ``p_up`` not a number in ``(0, 1]``; ``window`` not an integer >= 1;
         ``switching`` not a bool; frames that would hold more than the machine's memory.
     """
     steps = check_int(steps, "steps", 1)
     seed = check_int(seed, "seed", 0)  # a Python int: numpy's int64 wraps in seed * 1000
-    if not _is_real(speed) or not np.isfinite(speed) or speed < 0:
-        raise InputError(f"speed {speed!r}: expected metres per step, a finite number >= 0")
+    if not _is_real(speed) or not np.isfinite(speed) or not 0 <= speed <= MAX_SPEED:
+        raise InputError(f"speed {speed!r}: expected metres per step, a finite number >= 0 "
+                         f"and at most {MAX_SPEED:g}")
     if not _is_real(p_up) or not 0 < p_up <= 1:
         raise InputError(f"p_up {p_up!r}: expected a probability in (0, 1]")
     window = check_int(window, "window", 1)

@@ -7,7 +7,7 @@ import json
 import math
 
 from data_synth import check_formation
-from data_synth.motion import DEFAULT_SPEED
+from data_synth.motion import DEFAULT_SPEED, MAX_SPEED
 from pipeline import validate
 from pipeline.commands.options import (
     add_feature_options,
@@ -119,9 +119,9 @@ def online_config_from_args(args):
     check_online_options(args)
     if args.speed is None:
         args.speed = DEFAULT_SPEED
-    if not (math.isfinite(args.speed) and args.speed >= 0):
+    if not (math.isfinite(args.speed) and 0 <= args.speed <= MAX_SPEED):
         raise InputError(f"--speed {args.speed}: expected a finite number of metres per step "
-                         ">= 0")
+                         f"from 0 to {MAX_SPEED:g} (the scene is tens of metres long)")
     from pipeline.runs.transports import get_transport
 
     if not args.no_fusion and not hasattr(get_transport(args.transport).load(), "online_fusion"):

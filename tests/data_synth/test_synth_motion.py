@@ -46,6 +46,8 @@ def test_switching_graph_is_a_subset_that_recurs():
 
 @pytest.mark.parametrize("kw, match", [
     ({"steps": 0}, "steps"), ({"speed": -1.0}, "speed"), ({"p_up": 0.0}, "p_up"),
+    # so far that the cameras' projections overflow: named, not an OverflowError
+    ({"speed": 1e308}, r"speed 1e\+308: .*at most 1e\+06"),
     # not numbers: named, not a TypeError
     ({"speed": "1"}, r"speed '1'.*>= 0"), ({"speed": None}, "speed None"),
     ({"speed": True}, "speed True"), ({"p_up": "x"}, r"p_up 'x'.*\(0, 1\]"),

@@ -148,7 +148,7 @@ def test_a_formation_too_large_for_memory_is_refused_before_rendering(tmp_path, 
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("speed", ["inf", "-inf", "nan", "-0.5"])
+@pytest.mark.parametrize("speed", ["inf", "-inf", "nan", "-0.5", "1e308"])
 def test_online_speed_that_is_no_distance_is_named_as_the_option(tmp_path, capsys, speed):
     out = tmp_path / "run"
     assert main(["run-formation", "--out", str(out), *FAST, "--steps", "2",
