@@ -77,8 +77,12 @@ def online_match(views, t: int, n: int, window: int, edges_up, store: dict, *, f
     frames = np.arange((t + 1) * n)
     pairs = step_pairs(frames % n, frames // n, t, window, edges_up)
     local = np.unique(pairs)
+    # COLMAP's verification on several threads draws its RANSAC samples otherwise from run to
+    # run (a pair of 121 inliers on one run had none on the next); on one, every pair gets
+    # what a robot matching it alone gets (pipeline.team.online_match)
+    one = {"workers": 1} if match_options.get("matcher") == "colmap" else {}
     lk = Links.from_matches(match_edges([store[g] for g in local], [views[g] for g in local],
-                                        np.searchsorted(local, pairs), **match_options))
+                                        np.searchsorted(local, pairs), **match_options, **one))
     links = Links(local[lk.cam_i], lk.feat_i, local[lk.cam_j], lk.feat_j, lk.quality)
     return feats, links, {"pairs": int(len(pairs)),
                           "descriptor_bytes": [int(f.descriptors.nbytes) for f in feats]}
