@@ -47,10 +47,10 @@ from pipeline.types import View
 __all__ = ["Sequence", "render_motion", "DEFAULT_SPEED", "MAX_SPEED"]
 
 DEFAULT_SPEED = 0.15
+"""Metres the formation drives along the facade per step (default of :func:`render_motion`)."""
 #: the fastest formation rendered (metres per step): the scene is tens of metres long, and the
 #: projections of cameras near 1e308 m overflow
 MAX_SPEED = 1e6
-"""Metres the formation drives along the facade per step (default of :func:`render_motion`)."""
 
 
 @dataclass
