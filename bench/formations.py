@@ -5,7 +5,7 @@
 Runs ``python -m pipeline run-formations`` (SIFT, 640x480, seed 0, ``--resolution paper``,
 the paper's rule, as the command does by default; ground truth at 2 px) as a whole process
 and prints, with the load average at the start and the end, the README's table: conflictive
-sets and features, links deleted by resolution (good / spurious), sets left, links cut by
+sets and features, sets well / wrongly solved (Table IV), links deleted by resolution (good / spurious), sets left, links cut by
 fusion (spurious among them), pairwise precision before and after, beside the paper's
 figures, and the raw link precision of matching. Every figure is a count: the load does not
 change them. The command's own fuller tables are in ``OUT/formations.md``.
@@ -24,11 +24,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.evaluation.report import PAPER_TABLE_III_IV as _P  # noqa: E402
 
-#: the paper's Tables III–IV (SURF on real images, good / spurious counted by hand)
-PAPER = {"Conflictive sets": "2, 22, 31, 72", "Conflictive features": "14, 144, 204, 521",
-         "Links deleted by resolution (good / spurious)":
-             "2 (1/1), 26 (2/24), 46 (19/27), 131 (43/88)",
+#: the paper's Tables III–IV (SURF on real images, good / spurious counted by hand; its
+#: Table IV rows read as pipeline.evaluation.report.PAPER_TABLE_III_IV reads them)
+PAPER = {"Conflictive sets": ", ".join(map(str, _P["Conflictive sets (c)"])),
+         "Conflictive features": ", ".join(map(str, _P["Conflictive features"])),
+         "Conflictive sets well / wrongly solved": ", ".join(
+             f"{w}/{x}" for w, x in zip(_P["Inconsistencies well solved"],
+                                        _P["Inconsistencies wrongly solved"], strict=True)),
+         "Links deleted by resolution (good / spurious)": ", ".join(
+             f"{d} ({g}/{s})" for d, g, s in zip(_P["Deleted links"], _P["Good deleted links"],
+                                                 _P["Spurious deleted links"], strict=True)),
          "Conflictive sets after": "0"}
 
 
@@ -37,6 +44,8 @@ def table(reports: dict[str, dict]) -> str:
     rows = {
         "Conflictive sets": lambda r: r["before"]["conflictive_sets"],
         "Conflictive features": lambda r: r["before"]["conflictive_features"],
+        "Conflictive sets well / wrongly solved": lambda r: (
+            f"{r['resolution']['sets_well_solved']}/{r['resolution']['sets_wrongly_solved']}"),
         "Links deleted by resolution (good / spurious)": lambda r: (
             f"{r['resolution']['deleted_links']} ({r['resolution']['good_deleted']}/"
             f"{r['resolution']['spurious_deleted']})"),

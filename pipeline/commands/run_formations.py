@@ -30,6 +30,8 @@ TABLE_ROWS = [
     ("Conflictive sets (c)", "before", "conflictive_sets"),
     ("Number of features m_sum", "before", "m_sum"),
     ("Conflictive features", "before", "conflictive_features"),
+    ("Inconsistencies well solved", "resolution", "sets_well_solved"),
+    ("Inconsistencies wrongly solved", "resolution", "sets_wrongly_solved"),
     ("Deleted links", "resolution", "deleted_links"),
     ("Good deleted links", "resolution", "good_deleted"),
     ("Spurious deleted links", "resolution", "spurious_deleted"),

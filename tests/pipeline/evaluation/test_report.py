@@ -57,3 +57,30 @@ def test_sections_without_ground_truth_leave_good_and_spurious_out():
 def test_paper_tables_have_one_value_per_formation():
     assert all(len(v) == 4 for v in PAPER_TABLE_III_IV.values())
     assert PAPER_TABLE_III_IV["Deleted links"] == (2, 26, 46, 131)
+
+
+def test_sets_well_and_wrongly_solved_as_table_iv_counts_them():
+    """Table IV: a conflictive set is well solved when none of the links the algorithm keeps
+    in it is spurious (links cut by fusion came after it: still kept by the algorithm)."""
+    inside = np.array([True, True, True, True, False])  # Fig. 1's set; link 4 outside it
+    for truth, want in ((np.array([1, 0, 1, 1, 0]), (1, 0)),   # the spurious one was cut
+                        (np.array([0, 1, 1, 1, 1]), (0, 1)),   # a spurious one was kept
+                        (np.array([1, 1, 1, 1, 1]), (1, 0))):
+        ledger = LinkLedger.all_kept(LINKS, truth=truth, conflictive_before=inside)
+        ledger.cut(np.array([1]), "resolution", 3, iteration=1, case="c")
+        ledger.cut(np.array([0]), "fusion-outlier", 40)
+        r = resolution_section(ledger, {})
+        assert (r["sets_well_solved"], r["sets_wrongly_solved"]) == want, truth
+    # without conflictive sets, nothing to solve
+    r = resolution_section(_ledger(truth=np.array([1, 0, 1, 1, 1])), {})
+    assert (r["sets_well_solved"], r["sets_wrongly_solved"]) == (0, 0)
+
+
+def test_paper_table_iv_rows_are_keyed_by_what_they_count():
+    """The text beside Table IV: its fifth row counts the spurious links deleted, its sixth
+    the good ones; they were keyed the other way round."""
+    assert PAPER_TABLE_III_IV["Spurious deleted links"] == (1, 2, 19, 43)
+    assert PAPER_TABLE_III_IV["Good deleted links"] == (1, 24, 27, 88)
+    assert (PAPER_TABLE_III_IV["Inconsistencies well solved"],
+            PAPER_TABLE_III_IV["Inconsistencies wrongly solved"]) == ((1, 20, 24, 55),
+                                                                      (1, 2, 7, 17))
