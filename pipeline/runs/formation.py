@@ -22,7 +22,7 @@ from pipeline.faults import FaultConfig
 from pipeline.outcome import NO_LINKS_WHY, flag_result, merge_radius_why
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
-from pipeline.stages import CleaningResult, consistency_stage, evidence_inputs
+from pipeline.stages import CleaningResult, consistency_stage, evidence_inputs, merge_radius_for
 from pipeline.types import Links, RunRecord
 
 __all__ = ["FormationConfig", "run_formation", "write_formation_run"]
@@ -122,6 +122,9 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
         # the memory limit is a guard on the run, not an option of its outputs
         "config": {**{k: v for k, v in asdict(config).items() if k != "max_memory_gb"},
                    "formation": formation_used(config.formation, config.graph),
+                   # the radius the keypoints were merged at (merge_radius null: the rule's)
+                   "merge_radius_used_px": merge_radius_for(config.resolution,
+                                                            config.merge_radius),
                    "out": str(out)},
     }
     if cleaning.faults is not None:

@@ -73,3 +73,15 @@ def test_a_parametric_run_records_no_formation_letter(tmp_path, monkeypatch):
     assert config["formation"] is None and config["robots"] == 3 and config["graph"] == "line"
     clean, _ = _run(tmp_path, "lettered")
     assert clean["config"]["formation"] == "d"
+
+
+def test_the_report_records_the_merge_radius_the_keypoints_were_merged_at(tmp_path,
+                                                                          monkeypatch):
+    """Without --merge-radius, config.merge_radius was null and the radius the run merged its
+    keypoints at (the rule's: 2 px with evidence, 0.5 px with paper) was written nowhere."""
+    from pipeline.consistency.rules import get_rule
+
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path / "cache"))
+    report, _ = _run(tmp_path, "radius")
+    assert report["config"]["merge_radius"] is None
+    assert report["config"]["merge_radius_used_px"] == get_rule("evidence").merge_radius_px == 2.0
