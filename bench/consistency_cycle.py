@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -74,14 +75,12 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, nargs="+", default=[100, 1000])
     ap.add_argument("--evidence-max-n", type=int, default=None,
                     help="run the evidence rule only up to this n (default: every n)")
-    ap.add_argument("--repeat", type=int, default=3,
+    ap.add_argument("--repeat", type=count_argument, default=3,
                     help="runs of each process, the resolutions in turn (medians reported)")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     if min(args.n) < 2:
         ap.error(f"--n {min(args.n)}: a cycle joins at least 2 cameras")
 

@@ -47,6 +47,7 @@ import numpy as np  # noqa: E402
 from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E402
 
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -246,7 +247,7 @@ def plot(records: list[dict], path: Path) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[6, 10, 20, 50, 100, 200, 500, 1000])
-    ap.add_argument("--repeat", type=int, default=3,
+    ap.add_argument("--repeat", type=count_argument, default=3,
                     help="alternating runs of the distributed stage and union-find (medians)")
     ap.add_argument("--per-robot-max-n", type=int, default=200,
                     help="also run robot by robot (the engine of faults and middleware) up to this n")
@@ -265,8 +266,6 @@ def main(argv=None) -> int:
     ns = [6, 10, 20] if args.quick else args.n
     if min(ns) < 2:
         ap.error(f"--n {min(ns)}: a team has at least 2 robots")
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     if importlib.util.find_spec("matplotlib") is None:
         # checked before the runs: the figure is drawn at the end, after minutes of work
         ap.error("matplotlib is missing, for the figure time_bytes.png: install the bench "

@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.matching.features import extract_all  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
@@ -82,13 +83,11 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--max-features", type=int, default=2000)
     ap.add_argument("--methods", default="sift,orb,akaze")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=count_argument, default=3)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-foundation"))
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
     except ValueError:

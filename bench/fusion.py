@@ -48,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -185,7 +186,7 @@ def main(argv=None) -> int:
     ap.add_argument("--formations", nargs="*", default=["a", "b", "c", "d"])
     ap.add_argument("--resolutions", nargs="+", default=["evidence", "paper"])
     ap.add_argument("--sceaux", action=argparse.BooleanOptionalAction, default=True)
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=count_argument, default=3)
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--long-rounds", type=int, default=1000,
                     help="rounds of the fixed scheme that tell 'not converged at 100'")
@@ -193,8 +194,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     if args.long_rounds <= 100:
         ap.error(f"--long-rounds {args.long_rounds}: more than the fixed scheme's 100 rounds "
                  "(it tells whether a link was cut before its votes settled)")

@@ -28,7 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.commands.options import size_argument  # noqa: E402
+from pipeline.commands.options import count_argument, size_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -72,19 +72,15 @@ def _run(args: list[str], out: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")
-    ap.add_argument("--steps", type=int, default=3)
+    ap.add_argument("--steps", type=count_argument, default=3)
     ap.add_argument("--size", default=None, type=size_argument,
                     help="WxH (default: the command's)")
-    ap.add_argument("--repeat", type=int, default=1,
+    ap.add_argument("--repeat", type=count_argument, default=1,
                     help="runs of each configuration, alternated; the median wall kept")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-online-team"))
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
-    if args.steps < 1:
-        ap.error(f"--steps {args.steps}: at least 1")
     common = ["--steps", str(args.steps), "--formation", args.formation] + \
         ([] if args.size is None else ["--size", args.size])
     load = [round(x, 2) for x in os.getloadavg()]

@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 import data_synth  # noqa: E402
 from pipeline import validate  # noqa: E402
 from pipeline.association import camera_offsets  # noqa: E402
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import baselines, union_find_conflicts  # noqa: E402
 from pipeline.consistency.rules import get_rule  # noqa: E402
@@ -126,7 +127,7 @@ def one_run(formation: str, seed: int, merge_radius: float) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formations", default="abcd")
-    ap.add_argument("--seeds", type=int, default=5, help="how many seeds")
+    ap.add_argument("--seeds", type=count_argument, default=5, help="how many seeds")
     ap.add_argument("--first-seed", type=int, default=0,
                     help="seeds FIRST .. FIRST + SEEDS - 1 (unseen seeds: e.g. 5)")
     ap.add_argument("--merge-radius", default=f"{MERGE_RADIUS_PX},{get_rule('evidence').merge_radius_px}",
@@ -135,8 +136,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.seeds < 1:
-        ap.error(f"--seeds {args.seeds}: at least 1")
     validate.seed(args.first_seed, "--first-seed")  # named, not as the renderer's "seed"
     if not args.formations:
         ap.error("--formations '': give at least one formation, e.g. abcd")

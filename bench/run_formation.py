@@ -52,6 +52,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -117,15 +118,13 @@ def _write_images(folder: Path, formation: str, env: dict) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=5,
+    ap.add_argument("--repeat", type=count_argument, default=5,
                     help="rounds of floor, run, imports, help in turn (default 5)")
     ap.add_argument("--formation", default="d")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-run-formation"))
     args = ap.parse_args()
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
 
     # Python as a user runs it: compiled modules are cached (a PYTHONDONTWRITEBYTECODE left in
     # the environment would recompile the project's ~60 modules in every process)

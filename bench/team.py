@@ -26,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.commands.options import size_argument  # noqa: E402
+from pipeline.commands.options import count_argument, size_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -128,14 +128,12 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="640x480", type=size_argument)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team"))
     ap.add_argument("--only", default=None, help="run one formation key only")
-    ap.add_argument("--repeat", type=int, default=3,
+    ap.add_argument("--repeat", type=count_argument, default=3,
                     help="runs of each sim/zenoh configuration, the median wall kept "
                          "(default 3; the machine may be shared)")
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     if args.only is not None and not any(args.only in name for name in FORMATIONS):
         ap.error(f"--only {args.only!r}: no formation key holds it; the keys are "
                  + ", ".join(repr(name) for name in FORMATIONS))

@@ -29,6 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -71,13 +72,11 @@ def _run(cfg_kw: dict, out: Path, transport: str, wire: str | None = None) -> di
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--twenty", action="store_true", help="also the 20-robot ring2 team")
-    ap.add_argument("--repeat", type=int, default=1, help="runs of each encoding (median wall)")
+    ap.add_argument("--repeat", type=count_argument, default=1, help="runs of each encoding (median wall)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-bytes"))
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.repeat < 1:
-        ap.error(f"--repeat {args.repeat}: at least 1")
     teams = {"d (6 robots)": dict(formation="d")}
     if args.twenty:
         teams["ring2 (20 robots)"] = dict(robots=20, graph="ring2")

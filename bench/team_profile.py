@@ -25,6 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -46,17 +47,13 @@ def _rows(stats: pstats.Stats, key: str, top: int) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")
-    ap.add_argument("--steps", type=int, default=3)
+    ap.add_argument("--steps", type=count_argument, default=3)
     ap.add_argument("--no-fusion", action="store_true", help="profile the stage's teams only")
-    ap.add_argument("--top", type=int, default=12)
+    ap.add_argument("--top", type=count_argument, default=12)
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-profile"))
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    if args.steps < 1:
-        ap.error(f"--steps {args.steps}: at least 1")
-    if args.top < 1:
-        ap.error(f"--top {args.top}: at least 1 function per table")
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     cmd = ["run-formation", "--steps", str(args.steps), "--formation", args.formation,

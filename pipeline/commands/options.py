@@ -12,7 +12,7 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
+__all__ = ["count_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size", "size_argument"]
@@ -191,6 +191,22 @@ def feature_options(args) -> tuple[str, int | None]:
         raise InputError(f"--max-features {args.max_features}: at most {MAX_FEATURES} per image; "
                          "give a smaller count (e.g. 2000) or 'auto' for photos")
     return method, int(args.max_features)
+
+
+def count_argument(text: str) -> int:
+    """An argparse ``type`` for a count of at least one (the bench scripts' ``--repeat``,
+    ``--steps``, ...): argparse's one-line error names the option and the value.
+
+    >>> count_argument("3")
+    3
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of at least 1")
+    return value
 
 
 def size_argument(text: str) -> str:

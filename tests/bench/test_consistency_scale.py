@@ -16,7 +16,7 @@ def _bench():
 
 @pytest.mark.parametrize("args, message", [
     (["--n", "6", "1"], "--n 1: a team has at least 2 robots"),
-    (["--n", "6", "--repeat", "0"], "--repeat 0: at least 1"),
+    (["--n", "6", "--repeat", "0"], "argument --repeat: '0': expected a whole number of at least 1"),
 ])
 def test_bad_arguments_are_refused(tmp_path, capsys, args, message):
     out = tmp_path / "scale"
