@@ -1,0 +1,179 @@
+"""Benchmark: how much the cycles' support should weigh against the descriptor evidence in ``sync``.
+
+``sync`` (:mod:`pipeline.consistency.sync`) merges by ``w = λ + TRIANGLE_WEIGHT · s``: ``λ``
+the link's ratio log-odds, ``s`` its support term (triangles, the agreement rate beyond
+``K`` shared views, a quadrangle: :func:`pipeline.consistency.cycles.support_term`). On
+the warped hotel sets with hidden landmarks the plain greedy merge by descriptor quality
+beats it (README, "Multi-way matching"); on the synthetic ring2 team, where the quality is
+noise, the quality merge fails. This bench measures, on the same inputs as
+``bench/multiway.py``, the association of the same merge with the support scaled by ``α``:
+
+    ``w_α = λ + α · TRIANGLE_WEIGHT · s``  (``α = 1``: ``sync``; ``α = 0``: the quality order)
+
+computed centrally: each link's ``λ`` and ``w`` are the ``sync`` robots' own (their support
+round on the simulator, :func:`multiway.sync_evidence`), ``s = (w − λ) / TRIANGLE_WEIGHT``,
+then the sequential constrained greedy merge in ``sync``'s order (``w_α`` decreasing, ties
+by :func:`pipeline.consistency.keys.tie_key` and the ids), which ``sync``'s Borůvka rounds
+reach exactly (``tests/pipeline/consistency/test_sync.py``); at ``α = 1`` each row checks
+its kept links against ``sync``'s own (``same_as_sync``). ``good_links`` (the input's good
+links, nothing invented) bounds every rule that only keeps or cuts. Columns: pairwise F1 of
+the closure (as CLEAR's), per ``α``, and the spurious links each association keeps.
+
+Inputs: CMU hotel (``--frames``, given descriptors only, the Hungarian matches), warped
+copies with and without hidden landmarks (:func:`multiway.warped_landmarks`, SIFT,
+descriptors only), graphs ``complete``, ``seq:4``, ``ring2``, and the ring2 team
+(``--team``, ``--team-seeds``).
+
+Prints one line per input and saves ``runs/bench-sync-weights/results.json``.
+
+Usage: ``.venv/bin/python bench/sync_weights.py [--frames 20 101] [--warped-seeds 1 2 3]
+[--team 300] [--alphas 0 0.25 0.5 1 2]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+import multiway  # noqa: E402
+
+from pipeline.consistency import resolve_conflicts  # noqa: E402
+from pipeline.consistency.evidence import TRIANGLE_WEIGHT  # noqa: E402
+from pipeline.consistency.keys import tie_key  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.matching.link_evidence import ratio_llr  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
+
+
+def greedy_merge(m, links, w: np.ndarray) -> np.ndarray:
+    """Kept mask of the sequential constrained greedy merge in ``sync``'s order: links by
+    ``w`` decreasing, ties by :func:`tie_key` of their global ends, then the smaller and the
+    larger end; a link joins its two clusters unless they share a camera (Def. 2.4); kept
+    iff its ends end in one cluster."""
+    from scipy.cluster.hierarchy import DisjointSet
+
+    off = np.concatenate([[0], np.cumsum(m)])
+    a = off[links.cam_i] + links.feat_i
+    b = off[links.cam_j] + links.feat_j
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((hi, lo, tie_key(lo, hi), -np.asarray(w, np.float64)))
+    cam = np.repeat(np.arange(len(m)), m)
+    ds = DisjointSet(range(int(off[-1])))
+    cams = {}  # root -> set of cameras of its cluster
+    for k in order.tolist():
+        x, y = ds[int(a[k])], ds[int(b[k])]
+        if x == y:
+            continue
+        cx, cy = cams.get(x, {int(cam[a[k]])}), cams.get(y, {int(cam[b[k]])})
+        if cx & cy:
+            continue
+        ds.merge(x, y)
+        cams[ds[x]] = cx | cy
+    return np.array([ds.connected(int(p), int(q)) for p, q in zip(a, b, strict=True)])
+
+
+def measure(case, alphas) -> dict:
+    """F1 and spurious links kept per ``α`` (module docstring), ``good_links``' F1, and
+    whether ``α = 1`` keeps exactly ``sync``'s links."""
+    w, _ = multiway.sync_evidence(case.m, case.links)
+    lam = ratio_llr(1.0 - case.links.quality)
+    support = w - lam  # TRIANGLE_WEIGHT times the support term, as the robots computed it
+    good = np.asarray(case.link_good, bool)
+    out = {"links": int(len(good)), "good": int(good.sum()), "alphas": {}}
+    for alpha in alphas:
+        kept = greedy_merge(case.m, case.links, lam + alpha * support)
+        out["alphas"][f"{alpha:g}"] = dict(f1=case.scores(kept)["f1"],
+                                           spurious_kept=int((kept & ~good).sum()))
+        if alpha == 1:
+            sync = ~resolve_conflicts(case.m, case.edges, case.links, resolution="sync").deleted
+            out["same_as_sync"] = bool(np.array_equal(kept, sync))
+    out["good_links_f1"] = case.scores(good)["f1"]
+    return out
+
+
+def cases(a):
+    """(title, record fields, case) of every input of the bench."""
+    for frames in a.frames:
+        for graph in a.graphs:
+            yield (f"hotel {frames} frames, {graph}", dict(data="hotel", frames=frames, graph=graph),
+                   multiway.landmark_case(a.data, frames, graph, "descriptors", a.shuffle_seed))
+    for hide in a.warped_hide:
+        for wseed in a.warped_seeds:
+            with tempfile.TemporaryDirectory() as tmp:
+                wdir = multiway.warped_landmarks(a.data, Path(tmp) / "w", wseed, hide=hide)
+                for graph in a.graphs:
+                    yield (f"warped seed {wseed}, hidden {hide:g}, {graph}",
+                           dict(data="warped", warp_seed=wseed, hidden=hide, graph=graph),
+                           multiway.landmark_case(str(wdir), None, graph, "descriptors",
+                                                  a.shuffle_seed, descriptors="sift"))
+    for n in a.team:
+        for seed in a.team_seeds:
+            yield (f"team {n}, seed {seed}", dict(data="team", cameras=n, team_seed=seed,
+                                                  graph="ring2"),
+                   multiway.team_case(n, seed=seed))
+
+
+@one_line_errors
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", default=str(multiway.SHARED_DATA / "cmu_hotel"))
+    p.add_argument("--frames", type=int, nargs="*", default=[20, 101])
+    p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
+    p.add_argument("--warped-seeds", type=int, nargs="*", default=[1, 2, 3])
+    p.add_argument("--warped-hide", type=float, nargs="*", default=[0.0, 0.25])
+    p.add_argument("--team", type=int, nargs="*", default=[300])
+    p.add_argument("--team-seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--alphas", type=float, nargs="+", default=[0.0, 0.25, 0.5, 1.0, 2.0])
+    p.add_argument("--shuffle-seed", type=int, default=0)
+    p.add_argument("--out", default=str(ROOT / "runs" / "bench-sync-weights"))
+    a = p.parse_args(argv)
+    if problem := results_folder_problem(a.out):
+        p.error(problem)
+    if bad := [x for x in a.alphas if not np.isfinite(x) or x < 0]:
+        p.error(f"--alphas {bad[0]:g}: a scale of the support is finite and at least 0")
+    if a.team and min(a.team) < 3:
+        p.error(f"--team {min(a.team)}: a ring2 team has at least 3 cameras")
+    if (a.frames or a.warped_seeds) and not Path(a.data).is_dir():
+        p.error(f"--data {a.data}: no such folder (a labelled set laid out as CMU hotel); "
+                "pass --frames --warped-seeds with no values to run the team rows only")
+    alphas = sorted(set(a.alphas) | {1.0})
+    load = os.getloadavg()[0]
+    print("F1 per alpha (w = lambda + alpha * TRIANGLE_WEIGHT * support; 1 = sync, 0 = the "
+          "quality order); spurious links kept in brackets")
+    print(f"{'input':<38}" + "".join(f"{f'a={x:g}':>15}" for x in alphas) + f"{'good_links':>12}")
+    records = []
+    for title, fields, case in cases(a):
+        r = measure(case, alphas)
+        records.append({**fields, **r})
+        cells = "".join(f"{r['alphas'][f'{x:g}']['f1']:>8.3f} ({r['alphas'][f'{x:g}']['spurious_kept']:>4})"
+                        for x in alphas)
+        same = "" if r["same_as_sync"] else "  (alpha 1 differs from sync's own links!)"
+        print(f"{title:<38}{cells}{r['good_links_f1']:>12.3f}{same}", flush=True)
+    best = {f"{x:g}": 0 for x in alphas}
+    for r in records:
+        top = max(v["f1"] for v in r["alphas"].values())
+        for k, v in r["alphas"].items():
+            best[k] += v["f1"] >= top - 1e-12
+    print("inputs on which each alpha is (one of) the best: "
+          + ", ".join(f"{k}: {v} of {len(records)}" for k, v in best.items()))
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "results.json", {"machine": multiway.machine(load), "args": vars(a),
+                                             "triangle_weight": TRIANGLE_WEIGHT,
+                                             "best_counts": best, "records": records})
+    print(f"saved {out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,48 @@
+"""bench/sync_weights.py: the support of ``sync`` scaled by alpha, merged centrally."""
+
+import json
+
+import numpy as np
+import pytest
+from benchload import load_bench
+
+
+def _bench():
+    return load_bench("sync_weights")
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_alpha_one_is_sync_and_zero_is_the_quality_order(seed):
+    bench = _bench()
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.matching.link_evidence import ratio_llr
+
+    case = bench.multiway.team_case(40, seed=seed)
+    w, _ = bench.multiway.sync_evidence(case.m, case.links)
+    sync = ~resolve_conflicts(case.m, case.edges, case.links, resolution="sync").deleted
+    np.testing.assert_array_equal(bench.greedy_merge(case.m, case.links, w), sync)
+    # alpha 0: the merge follows the ratio log-odds alone; every kept link is conflict-free
+    lam = ratio_llr(1.0 - case.links.quality)
+    kept = bench.greedy_merge(case.m, case.links, lam)
+    assert case.scores(kept)["cycle_consistent"]
+    assert not np.array_equal(kept, sync)  # on the team the quality is noise: it differs
+
+
+def test_it_prints_and_saves_each_input(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert _bench().main(["--frames", "--warped-seeds", "--team", "40", "--team-seeds", "1",
+                          "--alphas", "0", "2", "--out", str(out)]) == 0
+    saved = json.loads((out / "results.json").read_text())
+    (rec,) = saved["records"]
+    assert (rec["cameras"], rec["team_seed"], rec["same_as_sync"]) == (40, 1, True)
+    assert sorted(rec["alphas"]) == ["0", "1", "2"]  # alpha 1 (sync) always measured
+    assert rec["good_links_f1"] == pytest.approx(1.0, abs=1e-12)
+    printed = capsys.readouterr().out
+    assert "team 40, seed 1" in printed and "differs" not in printed
+
+
+def test_a_negative_alpha_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        _bench().main(["--team", "40", "--frames", "--warped-seeds", "--alphas", "-1",
+                       "--out", str(tmp_path / "o")])
+    assert "--alphas -1" in capsys.readouterr().err
