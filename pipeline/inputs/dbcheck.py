@@ -9,8 +9,9 @@ it is read here first with :mod:`sqlite3` (read only) and every problem becomes 
 Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows >= 0``, a usable ``cols``
 (keypoints 2, 4 or 6 float32 columns; inlier matches 2 uint32 columns) and a blob of exactly
 ``rows * cols * 4`` bytes; image ids and pair ids are stored as integers (not text, real
-numbers or blobs); a pair id appears once and names two different images of the ``images``
-table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
+numbers or blobs); every image's ``camera_id`` is a row of the ``cameras`` table (COLMAP's
+mapper stops on an image without its camera); a pair id appears once and names two different
+images of the ``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
 images the other way round is read in its own orientation).
 
 The user's file is opened through SQLite, read only (:func:`open_readonly`), so changes
@@ -114,6 +115,15 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
     _integer_ids(path, "two_view_geometries", "pair_id",
                  _rows(con, "SELECT pair_id, typeof(pair_id) FROM two_view_geometries", path))
     images = {r[0] for r in _rows(con, "SELECT image_id FROM images", path)}
+    if "cameras" in tables:
+        cameras = {r[0] for r in _rows(con, "SELECT camera_id FROM cameras", path)}
+        for image_id, name, camera_id in _rows(
+                con, "SELECT image_id, name, camera_id FROM images ORDER BY image_id", path):
+            if camera_id not in cameras:
+                raise InputError(f"database {str(path)!r}, table images, image_id {image_id} "
+                                 f"({name!r}): names camera_id {camera_id!r}, which is not in "
+                                 "the cameras table; the database is inconsistent (rebuild it "
+                                 "with COLMAP)")
     kp = _rows(con, "SELECT image_id, rows, cols, length(data) FROM keypoints", path)
     _check_matrix_rows(path, "keypoints", "image_id", kp, (2, 4, 6))
     tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries", path)
