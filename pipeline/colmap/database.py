@@ -447,6 +447,8 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     names = [im.name for im in images]
     image_ids = np.array([im.image_id for im in images], dtype=np.int64)
     cam_of_id = {int(iid): k for k, iid in enumerate(image_ids)}
+    for im in images:
+        _check_keypoints(path, im.name, keypoints[im.image_id], cameras.get(im.camera_id))
     kps = [_xy(keypoints[im.image_id]) for im in images]
     usable = [(pid, g) for pid, g in zip(pair_ids, geometries, strict=True)
               if len(g.inlier_matches)]
@@ -497,6 +499,44 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
                             pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
                             cameras=[cameras.get(im.camera_id) for im in images],
                             fundamental=fundamental, link_pair_id=source)
+
+
+#: how far (a fraction of the longer side) a keypoint may lie outside its camera's image
+KEYPOINT_MARGIN = 0.05
+
+
+def _check_keypoints(path: Path, name: str, keypoints, camera) -> None:
+    """InputError unless every keypoint of image ``name`` is a finite position in its camera's
+    ``W x H`` image (COLMAP's convention, ``[0, W] x [0, H]``), give or take
+    :data:`KEYPOINT_MARGIN` of the longer side; a camera of unknown size (0) bounds nothing.
+
+    NaN keypoints were refused later under the pipeline's camera index, not the image's name;
+    keypoints at another resolution than their camera (or absurd ones, ``1e30``) were read as
+    they were, and ``--fusion``'s mapping never returned on such a database.
+    """
+    kp = np.asarray(keypoints, dtype=np.float64)
+    if kp.size == 0:
+        return
+    xy = kp.reshape(len(kp), -1)[:, :2]
+    finite = np.isfinite(xy).all(axis=1)
+    if not finite.all():
+        k = int(np.flatnonzero(~finite)[0])
+        raise InputError(f"database {str(path)!r}: keypoint {k} of image {name!r} is "
+                         f"[{xy[k, 0]:g}, {xy[k, 1]:g}], not a position; the database is "
+                         "corrupt (rebuild it with COLMAP)")
+    w, h = (0, 0) if camera is None else (int(camera.width), int(camera.height))
+    if w <= 0 or h <= 0:
+        return
+    margin = KEYPOINT_MARGIN * max(w, h)
+    out = ((xy[:, 0] < -margin) | (xy[:, 0] > w + margin)
+           | (xy[:, 1] < -margin) | (xy[:, 1] > h + margin))
+    if out.any():
+        k = int(np.flatnonzero(out)[0])
+        raise InputError(f"database {str(path)!r}: keypoint {k} of image {name!r} at "
+                         f"[{xy[k, 0]:g}, {xy[k, 1]:g}] lies outside the {w}x{h} image of its "
+                         f"camera ({int(out.sum())} of its {len(xy)} keypoints do); keypoints "
+                         "and camera of different resolutions, or a corrupt database: rebuild "
+                         "it with COLMAP")
 
 
 def _fundamental_px(geometry) -> np.ndarray | None:
