@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from pipeline import validate
@@ -148,8 +149,9 @@ def config_from_args(args) -> ImagesConfig:
         raise InputError(f"--truth-tol {args.truth_tol} without --truth: the tolerance is "
                          "that of --truth homographies; add it or drop --truth-tol")
     truth_tol = 2.0 if args.truth_tol is None else args.truth_tol
-    if not truth_tol > 0:
-        raise InputError(f"--truth-tol {truth_tol}: expected a positive number of pixels")
+    if not (math.isfinite(truth_tol) and truth_tol > 0):
+        raise InputError(f"--truth-tol {truth_tol}: expected a finite number of pixels > 0, "
+                         "e.g. --truth-tol 2 (at inf every link would count as good)")
     method, max_features = feature_options(args)
     if args.no_rerun and (args.spawn or args.connect):
         raise InputError(f"{'--spawn' if args.spawn else '--connect'} with --no-rerun: the live "
