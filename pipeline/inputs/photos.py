@@ -553,7 +553,7 @@ def identical_pixels(views: list[View], digests: list[bytes] | None = None) -> l
 
 
 def load_folder(directory: str | Path, max_size: int | None = 1600,
-                intrinsics: str | Path = "auto") -> list[View]:
+                intrinsics: str | Path = "auto", check_names=None) -> list[View]:
     """Load every image of a folder as a :class:`View`, in name order.
 
     Parameters
@@ -570,6 +570,10 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
         - ``"auto"``: ``DIR/K.txt`` if present (as the path case), otherwise per image EXIF if
           present, otherwise the stated guess ``f = 1.2 max(w, h)``, principal point at the
           centre, with ``intrinsics_known=False`` (matching then uses the fundamental matrix).
+    check_names : callable or None
+        Called with the image file names, in name order, once the folder is listed and before
+        any image is decoded (e.g. a comm-graph file naming them, so that a bad row is refused
+        before the images of a large folder are read); it raises to refuse them.
 
     Returns
     -------
@@ -603,6 +607,8 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                              f"longest side), or None for full resolution")
     files = _image_files(directory)
     mode, K_file, k_path = _resolve_intrinsics(intrinsics, directory)
+    if check_names is not None:
+        check_names([p.name for p in files])
     views: list[View] = []
     multi: list[str] = []
     off_centre: list[str] = []

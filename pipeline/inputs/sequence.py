@@ -52,8 +52,12 @@ class PhotoSequence:
 
 
 def load_sequence(directory: str | Path, max_size: int | None = 1600,
-                  intrinsics: str | Path = "auto") -> PhotoSequence:
+                  intrinsics: str | Path = "auto", check_robots=None) -> PhotoSequence:
     """Read ``DIR`` (module docstring) into a :class:`PhotoSequence`.
+
+    ``check_robots``: called with the robots' sub-folder names, in robot order, once the
+    folder is listed and before any frame is decoded (e.g. a comm-graph file naming them);
+    it raises to refuse them.
 
     Raises
     ------
@@ -111,6 +115,8 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
                     f"otherwise than by number ({robot}/{pair[0]} before {robot}/{pair[1]}): "
                     "step k is every robot's k-th frame by name; zero-pad the numbers (e.g. "
                     f"{_zero_padded(pair[1])}) for number order")
+    if check_robots is not None:
+        check_robots([p.name for p in subs])
     # the most specific K.txt wins: a robot's own camera is not overridden by the team's
     per_robot = [_load_robot(p, max_size,
                              "auto" if intrinsics == "auto" and (p / "K.txt").is_file()

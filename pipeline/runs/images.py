@@ -355,14 +355,17 @@ def _load(config: ImagesConfig, timer: StageTimer):
     with timer.stage("load", f"{config.directory}, longest side {config.max_size or 'full'} px"):
         intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
             else Path(config.intrinsics)
-        loaded = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics)
+        by_similarity = str(config.graph).startswith("knn:")
+        # a graph file is read on the file names before any image is decoded
+        loaded = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics,
+                             check_names=None if by_similarity
+                             else lambda names: comm_graph(config.graph, names))
         # cameras in the order of their pixels' digests: file names change nothing
         digests = pixel_digests(loaded)
         views = in_content_order(loaded, digests)
         for same in identical_pixels(loaded, digests):
             timer.warn(f"images {', '.join(same)} have identical pixels: the same photograph "
                        "twice matches itself and adds nothing; keep one")
-        by_similarity = str(config.graph).startswith("knn:")
         comm_edges = None
         if not by_similarity:
             # kinds that follow an order (line, ring, seq:K) and index files follow the file

@@ -77,7 +77,10 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     timer = timer or StageTimer()
     check_matcher(config.matcher, config.features)  # before any work
     with timer.stage("load", config.directory):
-        seq = load_sequence(config.directory, config.max_size, config.intrinsics)
+        # a graph file is read on the robots' names before any frame is decoded
+        seq = load_sequence(config.directory, config.max_size, config.intrinsics,
+                            check_robots=lambda robots: comm_graph(config.graph, robots,
+                                                                   what="robot"))
     if seq.ignored:
         timer.warn(f"{len(seq.ignored)} image(s) directly in {config.directory} belong to no "
                    f"robot and are not used ({', '.join(seq.ignored[:3])}"
