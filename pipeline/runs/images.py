@@ -356,10 +356,19 @@ def _load(config: ImagesConfig, timer: StageTimer):
         intrinsics = config.intrinsics if config.intrinsics in ("auto", "exif") \
             else Path(config.intrinsics)
         by_similarity = str(config.graph).startswith("knn:")
-        # a graph file is read on the file names before any image is decoded
+
+        def check_names(names: list[str]) -> None:
+            # a graph file and the homographies are read on the file names before any image
+            # is decoded
+            if not by_similarity:
+                comm_graph(config.graph, names)
+            if config.truth == "homographies":
+                from pipeline.evaluation.truth import read_homographies
+
+                read_homographies(config.directory, len(names))
+
         loaded = load_folder(config.directory, max_size=config.max_size, intrinsics=intrinsics,
-                             check_names=None if by_similarity
-                             else lambda names: comm_graph(config.graph, names))
+                             check_names=check_names)
         # cameras in the order of their pixels' digests: file names change nothing
         digests = pixel_digests(loaded)
         views = in_content_order(loaded, digests)
