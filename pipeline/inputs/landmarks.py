@@ -22,7 +22,8 @@ when it would give an image another file than the one of its name, or when some 
 named after their images and an image has none of its name (order would give it another
 image's file: order is for folders whose files are named after no image). An image with
 two keypoint files of its name (``NAME.txt`` and ``NAME.mat``) is refused unless they hold the
-same labels. Text and MAT files
+same labels, and so are two images of one name (``NAME.png`` and ``NAME.jpg``), which would
+both take ``NAME.txt``. Text and MAT files
 that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
 keypoint files and are ignored.
 """
@@ -293,6 +294,21 @@ def _refuse_order_mismatch(directory: Path, images: list[Path], paired: list[Pat
                      f"after its image ({pattern}), or none")
 
 
+def _refuse_shared_stem(directory: Path, images: list[Path],
+                        by_stem: dict[str, tuple[Path, np.ndarray]]) -> None:
+    """InputError when two images of one name (``NAME.png`` and ``NAME.jpg``) would both take
+    the keypoint file ``NAME.txt`` of that name: one image's labels given to another, and
+    the same view counted twice."""
+    first: dict[str, Path] = {}
+    for im in images:
+        other = first.setdefault(im.stem, im)
+        if other is not im:
+            raise InputError(f"{directory}: {other.name} and {im.name} are both images of the "
+                             f"keypoint file {by_stem[im.stem][0].name} (files pair with images "
+                             "by name); keep one of the two images, or give each its own name "
+                             "and keypoint file")
+
+
 def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path],
                   kind: str = "keypoint") -> None:
     """Warn of ``kind`` (keypoint or descriptor) files paired with no image (their image is
@@ -388,6 +404,7 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                              f"of {p.stem} and their labels differ; keep one of them")
     if all(im.stem in by_stem for im in images):
         pairing = "name"
+        _refuse_shared_stem(directory, images, by_stem)
         kps = [by_stem[im.stem] for im in images]
         _warn_orphans(directory, files, [p for p, _ in by_stem.values()
                                          if p.stem not in image_stems])

@@ -192,3 +192,16 @@ def test_one_file_of_negative_descriptors_among_histograms_is_warned(tmp_path, c
     assert {f.descriptor_kind for f in frames} == {"vector"}
     assert "1 of 3 descriptor files hold negative values (view1.scf)" in caplog.text
     assert "compared by L2 distance, not chi-square" in caplog.text
+
+
+def test_two_images_of_one_name_are_refused_not_given_one_keypoint_file(tmp_path):
+    """view0.png and view0.jpg (a converted copy) both paired with view0.txt by name: the same
+    labels on two cameras, one view counted twice; refused naming both images and the file."""
+    pts = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0]])
+    for k in range(3):
+        _image(tmp_path / f"view{k}.png")
+        np.savetxt(tmp_path / f"view{k}.txt", pts + k)
+    Image.open(tmp_path / "view0.png").convert("RGB").save(tmp_path / "view0.jpg")
+    with pytest.raises(InputError, match=r"view0\.jpg and view0\.png are both images of the "
+                                         r"keypoint file view0\.txt"):
+        load_landmark_folder(tmp_path, descriptors="sift")
