@@ -94,11 +94,15 @@ def flag_result(report: dict, names: list[str] | None = None,
     if not isinstance(total, int):
         total = (report.get("before") or {}).get("links")
     kept = after.get("links")
-    if total == 0:
+    # rows an input had already deleted (a run-output links.csv given to resolve) stay as
+    # they were: when they are all it holds, this run had no link to associate, and cut none
+    active = total - int(report.get("previously_deleted") or 0) if isinstance(total, int) \
+        else total
+    if active == 0:
         warnings.append(_warning(
             "no-links", "the input holds no link between two images: there is nothing to "
                         f"associate ({no_links_why})"))
-    if total and kept == 0:
+    if active and kept == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
                                                   "cut; the result holds no association"))
     gone = {str(k) for k in faults.get("crashed", {})}

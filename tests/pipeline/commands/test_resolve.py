@@ -1,5 +1,6 @@
 """``python -m pipeline resolve``: round trip on the paper's Fig. 1 and each bad input."""
 
+import json
 import re
 
 import numpy as np
@@ -208,3 +209,18 @@ def test_deleted_rows_between_non_neighbours_are_read_with_the_comm_graph(tmp_pa
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert "in.links.csv:3: link (0,1)-(2,0) joins cameras 0 and 2, which are not neighbours" \
         in capsys.readouterr().err
+
+
+def test_a_links_csv_of_deleted_rows_only_has_nothing_to_associate(tmp_path, capsys):
+    """A run-output links.csv whose rows were all deleted by an earlier run: this run has no
+    link to associate and cuts none, so it warns 'no-links' (naming rows already deleted),
+    not that every input link was cut."""
+    src, out, rep = tmp_path / "in.csv", tmp_path / "o.csv", tmp_path / "r.json"
+    src.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n"
+                   "0,0,1,0,deleted,resolution,3,\n1,0,2,0,deleted,resolution,3,\n")
+    assert main(["resolve", "--links", str(src), "--out", str(out), "--report", str(rep)]) == 0
+    err = capsys.readouterr().err
+    assert "there is nothing to associate" in err and "only rows already deleted" in err
+    assert "was cut" not in err
+    assert [w["code"] for w in json.loads(rep.read_text())["warnings"]] == ["no-links"]
+    assert read_run_links_csv(out).status.tolist() == ["deleted", "deleted"]
