@@ -339,6 +339,21 @@ def results_folder_problem(out, flag: str = "--out") -> str | None:
     return None
 
 
+def _missing_before_dotdot(p: Path) -> Path | None:
+    """The first entry of ``p`` that is no folder (missing, or a file) while a later ``..`` of
+    ``p`` steps out of it (``RUN/sub/..``: the system resolves no such path, and making the
+    folders above the run folder would make ``RUN/sub``), or None."""
+    parts = p.parts
+    if ".." not in parts[1:]:
+        return None
+    last = len(parts) - 1 - parts[::-1].index("..")
+    for i in range(last):
+        prefix = Path(*parts[:i + 1])
+        if parts[i] != ".." and not prefix.is_dir():
+            return prefix
+    return None
+
+
 def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     """Check that the run folder ``out`` may be (re)placed by a new run; return it as a Path.
 
@@ -353,6 +368,12 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     if not str(out) or p.is_symlink():
         what = "is a symbolic link" if str(out) else "is empty"
         raise InputError(f"{flag} {str(out)!r} {what}; give the name of a run folder")
+    gone = _missing_before_dotdot(p)
+    if gone is not None:
+        raise InputError(f"{flag} {str(out)!r}: {str(gone)!r} is no folder, so the '..' "
+                         "after it names none (a run would make the missing folders and leave "
+                         f"them behind); give the path without '..', e.g. "
+                         f"{os.path.normpath(out)!r}")
     real = _real(p)
     cwd = _real(Path.cwd())
     if real == Path(real.anchor) or real == cwd or real in cwd.parents:
