@@ -354,6 +354,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     from pipeline.evaluation.links import link_truth
     from pipeline.evaluation.online import ScopedTruth, scope_pairs
     from pipeline.evaluation.report import versions
+    from pipeline.matching.features import MERGE_RADIUS_PX
 
     oa, seq = run.online, run.sequence
     links = oa.all_links()
@@ -406,6 +407,10 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         "ground_truth": {"tolerance_px": config.tol_px},
         "versions": versions(),
         "config": {**asdict(config), "formation": formation_used(config.formation, config.graph),
+                   # the radius the keypoints were merged at (merge_radius null: the online
+                   # run's own, MERGE_RADIUS_PX, whatever the rule)
+                   "merge_radius_used_px": float(MERGE_RADIUS_PX if config.merge_radius is None
+                                                 else config.merge_radius),
                    "out": str(config.out_dir())},
     }
     from pipeline.outcome import flag_online, merge_radius_why
