@@ -354,6 +354,30 @@ def _missing_before_dotdot(p: Path) -> Path | None:
     return None
 
 
+#: bytes the names a run keeps beside its folder NAME add to it: ``.NAME.old-`` and 12 hex
+#: digits (the longest; ``.NAME.lock-`` and ``.NAME.tmp-`` take 8 random characters,
+#: :mod:`pipeline.runfolder`)
+RUN_NAME_SPARE = len("..old-") + 12
+
+
+def _name_too_long(p: Path) -> str | None:
+    """Why the run folder ``p``'s own name leaves no room for the names a run keeps beside
+    it (the file system's limit, usually 255 bytes, less :data:`RUN_NAME_SPARE`), or None."""
+    parent = Path(os.path.abspath(p)).parent
+    while not parent.is_dir() and parent != parent.parent:
+        parent = parent.parent
+    try:
+        limit = os.pathconf(parent, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        limit = 255
+    n = len(os.fsencode(p.name))
+    if n + RUN_NAME_SPARE <= limit:
+        return None
+    return (f"its name is {n} bytes long, and a run keeps '.NAME.lock-…', '.NAME.tmp-…' and "
+            f"'.NAME.old-…' beside its folder: a run folder's name may be at most "
+            f"{limit - RUN_NAME_SPARE} bytes here")
+
+
 def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     """Check that the run folder ``out`` may be (re)placed by a new run; return it as a Path.
 
@@ -374,6 +398,9 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
                          "after it names none (a run would make the missing folders and leave "
                          f"them behind); give the path without '..', e.g. "
                          f"{os.path.normpath(out)!r}")
+    too_long = _name_too_long(p)
+    if too_long is not None:
+        raise InputError(f"{flag} {str(out)!r}: {too_long}; choose a shorter name")
     real = _real(p)
     cwd = _real(Path.cwd())
     if real == Path(real.anchor) or real == cwd or real in cwd.parents:
