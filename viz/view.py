@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -177,7 +178,7 @@ def main(argv=None) -> int:
               f"ssh -L {args.port}:localhost:{args.port} -L {args.grpc_port}:localhost:"
               f"{args.grpc_port} HOST, then open that URL); Ctrl-C stops it", flush=True)
     if args.dry_run:
-        print(" ".join(cmd))
+        print(shlex.join(cmd))  # a path with a space or a quote stays one argument
         return 0
     try:
         return subprocess.call(cmd)
