@@ -242,6 +242,10 @@ def _check_writable_folder(path: Path, flag: str) -> None:
     """The nearest existing ancestor of ``path`` must be a folder we may write in."""
     parent = Path(os.path.abspath(path)).parent
     while not parent.exists():
+        if parent.is_symlink():  # mkdir would say only "File exists"
+            raise InputError(f"{flag} {str(path)!r}: {str(parent)!r} is a symbolic link that "
+                             f"leads nowhere (to {os.readlink(parent)!r}); create or mount its "
+                             "target, or choose another place")
         parent = parent.parent
     if not parent.is_dir():
         raise InputError(f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder; "
