@@ -367,8 +367,9 @@ def parse_team(doc, path: Path | None = None) -> Team:
                              "{\"endpoint\": \"tcp/HOST:PORT\"}")
         ep = obs.get("endpoint")
         m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
-        if not m:
-            raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT")
+        if not m or not 0 < int(m.group(3)) < 65536:  # port 0: a port of the system's choice
+            raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT "
+                             "with a port in 1..65535")
         if ep in endpoints:
             raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
         for key in _endpoint_addresses(m):

@@ -181,6 +181,15 @@ def test_the_observer_on_a_robots_address_written_another_way_is_refused():
         parse_team(_doc(observer={"endpoint": "tcp/localhost:7000"}))
 
 
+@pytest.mark.parametrize("endpoint", ["tcp/127.0.0.1:0", "tcp/127.0.0.1:99999"])
+def test_an_observer_port_outside_1_to_65535_is_refused(endpoint):
+    """Port 0 would listen on a port the system picks, where no robot connects; 99999 only
+    failed when the observer opened its session, while every robot ran on unheard."""
+    with pytest.raises(InputError, match=rf"observer endpoint '{re.escape(endpoint)}' must look "
+                                         r"like tcp/HOST:PORT with a port in 1\.\.65535"):
+        parse_team(_doc(observer={"endpoint": endpoint}))
+
+
 @pytest.mark.parametrize("first, second", [
     ("tcp/127.0.0.1:7001", "tcp/localhost:7002"),      # other port
     ("tcp/127.0.0.1:7001", "quic/localhost:7001"),     # quic is UDP: another port space
