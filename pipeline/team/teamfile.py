@@ -468,10 +468,11 @@ def _check_data(data: dict, n: int, where: str) -> None:
         seed = data.get("seed", 0)
         if not _is_int(seed) or seed < 0:
             raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")
-        if data.get("robots") is not None and not _is_int(data["robots"]):
-            raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer or "
-                             "null")
-        expected = data.get("robots") or 6
+        if data.get("robots") is not None and not (_is_int(data["robots"])
+                                                   and data["robots"] >= 2):
+            raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer >= 2 "
+                             "or null (the formation's 6)")
+        expected = 6 if data.get("robots") is None else data["robots"]
         if expected != n:
             raise InputError(f"{where}: data describes {expected} robots but 'robots' lists {n}")
     elif kind == "images":

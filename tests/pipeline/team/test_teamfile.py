@@ -382,3 +382,21 @@ def test_a_version_other_than_1_is_refused(version):
     with pytest.raises(InputError, match=r"version .* is not supported \(use 1\)"):
         parse_team(_doc(version=version))
     assert parse_team(_doc(version=1.0)).n == 3
+
+
+@pytest.mark.parametrize("robots", [0, 1, -3])
+def test_a_formation_of_fewer_than_two_robots_is_named_as_written(robots):
+    """data.robots 0 was read as the formation's default and refused as 'data describes 6
+    robots', a count the file did not hold."""
+    data = {"kind": "formation", "formation": "line", "robots": robots, "size": [320, 240]}
+    with pytest.raises(InputError, match=rf"data.robots {robots} must be an integer >= 2 or "
+                                         r"null \(the formation's 6\)"):
+        parse_team(_doc(data=data))
+
+
+def test_a_formation_of_null_robots_is_the_formation_s_six():
+    data = {"kind": "formation", "formation": "line", "robots": None, "size": [320, 240]}
+    with pytest.raises(InputError, match=r"data describes 6 robots but 'robots' lists 3"):
+        parse_team(_doc(data=data))
+    data["robots"] = 3
+    assert parse_team(_doc(data=data)).n == 3
