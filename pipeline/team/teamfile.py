@@ -285,11 +285,14 @@ def parse_team(doc, path: Path | None = None) -> Team:
                              "each robot listens on its own")
         keys = _endpoint_addresses(m)
         for key in keys:
-            if key in addresses:
-                other = addresses[key]
+            other = _same_address(key, addresses)
+            if other is not None:
+                wild = _ANY in (key[1], *(k[1] for k, r in addresses.items() if r == other))
+                how = (f"robot {other}'s {robots[other].endpoint!r} on the same port: a wildcard "
+                       "address listens on every address of its machine") if wild else \
+                    f"the address of robot {other}'s {robots[other].endpoint!r}"
                 raise InputError(f"{where}: robots {other} and {rid} share endpoint {ep!r} "
-                                 f"(the address of robot {other}'s {robots[other].endpoint!r}); "
-                                 "each robot listens on its own")
+                                 f"({how}); each robot listens on its own")
         addresses.update(dict.fromkeys(keys, rid))
         endpoints[ep] = rid
         robots[rid] = RobotEntry(rid, ep)
@@ -373,12 +376,30 @@ def parse_team(doc, path: Path | None = None) -> Team:
         if ep in endpoints:
             raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
         for key in _endpoint_addresses(m):
-            if key in addresses:
-                other = addresses[key]
+            other = _same_address(key, addresses)
+            if other is not None:
                 raise InputError(f"{where}: observer endpoint {ep!r} is robot {other}'s "
                                  f"({robots[other].endpoint!r}, the same address)")
         observer = ep
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+#: what a wildcard address (0.0.0.0, ::) is compared as: it listens on every address of the
+#: machine, so it takes its port from every other address there
+_ANY = "any"
+_ANY_IPS = (ipaddress.ip_address("0.0.0.0"), ipaddress.ip_address("::"))
+
+
+def _same_address(key: tuple[str, str, int], addresses: dict) -> int | None:
+    """The robot already listening where ``key`` (transport, address, port) would listen, or
+    None: the same address, or either of the two a wildcard on the same transport and port."""
+    if key in addresses:
+        return addresses[key]
+    transport, address, port = key
+    for (t, a, p), rid in addresses.items():
+        if t == transport and p == port and _ANY in (a, address):
+            return rid
+    return None
 
 
 #: what localhost's addresses are compared as: 127.0.0.1, ::1 and localhost are one (a name
@@ -414,7 +435,8 @@ def _host_addresses(host: str) -> tuple[str, ...]:
         ip = _ip(a.split("%")[0])
         if ip is not None and getattr(ip, "ipv4_mapped", None):
             ip = ip.ipv4_mapped
-        key = _LOOPBACK if ip in _LOCALHOST_IPS else str(ip) if ip else a
+        key = _LOOPBACK if ip in _LOCALHOST_IPS else _ANY if ip in _ANY_IPS else \
+            str(ip) if ip else a
         if key not in out:
             out.append(key)
     return tuple(out)

@@ -400,3 +400,29 @@ def test_a_formation_of_null_robots_is_the_formation_s_six():
         parse_team(_doc(data=data))
     data["robots"] = 3
     assert parse_team(_doc(data=data)).n == 3
+
+
+@pytest.mark.parametrize("first, second", [
+    ("tcp/0.0.0.0:7001", "tcp/127.0.0.1:7001"),
+    ("tcp/127.0.0.1:7001", "tcp/0.0.0.0:7001"),
+    ("tcp/[::]:7001", "tcp/10.0.0.2:7001"),
+])
+def test_a_wildcard_address_shares_its_port_with_every_address(first, second):
+    """A robot on 0.0.0.0 (or ::) listens on every address of its machine: the other robot
+    could not bind that port, and the team was accepted until it failed at its start."""
+    with pytest.raises(InputError, match=(
+            rf"robots 0 and 1 share endpoint '{re.escape(second)}' \(robot 0's "
+            rf"'{re.escape(first)}' on the same port: a wildcard address listens on every "
+            r"address of its machine\); each robot listens on its own")):
+        parse_team(_doc(robots=_endpoints(first, second, "tcp/127.0.0.1:7002")))
+
+
+def test_a_wildcard_observer_on_a_robots_port_is_refused():
+    with pytest.raises(InputError, match=r"observer endpoint 'tcp/0.0.0.0:7000' is robot 0's"):
+        parse_team(_doc(observer={"endpoint": "tcp/0.0.0.0:7000"}))
+
+
+def test_a_wildcard_address_on_other_ports_is_not_shared():
+    t = parse_team(_doc(robots=_endpoints("tcp/0.0.0.0:7001", "tcp/127.0.0.1:7002",
+                                          "quic/127.0.0.1:7001")))
+    assert t.n == 3
