@@ -344,7 +344,8 @@ def parse_team(doc, path: Path | None = None) -> Team:
             rid = int(key)
         except ValueError:
             rid = -1
-        if not 0 <= rid < n or not isinstance(val, dict):
+        # written as the id itself: ' 1' or '01' beside '1' would silently replace its options
+        if key != str(rid) or not 0 <= rid < n or not isinstance(val, dict):
             raise InputError(f"{where}: robot_options key {key!r} must be a robot id 0..{n - 1} "
                              "with an object of options")
         _check_options(val, where)

@@ -426,3 +426,11 @@ def test_a_wildcard_address_on_other_ports_is_not_shared():
     t = parse_team(_doc(robots=_endpoints("tcp/0.0.0.0:7001", "tcp/127.0.0.1:7002",
                                           "quic/127.0.0.1:7001")))
     assert t.n == 3
+
+
+@pytest.mark.parametrize("key", ["01", " 1", "+1"])
+def test_a_robot_options_key_must_be_the_id_as_written(key):
+    """'01' beside '1' were both robot 1: one object replaced the other, silently."""
+    with pytest.raises(InputError, match=rf"robot_options key '{re.escape(key)}' must be a "
+                                         r"robot id 0\.\.2 with an object of options"):
+        parse_team(_doc(robot_options={"1": {"loss_timeout": 9}, key: {"loss_timeout": 50}}))
