@@ -63,12 +63,24 @@ def test_an_uncontested_pair_goes_before_a_contested_one():
     np.testing.assert_array_equal(mg.kept(a, b), [True, False, False, True, True])
 
 
+def test_the_stretch_search_swaps_two_stretches_between_clusters():
+    bench = _bench()
+    # camera 0 holds stretches A1, B1; camera 1 holds A2, B2; A1-A2 and B1-B2 are linked
+    # twice, A1-B2 and B1-A2 once; the search starts from the crossed association
+    stretch, cam = np.array([0, 1, 2, 3]), np.array([0, 0, 1, 1])
+    a, b = np.array([0, 0, 1, 1, 0, 1]), np.array([2, 2, 3, 3, 3, 2])
+    crossed = np.array([False] * 4 + [True, True])
+    kept = bench.stretch_search(stretch, cam, a, b, crossed)
+    # moving A1 to A2's cluster takes B1, which shares A1's camera, the other way
+    np.testing.assert_array_equal(kept, [True] * 4 + [False, False])
+
+
 def test_it_prints_and_saves(tmp_path, capsys):
     out = tmp_path / "out"
     assert _bench().main(["--n", "40", "--seeds", "1", "--out", str(out)]) == 0
     (rec,) = json.loads((out / "results.json").read_text())["records"]
     assert (rec["cameras"], rec["seed"], rec["same_as_sync"]) == (40, 1, True)
-    assert sorted(rec["orders"]) == ["contested_last", "count_linkage", "sync"]
+    assert sorted(rec["orders"]) == ["contested_last", "count_linkage", "stretch_search", "sync"]
     printed = capsys.readouterr().out
     assert "40 cameras, seed 1:" in printed and "differs" not in printed
 
