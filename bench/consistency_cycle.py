@@ -125,13 +125,12 @@ def main(argv=None) -> int:
     print(f"load average {load_start[0]:.1f} at the start, {load_end[0]:.1f} at the end "
           f"({os.cpu_count()} cores)")
     args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "results.json", records)
-    write_json_atomic(args.out / "meta.json", dict(python=platform.python_version(),
-                                                    machine=platform.machine(),
-                                                    repeat=args.repeat,
-                                                    load_average_at_start=load_start,
-                                                    load_average=load_end,
-                                                    command=" ".join(sys.argv)))
+    # one file: the figures and what they were measured on are replaced together
+    write_json_atomic(args.out / "results.json",
+                      dict(meta=dict(python=platform.python_version(), machine=platform.machine(),
+                                     repeat=args.repeat, load_average_at_start=load_start,
+                                     load_average=load_end, command=" ".join(sys.argv)),
+                           records=records))
     print(f"saved {args.out / 'results.json'}")
     return 0
 

@@ -16,8 +16,8 @@ the same input, run alternately (``--repeat`` times, medians: the ratio survives
 machine). The simulation runs with the batched evaluation (the default where it applies,
 :mod:`pipeline.consistency.engines.batched`, :mod:`pipeline.consistency.engines.batched_evidence`) and, up to
 ``--per-robot-max-n``, also robot by robot; both must give the same cuts, rounds, messages and
-bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json`` (one record
-per ``n`` and resolution) and ``time_bytes.png`` (time and MB sent against ``n``).
+bytes (checked). Prints a table and saves ``runs/bench-consistency/results.json`` (``records``:
+one per ``n`` and resolution; ``meta``: the machine, the load and the command) and ``time_bytes.png`` (time and MB sent against ``n``).
 
 Targets: distributed ≤ 10× union-find at ``n`` = 100 and 1000, ``n`` = 1000 in ≤ 10 s, and
 ≤ 8 MB sent at ``n`` = 100 (delta messages; bytes as a robot puts them on the wire).
@@ -289,8 +289,8 @@ def main(argv=None) -> int:
     meta = dict(python=platform.python_version(), machine=platform.machine(), repeat=args.repeat,
                 features_per_robot=args.features, spurious=args.spurious, detect=args.detect,
                 seed=args.seed, load_average=os.getloadavg(), command=" ".join(sys.argv))
-    write_json_atomic(args.out / "results.json", records)
-    write_json_atomic(args.out / "meta.json", meta)
+    # one file: the figures and what they were measured on are replaced together
+    write_json_atomic(args.out / "results.json", dict(meta=meta, records=records))
     plot(records, args.out / "time_bytes.png")
     print(f"saved {args.out / 'results.json'} and {args.out / 'time_bytes.png'}")
     return 0

@@ -198,11 +198,11 @@ def main(argv=None) -> int:
                       f"{r['robot_peak_bytes'] / 1024:>8.0f} {r['peak_rss_mb']:>7} {r['digest']}",
                       flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "results.json", records)
-    write_json_atomic(args.out / "meta.json", dict(python=platform.python_version(),
-                                                    machine=platform.machine(),
-                                                    load_average=os.getloadavg(),
-                                                    command=" ".join(sys.argv)))
+    # one file: the figures and what they were measured on are replaced together
+    write_json_atomic(args.out / "results.json",
+                      dict(meta=dict(python=platform.python_version(), machine=platform.machine(),
+                                     load_average=os.getloadavg(), command=" ".join(sys.argv)),
+                           records=records))
     print(f"saved {args.out / 'results.json'}")
     return 0
 

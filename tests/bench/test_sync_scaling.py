@@ -30,5 +30,8 @@ def test_a_relative_data_folder_is_the_callers(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(ROOT / "tests")
     assert load_bench("sync_scaling").main(
         ["--cases", "hotel:6:ring", "--data", "data/cmu_hotel_small", "--out", str(tmp_path)]) == 0
-    (rec,) = json.loads((tmp_path / "results.json").read_text())
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert not (tmp_path / "meta.json").exists()  # one file, replaced at once
+    (rec,) = saved["records"]
+    assert "load_average" in saved["meta"]
     assert "error" not in rec and rec["cameras"] == 6
