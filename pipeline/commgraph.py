@@ -298,7 +298,8 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
     Raises
     ------
     InputError
-        Missing or non-text file, a line without exactly two cameras, an unknown image name, a
+        Missing or non-text file, a line without exactly two cameras, a blank name (empty or
+        only spaces, ``" ",b.jpg``, ``a.jpg,,b.jpg``), an unknown image name, a
         non-integer, negative, too large or out-of-range index, a self-edge, or no edge at all
         — naming the file and line.
     """
@@ -311,9 +312,16 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
     rows = []
     header_allowed = True
     for line_no, raw in text_lines(path, "graph file"):
-        tokens = line_fields(raw, f"{path}, line {line_no}")
+        tokens = line_fields(raw, f"{path}, line {line_no}", keep_blank=True)
         if not tokens:
             continue
+        while len(tokens) > 2 and not tokens[-1]:
+            tokens.pop()  # a trailing comma (a spreadsheet's empty column) holds no name
+        if "" in tokens[:2]:
+            col = ("cam_i", "cam_j")[tokens.index("")]
+            raise InputError(f"{path}, line {line_no}: {raw.strip()!r}: {col} is a blank "
+                             f"{what} name; write the {what}'s name or its index there, or "
+                             "delete the line")
         if header_allowed and [t.lower() for t in tokens] == ["cam_i", "cam_j"]:
             header_allowed = False
             continue

@@ -93,9 +93,10 @@ def _uncomment(line: str) -> tuple[str, bool]:
     return "".join(out), comma
 
 
-def line_fields(raw: str, where: str = "graph file") -> list[str]:
+def line_fields(raw: str, where: str = "graph file", keep_blank: bool = False) -> list[str]:
     """Non-empty, stripped fields of ``raw``; ``[]`` for a blank or comment line (``where``
-    names the line in an error).
+    names the line in an error). With ``keep_blank`` a field that is empty or only spaces
+    (``a,,b``, ``" " b``) is kept, as ``''``, for the caller to refuse.
 
     Examples
     --------
@@ -111,4 +112,4 @@ def line_fields(raw: str, where: str = "graph file") -> list[str]:
     if not line:
         return []
     fields = csv_row(line, where, delimiter="," if comma else " ", skipinitialspace=True)
-    return [f.strip() for f in fields if f.strip()]
+    return [f.strip() for f in fields if keep_blank or f.strip()]
