@@ -23,6 +23,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_interrupts  # noqa: E402
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.evaluation.report import PAPER_TABLE_III_IV as _P  # noqa: E402
 

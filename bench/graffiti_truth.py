@@ -24,6 +24,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_interrupts  # noqa: E402
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
 import numpy as np  # noqa: E402
 from multiway import SHARED_DATA  # noqa: E402
 

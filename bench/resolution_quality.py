@@ -23,12 +23,16 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, shortest_path
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from pipeline.errors import one_line_interrupts  # noqa: E402
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
+import numpy as np  # noqa: E402
+import scipy.sparse as sp  # noqa: E402
+from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline import validate  # noqa: E402

@@ -58,13 +58,16 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from pipeline.errors import one_line_interrupts  # noqa: E402
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
 import multiway  # noqa: E402
+import numpy as np  # noqa: E402
 
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.commands.options import count_argument  # noqa: E402

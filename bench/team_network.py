@@ -39,6 +39,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pipeline.errors import one_line_interrupts  # noqa: E402
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
 from pipeline.commands.options import size_argument  # noqa: E402
 from pipeline.consistency.robot import ROBOT_LOST  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402

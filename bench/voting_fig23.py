@@ -15,7 +15,11 @@ import importlib.util
 import sys
 from pathlib import Path
 
-import numpy as np
+from pipeline.errors import one_line_interrupts
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

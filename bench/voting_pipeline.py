@@ -13,11 +13,15 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
+from pipeline.errors import one_line_interrupts
 
-from pipeline.errors import one_line_errors
-from pipeline.outputs import results_folder_problem
-from pipeline.runfolder import write_json_atomic
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
+import numpy as np  # noqa: E402
+
+from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.outputs import results_folder_problem  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the repository's runs/, as every bench, whatever the current folder

@@ -98,22 +98,26 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
+from pipeline.errors import one_line_interrupts
 
-from pipeline import validate
-from pipeline.errors import one_line_errors
-from pipeline.fusion.consensus import (
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
+import numpy as np  # noqa: E402
+
+from pipeline import validate  # noqa: E402
+from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.fusion.consensus import (  # noqa: E402
     RandomGeometricTopology,
     ransac_hypotheses,
 )
-from pipeline.fusion.voting import (
+from pipeline.fusion.voting import (  # noqa: E402
     distributed_ml,
     dynamic_voting,
     gate_threshold,
     static_voting,
 )
-from pipeline.outputs import results_folder_problem
-from pipeline.runfolder import write_json_atomic
+from pipeline.outputs import results_folder_problem  # noqa: E402
+from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the repository's runs/, as every bench, whatever the current folder

@@ -15,29 +15,7 @@ from __future__ import annotations
 import os
 import sys
 
-from pipeline.errors import caused_by_interrupt as _caused_by_interrupt
-from pipeline.errors import report_interrupt as _interrupted
-from pipeline.errors import run_interruptibly
-
-
-def _last_word(program: str, exc_type, exc, tb) -> None:
-    """``program``'s last word on an exception nothing caught: a Ctrl-C (however early)
-    ends with one line and exit 130, never a traceback or a death by signal."""
-    if _caused_by_interrupt(exc):
-        _interrupted(program)
-        try:
-            sys.stderr.flush()
-        finally:
-            os._exit(130)
-    sys.__excepthook__(exc_type, exc, tb)
-
-
-def exit_quietly_on_interrupt(program: str) -> None:
-    """Make a Ctrl-C that escapes ``program``'s main, however early (while its libraries
-    load), end it as this program's does: one line naming ``program``, exit 130. For the
-    other programs of the project (``python -m viz.saved_run``), before their imports."""
-    sys.excepthook = lambda exc_type, exc, tb: _last_word(program, exc_type, exc, tb)
-
+from pipeline.errors import exit_quietly_on_interrupt, run_interruptibly
 
 if __name__ == "__main__":  # run as a program: from here on, before the imports below
     exit_quietly_on_interrupt("formation-match")

@@ -41,15 +41,53 @@ def report_interrupt(command: str) -> int:
     return 130
 
 
+def _last_word(program: str, exc_type, exc, tb) -> None:
+    """``program``'s last word on an exception nothing caught: a Ctrl-C (however early)
+    ends with one line and exit 130, never a traceback or a death by signal."""
+    import os
+    import sys
+
+    if caused_by_interrupt(exc):
+        report_interrupt(program)
+        try:
+            sys.stderr.flush()
+        finally:
+            os._exit(130)
+    sys.__excepthook__(exc_type, exc, tb)
+
+
+def exit_quietly_on_interrupt(program: str) -> None:
+    """Make a Ctrl-C that escapes ``program``'s main, however early (while its libraries
+    load), end it as this program's does: one line naming ``program``, exit 130. For the
+    other programs of the project (``python -m viz.saved_run``), before their imports."""
+    import sys
+
+    sys.excepthook = lambda exc_type, exc, tb: _last_word(program, exc_type, exc, tb)
+
+
+def _bench_name(path: str) -> str:
+    from pathlib import Path
+
+    return f"bench/{Path(path).name}"
+
+
+def one_line_interrupts(module: str, path: str) -> None:
+    """Called by a bench with its ``__name__`` and ``__file__`` before its libraries load: run
+    as a program, a Ctrl-C while they load ends as one in its main does
+    (:func:`one_line_errors`): one line ``interrupted: bench/NAME.py stopped …``, exit 130.
+    Imported (by another bench, by the tests), it changes nothing."""
+    if module == "__main__":
+        exit_quietly_on_interrupt(_bench_name(path))
+
+
 def one_line_errors(main):
     """A bench's ``main`` (or its entry point) ending as the command line does: an
     :class:`InputError` as one line ``error: …`` on stderr, exit status 2; a Ctrl-C as one
     line ``interrupted: bench/NAME.py stopped …``, exit status 130; no traceback."""
     import functools
     import sys
-    from pathlib import Path
 
-    name = f"bench/{Path(main.__code__.co_filename).name}"
+    name = _bench_name(main.__code__.co_filename)
 
     @functools.wraps(main)
     def wrapped(*args, **kwargs) -> int:

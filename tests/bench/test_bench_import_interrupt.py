@@ -1,0 +1,34 @@
+"""A Ctrl-C while a bench run as a program still loads its libraries ends as one in its main:
+one line ``interrupted: bench/NAME.py stopped …`` on stderr and exit status 130, no
+traceback."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+#: opencv_floor is no bench of its own: bench/run_formation.py runs it
+BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py") if p.stem != "opencv_floor")
+
+
+@pytest.fixture(scope="module")
+def interrupted_numpy(tmp_path_factory):
+    """A folder whose ``numpy`` is interrupted while it loads, as by a Ctrl-C then."""
+    folder = tmp_path_factory.mktemp("interrupted")
+    (folder / "numpy").mkdir()
+    (folder / "numpy" / "__init__.py").write_text("raise KeyboardInterrupt\n")
+    return folder
+
+
+@pytest.mark.parametrize("name", BENCHES)
+def test_a_ctrl_c_while_a_bench_loads_is_one_line_and_130(name, interrupted_numpy):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(interrupted_numpy), str(ROOT)]))
+    # --help: a bench that loaded would print its help and end with 0, doing no work
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / f"{name}.py"), "--help"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    assert (proc.returncode, proc.stderr) == (
+        130, f"interrupted: bench/{name}.py stopped, nothing was written or replaced\n")
+    assert proc.stdout == ""
