@@ -31,8 +31,6 @@ from __future__ import annotations
 
 import sys
 
-from pipeline.progress import counted
-
 __all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
            "merge_radius_why", "exit_status"]
 
@@ -208,7 +206,7 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     total = int(final.get("links", 0))
     if total == 0:
         warnings.append(_warning(
-            "no-links", f"no link in {counted(len(steps), 'step')}: there is nothing to associate "
+            "no-links", f"no link in {len(steps)} steps: there is nothing to associate "
                         f"({no_links_why})"))
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} links was cut; "

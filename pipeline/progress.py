@@ -21,15 +21,9 @@ import threading
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar",
-           "counted"]
+__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar"]
 
 log = logging.getLogger("pipeline.progress")
-
-
-def counted(n: int, noun: str) -> str:
-    """``n`` and ``noun`` as a message says them: ``1 step``, ``0 steps``, ``3 steps``."""
-    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 @functools.cache

@@ -112,7 +112,3 @@ def test_rounds_bar_counts_rounds_on_a_terminal_and_is_silent_otherwise(caplog):
     with progress.rounds_bar("consistency", delay=0, stream=f) as bar:
         bar.update(3)
     assert f.getvalue() == ""
-
-
-def test_counted_says_one_thing_in_the_singular():
-    assert [progress.counted(n, "step") for n in (0, 1, 2)] == ["0 steps", "1 step", "2 steps"]
