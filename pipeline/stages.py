@@ -24,7 +24,7 @@ from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.types import LinkLedger, Links, View
 
-__all__ = ["CleaningResult", "merge_radius_for", "budget_line", "extract_and_match",
+__all__ = ["CleaningResult", "merge_radius_for", "check_merge_radius", "budget_line", "extract_and_match",
            "evidence_inputs", "consistency_stage", "ledger_from_consistency", "fusion_stage",
            "fused_tracks", "posed_views", "fusion_on_reconstruction", "clean_association"]
 
@@ -82,6 +82,28 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
         raise InputError(f"--merge-radius {merge_radius}: expected pixels >= 0 (0 merges nothing)")
     return float(merge_radius)
 
+
+def check_merge_radius(merge_radius: float | None, sizes, what: str) -> None:
+    """Refuse a given ``--merge-radius`` (negative, not finite, or wider than the shorter side
+    of the smallest image: keypoints of one image would be merged across the whole image, into
+    one or two features) before the features are extracted; ``None`` (the default) passes.
+
+    ``sizes``: the ``(width, height)`` of the images; ``what``: what they are, for the
+    message (``'the rendered images'``, ``'the photographs as loaded'``).
+
+    Raises
+    ------
+    InputError
+        The radius and the range allowed, ``0`` to the shorter side.
+    """
+    from pipeline.errors import InputError
+
+    if merge_radius is None:
+        return
+    side = min(min(int(w), int(h)) for w, h in sizes)
+    if not np.isfinite(merge_radius) or not 0 <= merge_radius <= side:
+        raise InputError(f"--merge-radius {merge_radius:g}: expected pixels from 0 (merges "
+                         f"nothing) to {side}, the shorter side of {what}")
 
 
 def photo_merge_radius(method: str, resolution: str, merge_radius: float | None) -> float:

@@ -86,6 +86,10 @@ def config_from_args(args) -> FormationConfig:
     method, max_features = feature_options(args)
     robots = None if args.robots is None else validate.robots(args.robots)
     size = parse_size(args.size)
+    from pipeline.stages import check_merge_radius, merge_radius_for
+
+    merge_radius_for(args.resolution, args.merge_radius)  # before the render, not after
+    check_merge_radius(args.merge_radius, [size], f"--size {args.size}")
     # formations a-d: the paper's 6 robots
     check_formation_memory(robots if robots is not None else 6, size, args.max_memory_gb)
     check_formation(args.formation)  # before the render stage opens
@@ -112,7 +116,7 @@ def online_config_from_args(args):
     """The :class:`pipeline.runs.online.OnlineConfig` of ``run-formation --steps N``."""
     from pipeline.budget import check_motion_memory
     from pipeline.runs.online import OnlineConfig
-    from pipeline.stages import merge_radius_for
+    from pipeline.stages import check_merge_radius, merge_radius_for
 
     if args.steps < 1:
         raise InputError(f"--steps {args.steps}: expected a number of steps >= 1")
@@ -152,6 +156,9 @@ def online_config_from_args(args):
                     "steps), so the graph does not switch; use --window 2 or more")
     check_formation(args.formation)
     size = parse_size(args.size)
+    merge_radius = None if args.merge_radius is None else \
+        merge_radius_for(args.resolution, args.merge_radius)
+    check_merge_radius(merge_radius, [size], f"--size {args.size}")
     check_motion_memory(robots if robots is not None else 6, args.steps, size,
                         args.max_memory_gb)  # every frame is rendered before the first step
     from pipeline.runs.transports import check_online_team_size
@@ -167,8 +174,7 @@ def online_config_from_args(args):
                         tol_px=validate.tolerance_px(args.tol_px),
                         batch_every=args.batch_every, fusion=not args.no_fusion, out=args.out,
                         rerun=not args.no_rerun, transport=args.transport,
-                        merge_radius=None if args.merge_radius is None else
-                        merge_radius_for(args.resolution, args.merge_radius))
+                        merge_radius=merge_radius)
 
 
 def run(args) -> int:

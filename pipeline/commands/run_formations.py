@@ -206,13 +206,15 @@ def run(args) -> int:
     from pipeline.outcome import exit_status
     from pipeline.runfolder import publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
-    from pipeline.stages import merge_radius_for
+    from pipeline.stages import check_merge_radius, merge_radius_for
 
     validate.not_empty(args.out, "--out", "give a folder name, e.g. runs")  # not the cwd
     method, max_features = feature_options(args)
     args.seed = validate.seed(args.seed, "--seed")
     resolution = args.resolution
     size = parse_size(args.size)
+    merge_radius_for(resolution, args.merge_radius)  # before the first render
+    check_merge_radius(args.merge_radius, [size], f"--size {args.size}")
     check_formation_memory(6, size, args.max_memory_gb)  # one formation of 6 at a time
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)

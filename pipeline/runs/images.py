@@ -177,9 +177,10 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     from pipeline.commgraph import comm_graph
     from pipeline.matching.retrieval import knn_edges
     from pipeline.runs.transports import check_team_size, get_transport
-    from pipeline.stages import clean_association
+    from pipeline.stages import check_merge_radius, clean_association
 
     timer = timer or StageTimer()
+    given_radius = config.merge_radius
     config = _photo_defaults(config)
     out = config.out_dir()
     from pipeline.commgraph import positive_k
@@ -189,6 +190,9 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     if str(config.graph).startswith("knn:"):
         positive_k(str(config.graph))
     views, comm_edges = _load(config, timer) if loaded is None else loaded
+    # as given: the sizes are known now, before the features
+    check_merge_radius(given_radius, [v.size for v in views], "the smallest photograph as "
+                       "loaded (after --max-size)")
     names = [v.name for v in views]
     if config.truth == "homographies":  # its files checked before any work, read at the end
         from pipeline.evaluation.truth import read_homographies

@@ -72,7 +72,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     from pipeline.inputs.sequence import load_sequence
     from pipeline.matching.pairs import check_matcher
     from pipeline.runs.online import associate_online, batch_steps_of, online_tables
-    from pipeline.stages import photo_merge_radius
+    from pipeline.stages import check_merge_radius, photo_merge_radius
 
     timer = timer or StageTimer()
     check_matcher(config.matcher, config.features)  # before any work
@@ -81,6 +81,8 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
         seq = load_sequence(config.directory, config.max_size, config.intrinsics,
                             check_robots=lambda robots: comm_graph(config.graph, robots,
                                                                    what="robot"))
+    check_merge_radius(config.merge_radius, [v.size for v in seq.views], "the smallest frame "
+                       "as loaded (after --max-size)")  # before the features
     if seq.ignored:
         timer.warn(f"{len(seq.ignored)} image(s) directly in {config.directory} belong to no "
                    f"robot and are not used ({', '.join(seq.ignored[:3])}"

@@ -159,15 +159,15 @@ def test_frames_without_features_are_warned_and_named(tmp_path, capsys):
 
 
 def test_no_link_because_of_a_wide_merge_radius_names_the_radius(tmp_path, capsys):
-    """--merge-radius 1000 merges each frame's keypoints into one feature, so nothing links:
-    the warning named the images and the speed only, where a batch run names the radius."""
+    """--merge-radius 144 (the shorter side, the widest allowed) merges each frame's keypoints
+    into one feature, so nothing links: the warning named the images and the speed only, where a batch run names the radius."""
     out = tmp_path / "merged"
-    assert main(["run-formation", "--steps", "2", "--merge-radius", "1000", "--no-fusion",
+    assert main(["run-formation", "--steps", "2", "--merge-radius", "144", "--no-fusion",
                  "--no-rerun", "--out", str(out), *FAST]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["final"]["links"] == 0
     message = report["warnings"][0]["message"]
-    assert "a --merge-radius of 1000 px merging each image's keypoints" in message
+    assert "a --merge-radius of 144 px merging each image's keypoints" in message
     assert message in capsys.readouterr().err
 
 
