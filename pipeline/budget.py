@@ -76,6 +76,7 @@ import os
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.progress import counted
 from pipeline.types import Links
 
 __all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_LANDMARK_PAIR", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
@@ -305,8 +306,8 @@ def check_motion_memory(n_robots: int, steps: int, size: tuple[int, int], limit,
     frame per robot (:data:`BYTES_PER_ROBOT_PIXEL`)."""
     w, h = size
     b = MemoryBudget(limit, flag)
-    b.add(f"rendering {steps} steps of {n_robots} robots at {w}x{h} "
-          f"({steps * n_robots} frames)",
+    b.add(f"rendering {counted(steps, 'step')} of {n_robots} robots at {w}x{h} "
+          f"({counted(steps * n_robots, 'frame')})",
           steps * n_robots * w * h * BYTES_PER_FRAME_PIXEL,
           "fewer --steps, fewer --robots or a smaller --size")
     b.add(f"matching and cleaning one step of {n_robots} robots at {w}x{h}",

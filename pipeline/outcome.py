@@ -205,8 +205,10 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     final = report.get("final", {})
     total = int(final.get("links", 0))
     if total == 0:
+        from pipeline.progress import counted
+
         warnings.append(_warning(
-            "no-links", f"no link in {len(steps)} steps: there is nothing to associate "
+            "no-links", f"no link in {counted(len(steps), 'step')}: there is nothing to associate "
                         f"({no_links_why})"))
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
         warnings.append(_warning("all-links-cut", f"every one of the {total} links was cut; "

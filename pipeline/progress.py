@@ -21,12 +21,22 @@ import threading
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar"]
+__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar",
+           "counted"]
 
 log = logging.getLogger("pipeline.progress")
 
 
 @functools.cache
+def counted(n: int, word: str) -> str:
+    """``n`` and ``word``, in the plural (``s`` added) unless ``n`` is 1.
+
+    >>> counted(1, "step"), counted(2, "step"), counted(0, "link")
+    ('1 step', '2 steps', '0 links')
+    """
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
 def _malloc_trim():
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")

@@ -30,6 +30,7 @@ from pipeline.faults import (
     faults_from_args,
     warn_rule_under_faults,
 )
+from pipeline.progress import counted
 from pipeline.runs.formation import FormationConfig
 
 
@@ -206,7 +207,8 @@ def _run_online(args) -> int:
     report = json.loads((out / "report.json").read_text())
     f = report["final"]
     return online_run_summary(
-        report, out, f"{len(report['steps'])} steps, {f['links']} links, conflict-free after "
+        report, out, f"{counted(len(report['steps']), 'step')}, {counted(f['links'], 'link')}, "
+        "conflict-free after "
         f"every step: {report['conflict_free_every_step']}; pairwise F1 online "
         f"{f['online']['f1']:.3f}" + (f", batch {f['batch']['f1']:.3f}" if "batch" in f else ""),
         args.no_rerun)

@@ -26,6 +26,7 @@ from pipeline.commands.options import (
 )
 from pipeline.errors import InputError
 from pipeline.outcome import exit_status
+from pipeline.progress import counted
 from pipeline.runs.images import ImagesConfig
 
 __all__ = ["add_arguments", "config_from_args", "run", "check_live", "RERUN_DEFAULT_URL"]
@@ -239,8 +240,8 @@ def _run_sequence(args) -> int:
     report = json.loads((out / "report.json").read_text())
     f = report["final"]
     return online_run_summary(
-        report, out, f"{len(report['steps'])} steps of {report['n_robots']} robots, "
-        f"{f['links']} links, conflict-free after every step: "
+        report, out, f"{counted(len(report['steps']), 'step')} of {report['n_robots']} robots, "
+        f"{counted(f['links'], 'link')}, conflict-free after every step: "
         f"{report['conflict_free_every_step']}; kept online {f['online']['kept']}"
         + (f", batch {f['batch']['kept']}" if "batch" in f else ""), args.no_rerun)
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from data_synth.motion import DEFAULT_SPEED
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
-from pipeline.progress import StageTimer
+from pipeline.progress import StageTimer, counted
 from pipeline.types import Links
 
 __all__ = ["OnlineConfig", "OnlineRun", "run_online_steps", "run_online",
@@ -199,7 +199,7 @@ def run_online_steps(config: OnlineConfig, timer: StageTimer | None = None,
     from data_synth.motion import render_motion
 
     timer = timer or StageTimer(verbose=False)
-    with timer.stage("render", f"{config.steps} steps"):
+    with timer.stage("render", counted(config.steps, "step")):
         seq = render_motion(config.formation, config.seed, config.steps, config.size,
                             config.robots, config.graph, speed=config.speed,
                             switching=config.switching, window=config.window)
@@ -267,7 +267,7 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
     step_of = np.zeros(0, np.int64)
     records, batch, batch_kept = [], None, {}
     desc_bytes: list = []  # bytes of each frame's descriptors (held by its robot)
-    with jobs.online_robots() as store, timer.stage("online", f"{steps} steps, window {window}"):
+    with jobs.online_robots() as store, timer.stage("online", f"{counted(steps, 'step')}, window {window}"):
         for t in range(steps):
             ids = [t * n + i for i in range(n)]
             t0 = time.perf_counter()
@@ -388,7 +388,7 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
     run.truth = truth.astype(np.int8)
     report = {
         "title": formation_name(config.formation, config.robots, config.graph)
-                 + f" in motion ({config.steps} steps, seed "
+                 + f" in motion ({counted(config.steps, 'step')}, seed "
                  f"{config.seed})",
         "n_robots": int(seq.n_robots),
         "n_images": int(oa.n_images),

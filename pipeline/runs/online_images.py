@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
-from pipeline.progress import StageTimer
+from pipeline.progress import StageTimer, counted
 
 __all__ = ["SequenceConfig", "run_images_sequence"]
 
@@ -109,7 +109,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     check_online_team_size(config.transport, seq.n_robots, config.window, config.hold,
                            seq.steps)
     edges = comm_graph(config.graph, seq.robots, what="robot")
-    timer.note(f"{seq.n_robots} robots, {seq.steps} steps, comm edges {edges.tolist()}")
+    timer.note(f"{seq.n_robots} robots, {counted(seq.steps, 'step')}, comm edges {edges.tolist()}")
     message = split_warning(seq.n_robots, edges, "robots", "their frames cannot be associated "
                             "across the groups")
     if message:
@@ -140,7 +140,7 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
 
     report = {
         "title": f"{seq.n_robots} robots' frame sequences from {config.directory} "
-                 f"({seq.steps} steps)",
+                 f"({counted(seq.steps, 'step')})",
         "n_robots": int(seq.n_robots), "robots": seq.robots,
         "n_images": int(oa.n_images), "comm_edges": edges.tolist(),
         "features_per_camera": [int(len(f)) for f in run.features],

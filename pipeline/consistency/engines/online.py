@@ -212,6 +212,7 @@ from pipeline.consistency.engines.gather import solve_at_roots
 from pipeline.consistency.history import overlapping_runs, rebuild, runs_by_robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
+from pipeline.progress import counted
 from pipeline.types import Links
 
 __all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold",
@@ -548,7 +549,7 @@ class OnlineAssociation:
             k = bad[0]
             raise InputError(f"new link {k} ({links.cam_i[k]},{links.feat_i[k]})-"
                              f"({links.cam_j[k]},{links.feat_j[k]}): a new link joins a frame of "
-                             f"this step to a frame in the window of {self.window} steps")
+                             f"this step to a frame in the window of {counted(self.window, 'step')}")
         L = self.links
         n0 = len(L.ci)
         k = len(links)

@@ -99,7 +99,7 @@ def test_a_conflict_in_a_retired_frame_is_cut_by_the_history_repair():
 def test_a_new_link_must_touch_the_step_and_the_window():
     oa = OnlineAssociation(window=1, resolution="paper")
     oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [1], [0]))
-    with pytest.raises(InputError, match="window of 1 steps"):
+    with pytest.raises(InputError, match="window of 1 step$"):
         oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [2], [0]))
     with pytest.raises(InputError, match="window"):
         OnlineAssociation(window=0)
@@ -255,7 +255,7 @@ def test_a_held_link_between_two_old_frames_can_still_be_cut(hold):
 def test_a_held_frame_takes_no_new_link():
     oa = OnlineAssociation(window=1, resolution="paper", hold=2)
     oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [1], [0]))
-    with pytest.raises(InputError, match="window of 1 steps"):
+    with pytest.raises(InputError, match="window of 1 step$"):
         oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0], [0], [2], [0]))
     with pytest.raises(InputError, match="hold -1"):
         OnlineAssociation(window=1, hold=-1)
