@@ -363,6 +363,14 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: {asks[0]} sets fusion on a links team without "
                              "data.keypoints and every robot's pose in data.cameras (K, R, t); "
                              "fusion needs every robot's keypoints and pose")
+    if data["kind"] == "formation":  # the images' size is known: as --merge-radius and --size
+        w, h = data.get("size", [640, 480])
+        for k, v in [("options", given), *((f"robot_options[{k!r}]", v) for k, v in ro.items())]:
+            r = v.get("merge_radius")
+            if r is not None and r > min(w, h):
+                raise InputError(f"{where}: {k} merge_radius {r!r} must be pixels from 0 to "
+                                 f"{min(w, h)}, the shorter side of data.size {w}x{h} (wider, "
+                                 "each image's keypoints would be merged across the image)")
     obs = doc.get("observer")
     observer = None
     if obs is not None:
