@@ -59,6 +59,13 @@ def merge_radius_why(radius: float | None, size: tuple[int, int]) -> str:
     return f", or a --merge-radius of {radius:g} px merging each image's keypoints"
 
 
+def _every(n: int, noun: str) -> str:
+    """``the one link`` or ``every one of the 3 links``, as a warning says them."""
+    from pipeline.progress import counted
+
+    return f"the one {noun}" if n == 1 else f"every one of the {counted(n, noun)}"
+
+
 def flag_result(report: dict, names: list[str] | None = None,
                 no_links_why: str = NO_LINKS_WHY) -> dict:
     """Add ``conflict_free: false`` and ``warnings`` to ``report`` (in place) where due.
@@ -103,8 +110,8 @@ def flag_result(report: dict, names: list[str] | None = None,
             "no-links", "the input holds no link between two images: there is nothing to "
                         f"associate ({no_links_why})"))
     if active and kept == 0:
-        warnings.append(_warning("all-links-cut", f"every one of the {total} input links was "
-                                                  "cut; the result holds no association"))
+        warnings.append(_warning("all-links-cut", f"{_every(total, 'input link')} was cut; the "
+                                                  "result holds no association"))
     gone = {str(k) for k in faults.get("crashed", {})}
     team = report.get("team") or {}
     if isinstance(team.get("robots"), dict):  # a team of processes: those without a result
@@ -211,8 +218,8 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
             "no-links", f"no link in {counted(len(steps), 'step')}: there is nothing to associate "
                         f"({no_links_why})"))
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
-        warnings.append(_warning("all-links-cut", f"every one of the {total} links was cut; "
-                                                  "the result holds no association"))
+        warnings.append(_warning("all-links-cut", f"{_every(total, 'link')} was cut; the "
+                                                  "result holds no association"))
     warnings += _no_features(report, names)
     if warnings:
         report["warnings"] = warnings

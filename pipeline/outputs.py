@@ -328,7 +328,7 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
 
 def results_folder_problem(out, flag: str = "--out") -> str | None:
     """Why ``out`` cannot be the folder a benchmark writes its results in (``results.json``
-    and the like, replaced one by one), or None: empty, a file or a path through one, or in a
+    and the like, each file replaced at once), or None: empty, a file or a path through one, or in a
     folder that may not be written. Checked before the benchmark's work, which takes minutes."""
     if not os.fspath(out):
         return f"{flag} '' is empty: give a folder name"

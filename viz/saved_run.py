@@ -19,7 +19,7 @@ computed, and what the folder does not hold is left out of the recording:
 from __future__ import annotations
 
 if __name__ == "__main__":  # run as a program: a Ctrl-C while the libraries load is one line
-    from pipeline.__main__ import exit_quietly_on_interrupt
+    from pipeline.errors import exit_quietly_on_interrupt
 
     exit_quietly_on_interrupt("viz.saved_run")
 

@@ -40,3 +40,10 @@ def test_links_all_cut_and_links_kept():
         ["all-links-cut"]
     assert _codes({"links": 5, "after": {"links": 3, "conflictive_sets": 0}}) == []
     assert _codes({"after": {"links": 3, "conflictive_sets": 0}}) == []  # count unknown
+
+
+def test_one_link_cut_is_said_in_the_singular():
+    one = flag_result({"links": 1, "after": {"links": 0, "conflictive_sets": 0}})
+    assert one["warnings"][0]["message"].startswith("the one input link was cut;")
+    five = flag_result({"links": 5, "after": {"links": 0, "conflictive_sets": 0}})
+    assert five["warnings"][0]["message"].startswith("every one of the 5 input links was cut;")
