@@ -27,7 +27,6 @@ __all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "ro
 log = logging.getLogger("pipeline.progress")
 
 
-@functools.cache
 def counted(n: int, word: str) -> str:
     """``n`` and ``word``, in the plural (``s`` added) unless ``n`` is 1.
 
@@ -37,6 +36,7 @@ def counted(n: int, word: str) -> str:
     return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
+@functools.cache
 def _malloc_trim():
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")

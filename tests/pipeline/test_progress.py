@@ -112,3 +112,9 @@ def test_rounds_bar_counts_rounds_on_a_terminal_and_is_silent_otherwise(caplog):
     with progress.rounds_bar("consistency", delay=0, stream=f) as bar:
         bar.update(3)
     assert f.getvalue() == ""
+
+
+def test_the_c_library_is_looked_up_once_not_at_every_stage_end():
+    # each stage end calls release_free_memory; finding and loading libc again each time
+    # would put a library lookup on that path
+    assert progress._malloc_trim() is progress._malloc_trim()
