@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import sys
 
+from pipeline.progress import counted
+
 __all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
            "merge_radius_why", "exit_status"]
 
@@ -61,8 +63,6 @@ def merge_radius_why(radius: float | None, size: tuple[int, int]) -> str:
 
 def _every(n: int, noun: str) -> str:
     """``the one link`` or ``every one of the 3 links``, as a warning says them."""
-    from pipeline.progress import counted
-
     return f"the one {noun}" if n == 1 else f"every one of the {counted(n, noun)}"
 
 
@@ -212,8 +212,6 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     final = report.get("final", {})
     total = int(final.get("links", 0))
     if total == 0:
-        from pipeline.progress import counted
-
         warnings.append(_warning(
             "no-links", f"no link in {counted(len(steps), 'step')}: there is nothing to associate "
                         f"({no_links_why})"))
