@@ -50,13 +50,19 @@ def test_a_bad_graph_file_is_refused_before_any_image_is_decoded(tmp_path, capsy
     assert not out.exists()
 
 
-def test_a_bad_robot_graph_file_is_refused_before_any_frame_is_decoded(tmp_path, capsys,
-                                                                       no_decoding):
+def _two_robots(tmp_path):
+    """A sequence folder of robots a and b, two photographs each."""
     team = tmp_path / "team"
     for robot in ("a", "b"):
         (team / robot).mkdir(parents=True)
         for k, name in enumerate(NAMES[:2]):
             shutil.copy(SCEAUX / name, team / robot / f"f{k}.jpg")
+    return team
+
+
+def test_a_bad_robot_graph_file_is_refused_before_any_frame_is_decoded(tmp_path, capsys,
+                                                                       no_decoding):
+    team = _two_robots(tmp_path)
     graph = tmp_path / "robots.csv"
     graph.write_text("a,zz\n")
     out = tmp_path / "run"
@@ -69,11 +75,7 @@ def test_a_bad_robot_graph_file_is_refused_before_any_frame_is_decoded(tmp_path,
 
 def test_knn_is_refused_for_a_sequence_before_any_frame_is_decoded(tmp_path, capsys,
                                                                    no_decoding):
-    team = tmp_path / "team"
-    for robot in ("a", "b"):
-        (team / robot).mkdir(parents=True)
-        for k, name in enumerate(NAMES[:2]):
-            shutil.copy(SCEAUX / name, team / robot / f"f{k}.jpg")
+    team = _two_robots(tmp_path)
     assert main(["run-images", str(team), "--sequence", "--graph", "knn:1", "--no-rerun",
                  "--out", str(tmp_path / "run")]) == 2
     assert _error_line(capsys).startswith("error: graph 'knn:1': with --sequence the graph is "
