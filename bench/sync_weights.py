@@ -58,31 +58,60 @@ from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 
-def greedy_merge(m, links, w: np.ndarray) -> np.ndarray:
-    """Kept mask of the sequential constrained greedy merge in ``sync``'s order: links by
-    ``w`` decreasing, ties by :func:`tie_key` of their global ends, then the smaller and the
-    larger end; a link joins its two clusters unless they share a camera (Def. 2.4); kept
-    iff its ends end in one cluster."""
-    from scipy.cluster.hierarchy import DisjointSet
+class Merge:
+    """Clusters of features under the constrained merge (no cluster holds two features of
+    one camera, Def. 2.4): a disjoint-set forest with each root's camera set."""
 
+    def __init__(self, m):
+        from scipy.cluster.hierarchy import DisjointSet
+
+        self.cam = np.repeat(np.arange(len(m)), np.asarray(m))
+        self.ds = DisjointSet(range(int(np.sum(m))))
+        self.cams: dict[int, set] = {}
+
+    def root(self, f: int) -> int:
+        return self.ds[int(f)]
+
+    def cameras(self, r: int) -> set:
+        return self.cams.get(r) or {int(self.cam[r])}  # a singleton's root is its feature
+
+    def eligible(self, x: int, y: int) -> bool:
+        return x != y and not self.cameras(x) & self.cameras(y)
+
+    def join(self, x: int, y: int) -> int:
+        cx, cy = self.cameras(x), self.cameras(y)
+        self.ds.merge(x, y)
+        r = self.ds[x]
+        self.cams[r] = cx | cy
+        return r
+
+    def try_join(self, f: int, g: int) -> None:
+        x, y = self.root(f), self.root(g)
+        if self.eligible(x, y):
+            self.join(x, y)
+
+    def kept(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.array([self.ds.connected(int(p), int(q)) for p, q in zip(a, b, strict=True)])
+
+
+def sync_order(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Link indices in ``sync``'s order: ``w`` decreasing, ties by :func:`tie_key` of the
+    global ends, then the smaller and the larger end."""
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    return np.lexsort((hi, lo, tie_key(lo, hi), -np.asarray(w, np.float64)))
+
+
+def greedy_merge(m, links, w: np.ndarray) -> np.ndarray:
+    """Kept mask of the sequential constrained greedy merge in ``sync``'s order
+    (:func:`sync_order`): a link joins its two clusters unless they share a camera (Def.
+    2.4); kept iff its ends end in one cluster."""
     off = np.concatenate([[0], np.cumsum(m)])
     a = off[links.cam_i] + links.feat_i
     b = off[links.cam_j] + links.feat_j
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    order = np.lexsort((hi, lo, tie_key(lo, hi), -np.asarray(w, np.float64)))
-    cam = np.repeat(np.arange(len(m)), m)
-    ds = DisjointSet(range(int(off[-1])))
-    cams = {}  # root -> set of cameras of its cluster
-    for k in order.tolist():
-        x, y = ds[int(a[k])], ds[int(b[k])]
-        if x == y:
-            continue
-        cx, cy = cams.get(x, {int(cam[a[k]])}), cams.get(y, {int(cam[b[k]])})
-        if cx & cy:
-            continue
-        ds.merge(x, y)
-        cams[ds[x]] = cx | cy
-    return np.array([ds.connected(int(p), int(q)) for p, q in zip(a, b, strict=True)])
+    mg = Merge(m)
+    for k in sync_order(a, b, w).tolist():
+        mg.try_join(a[k], b[k])
+    return mg.kept(a, b)
 
 
 def measure(case, alphas) -> dict:

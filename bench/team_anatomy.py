@@ -68,58 +68,15 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import multiway  # noqa: E402
 import numpy as np  # noqa: E402
+from sync_weights import Merge, sync_order  # noqa: E402
 
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
-from pipeline.consistency.keys import tie_key  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.matching.link_evidence import ratio_llr  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
-
-
-class Merge:
-    """Clusters of features under the constrained merge (no cluster holds two features of
-    one camera, Def. 2.4): a disjoint-set forest with each root's camera set."""
-
-    def __init__(self, m):
-        from scipy.cluster.hierarchy import DisjointSet
-
-        self.cam = np.repeat(np.arange(len(m)), np.asarray(m))
-        self.ds = DisjointSet(range(int(np.sum(m))))
-        self.cams: dict[int, set] = {}
-
-    def root(self, f: int) -> int:
-        return self.ds[int(f)]
-
-    def cameras(self, r: int) -> set:
-        return self.cams.get(r) or {int(self.cam[r])}  # a singleton's root is its feature
-
-    def eligible(self, x: int, y: int) -> bool:
-        return x != y and not self.cameras(x) & self.cameras(y)
-
-    def join(self, x: int, y: int) -> int:
-        cx, cy = self.cameras(x), self.cameras(y)
-        self.ds.merge(x, y)
-        r = self.ds[x]
-        self.cams[r] = cx | cy
-        return r
-
-    def try_join(self, f: int, g: int) -> None:
-        x, y = self.root(f), self.root(g)
-        if self.eligible(x, y):
-            self.join(x, y)
-
-    def kept(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.array([self.ds.connected(int(p), int(q)) for p, q in zip(a, b, strict=True)])
-
-
-def sync_order(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Link indices in ``sync``'s order: ``w`` decreasing, ties by :func:`tie_key` of the
-    global ends, then the smaller and the larger end."""
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    return np.lexsort((hi, lo, tie_key(lo, hi), -np.asarray(w, np.float64)))
 
 
 def stretches(m, a, b, w, s) -> tuple[Merge, list[int]]:
