@@ -19,6 +19,15 @@ its kept links against ``sync``'s own (``same_as_sync``). ``good_links`` (the in
 links, nothing invented) bounds every rule that only keeps or cuts. Columns: pairwise F1 of
 the closure (as CLEAR's), per ``α``, and the spurious links each association keeps.
 
+*Does counting links point at the truth?* On the ring2 team the truth separates fewer input
+links than ``sync``'s association, and a global search over whole stretches that counts
+links (``stretch_search`` of ``bench/team_anatomy.py``, started from ``sync``'s association)
+raises the F1 there. Each row also gives, for the same input, the input links separated
+(ends in two clusters of the closure) by the truth (its wrong links), by ``sync``'s
+association and by that search's, the search's F1, and the sum of ``sync``'s own weights
+``w`` over the links the truth and ``sync`` join (the objective its merge climbs). Where the
+truth separates more links than ``sync``, a move that joins more links leads away from it.
+
 Inputs: CMU hotel (``--frames``, given descriptors only, the Hungarian matches), warped
 copies with and without hidden landmarks (:func:`multiway.warped_landmarks`, SIFT,
 descriptors only), graphs ``complete``, ``seq:4``, ``ring2``, and the ring2 team
@@ -130,7 +139,30 @@ def measure(case, alphas) -> dict:
             sync = ~resolve_conflicts(case.m, case.edges, case.links, resolution="sync").deleted
             out["same_as_sync"] = bool(np.array_equal(kept, sync))
     out["good_links_f1"] = case.scores(good)["f1"]
+    out["objective"] = objective_check(case, w, lam)
     return out
+
+
+def objective_check(case, w: np.ndarray, lam: np.ndarray) -> dict:
+    """Input links separated by the truth, ``sync`` and the stretch search from ``sync``;
+    the search's F1; ``w`` summed over the links the truth and ``sync`` join (module
+    docstring)."""
+    from team_anatomy import stretch_search, stretches  # imports this module: here, not above
+
+    m, links = case.m, case.links
+    off = np.concatenate([[0], np.cumsum(m)])
+    a = off[links.cam_i] + links.feat_i
+    b = off[links.cam_j] + links.feat_j
+    mg, _ = stretches(m, a, b, w, w - lam)
+    roots = np.array([mg.root(f) for f in range(int(np.sum(m)))])
+    _, stretch = np.unique(roots, return_inverse=True)
+    sync = greedy_merge(m, links, w)
+    searched = stretch_search(stretch, mg.cam, a, b, sync)
+    good = np.asarray(case.link_good, bool)
+    return dict(separated=dict(truth=int((~good).sum()), sync=int((~sync).sum()),
+                               stretch_search=int((~searched).sum())),
+                stretch_search_f1=case.scores(searched)["f1"],
+                w_joined=dict(truth=float(w[good].sum()), sync=float(w[sync].sum())))
 
 
 def cases(a):
@@ -182,7 +214,9 @@ def main(argv=None) -> int:
     load = os.getloadavg()[0]
     print("F1 per alpha (w = lambda + alpha * TRIANGLE_WEIGHT * support; 1 = sync, 0 = the "
           "quality order); spurious links kept in brackets")
-    print(f"{'input':<38}" + "".join(f"{f'a={x:g}':>15}" for x in alphas) + f"{'good_links':>12}")
+    print(f"{'input':<38}" + "".join(f"{f'a={x:g}':>15}" for x in alphas) + f"{'good_links':>12}"
+          + "   input links separated by truth / sync / stretch search (its F1); sum of w "
+          "joined by truth / sync")
     records = []
     for title, fields, case in cases(a):
         r = measure(case, alphas)
@@ -190,7 +224,11 @@ def main(argv=None) -> int:
         cells = "".join(f"{r['alphas'][f'{x:g}']['f1']:>8.3f} ({r['alphas'][f'{x:g}']['spurious_kept']:>4})"
                         for x in alphas)
         same = "" if r["same_as_sync"] else "  (alpha 1 differs from sync's own links!)"
-        print(f"{title:<38}{cells}{r['good_links_f1']:>12.3f}{same}", flush=True)
+        o = r["objective"]
+        sep, wj = o["separated"], o["w_joined"]
+        print(f"{title:<38}{cells}{r['good_links_f1']:>12.3f}   {sep['truth']} / {sep['sync']} / "
+              f"{sep['stretch_search']} ({o['stretch_search_f1']:.3f}); {wj['truth']:.0f} / "
+              f"{wj['sync']:.0f}{same}", flush=True)
     best = {f"{x:g}": 0 for x in alphas}
     for r in records:
         top = max(v["f1"] for v in r["alphas"].values())

@@ -39,6 +39,29 @@ def test_it_prints_and_saves_each_input(tmp_path, capsys):
     assert rec["good_links_f1"] == pytest.approx(1.0, abs=1e-12)
     printed = capsys.readouterr().out
     assert "team 40, seed 1" in printed and "differs" not in printed
+    obj = rec["objective"]
+    case = _bench().multiway.team_case(40, seed=1)
+    assert obj["separated"]["truth"] == int((~np.asarray(case.link_good, bool)).sum())
+    # the search starts from sync's association and only makes moves that join at least as
+    # many input links: it never separates more than sync
+    assert obj["separated"]["stretch_search"] <= obj["separated"]["sync"]
+    assert 0.0 <= obj["stretch_search_f1"] <= 1.0
+    assert f"{obj['separated']['truth']} / {obj['separated']['sync']} / " in printed
+
+
+def test_the_objective_check_counts_what_each_association_separates():
+    bench = _bench()
+    case = bench.multiway.team_case(40, seed=0)
+    w, _ = bench.multiway.sync_evidence(case.m, case.links)
+    from pipeline.matching.link_evidence import ratio_llr
+
+    lam = ratio_llr(1.0 - case.links.quality)
+    obj = bench.objective_check(case, w, lam)
+    sync = bench.greedy_merge(case.m, case.links, w)
+    good = np.asarray(case.link_good, bool)
+    assert obj["separated"]["sync"] == int((~sync).sum())
+    assert obj["w_joined"]["truth"] == pytest.approx(float(w[good].sum()), rel=1e-12)
+    assert obj["w_joined"]["sync"] == pytest.approx(float(w[sync].sum()), rel=1e-12)
 
 
 def test_a_negative_alpha_is_refused(tmp_path, capsys):
