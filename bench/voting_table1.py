@@ -7,10 +7,10 @@ The Figs. 2–3 example is :mod:`voting_fig23`, the fusion stage on rendered for
     python bench/voting_table1.py                 # 1000 trials, every reading
     python bench/voting_table1.py --trials 100    # quicker
 
-Writes ``runs/bench-voting/``: ``table.json`` (keys ``ml``, ``static``, ``dynamic`` for the
-best-matching reading, each with ``false_positive_votes``, ``false_negative_votes``,
-``error_mean``, ``error_std``, ``iterations``, ``trials``) and ``readings.json`` (every
-reading).
+Writes ``runs/bench-voting/results.json``, one file replaced at once: ``table`` (keys ``ml``,
+``static``, ``dynamic`` for the best-matching reading, each with ``false_positive_votes``,
+``false_negative_votes``, ``error_mean``, ``error_std``, ``iterations``, ``trials``),
+``readings`` (every reading) and ``meta`` (the radius and the seed).
 
 The setting, as the text gives it
 ---------------------------------
@@ -21,8 +21,8 @@ covariances with eigenvalues of mean 0.5 and std 0.5; a topology redrawn every r
 consensus rounds for the ML and for dynamic voting, 300 for static voting (100 per step).
 ``d = 2`` (the feature of Fig. 2 is planar; the text does not say for the Monte Carlo).
 
-Readings of what the text leaves open (every one is run; see ``readings.json``)
------------------------------------------------------------------------------
+Readings of what the text leaves open (every one is run; see ``readings`` in ``results.json``)
+------------------------------------------------------------------------------------------
 * ``noise``: ``literal`` — the measurement error is isotropic ``N(0, σ² I)`` and the
   covariance ``Λ_i`` is drawn independently of it (as the two sentences read);
   ``consistent`` — ``x_i ~ N(θ, s Λ_i)`` with ``s = 1`` for inliers and ``(10/2)² = 25`` for
@@ -404,10 +404,11 @@ def main(argv=None) -> int:
                                                "hypotheses", "c", "maxc_rounds")}
     table["paper"] = PAPER
     table["details"] = best["table"]
-    write_json_atomic(args.out / "table.json", table)
-    write_json_atomic(args.out / "readings.json", dict(rows=rows, radius=args.radius,
-                                                       seed=args.seed))
-    print(f"wrote {args.out / 'table.json'}, {args.out / 'readings.json'}")
+    # one file: the best reading's table and the readings it was picked from are replaced together
+    write_json_atomic(args.out / "results.json",
+                      dict(meta=dict(radius=args.radius, seed=args.seed), table=table,
+                           readings=rows))
+    print(f"wrote {args.out / 'results.json'}")
     return 0
 
 

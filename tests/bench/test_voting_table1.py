@@ -5,6 +5,8 @@ round have not converged, so two close votes are not a tie of counts; the Monte 
 the tie rule of the converged modes (votes within 1e-4 tied, lowest index wins), which moved
 its figures away from those its docstring reports."""
 
+import json
+
 import pytest
 from benchload import load_bench
 
@@ -39,3 +41,16 @@ def test_the_monte_carlo_picks_winners_by_the_plain_argmax(eig):
             assert ours["error_mean_ml_in"] == pytest.approx(want["error_mean_ml_in"], abs=1e-12)
             moved += (_vote(bench, x, cov, method, gate, p, 1e-4).inlier != argmax.inlier).any()
     assert moved  # the tie rule would have decided some of these otherwise
+
+
+def test_the_table_and_its_readings_are_one_file_replaced_at_once(tmp_path, capsys):
+    """The best reading's table and the readings it was picked from are saved together: a
+    failure between two files would leave a new table beside old readings."""
+    assert load_bench("voting_table1").main(["--trials", "2", "--out", str(tmp_path)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.json"]
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["meta"] == {"radius": 0.4, "seed": 0}
+    best = min(saved["readings"], key=lambda r: r["score"])
+    assert saved["table"]["reading"]["score"] == best["score"]
+    assert saved["table"]["details"] == best["table"]
+    assert "results.json" in capsys.readouterr().out
