@@ -25,6 +25,13 @@ import os  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.errors import one_line_interrupts  # noqa: E402  (it loads no library)
+
+one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
+
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 

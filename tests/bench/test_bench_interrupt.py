@@ -15,8 +15,9 @@ from benchload import load_bench
 from pipeline.errors import one_line_errors
 
 ROOT = Path(__file__).resolve().parents[2]
-#: opencv_floor is no bench of its own: bench/run_formation.py runs it, and it imports nothing
-#: of the pipeline (its imports count in the floor's time)
+#: opencv_floor is no bench of its own: bench/run_formation.py runs it, and its command line is
+#: read by hand (its imports count in the floor's time); a Ctrl-C while it loads is checked in
+#: test_bench_import_interrupt.py
 BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py") if p.stem != "opencv_floor")
 
 
