@@ -15,7 +15,10 @@ import importlib.util
 import sys
 from pathlib import Path
 
-from pipeline.errors import one_line_interrupts
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.errors import one_line_interrupts  # noqa: E402
 
 one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below load
 
@@ -35,7 +38,6 @@ from pipeline.fusion.voting import dynamic_voting, gate_threshold  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 #: the repository's runs/, as every bench, whatever the current folder
 OUT = ROOT / "runs" / "bench-voting"
 
