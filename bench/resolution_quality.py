@@ -50,10 +50,12 @@ from pipeline.matching.link_evidence import link_evidence  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.stages import check_merge_radius  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
 METHODS = ("paper", "evidence", "drop_conflictive_sets", "keep_first_per_image",
            "quality_merge", "oracle")
+SIZE = (640, 480)  # the rendered images, in pixels
 
 
 def diameters(features_per_camera, links: Links) -> tuple[int, int]:
@@ -77,7 +79,7 @@ def diameters(features_per_camera, links: Links) -> tuple[int, int]:
 
 
 def one_run(formation: str, seed: int, merge_radius: float) -> list[dict]:
-    fm = data_synth.render(formation, seed=seed, size=(640, 480))
+    fm = data_synth.render(formation, seed=seed, size=SIZE)
     views, edges = fm.views, np.asarray(fm.comm_edges)
     feats = extract_all(views, "sift", 2000, merge_radius)
     matches = match_edges(feats, views, edges)
@@ -151,9 +153,7 @@ def main(argv=None) -> int:
         ap.error(f"--merge-radius {args.merge_radius!r}: expected comma-separated radii in "
                  "pixels, e.g. 2,3")
     for radius in radii:  # as run-formation refuses one (a negative one merged nothing)
-        if not np.isfinite(radius) or radius < 0:
-            ap.error(f"--merge-radius {args.merge_radius!r}: {radius:g} is not a radius in "
-                     "pixels >= 0 (0 merges nothing)")
+        check_merge_radius(radius, [SIZE], f"the rendered images ({SIZE[0]}x{SIZE[1]})")
 
     passes = {}
     for radius in radii:

@@ -51,9 +51,12 @@ def _bench(name):
     ("resolution_quality", ["--formations", "xa"], "error: unknown formation 'x'; choose one of"),
     ("resolution_quality", ["--merge-radius", "x,2"], "--merge-radius 'x,2': expected comma"),
     ("resolution_quality", ["--merge-radius=-1,2"],
-     "--merge-radius '-1,2': -1 is not a radius in pixels >= 0 (0 merges nothing)"),
-    ("resolution_quality", ["--merge-radius", "0.5,nan"],
-     "--merge-radius '0.5,nan': nan is not a radius in pixels >= 0"),
+     "error: --merge-radius -1: expected pixels from 0 (merges nothing) to 480, the shorter "
+     "side of the rendered images (640x480)"),
+    ("resolution_quality", ["--merge-radius", "0.5,nan"], "error: --merge-radius nan: expected "),
+    ("resolution_quality", ["--merge-radius", "2,inf"], "error: --merge-radius inf: expected "),
+    ("resolution_quality", ["--merge-radius", "1e9"],
+     "error: --merge-radius 1e+09: expected pixels from 0 (merges nothing) to 480"),
     ("multiway", ["--frames", "--graffiti", "", "--formations", "", "--warped-seeds",
                   "--team", "0"], "--team 0: a team has at least 2 cameras"),
 ])
