@@ -198,6 +198,7 @@ def run(args) -> int:
 
 
 def _run_online(args) -> int:
+    from pipeline.evaluation.metrics import score_text
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.online import run_online
 
@@ -210,5 +211,6 @@ def _run_online(args) -> int:
         report, out, f"{counted(len(report['steps']), 'step')}, {counted(f['links'], 'link')}, "
         "conflict-free after "
         f"every step: {report['conflict_free_every_step']}; pairwise F1 online "
-        f"{f['online']['f1']:.3f}" + (f", batch {f['batch']['f1']:.3f}" if "batch" in f else ""),
+        f"{score_text(f['online'], 'f1')}"
+        + (f", batch {score_text(f['batch'], 'f1')}" if "batch" in f else ""),
         args.no_rerun)

@@ -20,6 +20,7 @@ from pipeline.commands.options import (
     feature_options,
     parse_size,
 )
+from pipeline.evaluation.metrics import score_text
 from pipeline.evaluation.report import PAPER_TABLE_III_IV
 
 FORMATIONS = ("a", "b", "c", "d")
@@ -87,7 +88,7 @@ def formations_table(reports: dict[str, dict]) -> str:
               "|---|" + "---|" * len(names)]
 
     def prf(s):
-        return f"{s['precision']:.3f} / {s['recall']:.3f} / {s['f1']:.3f}"
+        return " / ".join(score_text(s, key) for key in ("precision", "recall", "f1"))
 
     lines.append("| matching only (before) | " + " | ".join(
         prf(reports[n]["pairwise"]["before"]) for n in names) + " |")

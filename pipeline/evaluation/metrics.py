@@ -20,7 +20,7 @@ from pipeline.association import AssociationGraph, association_sets, camera_offs
 from pipeline.errors import InputError
 from pipeline.types import Links
 
-__all__ = ["association_pairs", "pairwise_scores", "PairwiseTruth", "true_pairs_all"]
+__all__ = ["association_pairs", "pairwise_scores", "PairwiseTruth", "score_text", "true_pairs_all"]
 
 
 def association_pairs(features_per_camera, links: Links) -> np.ndarray:
@@ -90,6 +90,33 @@ def pairwise_scores(predicted: np.ndarray, truth: np.ndarray, m_total: int) -> d
     f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
     return {"precision": precision, "recall": recall, "f1": f1,
             "predicted_pairs": int(len(pk)), "true_pairs": int(len(tk)), "correct_pairs": correct}
+
+
+#: a score printed where it is 0/0 (its value in a report stays the 0.0 it is computed as)
+NOT_DEFINED = "–"
+
+
+def score_text(scores: dict, key: str) -> str:
+    """``scores[key]`` (``precision``, ``recall`` or ``f1`` of :func:`pairwise_scores` or
+    :meth:`PairwiseTruth.scores`) as a table prints it, ``'–'`` where it is 0/0 and so not a
+    measurement: precision without a predicted pair, recall without a true pair, F1 without
+    either.
+
+    Examples
+    --------
+    >>> score_text({"precision": 0.5, "recall": 0.25, "f1": 1 / 3, "predicted_pairs": 2,
+    ...             "true_pairs": 4}, "f1")
+    '0.333'
+    >>> none = {"precision": 0.0, "recall": 0.0, "f1": 0.0, "predicted_pairs": 0, "true_pairs": 0}
+    >>> [score_text(none, k) for k in ("precision", "recall", "f1")]
+    ['–', '–', '–']
+    >>> score_text(dict(none, true_pairs=3), "recall"), score_text(dict(none, true_pairs=3), "f1")
+    ('0.000', '0.000')
+    """
+    undefined = {"precision": scores["predicted_pairs"] == 0,
+                 "recall": scores["true_pairs"] == 0,
+                 "f1": scores["predicted_pairs"] == 0 and scores["true_pairs"] == 0}[key]
+    return NOT_DEFINED if undefined else f"{scores[key]:.3f}"
 
 
 class PairwiseTruth:

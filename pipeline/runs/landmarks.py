@@ -344,6 +344,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
 
 def landmarks_markdown(report: dict) -> str:
     """The run's table: links, sets, pairwise P/R/F1 before and after, baselines."""
+    from pipeline.evaluation.metrics import score_text
+
     b, a, r, pw = report["before"], report["after"], report["resolution"], report["pairwise"]
     lines = [f"## {report['title']}", "", "| | before | after |", "|---|---:|---:|"]
     for label, key in (("Links", "links"), ("Good links", "good_links"),
@@ -352,11 +354,12 @@ def landmarks_markdown(report: dict) -> str:
                        ("Conflictive sets", "conflictive_sets")):
         lines.append(f"| {label} | {b[key]} | {a[key]} |")
     for key in ("precision", "recall", "f1"):
-        lines.append(f"| Pairwise {key} (closure) | {pw['before'][key]:.3f} | "
-                     f"{pw['after'][key]:.3f} |")
+        lines.append(f"| Pairwise {key} (closure) | {score_text(pw['before'], key)} | "
+                     f"{score_text(pw['after'], key)} |")
     lines.append(f"| Pairwise F1 of the Hungarian matches themselves | "
-                 f"{pw['input_links']['f1']:.3f} | |")
-    lines.append(f"| Pairwise F1 of the links themselves | {pw['before_links']['f1']:.3f} | |")
+                 f"{score_text(pw['input_links'], 'f1')} | |")
+    lines.append(f"| Pairwise F1 of the links themselves | {score_text(pw['before_links'], 'f1')} "
+                 "| |")
     lines.append(f"| Cycle-consistent | {report['cycle_consistent_before']} | "
                  f"{report['cycle_consistent']} |")
     ref = report["refinement"]
@@ -375,6 +378,6 @@ def landmarks_markdown(report: dict) -> str:
                   "|---|---:|---:|---:|---:|"]
         for name, bl in report["baselines"].items():
             p = bl["pairwise"]
-            lines.append(f"| {name} | {p['precision']:.3f} | {p['recall']:.3f} | "
-                         f"{p['f1']:.3f} | {bl['time_s']:.2f} |")
+            lines.append(f"| {name} | {score_text(p, 'precision')} | {score_text(p, 'recall')} | "
+                         f"{score_text(p, 'f1')} | {bl['time_s']:.2f} |")
     return "\n".join(lines) + "\n"
