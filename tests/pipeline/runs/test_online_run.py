@@ -77,7 +77,8 @@ def test_recording_carries_the_step_timeline(run_dir):
 @pytest.mark.parametrize("flags, match", [
     (["--steps", "0"], "--steps 0"),
     (["--steps", "2", "--window", "0"], "--window 0"),
-    (["--steps", "2", "--speed", "-1"], "--speed"),
+    # a speed typed as a whole number is named as typed, not as -1.0
+    (["--steps", "2", "--speed", "-1"], "--speed -1: expected a finite number of metres"),
     (["--steps", "2", "--hold", "-1"], "--hold -1"),
     (["--steps", "2", "--drop-prob", "0.1"], "switching-topology"),
     # the graph of each step is drawn from --seed: a --fault-seed changed nothing, silently
