@@ -316,6 +316,8 @@ class DatabaseContents:
     snapshot : Path or None — the private snapshot of the database that was read (kept while
         this object lives; the cleaned copy is made from it)
     pairs_without_inliers : int — two-view geometries with no inliers (failed verification)
+    watermark_pairs_ignored : int — pairs with inliers left out as ``WATERMARK`` (read with
+        ``ignore_watermarks``; 0 otherwise)
     fundamental : dict ``(i, j) -> (3, 3)`` — the pair's fundamental matrix in OpenCV pixels
         (``x_jᵀ F x_i = 0``), ``i < j``, for the pairs whose geometry has one
     """
@@ -327,6 +329,7 @@ class DatabaseContents:
     links: Links
     not_one_to_one: np.ndarray
     pairs_without_inliers: int = 0
+    watermark_pairs_ignored: int = 0
     fundamental: dict = field(default_factory=dict)
     cameras: list = field(default_factory=list)
     link_pair_id: np.ndarray | None = None
@@ -370,7 +373,8 @@ def check_database_file(path: Path) -> None:
             raise InputError(f"{str(path)!r} is not a COLMAP database (not an SQLite file)")
 
 
-def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
+def read_database(path: str | Path, check_sizes=None, *,
+                  ignore_watermarks: bool = False) -> DatabaseContents:
     """Read keypoints and two-view geometries from a COLMAP database (COLMAP or hloc made).
 
     Parameters
@@ -378,6 +382,13 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
     path : the ``.db`` file; read through SQLite, read only (see the module notes)
     check_sizes : called with the :class:`~pipeline.inputs.dbcheck.DatabaseSizes` the tables
         declare before anything is copied or read (e.g. a memory guard that raises)
+    ignore_watermarks : read the pairs as COLMAP's mapper does with its ``ignore_watermarks``
+        option on: the two-view geometries of configuration ``WATERMARK`` (and only those)
+        give no links; their number is ``watermark_pairs_ignored``. COLMAP's source,
+        ``src/colmap/scene/database_cache.cc`` (``DatabaseCache`` loading, which builds the
+        mapper's correspondence graph): a pair is used when its inliers reach
+        ``min_num_matches`` and ``!ignore_watermarks || config != TwoViewGeometry::WATERMARK``;
+        ``DEGENERATE``, ``UNDEFINED`` and every other configuration are used either way
 
     Returns
     -------
@@ -428,7 +439,7 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
         except (RuntimeError, ValueError, IndexError) as exc:
             raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
         contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras,
-                             raw)
+                             raw, ignore_watermarks=ignore_watermarks)
     except BaseException:
         shutil.rmtree(snapshot_dir, ignore_errors=True)
         raise
@@ -438,9 +449,11 @@ def read_database(path: str | Path, check_sizes=None) -> DatabaseContents:
 
 
 def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
-              cameras, raw: tuple[int, int] = (0, 0)) -> DatabaseContents:
+              cameras, raw: tuple[int, int] = (0, 0), *,
+              ignore_watermarks: bool = False) -> DatabaseContents:
     """The contents read; ``raw``: the matches table's ``(matches, image pairs)``, named
-    when no pair is verified (matched with geometric verification skipped)."""
+    when no pair is verified (matched with geometric verification skipped);
+    ``ignore_watermarks``: as :func:`read_database`."""
     if len(images) < 2:
         raise InputError(f"database {str(path)!r} holds {len(images)} image(s); at least two are needed")
     images = sorted(images, key=lambda im: im.name)
@@ -452,6 +465,16 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     kps = [_xy(keypoints[im.image_id]) for im in images]
     usable = [(pid, g) for pid, g in zip(pair_ids, geometries, strict=True)
               if len(g.inlier_matches)]
+    watermarks = 0
+    if ignore_watermarks:
+        with_inliers = len(usable)
+        usable = [(pid, g) for pid, g in usable if g.config != _TVG.WATERMARK]
+        watermarks = with_inliers - len(usable)
+        if not usable and watermarks:
+            raise InputError(
+                f"database {str(path)!r}: its {watermarks} verified image pair(s) are all "
+                f"WATERMARK pairs, which COLMAP's mapper ignores with ignore_watermarks on: "
+                f"nothing is left to clean (drop --ignore-watermarks to clean them)")
     if not usable:
         what = "no two-view geometries" if not n_rows else \
             f"{n_rows} two-view geometries, all without inliers"
@@ -496,7 +519,8 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     not_one_to_one = _repeated(ga * n + cj) | _repeated(gb * n + ci)
     return DatabaseContents(path=path, names=names, image_ids=image_ids, keypoints=kps,
                             links=links, not_one_to_one=not_one_to_one,
-                            pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable),
+                            pairs_without_inliers=max(n_rows, len(pair_ids)) - len(usable)
+                            - watermarks, watermark_pairs_ignored=watermarks,
                             cameras=[cameras.get(im.camera_id) for im in images],
                             fundamental=fundamental, link_pair_id=source)
 

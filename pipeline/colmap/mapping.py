@@ -136,7 +136,8 @@ def _largest(models: dict):
 def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
                         output_dir: str | Path | None = None, num_threads: int = -1,
                         seed: int = 0, fixed_intrinsics=(),
-                        min_pose_inliers: int = COLMAP_MIN_POSE_INLIERS) -> MappingSummary:
+                        min_pose_inliers: int = COLMAP_MIN_POSE_INLIERS,
+                        ignore_watermarks: bool = False) -> MappingSummary:
     """``pycolmap.incremental_mapping`` on a database; figures of the largest model.
 
     Parameters
@@ -153,6 +154,8 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
         length is refined and the distortion terms still are; otherwise those cameras are
         held constant
     min_pose_inliers : the mapper's ``abs_pose_min_num_inliers`` (COLMAP's default 30)
+    ignore_watermarks : the mapper's ``ignore_watermarks`` (COLMAP's default off: its
+        ``WATERMARK`` pairs are used like the others)
 
     Returns
     -------
@@ -162,6 +165,7 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
     check_database_file(database_path)
     options, images, _ = _pipeline_options(database_path, num_threads, seed, fixed_intrinsics,
                                            image_dir, min_pose_inliers)
+    options.ignore_watermarks = bool(ignore_watermarks)
     with tempfile.TemporaryDirectory(prefix="colmap-map-") as tmp:
         out = Path(output_dir) if output_dir is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,5 @@
-"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE] [--loop-check] [--fusion]``.
+"""``python -m pipeline clean-db IN.db --out OUT.db [--comm-graph FILE] [--loop-check] [--fusion]
+[--ignore-watermarks]``.
 
 A COLMAP database's verified matches made consistent; the job and what it writes are
 described in :mod:`pipeline.runs.clean_db`. This module parses the options and prints the
@@ -47,6 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "voted out of their tracks cut their links (reason fusion-outlier): "
                         "wrong matches the consistency stage cannot see, e.g. a window matched "
                         "to its twin in several views (off by default: it costs one mapping)")
+    p.add_argument("--ignore-watermarks", action="store_true",
+                   help="read the database as COLMAP's mapper does with ignore_watermarks on: "
+                        "its WATERMARK image pairs (only those) take no part and are copied "
+                        "into OUT.db unchanged; the summary counts them (off by default, as "
+                        "in COLMAP: every pair with inliers is used)")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p, links_only=True)
 
@@ -89,7 +95,7 @@ def run(args) -> int:
                              args.resolution, rerun=not args.no_rerun,
                              image_dir=args.image_dir, outputs=outputs,
                              baselines=args.baselines, loop_tol_deg=loop_tol,
-                             fusion=args.fusion)
+                             fusion=args.fusion, ignore_watermarks=args.ignore_watermarks)
         summary = flag_result(res.summary(), no_links_why="the database holds no verified "
                                                           "match between two images")
         if args.report:
@@ -98,6 +104,9 @@ def run(args) -> int:
         print(stale, file=sys.stderr)
     b, a, cut, r = res.before, res.after, res.cut, res.resolution
     print(f"{res.images} images, {res.comm_edges} comm edges, {res.links} verified links")
+    if res.ignored_watermark_pairs is not None:
+        print(f"WATERMARK image pairs ignored (--ignore-watermarks): "
+              f"{res.ignored_watermark_pairs}, copied unchanged")
     print(f"conflictive sets: {b['conflictive_sets']} before, {a['conflictive_sets']} after "
           f"({b['conflictive_features']} -> {a['conflictive_features']} conflictive features)")
     print(f"links cut: {cut['resolution']} by resolution in {r['iterations']} iteration(s) "

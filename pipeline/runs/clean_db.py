@@ -36,6 +36,16 @@ poses refutes. The images the mapping did not register take no part (their links
 consistency stage left them), as in ``run-images``. A mapping folded by the repeated structure
 gives wrong poses, and fusion then cuts right links: the summary's ``fusion`` section gives
 the mapping's figures, so a user can judge it.
+
+With ``ignore_watermarks`` (``--ignore-watermarks``) the database is read as COLMAP's mapper
+reads it with its ``ignore_watermarks`` option on (off by default): the two-view geometries of
+configuration ``WATERMARK`` are left out, and only those (COLMAP's
+``src/colmap/scene/database_cache.cc``, where the mapper's correspondence graph is built: a
+pair is used when ``!ignore_watermarks || config != TwoViewGeometry::WATERMARK``; ``DEGENERATE``
+and ``UNDEFINED`` pairs are used either way). Those pairs give no links to the stage and are
+copied into ``OUT.db`` exactly as they were; ``--fusion``'s mapping ignores them too. The
+summary's ``ignored_watermark_pairs`` counts them. Without it every pair with inliers gives
+links, whatever its configuration, as the mapper's default reads them.
 """
 
 from __future__ import annotations
@@ -73,11 +83,15 @@ class CleanDbResult:
     baselines: dict = field(default_factory=dict)
     loop_check: dict = field(default_factory=dict)
     fusion: dict = field(default_factory=dict)
+    #: WATERMARK pairs left out (``--ignore-watermarks``); None: every pair was read
+    ignored_watermark_pairs: int | None = None
 
     def summary(self) -> dict:
         out = {"input": str(self.input), "output": str(self.output), "images": self.images,
                "comm_edges": self.comm_edges, "links": self.links, "before": self.before,
                "after": self.after, "cut": self.cut, "resolution": self.resolution}
+        if self.ignored_watermark_pairs is not None:
+            out["ignored_watermark_pairs"] = self.ignored_watermark_pairs
         if self.baselines:
             out["baselines"] = self.baselines
         if self.loop_check:
@@ -93,7 +107,7 @@ def clean_database(database: str | Path, out: str | Path,
                    resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None, outputs=None,
                    baselines: bool = False, loop_tol_deg: float | None = None,
-                   fusion: bool = False) -> CleanDbResult:
+                   fusion: bool = False, ignore_watermarks: bool = False) -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -120,6 +134,9 @@ def clean_database(database: str | Path, out: str | Path,
     fusion : after the consistency stage, fuse the kept links' tracks on the poses of a COLMAP
         mapping of the input and cut the links of the observations voted out (module
         docstring); its summary is ``CleanDbResult.fusion``
+    ignore_watermarks : read the database as COLMAP's mapper with ``ignore_watermarks`` on:
+        its ``WATERMARK`` pairs (only those) give no links and are copied unchanged (module
+        docstring); their number is ``CleanDbResult.ignored_watermark_pairs``
 
     Returns
     -------
@@ -151,17 +168,22 @@ def clean_database(database: str | Path, out: str | Path,
         budget.add(f"the robots of its {sizes['images']} images",
                    sizes["images"] * BYTES_PER_CAMERA)
 
-    contents = colmap.read_database(database, check_sizes=count_tables)
+    contents = colmap.read_database(database, check_sizes=count_tables,
+                                    ignore_watermarks=ignore_watermarks)
     try:
-        return _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
-                      image_dir, outputs, baselines, loop_tol_deg, fusion)
+        result = _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
+                        image_dir, outputs, baselines, loop_tol_deg, fusion, ignore_watermarks)
+        if ignore_watermarks:
+            result.ignored_watermark_pairs = contents.watermark_pairs_ignored
+        return result
     finally:
         contents.close()
 
 
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
            rerun: bool, image_dir, outputs, baselines: bool = False,
-           loop_tol_deg: float | None = None, fusion: bool = False) -> CleanDbResult:
+           loop_tol_deg: float | None = None, fusion: bool = False,
+           ignore_watermarks: bool = False) -> CleanDbResult:
     """:func:`clean_database` on the database read as ``contents``."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
@@ -207,7 +229,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     fusion_section = _fusion_pass(contents, model_ok, model_links, idx, result, reason,
-                                  edges) if fusion else {}
+                                  edges, ignore_watermarks) if fusion else {}
     keep = reason == ""
     after = count_conflicts(AssociationGraph(m, links.subset(keep))).as_dict()
     colmap.write_cleaned_database(contents, output_path(outputs, out, "--out"), keep)
@@ -280,7 +302,7 @@ def _loop_pass(contents, reason: np.ndarray, tol_deg: float) -> dict:
 
 
 def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, result,
-                 reason: np.ndarray, edges) -> dict:
+                 reason: np.ndarray, edges, ignore_watermarks: bool = False) -> dict:
     """Fusion on the poses of a COLMAP mapping of the input (module docstring): the links it
     cuts among the consistency stage's kept ``model_links`` (rows ``idx`` of the database's
     links) get ``reason`` ``fusion-outlier`` (in place). The mapping sees the links the robots
@@ -299,7 +321,8 @@ def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, r
         db = contents.snapshot or contents.path
         if not model_ok.all():
             db = colmap.write_cleaned_database(contents, Path(tmp) / "model.db", model_ok)
-        mapping = colmap.incremental_mapping_with_retry(db, seed=0)
+        mapping = colmap.incremental_mapping_with_retry(
+            db, seed=0, **({"ignore_watermarks": True} if ignore_watermarks else {}))
     names = contents.names
     # a database holds no pixels and no poses: fusion reads names, keypoints and the mapping
     views = [View(name, np.zeros((1, 1), np.uint8), np.eye(3)) for name in names]
