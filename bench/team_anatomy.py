@@ -150,10 +150,12 @@ SEARCH_PASSES = 50
 
 
 def stretch_search(stretch: np.ndarray, cam: np.ndarray, a: np.ndarray, b: np.ndarray,
-                   kept: np.ndarray) -> np.ndarray:
+                   kept: np.ndarray, passes: int = SEARCH_PASSES) -> np.ndarray:
     """The local search of the module docstring: ``stretch`` the stretch of each feature,
     ``cam`` its camera, ``a``/``b`` the links' global ends, ``kept`` the association it starts
-    from (whose clusters are unions of stretches). Returns the kept mask it ends at."""
+    from (whose clusters are unions of stretches). Returns the kept mask it ends at; with
+    ``passes=0`` the one it starts from (``kept`` itself when its clusters are unions of
+    stretches)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -171,7 +173,7 @@ def stretch_search(stretch: np.ndarray, cam: np.ndarray, a: np.ndarray, b: np.nd
     np.add.at(W, (y, x), 1)
     np.fill_diagonal(W, 0)
     seen: set = set()
-    for _ in range(SEARCH_PASSES):
+    for _ in range(passes):
         moved = False
         for s0 in range(n_str):
             g1 = group[s0]

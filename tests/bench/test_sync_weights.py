@@ -69,3 +69,26 @@ def test_a_negative_alpha_is_refused(tmp_path, capsys):
         _bench().main(["--team", "40", "--frames", "--warped-seeds", "--alphas", "-1",
                        "--out", str(tmp_path / "o")])
     assert "--alphas -1" in capsys.readouterr().err
+
+
+def test_the_search_starts_from_syncs_association_when_a_strong_link_blocks_a_supported_one():
+    """A wrong link given the strongest descriptor evidence is merged first and blocks
+    supported links: ``sync`` cuts links that close triangles, so the stretches of the
+    supported links alone would join links ``sync`` cut; the search's atoms must not."""
+    bench = _bench()
+    case = bench.multiway.team_case(40, seed=0)
+    w, _ = bench.multiway.sync_evidence(case.m, case.links)
+    from pipeline.matching.link_evidence import ratio_llr
+
+    lam = ratio_llr(1.0 - case.links.quality)
+    good = np.asarray(case.link_good, bool)
+    wrong = np.flatnonzero(~good & (w - lam <= 0))
+    assert len(wrong)
+    w, lam = w.copy(), lam.copy()
+    w[wrong[:3]] += 1000.0
+    lam[wrong[:3]] += 1000.0
+    sync = bench.greedy_merge(case.m, case.links, w)
+    assert (~sync & (w - lam > 0)).any()  # a supported link cut: the case this test is for
+    obj = bench.objective_check(case, w, lam)
+    assert obj["start_is_sync"]
+    assert obj["separated"]["stretch_search"] <= obj["separated"]["sync"]
