@@ -21,7 +21,7 @@ the closure (as CLEAR's), per ``α``, and the spurious links each association ke
 
 *Does counting links point at the truth?* On the ring2 team the truth separates fewer input
 links than ``sync``'s association, and a global search over whole stretches that counts
-links (``stretch_search`` of ``bench/team_anatomy.py``, started from ``sync``'s association)
+links (:func:`stretch_search`, described in ``bench/team_anatomy.py``, started from ``sync``'s association)
 raises the F1 there. Each row also gives, for the same input, the input links separated
 (ends in two clusters of the closure) by the truth (its wrong links), by ``sync``'s
 association and by that search's, the search's F1, and the sum of ``sync``'s own weights
@@ -57,6 +57,8 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import multiway  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.sparse import coo_matrix  # noqa: E402
+from scipy.sparse.csgraph import connected_components  # noqa: E402
 
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT  # noqa: E402
@@ -123,6 +125,65 @@ def greedy_merge(m, links, w: np.ndarray) -> np.ndarray:
     return mg.kept(a, b)
 
 
+#: passes of ``stretch_search`` at most
+SEARCH_PASSES = 50
+
+
+def stretch_search(stretch: np.ndarray, cam: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   kept: np.ndarray, passes: int = SEARCH_PASSES) -> np.ndarray:
+    """The local search of ``bench/team_anatomy.py``'s docstring: ``stretch`` the stretch of each feature,
+    ``cam`` its camera, ``a``/``b`` the links' global ends, ``kept`` the association it starts
+    from (whose clusters are unions of stretches). Returns the kept mask it ends at; with
+    ``passes=0`` the one it starts from (``kept`` itself when its clusters are unions of
+    stretches)."""
+    n_str, n_cam = int(stretch.max()) + 1, int(cam.max()) + 1
+    x, y = stretch[a], stretch[b]
+    _, comp = connected_components(coo_matrix((np.ones(int(kept.sum())), (x[kept], y[kept])),
+                                              shape=(n_str, n_str)), directed=False)
+    group = comp.astype(np.int64)
+    C = np.zeros((n_str, n_cam), np.float32)
+    C[stretch, cam] = 1.0
+    overlap = (C @ C.T) > 0
+    np.fill_diagonal(overlap, False)
+    W = np.zeros((n_str, n_str), np.int64)
+    np.add.at(W, (x, y), 1)
+    np.add.at(W, (y, x), 1)
+    np.fill_diagonal(W, 0)
+    seen: set = set()
+    for _ in range(passes):
+        moved = False
+        for s0 in range(n_str):
+            g1 = group[s0]
+            for g2 in sorted(set(group[W[s0] > 0].tolist()) - {g1}):
+                s1 = np.zeros(n_str, bool)
+                s1[s0] = True
+                s2 = np.zeros(n_str, bool)
+                front = s1.copy()
+                while front.any():
+                    new2 = (group == g2) & ~s2 & overlap[front].any(0)
+                    s2 |= new2
+                    front = (group == g1) & ~s1 & overlap[new2].any(0)
+                    s1 |= front
+                r1, r2 = (group == g1) & ~s1, (group == g2) & ~s2
+                gain = (W[np.ix_(s1, r2)].sum() + W[np.ix_(s2, r1)].sum()
+                        - W[np.ix_(s1, r1)].sum() - W[np.ix_(s2, r2)].sum())
+                key = frozenset((tuple(np.flatnonzero(s1)), tuple(np.flatnonzero(s2))))
+                if gain > 0 or (gain == 0 and s2.any() and key not in seen):
+                    seen.add(key)
+                    group[s1], group[s2] = g2, g1
+                    moved = True
+                    break
+        for g1 in np.unique(group).tolist():
+            for g2 in np.unique(group[W[group == g1].sum(0) > 0]).tolist():
+                if g2 != g1 and (group == g1).any() and \
+                        not (C[group == g1].any(0) & C[group == g2].any(0)).any():
+                    group[group == g2] = g1
+                    moved = True
+        if not moved:
+            break
+    return group[x] == group[y]
+
+
 def measure(case, alphas) -> dict:
     """F1 and spurious links kept per ``α`` (module docstring), ``good_links``' F1, and
     whether ``α = 1`` keeps exactly ``sync``'s links."""
@@ -155,10 +216,6 @@ def objective_check(case, w: np.ndarray, lam: np.ndarray) -> dict:
     every other in ``sync``'s order, as on the team; on the warped inputs a strong
     unsupported link can come first and block a supported one, and a stretch would then
     join links ``sync`` cut (the search would start from another association)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from team_anatomy import stretch_search  # imports this module: here, not above
-
     m, links = case.m, case.links
     off = np.concatenate([[0], np.cumsum(m)])
     a = off[links.cam_i] + links.feat_i

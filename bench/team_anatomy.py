@@ -34,14 +34,15 @@ separates (beside the truth's: the wrong links):
   (merged clusters add their counts), ties by the clusters' smallest ids.
 
 and, as a central reference for a global move (like ``bench/team_moves.py``; no rule of the
-pipeline), ``stretch_search``: a local search over whole stretches starting from ``sync``'s
+pipeline), ``stretch_search`` (kept in ``bench/sync_weights.py``, which runs it on the
+other inputs): a local search over whole stretches starting from ``sync``'s
 association, counting input links (the quality is noise here). A *Kempe chain* move takes a
 stretch ``x`` from its cluster ``G`` into a cluster ``H`` linked to it, the stretches of
 ``H`` that share a camera with ``x`` into ``G``, the stretches of ``G`` that share a camera
 with those into ``H``, and so on until none is left (both clusters stay conflict-free); it
 is made when it joins more input links, or as many (a plateau move, each chain at most once
 per run, so the search ends). Two clusters linked to each other that share no camera merge.
-Passes repeat until nothing moves (at most :data:`SEARCH_PASSES`).
+Passes repeat until nothing moves (at most ``sync_weights.SEARCH_PASSES``).
 
 Prints one line per team and saves ``runs/bench-team-anatomy/results.json``.
 
@@ -68,7 +69,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import multiway  # noqa: E402
 import numpy as np  # noqa: E402
-from sync_weights import Merge, sync_order  # noqa: E402
+from sync_weights import Merge, stretch_search, sync_order  # noqa: E402
 
 from pipeline.association import camera_offsets  # noqa: E402
 from pipeline.commands.options import count_argument  # noqa: E402
@@ -143,68 +144,6 @@ def count_linkage(mg: Merge, a, b, rest: list[int]) -> None:
         for z, cz in merged.items():
             count[z][r] = cz
             heapq.heappush(heap, (-cz, min(r, z), max(r, z)))
-
-
-#: passes of ``stretch_search`` at most
-SEARCH_PASSES = 50
-
-
-def stretch_search(stretch: np.ndarray, cam: np.ndarray, a: np.ndarray, b: np.ndarray,
-                   kept: np.ndarray, passes: int = SEARCH_PASSES) -> np.ndarray:
-    """The local search of the module docstring: ``stretch`` the stretch of each feature,
-    ``cam`` its camera, ``a``/``b`` the links' global ends, ``kept`` the association it starts
-    from (whose clusters are unions of stretches). Returns the kept mask it ends at; with
-    ``passes=0`` the one it starts from (``kept`` itself when its clusters are unions of
-    stretches)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n_str, n_cam = int(stretch.max()) + 1, int(cam.max()) + 1
-    x, y = stretch[a], stretch[b]
-    _, comp = connected_components(coo_matrix((np.ones(int(kept.sum())), (x[kept], y[kept])),
-                                              shape=(n_str, n_str)), directed=False)
-    group = comp.astype(np.int64)
-    C = np.zeros((n_str, n_cam), np.float32)
-    C[stretch, cam] = 1.0
-    overlap = (C @ C.T) > 0
-    np.fill_diagonal(overlap, False)
-    W = np.zeros((n_str, n_str), np.int64)
-    np.add.at(W, (x, y), 1)
-    np.add.at(W, (y, x), 1)
-    np.fill_diagonal(W, 0)
-    seen: set = set()
-    for _ in range(passes):
-        moved = False
-        for s0 in range(n_str):
-            g1 = group[s0]
-            for g2 in sorted(set(group[W[s0] > 0].tolist()) - {g1}):
-                s1 = np.zeros(n_str, bool)
-                s1[s0] = True
-                s2 = np.zeros(n_str, bool)
-                front = s1.copy()
-                while front.any():
-                    new2 = (group == g2) & ~s2 & overlap[front].any(0)
-                    s2 |= new2
-                    front = (group == g1) & ~s1 & overlap[new2].any(0)
-                    s1 |= front
-                r1, r2 = (group == g1) & ~s1, (group == g2) & ~s2
-                gain = (W[np.ix_(s1, r2)].sum() + W[np.ix_(s2, r1)].sum()
-                        - W[np.ix_(s1, r1)].sum() - W[np.ix_(s2, r2)].sum())
-                key = frozenset((tuple(np.flatnonzero(s1)), tuple(np.flatnonzero(s2))))
-                if gain > 0 or (gain == 0 and s2.any() and key not in seen):
-                    seen.add(key)
-                    group[s1], group[s2] = g2, g1
-                    moved = True
-                    break
-        for g1 in np.unique(group).tolist():
-            for g2 in np.unique(group[W[group == g1].sum(0) > 0]).tolist():
-                if g2 != g1 and (group == g1).any() and \
-                        not (C[group == g1].any(0) & C[group == g2].any(0)).any():
-                    group[group == g2] = g1
-                    moved = True
-        if not moved:
-            break
-    return group[x] == group[y]
 
 
 def anatomy(case) -> dict:
