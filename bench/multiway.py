@@ -58,7 +58,10 @@ Where each link is known good or spurious (every case but none), ``good_cut`` an
 ``spurious_cut`` count what each method cut. Method ``good_links`` (on request) keeps exactly
 the good links: the association of the input's right links, no link invented, the bound of
 every rule's recall (:func:`sparse_recall` prints each method's recall on the sparse graphs
-over its recall on the complete graph, the target "at least half").
+over its recall on the complete graph, the target "at least half"). :func:`baseline_check`
+prints, per distributed rule and kind of input, on how many inputs its F1 is above, equal to
+and below the best centralized baseline's (the target "at least the best centralized
+baseline on every input"), and its largest shortfall.
 
 Prints one table per case and saves ``runs/bench-multiway/results.json``.
 
@@ -590,6 +593,56 @@ def sparse_recall(records: list) -> list[dict]:
     return out
 
 
+def baseline_check(records: list) -> list[dict]:
+    """The target "on every data set and graph: F1 at least the best centralized baseline on
+    the same input": for every input (case, data, frames, graph, input, warp seed and hidden
+    fraction, team size and seed, formation and seed) on which a distributed rule and at
+    least one centralized baseline ran, the rule's F1 against the best baseline's. Scores are
+    compared as the tables print them (4 decimals): ``above``, ``equal`` or ``below``."""
+    keys = ("case", "data", "frames", "graph", "inputs", "warp_seed", "hidden", "cameras",
+            "team_seed", "formation", "seed")
+    groups: dict = {}
+    for r in records:
+        if r.get("status") == "ok" and r.get("renumber") is None:
+            groups.setdefault(tuple(r.get(k) for k in keys), {})[r["method"]] = r["f1"]
+    out = []
+    for key, f1 in groups.items():
+        central = {m: f1[m] for m in CENTRALIZED if m in f1}
+        if not central:
+            continue
+        best = max(central, key=lambda m: (round(central[m], 4), m))
+        ref = round(central[best], 4)
+        for method in DISTRIBUTED:
+            if method in f1:
+                got = round(f1[method], 4)
+                out.append({**dict(zip(keys, key, strict=True)), "method": method, "f1": f1[method],
+                            "best_baseline": best, "baseline_f1": central[best],
+                            "verdict": "above" if got > ref else "equal" if got == ref
+                            else "below"})
+    return out
+
+
+def baseline_lines(checks: list[dict]) -> list[str]:
+    """One line per distributed rule and kind of input (case and input): how many inputs it
+    is above, equal to and below the best centralized baseline, and its largest shortfall."""
+    lines = []
+    kinds = dict.fromkeys((c["method"], c["case"], c["inputs"]) for c in checks)
+    for method, case, inputs in kinds:
+        mine = [c for c in checks if (c["method"], c["case"], c["inputs"]) == (method, case, inputs)]
+        n = {v: sum(c["verdict"] == v for c in mine) for v in ("above", "equal", "below")}
+        line = (f"  {method}, {case}" + (f" ({inputs})" if inputs else "") + f": above on "
+                f"{n['above']}, equal on {n['equal']}, below on {n['below']} of {len(mine)}")
+        if n["below"]:
+            w = min(mine, key=lambda c: c["f1"] - c["baseline_f1"])
+            where = ", ".join(f"{k} {w[k]}" for k in ("frames", "graph", "warp_seed", "hidden",
+                                                       "cameras", "team_seed", "formation",
+                                                       "seed") if w.get(k) is not None)
+            line += (f"; largest shortfall {w['f1'] - w['baseline_f1']:+.4f} ({where}: "
+                     f"{w['f1']:.4f} against {w['best_baseline']}'s {w['baseline_f1']:.4f})")
+        lines.append(line)
+    return lines
+
+
 def run_case(title: str, case: Case, methods, base: dict, a, records: list) -> None:
     """Every method on one case: rows appended to ``records``, the table printed."""
     rows = []
@@ -765,11 +818,16 @@ def main(argv=None) -> int:
                   f"{worst['frames']} frames, {worst['graph']}, {worst['inputs']}"
                   + (f", warp seed {worst['warp_seed']}, hidden {worst['hidden']:g}"
                      if worst["warp_seed"] is not None else ""))
+    checks = baseline_check(records)
+    if checks:
+        print("F1 against the best centralized baseline on the same input (target: at least it "
+              "on every input)")
+        print("\n".join(baseline_lines(checks)))
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "results.json", {
         "machine": machine(load), "args": vars(a), "records": records, "sparse_recall": ratios,
-        "renumbering": renumber_table(records)})
+        "baseline_check": checks, "renumbering": renumber_table(records)})
     print(f"saved {out / 'results.json'} (load average {load:.1f} at start, "
           f"{os.getloadavg()[0]:.1f} at end)")
     return 0
