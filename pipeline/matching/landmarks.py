@@ -159,12 +159,13 @@ def guided_match(cost: np.ndarray, x_i: np.ndarray, x_j: np.ndarray,
     r, s = linear_sum_assignment(cost)
     if r.size < 8:
         return np.stack([r, s], axis=1).astype(np.int64), False
-    inl, F, _ = epipolar_filter(x_i[r], x_j[s], None, None, False, threshold_px)
+    a, b, swap = _canonical_pairs(x_i[r], x_j[s], x_i, x_j)
+    inl, F, _ = epipolar_filter(a, b, None, None, False, threshold_px)
     if F is None:
         return np.stack([r, s], axis=1).astype(np.int64), False
+    F = F.T if swap else F
     try:
-        H, h_mask = cv2.findHomography(x_i[r].astype(np.float64), x_j[s].astype(np.float64),
-                                       cv2.USAC_MAGSAC, threshold_px)
+        H, h_mask = cv2.findHomography(a, b, cv2.USAC_MAGSAC, threshold_px)
     except cv2.error:
         H, h_mask = None, None
     if H is not None and h_mask is not None and \
@@ -182,6 +183,26 @@ def guided_match(cost: np.ndarray, x_i: np.ndarray, x_j: np.ndarray,
     r, s = linear_sum_assignment(band)
     ok = band[r, s] < _FORBIDDEN
     return np.stack([r[ok], s[ok]], axis=1).astype(np.int64), True
+
+
+def _canonical_pairs(p_i: np.ndarray, p_j: np.ndarray, x_i: np.ndarray, x_j: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The assigned pairs ``(p_i[t], p_j[t])`` as RANSAC is to see them: the two images in an
+    order fixed by their keypoints (``swap``: ``x_j``'s first), the pairs sorted by position.
+
+    RANSAC draws its samples by index (USAC's fixed random state), so the model it returns
+    depends on the order of its input; in this order it depends on the labelled positions
+    only, not on the order of the landmarks in the label files nor on which of the two images
+    comes first by name.
+    """
+    def key(x: np.ndarray) -> tuple:
+        return (len(x), *map(tuple, x[np.lexsort(x.T[::-1])].tolist()))
+
+    swap = key(x_j) < key(x_i)
+    a, b = (p_j, p_i) if swap else (p_i, p_j)
+    order = np.lexsort((b[:, 1], b[:, 0], a[:, 1], a[:, 0]))
+    return (np.ascontiguousarray(a[order], dtype=np.float64),
+            np.ascontiguousarray(b[order], dtype=np.float64), swap)
 
 
 def _ratio_of(cost: np.ndarray, pairs: np.ndarray) -> np.ndarray:

@@ -157,3 +157,21 @@ def test_epipolar_needs_keypoints():
     d = [np.ones((2, 3)), np.ones((2, 3))]
     with pytest.raises(InputError, match="needs the keypoints"):
         match_landmark_edges(d, np.array([[0, 1]]), "histogram", None, None, "epipolar")
+
+
+def test_guided_matching_does_not_depend_on_landmark_or_image_order():
+    """RANSAC samples by index: fed the pairs in label order, the epipolar model (and so the
+    pairs kept) changed with the order of the landmarks in the label files and with which of
+    the two images came first by name."""
+    n = 40
+    x_i, x_j = _two_views(n=n, seed=0)
+    rng = np.random.default_rng(0)
+    x_i, x_j = x_i + rng.normal(0, 1.5, x_i.shape), x_j + rng.normal(0, 1.5, x_j.shape)
+    cost = rng.uniform(0.3, 1, (n, n))
+    cost[np.arange(n), np.arange(n)] = rng.uniform(0, 0.6, n)
+    pairs = sorted(map(tuple, guided_match(cost, x_i, x_j, 3.0)[0].tolist()))
+    p = rng.permutation(n)  # the same landmarks, listed in another order
+    permuted = guided_match(cost[np.ix_(p, p)], x_i[p], x_j[p], 3.0)[0]
+    assert sorted((int(p[r]), int(p[s])) for r, s in permuted) == pairs
+    swapped = guided_match(cost.T, x_j, x_i, 3.0)[0]  # image j first
+    assert sorted((s, r) for r, s in swapped.tolist()) == pairs
