@@ -81,10 +81,12 @@ class LandmarkFrame:
     descriptor_file: str = ""
 
 
-def natural_key(name: str) -> list:
-    """Sort key that orders embedded numbers by value: ``a2 < a10``."""
-    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower())
-            for t in re.split(r"(\d+)", name) if t]
+def natural_key(name: str) -> tuple[list, str]:
+    """Sort key that orders embedded numbers by value: ``a2 < a10``; names it ranks equal
+    (``a1`` and ``a01``, ``A1`` and ``a1``) by the name itself, so that the order never
+    depends on the order the folder lists its files in."""
+    return ([(0, int(t), "") if t.isdigit() else (1, 0, t.lower())
+             for t in re.split(r"(\d+)", name) if t], name)
 
 
 def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:

@@ -205,3 +205,12 @@ def test_two_images_of_one_name_are_refused_not_given_one_keypoint_file(tmp_path
     with pytest.raises(InputError, match=r"view0\.jpg and view0\.png are both images of the "
                                          r"keypoint file view0\.txt"):
         load_landmark_folder(tmp_path, descriptors="sift")
+
+
+def test_natural_order_does_not_depend_on_the_listing_order():
+    """Names of one number and one text but for zeros or case (v1, v01, V1) tied, and kept
+    the order the folder listed them in: the cameras' order, and with it the ring and seq:K
+    graphs and the pairing by order, changed with the file system."""
+    names = ["v1.png", "v01.png", "V1.png", "v2.png"]
+    assert sorted(names, key=natural_key) == sorted(names[::-1], key=natural_key)
+    assert sorted(names, key=natural_key)[-1] == "v2.png"
