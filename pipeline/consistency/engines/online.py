@@ -437,7 +437,9 @@ class OnlineAssociation:
                    cut_weigh=0, cut_history=0, cut_old=0, weighed_sets=0, weigh_rounds=0,
                    weigh_messages=0, weigh_bytes=0, rounds=0, detection_rounds=0,
                    resolution_rounds=0, large_sets=0, merge_rounds=0, messages=0, bytes=0,
-                   stage_peak_bytes=0)
+                   stage_peak_bytes=0, history_bytes=0)
+        if self.robots_check and self.overturn:  # a step without new links has them too
+            rec["history_rounds"] = 0
         if len(new_ids):
             self._stage(new_ids, t, rec)
         rec["messages"] += retire_msgs

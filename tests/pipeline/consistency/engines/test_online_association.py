@@ -432,3 +432,13 @@ def test_the_sets_solved_by_the_robots_at_their_roots_are_the_batched_solution(p
                       ("cut", "cut_rule", "cut_weigh", "cut_history", "conflictive_sets",
                        "conflictive_features", "weighed_sets"))
     assert r.is_conflict_free()
+
+
+@pytest.mark.parametrize("robots_check", [True, False])
+def test_a_step_without_new_links_has_every_field_of_a_step_with_links(robots_check):
+    # a formation driven off the scene: its frames see nothing, the step makes no link
+    oa = OnlineAssociation(window=2, resolution="paper", robots_check=robots_check)
+    linked = oa.add_step([Frame(0, 2), Frame(1, 1)], Links([0], [0], [1], [0]))
+    empty = oa.add_step([Frame(0, 0), Frame(1, 0)], Links([], [], [], []))
+    assert empty["links_new"] == 0
+    assert sorted(empty) == sorted(linked)
