@@ -5,7 +5,8 @@ online step by step.
 (:mod:`pipeline.inputs.sequence`); step ``k`` is every robot's ``k``-th frame. The robots'
 communication graph is ``--graph`` over the robots (a kind, or a file of sub-folder names or
 indices), the same at every step. Each step runs what ``run-formation --steps N`` runs
-(:func:`pipeline.runs.online.associate_online`): the new frames' features, matching against
+(:func:`pipeline.runs.online.associate_online`): the new frames' features (SIFT as
+``run-images`` extracts photographs: RootSIFT, COLMAP's contrast threshold), matching against
 the robot's ``W - 1`` previous frames and its neighbours' last ``W`` frames, the online stage
 (:class:`pipeline.consistency.engines.online.OnlineAssociation`), the conflict check after
 the step; the batch run from scratch at the last step (and every ``batch_every`` steps).
@@ -48,6 +49,13 @@ class SequenceConfig:
     features: str = "sift"
     max_features: int | None = None
     matcher: str = "opencv"
+    #: SIFT as ``run-images`` extracts it from photographs
+    #: (:class:`pipeline.runs.images.ImagesConfig`): COLMAP's contrast threshold, RootSIFT
+    #: descriptors (unit length, as COLMAP's matcher takes them), the budget counting
+    #: distinct locations
+    contrast_threshold: float | None = 0.02
+    rootsift: bool = True
+    budget_after_merge: bool = True
     resolution: str = DEFAULT_RESOLUTION
     batch_every: int = 0
     out: str | None = None
@@ -118,7 +126,10 @@ def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None)
     run = associate_online(seq.views, seq.n_robots, [edges] * seq.steps, config.window,
                            config.resolution, timer, features=config.features,
                            max_features=config.max_features, fusion=False,
-                           feature_options={"merge_radius": radius},
+                           feature_options={"merge_radius": radius,
+                                            "contrast_threshold": config.contrast_threshold,
+                                            "rootsift": config.rootsift,
+                                            "budget_after_merge": config.budget_after_merge},
                            batch_steps=batch_steps_of(seq.steps, config.batch_every)
                            | {seq.steps - 1},
                            match_options=dict(threshold_px=None, matcher=config.matcher),

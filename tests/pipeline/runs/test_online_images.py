@@ -212,3 +212,16 @@ def test_a_frame_without_features_is_warned_and_in_the_report(folder, tmp_path, 
     assert report["features_per_camera"][3] == 0 and min(report["features_per_camera"][:3]) > 0
     assert [w["code"] for w in report["warnings"]] == ["no-features"]
     assert report["warnings"][0]["message"].startswith(message)
+
+
+def test_opencv_sift_with_colmaps_matcher_finds_the_links_run_images_finds(folder, tmp_path):
+    """--features sift with the default matcher (COLMAP's): the frames were extracted as a
+    rendered formation's, plain SIFT, whose descriptors COLMAP's matcher saturates: no link
+    at all. They are now extracted as run-images extracts photographs (RootSIFT, unit length)."""
+    fast = [a for a in FAST if a not in ("--matcher", "opencv")]
+    out = tmp_path / "colmap"
+    assert main(["run-images", str(folder), "--sequence", "--window", "2", "--no-rerun",
+                 "--quiet", "--out", str(out), *fast]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["config"]["matcher"] == "colmap"
+    assert report["steps"][0]["links_new"] > 0
