@@ -5,6 +5,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+#: every bench script's name
+BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py"))
 
 
 def load_bench(name: str):
@@ -38,3 +40,11 @@ def default_options(monkeypatch, name: str):
     except _Parsed as exc:
         return exc.args[0]
     raise AssertionError(f"bench/{name}.py did not parse its arguments")
+
+
+def shadowing_package(folder: Path, name: str, body: str) -> Path:
+    """``folder`` holding a package ``name`` whose ``__init__.py`` is ``body``: put first on a
+    bench's ``PYTHONPATH``, it stands in for the real one."""
+    (folder / name).mkdir()
+    (folder / name / "__init__.py").write_text(body)
+    return folder

@@ -8,21 +8,20 @@ import sys
 from pathlib import Path
 
 import pytest
+from benchload import BENCHES, shadowing_package
 
 ROOT = Path(__file__).resolve().parents[2]
-#: opencv_floor too: bench/run_formation.py runs it, and it is run by hand on an image folder
-BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py"))
 
 
 @pytest.fixture(scope="module")
 def interrupted_numpy(tmp_path_factory):
     """A folder whose ``numpy`` is interrupted while it loads, as by a Ctrl-C then."""
-    folder = tmp_path_factory.mktemp("interrupted")
-    (folder / "numpy").mkdir()
-    (folder / "numpy" / "__init__.py").write_text("raise KeyboardInterrupt\n")
-    return folder
+    return shadowing_package(tmp_path_factory.mktemp("interrupted"), "numpy",
+                             "raise KeyboardInterrupt\n")
 
 
+# every bench, opencv_floor too: bench/run_formation.py runs it, and it is run by hand on an
+# image folder
 @pytest.mark.parametrize("name", BENCHES)
 def test_a_ctrl_c_while_a_bench_loads_is_one_line_and_130(name, interrupted_numpy):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(interrupted_numpy), str(ROOT)]))

@@ -9,19 +9,16 @@ import sys
 from pathlib import Path
 
 import pytest
+from benchload import BENCHES, shadowing_package
 
 ROOT = Path(__file__).resolve().parents[2]
-BENCHES = sorted(p.stem for p in (ROOT / "bench").glob("*.py"))
 
 
 @pytest.fixture(scope="module")
 def other_pipeline(tmp_path_factory):
     """A folder whose ``pipeline`` is not this checkout's."""
-    folder = tmp_path_factory.mktemp("other")
-    (folder / "pipeline").mkdir()
-    (folder / "pipeline" / "__init__.py").write_text(
-        "raise ImportError('the pipeline of another checkout')\n")
-    return folder
+    return shadowing_package(tmp_path_factory.mktemp("other"), "pipeline",
+                             "raise ImportError('the pipeline of another checkout')\n")
 
 
 @pytest.mark.parametrize("name", BENCHES)

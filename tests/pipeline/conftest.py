@@ -1,4 +1,5 @@
-"""Shared fixtures of the real-image tests (pipeline.inputs.photos, pipeline.colmap, run-images, clean-db)."""
+"""Shared fixtures of the real-image tests (pipeline.inputs.photos, pipeline.colmap, run-images,
+clean-db) and of the labelled-landmark runs."""
 
 import shutil
 from pathlib import Path
@@ -42,3 +43,19 @@ def refuse_writes_in(monkeypatch):
         monkeypatch.setattr(outputs.tempfile, "TemporaryFile", refuse)
 
     return apply
+
+
+@pytest.fixture
+def votes_remove_every_match(tmp_path) -> Path:
+    """A labelled folder of three 100x100 images of two landmarks whose Hungarian matches of
+    the given descriptors form one inconsistent cycle (a-b swapped, a-c and b-c not): every
+    pair's two-hop vote ties with its direct one, so the votes keep no match."""
+    import numpy as np
+    from PIL import Image
+
+    desc = {"a": [[-2, 1], [0, 2]], "b": [[1, 2], [1, -1]], "c": [[-2, 0], [1, -1]]}
+    for name, d in desc.items():
+        Image.new("L", (100, 100), 128).save(tmp_path / f"{name}.png")
+        np.savetxt(tmp_path / f"{name}.txt", [[10.0, 10.0], [50.0, 50.0]])
+        np.savetxt(tmp_path / f"{name}.scf", np.asarray(d, dtype=float))
+    return tmp_path

@@ -25,18 +25,14 @@ def test_a_score_of_no_pairs_is_printed_as_not_defined(predicted, truth, printed
     assert all(isinstance(s[k], float) for k in ("precision", "recall", "f1"))
 
 
-def test_the_landmarks_table_prints_a_precision_of_no_predicted_pair_as_not_defined(tmp_path):
+def test_the_landmarks_table_prints_a_precision_of_no_predicted_pair_as_not_defined(
+        votes_remove_every_match):
     """Votes that remove every match leave no predicted pair: the table printed its
     precision, and each baseline's, as 0.000."""
-    from PIL import Image
 
     from pipeline.runs.landmarks import LandmarksConfig, landmarks_markdown, run_landmarks
 
-    desc = {"a": [[-2, 1], [0, 2]], "b": [[1, 2], [1, -1]], "c": [[-2, 0], [1, -1]]}
-    for name, d in desc.items():
-        Image.new("L", (100, 100), 128).save(tmp_path / f"{name}.png")
-        np.savetxt(tmp_path / f"{name}.txt", [[10.0, 10.0], [50.0, 50.0]])
-        np.savetxt(tmp_path / f"{name}.scf", np.asarray(d, dtype=float))
+    tmp_path = votes_remove_every_match
     config = LandmarksConfig(directory=str(tmp_path), geometry="none", resolution="paper",
                              out=str(tmp_path / "run"))
     out, report = run_landmarks(config)

@@ -25,21 +25,14 @@ def test_a_graph_kind_names_the_default_run_folder():
         Path("runs") / "landmarks-hotel-f20-seq4"
 
 
-def test_votes_that_remove_every_match_are_named_in_the_warning(tmp_path):
+def test_votes_that_remove_every_match_are_named_in_the_warning(votes_remove_every_match):
     """Three images of two landmarks whose Hungarian matches form one inconsistent cycle
     (a-b swapped, a-c and b-c not): every pair's two-hop vote ties with its direct one, so
     the votes keep no match. The no-links warning blamed a --ratio gate or the --graph,
     neither of which this run has; it now names the votes and the 6 matches they removed."""
-    import numpy as np
-    from PIL import Image
-
     from pipeline.runs.landmarks import run_landmarks
 
-    desc = {"a": [[-2, 1], [0, 2]], "b": [[1, 2], [1, -1]], "c": [[-2, 0], [1, -1]]}
-    for name, d in desc.items():
-        Image.new("L", (100, 100), 128).save(tmp_path / f"{name}.png")
-        np.savetxt(tmp_path / f"{name}.txt", [[10.0, 10.0], [50.0, 50.0]])
-        np.savetxt(tmp_path / f"{name}.scf", np.asarray(d, dtype=float))
+    tmp_path = votes_remove_every_match
     config = LandmarksConfig(directory=str(tmp_path), geometry="none", resolution="paper",
                              baselines=False, out=str(tmp_path / "run"))
     _, report = run_landmarks(config)
