@@ -60,6 +60,7 @@ import numpy as np  # noqa: E402
 from scipy.sparse import coo_matrix  # noqa: E402
 from scipy.sparse.csgraph import connected_components  # noqa: E402
 
+from pipeline.association import AssociationGraph  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT  # noqa: E402
 from pipeline.consistency.keys import tie_key  # noqa: E402
@@ -116,9 +117,7 @@ def greedy_merge(m, links, w: np.ndarray) -> np.ndarray:
     """Kept mask of the sequential constrained greedy merge in ``sync``'s order
     (:func:`sync_order`): a link joins its two clusters unless they share a camera (Def.
     2.4); kept iff its ends end in one cluster."""
-    off = np.concatenate([[0], np.cumsum(m)])
-    a = off[links.cam_i] + links.feat_i
-    b = off[links.cam_j] + links.feat_j
+    a, b = AssociationGraph(m, links).global_ids()
     mg = Merge(m)
     for k in sync_order(a, b, w).tolist():
         mg.try_join(a[k], b[k])
@@ -217,10 +216,9 @@ def objective_check(case, w: np.ndarray, lam: np.ndarray) -> dict:
     unsupported link can come first and block a supported one, and a stretch would then
     join links ``sync`` cut (the search would start from another association)."""
     m, links = case.m, case.links
-    off = np.concatenate([[0], np.cumsum(m)])
-    a = off[links.cam_i] + links.feat_i
-    b = off[links.cam_j] + links.feat_j
-    n = int(off[-1])
+    graph = AssociationGraph(m, links)
+    a, b = graph.global_ids()
+    n = graph.m_total
     cam = np.repeat(np.arange(len(m)), m)
     sync = greedy_merge(m, links, w)
     inner = sync & (w - lam > 0)

@@ -71,7 +71,7 @@ import multiway  # noqa: E402
 import numpy as np  # noqa: E402
 from sync_weights import Merge, stretch_search, sync_order  # noqa: E402
 
-from pipeline.association import camera_offsets  # noqa: E402
+from pipeline.association import AssociationGraph  # noqa: E402
 from pipeline.commands.options import count_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -149,9 +149,7 @@ def count_linkage(mg: Merge, a, b, rest: list[int]) -> None:
 def anatomy(case) -> dict:
     """The counts and F1 of the module docstring for one team."""
     m, links = case.m, case.links
-    off = camera_offsets(m)
-    a = off[links.cam_i] + links.feat_i
-    b = off[links.cam_j] + links.feat_j
+    a, b = AssociationGraph(m, links).global_ids()
     truth = np.asarray(case.truth_id)
     w, check = multiway.sync_evidence(m, links)
     lam = ratio_llr(1.0 - links.quality)
