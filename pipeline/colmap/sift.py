@@ -146,7 +146,7 @@ def _fundamental_px(tvg) -> np.ndarray | None:
 
 def match_pairs(names: list[str], keypoints: list[np.ndarray], descriptors: list[np.ndarray],
                 cameras: list[tuple[np.ndarray, tuple[int, int], bool, bool]], edges,
-                threads: int = -1, ratio: float = 0.8, max_error_px: float = 4.0,
+                threads: int = 1, ratio: float = 0.8, max_error_px: float = 4.0,
                 min_inliers: int = 15) -> list[VerifiedPair]:
     """COLMAP's matching and geometric verification on the given pairs only.
 
@@ -158,7 +158,10 @@ def match_pairs(names: list[str], keypoints: list[np.ndarray], descriptors: list
     cameras : list of ``(K (3, 3), (width, height), calibrated, prior focal length)``; a
         calibrated camera is ``PINHOLE``, the others :data:`RADIAL_MODEL`
     edges : (E, 2) int — the pairs to match, ``i < j``
-    threads : COLMAP threads (-1: all cores)
+    threads : COLMAP threads (-1: all cores). One by default: on several threads COLMAP's CPU
+        matching does not return the same matches from call to call (four Sceaux photographs,
+        ring2, 40 calls on all cores of a 2-core machine: two different results; on one
+        thread: one), and every later figure of a run follows its matches
     ratio, max_error_px, min_inliers : COLMAP's ``max_ratio``, the RANSAC ``max_error`` and
         ``min_num_inliers`` (its defaults: 0.8, 4 px, 15)
 

@@ -488,7 +488,9 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
         threads, each product runs on one BLAS thread (``threadpoolctl``): threads over edges
         beat BLAS threads inside each product on the default formation (0.095 s against
         0.137 s for its 15 edges, one machine); binary descriptors' popcount is
-        single-threaded and releases the GIL — measured in ``bench/foundation.py``.
+        single-threaded and releases the GIL — measured in ``bench/foundation.py``. With
+        ``matcher="colmap"``: COLMAP's threads, one by default, for the same matches at every
+        call (:func:`pipeline.colmap.sift.match_pairs`).
     matcher : {"opencv", "colmap"}
         ``colmap``: every edge in one call of COLMAP's matcher (its threads; ``threshold_px``
         ``None`` is its own 4 px), the same pairs as :func:`match_pair` edge by edge.
@@ -517,7 +519,7 @@ def match_edges(features: list[Features], views: list[View], comm_edges, ratio: 
     if matcher == "colmap":
         return _colmap_matches(edges, features, [v.K for v in views], [v.size for v in views],
                                [v.intrinsics_known for v in views], ratio, threshold_px,
-                               min_matches, threads=workers if workers is not None else -1)
+                               min_matches, threads=workers if workers is not None else 1)
 
     def one(e):
         i, j = int(e[0]), int(e[1])

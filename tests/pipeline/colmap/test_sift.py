@@ -93,3 +93,22 @@ def test_sampson_error_of_colmap_geometry_is_in_opencv_pixels(three_views):
     err = sampson_error_px(vp.F, feats[0].keypoints[vp.pairs[:, 0]].astype(float),
                            feats[1].keypoints[vp.pairs[:, 1]].astype(float))
     assert np.percentile(err, 95) < 4.0
+
+
+def test_colmap_matching_runs_on_one_thread_unless_told(three_views, monkeypatch):
+    """On several threads COLMAP's CPU matching does not give the same matches from call to
+    call; run-images' matching (match_edges, no ``workers``) asks for one thread."""
+    import pycolmap
+
+    seen = []
+    real = pycolmap.match_image_pairs
+
+    def spy(*args, matching_options, **kwargs):
+        seen.append(matching_options.num_threads)
+        return real(*args, matching_options=matching_options, **kwargs)
+    monkeypatch.setattr(pycolmap, "match_image_pairs", spy)
+    feats = extract_all(three_views, "colmap-sift", 500)
+    edges = np.array([[0, 1], [1, 2]])
+    match_edges(feats, three_views, edges, matcher="colmap", threshold_px=None)
+    match_edges(feats, three_views, edges, matcher="colmap", threshold_px=None, workers=2)
+    assert seen == [1, 2]
