@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.options import add_memory_option
+from pipeline.commands.options import add_memory_option, add_transport_option
 from pipeline.errors import InputError
 from pipeline.runs.landmarks import (
     REFINEMENTS,
@@ -79,6 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run folder (default runs/landmarks-<DIR name>[-fN]-<graph>; a graph "
                         "file by its name without suffix)")
     add_memory_option(p)
+    add_transport_option(p)
 
 
 def _refuse_unused_options(args) -> None:
@@ -109,7 +110,8 @@ def config_from_args(args) -> LandmarksConfig:
                            descriptors=args.descriptors, ratio=args.ratio,
                            geometry=args.geometry, refine=args.refine,
                            resolution=args.resolution, baselines=not args.no_baselines,
-                           out=args.out, max_memory_gb=args.max_memory_gb, **given)
+                           out=args.out, max_memory_gb=args.max_memory_gb,
+                           transport=args.transport, **given)
 
 
 def run(args) -> int:

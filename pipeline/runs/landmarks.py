@@ -88,6 +88,7 @@ class LandmarksConfig:
     baselines: bool = True
     out: str | None = None
     max_memory_gb: float = DEFAULT_LIMIT_GB
+    transport: str = "sim"
 
     def out_dir(self) -> Path:
         if self.out:
@@ -192,6 +193,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.matching.landmarks import match_landmark_edges
+    from pipeline.runs.transports import check_team_size, get_transport
     from pipeline.stages import ledger_from_consistency
 
     if config.refine is not None and config.refine not in REFINEMENTS:
@@ -223,6 +225,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                                 "associated across the groups")
         if message:
             timer.warn(message)
+    check_team_size(config.transport, len(frames), "images")
     _check_matching_memory(m, comm_edges, config)
     with timer.stage("matching", f"Hungarian ({'chi-square' if kind == 'histogram' else 'L2'}), "
                                  f"geometry {config.geometry}, ratio gate {config.ratio}"):
@@ -247,9 +250,16 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     else:
         input_links = links
     _check_memory(m, links, config)
+    fault_section = None
     with timer.stage("resolution", get_rule(config.resolution).title):
         c0 = time.process_time()
-        res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
+        if config.transport == "sim" or not len(links):
+            # without a link the robots have nothing to exchange: no team is started (the
+            # same empty association on every transport, as in resolve)
+            res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
+        else:
+            res, fault_section = get_transport(config.transport).load().resolve(
+                m, comm_edges, links, None, config.resolution, None)
         resolution_cpu = time.process_time() - c0
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")
@@ -316,11 +326,16 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             "bytes": st.get("bytes"),
             "max_robot_memory_bytes": st.get("max_robot_memory_bytes"),
             "time_s": round(timer.timings.get("resolution", 0.0), 4),
-            "cpu_s": round(resolution_cpu, 4),
+            # the CPU of this process: every simulated robot's; over another transport the
+            # robots' own times are in the report's team section
+            "cpu_s": round(resolution_cpu, 4) if config.transport == "sim" else None,
+            "transport": config.transport,
         },
         "fusion": {"enabled": False, "reason": "labelled landmarks come without camera poses"},
         "triangulation": {"enabled": False, "reason": "no camera poses"},
         "baselines": baselines,
+        **({"team": st["team"]} if "team" in st else {}),
+        **({"faults": fault_section} if fault_section is not None else {}),
         "ground_truth": {"kind": "labelled landmarks: row k of every keypoint file is landmark "
                                  "k; a row 'nan nan' is a landmark the image does not see"},
         "feature_landmarks": [f.landmarks.tolist() for f in frames],

@@ -455,3 +455,15 @@ def test_a_run_above_the_memory_limit_is_refused_before_the_rule(folder, capsys)
            "matched links would need about", "--max-memory-gb")
     _fails(capsys, _argv(folder, "--max-memory-gb", "0"), folder, "--max-memory-gb '0'")
     assert main(_argv(folder, "--resolution", "paper", "--max-memory-gb", "1")) == 0
+
+
+def test_more_images_than_robot_processes_over_zenoh_is_refused(folder, capsys, monkeypatch):
+    """Over zenoh each image is a robot process: a folder of more images than one machine may
+    start is refused before the matching, with the count and what to do."""
+    from pipeline.runs.transports import zenoh
+
+    monkeypatch.setattr(zenoh, "MAX_ROBOT_PROCESSES", 3)
+    before = tree(folder)
+    assert main(_argv(folder, "--transport", "zenoh")) == 2
+    one_line_error(capsys, "4 images would be 4 processes, at most 3; use --transport sim")
+    assert tree(folder) == before and not (folder.parent / "run").exists()

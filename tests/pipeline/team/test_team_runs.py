@@ -353,6 +353,27 @@ def test_zenoh_links_equal_the_simulators_run_images(sceaux_small, tmp_path):
     assert rep["fusion"]["enabled"] is False
 
 
+@pytest.mark.parametrize("resolution, extra", [("sync", ["--geometry", "none"]),
+                                               ("paper", [])])
+def test_zenoh_links_equal_the_simulators_run_landmarks(tmp_path, resolution, extra):
+    """Six labelled hotel frames: over zenoh the rule runs as one robot process per image,
+    each reading its own rows of the matched links, and decides as the simulator."""
+    hotel = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"
+    args = ["run-landmarks", str(hotel), "--graph", "complete", "--resolution", resolution,
+            "--no-baselines", *extra]
+    assert main([*args, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*args, "--out", str(tmp_path / "zen"), "--transport", "zenoh"]) == 0
+    sim = _rows(tmp_path / "sim" / "links.csv")
+    assert _rows(tmp_path / "zen" / "links.csv") == sim
+    rep = json.loads((tmp_path / "zen" / "report.json").read_text())
+    sim_rep = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert rep["resolution"]["transport"] == "zenoh" and sim_rep["resolution"]["transport"] == "sim"
+    assert rep["pairwise"] == sim_rep["pairwise"] and rep["after"] == sim_rep["after"]
+    assert len(rep["team"]["robots"]) == 6 and "team" not in sim_rep
+    if resolution == "sync":  # the descriptor matches had conflicts for the rule to cut
+        assert sum(r[4] == "deleted" for r in sim[1:]) > 0
+
+
 def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceaux_small,
                                                                            tmp_path, capsys):
     assert main(["run-images", str(sceaux_small), "--graph", "knn:2", "--max-size", "320",
