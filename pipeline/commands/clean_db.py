@@ -11,7 +11,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.options import add_overwrite_and_memory_options, add_resolution_option
+from pipeline.commands.options import (
+    add_overwrite_and_memory_options,
+    add_resolution_option,
+    add_transport_option,
+)
 
 __all__ = ["add_arguments", "run", "fusion_lines"]
 
@@ -55,6 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "in COLMAP: every pair with inliers is used)")
     add_overwrite_and_memory_options(p, "OUT.db / --report")
     add_resolution_option(p, links_only=True)
+    add_transport_option(p)
 
 
 def _loop_tol(args) -> float | None:
@@ -95,7 +100,8 @@ def run(args) -> int:
                              args.resolution, rerun=not args.no_rerun,
                              image_dir=args.image_dir, outputs=outputs,
                              baselines=args.baselines, loop_tol_deg=loop_tol,
-                             fusion=args.fusion, ignore_watermarks=args.ignore_watermarks)
+                             fusion=args.fusion, ignore_watermarks=args.ignore_watermarks,
+                             transport=args.transport)
         summary = flag_result(res.summary(), no_links_why="the database holds no verified "
                                                           "match between two images")
         if args.report:

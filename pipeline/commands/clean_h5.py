@@ -9,7 +9,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.options import add_overwrite_and_memory_options
+from pipeline.commands.options import (
+    add_overwrite_and_memory_options,
+    add_resolution_option,
+    add_transport_option,
+)
 from pipeline.errors import InputError
 
 __all__ = ["add_arguments", "run"]
@@ -35,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "synchronization, a CLEAR-style method, union-find dropping conflictive "
                         "sets, ...), for comparison: a line each and the summary's baselines")
     add_overwrite_and_memory_options(p, "OUT.h5, its side files and --report")
+    add_resolution_option(p, links_only=True)
+    add_transport_option(p)
 
 
 def run(args) -> int:
@@ -63,7 +69,8 @@ def run(args) -> int:
         s = flag_result(clean_h5(args.features, args.matches, args.out, args.pairs,
                                  rerun=not args.no_rerun, image_dir=args.image_dir,
                                  outputs=outputs, max_memory_gb=args.max_memory_gb,
-                                 baselines=args.baselines),
+                                 baselines=args.baselines, resolution=args.resolution,
+                                 transport=args.transport),
                         no_links_why="matches.h5 holds no match between two images of the "
                                      "pairs read")
         if args.report:

@@ -107,7 +107,8 @@ def clean_database(database: str | Path, out: str | Path,
                    resolution: str = DEFAULT_LINKS_RESOLUTION, *, rerun: bool = True,
                    image_dir: str | Path | None = None, outputs=None,
                    baselines: bool = False, loop_tol_deg: float | None = None,
-                   fusion: bool = False, ignore_watermarks: bool = False) -> CleanDbResult:
+                   fusion: bool = False, ignore_watermarks: bool = False,
+                   transport: str = "sim") -> CleanDbResult:
     """Read, make consistent, write a new database (see the module docstring).
 
     With ``resolution="evidence"`` a link's evidence is its Sampson error under the pair's
@@ -137,6 +138,9 @@ def clean_database(database: str | Path, out: str | Path,
     ignore_watermarks : read the database as COLMAP's mapper with ``ignore_watermarks`` on:
         its ``WATERMARK`` pairs (only those) give no links and are copied unchanged (module
         docstring); their number is ``CleanDbResult.ignored_watermark_pairs``
+    transport : where the robots of the consistency stage run (:mod:`pipeline.runs.
+        transports`): over ``zenoh`` one process per image, each given its own rows of the
+        links, their weights and its keypoints; the fusion pass runs in the simulator only
 
     Returns
     -------
@@ -152,6 +156,10 @@ def clean_database(database: str | Path, out: str | Path,
     from pipeline.budget import BYTES_PER_CAMERA, BYTES_PER_ROW, COPIES_OF_READ_DATA, MemoryBudget
 
     database, out = Path(database), Path(out)
+    if fusion and transport != "sim":
+        raise InputError(f"--fusion runs on the simulated network only (its poses come from a "
+                         f"COLMAP mapping of the whole database); drop --transport {transport} "
+                         "or --fusion")
     if loop_tol_deg is not None:
         check_loop_tol(loop_tol_deg)
     if out.resolve() == database.resolve():
@@ -172,7 +180,8 @@ def clean_database(database: str | Path, out: str | Path,
                                     ignore_watermarks=ignore_watermarks)
     try:
         result = _clean(contents, database, out, comm_graph_file, budget, resolution, rerun,
-                        image_dir, outputs, baselines, loop_tol_deg, fusion, ignore_watermarks)
+                        image_dir, outputs, baselines, loop_tol_deg, fusion, ignore_watermarks,
+                        transport)
         if ignore_watermarks:
             result.ignored_watermark_pairs = contents.watermark_pairs_ignored
         return result
@@ -183,7 +192,7 @@ def clean_database(database: str | Path, out: str | Path,
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
            rerun: bool, image_dir, outputs, baselines: bool = False,
            loop_tol_deg: float | None = None, fusion: bool = False,
-           ignore_watermarks: bool = False) -> CleanDbResult:
+           ignore_watermarks: bool = False, transport: str = "sim") -> CleanDbResult:
     """:func:`clean_database` on the database read as ``contents``."""
     from pipeline import colmap
     from pipeline.association import AssociationGraph, count_conflicts
@@ -194,9 +203,10 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
     from pipeline.runs.cleaned import check_image_dir
-    from pipeline.stages import consistency_stage
+    from pipeline.runs.transports import check_team_size, get_transport
 
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    check_team_size(transport, n, "images in the database")
     if rerun:
         check_image_dir(image_dir, contents.names)
     reason = np.full(len(links), "", dtype=object)
@@ -224,8 +234,11 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if rule.needs_evidence else None
-    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
-    result, _ = consistency_stage(m, edges, model_links, resolution=resolution, evidence=evidence)
+    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar);
+    # without a link no team is started (the same empty association on every transport)
+    where = transport if len(model_links) else "sim"
+    result, _ = get_transport(where).load().resolve(m, edges, model_links, None, resolution,
+                                                    None, evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     fusion_section = _fusion_pass(contents, model_ok, model_links, idx, result, reason,
@@ -251,7 +264,9 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
              + (("fusion-outlier",) if fusion else ())},
         resolution={"method": stats.get("resolution"), **{k: stats.get(k) for k in (
             "iterations", "detection_rounds", "resolution_rounds", "messages", "bytes",
-            "max_robot_memory_bytes")}}, baselines=section, loop_check=loop_section,
+            "max_robot_memory_bytes")}, "transport": transport,
+            **({"team": stats["team"]} if "team" in stats else {})},
+        baselines=section, loop_check=loop_section,
         fusion=fusion_section)
 
 

@@ -29,8 +29,14 @@ __all__ = ["clean_h5"]
 def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
              pairs: str | Path | None = None, *, rerun: bool = True,
              image_dir: str | Path | None = None, outputs=None,
-             max_memory_gb: float = DEFAULT_LIMIT_GB, baselines: bool = False) -> dict:
+             max_memory_gb: float = DEFAULT_LIMIT_GB, baselines: bool = False,
+             resolution: str = DEFAULT_LINKS_RESOLUTION, transport: str = "sim") -> dict:
     """Read hloc's files, make the matches consistent, write OUT.h5 and its side outputs.
+
+    ``resolution``: the rule (:mod:`pipeline.consistency.rules`; default
+    ``DEFAULT_LINKS_RESOLUTION``, the evidence of a match its hloc score as its quality);
+    ``transport``: where its robots run (:mod:`pipeline.runs.transports`; over ``zenoh`` one
+    process per image, each reading its own rows of the matches).
 
     ``baselines``: also run the centralized baselines on the matches the rule ran on (the
     summary's ``baselines``: :func:`pipeline.evaluation.report.baselines_beside`).
@@ -56,6 +62,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.budget import MemoryBudget, baselines_bytes, check_detection_memory
     from pipeline.commgraph import comm_edges_for
+    from pipeline.consistency.setlists import bundle_budget
     from pipeline.inputs import hloc
     from pipeline.runfolder import output_path
     from pipeline.runs.cleaned import (
@@ -64,7 +71,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         cleaning_ledger,
         write_side_outputs,
     )
-    from pipeline.stages import consistency_stage
+    from pipeline.runs.transports import check_team_size, get_transport
 
     out = Path(out)
     budget = MemoryBudget(max_memory_gb)
@@ -82,13 +89,18 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     reason[contents.not_one_to_one] = "not-one-to-one"
     ok = reason == ""
     model_links = links.subset(ok)
-    check_detection_memory(m, model_links, budget,
-                           detection=get_rule(DEFAULT_LINKS_RESOLUTION).detection)
+    check_team_size(transport, n, "images in the features file")
+    rule = get_rule(resolution)
+    check_detection_memory(m, model_links, budget, detection=rule.detection,
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    result, _ = consistency_stage(m, edges, model_links, resolution=DEFAULT_LINKS_RESOLUTION)
+    # without a link no team is started (the same empty association on every transport)
+    where = transport if len(model_links) else "sim"
+    result, _ = get_transport(where).load().resolve(m, edges, model_links, None, rule.name,
+                                                    None)
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""
@@ -111,9 +123,11 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
                "written": [str(out)] + [str(p) for p in written], "images": n,
                "comm_edges": int(len(edges)), "links": int(len(links)), "before": before,
                "after": after, "cut": cut,
-               "resolution": {k: st.get(k) for k in ("resolution", "iterations",
-                                                     "detection_rounds", "resolution_rounds",
-                                                     "messages", "bytes")}}
+               "resolution": {**{k: st.get(k) for k in ("resolution", "iterations",
+                                                       "detection_rounds", "resolution_rounds",
+                                                       "messages", "bytes")},
+                              "transport": transport,
+                              **({"team": st["team"]} if "team" in st else {})}}
     if baselines:
         from pipeline.evaluation.report import baselines_beside
 

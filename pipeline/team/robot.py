@@ -8,7 +8,8 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    the intrinsics the team file gives it. A links file (``resolve``): its own file (``data.links``
    a list, one per robot), or the rows of a shared one that touch it; with ``data.keypoints``
    and ``data.cameras`` (the fusion of an online step) also its own keypoints file and its
-   own camera, :func:`links_camera`. Its own options
+   own camera, :func:`links_camera`; with ``data.weights`` its own links' evidence
+   (:func:`links_weights`). Its own options
    (``options`` with its ``robot_options``). Public knowledge, as in the simulator: the team
    size ``n`` and the comm graph, of which it uses the edges that touch it.
 2. **Its own features** (:func:`pipeline.matching.features.extract`, with the team's feature options:
@@ -62,12 +63,13 @@ from pipeline.team.teamfile import (
     PROFILE_DIR_ENV,
     keypoints_file_of,
     links_file_of,
+    weights_file_of,
 )
 from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
            "flood_flag", "result_links", "load_view", "links_camera", "links_projection",
-           "write_keypoints"]
+           "write_keypoints", "links_weights"]
 
 
 def _log(i: int, text: str) -> None:
@@ -79,8 +81,9 @@ def peak_rss_bytes() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
-def own_links_from_file(path, i: int, own_file: bool = False):
-    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays.
+def own_links_from_file(path, i: int, own_file: bool = False, rows: bool = False):
+    """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays
+    (``rows``: and, last, each one's row index in the file).
 
     ``own_file``: the file is robot ``i``'s own (``data.links`` lists one file per robot), so
     every row must touch it (InputError naming the first that does not: a file given to the
@@ -101,7 +104,39 @@ def own_links_from_file(path, i: int, own_file: bool = False):
     nbr = np.concatenate([L.cam_j[a], L.cam_i[b]])
     r = np.concatenate([L.feat_i[a], L.feat_j[b]])
     s = np.concatenate([L.feat_j[a], L.feat_i[b]])
-    return nbr, r, s, np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
+    quality = np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
+    return (nbr, r, s, quality, np.concatenate([a, b])) if rows else (nbr, r, s, quality)
+
+
+def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
+    """Robot ``i``'s link weights on a links team that gives them (``data.weights``: its own
+    file, header ``weight``, one finite number per row of its own links file, in its order),
+    else None.
+
+    Raises
+    ------
+    InputError
+        Not that header, a row that is not one finite number (naming the line), or another
+        count of rows than its links file holds.
+    """
+    path = weights_file_of(team, i)
+    if path is None:
+        return None
+    lines = path.read_text().splitlines()
+    if not lines or lines[0].strip() != "weight":
+        raise InputError(f"{path}:1: a weights file starts with the header weight")
+    w = np.zeros(len(lines) - 1, np.float64)
+    for k, line in enumerate(lines[1:]):
+        try:
+            w[k] = float(line)
+        except ValueError:
+            w[k] = np.nan
+        if not np.isfinite(w[k]):
+            raise InputError(f"{path}:{k + 2}: {line!r} is not a weight (one finite number)")
+    if len(w) != n_rows:
+        raise InputError(f"{path}: {len(w)} weights for the {n_rows} rows of robot {i}'s "
+                         "links file; one weight per row, in its order")
+    return w
 
 
 def write_keypoints(path, keypoints) -> None:
@@ -378,9 +413,12 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
 
         fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
         path, own_file = links_file_of(team, i)
-        nbr, r, s, quality = own_links_from_file(path, i, own_file)
+        nbr, r, s, quality, rows = own_links_from_file(path, i, own_file, rows=True)
+        given = links_weights(team, i, len(rows)) if own_file else None
         lossy = flood_flag(transport, _own_lossy(opts), team.n)
-        weight = ratio_llr(1.0 - quality)  # the evidence a links file carries
+        # the evidence a links file carries: the weights given beside it (data.weights), else
+        # the log-odds of its quality
+        weight = ratio_llr(1.0 - quality) if given is None else given[rows]
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
             k = int(bad[0])

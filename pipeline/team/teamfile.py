@@ -31,6 +31,11 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # evidence rule's geometric test, no fusion) or null (pose unknown);
               # optional "history": ["h0.npz", ...], one file per robot: an online step's
               # history check after the rule (pipeline.consistency.history.HistoryInputs)
+              # optional "weights": ["w0.csv", ...], one file per robot, with "links" a
+              # list: a header "weight", then one row per row of the robot's own links file,
+              # in its order: each link's local evidence as both robots of the link hold it
+              # (pipeline.matching.link_evidence; e.g. clean-db's Sampson error under the
+              # pair's stored geometry), in place of the log-odds of its quality
           or {"kind": "online-match", "step": 3, "window": 3, "frames": ["f0.npz", ...],
               "store": ["robot-0", ...]}
               # an online step's matching (pipeline.team.online_match): robot I's new frame
@@ -79,7 +84,8 @@ from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
-           "DATA_KINDS", "links_file_of", "keypoints_file_of", "TEAM_ONLY_OPTIONS"]
+           "DATA_KINDS", "links_file_of", "keypoints_file_of", "weights_file_of",
+           "TEAM_ONLY_OPTIONS"]
 
 DATA_KINDS = ("formation", "images", "links", "online-match")
 DEFAULT_OPTIONS = {
@@ -149,7 +155,7 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
               "images": {"kind", "images", "intrinsics", "intrinsics_known", "max_size",
                          "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
-                        "history"},
+                        "history", "weights"},
               "online-match": {"kind", "step", "window", "frames", "store"}}
 #: a reliable, ordered Zenoh link (the rounds' "nothing lost" rests on it: not udp), host a
 #: name, an IPv4 address or a bracketed IPv6 address
@@ -568,6 +574,13 @@ def _check_data(data: dict, n: int, where: str) -> None:
                                      and all(isinstance(p, str) for p in hist)):
             raise InputError(f"{where}: data.history must list {n} paths, one history file "
                              "per robot (an online step's check), or be absent")
+        weights = data.get("weights")
+        if weights is not None and not (isinstance(lk, list) and isinstance(weights, list)
+                                        and len(weights) == n
+                                        and all(isinstance(p, str) for p in weights)):
+            raise InputError(f"{where}: data.weights must list {n} paths, one weights file per "
+                             "robot (a row per row of its own links file), with data.links a "
+                             "list of one links file per robot; or be absent")
 
 
 def _is_matrix(v, rows: int, cols: int) -> bool:
@@ -738,6 +751,10 @@ def check_data_files(team: Team, i: int) -> list[tuple[str, Path]]:
         hp = team.resolve_path(team.data["history"][int(i)])
         files.append((f"data.history[{i}] of the team file",
                       require_input_file(hp, f"{where}: data.history[{i}]")))
+    wp = weights_file_of(team, i)
+    if wp is not None:
+        files.append((f"data.weights[{i}] of the team file",
+                      require_input_file(wp, f"{where}: data.weights[{i}]")))
     return files
 
 
@@ -754,6 +771,12 @@ def keypoints_file_of(team: Team, i: int) -> Path | None:
     """Robot ``i``'s keypoints file of a links team (``data.keypoints``), or None."""
     kp = team.data.get("keypoints")
     return None if kp is None else team.resolve_path(kp[int(i)])
+
+
+def weights_file_of(team: Team, i: int) -> Path | None:
+    """Robot ``i``'s weights file of a links team (``data.weights``), or None."""
+    w = team.data.get("weights")
+    return None if w is None else team.resolve_path(w[int(i)])
 
 
 def write_team(path, team: Team) -> Path:

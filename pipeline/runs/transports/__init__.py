@@ -41,10 +41,12 @@ loads nothing heavy) with one function per job:
     one step changed (the frames of those tracks are the robots, frames sharing a link are
     neighbours); ``track_labels``: each feature's track named by the smallest global feature
     id of its set, as robots that detect their sets name them (the max-c draws hang on them).
-``resolve(features_per_camera, comm_edges, links, faults, resolution, ids) -> (ConsistencyResult, dict or None)``
+``resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evidence=None) -> (ConsistencyResult, dict or None)``
     ``resolve``: the consistency stage on a user's links (``ids``: the compact renumbering
     of :mod:`pipeline.inputs.compact`), with the ``faults`` section of the report when
-    faults were injected or a robot was lost.
+    faults were injected or a robot was lost; also the stage of ``run-landmarks`` and of the
+    cleaning commands (``evidence``: the links' weights and the images' keypoints, as
+    :func:`pipeline.stages.consistency_stage` takes them; ``clean-db``).
 
 Optional module attributes: ``MAX_ROBOT_PROCESSES`` (the most robots a job may start on this
 machine, checked before any work by :func:`check_team_size`), ``COMPACT_IDS`` (``resolve``

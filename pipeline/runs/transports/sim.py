@@ -105,11 +105,12 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
-    """The consistency stage on the simulated network, its faults in the layout of ``ids``."""
+def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evidence=None):
+    """The consistency stage on the simulated network, its faults in the layout of ``ids``
+    (``evidence``: :func:`pipeline.stages.consistency_stage`'s)."""
     from pipeline.inputs.compact import faults_in_layout
 
     # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
     return stages.consistency_stage(features_per_camera, comm_edges, links,
                              None if faults is None else faults_in_layout(faults, ids),
-                             resolution=resolution)
+                             resolution=resolution, evidence=evidence)

@@ -72,6 +72,20 @@ def write_robot_links(folder: Path, links, n: int) -> list[Path]:
     return paths
 
 
+def write_robot_weights(folder: Path, links, weights, n: int) -> list[str]:
+    """One weights file per robot in ``folder`` (``weights-robotI.csv``, the team file's
+    ``data.weights``): header ``weight``, then the weight of each row of its links file
+    (:func:`write_robot_links`, the same order), as the shortest text that reads back to the
+    same float64. Returns the paths."""
+    w = np.asarray(weights, np.float64).reshape(-1)
+    paths = []
+    for i in range(n):
+        sel = np.flatnonzero((links.cam_i == i) | (links.cam_j == i))
+        paths.append(str(folder / f"weights-robot{i}.csv"))
+        Path(paths[-1]).write_text("weight\n" + "".join(f"{v!r}\n" for v in w[sel].tolist()))
+    return paths
+
+
 def _write_robot_keypoints(folder: Path, keypoints) -> list[str]:
     """One keypoints file per robot in ``folder`` (``keypoints-robotI.csv``, the team file's
     ``data.keypoints``, :func:`pipeline.team.robot.write_keypoints`). Returns the paths."""
@@ -321,13 +335,16 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
     return res
 
 
-def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
+def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evidence=None):
     """``resolve --transport zenoh``: the consistency stage as one robot process per camera.
 
     The links to make consistent (kept rows, compact ids, with their quality: the evidence
     of the evidence rule) go to one file per robot in a temporary team folder, each with the
     rows that touch that robot: a robot reads only its own (:func:`resolve_links_file`).
-    ``ids`` is not needed: the robots are the cameras of the compact layout. Returns
+    ``ids`` is not needed: the robots are the cameras of the compact layout. ``evidence``
+    (``link_weight`` and ``keypoints``, as the simulator's stage takes them,
+    :func:`pipeline.stages.consistency_stage`; ``clean-db``): each robot also gets its own
+    links' weights (``data.weights``) and its own keypoints, with no pose. Returns
     ``(ConsistencyResult, faults section or None)``; the result's links are ``links``.
     """
     import tempfile
@@ -338,9 +355,16 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids):
     m = features_per_camera
     with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
         paths = write_robot_links(Path(work), links, len(m))
+        extra = {}
+        if evidence is not None:
+            extra["weights"] = write_robot_weights(Path(work), links, evidence["link_weight"],
+                                                   len(m))
+            if evidence.get("keypoints") is not None:
+                extra["keypoints"] = _write_robot_keypoints(Path(work), evidence["keypoints"])
+                extra["cameras"] = [None] * len(m)
         res = resolve_links_file(paths, m, comm_edges_for(m, links, comm_edges),
                                  team_options(faults=faults, resolution=resolution),
-                                 workdir=work, links=links)
+                                 workdir=work, links=links, data_extra=extra)
 
     fault_section = None
     if (faults is not None and faults.any) or res.stats["faults"]["robots_lost"]:

@@ -3,6 +3,7 @@ hloc's layout: features.h5 groups per image name with 'keypoints'; matches.h5 gr
 names_to_pair(name0, name1) with 'matches0' (int16, -1 = none) and 'matching_scores0')."""
 
 import hashlib
+import json
 
 import h5py
 import numpy as np
@@ -170,3 +171,25 @@ def test_no_rerun_beside_an_earlier_recording_warns_that_it_is_stale(tmp_path, c
     err = capsys.readouterr().err
     assert f"warning: {str(rrd)!r} beside {str(out)!r} is not this run's recording" in err
     assert rrd.read_bytes() == recording  # warned, not removed
+
+
+def test_the_rule_is_the_one_asked_for(tmp_path):
+    """clean-h5 ran DEFAULT_LINKS_RESOLUTION whatever the user wanted; --resolution now picks
+    the rule, named in the summary, and each rule leaves the matches conflict-free."""
+    from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
+
+    feats, matches = _write(tmp_path)
+    seen = {}
+    for rule in ("paper", "sync"):
+        report = tmp_path / f"{rule}.json"
+        assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                     str(tmp_path / f"{rule}.h5"), "--resolution", rule, "--no-rerun",
+                     "--report", str(report)]) == 0
+        s = json.loads(report.read_text())
+        assert s["resolution"]["resolution"] == rule and s["after"]["conflictive_sets"] == 0
+        seen[rule] = s
+    assert DEFAULT_LINKS_RESOLUTION == "sync"
+    default = tmp_path / "default.json"
+    assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                 str(tmp_path / "d.h5"), "--no-rerun", "--report", str(default)]) == 0
+    assert json.loads(default.read_text())["resolution"]["resolution"] == "sync"

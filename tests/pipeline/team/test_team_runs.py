@@ -130,6 +130,70 @@ def test_zenoh_links_equal_the_simulators_resolve(links_input, tmp_path, resolut
         assert zen["resolution"]["iterations"] == sim_report["resolution"]["iterations"]
 
 
+@pytest.mark.parametrize("resolution", ["sync", "evidence"])
+def test_zenoh_robots_decide_on_the_link_weights_given_them(links_input, resolution):
+    """The weights of the links (clean-db's Sampson evidence, not the links file's quality)
+    reach each robot process in its own weights file (data.weights): the robots decide as
+    the simulator given the same weights, and not as on the quality alone."""
+    from pipeline.inputs.linkscsv import read_links_csv
+    from pipeline.runs.transports import sim, zenoh
+
+    links = read_links_csv(links_input / "in.csv").links
+    m = np.full(4, 12)
+    edges = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)])
+    w = np.random.default_rng(5).normal(0.0, 3.0, len(links))
+    evidence = {"link_weight": w, "keypoints": None}
+    on_quality, _ = sim.resolve(m, edges, links, None, resolution, None)
+    given, _ = sim.resolve(m, edges, links, None, resolution, None, evidence=evidence)
+    assert (on_quality.deleted != given.deleted).any()  # the weights decide here
+    robots, _ = zenoh.resolve(m, edges, links, None, resolution, None, evidence=evidence)
+    np.testing.assert_array_equal(robots.deleted, given.deleted)
+
+
+def test_zenoh_links_equal_the_simulators_clean_db(tmp_path):
+    """clean-db --transport zenoh: one robot process per image, each with its own rows, their
+    weights (the pair's stored geometry) and its keypoints; the same OUT.links.csv as the
+    simulator's, and --fusion (a mapping of the whole database) is refused over zenoh."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "commands"))
+    from test_clean_db import _db_with_planted_conflicts
+
+    src = tmp_path / "in.db"
+    _db_with_planted_conflicts(src)
+    for rule in ("sync", "evidence"):
+        for t in ("sim", "zenoh"):
+            assert main(["clean-db", str(src), "--out", str(tmp_path / f"{rule}-{t}.db"),
+                         "--resolution", rule, "--transport", t, "--no-rerun",
+                         "--report", str(tmp_path / f"{rule}-{t}.json")]) == 0
+        sim = _rows(tmp_path / f"{rule}-sim.links.csv")
+        assert _rows(tmp_path / f"{rule}-zenoh.links.csv") == sim
+        assert sum(r[5] == "resolution" for r in sim[1:]) > 0
+        rep = json.loads((tmp_path / f"{rule}-zenoh.json").read_text())
+        assert rep["resolution"]["transport"] == "zenoh" and len(rep["resolution"]["team"]["robots"]) == 4
+    assert main(["clean-db", str(src), "--out", str(tmp_path / "f.db"), "--fusion",
+                 "--transport", "zenoh"]) == 2
+    assert not (tmp_path / "f.db").exists()
+
+
+@pytest.mark.parametrize("resolution", ["sync", "paper"])
+def test_zenoh_links_equal_the_simulators_clean_h5(tmp_path, resolution):
+    """clean-h5 --transport zenoh (three images, one Fig. 1 conflict): one robot process per
+    image, the same OUT.links.csv as the simulator's for the rule given."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "commands"))
+    from test_clean_h5 import _write
+
+    feats, matches = _write(tmp_path)
+    for t in ("sim", "zenoh"):
+        assert main(["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                     str(tmp_path / f"{t}.h5"), "--resolution", resolution, "--transport", t,
+                     "--no-rerun", "--report", str(tmp_path / f"{t}.json")]) == 0
+    sim = _rows(tmp_path / "sim.links.csv")
+    assert _rows(tmp_path / "zenoh.links.csv") == sim
+    assert sum(r[5] == "resolution" for r in sim[1:]) > 0
+    rep = json.loads((tmp_path / "zenoh.json").read_text())
+    assert rep["resolution"]["resolution"] == resolution
+    assert rep["resolution"]["transport"] == "zenoh" and len(rep["resolution"]["team"]["robots"]) == 3
+
+
 def _kept_links(path):
     rows = [r.split(",") for r in Path(path).read_text().splitlines()[1:]]
     kept = [r for r in rows if r[4] == "kept"]

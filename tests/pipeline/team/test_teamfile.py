@@ -90,6 +90,11 @@ def test_a_valid_team_parses():
     ({"data": {**_LINKS, "history": ["h0.npz", "h1.npz"]}},
      "data.history must list 3 paths, one history file per robot"),
     ({"data": {**_LINKS, "history": "h.npz"}}, "data.history must list 3 paths"),
+    ({"data": {**_LINKS, "weights": ["w0.csv", "w1.csv", "w2.csv"]}},
+     "data.weights must list 3 paths, one weights file per robot (a row per row of its own "
+     "links file), with data.links a list"),
+    ({"data": {**_LINKS, "links": ["l0.csv", "l1.csv", "l2.csv"], "weights": ["w0.csv"]}},
+     "data.weights must list 3 paths"),
     ({"options": {"fusion": True}}, "options sets fusion on a links team without data.keypoints"),
     ({"data": {**_MATCH, "step": -1}}, "data.step -1 must be an integer >= 0"),
     ({"data": {**_MATCH, "window": 0}}, "data.window 0 must be an integer >= 1"),
@@ -434,3 +439,32 @@ def test_a_robot_options_key_must_be_the_id_as_written(key):
     with pytest.raises(InputError, match=rf"robot_options key '{re.escape(key)}' must be a "
                                          r"robot id 0\.\.2 with an object of options"):
         parse_team(_doc(robot_options={"1": {"loss_timeout": 9}, key: {"loss_timeout": 50}}))
+
+
+@pytest.mark.parametrize("text, words", [
+    ("w\n1.5\n", "w1.csv:1: a weights file starts with the header weight"),
+    ("weight\n1.5\nnan\n", "w1.csv:3: 'nan' is not a weight (one finite number)"),
+    ("weight\n1.5\n1,2\n", "w1.csv:3: '1,2' is not a weight"),
+    ("weight\n1.5\n", "1 weights for the 2 rows of robot 1's links file"),
+])
+def test_bad_weights_file_is_one_line_error(tmp_path, text, words):
+    """A links team's data.weights: each robot reads its own file, one weight per row of its
+    own links file."""
+    from pipeline.team.robot import links_weights
+
+    doc = _doc(data={**_LINKS, "links": ["l0.csv", "l1.csv", "l2.csv"],
+                     "weights": ["w0.csv", "w1.csv", "w2.csv"]})
+    (tmp_path / "TEAM.json").write_text(json.dumps(doc))
+    (tmp_path / "w1.csv").write_text(text)
+    team = load_team(tmp_path / "TEAM.json")
+    with pytest.raises(InputError) as e:
+        links_weights(team, 1, 2)
+    assert words in str(e.value) and "\n" not in str(e.value)
+    (tmp_path / "w1.csv").write_text("weight\n1.5\n-2\n")
+    assert links_weights(team, 1, 2).tolist() == [1.5, -2.0]
+    assert links_weights(load_team_without_weights(tmp_path), 1, 2) is None
+
+
+def load_team_without_weights(tmp_path):
+    (tmp_path / "T2.json").write_text(json.dumps(_doc()))
+    return load_team(tmp_path / "T2.json")
