@@ -202,7 +202,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     from pipeline.consistency.setlists import bundle_budget
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
-    from pipeline.runs.cleaned import check_image_dir
+    from pipeline.runs.cleaned import check_image_dir, refuse_lost_robots
     from pipeline.runs.transports import check_team_size, get_transport
 
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
@@ -239,6 +239,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     where = transport if len(model_links) else "sim"
     result, _ = get_transport(where).load().resolve(m, edges, model_links, None, resolution,
                                                     None, evidence=evidence)
+    refuse_lost_robots(result, contents.names, "clean-db")
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     fusion_section = _fusion_pass(contents, model_ok, model_links, idx, result, reason,

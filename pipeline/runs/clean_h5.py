@@ -69,6 +69,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         CleaningOutcome,
         check_image_dir,
         cleaning_ledger,
+        refuse_lost_robots,
         write_side_outputs,
     )
     from pipeline.runs.transports import check_team_size, get_transport
@@ -101,6 +102,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     where = transport if len(model_links) else "sim"
     result, _ = get_transport(where).load().resolve(m, edges, model_links, None, rule.name,
                                                     None)
+    refuse_lost_robots(result, contents.names, "clean-h5")
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

@@ -194,6 +194,39 @@ def test_zenoh_links_equal_the_simulators_clean_h5(tmp_path, resolution):
     assert rep["resolution"]["transport"] == "zenoh" and len(rep["resolution"]["team"]["robots"]) == 3
 
 
+@pytest.mark.parametrize("command", ["clean-db", "clean-h5"])
+def test_a_robot_lost_while_cleaning_writes_nothing(tmp_path, monkeypatch, capsys, command):
+    """A robot process killed during clean-db's or clean-h5's stage: its links came back as
+    cut (reason 'resolution') and left the cleaned file, though nothing judged them; now the
+    command stops, naming the image, and writes nothing."""
+    import pipeline.runs.transports.zenoh as zen
+
+    original = zen.resolve_links_file
+
+    def killing(*a, **k):
+        return original(*a, **{**k, "kill": (1, "consistency", 0.0)})
+
+    monkeypatch.setattr(zen, "resolve_links_file", killing)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "commands"))
+    if command == "clean-db":
+        from test_clean_db import _db_with_planted_conflicts
+
+        _db_with_planted_conflicts(tmp_path / "in.db")
+        args = ["clean-db", str(tmp_path / "in.db"), "--out", str(tmp_path / "out.db")]
+        name = "view_1.jpg"
+    else:
+        from test_clean_h5 import _write
+
+        feats, matches = _write(tmp_path)
+        args = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
+                str(tmp_path / "out.h5")]
+        name = "c.jpg"  # the second name in sorted order
+    assert main([*args, "--transport", "zenoh", "--no-rerun"]) != 0
+    err = capsys.readouterr().err
+    assert f"the robot process of image {name!r} was lost during {command}" in err
+    assert not list(tmp_path.glob("out*"))
+
+
 def _kept_links(path):
     rows = [r.split(",") for r in Path(path).read_text().splitlines()[1:]]
     kept = [r for r in rows if r[4] == "kept"]
