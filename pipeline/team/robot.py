@@ -110,13 +110,14 @@ def own_links_from_file(path, i: int, own_file: bool = False, rows: bool = False
 
 def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
     """Robot ``i``'s link weights on a links team that gives them (``data.weights``: its own
-    file, header ``weight``, one finite number per row of its own links file, in its order),
-    else None.
+    file, header ``weight``, one number per row of its own links file, in its order; ``inf``
+    and ``-inf`` are numbers, as the simulator's link weights may be, ``nan`` is not), else
+    None.
 
     Raises
     ------
     InputError
-        Not that header, a row that is not one finite number (naming the line), or another
+        Not that header, a row that is not one number (naming the line), or another
         count of rows than its links file holds.
     """
     path = weights_file_of(team, i)
@@ -131,8 +132,8 @@ def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
             w[k] = float(line)
         except ValueError:
             w[k] = np.nan
-        if not np.isfinite(w[k]):
-            raise InputError(f"{path}:{k + 2}: {line!r} is not a weight (one finite number)")
+        if np.isnan(w[k]):
+            raise InputError(f"{path}:{k + 2}: {line!r} is not a weight (one number, not nan)")
     if len(w) != n_rows:
         raise InputError(f"{path}: {len(w)} weights for the {n_rows} rows of robot {i}'s "
                          "links file; one weight per row, in its order")

@@ -35,7 +35,8 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # list: a header "weight", then one row per row of the robot's own links file,
               # in its order: each link's local evidence as both robots of the link hold it
               # (pipeline.matching.link_evidence; e.g. clean-db's Sampson error under the
-              # pair's stored geometry), in place of the log-odds of its quality
+              # pair's stored geometry), in place of the log-odds of its quality; a
+              # number each (inf and -inf too, not nan)
           or {"kind": "online-match", "step": 3, "window": 3, "frames": ["f0.npz", ...],
               "store": ["robot-0", ...]}
               # an online step's matching (pipeline.team.online_match): robot I's new frame

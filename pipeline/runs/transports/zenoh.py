@@ -353,8 +353,20 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evi
     from pipeline.faults import fault_report
 
     m = features_per_camera
+    written = links
+    if evidence is None and not np.isfinite(links.quality).all():
+        # a quality a links file cannot carry (-inf: an assignment's pair whose nearest
+        # alternative is at distance 0, run-landmarks): the robots get the weights the
+        # simulator derives from the qualities, in their weights files, and a placeholder
+        # quality they do not read
+        from pipeline.matching.link_evidence import ratio_llr
+        from pipeline.types import Links
+
+        evidence = {"link_weight": ratio_llr(1.0 - links.quality), "keypoints": None}
+        written = Links(links.cam_i, links.feat_i, links.cam_j, links.feat_j,
+                        np.where(np.isfinite(links.quality), links.quality, 0.0))
     with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
-        paths = write_robot_links(Path(work), links, len(m))
+        paths = write_robot_links(Path(work), written, len(m))
         extra = {}
         if evidence is not None:
             extra["weights"] = write_robot_weights(Path(work), links, evidence["link_weight"],

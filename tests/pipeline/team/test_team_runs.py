@@ -150,6 +150,25 @@ def test_zenoh_robots_decide_on_the_link_weights_given_them(links_input, resolut
     np.testing.assert_array_equal(robots.deleted, given.deleted)
 
 
+@pytest.mark.parametrize("resolution", ["sync", "paper"])
+def test_zenoh_robots_decide_on_links_of_quality_minus_inf(links_input, resolution):
+    """run-landmarks' assignment gives a pair whose nearest alternative is at distance 0 the
+    ratio inf, quality -inf (the 101 CMU hotel frames, ring2): the simulator takes it (weight
+    -inf), and the robots, which had it in their links files, refused them ("quality '-inf'
+    is not a finite number") and stopped the run; they now decide as the simulator."""
+    from pipeline.inputs.linkscsv import read_links_csv
+    from pipeline.runs.transports import sim, zenoh
+
+    links = read_links_csv(links_input / "in.csv").links
+    links.quality[::5] = -np.inf
+    m = np.full(4, 12)
+    edges = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)])
+    simulated, _ = sim.resolve(m, edges, links, None, resolution, None)
+    robots, _ = zenoh.resolve(m, edges, links, None, resolution, None)
+    assert simulated.deleted.any()
+    np.testing.assert_array_equal(robots.deleted, simulated.deleted)
+
+
 def test_zenoh_links_equal_the_simulators_clean_db(tmp_path):
     """clean-db --transport zenoh: one robot process per image, each with its own rows, their
     weights (the pair's stored geometry) and its keypoints; the same OUT.links.csv as the

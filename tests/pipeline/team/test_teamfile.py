@@ -443,7 +443,7 @@ def test_a_robot_options_key_must_be_the_id_as_written(key):
 
 @pytest.mark.parametrize("text, words", [
     ("w\n1.5\n", "w1.csv:1: a weights file starts with the header weight"),
-    ("weight\n1.5\nnan\n", "w1.csv:3: 'nan' is not a weight (one finite number)"),
+    ("weight\n1.5\nnan\n", "w1.csv:3: 'nan' is not a weight (one number, not nan)"),
     ("weight\n1.5\n1,2\n", "w1.csv:3: '1,2' is not a weight"),
     ("weight\n1.5\n", "1 weights for the 2 rows of robot 1's links file"),
 ])
@@ -462,6 +462,8 @@ def test_bad_weights_file_is_one_line_error(tmp_path, text, words):
     assert words in str(e.value) and "\n" not in str(e.value)
     (tmp_path / "w1.csv").write_text("weight\n1.5\n-2\n")
     assert links_weights(team, 1, 2).tolist() == [1.5, -2.0]
+    (tmp_path / "w1.csv").write_text("weight\n-inf\ninf\n")  # the simulator's weights may be
+    assert links_weights(team, 1, 2).tolist() == [-np.inf, np.inf]
     assert links_weights(load_team_without_weights(tmp_path), 1, 2) is None
 
 
