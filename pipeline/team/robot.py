@@ -120,20 +120,27 @@ def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
         Not that header, a row that is not one number (naming the line), or another
         count of rows than its links file holds.
     """
+    import re
+
+    from pipeline.inputs.csvfields import text_lines
+
     path = weights_file_of(team, i)
     if path is None:
         return None
-    lines = path.read_text().splitlines()
+    # the one reader of a user's text files: UTF-8 (else an error naming the line), a line of
+    # bounded length, rows ending at \n or \r\n only
+    lines = [line for _, line in text_lines(path, f"robot {i}'s weights file")]
     if not lines or lines[0].strip() != "weight":
         raise InputError(f"{path}:1: a weights file starts with the header weight")
+    # digits 0-9 as a CSV writes them, or inf: Python's float() also takes "1_0" (10), other
+    # scripts' digits and "nan"
+    number = re.compile(r"[+-]?(([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|inf|infinity)",
+                        re.IGNORECASE)
     w = np.zeros(len(lines) - 1, np.float64)
     for k, line in enumerate(lines[1:]):
-        try:
-            w[k] = float(line)
-        except ValueError:
-            w[k] = np.nan
-        if np.isnan(w[k]):
+        if not number.fullmatch(line.strip()):
             raise InputError(f"{path}:{k + 2}: {line!r} is not a weight (one number, not nan)")
+        w[k] = float(line)
     if len(w) != n_rows:
         raise InputError(f"{path}: {len(w)} weights for the {n_rows} rows of robot {i}'s "
                          "links file; one weight per row, in its order")

@@ -446,6 +446,11 @@ def test_a_robot_options_key_must_be_the_id_as_written(key):
     ("weight\n1.5\nnan\n", "w1.csv:3: 'nan' is not a weight (one number, not nan)"),
     ("weight\n1.5\n1,2\n", "w1.csv:3: '1,2' is not a weight"),
     ("weight\n1.5\n", "1 weights for the 2 rows of robot 1's links file"),
+    # a file that is not UTF-8 text was a UnicodeDecodeError's traceback
+    (b"weight\n1.5\n\xff2\n", "w1.csv' is not a UTF-8 text file (invalid start byte at line 3)"),
+    (b"\xff\xfew\x00e\x00", "w1.csv' is not a UTF-8 text file (UTF-16 or UTF-32"),
+    # float() would have read it as 10
+    ("weight\n1.5\n1_0\n", "w1.csv:3: '1_0' is not a weight"),
 ])
 def test_bad_weights_file_is_one_line_error(tmp_path, text, words):
     """A links team's data.weights: each robot reads its own file, one weight per row of its
@@ -455,7 +460,8 @@ def test_bad_weights_file_is_one_line_error(tmp_path, text, words):
     doc = _doc(data={**_LINKS, "links": ["l0.csv", "l1.csv", "l2.csv"],
                      "weights": ["w0.csv", "w1.csv", "w2.csv"]})
     (tmp_path / "TEAM.json").write_text(json.dumps(doc))
-    (tmp_path / "w1.csv").write_text(text)
+    w1 = tmp_path / "w1.csv"
+    w1.write_bytes(text) if isinstance(text, bytes) else w1.write_text(text)
     team = load_team(tmp_path / "TEAM.json")
     with pytest.raises(InputError) as e:
         links_weights(team, 1, 2)
