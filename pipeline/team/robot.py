@@ -141,9 +141,10 @@ def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
         if not number.fullmatch(line.strip()):
             raise InputError(f"{path}:{k + 2}: {line!r} is not a weight (one number, not nan)")
         w[k] = float(line)
-    if len(w) != n_rows:
-        raise InputError(f"{path}: {len(w)} weights for the {n_rows} rows of robot {i}'s "
-                         "links file; one weight per row, in its order")
+    if len(w) != n_rows:  # the line of the first weight too many, or the one missing
+        raise InputError(f"{path}:{min(len(w), n_rows) + 2}: {len(w)} weights for the "
+                         f"{n_rows} rows of robot {i}'s links file; one weight per row, in "
+                         "its order")
     return w
 
 

@@ -445,7 +445,8 @@ def test_a_robot_options_key_must_be_the_id_as_written(key):
     ("w\n1.5\n", "w1.csv:1: a weights file starts with the header weight"),
     ("weight\n1.5\nnan\n", "w1.csv:3: 'nan' is not a weight (one number, not nan)"),
     ("weight\n1.5\n1,2\n", "w1.csv:3: '1,2' is not a weight"),
-    ("weight\n1.5\n", "1 weights for the 2 rows of robot 1's links file"),
+    ("weight\n1.5\n", "w1.csv:3: 1 weights for the 2 rows of robot 1's links file"),
+    ("weight\n1.5\n2\n3\n", "w1.csv:4: 3 weights for the 2 rows"),
     # a file that is not UTF-8 text was a UnicodeDecodeError's traceback
     (b"weight\n1.5\n\xff2\n", "w1.csv' is not a UTF-8 text file (invalid start byte at line 3)"),
     (b"\xff\xfew\x00e\x00", "w1.csv' is not a UTF-8 text file (UTF-16 or UTF-32"),
