@@ -128,6 +128,7 @@ from pipeline.fusion.protocol import (
     LockstepExchange,
     hypothesis_draws,
 )
+from pipeline.fusion.robot import CUT, CUT_DTYPE
 from pipeline.fusion.voting import (
     VOTE_TIE_TOL,
     RoundProtocol,
@@ -173,7 +174,8 @@ class FusionResult:
         tracks of the same ``track_ids`` may be several)
     stats : dict
         ``rounds`` (max-c + consensus), ``messages`` (robot-to-robot, one per neighbour pair
-        and direction per round, bundling all shared tracks), ``bytes``, and counts.
+        and direction per round, bundling all shared tracks, then the ``fusion-cut`` notices
+        of the robots that declared outliers), ``bytes``, and counts.
     """
 
     points: np.ndarray
@@ -294,7 +296,7 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
         so the consensus is the fault-free one and a crashed robot leaves the graph once its
         neighbours declare it lost; its observations are not judged and its links not cut.
         Traffic is counted on the transport (kinds ``fusion-setup``, ``fusion-maxc``,
-        ``fusion``).
+        ``fusion``, and ``fusion-cut``: the notices of the robots that declared outliers).
     wire : ``"float32"`` or ``"float64"`` — precision of the reals on the wire: the
         observations ``x_i``, ``Λ_i⁻¹`` of the exact mode's entries, the Metropolis state
         (float32 cut the same links as float64 on formations a–d and Sceaux, ``bench/fusion.py``)
@@ -459,6 +461,8 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     reproj_ok = res.valid & (z > 0) & (e2 <= px_thr)
     # a robot that crashed never finished: its observations are not judged
     outlier = voted_out & res.valid & ~reproj_ok & ~crashed[None]
+    if protocol is not None:
+        _cut_notices(protocol.exchange, comm, outlier.sum(0))
 
     # fused point: largest connected group of observers per track, its most common winner
     # (a tie of votes between hypotheses can split a group; the split is counted in the stats)
@@ -574,6 +578,20 @@ def _observations_and_cuts(tr, T: int, obs_track, obs_cam, obs_g, off, links: Li
     cut = bad_feature[off[links.cam_i] + links.feat_i] | bad_feature[off[links.cam_j] + links.feat_j]
     cut &= ~(crashed[links.cam_i] | crashed[links.cam_j])
     return obs_est, obs_in, obs_votes, cut
+
+
+def _cut_notices(exchange, comm: np.ndarray, outliers) -> None:
+    """The decision's messages: a robot that declared ``outliers[i] > 0`` of its observations
+    outliers tells each comm neighbour which features they are (kind ``fusion-cut``, the ids
+    as :data:`~pipeline.fusion.robot.CUT_DTYPE`), so that the neighbour cuts its end of their
+    links (:class:`pipeline.fusion.robot.FusionRobot` sends them, one to every neighbour still
+    heard, after its decision); ``exchange`` carries them as one more round, drained."""
+    k = np.asarray(outliers, dtype=np.int64)
+    size = np.where(k > 0, HEADER_BYTES + np.dtype(CUT_DTYPE).itemsize * k, 0)
+    sizes = np.stack([size[comm[:, 0]], size[comm[:, 1]]], 1).reshape(-1)
+    if sizes.any():
+        exchange.round(CUT, sizes)
+        exchange.finish()
 
 
 def _stage_stats(stats: dict, res, protocol, consensus: str, wire: str, node_edges,

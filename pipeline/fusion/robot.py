@@ -102,9 +102,12 @@ from pipeline.fusion.voting import (
     winning_view,
 )
 
-__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT"]
+__all__ = ["FusionOptions", "FusionRobot", "SETUP", "MAXC", "FUSION", "FLOOD", "CUT",
+           "CUT_DTYPE"]
 
 SETUP, MAXC, FUSION, CUT = "fusion-setup", "fusion-maxc", "fusion", "fusion-cut"
+#: the feature ids of a ``fusion-cut`` message (what the simulator counts for it too)
+CUT_DTYPE = np.int32
 FLOOD = FUSION  # the simulator counts the flood as the consensus: kind "fusion"
 _BIG = np.iinfo(np.int64).max // 2
 
@@ -630,7 +633,7 @@ class FusionRobot:
     def _cut_messages(self):
         if not len(self.outlier_feats):
             return []
-        return [(j, CUT, {"feat": self.outlier_feats.astype(np.int32)})
+        return [(j, CUT, {"feat": self.outlier_feats.astype(CUT_DTYPE)})
                 for j in self.neighbours if j in self.alive]
 
     def cut_rows(self, link_nbr, link_r, link_s) -> np.ndarray:

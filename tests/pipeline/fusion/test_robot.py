@@ -92,6 +92,24 @@ def test_robots_one_by_one_equal_the_vectorized_stage(chord, consensus):
 
 
 @pytest.mark.parametrize("consensus", ["exact", "metropolis"])
+def test_the_stage_counts_the_robots_cut_notices(consensus):
+    """Every message the robots send is counted by the vectorized stage, at its size: the
+    ``fusion-cut`` notices too (a robot that declared outliers tells each neighbour which of
+    its features they are, so that the neighbour cuts its end of the links)."""
+    views, feats, links, edges, labels = _ring_rig()
+    ref = fuse_tracks(views, feats, links, edges, track_labels=np.concatenate(labels),
+                      consensus=consensus)
+    robots = _robots(views, feats, edges, labels, consensus)
+    team = LocalTeam(len(views), edges)
+    team.run(lambda end: run_fusion_locally(robots[end.id], end))
+    counted = team.network.counters()
+    assert counted["messages_by_kind"]["fusion-cut"] > 0           # some robots cut
+    assert ref.stats["bytes_by_kind"] == counted["bytes_by_kind"]
+    assert (ref.stats["messages"], ref.stats["bytes"]) == \
+        (sum(counted["messages_by_kind"].values()), sum(counted["bytes_by_kind"].values()))
+
+
+@pytest.mark.parametrize("consensus", ["exact", "metropolis"])
 def test_robots_measure_their_own_noise_as_the_stage_does(consensus):
     # keypoint noise above the 1 px floor, different per camera: every robot's σ_i, and so
     # its covariances, vote and pixel check, are the simulator's
