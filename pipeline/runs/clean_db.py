@@ -202,8 +202,12 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     from pipeline.consistency.setlists import bundle_budget
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
-    from pipeline.runs.cleaned import check_image_dir, refuse_lost_robots
-    from pipeline.runs.transports import check_team_size, get_transport
+    from pipeline.runs.cleaned import check_image_dir
+    from pipeline.runs.transports import (
+        check_team_size,
+        get_transport,
+        refuse_lost_robots,
+    )
 
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     check_team_size(transport, n, "images in the database")

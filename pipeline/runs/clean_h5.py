@@ -69,10 +69,13 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         CleaningOutcome,
         check_image_dir,
         cleaning_ledger,
-        refuse_lost_robots,
         write_side_outputs,
     )
-    from pipeline.runs.transports import check_team_size, get_transport
+    from pipeline.runs.transports import (
+        check_team_size,
+        get_transport,
+        refuse_lost_robots,
+    )
 
     out = Path(out)
     budget = MemoryBudget(max_memory_gb)

@@ -25,7 +25,7 @@ from pipeline.errors import InputError
 from pipeline.types import Features, LinkLedger, Links, View
 
 __all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "check_image_dir",
-           "write_side_outputs", "stale_recording", "refuse_lost_robots"]
+           "write_side_outputs", "stale_recording"]
 
 
 def side_paths(out: str | Path) -> tuple[Path, Path]:
@@ -76,20 +76,6 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
     if (reason == "fusion-outlier").any():
         ledger.cut(reason == "fusion-outlier", "fusion-outlier", -1)
     return ledger
-
-
-def refuse_lost_robots(result, names: list[str], command: str) -> None:
-    """TeamError when a robot process was lost during the consistency stage (``--transport
-    zenoh``): its links would read as cut and leave the cleaned file, though nothing judged
-    them; a cleaning command writes nothing then (the simulator, which models no lost robot
-    here, never reports one)."""
-    from pipeline.errors import TeamError
-
-    lost = sorted(int(k) for k in result.stats.get("faults", {}).get("robots_lost", {}))
-    if lost:
-        raise TeamError(f"the robot process of image {names[lost[0]]!r} was lost during "
-                        f"{command}'s consistency stage; nothing was written: run it again "
-                        "(or with --transport sim)")
 
 
 def check_image_dir(image_dir: str | Path | None, names: list[str]) -> None:

@@ -193,7 +193,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.matching.landmarks import match_landmark_edges
-    from pipeline.runs.transports import check_team_size, get_transport
+    from pipeline.runs.transports import check_team_size, get_transport, refuse_lost_robots
     from pipeline.stages import ledger_from_consistency
 
     if config.refine is not None and config.refine not in REFINEMENTS:
@@ -250,7 +250,6 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     else:
         input_links = links
     _check_memory(m, links, config)
-    fault_section = None
     with timer.stage("resolution", get_rule(config.resolution).title):
         c0 = time.process_time()
         if config.transport == "sim" or not len(links):
@@ -258,8 +257,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             # same empty association on every transport, as in resolve)
             res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
         else:
-            res, fault_section = get_transport(config.transport).load().resolve(
+            res, _ = get_transport(config.transport).load().resolve(
                 m, comm_edges, links, None, config.resolution, None)
+            refuse_lost_robots(res, names, "run-landmarks")
         resolution_cpu = time.process_time() - c0
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")
@@ -335,7 +335,6 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         "triangulation": {"enabled": False, "reason": "no camera poses"},
         "baselines": baselines,
         **({"team": st["team"]} if "team" in st else {}),
-        **({"faults": fault_section} if fault_section is not None else {}),
         "ground_truth": {"kind": "labelled landmarks: row k of every keypoint file is landmark "
                                  "k; a row 'nan nan' is a landmark the image does not see"},
         "feature_landmarks": [f.landmarks.tolist() for f in frames],

@@ -67,7 +67,7 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size", "check_online_team_size"]
+           "check_team_size", "check_online_team_size", "refuse_lost_robots"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,23 @@ def check_team_size(name: str, robots: int, what: str) -> None:
                          f"{robots} {what} would be {robots} processes, at most {cap}; use "
                          "--transport sim, or start the robots on their own hosts "
                          "(formation-match robot --team TEAM.json)")
+
+
+def refuse_lost_robots(result, names: list[str], command: str) -> None:
+    """TeamError when a robot process was lost during ``command``'s consistency stage (a
+    transport whose robots are processes): its links would read as cut by the rule, leave a
+    cleaned file (``clean-db``, ``clean-h5``) or lower a benchmark's scores
+    (``run-landmarks``), though nothing judged them; the command then writes nothing. The
+    simulator, which models no lost robot in these commands, never reports one.
+
+    ``names``: the image of each robot, by id."""
+    from pipeline.errors import TeamError
+
+    lost = sorted(int(k) for k in result.stats.get("faults", {}).get("robots_lost", {}))
+    if lost:
+        raise TeamError(f"the robot process of image {names[lost[0]]!r} was lost during "
+                        f"{command}'s consistency stage; nothing was written: run it again "
+                        "(or with --transport sim)")
 
 
 def check_online_team_size(name: str, robots: int, window: int, hold: int | None,

@@ -212,11 +212,12 @@ def test_zenoh_links_equal_the_simulators_clean_h5(tmp_path, resolution):
     assert rep["resolution"]["transport"] == "zenoh" and len(rep["resolution"]["team"]["robots"]) == 3
 
 
-@pytest.mark.parametrize("command", ["clean-db", "clean-h5"])
+@pytest.mark.parametrize("command", ["clean-db", "clean-h5", "run-landmarks"])
 def test_a_robot_lost_while_cleaning_writes_nothing(tmp_path, monkeypatch, capsys, command):
     """A robot process killed during clean-db's or clean-h5's stage: its links came back as
-    cut (reason 'resolution') and left the cleaned file, though nothing judged them; now the
-    command stops, naming the image, and writes nothing."""
+    cut (reason 'resolution') and left the cleaned file, though nothing judged them; in
+    run-landmarks they lowered the scores as the rule's cuts. Now the command stops, naming
+    the image, and writes nothing."""
     import pipeline.runs.transports.zenoh as zen
 
     original = zen.resolve_links_file
@@ -232,14 +233,20 @@ def test_a_robot_lost_while_cleaning_writes_nothing(tmp_path, monkeypatch, capsy
         _db_with_planted_conflicts(tmp_path / "in.db")
         args = ["clean-db", str(tmp_path / "in.db"), "--out", str(tmp_path / "out.db")]
         name = "view_1.jpg"
-    else:
+    elif command == "clean-h5":
         from test_clean_h5 import _write
 
         feats, matches = _write(tmp_path)
         args = ["clean-h5", "--features", str(feats), "--matches", str(matches), "--out",
                 str(tmp_path / "out.h5")]
         name = "c.jpg"  # the second name in sorted order
-    assert main([*args, "--transport", "zenoh", "--no-rerun"]) != 0
+    else:
+        hotel = Path(__file__).resolve().parents[2] / "data" / "cmu_hotel_small"
+        args = ["run-landmarks", str(hotel), "--geometry", "none", "--no-baselines", "--out",
+                str(tmp_path / "out")]
+        name = "hotel.seq20.png"  # the second image in natural name order
+    rerun = [] if command == "run-landmarks" else ["--no-rerun"]  # it writes no recording
+    assert main([*args, "--transport", "zenoh", *rerun]) != 0
     err = capsys.readouterr().err
     assert f"the robot process of image {name!r} was lost during {command}" in err
     assert not list(tmp_path.glob("out*"))
