@@ -11,7 +11,9 @@ stride) → each robot matches its landmarks to its communication neighbours' on
 keypoints, optional ratio gate; :mod:`pipeline.matching.landmarks`)
 → ``--refine votes``: the robots refine those matches by two-hop votes through common
 neighbours (:mod:`pipeline.matching.votes`) → the distributed consistency stage
-(``--resolution``) → the centralized baselines on the same links → evaluation.
+(``--resolution``; with ``--transport zenoh`` one robot process per image, each reading its
+own rows of the links, the transport's ``resolve`` job: a robot lost there stops the run)
+→ the centralized baselines on the same links → evaluation.
 
 Defaults (stated): guided matching at a 3 px epipolar threshold (hand-labelled positions,
 :mod:`pipeline.matching.landmarks`), the
