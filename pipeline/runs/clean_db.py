@@ -203,11 +203,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     from pipeline.outputs import require_input_file
     from pipeline.runfolder import output_path
     from pipeline.runs.cleaned import check_image_dir
-    from pipeline.runs.transports import (
-        check_team_size,
-        get_transport,
-        refuse_lost_robots,
-    )
+    from pipeline.runs.transports import check_team_size, resolve_alone
 
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     check_team_size(transport, n, "images in the database")
@@ -238,12 +234,9 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if rule.needs_evidence else None
-    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar);
-    # without a link no team is started (the same empty association on every transport)
-    where = transport if len(model_links) else "sim"
-    result, _ = get_transport(where).load().resolve(m, edges, model_links, None, resolution,
-                                                    None, evidence=evidence)
-    refuse_lost_robots(result, contents.names, "clean-db")
+    # the stage shows its own round counter on a long run (pipeline.progress.rounds_bar)
+    result = resolve_alone(transport, m, edges, model_links, resolution, contents.names,
+                           "clean-db", evidence=evidence)
     idx = np.flatnonzero(model_ok)
     reason[idx[result.deleted]] = "resolution"
     fusion_section = _fusion_pass(contents, model_ok, model_links, idx, result, reason,

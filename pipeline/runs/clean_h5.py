@@ -71,11 +71,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         cleaning_ledger,
         write_side_outputs,
     )
-    from pipeline.runs.transports import (
-        check_team_size,
-        get_transport,
-        refuse_lost_robots,
-    )
+    from pipeline.runs.transports import check_team_size, resolve_alone
 
     out = Path(out)
     budget = MemoryBudget(max_memory_gb)
@@ -101,11 +97,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
-    # without a link no team is started (the same empty association on every transport)
-    where = transport if len(model_links) else "sim"
-    result, _ = get_transport(where).load().resolve(m, edges, model_links, None, rule.name,
-                                                    None)
-    refuse_lost_robots(result, contents.names, "clean-h5")
+    result = resolve_alone(transport, m, edges, model_links, rule.name, contents.names,
+                           "clean-h5")
     idx = np.flatnonzero(ok)
     reason[idx[result.deleted]] = "resolution"
     keep = reason == ""

@@ -189,13 +189,13 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     """
     from pipeline.association import AssociationGraph, camera_offsets, count_conflicts
     from pipeline.commgraph import comm_graph, split_warning
-    from pipeline.consistency import centralized, resolve_conflicts
+    from pipeline.consistency import centralized
     from pipeline.consistency.rules import get_rule, rule_names
     from pipeline.evaluation.report import versions
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.matching.landmarks import match_landmark_edges
-    from pipeline.runs.transports import check_team_size, get_transport, refuse_lost_robots
+    from pipeline.runs.transports import check_team_size, resolve_alone
     from pipeline.stages import ledger_from_consistency
 
     if config.refine is not None and config.refine not in REFINEMENTS:
@@ -254,14 +254,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     _check_memory(m, links, config)
     with timer.stage("resolution", get_rule(config.resolution).title):
         c0 = time.process_time()
-        if config.transport == "sim" or not len(links):
-            # without a link the robots have nothing to exchange: no team is started (the
-            # same empty association on every transport, as in resolve)
-            res = resolve_conflicts(m, comm_edges, links, resolution=config.resolution)
-        else:
-            res, _ = get_transport(config.transport).load().resolve(
-                m, comm_edges, links, None, config.resolution, None)
-            refuse_lost_robots(res, names, "run-landmarks")
+        res = resolve_alone(config.transport, m, comm_edges, links, config.resolution, names,
+                            "run-landmarks")
         resolution_cpu = time.process_time() - c0
         kept = ~res.deleted
         timer.note(f"{int(res.deleted.sum())} links cut")

@@ -67,7 +67,7 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size", "check_online_team_size", "refuse_lost_robots"]
+           "check_team_size", "check_online_team_size", "resolve_alone"]
 
 
 @dataclass(frozen=True)
@@ -136,21 +136,31 @@ def check_team_size(name: str, robots: int, what: str) -> None:
                          "(formation-match robot --team TEAM.json)")
 
 
-def refuse_lost_robots(result, names: list[str], command: str) -> None:
-    """TeamError when a robot process was lost during ``command``'s consistency stage (a
-    transport whose robots are processes): its links would read as cut by the rule, leave a
-    cleaned file (``clean-db``, ``clean-h5``) or lower a benchmark's scores
-    (``run-landmarks``), though nothing judged them; the command then writes nothing. The
-    simulator, which models no lost robot in these commands, never reports one.
+def resolve_alone(transport: str, features_per_camera, comm_edges, links, resolution: str,
+                  names: list[str], command: str, evidence=None):
+    """The rule's stage of a command whose robots run the rule alone (``run-landmarks``,
+    ``clean-db``, ``clean-h5``): the ``resolve`` job of ``transport`` (``evidence``: its), on
+    the simulator when there is no link (the robots would have nothing to exchange; the same
+    empty association on every transport). Returns the :class:`ConsistencyResult`.
 
-    ``names``: the image of each robot, by id."""
+    Raises
+    ------
+    TeamError
+        A robot process was lost during the stage: its links would read as cut by the rule,
+        leave a cleaned file or lower a benchmark's scores, though nothing judged them; the
+        command then writes nothing. ``names``: the image of each robot, by id.
+    """
     from pipeline.errors import TeamError
 
-    lost = sorted(int(k) for k in result.stats.get("faults", {}).get("robots_lost", {}))
+    where = transport if len(links) else "sim"
+    res, _ = get_transport(where).load().resolve(features_per_camera, comm_edges, links, None,
+                                                 resolution, None, evidence=evidence)
+    lost = sorted(int(k) for k in res.stats.get("faults", {}).get("robots_lost", {}))
     if lost:
         raise TeamError(f"the robot process of image {names[lost[0]]!r} was lost during "
                         f"{command}'s consistency stage; nothing was written: run it again "
                         "(or with --transport sim)")
+    return res
 
 
 def check_online_team_size(name: str, robots: int, window: int, hold: int | None,

@@ -56,12 +56,18 @@ MAX_ROBOT_PROCESSES = 256
 COMPACT_IDS = True
 
 
+def _robot_rows(links, n: int):
+    """``(i, rows)`` for each robot ``i < n``: the rows of ``links`` that touch it, in order
+    (the rows of its links file)."""
+    for i in range(n):
+        yield i, np.flatnonzero((links.cam_i == i) | (links.cam_j == i))
+
+
 def write_robot_links(folder: Path, links, n: int) -> list[Path]:
     """One links file per robot in ``folder`` (``links-robotI.csv``): the rows of ``links``
     that touch robot ``I``, in their order, with their quality. Returns the paths."""
     paths = []
-    for i in range(n):
-        sel = np.flatnonzero((links.cam_i == i) | (links.cam_j == i))
+    for i, sel in _robot_rows(links, n):
         p = folder / f"links-robot{i}.csv"
         p.write_text("cam_i,feat_i,cam_j,feat_j,quality\n" + "".join(
             f"{a},{b},{c},{d},{float(q)!r}\n" for a, b, c, d, q in zip(
@@ -79,8 +85,7 @@ def write_robot_weights(folder: Path, links, weights, n: int) -> list[str]:
     same float64. Returns the paths."""
     w = np.asarray(weights, np.float64).reshape(-1)
     paths = []
-    for i in range(n):
-        sel = np.flatnonzero((links.cam_i == i) | (links.cam_j == i))
+    for i, sel in _robot_rows(links, n):
         paths.append(str(folder / f"weights-robot{i}.csv"))
         Path(paths[-1]).write_text("weight\n" + "".join(f"{v!r}\n" for v in w[sel].tolist()))
     return paths
