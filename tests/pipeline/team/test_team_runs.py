@@ -506,7 +506,7 @@ def test_run_images_over_zenoh_with_a_similarity_graph_is_a_one_line_error(sceau
 
 
 @pytest.mark.parametrize("resolution,fusion,n_steps", [
-    ("evidence", True, 3), ("paper", True, 3), ("sync", False, 3), ("paper", False, 5)])
+    ("evidence", True, 3), ("sync", False, 3), ("paper", True, 5)])
 def test_zenoh_online_steps_equal_the_simulators(resolution, fusion, n_steps, tmp_path):
     """``run-formation --steps N --transport zenoh``: each step's stage runs as robot processes
     (one per frame of the step's sub-problem), and so does each step's fusion of the changed
