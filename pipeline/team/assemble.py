@@ -32,7 +32,7 @@ __all__ = ["team_options", "links_of_team", "consistency_of_team", "fusion_of_te
 #: fusion (pipeline.fusion.robot, with the reliable fusion's empty rounds ``fusion-tick``);
 #: every other kind is the consistency stage's (detection, each resolution rule's own —
 #: the evidence rule's ``bundle``, the sync rule's ``sync-*`` —, the reliable channel's)
-EXCHANGE_KINDS = ("features", "matches", "counts", "lossy")
+EXCHANGE_KINDS = ("features", "matches", "counts", "lossy", "shared-links")
 FUSION_KINDS = ("fusion-setup", "fusion-maxc", "fusion", "fusion-cut", "fusion-tick")
 
 

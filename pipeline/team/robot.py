@@ -27,7 +27,10 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
    learnt something new), enough on any connected graph of ``n`` robots; with them a flag,
    whether some robot injects message loss (its own ``drop_prob``; a links team floods the
-   flag alone, :func:`flood_flag`), which picks the rule (:func:`robot_resolution`).
+   flag alone, :func:`flood_flag`), which picks the rule (:func:`robot_resolution`). A links
+   team whose robots read their own files: in the flag's first round the two ends of every
+   link compare their rows of it and, for a rule that weighs links, its quality or weight
+   (:func:`check_shared_links`; a link one file leaves out, or two values, is an InputError).
 5. **Consistency** with local termination (:func:`pipeline.consistency.termination.
    run_consistency_locally`): detection, then Alg. 1 or the evidence rule
    (:func:`robot_resolution`), repeated until conflict-free.
@@ -69,7 +72,8 @@ from pipeline.transport.wire import encode_packet, set_compression
 
 __all__ = ["robot_main", "run_robot_process", "own_links_from_file", "robot_resolution",
            "flood_flag", "result_links", "load_view", "links_camera", "links_projection",
-           "write_keypoints", "links_weights"]
+           "write_keypoints", "links_weights", "send_shared_links", "check_shared_links",
+           "SHARED_LINKS"]
 
 
 def _log(i: int, text: str) -> None:
@@ -357,21 +361,97 @@ def _own_lossy(opts: dict) -> bool:
     return float(opts.get("drop_prob", 0.0)) > 0
 
 
-def flood_flag(transport, flag: bool, n: int) -> bool:
+def flood_flag(transport, flag: bool, n: int, first_round=None) -> bool:
     """Whether any robot of a connected team of ``n`` holds ``flag``: each robot tells its
     neighbours its flag, then the OR it learnt whenever it grows, for ``n - 1`` rounds (every
     robot is within ``n - 1`` hops of every other on a connected graph). Used by robots that
-    exchange no counts (a links file) to learn whether some robot injects message loss."""
+    exchange no counts (a links file) to learn whether some robot injects message loss.
+
+    ``first_round``: called with the inbox of the first round (the messages a caller sent
+    before, :func:`send_shared_links`, ride in it: no round of their own)."""
     have = bool(flag)
     told = False
-    for _ in range(max(n - 1, 1)):
+    for t in range(max(n - 1, 1)):
         if have and not told:
             for k in sorted(transport.neighbours):
                 transport.send(k, "lossy", {"lossy": np.array([1], np.uint8)})
             told = True
         inbox, _ = transport.end_round()
+        if t == 0 and first_round is not None:
+            first_round(inbox)
         have = have or any(m.kind == "lossy" for m in inbox)
     return have
+
+
+#: message kind of :func:`send_shared_links`
+SHARED_LINKS = "shared-links"
+
+
+def send_shared_links(transport, nbr, r, s, value=None) -> None:
+    """Tell every neighbour the links this robot's own links file holds with it (``r`` its own
+    feature, ``s`` the neighbour's) and, with ``value``, each one's quality or weight as read
+    here (a ``shared-links`` message each, also when empty: a neighbour that lists links with
+    this robot learns that it lists none). :func:`check_shared_links` compares them with the
+    neighbour's own rows."""
+    for k in sorted(transport.neighbours):
+        sel = np.flatnonzero(nbr == k)
+        payload = {"r": r[sel].astype(np.int32), "s": s[sel].astype(np.int32)}
+        if value is not None:
+            payload["value"] = np.asarray(value, np.float64)[sel]
+        transport.send(k, SHARED_LINKS, payload)
+
+
+def check_shared_links(i: int, inbox, nbr, r, s, value, what: str, where: dict) -> None:
+    """Robot ``i``'s rows against the ``shared-links`` messages of its neighbours
+    (:func:`send_shared_links`): every link the two ends share must be in both ends' files,
+    with one ``what`` (``quality`` or ``weight``, compared when ``value`` is given).
+
+    ``where``: the files the message names — ``own`` robot ``i``'s links file and
+    ``own_values`` the file of its values (``its links file F``, ``its weights file W``),
+    ``links`` and ``values`` the team file's keys of the neighbour's (``data.links``,
+    ``data.weights``).
+
+    Raises
+    ------
+    InputError
+        Naming the first link (in robot ``i``'s table order) that one end lists and the
+        other does not, or whose two ends give it different values; a ``sync`` team would
+        otherwise run out of Borůvka rounds, and the other rules decide on one end's value.
+    """
+    def name(j, rr, ss):
+        return f"robot {i}: link ({i},{int(rr)})-({int(j)},{int(ss)})"
+
+    for msg in sorted((m for m in inbox if m.kind == SHARED_LINKS), key=lambda m: m.src):
+        j, p = int(msg.src), msg.payload
+        sel = np.flatnonzero(nbr == j)
+        mine = (r[sel].astype(np.int64) << 32) | s[sel].astype(np.int64)
+        theirs = (p["s"].astype(np.int64) << 32) | p["r"].astype(np.int64)
+        order = np.argsort(theirs, kind="stable")
+        theirs = theirs[order]
+        pos = np.minimum(np.searchsorted(theirs, mine), max(theirs.size - 1, 0))
+        found = (theirs[pos] == mine) if theirs.size else np.zeros(mine.size, bool)
+        if not found.all():
+            k = sel[int(np.flatnonzero(~found)[0])]
+            raise InputError(f"{name(j, r[k], s[k])} is in {where['own']} but not in robot "
+                             f"{j}'s ({where['links']}[{j}]); both ends of a link list it: "
+                             "give both files every link the two robots share")
+        extra = ~np.isin(theirs, mine)
+        if extra.any():
+            key = int(theirs[int(np.flatnonzero(extra)[0])])
+            rr, ss = key >> 32, key & 0xFFFFFFFF
+            raise InputError(f"{name(j, rr, ss)} is in robot {j}'s links file "
+                             f"({where['links']}[{j}]) but not in {where['own']}; both ends of "
+                             "a link list it: give both files every link the two robots share")
+        if value is None or "value" not in p:
+            continue
+        mine_v = np.asarray(value, np.float64)[sel]
+        theirs_v = p["value"][order][pos]
+        bad = np.flatnonzero(mine_v != theirs_v)
+        if bad.size:
+            k, b = sel[int(bad[0])], int(bad[0])
+            raise InputError(f"{name(j, r[k], s[k])} has {what} {float(mine_v[b])!r} in "
+                             f"{where['own_values']} but {float(theirs_v[b])!r} in robot {j}'s "
+                             f"({where['values']}[{j}]); give both ends the same {what}")
 
 
 def _own_rows(i: int, matches: dict, weights: dict):
@@ -424,10 +504,6 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         path, own_file = links_file_of(team, i)
         nbr, r, s, quality, rows = own_links_from_file(path, i, own_file, rows=True)
         given = links_weights(team, i, len(rows)) if own_file else None
-        lossy = flood_flag(transport, _own_lossy(opts), team.n)
-        # the evidence a links file carries: the weights given beside it (data.weights), else
-        # the log-odds of its quality
-        weight = ratio_llr(1.0 - quality) if given is None else given[rows]
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
             k = int(bad[0])
@@ -442,6 +518,26 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
                              f"{path} names a feature beyond data."
                              f"features_per_camera ({int(fpc[i])} and {int(fpc[nbr[k]])}); "
                              "give counts that cover every feature id of the links file")
+        # the evidence a links file carries: the weights given beside it (data.weights), else
+        # the log-odds of its quality
+        weight = ratio_llr(1.0 - quality) if given is None else given[rows]
+        check = None
+        if own_file:
+            # each robot read its own file: the two ends of every link compare their rows (and,
+            # for a rule that weighs links, the values) in the flag's first round
+            value = (None if not get_rule(str(opts.get("resolution", DEFAULT_RESOLUTION)))
+                     .needs_evidence else quality if given is None else given[rows])
+            what = "quality" if given is None else "weight"
+            wfile = weights_file_of(team, i)
+            where = {"own": f"its links file {path}", "links": "data.links",
+                     "own_values": (f"its links file {path}" if given is None
+                                    else f"its weights file {wfile}"),
+                     "values": "data.links" if given is None else "data.weights"}
+            send_shared_links(transport, nbr, r, s, value)
+
+            def check(inbox):
+                check_shared_links(i, inbox, nbr, r, s, value, what, where)
+        lossy = flood_flag(transport, _own_lossy(opts), team.n, check)
         keypoints, pose = links_camera(team, i)
         projection = links_projection(team, i)
     else:

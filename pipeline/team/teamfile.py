@@ -21,7 +21,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # K of the image as the robot uses it (after downscaling to max_size)
           or {"kind": "links", "links": "in.csv", "features_per_camera": [m_0, ...]},
               # "links": ["r0.csv", "r1.csv", ...]: one file per robot, each holding only
-              # the rows that touch that robot (a robot reads only its own)
+              # the rows that touch that robot (a robot reads only its own); a link is in
+              # both its robots' files, with one quality (and one weight of "weights"):
+              # the two ends compare them before the rule (pipeline.team.robot)
               # optional, both or neither: "keypoints": ["k0.csv", ...], one file per
               # robot, a header "x,y" then one row per feature (m_i rows, pixels), and
               # "cameras": [{"K": [[...]], "R": [[...]], "t": [tx, ty, tz]}, ...], each
