@@ -4,10 +4,12 @@ Each command lives in ``pipeline/commands/<name>.py`` with ``add_arguments(parse
 ``run(args) -> int``. Only the module of the command being run is imported (its arguments are
 defined on demand), so ``python -m pipeline --help`` loads no OpenCV, SciPy, pycolmap or Rerun.
 
-Exit codes: 0 done; 2 bad input, a file that cannot be read or written, or a team of robot
-processes that did not finish (one line on stderr naming the robot, nothing written); 3 the run finished but its result is not conflict-free (written, flagged in
-the report, one line on stderr); 130 interrupted (Ctrl-C; nothing half-written). A closed stdout
-pipe (``| head -3``) ends the command quietly with 0.
+Exit codes: 0 done; 2 bad input, a file that cannot be read or written, a team of robot
+processes that did not finish (one line on stderr naming the robot, nothing written), or a
+distributed stage that ran past its bound of rounds (one line naming it); 3 the run finished
+but its result is not conflict-free (written, flagged in the report, one line on stderr); 130
+interrupted (Ctrl-C; nothing half-written). A closed stdout pipe (``| head -3``) ends the
+command quietly with 0.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import select  # noqa: E402
 import threading  # noqa: E402
 from collections.abc import Callable, Iterable  # noqa: E402
 
-from pipeline.errors import InputError, TeamError  # noqa: E402
+from pipeline.errors import InputError, StageStalledError, TeamError  # noqa: E402
 
 # command name -> (module, one-line help)
 COMMANDS = {
@@ -157,6 +159,11 @@ def _run(argv: list[str], command: str | None) -> int:
         return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except StageStalledError as exc:
+        print(f"error: {exc}, a bound a correct run never reaches: the inputs break an "
+              "assumption no check caught (e.g. the two ends of a link read it otherwise), or "
+              "the stage has a defect", file=sys.stderr)
         return 2
     except OSError as exc:
         if isinstance(exc, BrokenPipeError) and _stdout_closed():

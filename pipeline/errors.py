@@ -110,3 +110,10 @@ def run_interruptibly(command: str, run) -> int:
         if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
             return report_interrupt(command)
         raise
+
+
+class StageStalledError(RuntimeError):
+    """A distributed stage did not end within the bound of rounds it is proven to end in
+    (the message names the robot or stage and the bound). A correct run never reaches it:
+    the inputs break an assumption no check caught, or the stage has a defect. The command
+    line reports it as one line (exit code 2)."""

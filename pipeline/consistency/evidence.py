@@ -74,6 +74,7 @@ from scipy.sparse.csgraph import connected_components
 from pipeline.consistency.cycles import shared_cameras, support_term
 from pipeline.consistency.keys import isin_sorted, ranges, tie_key
 from pipeline.consistency.robot import Robot
+from pipeline.errors import StageStalledError
 from pipeline.transport import Message, Transport
 
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common_features",
@@ -679,7 +680,7 @@ def run_evidence_resolution(robots: list[Robot], network: Transport,
         for i in receivers:
             evidence_step(robots[i], network.inbox(i), sends[i], t)
         if t > cap:
-            raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
+            raise StageStalledError(f"evidence resolution did not end within {cap} rounds")
     unsolved = [rb.id for rb in robots if set(rb.evidence.bundles) - rb.evidence.solved]
     labels = set()
     for rb in robots:

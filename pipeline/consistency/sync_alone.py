@@ -38,6 +38,7 @@ from pipeline.consistency.sync import (
     support_step,
 )
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun
+from pipeline.errors import StageStalledError
 
 __all__ = ["run_sync_locally"]
 
@@ -85,8 +86,8 @@ def run_sync_locally(robot: Robot, transport, protocol, n_robots: int | None = N
                 break
             boruvka += 1
             if boruvka > robot.m_total:
-                raise RuntimeError(f"robot {robot.id}: sync did not end within "
-                                   f"{robot.m_total} Borůvka rounds")
+                raise StageStalledError(f"robot {robot.id}: sync did not end within "
+                                        f"{robot.m_total} Borůvka rounds")
             bits = run_phase("sync-merge", start_merge, merge_step)
         if not bits & LOST:
             break

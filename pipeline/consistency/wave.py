@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from pipeline.errors import StageStalledError
+
 __all__ = ["TerminationWave", "RobotRun", "run_wave_phase", "CONFLICT", "LOST"]
 
 CONFLICT, LOST = 1, 2
@@ -80,4 +82,4 @@ def run_wave_phase(transport, wave: TerminationWave, step, done, bits, max_round
         if wave.update(done(), bits(), states):
             return t, wave.bits
         if t > max_rounds:
-            raise RuntimeError(f"robot {robot_id}: {phase} did not end within {max_rounds} rounds")
+            raise StageStalledError(f"robot {robot_id}: {phase} did not end within {max_rounds} rounds")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.errors import StageStalledError
 from pipeline.fusion.robot import FusionRobot
 
 __all__ = ["run_fusion_locally", "run_fusion_reliably", "TICK"]
@@ -54,7 +55,7 @@ def run_fusion_locally(fusion: FusionRobot, transport, n_robots: int | None = No
             return dict(rounds=t, fusion_rounds=int(heard_max),
                         local_rounds=int(fusion.local_rounds), lost=sorted(fusion.lost))
         if t > cap:
-            raise RuntimeError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
+            raise StageStalledError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
 
 
 TICK = "fusion-tick"
@@ -121,7 +122,7 @@ def run_fusion_reliably(fusion: FusionRobot, transport, options=None,
         for s in states.values():
             heard_max = max(heard_max, int(s.get("r", 0)))
         if state["rounds"] > cap:
-            raise RuntimeError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
+            raise StageStalledError(f"robot {fusion.i}: fusion did not end within {cap} rounds")
         return wave.update(fusion.done and chan.idle(), 0, states)
 
     while not fusion.done:

@@ -332,3 +332,43 @@ def test_a_closed_stdout_pipe_ends_the_command_quietly(tmp_path):
         os.close(write)
     assert out.stderr == ""
     assert out.returncode == 0
+
+
+def test_a_stage_past_its_bound_of_rounds_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    """Two robots that read one link otherwise (quality 0.9 and 0.8) with the ends' comparison
+    taken away: sync runs past its bound of Borůvka rounds, which each robot command ended with
+    a traceback (exit 1); it is one line naming the robot and the bound, exit 2."""
+    import threading
+
+    import pipeline.team.robot as teamrobot
+    from pipeline.__main__ import _run
+    from pipeline.team.launcher import free_ports
+
+    monkeypatch.setattr(teamrobot, "check_shared_links", lambda *a, **k: None)
+    head = "cam_i,feat_i,cam_j,feat_j,quality\n"
+    (tmp_path / "r0.csv").write_text(head + "0,0,1,0,0.9\n")
+    (tmp_path / "r1.csv").write_text(head + "0,0,1,0,0.8\n")
+    team = tmp_path / "TEAM.json"
+    team.write_text(json.dumps({
+        "version": 1, "name": "stalled", "comm_edges": [[0, 1]],
+        "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{p}"}
+                   for i, p in enumerate(free_ports(2))],
+        "data": {"kind": "links", "links": [str(tmp_path / "r0.csv"), str(tmp_path / "r1.csv")],
+                 "features_per_camera": [1, 1]},
+        "options": {"resolution": "sync", "start_timeout_s": 20.0}}))
+    codes = [None, None]
+
+    def robot(i):
+        codes[i] = _run(["robot", "--team", str(team), "--id", str(i)], "robot")
+
+    threads = [threading.Thread(target=robot, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    err = capsys.readouterr().err
+    assert codes == [2, 2] and "Traceback" not in err, err
+    lines = sorted(ln for ln in err.splitlines() if ln.startswith("error:"))
+    assert [ln.split(",")[0] for ln in lines] == [
+        f"error: robot {i}: sync did not end within 2 Borůvka rounds" for i in (0, 1)]
+    assert all(ln.endswith("or the stage has a defect") for ln in lines), lines

@@ -49,6 +49,7 @@ from pipeline.consistency.engines.batched_resolution import run_resolution
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.protocols import PaperProtocol
 from pipeline.consistency.robot import Robot
+from pipeline.errors import StageStalledError
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.transport.simulated import Network
 
@@ -370,7 +371,7 @@ def run_detection(robots: list[Robot], network: Transport, protocol: PaperProtoc
         if msgs:
             network.count("blocks", msgs, nbytes)
         if t > cap:
-            raise RuntimeError(f"detection did not end within {cap} rounds")
+            raise StageStalledError(f"detection did not end within {cap} rounds")
     ran = np.diff(team.row_bounds) > 0
     n_sets = _finish(robots, team, X.all(), t_stop, ran)
     peak[ran] = np.maximum(peak[ran], stop_mem[ran] + 16 * n_sets[ran])

@@ -87,6 +87,7 @@ from pipeline.consistency.evidence import (
 )
 from pipeline.consistency.keys import isin_sorted, ranges
 from pipeline.consistency.robot import Robot
+from pipeline.errors import StageStalledError
 from pipeline.transport import HEADER_BYTES, Transport
 
 __all__ = ["run_evidence_resolution", "evidence_pass"]
@@ -259,7 +260,7 @@ def _flood(sg: _SetGraphs, cap: int) -> tuple[int, int, int, np.ndarray, np.ndar
         solve_round[fr.node] = t  # levels only grow: a node's last arrival wins
         np.add.at(received, fr.node, 1)
         if t > cap:
-            raise RuntimeError(f"evidence resolution did not end within {cap} rounds")
+            raise StageStalledError(f"evidence resolution did not end within {cap} rounds")
     return t, messages, nbytes, solve_round, received
 
 

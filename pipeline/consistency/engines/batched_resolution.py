@@ -49,6 +49,7 @@ from pipeline.consistency.resolution import (
     start_resolution,
 )
 from pipeline.consistency.robot import CASE_B, CASE_C, ON_REJECT, Robot
+from pipeline.errors import StageStalledError
 from pipeline.transport import HEADER_BYTES, Transport
 
 __all__ = ["run_resolution"]
@@ -198,7 +199,7 @@ def run_resolution(robots: list[Robot], network: Transport, protocol: PaperProto
         req_link, req_q, rej_link = _round(tab, req_link, req_q, rej_link, t, network, n,
                                            req_bytes, rej_bytes)
         if t > cap:
-            raise RuntimeError(f"resolution did not end within {cap} rounds")
+            raise StageStalledError(f"resolution did not end within {cap} rounds")
     tab.write_back(robots)
     for rb in robots:
         if stepped[rb.id]:

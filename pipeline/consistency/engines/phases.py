@@ -10,6 +10,7 @@ import numpy as np
 
 from pipeline.consistency.protocols import DETECTION, RESOLUTION, end_phase
 from pipeline.consistency.robot import Robot
+from pipeline.errors import StageStalledError
 from pipeline.transport import Transport
 
 __all__ = ["run_phase", "run_resolution_phase", "run_quiet_phase"]
@@ -48,7 +49,7 @@ def run_phase(robots: list[Robot], network: Transport, protocol, phase: str, ite
         for rb in protocol.team(live):
             protocol.step(phase, rb, network.inbox(rb.id), t)
         if t > cap:
-            raise RuntimeError(f"{phase} did not end within {cap} rounds")
+            raise StageStalledError(f"{phase} did not end within {cap} rounds")
     end_phase(phase, robots)
     out = dict(rounds=t, start_round=start_round, lost=protocol.lost_in_phase(live))
     if phase == DETECTION:
@@ -89,5 +90,5 @@ def run_quiet_phase(robots: list[Robot], network: Transport, start, step, on_rou
         for i in receivers:
             step(robots[i], network.inbox(i), sends[i], t0 + t)
         if t > cap:
-            raise RuntimeError(f"{what} did not end within {cap} rounds")
+            raise StageStalledError(f"{what} did not end within {cap} rounds")
     return t

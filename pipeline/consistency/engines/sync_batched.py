@@ -98,6 +98,7 @@ from pipeline.consistency.sync import (
     start_support,
     support_step,
 )
+from pipeline.errors import StageStalledError
 from pipeline.transport import HEADER_BYTES, Transport
 from pipeline.transport.simulated import Network
 
@@ -346,7 +347,7 @@ def _flood_best(team: _Team, best: np.ndarray, fl: np.ndarray, fptr: np.ndarray,
         counts.add(BEST, team.messages(S), entry * S.size)
         t += 1
         if t > cap:
-            raise RuntimeError(f"sync phase did not end within {cap} rounds")
+            raise StageStalledError(f"sync phase did not end within {cap} rounds")
         val, tgt = best[f[S]], g[S]
         ut, inv = np.unique(tgt, return_inverse=True)
         top = np.full(ut.size, -1, dtype=np.int64)
@@ -409,7 +410,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
             break
         boruvka += 1
         if boruvka > M:
-            raise RuntimeError(f"sync did not end within {M} Borůvka rounds")
+            raise StageStalledError(f"sync did not end within {M} Borůvka rounds")
         # camera sets held after phase A's prune: clusters of two or more in use
         own = np.flatnonzero(size[label] >= 2)
         far_op = op[size[label[g[op]]] >= 2]
@@ -454,7 +455,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
             d += 1
             dist[V] = d
         if last > cap:
-            raise RuntimeError(f"sync phase did not end within {cap} rounds")
+            raise StageStalledError(f"sync phase did not end within {cap} rounds")
         t += last
         keys = np.unique(np.concatenate(held))
         held_max = np.maximum(held_max, np.bincount(keys // M, minlength=n))
@@ -515,7 +516,7 @@ def run_sync(robots: list[Robot], network: Transport, on_round=None) -> dict:
             break
         boruvka += 1
         if boruvka > m_total:
-            raise RuntimeError(f"sync did not end within {m_total} Borůvka rounds")
+            raise StageStalledError(f"sync did not end within {m_total} Borůvka rounds")
         t += run_quiet_phase(robots, network, start_merge, merge_step, on_round, t, cap, "sync")
     for rb in robots:
         rb.sync.rounds = boruvka
