@@ -155,3 +155,26 @@ def test_a_non_finite_keypoint_or_projection_is_named(camera, value, what, monke
     with pytest.raises(InputError, match=rf"{what} of camera {camera}: a non-finite value at "
                                          rf"\(0, 0\) \({value}\)"):
         resolve_conflicts(m, None, Links(**FIG1), keypoints=kp, projections=P)
+
+
+def test_the_simulator_hands_both_ends_of_a_link_its_one_value():
+    """A robot process reads its own rows and the two ends compare them
+    (pipeline.team.robot.check_shared_links); the simulator takes one row per link and hands
+    both ends that row's value, so the ends cannot disagree: a link given twice (either way
+    round, with two qualities) is refused, and each end's weight is its link's."""
+    from pipeline.consistency.engines.driver import _equip_evidence, build_robots
+    from pipeline.consistency.sync import equip_robot
+
+    for cam_i, cam_j in (([0, 0], [1, 1]), ([0, 1], [1, 0])):
+        with pytest.raises(InputError, match="duplicate link|cam_i must be < cam_j"):
+            resolve_conflicts([1, 1], None, Links(cam_i, [0, 0], cam_j, [0, 0], [0.9, 0.8]),
+                              resolution="sync")
+    links = Links(**FIG1)
+    w = np.array([0.5, -1.0, 2.0, np.inf])
+    robots, index = build_robots([2, 1, 1, 1], links)
+    _equip_evidence(robots, index, links, w, None, None, equip_robot)
+    seen: dict = {}
+    for rb, li in zip(robots, index, strict=True):
+        for k, link in enumerate(li.tolist()):
+            seen.setdefault(link, []).append(rb.sync.weight[k])
+    assert seen == {k: [w[k], w[k]] for k in range(len(w))}
