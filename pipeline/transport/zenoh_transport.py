@@ -80,8 +80,8 @@ Writing a neighbour off (no hang, ever)
     so it waited for that neighbour's packets for ever, and its other neighbours for it: a
     cycle of waits around a ring.)
 
-    Bounds, stated for :meth:`ZenohTransport.end_round`: the packets are queued to one
-    sender thread per neighbour (a put into a slow link's full queue blocks that link's
+    Bounds, stated for :meth:`ZenohTransport.end_round`: the packets are queued to the
+    neighbour's sender thread (see "Threads"; a put into a slow link's full queue blocks that
     sender only, at most ``block_s`` seconds per packet before Zenoh closes that link, which
     reads as ``closed``), and the wait ends within ``round_limit_s`` plus one beat period
     whatever the neighbours do. A round therefore never waits for ever;
@@ -114,6 +114,22 @@ Rejoin (the rule, and why nothing is lost)
     both ends, so the team still ends conflict-free (the survivors repeat detection after a
     loss, :mod:`pipeline.consistency.termination`), and the run reports the links it lost.
 
+Threads
+    A robot's threads do not grow with its neighbours beyond :data:`SENDER_THREADS`: its round
+    packets go through at most that many sender threads, neighbour ``k`` always through the
+    same one (the ``n``-th neighbour by id through sender ``n mod SENDER_THREADS``), so each
+    neighbour's packets are put in the order they were queued. A robot with at most
+    :data:`SENDER_THREADS` neighbours has one sender per neighbour, and a put into a slow
+    link's full queue holds up that link only; with more, it also holds up the neighbours that
+    share its sender, by at most ``block_s`` per packet (they keep hearing this robot's beats,
+    so they wait, and ask for the packet again, see "A round packet lost"). Every Python
+    callback of a Zenoh subscriber runs on a thread of its own, so the robot declares one
+    subscriber per key kind for all its neighbours (``fm/T/round/*/ID``, ...; what comes from
+    a robot that is not a neighbour is ignored), not one per neighbour and kind: with those
+    and a sender per neighbour, a robot ran seven threads per neighbour, 700 on a complete
+    graph of 101 images and 70,000 for the team on one machine. One more thread sends the
+    beats.
+
 Start handshake
     Each robot repeats ``hello`` to every neighbour (carrying whether it has heard that
     neighbour) until it has heard every neighbour and every neighbour has heard it, then sends
@@ -143,7 +159,8 @@ from pipeline.errors import InputError
 from pipeline.transport import Message, NotANeighbourError, RobotMissingError, RoundEndpoint
 from pipeline.transport.wire import WireError, decode_packet, encode_packet
 
-__all__ = ["ZenohTransport", "zenoh_config", "open_session", "key", "ASK_AFTER_S"]
+__all__ = ["ZenohTransport", "zenoh_config", "open_session", "key", "ASK_AFTER_S",
+           "SENDER_THREADS"]
 
 
 def key(team: str, what: str, *ids) -> str:
@@ -161,6 +178,13 @@ def link_timeouts(round_timeout_s: float) -> tuple[float, float]:
 #: seconds a robot waits for a neighbour's round packet, while hearing its beats, before it
 #: asks for it again (and again every so many seconds): a packet lost with its link
 ASK_AFTER_S = 2.0
+
+#: the most sender threads a robot runs (module docstring, "Threads"): one per neighbour up
+#: to this many, so a robot of the project's sparse graphs (line, ring: 2 neighbours, ring2: 4,
+#: formations a-d: 5, seq:3: 6) keeps a thread per link; a robot with more neighbours (a
+#: complete graph of 101 images: 100) shares them, where one per neighbour made 10,000
+#: threads on one machine and a robot could not start its own
+SENDER_THREADS = 8
 
 
 def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None):
@@ -280,18 +304,13 @@ class ZenohTransport(RoundEndpoint):
         self.session = open_session([team.endpoint(self.robot_id)], connect,
                                     f"robot {self.robot_id}", self.round_timeout_s)
         name = team.name
-        self._subs = []
-        for k in sorted(self.neighbours):
-            self._subs.append(self.session.declare_subscriber(
-                key(name, "round", k, self.robot_id), self._on_packet))
-            self._subs.append(self.session.declare_subscriber(
-                key(name, "hello", k, self.robot_id), self._on_hello))
-            self._subs.append(self.session.declare_subscriber(
-                key(name, "alive", k, self.robot_id), self._on_beat))
-            self._subs.append(self.session.declare_subscriber(
-                key(name, "gone", k, self.robot_id), self._on_gone))
-            self._subs.append(self.session.declare_subscriber(
-                key(name, "again", k, self.robot_id), self._on_again))
+        # one subscriber per kind for every neighbour (``*`` the sender): each Python callback
+        # of a subscriber runs on a thread of its own (module docstring, "Threads"); what
+        # does not come from a neighbour is ignored (_from)
+        self._subs = [self.session.declare_subscriber(key(name, what, "*", self.robot_id), on)
+                      for what, on in (("round", self._on_packet), ("hello", self._on_hello),
+                                       ("alive", self._on_beat), ("gone", self._on_gone),
+                                       ("again", self._on_again))]
         import zenoh
 
         # round packets must never be dropped by Zenoh itself (its default under congestion
@@ -300,11 +319,15 @@ class ZenohTransport(RoundEndpoint):
             key(name, "round", self.robot_id, k),
             congestion_control=zenoh.CongestionControl.BLOCK)
             for k in sorted(self.neighbours)}
-        # one sender per neighbour: a put into a slow link's full queue blocks that link only
-        self._sendq = {k: queue.SimpleQueue() for k in sorted(self.neighbours)}
-        self._senders = {k: threading.Thread(target=self._sender, args=(k,), daemon=True)
-                         for k in sorted(self.neighbours)}
-        for t in self._senders.values():
+        # at most SENDER_THREADS senders, neighbour k always served by the same one (its
+        # packets stay in order): a put into a slow link's full queue blocks the neighbours of
+        # that sender only (module docstring, "Threads")
+        order = sorted(self.neighbours)
+        self._senders = [threading.Thread(target=self._sender, args=(j,), daemon=True)
+                         for j in range(min(SENDER_THREADS, len(order)))]
+        self._sendq = [queue.SimpleQueue() for _ in self._senders]
+        self._sender_of = {k: n % SENDER_THREADS for n, k in enumerate(order)}
+        for t in self._senders:
             t.start()
         self._beat_pubs = {k: self.session.declare_publisher(
             key(name, "alive", self.robot_id, k)) for k in sorted(self.neighbours)}
@@ -314,16 +337,26 @@ class ZenohTransport(RoundEndpoint):
         # the kernel closes its sockets), which its neighbours hear within milliseconds
         self._left: set[int] = set()
         self._token = self.session.liveliness().declare_token(key(name, "live", self.robot_id))
-        for k in sorted(self.neighbours):
-            self._subs.append(self.session.liveliness().declare_subscriber(
-                key(name, "live", k), self._on_liveliness))
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            key(name, "live", "*"), self._on_liveliness))
+
+    def _from(self, sample, at: int) -> int | None:
+        """The robot id at chunk ``at`` of ``sample``'s key expression when it is a
+        neighbour's, else None (a subscriber hears ``*``: every sender)."""
+        try:
+            k = int(str(sample.key_expr).split("/")[at])
+        except (ValueError, IndexError):
+            return None
+        return k if k in self.neighbours else None
 
     def _on_liveliness(self, sample) -> None:
         import zenoh
 
         if sample.kind != zenoh.SampleKind.DELETE:
             return
-        k = int(str(sample.key_expr).rsplit("/", 1)[-1])
+        k = self._from(sample, -1)
+        if k is None:
+            return
         with self._cv:
             self._left.add(k)
             self._cv.notify_all()
@@ -347,20 +380,26 @@ class ZenohTransport(RoundEndpoint):
             except Exception:  # noqa: BLE001 - the session is closing
                 return
 
-    def _sender(self, k: int) -> None:
-        """Hand neighbour ``k``'s round packets to Zenoh in order; ``None`` ends it."""
-        q = self._sendq[k]
+    def _queue(self, k: int, data: bytes) -> None:
+        """Queue a round packet for neighbour ``k`` to its sender (never blocks)."""
+        self._sendq[self._sender_of[k]].put((k, data))
+
+    def _sender(self, j: int) -> None:
+        """Sender ``j``: hand the round packets of its neighbours to Zenoh, each neighbour's in
+        the order they were queued; ``None`` ends it."""
+        q = self._sendq[j]
         while True:
-            data = q.get()
-            if data is None:
+            item = q.get()
+            if item is None:
                 return
+            k, data = item
             if k in self.written_off:
                 continue
             t_put = time.monotonic()
             try:
                 self._pubs[k].put(data)
-            except Exception:  # noqa: BLE001 - the session is closing
-                return
+            except Exception:  # noqa: BLE001 - the session is closing: its other neighbours'
+                continue  # puts fail too, and close() ends this sender
             with self._cv:
                 self.send_s += time.monotonic() - t_put
 
@@ -368,12 +407,16 @@ class ZenohTransport(RoundEndpoint):
         self.session.put(key(self.team.name, "gone", self.robot_id, k), b"1")
 
     def _on_beat(self, sample) -> None:
-        k = int(str(sample.key_expr).split("/")[-2])
+        k = self._from(sample, -2)
+        if k is None:
+            return
         with self._cv:
             self._heard[k] = time.monotonic()
 
     def _on_gone(self, sample) -> None:
-        k = int(str(sample.key_expr).split("/")[-2])
+        k = self._from(sample, -2)
+        if k is None:
+            return
         with self._cv:
             if k not in self.written_off:
                 self._write_off(k, "told")
@@ -418,6 +461,8 @@ class ZenohTransport(RoundEndpoint):
                       f"{sample.key_expr}: {exc}")
             return
         src = int(header["src"])
+        if src not in self.neighbours:  # the subscriber hears every sender (_from)
+            return
         with self._cv:
             self._heard[src] = time.monotonic()
             if src not in self.written_off:  # a written-off robot's packets are ignored
@@ -426,10 +471,12 @@ class ZenohTransport(RoundEndpoint):
 
     def _on_again(self, sample) -> None:
         """A neighbour asks for this robot's packet of a round again (module docstring)."""
+        k = self._from(sample, -2)
         try:
-            k = int(str(sample.key_expr).split("/")[-2])
             r = int(sample.payload.to_bytes())
         except ValueError:
+            return
+        if k is None:
             return
         with self._cv:
             data = self._kept.get(k, {}).get(r)
@@ -438,7 +485,7 @@ class ZenohTransport(RoundEndpoint):
             self.resent += 1
         self._log(f"robot {self.robot_id}: sent its round {r} packet to robot {k} again "
                   "(asked: it did not arrive)")
-        self._sendq[k].put(data)
+        self._queue(k, data)
 
     def _on_hello(self, sample) -> None:
         try:
@@ -447,6 +494,8 @@ class ZenohTransport(RoundEndpoint):
             waiting = not bool(doc.get("done", False))
             terms = doc.get("terms")
         except (ValueError, KeyError, TypeError, AttributeError):
+            return
+        if src not in self.neighbours:  # the subscriber hears every sender (_from)
             return
         if isinstance(terms, dict) and terms != self._terms:
             with self._cv:
@@ -582,7 +631,7 @@ class ZenohTransport(RoundEndpoint):
         :meth:`RoundEndpoint.end_round`).
 
         Bound: returns within ``round_limit_s`` plus one beat period, whatever the neighbours
-        do (the packets are queued to each neighbour's sender thread, which never holds the
+        do (the packets are queued to the neighbours' sender threads, which never hold the
         round up): a neighbour whose
         packet has not come is written off when its session closes, after ``round_timeout_s``
         of silence, when it says it wrote this robot off, or when the round has waited
@@ -600,7 +649,7 @@ class ZenohTransport(RoundEndpoint):
             self.wire_bytes_to[k] += len(data)
             self.wire_packets += 1
             sent[k] = data
-            self._sendq[k].put(data)  # never blocks: the neighbour's sender puts it
+            self._queue(k, data)  # never blocks: the neighbour's sender puts it
         t0 = time.monotonic()
         with self._cv:
             for k, data in sent.items():  # kept for a neighbour that asks again (two rounds)
@@ -691,11 +740,11 @@ class ZenohTransport(RoundEndpoint):
     def close(self) -> None:
         """Let the senders hand over what they still hold (each at most ``block_s`` per
         packet, :func:`link_timeouts`, in parallel), then close the session."""
-        for q in self._sendq.values():
+        for q in self._sendq:
             q.put(None)
         block_s = link_timeouts(self.round_timeout_s)[1]
         end = time.monotonic() + 2 * block_s
-        for t in self._senders.values():
+        for t in self._senders:
             t.join(timeout=max(0.0, end - time.monotonic()))
         self._stop.set()
         try:
