@@ -155,8 +155,11 @@ def _run(argv: list[str], command: str | None) -> int:
     if getattr(args, "_missing", False):
         parser.error(f"command {args.command!r} is not available in this build")
     mod = importlib.import_module(f"pipeline.commands.{args._module}")
+    from pipeline.commands.options import transport_time_limit
     try:
-        return int(mod.run(args) or 0)
+        # --team-timeout of a command that takes --transport (checked first)
+        with transport_time_limit(args):
+            return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

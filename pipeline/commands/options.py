@@ -2,7 +2,9 @@
 
 ``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.matching.features`),
 ``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
-(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`) and ``--merge-radius`` (near-duplicate keypoints).
+(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`), ``--transport`` and
+``--team-timeout`` (where the robots run, :mod:`pipeline.runs.transports`) and
+``--merge-radius`` (near-duplicate keypoints).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from pipeline.validate import render_size
 
 __all__ = ["count_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
+           "team_timeout", "transport_time_limit",
            "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size", "size_argument"]
 
@@ -130,11 +133,65 @@ def online_run_summary(report: dict, out, first_line: str, no_rerun: bool) -> in
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:
     """``--transport NAME``: where the robots run, one of :mod:`pipeline.runs.transports`
-    (shared by the commands that run the robots)."""
+    (shared by the commands that run the robots), and ``--team-timeout S``, the seconds each
+    team of robot processes may run (:func:`transport_time_limit`, which the command line
+    applies around the command)."""
     from pipeline.runs.transports import transport_help, transport_names
+    from pipeline.team.launcher import TEAM_TIMEOUT_S
 
     p.add_argument("--transport", default="sim", choices=transport_names(),
                    help=transport_help())
+    p.add_argument("--team-timeout", default=None, metavar="S",
+                   help="with robot processes (--transport zenoh): seconds each team may run "
+                        f"before it is stopped (default {TEAM_TIMEOUT_S:g}; an online run "
+                        "starts teams every step, each gets S); raise it for a large team on a "
+                        "slow machine")
+
+
+#: the longest ``--team-timeout``, in seconds (a week): beyond it, a typo
+MAX_TEAM_TIMEOUT_S = 7 * 86400.0
+
+
+def team_timeout(value) -> float:
+    """``--team-timeout``'s ``value`` in seconds: a finite number above 0 (``nan`` would make
+    the deadline never come, ``inf`` the same), at most :data:`MAX_TEAM_TIMEOUT_S`.
+
+    >>> team_timeout("1800")
+    1800.0
+    """
+    import math
+
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"--team-timeout {value!r}: not a number; give the seconds each team "
+                         "of robot processes may run, e.g. --team-timeout 1800") from None
+    if not (math.isfinite(v) and 0 < v <= MAX_TEAM_TIMEOUT_S):
+        raise InputError(f"--team-timeout {value!r}: must be a finite number of seconds above 0 "
+                         f"(at most {MAX_TEAM_TIMEOUT_S:g}), e.g. --team-timeout 1800")
+    return v
+
+
+def transport_time_limit(args):
+    """The context manager a command runs in (:func:`pipeline.__main__._run`): with
+    ``--team-timeout S`` (:func:`add_transport_option`), every team of robot processes it
+    starts is stopped after ``S`` seconds (:func:`pipeline.runs.transports.time_limit`); a
+    command without ``--transport``, or without the option: nothing.
+
+    Raises
+    ------
+    InputError
+        A bad ``S`` (:func:`team_timeout`), or ``S`` with a transport that starts no team
+        (``--transport sim``).
+    """
+    import contextlib
+
+    given = getattr(args, "team_timeout", None)
+    if given is None or not hasattr(args, "transport"):
+        return contextlib.nullcontext()
+    from pipeline.runs.transports import time_limit
+
+    return time_limit(args.transport, team_timeout(given))
 
 
 def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None,

@@ -40,7 +40,28 @@ from pipeline.team.teamfile import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry,
 from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
-           "Observer"]
+           "Observer", "TEAM_TIMEOUT_S", "team_time_limit"]
+
+
+#: seconds a team may run before :func:`launch_team` kills it, unless the caller or
+#: :func:`team_time_limit` (the commands' ``--team-timeout``) says otherwise
+TEAM_TIMEOUT_S = 600.0
+
+_time_limit = {"s": TEAM_TIMEOUT_S}
+
+
+@contextlib.contextmanager
+def team_time_limit(seconds: float):
+    """Within the block, every :func:`launch_team` not given its own ``timeout_s`` kills its
+    team after ``seconds`` (``--team-timeout`` of the commands that take ``--transport``; a
+    job that starts several teams, an online run one or more per step, gives each the
+    limit)."""
+    old = _time_limit["s"]
+    _time_limit["s"] = float(seconds)
+    try:
+        yield
+    finally:
+        _time_limit["s"] = old
 
 
 #: where :func:`free_ports` draws when the kernel's ephemeral range cannot be read
@@ -244,7 +265,7 @@ class Observer:
             self.session.close()
 
 
-def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float = 600.0,
+def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float | None = None,
                 kill: tuple[int, str, float] | None = None, log=None,
                 fork: bool = True) -> TeamRun:
     """Run every robot of ``team`` as a process on this machine; return what they published.
@@ -253,7 +274,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     ----------
     team : Team — loopback endpoints (see :func:`make_team`), with an observer endpoint
     workdir : folder for ``TEAM.json`` and the robots' logs (default: a temporary folder)
-    timeout_s : float — overall limit; the team is killed after it
+    timeout_s : float or None — overall limit; the team is killed after it (None: the
+        limit of the enclosing :func:`team_time_limit`, else :data:`TEAM_TIMEOUT_S`)
     kill : ``(robot, status, delay_s)`` or None — fault injection: ``kill -9`` of ``robot``
         ``delay_s`` seconds after it published ``status`` (``started``, ``consistency``)
     log : callable(str) or None
@@ -267,6 +289,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         stderr line), or the team did not finish within ``timeout_s``.
     """
     log = log or (lambda s: print(s, file=sys.stderr, flush=True))
+    timeout_s = _time_limit["s"] if timeout_s is None else float(timeout_s)
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="fm-team-")
@@ -373,9 +396,12 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     missing = sorted(set(range(team.n)) - set(observer.results))
                     never = [i for i in missing if i not in observer.status]
                     who = never or missing
-                    raise TeamError(f"team did not finish within {timeout_s:g} s; robot "
-                                    f"{who[0]} ({team.endpoint(who[0])}) "
-                                    f"{'never started' if never else 'did not publish a result'}")
+                    raise TeamError(f"the team of {team.n} robot processes did not end "
+                                    f"within {timeout_s:g} s (robot {who[0]} "
+                                    f"({team.endpoint(who[0])}) "
+                                    f"{'never started' if never else 'did not publish a result'}"
+                                    "); a large team on a slow machine needs longer: raise "
+                                    "--team-timeout")
                 observer.cv.wait(0.05)
         run.published_s = time.monotonic() - t0
         # wait for the processes that published to exit

@@ -50,7 +50,10 @@ loads nothing heavy) with one function per job:
 
 Optional module attributes: ``MAX_ROBOT_PROCESSES`` (the most robots a job may start on this
 machine, checked before any work by :func:`check_team_size`), ``COMPACT_IDS`` (``resolve``
-runs on the cameras that appear in a link or a comm edge only, :mod:`pipeline.inputs.compact`).
+runs on the cameras that appear in a link or a comm edge only, :mod:`pipeline.inputs.compact`),
+``team_time_limit(seconds)`` (a context manager: every team of robot processes the jobs start
+within it is killed after ``seconds``, the commands' ``--team-timeout``; see
+:func:`time_limit`).
 
 A new transport (e.g. ROS 2) is one module with these functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
@@ -67,7 +70,7 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size", "check_online_team_size", "resolve_alone"]
+           "check_team_size", "check_online_team_size", "resolve_alone", "time_limit"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +137,33 @@ def check_team_size(name: str, robots: int, what: str) -> None:
                          f"{robots} {what} would be {robots} processes, at most {cap}; use "
                          "--transport sim, or start the robots on their own hosts "
                          "(formation-match robot --team TEAM.json)")
+
+
+def time_limit(name: str, seconds: float | None):
+    """The context manager under which a command's jobs run on transport ``name`` with
+    ``--team-timeout seconds`` (its module's ``team_time_limit``; ``seconds`` None: the
+    option not given, the transport's own limit).
+
+    Raises
+    ------
+    InputError
+        ``seconds`` given to a transport that starts no team of processes (``sim``: the
+        option would be ignored without a word).
+    """
+    import contextlib
+
+    from pipeline.errors import InputError
+
+    limit = getattr(get_transport(name).load(), "team_time_limit", None)
+    if seconds is None:
+        return contextlib.nullcontext()
+    if limit is None:
+        teams = [e.name for e in TRANSPORTS.values()
+                 if getattr(e.load(), "team_time_limit", None) is not None]
+        raise InputError(f"--team-timeout applies to robot processes (--transport "
+                         f"{'|'.join(teams)}); --transport {name} starts none: drop it, or "
+                         f"add --transport {teams[0]}")
+    return limit(seconds)
 
 
 def resolve_alone(transport: str, features_per_camera, comm_edges, links, resolution: str,

@@ -3,7 +3,8 @@
 The robots compute everything (:mod:`pipeline.team.robot`); this process launches them
 (:mod:`pipeline.team.launcher`) and, as the observer, turns what they published into the
 job's results (:mod:`pipeline.team.assemble`). The job functions are those of the registry
-(:mod:`pipeline.runs.transports`).
+(:mod:`pipeline.runs.transports`); ``team_time_limit`` (the launcher's) bounds every team they
+start (``--team-timeout``).
 """
 
 from __future__ import annotations
@@ -32,13 +33,13 @@ from pipeline.team.assemble import (
     links_of_team,
     team_options,
 )
-from pipeline.team.launcher import launch_team, make_team, team_summary
+from pipeline.team.launcher import launch_team, make_team, team_summary, team_time_limit
 from pipeline.team.teamfile import DEFAULT_OPTIONS
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
            "online_stage", "online_fusion",
            "resolve_links_file",
-           "write_robot_links", "links_of_run"]
+           "write_robot_links", "links_of_run", "team_time_limit"]
 
 
 #: the robots of an online step solve the small sets at their roots themselves (processes:
