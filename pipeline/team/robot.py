@@ -536,8 +536,21 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             send_shared_links(transport, nbr, r, s, value)
 
             def check(inbox):
-                check_shared_links(i, inbox, nbr, r, s, value, what, where)
+                try:
+                    check_shared_links(i, inbox, nbr, r, s, value, what, where)
+                except InputError as exc:
+                    mismatch.append(exc)
+        mismatch: list[InputError] = []
         lossy = flood_flag(transport, _own_lossy(opts), team.n, check)
+        if mismatch:
+            # stop only once the far end holds this robot's rows: it sends its round 1 packet
+            # after its round 0 ended, which needed them. Stopping at once could close this
+            # robot's session before its queued round 0 packet left, and the far end would
+            # then see a robot lost rather than the mismatch (the flag's rounds after the
+            # first give that round when there are two or more)
+            if max(team.n - 1, 1) < 2:
+                transport.end_round()
+            raise mismatch[0]
         keypoints, pose = links_camera(team, i)
         projection = links_projection(team, i)
     else:
