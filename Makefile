@@ -42,8 +42,11 @@ run-formation: $(STAMP)
 run-formations: $(STAMP)
 	$(PY) -m pipeline run-formations
 
+# the suite on TEST_WORKERS processes (pytest-xdist): two use both cores of a 2-core machine;
+# make test TEST_WORKERS=0 runs it in one process
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS)
 
 lint: $(STAMP)
 	$(PY) -m ruff check pipeline data_synth viz tests bench
