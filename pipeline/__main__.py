@@ -157,7 +157,8 @@ def _run(argv: list[str], command: str | None) -> int:
     mod = importlib.import_module(f"pipeline.commands.{args._module}")
     from pipeline.commands.options import transport_time_limit
     try:
-        # --team-timeout of a command that takes --transport (checked first)
+        # --team-timeout and --round-timeout of a command that takes --transport (checked
+        # first)
         with transport_time_limit(args):
             return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:

@@ -2,8 +2,9 @@
 
 ``--features`` and ``--max-features`` (the feature stage, :mod:`pipeline.matching.features`),
 ``--seed`` and ``--size`` (the rendered formations of :mod:`data_synth`), ``--resolution``
-(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`), ``--transport`` and
-``--team-timeout`` (where the robots run, :mod:`pipeline.runs.transports`) and
+(the consistency stage's resolution rule, :mod:`pipeline.consistency.rules`), ``--transport``,
+``--team-timeout`` and ``--round-timeout`` (where the robots run, how long a team may run
+and a robot waits for a silent neighbour, :mod:`pipeline.runs.transports`) and
 ``--merge-radius`` (near-duplicate keypoints).
 """
 
@@ -16,7 +17,7 @@ from pipeline.validate import render_size
 
 __all__ = ["count_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
-           "team_timeout", "transport_time_limit",
+           "team_timeout", "round_timeout", "transport_time_limit",
            "add_memory_option", "add_overwrite_and_memory_options",
            "feature_options", "parse_size", "size_argument"]
 
@@ -133,11 +134,15 @@ def online_run_summary(report: dict, out, first_line: str, no_rerun: bool) -> in
 
 def add_transport_option(p: argparse.ArgumentParser) -> None:
     """``--transport NAME``: where the robots run, one of :mod:`pipeline.runs.transports`
-    (shared by the commands that run the robots), and ``--team-timeout S``, the seconds each
-    team of robot processes may run (:func:`transport_time_limit`, which the command line
-    applies around the command)."""
+    (shared by the commands that run the robots), ``--team-timeout S``, the seconds each
+    team of robot processes may run, and ``--round-timeout S``, the seconds of silence after
+    which a robot writes a neighbour off (the team's ``round_timeout_s``; its start
+    handshake's ``start_timeout_s`` and ``round_limit_s`` at least twice that,
+    :func:`pipeline.team.teamfile.round_timeout_options`); both through
+    :func:`transport_time_limit`, which the command line applies around the command."""
     from pipeline.runs.transports import transport_help, transport_names
     from pipeline.team.launcher import TEAM_TIMEOUT_S
+    from pipeline.team.teamfile import DEFAULT_OPTIONS
 
     p.add_argument("--transport", default="sim", choices=transport_names(),
                    help=transport_help())
@@ -146,6 +151,14 @@ def add_transport_option(p: argparse.ArgumentParser) -> None:
                         f"before it is stopped (default {TEAM_TIMEOUT_S:g}; an online run "
                         "starts teams every step, each gets S); raise it for a large team on a "
                         "slow machine")
+    p.add_argument("--round-timeout", default=None, metavar="S",
+                   help="with robot processes (--transport zenoh): seconds of silence after "
+                        "which a robot writes a neighbour off (default "
+                        f"{DEFAULT_OPTIONS['round_timeout_s']:g}); the start handshake waits "
+                        f"max({DEFAULT_OPTIONS['start_timeout_s']:g}, 2 x S) s and a round at "
+                        f"most max({DEFAULT_OPTIONS['round_limit_s']:g}, 2 x S) s; every team "
+                        "of the run gets it; raise it when robots on a loaded machine write "
+                        "healthy neighbours off")
 
 
 #: the longest ``--team-timeout``, in seconds (a week): beyond it, a typo
@@ -172,26 +185,66 @@ def team_timeout(value) -> float:
     return v
 
 
+#: the longest ``--round-timeout``, in seconds (an hour of silence): beyond it, a typo
+MAX_ROUND_TIMEOUT_S = 3600.0
+
+
+def round_timeout(value) -> float:
+    """``--round-timeout``'s ``value`` in seconds: a finite number above 0, at most
+    :data:`MAX_ROUND_TIMEOUT_S` (the start handshake's and a round's limits, twice it, stay
+    within a team file's bound, :data:`pipeline.team.teamfile.MAX_TIMEOUT_S`).
+
+    >>> round_timeout("45")
+    45.0
+    """
+    import math
+
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"--round-timeout {value!r}: not a number; give the seconds of "
+                         "silence after which a robot writes a neighbour off, e.g. "
+                         "--round-timeout 120") from None
+    if not (math.isfinite(v) and 0 < v <= MAX_ROUND_TIMEOUT_S):
+        raise InputError(f"--round-timeout {value!r}: must be a finite number of seconds above "
+                         f"0 (at most {MAX_ROUND_TIMEOUT_S:g}), e.g. --round-timeout 120")
+    return v
+
+
 def transport_time_limit(args):
     """The context manager a command runs in (:func:`pipeline.__main__._run`): with
     ``--team-timeout S`` (:func:`add_transport_option`), every team of robot processes it
-    starts is stopped after ``S`` seconds (:func:`pipeline.runs.transports.time_limit`); a
-    command without ``--transport``, or without the option: nothing.
+    starts is stopped after ``S`` seconds (:func:`pipeline.runs.transports.time_limit`); with
+    ``--round-timeout S``, the robots of every team it starts write a neighbour off after
+    ``S`` seconds of silence (:func:`pipeline.runs.transports.round_timeout`); a command
+    without ``--transport``, or without the options: nothing.
 
     Raises
     ------
     InputError
-        A bad ``S`` (:func:`team_timeout`), or ``S`` with a transport that starts no team
-        (``--transport sim``).
+        A bad ``S`` (:func:`team_timeout`, :func:`round_timeout`), or an option with a
+        transport that starts no team (``--transport sim``); ``--team-timeout`` is checked
+        first.
     """
     import contextlib
 
-    given = getattr(args, "team_timeout", None)
-    if given is None or not hasattr(args, "transport"):
+    limit = getattr(args, "team_timeout", None)
+    silence = getattr(args, "round_timeout", None)
+    if (limit is None and silence is None) or not hasattr(args, "transport"):
         return contextlib.nullcontext()
+    from pipeline.runs.transports import round_timeout as round_context
     from pipeline.runs.transports import time_limit
 
-    return time_limit(args.transport, team_timeout(given))
+    # both checked here, before the command; entered when it runs
+    bound = time_limit(args.transport, None if limit is None else team_timeout(limit))
+    quiet = round_context(args.transport, None if silence is None else round_timeout(silence))
+
+    @contextlib.contextmanager
+    def within():
+        with bound, quiet:
+            yield
+
+    return within()
 
 
 def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None,

@@ -22,7 +22,6 @@ import numpy as np
 
 from pipeline.consistency.result import ConsistencyResult, result_from_logs
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.team.teamfile import DEFAULT_OPTIONS
 from pipeline.types import Links, PairMatches
 
 __all__ = ["team_options", "links_of_team", "consistency_of_team", "fusion_of_team",
@@ -45,14 +44,16 @@ FUSION_SKIPPED = {"enabled": False, "reason": "fusion does not run over the zeno
 
 
 def team_options(features: str = "sift", max_features: int | None = 2000, faults=None,
-                 round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"],
+                 round_timeout_s: float | None = None,
                  merge_radius: float | None = None,
                  resolution: str = DEFAULT_RESOLUTION, fusion: bool = False,
                  **feature_options) -> dict:
     """Team options from command-line settings; only ``--drop-prob`` is a zenoh fault.
 
     ``feature_options``: ``contrast_threshold``, ``rootsift``, ``budget_after_merge``,
-    ``threshold_px`` (see :data:`pipeline.team.teamfile.DEFAULT_OPTIONS`).
+    ``threshold_px`` (see :data:`pipeline.team.teamfile.DEFAULT_OPTIONS`). ``round_timeout_s``
+    None: not set here, so the team takes the command's ``--round-timeout`` or the default
+    (:func:`pipeline.team.launcher.make_team`).
 
     Raises
     ------
@@ -65,9 +66,10 @@ def team_options(features: str = "sift", max_features: int | None = 2000, faults
 
     opts = {"features": features,
             "max_features": None if max_features is None else int(max_features),
-            "round_timeout_s": float(round_timeout_s),
             "merge_radius": float(MERGE_RADIUS_PX if merge_radius is None else merge_radius),
             "resolution": resolution, "fusion": bool(fusion), **feature_options}
+    if round_timeout_s is not None:
+        opts["round_timeout_s"] = float(round_timeout_s)
     if faults is not None:
         check_faults_for_transport(faults, "zenoh")
         opts["drop_prob"] = float(faults.drop_prob)

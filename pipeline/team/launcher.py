@@ -36,11 +36,18 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import TeamError
-from pipeline.team.teamfile import DEFAULT_OPTIONS, LAUNCHED_AT_ENV, RobotEntry, Team, write_team
+from pipeline.team.teamfile import (
+    DEFAULT_OPTIONS,
+    LAUNCHED_AT_ENV,
+    RobotEntry,
+    Team,
+    round_timeout_options,
+    write_team,
+)
 from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
-           "Observer", "TEAM_TIMEOUT_S", "team_time_limit"]
+           "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout"]
 
 
 #: seconds a team may run before :func:`launch_team` kills it, unless the caller or
@@ -62,6 +69,26 @@ def team_time_limit(seconds: float):
         yield
     finally:
         _time_limit["s"] = old
+
+
+_round_timeout = {"s": None}
+
+
+@contextlib.contextmanager
+def team_round_timeout(seconds: float):
+    """Within the block, every team :func:`make_team` makes writes a silent neighbour off after
+    ``seconds`` (``--round-timeout`` of the commands that take ``--transport``; a job that
+    makes several teams, an online run some per step, gives it to each): its options take
+    :func:`pipeline.team.teamfile.round_timeout_options` of ``seconds`` (``round_timeout_s``,
+    and ``start_timeout_s`` and ``round_limit_s`` at least twice it) where the caller's
+    options do not set them. A team read from a file (``robot``, ``observe``) keeps its
+    file's."""
+    old = _round_timeout["s"]
+    _round_timeout["s"] = float(seconds)
+    try:
+        yield
+    finally:
+        _round_timeout["s"] = old
 
 
 #: where :func:`free_ports` draws when the kernel's ephemeral range cannot be read
@@ -122,12 +149,15 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
 
     ``comm_edges`` is an edge array: an edge listed twice is an InputError naming it
     (:func:`pipeline.commgraph.check_comm_edges`, through the team file's own check).
+    ``options`` over :data:`~pipeline.team.teamfile.DEFAULT_OPTIONS`; within
+    :func:`team_round_timeout` its timeouts where ``options`` sets none.
     """
     e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
     n = int(n if n is not None else e.max() + 1)
     ports = free_ports(n + 1, host)
     robots = [RobotEntry(i, f"tcp/{host}:{p}") for i, p in enumerate(ports[:n])]
-    opts = {**DEFAULT_OPTIONS, **(options or {})}
+    timeouts = {} if _round_timeout["s"] is None else round_timeout_options(_round_timeout["s"])
+    opts = {**DEFAULT_OPTIONS, **timeouts, **(options or {})}
     team = Team(name, robots, e, data, opts, observer=f"tcp/{host}:{ports[n]}")
     from pipeline.team.teamfile import parse_team
 

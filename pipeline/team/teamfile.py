@@ -87,6 +87,7 @@ from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
+           "round_timeout_options",
            "DATA_KINDS", "links_file_of", "keypoints_file_of", "weights_file_of",
            "TEAM_ONLY_OPTIONS"]
 
@@ -239,6 +240,25 @@ class Team:
         if self.observer:
             out["observer"] = {"endpoint": self.observer}
         return out
+
+
+def round_timeout_options(round_timeout_s: float) -> dict:
+    """The timeout options of a team whose robots write a silent neighbour off after
+    ``round_timeout_s`` seconds (the commands' ``--round-timeout``, given to every team the
+    launcher makes, :func:`pipeline.team.launcher.team_round_timeout`): ``round_timeout_s``
+    itself, and the start handshake's ``start_timeout_s`` and the longest wait of one round,
+    ``round_limit_s``, each at least twice it (their defaults, 60 s and 600 s, otherwise): a
+    machine slow enough to leave a neighbour silent that long starts its robots and runs
+    their rounds slowly too, and a round never gives up on a neighbour before its silence
+    would have written it off.
+
+    >>> round_timeout_options(45)
+    {'round_timeout_s': 45.0, 'start_timeout_s': 90.0, 'round_limit_s': 600.0}
+    """
+    r = float(round_timeout_s)
+    return {"round_timeout_s": r,
+            "start_timeout_s": max(float(DEFAULT_OPTIONS["start_timeout_s"]), 2.0 * r),
+            "round_limit_s": max(float(DEFAULT_OPTIONS["round_limit_s"]), 2.0 * r)}
 
 
 def _where(path) -> str:

@@ -53,7 +53,9 @@ machine, checked before any work by :func:`check_team_size`), ``COMPACT_IDS`` (`
 runs on the cameras that appear in a link or a comm edge only, :mod:`pipeline.inputs.compact`),
 ``team_time_limit(seconds)`` (a context manager: every team of robot processes the jobs start
 within it is killed after ``seconds``, the commands' ``--team-timeout``; see
-:func:`time_limit`).
+:func:`time_limit`), ``team_round_timeout(seconds)`` (a context manager: the robots of every
+team the jobs start within it write a neighbour off after ``seconds`` of silence, the
+commands' ``--round-timeout``; see :func:`round_timeout`).
 
 A new transport (e.g. ROS 2) is one module with these functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
@@ -70,7 +72,8 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size", "check_online_team_size", "resolve_alone", "time_limit"]
+           "check_team_size", "check_online_team_size", "resolve_alone", "time_limit",
+           "round_timeout"]
 
 
 @dataclass(frozen=True)
@@ -150,20 +153,41 @@ def time_limit(name: str, seconds: float | None):
         ``seconds`` given to a transport that starts no team of processes (``sim``: the
         option would be ignored without a word).
     """
+    return _team_context(name, "team_time_limit", "--team-timeout", seconds)
+
+
+def round_timeout(name: str, seconds: float | None):
+    """The context manager under which a command's jobs run on transport ``name`` with
+    ``--round-timeout seconds`` (its module's ``team_round_timeout``: the robots of every team
+    write a neighbour off after ``seconds`` of silence; ``seconds`` None: the option not given,
+    the team file's default).
+
+    Raises
+    ------
+    InputError
+        ``seconds`` given to a transport that starts no team of processes (``sim``).
+    """
+    return _team_context(name, "team_round_timeout", "--round-timeout", seconds)
+
+
+def _team_context(name: str, attribute: str, option: str, seconds: float | None):
+    """Transport ``name``'s module's context manager ``attribute`` of ``seconds``, the value of
+    the command-line ``option`` (None: not given, no context); InputError naming the option
+    when the transport has none (it starts no team of processes)."""
     import contextlib
 
     from pipeline.errors import InputError
 
-    limit = getattr(get_transport(name).load(), "team_time_limit", None)
+    context = getattr(get_transport(name).load(), attribute, None)
     if seconds is None:
         return contextlib.nullcontext()
-    if limit is None:
+    if context is None:
         teams = [e.name for e in TRANSPORTS.values()
-                 if getattr(e.load(), "team_time_limit", None) is not None]
-        raise InputError(f"--team-timeout applies to robot processes (--transport "
+                 if getattr(e.load(), attribute, None) is not None]
+        raise InputError(f"{option} applies to robot processes (--transport "
                          f"{'|'.join(teams)}); --transport {name} starts none: drop it, or "
                          f"add --transport {teams[0]}")
-    return limit(seconds)
+    return context(seconds)
 
 
 def resolve_alone(transport: str, features_per_camera, comm_edges, links, resolution: str,

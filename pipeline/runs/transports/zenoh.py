@@ -4,7 +4,8 @@ The robots compute everything (:mod:`pipeline.team.robot`); this process launche
 (:mod:`pipeline.team.launcher`) and, as the observer, turns what they published into the
 job's results (:mod:`pipeline.team.assemble`). The job functions are those of the registry
 (:mod:`pipeline.runs.transports`); ``team_time_limit`` (the launcher's) bounds every team they
-start (``--team-timeout``).
+start (``--team-timeout``), and ``team_round_timeout`` (the launcher's) sets the silence after
+which its robots write a neighbour off (``--round-timeout``).
 """
 
 from __future__ import annotations
@@ -33,13 +34,18 @@ from pipeline.team.assemble import (
     links_of_team,
     team_options,
 )
-from pipeline.team.launcher import launch_team, make_team, team_summary, team_time_limit
-from pipeline.team.teamfile import DEFAULT_OPTIONS
+from pipeline.team.launcher import (
+    launch_team,
+    make_team,
+    team_round_timeout,
+    team_summary,
+    team_time_limit,
+)
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
            "online_stage", "online_fusion",
            "resolve_links_file",
-           "write_robot_links", "links_of_run", "team_time_limit"]
+           "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout"]
 
 
 #: the robots of an online step solve the small sets at their roots themselves (processes:
@@ -134,7 +140,7 @@ def _union_links(parts):
 
 
 def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
-              round_timeout_s: float = DEFAULT_OPTIONS["round_timeout_s"],
+              round_timeout_s: float | None = None,
               wire: str = "compact") -> FormationRobots:
     """``run-formation --transport zenoh``: one robot process per camera.
 
@@ -145,7 +151,9 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
     ----------
     config : FormationConfig
     kill : ``(robot, status, delay_s)`` or None — ``kill -9`` a robot mid-run (tests, bench)
-    round_timeout_s : float — silence after which a neighbour is written off
+    round_timeout_s : float or None — silence after which a neighbour is written off (None:
+        the command's ``--round-timeout``, :func:`~pipeline.team.launcher.team_round_timeout`,
+        else the team file's default)
     wire : the robots' encoding, ``compact`` or ``plain``
         (:data:`pipeline.team.teamfile.WIRE_FORMS`)
     workdir : folder for TEAM.json and the robots' logs (default: temporary)
