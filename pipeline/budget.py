@@ -70,7 +70,6 @@ the interpreter and libraries, rounded up):
 
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -138,15 +137,9 @@ MAX_LIMIT_GB = 1e6
 def limit_gb(value, flag: str = "--max-memory-gb") -> float:
     """``value`` as a limit in GB: a finite number above 0 (``nan`` would turn every
     comparison false, and so the guard off)."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{flag} {value!r}: not a number; give the memory limit in GB, e.g. "
-                         f"{flag} 4") from None
-    if not (math.isfinite(v) and 0 < v <= MAX_LIMIT_GB):
-        raise InputError(f"{flag} {value!r}: must be a finite number of GB above 0 (at most "
-                         f"{MAX_LIMIT_GB:g}), e.g. {flag} 4")
-    return v
+    from pipeline.validate import positive_number
+
+    return positive_number(value, flag, "GB", MAX_LIMIT_GB, "the memory limit in GB", "4")
 
 
 class MemoryBudget:

@@ -4,6 +4,8 @@ Each check returns the value (converted) or raises :class:`~pipeline.errors.Inpu
 naming the flag, the value and the accepted range. The stated limits:
 
 - ``--tol-px``: a finite number of pixels > 0.
+- a limit (``--max-memory-gb``, ``--team-timeout``, ``--round-timeout``): a finite number above
+  0 and at most the option's own bound (:func:`positive_number`).
 - ``--threads``: ``-1`` (all cores) or ``1 .. MAX_THREADS``.
 - a seed (``--fault-seed``, ``--seed``): an integer in ``0 .. 2**63 - 1`` (numpy's seeding
   takes non-negative integers).
@@ -48,6 +50,29 @@ def not_empty(value, flag: str, advice: str = "give a folder name") -> None:
     """
     if value is not None and str(value) == "":
         raise InputError(f"{flag} '' is empty (an unset variable?); {advice}")
+
+
+def positive_number(value, flag: str, unit: str, top: float, what: str, example: str) -> float:
+    """A finite number of ``unit`` above 0 and at most ``top`` (``nan`` would turn every
+    comparison false, ``inf`` make a wait never end); the one-line error says ``what`` to give
+    and ``example``.
+
+    >>> positive_number("45", "--round-timeout", "seconds", 3600, "seconds of silence", "120")
+    45.0
+    >>> positive_number("nan", "--max-memory-gb", "GB", 1e6, "the memory limit in GB", "4")
+    Traceback (most recent call last):
+    ...
+    pipeline.errors.InputError: --max-memory-gb 'nan': must be a finite number of GB above 0 (at most 1e+06), e.g. --max-memory-gb 4
+    """
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{flag} {value!r}: not a number; give {what}, e.g. {flag} "
+                         f"{example}") from None
+    if not (math.isfinite(v) and 0 < v <= top):
+        raise InputError(f"{flag} {value!r}: must be a finite number of {unit} above 0 "
+                         f"(at most {top:g}), e.g. {flag} {example}")
+    return v
 
 
 def tolerance_px(value, flag: str = "--tol-px") -> float:

@@ -166,23 +166,16 @@ MAX_TEAM_TIMEOUT_S = 7 * 86400.0
 
 
 def team_timeout(value) -> float:
-    """``--team-timeout``'s ``value`` in seconds: a finite number above 0 (``nan`` would make
-    the deadline never come, ``inf`` the same), at most :data:`MAX_TEAM_TIMEOUT_S`.
+    """``--team-timeout``'s ``value`` in seconds: a finite number above 0, at most
+    :data:`MAX_TEAM_TIMEOUT_S`.
 
     >>> team_timeout("1800")
     1800.0
     """
-    import math
+    from pipeline.validate import positive_number
 
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"--team-timeout {value!r}: not a number; give the seconds each team "
-                         "of robot processes may run, e.g. --team-timeout 1800") from None
-    if not (math.isfinite(v) and 0 < v <= MAX_TEAM_TIMEOUT_S):
-        raise InputError(f"--team-timeout {value!r}: must be a finite number of seconds above 0 "
-                         f"(at most {MAX_TEAM_TIMEOUT_S:g}), e.g. --team-timeout 1800")
-    return v
+    return positive_number(value, "--team-timeout", "seconds", MAX_TEAM_TIMEOUT_S,
+                           "the seconds each team of robot processes may run", "1800")
 
 
 #: the longest ``--round-timeout``, in seconds (an hour of silence): beyond it, a typo
@@ -197,18 +190,11 @@ def round_timeout(value) -> float:
     >>> round_timeout("45")
     45.0
     """
-    import math
+    from pipeline.validate import positive_number
 
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"--round-timeout {value!r}: not a number; give the seconds of "
-                         "silence after which a robot writes a neighbour off, e.g. "
-                         "--round-timeout 120") from None
-    if not (math.isfinite(v) and 0 < v <= MAX_ROUND_TIMEOUT_S):
-        raise InputError(f"--round-timeout {value!r}: must be a finite number of seconds above "
-                         f"0 (at most {MAX_ROUND_TIMEOUT_S:g}), e.g. --round-timeout 120")
-    return v
+    return positive_number(value, "--round-timeout", "seconds", MAX_ROUND_TIMEOUT_S,
+                           "the seconds of silence after which a robot writes a neighbour off",
+                           "120")
 
 
 def transport_time_limit(args):

@@ -54,27 +54,30 @@ __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "di
 #: :func:`team_time_limit` (the commands' ``--team-timeout``) says otherwise
 TEAM_TIMEOUT_S = 600.0
 
-_time_limit = {"s": TEAM_TIMEOUT_S}
+#: what the enclosing :func:`team_time_limit` and :func:`team_round_timeout` set (their
+#: defaults outside them)
+_within = {"time_limit": TEAM_TIMEOUT_S, "round_timeout": None}
 
 
 @contextlib.contextmanager
+def _setting(name: str, seconds: float):
+    """Within the block, ``_within[name]`` is ``seconds`` (restored on exit)."""
+    old = _within[name]
+    _within[name] = float(seconds)
+    try:
+        yield
+    finally:
+        _within[name] = old
+
+
 def team_time_limit(seconds: float):
     """Within the block, every :func:`launch_team` not given its own ``timeout_s`` kills its
     team after ``seconds`` (``--team-timeout`` of the commands that take ``--transport``; a
     job that starts several teams, an online run one or more per step, gives each the
     limit)."""
-    old = _time_limit["s"]
-    _time_limit["s"] = float(seconds)
-    try:
-        yield
-    finally:
-        _time_limit["s"] = old
+    return _setting("time_limit", seconds)
 
 
-_round_timeout = {"s": None}
-
-
-@contextlib.contextmanager
 def team_round_timeout(seconds: float):
     """Within the block, every team :func:`make_team` makes writes a silent neighbour off after
     ``seconds`` (``--round-timeout`` of the commands that take ``--transport``; a job that
@@ -83,12 +86,7 @@ def team_round_timeout(seconds: float):
     and ``start_timeout_s`` and ``round_limit_s`` at least twice it) where the caller's
     options do not set them. A team read from a file (``robot``, ``observe``) keeps its
     file's."""
-    old = _round_timeout["s"]
-    _round_timeout["s"] = float(seconds)
-    try:
-        yield
-    finally:
-        _round_timeout["s"] = old
+    return _setting("round_timeout", seconds)
 
 
 #: where :func:`free_ports` draws when the kernel's ephemeral range cannot be read
@@ -156,7 +154,8 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     n = int(n if n is not None else e.max() + 1)
     ports = free_ports(n + 1, host)
     robots = [RobotEntry(i, f"tcp/{host}:{p}") for i, p in enumerate(ports[:n])]
-    timeouts = {} if _round_timeout["s"] is None else round_timeout_options(_round_timeout["s"])
+    silence = _within["round_timeout"]
+    timeouts = {} if silence is None else round_timeout_options(silence)
     opts = {**DEFAULT_OPTIONS, **timeouts, **(options or {})}
     team = Team(name, robots, e, data, opts, observer=f"tcp/{host}:{ports[n]}")
     from pipeline.team.teamfile import parse_team
@@ -319,7 +318,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         stderr line), or the team did not finish within ``timeout_s``.
     """
     log = log or (lambda s: print(s, file=sys.stderr, flush=True))
-    timeout_s = _time_limit["s"] if timeout_s is None else float(timeout_s)
+    timeout_s = _within["time_limit"] if timeout_s is None else float(timeout_s)
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="fm-team-")

@@ -51,7 +51,7 @@ def test_each_team_of_an_online_run_gets_the_limit(tmp_path, capsys, monkeypatch
     real = launcher.launch_team
 
     def spy(team, *a, **kw):
-        limits.append(kw.get("timeout_s", launcher._time_limit["s"]))
+        limits.append(kw.get("timeout_s", launcher._within["time_limit"]))
         return real(team, *a, **kw)
 
     monkeypatch.setattr("pipeline.runs.transports.zenoh.launch_team", spy)

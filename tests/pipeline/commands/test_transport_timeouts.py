@@ -1,14 +1,20 @@
-"""``--round-timeout S`` (pipeline.commands.options): on every command that takes --transport,
-checked like ``--team-timeout`` (one line, exit 2) before the command runs, refused where the
-transport starts no team of processes; within it every team the launcher makes carries the
-timeouts of pipeline.team.teamfile.round_timeout_options."""
+"""``--team-timeout S`` and ``--round-timeout S`` (pipeline.commands.options): on every
+command that takes --transport, checked like the other numeric options (one line, exit 2)
+before the command runs, refused where the transport starts no team of processes; within
+``--round-timeout`` every team the launcher makes carries the timeouts of
+pipeline.team.teamfile.round_timeout_options."""
 
 import argparse
 
 import pytest
 
 from pipeline.__main__ import COMMANDS, build_parser, main
-from pipeline.commands.options import MAX_ROUND_TIMEOUT_S, round_timeout, transport_time_limit
+from pipeline.commands.options import (
+    MAX_ROUND_TIMEOUT_S,
+    round_timeout,
+    team_timeout,
+    transport_time_limit,
+)
 from pipeline.errors import InputError
 from pipeline.team.teamfile import DEFAULT_OPTIONS, MAX_TIMEOUT_S, round_timeout_options
 
@@ -30,36 +36,72 @@ def _options(command):
     return {o for a in sub._actions for o in a.option_strings}
 
 
+def test_every_command_with_transport_takes_team_timeout():
+    with_transport = {c for c in COMMANDS if "--transport" in _options(c)}
+    assert with_transport == set(ARGS)
+    for command in with_transport:
+        assert "--team-timeout" in _options(command), command
+
+
+#: each option, a value beyond its bound and the example its error gives
+OPTIONS = {"--team-timeout": ("1e9", "1800"), "--round-timeout": ("3601", "120")}
+
+
+@pytest.mark.parametrize("option", sorted(OPTIONS))
+@pytest.mark.parametrize("command", sorted(ARGS))
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "0", "-5", "too-large", "ten", ""])
+def test_a_bad_timeout_is_one_line_and_exit_2(option, command, value, capsys, tmp_path,
+                                              monkeypatch):
+    monkeypatch.chdir(tmp_path)  # nothing is written: the option is checked first
+    too_large, example = OPTIONS[option]
+    value = too_large if value == "too-large" else value
+    code = main([command, *ARGS[command], "--transport", "zenoh", f"{option}={value}"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith(f"error: {option} {value!r}: ")
+    assert f"e.g. {option} {example}" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("option", sorted(OPTIONS))
+@pytest.mark.parametrize("command", sorted(ARGS))
+def test_a_timeout_is_refused_on_the_simulator(option, command, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for transport in ([], ["--transport", "sim"]):
+        assert main([command, *ARGS[command], *transport, option, "60"]) == 2
+        err = capsys.readouterr().err
+        assert err == (f"error: {option} applies to robot processes (--transport zenoh); "
+                       "--transport sim starts none: drop it, or add --transport zenoh\n")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("text, seconds", [("1800", 1800.0), ("0.5", 0.5), ("1e3", 1000.0)])
+def test_team_timeout_reads_seconds(text, seconds):
+    assert team_timeout(text) == seconds
+
+
+def test_the_limit_reaches_launch_team_and_is_restored():
+    import argparse
+
+    from pipeline.team import launcher
+
+    args = argparse.Namespace(transport="zenoh", team_timeout="42")
+    assert launcher._within["time_limit"] == launcher.TEAM_TIMEOUT_S == 600.0
+    with transport_time_limit(args):
+        assert launcher._within["time_limit"] == 42.0
+    assert launcher._within["time_limit"] == 600.0
+    with transport_time_limit(argparse.Namespace(transport="zenoh", team_timeout=None)):
+        assert launcher._within["time_limit"] == 600.0
+    with pytest.raises(InputError, match="applies to robot processes"):
+        transport_time_limit(argparse.Namespace(transport="sim", team_timeout="42"))
+
+
 def test_every_command_with_transport_takes_round_timeout():
     with_transport = {c for c in COMMANDS if "--transport" in _options(c)}
     assert with_transport == set(ARGS)
     for command in with_transport:
         assert "--round-timeout" in _options(command), command
     assert not any("--round-timeout" in _options(c) for c in set(COMMANDS) - with_transport)
-
-
-@pytest.mark.parametrize("command", sorted(ARGS))
-@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "0", "-5", "3601", "ten", ""])
-def test_a_bad_round_timeout_is_one_line_and_exit_2(command, value, capsys, tmp_path,
-                                                    monkeypatch):
-    monkeypatch.chdir(tmp_path)  # nothing is written: the option is checked first
-    code = main([command, *ARGS[command], "--transport", "zenoh", f"--round-timeout={value}"])
-    err = capsys.readouterr().err
-    assert code == 2
-    assert err.startswith(f"error: --round-timeout {value!r}: ")
-    assert "e.g. --round-timeout 120" in err and len(err.strip().splitlines()) == 1
-    assert not list(tmp_path.iterdir())
-
-
-@pytest.mark.parametrize("command", sorted(ARGS))
-def test_round_timeout_is_refused_on_the_simulator(command, capsys, tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    for transport in ([], ["--transport", "sim"]):
-        assert main([command, *ARGS[command], *transport, "--round-timeout", "60"]) == 2
-        err = capsys.readouterr().err
-        assert err == ("error: --round-timeout applies to robot processes (--transport zenoh); "
-                       "--transport sim starts none: drop it, or add --transport zenoh\n")
-    assert not list(tmp_path.iterdir())
 
 
 def test_team_timeout_is_checked_first():
@@ -99,7 +141,7 @@ def test_the_timeouts_reach_make_team_and_are_restored():
     assert default == {"round_timeout_s": 30.0, "start_timeout_s": 60.0, "round_limit_s": 600.0}
     with transport_time_limit(argparse.Namespace(transport="zenoh", team_timeout=None,
                                                  round_timeout="400")):
-        assert launcher._time_limit["s"] == launcher.TEAM_TIMEOUT_S  # not touched
+        assert launcher._within["time_limit"] == launcher.TEAM_TIMEOUT_S  # not touched
         assert options() == {"round_timeout_s": 400.0, "start_timeout_s": 800.0,
                              "round_limit_s": 800.0}
         # a caller's own options win, key by key (tests, bench: a team made on purpose)
@@ -108,8 +150,8 @@ def test_the_timeouts_reach_make_team_and_are_restored():
     assert options() == default
     with transport_time_limit(argparse.Namespace(transport="zenoh", team_timeout="42",
                                                  round_timeout="45")):
-        assert launcher._time_limit["s"] == 42.0 and options()["start_timeout_s"] == 90.0
-    assert launcher._time_limit["s"] == 600.0 and options() == default
+        assert launcher._within["time_limit"] == 42.0 and options()["start_timeout_s"] == 90.0
+    assert launcher._within["time_limit"] == 600.0 and options() == default
 
 
 def test_a_team_file_keeps_its_own_timeouts(tmp_path):
