@@ -24,6 +24,7 @@ if __name__ == "__main__":  # run as a program: from here on, before the imports
 
 import argparse  # noqa: E402
 import atexit  # noqa: E402
+import contextlib  # noqa: E402
 import importlib  # noqa: E402
 import logging  # noqa: E402
 import select  # noqa: E402
@@ -155,11 +156,11 @@ def _run(argv: list[str], command: str | None) -> int:
     if getattr(args, "_missing", False):
         parser.error(f"command {args.command!r} is not available in this build")
     mod = importlib.import_module(f"pipeline.commands.{args._module}")
-    from pipeline.commands.options import transport_time_limit
     try:
-        # --team-timeout and --round-timeout of a command that takes --transport (checked
-        # first)
-        with transport_time_limit(args):
+        # what the command runs within, set by its parser: --team-timeout and --round-timeout
+        # of a command that takes --transport (checked first)
+        within = getattr(args, "_within", None)
+        with within(args) if within is not None else contextlib.nullcontext():
             return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:
         print(f"error: {exc}", file=sys.stderr)

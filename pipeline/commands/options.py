@@ -159,6 +159,8 @@ def add_transport_option(p: argparse.ArgumentParser) -> None:
                         f"most max({DEFAULT_OPTIONS['round_limit_s']:g}, 2 x S) s; every team "
                         "of the run gets it; raise it when robots on a loaded machine write "
                         "healthy neighbours off")
+    # the command line runs the command within these (pipeline.__main__._run)
+    p.set_defaults(_within=transport_time_limit)
 
 
 #: the longest ``--team-timeout``, in seconds (a week): beyond it, a typo
