@@ -202,17 +202,17 @@ def round_timeout(value) -> float:
 def transport_time_limit(args):
     """The context manager a command runs in (:func:`pipeline.__main__._run`): with
     ``--team-timeout S`` (:func:`add_transport_option`), every team of robot processes it
-    starts is stopped after ``S`` seconds (:func:`pipeline.runs.transports.time_limit`); with
-    ``--round-timeout S``, the robots of every team it starts write a neighbour off after
-    ``S`` seconds of silence (:func:`pipeline.runs.transports.round_timeout`); a command
-    without ``--transport``, or without the options: nothing.
+    starts is stopped after ``S`` seconds; with ``--round-timeout S``, the robots of every team
+    it starts write a neighbour off after ``S`` seconds of silence
+    (:func:`pipeline.runs.transports.team_limits`); a command without ``--transport``, or
+    without the options: nothing.
 
     Raises
     ------
     InputError
         A bad ``S`` (:func:`team_timeout`, :func:`round_timeout`), or an option with a
         transport that starts no team (``--transport sim``); ``--team-timeout`` is checked
-        first.
+        first. Both are checked here, before the command; the context is entered when it runs.
     """
     import contextlib
 
@@ -220,19 +220,11 @@ def transport_time_limit(args):
     silence = getattr(args, "round_timeout", None)
     if (limit is None and silence is None) or not hasattr(args, "transport"):
         return contextlib.nullcontext()
-    from pipeline.runs.transports import round_timeout as round_context
-    from pipeline.runs.transports import time_limit
+    from pipeline.runs.transports import team_limits
 
-    # both checked here, before the command; entered when it runs
-    bound = time_limit(args.transport, None if limit is None else team_timeout(limit))
-    quiet = round_context(args.transport, None if silence is None else round_timeout(silence))
-
-    @contextlib.contextmanager
-    def within():
-        with bound, quiet:
-            yield
-
-    return within()
+    limit = None if limit is None else team_timeout(limit)
+    return team_limits(args.transport, limit,
+                       None if silence is None else round_timeout(silence))
 
 
 def add_merge_radius_option(p: argparse.ArgumentParser, online: str | None = None,

@@ -52,10 +52,10 @@ Optional module attributes: ``MAX_ROBOT_PROCESSES`` (the most robots a job may s
 machine, checked before any work by :func:`check_team_size`), ``COMPACT_IDS`` (``resolve``
 runs on the cameras that appear in a link or a comm edge only, :mod:`pipeline.inputs.compact`),
 ``team_time_limit(seconds)`` (a context manager: every team of robot processes the jobs start
-within it is killed after ``seconds``, the commands' ``--team-timeout``; see
-:func:`time_limit`), ``team_round_timeout(seconds)`` (a context manager: the robots of every
-team the jobs start within it write a neighbour off after ``seconds`` of silence, the
-commands' ``--round-timeout``; see :func:`round_timeout`).
+within it is killed after ``seconds``, the commands' ``--team-timeout``) and
+``team_round_timeout(seconds)`` (a context manager: the robots of every team the jobs start
+within it write a neighbour off after ``seconds`` of silence, the commands'
+``--round-timeout``); both through :func:`team_limits`.
 
 A new transport (e.g. ROS 2) is one module with these functions and one
 :func:`register` call below (:class:`TransportEntry`: name, help line, loader of the module).
@@ -72,8 +72,7 @@ from dataclasses import dataclass
 
 __all__ = ["TransportEntry", "TRANSPORTS", "register",
            "unregister", "get_transport", "transport_names", "transport_help",
-           "check_team_size", "check_online_team_size", "resolve_alone", "time_limit",
-           "round_timeout"]
+           "check_team_size", "check_online_team_size", "resolve_alone", "team_limits"]
 
 
 @dataclass(frozen=True)
@@ -142,52 +141,48 @@ def check_team_size(name: str, robots: int, what: str) -> None:
                          "(formation-match robot --team TEAM.json)")
 
 
-def time_limit(name: str, seconds: float | None):
-    """The context manager under which a command's jobs run on transport ``name`` with
-    ``--team-timeout seconds`` (its module's ``team_time_limit``; ``seconds`` None: the
-    option not given, the transport's own limit).
+def team_limits(name: str, team_timeout_s: float | None = None,
+                round_timeout_s: float | None = None):
+    """The context manager under which a command's jobs run on transport ``name``: with
+    ``team_timeout_s`` (``--team-timeout``), every team of robot processes they start is killed
+    after it (the module's ``team_time_limit``); with ``round_timeout_s`` (``--round-timeout``),
+    the robots of every team write a neighbour off after that much silence (the module's
+    ``team_round_timeout``). None: the option was not given (the transport's own limits).
 
     Raises
     ------
     InputError
-        ``seconds`` given to a transport that starts no team of processes (``sim``: the
-        option would be ignored without a word).
+        An option given to a transport that starts no team of processes (``sim``: it would be
+        ignored without a word), ``--team-timeout`` named first.
     """
-    return _team_context(name, "team_time_limit", "--team-timeout", seconds)
-
-
-def round_timeout(name: str, seconds: float | None):
-    """The context manager under which a command's jobs run on transport ``name`` with
-    ``--round-timeout seconds`` (its module's ``team_round_timeout``: the robots of every team
-    write a neighbour off after ``seconds`` of silence; ``seconds`` None: the option not given,
-    the team file's default).
-
-    Raises
-    ------
-    InputError
-        ``seconds`` given to a transport that starts no team of processes (``sim``).
-    """
-    return _team_context(name, "team_round_timeout", "--round-timeout", seconds)
-
-
-def _team_context(name: str, attribute: str, option: str, seconds: float | None):
-    """Transport ``name``'s module's context manager ``attribute`` of ``seconds``, the value of
-    the command-line ``option`` (None: not given, no context); InputError naming the option
-    when the transport has none (it starts no team of processes)."""
     import contextlib
 
     from pipeline.errors import InputError
 
-    context = getattr(get_transport(name).load(), attribute, None)
-    if seconds is None:
-        return contextlib.nullcontext()
-    if context is None:
-        teams = [e.name for e in TRANSPORTS.values()
-                 if getattr(e.load(), attribute, None) is not None]
-        raise InputError(f"{option} applies to robot processes (--transport "
-                         f"{'|'.join(teams)}); --transport {name} starts none: drop it, or "
-                         f"add --transport {teams[0]}")
-    return context(seconds)
+    module = get_transport(name).load()
+    settings = []  # every option checked before any is set
+    for attribute, option, seconds in (("team_time_limit", "--team-timeout", team_timeout_s),
+                                       ("team_round_timeout", "--round-timeout",
+                                        round_timeout_s)):
+        if seconds is None:
+            continue
+        context = getattr(module, attribute, None)
+        if context is None:
+            teams = [e.name for e in TRANSPORTS.values()
+                     if getattr(e.load(), attribute, None) is not None]
+            raise InputError(f"{option} applies to robot processes (--transport "
+                             f"{'|'.join(teams)}); --transport {name} starts none: drop it, "
+                             f"or add --transport {teams[0]}")
+        settings.append((context, seconds))
+
+    @contextlib.contextmanager
+    def within():
+        with contextlib.ExitStack() as stack:
+            for context, seconds in settings:
+                stack.enter_context(context(seconds))
+            yield
+
+    return within()
 
 
 def resolve_alone(transport: str, features_per_camera, comm_edges, links, resolution: str,
