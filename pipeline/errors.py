@@ -10,10 +10,28 @@ class TeamError(RuntimeError):
     message names it)."""
 
 
+_interrupt_arrived = False  # set by the SIGINT handler of exit_quietly_on_interrupt
+
+
+def _on_interrupt(signum, frame) -> None:
+    """The SIGINT handler of a program of the project: Python's own (raise
+    KeyboardInterrupt), which also records that a Ctrl-C arrived. A C extension interrupted
+    while it loads may drop the KeyboardInterrupt and raise an unrelated error with no link to
+    it (NumPy: ``ImportError: PyCapsule_Import could not import module "datetime"``); the
+    record still tells :func:`caused_by_interrupt` why."""
+    global _interrupt_arrived
+    _interrupt_arrived = True
+    raise KeyboardInterrupt
+
+
 def caused_by_interrupt(exc: BaseException | None) -> bool:
     """``exc`` is a KeyboardInterrupt, or an error raised because of one (a C++ extension
     interrupted while it loads reports an ImportError, which its package may turn into
-    another error: pycolmap's "Cannot import the C++ backend")."""
+    another error: pycolmap's "Cannot import the C++ backend"), or any error once a Ctrl-C has
+    arrived in a program that records it (:func:`exit_quietly_on_interrupt`): the user asked
+    the program to stop, and a library may have lost the KeyboardInterrupt on the way."""
+    if exc is not None and _interrupt_arrived:
+        return True
     seen = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):
@@ -60,9 +78,14 @@ def exit_quietly_on_interrupt(program: str) -> None:
     """Make a Ctrl-C that escapes ``program``'s main, however early (while its libraries
     load), end it as this program's does: one line naming ``program``, exit 130. For the
     other programs of the project (``python -m viz.saved_run``), before their imports."""
+    import signal
     import sys
+    import threading
 
     sys.excepthook = lambda exc_type, exc, tb: _last_word(program, exc_type, exc, tb)
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        signal.signal(signal.SIGINT, _on_interrupt)  # not where SIGINT is ignored (nohup, &)
 
 
 def _bench_name(path: str) -> str:

@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import textwrap
 import tomllib
 from pathlib import Path
 
@@ -291,6 +292,34 @@ def test_ctrl_c_while_a_cxx_extension_loads_is_not_an_import_error(monkeypatch, 
     assert main(["resolve", "--links", "x", "--out", "y"]) == 130
     err = capsys.readouterr().err
     assert err.startswith("interrupted: resolve stopped") and "C++" not in err
+
+
+def test_ctrl_c_that_a_library_drops_while_it_loads_is_still_an_interrupt():
+    """NumPy's C code, interrupted while it imports ``datetime``, drops the KeyboardInterrupt
+    and raises ``ImportError: PyCapsule_Import could not import module "datetime"`` with no
+    link to it (seen in the real-process test below, once): the program records
+    that a Ctrl-C arrived, so this too ends with one line and exit 130, not a traceback."""
+    code = textwrap.dedent("""
+        import signal, sys
+        from pipeline.errors import exit_quietly_on_interrupt, run_interruptibly
+        exit_quietly_on_interrupt("prog")
+
+        def load():
+            dropped = False
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                dropped = True  # what the C code does with it
+            if dropped:
+                raise ImportError('PyCapsule_Import could not import module "datetime"')
+            return 0
+
+        sys.exit(run_interruptibly("prog", load))
+    """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stderr) == (
+        130, "interrupted: prog stopped, nothing was written or replaced\n")
 
 
 @pytest.mark.parametrize("delay", [0.1, 0.25, 0.5])
