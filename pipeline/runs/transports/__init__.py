@@ -153,7 +153,9 @@ def team_limits(name: str, team_timeout_s: float | None = None,
     ------
     InputError
         An option given to a transport that starts no team of processes (``sim``: it would be
-        ignored without a word), ``--team-timeout`` named first.
+        ignored without a word), ``--team-timeout`` named first; a ``--round-timeout`` not
+        shorter than the team's limit (given or the default): the team would be stopped
+        before a robot could write a silent neighbour off.
     """
     import contextlib
 
@@ -174,6 +176,14 @@ def team_limits(name: str, team_timeout_s: float | None = None,
                              f"{'|'.join(teams)}); --transport {name} starts none: drop it, "
                              f"or add --transport {teams[0]}")
         settings.append((context, seconds))
+    if round_timeout_s is not None:
+        limit = team_timeout_s if team_timeout_s is not None else module.TEAM_TIMEOUT_S
+        if round_timeout_s >= limit:
+            given = "" if team_timeout_s is not None else ", its default"
+            raise InputError(f"--round-timeout {round_timeout_s:g} is not shorter than "
+                             f"--team-timeout {limit:g}{given}: every team would be stopped "
+                             "before a robot wrote a silent neighbour off; raise "
+                             "--team-timeout above it (or lower --round-timeout)")
 
     @contextlib.contextmanager
     def within():

@@ -35,6 +35,7 @@ from pipeline.team.assemble import (
     team_options,
 )
 from pipeline.team.launcher import (
+    TEAM_TIMEOUT_S,
     launch_team,
     make_team,
     team_round_timeout,
@@ -45,7 +46,8 @@ from pipeline.team.launcher import (
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
            "online_stage", "online_fusion",
            "resolve_links_file",
-           "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout"]
+           "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout",
+           "TEAM_TIMEOUT_S"]
 
 
 #: the robots of an online step solve the small sets at their roots themselves (processes:

@@ -148,10 +148,29 @@ def test_the_timeouts_reach_make_team_and_are_restored():
         assert options(round_timeout_s=1.0) == {"round_timeout_s": 1.0,
                                                 "start_timeout_s": 800.0, "round_limit_s": 800.0}
     assert options() == default
-    with transport_time_limit(argparse.Namespace(transport="zenoh", team_timeout="42",
+    with transport_time_limit(argparse.Namespace(transport="zenoh", team_timeout="420",
                                                  round_timeout="45")):
-        assert launcher._within["time_limit"] == 42.0 and options()["start_timeout_s"] == 90.0
+        assert launcher._within["time_limit"] == 420.0 and options()["start_timeout_s"] == 90.0
     assert launcher._within["time_limit"] == 600.0 and options() == default
+
+
+@pytest.mark.parametrize("team, given", [("42", ""), (None, ", its default")])
+@pytest.mark.parametrize("command", sorted(ARGS))
+def test_a_round_timeout_not_below_the_team_limit_is_refused(command, team, given, capsys,
+                                                             tmp_path, monkeypatch):
+    """Every team would be stopped before a robot wrote a silent neighbour off: one line,
+    exit 2, nothing written, the limit named (given, or the default 600 s)."""
+    monkeypatch.chdir(tmp_path)
+    limit = team or "600"
+    more = ["--team-timeout", team] if team else []
+    code = main([command, *ARGS[command], "--transport", "zenoh", *more,
+                 "--round-timeout", limit])
+    assert code == 2
+    assert capsys.readouterr().err == (
+        f"error: --round-timeout {limit} is not shorter than --team-timeout {limit}{given}: "
+        "every team would be stopped before a robot wrote a silent neighbour off; raise "
+        "--team-timeout above it (or lower --round-timeout)\n")
+    assert not list(tmp_path.iterdir())
 
 
 def test_a_team_file_keeps_its_own_timeouts(tmp_path):
