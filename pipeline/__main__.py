@@ -32,6 +32,7 @@ import threading  # noqa: E402
 from collections.abc import Callable, Iterable  # noqa: E402
 
 from pipeline.errors import InputError, StageStalledError, TeamError  # noqa: E402
+from pipeline.outcome import recording_warnings  # noqa: E402
 
 # command name -> (module, one-line help)
 COMMANDS = {
@@ -160,7 +161,8 @@ def _run(argv: list[str], command: str | None) -> int:
         # what the command runs within, set by its parser: --team-timeout and --round-timeout
         # of a command that takes --transport (checked first)
         within = getattr(args, "_within", None)
-        with within(args) if within is not None else contextlib.nullcontext():
+        with within(args) if within is not None else contextlib.nullcontext(), \
+                recording_warnings():  # the report keeps the warnings printed (outcome)
             return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -20,7 +20,10 @@ promise, or keep it only by cutting everything; a run must then not look like a 
   ``no-features`` (images where no feature was found, named),
   ``quality-reversed`` (``resolve``: the links the triangles refute carry the higher quality,
   :mod:`pipeline.evaluation.quality`), ``quality-scale`` (``resolve``: qualities above 1,
-  another scale than ``1 - Lowe ratio``).
+  another scale than ``1 - Lowe ratio``), ``logged`` (each warning the run printed on stderr
+  before its report was made, within :func:`recording_warnings`: files of the input left
+  out, identical images, a comm graph in pieces, …; so the report keeps what the terminal
+  showed).
 
 :func:`exit_status` prints them on stderr and gives the exit code. The rule: ``3`` when the
 result is not conflict-free (it is still written, and flagged), else ``0``; warnings alone do
@@ -29,12 +32,14 @@ not change the exit code. A clean run's report is left byte-identical.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import sys
 
 from pipeline.progress import counted
 
 __all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
-           "merge_radius_why", "exit_status"]
+           "merge_radius_why", "exit_status", "recording_warnings"]
 
 #: Exit code of a run whose written result still holds conflictive sets.
 EXIT_NOT_CONFLICT_FREE = 3
@@ -42,6 +47,45 @@ EXIT_NOT_CONFLICT_FREE = 3
 
 def _warning(code: str, message: str) -> dict:
     return {"code": code, "message": message}
+
+
+#: the warnings the program's loggers printed within :func:`recording_warnings` (None:
+#: outside it)
+_printed: list[str] | None = None
+
+
+class _Recorder(logging.Handler):
+    """Keeps the message of every warning (and error) a ``pipeline`` logger prints."""
+
+    def __init__(self):
+        super().__init__(level=logging.WARNING)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if _printed is not None:
+            text = record.getMessage()
+            _printed.append(text.removeprefix("warning: "))
+
+
+@contextlib.contextmanager
+def recording_warnings():
+    """Within the block (a command's run), the warnings the ``pipeline`` loggers print on
+    stderr are also kept: :func:`flag_result` and :func:`flag_online` add those printed so far
+    to the report, code ``logged`` (not printed again by :func:`exit_status`)."""
+    global _printed
+    log = logging.getLogger("pipeline")
+    handler, before = _Recorder(), _printed
+    _printed = []
+    log.addHandler(handler)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        _printed = before
+
+
+def _logged() -> list[dict]:
+    """The ``logged`` warnings: each one printed so far within :func:`recording_warnings`."""
+    return [_warning("logged", text) for text in dict.fromkeys(_printed or ())]
 
 
 #: one-sided p-value under which a report's ``quality_evidence`` (the links' quality against
@@ -176,7 +220,7 @@ def flag_result(report: dict, names: list[str] | None = None,
             "quality as 1 - Lowe ratio (at most 1) and count every quality above 0.99 as "
             "near-certain, so the order of these barely weighs; rescale the quality to [0, 1] "
             "(e.g. score / max score)"))
-    warnings += _no_features(report, names)
+    warnings += _no_features(report, names) + _logged()
     if warnings:
         report["warnings"] = warnings
     return report
@@ -218,7 +262,7 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
         warnings.append(_warning("all-links-cut", f"{_every(total, 'link')} was cut; the "
                                                   "result holds no association"))
-    warnings += _no_features(report, names)
+    warnings += _no_features(report, names) + _logged()
     if warnings:
         report["warnings"] = warnings
     return report
@@ -228,6 +272,8 @@ def exit_status(report: dict, stream=None) -> int:
     """Print the report's warnings on ``stream`` (stderr); the exit code (module rule)."""
     stream = stream if stream is not None else sys.stderr
     for w in report.get("warnings", []):
+        if w["code"] == "logged":  # printed when it arose
+            continue
         kind = "error" if w["code"] == "not-conflict-free" else "warning"
         print(f"{kind}: {w['message']}", file=stream)
     return EXIT_NOT_CONFLICT_FREE if report.get("conflict_free") is False else 0

@@ -47,3 +47,56 @@ def test_one_link_cut_is_said_in_the_singular():
     assert one["warnings"][0]["message"].startswith("the one input link was cut;")
     five = flag_result({"links": 5, "after": {"links": 0, "conflictive_sets": 0}})
     assert five["warnings"][0]["message"].startswith("every one of the 5 input links was cut;")
+
+
+# ------------------------------------------------- the warnings printed, kept in the report
+
+def test_the_warnings_printed_during_a_run_are_kept_in_its_report_once():
+    """A warning a ``pipeline`` logger printed within ``recording_warnings`` is added to the
+    report (code ``logged``, the ``warning: `` prefix dropped, a repeat once) and not printed
+    again by ``exit_status``; outside the block nothing is kept."""
+    import logging
+
+    from pipeline.outcome import flag_online, recording_warnings
+
+    log = logging.getLogger("pipeline.somewhere")
+    clean = {"links": 5, "after": {"links": 5, "conflictive_sets": 0}}
+    with recording_warnings():
+        log.warning("warning: %s", "3 file(s) left out")
+        log.warning("warning: %s", "3 file(s) left out")
+        log.info("a stage line")
+        report = flag_result(dict(clean))
+        online = flag_online({"steps": [{}], "final": {"links": 4, "online": {"kept": 4}}})
+    assert report["warnings"] == [{"code": "logged", "message": "3 file(s) left out"}]
+    assert online["warnings"] == report["warnings"]
+    out = io.StringIO()
+    assert exit_status(report, out) == 0 and out.getvalue() == ""
+    log.warning("warning: %s", "after the run")
+    assert "warnings" not in flag_result(dict(clean))
+
+
+def test_a_photo_run_report_names_the_files_it_left_out(tmp_path, capsys):
+    """run-images on a folder with a sub-folder of images and a link leading nowhere: the
+    warning printed on stderr is in report.json too (it was on stderr only)."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from pipeline.__main__ import main
+
+    small = Path(__file__).resolve().parents[1] / "data" / "graffiti_small"
+    photos = tmp_path / "photos"
+    (photos / "sub").mkdir(parents=True)
+    for name in ("img1.png", "img2.png"):
+        shutil.copy(small / name, photos / name)
+    shutil.copy(small / "img3.png", photos / "sub" / "img3.png")
+    (photos / "gone.png").symlink_to(tmp_path / "nowhere.png")
+    out = tmp_path / "run"
+    assert main(["run-images", str(photos), "--max-size", "160", "--no-rerun", "--no-fusion",
+                 "--out", str(out), "-q"]) == 0
+    err = capsys.readouterr().err
+    printed = [line.removeprefix("warning: ") for line in err.splitlines()
+               if "left out" in line]
+    assert len(printed) == 1 and "gone.png" in printed[0] and "sub" in printed[0]
+    report = json.loads((out / "report.json").read_text())
+    assert {"code": "logged", "message": printed[0]} in report["warnings"]
