@@ -770,6 +770,7 @@ def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -
                                seed=int(opts["fault_seed"]),
                                round_timeout_s=float(opts["round_timeout_s"]),
                                round_limit_s=float(opts["round_limit_s"]),
+                               shared_memory=bool(opts["shared_memory"]),
                                log=lambda s: _log(i, s))
     startup["session_open"] = _since_launch()
     try:

@@ -122,6 +122,9 @@ DEFAULT_OPTIONS = {
     # (the rule's own flood then leaves them) and the conflict-free ones
     "gather_conflictive": False,
     "gather_free": False,
+    # Zenoh's shared memory with the robot processes of the same host (a pool per robot:
+    # pipeline.transport.zenoh_transport.zenoh_config); off, every message goes over TCP
+    "shared_memory": False,
 }
 #: encodings of what robots send (option ``wire``): ``compact`` — descriptors in compact form
 #: (pipeline.matching.packed), features only to the neighbour that matches them, packets
@@ -687,7 +690,7 @@ def _check_options(opts: dict, where: str) -> None:
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
                          "pixels >= 0")
     for k in ("fusion", "rootsift", "budget_after_merge", "solve_small_sets", "gather_conflictive",
-              "gather_free"):
+              "gather_free", "shared_memory"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
     if opts.get("wire", "compact") not in WIRE_FORMS:

@@ -187,9 +187,17 @@ ASK_AFTER_S = 2.0
 SENDER_THREADS = 8
 
 
-def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None):
+def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float | None = None,
+                 shared_memory: bool = False):
     """A peer-mode Zenoh config: no multicast scouting, no gossip, explicit endpoints; with
-    ``round_timeout_s``, the lease and the longest blocked put of :func:`link_timeouts`."""
+    ``round_timeout_s``, the lease and the longest blocked put of :func:`link_timeouts`.
+
+    ``shared_memory`` (the team option of that name, off by default): Zenoh's shared-memory
+    transport between the sessions of one host, on by default in Zenoh 1.x. Each session
+    then keeps a pool (16 MB by default) and passes messages of 3 kB or more through it; on a
+    robot process that pool, and what its neighbours' messages map, was most of its private
+    memory, growing with its neighbours (``bench/team_memory.py``), for messages that are a
+    few MB per stage. Between robots on separate hosts it is never used."""
     import zenoh
 
     doc = {
@@ -199,23 +207,25 @@ def zenoh_config(listen: list[str], connect: list[str], round_timeout_s: float |
         "connect": {"endpoints": list(connect),
                     "retry": {"period_init_ms": 100, "period_max_ms": 1000,
                               "period_increase_factor": 2}},
+        "transport": {"shared_memory": {"enabled": bool(shared_memory)}},
     }
     if round_timeout_s is not None:
         lease_s, block_s = link_timeouts(round_timeout_s)
-        doc["transport"] = {"link": {"tx": {
+        doc["transport"]["link"] = {"tx": {
             "lease": int(lease_s * 1000),
             "queue": {"congestion_control": {"block": {"wait_before_close":
-                                                           int(block_s * 1e6)}}}}}}
+                                                           int(block_s * 1e6)}}}}}
     return zenoh.Config.from_json5(json.dumps(doc))
 
 
 def open_session(listen: list[str], connect: list[str], who: str,
-                 round_timeout_s: float | None = None):
-    """Open a Zenoh session; a listen endpoint that cannot be bound is one InputError line."""
+                 round_timeout_s: float | None = None, shared_memory: bool = False):
+    """Open a Zenoh session (:func:`zenoh_config`); a listen endpoint that cannot be bound is
+    one InputError line."""
     import zenoh
 
     try:
-        return zenoh.open(zenoh_config(listen, connect, round_timeout_s))
+        return zenoh.open(zenoh_config(listen, connect, round_timeout_s, shared_memory))
     except zenoh.ZError as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else "zenoh error"
         # Zenoh's messages carry the paths of its Rust sources: not the user's concern
@@ -247,6 +257,8 @@ class ZenohTransport(RoundEndpoint):
         written off (``silent``)
     round_limit_s : float — longest one round waits for a neighbour that beats but sends
         nothing (then ``limit``)
+    shared_memory : bool — Zenoh's shared memory with the sessions of this host
+        (:func:`zenoh_config`)
     beat_s : float — period of the liveness beats
     log : callable(str) or None — progress lines (default: stderr)
 
@@ -258,7 +270,7 @@ class ZenohTransport(RoundEndpoint):
 
     def __init__(self, team, robot_id: int, *, drop_prob: float = 0.0, seed: int = 0,
                  round_timeout_s: float = 30.0, round_limit_s: float = 600.0,
-                 beat_s: float = 0.2, log=None) -> None:
+                 shared_memory: bool = False, beat_s: float = 0.2, log=None) -> None:
         self.team = team
         self.robot_id = int(robot_id)
         self.neighbours = frozenset(team.neighbours(self.robot_id))
@@ -302,7 +314,8 @@ class ZenohTransport(RoundEndpoint):
         if team.observer:
             connect.append(team.observer)
         self.session = open_session([team.endpoint(self.robot_id)], connect,
-                                    f"robot {self.robot_id}", self.round_timeout_s)
+                                    f"robot {self.robot_id}", self.round_timeout_s,
+                                    shared_memory)
         name = team.name
         # one subscriber per kind for every neighbour (``*`` the sender): each Python callback
         # of a subscriber runs on a thread of its own (module docstring, "Threads"); what

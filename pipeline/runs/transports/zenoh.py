@@ -143,7 +143,7 @@ def _union_links(parts):
 
 def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: list | None = None,
               round_timeout_s: float | None = None,
-              wire: str = "compact") -> FormationRobots:
+              wire: str = "compact", shared_memory: bool = False) -> FormationRobots:
     """``run-formation --transport zenoh``: one robot process per camera.
 
     The robots render their own cameras, extract, match, resolve and fuse; this process (the
@@ -158,6 +158,9 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
         else the team file's default)
     wire : the robots' encoding, ``compact`` or ``plain``
         (:data:`pipeline.team.teamfile.WIRE_FORMS`)
+    shared_memory : the team option (Zenoh's shared memory between the robot processes,
+        :func:`pipeline.transport.zenoh_transport.zenoh_config`; ``bench/team_memory.py``
+        compares the two)
     workdir : folder for TEAM.json and the robots' logs (default: temporary)
     keep_run : list or None — the :class:`~pipeline.team.launcher.TeamRun` is appended to it
     """
@@ -165,7 +168,8 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
 
     opts = team_options(config.features, config.max_features, config.faults, round_timeout_s,
                         merge_radius_for(config.resolution, config.merge_radius),
-                        config.resolution, fusion=bool(config.fusion), wire=wire)
+                        config.resolution, fusion=bool(config.fusion), wire=wire,
+                        shared_memory=bool(shared_memory))
     edges = data_synth.formation_edges(config.formation, config.seed, config.robots,
                                        config.graph)
     n = config.robots or 6

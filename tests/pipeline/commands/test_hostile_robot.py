@@ -165,6 +165,7 @@ def _three(first):
     ({"options": {"fusion": "yes"}}, "option fusion 'yes' must be true or false"),
     ({"options": {"rootsift": "yes"}}, "option rootsift 'yes'"),
     ({"options": {"budget_after_merge": 2}}, "option budget_after_merge 2"),
+    ({"options": {"shared_memory": "no"}}, "option shared_memory 'no' must be true or false"),
     ({"options": {"threshold_px": float("inf")}}, "option threshold_px inf"),
     ({"options": {"resolution": "x"}}, "option resolution 'x'"),
     ({"robot_options": {"5": {}}}, "robot_options key '5' must be a robot id 0..2"),
