@@ -70,9 +70,13 @@ def csv_row(line: str, where: str, **fmt) -> list[str]:
     naming ``where`` (e.g. ``FILE:LINE``) when CSV cannot read it."""
     try:
         return next(csv.reader([line], **fmt), [])
-    except csv.Error as exc:
-        raise InputError(f"{where}: {line[:80]!r}: not a CSV row ({exc}); a row ends only "
-                         "with a line break") from None
+    except csv.Error:
+        # the one row csv refuses here: a carriage return outside quotes (its own message
+        # asks for a "universal-newline mode" the user cannot choose)
+        raise InputError(f"{where}: {line[:80]!r}: not a CSV row (a carriage return inside "
+                         "it); a row ends only with a line break, \\n or \\r\\n: lines "
+                         "ended by a carriage return alone (classic Mac OS) are one line here, "
+                         "save the file with LF or CRLF line ends") from None
 
 
 def _uncomment(line: str) -> tuple[str, bool]:
