@@ -92,16 +92,21 @@ MAX_ID = 2**31 - 2
 
 
 def _int_field(path, lineno, raw, name, value) -> int:
+    """An id column's value (or the ``round`` column of a run-output links.csv: a 0-based
+    round number, named as such in the messages)."""
+    what, kind = ("a round number", "rounds") if name == "round" else ("an integer id", "ids")
+    empty = " (or empty: none)" if name == "round" else ""
     # ASCII digits only: Python's int() also takes "1_0" (10), "+1" and other scripts' digits
     if not _ID.fullmatch(value):
-        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {value!r} is not an integer id; "
-                         "ids are 0-based integers written in digits 0-9")
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {value!r} is not {what}; "
+                         f"{kind} are 0-based integers written in digits 0-9{empty}")
     v = int(value)
     if v < 0:
-        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is negative; ids are 0-based")
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is negative; {kind} are "
+                         f"0-based{empty}")
     if v > MAX_ID:
-        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is too large; ids must be at "
-                         f"most {MAX_ID}")
+        raise InputError(f"{path}:{lineno}: {raw!r}: {name} {v} is too large; {kind} must be "
+                         f"at most {MAX_ID}")
     return v
 
 

@@ -159,3 +159,19 @@ def test_a_large_plain_file_is_read_at_once(tmp_path, monkeypatch):
     lf = lc.read_links_csv(p)
     assert len(lf.links) == 3 * n and lf.line[[0, -1]].tolist() == [2, 3 * n + 1]
     assert lf.links.quality[5] == 5 / n
+
+
+@pytest.mark.parametrize(("value", "said"), [
+    ("x", "round 'x' is not a round number; rounds are 0-based integers written in digits 0-9 "
+          "(or empty: none)"),
+    ("-3", "round -3 is negative; rounds are 0-based (or empty: none)"),
+])
+def test_a_bad_round_of_a_run_links_csv_is_named_as_a_round(tmp_path, value, said):
+    """The round column of a run-output links.csv read back is a round number that may be
+    empty: its message says so, not that an id is expected."""
+    p = tmp_path / "links.csv"
+    p.write_text("cam_i,feat_i,cam_j,feat_j,status,reason,round,truth\n"
+                 f"0,1,1,1,deleted,resolution,{value},\n")
+    with pytest.raises(InputError) as exc:
+        read_links_csv(p)
+    assert said in str(exc.value) and " id" not in str(exc.value)
