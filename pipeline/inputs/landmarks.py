@@ -6,7 +6,8 @@ images is the identity on rows. Layout:
 
 * images: ``.png``, ``.jpg``, ``.jpeg``, ``.tif``, ``.tiff``, ``.bmp``, ``.ppm``, ``.pgm``;
 * keypoints, one file per image: ``NAME.txt`` (``K`` rows ``x y``, whitespace or comma
-  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``); OpenCV pixel convention; a
+  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``; a MATLAB v7.3 file, HDF5,
+  too); OpenCV pixel convention; a
   row ``nan nan`` marks a landmark the image does not see (occluded, out of view): the image
   then has a feature for each of its other rows only, and a landmark need not be seen by
   every image;
@@ -164,17 +165,59 @@ def _why_not_table(path: Path) -> str:
     return "no row of two numbers in it"
 
 
+#: MATLAB classes of a v7.3 variable that hold no numbers, as :func:`_read_mat_keypoints`
+#: names them
+_MAT73_NOT_NUMERIC = {"char": "text", "logical": "logical values", "cell": "a cell array",
+                      "struct": "a struct", "function_handle": "a function handle"}
+
+
+def _read_mat73_pts(path: Path) -> np.ndarray | None:
+    """``pts_coord`` of a MATLAB v7.3 MAT file (an HDF5 file, ``save -v7.3``), as MATLAB holds
+    it (``2 x K``); ``None`` without that variable or when HDF5 cannot read the file."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            ds = f.get("pts_coord")
+            if ds is None:
+                return None
+            cls = ds.attrs.get("MATLAB_class", b"double")
+            cls = cls.decode(errors="replace") if isinstance(cls, bytes) else str(cls)
+            if isinstance(ds, h5py.Group):  # a struct or an object: an HDF5 group
+                cls = "struct"
+            data = None if cls in _MAT73_NOT_NUMERIC else np.asarray(ds[()])
+            empty = bool(ds.attrs.get("MATLAB_empty", 0))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if data is None:
+        raise InputError(f"{path}: pts_coord holds {_MAT73_NOT_NUMERIC[cls]}, expected a "
+                         "numeric 2 x K array (row 0 = x, row 1 = y)")
+    if empty:  # an empty matrix: the data are its sizes
+        return np.zeros(tuple(int(n) for n in data.ravel()), dtype=np.float64)
+    if data.dtype.names == ("real", "imag"):  # complex numbers
+        data = data["real"] + 1j * data["imag"]
+    # MATLAB writes in column-major order: the HDF5 dataset of a 2 x K matrix is K x 2
+    return data.T
+
+
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:
-    """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable."""
+    """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable.
+
+    MATLAB v7.3 files (HDF5, ``save -v7.3``) are read too (:func:`_read_mat73_pts`)."""
     from scipy.io import loadmat
 
     try:
         data = loadmat(path, variable_names=["pts_coord"])
+    except NotImplementedError:  # scipy's answer to a v7.3 file: read it as HDF5
+        raw = _read_mat73_pts(path)
+        if raw is None:
+            return None
     except Exception:  # noqa: BLE001 — any unreadable MAT file is simply not a keypoint file
         return None
-    if "pts_coord" not in data:
-        return None
-    raw = np.asarray(data["pts_coord"])
+    else:
+        if "pts_coord" not in data:
+            return None
+        raw = np.asarray(data["pts_coord"])
     if raw.dtype.kind not in "iuf":  # text, a struct, complex numbers
         what = {"U": "text", "S": "text", "c": "complex numbers", "V": "a struct",
                 "O": "a cell array", "b": "logical values"}.get(raw.dtype.kind, raw.dtype.name)
