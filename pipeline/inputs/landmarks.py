@@ -6,8 +6,8 @@ images is the identity on rows. Layout:
 
 * images: ``.png``, ``.jpg``, ``.jpeg``, ``.tif``, ``.tiff``, ``.bmp``, ``.ppm``, ``.pgm``;
 * keypoints, one file per image: ``NAME.txt`` (``K`` rows ``x y``, whitespace or comma
-  separated) or ``NAME.mat`` holding ``pts_coord`` (``2 x K``; a MATLAB v7.3 file, HDF5,
-  too); OpenCV pixel convention; a
+  separated; lines ended by LF, CRLF or a carriage return alone) or ``NAME.mat`` holding
+  ``pts_coord`` (``2 x K``; a MATLAB v7.3 file, HDF5, too); OpenCV pixel convention; a
   row ``nan nan`` marks a landmark the image does not see (occluded, out of view): the image
   then has a feature for each of its other rows only, and a landmark need not be seen by
   every image;
@@ -90,15 +90,28 @@ def natural_key(name: str) -> tuple[list, str]:
              for t in re.split(r"(\d+)", name) if t], name)
 
 
+def _table_lines(path: Path):
+    """``(line number, line)`` of a label table: the lines of
+    :func:`~pipeline.inputs.csvfields.text_lines`, each split at a carriage return too (a
+    table of numbers has no quoted field a carriage return could belong to: a file whose lines
+    end with a carriage return alone, classic Mac OS, is read as its editor shows it, and
+    its line numbers are counted so)."""
+    from pipeline.inputs.csvfields import text_lines
+
+    number = 0
+    for _, line in text_lines(path, "label file"):
+        for piece in line.split("\r"):
+            number += 1
+            yield number, piece
+
+
 def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:
     """The rows ``[x, y]`` of a text table read up to its first line that is not two numbers,
     and that line (``"line N is '...'"``), or None when every line is two numbers; an
     unreadable file (not UTF-8, a line too long) gives no rows and no line."""
-    from pipeline.inputs.csvfields import text_lines
-
     rows: list = []
     try:
-        lines = list(text_lines(path, "label file"))
+        lines = list(_table_lines(path))
     except (InputError, OSError):
         return rows, None
     for number, line in lines:
@@ -130,13 +143,11 @@ def _txt_problem(path: Path, k: int | None = None) -> str | None:
     them, a third column, numbers separated by semicolons) are as many as the other label
     files' ``k`` (two or more when no label file was read) (``None`` for any other file, e.g.
     a README or a 3 x 3 homography)."""
-    from pipeline.inputs.csvfields import text_lines
-
     rows, bad = _parse_txt_keypoints(path)
     if rows or bad is None:
         return bad
     numeric = 0
-    for _, line in text_lines(path, "label file"):
+    for _, line in _table_lines(path):
         toks = line.split("#", 1)[0].replace(",", " ").replace(";", " ").split()
         try:
             numeric += len([float(t) for t in toks]) >= 2
