@@ -76,6 +76,12 @@ FILE_HEADROOM_BYTES = 16 * 2**20
 #: centre is warned (a calibrated lens has it within a few percent): the usual cause is a
 #: K.txt of the full-resolution photos beside resized copies.
 OFF_CENTRE = 0.2
+#: Deeper-than-8-bit pixels are stretched to 0..255 up to this percentile of their values
+#: (:func:`_to_uint8`): the brightest 0.1 % (hot or saturated pixels) saturate instead of
+#: setting the scale of the whole image.
+DEEP_STRETCH_PERCENTILE = 99.9
+#: the percentiles are taken on at most this many of an image's values, evenly spaced
+DEEP_STRETCH_SAMPLE = 4_000_000
 
 
 @dataclass
@@ -199,15 +205,23 @@ def _to_uint8(arr: np.ndarray) -> np.ndarray:
     """Map any integer/float pixel array to uint8.
 
     8-bit data is returned as is. Deeper data (16-bit PNG/TIFF, 32-bit integer or float) is
-    stretched linearly from 0 to its maximum, because many 16-bit cameras use only 10–12 bits
-    and a fixed ``/ 257`` would leave the image nearly black (few SIFT detections).
+    stretched linearly from 0 to its :data:`DEEP_STRETCH_PERCENTILE`-th percentile (brighter
+    pixels saturate), because many 16-bit cameras use only 10–12 bits and a fixed ``/ 257``
+    would leave the image nearly black (few SIFT detections); the maximum itself is no bound,
+    since one hot or saturated pixel at 65535 in 10-bit data would leave every other pixel
+    below 5 of 255, an image without a single feature. Negative values (signed or float data)
+    are mapped to 0 from the mirror percentile (0.1 %) up, alike.
     """
     if arr.dtype == np.uint8:
         return arr
     a = arr.astype(np.float64)
     a = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
-    lo = min(float(a.min()), 0.0)
-    hi = float(a.max())
+    sample = a.ravel()[::max(1, a.size // DEEP_STRETCH_SAMPLE)]
+    low, high = np.percentile(sample, [100.0 - DEEP_STRETCH_PERCENTILE, DEEP_STRETCH_PERCENTILE])
+    lo = min(float(low), 0.0)
+    hi = float(high)
+    if hi <= lo:  # the image is dark but for a few pixels: those are its content
+        lo, hi = min(float(a.min()), 0.0), float(a.max())
     if hi <= lo:
         return np.zeros(arr.shape, dtype=np.uint8)
     return np.clip(np.rint((a - lo) * (255.0 / (hi - lo))), 0, 255).astype(np.uint8)
