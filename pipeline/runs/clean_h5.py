@@ -126,6 +126,14 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
                                                        "messages", "bytes")},
                               "transport": transport,
                               **({"team": st["team"]} if "team" in st else {})}}
+    from pipeline.evaluation.quality import quality_evidence
+
+    # the rule weighs matching_scores0 as the links' quality: a distance (higher = worse) or a
+    # score on another scale than [0, 1] is warned of, as resolve warns of its quality column
+    summary["resolution_method"] = st.get("resolution")
+    summary["quality_evidence"] = {**quality_evidence(m, model_links),
+                                   "read_by_rule": bool(get_rule(st.get("resolution")
+                                                                 or rule.name).needs_evidence)}
     if baselines:
         from pipeline.evaluation.report import baselines_beside
 
