@@ -359,7 +359,10 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
             f"{path.name}: cannot read it as an image ({exc}); remove or replace the file "
             f"(a truncated or non-image file)") from None
     if pixels.ndim not in (2, 3) or min(pixels.shape[:2]) < 2:
-        raise InputError(f"{path.name}: image of shape {pixels.shape} is too small or not 2-D")
+        size = f"{pixels.shape[1]}x{pixels.shape[0]}" if pixels.ndim in (2, 3) else \
+            f"of shape {pixels.shape}"
+        raise InputError(f"{path.name}: a {size} image (fewer than 2 pixels on a side) is no "
+                         "photograph and holds no feature; remove or replace it")
     return np.ascontiguousarray(pixels), im
 
 
