@@ -149,6 +149,11 @@ def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == "keypoints":
                 image = obj.parent.name.strip("/")
+                if not image:
+                    raise InputError(f"{path}: a 'keypoints' dataset at the file's root group "
+                                     "('/') belongs to no image: hloc's features.h5 holds one "
+                                     "group per image, named after it, with the image's "
+                                     "'keypoints'; write the keypoints so, or remove the dataset")
                 what = f"keypoints of {image!r}"
                 if len(obj.shape) != 2 or obj.shape[1] != 2 and obj.shape[0] != 0:
                     raise InputError(f"{path}: {what} have shape {obj.shape}; expected (N, 2)")
@@ -278,12 +283,13 @@ def _check_pair_groups(fd, h5py, path: Path) -> None:
     fd.visititems(visit)
     if foreign:
         key, held = next(iter(foreign.items()))
+        where = f"group {key!r}" if key else "the file's root group ('/')"
         raise InputError(
-            f"{path}: group {key!r} holds {', '.join(repr(h) for h in held)} but no 'matches0'"
+            f"{path}: {where} holds {', '.join(repr(h) for h in held)} but no 'matches0'"
             + (f" (nor {len(foreign) - 1} other group(s))" if len(foreign) > 1 else "")
             + ": not hloc's layout, where each pair's 'matches0' gives, for every keypoint of "
             "the first image, its match in the second (-1 for none); write the matches so, or "
-            "remove the group")
+            + ("remove the group" if key else "remove those datasets"))
 
 
 def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
@@ -300,6 +306,11 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
     out: list[tuple[str, str, str]] = []
     seen: dict[frozenset, str] = {}
     for key in keys:
+        if not key:
+            raise InputError("matches file: a 'matches0' dataset at the file's root group ('/') "
+                             "belongs to no image pair: hloc's matches.h5 holds one group per "
+                             "pair, 'name0/name1', with the pair's 'matches0'; write the "
+                             "matches so, or remove the dataset")
         parts = key.split("/")
         found = None
         if len(parts) == 2 and all(len(by_flat.get(p, [])) == 1 for p in parts):
