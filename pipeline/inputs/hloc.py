@@ -394,12 +394,23 @@ def read_h5(features: str | Path, matches: str | Path,
             stored = _stored_pairs(fd, h5py, names)
         else:
             stored = []
+            pair_of_key: dict[str, tuple[str, str]] = {}
             for a, b in wanted:
                 hit = _find_pair(fd, a, b)
                 if hit is None:
                     raise InputError(f"{matches}: no matches stored for pair {a} {b} of "
-                                     f"{pairs}")
+                                     f"{pairs} (no group {names_to_pair(a, b)!r} nor "
+                                     f"{names_to_pair(b, a)!r}); match that pair, or remove "
+                                     "its line")
                 key, rev = hit
+                if key in pair_of_key:  # names_to_pair writes '/' inside a name as '-'
+                    c, d = pair_of_key[key]
+                    raise InputError(
+                        f"{matches}: pairs {c} {d} and {a} {b} of {pairs} are both stored as "
+                        f"group {key!r} (hloc writes a '/' inside an image name as '-'), so "
+                        "one group holds the matches of one of them only; rename one of the "
+                        "images (and match again), or remove one of the lines")
+                pair_of_key[key] = (a, b)
                 stored.append((key, b, a) if rev else (key, a, b))
         done = set()
         for key, n0, n1 in stored:
