@@ -506,10 +506,11 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     bad = np.flatnonzero((fi >= m[ci]) | (fj >= m[cj]))
     if bad.size:
         k = bad[0]
+        cam, feat = (ci[k], fi[k]) if fi[k] >= m[ci[k]] else (cj[k], fj[k])
         raise InputError(
             f"database {str(path)!r}: a two-view geometry of {names[ci[k]]} / {names[cj[k]]} "
-            f"names keypoint {max(fi[k], fj[k])} beyond the stored keypoints; the database is "
-            f"inconsistent")
+            f"names keypoint {feat} of {names[cam]}, which has {m[cam]} stored keypoints; the "
+            "database is inconsistent (rebuild it with COLMAP)")
     links = Links(ci, fi, cj, fj)
     # Assumption 2.2 (one-to-one per pair): every inlier of a feature linked twice or more
     # into one other image (a database stores no score to tell which of them is right)
