@@ -10,7 +10,7 @@ Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows
 (keypoints 2, 4 or 6 float32 columns; inlier matches 2 uint32 columns) and a blob of exactly
 ``rows * cols * 4`` bytes; image ids and pair ids are stored as integers (not text, real
 numbers or blobs); every image's ``camera_id`` is a row of the ``cameras`` table (COLMAP's
-mapper stops on an image without its camera); a pair id appears once and names two different
+mapper stops on an image without its camera; a database without that table has none); a pair id appears once and names two different
 images of the ``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
 images the other way round is read in its own orientation).
 
@@ -115,15 +115,17 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
     _integer_ids(path, "two_view_geometries", "pair_id",
                  _rows(con, "SELECT pair_id, typeof(pair_id) FROM two_view_geometries", path))
     images = {r[0] for r in _rows(con, "SELECT image_id FROM images", path)}
-    if "cameras" in tables:
-        cameras = {r[0] for r in _rows(con, "SELECT camera_id FROM cameras", path)}
-        for image_id, name, camera_id in _rows(
-                con, "SELECT image_id, name, camera_id FROM images ORDER BY image_id", path):
-            if camera_id not in cameras:
-                raise InputError(f"database {str(path)!r}, table images, image_id {image_id} "
-                                 f"({name!r}): names camera_id {camera_id!r}, which is not in "
-                                 "the cameras table; the database is inconsistent (rebuild it "
-                                 "with COLMAP)")
+    # a database without the cameras table has none of its images' cameras either
+    cameras = {r[0] for r in _rows(con, "SELECT camera_id FROM cameras", path)} \
+        if "cameras" in tables else set()
+    for image_id, name, camera_id in _rows(
+            con, "SELECT image_id, name, camera_id FROM images ORDER BY image_id", path):
+        if camera_id not in cameras:
+            lacks = "which is not in the cameras table" if "cameras" in tables else \
+                "but the database has no cameras table"
+            raise InputError(f"database {str(path)!r}, table images, image_id {image_id} "
+                             f"({name!r}): names camera_id {camera_id!r}, {lacks}; the "
+                             "database is inconsistent (rebuild it with COLMAP)")
     kp = _rows(con, "SELECT image_id, rows, cols, length(data) FROM keypoints", path)
     _check_matrix_rows(path, "keypoints", "image_id", kp, (2, 4, 6))
     tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries", path)
