@@ -10,7 +10,9 @@ Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows
 (keypoints 2, 4 or 6 float32 columns; inlier matches 2 uint32 columns) and a blob of exactly
 ``rows * cols * 4`` bytes; image ids and pair ids are stored as integers (not text, real
 numbers or blobs); every image's ``camera_id`` is a row of the ``cameras`` table (COLMAP's
-mapper stops on an image without its camera; a database without that table has none); a pair id appears once and names two different
+mapper stops on an image without its camera; a database without that table has none); where
+the ``frames`` table holds frames, every image is a camera of a frame that exists, of a rig
+that has that camera (:func:`_check_frames`); a pair id appears once and names two different
 images of the ``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
 images the other way round is read in its own orientation).
 
@@ -89,6 +91,54 @@ def _integer_ids(path: Path, table: str, column: str, rows) -> None:
                 "it with COLMAP)")
 
 
+#: ``sensor_type`` of a camera in the ``rigs``, ``rig_sensors`` and ``frame_data`` tables
+#: (COLMAP's ``SensorType::CAMERA``)
+CAMERA_SENSOR = 0
+
+
+def _check_frames(con, path: Path, tables: set[str]) -> None:
+    """InputError for an image that COLMAP's mapper finds in no frame, or in a frame of no
+    such frame, or of a rig without its camera (``Check failed: image.HasFrameId()``,
+    ``Frame with ID F does not exist``, ``rig.HasSensor``). A database without frames (an
+    older COLMAP's, or one whose frames were removed) is fine: COLMAP gives each image a
+    frame of its own."""
+    frames = dict(_rows(con, "SELECT frame_id, rig_id FROM frames", path)) \
+        if "frames" in tables else {}
+    if not frames:
+        return
+    data = _rows(con, "SELECT data_id, frame_id, sensor_id FROM frame_data WHERE sensor_type = "
+                      f"{CAMERA_SENSOR}", path) if "frame_data" in tables else []
+    frame_of = {data_id: (frame_id, sensor_id) for data_id, frame_id, sensor_id in data}
+    sensors: dict[int, set] = {}
+    if "rigs" in tables:
+        for rig_id, sensor_id in _rows(con, "SELECT rig_id, ref_sensor_id FROM rigs WHERE "
+                                            f"ref_sensor_type = {CAMERA_SENSOR}", path):
+            sensors.setdefault(rig_id, set()).add(sensor_id)
+    if "rig_sensors" in tables:
+        for rig_id, sensor_id in _rows(con, "SELECT rig_id, sensor_id FROM rig_sensors WHERE "
+                                            f"sensor_type = {CAMERA_SENSOR}", path):
+            sensors.setdefault(rig_id, set()).add(sensor_id)
+    for image_id, name in _rows(con, "SELECT image_id, name FROM images ORDER BY image_id",
+                                path):
+        where = f"database {str(path)!r}, table images, image_id {image_id} ({name!r})"
+        if image_id not in frame_of:
+            raise InputError(f"{where}: in no frame (table frame_data has no camera row with "
+                             f"data_id {image_id}), though the frames table holds "
+                             f"{len(frames)} frame(s); the database is inconsistent (rebuild "
+                             "it with COLMAP)")
+        frame_id, sensor_id = frame_of[image_id]
+        if frame_id not in frames:
+            raise InputError(f"{where}: table frame_data puts it in frame_id {frame_id!r}, "
+                             "which is not in the frames table; the database is inconsistent "
+                             "(rebuild it with COLMAP)")
+        rig_id = frames[frame_id]
+        if rig_id in sensors and sensor_id not in sensors[rig_id]:
+            raise InputError(f"{where}: table frame_data gives it camera {sensor_id!r} of "
+                             f"frame {frame_id}, whose rig {rig_id} has no such camera (tables "
+                             "rigs, rig_sensors); the database is inconsistent (rebuild it "
+                             "with COLMAP)")
+
+
 def check_database_tables(con: sqlite3.Connection, path: str | Path) -> DatabaseSizes:
     """Raise InputError on the first inconsistent row (module docstring); read only.
 
@@ -126,6 +176,7 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
             raise InputError(f"database {str(path)!r}, table images, image_id {image_id} "
                              f"({name!r}): names camera_id {camera_id!r}, {lacks}; the "
                              "database is inconsistent (rebuild it with COLMAP)")
+    _check_frames(con, path, tables)
     kp = _rows(con, "SELECT image_id, rows, cols, length(data) FROM keypoints", path)
     _check_matrix_rows(path, "keypoints", "image_id", kp, (2, 4, 6))
     tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries", path)
