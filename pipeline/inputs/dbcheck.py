@@ -12,7 +12,8 @@ Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows
 numbers or blobs); every image's ``camera_id`` is a row of the ``cameras`` table (COLMAP's
 mapper stops on an image without its camera; a database without that table has none); where
 the ``frames`` table holds frames, every image is a camera of a frame that exists, of a rig
-that has that camera (:func:`_check_frames`); a pair id appears once and names two different
+that has that camera (:func:`_check_frames`); a pose prior's matrices have their sizes
+(:func:`_check_pose_priors`); a pair id appears once and names two different
 images of the ``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
 images the other way round is read in its own orientation).
 
@@ -139,6 +140,28 @@ def _check_frames(con, path: Path, tables: set[str]) -> None:
                              "with COLMAP)")
 
 
+#: bytes of each matrix column of the ``pose_priors`` table (float64: a position, its 3 x 3
+#: covariance, a gravity direction); COLMAP's mapper reads them and stops on another size
+POSE_PRIOR_BYTES = {"position": 3 * 8, "position_covariance": 9 * 8, "gravity": 3 * 8}
+
+
+def _check_pose_priors(con, path: Path) -> None:
+    """InputError for a ``pose_priors`` matrix (:data:`POSE_PRIOR_BYTES`) stored with another
+    size than its values need (NULL: none stored, as COLMAP writes an unknown one)."""
+    columns = [r[1] for r in _rows(con, "PRAGMA table_info(pose_priors)", path)]
+    key = "pose_prior_id" if "pose_prior_id" in columns else "rowid"
+    for column, size in POSE_PRIOR_BYTES.items():
+        if column not in columns:
+            continue
+        bad = _rows(con, f"SELECT {key}, length({column}) FROM pose_priors WHERE {column} IS NOT "
+                         f"NULL AND length({column}) != {size} LIMIT 1", path)
+        if bad:
+            raise InputError(f"database {str(path)!r}, table pose_priors, {key} {bad[0][0]}: "
+                             f"{column} holds {bad[0][1]} bytes, expected {size} ({size // 8} "
+                             "float64 values) or NULL; the database is corrupt (rebuild it with "
+                             "COLMAP, or delete that row)")
+
+
 def check_database_tables(con: sqlite3.Connection, path: str | Path) -> DatabaseSizes:
     """Raise InputError on the first inconsistent row (module docstring); read only.
 
@@ -177,6 +200,8 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
                              f"({name!r}): names camera_id {camera_id!r}, {lacks}; the "
                              "database is inconsistent (rebuild it with COLMAP)")
     _check_frames(con, path, tables)
+    if "pose_priors" in tables:
+        _check_pose_priors(con, path)
     kp = _rows(con, "SELECT image_id, rows, cols, length(data) FROM keypoints", path)
     _check_matrix_rows(path, "keypoints", "image_id", kp, (2, 4, 6))
     tvg = _rows(con, "SELECT pair_id, rows, cols, length(data) FROM two_view_geometries", path)
