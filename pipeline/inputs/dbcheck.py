@@ -12,7 +12,8 @@ Checked: ``keypoints``, ``matches`` and ``two_view_geometries`` rows have ``rows
 numbers or blobs); every image's ``camera_id`` is a row of the ``cameras`` table (COLMAP's
 mapper stops on an image without its camera; a database without that table has none); where
 the ``frames`` table holds frames, every image is a camera of a frame that exists, of a rig
-that has that camera (:func:`_check_frames`); a pose prior's matrices have their sizes
+that has that camera (:func:`_check_frames`), and every camera of a rig is in the ``cameras``
+table (:func:`_check_rigs`); a pose prior's matrices have their sizes
 (:func:`_check_pose_priors`); a pair id appears once and names two different
 images of the ``images`` table (COLMAP's ``pair_id = 2147483647 * image_id1 + image_id2``; a row stored with the two
 images the other way round is read in its own orientation).
@@ -95,6 +96,25 @@ def _integer_ids(path: Path, table: str, column: str, rows) -> None:
 #: ``sensor_type`` of a camera in the ``rigs``, ``rig_sensors`` and ``frame_data`` tables
 #: (COLMAP's ``SensorType::CAMERA``)
 CAMERA_SENSOR = 0
+
+
+def _check_rigs(con, path: Path, tables: set[str], cameras: set) -> None:
+    """InputError for a rig whose camera (its reference sensor, or one of ``rig_sensors``) the
+    cameras table lacks: COLMAP's mapper stops on it (``Camera 2 from rig 1 not found``)."""
+    named = []
+    if "rigs" in tables:
+        named += [("rigs", rig_id, sensor_id) for rig_id, sensor_id in _rows(
+            con, f"SELECT rig_id, ref_sensor_id FROM rigs WHERE ref_sensor_type = {CAMERA_SENSOR}"
+                 " ORDER BY rig_id", path)]
+    if "rig_sensors" in tables:
+        named += [("rig_sensors", rig_id, sensor_id) for rig_id, sensor_id in _rows(
+            con, "SELECT rig_id, sensor_id FROM rig_sensors WHERE sensor_type = "
+                 f"{CAMERA_SENSOR} ORDER BY rig_id, sensor_id", path)]
+    for table, rig_id, sensor_id in named:
+        if sensor_id not in cameras:
+            raise InputError(f"database {str(path)!r}, table {table}, rig_id {rig_id}: names "
+                             f"camera {sensor_id!r}, which is not in the cameras table; the "
+                             "database is inconsistent (rebuild it with COLMAP)")
 
 
 def _check_frames(con, path: Path, tables: set[str]) -> None:
@@ -199,6 +219,7 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
             raise InputError(f"database {str(path)!r}, table images, image_id {image_id} "
                              f"({name!r}): names camera_id {camera_id!r}, {lacks}; the "
                              "database is inconsistent (rebuild it with COLMAP)")
+    _check_rigs(con, path, tables, cameras)
     _check_frames(con, path, tables)
     if "pose_priors" in tables:
         _check_pose_priors(con, path)
