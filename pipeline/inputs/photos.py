@@ -204,7 +204,8 @@ def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = Fa
 def _to_uint8(arr: np.ndarray) -> np.ndarray:
     """Map any integer/float pixel array to uint8.
 
-    8-bit data is returned as is. Deeper data (16-bit PNG/TIFF, 32-bit integer or float) is
+    8-bit data is returned as is. Deeper data (16-bit PNG/TIFF, gray or colour
+    (:func:`_deep_color_pixels`), 32-bit integer or float) is
     stretched linearly from 0 to its :data:`DEEP_STRETCH_PERCENTILE`-th percentile (brighter
     pixels saturate), because many 16-bit cameras use only 10–12 bits and a fixed ``/ 257``
     would leave the image nearly black (few SIFT detections); the maximum itself is no bound,
@@ -318,6 +319,33 @@ def _tiff_layout(path: Path) -> str | None:
     return f"{tags.get(258, 1)}-bit {kind} TIFF, {tags.get(277, 1)} sample(s) per pixel"
 
 
+def _deep_color(im: Image.Image) -> bool:
+    """Whether ``im`` (opened, not yet loaded) is a 16-bit-per-channel colour PNG or TIFF:
+    Pillow decodes those to 8 bits by keeping each sample's high byte, so 10- or 12-bit data
+    stored in 16 bits comes out at 0..3 or 0..15 of 255, an image without a feature."""
+    if im.mode not in ("RGB", "RGBA"):
+        return False
+    for tile in im.tile:
+        args = tile[3]
+        raw = args[0] if isinstance(args, tuple) and args else args
+        if isinstance(raw, str) and ";16" in raw:
+            return True
+    return False
+
+
+def _deep_color_pixels(path: Path, im: Image.Image) -> np.ndarray:
+    """The (H, W, 3) uint8 RGB pixels of a 16-bit colour file (:func:`_deep_color`), from all
+    16 bits (OpenCV reads them) stretched as :func:`_to_uint8` stretches deep gray images;
+    Pillow's 8-bit pixels where OpenCV cannot read the file as Pillow did."""
+    data = np.fromfile(path, dtype=np.uint8)
+    arr = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    w, h = im.size
+    if arr is None or arr.dtype != np.uint16 or arr.ndim != 3 or arr.shape[:2] != (h, w) \
+            or arr.shape[2] not in (3, 4):
+        return _pixels(im)
+    return _to_uint8(arr[..., 2::-1])  # BGR(A) -> RGB, alpha dropped
+
+
 def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     """Decode one image file completely.
 
@@ -344,8 +372,9 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
             raise InputError(f"{path.name}: the file is empty (0 bytes), not an image; remove or "
                              "replace it (an interrupted copy or download?)")
         im = open_header(path)
+        deep = _deep_color(im)
         im.load()  # forces the full decode: a truncated JPEG raises here, not later
-        pixels = _pixels(im)
+        pixels = _pixels(im) if not deep else _deep_color_pixels(path, im)
     except InputError:
         raise
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
