@@ -377,15 +377,34 @@ def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
     """Read a run-output ``links.csv`` back as a :class:`~pipeline.types.LinkLedger`.
 
     ``iteration`` and ``case`` are not stored in the file and read back as ``-1`` and ``''``;
-    ``truth`` and ``round`` read back as ``-1`` where empty.
+    ``truth`` and ``round`` read back as ``-1`` where empty; blank lines are skipped.
+
+    Raises
+    ------
+    InputError
+        Not the run header; a row with another number of columns than the header, an id or
+        round that is not a whole number >= 0, a truth other than 1, 0 or empty, a status
+        other than ``kept`` or ``deleted`` (naming the file, the line and the value).
     """
     from pipeline.inputs.csvfields import csv_row, text_lines
 
     path = Path(path)
-    rows = [csv_row(line, f"{path}:{n}") for n, line in text_lines(path, "links file")]
-    if not rows or tuple(rows[0]) != RUN_LINK_COLUMNS:
+    rows = [(n, line, csv_row(line, f"{path}:{n}")) for n, line in text_lines(path, "links file")
+            if line.strip()]
+    if not rows or tuple(rows[0][2]) != RUN_LINK_COLUMNS:
         raise InputError(f"{path}: not a run links.csv (header must be {','.join(RUN_LINK_COLUMNS)})")
-    body = rows[1:]
+    body = []
+    for lineno, raw, fields in rows[1:]:
+        if len(fields) != len(RUN_LINK_COLUMNS):
+            raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; the header "
+                             f"names {len(RUN_LINK_COLUMNS)} ({','.join(RUN_LINK_COLUMNS)})")
+        ids = [_int_field(path, lineno, raw, name, v)
+               for name, v in zip(RUN_LINK_COLUMNS[:4], fields[:4], strict=True)]
+        rnd = "" if fields[6] == "" else str(_int_field(path, lineno, raw, "round", fields[6]))
+        if fields[7] not in ("", "0", "1"):
+            raise InputError(f"{path}:{lineno}: {raw!r}: truth {fields[7]!r} is not 1 (good), "
+                             "0 (spurious) or empty")
+        body.append([*map(str, ids), fields[4], fields[5], rnd, fields[7]])
     col = {name: [r[k] for r in body] for k, name in enumerate(RUN_LINK_COLUMNS)}
 
     def ints(vals):

@@ -108,6 +108,30 @@ def test_run_links_csv_round_trip_and_atomic(tmp_path):
     assert read_run_links_csv(out).status.tolist() == ["kept", "deleted", "kept"]  # intact
 
 
+
+@pytest.mark.parametrize("row, said", [
+    ("0,1,1,2", "has 4 columns"),                       # a row cut short
+    ("0,1,1,2,kept,,,1,extra", "has 9 columns"),        # one too many
+    ("zz,1,1,2,kept,,,1", "cam_i 'zz' is not an integer id"),
+    ("0,-3,1,2,kept,,,1", "feat_i -3 is negative"),
+    ("0,1,1,2,deleted,resolution,r2,", "round 'r2' is not a round number"),
+    ("0,1,1,2,kept,,,yes", "truth 'yes' is not 1"),
+])
+def test_a_bad_row_of_a_run_links_csv_is_named_not_a_traceback(tmp_path, row, said):
+    """A run's links.csv read back (viz.saved_run) with a row of the wrong width or a
+    non-integer field raised IndexError / ValueError; now an InputError naming the file, the
+    line and the value."""
+    p = write(tmp_path, ",".join(RUN_LINK_COLUMNS) + "\n0,5,1,6,kept,,,1\n" + row + "\n",
+              name="links.csv")
+    with pytest.raises(InputError, match=f"links.csv:3: .*{said}"):
+        read_run_links_csv(p)
+
+
+def test_a_blank_line_in_a_run_links_csv_is_skipped(tmp_path):
+    p = write(tmp_path, ",".join(RUN_LINK_COLUMNS) + "\n0,5,1,6,kept,,,1\n\n",
+              name="links.csv")
+    assert read_run_links_csv(p).links.feat_j.tolist() == [6]
+
 def test_huge_ids_are_named_not_overflowing(tmp_path):
     """Regression: a 20-digit id raised OverflowError deep inside numpy (found by fuzzing)."""
     with pytest.raises(InputError, match="feat_j .* is too large"):
