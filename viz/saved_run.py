@@ -44,6 +44,18 @@ def _camera_names(report: dict, images: dict) -> list[str]:
     return [name for name, _ in sorted(images.items(), key=lambda kv: kv[1]["image_id"])]
 
 
+def _feature_counts(folder: Path, report: dict) -> list[int]:
+    """``report.json``'s ``features_per_camera``: one whole count >= 0 per camera, else an
+    InputError naming the value."""
+    m = report["features_per_camera"]
+    if not isinstance(m, list) or not all(
+            isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in m):
+        raise InputError(f"{folder}: report.json's features_per_camera is {str(m)[:80]!r}, not "
+                         "a list of feature counts (whole numbers >= 0, one per camera); not a "
+                         "run's report (docs/DESIGN.md 'Run outputs')")
+    return m
+
+
 def _refuse_online(folder: Path) -> None:
     """InputError for an online run folder: its recording comes from the run only."""
     if not ((folder / "link_steps.csv").exists() and (folder / "images.csv").exists()):
@@ -99,9 +111,13 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     except ValueError as exc:  # pycolmap: missing or unreadable model files
         raise InputError(f"{folder}: sparse/ holds no readable COLMAP model ({exc})") from exc
     images = colmap.model_images(rec)
-    m = [int(x) for x in report["features_per_camera"]]
+    m = _feature_counts(folder, report)
     names = _camera_names(report, images)
-    ledger.conflictive_before = conflictive_links(m, ledger.links)
+    try:
+        ledger.conflictive_before = conflictive_links(m, ledger.links)
+    except InputError as exc:  # a link naming a camera or feature report.json does not list
+        raise InputError(f"{folder / 'links.csv'}: {exc}; the folder's links.csv and "
+                         "report.json do not belong together") from None
     if len(names) != len(m):
         raise InputError(f"{folder}: report.json lists {len(m)} cameras but {len(names)} images "
                          "are known; the folder's files do not belong together")

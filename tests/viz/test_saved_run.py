@@ -225,3 +225,27 @@ def test_a_landmarks_run_and_a_missing_folder_are_named(tmp_path, capsys):
     assert main([str(tmp_path / "no-such")]) == 2
     assert f"{tmp_path / 'no-such'}: no such folder; give the run folder" in \
         capsys.readouterr().err
+
+
+def test_a_report_whose_feature_counts_are_not_counts_is_said_not_a_traceback(tmp_path, capsys):
+    """report.json's features_per_camera of null, strings or a number raised TypeError /
+    ValueError; links.csv naming a camera the report does not list was said without the
+    file. Both are now one 'error:' line naming the file (exit 2), and nothing is written."""
+    for name, value in (("null", None), ("strings", ["a", "b", "c"]), ("number", 3),
+                        ("negative", [-1, 16, 16]), ("booleans", [True, True, True])):
+        folder = _save(make_record(), tmp_path / name)
+        report = json.loads((folder / "report.json").read_text())
+        report["features_per_camera"] = value
+        (folder / "report.json").write_text(json.dumps(report))
+        assert main([str(folder)]) == 2, name
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1, err
+        assert "features_per_camera" in err, err
+        assert not (folder / "recording.rrd").exists()
+    folder = _save(make_record(), tmp_path / "other-links")
+    lines = (folder / "links.csv").read_text().splitlines()
+    lines[1] = "7," + lines[1].split(",", 1)[1]  # camera 7 of a 3-camera run
+    (folder / "links.csv").write_text("\n".join(lines) + "\n")
+    assert main([str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert "links.csv" in err and "camera id out of range" in err, err
