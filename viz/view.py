@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["find_recording", "viewer_command", "web_url", "main"]
+__all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main"]
 
 WEB_PORT = 9090
 GRPC_PORT = 9876
@@ -92,6 +93,33 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
     return found[-1]
 
 
+#: how every ``.rrd`` file begins: Rerun's file header magic, ``RRF`` and its format version
+RRD_MAGIC = re.compile(rb"RRF[0-9]")
+
+
+def check_recording(path: Path) -> Path:
+    """``path`` if it begins as a Rerun recording does (:data:`RRD_MAGIC`).
+
+    The viewer opens any file it is given and, on one that is not a recording, serves an
+    empty viewer with no error: the file is checked before it is handed over.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not read, or is empty or another kind of file (naming it).
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:
+        raise FileNotFoundError(f"{path}: cannot be read ({exc.strerror})") from None
+    if not RRD_MAGIC.fullmatch(head):
+        what = "an empty file" if not head else "not a Rerun recording (it lacks the .rrd header)"
+        raise FileNotFoundError(f"{path}: {what}; give a run folder, or a .rrd written by a "
+                                "run or by python -m viz.saved_run")
+    return path
+
+
 def _names(paths: list[Path], shown: int = 4) -> str:
     """The first ``shown`` of ``paths`` by name, and how many more."""
     names = ", ".join(repr(q.name) for q in paths[:shown])
@@ -147,7 +175,7 @@ def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Na
     or ``None`` after printing why there is none."""
     args = ap.parse_args(argv)
     try:
-        return args, find_recording(args.target)
+        return args, check_recording(find_recording(args.target))
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return args, None

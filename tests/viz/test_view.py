@@ -22,7 +22,7 @@ from viz.view import find_recording, has_display, main, viewer_command, web_url
 def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, monkeypatch):
     run = tmp_path / "run"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"x")
+    (run / "recording.rrd").write_bytes(b"RRF2")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main([str(run), "--dry-run"]) == 0
@@ -130,7 +130,7 @@ def test_web_viewer_ports_it_cannot_serve_on_are_refused(tmp_path, capsys, monke
     both printed a URL whose recording never loaded (rerun: 'port is already used')."""
     run = tmp_path / "run"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"x")
+    (run / "recording.rrd").write_bytes(b"RRF2")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main([str(run), "--dry-run", *ports]) == 2

@@ -14,7 +14,7 @@ from viz.view import main, viewer_command
 def test_the_printed_command_splits_back_into_the_command(tmp_path, capsys, name, mode):
     run = tmp_path / name / "formation-d"
     run.mkdir(parents=True)
-    (run / "recording.rrd").write_bytes(b"x")
+    (run / "recording.rrd").write_bytes(b"RRF2")
     assert main([str(run), "--dry-run", mode]) == 0
     printed = capsys.readouterr().out.splitlines()[-1]
     assert shlex.split(printed) == viewer_command(run / "recording.rrd", web=mode == "--web")
