@@ -161,7 +161,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     folder's marker, so that a next run may still replace the folder
     (:func:`pipeline.outputs.run_folder_problem`).
     """
-    from pipeline.outputs import run_folder_problem, write_run_marker
+    from pipeline.outputs import check_output_files, run_folder_problem, write_run_marker
     from pipeline.runfolder import note_output_in_place
     from pipeline.validate import not_empty
     from viz.rerun_log import log_run
@@ -169,6 +169,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     not_empty(out, "--out", "name a .rrd file, or drop --out to write RUN_DIR/recording.rrd")
     folder = Path(folder)
     _refuse_online(folder)  # before the output: its recording.rrd is the one to open
+    named = out is not None
     if out is None:
         out = folder / "recording.rrd"
         if out.exists():
@@ -179,6 +180,12 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
                          "(e.g. recording.rrd)")
     if out.is_symlink() or (out.exists() and not out.is_file()):
         raise InputError(f"--out {str(out)!r} is not a regular file; name a .rrd file")
+    try:  # before any work: a read-only folder refused the temporary file with a traceback
+        check_output_files([("--out" if named else "the recording", out)], overwrite=True)
+    except InputError as exc:
+        if not named:
+            raise InputError(f"{exc} with --out FILE.rrd") from None
+        raise
     inside = Path(out).resolve().parent == folder.resolve()
     pure_run = inside and run_folder_problem(folder) is None
     record = read_run_folder(folder)

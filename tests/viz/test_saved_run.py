@@ -249,3 +249,34 @@ def test_a_report_whose_feature_counts_are_not_counts_is_said_not_a_traceback(tm
     assert main([str(folder)]) == 2
     err = capsys.readouterr().err
     assert "links.csv" in err and "camera id out of range" in err, err
+
+
+def test_a_recording_it_cannot_write_is_said_before_any_work(tmp_path, capsys):
+    """An --out under a file, or a run folder without write permission, raised
+    NotADirectoryError / RuntimeError from the recording stream as a traceback, after the
+    folder was read; now one 'error:' line naming the place (exit 2), before any work."""
+    import os
+    import stat
+
+    folder = _save(make_record(), tmp_path / "run")
+    (tmp_path / "a-file").write_text("x")
+    assert main([str(folder), "--out", str(tmp_path / "a-file" / "x.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --out") and "is a file, not a folder" in err, err
+    assert err.count("\n") == 1
+    folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    try:
+        try:
+            (folder / "probe").touch()
+        except OSError:
+            pass
+        else:
+            (folder / "probe").unlink()
+            pytest.skip("this user writes in a folder without write permission (root)")
+        assert main([str(folder)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: the recording") and "cannot write in" in err, err
+        assert "--out FILE.rrd" in err and err.count("\n") == 1
+        assert sorted(os.listdir(folder)) == ["links.csv", "report.json", "sparse"]
+    finally:
+        folder.chmod(stat.S_IRWXU)
