@@ -127,8 +127,8 @@ def check_live(spawn: bool, connect: str | None, timeout_s: float = 1.0) -> None
     if connect is None:
         return
     url = RERUN_DEFAULT_URL if connect == "connect" else connect
-    parts = urlsplit(url.removeprefix("rerun+"))
-    try:
+    try:  # urlsplit itself refuses some URLs, e.g. an unclosed IPv6 bracket
+        parts = urlsplit(url.removeprefix("rerun+"))
         host, port = parts.hostname, parts.port
     except ValueError:
         host = port = None
