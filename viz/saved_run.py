@@ -40,8 +40,41 @@ def _camera_names(report: dict, images: dict) -> list[str]:
     """Camera ``i``'s image name: from the report of a photo run, else (rendered formations,
     whose ``sparse/`` holds every camera with image id ``i + 1``) in image-id order."""
     if "images" in report:
-        return [str(im["name"]) for im in report["images"]]
+        return [im["name"] for im in report["images"]]
     return [name for name, _ in sorted(images.items(), key=lambda kv: kv[1]["image_id"])]
+
+
+def _check_report_images(folder: Path, report: dict) -> None:
+    """InputError unless ``report.json``'s ``images`` (a photo run's; absent in a formation
+    run's) lists, per camera, its ``name``, its ``size`` ``[width, height]`` in pixels and its
+    3 x 3 ``K``: what the recording reads of an image the mapper did not register."""
+    if "images" not in report:
+        return
+    images = report["images"]
+    bad = None if isinstance(images, list) else f"is {str(images)[:60]!r}, not a list"
+    for k, im in enumerate(images if bad is None else ()):
+        if not isinstance(im, dict):
+            bad = f"entry {k} is {str(im)[:60]!r}, not an object"
+        elif not isinstance(im.get("name"), str) or not im["name"]:
+            bad = f"entry {k} has no image name ({str(im.get('name'))[:60]!r})"
+        elif not (isinstance(im.get("size"), list) and len(im["size"]) == 2 and all(
+                isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in im["size"])):
+            bad = (f"entry {k} ({im['name']}) has size {str(im.get('size'))[:60]!r}, not "
+                   "[width, height] in pixels")
+        elif not _is_matrix_3x3(im.get("K")):
+            bad = f"entry {k} ({im['name']}) has K {str(im.get('K'))[:60]!r}, not a 3 x 3 matrix"
+        if bad:
+            break
+    if bad:
+        raise InputError(f"{folder}: report.json's images {bad}; not a run's report "
+                         "(docs/DESIGN.md 'Run outputs')")
+
+
+def _is_matrix_3x3(K) -> bool:
+    return isinstance(K, list) and len(K) == 3 and all(
+        isinstance(row, list) and len(row) == 3 and all(
+            isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(x) for x in row)
+        for row in K)
 
 
 def _feature_counts(folder: Path, report: dict) -> list[int]:
@@ -77,8 +110,9 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     ------
     InputError
         A missing ``report.json``, ``links.csv`` or ``sparse/``, one that does not read
-        (``report.json`` not JSON or without ``features_per_camera``, ``sparse/`` without a
-        COLMAP model), or files that disagree (a camera count different from the report's).
+        (``report.json`` not JSON, without ``features_per_camera`` or with ``images`` entries
+        lacking a name, a size or a 3 x 3 ``K``; ``sparse/`` without a COLMAP model), or files
+        that disagree (a camera count different from the report's).
     """
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv
@@ -112,6 +146,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         raise InputError(f"{folder}: sparse/ holds no readable COLMAP model ({exc})") from exc
     images = colmap.model_images(rec)
     m = _feature_counts(folder, report)
+    _check_report_images(folder, report)
     names = _camera_names(report, images)
     try:
         ledger.conflictive_before = conflictive_links(m, ledger.links)
@@ -121,6 +156,8 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     if len(names) != len(m):
         raise InputError(f"{folder}: report.json lists {len(m)} cameras but {len(names)} images "
                          "are known; the folder's files do not belong together")
+    config = report.get("config")
+    method = str(config.get("features", "")) if isinstance(config, dict) else ""
     views, feats = [], []
     for k, name in enumerate(names):
         im = images.get(name)
@@ -136,8 +173,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         views.append(View(name=name, image=np.full((size[1], size[0]), 128, np.uint8), K=K,
                           R=R, t=t))
         feats.append(Features(kp.astype(np.float32), np.zeros((m[k], 0), np.float32),
-                              np.ones(m[k], np.float32), str(report.get("config", {})
-                                                             .get("features", ""))))
+                              np.ones(m[k], np.float32), method))
     points, point_ids, _, _ = colmap.model_points(rec)
     return RunRecord(views=views, features=feats, ledger=ledger, points=points,
                      point_tracks=point_ids, report_markdown=_markdown(report))
@@ -146,9 +182,12 @@ def read_run_folder(folder: str | Path) -> RunRecord:
 def _markdown(report: dict) -> str:
     from pipeline.evaluation.report import report_markdown
 
+    if not (all(isinstance(report.get(k), dict) for k in ("before", "after", "resolution"))
+            and all(isinstance(report.get(k) or {}, dict) for k in ("fusion", "faults"))):
+        return ""  # a report without those sections as objects: no report panel
     try:
         return report_markdown(report)
-    except KeyError:  # a report without the before/after/resolution sections
+    except KeyError:  # a report whose sections lack a figure of the table
         return ""
 
 

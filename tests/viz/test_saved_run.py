@@ -280,3 +280,51 @@ def test_a_recording_it_cannot_write_is_said_before_any_work(tmp_path, capsys):
         assert sorted(os.listdir(folder)) == ["links.csv", "report.json", "sparse"]
     finally:
         folder.chmod(stat.S_IRWXU)
+
+
+def _photo_report(record) -> dict:
+    """What a run-images report says of its images (read for the unregistered ones)."""
+    return {"n_cameras": len(record.views),
+            "features_per_camera": [len(f) for f in record.features],
+            "images": [{"name": v.name, "size": list(v.size), "K": v.K.tolist()}
+                       for v in record.views],
+            "config": {"features": "sift"},
+            "before": {"links": 1}, "after": {"links": 1}, "resolution": {}}
+
+
+@pytest.mark.parametrize("spoil, said", [
+    (lambda r: r.update(images=None), "images is 'None', not a list"),
+    (lambda r: r.update(images=[1, 2, 3]), "entry 0 is '1', not an object"),
+    (lambda r: r["images"][1].pop("name"), "entry 1 has no image name"),
+    (lambda r: r["images"][0].update(size="x"), "has size 'x'"),
+    (lambda r: r["images"][0].pop("size"), "has size 'None'"),
+    (lambda r: r["images"][2].update(K=None), "has K 'None'"),
+])
+def test_a_report_whose_images_do_not_read_is_said_not_a_traceback(tmp_path, capsys, spoil,
+                                                                    said):
+    """A photo run's report.json whose images section was not a list of {name, size, K}
+    raised TypeError / KeyError / IndexError; now one 'error:' line naming the entry."""
+    record = make_record()
+    folder = _save(record, tmp_path / "run")
+    report = _photo_report(record)
+    spoil(report)
+    (folder / "report.json").write_text(json.dumps(report))
+    assert main([str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and said in err, err
+    assert not (folder / "recording.rrd").exists()
+
+
+@pytest.mark.parametrize("spoil", [lambda r: r.update(config=None),
+                                   lambda r: r.update(before=None),
+                                   lambda r: r.update(fusion=[1])])
+def test_report_sections_that_are_not_objects_leave_the_report_panel_out(tmp_path, spoil):
+    """A config or a before / after / fusion section that is not an object raised
+    AttributeError / TypeError; what the recording reads of them is optional."""
+    record = make_record()
+    folder = _save(record, tmp_path / "run")
+    report = _photo_report(record)
+    spoil(report)
+    (folder / "report.json").write_text(json.dumps(report))
+    assert main([str(folder)]) == 0
+    assert count_strips(folder / "recording.rrd", "world/links/deleted") == N_DELETED
