@@ -106,8 +106,13 @@ def check_recording(path: Path) -> Path:
     Raises
     ------
     FileNotFoundError
-        ``path`` does not read, or is empty or another kind of file (naming it).
+        ``path`` is not a regular file, does not read, or is empty or another kind of file
+        (naming it).
     """
+    if not Path(path).is_file():  # a FIFO would block the read (and the viewer) for ever
+        raise FileNotFoundError(f"{path}: not a regular file (a folder, FIFO, device or a "
+                                "symbolic link leading nowhere); give a run folder or its "
+                                "recording.rrd")
     try:
         with open(path, "rb") as f:
             head = f.read(4)

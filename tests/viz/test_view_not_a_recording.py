@@ -32,3 +32,21 @@ def test_a_written_recording_is_opened(tmp_path, capsys, monkeypatch):
     path = log_run(tmp_path / "recording.rrd", make_record(n_cams=2, size=(32, 24)))
     assert main([str(path), "--dry-run"]) == 0
     assert f"opening {path}" in capsys.readouterr().out
+
+
+def test_a_fifo_or_folder_named_rrd_is_refused_not_read(tmp_path, capsys, monkeypatch):
+    """A FIFO named *.rrd in a run folder was opened and read: the program blocked for ever
+    (and rerun with it); a folder named *.rrd was handed to the viewer."""
+    import os
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    fifo_run = tmp_path / "fifo-run"
+    fifo_run.mkdir()
+    os.mkfifo(fifo_run / "a.rrd")
+    dir_run = tmp_path / "dir-run"
+    (dir_run / "recording.rrd").mkdir(parents=True)
+    for target in (fifo_run, dir_run):
+        assert main([str(target), "--dry-run"]) == 2
+        err = capsys.readouterr().err
+        assert "not a regular file" in err and err.count("\n") == 1, err
