@@ -129,6 +129,10 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
             raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
+        if (folder / name).is_file() != (name != "sparse"):  # a FIFO would block the read
+            what = "a folder" if name == "sparse" else "a regular file"
+            raise InputError(f"{folder}: its {name} is not {what}; not a run folder "
+                             "(docs/DESIGN.md 'Run outputs')")
     from pipeline.association import conflictive_links
 
     try:

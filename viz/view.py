@@ -39,6 +39,8 @@ def landmarks_run(folder: Path) -> bool:
     ``feature_landmarks``)."""
     import json
 
+    if not (folder / "report.json").is_file():  # a FIFO would block the read
+        return False
     try:
         report = json.loads((folder / "report.json").read_text())
     except (OSError, UnicodeDecodeError, ValueError):

@@ -328,3 +328,23 @@ def test_report_sections_that_are_not_objects_leave_the_report_panel_out(tmp_pat
     (folder / "report.json").write_text(json.dumps(report))
     assert main([str(folder)]) == 0
     assert count_strips(folder / "recording.rrd", "world/links/deleted") == N_DELETED
+
+
+@pytest.mark.parametrize("name", ["report.json", "links.csv"])
+def test_a_fifo_or_folder_in_place_of_a_run_file_is_said_not_read(tmp_path, capsys, name):
+    """A FIFO named report.json or links.csv was opened and read: viz.saved_run (and
+    viz.view, asking whether the folder is a run-landmarks one) blocked for ever; a folder
+    named report.json raised IsADirectoryError. Now one 'error:' line, exit 2."""
+    import os
+
+    from viz.view import main as view_main
+
+    for kind in ("fifo", "folder"):
+        folder = _save(make_record(), tmp_path / f"{kind}-{name}")
+        (folder / name).unlink()
+        os.mkfifo(folder / name) if kind == "fifo" else (folder / name).mkdir()
+        assert main([str(folder)]) == 2
+        err = capsys.readouterr().err
+        assert f"its {name} is not a regular file" in err and err.count("\n") == 1, err
+        assert view_main([str(folder), "--dry-run"]) == 2
+        assert "no recording.rrd" in capsys.readouterr().err
