@@ -185,6 +185,23 @@ def screenshot(url: str, timeout_s: float = 60.0, size: tuple[int, int] = (1600,
         tools.close()
 
 
+def _bad_options(out: str, timeout_s: float) -> str | None:
+    """Why the screenshot cannot be written to ``out`` or waited for ``timeout_s`` seconds,
+    or None; said before the viewer and the browser start."""
+    import math
+
+    from pipeline.errors import InputError
+    from pipeline.outputs import check_output_files
+
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        return f"--timeout {timeout_s:g}: give the seconds to wait, a number > 0 (e.g. 90)"
+    try:
+        check_output_files([("--out", out)], overwrite=True)  # the default is replaced
+    except InputError as exc:
+        return str(exc)
+    return None
+
+
 def main(argv=None) -> int:
     from viz.view import parse_with_recording, web_url
 
@@ -197,6 +214,10 @@ def main(argv=None) -> int:
     args, path = parse_with_recording(ap, argv)
     if path is None:
         return 2
+    problem = _bad_options(args.out, args.timeout)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     if find_browser() is None:
         print("error: no headless browser: install Chromium (Debian: apt-get install chromium)",
               file=sys.stderr)
@@ -208,7 +229,10 @@ def main(argv=None) -> int:
         png = screenshot(url, args.timeout)
     finally:
         stop(server)
-    Path(args.out).write_bytes(png)
+    from pipeline.runfolder import atomic_file
+
+    with atomic_file(args.out, "wb", flag="--out") as f:  # a failure leaves --out as it was
+        f.write(png)
     share = coloured_share(png)
     if share < MIN_COLOURED_SHARE:
         print(f"error: {url} shows no recording after {args.timeout:g} s ({share:.1%} of the "
