@@ -206,6 +206,12 @@ def main(argv=None) -> int:
     if bad:
         print(f"error: {bad}", file=sys.stderr)
         return 2
+    if not web and not args.dry_run and sys.platform.startswith("linux") and not has_display():
+        # the native viewer would fail with its own multi-line log and exit status 1
+        print("error: --native needs a display (DISPLAY / WAYLAND_DISPLAY is not set): drop "
+              "--native to serve the web viewer, or run it where there is a display",
+              file=sys.stderr)
+        return 2
     cmd = viewer_command(path, web, args.port, args.grpc_port)
     print(f"opening {path}")
     if web:
