@@ -1,8 +1,8 @@
 """Open a run's recording in Rerun: ``python -m viz.view [RUN_DIR | FILE.rrd]`` (``make view``).
 
 Without a path it opens the newest ``runs/**/recording.rrd``. On a machine with a display it
-starts the native viewer; without one (no ``DISPLAY`` / ``WAYLAND_DISPLAY``, e.g. over SSH) it
-serves the web viewer (``rerun FILE --web-viewer``) and prints the URL to open, with the SSH
+starts the native viewer; without one (:func:`has_display`: on Linux no ``DISPLAY`` /
+``WAYLAND_DISPLAY``, on macOS and Windows a session over SSH) it serves the web viewer (``rerun FILE --web-viewer``) and prints the URL to open, with the SSH
 port forwarding to reach it from another machine. ``--web`` / ``--native`` force either.
 
 The web viewer's page takes its data source only from its ``?url=`` parameter (the gRPC
@@ -133,8 +133,14 @@ def _names(paths: list[Path], shown: int = 4) -> str:
     return names + (f", … {len(paths) - shown} more" if len(paths) > shown else "")
 
 
-def has_display(env=None) -> bool:
+def has_display(env=None, platform: str | None = None) -> bool:
+    """Whether the native viewer can open a window here: on macOS and Windows, unless the
+    session is a remote shell (``SSH_CONNECTION`` / ``SSH_TTY``); elsewhere (Linux, BSD),
+    when ``DISPLAY`` or ``WAYLAND_DISPLAY`` names a display."""
     env = os.environ if env is None else env
+    platform = sys.platform if platform is None else platform
+    if platform.startswith(("darwin", "win32", "cygwin")):  # no DISPLAY: a window server
+        return not (env.get("SSH_CONNECTION") or env.get("SSH_TTY"))
     return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
 
 

@@ -25,6 +25,7 @@ def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, mon
     (run / "recording.rrd").write_bytes(b"RRF2")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("sys.platform", "linux")  # no display variable: no display
     assert main([str(run), "--dry-run"]) == 0
     out = capsys.readouterr().out
     # the page with its data source: the bare http://localhost:9090 opens an empty viewer
@@ -38,7 +39,7 @@ def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, mon
 
 
 def test_display_starts_the_native_viewer():
-    assert has_display({"DISPLAY": ":0"}) and not has_display({})
+    assert has_display({"DISPLAY": ":0"}, "linux") and not has_display({}, "linux")
     cmd = viewer_command(os.path.join("a", "recording.rrd"), web=False)
     assert "--web-viewer" not in cmd and cmd[-1].endswith("recording.rrd")
 
@@ -133,6 +134,7 @@ def test_web_viewer_ports_it_cannot_serve_on_are_refused(tmp_path, capsys, monke
     (run / "recording.rrd").write_bytes(b"RRF2")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("sys.platform", "linux")  # no display variable: no display
     assert main([str(run), "--dry-run", *ports]) == 2
     captured = capsys.readouterr()
     assert captured.err == message and "web viewer:" not in captured.out

@@ -35,3 +35,20 @@ def test_native_with_a_display_starts_it(run, monkeypatch):
     monkeypatch.setattr(subprocess, "call", lambda cmd: started.append(cmd) or 0)
     assert view.main([str(run)]) == 0
     assert started and "--web-viewer" not in started[0]
+
+
+@pytest.mark.parametrize("platform", ["darwin", "win32"])
+def test_macos_and_windows_open_the_native_viewer_without_display_variables(platform):
+    """macOS and Windows set no DISPLAY: make view served the web viewer there and printed
+    an SSH tunnel to use, on a desktop with a screen. Their native viewer is used unless the
+    session is a remote shell."""
+    assert view.has_display({}, platform)
+    assert not view.has_display({"SSH_CONNECTION": "10.0.0.2 50000 10.0.0.1 22"}, platform)
+    assert not view.has_display({"SSH_TTY": "/dev/ttys001"}, platform)
+
+
+@pytest.mark.parametrize("platform", ["linux", "freebsd14"])
+def test_linux_and_bsd_need_a_display_variable(platform):
+    assert not view.has_display({}, platform)
+    assert view.has_display({"DISPLAY": ":0"}, platform)
+    assert view.has_display({"WAYLAND_DISPLAY": "wayland-0"}, platform)
