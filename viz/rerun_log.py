@@ -476,10 +476,10 @@ def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
     import cv2
 
     a, b = _gray_to_rgb(record.views[i].image), _gray_to_rgb(record.views[j].image)
-    h = max(a.shape[0], b.shape[0])
+    h = _pair_height(a.shape[:2], b.shape[:2])
     sa, sb = h / a.shape[0], h / b.shape[0]
-    a = cv2.resize(a, (round(a.shape[1] * sa), h)) if sa != 1 else a
-    b = cv2.resize(b, (round(b.shape[1] * sb), h)) if sb != 1 else b
+    a = cv2.resize(a, (max(1, round(a.shape[1] * sa)), h)) if sa != 1 else a
+    b = cv2.resize(b, (max(1, round(b.shape[1] * sb)), h)) if sb != 1 else b
     canvas = np.concatenate([a, b], axis=1)
     lk = record.ledger.links
     ni = names[i] or f"cam_{i:02d}"
@@ -507,6 +507,18 @@ def _log_pair(rec: rr.RecordingStream, record: RunRecord, i: int, j: int,
         labels=np.char.add("cut by ", reason[deleted]), show_labels=False,
         radii=rr.components.Radius.ui_points(1.25)), static=True)
     return entity
+
+
+def _pair_height(shape_a: tuple[int, int], shape_b: tuple[int, int]) -> int:
+    """Height of the side-by-side pair canvas: the taller image's, lowered until the canvas is
+    at most twice as wide as the wider image (a pair of one size is never scaled). A wide
+    and a tall image (2000 x 60 beside 60 x 2000) would otherwise make a canvas 33 times
+    wider than either, beyond what JPEG encodes (65500 px), and store it raw."""
+    (ha, wa), (hb, wb) = shape_a, shape_b
+    h = max(ha, hb)
+    width = wa * h / ha + wb * h / hb
+    limit = 2 * max(wa, wb)
+    return max(1, int(h * limit / width)) if width > limit else h
 
 
 def _even_sample(n: int, k: int) -> np.ndarray:
