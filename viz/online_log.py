@@ -39,7 +39,7 @@ def _pair_strips(centres, ci, cj) -> tuple[list, list]:
     key = np.stack([ci, cj], axis=1)
     pairs, counts = np.unique(key, axis=0, return_counts=True)
     strips = [np.stack([centres[a], centres[b]]) for a, b in pairs.tolist()]
-    return strips, [f"{int(c)} links" for c in counts]
+    return strips, [f"{int(c)} link" if c == 1 else f"{int(c)} links" for c in counts]
 
 
 def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
