@@ -62,7 +62,8 @@ def _check_report_images(folder: Path, report: dict) -> None:
             bad = (f"entry {k} ({im['name']}) has size {str(im.get('size'))[:60]!r}, not "
                    "[width, height] in pixels")
         elif not _is_matrix_3x3(im.get("K")):
-            bad = f"entry {k} ({im['name']}) has K {str(im.get('K'))[:60]!r}, not a 3 x 3 matrix"
+            bad = (f"entry {k} ({im['name']}) has K {str(im.get('K'))[:60]!r}, not an "
+                   "invertible 3 x 3 camera matrix")
         if bad:
             break
     if bad:
@@ -71,10 +72,12 @@ def _check_report_images(folder: Path, report: dict) -> None:
 
 
 def _is_matrix_3x3(K) -> bool:
+    """Whether ``K`` is a camera matrix: 3 x 3 finite numbers, invertible (the recording
+    back-projects keypoints through its inverse)."""
     return isinstance(K, list) and len(K) == 3 and all(
         isinstance(row, list) and len(row) == 3 and all(
             isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(x) for x in row)
-        for row in K)
+        for row in K) and np.linalg.cond(np.asarray(K, float)) < 1e12
 
 
 def _feature_counts(folder: Path, report: dict) -> list[int]:
@@ -111,8 +114,8 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     InputError
         A missing ``report.json``, ``links.csv`` or ``sparse/``, one that does not read
         (``report.json`` not JSON, without ``features_per_camera`` or with ``images`` entries
-        lacking a name, a size or a 3 x 3 ``K``; ``sparse/`` without a COLMAP model), or files
-        that disagree (a camera count different from the report's).
+        lacking a name, a size or an invertible 3 x 3 ``K``; ``sparse/`` without a COLMAP
+        model), or files that disagree (a camera count different from the report's).
     """
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv

@@ -299,6 +299,8 @@ def _photo_report(record) -> dict:
     (lambda r: r["images"][0].update(size="x"), "has size 'x'"),
     (lambda r: r["images"][0].pop("size"), "has size 'None'"),
     (lambda r: r["images"][2].update(K=None), "has K 'None'"),
+    (lambda r: r["images"][2].update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 1]], name="unregistered"),
+     "not an invertible 3 x 3 camera matrix"),
 ])
 def test_a_report_whose_images_do_not_read_is_said_not_a_traceback(tmp_path, capsys, spoil,
                                                                     said):
