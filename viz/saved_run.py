@@ -119,6 +119,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     """
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv
+    from pipeline.inputs.photos import MAX_IMAGE_PIXELS
     from viz.view import LANDMARKS_RUN_NOTE, landmarks_run
 
     folder = Path(folder)
@@ -177,6 +178,11 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         if len(kp) != m[k]:
             raise InputError(f"{folder}: camera {k} ({name}) has {len(kp)} keypoints in sparse/ "
                              f"but {m[k]} features in report.json")
+        if int(size[0]) * int(size[1]) > MAX_IMAGE_PIXELS:  # its blank image would not fit
+            raise InputError(f"{folder}: camera {k} ({name}) is {size[0]} x {size[1]} pixels "
+                             f"in {'sparse/' if im is not None else 'report.json'}, more than "
+                             f"any image a run reads ({MAX_IMAGE_PIXELS:,} pixels); the "
+                             "folder's files are not a run's")
         views.append(View(name=name, image=np.full((size[1], size[0]), 128, np.uint8), K=K,
                           R=R, t=t))
         feats.append(Features(kp.astype(np.float32), np.zeros((m[k], 0), np.float32),

@@ -350,3 +350,20 @@ def test_a_fifo_or_folder_in_place_of_a_run_file_is_said_not_read(tmp_path, caps
         assert f"its {name} is not a regular file" in err and err.count("\n") == 1, err
         assert view_main([str(folder), "--dry-run"]) == 2
         assert "no recording.rrd" in capsys.readouterr().err
+
+
+def test_an_image_larger_than_any_run_reads_is_refused_not_allocated(tmp_path, capsys):
+    """The recording draws each camera on a blank image of its size: a report.json size of
+    100000 x 100000 made viz.saved_run allocate 10 GB (killed by the kernel). A size above
+    what a run reads (pipeline.inputs.photos.MAX_IMAGE_PIXELS) is now an input error."""
+    from pipeline.inputs.photos import MAX_IMAGE_PIXELS
+
+    record = make_record()
+    folder = _save(record, tmp_path / "run")
+    report = _photo_report(record)
+    report["images"][2].update(name="unregistered", size=[20_000, MAX_IMAGE_PIXELS // 20_000 + 1])
+    (folder / "report.json").write_text(json.dumps(report))
+    assert main([str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert "camera 2 (unregistered) is 20000 x 5001 pixels in report.json" in err, err
+    assert err.count("\n") == 1 and not (folder / "recording.rrd").exists()
