@@ -156,11 +156,6 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     m = _feature_counts(folder, report)
     _check_report_images(folder, report)
     names = _camera_names(report, images)
-    try:
-        ledger.conflictive_before = conflictive_links(m, ledger.links)
-    except InputError as exc:  # a link naming a camera or feature report.json does not list
-        raise InputError(f"{folder / 'links.csv'}: {exc}; the folder's links.csv and "
-                         "report.json do not belong together") from None
     if len(names) != len(m):
         raise InputError(f"{folder}: report.json lists {len(m)} cameras but {len(names)} images "
                          "are known; the folder's files do not belong together")
@@ -174,19 +169,29 @@ def read_run_folder(folder: str | Path) -> RunRecord:
         else:
             meta = report["images"][k]
             size, K, R, t = tuple(meta["size"]), np.asarray(meta["K"], float), None, None
-            kp = np.full((m[k], 2), np.nan)
-        if len(kp) != m[k]:
-            raise InputError(f"{folder}: camera {k} ({name}) has {len(kp)} keypoints in sparse/ "
-                             f"but {m[k]} features in report.json")
+            kp = None  # unknown: as many as report.json counts, checked below
         if int(size[0]) * int(size[1]) > MAX_IMAGE_PIXELS:  # its blank image would not fit
             raise InputError(f"{folder}: camera {k} ({name}) is {size[0]} x {size[1]} pixels "
                              f"in {'sparse/' if im is not None else 'report.json'}, more than "
                              f"any image a run reads ({MAX_IMAGE_PIXELS:,} pixels); the "
                              "folder's files are not a run's")
+        if kp is None and m[k] > int(size[0]) * int(size[1]):  # nor would its keypoints
+            raise InputError(f"{folder}: camera {k} ({name}) has {m[k]:,} features in "
+                             f"report.json, more than its {size[0]} x {size[1]} pixels; the "
+                             "folder's files are not a run's")
+        kp = np.full((m[k], 2), np.nan) if kp is None else kp
+        if len(kp) != m[k]:
+            raise InputError(f"{folder}: camera {k} ({name}) has {len(kp)} keypoints in sparse/ "
+                             f"but {m[k]} features in report.json")
         views.append(View(name=name, image=np.full((size[1], size[0]), 128, np.uint8), K=K,
                           R=R, t=t))
         feats.append(Features(kp.astype(np.float32), np.zeros((m[k], 0), np.float32),
                               np.ones(m[k], np.float32), method))
+    try:
+        ledger.conflictive_before = conflictive_links(m, ledger.links)
+    except InputError as exc:  # a link naming a camera or feature report.json does not list
+        raise InputError(f"{folder / 'links.csv'}: {exc}; the folder's links.csv and "
+                         "report.json do not belong together") from None
     points, point_ids, _, _ = colmap.model_points(rec)
     return RunRecord(views=views, features=feats, ledger=ledger, points=points,
                      point_tracks=point_ids, report_markdown=_markdown(report))

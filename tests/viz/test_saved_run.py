@@ -367,3 +367,25 @@ def test_an_image_larger_than_any_run_reads_is_refused_not_allocated(tmp_path, c
     err = capsys.readouterr().err
     assert "camera 2 (unregistered) is 20000 x 5001 pixels in report.json" in err, err
     assert err.count("\n") == 1 and not (folder / "recording.rrd").exists()
+
+
+def test_a_feature_count_beyond_the_image_is_refused_before_any_allocation(tmp_path, capsys):
+    """report.json's features_per_camera sized every per-feature array: the conflictive sets
+    were computed over them before any count was checked (10**9 features for one camera
+    asked numpy for 3.7 GiB, then more), and an unregistered image got that many unknown
+    keypoints. Counts are now checked first: against sparse/ for a registered image, against
+    the image's pixels for one the mapper did not register."""
+    record = make_record()
+    folder = _save(record, tmp_path / "run")
+    report = _photo_report(record)
+    report["images"][2]["name"] = "unregistered"
+    report["features_per_camera"][2] = 10**6  # more than its 320 x 240 pixels
+    (folder / "report.json").write_text(json.dumps(report))
+    assert main([str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert "camera 2 (unregistered) has 1,000,000 features in report.json, more than its " \
+           "320 x 240 pixels" in err, err
+    report["images"][2]["name"] = record.views[2].name
+    (folder / "report.json").write_text(json.dumps(report))
+    assert main([str(folder)]) == 2
+    assert "keypoints in sparse/ but 1000000 features in report.json" in capsys.readouterr().err
