@@ -223,6 +223,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     from pipeline.validate import not_empty
     from viz.rerun_log import log_run
 
+    not_empty(folder, "RUN_DIR", "give the run folder (a run's --out)")  # not the current one
     not_empty(out, "--out", "name a .rrd file, or drop --out to write RUN_DIR/recording.rrd")
     folder = Path(folder)
     _refuse_online(folder)  # before the output: its recording.rrd is the one to open

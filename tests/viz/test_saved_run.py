@@ -389,3 +389,14 @@ def test_a_feature_count_beyond_the_image_is_refused_before_any_allocation(tmp_p
     (folder / "report.json").write_text(json.dumps(report))
     assert main([str(folder)]) == 2
     assert "keypoints in sparse/ but 1000000 features in report.json" in capsys.readouterr().err
+
+
+def test_an_empty_run_dir_is_named_as_empty_not_read_as_the_current_folder(tmp_path, capsys,
+                                                                         monkeypatch):
+    """python -m viz.saved_run "$UNSET" read the current folder (Path('') is '.') and, in a
+    run folder, wrote its recording there; now 'RUN_DIR '' is empty', exit 2."""
+    folder = _save(make_record(), tmp_path / "run")
+    monkeypatch.chdir(folder)
+    assert main([""]) == 2
+    assert capsys.readouterr().err.startswith("error: RUN_DIR '' is empty")
+    assert not (folder / "recording.rrd").exists()
