@@ -193,3 +193,52 @@ def test_robots_started_with_team_files_of_other_rules_both_stop_in_the_handshak
     finally:
         for rb in robots:
             rb.close()
+
+
+class _CountedHellos:
+    """A robot's Zenoh session that counts its ``hello`` puts per neighbour."""
+
+    def __init__(self, session):
+        self._session, self.to = session, {}
+
+    def put(self, key_expr, payload):
+        if "/hello/" in str(key_expr):
+            dst = int(str(key_expr).rsplit("/", 1)[1])
+            self.to[dst] = self.to.get(dst, 0) + 1
+        return self._session.put(key_expr, payload)
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+
+def test_hellos_to_a_neighbour_that_never_starts_are_paced():
+    """Robot 0 waits 3 s for robot 2, which never starts: its hellos to robot 2 come ever
+    more slowly (0.05 s, doubling up to 1 s: about 7), where it sent one on every turn of its
+    loop (every 0.05 s at most, and on every hello it received: 60 or more), a cost that
+    grew with the square of a robot's neighbours in a dense team."""
+    team = make_team("paced", [[0, 1], [0, 2]], {"kind": "links", "links": "in.csv",
+                                                  "features_per_camera": [1, 1, 1]}, n=3)
+    robots = [ZenohTransport(team, i, round_timeout_s=30.0, log=lambda s: None)
+              for i in range(2)]
+    counted = robots[0].session = _CountedHellos(robots[0].session)
+    errors = []
+
+    def run(i):
+        try:
+            robots[i].handshake(timeout_s=3.0)
+        except Exception as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(2)]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert not errors, errors
+        assert robots[0].written_off == {2: "start"} and not robots[1].written_off
+        assert 3 <= counted.to[2] <= 12, counted.to
+        assert counted.to[1] <= 12, counted.to
+    finally:
+        for r in robots:
+            r.close()
