@@ -242,3 +242,21 @@ def test_hellos_to_a_neighbour_that_never_starts_are_paced():
     finally:
         for r in robots:
             r.close()
+
+
+def test_the_beat_period_follows_the_round_timeout():
+    """A thirtieth of the silence that writes a neighbour off, from 0.2 s to 5 s: every 1 s at
+    the default 30 s, where it was 0.2 s whatever the timeout (500 beats a second from a
+    robot with 100 neighbours)."""
+    from pipeline.transport.zenoh_transport import beat_period
+
+    assert beat_period(30.0) == 1.0
+    assert beat_period(2.0) == 0.2 and beat_period(0.5) == 0.2
+    assert beat_period(3600.0) == 5.0
+    team = make_team("beats", [[0, 1]], {"kind": "links", "links": "in.csv",
+                                         "features_per_camera": [1, 1]}, n=2)
+    robot = ZenohTransport(team, 0, round_timeout_s=60.0, log=lambda s: None)
+    try:
+        assert robot.beat_s == 2.0
+    finally:
+        robot.close()
