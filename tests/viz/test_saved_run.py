@@ -292,6 +292,17 @@ def _photo_report(record) -> dict:
             "before": {"links": 1}, "after": {"links": 1}, "resolution": {}}
 
 
+def _photo_run(tmp_path, spoil):
+    """A saved run folder whose report.json is a photo run's (:func:`_photo_report`) as
+    ``spoil(report)`` leaves it; the folder and its record."""
+    record = make_record()
+    folder = _save(record, tmp_path / "run")
+    report = _photo_report(record)
+    spoil(report)
+    (folder / "report.json").write_text(json.dumps(report))
+    return folder, record
+
+
 @pytest.mark.parametrize("spoil, said", [
     (lambda r: r.update(images=None), "images is 'None', not a list"),
     (lambda r: r.update(images=[1, 2, 3]), "entry 0 is '1', not an object"),
@@ -306,11 +317,7 @@ def test_a_report_whose_images_do_not_read_is_said_not_a_traceback(tmp_path, cap
                                                                     said):
     """A photo run's report.json whose images section was not a list of {name, size, K}
     raised TypeError / KeyError / IndexError; now one 'error:' line naming the entry."""
-    record = make_record()
-    folder = _save(record, tmp_path / "run")
-    report = _photo_report(record)
-    spoil(report)
-    (folder / "report.json").write_text(json.dumps(report))
+    folder, _ = _photo_run(tmp_path, spoil)
     assert main([str(folder)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and said in err, err
@@ -323,11 +330,7 @@ def test_a_report_whose_images_do_not_read_is_said_not_a_traceback(tmp_path, cap
 def test_report_sections_that_are_not_objects_leave_the_report_panel_out(tmp_path, spoil):
     """A config or a before / after / fusion section that is not an object raised
     AttributeError / TypeError; what the recording reads of them is optional."""
-    record = make_record()
-    folder = _save(record, tmp_path / "run")
-    report = _photo_report(record)
-    spoil(report)
-    (folder / "report.json").write_text(json.dumps(report))
+    folder, _ = _photo_run(tmp_path, spoil)
     assert main([str(folder)]) == 0
     assert count_strips(folder / "recording.rrd", "world/links/deleted") == N_DELETED
 
@@ -358,11 +361,8 @@ def test_an_image_larger_than_any_run_reads_is_refused_not_allocated(tmp_path, c
     what a run reads (pipeline.inputs.photos.MAX_IMAGE_PIXELS) is now an input error."""
     from pipeline.inputs.photos import MAX_IMAGE_PIXELS
 
-    record = make_record()
-    folder = _save(record, tmp_path / "run")
-    report = _photo_report(record)
-    report["images"][2].update(name="unregistered", size=[20_000, MAX_IMAGE_PIXELS // 20_000 + 1])
-    (folder / "report.json").write_text(json.dumps(report))
+    folder, _ = _photo_run(tmp_path, lambda r: r["images"][2].update(
+        name="unregistered", size=[20_000, MAX_IMAGE_PIXELS // 20_000 + 1]))
     assert main([str(folder)]) == 2
     err = capsys.readouterr().err
     assert "camera 2 (unregistered) is 20000 x 5001 pixels in report.json" in err, err
@@ -375,16 +375,16 @@ def test_a_feature_count_beyond_the_image_is_refused_before_any_allocation(tmp_p
     asked numpy for 3.7 GiB, then more), and an unregistered image got that many unknown
     keypoints. Counts are now checked first: against sparse/ for a registered image, against
     the image's pixels for one the mapper did not register."""
-    record = make_record()
-    folder = _save(record, tmp_path / "run")
-    report = _photo_report(record)
-    report["images"][2]["name"] = "unregistered"
-    report["features_per_camera"][2] = 10**6  # more than its 320 x 240 pixels
-    (folder / "report.json").write_text(json.dumps(report))
+    def spoil(report):
+        report["images"][2]["name"] = "unregistered"
+        report["features_per_camera"][2] = 10**6  # more than its 320 x 240 pixels
+
+    folder, record = _photo_run(tmp_path, spoil)
     assert main([str(folder)]) == 2
     err = capsys.readouterr().err
     assert "camera 2 (unregistered) has 1,000,000 features in report.json, more than its " \
            "320 x 240 pixels" in err, err
+    report = json.loads((folder / "report.json").read_text())
     report["images"][2]["name"] = record.views[2].name
     (folder / "report.json").write_text(json.dumps(report))
     assert main([str(folder)]) == 2
