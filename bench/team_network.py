@@ -166,6 +166,35 @@ def summarize(raw: dict, edges, reference: dict | None) -> dict:
     }
 
 
+def table(out: dict) -> list[str]:
+    """The saved results as the README's markdown table, one row per team and case: wall,
+    rounds, outcomes, conflictive sets after, links lost (of the unlimited run's), links
+    decided otherwise, MB counted / packets / on the cables, the busiest cable's MB (both
+    directions) and the seconds its busiest direction alone needs at the cap."""
+    lines = ["| team | case | wall | rounds | outcomes | conflictive sets after | links lost | "
+             "decided otherwise | MB counted / packets / on the cables | busiest cable | "
+             "bytes alone need |",
+             "|---|---|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
+    for name, team in out["teams"].items():
+        label = "d" if name == "d" else f"{name}, {team['robots']}"
+        links = next((r["links"] for r in team["rows"] if r["case"] == "unlimited"), None)
+        for r in team["rows"]:
+            counts = {}
+            for o in r["outcomes"].values():
+                counts[o] = counts.get(o, 0) + 1
+            outcomes = ", ".join(f"{o} {k}" for o, k in sorted(counts.items())) or "none"
+            busiest = max((v["socket"] for v in r["per_link"].values()), default=0)
+            lost = "–" if r["links_lost"] is None else f"{r['links_lost']} of {links}"
+            need = "–" if r["bytes_alone_need_s"] is None else f"{r['bytes_alone_need_s']:.2f} s"
+            lines.append(
+                f"| {label} | {r['case']} | {r['wall_s']:.2f} s | {r['rounds']} | {outcomes} | "
+                f"{r['conflictive_sets_after']} | {lost} | "
+                f"{'–' if r['links_decided_differently'] is None else r['links_decided_differently']}"
+                f" | {r['bytes_counted'] / 1e6:.2f} / {r['bytes_packets'] / 1e6:.2f} / "
+                f"{r['bytes_socket'] / 1e6:.2f} | {busiest / 1e6:.2f} MB | {need} |")
+    return lines
+
+
 @one_line_errors
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
@@ -183,7 +212,16 @@ def main(argv=None) -> int:
     ap.add_argument("--limit-s", type=float, default=900.0,
                     help="a robot still running this long after the start counts as hung")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-team-network"))
+    ap.add_argument("--reprint", metavar="RESULTS_JSON",
+                    help="print the table of a saved results.json and stop (runs nothing)")
     args = ap.parse_args(argv)
+    if args.reprint:
+        try:
+            saved = json.loads(Path(args.reprint).read_text())
+            print("\n".join(table(saved)))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            ap.error(f"--reprint {args.reprint}: not this bench's results.json ({exc})")
+        return 0
     if problem := results_folder_problem(args.out):
         ap.error(problem)
     for flag, given, known in (("--teams", args.teams, ("d", "ring2")),
@@ -240,6 +278,7 @@ def main(argv=None) -> int:
     Path(args.out).mkdir(parents=True, exist_ok=True)
     write_json_atomic(Path(args.out) / "results.json", json.loads(json.dumps(out)))
     print(f"saved {args.out}/results.json ({out['bench_s']} s)")
+    print("\n".join(table(out)))
     return 0
 
 

@@ -70,3 +70,43 @@ def test_a_sigterm_removes_the_namespaces_as_ctrl_c_does(tmp_path):
     finally:
         proc.kill()
     assert (tmp_path / "removed").exists()
+
+
+def _row(case, wall, lost, need=None, outcomes=("done", "done")):
+    return {"case": case, "wall_s": wall, "rounds": 7, "links": 10,
+            "outcomes": {str(i): o for i, o in enumerate(outcomes)},
+            "conflictive_sets_after": 0, "links_lost": lost,
+            "links_decided_differently": 0 if lost is not None else None,
+            "bytes_counted": 2_000_000, "bytes_packets": 1_500_000, "bytes_socket": 1_600_000,
+            "bytes_alone_need_s": need,
+            "per_link": {"0-1": {"socket": 1_000_000}, "1-2": {"socket": 600_000}}}
+
+
+def test_the_table_is_printed_from_the_saved_results(tmp_path, capsys):
+    """The README's table comes from the bench: at the end of a run, and again from a saved
+    results.json with --reprint (nothing run)."""
+    import json
+
+    bench = load_bench("team_network")
+    saved = {"teams": {"ring2": {"robots": 3, "rows": [
+        _row("unlimited", 1.234, 0), _row("1mbit", 2.5, 0, need=0.456),
+        _row("kill", 1.0, 4, outcomes=("cut", "done", "cut"))]}}}
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(saved))
+    assert bench.main(["--reprint", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2] == ("| ring2, 3 | unlimited | 1.23 s | 7 | done 2 | 0 | 0 of 10 | 0 | "
+                        "2.00 / 1.50 / 1.60 | 1.00 MB | – |")
+    assert lines[3].endswith("| 0.46 s |")
+    assert "| cut 2, done 1 | 0 | 4 of 10 |" in lines[4]
+    assert len(lines) == 5
+
+
+def test_a_reprint_of_another_file_is_refused(tmp_path, capsys):
+    bench = load_bench("team_network")
+    path = tmp_path / "results.json"
+    path.write_text('{"size": [640, 480]}')
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--reprint", str(path)])
+    assert exc.value.code == 2
+    assert "not this bench's results.json" in capsys.readouterr().err
