@@ -175,6 +175,12 @@ def _previous(out: Path) -> dict:
     return results
 
 
+def _fixed(x, digits: int) -> str:
+    """``x`` with ``digits`` decimals, or ``–`` where the figure does not exist (no batch run
+    to compare with, a step with no memory)."""
+    return "–" if x is None else f"{x:.{digits}f}"
+
+
 @one_line_errors
 def main(argv=None) -> int:
     """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
@@ -244,14 +250,14 @@ def main(argv=None) -> int:
         s = r["summary"]
         ls = s["last_step"]
         print(f"n={n}: conflict-free every step {s['conflict_free_every_step']}; step "
-              f"{s['compared_step']}: online/batch wall {ls['wall_ratio']}, bytes "
-              f"{ls['bytes_ratio']}; robot memory at step {s['steps']} / at step "
-              f"{s['memory_reference_step']} (window + hold): {s['memory_growth']}", flush=True)
+              f"{s['compared_step']}: online/batch wall {_fixed(ls['wall_ratio'], 4)}, bytes "
+              f"{_fixed(ls['bytes_ratio'], 4)}; robot memory at step {s['steps']} / at step "
+              f"{s['memory_reference_step']} (window + hold): {_fixed(s['memory_growth'], 3)}", flush=True)
         print("  robot memory (MB) / stage state (kB) / retired entries, by step: " + ", ".join(
             f"{c['step']}: {c['robot_memory_bytes_max'] / 1e6:.3f} / "
             f"{c['robot_state_bytes_max'] / 1e3:.1f} / {c['retired_entries_max']}"
             for c in s["memory_curve"]) + f"; state last / at step {s['steps'] // 2}: "
-            f"{s['state_growth_second_half']}", flush=True)
+            f"{_fixed(s['state_growth_second_half'], 3)}", flush=True)
         h = s["history"]
         print(f"  history check: {h['cut']} links cut, {h['bytes'] / 1e6:.3f} MB"
               + (f", {h['rounds']} rounds of the robots' protocol" if h["rounds"] else
