@@ -324,16 +324,23 @@ def test_ctrl_c_that_a_library_drops_while_it_loads_is_still_an_interrupt():
 
 @pytest.mark.parametrize("delay", [0.1, 0.25, 0.5])
 def test_ctrl_c_in_the_first_second_ends_with_130_and_no_traceback(tmp_path, delay):
-    """A real process, interrupted while Python loads NumPy, SciPy and the command (after
-    the interpreter's own start, which runs before any of the program's code)."""
+    """A real process, interrupted while Python loads NumPy, SciPy and the command: ``delay``
+    seconds after the interpreter's own start (which runs before any of the program's code: a
+    Ctrl-C there is Python's, e.g. "Fatal Python error: init_import_site" on a loaded
+    machine, so the process says when it is past it, and the clock starts then)."""
     import signal
     import time
 
     src = tmp_path / "in.csv"
     src.write_text("0,0,1,0\n1,0,2,0\n0,1,2,0\n")
-    proc = subprocess.Popen([sys.executable, "-m", "pipeline", "resolve", "--links", str(src),
-                             "--out", str(tmp_path / "o.csv")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    argv = ["pipeline", "resolve", "--links", str(src), "--out", str(tmp_path / "o.csv")]
+    start = ("import runpy, sys\n"
+             f"sys.argv = {argv!r}\n"
+             "sys.stdout.write('started\\n'); sys.stdout.flush()\n"
+             "runpy.run_module('pipeline', run_name='__main__', alter_sys=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", start], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    assert proc.stdout.readline() == "started\n"
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
