@@ -1,6 +1,7 @@
 """Matching: from images to links between neighbours' features.
 
-Features of one camera (:mod:`.features`), mutual ratio-test matches checked by epipolar
+The names of its variants (:mod:`.methods`: feature methods, pair matchers), features of one
+camera (:mod:`.features`, one detector per method), mutual ratio-test matches checked by epipolar
 RANSAC on each communication edge (:mod:`.pairs`), neighbours by image similarity for
 ``knn:K`` graphs (:mod:`.retrieval`), each link's local evidence (:mod:`.link_evidence`),
 labelled-landmark matching (:mod:`.landmarks`) and the distributed vote between matchers

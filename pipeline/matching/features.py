@@ -25,28 +25,20 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from pipeline.errors import InputError
+from pipeline.matching.methods import COLMAP_SIFT, FEATURE_METHODS, MAX_FEATURES, MIN_FEATURES
 from pipeline.types import Features, View
 
-__all__ = ["METHODS", "available_methods", "check_method", "extract", "extract_all",
+__all__ = ["METHODS", "DETECTORS", "COLMAP_SIFT", "available_methods", "check_method", "extract", "extract_all",
            "merge_colocated", "surf_available", "root_sift", "photo_max_features",
            "PHOTO_CONTRAST_THRESHOLD", "MIN_FEATURES", "MAX_FEATURES"]
 
-#: feature methods this module knows; ``surf`` needs an OpenCV build with non-free algorithms
-METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
-
-#: COLMAP's SIFT (pycolmap, :mod:`pipeline.colmap.sift`) rather than OpenCV's
-COLMAP_SIFT = "colmap-sift"
+#: feature methods this module knows (:mod:`pipeline.matching.methods`, one detector each in
+#: :data:`DETECTORS`); ``surf`` needs an OpenCV build with non-free algorithms
+METHODS = FEATURE_METHODS
 
 #: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
 MERGE_RADIUS_PX = 0.5
 
-#: Fewest features per image a run accepts (an epipolar RANSAC needs 7 or 8 matches).
-MIN_FEATURES = 8
-
-#: Most features per image a run accepts: over a hundred times COLMAP's default of 8192, and
-#: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
-#: or overflow (beyond 2**31: a traceback).
-MAX_FEATURES = 1_000_000
 
 #: images with a side shorter than this give zero features (smaller than any descriptor patch)
 MIN_IMAGE_PX = 16
@@ -124,30 +116,44 @@ def check_method(method: str) -> None:
     _detector(method, 2000)
 
 
+def _sift(max_features: int, contrast_threshold: float | None):
+    if contrast_threshold is not None:
+        return cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
+    return cv2.SIFT_create(nfeatures=max_features)
+
+
+def _surf(max_features: int, contrast_threshold: float | None):
+    try:
+        return cv2.xfeatures2d.SURF_create()
+    except (cv2.error, AttributeError):
+        raise InputError(
+            "feature method 'surf' is not available: this OpenCV build has no non-free "
+            "algorithms (OPENCV_ENABLE_NONFREE); use one of "
+            f"{', '.join(available_methods())}") from None
+
+
+#: the detector of each feature method, ``(max_features, contrast_threshold) -> detector``
+#: (the contrast threshold is SIFT's; ``None`` for :data:`COLMAP_SIFT`, which is not OpenCV's:
+#: :mod:`pipeline.colmap.sift` extracts it); AKAZE moved to contrib in OpenCV 5
+#: (``cv2.AKAZE_create`` no longer exists) and takes no feature budget
+DETECTORS = {
+    "sift": _sift,
+    "orb": lambda max_features, _: cv2.ORB_create(nfeatures=max_features),
+    "akaze": lambda _n, _c: cv2.xfeatures2d.AKAZE_create(),
+    "surf": _surf,
+    COLMAP_SIFT: lambda _n, _c: None,
+}
+assert tuple(DETECTORS) == METHODS
+
+
 def _detector(method: str, max_features: int, contrast_threshold: float | None = None):
     """The OpenCV detector for ``method`` (``None`` for :data:`COLMAP_SIFT`, which is not
     OpenCV's); raises :class:`InputError` for unknown/unavailable ones."""
-    if method == COLMAP_SIFT:
-        return None
-    if method == "sift":
-        if contrast_threshold is not None:
-            return cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
-        return cv2.SIFT_create(nfeatures=max_features)
-    if method == "orb":
-        return cv2.ORB_create(nfeatures=max_features)
-    if method == "akaze":
-        # OpenCV 5 moved AKAZE to contrib (cv2.AKAZE_create no longer exists)
-        return cv2.xfeatures2d.AKAZE_create()
-    if method == "surf":
-        try:
-            return cv2.xfeatures2d.SURF_create()
-        except (cv2.error, AttributeError):
-            raise InputError(
-                "feature method 'surf' is not available: this OpenCV build has no non-free "
-                "algorithms (OPENCV_ENABLE_NONFREE); use one of "
-                f"{', '.join(available_methods())}") from None
-    raise InputError(f"unknown feature method {method!r}; choose one of "
-                     f"{', '.join(available_methods())}")
+    make = DETECTORS.get(method) if isinstance(method, str) else None
+    if make is None:
+        raise InputError(f"unknown feature method {method!r}; choose one of "
+                         f"{', '.join(available_methods())}")
+    return make(max_features, contrast_threshold)
 
 
 def _gray(image_or_view) -> np.ndarray:

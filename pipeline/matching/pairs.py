@@ -31,15 +31,13 @@ import numpy as np
 
 from pipeline.commgraph import check_comm_edges
 from pipeline.errors import InputError
+from pipeline.matching.methods import MATCHERS
 from pipeline.types import Features, PairMatches, View
 
 __all__ = ["mutual_ratio_matches", "epipolar_filter", "sampson_error_px", "lowe_ratios",
            "match_pair", "match_edges", "photo_threshold_px", "MIN_MATCHES", "MATCHERS",
            "COLMAP_MIN_INLIERS", "COLMAP_MAX_ERROR_PX", "check_matcher", "COLMAP_MATCHER_FEATURES", "step_pairs"]
 
-#: pair matchers: OpenCV + numpy (:func:`mutual_ratio_matches`, :func:`epipolar_filter`) or
-#: COLMAP's (:func:`pipeline.colmap.sift.match_pairs`)
-MATCHERS = ("opencv", "colmap")
 #: COLMAP's defaults for its verification: ``TwoViewGeometryOptions.min_num_inliers`` and
 #: ``ransac.max_error`` (pixels)
 COLMAP_MIN_INLIERS, COLMAP_MAX_ERROR_PX = 15, 4.0

@@ -85,6 +85,7 @@ import numpy as np
 
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
+from pipeline.matching.methods import FEATURE_METHODS, MATCHERS, MAX_FEATURES
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
            "round_timeout_options",
@@ -136,11 +137,6 @@ WIRE_FORMS = ("compact", "plain")
 #: and extract one kind of descriptor: a neighbour's features are matched as its own kind)
 TEAM_ONLY_OPTIONS = ("resolution", "solve_small_sets", "bundle_budget", "gather_conflictive",
                      "gather_free", "fusion", "features", "rootsift")
-#: feature methods a team file may name (``pipeline.matching.features.METHODS``; whether this machine's
-#: OpenCV offers one is checked when the robot extracts)
-FEATURE_METHODS = ("sift", "orb", "akaze", "surf", "colmap-sift")
-#: pair matchers a team file may name (``pipeline.matching.pairs.MATCHERS``)
-MATCHERS = ("opencv", "colmap")
 #: environment variable in which the launcher passes the wall-clock time (``time.time()``) at
 #: which it started a robot process, so the robot can report how long its start took
 LAUNCHED_AT_ENV = "FORMATION_MATCH_LAUNCHED_AT"
@@ -665,8 +661,6 @@ def _check_options(opts: dict, where: str) -> None:
         if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
             raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "
                              f"(0, {MAX_TIMEOUT_S:g}]")
-    from pipeline.matching.features import MAX_FEATURES
-
     for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
         v = opts.get(k, 8)
         if k == "max_features" and v is None:

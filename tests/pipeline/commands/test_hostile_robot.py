@@ -283,11 +283,31 @@ def test_an_address_not_of_this_host_is_named_as_such(team_dir):
     assert "port is in use" not in lines[0] and ".cargo" not in lines[0]
 
 
-def test_team_feature_methods_are_the_pipelines():
-    from pipeline.matching.features import METHODS
-    from pipeline.team.teamfile import FEATURE_METHODS
+def test_a_team_file_names_its_feature_method_from_the_pipelines_list_without_opencv():
+    """One list of feature methods (pipeline.matching.methods): a team file naming an unknown
+    one is refused with that list, and checking it loads no OpenCV (the observer and the
+    launcher parse team files)."""
+    import json
+    import subprocess
+    import sys
 
-    assert FEATURE_METHODS == METHODS
+    doc = {"version": 1, "name": "methods", "comm_edges": [[0, 1]],
+           "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:17001"},
+                      {"id": 1, "endpoint": "tcp/127.0.0.1:17002"}],
+           "data": {"kind": "links", "links": "in.csv", "features_per_camera": [1, 1]},
+           "options": {"features": "brisk"}}
+    code = ("import json, sys\n"
+            "from pipeline.errors import InputError\n"
+            "from pipeline.team.teamfile import parse_team\n"
+            "try:\n"
+            f"    parse_team({doc!r})\n"
+            "except InputError as exc:\n"
+            "    print(json.dumps([str(exc), 'cv2' in sys.modules]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    message, opencv = json.loads(out.stdout.strip().splitlines()[-1])
+    assert "option features 'brisk' must be one of sift, orb, akaze, surf, colmap-sift" in message
+    assert not opencv
 
 
 def test_links_beyond_the_declared_feature_counts_are_named(tmp_path):
