@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
 import json
 import os
 import random
@@ -163,14 +164,27 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     return parse_team(team.to_json())  # the same checks as a hand-written file
 
 
-def die_with_parent() -> None:
+def die_with_parent(parent_pid: int | None = None) -> None:
     """Ask the kernel to kill this process when its parent dies (``PR_SET_PDEATHSIG``); runs in
-    a child between fork and exec, and in every robot the zygote forks."""
+    a child between fork and exec, and in every robot the zygote forks.
+
+    The request holds only from when it is made: a parent that died between the fork and the
+    ``prctl`` (a loaded machine may not run the child for a while) has already handed the child
+    to another process, and no signal would come. So the child compares its parent with
+    ``parent_pid`` (the forking process's pid, taken before the fork) once the request is in,
+    and ends at once (exit 1) when they differ."""
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except OSError:
         pass
+    if parent_pid is not None and os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def _dies_with(parent_pid: int):
+    """A ``preexec_fn`` for a child of ``parent_pid``: :func:`die_with_parent`."""
+    return functools.partial(die_with_parent, parent_pid)
 
 
 class _ForkedRobot:
@@ -371,7 +385,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             zygote = subprocess.Popen(
                 [sys.executable, "-m", "pipeline.team.zygote", str(team_path), str(workdir)],
                 stdout=subprocess.PIPE, stderr=errfiles["zygote"], env=env, process_group=0,
-                preexec_fn=die_with_parent)
+                preexec_fn=_dies_with(os.getpid()))
             pgid = zygote.pid
             threading.Thread(target=_read_zygote, daemon=True,
                              args=(zygote.stdout, procs, run.exit_codes, observer.cv)).start()
@@ -382,7 +396,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 procs[i] = subprocess.Popen(
                     [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
                      "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
-                    process_group=0 if pgid is None else pgid, preexec_fn=die_with_parent)
+                    process_group=0 if pgid is None else pgid,
+                    preexec_fn=_dies_with(os.getpid()))
                 if pgid is None:
                     pgid = procs[i].pid
         run.start_s = time.monotonic() - t0

@@ -34,8 +34,10 @@ PRELOAD = ("numpy", "scipy.sparse", "scipy.sparse.csgraph", "scipy.special", "cv
            "pipeline.transport.zenoh_transport", "pipeline.commands.robot", "pipeline.__main__")
 
 
-def _robot(team_path: str, i: int, log_path: str) -> None:
-    """The child: robot ``i``, its output in its log; never returns."""
+def _robot(team_path: str, i: int, log_path: str, zygote_pid: int) -> None:
+    """The child: robot ``i``, its output in its log; never returns. It dies with the zygote
+    (``zygote_pid``), even one that died before the child ran
+    (:func:`pipeline.team.launcher.die_with_parent`)."""
     code = 1
     try:
         fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -44,7 +46,7 @@ def _robot(team_path: str, i: int, log_path: str) -> None:
         os.close(fd)
         from pipeline.team.launcher import die_with_parent
 
-        die_with_parent()
+        die_with_parent(zygote_pid)
         from pipeline.__main__ import main as cli
 
         code = cli(["robot", "--team", team_path, "--id", str(i)])
@@ -72,12 +74,13 @@ def main(argv: list[str] | None = None) -> int:
 
     team = load_team(team_path)
     children: dict[int, int] = {}
+    me = os.getpid()
     for i in range(team.n):
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
         if pid == 0:
-            _robot(team_path, i, os.path.join(workdir, f"robot{i}.log"))
+            _robot(team_path, i, os.path.join(workdir, f"robot{i}.log"), me)
         children[pid] = i
         print(f"pid {i} {pid}", flush=True)
     while children:
