@@ -40,9 +40,11 @@ Why the outcome equals the rows of Sec. III (the phase ends when nothing is in f
     it is not named as a track, as in :func:`.detection.find_conflictive_sets`.
 
 Bounds and cost
-    A value moves one link per round and changes only by improving, so the phase ends within
-    ``diam(C) + 1`` rounds after the start for every set (the rows of eq. 5 need ``d + 1``
-    too, Cor. 3.6). Memory per robot: its links and four numbers per own feature
+    A value moves one link per round and changes only by improving, so every label is final
+    within ``diam(C)`` rounds; a ``dup`` flag or a final count is known only once the labels
+    of a robot's features meet, and then floods another ``diam(C)`` rounds: the phase ends
+    within ``2 diam(C) + 1`` rounds after the start for every set (the rows of eq. 5 need
+    ``d + 1``, Cor. 3.6; a path 0:0 - 1:0 - ... - 5:0 - 0:1 takes 10 rounds). Memory per robot: its links and four numbers per own feature
     (``O(L_i + m_i)``), never ``Σ |C|²``. Messages: one per linked neighbour and round in
     which some feature linked to it changed; payload per changed feature ``feat`` (int32,
     the sender's local id), ``label`` (id), ``dup`` (uint8), ``key`` (int64).

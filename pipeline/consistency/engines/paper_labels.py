@@ -24,7 +24,9 @@ def run_labels(robots: list[Robot], network: Transport, iteration: int, on_round
     nothing is in flight; returns what :func:`.engines.phases.run_phase` returns for a
     detection."""
     start_round = int(network.round)
-    cap = int(sum(rb.m for rb in robots)) + 2
+    # labels settle within diam(C) rounds, the dup flags and root keys they reveal flood
+    # another diam(C): 2 diam + 1 rounds, and diam < m_sum (pipeline.consistency.labels)
+    cap = 2 * int(sum(rb.m for rb in robots)) + 2
     # the robots count the phase's own rounds (t_stop); the progress report, the stage's
     tell = None if on_round is None else (lambda t: on_round(t0 + t))
     t = run_quiet_phase(robots, network, lambda rb, send: start_labels(rb, iteration, send),

@@ -115,3 +115,21 @@ def test_a_robot_alone_under_loss_ends_conflict_free(p):
     assert not kept.all()
     assert is_conflict_free(fpc, links.subset(kept))
     assert not any(r.lost_neighbours for r in runs)
+
+
+@pytest.mark.parametrize("n", [5, 50])
+def test_a_long_cycle_ends_within_the_flooding_bound(n):
+    """A cycle through n + 1 cameras back to a second feature of camera 0: the labels settle
+    in diam rounds and the dup flag they reveal floods back another diam, past the m_sum + 2
+    rounds the simulator allowed (it stopped with 'label flooding did not end')."""
+    ci, cj = np.arange(n + 1), np.r_[np.arange(1, n + 1), 0]
+    fi, fj = np.zeros(n + 1, np.int64), np.r_[np.zeros(n, np.int64), 1]
+    lo = ci < cj
+    links = Links(np.where(lo, ci, cj), np.where(lo, fi, fj), np.where(lo, cj, ci),
+                  np.where(lo, fj, fi))
+    fpc = np.r_[2, np.ones(n, np.int64)]
+    edges = comm_edges(links)
+    paper = resolve_conflicts(fpc, edges, links, resolution="paper")
+    flood = resolve_conflicts(fpc, edges, links, resolution="paper-labels")
+    assert int(flood.deleted.sum()) == 1
+    np.testing.assert_array_equal(paper.deleted, flood.deleted)
