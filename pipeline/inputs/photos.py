@@ -486,7 +486,9 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
        factor on the diagonal, so ``f = f35 * hypot(w, h) / hypot(36, 24)``.
     2. ``FocalLength`` (mm) times ``FocalPlaneXResolution`` (pixels per unit of
        ``FocalPlaneResolutionUnit``); that resolution refers to ``ExifImageWidth`` pixels, so
-       it is rescaled when the stored width differs (the file was resized after capture).
+       it is rescaled when the stored width differs (the file was resized after capture);
+       where the stored image is ``ExifImageWidth x ExifImageHeight`` turned a quarter (pixels
+       rotated by a tool that kept the EXIF block), the sensor's width is the stored height.
 
     Returns
     -------
@@ -510,7 +512,12 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
     focal = f_mm * xres / unit_mm
     exif_width = _rational(tags.get(ExifTags.Base.ExifImageWidth))
     if exif_width is not None:
-        focal *= width / exif_width
+        # pixels turned a quarter by a tool that kept the EXIF block: the sensor's width
+        # (ExifImageWidth, the axis of FocalPlaneXResolution) is now the stored height
+        exif_height = _rational(tags.get(ExifTags.Base.ExifImageHeight))
+        turned = exif_height is not None and exif_height != exif_width and width != height \
+            and (width > height) != (exif_width > exif_height)
+        focal *= (height if turned else width) / exif_width
     return focal, "exif-focal-plane"
 
 
