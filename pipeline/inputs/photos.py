@@ -665,6 +665,7 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
     views: list[View] = []
     multi: list[str] = []
     off_centre: list[str] = []
+    turned: list[str] = []  # portrait files beside a landscape K.txt, or the other way round
     for path in files:
         pixels, header = load_image(path)
         # a multi-page TIFF, an animated PNG or WebP: the frames after the first are not
@@ -681,7 +682,13 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                 raise InputError(
                     f"{k_path}: principal point ({cx:g}, {cy:g}) lies outside image {path.name} "
                     f"({w}x{h}); K.txt must be given at the images' full resolution")
-            if abs(cx - (w - 1) / 2) > OFF_CENTRE * w or abs(cy - (h - 1) / 2) > OFF_CENTRE * h:
+            # how far the principal point lies from the centre, as a fraction of the side,
+            # in the image as stored and in the image turned a quarter (h x w)
+            off = max(abs(cx - (w - 1) / 2) / w, abs(cy - (h - 1) / 2) / h)
+            off_turned = max(abs(cx - (h - 1) / 2) / h, abs(cy - (w - 1) / 2) / w)
+            if w != h and off_turned <= OFF_CENTRE and off_turned < off:
+                turned.append(f"{path.name} ({w}x{h})")
+            elif off > OFF_CENTRE:
                 off_centre.append(f"{path.name} ({w}x{h})")
         else:
             found = _exif_K(header, w, h)
@@ -704,6 +711,15 @@ def load_folder(directory: str | Path, max_size: int | None = 1600,
                     f"{', ...' if len(off_centre) > 5 else ''}; is K.txt for another "
                     "resolution? It must be at the files' resolution (for resized copies, scale "
                     "fx, fy, cx and cy by the resize factor)")
+    if turned:
+        cx, cy = K_file[0, 2], K_file[1, 2]
+        log.warning("warning: %s", f"{k_path}: principal point ({cx:g}, {cy:g}) lies near the "
+                    "centre of the image turned a quarter, not of the image, for "
+                    f"{len(turned)} image(s): {', '.join(turned[:5])}"
+                    f"{', ...' if len(turned) > 5 else ''}; their pixels are turned against "
+                    "K.txt's camera (one K serves every image, and the EXIF orientation tag "
+                    "is not applied): turn those files to K.txt's orientation, or run them "
+                    "apart with a K.txt of their own (fx, fy and cx, cy swapped)")
     if multi:
         log.warning("warning: %s", f"{len(multi)} file(s) in {str(directory)!r} hold several "
                     f"frames or pages and only the first of each is read: {', '.join(multi)}; "
