@@ -189,6 +189,25 @@ def clean_database(database: str | Path, out: str | Path,
         contents.close()
 
 
+def _warn_split(n: int, links, off_graph: np.ndarray) -> None:
+    """Warn when ``--comm-graph`` leaves the images in more groups than the database's verified
+    matches do: the links between the groups are cut (``not-comm-edge``), their features are
+    never associated, and COLMAP's mapper on OUT.db holds one group per model at best."""
+    import logging
+
+    from pipeline.commgraph import graph_parts, split_warning
+
+    def pairs(mask):
+        return np.stack([links.cam_i[mask], links.cam_j[mask]], axis=1)
+
+    joined = graph_parts(n, pairs(np.ones(len(links), dtype=bool)))
+    message = split_warning(n, pairs(~off_graph), advice=(
+        f"the database's verified matches join them in {joined}; add the missing edges to "
+        "--comm-graph, or leave it out"))
+    if message and graph_parts(n, pairs(~off_graph)) > joined:
+        logging.getLogger(__name__).warning("warning: %s", message)
+
+
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
            rerun: bool, image_dir, outputs, baselines: bool = False,
            loop_tol_deg: float | None = None, fusion: bool = False,
@@ -217,6 +236,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
         edges = read_comm_graph(comm_graph_file, contents.names)
         off_graph = links_off_graph(links, edges, n)
         reason[off_graph & (reason == "")] = "not-comm-edge"
+        _warn_split(n, links, off_graph)
     else:
         edges = None
     loop_section = {}
