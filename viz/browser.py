@@ -33,8 +33,10 @@ BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 VIEWS_AREA = (0.14, 0.05, 0.78, 0.84)
 #: share of that area in coloured pixels from which it shows a recording: a run's images,
 #: keypoints, links and camera frusta take 1.8 % (three 64x48 noise images, 24 links) to 12 %
-#: (formation d) of it; the viewer's own screens (welcome, loading, an empty layout) none
-MIN_COLOURED_SHARE = 0.005
+#: (formation d) of it, an online run's plots of its step figures (``run-formation --steps``,
+#: ``run-images --sequence``: thin lines on white) 0.2 % (one step) to 0.5 %; the viewer's own
+#: screens (welcome, loading, an empty layout) none, not one pixel
+MIN_COLOURED_SHARE = 0.0005
 
 
 def find_browser() -> str | None:
