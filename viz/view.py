@@ -82,8 +82,7 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
                                         f"({_names(runs_in)}): give the run to open")
             if landmarks_run(p):
                 raise FileNotFoundError(f"{p}: {LANDMARKS_RUN_NOTE}")
-            raise FileNotFoundError(f"{p}: no recording.rrd in this folder (was it written with "
-                                    f"--no-rerun?)")
+            raise FileNotFoundError(f"{p}: no recording.rrd in this folder; {_no_recording(p)}")
         raise FileNotFoundError(f"{p}: no such run folder or .rrd file")
     # a hidden folder is no run: e.g. the staging folder of a run still writing, or of one
     # killed before its folder was put in place (pipeline.runfolder.atomic_run_folder)
@@ -93,6 +92,24 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
     if not found:
         raise FileNotFoundError(f"no recording under {runs}/ yet: run 'make run-formation' first")
     return found[-1]
+
+
+def _no_recording(folder: Path) -> str:
+    """What to do about a folder without a recording: a run folder written with
+    ``--no-rerun`` gets one from :mod:`viz.saved_run`, an online one only from its run; any
+    other folder (``resolve``'s outputs, a killed run's staging folder) is no run folder."""
+    import shlex
+
+    if (folder / "link_steps.csv").is_file() and (folder / "images.csv").is_file():
+        return ("an online run folder written with --no-rerun: its recording, on the step "
+                "timeline, is written by the run itself; run it again without --no-rerun")
+    if all((folder / name).is_file() for name in ("report.json", "links.csv")) and \
+            (folder / "sparse").is_dir():
+        return ("a run folder written with --no-rerun: write its recording with python -m "
+                f"viz.saved_run {shlex.quote(str(folder))}, then open it")
+    return ("not a run folder (a run-formation or run-images run folder holds report.json, "
+            "links.csv and sparse/; resolve writes no recording): give the run folder (--out) "
+            "of a run-formation or run-images run")
 
 
 #: how every ``.rrd`` file begins: Rerun's file header magic, ``RRF`` and its format version
