@@ -522,9 +522,14 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             _refuse_order_mismatch(directory, images, dfiles, by_stem_d, "descriptor",
                                    "NAME.scf")
         else:
+            # where the files are named after their images, the first image without one
+            lacking = [im for im in images if im.stem not in by_stem_d]
+            which = (f": {lacking[0].name} has no {lacking[0].stem}.scf"
+                     + (f" ({len(lacking)} images have none)" if len(lacking) > 1 else "")
+                     if lacking and len(lacking) < len(images) else "")
             raise InputError(f"{directory}: --descriptors given needs one NAME.scf per image "
-                             f"(found {len(desc_files)} for {len(images)} images); or use "
-                             "--descriptors sift")
+                             f"(found {len(desc_files)} for {len(images)} images){which}; give "
+                             "it one, or use --descriptors sift")
         first = None
         for fr, dp in zip(out, dfiles, strict=True):
             d = _read_descriptors(dp)

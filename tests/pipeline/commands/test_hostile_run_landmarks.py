@@ -175,8 +175,14 @@ def test_an_image_that_is_not_an_image(folder, capsys, damage, extra):
 
 
 def test_missing_descriptor_file(folder, capsys):
+    """The refusal names the image without a descriptor file of its name (it gave the
+    counts only: which of 4, or of 101, images lacked one was left to find)."""
     (folder / "v2.scf").unlink()
-    _fails(capsys, _argv(folder), folder, "needs one NAME.scf per image (found 3 for 4 images)")
+    _fails(capsys, _argv(folder), folder, "needs one NAME.scf per image (found 3 for 4 images): "
+           "v2.png has no v2.scf; give it one, or use --descriptors sift")
+    (folder / "v3.scf").unlink()
+    _fails(capsys, _argv(folder), folder, "(found 2 for 4 images): v2.png has no v2.scf (2 "
+           "images have none)")
 
 
 @pytest.mark.parametrize("value, kind", [(np.array([["a", "b"]]), "text"),
