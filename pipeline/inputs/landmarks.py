@@ -260,8 +260,10 @@ def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
                          "landmark needs finite pixel coordinates (or 'nan nan' for a landmark "
                          "this image does not see)")
     if unseen.all():
-        raise InputError(f"{path}: every landmark row is 'nan nan': the image sees none of "
-                         "them; remove it from the folder")
+        # named with its image: files paired by name order do not say which image it labels
+        raise InputError(f"{path}: every landmark row is 'nan nan': {image.name}, the image it "
+                         f"labels, sees none of them; remove {image.name} from the folder with "
+                         f"{path.name} (and its descriptor file), or label what it sees")
     seen = np.flatnonzero(~unseen)
     pts = pts[seen]
     from pipeline.inputs.photos import open_header

@@ -174,6 +174,19 @@ def test_an_image_that_is_not_an_image(folder, capsys, damage, extra):
     _fails(capsys, _argv(folder, *extra), folder, "v1.png: cannot read it as an image")
 
 
+def test_an_image_that_sees_no_landmark_is_named_with_its_label_file(folder, capsys):
+    """Label files named after no image pair with the images by name order (the CMU hotel's
+    layout): the refusal of a label file of only 'nan nan' rows named the file alone and said
+    to remove "it", so which image to take out with it was left to count."""
+    for k in range(4):
+        (folder / f"v{k}.txt").rename(folder / f"labels{k + 1}.txt")
+        (folder / f"v{k}.scf").rename(folder / f"desc{k + 1}.scf")
+    (folder / "labels3.txt").write_text("nan nan\n" * K)
+    _fails(capsys, _argv(folder), folder, "labels3.txt: every landmark row is 'nan nan': v2.png, "
+           "the image it labels, sees none of them; remove v2.png from the folder with "
+           "labels3.txt (and its descriptor file), or label what it sees")
+
+
 def test_missing_descriptor_file(folder, capsys):
     """The refusal names the image without a descriptor file of its name (it gave the
     counts only: which of 4, or of 101, images lacked one was left to find)."""
