@@ -16,7 +16,7 @@ import signal
 import tempfile
 import threading
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +59,8 @@ class MappingSummary:
     min_pose_inliers : int — the mapper's ``abs_pose_min_num_inliers`` for this model
     registered_at_colmap_default : int or None — images COLMAP's default threshold registered,
         when :func:`incremental_mapping_with_retry` kept a model of the relaxed one
+    other_models : list of list[str] — the registered images of each other model COLMAP made
+        (largest first); they are not in this summary's model, nor in ``sparse/``
     """
 
     images: int
@@ -72,6 +74,7 @@ class MappingSummary:
     reconstruction: object = None
     min_pose_inliers: int = COLMAP_MIN_POSE_INLIERS
     registered_at_colmap_default: int | None = None
+    other_models: list = field(default_factory=list)
 
     def summary(self) -> dict:
         """The figures as a JSON-ready dict (without the reconstruction)."""
@@ -84,6 +87,8 @@ class MappingSummary:
                "min_pose_inliers": int(self.min_pose_inliers)}
         if self.registered_at_colmap_default is not None:
             out["registered_at_colmap_default"] = int(self.registered_at_colmap_default)
+        if self.other_models:  # said only when COLMAP made several models
+            out["other_models"] = [list(names) for names in self.other_models]
         bogus = bogus_camera_images(self.reconstruction)
         if bogus:  # said only when there are some
             out["bogus_camera_images"] = bogus
@@ -133,6 +138,13 @@ def _largest(models: dict):
         if models else None
 
 
+def _others(models: dict, kept) -> list[list[str]]:
+    """The registered image names of every model but ``kept``, largest first."""
+    out = [sorted(r.images[i].name for i in r.reg_image_ids())
+           for r in models.values() if r is not kept]
+    return sorted((names for names in out if names), key=lambda names: (-len(names), names))
+
+
 def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = "",
                         output_dir: str | Path | None = None, num_threads: int = -1,
                         seed: int = 0, fixed_intrinsics=(),
@@ -170,7 +182,10 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
         out = Path(output_dir) if output_dir is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         models = _mapping(database_path, str(image_dir or tmp), out, options, len(images))
-    return _summary(_largest(models), len(images), len(models), min_pose_inliers)
+    largest = _largest(models)
+    out = _summary(largest, len(images), len(models), min_pose_inliers)
+    out.other_models = _others(models, largest)
+    return out
 
 
 def incremental_mapping_with_retry(database_path: str | Path, *, mapping=None,

@@ -9,6 +9,9 @@ Flags
 -----
 ``few-registered``
     The reconstruction before cleaning registered fewer than half the images.
+``unregistered``
+    It registered half of them or more, but not all: the images it left out are named, and
+    those another model of COLMAP's held (``sparse/`` keeps the largest model only).
 ``relaxed-registration``
     COLMAP's registration threshold left images out and the reconstruction before cleaning
     is the one mapped again at the relaxed threshold
@@ -72,7 +75,8 @@ def _weak_matching_causes(n: int, edges: np.ndarray, pair_links: list[int],
 def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                          pair_links: list[int], features_per_camera: list[int],
                          intrinsics_guessed: int = 0, cut_by_reason: dict | None = None,
-                         lost_image_cuts: dict | None = None) -> list[dict]:
+                         lost_image_cuts: dict | None = None,
+                         image_names: list[str] | None = None) -> list[dict]:
     """Flags of a photo run (module notes).
 
     Parameters
@@ -88,6 +92,8 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
     cut_by_reason : dict — links cut per reason (``resolution``, ``fusion-outlier``…)
     lost_image_cuts : dict — for each image lost by cleaning, ``{reason: links cut}`` of its
         links
+    image_names : list[str], (n,) — every image's name (to name the unregistered ones); with
+        ``before["other_models"]`` (the registered images of COLMAP's other models)
 
     Returns
     -------
@@ -108,8 +114,19 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                              f"too few photos, give it none)")
         flags.append({"flag": "few-registered",
                       "message": f"the reconstruction registered only {reg_b} of {n_images} "
-                                 f"images (fewer than half)",
+                                 f"images (fewer than half){_other_models(before)}",
                       "likely_cause": "; ".join(causes)})
+    elif reg_b < n_images:
+        left = sorted(set(image_names or []) - set(before.get("registered_names", [])))
+        named = f": {_few(left)}" if left else ""
+        flags.append({"flag": "unregistered",
+                      "message": f"the reconstruction left {n_images - reg_b} of {n_images} "
+                                 f"images unregistered{named}{_other_models(before)}",
+                      "likely_cause": "they share too few matches with the registered images "
+                                      "(another scene, little overlap, or views from nearly "
+                                      "one place: a model grows only through points it has "
+                                      "triangulated); run them as a folder of their own, or "
+                                      "add photos that link them to the others"})
     if before.get("registered_at_colmap_default") is not None:
         flags.append({"flag": "relaxed-registration",
                       "message": f"COLMAP's registration threshold (30 triangulated points "
@@ -167,6 +184,22 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                       "likely_cause": f"links cut: {cut_text}; cutting links shortens tracks "
                                       f"and removes points whose only support was cut"})
     return flags
+
+
+def _few(names: list[str], shown: int = 5) -> str:
+    more = len(names) - shown
+    return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
+
+
+def _other_models(summary: dict) -> str:
+    """What COLMAP's other models held (``summary["other_models"]``), or ''."""
+    others = summary.get("other_models") or []
+    if not others:
+        return ""
+    held = sorted(name for names in others for name in names)
+    return (f"; COLMAP made {len(others) + 1} models and sparse/ holds the largest only: the "
+            f"other {'model' if len(others) == 1 else 'models'} registered {len(held)} "
+            f"image(s) ({_few(held)})")
 
 
 def flags_markdown(flags: list[dict]) -> str:

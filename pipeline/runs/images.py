@@ -626,7 +626,7 @@ def _flags(views, feats, ledger, comm_edges, matches, map_before, map_after) -> 
         [len(p.pairs) for p in matches], [len(f) for f in feats],
         intrinsics_guessed=sum(not v.intrinsics_known for v in views),
         cut_by_reason=dict(zip(names.tolist(), counts.tolist(), strict=True)),
-        lost_image_cuts=per_image)
+        lost_image_cuts=per_image, image_names=[v.name for v in views])
 
 
 def _write_recording(path: Path, views, feats, cleaning, map_before, mapping,

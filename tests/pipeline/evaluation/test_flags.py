@@ -130,3 +130,27 @@ def test_bogus_camera_images_reads_colmaps_own_test():
     assert rec.num_reg_images() == 3
     assert bogus_camera_images(rec) == ["2.png"]
     assert not poses_usable(rec)
+
+
+def test_images_left_unregistered_are_named_even_above_half():
+    """Four of six registered: not "few", but the two left out were said nowhere (the report
+    showed 4 registered images, nothing more)."""
+    before = _summary(4, NAMES[:4], 800)
+    flags = reconstruction_flags(6, before, before, RING, [100] * 6, [5000] * 6,
+                                 image_names=NAMES)
+    assert [f["flag"] for f in flags] == ["unregistered"]
+    assert flags[0]["message"] == "the reconstruction left 2 of 6 images unregistered: 4.jpg, 5.jpg"
+    assert "run them as a folder of their own" in flags[0]["likely_cause"]
+
+
+def test_the_images_of_colmaps_other_models_are_named():
+    names = [f"{k:02d}.jpg" for k in range(14)]
+    before = dict(_summary(8, names[:8], 900),
+                  other_models=[names[8:12], names[12:14]])
+    flags = reconstruction_flags(14, before, before, np.array([[k, k + 1] for k in range(13)]),
+                                 [100] * 13, [5000] * 14, image_names=names)
+    assert [f["flag"] for f in flags] == ["unregistered"]
+    assert flags[0]["message"] == (
+        "the reconstruction left 6 of 14 images unregistered: 08.jpg, 09.jpg, 10.jpg, 11.jpg, "
+        "12.jpg and 1 more; COLMAP made 3 models and sparse/ holds the largest only: the other "
+        "models registered 6 image(s) (08.jpg, 09.jpg, 10.jpg, 11.jpg, 12.jpg and 1 more)")
