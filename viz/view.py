@@ -20,6 +20,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 __all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main"]
@@ -244,10 +245,48 @@ def main(argv=None) -> int:
     if args.dry_run:
         print(shlex.join(cmd))  # a path with a space or a quote stays one argument
         return 0
+    return run_viewer(cmd)
+
+
+class _Stopped(Exception):
+    """This process got SIGTERM or SIGHUP (``kill PID``, a closed terminal)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def run_viewer(cmd: list[str]) -> int:
+    """Run the viewer ``cmd`` until it ends, and return its exit status. A Ctrl-C ends both
+    (the viewer gets it too: status 0); a SIGTERM or SIGHUP to this process (``kill PID``, a
+    closed terminal) stops the viewer before this process ends with ``128 + signal``: left
+    running, its server would hold the ports of the next ``python -m viz.view --web``."""
+    import signal
+
+    proc = subprocess.Popen(cmd)
+
+    def stop(signum, _frame):
+        raise _Stopped(signum)
+
+    handled = (signal.SIGTERM, signal.SIGHUP)
+    old = {s: signal.signal(s, stop) for s in handled} \
+        if threading.current_thread() is threading.main_thread() else {}
     try:
-        return subprocess.call(cmd)
+        return proc.wait()
     except KeyboardInterrupt:
         return 0
+    except _Stopped as exc:
+        return 128 + exc.signum
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 if __name__ == "__main__":
