@@ -1,6 +1,5 @@
 """How ``python -m viz.view`` chooses between the native and the web viewer."""
 
-import subprocess
 
 import pytest
 
@@ -21,7 +20,7 @@ def test_native_without_a_display_is_refused_before_the_viewer_starts(run, capsy
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setattr(view.sys, "platform", "linux")
-    monkeypatch.setattr(subprocess, "call", lambda cmd: pytest.fail(f"started {cmd}"))
+    monkeypatch.setattr(view, "run_viewer", lambda cmd: pytest.fail(f"started {cmd}"))
     assert view.main([str(run), "--native"]) == 2
     captured = capsys.readouterr()
     assert captured.err.startswith("error: --native needs a display")
@@ -32,7 +31,7 @@ def test_native_without_a_display_is_refused_before_the_viewer_starts(run, capsy
 def test_native_with_a_display_starts_it(run, monkeypatch):
     monkeypatch.setenv("DISPLAY", ":0")
     started = []
-    monkeypatch.setattr(subprocess, "call", lambda cmd: started.append(cmd) or 0)
+    monkeypatch.setattr(view, "run_viewer", lambda cmd: started.append(cmd) or 0)
     assert view.main([str(run)]) == 0
     assert started and "--web-viewer" not in started[0]
 
