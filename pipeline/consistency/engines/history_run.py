@@ -4,6 +4,17 @@ Every robot of a step's sub-problem steps on its own inbox, phase after phase, e
 until nothing is in flight (the end a robot alone learns from the termination wave). Where a
 robot alone skips a phase because the wave's bits say no robot needs it, here the phase
 runs and ends at once: no robot has anything to send, so the decisions are the same.
+
+Bounds (the caps only turn a bug into an error; a correct run never reaches them). Phase 1
+floods over *features*, one link per round: the two smallest pieces of a set are final at
+every feature within ``D`` rounds, ``D`` the set's diameter in links; a flag is raised by
+then and floods another ``D``; the last messages arrive in round ``2 D + 1``. A set after
+the rule's cuts may hold one frame many times (the rule cut history links, which stay), so
+``D`` is bounded by the features, not the frames: ``D < m_sum``, cap ``2 m_sum + 2`` (three
+frames chaining ``r_i - x_i = y_i - r_{i+1}`` through ``k`` pieces, ``=`` a history link the
+paper rule cuts, give ``D = 3 k``). Phases 2 and 3 go over *robots* (a set's tree of frames,
+depth at most ``n - 1``): the echo ends within ``2 n`` rounds (tokens out, echoes back), the
+repair within ``3 n - 2`` (request down, halves up, cuts down): cap ``3 n + 6``.
 """
 
 from __future__ import annotations
@@ -36,11 +47,13 @@ def run_history(features_per_camera, links: Links, alive: np.ndarray,
         equip_history(rb, inputs[rb.id])
     network = Network(len(fpc), comm_edges_for(fpc, links, None))
     phases = {}
+    # module docstring: phase 1 floods over features, the others over the frames' trees
+    caps = dict(names=2 * int(fpc.sum()) + 2)
     for name, start, step, finish in PHASES:
         phases[name] = run_quiet_phase(
             robots, network, start,
             lambda rb, inbox, send, t, step=step: step(rb, inbox, send, t),
-            what=f"history {name}", cap=3 * len(robots) + 6)
+            what=f"history {name}", cap=caps.get(name, 3 * len(robots) + 6))
         if finish is not None:
             for rb in robots:
                 finish(rb)
