@@ -138,11 +138,14 @@ def online_config_from_args(args):
     method, max_features = feature_options(args)
     robots = None if args.robots is None else validate.robots(args.robots)
     faults = faults_from_args(args)
-    if faults is not None and faults.any and not (faults.switching_topology and not
-                                                   faults.drop_prob and not
-                                                   faults.crash and not faults.delay_rounds):
-        raise InputError("--steps models only --switching-topology (the graph of each step); "
-                         "drop the other fault options")
+    if faults is not None:
+        given = ([f"--drop-prob {args.drop_prob}"] if faults.drop_prob else []) \
+            + ([f"--delay-rounds {args.delay_rounds}"] if faults.delay_rounds else []) \
+            + [f"--crash {c}" for c in args.crash]
+        if given:
+            raise InputError(f"{', '.join(given)}: an online run (--steps) models only "
+                             "--switching-topology (the graph of each step); drop "
+                             f"{'it' if len(given) == 1 else 'them'}")
     if faults is not None and faults.seed != 0:
         raise InputError(f"--fault-seed {faults.seed}: an online run (--steps) draws the graph "
                          "of each step from --seed, the scene's seed; drop --fault-seed, or "

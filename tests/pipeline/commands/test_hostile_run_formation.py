@@ -10,7 +10,7 @@ import pytest
 from pipeline.__main__ import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hostile import one_line_error, run_capped, tree  # noqa: E402
+from hostile import one_line_error, refused, run_capped, tree  # noqa: E402
 
 FAST = ["--size", "256x192", "--max-features", "200", "--no-rerun", "--no-fusion"]
 
@@ -158,3 +158,17 @@ def test_online_speed_that_is_no_distance_is_named_as_the_option(tmp_path, capsy
     assert len(lines) == 1 and f"--speed {float(speed)}" in lines[0], err
     assert "[render]" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["--drop-prob", "0.1"], "--drop-prob 0.1: "),
+    (["--delay-rounds", "2", "--switching-topology"], "--delay-rounds 2: "),
+    (["--crash", "1@3", "--crash", "2@4"], "--crash 1@3, --crash 2@4: "),
+])
+def test_online_fault_flags_are_refused_by_name(tmp_path, capsys, argv, named):
+    """An online run refused every fault flag but --switching-topology without saying which
+    one it was given ('drop the other fault options')."""
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "mine.txt").write_text("kept")
+    refused(capsys, ["run-formation", "--out", str(tmp_path / "run"), *FAST, "--steps", "2",
+                     *argv], tmp_path, named, "--switching-topology")
