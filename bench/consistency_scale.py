@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E402
 
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
-from pipeline.commands.options import count_argument  # noqa: E402
+from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -262,7 +262,7 @@ def main(argv=None) -> int:
     ap.add_argument("--spurious", type=float, default=0.03,
                     help="spurious links per edge, as a fraction of its true links")
     ap.add_argument("--detect", type=float, default=0.85, help="probability a true link is found")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_argument, default=0)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):

@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 
 import data_synth  # noqa: E402
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
-from pipeline.commands.options import count_argument  # noqa: E402
+from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
 from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.matching.features import extract_all  # noqa: E402
 from pipeline.matching.pairs import match_edges  # noqa: E402
@@ -83,7 +83,7 @@ def bench_method(method: str, args, size) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--formation", default="d")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_argument, default=0)
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--max-features", type=int, default=2000)
     ap.add_argument("--methods", default="sift,orb,akaze")

@@ -93,6 +93,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -694,8 +695,8 @@ def main(argv=None) -> int:
     p.add_argument("--graffiti", default=str(SHARED_DATA / "graffiti"),
                    help="the Graffiti folder (H1to{k}p); '' skips it")
     p.add_argument("--formations", default="abcd", help="formations to render ('' none)")
-    p.add_argument("--formation-seeds", type=int, nargs="*", default=[5, 6, 7, 8, 9])
-    p.add_argument("--warped-seeds", type=int, nargs="*", default=[1, 2, 3],
+    p.add_argument("--formation-seeds", type=seed_argument, nargs="*", default=[5, 6, 7, 8, 9])
+    p.add_argument("--warped-seeds", type=seed_argument, nargs="*", default=[1, 2, 3],
                    help="warped copies of --data (warped_landmarks), 30 frames each, SIFT at "
                         "the keypoints; none: skip")
     p.add_argument("--warped-inputs", nargs="+", default=["descriptors", "guided"],
@@ -709,14 +710,14 @@ def main(argv=None) -> int:
                         "sum of the sync rule's weights over the input links each association "
                         "joins, and how well the quality tells the links the triangles "
                         "confirm from those they refute")
-    p.add_argument("--team-seeds", type=int, nargs="+", default=[0],
+    p.add_argument("--team-seeds", type=seed_argument, nargs="+", default=[0],
                    help="seeds of the team rows (which pairs swap, the qualities drawn)")
     p.add_argument("--team-methods", nargs="+",
                    default=["resolve:sync", "sync", "evidence", "drop_conflictive_sets",
                             "quality_merge"],
                    help="methods of the team rows; resolve:RULE runs the resolve command")
-    p.add_argument("--shuffle-seed", type=int, default=0)
-    p.add_argument("--renumber", type=int, nargs="*", default=[],
+    p.add_argument("--shuffle-seed", type=seed_argument, default=0)
+    p.add_argument("--renumber", type=seed_argument, nargs="*", default=[],
                    help="also run every labelled case with its cameras renumbered by these "
                         "seeds (decisions should not depend on the numbering)")
     p.add_argument("--cap-gb", type=float, default=6.0)

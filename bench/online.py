@@ -54,6 +54,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -200,7 +201,7 @@ def main(argv=None) -> int:
                     help="steps (1-based) at which the batch run goes, instead of every "
                          "--batch-every and the last (the batch rerun's cost grows with the "
                          "history: on a busy machine a large team's last steps take long)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_argument, default=0)
     ap.add_argument("--no-overturn", action="store_true",
                     help="the history repair cuts only new links (the earlier rule), instead of "
                          "weighing the conflictive set's open links again")

@@ -32,6 +32,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
                     default=(320, 240))
     ap.add_argument("--max-features", type=int, default=300)
     ap.add_argument("--resolution", default="evidence")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_argument, default=0)
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):

@@ -37,6 +37,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 import numpy as np  # noqa: E402
 from multiway import SHARED_DATA  # noqa: E402
 
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.commgraph import comm_graph  # noqa: E402
 from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -95,7 +96,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
     ap.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
     ap.add_argument("--descriptors", nargs="+", default=["given", "sift"])
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_argument, default=0)
     ap.add_argument("--universe", type=int, default=30, help="the given universe size")
     ap.add_argument("--json", type=Path, default=None, help="also save the records here")
     args = ap.parse_args(argv)

@@ -61,6 +61,7 @@ from scipy.sparse import coo_matrix  # noqa: E402
 from scipy.sparse.csgraph import connected_components  # noqa: E402
 
 from pipeline.association import AssociationGraph  # noqa: E402
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT  # noqa: E402
 from pipeline.consistency.keys import tie_key  # noqa: E402
@@ -262,12 +263,12 @@ def main(argv=None) -> int:
     p.add_argument("--data", default=str(multiway.SHARED_DATA / "cmu_hotel"))
     p.add_argument("--frames", type=int, nargs="*", default=[20, 101])
     p.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
-    p.add_argument("--warped-seeds", type=int, nargs="*", default=[1, 2, 3])
+    p.add_argument("--warped-seeds", type=seed_argument, nargs="*", default=[1, 2, 3])
     p.add_argument("--warped-hide", type=float, nargs="*", default=[0.0, 0.25])
     p.add_argument("--team", type=int, nargs="*", default=[300])
-    p.add_argument("--team-seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--team-seeds", type=seed_argument, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--alphas", type=float, nargs="+", default=[0.0, 0.25, 0.5, 1.0, 2.0])
-    p.add_argument("--shuffle-seed", type=int, default=0)
+    p.add_argument("--shuffle-seed", type=seed_argument, default=0)
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-sync-weights"))
     a = p.parse_args(argv)
     if problem := results_folder_problem(a.out):

@@ -72,7 +72,7 @@ import numpy as np  # noqa: E402
 from sync_weights import Merge, stretch_search, sync_order  # noqa: E402
 
 from pipeline.association import AssociationGraph  # noqa: E402
-from pipeline.commands.options import count_argument  # noqa: E402
+from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.matching.link_evidence import ratio_llr  # noqa: E402
@@ -216,7 +216,7 @@ def anatomy(case) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=count_argument, nargs="+", default=[300, 3000])
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--seeds", type=seed_argument, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-team-anatomy"))
     a = p.parse_args(argv)
     if problem := results_folder_problem(a.out):

@@ -46,6 +46,7 @@ import multiway  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.association import AssociationGraph, camera_offsets  # noqa: E402
+from pipeline.commands.options import seed_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
@@ -131,7 +132,7 @@ def _root(parent: list, x: int) -> int:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, nargs="+", default=[300, 3000])
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--seeds", type=seed_argument, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-team-moves"))
     a = p.parse_args(argv)
     if problem := results_folder_problem(a.out):

@@ -15,7 +15,7 @@ import argparse
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["count_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
+__all__ = ["count_argument", "seed_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "team_timeout", "round_timeout", "transport_time_limit",
            "add_memory_option", "add_overwrite_and_memory_options",
@@ -297,6 +297,22 @@ def count_argument(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of at least 1")
     return value
+
+
+def seed_argument(text: str) -> int:
+    """An argparse ``type`` for a seed (the bench scripts' ``--seed``, ``--seeds``,
+    ``--team-seeds``, ...): the commands' seed check (:func:`pipeline.validate.seed`), as
+    argparse's one-line error naming the option and the value.
+
+    >>> seed_argument("7")
+    7
+    """
+    from pipeline.validate import seed
+
+    try:
+        return seed(text, "seed")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: " + str(exc).split(": ", 1)[1]) from None
 
 
 def size_argument(text: str) -> str:
