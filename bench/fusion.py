@@ -52,7 +52,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
-from pipeline.commands.options import count_argument  # noqa: E402
+from pipeline.commands.options import count_argument, parse_size, size_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -191,7 +191,7 @@ def main(argv=None) -> int:
     ap.add_argument("--resolutions", nargs="+", default=["evidence", "paper"])
     ap.add_argument("--sceaux", action=argparse.BooleanOptionalAction, default=True)
     ap.add_argument("--repeat", type=count_argument, default=3)
-    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--size", default="640x480", type=size_argument)
     ap.add_argument("--long-rounds", type=int, default=1000,
                     help="rounds of the fixed scheme that tell 'not converged at 100'")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-fusion"))
@@ -201,7 +201,15 @@ def main(argv=None) -> int:
     if args.long_rounds <= 100:
         ap.error(f"--long-rounds {args.long_rounds}: more than the fixed scheme's 100 rounds "
                  "(it tells whether a link was cut before its votes settled)")
-    size = tuple(int(v) for v in args.size.lower().split("x"))
+    size = parse_size(args.size)
+    # every formation and rule before the first case runs (a bad one last ran the others first)
+    import data_synth
+    from pipeline.consistency.rules import get_rule
+
+    for name in args.formations:
+        data_synth.check_formation(name)
+    for res in args.resolutions:
+        get_rule(res)
     import pipeline.fusion.landmarks  # noqa: F401  (imports outside the timings)
 
     load = [round(x, 2) for x in os.getloadavg()]
