@@ -85,6 +85,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    import data_synth
+
+    # refused by run-formation only once the bench had started (exit 1)
+    data_synth.check_formation(args.formation)
     common = ["--steps", str(args.steps), "--formation", args.formation] + \
         ([] if args.size is None else ["--size", args.size])
     load = [round(x, 2) for x in os.getloadavg()]

@@ -129,6 +129,10 @@ def main() -> int:
     args = ap.parse_args()
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    import data_synth
+
+    # refused by run-formation only once the bench had started (exit 1)
+    data_synth.check_formation(args.formation)
 
     # Python as a user runs it: compiled modules are cached (a PYTHONDONTWRITEBYTECODE left in
     # the environment would recompile the project's ~60 modules in every process)

@@ -58,6 +58,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    import data_synth
+
+    # refused by run-formation only once the bench had started (exit 1)
+    data_synth.check_formation(args.formation)
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
     cmd = ["run-formation", "--steps", str(args.steps), "--formation", args.formation,
