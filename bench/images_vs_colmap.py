@@ -414,6 +414,13 @@ def main(argv=None) -> int:
     for flag, text in (("--ring-seeds", args.ring_seeds), ("--ring-cameras", args.ring_cameras)):
         if not all(x.isdigit() for x in text.split(",") if x):
             ap.error(f"{flag} {text!r}: expected comma-separated whole numbers, e.g. 0,1,2")
+    for sides in rings:  # data_synth's ValueError traceback, after the photo folders had run
+        if len(sides) != 4 or not sides.isalpha():
+            ap.error(f"--rings {sides}: expected four letters, one facade per side of the tower, "
+                     "e.g. ABCD or AABB")
+    if rings and (few := [x for x in args.ring_cameras.split(",") if x and int(x) < 2]):
+        # 0 ended in a traceback, 1 ran every method to fail on one image
+        ap.error(f"--ring-cameras {few[0]}: a ring needs at least 2 cameras")
     for folder in folders:
         if not Path(folder).is_dir():
             ap.error(f"{folder}: no such photo folder")

@@ -12,6 +12,12 @@ NOTHING = ["--rings-only", "--rings", ""]  # no input: without the checks, a qui
     (["--ring-seeds", "x", *NOTHING], "--ring-seeds 'x': expected comma-separated whole"),
     (["--methods", "ours,foo", *NOTHING], "--methods foo: expected a comma-separated subset"),
     (["--inputs", "named,raw", *NOTHING], "--inputs raw: expected a comma-separated subset"),
+    (["--rings-only", "--rings", "XYZ"], "--rings XYZ: expected four letters, one facade"),
+    (["--rings-only", "--rings", "ABCD,AB1D"], "--rings AB1D: expected four letters"),
+    (["--rings-only", "--rings", "ABCD", "--ring-cameras", "18,0"],
+     "--ring-cameras 0: a ring needs at least 2 cameras"),
+    (["--rings-only", "--rings", "ABCD", "--ring-cameras", "1", "--methods", "ours",
+      "--inputs", "named"], "--ring-cameras 1: a ring needs at least 2 cameras"),
 ])
 def test_what_it_cannot_run_is_refused_first(tmp_path, capsys, args, message):
     out = tmp_path / "results.json"
