@@ -37,12 +37,12 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 import numpy as np  # noqa: E402
 from multiway import SHARED_DATA  # noqa: E402
 
-from pipeline.commands.options import seed_argument  # noqa: E402
+from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
 from pipeline.commgraph import comm_graph  # noqa: E402
 from pipeline.consistency.spectral import clear_sync, spectral_sync  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.evaluation.metrics import PairwiseTruth, pairwise_scores  # noqa: E402
-from pipeline.inputs.landmarks import load_landmark_folder  # noqa: E402
+from pipeline.inputs.landmarks import DESCRIPTOR_SOURCES, load_landmark_folder  # noqa: E402
 from pipeline.matching.landmarks import match_landmark_edges  # noqa: E402
 from pipeline.outputs import check_output_files  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -95,9 +95,11 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=SHARED_DATA / "cmu_hotel")
     ap.add_argument("--frames", type=int, nargs="+", default=[20, 101])
     ap.add_argument("--graphs", nargs="+", default=["complete", "seq:4", "ring2"])
-    ap.add_argument("--descriptors", nargs="+", default=["given", "sift"])
+    ap.add_argument("--descriptors", nargs="+", default=["given", "sift"],
+                    choices=DESCRIPTOR_SOURCES)
     ap.add_argument("--seed", type=seed_argument, default=0)
-    ap.add_argument("--universe", type=int, default=30, help="the given universe size")
+    ap.add_argument("--universe", type=count_argument, default=30,
+                    help="the given universe size")
     ap.add_argument("--json", type=Path, default=None, help="also save the records here")
     args = ap.parse_args(argv)
     if args.json:

@@ -75,3 +75,21 @@ def test_a_json_path_it_cannot_write_is_refused_first(tmp_path, capsys, where):
     out, err = capsys.readouterr()
     assert err.startswith(f"error: --json {str(path)!r}") and "Traceback" not in err
     assert out == "" and (tmp_path / "f").read_text() == "mine"
+
+
+@pytest.mark.parametrize("args, message", [
+    # spectral_sync's ValueError traceback, after the first method had run
+    (["--universe", "0"], "argument --universe: '0': expected a whole number of at least 1"),
+    (["--universe", "-3"], "argument --universe: '-3': expected a whole number of at least 1"),
+    # refused only when its turn came, after every frame count of the sources before it
+    (["--descriptors", "given", "foo"], "argument --descriptors: invalid choice: 'foo'"),
+])
+def test_an_argument_it_cannot_run_is_refused_when_parsed(tmp_path, capsys, args, message):
+    path = tmp_path / "records.json"
+    argv = [a for a in _args(path) if a not in ("--descriptors", "given")] + args
+    with pytest.raises(SystemExit) as exc:
+        _bench().main(argv)
+    assert exc.value.code == 2
+    out, err = capsys.readouterr()
+    assert message in err and "Traceback" not in err
+    assert out == "" and not path.exists()
