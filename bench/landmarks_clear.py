@@ -70,6 +70,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
+    if args.results in ("", ".", "..") or Path(args.results).name != args.results:
+        # a folder, '' or a path through one was refused only when saving, after every run
+        ap.error(f"--results {args.results!r}: give a file name, saved under --out (e.g. "
+                 "results-20.json)")
+    if (args.out / args.results).is_dir():
+        ap.error(f"--results {args.results!r}: {str(args.out / args.results)!r} is a folder; "
+                 "give another file name")
     for conf in args.configs:
         if _config(conf) is None:
             ap.error(f"--configs {conf!r}: expected REFINE:RATIO:GEOMETRY[:PX], e.g. "

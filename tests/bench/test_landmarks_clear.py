@@ -37,3 +37,25 @@ def test_help_is_not_preceded_by_the_table_header():
     proc = subprocess.run([sys.executable, str(ROOT / "bench" / "landmarks_clear.py"), "--help"],
                           capture_output=True, text=True, check=True)
     assert proc.stdout.startswith("usage: ")
+
+
+@pytest.mark.parametrize("results, message", [
+    ("", "--results '': give a file name, saved under --out"),
+    ("../escaped.json", "--results '../escaped.json': give a file name, saved under --out"),
+    ("sub", "--results 'sub': '{out}/sub' is a folder; give another file name"),
+])
+def test_a_results_name_it_cannot_save_under_is_refused_before_any_run(tmp_path, capsys,
+                                                                       results, message):
+    # refused only when saving, after every run had been made (and written under --out)
+    out = tmp_path / "out"
+    (out / "sub").mkdir(parents=True)
+    with pytest.raises(SystemExit) as exc:
+        load_bench("landmarks_clear").main(
+            ["--data", str(ROOT / "tests" / "data" / "cmu_hotel_small"), "--frames", "3",
+             "--graphs", "ring", "--configs", "none:none:none", "--out", str(out),
+             "--results", results])
+    assert exc.value.code == 2
+    captured = capsys.readouterr()
+    assert message.format(out=out) in captured.err and "Traceback" not in captured.err
+    assert captured.out == "" and [p.name for p in out.iterdir()] == ["sub"]
+    assert not (tmp_path / "escaped.json").exists()
