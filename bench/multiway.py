@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import resource
@@ -93,7 +94,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
-from pipeline.commands.options import seed_argument  # noqa: E402
+from pipeline.commands.options import positive_argument, seed_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -522,7 +523,7 @@ def measured(method: str, case, cap_gb: float, cap_s: float) -> dict:
         try:
             base = _rss_mb()
             resource.setrlimit(resource.RLIMIT_AS, (int(cap_gb * 2**30), int(cap_gb * 2**30)))
-            signal.alarm(int(cap_s))
+            signal.alarm(math.ceil(cap_s))  # int(): under 1 s, no alarm at all
             t0, c0 = time.perf_counter(), time.process_time()
             res = run_method(method, case, cap_gb)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -720,8 +721,8 @@ def main(argv=None) -> int:
     p.add_argument("--renumber", type=seed_argument, nargs="*", default=[],
                    help="also run every labelled case with its cameras renumbered by these "
                         "seeds (decisions should not depend on the numbering)")
-    p.add_argument("--cap-gb", type=float, default=6.0)
-    p.add_argument("--cap-s", type=float, default=600.0)
+    p.add_argument("--cap-gb", type=positive_argument, default=6.0)
+    p.add_argument("--cap-s", type=positive_argument, default=600.0)
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-multiway"))
     a = p.parse_args(argv)

@@ -44,6 +44,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 import numpy as np  # noqa: E402
 from multiway import SHARED_DATA  # noqa: E402
 
+from pipeline.commands.options import positive_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -136,7 +137,7 @@ def run_child(engine: str, flood: str, case: str, data: Path, timeout: float) ->
         if time.perf_counter() - t0 > timeout:
             proc.kill()
             _, status, usage = os.wait4(proc.pid, 0)
-            return dict(engine=engine, flood=flood, case=case, error=f"over {timeout:.0f} s")
+            return dict(engine=engine, flood=flood, case=case, error=f"over {timeout:g} s")
         time.sleep(0.2)
     out = proc.stdout.read().decode().strip().splitlines()
     if os.waitstatus_to_exitcode(status) != 0 or not out:
@@ -167,7 +168,7 @@ def main(argv=None) -> int:
     ap.add_argument("--engines", nargs="+", default=["batched"], choices=["robot", "batched"])
     ap.add_argument("--floods", nargs="+", default=["links"], choices=["links", "tree"])
     ap.add_argument("--data", type=Path, default=SHARED_DATA / "cmu_hotel")
-    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per child")
+    ap.add_argument("--timeout", type=positive_argument, default=1800.0, help="seconds per child")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--child", nargs=3, metavar=("ENGINE", "FLOOD", "CASE"),
                     help=argparse.SUPPRESS)

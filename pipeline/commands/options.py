@@ -11,11 +11,12 @@ and a robot waits for a silent neighbour, :mod:`pipeline.runs.transports`) and
 from __future__ import annotations
 
 import argparse
+import math
 
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["count_argument", "seed_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
+__all__ = ["count_argument", "seed_argument", "positive_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "team_timeout", "round_timeout", "transport_time_limit",
            "add_memory_option", "add_overwrite_and_memory_options",
@@ -296,6 +297,23 @@ def count_argument(text: str) -> int:
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of at least 1")
+    return value
+
+
+def positive_argument(text: str) -> float:
+    """An argparse ``type`` for a finite number above 0 (the bench scripts' time and memory
+    caps: ``--timeout``, ``--cap-s``, ``--cap-gb``): argparse's one-line error names the option
+    and the value.
+
+    >>> positive_argument("1.5")
+    1.5
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a finite number above 0")
     return value
 
 
