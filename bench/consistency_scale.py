@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 from scipy.sparse.csgraph import connected_components, shortest_path  # noqa: E402
 
 from pipeline.association import AssociationGraph, count_conflicts  # noqa: E402
-from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
+from pipeline.commands.options import count_argument, given_options, seed_argument  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
@@ -257,7 +257,7 @@ def main(argv=None) -> int:
                     help="also run robot by robot (the engine of faults and middleware) up to this n")
     ap.add_argument("--resolution", nargs="+", choices=("paper", "evidence"),
                     default=["paper", "evidence"], help="resolutions to run, side by side")
-    ap.add_argument("--quick", action="store_true", help="small n only (6, 10, 20)")
+    ap.add_argument("--quick", action="store_true", help="small n only (6, 10, 20), unless --n is given")
     ap.add_argument("--features", type=int, default=2000, help="features per robot")
     ap.add_argument("--spurious", type=float, default=0.03,
                     help="spurious links per edge, as a fraction of its true links")
@@ -267,7 +267,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
         ap.error(problem)
-    ns = [6, 10, 20] if args.quick else args.n
+    ns = [6, 10, 20] if args.quick and "n" not in given_options(ap, argv) else args.n
     if min(ns) < 2:
         ap.error(f"--n {min(ns)}: a team has at least 2 robots")
     if importlib.util.find_spec("matplotlib") is None:

@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 import numpy as np  # noqa: E402
 from consistency_scale import synthetic_formation  # noqa: E402
 
-from pipeline.commands.options import count_argument, seed_argument  # noqa: E402
+from pipeline.commands.options import count_argument, given_options, seed_argument  # noqa: E402
 from pipeline.commgraph import comm_edges_for  # noqa: E402
 from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import is_conflict_free, union_find_conflicts  # noqa: E402
@@ -191,9 +191,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--formations", type=count_argument, default=200)
     ap.add_argument("--seed", type=seed_argument, default=0)
-    ap.add_argument("--quick", action="store_true", help="20 formations")
+    ap.add_argument("--quick", action="store_true", help="20 formations, unless --formations is given")
     args = ap.parse_args(argv)
-    count = 20 if args.quick else args.formations
+    count = 20 if args.quick and "formations" not in given_options(ap, argv) else args.formations
     t0 = time.perf_counter()
     rows = []
     for k in range(count):

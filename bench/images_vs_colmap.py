@@ -387,7 +387,8 @@ def main(argv=None) -> int:
                     help="photo folders (default: Sceaux at full size and Graffiti from "
                          f"{SHARED_DATA})")
     ap.add_argument("--quick", action="store_true",
-                    help=f"{QUICK_DATA.relative_to(ROOT)} and the ABCD ring only")
+                    help=f"{QUICK_DATA.relative_to(ROOT)} and the ABCD ring only (unless folders or "
+                         "--rings are given)")
     ap.add_argument("--methods", default=",".join(METHODS),
                     help=f"comma-separated subset of {','.join(METHODS)}")
     ap.add_argument("--inputs", default="named,renamed", help="named, renamed or both")
@@ -403,7 +404,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     folders = [] if args.rings_only else \
         (args.folders or ([QUICK_DATA] if args.quick else DEFAULT_DATA))
-    rings = ["ABCD"] if args.quick else [r for r in args.rings.split(",") if r]
+    from pipeline.commands.options import given_options
+
+    quick_rings = args.quick and "rings" not in given_options(ap, argv)
+    rings = ["ABCD"] if quick_rings else [r for r in args.rings.split(",") if r]
     methods = [m for m in args.methods.split(",") if m]
     kinds = [i for i in args.inputs.split(",") if i]
     for flag, given, known in (("--methods", methods, METHODS),

@@ -21,7 +21,7 @@ implied by the closure of the kept links, against the labels.
 Prints a table; saves ``runs/bench-landmarks/results.json`` (one record per run).
 
 Usage: ``.venv/bin/python bench/landmarks_clear.py [--data DIR] [--frames 20 101] [--configs ...]
-[--graphs complete ring seq:4] [--quick]`` (``--quick``: 20 frames only).
+[--graphs complete ring seq:4] [--quick]`` (``--quick``: 20 frames, unless ``--frames`` is given).
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 from multiway import SHARED_DATA  # noqa: E402
 
+from pipeline.commands.options import given_options  # noqa: E402
 from pipeline.consistency.rules import RULES as RESOLUTIONS  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
@@ -65,7 +66,7 @@ def main(argv=None) -> int:
                     help="REFINE:RATIO:GEOMETRY[:PX] (refine votes|none, ratio none|R, geometry "
                          "epipolar|none, epipolar bound PX, default 3)")
     ap.add_argument("--results", default="results.json", help="file name under --out")
-    ap.add_argument("--quick", action="store_true", help="20 frames only")
+    ap.add_argument("--quick", action="store_true", help="20 frames only, unless --frames is given")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench-landmarks")
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):
@@ -85,7 +86,7 @@ def main(argv=None) -> int:
         print(f"error: --data {args.data}: no such folder; give the CMU hotel folder (its frames "
               "and their label files)", file=sys.stderr)
         return 2
-    frames = [20] if args.quick else args.frames
+    frames = [20] if args.quick and "frames" not in given_options(ap, argv) else args.frames
     print(HEADER)
     print("|" + "---|" * (HEADER.count("|") - 1))
     records = []

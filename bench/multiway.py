@@ -67,7 +67,8 @@ Prints one table per case and saves ``runs/bench-multiway/results.json``.
 
 Usage: ``.venv/bin/python bench/multiway.py [--data DIR] [--frames 20 101] [--graphs ...]
 [--inputs descriptors guided guided+votes] [--methods ...] [--team 300 3000] [--quick]``
-(``--quick``: 20 frames, complete graph, descriptors only, formation a seed 5, team of 100).
+(``--quick``: 20 frames, complete graph, descriptors only, formation a seed 5, team of 100,
+for the options not given).
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 
 import numpy as np  # noqa: E402
 
-from pipeline.commands.options import positive_argument, seed_argument  # noqa: E402
+from pipeline.commands.options import given_options, positive_argument, seed_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
@@ -683,6 +684,12 @@ def machine(load_at_start: float) -> dict:
             "load_average_at_end": round(os.getloadavg()[0], 2)}
 
 
+#: what ``--quick`` runs, for each option not given
+QUICK = {"frames": [20], "graphs": ["complete"], "inputs": ["descriptors"], "team": [100],
+         "warped_seeds": [1], "warped_hide": [0.25], "warped_inputs": ["descriptors"],
+         "graffiti": "", "formations": "a", "formation_seeds": [5]}
+
+
 @one_line_errors
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -723,7 +730,11 @@ def main(argv=None) -> int:
                         "seeds (decisions should not depend on the numbering)")
     p.add_argument("--cap-gb", type=positive_argument, default=6.0)
     p.add_argument("--cap-s", type=positive_argument, default=600.0)
-    p.add_argument("--quick", action="store_true")
+    p.add_argument("--quick", action="store_true",
+                   help="small values for the options not given: " + ", ".join(
+                       f"--{k.replace('_', '-')} "
+                       + (" ".join(map(str, v)) if isinstance(v, list) else v or "''")
+                       for k, v in QUICK.items()))
     p.add_argument("--out", default=str(ROOT / "runs" / "bench-multiway"))
     a = p.parse_args(argv)
     if problem := results_folder_problem(a.out):
@@ -737,10 +748,11 @@ def main(argv=None) -> int:
             p.error(f"{flag} {' '.join(unknown)}: unknown; choose from {', '.join(known)}")
     if a.team and min(a.team) < 2:
         p.error(f"--team {min(a.team)}: a team has at least 2 cameras")
-    if a.quick:
-        a.frames, a.graphs, a.inputs, a.team = [20], ["complete"], ["descriptors"], [100]
-        a.warped_seeds, a.warped_hide, a.warped_inputs = [1], [0.25], ["descriptors"]
-        a.graffiti, a.formations, a.formation_seeds = "", "a", [5]
+    if a.quick:  # small values for the options not given (--quick --frames 6 runs 6 frames)
+        given = given_options(p, argv)
+        for dest, value in QUICK.items():
+            if dest not in given:
+                setattr(a, dest, value)
     import data_synth
 
     for formation in a.formations:  # before the labelled, warped and Graffiti cases run

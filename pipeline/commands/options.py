@@ -16,7 +16,7 @@ import math
 from pipeline.errors import InputError
 from pipeline.validate import render_size
 
-__all__ = ["count_argument", "seed_argument", "positive_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
+__all__ = ["count_argument", "given_options", "seed_argument", "positive_argument", "add_feature_options", "add_online_options", "check_online_options", "online_run_summary", "add_scene_options",
            "add_resolution_option", "add_transport_option", "add_merge_radius_option",
            "team_timeout", "round_timeout", "transport_time_limit",
            "add_memory_option", "add_overwrite_and_memory_options",
@@ -298,6 +298,25 @@ def count_argument(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of at least 1")
     return value
+
+
+def given_options(parser: argparse.ArgumentParser, argv) -> set[str]:
+    """The ``dest`` of every option ``argv`` sets itself (rather than leaving it to its
+    default): a bench's ``--quick`` picks small values only for the options not given, e.g.
+    ``--quick --frames 4``. Parse ``argv`` with ``parser`` first (its errors are reported
+    there).
+
+    >>> p = argparse.ArgumentParser()
+    >>> _ = p.add_argument("--n", type=int, default=3)
+    >>> _ = p.add_argument("--quick", action="store_true")
+    >>> sorted(given_options(p, ["--quick"]))
+    ['quick']
+    """
+    unset = object()
+    probe = argparse.Namespace(**{a.dest: unset for a in parser._actions
+                                  if a.dest is not argparse.SUPPRESS})
+    parser.parse_args(argv, namespace=probe)  # argparse sets no default on a dest already set
+    return {dest for dest, value in vars(probe).items() if value is not unset}
 
 
 def positive_argument(text: str) -> float:
