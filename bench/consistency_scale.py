@@ -56,7 +56,7 @@ from pipeline.consistency import resolve_conflicts  # noqa: E402
 from pipeline.consistency.centralized import drop_conflictive_sets, is_conflict_free  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
-from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.runfolder import OutputFiles, write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
 
 OUT = ROOT / "runs" / "bench-consistency"
@@ -293,9 +293,12 @@ def main(argv=None) -> int:
     meta = dict(python=platform.python_version(), machine=platform.machine(), repeat=args.repeat,
                 features_per_robot=args.features, spurious=args.spurious, detect=args.detect,
                 seed=args.seed, load_average=os.getloadavg(), command=" ".join(sys.argv))
-    # one file: the figures and what they were measured on are replaced together
-    write_json_atomic(args.out / "results.json", dict(meta=meta, records=records))
-    plot(records, args.out / "time_bytes.png")
+    # the figures, what they were measured on and their plot are replaced together: a Ctrl-C
+    # while the plot was drawn left a new results.json beside a half-written time_bytes.png
+    with OutputFiles(replace=True) as files:
+        write_json_atomic(files.path(args.out / "results.json", "--out"),
+                          dict(meta=meta, records=records))
+        plot(records, files.path(args.out / "time_bytes.png", "--out"))
     print(f"saved {args.out / 'results.json'} and {args.out / 'time_bytes.png'}")
     return 0
 

@@ -36,7 +36,7 @@ from pipeline.fusion.consensus import (  # noqa: E402
 )
 from pipeline.fusion.voting import dynamic_voting, gate_threshold  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
-from pipeline.runfolder import write_json_atomic  # noqa: E402
+from pipeline.runfolder import OutputFiles, write_json_atomic  # noqa: E402
 
 #: the repository's runs/, as every bench, whatever the current folder
 OUT = ROOT / "runs" / "bench-voting"
@@ -183,13 +183,17 @@ def main(argv=None) -> int:
     if importlib.util.find_spec("matplotlib") is None:
         ap.error("matplotlib is missing, for the figure fig2_3.png: install the bench extra "
                  "(make bench-voting, or pip install -e '.[bench]')")
-    fig = plot_fig23(args.out / "fig2_3.png")
+    # the figure and its figures are replaced together (fig2_3.png was drawn in place, and a
+    # Ctrl-C after it left a new figure beside the previous fig2_3.json)
+    with OutputFiles(replace=True) as files:
+        fig = plot_fig23(files.path(args.out / "fig2_3.png", "--out"))
+        fig["path"] = str(args.out / "fig2_3.png")
+        write_json_atomic(files.path(args.out / "fig2_3.json", "--out"), fig)
     print(f"\nFigs. 2-3 example: ML of all {np.round(fig['ml_all'], 2).tolist()}, ML of inliers "
           f"{np.round(fig['ml_in'], 2).tolist()}; winner h={fig['winner']} (members "
           f"{fig['members']}), final |θ_i − ML_in| <= {fig['final_theta_max_dev']:.1e}, "
           f"v_i -> {fig['final_votes'][0]:.3f}; last opinion change at t={fig['last_opinion_change']}")
     print(f"  Conditions 1 and 3 hold: {fig['condition1']}, {fig['condition3']}; figure: {fig['path']}")
-    write_json_atomic(args.out / "fig2_3.json", fig)
     print(f"wrote {args.out / 'fig2_3.json'}")
     return 0
 
