@@ -96,7 +96,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 import numpy as np  # noqa: E402
 
 from pipeline.commands.options import given_options, positive_argument, seed_argument  # noqa: E402
-from pipeline.errors import one_line_errors  # noqa: E402
+from pipeline.errors import InputError, one_line_errors  # noqa: E402
 from pipeline.outputs import results_folder_problem  # noqa: E402
 from pipeline.runfolder import write_json_atomic  # noqa: E402
 from pipeline.types import Links  # noqa: E402
@@ -206,7 +206,31 @@ def graffiti_case(directory: str, graph: str) -> Case:
 
 
 
-def warped_landmarks(directory: str, out: Path, seed: int, frames: int = 30,
+#: images of a warped copy of ``--data`` (:func:`warped_landmarks`)
+WARPED_FRAMES = 30
+
+
+def check_data_frames(data: str, frames: list[int], warped: bool) -> None:
+    """Before any case: ``data`` holds the labelled images the cases take, ``frames`` of them
+    (``--frames``) and :data:`WARPED_FRAMES` for the warped copies (``warped``: any
+    ``--warped-seeds``); InputError naming the option and what to do. A small folder was
+    refused only when the case came, after the cases before it, and a warped copy's refusal
+    named ``--frames 30``, a value no one gave."""
+    from pipeline.inputs.landmarks import load_landmark_folder
+
+    if not frames and not warped:
+        return
+    held = len(load_landmark_folder(data, "given"))
+    if bad := [f for f in frames if not 2 <= f <= held]:
+        raise InputError(f"--frames {bad[0]}: expected 2..{held} (--data {data} holds {held} "
+                         "labelled images)")
+    if warped and held < WARPED_FRAMES:
+        raise InputError(f"--warped-seeds: the warped copies take {WARPED_FRAMES} labelled images "
+                         f"of --data {data}, which holds {held}; give a larger set, or "
+                         "--warped-seeds with no seed to skip them")
+
+
+def warped_landmarks(directory: str, out: Path, seed: int, frames: int = WARPED_FRAMES,
                      hide: float = 0.0) -> Path:
     """A harder labelled set from ``directory`` (CMU hotel's layout): ``frames`` images at a
     fixed stride, each warped by its own random homography (rotation up to 25°, scale 0.6–1.2,
@@ -757,6 +781,7 @@ def main(argv=None) -> int:
 
     for formation in a.formations:  # before the labelled, warped and Graffiti cases run
         data_synth.check_formation(formation)
+    check_data_frames(a.data, a.frames, bool(a.warped_seeds and a.warped_hide))
     records = []
     load = os.getloadavg()[0]
     for frames in a.frames:

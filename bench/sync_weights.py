@@ -280,6 +280,8 @@ def main(argv=None) -> int:
     if (a.frames or a.warped_seeds) and not Path(a.data).is_dir():
         p.error(f"--data {a.data}: no such folder (a labelled set laid out as CMU hotel); "
                 "pass --frames --warped-seeds with no values to run the team rows only")
+    if a.frames or a.warped_seeds:
+        multiway.check_data_frames(a.data, a.frames, bool(a.warped_seeds and a.warped_hide))
     alphas = sorted(set(a.alphas) | {1.0})
     load = os.getloadavg()[0]
     print("F1 per alpha (w = lambda + alpha * TRIANGLE_WEIGHT * support; 1 = sync, 0 = the "
