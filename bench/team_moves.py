@@ -160,7 +160,9 @@ def main(argv=None) -> int:
                   f"links separated) -> after {moves} move(s) {s1['f1']:.4f} "
                   f"({s1['links_split']}; the truth {rec['truth_separated']}), "
                   f"cycle-consistent {rec['consistent']}, {wall:.1f} s; quality AUC "
-                  f"{check.get('auc', float('nan')):.3f}", flush=True)
+                  # none without a link the triangles confirm and one they refute (saved null)
+                  + ("-" if rec["quality_auc"] is None else f"{rec['quality_auc']:.3f}"),
+                  flush=True)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "results.json", {"machine": multiway.machine(load), "args": vars(a),

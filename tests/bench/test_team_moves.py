@@ -36,3 +36,11 @@ def test_it_prints_and_saves_each_team(tmp_path, capsys):
     rec = json.loads((tmp_path / "results.json").read_text())["records"]
     assert [(r["cameras"], r["seed"]) for r in rec] == [(60, 1)]
     assert "60 cameras, seed 1: sync F1" in capsys.readouterr().out
+
+
+def test_a_team_without_a_quality_auc_prints_a_dash_as_it_saves_null(tmp_path, capsys):
+    # two cameras share no triangle: no AUC of the quality, saved null and printed 'nan'
+    assert _bench().main(["--n", "2", "--seeds", "0", "--out", str(tmp_path)]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.startswith("2 cameras, seed 0:") and line.endswith("quality AUC -")
+    assert json.loads((tmp_path / "results.json").read_text())["records"][0]["quality_auc"] is None
