@@ -48,3 +48,31 @@ def shadowing_package(folder: Path, name: str, body: str) -> Path:
     (folder / name).mkdir()
     (folder / name / "__init__.py").write_text(body)
     return folder
+
+
+#: what a bench's ``--out`` folder holds before a run that must leave it as it was
+PREVIOUS = '{"previous": true}'
+
+
+def previous_results(tmp_path: Path) -> Path:
+    """A bench's ``--out`` folder holding a previous ``results.json`` (:data:`PREVIOUS`)."""
+    out = tmp_path / "bench"
+    out.mkdir()
+    (out / "results.json").write_text(PREVIOUS)
+    return out
+
+
+def refused(main, argv: list[str], out: Path, capsys) -> str:
+    """``main(argv)`` is refused: exit status 2 (returned, or argparse's ``SystemExit``), no
+    traceback, and ``out`` as :func:`previous_results` made it; returns what it printed on
+    stderr."""
+    try:  # argparse's refusals exit; an InputError is printed and returned (one_line_errors)
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    assert [p.name for p in out.iterdir()] == ["results.json"]
+    assert (out / "results.json").read_text() == PREVIOUS
+    return err

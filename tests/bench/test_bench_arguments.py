@@ -6,7 +6,7 @@ import inspect
 from pathlib import Path
 
 import pytest
-from benchload import load_bench
+from benchload import load_bench, previous_results, refused
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -61,18 +61,8 @@ def _bench(name):
                   "--team", "0"], "--team 0: a team has at least 2 cameras"),
 ])
 def test_a_count_the_bench_cannot_run_is_refused(tmp_path, capsys, name, args, message):
-    out = tmp_path / "bench"
-    out.mkdir()
-    (out / "results.json").write_text('{"previous": true}')
-    try:  # argparse's refusals exit; an InputError is printed and returned (one_line_errors)
-        code = _bench(name).main(args + ["--out", str(out)])
-    except SystemExit as exc:
-        code = exc.code
-    assert code == 2
-    err = capsys.readouterr().err
-    assert message in err and "Traceback" not in err
-    assert (out / "results.json").read_text() == '{"previous": true}'
-    assert [p.name for p in out.iterdir()] == ["results.json"]
+    out = previous_results(tmp_path)
+    assert message in refused(_bench(name).main, args + ["--out", str(out)], out, capsys)
 
 
 def test_landmarks_clear_names_a_missing_data_folder_before_any_output(tmp_path, capsys):
