@@ -115,6 +115,13 @@ def one(args, hold: int) -> dict:
     }
 
 
+def _by_reason(counts: dict) -> str:
+    """``{reason: links}`` as ``N (N1 by REASON1, ...)``, or ``0``."""
+    total = sum(counts.values())
+    parts = ", ".join(f"{v} by {k}" for k, v in sorted(counts.items()) if v)
+    return f"{total} ({parts})" if parts else "0"
+
+
 @one_line_errors
 def main(argv=None) -> int:
     """The bench; a value the online stage refuses (e.g. ``--window 0``, ``--robots 1``) is a
@@ -151,7 +158,7 @@ def main(argv=None) -> int:
               f"{r['of_them_in_a_conflictive_set_while_open']} ever in a conflictive set "
               f"while open, {r['of_them_in_a_touched_set_while_open']} in a set a step's new "
               f"links touched while open; good cut online but kept by batch "
-              f"{r['good_cut_online_kept_by_batch']}", flush=True)
+              f"{_by_reason(r['good_cut_online_kept_by_batch'])}", flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()}

@@ -108,6 +108,7 @@ one_line_interrupts(__name__, __file__)  # a Ctrl-C while the libraries below lo
 import numpy as np  # noqa: E402
 
 from pipeline import validate  # noqa: E402
+from pipeline.commands.options import positive_argument  # noqa: E402
 from pipeline.errors import one_line_errors  # noqa: E402
 from pipeline.fusion.consensus import (  # noqa: E402
     RandomGeometricTopology,
@@ -338,8 +339,9 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--trials", type=int, default=1000, help="Monte Carlo trials (paper: 1000)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--radius", type=float, default=0.4,
-                    help="communication radius of the per-round random geometric graph")
+    ap.add_argument("--radius", type=positive_argument, default=0.4,
+                    help="communication radius of the per-round random geometric graph (a "
+                         "finite number above 0; the robots lie in the unit square)")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if problem := results_folder_problem(args.out):

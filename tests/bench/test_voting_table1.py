@@ -54,3 +54,17 @@ def test_the_table_and_its_readings_are_one_file_replaced_at_once(tmp_path, caps
     assert saved["table"]["reading"]["score"] == best["score"]
     assert saved["table"]["details"] == best["table"]
     assert "results.json" in capsys.readouterr().out
+
+
+def test_a_radius_that_is_no_distance_is_refused_when_parsed(tmp_path, capsys):
+    """--radius inf (or nan, 0) was taken: every robot then hears every other, or none."""
+    import pytest
+    from benchload import load_bench
+
+    for radius in ("inf", "nan", "0"):
+        with pytest.raises(SystemExit) as exc:
+            load_bench("voting_table1").main(["--radius", radius, "--out", str(tmp_path)])
+        assert exc.value.code == 2
+        assert f"argument --radius: '{radius}': expected a finite number above 0" in \
+            capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
