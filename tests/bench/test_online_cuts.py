@@ -34,8 +34,6 @@ def test_a_value_the_stage_refuses_is_a_one_line_error(tmp_path, capsys):
 
 def test_the_good_links_cut_online_are_printed_by_reason():
     """They were printed as a raw dict ({'evidence': 2})."""
-    from benchload import load_bench
-
     by_reason = load_bench("online_cuts")._by_reason
     assert by_reason({"evidence": 2, "history": 1}) == "3 (2 by evidence, 1 by history)"
     assert by_reason({"evidence": 0}) == "0" and by_reason({}) == "0"

@@ -58,9 +58,6 @@ def test_the_table_and_its_readings_are_one_file_replaced_at_once(tmp_path, caps
 
 def test_a_radius_that_is_no_distance_is_refused_when_parsed(tmp_path, capsys):
     """--radius inf (or nan, 0) was taken: every robot then hears every other, or none."""
-    import pytest
-    from benchload import load_bench
-
     for radius in ("inf", "nan", "0"):
         with pytest.raises(SystemExit) as exc:
             load_bench("voting_table1").main(["--radius", radius, "--out", str(tmp_path)])
