@@ -435,6 +435,9 @@ def main(argv=None) -> int:
         check_output_files([("--out", args.out)], overwrite=True)
     except InputError as exc:
         ap.error(str(exc))
+    if not folders and not rings:  # an empty table would replace the previous results
+        ap.error("nothing to run: --rings-only with no ring (--rings is empty); name the rings, "
+                 "e.g. --rings ABCD, or drop --rings-only")
     import importlib
 
     for name in WARM_IMPORTS:

@@ -18,6 +18,8 @@ NOTHING = ["--rings-only", "--rings", ""]  # no input: without the checks, a qui
      "--ring-cameras 0: a ring needs at least 2 cameras"),
     (["--rings-only", "--rings", "ABCD", "--ring-cameras", "1", "--methods", "ours",
       "--inputs", "named"], "--ring-cameras 1: a ring needs at least 2 cameras"),
+    # it ran nothing and saved an empty table over the previous results
+    (NOTHING, "nothing to run: --rings-only with no ring"),
 ])
 def test_what_it_cannot_run_is_refused_first(tmp_path, capsys, args, message):
     out = tmp_path / "results.json"
