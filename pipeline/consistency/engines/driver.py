@@ -310,7 +310,9 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections,
                         rule.hook("equip"))
     if bundle_budget is not None:
-        if isinstance(bundle_budget, bool) or int(bundle_budget) != bundle_budget \
+        if isinstance(bundle_budget, bool) \
+                or not isinstance(bundle_budget, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(bundle_budget) or int(bundle_budget) != bundle_budget \
                 or bundle_budget < 1:
             raise InputError(f"bundle_budget {bundle_budget!r}: give a set size of at least "
                              "1 feature, or None for the default")

@@ -130,7 +130,7 @@ def test_the_default_budget_fits_a_sets_bundles_in_the_stated_bytes():
     assert bundle_budget(101, 7) == 7
 
 
-@pytest.mark.parametrize("bad", [0, -3, 2.5, True])
+@pytest.mark.parametrize("bad", [0, -3, 2.5, True, "8", float("nan"), float("inf")])
 def test_a_bad_bundle_budget_is_an_input_error(bad):
     links = Links([0, 0, 1, 2], [0, 0, 0, 0], [3, 1, 2, 3], [1, 0, 0, 0])
     with pytest.raises(InputError, match="bundle_budget"):
