@@ -197,6 +197,8 @@ def resolution_scores(features_per_camera, links: Links, truth: np.ndarray,
     kept = _per_link(kept, len(links), "kept")
     if in_sets is None:
         in_sets = links_in_conflictive_sets(features_per_camera, links)
+    else:  # a list failed on .sum(), another length with numpy's broadcasting message
+        in_sets = _per_link(in_sets, len(links), "in_sets")
     return {"good_cut": int((~kept & truth).sum()), "spurious_cut": int((~kept & ~truth).sum()),
             "spurious_in_sets": int((in_sets & ~truth).sum()),
             "spurious_left": int((in_sets & ~truth & kept).sum()),

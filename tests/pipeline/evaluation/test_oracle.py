@@ -118,3 +118,17 @@ def test_truth_that_is_not_boolean_is_named_not_cast(truth, needle):
         oracle_cut([2, 1, 1, 1], links, truth)
     with pytest.raises(InputError, match=needle):
         resolution_scores([2, 1, 1, 1], links, truth, [True] * 4)
+
+
+def test_in_sets_is_checked_as_kept_is():
+    """A list failed with "'list' object has no attribute 'sum'"; another length with numpy's
+    broadcasting message; a -1 was read as a link in a set."""
+    from pipeline.errors import InputError
+
+    truth, kept = [True, False, True, True], [True, True, False, True]
+    given = resolution_scores([1, 1, 1, 2], FIG1, truth, kept, in_sets=[True] * 4)
+    assert given == resolution_scores([1, 1, 1, 2], FIG1, truth, kept)
+    with pytest.raises(InputError, match=r"in_sets has shape \(3,\); give one entry per link"):
+        resolution_scores([1, 1, 1, 2], FIG1, truth, kept, in_sets=[True] * 3)
+    with pytest.raises(InputError, match=r"in_sets\[1\] = -1"):
+        resolution_scores([1, 1, 1, 2], FIG1, truth, kept, in_sets=[1, -1, 1, 1])
