@@ -156,7 +156,8 @@ def oracle_cut(features_per_camera, links: Links, truth: np.ndarray, *, graph=No
     -------
     kept : ndarray, (L,) bool
     """
-    fpc = np.asarray(features_per_camera, dtype=np.int64)
+    # counts as camera_offsets checks them: a cast to int64 read 2.5 features as 2
+    fpc = np.diff(camera_offsets(features_per_camera))
     truth = _per_link(truth, len(links), "truth")
     kept = np.ones(len(links), dtype=bool)
     if not len(links):

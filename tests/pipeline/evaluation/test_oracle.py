@@ -132,3 +132,15 @@ def test_in_sets_is_checked_as_kept_is():
         resolution_scores([1, 1, 1, 2], FIG1, truth, kept, in_sets=[True] * 3)
     with pytest.raises(InputError, match=r"in_sets\[1\] = -1"):
         resolution_scores([1, 1, 1, 2], FIG1, truth, kept, in_sets=[1, -1, 1, 1])
+
+
+@pytest.mark.parametrize("counts, needle", [
+    ([1.5, 1, 1, 2], r"features_per_camera\[0\] = 1\.5 is not a whole-number id"),
+    ([1, 1, 1, np.nan], r"features_per_camera\[3\] = nan"),
+])
+def test_oracle_cut_names_counts_that_are_not_whole_numbers(counts, needle):
+    """A cast to int64 read 1.5 features as 1 and returned a cut of the truncated input."""
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=needle):
+        oracle_cut(counts, FIG1, np.ones(4, bool))
