@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from pipeline.association import camera_offsets
 from pipeline.consistency.centralized import union_find_conflicts
 from pipeline.errors import InputError
-from pipeline.types import Links
+from pipeline.types import Links, id_array
 
 __all__ = ["oracle_cut", "min_conflict_cut", "resolution_scores",
            "links_in_conflictive_sets"]
@@ -89,6 +89,9 @@ def min_conflict_cut(cam: np.ndarray, a: np.ndarray, b: np.ndarray,
 
     Raises
     ------
+    InputError
+        ``cam``, ``a`` or ``b`` not whole numbers, ``a`` and ``b`` of other lengths, or an
+        end outside ``0..V-1``.
     RuntimeError
         The integer program did not converge within ``max_rounds`` rounds.
 
@@ -99,6 +102,7 @@ def min_conflict_cut(cam: np.ndarray, a: np.ndarray, b: np.ndarray,
     camera; paths are added until the solution is feasible for *all* paths, so the result is
     optimal. Exponential in the worst case; conflictive sets are small.
     """
+    cam, a, b = _nodes(cam, a, b)
     E = int(a.size)
     cut = np.zeros(E, dtype=bool)
     if E == 0:
@@ -121,6 +125,25 @@ def min_conflict_cut(cam: np.ndarray, a: np.ndarray, b: np.ndarray,
             raise RuntimeError(f"oracle integer program failed: {res.message}")
         cut = res.x > 0.5
     raise RuntimeError(f"oracle cut did not converge in {max_rounds} rounds")
+
+
+def _nodes(cam, a, b) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``cam``, ``a``, ``b`` of :func:`min_conflict_cut` as int64 arrays; InputError naming
+    what is wrong (lists failed with AttributeError, an end past the nodes with an IndexError
+    deep in the path search)."""
+    try:
+        cam, a, b = (id_array(v, name) for v, name in ((cam, "cam"), (a, "a"), (b, "b")))
+    except ValueError as exc:
+        raise InputError(f"min_conflict_cut: {exc}") from None
+    if a.size != b.size:
+        raise InputError(f"min_conflict_cut: a has {a.size} link ends and b {b.size}; give "
+                         "one entry per link in each")
+    bad = np.flatnonzero((a < 0) | (a >= cam.size) | (b < 0) | (b >= cam.size))
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(f"min_conflict_cut: link {k} ({int(a[k])}, {int(b[k])}) names a node "
+                         f"outside 0..{cam.size - 1}, the nodes of cam")
+    return cam, a, b
 
 
 def _per_link(mask, n_links: int, name: str) -> np.ndarray:

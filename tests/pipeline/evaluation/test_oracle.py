@@ -144,3 +144,17 @@ def test_oracle_cut_names_counts_that_are_not_whole_numbers(counts, needle):
 
     with pytest.raises(InputError, match=needle):
         oracle_cut(counts, FIG1, np.ones(4, bool))
+
+
+def test_min_conflict_cut_takes_lists_and_names_bad_ends():
+    """Lists failed with AttributeError ('list' object has no attribute 'size')."""
+    from pipeline.errors import InputError
+
+    # a chain 0 - 1 - 2 - 3 - 4 whose ends 0 and 4 are features of camera 0
+    assert min_conflict_cut([0, 1, 2, 3, 0], [0, 1, 2, 3], [1, 2, 3, 4]).sum() == 1
+    with pytest.raises(InputError, match=r"a has 3 link ends and b 4"):
+        min_conflict_cut([0, 1, 2, 3, 0], [0, 1, 2], [1, 2, 3, 4])
+    with pytest.raises(InputError, match=r"link 3 \(3, 9\) names a node outside 0\.\.4"):
+        min_conflict_cut([0, 1, 2, 3, 0], [0, 1, 2, 3], [1, 2, 3, 9])
+    with pytest.raises(InputError, match=r"b\[0\] = 1\.5"):
+        min_conflict_cut([0, 1, 2, 3, 0], [0, 1, 2, 3], [1.5, 2, 3, 4])
