@@ -102,7 +102,8 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
     Raises
     ------
     InputError
-        Unknown kind, a bad ``K``, ``geometric`` without positions.
+        Unknown kind, a bad ``K``, ``geometric`` without positions, ``n`` not a whole number
+        ``>= 0``.
 
     Examples
     --------
@@ -113,6 +114,9 @@ def graph_edges(kind: str, n: int, centres: np.ndarray | None = None, seed: int 
     >>> graph_edges("ring", 2).tolist(), graph_edges("ring", 1).tolist()
     ([[0, 1]], [])
     """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        # int(3.5) made a graph of 3 robots, a negative n one of none
+        raise InputError(f"graph {kind!r}: n = {n!r} robots; give a whole number >= 0")
     n = int(n)
     idx = np.arange(n)
     ring = np.stack([idx, (idx + 1) % n], axis=1)

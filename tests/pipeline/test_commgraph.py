@@ -247,3 +247,15 @@ def test_edges_of_a_python_set_or_generator_are_named_by_type(edges, kind):
     with pytest.raises(InputError, match=rf"communication edges given as a {kind}: give a list "
                                          r"of \(camera i, camera j\) pairs or an \(E, 2\)"):
         resolve_conflicts([1, 1], edges, Links([0], [0], [1], [0]))
+
+
+@pytest.mark.parametrize("n", [3.5, -3, "4", True])
+def test_graph_edges_refuses_a_number_of_robots_that_is_not_one(n):
+    """int(3.5) made a ring of 3 robots, a negative n a graph of none, silently."""
+    with pytest.raises(InputError, match=rf"graph 'ring': n = {n!r} robots; give a whole number"):
+        graph_edges("ring", n)
+
+
+def test_graph_edges_takes_numpy_integers():
+    assert graph_edges("ring", np.int32(3)).tolist() == [[0, 1], [0, 2], [1, 2]]
+    assert graph_edges("line", 0).tolist() == []
