@@ -55,3 +55,17 @@ def test_readme_says_where_make_setup_puts_the_command():
     assert "`.venv/bin/formation-match`" in commands
     assert "source .venv/bin/activate" in commands
     assert "VENV   := .venv" in (ROOT / "Makefile").read_text()
+
+
+def test_architecture_names_every_rule_and_both_defaults():
+    # the registry row named two of the four rules and only DEFAULT_RESOLUTION, saying that
+    # clean-h5 and run-landmarks "name theirs": resolve and clean-db run sync by default too
+    from pipeline.consistency import rules
+
+    row = next(line for line in (ROOT / "docs" / "architecture.md").read_text().splitlines()
+               if line.startswith("| resolution rule"))
+    assert all(f"`{name}`" in row for name in ("paper", "evidence", "sync", "paper-labels"))
+    for constant in ("DEFAULT_RESOLUTION", "DEFAULT_LINKS_RESOLUTION"):
+        assert f"`{constant}` (`{getattr(rules, constant)}`)" in row
+    for command in ("resolve", "clean-db", "clean-h5", "run-landmarks"):
+        assert f"`{command}`" in row
