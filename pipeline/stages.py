@@ -120,13 +120,15 @@ def photo_merge_radius(method: str, resolution: str, merge_radius: float | None)
 def budget_line(views: list[View], max_features: int | None, method: str = "sift") -> str:
     """The feature budget as the stage line says it: ``2000 per image``, or with budgets
     scaled with each image (``max_features=None``) the numbers, e.g. ``3300 per image (2000
-    per 640x480 pixels, at most 8192)`` or ``2000-8192 per image (…)`` for mixed sizes.
+    per 640x480 pixels, from 2000 to 8192)`` or ``2000-8192 per image (…)`` for mixed sizes.
 
     Examples
     --------
     >>> import numpy as np
     >>> budget_line([View("a", np.zeros((640, 800)), np.eye(3))] * 6, None)
-    '3333 per image (2000 per 640x480 pixels, at most 8192)'
+    '3333 per image (2000 per 640x480 pixels, from 2000 to 8192)'
+    >>> budget_line([View("a", np.zeros((240, 320)), np.eye(3))], None)  # not 500: the floor
+    '2000 per image (2000 per 640x480 pixels, from 2000 to 8192)'
     >>> budget_line([], 2000)
     '2000 per image'
     >>> budget_line([], 300, "colmap-sift")
@@ -146,7 +148,7 @@ def budget_line(views: list[View], max_features: int | None, method: str = "sift
         return f"{max_features} per image"
     budgets = sorted({photo_max_features(v.image.shape[1], v.image.shape[0]) for v in views})
     span = "-".join(str(b) for b in {budgets[0]: 0, budgets[-1]: 0}) if budgets else "?"
-    return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, at most "
+    return (f"{span} per image ({BASE_FEATURES} per 640x480 pixels, from {BASE_FEATURES} to "
             f"{MAX_PHOTO_FEATURES})")
 
 

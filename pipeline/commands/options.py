@@ -40,7 +40,7 @@ def add_feature_options(p: argparse.ArgumentParser, photos: bool = False) -> Non
         p.add_argument("--max-features", default="auto", metavar="N|auto",
                        help="features per image; auto (default): with colmap-sift COLMAP's "
                             "own 8192 at every size, with the other methods 2000 per 640x480 "
-                            "pixels, at most 8192. COLMAP's SIFT applies its budget to whole "
+                            "pixels, from 2000 to 8192. COLMAP's SIFT applies its budget to whole "
                             "scale levels, each location with up to two orientations: an image "
                             "may keep somewhat more locations than N")
     else:

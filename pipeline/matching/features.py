@@ -55,7 +55,7 @@ PHOTO_CONTRAST_THRESHOLD = 0.02
 
 
 def photo_max_features(width: int, height: int, method: str = "sift") -> int:
-    """Feature budget of one photograph: ``2000`` per 640x480 pixels, capped at 8192;
+    """Feature budget of one photograph: ``2000`` per 640x480 pixels, from 2000 to 8192;
     COLMAP's SIFT (``method="colmap-sift"``) keeps COLMAP's own 8192 at every size, as a
     COLMAP user gets (on the 800x640 Graffiti photographs the area rule's 3333 left 73 % of
     COLMAP's points).

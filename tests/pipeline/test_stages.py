@@ -62,7 +62,7 @@ def test_the_features_stage_line_says_the_budget_of_the_images():
     views = [View(f"v{k}", rng.integers(0, 255, size=(640, 800), dtype=np.uint8), np.eye(3))
              for k in range(2)]
     for budget, line in ((None, "[features] sift, at most 3333 per image (2000 per 640x480 "
-                                "pixels, at most 8192)"),
+                                "pixels, from 2000 to 8192)"),
                          (500, "[features] sift, at most 500 per image")):
         out = io.StringIO()
         extract_and_match(views, np.zeros((0, 2), dtype=np.int64), "sift", budget,

@@ -153,3 +153,16 @@ def test_merge_radius_help_states_what_colmap_sift_gets(command, colmap_sift_rad
     assert used == colmap_sift_radius
     assert ("0.5 px with colmap-sift" in text) == (colmap_sift_radius == 0.5)
     assert "2 px (the truth tolerance) with --resolution evidence" in text
+
+
+def test_max_features_auto_help_states_the_floor_the_budget_keeps():
+    """run-images' --help said 'with the other methods 2000 per 640x480 pixels, at most 8192':
+    a 320x240 photograph read as 500 features, but it gets 2000 (the budget's floor)."""
+    from pipeline.matching.features import photo_max_features
+
+    p = argparse.ArgumentParser()
+    add_feature_options(p, photos=True)
+    text = next(a.help for a in p._actions if "--max-features" in a.option_strings)
+    low, high = photo_max_features(320, 240), photo_max_features(4000, 3000)
+    assert (low, high) == (2000, 8192)
+    assert f"2000 per 640x480 pixels, from {low} to {high}" in text
