@@ -23,7 +23,9 @@ __all__ = ["add_arguments", "run", "fusion_lines"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("database", metavar="IN.db", help="COLMAP database with two-view geometries "
                                                      "(made by COLMAP or hloc); never modified")
-    p.add_argument("--out", required=True, metavar="OUT.db", help="the cleaned database to write")
+    p.add_argument("--out", required=True, metavar="OUT.db",
+                   help="the cleaned database to write; OUT.links.csv and OUT.rrd are written "
+                        "beside it")
     p.add_argument("--comm-graph", default=None, metavar="FILE",
                    help="communication graph: 'cam_i,cam_j' lines, 0-based indices of the images "
                         "in name order or image names (default: images sharing verified "
@@ -57,7 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "its WATERMARK image pairs (only those) take no part and are copied "
                         "into OUT.db unchanged; the summary counts them (off by default, as "
                         "in COLMAP: every pair with inliers is used)")
-    add_overwrite_and_memory_options(p, "OUT.db / --report")
+    add_overwrite_and_memory_options(p, "OUT.db, its side files and --report")
     add_resolution_option(p, links_only=True)
     add_transport_option(p)
 

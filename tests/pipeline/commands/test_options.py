@@ -166,3 +166,16 @@ def test_max_features_auto_help_states_the_floor_the_budget_keeps():
     low, high = photo_max_features(320, 240), photo_max_features(4000, 3000)
     assert (low, high) == (2000, 8192)
     assert f"2000 per 640x480 pixels, from {low} to {high}" in text
+
+
+@pytest.mark.parametrize("command, out", [("clean-db", "OUT.db"), ("clean-h5", "OUT.h5")])
+def test_cleaning_commands_help_names_the_side_files_overwrite_replaces(command, out):
+    """clean-db's --help said '--out OUT.db: the cleaned database to write' and '--overwrite:
+    replace OUT.db / --report', but it also refuses (and with --overwrite replaces) the
+    OUT.links.csv and OUT.rrd it writes beside OUT.db, as clean-h5's help says."""
+    from pipeline.__main__ import build_parser
+
+    sub = build_parser([command])._subparsers._group_actions[0].choices[command]
+    helps = {a.option_strings[0]: a.help for a in sub._actions if a.option_strings}
+    assert "OUT.links.csv and OUT.rrd are written beside it" in helps["--out"]
+    assert f"replace {out}, its side files and --report" in helps["--overwrite"]
