@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.association import conflictive_links
+from pipeline.association import camera_offsets, conflictive_links
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
@@ -242,7 +242,8 @@ def consistency_stage(features_per_camera, comm_edges, links: Links,
     """
     from pipeline.consistency import resolve_conflicts
 
-    m = np.asarray(features_per_camera, dtype=np.int64)
+    # counts as resolve_conflicts checks them: a cast to int64 read 1.5 features as 1
+    m = np.diff(camera_offsets(features_per_camera))
     kw = dict(resolution=resolution, **(evidence or {}))
     if faults is None or not faults.any:
         return resolve_conflicts(m, comm_edges, links, **kw), None

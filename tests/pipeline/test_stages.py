@@ -68,3 +68,16 @@ def test_the_features_stage_line_says_the_budget_of_the_images():
         extract_and_match(views, np.zeros((0, 2), dtype=np.int64), "sift", budget,
                           StageTimer(stream=out))
         assert line in out.getvalue().splitlines()[0], out.getvalue()
+
+
+def test_consistency_stage_names_counts_that_are_not_whole_numbers():
+    """A cast to int64 read 1.5 features as 1 and resolved the truncated input (nan: numpy's
+    'cannot convert float NaN to integer')."""
+    import pytest
+
+    from pipeline.errors import InputError
+
+    for counts, needle in (([1.5, 1, 1, 2], r"features_per_camera\[0\] = 1\.5 is not a whole"),
+                           ([1, 1, 1, np.nan], r"features_per_camera\[3\] = nan")):
+        with pytest.raises(InputError, match=needle):
+            consistency_stage(counts, None, FIG1)
