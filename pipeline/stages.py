@@ -78,9 +78,21 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     if merge_radius is None:
         own = get_rule(resolution).merge_radius_px
         return MERGE_RADIUS_PX if own is None else own
+    _refuse_non_number(merge_radius)
     if not np.isfinite(merge_radius) or merge_radius < 0:
         raise InputError(f"--merge-radius {merge_radius}: expected pixels >= 0 (0 merges nothing)")
     return float(merge_radius)
+
+
+def _refuse_non_number(merge_radius) -> None:
+    """InputError unless ``merge_radius`` is a real number (text failed with numpy's "ufunc
+    'isfinite' not supported", ``True`` was read as 1 px)."""
+    from pipeline.errors import InputError
+
+    if isinstance(merge_radius, bool) or not isinstance(merge_radius,
+                                                        (int, float, np.integer, np.floating)):
+        raise InputError(f"--merge-radius {merge_radius!r}: expected a number of pixels >= 0 "
+                         "(0 merges nothing), or None for the rule's")
 
 
 def check_merge_radius(merge_radius: float | None, sizes, what: str) -> None:
@@ -100,6 +112,7 @@ def check_merge_radius(merge_radius: float | None, sizes, what: str) -> None:
 
     if merge_radius is None:
         return
+    _refuse_non_number(merge_radius)
     side = min(min(int(w), int(h)) for w, h in sizes)
     if not np.isfinite(merge_radius) or not 0 <= merge_radius <= side:
         raise InputError(f"--merge-radius {merge_radius:g}: expected pixels from 0 (merges "

@@ -1,5 +1,7 @@
 """The stage chain of pipeline.stages: the consistency entry (with faults) and the fusion stage."""
 
+import re
+
 import numpy as np
 from fusion.test_landmarks import planted_rig
 
@@ -81,3 +83,21 @@ def test_consistency_stage_names_counts_that_are_not_whole_numbers():
                            ([1, 1, 1, np.nan], r"features_per_camera\[3\] = nan")):
         with pytest.raises(InputError, match=needle):
             consistency_stage(counts, None, FIG1)
+
+
+def test_a_merge_radius_that_is_not_a_number_is_named():
+    """Text failed with numpy's "ufunc 'isfinite' not supported for the input types"; True
+    was read as a radius of 1 px."""
+    import pytest
+
+    from pipeline.errors import InputError
+    from pipeline.stages import check_merge_radius, merge_radius_for
+
+    for bad in ("2", True, [2.0]):
+        with pytest.raises(InputError, match=rf"--merge-radius {re.escape(repr(bad))}: expected "
+                                             r"a number of pixels"):
+            merge_radius_for("evidence", bad)
+        with pytest.raises(InputError, match=r"expected a number of pixels"):
+            check_merge_radius(bad, [(64, 48)], "the images")
+    assert merge_radius_for("evidence", np.float32(1.5)) == 1.5
+    assert merge_radius_for("evidence", 3) == 3.0
