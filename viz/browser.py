@@ -205,11 +205,12 @@ def _bad_options(out: str, timeout_s: float) -> str | None:
 
 
 def main(argv=None) -> int:
-    from viz.view import parse_with_recording, web_url
+    from viz.view import TARGET_HELP, parse_with_recording, web_url
 
     ap = argparse.ArgumentParser(prog="python -m viz.browser",
                                  description=__doc__.split("\n\n")[0])
-    ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd")
+    ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd",
+                    help=TARGET_HELP)
     ap.add_argument("--out", default="viewer.png", help="screenshot (default viewer.png)")
     ap.add_argument("--timeout", type=float, default=90.0,
                     help="seconds to wait for the recording to show (default 90)")

@@ -26,6 +26,9 @@ from pathlib import Path
 __all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main"]
 
 WEB_PORT = 9090
+#: the help of the recording to open (this command's and :mod:`viz.browser`'s)
+TARGET_HELP = ("a run folder (its recording.rrd) or a .rrd file (default: the newest "
+               "recording.rrd under runs/)")
 GRPC_PORT = 9876
 
 
@@ -214,10 +217,14 @@ def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Na
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m viz.view", description=__doc__.split("\n\n")[0])
-    ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd")
+    ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd",
+                    help=TARGET_HELP)
     mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--web", action="store_true", help="serve the web viewer")
-    mode.add_argument("--native", action="store_true", help="start the native viewer")
+    mode.add_argument("--web", action="store_true",
+                      help="serve the web viewer and print its URL (the default without a "
+                           "display)")
+    mode.add_argument("--native", action="store_true",
+                      help="start the native viewer (the default on a machine with a display)")
     ap.add_argument("--port", type=int, default=WEB_PORT, help="web viewer port (default 9090)")
     ap.add_argument("--grpc-port", type=int, default=GRPC_PORT,
                     help="port of the gRPC proxy that serves the recording (default 9876)")

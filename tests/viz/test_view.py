@@ -150,3 +150,20 @@ def test_a_landmarks_run_folder_is_named_not_asked_about_no_rerun(tmp_path):
         find_recording(run)
     assert "a run-landmarks run folder" in str(exc.value)
     assert "--no-rerun" not in str(exc.value)
+
+
+@pytest.mark.parametrize("module", ["viz.view", "viz.browser"])
+def test_help_states_what_opens_without_a_path(module, capsys):
+    """--help listed RUN_DIR|FILE.rrd with no word (it opens the newest runs/**/recording.rrd
+    when left out) and --web / --native without which is the default."""
+    import importlib
+    import re
+
+    with pytest.raises(SystemExit):
+        importlib.import_module(module).main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default: the newest recording.rrd under runs/" in text
+    if module == "viz.view":
+        assert re.search(r"--web serve the web viewer .*the default without a display", text)
+        assert re.search(r"--native start the native viewer \(the default on a machine with a "
+                         r"display\)", text)
