@@ -306,6 +306,13 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
     # a rule that is not fault-tolerant (e.g. the evidence rule) runs on a fault-free network;
     # with faults the fault-tolerant Alg. 1 is used, and stats['resolution'] says so
     rule = rule_for_network(resolution, reliable)
+    if network.faulty and not reliable and not rule.fault_tolerant:
+        # the paper's protocol as is on a faulty network measures how Alg. 1 breaks; the other
+        # rules' floods stalled there (StageStalledError) or failed deep inside (KeyError)
+        raise InputError(f"ProtocolOptions(reliable=False) on a faulty network: rule "
+                         f"{rule.name!r} needs a lossless network (only 'paper' runs the "
+                         "paper's protocol as is, to see it break); leave reliable unset for "
+                         "the fault-tolerant protocol, or use resolution='paper'")
     if rule.needs_evidence:
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections,
                         rule.hook("equip"))

@@ -178,3 +178,22 @@ def test_the_simulator_hands_both_ends_of_a_link_its_one_value():
         for k, link in enumerate(li.tolist()):
             seen.setdefault(link, []).append(rb.sync.weight[k])
     assert seen == {k: [w[k], w[k]] for k in range(len(w))}
+
+
+@pytest.mark.parametrize("resolution", ["evidence", "sync", "paper-labels"])
+def test_the_papers_protocol_on_a_faulty_network_is_refused_for_a_rule_that_needs_none(
+        resolution):
+    """ProtocolOptions(reliable=False) with drops failed with a KeyError inside the evidence
+    rule, or a StageStalledError of sync's or the label flooding's rounds; 'paper' keeps
+    running as is (the faults bench measures how it breaks)."""
+    from pipeline.consistency import ProtocolOptions
+    from pipeline.transport.simulated import NetworkOptions
+
+    lossy = NetworkOptions(drop_probability=0.3, seed=2)
+    with pytest.raises(InputError, match=rf"ProtocolOptions\(reliable=False\) on a faulty "
+                                         rf"network: rule '{resolution}' needs a lossless"):
+        resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), lossy,
+                          protocol=ProtocolOptions(reliable=False), resolution=resolution)
+    res = resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), lossy,
+                            protocol=ProtocolOptions(reliable=False), resolution="paper")
+    assert res.stats["protocol"] == "paper"
