@@ -209,13 +209,30 @@ class Network(Transport):
 
     def _apply_topology(self) -> None:
         if self.options.topology is not None:
-            self._nbrs = neighbour_table(self.options.topology(self.round), self.n)
+            self._nbrs = neighbour_table(self._topology_edges(self.round), self.n)
+
+    def _topology_edges(self, t: int) -> np.ndarray:
+        """The edges ``options.topology`` gives for round ``t``, ``(E, 2)`` int64; InputError
+        when they are no pairs of this team's robots (an IndexError deep in the neighbour
+        table, or a robot ``-1`` read as the last one)."""
+        given = self.options.topology(t)
+        try:
+            e = np.asarray(given, dtype=np.int64).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise InputError(f"NetworkOptions topology: round {t} gives {given!r}; give pairs "
+                             "(i, j) of robot ids") from None
+        bad = np.flatnonzero(((e < 0) | (e >= self.n)).any(axis=1))
+        if bad.size:
+            raise InputError(f"NetworkOptions topology: round {t} gives edge "
+                             f"{tuple(e[bad[0]].tolist())}, which names a robot outside the "
+                             f"team's 0..{self.n - 1}")
+        return e
 
     def edges(self, t: int) -> np.ndarray:
         """Links of the topology in round ``t``, ``(E_t, 2)`` int64 (crashes not applied)."""
         if self.options.topology is None:
             return np.asarray(self._initial_edges, dtype=np.int64).reshape(-1, 2)
-        return np.asarray(self.options.topology(t), dtype=np.int64).reshape(-1, 2)
+        return self._topology_edges(t)
 
     @property
     def switching(self) -> bool:

@@ -176,3 +176,20 @@ def test_network_options_out_of_range_are_refused_naming_the_value(options, bad)
 
     with pytest.raises(InputError, match=f"NetworkOptions .*{bad}"):
         NetworkOptions(**options)
+
+
+@pytest.mark.parametrize("edges, needle", [
+    ([(0, 9)], r"round 0 gives edge \(0, 9\), which names a robot outside the team's 0\.\.3"),
+    ([(0, 1), (-1, 2)], r"round 0 gives edge \(-1, 2\)"),
+    (["ab"], r"round 0 gives \['ab'\]; give pairs \(i, j\) of robot ids"),
+])
+def test_a_topology_that_names_no_robot_of_the_team_is_refused(edges, needle):
+    """An edge to robot 9 of 4 ended in an IndexError of the neighbour table; robot -1 was read
+    as the last robot."""
+    from pipeline.consistency import resolve_conflicts
+    from pipeline.errors import InputError
+    from pipeline.types import Links
+
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    with pytest.raises(InputError, match=rf"NetworkOptions topology: {needle}"):
+        resolve_conflicts([2, 1, 1, 1], None, links, NetworkOptions(topology=lambda t: edges))
