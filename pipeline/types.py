@@ -181,9 +181,48 @@ class Links:
         return int(self.cam_i.shape[0])
 
     def subset(self, mask: np.ndarray) -> Links:
-        """The links where ``mask`` is true (boolean mask or index array)."""
-        return Links(self.cam_i[mask], self.feat_i[mask], self.cam_j[mask], self.feat_j[mask],
-                     self.quality[mask])
+        """The links where ``mask`` is true (boolean mask or index array).
+
+        Raises
+        ------
+        InputError
+            A boolean mask of another length than the links, an index outside ``0..L-1``,
+            or an index given twice (a link is stored once: a mask of 0 / 1 integers, read as
+            indices, repeated links 0 and 1), or neither booleans nor integers.
+
+        Examples
+        --------
+        >>> links = Links([0, 0, 1], [0, 1, 0], [1, 1, 2], [0, 1, 0])
+        >>> links.subset([True, False, True]).feat_i.tolist(), links.subset([2, 0]).cam_i.tolist()
+        ([0, 0], [1, 0])
+        """
+        sel = self._selection(mask)
+        return Links(self.cam_i[sel], self.feat_i[sel], self.cam_j[sel], self.feat_j[sel],
+                     self.quality[sel])
+
+    def _selection(self, mask) -> np.ndarray:
+        """``mask`` of :meth:`subset` as a boolean ``(L,)`` mask or a 1-D index array,
+        checked."""
+        n = len(self)
+        m = np.asarray(mask)
+        if m.size == 0 and m.ndim == 1 and m.dtype.kind in "biuf":  # [] is float64
+            return np.zeros(0, dtype=np.int64)
+        if m.dtype == bool:
+            if m.shape != (n,):
+                raise InputError(f"Links.subset: a mask of shape {m.shape} for {n} links; give "
+                                 f"one boolean per link ({n},), or link indices")
+            return m
+        if m.dtype.kind not in "iu" or m.ndim != 1:
+            raise InputError(f"Links.subset: give a boolean mask ({n},) or a flat array of "
+                             f"link indices, not an array of dtype {m.dtype} and shape {m.shape}")
+        out = np.flatnonzero((m < 0) | (m >= n))
+        if out.size:
+            raise InputError(f"Links.subset: index {m[out[0]].item()} is outside 0..{n - 1} "
+                             f"({n} links)")
+        if np.unique(m).size != m.size:
+            raise InputError("Links.subset: an index is given more than once (a link is stored "
+                             "once); for a mask of 0 / 1 give booleans (mask.astype(bool))")
+        return m
 
     @staticmethod
     def from_matches(matches: list[PairMatches]) -> Links:

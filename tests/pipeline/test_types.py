@@ -102,3 +102,20 @@ def test_a_quality_that_is_not_one_number_per_link_is_refused(quality, match):
 def _links_columns():
     links = _links()
     return links.cam_i, links.feat_i, links.cam_j, links.feat_j
+
+
+def test_links_subset_refuses_what_would_select_other_links():
+    """A mask of 0 / 1 integers was read as indices (links 1, 0, 1, 1: link 1 three times);
+    a boolean mask of another length or an index past the links ended in numpy's IndexError."""
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    with pytest.raises(InputError, match=r"an index is given more than once .* give booleans"):
+        links.subset(np.array([1, 0, 1, 1]))
+    with pytest.raises(InputError, match=r"a mask of shape \(3,\) for 4 links"):
+        links.subset([True, False, True])
+    with pytest.raises(InputError, match=r"index 7 is outside 0\.\.3 \(4 links\)"):
+        links.subset([0, 7])
+    with pytest.raises(InputError, match=r"not an array of dtype float64"):
+        links.subset([0.5])
+    assert links.subset(np.array([1, 0, 1, 1], dtype=bool)).feat_i.tolist() == [0, 0, 1]
+    assert links.subset([3, 0]).cam_j.tolist() == [3, 1]
+    assert len(links.subset([])) == 0 and len(links.subset(np.zeros(4, bool))) == 0
