@@ -340,7 +340,9 @@ class LinkLedger:
             case: str | np.ndarray | None = None) -> None:
         """Mark the links selected by ``mask`` (bool ``(L,)`` or indices) deleted by ``reason``
         in ``round`` (a number or one per selected link); ``iteration`` and ``case`` are kept
-        unless given."""
+        unless given. ``mask`` is checked as :meth:`Links.subset` checks it (a 0 / 1 integer
+        mask cut links 0 and 1)."""
+        mask = self.links._selection(mask)
         self.status[mask] = "deleted"
         self.reason[mask] = reason
         self.round[mask] = round

@@ -119,3 +119,15 @@ def test_links_subset_refuses_what_would_select_other_links():
     assert links.subset(np.array([1, 0, 1, 1], dtype=bool)).feat_i.tolist() == [0, 0, 1]
     assert links.subset([3, 0]).cam_j.tolist() == [3, 1]
     assert len(links.subset([])) == 0 and len(links.subset(np.zeros(4, bool))) == 0
+
+
+def test_ledger_cut_refuses_a_mask_of_integers_read_as_indices():
+    """cut(np.array([1, 0, 0, 0])) cut links 1 and 0, not link 0."""
+    links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
+    ledger = LinkLedger.all_kept(links)
+    with pytest.raises(InputError, match=r"an index is given more than once"):
+        ledger.cut(np.array([1, 0, 0, 0]), "resolution", 1)
+    assert ledger.status.tolist() == ["kept"] * 4
+    ledger.cut(np.array([2]), "resolution", 1)
+    ledger.cut(np.array([True, False, False, False]), "fusion-outlier", 2)
+    assert ledger.status.tolist() == ["deleted", "kept", "deleted", "kept"]
