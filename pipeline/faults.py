@@ -79,6 +79,7 @@ class FaultConfig:
     switch_window: int = 4
 
     def __post_init__(self):
+        _check_fields(self)
         if not 0.0 <= float(self.drop_prob) < 1.0:
             raise InputError(f"--drop-prob {self.drop_prob}: must be in [0, 1) (1 would lose "
                              "every message)")
@@ -217,6 +218,30 @@ def check_simulated_work(n_robots: int, edges, faults: FaultConfig,
             f"{n_robots * rounds:,} robot-rounds, above the {MAX_ROBOT_ROUNDS:,} a run may "
             "take (half a minute); lower --delay-rounds, or run the cameras in smaller "
             "groups")
+
+
+def _whole(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, np.integer))
+
+
+def _check_fields(config: FaultConfig) -> None:
+    """InputError naming a field of ``config`` of the wrong type: text for ``drop_prob`` failed
+    in ``float()``, a crash robot of 1.5 was read as robot 1, ``'no'`` switched the topology
+    on, a negative seed was taken."""
+    p = config.drop_prob
+    if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)):
+        raise InputError(f"FaultConfig drop_prob {p!r}: give a probability in [0, 1), e.g. 0.1")
+    for pair in config.crash:
+        if not isinstance(pair, (tuple, list)) or len(pair) != 2 \
+                or not all(_whole(v) and v >= 0 for v in pair):
+            raise InputError(f"FaultConfig crash {pair!r}: give (robot, round) pairs of whole "
+                             "numbers >= 0, e.g. ((1, 4),)")
+    if not isinstance(config.switching_topology, (bool, np.bool_)):
+        raise InputError(f"FaultConfig switching_topology {config.switching_topology!r}: give "
+                         "True or False")
+    if not _whole(config.seed) or not 0 <= config.seed < 2**63:
+        raise InputError(f"FaultConfig seed {config.seed!r}: a seed must be an integer from 0 "
+                         "to 2**63 - 1")
 
 
 def _check_delay(d) -> int:

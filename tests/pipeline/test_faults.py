@@ -323,3 +323,20 @@ def test_the_work_check_counts_the_association_graphs_diameter():
     check_simulated_work(3, tri, faults)  # the comm graph alone: 1,212 robot-rounds
     with pytest.raises(InputError, match=r"association graph \(links\) of diameter 7000"):
         check_simulated_work(3, tri, faults, fpc, links)
+
+
+@pytest.mark.parametrize("fields, needle", [
+    (dict(drop_prob="0.1"), r"FaultConfig drop_prob '0\.1': give a probability"),
+    (dict(crash=((1.5, 2),)), r"FaultConfig crash \(1\.5, 2\): give \(robot, round\) pairs"),
+    (dict(crash=((1,),)), r"FaultConfig crash \(1,\)"),
+    (dict(crash=((1, -5),)), r"FaultConfig crash \(1, -5\)"),
+    (dict(switching_topology="no"), r"FaultConfig switching_topology 'no': give True or False"),
+    (dict(seed=-1), r"FaultConfig seed -1: a seed must be an integer from 0"),
+    (dict(seed=1.5), r"FaultConfig seed 1\.5"),
+])
+def test_fault_config_names_a_field_of_the_wrong_type(fields, needle):
+    """'0.1' failed in float(), a crash of robot 1.5 crashed robot 1, 'no' switched the
+    topology on, a negative seed was taken."""
+    with pytest.raises(InputError, match=needle):
+        FaultConfig(**fields)
+    assert FaultConfig(crash=((np.int64(1), 4),), switching_topology=np.bool_(True)).any
