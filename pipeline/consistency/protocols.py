@@ -81,6 +81,10 @@ class ProtocolOptions:
     delta_messages: bool | None = None
 
     def __post_init__(self) -> None:
+        for name in ("reliable", "delta_messages"):  # 'no' was read as True
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, (bool, np.bool_)):
+                raise InputError(f"ProtocolOptions {name} {v!r}: give True, False or None")
         # loss_timeout 0 declared every neighbour lost at once: every link cut
         for name in ("retransmit_after", "heartbeat_every", "loss_timeout"):
             v = getattr(self, name)

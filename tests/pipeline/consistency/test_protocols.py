@@ -20,3 +20,14 @@ def test_timers_below_one_round_are_refused_naming_them(name, value):
 
 def test_the_defaults_and_the_delay_timers_are_accepted():
     assert ProtocolOptions.for_delay(3).loss_timeout == ProtocolOptions().loss_timeout + 6
+
+
+@pytest.mark.parametrize("field", ["reliable", "delta_messages"])
+def test_protocol_switches_are_booleans_or_none(field):
+    """reliable='no' (or delta_messages='no') was read as True."""
+    with pytest.raises(InputError, match=rf"ProtocolOptions {field} 'no': give True, False or "
+                                         r"None"):
+        ProtocolOptions(**{field: "no"})
+    with pytest.raises(InputError, match=rf"ProtocolOptions {field} 0"):
+        ProtocolOptions(**{field: 0})
+    assert ProtocolOptions(**{field: False}) != ProtocolOptions(**{field: True})
