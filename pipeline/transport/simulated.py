@@ -92,6 +92,10 @@ class NetworkOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise InputError(f"NetworkOptions {name} {v!r}: give a whole number >= 0")
+        if self.topology is not None and not callable(self.topology):
+            # failed at the network's first round with "'int' object is not callable"
+            raise InputError(f"NetworkOptions topology {self.topology!r}: give a function of "
+                             "the round that returns its (i, j) edges, or None")
         for r, t in dict(self.crash_at).items():
             if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or t < 0:
                 raise InputError(f"NetworkOptions crash_at: robot {r!r} crashes at round {t!r}; "

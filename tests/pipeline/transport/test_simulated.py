@@ -193,3 +193,14 @@ def test_a_topology_that_names_no_robot_of_the_team_is_refused(edges, needle):
     links = Links([0, 1, 2, 0], [0, 0, 0, 1], [1, 2, 3, 3], [0, 0, 0, 0])
     with pytest.raises(InputError, match=rf"NetworkOptions topology: {needle}"):
         resolve_conflicts([2, 1, 1, 1], None, links, NetworkOptions(topology=lambda t: edges))
+
+
+def test_a_topology_that_is_no_function_is_refused():
+    """NetworkOptions(topology=edges) failed at the first round with "'list' object is not
+    callable"."""
+    from pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=r"NetworkOptions topology \[\(0, 1\)\]: give a function "
+                                         r"of the round"):
+        NetworkOptions(topology=[(0, 1)])
+    assert NetworkOptions(topology=lambda t: [(0, 1)]).any_fault
