@@ -164,6 +164,12 @@ def detect_once(features_per_camera, links: Links, comm_edges=None,
     -------
     Detection
     """
+    if isinstance(comm_edges, Links) and not isinstance(links, Links):
+        # resolve_conflicts' order (comm_edges second) was named "links must be a Links, not
+        # ndarray" (or NoneType), which did not say the two were swapped
+        raise InputError("detect_once takes (features_per_camera, links, comm_edges): the "
+                         "links come second, unlike resolve_conflicts(features_per_camera, "
+                         "comm_edges, links); swap the two arguments")
     _check_options(network_options, protocol)
     fpc = _feature_counts(features_per_camera)
     check_links(links, fpc)  # as resolve_conflicts: a self-link read as a conflict

@@ -197,3 +197,15 @@ def test_the_papers_protocol_on_a_faulty_network_is_refused_for_a_rule_that_need
     res = resolve_conflicts([2, 1, 1, 1], None, Links(**FIG1), lossy,
                             protocol=ProtocolOptions(reliable=False), resolution="paper")
     assert res.stats["protocol"] == "paper"
+
+
+@pytest.mark.parametrize("edges", [None, np.array([[0, 1], [1, 2], [2, 3], [0, 3]])])
+def test_detect_once_with_resolve_conflicts_argument_order_says_so(edges):
+    """detect_once(m, comm_edges, links) was refused as 'links must be a pipeline.types.Links
+    ..., not NoneType' (or ndarray), without a word of the swapped order."""
+    from pipeline.consistency import detect_once
+
+    with pytest.raises(InputError, match=r"detect_once takes \(features_per_camera, links, "
+                                         r"comm_edges\): the links come second"):
+        detect_once([2, 1, 1, 1], edges, Links(**FIG1))
+    assert detect_once([2, 1, 1, 1], Links(**FIG1), edges).stats["conflictive_features"] == 5
