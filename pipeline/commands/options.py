@@ -186,18 +186,25 @@ MAX_ROUND_TIMEOUT_S = 3600.0
 
 
 def round_timeout(value) -> float:
-    """``--round-timeout``'s ``value`` in seconds: a finite number above 0, at most
-    :data:`MAX_ROUND_TIMEOUT_S` (the start handshake's and a round's limits, twice it, stay
+    """``--round-timeout``'s ``value`` in seconds: a finite number from
+    :data:`pipeline.team.teamfile.MIN_ROUND_TIMEOUT_S` to :data:`MAX_ROUND_TIMEOUT_S` (the start handshake's and a round's limits, twice it, stay
     within a team file's bound, :data:`pipeline.team.teamfile.MAX_TIMEOUT_S`).
 
     >>> round_timeout("45")
     45.0
     """
+    from pipeline.team.teamfile import MIN_ROUND_TIMEOUT_S
     from pipeline.validate import positive_number
 
-    return positive_number(value, "--round-timeout", "seconds", MAX_ROUND_TIMEOUT_S,
-                           "the seconds of silence after which a robot writes a neighbour off",
-                           "120")
+    v = positive_number(value, "--round-timeout", "seconds", MAX_ROUND_TIMEOUT_S,
+                        "the seconds of silence after which a robot writes a neighbour off",
+                        "120")
+    if v < MIN_ROUND_TIMEOUT_S:
+        raise InputError(f"--round-timeout {value!r}: shorter than {MIN_ROUND_TIMEOUT_S:g} s; "
+                         "a live robot beats every 0.2 s at most, so every robot would write "
+                         "its neighbours off as silent and the team would keep no link: give "
+                         "a few seconds or more, e.g. --round-timeout 120")
+    return v
 
 
 def transport_time_limit(args):

@@ -146,6 +146,12 @@ PROFILE_DIR_ENV = "FORMATION_MATCH_PROFILE_DIR"
 #: longest round / start timeout a team file may ask for (one day): beyond it a robot would
 #: wait for a neighbour that never answers for ever, in practice
 MAX_TIMEOUT_S = 86400.0
+#: shortest ``round_timeout_s``: a live neighbour beats at most every 0.2 s
+#: (:func:`pipeline.transport.zenoh_transport.beat_period`), so below 0.2 s of silence every
+#: neighbour is written off by construction (``--round-timeout 0.01``: every robot wrote every
+#: neighbour off before a feature crossed and the run ended "done" with no link), and below
+#: five beats one late beat on a loaded machine writes a healthy neighbour off
+MIN_ROUND_TIMEOUT_S = 1.0
 #: most rounds of silence before a neighbour is declared lost (``loss_timeout``)
 MAX_LOSS_TIMEOUT = 100_000
 #: most features a team file may give one robot (``data.features_per_camera``): a robot holds
@@ -661,6 +667,12 @@ def _check_options(opts: dict, where: str) -> None:
         if not _is_number(v) or not 0 < v <= MAX_TIMEOUT_S:
             raise InputError(f"{where}: option {k} {v!r} must be a number of seconds in "
                              f"(0, {MAX_TIMEOUT_S:g}]")
+    silence = opts.get("round_timeout_s", MIN_ROUND_TIMEOUT_S)
+    if silence < MIN_ROUND_TIMEOUT_S:
+        raise InputError(f"{where}: option round_timeout_s {silence!r} is shorter than "
+                         f"{MIN_ROUND_TIMEOUT_S:g} s: a live neighbour beats every 0.2 s at "
+                         "most, so every robot would write its neighbours off as silent; give "
+                         "a few seconds or more, e.g. 30 (the default)")
     for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
         v = opts.get(k, 8)
         if k == "max_features" and v is None:

@@ -151,6 +151,9 @@ def _three(first):
     ({"options": {"round_timeout_s": 1e308}}, "option round_timeout_s 1e+308 must be a number "
                                               "of seconds in (0, 86400]"),
     ({"options": {"start_timeout_s": 1e308}}, "option start_timeout_s 1e+308"),
+    ({"options": {"round_timeout_s": 0.05}}, "option round_timeout_s 0.05 is shorter than 1 s: "
+                                             "a live neighbour beats every 0.2 s at most"),
+    ({"robot_options": {"1": {"round_timeout_s": 0.1}}}, "option round_timeout_s 0.1 is shorter"),
     ({"options": {"loss_timeout": 10**18}}, "option loss_timeout 1000000000000000000 must be "
                                             "an integer in 1..100000"),
     ({"options": {"loss_timeout": 0}}, "option loss_timeout 0"),

@@ -110,9 +110,25 @@ def test_team_timeout_is_checked_first():
         transport_time_limit(args)
 
 
-@pytest.mark.parametrize("text, seconds", [("45", 45.0), ("0.5", 0.5), ("3.6e3", 3600.0)])
+@pytest.mark.parametrize("text, seconds", [("45", 45.0), ("1", 1.0), ("3.6e3", 3600.0)])
 def test_round_timeout_reads_seconds(text, seconds):
     assert round_timeout(text) == seconds
+
+
+@pytest.mark.parametrize("command", sorted(ARGS))
+@pytest.mark.parametrize("value", ["0.01", "0.1", "0.99"])
+def test_a_round_timeout_shorter_than_the_beats_is_refused(command, value, capsys, tmp_path,
+                                                           monkeypatch):
+    """A robot beats every 0.2 s at most: ``--round-timeout 0.01`` made every robot write
+    every neighbour off before a feature crossed, and the run ended with exit 0 and no link
+    (its warnings blamed the images). It is refused before the command, naming the value."""
+    monkeypatch.chdir(tmp_path)
+    code = main([command, *ARGS[command], "--transport", "zenoh", "--round-timeout", value])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith(f"error: --round-timeout {value!r}: shorter than 1 s; ")
+    assert "e.g. --round-timeout 120" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.iterdir())
 
 
 def test_the_rule_keeps_the_start_and_round_limits_at_least_twice_the_silence():
