@@ -301,14 +301,18 @@ def images_of_run(config, views, team, run) -> ImagesRobots:
     Raises
     ------
     TeamError
-        A robot did not publish (the run of photographs needs every camera's keypoints).
+        A robot did not publish (the run of photographs needs every camera's keypoints): one
+        line naming it and saying that nothing was written.
     """
     from pipeline.types import Features
 
     n = team.n
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
-        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result")
+        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result: its "
+                        "process ended or was cut off first (its own log or stderr says why); "
+                        "a run of photographs needs every robot's keypoints, so nothing was "
+                        "written: run the team again")
     feats = []
     for i in range(n):
         kp = run.results[i][1]["keypoints"].reshape(-1, 2)
