@@ -196,10 +196,17 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                         late = (", or it ended before this observer listened (a robot repeats "
                                 "its result for start_timeout_s, at least 10 s): start the "
                                 "observer before the robots end")
+                        if who in never:
+                            why = "never started" + late
+                        elif who in obs.holding:
+                            why = ("did not publish: it is still running; give the team longer, "
+                                   f"a --timeout above {timeout_s:g} s")
+                        else:
+                            why = ("did not publish: its process ended without a result (its "
+                                   "stderr says why)")
                         raise TeamError(
                             f"no robot published a result within {timeout_s:g} s; robot {who} "
-                            f"({team.endpoint(who)}) "
-                            f"{'never started' + late if who in never else 'did not publish'}")
+                            f"({team.endpoint(who)}) {why}")
                     lost |= set(missing)
                     log(f"robots {missing} did not publish within {timeout_s:g} s: lost")
                     break

@@ -629,3 +629,45 @@ def test_the_observer_session_has_the_robots_lease(monkeypatch):
     with pytest.raises(RuntimeError, match="stop here"):
         launcher.Observer(team)
     assert seen["round_timeout_s"] == 45.0
+
+
+def test_an_observer_whose_timeout_ends_before_running_robots_publish_says_to_raise_it():
+    """Every robot runs (its liveliness token is up) but none has published when --timeout
+    ends: the error said only "robot 0 (…) did not publish"; it now says the robot is still
+    running and to give the team a longer --timeout."""
+    import threading
+
+    from pipeline.errors import TeamError
+    from pipeline.team.launcher import make_team
+    from pipeline.team.observe import observe_team
+    from pipeline.transport.zenoh_transport import key, open_session
+
+    team = make_team("slow", [[0, 1]], {"kind": "links", "links": "x.csv",
+                                        "features_per_camera": [1, 1]}, n=2)
+    stop = threading.Event()
+    up = threading.Barrier(3)
+
+    def robot(i):
+        s = open_session([team.endpoint(i)], [team.observer], f"robot {i}")
+        token = s.liveliness().declare_token(key(team.name, "live", i))
+        try:
+            up.wait()
+            stop.wait(30)
+        finally:
+            token.undeclare()
+            s.close()
+
+    threads = [threading.Thread(target=robot, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    try:
+        up.wait()
+        with pytest.raises(TeamError, match=r"no robot published a result within 2 s; robot 0 "
+                                            r"\(tcp/127.0.0.1:\d+\) did not publish: it is "
+                                            r"still running; give the team longer, a --timeout "
+                                            r"above 2 s$"):
+            observe_team(team, timeout_s=2)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join()
