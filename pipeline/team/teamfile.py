@@ -311,10 +311,8 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: robot id {rid} is listed twice")
         m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
         if not m or not 0 < int(m.group(3)) < 65536:
-            why = " (udp may lose a round's packet; the rounds need a reliable link)" \
-                if isinstance(ep, str) and ep.startswith("udp/") else ""
             raise InputError(f"{where}: robot {rid} endpoint {ep!r} must look like "
-                             f"tcp/HOST:PORT with a port in 1..65535{why}")
+                             f"tcp/HOST:PORT with a port in 1..65535{_endpoint_hint(ep)}")
         if ep in endpoints:
             raise InputError(f"{where}: robots {endpoints[ep]} and {rid} share endpoint {ep!r}; "
                              "each robot listens on its own")
@@ -418,7 +416,7 @@ def parse_team(doc, path: Path | None = None) -> Team:
         m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
         if not m or not 0 < int(m.group(3)) < 65536:  # port 0: a port of the system's choice
             raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT "
-                             "with a port in 1..65535")
+                             f"with a port in 1..65535{_endpoint_hint(ep)}")
         if ep in endpoints:
             raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
         for key in _endpoint_addresses(m):
@@ -428,6 +426,22 @@ def parse_team(doc, path: Path | None = None) -> Team:
                                  f"({robots[other].endpoint!r}, the same address)")
         observer = ep
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+def _endpoint_hint(ep) -> str:
+    """Why an endpoint that ``_ENDPOINT`` refused may be wrong, for the error's end: udp (not
+    reliable), or an IPv6 address written without its brackets (``tcp/::1:7447``, where the
+    last ``:`` cannot tell the address from the port)."""
+    if not isinstance(ep, str):
+        return ""
+    if ep.startswith("udp/"):
+        return " (udp may lose a round's packet; the rounds need a reliable link)"
+    head, _, rest = ep.partition("/")
+    host, _, port = rest.rpartition(":")
+    if head in ("tcp", "quic", "tls") and port.isdigit() and ":" in host \
+            and isinstance(_ip(host), ipaddress.IPv6Address):
+        return f" (an IPv6 address goes in brackets: {head}/[{host}]:{port})"
+    return ""
 
 
 #: what a wildcard address (0.0.0.0, ::) is compared as: it listens on every address of the

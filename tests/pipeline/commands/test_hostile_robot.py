@@ -200,6 +200,22 @@ def test_endpoint_that_is_not_host_port(team_dir, capsys, endpoint):
             f"robot 0 endpoint {endpoint!r} must look like tcp/HOST:PORT")
 
 
+@pytest.mark.parametrize("endpoint, fixed", [("tcp/::1:7447", "tcp/[::1]:7447"),
+                                              ("tls/fe80::1:7447", "tls/[fe80::1]:7447")])
+def test_an_ipv6_endpoint_without_brackets_is_refused_with_the_bracketed_form(
+        team_dir, capsys, endpoint, fixed):
+    """``tcp/::1:7447`` (an IPv6 address as written elsewhere) was refused as not
+    ``tcp/HOST:PORT`` only; the line now gives the form that works."""
+    doc = _doc(robots=_three({"id": 0, "endpoint": endpoint}))
+    refused(capsys, _robot(_write(team_dir, doc)), team_dir,
+            f"robot 0 endpoint {endpoint!r} must look like tcp/HOST:PORT with a port in "
+            f"1..65535 (an IPv6 address goes in brackets: {fixed})")
+    doc = _doc(observer={"endpoint": endpoint})
+    refused(capsys, _robot(_write(team_dir, doc)), team_dir,
+            f"observer endpoint {endpoint!r} must look like tcp/HOST:PORT with a port in "
+            f"1..65535 (an IPv6 address goes in brackets: {fixed})")
+
+
 def test_shared_endpoint_in_a_huge_team_is_found_in_bounded_time(team_dir, capsys):
     """200,000 robots: parsed in about a second; the first shared endpoint is named."""
     doc = _doc(robots=[{"id": i, "endpoint": f"tcp/127.0.0.1:{1 + i % 65000}"}
