@@ -57,7 +57,8 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
     ------
     InputError
         A bad team file, one without an observer endpoint, or a team of photographs in more
-        than one folder.
+        than one folder or with a photograph missing on this machine (checked before it
+        listens).
     TeamError
         A robot failed, or none published within ``timeout_s``
         (:func:`pipeline.team.observe.observe_team`).
@@ -80,6 +81,17 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
         if len(folders) != 1:
             raise InputError(f"team {team.name!r}: the observer reads the photographs from one "
                              f"folder, data.images names {len(folders)}; put them in one")
+        # the observer loads them once every robot has published (for the reconstructions):
+        # a photograph missing here was found only then, the team's whole run lost with it
+        from pipeline.outputs import require_input_file
+
+        for i, p in enumerate(team.data["images"]):
+            try:
+                require_input_file(team.resolve_path(p), f"team {team.name!r}: data.images[{i}]")
+            except InputError as exc:
+                raise InputError(f"{exc}; the observer needs the team's photographs on "
+                                 "this machine too (it loads them for the reconstructions): "
+                                 "put them where the team file's paths lead") from None
     if kind == "links" and any(team.options_for(i)["fusion"] for i in range(team.n)):
         raise InputError(f"team {team.name!r}: the observer of a links team writes the "
                          "consistency stage only, not the fusion cuts its robots make; set "

@@ -216,6 +216,34 @@ def test_observe_refuses_a_team_without_observer_or_photographs_in_two_folders(t
     assert not (tmp_path / "o").exists()
 
 
+def test_observe_refuses_a_team_of_photographs_missing_on_its_machine_before_it_listens(
+        tmp_path, capsys, monkeypatch):
+    """The observer of a team of photographs loads them once every robot has published: a
+    photograph missing on its machine (a team file copied without them) was found only then,
+    as "cannot read it as an image", and the team's whole run was lost. It is refused before
+    the observer listens, naming the file."""
+    import pipeline.team.observe as observing
+
+    def listened(*a, **k):
+        raise AssertionError("the observer listened")
+
+    monkeypatch.setattr(observing, "observe_team", listened)
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "a.jpg").write_bytes(b"x")
+    doc = {"version": 1, "name": "two", "comm_edges": [[0, 1]],
+           "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"},
+                      {"id": 1, "endpoint": "tcp/127.0.0.1:7448"}],
+           "observer": {"endpoint": "tcp/127.0.0.1:7449"},
+           "data": {"kind": "images", "images": ["photos/a.jpg", "photos/b.jpg"]}}
+    (tmp_path / "T.json").write_text(json.dumps(doc))
+    assert main(["observe", "--team", str(tmp_path / "T.json"), "--out",
+                 str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: team 'two': data.images[1] {str(tmp_path / 'photos' / 'b.jpg')!r}: no such " \
+           "file; the observer needs the team's photographs on this machine too" in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_photographs_by_hand_and_observe_give_the_launchers_run_folder(sceaux_small,
                                                                        tmp_path):
     """Four photographs, photo defaults, robots started by hand: the observer's run folder
