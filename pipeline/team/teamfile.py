@@ -738,9 +738,19 @@ def load_team(path) -> Team:
     if not p.exists():
         raise InputError(f"team file {str(p)!r} not found")
     require_input_file(p, "team file")
+    raw = p.read_bytes()
     try:
-        doc = json.loads(p.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
+        # utf-8-sig: a file saved by Notepad starts with a byte order mark, which json refused
+        # ("Unexpected UTF-8 BOM (decode using utf-8-sig)")
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        utf16 = " (a UTF-16 file)" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else ""
+        raise InputError(f"team file {str(p)!r} is not valid JSON: not UTF-8 text{utf16} (byte "
+                         f"0x{raw[exc.start]:02x} at offset {exc.start}); save it as UTF-8") \
+            from None
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
         raise InputError(f"team file {str(p)!r} is not valid JSON: {exc}") from None
     except RecursionError:
         raise InputError(f"team file {str(p)!r} nests lists or objects too deeply to be a "

@@ -238,6 +238,24 @@ def test_missing_or_invalid_json_file(tmp_path):
         load_team(p)
 
 
+def test_a_team_file_saved_with_a_byte_order_mark_loads_and_utf16_is_named(tmp_path):
+    """A TEAM.json edited in Notepad starts with a UTF-8 byte order mark: it was refused as
+    "not valid JSON: Unexpected UTF-8 BOM (decode using utf-8-sig)"; it now loads as the file
+    without it. A UTF-16 file is refused naming the encoding and what to do."""
+    text = json.dumps(_doc())
+    plain, bom, utf16 = (tmp_path / n for n in ("plain.json", "bom.json", "utf16.json"))
+    plain.write_text(text, encoding="utf-8")
+    bom.write_text(text, encoding="utf-8-sig")
+    utf16.write_text(text, encoding="utf-16")
+    assert bom.read_bytes().startswith(b"\xef\xbb\xbf")
+    a, b = load_team(plain), load_team(bom)
+    assert (a.name, a.comm_edges.tolist(), a.data, a.options) == \
+        (b.name, b.comm_edges.tolist(), b.data, b.options)
+    with pytest.raises(InputError, match=r"is not valid JSON: not UTF-8 text \(a UTF-16 file\) "
+                                         r"\(byte 0xff at offset 0\); save it as UTF-8$"):
+        load_team(utf16)
+
+
 def test_the_launcher_refuses_an_edge_listed_twice():
     from pipeline.team.launcher import make_team
 
