@@ -9,6 +9,9 @@ the whole process.
 
 from __future__ import annotations
 
+import errno
+import os
+import shutil
 import signal
 import threading
 from contextlib import contextmanager
@@ -16,7 +19,7 @@ from contextlib import contextmanager
 import numpy as np
 import pycolmap
 
-__all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid"]
+__all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid", "write_reconstruction"]
 
 
 def _default_sigterm() -> None:
@@ -55,3 +58,35 @@ def rigid(R: np.ndarray, t: np.ndarray) -> pycolmap.Rigid3d:
     """``cam_from_world`` ``(R (3, 3), t (3,))`` as a ``pycolmap.Rigid3d``."""
     return pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R, dtype=np.float64)),
                             np.asarray(t, dtype=np.float64).reshape(3))
+
+
+#: free bytes below which a failed write is put down to a full disk
+_FULL_BYTES = 2**20
+
+
+def _counts(rec) -> tuple[int, int, int, int]:
+    return (rec.num_cameras(), rec.num_images(), rec.num_points3D(),
+            rec.compute_num_observations())
+
+
+def write_reconstruction(rec, path) -> None:
+    """``rec.write(path)``, checked: COLMAP's writer ignores a failed write (a full disk, a
+    file-size limit) and leaves truncated ``.bin`` files without a word, so the model is read
+    back and compared; OSError naming ``path`` when it does not come back whole (ENOSPC when
+    the disk is full)."""
+    path = os.fspath(path)
+    rec.write(path)
+    try:
+        back = _counts(pycolmap.Reconstruction(path))
+    except Exception:  # noqa: BLE001 - whatever the reader makes of truncated files
+        back = None
+    if back == _counts(rec):
+        return
+    try:
+        full = shutil.disk_usage(path).free < _FULL_BYTES
+    except OSError:
+        full = False
+    if full:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), path)
+    raise OSError(errno.EIO, "the COLMAP model was not written whole (a file-size limit or a "
+                  "write error)", path)

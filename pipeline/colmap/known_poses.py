@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, rigid
+from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, rigid, write_reconstruction
 from pipeline.types import Features, View
 
 __all__ = ["triangulate_known_poses", "build_reconstruction", "write_points_model"]
@@ -109,5 +109,5 @@ def write_points_model(path: str | Path, views: list[View], features: list[Featu
         rec.update_point_3d_errors()
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
-        rec.write(str(path))
+        write_reconstruction(rec, path)
     return rec

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
+from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, write_reconstruction
 from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
 
@@ -426,7 +426,8 @@ def write_model(path: str | Path, reconstruction=None) -> Path:
     loads back with :func:`read_model`; the folder is created."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
-    (reconstruction if reconstruction is not None else pycolmap.Reconstruction()).write(path)
+    write_reconstruction(reconstruction if reconstruction is not None else pycolmap.Reconstruction(),
+                         path)
     return path
 
 
@@ -476,7 +477,7 @@ def write_model_for_files(path: str | Path, reconstruction, sizes: dict[str, tup
     full = pycolmap.Reconstruction(str(path))
     rescale_to_files(full, sizes)
     _extract_colors(full, image_dir)
-    full.write(path)
+    write_reconstruction(full, path)
     return path
 
 
