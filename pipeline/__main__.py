@@ -25,6 +25,7 @@ if __name__ == "__main__":  # run as a program: from here on, before the imports
 import argparse  # noqa: E402
 import atexit  # noqa: E402
 import contextlib  # noqa: E402
+import errno  # noqa: E402
 import importlib  # noqa: E402
 import logging  # noqa: E402
 import select  # noqa: E402
@@ -175,12 +176,25 @@ def _run(argv: list[str], command: str | None) -> int:
     except OSError as exc:
         if isinstance(exc, BrokenPipeError) and _stdout_closed():
             return _stdout_gone()
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        print(f"error: {_where(exc)}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except MemoryError:
         print(f"error: {args.command} ran out of memory; try a smaller input", file=sys.stderr)
         return 2
+
+
+#: errors of writing: a copy (``shutil.copyfile``) that fails so is named by its destination
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS}
+
+
+def _where(exc: OSError) -> str:
+    """The file(s) an OSError names, for its one line: a copy's error names both files (the
+    source first), a full disk only the destination, the file on that disk."""
+    if exc.filename2 is not None:
+        if exc.errno in _WRITE_ERRNOS:
+            return f"{exc.filename2}: "
+        return f"{exc.filename} -> {exc.filename2}: "
+    return f"{exc.filename}: " if exc.filename else ""
 
 
 def _stdout_closed() -> bool:
