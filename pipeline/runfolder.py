@@ -49,8 +49,10 @@ from __future__ import annotations
 import ctypes
 import errno
 import fcntl
+import hashlib
 import json
 import os
+import re
 import secrets
 import shutil
 import signal
@@ -249,11 +251,17 @@ class OutputFiles:
         target = Path(target)
         refuse_unsafe_target(target, flag)
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{target.suffix}",
-                                   dir=target.parent)
-        os.close(fd)
-        self._items.append((Path(tmp), target, flag))
-        return Path(tmp)
+        _drop_dead_parts(target)
+        while True:
+            tmp = target.parent / _part_name(target, secrets.token_hex(4))
+            try:
+                os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                                 0o600))
+                break
+            except FileExistsError:
+                continue
+        self._items.append((tmp, target, flag))
+        return tmp
 
     def __enter__(self) -> OutputFiles:
         return self
@@ -299,6 +307,78 @@ class OutputFiles:
                         os.unlink(target)
                     _put_in_place_so_far.remove(target)
             raise
+
+
+# The temporary file of an output is ``.STEM.PID-START-R-D.partSUFFIX``: the process that
+# writes it (pid and start time, so that a reused pid is told apart), a random part and a
+# keyed digest of all that and of the machine's boot and pid namespace (:func:`_pid_space`),
+# which a name a user gave, or a process of another machine or container, does not carry. A later command writing
+# the same output removes those of processes no longer alive, with the files their writers
+# made beside them (``.NAME.*``: a SQLite journal, a recording's own temporary file).
+
+def _process_start(pid: int) -> str | None:
+    """The start time of process ``pid`` (clock ticks since boot); None when there is none."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            stat_line = f.read().decode("ascii", errors="replace")
+    except OSError:
+        return None
+    return stat_line.rsplit(")", 1)[-1].split()[19]  # field 22; the name may hold spaces
+
+
+def _pid_space() -> str:
+    """This boot of this machine and its process namespace: where a pid means one process (a
+    folder shared over the network or with a container is written by others' pids too)."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id") as f:
+            boot = f.read().strip()
+        return f"{boot} {os.readlink('/proc/self/ns/pid')}"
+    except OSError:
+        return ""
+
+
+def _part_digest(target: Path, pid: str, start: str, rand: str) -> str:
+    h = hashlib.blake2b(f"{target.stem}|{target.suffix}|{pid}|{start}|{rand}|{_pid_space()}"
+                        .encode(), digest_size=6, key=b"formation-match: temporary output file")
+    return h.hexdigest()
+
+
+def _part_name(target: Path, rand: str) -> str:
+    pid = str(os.getpid())
+    start = _process_start(os.getpid()) or "0"
+    return (f".{target.stem}.{pid}-{start}-{rand}-{_part_digest(target, pid, start, rand)}"
+            f".part{target.suffix}")
+
+
+def _drop_dead_parts(target: Path) -> None:
+    """Remove the temporary files of ``target`` left by commands killed while writing it
+    (and what their writers made beside them); only names carrying their digest, only
+    regular files, only where the system tells which processes live (``/proc``)."""
+    if _process_start(os.getpid()) is None or not _pid_space():
+        return
+    part = re.compile(rf"\.{re.escape(target.stem)}\.(\d+)-(\d+)-([0-9a-f]{{8}})-([0-9a-f]{{12}})"
+                      rf"\.part{re.escape(target.suffix)}")
+    try:
+        entries = os.listdir(target.parent)
+    except OSError:
+        return
+    for name in entries:
+        m = part.fullmatch(name)
+        if m is None and name.startswith("."):  # a file a writer made beside one: .PART.*
+            m = part.match(name, 1)
+            if m is not None and not name[m.end():].startswith("."):
+                m = None
+        if m is None:
+            continue
+        pid, start, rand, digest = m.groups()
+        if digest != _part_digest(target, pid, start, rand) or _process_start(int(pid)) == start:
+            continue
+        path = target.parent / name
+        try:
+            if stat.S_ISREG(os.lstat(path).st_mode):
+                os.unlink(path)
+        except OSError:
+            pass
 
 
 def output_path(outputs: OutputFiles | None, target: str | os.PathLike, flag: str) -> Path:
