@@ -393,6 +393,23 @@ def output_path(outputs: OutputFiles | None, target: str | os.PathLike, flag: st
 _held: dict[str, list[int]] = {}
 
 
+def _close_locks_in_child() -> None:
+    """In a process forked from one holding run folder locks (a pool of workers): close its
+    copies of the lock files. A flock belongs to the open file, which a fork shares: a worker
+    that outlived its killed run (blocked on the pipe to it) held the lock, and every later
+    run into that --out was refused, naming the dead run's pid."""
+    for fd, _ in list(_held.values()):
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _held.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_locks_in_child)
+
+
 def _key(out: Path) -> str:
     return os.path.join(os.path.realpath(out.parent), out.name)
 
