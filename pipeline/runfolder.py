@@ -192,7 +192,7 @@ def atomic_file(path: str | os.PathLike, mode: str = "w", newline: str | None = 
     path = Path(path)
     refuse_unsafe_target(path, flag)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    fd, tmp = _new_part(path)
     try:
         try:
             with os.fdopen(fd, mode, newline=newline) as f:
@@ -251,15 +251,8 @@ class OutputFiles:
         target = Path(target)
         refuse_unsafe_target(target, flag)
         target.parent.mkdir(parents=True, exist_ok=True)
-        _drop_dead_parts(target)
-        while True:
-            tmp = target.parent / _part_name(target, secrets.token_hex(4))
-            try:
-                os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
-                                 0o600))
-                break
-            except FileExistsError:
-                continue
+        fd, tmp = _new_part(target)
+        os.close(fd)
         self._items.append((tmp, target, flag))
         return tmp
 
@@ -350,6 +343,18 @@ def _part_name(target: Path, rand: str) -> str:
             f".part{target.suffix}")
 
 
+def _new_part(target: Path) -> tuple[int, Path]:
+    """A new temporary file for ``target`` beside it (open for writing, mode 0600), once the
+    dead commands' ones are removed."""
+    _drop_dead_parts(target)
+    while True:
+        tmp = target.parent / _part_name(target, secrets.token_hex(4))
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600), tmp
+        except FileExistsError:
+            continue
+
+
 def _drop_dead_parts(target: Path) -> None:
     """Remove the temporary files of ``target`` left by commands killed while writing it
     (and what their writers made beside them); only names carrying their digest, only
@@ -357,14 +362,16 @@ def _drop_dead_parts(target: Path) -> None:
     if _process_start(os.getpid()) is None or not _pid_space():
         return
     part = re.compile(rf"\.{re.escape(target.stem)}\.(\d+)-(\d+)-([0-9a-f]{{8}})-([0-9a-f]{{12}})"
-                      rf"\.part{re.escape(target.suffix)}")
+                      rf"\.part")
     try:
         entries = os.listdir(target.parent)
     except OSError:
         return
     for name in entries:
-        m = part.fullmatch(name)
-        if m is None and name.startswith("."):  # a file a writer made beside one: .PART.*
+        m = part.match(name)
+        if m is not None and name[m.end():] != target.suffix:
+            m = None
+        if m is None and name.startswith("."):  # a file a writer made beside one: .PART*
             m = part.match(name, 1)
             if m is not None and not name[m.end():].startswith("."):
                 m = None

@@ -61,3 +61,36 @@ def test_a_live_commands_and_a_users_files_are_kept(tmp_path):
     assert target.read_text() == "first"
     for name in mine + [other]:
         assert (tmp_path / name).exists(), name
+
+
+_KILLED_JSON_WRITER = textwrap.dedent("""
+    import os, signal, sys
+    from pipeline.runfolder import OutputFiles, atomic_file
+    target = sys.argv[1]
+    if sys.argv[2] == "nested":  # --report of resolve: a JSON written atomically into a part
+        target = OutputFiles(replace=True).path(target, "--report")
+    with atomic_file(target) as f:
+        f.write('{"half": ')
+        f.flush()
+        os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+
+def test_a_file_written_atomically_by_a_killed_command_leaves_nothing_after_the_next(tmp_path):
+    # a bench's results.json (write_json_atomic), and a command's --report inside its part
+    from pipeline.runfolder import write_json_atomic
+
+    target = tmp_path / "results.json"
+    target.write_text('{"previous": 1}\n')
+    for how in ("alone", "nested"):
+        proc = subprocess.run([sys.executable, "-c", _KILLED_JSON_WRITER, str(target), how],
+                              capture_output=True, text=True, timeout=120, cwd=os.getcwd())
+        assert proc.returncode == -signal.SIGKILL, proc.stderr
+        assert len(list(tmp_path.iterdir())) == (2 if how == "alone" else 3)
+        if how == "alone":
+            write_json_atomic(target, {"new": 1})
+        else:
+            with OutputFiles(replace=True) as out:
+                write_json_atomic(out.path(target, "--report"), {"new": 2})
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["results.json"], how
+    assert target.read_text() == '{\n  "new": 2\n}\n'
