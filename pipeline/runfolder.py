@@ -67,6 +67,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.outputs import (
+    RUN_MARKER,
     check_run_folder,
     own_folder,
     ownership_proof,
@@ -444,9 +445,32 @@ def _recover(out: Path) -> None:
         print(f"note: restored the previous run {out} from {newest.name} (a run was stopped "
               "while putting its folder in place)", file=sys.stderr)
     for p in olds + [p for p in _siblings(out, "tmp") if own_folder(p)]:
-        shutil.rmtree(p, ignore_errors=True)
+        _remove_own(p)
     for p in _siblings(out, "lock"):
         _drop_dead_lock(p)
+
+
+def _remove_own(folder: Path) -> None:
+    """Remove ``folder``, a run or staging folder of ours, so that a kill halfway leaves one
+    the next run still knows as its own and removes: it is first marked as a staging folder
+    (a run folder missing some of its files is no longer one), and its marker goes last."""
+    try:
+        write_run_marker(folder, finished=False)
+        entries = list(os.scandir(folder))
+    except OSError:
+        shutil.rmtree(folder, ignore_errors=True)
+        return
+    for entry in entries:
+        if entry.name == RUN_MARKER:
+            continue
+        try:
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path, ignore_errors=True)
+            else:
+                os.unlink(entry.path)
+        except OSError:
+            pass
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 @contextmanager
@@ -649,7 +673,7 @@ def _discard_previous(old: Path, out: Path) -> None:
         pass
     problem = run_folder_problem(old)
     if problem is None:
-        shutil.rmtree(old, ignore_errors=True)
+        _remove_own(old)
         return
     print(f"warning: the previous run in {out} was not deleted: {problem}; it is kept as "
           f"{old}", file=sys.stderr)
@@ -725,7 +749,7 @@ def atomic_run_folder(out: str | os.PathLike, inputs=()):
                 return
             _put_in_place(tmp, out)
         except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_own(tmp)
             raise
 
 
@@ -800,7 +824,7 @@ def publish_together():
     finally:
         _together.remove(together)
         for tmp, _, _ in together.staged:  # not put in place: an error or an interrupt
-            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_own(tmp)
 
 
 @contextmanager
