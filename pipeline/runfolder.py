@@ -344,12 +344,27 @@ def _part_name(target: Path, rand: str) -> str:
             f".part{target.suffix}")
 
 
+#: any temporary file of ours (:func:`_new_part`)
+_ANY_PART = re.compile(r"\..+\.(\d+-\d+-[0-9a-f]{8}-[0-9a-f]{12}|[0-9a-f]{8})\.part.*")
+#: the longest temporary name that leaves room for its writer's own files beside it (a
+#: recording's ``.NAME.XXXXXXXX.tmp``, a database's ``NAME-journal``) under the usual 255 bytes
+_PART_NAME_MAX = 240
+
+
 def _new_part(target: Path) -> tuple[int, Path]:
     """A new temporary file for ``target`` beside it (open for writing, mode 0600), once the
-    dead commands' ones are removed."""
-    _drop_dead_parts(target)
+    dead commands' ones are removed. For a ``target`` that is itself one of them (a JSON
+    written into an output's temporary file) a short ``.TARGET.R``, removed with it; for a
+    name too long to carry the process, the short ``.STEM.R.partSUFFIX`` (never removed)."""
+    own = _ANY_PART.fullmatch(target.name) is not None
+    if not own:
+        _drop_dead_parts(target)
     while True:
-        tmp = target.parent / _part_name(target, secrets.token_hex(4))
+        rand = secrets.token_hex(4)
+        name = f".{target.name}.{rand}" if own else _part_name(target, rand)
+        if len(os.fsencode(name)) > _PART_NAME_MAX and not own:
+            name = f".{target.stem}.{rand}.part{target.suffix}"
+        tmp = target.parent / name
         try:
             return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600), tmp
         except FileExistsError:

@@ -94,3 +94,14 @@ def test_a_file_written_atomically_by_a_killed_command_leaves_nothing_after_the_
                 write_json_atomic(out.path(target, "--report"), {"new": 2})
         assert sorted(p.name for p in tmp_path.iterdir()) == ["results.json"], how
     assert target.read_text() == '{\n  "new": 2\n}\n'
+
+
+def test_a_long_output_name_still_leaves_room_for_its_writers_files(tmp_path):
+    # a 225-byte name: the temporary name carrying its process would leave no room for a JSON
+    # written atomically into it (its own temporary beside it): the short one is used
+    from pipeline.runfolder import write_json_atomic
+
+    target = tmp_path / ("a" * 220 + ".json")
+    with OutputFiles(replace=True) as out:
+        write_json_atomic(out.path(target, "--report"), {"ok": 1})
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
