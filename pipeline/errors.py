@@ -10,6 +10,30 @@ class TeamError(RuntimeError):
     message names it)."""
 
 
+def die_with_parent(parent_pid: int | None = None) -> None:
+    """Ask the kernel to kill this process when its parent dies (Linux's
+    ``PR_SET_PDEATHSIG``, SIGKILL): a child that must not outlive the command that started it
+    (a robot, the robots' zygote, a forked feature worker); elsewhere nothing happens, and the
+    child ends when its pipe to the parent closes, as before.
+
+    The request holds only from when it is made: a parent that died between the fork and the
+    ``prctl`` (a loaded machine may not run the child for a while) has already handed the child
+    to another process, and no signal would come. So the child compares its parent with
+    ``parent_pid`` (the forking process's pid, taken before the fork) once the request is in,
+    and ends at once (exit 1) when they differ."""
+    import ctypes
+    import os
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (AttributeError, OSError):
+        return
+    if parent_pid is not None and os.getppid() != parent_pid:
+        os._exit(1)
+
+
 _interrupt_arrived = False  # set by the SIGINT handler of exit_quietly_on_interrupt
 
 

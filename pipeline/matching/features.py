@@ -15,10 +15,8 @@ keypoints are merged here (the strongest response is kept).
 
 from __future__ import annotations
 
-import ctypes
 import multiprocessing
 import os
-import signal
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import cv2
@@ -27,7 +25,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from pipeline.errors import InputError
+from pipeline.errors import InputError, die_with_parent
 from pipeline.matching.methods import COLMAP_SIFT, FEATURE_METHODS, MAX_FEATURES, MIN_FEATURES
 from pipeline.types import Features, View
 
@@ -397,22 +395,6 @@ def extract_all(views, method: str = "sift", max_features: int | None = 2000,
 _FORKED_JOB = None
 _FORK = multiprocessing.get_context("fork") if "fork" in multiprocessing.get_all_start_methods() \
     else None
-
-
-_PR_SET_PDEATHSIG = 1
-
-
-def die_with_parent(parent: int) -> None:
-    """In a forked worker: end when the process ``parent`` that forked it ends (Linux's
-    ``PR_SET_PDEATHSIG``). A worker of a run killed with SIGKILL stayed, blocked on its pipe
-    to the dead run, holding memory, for good."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (AttributeError, OSError):
-        return  # not Linux: the worker ends when its pipe is closed, as before
-    if os.getppid() != parent:  # the parent ended before the prctl
-        os._exit(1)
 
 
 def _forked_one(k: int) -> Features:

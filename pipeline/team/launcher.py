@@ -19,7 +19,6 @@ also asks the kernel to kill it if its parent (the launcher, or the zygote) dies
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import functools
 import json
 import os
@@ -36,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import TeamError
+from pipeline.errors import TeamError, die_with_parent
 from pipeline.team.teamfile import (
     DEFAULT_OPTIONS,
     LAUNCHED_AT_ENV,
@@ -162,24 +161,6 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     from pipeline.team.teamfile import parse_team
 
     return parse_team(team.to_json())  # the same checks as a hand-written file
-
-
-def die_with_parent(parent_pid: int | None = None) -> None:
-    """Ask the kernel to kill this process when its parent dies (``PR_SET_PDEATHSIG``); runs in
-    a child between fork and exec, and in every robot the zygote forks.
-
-    The request holds only from when it is made: a parent that died between the fork and the
-    ``prctl`` (a loaded machine may not run the child for a while) has already handed the child
-    to another process, and no signal would come. So the child compares its parent with
-    ``parent_pid`` (the forking process's pid, taken before the fork) once the request is in,
-    and ends at once (exit 1) when they differ."""
-    try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-    if parent_pid is not None and os.getppid() != parent_pid:
-        os._exit(1)
 
 
 def _dies_with(parent_pid: int):

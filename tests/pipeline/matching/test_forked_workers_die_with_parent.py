@@ -11,7 +11,7 @@ import time
 _KILLED_PARENT = textwrap.dedent("""
     import multiprocessing, os, signal, time
     from concurrent.futures import ProcessPoolExecutor
-    from pipeline.matching.features import die_with_parent
+    from pipeline.errors import die_with_parent
 
     pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
                                initializer=die_with_parent, initargs=(os.getpid(),))
