@@ -36,7 +36,7 @@ def _bench(name):
     ("multiway", ["--frames", "--graffiti", "", "--formations", "", "--warped-seeds", "--team", "10",
                   "--methods", "Sync"], "--methods Sync: unknown; choose from paper,"),
     ("fusion", ["--resolutions", "foo"], "error: resolution 'foo': choose one of"),
-    ("voting_table1", ["--radius", "-1", "--trials", "2"], "error: radius must be > 0, got -1"),
+    ("voting_table1", ["--radius", "-1", "--trials", "2"], "argument --radius: '-1': expected a finite number above 0"),
     ("voting_table1", ["--trials", "1"], "--trials must be >= 2 (Table I's standard deviation"),
     ("voting_table1", ["--seed", "-1", "--trials", "2"],
      "error: --seed -1: a seed must be an integer from 0 to 2**63 - 1"),
