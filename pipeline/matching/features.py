@@ -40,7 +40,6 @@ METHODS = FEATURE_METHODS
 #: keypoints closer than this (pixels) count as one location (see :func:`merge_colocated`)
 MERGE_RADIUS_PX = 0.5
 
-
 #: images with a side shorter than this give zero features (smaller than any descriptor patch)
 MIN_IMAGE_PX = 16
 
