@@ -431,16 +431,17 @@ def graph_parts(n: int, edges: np.ndarray) -> int:
 
 def split_warning(n: int, edges: np.ndarray, items: str = "images",
                   lost: str = "their features cannot be associated across the groups",
-                  advice: str = "choose a denser --graph") -> str | None:
+                  advice: str = "choose a denser --graph", parts: int | None = None) -> str | None:
     """The warning of a comm graph on ``n`` ``items`` that splits them into groups that never
-    match each other (:func:`graph_parts`), or None when it is connected.
+    match each other (:func:`graph_parts`, or ``parts`` when the caller counted them), or None
+    when it is connected.
 
     >>> split_warning(4, np.array([[0, 1], [2, 3]]))
     'the comm graph splits the 4 images into 2 groups that never match each other: their features cannot be associated across the groups (choose a denser --graph)'
     >>> split_warning(2, np.array([[0, 1]])) is None
     True
     """
-    parts = graph_parts(n, edges)
+    parts = graph_parts(n, edges) if parts is None else parts
     if parts <= 1:
         return None
     return (f"the comm graph splits the {n} {items} into {parts} groups that never match each "

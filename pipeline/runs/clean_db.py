@@ -201,11 +201,12 @@ def _warn_split(n: int, links, off_graph: np.ndarray) -> None:
         return np.stack([links.cam_i[mask], links.cam_j[mask]], axis=1)
 
     joined = graph_parts(n, pairs(np.ones(len(links), dtype=bool)))
-    if graph_parts(n, pairs(~off_graph)) <= joined:
-        return
-    logging.getLogger(__name__).warning("warning: %s", split_warning(n, pairs(~off_graph), advice=(
-        f"the database's verified matches join them in {joined}; add the missing edges to "
-        "--comm-graph, or leave it out")))
+    parts = graph_parts(n, pairs(~off_graph))
+    if parts > joined:
+        logging.getLogger(__name__).warning("warning: %s", split_warning(
+            n, pairs(~off_graph), parts=parts, advice=(
+                f"the database's verified matches join them in {joined}; add the missing "
+                "edges to --comm-graph, or leave it out")))
 
 
 def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolution: str,
