@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline import validate
 from pipeline.errors import InputError
 
 __all__ = ["FaultConfig", "add_fault_arguments", "faults_from_args", "parse_crash",
@@ -239,9 +240,10 @@ def _check_fields(config: FaultConfig) -> None:
     if not isinstance(config.switching_topology, (bool, np.bool_)):
         raise InputError(f"FaultConfig switching_topology {config.switching_topology!r}: give "
                          "True or False")
-    if not _whole(config.seed) or not 0 <= config.seed < 2**63:
+    if not _whole(config.seed):
         raise InputError(f"FaultConfig seed {config.seed!r}: a seed must be an integer from 0 "
                          "to 2**63 - 1")
+    validate.seed(config.seed, "FaultConfig seed")  # the commands' range
 
 
 def _check_delay(d) -> int:

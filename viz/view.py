@@ -102,8 +102,6 @@ def _no_recording(folder: Path) -> str:
     """What to do about a folder without a recording: a run folder written with
     ``--no-rerun`` gets one from :mod:`viz.saved_run`, an online one only from its run; any
     other folder (``resolve``'s outputs, a killed run's staging folder) is no run folder."""
-    import shlex
-
     if (folder / "link_steps.csv").is_file() and (folder / "images.csv").is_file():
         return ("an online run folder written with --no-rerun: its recording, on the step "
                 "timeline, is written by the run itself; run it again without --no-rerun")
