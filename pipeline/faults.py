@@ -230,7 +230,7 @@ def _check_fields(config: FaultConfig) -> None:
     in ``float()``, a crash robot of 1.5 was read as robot 1, ``'no'`` switched the topology
     on, a negative seed was taken."""
     p = config.drop_prob
-    if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)):
+    if not validate.is_number(p):
         raise InputError(f"FaultConfig drop_prob {p!r}: give a probability in [0, 1), e.g. 0.1")
     for pair in config.crash:
         if not isinstance(pair, (tuple, list)) or len(pair) != 2 \

@@ -88,9 +88,9 @@ def _refuse_non_number(merge_radius) -> None:
     """InputError unless ``merge_radius`` is a real number (text failed with numpy's "ufunc
     'isfinite' not supported", ``True`` was read as 1 px)."""
     from pipeline.errors import InputError
+    from pipeline.validate import is_number
 
-    if isinstance(merge_radius, bool) or not isinstance(merge_radius,
-                                                        (int, float, np.integer, np.floating)):
+    if not is_number(merge_radius):
         raise InputError(f"--merge-radius {merge_radius!r}: expected a number of pixels >= 0 "
                          "(0 merges nothing), or None for the rule's")
 

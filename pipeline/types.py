@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.validate import is_number
 
 __all__ = ["View", "Features", "PairMatches", "Links", "LinkLedger", "RunRecord", "id_array"]
 
@@ -112,7 +113,7 @@ def id_array(values, what: str) -> np.ndarray:
     if v.dtype.kind == "O":  # Python ints past int64, None, mixed objects
         flat = v.reshape(-1)
         for k, x in enumerate(flat.tolist()):
-            if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) \
+            if not is_number(x) \
                     or not float(x).is_integer() or not -2**63 <= x < 2**63:
                 raise ValueError(f"{what}[{k}] = {flat[k]!r} is not a whole-number id")
         v = np.asarray(flat.tolist(), dtype=np.float64 if any(

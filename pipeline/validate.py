@@ -23,6 +23,7 @@ naming the flag, the value and the accepted range. The stated limits:
 from __future__ import annotations
 
 import math
+import numbers
 
 from pipeline.errors import InputError
 
@@ -106,6 +107,16 @@ def threads(value, flag: str = "--threads") -> int:
         raise InputError(f"{flag} {value}: give -1 (all cores) or a count from 1 to "
                          f"{MAX_THREADS}")
     return v
+
+
+def is_number(v) -> bool:
+    """``v`` is a real number, Python's or NumPy's: not a bool, not text (which the checks of
+    the Python API refuse by name rather than let ``float()`` or NumPy fail on).
+
+    >>> is_number(2.5), is_number(3), is_number(True), is_number("2")
+    (True, True, False, False)
+    """
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
 def seed(value, flag: str) -> int:

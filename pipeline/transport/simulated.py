@@ -43,6 +43,7 @@ import numpy as np
 from pipeline.commgraph import neighbour_table
 from pipeline.errors import InputError
 from pipeline.transport import Message, NotANeighbourError, Transport
+from pipeline.validate import is_number
 
 __all__ = ["NetworkOptions", "Network", "recurrent_topology"]
 
@@ -84,7 +85,7 @@ class NetworkOptions:
 
     def __post_init__(self) -> None:
         p = self.drop_probability
-        if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)) \
+        if not is_number(p) \
                 or not 0.0 <= p <= 1.0:  # also refuses nan
             raise InputError(f"NetworkOptions drop_probability {p!r}: give a probability in "
                              "[0, 1]")

@@ -51,6 +51,7 @@ from pipeline.progress import rounds_bar
 from pipeline.transport import Transport
 from pipeline.transport.simulated import Network, NetworkOptions
 from pipeline.types import Links
+from pipeline.validate import is_number
 
 __all__ = [
     "ConsistencyResult",
@@ -323,9 +324,7 @@ def resolve_conflicts(features_per_camera, comm_edges, links: Links,
         _equip_evidence(robots, link_index, links, link_weight, keypoints, projections,
                         rule.hook("equip"))
     if bundle_budget is not None:
-        if isinstance(bundle_budget, bool) \
-                or not isinstance(bundle_budget, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(bundle_budget) or int(bundle_budget) != bundle_budget \
+        if not is_number(bundle_budget) or not np.isfinite(bundle_budget) or int(bundle_budget) != bundle_budget \
                 or bundle_budget < 1:
             raise InputError(f"bundle_budget {bundle_budget!r}: give a set size of at least "
                              "1 feature, or None for the default")
