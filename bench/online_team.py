@@ -3,7 +3,9 @@ and without the fusion of each step's changed tracks, side by side in one run.
 
 Each configuration is a command-line run (process start included): ``sim``, ``sim
 --no-fusion``, ``zenoh --no-fusion`` and ``zenoh`` (fusion on: one robot process per frame of
-the changed tracks each step, :func:`pipeline.runs.transports.zenoh.online_fusion`), on the
+the changed tracks each step, :func:`pipeline.runs.transports.zenoh.online_fusion`), and
+``zenoh`` again with every team forking its robots from a zygote of its own
+(``FORMATION_MATCH_ZYGOTE=team``; the others share one zygote for the run's teams), on the
 same formation, alternated ``--repeat`` times (the median wall kept). Printed and saved per
 configuration: wall time, the online stage's time, the fusion's time summed over the steps
 (``fusion.wall_s`` of each step, team start included over Zenoh), links cut by fusion, tracks
@@ -39,14 +41,20 @@ from pipeline.runfolder import write_json_atomic  # noqa: E402
 
 CONFIGS = {"sim": [], "sim --no-fusion": ["--no-fusion"],
            "zenoh --no-fusion": ["--transport", "zenoh", "--no-fusion"],
-           "zenoh": ["--transport", "zenoh"]}
+           "zenoh": ["--transport", "zenoh"],
+           "zenoh, zygote per team": ["--transport", "zenoh"]}
+
+#: the environment of a configuration (FORMATION_MATCH_ZYGOTE: where the robots of each
+#: team are forked from, pipeline.runs.transports.zenoh.ZYGOTE_ENV)
+ENV = {"zenoh, zygote per team": {"FORMATION_MATCH_ZYGOTE": "team"}}
 
 
-def _run(args: list[str], out: Path) -> dict:
+def _run(args: list[str], out: Path, env: dict | None = None) -> dict:
     """``python -m pipeline run-formation ARGS``: wall, report, links and steps tables."""
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "pipeline", "run-formation", *args,
                            "--no-rerun", "--out", str(out)], cwd=ROOT,
+                          env={**os.environ, "FORMATION_MATCH_ZYGOTE": "run", **(env or {})},
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
@@ -97,7 +105,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.repeat):
             for name, extra in CONFIGS.items():
-                runs[name].append(_run(common + extra, Path(tmp) / f"{r}-{name}"))
+                runs[name].append(_run(common + extra, Path(tmp) / f"{r}-{name}",
+                                       ENV.get(name)))
     rows = {}
     for name, rs in runs.items():
         best = dict(sorted(rs, key=lambda x: x["wall_s"])[len(rs) // 2])
@@ -121,6 +130,9 @@ def main(argv=None) -> int:
     sn = rows["sim --no-fusion"]["wall_s"]
     print(f"zenoh with fusion / zenoh --no-fusion: {z / zn:.2f}; zenoh / sim: {z / s:.2f}; "
           f"without fusion: {zn / sn:.2f}")
+    zt = rows["zenoh, zygote per team"]
+    print(f"zenoh, one zygote for the run's teams / a zygote per team: wall "
+          f"{z / zt['wall_s']:.2f}, online stage {rows['zenoh']['online_s'] / zt['online_s']:.2f}")
     results = {"command": ["run-formation", *common, "--no-rerun"], "repeat": args.repeat,
                "cpus": os.cpu_count(), "load_average_at_start": load, "runs": rows}
     write_json_atomic(Path(args.out) / "results.json", results)

@@ -47,16 +47,17 @@ from pipeline.team.teamfile import (
 from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
-           "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout"]
+           "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout",
+           "shared_zygote", "SharedZygote"]
 
 
 #: seconds a team may run before :func:`launch_team` kills it, unless the caller or
 #: :func:`team_time_limit` (the commands' ``--team-timeout``) says otherwise
 TEAM_TIMEOUT_S = 600.0
 
-#: what the enclosing :func:`team_time_limit` and :func:`team_round_timeout` set (their
-#: defaults outside them)
-_within = {"time_limit": TEAM_TIMEOUT_S, "round_timeout": None}
+#: what the enclosing :func:`team_time_limit`, :func:`team_round_timeout` and
+#: :func:`shared_zygote` set (their defaults outside them)
+_within = {"time_limit": TEAM_TIMEOUT_S, "round_timeout": None, "zygote": None}
 
 
 @contextlib.contextmanager
@@ -205,13 +206,135 @@ def _read_zygote(stream, procs: dict, codes: dict, cv: threading.Condition) -> N
         parts = raw.decode(errors="replace").split()
         if len(parts) != 3 or parts[0] not in ("pid", "exit"):
             continue
-        i, v = int(parts[1]), int(parts[2])
-        with cv:
-            if parts[0] == "pid":
-                procs[i] = _ForkedRobot(i, v, codes, cv)
-            else:
-                codes[i] = v
-            cv.notify_all()
+        _note_robot(parts[0], int(parts[1]), int(parts[2]), procs, codes, cv)
+
+
+def _note_robot(kind: str, i: int, v: int, procs: dict, codes: dict,
+                cv: threading.Condition) -> None:
+    """Record a zygote's ``pid`` (``v`` the pid) or ``exit`` (``v`` the code) line of robot
+    ``i``."""
+    with cv:
+        if kind == "pid":
+            procs[i] = _ForkedRobot(i, v, codes, cv)
+        else:
+            codes[i] = v
+        cv.notify_all()
+
+
+class SharedZygote:
+    """One serving zygote (``python -m pipeline.team.zygote --serve``) for every team
+    :func:`launch_team` starts within :func:`shared_zygote`: the robot program is imported
+    once for the job instead of once per team (an online run over Zenoh starts three teams
+    per step). Started at the first team; a team's robots are told apart by a tag on the
+    zygote's lines. A team that ends kills its own robots (by pid: the zygote lives on) and
+    waits for their exits; robots of an ended team that the zygote reports only afterwards
+    are killed on sight."""
+
+    def __init__(self) -> None:
+        self.proc: subprocess.Popen | None = None
+        self.teams: dict = {}       # tag -> (procs, codes, cv)
+        self.ended: set = set()     # tags of teams that ended
+        self.lock = threading.Lock()
+        self.count = 0
+        self._tmp = tempfile.TemporaryDirectory(prefix="fm-zygote-")
+        self.log_path = Path(self._tmp.name) / "zygote.log"
+        self._log = None
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def _start(self, env: dict) -> None:
+        self.close_process()
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 - closed in close_process
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "pipeline.team.zygote", "--serve"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env,
+            process_group=0, preexec_fn=_dies_with(os.getpid()))
+        threading.Thread(target=self._read, args=(self.proc.stdout,), daemon=True).start()
+
+    def _read(self, stream) -> None:
+        for raw in stream:
+            parts = raw.decode(errors="replace").split()
+            if len(parts) != 4 or parts[0] not in ("pid", "exit"):
+                continue
+            tag, i, v = parts[1], int(parts[2]), int(parts[3])
+            with self.lock:
+                team = self.teams.get(tag)
+                late = tag in self.ended
+            if late and parts[0] == "pid":
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(v, signal.SIGKILL)
+            if team is not None:
+                _note_robot(parts[0], i, v, *team)
+
+    def start_team(self, team_path: Path, workdir: Path, procs: dict, codes: dict,
+                   cv: threading.Condition, env: dict) -> str:
+        """Ask the zygote (started now if it is not running) to fork the robots of the team
+        in ``team_path``; their ``pid``/``exit`` lines go to ``procs``/``codes`` under
+        ``cv``. Returns the team's tag."""
+        if not self.alive():
+            self._start(env)
+        with self.lock:
+            self.count += 1
+            tag = str(self.count)
+            self.teams[tag] = (procs, codes, cv)
+        line = json.dumps({"tag": tag, "team": str(team_path), "workdir": str(workdir),
+                           "launched_at": repr(time.time())})
+        try:
+            self.proc.stdin.write(line.encode() + b"\n")
+            self.proc.stdin.flush()
+        except (BrokenPipeError, OSError):
+            pass  # the zygote died: the launcher sees it end and names its log
+        return tag
+
+    def end_team(self, tag: str) -> None:
+        """The team ``tag`` ended: a robot of it forked from now on is killed at once (its
+        exits are still recorded, until :meth:`forget`)."""
+        with self.lock:
+            self.ended.add(tag)
+
+    def forget(self, tag: str) -> None:
+        """The team ``tag``'s robots are gone: no line of it is recorded any more."""
+        with self.lock:
+            self.teams.pop(tag, None)
+
+    def close_process(self) -> None:
+        """Stop the zygote and whatever robots it still has."""
+        if self.proc is not None:
+            with contextlib.suppress(Exception):
+                self.proc.stdin.close()
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            with contextlib.suppress(Exception):
+                self.proc.wait(timeout=5)
+            if self.proc.stdout is not None:
+                with contextlib.suppress(Exception):
+                    self.proc.stdout.close()
+            self.proc = None
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def close(self) -> None:
+        self.close_process()
+        self._tmp.cleanup()
+
+
+@contextlib.contextmanager
+def shared_zygote():
+    """Within the block, every :func:`launch_team` that forks its robots (the default) forks
+    them from one :class:`SharedZygote`, stopped when the block ends (a block within another
+    uses the outer one)."""
+    if _within["zygote"] is not None:
+        yield _within["zygote"]
+        return
+    zygote = SharedZygote()
+    _within["zygote"] = zygote
+    try:
+        yield zygote
+    finally:
+        _within["zygote"] = None
+        zygote.close()
 
 
 @dataclass
@@ -357,10 +480,15 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             old_handlers[sig] = signal.signal(sig, on_signal)
     t0 = time.monotonic()
     zygote = None
+    shared, tag = (_within["zygote"] if fork else None), None
+    zygote_log = workdir / "zygote.log" if shared is None else shared.log_path
     try:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
-        if fork:
+        if shared is not None:
+            tag = shared.start_team(team_path, workdir, procs, run.exit_codes, observer.cv, env)
+            zygote = shared.proc
+        elif fork:
             env[LAUNCHED_AT_ENV] = repr(time.time())
             errfiles["zygote"] = open(workdir / "zygote.log", "wb")  # noqa: SIM115
             zygote = subprocess.Popen(
@@ -391,7 +519,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 if zygote is not None and zygote.poll() is not None and len(procs) < team.n:
                     raise TeamError("the robots' zygote (python -m pipeline.team.zygote) ended "
                                     f"with exit code {zygote.returncode} before starting "
-                                    f"every robot: {_tail(workdir / 'zygote.log')}")
+                                    f"every robot: {_tail(zygote_log)}")
                 if kill is not None and kill[0] not in run.killed and kill[0] in procs:
                     k, status, delay = kill
                     if status in observer.seen.get(k, ()):
@@ -442,8 +570,17 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         return run
     finally:
         stopping["now"] = True
+        if shared is not None and tag is not None:
+            shared.end_team(tag)
         kill_all()
-        if zygote is not None:
+        if shared is not None:
+            # the zygote serves the next team: this team's robots only, reaped by it
+            for p in list(procs.values()):
+                with contextlib.suppress(Exception):
+                    p.wait(timeout=5)
+            if tag is not None:
+                shared.forget(tag)
+        elif zygote is not None:
             # the zygote reaps its robots; killed with them, it reports no more exits, and
             # robots it did not reap are reaped by init
             with contextlib.suppress(Exception):

@@ -10,6 +10,7 @@ which its robots write a neighbour off (``--round-timeout``).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from pathlib import Path
 
@@ -38,6 +39,7 @@ from pipeline.team.launcher import (
     TEAM_TIMEOUT_S,
     launch_team,
     make_team,
+    shared_zygote,
     team_round_timeout,
     team_summary,
     team_time_limit,
@@ -662,12 +664,45 @@ def links_of_run(team, run) -> ConsistencyResult:
     return res
 
 
+#: the environment variable that says where the robots of an online run's teams are forked
+#: from: ``run`` (default) one zygote for every team of the run, ``team`` a zygote of each
+#: team's own (the robot program imported again for each team; ``bench/online_team.py``
+#: compares the two)
+ZYGOTE_ENV = "FORMATION_MATCH_ZYGOTE"
+ZYGOTE_CHOICES = ("run", "team")
+
+
+def zygote_per_run() -> bool:
+    """Whether an online run's teams share one zygote (:data:`ZYGOTE_ENV`).
+
+    Raises
+    ------
+    InputError
+        Another value than :data:`ZYGOTE_CHOICES`, named.
+    """
+    import os
+
+    value = os.environ.get(ZYGOTE_ENV, "run").strip() or "run"
+    if value not in ZYGOTE_CHOICES:
+        raise InputError(f"{ZYGOTE_ENV}={value!r}: choose one of {', '.join(ZYGOTE_CHOICES)} "
+                         "(run: one zygote for every team of an online run, the default; "
+                         "team: one per team), or unset it")
+    return value == "run"
+
+
+@contextlib.contextmanager
 def online_robots():
     """What the robots of an online run keep from step to step (:func:`online_match`): a
-    folder per robot, under a temporary folder removed at the end of the run."""
+    folder per robot, under a temporary folder removed at the end of the run. Every team the
+    run starts (three per step: matching, the rule's stage, fusion) forks its robots from one
+    zygote (:func:`pipeline.team.launcher.shared_zygote`): the robot program is imported
+    once for the run, not once per team (unless :data:`ZYGOTE_ENV` says ``team``)."""
     import tempfile
 
-    return tempfile.TemporaryDirectory(prefix="online-robots-")
+    shared = zygote_per_run()
+    with tempfile.TemporaryDirectory(prefix="online-robots-") as store, \
+            (shared_zygote() if shared else contextlib.nullcontext()):
+        yield store
 
 
 def online_match(views, t: int, n: int, window: int, edges_up, store, *, features: str,
