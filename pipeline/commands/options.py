@@ -212,8 +212,9 @@ def transport_time_limit(args):
     ``--team-timeout S`` (:func:`add_transport_option`), every team of robot processes it
     starts is stopped after ``S`` seconds; with ``--round-timeout S``, the robots of every team
     it starts write a neighbour off after ``S`` seconds of silence
-    (:func:`pipeline.runs.transports.team_limits`); a command without ``--transport``, or
-    without the options: nothing.
+    (:func:`pipeline.runs.transports.team_limits`, which also enters the transport's own
+    context for a command's teams: over Zenoh one zygote forks the robots of them all); a
+    command without ``--transport``: nothing.
 
     Raises
     ------
@@ -226,7 +227,7 @@ def transport_time_limit(args):
 
     limit = getattr(args, "team_timeout", None)
     silence = getattr(args, "round_timeout", None)
-    if (limit is None and silence is None) or not hasattr(args, "transport"):
+    if not hasattr(args, "transport"):
         return contextlib.nullcontext()
     from pipeline.runs.transports import team_limits
 

@@ -143,7 +143,9 @@ def check_team_size(name: str, robots: int, what: str) -> None:
 
 def team_limits(name: str, team_timeout_s: float | None = None,
                 round_timeout_s: float | None = None):
-    """The context manager under which a command's jobs run on transport ``name``: with
+    """The context manager under which a command's jobs run on transport ``name``: the
+    module's ``job_teams`` context, if it has one (``zenoh``: one zygote forks the robots of
+    every team the command starts); with
     ``team_timeout_s`` (``--team-timeout``), every team of robot processes they start is killed
     after it (the module's ``team_time_limit``); with ``round_timeout_s`` (``--round-timeout``),
     the robots of every team write a neighbour off after that much silence (the module's
@@ -185,11 +187,15 @@ def team_limits(name: str, team_timeout_s: float | None = None,
                              "before a robot wrote a silent neighbour off; raise "
                              "--team-timeout above it (or lower --round-timeout)")
 
+    job = getattr(module, "job_teams", None)
+
     @contextlib.contextmanager
     def within():
         with contextlib.ExitStack() as stack:
             for context, seconds in settings:
                 stack.enter_context(context(seconds))
+            if job is not None:
+                stack.enter_context(job())
             yield
 
     return within()

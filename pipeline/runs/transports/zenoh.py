@@ -46,7 +46,7 @@ from pipeline.team.launcher import (
 )
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
-           "online_stage", "online_fusion",
+           "online_stage", "online_fusion", "job_teams", "online_robots", "ZYGOTE_ENV",
            "resolve_links_file",
            "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout",
            "TEAM_TIMEOUT_S"]
@@ -690,6 +690,14 @@ def zygote_per_run() -> bool:
     return value == "run"
 
 
+def job_teams():
+    """The context a command's jobs run in (:func:`pipeline.runs.transports.team_limits`):
+    every team they start forks its robots from one zygote
+    (:func:`pipeline.team.launcher.shared_zygote`; ``run-formations`` starts one per
+    formation, an online run three per step), unless :data:`ZYGOTE_ENV` says ``team``."""
+    return shared_zygote() if zygote_per_run() else contextlib.nullcontext()
+
+
 @contextlib.contextmanager
 def online_robots():
     """What the robots of an online run keep from step to step (:func:`online_match`): a
@@ -699,9 +707,7 @@ def online_robots():
     once for the run, not once per team (unless :data:`ZYGOTE_ENV` says ``team``)."""
     import tempfile
 
-    shared = zygote_per_run()
-    with tempfile.TemporaryDirectory(prefix="online-robots-") as store, \
-            (shared_zygote() if shared else contextlib.nullcontext()):
+    with tempfile.TemporaryDirectory(prefix="online-robots-") as store, job_teams():
         yield store
 
 
