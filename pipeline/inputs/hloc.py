@@ -430,6 +430,10 @@ def read_h5(features: str | Path, matches: str | Path,
                                      f" ({raw.dtype} is unsigned: hloc's -1, no match, reads "
                                      f"as {raw.max()}; store matches0 as a signed integer, "
                                      "e.g. int32)" if unsigned else ""))
+            if raw.dtype.kind == "u":  # the cleaned copy writes a cut match as -1 in place
+                raise InputError(f"{matches}: matches0 of pair {key!r} is stored as {raw.dtype}, "
+                                 "which cannot hold hloc's -1 (no match) that a cut match is "
+                                 "written as; store matches0 as a signed integer, e.g. int32")
             m0 = raw.astype(np.int64)
             if raw.size and raw.min() < -1:
                 raise InputError(f"{matches}: matches0 of pair {key!r} holds {raw.min()}; "
