@@ -162,7 +162,14 @@ def read_features(path: str | Path, budget=None) -> dict[str, np.ndarray]:
                     row = int(np.flatnonzero(~np.isfinite(kp).all(axis=1))[0])
                     raise InputError(f"{path}: {what}: keypoint {row} is {kp[row].tolist()}; "
                                      "every keypoint needs finite pixel coordinates")
-                out[image] = kp.reshape(-1, 2).astype(np.float32)
+                with np.errstate(over="ignore"):
+                    kp32 = kp.reshape(-1, 2).astype(np.float32)
+                if not np.isfinite(kp32).all():  # float64 past float32's range: inf once cast
+                    row = int(np.flatnonzero(~np.isfinite(kp32).all(axis=1))[0])
+                    raise InputError(f"{path}: {what}: keypoint {row} is {kp[row].tolist()}, "
+                                     "beyond the range of pixel coordinates (float32, as hloc "
+                                     "stores them); the file is damaged or not written by hloc")
+                out[image] = kp32
         fd.visititems(visit)
     if not out:
         raise InputError(f"{path}: no image group with a 'keypoints' dataset; is this hloc's "

@@ -56,3 +56,21 @@ def test_unsigned_matches0_without_a_wrapped_minus_one_is_refused(tmp_path, caps
         "hold hloc's -1 (no match) that a cut match is written as; store matches0 as a signed "
         "integer, e.g. int32")
     assert matches.read_bytes() == before
+
+
+def test_float64_keypoints_past_float32_are_refused_not_read_as_inf(tmp_path, capsys):
+    # the finite check ran on the float64 values and the cast to float32 then made them inf
+    # (a NumPy RuntimeWarning, and the run went on with infinite keypoints)
+    feats, matches = _write(tmp_path)
+    with h5py.File(feats, "a") as fd:
+        kp = fd["b.jpg/keypoints"][()].astype(np.float64)
+        kp[3] = [1e40, 5.0]
+        del fd["b.jpg/keypoints"]
+        fd["b.jpg"].create_dataset("keypoints", data=kp)
+    code, captured, out = _run(capsys, tmp_path, feats, matches)
+    assert code == 2 and not out.exists() and "Traceback" not in captured.err
+    assert "RuntimeWarning" not in captured.err
+    assert captured.err.strip().splitlines()[-1] == (
+        f"error: {feats}: keypoints of 'b.jpg': keypoint 3 is [1e+40, 5.0], beyond the range "
+        "of pixel coordinates (float32, as hloc stores them); the file is damaged or not "
+        "written by hloc")
