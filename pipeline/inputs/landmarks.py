@@ -550,6 +550,15 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                 row = int(fr.landmarks[np.flatnonzero(~np.isfinite(d).all(axis=1))[0]])
                 raise InputError(f"{dp}: descriptor row {row + 1} holds a non-finite value "
                                  "(nan or inf); every descriptor must be finite numbers")
+            # the L2 distance of two descriptors sums D squared differences in float64
+            limit = np.sqrt(np.finfo(np.float64).max / (4 * max(1, d.shape[1])))
+            if d.size and np.abs(d).max() > limit:
+                at = np.unravel_index(int(np.argmax(np.abs(d))), d.shape)
+                raise InputError(f"{dp}: descriptor row {int(fr.landmarks[at[0]]) + 1} holds "
+                                 f"{d[at]:g}, too large to compare (the distance of "
+                                 f"descriptors of {d.shape[1]} values overflows above "
+                                 f"{limit:.3g}); the file is damaged or in other units: "
+                                 "rescale it")
             first = first or (dp, d.shape[1])
             if d.shape[1] != first[1]:
                 raise InputError(f"{dp}: descriptors of {d.shape[1]} values but {first[0].name} "
