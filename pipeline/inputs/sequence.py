@@ -14,6 +14,7 @@ import dataclasses
 import logging
 import re
 from dataclasses import dataclass
+from decimal import Decimal
 from pathlib import Path
 
 from pipeline.errors import InputError
@@ -145,12 +146,27 @@ def _load_robot(folder: Path, max_size: int | None, intrinsics) -> list[View]:
         raise InputError(f"robot {folder.name!r} ({str(folder)!r}): {message}") from None
 
 
+#: a number in a file name: digits, with their decimals where one point joins two runs of
+#: digits (a timestamp such as ``1700000000.15``); digits joined by more points (a date
+#: ``2024.2.01``) are numbers each
+_NUMBER = re.compile(r"(?<!\d)(?<!\d\.)(\d+)(\.\d+)(?!\.?\d)|(\d+)()")
+
+
 def _number_order_breach(names: list[str]) -> tuple[str, str] | None:
     """The first two of ``names`` (in name order) that number order puts the other way
-    round (``frame10.png`` before ``frame2.png``), or None when both orders agree."""
+    round (``frame10.png`` before ``frame2.png``), or None when both orders agree. Digits
+    after a number's decimal point are its fraction: ``1700000000.15.png`` comes before
+    ``1700000000.2.png`` in both orders (timestamps written without trailing zeros)."""
     def key(name):
-        return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", name)
-                if t]
+        out, at = [], 0
+        for m in _NUMBER.finditer(name):
+            if m.start() > at:
+                out.append((1, 0, name[at:m.start()]))
+            out.append((0, Decimal(m.group()), ""))
+            at = m.end()
+        if at < len(name):
+            out.append((1, 0, name[at:]))
+        return out
 
     by_number = sorted(names, key=key)
     for a, b in zip(names, by_number, strict=True):
@@ -160,5 +176,6 @@ def _number_order_breach(names: list[str]) -> tuple[str, str] | None:
 
 
 def _zero_padded(name: str) -> str:
-    """``name`` with its numbers written with three digits or more (``frame002.png``)."""
-    return re.sub(r"\d+", lambda m: m.group().zfill(3), name)
+    """``name`` with its numbers written with three digits or more before their decimal
+    point (``frame002.png``; ``t002.5.png``)."""
+    return _NUMBER.sub(lambda m: (m.group(1) or m.group(3)).zfill(3) + (m.group(2) or ""), name)
