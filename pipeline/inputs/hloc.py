@@ -299,8 +299,27 @@ def _check_pair_groups(fd, h5py, path: Path) -> None:
             + ("remove the group" if key else "remove those datasets"))
 
 
-def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
-    """Every pair group of the file as ``(key, name0, name1)``."""
+def _groups_without_keypoints(features: Path, flat_names: list[str]) -> dict[str, list[str]]:
+    """``{name: its datasets}`` for each of ``flat_names`` (written as in a pair key, ``/`` as
+    ``-``) whose group in the features file holds datasets but no ``keypoints``."""
+    h5py = _h5py()
+    wanted, out = set(flat_names), {}
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Group) and name.replace("/", "-") in wanted \
+                and "keypoints" not in obj:
+            held = [k for k, v in obj.items() if isinstance(v, h5py.Dataset)]
+            if held:
+                out[name] = held
+    with _open(features, "features file") as fd:
+        fd.visititems(visit)
+    return out
+
+
+def _stored_pairs(fd, h5py, names: list[str],
+                  features: Path | None = None) -> list[tuple[str, str, str]]:
+    """Every pair group of the file as ``(key, name0, name1)`` (``features``: the features
+    file, to name an image whose group there holds no keypoints)."""
     by_flat = {}
     for n in names:
         by_flat.setdefault(n.replace("/", "-"), []).append(n)
@@ -332,6 +351,13 @@ def _stored_pairs(fd, h5py, names: list[str]) -> list[tuple[str, str, str]]:
             missing = [p for p in parts if p not in by_flat] if len(parts) == 2 else \
                 ([] if any(key.startswith(f + "_") or key.endswith("_" + f) for f in by_flat)
                  else [key])
+            bare = _groups_without_keypoints(features, missing) if features else {}
+            if bare:  # the image has a group in the features file, but no keypoints in it
+                name, held = next(iter(bare.items()))
+                raise InputError(f"matches file: pair group {key!r} names {name!r}, whose group "
+                                 "in the features file holds no 'keypoints' dataset (only "
+                                 f"{', '.join(repr(h) for h in held)}): extract the features "
+                                 "of that image again, or remove the pair group")
             if missing:  # --pairs cannot help: an image the features file does not hold
                 raise InputError(f"matches file: pair group {key!r} names "
                                  f"{', '.join(repr(m) for m in missing)}, not an image of the "
@@ -398,7 +424,7 @@ def read_h5(features: str | Path, matches: str | Path,
             budget.add_read("reading the largest pair of the matches file",
                             max((ds.nbytes for ds in found), default=0))
         if wanted is None:
-            stored = _stored_pairs(fd, h5py, names)
+            stored = _stored_pairs(fd, h5py, names, features)
         else:
             stored = []
             pair_of_key: dict[str, tuple[str, str]] = {}
