@@ -288,6 +288,11 @@ def _check_pair_groups(fd, h5py, path: Path) -> None:
         if isinstance(obj, h5py.Dataset) and "matches0" not in obj.parent:
             foreign.setdefault(obj.parent.name.strip("/"), []).append(name.rsplit("/", 1)[-1])
     fd.visititems(visit)
+    if foreign and all(key and "keypoints" in held for key, held in foreign.items()):
+        key = next(iter(foreign))  # the features file given as the matches file
+        raise InputError(f"{path}: its {len(foreign)} group(s) of 'keypoints' without "
+                         f"'matches0' (e.g. {key!r}) are images, not pairs: a features file, "
+                         "not hloc's matches.h5; give the matches file as --matches")
     if foreign:
         key, held = next(iter(foreign.items()))
         where = f"group {key!r}" if key else "the file's root group ('/')"
