@@ -80,9 +80,13 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
             log.warning("warning: %s", f"{str(p)!r}: {'; '.join(why)}")
     subs = [p for p in subs if p.name not in empty]
     if len(subs) < 2:
+        flat = image_paths(directory)
         raise InputError(f"--sequence {str(directory)!r}: {len(subs)} robot sub-folder(s) "
                          "holding images; a team needs at least two (one sub-folder of frames "
-                         "per robot)")
+                         "per robot)" + (
+                             f"; its {len(flat)} image(s) directly in it belong to no robot: "
+                             "to run them as one snapshot of a team, drop --sequence"
+                             if flat else ""))
     not_utf8 = [p.name for p in subs if not is_utf8_name(p.name)]
     if not_utf8:
         raise InputError(f"--sequence {str(directory)!r}: {len(not_utf8)} robot sub-folder "
