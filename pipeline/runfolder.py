@@ -332,8 +332,8 @@ def _pid_space() -> str:
 
 
 def _part_digest(target: Path, pid: str, start: str, rand: str) -> str:
-    h = hashlib.blake2b(f"{target.stem}|{target.suffix}|{pid}|{start}|{rand}|{_pid_space()}"
-                        .encode(), digest_size=6, key=b"formation-match: temporary output file")
+    h = hashlib.blake2b(os.fsencode(f"{target.stem}|{target.suffix}|{pid}|{start}|{rand}|"
+                                    f"{_pid_space()}"), digest_size=6, key=b"formation-match: temporary output file")
     return h.hexdigest()
 
 
