@@ -16,12 +16,15 @@ Reads the results only. On the ``step`` timeline, at every step:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import uuid
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
+
+from viz.rerun_log import recording_file
 
 __all__ = ["log_online", "STEP_SCALARS"]
 
@@ -53,12 +56,13 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
     without poses, e.g. photographs; ``sequence`` may then be ``None``).
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
     centres = _centres(sequence.flat.views) if centres is None else np.asarray(centres, float)
     L = online.links
+    files = contextlib.ExitStack()
+    tmp, sink = files.enter_context(recording_file(path))
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
-        rec.save(tmp)
+        rec.save(sink)
         rec.set_log_time_enabled(False)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for r in steps:
@@ -88,4 +92,6 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
         rec.disconnect()
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        files.close()
     return path

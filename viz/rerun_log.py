@@ -49,6 +49,7 @@ then the fusion); the last step shows the kept links as kept.
 from __future__ import annotations
 
 import colorsys
+import contextlib
 import os
 import uuid
 from pathlib import Path
@@ -678,6 +679,38 @@ def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int,
                          collapse_panels=False)
 
 
+
+def _is_utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:  # bytes that are not UTF-8, read back as surrogates
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def recording_file(path: str | os.PathLike):
+    """Yield ``(tmp, sink)``: the temporary file beside ``path`` that a recording is written to
+    (then renamed to ``path``) and the path to give Rerun's file sink for it.
+
+    Rerun takes a path as UTF-8 text: in a folder whose path is not (Latin-1 bytes) the sink
+    reaches the file through an open descriptor of the folder, ``/proc/self/fd/N/``, and the
+    temporary name spells such bytes as ``\\xNN``.
+    """
+    path = Path(path)
+    name = path.name if _is_utf8(path.name) else os.fsencode(path.name).decode(
+        "ascii", "backslashreplace")
+    tmp = path.with_name(f".{name}.{uuid.uuid4().hex[:8]}.tmp")
+    if _is_utf8(str(tmp)):
+        yield tmp, str(tmp)
+        return
+    fd = os.open(tmp.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        yield tmp, f"/proc/self/fd/{fd}/{tmp.name}"
+    finally:
+        os.close(fd)
+
+
 def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
             recording_name: str | None = None, *, image_plane_distance: float | None = None,
             world_axes=None, jpeg_quality: int = 85,
@@ -737,7 +770,6 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     _check_record(record)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
 
     posed = [_has_pose(v) for v in record.views]
     depth = float(image_plane_distance) if image_plane_distance else (
@@ -753,15 +785,17 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         f"{names[i] or f'cam_{i:02d}'}--{names[j] or f'cam_{j:02d}'}"), int(i), int(j))
         for i, j in pairs]
     blueprint = _blueprint(record, posed, max_image_views, pair_entities)
+    files = contextlib.ExitStack()
+    tmp, sink = files.enter_context(recording_file(path))
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
         if live:
             if live == "spawn":
                 rr.spawn(connect=False)
             url = None if live in ("spawn", "connect") else live
-            rec.set_sinks(rr.FileSink(tmp), rr.GrpcSink(url), default_blueprint=blueprint)
+            rec.set_sinks(rr.FileSink(sink), rr.GrpcSink(url), default_blueprint=blueprint)
         else:
-            rec.save(tmp, default_blueprint=blueprint)
+            rec.save(sink, default_blueprint=blueprint)
         rec.set_log_time_enabled(False)
         if recording_name:
             rec.send_recording_name(recording_name)
@@ -827,4 +861,6 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         if tmp.exists():
             tmp.unlink()
         raise
+    finally:
+        files.close()
     return path
