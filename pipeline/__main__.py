@@ -245,6 +245,8 @@ def entry() -> None:
     if sys.gettrace() is not None or sys.getprofile() is not None or others:
         sys.exit(code)
     for stream in (sys.stdout, sys.stderr):
+        if stream is None:  # started with that descriptor closed (``>&-``): Python sets None
+            continue
         try:
             stream.flush()
         except (OSError, ValueError):  # a closed pipe (``| head``) or a closed stream
