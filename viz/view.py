@@ -213,6 +213,18 @@ def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Na
         return args, None
 
 
+def _say(text: str) -> None:
+    """Print ``text`` to stdout at once. A reader that stopped reading (``| head -1``) ends
+    the printing, not the command: the rest of stdout, the viewer's included, goes to
+    /dev/null."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m viz.view", description=__doc__.split("\n\n")[0])
     ap.add_argument("target", nargs="?", default=None, metavar="RUN_DIR|FILE.rrd",
@@ -242,13 +254,13 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     cmd = viewer_command(path, web, args.port, args.grpc_port)
-    print(f"opening {path}")
+    _say(f"opening {path}")
     if web:
-        print(f"web viewer: {web_url(args.port, args.grpc_port)}\n(from another machine: "
-              f"ssh -L {args.port}:localhost:{args.port} -L {args.grpc_port}:localhost:"
-              f"{args.grpc_port} HOST, then open that URL); Ctrl-C stops it", flush=True)
+        _say(f"web viewer: {web_url(args.port, args.grpc_port)}\n(from another machine: "
+             f"ssh -L {args.port}:localhost:{args.port} -L {args.grpc_port}:localhost:"
+             f"{args.grpc_port} HOST, then open that URL); Ctrl-C stops it")
     if args.dry_run:
-        print(shlex.join(cmd))  # a path with a space or a quote stays one argument
+        _say(shlex.join(cmd))  # a path with a space or a quote stays one argument
         return 0
     return run_viewer(cmd)
 
