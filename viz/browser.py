@@ -205,7 +205,7 @@ def _bad_options(out: str, timeout_s: float) -> str | None:
 
 
 def main(argv=None) -> int:
-    from viz.view import TARGET_HELP, parse_with_recording, web_url
+    from viz.view import TARGET_HELP, parse_with_recording, say, web_url
 
     ap = argparse.ArgumentParser(prog="python -m viz.browser",
                                  description=__doc__.split("\n\n")[0])
@@ -241,7 +241,7 @@ def main(argv=None) -> int:
         print(f"error: {url} shows no recording after {args.timeout:g} s ({share:.1%} of the "
               f"views area coloured); screenshot in {args.out}", file=sys.stderr)
         return 1
-    print(f"{url} shows {path} ({share:.1%} of the views area coloured); screenshot in {args.out}")
+    say(f"{url} shows {path} ({share:.1%} of the views area coloured); screenshot in {args.out}")
     return 0
 
 

@@ -32,6 +32,7 @@ import numpy as np  # noqa: E402
 
 from pipeline.errors import InputError  # noqa: E402
 from pipeline.types import Features, RunRecord, View  # noqa: E402
+from viz.view import say  # noqa: E402
 
 __all__ = ["read_run_folder", "log_run_folder", "main"]
 
@@ -275,7 +276,7 @@ def _main(argv: list[str] | None) -> int:
     except (InputError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {path}")
+    say(f"wrote {path}")
     return 0
 
 

@@ -213,7 +213,7 @@ def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Na
         return args, None
 
 
-def _say(text: str) -> None:
+def say(text: str) -> None:
     """Print ``text`` to stdout at once. A reader that stopped reading (``| head -1``) ends
     the printing, not the command: the rest of stdout, the viewer's included, goes to
     /dev/null."""
@@ -254,13 +254,13 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     cmd = viewer_command(path, web, args.port, args.grpc_port)
-    _say(f"opening {path}")
+    say(f"opening {path}")
     if web:
-        _say(f"web viewer: {web_url(args.port, args.grpc_port)}\n(from another machine: "
+        say(f"web viewer: {web_url(args.port, args.grpc_port)}\n(from another machine: "
              f"ssh -L {args.port}:localhost:{args.port} -L {args.grpc_port}:localhost:"
              f"{args.grpc_port} HOST, then open that URL); Ctrl-C stops it")
     if args.dry_run:
-        _say(shlex.join(cmd))  # a path with a space or a quote stays one argument
+        say(shlex.join(cmd))  # a path with a space or a quote stays one argument
         return 0
     return run_viewer(cmd)
 

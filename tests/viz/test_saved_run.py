@@ -175,7 +175,7 @@ def test_a_ctrl_c_after_the_recording_is_written_names_it(tmp_path, capsys, monk
     def interrupted(*_args, **_kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(viz.saved_run, "print", interrupted, raising=False)
+    monkeypatch.setattr(viz.saved_run, "say", interrupted)
     assert main([str(folder)]) == 130
     err = capsys.readouterr().err
     assert err == (f"interrupted: viz.saved_run stopped; already in place, complete: "
