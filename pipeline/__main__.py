@@ -146,7 +146,20 @@ def interruptible(command: str, run: Callable[[], int]) -> int:
     traceback. Also used by the other programs of the project (``python -m viz.saved_run``)."""
     if "pipeline.runfolder" in sys.modules:  # a new command: nothing of it in place yet
         sys.modules["pipeline.runfolder"].forget_outputs_in_place()
+    paths_printable()
     return run_interruptibly(command, run)
+
+
+def paths_printable() -> None:
+    """Let stdout print every path as the file system names it. In a UTF-8 locale such as
+    en_US.UTF-8 Python's stdout refuses the bytes of a name that is not UTF-8 (Latin-1),
+    which Python reads as surrogates: the line naming such an output ended the command in a
+    UnicodeEncodeError traceback once the output was written. Those bytes are now written
+    back as they are (Python's ``surrogateescape``, its own choice in the C locale)."""
+    stream = sys.stdout
+    if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+        with contextlib.suppress(ValueError, OSError):  # a closed or detached stream
+            stream.reconfigure(errors="surrogateescape")
 
 
 def _run(argv: list[str], command: str | None) -> int:

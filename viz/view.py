@@ -239,6 +239,9 @@ def main(argv=None) -> int:
     ap.add_argument("--grpc-port", type=int, default=GRPC_PORT,
                     help="port of the gRPC proxy that serves the recording (default 9876)")
     ap.add_argument("--dry-run", action="store_true", help="print the command, do not run it")
+    from pipeline.__main__ import paths_printable
+
+    paths_printable()
     args, path = parse_with_recording(ap, argv)
     if path is None:
         return 2
