@@ -177,12 +177,6 @@ def _refuse_empty_paths(args) -> None:
                         ("--intrinsics", args.intrinsics)):
         validate.not_empty(value, flag, "give a folder name" if flag != "--intrinsics"
                            else "give auto, exif or the path of a K.txt")
-    from pipeline.inputs.photos import is_utf8_name
-
-    if args.out is not None and not is_utf8_name(str(Path(args.out).absolute())):
-        raise InputError(f"--out {str(Path(args.out).absolute())!r} is not UTF-8 text (a "
-                         "Latin-1 name?): the recording cannot be written there; give a "
-                         "UTF-8 folder name")
 
 
 def _inputs(config: ImagesConfig) -> list[tuple[str, str]]:
