@@ -278,12 +278,16 @@ class _Stopped(Exception):
 
 def run_viewer(cmd: list[str]) -> int:
     """Run the viewer ``cmd`` until it ends, and return its exit status. A Ctrl-C ends both
-    (the viewer gets it too: status 0); a SIGTERM or SIGHUP to this process (``kill PID``, a
-    closed terminal) stops the viewer before this process ends with ``128 + signal``: left
-    running, its server would hold the ports of the next ``python -m viz.view --web``."""
+    (status 0); a SIGTERM or SIGHUP to this process (``kill PID``, a closed terminal) stops the
+    viewer before this process ends with ``128 + signal``: left running, its server would
+    hold the ports of the next ``python -m viz.view --web``.
+
+    The viewer runs in its own process group and is stopped as a group: the ``rerun`` command
+    of the Python package is a wrapper that starts the viewer binary as its child, which a
+    signal to the wrapper alone left running."""
     import signal
 
-    proc = subprocess.Popen(cmd)
+    proc = subprocess.Popen(cmd, process_group=0)
 
     def stop(signum, _frame):
         raise _Stopped(signum)
@@ -300,13 +304,20 @@ def run_viewer(cmd: list[str]) -> int:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-        if proc.poll() is None:
-            proc.terminate()
+        if proc.poll() is None:  # not reaped: its pid still names its group
+            _signal_group(proc.pid, signal.SIGTERM)
             try:
                 proc.wait(timeout=5)
             except subprocess.TimeoutExpired:
-                proc.kill()
+                _signal_group(proc.pid, signal.SIGKILL)
                 proc.wait()
+
+
+def _signal_group(pgid: int, sig: int) -> None:
+    try:
+        os.killpg(pgid, sig)
+    except ProcessLookupError:  # every process of it has ended
+        pass
 
 
 if __name__ == "__main__":
