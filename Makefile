@@ -68,8 +68,10 @@ bench-voting: $(BENCH_STAMP)
 
 # make view [RUN=runs/DIR or FILE.rrd]: native viewer with a display, else the web viewer (its URL,
 # with the recording's address, printed; python -m viz.browser checks it in headless Chromium)
+# RUN is passed as one argument, as typed: single-quoted for the shell, its own quotes escaped,
+# its text taken unexpanded (a '$' in a folder name is no make variable)
 view: $(STAMP)
-	$(PY) -m viz.view $(if $(RUN),"$(RUN)")
+	$(PY) -m viz.view $(if $(value RUN),'$(subst ','\'',$(value RUN))')
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
