@@ -304,6 +304,11 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
     for flag, p in inputs:
         if p is not None and not os.fspath(p):
             raise InputError(f"{flag} '' is empty: give the file to read")
+    for flag, p in outputs:  # Path('new/') reads as the file 'new'
+        if p is not None and os.fspath(p).endswith(os.sep):
+            raise InputError(f"{flag} {os.fspath(p)!r} ends with {os.sep!r}, so it names a "
+                             "folder; give the name of a file to write, e.g. "
+                             f"{os.path.join(os.fspath(p), 'out')!r}")
     outs = [(f, Path(p)) for f, p in outputs if p is not None]
     ins = [(f, Path(p)) for f, p in inputs if p is not None]
     for flag, p in outs:
