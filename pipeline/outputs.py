@@ -305,6 +305,9 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
         if p is not None and not os.fspath(p):
             raise InputError(f"{flag} '' is empty: give the file to read")
     for flag, p in outputs:  # Path('new/') reads as the file 'new'
+        if p is not None and os.fspath(p) == "-":
+            raise InputError(f"{flag} '-': outputs are written to files, never to stdout; give "
+                             "a file name ('./-' for a file named '-')")
         if p is not None and os.fspath(p).endswith(os.sep):
             raise InputError(f"{flag} {os.fspath(p)!r} ends with {os.sep!r}, so it names a "
                              "folder; give the name of a file to write, e.g. "

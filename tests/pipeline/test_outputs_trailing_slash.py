@@ -1,6 +1,6 @@
 """An output file given with a trailing '/' (``resolve --out results/``): Path('results/')
 reads as the file 'results', so the links were written to a file of that name, where a
-folder was meant."""
+folder was meant; ``--out -`` wrote a file named '-', where stdout was meant."""
 
 import pytest
 
@@ -21,3 +21,14 @@ def test_resolve_writes_nothing_for_such_an_out(tmp_path, capsys):
     assert main(["resolve", "--links", str(links), "--out", f"{tmp_path}/results/"]) == 2
     assert "ends with '/'" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["links.csv"]
+
+
+def test_a_dash_is_no_stdout(tmp_path, monkeypatch, capsys):
+    links = tmp_path / "links.csv"
+    links.write_text("0,0,1,0\n1,0,2,0\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["resolve", "--links", str(links), "--out", "-"]) == 2
+    assert "--out '-': outputs are written to files, never to stdout" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["links.csv"]
+    assert main(["resolve", "--links", str(links), "--out", "./-"]) == 0
+    assert (tmp_path / "-").is_file()
