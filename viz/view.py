@@ -169,7 +169,8 @@ def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
     ``port``, the recording served by the gRPC proxy on ``grpc_port``)."""
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
         or "rerun"
-    cmd = [exe, str(path)]
+    arg = str(path)
+    cmd = [exe, os.path.join(".", arg) if arg.startswith("-") else arg]  # not an option of rerun's
     if web:
         cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port)]
     return cmd
