@@ -219,6 +219,25 @@ def _same(a, b) -> bool:
         return False
 
 
+def current_folder(path, flag: str) -> Path | None:
+    """The current folder (its real path), or None where it was removed (the command was
+    started in a folder deleted since) and ``path`` is absolute.
+
+    Raises
+    ------
+    InputError
+        ``path`` is relative to a current folder that was removed (naming ``flag``).
+    """
+    try:
+        return _real(Path.cwd())
+    except FileNotFoundError:
+        if not os.path.isabs(path):
+            raise InputError(f"{flag} {os.fspath(path)!r} is relative to the current folder, "
+                             "which was removed; cd to a folder that exists, or give an "
+                             f"absolute {flag}") from None
+        return None
+
+
 def require_input_file(path, what: str) -> Path:
     """``Path(path)`` if it names a readable regular file; else an InputError.
 
@@ -315,6 +334,8 @@ def check_output_files(outputs: Named, inputs: Named = (), overwrite: bool = Fal
     outs = [(f, Path(p)) for f, p in outputs if p is not None]
     ins = [(f, Path(p)) for f, p in inputs if p is not None]
     for flag, p in outs:
+        current_folder(p, flag)
+    for flag, p in outs:
         if not str(p) or p.name in ("", ".", ".."):
             raise InputError(f"{flag} {str(p)!r}: give the name of a file to write")
         refuse_unsafe_target(p, flag)
@@ -404,6 +425,7 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     if not str(out) or p.is_symlink():
         what = "is a symbolic link" if str(out) else "is empty"
         raise InputError(f"{flag} {str(out)!r} {what}; give the name of a run folder")
+    cwd = current_folder(p, flag)
     gone = _missing_before_dotdot(p)
     if gone is not None:
         raise InputError(f"{flag} {str(out)!r}: {str(gone)!r} is no folder, so the '..' "
@@ -414,8 +436,7 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     if too_long is not None:
         raise InputError(f"{flag} {str(out)!r}: {too_long}; choose a shorter name")
     real = _real(p)
-    cwd = _real(Path.cwd())
-    if real == Path(real.anchor) or real == cwd or real in cwd.parents:
+    if real == Path(real.anchor) or (cwd is not None and (real == cwd or real in cwd.parents)):
         raise InputError(f"{flag} {str(out)!r} is {'/' if real == Path(real.anchor) else 'the current folder or one of its parents'}; "
                          "a run folder is replaced as a whole: give a new folder name, e.g. "
                          "runs/NAME")

@@ -434,7 +434,10 @@ if hasattr(os, "register_at_fork"):
 
 
 def _key(out: Path) -> str:
-    return os.path.join(os.path.realpath(out.parent), out.name)
+    try:
+        return os.path.join(os.path.realpath(out.parent), out.name)
+    except FileNotFoundError:  # relative to a removed current folder: check_run_folder says so
+        return os.fspath(out)
 
 
 def _siblings(out: Path, kind: str) -> list[Path]:

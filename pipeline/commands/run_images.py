@@ -220,10 +220,12 @@ def sequence_config_from_args(args):
 
 
 def _run_sequence(args) -> int:
+    from pipeline.outputs import current_folder
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.online_images import run_images_sequence
 
     config = sequence_config_from_args(args)
+    current_folder(config.out_dir(), "--out")
     out, folder = config.out_dir().resolve(), Path(config.directory).resolve()
     if folder in out.parents:
         raise InputError(f"--out {str(config.out_dir())!r} is inside DIR {config.directory!r}: "
