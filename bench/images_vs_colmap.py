@@ -316,13 +316,14 @@ def run_ours(images: Path, work: Path, graph: str, truth=None, fusion: bool = Tr
     return {"images": report["n_cameras"],
             "features_mean": round(sum(report["features_per_camera"]) / report["n_cameras"]),
             "registered": after["registered_images"], "points": after["points"],
-            "track_length": after["mean_track_length"],
-            "reproj_px": after["mean_reprojection_error"], "time_s": round(dt, 1),
+            # a model of no point: 0.0, as _model_row counts COLMAP's own runs
+            "track_length": after["mean_track_length"] or 0.0,
+            "reproj_px": after["mean_reprojection_error"] or 0.0, "time_s": round(dt, 1),
             "cpu_s": round(dc, 1),
             "time_split_s": {k: round(v, 1) for k, v in report["timings_s"].items()},
             "before_cleaning": {"registered": before["registered_images"],
                                 "points": before["points"],
-                                "track_length": before["mean_track_length"]},
+                                "track_length": before["mean_track_length"] or 0.0},
             "links": report["before"]["links"], "links_kept": report["after"]["links"],
             "comm_edges": len(report["comm_edges"]), "flags": report.get("flags", []),
             **_judge(colmap.read_model(out / "sparse"), truth)}

@@ -53,8 +53,8 @@ class MappingSummary:
     registered_names : list[str]
     points : int — 3D points of the largest model
     observations : int — 2D observations of those points
-    mean_track_length : float — observations per point
-    mean_reprojection_error : float — pixels
+    mean_track_length : float — observations per point (0.0 without a point)
+    mean_reprojection_error : float — pixels (0.0 without a point)
     reconstruction : pycolmap.Reconstruction or None
     min_pose_inliers : int — the mapper's ``abs_pose_min_num_inliers`` for this model
     registered_at_colmap_default : int or None — images COLMAP's default threshold registered,
@@ -77,13 +77,17 @@ class MappingSummary:
     other_models: list = field(default_factory=list)
 
     def summary(self) -> dict:
-        """The figures as a JSON-ready dict (without the reconstruction)."""
+        """The figures as a JSON-ready dict (without the reconstruction); the means are
+        ``None`` without a point (a model of no point has no error to average, not a 0 px one)."""
+        def mean(value) -> float | None:
+            return round(float(value), 4) if self.points else None
+
         out = {"images": self.images, "models": self.models,
                "registered_images": self.registered_images,
                "registered_names": list(self.registered_names), "points": self.points,
                "observations": self.observations,
-               "mean_track_length": round(float(self.mean_track_length), 4),
-               "mean_reprojection_error": round(float(self.mean_reprojection_error), 4),
+               "mean_track_length": mean(self.mean_track_length),
+               "mean_reprojection_error": mean(self.mean_reprojection_error),
                "min_pose_inliers": int(self.min_pose_inliers)}
         if self.registered_at_colmap_default is not None:
             out["registered_at_colmap_default"] = int(self.registered_at_colmap_default)

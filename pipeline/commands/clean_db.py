@@ -152,7 +152,9 @@ def fusion_lines(fu: dict, cut: int, images: int) -> list[str]:
     out = [f"fusion: {cut} links cut as outliers of their tracks, on the poses of a COLMAP "
            f"mapping of the input ({fu['cameras']} of {images} images registered"
            + (f" in the largest of its {models} models" if models > 1 else "")
-           + f", {mp['points']} points, {mp['mean_reprojection_error']:.2f} px)"]
+           + f", {mp['points']} points"
+           + (f", {mp['mean_reprojection_error']:.2f} px)" if mp.get("mean_reprojection_error")
+              is not None else ")")]
     if models > 1:
         out.append(f"  the images of the other models are not fused "
                    f"({len(fu['cameras_without_pose'])} without a pose here; see the report's "

@@ -167,8 +167,9 @@ def reconstruction_flags(n_images: int, before: dict, after: dict, comm_edges,
                                          "out)")})
     worse = []
     p_b, p_a = int(before["points"]), int(after["points"])
-    e_b, e_a = float(before["mean_reprojection_error"]), float(after["mean_reprojection_error"])
-    t_b, t_a = float(before["mean_track_length"]), float(after["mean_track_length"])
+    # a model without a point has no mean (None): it compares as 0, as its points do
+    e_b, e_a = (float(s["mean_reprojection_error"] or 0.0) for s in (before, after))
+    t_b, t_a = (float(s["mean_track_length"] or 0.0) for s in (before, after))
     # fewer points with a smaller error and tracks as long: the points that went were the
     # inconsistent ones, which is what cleaning is for (a few points of a small model)
     sharper = 0 < e_a < e_b and t_a >= (1 - TOLERANCE) * t_b

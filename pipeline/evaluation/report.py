@@ -15,6 +15,7 @@ import numpy as np
 
 from pipeline.association import AssociationGraph, count_conflicts
 from pipeline.consistency.rules import deleted_cases
+from pipeline.evaluation.metrics import NOT_DEFINED
 from pipeline.types import LinkLedger, Links
 
 __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
@@ -298,7 +299,9 @@ def mapping_markdown(before, after) -> str:
             ("Mean reprojection error [px]", "mean_reprojection_error")]
     b, a = before.summary(), after.summary()
     lines = ["", "| Reconstruction | before | after |", "|---|---:|---:|"]
-    lines += [f"| {label} | {b[key]} | {a[key]} |" for label, key in rows]
+    # a mean over no point is no figure (None in the summary), not a perfect 0
+    lines += [f"| {label} | {NOT_DEFINED if b[key] is None else b[key]} | "
+              f"{NOT_DEFINED if a[key] is None else a[key]} |" for label, key in rows]
     return "\n".join(lines) + "\n"
 
 

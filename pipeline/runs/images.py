@@ -668,6 +668,7 @@ def _mapping_note(mapping) -> str:
     relaxed = "" if mapping.registered_at_colmap_default is None else (
         f" (at {mapping.min_pose_inliers} points seen; COLMAP's 30 registered "
         f"{mapping.registered_at_colmap_default})")
+    means = (f", track length {mapping.mean_track_length:.2f}, reprojection error "
+             f"{mapping.mean_reprojection_error:.3f} px") if mapping.points else ""
     return (f"{mapping.registered_images} of {mapping.images} images registered{relaxed}, "
-            f"{mapping.points} points, track length {mapping.mean_track_length:.2f}, "
-            f"reprojection error {mapping.mean_reprojection_error:.3f} px")
+            f"{mapping.points} points{means}")
