@@ -165,9 +165,12 @@ def knn_edges(features: list[Features], k: int, words: int = DEFAULT_WORDS,
 
     Notes
     -----
-    Ties (e.g. images without features, similarity 0) go to the image first in
-    :func:`content_order`, so the graph is repeatable and the same for any order of the images. Each image picks ``min(k, n - 1)`` neighbours: ``n * min(k, n-1) / 2``
-    to ``n * min(k, n-1)`` edges.
+    Ties go to the image first in :func:`content_order`, so the graph is repeatable and the
+    same for any order of the images. An image without features (a blank one) is picked last,
+    after every image with features: its similarity, 0, would otherwise outrank the cosines
+    of images that overlap, which are often negative (the vocabulary is drawn from these
+    very images), and every image would pick it and match nothing. Each image picks
+    ``min(k, n - 1)`` neighbours: ``n * min(k, n-1) / 2`` to ``n * min(k, n-1)`` edges.
     """
     n = len(features)
     if n < 2:
@@ -179,6 +182,8 @@ def knn_edges(features: list[Features], k: int, words: int = DEFAULT_WORDS,
     # rounded: a product of the same two vectors may differ in its last bit with their rows'
     # places in the matrix, which must not decide a near tie
     key = -np.round(S, 9)
+    # below any cosine (>= -1): an image without features is nobody's choice while another is
+    key[:, [len(f) == 0 for f in features]] = 2.0
     np.fill_diagonal(key, np.inf)
     # sort on (-similarity, content rank): equal similarities go to the image first in
     # content order, whatever the camera indices
