@@ -80,7 +80,8 @@ class TrackTriangulation:
             "triangulated_tracks": int(ok.sum()),
             "observations": n_obs,
             "inlier_observations": n_inl,
-            "inlier_ratio": float(n_inl / n_obs) if n_obs else 0.0,
+            # no observation: no ratio (a 0.0 would read as every observation rejected)
+            "inlier_ratio": float(n_inl / n_obs) if n_obs else None,
             "mean_reprojection_error_px": float(all_err.mean()) if all_err.size else None,
             "median_reprojection_error_px": float(np.median(all_err)) if all_err.size else None,
             "median_3d_error": float(np.median(gt)) if gt.size else None,
