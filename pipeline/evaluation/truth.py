@@ -67,10 +67,15 @@ def read_homographies(directory: str | Path, n: int) -> np.ndarray:
         if not np.isfinite(h).all():
             raise InputError(f"{path}: the homography holds a non-finite value (nan or inf); "
                              "expected an invertible 3 x 3 matrix of numbers")
-        if abs(np.linalg.det(h)) < 1e-12:
+        # a homography is defined up to scale (a DLT solution has unit norm, H1to{k}p.txt files
+        # end in 1): tested and kept at the scale of its largest entry, where a determinant
+        # tells a singular matrix from a small one
+        top = float(np.abs(h).max())
+        hn = h / top if top > 0 else h
+        if abs(np.linalg.det(hn)) < 1e-12:
             raise InputError(f"{path}: the homography is singular (determinant "
                              f"{np.linalg.det(h):.3g}); expected an invertible 3 x 3 matrix")
-        H[k - 1] = h
+        H[k - 1] = hn
     return H
 
 
