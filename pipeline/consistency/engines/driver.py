@@ -507,6 +507,12 @@ def _equip_evidence(robots, link_index, links: Links, link_weight, keypoints,
                                  f"({np.asarray(given, dtype=np.float64)[k]}); give finite "
                                  "numbers" + (" (None where the pose is unknown)"
                                               if what.startswith("projection") else ""))
+        # the geometric test triangulates through finite cameras: with a singular K R (a zero
+        # matrix, a camera at infinity) no point fits and every set through it was cut
+        if P is not None and np.linalg.matrix_rank(np.asarray(P, dtype=np.float64)[:, :3]) < 3:
+            raise InputError(f"projection of camera {rb.id}: its left 3 x 3 block (K R) is "
+                             "singular; give the camera's K [R | t] with an invertible K, or "
+                             "None where the pose is unknown")
         equip_robot(rb, w[li], kp, P)
 
 
