@@ -654,6 +654,11 @@ def _check_links_cameras(data: dict, n: int, where: str) -> None:
             if not _is_matrix(c["P"], 3, 4):
                 raise InputError(f"{where}: data.cameras[{i}].P must be a 3x4 matrix of finite "
                                  "numbers (K [R | t])")
+            # no finite camera: its robot's geometric test would refuse every point through it
+            if np.linalg.matrix_rank(np.asarray(c["P"], dtype=np.float64)[:, :3]) < 3:
+                raise InputError(f"{where}: data.cameras[{i}].P: its left 3x3 block (K R) is "
+                                 "singular; give the camera's K [R | t], or null where its pose "
+                                 "is unknown")
             continue
         if not isinstance(c, dict) or set(c) != {"K", "R", "t"}:
             keys = sorted(set(c) - {"K", "R", "t"}) if isinstance(c, dict) else []
@@ -664,6 +669,10 @@ def _check_links_cameras(data: dict, n: int, where: str) -> None:
             if not _is_matrix(c[key], *shape):
                 raise InputError(f"{where}: data.cameras[{i}].{key} must be a 3x3 matrix of "
                                  "finite numbers")
+            if np.linalg.matrix_rank(np.asarray(c[key], dtype=np.float64)) < 3:
+                raise InputError(f"{where}: data.cameras[{i}].{key} is singular; give the "
+                                 "camera's " + ("intrinsics (an invertible K)" if key == "K"
+                                                else "rotation (cam_from_world)"))
         if not (isinstance(c["t"], list) and len(c["t"]) == 3 and all(map(_is_number, c["t"]))):
             raise InputError(f"{where}: data.cameras[{i}].t {c['t']!r} must be 3 finite numbers")
 

@@ -79,7 +79,8 @@ def test_a_valid_team_parses():
                "cameras": [_CAM, {"P": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}, None]}},
      "data.cameras[1].P must be a 3x4 matrix of finite numbers"),
     ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
-               "cameras": [_CAM, {"P": [[1, 0, 0, 0]] * 3}, None]}, "options": {"fusion": True}},
+               "cameras": [_CAM, {"P": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]}, None]},
+      "options": {"fusion": True}},
      "options sets fusion on a links team without data.keypoints and every robot's pose"),
     ({"data": {**_LINKS, "keypoints": ["k0", "k1", "k2"],
                "cameras": [_CAM, _CAM, {**_CAM, "R": [[1, 0], [0, 1]]}]}},
@@ -340,7 +341,7 @@ def test_a_robot_reads_back_its_own_keypoints_and_camera_exactly(tmp_path):
 def test_a_robot_knows_its_projection_from_its_pose_or_its_p_entry(tmp_path):
     """links_projection: K [R | t] of a pose, the P of a projection-only entry (no pose for
     fusion then), None where unknown; each robot its own entry."""
-    P = np.arange(12, dtype=float).reshape(3, 4)
+    P = np.arange(12, dtype=float).reshape(3, 4) + np.eye(3, 4)  # a finite camera
     doc = json.loads(_robot_team(tmp_path).path.read_text())
     doc["robots"].append({"id": 2, "endpoint": "tcp/127.0.0.1:7002"})
     doc["comm_edges"] = [[0, 1], [1, 2]]
