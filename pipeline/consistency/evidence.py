@@ -80,7 +80,7 @@ from pipeline.transport import Message, Transport
 __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common_features",
            "node_cameras", "distinct_cameras", "one_point", "far_point", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
-           "CASE_EVIDENCE", "SAME_CENTRE", "start_evidence_reliable", "evidence_round",
+           "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round",
            "evidence_done",
            "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "set_geometry",
            "solve_set", "cut_own_side", "send_bundle_items", "read_bundle_items", "finish_evidence", "evidence_pass", "reexamine_sets"]
@@ -260,42 +260,38 @@ def distinct_cameras(e: np.ndarray, cam: np.ndarray, E: int) -> np.ndarray:
     return np.bincount(pairs // C, minlength=E).astype(np.int64)
 
 
-SAME_CENTRE = 1e-9
-"""Camera centres closer than this (relative to their distance from the origin, plus one)
-are one centre for :func:`far_point`."""
-
-
 def far_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
-    """Whether rays from one camera centre meet at a distant point: ``kp (T, k, 2)``,
-    ``P (T, k, 3, 4)`` -> ``(T,)`` bool: the ``k`` cameras share one centre (within
-    :data:`SAME_CENTRE` of its scale) and the point at infinity in the mean direction of the
-    ``k`` rays (each in front of its camera) lies in front of every camera and within ``tol``
-    px of each observation.
+    """Whether rays meet at a distant point: ``kp (T, k, 2)``, ``P (T, k, 3, 4)`` -> ``(T,)``
+    bool: the point at infinity in the mean direction of the ``k`` rays (each in front of its
+    camera) lies in front of every camera and within ``tol`` px of each observation.
 
-    Cameras with one centre (a robot standing still, ``run-formation --steps --speed 0``) put
-    that centre in the DLT system's null space: its least-squares point is the centre itself,
-    and the test then decided by the sign of rounding noise. Rays from one centre carry no
-    depth, so the observations are one point exactly when their rays agree; cameras with
-    distinct centres keep the DLT test alone."""
+    The DLT's least-squares point is a poor judge where the cameras' centres are (nearly)
+    one: one centre (a robot standing still, ``run-formation --steps --speed 0``) lies in the
+    DLT system's null space, so its point is the centre itself and the test decided by the
+    sign of rounding noise; centres a millimetre apart (a robot creeping, ``--speed 1e-3``)
+    leave the depth to the keypoints' noise, and the DLT point landed anywhere on the rays,
+    behind a camera or where it reprojects far off, refusing observations of one point (the
+    evidence rule then cut a third of the good links of such a run). Rays with (nearly) no
+    baseline carry no depth: the observations are one point exactly when their rays agree,
+    which the point at infinity tests. It is the same test for any cameras: a point at
+    infinity that reprojects within ``tol`` px of every observation explains them as well as
+    a finite one does (with a wide baseline the DLT finds such a point itself, far away), so
+    it is tried wherever the DLT point is refused."""
     M = P[..., :3]
     h = np.concatenate([kp, np.ones(kp.shape[:-1] + (1,))], axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         Minv = np.linalg.pinv(M)
-        centre = -np.einsum("tkij,tkj->tki", Minv, P[..., 3])           # (T, k, 3)
-        spread = np.linalg.norm(centre - centre[:, :1], axis=-1).max(axis=1)
-        scale = 1.0 + np.linalg.norm(centre[:, 0], axis=-1)
         ray = np.einsum("tkij,tkj->tki", Minv, h)  # M @ ray = h: depth 1, in front
         ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
         p = np.einsum("tkij,tj->tki", M, ray.mean(axis=1))
         err = np.hypot(p[..., 0] / p[..., 2] - kp[..., 0], p[..., 1] / p[..., 2] - kp[..., 1])
-    return (spread <= SAME_CENTRE * scale) & (p[..., 2] > 0).all(axis=1) \
-        & (err <= tol).all(axis=1)
+    return (p[..., 2] > 0).all(axis=1) & (err <= tol).all(axis=1)
 
 
 def one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
     """:func:`_consistent` on a stack of observation triples: ``kp (T, 3, 2)``,
     ``P (T, 3, 3, 4)`` -> ``(T,)`` bool, the DLT point in front of the three cameras and
-    within ``tol`` px of each observation, or else (cameras of one centre) the
+    within ``tol`` px of each observation, or else the
     :func:`far_point`."""
     A = np.empty((len(kp), 6, 4))
     A[:, 0::2] = kp[:, :, :1] * P[:, :, 2] - P[:, :, 0]
@@ -314,7 +310,7 @@ def one_point(kp: np.ndarray, P: np.ndarray, tol: float) -> np.ndarray:
 
 def _consistent(members: list[int], kp: dict, P: dict, tol: float) -> bool:
     """DLT point of the observations ``members`` in front of all and within ``tol`` px, or
-    else (cameras of one centre) the :func:`far_point` of their rays."""
+    else the :func:`far_point` of their rays."""
     A = np.empty((2 * len(members), 4))
     for k, g in enumerate(members):
         x, y = kp[g]

@@ -656,13 +656,14 @@ def test_two_frames_of_one_pose_still_refute_a_wrong_match():
     assert evidence_cut([0], [1], [0], [1], [1.0], kp, {0: _STILL, 1: _STILL}).tolist() == [True]
 
 
-def test_far_point_is_for_cameras_of_one_centre():
-    """Cameras with distinct centres keep the DLT test alone: the same two observations that
-    one pose's frames accept through the far point are judged by the DLT point once the
-    second frame moved 1 m (parallel rays: its point is at infinity, refused as before)."""
+def test_far_point_fits_rays_that_agree_from_any_cameras():
+    """The point at infinity is a point: rays that agree (here parallel, the second camera
+    moved 1 m) meet there whatever the baseline; rays 20 px apart do not."""
     from pipeline.consistency.evidence import far_point
 
     kp = np.array([[[300.0, 200.0], [300.0, 200.0]]])
     moved = _K @ np.c_[_R, [-2.0, 0.0, 2.0]]
     assert far_point(kp, np.array([[_STILL, _STILL]]), TOL_PX).tolist() == [True]
-    assert far_point(kp, np.array([[_STILL, moved]]), TOL_PX).tolist() == [False]
+    assert far_point(kp, np.array([[_STILL, moved]]), TOL_PX).tolist() == [True]
+    off = np.array([[[300.0, 200.0], [320.0, 200.0]]])
+    assert far_point(off, np.array([[_STILL, moved]]), TOL_PX).tolist() == [False]
