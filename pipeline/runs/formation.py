@@ -99,7 +99,10 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
     # the rule the consistency stage ran: on a faulty network a rule that is not
     # fault-tolerant gives way to Alg. 1 (pipeline.consistency.rules.rule_for_network)
     ran = cleaning.resolution_stats.get("resolution") or config.resolution
-    evaluated = _evaluate(config, formation, feats, matches, ledger, timer, ran)
+    # a faulty network, or a robot lost without one (a robot process killed)
+    faulty = (config.faults is not None and config.faults.any) \
+        or bool((ledger.reason == "robot-lost").any())
+    evaluated = _evaluate(config, formation, feats, matches, ledger, timer, ran, faulty)
     triangulation, tri_after, gt_points, fused_errors = _triangulate(
         views, feats, ledger, cleaning, evaluated.pop("resolved_links"), timer)
     report = {
@@ -143,12 +146,13 @@ def write_formation_run(config: FormationConfig, formation, feats: list, matches
 
 
 def _evaluate(config: FormationConfig, formation, feats: list, matches: list, ledger,
-              timer: StageTimer, method: str | None = None) -> dict:
+              timer: StageTimer, method: str | None = None, faulty: bool = False) -> dict:
     """The ground-truth sections of the report (``before``, ``after``, ``pairwise``,
     ``baselines``, ``resolution_quality``); sets ``ledger.truth``. Also returns
     ``resolved_links``, what the consistency stage kept (fusion ran on exactly these).
     ``method``: the resolution rule the consistency stage ran (default
-    ``config.resolution``), whose row of ``resolution_quality`` is what the run cut."""
+    ``config.resolution``), whose row of ``resolution_quality`` is what the run cut
+    (``faulty``: on a faulty network, which the other rules' rows do not share)."""
     from pipeline.consistency import centralized
     from pipeline.evaluation import report as sections
     from pipeline.evaluation.links import MissingLinks, link_truth
@@ -199,7 +203,7 @@ def _evaluate(config: FormationConfig, formation, feats: list, matches: list, le
             m, links, truth, pairwise_of,
             _resolution_masks(views, feats, matches, comm_edges, links, truth,
                               method or config.resolution, resolved, baseline_masks,
-                              graph_of(links)),
+                              graph_of(links), faulty=faulty),
             graph=graph_of(links))
     return {"before": before, "after": after, "pairwise": pairwise, "baselines": baselines,
             "resolution_quality": quality, "resolved_links": resolved_links}
@@ -273,14 +277,16 @@ def _links_key(links: Links) -> bytes:
 
 def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np.ndarray,
                       method: str, resolved: np.ndarray, baseline_masks: dict | None = None,
-                      graph: AssociationGraph | None = None) -> dict:
+                      graph: AssociationGraph | None = None, faulty: bool = False) -> dict:
     """Kept masks ``(L,)`` of every resolution on the same input, for the report only.
 
     The run's own method (``resolved``: what its consistency stage kept), every other
     resolution rule (:mod:`pipeline.consistency.rules`, run here on the fault-free network), every centralized baseline
     (``baseline_masks``: ``centralized.baselines(m, links)`` when the caller has it) and
     the oracle (:func:`pipeline.evaluation.oracle.oracle_cut`, which knows the truth); ``graph``: the
-    :class:`AssociationGraph` of ``links``, when the caller has it.
+    :class:`AssociationGraph` of ``links``, when the caller has it. ``faulty``: the run's
+    stage ran on a faulty network (its links cut ``robot-lost`` are in ``resolved``), so a
+    rule that cuts as ``method`` by construction is run fault-free instead of sharing its row.
     """
     from pipeline.consistency import centralized
     from pipeline.consistency.rules import get_rule, rule_names
@@ -290,7 +296,7 @@ def _resolution_masks(views, feats, matches, comm_edges, links: Links, truth: np
     masks = {method: np.asarray(resolved, dtype=bool)}
     for other in rule_names():
         same = get_rule(other).cuts_as
-        if other not in masks and same in masks:
+        if other not in masks and same in masks and not (faulty and same == method):
             masks[other] = masks[same]  # the same cuts by construction (rules.py, cuts_as)
         elif other not in masks:
             evidence = evidence_inputs(views, feats, links, matches) \

@@ -85,3 +85,16 @@ def test_the_report_records_the_merge_radius_the_keypoints_were_merged_at(tmp_pa
     report, _ = _run(tmp_path, "radius")
     assert report["config"]["merge_radius"] is None
     assert report["config"]["merge_radius_used_px"] == get_rule("evidence").merge_radius_px == 2.0
+
+
+def test_a_rule_cutting_as_alg1_keeps_its_fault_free_row_when_alg1_ran_under_a_crash(
+        tmp_path, monkeypatch):
+    """paper-labels cuts as Alg. 1 on a fault-free network; under a crash the run's Alg. 1 row
+    holds the links cut robot-lost, which paper-labels, run fault-free, never cuts."""
+    monkeypatch.setenv("FORMATION_MATCH_CACHE", str(tmp_path / "cache"))
+    clean, _ = _run(tmp_path, "clean")
+    crashed, rows = _run(tmp_path, "crashed", FaultConfig(crash=((0, 0),)))
+    assert any(r["reason"] == "robot-lost" for r in rows)
+    q = crashed["resolution_quality"]
+    assert q["paper"] != clean["resolution_quality"]["paper"]  # the crash shows in the run's row
+    assert q["paper-labels"] == clean["resolution_quality"]["paper-labels"]
