@@ -190,7 +190,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.association import AssociationGraph, camera_offsets, count_conflicts
     from pipeline.commgraph import comm_graph, split_warning
     from pipeline.consistency import centralized
-    from pipeline.consistency.rules import get_rule, rule_names
+    from pipeline.consistency.rules import deleted_cases, get_rule, rule_names
     from pipeline.evaluation.report import versions
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
@@ -315,7 +315,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             "deleted_links": int(cut.sum()),
             "good_deleted": int((cut & truth).sum()),
             "spurious_deleted": int((cut & ~truth).sum()),
-            "deleted_by_case": {c: int((res.case == c).sum()) for c in ("b", "c")},
+            # Alg. 1's cases, then the rule's own (the cuts of sync and evidence counted too)
+            "deleted_by_case": {c: int((res.case == c).sum())
+                                for c in deleted_cases(st.get("resolution", config.resolution))},
             "detection_rounds": st.get("detection_rounds"),
             "resolution_rounds": st.get("resolution_rounds"),
             "messages": st.get("messages"),

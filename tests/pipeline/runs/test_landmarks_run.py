@@ -85,3 +85,20 @@ def test_the_matching_of_the_largest_image_pair_is_counted_against_the_memory_li
     _check_matching_memory(m, np.array([[0, 1], [1, 2]]), config)
     _check_matching_memory(m, np.zeros((0, 2), np.int64), config)
     assert 3000 * 3000 * BYTES_PER_LANDMARK_PAIR > 0.1e9 > 3000 * 100 * BYTES_PER_LANDMARK_PAIR
+
+
+@pytest.mark.parametrize("resolution", ["sync", "evidence", "paper"])
+def test_deleted_by_case_counts_every_cut_of_the_rule(votes_remove_every_match, tmp_path,
+                                                      resolution):
+    """deleted_by_case named only Alg. 1's cases (b) and (c): the cuts of sync and evidence
+    were counted nowhere, so the cases summed to 0 beside deleted_links > 0."""
+    import json
+
+    from pipeline.__main__ import main
+
+    out = tmp_path / "run"
+    main(["run-landmarks", str(votes_remove_every_match), "--refine", "none", "--geometry",
+          "none", "--no-baselines", "--resolution", resolution, "--out", str(out)])
+    r = json.loads((out / "report.json").read_text())["resolution"]
+    assert r["deleted_links"] > 0
+    assert sum(r["deleted_by_case"].values()) == r["deleted_links"]
