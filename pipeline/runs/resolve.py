@@ -168,7 +168,9 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         "links": len(all_links), "deleted": int(res.deleted.sum()),
         "previously_deleted": int((~active).sum()),
         "resolution_method": res.stats["resolution"],
-        "deleted_by_case": {c: int((res.case == c).sum()) for c in deleted_cases(resolution)},
+        # the cases of the rule that ran (on a faulty network Alg. 1 may run instead)
+        "deleted_by_case": {c: int((res.case == c).sum())
+                            for c in deleted_cases(res.stats["resolution"])},
         "before": before, "after": after,
         "resolution": {k: st[k] for k in ("iterations", "detection_rounds", "resolution_rounds",
                                           "closing_rounds", "messages", "bytes",
