@@ -407,7 +407,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
                  robot_sigma_px=[float(x) for x in sigma],
                  noise_residuals=[int(x) for x in residuals], rounds=0,
                  consensus_rounds=0,  # until the stage runs (no track: it does not)
-                 maxc_rounds=0, messages=0, bytes=0, logical_messages=0)
+                 maxc_rounds=0, messages=0, bytes=0, logical_messages=0,
+                 # the mode that runs (or would have: no track), not the fixed scheme's
+                 **({"consensus": consensus, "settled": True} if stop else {}))
     obs_track_out = obs_track
     if track_labels is not None:
         # reporting only: number the tracks like tracks_of (smallest feature id), the
