@@ -19,6 +19,7 @@ from pipeline.evaluation.metrics import NOT_DEFINED
 from pipeline.types import LinkLedger, Links
 
 __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_section",
+           "sets_solved",
            "fusion_section", "baselines_section", "baselines_beside", "baselines_lines", "resolution_quality_section",
            "matching_section", "report_markdown",
            "mapping_markdown", "track_gt_points", "fused_point_errors"]
@@ -103,12 +104,12 @@ def resolution_section(ledger: LinkLedger, stats: dict) -> dict:
     if good is not None:
         out["good_deleted"] = int((cut & good).sum())
         out["spurious_deleted"] = int((cut & ~good).sum())
-        out["sets_well_solved"], out["sets_wrongly_solved"] = _sets_solved(ledger, good)
+        out["sets_well_solved"], out["sets_wrongly_solved"] = sets_solved(ledger, good)
     out["details"] = {k: v for k, v in stats.items() if k not in out and k != "resolution"}
     return out
 
 
-def _sets_solved(ledger: LinkLedger, good: np.ndarray) -> tuple[int, int]:
+def sets_solved(ledger: LinkLedger, good: np.ndarray) -> tuple[int, int]:
     """Conflictive sets of the input (Def. 2.4) that the consistency stage solved well and
     wrongly (Table IV, :data:`PAPER_TABLE_III_IV`): wrongly when one of the set's links it kept
     (not cut ``resolution`` or ``robot-lost``; fusion comes after) is spurious."""

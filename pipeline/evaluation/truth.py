@@ -216,8 +216,8 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
     """Every ground-truth figure of a run on homography-related photographs, in place.
 
     Sets ``ledger.truth`` (1 good, 0 spurious) and fills ``report``: ``before`` / ``after``
-    (good, spurious, missing links, precision), ``resolution`` and ``fusion`` (good /
-    spurious cut), ``baselines`` (recomputed with the truth: good / spurious / missing links,
+    (good, spurious, missing links, precision), ``resolution`` (good / spurious cut,
+    conflictive sets well / wrongly solved) and ``fusion`` (good / spurious cut), ``baselines`` (recomputed with the truth: good / spurious / missing links,
     pairwise), ``pairwise`` (``before``, ``after_resolution``, ``after``) and
     ``ground_truth`` (kind, tolerance, true pairs).
 
@@ -267,8 +267,10 @@ def fill_report(report: dict, directory: str | Path, views, features, comm_edges
         report[key].update(sections.association_counts(m, links.subset(mask), good[mask],
                                                        missing(links.subset(mask))))
     cut = ledger.reason == "resolution"
+    well, wrong = sections.sets_solved(ledger, good)
     report["resolution"].update(good_deleted=int((cut & good).sum()),
-                                spurious_deleted=int((cut & ~good).sum()))
+                                spurious_deleted=int((cut & ~good).sum()),
+                                sets_well_solved=well, sets_wrongly_solved=wrong)
     fused = ledger.reason == "fusion-outlier"
     report["fusion"].update(cut_good=int((fused & good).sum()),
                             cut_spurious=int((fused & ~good).sum()))

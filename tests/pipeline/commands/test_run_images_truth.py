@@ -207,3 +207,27 @@ def test_fusion_on_graffiti_cuts_more_spurious_than_good_links(tmp_path):
     # the robots of the strong viewpoint changes measure more than the 1 px floor
     assert max(fusion["robot_sigma_px"]) > 1.2 and min(fusion["robot_sigma_px"]) >= 1.0
     assert fusion["cut_spurious"] > fusion["cut_good"] or fusion["cut_links"] == 0
+
+
+def test_conflictive_sets_well_and_wrongly_solved_are_counted_as_on_a_formation(graffiti_run):
+    """Table IV's well / wrongly solved sets, a ground-truth figure of a formation run, were
+    missing from a photo run with --truth: counted here from links.csv, a set wrongly solved
+    when a link of it that the consistency stage kept is spurious."""
+    report, rows, _ = graffiti_run
+    m = report["features_per_camera"]
+    off = np.concatenate([[0], np.cumsum(m)])
+    a = np.array([off[int(r["cam_i"])] + int(r["feat_i"]) for r in rows])
+    b = np.array([off[int(r["cam_j"])] + int(r["feat_j"]) for r in rows])
+    _, comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)),
+                                              shape=(off[-1], off[-1])), directed=False)
+    cam = np.repeat(np.arange(len(m)), m)
+    members = {}
+    for f in np.unique(np.r_[a, b]):
+        members.setdefault(comp[f], []).append(cam[f])
+    conflictive = {c for c, cams in members.items() if len(cams) > len(set(cams))}
+    wrong = {comp[x] for x, r in zip(a, rows, strict=True) if comp[x] in conflictive
+             and r["reason"] not in ("resolution", "robot-lost") and r["truth"] == "0"}
+    res = report["resolution"]
+    assert report["before"]["conflictive_sets"] == len(conflictive) > 0
+    assert (res["sets_well_solved"], res["sets_wrongly_solved"]) == (
+        len(conflictive) - len(wrong), len(wrong))
