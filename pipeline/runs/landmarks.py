@@ -365,8 +365,8 @@ def landmarks_markdown(report: dict) -> str:
                        ("Association sets", "association_sets"),
                        ("Conflictive sets", "conflictive_sets")):
         lines.append(f"| {label} | {b[key]} | {a[key]} |")
-    for key in ("precision", "recall", "f1"):
-        lines.append(f"| Pairwise {key} (closure) | {score_text(pw['before'], key)} | "
+    for key, label in (("precision", "precision"), ("recall", "recall"), ("f1", "F1")):
+        lines.append(f"| Pairwise {label} (closure) | {score_text(pw['before'], key)} | "
                      f"{score_text(pw['after'], key)} |")
     lines.append(f"| Pairwise F1 of the Hungarian matches themselves | "
                  f"{score_text(pw['input_links'], 'f1')} | |")

@@ -102,3 +102,25 @@ def test_deleted_by_case_counts_every_cut_of_the_rule(votes_remove_every_match, 
     r = json.loads((out / "report.json").read_text())["resolution"]
     assert r["deleted_links"] > 0
     assert sum(r["deleted_by_case"].values()) == r["deleted_links"]
+
+
+def test_the_table_labels_the_closure_f1_as_the_readme_does():
+    """The closure's F1 row was labelled 'Pairwise f1', the report key, beside the README's
+    and the table's own 'F1' rows."""
+    from pipeline.runs.landmarks import landmarks_markdown
+
+    score = {"precision": 1.0, "recall": 0.5, "f1": 2 / 3, "predicted_pairs": 1,
+             "true_pairs": 2, "correct_pairs": 1}
+    counts = {"links": 1, "good_links": 1, "spurious_links": 0, "missing_links": 1,
+              "association_sets": 1, "conflictive_sets": 0}
+    report = {"title": "t", "before": counts, "after": counts, "baselines": {},
+              "pairwise": {"before": score, "after": score, "input_links": score,
+                           "before_links": score},
+              "cycle_consistent": True, "cycle_consistent_before": True,
+              "refinement": {"method": "none"},
+              "resolution": {"method": "sync", "deleted_links": 0, "good_deleted": 0,
+                             "spurious_deleted": 0, "iterations": 0, "detection_rounds": 0,
+                             "resolution_rounds": 0, "messages": 0, "bytes": 0, "time_s": 0.0}}
+    md = landmarks_markdown(report)
+    assert "| Pairwise F1 (closure) | 0.667 | 0.667 |" in md
+    assert "Pairwise f1" not in md
