@@ -257,18 +257,21 @@ def test_intrinsics_naming_a_folder_says_so(photos, tmp_path, capsys):
     one_line_error(capsys, f"intrinsics file {str(tmp_path)!r} is a folder; give the K.txt file")
 
 
-def test_an_out_name_that_is_not_utf8_is_written_with_its_recording(photos, tmp_path,
-                                                                    monkeypatch):
+def test_an_out_name_that_is_not_utf8_is_written_with_its_recording(photos, tmp_path):
     """A Latin-1 --out ('run\\xe9') was refused ('the recording cannot be written there'),
-    with --no-rerun too, where every other command writes its run."""
-    import io
+    with --no-rerun too, where every other command writes its run. Run as its own process:
+    its lines name the path, which is not UTF-8 text, and pytest-xdist sends captured lines
+    between its processes as UTF-8."""
     import os
+    import subprocess
 
-    out = tmp_path / os.fsdecode(b"run\xe9")
-    terminal = io.TextIOWrapper(io.BytesIO(), encoding="utf-8")  # prints the name's bytes
-    monkeypatch.setattr(sys, "stdout", terminal)
-    assert main(["run-images", str(photos), "--out", str(out), "--max-features", "300"]) in (0, 3)
-    assert {"report.json", "links.csv", "recording.rrd"} <= set(os.listdir(out))
+    out = os.path.join(os.fsencode(tmp_path), b"run\xe9")
+    root = Path(__file__).resolve().parents[3]
+    proc = subprocess.run([sys.executable, "-m", "pipeline", "run-images", str(photos), "--out",
+                           out, "--max-features", "300"], cwd=root, capture_output=True,
+                          env={**os.environ, "LC_ALL": "C.UTF-8"}, timeout=600)
+    assert proc.returncode in (0, 3), proc.stderr[-2000:]
+    assert {b"report.json", b"links.csv", b"recording.rrd"} <= set(os.listdir(out))
 
 
 def test_a_refused_run_with_the_default_out_creates_nothing(tmp_path, monkeypatch, capsys):
