@@ -12,7 +12,10 @@ Where: ``$FORMATION_MATCH_CACHE`` if set, else ``$XDG_CACHE_HOME/formation-match
 folder, or unset with no password entry). ``FORMATION_MATCH_CACHE=off`` (or ``0``, ``no``,
 ``false``) turns the cache off. One uncompressed ``.npz`` per entry (~13 MB at 640x480 with 6 robots),
 written to a temporary file and renamed (concurrent runs never see half a file). An entry that
-cannot be read or does not hold what its name says is ignored and written again.
+cannot be read or does not hold what its name says is ignored and written again. Each camera's
+pixels and depth carry their CRC-32 (``crc``, stored after ``key``), so that one camera read
+alone (:func:`load_view`, which does not read the whole archive member and so does not meet
+the zip's own CRC) is checked too: a damaged entry gives no view, never a wrong one.
 
 The folder is kept under a size cap, ``$FORMATION_MATCH_CACHE_MAX_MB`` (default 1024 MB): each
 write removes the least recently used entries (a hit marks its entry used) until the folder
@@ -35,6 +38,7 @@ import re
 import stat
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 
 import cv2
@@ -222,11 +226,14 @@ def load_views(seed: int, size: tuple[int, int], n: int) -> dict | None:
             if str(z["key"]) != _key(seed, size, n):
                 return None
             out = {name: z[name] for name in shapes}
+            crc = z["crc"]
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
     for name, (shape, dtype) in shapes.items():
         if out[name].shape != shape or out[name].dtype != dtype:
             return None
+    if crc.shape != (n, 2) or crc.dtype != np.uint32:
+        return None  # an entry without the cameras' CRCs: load_view could not check it
     _mark_used(path)
     return out
 
@@ -279,14 +286,24 @@ def load_view(seed: int, size: tuple[int, int], n: int, i: int) -> dict | None:
         with open(path, "rb") as f, zipfile.ZipFile(f) as z:
             if str(np.load(io.BytesIO(z.read("key.npy")))) != _key(seed, size, n):
                 return None
+            crc = np.load(io.BytesIO(z.read("crc.npy")), allow_pickle=False)
             out = {name: _stored_array_slice(f, z, name, shape, dtype, i)
                    for name, (shape, dtype) in shapes.items()}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
-    if any(v is None for v in out.values()):
+    if any(v is None for v in out.values()) or crc.shape != (n, 2) or crc.dtype != np.uint32:
         return None
+    if [zlib.crc32(out[name]) for name in shapes] != crc[i].tolist():
+        return None  # damaged on disk: the zip's CRC covers the whole member, not one camera
     _mark_used(path)
     return out
+
+
+def _camera_crcs(arrays: dict) -> np.ndarray:
+    """``(n, 2)`` uint32: the CRC-32 of each camera's ``image`` and ``depth`` bytes."""
+    return np.array([[zlib.crc32(np.ascontiguousarray(arrays[name][i]))
+                      for name in ("image", "depth")] for i in range(len(arrays["image"]))],
+                    np.uint32).reshape(-1, 2)
 
 
 def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
@@ -302,7 +319,7 @@ def save_views(seed: int, size: tuple[int, int], arrays: dict) -> Path | None:
         with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.tmp-",
                                          suffix=".npz", delete=False) as f:
             tmp = Path(f.name)
-            np.savez(f, key=np.array(_key(seed, size, n)), **arrays)
+            np.savez(f, key=np.array(_key(seed, size, n)), crc=_camera_crcs(arrays), **arrays)
         os.replace(tmp, path)
     except OSError:
         if tmp is not None:
