@@ -77,7 +77,7 @@ from pipeline.outputs import (
 )
 
 __all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "note_output_in_place",
-           "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path",
+           "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path", "reading_run_folder",
            "publish", "publish_mode", "publish_together", "write_json_atomic"]
 
 
@@ -535,6 +535,44 @@ def claim_run_folder(out: str | os.PathLike, inputs=(), flag: str = "--out"):
             _remove_empty(made)
 
 
+@contextmanager
+def reading_run_folder(folder: str | os.PathLike, flag: str = "RUN_DIR"):
+    """Hold the lock of the run folder ``folder`` while a reader reads it (and writes into
+    it: ``viz.saved_run``'s recording), so that no run replaces it meanwhile and the files
+    read are one run's. Unlike :func:`claim_run_folder` the folder is not checked: a reader
+    may read a run folder holding files of a user's.
+
+    Where no lock can be made beside it (a read-only parent folder), no run can take it
+    either: the block runs without one.
+
+    Raises
+    ------
+    InputError
+        A live run holds the folder (the message names its pid), or ``.NAME.lock`` beside
+        it is not a lock of ours.
+    """
+    folder = Path(os.path.realpath(folder))
+    key = _key(folder)
+    if key in _held:
+        yield folder
+        return
+    lock = folder.parent / f".{folder.name}.lock"
+    try:
+        fd = _lock(lock, folder, flag, busy="wait for it to finish, then read it")
+    except OSError:  # no lock can be made here, so no run can be writing the folder
+        yield folder
+        return
+    try:
+        _held[key] = [fd, 1]
+        try:
+            yield folder
+        finally:
+            del _held[key]
+            _unlink_if_same(lock, fd)
+    finally:
+        os.close(fd)
+
+
 def _missing_parents(out: Path) -> list[Path]:
     """The folders above ``out`` that do not exist yet, deepest first (``runs/`` of a default
     ``--out``): made for the run, removed again when it writes no folder."""
@@ -557,6 +595,9 @@ def _remove_empty(folders: list[Path]) -> None:
 
 
 _LOCK_HEAD = "formation-match lock"
+
+#: what a command refused a run folder that a live run holds is told to do
+_BUSY_WRITER = "wait for it to finish or choose another --out"
 
 
 def _lock_pid(fd: int) -> str | None:
@@ -587,9 +628,10 @@ def _new_lock(lock: Path) -> tuple[int, Path]:
     return fd, Path(tmp)
 
 
-def _lock(lock: Path, out: Path, flag: str) -> int:
+def _lock(lock: Path, out: Path, flag: str, busy: str = _BUSY_WRITER) -> int:
     """Hold ``lock``: our own lock file, locked and written first, is put at ``lock`` without
-    replacing anything; an existing lock of a dead run is removed first. The fd."""
+    replacing anything; an existing lock of a dead run is removed first. The fd. ``busy``
+    says what to do when a live run holds it."""
     fd, tmp = _new_lock(lock)
     try:
         while True:
@@ -597,7 +639,7 @@ def _lock(lock: Path, out: Path, flag: str) -> int:
                 publish(tmp, lock, replace=False)
                 return fd
             except FileExistsError:
-                _clear_stale_lock(lock, out, flag)
+                _clear_stale_lock(lock, out, flag, busy)
     except BaseException:
         os.close(fd)
         if os.path.lexists(tmp):
@@ -613,7 +655,7 @@ def _open_entry(path: Path) -> int | None:
         return None
 
 
-def _clear_stale_lock(lock: Path, out: Path, flag: str) -> None:
+def _clear_stale_lock(lock: Path, out: Path, flag: str, busy: str = _BUSY_WRITER) -> None:
     """``lock`` exists: InputError when a live run holds it or it is not ours; removed when
     its run died."""
     where = f"{flag} {str(out)!r}: {str(lock)!r} beside it"
@@ -637,7 +679,7 @@ def _clear_stale_lock(lock: Path, out: Path, flag: str) -> None:
             fcntl.flock(efd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise InputError(f"{flag} {str(out)!r} is being written by another run (pid {pid}); "
-                             "wait for it to finish or choose another --out") from None
+                             f"{busy}") from None
         _unlink_if_same(lock, efd)  # its run died
     finally:
         os.close(efd)

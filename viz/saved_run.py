@@ -220,7 +220,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     (:func:`pipeline.outputs.run_folder_problem`).
     """
     from pipeline.outputs import check_output_files, run_folder_problem, write_run_marker
-    from pipeline.runfolder import note_output_in_place
+    from pipeline.runfolder import note_output_in_place, reading_run_folder
     from pipeline.validate import not_empty
     from viz.rerun_log import log_run
 
@@ -245,13 +245,16 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
         if not named:
             raise InputError(f"{exc} with --out FILE.rrd") from None
         raise
-    inside = Path(out).resolve().parent == folder.resolve()
-    pure_run = inside and run_folder_problem(folder) is None
-    record = read_run_folder(folder)
-    path = log_run(out, record, recording_name=folder.name)
-    note_output_in_place(path)  # a Ctrl-C from here on names it as written
-    if pure_run:
-        write_run_marker(folder, finished=True)
+    # a run replacing the folder meanwhile would mix two runs' files, or get a recording of
+    # the previous run added to its own: no run takes the folder while it is read and written
+    with reading_run_folder(folder):
+        inside = Path(out).resolve().parent == folder.resolve()
+        pure_run = inside and run_folder_problem(folder) is None
+        record = read_run_folder(folder)
+        path = log_run(out, record, recording_name=folder.name)
+        note_output_in_place(path)  # a Ctrl-C from here on names it as written
+        if pure_run:
+            write_run_marker(folder, finished=True)
     return path
 
 
