@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from viz.rerun_log import recording_file
+from viz.rerun_log import check_recording_whole, recording_file
 
 __all__ = ["log_online", "STEP_SCALARS"]
 
@@ -87,6 +87,7 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
                 f"history check){by_fusion}, {r['conflictive_sets_after']} conflictive sets "
                 "after"))
         rec.disconnect()  # writes the footer; the file does not read back without it
+        check_recording_whole(sink, path)
         os.replace(tmp, path)
     except BaseException:
         rec.disconnect()

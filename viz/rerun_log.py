@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import colorsys
 import contextlib
+import errno
 import os
 import uuid
 from pathlib import Path
@@ -65,6 +66,7 @@ __all__ = [
     "CUT_WHY",
     "PAIR_KEPT_SAMPLE",
     "case_why",
+    "check_recording_whole",
     "cut_summary",
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
@@ -711,6 +713,28 @@ def recording_file(path: str | os.PathLike):
         os.close(fd)
 
 
+def check_recording_whole(sink: str | os.PathLike, path: str | os.PathLike) -> None:
+    """OSError naming ``path`` unless the recording file ``sink`` was written in full.
+
+    Rerun's file sink reports a failed write (a full disk, a file-size limit, a quota) only in
+    its log, and leaves the file cut where the write failed, without its footer: such a file
+    reads back with a warning, which is an error here.
+    """
+    import warnings
+
+    from rerun.chunk import RrdReader
+    from rerun.error_utils import RerunWarning
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RerunWarning)
+            RrdReader(Path(sink))
+    except (RerunWarning, RuntimeError, OSError, ValueError):
+        raise OSError(errno.EIO, "the recording was not written in full (a full disk or a "
+                      "file-size limit: Rerun's message above says why); nothing was put in "
+                      "its place", str(path)) from None
+
+
 def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "formation-match",
             recording_name: str | None = None, *, image_plane_distance: float | None = None,
             world_axes=None, jpeg_quality: int = 85,
@@ -855,6 +879,7 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
         rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",
                                           media_type=rr.MediaType.MARKDOWN), static=True)
         rec.disconnect()  # writes the footer; the file does not read back without it
+        check_recording_whole(sink, path)
         os.replace(tmp, path)
     except BaseException:
         rec.disconnect()
