@@ -277,7 +277,7 @@ class OutputFiles:
                     os.unlink(tmp)
 
     def _commit(self) -> None:
-        done: list[Path] = []
+        done: list[tuple[Path, tuple[int, int]]] = []
         try:
             for tmp, target, flag in self._items:
                 if not tmp.is_file():
@@ -285,6 +285,7 @@ class OutputFiles:
                                      "was removed while the command worked; nothing was written")
                 publish_mode(tmp, directory=False)
                 refuse_unsafe_target(target, flag)
+                st = os.lstat(tmp)  # the file keeps its inode when put in place
                 _put_in_place_so_far.append(target)  # before: an interrupt may end it there
                 try:
                     publish(tmp, target, self.replace)
@@ -293,14 +294,24 @@ class OutputFiles:
                     if isinstance(exc, FileExistsError):
                         raise _appeared(target, flag) from None
                     raise _named(exc, target) from None
-                done.append(target)
+                done.append((target, (st.st_dev, st.st_ino)))
         except BaseException:
             if not self.replace:  # files this block created: leave none
-                for target in done:
-                    if os.path.lexists(target):
-                        os.unlink(target)
+                for target, ours in done:
+                    _unlink_if_ours(target, ours)
                     _put_in_place_so_far.remove(target)
             raise
+
+
+def _unlink_if_ours(path: Path, ours: tuple[int, int]) -> None:
+    """Remove ``path`` if it is still the file ``ours`` (device, inode) that this command put
+    there: another command's output written there meanwhile (``--overwrite``) is kept."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if (st.st_dev, st.st_ino) == ours:
+        os.unlink(path)
 
 
 # The temporary file of an output is ``.STEM.PID-START-R-D.partSUFFIX``: the process that
