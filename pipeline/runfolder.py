@@ -78,6 +78,7 @@ from pipeline.outputs import (
 
 __all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "note_output_in_place",
            "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path", "reading_run_folder",
+           "staging_beside",
            "publish", "publish_mode", "publish_together", "write_json_atomic"]
 
 
@@ -582,6 +583,28 @@ def reading_run_folder(folder: str | os.PathLike, flag: str = "RUN_DIR"):
             _unlink_if_same(lock, fd)
     finally:
         os.close(fd)
+
+
+@contextmanager
+def staging_beside(out: str | os.PathLike):
+    """Yield a new staging folder ``.NAME.tmp-R`` beside the run folder ``out`` (whose lock
+    the caller holds), to write a file in and then rename it into ``out``: a command killed
+    meanwhile leaves it where the next run into ``out`` removes it, whereas a temporary file
+    left inside ``out`` is a file the run did not write, and keeps every later run from
+    replacing the folder. Removed at the end; ``None`` where none can be made there (a
+    read-only parent folder)."""
+    out = Path(out)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    except OSError:
+        yield None
+        return
+    try:
+        write_run_marker(tmp, finished=False)
+        same_disk = os.stat(tmp).st_dev == os.stat(out).st_dev  # else no rename: a mount point
+        yield tmp if same_disk else None
+    finally:
+        _remove_own(tmp)
 
 
 def _missing_parents(out: Path) -> list[Path]:

@@ -24,7 +24,9 @@ if __name__ == "__main__":  # run as a program: a Ctrl-C while the libraries loa
     exit_quietly_on_interrupt("viz.saved_run")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import json  # noqa: E402
+import os  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -220,7 +222,7 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     (:func:`pipeline.outputs.run_folder_problem`).
     """
     from pipeline.outputs import check_output_files, run_folder_problem, write_run_marker
-    from pipeline.runfolder import note_output_in_place, reading_run_folder
+    from pipeline.runfolder import note_output_in_place, reading_run_folder, staging_beside
     from pipeline.validate import not_empty
     from viz.rerun_log import log_run
 
@@ -247,11 +249,18 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
         raise
     # a run replacing the folder meanwhile would mix two runs' files, or get a recording of
     # the previous run added to its own: no run takes the folder while it is read and written
-    with reading_run_folder(folder):
-        inside = Path(out).resolve().parent == folder.resolve()
+    with reading_run_folder(folder) as real:
+        inside = Path(out).resolve().parent == real
         pure_run = inside and run_folder_problem(folder) is None
         record = read_run_folder(folder)
-        path = log_run(out, record, recording_name=folder.name)
+        # written beside the folder, then renamed into it: a recording's temporary file left
+        # in the folder by a kill would keep every later run from replacing it
+        with staging_beside(real) if inside else contextlib.nullcontext() as stage:
+            path = log_run(out if stage is None else stage / out.name, record,
+                           recording_name=folder.name)
+            if stage is not None:
+                os.replace(path, out)
+                path = out
         note_output_in_place(path)  # a Ctrl-C from here on names it as written
         if pure_run:
             write_run_marker(folder, finished=True)
