@@ -4,6 +4,7 @@ Tables III and IV, plus what the paper could not count without ground truth."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import os
@@ -205,7 +206,7 @@ def run(args) -> int:
     from pipeline import validate
     from pipeline.budget import check_formation_memory
     from pipeline.outcome import exit_status
-    from pipeline.runfolder import publish_together
+    from pipeline.runfolder import claim_run_folder, publish_together
     from pipeline.runs.formation import FormationConfig, run_formation
     from pipeline.stages import check_merge_radius, merge_radius_for
 
@@ -220,26 +221,31 @@ def run(args) -> int:
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)
     reports = {}
-    # the four run folders and the summaries are put in place together at the end: an error
-    # or an interrupt before leaves the previous runs of --out as they were
-    with publish_together() as together:
+    # every run folder is held from the start (as run-formation holds its --out): one that
+    # another run is writing is refused before any formation runs, not after some did
+    with contextlib.ExitStack() as claims:
         for name in FORMATIONS:
-            cfg = FormationConfig(formation=name, seed=args.seed, size=size,
-                                  features=method, max_features=max_features,
-                                  out=str(parent / f"formation-{name}"),
-                                  resolution=resolution, merge_radius=args.merge_radius)
-            out = together.staged_folder(run_formation(cfg, transport=args.transport))
-            reports[name] = json.loads((out / "report.json").read_text())
-        table = formations_table(reports)
-        check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
-        written = []
-        # every option that changes the counts, the merge radius as the runs used it
-        budget = "auto" if max_features is None else max_features
-        radius = merge_radius_for(resolution, args.merge_radius)
-        together.then(lambda: written.extend(write_summaries(
-            parent, f"# Formations (a)–(d), seed {args.seed}, {method} ({budget} features per "
-            f"image), {args.size}, resolution {args.resolution}, keypoint merge radius "
-            f"{radius:g} px\n\n" + table, reports)))
+            claims.enter_context(claim_run_folder(parent / f"formation-{name}"))
+        # the four run folders and the summaries are put in place together at the end: an error
+        # or an interrupt before leaves the previous runs of --out as they were
+        with publish_together() as together:
+            for name in FORMATIONS:
+                cfg = FormationConfig(formation=name, seed=args.seed, size=size,
+                                      features=method, max_features=max_features,
+                                      out=str(parent / f"formation-{name}"),
+                                      resolution=resolution, merge_radius=args.merge_radius)
+                out = together.staged_folder(run_formation(cfg, transport=args.transport))
+                reports[name] = json.loads((out / "report.json").read_text())
+            table = formations_table(reports)
+            check_outputs(parent, args.overwrite)  # nothing of a user's came there meanwhile
+            written = []
+            # every option that changes the counts, the merge radius as the runs used it
+            budget = "auto" if max_features is None else max_features
+            radius = merge_radius_for(resolution, args.merge_radius)
+            together.then(lambda: written.extend(write_summaries(
+                parent, f"# Formations (a)–(d), seed {args.seed}, {method} ({budget} features per "
+                f"image), {args.size}, resolution {args.resolution}, keypoint merge radius "
+                f"{radius:g} px\n\n" + table, reports)))
     md, js = written
     print(table)
     print(f"saved {md} and {js}")
