@@ -37,6 +37,7 @@ import os
 import re
 import stat
 import tempfile
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -113,6 +114,14 @@ def _mark_used(path: Path) -> None:
         pass
 
 
+#: what reading a damaged entry raises: besides OSError, ValueError (numpy) and the zip's own
+#: errors, a changed byte in a zip header gives NotImplementedError (an unknown compression
+#: method or version) or RuntimeError (an "encrypted" member), and one in an array's header
+#: tokenize's TokenError or SyntaxError (numpy parses it as a Python literal) or MemoryError
+#: (a shape no memory holds)
+_UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, NotImplementedError,
+               RuntimeError, SyntaxError, tokenize.TokenError, MemoryError)
+
 #: an entry's name, and a temporary file's while it is written (the key in group 1)
 _ENTRY_NAME = re.compile(r"(views-seed\d+-\d+x\d+-n\d+-[0-9a-f]{16})\.npz")
 _TMP_NAME = re.compile(r"\.(views-seed\d+-\d+x\d+-n\d+-[0-9a-f]{16})\.tmp-[^/]+\.npz")
@@ -147,7 +156,7 @@ def _stored_key(path: Path) -> str | None:
             if len(data) != dtype.itemsize:
                 return None
             return str(np.frombuffer(data, dtype=dtype)[0])
-    except (OSError, ValueError):
+    except _UNREADABLE:
         return None
 
 
@@ -227,7 +236,7 @@ def load_views(seed: int, size: tuple[int, int], n: int) -> dict | None:
                 return None
             out = {name: z[name] for name in shapes}
             crc = z["crc"]
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+    except _UNREADABLE:
         return None
     for name, (shape, dtype) in shapes.items():
         if out[name].shape != shape or out[name].dtype != dtype:
@@ -289,7 +298,7 @@ def load_view(seed: int, size: tuple[int, int], n: int, i: int) -> dict | None:
             crc = np.load(io.BytesIO(z.read("crc.npy")), allow_pickle=False)
             out = {name: _stored_array_slice(f, z, name, shape, dtype, i)
                    for name, (shape, dtype) in shapes.items()}
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+    except _UNREADABLE:
         return None
     if any(v is None for v in out.values()) or crc.shape != (n, 2) or crc.dtype != np.uint32:
         return None
