@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import stat
 import tempfile
 from collections.abc import Iterable
@@ -411,6 +412,26 @@ def _name_too_long(p: Path) -> str | None:
             f"{limit - RUN_NAME_SPARE} bytes here")
 
 
+def _mount_point(real: Path) -> bool:
+    """Whether the folder ``real`` (a real path) is a mount point, a bind mount of a folder of
+    the same file system included (``/proc/self/mountinfo`` lists those; ``os.path.ismount``
+    alone does not see them)."""
+    if os.path.ismount(real):
+        return True
+    try:
+        with open("/proc/self/mountinfo", "rb") as f:
+            table = f.read()
+    except OSError:
+        return False
+    want = os.fsencode(real)
+    for line in table.splitlines():
+        fields = line.split(b" ")
+        if len(fields) > 4 and re.sub(rb"\\([0-7]{3})", lambda m: bytes([int(m[1], 8)]),
+                                      fields[4]) == want:
+            return True
+    return False
+
+
 def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
     """Check that the run folder ``out`` may be (re)placed by a new run; return it as a Path.
 
@@ -458,6 +479,10 @@ def check_run_folder(out, inputs: Named = (), flag: str = "--out") -> Path:
         if not p.is_dir():
             raise InputError(f"{flag} {str(out)!r} is a file; a run is written as a folder: "
                              "choose a folder name")
+        if _mount_point(real):  # renaming it fails (EBUSY), after the whole run
+            raise InputError(f"{flag} {str(out)!r} is a mount point; a run folder is put in "
+                             "place by renaming it, which a mount point cannot be: give a "
+                             f"folder inside it, e.g. {str(p / 'run')!r}")
         try:
             empty = next(p.iterdir(), None) is None
         except OSError as exc:
