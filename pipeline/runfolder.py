@@ -278,6 +278,13 @@ class OutputFiles:
                     os.unlink(tmp)
 
     def _commit(self) -> None:
+        # two commands putting outputs of the same names in place at once (``--overwrite``)
+        # take turns: each one's outputs land together, never one's OUT.db beside the other's
+        # OUT.links.csv
+        with _folders_locked({tmp.parent for tmp, _, _ in self._items}):
+            self._put_all_in_place()
+
+    def _put_all_in_place(self) -> None:
         done: list[tuple[Path, tuple[int, int]]] = []
         try:
             for tmp, target, flag in self._items:
@@ -302,6 +309,25 @@ class OutputFiles:
                     _unlink_if_ours(target, ours)
                     _put_in_place_so_far.remove(target)
             raise
+
+
+@contextmanager
+def _folders_locked(folders):
+    """Hold an exclusive ``flock`` on each of ``folders`` (in one order, so that two holders
+    never wait on each other), waiting for another holder; a folder that cannot be locked
+    (no permission to open it, a file system without locks) is passed over."""
+    with ExitStack() as held:
+        for folder in sorted({os.path.realpath(f) for f in folders}):
+            try:
+                fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+            except OSError:
+                continue
+            held.callback(os.close, fd)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            except OSError:
+                continue
+        yield
 
 
 def _unlink_if_ours(path: Path, ours: tuple[int, int]) -> None:
