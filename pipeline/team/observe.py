@@ -27,6 +27,15 @@ When it stops (every wait is bounded)
     still arrive, their receipts do not), and a robot that never hears one repeats its result
     for ``start_timeout_s``. A robot has stopped repeating when its liveliness token is gone
     and no result came from it for :data:`QUIET_S`.
+
+A robot restarted with the same id
+    A robot's process says ``started`` once, as its session opens. A token that vanished and
+    came back *without* a new ``started`` is a link that lapsed (the robot ran on); one that
+    vanished before a ``started`` came again is a new process of that robot, the first one
+    having ended without a result (killed, crashed). Its neighbours wrote the first one off
+    and cut its links, and a robot written off is never taken back, so the robot is lost:
+    reported among the killed at its first vanish, named in a log line, and whatever the new
+    process publishes is acknowledged (so it stops repeating it) but not used.
 """
 
 from __future__ import annotations
@@ -35,6 +44,7 @@ import time
 
 from pipeline.errors import InputError, TeamError
 from pipeline.team.launcher import Observer, TeamRun
+from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["observe_team", "TeamObserver", "GRACE_S", "unreported"]
 
@@ -59,6 +69,10 @@ class TeamObserver(Observer):
         self.vanished: dict[int, float] = {}
         self.alive: set[int] = set()
         self.holding: set[int] = set()  # robots whose liveliness token is there now
+        # robots whose process ended without a result: when it first vanished (kept when its
+        # token comes back, which a restart and a lapsed link both do)
+        self.ended: dict[int, float] = {}
+        self.restarted: dict[int, float] = {}  # a new process of a robot lost: first vanish
         self._subs.append(self.session.liveliness().declare_subscriber(
             self._key(team.name, "live", "*"), self._on_live, history=True))
 
@@ -72,12 +86,39 @@ class TeamObserver(Observer):
         with self.cv:
             if sample.kind == zenoh.SampleKind.DELETE:
                 self.vanished.setdefault(i, time.monotonic())
+                if i not in self.results:
+                    self.ended.setdefault(i, self.vanished[i])
                 self.holding.discard(i)
             else:  # (again:) a token back after a lapse of its link is a robot still running
                 self.vanished.pop(i, None)
                 self.alive.add(i)
                 self.holding.add(i)
             self.cv.notify_all()
+
+    def _on_status(self, sample) -> None:
+        try:
+            i = int(str(sample.key_expr).rsplit("/", 1)[-1])
+            text = sample.payload.to_string()
+        except (ValueError, AttributeError):
+            return
+        with self.cv:
+            if text == "started" and i in self.ended and i not in self.results:
+                self.restarted.setdefault(i, self.ended[i])  # module docstring
+        super()._on_status(sample)
+
+    def _on_result(self, sample) -> None:
+        try:
+            i = int(decode_packet(sample.payload.to_bytes())[0]["id"])
+        except (WireError, KeyError, TypeError, ValueError):
+            return
+        with self.cv:
+            restarted = i in self.restarted
+            if restarted:
+                self.heard[i] = time.monotonic()
+        if restarted:  # the new process of a lost robot: stop its repeats, keep it lost
+            self.ack(i)
+            return
+        super()._on_result(sample)
 
 
 def _check_terms(team, results: dict) -> None:
@@ -178,8 +219,15 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                 _check_terms(team, obs.results)
                 lost = {i for i, t in obs.vanished.items()
                         if i not in obs.results and now - t > GRACE_S}
+                lost |= set(obs.restarted)
                 lost |= _written_off_unstarted(team, obs)
                 if all(i in obs.results or i in lost for i in range(team.n)):
+                    for i in sorted(obs.restarted):
+                        log(f"robot {i} ({team.endpoint(i)}) was started again after its "
+                            "process had ended without a result: its neighbours wrote it off "
+                            "and a robot written off is never taken back, so it is lost and "
+                            "what its new process publishes is not used; start the whole team "
+                            "again for its links")
                     off = sorted(_written_off_unstarted(team, obs))
                     if off:
                         log(f"robots {off} never started and every neighbour wrote them off: "
@@ -214,7 +262,8 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
             run.results = dict(obs.results)
             run.status = dict(obs.status)
             run.finished_at = dict(obs.finished_at)
-            run.killed = {i: obs.vanished.get(i, time.monotonic()) for i in sorted(lost)}
+            run.killed = {i: obs.restarted.get(i, obs.vanished.get(i, time.monotonic()))
+                          for i in sorted(lost)}
             run.wall_s = run.published_s = time.monotonic() - t0
             _settle(obs, min(deadline, time.monotonic() + SETTLE_S))
         return run

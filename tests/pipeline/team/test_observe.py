@@ -628,6 +628,7 @@ def test_a_token_back_after_a_lapse_is_a_robot_still_running():
     obs = object.__new__(TeamObserver)  # its bookkeeping only: no session
     obs.cv = threading.Condition()
     obs.vanished, obs.alive, obs.holding = {}, set(), set()
+    obs.ended, obs.results = {}, {}
     key = "formation-match/team/live/3"
     obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
     obs._on_live(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.DELETE))
