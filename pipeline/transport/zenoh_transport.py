@@ -144,6 +144,15 @@ Start handshake
     is told it was heard; and a neighbour heard once whose session then closes (liveliness
     token gone) is written off at once (``closed``), not after the timeout.
 
+    A neighbour started again: every hello carries a mark drawn by the robot's process when
+    it starts (:attr:`ZenohTransport.incarnation`). A hello of another mark than the first
+    heard from that neighbour comes from a new process of it (killed, then started again with
+    the same id), whose first process took part and ended without finishing: the first is
+    written off (``closed``, as its session closed) and the new one is told ``gone``, so it
+    ends alone (``told``) instead of joining rounds it never ran (it used to finish the
+    handshake, be sent the earlier process's round packets when it asked for them, and have
+    its packets taken for the rounds its first process left).
+
     Paced hellos: a robot tells a neighbour at once when it first hears it (its ``heard`` bit
     changes); otherwise it repeats its hello to that neighbour after 0.05 s, then after twice
     as long each time, up to :data:`HELLO_EVERY_MAX_S` (a first hello can be lost while the
@@ -157,6 +166,7 @@ Start handshake
 from __future__ import annotations
 
 import json
+import os
 import queue
 import re
 import sys
@@ -312,6 +322,11 @@ class ZenohTransport(RoundEndpoint):
         self._out: dict[int, list[tuple[str, dict]]] = {k: [] for k in self.neighbours}
         self._packets: dict[tuple[int, int], tuple[dict, list]] = {}
         self._hello: dict[int, bool] = {}
+        # this process's own mark, sent with every hello, and the first heard from each
+        # neighbour: a hello of another mark is a new process of that robot (module
+        # docstring, "A neighbour started again")
+        self.incarnation = os.urandom(8).hex()
+        self._inc: dict[int, str] = {}
         # the team-wide settings of this robot's team file, sent with every hello; a
         # neighbour's that differ are kept here and stop the handshake (see handshake)
         self._terms = team.shared_terms()
@@ -531,6 +546,7 @@ class ZenohTransport(RoundEndpoint):
             src, heard_me = int(doc["src"]), bool(doc["heard"])
             waiting = not bool(doc.get("done", False))
             terms = doc.get("terms")
+            inc = str(doc.get("inc"))
         except (ValueError, KeyError, TypeError, AttributeError):
             return
         if src not in self.neighbours:  # the subscriber hears every sender (_from)
@@ -544,12 +560,20 @@ class ZenohTransport(RoundEndpoint):
                 try:
                     self.session.put(key(self.team.name, "hello", self.robot_id, src),
                                      json.dumps({"src": self.robot_id, "heard": False,
-                                                 "done": False, "terms": self._terms}))
+                                                 "done": False, "terms": self._terms, "inc": self.incarnation}))
                 except Exception:  # noqa: BLE001 - the session is closing
                     pass
             return
         with self._cv:
             self._heard[src] = time.monotonic()
+            if self._inc.setdefault(src, inc) != inc:  # a new process of that robot
+                if src not in self.written_off:
+                    self._log(f"robot {self.robot_id}: robot {src} was started again (a new "
+                              "process with its id) after its first process ended: the first "
+                              "is written off and the new one is told so")
+                    self._write_off(src, "closed")
+                self._cv.notify_all()
+                return  # told ``gone`` by the beat thread: it was heard since
             self._hello[src] = self._hello.get(src, False) or heard_me
             self._cv.notify_all()
             answer = waiting and self._started and src in self.neighbours \
@@ -558,7 +582,7 @@ class ZenohTransport(RoundEndpoint):
             try:
                 self.session.put(key(self.team.name, "hello", self.robot_id, src),
                                  json.dumps({"src": self.robot_id, "heard": True, "done": True,
-                                             "terms": self._terms}))
+                                             "terms": self._terms, "inc": self.incarnation}))
             except Exception:  # noqa: BLE001 - the session is closing
                 pass
 
@@ -618,7 +642,7 @@ class ZenohTransport(RoundEndpoint):
                 told[k], sent_at[k] = heard, now
                 self.session.put(key(name, "hello", self.robot_id, k),
                                  json.dumps({"src": self.robot_id, "heard": heard, "done": done,
-                                             "terms": self._terms}))
+                                             "terms": self._terms, "inc": self.incarnation}))
 
         while True:
             say()
