@@ -222,6 +222,15 @@ def observe_team(team, *, timeout_s: float = 600.0, log=None) -> TeamRun:
                 lost |= set(obs.restarted)
                 lost |= _written_off_unstarted(team, obs)
                 if all(i in obs.results or i in lost for i in range(team.n)):
+                    if not obs.results:  # nothing to write: a run folder of no link at all
+                        raise TeamError(
+                            "no robot's result reached this observer: every robot's process "
+                            f"ended without one reaching it (robots "
+                            f"{', '.join(map(str, sorted(lost)))}); "
+                            "robots that ran to their end lost their results with their links "
+                            "to the observer (paused or cut off longer than their lease), and "
+                            "each robot's --result file holds what it decided: keep the "
+                            "observer running and reachable, and run the team again")
                     for i in sorted(obs.restarted):
                         log(f"robot {i} ({team.endpoint(i)}) was started again after its "
                             "process had ended without a result: its neighbours wrote it off "
