@@ -3,8 +3,8 @@ the cleaned copy could not hold, are refused before any work, naming the dataset
 
 import h5py
 import numpy as np
+from hloc_files import run_clean_h5, write_h5
 
-from pipeline.__main__ import main
 from pipeline.inputs.hloc import names_to_pair
 
 NAMES = ["a.jpg", "b.jpg", "c.jpg"]
@@ -14,30 +14,13 @@ M = 12
 def _write(d, m0_dtype=np.int32):
     """Three images whose every keypoint is matched: a-b and b-c on the identity, a-c shifted
     by one, so the chains close on other keypoints and the rule must cut."""
-    feats, matches = d / "features.h5", d / "matches.h5"
-    rng = np.random.default_rng(0)
-    with h5py.File(feats, "w") as fd:
-        for name in NAMES:
-            fd.create_group(name).create_dataset(
-                "keypoints", data=rng.uniform(0, 100, (M, 2)).astype(np.float32))
-    with h5py.File(matches, "w") as fd:
-        for (i, j), m0 in (((0, 1), np.arange(M)), ((1, 2), np.arange(M)),
-                           ((0, 2), np.roll(np.arange(M), 1))):
-            fd.create_group(names_to_pair(NAMES[i], NAMES[j])).create_dataset(
-                "matches0", data=m0.astype(m0_dtype))
-    return feats, matches
-
-
-def _run(capsys, tmp_path, feats, matches):
-    out = tmp_path / "out.h5"
-    code = main(["clean-h5", "--features", str(feats), "--matches", str(matches),
-                 "--out", str(out), "--no-rerun"])
-    return code, capsys.readouterr(), out
+    chains = (np.arange(M), np.arange(M), np.roll(np.arange(M), 1))
+    return write_h5(d, NAMES, M, lambda k: chains[k].astype(m0_dtype))
 
 
 def test_signed_matches_that_need_cuts_are_cleaned(tmp_path, capsys):
     feats, matches = _write(tmp_path)
-    code, captured, out = _run(capsys, tmp_path, feats, matches)
+    code, captured, out = run_clean_h5(capsys, tmp_path, feats, matches)
     assert code == 0 and out.exists(), captured.err
     with h5py.File(out) as fd:
         assert (fd[names_to_pair("a.jpg", "c.jpg")]["matches0"][()] == -1).any() or \
@@ -49,7 +32,7 @@ def test_unsigned_matches0_without_a_wrapped_minus_one_is_refused(tmp_path, caps
     # write -1 into a uint16 dataset: OverflowError, a traceback, exit 1
     feats, matches = _write(tmp_path, np.uint16)
     before = matches.read_bytes()
-    code, captured, out = _run(capsys, tmp_path, feats, matches)
+    code, captured, out = run_clean_h5(capsys, tmp_path, feats, matches)
     assert code == 2 and not out.exists() and "Traceback" not in captured.err
     assert captured.err.strip().splitlines()[-1] == (
         f"error: {matches}: matches0 of pair 'a.jpg/b.jpg' is stored as uint16, which cannot "
@@ -67,7 +50,7 @@ def test_float64_keypoints_past_float32_are_refused_not_read_as_inf(tmp_path, ca
         kp[3] = [1e40, 5.0]
         del fd["b.jpg/keypoints"]
         fd["b.jpg"].create_dataset("keypoints", data=kp)
-    code, captured, out = _run(capsys, tmp_path, feats, matches)
+    code, captured, out = run_clean_h5(capsys, tmp_path, feats, matches)
     assert code == 2 and not out.exists() and "Traceback" not in captured.err
     assert "RuntimeWarning" not in captured.err
     assert captured.err.strip().splitlines()[-1] == (
