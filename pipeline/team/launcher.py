@@ -171,10 +171,13 @@ def _dies_with(parent_pid: int):
 
 class _ForkedRobot:
     """A robot forked by the zygote, seen like a :class:`subprocess.Popen` (pid, poll, wait,
-    kill); its exit code comes from the zygote's ``exit`` line."""
+    kill); its exit code comes from the zygote's ``exit`` line. ``gone`` is set once the
+    zygote's lines ended (it died, and its robots with it): no exit line comes any more, and
+    :meth:`wait` returns at once (``None`` for a robot whose exit was not reported)."""
 
-    def __init__(self, i: int, pid: int, codes: dict, cv: threading.Condition) -> None:
-        self.i, self.pid, self._codes, self._cv = int(i), int(pid), codes, cv
+    def __init__(self, i: int, pid: int, codes: dict, cv: threading.Condition,
+                 gone: threading.Event) -> None:
+        self.i, self.pid, self._codes, self._cv, self._gone = int(i), int(pid), codes, cv, gone
 
     @property
     def returncode(self):
@@ -186,12 +189,12 @@ class _ForkedRobot:
     def wait(self, timeout: float | None = None):
         end = None if timeout is None else time.monotonic() + timeout
         with self._cv:
-            while self.i not in self._codes:
+            while self.i not in self._codes and not self._gone.is_set():
                 left = None if end is None else end - time.monotonic()
                 if left is not None and left <= 0:
                     raise subprocess.TimeoutExpired(f"robot {self.i}", timeout)
                 self._cv.wait(0.05 if left is None else min(left, 0.05))
-        return self._codes[self.i]
+        return self._codes.get(self.i)
 
     def kill(self) -> None:
         if self.i in self._codes:  # reaped: its pid may belong to another process by now
@@ -200,22 +203,36 @@ class _ForkedRobot:
             os.kill(self.pid, signal.SIGKILL)
 
 
-def _read_zygote(stream, procs: dict, codes: dict, cv: threading.Condition) -> None:
-    """Reader thread: the zygote's ``pid I PID`` and ``exit I CODE`` lines."""
-    for raw in stream:
-        parts = raw.decode(errors="replace").split()
-        if len(parts) != 3 or parts[0] not in ("pid", "exit"):
-            continue
-        _note_robot(parts[0], int(parts[1]), int(parts[2]), procs, codes, cv)
+def _read_zygote(stream, procs: dict, codes: dict, cv: threading.Condition,
+                 gone: threading.Event) -> None:
+    """Reader thread: the zygote's ``pid I PID`` and ``exit I CODE`` lines; ``gone`` is set
+    when they end."""
+    try:
+        for raw in stream:
+            parts = raw.decode(errors="replace").split()
+            if len(parts) != 3 or parts[0] not in ("pid", "exit"):
+                continue
+            _note_robot(parts[0], int(parts[1]), int(parts[2]), procs, codes, cv, gone)
+    except (OSError, ValueError):  # the stream closed under the reader
+        pass
+    finally:
+        _zygote_gone(cv, gone)
+
+
+def _zygote_gone(cv: threading.Condition, gone: threading.Event) -> None:
+    """The zygote's lines ended: no robot's exit will be reported any more."""
+    with cv:
+        gone.set()
+        cv.notify_all()
 
 
 def _note_robot(kind: str, i: int, v: int, procs: dict, codes: dict,
-                cv: threading.Condition) -> None:
+                cv: threading.Condition, gone: threading.Event) -> None:
     """Record a zygote's ``pid`` (``v`` the pid) or ``exit`` (``v`` the code) line of robot
     ``i``."""
     with cv:
         if kind == "pid":
-            procs[i] = _ForkedRobot(i, v, codes, cv)
+            procs[i] = _ForkedRobot(i, v, codes, cv, gone)
         else:
             codes[i] = v
         cv.notify_all()
@@ -232,8 +249,9 @@ class SharedZygote:
 
     def __init__(self) -> None:
         self.proc: subprocess.Popen | None = None
-        self.teams: dict = {}       # tag -> (procs, codes, cv)
+        self.teams: dict = {}       # tag -> (procs, codes, cv, gone, the zygote's Popen)
         self.ended: set = set()     # tags of teams that ended
+        self.dead: set = set()      # the zygote Popens whose lines ended
         self.lock = threading.Lock()
         self.count = 0
         self._tmp = tempfile.TemporaryDirectory(prefix="fm-zygote-")
@@ -245,39 +263,54 @@ class SharedZygote:
 
     def _start(self, env: dict) -> None:
         self.close_process()
-        self._log = open(self.log_path, "ab")  # noqa: SIM115 - closed in close_process
+        # each zygote its own log: the error of one that died is not read as the next one's
+        self._log = open(self.log_path, "wb")  # noqa: SIM115 - closed in close_process
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "pipeline.team.zygote", "--serve"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env,
             process_group=0, preexec_fn=_dies_with(os.getpid()))
-        threading.Thread(target=self._read, args=(self.proc.stdout,), daemon=True).start()
+        threading.Thread(target=self._read, args=(self.proc, self.proc.stdout),
+                         daemon=True).start()
 
-    def _read(self, stream) -> None:
-        for raw in stream:
-            parts = raw.decode(errors="replace").split()
-            if len(parts) != 4 or parts[0] not in ("pid", "exit"):
-                continue
-            tag, i, v = parts[1], int(parts[2]), int(parts[3])
+    def _read(self, proc, stream) -> None:
+        try:
+            for raw in stream:
+                parts = raw.decode(errors="replace").split()
+                if len(parts) != 4 or parts[0] not in ("pid", "exit"):
+                    continue
+                tag, i, v = parts[1], int(parts[2]), int(parts[3])
+                with self.lock:
+                    team = self.teams.get(tag)
+                    late = tag in self.ended
+                if late and parts[0] == "pid":
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(v, signal.SIGKILL)
+                if team is not None:
+                    _note_robot(parts[0], i, v, *team[:4])
+        except (OSError, ValueError):  # the stream closed under the reader
+            pass
+        finally:
+            # this zygote died (its robots with it): its teams hear of no more exits
             with self.lock:
-                team = self.teams.get(tag)
-                late = tag in self.ended
-            if late and parts[0] == "pid":
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(v, signal.SIGKILL)
-            if team is not None:
-                _note_robot(parts[0], i, v, *team)
+                self.dead.add(proc)
+                served = [t for t in self.teams.values() if t[4] is proc]
+            for _, _, cv, gone, _ in served:
+                _zygote_gone(cv, gone)
 
     def start_team(self, team_path: Path, workdir: Path, procs: dict, codes: dict,
-                   cv: threading.Condition, env: dict) -> str:
+                   cv: threading.Condition, env: dict, gone: threading.Event) -> str:
         """Ask the zygote (started now if it is not running) to fork the robots of the team
         in ``team_path``; their ``pid``/``exit`` lines go to ``procs``/``codes`` under
-        ``cv``. Returns the team's tag."""
+        ``cv``, and ``gone`` is set if the zygote dies. Returns the team's tag."""
         if not self.alive():
             self._start(env)
         with self.lock:
             self.count += 1
             tag = str(self.count)
-            self.teams[tag] = (procs, codes, cv)
+            self.teams[tag] = (procs, codes, cv, gone, self.proc)
+            dead = self.proc in self.dead
+        if dead:  # its lines ended before the team was noted
+            _zygote_gone(cv, gone)
         line = json.dumps({"tag": tag, "team": str(team_path), "workdir": str(workdir),
                            "launched_at": repr(time.time())})
         try:
@@ -480,13 +513,15 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             old_handlers[sig] = signal.signal(sig, on_signal)
     t0 = time.monotonic()
     zygote = None
+    gone = threading.Event()  # the zygote's lines ended
     shared, tag = (_within["zygote"] if fork else None), None
     zygote_log = workdir / "zygote.log" if shared is None else shared.log_path
     try:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
         if shared is not None:
-            tag = shared.start_team(team_path, workdir, procs, run.exit_codes, observer.cv, env)
+            tag = shared.start_team(team_path, workdir, procs, run.exit_codes, observer.cv, env,
+                                    gone)
             zygote = shared.proc
         elif fork:
             env[LAUNCHED_AT_ENV] = repr(time.time())
@@ -497,7 +532,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 preexec_fn=_dies_with(os.getpid()))
             pgid = zygote.pid
             threading.Thread(target=_read_zygote, daemon=True,
-                             args=(zygote.stdout, procs, run.exit_codes, observer.cv)).start()
+                             args=(zygote.stdout, procs, run.exit_codes, observer.cv,
+                                   gone)).start()
         else:
             for i in range(team.n):
                 env[LAUNCHED_AT_ENV] = repr(time.time())
@@ -516,10 +552,22 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 for i, p in list(procs.items()):
                     if i not in run.exit_codes and p.poll() is not None:
                         run.exit_codes[i] = p.returncode
-                if zygote is not None and zygote.poll() is not None and len(procs) < team.n:
-                    raise TeamError("the robots' zygote (python -m pipeline.team.zygote) ended "
-                                    f"with exit code {zygote.returncode} before starting "
-                                    f"every robot: {_tail(zygote_log)}")
+                running = [i for i in range(team.n)
+                           if i not in observer.results and i not in run.exit_codes]
+                if gone.is_set() and running:
+                    # the zygote died: its robots die with it (PR_SET_PDEATHSIG) and no exit
+                    # of theirs comes
+                    code = None
+                    with contextlib.suppress(Exception):
+                        code = zygote.wait(timeout=1)
+                    when = ("before starting every robot" if len(procs) < team.n else
+                            f"while robot {running[0]} ({team.endpoint(running[0])}) ran, "
+                            "which ended with it")
+                    why = _tail(zygote_log)
+                    raise TeamError("the robots' zygote (python -m pipeline.team.zygote) ended"
+                                    + ("" if code is None else f" with exit code {code}")
+                                    + f" {when}; nothing was kept: run again"
+                                    + (f" ({why})" if why else ""))
                 if kill is not None and kill[0] not in run.killed and kill[0] in procs:
                     k, status, delay = kill
                     if status in observer.seen.get(k, ()):
