@@ -279,14 +279,15 @@ class SharedZygote:
                 if len(parts) != 4 or parts[0] not in ("pid", "exit"):
                     continue
                 tag, i, v = parts[1], int(parts[2]), int(parts[3])
+                # under the lock: a team ending now (end_team) either finds the robot noted
+                # among its own, which it kills, or has ended before, and it is killed here
                 with self.lock:
                     team = self.teams.get(tag)
-                    late = tag in self.ended
-                if late and parts[0] == "pid":
-                    with contextlib.suppress(ProcessLookupError):
-                        os.kill(v, signal.SIGKILL)
-                if team is not None:
-                    _note_robot(parts[0], i, v, *team[:4])
+                    if tag in self.ended and parts[0] == "pid":
+                        with contextlib.suppress(ProcessLookupError):
+                            os.kill(v, signal.SIGKILL)
+                    if team is not None:
+                        _note_robot(parts[0], i, v, *team[:4])
         except (OSError, ValueError):  # the stream closed under the reader
             pass
         finally:
