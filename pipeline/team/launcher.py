@@ -254,8 +254,8 @@ class SharedZygote:
         self.dead: set = set()      # the zygote Popens whose lines ended
         self.lock = threading.Lock()
         self.count = 0
-        self._tmp = tempfile.TemporaryDirectory(prefix="fm-zygote-")
-        self.log_path = Path(self._tmp.name) / "zygote.log"
+        # the zygote's standard error: a file without a name (nothing is left behind when
+        # the launcher is killed), each zygote its own
         self._log = None
 
     def alive(self) -> bool:
@@ -263,8 +263,7 @@ class SharedZygote:
 
     def _start(self, env: dict) -> None:
         self.close_process()
-        # each zygote its own log: the error of one that died is not read as the next one's
-        self._log = open(self.log_path, "wb")  # noqa: SIM115 - closed in close_process
+        self._log = tempfile.TemporaryFile(prefix="fm-zygote-")  # noqa: SIM115 - closed in close_process
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "pipeline.team.zygote", "--serve"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env,
@@ -349,9 +348,17 @@ class SharedZygote:
             self._log.close()
             self._log = None
 
+    def log_tail(self) -> str:
+        """The last error line of the running (or last) zygote's standard error."""
+        if self._log is None:
+            return ""
+        fd = self._log.fileno()
+        size = os.fstat(fd).st_size
+        return _last_lines(os.pread(fd, min(size, 1 << 16), max(0, size - (1 << 16)))
+                           .decode(errors="replace"))
+
     def close(self) -> None:
         self.close_process()
-        self._tmp.cleanup()
 
 
 @contextlib.contextmanager
@@ -516,7 +523,6 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     zygote = None
     gone = threading.Event()  # the zygote's lines ended
     shared, tag = (_within["zygote"] if fork else None), None
-    zygote_log = workdir / "zygote.log" if shared is None else shared.log_path
     try:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -564,7 +570,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     when = ("before starting every robot" if len(procs) < team.n else
                             f"while robot {running[0]} ({team.endpoint(running[0])}) ran, "
                             "which ended with it")
-                    why = _tail(zygote_log)
+                    why = (_tail(workdir / "zygote.log") if shared is None else
+                           shared.log_tail())
                     raise TeamError("the robots' zygote (python -m pipeline.team.zygote) ended"
                                     + ("" if code is None else f" with exit code {code}")
                                     + f" {when}; nothing was kept: run again"
@@ -653,9 +660,14 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
 
 def _tail(path: Path, lines: int = 1) -> str:
     try:
-        text = path.read_text(errors="replace").strip().splitlines()
+        return _last_lines(path.read_text(errors="replace"), lines)
     except OSError:
         return ""
+
+
+def _last_lines(text: str, lines: int = 1) -> str:
+    """The last ``lines`` lines of ``text``; with one, its last error line (or last line)."""
+    text = text.strip().splitlines()
     if lines == 1:
         errs = [t for t in text if t.startswith("error:") or "Error" in t]
         return (errs or text or [""])[-1]
