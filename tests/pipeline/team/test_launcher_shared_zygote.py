@@ -4,10 +4,10 @@ that ends, well or not, leaves none of its robots behind, and the zygote ends wi
 
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from zygote_teams import EDGES, FPC, LINKS, children
 
 from pipeline.errors import TeamError
 
@@ -15,14 +15,8 @@ from pipeline.errors import TeamError
 @pytest.fixture()
 def links(tmp_path):
     p = tmp_path / "in.csv"
-    # two conflictive sets over four cameras: robots must talk to cut them
-    p.write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n1,0,2,0\n0,1,2,0\n2,1,3,0\n3,0,0,2\n"
-                 "1,1,3,0\n")
+    p.write_text(LINKS)
     return p
-
-
-FPC = [3, 2, 2, 1]
-EDGES = [[0, 1], [1, 2], [0, 2], [2, 3], [0, 3], [1, 3]]
 
 
 def _resolve(links, work):
@@ -30,19 +24,6 @@ def _resolve(links, work):
 
     res = resolve_links_file(links, FPC, EDGES, workdir=work)
     return res.deleted.copy(), res.stats["team"]
-
-
-def _children(pid: int) -> list[int]:
-    """Live processes whose parent is ``pid``."""
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid and fields[0] != "Z":
-            out.append(int(stat.parent.name))
-    return out
 
 
 def test_teams_in_one_block_fork_from_one_zygote_with_the_same_results(links, tmp_path):
@@ -54,7 +35,7 @@ def test_teams_in_one_block_fork_from_one_zygote_with_the_same_results(links, tm
         pid = zygote.proc.pid
         second, summary = _resolve(links, tmp_path / "second")
         assert zygote.proc.pid == pid and zygote.count == 2
-        assert _children(pid) == []  # each team's robots ended with it
+        assert children(pid) == []  # each team's robots ended with it
     np.testing.assert_array_equal(first, alone)
     np.testing.assert_array_equal(second, alone)
     assert alone.any()  # the rule cut something: the robots talked
@@ -85,9 +66,9 @@ def test_a_team_stopped_early_leaves_no_robot_and_the_next_team_runs(links, tmp_
         with pytest.raises(TeamError, match="did not end within"):
             launch_team(team, tmp_path / "stopped", timeout_s=0.01)
         t0 = time.monotonic()
-        while _children(zygote.proc.pid) and time.monotonic() - t0 < 10:
+        while children(zygote.proc.pid) and time.monotonic() - t0 < 10:
             time.sleep(0.05)
-        assert _children(zygote.proc.pid) == []
+        assert children(zygote.proc.pid) == []
         again, _ = _resolve(links, tmp_path / "again")
     assert again.any()
 

@@ -10,27 +10,13 @@ import time
 from pathlib import Path
 
 import pytest
+from zygote_teams import EDGES, FPC, LINKS, children
 
 from pipeline.errors import TeamError
 
-FPC = [3, 2, 2, 1]
-EDGES = [[0, 1], [1, 2], [0, 2], [2, 3], [0, 3], [1, 3]]
-
-
-def _children(pid: int) -> list[int]:
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid and fields[0] != "Z":
-            out.append(int(stat.parent.name))
-    return out
-
 
 def _zygote_of(pid: int) -> int | None:
-    for child in _children(pid):
+    for child in children(pid):
         with contextlib.suppress(OSError):
             if b"pipeline.team.zygote" in Path(f"/proc/{child}/cmdline").read_bytes():
                 return child
@@ -43,7 +29,7 @@ def _kill_zygote_once_its_robots_run(n: int, seen: list) -> None:
     end = time.monotonic() + 30
     while time.monotonic() < end:
         z = _zygote_of(os.getpid())
-        robots = _children(z) if z is not None else []
+        robots = children(z) if z is not None else []
         if len(robots) == n:
             for r in robots:
                 with contextlib.suppress(ProcessLookupError):
@@ -59,7 +45,7 @@ def test_a_zygote_killed_mid_team_stops_the_team_at_once(shared, tmp_path):
     from pipeline.team.launcher import launch_team, make_team, shared_zygote
 
     links = tmp_path / "in.csv"
-    links.write_text("cam_i,feat_i,cam_j,feat_j\n0,0,1,0\n1,0,2,0\n0,1,2,0\n2,1,3,0\n")
+    links.write_text(LINKS)
     team = make_team("zygote-death", EDGES, {"kind": "links", "links": str(links),
                                              "features_per_camera": FPC}, n=4)
     seen: list = []
