@@ -19,9 +19,14 @@ def test_a_robot_restarted_with_the_same_id_is_reported_lost():
     def robot(i, first_process, header):
         if first_process:  # started, then killed before publishing
             s = open_session([team.endpoint(i)], [team.observer], f"robot {i}")
+            # the observer hears it only once connected (a loaded machine takes a while)
+            t0 = time.monotonic()
+            while not list(s.info.peers_zid()) and time.monotonic() - t0 < 30:
+                time.sleep(0.01)
             token = s.liveliness().declare_token(key(team.name, "live", i))
-            s.put(key(team.name, "status", i), "started")
-            time.sleep(1.0)
+            for _ in range(10):  # said again: a put before the observer's subscription reached
+                s.put(key(team.name, "status", i), "started")  # this session is lost
+                time.sleep(0.1)
             token.undeclare()
             s.close()
             time.sleep(0.5)
