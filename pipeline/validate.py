@@ -29,7 +29,7 @@ from pipeline.errors import InputError
 
 __all__ = ["not_empty", "MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
            "tolerance_px", "lowe_ratio", "threads", "seed", "render_size", "robots",
-           "focal_px_ok", "check_focal"]
+           "focal_px_ok", "check_focal", "is_utf8_name"]
 
 MAX_THREADS = 1024
 MAX_RENDER_SIDE = 8192
@@ -117,6 +117,20 @@ def is_number(v) -> bool:
     (True, True, False, False)
     """
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def is_utf8_name(name: str) -> bool:
+    """Whether a file name decoded from the file system is UTF-8 text (bytes that are not
+    become lone surrogates, which no UTF-8 output can hold).
+
+    >>> is_utf8_name("caf\u00e9.jpg"), is_utf8_name(b"caf\xe9.jpg".decode("utf-8", "surrogateescape"))
+    (True, False)
+    """
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def seed(value, flag: str) -> int:

@@ -60,6 +60,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from pipeline.types import RunRecord
+from pipeline.validate import is_utf8_name
 
 __all__ = [
     "CUT_COLORS",
@@ -682,14 +683,6 @@ def _blueprint(record: RunRecord, posed: list[bool], max_image_views: int,
 
 
 
-def _is_utf8(text: str) -> bool:
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:  # bytes that are not UTF-8, read back as surrogates
-        return False
-    return True
-
-
 @contextlib.contextmanager
 def recording_file(path: str | os.PathLike):
     """Yield ``(tmp, sink)``: the temporary file beside ``path`` that a recording is written to
@@ -700,10 +693,10 @@ def recording_file(path: str | os.PathLike):
     temporary name spells such bytes as ``\\xNN``.
     """
     path = Path(path)
-    name = path.name if _is_utf8(path.name) else os.fsencode(path.name).decode(
+    name = path.name if is_utf8_name(path.name) else os.fsencode(path.name).decode(
         "ascii", "backslashreplace")
     tmp = path.with_name(f".{name}.{uuid.uuid4().hex[:8]}.tmp")
-    if _is_utf8(str(tmp)):
+    if is_utf8_name(str(tmp)):
         yield tmp, str(tmp)
         return
     fd = os.open(tmp.parent, os.O_RDONLY | os.O_DIRECTORY)

@@ -30,7 +30,7 @@ from PIL import ExifTags, Image, UnidentifiedImageError
 
 from pipeline.errors import InputError
 from pipeline.types import View
-from pipeline.validate import check_focal, focal_px_ok
+from pipeline.validate import check_focal, focal_px_ok, is_utf8_name
 
 __all__ = [
     "image_paths",
@@ -153,16 +153,6 @@ def _image_files(directory: Path) -> list[Path]:
             f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "
             f"two cameras; add more images" + (f" ({'; '.join(left_out)})" if left_out else ""))
     return images
-
-
-def is_utf8_name(name: str) -> bool:
-    """Whether a file name decoded from the file system is UTF-8 text (bytes that are not
-    become lone surrogates, which no UTF-8 output can hold)."""
-    try:
-        name.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
 
 
 def _holds_images(path: Path) -> bool:
