@@ -120,7 +120,7 @@ def is_number(v) -> bool:
 
 
 def is_utf8_name(name: str) -> bool:
-    """Whether a file name decoded from the file system is UTF-8 text (bytes that are not
+    r"""Whether a file name decoded from the file system is UTF-8 text (bytes that are not
     become lone surrogates, which no UTF-8 output can hold).
 
     >>> is_utf8_name("caf\u00e9.jpg"), is_utf8_name(b"caf\xe9.jpg".decode("utf-8", "surrogateescape"))
