@@ -14,6 +14,7 @@ def test_a_robot_restarted_with_the_same_id_is_reported_lost():
     team = make_team("restarted", [[0, 1]], {"kind": "links", "links": "x.csv",
                                              "features_per_camera": [1, 1]}, n=2)
     stop = threading.Event()
+    first_gone = threading.Event()  # robot 1's first process ended
     logs = []
 
     def robot(i, first_process, header):
@@ -29,7 +30,10 @@ def test_a_robot_restarted_with_the_same_id_is_reported_lost():
                 time.sleep(0.1)
             token.undeclare()
             s.close()
+            first_gone.set()
             time.sleep(0.5)
+        else:  # the survivor wrote robot 1 off once its first process had ended
+            first_gone.wait(60)
         s = open_session([team.endpoint(i)], [team.observer], f"robot {i}")
         token = s.liveliness().declare_token(key(team.name, "live", i))
         s.put(key(team.name, "status", i), "started")
