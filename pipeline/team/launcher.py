@@ -262,8 +262,8 @@ class SharedZygote:
         return self.proc is not None and self.proc.poll() is None
 
     def _start(self, env: dict) -> None:
-        self.close_process()
-        self._log = tempfile.TemporaryFile(prefix="fm-zygote-")  # noqa: SIM115 - closed in close_process
+        self.close()
+        self._log = tempfile.TemporaryFile(prefix="fm-zygote-")  # noqa: SIM115 - closed in close
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "pipeline.team.zygote", "--serve"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env,
@@ -331,8 +331,8 @@ class SharedZygote:
         with self.lock:
             self.teams.pop(tag, None)
 
-    def close_process(self) -> None:
-        """Stop the zygote and whatever robots it still has."""
+    def close(self) -> None:
+        """Stop the zygote and whatever robots it still has (the next team starts another)."""
         if self.proc is not None:
             with contextlib.suppress(Exception):
                 self.proc.stdin.close()
@@ -356,9 +356,6 @@ class SharedZygote:
         size = os.fstat(fd).st_size
         return _last_lines(os.pread(fd, min(size, 1 << 16), max(0, size - (1 << 16)))
                            .decode(errors="replace"))
-
-    def close(self) -> None:
-        self.close_process()
 
 
 @contextlib.contextmanager
