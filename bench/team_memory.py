@@ -11,7 +11,8 @@ For each team size ``N`` (``--robots``; a rendered formation of ``N`` robots on 
 graph, each robot ``N - 1`` neighbours), the same ``run-formation --transport zenoh`` run
 (``--size``, ``--max-features``, no fusion, no recording) with the option off and on, side by
 side in one run (``--repeat`` times, alternating): the peak private memory of every robot
-process (sampled every 0.2 s while the team runs; min / median / max over the robots), the
+process (sampled every 0.02 s while the team runs: robots forked by a warm zygote may live
+under 0.2 s; min / median / max over the robots), the
 wall time of the team and the CPU time of the whole run (this process and its children),
 and whether the two runs kept the same links (``links.csv``: statuses and reasons). Prints a
 table and saves ``runs/bench-team-memory/results.json``.
@@ -68,10 +69,10 @@ def private_mb(pid: int) -> float | None:
 
 
 class RobotSampler:
-    """Samples, every ``period_s``, the private memory of the grandchildren of this process
+    """Samples, every ``period_s`` (or the time a sweep took, if longer), the private memory of the grandchildren of this process
     (the robots the zygote forked; the zygote itself is a child) and keeps each one's peak."""
 
-    def __init__(self, period_s: float = 0.2) -> None:
+    def __init__(self, period_s: float = 0.02) -> None:
         self.period_s = period_s
         self.peak: dict[int, float] = {}
         self._stop = threading.Event()
@@ -80,12 +81,15 @@ class RobotSampler:
     def _run(self) -> None:
         me = os.getpid()
         while not self._stop.is_set():
+            t0 = time.perf_counter()
             for zygote in _children(me):
                 for robot in _children(zygote):
                     v = private_mb(robot)
                     if v is not None:
                         self.peak[robot] = max(self.peak.get(robot, 0.0), v)
-            self._stop.wait(self.period_s)
+            # a sweep reads ~0.7 ms per robot: at least as long again idle, so that sampling
+            # a large team takes at most half a core from it
+            self._stop.wait(max(self.period_s, time.perf_counter() - t0))
 
     def __enter__(self):
         self._thread.start()
