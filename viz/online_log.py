@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from viz.rerun_log import check_recording_whole, recording_file
+from viz.rerun_log import check_recording_whole, record_to_memory, recording_file, write_recording
 
 __all__ = ["log_online", "STEP_SCALARS"]
 
@@ -62,7 +62,7 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
     tmp, sink = files.enter_context(recording_file(path))
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
-        rec.save(sink)
+        stream = record_to_memory(rec)
         rec.set_log_time_enabled(False)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for r in steps:
@@ -86,7 +86,7 @@ def log_online(path: str | os.PathLike, sequence, online, steps: list[dict],
                 f"conflictive features found, {r['cut']} cut ({r.get('cut_history', 0)} by the "
                 f"history check){by_fusion}, {r['conflictive_sets_after']} conflictive sets "
                 "after"))
-        rec.disconnect()  # writes the footer; the file does not read back without it
+        write_recording(rec, stream, tmp, path)
         check_recording_whole(sink, path)
         os.replace(tmp, path)
     except BaseException:

@@ -68,6 +68,8 @@ __all__ = [
     "PAIR_KEPT_SAMPLE",
     "case_why",
     "check_recording_whole",
+    "record_to_memory",
+    "write_recording",
     "cut_summary",
     "KEYPOINT_CLASSES",
     "LINK_COLORS",
@@ -706,6 +708,38 @@ def recording_file(path: str | os.PathLike):
         os.close(fd)
 
 
+def record_to_memory(rec: rr.RecordingStream, blueprint=None) -> rr.BinaryStream:
+    """Send ``rec``'s log to a stream held in memory (read by :func:`write_recording`), with
+    ``blueprint`` as its default (as ``rec.save(..., default_blueprint=...)`` gives it).
+
+    A recording is written by this process, not by Rerun's file sink: that sink reports a
+    failed write only in its log and can then block for ever in ``disconnect`` (seen under a
+    64 KB and a 256 KB file-size limit, 2 of 9 runs never ended), so a full disk would hang
+    the command after its whole run. The recording is held whole until written (a few MB:
+    JPEG images, keypoints and links)."""
+    stream = rec.binary_stream()
+    if blueprint is not None:
+        rec.send_blueprint(blueprint, make_active=False, make_default=True)
+    return stream
+
+
+def write_recording(rec: rr.RecordingStream, stream: rr.BinaryStream, tmp: Path,
+                    path: str | os.PathLike) -> None:
+    """End ``rec`` (its footer) and write everything ``stream`` holds to ``tmp``, flushed to
+    the disk: a failed write (a full disk, a file-size limit, a quota) is an ``OSError``
+    naming ``path``, the recording it was for."""
+    rec.disconnect()  # writes the footer; the file does not read back without it
+    data = stream.read(flush=True) or b""
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        raise OSError(e.errno, f"the recording ({len(data) / 1e6:.1f} MB) could not be written: "
+                      f"{e.strerror}; nothing was put in its place", str(path)) from None
+
+
 def check_recording_whole(sink: str | os.PathLike, path: str | os.PathLike) -> None:
     """OSError naming ``path`` unless the recording file ``sink`` was written in full.
 
@@ -811,8 +845,9 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                 rr.spawn(connect=False)
             url = None if live in ("spawn", "connect") else live
             rec.set_sinks(rr.FileSink(sink), rr.GrpcSink(url), default_blueprint=blueprint)
+            stream = None
         else:
-            rec.save(sink, default_blueprint=blueprint)
+            stream = record_to_memory(rec, blueprint)
         rec.set_log_time_enabled(False)
         if recording_name:
             rec.send_recording_name(recording_name)
@@ -871,7 +906,10 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
                 static=True)
         rec.log("report", rr.TextDocument(record.report_markdown or "_no report_",
                                           media_type=rr.MediaType.MARKDOWN), static=True)
-        rec.disconnect()  # writes the footer; the file does not read back without it
+        if stream is None:
+            rec.disconnect()  # writes the footer; the file does not read back without it
+        else:
+            write_recording(rec, stream, tmp, path)
         check_recording_whole(sink, path)
         os.replace(tmp, path)
     except BaseException:
