@@ -47,9 +47,11 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
 3. **Decision**: the winner (``argmax_h v_i^h``; exact mode: the decision of the flood) and the
    outlier test of
    :func:`~pipeline.fusion.landmarks.fuse_tracks` (voted out, and its own keypoint does not
-   reproject onto the fused landmark within the pixel gate). The robot cuts its own links at
-   its outlier features and tells each neighbour which of its features it declared outliers
-   (``fusion-cut``, only when there are some); the neighbour cuts its ends of those links.
+   reproject onto the fused landmark within the pixel gate). The robot tells each neighbour
+   which of its features it declared outliers (``fusion-cut``, only when there are some); each
+   end then cuts a link whose ends are one outlier and one not (an outlier leaves its
+   landmark, a link of two outliers stays: :mod:`pipeline.fusion.landmarks`, "Outliers leave
+   the landmark"), both ends deciding alike.
 
 Termination
 -----------
@@ -637,12 +639,14 @@ class FusionRobot:
                 for j in self.neighbours if j in self.alive]
 
     def cut_rows(self, link_nbr, link_r, link_s) -> np.ndarray:
-        """Rows of the robot's link table cut by the fusion stage (its own outlier features,
-        and its neighbours' as they told it), ``(L_i,)`` bool."""
-        cut = np.isin(link_r, self.outlier_feats)
+        """Rows of the robot's link table cut by the fusion stage, ``(L_i,)`` bool: those whose
+        ends are one outlier and one not (its own outlier features, its neighbours' as they
+        told it; :mod:`pipeline.fusion.landmarks`, "Outliers leave the landmark")."""
+        own = np.isin(link_r, self.outlier_feats)
+        theirs = np.zeros(len(own), dtype=bool)
         for j, feats in self.cuts_from.items():
-            cut |= (link_nbr == j) & np.isin(link_s, feats)
-        return cut
+            theirs |= (link_nbr == j) & np.isin(link_s, feats)
+        return own ^ theirs
 
 
 # --------------------------------------------------------------------------------------------

@@ -231,7 +231,7 @@ def fusion_of_team(team, results: dict, ledger,
     fused landmarks, read from what the robots published (reporting only).
 
     A link still kept after consistency is cut as ``fusion-outlier`` when either end's robot
-    cut it (its own outlier observation, or its neighbour's as the neighbour told it), in the
+    cut it (one end an outlier observation and the other not, each end told the other's), in the
     team's fusion round count (the largest a robot heard with the termination wave). The fused
     landmark of a track is formed as the simulator forms it
     (:func:`pipeline.fusion.points.fused_points`, from every robot's final estimate); its id
