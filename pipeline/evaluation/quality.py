@@ -32,7 +32,8 @@ __all__ = ["quality_evidence", "MAX_CHECKED"]
 
 MAX_CHECKED = 50_000
 """Links the check classifies at most; beyond it (or beyond :data:`MAX_ENTRIES`), links
-drawn in a random order (a fixed seed) until either is reached."""
+drawn in a random order (a fixed seed, over the links sorted by their ends: the rows' order
+in the file draws nothing) until either is reached."""
 MAX_ENTRIES = 2_000_000
 """Neighbour-list entries the check reads at most (a link costs the degrees of its two ends):
 its cost follows these, not the input's triangles (a dense 101-image input, 151,500 links of
@@ -102,7 +103,11 @@ def quality_evidence(features_per_camera, links: Links, max_checked: int = MAX_C
     if L <= max_checked and int(cost.sum()) <= max_entries:
         pick = np.arange(L)
     else:
-        perm = np.random.default_rng(0).permutation(L)[:max_checked]
+        # the draw is over the links, not the rows: the same links in another row order (or
+        # with their ends swapped) are checked alike
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        canon = np.lexsort((q, hi, lo))
+        perm = canon[np.random.default_rng(0).permutation(L)[:max_checked]]
         take = max(1, int(np.searchsorted(np.cumsum(cost[perm]), max_entries, side="right")))
         pick = np.sort(perm[:take])
     pa, pb = a[pick], b[pick]
