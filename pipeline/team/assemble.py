@@ -150,6 +150,29 @@ class _LinkIndex:
         return pos
 
 
+def _team_phases(heads: dict, phases: list) -> list:
+    """One robot's phase records with the team's counts where the simulator reports the
+    team's (:mod:`pipeline.consistency.engines.driver`): a detection's
+    ``conflictive_features`` summed over the robots' own (each robot counts only its
+    features), and a resolution's ``conflictive_sets``, the sets the robots rooted
+    (``roots``, each set once). Every robot runs the same phases (the termination wave ends
+    each phase at all of them), so the records of one phase are those at the same place."""
+    out = []
+    for k, ph in enumerate(phases):
+        ph = dict(ph)
+        same = [h["run"]["phases"][k] for h in heads.values()
+                if len(h.get("run", {}).get("phases", [])) > k
+                and h["run"]["phases"][k].get("phase") == ph.get("phase")
+                and h["run"]["phases"][k].get("iteration") == ph.get("iteration")]
+        if ph.get("phase") == "detection" and "conflictive_features" in ph:
+            ph["conflictive_features"] = int(sum(p.get("conflictive_features", 0)
+                                                 for p in same))
+        if ph.get("phase") == "resolution" and "roots" in ph:
+            ph["conflictive_sets"] = int(sum(p.get("roots", 0) for p in same))
+        out.append(ph)
+    return out
+
+
 def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> ConsistencyResult:
     """The :class:`ConsistencyResult` of a team run, read from the robots' published logs."""
     n = team.n
@@ -189,7 +212,7 @@ def consistency_of_team(team, results: dict, links: Links, fpc, killed=()) -> Co
         detection_rounds=int(any_run.get("detection_rounds", 0)),
         resolution_rounds=int(any_run.get("resolution_rounds", 0)),
         closing_rounds=int(any_run.get("closing_rounds", 0)),
-        per_iteration=any_run.get("phases", []),
+        per_iteration=_team_phases(heads, any_run.get("phases", [])),
         messages=int(sum(msgs.values())), bytes=int(sum(byts.values())),
         messages_by_kind={k: v for k, v in msgs.items() if v},
         bytes_by_kind={k: v for k, v in byts.items() if v},

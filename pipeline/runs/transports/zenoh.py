@@ -538,6 +538,8 @@ def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
                  for p in head.get("run", {}).get("phases", []) if p.get("phase") == "resolution")
     if not res.stats["per_iteration"]:
         res.stats["per_iteration"].append({})
+    for p in res.stats["per_iteration"]:  # a pass's own count (consistency_of_team): the
+        p.pop("conflictive_sets", None)   # step sums the records, so the total goes once
     res.stats["per_iteration"][0]["conflictive_features"] = acted
     res.stats["per_iteration"][0]["conflictive_sets"] = rooted
 
