@@ -107,7 +107,8 @@ def quality_merge(features_per_camera, links, *, _uf=None) -> np.ndarray:
     A link is kept if it merges two clusters with disjoint cameras, or if its two ends already
     lie in one cluster. Links outside conflictive sets are always kept (their sets already
     hold each camera once), so the loop runs over the links of conflictive sets only. Ties in
-    quality are broken by input order.
+    quality are broken by the links' ends, lower camera pair first, then lower features (the
+    order of a run's links), so the rows' order of a links file changes nothing.
 
     Notes
     -----
@@ -124,7 +125,10 @@ def quality_merge(features_per_camera, links, *, _uf=None) -> np.ndarray:
     todo = np.flatnonzero(conflictive[a])
     if todo.size == 0:
         return kept
-    todo = todo[np.argsort(-links.quality[todo], kind="stable")]
+    # decreasing quality, ties by the link's ends (camera pair, then features; cam_i < cam_j),
+    # not by the row it came in: the same links in another order merge alike
+    todo = todo[np.lexsort((links.feat_j[todo], links.feat_i[todo], links.cam_j[todo],
+                            links.cam_i[todo], -links.quality[todo]))]
     parent: dict[int, int] = {}
     cams: dict[int, int] = {}
 
