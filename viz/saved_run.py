@@ -201,13 +201,13 @@ def read_run_folder(folder: str | Path) -> RunRecord:
 
 
 def _markdown(report: dict) -> str:
-    from pipeline.evaluation.report import report_markdown
+    from pipeline.evaluation.report import images_report_markdown, report_markdown
 
     if not (all(isinstance(report.get(k), dict) for k in ("before", "after", "resolution"))
             and all(isinstance(report.get(k) or {}, dict) for k in ("fusion", "faults"))):
         return ""  # a report without those sections as objects: no report panel
-    try:
-        return report_markdown(report)
+    try:  # a photo run's report: its reconstructions and warnings too, as the run shows it
+        return images_report_markdown(report) if "images" in report else report_markdown(report)
     except KeyError:  # a report whose sections lack a figure of the table
         return ""
 

@@ -22,7 +22,8 @@ __all__ = ["PAPER_TABLE_III_IV", "versions", "association_counts", "resolution_s
            "sets_solved",
            "fusion_section", "baselines_section", "baselines_beside", "baselines_lines", "resolution_quality_section",
            "matching_section", "report_markdown",
-           "mapping_markdown", "track_gt_points", "fused_point_errors"]
+           "mapping_markdown", "mapping_summaries_markdown", "images_report_markdown",
+           "track_gt_points", "fused_point_errors"]
 
 #: Aragüés et al., Tables III and IV (SURF, real images, no ground truth), formations (a)–(d),
 #: keyed by what each row counts. Table IV's fifth and sixth rows are read by the text beside
@@ -293,17 +294,46 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+_MAPPING_ROWS = (("Registered images", "registered_images"), ("Points", "points"),
+                 ("Mean track length", "mean_track_length"),
+                 ("Mean reprojection error [px]", "mean_reprojection_error"))
+
+
 def mapping_markdown(before, after) -> str:
     """Markdown rows of two incremental reconstructions (:class:`pipeline.colmap.MappingSummary`)."""
-    rows = [("Registered images", "registered_images"), ("Points", "points"),
-            ("Mean track length", "mean_track_length"),
-            ("Mean reprojection error [px]", "mean_reprojection_error")]
-    b, a = before.summary(), after.summary()
+    return mapping_summaries_markdown(before.summary(), after.summary())
+
+
+def mapping_summaries_markdown(b: dict, a: dict) -> str:
+    """:func:`mapping_markdown` of the two reconstructions' summaries (``MappingSummary.
+    summary()``, as a photo run's ``report.json`` holds them under ``triangulation``)."""
+    rows = _MAPPING_ROWS
     lines = ["", "| Reconstruction | before | after |", "|---|---:|---:|"]
     # a mean over no point is no figure (None in the summary), not a perfect 0
     lines += [f"| {label} | {NOT_DEFINED if b[key] is None else b[key]} | "
               f"{NOT_DEFINED if a[key] is None else a[key]} |" for label, key in rows]
     return "\n".join(lines) + "\n"
+
+
+def images_report_markdown(report: dict) -> str:
+    """The markdown of a photo run's report (``run-images``): :func:`report_markdown`, the
+    reconstructions before and after cleaning (``triangulation``) and the warnings
+    (``flags``); read from ``report`` alone, so the run and a reader of its ``report.json``
+    (:mod:`viz.saved_run`) show the same text."""
+    from pipeline.evaluation.flags import flags_markdown
+
+    md = report_markdown(report)
+    tri = report.get("triangulation")
+    if isinstance(tri, dict) and all(
+            isinstance(tri.get(k), dict) and all(key in tri[k] for _, key in _MAPPING_ROWS)
+            for k in ("before", "after")):
+        md += mapping_summaries_markdown(tri["before"], tri["after"])
+    flags = report.get("flags")
+    if isinstance(flags, list) and all(
+            isinstance(f, dict) and all(k in f for k in ("flag", "message", "likely_cause"))
+            for f in flags):
+        md += flags_markdown(flags)
+    return md
 
 
 def track_gt_points(all_gt: np.ndarray, tri) -> np.ndarray:

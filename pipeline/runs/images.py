@@ -473,11 +473,7 @@ def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, 
     _explain_flags(report["flags"], report["cleaning_effect"])
     for f in report["flags"]:
         timer.warn(f"{f['message']}. Likely cause: {f['likely_cause']}.")
-    from pipeline.evaluation.flags import flags_markdown
-
-    md = (sections.report_markdown(report) + sections.mapping_markdown(map_before, map_after)
-          + flags_markdown(report["flags"]))
-    return report, md
+    return report, sections.images_report_markdown(report)
 
 
 def _write(out: Path, config: ImagesConfig, report: dict, md: str, views, feats, cleaning,
