@@ -62,6 +62,8 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
     FileNotFoundError
         Nothing to open (with what to run first).
     """
+    from pipeline.progress import counted
+
     if target:
         p = Path(target)
         if p.is_file():
@@ -80,9 +82,12 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
             if found:  # several outputs of clean-db / clean-h5 in one folder
                 raise FileNotFoundError(f"{p}: {len(found)} recordings in this folder "
                                         f"({_names(found)}): give the one to open")
-            runs_in = sorted(q.parent for q in p.glob("*/recording.rrd"))
+            # a hidden folder is no run (the staging folder of a run killed before its
+            # folder was put in place), as for the newest recording below
+            runs_in = sorted(q.parent for q in p.glob("*/recording.rrd")
+                             if not q.parent.name.startswith("."))
             if runs_in:  # the parent of run folders, e.g. run-formations' --out
-                raise FileNotFoundError(f"{p}: a folder of {len(runs_in)} runs "
+                raise FileNotFoundError(f"{p}: a folder of {counted(len(runs_in), 'run')} "
                                         f"({_names(runs_in)}): give the run to open")
             if landmarks_run(p):
                 raise FileNotFoundError(f"{p}: {LANDMARKS_RUN_NOTE}")
