@@ -54,8 +54,9 @@ def landmarks_run(folder: Path) -> bool:
 
 def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) -> Path:
     """The ``.rrd`` to open: ``target`` itself, ``target/recording.rrd`` (or the only ``.rrd``
-    in a folder), or the newest ``recording.rrd`` under ``runs`` outside hidden folders (a
-    run's staging folder holds a recording before the run is in place, or after it failed).
+    in a folder, hidden ones left out), or the newest ``recording.rrd`` under ``runs`` outside
+    hidden folders (a run's staging folder holds a recording before the run is in place, or
+    after it failed).
 
     Raises
     ------
@@ -76,7 +77,9 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
         if p.is_dir():
             if (p / "recording.rrd").is_file():
                 return p / "recording.rrd"
-            found = sorted(p.glob("*.rrd"))
+            # a hidden .rrd is no output: the temporary file of one being written, or left
+            # by a command killed before putting its outputs in place (clean-db, clean-h5)
+            found = sorted(q for q in p.glob("*.rrd") if not q.name.startswith("."))
             if len(found) == 1:
                 return found[0]
             if found:  # several outputs of clean-db / clean-h5 in one folder
