@@ -30,6 +30,8 @@ WEB_PORT = 9090
 TARGET_HELP = ("a run folder (its recording.rrd) or a .rrd file (default: the newest "
                "recording.rrd under runs/)")
 GRPC_PORT = 9876
+#: the address the web viewer serves on (:func:`viewer_command`)
+LOOPBACK = "127.0.0.1"
 
 
 #: what a run-landmarks folder is, for a reader asking it for a recording
@@ -174,13 +176,17 @@ def has_display(env=None, platform: str | None = None) -> bool:
 def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
                    grpc_port: int = GRPC_PORT) -> list[str]:
     """The ``rerun`` command line that opens ``path`` natively or in the web viewer (page on
-    ``port``, the recording served by the gRPC proxy on ``grpc_port``)."""
+    ``port``, the recording served by the gRPC proxy on ``grpc_port``, both on this
+    machine's loopback address only: Rerun's default, every interface, would serve the
+    recording to anyone who can reach the machine; from another machine the printed SSH
+    port forwarding reaches it)."""
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
         or "rerun"
     arg = str(path)
     cmd = [exe, os.path.join(".", arg) if arg.startswith("-") else arg]  # not an option of rerun's
     if web:
-        cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port)]
+        cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port),
+                "--bind", LOOPBACK]
     return cmd
 
 
