@@ -566,11 +566,24 @@ def cut_summary(record: RunRecord) -> str:
             why += " (" + "; ".join(how) + ")"
         lines.append(f"* **{_links(int(counts[k]))} cut by {name}** (drawn "
                      f"{_COLOUR_NAMES.get(cut_color(name), 'pink')}): {why}.")
-    lines += ["", "The first 3D view shows the cut links between the cameras that made them; "
-              "the kept links (green) are hidden there: show them with the eye of "
-              "`world/links/kept`, or open the tab *All links*. A cut link's label (hover) "
-              "names its two features, its stage and, with ground truth, whether it was good "
-              "or spurious. " + (
+    posed = np.array([_has_pose(v) for v in record.views], dtype=bool)
+    lk = record.ledger.links
+    unposed = ~(posed[lk.cam_i] & posed[lk.cam_j]) if len(posed) else np.zeros(0, bool)
+    if not posed.any():  # no 3D view of the links (the blueprint's side panel only)
+        where = ("No image has a pose, so no link is drawn in 3D: the graph and the pair "
+                 "view show them. ")
+    else:
+        where = ("The first 3D view shows the cut links between the cameras that made them; "
+                 "the kept links (green) are hidden there: show them with the eye of "
+                 "`world/links/kept`, or open the tab *All links*. A cut link's label (hover) "
+                 "names its two features, its stage and, with ground truth, whether it was "
+                 "good or spurious. ")
+        if unposed.any():  # a strip needs both of its cameras' poses
+            where += (f"{_links(int((unposed & deleted).sum()))} cut and "
+                      f"{_links(int((unposed & ~deleted).sum()))} kept touch an image without "
+                      "a pose (one the mapper did not register, under `images/`): counted "
+                      "here, not drawn in 3D. ")
+    lines += ["", where + (
                   "The graph shows each conflictive set as it was before the resolution, a "
                   "`×` on every link the run cut; " if n_conf else
                   "There was no conflictive set before the resolution, so the graph is "
