@@ -137,6 +137,13 @@ def online_config_from_args(args):
     args.formation = formation_choice(args)
     method, max_features = feature_options(args)
     robots = None if args.robots is None else validate.robots(args.robots)
+    # before faults_from_args, whose advice for a seed without drops (add --drop-prob) an
+    # online run refuses
+    fault_seed = validate.seed(args.fault_seed, "--fault-seed")
+    if fault_seed != 0:
+        raise InputError(f"--fault-seed {fault_seed}: an online run (--steps) draws the graph "
+                         "of each step from --seed, the scene's seed; drop --fault-seed, or "
+                         "change --seed")
     faults = faults_from_args(args)
     if faults is not None:
         given = ([f"--drop-prob {args.drop_prob}"] if faults.drop_prob else []) \
@@ -146,10 +153,6 @@ def online_config_from_args(args):
             raise InputError(f"{', '.join(given)}: an online run (--steps) models only "
                              "--switching-topology (the graph of each step); drop "
                              f"{'it' if len(given) == 1 else 'them'}")
-    if faults is not None and faults.seed != 0:
-        raise InputError(f"--fault-seed {faults.seed}: an online run (--steps) draws the graph "
-                         "of each step from --seed, the scene's seed; drop --fault-seed, or "
-                         "change --seed")
     switching = bool(faults is not None and faults.switching_topology)
     if switching and args.window == 1:
         from pipeline.progress import log
