@@ -10,8 +10,8 @@ STAMP  := $(VENV)/.installed
 # clone was moved or copied: it imports the old folder's code, and its formation-match runs the
 # old folder's python) is made again; one of a Python older than 3.11, or without pip, is named
 # with what to do (make clean, then PYTHON=...). The check finds where the .venv's python would
-# import pipeline from without running it (an error in the code does not remake the .venv). A PYTHON that is not a command, or older than
-# 3.11, is named before any .venv is made from it.
+# import pipeline from without running it (an error in the code does not remake the .venv). A PYTHON that is not a command, that
+# does not run (a pyenv shim of a version not selected exits 127), or older than 3.11, is named before any .venv is made from it.
 VENV_HERE = test -x $(PY) && (cd / && "$(CURDIR)/$(PY)" -c 'import importlib.util as u, os, sys; s = u.find_spec("pipeline"); sys.exit(s is None or os.path.realpath(s.origin) != os.path.realpath(sys.argv[1]))' "$(CURDIR)/pipeline/__init__.py") >/dev/null 2>&1
 ifeq ($(shell $(VENV_HERE) && echo ok),)
   $(shell rm -f $(STAMP))
@@ -20,7 +20,9 @@ endif
 $(STAMP): pyproject.toml
 	@$(VENV_HERE) || { rm -rf $(VENV); \
 	  command -v "$(PYTHON)" >/dev/null 2>&1 || { echo "error: PYTHON='$(PYTHON)' is not a command; formation-match needs Python 3.11 or newer: make PYTHON=python3.11 (or newer, or its path)" >&2; exit 1; }; \
-	  $(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null || { echo "error: PYTHON='$(PYTHON)' is $$($(PYTHON) --version 2>&1 | head -1); formation-match needs 3.11 or newer: make PYTHON=python3.11 (or newer)" >&2; exit 1; }; \
+	  $(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' >/dev/null 2>&1; rc=$$?; \
+	  [ $$rc = 0 ] || [ $$rc = 1 ] || { echo "error: PYTHON='$(PYTHON)' does not run (exit $$rc: $$($(PYTHON) --version 2>&1 | head -1)); formation-match needs Python 3.11 or newer: make PYTHON=python3.11 (or newer, or its path)" >&2; exit 1; }; \
+	  [ $$rc = 0 ] || { echo "error: PYTHON='$(PYTHON)' is $$($(PYTHON) --version 2>&1 | head -1); formation-match needs 3.11 or newer: make PYTHON=python3.11 (or newer)" >&2; exit 1; }; \
 	  $(PYTHON) -m venv $(VENV); }
 	@$(PY) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(VENV) holds Python $$($(PY) -c 'import sys; print(sys.version.split()[0])'); formation-match needs 3.11 or newer: make clean, then make PYTHON=python3.11 (or newer)" >&2; exit 1; }
 	@$(PY) -m pip --version >/dev/null 2>&1 || $(PY) -m ensurepip --upgrade >/dev/null 2>&1 || { echo "error: $(VENV) has no pip (on Debian: apt install python3-venv); make clean, then again" >&2; exit 1; }

@@ -44,19 +44,29 @@ esac
 """
 
 
+#: a pyenv shim of a version that is installed but not selected: a command that does not run
+SHIM_PYTHON = """#!/bin/sh
+echo "pyenv: python3.10: command not found" >&2
+exit 127
+"""
+
+
 @pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
-@pytest.mark.parametrize("python, said", [("no-such-python-3", "is not a command"),
-                                          ("", "is not a command"),
-                                          ("OLD", "is Python 3.10.12")])
+@pytest.mark.parametrize("python, said", [
+    ("no-such-python-3", "is not a command"),
+    ("", "is not a command"),
+    ("OLD", "is Python 3.10.12"),
+    # was named "is pyenv: python3.10: command not found", as if a Python too old
+    ("SHIM", "does not run (exit 127: pyenv: python3.10: command not found)")])
 def test_make_setup_names_a_python_it_cannot_use_before_making_the_venv(tmp_path, python, said):
     # a PYTHON that is not a command, or older than 3.11, made a .venv (or a shell error,
     # '-m: not found'), then asked for make clean before the right PYTHON was taken
     for name in ("Makefile", "pyproject.toml"):
         shutil.copy(ROOT / name, tmp_path / name)
-    if python == "OLD":
-        python = str(tmp_path / "python3.10")
-        (tmp_path / "python3.10").write_text(OLD_PYTHON)
+    if python in ("OLD", "SHIM"):
+        (tmp_path / "python3.10").write_text(OLD_PYTHON if python == "OLD" else SHIM_PYTHON)
         (tmp_path / "python3.10").chmod(0o755)
+        python = str(tmp_path / "python3.10")
     run = subprocess.run(["make", "setup", f"PYTHON={python}"], cwd=tmp_path,
                          capture_output=True, text=True)
     assert run.returncode != 0
