@@ -341,6 +341,11 @@ def faults_from_args(args) -> FaultConfig:
                          crash=tuple(parse_crash(c) for c in args.crash),
                          switching_topology=bool(args.switching_topology), seed=seed)
     if seed != 0 and not (config.drop_prob > 0 or config.switching_topology):
+        if getattr(args, "transport", "sim") != "sim":
+            # robot processes model no switching topology (check_faults_for_transport)
+            raise InputError(f"--fault-seed {seed}: it seeds the message drops, and this run has "
+                             f"none (it would change nothing); over --transport {args.transport} "
+                             "add --drop-prob, or drop --fault-seed")
         raise InputError(f"--fault-seed {seed}: it seeds the message drops and the switching "
                          "topology, and this run has neither (it would change nothing); add "
                          "--drop-prob or --switching-topology, or drop --fault-seed")
