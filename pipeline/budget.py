@@ -282,13 +282,16 @@ def baselines_bytes(features: int, links: int) -> int:
 
 
 def check_formation_memory(n_robots: int, size: tuple[int, int], limit,
-                           flag: str = "--max-memory-gb") -> None:
+                           flag: str = "--max-memory-gb", *, robots_option: bool = True) -> None:
     """InputError, before anything is rendered, when a formation of ``n_robots`` robots at
-    ``size`` would need more than ``limit`` GB (:data:`BYTES_PER_ROBOT_PIXEL`)."""
+    ``size`` would need more than ``limit`` GB (:data:`BYTES_PER_ROBOT_PIXEL`).
+    ``robots_option``: the command takes ``--robots`` (``run-formations`` and
+    ``match-formation`` render the paper's six), so the message may advise fewer."""
     w, h = size
     MemoryBudget(limit, flag).add(
         f"rendering and cleaning the views of {n_robots} robots at {w}x{h}",
-        n_robots * w * h * BYTES_PER_ROBOT_PIXEL, "fewer --robots or a smaller --size")
+        n_robots * w * h * BYTES_PER_ROBOT_PIXEL,
+        "fewer --robots or a smaller --size" if robots_option else "a smaller --size")
 
 
 def check_motion_memory(n_robots: int, steps: int, size: tuple[int, int], limit,

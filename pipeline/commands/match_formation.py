@@ -132,7 +132,7 @@ def run(args) -> int:
     args.threshold_px = validate.tolerance_px(args.threshold_px, "--threshold-px")
     args.seed = validate.seed(args.seed, "--seed")
     # the formations are rendered one at a time, six robots each
-    check_formation_memory(6, size, args.max_memory_gb)
+    check_formation_memory(6, size, args.max_memory_gb, robots_option=False)
     timer = StageTimer()
     results = [match_formation(n, seed=args.seed, size=size, features=method,
                                max_features=max_features, ratio=args.ratio,

@@ -217,7 +217,7 @@ def run(args) -> int:
     size = parse_size(args.size)
     merge_radius_for(resolution, args.merge_radius)  # before the first render
     check_merge_radius(args.merge_radius, [size], f"--size {args.size}")
-    check_formation_memory(6, size, args.max_memory_gb)  # one formation of 6 at a time
+    check_formation_memory(6, size, args.max_memory_gb, robots_option=False)  # one formation of 6 at a time
     parent = Path(args.out)
     check_outputs(parent, args.overwrite)
     reports = {}
