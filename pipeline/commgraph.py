@@ -159,7 +159,7 @@ def positive_k(spec: str) -> int:
 
 
 def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
-               what: str = "image") -> np.ndarray:
+               what: str = "image", *, offers_knn: bool = True) -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
 
     Parameters
@@ -174,6 +174,8 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
         most similar images of each (e.g. ``knn_edges`` of the images' features)
     what : str — what the named nodes are, in the messages of a bad file (``robot`` for the
         robots of a team's frame sequences)
+    offers_knn : bool — the command takes ``knn:K`` (``run-images``; not ``run-landmarks``,
+        nor a team's robots), so that a message listing the kinds names it
 
     Returns
     -------
@@ -209,7 +211,8 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
             raise InputError(f"graph {spec!r} picks neighbours by image similarity and needs "
                              f"the images' features; use seq:K for neighbours in name order")
         return knn(k)
-    kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"] + ["knn:K"])
+    kinds = ", ".join([k for k in _ALL_KINDS if k != "geometric"]
+                      + (["knn:K"] if offers_knn and what != "robot" else []))
     if not spec.strip() and not Path(spec).is_file():  # Path('') is the current folder
         raise InputError(f"graph {spec!r} is empty; give a kind ({kinds}) or a file of "
                          "'cam_i,cam_j' lines")

@@ -215,7 +215,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     with timer.stage("load", f"{config.directory}, descriptors {config.descriptors}"):
         frames = load_landmark_folder(config.directory, config.descriptors, config.frames)
         names = [f.name for f in frames]
-        comm_edges = comm_graph(config.graph, names)
+        comm_edges = comm_graph(config.graph, names, offers_knn=False)
         m = np.array([len(f.keypoints) for f in frames], dtype=np.int64)
         kind = frames[0].descriptor_kind
         source = "sift" if frames[0].descriptor_file == "sift" else "given"
