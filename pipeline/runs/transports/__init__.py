@@ -121,7 +121,9 @@ def get_transport(name: str) -> TransportEntry:
     return TRANSPORTS[name]
 
 
-def check_team_size(name: str, robots: int, what: str) -> None:
+def check_team_size(name: str, robots: int, what: str,
+                    otherwise: str = "start the robots on their own hosts (formation-match robot "
+                                     "--team TEAM.json)") -> None:
     """Refuse a job that would start more robots than transport ``name`` allows on this
     machine (its module's ``MAX_ROBOT_PROCESSES``; none: no limit).
 
@@ -129,7 +131,7 @@ def check_team_size(name: str, robots: int, what: str) -> None:
     ------
     InputError
         ``robots`` above the limit; ``what`` says what they are (e.g. "cameras in the links
-        file").
+        file"), ``otherwise`` what else to do than ``--transport sim``.
     """
     from pipeline.errors import InputError
 
@@ -137,8 +139,7 @@ def check_team_size(name: str, robots: int, what: str) -> None:
     if cap is not None and robots > cap:
         raise InputError(f"--transport {name} starts one process per robot on this machine: "
                          f"{robots} {what} would be {robots} processes, at most {cap}; use "
-                         "--transport sim, or start the robots on their own hosts "
-                         "(formation-match robot --team TEAM.json)")
+                         f"--transport sim, or {otherwise}")
 
 
 def team_limits(name: str, team_timeout_s: float | None = None,
@@ -237,9 +238,12 @@ def check_online_team_size(name: str, robots: int, window: int, hold: int | None
     from pipeline.consistency.engines.online import default_hold
 
     hold = default_hold(window) if hold is None else int(hold)
+    # the launching process starts a team for every step: no team file a user could start
+    # on other hosts
     check_team_size(name, robots * min(int(window) + hold, int(steps)),
                     "frames in a step's window (robots x min(window + hold, steps): a step's "
-                    "stage runs one robot per frame)")
+                    "stage runs one robot per frame)",
+                    otherwise="a shorter --window or --hold")
 
 
 def transport_help() -> str:
