@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ["triangulate_views", "local_estimates", "project", "observing_neighbours",
-           "two_view_points", "TwoViewPoints"]
+           "two_view_points", "TwoViewPoints", "pair_agrees"]
 
 
 def _inv3(A):
@@ -129,6 +129,34 @@ class TwoViewPoints(NamedTuple):
     hi: np.ndarray
     X: np.ndarray    # (U, 3) — the point (linear triangulation, Gauss–Newton on the pixels)
     ok: np.ndarray   # (U,) bool — the point is defined (normal matrix positive definite)
+
+
+def pair_agrees(uv, R, t, K, tol_px: float) -> np.ndarray:
+    """Whether each pair of observations can be one point, ``(M,)`` bool.
+
+    ``uv (M, 2, 2)`` the two keypoints, ``R (M, 2, 3, 3)``, ``t (M, 2, 3)``, ``K (M, 2, 3, 3)``
+    their cameras, the lower robot id first (so both robots of a pair compute the same bits).
+    Their two-view point (:func:`triangulate_views`) in front of both cameras and within
+    ``tol_px`` of each keypoint; where it is refused, the point at infinity along their rays
+    (:func:`pipeline.consistency.evidence.far_point`: rays without a baseline, the frames of
+    a robot standing still, carry no depth and agree exactly when their rays do).
+    """
+    from pipeline.consistency.evidence import far_point
+
+    uv = np.asarray(uv, np.float64).reshape(-1, 2, 2)
+    M = len(uv)
+    if not M:
+        return np.zeros(0, dtype=bool)
+    X, _, ok, _ = triangulate_views(uv, np.ones((M, 2), dtype=bool), R, t, K)
+    with np.errstate(all="ignore"):
+        u, _, z = project(X[:, None], R, t, K, jacobian=False)
+        err = np.sqrt(((u - uv) ** 2).sum(-1))
+    agree = ok & (z > 0).all(1) & (err <= tol_px).all(1)
+    if not agree.all():
+        P = K @ np.concatenate([R, t[..., None]], axis=-1)
+        rest = np.flatnonzero(~agree)
+        agree[rest] = far_point(uv[rest], P[rest], tol_px)
+    return agree
 
 
 def observing_neighbours(observes, adj, robots=None) -> np.ndarray:

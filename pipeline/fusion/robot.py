@@ -85,6 +85,7 @@ from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
 from pipeline.fusion.local import (
     local_estimates,
     observing_neighbours,
+    pair_agrees,
     project,
     two_view_points,
 )
@@ -183,6 +184,7 @@ class FusionRobot:
         # the Metropolis mode keeps what it hears from neighbour j in column col[j]
         self.col = {j: c for c, j in enumerate(self.neighbours)}
         lab = np.asarray(track_names, dtype=np.int64).reshape(-1)
+        self.track_of = lab   # its own name for the track of each of its features
         have = np.flatnonzero(lab >= 0)
         names, inv, counts = np.unique(lab[have], return_inverse=True, return_counts=True)
         single = counts[inv] == 1
@@ -646,7 +648,28 @@ class FusionRobot:
         theirs = np.zeros(len(own), dtype=bool)
         for j, feats in self.cuts_from.items():
             theirs |= (link_nbr == j) & np.isin(link_s, feats)
-        return own ^ theirs
+        cut = own ^ theirs
+        for k in np.flatnonzero(own & theirs):   # two outliers: stay if they can be one point
+            cut[k] = not self._pair_agrees(int(link_nbr[k]), int(link_r[k]))
+        return cut
+
+    def _pair_agrees(self, j: int, f: int) -> bool:
+        """:func:`~pipeline.fusion.local.pair_agrees` of its feature ``f`` and neighbour ``j``'s
+        observation of the same track (its setup message: keypoint and camera), the lower id
+        first, at :func:`~pipeline.fusion.landmarks.outlier_pair_tol`: what ``j`` computes."""
+        from pipeline.fusion.landmarks import outlier_pair_tol
+
+        s = self.setups[j]
+        at = np.flatnonzero(s["names"] == self.track_of[f])
+        if not len(at):   # not a track it fused with j: nothing says they are one point
+            return False
+        mine = (self.keypoints[f].astype(np.float64), self.K, self.R, self.t)
+        K, R, t = _camera_from(s["camera"])
+        other = (s["keypoints"][at[0]].astype(np.float64), K, R, t)
+        lo, hi = (mine, other) if self.i < j else (other, mine)
+        uv, Ks, Rs, ts = (np.stack([lo[x], hi[x]])[None] for x in range(4))
+        return bool(pair_agrees(uv, Rs, ts, Ks, outlier_pair_tol(self.opt.sigma_px,
+                                                                   self.px_thr))[0])
 
 
 # --------------------------------------------------------------------------------------------

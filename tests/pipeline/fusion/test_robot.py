@@ -57,12 +57,13 @@ def _robots(views, feats, edges, labels, consensus="exact"):
 
 
 def _cuts(robots, links, feats):
-    off = np.concatenate([[0], np.cumsum([len(f) for f in feats])])
-    bad = np.zeros(off[-1], dtype=bool)
+    """The links the robots cut, each as its lower end decided it (``cut_rows``: one end an
+    outlier and the other not, or two outliers that cannot be one point)."""
+    out = np.zeros(len(links), dtype=bool)
     for i, r in enumerate(robots):
-        bad[off[i] + r.outlier_feats] = True
-    # an outlier leaves its landmark: links with exactly one outlier end are cut
-    return bad[off[links.cam_i] + links.feat_i] ^ bad[off[links.cam_j] + links.feat_j]
+        mine = np.flatnonzero(links.cam_i == i)
+        out[mine] = r.cut_rows(links.cam_j[mine], links.feat_i[mine], links.feat_j[mine])
+    return out
 
 
 @pytest.mark.parametrize("consensus", ["exact", "metropolis"])
