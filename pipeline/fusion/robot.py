@@ -368,7 +368,8 @@ class FusionRobot:
         B, Kh, c = self.sets.shape
         nb = np.where(self.nb_obs[:, self.neighbours, None, None], self.nb_sets, -np.inf)
         cand = np.concatenate([self.sets[:, None], nb], axis=1)            # (B, 1+deg, K, c)
-        new_sets = top_c_distinct(cand.transpose(0, 2, 1, 3).reshape(B, Kh, -1), c)
+        # (the width spelt out: a robot that observes no track has B = 0, where -1 is undefined)
+        new_sets = top_c_distinct(cand.transpose(0, 2, 1, 3).reshape(B, Kh, cand.shape[1] * c), c)
         self.maxc_changed = (new_sets != self.sets).any(axis=(1, 2))
         self.sets = new_sets
         self.maxc_round += 1
