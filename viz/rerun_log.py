@@ -106,7 +106,8 @@ CUT_WHY = {
                   "camera, Def. 2.4: the graph view) and the resolution rule cut the set until "
                   "each camera appears once in it",
     "fusion-outlier": "the robust fusion of its landmark (distributed RANSAC, dynamic voting) "
-                      "declared one of its two observations an outlier",
+                      "declared one of its two observations an outlier and not the other (the "
+                      "outlier leaves the landmark; a link between two outliers is kept)",
     "robot-lost": "one of its robots fell silent and its neighbours declared it lost",
     "not-one-to-one": "the input matched one keypoint to several of the other image",
     "not-comm-edge": "its two images are not neighbours in the communication graph",
