@@ -51,7 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fusion", action="store_true",
                    help="after the consistency stage, map the input with COLMAP (seed 0) and "
                         "run the robust distributed fusion on its poses: the observations "
-                        "voted out of their tracks cut their links (reason fusion-outlier): "
+                        "voted out of their tracks leave them, their links to the others "
+                        "cut (reason fusion-outlier; a link between two of them stays): "
                         "wrong matches the consistency stage cannot see, e.g. a window matched "
                         "to its twin in several views (off by default: it costs one mapping)")
     p.add_argument("--ignore-watermarks", action="store_true",

@@ -29,8 +29,9 @@ voting, :func:`pipeline.stages.fusion_stage`, the second stage of ``run-images``
 the consistency stage, on the poses of a COLMAP mapping of the links the robots start from
 (the input's, less those the checks above cut;
 :func:`pipeline.colmap.incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its
-links before cleaning): the observations it votes out of their tracks cut their links, reason
-``fusion-outlier``. It sees what the consistency stage cannot: a wrong match in a
+links before cleaning): the observations it votes out of their tracks leave them, their links
+to the track's observations not voted out cut with reason ``fusion-outlier`` (a link between
+two outliers stays: :mod:`pipeline.fusion.landmarks`, "Outliers leave the landmark"). It sees what the consistency stage cannot: a wrong match in a
 conflict-free set (a window matched to its twin in several views), which only geometry with
 poses refutes. The images the mapping did not register take no part (their links stay as the
 consistency stage left them), as in ``run-images``. A mapping folded by the repeated structure

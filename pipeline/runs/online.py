@@ -16,8 +16,10 @@ stage ran on, window frames only) are fused again by robust distributed fusion
 its robots, frames sharing a link as neighbours), as the ``online_fusion`` job of the run's
 transport (in this process, or one robot process per frame over Zenoh); each track named by
 the smallest global feature id of its set, as the robots name it when they detect their sets
-(the name seeds their max-c draws); observations voted out cut their links as
-``fusion-outlier`` (a cut only splits a set: the association stays conflict-free). Tracks no
+(the name seeds their max-c draws); a link with exactly one end voted out is cut as
+``fusion-outlier`` (an outlier leaves its landmark, a link between two outliers stays:
+:mod:`pipeline.fusion.landmarks`; a cut only splits a set: the association stays
+conflict-free). Tracks no
 link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,
 bytes, links cut, tracks fused, wall time), apart from the consistency stage's figures.
 

@@ -39,8 +39,11 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    the robot's own part of robust distributed fusion (:mod:`pipeline.fusion.robot`) on the
    tracks it learnt in step 5 (:meth:`pipeline.consistency.robot.Robot.final_tracks`), ended
    by the termination wave; with message loss injected (``drop_prob``), every logical round
-   over the reliable channel in lockstep (:func:`pipeline.fusion.robot_loops.run_fusion_reliably`). It cuts its links at the observations it or a neighbour declared
-   outliers, and its links to a neighbour that fell silent during fusion (``robot-lost``).
+   over the reliable channel in lockstep (:func:`pipeline.fusion.robot_loops.run_fusion_reliably`). It cuts a link when exactly one
+   of its ends is an observation declared an outlier (its own, or its neighbour's as the
+   neighbour told it; a link between two outliers stays: :mod:`pipeline.fusion.landmarks`,
+   "Outliers leave the landmark"), and its links to a neighbour that fell silent during
+   fusion (``robot-lost``).
 7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion
    cuts (also in ``--result``, :func:`result_links`), the matches it holds, its keypoints and its fused landmarks (for the observer's
    evaluation only) and its counters.
