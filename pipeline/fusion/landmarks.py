@@ -497,6 +497,10 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     outlier = voted_out & res.valid & ~reproj_ok & ~crashed[None]
     if protocol is not None:
         _cut_notices(protocol.exchange, comm, outlier.sum(0))
+        # a robot that crashed while the notices went out never finished either: its
+        # decision reached no one, so it is not judged and its links are not cut
+        crashed[sorted(protocol.exchange.crashed)] = True
+        outlier &= ~crashed[None]
 
     # fused point: largest connected group of observers per track, its most common winner
     # (a tie of votes between hypotheses can split a group; the split is counted in the stats)
