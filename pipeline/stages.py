@@ -291,8 +291,8 @@ def fusion_stage(ledger: LinkLedger, views: list[View], features: list, comm_edg
                  track_labels=None):
     """Robust distributed fusion (Montijano et al., dynamic voting) of the kept links among
     ``cameras``; the links with exactly one end voted out are cut as ``fusion-outlier`` in
-    ``ledger`` (an outlier leaves its landmark, a link between two outliers stays:
-    :mod:`pipeline.fusion.landmarks`).
+    ``ledger``, and those between two outliers that cannot be one point (an outlier leaves
+    its landmark: :mod:`pipeline.fusion.landmarks`).
 
     ``cameras`` (default all) are the robots that take part: they need a pose in ``views``.
     ``track_labels`` (``CleaningResult.track_labels``): the robots' own track names, from

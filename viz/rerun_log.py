@@ -107,7 +107,8 @@ CUT_WHY = {
                   "each camera appears once in it",
     "fusion-outlier": "the robust fusion of its landmark (distributed RANSAC, dynamic voting) "
                       "declared one of its two observations an outlier and not the other (the "
-                      "outlier leaves the landmark; a link between two outliers is kept)",
+                      "outlier leaves the landmark; a link between two outliers is kept where they "
+                      "can be one point)",
     "robot-lost": "one of its robots fell silent and its neighbours declared it lost",
     "not-one-to-one": "the input matched one keypoint to several of the other image",
     "not-comm-edge": "its two images are not neighbours in the communication graph",

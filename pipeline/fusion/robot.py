@@ -50,7 +50,8 @@ Logical rounds (each one :meth:`~pipeline.transport.RoundEndpoint.end_round`)
    reproject onto the fused landmark within the pixel gate). The robot tells each neighbour
    which of its features it declared outliers (``fusion-cut``, only when there are some); each
    end then cuts a link whose ends are one outlier and one not (an outlier leaves its
-   landmark, a link of two outliers stays: :mod:`pipeline.fusion.landmarks`, "Outliers leave
+   landmark, a link of two outliers stays where the two can be one point:
+   :mod:`pipeline.fusion.landmarks`, "Outliers leave
    the landmark"), both ends deciding alike.
 
 Termination

@@ -31,7 +31,8 @@ the consistency stage, on the poses of a COLMAP mapping of the links the robots 
 :func:`pipeline.colmap.incremental_mapping_with_retry`, seed 0, as ``run-images`` maps its
 links before cleaning): the observations it votes out of their tracks leave them, their links
 to the track's observations not voted out cut with reason ``fusion-outlier`` (a link between
-two outliers stays: :mod:`pipeline.fusion.landmarks`, "Outliers leave the landmark"). It sees what the consistency stage cannot: a wrong match in a
+two outliers stays where the two can be one point: :mod:`pipeline.fusion.landmarks`,
+"Outliers leave the landmark"). It sees what the consistency stage cannot: a wrong match in a
 conflict-free set (a window matched to its twin in several views), which only geometry with
 poses refutes. The images the mapping did not register take no part (their links stay as the
 consistency stage left them), as in ``run-images``. A mapping folded by the repeated structure

@@ -17,7 +17,8 @@ its robots, frames sharing a link as neighbours), as the ``online_fusion`` job o
 transport (in this process, or one robot process per frame over Zenoh); each track named by
 the smallest global feature id of its set, as the robots name it when they detect their sets
 (the name seeds their max-c draws); a link with exactly one end voted out is cut as
-``fusion-outlier`` (an outlier leaves its landmark, a link between two outliers stays:
+``fusion-outlier`` (an outlier leaves its landmark, a link between two outliers stays where
+they can be one point:
 :mod:`pipeline.fusion.landmarks`; a cut only splits a set: the association stays
 conflict-free). Tracks no
 link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,

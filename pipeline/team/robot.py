@@ -41,7 +41,8 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    by the termination wave; with message loss injected (``drop_prob``), every logical round
    over the reliable channel in lockstep (:func:`pipeline.fusion.robot_loops.run_fusion_reliably`). It cuts a link when exactly one
    of its ends is an observation declared an outlier (its own, or its neighbour's as the
-   neighbour told it; a link between two outliers stays: :mod:`pipeline.fusion.landmarks`,
+   neighbour told it; a link between two outliers stays where the two can be one point:
+   :mod:`pipeline.fusion.landmarks`,
    "Outliers leave the landmark"), and its links to a neighbour that fell silent during
    fusion (``robot-lost``).
 7. **Publishes** its link table with every deletion (reason, round, iteration) and the fusion

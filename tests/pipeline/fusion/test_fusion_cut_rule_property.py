@@ -1,7 +1,8 @@
 """The fusion stage's cut rule on small random rigs (pipeline.fusion.landmarks, "Outliers leave
 the landmark"): a link is cut exactly when one of its ends is an observation declared an
-outlier, so the kept association stays conflict-free, and the robots one by one (on a
-fault-free or a lossy network) cut the links the vectorized stage cuts."""
+outlier, or when both are and the two cannot be one point (pipeline.fusion.local.pair_agrees),
+so the kept association stays conflict-free, and the robots one by one (on a fault-free or a
+lossy network) cut the links the vectorized stage cuts."""
 
 import numpy as np
 from hypothesis import given, settings
@@ -9,9 +10,11 @@ from hypothesis import strategies as st
 
 from data_synth.formations import look_at
 from pipeline.association import AssociationGraph, association_sets, count_conflicts
-from pipeline.fusion.landmarks import fuse_tracks
+from pipeline.fusion.landmarks import fuse_tracks, outlier_pair_tol
+from pipeline.fusion.local import pair_agrees
 from pipeline.fusion.robot import FusionOptions, FusionRobot
 from pipeline.fusion.robot_loops import run_fusion_locally, run_fusion_reliably
+from pipeline.fusion.voting import chi2_ppf
 from pipeline.transport.local import LocalTeam
 from pipeline.transport.simulated import NetworkOptions
 from pipeline.types import Features, Links, View
@@ -84,8 +87,24 @@ def test_a_link_is_cut_exactly_when_one_end_is_an_outlier(n, P, seed, extra, con
     cut = np.asarray(fr.cut_links, dtype=bool)
     # (a) no kept link joins an outlier and an observation that is not one
     assert not (~cut & (end_a != end_b)).any()
-    # (b) every link between two outliers or two observations that are not is kept
-    assert not (cut & (end_a == end_b)).any()
+    # (b) every link between two observations that are not outliers is kept; one between two
+    # outliers exactly when the two can be one point
+    assert not (cut & ~end_a & ~end_b).any()
+    both = np.flatnonzero(end_a & end_b)
+    if len(both):
+        Rs = np.stack([v.R for v in views]).astype(np.float64)
+        ts = np.stack([np.asarray(v.t, np.float64).reshape(3) for v in views])
+        Ks = np.stack([v.K for v in views]).astype(np.float64)
+        ci, cj = links.cam_i[both], links.cam_j[both]   # cam_i < cam_j: the lower id first
+        uv = np.stack([np.stack([feats[c].keypoints[f] for c, f in zip(ci, links.feat_i[both],
+                                                                      strict=True)]),
+                       np.stack([feats[c].keypoints[f] for c, f in zip(cj, links.feat_j[both],
+                                                                      strict=True)])],
+                      axis=1).astype(np.float64)
+        two = np.stack([ci, cj], axis=1)
+        agree = pair_agrees(uv, Rs[two], ts[two], Ks[two],
+                            outlier_pair_tol(1.0, chi2_ppf(0.99, 2)))
+        np.testing.assert_array_equal(cut[both], ~agree)
     assert fr.stats["links_cut"] == int(cut.sum())
     # (c) the kept association is conflict-free, as the input was
     assert count_conflicts(AssociationGraph(m, links)).conflictive_sets == 0
