@@ -83,7 +83,8 @@ __all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BY
            "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
            "COPIES_OF_READ_DATA", "DEFAULT_LIMIT_GB", "MAX_LIMIT_GB", "MemoryBudget",
-           "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK", "count_lines", "detection_entries", "limit_gb",
+           "check_detection_memory", "check_formation_memory", "BYTES_PER_SYNC_LINK",
+           "SYNC_CAMERA_SETS_PER_FEATURE", "camera_sets_bytes", "count_lines", "detection_entries", "limit_gb",
            "row_crossings"]
 
 #: measured peak bytes per entry of ``sum_s |s|^2`` (2.7 GB for 7.8e7 entries)
@@ -106,6 +107,14 @@ BYTES_PER_ROW = 1500
 #: the sum 50 % above the largest measured (it was 2.2 KB, measured in a process that held the
 #: links without their file, and so counted the rows twice)
 BYTES_PER_SYNC_LINK = 1_200
+#: camera bit sets (``8 + 8 * ceil(n/64)`` bytes each, ``n`` the cameras) the ``sync`` rule
+#: holds per linked feature: a robot holds the set of each of its own clusters, the team's
+#: merge keeps a growing buffer of every cluster's. Measured through ``resolve`` on chains
+#: of cameras (``n`` of 40,000 and 50,000; peak RSS beyond ``paper-labels`` on the same
+#: links): pairs of features 1.56 sets per linked feature (1.25 GB for 160,000 features),
+#: tracks of three 0.87 (0.53 GB for 120,000). Over thousands of cameras these sets, not the
+#: links, make the peak: they grow with features times cameras
+SYNC_CAMERA_SETS_PER_FEATURE = 2
 #: bytes per camera (robot) of the simulated team (measured 9.3 KB)
 BYTES_PER_CAMERA = 12_000
 #: bytes per communication edge (measured 0.4 KB)
@@ -238,9 +247,23 @@ def _set_sizes(features_per_camera, links: Links, of_links: bool = False):
     return s, sizes[labels[a]] if len(links) else np.zeros(0, np.int64)
 
 
+def camera_sets_bytes(features_per_camera, links: Links) -> tuple[int, int]:
+    """``(bytes, linked features)`` of the ``sync`` rule's camera bit sets on ``links``
+    (:data:`SYNC_CAMERA_SETS_PER_FEATURE`)."""
+    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    if not len(links):
+        return 0, 0
+    offsets = np.concatenate([[0], np.cumsum(fpc)])
+    ends = np.concatenate([offsets[np.asarray(links.cam_i, dtype=np.int64)] + links.feat_i,
+                           offsets[np.asarray(links.cam_j, dtype=np.int64)] + links.feat_j])
+    linked = int(np.unique(ends).size)
+    per_set = 8 + 8 * ((fpc.size + 63) // 64)
+    return linked * SYNC_CAMERA_SETS_PER_FEATURE * per_set, linked
+
+
 def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
                            flag: str = "--max-memory-gb", *, detection: bool = True,
-                           set_lists: int | None = None) -> None:
+                           set_lists: int | None = None, camera_sets: bool = False) -> None:
     """Count the consistency stage's memory in ``budget`` (or a limit in GB): InputError if it
     takes the total above the limit (module notes).
 
@@ -249,12 +272,23 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
     hold their links and the far ends' clusters; ``paper-labels``, four numbers per feature
     besides its links): :data:`BYTES_PER_SYNC_LINK` per link, the larger of the two.
     ``set_lists``: the bundle budget ``B`` of a rule whose own detection floods up to
-    ``B + 1`` ids of each set (``evidence``): :data:`BYTES_PER_LIST_ENTRY` per entry too."""
+    ``B + 1`` ids of each set (``evidence``): :data:`BYTES_PER_LIST_ENTRY` per entry too.
+    ``camera_sets``: the rule holds a bit set of every camera per cluster (``sync``): the
+    larger of that (:func:`camera_sets_bytes`) and the per-link figure, which was measured
+    where the sets were a small part of it."""
     if not isinstance(budget, MemoryBudget):
         budget = MemoryBudget(budget, flag)
     if not detection:
-        budget.add(f"the robots' links and the clusters at their far ends ({len(links)} links)",
-                   len(links) * BYTES_PER_SYNC_LINK, "split the input or raise the limit")
+        sets, linked = camera_sets_bytes(features_per_camera, links) if camera_sets else (0, 0)
+        if sets > len(links) * BYTES_PER_SYNC_LINK:
+            n = len(np.asarray(features_per_camera).reshape(-1))
+            budget.add(f"the robots' clusters and their sets of cameras ({linked} features "
+                       f"linked, a set of {n} cameras each)", sets,
+                       "split the input (fewer cameras in one run)")
+        else:
+            budget.add(f"the robots' links and the clusters at their far ends ({len(links)} "
+                       "links)", len(links) * BYTES_PER_SYNC_LINK,
+                       "split the input or raise the limit")
         if set_lists is not None:
             entries, largest = detection_entries(features_per_camera, links, int(set_lists) + 1)
             budget.add(f"the evidence rule's detection (the links chain up to {largest} features "

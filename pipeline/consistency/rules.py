@@ -76,6 +76,10 @@ the sets it found.
     The rule's own detection floods up to ``B + 1`` ids of each set (:mod:`.setlists`, ``B``
     the bundle budget): the memory guard counts those (:func:`pipeline.budget.
     check_detection_memory`).
+``camera_sets``
+    The rule's robots hold a bit set of every camera per cluster (``sync``): its memory
+    grows with the linked features times the cameras, and the memory guard counts it
+    (:func:`pipeline.budget.check_detection_memory`).
 ``weighs_cycles``
     Whether the rule weighs each link by the triangles (and quadrangles) it closes with the
     other links (:mod:`.cycles`). Such a rule takes the matches as they are: a two-hop vote
@@ -166,6 +170,7 @@ class ResolutionRule:
     merge_radius_px: float | None = None
     cuts_as: str | None = None
     set_lists: bool = False
+    camera_sets: bool = False
     weighs_cycles: bool = False
     _loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -294,6 +299,7 @@ register(ResolutionRule(
     stage_batched="pipeline.consistency.engines.sync_batched:run_sync_batched",
     alone="pipeline.consistency.sync_alone:run_sync_locally",
     equip="pipeline.consistency.sync:equip_robot",
+    camera_sets=True,
     needs_evidence=True,
     weighs_cycles=True,
     merge_radius_px=2.0))

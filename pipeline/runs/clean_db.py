@@ -250,7 +250,8 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     # the association graph the robots start from: one-to-one links on comm edges
     rule = get_rule(resolution)
     check_detection_memory(m, model_links, budget, detection=rule.detection,
-                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None,
+                           camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")

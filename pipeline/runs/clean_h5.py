@@ -92,7 +92,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     check_team_size(transport, n, "images in the features file")
     rule = get_rule(resolution)
     check_detection_memory(m, model_links, budget, detection=rule.detection,
-                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None,
+                           camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")

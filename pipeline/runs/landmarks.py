@@ -136,7 +136,8 @@ def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
     budget.add_rows("the matched links", len(links))
     rule = get_rule(config.resolution)
     check_detection_memory(m, links, budget, detection=rule.detection,
-                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None,
+                           camera_sets=rule.camera_sets)
     if config.baselines:
         budget.add("the centralized baselines", baselines_bytes(int(np.sum(m)), len(links)),
                    "add --no-baselines")

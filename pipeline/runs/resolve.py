@@ -128,7 +128,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     faulty = faults is not None and faults.any
     rule = rule_for_network(resolution, faulty)
     check_detection_memory(m, run_links, budget, detection=rule.detection,
-                           set_lists=bundle_budget(len(m)) if rule.set_lists else None)
+                           set_lists=bundle_budget(len(m)) if rule.set_lists else None,
+                           camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(int(m.sum()), len(run_links)), "drop --baselines")
