@@ -49,7 +49,7 @@ import numpy as np
 
 from pipeline.consistency.keys import isin_sorted, ranges
 
-__all__ = ["cycle_support", "shared_cameras", "support_term", "SUPPORT_VIEWS"]
+__all__ = ["cycle_support", "cycle_support_rows", "shared_cameras", "support_term", "SUPPORT_VIEWS"]
 
 #: third cameras whose triangles count at face value (:func:`support_term`)
 SUPPORT_VIEWS = 3
@@ -104,6 +104,18 @@ def support_term(tau: np.ndarray, shared: np.ndarray, quad: np.ndarray) -> np.nd
     return tau * np.minimum(1.0, SUPPORT_VIEWS / shared) + (np.asarray(quad) & (tau == 0))
 
 
+def _rows_of(lists: dict[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A dict gid -> list as rows ``(keys ascending, ptr, values)``."""
+    if not lists:
+        return np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64)
+    keys = np.fromiter(lists, dtype=np.int64, count=len(lists))
+    order = np.argsort(keys, kind="stable")
+    vals = [np.asarray(lists[int(k)], dtype=np.int64).reshape(-1) for k in keys[order]]
+    ptr = np.zeros(keys.size + 1, dtype=np.int64)
+    np.cumsum([v.size for v in vals], out=ptr[1:])
+    return keys[order], ptr, np.concatenate(vals)
+
+
 def cycle_support(own: np.ndarray, far: np.ndarray, lists: dict[int, np.ndarray],
                   own_lists: dict[int, np.ndarray], camera_of) -> tuple[np.ndarray, np.ndarray]:
     """Triangle count and quadrangle flag of each own link.
@@ -121,30 +133,85 @@ def cycle_support(own: np.ndarray, far: np.ndarray, lists: dict[int, np.ndarray]
     tau : (L,) int64 — third cameras with a common feature of both ends
     quad : (L,) bool — a 4-cycle through four cameras closes over a link with ``tau = 0``
     """
+    return cycle_support_rows(own, far, _rows_of(lists), _rows_of(own_lists), camera_of)
+
+
+#: list entries expanded at once by :func:`cycle_support_rows`
+CHUNK = 1 << 22
+
+
+def cycle_support_rows(own: np.ndarray, far: np.ndarray, rows, own_rows, camera_of,
+                       chunk: int = CHUNK) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cycle_support` on lists given as rows: ``rows`` and ``own_rows`` are each
+    ``(keys, ptr, values)``, ``keys`` ascending gids, the list of ``keys[x]`` at
+    ``values[ptr[x]:ptr[x + 1]]``. Evaluated for every link at once (the lists ``N(t)`` of
+    the quadrangle test in pieces of about ``chunk`` entries)."""
+    own = np.asarray(own, dtype=np.int64).reshape(-1)
+    far = np.asarray(far, dtype=np.int64).reshape(-1)
     L = own.shape[0]
     tau = np.zeros(L, dtype=np.int64)
     quad = np.zeros(L, dtype=bool)
-    empty = np.zeros(0, dtype=np.int64)
-    for k in range(L):
-        r, s = int(own[k]), int(far[k])
-        nr = own_lists.get(r, empty)
-        ns = lists.get(s, empty)
-        cr, cs = camera_of(np.array([r, s]))
-        common = np.intersect1d(nr, ns)
-        if common.size:
-            tau[k] = np.unique(camera_of(common)).size
-            continue
-        ts = nr[nr != s]
-        if ts.size == 0 or ns.size == 0:
-            continue
-        ct = camera_of(ts)
-        ts, ct = ts[(ct != cr) & (ct != cs)], ct[(ct != cr) & (ct != cs)]
-        cu_s = camera_of(ns)
-        us = ns[(cu_s != cr) & (cu_s != cs)]
-        for t, c in zip(ts.tolist(), ct.tolist(), strict=True):
-            nt = lists.get(t, empty)
-            hit = np.intersect1d(nt, us)
-            if hit.size and (camera_of(hit) != c).any():
-                quad[k] = True
-                break
+    if L == 0:
+        return tau, quad
+    K, P, V = (np.asarray(a, dtype=np.int64) for a in rows)
+    OK, OP, OV = (np.asarray(a, dtype=np.int64) for a in own_rows)
+
+    def span(keys, ptr, g):
+        """``(start, stop)`` of the list of each gid ``g`` (empty where it has none)."""
+        if keys.size == 0:
+            z = np.zeros(g.shape, dtype=np.int64)
+            return z, z
+        pos = np.minimum(np.searchsorted(keys, g), keys.size - 1)
+        there = keys[pos] == g
+        return np.where(there, ptr[pos], 0), np.where(there, ptr[pos + 1], 0)
+
+    def cams(g):
+        return np.asarray(camera_of(g), dtype=np.int64).reshape(-1)
+
+    ids = np.unique(np.concatenate([OV, V]))  # every listed gid, as a dense index
+    W = np.int64(max(ids.size, 1))
+
+    def index(g):
+        return np.searchsorted(ids, g)
+
+    cr, cs = cams(own), cams(far)
+    # N(r) of each link, as (link, t)
+    a0, a1 = span(OK, OP, own)
+    e_r = np.repeat(np.arange(L, dtype=np.int64), a1 - a0)
+    nr = OV[ranges(a0, a1)]
+    # N(s) of each link, as sorted keys link * W + index
+    b0, b1 = span(K, P, far)
+    e_s = np.repeat(np.arange(L, dtype=np.int64), b1 - b0)
+    ns = V[ranges(b0, b1)]
+    ns_keys = np.sort(e_s * W + index(ns))
+    # τ: cameras of the features in both lists
+    hit = isin_sorted(e_r * W + index(nr), ns_keys)
+    if hit.any():
+        cam_common = cams(nr[hit])
+        C = np.int64(max(int(cam_common.max()), int(cr.max()), int(cs.max())) + 1)
+        pairs = np.unique(e_r[hit] * C + cam_common)
+        tau = np.bincount(pairs // C, minlength=L).astype(np.int64)
+    # quadrangles, on links without a triangle: t in N(r) \ {s}, u in N(s), both on cameras
+    # other than r's and s's, t ~ u on two different cameras
+    ct_all = cams(nr) if nr.size else np.zeros(0, np.int64)
+    keep = (tau[e_r] == 0) & (nr != far[e_r]) & (ct_all != cr[e_r]) & (ct_all != cs[e_r])
+    e_t, ts, ct = e_r[keep], nr[keep], ct_all[keep]
+    cu = cams(ns) if ns.size else np.zeros(0, np.int64)
+    ok_u = (cu != cr[e_s]) & (cu != cs[e_s])
+    us_keys = np.sort(e_s[ok_u] * W + index(ns[ok_u]))
+    if ts.size == 0 or us_keys.size == 0:
+        return tau, quad
+    c0, c1 = span(K, P, ts)
+    done = np.cumsum(c1 - c0)
+    start = 0
+    while start < ts.size:
+        before = int(done[start - 1]) if start else 0
+        stop = max(start + 1, int(np.searchsorted(done, before + chunk, side="right")))
+        sl = slice(start, stop)
+        n_u = c1[sl] - c0[sl]
+        u = V[ranges(c0[sl], c1[sl])]
+        k = np.repeat(e_t[sl], n_u)
+        found = isin_sorted(k * W + index(u), us_keys) & (cams(u) != np.repeat(ct[sl], n_u))
+        quad[k[found]] = True
+        start = stop
     return tau, quad

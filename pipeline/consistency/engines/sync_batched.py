@@ -77,7 +77,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.cycles import cycle_support, support_term
+from pipeline.consistency.cycles import cycle_support_rows, support_term
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
 from pipeline.consistency.keys import EMPTY, isin_sorted, ranges, tie_key
@@ -308,15 +308,14 @@ def _quadrangles(team: _Team, tau: np.ndarray, adj: np.ndarray, ptr: np.ndarray)
     rep = A[A < team.twin[A]]
     if rep.size == 0:
         return quad
-    ends = np.unique(np.concatenate([team.f[rep], team.g[rep]]))
-    near = np.unique(team.g[adj[ranges(ptr[ends], ptr[ends + 1])]])
-    rows = {int(x): team.g[adj[ptr[x]:ptr[x + 1]]] for x in np.union1d(ends, near).tolist()}
     offsets = team.offsets
 
     def camera_of(g):
         return np.searchsorted(offsets, np.asarray(g), side="right") - 1
 
-    _, q = cycle_support(team.f[rep], team.g[rep], rows, rows, camera_of)
+    # the alive graph's rows, every feature's: what the robots hold after the support round
+    rows = (np.arange(team.M, dtype=np.int64), ptr, team.g[adj])
+    _, q = cycle_support_rows(team.f[rep], team.g[rep], rows, rows, camera_of)
     quad[rep] = q
     quad[team.twin[rep]] = q
     return quad
