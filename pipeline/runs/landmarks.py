@@ -163,10 +163,16 @@ def true_landmark_pairs(features_per_camera, landmarks=None) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
 
 
-def _scores(m, links: Links, true_pairs: np.ndarray) -> dict:
-    from pipeline.evaluation.metrics import association_pairs, pairwise_scores
+def _scores(m, links: Links, true_pairs) -> dict:
+    """Pairwise scores of the closure of ``links`` (``true_pairs``: a :class:`~pipeline.
+    evaluation.metrics.PairwiseTruth`, or the ``(Q, 2)`` pairs), counted per association set
+    without listing the ``k (k - 1) / 2`` pairs of each: a set chaining thousands of features
+    implies billions of them."""
+    from pipeline.evaluation.metrics import PairwiseTruth
 
-    return pairwise_scores(association_pairs(m, links), true_pairs, int(np.sum(m)))
+    if not isinstance(true_pairs, PairwiseTruth):
+        true_pairs = PairwiseTruth(true_pairs, int(np.sum(m)))
+    return true_pairs.scores(m, links)
 
 
 def _link_scores(m, links: Links, true_pairs: np.ndarray) -> dict:
@@ -192,6 +198,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     from pipeline.commgraph import comm_graph, split_warning
     from pipeline.consistency import centralized
     from pipeline.consistency.rules import deleted_cases, get_rule, rule_names
+    from pipeline.evaluation.metrics import PairwiseTruth
     from pipeline.evaluation.report import versions
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
@@ -277,9 +284,11 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             return c
 
         before, after = counts(links, truth), counts(kept_links, truth[kept])
+        truth_pairs = PairwiseTruth(tp, int(np.sum(m)))
         pairwise = {"input_links": _link_scores(m, input_links, tp),
-                    "before": _scores(m, links, tp), "before_links": _link_scores(m, links, tp),
-                    "after": _scores(m, kept_links, tp)}
+                    "before": _scores(m, links, truth_pairs),
+                    "before_links": _link_scores(m, links, tp),
+                    "after": _scores(m, kept_links, truth_pairs)}
     baselines = {}
     if config.baselines:
         with timer.stage("baselines", "centralized, same links"):
@@ -288,7 +297,7 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                 keep = np.asarray(fn(m, links), dtype=bool)
                 dt = time.perf_counter() - t0
                 bl = links.subset(keep)
-                baselines[name] = {"pairwise": _scores(m, bl, tp),
+                baselines[name] = {"pairwise": _scores(m, bl, truth_pairs),
                                    "cycle_consistent": bool(centralized.is_conflict_free(m, bl)),
                                    "deleted_links": int((~keep).sum()),
                                    "good_deleted": int((~keep & truth).sum()),
