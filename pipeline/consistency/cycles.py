@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.keys import isin_sorted, ranges
+from pipeline.consistency.keys import isin_sorted, ranges, unique
 
 __all__ = ["cycle_support", "cycle_support_rows", "shared_cameras", "support_term", "SUPPORT_VIEWS"]
 
@@ -77,7 +77,7 @@ def shared_cameras(a: np.ndarray, b: np.ndarray, cam_a: np.ndarray,
     cam = np.empty(nodes.size, dtype=np.int64)
     cam[ia], cam[ib] = cam_a, cam_b
     C = np.int64(cam.max()) + 1
-    into = np.unique(np.r_[ia, ib] * C + cam[np.r_[ib, ia]])  # (node, camera it links into)
+    into = unique(np.r_[ia, ib] * C + cam[np.r_[ib, ia]])  # (node, camera it links into)
     ptr = np.searchsorted(into // C, np.arange(nodes.size + 1))
     pos = ranges(ptr[ia], ptr[ia + 1])
     e = np.repeat(np.arange(E), ptr[ia + 1] - ptr[ia])
@@ -168,7 +168,7 @@ def cycle_support_rows(own: np.ndarray, far: np.ndarray, rows, own_rows, camera_
     def cams(g):
         return np.asarray(camera_of(g), dtype=np.int64).reshape(-1)
 
-    ids = np.unique(np.concatenate([OV, V]))  # every listed gid, as a dense index
+    ids = unique(np.concatenate([OV, V]))  # every listed gid, as a dense index
     W = np.int64(max(ids.size, 1))
 
     def index(g):
@@ -189,7 +189,7 @@ def cycle_support_rows(own: np.ndarray, far: np.ndarray, rows, own_rows, camera_
     if hit.any():
         cam_common = cams(nr[hit])
         C = np.int64(max(int(cam_common.max()), int(cr.max()), int(cs.max())) + 1)
-        pairs = np.unique(e_r[hit] * C + cam_common)
+        pairs = unique(e_r[hit] * C + cam_common)
         tau = np.bincount(pairs // C, minlength=L).astype(np.int64)
     # quadrangles, on links without a triangle: t in N(r) \ {s}, u in N(s), both on cameras
     # other than r's and s's, t ~ u on two different cameras

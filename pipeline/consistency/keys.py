@@ -9,10 +9,27 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EMPTY", "isin_sorted", "ranges", "tie_key"]
+__all__ = ["EMPTY", "isin_sorted", "ranges", "tie_key", "unique"]
 
 #: an empty int64 index array
 EMPTY = np.zeros(0, dtype=np.int64)
+
+
+def unique(a: np.ndarray) -> np.ndarray:
+    """``np.unique(a)`` of a flat array, by sorting: NumPy 2.4's ``np.unique`` without
+    ``return_*`` hashes, 10-20 times slower on millions of int64 keys (4 M random keys:
+    11 s against 0.5 s), which made it most of a large ``sync`` run.
+
+    >>> unique(np.array([3, 1, 3, 2]))
+    array([1, 2, 3])
+    """
+    s = np.sort(np.asarray(a).reshape(-1))
+    if s.size < 2:
+        return s
+    keep = np.empty(s.size, dtype=bool)
+    keep[0] = True
+    np.not_equal(s[1:], s[:-1], out=keep[1:])
+    return s[keep]
 
 
 def isin_sorted(q: np.ndarray, a: np.ndarray) -> np.ndarray:

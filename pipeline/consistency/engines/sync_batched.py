@@ -80,7 +80,7 @@ import numpy as np
 from pipeline.consistency.cycles import cycle_support_rows, support_term
 from pipeline.consistency.engines.phases import run_quiet_phase
 from pipeline.consistency.evidence import TRIANGLE_WEIGHT
-from pipeline.consistency.keys import EMPTY, isin_sorted, ranges, tie_key
+from pipeline.consistency.keys import EMPTY, isin_sorted, ranges, tie_key, unique
 from pipeline.consistency.robot import Robot
 from pipeline.consistency.sync import (
     _BITS,
@@ -157,7 +157,7 @@ class _Team:
             and np.array_equal(self.alive, self.alive[self.twin])))
         pk = self.rob * n + self.nbr
         self.pair = np.concatenate([[0], np.cumsum(pk[1:] != pk[:-1])]) if H else EMPTY
-        self.pairs = np.unique(pk[self.alive]) if H else EMPTY
+        self.pairs = unique(pk[self.alive]) if H else EMPTY
         self.by_f = np.argsort(self.f, kind="stable")  # half-links by own feature
 
     def messages(self, S: np.ndarray) -> int:
@@ -261,8 +261,8 @@ def _support(team: _Team, counts: _Counts) -> tuple[int, np.ndarray]:
     M, H = team.M, team.H
     A = np.flatnonzero(team.alive)
     deg = np.bincount(team.f[A], minlength=M)
-    keys = np.unique(team.pair[A] * M + team.f[A])  # (message, own feature listed)
-    msgs = int(np.unique(keys // M).size)
+    keys = unique(team.pair[A] * M + team.f[A])  # (message, own feature listed)
+    msgs = int(unique(keys // M).size)
     counts.add(SUPPORT, msgs, 8 * keys.size + team.id_bytes * int(deg[keys % M].sum()))
     # τ: the far feature's list entries linked to the own feature
     adj, ptr = team.csr(team.alive)
@@ -450,13 +450,13 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
             held.append(nbr[X] * M + new[f[X]])
             if E.size or X.size:
                 last = 2 + d
-            V = np.unique(u[dist[u] == -1])
+            V = unique(u[dist[u] == -1])
             d += 1
             dist[V] = d
         if last > cap:
             raise StageStalledError(f"sync phase did not end within {cap} rounds")
         t += last
-        keys = np.unique(np.concatenate(held))
+        keys = unique(np.concatenate(held))
         held_max = np.maximum(held_max, np.bincount(keys // M, minlength=n))
         # apply the merges
         cams.merge(a, b)
@@ -482,7 +482,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         st.open = is_open[hs].copy()
         st.tree = tree[hs].copy()
         st.w = w[hs].copy()
-        mine = np.unique(st.label[size[st.label] >= 2])
+        mine = unique(st.label[size[st.label] >= 2])
         st.cams = {int(x): row for x, row in zip(mine.tolist(), cams.of(mine), strict=True)}
         st.rounds = boruvka
         rb.peak_memory_bytes = max(rb.peak_memory_bytes,
