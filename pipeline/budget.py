@@ -78,7 +78,7 @@ from pipeline.errors import InputError
 from pipeline.progress import counted
 from pipeline.types import Links
 
-__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "BYTES_PER_CAMERA", "BYTES_PER_LANDMARK_PAIR", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
+__all__ = ["BASELINE_DENSE_FEATURES", "baselines_bytes", "spectral_dense_features", "BYTES_PER_CAMERA", "BYTES_PER_LANDMARK_PAIR", "BYTES_PER_EDGE", "BYTES_PER_ENTRY", "BYTES_PER_ROW_CROSSING", "BYTES_PER_FRAME_PIXEL", "check_motion_memory", "BYTES_PER_LIST_ENTRY",
            "BYTES_PER_ROBOT_PIXEL", "BYTES_PER_FUSION_OBSERVER_PAIR", "BYTES_PER_FUSION_TRACK_ROBOT",
            "check_fusion_memory", "fusion_bytes",
            "BYTES_PER_ROW",
@@ -308,11 +308,48 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
                "their memory follows the links")
 
 
-def baselines_bytes(features: int, links: int) -> int:
-    """Estimated peak of the centralized baselines on ``links`` links among ``features``
-    features (module notes)."""
-    dense = min(int(features), BASELINE_DENSE_FEATURES)
-    return int(links) * BYTES_PER_ROW + BASELINE_DENSE_COPIES * dense * dense * 8
+def baselines_bytes(features_per_camera, links: Links) -> int:
+    """Estimated peak of the centralized baselines on ``links`` (module notes): a copy of
+    the links per baseline and the spectral baselines' largest eigenproblem
+    (:func:`spectral_dense_features`)."""
+    dense = spectral_dense_features(features_per_camera, links)
+    return int(len(links)) * BYTES_PER_ROW + BASELINE_DENSE_COPIES * dense * dense * 8
+
+
+def spectral_dense_features(features_per_camera, links: Links) -> int:
+    """Size of the largest matrix the spectral baselines solve densely, at least.
+
+    A component of ``m_c`` features gets ``k_c`` universe points, at least the most features
+    of one camera in it (:func:`pipeline.consistency.spectral.universe_size_count`); its
+    leading ``k_c`` eigenpairs are solved densely when ``4 k_c >= m_c``
+    (:func:`pipeline.consistency.spectral._top_eigen`), whatever ``m_c``: three cameras whose
+    links chain 33,675 features into one set (``k_c`` over 11,000) ran out of memory past
+    5 GB where :data:`BASELINE_DENSE_FEATURES` alone counted 0.4 GB. Otherwise the largest
+    component of at most :data:`BASELINE_DENSE_FEATURES` features, as before."""
+    fpc = np.asarray(features_per_camera, dtype=np.int64).reshape(-1)
+    m_total = int(fpc.sum())
+    dense = min(m_total, BASELINE_DENSE_FEATURES)
+    if not len(links):
+        return dense
+    from pipeline.association import AssociationGraph
+
+    graph = AssociationGraph(fpc, links)
+    a, b = graph.global_ids()
+    linked = np.zeros(m_total, dtype=bool)
+    linked[a] = linked[b] = True
+    comp = graph.components()
+    cam = np.repeat(np.arange(fpc.size, dtype=np.int64), fpc)
+    g = np.flatnonzero(linked)
+    size = np.bincount(comp[g])
+    big = np.flatnonzero(size > BASELINE_DENSE_FEATURES)
+    if big.size == 0:
+        return dense
+    sel = g[np.isin(comp[g], big)]
+    keys, counts = np.unique(comp[sel] * np.int64(fpc.size) + cam[sel], return_counts=True)
+    k_min = np.zeros(size.size, dtype=np.int64)
+    np.maximum.at(k_min, keys // fpc.size, counts)
+    must = big[4 * k_min[big] >= size[big]]
+    return max(dense, int(size[must].max(initial=0)))
 
 
 def check_formation_memory(n_robots: int, size: tuple[int, int], limit,

@@ -254,7 +254,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
                            camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
-                   baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
+                   baselines_bytes(m, model_links), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     evidence = dict(link_weight=_link_weight(contents, model_links),
                     keypoints=contents.keypoints) if rule.needs_evidence else None

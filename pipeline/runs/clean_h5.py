@@ -96,7 +96,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
                            camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
-                   baselines_bytes(int(np.sum(m)), len(model_links)), "drop --baselines")
+                   baselines_bytes(m, model_links), "drop --baselines")
     before = count_conflicts(AssociationGraph(m, model_links)).as_dict()
     result = resolve_alone(transport, m, edges, model_links, rule.name, contents.names,
                            "clean-h5")

@@ -139,7 +139,7 @@ def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None,
                            camera_sets=rule.camera_sets)
     if config.baselines:
-        budget.add("the centralized baselines", baselines_bytes(int(np.sum(m)), len(links)),
+        budget.add("the centralized baselines", baselines_bytes(m, links),
                    "add --no-baselines")
 
 

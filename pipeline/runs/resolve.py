@@ -132,7 +132,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
                            camera_sets=rule.camera_sets)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
-                   baselines_bytes(int(m.sum()), len(run_links)), "drop --baselines")
+                   baselines_bytes(m, run_links), "drop --baselines")
     if faults is not None:
         faults_in_layout(faults, ids)  # a crash of a robot not in the input is refused here
     # the input checked: a rule that gives way to Alg. 1 under the faults is warned of now, so
