@@ -288,7 +288,7 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
         else:
             budget.add(f"the robots' links and the clusters at their far ends ({len(links)} "
                        "links)", len(links) * BYTES_PER_SYNC_LINK,
-                       "split the input or raise the limit")
+                       "split the input")
         if set_lists is not None:
             entries, largest = detection_entries(features_per_camera, links, int(set_lists) + 1)
             budget.add(f"the evidence rule's detection (the links chain up to {largest} features "
