@@ -220,7 +220,7 @@ def check_data_frames(data: str, frames: list[int], warped: bool) -> None:
 
     if not frames and not warped:
         return
-    held = len(load_landmark_folder(data, "given"))
+    held = len(load_landmark_folder(data))
     if bad := [f for f in frames if not 2 <= f <= held]:
         raise InputError(f"--frames {bad[0]}: expected 2..{held} (--data {data} holds {held} "
                          "labelled images)")
@@ -245,7 +245,7 @@ def warped_landmarks(directory: str, out: Path, seed: int, frames: int = WARPED_
 
     from pipeline.inputs.landmarks import load_landmark_folder
 
-    fr = load_landmark_folder(directory, "given", frames)
+    fr = load_landmark_folder(directory, "auto", frames)
     n_rows = max(int(f.landmarks.max()) + 1 for f in fr)
     rng = np.random.default_rng(seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -281,8 +281,10 @@ def warped_landmarks(directory: str, out: Path, seed: int, frames: int = WARPED_
 
 
 def landmark_case(directory: str, frames: int | None, graph: str, inputs: str, seed: int,
-                  descriptors: str = "given"):
-    """Links, features per camera and the true landmark of every feature (shuffled order)."""
+                  descriptors: str = "auto"):
+    """Links, features per camera and the true landmark of every feature (shuffled order);
+    ``auto`` descriptors as ``run-landmarks`` reads them: the ``.scf`` files where the folder
+    has them, else SIFT at the keypoints."""
     from pipeline.commgraph import comm_graph
     from pipeline.inputs.landmarks import load_landmark_folder
     from pipeline.matching.landmarks import match_landmark_edges

@@ -60,7 +60,7 @@ def hotel(data: Path, frames: str, graph: str):
     from pipeline.matching.landmarks import match_landmark_edges
     from pipeline.matching.link_evidence import ratio_llr
 
-    fr = load_landmark_folder(data, "given", None if frames == "all" else int(frames))
+    fr = load_landmark_folder(data, "auto", None if frames == "all" else int(frames))
     edges = comm_graph(graph, [f.name for f in fr])
     fpc = np.array([len(f.keypoints) for f in fr])
     links, _ = match_landmark_edges([f.descriptors for f in fr], edges, fr[0].descriptor_kind,
