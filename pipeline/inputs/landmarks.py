@@ -429,6 +429,9 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     if descriptors not in DESCRIPTOR_SOURCES:
         raise InputError(f"--descriptors {descriptors!r}: expected one of "
                          f"{', '.join(DESCRIPTOR_SOURCES)}")
+    if directory.is_file():
+        raise InputError(f"{directory}: a file, not a folder; give the folder that holds the "
+                         "images and their keypoint files")
     if not directory.is_dir():
         raise InputError(f"{directory}: no such folder of labelled images")
     files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
@@ -437,8 +440,12 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     if descriptors == "auto":
         descriptors = "given" if any(p.suffix.lower() == ".scf" for p in files) else "sift"
     if len(images) < 2:
+        subs = [p.name for p in sorted(directory.iterdir(), key=lambda p: natural_key(p.name))
+                if not p.name.startswith(".") and _holds_images(p)]
+        hint = (f"; its sub-folder(s) {', '.join(subs[:5])}{', ...' if len(subs) > 5 else ''} "
+                "hold images: give one of them, a labelled set each" if subs else "")
         raise InputError(f"{directory}: found {len(images)} image(s); a labelled-landmark "
-                         "folder needs at least two (image + NAME.txt or NAME.mat each)")
+                         f"folder needs at least two (image + NAME.txt or NAME.mat each){hint}")
     kp_files: list[tuple[Path, np.ndarray]] = []
     rejected: dict[str, Path] = {}  # stem -> a .txt / .mat that is not a keypoint table
     for p in files:
@@ -583,6 +590,15 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
             fr.descriptors = sift_at_keypoints(fr.image_path, fr.keypoints)
             fr.descriptor_kind, fr.descriptor_file = "vector", "sift"
     return out
+
+
+def _holds_images(path: Path) -> bool:
+    """``path`` is a folder with an image file directly in it (unreadable: no)."""
+    try:
+        return path.is_dir() and any(q.is_file() and q.suffix.lower() in IMAGE_SUFFIXES
+                                     for q in path.iterdir())
+    except OSError:
+        return False
 
 
 def sift_at_keypoints(image_path: str | Path, keypoints: np.ndarray) -> np.ndarray:

@@ -102,7 +102,7 @@ def test_graph_naming_a_folder(folder, tmp_path, capsys):
 
 def test_folder_missing_a_file_or_too_small(tmp_path, capsys, folder):
     _fails(capsys, _argv(tmp_path / "nope"), folder, "no such folder")
-    _fails(capsys, _argv(folder / "v0.txt"), folder, "no such folder")
+    _fails(capsys, _argv(folder / "v0.txt"), folder, "a file, not a folder")
     (tmp_path / "empty").mkdir()
     _fails(capsys, _argv(tmp_path / "empty"), folder, "found 0 image(s)")
     for k in (1, 2, 3):
