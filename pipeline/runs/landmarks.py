@@ -143,6 +143,29 @@ def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
                    "add --no-baselines")
 
 
+def shared_descriptor_warning(frames) -> str | None:
+    """A warning when landmarks of one image have identical descriptor rows (two labels
+    within a pixel of each other, or copied rows): the assignment cannot tell them apart and
+    settles its ties by row order, which is the labels' order in every image, so the scores
+    would credit the labels, not the matching."""
+    hits = []
+    for f in frames:
+        _, first, counts = np.unique(f.descriptors, axis=0, return_index=True,
+                                     return_counts=True)
+        if (counts > 1).any():
+            dup = int(counts[counts > 1].sum())
+            k = int(first[np.flatnonzero(counts > 1)[0]])
+            same = np.flatnonzero((f.descriptors == f.descriptors[k]).all(axis=1))
+            rows = [int(f.landmarks[j]) + 1 for j in same[:2]]
+            hits.append(f"{f.name} ({dup} landmarks, e.g. label rows {rows[0]} and {rows[1]})")
+    if not hits:
+        return None
+    return (f"{len(hits)} image(s) hold landmarks with identical descriptors: "
+            f"{'; '.join(hits[:3])}{'; ...' if len(hits) > 3 else ''}; matching cannot tell "
+            "them apart and breaks the tie by row order, the labels' order in every image, so the "
+            "scores are optimistic; merge or remove landmarks labelled at the same spot")
+
+
 def true_landmark_pairs(features_per_camera, landmarks=None) -> np.ndarray:
     """True pairs ``(Q, 2)`` (global ids) of every image pair: features of one landmark.
 
@@ -233,6 +256,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
                    f"graph {config.graph}: {len(comm_edges)} edges")
         message = split_warning(len(frames), comm_edges, lost="their landmarks cannot be "
                                 "associated across the groups")
+        if message:
+            timer.warn(message)
+        message = shared_descriptor_warning(frames)
         if message:
             timer.warn(message)
     check_team_size(config.transport, len(frames), "images")
