@@ -133,6 +133,18 @@ def is_utf8_name(name: str) -> bool:
     return True
 
 
+def check_utf8_names(names, directory, why: str, rename: str = "them") -> None:
+    """InputError naming the file names among ``names`` (images of ``directory``) that are not
+    UTF-8 text (:func:`is_utf8_name`): ``why`` the outputs that must name them, ``rename``
+    what to rename."""
+    bad = [n for n in names if not is_utf8_name(n)]
+    if bad:
+        raise InputError(
+            f"{len(bad)} image file name(s) in {str(directory)!r} are not UTF-8 text "
+            f"({', '.join(repr(n) for n in bad[:5])}{', ...' if len(bad) > 5 else ''}): "
+            f"{why}; rename {rename}, e.g. with convmv -f latin1 -t utf8")
+
+
 def seed(value, flag: str) -> int:
     """A non-negative integer seed below ``2**63``."""
     try:

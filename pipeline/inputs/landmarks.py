@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
-from pipeline.validate import is_utf8_name
+from pipeline.validate import check_utf8_names
 
 __all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frames",
            "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
@@ -440,13 +440,9 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
     images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
     if descriptors == "auto":
         descriptors = "given" if any(p.suffix.lower() == ".scf" for p in files) else "sift"
-    not_utf8 = [p.name for p in images if not is_utf8_name(p.name)]
-    if not_utf8:
-        raise InputError(
-            f"{len(not_utf8)} image file name(s) in {str(directory)!r} are not UTF-8 text "
-            f"({', '.join(repr(n) for n in not_utf8[:5])}{', ...' if len(not_utf8) > 5 else ''}"
-            "): report.json names every image in UTF-8; rename them (with their keypoint and "
-            "descriptor files), e.g. with convmv -f latin1 -t utf8")
+    check_utf8_names([p.name for p in images], directory,
+                     "report.json names every image in UTF-8",
+                     "them (with their keypoint and descriptor files)")
     if len(images) < 2:
         subs = [p.name for p in sorted(directory.iterdir(), key=lambda p: natural_key(p.name))
                 if not p.name.startswith(".") and _holds_images(p)]

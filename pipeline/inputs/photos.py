@@ -30,7 +30,7 @@ from PIL import ExifTags, Image, UnidentifiedImageError
 
 from pipeline.errors import InputError
 from pipeline.types import View
-from pipeline.validate import check_focal, focal_px_ok, is_utf8_name
+from pipeline.validate import check_focal, check_utf8_names, focal_px_ok, is_utf8_name
 
 __all__ = [
     "image_paths",
@@ -141,13 +141,8 @@ def _image_files(directory: Path) -> list[Path]:
         raise InputError(
             f"no images in {str(directory)!r}: expected files ending in "
             f"{', '.join(IMAGE_SUFFIXES)} (found {len(files)} other file(s)){hint}")
-    not_utf8 = [p.name for p in images if not is_utf8_name(p.name)]
-    if not_utf8:
-        raise InputError(
-            f"{len(not_utf8)} image file name(s) in {str(directory)!r} are not UTF-8 text "
-            f"({', '.join(repr(n) for n in not_utf8[:5])}{', ...' if len(not_utf8) > 5 else ''}"
-            "): the outputs name every image in UTF-8 (report.json, COLMAP's model); rename "
-            "them, e.g. with convmv -f latin1 -t utf8")
+    check_utf8_names([p.name for p in images], directory,
+                     "the outputs name every image in UTF-8 (report.json, COLMAP's model)")
     if len(images) == 1:
         raise InputError(
             f"only one image in {str(directory)!r} ({images[0].name}): matching needs at least "
