@@ -81,7 +81,8 @@ leaves open. Here an outlier leaves its landmark: a link is cut when exactly one
 is an outlier, so the outliers' links to the landmark's other observations go; a link
 between two outliers stays when the two can be one point — their two-view point in front
 of both cameras and within the pixel gate of both keypoints at the team's noise floor
-(:func:`outlier_pair_tol`), or, without a baseline, the point at infinity along their rays
+(:func:`pipeline.fusion.local.outlier_pair_tol`), or, without a baseline, the point at infinity along
+their rays
 (:func:`pipeline.fusion.local.pair_agrees`) — and is cut otherwise. What stays joins them in
 a set of their own (a subset of a conflict-free set is conflict-free). Outliers linked to
 each other are most often observations of one other point that a wrong link joined to this
@@ -146,6 +147,7 @@ from pipeline.fusion.local import (
     TwoViewPoints,
     local_estimates,
     observing_neighbours,
+    outlier_pair_tol,
     pair_agrees,
     project,
     two_view_points,
@@ -620,13 +622,6 @@ def _observations_and_cuts(tr, T: int, obs_track, obs_cam, obs_g, off, links: Li
     cut = bad_feature[off[links.cam_i] + links.feat_i] ^ bad_feature[off[links.cam_j] + links.feat_j]
     cut &= ~(crashed[links.cam_i] | crashed[links.cam_j])
     return obs_est, obs_in, obs_votes, cut
-
-
-def outlier_pair_tol(sigma_px: float, px_thr: float) -> float:
-    """Pixels within which two outliers' common point must reproject for their link to stay:
-    the pixel gate ``‖e‖² / σ² <= χ²_{2,p}`` at the team's noise floor ``sigma_px`` (known to
-    every robot, so both ends of a link decide alike; a robot's measured ``σ_i`` is its own)."""
-    return float(sigma_px) * float(np.sqrt(px_thr))
 
 
 def _outliers_apart(links: Links, outlier_g, off, features, Rs, ts, Ks, tol_px: float,

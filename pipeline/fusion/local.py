@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ["triangulate_views", "local_estimates", "project", "observing_neighbours",
-           "two_view_points", "TwoViewPoints", "pair_agrees"]
+           "two_view_points", "TwoViewPoints", "pair_agrees", "outlier_pair_tol"]
 
 
 def _inv3(A):
@@ -129,6 +129,14 @@ class TwoViewPoints(NamedTuple):
     hi: np.ndarray
     X: np.ndarray    # (U, 3) — the point (linear triangulation, Gauss–Newton on the pixels)
     ok: np.ndarray   # (U,) bool — the point is defined (normal matrix positive definite)
+
+
+def outlier_pair_tol(sigma_px: float, px_thr: float) -> float:
+    """Pixels within which two outliers' common point must reproject for their link to stay
+    (:mod:`pipeline.fusion.landmarks`, "Outliers leave the landmark"): the pixel gate
+    ``‖e‖² / σ² <= χ²_{2,p}`` at the team's noise floor ``sigma_px`` (known to every robot,
+    so both ends of a link decide alike; a robot's measured ``σ_i`` is its own)."""
+    return float(sigma_px) * float(np.sqrt(px_thr))
 
 
 def pair_agrees(uv, R, t, K, tol_px: float) -> np.ndarray:

@@ -86,6 +86,7 @@ from pipeline.fusion.flood_wire import TRIU, decode_flood, encode_flood
 from pipeline.fusion.local import (
     local_estimates,
     observing_neighbours,
+    outlier_pair_tol,
     pair_agrees,
     project,
     two_view_points,
@@ -658,9 +659,7 @@ class FusionRobot:
     def _pair_agrees(self, j: int, f: int) -> bool:
         """:func:`~pipeline.fusion.local.pair_agrees` of its feature ``f`` and neighbour ``j``'s
         observation of the same track (its setup message: keypoint and camera), the lower id
-        first, at :func:`~pipeline.fusion.landmarks.outlier_pair_tol`: what ``j`` computes."""
-        from pipeline.fusion.landmarks import outlier_pair_tol
-
+        first, at :func:`~pipeline.fusion.local.outlier_pair_tol`: what ``j`` computes."""
         s = self.setups[j]
         at = np.flatnonzero(s["names"] == self.track_of[f])
         if not len(at):   # not a track it fused with j: nothing says they are one point

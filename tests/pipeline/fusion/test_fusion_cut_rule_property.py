@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 from data_synth.formations import look_at
 from pipeline.association import AssociationGraph, association_sets, count_conflicts
-from pipeline.fusion.landmarks import fuse_tracks, outlier_pair_tol
-from pipeline.fusion.local import pair_agrees
+from pipeline.fusion.landmarks import fuse_tracks
+from pipeline.fusion.local import outlier_pair_tol, pair_agrees
 from pipeline.fusion.robot import FusionOptions, FusionRobot
 from pipeline.fusion.robot_loops import run_fusion_locally, run_fusion_reliably
 from pipeline.fusion.voting import chi2_ppf
