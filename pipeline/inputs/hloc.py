@@ -450,8 +450,10 @@ def read_h5(features: str | Path, matches: str | Path,
                         "images (and match again), or remove one of the lines")
                 pair_of_key[key] = (a, b)
                 stored.append((key, b, a) if rev else (key, a, b))
+        from pipeline.progress import progress
+
         done = set()
-        for key, n0, n1 in stored:
+        for key, n0, n1 in progress(stored, desc="reading matches"):
             if key in done:
                 continue
             done.add(key)

@@ -372,7 +372,19 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
                                  for p in team.pairs.tolist()):
         return run_sync(robots, network, on_round=on_round)
     counts = _Counts()
+    # the rounds are counted as the batch evaluates them and reported then (a long run shows
+    # its progress while it computes); the network's clock is advanced at the end
+    told = 0
+
+    def tell(upto: int) -> None:
+        nonlocal told
+        if on_round is not None:
+            for k in range(told + 1, upto + 1):
+                on_round(k)
+        told = max(told, upto)
+
     support_rounds, w = _support(team, counts)
+    tell(support_rounds)
     A = np.flatnonzero(team.alive)
     if not np.array_equal(w[A], w[team.twin[A]]):  # the ends disagree on a weight
         return run_sync(robots, network, on_round=on_round)
@@ -405,6 +417,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         fmask = (tree & alive) if team.flood == "tree" else (alive & (label[f] == label[g]))
         fl, fptr = team.csr(fmask)
         t += _flood_best(team, best, fl, fptr, counts, cap)
+        tell(t)
         if not (best >= 0).any():
             break
         boruvka += 1
@@ -456,6 +469,7 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         if last > cap:
             raise StageStalledError(f"sync phase did not end within {cap} rounds")
         t += last
+        tell(t)
         keys = unique(np.concatenate(held))
         held_max = np.maximum(held_max, np.bincount(keys // M, minlength=n))
         # apply the merges
@@ -464,10 +478,9 @@ def run_sync_batched(robots: list[Robot], network: Transport, on_round=None) -> 
         label = new
         tree[Mh] = True
         dirty = is_open & (memb[f] | memb[g])
-    for k in range(1, t + 1):
+    for _ in range(t):
         network.end_round()
-        if on_round is not None:
-            on_round(k)
+    tell(t)
     for kind, m in counts.messages.items():
         network.count(kind, m, counts.bytes[kind])
     # every robot's state, then its own cut
