@@ -84,9 +84,14 @@ def run_loop_locally(robot: Robot, transport, protocol: ProtocolOptions | None, 
     log = RobotRun()
     t_start = time.perf_counter()
     iteration = 0
+    passes = 0
+    redo = False  # a detection repeated after a loss stays in its iteration
     while True:
-        iteration += 1
-        if iteration > max_iterations:
+        passes += 1
+        if not redo:
+            iteration += 1
+        redo = False
+        if passes > max_iterations:
             raise RuntimeError(f"robot {robot.id}: conflicts remain after {max_iterations} "
                                "iterations (Prop. 4.5 bound)")
         start = transport.round
@@ -103,6 +108,7 @@ def run_loop_locally(robot: Robot, transport, protocol: ProtocolOptions | None, 
                                lost_somewhere=bool(bits & LOST)))
         if bits & LOST:
             log.repeated_detections += 1
+            redo = True
             continue
         if not bits & CONFLICT:
             # every linked neighbour confirms it is alive (reliable.py, "Closing round")
@@ -117,6 +123,7 @@ def run_loop_locally(robot: Robot, transport, protocol: ProtocolOptions | None, 
                                    rounds=rounds, lost_somewhere=bool(bits & LOST)))
             if bits & LOST:
                 log.repeated_detections += 1
+                redo = True
                 continue
             break
         log.iterations += 1

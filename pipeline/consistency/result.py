@@ -42,7 +42,9 @@ class ConsistencyResult:
         last detection that finds none ends the loop and is counted in the rounds),
         ``detection_rounds``, ``resolution_rounds`` (totals over all passes),
         ``closing_rounds`` (total of the closing phases; reliable protocol only),
-        ``per_iteration`` (one dict per detection: ``detection_rounds``, ``t_stop`` (n,) the
+        ``per_iteration`` (one dict per detection; a detection repeated after a loss is
+        marked ``repeated`` and keeps the ``iteration`` number of the pass it redoes, which
+        the cuts of that pass carry too: ``detection_rounds``, ``t_stop`` (n,) the
         round each robot stopped (Prop. 3.5), ``conflictive_features``, ``conflictive_sets``,
         ``resolution_rounds``, ``last_assignment_round``, ``messages``, ``bytes``),
         ``messages``, ``bytes``, ``messages_by_kind``, ``bytes_by_kind``,

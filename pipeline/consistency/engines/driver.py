@@ -388,10 +388,15 @@ def _loop(robots, network, proto, in_batch: bool, run_pass, reliable: bool,
     iteration = 0
     repeated = 0
     close_round = None
+    passes = 0
+    redo = False  # a detection repeated after a loss stays in its iteration
     while True:
-        iteration += 1
-        if iteration > max_iterations:
+        passes += 1
+        if passes > max_iterations:
             raise RuntimeError(f"conflicts remain after {max_iterations} iterations (Prop. 4.5 bound)")
+        if not redo:
+            iteration += 1
+        redo = False
         c0 = network.counters()
         on_round = counting(DETECTION, iteration)
         if in_batch:
@@ -406,6 +411,7 @@ def _loop(robots, network, proto, in_batch: bool, run_pass, reliable: bool,
             rec.update(_delta(c0, network.counters()), repeated=True)
             per_iteration.append(rec)
             repeated += 1
+            redo = True
             continue
         if det["conflictive_features"] == 0:
             if proto.closing:
@@ -418,6 +424,7 @@ def _loop(robots, network, proto, in_batch: bool, run_pass, reliable: bool,
                     rec.update(_delta(c0, network.counters()), repeated=True)
                     per_iteration.append(rec)
                     repeated += 1
+                    redo = True
                     continue
                 close_round = clo["start_round"]
             rec.update(_delta(c0, network.counters()))
