@@ -209,7 +209,14 @@ class FusionResult:
     stats : dict
         ``rounds`` (max-c + consensus), ``messages`` (robot-to-robot, one per neighbour pair
         and direction per round, bundling all shared tracks, then the ``fusion-cut`` notices
-        of the robots that declared outliers), ``bytes``, and counts.
+        of the robots that declared outliers), ``bytes``, and counts, among them
+        ``observations_voted_out`` (estimates voted out of their track),
+        ``observations_cut`` (observations *declared outliers*: voted out and not
+        reprojecting within the gate of the fused landmark, i.e. ``~obs_inlier``; not the
+        observations that lost a link: an outlier's links to the other outliers stay where
+        the two can be one point, so an outlier may keep links; the name is kept for the
+        reports that hold it) and ``links_cut`` (links cut ``fusion-outlier``; a run's
+        ``fusion`` section also holds them as ``observations_cut_links`` and ``cut_links``).
     """
 
     points: np.ndarray
