@@ -63,12 +63,16 @@ def release_free_memory() -> bool:
 @contextmanager
 def ticker(description: str, delay: float = 2.0, stream=None):
     """Show a tqdm line with the elapsed time while the block runs, if it runs longer than
-    ``delay`` seconds (only on a terminal: tqdm stays silent when ``stream`` is not one).
+    ``delay`` seconds (only on a terminal: tqdm stays silent when ``stream`` is not one; and
+    only when INFO messages are shown: nothing with ``--quiet``, as :func:`progress`).
 
     For stages whose inner loop gives no count to report (the simulated robot network runs
     ``n`` robots for up to ``d + 1`` rounds per detection): it says the run is alive and for
     how long, not how much is left.
     """
+    if not log.isEnabledFor(logging.INFO):
+        yield
+        return
     stop = threading.Event()
 
     def tick():
