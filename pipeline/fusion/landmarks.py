@@ -517,10 +517,9 @@ def fuse_tracks(views: list[View], features: list[Features], links: Links, comm_
     fused = fused_points(node_edges, good, res.theta, res.winner, K)
     pts, has_pt, grp, split = fused.points, fused.has_point, fused.group, fused.split
 
-    obs_est, obs_in, obs_votes, cut = _observations_and_cuts(
+    obs_est, obs_in, obs_votes, cut, both = _observations_and_cuts(
         tr, T, obs_track, obs_cam, obs_g, off, links, estimated, outlier, crashed, res.votes, K)
-    cut |= _outliers_apart(links, obs_g[~obs_in], off, features, Rs, ts, Ks,
-                           outlier_pair_tol(sigma_px, px_thr), crashed)
+    cut[both] = _apart(links, both, features, Rs, ts, Ks, outlier_pair_tol(sigma_px, px_thr))
     kinds = _stage_stats(stats, res, protocol, consensus, wire, node_edges, active_comm, crashed)
     stats.update(
         tracks_fused=int(has_pt.sum()), observations_voted_out=int(voted_out.sum()),
@@ -609,9 +608,10 @@ def _observer_graph(comm: np.ndarray, observes: np.ndarray):
 def _observations_and_cuts(tr, T: int, obs_track, obs_cam, obs_g, off, links: Links, estimated,
                            outlier, crashed, votes, K: int):
     """Back from the fused tracks' rows to every observation and link: each observation's
-    ``estimated``, ``inlier`` and votes, and the links with exactly one end at an outlier
-    observation (module docstring, "Outliers leave the landmark"; never a crashed robot's;
-    the links between two outliers are judged by :func:`_outliers_apart`)."""
+    ``estimated``, ``inlier`` and votes; the links cut, those with exactly one end at an
+    outlier observation (module docstring, "Outliers leave the landmark"; never a crashed
+    robot's), and the indices of the links with both ends at outliers, which
+    :func:`_apart` judges."""
     n_obs = len(obs_g)
     obs_est = np.zeros(n_obs, dtype=bool)
     obs_in = np.ones(n_obs, dtype=bool)
@@ -625,25 +625,21 @@ def _observations_and_cuts(tr, T: int, obs_track, obs_cam, obs_g, off, links: Li
     obs_votes[sel] = votes[bo[sel], obs_cam[sel]]
     bad_feature = np.zeros(off[-1], dtype=bool)
     bad_feature[obs_g[~obs_in]] = True
-    # an outlier leaves its landmark: its links to the others go (two outliers: _outliers_apart)
-    cut = bad_feature[off[links.cam_i] + links.feat_i] ^ bad_feature[off[links.cam_j] + links.feat_j]
-    cut &= ~(crashed[links.cam_i] | crashed[links.cam_j])
-    return obs_est, obs_in, obs_votes, cut
+    # an outlier leaves its landmark: its links to the others go (two outliers: _apart)
+    end_i = bad_feature[off[links.cam_i] + links.feat_i]
+    end_j = bad_feature[off[links.cam_j] + links.feat_j]
+    judged = ~(crashed[links.cam_i] | crashed[links.cam_j])
+    return obs_est, obs_in, obs_votes, (end_i ^ end_j) & judged, \
+        np.flatnonzero(end_i & end_j & judged)
 
 
-def _outliers_apart(links: Links, outlier_g, off, features, Rs, ts, Ks, tol_px: float,
-                    crashed) -> np.ndarray:
-    """Links ``(L,)`` between two outlier observations (global ids ``outlier_g``) that cannot
-    be one point (:func:`pipeline.fusion.local.pair_agrees`, within ``tol_px``): cut with the
-    outliers' other links (module docstring, "Outliers leave the landmark")."""
-    bad = np.zeros(int(off[-1]), dtype=bool)
-    bad[outlier_g] = True
-    both = bad[off[links.cam_i] + links.feat_i] & bad[off[links.cam_j] + links.feat_j]
-    both &= ~(crashed[links.cam_i] | crashed[links.cam_j])
-    out = np.zeros(len(both), dtype=bool)
-    k = np.flatnonzero(both)
+def _apart(links: Links, k: np.ndarray, features, Rs, ts, Ks, tol_px: float) -> np.ndarray:
+    """Whether each link ``k`` (between two outlier observations) joins two observations that
+    cannot be one point (:func:`pipeline.fusion.local.pair_agrees`, within ``tol_px``, the
+    lower camera first): cut with the outliers' other links (module docstring, "Outliers
+    leave the landmark")."""
     if not len(k):
-        return out
+        return np.zeros(0, dtype=bool)
     lo = np.minimum(links.cam_i[k], links.cam_j[k])
     flip = links.cam_i[k] != lo
     fl = np.where(flip, links.feat_j[k], links.feat_i[k])
@@ -655,8 +651,7 @@ def _outliers_apart(links: Links, outlier_g, off, features, Rs, ts, Ks, tol_px: 
 
     uv = np.stack([keypoints(lo, fl), keypoints(hi, fh)], axis=1)
     two = np.stack([lo, hi], axis=1)
-    out[k] = ~pair_agrees(uv, Rs[two], ts[two], Ks[two], tol_px)
-    return out
+    return ~pair_agrees(uv, Rs[two], ts[two], Ks[two], tol_px)
 
 
 def _cut_notices(exchange, comm: np.ndarray, outliers) -> None:

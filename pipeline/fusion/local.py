@@ -14,6 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pipeline.consistency.evidence import far_point
+
 __all__ = ["triangulate_views", "local_estimates", "project", "observing_neighbours",
            "two_view_points", "TwoViewPoints", "pair_agrees", "outlier_pair_tol"]
 
@@ -149,8 +151,6 @@ def pair_agrees(uv, R, t, K, tol_px: float) -> np.ndarray:
     (:func:`pipeline.consistency.evidence.far_point`: rays without a baseline, the frames of
     a robot standing still, carry no depth and agree exactly when their rays do).
     """
-    from pipeline.consistency.evidence import far_point
-
     uv = np.asarray(uv, np.float64).reshape(-1, 2, 2)
     M = len(uv)
     if not M:
