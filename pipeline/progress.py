@@ -17,11 +17,10 @@ import ctypes.util
 import functools
 import logging
 import sys
-import threading
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimer", "progress", "log", "release_free_memory", "ticker", "rounds_bar",
+__all__ = ["StageTimer", "progress", "log", "release_free_memory", "rounds_bar",
            "counted"]
 
 log = logging.getLogger("pipeline.progress")
@@ -58,40 +57,6 @@ def release_free_memory() -> bool:
     """
     trim = _malloc_trim()
     return bool(trim(0)) if trim is not None else False
-
-
-@contextmanager
-def ticker(description: str, delay: float = 2.0, stream=None):
-    """Show a tqdm line with the elapsed time while the block runs, if it runs longer than
-    ``delay`` seconds (only on a terminal: tqdm stays silent when ``stream`` is not one; and
-    only when INFO messages are shown: nothing with ``--quiet``, as :func:`progress`).
-
-    For stages whose inner loop gives no count to report (the simulated robot network runs
-    ``n`` robots for up to ``d + 1`` rounds per detection): it says the run is alive and for
-    how long, not how much is left.
-    """
-    if not log.isEnabledFor(logging.INFO):
-        yield
-        return
-    stop = threading.Event()
-
-    def tick():
-        if stop.wait(delay):
-            return
-        from tqdm.std import tqdm
-
-        with tqdm(desc=description, total=None, unit="s", file=stream or sys.stderr,
-                  disable=None, leave=False, ncols=100, bar_format="{desc}: {elapsed}") as bar:
-            while not stop.wait(1.0):
-                bar.update(1)
-
-    thread = threading.Thread(target=tick, daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join(timeout=2.0)
 
 
 class _NoBar:

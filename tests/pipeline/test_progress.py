@@ -1,14 +1,10 @@
 """StageTimer (stage times, progress lines, freed memory handed back at the end of a stage) and
-the elapsed-time ticker of long stages."""
+the progress bars of long stages."""
 
 import io
-import logging
-import time
-
-import pytest
 
 import pipeline.progress as progress
-from pipeline.progress import StageTimer, release_free_memory, ticker
+from pipeline.progress import StageTimer, release_free_memory
 
 
 def test_stage_times_add_up_and_lines_are_printed():
@@ -43,54 +39,10 @@ def test_release_free_memory_is_safe_to_call():
     assert release_free_memory() in (True, False)
 
 
-@pytest.fixture
-def log_level():
-    """Sets the progress logger's level for one test (setLevel, which clears the logger's
-    cache of isEnabledFor answers) and puts the old one back."""
-    before = progress.log.level
-    yield progress.log.setLevel
-    progress.log.setLevel(before)
-
-
 def _terminal():
     f = io.StringIO()
     f.isatty = lambda: True
     return f
-
-
-def test_ticker_shows_elapsed_time_on_a_terminal_after_its_delay(log_level):
-    """The line shows within the first seconds (waited for, up to 10 s: on a loaded machine
-    the ticker's thread may start late; the line's time is what is checked), INFO messages
-    shown (the commands' default)."""
-    log_level(logging.INFO)
-    f = _terminal()
-    with ticker("consistency stage", delay=0.1, stream=f):
-        t0 = time.monotonic()
-        while "consistency stage: 00:0" not in f.getvalue() and time.monotonic() - t0 < 10:
-            time.sleep(0.05)
-        time.sleep(1.3)
-    assert "consistency stage: 00:01" in f.getvalue()
-
-
-def test_ticker_is_silent_for_short_stages_and_off_a_terminal():
-    f = _terminal()
-    with ticker("quick", delay=5, stream=f):
-        pass
-    assert f.getvalue() == ""
-    g = io.StringIO()
-    with ticker("long", delay=0.1, stream=g):
-        time.sleep(0.5)
-    assert g.getvalue() == ""
-
-
-def test_ticker_is_silent_with_quiet(log_level):
-    """``--quiet`` hides INFO messages: the ticker then shows nothing, on a terminal too, as
-    the other progress lines do."""
-    log_level(logging.WARNING)
-    f = _terminal()
-    with ticker("long", delay=0.05, stream=f):
-        time.sleep(1.3)
-    assert f.getvalue() == ""
 
 
 def test_progress_off_a_terminal_yields_the_items_without_a_bar(monkeypatch):
