@@ -176,18 +176,18 @@ def has_display(env=None, platform: str | None = None) -> bool:
 def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
                    grpc_port: int = GRPC_PORT) -> list[str]:
     """The ``rerun`` command line that opens ``path`` natively or in the web viewer (page on
-    ``port``, the recording served by the gRPC proxy on ``grpc_port``, both on this
-    machine's loopback address only: Rerun's default, every interface, would serve the
-    recording to anyone who can reach the machine; from another machine the printed SSH
-    port forwarding reaches it)."""
+    ``port``, the recording served by the gRPC proxy on ``grpc_port``), on this machine's
+    loopback address only: Rerun's default, every interface, would serve the recording to
+    anyone who can reach the machine; from another machine the printed SSH port forwarding
+    reaches it. The native viewer serves too (its local viewer server, on 9876 or a free
+    port, which takes the logging SDK's connections): bound to loopback as well."""
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
         or "rerun"
     arg = str(path)
     cmd = [exe, os.path.join(".", arg) if arg.startswith("-") else arg]  # not an option of rerun's
     if web:
-        cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port),
-                "--bind", LOOPBACK]
-    return cmd
+        cmd += ["--web-viewer", "--web-viewer-port", str(port), "--port", str(grpc_port)]
+    return cmd + ["--bind", LOOPBACK]
 
 
 def web_url(port: int = WEB_PORT, grpc_port: int = GRPC_PORT, host: str = "localhost") -> str:

@@ -41,7 +41,7 @@ def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, mon
 def test_display_starts_the_native_viewer():
     assert has_display({"DISPLAY": ":0"}, "linux") and not has_display({}, "linux")
     cmd = viewer_command(os.path.join("a", "recording.rrd"), web=False)
-    assert "--web-viewer" not in cmd and cmd[-1].endswith("recording.rrd")
+    assert "--web-viewer" not in cmd and cmd[1].endswith("recording.rrd")
 
 
 def test_newest_recording_and_missing_ones(tmp_path, capsys):

@@ -16,3 +16,14 @@ def test_the_web_viewer_serves_on_loopback_only(tmp_path, capsys):
     assert main([str(tmp_path), "--web", "--dry-run"]) == 0
     printed = capsys.readouterr().out.strip().splitlines()[-1]
     assert shlex.split(printed)[-2:] == ["--bind", "127.0.0.1"], printed
+
+
+def test_the_native_viewer_serves_on_loopback_only(tmp_path, capsys):
+    """The native viewer also starts a viewer server (for the logging SDK's connections),
+    on every interface unless told: it is bound to loopback too."""
+    cmd = viewer_command(tmp_path / "recording.rrd", web=False)
+    assert cmd[cmd.index("--bind") + 1] == "127.0.0.1", cmd
+    (tmp_path / "recording.rrd").write_bytes(b"RRF2")
+    assert main([str(tmp_path), "--native", "--dry-run"]) == 0
+    printed = capsys.readouterr().out.strip().splitlines()[-1]
+    assert shlex.split(printed)[-2:] == ["--bind", "127.0.0.1"], printed
