@@ -82,8 +82,8 @@ __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round",
            "evidence_done",
-           "own_sets", "own_set_links", "bundle_nbytes", "set_problem", "set_geometry",
-           "solve_set", "cut_own_side", "send_bundle_items", "read_bundle_items", "finish_evidence", "evidence_pass", "reexamine_sets"]
+           "own_sets", "own_set_links", "bundle_nbytes", "set_links", "set_problem", "set_geometry",
+           "solve_set", "solve_sets", "set_weights", "cut_own_side", "send_bundle_items", "read_bundle_items", "finish_evidence", "evidence_pass", "reexamine_sets"]
 
 Send = Callable[[int, str, dict], None]
 
@@ -561,23 +561,30 @@ def evidence_step(robot: Robot, inbox: list[Message], send: Send, round_: int) -
     robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
 
 
+def set_links(bundles: dict) -> tuple:
+    """The set's links from its bundles, each once, ordered by ``(min, max)`` of their ends:
+    ``(a, b, cam_a, cam_b, local)``, ``local`` the weight of each link's first bundle entry
+    (its local evidence)."""
+    cam = {g: bb[3] for g, bb in bundles.items()}
+    a = np.concatenate([np.full(bb[1].size, g, dtype=np.int64) for g, bb in bundles.items()])
+    b = np.concatenate([bb[1] for bb in bundles.values()])
+    w = np.concatenate([bb[2] for bb in bundles.values()])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    span = int(hi.max(initial=0)) + 1
+    key, first = np.unique(lo * span + hi, return_index=True)
+    a, b, w = key // span, key % span, w[first]
+    cam_a = np.array([cam[g] for g in a.tolist()], dtype=np.int64)
+    cam_b = np.array([cam[g] for g in b.tolist()], dtype=np.int64)
+    return a, b, cam_a, cam_b, w
+
+
 def set_problem(bundles: dict) -> tuple:
     """The set's links (each once) with their weights and the geometric data, from bundles.
 
     Returns ``(a, b, cam_a, cam_b, weight, keypoints, projections)``; ``keypoints`` and
     ``projections`` are ``None`` unless every bundle carries a projection.
     """
-    cam = {g: bb[3] for g, bb in bundles.items()}
-    a = np.concatenate([np.full(bb[1].size, g, dtype=np.int64) for g, bb in bundles.items()])
-    b = np.concatenate([bb[1] for bb in bundles.values()])
-    w = np.concatenate([bb[2] for bb in bundles.values()])
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    # each link once, ordered by (lo, hi), with the weight of its first bundle entry
-    span = int(hi.max(initial=0)) + 1
-    key, first = np.unique(lo * span + hi, return_index=True)
-    a, b, w = key // span, key % span, w[first]
-    cam_a = np.array([cam[g] for g in a.tolist()], dtype=np.int64)
-    cam_b = np.array([cam[g] for g in b.tolist()], dtype=np.int64)
+    a, b, cam_a, cam_b, w = set_links(bundles)
     kp, P = set_geometry(bundles)
     tau = triangle_support(a, b, node_cameras(a, b, cam_a, cam_b), kp, P)
     w = w + TRIANGLE_WEIGHT * support_term(tau, shared_cameras(a, b, cam_a, cam_b), False)
@@ -601,6 +608,86 @@ def solve_set(bundles: dict) -> tuple:
     """
     a, b, cam_a, cam_b, w, kp, P = set_problem(bundles)
     return a, b, cam_a, cam_b, evidence_cut(a, b, cam_a, cam_b, w, kp, P)
+
+
+def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
+                geometric=None, tol_px: float | None = None) -> np.ndarray:
+    """The evidence rule's link weights (:func:`set_problem`) of the links of several sets
+    at once.
+
+    Parameters
+    ----------
+    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
+    cam_a, cam_b : (E,) int — their cameras
+    local : (E,) float — each link's local evidence (what its bundles carry)
+    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
+    geometric : (E,) bool or None — the link's set has every projection (the rule's test
+        on it); None: all do when ``projections`` is given
+    tol_px : float or None — the test's tolerance (default the rule's
+        :data:`REPROJECTION_TOL_PX`)
+
+    Returns
+    -------
+    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
+    cameras in which both ends match one common feature whose three observations are one
+    point (:func:`triangle_support`; all common features
+    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
+    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
+    :func:`set_problem` on its bundles; the sets' triangles are listed at once and their
+    three-view points solved as one stack of SVDs (the rule solves one at a time).
+    """
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
+    local = np.asarray(local, np.float64)
+    E = a.size
+    if E == 0:
+        return np.zeros(0)
+    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
+    e, z = common_features(lo, hi)
+    ok = np.ones(e.size, bool)
+    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
+    if keypoints is not None and projections is not None and e.size:
+        test = np.flatnonzero(geo[e])
+        if test.size:
+            ids = np.stack([lo[e[test]], hi[e[test]], z[test]], axis=1)
+            ok[test] = one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
+                                 np.asarray(projections(ids.ravel()), np.float64)
+                                 .reshape(-1, 3, 3, 4), tol)
+    e, z = e[ok], z[ok]
+    tau = distinct_cameras(e, node_cameras(a, b, cam_a, cam_b)(z), E)
+    shared = shared_cameras(a, b, cam_a, cam_b)
+    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
+
+
+def solve_sets(bundle_sets: list[dict]) -> list[tuple]:
+    """:func:`solve_set` on each of several sets (disjoint: no link joins two of them), with
+    the weights of all computed at once (:func:`set_weights`: their triangles' three-view
+    points as one stack of SVDs where :func:`set_problem` solves one stack per set). Same
+    solutions as :func:`solve_set` on each (``tests/pipeline/consistency/test_solve_sets.py``);
+    a root that completes many sets in one round solves them together."""
+    parts = []
+    for bundles in bundle_sets:
+        a, b, cam_a, cam_b, w = set_links(bundles)
+        parts.append((a, b, cam_a, cam_b, np.asarray(w, np.float64), *set_geometry(bundles)))
+    if not parts:
+        return []
+    a, b, cam_a, cam_b, local = (np.concatenate([p[k] for p in parts]) for k in range(5))
+    geometric = np.concatenate([np.full(p[0].size, p[5] is not None) for p in parts])
+    posed = [p for p in parts if p[5] is not None]   # sets with the geometric test
+    ids = np.array([g for p in posed for g in p[5]], np.int64)
+    kp = np.array([p[5][g] for p in posed for g in p[5]], np.float64).reshape(-1, 2)
+    P = np.array([p[6][g] for p in posed for g in p[5]], np.float64).reshape(-1, 3, 4)
+    order = np.argsort(ids, kind="stable")
+    ids, kp, P = ids[order], kp[order], P[order]
+    w = set_weights(a, b, cam_a, cam_b, local, lambda q: kp[np.searchsorted(ids, q)],
+                    lambda q: P[np.searchsorted(ids, q)], geometric=geometric)
+    out, at = [], 0
+    for sa, sb, sca, scb, _, skp, sP in parts:
+        e = slice(at, at + sa.size)
+        at += sa.size
+        out.append((sa, sb, sca, scb, evidence_cut(sa, sb, sca, scb, w[e], skp, sP)))
+    return out
 
 
 def cut_own_side(robot: Robot, solution: tuple, round_) -> None:

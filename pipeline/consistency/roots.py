@@ -21,7 +21,8 @@ others learn only the links it cuts:
    the rule's own: keypoint, alive links with their evidence weights, camera, projection) to
    its up robot, and remembers the sender as a *child* for that set; the root keeps them.
 3. **Solve** (at the root, no message). When the root holds a bundle for every member of the
-   list it solves :func:`.evidence.solve_set` on them — the rule's Kruskal merge by
+   list it solves :func:`.evidence.solve_set` on them (the sets it completes in one round
+   together, :func:`.evidence.solve_sets`) — the rule's Kruskal merge by
    decreasing evidence with the geometric test where every bundle carries a projection — and
    cuts its side of the links it cuts.
 4. **Down.** The root sends the cut links (the two ends' global ids) to its children; each
@@ -66,7 +67,7 @@ from pipeline.consistency.evidence import (
     bundle_nbytes,
     read_bundle_items,
     send_bundle_items,
-    solve_set,
+    solve_sets,
 )
 from pipeline.consistency.robot import Robot
 from pipeline.transport import Message
@@ -187,8 +188,7 @@ def start_roots(robot: Robot, send) -> int:
             out.setdefault(j, []).append(s)
     for j in sorted(out):
         send(j, TOKEN, {"set": np.array(out[j], np.int64)})
-    for s in rooted:  # a set whose every member is here (one robot) is complete already
-        _solve_if_complete(robot, s, send, 0)
+    _solve_complete(robot, rooted, send, 0)  # a set whose every member is here (one robot)
     robot.measure_memory()
     return len(rooted)
 
@@ -242,24 +242,26 @@ def roots_step(robot: Robot, inbox: list[Message], send, round_: int) -> None:
         for j in sorted(st.children.get(s, ())):
             down.setdefault(j, []).append((s, a, b))
     _send_cuts(down, send)
-    for s in list(st.held):
-        _solve_if_complete(robot, s, send, round_)
+    _solve_complete(robot, list(st.held), send, round_)
     robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
 
 
-def _solve_if_complete(robot: Robot, s: int, send, round_: int) -> None:
+def _solve_complete(robot: Robot, sets, send, round_: int) -> None:
+    """Solve, cut and answer each of ``sets`` (in that order) whose bundles are all here:
+    step 3 then 4 of the protocol. The sets completed in one round are solved together
+    (:func:`.evidence.solve_sets`: the same solutions as one at a time)."""
     st: RootsState = robot.roots
-    if s in st.solved or len(st.held[s]) < st.members[s]:
-        return
-    st.solved.add(s)
-    st.answered.add(s)
-    a, b, _, _, cut = solve_set(st.held[s])
-    a, b = a[cut], b[cut]
-    _cut_pairs(robot, a, b, round_)
-    _send_cuts({j: [(s, a, b)] for j in sorted(st.children.get(s, ()))}, send)
-    robot.peak_memory_bytes = max(robot.peak_memory_bytes, robot.memory_bytes() + st.nbytes())
-    st.held_bytes -= sum(bundle_nbytes(x) for x in st.held[s].values())
-    st.held[s] = {}  # solved: nothing more to hold
+    done = [s for s in sets if s not in st.solved and len(st.held[s]) >= st.members[s]]
+    for s, (a, b, _, _, cut) in zip(done, solve_sets([st.held[s] for s in done]), strict=True):
+        st.solved.add(s)
+        st.answered.add(s)
+        a, b = a[cut], b[cut]
+        _cut_pairs(robot, a, b, round_)
+        _send_cuts({j: [(s, a, b)] for j in sorted(st.children.get(s, ()))}, send)
+        robot.peak_memory_bytes = max(robot.peak_memory_bytes,
+                                      robot.memory_bytes() + st.nbytes())
+        st.held_bytes -= sum(bundle_nbytes(x) for x in st.held[s].values())
+        st.held[s] = {}  # solved: nothing more to hold
 
 
 def _send_cuts(down: dict, send) -> None:

@@ -7,7 +7,8 @@ the neighbour a robot's first token came from is a parent on a shortest path). I
 robots send their bundles (:mod:`pipeline.consistency.evidence`, step 1: each feature's
 keypoint, its links with their evidence weights, its frame's projection) up that tree; the
 root solves what :func:`~pipeline.consistency.evidence.solve_set` solves on them (the weights
-of :func:`~pipeline.consistency.evidence.set_problem`, here :func:`set_weights` for all sets
+of :func:`~pipeline.consistency.evidence.set_problem`, here
+:func:`~pipeline.consistency.evidence.set_weights` for all sets
 at once, then :func:`~pipeline.consistency.evidence.evidence_cut`: the Kruskal merge by
 decreasing evidence with the geometric test) and sends the cut links back down; each robot
 cuts its side. The same bundles give the same cuts as the rule's own flood of them to every
@@ -35,7 +36,7 @@ from pipeline.consistency.robot import Robot
 from pipeline.consistency.roots import roots_step, spread, start_roots
 from pipeline.transport import HEADER_BYTES
 
-__all__ = ["RootSolution", "run_roots", "set_weights", "solve_at_roots"]
+__all__ = ["RootSolution", "run_roots", "solve_at_roots"]
 
 
 @dataclass
@@ -76,7 +77,7 @@ def solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_cam, unposed, 
     sent : (L,) bool — links whose cut is sent back (a cut history link is not)
     n_cams : int — cameras of the stage
     """
-    from pipeline.consistency.evidence import evidence_cut
+    from pipeline.consistency.evidence import evidence_cut, set_weights
     from pipeline.matching.link_evidence import ratio_llr
 
     ia = np.searchsorted(sub, a_all)
@@ -133,66 +134,6 @@ def solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_cam, unposed, 
     held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=n_cams)
     return RootSolution(links=ks, set_of=lc, a=a, b=b, cut=cut, sets=c_w, rounds=rounds,
                         messages=msgs, nbytes=nbytes, held=held)
-
-
-def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
-                geometric=None, tol_px: float | None = None) -> np.ndarray:
-    """The evidence rule's link weights (:func:`pipeline.consistency.evidence.set_problem`)
-    of the links of several sets at once.
-
-    Parameters
-    ----------
-    a, b : (E,) int — link ends (feature ids), each link once; no link joins two sets
-    cam_a, cam_b : (E,) int — their cameras
-    local : (E,) float — each link's local evidence (what its bundles carry)
-    keypoints, projections : callables ``(k,) ids -> (k, 2)`` and ``-> (k, 3, 4)`` or None
-    geometric : (E,) bool or None — the link's set has every projection (the rule's test
-        on it); None: all do when ``projections`` is given
-    tol_px : float or None — the test's tolerance (default the rule's
-        :data:`~pipeline.consistency.evidence.REPROJECTION_TOL_PX`)
-
-    Returns
-    -------
-    (E,) float64 — ``local + TRIANGLE_WEIGHT * support_term(tau, shared)``: ``tau`` the third
-    cameras in which both ends match one common feature whose three observations are one
-    point (:func:`~pipeline.consistency.evidence.triangle_support`; all common features
-    where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
-    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
-    ``set_problem`` on its bundles; the sets' triangles are listed at once and their
-    three-view points solved as one stack of SVDs (the rule solves one at a time).
-    """
-    from pipeline.consistency.cycles import shared_cameras, support_term
-    from pipeline.consistency.evidence import (
-        REPROJECTION_TOL_PX,
-        TRIANGLE_WEIGHT,
-        common_features,
-        distinct_cameras,
-        node_cameras,
-        one_point,
-    )
-
-    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
-    cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
-    local = np.asarray(local, np.float64)
-    E = a.size
-    if E == 0:
-        return np.zeros(0)
-    tol = REPROJECTION_TOL_PX if tol_px is None else float(tol_px)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)   # the rule's order of a link's ends
-    e, z = common_features(lo, hi)
-    ok = np.ones(e.size, bool)
-    geo = np.ones(E, bool) if geometric is None else np.asarray(geometric, bool)
-    if keypoints is not None and projections is not None and e.size:
-        test = np.flatnonzero(geo[e])
-        if test.size:
-            ids = np.stack([lo[e[test]], hi[e[test]], z[test]], axis=1)
-            ok[test] = one_point(np.asarray(keypoints(ids.ravel()), np.float64).reshape(-1, 3, 2),
-                                 np.asarray(projections(ids.ravel()), np.float64)
-                                 .reshape(-1, 3, 3, 4), tol)
-    e, z = e[ok], z[ok]
-    tau = distinct_cameras(e, node_cameras(a, b, cam_a, cam_b)(z), E)
-    shared = shared_cameras(a, b, cam_a, cam_b)
-    return local + TRIANGLE_WEIGHT * support_term(tau, shared, False)
 
 
 def run_roots(robots: list[Robot], network, on_round=None, t0: int = 0) -> dict:

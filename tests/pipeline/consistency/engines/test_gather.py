@@ -5,8 +5,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from test_online_association import _bundles, posed_streams
 
-from pipeline.consistency.engines.gather import set_weights
 from pipeline.consistency.engines.online import OnlineAssociation
+from pipeline.consistency.evidence import set_weights
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
