@@ -65,6 +65,21 @@ NO_LANDMARK_LINKS_WHY = ("a --ratio gate so strict that it keeps no match, or a 
                          "without an edge")
 
 
+def guidance_warning(matching: dict) -> str | None:
+    """What to tell when ``--geometry epipolar`` guided no pair: every edge kept its plain
+    descriptor assignment (fewer than 8 assigned landmarks, no fundamental matrix, or a
+    homography explaining the assignment as well, as on a planar scene or a pure rotation:
+    :func:`pipeline.matching.landmarks.guided_match`). The run then is a descriptors-only
+    run under another name; None where some edge was guided."""
+    edges = int(matching.get("edges", 0))
+    if matching.get("geometry") != "epipolar" or edges == 0 \
+            or int(matching.get("edges_without_model", 0)) < edges:
+        return None
+    return (f"--geometry epipolar guided none of the {edges} image pairs: no pair had a usable "
+            "fundamental matrix (fewer than 8 matched landmarks, or a homography explains the "
+            "matches as well: a planar scene, or a camera that only rotates), so every pair "
+            "kept its descriptor assignment, as with --geometry none")
+
 def default_refinement(resolution: str) -> str:
     """``--refine`` when not given: ``none`` for a rule that weighs the cycles of the links
     itself (``weighs_cycles``), ``votes`` for the others (module notes)."""
@@ -270,6 +285,9 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
             [f.keypoints for f in frames], config.geometry, config.epipolar_px)
         timer.note(f"{len(links)} links; {matching['edges_without_model']} edges without an "
                    "epipolar model" if config.geometry == "epipolar" else f"{len(links)} links")
+        message = guidance_warning(matching)
+        if message:
+            timer.warn(message)
     # times: wall (StageTimer) and CPU of this process (all simulated robots run in it, one
     # after another; a team would run them in parallel)
     refinement = {"method": config.refine}
