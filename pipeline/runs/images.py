@@ -346,6 +346,14 @@ def _photo_defaults(config: ImagesConfig) -> ImagesConfig:
     return config
 
 
+def _merge_radius_used(config: ImagesConfig) -> float:
+    """The radius the run merged co-located keypoints at (:func:`pipeline.stages.
+    photo_merge_radius`: as given, else COLMAP SIFT's, else the rule's own)."""
+    from pipeline.stages import photo_merge_radius
+
+    return float(photo_merge_radius(config.features, config.resolution, config.merge_radius))
+
+
 def _load(config: ImagesConfig, timer: StageTimer):
     """The photographs and the comm graph (``None`` for ``knn:K``, chosen after the features)."""
     from pipeline.commgraph import comm_graph
@@ -452,7 +460,9 @@ def _report(config: ImagesConfig, out: Path, views, feats, matches, comm_edges, 
                     "intrinsics_source": v.intrinsics_source,
                     "intrinsics_known": bool(v.intrinsics_known)} for v in views],
         "versions": sections.versions(),
-        "config": {**asdict(config), "out": str(out)},
+        "config": {**asdict(config), "out": str(out),
+                   # the radius the keypoints were merged at (merge_radius null: the rule's)
+                   "merge_radius_used_px": _merge_radius_used(config)},
     }
     if team is not None:
         report["team"] = team
