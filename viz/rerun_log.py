@@ -856,9 +856,11 @@ def log_run(path: str | os.PathLike, record: RunRecord, application_id: str = "f
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
         if live:
-            if live == "spawn":
-                rr.spawn(connect=False)
-            url = None if live in ("spawn", "connect") else live
+            url = None if live == "connect" else live
+            if live == "spawn":  # bound to loopback, which rr.spawn cannot do
+                from viz.view import spawn_viewer
+
+                url = spawn_viewer()
             rec.set_sinks(rr.FileSink(sink), rr.GrpcSink(url), default_blueprint=blueprint)
             stream = None
         else:

@@ -23,7 +23,8 @@ import sys
 import threading
 from pathlib import Path
 
-__all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main"]
+__all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main",
+           "rerun_executable", "spawn_viewer"]
 
 WEB_PORT = 9090
 #: the help of the recording to open (this command's and :mod:`viz.browser`'s)
@@ -173,6 +174,42 @@ def has_display(env=None, platform: str | None = None) -> bool:
     return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
 
 
+def rerun_executable() -> str:
+    """The ``rerun`` viewer of this environment (beside its Python), else on ``PATH``."""
+    return shutil.which("rerun", path=str(Path(sys.executable).parent)) \
+        or shutil.which("rerun") or "rerun"
+
+
+def _listening(port: int, host: str = LOOPBACK) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        s.settimeout(0.2)
+        return s.connect_ex((host, int(port))) == 0
+
+
+def spawn_viewer(port: int = GRPC_PORT, wait_s: float = 10.0) -> str:
+    """Start the native viewer for a live run (``run-images --spawn``), as ``rr.spawn`` does
+    but bound to this machine's loopback address: ``rr.spawn`` has no bind option, and the
+    viewer's server would take connections (and serve the run's photographs) on every
+    interface. A viewer already listening on ``port`` takes the stream instead, as with
+    ``rr.spawn``. Waits up to ``wait_s`` for it to listen; returns the gRPC URL to stream to.
+    """
+    url = f"rerun+http://{LOOPBACK}:{int(port)}/proxy"
+    if _listening(port):
+        return url
+    subprocess.Popen([rerun_executable(), "--port", str(int(port)), "--bind", LOOPBACK,
+                      "--expect-data-soon"], start_new_session=True,
+                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL)
+    import time
+
+    end = time.monotonic() + wait_s
+    while time.monotonic() < end and not _listening(port):
+        time.sleep(0.05)
+    return url
+
+
 def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
                    grpc_port: int = GRPC_PORT) -> list[str]:
     """The ``rerun`` command line that opens ``path`` natively or in the web viewer (page on
@@ -181,8 +218,7 @@ def viewer_command(path: Path, web: bool, port: int = WEB_PORT,
     anyone who can reach the machine; from another machine the printed SSH port forwarding
     reaches it. The native viewer serves too (its local viewer server, on 9876 or a free
     port, which takes the logging SDK's connections): bound to loopback as well."""
-    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun") \
-        or "rerun"
+    exe = rerun_executable()
     arg = str(path)
     cmd = [exe, os.path.join(".", arg) if arg.startswith("-") else arg]  # not an option of rerun's
     if web:
