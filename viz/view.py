@@ -199,6 +199,7 @@ def spawn_viewer(port: int = GRPC_PORT, wait_s: float = 10.0) -> str:
     if _listening(port):
         return url
     subprocess.Popen([rerun_executable(), "--port", str(int(port)), "--bind", LOOPBACK,
+                      "--memory-limit", "75%",  # rr.spawn's default
                       "--expect-data-soon"], start_new_session=True,
                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                      stderr=subprocess.DEVNULL)
