@@ -23,7 +23,7 @@ half-way, ``state_growth_second_half``). ``--no-overturn``: the history repair's
 rule (only new links are cut), for comparison. ``--hold H``: a frame's links stay open H steps
 after it leaves the matching window (default ``window - 1``; ``--hold 0``: the earlier rule). ``--no-weigh``: only the sets the
 detection finds conflictive are weighed by the rule (the earlier rule; default: every set the
-step's new links touch, step 2b of :mod:`pipeline.consistency.engines.online`).
+step's new links touch, step 2b: :mod:`pipeline.consistency.engines.online_weigh`).
 ``--no-gather``: the rule's small conflictive sets solved by its own flood of their bundles
 to every robot of the set (default: gathered at each set's root, the same cuts).
 ``--robots-solve``: the sets solved at their roots by the simulator's robots themselves,

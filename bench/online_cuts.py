@@ -5,7 +5,7 @@ of :mod:`bench.online` (``--seed``, ``--steps``, window ``--window``, the eviden
 fusion off) is associated online, the batch run goes at the last step, and every link gets
 its truth (:func:`pipeline.evaluation.links.link_truth`). It counts:
 
-* per history repair (step 3 of :mod:`pipeline.consistency.engines.online`): the links it
+* per history repair (step 3, :mod:`pipeline.consistency.engines.online_history`): the links it
   cut and how many were good, split by whether the repaired set held a spurious link between
   two retired frames (final, so the repair had to cut an open link instead);
 * per link at the end: spurious links the online run keeps and the batch run cuts, and of
@@ -42,6 +42,7 @@ OUT = ROOT / "runs" / "bench-online-cuts"
 
 def one(args, hold: int) -> dict:
     from pipeline.consistency.engines import online as eng
+    from pipeline.consistency.engines.online_detection import _duplicated_keys
     from pipeline.evaluation.links import link_truth
     from pipeline.progress import StageTimer
     from pipeline.runs.online import OnlineConfig, run_online_steps
@@ -67,7 +68,7 @@ def one(args, hold: int) -> dict:
         a, b = self._ends(was)
         comp = self._components(sub, np.concatenate([a, hist_a]), np.concatenate([b, hist_b]))
         img = np.searchsorted(self.offset, sub, side="right") - 1
-        bad = eng._duplicated_keys(comp, img)
+        bad = _duplicated_keys(comp, img)
         in_conflict.update(was[np.isin(comp[np.searchsorted(sub, a)], bad)].tolist())
         return check(self, sub, real, hist_a, hist_b, att_f, att_p, t, robots)
 

@@ -1,4 +1,4 @@
-"""The history check of an online step run by the robots (step 3 of :mod:`.engines.online`).
+"""The history check of an online step run by the robots (step 3, :mod:`.engines.online_history`).
 
 After a step's rule has cut, a set the step's new links formed may still hold one image twice:
 two window features of one frame (the rule cut a history link, which stands for a retired
@@ -48,7 +48,7 @@ its bits say, every robot alike, whether the next phase is needed):
    side of them: its rows and its border links (:attr:`HistoryState.cut`; the step's record
    applies them, reason ``history``).
 
-Same decisions as the record's check (:meth:`.engines.online.OnlineAssociation.
+Same decisions as the record's check (:meth:`.engines.online_history.HistoryCheck.
 _history_check` with ``overturn``, the default): the sets are the same components, a set is
 bad under the same two conditions (runs of one robot in one piece never overlap, so overlap
 needs two pieces; a window frame's single step never overlaps a retired run, so a set with
@@ -557,7 +557,7 @@ def rebuild_halves(halves, entries) -> np.ndarray:
 
 def rebuild(groups: dict, ids: np.ndarray, a: np.ndarray, b: np.ndarray,
             quality: np.ndarray) -> np.ndarray:
-    """The history repair of one bad set (step 3 of :mod:`.engines.online`): the link ids it
+    """The history repair of one bad set (step 3, :mod:`.engines.online_history`): the link ids it
     skips.
 
     ``groups``: node -> ``{team robot: [(lo, hi), ...]}`` the step runs of the frames a node

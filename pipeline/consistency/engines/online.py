@@ -5,6 +5,17 @@ frame per robot per step; :class:`OnlineAssociation` keeps every link ever made 
 cut, with the step that made and the step that cut it) and runs the distributed stage of
 Aragüés et al. only on what the step's new links touch.
 
+This module holds the record and drives each step: :class:`OnlineAssociation` reads a step's
+frames and new links (:meth:`~OnlineAssociation.add_step`, called by
+:mod:`pipeline.runs.online` once per step) and keeps the images, the labels, the link table
+(kept or cut, with its reason and steps), the window, the border links and the retired
+entries. Step 1 (retiring frames) and the retired entries are here; steps 2 to 4 are methods
+of the class written beside it, one module each (:mod:`.online_detection`,
+:mod:`.online_weigh`, :mod:`.online_history`); the guarantee below is of the whole step.
+After each step the record answers the caller: the step's figures (returned and kept in
+:attr:`~OnlineAssociation.steps`), the kept links, the links the step changed (for fusion),
+and the cut links with their reasons.
+
 Words
 -----
 *Image* (a camera of the papers, Def. 2.4): one frame of one robot; a conflict is two
@@ -55,92 +66,24 @@ One step (:meth:`OnlineAssociation.add_step`)
    the smallest name; the robot of a retiring feature sends the piece's name over each link
    that becomes a border link, 8 bytes, and a renamed piece's entries learn the new name, 8
    bytes each: ``retire_bytes``).
-2. *Incremental detection.* The touched labels are the labels of the new links' ends (each
-   robot knows them: the two robots of a new link exchange their ends' labels, counted as
-   one message of 16 bytes per link). The stage runs on the *sub-problem*: the window
-   features of the touched labels (the step's new features included), the kept window links
-   among them, the new links, and the *history links*: for every retired piece, a chain
-   through the window features its border links reach (the set closes through the piece;
-   the history link carries that connection, so the detection sees the set whole). On it
-   the simulator runs the rule of :mod:`pipeline.consistency.rules` (default
-   :data:`~pipeline.consistency.rules.DEFAULT_RESOLUTION`), images as its cameras, until
-   conflict-free: a rule with Aragüés et al.'s detection (Sec. III, Prop. 3.5) loops
-   detection and resolution (Prop. 4.5); the evidence rule is a whole stage (its bounded
-   label flooding, the bundles of its sets of at most ``B`` features, the ``sync`` merge of
-   the larger ones: :mod:`pipeline.consistency.engines.evidence_stage`), except that by
-   default (``gather``) its conflictive sets of at most ``B`` features are solved as in
-   step 2b, their bundles gathered at the set's root rather than flooded to every robot of
-   the set (the same bundles and :func:`~pipeline.consistency.evidence.solve_set`, so the
-   same cuts; the flood crosses every link of the set, the gathering one path per bundle:
-   on a 20-robot formation the flood was about 95 % of a step's bytes,
-   ``bench/online.py --no-gather``); a cut of a history link is
-   ignored (it is no link of the association; a history link that doubles a real link is
-   left to the real link in the detection and kept in the check below).
-2b. *Weighing the conflict-free sets* (``weigh``, default; the evidence rule,
-   :data:`WEIGHED_RULE`). The rule cuts only in the sets it finds conflictive (its sets of
-   at most ``B`` features, the bundle budget; a larger set gets its ``sync`` merge, and is
-   left to it here); every other set of the sub-problem, one the step's new links touched
-   and found conflict-free, is weighed by the rule's merge too. Its robots send their
-   bundles as the rule's robots make them (each window feature's keypoint, its links of
-   the set with their evidence weights, its frame's projection; history links as in the
-   rule's pass) up a tree to the set's *root*, the robot of the member that
-   :func:`.roots.root_of` picks from the set list every robot of a set of at most ``B``
-   features holds (a fixed scrambling of the ids, so a step's roots spread over its
-   robots); the root sends a token down the set's links and each robot takes the robot
-   its first token came from as its parent (:mod:`pipeline.consistency.roots`, the robots'
-   protocol, which robot processes run: ``robots_solve``; the simulator evaluates it in
-   batch, :func:`.gather.solve_at_roots`, counted as a shortest-path tree, and the two are
-   property-tested to cut alike). The root solves the rule's solution on
-   the set's bundles (:func:`~pipeline.consistency.evidence.solve_set`: triangle support
-   with the three-view test, the Kruskal merge by decreasing evidence with the geometric
-   test of the merged track) and sends the links it cuts down the tree; each robot cuts
-   its side of them (reason of the rule; a cut history link is ignored, as in the rule's
-   pass). Unlike a conflictive set, whose robots all solve alike (no reject messages), a
-   conflict-free set needs no symmetric solving: one solution sent down costs far fewer
-   bytes than every bundle flooded to every robot. In a conflict-free set the merge
-   never meets two features of one image: what it cuts is what the geometric test refutes,
-   so a set with a frame of unknown pose is not weighed (it would cut nothing). Why: a
-   clash splits a set as soon as it appears, and the pieces are conflict-free from then on;
-   a spurious link whose set never becomes conflictive again was never weighed, while the
-   batch run sees the uncut history, where the set is conflictive and the merge's
-   geometric test cuts it (``bench/online_cuts.py``, seed 0, ``H = 2``, before the
-   weighing: of the 290 spurious links the batch cut and the online run kept, 5 were ever
-   in a conflictive set while open, all 290 in a set a step's new links touched; with the
-   weighing the run keeps 154 spurious links, the batch 552, and the online pairwise F1 of
-   ``bench/online.py`` reaches the batch's). Each
-   step re-weighs a touched set with what the window holds then (more frames, more
-   triangles, a longer track for the geometric test): a link stays open to it for ``W + H``
-   steps.
-3. *History check.* A set the new links formed may join two retired pieces that hold one
-   retired image (two features of one retired frame), which the window alone cannot show.
-   Every member of a set knows the set after the detection (Prop. 3.5: its row is the whole
-   set); in a set that reaches two pieces or more, the set's robots flood the pieces' names
-   and entries (8 bytes per piece and :data:`RETIRED_ENTRY_BYTES` per entry, per robot of the
-   set, in the detection's rounds) and check whether one robot has overlapping runs in two
-   pieces. A conflictive set floods its open links too (24 bytes each per robot) and each
-   of its robots solves the same deterministic repair, the rule of *when new evidence
-   overturns an earlier decision*: a link between two retired frames is final (its piece is
-   only summarized, it can no longer be split); every other kept link of the set, new, or
-   older with an end in the window (window links and border links: *open* links), is
-   weighed again with the new ones. The repair starts from the set's retired pieces, adds
-   its open links by decreasing quality (ties by link id; the order of the evidence rule's
-   Kruskal merge) and skips a link that would join two groups in which one robot has
-   overlapping runs (window frames count as runs of one step). A skipped link is cut with
-   reason ``history``: when a weak link into a retired frame closes the clash, it is that
-   link that goes, not the stronger new one. (``overturn=False``: the earlier rule, which
-   starts from the set's old links and history links and skips only new links, so new
-   evidence never overturns an earlier decision.) By default (``robots_check``, with
-   ``overturn``) the stage's robots run this check themselves after the rule, one robot per
-   window frame of the sub-problem, messages only over the sub-problem's links
-   (:mod:`pipeline.consistency.history`: a label flooding of the two smallest pieces each
-   set reaches, which names the sets after the rule's cuts; an echo from each set with two
-   pieces or a frame twice gathers the pieces' entries at a root; a bad set's open links go
-   up that tree, the root computes the repair, the cut links go down, each robot cuts its
-   side); the record applies their cuts and counts their messages (``history_rounds``,
-   ``history_bytes``: above all the label flooding, which the estimate above takes as known
-   from the detection) in place of the estimate. Property-tested to cut as the record's
-   check (``robots_check=False``, which keeps the estimate: ``bench/online.py
-   --record-check``).
+2. *Incremental detection* (:mod:`.online_detection`). The stage runs only on the
+   *sub-problem*: the window features of the labels the new links touch, the kept window
+   links among them, the new links, and the *history links*, a chain through the window
+   features each retired piece's border links reach (the detection sees the set whole). On
+   it the simulator runs the rule of :mod:`pipeline.consistency.rules`, images as its
+   cameras, until conflict-free (Prop. 3.5, Prop. 4.5; the evidence rule is a whole stage,
+   its small conflictive sets solved at their roots as in step 2b: ``gather``).
+2b. *Weighing the conflict-free sets* (``weigh``, default; :mod:`.online_weigh`). Every other
+   set of the sub-problem, one the step's new links touched and the rule found
+   conflict-free, is weighed by the evidence rule's merge too, solved at the set's root; a
+   spurious link whose set is conflict-free still meets the merge's geometric test. It only
+   cuts links.
+3. *History check* (:mod:`.online_history`). A set the new links formed may join two retired
+   pieces that hold one retired image, which the window alone cannot show: the set's robots
+   compare the pieces' retired entries, and a conflictive set is repaired: starting from its
+   retired pieces (final), its *open* links (new, or older with an end in the window) are
+   added by decreasing quality, and a link that would join two groups in which one robot has
+   overlapping runs is cut with reason ``history``.
 4. Every set of the sub-problem gets a fresh label.
 
 Earlier decisions: a cut link is never restored. A kept link is cut only at a step whose new
@@ -208,35 +151,25 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.consistency.engines.driver import resolve_conflicts
-from pipeline.consistency.engines.gather import solve_at_roots
-from pipeline.consistency.history import overlapping_runs, rebuild, runs_by_robot
+from pipeline.consistency.engines.online_detection import LABEL_BYTES, IncrementalDetection
+from pipeline.consistency.engines.online_history import (
+    HISTORY,
+    RETIRED_ENTRY_BYTES,
+    HistoryCheck,
+)
+from pipeline.consistency.engines.online_weigh import Weighing
+from pipeline.consistency.history import runs_by_robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
 from pipeline.errors import InputError
 from pipeline.progress import counted
 from pipeline.types import Links
 
 __all__ = ["Frame", "OnlineAssociation", "batch_resolve", "default_hold",
-           "simulated_stage", "HISTORY",
-           "LABEL_BYTES", "RETIRED_ENTRY_BYTES", "FLOOD_LINK_BYTES"]
+           "simulated_stage", "HISTORY"]
 
 FRESH_LABELS = 1 << 40
 """First fresh label name: a set no retired frame anchors is named from here on."""
 
-WEIGHED_RULE = "evidence"
-"""The rule whose merge weighs the conflict-free sets of a step (step 2b of the module
-docstring): its stage cuts only in conflictive sets of at most ``B`` features (and merges the
-larger ones); ``sync`` merges every set already, ``paper``'s Alg. 1 has no weights."""
-
-HISTORY = "history"
-"""Reason of a link cut by the history repair (step 3 of the module docstring)."""
-
-LABEL_BYTES = 8
-"""Bytes of one label on the wire (int64)."""
-RETIRED_ENTRY_BYTES = 16
-"""Bytes of one retired entry, held or flooded: a piece name (int64) and a run of steps
-(two int32; the robot is the holder)."""
-FLOOD_LINK_BYTES = 24
-"""Bytes of one link in the history flood (two global feature ids and a float32 quality)."""
 RUNS_PER_ROBOT = 4
 """Step runs a retired piece keeps per robot (:meth:`OnlineAssociation._add_entries`)."""
 
@@ -268,7 +201,7 @@ class _LinkTable:
     step_cut: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
-class OnlineAssociation:
+class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
     """The association of a team in motion, grown one step at a time (module docstring).
 
     Parameters
@@ -276,14 +209,15 @@ class OnlineAssociation:
     window : int >= 1 — steps of frames a robot holds
     resolution : a rule of :mod:`pipeline.consistency.rules`
     overturn : bool — the history repair may cut open links older than the step (default;
-        module docstring, step 3), or only new links
+        step 3, :mod:`.online_history`), or only new links
     hold : int >= 0 or None — steps a frame stays in the stage (its links open) after it
         leaves the matching window; None: ``window - 1`` (module docstring, *Hold*)
     weigh : bool — every set the step's new links touch is weighed by the rule's merge
-        (default; module docstring, step 2b), or only the conflictive ones (the earlier rule)
+        (default; step 2b, :mod:`.online_weigh`), or only the conflictive ones (the earlier
+        rule)
     gather : bool — the evidence rule's conflictive sets of at most ``B`` features are solved
         at their roots too, their bundles gathered as in step 2b (default; the same cuts), or
-        by the rule's own flood to every robot of the set (module docstring, step 2)
+        by the rule's own flood to every robot of the set (step 2, :mod:`.online_detection`)
     stage : callable or None — runs the rule's stage of a step on its sub-problem:
         ``stage(features_per_image, links, resolution, *, solve_small_sets, keypoints,
         projections) -> ConsistencyResult`` with the images as cameras and images sharing a
@@ -574,214 +508,6 @@ class OnlineAssociation:
         L = self.links
         return self.offset[L.ci[ids]] + L.fi[ids], self.offset[L.cj[ids]] + L.fj[ids]
 
-    def _stage(self, new_ids: np.ndarray, t: int, rec: dict) -> None:
-        L = self.links
-        a_new, b_new = self._ends(new_ids)
-        touched = np.unique(np.concatenate([self.label[a_new], self.label[b_new]]))
-        # sub-problem: window features of touched labels (new features are their own labels)
-        w = self.window_images
-        wfeat = np.concatenate([self.offset[g] + np.arange(self.m[g]) for g in w]) if len(w) \
-            else np.zeros(0, np.int64)
-        sub = wfeat[np.isin(self.label[wfeat], touched)]
-        self.last_sub = sub
-        wl = self.window_links
-        a_w, _ = self._ends(wl)
-        old_ids = wl[L.kept[wl] & (L.step_added[wl] < t) & np.isin(self.label[a_w], touched)]
-        # history links: the window features each retired piece holds, chained (exact: a
-        # piece is connected, so are the window features its border links reach)
-        w_b, p_b, _ = self._border_ends()
-        on = np.isin(w_b, sub)
-        att_f, att_p = w_b[on], p_b[on]
-        hist_a, hist_b = _chain(att_f, att_p)
-        real = np.concatenate([old_ids, new_ids])
-        a_r, b_r = self._ends(real)
-        # a history link that doubles a real link is left out of the detection (the real
-        # link stands for it there; cutting it would not split the set: the check below
-        # still counts the history link)
-        n_f = len(self.label)
-        det = ~np.isin(np.minimum(hist_a, hist_b) * n_f + np.maximum(hist_a, hist_b),
-                       np.minimum(a_r, b_r) * n_f + np.maximum(a_r, b_r))
-        a_all = np.concatenate([a_r, hist_a[det]])
-        b_all = np.concatenate([b_r, hist_b[det]])
-        q_all = np.concatenate([L.quality[real], np.ones(int(det.sum()))])
-        n_real = len(real)
-        # images of the sub-problem are its cameras
-        img_of = np.searchsorted(self.offset, sub, side="right") - 1
-        images = np.unique(img_of)
-        rec.update(touched_labels=int(len(touched)), sub_images=int(len(images)),
-                   sub_features=int(len(sub)), sub_links=int(n_real),
-                   history_links=int(len(hist_a)))
-        local_links = self._local_links(images, a_all, b_all, q_all)
-        kw = {}
-        if self.rule.needs_evidence:
-            kw = dict(keypoints=[self.keypoints[g] for g in images],
-                      projections=[self.projection[g] for g in images]
-                      if all(self.projection[g] is not None for g in images) else None)
-        gather = self.gather and self.rule.name == WEIGHED_RULE
-        by_robots = self.robots_solve and self.rule.name == WEIGHED_RULE \
-            and (gather or self.weigh)
-        if by_robots:  # each image's own projection, None where unknown (a set with one
-            # is solved without the geometric test, as in the batched solution; with no pose
-            # at all no conflict-free set is weighed: it would cut nothing)
-            posed = [self.projection[g] for g in images]
-            kw.update(gather_conflictive=gather,
-                      gather_free=self.weigh and any(P is not None for P in posed),
-                      projections=posed)
-        robots_check = self.robots_check and self.overturn
-        # the weighing solved in batch by the simulator cuts after the stage: the robots'
-        # check then runs after it, on the simulator's robots (else within the stage)
-        weigh_after = (self.weigh or gather) and self.rule.name == WEIGHED_RULE \
-            and not by_robots
-        hist_in = None
-        if robots_check:  # step 3 by the stage's robots (pipeline.consistency.history)
-            hist_in = self._history_inputs(images, local_links, real, hist_a, hist_b, sub)
-            if not weigh_after:
-                kw["history"] = hist_in
-        res = self.stage(self.m[images], local_links, self.resolution,
-                         solve_small_sets=not gather, **kw)
-        st = res.stats
-        first = st["per_iteration"][0] if st["per_iteration"] else {}
-        rec.update(conflictive_features=int(first.get("conflictive_features", 0)),
-                   conflictive_sets=int(sum(p.get("conflictive_sets", 0)
-                                            for p in st["per_iteration"])),
-                   detection_rounds=int(st["detection_rounds"]),
-                   resolution_rounds=int(st["resolution_rounds"]),
-                   large_sets=int(st.get("large_sets", 0)),
-                   merge_rounds=int(st.get("merge_rounds", 0)),
-                   messages=int(st["messages"]), bytes=int(st["bytes"]),
-                   stage_peak_bytes=int(st["max_robot_memory_bytes"]))
-        rec["bytes"] += 2 * LABEL_BYTES * len(new_ids)
-        rec["messages"] += len(new_ids)  # counted as one message per link (both labels)
-        cut = np.flatnonzero(res.deleted[:n_real])
-        self._cut(real[cut], str(self.rule.name), t)
-        rec["cut_rule"] = int(len(cut))
-        # the sets the detection found conflict-free are weighed by the rule's merge too; the
-        # small conflictive ones are solved there when gathered
-        if (self.weigh or gather) and self.rule.name == WEIGHED_RULE:
-            self._weigh(sub, img_of, images, real, n_real, a_all, b_all, q_all, t, rec,
-                        st.get("bundle_budget"), conflict_free=self.weigh, conflictive=gather,
-                        solved=res if by_robots else None)
-        # history check and repair (step 3), then the new labels (step 4)
-        if robots_check and weigh_after:
-            from pipeline.consistency.engines.history_run import run_history
-
-            alive = np.r_[L.kept[real], ~np.asarray(res.deleted, bool)[n_real:]]
-            res.stats["history"] = run_history(self.m[images], local_links, alive, hist_in)
-        hist_cut, flood = self._history_check(sub, real, hist_a, hist_b, att_f, att_p, t,
-                                              res.stats.get("history") if robots_check
-                                              else None)
-        rec["cut_history"] = int(hist_cut)
-        rec["bytes"] += int(flood)
-        rec["history_bytes"] = int(flood)  # the record's estimate of the check's flood
-        if robots_check:  # the robots' own phases: their rounds follow the rule's
-            h = res.stats["history"]
-            rec["history_rounds"] = int(h["rounds"])
-            rec["history_bytes"] = int(h["bytes"])
-            rec["resolution_rounds"] += int(h["rounds"])
-            if not h.get("counted"):
-                rec["messages"] += int(h["messages"])
-            rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(h.get("peak_bytes", 0)))
-        rec["rounds"] = rec["detection_rounds"] + rec["resolution_rounds"]
-        rec["cut"] = rec["cut_rule"] + rec["cut_weigh"] + rec["cut_history"]
-        rec["cut_old"] = int(((L.step_cut == t) & (L.step_added < t)).sum())
-
-    def _weigh(self, sub, img_of, images, real, n_real, a_all, b_all, q_all, t: int,
-               rec: dict, budget: int | None = None, *, conflict_free: bool = True,
-               conflictive: bool = False, solved=None) -> None:
-        """Step 2b of the module docstring: the rule's merge on every set of the sub-problem
-        the detection found conflict-free (``conflict_free``) and, with ``conflictive``, on
-        its conflictive sets of at most ``budget`` features (the rule's solution of step 2,
-        gathered at the root instead of flooded to every robot of the set: the same bundles,
-        so the same cuts, :func:`~pipeline.consistency.evidence.solve_set`; counted as the
-        rule's: ``cut_rule``, ``conflictive_sets``; such a set is solved with the geometric
-        test where every image of it is posed, without where not, as the rule does).
-
-        The sets are the components of the sub-problem's links before the rule's cuts (real
-        and history links, as the detection saw them); one without two features of one image
-        is conflict-free and holds at most ``budget`` features (the rule's bundle budget
-        ``B``, :func:`pipeline.consistency.setlists.bundle_budget`: a larger set got the
-        rule's ``sync`` merge, conflictive or not) was left alone by the rule. A conflict-free
-        set with an image of unknown pose is not weighed: without the geometric test the
-        merge of a conflict-free set joins all of it (no two features of one image to keep
-        apart), it would cut nothing. The sets are solved at their roots
-        (:func:`.gather.solve_at_roots`: bundles up a shortest-path tree, the cut links back
-        down; its module docstring gives the counts); each robot cuts its side. A cut
-        history link is ignored, as in the rule's pass (it stands for a retired piece).
-
-        ``solved``: the stage's result when its robots solved these sets themselves
-        (``robots_solve``): their cuts are already made and counted as the rule's; here they
-        are counted as this step's (``cut_weigh``, ``weighed_sets``; the bytes are in the
-        stage's)."""
-        comp = self._components(sub, a_all, b_all)
-        posed = np.array([self.projection[g] is not None for g in images.tolist()], bool)
-        dup = np.asarray(_duplicated_keys(comp, img_of), np.int64)
-        unposed = np.unique(comp[~posed[np.searchsorted(images, img_of)]])
-        # conflictive sets unless gathered here (else the rule's), and conflict-free sets
-        # with an image of unknown pose (no test: the merge of a conflict-free set then joins
-        # all of it) or not weighed at all, are left alone
-        bad = dup if not conflictive else np.zeros(0, np.int64)
-        free_bad = unposed if conflict_free else np.unique(comp)
-        bad = np.union1d(bad, np.setdiff1d(free_bad, dup)).astype(np.int64)
-        if budget is not None:  # the rule's large sets (more than B features)
-            size = np.bincount(comp)
-            bad = np.union1d(bad, np.flatnonzero(size > int(budget))).astype(np.int64)
-        ia = np.searchsorted(sub, a_all)
-        on = ~np.isin(comp[ia], bad)
-        if not on.any():
-            return
-        cam = np.searchsorted(images, img_of)            # an image's camera in the stage
-        P_img = np.stack([np.eye(3, 4) if p is None else np.asarray(p, np.float64)
-                          for p in (self.projection[g] for g in images.tolist())]) \
-            if len(images) else np.zeros((0, 3, 4))
-        kp = np.concatenate([np.asarray(self.keypoints[g][sub[img_of == g] - self.offset[g]],
-                                        np.float32) for g in images.tolist()]).astype(np.float64) \
-            if len(sub) else np.zeros((0, 2))  # sub ascends, so do its images: kp[i] is sub[i]'s
-        is_real = np.arange(len(a_all)) < n_real          # a cut history link is ignored
-        if solved is None:
-            sol = solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_img, unposed,
-                                 is_real, len(images))
-            ks, cut, set_of, sets = sol.links, sol.cut, sol.set_of, sol.sets
-        else:  # cut by the stage's robots (and counted in its rounds, messages and bytes)
-            ks = np.flatnonzero(on)
-            ks = ks[np.argsort(comp[ia[ks]], kind="stable")]
-            cut = np.asarray(solved.deleted, bool)[ks]
-            set_of = comp[ia[ks]]
-            sets = np.unique(set_of)
-        in_dup = np.isin(set_of, dup)                      # a link of a conflictive set
-        cut_ids = real[ks[cut & is_real[ks]]]
-        self._cut(cut_ids, str(self.rule.name), t)
-        n_rule = int((cut & is_real[ks] & in_dup).sum())
-        n_dup = int(np.isin(sets, dup).sum())
-        a_s, b_s = a_all[ks], b_all[ks]
-        if solved is not None:  # the stage counted all its cuts, and their ends, as the rule's
-            rec["cut_rule"] -= int(len(cut_ids))
-            rec["conflictive_features"] -= int(len(np.unique(np.r_[a_s[cut], b_s[cut]])))
-        rec["cut_rule"] += n_rule
-        rec["conflictive_sets"] += n_dup
-        rec["conflictive_features"] += int(len(np.unique(np.r_[a_s[cut & in_dup],
-                                                                b_s[cut & in_dup]])))
-        rec.update(weighed_sets=int(len(sets)) - n_dup, cut_weigh=int(len(cut_ids)) - n_rule)
-        if solved is not None:
-            roots = solved.stats.get("roots", {})
-            rec.update(weigh_rounds=int(roots.get("rounds", 0)),
-                       weigh_messages=int(roots.get("messages", 0)),
-                       weigh_bytes=int(roots.get("bytes", 0)))
-            return
-        rec.update(weigh_rounds=sol.rounds, weigh_messages=sol.messages, weigh_bytes=sol.nbytes)
-        rec["resolution_rounds"] = max(rec["resolution_rounds"], sol.rounds)
-        rec["messages"] += sol.messages
-        rec["bytes"] += sol.nbytes
-        rec["stage_peak_bytes"] = max(rec["stage_peak_bytes"], int(sol.held.max(initial=0)))
-
-    def _local_links(self, images, a, b, q) -> Links:
-        img_a = np.searchsorted(self.offset, a, side="right") - 1
-        img_b = np.searchsorted(self.offset, b, side="right") - 1
-        ca, cb = np.searchsorted(images, img_a), np.searchsorted(images, img_b)
-        fa, fb = a - self.offset[img_a], b - self.offset[img_b]
-        swap = ca > cb
-        return Links(np.where(swap, cb, ca), np.where(swap, fb, fa), np.where(swap, ca, cb),
-                     np.where(swap, fa, fb), q)
-
     def changed_window_links(self) -> np.ndarray:
         """Ids of the kept window links of the sets the last step's stage ran on (both ends
         in its sub-problem): the tracks the step changed, e.g. for fusion."""
@@ -815,230 +541,6 @@ class OnlineAssociation:
         ia, ib = np.searchsorted(sub, a), np.searchsorted(sub, b)
         adj = sp.coo_matrix((np.ones(len(ia)), (ia, ib)), shape=(len(sub), len(sub)))
         return connected_components(adj, directed=False)[1].astype(np.int64)
-
-    def _history_inputs(self, images, local_links: Links, real, hist_a, hist_b, sub
-                        ) -> list:
-        """What each stage camera's robot holds for step 3 run by the robots
-        (:class:`~pipeline.consistency.history.HistoryInputs`): its frame's first global id,
-        team robot and step; for each of its rows the link id (-1: a history link), quality
-        and whether a history link joins its two features; its border links into retired
-        pieces and those pieces' retired entries."""
-        from pipeline.consistency.history import HistoryInputs
-
-        L = self.links
-        n_real = len(real)
-        n_f = len(self.label)
-        a_r, b_r = self._ends(real)
-        hist_keys = np.minimum(hist_a, hist_b) * n_f + np.maximum(hist_a, hist_b)
-        doubled = np.isin(np.minimum(a_r, b_r) * n_f + np.maximum(a_r, b_r), hist_keys)
-        k_all = len(local_links)
-        row_id = np.r_[real, np.full(k_all - n_real, -1, np.int64)]
-        row_q = np.r_[L.quality[real], np.ones(k_all - n_real)]
-        row_h = np.r_[doubled, np.ones(k_all - n_real, bool)]
-        ll = local_links
-        owner = np.r_[ll.cam_i, ll.cam_j]
-        nbr, s_ = np.r_[ll.cam_j, ll.cam_i], np.r_[ll.feat_j, ll.feat_i]
-        both = np.r_[np.arange(k_all), np.arange(k_all)]
-        w_b, p_b, img_b = self._border_ends()
-        on = np.isin(w_b, sub)
-        b_ids = self.border_links[on]
-        w_b, p_b, cam_b = w_b[on], p_b[on], np.searchsorted(images, img_b[on])
-        # the head of each piece's chain: its smallest window feature (_chain's order)
-        pieces, at = np.unique(p_b, return_inverse=True)
-        first = np.full(len(pieces), np.iinfo(np.int64).max)
-        np.minimum.at(first, at, w_b)
-        head = w_b == first[at]
-        # each camera's rows and border links, grouped once
-        o_row = np.argsort(owner, kind="stable")
-        at_row = np.searchsorted(owner[o_row], np.arange(len(images) + 1))
-        o_b = np.argsort(cam_b, kind="stable")
-        at_b = np.searchsorted(cam_b[o_b], np.arange(len(images) + 1))
-        out = []
-        for c, g in enumerate(images.tolist()):
-            rows = o_row[at_row[c]:at_row[c + 1]]
-            mine = o_b[at_b[c]:at_b[c + 1]]
-            ent = np.isin(self.ret_piece, p_b[mine])
-            out.append(HistoryInputs(
-                int(self.offset[g]), int(self.robot[g]), int(self.step[g]),
-                nbr[rows], s_[rows], row_id[both[rows]], row_q[both[rows]],
-                row_h[both[rows]], w_b[mine] - self.offset[g], p_b[mine], b_ids[mine],
-                L.quality[b_ids[mine]], head[mine], self.ret_piece[ent], self.ret_robot[ent],
-                self.ret_lo[ent], self.ret_hi[ent]))
-        return out
-
-    def _history_check(self, sub, real, hist_a, hist_b, att_f, att_p, t: int,
-                       robots: dict | None = None) -> tuple[int, int]:
-        """Step 3 of the module docstring: returns (links cut, flood bytes).
-
-        The sets after the rule's cuts are the components of the kept links and the history
-        links (a history link stands for a retired piece: it cannot be cut). A set is
-        conflictive if it holds one window image twice (the rule cut a history link) or if
-        two of its retired pieces share an image.
-
-        ``robots``: the check as the stage's robots ran it (:mod:`pipeline.consistency.history`:
-        ``cut`` the link ids they cut, ``bytes`` what they sent, counted here unless the stage
-        counted it, ``counted``); the record then only applies their cuts and renames."""
-        L = self.links
-        if robots is not None:
-            cut_ids = np.asarray(robots["cut"], np.int64)
-            self._cut(cut_ids, HISTORY, t)
-            bad = bool(len(cut_ids))
-            flood = 0 if robots.get("counted") else int(robots["bytes"])
-            return self._rename(sub, real, bad, len(cut_ids), flood)
-        kept_real = real[L.kept[real]]
-        a_k, b_k = self._ends(kept_real)
-        comp = self._components(sub, np.concatenate([a_k, hist_a]),
-                                np.concatenate([b_k, hist_b]))
-        img_of = np.searchsorted(self.offset, sub, side="right") - 1
-        w_all = self._border_ends()[0]
-        # the pieces of each set and their retired entries
-        pc = np.unique(np.stack([comp[np.searchsorted(sub, att_f)], att_p], axis=1), axis=0) \
-            if len(att_f) else np.zeros((0, 2), np.int64)
-        n_pieces = np.bincount(pc[:, 0], minlength=comp.max() + 1 if len(comp) else 0)
-        pc = pc[np.argsort(pc[:, 1], kind="stable")]  # one set per piece (its chain)
-        on = np.isin(self.ret_piece, pc[:, 1])
-        r_comp = pc[np.searchsorted(pc[:, 1], self.ret_piece[on]), 0]
-        r_piece, r_robot = self.ret_piece[on], self.ret_robot[on]
-        r_lo, r_hi = self.ret_lo[on], self.ret_hi[on]
-        # the flood: sets with two pieces or more compare their pieces' entries
-        flood = 0
-        many = np.flatnonzero(n_pieces >= 2)
-        if len(many):
-            robots_c = np.zeros(len(n_pieces), np.int64)
-            key = np.unique(np.stack([comp, self.robot[img_of]], axis=1), axis=0)
-            np.add.at(robots_c, key[:, 0], 1)
-            entries_c = np.bincount(r_comp, minlength=len(n_pieces))
-            flood += int((robots_c[many] * (RETIRED_ENTRY_BYTES * entries_c[many]
-                                            + LABEL_BYTES * n_pieces[many])).sum())
-        bad = set(_duplicated_keys(comp, img_of)) | \
-            set(overlapping_runs(r_comp, r_robot, r_lo, r_hi))
-        cut_n = 0
-        for c in sorted(bad):
-            members = np.flatnonzero(comp == c)
-            robots = np.unique(self.robot[img_of[members]])
-            in_c = np.isin(self.offset[L.ci[kept_real]] + L.fi[kept_real], sub[members])
-            links_c = kept_real[in_c]
-            here = r_comp == c
-            entries = (r_piece[here], r_robot[here], r_lo[here], r_hi[here])
-            if self.overturn:
-                border_c = self.border_links[np.isin(w_all, sub[members])]
-                flood += len(robots) * FLOOD_LINK_BYTES * int(len(links_c) + len(border_c))
-                skipped = self._rebuild(sub, members, links_c, border_c, img_of, entries)
-            else:
-                flood += len(robots) * FLOOD_LINK_BYTES * int((L.step_added[links_c] == t).sum())
-                skipped = self._repair(sub, members, links_c, hist_a, hist_b, img_of, att_f,
-                                       att_p, entries, t)
-            self._cut(skipped, HISTORY, t)
-            cut_n += len(skipped)
-        return self._rename(sub, real, bool(bad), cut_n, flood, comp)
-
-    def _rename(self, sub, real, changed: bool, cut_n: int, flood: int, comp=None
-                ) -> tuple[int, int]:
-        """Step 4: every set of the sub-problem (after the history cuts) gets a fresh name;
-        returns (links cut, flood bytes) for the caller."""
-        L = self.links
-        if changed:
-            self.border_links = self.border_links[L.kept[self.border_links]]
-            self._drop_dead_pieces()
-        if changed or comp is None:
-            w_b, p_b, _ = self._border_ends()
-            on = np.isin(w_b, sub)
-            hist_a, hist_b = _chain(w_b[on], p_b[on])
-            kept_real = real[L.kept[real]]
-            a_k, b_k = self._ends(kept_real)
-            comp = self._components(sub, np.concatenate([a_k, hist_a]),
-                                    np.concatenate([b_k, hist_b]))
-        # step 4: every set of the sub-problem gets a fresh name
-        n_c = int(comp.max()) + 1 if len(comp) else 0
-        self.label[sub] = self._fresh + comp.astype(np.int64)
-        self._fresh += n_c
-        return cut_n, flood
-
-    def _rebuild(self, sub, members, links_c, border_c, img_of, entries) -> np.ndarray:
-        """The history repair of one conflictive set when open links may be overturned
-        (step 3): the links it cuts. The set's retired pieces stay whole (their links are
-        final); its open links, every kept window link and border link of the set, are added
-        by decreasing quality (ties by link id), the order of the evidence rule's Kruskal
-        merge, and a link is skipped when the two groups it would join have overlapping runs
-        of one robot (:func:`pipeline.consistency.history.rebuild`, what the robots' check
-        computes at the set's root). Deterministic."""
-        L = self.links
-        r_piece, r_robot, r_lo, r_hi = entries
-        images: dict[int, dict] = {
-            int(f): {int(self.robot[img_of[k]]): [(int(self.step[img_of[k]]),) * 2]}
-            for k, f in zip(members, sub[members], strict=True)}
-        for p in np.unique(r_piece).tolist():  # a piece is node -1 - p
-            on = r_piece == p
-            runs: dict = {}
-            for r, lo, hi in zip(r_robot[on].tolist(), r_lo[on].tolist(), r_hi[on].tolist(),
-                                 strict=True):
-                runs.setdefault(r, []).append((lo, hi))
-            images[-1 - p] = runs
-        a_w, b_w = self._ends(links_c)
-        a_b, b_b = self._ends(border_c)
-        win_a = self.piece[a_b] < 0
-        node_b = -1 - self.piece[np.where(win_a, b_b, a_b)]
-        ids = np.concatenate([links_c, border_c])
-        na = np.concatenate([a_w, np.where(win_a, a_b, b_b)])
-        nb = np.concatenate([b_w, node_b])
-        return rebuild(images, ids, na, nb, L.quality[ids])
-
-    def _repair(self, sub, members, links_c, hist_a, hist_b, img_of, att_f, att_p,
-                entries, t) -> np.ndarray:
-        """The deterministic repair of one set (step 3): the new links it skips. A group of
-        features holds, per robot, the step runs of its frames (window frames as runs of
-        one step); two groups may join when no robot has overlapping runs in both."""
-        L = self.links
-        r_piece, r_robot, r_lo, r_hi = entries
-        parent = {int(f): int(f) for f in sub[members]}
-        images: dict[int, dict] = {
-            int(f): {int(self.robot[img_of[k]]): [(int(self.step[img_of[k]]),) * 2]}
-            for k, f in zip(members, sub[members], strict=True)}
-        mem = set(parent)
-        seen: set[int] = set()
-        for f, p in zip(att_f.tolist(), att_p.tolist(), strict=True):
-            if f in mem and p not in seen:   # a piece's runs go with one of its features
-                seen.add(p)
-                for r, lo, hi in zip(r_robot[r_piece == p].tolist(), r_lo[r_piece == p].tolist(),
-                                     r_hi[r_piece == p].tolist(), strict=True):
-                    images[f].setdefault(r, []).append((lo, hi))
-
-        def clash(x: dict, y: dict) -> bool:
-            return any(lo <= h and l2 <= hi for r in x.keys() & y.keys()
-                       for lo, hi in x[r] for l2, h in y[r])
-
-        def find(x):
-            while parent[x] != x:
-                parent[x] = parent[parent[x]]
-                x = parent[x]
-            return x
-
-        def union(x, y, force: bool = False) -> bool:
-            rx, ry = find(x), find(y)
-            if rx == ry:
-                return True
-            if not force and clash(images[rx], images[ry]):
-                return False
-            if len(images[rx]) < len(images[ry]):
-                rx, ry = ry, rx
-            parent[ry] = rx
-            for r, runs in images[ry].items():
-                images[rx].setdefault(r, []).extend(runs)
-            return True
-
-        is_new = L.step_added[links_c] == t
-        old, new = links_c[~is_new], links_c[is_new]
-        a_o, b_o = self._ends(old)
-        base = [(int(x), int(y)) for x, y in zip(a_o, b_o, strict=True)]
-        base += [(int(x), int(y)) for x, y in zip(hist_a, hist_b, strict=True)
-                 if int(x) in mem]
-        for x, y in base:  # joined before this step (a clash here is the runs' summary's)
-            union(x, y, force=True)
-        new = new[np.lexsort((new, -L.quality[new]))]
-        a_n, b_n = self._ends(new)
-        skipped = [int(k) for k, x, y in zip(new, a_n, b_n, strict=True)
-                   if not union(int(x), int(y))]
-        return np.asarray(skipped, np.int64)
 
     def _drop_dead_pieces(self) -> None:
         """A retired piece no border link reaches belongs to a set with no window feature
@@ -1082,25 +584,12 @@ def default_hold(window: int) -> int:
     return max(int(window) - 1, 0)
 
 
-def _chain(f: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Links chaining the items ``f`` of each group in order (``len(group) - 1`` per group).
-
-    >>> [x.tolist() for x in _chain(np.array([5, 3, 9, 4]), np.array([1, 1, 1, 2]))]
-    [[3, 5], [5, 9]]
-    """
-    if not len(f):
-        z = np.zeros(0, np.int64)
-        return z, z
-    u = np.unique(np.stack([group, f], axis=1), axis=0)
-    same = u[1:, 0] == u[:-1, 0]
-    ab = np.unique(np.stack([u[:-1, 1][same], u[1:, 1][same]], axis=1), axis=0)
-    return ab[:, 0], ab[:, 1]
-
 
 def _reduce_runs(start, p, r, lo, hi, gid):
     """Runs beginning at ``start`` (rows sorted by piece, robot, lo) merged into one row."""
     at = np.flatnonzero(start)
     return p[at], r[at], lo[at], np.maximum.reduceat(hi, at), gid[at]
+
 
 
 def simulated_stage(features_per_image, links: Links, resolution: str, *,
@@ -1122,15 +611,6 @@ def simulated_stage(features_per_image, links: Links, resolution: str, *,
 
         res.stats["history"] = run_history(features_per_image, links, ~res.deleted, history)
     return res
-
-
-def _duplicated_keys(group: np.ndarray, item: np.ndarray) -> list[int]:
-    """Groups holding one item twice."""
-    if not len(group):
-        return []
-    key = np.stack([group, item], axis=1)
-    u, counts = np.unique(key, axis=0, return_counts=True)
-    return np.unique(u[counts > 1, 0]).tolist()
 
 
 def batch_resolve(features_per_image, links: Links, resolution: str = DEFAULT_RESOLUTION,
