@@ -62,7 +62,8 @@ Writing a neighbour off (no hang, ever)
     A robot stops waiting for neighbour ``k`` — *writes it off* — for one of five reasons,
     kept in :attr:`ZenohTransport.written_off`:
 
-    ``closed``   its Zenoh session closed (liveliness token gone): its process ended;
+    ``closed``   its Zenoh session closed (liveliness token gone): its process ended (in a
+                 round, :data:`CLOSED_GRACE_S` after that, for its last packet to arrive);
     ``silent``   nothing from it (no packet, no beat) for ``round_timeout_s`` seconds: a host
                  frozen, or the link between them down (the robot cannot tell which);
     ``told``     ``k`` wrote *this* robot off and said so (``fm/T/gone/K/ID``);
@@ -198,6 +199,14 @@ def link_timeouts(round_timeout_s: float) -> tuple[float, float]:
 #: seconds a robot waits for a neighbour's round packet, while hearing its beats, before it
 #: asks for it again (and again every so many seconds): a packet lost with its link
 ASK_AFTER_S = 2.0
+
+#: seconds a robot still waits for a neighbour's round packet after the neighbour's session
+#: closed (liveliness token gone), before it writes the neighbour off (``closed``): a robot
+#: that sent its last packet and ended at once is heard to end on one callback thread while
+#: its packet, already received, is still being decoded on another (a few MB of features
+#: under load), and was written off with the packet in hand (its neighbour then stopped: "the
+#: features of frame F never came from robot K")
+CLOSED_GRACE_S = 2.0
 
 #: the most sender threads a robot runs (module docstring, "Threads"): one per neighbour up
 #: to this many, so a robot of the project's sparse graphs (line, ring: 2 neighbours, ring2: 4,
@@ -389,6 +398,7 @@ class ZenohTransport(RoundEndpoint):
         # a robot's liveliness token vanishes as soon as its session does (process killed:
         # the kernel closes its sockets), which its neighbours hear within milliseconds
         self._left: set[int] = set()
+        self._left_at: dict[int, float] = {}  # when each neighbour's token was heard to go
         self._token = self.session.liveliness().declare_token(key(name, "live", self.robot_id))
         self._subs.append(self.session.liveliness().declare_subscriber(
             key(name, "live", "*"), self._on_liveliness))
@@ -412,6 +422,7 @@ class ZenohTransport(RoundEndpoint):
             return
         with self._cv:
             self._left.add(k)
+            self._left_at.setdefault(k, time.monotonic())
             self._cv.notify_all()
 
     def _beat(self) -> None:
@@ -738,8 +749,8 @@ class ZenohTransport(RoundEndpoint):
                     break
                 now = time.monotonic()
                 for k in waiting:
-                    if k in self._left:
-                        self._write_off(k, "closed")
+                    if k in self._left and now - self._left_at.get(k, now) >= CLOSED_GRACE_S:
+                        self._write_off(k, "closed")  # its last packet had time to arrive
                     elif now - self._heard[k] > self.round_timeout_s:
                         self._write_off(k, "silent")
                     elif now - t0 > self.round_limit_s:
@@ -758,7 +769,9 @@ class ZenohTransport(RoundEndpoint):
                             pass
                 # bounded: every pass writes off or waits at most a beat period, and after
                 # round_limit_s every neighbour still waited for is written off
-                self._cv.wait(min(self.beat_s, self.round_timeout_s))
+                grace = [CLOSED_GRACE_S - (now - self._left_at[k]) for k in waiting
+                         if k in self._left and k not in self.silent]
+                self._cv.wait(max(0.01, min([self.beat_s, self.round_timeout_s, *grace])))
             got = {k: self._packets.pop((k, r)) for k in sorted(self.neighbours)
                    if k not in self.silent and (k, r) in self._packets}
             for kk in [kk for kk in self._packets if kk[1] <= r]:
