@@ -1,5 +1,5 @@
 """Each robot's local estimate of the landmark of every track it observes (Montijano et al.,
-Sec. III: the robots' local measurements that the consensus fuses).
+Sec. II: the measurement ``x_i`` with its covariance ``Λ_i`` that the consensus fuses).
 
 A robot triangulates a track from its own keypoint and those of its neighbours in the track
 (:func:`triangulate_views`: weighted Gauss-Newton with known poses), robustly over subsets of
