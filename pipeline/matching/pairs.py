@@ -1,8 +1,9 @@
 """Local data association between communication neighbours (Aragüés et al., Sec. II and V-B).
 
 Each robot matches its features only with those of its neighbours in the communication graph
-``G_com`` (Sec. II: "the local data association is computed only between neighbours"); a pair
-of robots that cannot communicate never gets an association block (``W_ij = 0``, eq. 3).
+``G_com`` (Sec. II: robot ``i`` "can compute the data association between its own set S_i and
+the sets of its neighbors S_j, with j ∈ N_i"); a pair of robots that cannot communicate never
+gets an association block (``W_ij = 0``, eq. 3).
 
 For every communication edge ``(i, j)``, ``i < j``:
 
