@@ -214,8 +214,9 @@ def conflictive_links(features_per_camera, links: Links) -> np.ndarray:
 def count_conflicts(graph: AssociationGraph) -> ConflictCounts:
     """Association sets, conflictive sets, ``m_sum`` and conflictive features (Def. 2.4).
 
-    Association sets are components with at least two features; ``m_sum`` counts the features
-    in them (the paper's Table III row "Number of features m_sum").
+    Association sets are components with at least two features (Def. 2.4 counts lone features
+    too; Table III does not: :func:`association_sets`); ``m_sum`` counts the features in them
+    (the paper's Table III row "Number of features m_sum").
     """
     labels, sizes, conflictive = conflictive_labels(graph)
     in_set = sizes[labels] >= 2 if labels.size else np.zeros(0, dtype=bool)
@@ -229,7 +230,13 @@ def count_conflicts(graph: AssociationGraph) -> ConflictCounts:
 
 
 def association_sets(features_per_camera, links: Links) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Association sets (Def. 2.4: connected components with >= 2 features) of ``links``.
+    """Association sets of ``links``: connected components with >= 2 features.
+
+    Def. 2.4 calls every connected component of ``G`` an association set, a lone feature
+    included. Here, as in :func:`count_conflicts`, a set needs two features: a lone feature is
+    associated with nothing, is never conflictive and has no landmark to fuse. The paper's
+    Table III fits this reading (formation (a): 528 sets for ``m_sum`` = 1335 associated
+    features); its Table I does not say (182 sets for 138 features).
 
     Sets are numbered in order of their smallest global feature id, so the same links always
     give the same numbering (the triangulation check and the fusion stage rely on it).
