@@ -2,8 +2,9 @@
 
 ``render(formation, seed)`` places 6 robots in formation in front of a textured scene with
 repeated structure, renders each robot's camera (image, ``K``, ``cam_from_world``, depth) and
-returns the communication graph of the paper's Fig. 4 formation ``a``–``d``; see
-:mod:`data_synth.formations` for the explicit edge lists and :mod:`data_synth.ground_truth` for
+returns the communication graph of formation ``a``–``d``, the four graphs of the paper's Fig. 4
+as :mod:`data_synth.formations` defines them (the figure is not in the paper's text; that module
+gives the explicit edge lists); see :mod:`data_synth.ground_truth` for
 good / spurious / missing links.
 
 Example
@@ -186,7 +187,8 @@ def formation_used(formation: str, graph: str | None) -> str | None:
 
 
 def check_formation(formation) -> None:
-    """InputError unless ``formation`` names one: a–d (the paper's Fig. 4) or a graph kind."""
+    """InputError unless ``formation`` names one: a–d (our four graphs for the paper's Fig. 4,
+    :mod:`data_synth.formations`) or a graph kind."""
     if not isinstance(formation, str) or (formation not in FORMATIONS and formation not in GRAPH_KINDS):
         raise InputError(f"unknown formation {formation!r}; choose one of "
                          f"{', '.join(FORMATIONS)} (the paper's Fig. 4) or a graph kind "

@@ -6,7 +6,8 @@ consensus exchanges values between neighbours). Every stage that takes a communi
 gets it from here:
 
 * :func:`graph_edges` — the named kinds ``line``, ``ring``, ``ring2``, ``complete``,
-  ``ring+triangles`` (formation b of the paper's Fig. 4), ``geometric`` (needs positions) and
+  ``ring+triangles`` (formation (b) of :mod:`data_synth.formations`, which defines the four
+  graphs of the paper's Fig. 4: the figure is not in its text), ``geometric`` (needs positions) and
   ``seq:K``;
 * :func:`comm_graph` — a kind or a file, for a set of named images (``run-images``), plus
   ``knn:K`` (neighbours by image similarity, :mod:`pipeline.matching.retrieval`);
