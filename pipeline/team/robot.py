@@ -23,11 +23,13 @@ The robot holds nothing global: no other robot's image, no union-find, no driver
    sends ``j`` the result (``matches``: pairs, ratios, epipolar errors and each link's local
    evidence, :func:`pipeline.matching.link_evidence.edge_evidence`). So both ends hold the same
    ``A_ij`` and the same evidence, equal to the simulator's for that edge.
-4. **Feature counts** (public knowledge of Sec. II: every robot's ``m_j`` gives the column
-   offsets of ``X_i·``): flooded for ``n - 1`` rounds (``counts`` messages, only when a robot
-   learnt something new), enough on any connected graph of ``n`` robots; with them a flag,
-   whether some robot injects message loss (its own ``drop_prob``; a links team floods the
-   flag alone, :func:`flood_flag`), which picks the rule (:func:`robot_resolution`). A links
+4. **Feature counts** (every robot's ``m_j`` gives the column offsets of ``X_i·``: the
+   blocks ``X_ij ∈ N^{m_i × m_j}`` of Sec. III, eq. 4, need them, though the paper also says
+   the robots do not know ``m_sum`` in general, so they learn them here): flooded for
+   ``n - 1`` rounds (``counts`` messages, only when a robot learnt something new), enough
+   on any connected graph of ``n`` robots; with them a flag, whether some robot injects
+   message loss (its own ``drop_prob``; a links team floods the flag alone,
+   :func:`flood_flag`), which picks the rule (:func:`robot_resolution`). A links
    team whose robots read their own files: in the flag's first round the two ends of every
    link compare their rows of it and, for a rule that weighs links, its quality or weight
    (:func:`check_shared_links`; a link one file leaves out, or two values, is an InputError).

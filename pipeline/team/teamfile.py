@@ -63,8 +63,8 @@ one; a user may write one by hand. Schema (``version`` 1)::
 
 A robot reads only its own part of the file: its endpoint and its neighbours' (to connect),
 its own ``options`` (``options`` with its ``robot_options``), its own data entry (its image,
-its links file), and the public facts of Sec. II: the team size and the comm graph, of which
-it uses only the edges that touch it.
+its links file), the team size ``n`` (the robots ``1 … n`` of Aragüés et al., Sec. II) and
+the comm graph, of which it uses only the edges that touch it: its neighbours ``N_i``.
 
 Relative paths in ``data`` are relative to the team file. Every problem is one
 :class:`~pipeline.errors.InputError` line naming the bad value.
