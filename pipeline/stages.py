@@ -64,8 +64,8 @@ def merge_radius_for(resolution: str, merge_radius: float | None) -> float:
     """The keypoint merge radius: as given, else the rule's own (``merge_radius_px`` of
     :mod:`pipeline.consistency.rules`: the evidence rule's is the ground-truth tolerance of a
     good link, 2 px, so that two keypoints that would both be "good" for one point are not
-    kept as two features of one camera, Def. 2.4), else the co-location radius of
-    :mod:`pipeline.matching.features` (the paper's Alg. 1).
+    kept as two features of one camera, Def. 2.4), else (a rule without its own, e.g.
+    ``paper``, Alg. 1) the co-location radius of :mod:`pipeline.matching.features`.
 
     Raises
     ------

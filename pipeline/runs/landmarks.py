@@ -21,7 +21,7 @@ whole assignment kept (``--ratio none``), refined by votes only when the rule do
 the cycles itself (:func:`default_refinement`: ``paper``, ``paper-labels``; ``sync`` and
 ``evidence`` take the matches as they are, see ``weighs_cycles`` in
 :mod:`pipeline.consistency.rules`). The
-votes are the ambiguity filter of Alg. 1: a pair the ratio gate would drop still carries paths
+votes are the ambiguity filter Alg. 1 needs: a pair the ratio gate would drop still carries paths
 that vote for the right match, and gating before voting removes them.
 
 Scoring follows CLEAR (Fathian et al., T-RO 2020): an association is judged by the pairwise
@@ -136,8 +136,8 @@ def _check_matching_memory(m, comm_edges, config: LandmarksConfig) -> None:
 def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
     """The memory guard of :mod:`pipeline.budget` on the matched links, before the rule and
     the baselines allocate what grows with them: InputError naming the part above
-    ``config.max_memory_gb`` (Alg. 1's detection on a dense graph of a hundred frames needs
-    GBs)."""
+    ``config.max_memory_gb`` (the detection of Sec. III, which the ``paper`` rule runs before
+    Alg. 1, needs GBs on a dense graph of a hundred frames)."""
     from pipeline.budget import (
         MemoryBudget,
         baselines_bytes,
