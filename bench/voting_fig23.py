@@ -43,12 +43,14 @@ OUT = ROOT / "runs" / "bench-voting"
 
 
 def fig23_example(seed: int = 3):
-    """10 robots, 7 inliers, fixed graph, ``c = 1``, 6 hypotheses, Conditions 1–4 hold.
+    """10 robots, 7 inliers, fixed graph, ``c = 1``, 6 hypotheses (the paper's Figs. 2–3).
 
     The observations are drawn (inliers around (3, 5), outliers 8–14 m away) and
     Conditions 1 and 3 are checked for the squared gate at p = 0.99 (Condition 2 holds for
     isotropic inlier covariances: every partial ML is then a convex combination); robot
-    positions are redrawn until the communication graph is connected.
+    positions are redrawn until the communication graph is connected. Condition 4 (eqs.
+    17–18, on the derivatives of ``d_i(w)``) is not checked: the paper says its example meets
+    every condition of Sec. IV-C; this one is known to meet 1–3 only.
     """
     rng = np.random.default_rng(seed)
     n, n_in = 10, 7
