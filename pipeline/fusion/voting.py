@@ -19,19 +19,28 @@ node ``b * N + i`` is robot ``i`` of problem ``b`` (see the consensus module).
 
 Readings of the text (where the paper leaves a choice open)
 -----------------------------------------------------------
-* **The chi-square gate** (eqs. 8, 12, 13). Eq. (12) and Condition 4 define ``d`` as the
-  Mahalanobis *distance* (a square root) and eqs. (8) and (13) compare it with the chi-square
-  *quantile* ``χ²_{d,p}``. ``gate="distance"`` follows that literally
+* **The chi-square gate** (eqs. 8, 12, 13). The paper calls ``d`` the Mahalanobis
+  *distance* (after eq. 8) and writes it with a square root (Sec. IV-C, ``d_i(w)`` before
+  Condition 4; eq. 17 differentiates that form), and eqs. (8) and (13) compare it with the
+  chi-square *quantile* ``χ²_{d,p}``. ``gate="distance"`` follows that literally
   (``sqrt(r' Λ⁻¹ r) <= χ²_{d,p}``); ``gate="squared"`` is the usual chi-square test
   (``r' Λ⁻¹ r <= χ²_{d,p}``). ``p`` is not given in the paper.
-* **Singular P** (Sec. IV-B): a robot whose ``P_i(t)`` is singular votes no. An indefinite
-  ``P_i``, which eq. (14) can create transiently when a robot withdraws, is treated the same
-  way (see :func:`pipeline.fusion.consensus.solve_information`).
+* **Singular P** (Sec. IV-B, after eq. 12): a robot whose ``P_i(t)`` is singular votes no.
+  The paper says so only where ``P_i⁻¹(t)`` does not exist; an indefinite ``P_i``, which
+  eq. (14) can create transiently when a robot withdraws, is invertible, but its
+  ``θ_i = P_i⁻¹ q_i`` is no combination of observations with weights in ``[0, 1]`` (the ``w``
+  of Sec. IV-C), so it is treated the same way
+  (:func:`pipeline.fusion.consensus.solve_information`).
 * **Eq. (9) for a member of a one-robot hypothesis** (``c = 1``): then ``θ_ML^h = x_i`` and
   ``Λ_ML^h = Λ_i``, so eq. (9) gives the zero matrix — the residual ``x_i − θ_ML^h`` is
   exactly zero. A member whose eq.-(9) covariance is not positive definite votes yes.
 * **Λ_ML^h in eq. (9)** is the robot's local ``(1/N) P_i⁻¹(t)`` after the hypothesis rounds
   (Sec. III: ``Λ_ML^h = (1/N) lim P_i⁻¹``); robots know ``N``.
+* **Eq. (9) as printed.** For a member the exact covariance of ``x_i − θ_ML^h`` is
+  ``Λ_i − Λ_ML^h`` (``Cov(x_i, θ_ML^h) = Λ_ML^h``); eq. (9) gives
+  ``Λ_ML^h + Λ_i − 2 Λ_ML^h Λ_i⁻¹ Λ_ML^h``, the same for ``c = 1`` (``Λ_ML^h = Λ_i``) and
+  larger (positive semidefinite difference) for ``c ≥ 2``: a looser gate. We use eq. (9) as
+  printed, to reproduce the paper.
 * **Winner and inliers**: each robot picks ``h* = argmax_h v_i^h`` from its own vote vector
   and counts itself an inlier iff its own current vote for ``h*`` is yes (static: its eq.-(8)
   vote; dynamic: its gate at the last round). Ties (:func:`pick_winner`): votes within
