@@ -31,14 +31,19 @@ The measurement (``noise="measured"``)
   ``p = 0.99``, the vote's confidence). The gates then pass the fraction ``p`` of the
   robot's good residuals under the measured law, not under a Gaussian fitted to its core
   (``median / 0.6745``: 0.4–0.9 px on Graffiti, whose gates cut 103 good links on the
-  complete graph where the fixed 1 px cut 67).
+  complete graph where the fixed 1 px cut 67; both figures of an earlier version of the
+  stage, before the cut rule of :mod:`pipeline.fusion.landmarks`, "Outliers leave the
+  landmark").
 * **The floor.** ``σ_i >= sigma_px`` (1 px by default): the gates decide whether an
   observation is the landmark's point, not how well it is localised. Rendered formations
   measure ``σ_i`` = 0.10–0.15 px by the rule above while right matches there lie up to 2 px
   apart (the tolerance of their ground truth and of the evidence rule's merge radius): gates
-  at that scale cut 189 good links on formation ``d`` (640x480, seed 0) where 1 px cuts 10.
-  Below the floor the measured noise is not used; above it, it is (Graffiti: 1.0–1.6 px,
-  Sceaux at full size: up to 2.8 px).
+  at that scale cut 189 good links on formation ``d`` (640x480, seed 0) where 1 px cut 10,
+  with the same earlier version of the stage (today 1 px cuts 1 there:
+  ``run-formations --resolution evidence``).
+  Below the floor the measured noise is not used; above it, it is (Graffiti, complete graph:
+  1.0–1.7 px, ``fusion.robot_sigma_px`` of the reports ``python bench/graffiti_truth.py``
+  saves; Sceaux at full size: up to 2.8 px).
 * **Too few residuals.** A robot with fewer than :data:`MIN_RESIDUALS` finite residuals
   (no observing neighbour, or a handful of tracks) keeps the floor.
 * **Who knows what.** Robot ``i`` uses its own ``σ_i`` for everything it decides: its local
