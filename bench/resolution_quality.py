@@ -12,8 +12,9 @@ sums over the runs next to the targets and saves ``runs/bench-resolution/results
 
 ``--merge-radius`` lists the radii within which keypoints of one image are merged at
 extraction (the near-duplicate measurement); each radius is one full pass over the runs,
-with every method on the same matches (default: the paper's 0.5 px and the evidence rule's
-2 px).
+with every method on the same matches (default: the ``paper`` rule's 0.5 px,
+``pipeline.matching.features.MERGE_RADIUS_PX`` — the paper gives none — and the evidence
+rule's 2 px).
 """
 
 from __future__ import annotations

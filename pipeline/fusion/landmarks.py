@@ -131,8 +131,8 @@ Interpretations and limits
 * The vote's gate is the usual chi-square test on the squared Mahalanobis distance
   (``gate="squared"``); the covariances here come from the measurement model with each
   robot's measured noise, so the test is calibrated to the robot's data (see
-  ``bench/voting.py`` for the readings of the paper's own gate). The pixel checks use the same
-  test on the reprojection error: ``‖e‖² / σ_i² <= χ²_{2,p}``.
+  ``bench/voting_table1.py`` for the readings of the paper's own gate). The pixel checks use
+  the same test on the reprojection error: ``‖e‖² / σ_i² <= χ²_{2,p}``.
 """
 
 from __future__ import annotations
