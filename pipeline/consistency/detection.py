@@ -19,7 +19,8 @@ Interpretations (stated):
 * Message content. Robot ``k`` sends to neighbour ``i`` only the rows ``s`` of ``X_k·(t)`` with
   ``[W_ki]_{s,·} ≠ 0`` — the only rows ``W_ik X_k·(t)`` reads — as ``rows`` (k's local ids),
   CSR ``indptr`` and column ``indices`` (int32). It sends only while it has not stopped.
-* Delta messages (the paper's protocol on a lossless network, the default there). A robot
+* Delta messages (the default of the paper's protocol on a lossless network; the paper
+  itself sends the whole ``X_k·(t)``, and the result is the same, below). A robot
   sends only the entries of those rows that are new since its last message,
   ``Δ_k·(t) = X_k·(t) ∖ X_k·(t−1)`` (``Δ_k·(0) = X_k·(0)``), and only the rows with a new
   entry; a neighbour with nothing new gets no message. The receiver needs no copy of its
