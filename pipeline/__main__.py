@@ -8,7 +8,8 @@ Exit codes: 0 done; 2 bad input, a file that cannot be read or written, a team o
 processes that did not finish (one line on stderr naming the robot, nothing written), or a
 distributed stage that ran past its bound of rounds (one line naming it); 3 the run finished
 but its result is not conflict-free (written, flagged in the report, one line on stderr); 130
-interrupted (Ctrl-C; nothing half-written). A closed stdout pipe (``| head -3``) ends the
+interrupted (Ctrl-C; nothing half-written); 143 terminated (SIGTERM: ``kill``, ``timeout``; it
+cleans up as a Ctrl-C does). A closed stdout pipe (``| head -3``) ends the
 command quietly with 0.
 """
 
@@ -17,10 +18,11 @@ from __future__ import annotations
 import os
 import sys
 
-from pipeline.errors import exit_quietly_on_interrupt, run_interruptibly
+from pipeline.errors import clean_up_on_terminate, exit_quietly_on_interrupt, run_interruptibly
 
 if __name__ == "__main__":  # run as a program: from here on, before the imports below
     exit_quietly_on_interrupt("formation-match")
+    clean_up_on_terminate()
 
 import argparse  # noqa: E402
 import atexit  # noqa: E402
@@ -252,6 +254,7 @@ def entry() -> None:
     that is not a daemon, which the normal exit waits for.
     """
     exit_quietly_on_interrupt("formation-match")  # a Ctrl-C that escapes main (module notes)
+    clean_up_on_terminate()  # a kill ends through the clean-up, as a Ctrl-C does
     code = main()
     others = [t for t in threading.enumerate()
               if t is not threading.main_thread() and not t.daemon]

@@ -65,9 +65,39 @@ def caused_by_interrupt(exc: BaseException | None) -> bool:
     return False
 
 
-def report_interrupt(command: str) -> int:
+class Terminated(SystemExit):
+    """A SIGTERM (``kill PID``, ``timeout``) arrived: raised by the handler of
+    :func:`clean_up_on_terminate` and by the team launcher's, so that every ``finally`` and
+    ``with`` block runs on the way out (temporary folders, staging folders, the run folder's
+    lock, robot processes) as on a Ctrl-C. Its exit status is 143 (128 + SIGTERM)."""
+
+    def __init__(self) -> None:
+        import signal
+
+        super().__init__(128 + signal.SIGTERM)
+
+
+def _on_terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+def clean_up_on_terminate() -> None:
+    """Make a SIGTERM end the program as a Ctrl-C does, through its clean-up (:class:`Terminated`,
+    exit status 143, one line ``terminated: … stopped …``) instead of at once with every
+    temporary folder (``fm-team-*``, ``colmap-read-*``), staging folder and lock left behind.
+    Only in the main thread, and not where SIGTERM is ignored or already handled."""
+    import signal
+    import threading
+
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
+        signal.signal(signal.SIGTERM, _on_terminate)
+
+
+def report_interrupt(command: str, how: str = "interrupted") -> int:
     """One line on stderr saying ``command`` was stopped by a Ctrl-C (naming the outputs
-    already in place, if any); the exit status of an interrupted command, 130."""
+    already in place, if any); the exit status of an interrupted command, 130. With ``how``
+    ``"terminated"``: stopped by a SIGTERM, exit status 143."""
     import sys
 
     done = []
@@ -75,12 +105,12 @@ def report_interrupt(command: str) -> int:
         done = sys.modules["pipeline.runfolder"].outputs_in_place()
     if done:  # too late to keep them: say which are there, written in full
         names = ", ".join(repr(str(p)) for p in done[:4]) + (", …" if len(done) > 4 else "")
-        print(f"interrupted: {command} stopped; already in place, complete: {names}",
+        print(f"{how}: {command} stopped; already in place, complete: {names}",
               file=sys.stderr)
     else:
-        print(f"interrupted: {command} stopped, nothing was written or replaced",
+        print(f"{how}: {command} stopped, nothing was written or replaced",
               file=sys.stderr)
-    return 130
+    return 130 if how == "interrupted" else Terminated().code
 
 
 def _last_word(program: str, exc_type, exc, tb) -> None:
@@ -153,6 +183,8 @@ def run_interruptibly(command: str, run) -> int:
         return run()
     except KeyboardInterrupt:
         return report_interrupt(command)
+    except Terminated:
+        return report_interrupt(command, "terminated")
     except Exception as exc:
         if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
             return report_interrupt(command)

@@ -23,13 +23,15 @@ __all__ = ["COLMAP_PIXEL_OFFSET", "quiet_colmap", "version", "rigid", "write_rec
 
 
 def _default_sigterm() -> None:
-    """Give SIGTERM back its default action after pycolmap's import, which installs glog's
-    failure handler on it: a ``kill`` or ``timeout`` then printed a C stack trace of 18 lines
-    as if the program had crashed. A handler set in Python (the team launcher's) is kept, and
-    so is glog's on the signals of a real crash (SIGSEGV, SIGABRT, ...)."""
-    if threading.current_thread() is threading.main_thread() \
-            and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    """Give SIGTERM back the action Python has for it after pycolmap's import, which installs
+    glog's failure handler on it in C, behind Python's back: a ``kill`` or ``timeout`` then
+    printed a C stack trace of 18 lines as if the program had crashed, and a handler set in
+    Python before the import (the command line's, which cleans up on SIGTERM) never ran. The
+    default action, or the Python handler, is set again; glog's handler on the signals of a
+    real crash (SIGSEGV, SIGABRT, ...) is kept."""
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.getsignal(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if handler is None else handler)
 
 
 _default_sigterm()

@@ -248,7 +248,7 @@ def _mapping(database_path: Path, image_dir: str, out: Path, options, n_images: 
 
 @contextmanager
 def interrupts_kept():
-    """Re-raise a Ctrl-C that a call into COLMAP swallowed.
+    """Re-raise a Ctrl-C (or a SIGTERM the program handles) that a call into COLMAP swallowed.
 
     ``pycolmap.incremental_mapping`` checks for interrupts and runs Python callbacks (the
     progress bar); a KeyboardInterrupt raised there can end the mapping early with the
@@ -256,27 +256,38 @@ def interrupts_kept():
     result from a cut-short mapping (seen under load: ``clean-db --fusion`` exited 0 after a
     Ctrl-C, 787 points where the full run has 786). In the main thread the SIGINT handler is
     wrapped for the call: it records the signal (and acts as before); if one arrived, a
-    KeyboardInterrupt is raised once the call has returned."""
+    KeyboardInterrupt is raised once the call has returned. So is a SIGTERM handler set in
+    Python (the command line's, :func:`pipeline.errors.clean_up_on_terminate`): its
+    :class:`~pipeline.errors.Terminated` is raised once the call has returned."""
     if threading.current_thread() is not threading.main_thread():
         yield  # signals reach the main thread only
         return
     got = []
-    previous = signal.getsignal(signal.SIGINT)
+    previous = {signal.SIGINT: signal.getsignal(signal.SIGINT),
+                signal.SIGTERM: signal.getsignal(signal.SIGTERM)}
 
     def handler(signum, frame):
         got.append(signum)
-        if callable(previous):
-            previous(signum, frame)
-        elif previous != signal.SIG_IGN:
+        if callable(previous[signum]):
+            previous[signum](signum, frame)
+        elif previous[signum] != signal.SIG_IGN:
             raise KeyboardInterrupt
 
-    signal.signal(signal.SIGINT, handler)
+    for sig, old in previous.items():
+        if sig == signal.SIGINT or callable(old):  # SIGTERM's default action stays
+            signal.signal(sig, handler)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if got:
+        for sig, old in previous.items():
+            if sig == signal.SIGINT or callable(old):
+                signal.signal(sig, old)
+    if signal.SIGINT in got:
         raise KeyboardInterrupt
+    if signal.SIGTERM in got:
+        from pipeline.errors import Terminated
+
+        raise Terminated()
 
 
 #: bundle adjustment rounds of :func:`mapping_from_poses` (each followed by the mapper's

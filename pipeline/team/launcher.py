@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import TeamError, die_with_parent
+from pipeline.errors import TeamError, Terminated, die_with_parent
 from pipeline.team.teamfile import (
     DEFAULT_OPTIONS,
     LAUNCHED_AT_ENV,
@@ -503,7 +503,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     stopping = {"now": False, "pending": None}
 
     def interrupt(signum):
-        return KeyboardInterrupt() if signum == signal.SIGINT else SystemExit(128 + signum)
+        return KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
 
     def on_signal(signum, frame):
         kill_all()
