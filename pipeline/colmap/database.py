@@ -406,20 +406,20 @@ def read_database(path: str | Path, check_sizes=None, *,
     path = Path(path)
     check_database_file(path)
     con = open_readonly(path)
+    snapshot_dir = None
     try:
-        sizes = check_database_tables(con, path)
-        if check_sizes is not None:
-            check_sizes(sizes)
-        snapshot_dir = tempfile.mkdtemp(prefix="colmap-read-")
-        copy = Path(snapshot_dir) / "read.db"
         try:
-            con.execute("VACUUM INTO ?", (str(copy),))
-        except sqlite3.Error as exc:
-            shutil.rmtree(snapshot_dir, ignore_errors=True)
-            raise InputError(f"database {str(path)!r} cannot be read ({exc})") from None
-    finally:
-        con.close()
-    try:
+            sizes = check_database_tables(con, path)
+            if check_sizes is not None:
+                check_sizes(sizes)
+            snapshot_dir = tempfile.mkdtemp(prefix="colmap-read-")
+            copy = Path(snapshot_dir) / "read.db"
+            try:
+                con.execute("VACUUM INTO ?", (str(copy),))
+            except sqlite3.Error as exc:
+                raise InputError(f"database {str(path)!r} cannot be read ({exc})") from None
+        finally:
+            con.close()
         snap = sqlite3.connect(copy)
         try:
             check_database_tables(snap, path)  # what pycolmap reads is what was checked
@@ -441,7 +441,10 @@ def read_database(path: str | Path, check_sizes=None, *,
         contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras,
                              raw, ignore_watermarks=ignore_watermarks)
     except BaseException:
-        shutil.rmtree(snapshot_dir, ignore_errors=True)
+        # any way out before the contents own it (an error, a Ctrl-C or a SIGTERM while the
+        # snapshot is taken) removes the snapshot
+        if snapshot_dir is not None:
+            shutil.rmtree(snapshot_dir, ignore_errors=True)
         raise
     contents.snapshot = copy
     contents._snapshot_dir = weakref.finalize(contents, shutil.rmtree, snapshot_dir, True)
