@@ -475,15 +475,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     """
     log = log or (lambda s: print(s, file=sys.stderr, flush=True))
     timeout_s = _within["time_limit"] if timeout_s is None else float(timeout_s)
-    tmp = None
-    if workdir is None:
-        tmp = tempfile.TemporaryDirectory(prefix="fm-team-")
-        workdir = tmp.name
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    team_path = write_team(workdir / "TEAM.json", team)
-    run = TeamRun(team)
-    observer = Observer(team)
+    tmp = observer = None
     procs: dict[int, subprocess.Popen] = {}
     errfiles = {}
     pgid = None
@@ -513,14 +505,23 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         stopping["now"] = True
         raise interrupt(signum)
 
+    # the handlers first: a signal from here on stops the team and removes its folder
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             old_handlers[sig] = signal.signal(sig, on_signal)
-    t0 = time.monotonic()
     zygote = None
     gone = threading.Event()  # the zygote's lines ended
     shared, tag = (_within["zygote"] if fork else None), None
     try:
+        if workdir is None:
+            tmp = tempfile.TemporaryDirectory(prefix="fm-team-")
+            workdir = tmp.name
+        workdir = Path(workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        team_path = write_team(workdir / "TEAM.json", team)
+        run = TeamRun(team)
+        observer = Observer(team)
+        t0 = time.monotonic()
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
         if shared is not None:
@@ -646,11 +647,12 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     p.wait(timeout=5)
         for f in errfiles.values():
             f.close()
-        observer.close()
+        if observer is not None:
+            observer.close()
+        if tmp is not None:  # before the handlers go: a signal now still waits for it
+            tmp.cleanup()
         for sig, h in old_handlers.items():
             signal.signal(sig, h)
-        if tmp is not None:
-            tmp.cleanup()
         if stopping["pending"] is not None:
             raise interrupt(stopping["pending"])
 
