@@ -491,8 +491,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
 
     # a signal while the team is being stopped (a second Ctrl-C, or the one `timeout`
     # forwards) must not break the cleanup: the observer's Zenoh session left open keeps the
-    # interpreter alive. It is held until the cleanup is done, then raised.
-    stopping = {"now": False, "pending": None}
+    # interpreter alive. It is held until the cleanup is done, then raised. The first one is
+    # also kept ("got"): Python drops the exception of a handler that runs within its hooks
+    # around a fork (starting the zygote or a robot), and the team then ran on to its end
+    # after a Ctrl-C; the wait below raises it again.
+    stopping = {"now": False, "pending": None, "got": None}
 
     def interrupt(signum):
         return KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
@@ -502,8 +505,13 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         if stopping["now"]:
             stopping["pending"] = signum
             return
-        stopping["now"] = True
+        stopping["now"], stopping["got"] = True, signum
         raise interrupt(signum)
+
+    def interrupted() -> None:
+        """Raise the signal a handler took, if Python dropped its exception."""
+        if stopping["got"] is not None:
+            raise interrupt(stopping["got"])
 
     # the handlers first: a signal from here on stops the team and removes its folder
     if threading.current_thread() is threading.main_thread():
@@ -554,6 +562,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         deadline = t0 + timeout_s
         with observer.cv:
             while True:
+                interrupted()
                 for i, p in list(procs.items()):
                     if i not in run.exit_codes and p.poll() is not None:
                         run.exit_codes[i] = p.returncode
@@ -621,6 +630,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         run.status = dict(observer.status)
         run.finished_at = dict(observer.finished_at)
         run.stderr = {i: _tail(workdir / f"robot{i}.log", 20) for i in procs}
+        interrupted()
         return run
     finally:
         stopping["now"] = True

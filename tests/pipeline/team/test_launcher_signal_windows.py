@@ -2,7 +2,9 @@
 
 - A SIGTERM once the team's folder was written and before the launcher's handlers were set
   killed the process with ``fm-team-*`` left in the temporary folder (the handlers came after
-  the folder, its TEAM.json and the observer)."""
+  the folder, its TEAM.json and the observer).
+- A Ctrl-C while the zygote was being forked ran its handler within Python's hooks around the
+  fork, which drop the exception: the team ran on to its end as if nothing had happened."""
 
 import os
 import signal
@@ -39,6 +41,16 @@ def written_then_killed(*args):
 launcher.write_team = written_then_killed
 """
 
+AT_FORK = """
+sent = []
+def ctrl_c_within_the_fork_hook():
+    if not sent:
+        sent.append(1)
+        os.kill(os.getpid(), signal.SIGINT)
+os.register_at_fork(after_in_parent=ctrl_c_within_the_fork_hook)
+"""
+
+
 def _launch(tmp_path, patch: str) -> tuple[subprocess.CompletedProcess, Path]:
     tmp = tmp_path / "tmp"
     tmp.mkdir()
@@ -53,4 +65,10 @@ def _launch(tmp_path, patch: str) -> tuple[subprocess.CompletedProcess, Path]:
 def test_a_sigterm_before_the_team_starts_leaves_no_folder(tmp_path):
     done, tmp = _launch(tmp_path, AFTER_WRITE)
     assert done.returncode == 128 + signal.SIGTERM, done.stderr
+    assert sorted(p.name for p in tmp.iterdir()) == []
+
+
+def test_a_ctrl_c_within_the_fork_of_the_zygote_stops_the_team(tmp_path):
+    done, tmp = _launch(tmp_path, AT_FORK)
+    assert (done.returncode, done.stdout) == (0, "interrupted\n"), done.stderr
     assert sorted(p.name for p in tmp.iterdir()) == []
