@@ -79,7 +79,8 @@ from pipeline.outputs import (
 __all__ = ["OutputFiles", "outputs_in_place", "forget_outputs_in_place", "note_output_in_place",
            "atomic_file", "atomic_run_folder", "claim_run_folder", "output_path", "reading_run_folder",
            "staging_beside",
-           "publish", "publish_mode", "publish_together", "write_json_atomic"]
+           "publish", "publish_mode", "publish_together", "write_json_atomic",
+           "make_scratch_folder", "scratch_folder"]
 
 
 def _umask() -> int:
@@ -440,6 +441,74 @@ def _drop_dead_parts(target: Path) -> None:
                 os.unlink(path)
         except OSError:
             pass
+
+
+# ------------------------------------------------------------------------------ scratch folders
+
+# A command's private folders in the temporary folder (a team's TEAM.json and logs, a
+# database's snapshot, a mapping's work) are ``PREFIX PID-START-D-R``: the process that made
+# them (pid and start time), a keyed digest of those and of the machine's boot and pid
+# namespace (:func:`_pid_space`), and mkdtemp's random part. The command removes its own on
+# every way out it lives through; a process killed outright (kill -9, the OOM killer, a
+# test's timeout) cannot, and the next folder of the same prefix made on this machine
+# removes those of processes no longer alive.
+
+_SCRATCH_RANDOM = "[a-z0-9_]{8}"  # tempfile's random part
+
+
+def _scratch_digest(prefix: str, pid: str, start: str) -> str:
+    h = hashlib.blake2b(os.fsencode(f"{prefix}|{pid}|{start}|{_pid_space()}"), digest_size=6,
+                        key=b"formation-match: scratch folder")
+    return h.hexdigest()
+
+
+def _drop_dead_scratch(prefix: str, parent: Path) -> None:
+    """Remove the folders ``PREFIX…`` of ours under ``parent`` whose process is gone: only
+    names carrying their digest, only folders (never a link) of this user, only where the
+    system tells which processes live (``/proc``)."""
+    if _process_start(os.getpid()) is None or not _pid_space():
+        return
+    name_re = re.compile(rf"{re.escape(prefix)}(\d+)-(\d+)-([0-9a-f]{{12}})-{_SCRATCH_RANDOM}")
+    try:
+        entries = os.listdir(parent)
+    except OSError:
+        return
+    for name in entries:
+        m = name_re.fullmatch(name)
+        if m is None:
+            continue
+        pid, start, digest = m.groups()
+        if digest != _scratch_digest(prefix, pid, start) or _process_start(int(pid)) == start:
+            continue
+        path = parent / name
+        try:
+            st = os.lstat(path)
+        except OSError:
+            continue
+        if stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid():
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def make_scratch_folder(prefix: str) -> Path:
+    """A new private folder (mode 0700) in the temporary folder, named ``PREFIX…`` after this
+    process (see above), once the ``PREFIX…`` folders of killed processes are removed. The
+    caller removes it (:func:`scratch_folder` does)."""
+    parent = Path(tempfile.gettempdir())
+    _drop_dead_scratch(prefix, parent)
+    pid = str(os.getpid())
+    start = _process_start(os.getpid()) or "0"
+    return Path(tempfile.mkdtemp(prefix=f"{prefix}{pid}-{start}-"
+                                        f"{_scratch_digest(prefix, pid, start)}-", dir=parent))
+
+
+@contextmanager
+def scratch_folder(prefix: str):
+    """:func:`make_scratch_folder` for the block (its path as a string), removed at its end."""
+    path = make_scratch_folder(prefix)
+    try:
+        yield str(path)
+    finally:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def output_path(outputs: OutputFiles | None, target: str | os.PathLike, flag: str) -> Path:

@@ -33,6 +33,7 @@ import pycolmap
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.errors import InputError
 from pipeline.inputs.dbcheck import MAX_PAIR_ID_IMAGE, check_database_tables, open_readonly
+from pipeline.runfolder import make_scratch_folder
 from pipeline.types import Features, Links, View
 
 __all__ = ["DatabaseContents", "calibrated", "check_database_file", "write_database",
@@ -412,7 +413,7 @@ def read_database(path: str | Path, check_sizes=None, *,
             sizes = check_database_tables(con, path)
             if check_sizes is not None:
                 check_sizes(sizes)
-            snapshot_dir = tempfile.mkdtemp(prefix="colmap-read-")
+            snapshot_dir = make_scratch_folder("colmap-read-")
             copy = Path(snapshot_dir) / "read.db"
             try:
                 con.execute("VACUUM INTO ?", (str(copy),))

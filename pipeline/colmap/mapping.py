@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import signal
-import tempfile
 import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ import pycolmap
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap, write_reconstruction
 from pipeline.colmap.database import check_database_file
 from pipeline.errors import InputError
+from pipeline.runfolder import scratch_folder
 
 __all__ = ["MappingSummary", "incremental_mapping", "incremental_mapping_with_retry",
            "mapping_from_poses", "poses_usable", "COLMAP_MIN_POSE_INLIERS", "RETRY_MIN_POSE_INLIERS",
@@ -182,7 +182,7 @@ def incremental_mapping(database_path: str | Path, *, image_dir: str | Path = ""
     options, images, _ = _pipeline_options(database_path, num_threads, seed, fixed_intrinsics,
                                            image_dir, min_pose_inliers)
     options.ignore_watermarks = bool(ignore_watermarks)
-    with tempfile.TemporaryDirectory(prefix="colmap-map-") as tmp:
+    with scratch_folder("colmap-map-") as tmp:
         out = Path(output_dir) if output_dir is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         models = _mapping(database_path, str(image_dir or tmp), out, options, len(images))
@@ -369,7 +369,7 @@ def mapping_from_poses(database_path: str | Path, reconstruction, *, num_threads
                 f"database {str(database_path)!r} does not hold the reconstruction's image "
                 f"{image.name!r} under id {image_id} (it has "
                 f"{names.get(int(image_id))!r}): map the database it was made from")
-    with tempfile.TemporaryDirectory(prefix="colmap-poses-") as tmp, quiet_colmap():
+    with scratch_folder("colmap-poses-") as tmp, quiet_colmap():
         tmp = Path(tmp)
         rec = pycolmap.triangulate_points(pycolmap.Reconstruction(reconstruction),
                                           database_path, tmp, tmp / "triangulated",

@@ -20,7 +20,6 @@ machine), so it is not used.
 from __future__ import annotations
 
 import functools
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +29,7 @@ import pycolmap
 
 from pipeline.colmap.base import COLMAP_PIXEL_OFFSET, quiet_colmap
 from pipeline.errors import InputError
+from pipeline.runfolder import scratch_folder
 
 __all__ = ["SiftResult", "sift", "sift_extractor", "VerifiedPair", "match_pairs", "DESCRIPTOR_SCALE",
            "RADIAL_MODEL"]
@@ -175,7 +175,7 @@ def match_pairs(names: list[str], keypoints: list[np.ndarray], descriptors: list
         raise InputError(f"match_pairs: {n} names, {len(keypoints)} keypoint sets, "
                          f"{len(descriptors)} descriptor sets, {len(cameras)} cameras")
     out: list[VerifiedPair] = []
-    with tempfile.TemporaryDirectory(prefix="colmap-match-") as tmp, quiet_colmap():
+    with scratch_folder("colmap-match-") as tmp, quiet_colmap():
         db_path = Path(tmp) / "match.db"
         with pycolmap.Database.open(db_path) as db:
             ids = []

@@ -345,14 +345,13 @@ def _fusion_pass(contents, model_ok: np.ndarray, model_links, idx: np.ndarray, r
     links) get ``reason`` ``fusion-outlier`` (in place). The mapping sees the links the robots
     started from (``model_ok``: without those the checks before the stage cut, e.g. outside
     the comm graph). Returns the summary's ``fusion`` section."""
-    import tempfile
-
     from pipeline import colmap
     from pipeline.commgraph import comm_edges_for
+    from pipeline.runfolder import scratch_folder
     from pipeline.stages import fusion_on_reconstruction, ledger_from_consistency
     from pipeline.types import Features, View
 
-    with tempfile.TemporaryDirectory(prefix="clean-db-mapping-") as tmp:
+    with scratch_folder("clean-db-mapping-") as tmp:
         # the snapshot is what was read: the mapping sees the same matches, the input stays
         # untouched; a copy without the links cut before the stage when there are any
         db = contents.snapshot or contents.path

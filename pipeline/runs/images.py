@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import shutil
-import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
@@ -38,7 +37,7 @@ import numpy as np
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
-from pipeline.runfolder import atomic_run_folder, write_json_atomic
+from pipeline.runfolder import atomic_run_folder, scratch_folder, write_json_atomic
 from pipeline.types import Links, View
 
 __all__ = ["ImagesConfig", "run_images"]
@@ -219,7 +218,7 @@ def run_images(config: ImagesConfig, timer: StageTimer | None = None, *, loaded=
     if by_similarity:
         comm_edges = chosen["edges"]
 
-    with tempfile.TemporaryDirectory(prefix="run-images-") as work, \
+    with scratch_folder("run-images-") as work, \
             ThreadPoolExecutor(max_workers=1) as mapper:
         work = Path(work)
         # calibrated cameras (K.txt) stay fixed in the bundle adjustments; EXIF and guessed

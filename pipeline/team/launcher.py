@@ -23,6 +23,7 @@ import functools
 import json
 import os
 import random
+import shutil
 import signal
 import socket
 import subprocess
@@ -36,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import TeamError, Terminated, die_with_parent
+from pipeline.runfolder import make_scratch_folder
 from pipeline.team.teamfile import (
     DEFAULT_OPTIONS,
     LAUNCHED_AT_ENV,
@@ -522,8 +524,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     shared, tag = (_within["zygote"] if fork else None), None
     try:
         if workdir is None:
-            tmp = tempfile.TemporaryDirectory(prefix="fm-team-")
-            workdir = tmp.name
+            tmp = make_scratch_folder("fm-team-")
+            workdir = tmp
         workdir = Path(workdir)
         workdir.mkdir(parents=True, exist_ok=True)
         team_path = write_team(workdir / "TEAM.json", team)
@@ -660,7 +662,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         if observer is not None:
             observer.close()
         if tmp is not None:  # before the handlers go: a signal now still waits for it
-            tmp.cleanup()
+            shutil.rmtree(tmp, ignore_errors=True)
         for sig, h in old_handlers.items():
             signal.signal(sig, h)
         if stopping["pending"] is not None:

@@ -373,10 +373,9 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evi
     links' weights (``data.weights``) and its own keypoints, with no pose. Returns
     ``(ConsistencyResult, faults section or None)``; the result's links are ``links``.
     """
-    import tempfile
-
     from pipeline.commgraph import comm_edges_for
     from pipeline.faults import fault_report
+    from pipeline.runfolder import scratch_folder
 
     m = features_per_camera
     written = links
@@ -391,7 +390,7 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evi
         evidence = {"link_weight": ratio_llr(1.0 - links.quality), "keypoints": None}
         written = Links(links.cam_i, links.feat_i, links.cam_j, links.feat_j,
                         np.where(np.isfinite(links.quality), links.quality, 0.0))
-    with tempfile.TemporaryDirectory(prefix="resolve-team-") as work:
+    with scratch_folder("resolve-team-") as work:
         paths = write_robot_links(Path(work), written, len(m))
         extra = {}
         if evidence is not None:
@@ -435,11 +434,10 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     ``stats['history']`` holds the links they cut (``cut``), the check's rounds and its
     messages and bytes (``counted``: already in the stage's counts).
     """
-    import tempfile
-
     from pipeline.commgraph import comm_edges_for
     from pipeline.consistency.rules import get_rule
     from pipeline.consistency.setlists import bundle_budget
+    from pipeline.runfolder import scratch_folder
     from pipeline.types import Links
 
     rule = get_rule(resolution)
@@ -459,7 +457,7 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
         opts.update(solve_small_sets=False, bundle_budget=bundle_budget(len(m)))
     if gather:
         opts.update(gather_conflictive=bool(gather_conflictive), gather_free=bool(gather_free))
-    with tempfile.TemporaryDirectory(prefix="online-step-") as work:
+    with scratch_folder("online-step-") as work:
         paths = write_robot_links(Path(work), sub, len(used))
         extra = {}
         if gather and keypoints is not None:
@@ -580,9 +578,8 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
         A robot did not publish, the detection cut a link (the links were not conflict-free),
         or a robot named a track otherwise than ``track_labels``.
     """
-    import tempfile
-
     from pipeline.fusion.landmarks import FusionResult, require_posed_views
+    from pipeline.runfolder import scratch_folder
 
     require_posed_views(views, features)
     n = len(views)
@@ -591,7 +588,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
                 "R": np.asarray(v.R, np.float64).tolist(),
                 "t": np.asarray(v.t, np.float64).reshape(3).tolist()} for v in views]
     opts = team_options(resolution="paper-labels", fusion=True)
-    with tempfile.TemporaryDirectory(prefix="online-fusion-") as work:
+    with scratch_folder("online-fusion-") as work:
         folder = Path(work)
         paths = write_robot_links(folder, links, n)
         data = {"kind": "links", "links": [str(p) for p in paths],
@@ -707,9 +704,9 @@ def online_robots():
     run starts (three per step: matching, the rule's stage, fusion) forks its robots from one
     zygote (:func:`pipeline.team.launcher.shared_zygote`): the robot program is imported
     once for the run, not once per team (unless :data:`ZYGOTE_ENV` says ``team``)."""
-    import tempfile
+    from pipeline.runfolder import scratch_folder
 
-    with tempfile.TemporaryDirectory(prefix="online-robots-") as store, job_teams():
+    with scratch_folder("online-robots-") as store, job_teams():
         yield store
 
 
@@ -735,9 +732,8 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         A robot did not publish, or the robots matched other pairs than
         :func:`pipeline.matching.pairs.step_pairs` lists.
     """
-    import tempfile
-
     from pipeline.matching.pairs import step_pairs
+    from pipeline.runfolder import scratch_folder
     from pipeline.team.online_match import write_frame
     from pipeline.types import Features, Links, PairMatches
 
@@ -756,7 +752,7 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                         matcher=match_options.get("matcher", "opencv"))
     team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2), data,
                      opts, n=n)
-    with tempfile.TemporaryDirectory(prefix="online-match-") as work:
+    with scratch_folder("online-match-") as work:
         run = launch_team(team, work)
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
