@@ -9,7 +9,7 @@ processes that did not finish (one line on stderr naming the robot, nothing writ
 distributed stage that ran past its bound of rounds (one line naming it); 3 the run finished
 but its result is not conflict-free (written, flagged in the report, one line on stderr); 130
 interrupted (Ctrl-C; nothing half-written); 143 terminated (SIGTERM: ``kill``, ``timeout``; it
-cleans up as a Ctrl-C does). A closed stdout pipe (``| head -3``) ends the
+cleans up as a Ctrl-C does; 129 for a SIGHUP, a closed terminal). A closed stdout pipe (``| head -3``) ends the
 command quietly with 0.
 """
 

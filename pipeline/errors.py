@@ -66,38 +66,42 @@ def caused_by_interrupt(exc: BaseException | None) -> bool:
 
 
 class Terminated(SystemExit):
-    """A SIGTERM (``kill PID``, ``timeout``) arrived: raised by the handler of
-    :func:`clean_up_on_terminate` and by the team launcher's, so that every ``finally`` and
-    ``with`` block runs on the way out (temporary folders, staging folders, the run folder's
-    lock, robot processes) as on a Ctrl-C. Its exit status is 143 (128 + SIGTERM)."""
+    """A SIGTERM (``kill PID``, ``timeout``) or a SIGHUP (the terminal closed) arrived: raised
+    by the handler of :func:`clean_up_on_terminate` and by the team launcher's, so that every
+    ``finally`` and ``with`` block runs on the way out (temporary folders, staging folders,
+    the run folder's lock, robot processes) as on a Ctrl-C. Its exit status is 128 + the
+    signal's number (143 for SIGTERM)."""
 
-    def __init__(self) -> None:
+    def __init__(self, signum: int | None = None) -> None:
         import signal
 
-        super().__init__(128 + signal.SIGTERM)
+        super().__init__(128 + int(signal.SIGTERM if signum is None else signum))
 
 
 def _on_terminate(signum, frame) -> None:
-    raise Terminated()
+    raise Terminated(signum)
 
 
 def clean_up_on_terminate() -> None:
-    """Make a SIGTERM end the program as a Ctrl-C does, through its clean-up (:class:`Terminated`,
-    exit status 143, one line ``terminated: … stopped …``) instead of at once with every
-    temporary folder (``fm-team-*``, ``colmap-read-*``), staging folder and lock left behind.
-    Only in the main thread, and not where SIGTERM is ignored or already handled."""
+    """Make a SIGTERM or a SIGHUP end the program as a Ctrl-C does, through its clean-up
+    (:class:`Terminated`, exit status 143 or 129, one line ``terminated: … stopped …``)
+    instead of at once with every temporary folder (``fm-team-*``, ``colmap-read-*``),
+    staging folder and lock left behind. Only in the main thread, and not where the signal
+    is ignored (``nohup``) or already handled."""
     import signal
     import threading
 
-    if (threading.current_thread() is threading.main_thread()
-            and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
-        signal.signal(signal.SIGTERM, _on_terminate)
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) == signal.SIG_DFL:
+            signal.signal(sig, _on_terminate)
 
 
-def report_interrupt(command: str, how: str = "interrupted") -> int:
+def report_interrupt(command: str, how: str = "interrupted", code: int = 130) -> int:
     """One line on stderr saying ``command`` was stopped by a Ctrl-C (naming the outputs
     already in place, if any); the exit status of an interrupted command, 130. With ``how``
-    ``"terminated"``: stopped by a SIGTERM, exit status 143."""
+    ``"terminated"`` and ``code``: stopped by a SIGTERM or a SIGHUP."""
     import sys
 
     done = []
@@ -110,7 +114,7 @@ def report_interrupt(command: str, how: str = "interrupted") -> int:
     else:
         print(f"{how}: {command} stopped, nothing was written or replaced",
               file=sys.stderr)
-    return 130 if how == "interrupted" else Terminated().code
+    return code
 
 
 def _last_word(program: str, exc_type, exc, tb) -> None:
@@ -183,8 +187,8 @@ def run_interruptibly(command: str, run) -> int:
         return run()
     except KeyboardInterrupt:
         return report_interrupt(command)
-    except Terminated:
-        return report_interrupt(command, "terminated")
+    except Terminated as exc:
+        return report_interrupt(command, "terminated", exc.code)
     except Exception as exc:
         if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
             return report_interrupt(command)

@@ -256,15 +256,15 @@ def interrupts_kept():
     result from a cut-short mapping (seen under load: ``clean-db --fusion`` exited 0 after a
     Ctrl-C, 787 points where the full run has 786). In the main thread the SIGINT handler is
     wrapped for the call: it records the signal (and acts as before); if one arrived, a
-    KeyboardInterrupt is raised once the call has returned. So is a SIGTERM handler set in
-    Python (the command line's, :func:`pipeline.errors.clean_up_on_terminate`): its
-    :class:`~pipeline.errors.Terminated` is raised once the call has returned."""
+    KeyboardInterrupt is raised once the call has returned. So are the SIGTERM and SIGHUP
+    handlers set in Python (the command line's, :func:`pipeline.errors.clean_up_on_terminate`):
+    their :class:`~pipeline.errors.Terminated` is raised once the call has returned."""
     if threading.current_thread() is not threading.main_thread():
         yield  # signals reach the main thread only
         return
     got = []
-    previous = {signal.SIGINT: signal.getsignal(signal.SIGINT),
-                signal.SIGTERM: signal.getsignal(signal.SIGTERM)}
+    previous = {sig: signal.getsignal(sig)
+                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
 
     def handler(signum, frame):
         got.append(signum)
@@ -273,21 +273,22 @@ def interrupts_kept():
         elif previous[signum] != signal.SIG_IGN:
             raise KeyboardInterrupt
 
-    for sig, old in previous.items():
-        if sig == signal.SIGINT or callable(old):  # SIGTERM's default action stays
-            signal.signal(sig, handler)
+    # SIGINT always; SIGTERM and SIGHUP where Python handles them (their default action
+    # stays: it ends the process at once)
+    wrapped = [sig for sig, old in previous.items() if sig == signal.SIGINT or callable(old)]
+    for sig in wrapped:
+        signal.signal(sig, handler)
     try:
         yield
     finally:
-        for sig, old in previous.items():
-            if sig == signal.SIGINT or callable(old):
-                signal.signal(sig, old)
+        for sig in wrapped:
+            signal.signal(sig, previous[sig])
     if signal.SIGINT in got:
         raise KeyboardInterrupt
-    if signal.SIGTERM in got:
+    if got:
         from pipeline.errors import Terminated
 
-        raise Terminated()
+        raise Terminated(got[0])
 
 
 #: bundle adjustment rounds of :func:`mapping_from_poses` (each followed by the mapper's

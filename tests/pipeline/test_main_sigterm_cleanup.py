@@ -9,11 +9,13 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 TERMINATED = 128 + 15  # the exit status of a command stopped by SIGTERM
 
 #: ``python -m pipeline ARGS`` (what it runs first, then its entry point), which sends itself a
-#: SIGTERM right after ``module.function`` has run
+#: SIGTERM (or the signal named by KILL_WITH) right after ``module.function`` has run
 KILLED_AFTER = textwrap.dedent("""
     import importlib, os, signal, sys
     from pipeline.errors import clean_up_on_terminate, exit_quietly_on_interrupt
@@ -25,7 +27,7 @@ KILLED_AFTER = textwrap.dedent("""
 
     def then_killed(*args, **kwargs):
         out = real(*args, **kwargs)
-        os.kill(os.getpid(), signal.SIGTERM)
+        os.kill(os.getpid(), getattr(signal, os.environ.get("KILL_WITH", "SIGTERM")))
         return out
 
     setattr(owner, name, then_killed)
@@ -35,16 +37,21 @@ KILLED_AFTER = textwrap.dedent("""
 """)
 
 
-def _killed_run(tmp_path, after: str, *argv: str) -> tuple[subprocess.CompletedProcess, Path]:
+def _killed_run(tmp_path, after: str, *argv: str,
+                signal_name: str = "SIGTERM") -> tuple[subprocess.CompletedProcess, Path]:
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     done = subprocess.run([sys.executable, "-c", KILLED_AFTER, after, *argv], cwd=ROOT,
-                          env={**os.environ, "TMPDIR": str(tmp)}, capture_output=True,
-                          text=True, timeout=60)
+                          env={**os.environ, "TMPDIR": str(tmp), "KILL_WITH": signal_name},
+                          capture_output=True, text=True, timeout=60)
     return done, tmp
 
 
-def test_sigterm_while_clean_db_reads_the_database_leaves_nothing(tmp_path):
+@pytest.mark.parametrize(("signal_name", "status"), [("SIGTERM", TERMINATED),
+                                                     ("SIGHUP", 128 + 1)])
+def test_sigterm_while_clean_db_reads_the_database_leaves_nothing(tmp_path, signal_name,
+                                                                  status):
+    """And a SIGHUP (the terminal closed), which killed it as a SIGTERM did."""
     src = tmp_path / "in" / "in.db"
     src.parent.mkdir()
     subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, 'tests/pipeline/commands'); "
@@ -55,9 +62,10 @@ def test_sigterm_while_clean_db_reads_the_database_leaves_nothing(tmp_path):
     # killed once the database's snapshot is read (it lives in the temporary folder), after
     # pycolmap's import: its glog handler on SIGTERM must not take the signal either
     done, tmp = _killed_run(tmp_path, "pipeline.colmap.database._contents", "clean-db",
-                            str(src), "--out", str(out / "o.db"), "--no-rerun")
+                            str(src), "--out", str(out / "o.db"), "--no-rerun",
+                            signal_name=signal_name)
     assert (done.returncode, done.stderr) == (
-        TERMINATED, "terminated: clean-db stopped, nothing was written or replaced\n")
+        status, "terminated: clean-db stopped, nothing was written or replaced\n")
     assert sorted(p.name for p in tmp.iterdir()) == []
     assert sorted(p.name for p in out.iterdir()) == []
 

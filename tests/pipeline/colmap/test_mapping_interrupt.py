@@ -36,10 +36,11 @@ def test_a_mapping_without_interrupt_returns_its_result(monkeypatch, tmp_path):
     assert mapping._mapping(tmp_path / "db", str(tmp_path), tmp_path, None, 2) == {0: "model"}
 
 
-def test_a_sigterm_swallowed_by_the_mapping_is_raised_after_it(monkeypatch, tmp_path):
-    """The command line ends on a SIGTERM through its clean-up (a Python handler raising
-    Terminated, pipeline.errors.clean_up_on_terminate); swallowed by the mapping as above, the
-    command went on and wrote a result from a cut-short mapping."""
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_sigterm_swallowed_by_the_mapping_is_raised_after_it(monkeypatch, tmp_path, sig):
+    """The command line ends on a SIGTERM (or a SIGHUP) through its clean-up (a Python handler
+    raising Terminated, pipeline.errors.clean_up_on_terminate); swallowed by the mapping as
+    above, the command went on and wrote a result from a cut-short mapping."""
     from pipeline.errors import Terminated, _on_terminate
 
     calls = []
@@ -47,18 +48,19 @@ def test_a_sigterm_swallowed_by_the_mapping_is_raised_after_it(monkeypatch, tmp_
     def swallowing(database_path, image_dir, out, options, input_path="",
                    initial_image_pair_callback=None, next_image_callback=None):
         try:
-            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), sig)
             next_image_callback()
         except BaseException:  # noqa: BLE001 - what the C++ side does with it
             calls.append("swallowed")
         return {}
 
     monkeypatch.setattr(mapping.pycolmap, "incremental_mapping", swallowing)
-    previous = signal.signal(signal.SIGTERM, _on_terminate)
+    previous = signal.signal(sig, _on_terminate)
     try:
-        with pytest.raises(Terminated):
+        with pytest.raises(Terminated) as got:
             mapping._mapping(tmp_path / "db", str(tmp_path), tmp_path, None, 2)
-        assert signal.getsignal(signal.SIGTERM) is _on_terminate  # restored
+        assert got.value.code == 128 + sig
+        assert signal.getsignal(sig) is _on_terminate  # restored
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        signal.signal(sig, previous)
     assert calls == ["swallowed"]
