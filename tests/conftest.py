@@ -2,11 +2,11 @@
 
 import os
 import shutil
-import tempfile
 
 from hypothesis import settings
 
 from data_synth.cache import ENV
+from pipeline.runfolder import make_scratch_folder
 
 # Property tests draw the same examples on every run and machine by default ("repeatable"), so
 # a run's verdict does not depend on luck; `pytest --hypothesis-profile explore` draws new
@@ -22,10 +22,11 @@ def pytest_configure(config):
     """Rendered views are cached in a folder of this session, never in the user's cache.
 
     Set before collection, so the doctests of ``data_synth`` and subprocesses (which inherit
-    the variable) use it too; removed with the session.
+    the variable) use it too; removed with the session, and, of a session that was killed
+    (a timeout), by the next one (:func:`pipeline.runfolder.make_scratch_folder`).
     """
     _saved["value"] = os.environ.get(ENV)
-    _saved["dir"] = tempfile.mkdtemp(prefix="formation-match-render-cache-")
+    _saved["dir"] = str(make_scratch_folder("formation-match-render-cache-"))
     os.environ[ENV] = _saved["dir"]
 
 
