@@ -78,7 +78,17 @@ class Terminated(SystemExit):
         super().__init__(128 + int(signal.SIGTERM if signum is None else signum))
 
 
+#: the signal :func:`_on_terminate` took, if any (while :func:`run_interruptibly` runs)
+_terminate_arrived: int | None = None
+
+
 def _on_terminate(signum, frame) -> None:
+    """The SIGTERM/SIGHUP handler: raise :class:`Terminated`, and record the signal. Python
+    drops the exception of a handler that runs within some of its own calls (a hook around
+    a fork, a method it calls from C and whose error it clears: seen while a module defined
+    a ``Callable[...]`` alias); the record still tells :func:`run_interruptibly`."""
+    global _terminate_arrived
+    _terminate_arrived = int(signum)
     raise Terminated(signum)
 
 
@@ -182,17 +192,27 @@ def one_line_errors(main):
 
 def run_interruptibly(command: str, run) -> int:
     """``run()``'s exit code; a Ctrl-C while it runs (also one a library turned into another
-    exception) ends it with :func:`report_interrupt`'s line and exit code 130."""
+    exception) ends it with :func:`report_interrupt`'s line and exit code 130; a SIGTERM or a
+    SIGHUP (:func:`clean_up_on_terminate`) with the line ``terminated: …`` and 128 + the
+    signal, also one whose exception was dropped on the way (the command then ran to its end:
+    the line names its outputs, all in place and complete)."""
+    global _terminate_arrived
+    _terminate_arrived = None
     try:
-        return run()
+        code = run()
     except KeyboardInterrupt:
         return report_interrupt(command)
     except Terminated as exc:
         return report_interrupt(command, "terminated", exc.code)
     except Exception as exc:
+        if _terminate_arrived is not None:
+            return report_interrupt(command, "terminated", 128 + _terminate_arrived)
         if caused_by_interrupt(exc):  # e.g. while a library's C++ part was loading
             return report_interrupt(command)
         raise
+    if _terminate_arrived is not None:
+        return report_interrupt(command, "terminated", 128 + _terminate_arrived)
+    return code
 
 
 class StageStalledError(RuntimeError):
