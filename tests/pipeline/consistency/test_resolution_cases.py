@@ -63,3 +63,42 @@ def test_reject_deletes_the_senders_side():
                                                    "dst_feat": np.array([1], np.int32)})],
                     lambda *a: None, 2)
     assert not rb.link_alive[4] and rb.deleted_round[4] == 2 and rb.deleted_case[4] == 3
+
+
+def rejects_of(sent):
+    return [(d, p["src_feat"].tolist(), p["dst_feat"].tolist()) for d, k, p in sent if k == "reject"]
+
+
+def test_the_lower_component_wins_whichever_robot_sends_it():
+    rb = receiver()
+    # C_3 now comes from robot 2 and C_6 from robot 1: the order is by component first
+    sent = run(rb, [request(1, [6], [0], [0]), request(2, [3], [0], [0])])
+    assert rb.component[0] == 3
+    assert not rb.link_alive[0] and rb.deleted_case[0] == 1  # link to robot 1 cut, case (b)
+    assert rb.link_alive[3]
+    assert rejects_of(sent) == [(1, [0], [0])]
+
+
+def test_one_component_reaching_a_feature_over_two_links_keeps_both():
+    rb = receiver()
+    # C_5 reaches feature 0 from robots 1 and 2 in one round: (d) for the first, (a) for the
+    # second, nothing cut, nothing forwarded (both links settled this round)
+    sent = run(rb, [request(1, [5], [0], [0]), request(2, [5], [0], [0])])
+    assert rb.component.tolist() == [5, -1, -1]
+    assert rb.link_alive.all()
+    assert sent == []
+
+
+def test_a_feature_in_component_zero_rejects_another_component():
+    rb = receiver()
+    rb.component[0] = 0  # C_0: the component of the root feature with global id 0
+    sent = run(rb, [request(1, [3], [0], [0])])
+    assert rb.component[0] == 0
+    assert not rb.link_alive[0] and rb.deleted_case[0] == 1  # (b)
+    assert rejects_of(sent) == [(1, [0], [0])]
+
+
+def test_case_c_replies_a_reject():
+    rb = receiver()
+    sent = run(rb, [request(1, [3], [1], [1]), request(2, [3], [2], [2])])
+    assert rejects_of(sent) == [(2, [2], [2])]  # the sender drops its side too (line 11)
