@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from pipeline.fusion.voting import gate_threshold, static_voting
+from pipeline.fusion.voting import dynamic_voting, gate_threshold, static_voting
 
 #: three robots, every pair linked: Metropolis weights 1/3 everywhere, exact averages
 TRIANGLE = np.array([(0, 1), (1, 2), (0, 2)])
@@ -56,3 +56,19 @@ def test_a_small_eq9_covariance_is_used_not_taken_for_round_off():
     res = static_voting(x, cov, TRIANGLE, K=1, c=2, p=P, gate="squared", rounds=(20, 0, 20),
                         members=members)
     assert res.votes[0, :, 0].tolist() == [0.0, 0.0, 1.0]
+
+
+def test_a_robot_that_does_not_observe_never_votes_in_dynamic_voting():
+    # four robots, every pair linked; robot 3 holds no observation of the landmark. The three
+    # observations lie around the origin, where robot 3's (unused) entry is stored as zero:
+    # eq. (12) is a test of an observation, so robot 3 never votes and never joins the ML.
+    square = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+    x = np.array([[0.1, 0.0], [-0.1, 0.0], [0.0, 0.1], [123.0, -7.0]])
+    cov = np.broadcast_to(np.eye(2), (4, 2, 2)).copy()
+    observed = np.array([True, True, True, False])
+    members = np.array([[True], [True], [True], [False]])
+    res = dynamic_voting(x, cov, square, K=1, p=P, gate="squared", rounds=60,
+                         members=members, observed=observed)
+    assert res.inlier[0].tolist() == [True, True, True, False]
+    np.testing.assert_allclose(res.votes[0, :, 0], 0.75, atol=1e-9)
+    np.testing.assert_allclose(res.theta[0, :3], np.tile(x[:3].mean(0), (3, 1)), atol=1e-9)
