@@ -1,5 +1,6 @@
 """The one-point test of the evidence rule refuses points behind a camera: the three-view DLT
-point (:func:`one_point`) and the point at infinity (:func:`far_point`) alike."""
+point (:func:`one_point`) and the point at infinity (:func:`far_point`) alike; a distant
+point is still a point."""
 
 import numpy as np
 
@@ -56,3 +57,14 @@ def test_a_direction_behind_one_camera_is_not_a_far_point():
     # B turned to look along +z as well: the three rays meet at infinity, in front of all
     Ps[1] = camera(FORWARD, (0, 0, -10))
     assert far_point(kp, np.array([Ps]), REPROJECTION_TOL_PX).tolist() == [True]
+
+
+def test_a_distant_point_seen_with_parallax_is_one_point():
+    # three cameras 100 apart see a point 2000 away: its homogeneous coordinate is about
+    # 5e-4 of the DLT vector, still a finite point; its rays spread over 0.05 rad (12 px at
+    # f = 500), so the point at infinity would not fit them, the point itself does
+    Ps = [camera(FORWARD, c) for c in ((0, 0, 0), (100, 0, 0), (0, 100, 0))]
+    X = np.array([30.0, 20.0, 2000.0])
+    kp = np.array([[project(P, X) for P in Ps]])
+    assert far_point(kp, np.array([Ps]), REPROJECTION_TOL_PX).tolist() == [False]
+    assert one_point(kp, np.array([Ps]), REPROJECTION_TOL_PX).tolist() == [True]
