@@ -184,3 +184,20 @@ def test_evidence_rule_alone_with_a_crash_ends_conflict_free():
         kept = links.subset(~deleted & alive[links.cam_i] & alive[links.cam_j])
         assert is_conflict_free(fpc, kept), crash
         assert logs[2] is None
+
+
+def test_a_phase_all_robots_start_done_ends_at_round_n_minus_1():
+    """Every robot done from the phase start (t0 = 0, the round of ``start``): each ends the
+    phase at t0 + n - 1 = n - 1, not a round later."""
+    n = 4
+    nbrs = {0: [1], 1: [0, 2], 2: [1, 3], 3: [2]}
+    waves = {i: TerminationWave(n) for i in range(n)}
+    for i in range(n):
+        waves[i].start(True, 0)
+    ended = {}
+    for t in range(1, 10):
+        states = {i: waves[i].state() for i in range(n)}
+        for i in range(n):
+            if waves[i].update(True, 0, {k: states[k] for k in nbrs[i]}):
+                ended.setdefault(i, t)
+    assert ended == dict.fromkeys(range(n), n - 1)
