@@ -85,7 +85,7 @@ def _rows(path: Path):
 _ID = re.compile(r"-?[0-9]+")
 #: a quality as written in a CSV: ASCII digits, an optional sign, point and exponent (Python's
 #: float() also takes "1_0" (10), other scripts' digits and "infinity")
-_NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 #: largest camera or feature id accepted (ids index int32 arrays inside the robots)
 MAX_ID = 2**31 - 2
@@ -291,7 +291,7 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
             raise InputError(f"{path}:{lineno}: {raw!r}: self-link within camera {ids[0]}; "
                              "a link must join two different cameras")
         if ncols == 5:
-            if not _NUMBER.fullmatch(fields[4]) and fields[4].lower() not in (
+            if not NUMBER.fullmatch(fields[4]) and fields[4].lower() not in (
                     "nan", "inf", "-inf", "+inf", "infinity", "-infinity", "+infinity"):
                 raise InputError(f"{path}:{lineno}: {raw!r}: quality {fields[4]!r} is not a "
                                  "number written in digits 0-9 (e.g. 0.75 or 1e-3)")

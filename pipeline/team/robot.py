@@ -180,15 +180,20 @@ def links_camera(team, i: int):
     path = keypoints_file_of(team, i)
     if path is None:
         return None, None
-    lines = path.read_text().splitlines()
+    from pipeline.inputs.csvfields import text_lines
+    from pipeline.inputs.linkscsv import NUMBER
+
+    # the one reader of a user's text files: UTF-8 (else an error naming the line), a line of
+    # bounded length, rows ending at \n or \r\n only
+    lines = [line for _, line in text_lines(path, f"robot {i}'s keypoints file")]
     if not lines or lines[0].replace(" ", "") != "x,y":
         raise InputError(f"{path}:1: a keypoints file starts with the header x,y")
     kp = np.zeros((len(lines) - 1, 2), np.float64)
     for k, line in enumerate(lines[1:]):
-        try:
-            xy = [float(v) for v in line.split(",")]
-        except ValueError:
-            xy = []
+        # digits 0-9 as a CSV writes them: Python's float() also takes "1_0" (10) and other
+        # scripts' digits
+        fields = [v.strip() for v in line.split(",")]
+        xy = [float(v) for v in fields] if all(NUMBER.fullmatch(v) for v in fields) else []
         if len(xy) != 2 or not np.isfinite(xy).all():
             raise InputError(f"{path}:{k + 2}: {line!r} is not a keypoint x,y of two finite "
                              "numbers")
