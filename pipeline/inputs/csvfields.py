@@ -17,15 +17,20 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 from collections.abc import Iterator
 
 from pipeline.errors import InputError
 
-__all__ = ["MAX_LINE_BYTES", "csv_row", "line_fields", "text_lines"]
+__all__ = ["MAX_LINE_BYTES", "NUMBER", "csv_row", "line_fields", "text_lines"]
 
 #: longest line of a user's text file, in bytes (a row of these files holds a few numbers or
 #: two file names; :mod:`csv` itself stops at fields of 131,072 characters)
 MAX_LINE_BYTES = 65536
+
+#: a number as written in a text file: ASCII digits, an optional sign, point and exponent
+#: (Python's float() also takes "1_0" (10), other scripts' digits and "infinity")
+NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 
 def text_lines(path: str | os.PathLike, what: str) -> Iterator[tuple[int, str]]:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.inputs.csvfields import NUMBER
 from pipeline.outputs import require_input_file
 from pipeline.runfolder import atomic_file
 from pipeline.types import LinkLedger, Links
@@ -83,9 +84,6 @@ def _rows(path: Path):
 
 
 _ID = re.compile(r"-?[0-9]+")
-#: a quality as written in a CSV: ASCII digits, an optional sign, point and exponent (Python's
-#: float() also takes "1_0" (10), other scripts' digits and "infinity")
-NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 #: largest camera or feature id accepted (ids index int32 arrays inside the robots)
 MAX_ID = 2**31 - 2

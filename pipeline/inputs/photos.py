@@ -29,6 +29,7 @@ import numpy as np
 from PIL import ExifTags, Image, UnidentifiedImageError
 
 from pipeline.errors import InputError
+from pipeline.inputs.csvfields import NUMBER
 from pipeline.types import View
 from pipeline.validate import check_focal, check_utf8_names, focal_px_ok, is_utf8_name
 
@@ -409,13 +410,15 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     except (UnicodeDecodeError, OSError) as exc:
         raise InputError(f"intrinsics file {str(path)!r} is not a text file ({exc})") from None
     tokens = [t for line in text.splitlines() for t in re.split(r"[\s,;]+", line.split("#")[0]) if t]
-    try:
-        values = np.array([float(t) for t in tokens], dtype=np.float64)
-    except ValueError:
-        bad = next(t for t in tokens if not _is_float(t))
+    # digits 0-9 as a text file writes them: Python's float() also takes "7_0" (70) and other
+    # scripts' digits
+    bad = next((t for t in tokens if not NUMBER.fullmatch(t)
+                and t.lower().lstrip("+-") not in ("nan", "inf", "infinity")), None)
+    if bad is not None:
         raise InputError(
             f"intrinsics file {str(path)!r}: {bad!r} is not a number; expected the 3x3 matrix "
-            f"'fx 0 cx / 0 fy cy / 0 0 1' or 'fx fy cx cy'") from None
+            f"'fx 0 cx / 0 fy cy / 0 0 1' or 'fx fy cx cy'")
+    values = np.array([float(t) for t in tokens], dtype=np.float64)
     if values.size == 4:
         fx, fy, cx, cy = values
         K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
@@ -435,14 +438,6 @@ def read_k_txt(path: str | Path) -> np.ndarray:
         raise InputError(f"intrinsics file {str(path)!r}: focal lengths must be positive, got "
                          f"fx={K[0, 0]}, fy={K[1, 1]}")
     return K
-
-
-def _is_float(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _rational(value) -> float | None:

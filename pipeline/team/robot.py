@@ -180,8 +180,7 @@ def links_camera(team, i: int):
     path = keypoints_file_of(team, i)
     if path is None:
         return None, None
-    from pipeline.inputs.csvfields import text_lines
-    from pipeline.inputs.linkscsv import NUMBER
+    from pipeline.inputs.csvfields import NUMBER, text_lines
 
     # the one reader of a user's text files: UTF-8 (else an error naming the line), a line of
     # bounded length, rows ending at \n or \r\n only
