@@ -106,6 +106,17 @@ def _table_lines(path: Path):
             yield number, piece
 
 
+def _number(token: str) -> float:
+    """``token`` as a number written in digits 0-9 (or nan, inf); ValueError for any other
+    text (Python's float() also takes "1_0" (10) and other scripts' digits)."""
+    from pipeline.inputs.csvfields import NUMBER
+
+    if not NUMBER.fullmatch(token) and token.lower().lstrip("+-") not in ("nan", "inf",
+                                                                          "infinity"):
+        raise ValueError(f"could not convert string to float: {token!r}")
+    return float(token)
+
+
 def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:
     """The rows ``[x, y]`` of a text table read up to its first line that is not two numbers,
     and that line (``"line N is '...'"``), or None when every line is two numbers; an
@@ -120,7 +131,7 @@ def _parse_txt_keypoints(path: Path) -> tuple[list, str | None]:
         if not line:
             continue
         try:
-            vals = [float(t) for t in line.replace(",", " ").split()]
+            vals = [_number(t) for t in line.replace(",", " ").split()]
         except ValueError:
             vals = []
         if len(vals) != 2:
@@ -151,7 +162,7 @@ def _txt_problem(path: Path, k: int | None = None) -> str | None:
     for _, line in _table_lines(path):
         toks = line.split("#", 1)[0].replace(",", " ").replace(";", " ").split()
         try:
-            numeric += len([float(t) for t in toks]) >= 2
+            numeric += len([_number(t) for t in toks]) >= 2
         except ValueError:
             continue
     return bad if (numeric >= 2 if k is None else numeric == k) else None
@@ -317,7 +328,7 @@ def _first_bad_line(path: Path) -> str:
             if not toks:
                 continue
             try:
-                [float(t) for t in toks]
+                [_number(t) for t in toks]
             except ValueError as exc:
                 return f"line {number}: {exc}"
             if width is None:
