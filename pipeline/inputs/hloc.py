@@ -325,6 +325,7 @@ def _stored_pairs(fd, h5py, names: list[str],
                   features: Path | None = None) -> list[tuple[str, str, str]]:
     """Every pair group of the file as ``(key, name0, name1)`` (``features``: the features
     file, to name an image whose group there holds no keypoints)."""
+    where = f"matches file {fd.filename!r}"
     by_flat = {}
     for n in names:
         by_flat.setdefault(n.replace("/", "-"), []).append(n)
@@ -338,7 +339,7 @@ def _stored_pairs(fd, h5py, names: list[str],
     seen: dict[frozenset, str] = {}
     for key in keys:
         if not key:
-            raise InputError("matches file: a 'matches0' dataset at the file's root group ('/') "
+            raise InputError(f"{where}: a 'matches0' dataset at the file's root group ('/') "
                              "belongs to no image pair: hloc's matches.h5 holds one group per "
                              "pair, 'name0/name1', with the pair's 'matches0'; write the "
                              "matches so, or remove the dataset")
@@ -359,26 +360,26 @@ def _stored_pairs(fd, h5py, names: list[str],
             bare = _groups_without_keypoints(features, missing) if features else {}
             if bare:  # the image has a group in the features file, but no keypoints in it
                 name, held = next(iter(bare.items()))
-                raise InputError(f"matches file: pair group {key!r} names {name!r}, whose group "
+                raise InputError(f"{where}: pair group {key!r} names {name!r}, whose group "
                                  "in the features file holds no 'keypoints' dataset (only "
                                  f"{', '.join(repr(h) for h in held)}): extract the features "
                                  "of that image again, or remove the pair group")
             if missing:  # --pairs cannot help: an image the features file does not hold
-                raise InputError(f"matches file: pair group {key!r} names "
+                raise InputError(f"{where}: pair group {key!r} names "
                                  f"{', '.join(repr(m) for m in missing)}, not an image of the "
                                  "features file: are features.h5 and matches.h5 of the same "
                                  "images?")
-            raise InputError(f"matches file: pair group {key!r} does not name two images of the "
+            raise InputError(f"{where}: pair group {key!r} does not name two images of the "
                              f"features file; give --pairs")
         if found[0] == found[1]:
-            raise InputError(f"matches file: pair group {key!r} pairs image {found[0]!r} with "
+            raise InputError(f"{where}: pair group {key!r} pairs image {found[0]!r} with "
                              "itself; remove it or give --pairs")
         # one image pair in two groups (both orders, or the new key beside the old): both
         # would be read as links, and the cleaned copy of the second would lose every match;
         # hloc reads one of them, the one pairs.txt's order finds first
         pair = frozenset(found)
         if pair in seen:
-            raise InputError(f"matches file: pair groups {seen[pair]!r} and {key!r} both hold "
+            raise InputError(f"{where}: pair groups {seen[pair]!r} and {key!r} both hold "
                              f"the image pair {min(found)!r}, {max(found)!r}; give --pairs (the "
                              "group its order names is read, as hloc reads it)")
         seen[pair] = key

@@ -27,7 +27,7 @@ def test_an_image_group_without_keypoints_is_named_as_such(tmp_path, capsys):
     code, captured, out = run_clean_h5(capsys, tmp_path, feats, matches)
     assert code == 2 and not out.exists() and "Traceback" not in captured.err
     assert captured.err.strip().splitlines()[-1] == (
-        "error: matches file: pair group 'a.jpg/db-b.jpg' names 'db/b.jpg', whose group in the "
+        f"error: matches file {str(matches)!r}: pair group 'a.jpg/db-b.jpg' names 'db/b.jpg', whose group in the "
         "features file holds no 'keypoints' dataset (only 'descriptors'): extract the features "
         "of that image again, or remove the pair group")
 
