@@ -24,6 +24,7 @@ hloc's ``reconstruction.main`` (or ``triangulation``) runs on it unchanged.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -52,19 +53,40 @@ def _h5py():
     return h5py
 
 
+@contextlib.contextmanager
 def _open(path: Path, what: str):
+    """The HDF5 file ``path`` open for reading (``what`` names it in messages, e.g.
+    ``"features file"``); an error HDF5 raises while the caller reads it (a damaged file: a
+    truncated or overwritten object header, a broken B-tree) is an InputError naming it."""
     from pipeline.outputs import require_input_file
 
     h5py = _h5py()
     require_input_file(path, what)
     try:
-        return h5py.File(path, "r")
+        fd = h5py.File(path, "r")
     except OSError as exc:
         if "unable to lock file" in str(exc):  # HDF5's lock: another program writes it
             raise InputError(f"{what} {str(path)!r} is open for writing in another program "
                              "(HDF5's file lock: e.g. hloc still writing it, or a notebook "
                              "that opened it in mode 'a'); close it there and run again") from None
         raise InputError(f"{what} {str(path)!r} is not an HDF5 file ({exc})") from None
+    with fd:
+        try:
+            yield fd
+        except (KeyError, RuntimeError, OSError, ValueError) as exc:
+            if not _raised_by_h5py(exc):
+                raise
+            raise InputError(f"{what} {str(path)!r} is damaged: HDF5 cannot read it "
+                             f"({type(exc).__name__}: {exc}); write it again (e.g. run hloc's "
+                             "extraction or matching again)") from None
+
+
+def _raised_by_h5py(exc: BaseException) -> bool:
+    """``exc`` was raised inside h5py (reading the file), not by this module's own code."""
+    tb, last = exc.__traceback__, None
+    while tb is not None:
+        last, tb = tb, tb.tb_next
+    return last is not None and "h5py" in Path(last.tb_frame.f_code.co_filename).parts
 
 
 #: a dataset larger than this (bytes) must be backed by at least 1/:data:`MAX_EXPANSION` of
