@@ -129,6 +129,10 @@ def _declared(fd, h5py, leaf: str) -> list:
     found = []
 
     def visit(name, obj):
+        if isinstance(name, bytes):  # h5py's name of a link that is not UTF-8
+            raise InputError(f"{fd.filename}: the name {name!r} is not UTF-8 text; hloc names "
+                             "its groups after the images, in UTF-8: rename that group or "
+                             "dataset (or its image, and extract or match again)")
         if isinstance(obj, h5py.Dataset) and name.rsplit("/", 1)[-1] == leaf:
             found.append(obj)
     fd.visititems(visit)
