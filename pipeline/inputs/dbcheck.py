@@ -54,6 +54,14 @@ def open_readonly(path: str | os.PathLike) -> sqlite3.Connection:
         raise InputError(f"database {str(path)!r} cannot be opened ({exc})") from None
 
 
+def _utf8(data: bytes) -> bool:
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
 def _rows(con, sql, path: Path):
     try:
         return con.execute(sql).fetchall()
@@ -213,6 +221,10 @@ def check_database_tables(con: sqlite3.Connection, path: str | Path) -> Database
         if "cameras" in tables else set()
     for image_id, name, camera_id in _rows(
             con, "SELECT image_id, name, camera_id FROM images ORDER BY image_id", path):
+        if isinstance(name, bytes) and not _utf8(name):  # stored as a BLOB: not text
+            raise InputError(f"database {str(path)!r}, table images, image_id {image_id}: "
+                             f"name {name!r} is not UTF-8 text; the database is corrupt "
+                             "(rebuild it with COLMAP)")
         if camera_id not in cameras:
             lacks = "which is not in the cameras table" if "cameras" in tables else \
                 "but the database has no cameras table"
