@@ -439,6 +439,14 @@ def read_database(path: str | Path, check_sizes=None, *,
                 cameras = {c.camera_id: c for c in db.read_all_cameras()}
         except (RuntimeError, ValueError, IndexError) as exc:
             raise InputError(f"{str(path)!r} could not be read as a COLMAP database ({exc})") from None
+        except MemoryError as exc:
+            # the tables' declared sizes passed check_sizes: COLMAP's reader was asked for
+            # more by a value it sizes a buffer from (e.g. a two_view_geometries camera1 or
+            # camera2 blob of a few bytes, or of another type)
+            raise InputError(f"{str(path)!r} could not be read as a COLMAP database (out of "
+                             f"memory: {exc or 'MemoryError'}): a value of its tables asks "
+                             "COLMAP's reader for more memory than the machine has, so the "
+                             "database is corrupt (rebuild it with COLMAP)") from None
         contents = _contents(path, images, keypoints, pair_ids, geometries, n_rows, cameras,
                              raw, ignore_watermarks=ignore_watermarks)
     except BaseException:
