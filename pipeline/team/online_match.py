@@ -63,13 +63,60 @@ def write_frame(path, view) -> None:
 
 
 def load_frame(path, name: str):
-    """The :class:`~pipeline.types.View` of a frame file written by :func:`write_frame`."""
+    """The :class:`~pipeline.types.View` of a frame file written by :func:`write_frame`.
+
+    Raises
+    ------
+    InputError
+        Naming the file: not a NumPy ``.npz`` archive (or one holding pickled objects), an
+        array missing, ``image`` not ``(H, W)`` or ``(H, W, 3)`` uint8 of at least 2 x 2
+        pixels, ``K`` not a finite ``(3, 3)``, ``intrinsics_known`` not one boolean, ``R``
+        and ``t`` (both or neither) not a finite ``(3, 3)`` and ``(3,)``.
+    """
+    import zipfile
+    import zlib
+
+    from pipeline.errors import InputError
     from pipeline.types import View
 
-    with np.load(path) as z:
-        posed = "R" in z.files
-        return View(name=name, image=z["image"], K=z["K"], R=z["R"] if posed else None,
-                    t=z["t"] if posed else None, intrinsics_known=bool(z["intrinsics_known"][0]))
+    where = f"frame file {str(path)!r}"
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # a plain .npy file: one array
+            raise ValueError("one array (.npy), not an archive of arrays (.npz)")
+        with z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise InputError(f"{where} is not a frame of an online step ({type(exc).__name__}: "
+                         f"{exc}); the online stage writes one per robot and step (.npz of "
+                         "image, K, intrinsics_known)") from None
+    for key in ("image", "K", "intrinsics_known"):
+        if key not in arrays:
+            raise InputError(f"{where} has no array {key!r}; a frame holds image, K, "
+                             "intrinsics_known (and R, t where the pose is known)")
+    image, K, known = arrays["image"], arrays["K"], arrays["intrinsics_known"]
+    if image.dtype != np.uint8 or not (image.ndim == 2 or (image.ndim == 3 and
+                                                          image.shape[2] == 3)) \
+            or min(image.shape[:2]) < 2:
+        raise InputError(f"{where}: image has shape {image.shape} and dtype {image.dtype}; "
+                         "expected (H, W) or (H, W, 3) uint8 of at least 2 x 2 pixels")
+    if ("R" in arrays) != ("t" in arrays):
+        raise InputError(f"{where} holds {'R' if 'R' in arrays else 't'} without "
+                         f"{'t' if 'R' in arrays else 'R'}; a known pose needs both")
+    for key, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
+        a = arrays.get(key)
+        if a is not None and (a.shape != shape or a.dtype.kind not in "fiu"
+                              or not np.isfinite(a).all()):
+            raise InputError(f"{where}: {key} {a.tolist() if a.size <= 12 else a.shape} is not "
+                             f"a {shape} array of finite numbers")
+    if known.dtype != np.bool_ or known.shape != (1,):
+        raise InputError(f"{where}: intrinsics_known {known.tolist() if known.size <= 4 else known.shape} "
+                         "is not one true/false value")
+    posed = "R" in arrays
+    return View(name=name, image=image, K=K.astype(np.float64),
+                R=arrays["R"].astype(np.float64) if posed else None,
+                t=arrays["t"].astype(np.float64) if posed else None,
+                intrinsics_known=bool(known[0]))
 
 
 def own_pairs(i: int, n: int, t: int, window: int, neighbours) -> list[tuple[int, int]]:
