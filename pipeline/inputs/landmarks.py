@@ -216,7 +216,13 @@ def _read_mat73_pts(path: Path) -> np.ndarray | None:
         raise InputError(f"{path}: pts_coord holds {_MAT73_NOT_NUMERIC[cls]}, expected a "
                          "numeric 2 x K array (row 0 = x, row 1 = y)")
     if empty:  # an empty matrix: the data are its sizes
-        return np.zeros(tuple(int(n) for n in data.ravel()), dtype=np.float64)
+        dims = data.ravel().astype(np.float64) if data.dtype.kind in "fiu" else np.zeros(0)
+        if dims.size == 0 or not np.isfinite(dims).all() or (dims < 0).any() \
+                or (dims != np.round(dims)).any() or (dims > 2**31).any() or dims.prod() != 0:
+            raise InputError(f"{path}: pts_coord is marked empty (MATLAB_empty) but holds "
+                             f"{data.ravel()[:4].tolist()}, not the sizes of an empty matrix; "
+                             "save pts_coord again (a numeric 2 x K array: row 0 = x, row 1 = y)")
+        return np.zeros(tuple(int(n) for n in dims), dtype=np.float64)
     if data.dtype.names == ("real", "imag"):  # complex numbers
         data = data["real"] + 1j * data["imag"]
     # MATLAB writes in column-major order: the HDF5 dataset of a 2 x K matrix is K x 2

@@ -54,3 +54,18 @@ def test_v73_mat_of_text_names_what_pts_coord_holds(tmp_path):
     with pytest.raises(InputError, match=r"view1.mat: pts_coord holds text, expected a numeric "
                                          r"2 x K array"):
         load_landmark_folder(tmp_path, descriptors="sift")
+
+
+@pytest.mark.parametrize("sizes", [[np.inf, 0.0], [-1.0, 0.0], [1e30, 0.0], [2.0, 3.0], [0.5, 0]])
+def test_v73_mat_marked_empty_with_sizes_of_no_empty_matrix_is_refused(tmp_path, sizes):
+    # an empty matrix is stored as its sizes with MATLAB_empty: inf, -1 or 1e30 there ended in
+    # an OverflowError or ValueError traceback, 0.5 was read as 0, 2 x 3 as an empty matrix
+    for k in range(2):
+        _image(tmp_path / f"view{k}.png")
+    _mat73(tmp_path / "view0.mat", "pts_coord", PTS.T)
+    _mat73(tmp_path / "view1.mat", "pts_coord", np.asarray(sizes))
+    with h5py.File(tmp_path / "view1.mat", "a") as f:
+        f["pts_coord"].attrs["MATLAB_empty"] = np.uint8(1)
+    with pytest.raises(InputError, match=r"view1.mat: pts_coord is marked empty \(MATLAB_empty\) "
+                                         r"but holds .*, not the sizes of an empty matrix"):
+        load_landmark_folder(tmp_path, descriptors="sift")
