@@ -229,12 +229,90 @@ def _read_mat73_pts(path: Path) -> np.ndarray | None:
     return data.T
 
 
+#: MAT v5 data types of the numbers of an array (miINT8 .. miUINT64, miUTF8 .. miUTF32);
+#: 14 is miMATRIX (an array inside a cell or struct), 15 miCOMPRESSED
+_MAT5_NUMBERS = set(range(1, 14)) | {16, 17, 18}
+#: MAT v5 array classes whose data are numbers or text (never arrays): char, sparse, double,
+#: single, the integers
+_MAT5_FLAT_CLASSES = {4, 5, *range(6, 16)}
+
+
+def _mat5_problem(data: bytes) -> str | None:
+    """Why a MAT v5 file's bytes must not reach SciPy's reader, or None.
+
+    SciPy's MAT v5 reader indexes a table by each data element's type without checking it: a
+    type that is no MAT data type (0, 19 and above, one damaged byte) where an array's numbers
+    belong crashes the process (a segmentation fault), where any other damage raises. The
+    elements are walked here (inside ``miCOMPRESSED`` ones too) and each type checked first;
+    a file that is not MAT v5 (v4, v7.3, no MAT header) is left to the reader."""
+    import struct
+    import zlib
+
+    if len(data) < 128 or data[126:128] not in (b"IM", b"MI") \
+            or data[124:126] not in (b"\x00\x01", b"\x01\x00"):
+        return None
+    e = "<" if data[126:128] == b"IM" else ">"
+
+    def elements(buf: bytes):
+        pos = 0
+        while pos + 8 <= len(buf):
+            mdtype, nbytes = struct.unpack(e + "II", buf[pos:pos + 8])
+            if mdtype >> 16:  # the small data element format: 4 bytes of data in the tag
+                mdtype, nbytes = mdtype & 0xFFFF, mdtype >> 16
+                yield mdtype, buf[pos + 4:pos + 4 + min(nbytes, 4)]
+                pos += 8
+            else:
+                yield mdtype, buf[pos + 8:pos + 8 + nbytes]
+                pos += 8 + (nbytes if mdtype == 15 else -(-nbytes // 8) * 8)
+
+    def matrix(body: bytes, depth: int) -> str | None:
+        if depth > 64:
+            return "arrays nested more than 64 deep"
+        subs = list(elements(body))
+        if not subs or subs[0][0] not in _MAT5_NUMBERS or len(subs[0][1]) < 4:
+            return "an array without its flags"
+        flat = struct.unpack(e + "I", subs[0][1][:4])[0] & 0xFF in _MAT5_FLAT_CLASSES
+        for mdtype, sub in subs[1:]:
+            if mdtype == 14 and not flat:
+                problem = matrix(sub, depth + 1)
+                if problem:
+                    return problem
+            elif mdtype not in _MAT5_NUMBERS:
+                return f"a data element of type {mdtype}, which is no MAT data type here"
+        return None
+
+    def top(buf: bytes, depth: int) -> str | None:
+        for mdtype, body in elements(buf):
+            if mdtype == 15 and depth == 0:
+                try:
+                    inner = zlib.decompressobj().decompress(body)
+                except zlib.error:
+                    continue  # the reader names a broken compressed variable itself
+                problem = top(inner, depth + 1)
+            elif mdtype == 14:
+                problem = matrix(body, depth)
+            else:
+                problem = f"a variable of data type {mdtype}, not an array"
+            if problem:
+                return problem
+        return None
+
+    return top(data[128:], 0)
+
+
 def _read_mat_keypoints(path: Path) -> np.ndarray | None:
     """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable.
 
     MATLAB v7.3 files (HDF5, ``save -v7.3``) are read too (:func:`_read_mat73_pts`)."""
     from scipy.io import loadmat
 
+    try:
+        problem = _mat5_problem(path.read_bytes())
+    except OSError:
+        return None
+    if problem is not None:
+        raise InputError(f"{path}: a damaged MAT file ({problem}); save it again from MATLAB "
+                         "or SciPy (pts_coord a numeric 2 x K array), or remove it")
     try:
         data = loadmat(path, variable_names=["pts_coord"])
     except NotImplementedError:  # scipy's answer to a v7.3 file: read it as HDF5

@@ -125,3 +125,36 @@ def test_a_number_not_written_in_digits_is_refused_by_name(tmp_path, suffix, row
     with pytest.raises(InputError, match=re.escape(bad)) as exc:
         load_landmark_folder(tmp_path)
     assert path.name in str(exc.value)
+
+
+def _mat73(path: Path, value, matlab_class, empty) -> None:
+    """A MAT file as MATLAB's ``save -v7.3`` lays it out (HDF5 after a 512-byte header)."""
+    import h5py
+
+    with h5py.File(path, "w", userblock_size=512) as f:
+        ds = f.create_dataset("pts_coord", data=np.asarray(value).T)
+        if matlab_class is not None:
+            ds.attrs["MATLAB_class"] = matlab_class
+        if empty is not None:
+            ds.attrs["MATLAB_empty"] = empty
+    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Sun Jan  7 10:00:00 2024 HDF5"
+    with open(path, "r+b") as f:
+        f.write(text.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02IM")
+
+
+@FUZZ
+@given(_ARRAYS.filter(lambda a: a.dtype.kind != "O"),
+       st.sampled_from([None, np.bytes_("double"), np.bytes_("char"), np.bytes_("cell"),
+                        np.bytes_("single"), np.bytes_(b"\xff"), 7, np.bytes_("")]),
+       st.sampled_from([None, 1, 0, np.uint8(1), np.array([1, 2])]), st.data())
+def test_a_v73_mat_file_of_any_array_is_read_or_refused(arr, cls, empty, data):
+    with tempfile.TemporaryDirectory() as d:
+        _folder(Path(d), mat=True)
+        path = Path(d) / "b.mat"
+        try:
+            _mat73(path, arr, cls, empty)
+        except (TypeError, ValueError):
+            return  # an array h5py cannot write
+        if data.draw(st.booleans()):
+            path.write_bytes(data.draw(bytes_mutant(path.read_bytes(), max_ops=3)))
+        _load(Path(d))
