@@ -573,6 +573,10 @@ def _check_data(data: dict, n: int, where: str) -> None:
                         for row in k)):
                     raise InputError(f"{where}: data.intrinsics[{i}] must be a 3x3 matrix of "
                                      "finite numbers or null")
+                if k is not None and not _pinhole(k):
+                    raise InputError(f"{where}: data.intrinsics[{i}] K = {k} is not a pinhole "
+                                     "matrix with positive focal lengths (rows 'fx s cx', "
+                                     "'0 fy cy', '0 0 1', fx and fy > 0), as a K.txt gives it")
         known = data.get("intrinsics_known")
         if known is not None and not (isinstance(known, list) and len(known) == n
                                       and all(isinstance(v, bool) for v in known)):
@@ -623,6 +627,14 @@ def _check_data(data: dict, n: int, where: str) -> None:
             raise InputError(f"{where}: data.weights must list {n} paths, one weights file per "
                              "robot (a row per row of its own links file), with data.links a "
                              "list of one links file per robot; or be absent")
+
+
+def _pinhole(K) -> bool:
+    """``K`` (a 3x3 of finite numbers) is a pinhole matrix: rows ``fx s cx``, ``0 fy cy``,
+    ``0 0 1`` with ``fx, fy > 0`` (what :func:`pipeline.inputs.photos.read_k_txt` accepts)."""
+    K = np.asarray(K, dtype=np.float64)
+    return bool(np.allclose(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0.0 and K[0, 0] > 0
+                and K[1, 1] > 0)
 
 
 def _is_matrix(v, rows: int, cols: int) -> bool:

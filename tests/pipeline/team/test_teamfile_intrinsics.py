@@ -1,0 +1,34 @@
+"""A team file's ``data.intrinsics`` must be pinhole matrices with positive focal lengths, as
+a K.txt is: a zero K left its robot with no match at all ('intrinsics K are singular') and a
+run that ended as if the images did not overlap, a negative focal length was used as given."""
+
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.team.teamfile import parse_team
+
+GOOD = [[300.0, 0.0, 160.0], [0.0, 300.0, 120.0], [0.0, 0.0, 1.0]]
+
+
+def _doc(K):
+    return {"version": 1, "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{7100 + i}"}
+                                     for i in range(2)],
+            "comm_edges": [[0, 1]],
+            "data": {"kind": "images", "images": ["a.jpg", "b.jpg"], "intrinsics": [GOOD, K]}}
+
+
+@pytest.mark.parametrize("K", [
+    [[0.0, 0, 0], [0, 0, 0], [0, 0, 0]],
+    [[-300.0, 0, 160], [0, 300, 120], [0, 0, 1]],
+    [[300.0, 0, 160], [0, 0, 120], [0, 0, 1]],
+    [[300.0, 0, 160], [0, 300, 120], [0, 0, 2]],
+    [[300.0, 0, 160], [5, 300, 120], [0, 0, 1]]])
+def test_intrinsics_that_are_no_pinhole_matrix_are_refused(K):
+    with pytest.raises(InputError, match=r"data.intrinsics\[1\] K = .* is not a pinhole matrix "
+                                         r"with positive focal lengths"):
+        parse_team(_doc(K))
+
+
+def test_pinhole_intrinsics_with_a_skew_are_read():
+    team = parse_team(_doc([[300.0, 0.5, 160], [0, 310, 120], [0, 0, 1]]))
+    assert team.data["intrinsics"][1][0][1] == 0.5
