@@ -167,8 +167,9 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
                         "history", "weights"},
               "online-match": {"kind", "step", "window", "frames", "store"}}
 #: a reliable, ordered Zenoh link (the rounds' "nothing lost" rests on it: not udp), host a
-#: name, an IPv4 address or a bracketed IPv6 address
-_ENDPOINT = re.compile(r"^(tcp|quic|tls)/(\[[0-9A-Fa-f:.]+\]|[^:\s\[\]]+):(\d{1,5})$")
+#: name, an IPv4 address or a bracketed IPv6 address; the port in digits 0-9 (``\d`` also
+#: takes other scripts' digits, which int() reads and Zenoh does not)
+_ENDPOINT = re.compile(r"^(tcp|quic|tls)/(\[[0-9A-Fa-f:.]+\]|[^:\s\[\]]+):([0-9]{1,5})$")
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
