@@ -686,6 +686,10 @@ def _check_links_cameras(data: dict, n: int, where: str) -> None:
                 raise InputError(f"{where}: data.cameras[{i}].{key} is singular; give the "
                                  "camera's " + ("intrinsics (an invertible K)" if key == "K"
                                                 else "rotation (cam_from_world)"))
+            if key == "K" and not _pinhole(c[key]):
+                raise InputError(f"{where}: data.cameras[{i}].K = {c[key]} is not a pinhole "
+                                 "matrix with positive focal lengths (rows 'fx s cx', "
+                                 "'0 fy cy', '0 0 1', fx and fy > 0), as a K.txt gives it")
         if not (isinstance(c["t"], list) and len(c["t"]) == 3 and all(map(_is_number, c["t"]))):
             raise InputError(f"{where}: data.cameras[{i}].t {c['t']!r} must be 3 finite numbers")
 

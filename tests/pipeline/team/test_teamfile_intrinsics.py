@@ -1,6 +1,7 @@
-"""A team file's ``data.intrinsics`` must be pinhole matrices with positive focal lengths, as
-a K.txt is: a zero K left its robot with no match at all ('intrinsics K are singular') and a
-run that ended as if the images did not overlap, a negative focal length was used as given."""
+"""A team file's ``data.intrinsics`` (and a links team's ``data.cameras[i].K``) must be pinhole
+matrices with positive focal lengths, as a K.txt is: a zero K left its robot with no match at
+all ('intrinsics K are singular') and a run that ended as if the images did not overlap, a
+negative focal length was used as given."""
 
 import pytest
 
@@ -32,3 +33,17 @@ def test_intrinsics_that_are_no_pinhole_matrix_are_refused(K):
 def test_pinhole_intrinsics_with_a_skew_are_read():
     team = parse_team(_doc([[300.0, 0.5, 160], [0, 310, 120], [0, 0, 1]]))
     assert team.data["intrinsics"][1][0][1] == 0.5
+
+
+@pytest.mark.parametrize("K", [[[-100.0, 0, 50], [0, 100, 40], [0, 0, 1]],
+                               [[100.0, 0, 50], [0, 100, 40], [0, 1, 1]]])
+def test_a_links_team_camera_whose_k_is_no_pinhole_matrix_is_refused(K):
+    cam = {"K": [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]], "R": [[1, 0, 0], [0, 1, 0],
+                                                                    [0, 0, 1]],
+           "t": [0.0, 0.0, 1.5]}
+    doc = _doc(None)
+    doc["data"] = {"kind": "links", "links": "in.csv", "features_per_camera": [2, 2],
+                   "keypoints": ["k0", "k1"], "cameras": [cam, {**cam, "K": K}]}
+    with pytest.raises(InputError, match=r"data.cameras\[1\].K = .* is not a pinhole matrix "
+                                         r"with positive focal lengths"):
+        parse_team(doc)
