@@ -18,6 +18,8 @@ TERMINATED = 128 + 15  # the exit status of a command stopped by SIGTERM
 #: SIGTERM (or the signal named by KILL_WITH) right after ``module.function`` has run
 KILLED_AFTER = textwrap.dedent("""
     import importlib, os, signal, sys
+    # as started from a terminal: under nohup (a CI job) SIGHUP is ignored, and stays so
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
     from pipeline.errors import clean_up_on_terminate, exit_quietly_on_interrupt
     exit_quietly_on_interrupt("formation-match")
     clean_up_on_terminate()
