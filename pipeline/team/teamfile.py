@@ -700,7 +700,7 @@ def _check_options(opts: dict, where: str) -> None:
         raise InputError(f"{where}: unknown option {sorted(unknown)[0]!r}; known: "
                          f"{', '.join(DEFAULT_OPTIONS)}")
     p = opts.get("drop_prob", 0.0)
-    if not isinstance(p, (int, float)) or not 0.0 <= p < 1.0:
+    if not _is_number(p) or not 0.0 <= p < 1.0:  # true/false are no probabilities
         raise InputError(f"{where}: option drop_prob {p!r} must be in [0, 1)")
     for k in ("round_timeout_s", "round_limit_s", "start_timeout_s"):
         v = opts.get(k, 1.0)
