@@ -23,6 +23,7 @@ images downscaled by ``(s_x, s_y)`` map to full resolution by ``x_full = (x + ½
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,9 @@ def read_homographies(directory: str | Path, n: int) -> np.ndarray:
             raise InputError(f"{directory}: no homography file H1to{k}p.txt for image {k} of "
                              f"{n} (name order); --truth homographies needs one per image 2..n")
         try:
-            h = np.loadtxt(path, dtype=np.float64)
+            with warnings.catch_warnings():  # an empty file: the shape check below names it
+                warnings.simplefilter("ignore", UserWarning)
+                h = np.loadtxt(path, dtype=np.float64)
         except ValueError as exc:
             raise InputError(f"{path}: not a numeric 3 x 3 matrix ({exc})") from None
         if h.shape != (3, 3):
