@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -476,8 +477,10 @@ def exif_focal_px(header: Image.Image, width: int, height: int) -> tuple[float, 
     neither route has usable tags.
     """
     try:
-        exif = header.getexif()
-        sub = exif.get_ifd(ExifTags.IFD.Exif)
+        with warnings.catch_warnings():  # Pillow's "Corrupt EXIF data" lines: the tags it
+            warnings.simplefilter("ignore", UserWarning)  # could read serve, or none do
+            exif = header.getexif()
+            sub = exif.get_ifd(ExifTags.IFD.Exif)
     except Exception:  # noqa: BLE001 - a broken EXIF block just means "no EXIF"
         return None
     tags = {**dict(exif), **dict(sub)}
