@@ -246,13 +246,21 @@ def open_header(path: str | Path) -> Image.Image:
     import warnings
 
     path = Path(path)
-    with _PILLOW_LIMIT, warnings.catch_warnings():
+    with _PILLOW_LIMIT, warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        warnings.simplefilter("always", UserWarning)  # Pillow's, said once below
         limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
         try:
             im = Image.open(path)
         finally:
             Image.MAX_IMAGE_PIXELS = limit
+    notes = sorted({str(w.message).strip() for w in said
+                    if issubclass(w.category, UserWarning)
+                    and not issubclass(w.category, Image.DecompressionBombWarning)})
+    if notes:  # a damaged header (TIFF tags, EXIF): read as far as it goes, named once
+        log.warning("warning: %s", f"{path.name}: its header is damaged (Pillow: "
+                    f"{'; '.join(notes[:3])}{'; …' if len(notes) > 3 else ''}); what could "
+                    "be read is used")
     _check_declared_size(path, im)
     return im
 
