@@ -89,6 +89,14 @@ def test_no_links(identity_truth):
     assert missing_links(identity_truth, f, empty, [[0, 1]]) == 2
 
 
+def test_link_counts_without_links_has_no_precision(identity_truth):
+    # 0 of 0 links good is no precision (nan), not a precision of 0 or 1
+    f, _ = three_cameras()
+    c = link_counts(identity_truth, f, Links.from_matches([]), [[0, 1], [0, 2], [1, 2]])
+    assert (c["good_links"], c["spurious_links"], c["missing_links"]) == (0, 0, 5)
+    assert np.isnan(c["precision"])
+
+
 def test_bad_inputs(identity_truth):
     f, links = three_cameras()
     with pytest.raises(InputError, match="2 feature sets for a formation of 3"):
