@@ -119,3 +119,27 @@ def test_wrong_links_from_the_depth():
     links = Links([0, 0, 1], [0, 0, 1], [1, 2, 2], [0, 1, 1])
     wrong, judged = wrong_links(truth.names, kp, links, truth)
     assert judged.all() and wrong.tolist() == [False, True, False]
+
+
+def test_a_link_with_an_end_off_the_depth_is_not_judged_nor_wrong():
+    from pipeline.evaluation.scene_truth import wrong_links
+    from pipeline.types import Links
+
+    truth = _plane_truth(3)
+    X, Y = np.array([0.2, 0.1, 10.0]), np.array([0.9, -0.4, 10.0])
+    kp = [np.array([_project(truth, k, X), _project(truth, k, Y)]) - 0.5 for k in range(3)]
+    truth.depth[2] = np.nan  # camera 2 sees no depth: its ends have no true point
+    links = Links([0, 0, 1], [0, 0, 1], [1, 2, 2], [0, 1, 1])
+    wrong, judged = wrong_links(truth.names, kp, links, truth)
+    assert judged.tolist() == [True, False, False]
+    assert wrong.tolist() == [False, False, False]
+
+
+def test_a_track_of_two_observations_is_judged():
+    # two observations are enough to see two different points (one is not)
+    truth = _plane_truth()
+    X, Y = np.array([0.2, 0.1, 10.0]), np.array([0.9, -0.4, 10.0])
+    right = [(truth.names[k], *_project(truth, k, X)) for k in (0, 1)]
+    wrong = [(truth.names[0], *_project(truth, 0, X)), (truth.names[3], *_project(truth, 3, Y))]
+    got = wrong_tracks([right, wrong, right[:1]], truth)
+    assert (got["points"], got["judged"], got["wrong"], got["wrong_fraction"]) == (3, 2, 1, 0.5)
