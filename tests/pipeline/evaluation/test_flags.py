@@ -154,3 +154,16 @@ def test_the_images_of_colmaps_other_models_are_named():
         "the reconstruction left 6 of 14 images unregistered: 08.jpg, 09.jpg, 10.jpg, 11.jpg, "
         "12.jpg and 1 more; COLMAP made 3 models and sparse/ holds the largest only: the other "
         "models registered 6 image(s) (08.jpg, 09.jpg, 10.jpg, 11.jpg, 12.jpg and 1 more)")
+
+
+def test_each_figure_is_flagged_alone_just_past_five_percent():
+    before = _summary(6, NAMES, 1000, track=4.0, err=0.50)
+    for after, what in ((_summary(6, NAMES, 1000, 3.7, 0.50), "mean track length 4.00 -> 3.70"),
+                        (_summary(6, NAMES, 1000, 4.0, 0.54), "mean reprojection error 0.500 -> 0.540 px"),
+                        (_summary(6, NAMES, 940, 4.0, 0.50), "points 1000 -> 940")):
+        flags = reconstruction_flags(6, before, after, RING, [100] * 6, [5000] * 6)
+        assert [f["flag"] for f in flags] == ["cleaning-worse"], what
+        assert flags[0]["message"] == "cleaning made the reconstruction worse: " + what
+    # within 5 % each: not flagged
+    assert reconstruction_flags(6, before, _summary(6, NAMES, 960, 3.85, 0.52), RING,
+                                [100] * 6, [5000] * 6) == []
