@@ -84,3 +84,36 @@ def test_paper_table_iv_rows_are_keyed_by_what_they_count():
     assert (PAPER_TABLE_III_IV["Inconsistencies well solved"],
             PAPER_TABLE_III_IV["Inconsistencies wrongly solved"]) == ((1, 20, 24, 55),
                                                                       (1, 2, 7, 17))
+
+
+def test_sets_solved_count_each_of_two_conflictive_sets_once():
+    # set A: Fig. 1 (camera 3 twice); set B: 0:1-1:1-2:1-0:2 (camera 0 twice)
+    links = Links(cam_i=[0, 0, 1, 2, 0, 1, 0], feat_i=[0, 0, 0, 0, 1, 1, 2],
+                  cam_j=[3, 1, 2, 3, 1, 2, 2], feat_j=[1, 0, 0, 0, 1, 1, 1])
+    inside = np.ones(7, dtype=bool)
+    # links 0 and 1 of A spurious and kept: A wrongly solved (once, not twice); link 6 of B
+    # spurious, lost with its robot: B well solved
+    ledger = LinkLedger.all_kept(links, truth=np.array([0, 0, 1, 1, 1, 1, 0]),
+                                 conflictive_before=inside)
+    ledger.cut(np.array([6]), "robot-lost", 2)
+    assert resolution_section(ledger, {})["sets_wrongly_solved"] == 1
+    assert resolution_section(ledger, {})["sets_well_solved"] == 1
+    # link 6 kept instead: both sets wrongly solved
+    ledger = LinkLedger.all_kept(links, truth=np.array([0, 0, 1, 1, 1, 1, 0]),
+                                 conflictive_before=inside)
+    r = resolution_section(ledger, {})
+    assert (r["sets_well_solved"], r["sets_wrongly_solved"]) == (0, 2)
+
+
+def test_baseline_rows_count_what_each_mask_cut():
+    from pipeline.evaluation.report import baselines_section
+
+    good = np.array([True, False, True, True, True])
+    masks = {"cut_two": np.array([True, False, True, False, True]),   # 1 spurious, 1 good
+             "keep_all": np.ones(5, dtype=bool)}
+    rows = baselines_section(M, LINKS, good, masks=masks)
+    assert (rows["cut_two"]["deleted_links"], rows["cut_two"]["good_deleted"],
+            rows["cut_two"]["spurious_deleted"]) == (2, 1, 1)
+    assert (rows["cut_two"]["good_links"], rows["cut_two"]["spurious_links"]) == (3, 0)
+    assert (rows["keep_all"]["deleted_links"], rows["keep_all"]["good_deleted"],
+            rows["keep_all"]["spurious_deleted"]) == (0, 0, 0)
