@@ -125,3 +125,14 @@ def test_with_rendered_formation():
     # a link shifted to a wrong partner is spurious
     wrong = Links([i], [tp[0, 0]], [j], [tp[1, 1]])
     assert not link_truth(f, fs, wrong).any()
+
+
+def test_missing_links_of_camera_pairs_with_one_sum_are_told_apart(identity_truth):
+    # four cameras see one point each; edges (0, 3) and (1, 2) add up to 3: the link of
+    # (0, 3) does not stand for the true pair of (1, 2)
+    formation = types.SimpleNamespace(views=[None] * 4)
+    f = [feats([[0, 0]]) for _ in range(4)]
+    links = Links([0], [0], [3], [0])
+    np.testing.assert_array_equal(
+        missing_links_per_edge(formation, f, links, [[0, 3], [1, 2]]), [0, 1])
+    assert MissingLinks(formation, f, [[1, 2], [0, 3]])(links) == 1
