@@ -188,15 +188,20 @@ def homography_true_pairs(keypoints: list[np.ndarray], H1: np.ndarray, scales: n
 
 
 def _missing(true_pairs: np.ndarray, links: Links, comm_edges: np.ndarray, m: np.ndarray) -> int:
-    """True pairs on communication edges that ``links`` does not contain."""
+    """True pairs on communication edges that ``links`` does not contain. Edges, pairs and
+    links are compared as unordered pairs: an edge given as ``(j, i)`` or a link stored from
+    its higher camera counts as its ``(i, j)`` (compared as ordered, such an edge's true pairs
+    were never counted missing, a figure better than the truth)."""
     off = np.concatenate([[0], np.cumsum(m)])
     cam = np.repeat(np.arange(m.size), m)
     n = m.size
-    on_edge = np.isin(cam[true_pairs[:, 0]] * n + cam[true_pairs[:, 1]],
-                      comm_edges[:, 0] * n + comm_edges[:, 1])
-    tp = true_pairs[on_edge]
+    edges = np.sort(np.asarray(comm_edges, np.int64).reshape(-1, 2), axis=1)
+    tp = np.sort(np.asarray(true_pairs, np.int64).reshape(-1, 2), axis=1)
+    on_edge = np.isin(cam[tp[:, 0]] * n + cam[tp[:, 1]], edges[:, 0] * n + edges[:, 1])
+    tp = tp[on_edge]
     a = off[links.cam_i] + links.feat_i
     b = off[links.cam_j] + links.feat_j
+    a, b = np.minimum(a, b), np.maximum(a, b)
     total = int(off[-1]) + 1
     found = np.isin(tp[:, 0] * total + tp[:, 1], a * total + b)
     return int((~found).sum())
