@@ -1,0 +1,71 @@
+"""The figures of an online step's record (pipeline.consistency.engines.online): its traffic,
+rounds and memory are its stage's, the labels of its new links and its weighing's; its cut
+old links are the cuts of links that earlier steps made."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from online_streams import camera, project, streams
+
+from pipeline.consistency.engines.online import Frame, OnlineAssociation, simulated_stage
+from pipeline.consistency.engines.online_detection import LABEL_BYTES
+from pipeline.types import Links
+
+
+def _spurious_step(weigh: bool):
+    """One step of three posed cameras, one feature each: 0 and 1 see X, 2 sees Y, and all
+    three are linked (the weighing cuts the two links to camera 2). Returns the record and
+    the stats of the stage it ran."""
+    X, Y = np.array([0.5, 0.2, 1.0]), np.array([1.5, -0.4, 0.5])
+    P = [camera(x) for x in (0.0, 1.0, 2.0)]
+    frames = [Frame(i, 1, project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
+    seen = []
+
+    def stage(*args, **kw):
+        res = simulated_stage(*args, **kw)
+        seen.append(res.stats)
+        return res
+
+    oa = OnlineAssociation(window=2, weigh=weigh, stage=stage)
+    rec = oa.add_step(frames, Links([0, 0, 1], [0, 0, 0], [1, 2, 2], [0, 0, 0],
+                                    [0.9, 0.3, 0.2]))
+    (st,) = seen
+    return rec, st
+
+
+@pytest.mark.parametrize("weigh", [True, False])
+def test_a_steps_traffic_is_its_stages_its_new_links_labels_and_its_weighings(weigh):
+    rec, st = _spurious_step(weigh)
+    assert rec["cut_weigh"] == (2 if weigh else 0)
+    assert rec["history_bytes"] == 0 and rec["history_rounds"] == 0
+    # each new link: one message carrying both ends' labels
+    assert rec["messages"] == st["messages"] + 3 + rec["weigh_messages"]
+    assert rec["bytes"] == st["bytes"] + 3 * 2 * LABEL_BYTES + rec["weigh_bytes"]
+    assert (rec["weigh_messages"] > 0) == weigh
+
+
+def test_the_weighing_takes_its_rounds_and_memory_into_the_steps():
+    rec, st = _spurious_step(True)
+    assert rec["weigh_rounds"] == 3
+    assert rec["detection_rounds"] == st["detection_rounds"]
+    # the weighing follows the detection: the rule's rounds or the weighing's, the longer
+    assert rec["resolution_rounds"] == max(st["resolution_rounds"], 3)
+    assert rec["rounds"] == rec["detection_rounds"] + rec["resolution_rounds"]
+    # every camera of the set holds its three bundles of 128 + 16 * 2 bytes
+    assert rec["stage_peak_bytes"] == max(st["max_robot_memory_bytes"], 3 * 160)
+
+
+@pytest.mark.parametrize("resolution", ["paper", "evidence"])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=streams())
+def test_cut_old_counts_the_step_s_cuts_of_earlier_links(resolution, data):
+    window, hold, stream = data
+    oa = OnlineAssociation(window, resolution=resolution, hold=hold)
+    for t, (frames, links) in enumerate(stream):
+        rec = oa.add_step(frames, links)
+        L = oa.links
+        now = np.asarray(L.step_cut) == t
+        added = np.asarray(L.step_added)
+        assert rec["cut"] == int(now.sum())
+        assert rec["cut_old"] == int((now & (added < t)).sum())
+        assert rec["cut"] - rec["cut_old"] == int((now & (added == t)).sum())
