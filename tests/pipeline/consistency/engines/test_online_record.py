@@ -69,3 +69,23 @@ def test_cut_old_counts_the_step_s_cuts_of_earlier_links(resolution, data):
         assert rec["cut"] == int(now.sum())
         assert rec["cut_old"] == int((now & (added < t)).sum())
         assert rec["cut"] - rec["cut_old"] == int((now & (added == t)).sum())
+
+
+@pytest.mark.parametrize("overturn", [True, False])
+def test_the_records_history_check_counts_the_pieces_it_compares(overturn):
+    """The record's own check (``robots_check`` off) of a set of two retired pieces: the
+    set's two robots compare the pieces' entries (four, one per robot and piece) and names,
+    then flood the set's links to rebuild it (``overturn``: its five window and border
+    links) or the step's three new links to repair it."""
+    from pipeline.consistency.engines.online_history import FLOOD_LINK_BYTES, RETIRED_ENTRY_BYTES
+
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0, robots_check=False,
+                           overturn=overturn)
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0]))
+    rec = oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
+                                                        [0, 0, 0], [0.9, 0.5, 0.7]))
+    assert rec["cut_history"] == 1 and len(oa.ret_piece) == 4
+    compare = 2 * (4 * RETIRED_ENTRY_BYTES + 2 * LABEL_BYTES)
+    flooded = 2 * FLOOD_LINK_BYTES * (5 if overturn else 3)
+    assert rec["history_bytes"] == compare + flooded
