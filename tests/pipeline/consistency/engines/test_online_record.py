@@ -89,3 +89,15 @@ def test_the_records_history_check_counts_the_pieces_it_compares(overturn):
     compare = 2 * (4 * RETIRED_ENTRY_BYTES + 2 * LABEL_BYTES)
     flooded = 2 * FLOOD_LINK_BYTES * (5 if overturn else 3)
     assert rec["history_bytes"] == compare + flooded
+
+
+def test_a_set_above_the_bundle_budget_is_left_to_the_rules_merge(monkeypatch):
+    """With ``B = 2`` the three features of the step's set make a large set: the rule's
+    stage merges it (``sync`` on its links) and the weighing leaves it alone."""
+    from pipeline.consistency import setlists
+
+    monkeypatch.setattr(setlists, "SET_BUNDLE_BYTES", 0)  # B: the least, 2
+    rec, st = _spurious_step(True)
+    assert st["bundle_budget"] == 2 and st["large_sets"] == 1
+    assert rec["weighed_sets"] == 0 and rec["cut_weigh"] == 0
+    assert rec["weigh_messages"] == 0 and rec["weigh_bytes"] == 0
