@@ -101,3 +101,34 @@ def test_a_set_above_the_bundle_budget_is_left_to_the_rules_merge(monkeypatch):
     assert st["bundle_budget"] == 2 and st["large_sets"] == 1
     assert rec["weighed_sets"] == 0 and rec["cut_weigh"] == 0
     assert rec["weigh_messages"] == 0 and rec["weigh_bytes"] == 0
+
+
+def test_the_robots_history_check_reports_its_largest_robot_state(monkeypatch):
+    """``peak_bytes`` of the robots' check (engines.history_run) is the largest state any
+    of its robots holds at the end, not some robot's."""
+    from pipeline.consistency.engines import history_run
+
+    robots = []
+
+    def equip(rb, inputs):
+        robots.append(rb)
+        return equip_history(rb, inputs)
+
+    equip_history = history_run.equip_history
+    monkeypatch.setattr(history_run, "equip_history", equip)
+    checks = []
+
+    def stage(*args, **kw):
+        res = simulated_stage(*args, **kw)
+        checks.append(res.stats.get("history"))
+        return res
+
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0, stage=stage)
+    oa.add_step([Frame(0, 2), Frame(1, 2)], Links([0, 0], [0, 1], [1, 1], [0, 1]))
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([0, 1], [0, 1], [2, 3], [0, 0]))
+    robots.clear()
+    oa.add_step([Frame(0, 1), Frame(1, 1)], Links([2, 3, 4], [0, 0, 0], [4, 4, 5],
+                                                  [0, 0, 0], [0.9, 0.5, 0.7]))
+    sizes = [rb.history.nbytes() for rb in robots]
+    assert len(set(sizes)) > 1  # the robots hold states of different sizes
+    assert checks[-1]["peak_bytes"] == max(sizes)
