@@ -154,3 +154,21 @@ def test_batched_equals_robot_by_robot_on_irregular_teams(seed, n, max_m, p_pair
     clusters = sorted({frozenset(np.flatnonzero(labels == g).tolist())
                        for g in np.unique(labels)}, key=min)
     assert clusters == _reference(fpc, links, weight)
+
+
+def test_a_link_cut_at_both_ends_after_the_robots_were_equipped_runs_them_one_by_one():
+    """The batched evaluation takes the robots' links as ``equip_sync`` left them open; a
+    link cut since (at both ends: the tables stay symmetric) leaves them not fresh."""
+    fpc, links, weight = planted_instance(5, 5, 4, 1.0, 0.9, False)
+    results = []
+    for run in (run_sync, run_sync_batched):
+        robots, net = _team(fpc, links, weight, "links")
+        assert sync_batched_applies(robots, net)
+        a = robots[0]
+        k, r, s = int(a.link_nbr[0]), int(a.link_r[0]), int(a.link_s[0])
+        twin = int(robots[k].find_links(np.array([0]), np.array([r]))[0])
+        assert int(robots[k].link_r[twin]) == s
+        a.link_alive[0] = robots[k].link_alive[twin] = False
+        assert not sync_batched_applies(robots, net)
+        results.append((run(robots, net), [], net, robots))
+    _assert_same(*results)
