@@ -132,3 +132,19 @@ def test_the_robots_history_check_reports_its_largest_robot_state(monkeypatch):
     sizes = [rb.history.nbytes() for rb in robots]
     assert len(set(sizes)) > 1  # the robots hold states of different sizes
     assert checks[-1]["peak_bytes"] == max(sizes)
+
+
+def test_retiring_features_that_join_two_pieces_keep_the_smaller_name():
+    """Step 0: tracks A = {0, 1} and B = {2, 3}; step 1 extends them (4 to A, 6 to B) and
+    joins them (4-6). Step 0 retires at step 2: two pieces, 0 and 1; step 1 retires at step 3:
+    4 and 6 join both pieces, which keep the smaller name; only piece 1's two entries (its
+    frames' robots 2 and 3) are renamed (``retire_bytes``, eight bytes per renamed entry)."""
+    oa = OnlineAssociation(window=2, resolution="paper", hold=0)
+    frames = [Frame(i, 1) for i in range(4)]
+    oa.add_step(frames, Links([0, 2], [0, 0], [1, 3], [0, 0]))
+    oa.add_step(frames, Links([0, 2, 4], [0, 0, 0], [4, 6, 6], [0, 0, 0]))
+    oa.add_step(frames, Links([], [], [], []))
+    assert oa.piece[:4].tolist() == [0, 0, 1, 1]
+    rec = oa.add_step(frames, Links([], [], [], []))
+    assert oa.piece[:7].tolist() == [0, 0, 0, 0, 0, -1, 0]
+    assert rec["retire_bytes"] == 16
