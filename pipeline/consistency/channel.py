@@ -113,6 +113,8 @@ class Channel:
                 if pm.last is None or (now - pm.first >= rto and pm.last < now):
                     if pm.last is not None:
                         self.retransmissions += 1
+                    else:  # kept while the link was down: it goes out for the first time
+                        pm.first = now
                     pm.last = now
                     self._transmit(k, pm.kind, pm.payload, seq, now)
         for k in [k for k in self._to_ack if k in up and k not in self.lost]:
