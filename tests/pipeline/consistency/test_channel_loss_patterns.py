@@ -95,6 +95,8 @@ def test_a_neighbour_declared_lost_is_ignored_from_then_on():
         if lost[1]:
             lost_at = net.round
     assert lost_at == T and chans[1].lost == {0}
+    # what it held for robot 0 is dropped: nothing left to retransmit, nothing held
+    assert chans[1].idle() and chans[1].memory_bytes() == 0
     # robot 0 heard robot 1's request; a message it sends now is not delivered to robot 1,
     # and robot 1 neither acknowledges it nor counts robot 0 as heard
     ends[0].pattern = []
@@ -118,3 +120,40 @@ def test_an_unacknowledged_message_is_sent_again_every_round_after_retransmit_af
     assert [r for r, src, k, _ in log if src == 1 and k == "ack"] == [5, 6]
     assert delivered[1] == [(0, 7)] and chans[0].idle() and chans[0].retransmissions == 4
 
+
+
+def test_new_messages_to_a_silent_neighbour_do_not_put_off_its_timeout():
+    net, chans, _, _ = _pair([[], [True] * 1000])  # robot 0 never hears robot 1
+    delivered = [[], []]
+    lost_at = None
+    for x in range(T + 2):
+        chans[0].send(1, "request", {"x": np.array([x], np.int32)}, net.round)
+        lost = _step(net, chans, delivered)
+        if lost[0] and lost_at is None:
+            lost_at = net.round
+    assert lost_at == T and chans[0].lost == {1}
+
+
+def test_a_neighbour_heard_every_round_is_never_lost_however_long_it_is_waited_for():
+    net, chans, _, _ = _pair([[], []])
+    heard = None
+    for _ in range(3 * T):
+        net.end_round()
+        now = net.round
+        heard = now if net.inbox(0) else heard
+        for i, c in enumerate(chans):
+            c.receive(net.inbox(i), now)
+        # robot 0 waits for something from robot 1 all along; robot 1 only sends heartbeats
+        assert chans[0].check_lost(now, waiting_on=[1]) == []
+        chans[0].flush(now)
+        chans[1].flush(now, heartbeat_to=[0])
+    assert chans[0].lost == set() and chans[1].heartbeats_sent >= T
+    # silent from now on (robot 1 no longer steps): lost T rounds after it was last heard
+    for _ in range(2 * T):
+        if chans[0].lost:
+            break
+        net.end_round()
+        heard = net.round if net.inbox(0) else heard
+        chans[0].receive(net.inbox(0), net.round)
+        chans[0].check_lost(net.round, waiting_on=[1])
+    assert chans[0].lost == {1} and net.round - heard == T
