@@ -10,6 +10,18 @@ class TeamError(RuntimeError):
     message names it)."""
 
 
+class RobotsLost(TeamError):
+    """Robots of a team were lost (their process ended or went silent) before it finished.
+
+    ``cameras``: the lost robots, as the team's cameras (its callers' numbering); ``stats``:
+    what the team that lost them spent (``messages``, ``bytes``, ``rounds``), where known."""
+
+    def __init__(self, message: str, cameras, stats: dict | None = None):
+        super().__init__(message)
+        self.cameras = sorted(int(c) for c in cameras)
+        self.stats = dict(stats or {})
+
+
 def die_with_parent(parent_pid: int | None = None) -> None:
     """Ask the kernel to kill this process when its parent dies (Linux's
     ``PR_SET_PDEATHSIG``, SIGKILL): a child that must not outlive the command that started it

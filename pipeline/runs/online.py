@@ -24,6 +24,12 @@ conflict-free). Tracks no
 link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,
 bytes, links cut, tracks fused, wall time), apart from the consistency stage's figures.
 
+Robot processes lost (``--transport zenoh``): a team of a step's stage or fusion that loses a
+robot is started again; a frame lost twice in a step is given up for it (its links of the
+step's stage cut ``robot-lost``, :meth:`pipeline.consistency.engines.online.OnlineAssociation.
+_stage_despite_losses`; left out of the step's fusion, :func:`_fuse_changed`). A robot lost
+during a step's matching stops the run (its frame's features never came).
+
 Outputs (run folder, written atomically): ``report.json`` (``steps``: one entry per step
 with ``links_new``, ``conflictive_sets_after``, ``wall_s``, ``rounds``, ``bytes`` and the
 rest of the online record, and the batch run's figures where it ran; ``final``: pairwise
@@ -154,26 +160,54 @@ def _fuse_changed(oa, views: list, features: list, fuse) -> dict:
     """Fusion of the tracks the last step changed (module docstring) by ``fuse``, the run's
     transport's ``online_fusion`` job (:mod:`pipeline.runs.transports`), with the tracks named
     by :func:`track_names`; returns its figures (over zenoh also the rounds and bytes the
-    robots spent naming their tracks, ``naming_rounds`` and ``naming_bytes``)."""
+    robots spent naming their tracks, ``naming_rounds`` and ``naming_bytes``).
+
+    A fusion team that loses a robot (:class:`~pipeline.errors.RobotsLost`) is started again;
+    a frame lost a second time in the step is left out of the step's fusion (its links are
+    not handed to it, so none of them is cut as ``fusion-outlier`` and it votes in no
+    decision, as a robot crashed during a batch run's fusion). ``frames_lost`` lists, per
+    lost attempt, the frames it lost; ``frames_left_out`` those left out."""
+    from pipeline.errors import RobotsLost
+
     t0 = time.perf_counter()
     ids = oa.changed_window_links()
     L = oa.links
     if not len(ids):
         return dict(rounds=0, messages=0, bytes=0, cut=0, tracks=0, wall_s=0.0)
-    images = np.unique(np.concatenate([L.ci[ids], L.cj[ids]]))
-    ci, cj = np.searchsorted(images, L.ci[ids]), np.searchsorted(images, L.cj[ids])
-    local = Links(ci, L.fi[ids], cj, L.fj[ids], L.quality[ids])
-    edges = np.unique(np.stack([ci, cj], axis=1), axis=0)
-    feats = [features[g] for g in images]
-    fr = fuse([views[g] for g in images], feats, local, edges,
-              track_labels=track_names([len(f) for f in feats], local))
-    cut = ids[np.asarray(fr.cut_links, bool)]
-    oa.cut(cut, "fusion-outlier")
-    st = fr.stats
-    out = dict(rounds=int(st.get("rounds", 0)), messages=int(st.get("messages", 0)),
-               bytes=int(st.get("bytes", 0)), cut=int(len(cut)),
-               tracks=int(len(fr.track_ids)))
-    out.update({k: int(st[k]) for k in ("naming_rounds", "naming_bytes") if k in st})
+    lost_log: list[list[int]] = []
+    seen: set = set()
+    out_frames: list[int] = []
+    while True:
+        if out_frames:
+            ids = ids[~(np.isin(L.ci[ids], out_frames) | np.isin(L.cj[ids], out_frames))]
+        if not len(ids):
+            fr = None
+            break
+        images = np.unique(np.concatenate([L.ci[ids], L.cj[ids]]))
+        ci, cj = np.searchsorted(images, L.ci[ids]), np.searchsorted(images, L.cj[ids])
+        local = Links(ci, L.fi[ids], cj, L.fj[ids], L.quality[ids])
+        edges = np.unique(np.stack([ci, cj], axis=1), axis=0)
+        feats = [features[g] for g in images]
+        try:
+            fr = fuse([views[g] for g in images], feats, local, edges,
+                      track_labels=track_names([len(f) for f in feats], local))
+            break
+        except RobotsLost as e:
+            lost = [int(images[c]) for c in e.cameras]
+            lost_log.append(lost)
+            out_frames += [g for g in lost if g in seen]
+            seen.update(lost)
+    out = dict(rounds=0, messages=0, bytes=0, cut=0, tracks=0)
+    if fr is not None:
+        cut = ids[np.asarray(fr.cut_links, bool)]
+        oa.cut(cut, "fusion-outlier")
+        st = fr.stats
+        out = dict(rounds=int(st.get("rounds", 0)), messages=int(st.get("messages", 0)),
+                   bytes=int(st.get("bytes", 0)), cut=int(len(cut)),
+                   tracks=int(len(fr.track_ids)))
+        out.update({k: int(st[k]) for k in ("naming_rounds", "naming_bytes") if k in st})
+    if lost_log:
+        out.update(frames_lost=lost_log, frames_left_out=sorted(out_frames))
     out["wall_s"] = time.perf_counter() - t0
     return out
 
@@ -331,6 +365,13 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 on_step(rec)
             # the fusion's cuts are links cut at this step too (links.csv, link_steps.csv)
             by_fusion = f", {rec['fusion']['cut']} cut by fusion" if fusion else ""
+            lost = sorted({g for att in rec["images_lost"] for g in att}
+                          | {g for att in rec.get("fusion", {}).get("frames_lost", ())
+                             for g in att})
+            if lost:  # robot processes lost and started again (or given up for the step)
+                by_fusion += (f", robot processes of frame(s) {', '.join(map(str, lost))} "
+                              f"lost and started again ({rec['cut_lost']} links cut "
+                              "robot-lost)")
             timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut{by_fusion}, "
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "

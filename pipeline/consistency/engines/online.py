@@ -160,7 +160,7 @@ from pipeline.consistency.engines.online_history import (
 from pipeline.consistency.engines.online_weigh import Weighing
 from pipeline.consistency.history import runs_by_robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.errors import InputError
+from pipeline.errors import InputError, RobotsLost
 from pipeline.progress import counted
 from pipeline.types import Links
 
@@ -349,13 +349,18 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
         made at an earlier step), ``rounds`` (detection + resolution rounds), ``messages``, ``bytes``
         (of them ``retire_bytes``: the names of retired pieces, step 1), ``wall_s``,
         ``robot_state_bytes_max``, ``retired_entries_max`` (a robot's retired entries),
-        ``stage_peak_bytes`` (the stage's peak over its images).
+        ``stage_peak_bytes`` (the stage's peak over its images), and what robots lost
+        during the stage cost (``stage_attempts``, ``images_lost``, ``cut_lost``,
+        ``lost_messages``, ``lost_bytes``, ``lost_rounds``: :meth:`_stage_despite_losses`).
 
         Raises
         ------
         InputError
             A link breaks Assumptions 2.1–2.3, has no end in the step's frames or an end
             outside the window.
+        RobotsLost
+            An image lost by the stage again with none of its links left to cut
+            (:meth:`_stage_despite_losses`).
         """
         t0 = time.perf_counter()
         self.last_sub = np.zeros(0, np.int64)
@@ -371,11 +376,12 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
                    cut_weigh=0, cut_history=0, cut_old=0, weighed_sets=0, weigh_rounds=0,
                    weigh_messages=0, weigh_bytes=0, rounds=0, detection_rounds=0,
                    resolution_rounds=0, large_sets=0, merge_rounds=0, messages=0, bytes=0,
-                   stage_peak_bytes=0, history_bytes=0)
+                   stage_peak_bytes=0, history_bytes=0, stage_attempts=0, images_lost=[],
+                   cut_lost=0, lost_messages=0, lost_bytes=0, lost_rounds=0)
         if self.robots_check and self.overturn:  # a step without new links has them too
             rec["history_rounds"] = 0
         if len(new_ids):
-            self._stage(new_ids, t, rec)
+            self._stage_despite_losses(new_ids, t, rec)
         rec["messages"] += retire_msgs
         rec["bytes"] += retire_bytes
         rec["retire_bytes"] = retire_bytes
@@ -386,6 +392,69 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
         rec["wall_s"] = time.perf_counter() - t0
         self.steps.append(rec)
         return rec
+
+    def _stage_despite_losses(self, new_ids: np.ndarray, t: int, rec: dict) -> None:
+        """Steps 2 to 4 (:meth:`_stage`), again where the stage lost robots.
+
+        A stage whose robots are processes may lose one (its process ends, its host goes
+        down: the stage raises :class:`~pipeline.errors.RobotsLost` naming its images, and
+        nothing of that stage is applied). A robot lost for the first time in the step is
+        started again: the same stage runs again on the same inputs, so it decides as the
+        undisturbed stage would. An image lost a second time in the step is given up for
+        it: its links in the step's sub-problem (the step's new links and the kept window
+        links of the sets they touch) are cut as ``robot-lost``, and the stage runs on what
+        is left. A cut only splits sets, and the stage that then completes is a whole stage
+        on the record's links: the guarantee of the step (module docstring) holds as
+        without the loss. An image lost again with none of its links left in the sub-problem
+        (it takes part through retired pieces only) stops the run
+        (:class:`~pipeline.errors.RobotsLost`).
+
+        ``rec`` gets ``stage_attempts`` (the stages started: 1 without a loss; the lost ones
+        and the one that completed, if any link was left for it), ``images_lost`` (per lost
+        attempt, the images it lost), ``cut_lost`` (links cut ``robot-lost``, counted in
+        ``cut``) and the lost attempts' messages, bytes and rounds (``lost_messages``,
+        ``lost_bytes``, ``lost_rounds``; counted in ``messages``, ``bytes`` and
+        ``rounds``: they were spent)."""
+        L = self.links
+        start = dict(rec)
+        lost_log: list[list[int]] = []
+        seen: set = set()
+        spent = dict(messages=0, bytes=0, rounds=0)
+        cut_lost, ran = 0, 0
+        while True:
+            try:
+                if len(new_ids):
+                    self._stage(new_ids, t, rec)
+                    ran = 1
+                break
+            except RobotsLost as e:
+                images = [int(self._stage_images[c]) for c in e.cameras]
+                lost_log.append(images)
+                for k in spent:
+                    spent[k] += int(e.stats.get(k, 0))
+                again = [g for g in images if g in seen]
+                seen.update(images)
+                rec.clear()
+                rec.update(start)
+                if not again:   # started again: the same stage on the same inputs
+                    continue
+                real = self._stage_real
+                gone = real[np.isin(L.ci[real], again) | np.isin(L.cj[real], again)]
+                gone = gone[L.kept[gone]]
+                if not len(gone):
+                    raise RobotsLost(f"{e} (image {again[0]} lost again with none of its "
+                                     "links left in the step's sub-problem)",
+                                     e.cameras, e.stats) from e
+                self._cut(gone, "robot-lost", t)
+                cut_lost += len(gone)
+                new_ids = new_ids[L.kept[new_ids]]
+        rec.update(stage_attempts=len(lost_log) + ran, images_lost=lost_log, cut_lost=cut_lost,
+                   lost_messages=spent["messages"], lost_bytes=spent["bytes"],
+                   lost_rounds=spent["rounds"])
+        rec["cut"] += cut_lost
+        rec["messages"] += spent["messages"]
+        rec["bytes"] += spent["bytes"]
+        rec["rounds"] += spent["rounds"]
 
     def _add_frames(self, frames: list[Frame], t: int) -> None:
         for fr in frames:

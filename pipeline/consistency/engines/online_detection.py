@@ -118,6 +118,7 @@ class IncrementalDetection:
             hist_in = self._history_inputs(images, local_links, real, hist_a, hist_b, sub)
             if not weigh_after:
                 kw["history"] = hist_in
+        self._stage_images, self._stage_real = images, real  # read where the stage loses robots
         res = self.stage(self.m[images], local_links, self.resolution,
                          solve_small_sets=not gather, **kw)
         st = res.stats

@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.association import conflictive_links
 from pipeline.consistency.result import ConsistencyResult
-from pipeline.errors import InputError, TeamError
+from pipeline.errors import InputError, RobotsLost, TeamError
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
@@ -411,7 +411,7 @@ def resolve(features_per_camera, comm_edges, links, faults, resolution, ids, evi
 
 def online_stage(features_per_camera, links, resolution, *, solve_small_sets=True,
                  keypoints=None, projections=None, gather_conflictive=False,
-                 gather_free=False, history=None) -> ConsistencyResult:
+                 gather_free=False, history=None, kill=None) -> ConsistencyResult:
     """The rule's stage of one online step (``run-formation --steps N --transport zenoh``): one
     robot process per frame of the step's sub-problem that has a link there, over Zenoh, each
     reading its own rows of the sub-problem's links (:func:`resolve_links_file`); neighbours
@@ -433,6 +433,18 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     file of ``data.history``, :func:`pipeline.team.robot._robot_history`), and
     ``stats['history']`` holds the links they cut (``cut``), the check's rounds and its
     messages and bytes (``counted``: already in the stage's counts).
+
+    ``kill``: ``(robot, status, delay_s)``, fault injection (tests, bench): ``kill -9`` of the
+    team's robot ``robot`` (the ``robot``-th camera with a link) ``delay_s`` s after it
+    published ``status`` (:func:`pipeline.team.launcher.launch_team`).
+
+    Raises
+    ------
+    RobotsLost
+        A robot process was lost during the stage (its process ended or its neighbours wrote
+        it off), its camera named in ``cameras``: the survivors' result is not returned (its
+        links would read as the rule's cuts); the online stage decides what follows
+        (:meth:`pipeline.consistency.engines.online.OnlineAssociation.add_step`).
     """
     from pipeline.commgraph import comm_edges_for
     from pipeline.consistency.rules import get_rule
@@ -470,14 +482,15 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             extra["history"] = _write_robot_history(Path(work), history, used, where)
         kept: list = []
         res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
-                                 workdir=work, links=sub, data_extra=extra, keep_run=kept)
+                                 workdir=work, links=sub, data_extra=extra, keep_run=kept,
+                                 kill=kill)
     lost = sorted(set(range(len(used))) - set(kept[0].results)
                   | {int(k) for k in kept[0].killed}
                   | {int(k) for k in res.stats.get("faults", {}).get("robots_lost", {})})
-    if lost:  # its links would read as the rule's cuts: an online step models no lost robot
-        raise TeamError(f"the robot process of image {int(used[lost[0]])} was lost during an "
-                        "online step's consistency stage (an online run over zenoh models no "
-                        "lost robot, only --switching-topology); run it again")
+    if lost:  # its links would read as the rule's cuts: the caller decides what follows
+        raise RobotsLost(f"the robot process of image {int(used[lost[0]])} was lost during an "
+                         "online step's consistency stage",
+                         used[lost].tolist(), _spent(res))
     if history is not None:
         from pipeline.consistency.history import HCUT, HECHO, HGO, HLAB, HTOK, HUP
 
@@ -506,6 +519,13 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
             bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)))
     return res
+
+
+def _spent(res) -> dict:
+    """What a team's run spent (messages, bytes, rounds), from its result's figures."""
+    st = res.stats
+    return dict(messages=int(st.get("messages", 0)), bytes=int(st.get("bytes", 0)),
+                rounds=int(st.get("detection_rounds", 0)) + int(st.get("resolution_rounds", 0)))
 
 
 def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
@@ -542,7 +562,7 @@ def _count_acted(res, rule, sub, used, m, run, history: bool) -> None:
     res.stats["per_iteration"][0]["conflictive_sets"] = rooted
 
 
-def online_fusion(views, features, links, comm_edges, *, track_labels=None):
+def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill=None):
     """The fusion of one online step's changed tracks (``run-formation --steps N --transport
     zenoh``): one robot process per frame, over Zenoh, each running the fusion code of a batch
     formation run (:func:`pipeline.team.robot.robot_main`, step 6: :class:`pipeline.fusion.robot.
@@ -570,13 +590,18 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
         of :func:`pipeline.team.assemble.fusion_of_team`, with the naming detection's
         ``naming_rounds``, ``naming_messages`` and ``naming_bytes`` and the ``team`` summary.
 
+    ``kill``: ``(robot, status, delay_s)``, fault injection (tests, bench), as
+    :func:`online_stage` takes it.
+
     Raises
     ------
     InputError
         A view without a pose.
+    RobotsLost
+        A robot did not publish (its process ended or was killed), named in ``cameras``.
     TeamError
-        A robot did not publish, the detection cut a link (the links were not conflict-free),
-        or a robot named a track otherwise than ``track_labels``.
+        The detection cut a link (the links were not conflict-free), or a robot named a track
+        otherwise than ``track_labels``.
     """
     from pipeline.fusion.landmarks import FusionResult, require_posed_views
     from pipeline.runfolder import scratch_folder
@@ -596,11 +621,11 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None):
                 "keypoints": _write_robot_keypoints(folder, [f.keypoints for f in features]),
                 "cameras": cameras}
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
-        run = launch_team(team, work)
-    lost = sorted(set(range(n)) - set(run.results))
+        run = launch_team(team, work, kill=kill)
+    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed})
     if lost:
-        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
-                        "publish a result")
+        raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
+                         "publish a result", lost)
     res = consistency_of_team(team, run.results, links, m, run.killed)
     if res.deleted.any():
         k = int(np.flatnonzero(res.deleted)[0])

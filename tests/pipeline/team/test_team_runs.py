@@ -648,23 +648,3 @@ def test_a_history_file_that_is_not_one_is_a_one_line_error(tmp_path):
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
     with pytest.raises(InputError, match="KeyError"):
         load_history_inputs(tmp_path / "other.npz", 0)
-
-
-def test_a_robot_lost_in_an_online_steps_stage_stops_the_run(tmp_path, monkeypatch, capsys):
-    """A robot process killed during a step's stage: its links were taken as the rule's cuts
-    (reason 'evidence', F1 fell) and the run ended 0 with no word; now it stops, naming it."""
-    import pipeline.runs.transports.zenoh as zen
-
-    original = zen.resolve_links_file
-
-    def killing(*a, **k):
-        return original(*a, **{**k, "kill": (1, "consistency", 0.0)})
-
-    monkeypatch.setattr(zen, "resolve_links_file", killing)
-    args = ["run-formation", "--steps", "2", "--window", "2", "--size", "160x120",
-            "--max-features", "120", "--formation", "a", "--no-rerun", "--no-fusion",
-            "--transport", "zenoh", "--out", str(tmp_path / "zen")]
-    assert main(args) != 0
-    err = capsys.readouterr().err
-    assert "was lost during an online step's consistency stage" in err
-    assert not (tmp_path / "zen").exists()
