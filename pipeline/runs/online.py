@@ -24,11 +24,13 @@ conflict-free). Tracks no
 link of the step touched keep their last fusion. The step record carries ``fusion`` (rounds,
 bytes, links cut, tracks fused, wall time), apart from the consistency stage's figures.
 
-Robot processes lost (``--transport zenoh``): a team of a step's stage or fusion that loses a
-robot is started again; a frame lost twice in a step is given up for it (its links of the
-step's stage cut ``robot-lost``, :meth:`pipeline.consistency.engines.online.OnlineAssociation.
-_stage_despite_losses`; left out of the step's fusion, :func:`_fuse_changed`). A robot lost
-during a step's matching stops the run (its frame's features never came).
+Robot processes lost (``--transport zenoh``): a team of a step's matching, stage or fusion
+that loses a robot is started again (the matching's ``match_attempts``,
+``match_robots_lost``); a frame lost twice in a step's stage or fusion is given up for it
+(its links of the step's stage cut ``robot-lost``, :meth:`pipeline.consistency.engines.
+online.OnlineAssociation._stage_despite_losses`; left out of the step's fusion,
+:func:`_fuse_changed`). A robot lost twice during a step's matching stops the run (its
+frame's features of the step are not known).
 
 Outputs (run folder, written atomically): ``report.json`` (``steps``: one entry per step
 with ``links_new``, ``conflictive_sets_after``, ``wall_s``, ``rounds``, ``bytes`` and the
@@ -318,7 +320,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 feature_options=feature_options, match_options=match_options)
             feats_all += feats
             desc_bytes += stats["descriptor_bytes"]
-            match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes", "held_bytes_max")
+            match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes", "held_bytes_max",
+                                                          "attempts", "robots_lost")
                          if k in stats}
             match_s = time.perf_counter() - t0
             frames = [Frame(i, len(f), f.keypoints, None if views[g].R is None else
@@ -367,7 +370,9 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             by_fusion = f", {rec['fusion']['cut']} cut by fusion" if fusion else ""
             lost = sorted({g for att in rec["images_lost"] for g in att}
                           | {g for att in rec.get("fusion", {}).get("frames_lost", ())
-                             for g in att})
+                             for g in att}
+                          | {t * n + i for att in rec.get("match_robots_lost", ())
+                             for i in att})
             if lost:  # robot processes lost and started again (or given up for the step)
                 by_fusion += (f", robot processes of frame(s) {', '.join(map(str, lost))} "
                               f"lost and started again ({rec['cut_lost']} links cut "

@@ -22,7 +22,11 @@ read and written by it alone), the features of its frames of the last ``W`` step
    received, each pair ``(a, b)``, ``a < b``, by :func:`pipeline.matching.pairs.match_pair` as
    :func:`pipeline.matching.pairs.match_edges` matches it (same orientation, same options);
 4. it publishes the new frame's keypoints and its pairs' matches (the launching process
-   orders them as the simulator's matching and goes on with the step).
+   orders them as the simulator's matching and goes on with the step); a frame it matches
+   that never came (its robot lost: stopped, killed or cut off during the step) it names
+   under ``missing`` with no pair, and the launching process starts the step's matching
+   again with ``data.resend`` (each robot then sends its window frames again, whatever its
+   ``sent.json`` says: what it sent may not have been kept).
 
 Every pair of the step is matched by exactly one robot: a pair joins a new frame and a window
 frame of two robots that talk (or of one robot); the new frame's robot matches it, and of two
@@ -38,8 +42,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from pipeline.errors import TeamError
 
 __all__ = ["online_match_main", "frame_file", "write_frame", "load_frame", "own_pairs"]
 
@@ -178,7 +180,9 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     # what it sent each neighbour at earlier steps and the neighbour still keeps (the same
     # window rule on both sides): each frame crosses a link once
     sent_path = store / "sent.json"
-    sent = json.loads(sent_path.read_text()) if sent_path.exists() else {}
+    # started again after a robot was lost (data.resend): what it sent may not have been kept
+    sent = json.loads(sent_path.read_text()) if sent_path.exists() and \
+        not data.get("resend", False) else {}
     earlier = [s * n + i for s in range(max(0, t - window + 1), t)]
     for j in sorted(transport.neighbours):
         had = {f for f in sent.get(str(j), []) if f // n > t - window}
@@ -198,12 +202,16 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     for msg in inbox:  # kept while in the window: the sender sends a frame once
         if msg.kind == "frame":
             save(int(msg.payload["id"][0]), msg.payload)
-    for f in sorted({f for pair in own_pairs(i, n, t, window, transport.neighbours)
-                     for f in pair}):
-        if not frame_file(store, f).exists():  # its robot was written off before sending it
-            raise TeamError(f"robot {i}: the features of frame {f} never came from robot "
-                            f"{f % n}, lost (stopped, killed or cut off) during step {t}'s "
-                            "matching; run it again")
+    missing = [f for f in sorted({f for pair in own_pairs(i, n, t, window,
+                                                          transport.neighbours)
+                                  for f in pair}) if not frame_file(store, f).exists()]
+    if missing:  # their robots were written off before sending them: the launcher decides
+        return ({"id": i, "frame": g, "pairs": [], "missing": missing, "held_bytes": 0,
+                 "descriptor_bytes": int(raw.descriptors.nbytes),
+                 "counters": transport.counters(), "timings_s": timings,
+                 "peak_memory_bytes": 0, "pid": os.getpid(),
+                 "peak_rss_bytes": 1024 * resource.getrusage(resource.RUSAGE_SELF).ru_maxrss},
+                {"keypoints": raw.keypoints, "scales": raw.scales})
     feats, meta = {}, {}
     for pair in own_pairs(i, n, t, window, transport.neighbours):
         for f in pair:

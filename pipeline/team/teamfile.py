@@ -43,7 +43,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
               "store": ["robot-0", ...]}
               # an online step's matching (pipeline.team.online_match): robot I's new frame
               # (frame id step * n + I) and its own folder, where it keeps its window's
-              # features between steps
+              # features between steps; optional "resend": true, the step's matching started
+              # again after a robot was lost: each robot sends its neighbours every window
+              # frame they match with, whatever it sent them before
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -165,7 +167,7 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
                          "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
                         "history", "weights"},
-              "online-match": {"kind", "step", "window", "frames", "store"}}
+              "online-match": {"kind", "step", "window", "frames", "store", "resend"}}
 #: a reliable, ordered Zenoh link (the rounds' "nothing lost" rests on it: not udp), host a
 #: name, an IPv4 address or a bracketed IPv6 address; the port in digits 0-9 (``\d`` also
 #: takes other scripts' digits, which int() reads and Zenoh does not)
@@ -598,6 +600,10 @@ def _check_data(data: dict, n: int, where: str) -> None:
             if not _is_int(v) or v < (0 if key == "step" else 1):
                 raise InputError(f"{where}: data.{key} {v!r} must be an integer >= "
                                  f"{0 if key == 'step' else 1}")
+        if not isinstance(data.get("resend", False), bool):
+            raise InputError(f"{where}: data.resend {data['resend']!r} must be true or false "
+                             "(true: the step's matching started again; each robot sends its "
+                             "window frames again)")
         for key, what in (("frames", "frame file (its camera's new frame)"),
                           ("store", "folder (its features between steps)")):
             v = data.get(key)

@@ -737,7 +737,7 @@ def online_robots():
 
 def online_match(views, t: int, n: int, window: int, edges_up, store, *, features: str,
                  max_features, merge_radius: float, feature_options: dict,
-                 match_options: dict):
+                 match_options: dict, kill=None):
     """An online step's matching as robot processes (:mod:`pipeline.team.online_match`): each
     robot extracts its new frame's features, keeps its window's in its own folder under
     ``store`` (kept by the caller from step to step), exchanges with the robots it talks to
@@ -751,11 +751,18 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     (``descriptor_bytes``, robot order) and the most bytes of features a robot holds
     (``held_bytes_max``: its window's frames and those its neighbours sent it).
 
+    A team that loses a robot (its process ends, or a frame never reaches a neighbour that
+    matches it: that robot publishes it ``missing``) is started again, once, each robot
+    sending its window frames again (``data.resend``); ``stats`` then counts the lost
+    team's messages and bytes too, ``attempts`` the teams started and ``robots_lost`` the
+    robots each lost team lost. ``kill``: ``(robot, status, delay_s)``, fault injection
+    (tests, bench) on the first team, as :func:`pipeline.team.launcher.launch_team` takes it.
+
     Raises
     ------
     TeamError
-        A robot did not publish, or the robots matched other pairs than
-        :func:`pipeline.matching.pairs.step_pairs` lists.
+        A robot was lost by the team started again too, or the robots matched other pairs
+        than :func:`pipeline.matching.pairs.step_pairs` lists.
     """
     from pipeline.matching.pairs import step_pairs
     from pipeline.runfolder import scratch_folder
@@ -775,13 +782,25 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                            if k in ("contrast_threshold", "rootsift", "budget_after_merge")},
                         threshold_px=match_options.get("threshold_px", 1.0),
                         matcher=match_options.get("matcher", "opencv"))
-    team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2), data,
-                     opts, n=n)
-    with scratch_folder("online-match-") as work:
-        run = launch_team(team, work)
-    lost = sorted(set(range(n)) - set(run.results))
+    lost_log, spent = [], dict(messages=0, bytes=0)
+    for attempt in (0, 1):  # a team that lost a robot is started again, once
+        team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2),
+                         {**data, "resend": bool(attempt)}, opts, n=n)
+        with scratch_folder("online-match-") as work:
+            run = launch_team(team, work, kill=kill if attempt == 0 else None)
+        lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}
+                      | {int(f) % n for h, _ in run.results.values()
+                         for f in h.get("missing", ())})
+        if not lost:
+            break
+        lost_log.append(lost)
+        for h, _ in run.results.values():
+            spent["messages"] += int(h["counters"]["messages"])
+            spent["bytes"] += int(h["counters"]["bytes"])
     if lost:
-        raise TeamError(f"robot {lost[0]} of step {t}'s matching team did not publish")
+        raise TeamError(f"robot {lost[0]} of step {t}'s matching team was lost twice (its "
+                        "process ended, or its frame never reached a neighbour); its features "
+                        "of the step are not known: run it again")
     feats, desc_bytes, held, matches = [], [], [], {}
     for i in range(n):
         header, arrays = run.results[i]
@@ -802,9 +821,12 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                         f"has {len(want)}")
     links = Links.from_matches([matches[p] for p in want])
     summary = team_summary(run)
-    stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values())),
-             "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values())),
+    stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values()))
+             + spent["messages"],
+             "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values()))
+             + spent["bytes"],
              "wall_s": float(summary["wall_s"]), "pairs": len(want),
              "descriptor_bytes": desc_bytes,
-             "held_bytes_max": max(held)}
+             "held_bytes_max": max(held), "attempts": 1 + len(lost_log),
+             "robots_lost": lost_log}
     return feats, links, stats

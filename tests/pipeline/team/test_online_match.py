@@ -91,10 +91,9 @@ class _CutOff:
 
 def test_a_neighbour_lost_before_its_frame_came_is_named(sequence, tmp_path):
     """Robot 0 of a 3-robot team matches the two new frames of step 0 (its own and robot 1's);
-    robot 1 lost before sending its frame stops robot 0 with an error naming robot 1 and the
-    missing frame (it read a file of its own folder that was never written, and said only
-    that the file did not exist)."""
-    from pipeline.errors import TeamError
+    robot 1 lost before sending its frame: robot 0 publishes the frame as ``missing`` and no
+    pair (it read a file of its own folder that was never written, and said only that the
+    file did not exist), and the launching process starts the step's matching again."""
     from pipeline.matching.features import MERGE_RADIUS_PX
     from pipeline.runs.transports.zenoh import team_options
     from pipeline.team.launcher import make_team
@@ -109,6 +108,45 @@ def test_a_neighbour_lost_before_its_frame_came_is_named(sequence, tmp_path):
             "store": [str(tmp_path / f"robot-{i}") for i in range(n)]}
     team = make_team("online-match-0", [[0, 1], [1, 2]], data,
                      team_options("sift", 300, None, merge_radius=MERGE_RADIUS_PX), n=n)
-    with pytest.raises(TeamError, match=r"^robot 0: the features of frame 1 never came from "
-                                        r"robot 1, lost .* during step 0's matching"):
-        online_match_main(team, 0, _CutOff())
+    header, arrays = online_match_main(team, 0, _CutOff())
+    assert header["missing"] == [1] and header["pairs"] == []
+    assert len(arrays["keypoints"]) > 0
+
+
+class _Recorder(_CutOff):
+    """A transport that records what robot 0 sends its neighbour 1 and hears nothing."""
+
+    def __init__(self):
+        self.sent = []
+
+    def send(self, dst, kind, payload):
+        self.sent.append(int(payload["id"][0]))
+
+
+def test_a_matching_started_again_sends_every_window_frame_again(sequence, tmp_path):
+    """``data.resend``: a robot whose step's matching is started again sends its neighbours
+    the window frames its ``sent.json`` says they hold (the lost team may have sent them
+    to a robot that died before keeping them)."""
+    from pipeline.matching.features import MERGE_RADIUS_PX
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.team.launcher import make_team
+    from pipeline.team.online_match import online_match_main, write_frame
+
+    views, n = sequence.flat.views, sequence.n_robots
+    store = [str(tmp_path / f"robot-{i}") for i in range(n)]
+    opts = team_options("sift", 300, None, merge_radius=MERGE_RADIUS_PX)
+    sent = {}
+    for t, resend in ((0, False), (1, False), (1, True)):
+        frames = []
+        for i in range(n):
+            frames.append(str(tmp_path / f"camera-{t}-{i}.npz"))
+            write_frame(frames[-1], views[t * n + i])
+        data = {"kind": "online-match", "step": t, "window": 2, "frames": frames,
+                "store": store, **({"resend": True} if resend else {})}
+        team = make_team(f"online-match-{t}", [[0, 1], [1, 2]], data, opts, n=n)
+        rec = _Recorder()
+        online_match_main(team, 0, rec)
+        sent[(t, resend)] = rec.sent
+    # step 0: robot 0's new frame goes to robot 1 only if 0 > 1: nothing; step 1: its frame
+    # of step 0 (not sent before); started again, the same frame again, not held as sent
+    assert sent[(0, False)] == [] and sent[(1, False)] == [0] and sent[(1, True)] == [0]

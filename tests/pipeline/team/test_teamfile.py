@@ -102,6 +102,7 @@ def test_a_valid_team_parses():
     ({"data": {**_MATCH, "frames": ["f0.npz"]}}, "data.frames must list 3 paths, one frame file"),
     ({"data": {**_MATCH, "store": "robots"}}, "data.store must list 3 paths, one folder"),
     ({"data": {**_MATCH, "links": "in.csv"}}, "data of kind online-match has unknown key 'links'"),
+    ({"data": {**_MATCH, "resend": 1}}, "data.resend 1 must be true or false"),
     ({"options": {"fusion": True}},
      "options sets fusion on a links team without data.keypoints"),
     # names every robot would refuse: observe refuses them too, not waiting for robots
