@@ -14,6 +14,14 @@ detection before the fusion), each step's stage time (matching and fusion not in
 each step's matching time (over Zenoh the robots' own, :mod:`pipeline.team.online_match`)
 and the bytes its robots exchanged, and whether ``links.csv`` and ``link_steps.csv`` equal
 the simulator's with the same fusion setting. Saves ``runs/bench-online-team/results.json``.
+
+``zenoh, robots killed`` is ``zenoh`` with a robot process killed (``kill -9``, the fault
+injection of :func:`pipeline.team.launcher.launch_team`) in each team of step
+``--kill-step``: its matching's, its stage's and its fusion's robot 0, as soon as it starts
+(the matching) or starts its consistency stage. Each such team is started again
+(:mod:`pipeline.runs.online`, "Robot processes lost"): the tables must equal the
+simulator's, and the step's record counts the attempts (printed: ``match_attempts``,
+``stage_attempts``, the fusion's lost frames per step).
 """
 
 from __future__ import annotations
@@ -44,15 +52,52 @@ CONFIGS = {"sim": [], "sim --no-fusion": ["--no-fusion"],
            "zenoh": ["--transport", "zenoh"],
            "zenoh, zygote per team": ["--transport", "zenoh"]}
 
+KILLED = "zenoh, robots killed"
+CONFIGS[KILLED] = ["--transport", "zenoh"]
+
 #: the environment of a configuration (FORMATION_MATCH_ZYGOTE: where the robots of each
 #: team are forked from, pipeline.runs.transports.zenoh.ZYGOTE_ENV)
 ENV = {"zenoh, zygote per team": {"FORMATION_MATCH_ZYGOTE": "team"}}
 
 
-def _run(args: list[str], out: Path, env: dict | None = None) -> dict:
-    """``python -m pipeline run-formation ARGS``: wall, report, links and steps tables."""
+def _killing_child(step: int, argv: list[str]) -> int:
+    """``run-formation ARGV`` (over Zenoh) with robot 0 of each team of step ``step`` killed:
+    the matching's as soon as it starts, the stage's and the fusion's as soon as they start
+    their consistency stage (module docstring)."""
+    import pipeline.runs.transports.zenoh as zenoh
+    from pipeline.__main__ import main as command
+
+    now = {"step": -1, "stage": 0, "fusion": 0}
+    match, stage, fusion = zenoh.online_match, zenoh.online_stage, zenoh.online_fusion
+
+    def killing_match(views, t, *a, **kw):
+        now.update(step=int(t), stage=0, fusion=0)
+        if t == step:
+            kw["kill"] = (0, "started", 0.0)
+        return match(views, t, *a, **kw)
+
+    def once(job, key):
+        def wrapped(*a, **kw):
+            now[key] += 1
+            if now["step"] == step and now[key] == 1:
+                kw["kill"] = (0, "consistency", 0.0)
+            return job(*a, **kw)
+        return wrapped
+
+    zenoh.online_match = killing_match
+    zenoh.online_stage = once(stage, "stage")
+    zenoh.online_fusion = once(fusion, "fusion")
+    return command(argv)
+
+
+def _run(args: list[str], out: Path, env: dict | None = None,
+         kill_step: int | None = None) -> dict:
+    """``python -m pipeline run-formation ARGS`` (with ``kill_step``: robots killed at that
+    step, :func:`_killing_child`): wall, report, links and steps tables."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "pipeline", "run-formation", *args,
+    head = [sys.executable, "-m", "pipeline"] if kill_step is None else \
+        [sys.executable, str(Path(__file__).resolve()), "--killing-child", str(kill_step)]
+    proc = subprocess.run([*head, "run-formation", *args,
                            "--no-rerun", "--out", str(out)], cwd=ROOT,
                           env={**os.environ, "FORMATION_MATCH_ZYGOTE": "run", **(env or {})},
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -77,6 +122,10 @@ def _run(args: list[str], out: Path, env: dict | None = None) -> dict:
             "fusion_bytes": sum(f.get("bytes", 0) for f in fus),
             "naming_bytes": sum(f.get("naming_bytes", 0) for f in fus),
             "links": len(rep["steps"]) and int(steps[-1]["links_total"]),
+            # teams started per step (1 each without a loss)
+            "match_attempts": [s.get("match_attempts", 1) for s in steps],
+            "stage_attempts": [s.get("stage_attempts", 0) for s in steps],
+            "fusion_frames_lost": [len(f.get("frames_lost", ())) for f in fus],
             "tables": [(out / n).read_text() for n in ("links.csv", "link_steps.csv")]}
 
 
@@ -89,8 +138,13 @@ def main(argv=None) -> int:
                     help="WxH (default: the command's)")
     ap.add_argument("--repeat", type=count_argument, default=1,
                     help="runs of each configuration, alternated; the median wall kept")
+    ap.add_argument("--kill-step", type=int, default=1,
+                    help="the step whose teams lose robot 0 in the 'zenoh, robots killed' "
+                         "configuration (module docstring; default 1)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-online-team"))
     args = ap.parse_args(argv)
+    if not 0 <= args.kill_step < args.steps:
+        ap.error(f"--kill-step {args.kill_step}: a step of the run, 0 to {args.steps - 1}")
     if problem := results_folder_problem(args.out):
         ap.error(problem)
     import data_synth
@@ -106,7 +160,8 @@ def main(argv=None) -> int:
         for r in range(args.repeat):
             for name, extra in CONFIGS.items():
                 runs[name].append(_run(common + extra, Path(tmp) / f"{r}-{name}",
-                                       ENV.get(name)))
+                                       ENV.get(name),
+                                       args.kill_step if name == KILLED else None))
     rows = {}
     for name, rs in runs.items():
         best = dict(sorted(rs, key=lambda x: x["wall_s"])[len(rs) // 2])
@@ -133,7 +188,17 @@ def main(argv=None) -> int:
     zt = rows["zenoh, zygote per team"]
     print(f"zenoh, one zygote for the run's teams / a zygote per team: wall "
           f"{z / zt['wall_s']:.2f}, online stage {rows['zenoh']['online_s'] / zt['online_s']:.2f}")
+    k = rows[KILLED]
+    print(f"{KILLED} at step {args.kill_step}: teams started per step: matching "
+          f"{k['match_attempts']}, stage {k['stage_attempts']}, fusion frames lost "
+          f"{k['fusion_frames_lost']}; the same tables as the simulator: "
+          f"{k['tables_equal_sim']}; wall / zenoh's {k['wall_s'] / z:.2f}, step "
+          f"{args.kill_step}'s stage {k['stage_s'][args.kill_step]:.2f} s against "
+          f"{rows['zenoh']['stage_s'][args.kill_step]:.2f} s, its matching "
+          f"{k['match_s'][args.kill_step]:.2f} s against "
+          f"{rows['zenoh']['match_s'][args.kill_step]:.2f} s")
     results = {"command": ["run-formation", *common, "--no-rerun"], "repeat": args.repeat,
+               "kill_step": args.kill_step,
                "cpus": os.cpu_count(), "load_average_at_start": load, "runs": rows}
     write_json_atomic(Path(args.out) / "results.json", results)
     print(f"saved {args.out}/results.json")
@@ -141,4 +206,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--killing-child"]:
+        raise SystemExit(_killing_child(int(sys.argv[2]), sys.argv[3:]))
     raise SystemExit(main())

@@ -391,6 +391,9 @@ class TeamRun:
     start_s: float = 0.0
     published_s: float = 0.0  # from the launch to the last result received
     stderr: dict = field(default_factory=dict)      # id -> last lines of the robot's stderr
+    #: with ``stop_at_loss``: the robot whose process ended without publishing, at which the
+    #: team was stopped (the others killed, their results not waited for); else None
+    stopped_at: int | None = None
 
     @property
     def survivors(self) -> list[int]:
@@ -454,7 +457,7 @@ class Observer:
 
 def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float | None = None,
                 kill: tuple[int, str, float] | None = None, log=None,
-                fork: bool = True) -> TeamRun:
+                fork: bool = True, stop_at_loss: bool = False) -> TeamRun:
     """Run every robot of ``team`` as a process on this machine; return what they published.
 
     Parameters
@@ -468,6 +471,13 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     log : callable(str) or None
     fork : bool — fork the robots from one zygote that imported the robot program once
         (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
+    stop_at_loss : bool — stop the team as soon as a robot's process ends without publishing
+        (killed, or ended otherwise without an error), killing the others
+        (:attr:`TeamRun.stopped_at`), for a caller that will start the team again anyway
+        (an online step, :mod:`pipeline.runs.online`): the survivors would otherwise finish
+        without it, and a robot lost before the start handshake is written off only after
+        ``start_timeout_s``. Default: the survivors finish, as a team without a launcher
+        would
 
     Raises
     ------
@@ -603,6 +613,12 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     last = _tail(workdir / f"robot{i}.log")
                     raise TeamError(f"robot {i} ({team.endpoint(i)}) failed with exit code "
                                     f"{run.exit_codes[i]}: {last}")
+                gone_early = [i for i in run.exit_codes if i not in observer.results]
+                if stop_at_loss and gone_early:
+                    run.stopped_at = int(gone_early[0])
+                    log(f"robot {run.stopped_at} ended without publishing: the team is "
+                        "stopped (it will be started again)")
+                    break
                 ended = set(observer.results) | set(run.exit_codes)
                 if len(ended) == team.n and all(i in observer.results or i in run.exit_codes
                                                 for i in range(team.n)):
@@ -622,10 +638,12 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                                     "--team-timeout")
                 observer.cv.wait(0.05)
         run.published_s = time.monotonic() - t0
-        # wait for the processes that published to exit
+        # wait for the processes that published to exit (a team stopped at a loss: those
+        # that did not publish are killed below, not waited for)
         for i, p in procs.items():
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                p.wait(timeout=5)
+            if run.stopped_at is None or i in observer.results:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.wait(timeout=5)
             run.exit_codes[i] = p.poll()
         run.wall_s = time.monotonic() - t0
         run.results = dict(observer.results)

@@ -414,7 +414,10 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
         attempt, the images it lost), ``cut_lost`` (links cut ``robot-lost``, counted in
         ``cut``) and the lost attempts' messages, bytes and rounds (``lost_messages``,
         ``lost_bytes``, ``lost_rounds``; counted in ``messages``, ``bytes`` and
-        ``rounds``: they were spent)."""
+        ``rounds``: they were spent) as the stage reports them (over Zenoh, a team is
+        stopped as soon as a robot process of it ends without publishing: the traffic of
+        its robots that had not published is not counted, :func:`pipeline.runs.transports.
+        zenoh.online_stage`)."""
         L = self.links
         start = dict(rec)
         lost_log: list[list[int]] = []

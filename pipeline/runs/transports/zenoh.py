@@ -330,14 +330,18 @@ def images_of_run(config, views, team, run) -> ImagesRobots:
 
 def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, *,
                        kill=None, workdir=None, keep_run: list | None = None, links=None,
-                       data_extra: dict | None = None) -> ConsistencyResult:
+                       data_extra: dict | None = None,
+                       stop_at_loss: bool = False) -> ConsistencyResult:
     """``resolve --transport zenoh``: each robot reads its own rows of ``links_csv``.
 
     ``links_csv``: one file the robots share, or a list of one file per robot holding only
     the rows that touch it (then each robot reads only its own file); the links of the
     result are ``links`` when given, else the shared file's rows in order, or the per-robot
     files' links each once, sorted. ``data_extra``: more keys of the team's ``data`` (e.g. the
-    robots' ``keypoints`` and ``cameras``, :mod:`pipeline.team.teamfile`)."""
+    robots' ``keypoints`` and ``cameras``, :mod:`pipeline.team.teamfile`). ``stop_at_loss``:
+    the team is stopped as soon as a robot's process ends without publishing
+    (:func:`pipeline.team.launcher.launch_team`), which raises :class:`RobotsLost` naming
+    it."""
     from pipeline.inputs.linkscsv import read_links_csv
 
     fpc = [int(v) for v in np.asarray(fpc).reshape(-1)]
@@ -347,9 +351,13 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
         else str(Path(links_csv).resolve())
     data = {"kind": "links", "links": paths, "features_per_camera": fpc, **(data_extra or {})}
     team = make_team("resolve", edges, data, options, n=len(fpc))
-    run = launch_team(team, workdir, kill=kill)
+    run = launch_team(team, workdir, kill=kill, stop_at_loss=stop_at_loss)
     if keep_run is not None:
         keep_run.append(run)
+    if run.stopped_at is not None:
+        raise RobotsLost(f"the robot process of camera {run.stopped_at} ended without "
+                         "publishing; the team was stopped",
+                         {run.stopped_at} | {int(k) for k in run.killed}, _spent_by(run))
     if links is not None:
         pass
     elif per_robot:
@@ -481,9 +489,14 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
         if history is not None:
             extra["history"] = _write_robot_history(Path(work), history, used, where)
         kept: list = []
-        res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
-                                 workdir=work, links=sub, data_extra=extra, keep_run=kept,
-                                 kill=kill)
+        try:
+            res = resolve_links_file(paths, m[used], comm_edges_for(m[used], sub, None), opts,
+                                     workdir=work, links=sub, data_extra=extra, keep_run=kept,
+                                     kill=kill, stop_at_loss=True)
+        except RobotsLost as e:  # the team's cameras are the sub-problem's used images
+            raise RobotsLost(f"the robot process of image {int(used[e.cameras[0]])} was lost "
+                             "during an online step's consistency stage",
+                             used[e.cameras].tolist(), e.stats) from e
     lost = sorted(set(range(len(used))) - set(kept[0].results)
                   | {int(k) for k in kept[0].killed}
                   | {int(k) for k in res.stats.get("faults", {}).get("robots_lost", {})})
@@ -519,6 +532,15 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             messages=int(sum(res.stats["messages_by_kind"].get(k, 0) for k in kinds)),
             bytes=int(sum(res.stats["bytes_by_kind"].get(k, 0) for k in kinds)))
     return res
+
+
+def _spent_by(run) -> dict:
+    """What the robots of a team that published counted (messages, bytes, rounds): a team
+    stopped at a loss publishes only what its robots had published by then."""
+    heads = [h for h, _ in run.results.values()]
+    return dict(messages=int(sum(h["counters"]["messages"] for h in heads)),
+                bytes=int(sum(h["counters"]["bytes"] for h in heads)),
+                rounds=int(max((h["counters"].get("round", 0) for h in heads), default=0)))
 
 
 def _spent(res) -> dict:
@@ -621,8 +643,9 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
                 "keypoints": _write_robot_keypoints(folder, [f.keypoints for f in features]),
                 "cameras": cameras}
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
-        run = launch_team(team, work, kill=kill)
-    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed})
+        run = launch_team(team, work, kill=kill, stop_at_loss=True)
+    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}) \
+        if run.stopped_at is None else sorted({run.stopped_at} | {int(k) for k in run.killed})
     if lost:
         raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
                          "publish a result", lost)
@@ -787,8 +810,10 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2),
                          {**data, "resend": bool(attempt)}, opts, n=n)
         with scratch_folder("online-match-") as work:
-            run = launch_team(team, work, kill=kill if attempt == 0 else None)
-        lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}
+            run = launch_team(team, work, kill=kill if attempt == 0 else None,
+                              stop_at_loss=True)
+        lost = sorted((set(range(n)) - set(run.results) if run.stopped_at is None
+                       else {run.stopped_at}) | {int(k) for k in run.killed}
                       | {int(f) % n for h, _ in run.results.values()
                          for f in h.get("missing", ())})
         if not lost:

@@ -1,0 +1,32 @@
+"""``launch_team(..., stop_at_loss=True)``: a robot whose process ends without publishing
+stops the team at once (the others killed, their results not waited for), for a caller that
+starts the team again anyway (an online step); without it the survivors finish without the
+lost robot, as a team without a launcher would."""
+
+from zygote_teams import EDGES, FPC, LINKS
+
+from pipeline.team.launcher import launch_team, make_team
+
+
+def _team(tmp_path):
+    links = tmp_path / "in.csv"
+    links.write_text(LINKS)
+    data = {"kind": "links", "links": str(links), "features_per_camera": FPC}
+    # a neighbour written off after 20 s of silence: a stop at once is far below it
+    return make_team("stopped", EDGES, data, {"round_timeout_s": 20.0}, n=4)
+
+
+def test_a_robot_killed_at_its_start_stops_the_team(tmp_path):
+    run = launch_team(_team(tmp_path), tmp_path / "a", kill=(2, "started", 0.0),
+                      stop_at_loss=True, timeout_s=120)
+    assert run.stopped_at == 2 and 2 in run.killed
+    # stopped before any survivor could finish: without robot 2 they wait for the start
+    # handshake's write-off (start_timeout_s, 60 s) before deciding anything
+    assert run.results == {}
+
+
+def test_without_it_the_survivors_finish_without_the_lost_robot(tmp_path):
+    run = launch_team(_team(tmp_path), tmp_path / "b", kill=(2, "consistency", 0.0),
+                      timeout_s=120)
+    assert run.stopped_at is None
+    assert sorted(run.results) == [0, 1, 3]
