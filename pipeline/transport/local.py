@@ -2,7 +2,11 @@
 
 :class:`LocalTeam` gives every robot its own :class:`~pipeline.transport.RoundEndpoint`
 on one shared simulated :class:`~pipeline.transport.simulated.Network` (so messages, bytes and the
-network's fault switches — drop, crash, delay — are exactly the simulator's). A round closes
+network's fault switches — drop, crash, delay — are exactly the simulator's). Each message's
+drop is decided by the seed, its sender, receiver, round and place among that sender's
+messages to that receiver in the round (``Network(keyed_drops=True)``), and inboxes are filled
+sender by sender, so a lossy run with a given seed is the same run whatever order the threads
+happen to send in. A round closes
 when every robot thread has called ``end_round`` (a barrier); robots that have finished or
 crashed keep the barrier turning until all are through. Each robot thread runs the same robot
 code as a robot process does; only the transport differs.
@@ -67,7 +71,9 @@ class LocalTeam:
 
     def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None) -> None:
         self.n = int(n)
-        self.network = Network(self.n, comm_edges, options)
+        # the threads send in whatever order they run: drops keyed by the message, not drawn
+        # in send order, so one seed gives one run
+        self.network = Network(self.n, comm_edges, options, keyed_drops=True)
         self._lock = threading.Lock()
         self._states: list = [None] * self.n
         self._prev_states: list = [None] * self.n

@@ -35,6 +35,8 @@ Byte encoding: see :mod:`pipeline.transport`.
 
 from __future__ import annotations
 
+import hashlib
+import struct
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
@@ -170,6 +172,14 @@ class Network(Transport):
     comm_edges : array_like, (E, 2) int
         Undirected communication edges ``(i, j)``.
     options : NetworkOptions or None
+    keyed_drops : bool
+        Decide each message's drop from ``(seed, sender, receiver, round, its number among
+        that sender's messages to that receiver in that round)`` alone, and deliver a round's
+        messages sender by sender (each sender's in its send order), instead of drawing the
+        drops from one generator in send order. Robots that send from threads of their own
+        (:class:`~pipeline.transport.local.LocalTeam`) send in an order no one chooses; keyed,
+        the same seed drops the same messages and fills the same inboxes whatever that order.
+        Off by default: a driver that sends in a fixed order keeps its drop draws.
 
     Notes
     -----
@@ -184,9 +194,13 @@ class Network(Transport):
     delivered_after_sender_crash : int — messages delivered after their sender crashed
     """
 
-    def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None) -> None:
+    def __init__(self, n: int, comm_edges, options: NetworkOptions | None = None, *,
+                 keyed_drops: bool = False) -> None:
         self.n = int(n)
         self.options = options or NetworkOptions()
+        self.keyed_drops = bool(keyed_drops)
+        # keyed drops: (src, dst) -> (round, messages sent on that link in that round so far)
+        self._link_sent: dict[tuple[int, int], tuple[int, int]] = {}
         _check_crashed_robots(self.options, self.n)
         self._initial_edges = [tuple(map(int, e)) for e in np.asarray(comm_edges).reshape(-1, 2)]
         self._nbrs = neighbour_table(self._initial_edges, self.n)
@@ -296,10 +310,21 @@ class Network(Transport):
         if not self.alive(src) or not self.alive(dst):
             self.dropped += 1
             return
-        if opts.drop_probability > 0.0 and self._rng.random() < opts.drop_probability:
+        if opts.drop_probability > 0.0 and self._draw(msg) < opts.drop_probability:
             self.dropped += 1
             return
         self._outbox.setdefault(self.round + 1 + int(opts.delay_rounds), []).append(msg)
+
+    def _draw(self, msg: Message) -> float:
+        """The uniform draw in [0, 1) that decides whether ``msg`` is dropped."""
+        if not self.keyed_drops:
+            return float(self._rng.random())
+        link = (msg.src, msg.dst)
+        t, k = self._link_sent.get(link, (self.round, 0))
+        k = k if t == self.round else 0
+        self._link_sent[link] = (self.round, k + 1)
+        key = struct.pack("<5Q", int(self.options.seed), msg.src, msg.dst, self.round, k)
+        return int.from_bytes(hashlib.blake2b(key, digest_size=8).digest(), "little") / 2.0**64
 
     def inbox(self, i: int) -> list[Message]:
         """Messages delivered to robot ``i`` at the start of the current round."""
@@ -314,6 +339,8 @@ class Network(Transport):
         self._round += 1
         self._apply_topology()
         due = self._outbox.pop(self.round, [])
+        if self.keyed_drops:
+            due.sort(key=lambda m: m.src)  # stable: each sender's messages in its send order
         # fresh lists for the inboxes that held messages (a caller may keep the old one);
         # the others are empty already: a round with little traffic costs what it carries
         for i in self._filled:
