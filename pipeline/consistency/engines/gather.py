@@ -46,7 +46,8 @@ class RootSolution:
     ``links`` (E,) the indices of the solved links in the caller's link arrays, grouped by
     set; ``set_of`` (E,) each link's set; ``a``, ``b`` (E,) its ends (smaller first);
     ``cut`` (E,) bool; ``sets`` the solved sets, ascending; ``rounds``, ``messages``,
-    ``nbytes`` of the gathering; ``held`` (cameras,) the bundle bytes each camera holds."""
+    ``nbytes`` of the gathering; ``held`` (cameras,) the bundle bytes each camera holds at most:
+    the sum over the sets it has a feature in of the set's bundle bytes, each set once."""
 
     links: np.ndarray
     set_of: np.ndarray
@@ -131,7 +132,10 @@ def solve_at_roots(sub, cam, a_all, b_all, q_all, on, comp, kp, P_cam, unposed, 
     msgs = int(f_dist.sum() + (members - 1).sum())
     nbytes = int((f_bytes * f_dist).sum() + (16 * cuts_c * (members - 1)).sum()) \
         + HEADER_BYTES * msgs
-    held = np.bincount(cam[f_set[:, 1]], weights=bundle_c[f_c], minlength=n_cams)
+    # a camera holds at most its set's bundles, once per set however many of its features
+    # the set has (a conflictive set may have two of one image)
+    cam_set = np.unique(np.stack([cam[f_set[:, 1]], f_c], axis=1), axis=0).reshape(-1, 2)
+    held = np.bincount(cam_set[:, 0], weights=bundle_c[cam_set[:, 1]], minlength=n_cams)
     return RootSolution(links=ks, set_of=lc, a=a, b=b, cut=cut, sets=c_w, rounds=rounds,
                         messages=msgs, nbytes=nbytes, held=held)
 
