@@ -54,7 +54,9 @@ def _on_interrupt(signum, frame) -> None:
     KeyboardInterrupt), which also records that a Ctrl-C arrived. A C extension interrupted
     while it loads may drop the KeyboardInterrupt and raise an unrelated error with no link to
     it (NumPy: ``ImportError: PyCapsule_Import could not import module "datetime"``); the
-    record still tells :func:`caused_by_interrupt` why."""
+    record still tells :func:`caused_by_interrupt` why. Python may also drop the exception
+    altogether (a handler that runs within a call whose error it clears); the record then
+    tells :func:`run_interruptibly` that the command was interrupted."""
     global _interrupt_arrived
     _interrupt_arrived = True
     raise KeyboardInterrupt
@@ -206,10 +208,13 @@ def run_interruptibly(command: str, run) -> int:
     """``run()``'s exit code; a Ctrl-C while it runs (also one a library turned into another
     exception) ends it with :func:`report_interrupt`'s line and exit code 130; a SIGTERM or a
     SIGHUP (:func:`clean_up_on_terminate`) with the line ``terminated: …`` and 128 + the
-    signal, also one whose exception was dropped on the way (the command then ran to its end:
-    the line names its outputs, all in place and complete)."""
-    global _terminate_arrived
+    signal. Either, also one whose exception was dropped on the way (Python drops what a
+    handler raises within some of its own calls; the Ctrl-C is known from the record of
+    :func:`exit_quietly_on_interrupt`'s handler): the command then ran to its end, and the line
+    names its outputs, all in place and complete."""
+    global _terminate_arrived, _interrupt_arrived
     _terminate_arrived = None
+    _interrupt_arrived = False
     try:
         code = run()
     except KeyboardInterrupt:
@@ -224,6 +229,8 @@ def run_interruptibly(command: str, run) -> int:
         raise
     if _terminate_arrived is not None:
         return report_interrupt(command, "terminated", 128 + _terminate_arrived)
+    if _interrupt_arrived:  # a Ctrl-C whose KeyboardInterrupt was dropped on the way
+        return report_interrupt(command)
     return code
 
 
