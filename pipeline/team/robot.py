@@ -628,28 +628,142 @@ def _robot_history(team, i: int, robot, transport, protocol, arrays: dict) -> di
     history`), on the robot's own inputs (its file of ``data.history``); the links it cuts go
     to ``arrays['history_cut']``. Returns its rounds and phases."""
     from pipeline.consistency.alone import run_history_locally
-    from pipeline.consistency.history import equip_history
 
-    equip_history(robot, load_history_inputs(team.resolve_path(team.data["history"][i]), i))
+    equip_history_file(robot, team.resolve_path(team.data["history"][i]), i)
     hrun = run_history_locally(robot, transport, protocol, team.n)
     arrays["history_cut"] = np.asarray(sorted(robot.history.cut), np.int64)
     return {"rounds": int(hrun.detection_rounds + hrun.resolution_rounds),
             "phases": hrun.phases}
 
 
+def _history_where(path, i: int) -> str:
+    return f"robot {i}: data.history[{i}] {path}"
+
+
+_HISTORY_WRITER = "the online stage writes one per robot (pipeline.runs.transports.zenoh.online_stage)"
+
+#: the arrays of a history file by group (the arrays of a group have one length each) and
+#: what each holds: ``"id"`` whole numbers >= 0, ``"id-1"`` whole numbers >= -1 (a row's link
+#: id, -1: a history link), ``"quality"`` finite numbers, ``"flag"`` true/false values
+_HISTORY_ARRAYS = {
+    "row": {"row_nbr": "id", "row_s": "id", "row_id": "id-1", "row_quality": "quality",
+            "row_hist": "flag"},
+    "border": {"border_r": "id", "border_piece": "id", "border_id": "id",
+               "border_quality": "quality", "border_head": "flag"},
+    "entry": {"entry_piece": "id", "entry_robot": "id", "entry_lo": "id", "entry_hi": "id"},
+}
+_HISTORY_WHAT = {"id": "whole numbers >= 0", "id-1": "whole numbers >= -1 (-1: a history link)",
+                 "quality": "finite numbers", "flag": "true/false values"}
+
+
+def _history_array_ok(a: np.ndarray, what: str) -> bool:
+    """Whether ``a`` (1-D) holds what ``what`` says (:data:`_HISTORY_ARRAYS`)."""
+    if a.size == 0:  # an empty array of any plain kind (np.array([]) is float64)
+        return a.dtype.kind in "biuf"
+    if what == "flag":
+        return a.dtype.kind == "b"
+    if what == "quality":
+        return a.dtype.kind in "iuf" and bool(np.isfinite(a).all())
+    if a.dtype.kind not in "iu":
+        return False
+    lo = -1 if what == "id-1" else 0
+    return bool(a.min() >= lo) and int(a.max()) <= np.iinfo(np.int64).max
+
+
+def _checked_history_arrays(f, where: str) -> dict:
+    """The arrays of an opened history file, after checking each one's shape, dtype and
+    values and the lengths of each group (:data:`_HISTORY_ARRAYS`); InputError naming the
+    array otherwise."""
+    missing = [k for k in ("head", *(k for g in _HISTORY_ARRAYS.values() for k in g))
+               if k not in f.files]
+    if missing:
+        raise InputError(f"{where} is not a history file of an online step: it has no array "
+                         f"{missing[0]!r}; {_HISTORY_WRITER}")
+    out = {}
+    head = f["head"]
+    if head.shape != (3,) or head.dtype.kind not in "iu" or (head < 0).any():
+        shown = head.tolist() if head.size <= 6 else f"an array of shape {head.shape}"
+        raise InputError(f"{where}: head {shown} ({head.dtype}) is not three whole numbers >= 0 "
+                         f"(first global id, robot, step); {_HISTORY_WRITER}")
+    out["head"] = head
+    for group, names in _HISTORY_ARRAYS.items():
+        length = None
+        for k, what in names.items():
+            a = f[k]
+            if a.ndim != 1 or not _history_array_ok(a, what):
+                shape = f"shape {a.shape}, dtype {a.dtype}"
+                raise InputError(f"{where}: array {k!r} ({shape}) is not a list of "
+                                 f"{_HISTORY_WHAT[what]}; {_HISTORY_WRITER}")
+            if length is None:
+                length, first = len(a), k
+            elif len(a) != length:
+                raise InputError(f"{where}: array {k!r} has {len(a)} entries, {first!r} "
+                                 f"{length}: the {group} arrays go together, one entry each; "
+                                 f"{_HISTORY_WRITER}")
+            out[k] = a
+    return out
+
+
 def load_history_inputs(path, i: int):
     """Robot ``i``'s inputs of an online step's history check from its file (``data.history``
     of the team file, :class:`pipeline.consistency.history.HistoryInputs` as named arrays).
-    Raises InputError naming the file when it is not one."""
+
+    Raises
+    ------
+    InputError
+        Naming the file: not a NumPy ``.npz`` archive (or one holding pickled objects), an
+        array missing; naming the array: ``head`` not three whole numbers >= 0; a row,
+        border or entry array not 1-D, of another kind than it holds (link ids, feature ids,
+        pieces, robots, steps: whole numbers >= 0, a row's link id >= -1; qualities: finite
+        numbers; ``row_hist``, ``border_head``: true/false values), or of another length
+        than the first array of its group.
+    """
+    import zipfile
+    import zlib
+
     from pipeline.consistency.history import HistoryInputs
 
+    where = _history_where(path, i)
     try:
-        with np.load(path) as f:
-            return HistoryInputs.from_arrays(f)
-    except (OSError, KeyError, ValueError, IndexError) as e:
-        raise InputError(f"robot {i}: data.history[{i}] {path} is not a history file of an "
-                         f"online step ({type(e).__name__}: {e}); the online stage writes "
-                         "one per robot (pipeline.runs.transports.zenoh.online_stage)") from e
+        f = np.load(path, allow_pickle=False)
+        if not isinstance(f, np.lib.npyio.NpzFile):  # a plain .npy file: one array
+            raise ValueError("one array (.npy), not an archive of arrays (.npz)")
+        with f:
+            arrays = _checked_history_arrays(f, where)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(f"{where} is not a history file of an online step "
+                         f"({type(e).__name__}: {e}); {_HISTORY_WRITER}") from e
+    return HistoryInputs.from_arrays(arrays)
+
+
+def equip_history_file(robot, path, i: int) -> None:
+    """Give ``robot`` (robot ``i``) its inputs of the history check from its file
+    (:func:`load_history_inputs`); InputError naming the file when they do not fit its link
+    table (a row it does not hold, a row of it left out) or name a feature it does not have
+    (``border_r``)."""
+    from pipeline.consistency.history import equip_history
+    from pipeline.progress import counted
+
+    inp = load_history_inputs(path, i)
+    where = _history_where(path, i)
+    br = np.asarray(inp.border_r)
+    if br.size and int(br.max()) >= robot.m:
+        raise InputError(f"{where}: array 'border_r' names feature {int(br.max())}, robot {i} "
+                         f"has {counted(robot.m, 'feature')}; {_HISTORY_WRITER}")
+    nbr, s_ = np.asarray(inp.row_nbr, np.int64), np.asarray(inp.row_s, np.int64)
+    pos = robot.find_links(nbr, s_)
+    if (pos < 0).any():
+        k = int(np.flatnonzero(pos < 0)[0])
+        raise InputError(f"{where}: row {k} (arrays 'row_nbr', 'row_s': neighbour {nbr[k]}, "
+                         f"its feature {s_[k]}) is no link of robot {i}; {_HISTORY_WRITER}")
+    if len(np.unique(pos)) != len(pos) or len(pos) != len(robot.link_key):
+        raise InputError(f"{where}: arrays 'row_nbr', 'row_s' name {counted(len(pos), 'row')} "
+                         f"({counted(len(np.unique(pos)), 'link')} of robot {i}), its link "
+                         f"table holds {counted(len(robot.link_key), 'link')}, one row each; "
+                         f"{_HISTORY_WRITER}")
+    equip_history(robot, inp)
 
 
 def _robot_fusion(team, i: int, robot, run, transport, keypoints, pose, arrays: dict,

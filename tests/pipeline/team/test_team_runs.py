@@ -646,5 +646,5 @@ def test_a_history_file_that_is_not_one_is_a_one_line_error(tmp_path):
         load_history_inputs(bad, 3)
     assert "\n" not in str(e.value)
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
-    with pytest.raises(InputError, match="KeyError"):
+    with pytest.raises(InputError, match="no array 'head'"):
         load_history_inputs(tmp_path / "other.npz", 0)
