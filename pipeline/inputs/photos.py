@@ -78,6 +78,13 @@ FILE_HEADROOM_BYTES = 16 * 2**20
 #: centre is warned (a calibrated lens has it within a few percent): the usual cause is a
 #: K.txt of the full-resolution photos beside resized copies.
 OFF_CENTRE = 0.2
+#: A K.txt whose skew ``K[0, 1]`` exceeds this fraction of ``fx`` is refused. The skew is
+#: ``fx cot(theta)``, ``theta`` the angle between the sensor's pixel axes: 0 on any modern
+#: camera, and COLMAP's and OpenCV's pinhole models have none (the COLMAP stages leave it
+#: out). 0.1 is axes more than 5.7 degrees from square, which no sensor has: such a value is
+#: a number in the wrong place of the matrix (``cx`` written where the skew goes) or another
+#: unit. A calibration that estimated a skew gives a fraction of a percent of ``fx``.
+MAX_SKEW_FRACTION = 0.1
 #: Deeper-than-8-bit pixels are stretched to 0..255 up to this percentile of their values
 #: (:func:`_to_uint8`): the brightest 0.1 % (hot or saturated pixels) saturate instead of
 #: setting the scale of the whole image.
@@ -396,7 +403,8 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     """Read pinhole intrinsics from a text file.
 
     Accepted layouts: the 3x3 matrix ``fx 0 cx / 0 fy cy / 0 0 1`` (the Sceaux ``K.txt``;
-    a skew in ``K[0, 1]`` is kept), or the four numbers ``fx fy cx cy`` on one line.
+    a skew ``s`` in ``K[0, 1]`` with ``|s| <= MAX_SKEW_FRACTION * fx`` (0.1) is kept), or the
+    four numbers ``fx fy cx cy`` on one line.
     Separators may be spaces, tabs or commas; ``#`` starts a comment.
 
     Returns
@@ -407,7 +415,10 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     ------
     InputError
         The file is missing, does not hold 9 or 4 numbers, the last row is not ``0 0 1``,
-        ``K[1, 0]`` is not 0, or a focal length is not positive.
+        ``K[1, 0]`` is not 0, a focal length is not positive, or the skew ``K[0, 1]`` is
+        larger than :data:`MAX_SKEW_FRACTION` times ``fx`` (the COLMAP stages, whose pinhole
+        has no skew, would leave out what the others use: pixel axes that far from square
+        are a number in the wrong place).
     """
     path = Path(path)
     if path.is_dir():
@@ -446,6 +457,13 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"intrinsics file {str(path)!r}: focal lengths must be positive, got "
                          f"fx={K[0, 0]}, fy={K[1, 1]}")
+    skew = K[0, 1]
+    if abs(skew) > MAX_SKEW_FRACTION * K[0, 0]:
+        raise InputError(
+            f"intrinsics file {str(path)!r}: skew K[0, 1] = {skew:g} is {abs(skew) / K[0, 0]:.3g} "
+            f"x fx ({K[0, 0]:g}); a camera's skew is 0 (COLMAP's and OpenCV's pinhole have "
+            f"none), at most {MAX_SKEW_FRACTION:g} x fx is accepted: give the matrix "
+            "'fx 0 cx / 0 fy cy / 0 0 1'")
     return K
 
 
