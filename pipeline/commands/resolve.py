@@ -29,7 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "header optional), or a run-output links.csv (e.g. this command's own "
                         "output: deleted rows stay deleted); never modified")
     p.add_argument("--out", required=True, metavar="OUT.csv",
-                   help="links.csv to write: cam_i,feat_i,cam_j,feat_j,status,reason,round,truth")
+                   help="links.csv to write: cam_i,feat_i,cam_j,feat_j,status,reason,round,truth"
+                        "[,quality] (the input's quality, if it has one)")
     p.add_argument("--comm-graph", default=None, metavar="EDGES.csv",
                    help="communication graph, rows cam_i,cam_j (default: cameras sharing a "
                         "link are neighbours)")

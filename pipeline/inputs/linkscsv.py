@@ -12,7 +12,8 @@ swapping its two ends (docs/DESIGN.md: each undirected link is stored once with 
 
 Output (``write_links_csv``): the ``links.csv`` of docs/DESIGN.md "Run outputs", header
 ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``, written atomically (temp file in the
-same folder, then ``os.replace``).
+same folder, then ``os.replace``); with ``quality=True`` (``resolve`` of a links file that has
+a quality column) a last column ``quality`` too, which both readers read back.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from pipeline.types import LinkLedger, Links
 __all__ = [
     "LINK_COLUMNS",
     "RUN_LINK_COLUMNS",
+    "RUN_LINK_QUALITY_COLUMNS",
     "LinksFile",
     "read_links_csv",
     "features_per_camera_for",
@@ -44,6 +46,8 @@ __all__ = [
 
 LINK_COLUMNS = ("cam_i", "feat_i", "cam_j", "feat_j", "quality")
 RUN_LINK_COLUMNS = ("cam_i", "feat_i", "cam_j", "feat_j", "status", "reason", "round", "truth")
+#: the run-output columns with each link's quality last (``resolve`` keeps its input's)
+RUN_LINK_QUALITY_COLUMNS = (*RUN_LINK_COLUMNS, "quality")
 
 
 @dataclass
@@ -213,8 +217,9 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     Parameters
     ----------
     path : path to a CSV with rows ``cam_i,feat_i,cam_j,feat_j[,quality]``, or a run-output
-        ``links.csv`` (header ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``), whose
-        status, reason and round are returned too
+        ``links.csv`` (header ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``, and
+        ``,quality`` where ``resolve`` kept its input's), whose status, reason and round are
+        returned too
 
     Returns
     -------
@@ -244,12 +249,17 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     lines, raws, vals, quals = [], [], [], []
     run_cols: list[tuple[str, str, int]] = []
     ncols = None
+    run_width = None  # the columns of a run-output links.csv: 8, or 9 with quality
     first = True
     for lineno, fields, raw in _rows(path):
         if first:
             first = False
-            if tuple(f.lower() for f in fields) == RUN_LINK_COLUMNS:
-                ncols = len(RUN_LINK_COLUMNS)  # a run-output links.csv, e.g. resolve's own
+            header = tuple(f.lower() for f in fields)
+            if header in (RUN_LINK_COLUMNS, RUN_LINK_QUALITY_COLUMNS):
+                # a run-output links.csv, e.g. resolve's own: read as a links file of 4
+                # columns, or 5 with its quality
+                run_width = len(header)
+                ncols = 5 if header == RUN_LINK_QUALITY_COLUMNS else 4
                 continue
             if any(f.lower() in LINK_COLUMNS for f in fields):  # a header, in some order
                 if tuple(f.lower() for f in fields) not in (LINK_COLUMNS[:4], LINK_COLUMNS):
@@ -257,10 +267,11 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                                      f"'cam_i,feat_i,cam_j,feat_j' or with ',quality'")
                 ncols = len(fields)
                 continue
-        if ncols == len(RUN_LINK_COLUMNS):
-            if len(fields) != ncols:
+        if run_width is not None:
+            if len(fields) != run_width:
+                names = RUN_LINK_QUALITY_COLUMNS[:run_width]
                 raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; the "
-                                 f"header names {ncols} ({','.join(RUN_LINK_COLUMNS)})")
+                                 f"header names {run_width} ({','.join(names)})")
             if fields[4] not in ("kept", "deleted"):
                 raise InputError(f"{path}:{lineno}: {raw!r}: status {fields[4]!r} is not "
                                  "'kept' or 'deleted'")
@@ -270,7 +281,7 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                                  "(good), 0 (spurious) or empty")
             run_cols.append((fields[4], fields[5], rnd, -1 if fields[7] == "" else
                              int(fields[7])))
-            fields = fields[:4]
+            fields = fields[:4] + fields[8:]  # the ids, and the quality if the file has it
         elif len(fields) not in (4, 5):
             sep = next((f" (columns are separated by commas, not {name})"
                         for c, name in (("\t", "tabs"), (";", "semicolons"), (" ", "spaces"))
@@ -318,7 +329,7 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
                              "camera pair")
     quality = np.asarray(quals, dtype=np.float64) if ncols == 5 else None
     out = LinksFile(Links(ci, fi, cj, fj, quality), np.asarray(lines, dtype=np.int64), ncols == 5)
-    if ncols == len(RUN_LINK_COLUMNS):
+    if run_width is not None:
         st, rs, rd, tr = zip(*run_cols, strict=True) if run_cols else ((), (), (), ())
         out.status = np.asarray(st, dtype=object).astype(str)
         out.reason = np.asarray(rs, dtype=object).astype(str)
@@ -342,12 +353,14 @@ def features_per_camera_for(links: Links, n_cameras: int | None = None) -> np.nd
     return m
 
 
-def write_links_csv(path: str | os.PathLike, ledger: LinkLedger) -> Path:
+def write_links_csv(path: str | os.PathLike, ledger: LinkLedger, quality: bool = False) -> Path:
     """Write the run-output ``links.csv`` of ``ledger`` atomically (temp file, then
     ``os.replace``).
 
     Columns ``cam_i,feat_i,cam_j,feat_j,status,reason,round,truth``: a negative round is
-    written empty, and so is an unknown truth (``-1``, or ``ledger.truth`` is ``None``).
+    written empty, and so is an unknown truth (``-1``, or ``ledger.truth`` is ``None``). With
+    ``quality``, a last column ``quality``: each link's ``ledger.links.quality``, written so
+    that it reads back as the same float64 (``resolve`` keeps the quality of its input so).
 
     Returns
     -------
@@ -361,13 +374,15 @@ def write_links_csv(path: str | os.PathLike, ledger: LinkLedger) -> Path:
         else ledger.truth.astype(np.int64)
     round_s = np.where(round_ >= 0, round_.astype(str), "")
     truth_s = np.where(truth >= 0, truth.astype(str), "")
+    columns = [links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
+               links.feat_j.tolist(), ledger.status.astype(str).tolist(),
+               ledger.reason.astype(str).tolist(), round_s.tolist(), truth_s.tolist()]
+    if quality:  # repr: the shortest text that reads back as the same float
+        columns.append([repr(q) for q in np.asarray(links.quality, np.float64).tolist()])
     with atomic_file(path, newline="") as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(RUN_LINK_COLUMNS)
-        w.writerows(zip(links.cam_i.tolist(), links.feat_i.tolist(), links.cam_j.tolist(),
-                        links.feat_j.tolist(), ledger.status.astype(str).tolist(),
-                        ledger.reason.astype(str).tolist(), round_s.tolist(), truth_s.tolist(),
-                        strict=True))
+        w.writerow(RUN_LINK_QUALITY_COLUMNS if quality else RUN_LINK_COLUMNS)
+        w.writerows(zip(*columns, strict=True))
     return path
 
 
@@ -375,27 +390,39 @@ def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
     """Read a run-output ``links.csv`` back as a :class:`~pipeline.types.LinkLedger`.
 
     ``iteration`` and ``case`` are not stored in the file and read back as ``-1`` and ``''``;
-    ``truth`` and ``round`` read back as ``-1`` where empty; blank lines are skipped.
+    ``truth`` and ``round`` read back as ``-1`` where empty; blank lines are skipped. A last
+    column ``quality`` (``resolve`` of a links file with one) is read into the links'
+    quality; without it the quality is 1.
 
     Raises
     ------
     InputError
         Not the run header; a row with another number of columns than the header, an id or
         round that is not a whole number >= 0, a truth other than 1, 0 or empty, a status
-        other than ``kept`` or ``deleted`` (naming the file, the line and the value).
+        other than ``kept`` or ``deleted``, a quality that is not a finite number (naming the
+        file, the line and the value).
     """
     from pipeline.inputs.csvfields import csv_row, text_lines
 
     path = Path(path)
     rows = [(n, line, csv_row(line, f"{path}:{n}")) for n, line in text_lines(path, "links file")
             if line.strip()]
-    if not rows or tuple(rows[0][2]) != RUN_LINK_COLUMNS:
-        raise InputError(f"{path}: not a run links.csv (header must be {','.join(RUN_LINK_COLUMNS)})")
+    header = tuple(rows[0][2]) if rows else ()
+    if header not in (RUN_LINK_COLUMNS, RUN_LINK_QUALITY_COLUMNS):
+        raise InputError(f"{path}: not a run links.csv (header must be {','.join(RUN_LINK_COLUMNS)}"
+                         ", with ,quality last or without)")
     body = []
+    quals = []
     for lineno, raw, fields in rows[1:]:
-        if len(fields) != len(RUN_LINK_COLUMNS):
+        if len(fields) != len(header):
             raise InputError(f"{path}:{lineno}: {raw!r} has {len(fields)} columns; the header "
-                             f"names {len(RUN_LINK_COLUMNS)} ({','.join(RUN_LINK_COLUMNS)})")
+                             f"names {len(header)} ({','.join(header)})")
+        if len(header) > len(RUN_LINK_COLUMNS):
+            q = fields[8]
+            if not NUMBER.fullmatch(q) or not math.isfinite(float(q)):
+                raise InputError(f"{path}:{lineno}: {raw!r}: quality {q!r} is not a finite "
+                                 "number written in digits 0-9 (e.g. 0.75 or 1e-3)")
+            quals.append(float(q))
         ids = [_int_field(path, lineno, raw, name, v)
                for name, v in zip(RUN_LINK_COLUMNS[:4], fields[:4], strict=True)]
         rnd = "" if fields[6] == "" else str(_int_field(path, lineno, raw, "round", fields[6]))
@@ -409,7 +436,8 @@ def read_run_links_csv(path: str | os.PathLike) -> LinkLedger:
         return np.array([int(v) if v != "" else -1 for v in vals], dtype=np.int64)
 
     links = Links(ints(col["cam_i"]), ints(col["feat_i"]), ints(col["cam_j"]),
-                  ints(col["feat_j"]))
+                  ints(col["feat_j"]),
+                  np.asarray(quals, np.float64) if len(header) > len(RUN_LINK_COLUMNS) else None)
     try:
         return LinkLedger(links, np.array(col["status"], dtype=str),
                           np.array(col["reason"], dtype=str), ints(col["round"]),

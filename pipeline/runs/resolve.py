@@ -5,7 +5,8 @@ Makes a user's own links conflict-free with the distributed consistency stage (A
 al., Sec. III detection and Sec. IV Alg. 1 resolution, one robot per camera) and writes the
 run-output ``links.csv`` (docs/DESIGN.md): every input row once, ``status`` ``kept`` or
 ``deleted``, ``reason`` ``resolution`` for a cut link, the resolution ``round`` that cut it,
-``truth`` empty (unknown). Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
+``truth`` empty (unknown), and where the input has a quality column, each link's quality in a
+last column ``quality``. Input rows are ``cam_i,feat_i,cam_j,feat_j[,quality]``; without
 ``--comm-graph``, cameras that share a link are neighbours. A run-output ``links.csv`` (this
 command's own output, or a run folder's) is accepted as input too: its deleted rows are
 written back unchanged and its kept rows are made consistent.
@@ -156,7 +157,8 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
         full.status[old], full.reason[old], full.round[old] = "deleted", lf.reason[old], lf.round[old]
         ledger = full
     ledger.truth = lf.truth  # a run output's truth column goes through (file order)
-    write_links_csv(output_path(outputs, out_csv, "--out"), ledger)
+    # the input's quality goes through, a last column (the rows in file order)
+    write_links_csv(output_path(outputs, out_csv, "--out"), ledger, quality=lf.has_quality)
     st = res.stats
     summary = {
         # the cameras that appear (in a link or a comm edge), whatever the layout the robots
