@@ -348,6 +348,34 @@ def _deep_color_pixels(path: Path, im: Image.Image) -> np.ndarray:
     return _to_uint8(arr[..., 2::-1])  # BGR(A) -> RGB, alpha dropped
 
 
+def _decode(path: Path, im: Image.Image) -> np.ndarray:
+    """The pixels of ``im`` (opened by :func:`open_header`), decoded in full (a truncated
+    JPEG raises here, not later), and its frames counted (a TIFF reads its pages' headers).
+    Pillow's warnings meanwhile (a damaged EXIF block of a TIFF, a frame above Pillow's
+    decompression-bomb limit, ...) are said as one warning naming the file, as
+    :func:`open_header` says those of the header; other warnings are warned again as they
+    were."""
+    with _PILLOW_LIMIT, warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        deep = _deep_color(im)
+        im.load()
+        pixels = _pixels(im) if not deep else _deep_color_pixels(path, im)
+        getattr(im, "n_frames", 1)  # after the pixels: a TIFF seeks its pages to count them
+    pillow = str(Path(Image.__file__).parent)
+    notes = []
+    for w in said:
+        if str(w.filename).startswith(pillow):  # raised in Pillow's own code
+            notes.append(" ".join(str(w.message).split()).rstrip("."))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    notes = sorted(set(notes))
+    if notes:
+        log.warning("warning: %s", f"{path.name}: decoding it, Pillow warned: "
+                    f"{'; '.join(notes[:3])}{'; …' if len(notes) > 3 else ''}; the image as "
+                    "decoded is used")
+    return pixels
+
+
 def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     """Decode one image file completely.
 
@@ -359,6 +387,10 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
     -------
     pixels : ndarray, (H, W) uint8 gray or (H, W, 3) uint8 RGB, at full resolution
     header : PIL.Image.Image — the opened file (for EXIF); its pixel data is already loaded
+
+    Pillow's warnings while the header is read (:func:`open_header`) and while the pixels
+    are decoded (a damaged EXIF block of a TIFF, a frame above Pillow's decompression-bomb
+    limit, ...) are each said as one warning naming the file, never as Pillow's raw lines.
 
     Raises
     ------
@@ -374,9 +406,7 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
             raise InputError(f"{path.name}: the file is empty (0 bytes), not an image; remove or "
                              "replace it (an interrupted copy or download?)")
         im = open_header(path)
-        deep = _deep_color(im)
-        im.load()  # forces the full decode: a truncated JPEG raises here, not later
-        pixels = _pixels(im) if not deep else _deep_color_pixels(path, im)
+        pixels = _decode(path, im)
     except InputError:
         raise
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
