@@ -975,10 +975,11 @@ def publish_together():
     the block ends without error, each replacing its previous run; on an error or an interrupt
     inside, every staged folder is removed and no previous run is touched.
 
-    The swaps and the writers given to ``then`` run with SIGINT and SIGTERM held (in the main
-    thread): a signal that arrives then is acted on once all are in place — an interrupt, then
-    too late to stop anything, is reported and the command ends normally; a SIGTERM ends the
-    process as it would have.
+    The swaps and the writers given to ``then`` run with SIGINT, SIGTERM and SIGHUP held (in
+    the main thread): a signal that arrives then is acted on once all are in place — an
+    interrupt, then too late to stop anything, is reported and the command ends normally; a
+    SIGTERM or a SIGHUP (a closed terminal) is raised again, and ends the process as it would
+    have (or is ignored, where it was ignored: ``nohup``).
 
     Example
     -------
@@ -1008,25 +1009,31 @@ def publish_together():
             if signal.SIGINT in got:
                 print("interrupt received while the runs were put in place: they are complete",
                       file=sys.stderr)
-            if signal.SIGTERM in got:
-                signal.raise_signal(signal.SIGTERM)
+            for sig in _HELD[1:]:
+                if sig in got:
+                    signal.raise_signal(sig)
     finally:
         _together.remove(together)
         for tmp, _, _ in together.staged:  # not put in place: an error or an interrupt
             _remove_own(tmp)
 
 
+#: the signals :func:`publish_together` holds while the folders are put in place
+_HELD = (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP")
+                                          else ())
+
+
 @contextmanager
 def _held_signals():
-    """Hold SIGINT and SIGTERM for the block (main thread only); yields the set of those
-    that arrived, for the caller to act on after it."""
+    """Hold SIGINT, SIGTERM and SIGHUP for the block (main thread only); yields the set of
+    those that arrived, for the caller to act on after it."""
     got: set = set()
     if threading.current_thread() is not threading.main_thread():
         yield got
         return
     old = {}
     try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in _HELD:
             old[sig] = signal.signal(sig, lambda signum, frame: got.add(signum))
         yield got
     finally:
