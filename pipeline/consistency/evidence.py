@@ -81,7 +81,7 @@ __all__ = ["EvidenceState", "equip", "evidence_cut", "triangle_support", "common
            "node_cameras", "distinct_cameras", "one_point", "far_point", "start_evidence",
            "evidence_step", "run_evidence_resolution", "TRIANGLE_WEIGHT", "REPROJECTION_TOL_PX",
            "CASE_EVIDENCE", "start_evidence_reliable", "evidence_round",
-           "evidence_done",
+           "evidence_done", "lookups",
            "own_sets", "own_set_links", "bundle_nbytes", "set_links", "set_problem", "set_geometry",
            "solve_set", "solve_sets", "set_weights", "cut_own_side", "send_bundle_items", "read_bundle_items", "finish_evidence", "evidence_pass", "reexamine_sets"]
 
@@ -590,9 +590,18 @@ def set_problem(bundles: dict) -> tuple:
     """
     a, b, cam_a, cam_b, w = set_links(bundles)
     kp, P = set_geometry(bundles)
-    tau = triangle_support(a, b, node_cameras(a, b, cam_a, cam_b), kp, P)
-    w = w + TRIANGLE_WEIGHT * support_term(tau, shared_cameras(a, b, cam_a, cam_b), False)
-    return a, b, cam_a, cam_b, w, kp, P
+    return a, b, cam_a, cam_b, set_weights(a, b, cam_a, cam_b, w, *lookups(kp, P)), kp, P
+
+
+def lookups(keypoints: dict | None, projections: dict | None) -> tuple:
+    """``(keypoints, projections)`` dicts ``{gid -> ...}`` as the lookups
+    :func:`set_weights` takes (``ids -> (k, 2)``, ``ids -> (k, 3, 4)``), or ``(None, None)``."""
+    if keypoints is None or projections is None:
+        return None, None
+    ids = np.array(sorted(keypoints), np.int64)
+    kp = np.array([keypoints[g] for g in ids.tolist()], np.float64).reshape(-1, 2)
+    P = np.array([projections[g] for g in ids.tolist()], np.float64).reshape(-1, 3, 4)
+    return (lambda q: kp[np.searchsorted(ids, q)]), (lambda q: P[np.searchsorted(ids, q)])
 
 
 def set_geometry(bundles: dict) -> tuple[dict | None, dict | None]:
@@ -616,8 +625,9 @@ def solve_set(bundles: dict) -> tuple:
 
 def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
                 geometric=None, tol_px: float | None = None) -> np.ndarray:
-    """The evidence rule's link weights (:func:`set_problem`) of the links of several sets
-    at once.
+    """The evidence rule's link weights of the links of one set or of several sets at once:
+    every caller's (:func:`set_problem`, the robots' roots, the simulator's batched
+    solutions) is this one.
 
     Parameters
     ----------
@@ -636,9 +646,10 @@ def set_weights(a, b, cam_a, cam_b, local, keypoints=None, projections=None,
     cameras in which both ends match one common feature whose three observations are one
     point (:func:`triangle_support`; all common features
     where ``geometric`` is False), ``shared`` the third cameras both ends are linked into
-    (:func:`~pipeline.consistency.cycles.shared_cameras`). Each set's weights are those of
-    :func:`set_problem` on its bundles; the sets' triangles are listed at once and their
-    three-view points solved as one stack of SVDs (the rule solves one at a time).
+    (:func:`~pipeline.consistency.cycles.shared_cameras`). The sets' triangles are listed at
+    once and their three-view points solved as one stack of SVDs: each link's weight is what
+    :func:`triangle_support` on its own set gives (``tests/pipeline/consistency/engines/
+    test_gather.py`` checks it against that, set by set).
     """
     a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
     cam_a, cam_b = np.asarray(cam_a, np.int64), np.asarray(cam_b, np.int64)
@@ -679,13 +690,9 @@ def solve_sets(bundle_sets: list[dict]) -> list[tuple]:
     a, b, cam_a, cam_b, local = (np.concatenate([p[k] for p in parts]) for k in range(5))
     geometric = np.concatenate([np.full(p[0].size, p[5] is not None) for p in parts])
     posed = [p for p in parts if p[5] is not None]   # sets with the geometric test
-    ids = np.array([g for p in posed for g in p[5]], np.int64)
-    kp = np.array([p[5][g] for p in posed for g in p[5]], np.float64).reshape(-1, 2)
-    P = np.array([p[6][g] for p in posed for g in p[5]], np.float64).reshape(-1, 3, 4)
-    order = np.argsort(ids, kind="stable")
-    ids, kp, P = ids[order], kp[order], P[order]
-    w = set_weights(a, b, cam_a, cam_b, local, lambda q: kp[np.searchsorted(ids, q)],
-                    lambda q: P[np.searchsorted(ids, q)], geometric=geometric)
+    kp = {g: v for p in posed for g, v in p[5].items()}
+    P = {g: v for p in posed for g, v in p[6].items()}
+    w = set_weights(a, b, cam_a, cam_b, local, *lookups(kp, P), geometric=geometric)
     out, at = [], 0
     for sa, sb, sca, scb, _, skp, sP in parts:
         e = slice(at, at + sa.size)

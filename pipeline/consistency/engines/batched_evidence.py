@@ -68,19 +68,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.consistency.cycles import shared_cameras, support_term
 from pipeline.consistency.evidence import (
-    TRIANGLE_WEIGHT,
     EvidenceState,
     bundle_nbytes,
     cut_own_side,
     evidence_cut,
     finish_evidence,
-    node_cameras,
+    lookups,
     own_set_links,
     own_sets,
     set_geometry,
-    triangle_support,
+    set_weights,
 )
 from pipeline.consistency.evidence import (
     run_evidence_resolution as run_robot_by_robot,
@@ -270,9 +268,9 @@ class _SetProblems:
 
     Each set's links once, ordered by ``(lo, hi)`` (their ends' global ids), with the weight
     of the first bundle entry in the set's bundle order (ascending gid) and the triangle
-    support (:func:`.evidence.triangle_support`: third cameras of the common neighbours of
-    the two ends, among the set's links). The sets are disjoint, so the common neighbours
-    are found on all their links together. A set with known poses counts only the triangles
+    support (:func:`.evidence.set_weights`: third cameras of the common neighbours of the
+    two ends, among the set's links). The sets are disjoint, so the common neighbours are
+    found on all their links together. A set with known poses counts only the triangles
     that pass the three-view test, set by set (:meth:`weight`).
 
     Attributes
@@ -307,11 +305,7 @@ class _SetProblems:
         self.cam_a = np.searchsorted(offsets, self.a, side="right") - 1
         self.cam_b = np.searchsorted(offsets, self.b, side="right") - 1
         self.local = w
-        self.shared = shared_cameras(self.a, self.b, self.cam_a, self.cam_b)
-        self.w = w + TRIANGLE_WEIGHT * support_term(
-            triangle_support(self.a, self.b,
-                             node_cameras(self.a, self.b, self.cam_a, self.cam_b)),
-            self.shared, False)
+        self.w = set_weights(self.a, self.b, self.cam_a, self.cam_b, w)
 
     def of(self, label: int) -> slice:
         k = int(np.searchsorted(self.label, label))
@@ -322,10 +316,8 @@ class _SetProblems:
         with the set's geometry (:func:`.evidence.set_geometry`; ``None``: ``w[e]``)."""
         if keypoints is None or projections is None:
             return self.w[e]
-        a, b = self.a[e], self.b[e]
-        tau = triangle_support(a, b, node_cameras(a, b, self.cam_a[e], self.cam_b[e]),
-                               keypoints, projections)
-        return self.local[e] + TRIANGLE_WEIGHT * support_term(tau, self.shared[e], False)
+        return set_weights(self.a[e], self.b[e], self.cam_a[e], self.cam_b[e], self.local[e],
+                           *lookups(keypoints, projections))
 
 
 def run_evidence_resolution(robots: list[Robot], network: Transport,

@@ -12,8 +12,18 @@ from pipeline.consistency.evidence import set_weights
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=posed_streams(max_steps=1))
 def test_the_weights_of_several_sets_at_once_are_the_rules(data):
-    """set_weights on all the sets of a step equals the rule's set_problem on each set."""
-    from pipeline.consistency.evidence import set_problem
+    """set_weights on all the sets of a step equals, on each set, the rule's weight computed
+    from its bundles link by link: the local evidence plus TRIANGLE_WEIGHT times the support
+    term of the triangles triangle_support counts there (every caller's weights, set_problem's
+    included, are set_weights: this is the reference it is held to)."""
+    from pipeline.consistency.cycles import shared_cameras, support_term
+    from pipeline.consistency.evidence import (
+        TRIANGLE_WEIGHT,
+        node_cameras,
+        set_geometry,
+        set_links,
+        triangle_support,
+    )
     from pipeline.matching.link_evidence import ratio_llr
 
     window, hold, stream = data
@@ -35,7 +45,10 @@ def test_the_weights_of_several_sets_at_once_are_the_rules(data):
                                 directed=False)[1][a]
     for c in np.unique(comp).tolist():
         on = np.flatnonzero(comp == c)
-        ra, rb, _, _, w, _, _ = set_problem(_bundles(oa, a[on], b[on], local[on]))
+        bundles = _bundles(oa, a[on], b[on], local[on])
+        ra, rb, ca, cb, w0 = set_links(bundles)
+        tau = triangle_support(ra, rb, node_cameras(ra, rb, ca, cb), *set_geometry(bundles))
+        w = w0 + TRIANGLE_WEIGHT * support_term(tau, shared_cameras(ra, rb, ca, cb), False)
         order = np.lexsort((np.maximum(a[on], b[on]), np.minimum(a[on], b[on])))
         assert (ra == np.minimum(a[on], b[on])[order]).all()
         np.testing.assert_allclose(got[on][order], w, rtol=0, atol=1e-12)
