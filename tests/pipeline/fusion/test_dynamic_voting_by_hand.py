@@ -90,15 +90,16 @@ def test_every_round_of_dynamic_voting_follows_eqs_10_to_14(gate):
 
 
 def test_only_observing_robots_are_drawn_into_hypotheses():
-    observed = np.zeros((3, 6), bool)
+    observed = np.zeros((4, 6), bool)
     observed[0, [1, 4]] = True
     observed[1, :] = True
     observed[2, [0, 2, 3, 5]] = True
+    observed[3, 2] = True                    # one observer: fewer than c draws
     for seed in range(20):
         members, _ = choose_hypotheses(observed, EDGES, K=4, c=2, rng=seed)
         assert not (members & ~observed[..., None]).any()
-        # c = 2 members per hypothesis where at least two robots observe (a connected graph)
-        np.testing.assert_array_equal(members.sum(1), 2)
+        # min(c, observers) members per hypothesis (a connected graph)
+        np.testing.assert_array_equal(members.sum(1), [[2] * 4] * 3 + [[1] * 4])
 
 
 def test_given_members_that_do_not_observe_are_dropped():
