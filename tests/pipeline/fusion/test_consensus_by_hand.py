@@ -33,3 +33,17 @@ def test_message_bytes_follow_the_encoding():
     draws = np.random.default_rng(0).random((4, K))
     _, st = max_c_consensus(draws, edges, c=2, rounds=3)
     assert st.bytes == 3 * 2 * 3 * 8 * K * 2
+
+
+def test_ransac_count_is_the_smallest_that_reaches_the_success_exactly():
+    # (1 − p_in^c)^K <= 1 − success in exact rational arithmetic; 0.7 and 0.91 put the
+    # boundary exactly at K = 2 (the float quotient of the logarithms is 2.0000000000000004)
+    from fractions import Fraction
+
+    from pipeline.fusion.consensus import ransac_hypotheses
+
+    for p_in, c, success in [("0.7", 1, "0.91"), ("0.9", 1, "0.99"), ("0.5", 2, "0.9375"),
+                             ("0.6", 1, "0.99"), ("0.8", 3, "0.999")]:
+        bad, miss = 1 - Fraction(p_in) ** c, 1 - Fraction(success)
+        want = next(k for k in range(1, 1000) if bad ** k <= miss)
+        assert ransac_hypotheses(float(p_in), c, float(success)) == want
