@@ -15,11 +15,24 @@ ROOT = Path(__file__).resolve().parents[1]
                                  "runs/$(x) `y` \\z"])
 def test_make_view_passes_a_run_path_as_one_argument_as_typed(run):
     # a '$' was read by make ('runs/$HOME' became 'runs/OME'), a '"' or '`' by the shell
-    out = subprocess.run(["make", "-n", "-s", "view", f"RUN={run}", "STAMP=Makefile"],
+    out = subprocess.run(["make", "-n", "-s", "-o", ".venv/.installed", "view", f"RUN={run}"],
                          cwd=ROOT, capture_output=True, text=True, check=True).stdout
     line = [ln for ln in out.splitlines() if "viz.view" in ln][-1]
     args = shlex.split(line)
     assert args[args.index("viz.view") + 1:] == ([run] if run else [])
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
+def test_the_dry_run_of_make_view_leaves_the_makefile_of_a_tree_without_venv(tmp_path):
+    # the test above passed STAMP=Makefile to keep make from setting up: in a tree whose .venv
+    # is not its own (none, or one made for another folder), the Makefile's check removes the
+    # stamp, $(STAMP), at parse time, and so deleted the tracked Makefile
+    for name in ("Makefile", "pyproject.toml"):
+        shutil.copy(ROOT / name, tmp_path / name)
+    out = subprocess.run(["make", "-n", "-s", "-o", ".venv/.installed", "view", "RUN=runs/x"],
+                         cwd=tmp_path, capture_output=True, text=True, check=True).stdout
+    assert "viz.view runs/x" in out.replace("'", "")
+    assert (tmp_path / "Makefile").read_text() == (ROOT / "Makefile").read_text()
 
 
 @pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
