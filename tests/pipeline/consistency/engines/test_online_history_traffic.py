@@ -36,3 +36,7 @@ def test_the_robots_check_is_counted_once(counted):
     assert rec["messages"] == st["messages"] + 3 + rec["retire_bytes"] // LABEL_BYTES \
         + extra_messages
     assert rec["history_bytes"] == h["bytes"]
+    # its rounds follow the rule's, in the resolution phase
+    assert rec["history_rounds"] == h["rounds"] > 0
+    assert rec["resolution_rounds"] == st["resolution_rounds"] + h["rounds"]
+    assert rec["rounds"] == st["detection_rounds"] + rec["resolution_rounds"]
