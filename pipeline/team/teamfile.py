@@ -578,8 +578,8 @@ def _check_data(data: dict, n: int, where: str) -> None:
                                      "finite numbers or null")
                 if k is not None and not _pinhole(k):
                     raise InputError(f"{where}: data.intrinsics[{i}] K = {k} is not a pinhole "
-                                     "matrix with positive focal lengths (rows 'fx s cx', "
-                                     "'0 fy cy', '0 0 1', fx and fy > 0), as a K.txt gives it")
+                                     f"matrix with positive focal lengths ({_pinhole_rule()}), "
+                                     "as a K.txt gives it")
         known = data.get("intrinsics_known")
         if known is not None and not (isinstance(known, list) and len(known) == n
                                       and all(isinstance(v, bool) for v in known)):
@@ -638,10 +638,21 @@ def _check_data(data: dict, n: int, where: str) -> None:
 
 def _pinhole(K) -> bool:
     """``K`` (a 3x3 of finite numbers) is a pinhole matrix: rows ``fx s cx``, ``0 fy cy``,
-    ``0 0 1`` with ``fx, fy > 0`` (what :func:`pipeline.inputs.photos.read_k_txt` accepts)."""
+    ``0 0 1`` with ``fx, fy > 0`` and ``|s| <= MAX_SKEW_FRACTION * fx`` (what
+    :func:`pipeline.inputs.photos.read_k_txt` accepts)."""
+    from pipeline.inputs.photos import MAX_SKEW_FRACTION
+
     K = np.asarray(K, dtype=np.float64)
     return bool(np.allclose(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0.0 and K[0, 0] > 0
-                and K[1, 1] > 0)
+                and K[1, 1] > 0 and abs(K[0, 1]) <= MAX_SKEW_FRACTION * K[0, 0])
+
+
+def _pinhole_rule() -> str:
+    """What :func:`_pinhole` asks, in the words of the error that refuses a matrix."""
+    from pipeline.inputs.photos import MAX_SKEW_FRACTION
+
+    return (f"rows 'fx s cx', '0 fy cy', '0 0 1', fx and fy > 0, the skew |s| at most "
+            f"{MAX_SKEW_FRACTION:g} x fx")
 
 
 def _is_matrix(v, rows: int, cols: int) -> bool:
@@ -694,8 +705,8 @@ def _check_links_cameras(data: dict, n: int, where: str) -> None:
                                                 else "rotation (cam_from_world)"))
             if key == "K" and not _pinhole(c[key]):
                 raise InputError(f"{where}: data.cameras[{i}].K = {c[key]} is not a pinhole "
-                                 "matrix with positive focal lengths (rows 'fx s cx', "
-                                 "'0 fy cy', '0 0 1', fx and fy > 0), as a K.txt gives it")
+                                 f"matrix with positive focal lengths ({_pinhole_rule()}), as a "
+                                 "K.txt gives it")
         if not (isinstance(c["t"], list) and len(c["t"]) == 3 and all(map(_is_number, c["t"]))):
             raise InputError(f"{where}: data.cameras[{i}].t {c['t']!r} must be 3 finite numbers")
 
