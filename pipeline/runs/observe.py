@@ -10,7 +10,9 @@ the run folder the one-machine launcher (``--transport zenoh``) writes for the s
   on :func:`pipeline.runs.transports.zenoh.formation_of_run`). The run's settings are the team
   file's (``data`` and ``options``).
 * ``data.kind == "links"``: ``links.csv`` (every link a robot published, each once, sorted
-  by ``(cam_i, feat_i, cam_j, feat_j)``; ``status`` and ``reason`` from the robots' logs) and
+  by ``(cam_i, feat_i, cam_j, feat_j)``; ``status`` and ``reason`` from the robots' logs;
+  where the team's links file has a quality column, each link's quality last, as the robots
+  published it with their link tables) and
   ``report.json`` (``before`` and ``after`` conflict counts, the resolution's figures, the
   ``team`` section), as ``resolve`` writes them.
 * ``data.kind == "images"``: the run folder of ``run-images --transport zenoh`` (the pycolmap
@@ -123,7 +125,8 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
                                    robots.cleaning, timer, extra=robots.extra)
     if kind == "images":
         return _write_images_run(out, team, run, summary, rerun, timer, zenoh)
-    return _write_links_run(Path(out), team, zenoh.links_of_run(team, run), summary, timer)
+    return _write_links_run(Path(out), team, zenoh.links_of_run(team, run), summary, timer,
+                            quality=zenoh.links_quality_published(run))
 
 
 def images_config_of(team, out, rerun: bool = True):
@@ -161,8 +164,11 @@ def _write_images_run(out, team, run, summary: dict, rerun: bool, timer: StageTi
     return run_images(config, timer, loaded=(views, edges), robots_job=robots_job)
 
 
-def _write_links_run(out: Path, team, res, summary: dict, timer: StageTimer) -> Path:
-    """``links.csv`` and ``report.json`` of an observed ``links`` team (module docstring)."""
+def _write_links_run(out: Path, team, res, summary: dict, timer: StageTimer,
+                     quality: bool = False) -> Path:
+    """``links.csv`` and ``report.json`` of an observed ``links`` team (module docstring);
+    ``quality``: ``links.csv`` ends with each link's quality (the robots' links file has
+    one)."""
     from pipeline.association import AssociationGraph, count_conflicts
     from pipeline.consistency.rules import deleted_cases
     from pipeline.inputs.linkscsv import write_links_csv
@@ -186,7 +192,7 @@ def _write_links_run(out: Path, team, res, summary: dict, timer: StageTimer) -> 
         "faults": st.get("faults"), "team": summary}
     flag_result(report)
     with timer.stage("write", str(out)), atomic_run_folder(out) as tmp:
-        write_links_csv(tmp / "links.csv", ledger_from_consistency(res))
+        write_links_csv(tmp / "links.csv", ledger_from_consistency(res), quality=quality)
         report["timings_s"] = {k: round(v, 4) for k, v in timer.timings.items()}
         write_json_atomic(tmp / "report.json", report)
     return out

@@ -93,7 +93,8 @@ def peak_rss_bytes() -> int:
 
 def own_links_from_file(path, i: int, own_file: bool = False, rows: bool = False):
     """The rows of a links file that touch robot ``i``: ``(nbr, r, s, quality)`` arrays
-    (``rows``: and, last, each one's row index in the file).
+    (``rows``: and each one's row index in the file, then whether the file has a quality
+    column).
 
     ``own_file``: the file is robot ``i``'s own (``data.links`` lists one file per robot), so
     every row must touch it (InputError naming the first that does not: a file given to the
@@ -115,7 +116,8 @@ def own_links_from_file(path, i: int, own_file: bool = False, rows: bool = False
     r = np.concatenate([L.feat_i[a], L.feat_j[b]])
     s = np.concatenate([L.feat_j[a], L.feat_i[b]])
     quality = np.concatenate([L.quality[a], L.quality[b]]).astype(np.float64)
-    return (nbr, r, s, quality, np.concatenate([a, b])) if rows else (nbr, r, s, quality)
+    return (nbr, r, s, quality, np.concatenate([a, b]), bool(lf.has_quality)) if rows \
+        else (nbr, r, s, quality)
 
 
 def links_weights(team, i: int, n_rows: int) -> np.ndarray | None:
@@ -507,12 +509,14 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
     arrays: dict = {}
     matches_hdr = []
     keypoints, projection, pose = None, None, None
+    has_quality = False  # a links file with a quality column
     if team.data["kind"] == "links":
         from pipeline.matching.link_evidence import ratio_llr
 
         fpc = np.asarray(team.data["features_per_camera"], dtype=np.int64)
         path, own_file = links_file_of(team, i)
-        nbr, r, s, quality, rows = own_links_from_file(path, i, own_file, rows=True)
+        nbr, r, s, quality, rows, has_quality = own_links_from_file(path, i, own_file,
+                                                                     rows=True)
         given = links_weights(team, i, len(rows)) if own_file else None
         bad = np.flatnonzero(~np.isin(nbr, list(transport.neighbours)))
         if bad.size:
@@ -580,6 +584,10 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
             arrays[f"eperr_{k}"] = pm.epipolar_error.astype(np.float32)
     order = np.lexsort((s, nbr))  # the order of the Robot's link table
     robot = Robot(i, fpc, nbr[order], r[order], s[order])
+    if has_quality:
+        # the quality of each row of its link table, as its links file gives it: the
+        # observer's links.csv keeps it (pipeline.runs.observe), as resolve's does
+        arrays["link_quality"] = quality[order].astype(np.float64)
     wire = {"exchange": int(getattr(transport, "wire_bytes", 0))}
     resolution = robot_resolution(opts, lossy)
     rule = get_rule(resolution)

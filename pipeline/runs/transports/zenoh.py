@@ -47,7 +47,7 @@ from pipeline.team.launcher import (
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
            "online_stage", "online_fusion", "job_teams", "online_robots", "ZYGOTE_ENV",
-           "resolve_links_file",
+           "resolve_links_file", "links_quality_published",
            "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout",
            "TEAM_TIMEOUT_S"]
 
@@ -694,7 +694,9 @@ def links_of_run(team, run) -> ConsistencyResult:
     """The consistency stage of a ``links`` team observed by :mod:`pipeline.team.observe`:
     the links are those the robots published in their link tables (each link once, sorted
     by ``(cam_i, feat_i, cam_j, feat_j)``: the observer reads no links file), the decisions
-    those of their logs."""
+    those of their logs. Each link's quality is the one its robots published with their link
+    tables (``link_quality``, where their links file has a quality column,
+    :func:`links_quality_published`), else 1."""
     from pipeline.types import Links
 
     parts = []
@@ -702,13 +704,22 @@ def links_of_run(team, run) -> ConsistencyResult:
         nbr = a["link_nbr"].astype(np.int64)
         r, s = a["link_r"].astype(np.int64), a["link_s"].astype(np.int64)
         lo = i < nbr
+        q = a["link_quality"].astype(np.float64) if "link_quality" in a \
+            else np.ones(len(nbr))
         parts.append(Links(np.where(lo, i, nbr), np.where(lo, r, s), np.where(lo, nbr, i),
-                           np.where(lo, s, r)))
+                           np.where(lo, s, r), q))
     links = _union_links(parts)
     res = consistency_of_team(team, run.results, links, team.data["features_per_camera"],
                               run.killed)
     res.stats["team"] = team_summary(run)
     return res
+
+
+def links_quality_published(run) -> bool:
+    """Whether every robot of an observed ``links`` team that published gave its links'
+    quality (``link_quality``: its links file has a quality column), so that the links of
+    :func:`links_of_run` carry the file's quality."""
+    return bool(run.results) and all("link_quality" in a for _, a in run.results.values())
 
 
 #: the environment variable that says where the robots of an online run's teams are forked
