@@ -386,6 +386,8 @@ class TeamRun:
     status: dict = field(default_factory=dict)      # id -> last status line
     exit_codes: dict = field(default_factory=dict)  # id -> return code
     killed: dict = field(default_factory=dict)      # id -> monotonic time of the kill
+    #: id -> monotonic time of a ``kill -STOP`` (fault injection: ``kill`` with ``stop_s``)
+    frozen: dict = field(default_factory=dict)
     finished_at: dict = field(default_factory=dict)  # id -> monotonic time of the result
     wall_s: float = 0.0
     start_s: float = 0.0
@@ -456,7 +458,7 @@ class Observer:
 
 
 def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float | None = None,
-                kill: tuple[int, str, float] | None = None, log=None,
+                kill: tuple | None = None, log=None,
                 fork: bool = True, stop_at_loss: bool = False) -> TeamRun:
     """Run every robot of ``team`` as a process on this machine; return what they published.
 
@@ -467,7 +469,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     timeout_s : float or None — overall limit; the team is killed after it (None: the
         limit of the enclosing :func:`team_time_limit`, else :data:`TEAM_TIMEOUT_S`)
     kill : ``(robot, status, delay_s)`` or None — fault injection: ``kill -9`` of ``robot``
-        ``delay_s`` seconds after it published ``status`` (``started``, ``consistency``)
+        ``delay_s`` seconds after it published ``status`` (``started``, ``consistency``,
+        ``fusion``); ``(robot, status, delay_s, stop_s)``: ``kill -STOP`` instead, and
+        ``kill -CONT`` ``stop_s`` seconds later (a host suspended, or cut off for a while: its
+        process does not end, its neighbours write it off after their round timeout; the
+        robot is in :attr:`TeamRun.frozen`, not in :attr:`TeamRun.killed`)
     log : callable(str) or None
     fork : bool — fork the robots from one zygote that imported the robot program once
         (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
@@ -531,6 +537,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             old_handlers[sig] = signal.signal(sig, on_signal)
     zygote = None
     gone = threading.Event()  # the zygote's lines ended
+    over = threading.Event()  # the team ended: a robot frozen by ``kill`` is not woken
     shared, tag = (_within["zygote"] if fork else None), None
     try:
         if workdir is None:
@@ -595,17 +602,25 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                                     + ("" if code is None else f" with exit code {code}")
                                     + f" {when}; nothing was kept: run again"
                                     + (f" ({why})" if why else ""))
-                if kill is not None and kill[0] not in run.killed and kill[0] in procs:
-                    k, status, delay = kill
+                if kill is not None and kill[0] not in run.killed and kill[0] not in run.frozen \
+                        and kill[0] in procs:
+                    k, status, delay = kill[:3]
                     if status in observer.seen.get(k, ()):
                         observer.cv.release()
                         try:
                             time.sleep(delay)
-                            os.kill(procs[k].pid, signal.SIGKILL)
+                            if len(kill) > 3:
+                                _freeze(procs[k], float(kill[3]), over)
+                            else:
+                                os.kill(procs[k].pid, signal.SIGKILL)
                         finally:
                             observer.cv.acquire()
-                        run.killed[k] = time.monotonic()
-                        log(f"kill -9 robot {k} (pid {procs[k].pid})")
+                        if len(kill) > 3:
+                            run.frozen[k] = time.monotonic()
+                            log(f"kill -STOP robot {k} (pid {procs[k].pid}) for {kill[3]:g} s")
+                        else:
+                            run.killed[k] = time.monotonic()
+                            log(f"kill -9 robot {k} (pid {procs[k].pid})")
                 failed = [i for i, c in run.exit_codes.items()
                           if c not in (0, -signal.SIGKILL) and i not in observer.results]
                 if failed:
@@ -656,6 +671,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         stopping["now"] = True
         if shared is not None and tag is not None:
             shared.end_team(tag)
+        over.set()
         kill_all()
         if shared is not None:
             # the zygote serves the next team: this team's robots only, reaped by it
@@ -685,6 +701,19 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             signal.signal(sig, h)
         if stopping["pending"] is not None:
             raise interrupt(stopping["pending"])
+
+
+def _freeze(proc, stop_s: float, over: threading.Event) -> None:
+    """``kill -STOP`` of a robot process, and ``kill -CONT`` ``stop_s`` seconds later unless
+    its team ended first (its robots are killed then, and its pid may be another's)."""
+    os.kill(proc.pid, signal.SIGSTOP)
+
+    def wake() -> None:
+        if not over.wait(stop_s) and proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(proc.pid, signal.SIGCONT)
+
+    threading.Thread(target=wake, daemon=True).start()
 
 
 def _tail(path: Path, lines: int = 1) -> str:
