@@ -620,7 +620,8 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
     InputError
         A view without a pose.
     RobotsLost
-        A robot did not publish (its process ended or was killed), named in ``cameras``.
+        A robot did not publish (its process ended or was killed) or its neighbours wrote it
+        off (it fell silent), named in ``cameras``.
     TeamError
         The detection cut a link (the links were not conflict-free), or a robot named a track
         otherwise than ``track_labels``.
@@ -644,12 +645,16 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
                 "cameras": cameras}
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
         run = launch_team(team, work, kill=kill, stop_at_loss=True)
-    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}) \
+    res = consistency_of_team(team, run.results, links, m, run.killed) \
+        if run.stopped_at is None else None
+    # a robot whose process ran on but fell silent (a host suspended or cut off) is written
+    # off by its neighbours, who name it: their naming cut its links robot-lost
+    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}
+                  | {int(k) for k in res.stats["faults"]["robots_lost"]}) \
         if run.stopped_at is None else sorted({run.stopped_at} | {int(k) for k in run.killed})
     if lost:
         raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
-                         "publish a result", lost)
-    res = consistency_of_team(team, run.results, links, m, run.killed)
+                         "publish a result, or its neighbours wrote it off", lost)
     if res.deleted.any():
         k = int(np.flatnonzero(res.deleted)[0])
         raise TeamError(f"the fusion team's detection cut link ({links.cam_i[k]},"

@@ -1,0 +1,61 @@
+"""An online step's team over Zenoh with a robot process FROZEN (``kill -STOP``, then
+``kill -CONT`` after longer than the round timeout: a host suspended or cut off for a
+while). Its process does not end, so the team is not stopped at once: its neighbours write
+it off, and the step must still start the team again as for a lost process, never stop the
+run."""
+
+import copy
+
+import numpy as np
+import pytest
+
+import pipeline.runs.transports.zenoh as zenoh
+from pipeline.runs.online import _fuse_changed, associate_online
+from pipeline.runs.transports import get_transport
+from pipeline.team.launcher import team_round_timeout
+
+ROUND_TIMEOUT_S = 2.0
+STOP_S = 8.0  # past the round timeout: the neighbours write the frozen robot off
+
+
+@pytest.fixture(scope="module")
+def one_step():
+    """Step 0 of formation a on the simulator: its online record, views and features."""
+    from data_synth.motion import render_motion
+    from pipeline.progress import StageTimer
+
+    seq = render_motion("a", 0, 1, (160, 120), window=2)
+    run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, 2, "evidence",
+                           StageTimer(verbose=False), max_features=120, fusion=False)
+    return run.online, seq.flat.views, run.features
+
+
+def _freezing(job, calls, frozen):
+    """``job`` with its robot ``frozen`` stopped as soon as it publishes ``consistency`` (the
+    start of its consistency stage), on its calls numbered in ``calls``."""
+    seen = []
+
+    def wrapped(*args, **kw):
+        seen.append(1)
+        if len(seen) - 1 in calls:
+            kw["kill"] = (frozen, "consistency", 0.0, STOP_S)
+        return job(*args, **kw)
+
+    return wrapped
+
+
+def test_a_fusion_robot_frozen_is_written_off_and_the_fusion_started_again(one_step):
+    oa, views, features = one_step
+    sim = get_transport("sim").load().online_fusion
+    want_oa, got_oa = copy.deepcopy(oa), copy.deepcopy(oa)
+    want = _fuse_changed(want_oa, views, features, sim)
+    with team_round_timeout(ROUND_TIMEOUT_S):
+        got = _fuse_changed(got_oa, views, features,
+                            _freezing(zenoh.online_fusion, {0}, frozen=1))
+    # it stopped the run before ("the fusion team's detection cut link ...: the links
+    # handed to fusion must be conflict-free"): the frozen robot's neighbours had cut its
+    # links robot-lost in their naming of the tracks
+    assert len(got["frames_lost"]) == 1 and got["frames_left_out"] == []
+    assert (got["cut"], got["tracks"]) == (want["cut"], want["tracks"])
+    assert np.array_equal(got_oa.links.kept, want_oa.links.kept)
+    assert np.array_equal(got_oa.links.reason, want_oa.links.reason)
