@@ -41,7 +41,7 @@ from pipeline.consistency.sync_alone import run_sync_locally
 from pipeline.consistency.wave import CONFLICT, LOST, RobotRun, TerminationWave, run_wave_phase
 
 __all__ = ["DETECTIONS", "ALG1", "LARGE", "run_loop_locally", "run_paper_labels_locally",
-           "run_evidence_locally", "run_history_locally"]
+           "run_evidence_locally", "run_history_locally", "LostInPhase"]
 
 #: the detections a robot alone can run: ``(start, round, done)`` over the reliable channel
 DETECTIONS = {
@@ -155,6 +155,18 @@ def run_paper_labels_locally(robot: Robot, transport, protocol: ProtocolOptions 
 LARGE = 4
 
 
+class LostInPhase(RuntimeError):
+    """A robot was lost in a phase whose work a loss leaves undone (the sets solved at their
+    roots, the history check): ``run`` is the robot's run log up to there (its
+    ``lost_neighbours`` name the lost). A robot whose team is started again on a loss
+    (option ``restarted_on_loss``, :mod:`pipeline.team.robot`) publishes it; else the
+    robot fails with it."""
+
+    def __init__(self, message: str, run) -> None:
+        super().__init__(message)
+        self.run = run
+
+
 def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | None = None,
                          n_robots: int | None = None) -> RobotRun:
     """The ``evidence`` rule for a robot alone: the phases of the simulator's stage
@@ -225,6 +237,8 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
     log.repeated_detections = restarts
     ev = robot.evidence
     if ev.gather_free or (ev.gather_conflictive and bits & CONFLICT):
+        if hasattr(transport, "status"):  # to the observer (a launcher's fault injection)
+            transport.status("roots")
         t, rbits, begin = run.phase(
             "roots", lambda rb, send: start_roots(rb, send),
             lambda rb, msgs, send, now, t: roots_step(rb, msgs, send, t),
@@ -233,8 +247,8 @@ def run_evidence_locally(robot: Robot, transport, protocol: ProtocolOptions | No
         log.resolution_rounds += t
         log.phases.append(dict(phase="roots", start_round=begin, rounds=t, bits=int(rbits)))
         if rbits & LOST:  # a set that lost a robot may stay unsolved: said, never hidden
-            raise RuntimeError(f"robot {robot.id}: a robot was lost while the sets were "
-                               "solved at their roots")
+            raise LostInPhase(f"robot {robot.id}: a robot was lost while the sets were "
+                              "solved at their roots", run.close())
     merge = None
     if bits & LARGE:
         alive = robot.link_alive.copy()
@@ -287,7 +301,8 @@ def run_history_locally(robot: Robot, transport, protocol: ProtocolOptions | Non
         log.phases.append(dict(phase=f"history-{name}", start_round=begin, rounds=t,
                                bits=int(out)))
         if out & LOST:
-            raise RuntimeError(f"robot {robot.id}: a robot was lost in the history check")
+            raise LostInPhase(f"robot {robot.id}: a robot was lost in the history check",
+                              run.close())
         bits()  # the state after the phase (the wave may have asked before its last round)
         return out
 

@@ -608,10 +608,29 @@ def robot_main(team, i: int, transport) -> tuple[dict, dict]:
         transport.lossy = True  # faults are injected into the consistency stage, as simulated
     protocol = ProtocolOptions(reliable=True, loss_timeout=int(opts["loss_timeout"]))
     t = time.perf_counter()
-    run = run_consistency_locally(robot, transport, protocol, team.n, resolution=resolution)
-    history = None
-    if team.data.get("history") is not None:  # an online step's history check
-        history = _robot_history(team, i, robot, transport, protocol, arrays)
+    from pipeline.consistency.alone import LostInPhase
+
+    restarted = bool(opts.get("restarted_on_loss", False))
+    history, lost_in = None, None
+    try:
+        run = run_consistency_locally(robot, transport, protocol, team.n,
+                                      resolution=resolution)
+    except LostInPhase as exc:
+        if not restarted:
+            raise
+        # the caller starts the team again: the robot says whom it lost and ends its work
+        run, lost_in = exc.run, str(exc)
+    if team.data.get("history") is not None and lost_in is None:  # an online step's check
+        try:
+            history = _robot_history(team, i, robot, transport, protocol, arrays)
+        except LostInPhase as exc:
+            if not restarted:
+                raise
+            run.lost_neighbours = sorted(set(run.lost_neighbours)
+                                         | set(exc.run.lost_neighbours))
+            lost_in = str(exc)
+    if lost_in is not None:
+        _log(i, f"{lost_in}: its team will be started again")
     timings["consistency"] = time.perf_counter() - t
     wire["consistency"] = int(getattr(transport, "wire_bytes", 0)) - sum(wire.values())
     fusion = None

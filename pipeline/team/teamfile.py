@@ -125,6 +125,10 @@ DEFAULT_OPTIONS = {
     # (the rule's own flood then leaves them) and the conflict-free ones
     "gather_conflictive": False,
     "gather_free": False,
+    # the caller starts the team again when it loses a robot (an online step): a robot lost
+    # in a phase a loss leaves undone (the sets solved at their roots, the history check)
+    # ends that work and the robot publishes, naming it lost, instead of failing
+    "restarted_on_loss": False,
     # Zenoh's shared memory with the robot processes of the same host (a pool per robot:
     # pipeline.transport.zenoh_transport.zenoh_config); off, every message goes over TCP
     "shared_memory": False,
@@ -753,7 +757,7 @@ def _check_options(opts: dict, where: str) -> None:
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
                          "pixels >= 0")
     for k in ("fusion", "rootsift", "budget_after_merge", "solve_small_sets", "gather_conflictive",
-              "gather_free", "shared_memory"):
+              "gather_free", "shared_memory", "restarted_on_loss"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
     if opts.get("wire", "compact") not in WIRE_FORMS:

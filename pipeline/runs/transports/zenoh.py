@@ -472,7 +472,9 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
     where = np.searchsorted(used, np.arange(len(m)))
     sub = Links(where[links.cam_i], links.feat_i, where[links.cam_j], links.feat_j,
                 links.quality)
-    opts = team_options(resolution=rule.name)
+    # a robot lost while the sets are solved at their roots or in the history check: the
+    # others name it and publish (the step starts the team again), they do not fail
+    opts = {**team_options(resolution=rule.name), "restarted_on_loss": True}
     if leaves:
         opts.update(solve_small_sets=False, bundle_budget=bundle_budget(len(m)))
     if gather:

@@ -18,27 +18,33 @@ ROUND_TIMEOUT_S = 2.0
 STOP_S = 8.0  # past the round timeout: the neighbours write the frozen robot off
 
 
-@pytest.fixture(scope="module")
-def one_step():
-    """Step 0 of formation a on the simulator: its online record, views and features."""
+def _step0(transport="sim"):
     from data_synth.motion import render_motion
     from pipeline.progress import StageTimer
 
     seq = render_motion("a", 0, 1, (160, 120), window=2)
     run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, 2, "evidence",
-                           StageTimer(verbose=False), max_features=120, fusion=False)
+                           StageTimer(verbose=False), max_features=120, fusion=False,
+                           transport=transport)
     return run.online, seq.flat.views, run.features
 
 
-def _freezing(job, calls, frozen):
-    """``job`` with its robot ``frozen`` stopped as soon as it publishes ``consistency`` (the
-    start of its consistency stage), on its calls numbered in ``calls``."""
+@pytest.fixture(scope="module")
+def one_step():
+    """Step 0 of formation a on the simulator: its online record, views and features."""
+    return _step0()
+
+
+def _freezing(job, calls, frozen, status="consistency"):
+    """``job`` with its robot ``frozen`` stopped as soon as it publishes ``status``
+    (``consistency``: the start of its consistency stage), on its calls numbered in
+    ``calls``."""
     seen = []
 
     def wrapped(*args, **kw):
         seen.append(1)
         if len(seen) - 1 in calls:
-            kw["kill"] = (frozen, "consistency", 0.0, STOP_S)
+            kw["kill"] = (frozen, status, 0.0, STOP_S)
         return job(*args, **kw)
 
     return wrapped
@@ -59,3 +65,18 @@ def test_a_fusion_robot_frozen_is_written_off_and_the_fusion_started_again(one_s
     assert (got["cut"], got["tracks"]) == (want["cut"], want["tracks"])
     assert np.array_equal(got_oa.links.kept, want_oa.links.kept)
     assert np.array_equal(got_oa.links.reason, want_oa.links.reason)
+
+
+def test_a_stage_robot_frozen_while_the_sets_are_solved_at_their_roots(one_step, monkeypatch):
+    oa, _, _ = one_step
+    monkeypatch.setattr(zenoh, "online_stage",
+                        _freezing(zenoh.online_stage, {0}, frozen=1, status="roots"))
+    with team_round_timeout(ROUND_TIMEOUT_S):
+        got, _, _ = _step0("zenoh")
+    # it stopped the run before: its neighbours failed ('a robot was lost while the sets were
+    # solved at their roots'), a robot error that ended the team with a TeamError
+    rec = got.steps[0]
+    assert rec["stage_attempts"] == 2 and len(rec["images_lost"]) == 1
+    assert rec["cut_lost"] == 0
+    for a in ("kept", "reason", "step_cut"):
+        assert np.array_equal(getattr(got.links, a), getattr(oa.links, a)), a
