@@ -50,7 +50,7 @@ from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
            "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout",
-           "shared_zygote", "SharedZygote"]
+           "shared_zygote", "SharedZygote", "written_off"]
 
 
 #: seconds a team may run before :func:`launch_team` kills it, unless the caller or
@@ -701,6 +701,22 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             signal.signal(sig, h)
         if stopping["pending"] is not None:
             raise interrupt(stopping["pending"])
+
+
+def written_off(run: TeamRun, named: dict) -> list[int]:
+    """Of the robots ``named`` lost by others (robot -> the robots that wrote it off), those
+    the team lost: a robot that published is not lost when every robot that named it
+    published after it and was itself named lost. A robot frozen for a while (a host
+    suspended) writes off, once it runs again, the neighbours that had ended without it;
+    they are not lost, it is (its neighbours named it before it published)."""
+    named = {int(k): [int(j) for j in v] for k, v in named.items()}
+    done = run.finished_at
+
+    def innocent(k: int) -> bool:
+        return k in done and all(j in named and j in done and done[j] > done[k]
+                                 for j in named[k])
+
+    return sorted(k for k in named if not innocent(k))
 
 
 def _freeze(proc, stop_s: float, over: threading.Event) -> None:

@@ -43,6 +43,7 @@ from pipeline.team.launcher import (
     team_round_timeout,
     team_summary,
     team_time_limit,
+    written_off,
 )
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
@@ -501,7 +502,8 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
                              used[e.cameras].tolist(), e.stats) from e
     lost = sorted(set(range(len(used))) - set(kept[0].results)
                   | {int(k) for k in kept[0].killed}
-                  | {int(k) for k in res.stats.get("faults", {}).get("robots_lost", {})})
+                  | set(written_off(kept[0], res.stats.get("faults", {}).get("robots_lost",
+                                                                              {}))))
     if lost:  # its links would read as the rule's cuts: the caller decides what follows
         raise RobotsLost(f"the robot process of image {int(used[lost[0]])} was lost during an "
                          "online step's consistency stage",
@@ -652,7 +654,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
     # a robot whose process ran on but fell silent (a host suspended or cut off) is written
     # off by its neighbours, who name it: their naming cut its links robot-lost
     lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}
-                  | {int(k) for k in res.stats["faults"]["robots_lost"]}) \
+                  | set(written_off(run, res.stats["faults"]["robots_lost"]))) \
         if run.stopped_at is None else sorted({run.stopped_at} | {int(k) for k in run.killed})
     if lost:
         raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
@@ -830,10 +832,13 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         with scratch_folder("online-match-") as work:
             run = launch_team(team, work, kill=kill if attempt == 0 else None,
                               stop_at_loss=True)
+        named: dict = {}  # robot -> the robots whose frame of it never came
+        for j, (h, _) in run.results.items():
+            for f in h.get("missing", ()):
+                named.setdefault(int(f) % n, []).append(int(j))
         lost = sorted((set(range(n)) - set(run.results) if run.stopped_at is None
                        else {run.stopped_at}) | {int(k) for k in run.killed}
-                      | {int(f) % n for h, _ in run.results.values()
-                         for f in h.get("missing", ())})
+                      | set(written_off(run, named)))
         if not lost:
             break
         lost_log.append(lost)

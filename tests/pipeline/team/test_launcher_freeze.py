@@ -23,3 +23,17 @@ def test_a_robot_frozen_past_the_round_timeout_is_written_off_by_its_neighbours(
     res = consistency_of_team(team, run.results, read_links_csv(links).links, FPC, run.killed)
     assert 2 in res.stats["faults"]["robots_lost"]
     assert sorted(res.stats["faults"]["robots_lost"][2]) == [0, 1, 3]
+
+
+def test_written_off_names_the_frozen_robot_not_the_neighbours_it_wrote_off_later():
+    from pipeline.team.launcher import TeamRun, written_off
+
+    run = TeamRun(team=None, finished_at={0: 5.0, 2: 6.0, 1: 17.0})
+    # robot 1 frozen: 0 and 2 wrote it off and ended; resumed, it wrote them off in turn
+    assert written_off(run, {1: [0, 2], 0: [1], 2: [1]}) == [1]
+    # a robot named by one that was not itself named stays lost, published or not
+    assert written_off(run, {0: [1]}) == [0]
+    assert written_off(TeamRun(team=None, finished_at={0: 5.0}), {1: [0]}) == [1]
+    # named by each other (a link cut both ways): the one that published last is lost
+    assert written_off(run, {0: [2], 2: [0]}) == [2]
+    assert written_off(run, {}) == []
