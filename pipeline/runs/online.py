@@ -376,7 +376,10 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             if lost:  # robot processes lost and started again (or given up for the step)
                 by_fusion += (f", robot processes of frame(s) {', '.join(map(str, lost))} "
                               f"lost and started again ({rec['cut_lost']} links cut "
-                              "robot-lost)")
+                              "robot-lost")
+                out = rec.get("fusion", {}).get("frames_left_out", [])
+                by_fusion += (f"; frame(s) {', '.join(map(str, out))} left out of the "
+                              "step's fusion, lost twice)" if out else ")")
             timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut{by_fusion}, "
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "
