@@ -538,6 +538,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     zygote = None
     gone = threading.Event()  # the zygote's lines ended
     over = threading.Event()  # the team ended: a robot frozen by ``kill`` is not woken
+    pending = kill is not None  # the fault injection is still to come
     shared, tag = (_within["zygote"] if fork else None), None
     try:
         if workdir is None:
@@ -602,20 +603,25 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                                     + ("" if code is None else f" with exit code {code}")
                                     + f" {when}; nothing was kept: run again"
                                     + (f" ({why})" if why else ""))
-                if kill is not None and kill[0] not in run.killed and kill[0] not in run.frozen \
-                        and kill[0] in procs:
+                if pending and kill[0] in procs:
                     k, status, delay = kill[:3]
                     if status in observer.seen.get(k, ()):
+                        pending = False
                         observer.cv.release()
                         try:
                             time.sleep(delay)
-                            if len(kill) > 3:
+                            # a robot that ended meanwhile is not there to kill (its pid may
+                            # be another process's by now)
+                            alive = procs[k].poll() is None
+                            if alive and len(kill) > 3:
                                 _freeze(procs[k], float(kill[3]), over)
-                            else:
-                                os.kill(procs[k].pid, signal.SIGKILL)
+                            elif alive:
+                                procs[k].kill()
                         finally:
                             observer.cv.acquire()
-                        if len(kill) > 3:
+                        if not alive:
+                            log(f"robot {k} ended before its kill -9")
+                        elif len(kill) > 3:
                             run.frozen[k] = time.monotonic()
                             log(f"kill -STOP robot {k} (pid {procs[k].pid}) for {kill[3]:g} s")
                         else:

@@ -37,3 +37,17 @@ def test_written_off_names_the_frozen_robot_not_the_neighbours_it_wrote_off_late
     # named by each other (a link cut both ways): the one that published last is lost
     assert written_off(run, {0: [2], 2: [0]}) == [2]
     assert written_off(run, {}) == []
+
+
+def test_a_robot_that_ended_before_its_injected_kill_is_not_killed(tmp_path):
+    # the kill comes 10 s after the robot's consistency status: the team of four ends within
+    # a second or two, and the robot's pid was reaped ('error: No such process' ended the
+    # command, or a process that took the pid since would have been killed)
+    links = tmp_path / "in.csv"
+    links.write_text(LINKS)
+    team = make_team("ended", EDGES, {"kind": "links", "links": str(links),
+                                      "features_per_camera": FPC}, n=4)
+    run = launch_team(team, tmp_path / "w", kill=(1, "consistency", 10.0), stop_at_loss=True,
+                      timeout_s=120)
+    assert run.stopped_at is None and sorted(run.results) == [0, 1, 2, 3]
+    assert run.killed == {}
