@@ -50,7 +50,7 @@ from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
            "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout",
-           "shared_zygote", "SharedZygote", "written_off"]
+           "shared_zygote", "SharedZygote", "written_off", "lost_robots"]
 
 
 #: seconds a team may run before :func:`launch_team` kills it, unless the caller or
@@ -723,6 +723,15 @@ def written_off(run: TeamRun, named: dict) -> list[int]:
                                  for j in named[k])
 
     return sorted(k for k in named if not innocent(k))
+
+
+def lost_robots(run: TeamRun, named: dict | None = None) -> list[int]:
+    """The robots ``run`` lost: the one it was stopped at (``stop_at_loss``), else those that
+    did not publish; those killed by the fault injection; and of those ``named`` lost by
+    others (robot -> the robots that named it), the ones :func:`written_off` holds lost."""
+    gone = set(range(run.team.n)) - set(run.results) if run.stopped_at is None \
+        else {run.stopped_at}
+    return sorted(gone | {int(k) for k in run.killed} | set(written_off(run, named or {})))
 
 
 def _freeze(proc, stop_s: float, over: threading.Event) -> None:

@@ -38,12 +38,12 @@ from pipeline.team.assemble import (
 from pipeline.team.launcher import (
     TEAM_TIMEOUT_S,
     launch_team,
+    lost_robots,
     make_team,
     shared_zygote,
     team_round_timeout,
     team_summary,
     team_time_limit,
-    written_off,
 )
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
@@ -357,8 +357,7 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
         keep_run.append(run)
     if run.stopped_at is not None:
         raise RobotsLost(f"the robot process of camera {run.stopped_at} ended without "
-                         "publishing; the team was stopped",
-                         {run.stopped_at} | {int(k) for k in run.killed}, _spent_by(run))
+                         "publishing; the team was stopped", lost_robots(run), _spent_by(run))
     if links is not None:
         pass
     elif per_robot:
@@ -500,10 +499,7 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
             raise RobotsLost(f"the robot process of image {int(used[e.cameras[0]])} was lost "
                              "during an online step's consistency stage",
                              used[e.cameras].tolist(), e.stats) from e
-    lost = sorted(set(range(len(used))) - set(kept[0].results)
-                  | {int(k) for k in kept[0].killed}
-                  | set(written_off(kept[0], res.stats.get("faults", {}).get("robots_lost",
-                                                                              {}))))
+    lost = lost_robots(kept[0], res.stats.get("faults", {}).get("robots_lost"))
     if lost:  # its links would read as the rule's cuts: the caller decides what follows
         raise RobotsLost(f"the robot process of image {int(used[lost[0]])} was lost during an "
                          "online step's consistency stage",
@@ -653,9 +649,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
         if run.stopped_at is None else None
     # a robot whose process ran on but fell silent (a host suspended or cut off) is written
     # off by its neighbours, who name it: their naming cut its links robot-lost
-    lost = sorted(set(range(n)) - set(run.results) | {int(k) for k in run.killed}
-                  | set(written_off(run, res.stats["faults"]["robots_lost"]))) \
-        if run.stopped_at is None else sorted({run.stopped_at} | {int(k) for k in run.killed})
+    lost = lost_robots(run, None if res is None else res.stats["faults"]["robots_lost"])
     if lost:
         raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
                          "publish a result, or its neighbours wrote it off", lost)
@@ -825,7 +819,7 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                            if k in ("contrast_threshold", "rootsift", "budget_after_merge")},
                         threshold_px=match_options.get("threshold_px", 1.0),
                         matcher=match_options.get("matcher", "opencv"))
-    lost_log, spent = [], dict(messages=0, bytes=0)
+    lost_log, spent = [], dict(messages=0, bytes=0, rounds=0)
     for attempt in (0, 1):  # a team that lost a robot is started again, once
         team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2),
                          {**data, "resend": bool(attempt)}, opts, n=n)
@@ -836,15 +830,12 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         for j, (h, _) in run.results.items():
             for f in h.get("missing", ()):
                 named.setdefault(int(f) % n, []).append(int(j))
-        lost = sorted((set(range(n)) - set(run.results) if run.stopped_at is None
-                       else {run.stopped_at}) | {int(k) for k in run.killed}
-                      | set(written_off(run, named)))
+        lost = lost_robots(run, named)
         if not lost:
             break
         lost_log.append(lost)
-        for h, _ in run.results.values():
-            spent["messages"] += int(h["counters"]["messages"])
-            spent["bytes"] += int(h["counters"]["bytes"])
+        for k, v in _spent_by(run).items():
+            spent[k] += v
     if lost:
         raise TeamError(f"robot {lost[0]} of step {t}'s matching team was lost twice (its "
                         "process ended, or its frame never reached a neighbour); its features "
@@ -869,10 +860,9 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                         f"has {len(want)}")
     links = Links.from_matches([matches[p] for p in want])
     summary = team_summary(run)
-    stats = {"messages": int(sum(h["counters"]["messages"] for h, _ in run.results.values()))
-             + spent["messages"],
-             "bytes": int(sum(h["counters"]["bytes"] for h, _ in run.results.values()))
-             + spent["bytes"],
+    this = _spent_by(run)
+    stats = {"messages": this["messages"] + spent["messages"],
+             "bytes": this["bytes"] + spent["bytes"],
              "wall_s": float(summary["wall_s"]), "pairs": len(want),
              "descriptor_bytes": desc_bytes,
              "held_bytes_max": max(held), "attempts": 1 + len(lost_log),
