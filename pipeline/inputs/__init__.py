@@ -4,7 +4,8 @@ Photograph folders and their intrinsics (:mod:`.photos`), links files (:mod:`.li
 ``links.csv`` of the run-output contract), hloc's ``features.h5`` / ``matches.h5`` and pair
 lists (:mod:`.hloc`), labelled-landmark folders (:mod:`.landmarks`), the fields of a graph
 file's line (:mod:`.csvfields`), a COLMAP database's tables checked before pycolmap reads them
-(:mod:`.dbcheck`) and sparse ids of a links file renumbered (:mod:`.compact`).
+(:mod:`.dbcheck`), sparse ids of a links file renumbered (:mod:`.compact`) and ``.npz``
+archives read whole without pickles (:mod:`.npzfile`).
 
 May import: the shared words of the root (:mod:`pipeline.errors`, :mod:`pipeline.types`,
 :mod:`pipeline.validate`, :mod:`pipeline.outputs`, :mod:`pipeline.runfolder`,

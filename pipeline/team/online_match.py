@@ -75,23 +75,17 @@ def load_frame(path, name: str):
         pixels, ``K`` not a finite ``(3, 3)``, ``intrinsics_known`` not one boolean, ``R``
         and ``t`` (both or neither) not a finite ``(3, 3)`` and ``(3,)``.
     """
-    import zipfile
-    import zlib
-
     from pipeline.errors import InputError
+    from pipeline.inputs.npzfile import npz_arrays
     from pipeline.types import View
 
     where = f"frame file {str(path)!r}"
     try:
-        z = np.load(path, allow_pickle=False)
-        if not isinstance(z, np.lib.npyio.NpzFile):  # a plain .npy file: one array
-            raise ValueError("one array (.npy), not an archive of arrays (.npz)")
-        with z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-        raise InputError(f"{where} is not a frame of an online step ({type(exc).__name__}: "
-                         f"{exc}); the online stage writes one per robot and step (.npz of "
-                         "image, K, intrinsics_known)") from None
+        arrays = npz_arrays(path)
+    except ValueError as exc:
+        raise InputError(f"{where} is not a frame of an online step ({exc}); the online stage "
+                         "writes one per robot and step (.npz of image, K, "
+                         "intrinsics_known)") from None
     for key in ("image", "K", "intrinsics_known"):
         if key not in arrays:
             raise InputError(f"{where} has no array {key!r}; a frame holds image, K, "

@@ -697,12 +697,12 @@ def _history_array_ok(a: np.ndarray, what: str) -> bool:
     return bool(a.min() >= lo) and int(a.max()) <= np.iinfo(np.int64).max
 
 
-def _checked_history_arrays(f, where: str) -> dict:
-    """The arrays of an opened history file, after checking each one's shape, dtype and
+def _checked_history_arrays(f: dict, where: str) -> dict:
+    """The arrays of a history file (by name), after checking each one's shape, dtype and
     values and the lengths of each group (:data:`_HISTORY_ARRAYS`); InputError naming the
     array otherwise."""
     missing = [k for k in ("head", *(k for g in _HISTORY_ARRAYS.values() for k in g))
-               if k not in f.files]
+               if k not in f]
     if missing:
         raise InputError(f"{where} is not a history file of an online step: it has no array "
                          f"{missing[0]!r}; {_HISTORY_WRITER}")
@@ -745,24 +745,16 @@ def load_history_inputs(path, i: int):
         numbers; ``row_hist``, ``border_head``: true/false values), or of another length
         than the first array of its group.
     """
-    import zipfile
-    import zlib
-
     from pipeline.consistency.history import HistoryInputs
+    from pipeline.inputs.npzfile import npz_arrays
 
     where = _history_where(path, i)
     try:
-        f = np.load(path, allow_pickle=False)
-        if not isinstance(f, np.lib.npyio.NpzFile):  # a plain .npy file: one array
-            raise ValueError("one array (.npy), not an archive of arrays (.npz)")
-        with f:
-            arrays = _checked_history_arrays(f, where)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
-        if isinstance(e, InputError):
-            raise
-        raise InputError(f"{where} is not a history file of an online step "
-                         f"({type(e).__name__}: {e}); {_HISTORY_WRITER}") from e
-    return HistoryInputs.from_arrays(arrays)
+        arrays = npz_arrays(path)
+    except ValueError as e:
+        raise InputError(f"{where} is not a history file of an online step ({e}); "
+                         f"{_HISTORY_WRITER}") from e
+    return HistoryInputs.from_arrays(_checked_history_arrays(arrays, where))
 
 
 def equip_history_file(robot, path, i: int) -> None:
