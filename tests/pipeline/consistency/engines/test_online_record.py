@@ -14,8 +14,8 @@ from pipeline.types import Links
 
 def _spurious_step(weigh: bool):
     """One step of three posed cameras, one feature each: 0 and 1 see X, 2 sees Y, and all
-    three are linked (the weighing cuts the two links to camera 2). Returns the record and
-    the stats of the stage it ran."""
+    three are linked (the weighing cuts the two links to camera 2). Returns the record, the
+    stats of the stage it ran and the association."""
     X, Y = np.array([0.5, 0.2, 1.0]), np.array([1.5, -0.4, 0.5])
     P = [camera(x) for x in (0.0, 1.0, 2.0)]
     frames = [Frame(i, 1, project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
@@ -30,12 +30,12 @@ def _spurious_step(weigh: bool):
     rec = oa.add_step(frames, Links([0, 0, 1], [0, 0, 0], [1, 2, 2], [0, 0, 0],
                                     [0.9, 0.3, 0.2]))
     (st,) = seen
-    return rec, st
+    return rec, st, oa
 
 
 @pytest.mark.parametrize("weigh", [True, False])
 def test_a_steps_traffic_is_its_stages_its_new_links_labels_and_its_weighings(weigh):
-    rec, st = _spurious_step(weigh)
+    rec, st, _ = _spurious_step(weigh)
     assert rec["cut_weigh"] == (2 if weigh else 0)
     assert rec["history_bytes"] == 0 and rec["history_rounds"] == 0
     # each new link: one message carrying both ends' labels
@@ -45,7 +45,7 @@ def test_a_steps_traffic_is_its_stages_its_new_links_labels_and_its_weighings(we
 
 
 def test_the_weighing_takes_its_rounds_and_memory_into_the_steps():
-    rec, st = _spurious_step(True)
+    rec, st, _ = _spurious_step(True)
     assert rec["weigh_rounds"] == 3
     assert rec["detection_rounds"] == st["detection_rounds"]
     # the weighing follows the detection: the rule's rounds or the weighing's, the longer
@@ -97,7 +97,7 @@ def test_a_set_above_the_bundle_budget_is_left_to_the_rules_merge(monkeypatch):
     from pipeline.consistency import setlists
 
     monkeypatch.setattr(setlists, "SET_BUNDLE_BYTES", 0)  # B: the least, 2
-    rec, st = _spurious_step(True)
+    rec, st, _ = _spurious_step(True)
     assert st["bundle_budget"] == 2 and st["large_sets"] == 1
     assert rec["weighed_sets"] == 0 and rec["cut_weigh"] == 0
     assert rec["weigh_messages"] == 0 and rec["weigh_bytes"] == 0

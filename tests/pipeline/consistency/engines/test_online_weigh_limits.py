@@ -4,8 +4,9 @@ solves it; a history link the solution refutes is not cut (it stands for a retir
 
 import numpy as np
 from online_streams import camera, project
+from test_online_record import _spurious_step
 
-from pipeline.consistency.engines.online import Frame, OnlineAssociation, simulated_stage
+from pipeline.consistency.engines.online import Frame, OnlineAssociation
 from pipeline.types import Links
 
 
@@ -16,20 +17,8 @@ def test_a_set_of_exactly_the_bundle_budget_is_weighed(monkeypatch):
     from pipeline.consistency import setlists
 
     monkeypatch.setattr(setlists, "SET_BUNDLE_BYTES", 3 * setlists.bundle_bytes_bound(3))
-    X, Y = np.array([0.5, 0.2, 1.0]), np.array([1.5, -0.4, 0.5])
-    P = [camera(x) for x in (0.0, 1.0, 2.0)]
-    frames = [Frame(i, 1, project(P[i], X if i < 2 else Y)[None], P[i]) for i in range(3)]
-    seen = []
-
-    def stage(*args, **kw):
-        res = simulated_stage(*args, **kw)
-        seen.append(res.stats)
-        return res
-
-    oa = OnlineAssociation(window=2, stage=stage)
-    rec = oa.add_step(frames, Links([0, 0, 1], [0, 0, 0], [1, 2, 2], [0, 0, 0],
-                                    [0.9, 0.3, 0.2]))
-    assert seen[0]["bundle_budget"] == 3 and seen[0]["large_sets"] == 0
+    rec, st, oa = _spurious_step(weigh=True)
+    assert st["bundle_budget"] == 3 and st["large_sets"] == 0
     assert rec["weighed_sets"] == 1 and rec["cut_weigh"] == 2
     assert oa.links.kept.tolist() == [True, False, False]
 
