@@ -243,6 +243,12 @@ def _pixels(im: Image.Image) -> np.ndarray:
 _PILLOW_LIMIT = threading.Lock()
 
 
+def _first_notes(notes: list[str]) -> str:
+    """Pillow's warnings about one file, as one warning of ours quotes them: the first three,
+    then an ellipsis."""
+    return "; ".join(notes[:3]) + ("; …" if len(notes) > 3 else "")
+
+
 def open_header(path: str | Path) -> Image.Image:
     """``Image.open`` (the header only) and the size check of :func:`_check_declared_size`.
 
@@ -266,8 +272,7 @@ def open_header(path: str | Path) -> Image.Image:
                     and not issubclass(w.category, Image.DecompressionBombWarning)})
     if notes:  # a damaged header (TIFF tags, EXIF): read as far as it goes, named once
         log.warning("warning: %s", f"{path.name}: its header is damaged (Pillow: "
-                    f"{'; '.join(notes[:3])}{'; …' if len(notes) > 3 else ''}); what could "
-                    "be read is used")
+                    f"{_first_notes(notes)}); what could be read is used")
     _check_declared_size(path, im)
     return im
 
@@ -371,8 +376,7 @@ def _decode(path: Path, im: Image.Image) -> np.ndarray:
     notes = sorted(set(notes))
     if notes:
         log.warning("warning: %s", f"{path.name}: decoding it, Pillow warned: "
-                    f"{'; '.join(notes[:3])}{'; …' if len(notes) > 3 else ''}; the image as "
-                    "decoded is used")
+                    f"{_first_notes(notes)}; the image as decoded is used")
     return pixels
 
 
