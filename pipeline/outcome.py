@@ -226,11 +226,12 @@ def flag_result(report: dict, names: list[str] | None = None,
     return report
 
 
-def _no_features(report: dict, names: list[str] | None) -> list[dict]:
+def _no_features(report: dict, names: list[str] | None, void=()) -> list[dict]:
     """The ``no-features`` warning of the images of ``report["features_per_camera"]`` that
-    hold none, or nothing."""
+    hold none (but the ``void`` ones, which have a warning of their own), or nothing."""
     m = report.get("features_per_camera")
-    empty = [] if m is None else [k for k, v in enumerate(m) if int(v) == 0]
+    void = set(void)
+    empty = [] if m is None else [k for k, v in enumerate(m) if int(v) == 0 and k not in void]
     if not empty:
         return []
     shown = [names[k] if names else f"camera {k}" for k in empty]
@@ -243,7 +244,9 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     """:func:`flag_result` for an online run's report (``steps``, ``final``,
     ``conflict_free_every_step``): ``no-links`` (no link in any step), ``all-links-cut``,
     ``not-conflict-free`` (a step ended with conflictive sets: ``conflict_free: false``),
-    ``no-features`` (frames of ``features_per_camera`` holding none, named by ``names``)."""
+    ``no-features`` (frames of ``features_per_camera`` holding none, named by ``names``),
+    ``frames-void`` (frames whose robot process the step's matching lost twice: the steps'
+    ``match_frames_void``; named there, not under ``no-features``)."""
     warnings = []
     steps = report.get("steps", [])
     left = [k for k, s in enumerate(steps) if s.get("conflictive_sets_after")]
@@ -262,7 +265,15 @@ def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
     elif int((final.get("online") or {}).get("kept", -1)) == 0:
         warnings.append(_warning("all-links-cut", f"{_every(total, 'link')} was cut; the "
                                                   "result holds no association"))
-    warnings += _no_features(report, names) + _logged()
+    void = sorted({int(g) for s in steps for g in s.get("match_frames_void", ())})
+    if void:
+        shown = [names[g] if names else f"frame {g}" for g in void]
+        warnings.append(_warning(
+            "frames-void", f"{len(void)} frame(s) never reached the association: "
+            f"{', '.join(shown[:10])}{', ...' if len(shown) > 10 else ''} (their robot "
+            "process was lost by its step's matching twice: no features, no links; the "
+            "other frames went on without them)"))
+    warnings += _no_features(report, names, void) + _logged()
     if warnings:
         report["warnings"] = warnings
     return report

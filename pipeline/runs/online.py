@@ -29,8 +29,11 @@ that loses a robot is started again (the matching's ``match_attempts``,
 ``match_robots_lost``); a frame lost twice in a step's stage or fusion is given up for it
 (its links of the step's stage cut ``robot-lost``, :meth:`pipeline.consistency.engines.
 online.OnlineAssociation._stage_despite_losses`; left out of the step's fusion,
-:func:`_fuse_changed`). A robot lost twice during a step's matching stops the run (its
-frame's features of the step are not known).
+:func:`_fuse_changed`). A robot lost again by its step's matching team started again does
+not stop the run: its new frame is *void* (no features: ``match_frames_void``; a robot
+lost for good has every later frame void too) and the step's pairs no robot could match
+have no links (``match_pairs_unmatched``): :func:`pipeline.runs.transports.zenoh.
+online_match`.
 
 Outputs (run folder, written atomically): ``report.json`` (``steps``: one entry per step
 with ``links_new``, ``conflictive_sets_after``, ``wall_s``, ``rounds``, ``bytes`` and the
@@ -321,7 +324,8 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
             feats_all += feats
             desc_bytes += stats["descriptor_bytes"]
             match_rec = {f"match_{k}": stats[k] for k in ("messages", "bytes", "held_bytes_max",
-                                                          "attempts", "robots_lost")
+                                                          "attempts", "robots_lost",
+                                                          "frames_void", "pairs_unmatched")
                          if k in stats}
             match_s = time.perf_counter() - t0
             frames = [Frame(i, len(f), f.keypoints, None if views[g].R is None else
@@ -380,6 +384,10 @@ def associate_online(views: list, n: int, step_edges: list, window: int, resolut
                 out = rec.get("fusion", {}).get("frames_left_out", [])
                 by_fusion += (f"; frame(s) {', '.join(map(str, out))} left out of the "
                               "step's fusion, lost twice)" if out else ")")
+            if rec.get("match_frames_void"):
+                by_fusion += (f", frame(s) {', '.join(map(str, rec['match_frames_void']))} "
+                              "void (their robots lost twice by the matching: no features; "
+                              f"{rec['match_pairs_unmatched']} frame pairs not matched)")
             timer.note(f"step {t}: {rec['links_new']} new links, {rec['cut']} cut{by_fusion}, "
                        f"{rec['conflictive_sets_after']} conflictive sets after, "
                        f"{rec['rounds']} rounds, {rec['bytes']} bytes, "

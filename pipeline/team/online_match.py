@@ -24,9 +24,18 @@ read and written by it alone), the features of its frames of the last ``W`` step
 4. it publishes the new frame's keypoints and its pairs' matches (the launching process
    orders them as the simulator's matching and goes on with the step); a frame it matches
    that never came (its robot lost: stopped, killed or cut off during the step) it names
-   under ``missing`` with no pair, and the launching process starts the step's matching
-   again with ``data.resend`` (each robot then sends its window frames again, whatever its
-   ``sent.json`` says: what it sent may not have been kept).
+   under ``missing`` and matches the pairs it has both frames of; the launching process
+   starts the step's matching again with ``data.resend`` (each robot then sends its window
+   frames again, whatever its ``sent.json`` says: what it sent may not have been kept).
+
+*Void frames* (``data.void``: global frame ids of the window). A robot lost by the team
+started again too never published its new frame: the launching process keeps the step going
+without it (:func:`pipeline.runs.transports.zenoh.online_match`), and that frame is *void*
+from then on: it has no features, and no robot stores, sends or matches it at a later step
+(its own robot drops it from its folder if it had stored it before it was lost: the features
+it would hold are not the run's). Every robot reads the same list, so the pairs it matches
+are :func:`own_pairs` without those that touch a void frame, and the launching process
+expects exactly these.
 
 Every pair of the step is matched by exactly one robot: a pair joins a new frame and a window
 frame of two robots that talk (or of one robot); the new frame's robot matches it, and of two
@@ -115,17 +124,20 @@ def load_frame(path, name: str):
                 intrinsics_known=bool(known[0]))
 
 
-def own_pairs(i: int, n: int, t: int, window: int, neighbours) -> list[tuple[int, int]]:
+def own_pairs(i: int, n: int, t: int, window: int, neighbours,
+              void=()) -> list[tuple[int, int]]:
     """The pairs ``(a, b)``, ``a < b``, robot ``i`` matches at step ``t``: its new frame
     against its frames of the window's earlier steps and every window frame of the robots it
-    talks to, except their new frames of a lower robot id (those match it)."""
+    talks to, except their new frames of a lower robot id (those match it), and except the
+    pairs touching a ``void`` frame (module docstring)."""
     g = t * n + i
     out = [(t2 * n + i, g) for t2 in range(max(0, t - window + 1), t)]
     for j in sorted(int(k) for k in neighbours):
         out += [(t2 * n + j, g) for t2 in range(max(0, t - window + 1), t)]
         if j > i:
             out.append((g, t * n + j))
-    return sorted(out)
+    void = {int(f) for f in void}
+    return sorted(p for p in out if p[0] not in void and p[1] not in void)
 
 
 def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
@@ -167,8 +179,10 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
             return {k: z[k] for k in z.files}
 
     save(g, own)
+    void = {int(f) for f in data.get("void", ())}
     for old in store.glob("frame-*.npz"):  # the robot's memory follows its window
-        if int(old.stem.split("-")[1]) // n <= t - window:
+        f = int(old.stem.split("-")[1])
+        if f // n <= t - window or f in void:  # a void frame is none of the run's
             old.unlink()
     timings["features"] = time.perf_counter() - t0
     # what it sent each neighbour at earlier steps and the neighbour still keeps (the same
@@ -177,7 +191,7 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     # started again after a robot was lost (data.resend): what it sent may not have been kept
     sent = json.loads(sent_path.read_text()) if sent_path.exists() and \
         not data.get("resend", False) else {}
-    earlier = [s * n + i for s in range(max(0, t - window + 1), t)]
+    earlier = [s * n + i for s in range(max(0, t - window + 1), t) if s * n + i not in void]
     for j in sorted(transport.neighbours):
         had = {f for f in sent.get(str(j), []) if f // n > t - window}
         for f in earlier + ([g] if i > j else []):  # one message per frame
@@ -196,18 +210,14 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     for msg in inbox:  # kept while in the window: the sender sends a frame once
         if msg.kind == "frame":
             save(int(msg.payload["id"][0]), msg.payload)
-    missing = [f for f in sorted({f for pair in own_pairs(i, n, t, window,
-                                                          transport.neighbours)
-                                  for f in pair}) if not frame_file(store, f).exists()]
-    if missing:  # their robots were written off before sending them: the launcher decides
-        return ({"id": i, "frame": g, "pairs": [], "missing": missing, "held_bytes": 0,
-                 "descriptor_bytes": int(raw.descriptors.nbytes),
-                 "counters": transport.counters(), "timings_s": timings,
-                 "peak_memory_bytes": 0, "pid": os.getpid(),
-                 "peak_rss_bytes": 1024 * resource.getrusage(resource.RUSAGE_SELF).ru_maxrss},
-                {"keypoints": raw.keypoints, "scales": raw.scales})
+    mine = own_pairs(i, n, t, window, transport.neighbours, void)
+    missing = [f for f in sorted({f for pair in mine for f in pair})
+               if not frame_file(store, f).exists()]
+    # their robots were written off before sending them: the launcher decides; the pairs
+    # of frames at hand are matched all the same (the launcher keeps them if it goes on)
+    mine = [p for p in mine if p[0] not in missing and p[1] not in missing]
     feats, meta = {}, {}
-    for pair in own_pairs(i, n, t, window, transport.neighbours):
+    for pair in mine:
         for f in pair:
             if f in feats:
                 continue
@@ -226,7 +236,7 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
     arrays = {"keypoints": raw.keypoints, "scales": raw.scales}
     header_pairs = []
     thr = opts.get("threshold_px", 1.0)  # None: scaled with the larger image
-    for a, b in own_pairs(i, n, t, window, transport.neighbours):
+    for a, b in mine:
         (Ka, ka, sa), (Kb, kb, sb) = meta[a], meta[b]
         pm = match_pair(a, b, feats[a], feats[b], Ka, Kb, bool(ka and kb),
                         threshold_px=None if thr is None else float(thr),
@@ -243,7 +253,8 @@ def online_match_main(team, i: int, transport) -> tuple[dict, dict]:
         with np.load(f) as z:
             held += int(z["keypoints"].nbytes + z["raw" if "raw" in z.files else
                                                 "descriptors"].nbytes)
-    header = {"id": i, "frame": g, "pairs": header_pairs, "held_bytes": held,
+    header = {"id": i, "frame": g, "pairs": header_pairs, "missing": missing,
+              "held_bytes": held,
               "descriptor_bytes": int(raw.descriptors.nbytes),
               "counters": transport.counters(), "timings_s": timings,
               "peak_memory_bytes": held, "pid": os.getpid(),

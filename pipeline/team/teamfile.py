@@ -45,7 +45,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
               # (frame id step * n + I) and its own folder, where it keeps its window's
               # features between steps; optional "resend": true, the step's matching started
               # again after a robot was lost: each robot sends its neighbours every window
-              # frame they match with, whatever it sent them before
+              # frame they match with, whatever it sent them before; optional "void":
+              # [frame ids], frames of the window whose robot was lost before publishing
+              # them: none stores, sends or matches them
       "options": {"features": "sift", "max_features": 2000, "drop_prob": 0.0, "fault_seed": 0,
                   "round_timeout_s": 30.0, "round_limit_s": 600.0,
                   "start_timeout_s": 60.0, "loss_timeout": 40,
@@ -171,7 +173,8 @@ _DATA_KEYS = {"formation": {"kind", "formation", "seed", "size", "robots", "grap
                          "intrinsics_source"},
               "links": {"kind", "links", "features_per_camera", "keypoints", "cameras",
                         "history", "weights"},
-              "online-match": {"kind", "step", "window", "frames", "store", "resend"}}
+              "online-match": {"kind", "step", "window", "frames", "store", "resend",
+                               "void"}}
 #: a reliable, ordered Zenoh link (the rounds' "nothing lost" rests on it: not udp), host a
 #: name, an IPv4 address or a bracketed IPv6 address; the port in digits 0-9 (``\d`` also
 #: takes other scripts' digits, which int() reads and Zenoh does not)
@@ -608,6 +611,14 @@ def _check_data(data: dict, n: int, where: str) -> None:
             raise InputError(f"{where}: data.resend {data['resend']!r} must be true or false "
                              "(true: the step's matching started again; each robot sends its "
                              "window frames again)")
+        void = data.get("void", [])
+        step, window = data["step"], data["window"]
+        if not (isinstance(void, list) and all(_is_int(f) and 0 <= f < step * n
+                                               and f // n > step - window for f in void)):
+            raise InputError(f"{where}: data.void {void!r} must list frame ids of the window's "
+                             f"earlier steps ({max(0, step - window + 1) * n} to "
+                             f"{step * n - 1}: frame = step * {n} + robot), the frames lost "
+                             "before they were published")
         for key, what in (("frames", "frame file (its camera's new frame)"),
                           ("store", "folder (its features between steps)")):
             v = data.get(key)

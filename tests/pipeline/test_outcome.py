@@ -100,3 +100,19 @@ def test_a_photo_run_report_names_the_files_it_left_out(tmp_path, capsys):
     assert len(printed) == 1 and "gone.png" in printed[0] and "sub" in printed[0]
     report = json.loads((out / "report.json").read_text())
     assert {"code": "logged", "message": printed[0]} in report["warnings"]
+
+
+def test_void_frames_are_named_as_such_not_as_images_without_features():
+    """A frame whose robot the step's matching lost twice has no features: the online
+    report names it under ``frames-void``, and a blank frame still under ``no-features``."""
+    from pipeline.outcome import exit_status, flag_online
+
+    report = flag_online({"steps": [{"match_frames_void": []}, {"match_frames_void": [3]}],
+                          "final": {"links": 4, "online": {"kept": 4}},
+                          "features_per_camera": [5, 0, 5, 0, 5]},
+                         names=["a", "b", "c", "d", "e"])
+    codes = {w["code"]: w["message"] for w in report["warnings"]}
+    assert sorted(codes) == ["frames-void", "no-features"]
+    assert "d" in codes["frames-void"] and "1 frame(s)" in codes["frames-void"]
+    assert "1 image(s): b " in codes["no-features"]
+    assert exit_status(report, stream=io.StringIO()) == 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -792,17 +793,26 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
     matches it: that robot publishes it ``missing``) is started again, once, each robot
     sending its window frames again (``data.resend``); ``stats`` then counts the lost
     team's messages and bytes too, ``attempts`` the teams started and ``robots_lost`` the
-    robots each lost team lost. ``kill``: ``(robot, status, delay_s)``, fault injection
-    (tests, bench) on the first team, as :func:`pipeline.team.launcher.launch_team` takes it.
+    robots each lost team lost. A robot the team started again loses too does not stop the
+    mission: the step goes on with what the others published. A robot that did not publish
+    has its new frame *void* (no features, ``frames_void``; no robot matches it at a later
+    step either: :mod:`pipeline.team.online_match`, ``data.void``, kept in ``store``), and
+    the step's pairs no robot matched (those of the void frames, and those whose frame
+    never reached the robot that matches them) have no links (``pairs_unmatched``). The
+    first team of the next step then sends its window frames again too (what a lost robot
+    had sent, or had been sent, may not have been kept). ``kill``: ``(robot, status,
+    delay_s)``, fault injection (tests, bench) on the first team, as
+    :func:`pipeline.team.launcher.launch_team` takes it; a list of them applies one per team
+    started (``None`` for none).
 
     Raises
     ------
     TeamError
-        A robot was lost by the team started again too, or the robots matched other pairs
-        than :func:`pipeline.matching.pairs.step_pairs` lists.
+        Every robot of the team started again was lost (nothing to go on with), or the
+        robots matched pairs :func:`pipeline.matching.pairs.step_pairs` does not list.
     """
     from pipeline.matching.pairs import step_pairs
-    from pipeline.runfolder import scratch_folder
+    from pipeline.runfolder import scratch_folder, write_json_atomic
     from pipeline.team.online_match import write_frame
     from pipeline.types import Features, Links, PairMatches
 
@@ -812,20 +822,31 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         path = store / "cameras" / f"frame-{t * n + i}.npz"  # what robot i's camera delivered
         write_frame(path, views[t * n + i])
         frames.append(str(path))
+    # what earlier steps' losses left: void frames (still in the window) and whether the
+    # robots' records of what they sent can be trusted
+    losses_path = store / "losses.json"
+    losses = json.loads(losses_path.read_text()) if losses_path.exists() else {}
+    void = sorted(int(f) for f in losses.get("void", ()) if int(f) // n > t - window)
     data = {"kind": "online-match", "step": int(t), "window": int(window), "frames": frames,
-            "store": [str(store / f"robot-{i}") for i in range(n)]}
+            "store": [str(store / f"robot-{i}") for i in range(n)], "void": void}
     opts = team_options(features, max_features, None, merge_radius=merge_radius,
                         **{k: v for k, v in feature_options.items()
                            if k in ("contrast_threshold", "rootsift", "budget_after_merge")},
                         threshold_px=match_options.get("threshold_px", 1.0),
                         matcher=match_options.get("matcher", "opencv"))
+    kills = list(kill) if isinstance(kill, list) else [kill, None]
     lost_log, spent = [], dict(messages=0, bytes=0, rounds=0)
     for attempt in (0, 1):  # a team that lost a robot is started again, once
+        resend = bool(attempt) or bool(losses.get("resend", False))
         team = make_team(f"online-match-{t}", np.asarray(edges_up, np.int64).reshape(-1, 2),
-                         {**data, "resend": bool(attempt)}, opts, n=n)
+                         {**data, "resend": resend}, opts, n=n)
+        # the team started again goes on without a robot lost again, so its robots wait
+        # for a silent neighbour's start no longer than for a round's word: forked at once
+        # from a warm zygote, a robot that is there answers in well under a second
+        opts = {**opts, "start_timeout_s": float(team.options["round_timeout_s"])}
         with scratch_folder("online-match-") as work:
-            run = launch_team(team, work, kill=kill if attempt == 0 else None,
-                              stop_at_loss=True)
+            run = launch_team(team, work, kill=kills[attempt] if attempt < len(kills) else None,
+                              stop_at_loss=attempt == 0)
         named: dict = {}  # robot -> the robots whose frame of it never came
         for j, (h, _) in run.results.items():
             for f in h.get("missing", ()):
@@ -834,14 +855,22 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         if not lost:
             break
         lost_log.append(lost)
-        for k, v in _spent_by(run).items():
-            spent[k] += v
-    if lost:
-        raise TeamError(f"robot {lost[0]} of step {t}'s matching team was lost twice (its "
-                        "process ended, or its frame never reached a neighbour); its features "
-                        "of the step are not known: run it again")
+        if attempt == 0:
+            for k, v in _spent_by(run).items():
+                spent[k] += v
+    if lost and not run.results:
+        raise TeamError(f"every robot of step {t}'s matching team was lost twice (robot "
+                        f"{lost[0]} first); no frame of the step is known: run it again")
     feats, desc_bytes, held, matches = [], [], [], {}
+    new_void = []
     for i in range(n):
+        if i not in run.results:  # lost by the team started again: its frame is void
+            new_void.append(t * n + i)
+            feats.append(Features(np.zeros((0, 2), np.float32),
+                                  np.zeros((0, 0), np.float32),
+                                  np.zeros(0, np.float32), features))
+            desc_bytes.append(0)
+            continue
         header, arrays = run.results[i]
         kp = arrays["keypoints"].reshape(-1, 2)
         feats.append(Features(kp, np.zeros((len(kp), 0), np.float32), arrays["scales"],
@@ -855,16 +884,31 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
                 arrays[f"eperr_{a}_{b}"], int(pr["n_putative"]), str(pr["reason"]))
     frames = np.arange((t + 1) * n)
     want = [tuple(p) for p in step_pairs(frames % n, frames // n, t, window, edges_up).tolist()]
-    if sorted(matches) != want:
+    was_void = set(void)
+    want = [p for p in want if p[0] not in was_void and p[1] not in was_void]
+    if set(matches) - set(want):
+        extra = sorted(set(matches) - set(want))[0]
+        raise TeamError(f"step {t}: the robots matched frame pair {extra}, which the step "
+                        "does not have")
+    if not lost and sorted(matches) != want:
         raise TeamError(f"step {t}: the robots matched {len(matches)} frame pairs, the step "
                         f"has {len(want)}")
+    unmatched = [p for p in want if p not in matches]
+    for a, b in unmatched:  # its robot, or a frame of it, was lost: no links this step
+        matches[(a, b)] = PairMatches(a, b, np.zeros((0, 2), np.int32),
+                                      np.zeros(0, np.float32), np.zeros(0, np.float32),
+                                      0, "robot-lost")
+    write_json_atomic(losses_path, {"void": sorted(f for f in was_void | set(new_void)
+                                                   if f // n > t + 1 - window),
+                                    "resend": bool(lost_log)})
     links = Links.from_matches([matches[p] for p in want])
     summary = team_summary(run)
     this = _spent_by(run)
     stats = {"messages": this["messages"] + spent["messages"],
              "bytes": this["bytes"] + spent["bytes"],
-             "wall_s": float(summary["wall_s"]), "pairs": len(want),
+             "wall_s": float(summary["wall_s"]), "pairs": len(want) - len(unmatched),
              "descriptor_bytes": desc_bytes,
-             "held_bytes_max": max(held), "attempts": 1 + len(lost_log),
-             "robots_lost": lost_log}
+             "held_bytes_max": max(held, default=0), "attempts": attempt + 1,
+             "robots_lost": lost_log, "frames_void": new_void,
+             "pairs_unmatched": len(unmatched)}
     return feats, links, stats

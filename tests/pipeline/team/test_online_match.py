@@ -150,3 +150,71 @@ def test_a_matching_started_again_sends_every_window_frame_again(sequence, tmp_p
     # step 0: robot 0's new frame goes to robot 1 only if 0 > 1: nothing; step 1: its frame
     # of step 0 (not sent before); started again, the same frame again, not held as sent
     assert sent[(0, False)] == [] and sent[(1, False)] == [0] and sent[(1, True)] == [0]
+
+
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 5), t=st.integers(0, 5), window=st.integers(1, 4),
+       edges=st.sets(st.tuples(st.integers(0, 4), st.integers(0, 4)), max_size=10),
+       data=st.data())
+def test_void_frames_leave_exactly_their_pairs_out(n, t, window, edges, data):
+    """``data.void``: the robots' pairs are the step's pairs without those touching a void
+    frame, each still matched by one robot."""
+    edges = np.array(sorted({(min(a, b), max(a, b)) for a, b in edges
+                             if a != b and a < n and b < n}), np.int64).reshape(-1, 2)
+    robot_of = np.arange((t + 1) * n) % n
+    step_of = np.arange((t + 1) * n) // n
+    earlier = list(range(max(0, t - window + 1) * n, t * n))
+    void = set(data.draw(st.lists(st.sampled_from(earlier), unique=True))) if earlier else set()
+    want = [tuple(p) for p in step_pairs(robot_of, step_of, t, window, edges).tolist()
+            if p[0] not in void and p[1] not in void]
+    mine = []
+    for i in range(n):
+        nbrs = set(edges[edges[:, 0] == i, 1].tolist()) | set(edges[edges[:, 1] == i, 0].tolist())
+        mine += own_pairs(i, n, t, window, nbrs, sorted(void))
+    assert sorted(mine) == want
+
+
+def _run_robot0(sequence, tmp_path, t: int, transport, **extra):
+    from pipeline.matching.features import MERGE_RADIUS_PX
+    from pipeline.runs.transports.zenoh import team_options
+    from pipeline.team.launcher import make_team
+    from pipeline.team.online_match import online_match_main, write_frame
+
+    views, n = sequence.flat.views, sequence.n_robots
+    frames = []
+    for i in range(n):
+        frames.append(str(tmp_path / f"camera-{t}-{i}.npz"))
+        write_frame(frames[-1], views[t * n + i])
+    data = {"kind": "online-match", "step": t, "window": 2, "frames": frames,
+            "store": [str(tmp_path / f"robot-{i}") for i in range(n)], **extra}
+    team = make_team(f"online-match-{t}", [[0, 1], [1, 2]], data,
+                     team_options("sift", 300, None, merge_radius=MERGE_RADIUS_PX), n=n)
+    return online_match_main(team, 0, transport)
+
+
+def test_a_robot_matches_the_pairs_it_has_and_names_the_frames_that_never_came(
+        sequence, tmp_path):
+    """Step 1: robot 0's neighbour 1 was written off before sending its frames: robot 0
+    names them ``missing`` and still matches its new frame against its own of step 0 (the
+    launching process keeps that pair if the step goes on without robot 1)."""
+    _run_robot0(sequence, tmp_path, 0, _Recorder())
+    header, arrays = _run_robot0(sequence, tmp_path, 1, _CutOff())
+    n = sequence.n_robots
+    assert header["missing"] == [1, n + 1]
+    assert [(p["a"], p["b"]) for p in header["pairs"]] == [(0, n)]
+    assert f"pairs_0_{n}" in arrays
+
+
+def test_a_void_frame_is_dropped_never_sent_and_never_matched(sequence, tmp_path):
+    """``data.void`` names robot 0's frame of step 0 (say it was killed after storing it,
+    before publishing): at step 1 robot 0 deletes it from its folder, does not send it to
+    robot 1, and matches no pair with it."""
+    _run_robot0(sequence, tmp_path, 0, _Recorder())
+    assert (tmp_path / "robot-0" / "frame-0.npz").exists()
+    rec = _Recorder()
+    header, _ = _run_robot0(sequence, tmp_path, 1, rec, void=[0])
+    n = sequence.n_robots
+    assert rec.sent == []
+    assert not (tmp_path / "robot-0" / "frame-0.npz").exists()
+    assert all(0 not in (p["a"], p["b"]) for p in header["pairs"])
+    assert header["missing"] == [1, n + 1]

@@ -103,6 +103,9 @@ def test_a_valid_team_parses():
     ({"data": {**_MATCH, "store": "robots"}}, "data.store must list 3 paths, one folder"),
     ({"data": {**_MATCH, "links": "in.csv"}}, "data of kind online-match has unknown key 'links'"),
     ({"data": {**_MATCH, "resend": 1}}, "data.resend 1 must be true or false"),
+    ({"data": {**_MATCH, "void": [6]}}, "data.void [6] must list frame ids of the window's "
+     "earlier steps (0 to 5"),
+    ({"data": {**_MATCH, "void": "3"}}, "data.void '3' must list frame ids"),
     ({"options": {"fusion": True}},
      "options sets fusion on a links team without data.keypoints"),
     # names every robot would refuse: observe refuses them too, not waiting for robots
