@@ -11,6 +11,9 @@ one; a user may write one by hand. Schema (``version`` 1)::
       "robots": [{"id": 0, "endpoint": "tcp/127.0.0.1:7447"}, ...],   # ids 0..n-1, each once
       "comm_edges": [[0, 1], [1, 2], ...],        # undirected, robots talk only along these
       "observer": {"endpoint": "tcp/127.0.0.1:7400"},                 # optional
+          # or "unixsock-stream//ABSOLUTE/PATH": a Unix socket, which robots on this machine
+          # reach whatever network they are on (robots in network namespaces of their own,
+          # pipeline.team.netns); robots always listen on tcp/quic/tls
       "data": {"kind": "formation", "formation": "d", "seed": 0, "size": [640, 480],
                "robots": null, "graph": null}
           or {"kind": "images", "images": ["a.jpg", ...], "intrinsics": [[[fx,0,cx],...], ...],
@@ -423,19 +426,51 @@ def parse_team(doc, path: Path | None = None) -> Team:
             raise InputError(f"{where}: 'observer' {obs!r} must be an object "
                              "{\"endpoint\": \"tcp/HOST:PORT\"}")
         ep = obs.get("endpoint")
-        m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
-        if not m or not 0 < int(m.group(3)) < 65536:  # port 0: a port of the system's choice
-            raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT "
-                             f"with a port in 1..65535{_endpoint_hint(ep)}")
-        if ep in endpoints:
-            raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
-        for key in _endpoint_addresses(m):
-            other = _same_address(key, addresses, ports)
-            if other is not None:
-                raise InputError(f"{where}: observer endpoint {ep!r} is robot {other}'s "
-                                 f"({robots[other].endpoint!r}, the same address)")
-        observer = ep
+        if isinstance(ep, str) and ep.startswith(UNIX_OBSERVER):
+            observer = _unix_observer(where, ep)  # no robot listens on one
+        else:
+            observer = _tcp_observer(where, ep, endpoints, addresses, ports, robots)
     return Team(name, [robots[i] for i in range(n)], e, data, opts, per, observer, path)
+
+
+def _tcp_observer(where: str, ep, endpoints: dict, addresses: dict, ports: dict,
+                  robots: dict) -> str:
+    """An observer endpoint on the network, checked: ``tcp/HOST:PORT`` (or quic, tls) where no
+    robot listens."""
+    m = _ENDPOINT.match(ep) if isinstance(ep, str) else None
+    if not m or not 0 < int(m.group(3)) < 65536:  # port 0: a port of the system's choice
+        raise InputError(f"{where}: observer endpoint {ep!r} must look like tcp/HOST:PORT "
+                         f"with a port in 1..65535{_endpoint_hint(ep)} (or "
+                         f"{UNIX_OBSERVER}/ABSOLUTE/PATH, a Unix socket on the robots' machine)")
+    if ep in endpoints:
+        raise InputError(f"{where}: observer endpoint {ep!r} is robot {endpoints[ep]}'s")
+    for key in _endpoint_addresses(m):
+        other = _same_address(key, addresses, ports)
+        if other is not None:
+            raise InputError(f"{where}: observer endpoint {ep!r} is robot {other}'s "
+                             f"({robots[other].endpoint!r}, the same address)")
+    return ep
+
+
+#: how an observer endpoint on a Unix socket starts (``unixsock-stream//tmp/obs.sock``)
+UNIX_OBSERVER = "unixsock-stream/"
+
+#: the longest path of a Unix socket, in bytes (``sun_path`` holds 108 with the final NUL)
+UNIX_PATH_MAX = 107
+
+
+def _unix_observer(where: str, ep: str) -> str:
+    """An observer endpoint on a Unix socket, checked: an absolute path of at most
+    :data:`UNIX_PATH_MAX` bytes (the robots, started anywhere, connect to the same file)."""
+    path = ep[len(UNIX_OBSERVER):]
+    if not path.startswith("/") or "\0" in path or path.endswith("/"):
+        raise InputError(f"{where}: observer endpoint {ep!r}: a Unix socket is "
+                         f"{UNIX_OBSERVER}/ABSOLUTE/PATH, the path of a file (the robots may "
+                         "run in other folders)")
+    if len(path.encode(errors="surrogateescape")) > UNIX_PATH_MAX:
+        raise InputError(f"{where}: observer endpoint {ep!r}: a Unix socket's path has at most "
+                         f"{UNIX_PATH_MAX} bytes; give a shorter one")
+    return ep
 
 
 def _endpoint_hint(ep) -> str:
