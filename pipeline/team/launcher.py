@@ -459,7 +459,7 @@ class Observer:
 
 def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float | None = None,
                 kill: tuple | None = None, log=None,
-                fork: bool = True, stop_at_loss: bool = False) -> TeamRun:
+                fork: bool = True, stop_at_loss: bool = False, start=None) -> TeamRun:
     """Run every robot of ``team`` as a process on this machine; return what they published.
 
     Parameters
@@ -484,6 +484,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         without it, and a robot lost before the start handshake is written off only after
         ``start_timeout_s``. Default: the survivors finish, as a team without a launcher
         would
+    start : callable or None — ``start(i, argv, **popen)`` starts robot ``i``'s program
+        ``argv`` (``python -m pipeline robot ...``) with :class:`subprocess.Popen`'s keywords
+        ``popen`` and returns its process, e.g. on a host of its own
+        (:meth:`pipeline.team.netns.NetnsRig.start`); each robot is then its own interpreter
+        (``fork`` is not used). None: ``subprocess.Popen(argv, **popen)``
 
     Raises
     ------
@@ -539,6 +544,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     gone = threading.Event()  # the zygote's lines ended
     over = threading.Event()  # the team ended: a robot frozen by ``kill`` is not woken
     pending = kill is not None  # the fault injection is still to come
+    fork = fork and start is None
     shared, tag = (_within["zygote"] if fork else None), None
     try:
         if workdir is None:
@@ -571,11 +577,13 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
             for i in range(team.n):
                 env[LAUNCHED_AT_ENV] = repr(time.time())
                 errfiles[i] = open(workdir / f"robot{i}.log", "wb")  # noqa: SIM115
-                procs[i] = subprocess.Popen(
-                    [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
-                     "--id", str(i)], stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
-                    process_group=0 if pgid is None else pgid,
-                    preexec_fn=_dies_with(os.getpid()))
+                argv = [sys.executable, "-m", "pipeline", "robot", "--team", str(team_path),
+                        "--id", str(i)]
+                popen = dict(stdout=errfiles[i], stderr=subprocess.STDOUT, env=env,
+                             process_group=0 if pgid is None else pgid,
+                             preexec_fn=_dies_with(os.getpid()))
+                procs[i] = subprocess.Popen(argv, **popen) if start is None \
+                    else start(i, argv, **popen)
                 if pgid is None:
                     pgid = procs[i].pid
         run.start_s = time.monotonic() - t0

@@ -30,6 +30,30 @@ Needs root, ``ip`` / ``tc`` (iproute2) and ``unshare`` (util-linux): :func:`unav
 why a rig cannot be made, so tests skip with that reason. Every namespace is named
 ``<prefix>-<i>`` with a prefix unique to this process; :meth:`NetnsRig.close` (also on ``with`` exit, on error or interrupt) kills the
 programs it started and deletes the namespaces, which removes their cables.
+
+A launched team on hosts of its own: :func:`launch_team_on_hosts` is
+:func:`pipeline.team.launcher.launch_team` (its arguments, its :class:`~pipeline.team.launcher.
+TeamRun`) with the team's robots on a rig made for that team's comm edges, every cable capped
+at ``rate`` if given (``FORMATION_MATCH_HOSTS`` of the ``zenoh`` transport,
+:func:`pipeline.runs.transports.zenoh.team_launcher`, sends every team of a job there). How:
+
+* each robot is its own interpreter, ``python -m pipeline robot`` started in its namespace by
+  :meth:`NetnsRig.start` (``ip netns exec``, then its own ``/dev/shm``), not forked from the
+  launcher's zygote. The zygote runs in this process's namespace, and so does every robot it
+  forks: to be on its host, each child would have to enter its namespace itself between the
+  fork and the robot program (``setns``: ``os.setns`` from Python 3.12 on, ``ctypes``
+  before) and, for a ``/dev/shm`` of its own, leave the zygote's mount namespace and mount
+  one (``unshare``, ``mount``), code of the zygote's own run in every fork. ``ip netns exec``
+  and ``unshare`` do exactly that on the command line, as ``bench/team_network.py`` starts its
+  robots, at the price of an interpreter start per robot (the robot program imported
+  again);
+* the observer stays in the launching process, on a Unix socket (the team file's
+  ``unixsock-stream//PATH``): a socket file is reached from every network namespace, so
+  every robot publishes its whole result to it as on the loopback (the ``--result`` file of
+  ``bench/team_network.py`` holds a robot's links only, not the arrays the jobs assemble).
+  Nothing is added to this host's own network (no address, no route: rigs of several
+  processes do not collide), robots still reach no one but their neighbours (peers do not
+  route for others), and only the comm graph's traffic crosses the cables and their caps.
 """
 
 from __future__ import annotations
@@ -43,13 +67,15 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["NetnsRig", "unavailable", "remove_stale", "NETEM_MISSING", "read_results", "team_links",
-           "kept_links", "conflictive_sets_after"]
+           "kept_links", "conflictive_sets_after", "launch_team_on_hosts", "check_rate"]
 
 #: what this kernel cannot do (stated in reports beside the faults the rig made)
 NETEM_MISSING = "netem (packet loss, delay, reordering) is absent from this kernel"
@@ -344,3 +370,86 @@ def conflictive_sets_after(res: dict) -> int:
     m = next(iter(res.values()))["features_per_camera"]
     labels, conflict = union_find_conflicts(m, kept_links(res))
     return int(np.unique(labels[conflict]).size)
+
+
+#: a ``tc`` rate (``1mbit``, ``256kbit``, ``1.5mbit``, ``100kbps``)
+_RATE = re.compile(r"^(\d+(\.\d*)?)(bit|kbit|mbit|gbit|tbit|bps|kbps|mbps|gbps|tbps)$", re.I)
+
+
+def check_rate(rate: str, what: str) -> str:
+    """``rate`` if it is a ``tc`` rate above 0 (``1mbit``, ``256kbit``, ...); else an
+    InputError naming ``what``."""
+    from pipeline.errors import InputError
+
+    m = _RATE.match(rate)
+    if m is None or float(m.group(1)) <= 0:
+        raise InputError(f"{what}: {rate!r} is not a bandwidth; give tc's form, a number above 0 "
+                         "and its unit, e.g. 1mbit, 256kbit, 10mbit")
+    return rate
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Within the block (main thread only) a Ctrl-C or a SIGTERM waits for its end, then
+    arrives: namespaces are made or deleted whole, never left half-made by a second Ctrl-C."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    old = {sig: signal.signal(sig, lambda signum, frame: got.append(signum))
+           for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+        if got:
+            signal.raise_signal(got[0])
+
+
+def launch_team_on_hosts(team, workdir=None, *, timeout_s: float | None = None,
+                         kill: tuple | None = None, log=None, fork: bool = True,
+                         stop_at_loss: bool = False, rate: str | None = None):
+    """:func:`pipeline.team.launcher.launch_team` of ``team`` with each robot on a host of its
+    own (module docstring): a :class:`NetnsRig` of ``team``'s comm edges, every cable capped at
+    ``rate`` (``tc`` form, e.g. ``1mbit``; None: uncapped), robot ``i`` listening on
+    :meth:`NetnsRig.endpoint` ``(i)`` and the observer on a Unix socket. The returned run's
+    ``team`` is the team as started (those endpoints). ``fork`` is not used: every robot is
+    its own interpreter. The namespaces are deleted when the team ends, on error, Ctrl-C and
+    SIGTERM too (a second one waits until they are gone).
+
+    Raises what ``launch_team`` raises; InputError when the temporary folder's path is too
+    long for a Unix socket."""
+    import dataclasses
+
+    from pipeline.errors import InputError
+    from pipeline.runfolder import make_scratch_folder
+    from pipeline.team.launcher import launch_team
+    from pipeline.team.teamfile import UNIX_OBSERVER, UNIX_PATH_MAX, RobotEntry, parse_team
+
+    if rate is not None:
+        check_rate(rate, "the cables' cap")
+    rig = NetnsRig(team.n, team.comm_edges)
+    folder = None
+    try:
+        folder = make_scratch_folder("fm-hosts-")
+        sock = folder / "observer.sock"
+        if len(str(sock).encode()) > UNIX_PATH_MAX:
+            raise InputError(f"the temporary folder {tempfile.gettempdir()!r} is too deep for "
+                             f"the observer's Unix socket ({sock}: {UNIX_PATH_MAX} bytes at "
+                             "most): set TMPDIR to a shorter folder, e.g. /tmp")
+        with _signals_held():
+            rig.make()
+            if rate is not None and rig.edges:
+                rig.cap(rate)
+        robots = [RobotEntry(i, rig.endpoint(i)) for i in range(team.n)]
+        hosted = parse_team(dataclasses.replace(team, robots=robots,
+                                                observer=f"{UNIX_OBSERVER}{sock}").to_json(),
+                            team.path)
+        return launch_team(hosted, workdir, timeout_s=timeout_s, kill=kill, log=log,
+                           stop_at_loss=stop_at_loss, start=rig.start)
+    finally:
+        with _signals_held():
+            rig.close()
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)

@@ -5,13 +5,16 @@ The robots compute everything (:mod:`pipeline.team.robot`); this process launche
 job's results (:mod:`pipeline.team.assemble`). The job functions are those of the registry
 (:mod:`pipeline.runs.transports`); ``team_time_limit`` (the launcher's) bounds every team they
 start (``--team-timeout``), and ``team_round_timeout`` (the launcher's) sets the silence after
-which its robots write a neighbour off (``--round-timeout``).
+which its robots write a neighbour off (``--round-timeout``). Every team runs on this
+machine's loopback, or each robot on a host of its own (a network namespace, one cable per
+comm edge) as :data:`HOSTS_ENV` says (:func:`team_launcher`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import json
 from pathlib import Path
 
@@ -49,6 +52,7 @@ from pipeline.team.launcher import (
 
 __all__ = ["formation", "formation_of_run", "images", "images_of_run", "images_team", "resolve",
            "online_stage", "online_fusion", "job_teams", "online_robots", "ZYGOTE_ENV",
+           "HOSTS_ENV", "team_launcher",
            "resolve_links_file", "links_quality_published",
            "write_robot_links", "links_of_run", "team_time_limit", "team_round_timeout",
            "TEAM_TIMEOUT_S"]
@@ -184,7 +188,7 @@ def formation(config, timer: StageTimer, *, kill=None, workdir=None, keep_run: l
         f"formation-n{config.robots}-{config.graph}"
     team = make_team(name, edges, data, opts, n=n)
     with timer.stage("team", f"{n} robot processes over zenoh"):
-        run = launch_team(team, workdir, kill=kill)
+        run = _launch_team(team, workdir, kill=kill)
         timer.note(f"{len(run.results)} of {n} robots published; "
                    f"process start {run.start_s:.2f} s")
     if keep_run is not None:
@@ -268,7 +272,7 @@ def images(config, views, comm_edges, timer: StageTimer, graph_from_features=Non
     team = images_team(config, views, comm_edges)
     n = team.n
     with timer.stage("team", f"{n} robot processes over zenoh"):
-        run = launch_team(team, workdir)
+        run = _launch_team(team, workdir)
         timer.note(f"{len(run.results)} of {n} robots published; "
                    f"process start {run.start_s:.2f} s")
     if keep_run is not None:
@@ -353,7 +357,7 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
         else str(Path(links_csv).resolve())
     data = {"kind": "links", "links": paths, "features_per_camera": fpc, **(data_extra or {})}
     team = make_team("resolve", edges, data, options, n=len(fpc))
-    run = launch_team(team, workdir, kill=kill, stop_at_loss=stop_at_loss)
+    run = _launch_team(team, workdir, kill=kill, stop_at_loss=stop_at_loss)
     if keep_run is not None:
         keep_run.append(run)
     if run.stopped_at is not None:
@@ -645,7 +649,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
                 "keypoints": _write_robot_keypoints(folder, [f.keypoints for f in features]),
                 "cameras": cameras}
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
-        run = launch_team(team, work, kill=kill, stop_at_loss=True)
+        run = _launch_team(team, work, kill=kill, stop_at_loss=True)
     res = consistency_of_team(team, run.results, links, m, run.killed) \
         if run.stopped_at is None else None
     # a robot whose process ran on but fell silent (a host suspended or cut off) is written
@@ -752,11 +756,70 @@ def zygote_per_run() -> bool:
     return value == "run"
 
 
+#: the environment variable that says where the robots of every team the jobs start run:
+#: unset or ``loopback`` (default), processes of this machine on its loopback; ``netns``, each
+#: robot on a host of its own, a Linux network namespace with one cable per comm edge of its
+#: team (:func:`pipeline.team.netns.launch_team_on_hosts`; needs root and iproute2);
+#: ``netns:RATE``, every cable capped at ``RATE`` (tc's form: ``1mbit``, ``256kbit``;
+#: ``bench/online_team.py`` runs an online run so)
+HOSTS_ENV = "FORMATION_MATCH_HOSTS"
+
+
+def team_launcher():
+    """The function that starts a team of the jobs (``launch_team``'s arguments and result):
+    :func:`pipeline.team.launcher.launch_team`, or on hosts of their own as
+    :data:`HOSTS_ENV` says.
+
+    Raises
+    ------
+    InputError
+        A value of :data:`HOSTS_ENV` other than ``loopback``, ``netns`` or ``netns:RATE``,
+        or a bad rate, named; ``netns`` where namespaces cannot be made (the reason named).
+    """
+    import os
+
+    from pipeline.team.netns import check_rate, launch_team_on_hosts
+
+    value = os.environ.get(HOSTS_ENV, "").strip()
+    if value in ("", "loopback"):
+        return launch_team
+    kind, colon, rate = value.partition(":")
+    if kind != "netns":
+        raise InputError(f"{HOSTS_ENV}={value!r}: choose loopback (the default: robot processes "
+                         "on this machine's loopback), netns (each robot in a network namespace "
+                         "of its own, one cable per comm edge) or netns:RATE (the cables capped, "
+                         "e.g. netns:1mbit), or unset it")
+    if colon:
+        check_rate(rate, f"{HOSTS_ENV}={value!r}")
+    why = _namespaces_unavailable()
+    if why is not None:
+        raise InputError(f"{HOSTS_ENV}={value!r}: robots on hosts of their own need network "
+                         f"namespaces, which cannot be made here ({why}); unset it to run them "
+                         "on this machine's loopback")
+    return functools.partial(launch_team_on_hosts, rate=rate if colon else None)
+
+
+@functools.lru_cache(maxsize=1)
+def _namespaces_unavailable() -> str | None:
+    """:func:`pipeline.team.netns.unavailable`, asked once per process (it makes a namespace)."""
+    from pipeline.team.netns import unavailable
+
+    return unavailable()
+
+
+def _launch_team(team, workdir=None, **options):
+    """Start ``team`` as :data:`HOSTS_ENV` says (:func:`team_launcher`)."""
+    return team_launcher()(team, workdir, **options)
+
+
 def job_teams():
     """The context a command's jobs run in (:func:`pipeline.runs.transports.team_limits`):
     every team they start forks its robots from one zygote
     (:func:`pipeline.team.launcher.shared_zygote`; ``run-formations`` starts one per
-    formation, an online run three per step), unless :data:`ZYGOTE_ENV` says ``team``."""
+    formation, an online run three per step), unless :data:`ZYGOTE_ENV` says ``team``.
+    :data:`HOSTS_ENV` is checked here, before any work (its robots are not forked: each is
+    its own interpreter on its own host)."""
+    team_launcher()
     return shared_zygote() if zygote_per_run() else contextlib.nullcontext()
 
 
@@ -845,8 +908,8 @@ def online_match(views, t: int, n: int, window: int, edges_up, store, *, feature
         # from a warm zygote, a robot that is there answers in well under a second
         opts = {**opts, "start_timeout_s": float(team.options["round_timeout_s"])}
         with scratch_folder("online-match-") as work:
-            run = launch_team(team, work, kill=kills[attempt] if attempt < len(kills) else None,
-                              stop_at_loss=attempt == 0)
+            run = _launch_team(team, work, kill=kills[attempt] if attempt < len(kills) else None,
+                               stop_at_loss=attempt == 0)
         named: dict = {}  # robot -> the robots whose frame of it never came
         for j, (h, _) in run.results.items():
             for f in h.get("missing", ()):
