@@ -22,6 +22,13 @@ injection of :func:`pipeline.team.launcher.launch_team`) in each team of step
 (:mod:`pipeline.runs.online`, "Robot processes lost"): the tables must equal the
 simulator's, and the step's record counts the attempts (printed: ``match_attempts``,
 ``stage_attempts``, the fusion's lost frames per step).
+
+``zenoh, hosts in namespaces, 1mbit cables`` is ``zenoh`` with every robot of every team on a
+host of its own: a Linux network namespace, one cable per comm edge of its team, each capped
+at 1 Mbit/s (``FORMATION_MATCH_HOSTS=netns:1mbit``, :func:`pipeline.team.netns.
+launch_team_on_hosts`; each robot its own interpreter, not forked from a zygote). It needs
+root and iproute2: where network namespaces cannot be made, the bench says why and leaves
+that configuration out.
 """
 
 from __future__ import annotations
@@ -55,9 +62,17 @@ CONFIGS = {"sim": [], "sim --no-fusion": ["--no-fusion"],
 KILLED = "zenoh, robots killed"
 CONFIGS[KILLED] = ["--transport", "zenoh"]
 
+HOSTS = "zenoh, hosts in namespaces, 1mbit cables"
+CONFIGS[HOSTS] = ["--transport", "zenoh"]
+
 #: the environment of a configuration (FORMATION_MATCH_ZYGOTE: where the robots of each
-#: team are forked from, pipeline.runs.transports.zenoh.ZYGOTE_ENV)
-ENV = {"zenoh, zygote per team": {"FORMATION_MATCH_ZYGOTE": "team"}}
+#: team are forked from, pipeline.runs.transports.zenoh.ZYGOTE_ENV; FORMATION_MATCH_HOSTS:
+#: where they run, pipeline.runs.transports.zenoh.HOSTS_ENV)
+ENV = {"zenoh, zygote per team": {"FORMATION_MATCH_ZYGOTE": "team"},
+       HOSTS: {"FORMATION_MATCH_HOSTS": "netns:1mbit"}}
+
+#: what every configuration runs with unless ENV says otherwise (not the caller's settings)
+BASE_ENV = {"FORMATION_MATCH_ZYGOTE": "run", "FORMATION_MATCH_HOSTS": "loopback"}
 
 
 def _killing_child(step: int, argv: list[str]) -> int:
@@ -99,7 +114,7 @@ def _run(args: list[str], out: Path, env: dict | None = None,
         [sys.executable, str(Path(__file__).resolve()), "--killing-child", str(kill_step)]
     proc = subprocess.run([*head, "run-formation", *args,
                            "--no-rerun", "--out", str(out)], cwd=ROOT,
-                          env={**os.environ, "FORMATION_MATCH_ZYGOTE": "run", **(env or {})},
+                          env={**os.environ, **BASE_ENV, **(env or {})},
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
@@ -151,14 +166,20 @@ def main(argv=None) -> int:
 
     # refused by run-formation only once the bench had started (exit 1)
     data_synth.check_formation(args.formation)
+    from pipeline.team.netns import unavailable
+
+    configs = dict(CONFIGS)
+    if (why := unavailable()) is not None:
+        print(f"{HOSTS}: left out, no network namespaces here ({why})")
+        del configs[HOSTS]
     common = ["--steps", str(args.steps), "--formation", args.formation] + \
         ([] if args.size is None else ["--size", args.size])
     load = [round(x, 2) for x in os.getloadavg()]
     print(f"{os.cpu_count()} cores; load average at the start (1, 5, 15 min): {load}")
-    runs: dict[str, list[dict]] = {k: [] for k in CONFIGS}
+    runs: dict[str, list[dict]] = {k: [] for k in configs}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.repeat):
-            for name, extra in CONFIGS.items():
+            for name, extra in configs.items():
                 runs[name].append(_run(common + extra, Path(tmp) / f"{r}-{name}",
                                        ENV.get(name),
                                        args.kill_step if name == KILLED else None))
@@ -171,15 +192,16 @@ def main(argv=None) -> int:
         del best["tables"]
         rows[name] = best
     print(f"run-formation {' '.join(common)} (--no-rerun), {args.repeat} run(s) each")
-    print(f"{'':20s} {'wall s':>7s} {'online s':>8s} {'fusion s':>8s} {'cut':>12s} "
+    w = max(20, *(len(name) for name in rows))  # the names' column
+    print(f"{'':{w}s} {'wall s':>7s} {'online s':>8s} {'fusion s':>8s} {'cut':>12s} "
           f"{'tracks':>14s} {'fusion MB':>9s} {'naming MB':>9s} same")
     for name, r in rows.items():
-        print(f"{name:20s} {r['wall_s']:7.2f} {r['online_s']:8.2f} {r['fusion_s']:8.2f} "
+        print(f"{name:{w}s} {r['wall_s']:7.2f} {r['online_s']:8.2f} {r['fusion_s']:8.2f} "
               f"{str(r['fusion_cut']):>12s} {str(r['fusion_tracks']):>14s} "
               f"{r['fusion_bytes'] / 1e6:9.2f} {r['naming_bytes'] / 1e6:9.2f} "
               f"{r['tables_equal_sim']}")
     for name, r in rows.items():
-        print(f"{name:20s} each step's stage, s: {r['stage_s']}; matching, s: {r['match_s']}"
+        print(f"{name:{w}s} each step's stage, s: {r['stage_s']}; matching, s: {r['match_s']}"
               + (f" ({r['match_bytes'] / 1e6:.2f} MB exchanged)" if r["match_bytes"] else ""))
     z, zn, s = rows["zenoh"]["wall_s"], rows["zenoh --no-fusion"]["wall_s"], rows["sim"]["wall_s"]
     sn = rows["sim --no-fusion"]["wall_s"]
@@ -197,6 +219,12 @@ def main(argv=None) -> int:
           f"{rows['zenoh']['stage_s'][args.kill_step]:.2f} s, its matching "
           f"{k['match_s'][args.kill_step]:.2f} s against "
           f"{rows['zenoh']['match_s'][args.kill_step]:.2f} s")
+    if HOSTS in rows:
+        h = rows[HOSTS]
+        print(f"{HOSTS}: the same tables as the simulator: {h['tables_equal_sim']}; wall / "
+              f"zenoh's {h['wall_s'] / z:.2f}, online stage / zenoh's "
+              f"{h['online_s'] / rows['zenoh']['online_s']:.2f}, fusion / zenoh's "
+              f"{h['fusion_s'] / rows['zenoh']['fusion_s']:.2f}")
     results = {"command": ["run-formation", *common, "--no-rerun"], "repeat": args.repeat,
                "kill_step": args.kill_step,
                "cpus": os.cpu_count(), "load_average_at_start": load, "runs": rows}
