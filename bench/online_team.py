@@ -23,6 +23,14 @@ injection of :func:`pipeline.team.launcher.launch_team`) in each team of step
 simulator's, and the step's record counts the attempts (printed: ``match_attempts``,
 ``stage_attempts``, the fusion's lost frames per step).
 
+``zenoh, robot 0 lost for good`` is ``zenoh`` with robot 0's matching process killed as
+soon as it starts in every team of every step from ``--kill-step`` on, the team started
+again included (its camera's frames never arrive: a host gone for good). The mission goes on
+without them (each such frame void, :func:`pipeline.runs.transports.zenoh.online_match`);
+printed: the void frames per step, the pairwise F1 against ``zenoh``'s and what the second
+team of each step costs. Its teams of the stage and fusion are not touched: they hold robot
+0's frames from before ``--kill-step``, which a host gone for good would lose too.
+
 ``zenoh, hosts in namespaces, 1mbit cables`` is ``zenoh`` with every robot of every team on a
 host of its own: a Linux network namespace, one cable per comm edge of its team, each capped
 at 1 Mbit/s (``FORMATION_MATCH_HOSTS=netns:1mbit``, :func:`pipeline.team.netns.
@@ -61,6 +69,8 @@ CONFIGS = {"sim": [], "sim --no-fusion": ["--no-fusion"],
 
 KILLED = "zenoh, robots killed"
 CONFIGS[KILLED] = ["--transport", "zenoh"]
+LOST = "zenoh, robot 0 lost for good"
+CONFIGS[LOST] = ["--transport", "zenoh"]
 
 HOSTS = "zenoh, hosts in namespaces, 1mbit cables"
 CONFIGS[HOSTS] = ["--transport", "zenoh"]
@@ -105,13 +115,35 @@ def _killing_child(step: int, argv: list[str]) -> int:
     return command(argv)
 
 
+def _losing_child(step: int, argv: list[str]) -> int:
+    """``run-formation ARGV`` (over Zenoh) with robot 0's matching process killed as soon as
+    it starts in every team of every step from ``step`` on, the team started again included:
+    its camera's frames never reach the others (module docstring)."""
+    import pipeline.runs.transports.zenoh as zenoh
+    from pipeline.__main__ import main as command
+
+    match = zenoh.online_match
+
+    def losing_match(views, t, *a, **kw):
+        if t >= step:
+            kw["kill"] = [(0, "started", 0.0), (0, "started", 0.0)]
+        return match(views, t, *a, **kw)
+
+    zenoh.online_match = losing_match
+    return command(argv)
+
+
 def _run(args: list[str], out: Path, env: dict | None = None,
-         kill_step: int | None = None) -> dict:
+         kill_step: int | None = None, lost_step: int | None = None) -> dict:
     """``python -m pipeline run-formation ARGS`` (with ``kill_step``: robots killed at that
-    step, :func:`_killing_child`): wall, report, links and steps tables."""
+    step, :func:`_killing_child`; with ``lost_step``: robot 0 lost for good from that step,
+    :func:`_losing_child`): wall, report, links and steps tables."""
     t0 = time.perf_counter()
-    head = [sys.executable, "-m", "pipeline"] if kill_step is None else \
-        [sys.executable, str(Path(__file__).resolve()), "--killing-child", str(kill_step)]
+    head = [sys.executable, "-m", "pipeline"]
+    if kill_step is not None:
+        head = [sys.executable, str(Path(__file__).resolve()), "--killing-child", str(kill_step)]
+    elif lost_step is not None:
+        head = [sys.executable, str(Path(__file__).resolve()), "--losing-child", str(lost_step)]
     proc = subprocess.run([*head, "run-formation", *args,
                            "--no-rerun", "--out", str(out)], cwd=ROOT,
                           env={**os.environ, **BASE_ENV, **(env or {})},
@@ -141,6 +173,8 @@ def _run(args: list[str], out: Path, env: dict | None = None,
             "match_attempts": [s.get("match_attempts", 1) for s in steps],
             "stage_attempts": [s.get("stage_attempts", 0) for s in steps],
             "fusion_frames_lost": [len(f.get("frames_lost", ())) for f in fus],
+            "frames_void": [s.get("match_frames_void", []) for s in steps],
+            "f1": rep["final"]["online"]["f1"],
             "tables": [(out / n).read_text() for n in ("links.csv", "link_steps.csv")]}
 
 
@@ -155,7 +189,8 @@ def main(argv=None) -> int:
                     help="runs of each configuration, alternated; the median wall kept")
     ap.add_argument("--kill-step", type=int, default=1,
                     help="the step whose teams lose robot 0 in the 'zenoh, robots killed' "
-                         "configuration (module docstring; default 1)")
+                         "configuration, and from which robot 0 is lost for good in 'zenoh, "
+                         "robot 0 lost for good' (module docstring; default 1)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "bench-online-team"))
     args = ap.parse_args(argv)
     if not 0 <= args.kill_step < args.steps:
@@ -182,7 +217,8 @@ def main(argv=None) -> int:
             for name, extra in configs.items():
                 runs[name].append(_run(common + extra, Path(tmp) / f"{r}-{name}",
                                        ENV.get(name),
-                                       args.kill_step if name == KILLED else None))
+                                       args.kill_step if name == KILLED else None,
+                                       args.kill_step if name == LOST else None))
     rows = {}
     for name, rs in runs.items():
         best = dict(sorted(rs, key=lambda x: x["wall_s"])[len(rs) // 2])
@@ -219,6 +255,13 @@ def main(argv=None) -> int:
           f"{rows['zenoh']['stage_s'][args.kill_step]:.2f} s, its matching "
           f"{k['match_s'][args.kill_step]:.2f} s against "
           f"{rows['zenoh']['match_s'][args.kill_step]:.2f} s")
+    lo = rows[LOST]
+    print(f"{LOST} from step {args.kill_step}: frames void per step {lo['frames_void']}, "
+          f"teams started per step: matching {lo['match_attempts']}; pairwise F1 "
+          f"{lo['f1']:.4f} against zenoh's {rows['zenoh']['f1']:.4f} (on the frames each "
+          f"association had); wall / zenoh's {lo['wall_s'] / z:.2f}, step {args.kill_step}'s "
+          f"matching {lo['match_s'][args.kill_step]:.2f} s against "
+          f"{rows['zenoh']['match_s'][args.kill_step]:.2f} s")
     if HOSTS in rows:
         h = rows[HOSTS]
         print(f"{HOSTS}: the same tables as the simulator: {h['tables_equal_sim']}; wall / "
@@ -236,4 +279,6 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--killing-child"]:
         raise SystemExit(_killing_child(int(sys.argv[2]), sys.argv[3:]))
+    if sys.argv[1:2] == ["--losing-child"]:
+        raise SystemExit(_losing_child(int(sys.argv[2]), sys.argv[3:]))
     raise SystemExit(main())
