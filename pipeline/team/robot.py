@@ -919,7 +919,9 @@ def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -
     try:
         transport.status("started")
         try:
-            waited = transport.handshake(float(opts["start_timeout_s"]))
+            # an online step's matching robot has its own frame to publish without neighbours
+            waited = transport.handshake(float(opts["start_timeout_s"]),
+                                         alone=team.data.get("kind") == "online-match")
         except InputError as exc:  # another team file than a neighbour's
             transport.status(f"failed: {exc}")
             raise

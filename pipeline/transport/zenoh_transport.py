@@ -615,18 +615,22 @@ class ZenohTransport(RoundEndpoint):
                          f"team {self.team.name!r} with the same robots, comm_edges, data.kind "
                          "and options it shares (resolution, ...)")
 
-    def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05) -> float:
+    def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05,
+                  alone: bool = False) -> float:
         """Wait until every neighbour is heard and has heard this robot; return seconds taken.
 
         A neighbour that starts late within ``timeout_s`` joins. One that has not answered by
         then is written off (``start``: named in the log, outcome ``partitioned``) and the robot
         runs on with the others; if it starts later it is told (``gone``) and ends alone.
+        With ``alone`` (a robot with work of its own to do without neighbours: an online
+        step's matching, :mod:`pipeline.team.online_match`) it runs on alone also when no
+        neighbour answered, every one written off so.
 
         Raises
         ------
         RobotMissingError
             No neighbour at all was heard within ``timeout_s`` (a wrong address is likelier
-            than every neighbour being down); the message names the first.
+            than every neighbour being down), and not ``alone``; the message names the first.
         InputError
             A neighbour's hello carries other team-wide settings (its team file differs in the
             robots, the comm graph, the data kind or a team-only option): the two would run
@@ -680,7 +684,7 @@ class ZenohTransport(RoundEndpoint):
                 k = missing[0]
                 text = (f"neighbour robot {k} ({self.team.endpoint(k)}) did not answer within "
                         f"{timeout_s:g} s; it never started or cannot be reached")
-                if len(missing) == len(self.neighbours):
+                if len(missing) == len(self.neighbours) and not alone:
                     raise RobotMissingError(f"robot {self.robot_id}: {text}")
                 # some neighbours answered: run on with them, the others written off
                 for k in missing:

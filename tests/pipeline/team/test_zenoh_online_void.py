@@ -63,25 +63,32 @@ def test_a_robot_lost_twice_by_a_step_matching_leaves_its_frame_void(tmp_path, m
 
 
 def test_a_robot_lost_for_good_leaves_every_later_frame_void(tmp_path, monkeypatch):
-    """Robot 0's host is gone from step 1 on (every matching team loses it): the mission
-    ends all the same, each of its later frames void, conflict-free after every step."""
+    """Robot 1 of a line 0 - 1 - 2 is gone for good from step 1 on (every matching team
+    loses it): robots 0 and 2, whose only neighbour it was, match their own frames alone
+    (they used to end with exit 3, "no neighbour answered", and stop the mission), each of
+    robot 1's later frames is void, and the mission ends conflict-free after every step."""
     job = zenoh.online_match
 
     def killing(views, t, *args, **kw):
         if t >= 1:
-            kw["kill"] = [(0, "started", 0.0), (0, "started", 0.0)]
+            kw["kill"] = [(1, "started", 0.0), (1, "started", 0.0)]
         return job(views, t, *args, **kw)
 
     monkeypatch.setattr(zenoh, "online_match", killing)
-    assert main([*ARGS, "--transport", "zenoh", "--round-timeout", "5",
-                 "--out", str(tmp_path / "zen")]) == 0
+    line = [a for a in ARGS if a not in ("--formation", "a")]
+    assert main([*line, "--robots", "3", "--graph", "line", "--transport", "zenoh",
+                 "--round-timeout", "5", "--out", str(tmp_path / "zen")]) == 0
     rep = json.loads((tmp_path / "zen" / "report.json").read_text())
     steps = rep["steps"]
-    with open(tmp_path / "zen" / "images.csv") as f:
-        n = sum(1 for r in csv.DictReader(f) if r["step"] == "0")
-    assert [s["match_frames_void"] for s in steps] == [[], [n], [2 * n]]
+    assert [s["match_frames_void"] for s in steps] == [[], [4], [7]]
     assert [s["match_attempts"] for s in steps] == [1, 2, 2]
     assert all(s["conflictive_sets_after"] == 0 for s in steps)
     with open(tmp_path / "zen" / "links.csv") as f:
-        ends = {int(r[k]) for r in csv.DictReader(f) for k in ("cam_i", "cam_j")}
-    assert not ends & {n, 2 * n}
+        rows = list(csv.DictReader(f))
+    ends = {int(r[k]) for r in rows for k in ("cam_i", "cam_j")}
+    assert not ends & {4, 7}
+    # robots 0 and 2 matched their new frames alone, against their own earlier ones and
+    # (robot 0) robot 1's frame of step 0, which robot 1 had sent it then
+    made = _made(tmp_path / "zen")
+    assert {(e[0], e[2]) for e in made[1]} == {(0, 3), (1, 3), (2, 5)}
+    assert {(e[0], e[2]) for e in made[2]} == {(3, 6), (5, 8)}
