@@ -50,7 +50,7 @@ from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
            "Observer", "TEAM_TIMEOUT_S", "team_time_limit", "team_round_timeout",
-           "shared_zygote", "SharedZygote", "written_off", "lost_robots"]
+           "shared_zygote", "SharedZygote", "written_off", "lost_robots", "silent_grace_s"]
 
 
 #: seconds a team may run before :func:`launch_team` kills it, unless the caller or
@@ -396,6 +396,10 @@ class TeamRun:
     #: with ``stop_at_loss``: the robot whose process ended without publishing, at which the
     #: team was stopped (the others killed, their results not waited for); else None
     stopped_at: int | None = None
+    #: id -> monotonic time the launcher killed it as silent: its process ran on without
+    #: publishing or computing for :func:`silent_grace_s` after every other robot had
+    #: published or ended (frozen for good, hung); it is lost (:func:`lost_robots`)
+    silenced: dict = field(default_factory=dict)
 
     @property
     def survivors(self) -> list[int]:
@@ -457,6 +461,34 @@ class Observer:
             self.session.close()
 
 
+def silent_grace_s(team: Team) -> float:
+    """How long :func:`launch_team` waits for the robots that neither published nor ended once
+    every other robot of ``team`` has: three times the longest ``round_timeout_s`` of its
+    robots, counted from the last result, end or status line any robot of the team gave, or
+    CPU time one of those robots' processes used (a robot still computing is not silent;
+    where the system does not tell a process's CPU time, from the others' last sign only).
+
+    The round timeout is the silence after which the robots themselves write a neighbour off.
+    A robot still running when all the others are done was written off by its neighbours
+    (frozen for good, a host suspended or cut off, or hung), or has only its own last work
+    left (its neighbours' exchanges with it are over), or waits out the silence of a
+    neighbour that is silent too: one round timeout covers that wait, the rest its last
+    work. A frozen robot's neighbours end about one round timeout after it froze, and once
+    resumed it writes them off and publishes within a few seconds: frozen for up to about
+    three round timeouts in all, it still publishes in time."""
+    return 3.0 * max(float(team.options_for(i)["round_timeout_s"]) for i in range(team.n))
+
+
+def _cpu_ticks(pid: int) -> int | None:
+    """CPU time process ``pid`` used so far (user and system, in clock ticks, Linux's
+    ``/proc/PID/stat``), or None where it cannot be read."""
+    try:
+        fields = Path(f"/proc/{int(pid)}/stat").read_text().rsplit(")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: float | None = None,
                 kill: tuple | None = None, log=None,
                 fork: bool = True, stop_at_loss: bool = False, start=None) -> TeamRun:
@@ -473,7 +505,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         ``fusion``); ``(robot, status, delay_s, stop_s)``: ``kill -STOP`` instead, and
         ``kill -CONT`` ``stop_s`` seconds later (a host suspended, or cut off for a while: its
         process does not end, its neighbours write it off after their round timeout; the
-        robot is in :attr:`TeamRun.frozen`, not in :attr:`TeamRun.killed`)
+        robot is in :attr:`TeamRun.frozen`, not in :attr:`TeamRun.killed`). A robot that
+        neither publishes, ends nor computes for :func:`silent_grace_s` after every other
+        robot has published or ended (frozen for good, or hung) is killed then and counted lost
+        (:attr:`TeamRun.silenced`; with ``stop_at_loss`` its end stops the team as any
+        other), instead of holding the team until ``timeout_s``
     log : callable(str) or None
     fork : bool — fork the robots from one zygote that imported the robot program once
         (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
@@ -588,6 +624,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     pgid = procs[i].pid
         run.start_s = time.monotonic() - t0
         deadline = t0 + timeout_s
+        grace_s = silent_grace_s(team)
+        # what the robots last did (results, ends, status lines; once every other robot is
+        # done, the CPU time of those still running) and since when: a robot silent for the
+        # grace after every other one published or ended is killed
+        progress, quiet_since = None, time.monotonic()
         with observer.cv:
             while True:
                 interrupted()
@@ -655,6 +696,22 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     if all(p.poll() is not None or i in observer.results
                            for i, p in procs.items()):
                         break
+                now = time.monotonic()
+                silent = [i for i in range(team.n) if i not in observer.results
+                          and i not in run.exit_codes and i not in run.silenced]
+                waiting = bool(silent) and len(silent) < team.n and len(procs) == team.n
+                seen = (len(set(observer.results) | set(run.exit_codes)),
+                        sum(len(v) for v in observer.seen.values()),
+                        *(_cpu_ticks(procs[i].pid) for i in (silent if waiting else ())))
+                if seen != progress:
+                    progress, quiet_since = seen, now
+                if waiting and now - quiet_since > grace_s:
+                    for i in silent:
+                        procs[i].kill()
+                        run.silenced[i] = time.monotonic()
+                        log(f"robot {i} ({team.endpoint(i)}) neither published nor ended "
+                            f"{grace_s:g} s after the others (three round timeouts): "
+                            "killed, counted lost")
                 if time.monotonic() > deadline:
                     missing = sorted(set(range(team.n)) - set(observer.results))
                     never = [i for i in missing if i not in observer.status]
@@ -735,8 +792,9 @@ def written_off(run: TeamRun, named: dict) -> list[int]:
 
 def lost_robots(run: TeamRun, named: dict | None = None) -> list[int]:
     """The robots ``run`` lost: the one it was stopped at (``stop_at_loss``), else those that
-    did not publish; those killed by the fault injection; and of those ``named`` lost by
-    others (robot -> the robots that named it), the ones :func:`written_off` holds lost."""
+    did not publish (those the launcher killed as silent among them); those killed by the
+    fault injection; and of those ``named`` lost by others (robot -> the robots that named
+    it), the ones :func:`written_off` holds lost."""
     gone = set(range(run.team.n)) - set(run.results) if run.stopped_at is None \
         else {run.stopped_at}
     return sorted(gone | {int(k) for k in run.killed} | set(written_off(run, named or {})))
@@ -789,9 +847,11 @@ def team_summary(run: TeamRun) -> dict:
                            "since_launch_s": h.get("since_launch_s")}
         else:
             # lost: "killed" (its process ended or went silent), "started" whether it ever
-            # said so (a robot never started is lost too)
+            # said so (a robot never started is lost too), "silenced" whether the launcher
+            # killed it, silent after the others had ended (silent_grace_s)
             rob[str(i)] = {"result": None, "exit_code": run.exit_codes.get(i),
-                           "killed": i in run.killed, "started": i in run.status}
+                           "killed": i in run.killed, "started": i in run.status,
+                           "silenced": i in run.silenced}
     # comm edges a robot that published never matched: it wrote the neighbour off before
     # their features crossed, so the pair's links are missing (not cut); a links team
     # reads its links and matches nothing
