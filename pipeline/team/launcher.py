@@ -393,9 +393,10 @@ class TeamRun:
     start_s: float = 0.0
     published_s: float = 0.0  # from the launch to the last result received
     stderr: dict = field(default_factory=dict)      # id -> last lines of the robot's stderr
-    #: with ``stop_at_loss``: the robot whose process ended without publishing, at which the
-    #: team was stopped (the others killed, their results not waited for); else None
-    stopped_at: int | None = None
+    #: with ``stop_at_loss``: the robots whose processes had ended without publishing when
+    #: the team was stopped (in increasing order; the others killed, their results not waited
+    #: for); else empty
+    stopped_by: list = field(default_factory=list)
     #: id -> monotonic time the launcher killed it as silent: its process ran on without
     #: publishing or computing for :func:`silent_grace_s` after every other robot had
     #: published or ended (frozen for good, hung); it is lost (:func:`lost_robots`)
@@ -515,7 +516,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
     stop_at_loss : bool — stop the team as soon as a robot's process ends without publishing
         (killed, or ended otherwise without an error), killing the others
-        (:attr:`TeamRun.stopped_at`), for a caller that will start the team again anyway
+        (:attr:`TeamRun.stopped_by`), for a caller that will start the team again anyway
         (an online step, :mod:`pipeline.runs.online`): the survivors would otherwise finish
         without it, and a robot lost before the start handshake is written off only after
         ``start_timeout_s``. Default: the survivors finish, as a team without a launcher
@@ -683,11 +684,13 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                     last = _tail(workdir / f"robot{i}.log")
                     raise TeamError(f"robot {i} ({team.endpoint(i)}) failed with exit code "
                                     f"{run.exit_codes[i]}: {last}")
-                gone_early = [i for i in run.exit_codes if i not in observer.results]
+                gone_early = sorted(int(i) for i in run.exit_codes if i not in observer.results)
                 if stop_at_loss and gone_early:
-                    run.stopped_at = int(gone_early[0])
-                    log(f"robot {run.stopped_at} ended without publishing: the team is "
-                        "stopped (it will be started again)")
+                    # every robot gone by now: two may end within one poll
+                    run.stopped_by = gone_early
+                    log(f"robot{'s' if len(gone_early) > 1 else ''} "
+                        f"{', '.join(map(str, gone_early))} ended without publishing: the "
+                        "team is stopped (it will be started again)")
                     break
                 ended = set(observer.results) | set(run.exit_codes)
                 if len(ended) == team.n and all(i in observer.results or i in run.exit_codes
@@ -727,7 +730,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         # wait for the processes that published to exit (a team stopped at a loss: those
         # that did not publish are killed below, not waited for)
         for i, p in procs.items():
-            if run.stopped_at is None or i in observer.results:
+            if not run.stopped_by or i in observer.results:
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     p.wait(timeout=5)
             run.exit_codes[i] = p.poll()
@@ -791,12 +794,12 @@ def written_off(run: TeamRun, named: dict) -> list[int]:
 
 
 def lost_robots(run: TeamRun, named: dict | None = None) -> list[int]:
-    """The robots ``run`` lost: the one it was stopped at (``stop_at_loss``), else those that
+    """The robots ``run`` lost: those it was stopped by (``stop_at_loss``), else those that
     did not publish (those the launcher killed as silent among them); those killed by the
     fault injection; and of those ``named`` lost by others (robot -> the robots that named
     it), the ones :func:`written_off` holds lost."""
-    gone = set(range(run.team.n)) - set(run.results) if run.stopped_at is None \
-        else {run.stopped_at}
+    gone = set(run.stopped_by) if run.stopped_by \
+        else set(range(run.team.n)) - set(run.results)
     return sorted(gone | {int(k) for k in run.killed} | set(written_off(run, named or {})))
 
 

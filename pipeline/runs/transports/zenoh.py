@@ -360,9 +360,12 @@ def resolve_links_file(links_csv, fpc, comm_edges, options: dict | None = None, 
     run = _launch_team(team, workdir, kill=kill, stop_at_loss=stop_at_loss)
     if keep_run is not None:
         keep_run.append(run)
-    if run.stopped_at is not None:
-        raise RobotsLost(f"the robot process of camera {run.stopped_at} ended without "
-                         "publishing; the team was stopped", lost_robots(run), _spent_by(run))
+    if run.stopped_by:
+        gone = run.stopped_by
+        raise RobotsLost(f"the robot process{'es' if len(gone) > 1 else ''} of camera"
+                         f"{'s' if len(gone) > 1 else ''} {', '.join(map(str, gone))} ended "
+                         "without publishing; the team was stopped", lost_robots(run),
+                         _spent_by(run))
     if links is not None:
         pass
     elif per_robot:
@@ -651,7 +654,7 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
         team = make_team("online-fusion", comm_edges, data, opts, n=n)
         run = _launch_team(team, work, kill=kill, stop_at_loss=True)
     res = consistency_of_team(team, run.results, links, m, run.killed) \
-        if run.stopped_at is None else None
+        if not run.stopped_by else None
     # a robot whose process ran on but fell silent (a host suspended or cut off) is written
     # off by its neighbours, who name it: their naming cut its links robot-lost
     lost = lost_robots(run, None if res is None else res.stats["faults"]["robots_lost"])

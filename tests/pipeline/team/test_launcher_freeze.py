@@ -18,7 +18,7 @@ def test_a_robot_frozen_past_the_round_timeout_is_written_off_by_its_neighbours(
                      {"round_timeout_s": 2.0}, n=4)
     run = launch_team(team, tmp_path / "w", kill=(2, "consistency", 0.0, 6.0),
                       stop_at_loss=True, timeout_s=120)
-    assert 2 in run.frozen and run.killed == {} and run.stopped_at is None
+    assert 2 in run.frozen and run.killed == {} and run.stopped_by == []
     assert sorted(run.results) == [0, 1, 2, 3]  # it resumed and published, after the others
     res = consistency_of_team(team, run.results, read_links_csv(links).links, FPC, run.killed)
     assert 2 in res.stats["faults"]["robots_lost"]
@@ -49,5 +49,5 @@ def test_a_robot_that_ended_before_its_injected_kill_is_not_killed(tmp_path):
                                       "features_per_camera": FPC}, n=4)
     run = launch_team(team, tmp_path / "w", kill=(1, "consistency", 10.0), stop_at_loss=True,
                       timeout_s=120)
-    assert run.stopped_at is None and sorted(run.results) == [0, 1, 2, 3]
+    assert run.stopped_by == [] and sorted(run.results) == [0, 1, 2, 3]
     assert run.killed == {}

@@ -19,11 +19,11 @@ def _team(tmp_path):
 def test_a_robot_killed_at_its_start_stops_the_team(tmp_path):
     run = launch_team(_team(tmp_path), tmp_path / "a", kill=(2, "started", 0.0),
                       stop_at_loss=True, timeout_s=120)
-    assert run.stopped_at == 2 and 2 in run.killed and 2 not in run.results
+    assert run.stopped_by == [2] and 2 in run.killed and 2 not in run.results
 
 
 def test_without_it_the_survivors_finish_without_the_lost_robot(tmp_path):
     run = launch_team(_team(tmp_path), tmp_path / "b", kill=(2, "consistency", 0.0),
                       timeout_s=120)
-    assert run.stopped_at is None
+    assert run.stopped_by == []
     assert sorted(run.results) == [0, 1, 3]
