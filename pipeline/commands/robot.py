@@ -28,7 +28,7 @@ def run(args) -> int:
     from pipeline.outputs import check_output_files
     from pipeline.team.robot import run_robot_process
     from pipeline.team.teamfile import check_data_files, load_team
-    from pipeline.transport import RobotMissingError
+    from pipeline.transport import NO_NEIGHBOUR_EXIT, RobotMissingError
 
     team = load_team(args.team)
     i = team.check_id(args.id)
@@ -40,5 +40,5 @@ def run(args) -> int:
         code = run_robot_process(team, i, args.result, overwrite=args.overwrite)
     except RobotMissingError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 3
+        return NO_NEIGHBOUR_EXIT
     return code

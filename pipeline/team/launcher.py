@@ -46,6 +46,7 @@ from pipeline.team.teamfile import (
     round_timeout_options,
     write_team,
 )
+from pipeline.transport import NO_NEIGHBOUR_EXIT
 from pipeline.transport.wire import WireError, decode_packet
 
 __all__ = ["free_ports", "make_team", "launch_team", "TeamRun", "TeamError", "die_with_parent",
@@ -515,7 +516,8 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     fork : bool — fork the robots from one zygote that imported the robot program once
         (:mod:`pipeline.team.zygote`; default), or start each as its own interpreter
     stop_at_loss : bool — stop the team as soon as a robot's process ends without publishing
-        (killed, or ended otherwise without an error), killing the others
+        (killed, ended otherwise without an error, or with exit code 3: it heard no
+        neighbour, :data:`~pipeline.transport.NO_NEIGHBOUR_EXIT`), killing the others
         (:attr:`TeamRun.stopped_by`), for a caller that will start the team again anyway
         (an online step, :mod:`pipeline.runs.online`): the survivors would otherwise finish
         without it, and a robot lost before the start handshake is written off only after
@@ -531,7 +533,11 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
     ------
     TeamError
         A robot exited with an error before publishing its result (named, with its last
-        stderr line), or the team did not finish within ``timeout_s``.
+        stderr line), or the team did not finish within ``timeout_s``. A robot that heard no
+        neighbour (exit code 3) is no error but lost, as a killed one, with ``stop_at_loss``
+        or when every neighbour of it was lost too (killed, frozen, ended without
+        publishing); otherwise its neighbours ran and it could not reach them (a wrong
+        address, the network), an error.
     """
     log = log or (lambda s: print(s, file=sys.stderr, flush=True))
     timeout_s = _within["time_limit"] if timeout_s is None else float(timeout_s)
@@ -630,6 +636,14 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         # done, the CPU time of those still running) and since when: a robot silent for the
         # grace after every other one published or ended is killed
         progress, quiet_since = None, time.monotonic()
+
+        def neighbours_lost(i: int) -> bool:
+            """Whether every neighbour of robot ``i`` was lost: its process ended without
+            publishing, or the fault injection or the launcher stopped it."""
+            return all(k in run.killed or k in run.frozen or k in run.silenced
+                       or (k in run.exit_codes and k not in observer.results)
+                       for k in team.neighbours(i))
+
         with observer.cv:
             while True:
                 interrupted()
@@ -678,7 +692,9 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                             run.killed[k] = time.monotonic()
                             log(f"kill -9 robot {k} (pid {procs[k].pid})")
                 failed = [i for i, c in run.exit_codes.items()
-                          if c not in (0, -signal.SIGKILL) and i not in observer.results]
+                          if c not in (0, -signal.SIGKILL) and i not in observer.results
+                          and not (c == NO_NEIGHBOUR_EXIT
+                                   and (stop_at_loss or neighbours_lost(i)))]
                 if failed:
                     i = failed[0]
                     last = _tail(workdir / f"robot{i}.log")

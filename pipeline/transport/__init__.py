@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["HEADER_BYTES", "Message", "NotANeighbourError", "Transport", "Endpoint",
-           "RoundEndpoint", "RobotMissingError"]
+           "RoundEndpoint", "RobotMissingError", "NO_NEIGHBOUR_EXIT"]
 
 HEADER_BYTES = 12
 
@@ -51,6 +51,11 @@ class NotANeighbourError(RuntimeError):
 
 class RobotMissingError(RuntimeError):
     """A neighbour never answered the start handshake of a team (the message names it)."""
+
+
+#: exit code of a robot process (``python -m pipeline robot``) that heard no neighbour in its
+#: start handshake (:class:`RobotMissingError`)
+NO_NEIGHBOUR_EXIT = 3
 
 
 @dataclass

@@ -235,7 +235,7 @@ def formation_of_run(config, team, run, timer: StageTimer) -> FormationRobots:
             timer.note(f"{stats['links_cut']} links cut as fusion outliers")
     else:
         cleaning.fusion_stats = {"enabled": False, "reason": "disabled by option"}
-    if run.killed or run.silenced or float(opts.get("drop_prob", 0)) > 0:
+    if run.killed or len(run.results) < team.n or float(opts.get("drop_prob", 0)) > 0:
         from pipeline.faults import FaultConfig, fault_report
 
         fc = config.faults or FaultConfig()
