@@ -444,9 +444,11 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
                 real = self._stage_real
                 gone = real[np.isin(L.ci[real], again) | np.isin(L.cj[real], again)]
                 gone = gone[L.kept[gone]]
-                if not len(gone):
-                    raise RobotsLost(f"{e} (image {again[0]} lost again with none of its "
-                                     "links left in the step's sub-problem)",
+                if not len(gone):  # (e names the image by its place in the sub-problem)
+                    raise RobotsLost(f"the robot process of image {again[0]} was lost twice "
+                                     f"during step {t}'s consistency stage, with none of its "
+                                     "links left in the step's sub-problem to cut (it takes "
+                                     "part through retired pieces only)",
                                      e.cameras, e.stats) from e
                 self._cut(gone, "robot-lost", t)
                 cut_lost += len(gone)
