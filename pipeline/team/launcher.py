@@ -152,7 +152,8 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     ``comm_edges`` is an edge array: an edge listed twice is an InputError naming it
     (:func:`pipeline.commgraph.check_comm_edges`, through the team file's own check).
     ``options`` over :data:`~pipeline.team.teamfile.DEFAULT_OPTIONS`; within
-    :func:`team_round_timeout` its timeouts where ``options`` sets none.
+    :func:`team_round_timeout` its timeouts where ``options`` sets none; ``closed_at_start``
+    unless ``options`` says otherwise (the launcher never starts a robot again in a team).
     """
     e = np.asarray(comm_edges, dtype=np.int64).reshape(-1, 2)
     n = int(n if n is not None else e.max() + 1)
@@ -160,7 +161,9 @@ def make_team(name: str, comm_edges, data: dict, options: dict | None = None,
     robots = [RobotEntry(i, f"tcp/{host}:{p}") for i, p in enumerate(ports[:n])]
     silence = _within["round_timeout"]
     timeouts = {} if silence is None else round_timeout_options(silence)
-    opts = {**DEFAULT_OPTIONS, **timeouts, **(options or {})}
+    # its robots are never started again under their ids: one that ends while starting is
+    # written off by its neighbours at once (closed_at_start)
+    opts = {**DEFAULT_OPTIONS, **timeouts, "closed_at_start": True, **(options or {})}
     team = Team(name, robots, e, data, opts, observer=f"tcp/{host}:{ports[n]}")
     from pipeline.team.teamfile import parse_team
 
@@ -426,6 +429,7 @@ class Observer:
         longest = max(float(team.options_for(i)["round_timeout_s"]) for i in range(team.n))
         self.session = open_session([team.observer], [], "observer", round_timeout_s=longest)
         self._key = key
+        self._ended: list = []  # the ``ended`` tokens declared (kept alive with the session)
         self._subs = [
             self.session.declare_subscriber(key(team.name, "result", "*"), self._on_result),
             self.session.declare_subscriber(key(team.name, "status", "*"), self._on_status)]
@@ -457,6 +461,16 @@ class Observer:
             self.status[i] = sample.payload.to_string()
             self.seen.setdefault(i, []).append(self.status[i])
             self.cv.notify_all()
+
+    def ended(self, i: int) -> None:
+        """Tell robot ``i``'s neighbours that its process ended (it did not publish): a
+        liveliness token ``fm/<team>/ended/<i>`` for the rest of the team, which a robot
+        subscribing later still receives (:meth:`pipeline.transport.zenoh_transport.
+        ZenohTransport._on_ended`). A robot killed while starting, before its neighbours
+        heard it, would otherwise be waited for until their start timeout."""
+        with contextlib.suppress(Exception):
+            self._ended.append(self.session.liveliness().declare_token(
+                self._key(self.team.name, "ended", int(i))))
 
     def close(self) -> None:
         with contextlib.suppress(Exception):
@@ -636,6 +650,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         # done, the CPU time of those still running) and since when: a robot silent for the
         # grace after every other one published or ended is killed
         progress, quiet_since = None, time.monotonic()
+        ended: set = set()  # robots whose end without a result the observer announced
 
         def neighbours_lost(i: int) -> bool:
             """Whether every neighbour of robot ``i`` was lost: its process ended without
@@ -650,6 +665,9 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 for i, p in list(procs.items()):
                     if i not in run.exit_codes and p.poll() is not None:
                         run.exit_codes[i] = p.returncode
+                for i in sorted(set(run.exit_codes) - set(observer.results) - ended):
+                    observer.ended(i)  # its neighbours may not know yet
+                    ended.add(i)
                 running = [i for i in range(team.n)
                            if i not in observer.results and i not in run.exit_codes]
                 if gone.is_set() and running:

@@ -921,7 +921,8 @@ def run_robot_process(team, i: int, result_path=None, overwrite: bool = False) -
         try:
             # an online step's matching robot has its own frame to publish without neighbours
             waited = transport.handshake(float(opts["start_timeout_s"]),
-                                         alone=team.data.get("kind") == "online-match")
+                                         alone=team.data.get("kind") == "online-match",
+                                         closed_unheard=bool(opts["closed_at_start"]))
         except InputError as exc:  # another team file than a neighbour's
             transport.status(f"failed: {exc}")
             raise

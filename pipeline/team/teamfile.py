@@ -134,6 +134,11 @@ DEFAULT_OPTIONS = {
     # in a phase a loss leaves undone (the sets solved at their roots, the history check)
     # ends that work and the robot publishes, naming it lost, instead of failing
     "restarted_on_loss": False,
+    # no robot of the team is started again under its id (the launcher's teams): a neighbour
+    # whose process ends while starting, before it was heard, is written off at once (its
+    # liveliness token gone) rather than after start_timeout_s; off, a robot started again
+    # by hand within start_timeout_s still joins
+    "closed_at_start": False,
     # Zenoh's shared memory with the robot processes of the same host (a pool per robot:
     # pipeline.transport.zenoh_transport.zenoh_config); off, every message goes over TCP
     "shared_memory": False,
@@ -803,7 +808,7 @@ def _check_options(opts: dict, where: str) -> None:
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
                          "pixels >= 0")
     for k in ("fusion", "rootsift", "budget_after_merge", "solve_small_sets", "gather_conflictive",
-              "gather_free", "shared_memory", "restarted_on_loss"):
+              "gather_free", "shared_memory", "restarted_on_loss", "closed_at_start"):
         if not isinstance(opts.get(k, False), bool):
             raise InputError(f"{where}: option {k} {opts[k]!r} must be true or false")
     if opts.get("wire", "compact") not in WIRE_FORMS:

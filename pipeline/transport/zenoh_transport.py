@@ -143,7 +143,12 @@ Start handshake
     timeout for a robot that had long started): a robot that has finished its handshake
     answers every ``hello`` it still gets with one of its own, so a neighbour still waiting
     is told it was heard; and a neighbour heard once whose session then closes (liveliness
-    token gone) is written off at once (``closed``), not after the timeout.
+    token gone) is written off at once (``closed``), not after the timeout. A neighbour that
+    ends before it was heard leaves no token to vanish; in a launcher's team (option
+    ``closed_at_start``: no robot is started again there) the launcher, which saw its
+    process end, declares a token ``ended/<id>`` for it, which the robot hears (a liveliness
+    subscriber with history, and a query every :data:`ENDED_ASK_S` while a neighbour is
+    unheard), and writes it off at once too (``closed``).
 
     A neighbour started again: every hello carries a mark drawn by the robot's process when
     it starts (:attr:`ZenohTransport.incarnation`). A hello of another mark than the first
@@ -166,6 +171,7 @@ Start handshake
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import queue
@@ -207,6 +213,10 @@ ASK_AFTER_S = 2.0
 #: under load), and was written off with the packet in hand (its neighbour then stopped: "the
 #: features of frame F never came from robot K")
 CLOSED_GRACE_S = 2.0
+
+#: seconds between two queries of a robot in the start handshake, while a neighbour is
+#: unheard, for its launcher's ``ended`` tokens (``closed_unheard``), and the longest one waits
+ENDED_ASK_S = 0.5
 
 #: the most sender threads a robot runs (module docstring, "Threads"): one per neighbour up
 #: to this many, so a robot of the project's sparse graphs (line, ring: 2 neighbours, ring2: 4,
@@ -402,6 +412,12 @@ class ZenohTransport(RoundEndpoint):
         self._token = self.session.liveliness().declare_token(key(name, "live", self.robot_id))
         self._subs.append(self.session.liveliness().declare_subscriber(
             key(name, "live", "*"), self._on_liveliness))
+        # a launcher that saw a neighbour's process end says so with a token of its own
+        # (``ended``, :class:`pipeline.team.launcher.Observer`): a process killed before this
+        # robot heard its token never shows one to vanish; the token's history reaches a robot
+        # that subscribes after the end
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            key(name, "ended", "*"), self._on_ended, history=True))
 
     def _from(self, sample, at: int) -> int | None:
         """The robot id at chunk ``at`` of ``sample``'s key expression when it is a
@@ -416,6 +432,32 @@ class ZenohTransport(RoundEndpoint):
         import zenoh
 
         if sample.kind != zenoh.SampleKind.DELETE:
+            return
+        k = self._from(sample, -1)
+        if k is None:
+            return
+        with self._cv:
+            self._left.add(k)
+            self._left_at.setdefault(k, time.monotonic())
+            self._cv.notify_all()
+
+    def _ask_ended(self) -> None:
+        """Ask the sessions this robot reaches for the launcher's ``ended`` tokens (a
+        liveliness query, answered within :data:`ENDED_ASK_S`): the subscriber hears of a
+        token only if its interest reached the launcher, which it does not when this robot's
+        link to the launcher came up after the subscriber was declared."""
+        with contextlib.suppress(Exception):
+            for reply in self.session.liveliness().get(key(self.team.name, "ended", "*"),
+                                                       timeout=ENDED_ASK_S):
+                if reply.ok is not None:
+                    self._on_ended(reply.ok)
+
+    def _on_ended(self, sample) -> None:
+        """A launcher's ``ended`` token for neighbour ``k``: its process ended, as its own
+        token vanishing says (:meth:`_on_liveliness`)."""
+        import zenoh
+
+        if sample.kind != zenoh.SampleKind.PUT:
             return
         k = self._from(sample, -1)
         if k is None:
@@ -616,7 +658,7 @@ class ZenohTransport(RoundEndpoint):
                          "and options it shares (resolution, ...)")
 
     def handshake(self, timeout_s: float = 60.0, period_s: float = 0.05,
-                  alone: bool = False) -> float:
+                  alone: bool = False, closed_unheard: bool = False) -> float:
         """Wait until every neighbour is heard and has heard this robot; return seconds taken.
 
         A neighbour that starts late within ``timeout_s`` joins. One that has not answered by
@@ -624,7 +666,12 @@ class ZenohTransport(RoundEndpoint):
         runs on with the others; if it starts later it is told (``gone``) and ends alone.
         With ``alone`` (a robot with work of its own to do without neighbours: an online
         step's matching, :mod:`pipeline.team.online_match`) it runs on alone also when no
-        neighbour answered, every one written off so.
+        neighbour answered, every one written off so. With ``closed_unheard`` (a team whose
+        robots are never started again under the same id: the launcher's) a neighbour whose
+        session closed before it was heard (its liveliness token came and went: its process
+        ended while starting) is written off at once (``closed``), as one heard and then
+        closed always is, not after ``timeout_s``; without it such a neighbour may still be
+        started again by hand and join.
 
         Raises
         ------
@@ -659,8 +706,13 @@ class ZenohTransport(RoundEndpoint):
                                  json.dumps({"src": self.robot_id, "heard": heard, "done": done,
                                              "terms": self._terms, "inc": self.incarnation}))
 
+        asked = t0  # a handshake done within ENDED_ASK_S never asks
         while True:
             say()
+            if closed_unheard and time.monotonic() - asked >= ENDED_ASK_S and \
+                    any(k not in self._hello for k in self.neighbours):
+                self._ask_ended()
+                asked = time.monotonic()
             with self._cv:
                 self._check_terms()
                 ok = all(self._hello.get(k, False) for k in self.neighbours
@@ -668,7 +720,9 @@ class ZenohTransport(RoundEndpoint):
                 if not ok:
                     self._cv.wait(period_s)
                     self._check_terms()
-                    for k in sorted(self._left & self._hello.keys()):  # heard, then ended
+                    # heard, then ended (or, closed_unheard, ended before it was heard)
+                    for k in sorted(self._left if closed_unheard
+                                    else self._left & self._hello.keys()):
                         self._write_off(k, "closed")
                     ok = all(self._hello.get(k, False) for k in self.neighbours
                              if k not in self.written_off)
