@@ -10,8 +10,9 @@ import pipeline.runs.transports.zenoh as zenoh
 from pipeline.__main__ import main
 
 ARGS = ["run-formation", "--steps", "3", "--window", "2", "--size", "160x120",
-        "--max-features", "120", "--formation", "a", "--no-rerun", "--resolution", "evidence",
-        "--no-fusion"]
+        "--max-features", "120", "--no-rerun", "--resolution", "evidence", "--no-fusion"]
+#: four robots on a ring (robot 0 talks to 1 and 3)
+RING = ["--robots", "4", "--graph", "ring"]
 
 
 def _made(folder: Path) -> dict:
@@ -27,7 +28,7 @@ def _made(folder: Path) -> dict:
 
 
 def test_a_robot_lost_twice_by_a_step_matching_leaves_its_frame_void(tmp_path, monkeypatch):
-    assert main([*ARGS, "--out", str(tmp_path / "sim")]) == 0
+    assert main([*ARGS, *RING, "--out", str(tmp_path / "sim")]) == 0
     job, calls = zenoh.online_match, []
 
     def killing(*args, **kw):  # robot 0 of step 1's matching, in both teams
@@ -37,7 +38,7 @@ def test_a_robot_lost_twice_by_a_step_matching_leaves_its_frame_void(tmp_path, m
         return job(*args, **kw)
 
     monkeypatch.setattr(zenoh, "online_match", killing)
-    assert main([*ARGS, "--transport", "zenoh", "--round-timeout", "5",
+    assert main([*ARGS, *RING, "--transport", "zenoh", "--round-timeout", "5",
                  "--out", str(tmp_path / "zen")]) == 0
     rep = json.loads((tmp_path / "zen" / "report.json").read_text())
     steps = rep["steps"]
@@ -75,8 +76,7 @@ def test_a_robot_lost_for_good_leaves_every_later_frame_void(tmp_path, monkeypat
         return job(views, t, *args, **kw)
 
     monkeypatch.setattr(zenoh, "online_match", killing)
-    line = [a for a in ARGS if a not in ("--formation", "a")]
-    assert main([*line, "--robots", "3", "--graph", "line", "--transport", "zenoh",
+    assert main([*ARGS, "--robots", "3", "--graph", "line", "--transport", "zenoh",
                  "--round-timeout", "5", "--out", str(tmp_path / "zen")]) == 0
     rep = json.loads((tmp_path / "zen" / "report.json").read_text())
     steps = rep["steps"]
