@@ -26,7 +26,9 @@ def test_scores_are_those_of_the_listed_pairs():
 
 def test_one_set_of_thousands_of_features_is_scored_without_listing_its_pairs():
     m, links = _chain(3000)  # 4.5 million implied pairs
-    tp = true_landmark_pairs(m, [np.zeros(1, np.int64)] * 3000)[:10]
+    # ten true pairs, image 0's with images 1..10: the first rows of the truth of all 3000
+    # images, which are those of the first 11 (listing all 4.5 million took ~40 s)
+    tp = true_landmark_pairs(m[:11], [np.zeros(1, np.int64)] * 11)[:10]
     tracemalloc.start()
     try:
         s = _scores(m, links, tp)
