@@ -9,8 +9,10 @@ from pathlib import Path
 import pipeline.runs.transports.zenoh as zenoh
 from pipeline.__main__ import main
 
+# four robots on a ring: a cycle (links to cut), each team's start-up half the six's
 ARGS = ["run-formation", "--steps", "3", "--window", "2", "--size", "160x120",
-        "--max-features", "120", "--formation", "a", "--no-rerun", "--resolution", "evidence"]
+        "--max-features", "120", "--robots", "4", "--graph", "ring", "--no-rerun",
+        "--resolution", "evidence"]
 
 
 def _killing(job, calls, status="consistency"):
