@@ -126,7 +126,7 @@ def check_survivors(fpc, edges, links, p, crashes, switching, seed):
     return res
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_random_graphs_under_random_fault_schedules(data):
     fpc, edges, links = data.draw(instances(max_n=9, max_feat=8))
