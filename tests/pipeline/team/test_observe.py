@@ -68,7 +68,9 @@ def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
     from pipeline.stages import merge_radius_for
     from pipeline.team.launcher import make_team
 
-    cfg = dict(formation="a", seed=0, size=(160, 120), fusion=True, rerun=False)
+    # four robots on a ring (a cycle): each started by hand imports the program on its own
+    cfg = dict(formation="ring", robots=4, graph="ring", seed=0, size=(160, 120), fusion=True,
+               rerun=False)
     sim = run_formation(FormationConfig(out=str(tmp_path / "sim"), **cfg))
     c = FormationConfig(**cfg)
     import data_synth
@@ -77,9 +79,9 @@ def test_robots_by_hand_and_observe_give_the_simulators_run_folder(tmp_path):
                         merge_radius=merge_radius_for(c.resolution, None),
                         resolution=c.resolution, fusion=True)
     opts["start_timeout_s"] = 120.0
-    team = make_team("by-hand", data_synth.formation_edges("a", 0, None, None),
-                     {"kind": "formation", "formation": "a", "seed": 0, "size": [160, 120],
-                      "robots": None, "graph": None}, opts, n=6)
+    team = make_team("by-hand", data_synth.formation_edges("ring", 0, 4, "ring"),
+                     {"kind": "formation", "formation": "ring", "seed": 0, "size": [160, 120],
+                      "robots": 4, "graph": "ring"}, opts, n=4)
     _observe_by_hand(team, tmp_path)
     rows = _rows(tmp_path / "obs" / "links.csv")
     assert rows == _rows(sim / "links.csv")
