@@ -22,7 +22,7 @@ def _step0(transport="sim"):
     from data_synth.motion import render_motion
     from pipeline.progress import StageTimer
 
-    seq = render_motion("a", 0, 1, (160, 120), window=2)
+    seq = render_motion("ring", 0, 1, (160, 120), n_robots=4, window=2)
     run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, 2, "evidence",
                            StageTimer(verbose=False), max_features=120, fusion=False,
                            transport=transport)
@@ -31,7 +31,8 @@ def _step0(transport="sim"):
 
 @pytest.fixture(scope="module")
 def one_step():
-    """Step 0 of formation a on the simulator: its online record, views and features."""
+    """Step 0 of four robots on a ring, on the simulator: its online record, views and
+    features."""
     return _step0()
 
 
