@@ -429,9 +429,14 @@ class ZenohTransport(RoundEndpoint):
         return k if k in self.neighbours else None
 
     def _on_liveliness(self, sample) -> None:
+        """A neighbour's own token gone: its session closed."""
         import zenoh
 
-        if sample.kind != zenoh.SampleKind.DELETE:
+        self._ended(sample, zenoh.SampleKind.DELETE)
+
+    def _ended(self, sample, kind) -> None:
+        """The neighbour ``sample`` names has ended, if the sample is of ``kind``."""
+        if sample.kind != kind:
             return
         k = self._from(sample, -1)
         if k is None:
@@ -453,19 +458,11 @@ class ZenohTransport(RoundEndpoint):
                     self._on_ended(reply.ok)
 
     def _on_ended(self, sample) -> None:
-        """A launcher's ``ended`` token for neighbour ``k``: its process ended, as its own
-        token vanishing says (:meth:`_on_liveliness`)."""
+        """A launcher's ``ended`` token for a neighbour: its process ended, as its own token
+        vanishing says (:meth:`_on_liveliness`)."""
         import zenoh
 
-        if sample.kind != zenoh.SampleKind.PUT:
-            return
-        k = self._from(sample, -1)
-        if k is None:
-            return
-        with self._cv:
-            self._left.add(k)
-            self._left_at.setdefault(k, time.monotonic())
-            self._cv.notify_all()
+        self._ended(sample, zenoh.SampleKind.PUT)
 
     def _beat(self) -> None:
         """Beats to the neighbours still counted on; ``gone`` notices to those written off

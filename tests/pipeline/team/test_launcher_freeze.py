@@ -3,19 +3,15 @@ process FROZEN (``kill -STOP``, ``kill -CONT`` ``stop_s`` seconds later: a host 
 cut off for a while), not killed. Its process does not end: its neighbours write it off after
 their round timeout, and the team ends once it resumed and published too."""
 
-from zygote_teams import EDGES, FPC, LINKS
+from zygote_teams import FPC, links_team
 
 from pipeline.inputs.linkscsv import read_links_csv
 from pipeline.team.assemble import consistency_of_team
-from pipeline.team.launcher import launch_team, make_team
+from pipeline.team.launcher import launch_team
 
 
 def test_a_robot_frozen_past_the_round_timeout_is_written_off_by_its_neighbours(tmp_path):
-    links = tmp_path / "in.csv"
-    links.write_text(LINKS)
-    team = make_team("frozen", EDGES, {"kind": "links", "links": str(links),
-                                       "features_per_camera": FPC},
-                     {"round_timeout_s": 2.0}, n=4)
+    team, links = links_team(tmp_path, "frozen", {"round_timeout_s": 2.0})
     run = launch_team(team, tmp_path / "w", kill=(2, "consistency", 0.0, 6.0),
                       stop_at_loss=True, timeout_s=120)
     assert 2 in run.frozen and run.killed == {} and run.stopped_by == []
@@ -43,10 +39,7 @@ def test_a_robot_that_ended_before_its_injected_kill_is_not_killed(tmp_path):
     # the kill comes 10 s after the robot's consistency status: the team of four ends within
     # a second or two, and the robot's pid was reaped ('error: No such process' ended the
     # command, or a process that took the pid since would have been killed)
-    links = tmp_path / "in.csv"
-    links.write_text(LINKS)
-    team = make_team("ended", EDGES, {"kind": "links", "links": str(links),
-                                      "features_per_camera": FPC}, n=4)
+    team, links = links_team(tmp_path, "ended")
     run = launch_team(team, tmp_path / "w", kill=(1, "consistency", 10.0), stop_at_loss=True,
                       timeout_s=120)
     assert run.stopped_by == [] and sorted(run.results) == [0, 1, 2, 3]

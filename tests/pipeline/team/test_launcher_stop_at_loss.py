@@ -3,17 +3,15 @@ stops the team at once (the others killed, their results not waited for), for a 
 starts the team again anyway (an online step); without it the survivors finish without the
 lost robot, as a team without a launcher would."""
 
-from zygote_teams import EDGES, FPC, LINKS
 
-from pipeline.team.launcher import launch_team, make_team
+from zygote_teams import links_team
+
+from pipeline.team.launcher import launch_team
 
 
 def _team(tmp_path):
-    links = tmp_path / "in.csv"
-    links.write_text(LINKS)
-    data = {"kind": "links", "links": str(links), "features_per_camera": FPC}
     # a neighbour written off after 20 s of silence: a stop at once is far below it
-    return make_team("stopped", EDGES, data, {"round_timeout_s": 20.0}, n=4)
+    return links_team(tmp_path, "stopped", {"round_timeout_s": 20.0})[0]
 
 
 def test_a_robot_killed_at_its_start_stops_the_team(tmp_path):

@@ -9,9 +9,9 @@ import signal
 import time
 from pathlib import Path
 
-from zygote_teams import EDGES, FPC, LINKS
+from zygote_teams import links_team
 
-from pipeline.team.launcher import TeamRun, launch_team, lost_robots, make_team
+from pipeline.team.launcher import TeamRun, launch_team, lost_robots
 
 
 def _state(pid: int) -> str | None:
@@ -43,11 +43,7 @@ def _ended(pid: int) -> None:
 
 
 def test_two_robots_ended_in_the_same_poll_are_both_lost(tmp_path):
-    links = tmp_path / "in.csv"
-    links.write_text(LINKS)
-    team = make_team("two-gone", EDGES, {"kind": "links", "links": str(links),
-                                         "features_per_camera": FPC},
-                     {"round_timeout_s": 20.0}, n=4)
+    team, _ = links_team(tmp_path, "two-gone", {"round_timeout_s": 20.0})
     work = tmp_path / "w"
 
     def log(line):

@@ -10,6 +10,17 @@ FPC = [3, 2, 2, 1]
 EDGES = [[0, 1], [1, 2], [0, 2], [2, 3], [0, 3], [1, 3]]
 
 
+def links_team(folder, name: str, options: dict | None = None):
+    """A launcher's team of four robots reading :data:`LINKS` (written to ``folder/in.csv``)
+    on :data:`EDGES`, with ``options``; returns the team and the links file."""
+    from pipeline.team.launcher import make_team
+
+    links = Path(folder) / "in.csv"
+    links.write_text(LINKS)
+    data = {"kind": "links", "links": str(links), "features_per_camera": FPC}
+    return make_team(name, EDGES, data, options, n=4), links
+
+
 def children(pid: int) -> list[int]:
     """Live (not zombie) processes whose parent is ``pid``."""
     out = []
