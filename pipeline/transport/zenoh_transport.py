@@ -146,9 +146,9 @@ Start handshake
     token gone) is written off at once (``closed``), not after the timeout. A neighbour that
     ends before it was heard leaves no token to vanish; in a launcher's team (option
     ``closed_at_start``: no robot is started again there) the launcher, which saw its
-    process end, declares a token ``ended/<id>`` for it, which the robot hears (a liveliness
-    subscriber with history, and a query every :data:`ENDED_ASK_S` while a neighbour is
-    unheard), and writes it off at once too (``closed``).
+    process end, declares a token ``ended/<id>`` for it, which the robot finds (a liveliness
+    query every :data:`ENDED_ASK_S` while a neighbour is unheard) and writes it off then too
+    (``closed``).
 
     A neighbour started again: every hello carries a mark drawn by the robot's process when
     it starts (:attr:`ZenohTransport.incarnation`). A hello of another mark than the first
@@ -412,12 +412,6 @@ class ZenohTransport(RoundEndpoint):
         self._token = self.session.liveliness().declare_token(key(name, "live", self.robot_id))
         self._subs.append(self.session.liveliness().declare_subscriber(
             key(name, "live", "*"), self._on_liveliness))
-        # a launcher that saw a neighbour's process end says so with a token of its own
-        # (``ended``, :class:`pipeline.team.launcher.Observer`): a process killed before this
-        # robot heard its token never shows one to vanish; the token's history reaches a robot
-        # that subscribes after the end
-        self._subs.append(self.session.liveliness().declare_subscriber(
-            key(name, "ended", "*"), self._on_ended, history=True))
 
     def _from(self, sample, at: int) -> int | None:
         """The robot id at chunk ``at`` of ``sample``'s key expression when it is a
@@ -448,21 +442,17 @@ class ZenohTransport(RoundEndpoint):
 
     def _ask_ended(self) -> None:
         """Ask the sessions this robot reaches for the launcher's ``ended`` tokens (a
-        liveliness query, answered within :data:`ENDED_ASK_S`): the subscriber hears of a
-        token only if its interest reached the launcher, which it does not when this robot's
-        link to the launcher came up after the subscriber was declared."""
+        liveliness query, answered within :data:`ENDED_ASK_S`; :class:`pipeline.team.launcher.
+        Observer`): a neighbour's process that ended before this robot heard its own token
+        never shows one to vanish. A query rather than a subscriber: a subscriber's interest
+        misses a launcher this robot's link reached only after it was declared."""
+        import zenoh
+
         with contextlib.suppress(Exception):
             for reply in self.session.liveliness().get(key(self.team.name, "ended", "*"),
                                                        timeout=ENDED_ASK_S):
                 if reply.ok is not None:
-                    self._on_ended(reply.ok)
-
-    def _on_ended(self, sample) -> None:
-        """A launcher's ``ended`` token for a neighbour: its process ended, as its own token
-        vanishing says (:meth:`_on_liveliness`)."""
-        import zenoh
-
-        self._ended(sample, zenoh.SampleKind.PUT)
+                    self._ended(reply.ok, zenoh.SampleKind.PUT)
 
     def _beat(self) -> None:
         """Beats to the neighbours still counted on; ``gone`` notices to those written off
@@ -665,10 +655,11 @@ class ZenohTransport(RoundEndpoint):
         step's matching, :mod:`pipeline.team.online_match`) it runs on alone also when no
         neighbour answered, every one written off so. With ``closed_unheard`` (a team whose
         robots are never started again under the same id: the launcher's) a neighbour whose
-        session closed before it was heard (its liveliness token came and went: its process
-        ended while starting) is written off at once (``closed``), as one heard and then
-        closed always is, not after ``timeout_s``; without it such a neighbour may still be
-        started again by hand and join.
+        session closed before it was heard (its liveliness token came and went, or its
+        launcher's ``ended`` token says so: its process ended while starting) is written off
+        within :data:`ENDED_ASK_S` or so (``closed``), as one heard and then closed always is,
+        not after ``timeout_s``; without it such a neighbour may still be started again by
+        hand and join.
 
         Raises
         ------

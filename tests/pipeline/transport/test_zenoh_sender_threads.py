@@ -28,12 +28,11 @@ def test_a_robot_with_many_neighbours_runs_few_threads_and_delivers_in_order():
     centre = ZenohTransport(team, 0, round_timeout_s=30.0, log=lambda s: None)
     robots = [centre] + [None] * LEAVES
     try:
-        # senders, the beat thread and one callback thread per subscriber (six key kinds and
-        # the launcher's ended tokens), where one sender and six subscribers per neighbour
-        # made 7 x LEAVES + 1
+        # senders, the beat thread and one callback thread per subscriber (six key kinds),
+        # where one sender and six subscribers per neighbour made 7 x LEAVES + 1
         assert len(centre._senders) == SENDER_THREADS
-        assert threading.active_count() - before <= SENDER_THREADS + 1 + 7
-        assert len(centre._subs) == 7
+        assert threading.active_count() - before <= SENDER_THREADS + 1 + 6
+        assert len(centre._subs) == 6
 
         errors = []
 
