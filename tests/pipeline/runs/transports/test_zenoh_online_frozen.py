@@ -8,6 +8,7 @@ import copy
 
 import numpy as np
 import pytest
+from frozen_robots import freezing
 
 import pipeline.runs.transports.zenoh as zenoh
 from pipeline.runs.online import _fuse_changed, associate_online
@@ -36,21 +37,6 @@ def one_step():
     return _step0()
 
 
-def _freezing(job, calls, frozen, status="consistency"):
-    """``job`` with its robot ``frozen`` stopped as soon as it publishes ``status``
-    (``consistency``: the start of its consistency stage), on its calls numbered in
-    ``calls``."""
-    seen = []
-
-    def wrapped(*args, **kw):
-        seen.append(1)
-        if len(seen) - 1 in calls:
-            kw["kill"] = (frozen, status, 0.0, STOP_S)
-        return job(*args, **kw)
-
-    return wrapped
-
-
 def test_a_fusion_robot_frozen_is_written_off_and_the_fusion_started_again(one_step):
     oa, views, features = one_step
     sim = get_transport("sim").load().online_fusion
@@ -58,7 +44,7 @@ def test_a_fusion_robot_frozen_is_written_off_and_the_fusion_started_again(one_s
     want = _fuse_changed(want_oa, views, features, sim)
     with team_round_timeout(ROUND_TIMEOUT_S):
         got = _fuse_changed(got_oa, views, features,
-                            _freezing(zenoh.online_fusion, {0}, frozen=1))
+                            freezing(zenoh.online_fusion, {0}, 1, STOP_S))
     # it stopped the run before ("the fusion team's detection cut link ...: the links
     # handed to fusion must be conflict-free"): the frozen robot's neighbours had cut its
     # links robot-lost in their naming of the tracks
@@ -73,7 +59,7 @@ def test_a_fusion_robot_frozen_is_written_off_and_the_fusion_started_again(one_s
 def test_a_stage_robot_frozen_while_the_sets_are_solved_at_their_roots(one_step, monkeypatch):
     oa, _, _ = one_step
     monkeypatch.setattr(zenoh, "online_stage",
-                        _freezing(zenoh.online_stage, {0}, frozen=1, status="roots"))
+                        freezing(zenoh.online_stage, {0}, 1, STOP_S, status="roots"))
     with team_round_timeout(ROUND_TIMEOUT_S):
         got, _, _ = _step0("zenoh")
     # it stopped the run before: its neighbours failed ('a robot was lost while the sets were

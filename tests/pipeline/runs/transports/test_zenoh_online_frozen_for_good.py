@@ -7,6 +7,7 @@ killed robot: started again, and a frame lost twice has its links of the step cu
 ``robot-lost``."""
 
 import numpy as np
+from frozen_robots import freezing
 
 import pipeline.runs.transports.zenoh as zenoh
 from pipeline.runs.online import associate_online
@@ -17,27 +18,13 @@ FOR_GOOD_S = 3600.0  # never resumed within the test
 LIMIT_S = 60.0       # each team's time limit: without the grace the step stops there
 
 
-def _freezing_for_good(job, calls, frozen, status="consistency"):
-    """``job`` with its robot ``frozen`` stopped for good as soon as it publishes ``status``,
-    on its calls numbered in ``calls`` (from 0)."""
-    seen = []
-
-    def wrapped(*args, **kw):
-        seen.append(1)
-        if len(seen) - 1 in calls:
-            kw["kill"] = (frozen, status, 0.0, FOR_GOOD_S)
-        return job(*args, **kw)
-
-    return wrapped
-
-
 def test_a_stage_robot_frozen_for_good_twice_has_its_frames_links_of_the_step_cut(
         monkeypatch):
     from data_synth.motion import render_motion
     from pipeline.progress import StageTimer
 
     monkeypatch.setattr(zenoh, "online_stage",
-                        _freezing_for_good(zenoh.online_stage, {0, 1}, frozen=1))
+                        freezing(zenoh.online_stage, {0, 1}, 1, FOR_GOOD_S))
     seq = render_motion("a", 0, 1, (160, 120), window=2)
     with team_round_timeout(ROUND_TIMEOUT_S), team_time_limit(LIMIT_S):
         run = associate_online(seq.flat.views, seq.n_robots, seq.step_edges, 2, "evidence",
