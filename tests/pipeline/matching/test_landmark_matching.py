@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from epipolar_views import project_two
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -93,17 +94,7 @@ def test_bad_ratio_and_kind():
 def _two_views(n=20, seed=0):
     """Projections of random 3D points into two cameras (a real epipolar geometry)."""
     rng = np.random.default_rng(seed)
-    X = rng.uniform([-1, -1, 4], [1, 1, 8], size=(n, 3))
-    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
-    a = 0.2
-    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    t = np.array([-1.0, 0.1, 0.2])
-
-    def project(P):
-        p = P @ K.T
-        return p[:, :2] / p[:, 2:]
-
-    return project(X), project(X @ R.T + t)
+    return project_two(rng.uniform([-1, -1, 4], [1, 1, 8], size=(n, 3)), 0.2)
 
 
 def test_guided_matching_undoes_a_descriptor_swap():

@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from epipolar_views import project_two
 from scipy.spatial.distance import cdist
 
 from pipeline.matching.landmarks import (
@@ -73,17 +74,8 @@ def test_ratio_gate_keeps_a_pair_exactly_at_the_ratio_and_reads_zero_over_zero_a
     assert len(hungarian_match(zero, 0.99)[0]) == 0
 
 
-def _views(X, seed=0):
-    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
-    a = 0.25
-    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    t = np.array([-1.0, 0.1, 0.2])
-
-    def project(P):
-        p = P @ K.T
-        return p[:, :2] / p[:, 2:]
-
-    return project(X), project(X @ R.T + t)
+def _views(X):
+    return project_two(X, 0.25)
 
 
 @pytest.mark.parametrize("n", [5, 7])
