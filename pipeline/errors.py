@@ -10,6 +10,28 @@ class TeamError(RuntimeError):
     message names it)."""
 
 
+def listed(items, limit: int = 5) -> str:
+    """``items`` for a one-line message: ``"3"``, ``"3 and 7"``, ``"3, 7 and 9"``, or past
+    ``limit`` the first ``limit`` and how many in all (``"3, 7, 9, 12, 15, ... (8 in all)"``):
+    a message about several robots or files names every one a user can act on, in one line."""
+    shown = [str(x) for x in items]
+    if len(shown) > limit:
+        return f"{', '.join(shown[:limit])}, ... ({len(shown)} in all)"
+    if len(shown) <= 1:
+        return "".join(shown)
+    return f"{', '.join(shown[:-1])} and {shown[-1]}"
+
+
+def processes_lost(names) -> str:
+    """``"the robot process of image N was lost"``, or for several images
+    ``"the robot processes of images N, M and K were lost"`` (:func:`listed`): the start of
+    a message about robot processes lost, naming every one (``names``: formatted already)."""
+    names = list(names)
+    if len(names) == 1:
+        return f"the robot process of image {names[0]} was lost"
+    return f"the robot processes of images {listed(names)} were lost"
+
+
 class RobotsLost(TeamError):
     """Robots of a team were lost (their process ended or went silent) before it finished.
 

@@ -160,7 +160,7 @@ from pipeline.consistency.engines.online_history import (
 from pipeline.consistency.engines.online_weigh import Weighing
 from pipeline.consistency.history import runs_by_robot
 from pipeline.consistency.rules import DEFAULT_RESOLUTION, get_rule
-from pipeline.errors import InputError, RobotsLost
+from pipeline.errors import InputError, RobotsLost, processes_lost
 from pipeline.progress import counted
 from pipeline.types import Links
 
@@ -445,10 +445,12 @@ class OnlineAssociation(IncrementalDetection, Weighing, HistoryCheck):
                 gone = real[np.isin(L.ci[real], again) | np.isin(L.cj[real], again)]
                 gone = gone[L.kept[gone]]
                 if not len(gone):  # (e names the image by its place in the sub-problem)
-                    raise RobotsLost(f"the robot process of image {again[0]} was lost twice "
-                                     f"during step {t}'s consistency stage, with none of its "
-                                     "links left in the step's sub-problem to cut (it takes "
-                                     "part through retired pieces only)",
+                    one = len(again) == 1
+                    raise RobotsLost(f"{processes_lost(again)} twice during step {t}'s "
+                                     f"consistency stage, with none of {'its' if one else 'their'} "
+                                     "links left in the step's sub-problem to cut "
+                                     f"({'it takes' if one else 'they take'} part through "
+                                     "retired pieces only)",
                                      e.cameras, e.stats) from e
                 self._cut(gone, "robot-lost", t)
                 cut_lost += len(gone)

@@ -216,14 +216,14 @@ def resolve_alone(transport: str, features_per_camera, comm_edges, links, resolu
         leave a cleaned file or lower a benchmark's scores, though nothing judged them; the
         command then writes nothing. ``names``: the image of each robot, by id.
     """
-    from pipeline.errors import TeamError
+    from pipeline.errors import TeamError, processes_lost
 
     where = transport if len(links) else "sim"
     res, _ = get_transport(where).load().resolve(features_per_camera, comm_edges, links, None,
                                                  resolution, None, evidence=evidence)
     lost = sorted(int(k) for k in res.stats.get("faults", {}).get("robots_lost", {}))
     if lost:
-        raise TeamError(f"the robot process of image {names[lost[0]]!r} was lost during "
+        raise TeamError(f"{processes_lost(repr(names[k]) for k in lost)} during "
                         f"{command}'s consistency stage; nothing was written: run it again "
                         "(or with --transport sim)")
     return res

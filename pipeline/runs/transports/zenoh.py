@@ -22,7 +22,7 @@ import numpy as np
 
 from pipeline.association import conflictive_links
 from pipeline.consistency.result import ConsistencyResult
-from pipeline.errors import InputError, RobotsLost, TeamError
+from pipeline.errors import InputError, RobotsLost, TeamError, listed, processes_lost
 from pipeline.faults import FaultConfig
 from pipeline.progress import StageTimer
 from pipeline.runs.transports.results import FormationRobots, ImagesRobots
@@ -302,6 +302,13 @@ def images_team(config, views, comm_edges):
     return make_team(f"images-{n}", comm_edges, data, opts, n=n)
 
 
+def _robots(lost, views) -> str:
+    """``"robot 1 (b.jpg)"``, or ``"robots 1 (b.jpg) and 2 (c.jpg)"``: every robot of a
+    message, by id and image."""
+    names = [f"{k} ({views[k].name})" for k in lost]
+    return f"robot {names[0]}" if len(names) == 1 else f"robots {listed(names)}"
+
+
 def images_of_run(config, views, team, run) -> ImagesRobots:
     """What the robots of a photo ``team`` published in ``run`` (launched here, or observed by
     :mod:`pipeline.team.observe`), as the ``images`` job's result.
@@ -317,8 +324,9 @@ def images_of_run(config, views, team, run) -> ImagesRobots:
     n = team.n
     lost = sorted(set(range(n)) - set(run.results))
     if lost:
-        raise TeamError(f"robot {lost[0]} ({views[lost[0]].name}) did not publish a result: its "
-                        "process ended or was cut off first (its own log or stderr says why); "
+        its = "its process" if len(lost) == 1 else "each one's process"
+        raise TeamError(f"{_robots(lost, views)} did not publish a result: {its} "
+                        "ended or was cut off first (its own log or stderr says why); "
                         "a run of photographs needs every robot's keypoints, so nothing was "
                         "written: run the team again")
     feats = []
@@ -504,12 +512,12 @@ def online_stage(features_per_camera, links, resolution, *, solve_small_sets=Tru
                                      workdir=work, links=sub, data_extra=extra, keep_run=kept,
                                      kill=kill, stop_at_loss=True)
         except RobotsLost as e:  # the team's cameras are the sub-problem's used images
-            raise RobotsLost(f"the robot process of image {int(used[e.cameras[0]])} was lost "
+            raise RobotsLost(f"{processes_lost(int(used[c]) for c in e.cameras)} "
                              "during an online step's consistency stage",
                              used[e.cameras].tolist(), e.stats) from e
     lost = lost_robots(kept[0], res.stats.get("faults", {}).get("robots_lost"))
     if lost:  # its links would read as the rule's cuts: the caller decides what follows
-        raise RobotsLost(f"the robot process of image {int(used[lost[0]])} was lost during an "
+        raise RobotsLost(f"{processes_lost(int(used[k]) for k in lost)} during an "
                          "online step's consistency stage",
                          used[lost].tolist(), _spent(res))
     if history is not None:
@@ -659,8 +667,8 @@ def online_fusion(views, features, links, comm_edges, *, track_labels=None, kill
     # off by its neighbours, who name it: their naming cut its links robot-lost
     lost = lost_robots(run, None if res is None else res.stats["faults"]["robots_lost"])
     if lost:
-        raise RobotsLost(f"robot {lost[0]} ({views[lost[0]].name}) of the fusion team did not "
-                         "publish a result, or its neighbours wrote it off", lost)
+        raise RobotsLost(f"{_robots(lost, views)} of the fusion team did not publish a "
+                         "result, or its neighbours wrote it off", lost)
     if res.deleted.any():
         k = int(np.flatnonzero(res.deleted)[0])
         raise TeamError(f"the fusion team's detection cut link ({links.cam_i[k]},"
