@@ -29,7 +29,10 @@ the interpreter and libraries, rounded up):
   every robot its feature is linked to (a robot sends the rows its neighbour reads), so on a
   dense graph, where a set is joined in a round or two, every row crosses each of its
   feature's links at once: ``sum_s |s| · 2 L_s`` entries in flight (``L_s`` the links of set
-  ``s``), :data:`BYTES_PER_ROW_CROSSING` each; the estimate is the larger of the two terms.
+  ``s``), :data:`BYTES_PER_ROW_CROSSING` each; the estimate is the larger of the two terms
+  (the entries alone where the simulator's batched engine runs it: it holds a round's
+  result, not the rows in flight; 101 frames below, 0.40 GB measured after the change that
+  made it so, against 36 bytes an entry's 0.25 GB and the 0.2 GB counted before it).
   Measured through ``resolve --resolution paper`` on the CMU hotel's descriptor matches
   (complete graphs; peak RSS beyond the interpreter and the rows): 60 frames (518,400
   entries, about 59 links a feature) 0.2 GB, 80 frames (4.03 M, 79) 2.5 GB, 101 frames
@@ -263,7 +266,8 @@ def camera_sets_bytes(features_per_camera, links: Links) -> tuple[int, int]:
 
 def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudget | float,
                            flag: str = "--max-memory-gb", *, detection: bool = True,
-                           set_lists: int | None = None, camera_sets: bool = False) -> None:
+                           set_lists: int | None = None, camera_sets: bool = False,
+                           in_flight: bool = True) -> None:
     """Count the consistency stage's memory in ``budget`` (or a limit in GB): InputError if it
     takes the total above the limit (module notes).
 
@@ -275,7 +279,11 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
     ``B + 1`` ids of each set (``evidence``): :data:`BYTES_PER_LIST_ENTRY` per entry too.
     ``camera_sets``: the rule holds a bit set of every camera per cluster (``sync``): the
     larger of that (:func:`camera_sets_bytes`) and the per-link figure, which was measured
-    where the sets were a small part of it."""
+    where the sets were a small part of it. ``in_flight``: the rows crossing the links are
+    held at once (robots stepped one by one, or processes on one machine); ``False`` where
+    the simulator's batched engine runs the detection (a lossless network, no fault: its
+    product of eq. 5 holds the round's result, not the rows in flight), so only the entries
+    count."""
     if not isinstance(budget, MemoryBudget):
         budget = MemoryBudget(budget, flag)
     if not detection:
@@ -302,7 +310,8 @@ def check_detection_memory(features_per_camera, links: Links, budget: MemoryBudg
     budget.add(f"the distributed detection (the links chain up to {largest} features into "
                "one association set; every robot holds every feature of its sets, eq. 5, and "
                "sends each row over every link of its feature)",
-               max(entries * BYTES_PER_ENTRY, crossings * BYTES_PER_ROW_CROSSING),
+               max(entries * BYTES_PER_ENTRY,
+                   crossings * BYTES_PER_ROW_CROSSING if in_flight else 0),
                "such sets come from wrong links: clean them first, or use --resolution sync "
                "(no detection) or paper-labels (Alg. 1 after a label-flooding detection): "
                "their memory follows the links")

@@ -251,7 +251,7 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     rule = get_rule(resolution)
     check_detection_memory(m, model_links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None,
-                           camera_sets=rule.camera_sets)
+                           camera_sets=rule.camera_sets, in_flight=transport != "sim")
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(m, model_links), "drop --baselines")

@@ -93,7 +93,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     rule = get_rule(resolution)
     check_detection_memory(m, model_links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None,
-                           camera_sets=rule.camera_sets)
+                           camera_sets=rule.camera_sets, in_flight=transport != "sim")
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(m, model_links), "drop --baselines")

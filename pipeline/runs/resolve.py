@@ -130,7 +130,7 @@ def resolve_file(links_csv: str | Path, out_csv: str | Path,
     rule = rule_for_network(resolution, faulty)
     check_detection_memory(m, run_links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None,
-                           camera_sets=rule.camera_sets)
+                           camera_sets=rule.camera_sets, in_flight=transport != "sim" or faulty)
     if baselines:
         budget.add("the centralized baselines (--baselines)",
                    baselines_bytes(m, run_links), "drop --baselines")
