@@ -499,8 +499,10 @@ def run_resolve_cli(rule: str, m, edges, links: Links, cap_gb: float) -> dict:
                                "--max-memory-gb", str(cap_gb)],
                               capture_output=True, text=True)
         wall = time.perf_counter() - t0
-        if proc.returncode != 0:
-            raise RuntimeError(proc.stderr.strip().splitlines()[-1])
+        if proc.returncode != 0:  # its last line is /usr/bin/time's, then its exit status
+            said = [x for x in proc.stderr.strip().splitlines()[:-1]
+                    if not x.startswith("Command ")]
+            raise RuntimeError(said[-1] if said else f"exit {proc.returncode}")
         with open(out, newline="") as f:
             kept = np.array([r["status"] == "kept" for r in csv.DictReader(f)])
     rss = int(proc.stderr.strip().splitlines()[-1]) / 1024
