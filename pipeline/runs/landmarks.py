@@ -152,7 +152,7 @@ def _check_memory(m, links: Links, config: LandmarksConfig) -> None:
     rule = get_rule(config.resolution)
     check_detection_memory(m, links, budget, detection=rule.detection,
                            set_lists=bundle_budget(len(m)) if rule.set_lists else None,
-                           camera_sets=rule.camera_sets)
+                           camera_sets=rule.camera_sets, in_flight=config.transport != "sim")
     if config.baselines:
         budget.add("the centralized baselines", baselines_bytes(m, links),
                    "add --no-baselines")

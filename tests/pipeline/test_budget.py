@@ -140,3 +140,22 @@ def test_resolve_counts_rows_in_flight_only_off_the_batched_engine(tmp_path):
                side_effect=lambda *a, **kw: seen.append(kw.get("in_flight"))):
         resolve_file(src, tmp_path / "out.csv", resolution="paper")
     assert seen == [False]
+
+
+def test_run_landmarks_counts_rows_in_flight_only_off_the_batched_engine():
+    """``run-landmarks --resolution paper`` on the CMU hotel's 101 frames was refused at an
+    estimated 9.9 GB of rows in flight on the simulator, whose batched detection holds none:
+    its guard now counts them over Zenoh only."""
+    from itertools import combinations
+
+    from pipeline.budget import BYTES_PER_ENTRY, BYTES_PER_ROW
+    from pipeline.runs.landmarks import LandmarksConfig, _check_memory
+
+    pairs = list(combinations(range(10), 2))
+    dense = Links([i for i, _ in pairs], [0] * 45, [j for _, j in pairs], [0] * 45)
+    limit = (45 * BYTES_PER_ROW + 100 * BYTES_PER_ENTRY) / 1e9
+    config = LandmarksConfig("unused", resolution="paper", baselines=False, max_memory_gb=limit)
+    _check_memory([1] * 10, dense, config)
+    config.transport = "zenoh"
+    with pytest.raises(InputError, match="sends each row over every link of its feature"):
+        _check_memory([1] * 10, dense, config)
