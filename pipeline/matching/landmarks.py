@@ -110,7 +110,9 @@ def hungarian_match(cost: np.ndarray, ratio: float | None = 0.8
     pairs : (M, 2) int64 — rows ``(r, s)``
     distance : (M,) float64 — ``cost[r, s]``
     ratio_of_pair : (M,) float64 — ``cost[r, s]`` over the nearest alternative in row ``r``
-        or column ``s`` (``inf`` when there is none, e.g. a single landmark)
+        or column ``s``; 0 when there is none (a single landmark on each side: no
+        alternative, so the gate cannot reject the pair; the convention of
+        :func:`pipeline.matching.pairs.lowe_ratios`)
 
     Examples
     --------

@@ -137,7 +137,8 @@ def mutual_ratio_matches(desc_i: np.ndarray, desc_j: np.ndarray, ratio: float = 
     ``A_ji = A_ijᵀ`` holds exactly. Exact brute force: one ``(N_i, N_j)`` distance matrix
     (``O(N_i N_j D)``, a BLAS product), L2 for float descriptors and Hamming for binary ones.
     A feature whose only candidate is one descriptor (``N = 1`` on the other side) has no
-    second neighbour and passes the ratio test with ratio 0.
+    second neighbour, so the ratio test cannot reject it: its ratio in that direction is 0
+    (the convention of :func:`lowe_ratios` too).
     """
     n_i, n_j = len(desc_i), len(desc_j)
     if n_i == 0 or n_j == 0:
@@ -254,6 +255,11 @@ def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
     For COLMAP's matches (mutual nearest neighbours, so ``s`` is the nearest), which come
     without their ratio. Float descriptors; the products run by blocks of rows.
 
+    A lone candidate (``d_j`` holds one descriptor) has no second neighbour, so the ratio
+    test cannot reject it: its ratio is 0, as in :func:`mutual_ratio_matches` (which keeps
+    it at any threshold); every ratio of one match thus means the same whichever function
+    computed it.
+
     The cost is one product ``q dⱼᵀ`` per block; the nearest other descriptor is the one
     that maximises ``q·d − |d|²/2`` (the same order as ``|q − d|²``), found in place on that
     product, and only the two distances of each row are then formed, as
@@ -262,9 +268,9 @@ def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
     its time).
     """
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0 or len(d_j) < 2:  # no second neighbour: nothing to reject the match
+        return np.zeros(len(pairs), np.float32)
     out = np.ones(len(pairs), np.float32)
-    if len(pairs) == 0 or len(d_j) < 2:
-        return out
     dj = np.asarray(d_j, dtype=np.float32)
     di = np.asarray(d_i, dtype=np.float32)
     sq_j = (dj * dj).sum(1)

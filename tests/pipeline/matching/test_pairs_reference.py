@@ -130,9 +130,6 @@ def test_lowe_ratios_equal_a_brute_force(block):
     assert (got[:12] < 1).all() and (got <= 1).all()
 
 
-def test_lowe_ratio_without_a_second_descriptor_is_one():
-    d = np.array([[1.0, 2.0]], np.float32)
-    np.testing.assert_array_equal(lowe_ratios(d, d, np.array([[0, 0]])), [1.0])
 
 
 def sampson_by_definition(F, x_i, x_j, h=1e-4):
