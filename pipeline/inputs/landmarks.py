@@ -26,7 +26,8 @@ two keypoint files of its name (``NAME.txt`` and ``NAME.mat``) is refused unless
 same labels, and so are two images of one name (``NAME.png`` and ``NAME.jpg``), which would
 both take ``NAME.txt``. Text and MAT files
 that are not keypoint tables (``SOURCE.txt``, homography files, other MAT contents) are not
-keypoint files and are ignored.
+keypoint files and are ignored; a MAT file that lists ``pts_coord`` but cannot give it (cut
+short, or a logical or sparse array) is refused, naming the file and the variable.
 """
 
 from __future__ import annotations
@@ -176,7 +177,7 @@ def _why_not_table(path: Path) -> str:
     from pipeline.inputs.csvfields import text_lines
 
     if path.suffix.lower() == ".mat":
-        return "no readable variable pts_coord"
+        return _why_not_mat(path)
     rows, bad = _parse_txt_keypoints(path)
     if bad is not None:
         return bad
@@ -200,7 +201,11 @@ def _read_mat73_pts(path: Path) -> np.ndarray | None:
     import h5py
 
     try:
-        with h5py.File(path, "r") as f:
+        f = h5py.File(path, "r")
+    except (OSError, ValueError):
+        return None  # not even its HDF5 superblock: :func:`_why_not_mat` names it
+    try:
+        with f:
             ds = f.get("pts_coord")
             if ds is None:
                 return None
@@ -210,8 +215,11 @@ def _read_mat73_pts(path: Path) -> np.ndarray | None:
                 cls = "struct"
             data = None if cls in _MAT73_NOT_NUMERIC else np.asarray(ds[()])
             empty = bool(ds.attrs.get("MATLAB_empty", 0))
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError) as exc:
+        # the file names pts_coord but its bytes are gone (a truncated copy)
+        raise InputError(f"{path}: pts_coord cannot be read ({_exc_text(exc)}): a truncated or "
+                         "damaged MAT file; save it again from MATLAB or SciPy, or remove "
+                         "it") from None
     if data is None:
         raise InputError(f"{path}: pts_coord holds {_MAT73_NOT_NUMERIC[cls]}, expected a "
                          "numeric 2 x K array (row 0 = x, row 1 = y)")
@@ -304,7 +312,7 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
     """``(K, 2)`` from a MAT file's ``pts_coord`` (``2 x K``), ``None`` without that variable.
 
     MATLAB v7.3 files (HDF5, ``save -v7.3``) are read too (:func:`_read_mat73_pts`)."""
-    from scipy.io import loadmat
+    from scipy.io import loadmat, whosmat
 
     try:
         problem = _mat5_problem(path.read_bytes())
@@ -314,17 +322,33 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
         raise InputError(f"{path}: a damaged MAT file ({problem}); save it again from MATLAB "
                          "or SciPy (pts_coord a numeric 2 x K array), or remove it")
     try:
-        data = loadmat(path, variable_names=["pts_coord"])
+        listed = {name: (shape, cls) for name, shape, cls in whosmat(path)}
     except NotImplementedError:  # scipy's answer to a v7.3 file: read it as HDF5
         raw = _read_mat73_pts(path)
         if raw is None:
             return None
-    except Exception:  # noqa: BLE001 — any unreadable MAT file is simply not a keypoint file
+    except Exception:  # noqa: BLE001 — no MAT file scipy can open: not a keypoint file
+        if _bare_hdf5_keys(path) and "pts_coord" in _bare_hdf5_keys(path):
+            raise InputError(f"{path}: an HDF5 file holding pts_coord, but without the MAT "
+                             "header MATLAB's save -v7.3 writes, so whether it is stored 2 x K "
+                             "(MATLAB, column-major) or K x 2 is unknown; save it with MATLAB "
+                             "or scipy.io.savemat (pts_coord 2 x K)") from None
         return None
     else:
-        if "pts_coord" not in data:
+        if "pts_coord" not in listed:
             return None
-        raw = np.asarray(data["pts_coord"])
+        shape, cls = listed["pts_coord"]
+        if cls in _MAT5_NOT_COORDINATES:  # loadmat gives logicals as uint8 0 / 1
+            raise InputError(f"{path}: pts_coord holds {_MAT5_NOT_COORDINATES[cls]}, expected "
+                             "a numeric 2 x K array (row 0 = x, row 1 = y)")
+        try:
+            data = loadmat(path, variable_names=["pts_coord"])
+            raw = np.asarray(data["pts_coord"])
+        except Exception as exc:  # noqa: BLE001 — listed, so a keypoint file, but damaged
+            size = " x ".join(str(n) for n in shape)
+            raise InputError(f"{path}: pts_coord ({size} {cls}) cannot be read "
+                             f"({_exc_text(exc)}): a truncated or damaged MAT file; save it "
+                             "again from MATLAB or SciPy, or remove it") from None
     if raw.dtype.kind not in "iuf":  # text, a struct, complex numbers
         what = {"U": "text", "S": "text", "c": "complex numbers", "V": "a struct",
                 "O": "a cell array", "b": "logical values"}.get(raw.dtype.kind, raw.dtype.name)
@@ -335,6 +359,56 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
         raise InputError(f"{path}: pts_coord has shape {pts.shape}, expected 2 x K "
                          "(row 0 = x, row 1 = y)")
     return pts.T.copy()
+
+
+#: MATLAB classes (as :func:`scipy.io.whosmat` names them) of a MAT v4 / v5 variable that
+#: ``loadmat`` would hand over as numbers, but that hold no coordinates
+_MAT5_NOT_COORDINATES = {"logical": "logical values",
+                         "sparse": "a sparse matrix (save full(pts_coord) instead)"}
+
+
+def _exc_text(exc: BaseException) -> str:
+    """An exception as a message fragment: its text, or its type when it has none."""
+    return str(exc).strip() or type(exc).__name__
+
+
+def _bare_hdf5_keys(path: Path) -> list[str]:
+    """The top-level names of an HDF5 file that SciPy does not take for a MAT file (no MAT
+    header in its user block); ``[]`` for any other file."""
+    import h5py
+
+    try:
+        if not h5py.is_hdf5(path):
+            return []
+        with h5py.File(path, "r") as f:
+            return sorted(f.keys())
+    except (OSError, ValueError, RuntimeError):
+        return []
+
+
+def _why_not_mat(path: Path) -> str:
+    """Why a ``.mat`` file is no keypoint file, for an error message: it is no MAT file SciPy
+    or HDF5 can open (their message), or it holds no variable ``pts_coord`` (its variables
+    named)."""
+    import h5py
+    from scipy.io import whosmat
+
+    try:
+        names = [name for name, _, _ in whosmat(path)]
+    except NotImplementedError:  # v7.3
+        try:
+            with h5py.File(path, "r") as f:
+                names = sorted(k for k in f.keys() if not k.startswith("#"))
+        except (OSError, ValueError, RuntimeError) as exc:
+            return f"a MAT v7.3 (HDF5) file that cannot be opened: {_exc_text(exc)}"
+    except Exception as exc:  # noqa: BLE001 — SciPy's reason, whatever it is
+        keys = _bare_hdf5_keys(path)
+        if keys:
+            return f"an HDF5 file without a MAT header, holding {', '.join(keys[:5])}"
+        return f"not a MAT file SciPy can read: {_exc_text(exc)}"
+    held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names \
+        else "it holds no variable"
+    return f"no variable pts_coord; {held}"
 
 
 def _check_keypoints(path: Path, pts: np.ndarray, image: Path) -> np.ndarray:
@@ -594,9 +668,14 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         if broken:
             raise InputError(f"{broken[0][0]}: not a keypoint table ({broken[0][1]}; every line "
                              "must be two numbers 'x y', or 'nan nan'); fix or remove the file")
+        # a .mat left out may be the missing label file: say why each was
+        mats = [p for p in sorted(rejected.values(), key=lambda q: natural_key(q.name))
+                if p.suffix.lower() == ".mat"]
+        left = "".join(f"; {p.name} was left out ({_why_not_mat(p)})" for p in mats[:3])
         raise InputError(
             f"{directory}: {len(images)} images but {len(kp_files)} keypoint files (NAME.txt "
-            "with K rows 'x y', or NAME.mat with pts_coord 2 x K); give each image a keypoint "
+            "with K rows 'x y', or NAME.mat with pts_coord 2 x K)"
+            f"{left}{'; ...' if len(mats) > 3 else ''}; give each image a keypoint "
             "file of the same name, or exactly one per image in the same name order")
     K = {pts.shape[0] for _, pts in kps}
     if len(K) != 1:
