@@ -55,7 +55,7 @@ from scipy.spatial.distance import pdist, squareform
 from pipeline.errors import InputError
 from pipeline.inputs.linkscsv import MAX_ID
 
-__all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "read_comm_graph",
+__all__ = ["GRAPH_KINDS", "graph_edges", "comm_graph", "names_graph_file", "read_comm_graph",
            "check_comm_edges", "comm_edges_for", "diameter_lower_bound", "links_off_graph",
            "edge_set", "positive_k", "graph_parts"]
 
@@ -159,6 +159,19 @@ def positive_k(spec: str) -> int:
     return int(k_text)
 
 
+def _built_kind(spec: str) -> bool:
+    """``spec`` is a kind :func:`comm_graph` builds from the image count alone."""
+    return spec in _ALL_KINDS and spec not in ("geometric", "seq:K") or spec.startswith("seq:")
+
+
+def names_graph_file(kind_or_file: str | Path) -> bool:
+    """True when :func:`comm_graph` reads ``kind_or_file`` as a graph file: an existing file
+    whose name is no kind (a kind wins over a file of its name)."""
+    spec = str(kind_or_file)
+    return not (_built_kind(spec) or spec.startswith("knn:")) and bool(spec.strip()) \
+        and Path(spec).is_file()
+
+
 def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
                what: str = "image", *, offers_knn: bool = True) -> np.ndarray:
     """The communication graph the user chose for a set of images, as undirected edges.
@@ -197,7 +210,7 @@ def comm_graph(kind_or_file: str | Path, names: list[str], knn=None,
     if n < 2:
         raise InputError(f"a comm graph needs at least two {_node(what)[0]}s, got {n}")
     spec = str(kind_or_file)
-    if spec in _ALL_KINDS and spec not in ("geometric", "seq:K") or spec.startswith("seq:"):
+    if _built_kind(spec):
         return graph_edges(spec, n)
     if spec.startswith("knn:"):
         k = positive_k(spec)

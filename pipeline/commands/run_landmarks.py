@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="communication graph over the images in name order (default complete): "
                         "line, ring, ring2 (ring + 2-hop chords), ring+triangles, complete, "
                         "seq:K (each image with the K nearest in name order) or a file of "
-                        "'cam_i,cam_j' lines")
+                        "'cam_i,cam_j' lines (image names, or indices in the folder's name "
+                        "order, --frames or not: with --frames every edge joins kept images)")
     p.add_argument("--frames", type=int, default=None, metavar="N",
                    help="use N images at a fixed stride floor(n/N) from the first (default all)")
     p.add_argument("--descriptors", default="auto", choices=("auto", "given", "sift"),

@@ -43,8 +43,8 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.validate import check_utf8_names
 
-__all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "select_frames",
-           "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
+__all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "folder_image_names",
+           "select_frames", "sift_at_keypoints", "IMAGE_SUFFIXES", "DESCRIPTOR_SOURCES"]
 
 log = logging.getLogger(__name__)
 
@@ -570,6 +570,21 @@ def select_frames(n_total: int, frames: int | None) -> np.ndarray:
     return np.arange(frames) * step
 
 
+def _listing(directory: Path) -> tuple[list[Path], list[Path]]:
+    """The files of a labelled folder (hidden ones left out) and its images, in natural name
+    order: image ``k`` is camera ``k`` of the folder."""
+    files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
+                   key=lambda p: natural_key(p.name))
+    return files, [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+
+
+def folder_image_names(directory: str | Path) -> list[str]:
+    """The names of a labelled folder's images in the order :func:`load_landmark_folder`
+    reads them (natural name order), every one, whatever ``frames`` keeps: the images a
+    graph file's indices count (:func:`pipeline.runs.landmarks.landmark_comm_graph`)."""
+    return [p.name for p in _listing(Path(directory))[1]]
+
+
 def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                          frames: int | None = None) -> list[LandmarkFrame]:
     """Read a labelled-landmark folder (module notes) in natural name order.
@@ -604,9 +619,7 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
                          "images and their keypoint files")
     if not directory.is_dir():
         raise InputError(f"{directory}: no such folder of labelled images")
-    files = sorted((p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
-                   key=lambda p: natural_key(p.name))
-    images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    files, images = _listing(directory)
     if descriptors == "auto":
         descriptors = "given" if any(p.suffix.lower() == ".scf" for p in files) else "sift"
     check_utf8_names([p.name for p in images], directory,

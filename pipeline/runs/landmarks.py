@@ -54,8 +54,8 @@ from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
 from pipeline.types import Links
 
-__all__ = ["LandmarksConfig", "REFINEMENTS", "default_refinement", "run_landmarks",
-           "true_landmark_pairs", "landmarks_markdown"]
+__all__ = ["LandmarksConfig", "REFINEMENTS", "default_refinement", "landmark_comm_graph",
+           "run_landmarks", "true_landmark_pairs", "landmarks_markdown"]
 
 
 #: refinements of the landmark matches before the consistency stage
@@ -115,6 +115,39 @@ class LandmarksConfig:
         # a graph file by its stem, as run-images names it: its path would nest folders
         graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
         return Path("runs") / f"landmarks-{folder}{frames}-{graph}"
+
+
+def landmark_comm_graph(graph: str, names: list[str], folder_names: list[str],
+                        frames: int | None) -> np.ndarray:
+    """The communication graph over the images a run keeps, ``(E, 2)`` int64 in their order.
+
+    A kind (``ring``, ``seq:K``, ...) is built over the kept images (``names``, in name
+    order). A graph file gives images by name or by index in the folder's natural name order
+    (``folder_names``: every labelled image of the folder, as ``run-images`` counts them), so
+    one file means the same images with or without ``--frames``; with ``--frames N`` every
+    edge must join two kept images (:func:`pipeline.inputs.landmarks.select_frames`), else
+    InputError naming the edge and the image left out.
+    """
+    from pipeline.commgraph import comm_graph, names_graph_file
+    from pipeline.inputs.landmarks import select_frames
+
+    if len(folder_names) == len(names) or not names_graph_file(graph):
+        return comm_graph(graph, names, offers_knn=False)
+    edges = comm_graph(graph, folder_names, offers_knn=False)
+    kept = select_frames(len(folder_names), frames)
+    at = np.full(len(folder_names), -1, dtype=np.int64)
+    at[kept] = np.arange(len(kept))
+    off = (at[edges] < 0).any(axis=1)
+    if off.any():
+        i, j = (int(v) for v in edges[np.flatnonzero(off)[0]])
+        gone = i if at[i] < 0 else j
+        shown = ", ".join(str(k) for k in kept[:8]) + (", ..." if len(kept) > 8 else "")
+        raise InputError(f"{graph}: the edge {folder_names[i]} - {folder_names[j]} (images {i} "
+                         f"and {j} of the folder's {len(folder_names)}, in name order) joins "
+                         f"{folder_names[gone]}, which --frames {frames} leaves out (it keeps "
+                         f"images {shown}); list edges between kept images only, or drop "
+                         "--frames")
+    return at[edges]
 
 
 def _check_matching_memory(m, comm_edges, config: LandmarksConfig) -> None:
@@ -233,12 +266,12 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
         (:func:`pipeline.commgraph.comm_graph`), ratio or resolution method.
     """
     from pipeline.association import AssociationGraph, camera_offsets, count_conflicts
-    from pipeline.commgraph import comm_graph, split_warning
+    from pipeline.commgraph import split_warning
     from pipeline.consistency import centralized
     from pipeline.consistency.rules import deleted_cases, get_rule, rule_names
     from pipeline.evaluation.metrics import PairwiseTruth
     from pipeline.evaluation.report import versions
-    from pipeline.inputs.landmarks import load_landmark_folder
+    from pipeline.inputs.landmarks import folder_image_names, load_landmark_folder
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.matching.landmarks import match_landmark_edges
     from pipeline.runs.transports import check_team_size, resolve_alone
@@ -261,7 +294,8 @@ def run_landmarks(config: LandmarksConfig, timer: StageTimer | None = None) -> t
     with timer.stage("load", f"{config.directory}, descriptors {config.descriptors}"):
         frames = load_landmark_folder(config.directory, config.descriptors, config.frames)
         names = [f.name for f in frames]
-        comm_edges = comm_graph(config.graph, names, offers_knn=False)
+        comm_edges = landmark_comm_graph(config.graph, names,
+                                         folder_image_names(config.directory), config.frames)
         m = np.array([len(f.keypoints) for f in frames], dtype=np.int64)
         kind = frames[0].descriptor_kind
         source = "sift" if frames[0].descriptor_file == "sift" else "given"
