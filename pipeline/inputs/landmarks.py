@@ -18,7 +18,8 @@ images is the identity on rows. Layout:
 Pairing of the files: when every image has a keypoint file of the same stem, by name.
 Otherwise (the CMU hotel files are ``hotel.seq0.png`` / ``hotel1.txt`` / ``hotel001.scf``)
 by *natural* name order (``seq2`` before ``seq10``) — the ``i``-th image with the ``i``-th
-keypoint file and the ``i``-th descriptor file — which needs equal counts, and is refused
+keypoint file and the ``i``-th descriptor file — which needs equal counts and names that do
+not tie in that order (``seq1`` and ``seq01``: a copy's place would be arbitrary), and is refused
 when it would give an image another file than the one of its name, or when some files are
 named after their images and an image has none of its name (order would give it another
 image's file: order is for folders whose files are named after no image). An image with
@@ -503,7 +504,21 @@ def _refuse_order_mismatch(directory: Path, images: list[Path], paired: list[Pat
     an image another file than its own: an image whose file of its name (``own``, by stem) is
     passed over, or, where some files are named after images, an image without one that takes
     another image's file (e.g. ``v3.txt`` renamed ``labels.txt``). Order is for folders whose
-    files are named after no image."""
+    files are named after no image. Two images (or two files) whose names tie in natural
+    order (``seq1`` and ``seq01``, ``a1`` and ``A1``: a copy beside its original) are refused
+    too: their order, and so the files they take, would be the arbitrary order of the names
+    themselves, shifting every later image onto the next one's file."""
+    for group, what in ((images, "images"), (paired, f"{kind} files")):
+        first: dict[tuple, Path] = {}
+        for p in group:
+            other = first.setdefault(tuple(natural_key(p.name)[0]), p)
+            if other is not p:
+                raise InputError(
+                    f"{directory}: {other.name} and {p.name} tie in natural name order (the "
+                    "same words and numbers: leading zeros and letter case do not count), and "
+                    f"the {what} pair by that order, so which {kind} file each image takes "
+                    f"would be arbitrary; remove the copy or rename one, or name every {kind} "
+                    f"file after its image ({pattern})")
     clash = next(((im, p) for im, p in zip(images, paired, strict=True)
                   if im.stem in own and p.stem != im.stem), None)
     if clash is not None:
