@@ -552,6 +552,30 @@ def _refuse_shared_stem(directory: Path, images: list[Path],
                              "and keypoint file")
 
 
+#: largest file :func:`_unsuffixed_tables` reads (a label table of 5000 rows is ~100 kB)
+_TABLE_BYTES = 1 << 20
+
+
+def _unsuffixed_tables(files: list[Path]) -> str:
+    """A message fragment naming the files of a suffix no reader takes (``house1``, as the
+    CMU house sequence names its labels, or ``labels.csv``) that hold rows of two numbers:
+    label tables the reader passed over for their name; ``""`` when there are none."""
+    known = {*IMAGE_SUFFIXES, ".txt", ".mat", ".scf"}
+    tables = []
+    for p in files:
+        try:
+            small = p.stat().st_size <= _TABLE_BYTES
+        except OSError:
+            continue
+        if p.suffix.lower() not in known and small and _read_txt_keypoints(p) is not None:
+            tables.append(p.name)
+    if not tables:
+        return ""
+    shown = ", ".join(tables[:3]) + (", ..." if len(tables) > 3 else "")
+    return (f"; {len(tables)} file(s) hold rows 'x y' but are not named .txt ({shown}): "
+            "keypoint files are read as NAME.txt, so rename them")
+
+
 def _warn_orphans(directory: Path, files: list[Path], orphans: list[Path],
                   kind: str = "keypoint") -> None:
     """Warn of ``kind`` (keypoint or descriptor) files paired with no image (their image is
@@ -700,11 +724,11 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         mats = [p for p in sorted(rejected.values(), key=lambda q: natural_key(q.name))
                 if p.suffix.lower() == ".mat"]
         left = "".join(f"; {p.name} was left out ({_why_not_mat(p)})" for p in mats[:3])
+        left += ("; ..." if len(mats) > 3 else "") + _unsuffixed_tables(files)
         raise InputError(
             f"{directory}: {len(images)} images but {len(kp_files)} keypoint files (NAME.txt "
-            "with K rows 'x y', or NAME.mat with pts_coord 2 x K)"
-            f"{left}{'; ...' if len(mats) > 3 else ''}; give each image a keypoint "
-            "file of the same name, or exactly one per image in the same name order")
+            f"with K rows 'x y', or NAME.mat with pts_coord 2 x K){left}; give each image a "
+            "keypoint file of the same name, or exactly one per image in the same name order")
     K = {pts.shape[0] for _, pts in kps}
     if len(K) != 1:
         sizes = {p.name: pts.shape[0] for p, pts in kps}
