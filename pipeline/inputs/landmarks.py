@@ -357,8 +357,11 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
                          "(row 0 = x, row 1 = y)")
     pts = raw.astype(np.float64)
     if pts.ndim != 2 or pts.shape[0] != 2:
+        # one row per landmark, as a text label file has them: the transpose of pts_coord
+        turned = (f" (it holds {pts.shape[0]} rows 'x y': save its transpose, pts_coord')"
+                  if pts.ndim == 2 and pts.shape[1] == 2 else "")
         raise InputError(f"{path}: pts_coord has shape {pts.shape}, expected 2 x K "
-                         "(row 0 = x, row 1 = y)")
+                         f"(row 0 = x, row 1 = y){turned}")
     return pts.T.copy()
 
 

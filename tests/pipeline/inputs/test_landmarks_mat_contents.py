@@ -93,3 +93,14 @@ def test_v73_files_truncated_or_without_the_mat_header_are_named(tmp_path):
     with pytest.raises(InputError, match=r"view1.mat: not a keypoint table \(a MAT v7.3 \(HDF5\) "
                                          r"file that cannot be opened: .*truncated"):
         load_landmark_folder(folder, descriptors="sift")
+
+
+def test_a_pts_coord_of_one_row_per_landmark_says_to_transpose_it(tmp_path):
+    # K x 2, as a text label file and the hotel's groundT.mat hold the labels: the message
+    # gave the shape alone
+    _folder(tmp_path)
+    savemat(tmp_path / "view1.mat", {"pts_coord": PTS})
+    with pytest.raises(InputError, match=r"view1.mat: pts_coord has shape \(4, 2\), expected "
+                                         r"2 x K \(row 0 = x, row 1 = y\) \(it holds 4 rows "
+                                         r"'x y': save its transpose, pts_coord'\)"):
+        load_landmark_folder(tmp_path, descriptors="sift")
