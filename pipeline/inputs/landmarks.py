@@ -329,7 +329,7 @@ def _read_mat_keypoints(path: Path) -> np.ndarray | None:
         if raw is None:
             return None
     except Exception:  # noqa: BLE001 — no MAT file scipy can open: not a keypoint file
-        if _bare_hdf5_keys(path) and "pts_coord" in _bare_hdf5_keys(path):
+        if "pts_coord" in _bare_hdf5_keys(path):
             raise InputError(f"{path}: an HDF5 file holding pts_coord, but without the MAT "
                              "header MATLAB's save -v7.3 writes, so whether it is stored 2 x K "
                              "(MATLAB, column-major) or K x 2 is unknown; save it with MATLAB "
