@@ -18,14 +18,15 @@ from pipeline.inputs.landmarks import load_landmark_folder
 PTS = np.array([[10.0, 12.0], [30.0, 20.0], [50.0, 40.0], [20.0, 35.0]])
 
 
-def _folder(tmp_path: Path, stems=("view0", "view1", "view2"), labels=None) -> Path:
+def _folder(folder: Path, stems=("view0", "view1", "view2"), labels=None) -> Path:
+    folder.mkdir(exist_ok=True)
     labels = labels or stems
     for k, (stem, label) in enumerate(zip(stems, labels, strict=True)):
         rng = np.random.default_rng(k)
         Image.fromarray(rng.integers(0, 255, (48, 64), dtype=np.uint8)).save(
-            tmp_path / f"{stem}.png")
-        savemat(tmp_path / f"{label}.mat", {"pts_coord": (PTS + k).T})
-    return tmp_path
+            folder / f"{stem}.png")
+        savemat(folder / f"{label}.mat", {"pts_coord": (PTS + k).T})
+    return folder
 
 
 @pytest.mark.parametrize("value, what", [
@@ -42,7 +43,6 @@ def test_logical_and_sparse_pts_coord_are_refused_by_their_class(tmp_path, value
 
 
 def test_a_truncated_mat_file_is_named_damaged_by_name_and_by_order(tmp_path):
-    (tmp_path / "name").mkdir()
     by_name = _folder(tmp_path / "name")
     data = (by_name / "view1.mat").read_bytes()
     (by_name / "view1.mat").write_bytes(data[:-16])
@@ -50,7 +50,6 @@ def test_a_truncated_mat_file_is_named_damaged_by_name_and_by_order(tmp_path):
                                          r"\(.*\): a truncated or damaged MAT file"):
         load_landmark_folder(by_name, descriptors="sift")
     # files paired by name order: the same file was left out and the images miscounted
-    (tmp_path / "order").mkdir()
     by_order = _folder(tmp_path / "order", labels=("lab1", "lab2", "lab3"))
     (by_order / "lab2.mat").write_bytes(data[:-16])
     with pytest.raises(InputError, match=r"lab2.mat: pts_coord \(2 x 4 double\) cannot be read"):
@@ -58,13 +57,11 @@ def test_a_truncated_mat_file_is_named_damaged_by_name_and_by_order(tmp_path):
 
 
 def test_a_mat_file_that_is_no_keypoint_file_says_why(tmp_path):
-    (tmp_path / "a").mkdir()
     folder = _folder(tmp_path / "a")
     (folder / "view1.mat").write_bytes(b"")
     with pytest.raises(InputError, match=r"view1.mat: not a keypoint table \(not a MAT file "
                                          r"SciPy can read: .*truncated"):
         load_landmark_folder(folder, descriptors="sift")
-    (tmp_path / "b").mkdir()
     folder = _folder(tmp_path / "b", labels=("lab1", "lab2", "lab3"))
     savemat(folder / "lab2.mat", {"xy": PTS.T})
     with pytest.raises(InputError, match=r"3 images but 2 keypoint files .*; lab2.mat was left "
@@ -73,14 +70,12 @@ def test_a_mat_file_that_is_no_keypoint_file_says_why(tmp_path):
 
 
 def test_v73_files_truncated_or_without_the_mat_header_are_named(tmp_path):
-    (tmp_path / "a").mkdir()
     folder = _folder(tmp_path / "a")
     with h5py.File(folder / "view1.mat", "w") as f:  # h5py's own file: no MAT header
         f.create_dataset("pts_coord", data=PTS.T)
     with pytest.raises(InputError, match=r"view1.mat: an HDF5 file holding pts_coord, but "
                                          r"without the MAT header"):
         load_landmark_folder(folder, descriptors="sift")
-    (tmp_path / "b").mkdir()
     folder = _folder(tmp_path / "b")
     with h5py.File(folder / "view1.mat", "w", userblock_size=512) as f:
         ds = f.create_dataset("pts_coord", data=PTS)
