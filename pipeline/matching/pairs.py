@@ -257,8 +257,9 @@ def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
 
     A lone candidate (``d_j`` holds one descriptor) has no second neighbour, so the ratio
     test cannot reject it: its ratio is 0, as in :func:`mutual_ratio_matches` (which keeps
-    it at any threshold); every ratio of one match thus means the same whichever function
-    computed it.
+    it at any threshold); a second candidate at distance 0 (two identical descriptors) makes
+    the match ambiguous, ratio 1, as there too. Every ratio of one match thus means the same
+    whichever function computed it.
 
     The cost is one product ``q dⱼᵀ`` per block; the nearest other descriptor is the one
     that maximises ``q·d − |d|²/2`` (the same order as ``|q − d|²``), found in place on that
@@ -287,7 +288,12 @@ def lowe_ratios(d_i: np.ndarray, d_j: np.ndarray, pairs: np.ndarray,
         sq_q = (q * q).sum(1)
         best = sq_q + sq_j[s_] - 2.0 * best_dot
         second = sq_q + sq_j[k] - 2.0 * (q * dj[k]).sum(1)
-        ratio = np.sqrt(np.maximum(best, 0.0)) / np.sqrt(np.maximum(second, 1e-12))
+        second = np.maximum(second, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.sqrt(np.maximum(best, 0.0)) / np.sqrt(second)
+        # another descriptor at distance 0 (a copy of the nearest, or of q): nothing tells the
+        # two apart, ratio 1, as mutual_ratio_matches rates two identical best candidates
+        ratio = np.where(second > 0, ratio, 1.0)
         out[a:a + len(r)] = np.clip(ratio, 0.0, 1.0)
     return out
 
