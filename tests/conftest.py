@@ -2,6 +2,7 @@
 
 import os
 import shutil
+import signal
 
 from hypothesis import settings
 
@@ -16,6 +17,13 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile("repeatable")
 
 _saved: dict = {}
+
+# A test run started in the background by a shell without job control (``cmd &`` in a script,
+# a CI step) inherits SIGINT ignored, and Python then installs no handler of its own: the
+# tests of what a Ctrl-C does (and the programs they start, which inherit it too) saw no
+# interrupt and failed. A Ctrl-C is what they test, so the session takes Python's own.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_configure(config):
