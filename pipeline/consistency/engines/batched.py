@@ -108,6 +108,10 @@ class _DenseKeys:
 #: largest ``A²`` (bytes) for which the detection keeps ``X`` as a dense boolean array
 DENSE_KEYS_MAX = 1 << 24
 
+#: most (reader, entry) pairs a round of eq. (5) lists before removing repeats (:func:`_step`;
+#: 32 MB of int64 keys); a round with more is one sparse matrix product
+EXPAND_KEYS_MAX = 1 << 22
+
 
 class _Balls:
     """The same set of keys when ``P`` is symmetric (:attr:`_Team.symmetric`): the deltas of
@@ -153,6 +157,12 @@ class _Balls:
 def _shift(A: int) -> int:
     """Bits of a column in the keys ``row << shift | col`` of ``A`` rows and columns."""
     return max(int(A).bit_length(), 1)
+
+
+def _unique(a: np.ndarray) -> np.ndarray:
+    """Sorted unique values of an int64 array (by sorting: faster here than hashing)."""
+    a = np.sort(a)
+    return a[np.r_[True, a[1:] != a[:-1]]] if a.size else a
 
 
 def _merge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -385,27 +395,33 @@ def _step(team: _Team, delta: np.ndarray, running: np.ndarray) -> np.ndarray:
 
     ``Δ`` is given by its sorted keys; each entry ``(s, c)`` of ``Δ`` reaches the rows ``r``
     with ``P[r, s]`` (the robots that read row ``s`` of the sender's delta message).
+
+    Two evaluations of the same set of keys. Listing every (reader, entry) pair and removing
+    the repeats holds one key per path to an entry: fastest where few paths repeat (sparse
+    graphs), but on a dense one about a hundred times the result (the 101-frame hotel input:
+    7.6 GB at the peak). Past :data:`EXPAND_KEYS_MAX` pairs the round is SciPy's sparse
+    product of boolean matrices instead (a sum is an "or"), whose memory is its result's.
     """
     if delta.size == 0:
         return _EMPTY
     A = team.A
     sh = _shift(A)
     s, c = delta >> sh, delta & ((1 << sh) - 1)
-    # the product by SciPy's sparse matrix product on boolean entries (a sum is an "or"): its
-    # memory is that of its result, where listing every (reader, entry) pair before removing
-    # the repeats held each key once per path (on the 101-frame hotel input, dense, about a
-    # hundred times the result: 7.6 GB at the peak)
+    start, stop = team.readers_ptr[s], team.readers_ptr[s + 1]
+    if int((stop - start).sum()) <= EXPAND_KEYS_MAX:
+        pos = ranges(start, stop)
+        r = team.readers[pos]
+        c = np.repeat(c, stop - start)
+        # a row's own column is in X from round 0 (eq. 4): not computed again
+        return _unique((r << sh | c)[running[team.owner[r]] & (r != c)])
     D = sp.csr_matrix((np.ones(s.size, dtype=bool), c,
                        np.concatenate([[0], np.cumsum(np.bincount(s, minlength=A))])),
                       shape=(A, A))
     rows = np.flatnonzero(running[team.owner])
-    if rows.size == 0:
-        return _EMPTY
     Q = team.P[rows] @ D
     Q.sort_indices()
     r = np.repeat(rows, np.diff(Q.indptr))
     keys = r << sh | Q.indices.astype(np.int64)  # sorted: rows ascending, columns within
-    # a row's own column is in X from round 0 (eq. 4): not computed again
     return keys[r != Q.indices]
 
 
