@@ -31,7 +31,7 @@ the interpreter and libraries, rounded up):
   feature's links at once: ``sum_s |s| · 2 L_s`` entries in flight (``L_s`` the links of set
   ``s``), :data:`BYTES_PER_ROW_CROSSING` each; the estimate is the larger of the two terms
   (the entries alone where the simulator's batched engine runs it: it holds a round's
-  result, not the rows in flight; 101 frames below, 0.40 GB measured after the change that
+  result, not the rows in flight; 101 frames below: 0.46 GB peak RSS after the change that
   made it so, against 36 bytes an entry's 0.25 GB and the 0.2 GB counted before it).
   Measured through ``resolve --resolution paper`` on the CMU hotel's descriptor matches
   (complete graphs; peak RSS beyond the interpreter and the rows): 60 frames (518,400
