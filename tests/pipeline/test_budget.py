@@ -111,7 +111,7 @@ def test_the_batched_detection_counts_the_entries_it_holds_not_rows_in_flight():
     """Where the simulator's batched engine runs the detection (a lossless network, no
     fault) it forms each round's product of eq. (5) as one sparse product and holds no row
     in flight: the crossings are not counted there, and ``resolve --resolution paper`` on
-    the CMU hotel's 101 frames (0.48 GB at the peak) is no longer refused at 8.3 GB."""
+    the CMU hotel's 101 frames (0.46 GB at the peak) is no longer refused at 8.3 GB."""
     from itertools import combinations
 
     from pipeline.budget import BYTES_PER_ENTRY
