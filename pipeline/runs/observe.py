@@ -78,6 +78,16 @@ def observe_run(team_path, out, *, timeout_s: float = 600.0, rerun: bool = True,
                          "(run-formation --steps N or run-images DIR --sequence with "
                          "--transport zenoh), whose launching process takes its matches; "
                          "there is no run folder to observe")
+    if kind in ("formation", "images"):
+        # every robot refuses a feature method this build lacks (surf without OpenCV's
+        # non-free part) before it starts: the observer would wait --timeout for robots that
+        # never start, then call them not started
+        from pipeline.matching.features import check_method
+
+        try:
+            check_method(team.options["features"])
+        except InputError as exc:
+            raise InputError(f"team {team.name!r}: option features: {exc}") from None
     if kind == "images":
         folders = {team.resolve_path(p).resolve().parent for p in team.data["images"]}
         if len(folders) != 1:
