@@ -109,13 +109,14 @@ def check_merge_radius(merge_radius: float | None, sizes, what: str) -> None:
         The radius and the range allowed, ``0`` to the shorter side.
     """
     from pipeline.errors import InputError
+    from pipeline.validate import shown
 
     if merge_radius is None:
         return
     _refuse_non_number(merge_radius)
     side = min(min(int(w), int(h)) for w, h in sizes)
     if not np.isfinite(merge_radius) or not 0 <= merge_radius <= side:
-        raise InputError(f"--merge-radius {merge_radius:g}: expected pixels from 0 (merges "
+        raise InputError(f"--merge-radius {shown(merge_radius)}: expected pixels from 0 (merges "
                          f"nothing) to {side}, the shorter side of {what}")
 
 

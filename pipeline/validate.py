@@ -27,7 +27,7 @@ import numbers
 
 from pipeline.errors import InputError
 
-__all__ = ["not_empty", "MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
+__all__ = ["not_empty", "shown", "MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
            "tolerance_px", "lowe_ratio", "threads", "seed", "render_size", "robots",
            "focal_px_ok", "check_focal", "is_utf8_name"]
 
@@ -37,6 +37,19 @@ MAX_RENDER_PIXELS = 4096 * 4096
 MAX_ROBOTS = 1000
 #: focal length / longest image side must lie in this range
 FOCAL_RANGE = (0.05, 1000.0)
+
+
+def shown(value: float) -> str:
+    """A number as an error message names it: short (``{:g}``) where that reads back as the
+    value, else every digit it has (``{:g}`` rounds 1000001 to ``1e+06`` and 120.0000001 to
+    ``120``, and a message refusing them named the limit itself as the value given).
+
+    >>> shown(1e9), shown(-1.0), shown(1000001.0), shown(120.0000001)
+    ('1e+09', '-1', '1000001.0', '120.0000001')
+    """
+    short = f"{value:g}"
+    v = float(value)
+    return short if float(short) == v or not math.isfinite(v) else repr(v)
 
 
 def not_empty(value, flag: str, advice: str = "give a folder name") -> None:

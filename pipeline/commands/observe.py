@@ -32,10 +32,10 @@ def run(args) -> int:
     from pipeline.runfolder import claim_run_folder
     from pipeline.runs.observe import observe_run
     from pipeline.team.teamfile import MAX_TIMEOUT_S
-    from pipeline.validate import not_empty
+    from pipeline.validate import not_empty, shown
 
     if not 0 < args.timeout <= MAX_TIMEOUT_S:
-        raise InputError(f"--timeout {args.timeout:g} must be a number of seconds in "
+        raise InputError(f"--timeout {shown(args.timeout)} must be a number of seconds in "
                          f"(0, {MAX_TIMEOUT_S:g}]")
     from pipeline.team.teamfile import load_team
 

@@ -125,7 +125,7 @@ def online_config_from_args(args):
     if args.speed is None:
         args.speed = DEFAULT_SPEED
     if not (math.isfinite(args.speed) and 0 <= args.speed <= MAX_SPEED):
-        raise InputError(f"--speed {args.speed:g}: expected a finite number of metres per step "
+        raise InputError(f"--speed {validate.shown(args.speed)}: expected a finite number of metres per step "
                          f"from 0 to {MAX_SPEED:g} (the scene is tens of metres long)")
     from pipeline.runs.transports import get_transport
 
