@@ -135,7 +135,7 @@ def flag_result(report: dict, names: list[str] | None = None,
     if left:
         report["conflict_free"] = False
         crashed = sorted(faults.get("crashed", {}), key=int)
-        why = f" (robot(s) {', '.join(crashed)} crashed before it ended)" if crashed else ""
+        why = f" (robot(s) {_listed(crashed)} crashed before it ended)" if crashed else ""
         warnings.append(_warning(
             "not-conflict-free",
             f"the result is not conflict-free: {left} conflictive set(s) with "
@@ -186,7 +186,7 @@ def flag_result(report: dict, names: list[str] | None = None,
         cut = faults.get("links_cut_robot_lost")
         warnings.append(_warning(
             "robots-lost",
-            f"robot(s) {', '.join(ids)} crashed, were killed or never took part before the "
+            f"robot(s) {_listed(ids)} crashed, were killed or never took part before the "
             f"consistency stage ended; {cut if cut is not None else 'their'} link(s) to them "
             "were cut as robot-lost by the survivors, and a link between two of them keeps the "
             "status it had when they stopped (checked by no robot after that): rerun without "
@@ -199,7 +199,7 @@ def flag_result(report: dict, names: list[str] | None = None,
                "cut-off neighbour or a round limit: each robot's counters name why")
         warnings.append(_warning(
             "robots-lost-without-crash",
-            f"robot(s) {', '.join(false_lost)} were declared lost by their neighbours although "
+            f"robot(s) {_listed(false_lost)} were declared lost by their neighbours although "
             f"they never crashed ({why}); "
             f"{faults.get('links_cut_robot_lost')} link(s) were cut as robot-lost"))
     qe = report.get("quality_evidence") or {}
@@ -226,9 +226,15 @@ def flag_result(report: dict, names: list[str] | None = None,
     return report
 
 
-#: images a ``no-features`` warning names (a formation of 1000 robots, most beside the facade,
-#: named 731 of them on one line)
+#: images or robots a warning names (a formation of 1000 robots, most beside the facade,
+#: named 731 images on one line; --drop-prob 0.9 every robot of a team of 40)
 NAMES_SHOWN = 20
+
+
+def _listed(names: list[str]) -> str:
+    """The first :data:`NAMES_SHOWN` of ``names`` and how many more."""
+    more = len(names) - NAMES_SHOWN
+    return ", ".join(names[:NAMES_SHOWN]) + (f" and {more} more" if more > 0 else "")
 
 
 def _no_features(report: dict, names: list[str] | None, void=()) -> list[dict]:
@@ -239,12 +245,11 @@ def _no_features(report: dict, names: list[str] | None, void=()) -> list[dict]:
     empty = [] if m is None else [k for k, v in enumerate(m) if int(v) == 0 and k not in void]
     if not empty:
         return []
-    shown = [names[k] if names else f"camera {k}" for k in empty[:NAMES_SHOWN]]
-    more = f" and {len(empty) - NAMES_SHOWN} more (features_per_camera in report.json has " \
-        "each image's count)" if len(empty) > NAMES_SHOWN else ""
+    shown = _listed([names[k] if names else f"camera {k}" for k in empty])
+    more = " (features_per_camera in report.json has each image's count)" \
+        if len(empty) > NAMES_SHOWN else ""
     return [_warning("no-features", f"no features found in {len(empty)} image(s): "
-                     f"{', '.join(shown)}{more} (blank, too small or too narrow); they take no "
-                     "part")]
+                     f"{shown}{more} (blank, too small or too narrow); they take no part")]
 
 
 def flag_online(report: dict, no_links_why: str = NO_LINKS_WHY,
