@@ -480,10 +480,13 @@ def online_report(config: OnlineConfig, run: OnlineRun, timer: StageTimer) -> di
         why = (f"--switching-topology left no communication link up in any of the "
                f"{len(run.steps)} step(s) (drawn from --seed); more --steps, or another --seed")
     else:
+        # the robots of one step see the scene alike whatever the speed: it can leave them
+        # without a link only by driving them beside the scene, where a frame sees only sky
+        left = config.speed and 0 in report["features_per_camera"]
         why = ("frames too small, too few features, or no overlap between the robots' views"
                + merge_radius_why(config.merge_radius, config.size)
                + (f"; at --speed {config.speed:g} m per step the formation may have left the "
-                  "scene" if config.speed else ""))
+                  "scene" if left else ""))
     return flag_online(report, why, [v.name for v in seq.flat.views])
 
 
