@@ -14,9 +14,10 @@ Delay and the robots' timers (stated): with ``--delay-rounds D`` every message s
 extra rounds in flight, so a lossless round trip takes ``2 (D + 1)`` rounds instead of 2. The
 robots are configured for that link latency, as a deployment would set its timers from the
 radio's: a message is retransmitted once ``2 (D + 1)`` rounds passed without its
-acknowledgement (instead of 2) and a neighbour is declared lost after ``T + 2 D`` silent rounds
-(``T`` = 40, :class:`~pipeline.consistency.protocols.ProtocolOptions`), so a delay alone never
-makes a live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The fusion
+acknowledgement (instead of 2) and a neighbour is declared lost after ``T + 4 D`` silent rounds
+(``T`` = 40, :class:`~pipeline.consistency.protocols.ProtocolOptions`: the retransmissions of a
+dropped message then get as many tries as without the delay), so a delay alone never makes a
+live neighbour look crashed (:meth:`FaultConfig.protocol_options`). The fusion
 stage's network (:meth:`fusion_transport`) has the same delay and its robots the same timers.
 
 Time (stated): on a faulty network the simulator steps every robot in every round, and one

@@ -19,7 +19,7 @@ def test_timers_below_one_round_are_refused_naming_them(name, value):
 
 
 def test_the_defaults_and_the_delay_timers_are_accepted():
-    assert ProtocolOptions.for_delay(3).loss_timeout == ProtocolOptions().loss_timeout + 6
+    assert ProtocolOptions.for_delay(3).loss_timeout == ProtocolOptions().loss_timeout + 12
 
 
 @pytest.mark.parametrize("field", ["reliable", "delta_messages"])

@@ -167,7 +167,7 @@ def test_fusion_transport_carries_the_delay_and_its_timers():
     net = FaultConfig(delay_rounds=5).fusion_transport(edges, np.array([0, 1, 3]), 10)
     assert net.options.delay_rounds == 5
     ex = LockstepExchange(net, np.array([[0, 1]]))
-    assert ex.options.retransmit_after == 12 and ex.options.loss_timeout == 50
+    assert ex.options.retransmit_after == 12 and ex.options.loss_timeout == 60
 
 
 @settings(max_examples=15, deadline=None)
