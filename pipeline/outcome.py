@@ -36,6 +36,7 @@ import contextlib
 import logging
 import sys
 
+from pipeline.errors import listed
 from pipeline.progress import counted
 
 __all__ = ["EXIT_NOT_CONFLICT_FREE", "flag_result", "flag_online", "NO_LINKS_WHY",
@@ -232,9 +233,9 @@ NAMES_SHOWN = 20
 
 
 def _listed(names: list[str]) -> str:
-    """The first :data:`NAMES_SHOWN` of ``names`` and how many more."""
-    more = len(names) - NAMES_SHOWN
-    return ", ".join(names[:NAMES_SHOWN]) + (f" and {more} more" if more > 0 else "")
+    """``names`` comma-separated, or the first :data:`NAMES_SHOWN` and how many more
+    (:func:`pipeline.errors.listed`)."""
+    return ", ".join(names) if len(names) <= NAMES_SHOWN else listed(names, NAMES_SHOWN)
 
 
 def _no_features(report: dict, names: list[str] | None, void=()) -> list[dict]:

@@ -15,7 +15,7 @@ def test_listed_names_every_item_up_to_its_limit_then_counts():
     assert listed([3]) == "3"
     assert listed([3, 7]) == "3 and 7"
     assert listed([3, 7, 9]) == "3, 7 and 9"
-    assert listed(range(8)) == "0, 1, 2, 3, 4, ... (8 in all)"
+    assert listed(range(8)) == "0, 1, 2, 3, 4 and 3 more"
     assert listed(range(8), limit=8) == "0, 1, 2, 3, 4, 5, 6 and 7"
 
 
