@@ -48,6 +48,7 @@ __all__ = [
     "load_folder",
     "load_image",
     "read_k_txt",
+    "warn_misnamed_k_txt",
     "exif_focal_px",
     "in_content_order",
 ]
@@ -578,6 +579,34 @@ def _exif_K(header: Image.Image, width: int, height: int) -> tuple[np.ndarray, s
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]]), source
 
 
+#: names (letter case and spaces aside) that mean K.txt but are not read as it: ``k.txt``
+#: written on a file system that ignores case, ``K.txt.txt`` saved by an editor that hides
+#: extensions
+_K_TXT_LOOKALIKES = ("k.txt", "k.txt.txt")
+
+
+def warn_misnamed_k_txt(directory: Path,
+                        instead: str = "the images' EXIF focal length or the guessed one "
+                                       "serve instead") -> None:
+    """Warn about what in ``directory`` looks like the intrinsics file but is not read as it:
+    ``k.txt``, ``K.TXT``, ``K.txt.txt``, or a ``K.txt`` that is a folder or a link leading
+    nowhere. Only a file named exactly ``K.txt`` is read, so the calibration the user put
+    there would silently give way to EXIF or the guessed focal length (``instead`` says what
+    serves in its place)."""
+    try:
+        entries = sorted(directory.iterdir(), key=lambda p: p.name)
+    except OSError:
+        return
+    near = [p for p in entries if p.name.strip().casefold() in _K_TXT_LOOKALIKES
+            and not (p.name == "K.txt" and p.is_file())]
+    for p in near:
+        what = ("is a folder" if p.is_dir() else "is a symbolic link leading nowhere"
+                if p.name == "K.txt" else "is not named exactly K.txt (letter case counts)")
+        log.warning("warning: %s", f"{str(p)!r} {what}, so it is not read as the intrinsics "
+                    f"file: {instead}; give the intrinsics as a file named exactly K.txt, or "
+                    "name the file with --intrinsics")
+
+
 def _resolve_intrinsics(intrinsics, directory: Path) -> tuple[str, np.ndarray | None, Path | None]:
     """Normalise the ``intrinsics`` argument to (mode, K from file or None, file or None)."""
     if isinstance(intrinsics, Path) or (isinstance(intrinsics, str) and intrinsics not in ("auto", "exif")):
@@ -589,6 +618,7 @@ def _resolve_intrinsics(intrinsics, directory: Path) -> tuple[str, np.ndarray | 
         k_file = directory / "K.txt"
         if k_file.is_file():
             return "file", read_k_txt(k_file), k_file
+        warn_misnamed_k_txt(directory)
         return "auto", None, None
     raise InputError(f"intrinsics {intrinsics!r}: expected 'auto', 'exif' or the path of a K.txt file")
 

@@ -18,7 +18,13 @@ from decimal import Decimal
 from pathlib import Path
 
 from pipeline.errors import InputError
-from pipeline.inputs.photos import image_paths, is_utf8_name, left_out_images, load_folder
+from pipeline.inputs.photos import (
+    image_paths,
+    is_utf8_name,
+    left_out_images,
+    load_folder,
+    warn_misnamed_k_txt,
+)
 from pipeline.types import View
 
 __all__ = ["PhotoSequence", "load_sequence"]
@@ -96,6 +102,8 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     shared = intrinsics
     if intrinsics == "auto" and (directory / "K.txt").is_file():
         shared = directory / "K.txt"
+    elif intrinsics == "auto":
+        warn_misnamed_k_txt(directory)
     counts = {p.name: len(image_paths(p)) for p in subs}
     if len(set(counts.values())) > 1:
         raise InputError(f"--sequence {str(directory)!r}: robots hold different numbers of "
@@ -123,9 +131,12 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
     if check_robots is not None:
         check_robots([p.name for p in subs])
     # the most specific K.txt wins: a robot's own camera is not overridden by the team's
-    per_robot = [_load_robot(p, max_size,
-                             "auto" if intrinsics == "auto" and (p / "K.txt").is_file()
-                             else shared) for p in subs]
+    own = {p.name: intrinsics == "auto" and (p / "K.txt").is_file() for p in subs}
+    for p in subs:
+        if intrinsics == "auto" and not own[p.name] and shared != "auto":
+            # load_folder reads the team's K.txt and does not look in the robot's folder
+            warn_misnamed_k_txt(p, f"{str(shared)!r} serves robot {p.name!r} instead")
+    per_robot = [_load_robot(p, max_size, "auto" if own[p.name] else shared) for p in subs]
     steps = len(per_robot[0])
     views: list[View] = []
     for k in range(steps):
