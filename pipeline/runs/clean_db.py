@@ -230,7 +230,8 @@ def _clean(contents, database: Path, out: Path, comm_graph_file, budget, resolut
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     check_team_size(transport, n, "images in the database")
     if rerun:
-        check_image_dir(image_dir, contents.names)
+        check_image_dir(image_dir, contents.names, _camera_sizes(contents),
+                        "the camera of the database")
     reason = np.full(len(links), "", dtype=object)
     reason[contents.not_one_to_one] = "not-one-to-one"
     if comm_graph_file is not None:
@@ -403,13 +404,18 @@ def _link_weight(contents, links) -> np.ndarray:
     return geometric_llr(err, pair, COLMAP_MAX_ERROR_PX)
 
 
+def _camera_sizes(contents) -> list[tuple[int, int]]:
+    """``(width, height)`` of each image's camera, ``(0, 0)`` where it has none."""
+    return [(int(c.width), int(c.height)) if c is not None else (0, 0)
+            for c in contents.cameras]
+
+
 def _side_outputs(contents, links, reason, idx, result, model_links, m, out, rerun, image_dir,
                   before, after, outputs) -> None:
     """``OUT.links.csv`` and ``OUT.rrd`` beside the cleaned database (:mod:`pipeline.runs.cleaned`)."""
     from pipeline.runs.cleaned import CleaningOutcome, cleaning_ledger, write_side_outputs
 
-    sizes = [(int(c.width), int(c.height)) if c is not None else (0, 0)
-             for c in contents.cameras]
+    sizes = _camera_sizes(contents)
     md = (f"## clean-db {Path(contents.path).name}\n\n| | before | after |\n|---|---:|---:|\n"
           f"| Verified links | {len(links)} | {int((reason == '').sum())} |\n"
           f"| Conflictive sets | {before['conflictive_sets']} | {after['conflictive_sets']} |\n")

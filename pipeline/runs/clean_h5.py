@@ -77,8 +77,9 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     budget = MemoryBudget(max_memory_gb)
     contents = hloc.read_h5(features, matches, pairs, budget)
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
+    sizes = _sizes(features, contents, image_dir)
     if rerun:
-        check_image_dir(image_dir, contents.names)
+        check_image_dir(image_dir, contents.names, sizes, "hloc's image_size in the features file")
     cam = {name: k for k, name in enumerate(contents.names)}
     # the pairs file (its repeated lines merged, as a graph file's) or, without one, the
     # images that share a match; checked as every comm graph is (pipeline.commgraph)
@@ -112,7 +113,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
           f"| Cut not one-to-one | | {cut['not-one-to-one']} |\n"
           f"| Cut by resolution | | {cut['resolution']} |\n")
     outcome = CleaningOutcome(
-        names=contents.names, sizes=_sizes(features, contents, image_dir),
+        names=contents.names, sizes=sizes,
         keypoints=contents.keypoints,
         ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,

@@ -78,10 +78,18 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
     return ledger
 
 
-def check_image_dir(image_dir: str | Path | None, names: list[str]) -> None:
+def check_image_dir(image_dir: str | Path | None, names: list[str],
+                    sizes: list[tuple[int, int]] | None = None, of: str = "") -> None:
     """InputError unless ``image_dir`` (when given) is a folder holding every image of
     ``names``; checked before any work, so that nothing is written for a run that cannot
-    finish."""
+    finish.
+
+    ``sizes``: the ``(width, height)`` each image's keypoints are in (``(0, 0)``: unknown),
+    ``of`` where they come from (``the camera of the database``). An image of ``image_dir``
+    must be that image, or it scaled alike on both axes (the recording scales the keypoints
+    to it): one of another shape (turned a quarter since it was matched, another photograph
+    of that name) would have its keypoints drawn stretched over the wrong pixels. Only the
+    headers are read."""
     if image_dir is None:
         return
     d = Path(image_dir)
@@ -94,6 +102,36 @@ def check_image_dir(image_dir: str | Path | None, names: list[str]) -> None:
                          + (f" (nor {len(missing) - 1} other(s))" if len(missing) > 1 else "")
                          + "; give the folder the images were matched from, or leave "
                          "--image-dir out (gray canvases are drawn)")
+    for name, (w, h) in zip(names, sizes or [], strict=True):
+        if w > 0 and h > 0:
+            _check_same_shape(d / name, name, (w, h), of, str(image_dir))
+
+
+def _check_same_shape(path: Path, name: str, size: tuple[int, int], of: str,
+                      image_dir: str) -> None:
+    """InputError when the image file ``path`` is not the ``size`` image its keypoints are
+    in, scaled alike on both axes (:func:`check_image_dir`)."""
+    from PIL import UnidentifiedImageError
+
+    from pipeline.inputs.photos import load_image, open_header
+
+    try:
+        with open_header(path) as im:
+            iw, ih = im.size
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
+        load_image(path)  # its InputError names what is wrong with the file
+        raise
+    w, h = size
+    # a resize rounds each side to a whole pixel: |ih w - iw h| <= (w + h) / 2
+    if abs(ih * w - iw * h) > (w + h) / 2:
+        turned = abs(iw * w - ih * h) <= (w + h) / 2
+        raise InputError(
+            f"--image-dir {image_dir!r}: {name!r} is {iw}x{ih}, but its keypoints are in a "
+            f"{w}x{h} image ({of}), and it is not that image scaled"
+            + (" (it is that image turned a quarter: its pixels were rotated since it was "
+               "matched)" if turned else "")
+            + "; give the folder the images were matched from, or leave --image-dir out "
+            "(gray canvases are drawn)")
 
 
 def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View:
