@@ -47,6 +47,8 @@ __all__ = [
     "ImageIntrinsics",
     "load_folder",
     "load_image",
+    "exif_orientation",
+    "as_oriented",
     "read_k_txt",
     "warn_misnamed_k_txt",
     "exif_focal_px",
@@ -430,6 +432,35 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
         raise InputError(f"{path.name}: a {size} image (fewer than 2 pixels on a side) is no "
                          "photograph and holds no feature; remove or replace it")
     return np.ascontiguousarray(pixels), im
+
+
+def exif_orientation(header: Image.Image) -> int:
+    """The EXIF orientation tag of an opened image, 1 to 8; 1 (as stored) where it has none
+    or one that is no orientation (a damaged block)."""
+    try:
+        with warnings.catch_warnings():  # a damaged EXIF block: Pillow's notes were said
+            warnings.simplefilter("ignore", UserWarning)  # by open_header already
+            tag = header.getexif().get(ExifTags.Base.Orientation, 1)
+    except Exception:  # noqa: BLE001 - a broken EXIF block just means "no EXIF"
+        return 1
+    tag = _exif_int(tag)
+    return tag if tag is not None and 1 <= tag <= 8 else 1
+
+
+def as_oriented(pixels: np.ndarray, orientation: int) -> np.ndarray:
+    """``pixels`` as a viewer shows them under the EXIF ``orientation`` tag (what OpenCV's
+    ``imread`` returns, and so what hloc's features were extracted from); this pipeline's
+    own stages use the pixels as stored (module notes). Pillow's ``ImageOps.exif_transpose``
+    turns them, on an image that carries its EXIF block."""
+    from PIL import ImageOps
+
+    if orientation == 1:
+        return pixels
+    im = Image.fromarray(np.ascontiguousarray(pixels))
+    exif = Image.Exif()
+    exif[ExifTags.Base.Orientation] = orientation
+    im.info["exif"] = exif.tobytes()
+    return np.ascontiguousarray(np.asarray(ImageOps.exif_transpose(im)))
 
 
 # ----------------------------------------------------------------------------------- intrinsics

@@ -79,7 +79,8 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
     links, m, n = contents.links, contents.features_per_camera, len(contents.names)
     sizes = _sizes(features, contents, image_dir)
     if rerun:
-        check_image_dir(image_dir, contents.names, sizes, "hloc's image_size in the features file")
+        check_image_dir(image_dir, contents.names, sizes, "hloc's image_size in the features file",
+                        oriented=True)
     cam = {name: k for k, name in enumerate(contents.names)}
     # the pairs file (its repeated lines merged, as a graph file's) or, without one, the
     # images that share a match; checked as every comm graph is (pipeline.commgraph)
@@ -117,7 +118,7 @@ def clean_h5(features: str | Path, matches: str | Path, out: str | Path,
         keypoints=contents.keypoints,
         ledger=cleaning_ledger(links, reason, idx, result, model_links, m))
     written = write_side_outputs(outcome, out, rerun=rerun, image_dir=image_dir,
-                                 report_markdown=md, outputs=outputs)
+                                 report_markdown=md, outputs=outputs, oriented=True)
     st = result.stats
     summary = {"features": str(features), "matches": str(matches), "output": str(out),
                "written": [str(out)] + [str(p) for p in written], "images": n,

@@ -79,7 +79,8 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
 
 
 def check_image_dir(image_dir: str | Path | None, names: list[str],
-                    sizes: list[tuple[int, int]] | None = None, of: str = "") -> None:
+                    sizes: list[tuple[int, int]] | None = None, of: str = "",
+                    oriented: bool = False) -> None:
     """InputError unless ``image_dir`` (when given) is a folder holding every image of
     ``names``; checked before any work, so that nothing is written for a run that cannot
     finish.
@@ -89,7 +90,8 @@ def check_image_dir(image_dir: str | Path | None, names: list[str],
     must be that image, or it scaled alike on both axes (the recording scales the keypoints
     to it): one of another shape (turned a quarter since it was matched, another photograph
     of that name) would have its keypoints drawn stretched over the wrong pixels. Only the
-    headers are read."""
+    headers are read. ``oriented``: the tool read each image turned by its EXIF orientation
+    tag (:func:`write_side_outputs`)."""
     if image_dir is None:
         return
     d = Path(image_dir)
@@ -104,20 +106,22 @@ def check_image_dir(image_dir: str | Path | None, names: list[str],
                          "--image-dir out (gray canvases are drawn)")
     for name, (w, h) in zip(names, sizes or [], strict=True):
         if w > 0 and h > 0:
-            _check_same_shape(d / name, name, (w, h), of, str(image_dir))
+            _check_same_shape(d / name, name, (w, h), of, str(image_dir), oriented)
 
 
 def _check_same_shape(path: Path, name: str, size: tuple[int, int], of: str,
-                      image_dir: str) -> None:
+                      image_dir: str, oriented: bool) -> None:
     """InputError when the image file ``path`` is not the ``size`` image its keypoints are
     in, scaled alike on both axes (:func:`check_image_dir`)."""
     from PIL import UnidentifiedImageError
 
-    from pipeline.inputs.photos import load_image, open_header
+    from pipeline.inputs.photos import exif_orientation, load_image, open_header
 
     try:
         with open_header(path) as im:
             iw, ih = im.size
+            if oriented and exif_orientation(im) >= 5:  # a quarter turn
+                iw, ih = ih, iw
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
         load_image(path)  # its InputError names what is wrong with the file
         raise
@@ -134,16 +138,19 @@ def _check_same_shape(path: Path, name: str, size: tuple[int, int], of: str,
             "(gray canvases are drawn)")
 
 
-def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View:
+def _load_view(name: str, size: tuple[int, int], image_dir: Path | None,
+               oriented: bool = False) -> View:
     w, h = (max(int(size[0]), 1), max(int(size[1]), 1))
     image = None
     if image_dir is not None:
-        from pipeline.inputs.photos import load_image
+        from pipeline.inputs.photos import as_oriented, exif_orientation, load_image
 
         path = image_dir / name
         if not path.is_file():
             raise InputError(f"--image-dir {str(image_dir)!r}: no image {name!r} in it")
         image, header = load_image(path)
+        if oriented:
+            image = as_oriented(image, exif_orientation(header))
         header.close()
     if image is None:
         image = np.full((h, w), 96, dtype=np.uint8)
@@ -155,13 +162,17 @@ def _load_view(name: str, size: tuple[int, int], image_dir: Path | None) -> View
 
 def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool = True,
                        image_dir: str | Path | None = None, report_markdown: str = "",
-                       outputs=None) -> list[Path]:
+                       outputs=None, oriented: bool = False) -> list[Path]:
     """Write ``STEM.links.csv`` and (with ``rerun``) ``STEM.rrd`` beside ``out``.
 
     Returns the paths written. Keypoints read from another tool are scaled to the images of
     ``image_dir`` when those differ in size from the stored camera size. ``outputs``: a
     :class:`pipeline.runfolder.OutputFiles` that puts them in place with the command's other
-    outputs (default: written at once).
+    outputs (default: written at once). ``oriented``: the tool read each image of
+    ``image_dir`` turned by its EXIF orientation tag, as hloc does (its ``read_image`` is
+    OpenCV's ``imread``, which applies the tag), so its keypoints are in the pixels so turned
+    and the image is drawn so; COLMAP reads the pixels as stored (clean-db), as run-images
+    does.
     """
     from pipeline.inputs.linkscsv import write_links_csv
     from pipeline.runfolder import output_path
@@ -177,7 +188,7 @@ def write_side_outputs(outcome: CleaningOutcome, out: str | Path, *, rerun: bool
         image_dir = Path(image_dir) if image_dir is not None else None
         views, feats = [], []
         for name, size, kp in zip(outcome.names, outcome.sizes, outcome.keypoints, strict=True):
-            v = _load_view(name, size, image_dir)
+            v = _load_view(name, size, image_dir, oriented)
             kp = np.asarray(kp, dtype=np.float32).reshape(-1, 2)
             if image_dir is not None and size[0] > 0 and v.size != tuple(size):
                 s = np.array([v.size[0] / size[0], v.size[1] / size[1]], np.float32)
