@@ -19,6 +19,7 @@ Conventions
 from __future__ import annotations
 
 import logging
+import os
 import re
 import threading
 import warnings
@@ -36,6 +37,7 @@ from pipeline.validate import check_focal, check_utf8_names, focal_px_ok, is_utf
 
 __all__ = [
     "image_paths",
+    "why_missing",
     "left_out_images",
     "is_utf8_name",
     "identical_pixels",
@@ -132,9 +134,22 @@ def _visible_files(directory: Path) -> list[Path]:
                   key=lambda p: p.name)
 
 
+def why_missing(path: Path) -> str:
+    """Why ``path``, which does not exist, names nothing: ``does not exist``, or the symbolic
+    link on its way that leads nowhere (a photo folder linked to a drive not mounted), named
+    with its target: "does not exist" alone sent the user looking at a link they can see."""
+    path = Path(path)
+    for link in (path, *path.parents):
+        if link.is_symlink() and not link.exists():
+            what = "is" if link == path else f"does not exist: {str(link)!r} on its way is"
+            return (f"{what} a symbolic link that leads nowhere (to {os.readlink(link)!r}); "
+                    "mount or create its target")
+    return "does not exist"
+
+
 def _image_files(directory: Path) -> list[Path]:
     if not directory.exists():
-        raise InputError(f"image folder {str(directory)!r} does not exist")
+        raise InputError(f"image folder {str(directory)!r} {why_missing(directory)}")
     if not directory.is_dir():
         raise InputError(f"{str(directory)!r} is not a folder: give the folder that holds the images")
     files = _visible_files(directory)

@@ -24,6 +24,7 @@ from pipeline.inputs.photos import (
     left_out_images,
     load_folder,
     warn_misnamed_k_txt,
+    why_missing,
 )
 from pipeline.types import View
 
@@ -74,6 +75,9 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         different numbers of frames, or any error of :func:`~pipeline.inputs.photos.load_folder`.
     """
     directory = Path(directory)
+    if not directory.exists():
+        raise InputError(f"--sequence {str(directory)!r} {why_missing(directory)}; expected "
+                         "a folder holding one sub-folder of frames per robot")
     if not directory.is_dir():
         raise InputError(f"--sequence {str(directory)!r}: expected a folder holding one "
                          "sub-folder of frames per robot")
