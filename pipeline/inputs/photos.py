@@ -90,6 +90,14 @@ OFF_CENTRE = 0.2
 #: a number in the wrong place of the matrix (``cx`` written where the skew goes) or another
 #: unit. A calibration that estimated a skew gives a fraction of a percent of ``fx``.
 MAX_SKEW_FRACTION = 0.1
+#: A K.txt whose ``fy / fx`` lies outside ``[1 / MAX_FOCAL_RATIO, MAX_FOCAL_RATIO]`` is refused.
+#: The two are one focal length over the pixel's height and width: equal on square pixels
+#: (a calibration gives them within a percent or so), an anamorphic lens squeezing at most 2x.
+#: The COLMAP stages use one focal length, ``sqrt(fx fy)``, and matching and fusion both:
+#: further apart, the stages see two different cameras, and the value is a digit lost or
+#: added (Sceaux's six 320 px photos with ``fy = 10 fx``: the run went on and flagged its
+#: cleaning as worse; with ``fy = fx / 10`` fusion cut three times the links).
+MAX_FOCAL_RATIO = 2.0
 #: Deeper-than-8-bit pixels are stretched to 0..255 up to this percentile of their values
 #: (:func:`_to_uint8`): the brightest 0.1 % (hot or saturated pixels) saturate instead of
 #: setting the scale of the whole image.
@@ -496,10 +504,11 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     ------
     InputError
         The file is missing, does not hold 9 or 4 numbers, the last row is not ``0 0 1``,
-        ``K[1, 0]`` is not 0, a focal length is not positive, or the skew ``K[0, 1]`` is
-        larger than :data:`MAX_SKEW_FRACTION` times ``fx`` (the COLMAP stages, whose pinhole
-        has no skew, would leave out what the others use: pixel axes that far from square
-        are a number in the wrong place).
+        ``K[1, 0]`` is not 0, a focal length is not positive, ``fx`` and ``fy`` are more than
+        :data:`MAX_FOCAL_RATIO` times apart, or the skew ``K[0, 1]`` is larger than
+        :data:`MAX_SKEW_FRACTION` times ``fx`` (the COLMAP stages, whose pinhole has no skew
+        and one focal length, would leave out what the others use: pixel axes that far from
+        square are a number in the wrong place).
     """
     path = Path(path)
     if path.is_dir():
@@ -538,6 +547,14 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"intrinsics file {str(path)!r}: focal lengths must be positive, got "
                          f"fx={K[0, 0]}, fy={K[1, 1]}")
+    ratio = K[1, 1] / K[0, 0]
+    if not 1.0 / MAX_FOCAL_RATIO <= ratio <= MAX_FOCAL_RATIO:
+        raise InputError(
+            f"intrinsics file {str(path)!r}: fy = {K[1, 1]:g} is {ratio:.3g} x fx ({K[0, 0]:g}); "
+            "fx and fy are one focal length over the pixels' width and height, nearly equal on "
+            f"any camera (an anamorphic lens: at most {MAX_FOCAL_RATIO:g}x apart), and the "
+            "COLMAP stages use one, sqrt(fx fy): a digit lost or added? give fx and fy of the "
+            "calibration")
     skew = K[0, 1]
     if abs(skew) > MAX_SKEW_FRACTION * K[0, 0]:
         raise InputError(

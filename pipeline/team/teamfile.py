@@ -693,21 +693,23 @@ def _check_data(data: dict, n: int, where: str) -> None:
 
 def _pinhole(K) -> bool:
     """``K`` (a 3x3 of finite numbers) is a pinhole matrix: rows ``fx s cx``, ``0 fy cy``,
-    ``0 0 1`` with ``fx, fy > 0`` and ``|s| <= MAX_SKEW_FRACTION * fx`` (what
-    :func:`pipeline.inputs.photos.read_k_txt` accepts)."""
-    from pipeline.inputs.photos import MAX_SKEW_FRACTION
+    ``0 0 1`` with ``fx, fy > 0`` at most ``MAX_FOCAL_RATIO`` times apart and
+    ``|s| <= MAX_SKEW_FRACTION * fx`` (what :func:`pipeline.inputs.photos.read_k_txt`
+    accepts)."""
+    from pipeline.inputs.photos import MAX_FOCAL_RATIO, MAX_SKEW_FRACTION
 
     K = np.asarray(K, dtype=np.float64)
     return bool(np.allclose(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0.0 and K[0, 0] > 0
-                and K[1, 1] > 0 and abs(K[0, 1]) <= MAX_SKEW_FRACTION * K[0, 0])
+                and K[1, 1] > 0 and 1.0 / MAX_FOCAL_RATIO <= K[1, 1] / K[0, 0] <= MAX_FOCAL_RATIO
+                and abs(K[0, 1]) <= MAX_SKEW_FRACTION * K[0, 0])
 
 
 def _pinhole_rule() -> str:
     """What :func:`_pinhole` asks, in the words of the error that refuses a matrix."""
-    from pipeline.inputs.photos import MAX_SKEW_FRACTION
+    from pipeline.inputs.photos import MAX_FOCAL_RATIO, MAX_SKEW_FRACTION
 
-    return (f"rows 'fx s cx', '0 fy cy', '0 0 1', fx and fy > 0, the skew |s| at most "
-            f"{MAX_SKEW_FRACTION:g} x fx")
+    return (f"rows 'fx s cx', '0 fy cy', '0 0 1', fx and fy > 0 and at most "
+            f"{MAX_FOCAL_RATIO:g} times apart, the skew |s| at most {MAX_SKEW_FRACTION:g} x fx")
 
 
 def _is_matrix(v, rows: int, cols: int) -> bool:
