@@ -250,10 +250,32 @@ def _node(what: str) -> tuple[str, str]:
             "robot": ("robot", "sub-folder names")}.get(what, (what, f"{what} names"))
 
 
+def _names_by_form(names: list[str]) -> dict[str, int]:
+    """``{name: index}`` of ``names``, and of the NFC form of each name whose form no other
+    name shares: a name typed in a graph file and the file name it means may encode an
+    accent two ways (macOS writes file names decomposed, NFD; an editor types them composed,
+    NFC), the same text printed alike in every message that said it was not one of them."""
+    import unicodedata
+
+    by_name = {name: k for k, name in enumerate(names)}
+    forms: dict[str, list[int]] = {}
+    for k, name in enumerate(names):
+        forms.setdefault(unicodedata.normalize("NFC", name), []).append(k)
+    for form, ks in forms.items():
+        if len(ks) == 1:
+            by_name.setdefault(form, ks[0])
+    return by_name
+
+
 def _camera(path, line_no, column, tok, names, by_name, what: str = "image") -> int:
-    """One end of an edge line: an image name (when names are known) or a 0-based index."""
-    if by_name is not None and tok in by_name:
-        return by_name[tok]
+    """One end of an edge line: an image name (when names are known, in either Unicode form:
+    :func:`_names_by_form`) or a 0-based index."""
+    import unicodedata
+
+    if by_name is not None:
+        for form in (tok, unicodedata.normalize("NFC", tok)):
+            if form in by_name:
+                return by_name[form]
     if not re.fullmatch(r"-?[0-9]+", tok):  # ASCII digits (\d takes other scripts too)
         if by_name is not None:
             n = len(names)
@@ -329,7 +351,7 @@ def read_comm_graph(path: str | os.PathLike, names: list[str] | None = None,
 
     path = Path(path)
     require_input_file(path, "comm graph file")
-    by_name = None if names is None else {name: k for k, name in enumerate(names)}
+    by_name = None if names is None else _names_by_form(names)
     rows = []
     header_allowed = True
     for line_no, raw in text_lines(path, "graph file"):
