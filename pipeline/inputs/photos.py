@@ -43,6 +43,7 @@ __all__ = [
     "identical_pixels",
     "pixel_digests",
     "IMAGE_SUFFIXES",
+    "CAMERA_FORMATS",
     "MIN_MAX_SIZE",
     "GUESS_FOCAL_FACTOR",
     "guess_K",
@@ -61,6 +62,12 @@ log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
+#: Suffixes of camera files Pillow does not open (so not in its registered extensions): a
+#: phone's HEIC / HEIF, JPEG XL, and raw files (DNG and the makers' own). Beside the
+#: photographs they are left out as any other format is, and warned as such.
+CAMERA_FORMATS = (".heic", ".heif", ".hif", ".jxl", ".dng", ".cr2", ".cr3", ".crw", ".nef",
+                  ".nrw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2", ".pef", ".srw",
+                  ".x3f", ".3fr", ".iiq", ".erf", ".mos", ".raw")
 #: the smallest longest side images may be downscaled to (``max_size``)
 MIN_MAX_SIZE = 16
 #: Focal length of the stated guess, in units of the longest image side.
@@ -195,11 +202,11 @@ def _holds_images(path: Path) -> bool:
 def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = False) -> list[str]:
     """What in ``directory`` looks like a photograph but is not read, for a warning: files of
     another image format Pillow knows (GIF, PPM, ...: not a photo format COLMAP's tools take
-    here), symbolic links that lead nowhere, and sub-folders holding images (one folder per
+    here) or a camera's that it does not (:data:`CAMERA_FORMATS`: HEIC, raw), symbolic links that lead nowhere, and sub-folders holding images (one folder per
     robot is ``--sequence``)."""
     from PIL import Image
 
-    known = set(Image.registered_extensions()) - set(IMAGE_SUFFIXES)
+    known = (set(Image.registered_extensions()) | set(CAMERA_FORMATS)) - set(IMAGE_SUFFIXES)
     out = []
     other = [p.name for p in files if p.suffix.lower() in known]
     if other:
