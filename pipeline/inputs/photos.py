@@ -359,6 +359,25 @@ def _tiff_layout(path: Path) -> str | None:
     return f"{tags.get(258, 1)}-bit {kind} TIFF, {tags.get(277, 1)} sample(s) per pixel"
 
 
+#: ISO-BMFF ``ftyp`` brands of HEIC / HEIF stills and sequences (ISO/IEC 23008-12)
+_HEIF_BRANDS = (b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs",
+                b"mif1", b"msf1")
+
+
+def _heif_brand(path: Path) -> str | None:
+    """The major brand of a HEIC / HEIF file (``heic``), read from its ``ftyp`` box, or
+    ``None``: a phone's photo renamed ``.jpg`` was refused as "a truncated or non-image
+    file"."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(12)
+    except OSError:
+        return None
+    if len(head) == 12 and head[4:8] == b"ftyp" and head[8:12] in _HEIF_BRANDS:
+        return head[8:12].decode("ascii")
+    return None
+
+
 def _deep_color(im: Image.Image) -> bool:
     """Whether ``im`` (opened, not yet loaded) is a 16-bit-per-channel colour PNG or TIFF:
     Pillow decodes those to 8 bits by keeping each sample's high byte, so 10- or 12-bit data
@@ -453,6 +472,13 @@ def load_image(path: str | Path) -> tuple[np.ndarray, Image.Image]:
                 f"{path.name}: {tiff}: not a layout this reader decodes; convert it to an 8- "
                 f"or 16-bit PNG or TIFF (e.g. magick {path.name} -depth 16 {path.stem}.png)"
             ) from None
+        heif = _heif_brand(path) if isinstance(exc, UnidentifiedImageError) else None
+        if heif is not None:
+            raise InputError(
+                f"{path.name}: a HEIC/HEIF image (brand {heif!r} in its header), whatever its "
+                "suffix says; this reader does not decode HEIC: convert it to JPEG (e.g. "
+                f"magick {path.name} {path.stem}-converted.jpg), or export the photos from the "
+                "phone as JPEG") from None
         raise InputError(
             f"{path.name}: cannot read it as an image ({exc}); remove or replace the file "
             f"(a truncated or non-image file)") from None

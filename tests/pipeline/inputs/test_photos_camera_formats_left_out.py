@@ -48,3 +48,18 @@ def test_a_folder_of_heic_files_only_is_warned_before_it_is_refused(tmp_path, ca
             pytest.raises(InputError, match=r"^no images in .*found 2 other file"):
         load_folder(d)
     assert len(_warned(caplog)) == 1 and "IMG_0001.heic, IMG_0002.heic;" in _warned(caplog)[0]
+
+
+def test_a_heic_file_named_jpg_is_named_as_heic(tmp_path):
+    """A phone's HEIC photo renamed .jpg (by a transfer tool) was refused as "a truncated or
+    non-image file"; the error now says what it is."""
+    from pipeline.inputs.photos import load_image
+
+    path = tmp_path / "IMG_0004.jpg"
+    path.write_bytes(HEIC_HEAD + bytes(64))
+    with pytest.raises(InputError) as err:
+        load_image(path)
+    assert str(err.value) == (
+        "IMG_0004.jpg: a HEIC/HEIF image (brand 'heic' in its header), whatever its suffix "
+        "says; this reader does not decode HEIC: convert it to JPEG (e.g. magick IMG_0004.jpg "
+        "IMG_0004-converted.jpg), or export the photos from the phone as JPEG")
