@@ -547,7 +547,10 @@ def read_k_txt(path: str | Path) -> np.ndarray:
     if path.is_dir():
         raise InputError(f"intrinsics file {str(path)!r} is a folder; give the K.txt file")
     if not path.is_file():
-        raise InputError(f"intrinsics file {str(path)!r} does not exist")
+        if path.exists():  # open() would wait on a FIFO for a writer that never comes
+            raise InputError(f"intrinsics file {str(path)!r} is not a regular file (a FIFO, "
+                             "device or socket); give the K.txt file")
+        raise InputError(f"intrinsics file {str(path)!r} {why_missing(path)}")
     try:
         text = path.read_text(encoding="utf-8-sig", errors="strict")  # a BOM (Notepad) too
     except (UnicodeDecodeError, OSError) as exc:
@@ -696,8 +699,10 @@ def warn_misnamed_k_txt(directory: Path,
     near = [p for p in entries if p.name.strip().casefold() in _K_TXT_LOOKALIKES
             and not (p.name == "K.txt" and p.is_file())]
     for p in near:
-        what = ("is a folder" if p.is_dir() else "is a symbolic link leading nowhere"
-                if p.name == "K.txt" else "is not named exactly K.txt (letter case counts)")
+        what = ("is not named exactly K.txt (letter case counts)" if p.name != "K.txt"
+                else "is a folder" if p.is_dir()
+                else "is a symbolic link leading nowhere" if not p.exists()
+                else "is not a regular file (a FIFO, device or socket)")
         log.warning("warning: %s", f"{str(p)!r} {what}, so it is not read as the intrinsics "
                     f"file: {instead}; give the intrinsics as a file named exactly K.txt, or "
                     "name the file with --intrinsics")

@@ -70,3 +70,30 @@ def test_a_robot_k_txt_lookalike_beside_the_teams_k_txt_is_warned(tmp_path, capl
         f"counts), so it is not read as the intrinsics file: {str(tmp_path / 'K.txt')!r} "
         "serves robot 'r1' instead; give the intrinsics as a file named exactly K.txt, or "
         "name the file with --intrinsics"]
+
+
+def test_a_k_txt_that_is_a_fifo_is_named_as_such(tmp_path, caplog):
+    """A K.txt that is a FIFO was read as absent (or, given with --intrinsics, said not to
+    exist): it is named as what it is."""
+    import os
+
+    from pipeline.errors import InputError
+    from pipeline.inputs.photos import read_k_txt
+
+    d = tmp_path / "photos"
+    _images(d)
+    os.mkfifo(d / "K.txt")
+    with caplog.at_level("WARNING", logger="pipeline"):
+        load_folder(d, max_size=None)
+    assert _lookalike_warnings(caplog) == [
+        f"warning: {str(d / 'K.txt')!r} is not a regular file (a FIFO, device or socket), so it "
+        "is not read as the intrinsics file: the images' EXIF focal length or the guessed one "
+        "serve instead; give the intrinsics as a file named exactly K.txt, or name the file "
+        "with --intrinsics"]
+    with pytest.raises(InputError, match=r"^intrinsics file '.*K.txt' is not a regular file "
+                                         r"\(a FIFO, device or socket\); give the K.txt file$"):
+        read_k_txt(d / "K.txt")
+    (tmp_path / "dead").symlink_to(tmp_path / "unmounted" / "K.txt")
+    with pytest.raises(InputError, match=r"^intrinsics file '.*dead' is a symbolic link that "
+                                         r"leads nowhere \(to '.*unmounted/K.txt'\)"):
+        read_k_txt(tmp_path / "dead")
