@@ -34,7 +34,7 @@ import select  # noqa: E402
 import threading  # noqa: E402
 from collections.abc import Callable, Iterable  # noqa: E402
 
-from pipeline.errors import InputError, StageStalledError, TeamError  # noqa: E402
+from pipeline.errors import InputError, StageStalledError, TeamError, one_line  # noqa: E402
 from pipeline.outcome import recording_warnings  # noqa: E402
 
 # command name -> (module, one-line help)
@@ -76,13 +76,22 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
+class _OneLineWarnings(logging.Formatter):
+    """The message alone; a warning (or worse) on one line (:func:`pipeline.errors.one_line`),
+    the progress lines as they are."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        return one_line(text) if record.levelno >= logging.WARNING else text
+
+
 def configure_logging(quiet: bool = False) -> None:
     """Messages of the ``pipeline`` loggers go to stderr as plain lines; ``quiet`` keeps only
     warnings and errors (and turns progress bars off, see :mod:`pipeline.progress`)."""
     log = logging.getLogger("pipeline")
     if not any(getattr(h, "_formation_match", False) for h in log.handlers):
         handler = _StderrHandler()
-        handler.setFormatter(logging.Formatter("%(message)s"))
+        handler.setFormatter(_OneLineWarnings("%(message)s"))
         handler._formation_match = True
         log.addHandler(handler)
         log.propagate = False
@@ -181,7 +190,7 @@ def _run(argv: list[str], command: str | None) -> int:
                 recording_warnings():  # the report keeps the warnings printed (outcome)
             return int(mod.run(args) or 0)
     except (InputError, TeamError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except StageStalledError as exc:
         print(f"error: {exc}, a bound a correct run never reaches: the inputs break an "

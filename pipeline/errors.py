@@ -5,6 +5,15 @@ class InputError(ValueError):
     """Bad user input. The message names the offending value and says what to do."""
 
 
+def one_line(text: str) -> str:
+    """``text`` with its line breaks and other characters that print nothing written as
+    escapes (``\\n``, ``\\t``, ``\\u200b``): every error and warning is one line on stderr
+    (README, "Errors you can meet"), and a file name a message quotes may hold a line break
+    ('new\\nline.jpg' split a warning over two lines)."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
+
+
 class TeamError(RuntimeError):
     """A team of robot processes did not finish: a robot never started, failed or hung (the
     message names it)."""
@@ -221,7 +230,7 @@ def one_line_errors(main):
         try:
             return run_interruptibly(name, lambda: main(*args, **kwargs))
         except InputError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {one_line(str(exc))}", file=sys.stderr)
             return 2
     return wrapped
 
