@@ -24,7 +24,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.types import Features, LinkLedger, Links, View
 
-__all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "check_image_dir",
+__all__ = ["side_paths", "CleaningOutcome", "cleaning_ledger", "image_file", "check_image_dir",
            "write_side_outputs", "stale_recording"]
 
 
@@ -78,6 +78,26 @@ def cleaning_ledger(links: Links, reason: np.ndarray, rows: np.ndarray, result,
     return ledger
 
 
+def image_file(image_dir: Path, name: str) -> Path | None:
+    """The file of ``image_dir`` holding the image ``name`` (a path relative to it), or
+    ``None``. A name whose accents the database or features file encodes otherwise than the
+    file system (decomposed, NFD, as macOS wrote it; composed, NFC, as an archive unpacked
+    elsewhere did) finds its file where exactly one file of that folder has the same NFC
+    form: "no image 'château.jpg' in it" named a file the folder visibly held."""
+    import unicodedata
+
+    path = image_dir / name
+    if path.is_file():
+        return path
+    want = unicodedata.normalize("NFC", path.name)
+    try:
+        same = [p for p in path.parent.iterdir()
+                if unicodedata.normalize("NFC", p.name) == want and p.is_file()]
+    except OSError:  # no such sub-folder (or one that cannot be listed)
+        return None
+    return same[0] if len(same) == 1 else None
+
+
 def check_image_dir(image_dir: str | Path | None, names: list[str],
                     sizes: list[tuple[int, int]] | None = None, of: str = "",
                     oriented: bool = False) -> None:
@@ -98,7 +118,7 @@ def check_image_dir(image_dir: str | Path | None, names: list[str],
     if not d.is_dir():
         raise InputError(f"--image-dir {str(image_dir)!r} is not a folder; give the folder of "
                          "the images (or leave it out: gray canvases are drawn)")
-    missing = [n for n in names if not (d / n).is_file()]
+    missing = [n for n in names if image_file(d, n) is None]
     if missing:
         raise InputError(f"--image-dir {str(image_dir)!r}: no image {missing[0]!r} in it"
                          + (f" (nor {len(missing) - 1} other(s))" if len(missing) > 1 else "")
@@ -106,7 +126,7 @@ def check_image_dir(image_dir: str | Path | None, names: list[str],
                          "--image-dir out (gray canvases are drawn)")
     for name, (w, h) in zip(names, sizes or [], strict=True):
         if w > 0 and h > 0:
-            _check_same_shape(d / name, name, (w, h), of, str(image_dir), oriented)
+            _check_same_shape(image_file(d, name), name, (w, h), of, str(image_dir), oriented)
 
 
 def _check_same_shape(path: Path, name: str, size: tuple[int, int], of: str,
@@ -145,8 +165,8 @@ def _load_view(name: str, size: tuple[int, int], image_dir: Path | None,
     if image_dir is not None:
         from pipeline.inputs.photos import as_oriented, exif_orientation, load_image
 
-        path = image_dir / name
-        if not path.is_file():
+        path = image_file(image_dir, name)
+        if path is None:
             raise InputError(f"--image-dir {str(image_dir)!r}: no image {name!r} in it")
         image, header = load_image(path)
         if oriented:
