@@ -551,11 +551,14 @@ def read_k_txt(path: str | Path) -> np.ndarray:
             raise InputError(f"intrinsics file {str(path)!r} is not a regular file (a FIFO, "
                              "device or socket); give the K.txt file")
         raise InputError(f"intrinsics file {str(path)!r} {why_missing(path)}")
-    try:
-        text = path.read_text(encoding="utf-8-sig", errors="strict")  # a BOM (Notepad) too
-    except (UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"intrinsics file {str(path)!r} is not a text file ({exc})") from None
-    tokens = [t for line in text.splitlines() for t in re.split(r"[\s,;]+", line.split("#")[0]) if t]
+    from pipeline.inputs.csvfields import text_lines
+
+    try:  # a UTF-8 BOM (Notepad) is read; UTF-16 and Latin-1 text are named as such
+        lines = [line for _, line in text_lines(path, "intrinsics file")]
+    except OSError as exc:
+        raise InputError(f"intrinsics file {str(path)!r} cannot be read ({exc.strerror or exc})"
+                         ) from None
+    tokens = [t for line in lines for t in re.split(r"[\s,;]+", line.split("#")[0]) if t]
     # digits 0-9 as a text file writes them: Python's float() also takes "7_0" (70) and other
     # scripts' digits
     bad = next((t for t in tokens if not NUMBER.fullmatch(t)
