@@ -242,17 +242,24 @@ def _to_uint8(arr: np.ndarray) -> np.ndarray:
     camera's counts, 7000 to 8000 of 65535; a sensor's black level) stretched from 0 kept an
     eighth of the range, and on Sceaux photographs so stored SIFT found 44 features an image
     where it found 750 in the 8-bit copies (no image registered). Negative values (signed or
-    float data) are stretched alike.
+    float data) are stretched alike; NaN and infinite values (a float image's mask) take no
+    part in the percentiles and are drawn black.
     """
     if arr.dtype == np.uint8:
         return arr
     a = arr.astype(np.float64)
-    a = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
-    sample = a.ravel()[::max(1, a.size // DEEP_STRETCH_SAMPLE)]
+    finite = np.isfinite(a)
+    if not finite.any():
+        return np.zeros(arr.shape, dtype=np.uint8)
+    # the scale is the finite values' (a float image's NaN mask is no pixel value), and the
+    # others are drawn black
+    values = a[finite] if not finite.all() else a.ravel()
+    sample = values[::max(1, values.size // DEEP_STRETCH_SAMPLE)]
     low, high = np.percentile(sample, [100.0 - DEEP_STRETCH_PERCENTILE, DEEP_STRETCH_PERCENTILE])
     lo, hi = float(low), float(high)
     if hi <= lo:  # the image is flat but for a few pixels: those are its content
-        lo, hi = float(a.min()), float(a.max())
+        lo, hi = float(values.min()), float(values.max())
+    a[~finite] = lo
     if hi <= lo:
         return np.zeros(arr.shape, dtype=np.uint8)
     return np.clip(np.rint((a - lo) * (255.0 / (hi - lo))), 0, 255).astype(np.uint8)

@@ -36,3 +36,15 @@ def test_a_flat_pedestal_with_a_few_warmer_pixels_keeps_them():
     a[0, :3] = [7250, 7500, 8000]
     out = _to_uint8(a)
     assert out[0, :3].tolist() == [64, 128, 255] and out.sum() == 64 + 128 + 255
+
+
+def test_a_float_image_masked_with_nan_keeps_its_contrast():
+    """A float image (thermal or depth) with a NaN mask over a third of it: the NaN pixels
+    counted as 0 in the percentiles, and its values at 7000-8000 were squeezed again."""
+    rng = np.random.default_rng(1)
+    a = (7000 + rng.random((60, 90)) * 1000).astype(np.float32)
+    a[:, :30] = np.nan
+    a[0, 40] = np.inf
+    out = _to_uint8(a)
+    assert (out[:, :30] == 0).all() and out[0, 40] == 0
+    assert out[1:, 30:].std() > 60 and np.percentile(out[1:, 30:], 99) > 245
