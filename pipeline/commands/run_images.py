@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 
 from pipeline import validate
@@ -226,7 +227,9 @@ def _run_sequence(args) -> int:
 
     config = sequence_config_from_args(args)
     current_folder(config.out_dir(), "--out")
-    out, folder = config.out_dir().resolve(), Path(config.directory).resolve()
+    # realpath, not Path.resolve: a symbolic link that loops is named by the checks below
+    out = Path(os.path.realpath(config.out_dir()))
+    folder = Path(os.path.realpath(config.directory))
     if folder in out.parents:
         raise InputError(f"--out {str(config.out_dir())!r} is inside DIR {config.directory!r}: "
                          "with --sequence every sub-folder of DIR is a robot, so the next run "

@@ -153,10 +153,19 @@ def why_missing(path: Path) -> str:
     """Why ``path``, which does not exist, names nothing: ``does not exist``, or the symbolic
     link on its way that leads nowhere (a photo folder linked to a drive not mounted), named
     with its target: "does not exist" alone sent the user looking at a link they can see."""
+    import errno
+
     path = Path(path)
     for link in (path, *path.parents):
         if link.is_symlink() and not link.exists():
             what = "is" if link == path else f"does not exist: {str(link)!r} on its way is"
+            try:
+                os.stat(link)
+            except OSError as exc:
+                if exc.errno == errno.ELOOP:
+                    return (f"{what} a symbolic link that leads back to itself (to "
+                            f"{os.readlink(link)!r}, a loop of links); make it lead to a "
+                            "file or folder")
             return (f"{what} a symbolic link that leads nowhere (to {os.readlink(link)!r}); "
                     "mount or create its target")
     return "does not exist"

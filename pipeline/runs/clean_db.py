@@ -164,7 +164,7 @@ def clean_database(database: str | Path, out: str | Path,
                          "or --fusion")
     if loop_tol_deg is not None:
         check_loop_tol(loop_tol_deg)
-    if out.resolve() == database.resolve():
+    if os.path.realpath(out) == os.path.realpath(database):  # a loop is named below
         raise InputError(f"--out {str(out)!r} is the input database; the input is never "
                          f"modified, choose a new file")
     check_no_log_beside(out)

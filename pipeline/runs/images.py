@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import os
 import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -85,7 +86,7 @@ class ImagesConfig:
     def out_dir(self) -> Path:
         if self.out:
             return Path(self.out)
-        folder = Path(self.directory).resolve().name or "images"
+        folder = Path(os.path.realpath(self.directory)).name or "images"
         graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
         return Path("runs") / f"images-{folder}-{graph}"
 

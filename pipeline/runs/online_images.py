@@ -25,6 +25,7 @@ photographs have no positions).
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -71,7 +72,7 @@ class SequenceConfig:
             return Path(self.out)
         graph = Path(self.graph).stem if Path(self.graph).is_file() else \
             self.graph.replace(":", "")
-        return Path("runs") / f"sequence-{Path(self.directory).resolve().name}-{graph}"
+        return Path("runs") / f"sequence-{Path(os.path.realpath(self.directory)).name}-{graph}"
 
 
 def run_images_sequence(config: SequenceConfig, timer: StageTimer | None = None) -> Path:
