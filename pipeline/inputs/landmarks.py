@@ -660,7 +660,11 @@ def load_landmark_folder(directory: str | Path, descriptors: str = "auto",
         raise InputError(f"{directory}: a file, not a folder; give the folder that holds the "
                          "images and their keypoint files")
     if not directory.is_dir():
-        raise InputError(f"{directory}: no such folder of labelled images")
+        from pipeline.inputs.photos import why_missing
+
+        why = why_missing(directory)
+        raise InputError(f"{directory}: no such folder of labelled images"
+                         if why == "does not exist" else f"{directory} {why}")
     files, images = _listing(directory)
     if descriptors == "auto":
         descriptors = "given" if any(p.suffix.lower() == ".scf" for p in files) else "sift"

@@ -40,6 +40,7 @@ no camera poses and no 3D points, so no ``sparse/`` and no recording.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -110,7 +111,8 @@ class LandmarksConfig:
     def out_dir(self) -> Path:
         if self.out:
             return Path(self.out)
-        folder = Path(self.directory).resolve().name or "landmarks"
+        # realpath, not Path.resolve: a symbolic link that loops is named by the folder's check
+        folder = Path(os.path.realpath(self.directory)).name or "landmarks"
         frames = f"-f{self.frames}" if self.frames else ""
         # a graph file by its stem, as run-images names it: its path would nest folders
         graph = Path(self.graph).stem if Path(self.graph).is_file() else self.graph.replace(":", "")
