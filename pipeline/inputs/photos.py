@@ -105,9 +105,9 @@ MAX_SKEW_FRACTION = 0.1
 #: added (Sceaux's six 320 px photos with ``fy = 10 fx``: the run went on and flagged its
 #: cleaning as worse; with ``fy = fx / 10`` fusion cut three times the links).
 MAX_FOCAL_RATIO = 2.0
-#: Deeper-than-8-bit pixels are stretched to 0..255 up to this percentile of their values
-#: (:func:`_to_uint8`): the brightest 0.1 % (hot or saturated pixels) saturate instead of
-#: setting the scale of the whole image.
+#: Deeper-than-8-bit pixels are stretched to 0..255 from ``100 -`` this percentile of their
+#: values up to this one (:func:`_to_uint8`): the brightest 0.1 % (hot or saturated pixels)
+#: and the darkest saturate instead of setting the scale of the whole image.
 DEEP_STRETCH_PERCENTILE = 99.9
 #: the percentiles are taken on at most this many of an image's values, evenly spaced
 DEEP_STRETCH_SAMPLE = 4_000_000
@@ -211,8 +211,9 @@ def _holds_images(path: Path) -> bool:
 def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = False) -> list[str]:
     """What in ``directory`` looks like a photograph but is not read, for a warning: files of
     another image format Pillow knows (GIF, PPM, ...: not a photo format COLMAP's tools take
-    here) or a camera's that it does not (:data:`CAMERA_FORMATS`: HEIC, raw), symbolic links that lead nowhere, and sub-folders holding images (one folder per
-    robot is ``--sequence``)."""
+    here) or a camera's that it does not (:data:`CAMERA_FORMATS`: HEIC, raw), symbolic links
+    that lead nowhere, and sub-folders holding images (one folder per robot is
+    ``--sequence``)."""
     from PIL import Image
 
     known = (set(Image.registered_extensions()) | set(CAMERA_FORMATS)) - set(IMAGE_SUFFIXES)
