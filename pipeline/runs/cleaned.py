@@ -124,7 +124,8 @@ def check_image_dir(image_dir: str | Path | None, names: list[str],
                          + (f" (nor {len(missing) - 1} other(s))" if len(missing) > 1 else "")
                          + "; give the folder the images were matched from, or leave "
                          "--image-dir out (gray canvases are drawn)")
-    for name, (w, h) in zip(names, sizes or [], strict=True):
+    for name, (w, h) in zip(names, sizes if sizes is not None else [(0, 0)] * len(names),
+                            strict=True):
         if w > 0 and h > 0:
             _check_same_shape(image_file(d, name), name, (w, h), of, str(image_dir), oriented)
 

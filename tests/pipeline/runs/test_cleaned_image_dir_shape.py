@@ -65,3 +65,12 @@ def test_clean_h5_refuses_an_image_of_another_shape_than_its_image_size(tmp_path
                      "--out", str(tmp_path / "o.h5"), "--image-dir", str(images)], tmp_path,
             "'c.jpg' is 320x400, but its keypoints are in a 400x320 image (hloc's image_size "
             "in the features file)", "turned a quarter")
+
+
+def test_names_without_sizes_check_the_files_only(tmp_path):
+    """check_image_dir with names and no sizes (the sizes are optional): a zip against an empty
+    list raised ValueError ('zip() argument 2 is shorter than argument 1')."""
+    from pipeline.runs.cleaned import check_image_dir
+
+    _images(tmp_path / "images", {"a.jpg": (40, 30)})
+    check_image_dir(tmp_path / "images", ["a.jpg"])
