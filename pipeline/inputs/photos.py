@@ -61,7 +61,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: File suffixes taken as images (case-insensitive); other files in the folder are skipped.
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
+#: ``.jfif`` and ``.jpe`` are JPEG files too (a browser on Windows saves a photo as
+#: ``.jfif``): left out, they were warned with the advice to convert them to JPEG.
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".jfif", ".jpe", ".png", ".tif", ".tiff", ".bmp", ".webp")
 #: Suffixes of camera files Pillow does not open (so not in its registered extensions): a
 #: phone's HEIC / HEIF, JPEG XL, and raw files (DNG and the makers' own). Beside the
 #: photographs they are left out as any other format is, and warned as such.

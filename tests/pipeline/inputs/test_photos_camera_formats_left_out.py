@@ -35,8 +35,8 @@ def test_heic_and_raw_files_beside_the_photographs_are_warned(tmp_path, caplog):
         assert [v.name for v in load_folder(d, max_size=None)] == ["p0.jpg", "p1.jpg"]
     assert _warned(caplog) == [
         f"warning: {str(d)!r}: 2 image file(s) of a format not read here left out "
-        "(IMG_0001.HEIC, IMG_0002.dng; convert them to one of .jpg, .jpeg, .png, .tif, .tiff, "
-        ".bmp, .webp)"]
+        "(IMG_0001.HEIC, IMG_0002.dng; convert them to one of .jpg, .jpeg, .jfif, .jpe, .png, "
+        ".tif, .tiff, .bmp, .webp)"]
 
 
 def test_a_folder_of_heic_files_only_is_warned_before_it_is_refused(tmp_path, caplog):
