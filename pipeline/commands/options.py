@@ -262,13 +262,7 @@ def feature_options(args) -> tuple[str, int | None]:
         An unknown method, one this OpenCV build lacks, or fewer than :data:`~pipeline.matching.features.MIN_FEATURES`
         or more than :data:`~pipeline.matching.features.MAX_FEATURES`.
     """
-    from pipeline.matching.features import (
-        MAX_FEATURES,
-        METHODS,
-        MIN_FEATURES,
-        available_methods,
-        check_method,
-    )
+    from pipeline.matching.features import METHODS, available_methods, check_method
 
     method = str(args.features).lower()
     if method not in METHODS:
@@ -278,18 +272,10 @@ def feature_options(args) -> tuple[str, int | None]:
     check_method(method)
     if str(args.max_features).lower() == "auto":
         return method, None
-    try:
-        args.max_features = int(args.max_features)
-    except ValueError:
-        raise InputError(f"--max-features {args.max_features!r}: expected a number of features "
-                         f"or 'auto'") from None
-    if args.max_features < MIN_FEATURES:
-        raise InputError(f"--max-features {args.max_features}: at least {MIN_FEATURES} are "
-                         "needed")
-    if args.max_features > MAX_FEATURES:
-        raise InputError(f"--max-features {args.max_features}: at most {MAX_FEATURES} per image; "
-                         "give a smaller count (e.g. 2000) or 'auto' for photos")
-    return method, int(args.max_features)
+    from pipeline.validate import max_features
+
+    args.max_features = max_features(args.max_features)
+    return method, args.max_features
 
 
 def count_argument(text: str) -> int:

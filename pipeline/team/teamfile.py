@@ -90,9 +90,10 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline import validate
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
-from pipeline.matching.methods import FEATURE_METHODS, MATCHERS, MAX_FEATURES
+from pipeline.matching.methods import FEATURE_METHODS, MATCHERS, MAX_FEATURES, MIN_FEATURES
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
            "round_timeout_options",
@@ -602,6 +603,7 @@ def _check_data(data: dict, n: int, where: str) -> None:
         seed = data.get("seed", 0)
         if not _is_int(seed) or seed < 0:
             raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")
+        validate.seed(seed, f"{where}: data.seed")  # run-formation --seed's range
         if data.get("robots") is not None and not (_is_int(data["robots"])
                                                    and data["robots"] >= 2):
             raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer >= 2 "
@@ -787,12 +789,16 @@ def _check_options(opts: dict, where: str) -> None:
                          f"{MIN_ROUND_TIMEOUT_S:g} s: a live neighbour beats every 0.2 s at "
                          "most, so every robot would write its neighbours off as silent; give "
                          "a few seconds or more, e.g. 30 (the default)")
-    for k, top in (("max_features", MAX_FEATURES), ("loss_timeout", MAX_LOSS_TIMEOUT)):
-        v = opts.get(k, 8)
-        if k == "max_features" and v is None:
-            continue  # scaled with the image size (photo_max_features)
-        if not _is_int(v) or not 1 <= v <= top:
-            raise InputError(f"{where}: option {k} {v!r} must be an integer in 1..{top}")
+    v = opts.get("max_features")
+    if v is not None:  # None: scaled with the image size (photo_max_features)
+        if not _is_int(v):
+            raise InputError(f"{where}: option max_features {v!r} must be an integer in "
+                             f"{MIN_FEATURES}..{MAX_FEATURES} or null")
+        validate.max_features(v, f"{where}: option max_features", auto="null")  # --max-features'
+    v = opts.get("loss_timeout", 8)
+    if not _is_int(v) or not 1 <= v <= MAX_LOSS_TIMEOUT:
+        raise InputError(f"{where}: option loss_timeout {v!r} must be an integer in "
+                         f"1..{MAX_LOSS_TIMEOUT}")
     for k in ("threshold_px", "contrast_threshold"):
         v = opts.get(k)
         if v is not None and (not _is_number(v) or not v > 0):
@@ -805,6 +811,7 @@ def _check_options(opts: dict, where: str) -> None:
     seed = opts.get("fault_seed", 0)
     if not _is_int(seed) or seed < 0:
         raise InputError(f"{where}: option fault_seed {seed!r} must be an integer >= 0")
+    validate.seed(seed, f"{where}: option fault_seed")  # run-formation --fault-seed's range
     r = opts.get("merge_radius")
     if r is not None and (not _is_number(r) or r < 0):
         raise InputError(f"{where}: option merge_radius {r!r} must be a finite number of "
