@@ -229,9 +229,10 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     ------
     InputError
         Missing file; a row with the wrong number of columns (4 or 5, the same in every row), a
-        non-integer or negative id, a non-finite quality, a self-link, a duplicate link or one
-        that breaks one-to-one-ness (among the kept rows of a run-output links.csv) — naming
-        the row number and its content.
+        non-integer or negative id, a non-finite quality, a self-link, a duplicate link (among
+        all rows of a run-output links.csv, whatever their status) or one that breaks
+        one-to-one-ness (among the kept rows of a run-output links.csv) — naming the row number
+        and its content.
 
     Examples
     --------
@@ -319,6 +320,16 @@ def read_links_csv(path: str | os.PathLike) -> LinksFile:
     # rows stay deleted; clean-db and clean-h5 delete rows that break one-to-one-ness there)
     rows = np.flatnonzero([st == "kept" for st, *_ in run_cols]) if run_cols \
         else np.arange(len(a))
+    # but every row of it once: a run lists each of its links once, kept or deleted, so a
+    # link twice (say once deleted, once kept) is a damaged file, which would be resolved
+    # with both rows and written twice
+    dup = _first_duplicate(ci, fi, cj, fj) if run_cols else None
+    if dup is not None:
+        k0, k1 = dup
+        raise InputError(f"{path}:{lines[k1]}: {raws[k1]!r}: duplicate link (the same link as "
+                         f"row {lines[k0]}: {raws[k0]!r}); a run-output links.csv lists every "
+                         "link once, kept or deleted: the file is damaged; remove one of the "
+                         "two rows or give the run's own links.csv")
     for cols, what in _one_to_one(*a[rows].T):
         dup = _first_duplicate(*cols)
         if dup is not None:
