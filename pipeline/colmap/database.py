@@ -487,10 +487,12 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
                 f"database {str(path)!r}: its {watermarks} verified image pair(s) are all "
                 f"WATERMARK pairs, which COLMAP's mapper ignores with ignore_watermarks on: "
                 f"nothing is left to clean (drop --ignore-watermarks to clean them)")
-    if not usable:
-        what = "no two-view geometries" if not n_rows else \
-            f"{n_rows} two-view geometries, all without inliers"
-        if not n_rows and raw[0]:
+    # two-view geometries all without inliers: the images were matched and verified and no
+    # pair held a match, an empty input (read as none, which clean-db warns of, as resolve
+    # does of an empty links file); no two-view geometry at all: a step was never run
+    if not n_rows:
+        what = "no two-view geometries"
+        if raw[0]:
             raise InputError(
                 f"database {str(path)!r} has {what}: its {raw[0]} matches of {raw[1]} image "
                 f"pairs were never geometrically verified (matched with the verification "
@@ -513,7 +515,9 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
             fundamental[(a, b)] = F
         parts.append((np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1],
                       np.full(len(m), int(pid), dtype=np.int64)))
-    ci, fi, cj, fj, source = (np.concatenate(col) for col in zip(*parts, strict=True))
+    ci, fi, cj, fj, source = (np.concatenate(col).astype(np.int64) for col in
+                              zip(*parts, strict=True)) if parts else \
+        (np.zeros(0, dtype=np.int64) for _ in range(5))
     m = np.array([len(k) for k in kps], dtype=np.int64)
     bad = np.flatnonzero((fi >= m[ci]) | (fj >= m[cj]))
     if bad.size:

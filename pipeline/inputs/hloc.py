@@ -433,7 +433,8 @@ def read_h5(features: str | Path, matches: str | Path,
     ------
     InputError
         Missing or non-HDF5 files, fewer than two images, a pair of ``pairs`` not stored,
-        ``matches0`` of the wrong length or naming a keypoint that does not exist, no match.
+        ``matches0`` of the wrong length or naming a keypoint that does not exist (a file of no
+        match is read as no link).
     """
     features, matches = Path(features), Path(matches)
     h5py = _h5py()
@@ -528,13 +529,14 @@ def read_h5(features: str | Path, matches: str | Path,
             ci.append(np.full(rows.size, a)), fi.append(fa)
             cj.append(np.full(rows.size, b)), fj.append(fb)
             q.append(score), lp.append(np.full(rows.size, len(keys) - 1)), lr.append(rows)
-    if not keys or sum(len(x) for x in fi) == 0:
-        raise InputError(f"{matches}: no matches to clean")
+    # no pair group, or none holding a match: an empty input, read as no link (clean-h5 warns
+    # of it and writes the copy unchanged, as resolve warns of an empty links file)
 
     def cat(parts):
-        return np.concatenate(parts).astype(np.int64)
+        return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
 
-    links = Links(cat(ci), cat(fi), cat(cj), cat(fj), np.concatenate(q).astype(np.float64))
+    links = Links(cat(ci), cat(fi), cat(cj), cat(fj),
+                  np.concatenate(q).astype(np.float64) if q else np.zeros(0))
     # Assumption 2.2: a feature linked twice into the same other image (later rows are cut)
     n = len(names)
     offs = np.concatenate([[0], np.cumsum(m)])

@@ -222,12 +222,12 @@ def test_database_of_matches_never_verified_names_them(tmp_path):
         colmap.read_database(path)
 
 
-def test_database_whose_geometries_have_no_inliers(tmp_path):
+def test_database_whose_geometries_have_no_inliers_reads_as_no_link(tmp_path):
     views, feats = _views_and_features(n=2)
     links = Links([0], [1], [1], [2])
     path = colmap.write_database(tmp_path / "failed.db", views, feats, links, keep=[False])
-    with pytest.raises(InputError, match="all without inliers"):
-        colmap.read_database(path)
+    contents = colmap.read_database(path)
+    assert len(contents.links) == 0 and contents.pairs_without_inliers == 1
 
 
 def test_not_a_database(tmp_path):

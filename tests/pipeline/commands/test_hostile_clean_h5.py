@@ -198,7 +198,6 @@ def test_a_file_another_program_writes_is_named_as_such(files, tmp_path, capsys,
 # --- the matches file ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("edit, needle", [
-    (lambda fd: [fd.__delitem__(k) for k in list(fd)], "no matches to clean"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full(3, -1, np.int16)), "has shape (3,)"),
     (lambda fd: _replace(fd, P01 + "/matches0", np.full((M, 2), -1, np.int16)),
      "has shape (20, 2)"),
@@ -245,7 +244,7 @@ def test_a_file_another_program_writes_is_named_as_such(files, tmp_path, capsys,
     # another tool's layout, (K, 2) index pairs: that pair was left out and copied uncleaned
     (lambda fd: fd[P01].move("matches0", "matches"),
      "group 'a.jpg/sub-b.jpg' holds 'matches', 'matching_scores0' but no 'matches0'"),
-], ids=["no-pairs", "short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
+], ids=["short", "2-d", "row", "column", "scores-column", "float-nan", "float-fraction", "strings", "out-of-range",
         "below-minus-one", "int64-huge", "uint64-max", "uint16-minus-one", "scores-short", "scores-nan",
         "scores-strings", "unknown-pair", "half-unknown-pair", "self-pair", "pair-both-orders",
         "pair-old-and-new-key", "matches-not-matches0"])
