@@ -477,6 +477,23 @@ def pair_scores(m, kept: Links, true_pairs) -> dict:
 # --------------------------------------------------------------------------- the methods
 
 
+def quality_as_written(quality: np.ndarray) -> np.ndarray:
+    """The links' quality, ``(L,)``, as ``resolve`` reads it: finite. A Hungarian pair whose
+    one end sits at descriptor distance 0 from another landmark has the ratio ``d / 0 = inf``
+    (:func:`pipeline.matching.landmarks.match_landmark_edges`), so quality ``1 - inf = -inf``,
+    which a links file cannot give. Written at least one below the lowest finite quality (and
+    below 0), such a link keeps its place in every order of the qualities (and of their
+    :func:`~pipeline.matching.link_evidence.ratio_llr`) that the rules follow in the pipeline:
+    below every other link, tied with the other links of ratio inf.
+
+    >>> quality_as_written(np.array([0.5, -np.inf, -2.0])).tolist()
+    [0.5, -3.0, -2.0]
+    """
+    q = np.asarray(quality, dtype=np.float64)
+    floor = min(float(q[np.isfinite(q)].min(initial=0.0)), 0.0) - 1.0
+    return np.where(q == -np.inf, floor, q)
+
+
 def run_resolve_cli(rule: str, m, edges, links: Links, cap_gb: float) -> dict:
     """``formation-match resolve --resolution RULE`` on the links written as a CSV file, as a
     user runs it (reading, checks, the stage, writing): kept mask, the child's wall time and
@@ -489,7 +506,8 @@ def run_resolve_cli(rule: str, m, edges, links: Links, cap_gb: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         src, graph, out = Path(tmp, "links.csv"), Path(tmp, "graph.csv"), Path(tmp, "out.csv")
         np.savetxt(src, np.stack([links.cam_i, links.feat_i, links.cam_j, links.feat_j,
-                                  links.quality], axis=1), fmt=["%d"] * 4 + ["%.6f"],
+                                  quality_as_written(links.quality)], axis=1),
+                   fmt=["%d"] * 4 + ["%.6f"],
                    delimiter=",", header="cam_i,feat_i,cam_j,feat_j,quality", comments="")
         np.savetxt(graph, edges, fmt="%d", delimiter=",")
         t0 = time.perf_counter()
