@@ -604,10 +604,11 @@ def _check_data(data: dict, n: int, where: str) -> None:
         if not _is_int(seed) or seed < 0:
             raise InputError(f"{where}: data.seed {seed!r} must be an integer >= 0")
         validate.seed(seed, f"{where}: data.seed")  # run-formation --seed's range
-        if data.get("robots") is not None and not (_is_int(data["robots"])
-                                                   and data["robots"] >= 2):
-            raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer >= 2 "
-                             "or null (the formation's 6)")
+        if data.get("robots") is not None:
+            if not _is_int(data["robots"]):
+                raise InputError(f"{where}: data.robots {data['robots']!r} must be an integer "
+                                 f"from 2 to {validate.MAX_ROBOTS} or null (the formation's 6)")
+            validate.robots(data["robots"], f"{where}: data.robots")  # run-formation --robots'
         expected = 6 if data.get("robots") is None else data["robots"]
         if expected != n:
             raise InputError(f"{where}: data describes {expected} robots but 'robots' lists {n}")

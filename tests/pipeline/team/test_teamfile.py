@@ -417,8 +417,8 @@ def test_a_formation_of_fewer_than_two_robots_is_named_as_written(robots):
     """data.robots 0 was read as the formation's default and refused as 'data describes 6
     robots', a count the file did not hold."""
     data = {"kind": "formation", "formation": "line", "robots": robots, "size": [320, 240]}
-    with pytest.raises(InputError, match=rf"data.robots {robots} must be an integer >= 2 or "
-                                         r"null \(the formation's 6\)"):
+    with pytest.raises(InputError, match=rf"data.robots {robots}: give a number of robots from "
+                                         r"2 to 1000"):
         parse_team(_doc(data=data))
 
 

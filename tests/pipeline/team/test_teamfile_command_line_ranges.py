@@ -40,3 +40,24 @@ def test_a_team_file_takes_the_command_line_bounds(tmp_path):
                       tmp_path / "TEAM.json")
     assert team.data["seed"] == 2**63 - 1 and team.options_for(0)["max_features"] == 8
     assert parse_team(_doc(options={"max_features": None})).options_for(0)["max_features"] is None
+
+
+def _team_of(n: int, robots) -> dict:
+    return {"version": 1, "name": "t", "comm_edges": [[i, i + 1] for i in range(n - 1)],
+            "robots": [{"id": i, "endpoint": f"tcp/127.0.0.1:{7000 + i}"} for i in range(n)],
+            "data": {**_FORMATION, "formation": "line", "robots": robots, "graph": "line"}}
+
+
+def test_a_team_file_refuses_more_robots_than_run_formation(tmp_path):
+    """run-formation --robots takes 2 to 1000; a team file of 1001 robots was accepted and
+    every robot then failed in data_synth."""
+    with pytest.raises(InputError) as exc:
+        parse_team(_team_of(1001, 1001), tmp_path / "TEAM.json")
+    assert "TEAM.json" in str(exc.value)
+    assert "data.robots 1001: give a number of robots from 2 to 1000" in str(exc.value)
+    with pytest.raises(InputError, match=r"data.robots True must be an integer from 2 to 1000"):
+        parse_team(_team_of(2, True), tmp_path / "TEAM.json")
+
+
+def test_a_team_file_takes_run_formation_s_most_robots(tmp_path):
+    assert parse_team(_team_of(1000, 1000), tmp_path / "TEAM.json").n == 1000
