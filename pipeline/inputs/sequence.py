@@ -23,6 +23,7 @@ from pipeline.inputs.photos import (
     is_utf8_name,
     left_out_images,
     load_folder,
+    read_k_txt,
     warn_misnamed_k_txt,
     why_missing,
 )
@@ -136,6 +137,15 @@ def load_sequence(directory: str | Path, max_size: int | None = 1600,
         check_robots([p.name for p in subs])
     # the most specific K.txt wins: a robot's own camera is not overridden by the team's
     own = {p.name: intrinsics == "auto" and (p / "K.txt").is_file() for p in subs}
+    if shared not in ("auto", "exif") and not all(own.values()):
+        # read once here: an error while loading the first robot named that robot, though
+        # the file serves every robot without a K.txt of its own
+        try:
+            read_k_txt(Path(shared))
+        except InputError as exc:
+            what = ("the folder's shared K.txt, serving every robot without a K.txt of its own"
+                    if intrinsics == "auto" else "--intrinsics, serving every robot")
+            raise InputError(f"--sequence {str(directory)!r}: {what}: {exc}") from None
     for p in subs:
         if intrinsics == "auto" and not own[p.name] and shared != "auto":
             # load_folder reads the team's K.txt and does not look in the robot's folder
