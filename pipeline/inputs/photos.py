@@ -231,6 +231,14 @@ def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = Fa
     if broken:
         out.append(f"{len(broken)} symbolic link(s) leading nowhere left out "
                    f"({', '.join(broken[:5])}{', ...' if len(broken) > 5 else ''})")
+    # named like a photograph but no file to read (x.jpg a FIFO: reading it would wait for
+    # a writer for ever)
+    special = [p.name for p in entries if p.suffix.lower() in known | set(IMAGE_SUFFIXES)
+               and p.exists() and not p.is_file() and not p.is_dir()]
+    if special:
+        out.append(f"{len(special)} entry(ies) named like images but not regular files (a "
+                   f"FIFO, device or socket) left out ({', '.join(special[:5])}"
+                   f"{', ...' if len(special) > 5 else ''}; give the photographs as files)")
     subs = [p.name for p in entries if _holds_images(p)]
     if subs:
         hint = ("a robot's frames lie directly in its own sub-folder of the --sequence folder"
