@@ -481,12 +481,9 @@ def _contents(path: Path, images, keypoints, pair_ids, geometries, n_rows: int,
     if ignore_watermarks:
         with_inliers = len(usable)
         usable = [(pid, g) for pid, g in usable if g.config != _TVG.WATERMARK]
+        # every pair with inliers a WATERMARK pair: no link is left, an empty input as one
+        # of pairs without inliers is (clean-db warns and writes the copy unchanged)
         watermarks = with_inliers - len(usable)
-        if not usable and watermarks:
-            raise InputError(
-                f"database {str(path)!r}: its {watermarks} verified image pair(s) are all "
-                f"WATERMARK pairs, which COLMAP's mapper ignores with ignore_watermarks on: "
-                f"nothing is left to clean (drop --ignore-watermarks to clean them)")
     # two-view geometries all without inliers: the images were matched and verified and no
     # pair held a match, an empty input (read as none, which clean-db warns of, as resolve
     # does of an empty links file); no two-view geometry at all: a step was never run

@@ -105,8 +105,12 @@ def run(args) -> int:
                              baselines=args.baselines, loop_tol_deg=loop_tol,
                              fusion=args.fusion, ignore_watermarks=args.ignore_watermarks,
                              transport=args.transport)
-        summary = flag_result(res.summary(), no_links_why="the database holds no verified "
-                                                          "match between two images")
+        why = "the database holds no verified match between two images"
+        if res.ignored_watermark_pairs and not res.links:
+            why = (f"its {res.ignored_watermark_pairs} verified image pair(s) are all WATERMARK "
+                   "pairs, which --ignore-watermarks leaves out and copies unchanged; drop "
+                   "--ignore-watermarks to clean them")
+        summary = flag_result(res.summary(), no_links_why=why)
         if args.report:
             write_json_atomic(outputs.path(args.report, "--report"), summary)
     if args.no_rerun and (stale := stale_recording(args.out)):

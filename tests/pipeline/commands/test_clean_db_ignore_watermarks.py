@@ -73,13 +73,26 @@ def test_without_the_flag_the_watermark_pair_is_an_ordinary_pair(tmp_path, water
     assert colmap.read_database(src).watermark_pairs_ignored == 0
 
 
-def test_a_database_of_watermark_pairs_only_is_refused(tmp_path, capsys):
+def test_a_database_of_watermark_pairs_only_is_copied_unchanged_with_a_warning(tmp_path, capsys):
+    """Every pair a WATERMARK pair leaves no link: an empty input, as a database whose pairs
+    hold no inliers is, warned of and copied unchanged (it stopped with exit 2)."""
     src = tmp_path / "in.db"
     _db_with_planted_conflicts(src)
     con = sqlite3.connect(src)
     with con:
         con.execute("UPDATE two_view_geometries SET config = ?", (WATERMARK,))
     con.close()
-    assert main(["clean-db", str(src), "--out", str(tmp_path / "o.db"), "--no-rerun",
-                 "--ignore-watermarks"]) == 2
-    assert "WATERMARK" in capsys.readouterr().err
+    pairs = colmap.read_database(src, ignore_watermarks=True).watermark_pairs_ignored
+    out = tmp_path / "o.db"
+    assert main(["clean-db", str(src), "--out", str(out), "--no-rerun",
+                 "--ignore-watermarks"]) == 0
+    err = capsys.readouterr().err
+    assert ("warning: the input holds no link between two images: there is nothing to "
+            f"associate (its {pairs} verified image pair(s) are all WATERMARK pairs, which "
+            "--ignore-watermarks leaves out and copies unchanged; drop --ignore-watermarks to "
+            "clean them)") in err, err
+    assert (tmp_path / "o.links.csv").read_text().splitlines() == [
+        "cam_i,feat_i,cam_j,feat_j,status,reason,round,truth"]
+    query = "SELECT * FROM two_view_geometries ORDER BY pair_id"
+    with sqlite3.connect(src) as a, sqlite3.connect(out) as b:
+        assert a.execute(query).fetchall() == b.execute(query).fetchall() != []
