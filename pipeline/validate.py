@@ -30,7 +30,7 @@ import numbers
 from pipeline.errors import InputError
 
 __all__ = ["not_empty", "shown", "MAX_THREADS", "MAX_RENDER_SIDE", "MAX_RENDER_PIXELS", "MAX_ROBOTS", "FOCAL_RANGE",
-           "tolerance_px", "lowe_ratio", "threads", "seed", "max_features", "render_size", "robots",
+           "tolerance_px", "lowe_ratio", "threads", "seed", "render_size", "robots",
            "focal_px_ok", "check_focal", "is_utf8_name"]
 
 MAX_THREADS = 1024
@@ -168,24 +168,6 @@ def seed(value, flag: str) -> int:
         raise InputError(f"{flag} {value!r}: not an integer; give a seed >= 0, e.g. 0") from None
     if not 0 <= v < 2**63:
         raise InputError(f"{flag} {value}: a seed must be an integer from 0 to 2**63 - 1")
-    return v
-
-
-def max_features(value, flag: str = "--max-features", auto: str = "'auto'") -> int:
-    """A count of features per image, ``MIN_FEATURES .. MAX_FEATURES``
-    (:mod:`pipeline.matching.methods`); ``auto`` is how the source spells a count scaled with
-    each image (``null`` in a team file)."""
-    from pipeline.matching.methods import MAX_FEATURES, MIN_FEATURES
-
-    try:
-        v = int(str(value).strip())
-    except ValueError:
-        raise InputError(f"{flag} {value!r}: expected a number of features or {auto}") from None
-    if v < MIN_FEATURES:
-        raise InputError(f"{flag} {v}: at least {MIN_FEATURES} are needed")
-    if v > MAX_FEATURES:
-        raise InputError(f"{flag} {v}: at most {MAX_FEATURES} per image; give a smaller count "
-                         f"(e.g. 2000) or {auto} for photos")
     return v
 
 

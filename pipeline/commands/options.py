@@ -272,7 +272,7 @@ def feature_options(args) -> tuple[str, int | None]:
     check_method(method)
     if str(args.max_features).lower() == "auto":
         return method, None
-    from pipeline.validate import max_features
+    from pipeline.matching.methods import max_features
 
     args.max_features = max_features(args.max_features)
     return method, args.max_features

@@ -9,7 +9,10 @@ below), the matchers in :func:`pipeline.matching.pairs.match_pair`.
 
 from __future__ import annotations
 
-__all__ = ["FEATURE_METHODS", "COLMAP_SIFT", "MATCHERS", "MIN_FEATURES", "MAX_FEATURES"]
+from pipeline.errors import InputError
+
+__all__ = ["FEATURE_METHODS", "COLMAP_SIFT", "MATCHERS", "MIN_FEATURES", "MAX_FEATURES",
+           "max_features"]
 
 #: COLMAP's SIFT (pycolmap, :mod:`pipeline.colmap.sift`) rather than OpenCV's
 COLMAP_SIFT = "colmap-sift"
@@ -30,3 +33,19 @@ MIN_FEATURES = 8
 #: far below where OpenCV's detectors fail to allocate (ORB: ``std::bad_alloc`` at 2**31 - 1)
 #: or overflow (beyond 2**31: a traceback).
 MAX_FEATURES = 1_000_000
+
+
+def max_features(value, flag: str = "--max-features", auto: str = "'auto'") -> int:
+    """A count of features per image, ``MIN_FEATURES .. MAX_FEATURES``, checked alike on the
+    command line and in a team file; ``auto`` is how the source spells a count scaled with
+    each image (``null`` in a team file)."""
+    try:
+        v = int(str(value).strip())
+    except ValueError:
+        raise InputError(f"{flag} {value!r}: expected a number of features or {auto}") from None
+    if v < MIN_FEATURES:
+        raise InputError(f"{flag} {v}: at least {MIN_FEATURES} are needed")
+    if v > MAX_FEATURES:
+        raise InputError(f"{flag} {v}: at most {MAX_FEATURES} per image; give a smaller count "
+                         f"(e.g. 2000) or {auto} for photos")
+    return v

@@ -93,7 +93,13 @@ import numpy as np
 from pipeline import validate
 from pipeline.consistency.rules import DEFAULT_RESOLUTION
 from pipeline.errors import InputError
-from pipeline.matching.methods import FEATURE_METHODS, MATCHERS, MAX_FEATURES, MIN_FEATURES
+from pipeline.matching.methods import (
+    FEATURE_METHODS,
+    MATCHERS,
+    MAX_FEATURES,
+    MIN_FEATURES,
+    max_features,
+)
 
 __all__ = ["Team", "RobotEntry", "load_team", "check_data_files", "write_team", "DEFAULT_OPTIONS",
            "round_timeout_options",
@@ -795,7 +801,7 @@ def _check_options(opts: dict, where: str) -> None:
         if not _is_int(v):
             raise InputError(f"{where}: option max_features {v!r} must be an integer in "
                              f"{MIN_FEATURES}..{MAX_FEATURES} or null")
-        validate.max_features(v, f"{where}: option max_features", auto="null")  # --max-features'
+        max_features(v, f"{where}: option max_features", auto="null")  # --max-features'
     v = opts.get("loss_timeout", 8)
     if not _is_int(v) or not 1 <= v <= MAX_LOSS_TIMEOUT:
         raise InputError(f"{where}: option loss_timeout {v!r} must be an integer in "
