@@ -130,16 +130,19 @@ RRD_MAGIC = re.compile(rb"RRF[0-9]")
 
 
 def check_recording(path: Path) -> Path:
-    """``path`` if it begins as a Rerun recording does (:data:`RRD_MAGIC`).
+    """``path`` if it begins as a Rerun recording does (:data:`RRD_MAGIC`) and ends with the
+    footer Rerun writes when it closes one.
 
     The viewer opens any file it is given and, on one that is not a recording, serves an
-    empty viewer with no error: the file is checked before it is handed over.
+    empty viewer with no error; on a recording cut short (a copy or download not finished, a
+    full disk) it shows the part before the cut, without the layout or the report, again with
+    no error: the file is checked before it is handed over.
 
     Raises
     ------
     FileNotFoundError
-        ``path`` is not a regular file, does not read, or is empty or another kind of file
-        (naming it).
+        ``path`` is not a regular file, does not read, is empty, another kind of file or a
+        recording cut short (naming it).
     """
     if not Path(path).is_file():  # a FIFO would block the read (and the viewer) for ever
         raise FileNotFoundError(f"{path}: not a regular file (a folder, FIFO, device or a "
@@ -154,6 +157,14 @@ def check_recording(path: Path) -> Path:
         what = "an empty file" if not head else "not a Rerun recording (it lacks the .rrd header)"
         raise FileNotFoundError(f"{path}: {what}; give a run folder, or a .rrd written by a "
                                 "run or by python -m viz.saved_run")
+    from rerun_bindings import check_for_rrd_footer
+
+    if not check_for_rrd_footer(str(path)):  # every recording this project writes has one
+        raise FileNotFoundError(f"{path}: a recording cut short (it ends before the footer "
+                                "that closes a recording: a copy or download not finished, a "
+                                "full disk); copy it again, or write it anew: run again the "
+                                "command that wrote it, or python -m viz.saved_run RUN_DIR "
+                                "--out NEW.rrd for a run folder")
     return path
 
 

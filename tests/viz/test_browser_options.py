@@ -4,6 +4,7 @@ folder raised IsADirectoryError then; --timeout nan never stopped waiting for a 
 that did not show); both are now said first, and the screenshot is written atomically."""
 
 import pytest
+from rrd_files import write_small_recording
 
 import viz.browser as browser
 
@@ -16,7 +17,7 @@ def no_viewer(monkeypatch, tmp_path):
     monkeypatch.setattr(browser, "screenshot", lambda *a, **k: pytest.fail("browser started"))
     run = tmp_path / "run"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(run / "recording.rrd")
     return run
 
 

@@ -4,6 +4,7 @@ display, opens any run folder."""
 import os
 
 import pytest
+from rrd_files import write_small_recording
 from test_rerun_log import make_record
 
 from viz.browser import (
@@ -22,7 +23,7 @@ from viz.view import find_recording, has_display, main, viewer_command, web_url
 def test_headless_serves_the_web_viewer_and_prints_the_url(tmp_path, capsys, monkeypatch):
     run = tmp_path / "run"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(run / "recording.rrd")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setattr("sys.platform", "linux")  # no display variable: no display
@@ -131,7 +132,7 @@ def test_web_viewer_ports_it_cannot_serve_on_are_refused(tmp_path, capsys, monke
     both printed a URL whose recording never loaded (rerun: 'port is already used')."""
     run = tmp_path / "run"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(run / "recording.rrd")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setattr("sys.platform", "linux")  # no display variable: no display

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from rrd_files import write_small_recording
 from test_rerun_log import make_record
 from test_saved_run import _save
 
@@ -26,7 +27,7 @@ def _run_into_a_closed_pipe(args):
 def test_a_reader_that_stopped_reading_ends_the_printing_quietly(tmp_path):
     run = tmp_path / "formation-d"
     run.mkdir()
-    (run / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(run / "recording.rrd")
     done = _run_into_a_closed_pipe(["viz.view", "--dry-run", "--web", str(run)])
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == 0

@@ -2,6 +2,7 @@
 
 
 import pytest
+from rrd_files import write_small_recording
 
 import viz.view as view
 
@@ -9,7 +10,7 @@ import viz.view as view
 @pytest.fixture
 def run(tmp_path):
     (tmp_path / "run").mkdir()
-    (tmp_path / "run" / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(tmp_path / "run" / "recording.rrd")
     return tmp_path / "run"
 
 

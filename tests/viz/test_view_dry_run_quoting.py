@@ -5,6 +5,7 @@ other files."""
 import shlex
 
 import pytest
+from rrd_files import write_small_recording
 
 from viz.view import main, viewer_command
 
@@ -14,7 +15,7 @@ from viz.view import main, viewer_command
 def test_the_printed_command_splits_back_into_the_command(tmp_path, capsys, name, mode):
     run = tmp_path / name / "formation-d"
     run.mkdir(parents=True)
-    (run / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(run / "recording.rrd")
     assert main([str(run), "--dry-run", mode]) == 0
     printed = capsys.readouterr().out.splitlines()[-1]
     assert shlex.split(printed) == viewer_command(run / "recording.rrd", web=mode == "--web")

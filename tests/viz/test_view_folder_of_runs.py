@@ -1,12 +1,14 @@
 """``python -m viz.view`` on the parent of run folders: the runs it lists are the ones it
 would open, not the hidden staging folder of a run killed before its folder was in place."""
 
+from rrd_files import write_small_recording
+
 from viz.view import main
 
 
 def _run(parent, name):
     (parent / name).mkdir(parents=True)
-    (parent / name / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(parent / name / "recording.rrd")
     return parent / name
 
 

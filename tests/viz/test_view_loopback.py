@@ -3,6 +3,8 @@ on this machine's loopback address only."""
 
 import shlex
 
+from rrd_files import write_small_recording
+
 from viz.view import main, viewer_command
 
 
@@ -12,7 +14,7 @@ def test_the_web_viewer_serves_on_loopback_only(tmp_path, capsys):
     port forwarding both go through this machine's own address."""
     cmd = viewer_command(tmp_path / "recording.rrd", web=True)
     assert cmd[cmd.index("--bind") + 1] == "127.0.0.1", cmd
-    (tmp_path / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(tmp_path / "recording.rrd")
     assert main([str(tmp_path), "--web", "--dry-run"]) == 0
     printed = capsys.readouterr().out.strip().splitlines()[-1]
     assert shlex.split(printed)[-2:] == ["--bind", "127.0.0.1"], printed
@@ -23,7 +25,7 @@ def test_the_native_viewer_serves_on_loopback_only(tmp_path, capsys):
     on every interface unless told: it is bound to loopback too."""
     cmd = viewer_command(tmp_path / "recording.rrd", web=False)
     assert cmd[cmd.index("--bind") + 1] == "127.0.0.1", cmd
-    (tmp_path / "recording.rrd").write_bytes(b"RRF2")
+    write_small_recording(tmp_path / "recording.rrd")
     assert main([str(tmp_path), "--native", "--dry-run"]) == 0
     printed = capsys.readouterr().out.strip().splitlines()[-1]
     assert shlex.split(printed)[-2:] == ["--bind", "127.0.0.1"], printed
