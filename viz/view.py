@@ -264,6 +264,27 @@ def _bad_ports(port: int, grpc_port: int) -> str | None:
     return None
 
 
+def _busy_port(port: int, grpc_port: int) -> str | None:
+    """Why the web viewer cannot serve on these ports now: one of them is taken on
+    :data:`LOOPBACK` (another viewer still serving, or another program), or None. Rerun would
+    fail after the URL is printed, naming the page's port but not the recording's."""
+    import errno
+    import socket
+
+    for flag, p in (("--port", port), ("--grpc-port", grpc_port)):
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a server binds
+            try:
+                s.bind((LOOPBACK, p))
+            except OSError as exc:
+                if exc.errno != errno.EADDRINUSE:
+                    continue  # rerun says why (e.g. a port below 1024 without root)
+                return (f"{flag} {p}: the port is in use on {LOOPBACK} (another viewer still "
+                        "serving, e.g. an earlier python -m viz.view --web, or another "
+                        f"program); stop it, or serve on a free one: python -m viz.view RUN {flag} N")
+    return None
+
+
 def parse_with_recording(ap: argparse.ArgumentParser, argv) -> tuple[argparse.Namespace,
                                                                       Path | None]:
     """``ap``'s arguments (its ``target`` a run folder or ``.rrd``) and the recording to open,
@@ -310,6 +331,8 @@ def main(argv=None) -> int:
         return 2
     web = args.web or (not args.native and not has_display())
     bad = _bad_ports(args.port, args.grpc_port) if web else None
+    if web and not bad and not args.dry_run:
+        bad = _busy_port(args.port, args.grpc_port)
     if bad:
         print(f"error: {bad}", file=sys.stderr)
         return 2
