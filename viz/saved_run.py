@@ -123,7 +123,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     from pipeline import colmap
     from pipeline.inputs.linkscsv import read_run_links_csv
     from pipeline.inputs.photos import MAX_IMAGE_PIXELS
-    from viz.view import LANDMARKS_RUN_NOTE, landmarks_run
+    from viz.view import LANDMARKS_RUN_NOTE, landmarks_run, staging_note
 
     folder = Path(folder)
     if not folder.is_dir():
@@ -132,6 +132,9 @@ def read_run_folder(folder: str | Path) -> RunRecord:
                          "or run-images run")
     if landmarks_run(folder):
         raise InputError(f"{folder}: {LANDMARKS_RUN_NOTE}")
+    staging = staging_note(folder)
+    if staging:
+        raise InputError(f"{folder}: {staging}")
     _refuse_online(folder)
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
@@ -225,10 +228,14 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     from pipeline.runfolder import note_output_in_place, reading_run_folder, staging_beside
     from pipeline.validate import not_empty
     from viz.rerun_log import log_run
+    from viz.view import staging_note
 
     not_empty(folder, "RUN_DIR", "give the run folder (a run's --out)")  # not the current one
     not_empty(out, "--out", "name a .rrd file, or drop --out to write RUN_DIR/recording.rrd")
     folder = Path(folder)
+    staging = staging_note(folder) if folder.is_dir() else None
+    if staging:  # before a lock is taken beside it, or a recording written into it
+        raise InputError(f"{folder}: {staging}")
     _refuse_online(folder)  # before the output: its recording.rrd is the one to open
     named = out is not None
     if out is None:

@@ -55,6 +55,26 @@ def landmarks_run(folder: Path) -> bool:
     return isinstance(report, dict) and "feature_landmarks" in report
 
 
+#: a run's staging folder beside its run folder NAME (pipeline.runfolder)
+STAGING_NAME = re.compile(r"\.(.+)\.tmp-[^/]*")
+
+
+def staging_note(path: Path) -> str | None:
+    """What ``path`` is when it is a run's staging folder ``.NAME.tmp-*`` (it holds the run
+    marker) or a file in one, and what to open instead; else None."""
+    from pipeline.outputs import RUN_MARKER
+
+    for folder in (path, path.parent):
+        m = STAGING_NAME.fullmatch(folder.name)
+        if m and folder.is_dir() and (folder / RUN_MARKER).is_file():
+            run = folder.parent / m.group(1)
+            return (f"{'' if folder is path else 'a file in '}the staging folder of the run "
+                    f"folder {run}: a run writes there and puts it in place as {run.name} when "
+                    f"done (one killed left it; the next run into {run.name} removes it); give "
+                    f"{run}")
+    return None
+
+
 def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) -> Path:
     """The ``.rrd`` to open: ``target`` itself, ``target/recording.rrd`` (or the only ``.rrd``
     in a folder, hidden ones left out), or the newest ``recording.rrd`` under ``runs`` outside
@@ -70,6 +90,9 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
 
     if target:
         p = Path(target)
+        staging = staging_note(p) if p.exists() else None
+        if staging:
+            raise FileNotFoundError(f"{p}: {staging}")
         if p.is_file():
             if p.suffix != ".rrd":
                 beside = p.with_suffix(".rrd")  # clean-db / clean-h5 write OUT.rrd by OUT
