@@ -108,6 +108,26 @@ def _refuse_online(folder: Path) -> None:
                      f"--sequence): {what}")
 
 
+def _what_instead(folder: Path) -> str:
+    """What to give for a folder that is no run folder: the runs it holds (``run-formations``'
+    --out), or the recordings ``clean-db`` / ``clean-h5`` wrote in it (``OUT.rrd``)."""
+    import shlex
+
+    from pipeline.progress import counted
+    from viz.view import _names
+
+    runs = sorted(q.parent for q in folder.glob("*/report.json")
+                  if not q.parent.name.startswith("."))
+    if runs:
+        return f"; a folder of {counted(len(runs), 'run')} ({_names(runs)}): give one of them"
+    rrds = sorted(q for q in folder.glob("*.rrd") if not q.name.startswith("."))
+    if rrds:
+        return (f"; it holds {counted(len(rrds), 'recording')} already ({_names(rrds)}, as "
+                "clean-db and clean-h5 write beside their output): open it with make view "
+                f"RUN={shlex.quote(str(rrds[0]))}")
+    return ""
+
+
 def read_run_folder(folder: str | Path) -> RunRecord:
     """The :class:`RunRecord` of a saved run folder (see the module docstring for what a
     folder does not hold).
@@ -138,7 +158,8 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     _refuse_online(folder)
     for name in ("report.json", "links.csv", "sparse"):
         if not (folder / name).exists():
-            raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run outputs')")
+            raise InputError(f"{folder}: no {name}; not a run folder (docs/DESIGN.md 'Run "
+                             f"outputs'){_what_instead(folder)}")
         if (folder / name).is_file() != (name != "sparse"):  # a FIFO would block the read
             what = "a folder" if name == "sparse" else "a regular file"
             raise InputError(f"{folder}: its {name} is not {what}; not a run folder "
