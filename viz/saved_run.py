@@ -108,6 +108,18 @@ def _refuse_online(folder: Path) -> None:
                      f"--sequence): {what}")
 
 
+def _check_is_folder(folder: Path) -> None:
+    """InputError unless ``folder`` is a folder (or a symbolic link to one), naming what it is."""
+    if folder.is_dir():
+        return
+    if folder.is_symlink() and not folder.exists():
+        what = f"a symbolic link leading nowhere (to {os.readlink(folder)!r})"
+    else:
+        what = "no such folder" if not folder.exists() else "a file, not a folder"
+    raise InputError(f"{folder}: {what}; give the run folder (--out) of a run-formation or "
+                     "run-images run")
+
+
 def _what_instead(folder: Path) -> str:
     """What to give for a folder that is no run folder: the runs it holds (``run-formations``'
     --out), or the recordings ``clean-db`` / ``clean-h5`` wrote in it (``OUT.rrd``)."""
@@ -146,10 +158,7 @@ def read_run_folder(folder: str | Path) -> RunRecord:
     from viz.view import LANDMARKS_RUN_NOTE, landmarks_run, staging_note
 
     folder = Path(folder)
-    if not folder.is_dir():
-        what = "no such folder" if not folder.exists() else "a file, not a folder"
-        raise InputError(f"{folder}: {what}; give the run folder (--out) of a run-formation "
-                         "or run-images run")
+    _check_is_folder(folder)
     if landmarks_run(folder):
         raise InputError(f"{folder}: {LANDMARKS_RUN_NOTE}")
     staging = staging_note(folder)
@@ -254,7 +263,8 @@ def log_run_folder(folder: str | Path, out: str | Path | None = None) -> Path:
     not_empty(folder, "RUN_DIR", "give the run folder (a run's --out)")  # not the current one
     not_empty(out, "--out", "name a .rrd file, or drop --out to write RUN_DIR/recording.rrd")
     folder = Path(folder)
-    staging = staging_note(folder) if folder.is_dir() else None
+    _check_is_folder(folder)  # before the output's checks, which would name the recording
+    staging = staging_note(folder)
     if staging:  # before a lock is taken beside it, or a recording written into it
         raise InputError(f"{folder}: {staging}")
     _refuse_online(folder)  # before the output: its recording.rrd is the one to open
