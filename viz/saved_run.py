@@ -126,15 +126,15 @@ def _what_instead(folder: Path) -> str:
     import shlex
 
     from pipeline.progress import counted
-    from viz.view import _names
+    from viz.view import names_shown
 
     runs = sorted(q.parent for q in folder.glob("*/report.json")
                   if not q.parent.name.startswith("."))
     if runs:
-        return f"; a folder of {counted(len(runs), 'run')} ({_names(runs)}): give one of them"
+        return f"; a folder of {counted(len(runs), 'run')} ({names_shown(runs)}): give one of them"
     rrds = sorted(q for q in folder.glob("*.rrd") if not q.name.startswith("."))
     if rrds:
-        return (f"; it holds {counted(len(rrds), 'recording')} already ({_names(rrds)}, as "
+        return (f"; it holds {counted(len(rrds), 'recording')} already ({names_shown(rrds)}, as "
                 "clean-db and clean-h5 write beside their output): open it with make view "
                 f"RUN={shlex.quote(str(rrds[0]))}")
     return ""

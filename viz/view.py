@@ -23,7 +23,7 @@ import sys
 import threading
 from pathlib import Path
 
-__all__ = ["check_recording", "find_recording", "viewer_command", "web_url", "main",
+__all__ = ["check_recording", "find_recording", "names_shown", "viewer_command", "web_url", "main",
            "rerun_executable", "spawn_viewer"]
 
 WEB_PORT = 9090
@@ -110,14 +110,14 @@ def find_recording(target: str | os.PathLike | None, runs: Path = Path("runs")) 
                 return found[0]
             if found:  # several outputs of clean-db / clean-h5 in one folder
                 raise FileNotFoundError(f"{p}: {len(found)} recordings in this folder "
-                                        f"({_names(found)}): give the one to open")
+                                        f"({names_shown(found)}): give the one to open")
             # a hidden folder is no run (the staging folder of a run killed before its
             # folder was put in place), as for the newest recording below
             runs_in = sorted(q.parent for q in p.glob("*/recording.rrd")
                              if not q.parent.name.startswith("."))
             if runs_in:  # the parent of run folders, e.g. run-formations' --out
                 raise FileNotFoundError(f"{p}: a folder of {counted(len(runs_in), 'run')} "
-                                        f"({_names(runs_in)}): give the run to open")
+                                        f"({names_shown(runs_in)}): give the run to open")
             if landmarks_run(p):
                 raise FileNotFoundError(f"{p}: {LANDMARKS_RUN_NOTE}")
             raise FileNotFoundError(f"{p}: no recording.rrd in this folder; {_no_recording(p)}")
@@ -191,10 +191,13 @@ def check_recording(path: Path) -> Path:
     return path
 
 
-def _names(paths: list[Path], shown: int = 4) -> str:
-    """The first ``shown`` of ``paths`` by name, and how many more."""
-    names = ", ".join(repr(q.name) for q in paths[:shown])
-    return names + (f", … {len(paths) - shown} more" if len(paths) > shown else "")
+def names_shown(paths: list[Path], shown: int = 4) -> str:
+    """``paths`` by name, comma-separated, or the first ``shown`` and how many more
+    (:func:`pipeline.errors.listed`)."""
+    from pipeline.errors import listed
+
+    names = [repr(q.name) for q in paths]
+    return ", ".join(names) if len(names) <= shown else listed(names, shown)
 
 
 def has_display(env=None, platform: str | None = None) -> bool:

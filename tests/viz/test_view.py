@@ -116,8 +116,8 @@ def test_a_folder_of_several_recordings_or_runs_names_them(tmp_path):
         (runs / f"formation-{name}" / "recording.rrd").write_bytes(b"x")
     with pytest.raises(FileNotFoundError) as exc:
         find_recording(runs)
-    assert ("a folder of 5 runs ('formation-a', 'formation-b', 'formation-c', 'formation-d', "
-            "… 1 more)") in str(exc.value)
+    assert ("a folder of 5 runs ('formation-a', 'formation-b', 'formation-c', 'formation-d' "
+            "and 1 more)") in str(exc.value)
 
 
 @pytest.mark.parametrize("ports, message", [
