@@ -464,10 +464,10 @@ class Observer:
 
     def ended(self, i: int) -> None:
         """Tell robot ``i``'s neighbours that its process ended (it did not publish): a
-        liveliness token ``fm/<team>/ended/<i>`` for the rest of the team, which a robot
-        subscribing later still receives (:meth:`pipeline.transport.zenoh_transport.
-        ZenohTransport._on_ended`). A robot killed while starting, before its neighbours
-        heard it, would otherwise be waited for until their start timeout."""
+        liveliness token ``fm/<team>/ended/<i>`` for the rest of the team, which its
+        neighbours find by a liveliness query while it is unheard (:meth:`pipeline.transport.
+        zenoh_transport.ZenohTransport._ask_ended`). A robot killed while starting, before its
+        neighbours heard it, would otherwise be waited for until their start timeout."""
         with contextlib.suppress(Exception):
             self._ended.append(self.session.liveliness().declare_token(
                 self._key(self.team.name, "ended", int(i))))
@@ -650,7 +650,7 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
         # done, the CPU time of those still running) and since when: a robot silent for the
         # grace after every other one published or ended is killed
         progress, quiet_since = None, time.monotonic()
-        ended: set = set()  # robots whose end without a result the observer announced
+        announced: set = set()  # robots whose end without a result the observer announced
 
         def neighbours_lost(i: int) -> bool:
             """Whether every neighbour of robot ``i`` was lost: its process ended without
@@ -665,9 +665,9 @@ def launch_team(team: Team, workdir: str | Path | None = None, *, timeout_s: flo
                 for i, p in list(procs.items()):
                     if i not in run.exit_codes and p.poll() is not None:
                         run.exit_codes[i] = p.returncode
-                for i in sorted(set(run.exit_codes) - set(observer.results) - ended):
+                for i in sorted(set(run.exit_codes) - set(observer.results) - announced):
                     observer.ended(i)  # its neighbours may not know yet
-                    ended.add(i)
+                    announced.add(i)
                 running = [i for i in range(team.n)
                            if i not in observer.results and i not in run.exit_codes]
                 if gone.is_set() and running:
