@@ -19,16 +19,17 @@ class TeamError(RuntimeError):
     message names it)."""
 
 
-def listed(items, limit: int = 5) -> str:
-    """``items`` for a one-line message: ``"3"``, ``"3 and 7"``, ``"3, 7 and 9"``, or past
-    ``limit`` the first ``limit`` and how many more (``"3, 7, 9, 12, 15 and 3 more"``): a
-    message about several robots or files names every one a user can act on, in one line."""
+def listed(items, limit: int = 5, last: str = " and ") -> str:
+    """``items`` for a one-line message: ``"3"``, ``"3 and 7"``, ``"3, 7 and 9"`` (``last``
+    before the last item; ``", "`` for a plain list), or past ``limit`` the first ``limit``
+    and how many more (``"3, 7, 9, 12, 15 and 3 more"``): a message about several robots or
+    files names every one a user can act on, in one line."""
     shown = [str(x) for x in items]
     if len(shown) > limit:
         return f"{', '.join(shown[:limit])} and {len(shown) - limit} more"
     if len(shown) <= 1:
         return "".join(shown)
-    return f"{', '.join(shown[:-1])} and {shown[-1]}"
+    return f"{', '.join(shown[:-1])}{last}{shown[-1]}"
 
 
 def processes_lost(names) -> str:

@@ -235,7 +235,7 @@ NAMES_SHOWN = 20
 def _listed(names: list[str]) -> str:
     """``names`` comma-separated, or the first :data:`NAMES_SHOWN` and how many more
     (:func:`pipeline.errors.listed`)."""
-    return ", ".join(names) if len(names) <= NAMES_SHOWN else listed(names, NAMES_SHOWN)
+    return listed(names, NAMES_SHOWN, last=", ")
 
 
 def _no_features(report: dict, names: list[str] | None, void=()) -> list[dict]:

@@ -196,8 +196,7 @@ def names_shown(paths: list[Path], shown: int = 4) -> str:
     (:func:`pipeline.errors.listed`)."""
     from pipeline.errors import listed
 
-    names = [repr(q.name) for q in paths]
-    return ", ".join(names) if len(names) <= shown else listed(names, shown)
+    return listed([repr(q.name) for q in paths], shown, last=", ")
 
 
 def has_display(env=None, platform: str | None = None) -> bool:

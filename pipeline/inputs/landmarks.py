@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import InputError
+from pipeline.errors import InputError, listed
 from pipeline.validate import check_utf8_names
 
 __all__ = ["LandmarkFrame", "natural_key", "load_landmark_folder", "folder_image_names",
@@ -410,8 +410,7 @@ def _why_not_mat(path: Path) -> str:
         if keys:
             return f"an HDF5 file without a MAT header, holding {', '.join(keys[:5])}"
         return f"not a MAT file SciPy can read: {_exc_text(exc)}"
-    held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names \
-        else "it holds no variable"
+    held = f"it holds {listed(names, last=', ')}" if names else "it holds no variable"
     return f"no variable pts_coord; {held}"
 
 
@@ -574,8 +573,8 @@ def _unsuffixed_tables(files: list[Path]) -> str:
             tables.append(p.name)
     if not tables:
         return ""
-    shown = ", ".join(tables[:3]) + (", ..." if len(tables) > 3 else "")
-    return (f"; {len(tables)} file(s) hold rows 'x y' but are not named .txt ({shown}): "
+    return (f"; {len(tables)} file(s) hold rows 'x y' but are not named .txt "
+            f"({listed(tables, 3, last=', ')}): "
             "keypoint files are read as NAME.txt, so rename them")
 
 

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from PIL import ExifTags, Image, UnidentifiedImageError
 
-from pipeline.errors import InputError
+from pipeline.errors import InputError, listed
 from pipeline.inputs.csvfields import NUMBER
 from pipeline.types import View
 from pipeline.validate import check_focal, check_utf8_names, focal_px_ok, is_utf8_name
@@ -237,8 +237,8 @@ def _left_out_images(directory: Path, files: list[Path], robot_folder: bool = Fa
                and p.exists() and not p.is_file() and not p.is_dir()]
     if special:
         out.append(f"{len(special)} entry(ies) named like images but not regular files (a "
-                   f"FIFO, device or socket) left out ({', '.join(special[:5])}"
-                   f"{', ...' if len(special) > 5 else ''}; give the photographs as files)")
+                   f"FIFO, device or socket) left out ({listed(special, last=', ')}; give "
+                   "the photographs as files)")
     subs = [p.name for p in entries if _holds_images(p)]
     if subs:
         hint = ("a robot's frames lie directly in its own sub-folder of the --sequence folder"

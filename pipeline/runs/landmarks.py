@@ -49,7 +49,7 @@ import numpy as np
 
 from pipeline.budget import DEFAULT_LIMIT_GB
 from pipeline.consistency.rules import DEFAULT_LINKS_RESOLUTION
-from pipeline.errors import InputError
+from pipeline.errors import InputError, listed
 from pipeline.outcome import flag_result
 from pipeline.progress import StageTimer
 from pipeline.runfolder import atomic_run_folder, write_json_atomic
@@ -143,12 +143,11 @@ def landmark_comm_graph(graph: str, names: list[str], folder_names: list[str],
     if off.any():
         i, j = (int(v) for v in edges[np.flatnonzero(off)[0]])
         gone = i if at[i] < 0 else j
-        shown = ", ".join(str(k) for k in kept[:8]) + (", ..." if len(kept) > 8 else "")
         raise InputError(f"{graph}: the edge {folder_names[i]} - {folder_names[j]} (images {i} "
                          f"and {j} of the folder's {len(folder_names)}, in name order) joins "
                          f"{folder_names[gone]}, which --frames {frames} leaves out (it keeps "
-                         f"images {shown}); list edges between kept images only, or drop "
-                         "--frames")
+                         f"images {listed(kept.tolist(), 8, last=', ')}); list edges between "
+                         "kept images only, or drop --frames")
     return at[edges]
 
 

@@ -18,6 +18,6 @@ def test_label_tables_without_the_txt_suffix_are_named(tmp_path):
     (tmp_path / "README").write_text("CMU house: 5 frames\n")  # no table: not named
     with pytest.raises(InputError, match=r"5 images but 0 keypoint files .*; 5 file\(s\) hold "
                                          r"rows 'x y' but are not named .txt \(house1, house2, "
-                                         r"house3, \.\.\.\): keypoint files are read as "
+                                         r"house3 and 2 more\): keypoint files are read as "
                                          r"NAME.txt, so rename them; give each image"):
         load_landmark_folder(tmp_path, descriptors="sift")

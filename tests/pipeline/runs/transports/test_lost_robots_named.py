@@ -17,6 +17,8 @@ def test_listed_names_every_item_up_to_its_limit_then_counts():
     assert listed([3, 7, 9]) == "3, 7 and 9"
     assert listed(range(8)) == "0, 1, 2, 3, 4 and 3 more"
     assert listed(range(8), limit=8) == "0, 1, 2, 3, 4, 5, 6 and 7"
+    assert listed([3, 7, 9], last=", ") == "3, 7, 9"
+    assert listed(range(8), last=", ") == "0, 1, 2, 3, 4 and 3 more"
 
 
 def test_processes_lost_is_singular_for_one_and_names_all_of_several():
