@@ -110,13 +110,16 @@ def _refuse_online(folder: Path) -> None:
 
 def _check_is_folder(folder: Path) -> None:
     """InputError unless ``folder`` is a folder (or a symbolic link to one), naming what it is."""
+    from pipeline.inputs.photos import why_missing
+
     if folder.is_dir():
         return
-    if folder.is_symlink() and not folder.exists():
-        what = f"a symbolic link leading nowhere (to {os.readlink(folder)!r})"
-    else:
-        what = "no such folder" if not folder.exists() else "a file, not a folder"
-    raise InputError(f"{folder}: {what}; give the run folder (--out) of a run-formation or "
+    if folder.exists():
+        what = ": a file, not a folder"
+    else:  # a symbolic link leading nowhere, it or one on its way, is named with its target
+        why = why_missing(folder)
+        what = ": no such folder" if why == "does not exist" else f" {why}"
+    raise InputError(f"{folder}{what}; give the run folder (--out) of a run-formation or "
                      "run-images run")
 
 

@@ -11,6 +11,6 @@ def test_a_run_folder_link_leading_nowhere_is_named(tmp_path, capsys):
     for extra in ([], ["--out", str(tmp_path / "r.rrd")]):
         assert main([str(link), *extra]) == 2
         err = capsys.readouterr().err
-        assert err.startswith(f"error: {link}: a symbolic link leading nowhere (to "), err
+        assert err.startswith(f"error: {link} is a symbolic link that leads nowhere (to "), err
         assert "--out FILE.rrd" not in err and err.count("\n") == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
