@@ -3,9 +3,8 @@ info line only, hidden by --quiet, though README promises a warning for every ph
 of another format left out: Pillow does not open them, so they were not among the formats
 it registers. They are now warned as the others are."""
 
-import numpy as np
 import pytest
-from PIL import Image
+from noise_photos import noise_photos
 
 from pipeline.errors import InputError
 from pipeline.inputs.photos import load_folder
@@ -15,10 +14,7 @@ HEIC_HEAD = b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic"
 
 
 def _jpegs(d, n=2):
-    d.mkdir()
-    rng = np.random.default_rng(0)
-    for k in range(n):
-        Image.fromarray(rng.integers(0, 255, (30, 40, 3), dtype=np.uint8)).save(d / f"p{k}.jpg")
+    noise_photos(d, [f"p{k}.jpg" for k in range(n)])
 
 
 def _warned(caplog):

@@ -3,25 +3,17 @@ though every other entry that looks like a photograph and is not read is warned.
 
 import os
 
-import numpy as np
 import pytest
-from PIL import Image
+from noise_photos import noise_photos
 
 from pipeline.errors import InputError
 from pipeline.inputs.photos import load_folder
 
 
-def _jpegs(d, n):
-    d.mkdir()
-    rng = np.random.default_rng(0)
-    for k in range(n):
-        Image.fromarray(rng.integers(0, 255, (30, 40, 3), dtype=np.uint8)).save(d / f"p{k}.jpg")
-
-
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
 def test_a_fifo_named_like_a_photograph_is_warned(tmp_path, caplog):
     d = tmp_path / "photos"
-    _jpegs(d, 2)
+    noise_photos(d, ["p0.jpg", "p1.jpg"])
     os.mkfifo(d / "x.jpg")
     os.mkfifo(d / "pipe")  # not named like a photograph: skipped as other files are
     with caplog.at_level("WARNING", logger="pipeline"):

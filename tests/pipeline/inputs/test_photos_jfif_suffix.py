@@ -2,19 +2,15 @@
 with a warning to convert it to one of .jpg, .jpeg, …: it is a JPEG file, and it is now
 read as one."""
 
-import numpy as np
-from PIL import Image
+
+from noise_photos import noise_photos
 
 from pipeline.inputs.photos import load_folder
 
 
 def test_jfif_and_jpe_files_are_read_as_jpegs(tmp_path, caplog):
     d = tmp_path / "downloads"
-    d.mkdir()
-    rng = np.random.default_rng(0)
-    for name in ("a.jfif", "b.JPE", "c.jpg"):
-        Image.fromarray(rng.integers(0, 255, (30, 40, 3), dtype=np.uint8)).save(
-            d / name, format="JPEG")
+    noise_photos(d, ("a.jfif", "b.JPE", "c.jpg"), fmt="JPEG")
     with caplog.at_level("WARNING", logger="pipeline"):
         views = load_folder(d, max_size=None)
     assert [v.name for v in views] == ["a.jfif", "b.JPE", "c.jpg"]

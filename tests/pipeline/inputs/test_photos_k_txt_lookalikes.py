@@ -2,9 +2,8 @@
 not the intrinsics file: run-images took the guessed focal length in its place without a
 word, so a calibrated folder ran as an uncalibrated one. It is now warned, naming the file."""
 
-import numpy as np
 import pytest
-from PIL import Image
+from noise_photos import noise_photos
 
 from pipeline.inputs.photos import load_folder
 from pipeline.inputs.sequence import load_sequence
@@ -13,10 +12,7 @@ K_TEXT = "50 0 19.5\n0 50 14.5\n0 0 1\n"
 
 
 def _images(folder, names=("a.png", "b.png")):
-    folder.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(0)
-    for name in names:
-        Image.fromarray(rng.integers(0, 255, (30, 40, 3), dtype=np.uint8)).save(folder / name)
+    noise_photos(folder, names)
 
 
 def _lookalike_warnings(caplog):
